@@ -1,0 +1,71 @@
+"""Input validation shared by the parameter classes.
+
+Every check raises ``ValueError`` whose message names the offending field, so a
+user who mistypes one entry of a config learns which one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+
+def as_square_matrix(value: ArrayLike, name: str, n: int | None = None) -> np.ndarray:
+    """Return ``value`` as a finite float64 (n, n) matrix.
+
+    A scalar or a 1-D vector is read as a diagonal, which is how gains are usually
+    written (``M = diag(10, 10)``).
+    """
+    arr = np.array(value, dtype=float)
+    if arr.ndim == 0:
+        arr = np.diag(np.full(n if n is not None else 1, float(arr)))
+    elif arr.ndim == 1:
+        arr = np.diag(arr)
+    if arr.ndim != 2 or arr.shape[0] != arr.shape[1]:
+        raise ValueError(f"{name} must be a square matrix, got shape {np.shape(value)}")
+    if n is not None and arr.shape[0] != n:
+        raise ValueError(f"{name} must be {n}x{n} to match the other matrices, got {arr.shape[0]}x{arr.shape[1]}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} has non-finite entries")
+    arr.setflags(write=False)
+    return arr
+
+
+def check_symmetric(arr: np.ndarray, name: str) -> None:
+    scale = max(1.0, float(np.max(np.abs(arr))))
+    if not np.allclose(arr, arr.T, rtol=0.0, atol=1e-12 * scale):
+        raise ValueError(f"{name} must be symmetric")
+
+
+def check_positive_definite(arr: np.ndarray, name: str) -> None:
+    check_symmetric(arr, name)
+    try:
+        np.linalg.cholesky(arr)
+    except np.linalg.LinAlgError:
+        raise ValueError(f"{name} must be positive definite (smallest eigenvalue {np.linalg.eigvalsh(arr).min():.3g})") from None
+
+
+def check_positive_semidefinite(arr: np.ndarray, name: str) -> None:
+    check_symmetric(arr, name)
+    eig_min = float(np.linalg.eigvalsh(arr).min())
+    scale = max(1.0, float(np.max(np.abs(arr))))
+    if eig_min < -1e-12 * scale:
+        raise ValueError(f"{name} must be positive semidefinite (smallest eigenvalue {eig_min:.3g})")
+
+
+def check_positive_scalar(value: float, name: str) -> float:
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not np.isfinite(out) or out <= 0.0:
+        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    return out
+
+
+def check_int_at_least(value: int, name: str, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {value}")
+    return int(value)

@@ -1,0 +1,122 @@
+"""Typed, validated parameter sets and the thesis' values (thesis §5.2, DESIGN.md §3).
+
+Parameters are frozen dataclasses checked on construction; each error names the
+field. Matrices that are diagonal in the thesis are given as their diagonals.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from coassist._checks import check_int_at_least, check_positive_scalar
+
+
+def _diag(values, name: str, length: int | None = None, *, positive: bool = False) -> tuple[float, ...]:
+    try:
+        arr = np.atleast_1d(np.asarray(values, dtype=float))
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a list of numbers, got {values!r}") from None
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be a list of diagonal entries, got shape {arr.shape}")
+    if length is not None and arr.size != length:
+        raise ValueError(f"{name} must have {length} entries, got {arr.size}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} has non-finite entries: {values!r}")
+    if positive and np.any(arr <= 0):
+        raise ValueError(f"{name} entries must be > 0, got {values!r}")
+    if not positive and np.any(arr < 0):
+        raise ValueError(f"{name} entries must be >= 0, got {values!r}")
+    return tuple(float(v) for v in arr)
+
+
+@dataclass(frozen=True)
+class ImpedanceParameters:
+    """Diagonal impedance of eq. 3.1: inertia M [kg], damping D [N·s/m], stiffness K [N/m], dt [s]."""
+
+    M: tuple[float, ...] = (10.0, 10.0)
+    D: tuple[float, ...] = (100.0, 100.0)
+    K: tuple[float, ...] = (0.0, 0.0)
+    dt: float = 0.008
+
+    def __post_init__(self) -> None:
+        M = _diag(self.M, "impedance.M", positive=True)
+        if not 1 <= len(M) <= 6:
+            raise ValueError(f"impedance.M must have 1 to 6 entries (one per DOF), got {len(M)}")
+        object.__setattr__(self, "M", M)
+        object.__setattr__(self, "D", _diag(self.D, "impedance.D", len(M)))
+        object.__setattr__(self, "K", _diag(self.K, "impedance.K", len(M)))
+        object.__setattr__(self, "dt", check_positive_scalar(self.dt, "impedance.dt"))
+
+    @property
+    def n_dof(self) -> int:
+        return len(self.M)
+
+
+@dataclass(frozen=True)
+class GameParameters:
+    """Cost weights of the cooperative game (eq. 3.15–3.17), as diagonals.
+
+    Q_* have 2n entries (positions then velocities), R_* have n. ``alpha`` is the share
+    of the human's cost; ``horizon`` and ``control_horizon`` are in samples.
+    """
+
+    Q_hh: tuple[float, ...] = (1.0, 1.0, 1e-4, 1e-4)
+    Q_hr: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)
+    Q_rh: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)
+    Q_rr: tuple[float, ...] = (1.0, 1.0, 1e-4, 1e-4)
+    R_h: tuple[float, ...] = (5e-4, 5e-4)
+    R_r: tuple[float, ...] = (5e-4, 5e-4)
+    alpha: float = 0.8
+    horizon: int = 50
+    control_horizon: int | None = None
+    input_weighting: str = "shared"
+
+    def __post_init__(self) -> None:
+        R_h = _diag(self.R_h, "game.R_h", positive=True)
+        n = len(R_h)
+        object.__setattr__(self, "R_h", R_h)
+        object.__setattr__(self, "R_r", _diag(self.R_r, "game.R_r", n, positive=True))
+        for name in ("Q_hh", "Q_hr", "Q_rh", "Q_rr"):
+            object.__setattr__(self, name, _diag(getattr(self, name), f"game.{name}", 2 * n))
+        alpha = float(self.alpha)
+        if not 0.0 <= alpha <= 1.0:
+            raise ValueError(f"game.alpha must be in [0, 1], got {self.alpha!r}")
+        object.__setattr__(self, "alpha", alpha)
+        check_int_at_least(self.horizon, "game.horizon", 1)
+        if self.control_horizon is not None:
+            check_int_at_least(self.control_horizon, "game.control_horizon", 1)
+            if self.control_horizon > self.horizon:
+                raise ValueError(f"game.control_horizon must be <= game.horizon ({self.horizon}), got {self.control_horizon}")
+        if self.input_weighting not in ("shared", "alpha_scaled"):
+            raise ValueError(f"game.input_weighting must be 'shared' or 'alpha_scaled', got {self.input_weighting!r}")
+
+    @property
+    def n_dof(self) -> int:
+        return len(self.R_h)
+
+
+@dataclass(frozen=True)
+class ControlPreset:
+    """A named pair of impedance and game parameters, plus the robot's effort limit [N]."""
+
+    name: str
+    impedance: ImpedanceParameters = field(default_factory=ImpedanceParameters)
+    game: GameParameters = field(default_factory=GameParameters)
+    effort_limit: float = 100.0
+
+    def __post_init__(self) -> None:
+        if self.impedance.n_dof != self.game.n_dof:
+            raise ValueError(
+                f"impedance has {self.impedance.n_dof} DOFs but game.R_h has {self.game.n_dof} entries"
+            )
+        check_positive_scalar(self.effort_limit, "effort_limit")
+
+
+#: Thesis §5.2: x-y impedance, evaluation of the prediction model (α = 0.8, R_r = 5e-4).
+THESIS_EVALUATION = ControlPreset(name="thesis-evaluation")
+#: Thesis §5.2.3: application scenario, more assistance (α = 0.9, R_r = 1e-4).
+THESIS_APPLICATION = ControlPreset(
+    name="thesis-application", game=GameParameters(alpha=0.9, R_r=(1e-4, 1e-4))
+)

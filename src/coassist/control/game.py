@@ -1,0 +1,400 @@
+"""Two-player linear-quadratic MPC games between human and robot (thesis §3.2).
+
+Both players act on one impedance model through the same input matrix::
+
+    Y = F z + Φ U_h + Φ U_r                                               (eq. 3.9)
+
+and each scores the predicted output against both references over the horizon
+(y(k+i) against the references at k+i, DESIGN.md §2)::
+
+    J_p = Σ_i e_h(k+i)' W_p,h e_h(k+i) + e_r(k+i)' W_p,r e_r(k+i) + U_p' R̃_p U_p
+    e_h = y − y_ref,h,   e_r = y − y_ref,r                       (eq. 3.15–3.16)
+
+**Cooperative** (eq. 3.17, 3.23–3.26): both players share the state cost
+Q_gt = α Q̃_h + (1 − α) Q̃_r with Q_h = blkdiag(Q_hh, Q_hr), Q_r = blkdiag(Q_rh, Q_rr),
+so W_h,h = W_r,h = α Q_hh + (1 − α) Q_rh and W_h,r = W_r,r = α Q_hr + (1 − α) Q_rr.
+The augmented system of eq. 3.7 stacks two copies of the same state, so its output is
+[y; y] and its cost reduces exactly to the form above. Input weights stay R_h, R_r
+(eq. 3.17); ``input_weighting="alpha_scaled"`` uses α R_h and (1 − α) R_r as the
+thesis group's code does.
+
+**Nash** (non-cooperative): each player keeps its own Q, W_h,· = (Q_hh, Q_hr) and
+W_r,· = (Q_rh, Q_rr), no α mixing.
+
+The equilibrium solves both players' first-order conditions (eq. 3.27–3.31)::
+
+    [P_h + R̃_h   P_h      ] [U_h]   [Φ'(Ŵ_h,h R_h + Ŵ_h,r R_r − S_h F z)]
+    [P_r         P_r + R̃_r] [U_r] = [Φ'(Ŵ_r,h R_h + Ŵ_r,r R_r − S_r F z)]
+
+with S_p = Ŵ_p,h + Ŵ_p,r (block-diagonal over the horizon) and P_p = Φ' S_p Φ. In the
+thesis' notation this is U_h = −K_h U_r + L_h Z with K_h = (P_h + R̃_h)⁻¹ Φ' S_h Φ_r:
+the coupling gain multiplies the *other* player's input. In the cooperative game the
+matrix is symmetric positive definite — it is the Hessian of the shared cost plus
+both input costs, whose minimiser is therefore the equilibrium — and is factored by
+Cholesky; the Nash matrix is not symmetric and is LU-factored.
+
+The system is LTI, so only the rows of the solution that the receding horizon
+applies (u_h(k), u_r(k)) are kept, as gains::
+
+    [u_h(k); u_r(k)] = G_z z + G_h vec(ref_h) + G_r vec(ref_r)
+
+and a control tick is three matrix-vector products.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import ArrayLike
+
+from coassist._checks import (
+    as_square_matrix,
+    check_positive_definite,
+    check_positive_semidefinite,
+)
+from coassist.control.prediction import prediction_matrices
+from coassist.config import GameParameters
+from coassist.model.impedance import ImpedanceModel
+
+InputWeighting = Literal["shared", "alpha_scaled"]
+_Q_NAMES = ("Q_hh", "Q_hr", "Q_rh", "Q_rr")
+
+
+@dataclass(frozen=True)
+class EquilibriumGains:
+    """First-step gains of the equilibrium: [u_h(k); u_r(k)] = G_z z + G_h ref_h + G_r ref_r.
+
+    Shapes: G_z (2n, 2n), G_h and G_r (2n, Np·m); rows 0…n−1 give u_h, n…2n−1 give u_r.
+    """
+
+    G_z: np.ndarray
+    G_h: np.ndarray
+    G_r: np.ndarray
+
+
+class _LinearQuadraticGame:
+    """Shared machinery: prediction matrices, per-weight products, the equilibrium solve."""
+
+    def __init__(
+        self,
+        model: ImpedanceModel,
+        *,
+        Q_hh: ArrayLike,
+        Q_hr: ArrayLike,
+        Q_rh: ArrayLike,
+        Q_rr: ArrayLike,
+        R_h: ArrayLike,
+        R_r: ArrayLike,
+        horizon: int,
+        control_horizon: int | None,
+    ) -> None:
+        if not isinstance(model, ImpedanceModel):
+            raise ValueError(f"model must be an ImpedanceModel, got {type(model).__name__}")
+        self.model = model
+        n, m = model.n_dof, model.C.shape[0]
+        self._n, self._m = n, m
+        Qs = {}
+        for name, value in zip(_Q_NAMES, (Q_hh, Q_hr, Q_rh, Q_rr)):
+            Q = as_square_matrix(value, name, m)
+            check_positive_semidefinite(Q, name)
+            Qs[name] = Q
+        self.Q = Qs
+        self.R_h = as_square_matrix(R_h, "R_h", n)
+        self.R_r = as_square_matrix(R_r, "R_r", n)
+        check_positive_definite(self.R_h, "R_h")
+        check_positive_definite(self.R_r, "R_r")
+        self.F, self.Phi = prediction_matrices(model.Ad, model.Bd, model.C, horizon, control_horizon)
+        self.horizon = horizon
+        self.control_horizon = horizon if control_horizon is None else control_horizon
+        Np, Nc = self.horizon, self.control_horizon
+        # Φ' Ŵ for Ŵ = blkdiag over the horizon of each Q: the cost is linear in the
+        # four Q's, so these products are all an α change needs (no rebuild of Φ'QΦ).
+        phi_blocks = self.Phi.reshape(Np, m, Nc * n)
+        self._PtQ = {k: np.einsum("imj,mq->jiq", phi_blocks, Q).reshape(Nc * n, Np * m) for k, Q in Qs.items()}
+        self._PtQP = {k: PtQ @ self.Phi for k, PtQ in self._PtQ.items()}
+        self._PtQF = {k: PtQ @ self.F for k, PtQ in self._PtQ.items()}
+        self._R_h_tilde = np.kron(np.eye(Nc), self.R_h)
+        self._R_r_tilde = np.kron(np.eye(Nc), self.R_r)
+        self._ref_shape = (Np, m)
+
+    @property
+    def n_dof(self) -> int:
+        return self._n
+
+    @property
+    def reference_shape(self) -> tuple[int, int]:
+        """Shape (Np, 2n) of ref_h and ref_r: [position; velocity] at k+1…k+Np."""
+        return self._ref_shape
+
+    # -- weights of each player, as coefficients on (Q_hh, Q_hr, Q_rh, Q_rr) -------------
+    def _player_weights(self) -> tuple[dict[str, float], dict[str, float], dict[str, float], dict[str, float]]:
+        """(W_h,h, W_h,r, W_r,h, W_r,r) as linear combinations of the four Q's."""
+        raise NotImplementedError
+
+    def _input_weights(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._R_h_tilde, self._R_r_tilde
+
+    @staticmethod
+    def _combine(terms: dict[str, np.ndarray], coeffs: dict[str, float]) -> np.ndarray:
+        out = np.zeros_like(next(iter(terms.values())))
+        for name, c in coeffs.items():
+            if c != 0.0:
+                out += c * terms[name]
+        return out
+
+    def _assemble(self) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+        """The stacked first-order conditions: matrix H and, per player, Φ'Ŵ_·,h, Φ'Ŵ_·,r, Φ'S F."""
+        w_hh, w_hr, w_rh, w_rr = self._player_weights()
+        R_h, R_r = self._input_weights()
+        cache: dict = {}
+
+        def combine(terms: dict[str, np.ndarray], coeffs: dict[str, float]) -> np.ndarray:
+            # In the cooperative game both players' terms are equal: build each once,
+            # and let _compute_gains see that they are the same object.
+            key = (id(terms), tuple(sorted(coeffs.items())))
+            if key not in cache:
+                cache[key] = self._combine(terms, coeffs)
+            return cache[key]
+
+        P_h = combine(self._PtQP, _add(w_hh, w_hr))
+        P_r = combine(self._PtQP, _add(w_rh, w_rr))
+        H = np.block([[P_h + R_h, P_h], [P_r, P_r + R_r]])
+        ref_h_terms = [combine(self._PtQ, w_hh), combine(self._PtQ, w_rh)]
+        ref_r_terms = [combine(self._PtQ, w_hr), combine(self._PtQ, w_rr)]
+        state_terms = [combine(self._PtQF, _add(w_hh, w_hr)), combine(self._PtQF, _add(w_rh, w_rr))]
+        return H, ref_h_terms, ref_r_terms, state_terms
+
+    def _factor(self, H: np.ndarray):
+        raise NotImplementedError
+
+    def _solve_factored(self, factor, rhs: np.ndarray, transposed: bool = False) -> np.ndarray:
+        raise NotImplementedError
+
+    def _compute_gains(self) -> None:
+        H, ref_h_terms, ref_r_terms, state_terms = self._assemble()
+        factor = self._factor(H)
+        n, N = self._n, self._n * self.control_horizon
+        # Only u_h(k) and u_r(k) are applied: the rows E' H⁻¹ suffice, found from H' X = E.
+        E = np.zeros((2 * N, 2 * n))
+        E[:n, :n] = np.eye(n)
+        E[N : N + n, n:] = np.eye(n)
+        X = self._solve_factored(factor, E, transposed=True).T  # (2n, 2N) = E' H⁻¹
+        X_h, X_r = X[:, :N], X[:, N:]
+        X_sum = None
+
+        def apply(terms: list[np.ndarray]) -> np.ndarray:
+            nonlocal X_sum
+            if terms[0] is terms[1]:
+                if X_sum is None:
+                    X_sum = X_h + X_r
+                return X_sum @ terms[0]
+            return X_h @ terms[0] + X_r @ terms[1]
+
+        gains = EquilibriumGains(G_z=-apply(state_terms), G_h=apply(ref_h_terms), G_r=apply(ref_r_terms))
+        for g in (gains.G_z, gains.G_h, gains.G_r):
+            g.setflags(write=False)
+        # One attribute assignment: a concurrent tick sees the old gains or the new, never a mix.
+        self._state = (gains, factor, ref_h_terms, ref_r_terms, state_terms)
+
+    @property
+    def gains(self) -> EquilibriumGains:
+        return self._state[0]
+
+    def _check_refs(self, ref_h: np.ndarray, ref_r: np.ndarray) -> None:
+        if ref_h.shape != self._ref_shape:
+            raise ValueError(f"ref_h must have shape {self._ref_shape} (horizon, 2n), got {ref_h.shape}")
+        if ref_r.shape != self._ref_shape:
+            raise ValueError(f"ref_r must have shape {self._ref_shape} (horizon, 2n), got {ref_r.shape}")
+
+    def solve(self, z: ArrayLike, ref_h: ArrayLike, ref_r: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """First-step equilibrium efforts (u_h(k), u_r(k)), each (n,) [N or N·m].
+
+        Parameters
+        ----------
+        z : (2n,) state [Δx; v].
+        ref_h, ref_r : (Np, 2n) the human's and the robot's reference outputs
+            [position; velocity] at k+1…k+Np, DOF order as in M.
+        """
+        z = np.asarray(z, dtype=float)
+        ref_h = np.asarray(ref_h, dtype=float)
+        ref_r = np.asarray(ref_r, dtype=float)
+        self._check_refs(ref_h, ref_r)
+        g = self._state[0]
+        dot = np.dot  # measured faster than the @ operator for these small products
+        u = dot(g.G_z, z)
+        u += dot(g.G_h, ref_h.reshape(-1))
+        u += dot(g.G_r, ref_r.reshape(-1))
+        return u[: self._n], u[self._n :]
+
+    def solve_horizon(self, z: ArrayLike, ref_h: ArrayLike, ref_r: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """The whole equilibrium input sequences U_h, U_r, each (Nc, n) (for analysis, not the tick)."""
+        z = np.asarray(z, dtype=float)
+        ref_h = np.asarray(ref_h, dtype=float)
+        ref_r = np.asarray(ref_r, dtype=float)
+        self._check_refs(ref_h, ref_r)
+        _, factor, ref_h_terms, ref_r_terms, state_terms = self._state
+        rh, rr = ref_h.reshape(-1), ref_r.reshape(-1)
+        rhs = np.concatenate([ref_h_terms[p] @ rh + ref_r_terms[p] @ rr - state_terms[p] @ z for p in (0, 1)])
+        U = self._solve_factored(factor, rhs)
+        N = self._n * self.control_horizon
+        return U[:N].reshape(-1, self._n), U[N:].reshape(-1, self._n)
+
+    def predict_output(self, z: ArrayLike, U_h: ArrayLike, U_r: ArrayLike) -> np.ndarray:
+        """Predicted outputs Y = F z + Φ (U_h + U_r), shape (Np, 2n) (eq. 3.9)."""
+        U = np.asarray(U_h, dtype=float).reshape(-1) + np.asarray(U_r, dtype=float).reshape(-1)
+        return (self.F @ np.asarray(z, dtype=float) + self.Phi @ U).reshape(self._ref_shape)
+
+
+def _add(a: dict[str, float], b: dict[str, float]) -> dict[str, float]:
+    out = dict(a)
+    for k, v in b.items():
+        out[k] = out.get(k, 0.0) + v
+    return out
+
+
+class CooperativeGame(_LinearQuadraticGame):
+    """Cooperative game-theoretic MPC: human and robot share the α-weighted cost (eq. 3.17–3.31).
+
+    Parameters
+    ----------
+    model : the impedance model both players act on.
+    Q_hh, Q_hr : (2n, 2n) the human's weights on tracking its own and the robot's
+        reference (position then velocity). PSD.
+    Q_rh, Q_rr : (2n, 2n) the robot's weights on the human's and its own reference. PSD.
+    R_h, R_r : (n, n) effort weights [1/N²]; SPD. A lower R_r lets the robot assist harder.
+    alpha : share of the human's cost in the common objective, 0 ≤ α ≤ 1 (0 < α < 1
+        with ``input_weighting="alpha_scaled"``). α → 1 follows the human's reference.
+    horizon : prediction horizon Np [samples].
+    control_horizon : Nc ≤ Np [samples]; the input is held after Nc. None: Nc = Np.
+    input_weighting : "shared" (eq. 3.17: R_h, R_r) or "alpha_scaled" (α R_h, (1 − α) R_r).
+    """
+
+    def __init__(
+        self,
+        model: ImpedanceModel,
+        *,
+        Q_hh: ArrayLike,
+        Q_hr: ArrayLike,
+        Q_rh: ArrayLike,
+        Q_rr: ArrayLike,
+        R_h: ArrayLike,
+        R_r: ArrayLike,
+        alpha: float,
+        horizon: int,
+        control_horizon: int | None = None,
+        input_weighting: InputWeighting = "shared",
+    ) -> None:
+        if input_weighting not in ("shared", "alpha_scaled"):
+            raise ValueError(f"input_weighting must be 'shared' or 'alpha_scaled', got {input_weighting!r}")
+        super().__init__(
+            model, Q_hh=Q_hh, Q_hr=Q_hr, Q_rh=Q_rh, Q_rr=Q_rr, R_h=R_h, R_r=R_r,
+            horizon=horizon, control_horizon=control_horizon,
+        )
+        self.input_weighting = input_weighting
+        self._alpha = self._check_alpha(alpha)
+        self._compute_gains()
+
+    def _check_alpha(self, alpha: float) -> float:
+        try:
+            a = float(alpha)
+        except (TypeError, ValueError):
+            raise ValueError(f"alpha must be a number, got {alpha!r}") from None
+        if self.input_weighting == "alpha_scaled":
+            if not 0.0 < a < 1.0:
+                raise ValueError(f"alpha must be in (0, 1) with input_weighting='alpha_scaled', got {alpha!r}")
+        elif not 0.0 <= a <= 1.0:
+            raise ValueError(f"alpha must be in [0, 1], got {alpha!r}")
+        return a
+
+    @property
+    def alpha(self) -> float:
+        return self._alpha
+
+    def set_alpha(self, alpha: float) -> None:
+        """Change α at run time; the gains are recomputed and swapped in at once.
+
+        The new gains are the exact equilibrium for the new α, so the next effort is
+        the new optimum: it changes by no more than the optimum itself does.
+        """
+        a = self._check_alpha(alpha)
+        previous = self._alpha
+        self._alpha = a
+        try:
+            self._compute_gains()
+        except Exception:
+            self._alpha = previous
+            raise
+
+    def _player_weights(self):
+        a = self._alpha
+        w_h = {"Q_hh": a, "Q_rh": 1.0 - a}  # weight on e_h, shared by both players
+        w_r = {"Q_hr": a, "Q_rr": 1.0 - a}  # weight on e_r
+        return w_h, w_r, w_h, w_r
+
+    def _input_weights(self):
+        if self.input_weighting == "alpha_scaled":
+            return self._alpha * self._R_h_tilde, (1.0 - self._alpha) * self._R_r_tilde
+        return self._R_h_tilde, self._R_r_tilde
+
+    def _factor(self, H):
+        try:
+            return scipy.linalg.cho_factor(H, lower=True, check_finite=False)
+        except np.linalg.LinAlgError:
+            raise ValueError("the cooperative game's Hessian is not positive definite; check R_h and R_r") from None
+
+    def _solve_factored(self, factor, rhs, transposed=False):
+        return scipy.linalg.cho_solve(factor, rhs, check_finite=False)  # H is symmetric
+
+
+class NashGame(_LinearQuadraticGame):
+    """Non-cooperative Nash equilibrium: each player minimises its own cost (eq. 3.15–3.16).
+
+    Q_h = blkdiag(Q_hh, Q_hr) for the human and Q_r = blkdiag(Q_rh, Q_rr) for the robot,
+    no α mixing. Same parameters and call as :class:`CooperativeGame` minus ``alpha``.
+    """
+
+    def __init__(
+        self,
+        model: ImpedanceModel,
+        *,
+        Q_hh: ArrayLike,
+        Q_hr: ArrayLike,
+        Q_rh: ArrayLike,
+        Q_rr: ArrayLike,
+        R_h: ArrayLike,
+        R_r: ArrayLike,
+        horizon: int,
+        control_horizon: int | None = None,
+    ) -> None:
+        super().__init__(
+            model, Q_hh=Q_hh, Q_hr=Q_hr, Q_rh=Q_rh, Q_rr=Q_rr, R_h=R_h, R_r=R_r,
+            horizon=horizon, control_horizon=control_horizon,
+        )
+        self._compute_gains()
+
+    def _player_weights(self):
+        return {"Q_hh": 1.0}, {"Q_hr": 1.0}, {"Q_rh": 1.0}, {"Q_rr": 1.0}
+
+    def _factor(self, H):
+        lu = scipy.linalg.lu_factor(H, check_finite=False)
+        diag = np.abs(np.diag(lu[0]))
+        if diag.min() <= 1e-13 * diag.max():
+            raise ValueError("the Nash game has no unique equilibrium for these weights (singular first-order conditions)")
+        return lu
+
+    def _solve_factored(self, factor, rhs, transposed=False):
+        return scipy.linalg.lu_solve(factor, rhs, trans=1 if transposed else 0, check_finite=False)
+
+
+def cooperative_game(model: ImpedanceModel, params: GameParameters) -> CooperativeGame:
+    """Build the :class:`CooperativeGame` of a validated :class:`~coassist.config.GameParameters`."""
+    return CooperativeGame(
+        model,
+        Q_hh=params.Q_hh, Q_hr=params.Q_hr, Q_rh=params.Q_rh, Q_rr=params.Q_rr,
+        R_h=params.R_h, R_r=params.R_r, alpha=params.alpha,
+        horizon=params.horizon, control_horizon=params.control_horizon,
+        input_weighting=params.input_weighting,  # type: ignore[arg-type]
+    )

@@ -1,0 +1,28 @@
+"""Trial logs, datasets on disk, and the loader for real UR5 recordings."""
+
+from coassist.data.rosbag_csv import RecordingError, load_ros_trial, load_ros_user
+from coassist.data.store import (
+    Dataset,
+    TrialFileError,
+    append_to_dataset,
+    read_dataset,
+    read_trial,
+    write_dataset,
+    write_trial,
+)
+from coassist.data.trial import Trial, TrialMeta
+
+__all__ = [
+    "Dataset",
+    "RecordingError",
+    "Trial",
+    "TrialFileError",
+    "TrialMeta",
+    "append_to_dataset",
+    "load_ros_trial",
+    "load_ros_user",
+    "read_dataset",
+    "read_trial",
+    "write_dataset",
+    "write_trial",
+]

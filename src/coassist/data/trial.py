@@ -1,0 +1,335 @@
+"""One logged trial of physical human-robot interaction.
+
+A :class:`Trial` is the unit everything else exchanges: the simulator logs one per run,
+the real-recording loader builds one per rosbag export, the intent model trains on
+windows cut from a set of them (a dataset D_k, thesis Algorithm 4.1), and the metrics of
+thesis §5.2.4 are computed on them.
+
+Conventions (DESIGN.md §2):
+
+- SI units: s, m, m/s, N.
+- ``d`` is the number of controlled Cartesian DOFs (1 to 6). Axis ``j`` of every
+  ``(T, d)`` array is the same DOF; the store names them x, y, z, rx, ry, rz in order.
+- ``prediction[k, i - 1]`` is the position predicted at tick ``k`` for tick ``k + i``,
+  ``i = 1 … H``; a row of NaN means "no prediction in use at that tick".
+
+Both classes are frozen and validated on construction, so a Trial that exists is
+consistent: every array has the right shape, is float64 (``fault`` int64), is a
+read-only copy of what was passed in, and time is strictly increasing.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = ["MAX_DOF", "SOURCES", "Trial", "TrialMeta"]
+
+#: Most Cartesian DOFs a trial may carry (3 linear + 3 angular).
+MAX_DOF = 6
+#: Where a trial comes from.
+SOURCES = ("sim", "real")
+
+
+def _require_str(value: Any, name: str, *, allow_empty: bool = False) -> str:
+    if not isinstance(value, str):
+        raise ValueError(f"TrialMeta.{name} must be a string, got {type(value).__name__} {value!r}")
+    if not allow_empty and not value.strip():
+        raise ValueError(f"TrialMeta.{name} must be a non-empty string")
+    return value
+
+
+def _freeze_json(value: Any) -> Any:
+    """Deep read-only view of a JSON value (dicts become mapping proxies, lists tuples)."""
+    if isinstance(value, dict):
+        return MappingProxyType({k: _freeze_json(v) for k, v in value.items()})
+    if isinstance(value, list):
+        return tuple(_freeze_json(v) for v in value)
+    return value
+
+
+def _thaw_json(value: Any) -> Any:
+    """Inverse of :func:`_freeze_json`: plain dicts and lists for ``json.dumps``."""
+    if isinstance(value, Mapping):
+        return {k: _thaw_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_thaw_json(v) for v in value]
+    return value
+
+
+@dataclass(frozen=True)
+class TrialMeta:
+    """What a trial is: who, which task, which object and controller, which model.
+
+    Attributes
+    ----------
+    user : str
+        Operator id, e.g. ``"user-0"`` (simulated) or ``"user-a"`` (recorded).
+    task : str
+        Nominal path: ``"linear"``, ``"curved"``, ``"sinusoidal"``, ``"z"``, ``"real"``, …
+    object : str
+        Co-manipulated object: ``"handle"``, ``"board"``, ``"heavy"``, ``"unknown"``.
+    controller : str
+        ``"cooperative"``, ``"impedance"``, ``"manual"``, ``"unknown"``.
+    model_id : str or None
+        Intent model in the loop; ``None`` means the nominal reference was used as the
+        predicted intent (dataset D0 of Algorithm 4.1).
+    seed : int or None
+        Seed of the simulated trial; ``None`` for recordings.
+    source : str
+        ``"sim"`` or ``"real"``.
+    dt : float
+        Nominal control period in s (> 0). For recordings, the median period.
+    extra : Mapping
+        JSON-serialisable task details (obstacle box, target point, start/end, loader
+        diagnostics, …). Stored normalised through JSON (tuples become lists on the
+        way in, so a written and re-read meta compares equal) and exposed read-only.
+    """
+
+    user: str
+    task: str
+    object: str
+    controller: str
+    model_id: str | None
+    seed: int | None
+    source: str
+    dt: float
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        _require_str(self.user, "user")
+        _require_str(self.task, "task")
+        _require_str(self.object, "object")
+        _require_str(self.controller, "controller")
+        if self.model_id is not None:
+            _require_str(self.model_id, "model_id")
+        if self.seed is not None:
+            if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
+                raise ValueError(f"TrialMeta.seed must be an int or None, got {self.seed!r}")
+            object.__setattr__(self, "seed", int(self.seed))
+        if self.source not in SOURCES:
+            raise ValueError(f"TrialMeta.source must be one of {SOURCES}, got {self.source!r}")
+        if isinstance(self.dt, bool):
+            raise ValueError(f"TrialMeta.dt must be a number, got {self.dt!r}")
+        try:
+            dt = float(self.dt)
+        except (TypeError, ValueError):
+            raise ValueError(f"TrialMeta.dt must be a number, got {self.dt!r}") from None
+        if not math.isfinite(dt) or dt <= 0.0:
+            raise ValueError(f"TrialMeta.dt must be a finite number > 0 (s), got {self.dt!r}")
+        object.__setattr__(self, "dt", dt)
+        if not isinstance(self.extra, Mapping):
+            raise ValueError(f"TrialMeta.extra must be a mapping, got {type(self.extra).__name__}")
+        # Normalise through strict JSON now, so that a meta that exists can always be
+        # written, and reads back equal (tuples -> lists, numpy scalars rejected early).
+        try:
+            text = json.dumps(_thaw_json(self.extra), allow_nan=False, sort_keys=True)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"TrialMeta.extra must be JSON-serialisable (no NaN/inf, str keys): {exc}") from None
+        object.__setattr__(self, "extra", _freeze_json(json.loads(text)))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-ready dict (the form stored in files and manifests)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["extra"] = _thaw_json(self.extra)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> TrialMeta:
+        """Inverse of :meth:`to_dict`; unknown or missing keys raise ``ValueError``."""
+        if not isinstance(data, Mapping):
+            raise ValueError(f"TrialMeta must be read from a mapping, got {type(data).__name__}")
+        names = [f.name for f in fields(cls)]
+        unknown = sorted(set(data) - set(names))
+        if unknown:
+            raise ValueError(f"TrialMeta has no field(s) {unknown}")
+        missing = [n for n in names if n not in data and n != "extra"]
+        if missing:
+            raise ValueError(f"TrialMeta is missing field(s) {missing}")
+        return cls(**{n: data[n] for n in names if n in data})
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), allow_nan=False, sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str | bytes) -> TrialMeta:
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"TrialMeta JSON is malformed: {exc}") from None
+        return cls.from_dict(data)
+
+
+def _float_array(value: ArrayLike, name: str) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=np.float64, copy=True)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"Trial.{name} must be numeric: {exc}") from None
+    arr.setflags(write=False)
+    return arr
+
+
+def _check_shape(arr: np.ndarray, name: str, expected: tuple[int | str, ...]) -> None:
+    ok = arr.ndim == len(expected) and all(
+        isinstance(e, str) or a == e for a, e in zip(arr.shape, expected)
+    )
+    if not ok:
+        shown = "(" + ", ".join(str(e) for e in expected) + ("," if len(expected) == 1 else "") + ")"
+        raise ValueError(f"Trial.{name} has shape {arr.shape}, expected {shown}")
+
+
+def _check_finite(arr: np.ndarray, name: str) -> None:
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.argwhere(~np.isfinite(arr))[0][0])
+        raise ValueError(f"Trial.{name} has non-finite values (first at tick {bad})")
+
+
+# Fields shaped like the pose, in the order the store writes them.
+_TD_REQUIRED = ("velocity", "wrench", "reference")
+_TD_OPTIONAL = ("intent", "effort_h", "effort_r")
+
+
+@dataclass(frozen=True, eq=False)
+class Trial:
+    """A logged trial: T ticks of the d controlled DOFs.
+
+    Attributes
+    ----------
+    meta : TrialMeta
+    time : ndarray, shape (T,)
+        Time stamps in s, strictly increasing; 0 at the first tick for logged and
+        loaded trials.
+    pose : ndarray, shape (T, d)
+        Measured end-effector position in m.
+    velocity : ndarray, shape (T, d)
+        Measured end-effector velocity in m/s.
+    wrench : ndarray, shape (T, d)
+        Interaction force measured at the sensor in N.
+    reference : ndarray, shape (T, d)
+        Nominal reference y_ref,r from the motion planner in m.
+    prediction : ndarray, shape (T, H, d), optional
+        Predicted human intent in use at tick k for ticks k+1 … k+H, in m. NaN rows
+        mark ticks without a prediction (e.g. before the history window is full).
+    intent : ndarray, shape (T, d), optional
+        The operator's true desired position in m (simulation only).
+    effort_h, effort_r : ndarray, shape (T, d), optional
+        Human and robot efforts applied, in N.
+    fault : ndarray of int64, shape (T,), optional
+        Controller fault flags per tick (0 = none).
+
+    Notes
+    -----
+    Equality is identity (``eq=False``): numpy arrays have no single truth value. Use
+    :meth:`equals` for an exact, bit-for-bit comparison.
+    """
+
+    meta: TrialMeta
+    time: np.ndarray
+    pose: np.ndarray
+    velocity: np.ndarray
+    wrench: np.ndarray
+    reference: np.ndarray
+    prediction: np.ndarray | None = None
+    intent: np.ndarray | None = None
+    effort_h: np.ndarray | None = None
+    effort_r: np.ndarray | None = None
+    fault: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.meta, TrialMeta):
+            raise ValueError(f"Trial.meta must be a TrialMeta, got {type(self.meta).__name__}")
+        set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
+
+        time = _float_array(self.time, "time")
+        if time.ndim != 1 or time.shape[0] < 1:
+            raise ValueError(f"Trial.time has shape {time.shape}, expected (T,) with T >= 1")
+        _check_finite(time, "time")
+        steps = np.diff(time)
+        if np.any(steps <= 0.0):
+            k = int(np.argmax(steps <= 0.0))
+            raise ValueError(
+                f"Trial.time must be strictly increasing; time[{k + 1}] = {time[k + 1]!r} <= time[{k}] = {time[k]!r}"
+            )
+        set_("time", time)
+        n = time.shape[0]
+
+        pose = _float_array(self.pose, "pose")
+        if pose.ndim != 2 or pose.shape[0] != n or not 1 <= pose.shape[1] <= MAX_DOF:
+            raise ValueError(f"Trial.pose has shape {pose.shape}, expected ({n}, d) with 1 <= d <= {MAX_DOF}")
+        _check_finite(pose, "pose")
+        set_("pose", pose)
+        d = pose.shape[1]
+
+        for name in _TD_REQUIRED + _TD_OPTIONAL:
+            value = getattr(self, name)
+            if value is None:
+                if name in _TD_REQUIRED:
+                    raise ValueError(f"Trial.{name} is required")
+                continue
+            arr = _float_array(value, name)
+            _check_shape(arr, name, (n, d))
+            _check_finite(arr, name)
+            set_(name, arr)
+
+        if self.prediction is not None:
+            pred = _float_array(self.prediction, "prediction")
+            _check_shape(pred, "prediction", (n, "H", d))
+            if pred.shape[1] < 1:
+                raise ValueError(f"Trial.prediction has shape {pred.shape}, expected ({n}, H, {d}) with H >= 1")
+            # NaN marks "no prediction at this tick"; infinities are always a bug.
+            if np.any(np.isinf(pred)):
+                raise ValueError("Trial.prediction has infinite values")
+            set_("prediction", pred)
+
+        if self.fault is not None:
+            raw = np.array(self.fault, copy=True)
+            if raw.dtype.kind == "f":
+                if not np.all(np.isfinite(raw)) or np.any(raw != np.round(raw)):
+                    raise ValueError("Trial.fault must hold integer flags")
+            elif raw.dtype.kind not in "biu":
+                raise ValueError(f"Trial.fault must hold integer flags, got dtype {raw.dtype}")
+            fault = raw.astype(np.int64)
+            _check_shape(fault, "fault", (n,))
+            fault.setflags(write=False)
+            set_("fault", fault)
+
+    @property
+    def n_samples(self) -> int:
+        """Number of ticks T."""
+        return int(self.time.shape[0])
+
+    @property
+    def n_dof(self) -> int:
+        """Number of controlled DOFs d."""
+        return int(self.pose.shape[1])
+
+    @property
+    def horizon(self) -> int | None:
+        """Prediction horizon H in samples, or None without predictions."""
+        return None if self.prediction is None else int(self.prediction.shape[1])
+
+    @property
+    def duration(self) -> float:
+        """time[-1] − time[0], in s."""
+        return float(self.time[-1] - self.time[0])
+
+    def equals(self, other: object) -> bool:
+        """Exact comparison: equal meta and bit-identical arrays (NaN payloads included)."""
+        if not isinstance(other, Trial) or self.meta != other.meta:
+            return False
+        for f in fields(self):
+            if f.name == "meta":
+                continue
+            a, b = getattr(self, f.name), getattr(other, f.name)
+            if (a is None) != (b is None):
+                return False
+            if a is not None and (a.dtype != b.dtype or a.shape != b.shape or a.tobytes() != b.tobytes()):
+                return False
+        return True

@@ -1,0 +1,112 @@
+"""The guarded controllers: the law when inputs are good, zero effort and a flag when not."""
+
+import logging
+
+import numpy as np
+import pytest
+
+from coassist.config import THESIS_EVALUATION
+from coassist.control import (
+    AssistiveController,
+    Fault,
+    ImpedanceControl,
+    ManualGuidance,
+    cooperative_game,
+    saturate,
+)
+from coassist.model import ImpedanceModel
+
+
+@pytest.fixture
+def plant():
+    p = THESIS_EVALUATION.impedance
+    return ImpedanceModel(p.M, p.D, p.K, p.dt)
+
+
+@pytest.fixture
+def assistive(plant):
+    return AssistiveController(cooperative_game(plant, THESIS_EVALUATION.game), effort_limit=50.0)
+
+
+def inputs(rng, horizon=50):
+    return rng.normal(size=4) * 0.01, rng.normal(size=(horizon, 4)) * 0.01, rng.normal(size=(horizon, 4)) * 0.01, rng.normal(size=2)
+
+
+def test_unsaturated_step_is_the_game_solution(assistive):
+    z, ref_h, ref_r, wrench = inputs(np.random.default_rng(0))
+    out = assistive.step(z, ref_h, ref_r, wrench)
+    u_h, u_r = assistive.game.solve(z, ref_h, ref_r)
+    assert out.fault == Fault.NONE
+    np.testing.assert_array_equal(out.u_r, u_r)
+    np.testing.assert_array_equal(out.u_h_model, u_h)
+
+
+@pytest.mark.parametrize(
+    "where, flag",
+    [("z", Fault.NONFINITE_STATE), ("ref_h", Fault.NONFINITE_REFERENCE), ("ref_r", Fault.NONFINITE_REFERENCE), ("wrench", Fault.NONFINITE_WRENCH)],
+)
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_input_gives_zero_effort_and_a_flag(assistive, where, flag, bad):
+    z, ref_h, ref_r, wrench = inputs(np.random.default_rng(1))
+    args = {"z": z, "ref_h": ref_h, "ref_r": ref_r, "wrench": wrench}
+    args[where].flat[1] = bad
+    out = assistive.step(**args)
+    assert out.fault & flag
+    np.testing.assert_array_equal(out.u_r, [0.0, 0.0])
+
+
+def test_fault_is_logged_once_and_the_loop_recovers(assistive, caplog):
+    z, ref_h, ref_r, wrench = inputs(np.random.default_rng(2))
+    bad = wrench.copy()
+    bad[0] = np.nan
+    with caplog.at_level(logging.WARNING, logger="coassist.control.controllers"):
+        for _ in range(5):
+            assistive.step(z, ref_h, ref_r, bad)
+    assert len([r for r in caplog.records if "NONFINITE_WRENCH" in r.getMessage()]) == 1
+    assert assistive.step(z, ref_h, ref_r, wrench).fault == Fault.NONE
+
+
+def test_saturation_keeps_direction_and_respects_the_limit():
+    u, clipped = saturate(np.array([30.0, -40.0]), np.array([10.0, 10.0]))
+    assert clipped
+    np.testing.assert_allclose(u, [7.5, -10.0])  # scaled by 10/40
+    u, clipped = saturate(np.array([3.0, -4.0]), np.array([10.0, 10.0]))
+    assert not clipped
+    np.testing.assert_array_equal(u, [3.0, -4.0])
+
+
+def test_controller_saturates_large_efforts(plant):
+    controller = AssistiveController(cooperative_game(plant, THESIS_EVALUATION.game), effort_limit=1.0)
+    ref_h = np.tile([0.3, 0.0, 0.0, 0.0], (50, 1))  # 30 cm away: a large effort
+    out = controller.step(np.zeros(4), ref_h, np.zeros((50, 4)), np.zeros(2))
+    raw = controller.game.solve(np.zeros(4), ref_h, np.zeros((50, 4)))[1]
+    assert out.fault == Fault.SATURATED
+    assert np.max(np.abs(out.u_r)) == pytest.approx(1.0)
+    np.testing.assert_allclose(out.u_r / np.linalg.norm(out.u_r), raw / np.linalg.norm(raw))
+
+
+def test_wrong_shapes_never_raise_inside_the_loop(assistive):
+    out = assistive.step(np.zeros(4), np.zeros((3, 4)), np.zeros((50, 4)), np.zeros(2))
+    assert out.fault == Fault.INTERNAL_ERROR
+    np.testing.assert_array_equal(out.u_r, [0.0, 0.0])
+
+
+def test_impedance_control_is_a_spring_toward_the_nominal_reference(plant):
+    imp = ImpedanceControl(plant, [200.0, 100.0])
+    z = np.array([0.1, 0.2, 5.0, 5.0])
+    ref_r = np.array([[0.15, 0.1, 0.0, 0.0]])
+    out = imp.step(z, np.zeros((1, 4)), ref_r, np.zeros(2))
+    np.testing.assert_allclose(out.u_r, [200 * 0.05, 100 * -0.1])  # K (x_ref,r − x), hand computed
+    assert imp.name == "impedance"
+
+
+def test_manual_guidance_applies_no_effort(plant):
+    mg = ManualGuidance(plant)
+    out = mg.step(np.ones(4), np.ones((1, 4)) * 3, np.ones((1, 4)) * 2, np.ones(2))
+    np.testing.assert_array_equal(out.u_r, [0.0, 0.0])
+    assert out.fault == Fault.NONE
+
+
+def test_effort_limit_is_validated(plant):
+    with pytest.raises(ValueError, match="effort_limit must be > 0"):
+        ImpedanceControl(plant, 100.0, effort_limit=[10.0, 0.0])

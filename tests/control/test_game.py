@@ -1,0 +1,244 @@
+"""The game's closed form against independent references.
+
+The reference is built the thesis' way, from the augmented system of eq. 3.7
+(two copies of the state, output [y; y], stacked errors E_gt of eq. 3.18 with the
+DESIGN.md §2 indexing), with prediction matrices obtained by simulating impulse
+responses — no code shared with the library beyond the impedance model.
+"""
+
+import numpy as np
+import osqp
+import pytest
+import scipy.linalg
+import scipy.sparse
+
+from coassist.control import CooperativeGame, NashGame
+from coassist.model import ImpedanceModel
+
+
+def random_psd(rng, m, rank=None):
+    a = rng.normal(size=(m, rank or m))
+    return a @ a.T / m
+
+
+def random_instance(rng, n, Np, Nc):
+    model = ImpedanceModel(rng.uniform(2, 10, n), rng.uniform(20, 100, n), rng.uniform(0, 50, n), 0.008)
+    m = 2 * n
+    Q = {k: random_psd(rng, m) * rng.uniform(50, 500) for k in ("Q_hh", "Q_hr", "Q_rh", "Q_rr")}
+    R_h = random_psd(rng, n) * 1e-3 + 1e-3 * np.eye(n)
+    R_r = random_psd(rng, n) * 1e-3 + 1e-3 * np.eye(n)
+    z = rng.normal(size=m) * 0.1
+    ref_h = rng.normal(size=(Np, m)) * 0.1
+    ref_r = rng.normal(size=(Np, m)) * 0.1
+    return model, Q, R_h, R_r, z, ref_h, ref_r
+
+
+def augmented_prediction(model, Np, Nc):
+    """F_gt, Φ_gt of eq. 3.7–3.12 for z_gt = [z; z], by simulating the augmented system."""
+    n = model.n_dof
+    A_gt = scipy.linalg.block_diag(model.Ad, model.Ad)
+    B_gt = np.vstack([model.Bd, model.Bd])
+    C_gt = scipy.linalg.block_diag(model.C, model.C)
+
+    def simulate(z0, U):
+        z, out = z0, []
+        for i in range(Np):
+            z = A_gt @ z + B_gt @ U[min(i, Nc - 1)]
+            out.append(C_gt @ z)
+        return np.concatenate(out)
+
+    F = np.column_stack([simulate(e, np.zeros((Nc, n))) for e in np.eye(4 * n)])
+    Phi = np.column_stack([simulate(np.zeros(4 * n), e.reshape(Nc, n)) for e in np.eye(n * Nc)])
+    return F, Phi
+
+
+def stacked_refs(ref_h, ref_r):
+    """[y_ref,h(k+1); y_ref,r(k+1); …] as in eq. 3.18 / 3.31."""
+    return np.concatenate([np.concatenate([h, r]) for h, r in zip(ref_h, ref_r)])
+
+
+def joint_minimiser(model, Q, R_h, R_r, alpha, Np, Nc, z, ref_h, ref_r):
+    """argmin over (U_h, U_r) of E_gt' Q_gt E_gt + U_h' R̃_h U_h + U_r' R̃_r U_r (dense KKT solve)."""
+    F, Phi = augmented_prediction(model, Np, Nc)
+    Q_h = scipy.linalg.block_diag(Q["Q_hh"], Q["Q_hr"])
+    Q_r = scipy.linalg.block_diag(Q["Q_rh"], Q["Q_rr"])
+    Q_gt = np.kron(np.eye(Np), alpha * Q_h + (1 - alpha) * Q_r)  # eq. 3.17, 3.19–3.20
+    G = np.hstack([Phi, Phi])  # both players through B_h = B_r
+    target = stacked_refs(ref_h, ref_r) - F @ np.concatenate([z, z])
+    R = scipy.linalg.block_diag(np.kron(np.eye(Nc), R_h), np.kron(np.eye(Nc), R_r))
+    H = G.T @ Q_gt @ G + R
+    U = np.linalg.solve(H, G.T @ Q_gt @ target)
+    return U, H, G.T @ Q_gt @ target
+
+
+CASES = [(1, 1, 1), (1, 8, 8), (2, 5, 2), (2, 20, 20), (3, 10, 4), (3, 15, 15), (6, 6, 3), (6, 12, 12)]
+
+
+@pytest.mark.parametrize("n, Np, Nc", CASES)
+def test_cooperative_equilibrium_is_the_joint_minimiser(n, Np, Nc):
+    rng = np.random.default_rng(1000 * n + 10 * Np + Nc)
+    model, Q, R_h, R_r, z, ref_h, ref_r = random_instance(rng, n, Np, Nc)
+    alpha = rng.uniform(0.05, 0.95)
+    game = CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=alpha, horizon=Np, control_horizon=Nc)
+    U_ref, _, _ = joint_minimiser(model, Q, R_h, R_r, alpha, Np, Nc, z, ref_h, ref_r)
+    U_h, U_r = game.solve_horizon(z, ref_h, ref_r)
+    U = np.concatenate([U_h.reshape(-1), U_r.reshape(-1)])
+    assert np.linalg.norm(U - U_ref) <= 1e-8 * np.linalg.norm(U_ref)
+    u_h, u_r = game.solve(z, ref_h, ref_r)
+    first = np.concatenate([U_ref[:n], U_ref[n * Nc : n * Nc + n]])
+    assert np.linalg.norm(np.concatenate([u_h, u_r]) - first) <= 1e-8 * np.linalg.norm(first)
+
+
+@pytest.mark.parametrize("n, Np, Nc", [(2, 10, 10), (6, 8, 4)])
+def test_cooperative_equilibrium_agrees_with_osqp(n, Np, Nc):
+    rng = np.random.default_rng(7 + n)
+    model, Q, R_h, R_r, z, ref_h, ref_r = random_instance(rng, n, Np, Nc)
+    game = CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=0.8, horizon=Np, control_horizon=Nc)
+    _, H, g = joint_minimiser(model, Q, R_h, R_r, 0.8, Np, Nc, z, ref_h, ref_r)
+    N = H.shape[0]
+    solver = osqp.OSQP()
+    # No constraints binding: loose bounds, tight tolerances, polishing.
+    solver.setup(P=scipy.sparse.csc_matrix(np.triu(H)), q=-g, A=scipy.sparse.identity(N, format="csc"),
+                 l=np.full(N, -1e9), u=np.full(N, 1e9), eps_abs=1e-12, eps_rel=1e-12, max_iter=200000,
+                 polishing=True, verbose=False)
+    result = solver.solve(raise_error=True)
+    assert result.info.status == "solved", result.info.status
+    U_h, U_r = game.solve_horizon(z, ref_h, ref_r)
+    U = np.concatenate([U_h.reshape(-1), U_r.reshape(-1)])
+    assert np.linalg.norm(U - result.x) <= 1e-6 * np.linalg.norm(result.x)
+
+
+def test_thesis_closed_form_eq_3_27_with_other_players_coupling_gain():
+    """U* = [[I, K_h], [K_r, I]]⁻¹ [L_h Z; L_r Z] with K_h = S_h Φ_r, K_r = S_r Φ_h (eq. 3.27–3.31)."""
+    rng = np.random.default_rng(3)
+    n, Np, Nc, alpha = 2, 10, 10, 0.7
+    model, Q, R_h, R_r, z, ref_h, ref_r = random_instance(rng, n, Np, Nc)
+    F, Phi = augmented_prediction(model, Np, Nc)
+    Q_h = scipy.linalg.block_diag(Q["Q_hh"], Q["Q_hr"])
+    Q_r = scipy.linalg.block_diag(Q["Q_rh"], Q["Q_rr"])
+    Q_gt = np.kron(np.eye(Np), alpha * Q_h + (1 - alpha) * Q_r)
+    R_ht, R_rt = np.kron(np.eye(Nc), R_h), np.kron(np.eye(Nc), R_r)
+    S_h = np.linalg.solve(Phi.T @ Q_gt @ Phi + R_ht, Phi.T @ Q_gt)
+    S_r = np.linalg.solve(Phi.T @ Q_gt @ Phi + R_rt, Phi.T @ Q_gt)
+    K_h, K_r = S_h @ Phi, S_r @ Phi  # Φ_h = Φ_r here
+    L_h = np.hstack([-S_h @ F, S_h])
+    L_r = np.hstack([-S_r @ F, S_r])
+    Z = np.concatenate([z, z, stacked_refs(ref_h, ref_r)])
+    lhs = np.block([[np.eye(n * Nc), K_h], [K_r, np.eye(n * Nc)]])
+    U_star = np.linalg.solve(lhs, np.concatenate([L_h @ Z, L_r @ Z]))
+    game = CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=alpha, horizon=Np)
+    U_h, U_r = game.solve_horizon(z, ref_h, ref_r)
+    np.testing.assert_allclose(np.concatenate([U_h.reshape(-1), U_r.reshape(-1)]), U_star, rtol=1e-8, atol=1e-10)
+
+
+def test_alpha_scaled_input_weighting_is_the_minimiser_with_scaled_R():
+    rng = np.random.default_rng(11)
+    n, Np, Nc, alpha = 2, 8, 8, 0.3
+    model, Q, R_h, R_r, z, ref_h, ref_r = random_instance(rng, n, Np, Nc)
+    game = CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=alpha, horizon=Np, input_weighting="alpha_scaled")
+    U_ref, _, _ = joint_minimiser(model, Q, alpha * R_h, (1 - alpha) * R_r, alpha, Np, Nc, z, ref_h, ref_r)
+    U_h, U_r = game.solve_horizon(z, ref_h, ref_r)
+    np.testing.assert_allclose(np.concatenate([U_h.reshape(-1), U_r.reshape(-1)]), U_ref, rtol=1e-8, atol=1e-10)
+
+
+def player_cost(model, Q_own_h, Q_own_r, R_own, Np, Nc, z, ref_h, ref_r, U_h, U_r, player):
+    """J_p of eq. 3.15/3.16 by simulating the model step by step."""
+    cost, zk = 0.0, z.copy()
+    for i in range(Np):
+        j = min(i, Nc - 1)
+        zk = model.Ad @ zk + model.Bd @ (U_h[j] + U_r[j])
+        e_h, e_r = zk - ref_h[i], zk - ref_r[i]
+        cost += e_h @ Q_own_h @ e_h + e_r @ Q_own_r @ e_r
+    U = U_h if player == "h" else U_r
+    return cost + sum(u @ R_own @ u for u in U)
+
+
+@pytest.mark.parametrize("n, Np, Nc", [(1, 6, 6), (2, 10, 4), (3, 8, 8)])
+def test_nash_efforts_are_mutual_best_responses(n, Np, Nc):
+    rng = np.random.default_rng(100 + n)
+    model, Q, R_h, R_r, z, ref_h, ref_r = random_instance(rng, n, Np, Nc)
+    game = NashGame(model, **Q, R_h=R_h, R_r=R_r, horizon=Np, control_horizon=Nc)
+    U_h, U_r = game.solve_horizon(z, ref_h, ref_r)
+    J_h = lambda Uh: player_cost(model, Q["Q_hh"], Q["Q_hr"], R_h, Np, Nc, z, ref_h, ref_r, Uh, U_r, "h")
+    J_r = lambda Ur: player_cost(model, Q["Q_rh"], Q["Q_rr"], R_r, Np, Nc, z, ref_h, ref_r, U_h, Ur, "r")
+    base_h, base_r = J_h(U_h), J_r(U_r)
+    for _ in range(20):
+        d = rng.normal(size=U_h.shape) * rng.choice([1e-3, 1e-1, 1.0])
+        assert J_h(U_h + d) >= base_h - 1e-9 * abs(base_h)
+        assert J_r(U_r + d) >= base_r - 1e-9 * abs(base_r)
+    # and it is not the cooperative solution: the players' costs differ here
+    coop = CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=0.5, horizon=Np, control_horizon=Nc)
+    assert not np.allclose(coop.solve_horizon(z, ref_h, ref_r)[1], U_r)
+    u_h, u_r = game.solve(z, ref_h, ref_r)
+    np.testing.assert_allclose(u_h, U_h[0], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(u_r, U_r[0], rtol=1e-9, atol=1e-12)
+
+
+def thesis_game(alpha, horizon=50, R_r=5e-4):
+    model = ImpedanceModel([10, 10], [100, 100], 0, 0.008)
+    Q = np.diag([1, 1, 1e-4, 1e-4])
+    return CooperativeGame(model, Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[R_r, R_r], alpha=alpha, horizon=horizon)
+
+
+def test_set_alpha_gives_exactly_the_new_optimum_and_efforts_are_continuous_in_alpha():
+    rng = np.random.default_rng(5)
+    z, ref_h, ref_r = rng.normal(size=4), rng.normal(size=(50, 4)), rng.normal(size=(50, 4))
+    game = thesis_game(0.8)
+    game.set_alpha(0.3)
+    assert game.alpha == 0.3
+    fresh = thesis_game(0.3)
+    for a, b in zip(game.solve(z, ref_h, ref_r), fresh.solve(z, ref_h, ref_r)):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    # a small change of α moves the effort by a proportionally small amount (no jump)
+    u0 = np.concatenate(game.solve(z, ref_h, ref_r))
+    steps = []
+    for delta in (1e-2, 1e-3, 1e-4):
+        game.set_alpha(0.3 + delta)
+        steps.append(np.linalg.norm(np.concatenate(game.solve(z, ref_h, ref_r)) - u0))
+    assert steps[1] < 0.2 * steps[0] and steps[2] < 0.2 * steps[1]
+
+
+def test_failed_alpha_change_keeps_the_old_gains():
+    game = thesis_game(0.8)
+    before = game.gains.G_z.copy()
+    with pytest.raises(ValueError, match="alpha must be in"):
+        game.set_alpha(1.5)
+    assert game.alpha == 0.8
+    np.testing.assert_array_equal(game.gains.G_z, before)
+
+
+def test_solve_is_linear_in_its_inputs():
+    rng = np.random.default_rng(2)
+    game = thesis_game(0.8, horizon=20)
+    a = (rng.normal(size=4), rng.normal(size=(20, 4)), rng.normal(size=(20, 4)))
+    b = (rng.normal(size=4), rng.normal(size=(20, 4)), rng.normal(size=(20, 4)))
+    ua, ub = game.solve(*a), game.solve(*b)
+    uab = game.solve(*(x + 2 * y for x, y in zip(a, b)))
+    np.testing.assert_allclose(uab[1], ua[1] + 2 * ub[1], rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (dict(alpha=-0.1), "alpha must be in"),
+        (dict(R_r=[0, 1e-4]), "R_r must be positive definite"),
+        (dict(Q_hh=np.eye(3)), "Q_hh must be 4x4"),
+        (dict(Q_rh=-np.eye(4)), "Q_rh must be positive semidefinite"),
+        (dict(control_horizon=60), "control_horizon must be <= horizon"),
+        (dict(input_weighting="alpha_scaled", alpha=1.0), r"alpha must be in \(0, 1\)"),
+        (dict(input_weighting="other"), "input_weighting"),
+    ],
+)
+def test_validation_names_the_field(change, message):
+    model = ImpedanceModel([10, 10], [100, 100], 0, 0.008)
+    Q = np.diag([1, 1, 1e-4, 1e-4])
+    kwargs = dict(Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[5e-4, 5e-4], alpha=0.8, horizon=50)
+    kwargs.update(change)
+    with pytest.raises(ValueError, match=message):
+        CooperativeGame(model, **kwargs)
+
+
+def test_reference_shape_is_checked():
+    game = thesis_game(0.8, horizon=5)
+    with pytest.raises(ValueError, match=r"ref_h must have shape \(5, 4\)"):
+        game.solve(np.zeros(4), np.zeros((4, 5)), np.zeros((5, 4)))

@@ -1,0 +1,187 @@
+"""Thesis §5.2.4 indexes against numbers worked out by hand."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from coassist.metrics import (
+    HORIZONS,
+    distance_to_target,
+    e_max,
+    e_rms,
+    f_rms,
+    precision_sigma,
+    prediction_errors,
+    time_to_target,
+)
+
+GARBAGE = 1e3  # predictions that must never be scored
+
+
+def hand_example():
+    """T = 4, d = 2, H = 2. pred[k, i-1] is for tick k+i.
+
+    k=0: step 1 off by (3, 4) -> 5, step 2 exact -> 0
+    k=1: step 1 off by (1, 0) -> 1, step 2 off by (0, -2) -> 2
+    k=2: step 1 off by (0, 0.5) -> 0.5, step 2 would be tick 4 (does not exist)
+    """
+    pose = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    pred = np.full((4, 2, 2), GARBAGE)
+    pred[0, 0] = [4.0, 4.0]
+    pred[0, 1] = [1.0, 1.0]
+    pred[1, 0] = [2.0, 1.0]
+    pred[1, 1] = [0.0, -1.0]
+    pred[2, 0] = [0.0, 1.5]
+    return pred, pose
+
+
+def test_hand_example_horizon_2():
+    pred, pose = hand_example()
+    errs = prediction_errors(pred, pose, 2)
+    np.testing.assert_array_equal(errs.tick, [0, 1])  # k + 2 < 4
+    np.testing.assert_allclose(errs.rms, [math.sqrt(12.5), math.sqrt(2.5)], rtol=1e-15)
+    np.testing.assert_allclose(errs.max, [5.0, 2.0], rtol=1e-15)
+    assert e_rms(pred, pose, 2) == pytest.approx((3.5355339059327378 + 1.5811388300841898) / 2, rel=1e-14)
+    assert e_max(pred, pose, 2) == (pytest.approx(3.5, rel=1e-14), pytest.approx(5.0, rel=1e-14))
+
+
+def test_hand_example_horizon_1():
+    pred, pose = hand_example()
+    errs = prediction_errors(pred, pose, 1)
+    np.testing.assert_array_equal(errs.tick, [0, 1, 2])
+    assert e_rms(pred, pose, 1) == pytest.approx(6.5 / 3, rel=1e-14)
+    result = e_max(pred, pose, 1)
+    assert result.mean == pytest.approx(6.5 / 3, rel=1e-14) and result.max == pytest.approx(5.0, rel=1e-14)
+
+
+def test_nan_prediction_ticks_are_skipped():
+    pred, pose = hand_example()
+    pred[1] = np.nan  # no prediction at tick 1
+    errs = prediction_errors(pred, pose, 2)
+    np.testing.assert_array_equal(errs.tick, [0])
+    assert e_rms(pred, pose, 2) == pytest.approx(math.sqrt(12.5), rel=1e-14)
+    pred[0] = np.nan
+    with pytest.raises(ValueError, match="no tick has a finite prediction"):
+        e_rms(pred, pose, 2)
+
+
+@pytest.mark.parametrize("horizon", [1, 5, 20, 50])
+def test_constant_offset_1d(horizon):
+    """A 1-D prediction offset by c from the measured future gives e_RMS = e_MAX = c."""
+    c = 0.037
+    t, h = 120, 50
+    rng = np.random.default_rng(horizon)
+    pose = np.cumsum(rng.normal(size=t)) * 0.01
+    pred = np.full((t, h), GARBAGE)
+    for k in range(t):
+        for i in range(1, h + 1):
+            if k + i < t:
+                pred[k, i - 1] = pose[k + i] + c
+    assert e_rms(pred, pose, horizon) == pytest.approx(c, rel=1e-12)
+    assert e_max(pred, pose, horizon) == (pytest.approx(c, rel=1e-12), pytest.approx(c, rel=1e-12))
+    assert len(prediction_errors(pred, pose, horizon).tick) == t - horizon
+
+
+def test_matches_a_naive_loop():
+    rng = np.random.default_rng(3)
+    t, h, d, n = 40, 8, 3, 6
+    pose = rng.normal(size=(t, d))
+    pred = rng.normal(size=(t, h, d))
+    rms, mx = [], []
+    for k in range(t):
+        if k + n >= t:
+            continue
+        e = [math.sqrt(sum((pred[k, i - 1, j] - pose[k + i, j]) ** 2 for j in range(d))) for i in range(1, n + 1)]
+        rms.append(math.sqrt(sum(x * x for x in e) / n))
+        mx.append(max(e))
+    assert e_rms(pred, pose, n) == pytest.approx(sum(rms) / len(rms), rel=1e-13)
+    assert e_max(pred, pose, n) == (pytest.approx(sum(mx) / len(mx), rel=1e-13), pytest.approx(max(mx), rel=1e-13))
+
+
+def test_horizons():
+    assert HORIZONS == (5, 10, 20, 50)
+    assert [round(n * 0.008, 3) for n in HORIZONS] == [0.04, 0.08, 0.16, 0.4]
+
+
+@pytest.mark.parametrize(
+    "pred_shape, pose_shape, horizon, message",
+    [
+        ((10, 5, 2), (10, 2), 6, r"between 1 and the prediction's H = 5"),
+        ((10, 5, 2), (10, 2), 0, r"between 1"),
+        ((10, 5, 2), (10, 2), True, r"integer"),
+        ((10, 5, 2), (10, 2), 2.0, r"integer"),
+        ((10, 5, 3), (10, 2), 2, r"prediction has shape \(10, 5, 3\), expected \(10, H, 2\)"),
+        ((9, 5, 2), (10, 2), 2, r"expected \(10, H, 2\)"),
+        ((4, 5, 2), (4, 2), 4, r"4 samples is too short for a horizon of 4"),
+    ],
+)
+def test_prediction_errors_validation(pred_shape, pose_shape, horizon, message):
+    with pytest.raises(ValueError, match=message):
+        prediction_errors(np.zeros(pred_shape), np.zeros(pose_shape), horizon)
+
+
+def test_prediction_errors_rejects_bad_pose():
+    pose = np.zeros((10, 2))
+    pose[3, 1] = np.nan
+    with pytest.raises(ValueError, match="pose has non-finite"):
+        e_rms(np.zeros((10, 5, 2)), pose, 2)
+
+
+def test_f_rms_hand_values():
+    assert f_rms([[3.0, 4.0], [0.0, 0.0], [6.0, 8.0]]) == pytest.approx(5.0, rel=1e-15)  # (5 + 0 + 10) / 3
+    assert f_rms([[3.0, 4.0, 100.0], [6.0, -8.0, -7.0]], axes=(0, 1)) == pytest.approx(7.5, rel=1e-15)
+    assert f_rms([-2.0, 2.0, 5.0]) == pytest.approx(3.0, rel=1e-15)
+    with pytest.raises(ValueError, match="axes"):
+        f_rms(np.zeros((3, 2)), axes=(0, 2))
+    with pytest.raises(ValueError, match="wrench has non-finite"):
+        f_rms([[np.nan, 1.0]])
+
+
+def test_distance_to_target():
+    np.testing.assert_allclose(distance_to_target([[4.0, 5.0], [1.0, 1.0]], [1.0, 1.0]), [5.0, 0.0], rtol=1e-15)
+    with pytest.raises(ValueError, match=r"target has shape \(3,\), expected \(2,\)"):
+        distance_to_target(np.zeros((2, 2)), [0.0, 0.0, 0.0])
+
+
+def test_sigma_hand_values():
+    # dt = 1 s, tau = 3 s -> 3 samples from the first one inside the ball (|x| <= 0.025)
+    pose = np.array([1.0, 0.5, 0.02, 0.01, 0.03, 0.0, 0.2])[:, None]
+    assert precision_sigma(pose, [0.0], 1.0, tau=3.0) == pytest.approx(0.02, rel=1e-14)  # (0.02+0.01+0.03)/3
+    # leaving the ball afterwards still counts (the mean is over tau after first entry)
+    assert precision_sigma(pose, [0.0], 1.0, tau=5.0) == pytest.approx(0.26 / 5, rel=1e-14)
+    # fewer than tau seconds left: average over what remains
+    assert precision_sigma(pose[:4], [0.0], 1.0, tau=3.0) == pytest.approx(0.015, rel=1e-14)
+    # never inside the ball
+    assert math.isnan(precision_sigma(pose[:2], [0.0], 1.0))
+    assert math.isnan(time_to_target(pose[:2], [0.0], 1.0))
+    # the ball is closed: exactly epsilon is inside
+    assert precision_sigma([[0.1], [0.025], [0.0]], [0.0], 1.0, tau=2.0) == pytest.approx(0.0125, rel=1e-14)
+
+
+def test_sigma_2d_and_time_to_target():
+    pose = np.array([[4.0, 5.0], [1.01, 1.0], [1.0, 1.02], [3.0, 3.0]])
+    assert precision_sigma(pose, [1.0, 1.0], 0.5, tau=1.0) == pytest.approx(0.015, rel=1e-12)
+    assert time_to_target(pose, [1.0, 1.0], 0.5) == 0.5
+    # a larger epsilon enters earlier
+    assert time_to_target(pose, [1.0, 1.0], 0.5, epsilon=10.0) == 0.0
+
+
+def test_sigma_thesis_window_is_375_samples():
+    """dt = 8 ms, tau = 3 s: exactly 375 samples from the first entry."""
+    dist = np.full(1000, 0.5)
+    dist[10:385] = 0.01  # 375 samples at 1 cm
+    dist[385:] = 0.02    # would pull the mean up if a 376th sample were used
+    pose = np.column_stack([dist, np.zeros_like(dist)])
+    assert precision_sigma(pose, [0.0, 0.0], 0.008) == pytest.approx(0.01, rel=1e-12)
+    assert time_to_target(pose, [0.0, 0.0], 0.008) == pytest.approx(0.08, rel=1e-12)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"dt": 0.0}, "dt"), ({"dt": 0.008, "epsilon": -1.0}, "epsilon"), ({"dt": 0.008, "tau": float("nan")}, "tau"),
+])
+def test_sigma_validation(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        precision_sigma(np.zeros((5, 2)), [0.0, 0.0], **kwargs)
