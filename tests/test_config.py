@@ -19,6 +19,12 @@ def test_thesis_values():
         (lambda: ImpedanceParameters(D=(1, 2, 3)), "impedance.D must have 2 entries"),
         (lambda: ImpedanceParameters(dt=0), "impedance.dt"),
         (lambda: GameParameters(alpha=1.2), "game.alpha"),
+        (lambda: GameParameters(alpha="abc"), "game.alpha must be a number"),
+        (lambda: GameParameters(alpha=None), "game.alpha must be a number"),
+        (lambda: GameParameters(alpha=1.0, input_weighting="alpha_scaled"), r"game.alpha must be in \(0, 1\)"),
+        (lambda: GameParameters(input_weighting="x"), "game.input_weighting"),
+        (lambda: GameParameters(R_h=(), R_r=(), Q_hh=(), Q_hr=(), Q_rh=(), Q_rr=()), "game.R_h must have 1 to 6"),
+        (lambda: ControlPreset("x", effort_limit="a"), "effort_limit must be a number"),
         (lambda: GameParameters(Q_hh=(1, 1)), "game.Q_hh must have 4 entries"),
         (lambda: GameParameters(R_r=(0, 1)), "game.R_r entries must be > 0"),
         (lambda: GameParameters(horizon=0), "game.horizon"),
@@ -29,3 +35,7 @@ def test_thesis_values():
 def test_validation_names_the_field(build, field):
     with pytest.raises(ValueError, match=field):
         build()
+
+
+def test_effort_limit_is_stored_as_a_number():
+    assert ControlPreset("x", effort_limit="100").effort_limit == 100.0

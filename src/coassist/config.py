@@ -76,13 +76,20 @@ class GameParameters:
     def __post_init__(self) -> None:
         R_h = _diag(self.R_h, "game.R_h", positive=True)
         n = len(R_h)
+        if not 1 <= n <= 6:
+            raise ValueError(f"game.R_h must have 1 to 6 entries (one per DOF), got {n}")
         object.__setattr__(self, "R_h", R_h)
         object.__setattr__(self, "R_r", _diag(self.R_r, "game.R_r", n, positive=True))
         for name in ("Q_hh", "Q_hr", "Q_rh", "Q_rr"):
             object.__setattr__(self, name, _diag(getattr(self, name), f"game.{name}", 2 * n))
-        alpha = float(self.alpha)
+        try:
+            alpha = float(self.alpha)
+        except (TypeError, ValueError):
+            raise ValueError(f"game.alpha must be a number, got {self.alpha!r}") from None
         if not 0.0 <= alpha <= 1.0:
             raise ValueError(f"game.alpha must be in [0, 1], got {self.alpha!r}")
+        if self.input_weighting == "alpha_scaled" and not 0.0 < alpha < 1.0:
+            raise ValueError(f"game.alpha must be in (0, 1) with input_weighting='alpha_scaled', got {self.alpha!r}")
         object.__setattr__(self, "alpha", alpha)
         check_int_at_least(self.horizon, "game.horizon", 1)
         if self.control_horizon is not None:
@@ -111,7 +118,7 @@ class ControlPreset:
             raise ValueError(
                 f"impedance has {self.impedance.n_dof} DOFs but game.R_h has {self.game.n_dof} entries"
             )
-        check_positive_scalar(self.effort_limit, "effort_limit")
+        object.__setattr__(self, "effort_limit", check_positive_scalar(self.effort_limit, "effort_limit"))
 
 
 #: Thesis §5.2: x-y impedance, evaluation of the prediction model (α = 0.8, R_r = 5e-4).

@@ -85,14 +85,57 @@ def test_controller_saturates_large_efforts(plant):
     np.testing.assert_allclose(out.u_r / np.linalg.norm(out.u_r), raw / np.linalg.norm(raw))
 
 
-def test_wrong_shapes_never_raise_inside_the_loop(assistive):
-    out = assistive.step(np.zeros(4), np.zeros((3, 4)), np.zeros((50, 4)), np.zeros(2))
+@pytest.mark.parametrize(
+    "args",
+    [
+        (np.zeros(4), np.zeros((3, 4)), np.zeros((50, 4)), np.zeros(2)),  # short reference
+        (np.zeros(4), np.zeros((50, 4)), np.zeros((50, 4)), np.zeros(7)),  # wrench of another DOF count
+        (0.5, np.zeros((50, 4)), np.zeros((50, 4)), np.zeros(2)),  # scalar state
+        (np.zeros(4) + 1j, np.zeros((50, 4)), np.zeros((50, 4)), np.zeros(2)),  # complex state
+        (np.zeros(4), "x", np.zeros((50, 4)), np.zeros(2)),  # not numbers
+    ],
+)
+def test_invalid_inputs_never_raise_inside_the_loop(assistive, args):
+    out = assistive.step(*args)
+    assert out.fault == Fault.INVALID_INPUT
+    np.testing.assert_array_equal(out.u_r, [0.0, 0.0])
+
+
+def test_non_finite_model_of_the_human_is_caught(assistive, monkeypatch):
+    monkeypatch.setattr(assistive.game, "solve", lambda z, rh, rr: (np.array([-np.inf, 0.0]), np.array([1.0, 1.0])))
+    out = assistive.step(*inputs(np.random.default_rng(3)))
+    assert out.fault == Fault.NONFINITE_EFFORT
+    np.testing.assert_array_equal(out.u_r, [0.0, 0.0])
+    np.testing.assert_array_equal(out.u_h_model, [0.0, 0.0])
+
+
+def test_a_law_that_raises_gives_zero_effort(assistive, monkeypatch):
+    def broken(z, rh, rr):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(assistive.game, "solve", broken)
+    out = assistive.step(*inputs(np.random.default_rng(4)))
     assert out.fault == Fault.INTERNAL_ERROR
     np.testing.assert_array_equal(out.u_r, [0.0, 0.0])
 
 
+def test_controllers_refuse_a_plant_with_stiffness(plant):
+    stiff = plant.with_stiffness([10.0, 10.0])
+    with pytest.raises(ValueError, match="model.K must be zero"):
+        ManualGuidance(stiff)
+    with pytest.raises(ValueError, match="model.K must be zero"):
+        ImpedanceControl(stiff, 100.0, effort_limit=50.0)
+
+
+def test_impedance_control_saturates_too(plant):
+    imp = ImpedanceControl(plant, 1000.0, effort_limit=20.0)
+    out = imp.step(np.zeros(4), np.zeros((1, 4)), np.array([[0.1, 0.0, 0.0, 0.0]]), np.zeros(2))
+    np.testing.assert_allclose(out.u_r, [20.0, 0.0])
+    assert out.fault == Fault.SATURATED
+
+
 def test_impedance_control_is_a_spring_toward_the_nominal_reference(plant):
-    imp = ImpedanceControl(plant, [200.0, 100.0])
+    imp = ImpedanceControl(plant, [200.0, 100.0], effort_limit=np.inf)
     z = np.array([0.1, 0.2, 5.0, 5.0])
     ref_r = np.array([[0.15, 0.1, 0.0, 0.0]])
     out = imp.step(z, np.zeros((1, 4)), ref_r, np.zeros(2))
@@ -107,6 +150,12 @@ def test_manual_guidance_applies_no_effort(plant):
     assert out.fault == Fault.NONE
 
 
-def test_effort_limit_is_validated(plant):
-    with pytest.raises(ValueError, match="effort_limit must be > 0"):
-        ImpedanceControl(plant, 100.0, effort_limit=[10.0, 0.0])
+@pytest.mark.parametrize("limit, message", [([10.0, 0.0], "effort_limit must be > 0"), ([1, 2, 3], "effort_limit must be a number or 2"), ("a", "effort_limit must be a number")])
+def test_effort_limit_is_validated(plant, limit, message):
+    with pytest.raises(ValueError, match=message):
+        ImpedanceControl(plant, 100.0, effort_limit=limit)
+
+
+def test_effort_limit_is_required(plant):
+    with pytest.raises(TypeError):
+        AssistiveController(cooperative_game(plant, THESIS_EVALUATION.game))

@@ -198,13 +198,30 @@ def test_set_alpha_gives_exactly_the_new_optimum_and_efforts_are_continuous_in_a
     assert steps[1] < 0.2 * steps[0] and steps[2] < 0.2 * steps[1]
 
 
-def test_failed_alpha_change_keeps_the_old_gains():
+def test_failed_alpha_change_keeps_the_old_gains(monkeypatch):
     game = thesis_game(0.8)
     before = game.gains.G_z.copy()
     with pytest.raises(ValueError, match="alpha must be in"):
         game.set_alpha(1.5)
+
+    def failing_factor(H):
+        raise ValueError("factorisation failed")
+
+    monkeypatch.setattr(game, "_factor", failing_factor)  # fail after the new α was accepted
+    with pytest.raises(ValueError, match="factorisation failed"):
+        game.set_alpha(0.3)
     assert game.alpha == 0.8
     np.testing.assert_array_equal(game.gains.G_z, before)
+
+
+@pytest.mark.parametrize("alpha", [0.0, 1.0])
+def test_extreme_alphas_are_the_joint_minimiser(alpha):
+    rng = np.random.default_rng(int(alpha) + 40)
+    model, Q, R_h, R_r, z, ref_h, ref_r = random_instance(rng, 2, 6, 3)
+    game = CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=alpha, horizon=6, control_horizon=3)
+    U_ref, _, _ = joint_minimiser(model, Q, R_h, R_r, alpha, 6, 3, z, ref_h, ref_r)
+    U_h, U_r = game.solve_horizon(z, ref_h, ref_r)
+    np.testing.assert_allclose(np.concatenate([U_h.reshape(-1), U_r.reshape(-1)]), U_ref, rtol=1e-8, atol=1e-10)
 
 
 def test_solve_is_linear_in_its_inputs():
@@ -238,7 +255,11 @@ def test_validation_names_the_field(change, message):
         CooperativeGame(model, **kwargs)
 
 
-def test_reference_shape_is_checked():
+def test_reference_and_state_shapes_are_checked():
     game = thesis_game(0.8, horizon=5)
     with pytest.raises(ValueError, match=r"ref_h must have shape \(5, 4\)"):
         game.solve(np.zeros(4), np.zeros((4, 5)), np.zeros((5, 4)))
+    with pytest.raises(ValueError, match=r"z must have shape \(4,\)"):
+        game.solve(0.5, np.zeros((5, 4)), np.zeros((5, 4)))
+    with pytest.raises(ValueError, match=r"z must have shape \(4,\)"):
+        game.solve_horizon(np.zeros((4, 1)), np.zeros((5, 4)), np.zeros((5, 4)))

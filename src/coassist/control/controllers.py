@@ -48,11 +48,17 @@ class Fault(enum.IntFlag):
     PREDICTION_STALE = 32  # the intent prediction in use was shifted, not fresh
     PREDICTION_FALLBACK = 64  # prediction too old or invalid: the nominal reference was used
     INTERNAL_ERROR = 128  # the control law raised; zero effort was applied
+    INVALID_INPUT = 256  # an input of the wrong shape or type (complex, strings)
 
 
 #: Faults after which the robot effort was forced to zero.
 ZERO_EFFORT_FAULTS = (
-    Fault.NONFINITE_STATE | Fault.NONFINITE_REFERENCE | Fault.NONFINITE_WRENCH | Fault.NONFINITE_EFFORT | Fault.INTERNAL_ERROR
+    Fault.NONFINITE_STATE
+    | Fault.NONFINITE_REFERENCE
+    | Fault.NONFINITE_WRENCH
+    | Fault.NONFINITE_EFFORT
+    | Fault.INTERNAL_ERROR
+    | Fault.INVALID_INPUT
 )
 
 
@@ -97,15 +103,21 @@ class _GuardedController:
 
     name = "controller"
 
-    def __init__(self, model: ImpedanceModel, horizon: int, effort_limit: ArrayLike | None) -> None:
+    def __init__(self, model: ImpedanceModel, horizon: int, effort_limit: ArrayLike) -> None:
         n = model.n_dof
-        if effort_limit is None:
-            limit = np.full(n, np.inf)
-        else:
+        if not np.all(model.K == 0):
+            raise ValueError(
+                "model.K must be zero: controllers render the free plant M a + D v = u_h + u_r "
+                "(use model.with_stiffness(0); ImpedanceControl takes its spring K separately)"
+            )
+        try:
             limit = np.broadcast_to(np.asarray(effort_limit, dtype=float), (n,)).copy()
-            if np.any(~(limit > 0)):
-                raise ValueError(f"effort_limit must be > 0 for every DOF, got {effort_limit!r}")
+        except (TypeError, ValueError):
+            raise ValueError(f"effort_limit must be a number or {n} numbers [N], got {effort_limit!r}") from None
+        if np.any(~(limit > 0)):
+            raise ValueError(f"effort_limit must be > 0 for every DOF (np.inf for no limit), got {effort_limit!r}")
         self.effort_limit = limit
+        self._wrench_shape = (n,)
         self.model = model
         self.horizon = horizon
         self._zero = np.zeros(n)
@@ -114,6 +126,11 @@ class _GuardedController:
 
     def _law(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
+
+    def _refuse(self, fault: Fault) -> ControlStep:
+        """Zero robot effort (and no model of the human) for a tick whose input was bad."""
+        self._warn_once(fault)
+        return ControlStep(self._zero.copy(), self._zero.copy(), fault)
 
     def _warn_once(self, fault: Fault) -> None:
         new = fault & ~self._warned & ~Fault.SATURATED
@@ -124,10 +141,20 @@ class _GuardedController:
     def step(self, z: ArrayLike, ref_h: ArrayLike, ref_r: ArrayLike, wrench: ArrayLike) -> ControlStep:
         """One guarded tick: z (2n,), ref_h and ref_r (horizon, 2n), wrench (n,) [N]."""
         try:
-            z = np.asarray(z, dtype=float)
-            ref_h = np.asarray(ref_h, dtype=float)
-            ref_r = np.asarray(ref_r, dtype=float)
-            wrench = np.asarray(wrench, dtype=float)
+            raw = (z, ref_h, ref_r, wrench)
+            if any(np.iscomplexobj(a) for a in raw):
+                raise TypeError("complex input")
+            z, ref_h, ref_r, wrench = (np.asarray(a, dtype=float) for a in raw)
+        except (TypeError, ValueError):
+            return self._refuse(Fault.INVALID_INPUT)
+        if (
+            ref_h.shape != self._ref_shape
+            or ref_r.shape != self._ref_shape
+            or z.shape != (self._ref_shape[1],)
+            or wrench.shape != self._wrench_shape
+        ):
+            return self._refuse(Fault.INVALID_INPUT)
+        try:
             fault = Fault.NONE
             if not np.isfinite(z).all():
                 fault |= Fault.NONFINITE_STATE
@@ -136,18 +163,10 @@ class _GuardedController:
             if not np.isfinite(wrench).all():
                 fault |= Fault.NONFINITE_WRENCH
             if fault:
-                self._warn_once(fault)
-                return ControlStep(self._zero.copy(), self._zero.copy(), fault)
-            if ref_h.shape != self._ref_shape or ref_r.shape != self._ref_shape or z.shape != (self._ref_shape[1],):
-                raise ValueError(
-                    f"expected z {(self._ref_shape[1],)}, references {self._ref_shape}; "
-                    f"got z {z.shape}, ref_h {ref_h.shape}, ref_r {ref_r.shape}"
-                )
+                return self._refuse(fault)
             u_h, u_r = self._law(z, ref_h, ref_r)
-            if not np.isfinite(u_r).all():
-                fault = Fault.NONFINITE_EFFORT
-                self._warn_once(fault)
-                return ControlStep(self._zero.copy(), self._zero.copy(), fault)
+            if not (np.isfinite(u_r).all() and np.isfinite(u_h).all()):
+                return self._refuse(Fault.NONFINITE_EFFORT)
             u_r, clipped = saturate(u_r, self.effort_limit)
             return ControlStep(u_r, u_h, Fault.SATURATED if clipped else Fault.NONE)
         except Exception as exc:  # the loop must go on; the robot gets zero effort
@@ -164,10 +183,11 @@ class AssistiveController(_GuardedController):
     Parameters
     ----------
     game : a :class:`CooperativeGame` (the thesis) or :class:`NashGame`.
-    effort_limit : (n,) or scalar, the largest robot effort per DOF [N]; None: no limit.
+    effort_limit : (n,) or scalar, the largest robot effort per DOF [N]; required, so
+        that no robot runs unlimited by omission (pass np.inf to mean it).
     """
 
-    def __init__(self, game: CooperativeGame | NashGame, *, effort_limit: ArrayLike | None = None) -> None:
+    def __init__(self, game: CooperativeGame | NashGame, *, effort_limit: ArrayLike) -> None:
         if not isinstance(game, (CooperativeGame, NashGame)):
             raise ValueError(f"game must be a CooperativeGame or NashGame, got {type(game).__name__}")
         self.game = game
@@ -183,7 +203,7 @@ class ImpedanceControl(_GuardedController):
 
     Parameters
     ----------
-    model : the free plant (M, D; its own K is ignored, use K = 0).
+    model : the free plant (M, D, K = 0).
     K : (n, n) or diagonal, stiffness toward x_ref,r [N/m]; PSD. Stiffer pulls the
         operator back to the nominal path harder.
     effort_limit : as for :class:`AssistiveController`.
@@ -191,7 +211,7 @@ class ImpedanceControl(_GuardedController):
 
     name = "impedance"
 
-    def __init__(self, model: ImpedanceModel, K: ArrayLike, *, effort_limit: ArrayLike | None = None) -> None:
+    def __init__(self, model: ImpedanceModel, K: ArrayLike, *, effort_limit: ArrayLike) -> None:
         K = as_square_matrix(K, "K", model.n_dof)
         check_positive_semidefinite(K, "K")
         self.K = K
@@ -208,7 +228,7 @@ class ManualGuidance(_GuardedController):
     name = "manual"
 
     def __init__(self, model: ImpedanceModel) -> None:
-        super().__init__(model, 1, None)
+        super().__init__(model, 1, np.inf)
 
     def _law(self, z, ref_h, ref_r):
         return self._zero.copy(), self._zero.copy()

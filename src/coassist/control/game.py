@@ -119,6 +119,7 @@ class _LinearQuadraticGame:
         self._R_h_tilde = np.kron(np.eye(Nc), self.R_h)
         self._R_r_tilde = np.kron(np.eye(Nc), self.R_r)
         self._ref_shape = (Np, m)
+        self._z_shape = (model.n_state,)
 
     @property
     def n_dof(self) -> int:
@@ -130,11 +131,11 @@ class _LinearQuadraticGame:
         return self._ref_shape
 
     # -- weights of each player, as coefficients on (Q_hh, Q_hr, Q_rh, Q_rr) -------------
-    def _player_weights(self) -> tuple[dict[str, float], dict[str, float], dict[str, float], dict[str, float]]:
+    def _player_weights(self, alpha: float | None) -> tuple[dict[str, float], dict[str, float], dict[str, float], dict[str, float]]:
         """(W_h,h, W_h,r, W_r,h, W_r,r) as linear combinations of the four Q's."""
         raise NotImplementedError
 
-    def _input_weights(self) -> tuple[np.ndarray, np.ndarray]:
+    def _input_weights(self, alpha: float | None) -> tuple[np.ndarray, np.ndarray]:
         return self._R_h_tilde, self._R_r_tilde
 
     @staticmethod
@@ -145,10 +146,10 @@ class _LinearQuadraticGame:
                 out += c * terms[name]
         return out
 
-    def _assemble(self) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    def _assemble(self, alpha: float | None) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
         """The stacked first-order conditions: matrix H and, per player, Φ'Ŵ_·,h, Φ'Ŵ_·,r, Φ'S F."""
-        w_hh, w_hr, w_rh, w_rr = self._player_weights()
-        R_h, R_r = self._input_weights()
+        w_hh, w_hr, w_rh, w_rr = self._player_weights(alpha)
+        R_h, R_r = self._input_weights(alpha)
         cache: dict = {}
 
         def combine(terms: dict[str, np.ndarray], coeffs: dict[str, float]) -> np.ndarray:
@@ -173,8 +174,8 @@ class _LinearQuadraticGame:
     def _solve_factored(self, factor, rhs: np.ndarray, transposed: bool = False) -> np.ndarray:
         raise NotImplementedError
 
-    def _compute_gains(self) -> None:
-        H, ref_h_terms, ref_r_terms, state_terms = self._assemble()
+    def _compute_gains(self, alpha: float | None = None) -> None:
+        H, ref_h_terms, ref_r_terms, state_terms = self._assemble(alpha)
         factor = self._factor(H)
         n, N = self._n, self._n * self.control_horizon
         # Only u_h(k) and u_r(k) are applied: the rows E' H⁻¹ suffice, found from H' X = E.
@@ -197,7 +198,7 @@ class _LinearQuadraticGame:
         for g in (gains.G_z, gains.G_h, gains.G_r):
             g.setflags(write=False)
         # One attribute assignment: a concurrent tick sees the old gains or the new, never a mix.
-        self._state = (gains, factor, ref_h_terms, ref_r_terms, state_terms)
+        self._state = (gains, factor, ref_h_terms, ref_r_terms, state_terms, alpha)
 
     @property
     def gains(self) -> EquilibriumGains:
@@ -222,6 +223,8 @@ class _LinearQuadraticGame:
         ref_h = np.asarray(ref_h, dtype=float)
         ref_r = np.asarray(ref_r, dtype=float)
         self._check_refs(ref_h, ref_r)
+        if z.shape != self._z_shape:
+            raise ValueError(f"z must have shape {self._z_shape} (2n,), got {z.shape}")
         g = self._state[0]
         dot = np.dot  # measured faster than the @ operator for these small products
         u = dot(g.G_z, z)
@@ -235,7 +238,9 @@ class _LinearQuadraticGame:
         ref_h = np.asarray(ref_h, dtype=float)
         ref_r = np.asarray(ref_r, dtype=float)
         self._check_refs(ref_h, ref_r)
-        _, factor, ref_h_terms, ref_r_terms, state_terms = self._state
+        if z.shape != self._z_shape:
+            raise ValueError(f"z must have shape {self._z_shape} (2n,), got {z.shape}")
+        _, factor, ref_h_terms, ref_r_terms, state_terms, _ = self._state
         rh, rr = ref_h.reshape(-1), ref_r.reshape(-1)
         rhs = np.concatenate([ref_h_terms[p] @ rh + ref_r_terms[p] @ rr - state_terms[p] @ z for p in (0, 1)])
         U = self._solve_factored(factor, rhs)
@@ -294,8 +299,7 @@ class CooperativeGame(_LinearQuadraticGame):
             horizon=horizon, control_horizon=control_horizon,
         )
         self.input_weighting = input_weighting
-        self._alpha = self._check_alpha(alpha)
-        self._compute_gains()
+        self._compute_gains(self._check_alpha(alpha))
 
     def _check_alpha(self, alpha: float) -> float:
         try:
@@ -311,7 +315,7 @@ class CooperativeGame(_LinearQuadraticGame):
 
     @property
     def alpha(self) -> float:
-        return self._alpha
+        return self._state[5]
 
     def set_alpha(self, alpha: float) -> None:
         """Change α at run time; the gains are recomputed and swapped in at once.
@@ -319,24 +323,18 @@ class CooperativeGame(_LinearQuadraticGame):
         The new gains are the exact equilibrium for the new α, so the next effort is
         the new optimum: it changes by no more than the optimum itself does.
         """
-        a = self._check_alpha(alpha)
-        previous = self._alpha
-        self._alpha = a
-        try:
-            self._compute_gains()
-        except Exception:
-            self._alpha = previous
-            raise
+        # α travels with its gains in one tuple: a failure leaves both as they were.
+        self._compute_gains(self._check_alpha(alpha))
 
-    def _player_weights(self):
-        a = self._alpha
+    def _player_weights(self, alpha):
+        a = alpha
         w_h = {"Q_hh": a, "Q_rh": 1.0 - a}  # weight on e_h, shared by both players
         w_r = {"Q_hr": a, "Q_rr": 1.0 - a}  # weight on e_r
         return w_h, w_r, w_h, w_r
 
-    def _input_weights(self):
+    def _input_weights(self, alpha):
         if self.input_weighting == "alpha_scaled":
-            return self._alpha * self._R_h_tilde, (1.0 - self._alpha) * self._R_r_tilde
+            return alpha * self._R_h_tilde, (1.0 - alpha) * self._R_r_tilde
         return self._R_h_tilde, self._R_r_tilde
 
     def _factor(self, H):
@@ -375,7 +373,7 @@ class NashGame(_LinearQuadraticGame):
         )
         self._compute_gains()
 
-    def _player_weights(self):
+    def _player_weights(self, alpha):
         return {"Q_hh": 1.0}, {"Q_hr": 1.0}, {"Q_rh": 1.0}, {"Q_rr": 1.0}
 
     def _factor(self, H):

@@ -55,7 +55,9 @@ def discretize(A: np.ndarray, B: np.ndarray, dt: float, method: Discretization =
     ``"zoh"``: A_d = e^{A dt}, B_d = ∫₀^dt e^{A s} ds B, from one matrix exponential of
     the block matrix [[A, B], [0, 0]] dt (Van Loan), exact for piecewise-constant u.
     ``"tustin"``: A_d = (I − A dt/2)⁻¹(I + A dt/2), B_d = (I − A dt/2)⁻¹ B dt, the
-    state-space form scipy.signal.cont2discrete uses with method="bilinear".
+    state-space form scipy.signal.cont2discrete uses with method="bilinear". That form
+    also maps the output (C_d = C (I − A dt/2)⁻¹, D_d ≠ 0); like the thesis group's code
+    we keep y = z, an approximation that only zero-order hold avoids.
     """
     nx, nu = B.shape
     if method == "zoh":
@@ -71,7 +73,7 @@ def discretize(A: np.ndarray, B: np.ndarray, dt: float, method: Discretization =
     raise ValueError(f"discretization must be 'zoh' or 'tustin', got {method!r}")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays make field-wise == ambiguous: identity semantics
 class ImpedanceModel:
     """The end effector's Cartesian impedance for 1 to 6 DOFs (eq. 3.1–3.5).
 
