@@ -1,0 +1,179 @@
+"""Where the controller's estimate of the operator's intent ŷ_ref,h comes from.
+
+The world asks an :class:`IntentSource` once per tick for the operator's desired
+positions over the next ``horizon`` ticks, from the last ``history`` samples of what
+the robot measures. This is the interface the LSTM predictor (thesis §4.1, Fig. 4.1)
+implements; the world builds the controller's human reference from it::
+
+    ref_h[i] = [p̂(k+1+i) − x0,  (p̂(k+1+i) − p̂(k+i)) / dt]      i = 0 … H−1
+
+(positions shifted into the controller's Δx frame; velocities by finite differences
+along the prediction, the first row using the second row's difference).
+
+History features, one row per tick, oldest first, thesis order (eq. 4.3–4.6, x-y)::
+
+    FEATURES = (x, y, ẋ, ẏ, f_x, f_y, x_ref, y_ref)     [m, m, m/s, m/s, N, N, m, m]
+
+x, y: measured tip position; ẋ, ẏ: its velocity; f: the force-sensor reading in use at
+that tick (Trial.wrench); x_ref, y_ref: the planner's nominal reference (Trial.reference).
+Row j of the window at tick k is exactly row k − history + 1 + j of the logged Trial,
+so windows cut from logged trials are what the source sees online. Before ``history``
+ticks have passed, the window is padded at the front with copies of tick 0's row (the
+robot is at rest at the start).
+
+Fallback: if ``predict`` raises, or returns anything other than a finite array of shape
+(≥ controller horizon, 2), the world uses the nominal reference for that tick and sets
+``Fault.PREDICTION_FALLBACK`` in Trial.fault.
+
+Model-backed sources travel to worker processes as a path (see :func:`load_intent_source`),
+never as an object: the intent package provides ``coassist.intent.load_intent_source(path)
+-> IntentSource``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+#: The per-tick history features, in the thesis' order.
+FEATURES = ("x", "y", "vx", "vy", "fx", "fy", "x_ref", "y_ref")
+
+
+@dataclass(frozen=True, eq=False)
+class TrialContext:
+    """What an intent source may know at the start of a trial.
+
+    dt : tick [s]. horizon : rows the controller reads (≤ the source's horizon).
+    start, target : (2,) [m]. reference : (n, 4) the planner's [x, y, ẋ, ẏ] on the tick
+    grid (the nominal plan is public: it is shown on the monitor).
+    task : the task kind. user, object : names.
+    true_intent : (n, 2) the operator's desired positions — simulation only, for the
+    oracle baseline; a real predictor must not read it.
+    """
+
+    dt: float
+    horizon: int
+    start: np.ndarray
+    target: np.ndarray
+    reference: np.ndarray
+    task: str
+    user: str
+    object: str
+    true_intent: np.ndarray | None = None
+
+
+@runtime_checkable
+class IntentSource(Protocol):
+    """A predictor of the operator's desired positions (module docstring).
+
+    Attributes
+    ----------
+    history : samples of past features read per call (0: none; ``predict`` then
+        receives an empty (0, 8) array).
+    horizon : rows returned by ``predict``.
+    model_id : id written to TrialMeta.model_id; None means the nominal reference is
+        used (dataset D0, thesis eq. 4.7).
+    """
+
+    history: int
+    horizon: int
+    model_id: str | None
+
+    def reset(self, context: TrialContext) -> None:
+        """Called once before tick 0 of every trial (clear any carried state here)."""
+        ...
+
+    def predict(self, history: np.ndarray) -> np.ndarray:
+        """(history, 8) features, oldest first → (horizon, 2) absolute positions [m] for k+1 … k+horizon.
+
+        Called exactly once per tick, in tick order. The array is a read-only view
+        valid only during the call: copy it to keep it.
+        """
+        ...
+
+
+class NominalIntent:
+    """ŷ_ref,h = y_ref,r: the thesis' assumption with no model loaded (eq. 4.7, dataset D0).
+
+    The world recognises it and passes the planner's reference rows (positions and
+    analytic velocities) as ref_h, so ref_h is exactly ref_r.
+    """
+
+    history = 0
+    model_id = None
+
+    def __init__(self, horizon: int = 50) -> None:
+        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
+            raise ValueError(f"NominalIntent.horizon must be an int >= 1, got {horizon!r}")
+        self.horizon = int(horizon)
+        self._ref: np.ndarray | None = None
+        self._k = 0
+
+    def reset(self, context: TrialContext) -> None:
+        self._ref = context.reference
+        self._k = 0
+
+    def predict(self, history: np.ndarray) -> np.ndarray:
+        if self._ref is None:
+            raise RuntimeError("NominalIntent.predict called before reset")
+        k, self._k = self._k, self._k + 1
+        return _rows(self._ref[:, :2], k, self.horizon)
+
+
+class OracleIntent:
+    """ŷ_ref,h = the operator's true intent: the best any predictor could do (simulation only)."""
+
+    history = 0
+    model_id = "oracle"
+
+    def __init__(self, horizon: int = 50) -> None:
+        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
+            raise ValueError(f"OracleIntent.horizon must be an int >= 1, got {horizon!r}")
+        self.horizon = int(horizon)
+        self._intent: np.ndarray | None = None
+        self._k = 0
+
+    def reset(self, context: TrialContext) -> None:
+        if context.true_intent is None:
+            raise ValueError("OracleIntent needs TrialContext.true_intent (simulated trials only)")
+        self._intent = context.true_intent
+        self._k = 0
+
+    def predict(self, history: np.ndarray) -> np.ndarray:
+        if self._intent is None:
+            raise RuntimeError("OracleIntent.predict called before reset")
+        k, self._k = self._k, self._k + 1
+        return _rows(self._intent, k, self.horizon)
+
+
+def _rows(grid: np.ndarray, k: int, horizon: int) -> np.ndarray:
+    """Rows k+1 … k+horizon of a (n, d) grid, holding the last row past the end."""
+    n = grid.shape[0]
+    if k + 1 + horizon <= n:
+        return grid[k + 1 : k + 1 + horizon]
+    idx = np.minimum(np.arange(k + 1, k + 1 + horizon), n - 1)
+    return grid[idx]
+
+
+def load_intent_source(spec: str, horizon: int = 50) -> IntentSource:
+    """An intent source from its name or model path.
+
+    ``"nominal"`` → :class:`NominalIntent`; ``"oracle"`` → :class:`OracleIntent`; any
+    other string is a model path handed to ``coassist.intent.load_intent_source``
+    (imported lazily, so the simulator works without the learning stack).
+    """
+    if not isinstance(spec, str) or not spec:
+        raise ValueError(f"intent must be 'nominal', 'oracle' or a model path, got {spec!r}")
+    if spec == "nominal":
+        return NominalIntent(horizon)
+    if spec == "oracle":
+        return OracleIntent(horizon)
+    try:
+        from coassist.intent import load_intent_source as load_model_source  # type: ignore[attr-defined]
+    except ImportError as exc:
+        raise ValueError(
+            f"intent {spec!r} is a model path, but coassist.intent.load_intent_source is not available ({exc})"
+        ) from None
+    return load_model_source(spec)

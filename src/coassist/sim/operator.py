@@ -1,0 +1,327 @@
+"""The simulated operator: intent around the obstacle, an arm that pulls toward it, a population.
+
+Intent (DESIGN.md §4)
+---------------------
+The operator wants the nominal path deformed smoothly around the obstacle, which
+only they can see. Along the arc length s the path is shifted sideways, along the path's
+left normal n_o at the obstacle, by::
+
+    d(s) = A · b(s),   b = 1 within ±(h_t + clearance) of the obstacle's arc length s_o,
+                       rising and falling over the anticipation distance with the
+                       smoothstep 6u⁵ − 15u⁴ + 10u³
+
+where h_t is the box's half-extent along the path and the amplitude A is the box's
+half-extent along the normal plus the operator's clearance, on the side they pick
+(if the deformed path still comes closer to the box than half the clearance, A grows
+until it does not). The operator times it with their own minimum-jerk pace: their
+motion starts ``start_delay`` after the planner's and lasts T_plan / pace (pace
+jittered per trial), so the intent can lead or lag the robot's reference.
+
+Arm (thesis eq. 4.1, the physically meaningful sign of DESIGN.md §2)
+---------------------------------------------------------------------
+::
+
+    u_h(k) = K_h(k) [(1 − β) e(k) + β e(k − d)] − C_h ṗ(k) + n(k),   e = x_ref,h − p
+
+p is the hand point (the tip for the handle), d = round(reaction_delay / dt) ticks,
+β = ``reflex_share``: the share of the stiffness that acts through the delayed
+(reflex and voluntary) pathway, the rest being the muscles' intrinsic stiffness,
+which acts at once. With β = 0 or no delay this is exactly eq. 4.1 plus noise. n is
+motor noise, a first-order (Ornstein–Uhlenbeck) process of standard deviation
+``motor_noise`` and correlation time ``motor_noise_time``. The force is scaled, not
+clipped per axis, to at most ``force_limit`` in norm.
+
+Reacting to the robot: stiffness adapts to the error (Franklin et al. 2008: the
+nervous system co-contracts when errors grow and relaxes when they shrink)::
+
+    ē ← ē + (dt/τ_a)(|e(k)| − ē),   K_h = clip(K_min + κ ē, K_min, K_max)
+
+A robot that helps where the operator wants to go keeps |e| small, so the arm
+relaxes and pushes less; a robot pulling elsewhere (e.g. toward the nominal path
+around the obstacle) raises |e|, and the operator stiffens and pushes harder.
+
+Population
+----------
+:func:`operator_profile` (user_index, population_seed): user 0 plays the thesis' author
+(fixed parameters tuned against the real user-a recordings, see docs/realism.md);
+users ≥ 1 are drawn from a seeded population around it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from coassist.sim.tasks import Task, _quintic
+
+
+def _num(value, name: str, lo: float = 0.0, hi: float = math.inf, *, lo_open: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"OperatorProfile.{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
+        bound = f"{'>' if lo_open else '>='} {lo}" + (f" and <= {hi}" if hi < math.inf else "")
+        raise ValueError(f"OperatorProfile.{name} must be finite and {bound}, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class OperatorProfile:
+    """One operator's personal parameters (module docstring for the model). SI units.
+
+    stiffness_min, stiffness_max : K_min ≤ K_max [N/m], the relaxed and fully
+        co-contracted arm stiffness.
+    stiffness_gain : κ [N/m per m of filtered error].
+    adaptation_time : τ_a [s] of the error filter.
+    damping : C_h [N·s/m].
+    reaction_delay : [s] of the delayed pathway; reflex_share : β ∈ [0, 1].
+    force_limit : largest hand force [N] (norm).
+    motor_noise : [N] standard deviation; motor_noise_time : [s] correlation time.
+    clearance : [m] kept from the obstacle; anticipation : [m] of path over which
+        the operator moves aside before (and back after) the obstacle.
+    pace : > 0, the operator's speed relative to the planner (1 = same);
+        pace_jitter : trial-to-trial standard deviation of the pace (relative).
+    start_delay : [s] from the planner's start to the operator's.
+    left_preference : probability of passing the obstacle on the left of the path.
+    """
+
+    name: str
+    stiffness_min: float = 550.0
+    stiffness_max: float = 1300.0
+    stiffness_gain: float = 12000.0
+    adaptation_time: float = 0.4
+    damping: float = 10.0
+    reaction_delay: float = 0.08
+    reflex_share: float = 0.5
+    force_limit: float = 40.0
+    motor_noise: float = 0.6
+    motor_noise_time: float = 0.15
+    clearance: float = 0.025
+    anticipation: float = 0.06
+    pace: float = 1.0
+    pace_jitter: float = 0.04
+    start_delay: float = 0.4
+    left_preference: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"OperatorProfile.name must be a non-empty string, got {self.name!r}")
+        for name, lo, hi, lo_open in (
+            ("stiffness_min", 0.0, math.inf, True), ("stiffness_max", 0.0, math.inf, True),
+            ("stiffness_gain", 0.0, math.inf, False), ("adaptation_time", 0.0, math.inf, True),
+            ("damping", 0.0, math.inf, False), ("reaction_delay", 0.0, 1.0, False),
+            ("reflex_share", 0.0, 1.0, False), ("force_limit", 0.0, math.inf, True),
+            ("motor_noise", 0.0, math.inf, False), ("motor_noise_time", 0.0, math.inf, True),
+            ("clearance", 0.0, math.inf, False), ("anticipation", 0.0, math.inf, True),
+            ("pace", 0.0, math.inf, True), ("pace_jitter", 0.0, 0.5, False),
+            ("start_delay", 0.0, math.inf, False), ("left_preference", 0.0, 1.0, False),
+        ):
+            object.__setattr__(self, name, _num(getattr(self, name), name, lo, hi, lo_open=lo_open))
+        if self.stiffness_max < self.stiffness_min:
+            raise ValueError(
+                f"OperatorProfile.stiffness_max ({self.stiffness_max}) must be >= stiffness_min ({self.stiffness_min})"
+            )
+
+    def to_extra(self) -> dict:
+        return asdict(self)
+
+
+#: User 0: "the author" of the iterative experiments (tuned on user-a, docs/realism.md).
+AUTHOR = OperatorProfile(name="user-0")
+
+
+def operator_profile(user_index: int, population_seed: int = 0) -> OperatorProfile:
+    """The operator profile of ``user_index`` in the population ``population_seed``.
+
+    User 0 is :data:`AUTHOR` (the same in every population). Users ≥ 1 are drawn
+    from a Generator seeded by SeedSequence([population_seed, user_index]), so a
+    user's profile does not depend on how many others were drawn. Spreads (log-normal
+    unless stated): stiffness ×/÷ 1.35, damping ×/÷ 1.4, delay 0.05–0.14 s, noise
+    ×/÷ 1.5, clearance 0.01–0.05 m, anticipation 0.05–0.2 m, pace ×/÷ 1.15, force
+    limit 30–60 N, left preference 0.1–0.9.
+    """
+    if isinstance(user_index, bool) or not isinstance(user_index, (int, np.integer)) or user_index < 0:
+        raise ValueError(f"user_index must be an int >= 0, got {user_index!r}")
+    if isinstance(population_seed, bool) or not isinstance(population_seed, (int, np.integer)) or population_seed < 0:
+        raise ValueError(f"population_seed must be an int >= 0, got {population_seed!r}")
+    if user_index == 0:
+        return AUTHOR
+    rng = np.random.default_rng(np.random.SeedSequence([int(population_seed), int(user_index)]))
+    a = AUTHOR
+
+    def lognormal(spread: float) -> float:
+        return float(np.exp(rng.normal(0.0, np.log(spread))))
+
+    stiff = lognormal(1.35)
+    return OperatorProfile(
+        name=f"user-{int(user_index)}",
+        stiffness_min=a.stiffness_min * stiff,
+        stiffness_max=a.stiffness_max * stiff * lognormal(1.15),
+        stiffness_gain=a.stiffness_gain * lognormal(1.5),
+        adaptation_time=a.adaptation_time * lognormal(1.4),
+        damping=a.damping * lognormal(1.4),
+        reaction_delay=float(rng.uniform(0.05, 0.14)),
+        reflex_share=float(rng.uniform(0.3, 0.7)),
+        force_limit=float(rng.uniform(30.0, 60.0)),
+        motor_noise=a.motor_noise * lognormal(1.5),
+        motor_noise_time=a.motor_noise_time * lognormal(1.3),
+        clearance=float(rng.uniform(0.01, 0.05)),
+        anticipation=float(rng.uniform(0.05, 0.20)),
+        pace=a.pace * lognormal(1.15),
+        pace_jitter=float(rng.uniform(0.02, 0.08)),
+        start_delay=float(rng.uniform(0.1, 0.5)),
+        left_preference=float(rng.uniform(0.1, 0.9)),
+    )
+
+
+def _smoothstep(u: np.ndarray) -> np.ndarray:
+    u = np.clip(u, 0.0, 1.0)
+    return u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
+
+
+@dataclass(frozen=True, eq=False)
+class Intent:
+    """The operator's desired trajectory on the tick grid.
+
+    positions, velocities : (n, 2) [m, m/s] at t = k·dt.
+    side : +1 passing on the left of the path, −1 on the right.
+    amplitude : |A| [m], the largest lateral shift.
+    pace : the trial's pace; end_time : [s] when the operator's motion ends.
+    """
+
+    positions: np.ndarray
+    velocities: np.ndarray
+    side: int
+    amplitude: float
+    pace: float
+    end_time: float
+
+
+def deformed_path(task: Task, side: int, clearance: float, anticipation: float) -> tuple[np.ndarray, float, int]:
+    """The nominal path's dense points shifted around the obstacle: ((P, 2) points, |A|, side taken).
+
+    The shift is along the path's normal *at the obstacle*, n_o, for every point:
+    d(s) = A b(s) n_o. A fixed direction keeps the deformed path smooth on curved
+    paths, where offsetting along the local normal would fold the curve wherever the
+    radius of curvature is below the offset (the sinusoid's troughs: ≈4 cm).
+    """
+    path, box = task.path, task.obstacle
+    s = path.arc
+    s_o = task.obstacle_arc
+    t_o = path.tangent(s_o)
+    n_o = path.normal(s_o)
+    half = 0.5 * np.asarray(box.size)
+    h_t = float(abs(t_o[0]) * half[0] + abs(t_o[1]) * half[1])
+    h_n = float(abs(n_o[0]) * half[0] + abs(n_o[1]) * half[1])
+    # The box centre's offset from the path along the normal (0 when centred on it).
+    offset = float(np.dot(np.asarray(box.center) - path.position(s_o), n_o))
+    dist = np.abs(s - s_o)
+    # Grow the shift (and the stretch it covers) until the path clears the box by at
+    # least clearance/2; at a sharp corner (the Z) the inside may be impossible, and the
+    # operator goes round the outside instead.
+    for sgn in (side, -side):
+        amp, plateau = h_n + clearance, h_t + clearance
+        for _ in range(40):
+            bump = 1.0 - _smoothstep((dist - plateau) / anticipation)
+            A = offset + sgn * amp
+            pts = path.points + (A * bump)[:, None] * n_o
+            if box.signed_distance(pts).min() >= 0.5 * clearance:
+                return pts, abs(A), sgn
+            amp *= 1.08
+            plateau += 0.005
+    return pts, abs(A), -side
+
+
+def intent_trajectory(task: Task, profile: OperatorProfile, rng: np.random.Generator, n: int, dt: float) -> Intent:
+    """The operator's intent for this trial on n ticks of dt [s] (module docstring).
+
+    ``rng`` draws the trial's side and pace jitter (in that order).
+    """
+    side = 1 if rng.random() < profile.left_preference else -1
+    pace = profile.pace * float(np.exp(rng.normal(0.0, profile.pace_jitter)))
+    pts, amp, side = deformed_path(task, side, profile.clearance, profile.anticipation)
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    t0 = task.planner.start_delay + profile.start_delay
+    T = task.planner.duration / pace
+    t = np.arange(int(n)) * float(dt)
+    sigma, dsigma, _ = _quintic((t - t0) / T)
+    # Time the deformed path by its own arc length: the detour costs the operator time.
+    s = arc[-1] * sigma
+    pos = np.stack([np.interp(s, arc, pts[:, 0]), np.interp(s, arc, pts[:, 1])], axis=1)
+    tan = np.gradient(pts, arc, axis=0)
+    tan /= np.linalg.norm(tan, axis=1, keepdims=True)
+    inside = ((t - t0) > 0.0) & ((t - t0) < T)
+    sdot = np.where(inside, dsigma * arc[-1] / T, 0.0)
+    vel = np.stack([np.interp(s, arc, tan[:, 0]), np.interp(s, arc, tan[:, 1])], axis=1) * sdot[:, None]
+    return Intent(positions=pos, velocities=vel, side=side, amplitude=amp, pace=pace, end_time=t0 + T)
+
+
+class OperatorArm:
+    """The operator's arm for one trial: call :meth:`force` once per tick, in order.
+
+    Parameters
+    ----------
+    profile : the operator.
+    intent : (n, 2) desired hand-frame positions x_ref,h [m] on the tick grid (the
+        tip's intent; the world adds the object's grasp offset itself).
+    dt : tick [s].
+    noise : (n, 2) the trial's motor noise [N], precomputed (see :func:`motor_noise`).
+    """
+
+    def __init__(self, profile: OperatorProfile, intent: np.ndarray, dt: float, noise: np.ndarray) -> None:
+        self.profile = profile
+        self._ix = intent[:, 0].tolist()  # plain floats: the tick is scalar arithmetic
+        self._iy = intent[:, 1].tolist()
+        self._nx = noise[:, 0].tolist()
+        self._ny = noise[:, 1].tolist()
+        self._n = len(self._ix)
+        self.delay_ticks = int(round(profile.reaction_delay / dt))
+        size = self.delay_ticks + 1
+        self._ex = [0.0] * size  # ring buffers of the error, for the delayed pathway
+        self._ey = [0.0] * size
+        self._size = size
+        self._ebar = 0.0
+        self._alpha = dt / profile.adaptation_time
+        self.stiffness = profile.stiffness_min
+
+    def force(self, k: int, px: float, py: float, vx: float, vy: float) -> tuple[float, float]:
+        """u_h(k) [N] for hand position (px, py) [m] and velocity (vx, vy) [m/s] at tick k."""
+        p = self.profile
+        i = k if k < self._n else self._n - 1
+        ex = self._ix[i] - px
+        ey = self._iy[i] - py
+        slot = k % self._size
+        self._ex[slot] = ex
+        self._ey[slot] = ey
+        # The oldest slot of the ring is e(k − d) (e(0) before d ticks have passed: at rest).
+        old = (k + 1) % self._size if k >= self.delay_ticks else 0
+        dx = self._ex[old]
+        dy = self._ey[old]
+        self._ebar += self._alpha * (math.sqrt(ex * ex + ey * ey) - self._ebar)
+        K = p.stiffness_min + p.stiffness_gain * self._ebar
+        if K > p.stiffness_max:
+            K = p.stiffness_max
+        self.stiffness = K
+        b = p.reflex_share
+        fx = K * ((1.0 - b) * ex + b * dx) - p.damping * vx + self._nx[i]
+        fy = K * ((1.0 - b) * ey + b * dy) - p.damping * vy + self._ny[i]
+        norm = math.sqrt(fx * fx + fy * fy)
+        if norm > p.force_limit:
+            scale = p.force_limit / norm
+            fx *= scale
+            fy *= scale
+        return fx, fy
+
+
+def motor_noise(profile: OperatorProfile, rng: np.random.Generator, n: int, dt: float) -> np.ndarray:
+    """(n, 2) Ornstein–Uhlenbeck motor noise [N], stationary std ``profile.motor_noise``."""
+    rho = math.exp(-dt / profile.motor_noise_time)
+    white = rng.standard_normal((int(n), 2)) * (profile.motor_noise * math.sqrt(1.0 - rho * rho))
+    white[0] = rng.standard_normal(2) * profile.motor_noise  # start in the stationary distribution
+    from scipy.signal import lfilter
+
+    return lfilter([1.0], [1.0, -rho], white, axis=0)

@@ -1,0 +1,46 @@
+"""The realism statistics and report."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from coassist.data import Trial, TrialMeta
+from coassist.experiments.realism import run_realism, summary_table, trial_stats, write_report
+
+REAL = Path("/work/shared/data/ur5-thesis/user-a")
+
+
+def _trial():
+    t = np.arange(0, 2.0, 0.01)
+    ref = np.column_stack([t * 0.25, np.zeros_like(t)])  # 0.5 m along x
+    pose = ref.copy()
+    pose[:, 1] = 0.05 * np.sin(np.pi * t / 2.0)  # up to 5 cm off the path
+    wrench = np.zeros((len(t), 2))
+    wrench[:, 0] = 3.0
+    wrench[50, 1] = 4.0  # one tick of |f| = 5 N
+    meta = TrialMeta(user="u", task="linear", object="handle", controller="c", model_id=None, seed=None,
+                     source="real", dt=0.01)
+    return Trial(meta=meta, time=t, pose=pose, velocity=np.zeros_like(pose), wrench=wrench, reference=ref)
+
+
+def test_trial_stats_by_hand():
+    s = trial_stats(_trial())
+    assert s["duration"] == pytest.approx(1.99)
+    assert s["peak_force"] == pytest.approx(5.0)
+    assert s["mean_force"] == pytest.approx((3.0 * 199 + 5.0) / 200)
+    assert s["peak_deviation"] == pytest.approx(0.05, abs=2e-3)
+    expected_length = np.sum(np.linalg.norm(np.diff(_trial().pose, axis=0), axis=1))
+    assert s["path_length"] == pytest.approx(expected_length)
+
+
+@pytest.mark.real_data
+@pytest.mark.skipif(not REAL.exists(), reason="real recordings not available")
+def test_realism_report(tmp_path):
+    result = run_realism(REAL, presets=("thesis-evaluation",), tasks=("linear",), trials_per_task=1, workers=1, progress=False)
+    assert len(result.real) == 15 and len(result.sim["thesis-evaluation"]["linear"]) == 1
+    table = summary_table(result)
+    assert "peak ‖f‖" in table and "thesis-evaluation" in table
+    out = write_report(result, tmp_path / "realism.md", notes="## Notes\n\nhello")
+    text = out.read_text()
+    assert text.startswith("# Realism check") and "hello" in text

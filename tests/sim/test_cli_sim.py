@@ -1,0 +1,43 @@
+"""The thin CLI commands over the simulator: collect and show."""
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from coassist.cli import app
+from coassist.data import read_dataset
+
+REAL = Path("/work/shared/data/ur5-thesis/user-a/trial_1")
+runner = CliRunner()
+
+
+def test_collect_then_show(tmp_path):
+    out = tmp_path / "D0"
+    res = runner.invoke(app, ["collect", "--out", str(out), "--tasks", "linear,curved", "--trials", "1",
+                              "--users", "0,1", "--seed", "5", "--workers", "1"])
+    assert res.exit_code == 0, res.output
+    ds = read_dataset(out)
+    assert ds.id == "D0" and len(ds) == 4
+    assert [t.meta.seed for t in ds.trials] == [5, 6, 7, 8]
+    assert [t.meta.user for t in ds.trials] == ["user-0", "user-0", "user-1", "user-1"]
+    png = tmp_path / "view.png"
+    res = runner.invoke(app, ["show", str(out), "--index", "1", "--out", str(png)])
+    assert res.exit_code == 0, res.output
+    assert png.stat().st_size > 10_000
+
+
+def test_collect_rejects_bad_options(tmp_path):
+    res = runner.invoke(app, ["collect", "--out", str(tmp_path / "x"), "--tasks", "circle"])
+    assert res.exit_code != 0 and "tasks" in res.output
+    res = runner.invoke(app, ["collect", "--out", str(tmp_path / "x"), "--controller", "nash"])
+    assert res.exit_code != 0 and "controller" in res.output
+
+
+@pytest.mark.real_data
+@pytest.mark.skipif(not REAL.exists(), reason="real recordings not available")
+def test_show_a_real_recording(tmp_path):
+    png = tmp_path / "real.png"
+    res = runner.invoke(app, ["show", str(REAL), "--out", str(png)])
+    assert res.exit_code == 0, res.output
+    assert png.stat().st_size > 10_000
