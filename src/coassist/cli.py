@@ -46,5 +46,225 @@ def sweep(
     console.print(f"[green]wrote[/] {out / 'summary.json'} and {out / 'dmpc_sweep.png'}")
 
 
+
+# --------------------------------------------------------------------------- intent model
+
+
+def _intent_preset(preset: str, **overrides):
+    from coassist.intent.training import PRESETS, with_overrides
+
+    if preset not in PRESETS:
+        raise typer.BadParameter(f"unknown preset {preset!r}; choose one of {sorted(PRESETS)}", param_hint="--preset")
+    try:
+        return with_overrides(PRESETS[preset], **overrides)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from None
+
+
+def _intent_trials(paths: list[Path]):
+    from coassist.intent import load_trials
+
+    try:
+        return load_trials(paths)
+    except (FileNotFoundError, ValueError) as exc:
+        raise typer.BadParameter(str(exc), param_hint="DATA") from None
+
+
+@app.command()
+def train(
+    data: list[Path] = typer.Argument(..., help="Dataset folders, real-recording folders (e.g. .../ur5-thesis/user-a) or single recordings."),
+    out: Path = typer.Option(..., "--out", "-o", help="Model folder to write (weights, model.json, history.json, loss.png)."),
+    preset: str = typer.Option("default", help="Starting configuration: 'default' (small, fast) or 'thesis' (exact §5.2.2)."),
+    init: str = typer.Option("scratch", help="scratch | resume:<model> | finetune:<model> | transfer:<model> (LSTM frozen)."),
+    epochs: int = typer.Option(None, help="Override the preset's epochs."),
+    lr: float = typer.Option(None, help="Override the initial learning rate."),
+    batch_size: int = typer.Option(None, help="Override the batch size."),
+    seed: int = typer.Option(None, help="Seed of split, init and batch order (default 0)."),
+    threads: int = typer.Option(None, help="Torch threads (default 2; at most the cores you may use)."),
+    test_fraction: float = typer.Option(None, help="Share of trials held out (default 0.2)."),
+    device: str = typer.Option(None, help="Torch device to train on: cpu (default) or cuda."),
+) -> None:
+    """Train the intent predictor (thesis §5.2.2; Algorithm 4.1 with resume:, 4.2 with transfer:)."""
+    import json
+
+    from coassist._io import atomic_write_text
+    from coassist.intent.training import train_model, write_model
+
+    p = _intent_preset(preset, epochs=epochs, lr=lr, batch_size=batch_size, seed=seed, threads=threads,
+                       test_fraction=test_fraction, init=init, device=device)  # fmt: skip
+    trials = _intent_trials(data)
+    history: list = []
+
+    def log(record: dict) -> None:
+        history.append(record)
+        atomic_write_text(out / "history.json", json.dumps(history, indent=1) + "\n")
+
+    try:
+        model = train_model(trials, p, p.train, progress=True, on_epoch=log)
+    except ValueError as exc:  # mismatched model, unknown init, too-short trials
+        console.print(f"[red]error:[/] {exc}")
+        raise typer.Exit(2) from None
+    write_model(model, out)
+    last = model.info["training_history"][-1]
+    console.print(
+        f"[green]wrote[/] {out}  train {len(model.info['train_trials'])} / test {len(model.info['test_trials'])} trials, "
+        f"final train loss {last['train_loss']:.3e}, test loss {last['test_loss'] if last['test_loss'] is None else format(last['test_loss'], '.3e')}, "
+        f"{model.info['train_seconds']:.0f} s"
+    )
+
+
+@app.command()
+def evaluate(
+    model: Path = typer.Option(..., "--model", "-m", help="Model folder written by `coassist train`."),
+    data: list[Path] = typer.Option(..., "--data", "-d", help="Dataset or recording folders to score on (repeatable)."),
+    out: Path = typer.Option(None, help="JSON file for the results (default: <model>/evaluation.json)."),
+    include_training: bool = typer.Option(False, help="Also score trials the model was trained on."),
+) -> None:
+    """e_RMS and e_MAX per horizon for the model and the baselines (nominal, constant velocity, ridge)."""
+    import json
+
+    from coassist._io import atomic_write_text
+    from coassist.intent import ModelFileError, ModelMismatchError, evaluate_model, load_model, results_table
+
+    try:
+        m = load_model(model)
+    except ModelFileError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--model") from None
+    trials = _intent_trials(data)
+    try:
+        result = evaluate_model(m, trials, held_out_only=not include_training)
+    except (ModelMismatchError, ValueError) as exc:
+        console.print(f"[red]error:[/] {exc}")
+        raise typer.Exit(2) from None
+    result["model"] = str(model)
+    console.print(results_table(result, f"{model}: {len(result['trials'])} trials, {result['n_ticks']} ticks"))
+    if result["skipped"]:
+        console.print(f"skipped {len(result['skipped'])} training trials (use --include-training to score them)")
+    dest = out or model / "evaluation.json"
+    atomic_write_text(dest, json.dumps(result, indent=1) + "\n")
+    console.print(f"[green]wrote[/] {dest}")
+
+
+@app.command()
+def tune(
+    data: list[Path] = typer.Argument(..., help="Dataset or recording folders."),
+    preset: str = typer.Option("default", help="Preset whose window and training defaults are searched around."),
+    n_trials: int = typer.Option(20, "--trials", help="Optuna trials to run."),
+    storage: str = typer.Option("sqlite:///study.db", help="Optuna storage URL (any database URL Optuna accepts)."),
+    study_name: str = typer.Option("intent", help="Study name (resumed if it exists)."),
+    epochs: int = typer.Option(None, help="Epochs per trial (default: the preset's)."),
+    seed: int = typer.Option(0, help="Sampler seed."),
+) -> None:
+    """Optuna search over optimiser, learning rate and sizes; objective: validation e_RMS at the full horizon."""
+    from coassist.intent.tuning import run_study
+
+    if n_trials < 1:
+        raise typer.BadParameter("must be >= 1", param_hint="--trials")
+    p = _intent_preset(preset)
+    trials = _intent_trials(data)
+    result = run_study(trials, p, n_trials=n_trials, storage=storage, study_name=study_name, epochs=epochs, seed=seed,
+                       progress=True)  # fmt: skip
+    console.print(f"best validation e_RMS {1e3 * result['best_value']:.2f} mm with {result['best_params']}")
+    console.print(f"study {result['study_name']!r} in {result['storage']} ({result['n_trials']} trials)")
+
+
+def _int_list(text: str, name: str) -> list[int]:
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise typer.BadParameter(f"{name} must be comma-separated integers, got {text!r}") from None
+    if not values or any(v < 0 for v in values):
+        raise typer.BadParameter(f"{name} must list integers >= 0, got {text!r}")
+    return values
+
+
+def _name_list(text: str, name: str, allowed: tuple[str, ...]) -> list[str]:
+    values = [v.strip() for v in text.split(",") if v.strip()]
+    bad = [v for v in values if v not in allowed]
+    if not values or bad:
+        raise typer.BadParameter(f"{name} must be comma-separated values from {', '.join(allowed)}; got {text!r}")
+    return values
+
+
+@app.command()
+def collect(
+    out: Path = typer.Option(..., help="Dataset folder to write (trial Parquet files + manifest.json)."),
+    controller: str = typer.Option("cooperative", help="cooperative | impedance | manual."),
+    users: str = typer.Option("0", help="Simulated operators, comma-separated (0 = the thesis' author)."),
+    tasks: str = typer.Option("linear,curved,sinusoidal", help="Nominal paths: linear, curved, sinusoidal, z."),
+    objects: str = typer.Option("handle", help="Objects: handle, board, heavy."),
+    trials: int = typer.Option(20, help="Trials per user, object and task."),
+    seed: int = typer.Option(0, help="Seed of the first trial; trial i uses seed + i."),
+    preset: str = typer.Option("thesis-evaluation", help="Control preset (thesis-evaluation[-dm], thesis-application[-dm])."),
+    intent: str = typer.Option("nominal", help="nominal | oracle | path of an intent model."),
+    dataset_id: str = typer.Option(None, help="Dataset id (default: the folder's name)."),
+    workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
+    ray_address: str = typer.Option(None, help="Run on a Ray cluster at this address (needs coassist[cluster])."),
+    overwrite: bool = typer.Option(False, help="Replace an existing dataset folder."),
+) -> None:
+    """Simulate trials and write them as a dataset (thesis §5.2.2; default: D0, 60 trials)."""
+    from coassist.sim import CONTROLLER_KINDS, OBJECTS, PRESETS, TASK_KINDS
+    from coassist.sim.collect import collect_dataset
+
+    if controller not in CONTROLLER_KINDS:
+        raise typer.BadParameter(f"controller must be one of {', '.join(CONTROLLER_KINDS)}, got {controller!r}")
+    if preset not in PRESETS:
+        raise typer.BadParameter(f"preset must be one of {', '.join(PRESETS)}, got {preset!r}")
+    if trials < 1 or seed < 0 or (workers is not None and workers < 1):
+        raise typer.BadParameter("trials and workers must be >= 1 and seed >= 0")
+    try:
+        folder = collect_dataset(
+            out, dataset_id=dataset_id, workers=workers, progress=True, ray_address=ray_address, overwrite=overwrite,
+            controller=controller, users=_int_list(users, "users"), tasks=_name_list(tasks, "tasks", TASK_KINDS),
+            objects=_name_list(objects, "objects", tuple(OBJECTS)), trials=trials, seed=seed, preset=preset,
+            intent=intent,
+        )
+    except (ValueError, FileExistsError, RuntimeError) as exc:
+        console.print(f"[red]error:[/] {exc}")
+        raise typer.Exit(1) from None
+    console.print(f"[green]wrote[/] {folder}")
+
+
+@app.command()
+def show(
+    path: Path = typer.Argument(..., help="A trial file, a dataset folder or a ROS CSV recording folder."),
+    out: Path = typer.Option(None, help="PNG to write (default: <name>.png in the current folder)."),
+    index: int = typer.Option(0, help="Which trial of a dataset."),
+) -> None:
+    """The monitor view of a trial (thesis Fig. 5.7–5.8) and its force over time."""
+    from coassist.sim.monitor import load_for_show, plot_trial
+
+    try:
+        trial = load_for_show(path, index)
+    except (ValueError, OSError) as exc:
+        console.print(f"[red]error:[/] {exc}")
+        raise typer.Exit(1) from None
+    if out is None:
+        out = Path(f"{path.resolve().name}{'' if index == 0 else f'_{index}'}.png")
+    console.print(f"[green]wrote[/] {plot_trial(trial, out)}")
+
+
+@app.command()
+def realism(
+    out: Path = typer.Option(Path("docs/realism.md"), help="Markdown report to write."),
+    real: Path = typer.Option(Path("/work/shared/data/ur5-thesis/user-a"), help="Folder of real trial_* recordings."),
+    trials: int = typer.Option(10, help="Simulated trials per task and preset."),
+    seed: int = typer.Option(0, help="Seed of the first simulated trial."),
+    workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
+) -> None:
+    """Simulated trials (user 0, handle, cooperative, nominal intent) side by side with real user-a trials."""
+    from coassist.experiments import realism as realism_exp
+
+    if trials < 1 or seed < 0:
+        raise typer.BadParameter("trials must be >= 1 and seed >= 0")
+    try:
+        result = realism_exp.run_realism(real, trials_per_task=trials, seed=seed, workers=workers, progress=True)
+    except ValueError as exc:
+        console.print(f"[red]error:[/] {exc}")
+        raise typer.Exit(1) from None
+    console.print(realism_exp.summary_table(result))
+    console.print(f"[green]wrote[/] {realism_exp.write_report(result, out, realism_exp.NOTES)}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     app()
