@@ -266,5 +266,43 @@ def realism(
     console.print(f"[green]wrote[/] {realism_exp.write_report(result, out, realism_exp.NOTES)}")
 
 
+@app.command()
+def reproduce(
+    out: Path = typer.Option(Path("runs/reproduce"), help="Output folder: report.html, summary.json, datasets, models."),
+    preset: str = typer.Option("default", help="default (≤ 15 min on 2 CPU cores), tiny (smoke run) or thesis (thesis sizes; GPU)."),
+    seed: int = typer.Option(0, help="Seed of every dataset and training."),
+    workers: int = typer.Option(None, help="Simulation processes (default: the preset's)."),
+    device: str = typer.Option(None, help="Torch device for training, e.g. cpu or cuda (default: the preset's)."),
+    real_data: Path = typer.Option(None, help="Folder with user-a/ and user-b/ recordings (default: ../shared/data/ur5-thesis)."),
+) -> None:
+    """The thesis' experiments end to end in simulation (dMPC study, iterative training, transfer, application, real data): one HTML report."""
+    from dataclasses import replace
+
+    from coassist.experiments import reproduce as rep
+
+    if preset not in rep.PRESETS:
+        raise typer.BadParameter(f"preset must be one of {tuple(rep.PRESETS)}, got {preset!r}", param_hint="--preset")
+    changes = {"seed": seed}
+    if workers is not None:
+        changes["workers"] = workers
+    if device is not None:
+        changes["device"] = device
+    if real_data is not None:
+        if not (real_data / "user-a").is_dir():
+            raise typer.BadParameter(f"{real_data} has no user-a/ folder of recordings", param_hint="--real-data")
+        changes["real_data"] = str(real_data)
+    try:
+        config = replace(rep.PRESETS[preset], **changes)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from None
+    summary = rep.run_reproduce(config, out, progress=True, say=console.print)
+    held = sum(1 for c in summary["claims"] if c["holds"])
+    console.print(f"claims: {held} of {len(summary['claims'])} hold")
+    for c in summary["claims"]:
+        mark = "[green]holds[/]" if c["holds"] else "[red]does not hold[/]"
+        console.print(f"  {mark}  {c['claim']}")
+    console.print(f"[green]wrote[/] {out / 'report.html'} and {out / 'summary.json'} in {summary['total_seconds']:.0f} s")
+
+
 if __name__ == "__main__":  # pragma: no cover
     app()

@@ -1,0 +1,346 @@
+"""Features, windows and scaling for the intent predictor (thesis §4.1, §5.2.2).
+
+At tick k the predictor sees the last ``history`` samples of the 4·d features, in the
+thesis' order (eq. 4.3–4.6; for the x-y plane d = 2)::
+
+    x, y, ẋ, ẏ, f_x, f_y, x_ref, y_ref        (pose, velocity, wrench, nominal reference)
+
+and predicts the human's desired positions at ticks k+1 … k+H. Training targets are
+the *measured* future poses (the thesis trains on what the person actually did).
+
+Two choices here are ours, both measured on real data (docs/intent-results.md):
+
+- ``input_frame``: ``"absolute"`` (the thesis: positions as recorded) or
+  ``"relative"`` (pose and reference columns minus the current pose x(k), so the
+  network sees shapes, not places, and transfers to other workspaces);
+- ``target``: what the network outputs for step i (i = 1 … H):
+  ``"absolute"``  x(k+i);
+  ``"relative"``  x(k+i) − x(k);
+  ``"residual"``  x(k+i) − (x(k) + i·dt·ẋ(k))   (over constant-velocity extrapolation).
+
+Inputs and targets are scaled to [−1, 1] by a :class:`Scaler` fitted on the training
+windows only (one range per feature; one range per axis for targets).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from coassist.data import Trial
+
+__all__ = [
+    "AXES",
+    "INPUT_FRAMES",
+    "TARGETS",
+    "Scaler",
+    "WindowConfig",
+    "WindowSet",
+    "feature_names",
+    "split_trials",
+    "trial_features",
+]
+
+AXES = ("x", "y", "z", "rx", "ry", "rz")
+INPUT_FRAMES = ("absolute", "relative")
+TARGETS = ("absolute", "relative", "residual")
+TARGET_SCALINGS = ("axis", "step")
+
+
+def feature_names(n_dof: int) -> tuple[str, ...]:
+    """Feature names in the thesis' order: pose, velocity, wrench, nominal reference.
+
+    ``feature_names(2) == ("x", "y", "vx", "vy", "fx", "fy", "x_ref", "y_ref")``.
+    """
+    if not 1 <= n_dof <= len(AXES):
+        raise ValueError(f"n_dof must be between 1 and {len(AXES)}, got {n_dof}")
+    ax = AXES[:n_dof]
+    return ax + tuple(f"v{a}" for a in ax) + tuple(f"f{a}" for a in ax) + tuple(f"{a}_ref" for a in ax)
+
+
+def trial_features(trial: Trial) -> np.ndarray:
+    """The (T, 4·d) feature matrix [pose | velocity | wrench | reference] of a trial (SI units)."""
+    return np.concatenate([trial.pose, trial.velocity, trial.wrench, trial.reference], axis=1)
+
+
+def _check_int(value: Any, name: str, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {value}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class WindowConfig:
+    """How a window is cut from a trial.
+
+    Attributes
+    ----------
+    history : int
+        Past samples covered by one input window, current one included (thesis: 125 = 1 s).
+    decimation : int
+        Keep every ``decimation``-th of them (1 = all, the thesis). ``history`` must be a
+        multiple; the network then sees ``history // decimation`` steps, the last being x(k).
+    horizon : int
+        Predicted future samples H (thesis: 50 = 0.4 s).
+    input_frame : str
+        ``"absolute"`` or ``"relative"`` (see the module docstring).
+    target : str
+        ``"absolute"``, ``"relative"`` or ``"residual"`` (see the module docstring).
+    target_scaling : str
+        ``"axis"``: one [−1, 1] range per axis over all H steps (the thesis);
+        ``"step"``: one range per step and axis, so the MSE weighs near and far steps alike.
+    """
+
+    history: int = 125
+    decimation: int = 1
+    horizon: int = 50
+    input_frame: str = "absolute"
+    target: str = "absolute"
+    target_scaling: str = "axis"
+
+    def __post_init__(self) -> None:
+        _check_int(self.history, "window.history", 1)
+        _check_int(self.decimation, "window.decimation", 1)
+        _check_int(self.horizon, "window.horizon", 1)
+        if self.history % self.decimation:
+            raise ValueError(
+                f"window.history ({self.history}) must be a multiple of window.decimation ({self.decimation})"
+            )
+        if self.input_frame not in INPUT_FRAMES:
+            raise ValueError(f"window.input_frame must be one of {INPUT_FRAMES}, got {self.input_frame!r}")
+        if self.target not in TARGETS:
+            raise ValueError(f"window.target must be one of {TARGETS}, got {self.target!r}")
+        if self.target_scaling not in TARGET_SCALINGS:
+            raise ValueError(f"window.target_scaling must be one of {TARGET_SCALINGS}, got {self.target_scaling!r}")
+
+    @property
+    def steps(self) -> int:
+        """Sequence length the network sees."""
+        return self.history // self.decimation
+
+    @property
+    def offsets(self) -> np.ndarray:
+        """Sample offsets of the window relative to k, oldest first, ending at 0. Shape (steps,)."""
+        return -self.decimation * np.arange(self.steps - 1, -1, -1)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+class Scaler:
+    """Min-max scaling of each column to [−1, 1] (thesis §5.2.2).
+
+    ``scaled = 2 (x − lo) / (hi − lo) − 1``. A constant column (hi = lo) gets a span of
+    1 so it maps to −1 instead of dividing by zero. Immutable once built.
+    """
+
+    def __init__(self, lo: Sequence[float], hi: Sequence[float]) -> None:
+        lo_a = np.array(lo, dtype=np.float64).reshape(-1)
+        hi_a = np.array(hi, dtype=np.float64).reshape(-1)
+        if lo_a.shape != hi_a.shape or lo_a.size == 0:
+            raise ValueError(f"Scaler lo and hi must be non-empty and of equal length, got {lo_a.shape} and {hi_a.shape}")
+        if not (np.all(np.isfinite(lo_a)) and np.all(np.isfinite(hi_a))):
+            raise ValueError("Scaler ranges must be finite")
+        if np.any(hi_a < lo_a):
+            raise ValueError("Scaler needs hi >= lo in every column")
+        span = hi_a - lo_a
+        span[span == 0.0] = 1.0
+        for a in (lo_a, hi_a, span):
+            a.setflags(write=False)
+        self.lo, self.hi, self._span = lo_a, hi_a, span
+
+    @classmethod
+    def fit(cls, values: np.ndarray) -> Scaler:
+        """Ranges of the columns of ``values`` (..., n)."""
+        flat = np.asarray(values, dtype=np.float64).reshape(-1, np.shape(values)[-1])
+        return cls(flat.min(axis=0), flat.max(axis=0))
+
+    def transform(self, x: np.ndarray) -> np.ndarray:
+        """(..., n) physical -> (..., n) in [−1, 1] on the fitted range."""
+        return 2.0 * (x - self.lo) / self._span - 1.0
+
+    def inverse(self, s: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`transform`."""
+        return (s + 1.0) * 0.5 * self._span + self.lo
+
+    def to_dict(self) -> dict[str, list[float]]:
+        return {"lo": self.lo.tolist(), "hi": self.hi.tolist()}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Scaler:
+        try:
+            return cls(data["lo"], data["hi"])
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"malformed scaler {data!r}: {exc}") from None
+
+
+def split_trials(ids: Sequence[str], test_fraction: float = 0.2, seed: int = 0) -> tuple[list[int], list[int]]:
+    """Split trials (not windows) into train and test, deterministically.
+
+    The ids are sorted first, so the split depends only on the set of trials and the
+    seed, not on load order. At least one trial goes to each side when there are two
+    or more. Returns (train indices, test indices) into ``ids``, each sorted.
+    """
+    if not 0.0 <= test_fraction < 1.0:
+        raise ValueError(f"test_fraction must be in [0, 1), got {test_fraction!r}")
+    if len(set(ids)) != len(ids):
+        raise ValueError("trial ids must be unique")
+    n = len(ids)
+    order = sorted(range(n), key=lambda i: ids[i])
+    perm = np.random.default_rng(seed).permutation(n)
+    n_test = int(round(test_fraction * n))
+    if test_fraction > 0 and n >= 2:
+        n_test = min(max(n_test, 1), n - 1)
+    test = sorted(order[p] for p in perm[:n_test])
+    train = sorted(order[p] for p in perm[n_test:])
+    return train, test
+
+
+class WindowSet:
+    """All windows of some trials, cut lazily (one batch at a time).
+
+    Holds the features of the trials concatenated, (ΣT, 4·d), and the global index of
+    every tick k that has a full history and (``need_future``) a full horizon. Batches
+    are gathered by fancy indexing, so nothing of size (N, steps, features) is built.
+    """
+
+    def __init__(
+        self,
+        trials: Sequence[Trial],
+        window: WindowConfig,
+        dt: float,
+        *,
+        stride: int = 1,
+        need_future: bool = True,
+    ) -> None:
+        if not trials:
+            raise ValueError("WindowSet needs at least one trial")
+        d = trials[0].n_dof
+        if any(t.n_dof != d for t in trials):
+            raise ValueError("all trials must have the same number of DOFs")
+        _check_int(stride, "stride", 1)
+        self.window, self.dt, self.n_dof = window, float(dt), d
+        feats, ends, owner, start = [], [], [], 0
+        first = window.history - 1
+        for i, t in enumerate(trials):
+            f = trial_features(t)
+            last = t.n_samples - 1 - (window.horizon if need_future else 0)
+            ks = np.arange(first, last + 1, stride)
+            feats.append(f)
+            ends.append(start + ks)
+            owner.append(np.full(ks.size, i))
+            start += t.n_samples
+        self.features = np.concatenate(feats)
+        self.ends = np.concatenate(ends).astype(np.int64)
+        self.trial = np.concatenate(owner)
+        if self.ends.size == 0:
+            raise ValueError(
+                f"no trial is long enough for history {window.history} + horizon {window.horizon} samples"
+            )
+
+    def __len__(self) -> int:
+        return int(self.ends.size)
+
+    # -- raw (physical) pieces ------------------------------------------------
+    def raw_inputs(self, sel: np.ndarray) -> np.ndarray:
+        """(B, steps, 4·d) input windows in the configured frame, SI units."""
+        ends = self.ends[sel]
+        x = self.features[ends[:, None] + self.window.offsets[None, :]]
+        if self.window.input_frame == "relative":
+            x = to_relative(x, self.n_dof)
+        return x
+
+    def anchors(self, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Current pose x(k) and velocity ẋ(k), each (B, d)."""
+        f = self.features[self.ends[sel]]
+        d = self.n_dof
+        return f[:, :d], f[:, d : 2 * d]
+
+    def future(self, sel: np.ndarray) -> np.ndarray:
+        """Measured poses x(k+1) … x(k+H), (B, H, d)."""
+        idx = self.ends[sel][:, None] + np.arange(1, self.window.horizon + 1)[None, :]
+        return self.features[idx][:, :, : self.n_dof]
+
+    def raw_targets(self, sel: np.ndarray) -> np.ndarray:
+        """Training targets in the configured parameterisation, (B, H, d), m."""
+        pose, vel = self.anchors(sel)
+        return encode_target(self.future(sel), pose, vel, self.window, self.dt)
+
+    # -- scaler fit (training split only) -------------------------------------
+    def fit_scalers(self) -> tuple[Scaler, Scaler]:
+        """Input scaler (per feature over every window step) and target scaler (per axis, or per step and axis)."""
+        nf = self.features.shape[1]
+        nt = self.n_dof * (self.window.horizon if self.window.target_scaling == "step" else 1)
+        lo, hi = np.full(nf, np.inf), np.full(nf, -np.inf)
+        tlo, thi = np.full(nt, np.inf), np.full(nt, -np.inf)
+        for chunk in np.array_split(np.arange(len(self)), max(1, len(self) // 4096)):
+            x = self.raw_inputs(chunk).reshape(-1, nf)
+            lo, hi = np.minimum(lo, x.min(0)), np.maximum(hi, x.max(0))
+            y = self.raw_targets(chunk).reshape(-1, nt)
+            tlo, thi = np.minimum(tlo, y.min(0)), np.maximum(thi, y.max(0))
+        return Scaler(lo, hi), Scaler(tlo, thi)
+
+
+def scale_targets(scaler: Scaler, y: np.ndarray) -> np.ndarray:
+    """Targets (B, H, d) -> scaled (B, H·d), per axis or per step and axis (by the scaler's size)."""
+    b, h, d = y.shape
+    if scaler.lo.size == d:
+        return scaler.transform(y).reshape(b, h * d)
+    return scaler.transform(y.reshape(b, h * d))
+
+
+def unscale_targets(scaler: Scaler, s: np.ndarray, horizon: int, n_dof: int) -> np.ndarray:
+    """Inverse of :func:`scale_targets`: (B, H·d) -> (B, H, d)."""
+    s = s.reshape(-1, horizon * n_dof)
+    if scaler.lo.size == n_dof:
+        return scaler.inverse(s.reshape(-1, horizon, n_dof))
+    return scaler.inverse(s).reshape(-1, horizon, n_dof)
+
+
+def to_relative(x: np.ndarray, n_dof: int) -> np.ndarray:
+    """Pose and reference columns of windows (..., steps, 4·d) minus the last pose."""
+    d = n_dof
+    out = np.array(x, dtype=np.float64, copy=True)
+    current = out[..., -1:, :d].copy()
+    out[..., :, :d] -= current
+    out[..., :, 3 * d :] -= current
+    return out
+
+
+def _target_base(pose: np.ndarray, vel: np.ndarray, horizon: int, window: WindowConfig, dt: float) -> np.ndarray | None:
+    """What the target is measured from: None (absolute), x(k), or x(k) + i·dt·ẋ(k). (B, H, d)."""
+    if window.target == "absolute":
+        return None
+    if window.target == "relative":
+        return np.repeat(pose[:, None, :], horizon, axis=1)
+    return constant_velocity(pose, vel, horizon, dt)
+
+
+def encode_target(future: np.ndarray, pose: np.ndarray, vel: np.ndarray, window: WindowConfig, dt: float) -> np.ndarray:
+    """Future poses (B, H, d) -> network target in ``window.target`` parameterisation."""
+    base = _target_base(pose, vel, future.shape[1], window, dt)
+    return future if base is None else future - base
+
+
+def decode_target(target: np.ndarray, pose: np.ndarray, vel: np.ndarray, window: WindowConfig, dt: float) -> np.ndarray:
+    """Inverse of :func:`encode_target`: network output (B, H, d) -> positions in m."""
+    base = _target_base(pose, vel, target.shape[1], window, dt)
+    return target if base is None else target + base
+
+
+def constant_velocity(pose: np.ndarray, vel: np.ndarray, horizon: int, dt: float) -> np.ndarray:
+    """x(k) + i·dt·ẋ(k) for i = 1 … H: (B, d), (B, d) -> (B, H, d)."""
+    steps = dt * np.arange(1, horizon + 1)[None, :, None]
+    return pose[:, None, :] + steps * vel[:, None, :]
+
+
+def check_dt(dt: float) -> float:
+    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be a finite number > 0 (s), got {dt!r}")
+    return float(dt)

@@ -1,0 +1,279 @@
+"""A trained intent model: network + windowing + scaling, saved as safetensors + JSON.
+
+A model folder holds::
+
+    weights.safetensors   the network's tensors (float32)
+    ridge.safetensors     the ridge baseline fitted on the same training windows (optional)
+    model.json            sidecar: features, dt, window, network, scaling ranges, dataset
+                          ids, split, preset, training configuration and history
+
+Every file is written atomically (temporary file + ``os.replace``), never pickled.
+:func:`load_model` checks the weights against the sidecar's hash and refuses a model
+whose features or dt differ from what the caller expects (:class:`ModelMismatchError`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from safetensors.torch import load as st_load
+from safetensors.torch import save as st_save
+
+from coassist._io import atomic_write_bytes, atomic_write_text
+from coassist.data import Trial
+from coassist.intent.features import (
+    Scaler,
+    WindowConfig,
+    WindowSet,
+    decode_target,
+    feature_names,
+    to_relative,
+    unscale_targets,
+)
+from coassist.intent.network import IntentNet, NetworkConfig
+
+__all__ = ["FORMAT", "IntentModel", "ModelFileError", "ModelMismatchError", "load_model", "save_model"]
+
+FORMAT = "coassist-intent/1"
+WEIGHTS = "weights.safetensors"
+RIDGE = "ridge.safetensors"
+SIDECAR = "model.json"
+#: Relative tolerance on dt when checking a model against a controller or data.
+DT_RTOL = 0.01
+
+
+class ModelMismatchError(ValueError):
+    """The model was trained on other features or another sampling period."""
+
+
+class ModelFileError(ValueError):
+    """A model folder that is missing files or inconsistent."""
+
+
+class IntentModel:
+    """Network, window and scalers: raw feature history in, predicted positions out.
+
+    Parameters
+    ----------
+    net : IntentNet
+    window : WindowConfig
+    input_scaler : Scaler over the 4·d features (in ``window.input_frame``)
+    target_scaler : Scaler over the d target axes (in ``window.target`` parameterisation)
+    dt : sampling period in s the model was trained at
+    info : JSON-ready details (preset, dataset ids, split, training history, …)
+    ridge : optional ridge baseline fitted on the same training windows
+    """
+
+    def __init__(
+        self,
+        net: IntentNet,
+        window: WindowConfig,
+        input_scaler: Scaler,
+        target_scaler: Scaler,
+        dt: float,
+        info: dict[str, Any] | None = None,
+        ridge: Any = None,
+    ) -> None:
+        nf, no = net.config.n_features, net.config.n_outputs
+        if nf % 4:
+            raise ValueError(f"network.n_features must be 4·d, got {nf}")
+        self.n_dof = nf // 4
+        if no != window.horizon * self.n_dof:
+            raise ValueError(f"network.n_outputs ({no}) must equal horizon·d = {window.horizon * self.n_dof}")
+        if input_scaler.lo.size != nf or target_scaler.lo.size not in (self.n_dof, no):
+            raise ValueError("scaler sizes do not match the network")
+        self.net, self.window = net, window
+        self.input_scaler, self.target_scaler = input_scaler, target_scaler
+        self.dt = float(dt)
+        self.features = feature_names(self.n_dof)
+        self.info = dict(info or {})
+        self.ridge = ridge
+
+    @property
+    def horizon(self) -> int:
+        return self.window.horizon
+
+    @property
+    def history(self) -> int:
+        return self.window.history
+
+    # ------------------------------------------------------------------ inference
+    def scale_inputs(self, x: np.ndarray) -> torch.Tensor:
+        """Raw windows (B, steps, 4·d) in the model's frame -> scaled float32 tensor."""
+        return torch.from_numpy(self.input_scaler.transform(x).astype(np.float32))
+
+    def outputs_to_positions(self, out: np.ndarray, pose: np.ndarray, vel: np.ndarray) -> np.ndarray:
+        """Network outputs (B, H·d), scaled -> predicted positions (B, H, d) in m."""
+        y = unscale_targets(self.target_scaler, out.astype(np.float64), self.horizon, self.n_dof)
+        return decode_target(y, pose, vel, self.window, self.dt)
+
+    def prepare(self, history: np.ndarray) -> np.ndarray:
+        """Raw history (B, history, 4·d), oldest first, at full rate -> (B, steps, 4·d) in the model's frame."""
+        x = np.asarray(history, dtype=np.float64)[:, self.window.offsets + self.window.history - 1]
+        return to_relative(x, self.n_dof) if self.window.input_frame == "relative" else x
+
+    @torch.inference_mode()
+    def predict_batch(self, history: np.ndarray) -> np.ndarray:
+        """Predicted positions (B, H, d) in m from raw histories (B, history, 4·d).
+
+        ``history[b, -1]`` is the current sample x(k); prediction i is for tick k+i.
+        """
+        h = np.asarray(history, dtype=np.float64)
+        if h.ndim != 3 or h.shape[1:] != (self.history, 4 * self.n_dof):
+            raise ValueError(f"history must have shape (B, {self.history}, {4 * self.n_dof}), got {h.shape}")
+        self.net.eval()
+        out = self.net(self.scale_inputs(self.prepare(h))).numpy()
+        d = self.n_dof
+        return self.outputs_to_positions(out, h[:, -1, :d], h[:, -1, d : 2 * d])
+
+    def predict(self, history: np.ndarray) -> np.ndarray:
+        """One prediction: raw history (history, 4·d) -> (H, d) positions in m.
+
+        The signature of the simulator's ``IntentSource.predict``.
+        """
+        return self.predict_batch(np.asarray(history, dtype=np.float64)[None])[0]
+
+    def reset(self, context: Any = None) -> None:
+        """Nothing to reset: the windowed model keeps no state between calls."""
+
+    @torch.inference_mode()
+    def predict_trial(self, trial: Trial, batch_size: int = 1024) -> np.ndarray:
+        """Predictions at every tick of a trial, (T, H, d); NaN before the history is full."""
+        self.check_compatible(trial_features_names(trial), trial.meta.dt, what=f"trial of user {trial.meta.user!r}")
+        ws = WindowSet([trial], self.window, self.dt, need_future=False)
+        self.net.eval()
+        pred = np.full((trial.n_samples, self.horizon, self.n_dof), np.nan)
+        for sel in np.array_split(np.arange(len(ws)), max(1, math.ceil(len(ws) / batch_size))):
+            out = self.net(self.scale_inputs(ws.raw_inputs(sel))).numpy()
+            pose, vel = ws.anchors(sel)
+            pred[ws.ends[sel]] = self.outputs_to_positions(out, pose, vel)
+        return pred
+
+    # ------------------------------------------------------------------ checks
+    def check_compatible(self, features: Sequence[str] | None, dt: float | None, what: str = "the caller") -> None:
+        """Raise :class:`ModelMismatchError` unless features and dt match the model's."""
+        if features is not None and tuple(features) != self.features:
+            raise ModelMismatchError(
+                f"model was trained on features {list(self.features)}, but {what} provides {list(features)}"
+            )
+        if dt is not None and not math.isclose(float(dt), self.dt, rel_tol=DT_RTOL):
+            raise ModelMismatchError(
+                f"model was trained at dt = {self.dt:g} s ({1 / self.dt:g} Hz), but {what} runs at dt = {float(dt):g} s "
+                f"({1 / float(dt):g} Hz); retrain or resample (tolerance {DT_RTOL:.0%})"
+            )
+
+    def sidecar(self, weights_sha256: str, ridge_sha256: str | None) -> dict[str, Any]:
+        return {
+            "format": FORMAT,
+            "features": list(self.features),
+            "n_dof": self.n_dof,
+            "dt": self.dt,
+            "history": self.window.history,
+            "horizon": self.window.horizon,
+            "window": self.window.to_dict(),
+            "network": self.net.config.to_dict(),
+            "input_scaler": self.input_scaler.to_dict(),
+            "target_scaler": self.target_scaler.to_dict(),
+            "weights_sha256": weights_sha256,
+            "ridge_sha256": ridge_sha256,
+            **self.info,
+        }
+
+
+def trial_features_names(trial: Trial) -> tuple[str, ...]:
+    return feature_names(trial.n_dof)
+
+
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def save_model(model: IntentModel, folder: str | os.PathLike[str]) -> Path:
+    """Write ``model`` into ``folder`` (created if needed); returns the folder."""
+    folder = Path(folder)
+    state = {k: v.detach().contiguous() for k, v in model.net.state_dict().items()}
+    weights = st_save(state)
+    atomic_write_bytes(folder / WEIGHTS, weights)
+    ridge_sha = None
+    if model.ridge is not None:
+        ridge = st_save(model.ridge.state_dict())
+        atomic_write_bytes(folder / RIDGE, ridge)
+        ridge_sha = _sha256(ridge)
+    # The sidecar goes last: a folder whose sidecar names a hash is complete.
+    text = json.dumps(model.sidecar(_sha256(weights), ridge_sha), indent=1, allow_nan=False)
+    atomic_write_text(folder / SIDECAR, text + "\n")
+    return folder
+
+
+def read_sidecar(folder: str | os.PathLike[str]) -> dict[str, Any]:
+    path = Path(folder) / SIDECAR
+    if not path.is_file():
+        raise ModelFileError(f"{path}: not found (is {Path(folder)} a model folder?)")
+    try:
+        meta = json.loads(path.read_text("utf-8"))
+    except json.JSONDecodeError as exc:
+        raise ModelFileError(f"{path}: malformed JSON: {exc}") from None
+    if meta.get("format") != FORMAT:
+        raise ModelFileError(f"{path}: format {meta.get('format')!r}, expected {FORMAT!r}")
+    return meta
+
+
+def load_model(
+    folder: str | os.PathLike[str],
+    *,
+    features: Sequence[str] | None = None,
+    dt: float | None = None,
+) -> IntentModel:
+    """Load a model folder written by :func:`save_model`.
+
+    Parameters
+    ----------
+    features, dt : optional
+        What the caller will feed the model; a mismatch raises :class:`ModelMismatchError`.
+    """
+    from coassist.intent.baselines import RidgeBaseline  # local: baselines imports this module
+
+    folder = Path(folder)
+    meta = read_sidecar(folder)
+    try:
+        window = WindowConfig(**meta["window"])
+        net_cfg = NetworkConfig(**meta["network"])
+        in_scaler = Scaler.from_dict(meta["input_scaler"])
+        out_scaler = Scaler.from_dict(meta["target_scaler"])
+        model_dt = float(meta["dt"])
+        stored_features = tuple(meta["features"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelFileError(f"{folder / SIDECAR}: bad or missing field: {exc}") from None
+    if stored_features != feature_names(net_cfg.n_features // 4):
+        raise ModelFileError(f"{folder / SIDECAR}: features {list(stored_features)} do not match the network")
+    weights_path = folder / WEIGHTS
+    if not weights_path.is_file():
+        raise ModelFileError(f"{weights_path}: not found")
+    raw = weights_path.read_bytes()
+    if _sha256(raw) != meta.get("weights_sha256"):
+        raise ModelFileError(f"{weights_path}: does not match the hash in {SIDECAR} (files from different saves?)")
+    net = IntentNet(net_cfg)
+    try:
+        net.load_state_dict(st_load(raw), strict=True)
+    except RuntimeError as exc:
+        raise ModelFileError(f"{weights_path}: tensors do not fit the network in {SIDECAR}: {exc}") from None
+    ridge = None
+    if meta.get("ridge_sha256"):
+        rraw = (folder / RIDGE).read_bytes() if (folder / RIDGE).is_file() else b""
+        if _sha256(rraw) != meta["ridge_sha256"]:
+            raise ModelFileError(f"{folder / RIDGE}: missing or does not match the hash in {SIDECAR}")
+        ridge = RidgeBaseline.from_state_dict(st_load(rraw), window, in_scaler, out_scaler, model_dt)
+    skip = {"format", "features", "n_dof", "dt", "history", "horizon", "window", "network", "input_scaler",
+            "target_scaler", "weights_sha256", "ridge_sha256"}  # fmt: skip
+    info = {k: v for k, v in meta.items() if k not in skip}
+    model = IntentModel(net, window, in_scaler, out_scaler, model_dt, info, ridge)
+    model.check_compatible(features, dt)
+    return model

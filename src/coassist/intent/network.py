@@ -1,0 +1,128 @@
+"""The RNN+FC intent network (thesis §4.1, Fig. 4.2, §5.2.2).
+
+An LSTM reads the window (B, steps, features); its last hidden state goes through
+fully connected layers to the H·d outputs (the predicted trajectory in the chosen
+target parameterisation, scaled to [−1, 1]). The thesis network is
+LSTM 3 × 250 → FC 250 → 200 → 2·50 with SiLU between FC layers, Xavier init.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import torch
+from torch import nn
+
+__all__ = ["ACTIVATIONS", "IntentNet", "NetworkConfig"]
+
+ACTIVATIONS = {"silu": nn.SiLU, "relu": nn.ReLU, "tanh": nn.Tanh}
+
+
+def _int(value: Any, name: str, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """Sizes of the network.
+
+    n_features : inputs per step (4·d).  n_outputs : H·d.
+    lstm_layers, hidden : the LSTM.  fc : widths of the hidden FC layers after the LSTM
+    (thesis: (200,), i.e. two FC layers 250 → 200 → 100).  activation : between FC layers.
+    skip_inputs : 0 (the thesis) or steps·n_features: adds a linear map from the flattened
+    window straight to the outputs, so the LSTM+FC learns a correction on top of a linear
+    predictor (initialised with the ridge solution; see ``training.build_model``).
+    """
+
+    n_features: int
+    n_outputs: int
+    lstm_layers: int = 3
+    hidden: int = 250
+    fc: tuple[int, ...] = (200,)
+    activation: str = "silu"
+    skip_inputs: int = 0
+
+    def __post_init__(self) -> None:
+        _int(self.n_features, "network.n_features", 1)
+        _int(self.n_outputs, "network.n_outputs", 1)
+        _int(self.lstm_layers, "network.lstm_layers", 1)
+        _int(self.hidden, "network.hidden", 1)
+        fc = tuple(self.fc) if isinstance(self.fc, (list, tuple)) else self.fc
+        if not isinstance(fc, tuple):
+            raise ValueError(f"network.fc must be a list of layer widths, got {self.fc!r}")
+        for i, w in enumerate(fc):
+            _int(w, f"network.fc[{i}]", 1)
+        object.__setattr__(self, "fc", fc)
+        _int(self.skip_inputs, "network.skip_inputs", 0)
+        if self.skip_inputs and self.skip_inputs % self.n_features:
+            raise ValueError(f"network.skip_inputs must be steps·n_features, got {self.skip_inputs}")
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(f"network.activation must be one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        out["fc"] = list(self.fc)
+        return out
+
+
+class IntentNet(nn.Module):
+    """LSTM then FC: (B, steps, n_features) -> (B, n_outputs)."""
+
+    def __init__(self, config: NetworkConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.lstm = nn.LSTM(config.n_features, config.hidden, config.lstm_layers, batch_first=True)
+        widths = (config.hidden, *config.fc, config.n_outputs)
+        layers: list[nn.Module] = []
+        for i, (a, b) in enumerate(zip(widths[:-1], widths[1:])):
+            if i:
+                layers.append(ACTIVATIONS[config.activation]())
+            layers.append(nn.Linear(a, b))
+        self.head = nn.Sequential(*layers)
+        self.skip = nn.Linear(config.skip_inputs, config.n_outputs) if config.skip_inputs else None
+        self.reset_parameters()
+
+    def reset_parameters(self) -> None:
+        """Xavier/Glorot-uniform weights, zero biases (thesis ref. [25])."""
+        for name, p in self.named_parameters():
+            if p.dim() >= 2:
+                nn.init.xavier_uniform_(p)
+            else:
+                nn.init.zeros_(p)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.forward_head(self.lstm_features(x), x.flatten(1))
+
+    def lstm_features(self, x: torch.Tensor) -> torch.Tensor:
+        """Last hidden state of the top LSTM layer, (B, hidden)."""
+        out, _ = self.lstm(x)
+        return out[:, -1]
+
+    def forward_head(self, h: torch.Tensor, x_flat: torch.Tensor | None) -> torch.Tensor:
+        """FC layers on the LSTM features (B, hidden), plus the skip on the flat window (B, steps·features)."""
+        y = self.head(h)
+        if self.skip is not None:
+            y = y + self.skip(x_flat)
+        return y
+
+    def lstm_parameters(self) -> list[nn.Parameter]:
+        return list(self.lstm.parameters())
+
+    def head_parameters(self) -> list[nn.Parameter]:
+        """Everything but the LSTM: the FC layers and the linear skip (what transfer trains)."""
+        return [p for n, p in self.named_parameters() if not n.startswith("lstm.")]
+
+    @torch.no_grad()
+    def init_skip(self, weight: torch.Tensor, bias: torch.Tensor) -> None:
+        """Set the linear skip to a given map (e.g. the ridge solution) and zero the last FC
+        layer, so the network starts as that linear predictor."""
+        if self.skip is None:
+            raise ValueError("network has no linear skip (network.skip_inputs = 0)")
+        self.skip.weight.copy_(weight)
+        self.skip.bias.copy_(bias)
+        last = self.head[-1]
+        last.weight.zero_()
+        last.bias.zero_()

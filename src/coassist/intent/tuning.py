@@ -1,0 +1,80 @@
+"""Hyper-parameter search with Optuna (thesis §5.2.2: optimiser and learning rate).
+
+The search never sees the test trials: the training trials of the usual split are split
+again into fit and validation trials, and the objective is the validation e_RMS at the
+model's full horizon (m). Studies live in any database Optuna accepts; the default is
+SQLite (``sqlite:///study.db``), so a search can be stopped and resumed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import Any
+
+from coassist.intent.evaluation import evaluate_model
+from coassist.intent.features import split_trials
+from coassist.intent.sources import LabeledTrial
+from coassist.intent.training import Preset, train_model
+
+__all__ = ["run_study"]
+
+
+def run_study(
+    trials: Sequence[LabeledTrial],
+    preset: Preset,
+    *,
+    n_trials: int = 20,
+    storage: str = "sqlite:///study.db",
+    study_name: str = "intent",
+    epochs: int | None = None,
+    seed: int = 0,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Search optimiser, learning rate, LSTM depth and width, FC width.
+
+    Returns ``{"best_params", "best_value", "n_trials", "storage", "study_name"}``.
+    """
+    import optuna
+
+    if n_trials < 1:
+        raise ValueError(f"n_trials must be >= 1, got {n_trials}")
+    ids = [lt.id for lt in trials]
+    train_idx, _ = split_trials(ids, preset.train.test_fraction, preset.train.seed)
+    pool = [trials[i] for i in train_idx]
+    if len(pool) < 2:
+        raise ValueError("tuning needs at least two training trials (one to fit, one to validate)")
+    fit_idx, val_idx = split_trials([lt.id for lt in pool], 0.25, seed + 1)
+    fit = [pool[i] for i in fit_idx]
+    val = [pool[i] for i in val_idx]
+    horizon = preset.window.horizon
+
+    def objective(trial: optuna.Trial) -> float:
+        params = {
+            "optimizer": trial.suggest_categorical("optimizer", ["adam", "adamw", "rmsprop"]),
+            "lr": trial.suggest_float("lr", 1e-4, 1e-2, log=True),
+        }
+        p = replace(
+            preset,
+            lstm_layers=trial.suggest_int("lstm_layers", 1, 3),
+            hidden=trial.suggest_categorical("hidden", [32, 64, 128, 256]),
+            fc=(trial.suggest_categorical("fc", [32, 64, 128, 256]),),
+            train=replace(preset.train, test_fraction=0.0, epochs=epochs or preset.train.epochs, seed=seed, **params),
+        )
+        model = train_model(fit, p, p.train)
+        result = evaluate_model(model, val, horizons=(horizon,), held_out_only=False)
+        return result["results"]["model"][str(horizon)]["e_rms"]
+
+    sampler = optuna.samplers.TPESampler(seed=seed)
+    study = optuna.create_study(storage=storage, study_name=study_name, direction="minimize", sampler=sampler,
+                                load_if_exists=True)  # fmt: skip
+    study.optimize(objective, n_trials=n_trials, show_progress_bar=progress)
+    return {
+        "best_params": study.best_params,
+        "best_value": study.best_value,
+        "n_trials": len(study.trials),
+        "storage": storage,
+        "study_name": study_name,
+        "fit_trials": [lt.id for lt in fit],
+        "validation_trials": [lt.id for lt in val],
+    }

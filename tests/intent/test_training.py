@@ -1,0 +1,142 @@
+"""Training: determinism, freezing for transfer, resume, gradients, configuration."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from coassist.intent import IntentNet, NetworkConfig, TrainConfig, save_model, train_model
+
+from .conftest import labeled
+
+
+def _state(model):
+    return {k: v.clone() for k, v in model.net.state_dict().items()}
+
+
+def test_same_seed_gives_bit_identical_weights(trials, tiny):
+    a = train_model(trials, tiny, tiny.train)
+    b = train_model(trials, tiny, tiny.train)
+    sa, sb = _state(a), _state(b)
+    assert all(torch.equal(sa[k], sb[k]) for k in sa)
+    assert a.info["training_history"] == [{**r, "seconds": s["seconds"]} for r, s in zip(b.info["training_history"], a.info["training_history"])]
+    c = train_model(trials, tiny, TrainConfig(**{**tiny.train.__dict__, "seed": 1}))
+    assert not torch.equal(_state(c)["lstm.weight_ih_l0"], sa["lstm.weight_ih_l0"])
+
+
+def test_training_reduces_the_loss(trials, tiny):
+    cfg = TrainConfig(**{**tiny.train.__dict__, "epochs": 4})
+    m = train_model(trials, tiny, cfg)
+    h = m.info["training_history"]
+    assert h[-1]["train_loss"] < h[0]["train_loss"]
+    assert abs(h[-1]["lr"] - cfg.lr * cfg.lr_final_ratio) < 1e-12  # geometric decay to the final ratio
+
+
+def test_transfer_freezes_the_lstm_bit_for_bit(tmp_path, trials, tiny):
+    base = train_model(trials, tiny, tiny.train)
+    save_model(base, tmp_path / "base")
+    new_user = labeled(3, prefix="U")
+    tl = train_model(new_user, tiny, TrainConfig(**{**tiny.train.__dict__, "init": f"transfer:{tmp_path / 'base'}"}))
+    sb, st = _state(base), _state(tl)
+    lstm = [k for k in sb if k.startswith("lstm.")]
+    head = [k for k in sb if not k.startswith("lstm.")]
+    assert lstm and all(torch.equal(sb[k], st[k]) for k in lstm)
+    assert any(not torch.equal(sb[k], st[k]) for k in head)
+    assert tl.info["frozen"] == ["lstm"] and tl.info["parent"]["dataset_ids"] == ["T"]
+    # Its scaling is the base model's, not refitted on the new data.
+    assert np.array_equal(tl.input_scaler.lo, base.input_scaler.lo)
+    # Fine-tuning everything does move the LSTM.
+    ft = train_model(new_user, tiny, TrainConfig(**{**tiny.train.__dict__, "init": f"finetune:{tmp_path / 'base'}"}))
+    assert not torch.equal(_state(ft)["lstm.weight_hh_l0"], sb["lstm.weight_hh_l0"])
+
+
+def test_resume_continues_the_history(tmp_path, trials, tiny):
+    base = train_model(trials, tiny, tiny.train)
+    save_model(base, tmp_path / "m0")
+    m1 = train_model(trials, tiny, TrainConfig(**{**tiny.train.__dict__, "init": f"resume:{tmp_path / 'm0'}"}))
+    assert [r["epoch"] for r in m1.info["training_history"]] == [1, 2, 3, 4]
+
+
+def test_loss_gradient_matches_finite_differences():
+    torch.manual_seed(0)
+    net = IntentNet(NetworkConfig(n_features=4, n_outputs=6, lstm_layers=2, hidden=5, fc=(7,), skip_inputs=12)).double()
+    x, y = torch.randn(3, 3, 4, dtype=torch.float64), torch.randn(3, 6, dtype=torch.float64)
+    params = list(net.parameters())
+
+    def loss_of(*flat):
+        with torch.no_grad():
+            for p, v in zip(params, flat):
+                p.copy_(v)
+        return torch.nn.functional.mse_loss(net(x), y)
+
+    loss = torch.nn.functional.mse_loss(net(x), y)
+    grads = torch.autograd.grad(loss, params)
+    rng = np.random.default_rng(0)
+    eps = 1e-6
+    for p, g in zip(params, grads):
+        for _ in range(3):
+            idx = tuple(int(rng.integers(0, s)) for s in p.shape)
+            with torch.no_grad():
+                orig = p[idx].item()
+                p[idx] = orig + eps
+                up = torch.nn.functional.mse_loss(net(x), y).item()
+                p[idx] = orig - eps
+                down = torch.nn.functional.mse_loss(net(x), y).item()
+                p[idx] = orig
+            assert (up - down) / (2 * eps) == pytest.approx(g[idx].item(), rel=1e-5, abs=1e-8)
+
+
+def test_xavier_init_and_zero_biases():
+    torch.manual_seed(0)
+    net = IntentNet(NetworkConfig(n_features=8, n_outputs=100, lstm_layers=3, hidden=250, fc=(200,)))
+    w = net.lstm.weight_hh_l0
+    bound = np.sqrt(6.0 / (w.shape[0] + w.shape[1]))
+    assert float(w.abs().max()) <= bound and float(w.abs().max()) > 0.9 * bound
+    assert all(float(p.abs().max()) == 0.0 for n, p in net.named_parameters() if "bias" in n)
+
+
+def test_thesis_preset_is_the_thesis_network():
+    from coassist.intent import PRESETS
+
+    p = PRESETS["thesis"]
+    net = IntentNet(p.network(2))
+    assert (net.lstm.num_layers, net.lstm.hidden_size) == (3, 250)
+    linears = [m for m in net.head if isinstance(m, torch.nn.Linear)]
+    assert [(m.in_features, m.out_features) for m in linears] == [(250, 200), (200, 100)]
+    assert isinstance(net.head[1], torch.nn.SiLU) and net.skip is None
+    assert (p.window.history, p.window.decimation, p.window.horizon) == (125, 1, 50)
+    t = p.train
+    assert (t.epochs, t.batch_size, t.lr, t.lr_final_ratio, t.optimizer) == (25, 64, 1e-3, 0.05, "adam")
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [({"epochs": 0}, "train.epochs"), ({"lr": -1.0}, "train.lr"), ({"optimizer": "lbfgs"}, "train.optimizer"),
+     ({"init": "transfer:"}, "train.init"), ({"init": "warm:x"}, "train.init"), ({"test_fraction": 1.0}, "train.test_fraction")],
+)
+def test_train_config_errors_name_the_field(kwargs, field):
+    with pytest.raises(ValueError, match=field.replace(".", r"\.")):
+        TrainConfig(**kwargs)
+
+
+def test_missing_start_model_is_a_clear_error(trials, tiny, tmp_path):
+    from coassist.intent import ModelFileError
+
+    with pytest.raises(ModelFileError, match="model.json"):
+        train_model(trials, tiny, TrainConfig(**{**tiny.train.__dict__, "init": f"resume:{tmp_path / 'nope'}"}))
+
+
+def test_preset_with_skip_starts_as_the_ridge_predictor(trials, tiny):
+    from dataclasses import replace
+
+    from coassist.intent.training import build_model
+
+    p = replace(tiny, skip=True)
+    m = build_model(p, trials, p.train)
+    assert float(m.net.head[-1].weight.abs().max()) == 0.0
+    ridge_train = train_model(trials, p, TrainConfig(**{**p.train.__dict__, "epochs": 1}))  # fits the ridge baseline
+    t = trials[0].trial
+    a, b = m.predict_trial(t), ridge_train.ridge.predict_trial(t)
+    ok = np.isfinite(a[:, 0, 0])
+    assert ok.sum() > 100 and np.allclose(a[ok], b[ok], atol=1e-4)  # float32 network vs float64 ridge (positions ~0.1 m)
