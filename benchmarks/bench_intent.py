@@ -158,18 +158,23 @@ def throughput(trials: list[LabeledTrial], batches: int) -> list[dict]:
 
 
 def full_train(trials: list[LabeledTrial]) -> dict:
+    """The default preset's training as ``coassist reproduce`` runs it (its epochs and window stride)."""
+    from coassist.experiments.reproduce import PRESETS as PIPELINE
+
+    cfg = PIPELINE["default"]
     p = PRESETS["default"]
     t0 = time.perf_counter()
-    model = train_model(trials, p, replace(p.train, threads=2))
+    model = train_model(trials, p, replace(p.train, threads=2, epochs=cfg.epochs, train_stride=cfg.train_stride))
     train_s = time.perf_counter() - t0
     transfer_set = synthetic_trials(15, prefix="TL")
     with tempfile.TemporaryDirectory() as tmp:
         save_model(model, tmp)
         t0 = time.perf_counter()
-        tl = train_model(transfer_set, p, replace(p.train, threads=2, init=f"transfer:{tmp}"))
+        tl = train_model(transfer_set, p, replace(p.train, threads=2, init=f"transfer:{tmp}", epochs=cfg.transfer_epochs,
+                                                  train_stride=cfg.train_stride))  # fmt: skip
         transfer_s = time.perf_counter() - t0
-    return {"train_s": train_s, "train_windows": model.info["n_train_windows"], "epochs": p.train.epochs,
-            "transfer_s": transfer_s, "transfer_windows": tl.info["n_train_windows"]}  # fmt: skip
+    return {"train_s": train_s, "train_windows": model.info["n_train_windows"], "epochs": cfg.epochs,
+            "transfer_s": transfer_s, "transfer_windows": tl.info["n_train_windows"], "transfer_epochs": cfg.transfer_epochs}
 
 
 def main() -> None:
@@ -195,7 +200,8 @@ def main() -> None:
     if args.full_train:
         full = full_train(trials)
         print(f"default training on 60 simulated-size trials: {full['train_s']:.0f} s "
-              f"({full['train_windows']} windows x {full['epochs']} epochs); transfer on 15 trials: {full['transfer_s']:.1f} s")  # fmt: skip
+              f"({full['train_windows']} windows x {full['epochs']} epochs); transfer on 15 trials: {full['transfer_s']:.1f} s "
+              f"({full['transfer_windows']} windows x {full['transfer_epochs']} epochs)")  # fmt: skip
         result["full_train"] = full
     if args.json:
         with open(args.json, "w") as fh:

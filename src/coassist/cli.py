@@ -247,7 +247,7 @@ def show(
 @app.command()
 def realism(
     out: Path = typer.Option(Path("docs/realism.md"), help="Markdown report to write."),
-    real: Path = typer.Option(Path("/work/shared/data/ur5-thesis/user-a"), help="Folder of real trial_* recordings."),
+    real: Path = typer.Option(None, help="Folder of real trial_* recordings (default: user-a of ../shared/data/ur5-thesis or $COASSIST_REAL_DATA)."),
     trials: int = typer.Option(10, help="Simulated trials per task and preset."),
     seed: int = typer.Option(0, help="Seed of the first simulated trial."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
@@ -255,8 +255,11 @@ def realism(
     """Simulated trials (user 0, handle, cooperative, nominal intent) side by side with real user-a trials."""
     from coassist.experiments import realism as realism_exp
 
+    from coassist.data import default_real_data
+
     if trials < 1 or seed < 0:
         raise typer.BadParameter("trials must be >= 1 and seed >= 0")
+    real = real or default_real_data() / "user-a"
     try:
         result = realism_exp.run_realism(real, trials_per_task=trials, seed=seed, workers=workers, progress=True)
     except ValueError as exc:
@@ -273,7 +276,7 @@ def reproduce(
     seed: int = typer.Option(0, help="Seed of every dataset and training."),
     workers: int = typer.Option(None, help="Simulation processes (default: the preset's)."),
     device: str = typer.Option(None, help="Torch device for training, e.g. cpu or cuda (default: the preset's)."),
-    real_data: Path = typer.Option(None, help="Folder with user-a/ and user-b/ recordings (default: ../shared/data/ur5-thesis)."),
+    real_data: Path = typer.Option(None, help="Folder with user-a/ and user-b/ recordings (default: ../shared/data/ur5-thesis or $COASSIST_REAL_DATA)."),
 ) -> None:
     """The thesis' experiments end to end in simulation (dMPC study, iterative training, transfer, application, real data): one HTML report."""
     from dataclasses import replace

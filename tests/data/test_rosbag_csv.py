@@ -3,13 +3,12 @@ UR5 recordings in ../shared/data/ur5-thesis (skipped when absent)."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from coassist.data import RecordingError, load_ros_trial, load_ros_user, read_trial, write_trial
+from coassist.data import RecordingError, default_real_data, load_ros_trial, load_ros_user, read_trial, write_trial
 
 # --------------------------------------------------------------------------- synthetic recordings
 
@@ -196,8 +195,7 @@ def test_loaded_trial_round_trips_through_the_store(tmp_path):
 
 
 def real_data_dir() -> Path:
-    env = os.environ.get("COASSIST_REAL_DATA")
-    path = Path(env) if env else Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "ur5-thesis"
+    path = default_real_data()
     if not (path / "user-a").is_dir():
         pytest.skip(f"real UR5 recordings (shared/data/ur5-thesis) not found: {path.resolve()}")
     return path
@@ -234,3 +232,10 @@ def test_real_user_b():
         assert abs(t.meta.dt - 0.008) < 5e-5
         # the person takes a very different route: deviations up to about 0.5 m
         assert 0.4 < np.linalg.norm(t.pose - t.reference, axis=1).max() < 0.6
+
+
+def test_real_data_folder_follows_the_environment(monkeypatch, tmp_path):
+    monkeypatch.setenv("COASSIST_REAL_DATA", str(tmp_path))
+    assert default_real_data() == tmp_path
+    monkeypatch.delenv("COASSIST_REAL_DATA")
+    assert default_real_data().parts[-3:] == ("shared", "data", "ur5-thesis")

@@ -1,14 +1,13 @@
 """The realism statistics and report."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from coassist.data import Trial, TrialMeta
+from coassist.data import Trial, TrialMeta, default_real_data
 from coassist.experiments.realism import run_realism, summary_table, trial_stats, write_report
 
-REAL = Path("/work/shared/data/ur5-thesis/user-a")
+REAL = default_real_data() / "user-a"
 
 
 def _trial():

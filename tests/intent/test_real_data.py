@@ -1,15 +1,15 @@
-"""Checks on the recorded UR5 trials (skipped when /work/shared/data is absent)."""
+"""Checks on the recorded UR5 trials (skipped when ../shared/data is absent)."""
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from coassist.data import default_real_data
 from coassist.intent import WindowConfig, WindowSet, load_trials, split_trials
 
-USER_A = Path("/work/shared/data/ur5-thesis/user-a")
+USER_A = default_real_data() / "user-a"
 
 pytestmark = [
     pytest.mark.real_data,

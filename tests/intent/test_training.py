@@ -90,10 +90,10 @@ def test_loss_gradient_matches_finite_differences():
 def test_xavier_init_and_zero_biases():
     torch.manual_seed(0)
     net = IntentNet(NetworkConfig(n_features=8, n_outputs=100, lstm_layers=3, hidden=250, fc=(200,)))
-    w = net.lstm.weight_hh_l0
+    w = net.lstm.weight_hh_l0.detach()
     bound = np.sqrt(6.0 / (w.shape[0] + w.shape[1]))
     assert float(w.abs().max()) <= bound and float(w.abs().max()) > 0.9 * bound
-    assert all(float(p.abs().max()) == 0.0 for n, p in net.named_parameters() if "bias" in n)
+    assert all(float(p.detach().abs().max()) == 0.0 for n, p in net.named_parameters() if "bias" in n)
 
 
 def test_thesis_preset_is_the_thesis_network():

@@ -1,14 +1,13 @@
 """The thin CLI commands over the simulator: collect and show."""
 
-from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
 from coassist.cli import app
-from coassist.data import read_dataset
+from coassist.data import default_real_data, read_dataset
 
-REAL = Path("/work/shared/data/ur5-thesis/user-a/trial_1")
+REAL = default_real_data() / "user-a" / "trial_1"
 runner = CliRunner()
 
 

@@ -1,6 +1,6 @@
 """Trial logs, datasets on disk, and the loader for real UR5 recordings."""
 
-from coassist.data.rosbag_csv import RecordingError, load_ros_trial, load_ros_user
+from coassist.data.rosbag_csv import RecordingError, default_real_data, load_ros_trial, load_ros_user
 from coassist.data.store import (
     Dataset,
     TrialFileError,
@@ -15,6 +15,7 @@ from coassist.data.trial import Trial, TrialMeta
 __all__ = [
     "Dataset",
     "RecordingError",
+    "default_real_data",
     "Trial",
     "TrialFileError",
     "TrialMeta",

@@ -38,7 +38,15 @@ import pandas as pd
 
 from coassist.data.trial import Trial, TrialMeta
 
-__all__ = ["DENORMAL_THRESHOLD", "LINEAR_DOFS", "TOPIC_FILES", "RecordingError", "load_ros_trial", "load_ros_user"]
+__all__ = [
+    "DENORMAL_THRESHOLD",
+    "LINEAR_DOFS",
+    "TOPIC_FILES",
+    "RecordingError",
+    "default_real_data",
+    "load_ros_trial",
+    "load_ros_user",
+]
 
 #: Trial field -> (CSV file, value column pattern).
 TOPIC_FILES: dict[str, tuple[str, str]] = {
@@ -226,3 +234,15 @@ def load_ros_user(folder: str | os.PathLike[str], *, dofs: Sequence[str] = ("x",
     if not trial_dirs:
         raise RecordingError(f"{folder}: no trial_* subfolders")
     return [load_ros_trial(p, user=folder.name, dofs=dofs) for p in trial_dirs]
+
+
+def default_real_data() -> Path:
+    """Where the real UR5 recordings are looked for: ``$COASSIST_REAL_DATA`` if set, else
+    ``shared/data/ur5-thesis`` beside this checkout (``<repo>/../shared/...``).
+
+    The folder holds ``user-a/`` and ``user-b/``; it may not exist (callers skip or say so).
+    """
+    env = os.environ.get("COASSIST_REAL_DATA")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parents[3].parent / "shared" / "data" / "ur5-thesis"

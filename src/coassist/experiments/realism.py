@@ -39,7 +39,6 @@ LABELS = {
     "mean_force": "mean ‖f‖ (f_RMS)",
     "peak_deviation": "peak deviation from nominal",
 }
-DEFAULT_REAL = Path("/work/shared/data/ur5-thesis/user-a")
 DEFAULT_TASKS = ("linear", "curved", "sinusoidal")
 DEFAULT_PRESETS = ("thesis-evaluation", "thesis-evaluation-dm")
 
@@ -143,7 +142,7 @@ class RealismResult:
 
 
 def run_realism(
-    real_folder: str | Path = DEFAULT_REAL,
+    real_folder: str | Path,
     *,
     presets: Sequence[str] = DEFAULT_PRESETS,
     tasks: Sequence[str] = DEFAULT_TASKS,

@@ -88,8 +88,10 @@ class IntentModel:
         self.n_dof = nf // 4
         if no != window.horizon * self.n_dof:
             raise ValueError(f"network.n_outputs ({no}) must equal horizon·d = {window.horizon * self.n_dof}")
-        if input_scaler.lo.size != nf or target_scaler.lo.size not in (self.n_dof, no):
-            raise ValueError("scaler sizes do not match the network")
+        if input_scaler.lo.size != nf:
+            raise ValueError(f"input scaler has {input_scaler.lo.size} ranges, the network {nf} features")
+        if target_scaler.lo.size not in (self.n_dof, no):
+            raise ValueError(f"target scaler has {target_scaler.lo.size} ranges; expected {self.n_dof} (per axis) or {no} (per step)")
         self.net, self.window = net, window
         self.input_scaler, self.target_scaler = input_scaler, target_scaler
         self.dt = float(dt)

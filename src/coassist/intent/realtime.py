@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import io
 import threading
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -91,7 +92,9 @@ def make_runner(model: IntentModel, backend: str = "torch", threads: int = 1) ->
     buf = io.BytesIO()
     net = model.net.eval()
     try:
-        with torch.no_grad():
+        # The tracer's warnings concern shapes we fix (batch 1, ``steps`` rows): not the user's to act on.
+        with torch.no_grad(), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
             torch.onnx.export(net, (torch.zeros(1, steps, nf),), buf, input_names=["x"], output_names=["y"],
                               dynamo=False)  # fmt: skip
     except Exception as exc:  # the exporter reports a missing 'onnx' package this way
@@ -128,9 +131,13 @@ class RealtimePredictor:
         self.horizon, self.n_dof, self.n_features = model.horizon, model.n_dof, 4 * model.n_dof
         self._buf = np.zeros((model.history, self.n_features))
         self._lock = threading.Condition()
-        self._pending: tuple[int, np.ndarray] | None = None
-        self._latest: tuple[int, np.ndarray] | None = None
+        # (generation, k, window) / (generation, k, positions): a worker result from before a
+        # reset() carries an old generation and is dropped, never served to the new trial.
+        self._pending: tuple[int, int, np.ndarray] | None = None
+        self._latest: tuple[int, int, np.ndarray] | None = None
+        self._generation = 0
         self._stop = False
+        self._busy = False  # the worker is running the network
         self._worker: threading.Thread | None = None
         self.errors = 0  # predictions that raised or were non-finite
         self.reset()
@@ -142,6 +149,7 @@ class RealtimePredictor:
     def reset(self, context: Any = None) -> None:
         """Start a new trial: empty history, no prediction."""
         with self._lock:
+            self._generation += 1
             self._k = -1
             self._filled = 0
             self._pending = None
@@ -161,33 +169,35 @@ class RealtimePredictor:
             window = self._buf.copy()
             if self.config.threaded:
                 with self._lock:
-                    self._pending = (self._k, window)
+                    self._pending = (self._generation, self._k, window)
                     self._lock.notify()
             else:
-                self._store(self._k, window)
+                self._store(self._generation, self._k, window)
         with self._lock:
             latest = self._latest
-        if latest is None or self._k - latest[0] > self.max_age:
+        age = -1 if latest is None else self._k - latest[1]
+        if not 0 <= age <= self.max_age:
+            # A non-finite nominal goes out flagged: the controller's guard turns it into zero effort.
             return PredictionTick(np.array(nominal, dtype=np.float64, copy=True), Fault.PREDICTION_FALLBACK, -1)
-        age = self._k - latest[0]
-        pos = latest[1]
+        pos = latest[2]
         if age:
             pos = np.concatenate([pos[age:], np.repeat(pos[-1:], age, axis=0)])
+        else:
+            pos = pos.copy()  # the caller may write into it; the stored one is shifted later
         return PredictionTick(pos, Fault.PREDICTION_STALE if age else Fault.NONE, age)
 
     # ------------------------------------------------------------------ worker side
-    def _store(self, k: int, window: np.ndarray) -> None:
+    def _store(self, generation: int, k: int, window: np.ndarray) -> None:
         try:
             pos = np.asarray(self._run(window), dtype=np.float64)
             ok = pos.shape == (self.horizon, self.n_dof) and bool(np.all(np.isfinite(pos)))
         except Exception:  # a failing network must not take the loop down: fall back
             ok = False
-        if not ok:
-            self.errors += 1
-            return
         with self._lock:
-            if self._latest is None or k > self._latest[0]:
-                self._latest = (k, pos)
+            if not ok:
+                self.errors += 1
+            elif generation == self._generation and (self._latest is None or k > self._latest[1]):
+                self._latest = (generation, k, pos)
 
     def _work(self) -> None:
         torch.set_num_threads(self.config.threads)
@@ -197,18 +207,21 @@ class RealtimePredictor:
                     self._lock.wait()
                 if self._stop:
                     return
-                k, window = self._pending
+                generation, k, window = self._pending
                 self._pending = None
-            self._store(k, window)
+                self._busy = True
+            self._store(generation, k, window)
+            with self._lock:
+                self._busy = False
 
     def wait_idle(self, timeout: float = 1.0) -> None:
-        """Testing aid: wait until the worker has taken the pending window and finished it."""
+        """Testing aid: wait until the worker has no window pending and none in progress."""
         import time
 
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             with self._lock:
-                if self._pending is None and (self._latest is not None and self._latest[0] == self._k or self.errors):
+                if self._pending is None and not self._busy:
                     return
             time.sleep(0.0005)
 

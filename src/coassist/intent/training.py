@@ -76,7 +76,8 @@ class TrainConfig:
     mirror : data augmentation: each training window is mirrored along each axis with
         probability 1/2 (all positions, velocities, forces and the target of that axis
         negated). The planar admittance M a + D v = f is symmetric under it; it needs the
-        relative input frame and a relative or residual target.
+        relative input frame and a relative or residual target. Not applied in transfer
+        (the frozen LSTM's features are computed once per window).
     """
 
     epochs: int = 25
@@ -156,8 +157,9 @@ class Preset:
 
 #: ``thesis``: exactly §5.2.2 — 125 samples of absolute features, LSTM 3 × 250,
 #: FC 250 → 200 → 2·50 (SiLU), Adam 1e-3 → 5e-5, batch 64, 25 epochs, MSE.
-#: ``default``: small and fast on a 2-core CPU; input frame and target chosen by
-#: measurement on real user-a data (docs/intent-results.md).
+#: ``default``: small and fast on a 2-core CPU; input frame, target, per-step target
+#: scaling, the ridge-initialised linear skip and mirror augmentation chosen by
+#: measurement on real user-a data (docs/intent-parameterisation.md).
 PRESETS: dict[str, Preset] = {
     "thesis": Preset(
         "thesis",
@@ -167,9 +169,11 @@ PRESETS: dict[str, Preset] = {
     ),  # fmt: skip
     "default": Preset(
         "default",
-        WindowConfig(history=125, decimation=5, horizon=50, input_frame="relative", target="residual"),
-        lstm_layers=2, hidden=64, fc=(64,),
-        train=TrainConfig(epochs=15, batch_size=64, lr=3e-3, lr_final_ratio=0.05, optimizer="adam"),
+        WindowConfig(history=125, decimation=5, horizon=50, input_frame="relative", target="residual",
+                     target_scaling="step"),
+        lstm_layers=2, hidden=64, fc=(64,), skip=True,
+        train=TrainConfig(epochs=15, batch_size=64, lr=3e-3, lr_final_ratio=0.05, optimizer="adam", mirror=True,
+                          train_stride=4),
     ),  # fmt: skip
 }
 
@@ -302,8 +306,10 @@ def train_model(
     test_ws = WindowSet([trials[i].trial for i in test_idx], window, dt, stride=config.eval_stride) if test_idx else None
 
     frozen = mode == "transfer"
-    if config.mirror and (window.input_frame != "relative" or window.target == "absolute" or frozen):
-        raise ValueError("train.mirror needs input_frame='relative', a relative or residual target, and no frozen LSTM")
+    if config.mirror and (window.input_frame != "relative" or window.target == "absolute"):
+        raise ValueError("train.mirror needs window.input_frame='relative' and a relative or residual window.target")
+    # Transfer caches the frozen LSTM's features of the windows as they are: no mirroring there.
+    mirror = config.mirror and not frozen
     if frozen:
         for p in net.lstm_parameters():
             p.requires_grad_(False)
@@ -332,7 +338,7 @@ def train_model(
             running, seen = 0.0, 0
             for s in range(steps_per_epoch):
                 sel = perm[s * config.batch_size : (s + 1) * config.batch_size]
-                signs = rng.choice([-1.0, 1.0], size=(sel.size, model.n_dof)) if config.mirror else None
+                signs = rng.choice([-1.0, 1.0], size=(sel.size, model.n_dof)) if mirror else None
                 loss = train_data.loss(sel, signs=signs)
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
@@ -375,6 +381,7 @@ def train_model(
             "train_trials": base.info.get("train_trials"),
         },  # fmt: skip
         "frozen": ["lstm"] if mode == "transfer" else [],
+        "mirrored": mirror,
         "train_config": asdict(config),
         "training_history": history,
         "train_seconds": time.perf_counter() - t_start,
