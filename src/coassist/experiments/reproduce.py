@@ -58,6 +58,12 @@ class ReproduceConfig:
     resume_epochs: int = 3  # training M_{k+1} from M_k
     transfer_epochs: int = 8
     train_stride: int = 4  # every n-th window (consecutive windows overlap almost entirely)
+    # Shrinkage of the linear skip's ridge start in the simulated stages. M_k meets data collected
+    # with M_k in the loop, i.e. inputs shifted from its training data; a weakly regularised linear
+    # map extrapolates badly there. Measured (M_0 trained on D_0, scored on D_1, e_RMS@50):
+    # skip_alpha 1 → 5.7 mm, 10 → 3.2 mm, 100 → 2.6 mm (constant velocity 2.8 mm). On the real
+    # user-a recordings (no such shift) the preset's 1 is best, and the real stage keeps it.
+    skip_alpha: float = 100.0
     transfer_trials: int = 15  # thesis: 15 per transfer target
     test_trials: int = 6  # held-out trials per transfer target, for the comparison
     new_users: tuple[int, ...] = (1, 2, 3, 4, 5)
@@ -79,6 +85,8 @@ class ReproduceConfig:
                 raise ValueError(f"reproduce.{name} must be an integer >= 1, got {v!r}")
         if self.transfer_trials < 3:
             raise ValueError(f"reproduce.transfer_trials must be >= 3 (one per task), got {self.transfer_trials}")
+        if not (isinstance(self.skip_alpha, (int, float)) and self.skip_alpha >= 0):
+            raise ValueError(f"reproduce.skip_alpha must be a number >= 0, got {self.skip_alpha!r}")
         if not self.tol > 0:
             raise ValueError(f"reproduce.tol must be > 0, got {self.tol!r}")
         if not self.new_users or any(u < 1 for u in self.new_users):
@@ -182,7 +190,8 @@ class _Context:
         )
         return folder, read_dataset(folder)
 
-    def train(self, name: str, datasets: list[Path], *, init: str, epochs: int, test_fraction: float = 0.2) -> Path:
+    def train(self, name: str, datasets: list[Path], *, init: str, epochs: int, test_fraction: float = 0.2,
+              simulated: bool = True) -> Path:
         """Train and save a model. ``test_fraction=0`` when the model is scored on a separate
         test set anyway: then every trial collected for training is trained on."""
         from coassist.intent import PRESETS as INTENT_PRESETS
@@ -193,6 +202,8 @@ class _Context:
         train_cfg = replace(preset.train, epochs=epochs, init=init, seed=cfg.seed, threads=cfg.threads,
                             train_stride=cfg.train_stride, eval_stride=cfg.train_stride, device=cfg.device,
                             test_fraction=test_fraction)
+        if simulated:
+            train_cfg = replace(train_cfg, skip_alpha=cfg.skip_alpha)
         model = train_model(load_trials(datasets), preset, train_cfg, progress=self.progress)
         path = self.out / "models" / name
         write_model(model, path)
@@ -315,7 +326,10 @@ def _stage_iterative(ctx: _Context):
         f"D0 ({3 * cfg.trials_per_task} trials: user 0, handle, linear/curved/sinusoidal) is collected with the nominal "
         "assumption ŷ_ref,h = y_ref,r; M_k is trained on D_k starting from M_{k−1}; D_{k+1} is collected with M_k in the "
         "loop. Each model's error is the one it achieved in the loop: measured on the dataset collected with it (the "
-        "predictions it made at every tick against the measured future poses)."
+        "predictions it made at every tick against the measured future poses). In the simulated stages the "
+        f"network's linear skip starts from a strongly shrunk ridge solution (skip_alpha = {cfg.skip_alpha:g}): each model "
+        "meets data collected with another model in the loop, and a weakly regularised linear map extrapolates badly "
+        "there (M_0 trained on D_0 and scored on D_1: 5.7 mm at 0.4 s with skip_alpha = 1, 2.6 mm with 100)."
     )
     rows = [[label] + [errors[label].get(h, {}).get("e_rms", float("nan")) for h in EVAL_HORIZONS]
             + [errors[label].get(50, {}).get("e_max_mean", float("nan"))] for label in labels]
@@ -623,7 +637,7 @@ def _stage_real(ctx: _Context, real: str | None) -> None:
     from coassist.intent import evaluate_model, load_model, load_trials
 
     cfg = ctx.config
-    a = ctx.train("real-user-a", [Path(real) / "user-a"], init="scratch", epochs=cfg.real_epochs)
+    a = ctx.train("real-user-a", [Path(real) / "user-a"], init="scratch", epochs=cfg.real_epochs, simulated=False)
     model_a = load_model(a)
     trials_a = load_trials([Path(real) / "user-a"])
     ev_a = evaluate_model(model_a, trials_a, held_out_only=True)
@@ -632,7 +646,7 @@ def _stage_real(ctx: _Context, real: str | None) -> None:
     b_train = write_dataset(b_trials[:2], ctx.out / "datasets" / "user-b-train", "user-b-train", "real user-b, trials 1-2", overwrite=True)
     b_test = write_dataset(b_trials[2:], ctx.out / "datasets" / "user-b-test", "user-b-test", "real user-b, trial 3", overwrite=True)
     b_model = ctx.train("real-user-b-transfer", [b_train], init=f"transfer:{a}", epochs=cfg.transfer_epochs,
-                        test_fraction=0.0)
+                        test_fraction=0.0, simulated=False)
     test_b = load_trials([b_test])
     ev_b = {"M_a": evaluate_model(model_a, test_b, held_out_only=False), "M_TL": evaluate_model(load_model(b_model), test_b, held_out_only=False)}
 

@@ -70,7 +70,12 @@ class TrainConfig:
     test_fraction : share of *trials* held out (thesis 0.2).
     train_stride, eval_stride : keep every n-th window (consecutive windows overlap almost
         entirely; 1 = all, the thesis).
-    ridge_alpha : regularisation of the ridge baseline fitted on the same windows.
+    ridge_alpha : regularisation of the ridge baseline fitted on the same windows (the
+        baseline the model is compared with; not tuned to the model's advantage).
+    skip_alpha : regularisation of the ridge solution the network's linear skip starts
+        from (``Preset.skip``). Larger shrinks that linear map, which makes the model
+        degrade more gracefully on inputs outside the training range (a new user, data
+        collected with another model in the loop).
     grad_clip : max gradient norm (0 = off).
     device : torch device to train on (``"cpu"``, ``"cuda"``); the model returned is on the CPU.
     mirror : data augmentation: each training window is mirrored along each axis with
@@ -93,6 +98,7 @@ class TrainConfig:
     train_stride: int = 1
     eval_stride: int = 1
     ridge_alpha: float = 1.0
+    skip_alpha: float = 1.0
     grad_clip: float = 0.0
     device: str = "cpu"
     mirror: bool = False
@@ -109,6 +115,7 @@ class TrainConfig:
             ("weight_decay", lambda v: v >= 0, ">= 0"),
             ("test_fraction", lambda v: 0 <= v < 1, "in [0, 1)"),
             ("ridge_alpha", lambda v: v >= 0, ">= 0"),
+            ("skip_alpha", lambda v: v >= 0, ">= 0"),
             ("grad_clip", lambda v: v >= 0, ">= 0"),
         ):
             v = getattr(self, name)
@@ -212,7 +219,7 @@ def build_model(preset: Preset, trials: Sequence[LabeledTrial], config: TrainCon
     torch.manual_seed(config.seed)
     net = IntentNet(preset.network(d))
     if net.skip is not None:
-        ridge = RidgeBaseline.fit(ws, in_scaler, out_scaler, config.ridge_alpha)
+        ridge = RidgeBaseline.fit(ws, in_scaler, out_scaler, config.skip_alpha)
         net.init_skip(torch.from_numpy(ridge.W.T.astype(np.float32)), torch.from_numpy(ridge.b.astype(np.float32)))
     return IntentModel(net, preset.window, in_scaler, out_scaler, dt)
 
