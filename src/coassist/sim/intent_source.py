@@ -176,4 +176,7 @@ def load_intent_source(spec: str, horizon: int = 50) -> IntentSource:
         raise ValueError(
             f"intent {spec!r} is a model path, but coassist.intent.load_intent_source is not available ({exc})"
         ) from None
-    return load_model_source(spec)
+    try:
+        return load_model_source(spec)
+    except (OSError, ValueError) as exc:  # missing folder, bad sidecar, features or dt that do not match
+        raise ValueError(f"intent {spec!r} could not be loaded as a model: {exc}") from None
