@@ -404,7 +404,8 @@ def _plot_iterative(ctx, s: Section, labels, errors, result, folders) -> None:
     s.add_figure(fig, "In-loop e_RMS and mean e_MAX per model and horizon (Fig. 5.14, 5.16).")
     plt.close(fig)
     # Fig. 5.13/5.15/5.17: one linear trial, each model's 0.4 s prediction offline
-    trial = next(t for t in result.iterations[0].dataset.trials if t.meta.task == "linear")
+    # A trial no model was trained on: from the last collection, with the final model in the loop.
+    trial = next(t for t in result.final_dataset.trials if t.meta.task == "linear")
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
     axes[0].plot(trial.reference[:, 0], trial.reference[:, 1], "k--", lw=1, label="nominal")
     axes[0].plot(trial.pose[:, 0], trial.pose[:, 1], "k", lw=2, label="measured")
@@ -423,7 +424,8 @@ def _plot_iterative(ctx, s: Section, labels, errors, result, folders) -> None:
     axes[1].set_ylabel("error at 0.4 s ahead [mm]")
     axes[1].grid(alpha=0.3)
     axes[1].legend(fontsize=7)
-    s.add_figure(fig, "One linear trial of D0: each model's prediction 0.4 s ahead (Fig. 5.13) and its point-wise error (Fig. 5.15, 5.17).")
+    s.add_figure(fig, "One linear trial of the last collection (final model in the loop; no model trained on it): each model's "
+                    "prediction 0.4 s ahead (Fig. 5.13) and its point-wise error (Fig. 5.15, 5.17).")
     plt.close(fig)
 
 

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from coassist._checks import check_int_at_least
 from coassist.data import Trial
 
 __all__ = [
@@ -67,14 +68,6 @@ def trial_features(trial: Trial) -> np.ndarray:
     return np.concatenate([trial.pose, trial.velocity, trial.wrench, trial.reference], axis=1)
 
 
-def _check_int(value: Any, name: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name} must be an integer, got {value!r}")
-    if value < minimum:
-        raise ValueError(f"{name} must be >= {minimum}, got {value}")
-    return int(value)
-
-
 @dataclass(frozen=True)
 class WindowConfig:
     """How a window is cut from a trial.
@@ -105,9 +98,9 @@ class WindowConfig:
     target_scaling: str = "axis"
 
     def __post_init__(self) -> None:
-        _check_int(self.history, "window.history", 1)
-        _check_int(self.decimation, "window.decimation", 1)
-        _check_int(self.horizon, "window.horizon", 1)
+        check_int_at_least(self.history, "window.history", 1)
+        check_int_at_least(self.decimation, "window.decimation", 1)
+        check_int_at_least(self.horizon, "window.horizon", 1)
         if self.history % self.decimation:
             raise ValueError(
                 f"window.history ({self.history}) must be a multiple of window.decimation ({self.decimation})"
@@ -224,7 +217,7 @@ class WindowSet:
         d = trials[0].n_dof
         if any(t.n_dof != d for t in trials):
             raise ValueError("all trials must have the same number of DOFs")
-        _check_int(stride, "stride", 1)
+        check_int_at_least(stride, "stride", 1)
         self.window, self.dt, self.n_dof = window, float(dt), d
         feats, ends, owner, start = [], [], [], 0
         first = window.history - 1
