@@ -7,7 +7,6 @@ import pytest
 from typer.testing import CliRunner
 
 from coassist.cli import app
-from coassist.experiments import dmpc_study
 from coassist.experiments.dmpc_study import CaseResult, SweepConfig, check_observations, run_sweep
 
 

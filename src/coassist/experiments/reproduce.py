@@ -24,7 +24,6 @@ nothing is tuned to make one hold.
 from __future__ import annotations
 
 import json
-import os
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -289,6 +288,7 @@ def _stage_sweep(ctx: _Context) -> None:
 
 def _stage_iterative(ctx: _Context):
     from coassist.experiments.iterative import iterative_training
+    from coassist.intent import evaluate_model, load_model, load_trials
 
     cfg = ctx.config
     folders: dict[int, Path] = {}
@@ -313,8 +313,6 @@ def _stage_iterative(ctx: _Context):
     errors = {label: in_loop_errors(ds.trials) for label, ds in zip(labels, datasets)}
     times = [{"k": it.k, "collect_s": it.collect_s, "train_s": it.train_s} for it in result.iterations]
     iter_time = float(np.mean([t["collect_s"] + t["train_s"] for t in times]))
-    from coassist.intent import evaluate_model, load_model, load_trials
-
     final_eval = evaluate_model(load_model(result.models[-1]), load_trials([folders[cfg.iterations]]), held_out_only=False)
     ctx.summary["iterative"] = {
         "final_model_offline_e_rms": {int(h): v["e_rms"] for h, v in final_eval["results"]["model"].items()},
