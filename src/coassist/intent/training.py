@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -437,8 +438,9 @@ def plot_losses(history: Sequence[dict[str, Any]], path: Path, title: str = "") 
     plt.close(fig)
 
 
-def write_model(model: IntentModel, out: Path) -> None:
+def write_model(model: IntentModel, out: str | os.PathLike[str]) -> None:
     """Save the model folder with its ``history.json`` and ``loss.png``."""
+    out = Path(out)
     save_model(model, out)
     history = model.info.get("training_history", [])
     atomic_write_text(out / "history.json", _json(history))
