@@ -414,10 +414,11 @@ def _plot_iterative(ctx, s: Section, labels, errors, result, folders) -> None:
         valid = np.arange(trial.n_samples - h)
         err = np.linalg.norm(pred[valid, h - 1] - trial.pose[valid + h], axis=1)
         axes[1].plot(trial.time[valid], err * 1000, color=f"C{k}", lw=1, label=f"M{k}")
-    axes[0].set_aspect("equal")
+    # y stretched (not equal axes): the detours are centimetres on a half-metre path
     axes[0].set_xlabel("x [m]")
     axes[0].set_ylabel("y [m]")
-    axes[0].legend(fontsize=7)
+    axes[0].grid(alpha=0.3)
+    axes[0].legend(fontsize=7, loc="best")
     axes[1].set_xlabel("t [s]")
     axes[1].set_ylabel("error at 0.4 s ahead [mm]")
     axes[1].grid(alpha=0.3)
