@@ -140,3 +140,25 @@ def test_preset_with_skip_starts_as_the_ridge_predictor(trials, tiny):
     a, b = m.predict_trial(t), ridge_train.ridge.predict_trial(t)
     ok = np.isfinite(a[:, 0, 0])
     assert ok.sum() > 100 and np.allclose(a[ok], b[ok], atol=1e-4)  # float32 network vs float64 ridge (positions ~0.1 m)
+
+
+def test_skip_alpha_shrinks_the_skip_and_leaves_the_baseline_alone(trials, tiny):
+    """skip_alpha sets the ridge the skip starts from; ridge_alpha alone sets the baseline."""
+    from dataclasses import replace
+
+    from coassist.intent import RidgeBaseline, WindowSet, split_trials
+    from coassist.intent.training import build_model
+
+    p = replace(tiny, skip=True, train=replace(tiny.train, skip_alpha=100.0, ridge_alpha=1.0, epochs=1))
+    m = build_model(p, trials, p.train)
+    train_idx, _ = split_trials([lt.id for lt in trials], p.train.test_fraction, p.train.seed)
+    ws = WindowSet([trials[i].trial for i in train_idx], p.window, m.dt)
+    strong = RidgeBaseline.fit(ws, m.input_scaler, m.target_scaler, 100.0)
+    weak = RidgeBaseline.fit(ws, m.input_scaler, m.target_scaler, 1.0)
+    skip = m.net.skip.weight.detach().numpy().T
+    np.testing.assert_allclose(skip, strong.W, rtol=1e-5, atol=1e-6)
+    assert np.abs(skip - weak.W).max() > 1e-3
+    trained = train_model(trials, p, p.train)  # its baseline is fitted on the strided training windows
+    ws_strided = WindowSet([trials[i].trial for i in train_idx], p.window, m.dt, stride=p.train.train_stride)
+    baseline = RidgeBaseline.fit(ws_strided, m.input_scaler, m.target_scaler, 1.0)
+    np.testing.assert_allclose(trained.ridge.W, baseline.W, rtol=1e-10, atol=1e-12)
