@@ -1,0 +1,154 @@
+"""What the control loop shares with the intent predictor: fault flags, features, intent sources.
+
+This module sits below ``control``, ``intent``, ``sim``, ``runtime`` and ``robot`` and
+imports nothing of coassist, so none of them needs another to agree on these names
+(DESIGN: one loop, several worlds; ``tests/test_layers.py`` enforces the order).
+
+- :class:`Fault` — why a tick did not apply the plain control law; one int64 per tick
+  in every logged trial (``Trial.fault``), flags combine.
+- :data:`FEATURES` — the per-tick history features of the x-y predictor, thesis
+  order (eq. 4.3–4.6).
+- :class:`TrialContext`, :class:`IntentSource` — what a predictor may know at the start
+  of a trial, and the per-tick interface the loop calls (window in, positions out).
+
+History features, one row per tick, oldest first::
+
+    FEATURES = (x, y, ẋ, ẏ, f_x, f_y, x_ref, y_ref)     [m, m, m/s, m/s, N, N, m, m]
+
+x, y: measured tool position; ẋ, ẏ: its velocity; f: the hand wrench in use at that
+tick (Trial.wrench); x_ref, y_ref: the planner's nominal reference (Trial.reference).
+Row j of the window at tick k is exactly row k − history + 1 + j of the logged Trial,
+so windows cut from logged trials are what the source sees online. Before ``history``
+ticks have passed, the window is padded at the front with copies of tick 0's row.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+__all__ = ["FEATURES", "Fault", "IntentSource", "SAFETY_FAULTS", "TrialContext", "ZERO_EFFORT_FAULTS"]
+
+
+class Fault(enum.IntFlag):
+    """Why a tick did not apply the plain control law (flags combine; values are stored in trials).
+
+    Controller guard (``control``): NONFINITE_* … INVALID_INPUT.
+    Intent: PREDICTION_STALE, PREDICTION_FALLBACK, PREDICTOR_STALLED.
+    Wrench pipeline (``runtime.wrench``): SENSOR_*, WRENCH_SPIKE.
+    Safety layer (``runtime.safety``): the limits, DEADLINE_MISS, DECELERATING, STOPPED.
+    Robot: ROBOT_PROTECTIVE_STOP, ROBOT_EMERGENCY_STOP (reported by the world).
+    """
+
+    NONE = 0
+    NONFINITE_STATE = 1
+    NONFINITE_REFERENCE = 2
+    NONFINITE_WRENCH = 4
+    SATURATED = 8  # the robot effort was scaled down to effort_limit
+    NONFINITE_EFFORT = 16
+    PREDICTION_STALE = 32  # the intent prediction in use was shifted, not fresh
+    PREDICTION_FALLBACK = 64  # prediction too old or invalid: the nominal reference was used
+    INTERNAL_ERROR = 128  # a stage raised; its safe output was used instead
+    INVALID_INPUT = 256  # an input of the wrong shape or type (complex, strings)
+    SENSOR_STALE = 512  # no new force/torque sample for longer than the pipeline allows
+    SENSOR_SATURATED = 1024  # a sensor channel at its range limit: the reading is not the hand force
+    WRENCH_SPIKE = 2048  # a physically implausible jump: the sample was rejected
+    JOINT_VELOCITY_LIMIT = 4096  # the joint velocity command was scaled to its limit
+    JOINT_ACCELERATION_LIMIT = 8192  # the change of the joint velocity command was limited
+    TOOL_SPEED_LIMIT = 16384  # the tool's linear or angular speed was scaled to its limit
+    WORKSPACE_LIMIT = 32768  # motion out of the workspace box was removed
+    CONTACT_FORCE_LIMIT = 65536  # the hand wrench exceeded the contact threshold: protective stop
+    SINGULARITY = 131072  # manipulability under its guard: motion scaled down
+    DEADLINE_MISS = 262144  # the previous tick overran its period
+    PREDICTOR_STALLED = 524288  # the intent worker is dead or has produced nothing for too long
+    DECELERATING = 1 << 20  # the safety layer is ramping the command to zero
+    STOPPED = 1 << 21  # the safety layer has stopped the robot (zero command until the run ends)
+    ROBOT_PROTECTIVE_STOP = 1 << 22  # the robot controller reports a protective stop
+    ROBOT_EMERGENCY_STOP = 1 << 23  # the robot controller reports an emergency stop
+
+
+#: Faults after which the robot effort was forced to zero.
+ZERO_EFFORT_FAULTS = (
+    Fault.NONFINITE_STATE
+    | Fault.NONFINITE_REFERENCE
+    | Fault.NONFINITE_WRENCH
+    | Fault.NONFINITE_EFFORT
+    | Fault.INTERNAL_ERROR
+    | Fault.INVALID_INPUT
+)
+
+#: Interventions of the safety layer (every one is logged in the tick's row).
+SAFETY_FAULTS = (
+    Fault.JOINT_VELOCITY_LIMIT
+    | Fault.JOINT_ACCELERATION_LIMIT
+    | Fault.TOOL_SPEED_LIMIT
+    | Fault.WORKSPACE_LIMIT
+    | Fault.CONTACT_FORCE_LIMIT
+    | Fault.SINGULARITY
+    | Fault.DEADLINE_MISS
+    | Fault.DECELERATING
+    | Fault.STOPPED
+)
+
+#: The per-tick history features, in the thesis' order.
+FEATURES = ("x", "y", "vx", "vy", "fx", "fy", "x_ref", "y_ref")
+
+
+@dataclass(frozen=True, eq=False)
+class TrialContext:
+    """What an intent source may know at the start of a trial.
+
+    dt : tick [s]. horizon : rows the controller reads (≤ the source's horizon).
+    start, target : (2,) [m]. reference : (n, 4) the planner's [x, y, ẋ, ẏ] on the tick
+    grid (the nominal plan is public: it is shown on the monitor).
+    task : the task kind. user, object : names.
+    true_intent : (n, 2) the operator's desired positions — simulation only, for the
+    oracle baseline; a real predictor must not read it.
+    """
+
+    dt: float
+    horizon: int
+    start: np.ndarray
+    target: np.ndarray
+    reference: np.ndarray
+    task: str
+    user: str
+    object: str
+    true_intent: np.ndarray | None = None
+
+
+@runtime_checkable
+class IntentSource(Protocol):
+    """A predictor of the operator's desired positions (module docstring).
+
+    Fallback: if ``predict`` raises, or returns anything other than a finite array of
+    shape (≥ controller horizon, 2), the loop uses the nominal reference for that tick
+    and sets ``Fault.PREDICTION_FALLBACK``.
+
+    Attributes
+    ----------
+    history : samples of past features read per call (0: none; ``predict`` then
+        receives an empty (0, 8) array).
+    horizon : rows returned by ``predict``.
+    model_id : id written to TrialMeta.model_id; None means the nominal reference is
+        used (dataset D0, thesis eq. 4.7).
+    """
+
+    history: int
+    horizon: int
+    model_id: str | None
+
+    def reset(self, context: TrialContext) -> None:
+        """Called once before tick 0 of every trial (clear any carried state here)."""
+        ...
+
+    def predict(self, history: np.ndarray) -> np.ndarray:
+        """(history, 8) features, oldest first → (horizon, 2) absolute positions [m] for k+1 … k+horizon.
+
+        Called exactly once per tick, in tick order. The array is a read-only view
+        valid only during the call: copy it to keep it.
+        """
+        ...

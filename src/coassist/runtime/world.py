@@ -1,0 +1,135 @@
+"""The interfaces between the control tick and a world (robot + physics) and its operator.
+
+A *world* owns time and physics: the point-mass simulator, the MuJoCo UR5, a real UR5
+through ur-rtde. An *operator* owns the hand: a simulated operator, a scripted force
+profile, a person in a browser. The tick (:mod:`coassist.runtime.tick`) owns neither;
+it reads a :class:`RobotState`, decides, and hands the world a :class:`Command`. This
+is dm_control's Physics / Task / Environment split (DESIGN: one loop, several worlds).
+
+Frames and units. The *base* frame is the robot's base (x forward, z up). A pose is
+``[x, y, z, rx, ry, rz]``: the tool centre point (TCP) position [m] and its orientation
+as a rotation vector [rad] (axis · angle), both in the base frame. A twist is
+``[vx, vy, vz, ωx, ωy, ωz]`` [m/s, rad/s] in the base frame. The raw wrench is what
+the force/torque sensor reports, ``[fx, fy, fz, τx, τy, τz]`` [N, N·m] in the *sensor*
+frame, with the sign of the force the tool applies to the sensor: a hand pushing a
+weightless tool along +x_sensor with 10 N reads +10 N. Bias, the tool's weight and
+noise are in it; :mod:`coassist.runtime.wrench` removes them.
+
+Command spaces. An arm world takes a joint velocity (its controller servos it, like a
+UR's ``speedJ``); ``"effort"`` worlds (the 2-D point-mass world) render the impedance
+model physically and take the robot's Cartesian effort u_r instead.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal, Protocol, runtime_checkable
+
+import numpy as np
+
+__all__ = ["COMMAND_SPACES", "Command", "HandOperator", "RobotState", "World"]
+
+CommandSpace = Literal["joint_velocity", "effort"]
+COMMAND_SPACES: tuple[str, ...] = ("joint_velocity", "effort")
+
+
+@dataclass(slots=True)
+class RobotState:
+    """One timestamped reading of the robot and its sensor.
+
+    t : [s] the world's clock at the reading (simulated time, or the robot's own
+        timestamp); strictly increasing from tick to tick.
+    q, qd : (n_joints,) joint positions [rad] and velocities [rad/s]; (0,) for a world
+        without joints.
+    tool_pose : (6,) TCP pose in the base frame (module docstring); for the point-mass
+        world the first ``d`` entries are its position and the rest are zero.
+    tool_twist : (6,) TCP twist in the base frame.
+    wrench : (6,) raw sensor reading in the sensor frame [N, N·m].
+    sensor_rotation : (3, 3) orientation of the sensor frame in the base frame
+        (columns: the sensor's axes); the wrench pipeline rotates with it.
+    wrench_seq : counts the sensor's samples; unchanged from the last tick means the
+        sensor sent nothing new (a 100 Hz sensor read at 125 Hz repeats one in five).
+    protective_stop, emergency_stop : the robot controller's own stop states.
+    """
+
+    t: float
+    q: np.ndarray
+    qd: np.ndarray
+    tool_pose: np.ndarray
+    tool_twist: np.ndarray
+    wrench: np.ndarray
+    sensor_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    wrench_seq: int = 0
+    protective_stop: bool = False
+    emergency_stop: bool = False
+
+
+@dataclass(slots=True)
+class Command:
+    """What the tick sends the world for one control period.
+
+    qd : (n_joints,) joint velocity [rad/s] (``joint_velocity`` worlds).
+    effort : (d,) the robot's Cartesian effort u_r [N] (``effort`` worlds).
+    twist : (6,) the Cartesian twist the joint velocity realises [m/s, rad/s] (for logs
+        and worlds that prefer ``speedL``).
+    stop : the safety layer has stopped the robot: brake to rest and hold.
+    """
+
+    qd: np.ndarray | None = None
+    effort: np.ndarray | None = None
+    twist: np.ndarray | None = None
+    stop: bool = False
+
+
+@runtime_checkable
+class World(Protocol):
+    """A robot and the physics around it, stepped one control period at a time.
+
+    Attributes
+    ----------
+    dt : the control period [s] (0.008 at 125 Hz, 0.002 at 500 Hz).
+    command_space : ``"joint_velocity"`` or ``"effort"``.
+    n_joints : joints commanded (0 for the point-mass world).
+    realtime : True when ``apply`` waits for the wall clock (a real robot, a world
+        paced for a viewer): the loop then measures deadline misses.
+    """
+
+    dt: float
+    command_space: str
+    n_joints: int
+    realtime: bool
+
+    def read(self) -> RobotState:
+        """The state at the start of the current period (cheap; no waiting)."""
+        ...
+
+    def apply(self, command: Command) -> None:
+        """Send ``command`` and advance to the next period (simulate it, or wait for it)."""
+        ...
+
+    def stop(self) -> None:
+        """Bring the robot to rest now (decelerate within its limits); safe to call twice."""
+        ...
+
+    def close(self) -> None:
+        """Release the robot or the physics; calls :meth:`stop` first where it moves."""
+        ...
+
+
+@runtime_checkable
+class HandOperator(Protocol):
+    """Whoever applies the hand force on the handle.
+
+    A world calls :meth:`force` during its physics (once per control period, or once
+    per physics sub-step where it integrates finer) with the handle's state, and
+    applies the returned wrench at the handle.
+    """
+
+    def force(self, t: float, hand_pose: np.ndarray, hand_twist: np.ndarray) -> np.ndarray:
+        """(6,) wrench the hand applies at the handle [N, N·m], base frame, at time t [s].
+
+        ``hand_pose`` and ``hand_twist`` are the handle's pose and twist (module
+        docstring for the layout). Must return a finite (6,) array; a world treats
+        anything else as zero force (the hand lets go).
+        """
+        ...
