@@ -226,6 +226,65 @@ def collect(
 
 
 @app.command()
+def drive(
+    out: Path = typer.Option(Path("runs/drive/trial.parquet"), help="Trial file to write (the same format as collect's trials, plus joint columns)."),
+    world: str = typer.Option("mujoco", help="mujoco (a UR5 in MuJoCo physics) | ur (a real UR5 through ur-rtde)."),
+    controller: str = typer.Option("assistive", help="assistive (the cooperative game) | imp (impedance control) | mg (manual guidance)."),
+    task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
+    obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
+    intent: str = typer.Option("nominal", help="nominal | oracle (MuJoCo) | path of an intent model (coassist train)."),
+    preset: str = typer.Option("thesis-application-dm", help="Control preset (the main job's by default)."),
+    user: int = typer.Option(0, help="Simulated operator (MuJoCo world)."),
+    seed: int = typer.Option(0, help="Seed of the task, the simulated operator and the sensor noise."),
+    rate: int = typer.Option(125, help="Control rate in Hz: 125 (UR CB3) or 500 (e-Series)."),
+    full_pose: bool = typer.Option(False, help="Control all 6 DOFs instead of the x-y plane."),
+    time_limit: float = typer.Option(None, help="Longest run in seconds (default: 2 x the plan + 10 s)."),
+    tool_speed: float = typer.Option(0.25, help="Safety: largest tool speed in m/s."),
+    contact_force: float = typer.Option(120.0, help="Safety: hand force in N that makes a protective stop."),
+    host: str = typer.Option(None, help="The real arm's IP address (--world ur)."),
+    yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before a real arm moves (scripts)."),
+    view: bool = typer.Option(False, help="Open MuJoCo's passive viewer (needs a display) and run in real time."),
+    plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
+) -> None:
+    """Run the assistive controller, IMP or MG on a UR5: in MuJoCo, or on a real arm."""
+    from coassist.data import write_trial
+    from coassist.robot.drive import DriveConfig
+    from coassist.robot.drive import drive as run_drive
+    from coassist.runtime.safety import SafetyLimits
+
+    try:
+        limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
+        config = DriveConfig(world=world, controller=controller, task=task, object=obj, preset=preset, intent=intent,
+                             user=user, seed=seed, rate_hz=rate, full_pose=full_pose, time_limit=time_limit,
+                             limits=limits)  # fmt: skip
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from None
+    if out.exists() and out.is_dir():
+        raise typer.BadParameter(f"{out} is a folder; give a trial file name", param_hint="--out")
+
+    def confirm(text: str) -> bool:
+        console.print("[bold]Limits in force[/] (coassist's safety layer, on top of the robot's own safety system):", markup=True)
+        console.print(text, markup=False)
+        console.print("Keep the teach pendant's emergency stop within reach.", markup=False)
+        return yes or typer.confirm("Move the robot?", default=False)
+
+    try:
+        trial = run_drive(config, host=host, view=view, confirm=confirm if world == "ur" else None)
+    except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
+        console.print(f"[red]error:[/] {exc}", markup=True, highlight=False)
+        raise typer.Exit(1) from None
+    path = write_trial(trial, out)
+    extra = trial.meta.extra
+    console.print(f"[green]wrote[/] {path}: {trial.n_samples} ticks, ended: {extra['ended']}", highlight=False)
+    if extra.get("stop_message"):
+        console.print(f"[yellow]{extra['stop_message']}[/]", highlight=False)
+    if plot:
+        from coassist.sim.monitor import plot_trial
+
+        console.print(f"[green]wrote[/] {plot_trial(trial, path.with_suffix('.png'))}")
+
+
+@app.command()
 def show(
     path: Path = typer.Argument(..., help="A trial file, a dataset folder or a ROS CSV recording folder."),
     out: Path = typer.Option(None, help="PNG to write (default: <name>.png in the current folder)."),

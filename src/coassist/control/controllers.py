@@ -22,7 +22,6 @@ never raises.
 
 from __future__ import annotations
 
-import enum
 import logging
 from typing import NamedTuple, Protocol
 
@@ -31,35 +30,10 @@ from numpy.typing import ArrayLike
 
 from coassist._checks import as_square_matrix, check_positive_semidefinite
 from coassist.control.game import CooperativeGame, NashGame
+from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault  # re-exported: the flags live below control
 from coassist.model.impedance import ImpedanceModel
 
 log = logging.getLogger(__name__)
-
-
-class Fault(enum.IntFlag):
-    """Why a tick did not apply the plain control law (flags combine)."""
-
-    NONE = 0
-    NONFINITE_STATE = 1
-    NONFINITE_REFERENCE = 2
-    NONFINITE_WRENCH = 4
-    SATURATED = 8
-    NONFINITE_EFFORT = 16
-    PREDICTION_STALE = 32  # the intent prediction in use was shifted, not fresh
-    PREDICTION_FALLBACK = 64  # prediction too old or invalid: the nominal reference was used
-    INTERNAL_ERROR = 128  # the control law raised; zero effort was applied
-    INVALID_INPUT = 256  # an input of the wrong shape or type (complex, strings)
-
-
-#: Faults after which the robot effort was forced to zero.
-ZERO_EFFORT_FAULTS = (
-    Fault.NONFINITE_STATE
-    | Fault.NONFINITE_REFERENCE
-    | Fault.NONFINITE_WRENCH
-    | Fault.NONFINITE_EFFORT
-    | Fault.INTERNAL_ERROR
-    | Fault.INVALID_INPUT
-)
 
 
 class ControlStep(NamedTuple):

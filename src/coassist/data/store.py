@@ -7,6 +7,7 @@ One trial = one Parquet file. Columns, for the d controlled DOFs named
     pose_<ax>, vel_<ax>, wrench_<ax>, ref_<ax>   float64   m, m/s, N, m
     intent_<ax>, effort_h_<ax>, effort_r_<ax>    float64   optional
     fault                                  int64     optional
+    q_<j>, qd_cmd_<j>  (j = 0 … J−1)       float64   rad, rad/s  optional (arm worlds)
     prediction_<ax>                        fixed_size_list<float64>[H]   optional
 
 The :class:`~coassist.data.trial.TrialMeta` is JSON in the Arrow schema metadata under
@@ -66,6 +67,8 @@ DATASET_FORMAT = "coassist.dataset"
 # Trial field -> column prefix, for the (T, d) arrays.
 _REQUIRED = {"pose": "pose", "velocity": "vel", "wrench": "wrench", "reference": "ref"}
 _OPTIONAL = {"intent": "intent", "effort_h": "effort_h", "effort_r": "effort_r"}
+# Trial field -> column prefix, for the (T, J) joint arrays of arm worlds.
+_JOINT = {"joints": "q", "joint_velocity": "qd_cmd"}
 
 
 class TrialFileError(ValueError):
@@ -119,6 +122,11 @@ def _trial_table(trial: Trial) -> pa.Table:
                 cols[f"{prefix}_{AXES[j]}"] = pa.array(np.ascontiguousarray(arr[:, j]), type=pa.float64())
     if trial.fault is not None:
         cols["fault"] = pa.array(trial.fault, type=pa.int64())
+    for field_name, prefix in _JOINT.items():
+        arr = getattr(trial, field_name)
+        if arr is not None:
+            for j in range(arr.shape[1]):
+                cols[f"{prefix}_{j}"] = pa.array(np.ascontiguousarray(arr[:, j]), type=pa.float64())
     if trial.prediction is not None:
         horizon = trial.prediction.shape[1]
         for j in range(d):
@@ -217,6 +225,12 @@ def read_trial(path: str | os.PathLike[str]) -> Trial:
             kwargs[field_name] = block(prefix)
     if "fault" in names:
         kwargs["fault"] = _column(table, "fault", path)
+    for field_name, prefix in _JOINT.items():
+        n_j = 0
+        while f"{prefix}_{n_j}" in names:
+            n_j += 1
+        if n_j:
+            kwargs[field_name] = np.column_stack([_column(table, f"{prefix}_{j}", path) for j in range(n_j)])
     if "prediction_x" in names:
         per_axis = []
         for j in range(d):

@@ -35,7 +35,7 @@ __all__ = ["MAX_DOF", "SOURCES", "Trial", "TrialMeta"]
 #: Most Cartesian DOFs a trial may carry (3 linear + 3 angular).
 MAX_DOF = 6
 #: Where a trial comes from.
-SOURCES = ("sim", "real")
+SOURCES = ("sim", "real", "mujoco", "ur5")
 
 
 def _require_str(value: Any, name: str, *, allow_empty: bool = False) -> str:
@@ -222,7 +222,11 @@ class Trial:
     effort_h, effort_r : ndarray, shape (T, d), optional
         Human and robot efforts applied, in N.
     fault : ndarray of int64, shape (T,), optional
-        Controller fault flags per tick (0 = none).
+        Fault flags per tick (0 = none; :class:`coassist.interfaces.Fault`).
+    joints : ndarray, shape (T, J), optional
+        Measured joint positions q in rad (arm worlds: MuJoCo UR5, the real UR5).
+    joint_velocity : ndarray, shape (T, J), optional
+        Joint velocity command q̇ sent at each tick in rad/s (after the safety layer).
 
     Notes
     -----
@@ -241,6 +245,8 @@ class Trial:
     effort_h: np.ndarray | None = None
     effort_r: np.ndarray | None = None
     fault: np.ndarray | None = None
+    joints: np.ndarray | None = None
+    joint_velocity: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.meta, TrialMeta):
@@ -299,6 +305,20 @@ class Trial:
             _check_shape(fault, "fault", (n,))
             fault.setflags(write=False)
             set_("fault", fault)
+
+        n_joints = None
+        for name in ("joints", "joint_velocity"):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            arr = _float_array(value, name)
+            if arr.ndim != 2 or arr.shape[0] != n or not 1 <= arr.shape[1] <= 12:
+                raise ValueError(f"Trial.{name} has shape {arr.shape}, expected ({n}, J) with 1 <= J <= 12")
+            if n_joints is not None and arr.shape[1] != n_joints:
+                raise ValueError(f"Trial.joints and Trial.joint_velocity have different joint counts ({n_joints}, {arr.shape[1]})")
+            n_joints = arr.shape[1]
+            _check_finite(arr, name)
+            set_(name, arr)
 
     @property
     def n_samples(self) -> int:

@@ -33,7 +33,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import torch
 
-from coassist.control import Fault
+from coassist.interfaces import FEATURES, Fault
 from coassist.intent.model import IntentModel
 
 __all__ = ["BACKENDS", "ModelIntent", "PredictionTick", "RealtimeConfig", "RealtimePredictor", "load_intent_source", "make_runner"]
@@ -271,7 +271,6 @@ def load_intent_source(path: str, threads: int = 1) -> ModelIntent:
     core, and more threads per process would oversubscribe them.
     """
     from coassist.intent.model import load_model, read_sidecar
-    from coassist.sim.intent_source import FEATURES  # local: sim does not import intent at module level
 
     model = load_model(path, features=FEATURES)
     torch.set_num_threads(threads)

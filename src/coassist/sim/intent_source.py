@@ -32,67 +32,9 @@ never as an object: the intent package provides ``coassist.intent.load_intent_so
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
-
 import numpy as np
 
-#: The per-tick history features, in the thesis' order.
-FEATURES = ("x", "y", "vx", "vy", "fx", "fy", "x_ref", "y_ref")
-
-
-@dataclass(frozen=True, eq=False)
-class TrialContext:
-    """What an intent source may know at the start of a trial.
-
-    dt : tick [s]. horizon : rows the controller reads (≤ the source's horizon).
-    start, target : (2,) [m]. reference : (n, 4) the planner's [x, y, ẋ, ẏ] on the tick
-    grid (the nominal plan is public: it is shown on the monitor).
-    task : the task kind. user, object : names.
-    true_intent : (n, 2) the operator's desired positions — simulation only, for the
-    oracle baseline; a real predictor must not read it.
-    """
-
-    dt: float
-    horizon: int
-    start: np.ndarray
-    target: np.ndarray
-    reference: np.ndarray
-    task: str
-    user: str
-    object: str
-    true_intent: np.ndarray | None = None
-
-
-@runtime_checkable
-class IntentSource(Protocol):
-    """A predictor of the operator's desired positions (module docstring).
-
-    Attributes
-    ----------
-    history : samples of past features read per call (0: none; ``predict`` then
-        receives an empty (0, 8) array).
-    horizon : rows returned by ``predict``.
-    model_id : id written to TrialMeta.model_id; None means the nominal reference is
-        used (dataset D0, thesis eq. 4.7).
-    """
-
-    history: int
-    horizon: int
-    model_id: str | None
-
-    def reset(self, context: TrialContext) -> None:
-        """Called once before tick 0 of every trial (clear any carried state here)."""
-        ...
-
-    def predict(self, history: np.ndarray) -> np.ndarray:
-        """(history, 8) features, oldest first → (horizon, 2) absolute positions [m] for k+1 … k+horizon.
-
-        Called exactly once per tick, in tick order. The array is a read-only view
-        valid only during the call: copy it to keep it.
-        """
-        ...
-
+from coassist.interfaces import FEATURES, IntentSource, TrialContext  # re-exported for sim's users
 
 class NominalIntent:
     """ŷ_ref,h = y_ref,r: the thesis' assumption with no model loaded (eq. 4.7, dataset D0).

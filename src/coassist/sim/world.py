@@ -49,10 +49,16 @@ from typing import Any
 import numpy as np
 
 from coassist.config import THESIS_APPLICATION, THESIS_EVALUATION, ControlPreset
-from coassist.control.controllers import AssistiveController, Fault, ImpedanceControl, ManualGuidance
+from coassist.control.controllers import AssistiveController, ImpedanceControl, ManualGuidance
 from coassist.control.game import cooperative_game
 from coassist.data import Trial, TrialMeta
 from coassist.model.impedance import ImpedanceModel
+from coassist.runtime.intent import WindowIntent
+from coassist.runtime.loop import TargetDwell, run_loop
+from coassist.runtime.safety import SafetyLayer, SafetyLimits
+from coassist.runtime.tick import ControlTick, Plan
+from coassist.runtime.world import Command, RobotState
+from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
 from coassist.sim.intent_source import (
     FEATURES,
     IntentSource,
@@ -70,9 +76,6 @@ CONTROLLER_KINDS = ("cooperative", "impedance", "manual")
 #: does not give it (its K_i = 0 would make IMP equal MG); 200 N/m pulls back with
 #: 10 N at a 5 cm deviation, about what the operators push with.
 IMPEDANCE_STIFFNESS = 200.0
-
-_FALLBACK = int(Fault.PREDICTION_FALLBACK)
-
 
 def scale_positions(preset: ControlPreset, scale: float, name: str) -> ControlPreset:
     """The preset with outputs in units of 1/scale m: every Q multiplied by scale².
@@ -132,6 +135,158 @@ def _diag2(matrix: np.ndarray, name: str) -> None:
         raise ValueError(f"the simulator needs a 2-DOF (x-y) plant with diagonal {name}, got {matrix.tolist()}")
 
 
+#: The point-mass world's sensor reading is already zeroed and carries no payload (the
+#: object's mass acts physically): its wrench pipeline only checks (stale, spike,
+#: saturation, non-finite) and neither filters nor shrinks, so the thesis' loop is kept.
+POINT_MASS_WRENCH = WrenchConfig(cutoff_hz=None, deadband_force=0.0, deadband_torque=0.0, force_range=327.67,
+                                 torque_range=30.0)  # fmt: skip
+#: The point-mass world is an ideal admittance robot, not an arm: no joints, and its
+#: simulated operators move up to ~0.4 m/s, so its tool-speed limit is the UR's 1 m/s
+#: (coassist's arm worlds default to 0.25 m/s).
+POINT_MASS_LIMITS = SafetyLimits(tool_speed=1.0)
+
+
+class PointMassWorld:
+    """The 2-D point-mass world: the thesis' robot as an ideal admittance, with object, sensor and operator.
+
+    An ``effort`` world (:mod:`coassist.runtime.world`): it renders the impedance model
+    physically, (M + m) a + D v = u_h + u_r + n_s + b_res (module docstring, step 5),
+    so the tick sends it the robot's effort u_r. It owns time (tick k), the operator's
+    arm (:class:`~coassist.sim.operator.OperatorArm`, called inside :meth:`apply`), the
+    board's yaw and the force sensor. All randomness comes from ``seed`` exactly as
+    before this world was split out of the loop, so trials are bit-identical.
+    """
+
+    command_space = "effort"
+    n_joints = 0
+    realtime = False
+
+    def __init__(self, task: Task, operator: OperatorProfile, obj: CarriedObject, model: ImpedanceModel, seed: int,
+                 n_max: int, n_grid: int, sensor: ForceSensor) -> None:  # fmt: skip
+        dt = float(model.dt)
+        self.dt = dt
+        rng_intent, rng_motor, rng_sensor = (np.random.default_rng(s) for s in np.random.SeedSequence([seed, 1]).spawn(3))
+        self.intent = intent_trajectory(task, operator, rng_intent, n_grid, dt)
+        noise_h = motor_noise(operator, rng_motor, n_max, dt)
+        self.raw_bias = sensor.raw_bias(obj, rng_sensor)
+        residual = self.raw_bias - sensor.zero(self.raw_bias, rng_sensor)  # what zeroing leaves behind
+        self.residual = residual
+        noise_s = rng_sensor.normal(0.0, sensor.noise, (n_max + 1, 2))
+        self._fresh = sensor.sample_ticks(n_max + 1, dt).tolist()
+        self._sat = sensor.saturation
+        # plant: per-axis exact ZOH of (M + m) a + D v = f
+        eff = ImpedanceModel(np.diag(np.diag(model.M) + obj.mass), model.D, np.zeros((2, 2)), dt)
+        Ad, Bd = eff.Ad, eff.Bd
+        self._axv = (float(Ad[0, 2]), float(Ad[1, 3]))
+        self._avv = (float(Ad[2, 2]), float(Ad[3, 3]))
+        self._bx = (float(Bd[0, 0]), float(Bd[1, 1]))
+        self._bv = (float(Bd[2, 0]), float(Bd[3, 1]))
+        self._m = obj.mass
+        self._yaw = obj.has_yaw
+        self._rh = obj.grasp_offset
+        self._rc = obj.center_offset
+        self._k_th, self._c_th = obj.yaw_stiffness, obj.yaw_damping
+        self._I_c = obj.yaw_inertia if obj.has_yaw else 1.0
+        self._arm = OperatorArm(operator, self.intent.positions, dt, noise_h)
+        sat = self._sat
+        self._nsx, self._nsy = noise_s[:, 0].tolist(), noise_s[:, 1].tolist()
+        self._bres = (float(residual[0]), float(residual[1]))
+        x0 = task.start
+        self.x, self.y = float(x0[0]), float(x0[1])
+        self.vx = self.vy = 0.0
+        self._th = self._thd = self._thdd = 0.0
+        self._ax_prev = self._ay_prev = 0.0
+        self.wx = float(np.clip(residual[0] + noise_s[0, 0], -sat, sat))
+        self.wy = float(np.clip(residual[1] + noise_s[0, 1], -sat, sat))
+        self._seq = 0
+        self.k = 0
+        self._fh = (0.0, 0.0)
+        self._stopped = False
+
+    def read(self) -> RobotState:
+        return RobotState(
+            t=self.k * self.dt, q=_NO_JOINTS, qd=_NO_JOINTS,
+            tool_pose=np.array((self.x, self.y, 0.0, 0.0, 0.0, 0.0)),
+            tool_twist=np.array((self.vx, self.vy, 0.0, 0.0, 0.0, 0.0)),
+            wrench=np.array((self.wx, self.wy, 0.0, 0.0, 0.0, 0.0)), wrench_seq=self._seq,
+        )  # fmt: skip
+
+    def hand_force(self) -> tuple[float, float]:
+        """The operator's force u_h(k) [N] applied during the last period."""
+        return self._fh
+
+    def apply(self, command: Command) -> None:
+        """One period: the operator's arm, the plant under u_h + u_r, the sensor's next reading."""
+        k = self.k
+        dt = self.dt
+        effort = command.effort
+        if command.stop or self._stopped or effort is None:
+            urx = ury = 0.0
+        else:
+            urx, ury = float(effort[0]), float(effort[1])
+            if not (math.isfinite(urx) and math.isfinite(ury)):  # never integrate garbage
+                urx = ury = 0.0
+        x, y, vx, vy = self.x, self.y, self.vx, self.vy
+        th, thd = self._th, self._thd
+        # the operator (the hand point moves with the board's yaw)
+        rhx, rhy = self._rh
+        if self._yaw:
+            px, py = x - th * rhy, y + th * rhx
+            pvx, pvy = vx - thd * rhy, vy + thd * rhx
+        else:
+            px, py, pvx, pvy = x, y, vx, vy
+        fhx, fhy = self._arm.force(k, px, py, pvx, pvy)
+        self._fh = (fhx, fhy)
+        # plant and sensor
+        m = self._m
+        nsx, nsy = self._nsx[k + 1], self._nsy[k + 1]
+        bres_x, bres_y = self._bres
+        cx = cy = 0.0
+        if self._yaw:
+            rcx, rcy = self._rc
+            tau = rhx * fhy - rhy * fhx - m * (rcx * self._ay_prev - rcy * self._ax_prev)
+            thdd = (tau - self._k_th * th - self._c_th * thd) / self._I_c
+            thd += thdd * dt
+            th += thd * dt
+            self._thdd, self._thd, self._th = thdd, thd, th
+            cx, cy = m * thdd * rcy, -m * thdd * rcx  # −m θ̈ J r_c
+        fx = fhx + urx + nsx + bres_x + cx
+        fy = fhy + ury + nsy + bres_y + cy
+        if command.stop or self._stopped:
+            # a stopped robot brakes: the tool holds where it is, whatever the hand does
+            self._stopped = True
+            vx_new = vy_new = 0.0
+            x_new, y_new = x, y
+        else:
+            vx_new = self._avv[0] * vx + self._bv[0] * fx
+            vy_new = self._avv[1] * vy + self._bv[1] * fy
+            x_new = x + self._axv[0] * vx + self._bx[0] * fx
+            y_new = y + self._axv[1] * vy + self._bx[1] * fy
+        inv_dt = 1.0 / dt
+        self._ax_prev = (vx_new - vx) * inv_dt
+        self._ay_prev = (vy_new - vy) * inv_dt
+        if self._fresh[k + 1]:
+            sat = self._sat
+            sx = fhx - m * self._ax_prev + cx + nsx + bres_x
+            sy = fhy - m * self._ay_prev + cy + nsy + bres_y
+            self.wx = sat if sx > sat else (-sat if sx < -sat else sx)
+            self.wy = sat if sy > sat else (-sat if sy < -sat else sy)
+            self._seq += 1
+        self.x, self.y, self.vx, self.vy = x_new, y_new, vx_new, vy_new
+        self.k = k + 1
+
+    def stop(self) -> None:
+        self._stopped = True
+        self.vx = self.vy = 0.0
+
+    def close(self) -> None:
+        pass
+
+
+_NO_JOINTS = np.zeros(0)
+_NO_JOINTS.setflags(write=False)
+
+
 def run_trial(
     task: Task,
     operator: OperatorProfile,
@@ -147,6 +302,9 @@ def run_trial(
     preset_name: str | None = None,
 ) -> Trial:
     """Simulate one trial and return its log (module docstring for the loop).
+
+    The :class:`PointMassWorld` runs under the same control tick as every other world
+    (:mod:`coassist.runtime.tick`, :func:`coassist.runtime.loop.run_loop`).
 
     Parameters
     ----------
@@ -180,7 +338,7 @@ def run_trial(
     source = NominalIntent(max(H, 2)) if intent_source is None else intent_source
     if not isinstance(source, IntentSource):
         raise ValueError(f"intent_source must implement IntentSource, got {type(source).__name__}")
-    Hs, L = int(source.horizon), int(source.history)
+    Hs = int(source.horizon)
     if Hs < H:
         raise ValueError(f"intent source horizon ({Hs}) must be >= the controller's ({H})")
     if time_limit is None:
@@ -189,175 +347,32 @@ def run_trial(
     if n_max < 2:
         raise ValueError(f"time_limit must cover at least 2 ticks of {dt} s, got {time_limit!r}")
 
-    rng_intent, rng_motor, rng_sensor = (np.random.default_rng(s) for s in np.random.SeedSequence([seed, 1]).spawn(3))
-
     # ---- precomputed grids (absolute frame), with H rows past the end for the horizon
     n_grid = n_max + Hs + 1
     x0 = np.array(task.start, dtype=float)
     ref_abs = task.planner.grid(n_grid, dt)  # (n_grid, 4)
-    ref_ctrl = ref_abs.copy()
-    ref_ctrl[:, :2] -= x0  # the controller's Δx frame
-    intent = intent_trajectory(task, operator, rng_intent, n_grid, dt)
-    noise_h = motor_noise(operator, rng_motor, n_max, dt)
-    raw_bias = sensor.raw_bias(obj, rng_sensor)
-    residual = raw_bias - sensor.zero(raw_bias, rng_sensor)  # what zeroing leaves behind
-    noise_s = rng_sensor.normal(0.0, sensor.noise, (n_max + 1, 2))
-    fresh = sensor.sample_ticks(n_max + 1, dt).tolist()
-    sat = sensor.saturation
-
-    nominal = isinstance(source, NominalIntent)
+    world = PointMassWorld(task, operator, obj, model, seed, n_max, n_grid, sensor)
+    intent = world.intent
     context = TrialContext(
         dt=dt, horizon=H, start=x0.copy(), target=np.array(task.target, dtype=float), reference=ref_abs,
         task=task.kind, user=operator.name, object=obj.name, true_intent=intent.positions,
     )
-    source.reset(context)
-
-    # ---- plant: per-axis exact ZOH of (M + m) a + D v = f
-    eff = ImpedanceModel(np.diag(np.diag(model.M) + obj.mass), model.D, np.zeros((2, 2)), dt)
-    Ad, Bd = eff.Ad, eff.Bd
-    axv_x, axv_y = float(Ad[0, 2]), float(Ad[1, 3])
-    avv_x, avv_y = float(Ad[2, 2]), float(Ad[3, 3])
-    bx_x, bx_y = float(Bd[0, 0]), float(Bd[1, 1])
-    bv_x, bv_y = float(Bd[2, 0]), float(Bd[3, 1])
-    m = obj.mass
-    yaw = obj.has_yaw
-    rhx, rhy = obj.grasp_offset
-    rcx, rcy = obj.center_offset
-    k_th, c_th = obj.yaw_stiffness, obj.yaw_damping
-    I_c = obj.yaw_inertia if yaw else 1.0
-    x0x, x0y = float(x0[0]), float(x0[1])
-    tx, ty = float(task.target[0]), float(task.target[1])
-    r2 = float(arrive_radius) ** 2
-    dwell_ticks = int(math.ceil(float(dwell) / dt))
+    tick = ControlTick(
+        controller, WindowIntent(source, H), WrenchPipeline(POINT_MASS_WRENCH, dt),
+        SafetyLayer(POINT_MASS_LIMITS, dt, 6), command_space="effort",
+    )  # fmt: skip
+    tick.reset(Plan(ref_abs, np.array((x0[0], x0[1], 0.0, 0.0, 0.0, 0.0))), context)
     t_done = max(task.planner.end_time, intent.end_time)
-    k_done = int(math.ceil(t_done / dt))
-
-    arm = OperatorArm(operator, intent.positions, dt, noise_h)
-
-    # ---- preallocated buffers and logs
-    z = np.zeros(4)
-    wrench = np.zeros(2)
-    ref_h_buf = np.zeros((Hs, 4))
-    ref_h_view = ref_h_buf[:H]
-    hist = np.zeros((2 * L, len(FEATURES))) if L > 0 else np.zeros((0, len(FEATURES)))
-    empty_hist = hist[:0]
-    empty_hist.setflags(write=False)
-    log = np.empty((n_max, 10))  # x y vx vy wx wy uhx uhy urx ury
-    faults = np.zeros(n_max, dtype=np.int64)
-    pred_log = None if nominal else np.full((n_max, Hs, 2), np.nan)
+    termination = TargetDwell(task.target, arrive_radius, int(math.ceil(float(dwell) / dt)), int(math.ceil(t_done / dt)))
+    log = run_loop(world, tick, n_max, termination)
+    n = log.n
+    ended = log.ended
     ref_pos = ref_abs[:, :2]
-    step = controller.step
-
-    # ---- state
-    x, y = x0x, x0y
-    vx = vy = 0.0
-    th = thd = thdd = 0.0
-    ax_prev = ay_prev = 0.0
-    wx = float(np.clip(residual[0] + noise_s[0, 0], -sat, sat))
-    wy = float(np.clip(residual[1] + noise_s[0, 1], -sat, sat))
-    bres_x, bres_y = float(residual[0]), float(residual[1])
-    nsx_all, nsy_all = noise_s[:, 0].tolist(), noise_s[:, 1].tolist()
-    inside = 0
-    ended = "time_limit"
-    n = n_max
-    inv_dt = 1.0 / dt
-
-    for k in range(n_max):
-        # 1-2. features and the intent prediction
-        fault_extra = 0
-        if L > 0:
-            row = (x, y, vx, vy, wx, wy, ref_pos[k, 0], ref_pos[k, 1])
-            if k == 0:
-                hist[:] = row  # pad: the robot was at rest before tick 0
-            i = k % L
-            hist[i] = row
-            hist[i + L] = row
-            window = hist[i + 1 : i + 1 + L]
-        else:
-            window = empty_hist
-        ref_r = ref_ctrl[k + 1 : k + 1 + H]
-        if nominal:
-            ref_h = ref_r
-        else:
-            try:
-                pred = source.predict(window)
-                ok = isinstance(pred, np.ndarray) and pred.ndim == 2 and pred.shape[0] >= H and pred.shape[1] == 2
-                ok = ok and bool(np.isfinite(pred[:Hs]).all())
-            except Exception:  # a failing predictor must not stop the loop
-                ok = False
-            if ok:
-                p = pred[:Hs]
-                pred_log[k, : p.shape[0]] = p
-                np.subtract(p, x0, out=ref_h_buf[: p.shape[0], :2])
-                if p.shape[0] >= 2:
-                    np.subtract(p[1:], p[:-1], out=ref_h_buf[1 : p.shape[0], 2:])
-                    ref_h_buf[1 : p.shape[0], 2:] *= inv_dt
-                    ref_h_buf[0, 2:] = ref_h_buf[1, 2:]
-                else:
-                    ref_h_buf[0, 2:] = 0.0
-                ref_h = ref_h_view
-            else:
-                fault_extra = _FALLBACK
-                ref_h = ref_r
-                pred_log[k] = ref_pos[k + 1 : k + 1 + Hs]
-        # 3. controller
-        z[0] = x - x0x
-        z[1] = y - x0y
-        z[2] = vx
-        z[3] = vy
-        wrench[0] = wx
-        wrench[1] = wy
-        u_r, _, fault = step(z, ref_h, ref_r, wrench)
-        urx, ury = u_r.tolist()
-        faults[k] = int(fault) | fault_extra
-        # 4. operator (the hand point moves with the board's yaw)
-        if yaw:
-            px, py = x - th * rhy, y + th * rhx
-            pvx, pvy = vx - thd * rhy, vy + thd * rhx
-        else:
-            px, py, pvx, pvy = x, y, vx, vy
-        fhx, fhy = arm.force(k, px, py, pvx, pvy)
-        # 5. plant and sensor
-        nsx, nsy = nsx_all[k + 1], nsy_all[k + 1]
-        cx = cy = 0.0
-        if yaw:
-            tau = rhx * fhy - rhy * fhx - m * (rcx * ay_prev - rcy * ax_prev)
-            thdd = (tau - k_th * th - c_th * thd) / I_c
-            thd += thdd * dt
-            th += thd * dt
-            cx, cy = m * thdd * rcy, -m * thdd * rcx  # −m θ̈ J r_c
-        fx = fhx + urx + nsx + bres_x + cx
-        fy = fhy + ury + nsy + bres_y + cy
-        vx_new = avv_x * vx + bv_x * fx
-        vy_new = avv_y * vy + bv_y * fy
-        x_new = x + axv_x * vx + bx_x * fx
-        y_new = y + axv_y * vy + bx_y * fy
-        ax_prev = (vx_new - vx) * inv_dt
-        ay_prev = (vy_new - vy) * inv_dt
-        log[k] = (x, y, vx, vy, wx, wy, fhx, fhy, urx, ury)
-        if fresh[k + 1]:
-            sx = fhx - m * ax_prev + cx + nsx + bres_x
-            sy = fhy - m * ay_prev + cy + nsy + bres_y
-            wx = sat if sx > sat else (-sat if sx < -sat else sx)
-            wy = sat if sy > sat else (-sat if sy < -sat else sy)
-        x, y, vx, vy = x_new, y_new, vx_new, vy_new
-        # end: the motion is over and the tip has settled at the target
-        if k >= k_done:
-            dx, dy = log[k, 0] - tx, log[k, 1] - ty
-            if dx * dx + dy * dy < r2:
-                inside += 1
-                if inside >= dwell_ticks:
-                    n = k + 1
-                    ended = "target"
-                    break
-            else:
-                inside = 0
-
-    if nominal:
+    if log.prediction is None:
         windows = np.lib.stride_tricks.sliding_window_view(ref_pos[1 : n + Hs], Hs, axis=0)  # (n, 2, Hs)
         prediction = np.ascontiguousarray(windows.transpose(0, 2, 1))
     else:
-        prediction = pred_log[:n]
+        prediction = log.prediction
     extra = task.to_extra()
     extra.update(
         {
@@ -369,8 +384,8 @@ def run_trial(
             "intent_amplitude": intent.amplitude,
             "intent_pace": intent.pace,
             "intent_end_time": intent.end_time,
-            "sensor_raw_bias": [float(v) for v in raw_bias],
-            "sensor_residual_bias": [float(v) for v in residual],
+            "sensor_raw_bias": [float(v) for v in world.raw_bias],
+            "sensor_residual_bias": [float(v) for v in world.residual],
             "arrive_radius": float(arrive_radius),
             "features": list(FEATURES),
         }
@@ -382,15 +397,15 @@ def run_trial(
     return Trial(
         meta=meta,
         time=np.arange(n) * dt,
-        pose=log[:n, 0:2],
-        velocity=log[:n, 2:4],
-        wrench=log[:n, 4:6],
+        pose=log.pose,
+        velocity=log.velocity,
+        wrench=log.wrench,
         reference=ref_pos[:n],
         prediction=prediction,
         intent=intent.positions[:n],
-        effort_h=log[:n, 6:8],
-        effort_r=log[:n, 8:10],
-        fault=faults[:n],
+        effort_h=log.effort_h,
+        effort_r=log.effort_r,
+        fault=log.fault,
     )
 
 

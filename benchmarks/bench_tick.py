@@ -1,0 +1,144 @@
+"""The whole control tick on the MuJoCo UR5, without the physics step, against a naive tick.
+
+    .venv/bin/python benchmarks/bench_tick.py [--ticks 3000] [--model MODEL] [--realtime-seconds 60]
+
+Measures ``tick.step()`` (wrench pipeline, predictor dispatch, game,
+impedance, J⁺, safety; the loop's log write is a row copy, included in the loop but not
+here) for the assistive controller with the simulated operator, and a naive tick that
+does the same work but recomputes the game's gains (prediction matrices and the
+equilibrium solve) and an SVD pseudo-inverse (np.linalg.pinv) every tick. With
+``--model`` the intent stage is the threaded RealtimePredictor on that model (the
+deployed path); without, the nominal plan. Prints median and p99 [ms] and the ratio.
+
+``--realtime-seconds S`` also runs the MuJoCo world at 500 Hz paced to the wall clock for S
+seconds and counts deadline misses (the tick's own work over 2 ms) and periods the
+world could not keep (physics + tick over 2 ms). One BLAS thread: one core.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import math  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from coassist.control.game import cooperative_game  # noqa: E402
+from coassist.robot import drive as drive_mod  # noqa: E402
+from coassist.robot.drive import DriveConfig  # noqa: E402
+from coassist.runtime import tick as tick_mod  # noqa: E402
+
+
+def _stats(x: np.ndarray) -> tuple[float, float]:
+    return float(np.median(x) * 1e3), float(np.percentile(x, 99) * 1e3)
+
+
+class NaiveController:
+    """The assistive controller that rebuilds the game every tick (no precomputed gains)."""
+
+    def __init__(self, controller, params) -> None:
+        self.inner, self.params = controller, params
+        self.name, self.model, self.horizon = controller.name, controller.model, controller.horizon
+
+    def step(self, z, ref_h, ref_r, wrench):
+        game = cooperative_game(self.model, self.params)
+        self.inner.game = game
+        return self.inner.step(z, ref_h, ref_r, wrench)
+
+
+def naive_dls(J, twist, thr, damp):
+    return np.linalg.pinv(J) @ twist, 0.0
+
+
+def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtime: bool = False) -> dict:
+    times: list[float] = []
+    misses = 0
+    dt = 1.0 / rate
+
+    def on_tick(k, state, out):
+        pass
+
+    config = DriveConfig(controller="assistive", task="z", intent=model or "nominal", rate_hz=rate,
+                         time_limit=ticks * dt, realtime_intent=True if model else None)  # fmt: skip
+    # time read + step by wrapping the tick's step (the loop's own clock does the same)
+    orig_step = tick_mod.ControlTick.step
+    orig_dls = tick_mod._spatial.dls_joint_velocity
+    orig_ctrl = drive_mod._controller
+
+    def timed_step(self, k, state, upstream=tick_mod.Fault.NONE):
+        t0 = time.perf_counter()
+        out = orig_step(self, k, state, upstream)
+        times.append(time.perf_counter() - t0)
+        return out
+
+    tick_mod.ControlTick.step = timed_step
+    if naive:
+        from coassist.sim.world import get_preset
+
+        def naive_controller(cfg):
+            c = orig_ctrl(cfg)
+            from dataclasses import replace
+
+            p = get_preset(cfg.preset).game
+            params = replace(p, horizon=c.horizon)
+            return NaiveController(c, params)
+
+        drive_mod._controller = naive_controller
+        tick_mod._spatial.dls_joint_velocity = naive_dls
+    try:
+        from coassist.robot.mujoco_world import MujocoUR5World
+        from coassist.sim.tasks import make_task
+
+        world = None
+        if realtime:
+            task = make_task("z", np.random.default_rng(np.random.SeedSequence([0, 0])))
+            world = MujocoUR5World("handle", control_dt=dt, start=(float(task.start[0]), float(task.start[1]), 0.2),
+                                   realtime=True)  # fmt: skip
+        t_wall = time.perf_counter()
+        trial = drive_mod.drive(config, world=world, on_tick=on_tick)
+        wall = time.perf_counter() - t_wall
+        if world is not None:
+            world.close()
+    finally:
+        tick_mod.ControlTick.step = orig_step
+        tick_mod._spatial.dls_joint_velocity = orig_dls
+        drive_mod._controller = orig_ctrl
+    arr = np.array(times)
+    misses = int((arr > dt).sum())
+    dl = int((trial.fault & int(tick_mod.Fault.DEADLINE_MISS) != 0).sum())
+    return {"times": arr, "misses": misses, "flagged": dl, "wall": wall, "n": trial.n_samples}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--ticks", type=int, default=3000)
+    ap.add_argument("--naive-ticks", type=int, default=300)
+    ap.add_argument("--model", default=None, help="an intent model folder (the deployed RealtimePredictor path)")
+    ap.add_argument("--realtime-seconds", type=float, default=0.0)
+    a = ap.parse_args()
+    fast = measure(a.ticks, a.model, naive=False)
+    slow = measure(a.naive_ticks, a.model, naive=True)
+    fm, fp = _stats(fast["times"][50:])
+    sm, sp = _stats(slow["times"][20:])
+    print(f"intent: {'RealtimePredictor on ' + a.model if a.model else 'nominal plan'}; 125 Hz; assistive; z task")
+    print("| tick.step (no physics) | median ms | p99 ms |")
+    print("|---|---|---|")
+    print(f"| coassist | {fm:.3f} | {fp:.3f} |")
+    print(f"| naive (gains + pinv every tick) | {sm:.3f} | {sp:.3f} |")
+    print(f"| ratio naive / coassist | {sm / fm:.0f}x | {sp / fp:.0f}x |")
+    print(f"ticks over the 8 ms deadline: coassist {fast['misses']}/{len(fast['times'])}, naive {slow['misses']}/{len(slow['times'])}")
+    if a.realtime_seconds > 0:
+        n = int(math.ceil(a.realtime_seconds * 500))
+        rt = measure(n, None, naive=False, rate=500, realtime=True)
+        m, p = _stats(rt["times"])
+        print(f"500 Hz real time, {rt['n']} ticks in {rt['wall']:.1f} s wall: tick median {m:.3f} ms, p99 {p:.3f} ms; "
+              f"ticks over 2 ms: {rt['misses']}; deadline misses flagged by the loop: {rt['flagged']}")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

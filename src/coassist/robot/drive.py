@@ -1,0 +1,335 @@
+"""Drive a UR5 with the assistive controller (or IMP / MG): MuJoCo physics or a real arm.
+
+This is the environment of the runtime for arm worlds: it builds a world, the task
+and its plan, the controller, the intent stage, the wrench pipeline, the safety layer
+and the tick, runs :func:`coassist.runtime.loop.run_loop`, and returns the run as a
+:class:`~coassist.data.Trial` in the same format as the point-mass world (plus the
+joint columns), so ``coassist train``, ``evaluate`` and ``show`` read it unchanged.
+
+Worlds:
+
+- ``"mujoco"``: :class:`~coassist.robot.mujoco_world.MujocoUR5World` with the simulated
+  operator lifted to 3-D (:class:`~coassist.sim.hand.SimulatedHand`) or any
+  :class:`~coassist.runtime.world.HandOperator`; deterministic for a seed.
+- ``"ur"``: :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`; the person at the handle
+  is the operator. The task is laid out from wherever the TCP is when the run starts
+  (coassist never moves a real arm to a start pose on its own).
+
+Controllers by name: ``assistive`` (the cooperative game), ``imp`` (impedance control,
+eq. 5.4), ``mg`` (manual guidance, eq. 5.5).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from coassist.control.controllers import AssistiveController, ImpedanceControl, ManualGuidance
+from coassist.control.game import cooperative_game
+from coassist.data import Trial, TrialMeta
+from coassist.interfaces import FEATURES, TrialContext
+from coassist.model.impedance import ImpedanceModel
+from coassist.runtime.intent import RealtimeIntent, WindowIntent
+from coassist.runtime.loop import LoopLog, TargetDwell, run_loop
+from coassist.runtime.safety import SafetyLayer, SafetyLimits
+from coassist.runtime.tick import ControlTick, Plan, TickConfig
+from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
+from coassist.sim.hand import SimulatedHand
+from coassist.sim.intent_source import load_intent_source
+from coassist.sim.objects import get_object
+from coassist.sim.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
+from coassist.sim.tasks import TASK_KINDS, make_task
+from coassist.sim.world import IMPEDANCE_STIFFNESS, get_preset
+from coassist.spatial import rotation_vector
+
+__all__ = ["CONTROLLERS", "DriveConfig", "WORLDS", "drive", "workspace_for"]
+
+#: Controller names of the drive command → the simulator's controller kinds.
+CONTROLLERS = {"assistive": "cooperative", "imp": "impedance", "mg": "manual"}
+WORLDS = ("mujoco", "ur")
+#: Height of the task plane above the base [m] in the MuJoCo world (the TCP at the handle).
+TASK_HEIGHT = 0.20
+#: Rotational inertia and damping of the 6-DOF admittance [kg·m², N·m·s/rad].
+ROTATIONAL_INERTIA = 0.5
+ROTATIONAL_DAMPING = 5.0
+
+
+@dataclass(frozen=True)
+class DriveConfig:
+    """One run on a UR5 (every field validated, errors name it as ``DriveConfig.<field>``).
+
+    world : "mujoco" or "ur".  controller : "assistive", "imp" or "mg".
+    task : a task kind (linear, curved, sinusoidal, z).  object : handle, board or heavy.
+    preset : a control preset (default the main job's, thesis-application-dm).
+    intent : "nominal", "oracle" (MuJoCo only) or a model folder.
+    user : simulated operator index (MuJoCo).  seed : task, operator and sensor seed.
+    rate_hz : 125 (UR CB3) or 500 (e-Series); the MuJoCo world runs either.
+    full_pose : control all 6 DOFs (orientation error as a rotation vector) instead of x-y.
+    time_limit : [s]; None: 2 × the plan's duration + 10 s.
+    limits : the safety layer's limits (the workspace box defaults to the task's).
+    realtime_intent : run the predictor in a worker thread (RealtimePredictor); the
+        default is on for the real arm and off in MuJoCo, where a deterministic run is
+        worth more than wall-clock realism.
+    """
+
+    world: str = "mujoco"
+    controller: str = "assistive"
+    task: str = "linear"
+    object: str = "handle"
+    preset: str = "thesis-application-dm"
+    intent: str = "nominal"
+    user: int = 0
+    seed: int = 0
+    rate_hz: int = 125
+    full_pose: bool = False
+    time_limit: float | None = None
+    limits: SafetyLimits = field(default_factory=SafetyLimits)
+    realtime_intent: bool | None = None
+
+    def __post_init__(self) -> None:
+        def bad(name: str, what: str) -> ValueError:
+            return ValueError(f"DriveConfig.{name} must be {what}, got {getattr(self, name)!r}")
+
+        if self.world not in WORLDS:
+            raise bad("world", f"one of {WORLDS}")
+        if self.controller not in CONTROLLERS:
+            raise bad("controller", f"one of {tuple(CONTROLLERS)}")
+        if self.task not in TASK_KINDS:
+            raise bad("task", f"one of {TASK_KINDS}")
+        get_object(self.object)
+        get_preset(self.preset)
+        if not isinstance(self.intent, str) or not self.intent:
+            raise bad("intent", "'nominal', 'oracle' or a model folder")
+        if self.intent == "oracle" and self.world == "ur":
+            raise bad("intent", "a model or 'nominal' on the real arm (the oracle knows the simulated operator's mind)")
+        for name in ("user", "seed"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+                raise bad(name, "an int >= 0")
+        if self.rate_hz not in (125, 500):
+            raise bad("rate_hz", "125 or 500")
+        if self.time_limit is not None and not (isinstance(self.time_limit, (int, float)) and self.time_limit > 0):
+            raise bad("time_limit", "a number of seconds > 0 or None")
+        if not isinstance(self.limits, SafetyLimits):
+            raise bad("limits", "a SafetyLimits")
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.rate_hz
+
+
+def _controller(config: DriveConfig):
+    """The controller on the plant of the preset, at the run's rate, on 2 (x-y) or 6 DOFs."""
+    preset = get_preset(config.preset)
+    imp, game = preset.impedance, preset.game
+    dt = config.dt
+    horizon = max(2, round(game.horizon * imp.dt / dt))  # the same look-ahead in seconds
+    M, D = list(imp.M), list(imp.D)
+    gp = replace(game, horizon=horizon, control_horizon=None if game.control_horizon is None else
+                 max(1, round(game.control_horizon * imp.dt / dt)))  # fmt: skip
+    if config.full_pose:
+        # z like x; rotations with their own inertia and damping; the game weighs them like positions.
+        M = M + [M[0], ROTATIONAL_INERTIA, ROTATIONAL_INERTIA, ROTATIONAL_INERTIA]
+        D = D + [D[0], ROTATIONAL_DAMPING, ROTATIONAL_DAMPING, ROTATIONAL_DAMPING]
+
+        def six(q: tuple[float, ...]) -> tuple[float, ...]:
+            return q[:2] + (q[0],) * 4 + q[2:] + (q[2],) * 4
+
+        gp = replace(gp, Q_hh=six(gp.Q_hh), Q_hr=six(gp.Q_hr), Q_rh=six(gp.Q_rh), Q_rr=six(gp.Q_rr),
+                     R_h=gp.R_h + (gp.R_h[0],) * 4, R_r=gp.R_r + (gp.R_r[0],) * 4)  # fmt: skip
+    n = len(M)
+    model = ImpedanceModel(np.diag(M), np.diag(D), np.zeros((n, n)), dt)
+    kind = CONTROLLERS[config.controller]
+    if kind == "cooperative":
+        return AssistiveController(cooperative_game(model, gp), effort_limit=preset.effort_limit)
+    if kind == "impedance":
+        return ImpedanceControl(model, IMPEDANCE_STIFFNESS * np.eye(n), effort_limit=preset.effort_limit)
+    return ManualGuidance(model)
+
+
+def workspace_for(reference: np.ndarray, start_pose: np.ndarray, margin: float = 0.25, z_margin: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
+    """The default workspace box: the plan's x-y extent ± margin, the start height ± z_margin [m]."""
+    lo = np.array([reference[:, 0].min() - margin, reference[:, 1].min() - margin, start_pose[2] - z_margin])
+    hi = np.array([reference[:, 0].max() + margin, reference[:, 1].max() + margin, start_pose[2] + z_margin])
+    return lo, hi
+
+
+def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host: str | None = None,
+          view: bool = False, confirm: Any = None, on_tick: Any = None, intent_source: Any = None) -> Trial:  # fmt: skip
+    """Run one trial on a UR5 (module docstring) and return it.
+
+    operator : the MuJoCo world's hand; None: the simulated operator ``config.user``.
+    world : a world built by the caller (tests inject faults this way); None: built here.
+    host : the real arm's address (world "ur").  view : MuJoCo's passive viewer.
+    confirm : called with the text of the limits in force before a real arm moves; it
+        must return True to go on (the CLI asks the person at the robot).
+    intent_source : an IntentSource or RealtimePredictor to use instead of ``config.intent``.
+    """
+    if not isinstance(config, DriveConfig):
+        raise ValueError(f"config must be a DriveConfig, got {type(config).__name__}")
+    dt = config.dt
+    controller = _controller(config)
+    H = int(controller.horizon)
+    task = make_task(config.task, np.random.default_rng(np.random.SeedSequence([config.seed, 0])))
+    profile = operator_profile(config.user)
+    obj = get_object(config.object)
+    time_limit = config.time_limit if config.time_limit is not None else 2.0 * task.planner.end_time + 10.0
+    n_max = int(math.ceil(time_limit / dt))
+    n_grid = n_max + max(H, 64) + 1
+    ref_abs = task.planner.grid(n_grid, dt)
+    rng_intent, rng_motor = (np.random.default_rng(s) for s in np.random.SeedSequence([config.seed, 1]).spawn(2))
+    intent_traj = intent_trajectory(task, profile, rng_intent, n_grid, dt)
+
+    built_here = world is None
+    if world is None:
+        if config.world == "mujoco":
+            from coassist.robot.mujoco_world import MujocoUR5World
+
+            start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
+            world = MujocoUR5World(config.object, control_dt=dt, start=start, seed=config.seed, view=view,
+                                   realtime=view)  # fmt: skip
+        else:
+            from coassist.robot.ur_rtde_world import URRTDEWorld
+
+            if not host:
+                raise ValueError("the real arm needs --host (the robot's IP address)")
+            world = URRTDEWorld(host, frequency=float(config.rate_hz))
+    try:
+        state0 = world.read()
+        start_pose = np.asarray(state0.tool_pose, dtype=float).copy()
+        if config.world == "ur":
+            # lay the task out from where the TCP is: shift the plan and the intent
+            shift = start_pose[:2] - ref_abs[0, :2]
+            ref_abs = ref_abs.copy()
+            ref_abs[:, :2] += shift
+        if operator is None and config.world == "mujoco" and hasattr(world, "operator"):
+            noise = motor_noise(profile, rng_motor, n_grid, dt)  # as long as the intent: stop() may step on
+            arm = OperatorArm(profile, intent_traj.positions, dt, noise)
+            hand_pose, _ = world.hand_pose()
+            operator = SimulatedHand(arm, dt, hand_pose, full_pose=config.full_pose,
+                                     offset=hand_pose[:2] - start_pose[:2])  # fmt: skip
+        if operator is not None and hasattr(world, "operator"):
+            world.operator = operator
+        kin = _kinematics_for(world)
+        mass, com = world.tool_mass_and_com() if hasattr(world, "tool_mass_and_com") else (0.0, np.zeros(3))
+        wrench = WrenchPipeline(WrenchConfig(tool_mass=mass, tool_com=tuple(com)), dt)
+        limits = config.limits
+        if limits.workspace_lower is None:
+            lo, hi = workspace_for(ref_abs, start_pose)
+            limits = replace(limits, workspace_lower=tuple(lo), workspace_upper=tuple(hi))
+        safety = SafetyLayer(limits, dt, 6)
+        intent_stage, model_id = _intent_stage(config, H, intent_source)
+        dofs = (0, 1, 2, 3, 4, 5) if config.full_pose else (0, 1)
+        tick = ControlTick(controller, intent_stage, wrench, safety, command_space="joint_velocity",
+                           kinematics=kin, config=TickConfig(dofs=dofs))  # fmt: skip
+        context = TrialContext(dt=dt, horizon=H, start=start_pose[:2].copy(), target=ref_abs[-1, :2].copy(),
+                               reference=ref_abs, task=task.kind, user=profile.name, object=obj.name,
+                               true_intent=intent_traj.positions)  # fmt: skip
+        tick.reset(Plan(ref_abs, start_pose), context)
+        # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
+        wrench.zero(np.asarray(state0.wrench, dtype=float)[None] - _hand_at_rest(world, state0),
+                    np.asarray(state0.sensor_rotation, dtype=float)[None])  # fmt: skip
+        if confirm is not None and not confirm(limits.describe()):
+            raise RuntimeError("not confirmed: the robot was not moved")
+        t_done = max(task.planner.end_time, intent_traj.end_time)
+        termination = TargetDwell(ref_abs[-1, :2], 0.025, int(math.ceil(5.0 / dt)), int(math.ceil(t_done / dt)))
+        log = run_loop(world, tick, n_max, termination, deadline=dt if getattr(world, "realtime", False) else None,
+                       on_tick=on_tick)  # fmt: skip
+    finally:
+        if built_here:
+            world.close()
+        if isinstance(intent_stage_holder := locals().get("intent_stage"), RealtimeIntent):
+            close = getattr(intent_stage_holder.predictor, "close", None)
+            if close is not None:
+                close()
+    return _trial(config, log, ref_abs, intent_traj.positions if config.world == "mujoco" else None, task, obj,
+                  profile.name if config.world == "mujoco" else "operator", model_id, controller.name, dofs, start_pose,
+                  wrench.bias)  # fmt: skip
+
+
+def _hand_at_rest(world: Any, state) -> np.ndarray:
+    """The raw reading's part that is the hand at the zeroing instant: none (nobody touches it)."""
+    return np.zeros(6)
+
+
+def _kinematics_for(world: Any):
+    """UR5 kinematics with the world's TCP (the MuJoCo model's tcp site, or the real arm's TCP offset)."""
+    from coassist.robot.kinematics import UR5Kinematics
+
+    offset = getattr(world, "tcp_offset_pose", None)
+    if offset is None and hasattr(world, "model") and hasattr(world, "data"):
+        import mujoco
+
+        m, d = world.model, world.data
+        tool0, tcp = m.body("tool0").id, m.site("tcp").id
+        R0 = d.xmat[tool0].reshape(3, 3)
+        rel = R0.T @ (d.site_xpos[tcp] - d.xpos[tool0])
+        Rrel = R0.T @ d.site_xmat[tcp].reshape(3, 3)
+        offset = np.concatenate([rel, rotation_vector(Rrel)])
+        del mujoco
+    return UR5Kinematics(tcp_offset=np.zeros(6) if offset is None else offset)
+
+
+def _intent_stage(config: DriveConfig, H: int, source: Any):
+    realtime = config.realtime_intent if config.realtime_intent is not None else config.world == "ur"
+    if source is not None:
+        if hasattr(source, "tick"):
+            return RealtimeIntent(source), getattr(source, "model_id", "realtime")
+        return WindowIntent(source, H), source.model_id
+    if config.intent in ("nominal", "oracle"):
+        src = load_intent_source(config.intent, horizon=max(H, 2))
+        return WindowIntent(src, H), src.model_id
+    if realtime:
+        from coassist.intent import RealtimeConfig, RealtimePredictor
+        from coassist.intent.model import load_model, read_sidecar
+
+        model = load_model(config.intent, features=FEATURES)
+        model.check_compatible(None, config.dt, what="the drive loop")
+        digest = str(read_sidecar(config.intent).get("weights_sha256", ""))[:12]
+        mid = f"{config.intent.rstrip('/').split('/')[-1]}@{digest}"
+        return RealtimeIntent(RealtimePredictor(model, RealtimeConfig(threaded=True)), model_id=mid), mid
+    src = load_intent_source(config.intent, horizon=max(H, 2))
+    return WindowIntent(src, H), src.model_id
+
+
+def _trial(config: DriveConfig, log: LoopLog, ref_abs, intent, task, obj, user, model_id, controller_name, dofs,
+           start_pose, bias) -> Trial:  # fmt: skip
+    n = log.n
+    if n == 0:
+        raise RuntimeError(f"the run ended before its first tick: {log.message or log.ended}")
+    d = len(dofs)
+    ref = log.reference
+    if log.prediction is None:
+        H = int(get_preset(config.preset).game.horizon)
+        H = max(2, round(H * get_preset(config.preset).impedance.dt / config.dt))
+        windows = np.lib.stride_tricks.sliding_window_view(ref_abs[1 : n + H, :2], H, axis=0)
+        pred2 = np.ascontiguousarray(windows.transpose(0, 2, 1))
+    else:
+        pred2 = np.where(np.isnan(log.prediction), np.nan, log.prediction)
+    if d > 2:
+        pred = np.empty((n, pred2.shape[1], d))
+        pred[:, :, :2] = pred2
+        pred[:, :, 2:] = start_pose[list(dofs[2:])]
+    else:
+        pred = pred2
+    intent_d = None
+    if intent is not None:
+        intent_d = np.empty((n, d))
+        intent_d[:, :2] = intent[:n]
+        if d > 2:
+            intent_d[:, 2:] = start_pose[list(dofs[2:])]
+    extra = task.to_extra()
+    extra.update({
+        "ended": log.ended, "stop_message": log.message, "preset": config.preset, "world": config.world,
+        "object": obj.to_extra(), "rate_hz": config.rate_hz, "full_pose": config.full_pose,
+        "start_pose": [float(v) for v in start_pose], "sensor_bias": [float(v) for v in bias],
+        "limits": config.limits.describe(), "features": list(FEATURES), "dofs": list(dofs),
+    })  # fmt: skip
+    meta = TrialMeta(user=user, task=task.kind, object=obj.name, controller=controller_name, model_id=model_id,
+                     seed=config.seed, source="mujoco" if config.world == "mujoco" else "ur5", dt=config.dt, extra=extra)  # fmt: skip
+    return Trial(meta=meta, time=np.arange(n) * config.dt, pose=log.pose, velocity=log.velocity, wrench=log.wrench,
+                 reference=ref, prediction=pred, intent=intent_d, effort_h=log.effort_h, effort_r=log.effort_r,
+                 fault=log.fault, joints=log.joints, joint_velocity=log.joint_velocity)  # fmt: skip

@@ -1,0 +1,550 @@
+"""A UR5 in MuJoCo as a :class:`coassist.runtime.world.World` (``joint_velocity`` commands).
+
+The physics is :func:`coassist.robot.ur5_mjcf.build_ur5_model`: the UR5 of
+example-robot-data with a force/torque sensor at the flange and the carried object
+below it; the MuJoCo world frame is the UR base frame. Frames, units and signs are
+those of :mod:`coassist.runtime.world`.
+
+One :meth:`MujocoUR5World.apply` is one control period: the operator (a
+:class:`~coassist.runtime.world.HandOperator`) is asked once, at the start of the
+period, for its wrench given the handle's pose and twist; that wrench (base frame, at
+the handle point) is applied for the whole period; the physics then runs
+``control_dt / physics_dt`` steps. Each physics step the joint servo (a UR's
+``speedJ``) moves its reference joint velocity toward the command with a first-order
+lag of ``servo_time_constant`` and tracks it by computed torque (the arm's inertia,
+gravity and Coriolis terms, and a critically damped position/velocity loop at
+``servo_bandwidth``; :mod:`coassist.robot.ur5_mjcf`), clipped to the UR5's joint
+torques. So the joints follow the command with that lag and the hand does not
+back-drive them (a 10 N push deflects the arm by a fraction of a milliradian), as on
+the real geared arm.
+
+Timing within a period: the operator sees the state at the start of the period; the
+sensor's samples are taken at their own instants (the physics step in which a sample
+time falls; MuJoCo's force sensor reflects that step's start state, 1 physics step old).
+
+The force/torque sensor (:class:`FTSensorModel`) samples MuJoCo's force and torque
+sensors at ``rate_hz`` (100 Hz, a Robotiq FT300), adds a constant bias and white noise
+drawn from ``np.random.default_rng(seed)``, and clips to its range; a sample is held
+until the next one and ``RobotState.wrench_seq`` counts them. The reading has the sign
+of the force the tool applies to the sensor (at rest: the tool's weight, m Rᵀ g with
+g = (0, 0, −9.81)), in the sensor frame (the flange frame, ``tool0``).
+
+Determinism: the physics is deterministic and the only randomness is the sensor noise,
+so the same seed and the same commands give bit-identical states.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from coassist.robot.ur5_mjcf import Q_SEED, TOOLS, VELOCITY_LIMITS, build_ur5_model
+from coassist.runtime.world import Command, HandOperator, RobotState
+
+__all__ = ["DEFAULT_START", "FTSensorModel", "MujocoUR5World", "TOOL_DOWN", "rotation_vector", "tool_down_ik"]
+
+#: The default start TCP position [m] (base frame): the tasks' START at 0.2 m height.
+DEFAULT_START = (-0.10, -0.615, 0.20)
+#: The start orientation of the tool (tool0 axes in the base frame): pointing straight
+#: down, tool x along base x (so tool y = −base y).
+TOOL_DOWN = np.diag([1.0, -1.0, -1.0])
+
+#: [rad] the joint servo's largest position error; beyond it (torque limits, a hard
+#: push) the reference is pulled back once per period so it does not wind up.
+MAX_TRACKING_ERROR = 0.05
+#: MuJoCo's force/torque sensors report the wrench the parent (the wrist) exerts on the
+#: subtree below the site; coassist's sensor reports the one the tool exerts on the
+#: sensor: the opposite (verified in tests/robot/test_mujoco_world.py).
+_MUJOCO_TO_COASSIST = -1.0
+
+
+@dataclass(frozen=True)
+class FTSensorModel:
+    """The force/torque sensor (module docstring).
+
+    noise_force, noise_torque : white-noise standard deviations [N], [N·m] (≥ 0).
+    rate_hz : sample rate [Hz] (readings held between samples); None: a new sample at
+        the end of every control period.
+    force_range, torque_range : |reading| limits per channel [N], [N·m].
+    bias : (6,) constant offset added to every reading [N, N·m].
+    """
+
+    noise_force: float = 0.05
+    noise_torque: float = 0.002
+    rate_hz: float | None = 100.0
+    force_range: float = 300.0
+    torque_range: float = 30.0
+    bias: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        for name in ("noise_force", "noise_torque"):
+            v = _number(getattr(self, name), f"FTSensorModel.{name}")
+            if v < 0.0:
+                raise ValueError(f"FTSensorModel.{name} must be >= 0, got {v!r}")
+            object.__setattr__(self, name, v)
+        for name in ("force_range", "torque_range"):
+            v = _number(getattr(self, name), f"FTSensorModel.{name}")
+            if v <= 0.0:
+                raise ValueError(f"FTSensorModel.{name} must be > 0, got {v!r}")
+            object.__setattr__(self, name, v)
+        if self.rate_hz is not None:
+            v = _number(self.rate_hz, "FTSensorModel.rate_hz")
+            if v <= 0.0:
+                raise ValueError(f"FTSensorModel.rate_hz must be > 0 or None, got {v!r}")
+            object.__setattr__(self, "rate_hz", v)
+        bias = np.asarray(self.bias, dtype=float)
+        if bias.shape != (6,) or not np.isfinite(bias).all():
+            raise ValueError(f"FTSensorModel.bias must be 6 finite numbers [N, N·m], got {self.bias!r}")
+        object.__setattr__(self, "bias", tuple(float(b) for b in bias))
+
+
+def _number(value, name: str) -> float:
+    if isinstance(value, bool):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return v
+
+
+def rotation_vector(R: np.ndarray) -> np.ndarray:
+    """The rotation vector (axis · angle, angle in [0, π]) of a 3×3 rotation matrix.
+
+    Every tool-down orientation is a half turn (angle π), where the rotation vector's
+    sign is ambiguous: ±π flips from tick to tick as on a real UR's TCP pose; compare
+    orientations as rotations, not as rotation-vector differences.
+    """
+    quat = np.empty(4)
+    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(R, dtype=float).reshape(9))
+    w, x, y, z = quat.tolist()
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    s = math.sqrt(x * x + y * y + z * z)
+    k = 2.0 if s < 1e-12 else 2.0 * math.atan2(s, w) / s
+    return np.array((k * x, k * y, k * z))
+
+
+def tool_down_ik(model: mujoco.MjModel, position, q_seed=None, *, site: str = "tcp") -> np.ndarray:
+    """Joint angles that put ``site`` at ``position`` (base frame) with the tool down (:data:`TOOL_DOWN`).
+
+    Damped least squares on MuJoCo's site Jacobian (mj_jacSite), from ``q_seed``
+    (default :data:`~coassist.robot.ur5_mjcf.Q_SEED`: elbow up, wrist down), steps
+    capped at 0.5 rad. Raises ValueError (naming ``start``) when it does not converge
+    to 1e-6 m / 1e-6 or leaves the joint ranges.
+    """
+    p = np.asarray(position, dtype=float)
+    q = (Q_SEED if q_seed is None else np.asarray(q_seed, dtype=float)).copy()
+    sid = model.site(site).id
+    d = mujoco.MjData(model)
+    jp, jr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
+    for _ in range(200):
+        d.qpos[:] = q
+        mujoco.mj_kinematics(model, d)
+        mujoco.mj_comPos(model, d)
+        Re = TOOL_DOWN @ d.site_xmat[sid].reshape(3, 3).T
+        e = np.concatenate([p - d.site_xpos[sid], 0.5 * np.array(
+            [Re[2, 1] - Re[1, 2], Re[0, 2] - Re[2, 0], Re[1, 0] - Re[0, 1]])])
+        if float(np.linalg.norm(e)) < 1e-12:
+            break
+        mujoco.mj_jacSite(model, d, jp, jr, sid)
+        J = np.vstack([jp, jr])
+        dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), e)
+        n = float(np.linalg.norm(dq))
+        if n > 0.5:
+            dq *= 0.5 / n
+        q += dq
+    d.qpos[:] = q
+    mujoco.mj_kinematics(model, d)
+    pos_err = float(np.linalg.norm(p - d.site_xpos[sid]))
+    rot_err = float(np.linalg.norm(d.site_xmat[sid].reshape(3, 3) - TOOL_DOWN))
+    lo, hi = model.jnt_range[:, 0], model.jnt_range[:, 1]
+    if pos_err > 1e-6 or rot_err > 1e-6 or np.any(q < lo) or np.any(q > hi):
+        raise ValueError(
+            f"start {p.tolist()} is not reachable with the tool pointing down from the seed "
+            f"(IK error {pos_err:.3g} m, {rot_err:.3g} in rotation)"
+        )
+    return q
+
+
+class MujocoUR5World:
+    """The MuJoCo UR5 world (module docstring); implements :class:`~coassist.runtime.world.World`.
+
+    Parameters
+    ----------
+    tool : the carried object, one of ``("handle", "board", "heavy")``.
+    control_dt : the control period [s] (0.008 at 125 Hz, 0.002 at 500 Hz); a positive
+        multiple of ``physics_dt``.
+    physics_dt : the MuJoCo step [s]; None: 0.002 s, or the largest divisor of
+        control_dt under it.
+    start : (3,) the start TCP position [m] in the base frame; the tool points straight
+        down (:data:`TOOL_DOWN`). The joints come from a damped-least-squares IK from
+        ``q_seed`` (default: elbow up, wrist down, :data:`~coassist.robot.ur5_mjcf.Q_SEED`).
+    servo_time_constant : [s] first-order lag of the joint velocity behind the command.
+    sensor : the :class:`FTSensorModel` (default: 0.05 N noise at 100 Hz, no bias).
+    operator : the :class:`~coassist.runtime.world.HandOperator`, or None (no hand).
+    seed : seeds the sensor noise (``np.random.default_rng(seed)``).
+    tcp_offset : (3,) the TCP in the tool0 frame [m]; None: the tool's default (the
+        handle point for the handle and the heavy block, the vacuum cup for the board).
+    gravity : False turns gravity off (tests).
+    realtime : pace :meth:`apply` to the wall clock (a viewer).
+    view : open MuJoCo's passive viewer (needs a display), synced every period.
+    """
+
+    command_space = "joint_velocity"
+    n_joints = 6
+
+    def __init__(
+        self,
+        tool: str = "handle",
+        *,
+        control_dt: float = 0.008,
+        physics_dt: float | None = None,
+        start=DEFAULT_START,
+        servo_time_constant: float = 0.02,
+        sensor: FTSensorModel | None = None,
+        operator: HandOperator | None = None,
+        seed: int | None = 0,
+        tcp_offset=None,
+        gravity: bool = True,
+        realtime: bool = False,
+        view: bool = False,
+        q_seed=None,
+        servo_bandwidth: float = 25.0,
+    ) -> None:
+        if tool not in TOOLS:
+            raise ValueError(f"tool must be one of {TOOLS}, got {tool!r}")
+        control_dt = _number(control_dt, "control_dt")
+        if control_dt <= 0.0:
+            raise ValueError(f"control_dt must be > 0, got {control_dt!r}")
+        if physics_dt is None:
+            physics_dt = control_dt / math.ceil(control_dt / 0.002 - 1e-9)
+        physics_dt = _number(physics_dt, "physics_dt")
+        if not 0.0 < physics_dt <= 0.004:
+            raise ValueError(f"physics_dt must be in (0, 0.004] s (the servo's stability), got {physics_dt!r}")
+        n_sub = round(control_dt / physics_dt)
+        if n_sub < 1 or abs(n_sub * physics_dt - control_dt) > 1e-9 * max(1.0, control_dt):
+            raise ValueError(f"control_dt must be a positive multiple of physics_dt={physics_dt}, got {control_dt!r}")
+        bandwidth = _number(servo_bandwidth, "servo_bandwidth")
+        if not 0.0 < bandwidth <= 0.1 / physics_dt:
+            raise ValueError(
+                f"servo_bandwidth must be in (0, {0.1 / physics_dt:g}] Hz at physics_dt={physics_dt} "
+                f"(the discrete servo's stability), got {servo_bandwidth!r}"
+            )
+        tau = _number(servo_time_constant, "servo_time_constant")
+        if tau <= 0.0:
+            raise ValueError(f"servo_time_constant must be > 0, got {servo_time_constant!r}")
+        if sensor is None:
+            sensor = FTSensorModel()
+        elif not isinstance(sensor, FTSensorModel):
+            raise ValueError(f"sensor must be an FTSensorModel, got {type(sensor).__name__}")
+        if operator is not None and not callable(getattr(operator, "force", None)):
+            raise ValueError(f"operator must have a force(t, hand_pose, hand_twist) method, got {operator!r}")
+        start_arr = np.asarray(start, dtype=float)
+        if start_arr.shape != (3,) or not np.isfinite(start_arr).all():
+            raise ValueError(f"start must be 3 finite numbers [m] (base frame), got {start!r}")
+        q0 = Q_SEED if q_seed is None else np.asarray(q_seed, dtype=float)
+        if q0.shape != (6,) or not np.isfinite(q0).all():
+            raise ValueError(f"q_seed must be 6 finite joint angles [rad], got {q_seed!r}")
+        if isinstance(seed, bool) or not (seed is None or isinstance(seed, (int, np.integer))):
+            raise ValueError(f"seed must be an int or None, got {seed!r}")
+
+        self.tool = tool
+        self.dt = control_dt
+        self.physics_dt = physics_dt
+        self.n_substeps = int(n_sub)
+        self.servo_time_constant = tau
+        self.sensor = sensor
+        self.operator = operator
+        self.realtime = bool(realtime)
+        self.servo_bandwidth = bandwidth
+        self.model = build_ur5_model(
+            tool, physics_dt=physics_dt, servo_time_constant=tau, tcp_offset=tcp_offset, gravity=gravity,
+        )
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self._tcp = m.site("tcp").id
+        self._handle = m.site("handle").id
+        self._ft = m.site("ft_sensor").id
+        self._tool_body = m.body("tool").id
+        self._tool0 = m.body("tool0").id
+        self._force_adr = int(m.sensor("ft_force").adr[0])
+        self._torque_adr = int(m.sensor("ft_torque").adr[0])
+        omega = 2.0 * math.pi * bandwidth
+        self._kp = omega * omega
+        self._kd = 2.0 * omega
+        self._alpha = 1.0 - math.exp(-physics_dt / tau)
+        self._sigma = np.array([sensor.noise_force] * 3 + [sensor.noise_torque] * 3)
+        self._range = np.array([sensor.force_range] * 3 + [sensor.torque_range] * 3)
+        self._bias = np.asarray(sensor.bias, dtype=float)
+        self._rng = np.random.default_rng(seed)
+
+        self.q_start = tool_down_ik(self.model, start_arr, q0)
+        # Servo state: the lagged reference velocity and its integral.
+        self._v_ref = [0.0] * 6  # lists of floats: the servo runs on plain floats
+        self._q_ref = self.q_start.tolist()
+        self._target = [0.0] * 6
+        self._u_list = [0.0] * 6
+        self._hand = np.zeros(6)
+        self._hand_list = [0.0] * 6
+        self._hand_active = False
+        self._u = np.zeros(6)
+        self._inv_dt = 1.0 / physics_dt
+        #: times the servo's position error reached MAX_TRACKING_ERROR (torque limits, a
+        #: hard push) and its reference was pulled back to the arm (no wind-up).
+        self.tracking_limit_events = 0
+        self._jacp = np.zeros((3, 6))
+        self._jacr = np.zeros((3, 6))
+        self._vel6 = np.zeros(6)
+        self._steps = 0
+        self._sample_index = 0
+        self.wrench_seq = 0
+        self.protective_stop = False
+        self.emergency_stop = False
+        #: apply() calls whose joint velocity was missing, of the wrong shape or not finite (zero was used).
+        self.invalid_commands = 0
+        #: operator wrenches that were not a finite (6,) array (zero was used).
+        self.invalid_hand_wrenches = 0
+        self._closed = False
+
+        d = self.data
+        # Views into mjData (stable for the data's lifetime): no wrapper per access.
+        self._ctrl = d.ctrl
+        self._bias_force = d.qfrc_bias
+        self._qpos = d.qpos
+        self._qvel = d.qvel
+        self._site_xpos = d.site_xpos
+        self._site_xmat = d.site_xmat
+        self._xipos = d.xipos
+        self._xfrc_tool = d.xfrc_applied[self._tool_body]
+        self._sensordata = d.sensordata
+        d.qpos[:] = self.q_start
+        d.qvel[:] = 0.0
+        mujoco.mj_forward(m, d)
+        self._set_servo(hold=True)
+        mujoco.mj_forward(m, d)  # sensors at rest under the holding torques; also mj_step1's state
+        self._wrench = self._sample()
+
+        self._wall0: float | None = None
+        self._viewer = None
+        if view:
+            if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+                raise RuntimeError("view=True needs a display (DISPLAY / WAYLAND_DISPLAY is not set)")
+            import mujoco.viewer as mj_viewer
+
+            self._viewer = mj_viewer.launch_passive(m, d)
+
+    # ------------------------------------------------------------------ physics
+    def _set_servo(self, hold: bool = False) -> None:
+        """The joint torques for the next physics step (needs mj_step1's M and c at the current state).
+
+        Computed torque, h the physics step: the reference moves v⁺ = v_ref + α (target −
+        v_ref) (the exact first-order lag over one step), a_ref = (v⁺ − v_ref)/h, and
+        τ = M(q) [a_ref + 2ω (v_ref − q̇) + ω² (q_ref − q)] + c(q, q̇), clipped by the
+        motors to the torque limits. An undisturbed arm ends the step at q̇ = v⁺ exactly;
+        then q_ref += h v⁺ (MuJoCo's semi-implicit position update). Every mode of the
+        error is critically damped at ω whatever the arm's inertia (ωh ≤ 0.63 here).
+        """
+        # Plain floats: six-element numpy operations cost about a microsecond each.
+        h, alpha, kd, kp = self.physics_dt, self._alpha, self._kd, self._kp
+        v_ref, q_ref, target = self._v_ref, self._q_ref, self._target
+        qd, q = self._qvel.tolist(), self._qpos.tolist()
+        u = self._u_list
+        for i in range(6):
+            v = v_ref[i]
+            dv = 0.0 if hold else alpha * (target[i] - v)
+            u[i] = dv / h + kd * (v - qd[i]) + kp * (q_ref[i] - q[i])
+            if not hold:
+                v += dv
+                v_ref[i] = v
+                q_ref[i] += h * v
+        self._u[:] = u
+        ctrl = self._ctrl
+        mujoco.mj_mulM(self.model, self.data, ctrl, self._u)
+        ctrl += self._bias_force
+
+    def _set_hand(self) -> None:
+        """xfrc_applied of the tool body: the hand wrench moved from the handle to the body's COM."""
+        fx, fy, fz, tx, ty, tz = self._hand_list
+        hx, hy, hz = self._site_xpos[self._handle].tolist()
+        cx, cy, cz = self._xipos[self._tool_body].tolist()
+        rx, ry, rz = hx - cx, hy - cy, hz - cz
+        # r × f by hand: np.cross costs tens of µs on 3-vectors.
+        self._xfrc_tool[:] = (fx, fy, fz, tx + ry * fz - rz * fy, ty + rz * fx - rx * fz, tz + rx * fy - ry * fx)
+
+    def _sample(self) -> np.ndarray:
+        """A new sensor sample from MuJoCo's sensors (sign, bias, noise, saturation)."""
+        raw = np.concatenate((
+            self._sensordata[self._force_adr:self._force_adr + 3],
+            self._sensordata[self._torque_adr:self._torque_adr + 3],
+        ))
+        raw *= _MUJOCO_TO_COASSIST
+        raw += self._bias
+        noise = self._rng.standard_normal(6)
+        noise *= self._sigma
+        raw += noise
+        np.minimum(raw, self._range, out=raw)
+        return np.maximum(raw, -self._range, out=raw)
+
+    def _substep(self) -> None:
+        m, d = self.model, self.data
+        if self._hand_active:
+            self._set_hand()
+        self._set_servo()
+        mujoco.mj_step2(m, d)
+        mujoco.mj_step1(m, d)
+        self._steps += 1
+        if self.sensor.rate_hz is not None:
+            idx = math.floor(self._steps * self.physics_dt * self.sensor.rate_hz + 1e-9)
+            if idx != self._sample_index:
+                self._sample_index = idx
+                self._wrench = self._sample()
+                self.wrench_seq += 1
+
+    # ------------------------------------------------------------------ World protocol
+    @property
+    def t(self) -> float:
+        """The simulated time [s]."""
+        return self._steps * self.physics_dt
+
+    def read(self) -> RobotState:
+        return RobotState(
+            t=self.t,
+            q=self._qpos.copy(),
+            qd=self._qvel.copy(),
+            tool_pose=self._site_pose(self._tcp),
+            tool_twist=self._site_twist(self._tcp),
+            wrench=self._wrench.copy(),
+            sensor_rotation=self._site_xmat[self._ft].reshape(3, 3).copy(),
+            wrench_seq=self.wrench_seq,
+            protective_stop=self.protective_stop,
+            emergency_stop=self.emergency_stop,
+        )
+
+    def apply(self, command: Command) -> None:
+        if self._closed:
+            raise RuntimeError("MujocoUR5World.apply after close()")
+        self._target = self._command_target(command).tolist()
+        self._hand = self._hand_wrench()
+        q = self._qpos.tolist()
+        if any(abs(r - x) > MAX_TRACKING_ERROR for r, x in zip(self._q_ref, q)):
+            self.tracking_limit_events += 1
+            self._q_ref = [x + min(max(r - x, -MAX_TRACKING_ERROR), MAX_TRACKING_ERROR) for r, x in zip(self._q_ref, q)]
+        self._hand_list = self._hand.tolist()
+        self._hand_active = any(self._hand_list)
+        if not self._hand_active:
+            self._xfrc_tool[:] = 0.0
+        for _ in range(self.n_substeps):
+            self._substep()
+        if self.sensor.rate_hz is None:
+            self._wrench = self._sample()
+            self.wrench_seq += 1
+        if self._viewer is not None and self._viewer.is_running():
+            self._viewer.sync()
+        if self.realtime:
+            now = time.perf_counter()
+            if self._wall0 is None:
+                self._wall0 = now - self.t
+            lag = self._wall0 + self.t - now
+            if lag > 0.0:
+                time.sleep(lag)
+            elif lag < -0.1:  # fell behind (a pause, a slow caller): re-anchor, no catching up
+                self._wall0 = now - self.t
+
+    def stop(self, max_time: float = 2.0) -> None:
+        """Command zero joint velocity until |q̇| < 1e-3 rad/s (at most ``max_time`` s)."""
+        if self._closed:
+            return
+        for _ in range(max(1, math.ceil(max_time / self.dt))):
+            self.apply(Command(stop=True))
+            if np.max(np.abs(self._qvel)) < 1e-3 and max(abs(v) for v in self._v_ref) < 1e-3:
+                break
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self.stop()
+        self._closed = True
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None
+
+    # ------------------------------------------------------------------ extras
+    def trigger_protective_stop(self) -> None:
+        """Simulate the controller's protective stop: the flag is set and the arm brakes to rest."""
+        self.protective_stop = True
+
+    def clear_protective_stop(self) -> None:
+        self.protective_stop = False
+
+    def _command_target(self, command: Command) -> np.ndarray:
+        """The servo's target joint velocity: command.qd clipped to the joint speed limits,
+        zero when stopping; a missing, mis-shaped or non-finite qd is counted and read as zero."""
+        if self.protective_stop or self.emergency_stop or getattr(command, "stop", False):
+            return np.zeros(6)
+        qd = getattr(command, "qd", None)
+        try:
+            arr = np.asarray(qd, dtype=float)
+            ok = qd is not None and arr.shape == (6,) and math.isfinite(float(np.add.reduce(arr)))
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            self.invalid_commands += 1
+            return np.zeros(6)
+        out = np.maximum(arr, -VELOCITY_LIMITS)
+        return np.minimum(out, VELOCITY_LIMITS, out=out)
+
+    def _hand_wrench(self) -> np.ndarray:
+        if self.operator is None:
+            return np.zeros(6)
+        pose, twist = self.hand_pose()
+        try:
+            w = np.array(self.operator.force(self.t, pose, twist), dtype=float)
+            ok = w.shape == (6,) and math.isfinite(float(np.add.reduce(w)))
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            self.invalid_hand_wrenches += 1
+            return np.zeros(6)
+        return w
+
+    def _site_pose(self, site: int) -> np.ndarray:
+        return np.concatenate((self._site_xpos[site], rotation_vector(self._site_xmat[site])))
+
+    def _site_twist(self, site: int) -> np.ndarray:
+        mujoco.mj_objectVelocity(self.model, self.data, mujoco.mjtObj.mjOBJ_SITE, site, self._vel6, 0)
+        return np.concatenate((self._vel6[3:], self._vel6[:3]))  # MuJoCo [ω; v] → [v; ω]
+
+    def hand_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The handle's pose (6,) and twist (6,) in the base frame (what the operator is given)."""
+        return self._site_pose(self._handle), self._site_twist(self._handle)
+
+    @property
+    def hand_wrench(self) -> np.ndarray:
+        """The wrench the hand applies in the current period (base frame, at the handle)."""
+        return self._hand.copy()
+
+    def tool_mass_and_com(self) -> tuple[float, np.ndarray]:
+        """Mass [kg] of everything below the sensor and its centre of mass (3,) in the sensor frame [m]."""
+        d = self.data
+        R = d.site_xmat[self._ft].reshape(3, 3)
+        com = R.T @ (d.subtree_com[self._tool0] - d.site_xpos[self._ft])
+        return float(self.model.body_subtreemass[self._tool0]), com
+
+    def tcp_jacobian(self) -> np.ndarray:
+        """(6, 6) TCP Jacobian [linear; angular] in the base frame at the current joints."""
+        mujoco.mj_jacSite(self.model, self.data, self._jacp, self._jacr, self._tcp)
+        return np.vstack([self._jacp, self._jacr])
+
+    def __enter__(self) -> MujocoUR5World:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,1 @@
+"""The runtime: one control loop, several worlds (DESIGN §7)."""

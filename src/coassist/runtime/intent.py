@@ -1,0 +1,165 @@
+"""The intent stage of the tick: ŷ_ref,h from a window-based source or the real-time predictor.
+
+Two kinds of predictor plug into the loop through :class:`TickIntent`:
+
+- :class:`WindowIntent` wraps an :class:`~coassist.interfaces.IntentSource` (the
+  simulator's sources, a trained model computed inside the tick): the stage keeps the
+  last ``history`` feature rows in a ring buffer twice as long (so every window is one
+  contiguous slice) and calls ``predict`` once per tick. Deterministic.
+- :class:`RealtimeIntent` wraps a :class:`coassist.intent.RealtimePredictor` (duck-typed
+  here: ``tick(sample, nominal)``, ``horizon``, ``errors``; ``worker_alive`` if it
+  has one), which never waits for the network. For real robots and paced worlds.
+
+Both return the (H, 2) predicted positions in use at tick k for ticks k+1 … k+H [m], or
+None (fallback: the loop uses the nominal reference, eq. 4.7), and the tick's flags:
+PREDICTION_FALLBACK, PREDICTION_STALE, and PREDICTOR_STALLED once the predictor has
+given nothing usable for ``stall_ticks`` ticks in a row after its history filled (a
+dead worker, a hung network, NaN outputs). A stalled predictor is a bad tick for the
+safety layer: the robot decelerates, and stops if it persists.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import numpy as np
+
+from coassist._checks import check_int_at_least
+from coassist.interfaces import FEATURES, Fault, IntentSource, TrialContext
+
+__all__ = ["RealtimeIntent", "TickIntent", "WindowIntent"]
+
+_N_FEATURES = len(FEATURES)
+_FALLBACK = Fault.PREDICTION_FALLBACK
+
+
+class TickIntent(Protocol):
+    """What the tick asks of its intent stage."""
+
+    horizon: int  # rows of positions returned
+    model_id: str | None
+    nominal: bool  # True: the source is the nominal plan itself (ref_h = ref_r exactly)
+
+    def reset(self, context: TrialContext) -> None: ...
+
+    def update(self, k: int, row: tuple[float, ...], nominal: np.ndarray) -> tuple[np.ndarray | None, Fault]:
+        """Push tick k's feature row (8 floats, FEATURES order); get (positions or None, flags)."""
+        ...
+
+
+class WindowIntent:
+    """A window-based :class:`IntentSource` inside the tick (module docstring).
+
+    Parameters
+    ----------
+    source : the predictor.
+    horizon : rows the controller needs (the source must give at least these).
+    stall_ticks : consecutive unusable predictions (after the history has filled)
+        that make the predictor stalled (≥ 1).
+    """
+
+    def __init__(self, source: IntentSource, horizon: int, stall_ticks: int = 25) -> None:
+        if not isinstance(source, IntentSource):
+            raise ValueError(f"intent source must implement IntentSource, got {type(source).__name__}")
+        self.source = source
+        self.need = check_int_at_least(horizon, "horizon", 1)
+        self.horizon = int(source.horizon)
+        if self.horizon < self.need:
+            raise ValueError(f"intent source horizon ({self.horizon}) must be >= the controller's ({self.need})")
+        self.history = int(source.history)
+        self.model_id = source.model_id
+        self.stall_ticks = check_int_at_least(stall_ticks, "stall_ticks", 1)
+        # The simulator's NominalIntent is recognised by name so that ref_h is the planner's
+        # own rows (analytic velocities), as eq. 4.7 means; it never falls back.
+        self.nominal = type(source).__name__ == "NominalIntent"
+        L = self.history
+        self._hist = np.zeros((2 * L, _N_FEATURES)) if L > 0 else np.zeros((0, _N_FEATURES))
+        self._empty = self._hist[:0]
+        self._empty.setflags(write=False)
+        self._bad = 0
+
+    def reset(self, context: TrialContext) -> None:
+        self.source.reset(context)
+        self._bad = 0
+
+    def update(self, k: int, row: tuple[float, ...], nominal: np.ndarray) -> tuple[np.ndarray | None, Fault]:
+        L = self.history
+        if L > 0:
+            hist = self._hist
+            if k == 0:
+                hist[:] = row  # pad: the robot was at rest before tick 0
+            i = k % L
+            hist[i] = row
+            hist[i + L] = row
+            window = hist[i + 1 : i + 1 + L]
+        else:
+            window = self._empty
+        try:
+            pred = self.source.predict(window)
+            ok = isinstance(pred, np.ndarray) and pred.ndim == 2 and pred.shape[0] >= self.need and pred.shape[1] == 2
+            ok = ok and bool(np.isfinite(pred[: self.horizon]).all())
+        except Exception:  # a failing predictor must not stop the loop
+            ok = False
+        if ok:
+            self._bad = 0
+            return pred[: self.horizon], Fault.NONE
+        self._bad += 1
+        return None, (_FALLBACK | Fault.PREDICTOR_STALLED) if self._bad > self.stall_ticks else _FALLBACK
+
+
+class RealtimeIntent:
+    """A :class:`coassist.intent.RealtimePredictor` inside the tick (module docstring).
+
+    Parameters
+    ----------
+    predictor : anything with ``tick(sample (8,), nominal (H, 2)) -> (positions, fault,
+        age)``, ``horizon``, ``history`` and ``errors`` (and optionally
+        ``worker_alive``, ``model_id``).
+    stall_ticks : consecutive fallback ticks, after the history has filled, that make
+        the predictor stalled (≥ 1; default 25 = 0.2 s at 125 Hz).
+    """
+
+    nominal = False
+
+    def __init__(self, predictor: Any, stall_ticks: int = 25, model_id: str | None = None) -> None:
+        for attr in ("tick", "horizon"):
+            if not hasattr(predictor, attr):
+                raise ValueError(f"predictor must have '{attr}' (a coassist.intent.RealtimePredictor)")
+        history = getattr(predictor, "history", None)
+        if history is None:
+            history = getattr(getattr(predictor, "model", None), "history", 0)
+        self.predictor = predictor
+        self.horizon = int(predictor.horizon)
+        self.history = int(history)
+        self.model_id = model_id if model_id is not None else getattr(predictor, "model_id", "realtime")
+        self.stall_ticks = check_int_at_least(stall_ticks, "stall_ticks", 1)
+        self._sample = np.zeros(_N_FEATURES)
+        self._bad = 0
+        self._errors = 0
+
+    def reset(self, context: TrialContext) -> None:
+        self.predictor.reset(context)
+        self._bad = 0
+        self._errors = int(getattr(self.predictor, "errors", 0))
+
+    def update(self, k: int, row: tuple[float, ...], nominal: np.ndarray) -> tuple[np.ndarray | None, Fault]:
+        self._sample[:] = row
+        try:
+            pos, fault, _age = self.predictor.tick(self._sample, nominal)
+            fault = Fault(int(fault))
+        except Exception:
+            pos, fault = None, _FALLBACK
+        errors = int(getattr(self.predictor, "errors", 0))
+        new_errors, self._errors = errors > self._errors, errors
+        alive = bool(getattr(self.predictor, "worker_alive", True))
+        usable = not (fault & _FALLBACK) and pos is not None
+        if usable:
+            arr = np.asarray(pos, dtype=float)
+            usable = arr.shape == (self.horizon, 2) and bool(np.isfinite(arr).all())
+        warm = k >= self.history  # before the window fills the fallback is expected
+        self._bad = 0 if usable else self._bad + (1 if warm else 0)
+        flags = Fault.NONE if usable else _FALLBACK
+        flags |= fault & Fault.PREDICTION_STALE
+        if not alive or new_errors or self._bad > self.stall_ticks:
+            flags |= Fault.PREDICTOR_STALLED
+        return (arr if usable else None), flags

@@ -1,0 +1,915 @@
+"""The safety layer: the last stage of every control tick, in every world, always on.
+
+Whatever reaches it — NaN, ±inf, 1e300, arrays of the wrong shape, ``None``, strings —
+the layer returns a finite joint velocity command inside the limits of
+:class:`SafetyLimits`, never raises, and reports every intervention as a
+:class:`~coassist.interfaces.Fault` flag for the tick's log row. The same code runs in
+simulation and on the UR5, so what the tests prove here holds on the robot.
+
+Notation: n joints, period dt [s], the previous command q̇⁻ (what the robot was told
+last tick), the Jacobian J = [J_v; J_ω] (6×n, base frame, twist = [v; ω]), the TCP
+position p (the first three entries of the pose), the workspace box [lo, hi] and the
+margin m (the layer aims at m · each speed limit, so a command stays inside the true
+limit even as J changes between ticks).
+
+**Cartesian stage** — :meth:`SafetyLayer.limit_twist`, before the joint mapping::
+
+    v ← v · min(1, m v̄ / ‖v‖)            ω ← ω · min(1, m ω̄ / ‖ω‖)       (direction kept)
+    v_i ← clip(v_i, min(lo_i − p_i, 0)/dt, max(hi_i − p_i, 0)/dt)     (each axis; the
+                                                               motion along a face is kept)
+
+**Joint stage** — :meth:`SafetyLayer.limit_joint_velocity`, in this order:
+
+1. *Stop.* A robot stop (protective or emergency) or a hand wrench ‖f‖ > f̄ or ‖τ‖ > τ̄
+   (a protective stop, CONTACT_FORCE_LIMIT) latches STOPPED: from then on the command
+   is zero and ``stop`` is True (the world brakes with its own stop), until ``reset()``.
+2. *Bad tick.* An upstream fault of :data:`BAD_TICK_FAULTS`, or q̇, J, the pose or the
+   hand wrench non-finite or of the wrong shape: the target becomes 0 (DECELERATING),
+   reached along the acceleration ramp of step 5. ``max_bad_ticks`` bad ticks in a row
+   latch STOPPED; a good tick resets the count.
+3. *Manipulability* (Yoshikawa) w = ∏ σ_i(J) (= |det J| for n = 6, √det(J Jᵀ) for n > 6,
+   √det(Jᵀ J) for n < 6). Below w_min the target is scaled by
+   clip((w − w_min/2)/(w_min/2), 0, 1): zero at half the guard (SINGULARITY).
+4. *Velocity sets.* The target t is scaled uniformly toward 0 by the largest s ≤ 1 that
+   puts s·t into every set (each set contains 0 and is star-shaped from it, so the
+   smallest of the per-set scales satisfies all; each set that acted is flagged)::
+
+       |q̇_i| ≤ m q̄̇_i                                        JOINT_VELOCITY_LIMIT
+       ‖J_v q̇‖ ≤ m v̄,   ‖J_ω q̇‖ ≤ m ω̄                        TOOL_SPEED_LIMIT
+       u_i · dt · (1 + κ/2) ≤ d_i,  κ = ‖q̇‖∞ / (m a dt)        WORKSPACE_LIMIT
+
+   with u_i the tool speed toward face i and d_i = max(distance to it, 0). The last is
+   the one-step condition p + J_v q̇ dt ∈ box tightened by the braking distance: κ is
+   the number of ticks the ramp of step 5 needs to bring q̇ to rest, and the tool
+   covers at most u_i dt (1 + κ/2) on the way. Approaching a face along a direction
+   therefore slows down within the acceleration limit and never needs a jump (the
+   condition is invariant under one ramp step, so it holds at the next tick too).
+5. *Acceleration.* Δ = t − q̇⁻, s = min(1, m a dt / ‖Δ‖∞), q̇ = q̇⁻ + s Δ
+   (JOINT_ACCELERATION_LIMIT when s < 1). q̇ lies between two points of the sets, and
+   the sets are convex (except the braking one, which only tightens the true limit),
+   so it stays inside them whenever q̇⁻ was inside for the current J and pose.
+6. *Verification* against the TRUE limits (no margin; :func:`within_limits`): joint
+   speed, acceleration against q̇⁻, tool speeds with the current J, the one-step
+   workspace condition p + J_v q̇ dt ∈ box (or, outside it, no outward motion). This can
+   fail only when q̇⁻ itself is outside the sets for the *new* J or pose (J or p jumped,
+   or the direction of motion changed while braking toward a face). Then:
+
+   a. The common case is a command sliding along a workspace face while J turns
+      under it: the outward tool velocity it gains is tiny. It is removed with the
+      least joint change, Δq̇ = Rᵀ (R Rᵀ)⁻¹ e (R: the rows of J_v of the crossed
+      faces, e: the excess over the one-step bound), and the result is kept if it
+      passes every check, acceleration included.
+   b. Else q̇_b = q̇⁻ ramped toward 0 by one acceleration step. If q̇_b is inside, the
+      command is the point of the segment [q̇_b, q̇] closest to q̇ that is inside —
+      both ends respect the acceleration limit, so the command does too.
+   c. Else (only if q̇⁻ is outside the sets, since q̇_b is a contraction of it toward
+      0), after trying (a) on q̇_b, no command found respects both the velocity limits
+      and the acceleration limit: the layer keeps the velocity limits and scales q̇_b
+      toward 0 until it is inside. This is the documented *residual case*: the step
+      from q̇⁻ then exceeds a dt, but only toward rest —
+      q̇ ∈ conv({0} ∪ {x : ‖x − q̇⁻‖∞ ≤ a dt}) — and it is counted in
+      ``limit_conflicts``. :func:`within_limits` accepts exactly this, and only when
+      q̇⁻ itself violates a velocity set for the current J and pose.
+
+   The flags of the violated sets are reported; the command is always finite.
+7. q̇ becomes q̇⁻. Any exception inside the method gives the ramp of q̇⁻ toward 0
+   (INTERNAL_ERROR | DECELERATING, a bad tick), never a raise.
+
+The layer limits commands, not the robot: the robot's own tracking lag, the
+nonlinearity of the kinematics within one period and a human who drags the arm are
+outside it. The workspace and tool limits use the first-order prediction
+p(k+1) = p(k) + J_v q̇ dt.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from coassist._checks import check_int_at_least, check_positive_scalar
+from coassist.interfaces import Fault
+
+try:  # numpy's determinant kernel without np.linalg.det's Python checks (≈ 2 µs less per tick)
+    from numpy.linalg import _umath_linalg as _ula
+
+    _det = _ula.det
+    _det(np.eye(2))
+except Exception:  # pragma: no cover - another numpy
+    _det = np.linalg.det
+
+__all__ = ["BAD_TICK_FAULTS", "SafetyLayer", "SafetyLimits", "within_limits"]
+
+#: Upstream faults that make a tick "bad": the layer decelerates, and stops after
+#: ``SafetyLimits.max_bad_ticks`` of them in a row.
+BAD_TICK_FAULTS = (
+    Fault.DEADLINE_MISS
+    | Fault.PREDICTOR_STALLED
+    | Fault.NONFINITE_STATE
+    | Fault.NONFINITE_WRENCH
+    | Fault.NONFINITE_EFFORT
+    | Fault.SENSOR_STALE
+    | Fault.WRENCH_SPIKE
+    | Fault.INTERNAL_ERROR
+    | Fault.INVALID_INPUT
+    | Fault.SENSOR_SATURATED
+)
+
+_ROBOT_STOPS = int(Fault.ROBOT_PROTECTIVE_STOP | Fault.ROBOT_EMERGENCY_STOP)
+_BAD = int(BAD_TICK_FAULTS)
+_JV = int(Fault.JOINT_VELOCITY_LIMIT)
+_JA = int(Fault.JOINT_ACCELERATION_LIMIT)
+_TS = int(Fault.TOOL_SPEED_LIMIT)
+_WS = int(Fault.WORKSPACE_LIMIT)
+_CF = int(Fault.CONTACT_FORCE_LIMIT)
+_SG = int(Fault.SINGULARITY)
+_DC = int(Fault.DECELERATING)
+_ST = int(Fault.STOPPED)
+_IE = int(Fault.INTERNAL_ERROR)
+_II = int(Fault.INVALID_INPUT)
+
+#: The flags the layer raises, counted in ``SafetyLayer.interventions``.
+_COUNTED = (
+    Fault.JOINT_VELOCITY_LIMIT,
+    Fault.JOINT_ACCELERATION_LIMIT,
+    Fault.TOOL_SPEED_LIMIT,
+    Fault.WORKSPACE_LIMIT,
+    Fault.CONTACT_FORCE_LIMIT,
+    Fault.SINGULARITY,
+    Fault.DECELERATING,
+    Fault.STOPPED,
+    Fault.ROBOT_PROTECTIVE_STOP,
+    Fault.ROBOT_EMERGENCY_STOP,
+    Fault.INTERNAL_ERROR,
+    Fault.INVALID_INPUT,
+)
+_COUNTED_BITS = tuple((int(f), f.name) for f in _COUNTED)
+
+#: Tolerance of the verification (step 6) and of :func:`within_limits`: rounding of a
+#: command computed to sit exactly on a limit is not a violation.
+_TOL = 1e-9
+#: A tool speed toward a face below this [m/s] is rounding (the pseudo-inverse of a twist
+#: along the face), not motion: it moves the tool 1e-11 m per tick at 125 Hz.
+_VN_EPS = 1e-9
+
+_FAULTS: dict[int, Fault] = {0: Fault.NONE}
+
+
+def _fault(bits: int) -> Fault:
+    """Fault(bits), cached: building an IntFlag costs microseconds, a dict lookup does not."""
+    f = _FAULTS.get(bits)
+    if f is None:
+        f = _FAULTS[bits] = Fault(bits)
+    return f
+
+
+def _positive(value, name: str) -> float:
+    return check_positive_scalar(value, f"SafetyLimits.{name}")
+
+
+@dataclass(frozen=True)
+class SafetyLimits:
+    """The limits the safety layer enforces on every command (validated; errors name the field).
+
+    Attributes
+    ----------
+    joint_velocity : float or (n,) [rad/s], default π/2 (90 °/s)
+        Largest joint speed, one value for all joints or one per joint. The layer aims
+        at ``margin`` times it.
+    joint_acceleration : float [rad/s²], default 8.0
+        Largest change of any joint's velocity command per second: the command moves
+        by at most ``joint_acceleration · dt`` per tick (also how fast a bad tick
+        decelerates).
+    tool_speed : float [m/s], default 0.25
+        Largest linear speed of the tool centre point (ISO/TS 15066 collaborative
+        speeds are of this order).
+    tool_angular_speed : float [rad/s], default 1.0 (57 °/s)
+        Largest rotation speed of the tool.
+    workspace_lower, workspace_upper : (3,) [m] or None, default None
+        Corners of the box, in the base frame, that the tool centre point may not
+        leave; None for no box (both or neither). Motion toward a face slows down so
+        that it stops at the face; outside the box, motion further out is removed
+        (the layer never pushes back on its own).
+    contact_force : float [N], default 120.0
+        Hand force (norm of the measured hand wrench's force) above which the robot
+        makes a protective stop.
+    contact_torque : float [N·m], default 15.0
+        The same for the hand torque.
+    min_manipulability : float [-], default 0.01; 0 disables
+        Yoshikawa manipulability √det(J Jᵀ) under which motion is scaled down, linearly
+        to zero at half this value (near a singularity small tool motions need large
+        joint motions).
+    max_bad_ticks : int, default 25 (0.2 s at 125 Hz)
+        Consecutive bad ticks (upstream faults, invalid inputs) after which the layer
+        stops the robot; the last of them is the stop. Until then it decelerates.
+    margin : float in (0, 1], default 0.98
+        Fraction of each velocity and acceleration limit the layer aims for, so that a
+        command stays inside the true limit as J changes between ticks.
+    """
+
+    joint_velocity: float | tuple[float, ...] = math.pi / 2
+    joint_acceleration: float = 8.0
+    tool_speed: float = 0.25
+    tool_angular_speed: float = 1.0
+    workspace_lower: tuple[float, float, float] | None = None
+    workspace_upper: tuple[float, float, float] | None = None
+    contact_force: float = 120.0
+    contact_torque: float = 15.0
+    min_manipulability: float = 0.01
+    max_bad_ticks: int = 25
+    margin: float = 0.98
+
+    def __post_init__(self) -> None:
+        jv = self.joint_velocity
+        if isinstance(jv, (str, bytes)):
+            raise ValueError(f"SafetyLimits.joint_velocity must be a number or a list of numbers, got {jv!r}")
+        try:
+            arr = np.asarray(jv, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"SafetyLimits.joint_velocity must be a number or a list of numbers, got {jv!r}") from None
+        if arr.ndim > 1 or arr.size == 0:
+            raise ValueError(f"SafetyLimits.joint_velocity must be a number or a list of numbers, got {jv!r}")
+        if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
+            raise ValueError(f"SafetyLimits.joint_velocity must be finite and > 0, got {jv!r}")
+        object.__setattr__(self, "joint_velocity", float(arr) if arr.ndim == 0 else tuple(float(v) for v in arr))
+        for name in ("joint_acceleration", "tool_speed", "tool_angular_speed", "contact_force", "contact_torque"):
+            object.__setattr__(self, name, _positive(getattr(self, name), name))
+        lo, hi = self.workspace_lower, self.workspace_upper
+        if (lo is None) != (hi is None):
+            missing = "workspace_upper" if hi is None else "workspace_lower"
+            raise ValueError(f"SafetyLimits.{missing} must be given with the other corner of the workspace box")
+        if lo is not None:
+            box = []
+            for name, val in (("workspace_lower", lo), ("workspace_upper", hi)):
+                try:
+                    a = np.asarray(val, dtype=float)
+                except (TypeError, ValueError):
+                    raise ValueError(f"SafetyLimits.{name} must be 3 numbers [m], got {val!r}") from None
+                if a.shape != (3,) or not np.all(np.isfinite(a)):
+                    raise ValueError(f"SafetyLimits.{name} must be 3 finite numbers [m], got {val!r}")
+                box.append(tuple(float(v) for v in a))
+            if not all(l < h for l, h in zip(*box)):
+                raise ValueError(f"SafetyLimits.workspace_upper must exceed workspace_lower on every axis, got {box[0]} and {box[1]}")
+            object.__setattr__(self, "workspace_lower", box[0])
+            object.__setattr__(self, "workspace_upper", box[1])
+        try:
+            wmin = float(self.min_manipulability)
+        except (TypeError, ValueError):
+            raise ValueError(f"SafetyLimits.min_manipulability must be a number, got {self.min_manipulability!r}") from None
+        if not math.isfinite(wmin) or wmin < 0:
+            raise ValueError(f"SafetyLimits.min_manipulability must be finite and >= 0, got {self.min_manipulability!r}")
+        object.__setattr__(self, "min_manipulability", wmin)
+        check_int_at_least(self.max_bad_ticks, "SafetyLimits.max_bad_ticks", 1)
+        object.__setattr__(self, "max_bad_ticks", int(self.max_bad_ticks))
+        try:
+            margin = float(self.margin)
+        except (TypeError, ValueError):
+            raise ValueError(f"SafetyLimits.margin must be a number, got {self.margin!r}") from None
+        if not 0.0 < margin <= 1.0:
+            raise ValueError(f"SafetyLimits.margin must be in (0, 1], got {self.margin!r}")
+        object.__setattr__(self, "margin", margin)
+
+    def joint_velocity_array(self, n_joints: int) -> np.ndarray:
+        """(n_joints,) joint speed limits [rad/s]; a per-joint tuple must have n_joints entries."""
+        jv = self.joint_velocity
+        if isinstance(jv, tuple):
+            if len(jv) != n_joints:
+                raise ValueError(f"SafetyLimits.joint_velocity has {len(jv)} entries but the robot has {n_joints} joints")
+            return np.array(jv)
+        return np.full(n_joints, jv)
+
+    def describe(self) -> str:
+        """The limits in plain words, one per line, for the operator to read before the robot moves."""
+        deg = 180.0 / math.pi
+        jv = self.joint_velocity
+        if isinstance(jv, tuple):
+            joint = "joint speed ≤ " + ", ".join(f"{v * deg:.0f}" for v in jv) + " °/s (joints 1…" + f"{len(jv)})"
+        else:
+            joint = f"joint speed ≤ {jv * deg:.0f} °/s ({jv:.3g} rad/s) on every joint"
+        lines = [
+            joint,
+            f"joint acceleration ≤ {self.joint_acceleration * deg:.0f} °/s² ({self.joint_acceleration:.3g} rad/s²)",
+            f"tool speed ≤ {self.tool_speed:.3g} m/s, tool rotation ≤ {self.tool_angular_speed * deg:.0f} °/s "
+            f"({self.tool_angular_speed:.3g} rad/s)",
+        ]
+        if self.workspace_lower is None:
+            lines.append("workspace: no box (the tool may go wherever the robot reaches)")
+        else:
+            axes = ", ".join(
+                f"{a} ∈ [{lo:.3f}, {hi:.3f}] m" for a, lo, hi in zip("xyz", self.workspace_lower, self.workspace_upper)
+            )
+            lines.append(f"workspace: the tool stays in the box {axes} (robot base frame)")
+        lines.append(
+            f"contact: hand force > {self.contact_force:.3g} N or hand torque > {self.contact_torque:.3g} N·m "
+            "→ protective stop"
+        )
+        if self.min_manipulability > 0:
+            lines.append(
+                f"singularity: motion slows below manipulability {self.min_manipulability:.3g}, "
+                f"stops at {self.min_manipulability / 2:.3g}"
+            )
+        else:
+            lines.append("singularity: no manipulability guard")
+        lines.append(
+            f"faults: the robot decelerates on a bad tick and stops after {self.max_bad_ticks} bad ticks in a row"
+        )
+        lines.append(f"margin: commands aim at {self.margin:.0%} of each speed and acceleration limit")
+        return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------- input parsing
+def _vector(x, n: int) -> np.ndarray | None:
+    """x as a finite float64 (n,) array, or None (wrong type, shape, or non-finite)."""
+    if type(x) is np.ndarray and x.dtype.char == "d" and x.shape == (n,):
+        s = sum(x.tolist())
+        if s - s == 0.0:  # NaN and ±inf survive the sum (inf − inf = NaN); overflow is re-checked
+            return x
+        return x if np.isfinite(x).all() else None
+    try:
+        a = np.asarray(x)
+        if a.dtype.kind not in "fiu" or a.shape != (n,):
+            return None
+        a = a.astype(np.float64)
+    except Exception:
+        return None
+    return a if np.isfinite(a).all() else None
+
+
+def _matrix(x, n: int) -> np.ndarray | None:
+    """x as a finite float64 (6, n) array, or None."""
+    try:
+        a = x if type(x) is np.ndarray and x.dtype.char == "d" else np.asarray(x)
+        if a.dtype.kind not in "fiu" or a.shape != (6, n):
+            return None
+        a = a.astype(np.float64, copy=False)
+    except Exception:
+        return None
+    return a if np.isfinite(a).all() else None
+
+
+def _fault_word(x) -> int | None:
+    """A fault word as a non-negative int, or None when it is not one."""
+    if isinstance(x, (int, np.integer)) and x >= 0:
+        return int(x)
+    return None
+
+
+# ---------------------------------------------------------------------- the true limits
+class _Bounds:
+    """The true limits as Python floats (the verification of step 6 and :func:`within_limits`)."""
+
+    __slots__ = ("n", "dt", "vmax", "vuniform", "acc", "tool", "ang", "lo", "hi")
+
+    def __init__(self, limits: SafetyLimits, dt: float, n: int) -> None:
+        self.n = n
+        self.dt = dt
+        self.vmax = limits.joint_velocity_array(n).tolist()
+        self.vuniform = None if isinstance(limits.joint_velocity, tuple) else limits.joint_velocity
+        self.acc = limits.joint_acceleration * dt
+        self.tool = limits.tool_speed
+        self.ang = limits.tool_angular_speed
+        self.lo = None if limits.workspace_lower is None else list(limits.workspace_lower)
+        self.hi = None if limits.workspace_upper is None else list(limits.workspace_upper)
+
+
+def _violations(b: _Bounds, x: np.ndarray, J: np.ndarray | None, pl: list | None, tol: float,
+                notes: list | None = None) -> int:
+    """Flags of the velocity sets (true limits + tol) that x violates; J, pl: valid or None.
+
+    JOINT_VELOCITY_LIMIT: |x_i| > q̄̇_i; TOOL_SPEED_LIMIT: ‖J_v x‖ > v̄ or ‖J_ω x‖ > ω̄;
+    WORKSPACE_LIMIT: p_i + (J_v x)_i dt beyond max(hi_i, p_i) or min(lo_i, p_i).
+    """
+    bad = 0
+    xl = x.tolist()
+    if b.vuniform is not None and notes is None:
+        if not max(max(xl), -min(xl)) <= b.vuniform + tol:
+            bad |= _JV
+    else:
+        for i, (xi, lim) in enumerate(zip(xl, b.vmax)):
+            if not abs(xi) <= lim + tol:
+                bad |= _JV
+                if notes is not None:
+                    notes.append(f"joint_velocity: joint {i} at {xi:.6g} rad/s, limit {lim:.6g}")
+    if J is None:
+        return bad
+    vl = J.dot(x).tolist()
+    lin = math.sqrt(vl[0] * vl[0] + vl[1] * vl[1] + vl[2] * vl[2])
+    ang = math.sqrt(vl[3] * vl[3] + vl[4] * vl[4] + vl[5] * vl[5])
+    if not lin <= b.tool + tol:  # `not <=`: NaN is a violation too
+        bad |= _TS
+        if notes is not None:
+            notes.append(f"tool_speed: {lin:.6g} m/s, limit {b.tool:.6g}")
+    if not ang <= b.ang + tol:
+        bad |= _TS
+        if notes is not None:
+            notes.append(f"tool_angular_speed: {ang:.6g} rad/s, limit {b.ang:.6g}")
+    if pl is not None and b.lo is not None:
+        dt = b.dt
+        for i in range(3):
+            p = pl[i]
+            nxt = p + vl[i] * dt
+            hi = b.hi[i] if b.hi[i] > p else p
+            lo = b.lo[i] if b.lo[i] < p else p
+            if not (lo - tol <= nxt <= hi + tol):
+                bad |= _WS
+                if notes is not None:
+                    notes.append(
+                        f"workspace: {'xyz'[i]} would go from {p:.6g} to {nxt:.6g} m, box [{b.lo[i]:.6g}, {b.hi[i]:.6g}]"
+                    )
+    return bad
+
+
+def _in_ramp_hull(x: list, prev: list, step: float) -> bool:
+    """x ∈ conv({0} ∪ {y : ‖y − prev‖∞ ≤ step}): some σ ∈ [0, 1] has |x_i − σ prev_i| ≤ σ step.
+
+    Each joint bounds σ linearly: σ (prev_i − step) ≤ x_i ≤ σ (prev_i + step).
+    """
+    lo, hi = 0.0, 1.0
+    for xi, pi in zip(x, prev):
+        for c, upper in ((pi + step, True), (pi - step, False)):
+            # upper: x_i ≤ σ c ; lower: σ c ≤ x_i
+            if c == 0.0:
+                if (upper and xi > 0.0) or (not upper and xi < 0.0):
+                    return False
+                continue
+            r = xi / c
+            if (c > 0.0) == upper:
+                lo = max(lo, r)
+            else:
+                hi = min(hi, r)
+    return lo <= hi + 1e-12
+
+
+def within_limits(qd, qd_prev, J, pose, limits: SafetyLimits, dt: float, tol: float = _TOL) -> list[str]:
+    """Every limit of ``limits`` that the joint velocity command qd violates (empty: none).
+
+    qd : (n,) the command [rad/s]; it must be finite.
+    qd_prev : (n,) the previous command, or None to skip the acceleration check (a
+        command sent with ``stop=True`` is not a velocity command: the world brakes
+        with its own stop).
+    J : (6, n) Jacobian, pose : (6,) TCP pose. When J (or the pose) is not finite or
+        of the wrong shape, the tool (or workspace) limits cannot be evaluated and are
+        skipped: the layer did not know them either.
+
+    The acceleration limit ‖qd − qd_prev‖∞ ≤ a dt holds, except in the residual case of
+    the module docstring (step 6c): qd_prev itself is outside the velocity sets for
+    this J and pose, and qd is a step of at most a dt from qd_prev scaled toward zero.
+    The returned strings start with the name of the violated SafetyLimits field.
+    """
+    with np.errstate(all="ignore"):
+        return _within_limits(qd, qd_prev, J, pose, limits, dt, tol)
+
+
+def _within_limits(qd, qd_prev, J, pose, limits, dt, tol):
+    try:
+        shape = np.shape(qd)
+    except Exception:
+        shape = ()
+    x = _vector(qd, shape[0] if len(shape) == 1 else -1)
+    if x is None:
+        return [f"qd: not a finite vector: {qd!r}"]
+    n = x.shape[0]
+    b = _Bounds(limits, float(dt), n)
+    Jm = _matrix(J, n)
+    p = _vector(pose, 6)
+    pl = None if p is None else p.tolist()
+    notes: list[str] = []
+    _violations(b, x, Jm, pl, tol, notes)
+    if qd_prev is not None:
+        prev = _vector(qd_prev, n)
+        if prev is None:
+            notes.append(f"joint_acceleration: the previous command is not a finite ({n},) vector")
+            return notes
+        xl, pv = x.tolist(), prev.tolist()
+        step = max(abs(a - c) for a, c in zip(xl, pv))
+        if step > b.acc + tol:
+            residual = _violations(b, prev, Jm, pl, tol) != 0 and _in_ramp_hull(xl, pv, b.acc + tol)
+            if not residual:
+                notes.append(
+                    f"joint_acceleration: a step of {step:.6g} rad/s in one tick, limit {b.acc:.6g} "
+                    f"({limits.joint_acceleration:.6g} rad/s² × {dt:.6g} s)"
+                )
+    return notes
+
+
+# ---------------------------------------------------------------------- the layer
+class SafetyLayer:
+    """The safety layer of one robot (module docstring).
+
+    Parameters
+    ----------
+    limits : the limits to enforce.
+    dt : the control period [s].
+    n_joints : joints of the robot (6 for the UR5).
+
+    Attributes
+    ----------
+    interventions : dict flag name → ticks on which the layer raised it since ``reset``.
+    bad_ticks : consecutive bad ticks so far.
+    limit_conflicts : ticks of the residual case (step 6c): the acceleration limit was
+        exceeded, toward rest, to keep a velocity limit after J or the pose jumped.
+    """
+
+    def __init__(self, limits: SafetyLimits, dt: float, n_joints: int) -> None:
+        if not isinstance(limits, SafetyLimits):
+            raise TypeError(f"SafetyLayer.limits must be a SafetyLimits, got {type(limits).__name__}")
+        self.limits = limits
+        self.dt = check_positive_scalar(dt, "SafetyLayer.dt")
+        self.n_joints = check_int_at_least(n_joints, "SafetyLayer.n_joints", 1)
+        n, m = self.n_joints, limits.margin
+        self._b = _Bounds(limits, self.dt, n)
+        self._n = n
+        self._inv_vmax_m = (1.0 / (m * limits.joint_velocity_array(n))).tolist()
+        self._acc_m = m * limits.joint_acceleration * self.dt
+        self._tool_m = m * limits.tool_speed
+        self._ang_m = m * limits.tool_angular_speed
+        self._f2 = limits.contact_force * limits.contact_force
+        self._t2 = limits.contact_torque * limits.contact_torque
+        self._wmin = limits.min_manipulability
+        self._box = limits.workspace_lower is not None
+        self._zeros = [0.0] * n
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self, qd=None) -> None:
+        """Start a run: not stopped, no bad ticks, counters cleared, previous command = qd or zeros.
+
+        qd : (n,) the robot's current joint velocity [rad/s] (so the first command ramps
+        from it), scaled into the joint speed limits. Raises ValueError when it is not
+        a finite (n,) vector.
+        """
+        prev = self._zeros
+        if qd is not None:
+            x = _vector(qd, self._n)
+            if x is None:
+                raise ValueError(f"SafetyLayer.reset: qd must be a finite ({self._n},) vector, got {qd!r}")
+            xl = x.tolist()
+            r = max(abs(v) * iv for v, iv in zip(xl, self._inv_vmax_m))
+            prev = [v / r for v in xl] if r > 1.0 else xl
+        self._prev = list(prev)
+        self._stopped = False
+        self._decelerating = False
+        self.bad_ticks = 0
+        self.limit_conflicts = 0
+        self.interventions = {name: 0 for _, name in _COUNTED_BITS}
+
+    @property
+    def stopped(self) -> bool:
+        """STOPPED is latched: every command is zero with ``stop`` True until :meth:`reset`."""
+        return self._stopped
+
+    @property
+    def decelerating(self) -> bool:
+        """The last command was the ramp toward rest of a bad tick (the tick may reset its admittance to it)."""
+        return self._decelerating
+
+    @property
+    def previous(self) -> np.ndarray:
+        """The last command [rad/s] (a copy)."""
+        return np.array(self._prev)
+
+    def latch_stop(self) -> None:
+        """Latch STOPPED from outside (an effort world's stop): zero command from now on."""
+        self._stopped = True
+        self._prev = list(self._zeros)
+
+    def _count(self, bits: int) -> None:
+        d = self.interventions
+        for bit, name in _COUNTED_BITS:
+            if bits & bit:
+                d[name] += 1
+
+    # ------------------------------------------------------------------ Cartesian stage
+    def limit_twist(self, twist, pose) -> tuple[np.ndarray, Fault]:
+        """The tool twist (6,) [m/s, rad/s] inside the tool speeds and the workspace (module docstring).
+
+        A twist that is not a finite (6,) vector, or a pose that is not one while a
+        workspace box is set, gives zeros and INVALID_INPUT. Never raises.
+        """
+        try:
+            with np.errstate(all="ignore"):
+                return self._limit_twist(twist, pose)
+        except Exception:  # pragma: no cover - defensive: nothing above is expected to raise
+            self._count(_II | _IE)
+            return np.zeros(6), _fault(_II | _IE)
+
+    def _limit_twist(self, twist, pose) -> tuple[np.ndarray, Fault]:
+        t = _vector(twist, 6)
+        p = _vector(pose, 6) if self._box else None
+        if t is None or (self._box and p is None):
+            self._count(_II)
+            return np.zeros(6), _fault(_II)
+        tl = t.tolist()
+        flags = 0
+        lin2 = tl[0] * tl[0] + tl[1] * tl[1] + tl[2] * tl[2]
+        if lin2 > self._tool_m * self._tool_m:
+            k = self._tool_m / math.sqrt(lin2)
+            tl[0] *= k
+            tl[1] *= k
+            tl[2] *= k
+            flags |= _TS
+        ang2 = tl[3] * tl[3] + tl[4] * tl[4] + tl[5] * tl[5]
+        if ang2 > self._ang_m * self._ang_m:
+            k = self._ang_m / math.sqrt(ang2)
+            tl[3] *= k
+            tl[4] *= k
+            tl[5] *= k
+            flags |= _TS
+        if p is not None:
+            b, dt = self._b, self.dt
+            pl = p.tolist()
+            for i in range(3):
+                # per axis, so the motion along a face is kept; outside the box the
+                # outward bound is 0: the tool may come back but is never pushed back
+                up = max(b.hi[i] - pl[i], 0.0) / dt
+                down = min(b.lo[i] - pl[i], 0.0) / dt
+                if tl[i] > up:
+                    tl[i] = up
+                    flags |= _WS
+                elif tl[i] < down:
+                    tl[i] = down
+                    flags |= _WS
+        if flags:
+            self._count(flags)
+        return np.array(tl), _fault(flags)
+
+    # ------------------------------------------------------------------ joint stage
+    def limit_joint_velocity(self, qd, J, pose, hand_wrench, upstream: Fault = Fault.NONE,
+                             robot_stop: Fault = Fault.NONE) -> tuple[np.ndarray, Fault, bool]:
+        """The joint velocity command to send: (command (n,) [rad/s], flags, stop).
+
+        qd : (n,) the requested joint velocity; J : (6, n) the Jacobian at the measured
+        q; pose : (6,) the measured TCP pose; hand_wrench : (6,) the hand wrench [N, N·m]
+        (any frame: only its norms are used); upstream : the tick's faults so far;
+        robot_stop : the robot's own stop flags. Stages in the module docstring. Never
+        raises; the command is always a new finite array.
+        """
+        try:
+            # garbage in (1e300 · 1e300) is handled, not warned about on every tick
+            with np.errstate(all="ignore"):
+                return self._limit_joint_velocity(qd, J, pose, hand_wrench, upstream, robot_stop)
+        except Exception:
+            # Something unforeseen: treat it as a bad tick and ramp toward rest from the
+            # last command (always finite: the layer only ever stores finite commands).
+            try:
+                flags, stop = _IE | _DC, False
+                self.bad_ticks += 1
+                if self._stopped or self.bad_ticks >= self.limits.max_bad_ticks:
+                    self._stopped = True
+                    out, flags, stop = list(self._zeros), _IE | _ST, True
+                else:
+                    out = self._ramp_to_rest(self._prev)
+                    if not all(math.isfinite(v) for v in out):
+                        out = list(self._zeros)
+                self._prev = out
+                self._decelerating = not stop
+                self._count(flags)
+                return np.array(out, dtype=float), _fault(flags), stop
+            except Exception:  # pragma: no cover - last resort
+                return np.zeros(self._n), Fault.INTERNAL_ERROR | Fault.STOPPED, True
+
+    def _ramp_to_rest(self, prev: list) -> list:
+        """prev moved one (margin) acceleration step toward 0, along its own direction."""
+        top = max(abs(v) for v in prev)
+        if top <= self._acc_m:
+            return list(self._zeros)
+        k = 1.0 - self._acc_m / top
+        return [v * k for v in prev]
+
+    def _stop(self, flags: int) -> tuple[np.ndarray, Fault, bool]:
+        self._stopped = True
+        self._decelerating = False
+        self._prev = list(self._zeros)
+        flags |= _ST
+        self._count(flags)
+        return np.zeros(self._n), _fault(flags), True
+
+    def _limit_joint_velocity(self, qd, J, pose, hand_wrench, upstream, robot_stop):
+        n = self._n
+        prev = self._prev
+        # -------- 1. stops: the robot's own, or the hand pushing too hard
+        up = _fault_word(upstream)
+        rs = _fault_word(robot_stop)
+        w = _vector(hand_wrench, 6)
+        flags = ((up or 0) | (rs or 0)) & _ROBOT_STOPS
+        if w is not None:
+            wl = w.tolist()
+            if (wl[0] * wl[0] + wl[1] * wl[1] + wl[2] * wl[2] > self._f2
+                    or wl[3] * wl[3] + wl[4] * wl[4] + wl[5] * wl[5] > self._t2):
+                flags |= _CF
+        if flags or self._stopped:
+            return self._stop(flags)
+
+        # -------- 2. bad tick: decelerate, stop when it persists
+        q = _vector(qd, n)
+        p = _vector(pose, 6)
+        v0 = None  # J q at the requested q, as a list
+        if q is not None and type(J) is np.ndarray and J.dtype.char == "d" and J.shape == (6, n):
+            # a non-finite entry of J reaches J q (0·inf = NaN): one product checks both
+            v = J.dot(q).tolist()
+            s = sum(v)
+            if s - s == 0.0:
+                Jm, v0 = J, v
+            else:
+                Jm = _matrix(J, n)
+        else:
+            Jm = _matrix(J, n)
+        if v0 is None and q is not None and Jm is not None:
+            v = Jm.dot(q).tolist()
+            if all(math.isfinite(x) for x in v):  # else J q overflowed: meaningless, a bad tick
+                v0 = v
+        bad = (up is None or rs is None or w is None or q is None or v0 is None or p is None
+               or (up & _BAD) != 0)
+        pl = None if p is None else p.tolist()
+        if bad:
+            self.bad_ticks += 1
+            if self.bad_ticks >= self.limits.max_bad_ticks:
+                return self._stop(0)
+            flags = _DC
+            cl = self._ramp_to_rest(prev)
+        else:
+            self.bad_ticks = 0
+            ql = q.tolist()
+            scale = 1.0
+            # -------- 3. manipulability guard
+            if self._wmin > 0.0:
+                wm = self._manipulability(Jm)
+                if wm < self._wmin:
+                    half = 0.5 * self._wmin
+                    scale = min(max((wm - half) / half, 0.0), 1.0)
+                    flags |= _SG
+            # -------- 4. velocity sets: the largest uniform scale into all of them
+            if scale > 0.0:
+                r = max(abs(v) * iv for v, iv in zip(ql, self._inv_vmax_m))
+                if r * scale > 1.0:
+                    scale = 1.0 / r
+                    flags |= _JV
+                lin2 = v0[0] * v0[0] + v0[1] * v0[1] + v0[2] * v0[2]
+                ang2 = v0[3] * v0[3] + v0[4] * v0[4] + v0[5] * v0[5]
+                k_lin = self._tool_m / math.sqrt(lin2) if lin2 > 0.0 else math.inf
+                k_ang = self._ang_m / math.sqrt(ang2) if ang2 > 0.0 else math.inf
+                k = min(k_lin, k_ang)
+                if k < scale:
+                    scale = k
+                    flags |= _TS
+                if self._box:
+                    k = self._workspace_scale(ql, v0, pl)
+                    if k < scale:
+                        scale = k
+                        flags |= _WS
+            if scale < 1.0:
+                tl = [v * scale for v in ql]
+            else:
+                tl = ql
+            # -------- 5. acceleration: a step of at most m a dt toward the target
+            dl = [t - c for t, c in zip(tl, prev)]
+            dmax = max(max(dl), -min(dl))
+            if dmax > self._acc_m:
+                k = self._acc_m / dmax
+                cl = [c + k * d for c, d in zip(prev, dl)]
+                flags |= _JA
+                dmax = max(abs(a - c) for a, c in zip(cl, prev))
+            else:
+                cl = tl  # dmax is the step already
+        # -------- 6. verification against the true limits, with the current J and pose
+        if bad:
+            dmax = max(abs(a - c) for a, c in zip(cl, prev))
+        cmd = np.array(cl, dtype=float)
+        viol = _violations(self._b, cmd, Jm, pl, _TOL)
+        if viol or not dmax <= self._b.acc + _TOL:
+            flags |= viol
+            cmd = self._repair(cmd, Jm, pl)
+        # -------- 7. remember
+        self._prev = cmd.tolist()
+        self._decelerating = bad
+        if flags:
+            self._count(flags)
+        return cmd, _fault(flags), False
+
+    def _manipulability(self, J: np.ndarray) -> float:
+        """Yoshikawa's w = ∏ σ_i(J) over the min(6, n) singular values."""
+        n = self._n
+        if n == 6:
+            return abs(float(_det(J)))
+        JJ = J.T @ J if n < 6 else J @ J.T
+        return math.sqrt(max(float(_det(JJ)), 0.0))
+
+    def _workspace_scale(self, ql: list, v0: list, pl: list) -> float:
+        """Largest σ ≤ 1 with σ q inside the braking bound of every face it approaches (step 4)."""
+        b, dt = self._b, self.dt
+        top = max(max(ql), -min(ql))
+        K = top / self._acc_m  # ticks the ramp needs to bring q to rest
+        best = 1.0
+        for i in range(3):
+            u = v0[i]
+            if u > _VN_EPS:
+                d = b.hi[i] - pl[i]
+            elif u < -_VN_EPS:
+                u = -u
+                d = pl[i] - b.lo[i]
+            else:
+                continue
+            if d < 0.0:
+                d = 0.0  # outside: no motion further out
+            if u * dt * (1.0 + 0.5 * K) <= d:
+                continue
+            # σ u dt (1 + σ K / 2) ≤ d  ⇔  σ ≤ 2 r / (1 + √(1 + 2 K r)),  r = d / (u dt)
+            r = d / (u * dt)
+            sigma = 2.0 * r / (1.0 + math.sqrt(1.0 + 2.0 * K * r))
+            if sigma < best:
+                best = sigma
+        return best
+
+    def _repair(self, cmd: np.ndarray, J: np.ndarray | None, pl: list | None) -> np.ndarray:
+        """Step 6: a command inside the true sets, within the acceleration limit when possible."""
+        b = self._b
+        prev = np.array(self._prev)
+
+        def feasible(x: np.ndarray | None) -> bool:
+            return (x is not None and not _violations(b, x, J, pl, _TOL)
+                    and float(np.max(np.abs(x - prev))) <= b.acc + _TOL)
+
+        # A command sliding along a face whose J moved under it: remove the (tiny)
+        # outward tool velocity with the least joint change, keep the rest.
+        out = self._face_correction(cmd, J, pl)
+        if feasible(out):
+            return out
+        brake = np.array(self._ramp_to_rest(self._prev), dtype=float)
+        if not _violations(b, brake, J, pl, _TOL):
+            # 6b: both ends of [brake, cmd] are one acceleration step from prev
+            lam = self._segment(brake, cmd - brake, J, pl)
+            out = brake + lam * (cmd - brake)
+            return out if feasible(out) else brake
+        out = self._face_correction(brake, J, pl)
+        if feasible(out):
+            return out
+        # 6c: the residual case (module docstring): keep the velocity limits
+        self.limit_conflicts += 1
+        sigma = self._segment(np.zeros(self._n), brake, J, pl)
+        out = sigma * brake
+        if _violations(b, out, J, pl, _TOL):  # rounding at the boundary: rest is always inside
+            out = np.zeros(self._n)
+        return out
+
+    def _face_correction(self, x: np.ndarray, J: np.ndarray | None, pl: list | None) -> np.ndarray | None:
+        """x minus the least-norm joint change that brings the tool velocity toward every face it
+        would cross back to the one-step bound: Δq = Rᵀ (R Rᵀ)⁻¹ e, R the rows of J_v, e the excess."""
+        b = self._b
+        if J is None or pl is None or b.lo is None:
+            return None
+        dt = self.dt
+        v = J[:3].dot(x).tolist()
+        rows, excess = [], []
+        for i in range(3):
+            p = pl[i]
+            up = (max(b.hi[i], p) - p) / dt
+            down = (min(b.lo[i], p) - p) / dt
+            if v[i] > up:
+                rows.append(i)
+                excess.append(v[i] - up)
+            elif v[i] < down:
+                rows.append(i)
+                excess.append(v[i] - down)
+        if not rows:
+            return None
+        R = J[rows]
+        try:
+            out = x - R.T @ np.linalg.solve(R @ R.T, np.array(excess))
+        except np.linalg.LinAlgError:
+            return None
+        return out if np.isfinite(out).all() else None
+
+    def _segment(self, base: np.ndarray, w: np.ndarray, J: np.ndarray | None, pl: list | None) -> float:
+        """Largest λ ∈ [0, 1] with base + λ w inside the true sets (base is inside)."""
+        b = self._b
+        lam = 1.0
+        for c, wi, lim in zip(base.tolist(), w.tolist(), b.vmax):
+            if wi > 0.0:
+                lam = min(lam, (lim - c) / wi)
+            elif wi < 0.0:
+                lam = min(lam, (-lim - c) / wi)
+        if J is not None:
+            u = J.dot(base)
+            z = J.dot(w)
+            for sl, rad in ((slice(0, 3), b.tool), (slice(3, 6), b.ang)):
+                uu, zz = u[sl], z[sl]
+                a2 = float(zz @ zz)
+                if a2 > 0.0:
+                    uz = float(uu @ zz)
+                    slack = max(rad * rad - float(uu @ uu), 0.0)
+                    lam = min(lam, (-uz + math.sqrt(uz * uz + a2 * slack)) / a2)
+            if pl is not None and b.lo is not None:
+                dt = self.dt
+                ul, zl = u.tolist(), z.tolist()
+                for i in range(3):
+                    p = pl[i]
+                    hi = max(b.hi[i], p)
+                    lo = min(b.lo[i], p)
+                    zi = zl[i] * dt
+                    if zi > 0.0:
+                        lam = min(lam, (hi - p - ul[i] * dt) / zi)
+                    elif zi < 0.0:
+                        lam = min(lam, (lo - p - ul[i] * dt) / zi)
+        # a hair inside, so the boundary point survives rounding
+        return min(max(lam * (1.0 - 1e-12), 0.0), 1.0)

@@ -1,0 +1,396 @@
+"""The control tick (thesis Fig. 4.1), once, for every world.
+
+Every period k the tick turns the world's :class:`~coassist.runtime.world.RobotState`
+into a :class:`~coassist.runtime.world.Command`::
+
+    sense ─► wrench pipeline ─► intent ─► controller ─► impedance model ─► twist ─► J⁺ (eq. 3.6) ─► safety ─► command
+             (hand wrench)      (ŷ_ref,h)  (u_r, eq. 3.27–3.31)  (eq. 3.1–3.5)
+
+1. **Wrench**: the raw sensor reading → the hand wrench w (6,) in the base frame
+   (:mod:`coassist.runtime.wrench`: bias, payload, filter, deadband, stale/spike flags).
+2. **Intent**: the feature row (x, y, ẋ, ẏ, f_x, f_y, x_ref, y_ref) goes to the intent
+   stage (:mod:`coassist.runtime.intent`), which returns p̂(k+1 … k+H) or falls back
+   to the nominal plan (eq. 4.7). The human reference is::
+
+       ref_h[i] = [p̂(k+1+i) − x0,  (p̂(k+1+i) − p̂(k+i)) / dt]      i = 0 … H−1
+
+   (the first row's velocity repeats the second's).
+3. **Controller**: u_r = controller.step(z, ref_h, ref_r, w_d) on the d controlled DOFs
+   (``TickConfig.dofs``, x-y by default), z = [Δx; v] relative to the start x0.
+4. **Impedance model** (arm worlds): the admittance M a + D v = w_d + u_r (eq. 3.1, K = 0)
+   is integrated exactly over the period (eq. 3.5) from its own virtual state z_a::
+
+       z_a(k+1) = A_d z_a(k) + B_d (w_d(k) + u_r(k))
+
+   and the controller reads z = z_a (the state its model predicts). The Cartesian twist
+   command follows the virtual state and pulls the measured pose onto it::
+
+       ẋ_cmd,i = v_a,i(k+1) + k_p (x0_i + Δx_a,i(k+1) − x_i)          controlled DOFs
+       ẋ_cmd,j = k_hold (x0_j − x_j)                                  the other DOFs, held
+       ω_cmd   = k_rot · log(R_des R_measᵀ)  (+ ω_a for controlled rotations)
+
+   with orientation errors as rotation vectors, never Euler angles.
+5. **Joint velocity** (eq. 3.6): q̇ = J⁺(q) ẋ_cmd with the damped least-squares
+   pseudo-inverse of :mod:`coassist.robot.kinematics` (bounded near singularities).
+6. **Safety** (:mod:`coassist.runtime.safety`): tool speed and workspace on the twist,
+   then joint speed, acceleration, tool speed, workspace and manipulability on q̇;
+   faults upstream (a stale or spiking sensor, a stalled predictor, a non-finite
+   controller output, a missed deadline) decelerate; too many in a row, a contact force
+   over its threshold or a robot stop latch STOPPED. When the layer changed the
+   command, the admittance state is reset to what the robot was told to do (so it does
+   not wind up and jump when the limit lets go).
+
+``effort`` worlds (the 2-D point-mass world) render the impedance model physically:
+steps 4–5 are theirs, the tick sends u_r, and the safety layer's effort stage applies
+(contact force and robot stops latch STOPPED; above the tool speed the effort may only
+brake). Every flag raised on the way is OR-ed into the tick's ``fault``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from coassist._checks import check_positive_scalar
+from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault, TrialContext
+from coassist.model.impedance import ImpedanceModel
+from coassist import spatial as _spatial
+from coassist.runtime.world import COMMAND_SPACES, Command, RobotState
+
+__all__ = ["ControlTick", "Plan", "TickConfig", "TickOutput", "UPSTREAM_BAD"]
+
+#: Faults of the stages before the safety layer that make a tick "bad" for it.
+UPSTREAM_BAD = (
+    Fault.NONFINITE_STATE
+    | Fault.NONFINITE_WRENCH
+    | Fault.NONFINITE_EFFORT
+    | Fault.INTERNAL_ERROR
+    | Fault.INVALID_INPUT
+    | Fault.SENSOR_STALE
+    | Fault.SENSOR_SATURATED
+    | Fault.WRENCH_SPIKE
+    | Fault.PREDICTOR_STALLED
+    | Fault.DEADLINE_MISS
+)
+#: Safety interventions after which the admittance state is reset to the command.
+_RESET_ADMITTANCE = (
+    Fault.JOINT_VELOCITY_LIMIT
+    | Fault.JOINT_ACCELERATION_LIMIT
+    | Fault.TOOL_SPEED_LIMIT
+    | Fault.WORKSPACE_LIMIT
+    | Fault.SINGULARITY
+    | Fault.DECELERATING
+    | Fault.STOPPED
+)
+_ROTATION = (3, 4, 5)
+
+
+@dataclass(frozen=True)
+class TickConfig:
+    """How the tick maps the admittance to a tool twist (arm worlds).
+
+    dofs : indices of the pose [x, y, z, rx, ry, rz] the controller controls, in order
+        (default (0, 1): the thesis' x-y plane). Must match the controller's DOFs.
+    position_gain : [1/s] how hard the commanded twist pulls the measured TCP onto the
+        admittance's virtual position; 10/s closes a 1 mm lag in about 0.1 s.
+    hold_gain : [1/s] the stiff impedance holding the uncontrolled translations at the
+        start pose (a 1 cm drift commands 5 cm/s back at 5/s).
+    hold_rotation_gain : [1/s] the same for the orientation (rotation-vector error).
+    dls_threshold : smallest singular value of J below which the pseudo-inverse is
+        damped (eq. 3.6 stays bounded near singularities).
+    dls_damping : the largest damping λ, reached at an exact singularity.
+    """
+
+    dofs: tuple[int, ...] = (0, 1)
+    position_gain: float = 10.0
+    hold_gain: float = 5.0
+    hold_rotation_gain: float = 5.0
+    dls_threshold: float = 0.05
+    dls_damping: float = 0.05
+
+    def __post_init__(self) -> None:
+        dofs = tuple(self.dofs)
+        if not dofs or len(set(dofs)) != len(dofs) or any(
+            isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not 0 <= i < 6 for i in dofs
+        ):
+            raise ValueError(f"TickConfig.dofs must be distinct pose indices in 0..5, got {self.dofs!r}")
+        if dofs[:2] != (0, 1):
+            raise ValueError(f"TickConfig.dofs must start with x, y (0, 1): the intent predicts the x-y plane, got {dofs!r}")
+        object.__setattr__(self, "dofs", tuple(int(i) for i in dofs))
+        for name in ("position_gain", "hold_gain", "hold_rotation_gain", "dls_threshold", "dls_damping"):
+            object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"TickConfig.{name}"))
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """What the motion planner gives the loop for one run.
+
+    reference : (n, 4) the nominal [x, y, ẋ, ẏ] on the tick grid [m, m/s], absolute, with
+        at least ``horizon`` rows past the last tick the run may reach.
+    start_pose : (6,) the TCP pose the run starts from (x0 of the controller's Δx frame;
+        the uncontrolled DOFs are held here).
+    """
+
+    reference: np.ndarray
+    start_pose: np.ndarray
+
+    def __post_init__(self) -> None:
+        ref = np.asarray(self.reference, dtype=float)
+        if ref.ndim != 2 or ref.shape[1] != 4 or ref.shape[0] < 2 or not np.isfinite(ref).all():
+            raise ValueError(f"Plan.reference must be a finite (n, 4) array with n >= 2, got shape {ref.shape}")
+        start = np.asarray(self.start_pose, dtype=float)
+        if start.shape != (6,) or not np.isfinite(start).all():
+            raise ValueError(f"Plan.start_pose must be 6 finite numbers [m, rad], got {self.start_pose!r}")
+        object.__setattr__(self, "reference", ref)
+        object.__setattr__(self, "start_pose", start)
+
+
+class TickOutput(NamedTuple):
+    """One tick's command and log row (d = controlled DOFs, H = intent horizon).
+
+    command : what the world is sent.  pose, velocity, wrench : (d,) measured pose and
+    twist and the hand wrench used [m, m/s, N].  reference : (d,) nominal at k.
+    prediction : (H, 2) positions in use (the nominal rows on fallback), or None when
+    the source is the nominal plan.  u_r, u_h_model : (d,) [N].  fault : the tick's flags.
+    """
+
+    command: Command
+    pose: np.ndarray
+    velocity: np.ndarray
+    wrench: np.ndarray
+    reference: np.ndarray
+    prediction: np.ndarray | None
+    u_r: np.ndarray
+    u_h_model: np.ndarray
+    fault: Fault
+
+
+class ControlTick:
+    """The tick (module docstring) for one controller, intent stage, wrench pipeline and safety layer.
+
+    Parameters
+    ----------
+    controller : an AssistiveController, ImpedanceControl or ManualGuidance on the d
+        controlled DOFs (``name``, ``model``, ``horizon``, ``step``).
+    intent : a :class:`~coassist.runtime.intent.TickIntent` (WindowIntent or RealtimeIntent).
+    wrench : a :class:`~coassist.runtime.wrench.WrenchPipeline`.
+    safety : a :class:`~coassist.runtime.safety.SafetyLayer` (always on).
+    command_space : the world's, ``"joint_velocity"`` or ``"effort"``.
+    kinematics : for joint-velocity worlds: ``forward_and_jacobian(q) -> (p, R, J)``
+        (:class:`coassist.robot.kinematics.UR5Kinematics`).
+    config : :class:`TickConfig`.
+    """
+
+    def __init__(self, controller: Any, intent: Any, wrench: Any, safety: Any, *, command_space: str,
+                 kinematics: Any = None, config: TickConfig | None = None) -> None:  # fmt: skip
+        if command_space not in COMMAND_SPACES:
+            raise ValueError(f"command_space must be one of {COMMAND_SPACES}, got {command_space!r}")
+        self.config = config or TickConfig()
+        model: ImpedanceModel = controller.model
+        d = model.n_dof
+        if d != len(self.config.dofs):
+            raise ValueError(f"the controller has {d} DOFs but TickConfig.dofs names {len(self.config.dofs)}")
+        if command_space == "joint_velocity" and kinematics is None:
+            raise ValueError("a joint-velocity world needs kinematics (the Jacobian of eq. 3.6)")
+        if int(intent.horizon) < int(controller.horizon):
+            raise ValueError(f"intent horizon ({intent.horizon}) must be >= the controller's ({controller.horizon})")
+        self.controller, self.intent, self.wrench, self.safety = controller, intent, wrench, safety
+        self.kinematics, self.command_space = kinematics, command_space
+        self.model, self.d, self.dt = model, d, float(model.dt)
+        self._dofs = np.array(self.config.dofs)
+        self._rot = [i for i in self.config.dofs if i in _ROTATION]
+        self._ctrl_trans = [j for j, i in enumerate(self.config.dofs) if i < 3]
+        self._ctrl_rot = [j for j, i in enumerate(self.config.dofs) if i >= 3]
+        cfg = self.config
+        self._rot_gain = np.array([cfg.position_gain if i in self.config.dofs else cfg.hold_rotation_gain for i in _ROTATION])
+        self._Ad, self._Bd = np.ascontiguousarray(model.Ad), np.ascontiguousarray(model.Bd)
+        self._tw = np.zeros(6)
+        self.H = int(controller.horizon)
+        self.Hs = int(intent.horizon)
+        self._ref_h_buf = np.zeros((self.Hs, 2 * d))
+        self._ref_h_view = self._ref_h_buf[: self.H]
+        self._z = np.zeros(2 * d)
+        self._zero_d = np.zeros(d)
+        self._plan: Plan | None = None
+
+    # ------------------------------------------------------------------ per run
+    def reset(self, plan: Plan, context: TrialContext, state: RobotState | None = None) -> None:
+        """Start a run: the plan's grids, the intent, a zero admittance state, the safety layer."""
+        if not isinstance(plan, Plan):
+            raise ValueError(f"plan must be a Plan, got {type(plan).__name__}")
+        d, dofs = self.d, self.config.dofs
+        self._plan = plan
+        start = plan.start_pose
+        self._start = start.copy()
+        self._x0 = start[self._dofs].copy()
+        n = plan.reference.shape[0]
+        ref_abs = np.zeros((n, 2 * d))  # the controller's reference [positions; velocities], absolute
+        ref_abs[:, :d] = start[self._dofs]
+        ref_abs[:, 0:2] = plan.reference[:, 0:2]
+        ref_abs[:, d : d + 2] = plan.reference[:, 2:4]
+        self._ref_pos = ref_abs[:, :d]  # the Trial's reference column
+        self._ref_xy = plan.reference[:, 0:2]
+        ref_ctrl = ref_abs.copy()
+        ref_ctrl[:, :d] -= self._x0
+        self._ref_ctrl = ref_ctrl
+        self._pred_pad = start[self._dofs][2:]
+        self.intent.reset(context)
+        self.wrench.reset()
+        self.safety.reset()
+        self._za = np.zeros(2 * d)
+        self._R_start = _spatial.rotation_matrix(start[3:6])
+        self._J = None
+        self._inv_dt = 1.0 / self.dt
+
+    # ------------------------------------------------------------------ per tick
+    def step(self, k: int, state: RobotState, upstream: Fault = Fault.NONE) -> TickOutput:
+        """Tick k: the command for this period and the log row (module docstring)."""
+        d, dofs = self.d, self._dofs
+        fault = Fault(upstream)
+        # 1. the hand wrench
+        reading = self.wrench.update(state.wrench, state.sensor_rotation, state.wrench_seq, state.t)
+        hand = reading.hand
+        fault |= reading.fault
+        pose = state.tool_pose
+        twist = state.tool_twist
+        if not (np.isfinite(pose).all() and np.isfinite(twist).all()):
+            fault |= Fault.NONFINITE_STATE
+        x = pose[dofs]
+        v = twist[dofs]
+        w = hand[dofs]
+        # 2. intent
+        ref_pos = self._ref_pos
+        row = (x[0], x[1], v[0], v[1], w[0], w[1], ref_pos[k, 0], ref_pos[k, 1])
+        ref_r = self._ref_ctrl[k + 1 : k + 1 + self.H]
+        prediction = None
+        if self.intent.nominal:
+            ref_h = ref_r
+            self.intent.update(k, row, self._ref_xy[k + 1 : k + 1 + self.Hs])
+        else:
+            nominal = self._ref_xy[k + 1 : k + 1 + self.Hs]
+            pred, pf = self.intent.update(k, row, nominal)
+            fault |= pf
+            if pred is not None:
+                buf = self._ref_h_buf
+                m = pred.shape[0]
+                np.subtract(pred, self._x0[:2], out=buf[:m, :2])
+                if m >= 2:
+                    np.subtract(pred[1:], pred[:-1], out=buf[1:m, d : d + 2])
+                    buf[1:m, d : d + 2] *= self._inv_dt
+                    buf[0, d : d + 2] = buf[1, d : d + 2]
+                else:
+                    buf[0, d : d + 2] = 0.0
+                ref_h = self._ref_h_view
+                prediction = pred
+            else:
+                ref_h = ref_r
+                prediction = nominal
+        # 3. controller, on the measured state (effort worlds) or the admittance's (arm worlds)
+        z = self._z
+        if self.command_space == "effort":
+            np.subtract(x, self._x0, out=z[:d])
+            z[d:] = v
+        else:
+            z[:] = self._za
+        u_r, u_h_model, cf = self.controller.step(z, ref_h, ref_r, w)
+        fault |= cf
+        if self.command_space == "effort":
+            command, sf = self._effort_safety(u_r, v, hand, state, fault)
+        else:
+            command, sf = self._arm(state, u_r, w, hand, fault)
+        fault |= sf
+        return TickOutput(command, x, v, w, ref_pos[k], prediction, u_r, u_h_model, fault)
+
+    # ------------------------------------------------------------------ stages
+    def _robot_stop(self, state: RobotState) -> Fault:
+        f = Fault.NONE
+        if state.protective_stop:
+            f |= Fault.ROBOT_PROTECTIVE_STOP
+        if state.emergency_stop:
+            f |= Fault.ROBOT_EMERGENCY_STOP
+        return f
+
+    def _effort_safety(self, u_r, v, hand, state, upstream: Fault) -> tuple[Command, Fault]:
+        """The safety layer's stage for effort worlds (module docstring)."""
+        lim = self.safety.limits
+        robot = self._robot_stop(state)
+        f = robot
+        force = math.sqrt(float(hand[0] * hand[0] + hand[1] * hand[1] + hand[2] * hand[2]))
+        if force > lim.contact_force:
+            f |= Fault.CONTACT_FORCE_LIMIT
+        if f or self.safety.stopped:
+            self.safety.latch_stop()
+            return Command(effort=self._zero_d.copy(), stop=True), f | Fault.STOPPED
+        if upstream & ZERO_EFFORT_FAULTS:
+            return Command(effort=u_r), f
+        speed = math.sqrt(float(v[0] * v[0] + v[1] * v[1]))
+        if speed > lim.tool_speed:
+            along = float(u_r[0] * v[0] + u_r[1] * v[1])
+            if along > 0.0:  # the robot may only brake above the speed limit
+                u_r = u_r.copy()
+                u_r[:2] -= along / (speed * speed) * v[:2]
+            f |= Fault.TOOL_SPEED_LIMIT
+        return Command(effort=u_r), f
+
+    def _arm(self, state: RobotState, u_r, w, hand, upstream: Fault) -> tuple[Command, Fault]:
+        cfg, d, dofs = self.config, self.d, self.config.dofs
+        f = Fault.NONE
+        q = np.asarray(state.q, dtype=float)
+        J = self._J
+        R_meas = p_meas = None
+        if q.shape == (self.kinematics.n_joints,) and np.isfinite(q).all():
+            try:
+                p_meas, R_meas, J = self.kinematics.forward_and_jacobian(q)
+                self._J = J
+            except Exception:
+                f |= Fault.INTERNAL_ERROR
+        else:
+            f |= Fault.NONFINITE_STATE
+        pose = np.asarray(state.tool_pose, dtype=float)
+        pose_ok = pose.shape == (6,) and bool(np.isfinite(pose).all())
+        bad = (upstream | f) & UPSTREAM_BAD
+        qd = np.zeros(self.kinematics.n_joints)
+        sf = Fault.NONE
+        if R_meas is not None and not bad and pose_ok:
+            # 4. the admittance over one period (eq. 3.5), driven by the hand and the robot's effort
+            za = self._Ad @ self._za + self._Bd @ (w + u_r)
+            self._za = za
+            start = self._start
+            tw = self._tw
+            # translations (from the kinematics, the same model as J): follow the admittance, hold the rest
+            tw[0:3] = cfg.hold_gain * (start[0:3] - p_meas)
+            for j in self._ctrl_trans:
+                tw[dofs[j]] = za[d + j] + cfg.position_gain * (start[dofs[j]] + za[j] - p_meas[dofs[j]])
+            # rotations: the error as a rotation vector, never Euler angles
+            if self._rot:
+                dr = np.zeros(3)
+                for j in self._ctrl_rot:
+                    dr[dofs[j] - 3] = za[j]
+                R_des = _spatial.rotation_matrix(dr) @ self._R_start
+            else:
+                R_des = self._R_start
+            tw[3:6] = self._rot_gain * _spatial._rotation_vector(R_des @ R_meas.T)
+            for j in self._ctrl_rot:
+                tw[dofs[j]] += za[d + j]
+            tw, sf = self.safety.limit_twist(tw, pose)
+            # 5. eq. 3.6 with the damped least-squares pseudo-inverse
+            qd, _ = _spatial.dls_joint_velocity(J, tw, cfg.dls_threshold, cfg.dls_damping)
+        Jc = J if J is not None else np.zeros((6, self.kinematics.n_joints))
+        qd, lf, stop = self.safety.limit_joint_velocity(qd, Jc, pose, hand, upstream | f, self._robot_stop(state))
+        sf |= lf | f
+        twist_cmd = Jc @ qd
+        if (sf & _RESET_ADMITTANCE) or bad:
+            # bumpless: the admittance continues from what the robot was told to do
+            x_meas = pose[self._dofs] if pose_ok else self._x0 + self._za[:d]
+            self._za[:d] = x_meas - self._x0
+            self._za[d:] = twist_cmd[self._dofs]
+            if self._rot and R_meas is not None:  # rotations: the measured orientation's Δ from the start
+                dr = _spatial._rotation_vector(R_meas @ self._R_start.T)
+                for j in self._ctrl_rot:
+                    self._za[j] = dr[dofs[j] - 3]
+        return Command(qd=qd, twist=twist_cmd, stop=stop), sf
+
+

@@ -1,0 +1,567 @@
+"""The wrench pipeline: from the raw force/torque reading to the hand wrench in the base frame.
+
+Once per control tick (125 Hz or 500 Hz) the loop hands :meth:`WrenchPipeline.update`
+the sensor's raw reading ``w_raw = [f; τ]`` [N, N·m] in the *sensor* frame (sign:
+the force the tool applies to the sensor, :mod:`coassist.runtime.world`), the sensor's
+orientation R (3×3, columns = sensor axes in the base frame), the sensor's sample
+counter and the tick time. It returns :class:`WrenchReading`: the hand wrench
+``[f_h; τ_h]`` in the base frame (torque about the sensor origin), the tick's
+:class:`~coassist.interfaces.Fault` flags and whether a new sample went into it.
+
+Stages, in order::
+
+    1. validate      w_raw not 6 finite reals         → 0, NONFINITE_WRENCH / INVALID_INPUT
+    2. stale         seq unchanged for > max_sample_age → 0, SENSOR_STALE
+    3. spike         |w_raw,i| > 1.5·range, or |Δw_raw,i| > spike_jump (sample to sample)
+                                                       → hold, WRENCH_SPIKE
+    4. saturation    |w_raw,i| ≥ range                  → hold, SENSOR_SATURATED
+    5. bias          w_s = w_raw − b                                (b: sensor frame)
+    6. payload       w_s ← w_s − [F_g; c × F_g],   F_g = m Rᵀ g     (sensor frame)
+    7. base frame    f_h = R f_s,   τ_h = R τ_s                     (about the sensor origin)
+    8. low-pass      y_k = y_{k−1} + (1 − e^{−2π f_c dt}) (x_k − y_{k−1})   every tick
+    9. deadband      f ← f · max(‖f‖ − d_f, 0)/‖f‖,  τ ← τ · max(‖τ‖ − d_τ, 0)/‖τ‖
+
+Payload (stage 6). The tool of mass m [kg] with centre of mass c [m] (sensor frame)
+hangs on the sensor. Quasi-statically the sensor carries everything applied to the
+tool, so with this sign convention it reads the hand's wrench plus the tool's weight,
+both as wrenches about the sensor origin, plus the sensor's bias b::
+
+    w_raw = b + [F_g; c × F_g] + w_hand,s,     F_g = m Rᵀ g   [N]
+
+where g (base frame, default (0, 0, −9.81) m/s²) is gravity and Rᵀ g is gravity in the
+sensor frame; :func:`payload_wrench` computes ``[F_g; c × F_g]``. Hence
+``w_hand,s = w_raw − b − [F_g; c × F_g]``. The bias is measured with nobody touching
+the tool: ``b = mean_i(w_raw,i − payload(R_i))`` (:meth:`WrenchPipeline.zero`, or
+:meth:`WrenchPipeline.request_zero` from the next accepted samples).
+
+What each fault does, and why:
+
+- Zero-output faults (invalid input, stale sensor, :data:`Fault.INTERNAL_ERROR`): the
+  output is exactly zero, as if the hand had let go, so the admittance stops driving
+  the robot. The filter and the held wrench restart from zero, so the output ramps back
+  through the filter when readings return. A stale sensor also forgets the spike
+  reference (after a gap, a large change from the last sample is plausible).
+- Hold faults (spike, saturation): the reading is not the hand force, so the last
+  accepted hand wrench is held (and still filtered). The pipeline does not stop
+  anything; the safety layer reads the flag and decides whether to decelerate or stop.
+- A spike is a reading beyond 1.5× the sensor's range (never physical: never accepted)
+  or a jump from the last accepted sample larger than ``spike_jump_*`` on any channel.
+  A jump that persists is a real step: its ``spike_hold``-th consecutive sample, each
+  within ``spike_jump_*`` of the one before, is accepted (``spike_hold = 1`` turns the
+  jump test off). Jumps that do not agree with each other (noise bursts) never are.
+
+Timing. The 100 Hz Robotiq FT300 read at 125 Hz repeats one sample in five: a repeated
+``seq`` is normal and the held wrench is used; only when ``seq`` has not moved for more
+than ``max_sample_age`` (measured on the tick clock ``t`` from the tick that first saw
+the current sample) is the sensor stale. The low-pass filter runs on *every* tick, on
+the held value, so its time base is the control period ``dt`` and its step response
+at tick k after a step accepted at tick 0 is exactly ``1 − exp(−2π f_c (k+1) dt)``.
+
+:meth:`WrenchPipeline.update` never raises and costs a few microseconds (scalar math on
+floats, no per-tick linear algebra).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from coassist.interfaces import Fault
+
+__all__ = ["WrenchConfig", "WrenchPipeline", "WrenchReading", "payload_wrench"]
+
+log = logging.getLogger(__name__)
+
+#: A reading beyond this multiple of the sensor's range cannot be physical (a corrupted
+#: packet, a 5 kN value): it is a spike however long it lasts.
+IMPLAUSIBLE_RANGE_FACTOR = 1.5
+#: Relative margin under the range at which a channel counts as saturated (the sensor
+#: clips exactly at its range; float noise must not hide it).
+_SATURATION_MARGIN = 1e-6
+
+
+class WrenchReading(NamedTuple):
+    """What the pipeline gives the tick.
+
+    hand : (6,) hand wrench ``[fx, fy, fz, τx, τy, τz]`` [N, N·m] in the base frame,
+        torque about the sensor origin; a new array every tick (safe to keep).
+    fault : the tick's fault flags (``Fault.NONE`` when all is well).
+    fresh : True when a new sensor sample was accepted and went into ``hand`` this tick
+        (False on a repeated sample, a rejected or saturated one, a fault, or zeroing).
+    """
+
+    hand: np.ndarray
+    fault: Fault
+    fresh: bool
+
+
+def _finite_float(value: object, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    out = float(value)
+    if not math.isfinite(out):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return out
+
+
+def _vector3(value: object, name: str) -> tuple[float, float, float]:
+    if isinstance(value, (str, bytes)):
+        raise ValueError(f"{name} must be 3 numbers, got {value!r}")
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be 3 numbers, got {value!r}") from None
+    if arr.dtype.kind not in "fiu" or arr.shape != (3,):
+        raise ValueError(f"{name} must be 3 real numbers, got {value!r}")
+    arr = arr.astype(float)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+@dataclass(frozen=True)
+class WrenchConfig:
+    """Parameters of the wrench pipeline (module docstring for the stages).
+
+    Attributes
+    ----------
+    tool_mass : mass of everything mounted after the sensor (handle, gripper, object
+        held rigidly) [kg], ≥ 0. Its weight is removed from the reading at every
+        orientation; 0 turns payload compensation off.
+    tool_com : centre of mass of that payload in the sensor frame [m], 3 numbers. Sets
+        the torque the weight makes about the sensor origin.
+    gravity : gravity vector in the robot base frame [m/s²], 3 numbers; (0, 0, −9.81)
+        for a floor-mounted robot with z up.
+    cutoff_hz : cutoff of the first-order low-pass filter on each channel [Hz], > 0, or
+        None for no filtering. Lower is smoother but lags the hand: the filter's time
+        constant is 1/(2π·cutoff_hz) (15 Hz: 10.6 ms).
+    deadband_force : force magnitude treated as no push [N], ≥ 0. Forces below it read
+        zero, above it the magnitude is reduced by it (continuous, direction kept), so
+        sensor noise and drift do not creep the robot. 0.2 N: four times the FT300's
+        noise (≈ 0.05 N), and 2 % of a light 10 N push (the admittance then renders
+        (F − 0.2 N)/D).
+    deadband_torque : the same for the torque magnitude [N·m], ≥ 0.
+    force_range : the sensor's force range per axis [N], > 0 (FT300: 300). A channel at
+        it is saturated; beyond 1.5× it the reading is impossible (a spike).
+    torque_range : the sensor's torque range per axis [N·m], > 0 (FT300: 30).
+    max_sample_age : longest time without a new sensor sample before the sensor counts
+        as stale and the output goes to zero [s], > 0 and ≥ the control period. A 100 Hz
+        sensor read at 125 Hz has gaps of up to 16 ms between new samples.
+    spike_jump_force : largest believable change of one force channel between two
+        consecutive samples [N], > 0; a larger change is held back as a spike.
+    spike_jump_torque : the same for a torque channel [N·m], > 0.
+    spike_hold : number of consecutive samples a jump must persist to be accepted as a
+        real step, ≥ 1 (the first ``spike_hold − 1`` are rejected; 1: no jump test).
+    zero_samples : number of accepted samples averaged by
+        :meth:`WrenchPipeline.request_zero` to measure the bias, ≥ 1 (25: 0.25 s at 100 Hz).
+    """
+
+    tool_mass: float = 0.0
+    tool_com: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    cutoff_hz: float | None = 15.0
+    deadband_force: float = 0.2
+    deadband_torque: float = 0.05
+    force_range: float = 300.0
+    torque_range: float = 30.0
+    max_sample_age: float = 0.03
+    spike_jump_force: float = 150.0
+    spike_jump_torque: float = 15.0
+    spike_hold: int = 3
+    zero_samples: int = 25
+
+    def __post_init__(self) -> None:
+        def name(field: str) -> str:
+            return f"WrenchConfig.{field}"
+
+        def put(field: str, value: object) -> None:
+            object.__setattr__(self, field, value)  # frozen: normalise once, here
+
+        for field in ("tool_mass", "deadband_force", "deadband_torque"):
+            value = _finite_float(getattr(self, field), name(field))
+            if value < 0.0:
+                raise ValueError(f"{name(field)} must be >= 0, got {value!r}")
+            put(field, value)
+        for field in ("force_range", "torque_range", "max_sample_age", "spike_jump_force", "spike_jump_torque"):
+            value = _finite_float(getattr(self, field), name(field))
+            if value <= 0.0:
+                raise ValueError(f"{name(field)} must be > 0, got {value!r}")
+            put(field, value)
+        if self.cutoff_hz is not None:
+            value = _finite_float(self.cutoff_hz, name("cutoff_hz"))
+            if value <= 0.0:
+                raise ValueError(f"{name('cutoff_hz')} must be > 0 or None, got {value!r}")
+            put("cutoff_hz", value)
+        put("tool_com", _vector3(self.tool_com, name("tool_com")))
+        put("gravity", _vector3(self.gravity, name("gravity")))
+        for field in ("spike_hold", "zero_samples"):
+            value = getattr(self, field)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise ValueError(f"{name(field)} must be an integer, got {value!r}")
+            if value < 1:
+                raise ValueError(f"{name(field)} must be >= 1, got {value!r}")
+            put(field, int(value))
+
+
+def payload_wrench(mass: float, com: ArrayLike, gravity: ArrayLike, rotation: ArrayLike) -> np.ndarray:
+    """The tool's gravity wrench as the sensor reads it, in the sensor frame.
+
+    ``[F_g; τ_g] = [m Rᵀ g; c × m Rᵀ g]`` [N, N·m]: the weight (gravity g in the base
+    frame, turned into the sensor frame by Rᵀ) and its torque about the sensor origin
+    from the centre of mass c (sensor frame).
+
+    Parameters
+    ----------
+    mass : [kg]. com : (3,) [m], sensor frame. gravity : (3,) [m/s²], base frame.
+    rotation : (3, 3) sensor orientation in the base frame (columns: sensor axes), or a
+        stack (..., 3, 3).
+
+    Returns
+    -------
+    (6,) or (..., 6).
+    """
+    R = np.asarray(rotation, dtype=float)
+    if R.shape[-2:] != (3, 3):
+        raise ValueError(f"rotation must have shape (..., 3, 3), got {R.shape}")
+    c = np.asarray(com, dtype=float).reshape(3)
+    g = np.asarray(gravity, dtype=float).reshape(3)
+    force = float(mass) * np.einsum("...ji,j->...i", R, g)  # m Rᵀ g
+    torque = np.cross(c, force)
+    return np.concatenate([force, torque], axis=-1)
+
+
+_ZERO6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+_NO_FAULT = Fault.NONE
+
+
+class WrenchPipeline:
+    """Raw sensor reading → hand wrench in the base frame, one call per control tick.
+
+    Parameters
+    ----------
+    config : :class:`WrenchConfig`.
+    dt : the control period [s] (0.008 at 125 Hz, 0.002 at 500 Hz): the filter's time base.
+
+    The bias starts at zero; set it with :meth:`zero` (or :meth:`request_zero`) before
+    the person takes the handle. :meth:`reset` clears the per-trial state and keeps it.
+    """
+
+    def __init__(self, config: WrenchConfig, dt: float) -> None:
+        if not isinstance(config, WrenchConfig):
+            raise ValueError(f"config must be a WrenchConfig, got {type(config).__name__}")
+        dt = _finite_float(dt, "dt")
+        if dt <= 0.0:
+            raise ValueError(f"dt must be > 0, got {dt!r}")
+        if config.max_sample_age < dt:
+            # Otherwise every repeated sample of a slower sensor would read as stale.
+            raise ValueError(f"WrenchConfig.max_sample_age ({config.max_sample_age}) must be >= dt ({dt})")
+        self.config = config
+        self.dt = dt
+        c = config
+        # Per-tick constants as plain floats: scalar math beats numpy on 6-vectors.
+        self._mg = tuple(c.tool_mass * gi for gi in c.gravity)
+        self._com = c.tool_com
+        self._has_payload = c.tool_mass > 0.0
+        self._alpha = None if c.cutoff_hz is None else 1.0 - math.exp(-2.0 * math.pi * c.cutoff_hz * dt)
+        self._db_f = c.deadband_force
+        self._db_t = c.deadband_torque
+        self._sat_f = c.force_range * (1.0 - _SATURATION_MARGIN)
+        self._sat_t = c.torque_range * (1.0 - _SATURATION_MARGIN)
+        self._max_f = c.force_range * IMPLAUSIBLE_RANGE_FACTOR
+        self._max_t = c.torque_range * IMPLAUSIBLE_RANGE_FACTOR
+        self._jump_f = c.spike_jump_force
+        self._jump_t = c.spike_jump_torque
+        # 1 ns of slack: a tick time on an exact multiple of max_sample_age must not be
+        # decided by float rounding of k·dt.
+        self._max_age = c.max_sample_age + 1e-9
+        self._bias = _ZERO6
+        self._error_logged = False
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+
+    def reset(self) -> None:
+        """Forget the per-trial state (filter, held wrench, spike and sample tracking,
+        a pending re-zero); the bias is kept."""
+        self._y = list(_ZERO6)  # filter state, base frame
+        self._held = _ZERO6  # last accepted hand wrench, base frame (filter input)
+        self._ref: tuple[float, ...] | None = None  # last accepted raw sample (spike test)
+        self._cand: tuple[float, ...] | None = None  # last rejected jump sample
+        self._cand_n = 0  # consecutive, mutually consistent jump samples so far
+        self._seq: object = None
+        self._seq_t = 0.0  # tick time at which the current seq was first seen
+        self._zero_left = 0
+        self._zero_n = 0
+        self._zero_sum = [0.0] * 6
+
+    @property
+    def bias(self) -> np.ndarray:
+        """(6,) sensor bias ``[f; τ]`` [N, N·m] in the sensor frame (a copy)."""
+        return np.array(self._bias)
+
+    @property
+    def zeroing(self) -> bool:
+        """True while :meth:`request_zero` is collecting samples (the output is zero)."""
+        return self._zero_left > 0
+
+    def zero(self, raw_samples: ArrayLike, rotations: ArrayLike) -> np.ndarray:
+        """Set the bias from readings taken with nobody touching the tool.
+
+        ``b = mean_i(w_raw,i − payload_wrench(m, c, g, R_i))`` in the sensor frame.
+        Several orientations are not needed for the bias (the payload is modelled), but
+        averaging over them also averages out a small error in m or c.
+
+        Parameters
+        ----------
+        raw_samples : (n, 6) raw readings [N, N·m], sensor frame.
+        rotations : (n, 3, 3) the sensor orientation at each, or one (3, 3) for all.
+
+        Returns the new bias (6,). Raises ValueError on bad input (not a per-tick call).
+        """
+        raw = np.asarray(raw_samples, dtype=float)
+        if raw.ndim != 2 or raw.shape[1] != 6 or raw.shape[0] < 1:
+            raise ValueError(f"raw_samples must have shape (n >= 1, 6), got {raw.shape}")
+        R = np.asarray(rotations, dtype=float)
+        if R.shape == (3, 3):
+            R = np.broadcast_to(R, (raw.shape[0], 3, 3))
+        if R.shape != (raw.shape[0], 3, 3):
+            raise ValueError(f"rotations must have shape ({raw.shape[0]}, 3, 3) or (3, 3), got {R.shape}")
+        if not (np.all(np.isfinite(raw)) and np.all(np.isfinite(R))):
+            raise ValueError("raw_samples and rotations must be finite")
+        err = np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max()
+        if err > 1e-6:
+            raise ValueError(f"rotations must be rotation matrices (max |RᵀR − I| = {err:.3g})")
+        c = self.config
+        bias = (raw - payload_wrench(c.tool_mass, c.tool_com, c.gravity, R)).mean(axis=0)
+        self._bias = tuple(float(v) for v in bias)
+        self._zero_left = 0
+        return self.bias
+
+    def request_zero(self, n: int | None = None) -> None:
+        """Re-measure the bias from the next ``n`` accepted samples (default ``zero_samples``).
+
+        Call it with nobody touching the tool. Until the n-th sample the output is exactly
+        zero, ``fresh`` is False and :attr:`zeroing` is True; no fault is flagged (this is
+        an intended pause, not a failure). Rejected (spike, saturated, invalid) samples do
+        not count. The filter restarts from zero afterwards.
+        """
+        if n is None:
+            n = self.config.zero_samples
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"n must be an integer >= 1, got {n!r}")
+        self._zero_left = int(n)
+        self._zero_n = 0
+        self._zero_sum = [0.0] * 6
+        self._y = list(_ZERO6)
+        self._held = _ZERO6
+
+    # ------------------------------------------------------------------ tick
+
+    def update(self, raw: ArrayLike, sensor_rotation: ArrayLike, seq: int, t: float) -> WrenchReading:
+        """One tick: raw reading (6,) sensor frame, R (3, 3), sample counter, tick time [s].
+
+        Never raises: an unexpected error gives zero output and ``Fault.INTERNAL_ERROR``.
+        """
+        try:
+            return self._update(raw, sensor_rotation, seq, t)
+        except Exception:  # the loop must keep running; the hand "lets go"
+            if not self._error_logged:
+                log.exception("wrench pipeline raised; zero hand wrench used")
+                self._error_logged = True
+            self._let_go(forget_reference=True)
+            return WrenchReading(np.zeros(6), Fault.INTERNAL_ERROR, False)
+
+    def _let_go(self, forget_reference: bool) -> None:
+        self._y = list(_ZERO6)
+        self._held = _ZERO6
+        self._cand = None
+        self._cand_n = 0
+        if forget_reference:
+            self._ref = None
+
+    def _update(self, raw, sensor_rotation, seq, t) -> WrenchReading:
+        fault = _NO_FAULT
+        # --- time and sample counter
+        if type(t) is not float:
+            t = float(t) if isinstance(t, (int, np.integer, np.floating)) and not isinstance(t, bool) else math.nan
+        if type(seq) is not int:
+            seq = int(seq) if isinstance(seq, np.integer) else None
+        new = stale = False
+        if seq is not None and math.isfinite(t):
+            if seq != self._seq:
+                new = True
+                self._seq = seq
+                self._seq_t = t
+            elif t - self._seq_t > self._max_age:
+                stale = True
+        else:
+            fault |= Fault.INVALID_INPUT
+
+        # --- 1. validate the rotation and the reading
+        R = sensor_rotation
+        if not (type(R) is np.ndarray and R.shape == (3, 3) and R.dtype.kind == "f"):
+            R = self._as_real(R, (3, 3))
+        if R is None:
+            fault |= Fault.INVALID_INPUT
+        else:
+            (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
+            # x·0 is 0 for a finite x and NaN for ±inf/NaN: one comparison checks all nine.
+            s = (r00 + r01 + r02 + r10 + r11 + r12 + r20 + r21 + r22) * 0.0
+            if s != s:
+                fault |= Fault.INVALID_INPUT
+        w = raw
+        if not (type(w) is np.ndarray and w.shape == (6,) and w.dtype.kind == "f"):
+            w = self._as_real(w, (6,))
+        if w is None:
+            fault |= Fault.INVALID_INPUT
+        else:
+            w0, w1, w2, w3, w4, w5 = w = tuple(w.tolist())
+            s = w0 * 0.0 + w1 * 0.0 + w2 * 0.0 + w3 * 0.0 + w4 * 0.0 + w5 * 0.0
+            if s != s:
+                fault |= Fault.NONFINITE_WRENCH
+
+        # --- 2. stale sensor
+        if stale:
+            fault |= Fault.SENSOR_STALE
+        if fault:
+            self._let_go(forget_reference=stale)
+            return WrenchReading(np.zeros(6), fault, False)
+
+        fresh = False
+        if new:
+            # --- 3. spike: impossible value, or an unbelievable jump that has not persisted
+            a0, a1, a2, a3, a4, a5 = abs(w0), abs(w1), abs(w2), abs(w3), abs(w4), abs(w5)
+            mf = max(a0, a1, a2)
+            mt = max(a3, a4, a5)
+            if mf > self._max_f or mt > self._max_t:
+                accepted = False
+                self._cand = None
+                self._cand_n = 0
+            elif self._ref is None or not self._jumps(w, self._ref):
+                accepted = True
+            else:
+                cand = self._cand
+                self._cand_n = self._cand_n + 1 if cand is not None and not self._jumps(w, cand) else 1
+                self._cand = w
+                accepted = self._cand_n >= self.config.spike_hold
+            if not accepted:
+                fault |= Fault.WRENCH_SPIKE
+            else:
+                self._ref = w
+                self._cand = None
+                self._cand_n = 0
+                # --- 4. saturation: a clipped channel is not the hand force; hold
+                if mf >= self._sat_f or mt >= self._sat_t:
+                    fault |= Fault.SENSOR_SATURATED
+                else:
+                    # --- 6. payload gravity wrench in the sensor frame: F = m Rᵀ g, τ = c × F
+                    if self._has_payload:
+                        gx, gy, gz = self._mg
+                        fx = r00 * gx + r10 * gy + r20 * gz
+                        fy = r01 * gx + r11 * gy + r21 * gz
+                        fz = r02 * gx + r12 * gy + r22 * gz
+                        cx, cy, cz = self._com
+                        w0 -= fx
+                        w1 -= fy
+                        w2 -= fz
+                        w3 -= cy * fz - cz * fy
+                        w4 -= cz * fx - cx * fz
+                        w5 -= cx * fy - cy * fx
+                    if self._zero_left > 0:
+                        self._collect_zero((w0, w1, w2, w3, w4, w5))
+                    else:
+                        # --- 5. bias (sensor frame)
+                        b = self._bias
+                        w0 -= b[0]
+                        w1 -= b[1]
+                        w2 -= b[2]
+                        w3 -= b[3]
+                        w4 -= b[4]
+                        w5 -= b[5]
+                        # --- 7. into the base frame
+                        self._held = (
+                            r00 * w0 + r01 * w1 + r02 * w2,
+                            r10 * w0 + r11 * w1 + r12 * w2,
+                            r20 * w0 + r21 * w1 + r22 * w2,
+                            r00 * w3 + r01 * w4 + r02 * w5,
+                            r10 * w3 + r11 * w4 + r12 * w5,
+                            r20 * w3 + r21 * w4 + r22 * w5,
+                        )
+                        fresh = True
+
+        if self._zero_left > 0:
+            return WrenchReading(np.zeros(6), fault, False)
+
+        # --- 8. low-pass, every tick on the held value (time base: the control period)
+        a = self._alpha
+        if a is None:
+            y0, y1, y2, y3, y4, y5 = self._held
+        else:
+            y = self._y
+            h = self._held
+            y0 = y[0] + a * (h[0] - y[0])
+            y1 = y[1] + a * (h[1] - y[1])
+            y2 = y[2] + a * (h[2] - y[2])
+            y3 = y[3] + a * (h[3] - y[3])
+            y4 = y[4] + a * (h[4] - y[4])
+            y5 = y[5] + a * (h[5] - y[5])
+            self._y = [y0, y1, y2, y3, y4, y5]
+
+        # --- 9. deadband on the vector norms (direction kept, continuous at the edge)
+        db = self._db_f
+        if db > 0.0:
+            n = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+            k = (n - db) / n if n > db else 0.0
+            y0 *= k
+            y1 *= k
+            y2 *= k
+        db = self._db_t
+        if db > 0.0:
+            n = math.sqrt(y3 * y3 + y4 * y4 + y5 * y5)
+            k = (n - db) / n if n > db else 0.0
+            y3 *= k
+            y4 *= k
+            y5 *= k
+        return WrenchReading(np.array((y0, y1, y2, y3, y4, y5)), fault, fresh)
+
+    def _jumps(self, w: tuple[float, ...], ref: tuple[float, ...]) -> bool:
+        """True when any channel of w differs from ref by more than its spike_jump."""
+        jf, jt = self._jump_f, self._jump_t
+        return (
+            abs(w[0] - ref[0]) > jf
+            or abs(w[1] - ref[1]) > jf
+            or abs(w[2] - ref[2]) > jf
+            or abs(w[3] - ref[3]) > jt
+            or abs(w[4] - ref[4]) > jt
+            or abs(w[5] - ref[5]) > jt
+        )
+
+    def _collect_zero(self, w: tuple[float, ...]) -> None:
+        """Accumulate one payload-compensated sample for the bias; finish after the last."""
+        acc = self._zero_sum
+        for i in range(6):
+            acc[i] += w[i]
+        self._zero_n += 1
+        self._zero_left -= 1
+        if self._zero_left == 0:
+            self._bias = tuple(v / self._zero_n for v in acc)
+            self._y = list(_ZERO6)
+            self._held = _ZERO6
+
+    @staticmethod
+    def _as_real(value: object, shape: tuple[int, ...]) -> np.ndarray | None:
+        """The slow path: value as a float array of ``shape``, or None (wrong shape or type)."""
+        if isinstance(value, (str, bytes)):
+            return None
+        try:
+            arr = np.asarray(value)
+        except Exception:  # ragged lists, objects that refuse conversion
+            return None
+        if arr.dtype.kind not in "fiu" or arr.shape != shape:  # bool, complex, str, object
+            return None
+        return arr.astype(float)

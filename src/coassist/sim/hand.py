@@ -1,0 +1,72 @@
+"""The simulated operator as the hand of an arm world (the MuJoCo UR5): the 2-D arm lifted to 3-D.
+
+x-y as in the thesis: :class:`~coassist.sim.operator.OperatorArm` (eq. 4.1 with delay,
+adaptation, noise and force limit) pulls the handle toward the operator's intent. The
+other DOFs:
+
+- ``full_pose=False`` (default, the thesis' x-y tasks): the hand applies nothing along
+  z or in rotation; the robot holds those DOFs at the start pose itself (the tick's
+  stiff hold impedance).
+- ``full_pose=True`` (6-DOF control): the hand also holds z and the orientation at the
+  start pose with its own spring-damper, the orientation error as a rotation vector::
+
+      f_z = k_z (z0 − z) − c_z ż,      τ = k_r log(R0 Rᵀ) − c_r ω
+
+The world calls :meth:`SimulatedHand.force` once per control period, in order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from coassist.sim.operator import OperatorArm
+from coassist.spatial import orientation_error, rotation_matrix
+
+__all__ = ["SimulatedHand"]
+
+
+class SimulatedHand:
+    """A :class:`~coassist.runtime.world.HandOperator` driven by an :class:`OperatorArm`.
+
+    Parameters
+    ----------
+    arm : the operator's arm for this trial (intent grid on the control period).
+    dt : the control period [s] (the arm's tick).
+    start_pose : (6,) the handle's start pose (held in z and orientation when full_pose).
+    full_pose : see the module docstring.
+    offset : (2,) the hand point minus the tool's TCP in x-y at the start [m]: the arm's
+        intent is the TCP's (as in the point-mass world, where the hand point moves with
+        the board's yaw), so the constant grasp offset is taken out.
+    z_stiffness, z_damping : [N/m], [N·s/m] of the hand's hold along z.
+    rotation_stiffness, rotation_damping : [N·m/rad], [N·m·s/rad] of the wrist's hold.
+    """
+
+    def __init__(self, arm: OperatorArm, dt: float, start_pose: np.ndarray, *, full_pose: bool = False, offset=(0.0, 0.0),
+                 z_stiffness: float = 300.0, z_damping: float = 30.0, rotation_stiffness: float = 3.0,
+                 rotation_damping: float = 0.3) -> None:  # fmt: skip
+        self.arm = arm
+        self.dt = float(dt)
+        self.start = np.asarray(start_pose, dtype=float).copy()
+        self.R0 = rotation_matrix(self.start[3:6])
+        self.full_pose = bool(full_pose)
+        self.kz, self.cz = float(z_stiffness), float(z_damping)
+        self.kr, self.cr = float(rotation_stiffness), float(rotation_damping)
+        self.ox, self.oy = float(offset[0]), float(offset[1])
+        self.k = 0
+        self.last = np.zeros(6)
+
+    def force(self, t: float, hand_pose: np.ndarray, hand_twist: np.ndarray) -> np.ndarray:
+        k = self.k
+        self.k += 1
+        w = np.zeros(6)
+        if not (np.isfinite(hand_pose).all() and np.isfinite(hand_twist).all()):
+            self.last = w
+            return w
+        w[0], w[1] = self.arm.force(
+            k, float(hand_pose[0]) - self.ox, float(hand_pose[1]) - self.oy, float(hand_twist[0]), float(hand_twist[1])
+        )
+        if self.full_pose:
+            w[2] = self.kz * (self.start[2] - hand_pose[2]) - self.cz * hand_twist[2]
+            w[3:6] = self.kr * orientation_error(self.R0, rotation_matrix(hand_pose[3:6])) - self.cr * hand_twist[3:6]
+        self.last = w
+        return w

@@ -1,0 +1,264 @@
+"""A fake of ur-rtde's RTDEControlInterface / RTDEReceiveInterface for tests.
+
+One :class:`FakeRobot` holds a trivial arm shared by the two interfaces and records
+every call of either, in order, as ``Call(source, name, args, t)`` (``source`` is
+"control" or "receive", ``t`` the monotonic time). Pass ``robot.control_factory`` and
+``robot.receive_factory`` to ``URRTDEWorld``.
+
+The arm: ``speedJ(qd, a, time)`` sets the target joint velocity; each ``waitPeriod``
+advances one period (1/frequency, or the step time when frequency is -1): the joint
+velocity moves toward the target by at most a·period, q integrates it, the timestamp
+advances. The TCP pose is ``tcp_pose`` or ``pose_fn(q)``; the TCP force is
+``tcp_force`` (base frame) minus what ``zeroFtSensor`` captured.
+
+Faults to inject (plain attributes):
+- ``protective_stop_at = N``: the N-th speedJ (1-based) triggers a protective stop: the
+  arm halts, the safety bits say so, and speedJ/speedStop return False from then on.
+- ``link_down = True`` or a method name in ``raise_on``: calls raise RuntimeError, as
+  ur-rtde does when the connection is gone (the call is still recorded).
+- ``connected = False``: isConnected() returns False.
+- ``frozen = True``: the timestamp stops advancing (a dead receive thread).
+- ``late_by = X``: waitPeriod returns X s after the end of the period (a late tick).
+- ``script_running = False``: speedJ returns False (the control script has stopped,
+  e.g. the watchdog fired) without any safety stop.
+- ``step_time``: what getStepTime returns.
+
+Method names and signatures follow ur-rtde 1.6.5 (tests check each exists there).
+"""
+
+from __future__ import annotations
+
+import datetime
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+PROTECTIVE_STOPPED_BIT = 1 << 2
+EMERGENCY_STOPPED_BIT = 1 << 7
+NORMAL_MODE_BIT = 1 << 0
+
+
+@dataclass
+class Call:
+    source: str
+    name: str
+    args: tuple
+    t: float
+
+
+class FakeRobot:
+    def __init__(
+        self,
+        *,
+        step_time: float = 0.002,
+        tcp_pose: list[float] | None = None,
+        pose_fn: Callable[[np.ndarray], list[float]] | None = None,
+        tcp_force: list[float] | None = None,
+    ) -> None:
+        self.calls: list[Call] = []
+        self.step_time = step_time
+        self.frequency = -1.0
+        self.q = np.zeros(6)
+        self.qd = np.zeros(6)
+        self.target_qd = np.zeros(6)
+        self.acceleration = 0.0
+        self.timestamp = 1000.0
+        self.tcp_pose = list(tcp_pose) if tcp_pose is not None else [0.4, 0.1, 0.3, 0.0, 0.0, 0.0]
+        self.pose_fn = pose_fn
+        self.tcp_speed = [0.0] * 6
+        self.tcp_force = list(tcp_force) if tcp_force is not None else [0.0] * 6
+        self.force_offset = [0.0] * 6
+        self.tcp_offset = [0.0] * 6
+        self.payload = (0.0, [0.0, 0.0, 0.0])
+        self.safety_bits = NORMAL_MODE_BIT
+        self.n_speedj = 0
+        # fault injection
+        self.protective_stop_at: int | None = None
+        self.link_down = False
+        self.raise_on: set[str] = set()
+        self.connected = True
+        self.frozen = False
+        self.late_by = 0.0
+        self.script_running = True
+
+    # -- factories (URRTDEWorld's control_factory / receive_factory) -----------------
+
+    def control_factory(self, host: str, frequency: float) -> FakeRTDEControl:
+        self.frequency = frequency
+        self.record("control", "__init__", host, frequency)
+        return FakeRTDEControl(self)
+
+    def receive_factory(self, host: str, frequency: float) -> FakeRTDEReceive:
+        self.record("receive", "__init__", host, frequency)
+        return FakeRTDEReceive(self)
+
+    # -- helpers ---------------------------------------------------------------------
+
+    def record(self, source: str, name: str, *args: object) -> None:
+        self.calls.append(Call(source, name, args, time.monotonic()))
+        if self.link_down or name in self.raise_on:
+            raise RuntimeError(f"RTDE {source} interface: not connected to the robot ({name})")
+
+    def names(self, source: str | None = None) -> list[str]:
+        return [c.name for c in self.calls if source is None or c.source == source]
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.frequency if self.frequency > 0 else self.step_time
+
+    @property
+    def protective_stopped(self) -> bool:
+        return bool(self.safety_bits & PROTECTIVE_STOPPED_BIT)
+
+    def step(self) -> None:
+        """Advance the arm one period."""
+        dt = self.period
+        dv = np.clip(self.target_qd - self.qd, -self.acceleration * dt, self.acceleration * dt)
+        self.qd = self.qd + dv
+        self.q = self.q + self.qd * dt
+        if not self.frozen:
+            self.timestamp += dt
+
+    def pose(self) -> list[float]:
+        return list(self.pose_fn(self.q)) if self.pose_fn is not None else list(self.tcp_pose)
+
+
+class FakeRTDEControl:
+    def __init__(self, robot: FakeRobot) -> None:
+        self.robot = robot
+
+    def _rec(self, name: str, *args: object) -> None:
+        self.robot.record("control", name, *args)
+
+    def isConnected(self) -> bool:
+        self._rec("isConnected")
+        return self.robot.connected
+
+    def getStepTime(self) -> float:
+        self._rec("getStepTime")
+        return self.robot.step_time
+
+    def setTcp(self, tcp_offset: list[float]) -> bool:
+        self._rec("setTcp", list(tcp_offset))
+        self.robot.tcp_offset = list(tcp_offset)
+        return True
+
+    def getTCPOffset(self) -> list[float]:
+        self._rec("getTCPOffset")
+        return list(self.robot.tcp_offset)
+
+    def setPayload(self, mass: float, cog: list[float]) -> bool:
+        self._rec("setPayload", mass, list(cog))
+        self.robot.payload = (mass, list(cog))
+        return True
+
+    def zeroFtSensor(self) -> bool:
+        self._rec("zeroFtSensor")
+        self.robot.force_offset = list(self.robot.tcp_force)
+        return True
+
+    def setWatchdog(self, min_frequency: float = 10.0) -> bool:
+        self._rec("setWatchdog", min_frequency)
+        return True
+
+    def kickWatchdog(self) -> bool:
+        self._rec("kickWatchdog")
+        return True
+
+    def initPeriod(self) -> datetime.timedelta:
+        self._rec("initPeriod")
+        return datetime.timedelta(seconds=time.monotonic())
+
+    def waitPeriod(self, t_cycle_start: datetime.timedelta) -> None:
+        self._rec("waitPeriod", t_cycle_start)
+        end = t_cycle_start.total_seconds() + self.robot.period + self.robot.late_by
+        while (left := end - time.monotonic()) > 0:
+            time.sleep(left)
+        self.robot.step()
+
+    def speedJ(self, qd: list[float], acceleration: float = 0.5, time: float = 0.0) -> bool:
+        self._rec("speedJ", list(qd), acceleration, time)
+        r = self.robot
+        r.n_speedj += 1
+        if r.protective_stop_at is not None and r.n_speedj >= r.protective_stop_at:
+            r.safety_bits |= PROTECTIVE_STOPPED_BIT
+        if r.protective_stopped or not r.script_running:
+            r.target_qd = np.zeros(6)
+            r.qd = np.zeros(6)
+            return False
+        r.target_qd = np.asarray(qd, dtype=float)
+        r.acceleration = acceleration
+        return True
+
+    def speedStop(self, a: float = 10.0) -> bool:
+        self._rec("speedStop", a)
+        self.robot.target_qd = np.zeros(6)
+        self.robot.acceleration = a
+        return not self.robot.protective_stopped
+
+    def stopScript(self) -> None:
+        self._rec("stopScript")
+
+    def disconnect(self) -> None:
+        self._rec("disconnect")
+
+
+class FakeRTDEReceive:
+    def __init__(self, robot: FakeRobot) -> None:
+        self.robot = robot
+
+    def _rec(self, name: str) -> None:
+        self.robot.record("receive", name)
+
+    def isConnected(self) -> bool:
+        self._rec("isConnected")
+        return self.robot.connected
+
+    def getTimestamp(self) -> float:
+        self._rec("getTimestamp")
+        return self.robot.timestamp
+
+    def getActualQ(self) -> list[float]:
+        self._rec("getActualQ")
+        return [float(v) for v in self.robot.q]
+
+    def getActualQd(self) -> list[float]:
+        self._rec("getActualQd")
+        return [float(v) for v in self.robot.qd]
+
+    def getActualTCPPose(self) -> list[float]:
+        self._rec("getActualTCPPose")
+        return self.robot.pose()
+
+    def getActualTCPSpeed(self) -> list[float]:
+        self._rec("getActualTCPSpeed")
+        return list(self.robot.tcp_speed)
+
+    def getActualTCPForce(self) -> list[float]:
+        self._rec("getActualTCPForce")
+        return [f - o for f, o in zip(self.robot.tcp_force, self.robot.force_offset, strict=True)]
+
+    def getSafetyStatusBits(self) -> int:
+        self._rec("getSafetyStatusBits")
+        return self.robot.safety_bits
+
+    def isProtectiveStopped(self) -> bool:
+        self._rec("isProtectiveStopped")
+        return self.robot.protective_stopped
+
+    def isEmergencyStopped(self) -> bool:
+        self._rec("isEmergencyStopped")
+        return bool(self.robot.safety_bits & EMERGENCY_STOPPED_BIT)
+
+    def getPayload(self) -> float:
+        self._rec("getPayload")
+        return self.robot.payload[0]
+
+    def getPayloadCog(self) -> list[float]:
+        self._rec("getPayloadCog")
+        return list(self.robot.payload[1])
+
+    def disconnect(self) -> None:
+        self._rec("disconnect")

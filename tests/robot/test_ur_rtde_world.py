@@ -1,0 +1,381 @@
+"""URRTDEWorld against the fake RTDE interfaces (tests/robot/fake_rtde.py); no robot needed."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from coassist.robot.ur_rtde_world import RobotLinkError, SafetyStatus, URRTDEWorld, stop_message
+from coassist.runtime.world import Command, RobotState, World
+
+# Loaded by path under a unique name: works with --import-mode=importlib and without
+# an __init__.py, and cannot clash with another test directory's helper module.
+_spec = importlib.util.spec_from_file_location("coassist_tests_fake_rtde", Path(__file__).with_name("fake_rtde.py"))
+fake_rtde = importlib.util.module_from_spec(_spec)
+sys.modules[_spec.name] = fake_rtde
+_spec.loader.exec_module(fake_rtde)
+FakeRobot = fake_rtde.FakeRobot
+
+HOST = "192.0.2.10"
+PERIOD_CALLS = ("initPeriod", "speedJ", "speedStop", "kickWatchdog", "waitPeriod")
+
+
+def make(robot: FakeRobot | None = None, **kwargs) -> tuple[URRTDEWorld, FakeRobot]:
+    robot = robot or FakeRobot()
+    kwargs.setdefault("frequency", 500.0)
+    world = URRTDEWorld(HOST, control_factory=robot.control_factory, receive_factory=robot.receive_factory, **kwargs)
+    return world, robot
+
+
+def run_ticks(world: URRTDEWorld, n: int, qd=None) -> list[RobotState]:
+    states = []
+    for k in range(n):
+        states.append(world.read())
+        world.apply(Command(qd=np.full(6, 0.01 * (k + 1)) if qd is None else qd))
+    return states
+
+
+def test_is_a_world():
+    world, _ = make()
+    assert isinstance(world, World)
+    assert (world.command_space, world.n_joints, world.realtime) == ("joint_velocity", 6, True)
+    assert world.dt == pytest.approx(1 / 500)
+
+
+def test_connect_order_zero_before_motion_and_one_watchdog():
+    world, robot = make(tcp_offset=[0, 0, 0.1, 0, 0, 0], payload=(0.8, [0, 0, 0.05]), watchdog_hz=20.0)
+    names = robot.names()
+    assert names[:2] == ["__init__", "__init__"]
+    assert [c.source for c in robot.calls[:2]] == ["receive", "control"]
+    assert names.index("setTcp") < names.index("zeroFtSensor")
+    assert names.index("setPayload") < names.index("zeroFtSensor")
+    assert "setWatchdog" not in names  # armed at the first apply, not while the caller sets up
+    run_ticks(world, 3)
+    names = robot.names()
+    assert names.index("zeroFtSensor") < names.index("speedJ")
+    assert names.index("setWatchdog") < names.index("speedJ")
+    watchdog = [c for c in robot.calls if c.name == "setWatchdog"]
+    assert len(watchdog) == 1 and watchdog[0].args == (20.0,)
+    assert next(c for c in robot.calls if c.name == "setPayload").args == (0.8, [0.0, 0.0, 0.05])
+
+
+def test_every_apply_is_init_speedj_kick_wait_with_the_exact_qd():
+    world, robot = make()
+    commanded = [np.array([0.1, -0.2, 0.3, -0.4, 0.5, -0.6]) * (k + 1) / 7 for k in range(5)]
+    for qd in commanded:
+        world.read()
+        world.apply(Command(qd=qd))
+    period = [c for c in robot.calls if c.source == "control" and c.name in PERIOD_CALLS]
+    assert [c.name for c in period] == ["initPeriod", "speedJ", "kickWatchdog", "waitPeriod"] * 5 + ["initPeriod"]
+    sent = [c for c in period if c.name == "speedJ"]
+    for call, qd in zip(sent, commanded, strict=True):
+        assert call.args[0] == [float(v) for v in qd]  # bit for bit
+        assert call.args[1:] == (1.4, world.dt)
+    assert all(type(v) is float for v in sent[0].args[0])
+    # the arm integrated the commands
+    assert np.all(np.abs(world.read().q) > 0)
+
+
+@pytest.mark.parametrize(
+    "qd",
+    [None, [0.1, 0.2, math.nan, 0, 0, 0], [0, 0, 0, 0, 0, math.inf], [0.1, 0.2], "fast", [[0.1] * 6]],
+    ids=["none", "nan", "inf", "short", "string", "2d"],
+)
+def test_bad_qd_sends_speed_stop_never_speedj(qd):
+    world, robot = make(deceleration=3.0)
+    world.read()
+    world.apply(Command(qd=qd))
+    control = [c for c in robot.calls if c.source == "control" and c.name in PERIOD_CALLS]
+    assert [c.name for c in control] == ["initPeriod", "speedStop", "kickWatchdog", "waitPeriod", "initPeriod"]
+    assert next(c for c in control if c.name == "speedStop").args == (3.0,)
+    assert "speedJ" not in robot.names()
+    assert world.rejected_commands == (0 if qd is None else 1)
+
+
+def test_stop_command_sends_speed_stop():
+    world, robot = make()
+    world.apply(Command(qd=np.ones(6), stop=True))
+    assert "speedJ" not in robot.names() and "speedStop" in robot.names()
+
+
+def test_stop_is_idempotent_and_a_no_op_after_close():
+    world, robot = make(deceleration=2.5)
+    world.stop()
+    world.stop()
+    assert [c.args for c in robot.calls if c.name == "speedStop"] == [(2.5,), (2.5,)]
+    world.close()
+    n = len(robot.calls)
+    world.stop()
+    assert len(robot.calls) == n
+
+
+def test_close_stops_then_stops_script_and_disconnects_even_if_speed_stop_raises(caplog):
+    world, robot = make()
+    run_ticks(world, 2)
+    robot.raise_on = {"speedStop", "stopScript"}
+    world.close()  # must not raise
+    tail = [(c.source, c.name) for c in robot.calls[-4:]]
+    assert tail == [("control", "speedStop"), ("control", "stopScript"), ("control", "disconnect"), ("receive", "disconnect")]
+    assert "speedStop failed" in caplog.text
+    n = len(robot.calls)
+    world.close()  # idempotent
+    assert len(robot.calls) == n
+    with pytest.raises(RobotLinkError, match="closed"):
+        world.read()
+    with pytest.raises(RobotLinkError, match="closed"):
+        world.apply(Command(qd=np.zeros(6)))
+
+
+def test_close_with_the_link_gone_never_raises():
+    world, robot = make()
+    robot.link_down = True
+    with world:
+        pass
+    assert robot.names()[-4:] == ["speedStop", "stopScript", "disconnect", "disconnect"]
+
+
+def test_protective_stop_is_reported_and_explained():
+    world, robot = make()
+    robot.protective_stop_at = 3
+    states = run_ticks(world, 3)  # speedJ #1, #2 accepted, #3 triggers it
+    assert not any(s.protective_stop for s in states)
+    assert stop_message(states[-1]) is None
+    state = world.read()
+    assert state.protective_stop and not state.emergency_stop
+    assert np.all(state.qd == 0)
+    world.apply(Command(qd=np.ones(6)))  # rejected by the controller, no exception: read() reports it
+    msg = stop_message(state, world.safety_status_bits)
+    assert msg.startswith("Protective stop") and "teach pendant" in msg and "rerun" in msg
+    assert stop_message(state) == msg  # the flag alone is enough
+
+
+def test_emergency_and_safeguard_messages():
+    base = dict(t=0.0, q=np.zeros(6), qd=np.zeros(6), tool_pose=np.zeros(6), tool_twist=np.zeros(6), wrench=np.zeros(6))
+    assert "Emergency stop" in stop_message(RobotState(**base, emergency_stop=True))
+    world, robot = make()
+    robot.safety_bits = SafetyStatus.SAFEGUARD_STOPPED
+    state = world.read()
+    assert state.protective_stop and "Safeguard stop" in stop_message(state, world.safety_status_bits)
+    robot.safety_bits = SafetyStatus.ROBOT_EMERGENCY_STOPPED
+    state = world.read()
+    assert state.emergency_stop and "Emergency stop" in stop_message(state, world.safety_status_bits)
+
+
+@pytest.mark.parametrize("fault", ["link_down", "getActualQ", "getActualTCPForce", "disconnected"])
+def test_lost_link_raises_robot_link_error_from_read(fault):
+    world, robot = make()
+    world.read()
+    if fault == "link_down":
+        robot.link_down = True
+    elif fault == "disconnected":
+        robot.connected = False
+    else:
+        robot.raise_on = {fault}
+    with pytest.raises(RobotLinkError, match=HOST) as info:
+        world.read()
+    assert isinstance(info.value, ConnectionError)
+    world.close()
+
+
+def test_a_stuck_timestamp_is_a_lost_link():
+    world, robot = make(link_timeout=0.02)
+    robot.frozen = True
+    world.read()
+    world.read()  # not yet past the timeout
+    time.sleep(0.03)
+    with pytest.raises(RobotLinkError, match="no new data"):
+        world.read()
+
+
+def test_apply_and_stop_raise_when_the_link_is_lost():
+    world, robot = make()
+    world.read()
+    robot.raise_on = {"speedJ", "speedStop"}
+    with pytest.raises(RobotLinkError, match="speedJ"):
+        world.apply(Command(qd=np.zeros(6)))
+    with pytest.raises(RobotLinkError, match="speedStop"):
+        world.stop()
+
+
+def test_rejected_speedj_without_a_safety_stop_is_a_link_error():
+    world, robot = make()
+    world.read()
+    robot.script_running = False
+    with pytest.raises(RobotLinkError, match="control script is not running"):
+        world.apply(Command(qd=np.zeros(6)))
+
+
+def test_late_wait_period_gives_an_overrun():
+    world, robot = make(frequency=100.0, overrun_tolerance=2.0)  # dt 10 ms, 20 ms slack for a busy machine
+    run_ticks(world, 2)
+    assert world.last_overrun == 0.0
+    assert world.last_period >= world.dt * 0.99
+    robot.late_by = 0.05
+    run_ticks(world, 1)
+    assert world.last_overrun > 0.03
+    assert world.last_period == pytest.approx(world.dt + world.last_overrun)
+
+
+def test_loop_work_counts_inside_the_period():
+    """The period opens at the end of apply, so time spent between read and apply is in it."""
+    world, robot = make(frequency=100.0, overrun_tolerance=0.5)
+    run_ticks(world, 1)
+    world.read()
+    time.sleep(0.03)  # a 30 ms tick at 100 Hz
+    world.apply(Command(qd=np.zeros(6)))
+    assert world.last_overrun > 0.015
+
+
+@pytest.mark.parametrize(
+    ("rotvec", "force_base", "expected"),
+    [
+        # TCP turned 90° about z: its x axis is the base's y.
+        ([0, 0, math.pi / 2], [0, 10, 0, 0, 0, 2], [10, 0, 0, 0, 0, 2]),
+        # TCP upside down (180° about x): its z axis is the base's -z.
+        ([math.pi, 0, 0], [0, 0, -5, 1, 0, 0], [0, 0, 5, 1, 0, 0]),
+        ([0, 0, 0], [1, 2, 3, 4, 5, 6], [1, 2, 3, 4, 5, 6]),
+    ],
+)
+def test_wrench_is_rotated_into_the_tcp_frame(rotvec, force_base, expected):
+    robot = FakeRobot(tcp_pose=[0.4, 0.0, 0.3, *rotvec], tcp_force=[3.0, -1.0, 7.0, 0.1, 0.2, 0.3])
+    world, _ = make(robot)
+    assert np.allclose(world.read().wrench, 0.0)  # zeroFtSensor took the reading at connect as zero
+    robot.force_offset = [0.0] * 6
+    robot.tcp_force = force_base
+    state = world.read()
+    assert np.allclose(state.wrench, expected, atol=1e-12)
+    R = state.sensor_rotation
+    assert np.allclose(R @ R.T, np.eye(3)) and np.isclose(np.linalg.det(R), 1.0)
+    assert np.allclose(R @ state.wrench[:3], force_base[:3]) and np.allclose(R @ state.wrench[3:], force_base[3:])
+
+
+def test_general_rotation_round_trip():
+    rng = np.random.default_rng(0)
+    rv = rng.normal(size=3)
+    robot = FakeRobot(tcp_pose=[0, 0, 0, *rv])
+    world, _ = make(robot, zero_sensor=False)
+    robot.tcp_force = list(rng.normal(size=6))
+    state = world.read()
+    axis = rv / np.linalg.norm(rv)
+    assert np.allclose(state.sensor_rotation @ axis, axis)  # the axis is fixed by its rotation
+    assert np.allclose(state.sensor_rotation @ state.wrench[:3], robot.tcp_force[:3])
+    assert "zeroFtSensor" not in robot.names()
+
+
+def test_wrench_seq_and_strictly_increasing_time():
+    world, robot = make()
+    s0 = world.read()
+    s1 = world.read()  # nothing new from the robot
+    assert s1.wrench_seq == s0.wrench_seq and s1.t > s0.t
+    robot.tcp_force = [1.0, 0, 0, 0, 0, 0]  # a new force sample, same timestamp
+    s2 = world.read()
+    assert s2.wrench_seq == s1.wrench_seq + 1 and s2.t > s1.t
+    world.apply(Command(qd=np.zeros(6)))  # the robot advances one period
+    s3 = world.read()
+    assert s3.wrench_seq == s2.wrench_seq + 1 and s3.t == pytest.approx(s0.t + world.dt)
+
+
+def test_state_layout():
+    robot = FakeRobot(tcp_pose=[0.4, 0.1, 0.3, 0.0, 0.1, 0.0])
+    robot.tcp_speed = [0.01, 0, 0, 0, 0, 0.2]
+    world, _ = make(robot)
+    s = world.read()
+    assert s.q.shape == s.qd.shape == s.tool_pose.shape == s.tool_twist.shape == s.wrench.shape == (6,)
+    assert np.array_equal(s.tool_pose, robot.tcp_pose) and np.array_equal(s.tool_twist, robot.tcp_speed)
+    assert s.t == robot.timestamp
+
+
+def test_dt_from_the_controller_step_time():
+    world, robot = make(FakeRobot(step_time=0.008), frequency=-1)
+    assert world.dt == 0.008 and robot.calls[0].args == (HOST, -1.0)
+    world, _ = make(FakeRobot(step_time=0.008), frequency=250)
+    assert world.dt == 1 / 250
+
+
+def test_unknown_step_time_asks_for_the_frequency():
+    robot = FakeRobot(step_time=0.0)
+    with pytest.raises(RobotLinkError, match="frequency="):
+        make(robot, frequency=-1)
+    assert robot.names()[-2:] == ["disconnect", "disconnect"]  # cleaned up
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        ({"host": ""}, "host"),
+        ({"host": None}, "host"),
+        ({"frequency": 0}, "frequency"),
+        ({"frequency": 1000}, "frequency"),
+        ({"frequency": "fast"}, "frequency"),
+        ({"acceleration": -1}, "acceleration"),
+        ({"acceleration": math.nan}, "acceleration"),
+        ({"deceleration": 0}, "deceleration"),
+        ({"watchdog_hz": 0}, "watchdog_hz"),
+        ({"tcp_offset": [0, 0, 0.1]}, "tcp_offset"),
+        ({"tcp_offset": [0, 0, math.inf, 0, 0, 0]}, "tcp_offset"),
+        ({"payload": 1.0}, "payload"),
+        ({"payload": (-1.0, [0, 0, 0])}, "payload mass"),
+        ({"payload": (1.0, [0, 0])}, "payload cog"),
+        ({"link_timeout": 0}, "link_timeout"),
+        ({"overrun_tolerance": -0.1}, "overrun_tolerance"),
+    ],
+)
+def test_constructor_errors_name_the_argument(kwargs, name):
+    robot = FakeRobot()
+    host = kwargs.pop("host", HOST)
+    with pytest.raises(ValueError, match=name):
+        URRTDEWorld(host, control_factory=robot.control_factory, receive_factory=robot.receive_factory, **kwargs)
+    assert robot.calls == []  # validated before connecting
+
+
+def test_connection_failures_are_link_errors_and_clean_up():
+    robot = FakeRobot()
+
+    def refuse(host, frequency):
+        raise RuntimeError("connection refused")
+
+    with pytest.raises(RobotLinkError, match=f"could not connect to the UR at {HOST}.*connection refused"):
+        URRTDEWorld(HOST, control_factory=refuse, receive_factory=robot.receive_factory)
+    assert robot.names() == ["__init__", "disconnect"]
+
+    robot = FakeRobot()
+    robot.connected = False
+    with pytest.raises(RobotLinkError, match="not connected"):
+        make(robot)
+
+
+def test_missing_ur_rtde_names_the_extra(monkeypatch):
+    robot = FakeRobot()
+    monkeypatch.setitem(sys.modules, "rtde_control", None)  # import fails
+    with pytest.raises(ImportError, match=r"pip install 'coassist\[robot\]'"):
+        URRTDEWorld(HOST, receive_factory=robot.receive_factory)
+    assert robot.names() == ["__init__", "disconnect"]
+
+
+def test_robot_info():
+    world, _ = make(FakeRobot(step_time=0.002), tcp_offset=[0, 0, 0.12, 0, 0, 0], payload=(1.5, [0, 0, 0.04]))
+    info = world.robot_info()
+    assert info["host"] == HOST and info["frequency"] == pytest.approx(500.0) and info["dt"] == world.dt
+    assert info["step_time"] == 0.002 and info["tcp_offset"] == [0, 0, 0.12, 0, 0, 0]
+    assert info["payload_mass"] == 1.5 and info["payload_cog"] == [0, 0, 0.04]
+    assert info["controller_version"] is None
+
+
+def test_fake_matches_the_real_ur_rtde_api():
+    """Every method the fake offers (so every one the world calls) exists in ur-rtde."""
+    rtde_control = pytest.importorskip("rtde_control")
+    rtde_receive = pytest.importorskip("rtde_receive")
+    pairs = [
+        (fake_rtde.FakeRTDEControl, rtde_control.RTDEControlInterface),
+        (fake_rtde.FakeRTDEReceive, rtde_receive.RTDEReceiveInterface),
+    ]
+    for fake, real in pairs:
+        for name in vars(fake):
+            if not name.startswith("_"):
+                assert hasattr(real, name), f"{real.__name__} has no {name}"

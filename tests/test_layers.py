@@ -1,0 +1,79 @@
+"""The package's layers: a module imports only from layers below its own (DESIGN §5, §7).
+
+Parses every module's imports (function-local ones included, since a lazy import is
+still a dependency) and fails when a layer imports one above it, or a sibling on the
+same layer. The layers, bottom up, with what each is for:
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import coassist
+
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("(root)", "_checks", "_io", "interfaces", "config", "spatial"),  # shared vocabulary and rigid-body math
+    ("model", "data", "metrics"),  # the impedance model; trials on disk; metrics
+    ("control",),  # games, baselines, guarded controllers (pure control laws)
+    ("intent", "runtime"),  # the predictor; the control loop, wrench pipeline, safety
+    ("sim",),  # the point-mass world, tasks, objects, simulated operators
+    ("robot",),  # kinematics, MuJoCo UR5, the real UR5
+    ("experiments",),  # thesis experiments, reports
+    ("cli",),  # the command line
+)
+#: Imports between packages of the same layer that are allowed.
+SIBLINGS_ALLOWED: set[tuple[str, str]] = {("config", "_checks")}
+
+RANK = {name: i for i, layer in enumerate(LAYERS) for name in layer}
+SRC = Path(coassist.__file__).parent
+
+
+def _package(parts: tuple[str, ...]) -> str:
+    return parts[0] if parts and parts[0] != "__init__" else "(root)"
+
+
+def _imports(path: Path) -> list[tuple[str, int]]:
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    out = []
+    pkg_parts = path.relative_to(SRC).with_suffix("").parts[:-1]
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:  # relative import: resolve against this module's package
+                base = pkg_parts[: len(pkg_parts) - node.level + 1]
+                mod = ".".join(("coassist", *base, *(node.module.split(".") if node.module else ())))
+            else:
+                mod = node.module or ""
+            out.append((mod, node.lineno))
+        elif isinstance(node, ast.Import):
+            out.extend((a.name, node.lineno) for a in node.names)
+    return [(m, line) for m, line in out if m == "coassist" or m.startswith("coassist.")]
+
+
+def test_every_package_has_a_layer():
+    packages = {_package(p.relative_to(SRC).with_suffix("").parts) for p in SRC.rglob("*.py")}
+    assert packages <= set(RANK), f"packages without a layer: {sorted(packages - set(RANK))}"
+
+
+def test_no_layer_imports_one_above_it():
+    bad = []
+    for path in sorted(SRC.rglob("*.py")):
+        here = _package(path.relative_to(SRC).with_suffix("").parts)
+        for mod, line in _imports(path):
+            there = _package(tuple(mod.split(".")[1:]))
+            if there == here:
+                continue
+            if RANK[there] > RANK[here] or (RANK[there] == RANK[here] and (here, there) not in SIBLINGS_ALLOWED):
+                bad.append(f"{path.relative_to(SRC.parent)}:{line}: {here} (layer {RANK[here]}) imports {mod} (layer {RANK[there]})")
+    assert not bad, "imports against the layering:\n" + "\n".join(bad)
+
+
+def test_the_checker_catches_an_upward_import(tmp_path):
+    # The test above must be able to fail: an upward import in a parsed file is found.
+    fake = SRC / "control" / "controllers.py"
+    imports = _imports(fake)
+    assert any(m.startswith("coassist.interfaces") for m, _ in imports)
+    probe = tmp_path / "probe.py"
+    probe.write_text("def f():\n    from coassist.sim import world\n")
+    tree_mods = [n.module for n in ast.walk(ast.parse(probe.read_text())) if isinstance(n, ast.ImportFrom)]
+    assert RANK[_package(tuple(tree_mods[0].split(".")[1:]))] > RANK["control"]
