@@ -521,3 +521,13 @@ def test_describe_mentions_every_limit():
         assert part in text, part
     assert "no box" in SafetyLimits().describe()
     assert "joints 1…6" in SafetyLimits(joint_velocity=(1.0,) * 6).describe()
+
+
+def test_a_jacobian_whose_manipulability_overflows_is_treated_as_singular():
+    layer = SafetyLayer(SafetyLimits(), DT, 7)
+    J = np.zeros((6, 7))
+    J[:, :6] = 1e200 * np.random.default_rng(0).normal(size=(6, 6))  # J Jᵀ overflows: det is NaN
+    with np.errstate(all="ignore"):
+        assert np.isnan(np.linalg.det(J @ J.T))
+    out, flags, _ = step(layer, np.full(7, 1e-250), J)
+    assert np.all(np.isfinite(out)) and flags & Fault.SINGULARITY and not out.any()

@@ -322,7 +322,7 @@ def test_bad_readings_give_zero_and_a_flag_without_raising(raw, flag):
     # The hand "let go": a good reading afterwards starts the filter from zero again.
     again = pipe.update(np.array([20.0, 0, 0, 0, 0, 0]), np.eye(3), 7, 0.048)
     assert again.fault == Fault.NONE
-    assert again.hand[0] == pytest.approx(20.0 * (1.0 - math.exp(-2 * math.pi * 5.0 * 0.008)) - 0.5)
+    assert again.hand[0] == pytest.approx(20.0 * (1.0 - math.exp(-2 * math.pi * 5.0 * 0.008)) - pipe.config.deadband_force)
 
 
 @pytest.mark.parametrize(

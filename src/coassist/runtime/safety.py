@@ -505,7 +505,7 @@ class SafetyLayer:
 
     Attributes
     ----------
-    interventions : dict flag name → ticks on which the layer raised it since ``reset``.
+    interventions : dict flag name → calls (of either stage) that raised it since ``reset``.
     bad_ticks : consecutive bad ticks so far.
     limit_conflicts : ticks of the residual case (step 6c): the acceleration limit was
         exceeded, toward rest, to keep a velocity limit after J or the pose jumped.
@@ -521,6 +521,7 @@ class SafetyLayer:
         self._b = _Bounds(limits, self.dt, n)
         self._n = n
         self._inv_vmax_m = (1.0 / (m * limits.joint_velocity_array(n))).tolist()
+        self._inv_vuniform = 0.0 if self._b.vuniform is None else 1.0 / (m * self._b.vuniform)
         self._acc_m = m * limits.joint_acceleration * self.dt
         self._tool_m = m * limits.tool_speed
         self._ang_m = m * limits.tool_angular_speed
@@ -735,13 +736,18 @@ class SafetyLayer:
             # -------- 3. manipulability guard
             if self._wmin > 0.0:
                 wm = self._manipulability(Jm)
+                if not wm < self._wmin and wm != wm:  # NaN (J Jᵀ overflowed): assume the worst
+                    wm = 0.0
                 if wm < self._wmin:
                     half = 0.5 * self._wmin
                     scale = min(max((wm - half) / half, 0.0), 1.0)
                     flags |= _SG
             # -------- 4. velocity sets: the largest uniform scale into all of them
             if scale > 0.0:
-                r = max(abs(v) * iv for v, iv in zip(ql, self._inv_vmax_m))
+                if self._inv_vuniform:
+                    r = max(max(ql), -min(ql)) * self._inv_vuniform
+                else:
+                    r = max(abs(v) * iv for v, iv in zip(ql, self._inv_vmax_m))
                 if r * scale > 1.0:
                     scale = 1.0 / r
                     flags |= _JV
