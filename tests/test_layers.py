@@ -23,7 +23,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("cli",),  # the command line
 )
 #: Imports between packages of the same layer that are allowed.
-SIBLINGS_ALLOWED: set[tuple[str, str]] = {("config", "_checks")}
+SIBLINGS_ALLOWED: set[tuple[str, str]] = {("config", "_checks"), ("spatial", "_checks")}
 
 RANK = {name: i for i, layer in enumerate(LAYERS) for name in layer}
 SRC = Path(coassist.__file__).parent

@@ -23,6 +23,8 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
+
+from coassist._checks import check_positive_scalar
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike
 
@@ -240,16 +242,6 @@ def distance_to_target(pose: ArrayLike, target: ArrayLike) -> np.ndarray:
     return np.linalg.norm(pose_arr - tgt, axis=1)
 
 
-def _check_positive(value: float, name: str) -> float:
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(out) or out <= 0.0:
-        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
-    return out
-
-
 def _first_entry(dist: np.ndarray, epsilon: float) -> int | None:
     inside = np.flatnonzero(dist <= epsilon)
     return int(inside[0]) if inside.size else None
@@ -258,8 +250,8 @@ def _first_entry(dist: np.ndarray, epsilon: float) -> int | None:
 def time_to_target(pose: ArrayLike, target: ArrayLike, dt: float, *, epsilon: float = 0.025) -> float:
     """Time in s at which the pose first enters the closed ball of radius ``epsilon``
     metres around ``target`` (tick index × dt); NaN if it never does."""
-    dt = _check_positive(dt, "dt")
-    epsilon = _check_positive(epsilon, "epsilon")
+    dt = check_positive_scalar(dt, "dt")
+    epsilon = check_positive_scalar(epsilon, "epsilon")
     k0 = _first_entry(distance_to_target(pose, target), epsilon)
     return math.nan if k0 is None else k0 * dt
 
@@ -303,9 +295,9 @@ def precision_sigma(
     tau : float
         Averaging window, in s (thesis: 3 s).
     """
-    dt = _check_positive(dt, "dt")
-    epsilon = _check_positive(epsilon, "epsilon")
-    tau = _check_positive(tau, "tau")
+    dt = check_positive_scalar(dt, "dt")
+    epsilon = check_positive_scalar(epsilon, "epsilon")
+    tau = check_positive_scalar(tau, "tau")
     dist = distance_to_target(pose, target)
     k0 = _first_entry(dist, epsilon)
     if k0 is None:

@@ -12,6 +12,8 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
+from coassist._checks import check_positive_scalar
+
 __all__ = [
     "damped_pseudo_inverse",
     "dls_joint_velocity",
@@ -197,16 +199,6 @@ def manipulability(J: ArrayLike) -> float:
     return float(np.prod(np.linalg.svd(J, compute_uv=False)))
 
 
-def _check_threshold(value: float, name: str) -> float:
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(out) or out <= 0.0:
-        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
-    return out
-
-
 def damped_pseudo_inverse(
     J: ArrayLike, *, sigma_threshold: float = 0.05, max_damping: float = 0.05
 ) -> tuple[np.ndarray, float]:
@@ -254,8 +246,8 @@ def _damped_svd(
     J: np.ndarray, sigma_threshold: float, max_damping: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """``J⁺ = Vt.T diag(inv_s) U.T``: the factors of the damped inverse, and λ."""
-    sigma_threshold = _check_threshold(sigma_threshold, "sigma_threshold")
-    max_damping = _check_threshold(max_damping, "max_damping")
+    sigma_threshold = check_positive_scalar(sigma_threshold, "sigma_threshold")
+    max_damping = check_positive_scalar(max_damping, "max_damping")
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     sigma_min = float(s[-1])
     if sigma_min >= sigma_threshold:

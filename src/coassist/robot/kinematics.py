@@ -49,10 +49,10 @@ from numpy.typing import ArrayLike
 
 # The pure math lives below the runtime, so the loop can use it without the robot extra;
 # re-exported here because it is half of what a user of this module wants.
+from coassist._checks import check_positive_scalar
 from coassist.spatial import (
     _as_rotation,
     _as_vector,
-    _check_threshold,
     _damped_svd,
     damped_pseudo_inverse,
     joint_velocity,
@@ -371,9 +371,9 @@ def solve_ik(
     p_d = _as_vector(position, "position", 3)
     R_d = None if rotation is None else _as_rotation(rotation, "rotation")
     q = kin._as_q(q0).copy()
-    tol_position = _check_threshold(tol_position, "tol_position")
-    tol_rotation = _check_threshold(tol_rotation, "tol_rotation")
-    max_step = _check_threshold(max_step, "max_step")
+    tol_position = check_positive_scalar(tol_position, "tol_position")
+    tol_rotation = check_positive_scalar(tol_rotation, "tol_rotation")
+    max_step = check_positive_scalar(max_step, "max_step")
     if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) or max_iterations < 1:
         raise ValueError(f"max_iterations must be an integer >= 1, got {max_iterations!r}")
     lower, upper = kin.joint_position_limit[:, 0], kin.joint_position_limit[:, 1]

@@ -45,6 +45,7 @@ import numpy as np
 
 from coassist.robot.ur5_mjcf import Q_SEED, TOOLS, VELOCITY_LIMITS, build_ur5_model
 from coassist.runtime.world import Command, HandOperator, RobotState
+from coassist.spatial import _rotation_vector, rotation_vector  # rotation_vector: re-exported
 
 __all__ = ["DEFAULT_START", "FTSensorModel", "MujocoUR5World", "TOOL_DOWN", "rotation_vector", "tool_down_ik"]
 
@@ -113,23 +114,6 @@ def _number(value, name: str) -> float:
     if not math.isfinite(v):
         raise ValueError(f"{name} must be finite, got {value!r}")
     return v
-
-
-def rotation_vector(R: np.ndarray) -> np.ndarray:
-    """The rotation vector (axis · angle, angle in [0, π]) of a 3×3 rotation matrix.
-
-    Every tool-down orientation is a half turn (angle π), where the rotation vector's
-    sign is ambiguous: ±π flips from tick to tick as on a real UR's TCP pose; compare
-    orientations as rotations, not as rotation-vector differences.
-    """
-    quat = np.empty(4)
-    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(R, dtype=float).reshape(9))
-    w, x, y, z = quat.tolist()
-    if w < 0.0:
-        w, x, y, z = -w, -x, -y, -z
-    s = math.sqrt(x * x + y * y + z * z)
-    k = 2.0 if s < 1e-12 else 2.0 * math.atan2(s, w) / s
-    return np.array((k * x, k * y, k * z))
 
 
 def tool_down_ik(model: mujoco.MjModel, position, q_seed=None, *, site: str = "tcp") -> np.ndarray:
@@ -516,7 +500,7 @@ class MujocoUR5World:
         return w
 
     def _site_pose(self, site: int) -> np.ndarray:
-        return np.concatenate((self._site_xpos[site], rotation_vector(self._site_xmat[site])))
+        return np.concatenate((self._site_xpos[site], _rotation_vector(self._site_xmat[site].reshape(3, 3))))
 
     def _site_twist(self, site: int) -> np.ndarray:
         mujoco.mj_objectVelocity(self.model, self.data, mujoco.mjtObj.mjOBJ_SITE, site, self._vel6, 0)

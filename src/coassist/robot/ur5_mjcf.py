@@ -65,6 +65,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from coassist.robot.kinematics import ur5_urdf_path  # one place knows where the URDF is installed
 from coassist.sim.objects import get_object
 
 __all__ = [
@@ -96,7 +97,6 @@ MOUNT_MASS = 0.3
 Q_SEED = np.array([-1.1583, -1.9627, -1.5428, -1.2068, 1.5708, -2.7291])
 TOOLS = ("handle", "board", "heavy")
 
-_URDF_REL = "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"
 _SHARE_REL = "cmeel.prefix/share"
 
 
@@ -165,18 +165,6 @@ def tool_geometry(tool: str) -> ToolGeometry:
         _Part("block", "box", (a / 2, b / 2, h / 2), (0.0, 0.0, z), obj.mass, steel),
     )
     return ToolGeometry(tool, parts, (0.0, 0.0, z), (0.0, 0.0, z))
-
-
-def ur5_urdf_path() -> Path:
-    """Path of example-robot-data's ``ur5_robot.urdf`` in the installed package."""
-    try:
-        dist = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError:
-        raise ImportError("the MuJoCo UR5 needs example-robot-data (pip install 'coassist[robot]')") from None
-    path = Path(dist.locate_file(_URDF_REL))
-    if not path.is_file():
-        raise FileNotFoundError(f"example-robot-data has no UR5 URDF at {path}")
-    return path
 
 
 @lru_cache(maxsize=1)

@@ -85,6 +85,7 @@ from typing import Any
 import numpy as np
 
 from coassist.runtime.world import Command, RobotState
+from coassist.spatial import rotation_matrix
 
 __all__ = ["RobotLinkError", "SafetyStatus", "URRTDEWorld", "stop_message"]
 
@@ -179,16 +180,6 @@ def _check_vector(value: Any, name: str, n: int) -> list[float]:
     if arr.shape != (n,) or not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be {n} finite numbers, got {value!r}")
     return [float(v) for v in arr]
-
-
-def _rotation_matrix(rv: np.ndarray) -> np.ndarray:
-    """Rotation vector (axis · angle) → 3x3 matrix (Rodrigues)."""
-    angle = float(np.linalg.norm(rv))
-    if angle < 1e-12:
-        return np.eye(3)
-    k = rv / angle
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
 
 
 def _default_control_factory(host: str, frequency: float) -> Any:
@@ -433,7 +424,7 @@ class URRTDEWorld:
         self._last_t = t
         self.safety_status_bits = bits
 
-        R = _rotation_matrix(pose[3:])
+        R = rotation_matrix(pose[3:])
         wrench = np.concatenate((R.T @ force[:3], R.T @ force[3:]))
         return RobotState(
             t=t,
