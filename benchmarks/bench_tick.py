@@ -57,12 +57,7 @@ def naive_dls(J, twist, thr, damp):
 
 def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtime: bool = False) -> dict:
     times: list[float] = []
-    misses = 0
     dt = 1.0 / rate
-
-    def on_tick(k, state, out):
-        pass
-
     config = DriveConfig(controller="assistive", task="z", intent=model or "nominal", rate_hz=rate,
                          time_limit=ticks * dt, realtime_intent=True if model else None)  # fmt: skip
     # time read + step by wrapping the tick's step (the loop's own clock does the same)
@@ -100,7 +95,7 @@ def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtim
             world = MujocoUR5World("handle", control_dt=dt, start=(float(task.start[0]), float(task.start[1]), 0.2),
                                    realtime=True)  # fmt: skip
         t_wall = time.perf_counter()
-        trial = drive_mod.drive(config, world=world, on_tick=on_tick)
+        trial = drive_mod.drive(config, world=world)
         wall = time.perf_counter() - t_wall
         if world is not None:
             world.close()

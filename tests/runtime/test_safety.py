@@ -531,3 +531,26 @@ def test_a_jacobian_whose_manipulability_overflows_is_treated_as_singular():
         assert np.isnan(np.linalg.det(J @ J.T))
     out, flags, _ = step(layer, np.full(7, 1e-250), J)
     assert np.all(np.isfinite(out)) and flags & Fault.SINGULARITY and not out.any()
+
+
+def test_effort_stage_brakes_above_the_tool_speed_and_latches_on_contact_force():
+    layer = SafetyLayer(SafetyLimits(tool_speed=0.25, contact_force=120.0), 0.008, 6)
+    calm = np.array([5.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    # below the speed limit the effort passes untouched
+    u, f, stop = layer.limit_effort(np.array([3.0, 4.0]), np.array([0.1, 0.0]), calm, Fault.NONE)
+    np.testing.assert_array_equal(u, [3.0, 4.0])
+    assert f == Fault.NONE and not stop
+    # above it, only the forward component along v is removed (hand-computed: v along x)
+    u, f, stop = layer.limit_effort(np.array([3.0, 4.0]), np.array([0.3, 0.0]), calm, Fault.NONE)
+    np.testing.assert_allclose(u, [0.0, 4.0], atol=1e-15)
+    assert f == Fault.TOOL_SPEED_LIMIT and not stop
+    # a braking effort above the limit is kept
+    u, _, _ = layer.limit_effort(np.array([-3.0, 0.0]), np.array([0.3, 0.0]), calm, Fault.NONE)
+    np.testing.assert_array_equal(u, [-3.0, 0.0])
+    # a hand force over the threshold latches the stop, for good
+    hard = np.array([100.0, 80.0, 0.0, 0.0, 0.0, 0.0])  # 128 N
+    u, f, stop = layer.limit_effort(np.array([3.0, 4.0]), np.array([0.1, 0.0]), hard, Fault.NONE)
+    assert stop and f & Fault.CONTACT_FORCE_LIMIT and f & Fault.STOPPED
+    np.testing.assert_array_equal(u, [0.0, 0.0])
+    u, f, stop = layer.limit_effort(np.array([3.0, 4.0]), np.array([0.1, 0.0]), calm, Fault.NONE)
+    assert stop and f & Fault.STOPPED and not u.any()

@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike
 
 from coassist._checks import as_square_matrix, check_positive_semidefinite
 from coassist.control.game import CooperativeGame, NashGame
-from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault  # re-exported: the flags live below control
+from coassist.interfaces import Fault
 from coassist.model.impedance import ImpedanceModel
 
 log = logging.getLogger(__name__)

@@ -27,11 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from coassist.control.controllers import AssistiveController, ImpedanceControl, ManualGuidance
-from coassist.control.game import cooperative_game
+from coassist.config import ImpedanceParameters
 from coassist.data import Trial, TrialMeta
 from coassist.interfaces import FEATURES, TrialContext
-from coassist.model.impedance import ImpedanceModel
 from coassist.runtime.intent import RealtimeIntent, WindowIntent
 from coassist.runtime.loop import LoopLog, TargetDwell, run_loop
 from coassist.runtime.safety import SafetyLayer, SafetyLimits
@@ -42,7 +40,7 @@ from coassist.sim.intent_source import load_intent_source
 from coassist.sim.objects import get_object
 from coassist.sim.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
 from coassist.sim.tasks import TASK_KINDS, make_task
-from coassist.sim.world import IMPEDANCE_STIFFNESS, get_preset
+from coassist.sim.world import get_preset, make_controller
 from coassist.spatial import rotation_vector
 
 __all__ = ["CONTROLLERS", "DriveConfig", "WORLDS", "drive", "workspace_for"]
@@ -122,32 +120,26 @@ class DriveConfig:
 
 
 def _controller(config: DriveConfig):
-    """The controller on the plant of the preset, at the run's rate, on 2 (x-y) or 6 DOFs."""
+    """The preset's controller at the run's rate, on 2 (x-y) or 6 DOFs (the simulator's make_controller)."""
     preset = get_preset(config.preset)
     imp, game = preset.impedance, preset.game
     dt = config.dt
-    horizon = max(2, round(game.horizon * imp.dt / dt))  # the same look-ahead in seconds
-    M, D = list(imp.M), list(imp.D)
-    gp = replace(game, horizon=horizon, control_horizon=None if game.control_horizon is None else
-                 max(1, round(game.control_horizon * imp.dt / dt)))  # fmt: skip
+    ticks = lambda n: max(1, round(n * imp.dt / dt))  # noqa: E731 (the same look-ahead in seconds)
+    gp = replace(game, horizon=max(2, ticks(game.horizon)),
+                 control_horizon=None if game.control_horizon is None else ticks(game.control_horizon))  # fmt: skip
+    M, D = imp.M, imp.D
     if config.full_pose:
         # z like x; rotations with their own inertia and damping; the game weighs them like positions.
-        M = M + [M[0], ROTATIONAL_INERTIA, ROTATIONAL_INERTIA, ROTATIONAL_INERTIA]
-        D = D + [D[0], ROTATIONAL_DAMPING, ROTATIONAL_DAMPING, ROTATIONAL_DAMPING]
+        M = M + (M[0], ROTATIONAL_INERTIA, ROTATIONAL_INERTIA, ROTATIONAL_INERTIA)
+        D = D + (D[0], ROTATIONAL_DAMPING, ROTATIONAL_DAMPING, ROTATIONAL_DAMPING)
 
         def six(q: tuple[float, ...]) -> tuple[float, ...]:
             return q[:2] + (q[0],) * 4 + q[2:] + (q[2],) * 4
 
         gp = replace(gp, Q_hh=six(gp.Q_hh), Q_hr=six(gp.Q_hr), Q_rh=six(gp.Q_rh), Q_rr=six(gp.Q_rr),
                      R_h=gp.R_h + (gp.R_h[0],) * 4, R_r=gp.R_r + (gp.R_r[0],) * 4)  # fmt: skip
-    n = len(M)
-    model = ImpedanceModel(np.diag(M), np.diag(D), np.zeros((n, n)), dt)
-    kind = CONTROLLERS[config.controller]
-    if kind == "cooperative":
-        return AssistiveController(cooperative_game(model, gp), effort_limit=preset.effort_limit)
-    if kind == "impedance":
-        return ImpedanceControl(model, IMPEDANCE_STIFFNESS * np.eye(n), effort_limit=preset.effort_limit)
-    return ManualGuidance(model)
+    impedance = ImpedanceParameters(M=M, D=D, K=(0.0,) * len(M), dt=dt)
+    return make_controller(CONTROLLERS[config.controller], replace(preset, impedance=impedance, game=gp))
 
 
 def workspace_for(reference: np.ndarray, start_pose: np.ndarray, margin: float = 0.25, z_margin: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
@@ -184,6 +176,7 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
     intent_traj = intent_trajectory(task, profile, rng_intent, n_grid, dt)
 
     built_here = world is None
+    intent_stage = None
     if world is None:
         if config.world == "mujoco":
             from coassist.robot.mujoco_world import MujocoUR5World
@@ -230,8 +223,7 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
                                true_intent=intent_traj.positions)  # fmt: skip
         tick.reset(Plan(ref_abs, start_pose), context)
         # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
-        wrench.zero(np.asarray(state0.wrench, dtype=float)[None] - _hand_at_rest(world, state0),
-                    np.asarray(state0.sensor_rotation, dtype=float)[None])  # fmt: skip
+        wrench.zero(np.asarray(state0.wrench, dtype=float)[None], np.asarray(state0.sensor_rotation, dtype=float)[None])
         if confirm is not None and not confirm(limits.describe()):
             raise RuntimeError("not confirmed: the robot was not moved")
         t_done = max(task.planner.end_time, intent_traj.end_time)
@@ -241,18 +233,13 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
     finally:
         if built_here:
             world.close()
-        if isinstance(intent_stage_holder := locals().get("intent_stage"), RealtimeIntent):
-            close = getattr(intent_stage_holder.predictor, "close", None)
+        if isinstance(intent_stage, RealtimeIntent):
+            close = getattr(intent_stage.predictor, "close", None)
             if close is not None:
                 close()
-    return _trial(config, log, ref_abs, intent_traj.positions if config.world == "mujoco" else None, task, obj,
+    return _trial(config, log, ref_abs, H, intent_traj.positions if config.world == "mujoco" else None, task, obj,
                   profile.name if config.world == "mujoco" else "operator", model_id, controller.name, dofs, start_pose,
                   wrench.bias)  # fmt: skip
-
-
-def _hand_at_rest(world: Any, state) -> np.ndarray:
-    """The raw reading's part that is the hand at the zeroing instant: none (nobody touches it)."""
-    return np.zeros(6)
 
 
 def _kinematics_for(world: Any):
@@ -261,15 +248,12 @@ def _kinematics_for(world: Any):
 
     offset = getattr(world, "tcp_offset_pose", None)
     if offset is None and hasattr(world, "model") and hasattr(world, "data"):
-        import mujoco
-
         m, d = world.model, world.data
         tool0, tcp = m.body("tool0").id, m.site("tcp").id
         R0 = d.xmat[tool0].reshape(3, 3)
         rel = R0.T @ (d.site_xpos[tcp] - d.xpos[tool0])
         Rrel = R0.T @ d.site_xmat[tcp].reshape(3, 3)
         offset = np.concatenate([rel, rotation_vector(Rrel)])
-        del mujoco
     return UR5Kinematics(tcp_offset=np.zeros(6) if offset is None else offset)
 
 
@@ -295,7 +279,7 @@ def _intent_stage(config: DriveConfig, H: int, source: Any):
     return WindowIntent(src, H), src.model_id
 
 
-def _trial(config: DriveConfig, log: LoopLog, ref_abs, intent, task, obj, user, model_id, controller_name, dofs,
+def _trial(config: DriveConfig, log: LoopLog, ref_abs, H, intent, task, obj, user, model_id, controller_name, dofs,
            start_pose, bias) -> Trial:  # fmt: skip
     n = log.n
     if n == 0:
@@ -303,12 +287,10 @@ def _trial(config: DriveConfig, log: LoopLog, ref_abs, intent, task, obj, user, 
     d = len(dofs)
     ref = log.reference
     if log.prediction is None:
-        H = int(get_preset(config.preset).game.horizon)
-        H = max(2, round(H * get_preset(config.preset).impedance.dt / config.dt))
         windows = np.lib.stride_tricks.sliding_window_view(ref_abs[1 : n + H, :2], H, axis=0)
         pred2 = np.ascontiguousarray(windows.transpose(0, 2, 1))
     else:
-        pred2 = np.where(np.isnan(log.prediction), np.nan, log.prediction)
+        pred2 = log.prediction
     if d > 2:
         pred = np.empty((n, pred2.shape[1], d))
         pred[:, :, :2] = pred2

@@ -53,7 +53,6 @@ from coassist._checks import check_positive_scalar
 from coassist.spatial import (
     _as_rotation,
     _as_vector,
-    _damped_svd,
     damped_pseudo_inverse,
     joint_velocity,
     manipulability,

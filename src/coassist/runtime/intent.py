@@ -69,9 +69,9 @@ class WindowIntent:
         self.history = int(source.history)
         self.model_id = source.model_id
         self.stall_ticks = check_int_at_least(stall_ticks, "stall_ticks", 1)
-        # The simulator's NominalIntent is recognised by name so that ref_h is the planner's
-        # own rows (analytic velocities), as eq. 4.7 means; it never falls back.
-        self.nominal = type(source).__name__ == "NominalIntent"
+        # model_id None means the nominal plan (IntentSource's contract): ref_h is then the
+        # planner's own rows (analytic velocities), as eq. 4.7 means, and nothing is predicted.
+        self.nominal = source.model_id is None
         L = self.history
         self._hist = np.zeros((2 * L, _N_FEATURES)) if L > 0 else np.zeros((0, _N_FEATURES))
         self._empty = self._hist[:0]

@@ -89,7 +89,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from coassist._checks import check_int_at_least, check_positive_scalar
-from coassist.interfaces import Fault
+from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault
 
 try:  # numpy's determinant kernel without np.linalg.det's Python checks (≈ 2 µs less per tick)
     from numpy.linalg import _umath_linalg as _ula
@@ -580,6 +580,39 @@ class SafetyLayer:
         for bit, name in _COUNTED_BITS:
             if bits & bit:
                 d[name] += 1
+
+    # ------------------------------------------------------------------ effort worlds
+    def limit_effort(self, u_r: np.ndarray, v: np.ndarray, hand: np.ndarray, upstream: Fault,
+                     robot_stop: Fault = Fault.NONE) -> tuple[np.ndarray, Fault, bool]:  # fmt: skip
+        """The stage for ``effort`` worlds (the point-mass world renders the admittance itself).
+
+        u_r : (d,) the robot's effort [N]; v : (d,) the tool's velocity [m/s] (x-y first);
+        hand : (6,) the hand wrench [N, N·m]. Returns (effort, flags, stop):
+
+        - a robot stop, or a hand force over ``contact_force``, latches STOPPED: zero
+          effort and ``stop`` from now on (the world brakes);
+        - with an upstream fault that zeroed the effort, the effort passes as it is;
+        - above ``tool_speed`` the effort may only brake: its component along v, if it
+          pushes forward, is removed (TOOL_SPEED_LIMIT).
+        """
+        lim = self.limits
+        f = robot_stop
+        force = math.sqrt(float(hand[0] * hand[0] + hand[1] * hand[1] + hand[2] * hand[2]))
+        if force > lim.contact_force:
+            f |= Fault.CONTACT_FORCE_LIMIT
+        if f or self._stopped:
+            self.latch_stop()
+            return np.zeros_like(u_r), f | Fault.STOPPED, True
+        if upstream & ZERO_EFFORT_FAULTS:
+            return u_r, f, False
+        speed = math.sqrt(float(v[0] * v[0] + v[1] * v[1]))
+        if speed > lim.tool_speed:
+            along = float(u_r[0] * v[0] + u_r[1] * v[1])
+            if along > 0.0:
+                u_r = u_r.copy()
+                u_r[:2] -= along / (speed * speed) * v[:2]
+            f |= Fault.TOOL_SPEED_LIMIT
+        return u_r, f, False
 
     # ------------------------------------------------------------------ Cartesian stage
     def limit_twist(self, twist, pose) -> tuple[np.ndarray, Fault]:

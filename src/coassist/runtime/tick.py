@@ -42,20 +42,19 @@ into a :class:`~coassist.runtime.world.Command`::
 
 ``effort`` worlds (the 2-D point-mass world) render the impedance model physically:
 steps 4–5 are theirs, the tick sends u_r, and the safety layer's effort stage applies
-(contact force and robot stops latch STOPPED; above the tool speed the effort may only
-brake). Every flag raised on the way is OR-ed into the tick's ``fault``.
+(``SafetyLayer.limit_effort``: contact force and robot stops latch STOPPED; above the
+tool speed the effort may only brake). Every flag raised on the way is OR-ed into the tick's ``fault``.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from coassist._checks import check_positive_scalar
-from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault, TrialContext
+from coassist.interfaces import Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
 from coassist import spatial as _spatial
 from coassist.runtime.world import COMMAND_SPACES, Command, RobotState
@@ -213,16 +212,13 @@ class ControlTick:
         self._ref_h_buf = np.zeros((self.Hs, 2 * d))
         self._ref_h_view = self._ref_h_buf[: self.H]
         self._z = np.zeros(2 * d)
-        self._zero_d = np.zeros(d)
-        self._plan: Plan | None = None
 
     # ------------------------------------------------------------------ per run
     def reset(self, plan: Plan, context: TrialContext, state: RobotState | None = None) -> None:
         """Start a run: the plan's grids, the intent, a zero admittance state, the safety layer."""
         if not isinstance(plan, Plan):
             raise ValueError(f"plan must be a Plan, got {type(plan).__name__}")
-        d, dofs = self.d, self.config.dofs
-        self._plan = plan
+        d = self.d
         start = plan.start_pose
         self._start = start.copy()
         self._x0 = start[self._dofs].copy()
@@ -236,7 +232,6 @@ class ControlTick:
         ref_ctrl = ref_abs.copy()
         ref_ctrl[:, :d] -= self._x0
         self._ref_ctrl = ref_ctrl
-        self._pred_pad = start[self._dofs][2:]
         self.intent.reset(context)
         self.wrench.reset()
         self.safety.reset()
@@ -267,8 +262,7 @@ class ControlTick:
         ref_r = self._ref_ctrl[k + 1 : k + 1 + self.H]
         prediction = None
         if self.intent.nominal:
-            ref_h = ref_r
-            self.intent.update(k, row, self._ref_xy[k + 1 : k + 1 + self.Hs])
+            ref_h = ref_r  # eq. 4.7: the plan's own rows; nothing to predict
         else:
             nominal = self._ref_xy[k + 1 : k + 1 + self.Hs]
             pred, pf = self.intent.update(k, row, nominal)
@@ -298,7 +292,8 @@ class ControlTick:
         u_r, u_h_model, cf = self.controller.step(z, ref_h, ref_r, w)
         fault |= cf
         if self.command_space == "effort":
-            command, sf = self._effort_safety(u_r, v, hand, state, fault)
+            effort, sf, stop = self.safety.limit_effort(u_r, v, hand, fault, self._robot_stop(state))
+            command = Command(effort=effort, stop=stop)
         else:
             command, sf = self._arm(state, u_r, w, hand, fault)
         fault |= sf
@@ -312,28 +307,6 @@ class ControlTick:
         if state.emergency_stop:
             f |= Fault.ROBOT_EMERGENCY_STOP
         return f
-
-    def _effort_safety(self, u_r, v, hand, state, upstream: Fault) -> tuple[Command, Fault]:
-        """The safety layer's stage for effort worlds (module docstring)."""
-        lim = self.safety.limits
-        robot = self._robot_stop(state)
-        f = robot
-        force = math.sqrt(float(hand[0] * hand[0] + hand[1] * hand[1] + hand[2] * hand[2]))
-        if force > lim.contact_force:
-            f |= Fault.CONTACT_FORCE_LIMIT
-        if f or self.safety.stopped:
-            self.safety.latch_stop()
-            return Command(effort=self._zero_d.copy(), stop=True), f | Fault.STOPPED
-        if upstream & ZERO_EFFORT_FAULTS:
-            return Command(effort=u_r), f
-        speed = math.sqrt(float(v[0] * v[0] + v[1] * v[1]))
-        if speed > lim.tool_speed:
-            along = float(u_r[0] * v[0] + u_r[1] * v[1])
-            if along > 0.0:  # the robot may only brake above the speed limit
-                u_r = u_r.copy()
-                u_r[:2] -= along / (speed * speed) * v[:2]
-            f |= Fault.TOOL_SPEED_LIMIT
-        return Command(effort=u_r), f
 
     def _arm(self, state: RobotState, u_r, w, hand, upstream: Fault) -> tuple[Command, Fault]:
         cfg, d, dofs = self.config, self.d, self.config.dofs

@@ -4,14 +4,8 @@ See DESIGN.md §4. Entry points: :func:`run_trial` (one trial from built parts),
 :class:`TrialSpec` + :func:`run_spec` / :func:`run_trials` (by name, in parallel).
 """
 
-from coassist.sim.intent_source import (
-    FEATURES,
-    IntentSource,
-    NominalIntent,
-    OracleIntent,
-    TrialContext,
-    load_intent_source,
-)
+from coassist.interfaces import FEATURES, IntentSource, TrialContext
+from coassist.sim.intent_source import NominalIntent, OracleIntent, load_intent_source
 from coassist.sim.objects import OBJECTS, CarriedObject, ForceSensor, get_object
 from coassist.sim.operator import (
     AUTHOR,

@@ -34,7 +34,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from coassist.interfaces import FEATURES, IntentSource, TrialContext  # re-exported for sim's users
+from coassist.interfaces import IntentSource, TrialContext
+
 
 class NominalIntent:
     """ŷ_ref,h = y_ref,r: the thesis' assumption with no model loaded (eq. 4.7, dataset D0).

@@ -59,13 +59,8 @@ from coassist.runtime.safety import SafetyLayer, SafetyLimits
 from coassist.runtime.tick import ControlTick, Plan
 from coassist.runtime.world import Command, RobotState
 from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
-from coassist.sim.intent_source import (
-    FEATURES,
-    IntentSource,
-    NominalIntent,
-    TrialContext,
-    load_intent_source,
-)
+from coassist.interfaces import FEATURES, IntentSource, TrialContext
+from coassist.sim.intent_source import NominalIntent, load_intent_source
 from coassist.sim.objects import CarriedObject, ForceSensor, get_object
 from coassist.sim.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise, operator_profile
 from coassist.sim.tasks import TASK_KINDS, Task, make_task
