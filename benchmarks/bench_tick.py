@@ -1,14 +1,17 @@
 """The whole control tick on the MuJoCo UR5, without the physics step, against a naive tick.
 
-    .venv/bin/python benchmarks/bench_tick.py [--ticks 3000] [--model MODEL] [--realtime-seconds 60]
+    .venv/bin/python benchmarks/bench_tick.py [--ticks 3000] [--model MODEL [--backends process,onnx,torch]]
+                                              [--realtime-seconds 60]
 
 Measures ``tick.step()`` (wrench pipeline, predictor dispatch, game,
 impedance, J⁺, safety; the loop's log write is a row copy, included in the loop but not
 here) for the assistive controller with the simulated operator, and a naive tick that
 does the same work but recomputes the game's gains (prediction matrices and the
 equilibrium solve) and an SVD pseudo-inverse (np.linalg.pinv) every tick. With
-``--model`` the intent stage is the threaded RealtimePredictor on that model (the
-deployed path); without, the nominal plan. Prints median and p99 [ms] and the ratio.
+``--model`` the intent stage is the RealtimePredictor on that model (the deployed
+path), once per backend: the network in a worker process, ONNX Runtime in a worker
+thread, eager torch in a worker thread (it holds the GIL the tick needs); without, the
+nominal plan. Prints median and p99 [ms] and the ratio.
 
 ``--realtime-seconds S`` also runs the MuJoCo world at 500 Hz paced to the wall clock for S
 seconds and counts deadline misses (the tick's own work over 2 ms) and periods the
@@ -55,11 +58,13 @@ def naive_dls(J, twist, thr, damp):
     return np.linalg.pinv(J) @ twist, 0.0
 
 
-def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtime: bool = False) -> dict:
+def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtime: bool = False,
+            backend: str = "process") -> dict:  # fmt: skip
     times: list[float] = []
     dt = 1.0 / rate
     config = DriveConfig(controller="assistive", task="z", intent=model or "nominal", rate_hz=rate,
-                         time_limit=ticks * dt, realtime_intent=True if model else None)  # fmt: skip
+                         time_limit=ticks * dt, realtime_intent=True if model else None,
+                         predictor_backend=backend)  # fmt: skip
     # time read + step by wrapping the tick's step (the loop's own clock does the same)
     orig_step = tick_mod.ControlTick.step
     orig_dls = tick_mod._spatial.dls_joint_velocity
@@ -90,7 +95,7 @@ def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtim
         from coassist.sim.tasks import make_task
 
         world = None
-        if realtime:
+        if realtime or model:  # a real-time predictor: pace the world to the wall clock, as on a robot
             task = make_task("z", np.random.default_rng(np.random.SeedSequence([0, 0])))
             world = MujocoUR5World("handle", control_dt=dt, start=(float(task.start[0]), float(task.start[1]), 0.2),
                                    realtime=True)  # fmt: skip
@@ -114,19 +119,22 @@ def main() -> None:
     ap.add_argument("--ticks", type=int, default=3000)
     ap.add_argument("--naive-ticks", type=int, default=300)
     ap.add_argument("--model", default=None, help="an intent model folder (the deployed RealtimePredictor path)")
+    ap.add_argument("--backends", default="process,onnx,torch", help="predictor backends to measure with --model")
     ap.add_argument("--realtime-seconds", type=float, default=0.0)
     a = ap.parse_args()
-    fast = measure(a.ticks, a.model, naive=False)
-    slow = measure(a.naive_ticks, a.model, naive=True)
-    fm, fp = _stats(fast["times"][50:])
+    backends = a.backends.split(",") if a.model else ["process"]
+    slow = measure(a.naive_ticks, a.model, naive=True, backend=backends[0])
     sm, sp = _stats(slow["times"][20:])
     print(f"intent: {'RealtimePredictor on ' + a.model if a.model else 'nominal plan'}; 125 Hz; assistive; z task")
-    print("| tick.step (no physics) | median ms | p99 ms |")
-    print("|---|---|---|")
-    print(f"| coassist | {fm:.3f} | {fp:.3f} |")
-    print(f"| naive (gains + pinv every tick) | {sm:.3f} | {sp:.3f} |")
-    print(f"| ratio naive / coassist | {sm / fm:.0f}x | {sp / fp:.0f}x |")
-    print(f"ticks over the 8 ms deadline: coassist {fast['misses']}/{len(fast['times'])}, naive {slow['misses']}/{len(slow['times'])}")
+    print("| tick.step (no physics) | median ms | p99 ms | ticks > 8 ms | ratio naive/this (median, p99) |")
+    print("|---|---|---|---|---|")
+    for backend in backends:
+        fast = measure(a.ticks, a.model, naive=False, backend=backend)
+        fm, fp = _stats(fast["times"][50:])
+        name = f"coassist, predictor backend {backend}" if a.model else "coassist"
+        print(f"| {name} | {fm:.3f} | {fp:.3f} | {fast['misses']}/{len(fast['times'])} | {sm / fm:.0f}x, {sp / fp:.0f}x |")
+    print(f"| naive (gains + pinv every tick; backend {backends[0]}) | {sm:.3f} | {sp:.3f} | "
+          f"{slow['misses']}/{len(slow['times'])} | 1x |")  # fmt: skip
     if a.realtime_seconds > 0:
         n = int(math.ceil(a.realtime_seconds * 500))
         rt = measure(n, None, naive=False, rate=500, realtime=True)

@@ -30,7 +30,16 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["FEATURES", "Fault", "IntentSource", "SAFETY_FAULTS", "TrialContext", "ZERO_EFFORT_FAULTS"]
+__all__ = [
+    "FEATURES",
+    "Fault",
+    "IntentSource",
+    "PlausibilityLimits",
+    "SAFETY_FAULTS",
+    "TrialContext",
+    "ZERO_EFFORT_FAULTS",
+    "prediction_plausible",
+]
 
 
 class Fault(enum.IntFlag):
@@ -52,7 +61,7 @@ class Fault(enum.IntFlag):
     PREDICTION_STALE = 32  # the intent prediction in use was shifted, not fresh
     PREDICTION_FALLBACK = 64  # prediction too old or invalid: the nominal reference was used
     INTERNAL_ERROR = 128  # a stage raised; its safe output was used instead
-    INVALID_INPUT = 256  # an input of the wrong shape or type (complex, strings)
+    INVALID_INPUT = 256  # an input of the wrong shape or type (bool, str, complex), or implausibly large
     SENSOR_STALE = 512  # no new force/torque sample for longer than the pipeline allows
     SENSOR_SATURATED = 1024  # a sensor channel at its range limit: the reading is not the hand force
     WRENCH_SPIKE = 2048  # a physically implausible jump: the sample was rejected
@@ -152,3 +161,46 @@ class IntentSource(Protocol):
         valid only during the call: copy it to keep it.
         """
         ...
+
+
+@dataclass(frozen=True)
+class PlausibilityLimits:
+    """What a predicted trajectory of the operator's hand may look like.
+
+    max_distance : [m] the farthest any predicted position may lie from the tool's
+        current position (the hand leads the tool by centimetres, a 0.4 s forecast at
+        the operators' 0.4 m/s adds 0.16 m: 0.5 m leaves room and still catches a
+        broken network's metres).
+    max_speed : [m/s] the fastest motion between consecutive predicted rows (a hand
+        guiding a load stays well under 1.5 m/s; 3 m/s is physically implausible here).
+    """
+
+    max_distance: float = 0.5
+    max_speed: float = 3.0
+
+    def __post_init__(self) -> None:
+        for name in ("max_distance", "max_speed"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
+                raise ValueError(f"PlausibilityLimits.{name} must be a finite number > 0, got {v!r}")
+
+
+def prediction_plausible(positions: np.ndarray, pose: np.ndarray, dt: float,
+                         limits: PlausibilityLimits = PlausibilityLimits()) -> bool:  # fmt: skip
+    """True when a prediction may be used: finite, near the tool, and no faster than a hand.
+
+    positions : (H, d) predicted positions for ticks k+1 … k+H [m].
+    pose : (d,) the tool's position at tick k [m].  dt : tick [s].
+
+    Plausible ⇔ all finite, max_i ‖p_i − pose‖_∞ ≤ max_distance and
+    max_i ‖p_{i+1} − p_i‖_∞ / dt ≤ max_speed.  (The first row is not held to the speed
+    bound against the pose: the hand leads the tool, the distance bound covers it.)
+    """
+    p = np.asarray(positions, dtype=np.float64)
+    if p.ndim != 2 or p.shape[0] < 1 or not np.isfinite(p).all():
+        return False
+    if float(np.max(np.abs(p - np.asarray(pose, dtype=np.float64)[: p.shape[1]]))) > limits.max_distance:
+        return False
+    if p.shape[0] > 1 and float(np.max(np.abs(np.diff(p, axis=0)))) > limits.max_speed * dt:
+        return False
+    return True

@@ -105,6 +105,27 @@ class FakeRealtimePredictor:
         return pos, Fault.PREDICTION_STALE if age else Fault.NONE, age
 
 
+def _real_predictor(runner, history: int = 10):
+    """The real RealtimePredictor (worker thread, plausibility checks, health) on a stand-in network."""
+    from types import SimpleNamespace
+
+    from coassist.intent.realtime import RealtimeConfig, RealtimePredictor
+
+    def make(H):
+        model = SimpleNamespace(horizon=H, history=history, n_dof=2, dt=DT)
+        return RealtimePredictor(model, RealtimeConfig(threaded=True), runner=lambda w: runner(w, H))
+
+    return make
+
+
+def _absurd(window, H):
+    return np.full((H, 2), 1e6)  # finite, a kilometre away: must never be used
+
+
+def _dies(window, H):
+    raise SystemExit  # ends the worker thread: the predictor must report itself dead
+
+
 def _set(rows, fn):
     def inject(k, state):
         if k in rows:
@@ -160,6 +181,10 @@ CASES = [
          predictor=lambda H: FakeRealtimePredictor(H, hang=range(100, 225)), stops=True),  # fmt: skip
     Case("predictor returns NaN (5 ticks)", Fault.PREDICTOR_STALLED | Fault.DECELERATING,
          predictor=lambda H: FakeRealtimePredictor(H, nan=range(100, 105))),  # fmt: skip
+    Case("predictor returns 1e6 m (finite, absurd)", Fault.PREDICTOR_STALLED | Fault.DECELERATING | Fault.STOPPED,
+         predictor=_real_predictor(_absurd), stops=True),  # fmt: skip
+    Case("predictor worker thread dies", Fault.PREDICTOR_STALLED | Fault.DECELERATING | Fault.STOPPED,
+         predictor=_real_predictor(_dies), stops=True),  # fmt: skip
     Case("pushed into a singular pose (arm stretched)", Fault.TOOL_SPEED_LIMIT | Fault.SINGULARITY,
          operator=ScriptedForce.constant((0.0, -40.0, 0.0, 0.0, 0.0, 0.0)), time_limit=5.0),  # fmt: skip
     Case("hand lets go at full speed", Fault.TOOL_SPEED_LIMIT,
@@ -194,6 +219,7 @@ def run_case(case: Case):
     return trial, violations
 
 
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
 @pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
 def test_fault_is_flagged_and_no_command_leaves_the_limits(case):
     trial, violations = run_case(case)  # the loop must not raise

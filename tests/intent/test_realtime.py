@@ -49,7 +49,7 @@ def test_slow_network_is_shifted_then_falls_back(model):
         calls.append(window)
         if len(calls) > 1:
             gate.wait(5.0)  # the second prediction is "late"
-        return np.arange(model.horizon * model.n_dof, dtype=float).reshape(model.horizon, model.n_dof)
+        return 1e-3 * np.arange(model.horizon * model.n_dof, dtype=float).reshape(model.horizon, model.n_dof)
 
     x = samples(model, model.history + 20)
     with RealtimePredictor(model, RealtimeConfig(max_age=3), runner=runner) as rt:
@@ -58,7 +58,7 @@ def test_slow_network_is_shifted_then_falls_back(model):
         rt.wait_idle()
         first = rt.tick(x[model.history], nominal(model))  # the worker now blocks on this window
         assert first.fault == Fault.PREDICTION_STALE and first.age == 1
-        fresh = np.arange(model.horizon * model.n_dof, dtype=float).reshape(model.horizon, model.n_dof)
+        fresh = 1e-3 * np.arange(model.horizon * model.n_dof, dtype=float).reshape(model.horizon, model.n_dof)
         assert np.array_equal(first.positions[:-1], fresh[1:]) and np.array_equal(first.positions[-1], fresh[-1])
         t0 = time.perf_counter()
         ages = [rt.tick(x[model.history + 1 + i], nominal(model)) for i in range(4)]
@@ -170,7 +170,7 @@ def test_fresh_prediction_is_a_copy(model):
         calls.append(1)
         if len(calls) > 1:
             raise RuntimeError("network died")
-        return np.ones((model.horizon, model.n_dof))
+        return np.full((model.horizon, model.n_dof), 0.1)
 
     x = samples(model, model.history + 1)
     with RealtimePredictor(model, RealtimeConfig(threaded=False), runner=once) as rt:
@@ -179,4 +179,151 @@ def test_fresh_prediction_is_a_copy(model):
         assert out.fault == Fault.NONE
         out.positions[:] = 1e3  # the caller scribbles on what it got
         nxt = rt.tick(x[-1], nominal(model))
-        assert nxt.fault == Fault.PREDICTION_STALE and np.all(nxt.positions == 1.0)
+        assert nxt.fault == Fault.PREDICTION_STALE and np.all(nxt.positions == 0.1)
+
+
+# ---------------------------------------------------------------------- bad predictions, bad samples
+
+
+def test_absurd_or_jumping_predictions_are_rejected_and_counted(model):
+    """A finite 1e6 m prediction, or one with a 1 m jump between two rows (125 m/s), is
+    never served: the nominal goes out flagged, and health() counts it as implausible."""
+    H, d = model.horizon, model.n_dof
+    good = np.full((H, d), 0.02)
+    jump = good.copy()
+    jump[H // 2 :] += 1.0 * 0.45  # 0.45 m in one tick: within 0.5 m of the pose, far beyond 3 m/s
+    outputs = iter([np.full((H, d), 1e6), jump, good])
+    x = samples(model, model.history + 2)
+    with RealtimePredictor(model, RealtimeConfig(threaded=False), runner=lambda w: next(outputs)) as rt:
+        outs = [rt.tick(s, nominal(model, 0.0)) for s in x]
+        health = rt.health()
+    assert [o.fault for o in outs[-3:]] == [Fault.PREDICTION_FALLBACK, Fault.PREDICTION_FALLBACK, Fault.NONE]
+    assert np.all(outs[-3].positions == 0.0) and np.all(outs[-2].positions == 0.0)
+    assert np.array_equal(outs[-1].positions, good)
+    assert (health.implausible, health.errors, health.predictions) == (2, 0, 1)
+
+
+def test_plausibility_bounds_against_hand_computed_cases():
+    from coassist.interfaces import PlausibilityLimits, prediction_plausible
+
+    lim = PlausibilityLimits(max_distance=0.5, max_speed=3.0)
+    pose = np.array([0.1, -0.2])
+    line = pose + np.outer(np.arange(1, 51), [0.02, 0.0])  # 0.02 m per 8 ms = 2.5 m/s; ends 1.0 m away
+    assert not prediction_plausible(line, pose, 0.008, lim)  # too far
+    assert prediction_plausible(line[:25], pose, 0.008, lim)  # 0.5 m away exactly, 2.5 m/s
+    fast = pose + np.outer(np.arange(1, 11), [0.025, 0.0])  # 3.125 m/s
+    assert not prediction_plausible(fast, pose, 0.008, lim)
+    assert prediction_plausible(fast, pose, 0.01, lim)  # 2.5 m/s at 100 Hz
+    assert not prediction_plausible(np.full((3, 2), np.nan), pose, 0.008, lim)
+    with pytest.raises(ValueError, match="PlausibilityLimits.max_speed"):
+        PlausibilityLimits(max_speed=0.0)
+
+
+@pytest.mark.parametrize("bad", [np.zeros(7), np.zeros((8, 1)), "0.1", np.ones(8, dtype=bool), [np.nan] * 8,
+                                 np.array([10**400] * 8, dtype=object), None])  # fmt: skip
+def test_a_bad_sample_is_held_flagged_and_never_raises(model, bad):
+    """One bad sample costs nothing: it is replaced by the previous row, the tick is
+    flagged INVALID_INPUT and the next prediction uses exactly that held window."""
+    if model.n_dof != 2:
+        pytest.skip("the parametrized shapes assume 2 DOFs")
+    x = samples(model, model.history + 2)
+    with RealtimePredictor(model, RealtimeConfig(threaded=False)) as rt:
+        for s in x[: model.history]:
+            rt.tick(s, nominal(model))
+        out = rt.tick(bad, nominal(model))
+        assert out.fault == Fault.INVALID_INPUT and out.age == 0 and out.positions.shape == (model.horizon, 2)
+        held = np.vstack([x[1 : model.history], x[model.history - 1]])
+        np.testing.assert_array_equal(out.positions, model.predict(held))
+        assert rt.health().held_samples == 1
+
+
+def test_a_long_sensor_gap_empties_the_history_then_predictions_resume(model):
+    cfg = RealtimeConfig(threaded=False, max_hold=3)
+    x = samples(model, 2 * model.history + 10)
+    with RealtimePredictor(model, cfg) as rt:
+        for s in x[: model.history]:
+            rt.tick(s, nominal(model))
+        gap = [rt.tick(np.full(4 * model.n_dof, np.nan), nominal(model)) for _ in range(5)]
+        after = [rt.tick(s, nominal(model)) for s in x[model.history : 2 * model.history]]
+        m = rt.max_age
+    # samples 1-3 of the gap are held (fresh predictions); the 4th empties the history, so the
+    # last prediction (made at gap[2]) ages: stale up to max_age, then the nominal until a
+    # whole window of real samples has come in again.
+    inv, stale = Fault.INVALID_INPUT, Fault.PREDICTION_STALE
+    assert [g.fault for g in gap] == [inv, inv, inv, inv | stale, inv | stale]
+    assert all(a.fault == stale and a.age == 3 + i for i, a in enumerate(after[: m - 2]))
+    assert all(a.fault == Fault.PREDICTION_FALLBACK for a in after[m - 2 : model.history - 1])
+    assert after[model.history - 1].fault == Fault.NONE and after[model.history - 1].age == 0
+
+
+def test_the_fallback_always_has_the_prediction_shape(model):
+    H, d = model.horizon, model.n_dof
+    x = samples(model, 2)
+    with RealtimePredictor(model, RealtimeConfig(threaded=False)) as rt:
+        long = rt.tick(x[0], np.arange((H + 5) * d, dtype=float).reshape(H + 5, d) * 1e-3)
+        short = rt.tick(x[1], np.array([[0.1] * d, [0.2] * d]))
+        junk = rt.tick(x[1], "not a reference")
+    assert long.positions.shape == short.positions.shape == junk.positions.shape == (H, d)
+    assert np.allclose(long.positions[-1], np.arange((H - 1) * d, H * d) * 1e-3)
+    assert np.all(short.positions[1:] == 0.2) and np.all(np.isnan(junk.positions))
+    assert junk.fault & Fault.INVALID_INPUT and long.fault == Fault.PREDICTION_FALLBACK
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
+def test_a_dead_worker_thread_is_reported_and_stalls_the_loop_intent(model):
+    from coassist.runtime.intent import RealtimeIntent
+
+    def dies(window):
+        raise SystemExit  # escapes the worker's `except Exception`: the thread ends
+
+    x = samples(model, model.history + 3)
+    rt = RealtimePredictor(model, RealtimeConfig(threaded=True), runner=dies)
+    try:
+        stage = RealtimeIntent(rt)
+        for k, s in enumerate(x[: model.history]):
+            stage.update(k, tuple(s), nominal(model))
+        rt._worker.join(timeout=2.0)
+        assert not rt.worker_alive and not rt.health().alive
+        _, flags = stage.update(model.history, tuple(x[-1]), nominal(model))
+        assert flags & Fault.PREDICTOR_STALLED
+    finally:
+        rt.close()
+
+
+def test_health_shows_a_hung_network_while_it_hangs(model):
+    gate = threading.Event()
+
+    def hangs(window):
+        gate.wait(5.0)
+        return np.zeros((model.horizon, model.n_dof))
+
+    x = samples(model, model.history)
+    with RealtimePredictor(model, RealtimeConfig(threaded=True), runner=hangs) as rt:
+        for s in x:
+            rt.tick(s, nominal(model))
+        time.sleep(0.15)
+        h = rt.health()
+        assert h.alive and h.busy and h.busy_s >= 0.1 and h.predictions == 0
+        gate.set()
+        rt.wait_idle()
+        assert rt.health().predictions == 1 and not rt.health().busy
+
+
+def test_process_backend_equals_the_model_and_reports_its_death(model):
+    """The model in a worker process answers exactly what it answers in-process (same
+    float64 bytes back); a killed process is reported dead and its calls fail."""
+    from coassist.intent.realtime import ProcessRunner
+
+    runner = ProcessRunner(model, threads=1)
+    try:
+        for seed in range(3):
+            window = np.random.default_rng(seed).normal(scale=0.05, size=(model.history, 4 * model.n_dof))
+            np.testing.assert_allclose(runner(window), model.predict(window), rtol=0, atol=1e-9)
+        assert runner.alive()
+        runner._proc.kill()
+        runner._proc.join(timeout=5.0)
+        assert not runner.alive()
+        with pytest.raises((EOFError, OSError, BrokenPipeError)):
+            runner(np.zeros((model.history, 4 * model.n_dof)))
+    finally:
+        runner.close()

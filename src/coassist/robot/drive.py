@@ -48,6 +48,8 @@ __all__ = ["CONTROLLERS", "DriveConfig", "WORLDS", "drive", "workspace_for"]
 #: Controller names of the drive command → the simulator's controller kinds.
 CONTROLLERS = {"assistive": "cooperative", "imp": "impedance", "mg": "manual"}
 WORLDS = ("mujoco", "ur")
+#: Where the real-time predictor runs (coassist.intent.realtime.BACKENDS).
+PREDICTOR_BACKENDS = ("process", "onnx", "torch")
 #: Height of the task plane above the base [m] in the MuJoCo world (the TCP at the handle).
 TASK_HEIGHT = 0.20
 #: Rotational inertia and damping of the 6-DOF admittance [kg·m², N·m·s/rad].
@@ -68,9 +70,12 @@ class DriveConfig:
     full_pose : control all 6 DOFs (orientation error as a rotation vector) instead of x-y.
     time_limit : [s]; None: 2 × the plan's duration + 10 s.
     limits : the safety layer's limits (the workspace box defaults to the task's).
-    realtime_intent : run the predictor in a worker thread (RealtimePredictor); the
+    realtime_intent : run the predictor off the control thread (RealtimePredictor); the
         default is on for the real arm and off in MuJoCo, where a deterministic run is
         worth more than wall-clock realism.
+    predictor_backend : where the real-time predictor runs: "process" (a worker process:
+        the tick never waits for the GIL; the default, see benchmarks/bench_tick.py),
+        "onnx" (ONNX Runtime in a worker thread) or "torch" (eager, worker thread).
     """
 
     world: str = "mujoco"
@@ -86,6 +91,7 @@ class DriveConfig:
     time_limit: float | None = None
     limits: SafetyLimits = field(default_factory=SafetyLimits)
     realtime_intent: bool | None = None
+    predictor_backend: str = "process"
 
     def __post_init__(self) -> None:
         def bad(name: str, what: str) -> ValueError:
@@ -113,6 +119,8 @@ class DriveConfig:
             raise bad("time_limit", "a number of seconds > 0 or None")
         if not isinstance(self.limits, SafetyLimits):
             raise bad("limits", "a SafetyLimits")
+        if self.predictor_backend not in PREDICTOR_BACKENDS:
+            raise bad("predictor_backend", f"one of {PREDICTOR_BACKENDS}")
 
     @property
     def dt(self) -> float:
@@ -182,8 +190,9 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
             from coassist.robot.mujoco_world import MujocoUR5World
 
             start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
+            # A real-time predictor runs against the wall clock: so must the world it serves.
             world = MujocoUR5World(config.object, control_dt=dt, start=start, seed=config.seed, view=view,
-                                   realtime=view)  # fmt: skip
+                                   realtime=view or bool(config.realtime_intent))  # fmt: skip
         else:
             from coassist.robot.ur_rtde_world import URRTDEWorld
 
@@ -274,7 +283,8 @@ def _intent_stage(config: DriveConfig, H: int, source: Any):
         model.check_compatible(None, config.dt, what="the drive loop")
         digest = str(read_sidecar(config.intent).get("weights_sha256", ""))[:12]
         mid = f"{config.intent.rstrip('/').split('/')[-1]}@{digest}"
-        return RealtimeIntent(RealtimePredictor(model, RealtimeConfig(threaded=True)), model_id=mid), mid
+        predictor = RealtimePredictor(model, RealtimeConfig(threaded=True, backend=config.predictor_backend))
+        return RealtimeIntent(predictor, model_id=mid), mid
     src = load_intent_source(config.intent, horizon=max(H, 2))
     return WindowIntent(src, H), src.model_id
 
