@@ -5,20 +5,23 @@
 
 Latency (torch.set_num_threads(1), ONNX Runtime with one intra-op thread): median and
 p99 of one complete prediction (raw history in, positions in m out, scaling included)
-for the ``default`` and thesis-size (3 × 250) networks, against plain eager PyTorch on
+for the ``lstm`` (the former default) and thesis-size (3 × 250) networks, against plain eager PyTorch on
 the full 125-sample window in the same run:
 
 - ``eager full``: eager PyTorch, 125 steps (the naive baseline);
 - ``eager decimated``: eager PyTorch on the decimated window (every 5th sample, 25 steps);
 - ``onnx full`` / ``onnx decimated``: ONNX Runtime on the same (needs onnx + onnxruntime);
 - ``stream step``: one LSTM step with the state carried (what a streaming predictor would
-  pay per tick; shown for reference: a window-trained LSTM is not exact when streamed).
+  pay per tick; shown for reference: a window-trained LSTM is not exact when streamed);
+- ``baselines``: the tuned ridge (one matrix product on the decimated window) and the
+  constant-acceleration Kalman predictor (one filter step), ratios against the ``lstm``
+  network's ``eager full``. The ``default`` preset is that ridge in the model format.
 
-Targets (issue 4): default ≤ 2 ms p99, thesis-size ≤ 8 ms p99.
+Targets (issue 4): lstm ≤ 2 ms p99, thesis-size ≤ 8 ms p99.
 
 Training throughput (2 threads): windows/s of a training step for both presets on a
 synthetic simulated-size dataset (60 trials × 18 s at 125 Hz). With ``--full-train`` it
-also times a complete ``default`` training on that dataset (target ≤ 3 min) and a
+also times a complete ``lstm`` training on that dataset (target ≤ 3 min) and a
 transfer on a 15-trial set (target ≤ 20 s).
 """
 
@@ -63,7 +66,7 @@ def time_calls(f, calls: int, warmup: int = 20) -> tuple[float, float]:
 
 def random_model(layers: int, hidden: int, fc: tuple[int, ...], decimation: int, skip: bool) -> IntentModel:
     """A model with random weights and plausible scalers (latency does not depend on training)."""
-    base = PRESETS["default"]
+    base = PRESETS["lstm"]
     window = replace(base.window, decimation=decimation)
     p = replace(base, window=window, lstm_layers=layers, hidden=hidden, fc=fc, skip=skip)
     torch.manual_seed(0)
@@ -77,8 +80,8 @@ def latency(calls: int) -> list[dict]:
     rng = np.random.default_rng(0)
     history = rng.normal(scale=0.05, size=(125, 8))
     rows = []
-    default = PRESETS["default"]
-    for name, layers, hidden, fc, skip in (("default", default.lstm_layers, default.hidden, default.fc, default.skip),
+    lstm_preset = PRESETS["lstm"]
+    for name, layers, hidden, fc, skip in (("lstm", lstm_preset.lstm_layers, lstm_preset.hidden, lstm_preset.fc, lstm_preset.skip),
                                            ("thesis-size", 3, 250, (200,), False)):  # fmt: skip
         variants = {}
         for dec in (1, 5):
@@ -111,6 +114,40 @@ def latency(calls: int) -> list[dict]:
     return rows
 
 
+def baseline_latency(calls: int, naive: tuple[float, float]) -> list[dict]:
+    """One prediction of the tuned baselines, raw history in, positions in m out, against ``naive``
+    (the default network, eager, full window: median and p99 in ms, measured in the same run)."""
+    from coassist.intent import RidgeBaseline
+    from coassist.intent.features import decode_target, to_relative, unscale_targets
+    from coassist.intent.kalman import KalmanCA, constant_acceleration, kalman_ca_filter
+
+    rng = np.random.default_rng(0)
+    history = rng.normal(scale=0.05, size=(125, 8))
+    m = random_model(1, 8, (8,), 5, False)  # only its window and scalers are used
+    w = m.window
+    ridge = RidgeBaseline(rng.normal(size=(w.steps * 8, w.horizon * 2)) * 1e-2, np.zeros(w.horizon * 2), 1e-4, w,
+                          m.input_scaler, m.target_scaler, m.dt)  # fmt: skip
+
+    def ridge_once():
+        x = to_relative(history[None, w.offsets + w.history - 1], 2)
+        out = ridge.predict_scaled(ridge.input_scaler.transform(x))
+        decode_target(unscale_targets(ridge.target_scaler, out, w.horizon, 2), history[None, -1, :2],
+                      history[None, -1, 2:4], w, m.dt)  # fmt: skip
+
+    kalman = KalmanCA(jerk_psd=1e3, velocity_noise=1e-3)
+
+    def kalman_once():  # one predict/update step from the previous tick, then the extrapolation
+        states = kalman_ca_filter(history[-2:, :2], history[-2:, 2:4], 0.008, [kalman])
+        constant_acceleration(states[0, -1], 50, 0.008)
+
+    rows = []
+    for label, f in (("ridge (numpy, decimated window)", ridge_once), ("Kalman CA (1 filter step + extrapolation)", kalman_once)):
+        med, p99 = time_calls(f, calls)
+        rows.append({"network": "baselines", "variant": label, "median_ms": med, "p99_ms": p99,
+                     "speedup_median": naive[0] / med, "speedup_p99": naive[1] / p99})  # fmt: skip
+    return rows
+
+
 def synthetic_trials(n_trials: int, seconds: float = 18.0, dt: float = 0.008, prefix: str = "SIM") -> list[LabeledTrial]:
     """Smooth random hand-guided motions the size of the simulator's trials."""
     out = []
@@ -132,7 +169,7 @@ def synthetic_trials(n_trials: int, seconds: float = 18.0, dt: float = 0.008, pr
 def throughput(trials: list[LabeledTrial], batches: int) -> list[dict]:
     torch.set_num_threads(2)
     rows = []
-    for name in ("default", "thesis"):
+    for name in ("lstm", "thesis"):
         p = PRESETS[name]
         from coassist.intent.training import build_model
 
@@ -141,7 +178,7 @@ def throughput(trials: list[LabeledTrial], batches: int) -> list[dict]:
         data = _Windows(model, ws, frozen_lstm=False)
         opt = torch.optim.Adam(model.net.parameters(), lr=1e-3)
         rng = np.random.default_rng(0)
-        n_batches = batches if name == "default" else max(3, batches // 5)
+        n_batches = batches if name == "lstm" else max(3, batches // 5)
         bs = p.train.batch_size
         model.net.train()
         for i in range(n_batches + 2):
@@ -162,7 +199,7 @@ def full_train(trials: list[LabeledTrial]) -> dict:
     from coassist.experiments.reproduce import PRESETS as PIPELINE
 
     cfg = PIPELINE["default"]
-    p = PRESETS["default"]
+    p = PRESETS["lstm"]
     t0 = time.perf_counter()
     model = train_model(trials, p, replace(p.train, threads=2, epochs=cfg.epochs, train_stride=cfg.train_stride))
     train_s = time.perf_counter() - t0
@@ -187,6 +224,8 @@ def main() -> None:
 
     print("latency per prediction, 1 thread (ms)")
     lat = latency(args.calls)
+    naive = next(r for r in lat if r["network"] == "lstm" and r["variant"] == "eager full")
+    lat += baseline_latency(args.calls, (naive["median_ms"], naive["p99_ms"]))
     print(f"  {'network':12s} {'variant':34s} {'median':>8s} {'p99':>8s} {'x med':>7s} {'x p99':>7s}")
     for r in lat:
         print(f"  {r['network']:12s} {r['variant']:34s} {r['median_ms']:8.3f} {r['p99_ms']:8.3f} "

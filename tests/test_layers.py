@@ -19,7 +19,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("intent", "runtime"),  # the predictor; the control loop, wrench pipeline, safety
     ("sim",),  # the point-mass world, tasks, objects, simulated operators
     ("robot",),  # kinematics, MuJoCo UR5, the real UR5
-    ("experiments",),  # thesis experiments, reports
+    ("experiments", "play"),  # thesis experiments, reports; a person in the loop (the live page)
     ("cli",),  # the command line
 )
 #: Imports between packages of the same layer that are allowed.

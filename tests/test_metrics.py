@@ -13,7 +13,11 @@ from coassist.metrics import (
     e_max,
     e_rms,
     f_rms,
+    jerk_rms,
+    overshoot,
+    peak_effort_ratio,
     precision_sigma,
+    tracking_error_rms,
     prediction_errors,
     time_to_target,
 )
@@ -185,3 +189,63 @@ def test_sigma_thesis_window_is_375_samples():
 def test_sigma_validation(kwargs, message):
     with pytest.raises(ValueError, match=message):
         precision_sigma(np.zeros((5, 2)), [0.0, 0.0], **kwargs)
+
+
+# --------------------------------------------------------------------------- smoothness and stability
+
+
+def test_jerk_of_a_cubic_is_six_times_its_coefficient():
+    dt = 0.01
+    t = np.arange(50) * dt
+    pose = np.stack([2.0 * t**3 + t, -0.5 * t**3], axis=1)  # jerk (12, −3): norm sqrt(153)
+    assert jerk_rms(pose, dt) == pytest.approx(math.sqrt(153.0), rel=1e-6)
+    # a straight line at constant speed has no jerk
+    assert jerk_rms(np.stack([t, 2 * t], axis=1), dt) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_jerk_rms_is_the_rms_over_the_third_differences():
+    dt = 0.5
+    # differences: [0, 0, 1, −1] → [0, 1, −2] → third [1, −3]; /dt³ = 8, −24
+    pose = np.array([0.0, 0.0, 0.0, 1.0, 0.0])
+    assert jerk_rms(pose, dt) == pytest.approx(math.sqrt((8.0**2 + 24.0**2) / 2))
+    with pytest.raises(ValueError, match="at least 4 samples"):
+        jerk_rms(np.zeros((3, 2)), dt)
+
+
+def test_overshoot_of_a_step_response():
+    # intent steps from 0 to 1 at k = 10; the tool rises, peaks at 1.25 and settles at 1
+    intent = np.r_[np.zeros(10), np.ones(40)]
+    tool = np.r_[np.zeros(10), np.linspace(0.2, 1.25, 10), np.linspace(1.25, 1.0, 10), np.ones(20)]
+    assert overshoot(tool, intent) == pytest.approx(0.25)
+    # the same step downwards: the tool undershoots to −1.25
+    assert overshoot(-tool, -intent) == pytest.approx(0.25)
+    # a tool that never passes the intent has none
+    assert overshoot(np.minimum(tool, 1.0), intent) == 0.0
+
+
+def test_overshoot_at_each_turn_of_a_back_and_forth_intent():
+    # intent: 0 → 2 (k 0–20), back to 0.5 (k 20–40), rests; the tool passes 2 by 0.1 and 0.5 by 0.3
+    intent = np.r_[np.linspace(0, 2, 21), np.linspace(2, 0.5, 21)[1:], np.full(20, 0.5)]
+    tool = intent.copy()
+    tool[22] = 2.1  # past the maximum, while the intent is already coming back
+    tool[45] = 0.2  # past the final rest, below it
+    y = np.zeros_like(intent)
+    pose, ref = np.stack([tool, y], axis=1), np.stack([intent, y], axis=1)
+    assert overshoot(pose, ref) == pytest.approx(0.3)
+    tool[45] = 0.5
+    assert overshoot(np.stack([tool, y], axis=1), ref) == pytest.approx(0.1)
+    # turns of the intent smaller than tol are not turns: a 0.5 mm ripple is ignored
+    ripple = np.r_[np.linspace(0, 1, 20), np.full(5, 0.9995), np.ones(20)]
+    assert overshoot(ripple + 0.0003, ripple, tol=1e-3) == pytest.approx(0.0003)
+
+
+def test_tracking_error_and_peak_effort_ratio_by_hand():
+    pose = np.array([[0.0, 0.0], [3.0, 4.0]])
+    intent = np.zeros((2, 2))
+    assert tracking_error_rms(pose, intent) == pytest.approx(math.sqrt(25.0 / 2))
+    u_r = np.array([[3.0, 4.0], [0.0, 1.0]])  # peak 5
+    u_h = np.array([[0.0, 2.0], [1.0, 0.0]])  # peak 2
+    assert peak_effort_ratio(u_r, u_h) == pytest.approx(2.5)
+    assert math.isnan(peak_effort_ratio(u_r, np.zeros((2, 2))))
+    with pytest.raises(ValueError, match="intent has shape"):
+        tracking_error_rms(pose, np.zeros((3, 2)))

@@ -6,22 +6,124 @@ library; no computation lives here.
 
 from __future__ import annotations
 
+import difflib
+import os
+import re
+from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import NoReturn
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 app = typer.Typer(
     help="coassist — assistive pHRI: cooperative game-theoretic MPC with learned human intent.",
     no_args_is_help=True,
     add_completion=False,
+    # Plain click help: rich markup would swallow bracketed text ("[s]", "coassist[cluster]"),
+    # and its boxed layout leaves a narrow column for the help text at 80 columns.
+    rich_markup_mode=None,
 )
 console = Console()
+err_console = Console(stderr=True, highlight=False)
 
 
 @app.callback()
 def main() -> None:
     """coassist — assistive pHRI: cooperative game-theoretic MPC with learned human intent."""
+
+
+# --------------------------------------------------------------------------- shared checks
+# Each runs before any work starts and ends in one line that names the option as typed.
+
+
+def _fail(message: str, code: int = 1) -> NoReturn:
+    """Print ``error: <message>`` on stderr (as plain text: brackets stay) and exit with ``code``."""
+    err_console.print(f"error: {message}", markup=False, soft_wrap=True)
+    raise typer.Exit(code)
+
+
+def _typed(message: str, options: Mapping[str, str]) -> str:
+    """``message`` with config field names (``train.epochs``) replaced by the options typed (``--epochs``)."""
+    for name in sorted(options, key=len, reverse=True):
+        message = re.sub(rf"(?<![\w.-]){re.escape(name)}(?![\w])", options[name], message)
+    return message
+
+
+def _choose(value: str, choices: Iterable[str], option: str, what: str) -> str:
+    """``value`` if it is one of ``choices``, else fail naming the option, with a "did you mean"."""
+    choices = list(choices)
+    if value in choices:
+        return value
+    close = difflib.get_close_matches(value, choices, n=1, cutoff=0.5)
+    hint = f"; did you mean {close[0]!r}?" if close else ""
+    _fail(f"{option} {value!r}: no such {what}{hint} (choose from: {', '.join(choices)})", 2)
+
+
+def _existing_ancestor(path: Path) -> Path:
+    """The nearest of ``path`` and its parents that exists (``.`` at worst)."""
+    path = Path(os.path.abspath(path))
+    while not path.exists() and path.parent != path:
+        path = path.parent
+    return path
+
+
+def _folder_out(path: Path, option: str, typed: Path | None = None) -> Path:
+    """Fail now unless ``path`` is, or can be made, a folder this user can write in.
+
+    ``typed``: what the user gave, when ``path`` is derived from it (a file's folder).
+    """
+    shown = f"{option} {path if typed is None else typed}"
+    if path.exists() and not path.is_dir():
+        _fail(f"{shown}: {path} is a file, not a folder")
+    base = _existing_ancestor(path)
+    if not base.is_dir():
+        _fail(f"{shown}: {base} is a file, not a folder")
+    if not os.access(base, os.W_OK | os.X_OK):
+        _fail(f"{shown}: {base} is not writable (permission denied)")
+    return path
+
+
+def _file_out(path: Path, option: str, default_name: str) -> Path:
+    """The file to write for ``--out path``: ``path`` itself, or ``path/default_name`` if it is a folder.
+
+    Fails now (not after the work) if the file's folder cannot be created or written.
+    """
+    if path.is_dir():
+        path = path / default_name
+    if path.is_dir():
+        _fail(f"{option} {path}: is a folder; give a file name")
+    _folder_out(path.parent, option, typed=path)
+    if path.exists() and not os.access(path, os.W_OK):
+        _fail(f"{option} {path}: is not writable (permission denied)")
+    return path
+
+
+def _check_device(device: str | None, option: str = "--device") -> None:
+    """Fail now if the torch device cannot be used here (not after loading the data)."""
+    if device is None:
+        return
+    import torch
+
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError):
+        _fail(f"{option} {device!r}: not a torch device (use cpu, cuda or cuda:<n>)", 2)
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            built = "built with CUDA, but no GPU is visible" if torch.backends.cuda.is_built() else "built without CUDA"
+            _fail(f"{option} {device}: CUDA is not available here (torch {torch.__version__} {built}); use --device cpu")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            _fail(f"{option} {device}: this machine has {torch.cuda.device_count()} CUDA device(s)")
+    elif dev.type == "mps" and not torch.backends.mps.is_available():
+        _fail(f"{option} {device}: Apple MPS is not available here; use --device cpu")
+    elif dev.type not in ("cpu", "cuda", "mps"):
+        _fail(f"{option} {device}: use cpu, cuda or cuda:<n>", 2)
+
+
+def _wrote(text: str) -> None:
+    console.print(f"[green]wrote[/] {escape(text)}", highlight=False, soft_wrap=True)  # paths stay whole
 
 
 @app.command()
@@ -40,41 +142,89 @@ def sweep(
     try:
         config = dmpc_study.SweepConfig(duration=duration, **kwargs)
     except ValueError as exc:
-        raise typer.BadParameter(str(exc)) from None
+        _fail(_typed(str(exc), {"duration": "--duration", "position_scale": "--position-scale"}), 2)
+    _folder_out(out, "--out")
     result = dmpc_study.run_sweep(config, out, progress=True)
     dmpc_study.print_summary(result, console)
-    console.print(f"[green]wrote[/] {out / 'summary.json'} and {out / 'dmpc_sweep.png'}")
+    _wrote(f"{out / 'summary.json'} and {out / 'dmpc_sweep.png'}")
 
 
 
 # --------------------------------------------------------------------------- intent model
 
 
-def _intent_preset(preset: str, **overrides):
+#: The training options as typed, for the fields of TrainConfig / NetworkConfig they set.
+TRAIN_OPTIONS = {
+    **{f"train.{name}": f"--{name.replace('_', '-')}" for name in (
+        "epochs", "lr", "batch_size", "seed", "threads", "test_fraction", "init", "device", "optimizer")},
+    "network.lstm_layers": "--layers", "network.hidden": "--hidden", "network.fc": "--fc",
+}  # fmt: skip
+
+
+def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, **overrides):
+    """The intent preset named by --preset, with the training (and network-size) options applied."""
+    from dataclasses import replace
+
     from coassist.intent.training import PRESETS, with_overrides
 
-    if preset not in PRESETS:
-        raise typer.BadParameter(f"unknown preset {preset!r}; choose one of {sorted(PRESETS)}", param_hint="--preset")
+    _choose(preset, PRESETS, "--preset", "intent-model preset")
     try:
-        return with_overrides(PRESETS[preset], **overrides)
+        p = with_overrides(PRESETS[preset], **overrides)
+        sizes = {k: v for k, v in (network or {}).items() if v is not None}
+        if sizes:
+            p = replace(p, **sizes)
+            p.network(2)  # validates the sizes (NetworkConfig)
+        return p
     except ValueError as exc:
-        raise typer.BadParameter(str(exc)) from None
+        _fail(_typed(str(exc), TRAIN_OPTIONS), 2)
 
 
-def _intent_trials(paths: list[Path]):
+SKIP_BAD_HELP = "Leave out trials that cannot be read, saying which and why (default: stop at the first)."
+
+
+def _intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA"):
+    import warnings
+
     from coassist.intent import load_trials
 
+    from coassist.data import RecordingError, TrialFileError
+    from coassist.data.store import ManifestError
+
+    def skipped(where: str, reason: str) -> None:
+        reason = reason.removeprefix(f"{where}: ")  # the reason usually names the file already
+        console.print(f"[yellow]skipped[/] {where}: {reason}", highlight=False)
+
     try:
-        return load_trials(paths)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            trials = load_trials(paths, on_bad=skipped if skip_bad else None)
     except (FileNotFoundError, ValueError) as exc:
-        raise typer.BadParameter(str(exc), param_hint="DATA") from None
+        one_trial = isinstance(exc, (TrialFileError, RecordingError)) and not isinstance(exc, ManifestError)
+        hint = " (--skip-bad-trials leaves unreadable trials out)" if one_trial and not skip_bad else ""
+        _fail(f"{option}: {exc}{hint}", 2)
+    for w in caught:
+        console.print(f"[yellow]warning:[/] {w.message}", highlight=False)
+    return trials
+
+
+def _check_model_out(out: Path, overwrite: bool, init: str) -> None:
+    """Refuse before any work an --out that is a file, or an existing model without --overwrite."""
+    bad_parent = next((p for p in reversed(out.parents) if p.exists() and not p.is_dir()), None)
+    if bad_parent is not None:
+        _fail(f"--out {out}: {bad_parent} is a file, not a folder", 2)
+    if out.exists() and not out.is_dir():
+        _fail(f"--out {out}: is a file; give a folder for the model", 2)
+    continuing = init.startswith("resume:") and Path(init.partition(":")[2]).absolute() == out.absolute()
+    if out.is_dir() and any(out.iterdir()) and not (overwrite or continuing):
+        _fail(f"--out {out}: already holds files; pass --overwrite to replace it (the old model stays until the new "
+              "one is complete)", 2)  # fmt: skip
 
 
 @app.command()
 def train(
     data: list[Path] = typer.Argument(..., help="Dataset folders, real-recording folders (e.g. .../ur5-thesis/user-a) or single recordings."),
     out: Path = typer.Option(..., "--out", "-o", help="Model folder to write (weights, model.json, history.json, loss.png)."),
-    preset: str = typer.Option("default", help="Starting configuration: 'default' (small, fast) or 'thesis' (exact §5.2.2)."),
+    preset: str = typer.Option("default", help="Starting configuration: 'default' (LSTM 2×64 learning the residual over the validation-tuned ridge), 'lstm' (the same, skip trained too), 'linear' (the tuned ridge alone, closed form) or 'thesis' (exact §5.2.2)."),
     init: str = typer.Option("scratch", help="scratch | resume:<model> | finetune:<model> | transfer:<model> (LSTM frozen)."),
     epochs: int = typer.Option(None, help="Override the preset's epochs."),
     lr: float = typer.Option(None, help="Override the initial learning rate."),
@@ -83,32 +233,48 @@ def train(
     threads: int = typer.Option(None, help="Torch threads (default 2; at most the cores you may use)."),
     test_fraction: float = typer.Option(None, help="Share of trials held out (default 0.2)."),
     device: str = typer.Option(None, help="Torch device to train on: cpu (default) or cuda."),
+    optimizer: str = typer.Option(None, help="Override the optimiser: adam, adamw, rmsprop or sgd."),
+    layers: int = typer.Option(None, help="LSTM layers (--init scratch; default: the preset's)."),
+    hidden: int = typer.Option(None, help="LSTM hidden size (--init scratch)."),
+    fc: str = typer.Option(None, help="Widths of the FC layers after the LSTM, comma-separated (--init scratch)."),
+    overwrite: bool = typer.Option(False, help="Replace the model already in --out (only once the new one is complete)."),
+    skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
 ) -> None:
-    """Train the intent predictor (thesis §5.2.2; Algorithm 4.1 with resume:, 4.2 with transfer:)."""
-    import json
+    """Train the intent predictor (thesis §5.2.2; Algorithm 4.1 with resume:, 4.2 with transfer:).
 
-    from coassist._io import atomic_write_text
-    from coassist.intent.training import train_model, write_model
+    After each epoch a checkpoint is kept beside --out (.<name>.partial); if the run is
+    stopped, --init resume:<out> continues it where it stopped, with the same result.
+    """
+    _check_model_out(out, overwrite, init)
+    _folder_out(out, "--out")  # before the slow imports: a bad --out is told at once
+    from coassist._io import OutputBusyError, OutputLock
+    from coassist.intent.training import OPTIMIZERS, train_model, write_model
 
-    p = _intent_preset(preset, epochs=epochs, lr=lr, batch_size=batch_size, seed=seed, threads=threads,
-                       test_fraction=test_fraction, init=init, device=device)  # fmt: skip
-    trials = _intent_trials(data)
-    history: list = []
-
-    def log(record: dict) -> None:
-        history.append(record)
-        atomic_write_text(out / "history.json", json.dumps(history, indent=1) + "\n")
-
+    if optimizer is not None:
+        _choose(optimizer, OPTIMIZERS, "--optimizer", "optimiser")
+    sizes = {"lstm_layers": layers, "hidden": hidden, "fc": None if fc is None else tuple(_int_list(fc, "--fc"))}
+    given = [TRAIN_OPTIONS[f"network.{k}"] for k, v in sizes.items() if v is not None]
+    if given and init != "scratch":
+        _fail(f"{', '.join(given)}: network sizes apply to --init scratch only; {init.partition(':')[0]}: keeps the "
+              "starting model's", 2)  # fmt: skip
+    p = _intent_preset(preset, network=sizes, epochs=epochs, lr=lr, batch_size=batch_size, seed=seed, threads=threads,
+                       test_fraction=test_fraction, init=init, device=device, optimizer=optimizer)  # fmt: skip
+    _check_device(device)
+    trials = _intent_trials(data, skip_bad_trials)
     try:
-        model = train_model(trials, p, p.train, progress=True, on_epoch=log)
+        with OutputLock(out):
+            model = train_model(trials, p, p.train, progress=True, checkpoint_to=out)
+            write_model(model, out)
     except ValueError as exc:  # mismatched model, unknown init, too-short trials
-        console.print(f"[red]error:[/] {exc}")
-        raise typer.Exit(2) from None
-    write_model(model, out)
+        _fail(_typed(str(exc), TRAIN_OPTIONS), 2)
+    except OutputBusyError as exc:
+        _fail(f"{exc}")
+    except OSError as exc:
+        _fail(f"cannot write {exc.filename or out}: {exc.strerror}")
     last = model.info["training_history"][-1]
     console.print(
-        f"[green]wrote[/] {out}  train {len(model.info['train_trials'])} / test {len(model.info['test_trials'])} trials, "
-        f"final train loss {last['train_loss']:.3e}, test loss {last['test_loss'] if last['test_loss'] is None else format(last['test_loss'], '.3e')}, "
+        f"[green]wrote[/] {escape(str(out))}  train {len(model.info['train_trials'])} / test {len(model.info['test_trials'])} trials, "
+        f"final loss (MSE of the scaled targets) train {last['train_loss']:.3e}, test {last['test_loss'] if last['test_loss'] is None else format(last['test_loss'], '.3e')}, "
         f"{model.info['train_seconds']:.0f} s"
     )
 
@@ -117,32 +283,41 @@ def train(
 def evaluate(
     model: Path = typer.Option(..., "--model", "-m", help="Model folder written by `coassist train`."),
     data: list[Path] = typer.Option(..., "--data", "-d", help="Dataset or recording folders to score on (repeatable)."),
-    out: Path = typer.Option(None, help="JSON file for the results (default: <model>/evaluation.json)."),
+    out: Path = typer.Option(None, help="JSON file for the results, or a folder for evaluation.json (default: <model>/evaluation.json)."),
     include_training: bool = typer.Option(False, help="Also score trials the model was trained on."),
+    skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
 ) -> None:
-    """e_RMS and e_MAX per horizon for the model and the baselines (nominal, constant velocity, ridge)."""
+    """e_RMS and e_MAX per horizon [mm] for the model and the baselines (nominal, constant velocity, tuned constant
+    acceleration and ridge), and the best baseline per horizon with the model's gain over it."""
+    if not model.exists():
+        _fail(f"--model {model}: no such folder", 2)
+    dest = _file_out(out or model / "evaluation.json", "--out", "evaluation.json")
     import json
 
     from coassist._io import atomic_write_text
     from coassist.intent import ModelFileError, ModelMismatchError, evaluate_model, load_model, results_table
+    from coassist.intent.evaluation import comparison_lines
 
     try:
         m = load_model(model)
-    except ModelFileError as exc:
-        raise typer.BadParameter(str(exc), param_hint="--model") from None
-    trials = _intent_trials(data)
+    except (ModelFileError, OSError) as exc:
+        _fail(f"--model {model}: {exc}", 2)
+    trials = _intent_trials(data, skip_bad_trials, "--data")
     try:
         result = evaluate_model(m, trials, held_out_only=not include_training)
     except (ModelMismatchError, ValueError) as exc:
-        console.print(f"[red]error:[/] {exc}")
-        raise typer.Exit(2) from None
+        _fail(str(exc), 2)
     result["model"] = str(model)
     console.print(results_table(result, f"{model}: {len(result['trials'])} trials, {result['n_ticks']} ticks"))
+    for line in comparison_lines(result):
+        console.print(line, highlight=False, soft_wrap=True)
     if result["skipped"]:
         console.print(f"skipped {len(result['skipped'])} training trials (use --include-training to score them)")
-    dest = out or model / "evaluation.json"
-    atomic_write_text(dest, json.dumps(result, indent=1) + "\n")
-    console.print(f"[green]wrote[/] {dest}")
+    try:
+        atomic_write_text(dest, json.dumps(result, indent=1) + "\n")
+    except OSError as exc:
+        _fail(f"--out {dest}: cannot write ({exc.strerror})")
+    _wrote(str(dest))
 
 
 @app.command()
@@ -151,39 +326,71 @@ def tune(
     preset: str = typer.Option("default", help="Preset whose window and training defaults are searched around."),
     n_trials: int = typer.Option(20, "--trials", help="Optuna trials to run."),
     storage: str = typer.Option("sqlite:///study.db", help="Optuna storage URL (any database URL Optuna accepts)."),
-    study_name: str = typer.Option("intent", help="Study name (resumed if it exists)."),
+    study_name: str = typer.Option("intent", help="Study name (resumed if it exists and was run on the same trials)."),
     epochs: int = typer.Option(None, help="Epochs per trial (default: the preset's)."),
     seed: int = typer.Option(0, help="Sampler seed."),
 ) -> None:
-    """Optuna search over optimiser, learning rate and sizes; objective: validation e_RMS at the full horizon."""
-    from coassist.intent.tuning import run_study
+    """Optuna search over optimiser, learning rate and sizes; objective: validation e_RMS at the full horizon.
 
-    if n_trials < 1:
-        raise typer.BadParameter("must be >= 1", param_hint="--trials")
+    Prints the best parameters as the `coassist train` options that use them.
+    """
+    from coassist.intent.tuning import StudyMismatchError, check_storage, run_study, train_options
+
+    for value, option in ((n_trials, "--trials"), (epochs, "--epochs")):
+        if value is not None and value < 1:
+            _fail(f"{option} must be >= 1, got {value}", 2)
+    if seed < 0:
+        _fail(f"--seed must be >= 0, got {seed}", 2)
+    try:
+        sqlite_file = check_storage(storage)
+    except ValueError as exc:
+        _fail(f"--storage {storage}: {exc}", 2)
+    if sqlite_file is not None:
+        _file_out(sqlite_file, "--storage", "study.db")
     p = _intent_preset(preset)
     trials = _intent_trials(data)
-    result = run_study(trials, p, n_trials=n_trials, storage=storage, study_name=study_name, epochs=epochs, seed=seed,
-                       progress=True)  # fmt: skip
-    console.print(f"best validation e_RMS {1e3 * result['best_value']:.2f} mm with {result['best_params']}")
-    console.print(f"study {result['study_name']!r} in {result['storage']} ({result['n_trials']} trials)")
+    try:
+        result = run_study(trials, p, n_trials=n_trials, storage=storage, study_name=study_name, epochs=epochs,
+                           seed=seed, progress=True)  # fmt: skip
+    except StudyMismatchError as exc:
+        _fail(f"--study-name {study_name}: {exc}", 2)
+    except ValueError as exc:
+        _fail(str(exc), 2)
+    console.print(f"best validation e_RMS {1e3 * result['best_value']:.2f} mm", highlight=False)
+    console.print(f"train with them: coassist train {' '.join(map(str, data))} --out <model> "
+                  f"{' '.join(train_options(result['best_params']))}", markup=False, highlight=False, soft_wrap=True)  # fmt: skip
+    console.print(f"study {result['study_name']!r} in {result['storage']} ({result['n_trials']} trials)", markup=False)
 
 
-def _int_list(text: str, name: str) -> list[int]:
+def _int_list(text: str, option: str) -> list[int]:
     try:
         values = [int(v) for v in text.split(",") if v.strip()]
     except ValueError:
-        raise typer.BadParameter(f"{name} must be comma-separated integers, got {text!r}") from None
+        _fail(f"{option} must be comma-separated integers, got {text!r}", 2)
     if not values or any(v < 0 for v in values):
-        raise typer.BadParameter(f"{name} must list integers >= 0, got {text!r}")
+        _fail(f"{option} must list integers >= 0, got {text!r}", 2)
     return values
 
 
-def _name_list(text: str, name: str, allowed: tuple[str, ...]) -> list[str]:
+def _name_list(text: str, option: str, allowed: tuple[str, ...], what: str) -> list[str]:
     values = [v.strip() for v in text.split(",") if v.strip()]
-    bad = [v for v in values if v not in allowed]
-    if not values or bad:
-        raise typer.BadParameter(f"{name} must be comma-separated values from {', '.join(allowed)}; got {text!r}")
-    return values
+    if not values:
+        _fail(f"{option} must list one or more of {', '.join(allowed)}; got {text!r}", 2)
+    return [_choose(v, allowed, option, what) for v in values]
+
+
+def _print_forces(folder: Path) -> None:
+    """The hand's and the robot's f_RMS (eq. 5.9) over a dataset: how much the robot helped."""
+    import numpy as np
+
+    from coassist.data import read_dataset
+    from coassist.metrics import f_rms
+
+    trials = read_dataset(folder).trials
+    hand = float(np.mean([f_rms(t.wrench) for t in trials]))
+    robot = float(np.mean([f_rms(t.effort_r) for t in trials]))
+    console.print(f"f_RMS (eq. 5.9), mean over {len(trials)} trials: hand {hand:.2f} N, robot {robot:.2f} N",
+                  highlight=False)  # fmt: skip
 
 
 @app.command()
@@ -195,34 +402,56 @@ def collect(
     objects: str = typer.Option("handle", help="Objects: handle, board, heavy."),
     trials: int = typer.Option(20, help="Trials per user, object and task."),
     seed: int = typer.Option(0, help="Seed of the first trial; trial i uses seed + i."),
-    preset: str = typer.Option("thesis-evaluation", help="Control preset (thesis-evaluation[-dm], thesis-application[-dm])."),
+    preset: str = typer.Option("thesis-evaluation-dm", help="Control preset: thesis-evaluation-dm (the main job's), thesis-application-dm, or either without -dm (SI units: the robot barely helps)."),
     intent: str = typer.Option("nominal", help="nominal | oracle | path of an intent model."),
     dataset_id: str = typer.Option(None, help="Dataset id (default: the folder's name)."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
     ray_address: str = typer.Option(None, help="Run on a Ray cluster at this address (needs coassist[cluster])."),
-    overwrite: bool = typer.Option(False, help="Replace an existing dataset folder."),
+    overwrite: bool = typer.Option(False, help="Replace an existing dataset folder (only once the new one is complete)."),
 ) -> None:
-    """Simulate trials and write them as a dataset (thesis §5.2.2; default: D0, 60 trials)."""
+    """Simulate trials and write them as a dataset (thesis §5.2.2; default: D0, 60 trials).
+
+    Each trial is written as it finishes; if the run is stopped, the same command
+    continues where it stopped.
+    """
+    from coassist._io import OutputBusyError
     from coassist.sim import CONTROLLER_KINDS, OBJECTS, PRESETS, TASK_KINDS
     from coassist.sim.collect import collect_dataset
 
-    if controller not in CONTROLLER_KINDS:
-        raise typer.BadParameter(f"controller must be one of {', '.join(CONTROLLER_KINDS)}, got {controller!r}")
-    if preset not in PRESETS:
-        raise typer.BadParameter(f"preset must be one of {', '.join(PRESETS)}, got {preset!r}")
-    if trials < 1 or seed < 0 or (workers is not None and workers < 1):
-        raise typer.BadParameter("trials and workers must be >= 1 and seed >= 0")
+    _choose(controller, CONTROLLER_KINDS, "--controller", "controller")
+    _choose(preset, PRESETS, "--preset", "control preset")
+    for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
+        if value is not None and value < minimum:
+            _fail(f"{option} must be >= {minimum}, got {value}", 2)
+    user_list = _int_list(users, "--users")
+    task_list = _name_list(tasks, "--tasks", TASK_KINDS, "task")
+    object_list = _name_list(objects, "--objects", tuple(OBJECTS), "object")
+    if intent not in ("nominal", "oracle") and not (Path(intent) / "model.json").is_file():
+        _fail(f"--intent {intent}: not nominal, oracle or a model folder (no model.json there)", 2)
+    _folder_out(out, "--out")
     try:
         folder = collect_dataset(
             out, dataset_id=dataset_id, workers=workers, progress=True, ray_address=ray_address, overwrite=overwrite,
-            controller=controller, users=_int_list(users, "users"), tasks=_name_list(tasks, "tasks", TASK_KINDS),
-            objects=_name_list(objects, "objects", tuple(OBJECTS)), trials=trials, seed=seed, preset=preset,
-            intent=intent,
+            controller=controller, users=user_list, tasks=task_list, objects=object_list, trials=trials, seed=seed,
+            preset=preset,
+            intent=intent, say=lambda line: console.print(line, highlight=False),
         )
-    except (ValueError, FileExistsError, RuntimeError) as exc:
-        console.print(f"[red]error:[/] {exc}")
-        raise typer.Exit(1) from None
-    console.print(f"[green]wrote[/] {folder}")
+    except (ValueError, FileExistsError, NotADirectoryError, RuntimeError, OutputBusyError) as exc:
+        _fail(f"{exc}")
+    except OSError as exc:
+        _fail(f"cannot write {exc.filename or out}: {exc.strerror}")
+    _wrote(str(folder))
+    _print_forces(Path(folder))
+
+
+#: drive's options as typed, for the DriveConfig / SafetyLimits fields they set.
+DRIVE_OPTIONS = {
+    **{f"DriveConfig.{name}": f"--{name.replace('_', '-')}" for name in (
+        "world", "controller", "task", "preset", "intent", "user", "seed", "full_pose", "time_limit",
+        "predictor_backend")},
+    "DriveConfig.object": "--object", "DriveConfig.rate_hz": "--rate",
+    "SafetyLimits.tool_speed": "--tool-speed", "SafetyLimits.contact_force": "--contact-force",
+}  # fmt: skip
 
 
 @app.command()
@@ -233,6 +462,8 @@ def drive(
     task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
     intent: str = typer.Option("nominal", help="nominal | oracle (MuJoCo) | path of an intent model (coassist train)."),
+    realtime_intent: bool = typer.Option(None, help="Run the model off the control thread, never waiting for it (default: on for --world ur, off in MuJoCo, where runs are then deterministic)."),
+    predictor_backend: str = typer.Option("process", help="Where a real-time model runs: process (own worker process), onnx (ONNX Runtime thread) or torch (thread)."),
     preset: str = typer.Option("thesis-application-dm", help="Control preset (the main job's by default)."),
     user: int = typer.Option(0, help="Simulated operator (MuJoCo world)."),
     seed: int = typer.Option(0, help="Seed of the task, the simulated operator and the sensor noise."),
@@ -250,17 +481,26 @@ def drive(
     from coassist.data import write_trial
     from coassist.robot.drive import DriveConfig
     from coassist.robot.drive import drive as run_drive
+    from coassist.robot.drive import CONTROLLERS, WORLDS
     from coassist.runtime.safety import SafetyLimits
+    from coassist.sim import PRESETS as CONTROL_PRESETS
 
+    _choose(world, WORLDS, "--world", "world")
+    _choose(controller, CONTROLLERS, "--controller", "controller")
+    _choose(preset, CONTROL_PRESETS, "--preset", "control preset")
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
         config = DriveConfig(world=world, controller=controller, task=task, object=obj, preset=preset, intent=intent,
                              user=user, seed=seed, rate_hz=rate, full_pose=full_pose, time_limit=time_limit,
-                             limits=limits)  # fmt: skip
+                             limits=limits, realtime_intent=realtime_intent,
+                             predictor_backend=predictor_backend)  # fmt: skip
     except ValueError as exc:
-        raise typer.BadParameter(str(exc)) from None
-    if out.exists() and out.is_dir():
-        raise typer.BadParameter(f"{out} is a folder; give a trial file name", param_hint="--out")
+        _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
+    out = _file_out(out, "--out", "trial.parquet")
+    if intent not in ("nominal", "oracle"):
+        import torch
+
+        torch.set_num_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
 
     def confirm(text: str) -> bool:
         console.print("[bold]Limits in force[/] (coassist's safety layer, on top of the robot's own safety system):", markup=True)
@@ -271,42 +511,104 @@ def drive(
     try:
         trial = run_drive(config, host=host, view=view, confirm=confirm if world == "ur" else None)
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
-        console.print(f"[red]error:[/] {exc}", markup=True, highlight=False)
-        raise typer.Exit(1) from None
+        _fail(str(exc))
     path = write_trial(trial, out)
     extra = trial.meta.extra
-    console.print(f"[green]wrote[/] {path}: {trial.n_samples} ticks, ended: {extra['ended']}", highlight=False)
+    _wrote(f"{path}: {trial.n_samples} ticks, ended: {extra['ended']}")
     if extra.get("stop_message"):
-        console.print(f"[yellow]{extra['stop_message']}[/]", highlight=False)
+        console.print(f"[yellow]{escape(extra['stop_message'])}[/]", highlight=False)
     if plot:
         from coassist.sim.monitor import plot_trial
 
-        console.print(f"[green]wrote[/] {plot_trial(trial, path.with_suffix('.png'))}")
+        _wrote(str(plot_trial(trial, path.with_suffix('.png'))))
 
 
 @app.command()
 def show(
-    path: Path = typer.Argument(..., help="A trial file, a dataset folder or a ROS CSV recording folder."),
-    out: Path = typer.Option(None, help="PNG to write (default: <name>.png in the current folder)."),
-    index: int = typer.Option(0, help="Which trial of a dataset."),
+    path: Path = typer.Argument(..., help="What train and evaluate read: a dataset folder, a folder of trial_* recordings, one recording folder or one trial file."),
+    out: Path = typer.Option(None, help="PNG to write, or a folder for it (default: <name>.png in the current folder)."),
+    index: int = typer.Option(0, help="Which trial of a dataset or folder of recordings (0 = the first)."),
+    skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP + " --index then counts the readable ones."),
 ) -> None:
     """The monitor view of a trial (thesis Fig. 5.7–5.8) and its force over time."""
-    from coassist.sim.monitor import load_for_show, plot_trial
+    from coassist.sim.monitor import plot_trial
 
+    name = f"{path.resolve().name}{'' if index == 0 else f'_{index}'}.png"
+    out = _file_out(Path(name) if out is None else out, "--out", name)
+    trials = _intent_trials([path], skip_bad_trials, option="PATH")
+    if not 0 <= index < len(trials):
+        _fail(f"--index {index}: {path} holds {len(trials)} trial(s), so it must be in 0 … {len(trials) - 1}", 2)
     try:
-        trial = load_for_show(path, index)
+        written = plot_trial(trials[index].trial, out)
+    except OSError as exc:
+        _fail(f"--out {out}: cannot write ({exc.strerror})")
+    _wrote(str(written))
+
+
+@app.command()
+def play(
+    user: str = typer.Option("me", help="Your id (letters, digits, - and _): it names your session folder <out>/<user>."),
+    out: Path = typer.Option(Path("runs/play"), help="Parent folder of the session folders (each a dataset coassist train reads)."),
+    controller: str = typer.Option("mg,imp,assistive", help="Controllers the page offers, comma-separated: mg, imp, assistive."),
+    intent: str = typer.Option("nominal", help="nominal | a model folder written by coassist train (its prediction is drawn live)."),
+    preset: str = typer.Option("thesis-application-dm", help="Control preset (thesis-evaluation[-dm], thesis-application[-dm])."),
+    tasks: str = typer.Option("linear,curved,sinusoidal,z", help="The protocol's paths, in order (repeated)."),
+    seed: int = typer.Option(0, help="Trial i's obstacle is drawn from seed + i."),
+    motion_time: float = typer.Option(None, help="Planned motion time of every path in seconds (default: the thesis' per path)."),
+    host: str = typer.Option("127.0.0.1", help="Address to listen on; anything but this machine needs --token."),
+    port: int = typer.Option(8765, help="Port to listen on (0: any free port)."),
+    token: str = typer.Option(None, help="Token the page must present (made for you on a non-local --host)."),
+    open_browser: bool = typer.Option(True, "--open/--no-open", help="Open the page in your web browser."),
+    drive: str = typer.Option(None, help="Watch a coassist drive run instead (read-only): mujoco | ur; uses the first --controller and --tasks."),
+    robot_host: str = typer.Option(None, help="The real arm's IP address (--drive ur)."),
+) -> None:
+    """Be the operator: a live page where your mouse, touch screen or gamepad is the hand on the robot."""
+    try:
+        import starlette  # noqa: F401  (the web extra, checked before anything starts)
+        import uvicorn  # noqa: F401
+
+        from coassist.play.server import PlayServer, is_loopback, new_token
+        from coassist.play.session import PlayConfig, PlaySession
+    except ImportError as exc:
+        _fail(f"coassist play needs the web extra ({exc.name} missing): pip install 'coassist[web]'")
+    if not 0 <= port <= 65535:
+        raise typer.BadParameter(f"must be 0..65535, got {port}", param_hint="--port")
+    if token is None and not is_loopback(host):
+        token = new_token()
+    try:
+        config = PlayConfig(user=user, out=out, controllers=tuple(v.strip() for v in controller.split(",") if v.strip()),
+                            intent="nominal" if drive and intent == "oracle" else intent, preset=preset, tasks=tuple(v.strip() for v in tasks.split(",") if v.strip()),
+                            seed=seed, motion_time=motion_time)  # fmt: skip
+        if drive is None:
+            session = PlaySession(config)
+        else:
+            from coassist.play.monitor import DriveMonitor
+            from coassist.robot.drive import DriveConfig
+
+            def confirm(text: str) -> bool:
+                console.print(text, markup=False)
+                return typer.confirm("Keep the emergency stop within reach. Move the robot?", default=False)
+
+            session = DriveMonitor(DriveConfig(world=drive, controller=config.controllers[0], task=config.tasks[0],
+                                               intent=intent, preset=preset, seed=seed), config,
+                                   host=robot_host, confirm=confirm)  # fmt: skip
+        server = PlayServer(session, host=host, port=port, token=token)
     except (ValueError, OSError) as exc:
-        console.print(f"[red]error:[/] {exc}")
-        raise typer.Exit(1) from None
-    if out is None:
-        out = Path(f"{path.resolve().name}{'' if index == 0 else f'_{index}'}.png")
-    console.print(f"[green]wrote[/] {plot_trial(trial, out)}")
+        _fail(f"{exc}")
+    console.print(f"coassist play: open [bold]{server.url}[/] (Ctrl+C to stop); trials go to {config.folder}", highlight=False)
+    if open_browser:
+        import webbrowser
+
+        webbrowser.open(server.url)
+    if drive is not None:
+        session.start()
+    server.run()
 
 
 @app.command()
 def realism(
     out: Path = typer.Option(Path("docs/realism.md"), help="Markdown report to write."),
-    real: Path = typer.Option(None, help="Folder of real trial_* recordings (default: user-a of ../shared/data/ur5-thesis or $COASSIST_REAL_DATA)."),
+    real: Path = typer.Option(None, help="Folder of real trial_* recordings (default: $COASSIST_REAL_DATA/user-a; see README)."),
     trials: int = typer.Option(10, help="Simulated trials per task and preset."),
     seed: int = typer.Option(0, help="Seed of the first simulated trial."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
@@ -316,16 +618,19 @@ def realism(
 
     from coassist.data import default_real_data
 
-    if trials < 1 or seed < 0:
-        raise typer.BadParameter("trials must be >= 1 and seed >= 0")
+    for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
+        if value is not None and value < minimum:
+            _fail(f"{option} must be >= {minimum}, got {value}", 2)
     real = real or default_real_data() / "user-a"
+    if not real.is_dir():
+        _fail(f"--real {real}: no such folder (set COASSIST_REAL_DATA to the folder holding user-a/)", 2)
+    out = _file_out(out, "--out", "realism.md")
     try:
         result = realism_exp.run_realism(real, trials_per_task=trials, seed=seed, workers=workers, progress=True)
     except ValueError as exc:
-        console.print(f"[red]error:[/] {exc}")
-        raise typer.Exit(1) from None
+        _fail(str(exc))
     console.print(realism_exp.summary_table(result))
-    console.print(f"[green]wrote[/] {realism_exp.write_report(result, out, realism_exp.NOTES)}")
+    _wrote(str(realism_exp.write_report(result, out, realism_exp.NOTES)))
 
 
 @app.command()
@@ -335,35 +640,39 @@ def reproduce(
     seed: int = typer.Option(0, help="Seed of every dataset and training."),
     workers: int = typer.Option(None, help="Simulation processes (default: the preset's)."),
     device: str = typer.Option(None, help="Torch device for training, e.g. cpu or cuda (default: the preset's)."),
-    real_data: Path = typer.Option(None, help="Folder with user-a/ and user-b/ recordings (default: ../shared/data/ur5-thesis or $COASSIST_REAL_DATA)."),
+    real_data: Path = typer.Option(None, help="Folder with user-a/ and user-b/ recordings (default: $COASSIST_REAL_DATA; see README)."),
 ) -> None:
     """The thesis' experiments end to end in simulation (dMPC study, iterative training, transfer, application, real data): one HTML report."""
     from dataclasses import replace
 
     from coassist.experiments import reproduce as rep
 
-    if preset not in rep.PRESETS:
-        raise typer.BadParameter(f"preset must be one of {tuple(rep.PRESETS)}, got {preset!r}", param_hint="--preset")
+    _choose(preset, rep.PRESETS, "--preset", "reproduce preset")
+    _check_device(device)
     changes = {"seed": seed}
     if workers is not None:
         changes["workers"] = workers
     if device is not None:
         changes["device"] = device
     if real_data is not None:
+        if not real_data.is_dir():
+            _fail(f"--real-data {real_data}: no such folder", 2)
         if not (real_data / "user-a").is_dir():
-            raise typer.BadParameter(f"{real_data} has no user-a/ folder of recordings", param_hint="--real-data")
+            _fail(f"--real-data {real_data}: has no user-a/ folder of recordings", 2)
         changes["real_data"] = str(real_data)
     try:
         config = replace(rep.PRESETS[preset], **changes)
     except ValueError as exc:
-        raise typer.BadParameter(str(exc)) from None
-    summary = rep.run_reproduce(config, out, progress=True, say=console.print)
+        _fail(_typed(str(exc), {"reproduce.seed": "--seed", "reproduce.workers": "--workers",
+                                "reproduce.device": "--device"}), 2)  # fmt: skip
+    _folder_out(out, "--out")
+    summary = rep.run_reproduce(config, out, progress=True, say=lambda line: console.print(line, highlight=False))
     held = sum(1 for c in summary["claims"] if c["holds"])
     console.print(f"claims: {held} of {len(summary['claims'])} hold")
     for c in summary["claims"]:
         mark = "[green]holds[/]" if c["holds"] else "[red]does not hold[/]"
-        console.print(f"  {mark}  {c['claim']}")
-    console.print(f"[green]wrote[/] {out / 'report.html'} and {out / 'summary.json'} in {summary['total_seconds']:.0f} s")
+        console.print(f"  {mark}  {escape(c['claim'])}", highlight=False)
+    _wrote(f"{out / 'report.html'} and {out / 'summary.json'} in {summary['total_seconds']:.0f} s")
 
 
 if __name__ == "__main__":  # pragma: no cover

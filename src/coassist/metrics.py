@@ -1,4 +1,9 @@
-"""Performance indexes of thesis §5.2.4: e_RMS, e_MAX, f_RMS and σ.
+"""Performance indexes of thesis §5.2.4 (e_RMS, e_MAX, f_RMS, σ) and of smoothness and stability.
+
+Smoothness and stability (beyond the thesis, issue #11): :func:`jerk_rms` of the tool
+path, :func:`overshoot` of the tool past the operator's intent at each of its turns,
+:func:`tracking_error_rms` of the tool against that intent, and
+:func:`peak_effort_ratio` of the robot's peak effort to the hand's.
 
 Pure functions on arrays (SI units). Conventions, where the thesis is loose
 (DESIGN.md §2):
@@ -36,7 +41,11 @@ __all__ = [
     "e_max",
     "e_rms",
     "f_rms",
+    "jerk_rms",
+    "overshoot",
+    "peak_effort_ratio",
     "precision_sigma",
+    "tracking_error_rms",
     "prediction_errors",
     "time_to_target",
 ]
@@ -304,3 +313,119 @@ def precision_sigma(
         return math.nan
     n = max(1, int(round(tau / dt)))
     return float(np.mean(dist[k0 : k0 + n]))
+
+
+# --------------------------------------------------------------------------- smoothness and stability
+
+
+def jerk_rms(pose: ArrayLike, dt: float) -> float:
+    """RMS of the tool's jerk, in m/s³, from third differences of the positions::
+
+        j(k) = (x(k+3) − 3 x(k+2) + 3 x(k+1) − x(k)) / dt³,   k = 0 … T−4
+        jerk_RMS = sqrt( (1/(T−3)) Σ_k ||j(k)||² )
+
+    Exact for a cubic path (x = c t³ gives j = 6c). A wiggling tool has a larger jerk
+    than a smooth one along the same path.
+
+    Parameters
+    ----------
+    pose : array_like, shape (T, d), T ≥ 4; positions in m.
+    dt : sampling period in s.
+    """
+    dt = check_positive_scalar(dt, "dt")
+    x = _as_positions(pose, "pose")
+    if x.shape[0] < 4:
+        raise ValueError(f"pose needs at least 4 samples for a third difference, got {x.shape[0]}")
+    j = np.diff(x, n=3, axis=0) / dt**3
+    return float(np.sqrt(np.mean(np.sum(j * j, axis=1))))
+
+
+def tracking_error_rms(pose: ArrayLike, intent: ArrayLike) -> float:
+    """sqrt( (1/T) Σ_k ||x(k) − x_ref,h(k)||² ), in m: how far the tool is from where the operator wants it."""
+    x = _as_positions(pose, "pose")
+    ref = _as_positions(intent, "intent")
+    if ref.shape != x.shape:
+        raise ValueError(f"intent has shape {ref.shape}, expected {x.shape} to match pose")
+    return float(np.sqrt(np.mean(np.sum((x - ref) ** 2, axis=1))))
+
+
+def _turning_points(x: np.ndarray, tol: float) -> list[tuple[int, int]]:
+    """(index, direction) of the extrema of a 1-D signal that it leaves by more than ``tol``.
+
+    A "zigzag" with hysteresis: an extremum counts once the signal has retreated from it
+    by more than tol; the last extremum (where the signal ends up) counts too. direction
+    is +1 for a maximum (the signal was rising into it), −1 for a minimum.
+    """
+    turns: list[tuple[int, int]] = []
+    direction = 0
+    ext_i = 0
+    for k in range(1, x.shape[0]):
+        if direction == 0:
+            if abs(x[k] - x[0]) > tol:
+                direction = 1 if x[k] > x[0] else -1
+                ext_i = k
+            continue
+        if direction * (x[k] - x[ext_i]) > 0.0:
+            ext_i = k
+        elif direction * (x[ext_i] - x[k]) > tol:
+            turns.append((ext_i, direction))
+            direction = -direction
+            ext_i = k
+    if direction != 0:
+        turns.append((ext_i, direction))
+    return turns
+
+
+def overshoot(pose: ArrayLike, intent: ArrayLike, *, tol: float = 1e-3) -> float:
+    """Largest overshoot of the tool past the operator's intent at the intent's turns, in m.
+
+    Per axis, the intent's turning points are its extrema that it then leaves by more
+    than ``tol`` m, plus where it comes to rest (the last extremum). At a turning point
+    e with value r_e, reached while moving in direction s_e (+1 rising into a maximum,
+    −1 falling into a minimum), between the previous turning point and the next (the
+    end for the last one) the intent never goes beyond r_e, so the tool's excursion
+    past it is overshoot::
+
+        OS_e = max(0, max_{k ∈ [k_{e−1}, k_{e+1}]} s_e (x(k) − r_e))
+        overshoot = max over axes and turning points of OS_e
+
+    A step of the intent to r answered by a tool that peaks at r + 0.1 r gives 0.1 r
+    (the classic overshoot); a tool that never passes the intent gives 0.
+
+    Parameters
+    ----------
+    pose : array_like, shape (T, d), tool positions in m.
+    intent : array_like, shape (T, d), the operator's desired positions in m.
+    tol : hysteresis in m: turns of the intent smaller than this are ignored.
+    """
+    tol = check_positive_scalar(tol, "tol")
+    x = _as_positions(pose, "pose")
+    ref = _as_positions(intent, "intent")
+    if ref.shape != x.shape:
+        raise ValueError(f"intent has shape {ref.shape}, expected {x.shape} to match pose")
+    worst = 0.0
+    for axis in range(x.shape[1]):
+        turns = _turning_points(ref[:, axis], tol)
+        bounds = [0] + [i for i, _ in turns] + [x.shape[0] - 1]
+        for e, (i, s) in enumerate(turns):
+            lo, hi = bounds[e], bounds[e + 2] if e + 1 < len(turns) else x.shape[0] - 1
+            worst = max(worst, float(np.max(s * (x[lo : hi + 1, axis] - ref[i, axis]))))
+    return worst
+
+
+def peak_effort_ratio(effort_r: ArrayLike, effort_h: ArrayLike) -> float:
+    """max_k ||u_r(k)|| / max_k ||u_h(k)||: the robot's peak effort relative to the hand's.
+
+    Above 1 the robot pushes harder than the operator at some point; a robot fighting an
+    oscillation shows peaks far above the hand's. NaN if the hand never pushes.
+
+    Parameters
+    ----------
+    effort_r, effort_h : array_like, shape (T, d), in N.
+    """
+    ur = _as_positions(effort_r, "effort_r")
+    uh = _as_positions(effort_h, "effort_h")
+    peak_h = float(np.max(np.linalg.norm(uh, axis=1)))
+    if peak_h == 0.0:
+        return math.nan
+    return float(np.max(np.linalg.norm(ur, axis=1))) / peak_h

@@ -13,6 +13,7 @@ import scipy.linalg
 import scipy.sparse
 
 from coassist.control import CooperativeGame, NashGame
+from coassist.control.game import extrapolation_feedback
 from coassist.model import ImpedanceModel
 
 
@@ -203,15 +204,76 @@ def test_failed_alpha_change_keeps_the_old_gains(monkeypatch):
     before = game.gains.G_z.copy()
     with pytest.raises(ValueError, match="alpha must be in"):
         game.set_alpha(1.5)
+    game.prepare_alpha_changes()
 
-    def failing_factor(H):
-        raise ValueError("factorisation failed")
+    def failing_gains(alpha):
+        raise ValueError("gains failed")
 
-    monkeypatch.setattr(game, "_factor", failing_factor)  # fail after the new α was accepted
-    with pytest.raises(ValueError, match="factorisation failed"):
+    monkeypatch.setattr(game._alpha_family, "gains", failing_gains)  # fail after the new α was accepted
+    with pytest.raises(ValueError, match="gains failed"):
         game.set_alpha(0.3)
     assert game.alpha == 0.8
     np.testing.assert_array_equal(game.gains.G_z, before)
+
+
+def fresh_and_online(build, alphas):
+    """Max over α of max|G_online − G_fresh| / max|G_fresh|, and the online family's rank."""
+    game = build(0.5)
+    game.prepare_alpha_changes()
+    worst = 0.0
+    for a in alphas:
+        game.set_alpha(a)
+        fresh = build(a)  # a new game: assembled, factored and solved from scratch at α
+        # relative to the largest gain of this α (one block can be exactly zero, e.g. G_r at α = 1 with Q_hr = 0)
+        online = np.hstack([game.gains.G_z, game.gains.G_h, game.gains.G_r])
+        ref = np.hstack([fresh.gains.G_z, fresh.gains.G_h, fresh.gains.G_r])
+        worst = max(worst, np.abs(online - ref).max() / np.abs(ref).max())
+    return worst, game._alpha_family.rank
+
+
+@pytest.mark.parametrize(
+    "n, Np, Nc, weights, input_weighting",
+    [(2, 50, 50, "thesis", "shared"), (2, 12, 12, "random", "shared"), (3, 10, 4, "random", "shared"),
+     (2, 12, 6, "random", "alpha_scaled"), (2, 20, 20, "thesis", "alpha_scaled")],
+)
+def test_online_alpha_gains_equal_a_fresh_computation(n, Np, Nc, weights, input_weighting):
+    rng = np.random.default_rng(50 + n + Np)
+    model, Q, R_h, R_r, *_ = random_instance(rng, n, Np, Nc)
+    if weights == "thesis":  # Q_hh = Q_rr, Q_hr = Q_rh = 0: ΔH = 0 with shared input weights
+        q = np.diag([1.0] * n + [1e-4] * n)
+        Q = dict(Q_hh=q, Q_hr=np.zeros_like(q), Q_rh=np.zeros_like(q), Q_rr=q)
+
+    def build(alpha):
+        return CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=alpha, horizon=Np, control_horizon=Nc,
+                               input_weighting=input_weighting)
+
+    lo = 0.02 if input_weighting == "alpha_scaled" else 0.0
+    worst, rank = fresh_and_online(build, np.linspace(lo, 1.0 - lo, 13))
+    assert worst <= 1e-9
+    # both paths of the family are exercised: affine (rank 0) and rational (rank > 0) in α
+    if weights == "thesis" and input_weighting == "shared":
+        assert rank == 0
+    else:
+        assert rank > 0
+
+
+def test_horizon_solution_after_an_online_alpha_change_is_the_joint_minimiser():
+    rng = np.random.default_rng(8)
+    model, Q, R_h, R_r, z, ref_h, ref_r = random_instance(rng, 2, 8, 4)
+    game = CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=0.9, horizon=8, control_horizon=4)
+    game.set_alpha(0.35)
+    U_ref, _, _ = joint_minimiser(model, Q, R_h, R_r, 0.35, 8, 4, z, ref_h, ref_r)
+    U_h, U_r = game.solve_horizon(z, ref_h, ref_r)
+    np.testing.assert_allclose(np.concatenate([U_h.reshape(-1), U_r.reshape(-1)]), U_ref, rtol=1e-8, atol=1e-10)
+    u_h, u_r = game.solve(z, ref_h, ref_r)
+    np.testing.assert_allclose(np.concatenate([u_h, u_r]), np.concatenate([U_ref[:2], U_ref[8:10]]), rtol=1e-8, atol=1e-10)
+
+
+def test_online_gains_are_read_only():
+    game = thesis_game(0.8, horizon=5)
+    game.set_alpha(0.4)
+    with pytest.raises(ValueError):
+        game.gains.G_h[0, 0] = 1.0
 
 
 @pytest.mark.parametrize("alpha", [0.0, 1.0])
@@ -263,3 +325,31 @@ def test_reference_and_state_shapes_are_checked():
         game.solve(0.5, np.zeros((5, 4)), np.zeros((5, 4)))
     with pytest.raises(ValueError, match=r"z must have shape \(4,\)"):
         game.solve_horizon(np.zeros((4, 1)), np.zeros((5, 4)), np.zeros((5, 4)))
+
+
+def test_extrapolation_feedback_is_the_effort_of_a_constant_velocity_reference():
+    """[−K, −D] against solve() with ref_h built row by row from the state (rows k+1 … k+Np)."""
+    rng = np.random.default_rng(21)
+    model, Q, R_h, R_r, *_ = random_instance(rng, 2, 12, 12)
+    game = CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=0.7, horizon=12)
+    K, D = extrapolation_feedback(game)
+    dt = 0.008
+    for _ in range(3):
+        x, v = rng.normal(size=2), rng.normal(size=2)
+        ref_h = np.array([np.r_[x + (i + 1) * dt * v, v] for i in range(12)])
+        _, u_r = game.solve(np.r_[x, v], ref_h, np.zeros((12, 4)))
+        np.testing.assert_allclose(u_r, -K @ x - D @ v, rtol=1e-10, atol=1e-12)
+
+
+def test_application_presets_damping_left_by_a_pose_extrapolating_prediction():
+    """The "-dm" application preset removes 2/3 of the plant's damping; the damped one leaves at least half."""
+    from coassist.sim.world import get_preset, make_controller
+
+    left = {}
+    for name in ("thesis-application-dm", "thesis-application-damped"):
+        preset = get_preset(name)
+        _, D = extrapolation_feedback(make_controller("cooperative", preset).game)
+        left[name] = preset.impedance.D[0] + D[0, 0]
+    assert left["thesis-application-dm"] == pytest.approx(32.5, abs=0.1)
+    assert left["thesis-application-damped"] == pytest.approx(53.6, abs=0.1)
+    assert left["thesis-application-damped"] >= 0.5 * get_preset("thesis-application-damped").impedance.D[0]

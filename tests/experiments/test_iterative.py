@@ -2,6 +2,7 @@
 
 import pytest
 
+from coassist.experiments import iterative
 from coassist.experiments.iterative import TRANSFER_STARTS, iterative_training, transfer_learning
 
 
@@ -50,11 +51,55 @@ def test_never_converging_is_reported_as_none():
     assert result.converged_at is None and result.deltas == pytest.approx((0.02,))
 
 
-def test_timings_are_recorded_per_step():
-    world = FakeWorld({None: 0.1, "M0": 0.08})
-    result = iterative_training(world.collect, world.train, world.online_errors, iterations=1)
-    (step,) = result.iterations
-    assert step.collect_s >= 0 and step.train_s >= 0 and result.deltas == ()
+class FakeClock:
+    """time.perf_counter for the module under test: advanced only by the fake steps."""
+
+    def __init__(self):
+        self.now = 1000.0
+
+    def perf_counter(self):
+        return self.now
+
+
+def test_timings_are_recorded_per_step(monkeypatch):
+    # Each step takes a known time on a fake clock: collect k takes 3 + k s, train k
+    # 10 + k s, and the evaluation 100 s, which belongs to neither.
+    clock = FakeClock()
+    monkeypatch.setattr(iterative, "time", clock)
+    world = FakeWorld({None: 0.1, "M0": 0.08, "M1": 0.07})
+
+    def collect(k, model):
+        clock.now += 3.0 + k
+        return world.collect(k, model)
+
+    def train(k, dataset, start):
+        clock.now += 10.0 + k
+        return world.train(k, dataset, start)
+
+    def online_errors(dataset):
+        clock.now += 100.0
+        return world.online_errors(dataset)
+
+    result = iterative_training(collect, train, online_errors, iterations=2)
+    assert [(s.collect_s, s.train_s) for s in result.iterations] == [(3.0, 10.0), (4.0, 11.0)]
+    assert result.deltas == pytest.approx((0.01,))
+
+
+def test_transfer_timings_are_per_start(monkeypatch):
+    clock = FakeClock()
+    monkeypatch.setattr(iterative, "time", clock)
+    cost = {"transfer": 2.0, "scratch": 30.0, "finetune_all": 7.0}
+
+    def collect():
+        clock.now += 5.0
+        return "D_TL"
+
+    def train(start, data):
+        clock.now += cost[start]
+        return start
+
+    outcome, _ = transfer_learning("z", collect, train)
+    assert outcome.collect_s == 5.0 and dict(outcome.train_s) == cost
 
 
 @pytest.mark.parametrize("kwargs, message", [(dict(iterations=0), "iterations"), (dict(tol=0), "tol"), (dict(criterion_horizon=7), "criterion_horizon=7")])

@@ -22,7 +22,7 @@ def test_variants_are_trained_as_labelled_and_scored_like_evaluate(monkeypatch):
 
     monkeypatch.setattr("coassist.intent.train_model", spy)
     trials = labeled(5)
-    labels = ["thesis: absolute in / absolute out", "+ mirror augmentation (the default preset)"]
+    labels = ["thesis: absolute in / absolute out", "+ mirror augmentation (the lstm preset)"]
     result = par.compare_parameterisations(trials, TINY, variants=labels, epochs=1, threads=1, train_stride=3,
                                            say=lambda m: None)  # fmt: skip
     assert seen == [("absolute", "absolute", False, False, 3), ("relative", "residual", True, True, 3)]

@@ -28,8 +28,12 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
     assert len(it["deltas_e_rms_50"]) == 1
     assert set(summary["transfer"]) >= {"z trajectory", "new users", "board"}
     for target in ("z trajectory", "new users", "board"):
-        assert set(summary["transfer"][target]["e_rms"]) == {"M_prev", "transfer", "finetune_all", "scratch", "nominal", "constant_velocity", "ridge"}
-    assert set(summary["application"]) == {f"{o}/{c}" for o in ("board", "heavy") for c in ("cooperative", "impedance", "manual")}
+        assert set(summary["transfer"][target]["e_rms"]) == {"M_prev", "transfer", "finetune_all", "scratch", "nominal", "constant_velocity", "constant_acceleration", "ridge"}
+    controllers = ("cooperative", "cooperative-arbitrated", "impedance", "manual")
+    assert set(summary["application"]) == {f"{o}/{c}" for o in ("board", "heavy") for c in controllers}
+    for result in summary["application"].values():  # the smoothness and stability measures, per trial
+        for name in ("f_rms", "sigma", "overshoot", "jerk_rms", "tracking_error_rms", "peak_effort_ratio"):
+            assert len(result[f"{name}_trials"]) == rep.PRESETS["tiny"].application_trials
     for key in ("M0", "M1", "TL-board-transfer", "TL-heavy-transfer"):
         assert (out / "models" / key / "history.json").is_file()
 

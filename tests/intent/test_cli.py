@@ -23,7 +23,7 @@ def test_train_then_evaluate(tmp_path):
     res = runner.invoke(app, ["evaluate", "--model", str(tmp_path / "m"), "--data", str(tmp_path / "D0")])
     assert res.exit_code == 0, res.output
     out = json.loads((tmp_path / "m" / "evaluation.json").read_text())
-    assert set(out["results"]) == {"model", "nominal", "constant_velocity", "ridge"}
+    assert set(out["results"]) == {"model", "nominal", "constant_velocity", "constant_acceleration", "ridge"}
     side = json.loads((tmp_path / "m" / "model.json").read_text())
     assert out["trials"] == side["test_trials"] and len(out["trials"]) == 1  # the held-out trial only
 
@@ -31,6 +31,6 @@ def test_train_then_evaluate(tmp_path):
 def test_bad_options_are_reported(tmp_path):
     runner = CliRunner()
     res = runner.invoke(app, ["train", str(tmp_path), "--out", str(tmp_path / "m"), "--preset", "huge"])
-    assert res.exit_code != 0 and "unknown preset" in res.output
+    assert res.exit_code != 0 and "--preset 'huge': no such intent-model preset" in res.output
     res = runner.invoke(app, ["train", str(tmp_path), "--out", str(tmp_path / "m"), "--init", "warm:x"])
-    assert res.exit_code != 0 and "train.init" in res.output
+    assert res.exit_code != 0 and "--init must be" in res.output and "train.init" not in res.output

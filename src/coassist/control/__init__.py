@@ -5,6 +5,7 @@ from coassist.control.controllers import (
     Controller,
     ControlStep,
     ImpedanceControl,
+    InputBounds,
     ManualGuidance,
     saturate,
 )
@@ -21,6 +22,7 @@ __all__ = [
     "EquilibriumGains",
     "Fault",
     "ImpedanceControl",
+    "InputBounds",
     "ManualGuidance",
     "NashGame",
     "cooperative_game",

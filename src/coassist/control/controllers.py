@@ -9,26 +9,40 @@ and differs only in u_r:
 
 - :class:`AssistiveController` — u_r(k) of the cooperative (or Nash) game (eq. 3.27–3.31).
 - :class:`ImpedanceControl` (IMP, eq. 5.4) — M a + D v + K (x − x_ref,r) = u_h: the
-  spring toward the nominal reference, applied as u_r = K (x_ref,r − x). With a moving
-  reference this is exactly eq. 5.4 with Δx = x − x_ref,r(t); the robot adds no
-  assistance beyond the spring.
+  spring toward the nominal reference, applied as u_r(k) = K (x_ref,r(k+1) − x(k)): the
+  spring pulls toward the reference one tick *ahead* (the first row of ref_r, which like
+  the game's references starts at k+1), i.e. eq. 5.4 with Δx(k) = x(k) − x_ref,r(k+1),
+  leading the moving plan by dt. The robot adds no assistance beyond the spring.
 - :class:`ManualGuidance` (MG, eq. 5.5) — u_r = 0: M a + D v = u_h.
 
-The control law is pure; the guard around it is what keeps bad input off the robot:
-a non-finite state, reference or wrench gives zero robot effort and a fault flag,
-the effort is saturated to ``effort_limit`` keeping its direction, and ``step``
-never raises.
+All three take the same ``step(z, ref_h, ref_r, wrench)``: the assistive controller
+reads ``horizon`` rows of the references, IMP and MG only the first row (they accept any
+number of rows ≥ 1, so the arrays built for the game can be passed to them unchanged).
+
+The control law is pure; the guard around it is what keeps bad input off the robot,
+and ``step`` never raises. Every bad tick gives zero robot effort and a fault flag:
+
+- not plainly numeric (booleans, strings, objects, complex numbers, values that do not
+  convert, such as ``10**400`` in an object array or a torch tensor that requires grad),
+  or the wrong shape → ``Fault.INVALID_INPUT``;
+- non-finite state, reference or wrench → ``NONFINITE_STATE`` / ``_REFERENCE`` / ``_WRENCH``;
+- finite but physically implausible (beyond :class:`InputBounds`: a 1e200 m state or
+  reference, a 100 kN wrench) → ``Fault.INVALID_INPUT``, since saturating the effort
+  would still act on garbage.
+
+The effort is then saturated to ``effort_limit`` keeping its direction (``SATURATED``).
 """
 
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from coassist._checks import as_square_matrix, check_positive_semidefinite
+from coassist._checks import as_square_matrix, check_positive_scalar, check_positive_semidefinite
 from coassist.control.game import CooperativeGame, NashGame
 from coassist.interfaces import Fault
 from coassist.model.impedance import ImpedanceModel
@@ -60,6 +74,55 @@ class Controller(Protocol):
     def step(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray) -> ControlStep: ...
 
 
+@dataclass(frozen=True)
+class InputBounds:
+    """The largest magnitudes a controller accepts as physically plausible.
+
+    position : |Δx| of the state and the references [m, or rad for orientation DOFs];
+        10 m is far beyond any arm's reach (UR5: 0.85 m).
+    velocity : |ẋ| of the state and the references [m/s or rad/s]; a cobot's tool
+        moves at most a few m/s.
+    wrench : |f| of the hand wrench [N or N·m]; force/torque sensors on such arms
+        range to a few hundred newtons.
+
+    A finite input beyond these is flagged ``Fault.INVALID_INPUT`` (zero robot effort).
+    """
+
+    position: float = 10.0
+    velocity: float = 10.0
+    wrench: float = 1e4
+
+    def __post_init__(self) -> None:
+        for name in ("position", "velocity", "wrench"):
+            object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"InputBounds.{name}"))
+
+
+def _as_numbers(value: object) -> np.ndarray | None:
+    """``value`` as a float64 array if it is plainly numeric (real ints or floats), else None.
+
+    Booleans, strings, object arrays and complex numbers are refused rather than
+    converted: ``np.asarray(["1.5"], float)`` or ``[True, False]`` would otherwise
+    pass as numbers. Anything that fails to convert (``__float__`` raising, an int too
+    large for a float, a torch tensor requiring grad) is refused too.
+    """
+    try:
+        if isinstance(value, np.ndarray):
+            arr = value
+        else:
+            arr = np.asarray(value)
+            if arr.dtype.kind in "fiu" and arr.size and not isinstance(value, (int, float, np.generic)):
+                # A nested sequence mixing bools with numbers converts to float: look inside.
+                items = np.asarray(value, dtype=object).ravel()
+                if any(isinstance(v, (bool, np.bool_)) for v in items):
+                    return None
+        if arr.dtype.kind not in "fiu":
+            return None
+        with np.errstate(over="ignore"):  # float128 beyond float64 becomes inf: flagged as non-finite
+            return arr.astype(float, copy=False)
+    except Exception:  # noqa: BLE001 -- any failure to convert is bad input, not a crash of the loop
+        return None
+
+
 def saturate(u: np.ndarray, limit: np.ndarray) -> tuple[np.ndarray, bool]:
     """Scale u (n,) so that |u_i| ≤ limit_i for all i, keeping its direction.
 
@@ -77,8 +140,16 @@ class _GuardedController:
 
     name = "controller"
 
-    def __init__(self, model: ImpedanceModel, horizon: int, effort_limit: ArrayLike) -> None:
+    #: IMP and MG read one row of the references and accept any number of rows ≥ 1.
+    _reads_first_row_only = False
+
+    def __init__(
+        self, model: ImpedanceModel, horizon: int, effort_limit: ArrayLike, bounds: InputBounds | None = None
+    ) -> None:
         n = model.n_dof
+        bounds = InputBounds() if bounds is None else bounds
+        if not isinstance(bounds, InputBounds):
+            raise ValueError(f"bounds must be an InputBounds, got {type(bounds).__name__}")
         if not np.all(model.K == 0):
             raise ValueError(
                 "model.K must be zero: controllers render the free plant M a + D v = u_h + u_r "
@@ -96,6 +167,9 @@ class _GuardedController:
         self.horizon = horizon
         self._zero = np.zeros(n)
         self._ref_shape = (horizon, 2 * n)
+        self.bounds = bounds
+        # |z_i| and |ref_ij| bound per column: positions then velocities.
+        self._state_bound = np.concatenate([np.full(n, bounds.position), np.full(n, bounds.velocity)])
         self._warned = Fault.NONE
 
     def _law(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -112,23 +186,27 @@ class _GuardedController:
             self._warned |= new
             log.warning("%s: %s; robot effort set to zero (further occurrences are flagged, not logged)", self.name, repr(new))
 
+    def _ref_ok(self, ref: np.ndarray) -> bool:
+        rows, cols = self._ref_shape
+        if ref.ndim != 2 or ref.shape[1] != cols:
+            return False
+        return ref.shape[0] >= 1 if self._reads_first_row_only else ref.shape[0] == rows
+
     def step(self, z: ArrayLike, ref_h: ArrayLike, ref_r: ArrayLike, wrench: ArrayLike) -> ControlStep:
-        """One guarded tick: z (2n,), ref_h and ref_r (horizon, 2n), wrench (n,) [N]."""
+        """One guarded tick: z (2n,) [m, m/s], ref_h and ref_r (horizon, 2n) [m, m/s]
+        (IMP and MG: any rows ≥ 1), wrench (n,) [N]. Never raises."""
         try:
-            raw = (z, ref_h, ref_r, wrench)
-            if any(np.iscomplexobj(a) for a in raw):
-                raise TypeError("complex input")
-            z, ref_h, ref_r, wrench = (np.asarray(a, dtype=float) for a in raw)
-        except (TypeError, ValueError):
-            return self._refuse(Fault.INVALID_INPUT)
-        if (
-            ref_h.shape != self._ref_shape
-            or ref_r.shape != self._ref_shape
-            or z.shape != (self._ref_shape[1],)
-            or wrench.shape != self._wrench_shape
-        ):
-            return self._refuse(Fault.INVALID_INPUT)
-        try:
+            arrays = [_as_numbers(a) for a in (z, ref_h, ref_r, wrench)]
+            if any(a is None for a in arrays):
+                return self._refuse(Fault.INVALID_INPUT)
+            z, ref_h, ref_r, wrench = arrays
+            if not (
+                z.shape == self._state_bound.shape
+                and wrench.shape == self._wrench_shape
+                and self._ref_ok(ref_h)
+                and self._ref_ok(ref_r)
+            ):
+                return self._refuse(Fault.INVALID_INPUT)
             fault = Fault.NONE
             if not np.isfinite(z).all():
                 fault |= Fault.NONFINITE_STATE
@@ -138,12 +216,22 @@ class _GuardedController:
                 fault |= Fault.NONFINITE_WRENCH
             if fault:
                 return self._refuse(fault)
+            bound = self._state_bound
+            if not (
+                (np.abs(z) <= bound).all()
+                and (np.abs(ref_h) <= bound).all()
+                and (np.abs(ref_r) <= bound).all()
+                and (np.abs(wrench) <= self.bounds.wrench).all()
+            ):
+                return self._refuse(Fault.INVALID_INPUT)
+            if self._reads_first_row_only:
+                ref_h, ref_r = ref_h[:1], ref_r[:1]
             u_h, u_r = self._law(z, ref_h, ref_r)
             if not (np.isfinite(u_r).all() and np.isfinite(u_h).all()):
                 return self._refuse(Fault.NONFINITE_EFFORT)
             u_r, clipped = saturate(u_r, self.effort_limit)
             return ControlStep(u_r, u_h, Fault.SATURATED if clipped else Fault.NONE)
-        except Exception as exc:  # the loop must go on; the robot gets zero effort
+        except Exception as exc:  # noqa: BLE001 -- the loop must go on; the robot gets zero effort
             if not self._warned & Fault.INTERNAL_ERROR:
                 log.exception("%s: control law failed (%s); robot effort set to zero", self.name, exc)
                 self._warned |= Fault.INTERNAL_ERROR
@@ -159,14 +247,17 @@ class AssistiveController(_GuardedController):
     game : a :class:`CooperativeGame` (the thesis) or :class:`NashGame`.
     effort_limit : (n,) or scalar, the largest robot effort per DOF [N]; required, so
         that no robot runs unlimited by omission (pass np.inf to mean it).
+    bounds : the plausible input range (default :class:`InputBounds`).
     """
 
-    def __init__(self, game: CooperativeGame | NashGame, *, effort_limit: ArrayLike) -> None:
+    def __init__(
+        self, game: CooperativeGame | NashGame, *, effort_limit: ArrayLike, bounds: InputBounds | None = None
+    ) -> None:
         if not isinstance(game, (CooperativeGame, NashGame)):
             raise ValueError(f"game must be a CooperativeGame or NashGame, got {type(game).__name__}")
         self.game = game
         self.name = "cooperative" if isinstance(game, CooperativeGame) else "nash"
-        super().__init__(game.model, game.horizon, effort_limit)
+        super().__init__(game.model, game.horizon, effort_limit, bounds)
 
     def _law(self, z, ref_h, ref_r):
         return self.game.solve(z, ref_h, ref_r)
@@ -180,16 +271,22 @@ class ImpedanceControl(_GuardedController):
     model : the free plant (M, D, K = 0).
     K : (n, n) or diagonal, stiffness toward x_ref,r [N/m]; PSD. Stiffer pulls the
         operator back to the nominal path harder.
-    effort_limit : as for :class:`AssistiveController`.
+    effort_limit, bounds : as for :class:`AssistiveController`.
+
+    ``step`` reads only the first row of ``ref_r`` (x_ref,r(k+1), the row the game's
+    references start with) and accepts references of any number of rows ≥ 1.
     """
 
     name = "impedance"
+    _reads_first_row_only = True
 
-    def __init__(self, model: ImpedanceModel, K: ArrayLike, *, effort_limit: ArrayLike) -> None:
+    def __init__(
+        self, model: ImpedanceModel, K: ArrayLike, *, effort_limit: ArrayLike, bounds: InputBounds | None = None
+    ) -> None:
         K = as_square_matrix(K, "K", model.n_dof)
         check_positive_semidefinite(K, "K")
         self.K = K
-        super().__init__(model, 1, effort_limit)
+        super().__init__(model, 1, effort_limit, bounds)
 
     def _law(self, z, ref_h, ref_r):
         n = self.model.n_dof
@@ -197,12 +294,17 @@ class ImpedanceControl(_GuardedController):
 
 
 class ManualGuidance(_GuardedController):
-    """MG baseline (eq. 5.5): no robot effort, the operator moves the free plant alone."""
+    """MG baseline (eq. 5.5): no robot effort, the operator moves the free plant alone.
+
+    ``step`` takes the same arguments as the others (references of any rows ≥ 1) and
+    applies the same input guard, so a bad input is flagged under MG too.
+    """
 
     name = "manual"
+    _reads_first_row_only = True
 
-    def __init__(self, model: ImpedanceModel) -> None:
-        super().__init__(model, 1, np.inf)
+    def __init__(self, model: ImpedanceModel, *, bounds: InputBounds | None = None) -> None:
+        super().__init__(model, 1, np.inf, bounds)
 
     def _law(self, z, ref_h, ref_r):
         return self._zero.copy(), self._zero.copy()

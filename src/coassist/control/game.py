@@ -1,11 +1,15 @@
 """Two-player linear-quadratic MPC games between human and robot (thesis §3.2).
 
-Both players act on one impedance model through the same input matrix::
+Notation. Both players act on one impedance model through the same input matrix::
 
     Y = F z + Φ U_h + Φ U_r                                               (eq. 3.9)
 
-and each scores the predicted output against both references over the horizon
-(y(k+i) against the references at k+i, DESIGN.md §2)::
+Y, U_h, U_r stack y(k+1…k+Np) and u_·(k…k+Nc−1) (:mod:`coassist.control.prediction`).
+Y_h and Y_r stack the human's and the robot's *reference outputs* y_ref,h, y_ref,r at
+k+1…k+Np, each (Np·2n,) [m, m/s]. Effort weights are R_h, R_r (n, n) [1/N²] and
+R̃_p = blkdiag(R_p, …, R_p) over the control horizon (eq. 3.21–3.22). Each player scores
+the predicted output against both references (y(k+i) against the references at k+i,
+DESIGN.md §2)::
 
     J_p = Σ_i e_h(k+i)' W_p,h e_h(k+i) + e_r(k+i)' W_p,r e_r(k+i) + U_p' R̃_p U_p
     e_h = y − y_ref,h,   e_r = y − y_ref,r                       (eq. 3.15–3.16)
@@ -21,24 +25,40 @@ thesis group's code does.
 **Nash** (non-cooperative): each player keeps its own Q, W_h,· = (Q_hh, Q_hr) and
 W_r,· = (Q_rh, Q_rr), no α mixing.
 
-The equilibrium solves both players' first-order conditions (eq. 3.27–3.31)::
+The equilibrium solves both players' first-order conditions (eq. 3.27–3.31). With
+Ŵ = blkdiag over the horizon of a W, W̄_p = Ŵ_p,h + Ŵ_p,r (player p's whole state
+weight) and P_p = Φ' W̄_p Φ::
 
-    [P_h + R̃_h   P_h      ] [U_h]   [Φ'(Ŵ_h,h R_h + Ŵ_h,r R_r − S_h F z)]
-    [P_r         P_r + R̃_r] [U_r] = [Φ'(Ŵ_r,h R_h + Ŵ_r,r R_r − S_r F z)]
+    [P_h + R̃_h   P_h      ] [U_h]   [Φ'(Ŵ_h,h Y_h + Ŵ_h,r Y_r − W̄_h F z)]
+    [P_r         P_r + R̃_r] [U_r] = [Φ'(Ŵ_r,h Y_h + Ŵ_r,r Y_r − W̄_r F z)]
 
-with S_p = Ŵ_p,h + Ŵ_p,r (block-diagonal over the horizon) and P_p = Φ' S_p Φ. In the
-thesis' notation this is U_h = −K_h U_r + L_h Z with K_h = (P_h + R̃_h)⁻¹ Φ' S_h Φ_r:
-the coupling gain multiplies the *other* player's input. In the cooperative game the
-matrix is symmetric positive definite — it is the Hessian of the shared cost plus
-both input costs, whose minimiser is therefore the equilibrium — and is factored by
-Cholesky; the Nash matrix is not symmetric and is LU-factored.
+In the thesis' notation (eq. 3.27–3.30) this is U_h = −K_h U_r + L_h Z with
+S_h = (Φ' Q_gt Φ + R̃_gt,h)⁻¹ Φ' Q_gt (eq. 3.28, a gain, not the weight W̄_h above) and
+K_h = S_h Φ_r: the coupling gain multiplies the *other* player's input (the thesis
+writes S_h Φ_h, equal only because Φ_h = Φ_r). In the cooperative game the matrix is
+symmetric positive definite — it is the Hessian of the shared cost plus both input
+costs, whose minimiser is therefore the equilibrium — and is factored by Cholesky;
+the Nash matrix is not symmetric and is LU-factored.
 
 The system is LTI, so only the rows of the solution that the receding horizon
 applies (u_h(k), u_r(k)) are kept, as gains::
 
-    [u_h(k); u_r(k)] = G_z z + G_h vec(ref_h) + G_r vec(ref_r)
+    [u_h(k); u_r(k)] = G_z z + G_h vec(Y_h) + G_r vec(Y_r)
 
 and a control tick is three matrix-vector products.
+
+**Online α** (the thesis' future work). In the cooperative game the matrix above and
+its right-hand side are both affine in α: H(α) = H(α₀) + β ΔH, T(α) = T(α₀) + β ΔT,
+β = α − α₀ (with either input weighting). :meth:`CooperativeGame.prepare_alpha_changes`
+solves the generalized symmetric eigenproblem ΔH V = H(α₀) V Λ once (V' H(α₀) V = I),
+so that H(α)⁻¹ = V (I + βΛ)⁻¹ V' and the first-step gains are::
+
+    G(α) = E'V (I + βΛ)⁻¹ V' (T₀ + β ΔT)
+         = C₀ + β C₁ + Σ_{λ_j ≠ 0} a_j (b₀_j + β b₁_j)' / (1 + β λ_j)
+
+Directions with λ_j = 0 fold into the constant C₀, C₁; with the thesis' weights
+(Q_hh = Q_rr, Q_hr = Q_rh = 0, shared input weights) ΔH = 0 and the gains are exactly
+affine in α, so a new α costs one scaled add of the (2n, 2n + 2·Np·2n) gain matrix.
 """
 
 from __future__ import annotations
@@ -240,7 +260,10 @@ class _LinearQuadraticGame:
         self._check_refs(ref_h, ref_r)
         if z.shape != self._z_shape:
             raise ValueError(f"z must have shape {self._z_shape} (2n,), got {z.shape}")
-        _, factor, ref_h_terms, ref_r_terms, state_terms, _ = self._state
+        _, factor, ref_h_terms, ref_r_terms, state_terms, alpha = self._state
+        if factor is None:  # gains set by the online-α path: factor this α's matrix now (analysis only)
+            H, ref_h_terms, ref_r_terms, state_terms = self._assemble(alpha)
+            factor = self._factor(H)
         rh, rr = ref_h.reshape(-1), ref_r.reshape(-1)
         rhs = np.concatenate([ref_h_terms[p] @ rh + ref_r_terms[p] @ rr - state_terms[p] @ z for p in (0, 1)])
         U = self._solve_factored(factor, rhs)
@@ -299,6 +322,7 @@ class CooperativeGame(_LinearQuadraticGame):
             horizon=horizon, control_horizon=control_horizon,
         )
         self.input_weighting = input_weighting
+        self._alpha_family: _AlphaFamily | None = None
         self._compute_gains(self._check_alpha(alpha))
 
     def _check_alpha(self, alpha: float) -> float:
@@ -318,13 +342,31 @@ class CooperativeGame(_LinearQuadraticGame):
         return self._state[5]
 
     def set_alpha(self, alpha: float) -> None:
-        """Change α at run time; the gains are recomputed and swapped in at once.
+        """Change α at run time; the new gains are swapped in at once.
 
-        The new gains are the exact equilibrium for the new α, so the next effort is
-        the new optimum: it changes by no more than the optimum itself does.
+        The new gains are the equilibrium for the new α (module docstring, "Online α";
+        equal to a fresh computation to ~1e-12 relative), so the next effort is the new
+        optimum: it changes by no more than the optimum itself does. After
+        :meth:`prepare_alpha_changes` (done by the first call if not before) a change
+        costs microseconds with the thesis' weights (benchmarks/bench_game.py).
         """
+        a = self._check_alpha(alpha)
+        family = self._alpha_family
+        if family is None:
+            self.prepare_alpha_changes()
+            family = self._alpha_family
+        G = family.gains(a)
         # α travels with its gains in one tuple: a failure leaves both as they were.
-        self._compute_gains(self._check_alpha(alpha))
+        self._state = (_split_gains(G, self._n, self._ref_shape), None, None, None, None, a)
+
+    def prepare_alpha_changes(self) -> None:
+        """Precompute the gains as a function of α (module docstring, "Online α").
+
+        One generalized symmetric eigendecomposition of the (2N, 2N) equilibrium matrix,
+        N = n·Nc, at the current α (0.1–1 s at 6 DOF, Nc = 50, one core): do it before the loop
+        starts so that no tick pays for it.
+        """
+        self._alpha_family = _AlphaFamily(self, self.alpha)
 
     def _player_weights(self, alpha):
         a = alpha
@@ -345,6 +387,88 @@ class CooperativeGame(_LinearQuadraticGame):
 
     def _solve_factored(self, factor, rhs, transposed=False):
         return scipy.linalg.cho_solve(factor, rhs, check_finite=False)  # H is symmetric
+
+
+def _split_gains(G: np.ndarray, n: int, ref_shape: tuple[int, int]) -> EquilibriumGains:
+    """EquilibriumGains viewing the columns [G_z | G_h | G_r] of one (2n, 2n + 2·Np·2n) matrix."""
+    G.setflags(write=False)
+    p = ref_shape[0] * ref_shape[1]
+    return EquilibriumGains(G_z=G[:, : 2 * n], G_h=G[:, 2 * n : 2 * n + p], G_r=G[:, 2 * n + p :])
+
+
+class _AlphaFamily:
+    """The cooperative game's first-step gains as a function of α (module docstring, "Online α").
+
+    Built at α₀ (where H(α₀) is known to be positive definite). Stores, for β = α − α₀:
+    C₀, C₁ (2n, p) from the directions with λ_j = 0, and A (2n, r), B₀, B₁ (r, p), λ (r,)
+    for the r others; p = 2n + 2·Np·2n columns [G_z | G_h | G_r].
+    """
+
+    #: |λ_j| below this folds into C₀ + β C₁: with |β| ≤ 1 the neglected factor
+    #: 1/(1 + βλ_j) − 1 is below 1e-12.
+    ZERO_EIGENVALUE = 1e-12
+
+    def __init__(self, game: "CooperativeGame", alpha0: float) -> None:
+        n, N = game._n, game._n * game.control_horizon
+        H0, T0 = self._system(game, alpha0)
+        H1, T1 = self._system(game, alpha0 + 1.0)
+        dH, dT = H1 - H0, T1 - T0  # exact slopes: both are affine in α
+        dH = 0.5 * (dH + dH.T)
+        if not dH.any():
+            lam, V = np.zeros(2 * N), None
+        else:
+            try:
+                lam, V = scipy.linalg.eigh(dH, H0, check_finite=False)
+            except np.linalg.LinAlgError:
+                raise ValueError("the cooperative game's Hessian is not positive definite; check R_h and R_r") from None
+        rows = np.r_[0:n, N : N + n]  # u_h(k) and u_r(k) in the stacked solution
+        if V is None:
+            # ΔH = 0: G(α) = E' H₀⁻¹ (T₀ + β ΔT), two solves with the Cholesky factor.
+            factor = scipy.linalg.cho_factor(H0, lower=True, check_finite=False)
+            E = np.zeros((2 * N, 2 * n))
+            E[rows, np.arange(2 * n)] = 1.0
+            X = scipy.linalg.cho_solve(factor, E, check_finite=False).T  # E' H₀⁻¹
+            self.C0, self.C1 = X @ T0, X @ dT
+            self.A = np.zeros((2 * n, 0))
+            self.B0 = self.B1 = np.zeros((0, T0.shape[1]))
+            self.lam = np.zeros(0)
+        else:
+            A = V[rows]  # E'V
+            B0, B1 = V.T @ T0, V.T @ dT
+            zero = np.abs(lam) <= self.ZERO_EIGENVALUE
+            self.C0, self.C1 = A[:, zero] @ B0[zero], A[:, zero] @ B1[zero]
+            keep = ~zero
+            self.A = np.ascontiguousarray(A[:, keep])
+            self.B0, self.B1 = np.ascontiguousarray(B0[keep]), np.ascontiguousarray(B1[keep])
+            self.lam = lam[keep]
+        self.alpha0 = float(alpha0)
+
+    @staticmethod
+    def _system(game: "CooperativeGame", alpha: float) -> tuple[np.ndarray, np.ndarray]:
+        """H(α) (2N, 2N) and the stacked right-hand sides T(α) (2N, p) = [−Φ'W̄F | Φ'Ŵ_·,h | Φ'Ŵ_·,r] per player."""
+        H, ref_h_terms, ref_r_terms, state_terms = game._assemble(alpha)
+        T = np.vstack([np.hstack([-state_terms[p], ref_h_terms[p], ref_r_terms[p]]) for p in (0, 1)])
+        return H, T
+
+    @property
+    def rank(self) -> int:
+        """r: the directions in which the gains are not affine in α."""
+        return self.lam.shape[0]
+
+    def gains(self, alpha: float) -> np.ndarray:
+        """G(α) (2n, p), a new array (published gains are never written to again).
+
+        Raises ValueError where H(α) is not positive definite (1 + βλ_j ≤ 0 for some j).
+        """
+        beta = float(alpha) - self.alpha0
+        G = np.multiply(self.C1, beta)
+        np.add(G, self.C0, out=G)
+        if self.lam.shape[0]:
+            denominator = 1.0 + beta * self.lam
+            if not denominator.min() > 1e-12:
+                raise ValueError(f"the cooperative game's Hessian is not positive definite at alpha = {alpha!r}")
+            G += (self.A / denominator) @ (self.B0 + beta * self.B1)
+        return G
 
 
 class NashGame(_LinearQuadraticGame):
@@ -385,6 +509,37 @@ class NashGame(_LinearQuadraticGame):
 
     def _solve_factored(self, factor, rhs, transposed=False):
         return scipy.linalg.lu_solve(factor, rhs, trans=1 if transposed else 0, check_finite=False)
+
+
+def extrapolation_feedback(game: _LinearQuadraticGame) -> tuple[np.ndarray, np.ndarray]:
+    """The state feedback a pose-extrapolating prediction closes through the robot's gains.
+
+    A predictor of the tool's future *pose* (what :mod:`coassist.intent` learns) is, to
+    first order, the constant-velocity extrapolation of the robot's own state::
+
+        ref_h[i] = [Δx + (i+1)·dt·v;  v]        i = 0 … Np−1 (rows k+1 … k+Np)
+
+    With it the robot's effort is a state feedback (plus terms in ref_r)::
+
+        u_r(k) = −K Δx − D v + G_r vec(ref_r),   [−K, −D] = G_z,r + G_h,r L
+
+    (G_·,r the u_r rows of the gains, L the (Np·2n, 2n) extrapolation map). D < 0 is
+    negative damping: the robot pushes along the motion, which is the assistance, and the
+    plant's damping D_plant + D is what is left to damp the coupled human-robot loop.
+
+    Returns K, D (n, n) [N/m, N·s/m].
+    """
+    n = game.n_dof
+    Np, m = game.reference_shape
+    dt = float(game.model.dt)
+    L = np.zeros((Np, m, 2 * n))
+    for i in range(Np):
+        L[i, :n, :n] = np.eye(n)
+        L[i, :n, n:] = (i + 1) * dt * np.eye(n)
+        L[i, n:, n:] = np.eye(n)
+    g = game.gains
+    feedback = g.G_z[n:] + g.G_h[n:] @ L.reshape(Np * m, 2 * n)
+    return -feedback[:, :n], -feedback[:, n:]
 
 
 def cooperative_game(model: ImpedanceModel, params: GameParameters) -> CooperativeGame:

@@ -1,8 +1,15 @@
 """Trial logs, datasets on disk, and the loader for real UR5 recordings."""
 
-from coassist.data.rosbag_csv import RecordingError, default_real_data, load_ros_trial, load_ros_user
+from coassist.data.rosbag_csv import (
+    RecordingError,
+    RecordingWarning,
+    default_real_data,
+    load_ros_trial,
+    load_ros_user,
+)
 from coassist.data.store import (
     Dataset,
+    DatasetWriter,
     TrialFileError,
     append_to_dataset,
     read_dataset,
@@ -14,12 +21,14 @@ from coassist.data.trial import Trial, TrialMeta
 
 __all__ = [
     "Dataset",
+    "DatasetWriter",
     "RecordingError",
-    "default_real_data",
+    "RecordingWarning",
     "Trial",
     "TrialFileError",
     "TrialMeta",
     "append_to_dataset",
+    "default_real_data",
     "load_ros_trial",
     "load_ros_user",
     "read_dataset",

@@ -23,12 +23,18 @@ about it:
   not resampled, since resampling would invent measurements.
 - Values like 5e-324 or 1e-182 are denormal noise from the export: any value with
   magnitude below 1e-100 is set to 0.
+- Implausible data loads but warns (:class:`RecordingWarning`, naming the folder): a
+  force beyond :data:`PLAUSIBLE_FORCE` (the CB3's force estimate saturates at
+  ±327.67 N, so larger is no measurement) and a time gap longer than
+  :data:`coassist.data.trial.GAP_FACTOR` periods. Training windows never span a gap
+  (:class:`coassist.intent.features.WindowSet`).
 """
 
 from __future__ import annotations
 
 import os
 import re
+import warnings
 from collections.abc import Sequence
 from functools import reduce
 from pathlib import Path
@@ -36,16 +42,19 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from coassist.data.trial import Trial, TrialMeta
+from coassist.data.trial import GAP_FACTOR, Trial, TrialMeta, time_gaps
 
 __all__ = [
     "DENORMAL_THRESHOLD",
     "LINEAR_DOFS",
+    "PLAUSIBLE_FORCE",
     "TOPIC_FILES",
     "RecordingError",
+    "RecordingWarning",
     "default_real_data",
     "load_ros_trial",
     "load_ros_user",
+    "recording_folders",
 ]
 
 #: Trial field -> (CSV file, value column pattern).
@@ -59,6 +68,9 @@ TOPIC_FILES: dict[str, tuple[str, str]] = {
 LINEAR_DOFS = ("x", "y", "z")
 #: Magnitudes below this are export noise and read as 0.
 DENORMAL_THRESHOLD = 1e-100
+#: Largest plausible hand force magnitude per axis in N (above the CB3's ±327.67 N range;
+#: the recordings peak at 31 N).
+PLAUSIBLE_FORCE = 330.0
 
 _SEQ = "header.seq"
 _SECS = "header.stamp.secs"
@@ -68,6 +80,31 @@ _RECEIVE = "Time"
 
 class RecordingError(ValueError):
     """A recording folder that cannot be loaded; the message names the file and column."""
+
+
+class RecordingWarning(UserWarning):
+    """A recording that loads but holds implausible data; the message names the folder."""
+
+
+def _warn_implausible(folder: Path, time: np.ndarray, dt: float, wrench: np.ndarray) -> None:
+    peak = np.abs(wrench).max(axis=0)
+    for j in np.flatnonzero(peak > PLAUSIBLE_FORCE):
+        k = int(np.argmax(np.abs(wrench[:, j])))
+        warnings.warn(
+            f"{folder / TOPIC_FILES['wrench'][0]}: force {LINEAR_DOFS[j]} = {wrench[k, j]:.4g} N at t = {time[k]:.3f} s "
+            f"exceeds the plausible {PLAUSIBLE_FORCE:g} N (sensor fault?)",
+            RecordingWarning,
+            stacklevel=3,
+        )
+    gaps = time_gaps(time, dt)
+    if gaps.size:
+        k = int(gaps[np.argmax(np.diff(time)[gaps])])
+        warnings.warn(
+            f"{folder}: {gaps.size} time gap(s) longer than {GAP_FACTOR:g} periods; the longest, "
+            f"{time[k + 1] - time[k]:.4g} s, at t = {time[k]:.3f} s (training windows do not span gaps)",
+            RecordingWarning,
+            stacklevel=3,
+        )
 
 
 def _check_dofs(dofs: Sequence[str]) -> tuple[str, ...]:
@@ -204,6 +241,7 @@ def load_ros_trial(
     }
     # A single-row recording has no period; fall back to the UR5 CB3 tick.
     dt = float(np.median(steps)) if steps.size else 0.008
+    _warn_implausible(folder, time, dt, arrays["wrench"])
     meta = TrialMeta(
         user=user,
         task="real",
@@ -228,12 +266,18 @@ def load_ros_user(folder: str | os.PathLike[str], *, dofs: Sequence[str] = ("x",
     ``trial_2`` comes before ``trial_10``. The user id is the folder's name.
     """
     folder = Path(folder)
+    return [load_ros_trial(p, user=folder.name, dofs=dofs) for p in recording_folders(folder)]
+
+
+def recording_folders(folder: str | os.PathLike[str]) -> list[Path]:
+    """The ``trial_*`` subfolders of a user's folder, in natural numeric order."""
+    folder = Path(folder)
     if not folder.is_dir():
         raise RecordingError(f"{folder}: user folder not found")
     trial_dirs = sorted((p for p in folder.iterdir() if p.is_dir() and p.name.startswith("trial_")), key=_natural_key)
     if not trial_dirs:
         raise RecordingError(f"{folder}: no trial_* subfolders")
-    return [load_ros_trial(p, user=folder.name, dofs=dofs) for p in trial_dirs]
+    return trial_dirs
 
 
 def default_real_data() -> Path:

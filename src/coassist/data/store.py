@@ -16,41 +16,50 @@ raw float64, so a read gives back the written arrays bit for bit.
 
 A dataset (the thesis' D_k, Algorithm 4.1) is a folder of trial files plus
 ``manifest.json`` (id, description, the trial files with their meta, creation time,
-coassist version). The manifest is the commit point: it is written last and
-atomically, so a crash leaves either the old dataset or the new one.
+coassist version). Its paths must stay inside the folder. A new dataset is written in
+a folder beside the old one and swapped in whole at the end, under the output's lock,
+so a crash leaves either the old dataset or the new one (:mod:`coassist._io`, the one
+writer of the project: every file is written to a temporary file, fsync'ed, renamed,
+and the folder fsync'ed). :class:`DatasetWriter` writes trials as they finish and lets
+an interrupted collection continue.
 
-Every write goes to a temporary file in the destination folder, is fsync'ed and then
-``os.replace``'d into place, so readers never see a half-written file.
+Every defect of a file is one :class:`TrialFileError` naming the file and the problem.
 """
 
 from __future__ import annotations
 
 import datetime as _dt
+import hashlib
 import json
 import os
-import tempfile
-from collections.abc import Callable, Iterable, Mapping
+import shutil
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 import coassist
+from coassist._io import OutputLock, atomic_write, partial_folder, remove_stale, staged_folder, swap_in
 from coassist.data.trial import MAX_DOF, Trial, TrialMeta
 
 __all__ = [
     "AXES",
     "FORMAT_VERSION",
     "MANIFEST_NAME",
+    "ManifestError",
     "META_KEY",
     "VERSION_KEY",
     "Dataset",
+    "DatasetWriter",
     "TrialFileError",
     "append_to_dataset",
+    "digest",
     "read_dataset",
+    "read_dataset_trial",
     "read_trial",
     "write_dataset",
     "write_trial",
@@ -75,36 +84,8 @@ class TrialFileError(ValueError):
     """A trial file or dataset folder that cannot be read; the message names the file."""
 
 
-# --------------------------------------------------------------------------- atomic I/O
-
-
-def _atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
-    """Write ``path`` through a temp file in the same folder, fsync, ``os.replace``."""
-    path = Path(path)
-    folder = path.parent
-    folder.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
-    tmp = Path(tmp_name)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    # Persist the rename itself (POSIX); not available everywhere, hence best effort.
-    try:
-        dir_fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(dir_fd)
-    except OSError:
-        pass
-    finally:
-        os.close(dir_fd)
+class ManifestError(TrialFileError):
+    """A dataset's ``manifest.json`` that cannot be used (the whole dataset, not one trial)."""
 
 
 # --------------------------------------------------------------------------- one trial
@@ -158,7 +139,7 @@ def write_trial(trial: Trial, path: str | os.PathLike[str]) -> Path:
     path = Path(path)
     table = _trial_table(trial)
     # zstd: lossless and compact; the float64 bits are stored unchanged.
-    _atomic_write(path, lambda fh: pq.write_table(table, fh, compression="zstd"))
+    atomic_write(path, lambda fh: pq.write_table(table, fh, compression="zstd"))
     return path
 
 
@@ -188,7 +169,8 @@ def read_trial(path: str | os.PathLike[str]) -> Trial:
     try:
         table = pq.read_table(path)
     except (pa.ArrowException, OSError) as exc:
-        raise TrialFileError(f"{path}: not a readable Parquet file: {exc}") from None
+        detail = str(exc).replace(f" '{path}'", "").replace(str(path), "the file")  # pyarrow repeats the path
+        raise TrialFileError(f"{path}: not a readable Parquet file (truncated or damaged?): {detail}") from None
     md = table.schema.metadata or {}
     if META_KEY not in md:
         raise TrialFileError(f"{path}: schema metadata key {META_KEY.decode()!r} missing (not a coassist trial file)")
@@ -207,11 +189,15 @@ def read_trial(path: str | os.PathLike[str]) -> Trial:
         raise TrialFileError(f"{path}: bad {META_KEY.decode()!r}: {exc}") from None
 
     names = set(table.column_names)
-    d = 0
-    while d < MAX_DOF and f"pose_{AXES[d]}" in names:
-        d += 1
-    if d == 0:
-        raise TrialFileError(f"{path}: missing column 'pose_x'")
+    # d is the most axes any required group has; every required group must have all d
+    # (a file without pose_y but with vel_y is damaged, not a 1-DOF trial).
+    present = {p: [j for j, ax in enumerate(AXES) if f"{p}_{ax}" in names] for p in _REQUIRED.values()}
+    d = max((js[-1] + 1 for js in present.values() if js), default=1)
+    for prefix, js in present.items():
+        missing = [f"{prefix}_{AXES[j]}" for j in range(d) if j not in js]
+        if missing:
+            more = f" (other columns give {d} DOFs)" if d > 1 else ""
+            raise TrialFileError(f"{path}: missing column {missing[0]!r}{more}")
 
     def block(prefix: str) -> np.ndarray:
         return np.column_stack([_column(table, f"{prefix}_{AXES[j]}", path) for j in range(d)])
@@ -255,11 +241,17 @@ def read_trial(path: str | os.PathLike[str]) -> Trial:
 
 @dataclass(frozen=True, eq=False)
 class Dataset:
-    """A dataset D_k: its id, its trials (in manifest order) and the manifest itself."""
+    """A dataset D_k: its id, its trials (in manifest order) and the manifest itself.
+
+    ``files`` names the trial file of each loaded trial; ``skipped`` lists
+    ``(file, reason)`` for the trials :func:`read_dataset` left out with ``skip_bad``.
+    """
 
     id: str
     trials: tuple[Trial, ...]
     manifest: Mapping[str, Any]
+    files: tuple[str, ...] = ()
+    skipped: tuple[tuple[str, str], ...] = ()
 
     @property
     def description(self) -> str:
@@ -289,29 +281,113 @@ def _collect_trials(trials: Iterable[Trial]) -> list[Trial]:
 
 def _write_manifest(folder: Path, manifest: Mapping[str, Any]) -> None:
     text = json.dumps(manifest, indent=2, allow_nan=False) + "\n"
-    _atomic_write(folder / MANIFEST_NAME, lambda fh: fh.write(text.encode()))
+    atomic_write(folder / MANIFEST_NAME, lambda fh: fh.write(text.encode()))
+
+
+def _confined(folder: Path, name: Any, where: str, path: Path) -> str:
+    """A manifest's trial file name, refused unless it stays inside the dataset folder."""
+    if not isinstance(name, str) or not name.strip():
+        raise ManifestError(f"{path}: {where} 'file' must be a file name, got {name!r}")
+    root = folder.resolve()
+    target = (folder / name).resolve()
+    if Path(name).is_absolute() or not target.is_relative_to(root) or target == root:
+        raise ManifestError(f"{path}: {where} 'file' {name!r} points outside the dataset folder {folder}")
+    return name
 
 
 def _read_manifest(folder: Path) -> dict[str, Any]:
+    """The validated manifest; every defect is a :class:`TrialFileError` naming the file."""
     path = folder / MANIFEST_NAME
     if not path.is_file():
         raise FileNotFoundError(f"no dataset at {folder}: {MANIFEST_NAME} not found")
     try:
-        manifest = json.loads(path.read_text())
+        manifest = json.loads(path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ManifestError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except json.JSONDecodeError as exc:
-        raise TrialFileError(f"{path}: malformed JSON: {exc}") from None
+        raise ManifestError(f"{path}: malformed JSON: {exc}") from None
+    if not isinstance(manifest, dict):
+        raise ManifestError(f"{path}: must hold a JSON object, got {type(manifest).__name__}")
     for key in ("dataset_id", "trials", "format_version"):
         if key not in manifest:
-            raise TrialFileError(f"{path}: missing key {key!r}")
+            raise ManifestError(f"{path}: missing key {key!r}")
     if manifest.get("format") != DATASET_FORMAT:
-        raise TrialFileError(f"{path}: 'format' is {manifest.get('format')!r}, expected {DATASET_FORMAT!r}")
-    if int(manifest["format_version"]) > FORMAT_VERSION:
-        raise TrialFileError(f"{path}: format version {manifest['format_version']} is newer than this coassist reads")
+        raise ManifestError(f"{path}: 'format' is {manifest.get('format')!r}, expected {DATASET_FORMAT!r}")
+    version = manifest["format_version"]
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise ManifestError(f"{path}: 'format_version' must be an integer >= 1, got {json.dumps(version)}")
+    if version > FORMAT_VERSION:
+        raise ManifestError(f"{path}: format version {version} is newer than this coassist reads ({FORMAT_VERSION})")
+    if not isinstance(manifest["dataset_id"], str) or not manifest["dataset_id"].strip():
+        raise ManifestError(f"{path}: 'dataset_id' must be a non-empty string, got {json.dumps(manifest['dataset_id'])}")
+    entries = manifest["trials"]
+    if not isinstance(entries, list):
+        raise ManifestError(f"{path}: 'trials' must be a list, got {json.dumps(entries)}")
+    seen: set[str] = set()
+    for i, entry in enumerate(entries):
+        where = f"trials[{i}]"
+        if not isinstance(entry, dict):
+            raise ManifestError(f"{path}: {where} must be an object, got {json.dumps(entry)}")
+        if "file" not in entry:
+            raise ManifestError(f"{path}: {where} has no 'file'")
+        name = _confined(folder, entry["file"], where, path)
+        if name in seen:
+            raise ManifestError(f"{path}: {where} lists {name!r} a second time")
+        seen.add(name)
+        if not isinstance(entry.get("meta"), dict):
+            raise ManifestError(f"{path}: {where} ({name}) has no 'meta' object")
+    n = manifest.get("n_trials", len(entries))
+    if n != len(entries):
+        raise ManifestError(f"{path}: 'n_trials' is {json.dumps(n)} but 'trials' lists {len(entries)}")
     return manifest
 
 
 def _entry(name: str, trial: Trial) -> dict[str, Any]:
     return {"file": name, "n_samples": trial.n_samples, "meta": trial.meta.to_dict()}
+
+
+def _new_manifest(dataset_id: str, description: str, entries: list[dict[str, Any]]) -> dict[str, Any]:
+    return {
+        "format": DATASET_FORMAT,
+        "format_version": FORMAT_VERSION,
+        "dataset_id": dataset_id,
+        "description": description,
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "coassist_version": coassist.__version__,
+        "n_trials": len(entries),
+        "trials": entries,
+    }
+
+
+def _check_destination(folder: Path, overwrite: bool) -> None:
+    """Refuse a destination that is a file, or a non-empty folder without ``overwrite``."""
+    if folder.exists() or folder.is_symlink():
+        if not folder.is_dir():
+            raise FileExistsError(f"{folder} exists and is not a folder")
+        if any(folder.iterdir()) and not overwrite:
+            raise FileExistsError(f"{folder} exists and is not empty; pass overwrite=True (coassist collect --overwrite) to replace it")
+    elif any(p.exists() and not p.is_dir() for p in folder.parents):
+        bad = next(p for p in reversed(folder.parents) if p.exists() and not p.is_dir())
+        raise NotADirectoryError(f"{folder}: {bad} is a file, not a folder")
+
+
+def _keep_unlisted(old: Path, new: Path) -> None:
+    """Carry the files of ``old`` that its manifest does not list (notes, figures) into ``new``."""
+    listed = {MANIFEST_NAME}
+    try:
+        listed |= {e["file"] for e in _read_manifest(old)["trials"]}
+    except (FileNotFoundError, TrialFileError):
+        pass
+    for p in old.iterdir():
+        if p.name in listed or (new / p.name).exists():
+            continue
+        if p.is_dir():
+            shutil.copytree(p, new / p.name)
+        else:
+            try:
+                os.link(p, new / p.name)
+            except OSError:
+                shutil.copy2(p, new / p.name)
 
 
 def write_dataset(
@@ -324,6 +400,10 @@ def write_dataset(
 ) -> Path:
     """Write trials as a dataset folder (trial files + ``manifest.json``).
 
+    The new dataset is written into a folder beside ``folder`` and swapped in whole at
+    the end (:func:`coassist._io.swap_in`): a crash at any point leaves the old dataset
+    (or nothing) intact. ``folder`` is locked while written (:class:`coassist._io.OutputLock`).
+
     Parameters
     ----------
     trials : iterable of Trial
@@ -335,9 +415,8 @@ def write_dataset(
     description : str
     overwrite : bool
         A folder that exists and is not empty is refused unless True. With True, the
-        new trial files and manifest replace the old ones, and the old dataset's trial
-        files that the new one does not reuse are removed. Files that no manifest
-        lists are never deleted.
+        new dataset replaces the old one; files the old manifest did not list (notes,
+        figures) are carried over.
 
     Returns
     -------
@@ -349,80 +428,226 @@ def write_dataset(
     if not isinstance(description, str):
         raise ValueError(f"description must be a string, got {type(description).__name__}")
     items = _collect_trials(trials)
-    old_files: set[str] = set()
-    if folder.exists():
-        if not folder.is_dir():
-            raise FileExistsError(f"{folder} exists and is not a folder")
-        if any(folder.iterdir()):
-            if not overwrite:
-                raise FileExistsError(f"{folder} exists and is not empty; pass overwrite=True to replace it")
-            if (folder / MANIFEST_NAME).is_file():
-                old_files = {e["file"] for e in _read_manifest(folder)["trials"]}
-    folder.mkdir(parents=True, exist_ok=True)
-
-    entries = []
-    for i, trial in enumerate(items):
-        name = _trial_file_name(i)
-        write_trial(trial, folder / name)
-        entries.append(_entry(name, trial))
-    manifest = {
-        "format": DATASET_FORMAT,
-        "format_version": FORMAT_VERSION,
-        "dataset_id": dataset_id,
-        "description": description,
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "coassist_version": coassist.__version__,
-        "n_trials": len(entries),
-        "trials": entries,
-    }
-    _write_manifest(folder, manifest)
-    for name in old_files - {e["file"] for e in entries}:
-        (folder / name).unlink(missing_ok=True)
+    _check_destination(folder, overwrite)
+    with OutputLock(folder):
+        _check_destination(folder, overwrite)  # again, now that no other run can write it
+        with staged_folder(folder) as staging:
+            entries = []
+            for i, trial in enumerate(items):
+                name = _trial_file_name(i)
+                write_trial(trial, staging / name)
+                entries.append(_entry(name, trial))
+            _write_manifest(staging, _new_manifest(dataset_id, description, entries))
+            if folder.is_dir():
+                _keep_unlisted(folder, staging)
     return folder
 
 
 def append_to_dataset(trials: Iterable[Trial], folder: str | os.PathLike[str]) -> Path:
     """Add trials to an existing dataset (new files after the existing ones).
 
-    The manifest is rewritten atomically after the new trial files are in place.
+    The manifest, the commit point, is rewritten atomically after the new trial files
+    are in place; a crash before leaves the old dataset (plus unlisted files).
     """
     folder = Path(folder)
-    manifest = _read_manifest(folder)
     items = _collect_trials(trials)
-    entries = list(manifest["trials"])
-    used = {e["file"] for e in entries}
-    index = len(entries)
-    for trial in items:
-        while _trial_file_name(index) in used:
-            index += 1
-        name = _trial_file_name(index)
-        write_trial(trial, folder / name)
-        entries.append(_entry(name, trial))
-        used.add(name)
-    manifest["trials"] = entries
-    manifest["n_trials"] = len(entries)
-    manifest["modified"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-    _write_manifest(folder, manifest)
+    with OutputLock(folder):
+        manifest = _read_manifest(folder)
+        entries = list(manifest["trials"])
+        used = {e["file"] for e in entries}
+        index = len(entries)
+        for trial in items:
+            while _trial_file_name(index) in used:
+                index += 1
+            name = _trial_file_name(index)
+            write_trial(trial, folder / name)
+            entries.append(_entry(name, trial))
+            used.add(name)
+        manifest["trials"] = entries
+        manifest["n_trials"] = len(entries)
+        manifest["modified"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        _write_manifest(folder, manifest)
     return folder
 
 
-def read_dataset(folder: str | os.PathLike[str]) -> Dataset:
+def read_dataset(
+    folder: str | os.PathLike[str],
+    *,
+    skip_bad: bool = False,
+) -> Dataset:
     """Read a dataset folder written by :func:`write_dataset`.
 
     Every trial listed in the manifest is loaded, and its meta must equal the one in
     the manifest (a mismatch means the folder was edited by hand).
+
+    Parameters
+    ----------
+    skip_bad : bool
+        False: the first unreadable trial file raises (:class:`TrialFileError` or
+        ``FileNotFoundError``, naming it). True: such trials are left out and listed in
+        ``Dataset.skipped`` with the reason. A bad manifest always raises.
     """
     folder = Path(folder)
     manifest = _read_manifest(folder)
-    trials = []
+    trials, files, skipped = [], [], []
     for entry in manifest["trials"]:
-        path = folder / entry["file"]
-        trial = read_trial(path)
         try:
-            listed = TrialMeta.from_dict(entry["meta"])
-        except (KeyError, ValueError) as exc:
-            raise TrialFileError(f"{folder / MANIFEST_NAME}: bad meta for {entry.get('file')!r}: {exc}") from None
-        if listed != trial.meta:
-            raise TrialFileError(f"{path}: meta differs from the one listed in {folder / MANIFEST_NAME}")
+            trial = _read_entry(folder, entry)
+        except (TrialFileError, FileNotFoundError) as exc:
+            if not skip_bad:
+                raise
+            skipped.append((entry["file"], str(exc)))
+            continue
         trials.append(trial)
-    return Dataset(id=str(manifest["dataset_id"]), trials=tuple(trials), manifest=manifest)
+        files.append(entry["file"])
+    return Dataset(id=str(manifest["dataset_id"]), trials=tuple(trials), manifest=manifest, files=tuple(files),
+                   skipped=tuple(skipped))  # fmt: skip
+
+
+def _read_entry(folder: Path, entry: Mapping[str, Any]) -> Trial:
+    path = folder / entry["file"]
+    trial = read_trial(path)
+    try:
+        listed = TrialMeta.from_dict(entry["meta"])
+    except ValueError as exc:
+        raise TrialFileError(f"{folder / MANIFEST_NAME}: bad meta for {entry['file']!r}: {exc}") from None
+    if listed != trial.meta:
+        raise TrialFileError(f"{path}: meta differs from the one listed in {folder / MANIFEST_NAME}")
+    return trial
+
+
+def read_dataset_trial(folder: str | os.PathLike[str], index: int) -> Trial:
+    """Only trial ``index`` (manifest order) of a dataset folder: other trials are not read."""
+    folder = Path(folder)
+    entries = _read_manifest(folder)["trials"]
+    if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < len(entries):
+        raise ValueError(f"{folder}: index must be in [0, {len(entries)}), got {index!r}")
+    return _read_entry(folder, entries[index])
+
+
+# --------------------------------------------------------------------------- resumable writing
+
+
+class DatasetWriter:
+    """Write a dataset trial by trial as the trials finish, resumably.
+
+    Trials go into ``.<name>.partial`` beside the destination, each file atomic, so a
+    killed run keeps every trial it finished. A later writer for the same destination
+    and the same ``key`` (a digest of what is being collected) picks them up
+    (:meth:`has` tells which); a different key discards them. :meth:`finish` writes the
+    manifest and swaps the folder in at the destination, replacing an old dataset only
+    then. The destination is locked from ``__enter__`` to ``__exit__``.
+
+    ::
+
+        with DatasetWriter(out, "D0", n_trials=60, key=digest, overwrite=True) as w:
+            for i, trial in run(todo=[i for i in range(60) if not w.has(i)]):
+                w.add(i, trial)
+            w.finish()
+    """
+
+    PROGRESS = "progress.json"
+
+    def __init__(
+        self,
+        folder: str | os.PathLike[str],
+        dataset_id: str,
+        *,
+        n_trials: int,
+        key: str,
+        description: str = "",
+        overwrite: bool = False,
+    ) -> None:
+        self.folder = Path(folder)
+        self.dataset_id = _check_id(dataset_id)
+        if isinstance(n_trials, bool) or not isinstance(n_trials, int) or n_trials < 1:
+            raise ValueError(f"n_trials must be an int >= 1, got {n_trials!r}")
+        if not isinstance(key, str) or not key:
+            raise ValueError(f"key must be a non-empty string, got {key!r}")
+        self.n_trials, self.key, self.description, self.overwrite = n_trials, key, description, overwrite
+        self.partial = partial_folder(self.folder)
+        self.resumed: list[int] = []  #: indices found done in a partial folder
+        self.discarded: bool = False  #: a partial folder of another collection was removed
+        self._lock = OutputLock(self.folder)
+        self._done: set[int] = set()
+        _check_destination(self.folder, overwrite)
+
+    def __enter__(self) -> DatasetWriter:
+        self._lock.__enter__()
+        try:
+            _check_destination(self.folder, self.overwrite)
+            self._open_partial()
+        except BaseException:
+            self._lock.__exit__(None, None, None)
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._lock.__exit__(*exc)
+
+    def _open_partial(self) -> None:
+        if self.partial.is_dir():
+            # The key is in progress.json until finish() moves it into the manifest.
+            same = False
+            for name, field_name in ((self.PROGRESS, "key"), (MANIFEST_NAME, "collection_key")):
+                try:
+                    record = json.loads((self.partial / name).read_text("utf-8"))
+                except (OSError, ValueError):
+                    continue
+                same = same or (isinstance(record, dict) and record.get(field_name) == self.key)
+            if not same:
+                shutil.rmtree(self.partial)
+                self.discarded = True
+        if not self.partial.is_dir():
+            os.mkdir(self.partial)
+            progress = {"key": self.key, "dataset_id": self.dataset_id, "n_trials": self.n_trials}
+            atomic_write(self.partial / self.PROGRESS, lambda fh: fh.write(json.dumps(progress).encode()))
+            return
+        remove_stale(self.partial)
+        for i in range(self.n_trials):
+            path = self.partial / _trial_file_name(i)
+            if path.is_file():
+                try:
+                    read_trial(path)
+                except (TrialFileError, OSError):
+                    path.unlink()  # damaged by something other than our atomic writes: redo it
+                    continue
+                self._done.add(i)
+        self.resumed = sorted(self._done)
+
+    def has(self, index: int) -> bool:
+        """Whether trial ``index`` is already written (this run or an interrupted one)."""
+        return index in self._done
+
+    def add(self, index: int, trial: Trial) -> Path:
+        """Write trial ``index`` (0 … n_trials−1) now."""
+        if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < self.n_trials:
+            raise ValueError(f"index must be an int in [0, {self.n_trials}), got {index!r}")
+        path = write_trial(trial, self.partial / _trial_file_name(index))
+        self._done.add(index)
+        return path
+
+    def finish(self) -> Path:
+        """Write the manifest and swap the dataset in at the destination; returns it."""
+        missing = [i for i in range(self.n_trials) if i not in self._done]
+        if missing:
+            raise ValueError(f"{self.folder}: {len(missing)} trial(s) not written yet (first: {missing[0]})")
+        entries = []
+        for i in range(self.n_trials):
+            name = _trial_file_name(i)
+            pf = pq.ParquetFile(self.partial / name)
+            meta = TrialMeta.from_json(pf.schema_arrow.metadata[META_KEY])
+            entries.append({"file": name, "n_samples": pf.metadata.num_rows, "meta": meta.to_dict()})
+        manifest = _new_manifest(self.dataset_id, self.description, entries)
+        manifest["collection_key"] = self.key
+        _write_manifest(self.partial, manifest)
+        (self.partial / self.PROGRESS).unlink(missing_ok=True)
+        if self.folder.is_dir():
+            _keep_unlisted(self.folder, self.partial)
+        swap_in(self.partial, self.folder)
+        return self.folder
+
+
+def digest(obj: Any) -> str:
+    """A short stable digest of a JSON-ready object (the ``key`` of a :class:`DatasetWriter`)."""
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]

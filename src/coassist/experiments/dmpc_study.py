@@ -287,7 +287,7 @@ def print_summary(result: SweepResult, console) -> None:
 
     table = Table(title=f"dMPC sweep: RMS error to x_ref,h [m] (scaling s = {result.config.position_scale:g})")
     table.add_column("R_r")
-    table.add_column("horizon")
+    table.add_column("horizon [samples]")
     for alpha in result.config.alphas:
         table.add_column(f"α = {alpha}", justify="right")
     by_key = {(c.alpha, c.R_r, c.horizon): c for c in result.cases}

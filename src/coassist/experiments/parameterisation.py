@@ -45,10 +45,10 @@ VARIANTS: dict[str, tuple[dict[str, Any], dict[str, Any], dict[str, Any]]] = {
         {"input_frame": "relative", "target": "residual", "target_scaling": "step"}, {"skip": False}, {"mirror": False}),
     "+ ridge-initialised linear skip": (
         {"input_frame": "relative", "target": "residual", "target_scaling": "step"}, {"skip": True}, {"mirror": False}),
-    "+ mirror augmentation (the default preset)": (
+    "+ mirror augmentation (the lstm preset)": (
         {"input_frame": "relative", "target": "residual", "target_scaling": "step"}, {"skip": True}, {"mirror": True}),
 }
-BASELINES = ("constant_velocity", "ridge", "nominal")
+BASELINES = ("constant_velocity", "constant_acceleration", "ridge", "nominal")
 
 
 def compare_parameterisations(
@@ -109,7 +109,7 @@ def main(argv: Sequence[str] | None = None) -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=None, help="recordings folder (default: user-a of the real recordings)")
-    ap.add_argument("--preset", default="default", choices=sorted(PRESETS))
+    ap.add_argument("--preset", default="lstm", choices=sorted(PRESETS))  # its variants are LSTM variants
     ap.add_argument("--epochs", type=int, default=None)
     ap.add_argument("--seeds", default="0", help="comma-separated seeds (each: another split and initialisation)")
     ap.add_argument("--threads", type=int, default=2)

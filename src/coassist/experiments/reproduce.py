@@ -12,10 +12,13 @@ Stages, in order (each writes its data under ``out/`` and a section of the repor
 5. the real UR5 recordings: the predictor trained on user-a against its baselines,
    and transferred to user-b.
 
-Control preset. The closed loops use the thesis' weights with positions in decimetres
-(``thesis-evaluation-dm``, ``thesis-application-dm``): in SI units the robot's effort
-is too small to change what the operator does (see the dMPC study and the sim
-package), and iterative training would have nothing to iterate on.
+Control preset. The closed loops use the thesis' weights with positions scaled: in
+decimetres for data collection (``thesis-evaluation-dm``) and ×5 for the application
+(``thesis-application-damped``): in SI units the robot's effort is too small to change
+what the operator does (see the dMPC study and the sim package), and iterative training
+would have nothing to iterate on; in decimetres the application's robot, tracking a
+learned prediction of its own motion, removes two thirds of the plant's damping and the
+tool rings around the operator's intent (coassist.sim.world.APPLICATION_DAMPED_SCALE).
 
 The thesis' claims are checked against the numbers, each marked holds / does not hold;
 nothing is tuned to make one hold.
@@ -47,9 +50,12 @@ class ReproduceConfig:
     """
 
     name: str = "default"
-    intent_preset: str = "default"  # coassist.intent.training.PRESETS
+    intent_preset: str = "lstm"  # coassist.intent.training.PRESETS, for the simulated stages (as measured there)
+    real_intent_preset: str = "default"  # the shipped default predictor, on the real recordings
     control_preset: str = "thesis-evaluation-dm"
-    application_preset: str = "thesis-application-dm"
+    # Positions ×5, not ×10: in decimetres the robot's gain on the learned prediction (an extrapolation of its
+    # own motion) removes 2/3 of the plant's damping and the tool rings (coassist.sim.world.APPLICATION_DAMPED_SCALE).
+    application_preset: str = "thesis-application-damped"
     trials_per_task: int = 20  # thesis: 60 trials = 20 per trajectory
     iterations: int = 4  # models M_0 … M_3, as the thesis
     tol: float = 2.5e-4  # stop criterion on e_RMS at 50 samples [m] (eq. 4.13): a quarter millimetre
@@ -101,7 +107,7 @@ PRESETS: dict[str, ReproduceConfig] = {
         transfer_trials=3, test_trials=2, new_users=(1,), application_trials=1, real_epochs=1, sweep_duration=1.0,
     ),
     "thesis": ReproduceConfig(
-        name="thesis", intent_preset="thesis", epochs=25, resume_epochs=25, transfer_epochs=25, train_stride=1,
+        name="thesis", intent_preset="thesis", real_intent_preset="thesis", epochs=25, resume_epochs=25, transfer_epochs=25, train_stride=1,
         real_epochs=25, device="cuda",
     ),
 }
@@ -190,14 +196,14 @@ class _Context:
         return folder, read_dataset(folder)
 
     def train(self, name: str, datasets: list[Path], *, init: str, epochs: int, test_fraction: float = 0.2,
-              simulated: bool = True) -> Path:
+              simulated: bool = True, preset_name: str | None = None) -> Path:
         """Train and save a model. ``test_fraction=0`` when the model is scored on a separate
         test set anyway: then every trial collected for training is trained on."""
         from coassist.intent import PRESETS as INTENT_PRESETS
         from coassist.intent import load_trials, train_model, write_model
 
         cfg = self.config
-        preset = INTENT_PRESETS[cfg.intent_preset]
+        preset = INTENT_PRESETS[preset_name or cfg.intent_preset]
         train_cfg = replace(preset.train, epochs=epochs, init=init, seed=cfg.seed, threads=cfg.threads,
                             train_stride=cfg.train_stride, eval_stride=cfg.train_stride, device=cfg.device,
                             test_fraction=test_fraction)
@@ -271,7 +277,7 @@ def _stage_sweep(ctx: _Context) -> None:
     s.figures.append(("Tracking for α ∈ {0.2, 0.5, 0.9} per R_r (rows) and horizon (columns).",
                       (ctx.out / "sweep" / "dmpc_sweep.png").read_bytes()))
     rows = [[c.R_r, c.horizon, c.alpha, c.rms_error_human, c.rms_error_robot, c.rms_effort_robot] for c in result.cases]
-    s.tables.append(("RMS errors [m] and robot effort [N]", ["R_r", "horizon", "α", "error to x_ref,h", "error to x_ref,r", "RMS u_r"], rows))
+    s.tables.append(("RMS errors [m] and robot effort [N]", ["R_r", "horizon [samples]", "α", "error to x_ref,h [m]", "error to x_ref,r [m]", "RMS u_r [N]"], rows))
     texts = {
         "higher_alpha_tracks_human_reference": "Higher α tracks the human's reference more closely",
         "lower_R_r_tracks_better": "Lower R_r makes the robot more responsive (smaller tracking error)",
@@ -313,6 +319,9 @@ def _stage_iterative(ctx: _Context):
     errors = {label: in_loop_errors(ds.trials) for label, ds in zip(labels, datasets)}
     times = [{"k": it.k, "collect_s": it.collect_s, "train_s": it.train_s} for it in result.iterations]
     iter_time = float(np.mean([t["collect_s"] + t["train_s"] for t in times]))
+    # Measured work, not wall-clock (which depends on the machine's load): trials collected, windows trained.
+    work = [{"k": it.k, "trials": len(it.dataset.trials), "windows_trained": _windows_trained(it.model)}
+            for it in result.iterations]
     final_eval = evaluate_model(load_model(result.models[-1]), load_trials([folders[cfg.iterations]]), held_out_only=False)
     ctx.summary["iterative"] = {
         "final_model_offline_e_rms": {int(h): v["e_rms"] for h, v in final_eval["results"]["model"].items()},
@@ -332,7 +341,7 @@ def _stage_iterative(ctx: _Context):
     rows = [[label] + [errors[label].get(h, {}).get("e_rms", float("nan")) for h in EVAL_HORIZONS]
             + [errors[label].get(50, {}).get("e_max_mean", float("nan"))] for label in labels]
     s.tables.append(("In-loop e_RMS [m] per horizon, and mean e_MAX at 50 samples (Fig. 5.14, 5.16)",
-                     ["model", "5", "10", "20", "50", "e_MAX mean @50"], rows))
+                     ["model", "5", "10", "20", "50", "e_MAX mean @50 [m]"], rows))
     s.tables.append(("Time per iteration (Table 5.1)", ["iteration", "collect [s]", "train [s]"],
                      [[t["k"], t["collect_s"], t["train_s"]] for t in times]))
     s.paragraphs.append(
@@ -361,8 +370,15 @@ def _stage_iterative(ctx: _Context):
         "; ".join(f"{l}: " + " < ".join(f"{errors[l][h]['e_rms'] * 1000:.1f}" for h in EVAL_HORIZONS) + " mm" for l in labels[1:]),
         reason="a model predicting short horizons no better than long ones",
     ))
+    ctx.summary["iterative"]["work"] = work
     ctx.sections.append(s)
     return result.models[-1], iter_time
+
+
+def _windows_trained(model_path) -> int:
+    """Training windows times this run's epochs of a saved model (its sidecar): the training work done."""
+    meta = json.loads((Path(model_path) / "model.json").read_text("utf-8"))
+    return int(meta["train_config"]["epochs"]) * int(meta["n_train_windows"])
 
 
 def _plot_iterative(ctx, s: Section, labels, errors, result, folders) -> None:
@@ -446,6 +462,7 @@ def _transfer_targets(cfg: ReproduceConfig) -> dict[str, dict[str, Any]]:
 def _stage_transfer(ctx: _Context, final_model: Path, iter_time: float) -> dict[str, Path]:
     from coassist.experiments.iterative import transfer_learning
     from coassist.intent import evaluate_model, load_model, load_trials
+    from coassist.intent.evaluation import comparison_lines
 
     cfg = ctx.config
     s = Section("3. Transfer learning (Algorithm 4.2, thesis §5.3.2)")
@@ -480,11 +497,15 @@ def _stage_transfer(ctx: _Context, final_model: Path, iter_time: float) -> dict[
         for start, path in outcome.models.items():
             evals[start] = evaluate_model(load_model(path), test, held_out_only=False)
         table = {label: {h: ev["results"]["model"][str(h)]["e_rms"] for h in EVAL_HORIZONS} for label, ev in evals.items()}
-        for base in ("nominal", "constant_velocity", "ridge"):
+        for base in ("nominal", "constant_velocity", "constant_acceleration", "ridge"):
             table[base] = {h: evals["transfer"]["results"][base][str(h)]["e_rms"] for h in EVAL_HORIZONS}
-        results[name] = {"e_rms": table, "collect_s": outcome.collect_s, "train_s": dict(outcome.train_s)}
+        results[name] = {"e_rms": table, "collect_s": outcome.collect_s, "train_s": dict(outcome.train_s),
+                         "work": {"trials": len(load_trials([folders["train"]])),
+                                  "windows_trained": _windows_trained(outcome.models["transfer"])},
+                         "best_baseline": evals["transfer"]["best_baseline"]}  # fmt: skip
+        s.paragraphs.append(f"{name}, M_TL against its best tuned baseline: " + "; ".join(comparison_lines(evals["transfer"], "M_TL")))
         tl_models[name] = outcome.models["transfer"]
-        for label in ("M_prev", "transfer", "finetune_all", "scratch", "nominal", "constant_velocity", "ridge"):
+        for label in ("M_prev", "transfer", "finetune_all", "scratch", "nominal", "constant_velocity", "constant_acceleration", "ridge"):
             rows.append([name, label] + [table[label][h] for h in EVAL_HORIZONS])
         time_rows.append([name, outcome.collect_s, outcome.train_s["transfer"], outcome.train_s["finetune_all"], outcome.train_s["scratch"]])
     s.tables.append(("e_RMS [m] on held-out trials of each target (Fig. 5.18–5.23)", ["target", "predictor", "5", "10", "20", "50"], rows))
@@ -505,13 +526,20 @@ def _stage_transfer(ctx: _Context, final_model: Path, iter_time: float) -> dict[
     # collected with the final model in the loop, which it was not trained on.
     final_own = ctx.summary["iterative"]["final_model_offline_e_rms"][50]
     close = {n: r["e_rms"]["transfer"][50] <= 1.25 * final_own for n, r in results.items()}
-    tl_time = {n: r["collect_s"] + r["train_s"]["transfer"] for n, r in results.items()}
-    total_iter = iter_time * cfg.iterations
+    # Work, not wall-clock: trials collected and windows trained (epochs × training windows) are
+    # what the time is made of, and they do not change with the machine's load.
+    it_work = ctx.summary["iterative"]["work"]
+    it_trials, it_windows = sum(w["trials"] for w in it_work), sum(w["windows_trained"] for w in it_work)
+    fraction = {n: (r["work"]["trials"] / it_trials, r["work"]["windows_trained"] / it_windows) for n, r in results.items()}
     s.claims.append(Claim(
-        "Transfer approaches the fully iterated model (within 25 % of its own e_RMS@50) in a fraction of the time",
-        all(close.values()) and all(t < 0.5 * total_iter for t in tl_time.values()),
-        f"fully iterated model on the data of its own loop: {final_own * 1000:.1f} mm after {total_iter:.0f} s; "
-        + "; ".join(f"{n}: {results[n]['e_rms']['transfer'][50] * 1000:.1f} mm after {tl_time[n]:.0f} s" for n in results),
+        "Transfer approaches the fully iterated model (within 25 % of its own e_RMS@50) with a fraction of the work "
+        "(under half the trials collected and windows trained)",
+        all(close.values()) and all(ft < 0.5 and fw < 0.5 for ft, fw in fraction.values()),
+        f"fully iterated model on the data of its own loop: {final_own * 1000:.1f} mm after {it_trials} trials and "
+        f"{it_windows} windows trained; "
+        + "; ".join(f"{n}: {results[n]['e_rms']['transfer'][50] * 1000:.1f} mm after {results[n]['work']['trials']} trials "
+                    f"({100 * fraction[n][0]:.0f} %) and {results[n]['work']['windows_trained']} windows "
+                    f"({100 * fraction[n][1]:.0f} %; the frozen LSTM runs forward once per window)" for n in results),
         reason="a new trajectory or object changes the motion more than 15 trials and frozen recurrent features can capture",
     ))
     frozen_vs = {n: (r["e_rms"]["transfer"][50], r["e_rms"]["finetune_all"][50], r["e_rms"]["scratch"][50]) for n, r in results.items()}
@@ -547,7 +575,7 @@ def _plot_transfer(ctx, s: Section, results) -> None:
 
 
 def _stage_application(ctx: _Context, final_model: Path, tl_models: dict[str, Path]) -> None:
-    from coassist.metrics import distance_to_target, f_rms, precision_sigma
+    from coassist.metrics import distance_to_target
 
     cfg = ctx.config
     s = Section("4. Application: carrying a large and a heavy object (thesis §5.2.3, §5.3.3)")
@@ -558,29 +586,33 @@ def _stage_application(ctx: _Context, final_model: Path, tl_models: dict[str, Pa
                                                                 epochs=cfg.transfer_epochs)}
     s.paragraphs.append(
         f"User 0 carries each object along the '{cfg.application_task}' path past the obstacle to the target, "
-        f"{cfg.application_trials} trials per controller: the assistive controller (α = 0.9, R_r = 1e-4, positions in dm, the "
-        "object's transferred model), impedance control (a 200 N/m spring toward the nominal path) and manual guidance."
+        f"{cfg.application_trials} trials per controller: the assistive controller (preset '{cfg.application_preset}': α = 0.9, R_r = 1e-4, the "
+        "object's transferred model), the same with α set every tick from the hand force (α 0.6–0.95, "
+        "coassist.control.arbitration), impedance control (a 200 N/m spring toward the nominal path) and manual guidance. "
+        "Every controller meets the same trials (same seeds). Smoothness and stability: the tool's jerk RMS, its overshoot "
+        "past the operator's intent at the intent's turns, its RMS distance from the intent, and the robot's peak effort "
+        "relative to the hand's (coassist.metrics); mean ± standard deviation over the trials."
     )
     results, rows, trials_by = {}, [], {}
     for j, obj in enumerate(("board", "heavy")):
-        for controller, intent in (("cooperative", str(models[obj])), ("impedance", "nominal"), ("manual", "nominal")):
+        for controller, intent in (("cooperative", str(models[obj])), ("cooperative-arbitrated", str(models[obj])),
+                                   ("impedance", "nominal"), ("manual", "nominal")):
             folder, ds = ctx.collect(f"app-{obj}-{controller}", tasks=(cfg.application_task,), objects=(obj,),
                                      trials=cfg.application_trials, seed=cfg.seed + 900_000 + 1000 * j,
                                      controller=controller, preset=cfg.application_preset, intent=intent)
-            f = [f_rms(t.wrench) for t in ds.trials]
-            sig = [precision_sigma(t.pose, np.asarray(t.meta.extra["target"], float), t.meta.dt) for t in ds.trials]
-            results[(obj, controller)] = {"f_rms": float(np.mean(f)), "f_rms_trials": f,
-                                          "sigma": float(np.nanmean(sig)) if np.isfinite(sig).any() else float("nan"),
-                                          "sigma_trials": sig, "reached": int(np.isfinite(sig).sum())}
+            r = application_metrics(ds.trials)
+            results[(obj, controller)] = r
             trials_by[(obj, controller)] = ds.trials
-            rows.append([obj, controller, results[(obj, controller)]["f_rms"], results[(obj, controller)]["sigma"] * 1000,
-                         f"{results[(obj, controller)]['reached']}/{len(sig)}"])
-    s.tables.append(("Interaction force and precision (Fig. 5.25, 5.27, 5.29, 5.31)",
-                     ["object", "controller", "f_RMS [N]", "σ [mm]", "reached target"], rows))
+            rows.append([obj, controller, _pm(r, "f_rms", 1.0, 2), _pm(r, "sigma", 1000.0, 2), f"{r['reached']}/{len(r['sigma_trials'])}",
+                         _pm(r, "overshoot", 1000.0, 1), _pm(r, "jerk_rms", 1.0, 2), _pm(r, "tracking_error_rms", 1000.0, 1),
+                         _pm(r, "peak_effort_ratio", 1.0, 2)])
+    s.tables.append(("Interaction force, precision, smoothness (Fig. 5.25, 5.27, 5.29, 5.31); mean ± std over trials",
+                     ["object", "controller", "f_RMS [N]", "σ [mm]", "reached target", "overshoot [mm]", "jerk RMS [m/s³]",
+                      "distance from intent RMS [mm]", "peak |u_r| / peak |u_h|"], rows))
     plt = _fig()
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
     for ax, obj in zip(axes, ("board", "heavy")):
-        for c, controller in enumerate(("cooperative", "impedance", "manual")):
+        for c, controller in enumerate(("cooperative", "cooperative-arbitrated", "impedance", "manual")):
             for i, t in enumerate(trials_by[(obj, controller)]):
                 d = distance_to_target(t.pose, np.asarray(t.meta.extra["target"], float))
                 ax.plot(t.time, d, color=f"C{c}", lw=1, label=controller if i == 0 else None)
@@ -620,7 +652,55 @@ def _stage_application(ctx: _Context, final_model: Path, tl_models: dict[str, Pa
             f"({m['reached']}/{n}), IMP {i_['sigma'] * 1000:.1f} mm ({i_['reached']}/{n})",
             reason="the simulated operator settles on the target alike with every controller; the precision is the operator's",
         ))
+        # Issue #11's bar for an assistive controller that helps without oscillating, for both variants.
+        for variant in ("cooperative", "cooperative-arbitrated"):
+            v = results[(obj, variant)]
+            saving = 1.0 - v["f_rms"] / m["f_rms"]
+            s.claims.append(Claim(
+                f"{obj}: {variant} needs ≥ 30 % less force than MG, reaches the target at least as precisely and "
+                "overshoots the operator's intent no more (beyond the thesis)",
+                bool(saving >= 0.30 and np.isfinite(v["sigma"]) and v["sigma"] <= np.nan_to_num(m["sigma"], nan=np.inf)
+                     and v["reached"] >= m["reached"] and v["overshoot"] <= m["overshoot"]),
+                f"force {100 * saving:.0f} % below MG; σ {v['sigma'] * 1000:.2f} vs MG {m['sigma'] * 1000:.2f} mm; overshoot "
+                f"{v['overshoot'] * 1000:.1f} vs MG {m['overshoot'] * 1000:.1f} mm; jerk RMS {v['jerk_rms']:.2f} vs MG "
+                f"{m['jerk_rms']:.2f} m/s³",
+                reason="the learned prediction extrapolates the tool's own motion, so tracking it removes damping and feeds the "
+                "prediction's tick-to-tick jitter into the tool",
+            ))
     ctx.sections.append(s)
+
+
+def application_metrics(trials) -> dict[str, Any]:
+    """Per-trial f_RMS [N], σ [m], overshoot past the intent [m], jerk RMS [m/s³], RMS distance from the
+    intent [m] and peak robot/hand effort ratio of simulated trials, with their means and standard deviations.
+
+    σ's mean is over the trials that reached the target (``reached`` counts them); the
+    other means are over all trials.
+    """
+    from coassist.metrics import f_rms, jerk_rms, overshoot, peak_effort_ratio, precision_sigma, tracking_error_rms
+
+    per_trial = {
+        "f_rms": [f_rms(t.wrench) for t in trials],
+        "sigma": [precision_sigma(t.pose, np.asarray(t.meta.extra["target"], float), t.meta.dt) for t in trials],
+        "overshoot": [overshoot(t.pose, t.intent) for t in trials],
+        "jerk_rms": [jerk_rms(t.pose, t.meta.dt) for t in trials],
+        "tracking_error_rms": [tracking_error_rms(t.pose, t.intent) for t in trials],
+        "peak_effort_ratio": [peak_effort_ratio(t.effort_r, t.effort_h) for t in trials],
+    }
+    out: dict[str, Any] = {}
+    for name, values in per_trial.items():
+        arr = np.asarray(values, dtype=float)
+        ok = arr[np.isfinite(arr)]
+        out[name] = float(ok.mean()) if ok.size else float("nan")
+        out[f"{name}_std"] = float(ok.std()) if ok.size else float("nan")
+        out[f"{name}_trials"] = [float(v) for v in values]
+    out["reached"] = int(np.isfinite(per_trial["sigma"]).sum())
+    return out
+
+
+def _pm(result: dict[str, Any], name: str, scale: float, digits: int) -> str:
+    """'mean ± std' of a metric in the table's unit."""
+    return f"{result[name] * scale:.{digits}f} ± {result[name + '_std'] * scale:.{digits}f}"
 
 
 # ----------------------------------------------------------------------------- 5. real recordings
@@ -638,7 +718,8 @@ def _stage_real(ctx: _Context, real: str | None) -> None:
     from coassist.intent import evaluate_model, load_model, load_trials
 
     cfg = ctx.config
-    a = ctx.train("real-user-a", [Path(real) / "user-a"], init="scratch", epochs=cfg.real_epochs, simulated=False)
+    a = ctx.train("real-user-a", [Path(real) / "user-a"], init="scratch", epochs=cfg.real_epochs, simulated=False,
+                  preset_name=cfg.real_intent_preset)
     model_a = load_model(a)
     trials_a = load_trials([Path(real) / "user-a"])
     ev_a = evaluate_model(model_a, trials_a, held_out_only=True)
@@ -647,30 +728,54 @@ def _stage_real(ctx: _Context, real: str | None) -> None:
     b_train = write_dataset(b_trials[:2], ctx.out / "datasets" / "user-b-train", "user-b-train", "real user-b, trials 1-2", overwrite=True)
     b_test = write_dataset(b_trials[2:], ctx.out / "datasets" / "user-b-test", "user-b-test", "real user-b, trial 3", overwrite=True)
     b_model = ctx.train("real-user-b-transfer", [b_train], init=f"transfer:{a}", epochs=cfg.transfer_epochs,
-                        test_fraction=0.0, simulated=False)
+                        test_fraction=0.0, simulated=False, preset_name=cfg.real_intent_preset)
     test_b = load_trials([b_test])
     ev_b = {"M_a": evaluate_model(model_a, test_b, held_out_only=False), "M_TL": evaluate_model(load_model(b_model), test_b, held_out_only=False)}
 
-    def table(ev, label):
-        return [[label] + [ev["results"]["model"][str(h)]["e_rms"] for h in EVAL_HORIZONS]] + [
-            [base] + [ev["results"][base][str(h)]["e_rms"] for h in EVAL_HORIZONS] for base in ("nominal", "constant_velocity", "ridge")]
+    from coassist.intent.evaluation import comparison_lines
 
+    bases = ("nominal", "constant_velocity", "constant_acceleration", "ridge")
+
+    def row(ev, name, label):
+        r = ev["results"][name]
+        return [label] + [r[str(h)]["e_rms"] * 1e3 for h in EVAL_HORIZONS] + [
+            f"{r['50']['trial_min'] * 1e3:.2f}–{r['50']['trial_max'] * 1e3:.2f}"]
+
+    def table(ev, label):
+        return [row(ev, "model", label)] + [row(ev, base, base) for base in bases]
+
+    cols = ["predictor", "0.04 s", "0.08 s", "0.16 s", "0.4 s", "0.4 s, range over trials"]
     s.paragraphs.append(
-        f"The predictor ({cfg.intent_preset} preset) trained on user-a's recordings, split by trial; errors on its held-out "
-        f"trials ({', '.join(ev_a['trials'])}). Then transferred (LSTM frozen) to user-b with two recordings and tested on the third."
+        f"The predictor ({cfg.real_intent_preset} preset) trained on user-a's recordings, split by trial; errors on its held-out "
+        f"trials ({', '.join(ev_a['trials'])}). Then transferred (LSTM frozen) to user-b with two recordings and tested on the third. "
+        "Every baseline is scored on the same ticks; the ridge's α and the Kalman filter's noise are chosen on validation "
+        "trials split from the training trials (never on the test trials). The shipped default predictor (intent preset "
+        "'default') is an LSTM learning only the residual over that tuned ridge; the claims below say by how much it "
+        "beats or trails the best baseline here, and `python -m coassist.experiments.predictors` measures it over "
+        "several seeds and on user-b (docs/intent-baselines.md)."
     )
-    s.tables.append(("user-a held-out: e_RMS [m]", ["predictor", "5", "10", "20", "50"], table(ev_a, "model")))
-    s.tables.append(("user-b trial 3: e_RMS [m]", ["predictor", "5", "10", "20", "50"],
-                     [["M_a (no transfer)"] + [ev_b["M_a"]["results"]["model"][str(h)]["e_rms"] for h in EVAL_HORIZONS]]
+    s.tables.append(("user-a held-out: e_RMS [mm]", cols, table(ev_a, "model")))
+    s.tables.append(("user-b trial 3: e_RMS [mm]", cols, [row(ev_b["M_a"], "model", "M_a (no transfer)")]
                      + table(ev_b["M_TL"], "M_TL (transferred)")))
-    res = ev_a["results"]
-    beats = all(res["model"][str(h)]["e_rms"] < min(res["constant_velocity"][str(h)]["e_rms"], res["ridge"][str(h)]["e_rms"]) for h in EVAL_HORIZONS)
+    s.paragraphs.append("user-a, the model against its best tuned baseline: " + "; ".join(comparison_lines(ev_a)))
+    s.paragraphs.append("user-b trial 3, M_TL against its best tuned baseline: " + "; ".join(comparison_lines(ev_b["M_TL"], "M_TL")))
+    best = ev_a["best_baseline"]
     s.claims.append(Claim(
-        "On real user-a data the model beats constant velocity and ridge at every horizon",
-        beats,
-        "@50: model {:.1f}, constant velocity {:.1f}, ridge {:.1f} mm".format(
-            res["model"]["50"]["e_rms"] * 1000, res["constant_velocity"]["50"]["e_rms"] * 1000, res["ridge"]["50"]["e_rms"] * 1000),
-        reason="too few epochs in this preset, or too few recordings (15) for the network",
+        "On held-out real user-a data the model is no worse than the best tuned baseline at any horizon",
+        all(b["gain"] >= 0 for b in best.values()),
+        "; ".join(f"{int(h) * model_a.dt:.2f} s: {b['name']} {b['e_rms'] * 1e3:.3f} mm, model {b['model_e_rms'] * 1e3:.3f} mm "
+                  f"({100 * b['gain']:+.1f} %)" for h, b in best.items()),
+        reason="the network adds little over the linear map its skip starts from; with 12 training recordings it can "
+        "overfit where the validation-tuned ridge does not",
+    ))
+    ridge50, model50 = ev_a["results"]["ridge"]["50"]["e_rms"], ev_a["results"]["model"]["50"]["e_rms"]
+    s.claims.append(Claim(
+        "On held-out real user-a data the model beats the tuned ridge by at least 15 % at 0.4 s",
+        model50 <= 0.85 * ridge50,
+        f"0.4 s: model {model50 * 1e3:.3f} mm, ridge (α = {ev_a['baselines']['ridge']['alpha']:.0e}) {ridge50 * 1e3:.3f} mm: "
+        f"{100 * (ridge50 - model50) / ridge50:+.1f} %",
+        reason="most of the remaining error at 0.4 s is what the person will do next; a tuned linear predictor of the "
+        "same window captures nearly all that the window tells",
     ))
     ctx.summary["real"] = {"user_a": ev_a, "user_b": ev_b}
     ctx.sections.append(s)

@@ -3,8 +3,18 @@
 - nominal: ŷ_ref,h(k+i) = y_ref,r(k+i), the planner's reference over the horizon — the
   assumption of dataset D0 (eq. 4.7);
 - constant velocity: x(k) + i·dt·ẋ(k);
+- constant acceleration: a Kalman filter on the measured pose and velocity, extrapolated
+  with constant acceleration (:mod:`coassist.intent.kalman`), its noise tuned on
+  validation trials;
 - ridge regression: a linear map from the same scaled input window to the same scaled
-  target as the network, fitted in closed form on the same training windows.
+  target as the network, fitted in closed form on the same training windows, its α
+  chosen on validation trials.
+
+Tuning protocol (:func:`fit_tuned_baselines`), the one the model's own hyper-parameter
+search uses (``intent.tuning``): the model's training trials are split again, by trial,
+into fit and validation trials (:func:`coassist.intent.features.validation_split`); α
+and the Kalman noise minimise the validation error over a fixed grid; the ridge is then
+refitted on all training windows with the chosen α. The test trials are never seen.
 
 All return predictions shaped like :attr:`coassist.data.Trial.prediction`: (T, H, d),
 ``pred[k, i-1]`` for tick k+i, in m.
@@ -13,6 +23,8 @@ All return predictions shaped like :attr:`coassist.data.Trial.prediction`: (T, H
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -26,9 +38,23 @@ from coassist.intent.features import (
     decode_target,
     scale_targets,
     unscale_targets,
+    validation_split,
 )
+from coassist.intent.kalman import KalmanCA, tune_kalman
 
-__all__ = ["RidgeBaseline", "constant_velocity_prediction", "nominal_prediction"]
+__all__ = [
+    "RIDGE_ALPHAS",
+    "RidgeBaseline",
+    "constant_acceleration_prediction",
+    "constant_velocity_prediction",
+    "fit_tuned_baselines",
+    "nominal_prediction",
+    "ridge_validation_errors",
+    "tune_ridge_alpha",
+]
+
+#: The ridge α searched on validation trials (scaled inputs and targets, see RidgeBaseline).
+RIDGE_ALPHAS = tuple(float(10.0**e) for e in np.arange(-7.0, 3.01, 0.5))
 
 
 def nominal_prediction(trial: Trial, horizon: int) -> np.ndarray:
@@ -41,6 +67,63 @@ def nominal_prediction(trial: Trial, horizon: int) -> np.ndarray:
 def constant_velocity_prediction(trial: Trial, horizon: int, dt: float | None = None) -> np.ndarray:
     """ŷ(k+i) = x(k) + i·dt·ẋ(k), with the measured velocity; dt defaults to the trial's. (T, H, d)."""
     return constant_velocity(trial.pose, trial.velocity, horizon, trial.meta.dt if dt is None else dt)
+
+
+def constant_acceleration_prediction(trial: Trial, horizon: int, params: KalmanCA, dt: float | None = None) -> np.ndarray:
+    """ŷ(k+i) = p̂ + τ v̂ + τ²/2 â (τ = i·dt) from the constant-acceleration Kalman filter. (T, H, d)."""
+    return params.predict(trial.pose, trial.velocity, horizon, trial.meta.dt if dt is None else dt)
+
+
+def _normal_equations(windows: WindowSet, input_scaler: Scaler, target_scaler: Scaler,
+                      chunk: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Centred Xc'Xc, Xc'Yc and the means of X and Y over the scaled windows, in chunks."""
+    n = len(windows)
+    sxx = sxy = sx = sy = None
+    for sel in np.array_split(np.arange(n), max(1, math.ceil(n / chunk))):
+        x = input_scaler.transform(windows.raw_inputs(sel)).reshape(sel.size, -1)
+        y = scale_targets(target_scaler, windows.raw_targets(sel))
+        if sxx is None:
+            sxx, sxy = np.zeros((x.shape[1],) * 2), np.zeros((x.shape[1], y.shape[1]))
+            sx, sy = np.zeros(x.shape[1]), np.zeros(y.shape[1])
+        sxx += x.T @ x
+        sxy += x.T @ y
+        sx += x.sum(0)
+        sy += y.sum(0)
+    mx, my = sx / n, sy / n
+    return sxx - n * np.outer(mx, mx), sxy - n * np.outer(mx, my), mx, my
+
+
+def ridge_validation_errors(
+    fit: WindowSet,
+    validation: WindowSet,
+    input_scaler: Scaler,
+    target_scaler: Scaler,
+    alphas: Sequence[float] = RIDGE_ALPHAS,
+    chunk: int = 4096,
+) -> np.ndarray:
+    """Validation error of the ridge fitted on ``fit`` for each α: (len(alphas),) in m².
+
+    The error is the mean over validation windows of Σ_i ||x̂(k+i) − x(k+i)||² / H, the
+    positions decoded from the scaled outputs. One eigendecomposition Xc'Xc = V Λ V'
+    serves every α: W(α) = V (Λ + α I)⁻¹ V' Xc'Yc.
+    """
+    alphas = [float(a) for a in alphas]
+    if not alphas or any(not (math.isfinite(a) and a >= 0) for a in alphas):
+        raise ValueError(f"ridge alphas must be finite numbers >= 0, got {alphas!r}")
+    cxx, cxy, mx, my = _normal_equations(fit, input_scaler, target_scaler, chunk)
+    lam, V = np.linalg.eigh(cxx)
+    vxy = V.T @ cxy
+    h, d = validation.window.horizon, validation.n_dof
+    sse, n = np.zeros(len(alphas)), len(validation)
+    floor = 1e-12 * max(float(lam.max()), 1e-300)  # α = 0 on a singular Xc'Xc: the minimum-norm solution
+    weights = [V @ (np.where(lam + a > floor, 1.0 / np.maximum(lam + a, floor), 0.0)[:, None] * vxy) for a in alphas]
+    for sel in np.array_split(np.arange(n), max(1, math.ceil(n / chunk))):
+        x = input_scaler.transform(validation.raw_inputs(sel)).reshape(sel.size, -1) - mx
+        truth = validation.raw_targets(sel)  # the positions' error equals the target's (same base)
+        for i, w in enumerate(weights):
+            e = unscale_targets(target_scaler, x @ w + my, h, d) - truth
+            sse[i] += float(np.sum(e * e)) / h
+    return sse / n
 
 
 class RidgeBaseline:
@@ -62,21 +145,8 @@ class RidgeBaseline:
             chunk: int = 4096) -> RidgeBaseline:  # fmt: skip
         if not (math.isfinite(alpha) and alpha >= 0):
             raise ValueError(f"alpha must be a finite number >= 0, got {alpha!r}")
-        n = len(windows)
-        sxx = sxy = sx = sy = None
-        for sel in np.array_split(np.arange(n), max(1, math.ceil(n / chunk))):
-            x = input_scaler.transform(windows.raw_inputs(sel)).reshape(sel.size, -1)
-            y = scale_targets(target_scaler, windows.raw_targets(sel))
-            if sxx is None:
-                sxx, sxy = np.zeros((x.shape[1],) * 2), np.zeros((x.shape[1], y.shape[1]))
-                sx, sy = np.zeros(x.shape[1]), np.zeros(y.shape[1])
-            sxx += x.T @ x
-            sxy += x.T @ y
-            sx += x.sum(0)
-            sy += y.sum(0)
-        mx, my = sx / n, sy / n
-        a = sxx - n * np.outer(mx, mx) + alpha * np.eye(sxx.shape[0])
-        W = np.linalg.solve(a, sxy - n * np.outer(mx, my))
+        cxx, cxy, mx, my = _normal_equations(windows, input_scaler, target_scaler, chunk)
+        W = np.linalg.solve(cxx + alpha * np.eye(cxx.shape[0]), cxy)
         return cls(W, my - mx @ W, alpha, windows.window, input_scaler, target_scaler, windows.dt)
 
     def predict_scaled(self, x: np.ndarray) -> np.ndarray:
@@ -106,3 +176,83 @@ class RidgeBaseline:
                        target_scaler, dt)  # fmt: skip
         except KeyError as exc:
             raise ValueError(f"ridge weights miss tensor {exc}") from None
+
+
+def tune_ridge_alpha(
+    trials: Sequence[Trial],
+    ids: Sequence[str],
+    window: WindowConfig,
+    dt: float,
+    input_scaler: Scaler,
+    target_scaler: Scaler,
+    *,
+    seed: int,
+    stride: int = 1,
+    alphas: Sequence[float] = RIDGE_ALPHAS,
+) -> tuple[float, dict[str, Any]]:
+    """α minimising :func:`ridge_validation_errors` on validation trials split from the training trials.
+
+    ``trials``/``ids``: the model's training trials (at least two), split by
+    :func:`validation_split` with ``seed``; windows every ``stride``-th, as in training.
+    Returns (α, record with the fit and validation trial ids, the grid and its errors in m²).
+    """
+    if len(trials) != len(ids):
+        raise ValueError(f"need one id per training trial, got {len(trials)} trials and {len(ids)} ids")
+    fit_idx, val_idx = validation_split(ids, seed)
+    fit_ws = WindowSet([trials[i] for i in fit_idx], window, dt, stride=stride)
+    val_ws = WindowSet([trials[i] for i in val_idx], window, dt, stride=stride)
+    alphas = [float(a) for a in alphas]
+    errors = ridge_validation_errors(fit_ws, val_ws, input_scaler, target_scaler, alphas)
+    record = {"fit_trials": [ids[i] for i in fit_idx], "validation_trials": [ids[i] for i in val_idx],
+              "alphas": alphas, "validation_mse": [float(e) for e in errors]}  # fmt: skip
+    return alphas[int(np.argmin(errors))], record
+
+
+def fit_tuned_baselines(
+    trials: Sequence[Trial],
+    ids: Sequence[str],
+    window: WindowConfig,
+    dt: float,
+    input_scaler: Scaler,
+    target_scaler: Scaler,
+    *,
+    seed: int,
+    stride: int = 1,
+    alpha: float | None = None,
+    fallback_alpha: float = 1.0,
+) -> tuple[RidgeBaseline, KalmanCA, dict[str, Any]]:
+    """The ridge and the Kalman predictor, tuned on validation trials from the training trials.
+
+    ``trials`` and ``ids`` are the model's training trials (never its test trials). α
+    comes from :func:`tune_ridge_alpha` unless ``alpha`` fixes it; the Kalman noise from
+    :func:`coassist.intent.kalman.tune_kalman` on the same validation trials. The ridge
+    is then refitted on all training windows (every ``stride``-th). With fewer than two
+    training trials there is nothing to validate on: α = ``fallback_alpha`` (or
+    ``alpha``) and the Kalman defaults, recorded as untuned.
+
+    Returns (ridge, kalman, record) — the record is JSON-ready for the model's sidecar.
+    """
+    if len(trials) != len(ids) or not trials:
+        raise ValueError(f"need one id per training trial, got {len(trials)} trials and {len(ids)} ids")
+    all_ws = WindowSet(list(trials), window, dt, stride=stride)
+    kalman = KalmanCA()
+    record: dict[str, Any] = {"protocol": "validation trials split by trial from the training trials "
+                              "(features.validation_split); criterion: mean squared position error over the whole horizon"}  # fmt: skip
+    if len(trials) < 2:
+        record["protocol"] = "untuned: fewer than two training trials, no validation trial"
+        alpha_used, ridge_rec = (fallback_alpha if alpha is None else alpha), {"tuned": False}
+    else:
+        if alpha is None:
+            alpha_used, search = tune_ridge_alpha(trials, ids, window, dt, input_scaler, target_scaler, seed=seed,
+                                                  stride=stride)  # fmt: skip
+            ridge_rec = {"tuned": True, **search}
+        else:
+            alpha_used, ridge_rec = float(alpha), {"tuned": False, "fixed_by": "train.ridge_alpha"}
+        fit_idx, val_idx = validation_split(ids, seed)
+        record["fit_trials"], record["validation_trials"] = [ids[i] for i in fit_idx], [ids[i] for i in val_idx]
+        kalman, record["constant_acceleration_search"] = tune_kalman(
+            [trials[i] for i in val_idx], window.horizon, dt, first_tick=window.history - 1)
+    ridge = RidgeBaseline.fit(all_ws, input_scaler, target_scaler, alpha_used)
+    record["ridge"] = {"alpha": float(alpha_used), **ridge_rec}
+    record["constant_acceleration"] = kalman.to_dict()
+    return ridge, kalman, record

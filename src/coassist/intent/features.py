@@ -33,6 +33,7 @@ import numpy as np
 
 from coassist._checks import check_int_at_least
 from coassist.data import Trial
+from coassist.data.trial import time_gaps
 
 __all__ = [
     "AXES",
@@ -44,7 +45,11 @@ __all__ = [
     "feature_names",
     "split_trials",
     "trial_features",
+    "validation_split",
 ]
+
+#: Share of the training trials held out for validation (hyper-parameters, baselines' tuning).
+VALIDATION_FRACTION = 0.25
 
 AXES = ("x", "y", "z", "rx", "ry", "rz")
 INPUT_FRAMES = ("absolute", "relative")
@@ -195,6 +200,17 @@ def split_trials(ids: Sequence[str], test_fraction: float = 0.2, seed: int = 0) 
     return train, test
 
 
+def validation_split(train_ids: Sequence[str], seed: int = 0) -> tuple[list[int], list[int]]:
+    """Split the training trials again, by trial, into fit and validation: the one protocol by
+    which hyper-parameters are chosen (``intent.tuning``) and the baselines are tuned
+    (``baselines.fit_tuned_baselines``). A quarter of the trials (at least one), with seed + 1.
+    Returns (fit indices, validation indices) into ``train_ids``.
+    """
+    if len(train_ids) < 2:
+        raise ValueError(f"a validation split needs at least two training trials, got {len(train_ids)}")
+    return split_trials(train_ids, VALIDATION_FRACTION, seed + 1)
+
+
 class WindowSet:
     """All windows of some trials, cut lazily (one batch at a time).
 
@@ -223,8 +239,15 @@ class WindowSet:
         first = window.history - 1
         for i, t in enumerate(trials):
             f = trial_features(t)
-            last = t.n_samples - 1 - (window.horizon if need_future else 0)
+            ahead = window.horizon if need_future else 0
+            last = t.n_samples - 1 - ahead
             ks = np.arange(first, last + 1, stride)
+            # No window spans a gap in the recording: gap g lies between samples g and
+            # g+1, and the window ending at k uses samples k−history+1 … k+ahead.
+            gaps = time_gaps(t.time, t.meta.dt)
+            if gaps.size:
+                spans = np.searchsorted(gaps, ks + ahead, side="left") - np.searchsorted(gaps, ks - first, side="left")
+                ks = ks[spans == 0]
             feats.append(f)
             ends.append(start + ks)
             owner.append(np.full(ks.size, i))

@@ -7,9 +7,12 @@ A model folder holds::
     model.json            sidecar: features, dt, window, network, scaling ranges, dataset
                           ids, split, preset, training configuration and history
 
-Every file is written atomically (temporary file + ``os.replace``), never pickled.
-:func:`load_model` checks the weights against the sidecar's hash and refuses a model
-whose features or dt differ from what the caller expects (:class:`ModelMismatchError`).
+The folder is written whole beside the destination and swapped in at the end
+(:func:`coassist._io.staged_folder`), under the output's lock, never pickled: a crash
+leaves the old model or the new one, never a mix. :func:`load_model` validates the
+sidecar, checks the weights against its hash and refuses a model whose features or dt
+differ from what the caller expects (:class:`ModelMismatchError`); every defect of the
+files is one :class:`ModelFileError` naming the file.
 """
 
 from __future__ import annotations
@@ -18,16 +21,17 @@ import hashlib
 import json
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+from safetensors import SafetensorError
 from safetensors.torch import load as st_load
 from safetensors.torch import save as st_save
 
-from coassist._io import atomic_write_bytes, atomic_write_text
+from coassist._io import OutputLock, atomic_write_bytes, staged_folder
 from coassist.data import Trial
 from coassist.intent.features import (
     Scaler,
@@ -198,34 +202,82 @@ def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def save_model(model: IntentModel, folder: str | os.PathLike[str]) -> Path:
-    """Write ``model`` into ``folder`` (created if needed); returns the folder."""
+def save_model(
+    model: IntentModel,
+    folder: str | os.PathLike[str],
+    *,
+    extra_files: Mapping[str, bytes] | None = None,
+) -> Path:
+    """Write ``model`` as the folder ``folder``, replacing what was there; returns the folder.
+
+    The folder is written beside ``folder`` and swapped in whole, under the output lock
+    (:class:`coassist._io.OutputLock`; a second writer gets ``OutputBusyError``).
+    ``extra_files`` (name -> bytes: history, figures, a training checkpoint) go into the
+    same swap. Whether an existing model may be replaced is the caller's decision.
+    """
     folder = Path(folder)
-    state = {k: v.detach().contiguous() for k, v in model.net.state_dict().items()}
+    state = {k: v.detach().cpu().contiguous() for k, v in model.net.state_dict().items()}
     weights = st_save(state)
-    atomic_write_bytes(folder / WEIGHTS, weights)
-    ridge_sha = None
-    if model.ridge is not None:
-        ridge = st_save(model.ridge.state_dict())
-        atomic_write_bytes(folder / RIDGE, ridge)
-        ridge_sha = _sha256(ridge)
-    # The sidecar goes last: a folder whose sidecar names a hash is complete.
-    text = json.dumps(model.sidecar(_sha256(weights), ridge_sha), indent=1, allow_nan=False)
-    atomic_write_text(folder / SIDECAR, text + "\n")
+    ridge = st_save(model.ridge.state_dict()) if model.ridge is not None else None
+    text = json.dumps(model.sidecar(_sha256(weights), None if ridge is None else _sha256(ridge)), indent=1,
+                      allow_nan=False)  # fmt: skip
+    files = {WEIGHTS: weights, **({RIDGE: ridge} if ridge is not None else {}), **dict(extra_files or {})}
+    files[SIDECAR] = (text + "\n").encode("utf-8")
+    if folder.exists() and not folder.is_dir():
+        raise ModelFileError(f"{folder} exists and is not a folder")
+    with OutputLock(folder), staged_folder(folder) as staging:
+        for name, data in files.items():
+            if Path(name).name != name:
+                raise ValueError(f"extra_files names must be plain file names, got {name!r}")
+            atomic_write_bytes(staging / name, data)
     return folder
 
 
+def _fail(path: Path, what: str) -> ModelFileError:
+    return ModelFileError(f"{path}: {what}")
+
+
 def read_sidecar(folder: str | os.PathLike[str]) -> dict[str, Any]:
-    path = Path(folder) / SIDECAR
+    """The sidecar of a model folder, its format and fields checked (:class:`ModelFileError`)."""
+    folder = Path(folder)
+    path = folder / SIDECAR
+    if not folder.exists():
+        raise _fail(path, f"not found: there is no model folder {folder}")
     if not path.is_file():
-        raise ModelFileError(f"{path}: not found (is {Path(folder)} a model folder?)")
+        raise _fail(path, f"not found (is {folder} a model folder?)")
     try:
-        meta = json.loads(path.read_text("utf-8"))
+        meta = json.loads(path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise _fail(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except json.JSONDecodeError as exc:
-        raise ModelFileError(f"{path}: malformed JSON: {exc}") from None
+        raise _fail(path, f"malformed JSON: {exc}") from None
+    except OSError as exc:
+        raise _fail(path, f"cannot be read: {exc.strerror}") from None
+    if not isinstance(meta, dict):
+        raise _fail(path, f"must hold a JSON object, got {type(meta).__name__}")
     if meta.get("format") != FORMAT:
-        raise ModelFileError(f"{path}: format {meta.get('format')!r}, expected {FORMAT!r}")
+        raise _fail(path, f"format {meta.get('format')!r}, expected {FORMAT!r}")
+    dt = meta.get("dt")
+    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt <= 0:
+        raise _fail(path, f"'dt' must be a finite number > 0 (s), got {json.dumps(dt)}")
+    for key in ("window", "network", "input_scaler", "target_scaler"):
+        if not isinstance(meta.get(key), dict):
+            raise _fail(path, f"{key!r} must be an object, got {json.dumps(meta.get(key))}")
+    features = meta.get("features")
+    if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
+        raise _fail(path, f"'features' must be a list of names, got {json.dumps(features)}")
+    for key in ("weights_sha256", "ridge_sha256"):
+        value = meta.get(key)
+        if not (isinstance(value, str) or (key == "ridge_sha256" and value is None)):
+            raise _fail(path, f"{key!r} must be a hex digest, got {json.dumps(value)}")
     return meta
+
+
+def _tensors(path: Path, raw: bytes) -> dict[str, torch.Tensor]:
+    try:
+        return st_load(raw)
+    except SafetensorError as exc:
+        raise _fail(path, f"not a readable safetensors file: {exc}") from None
 
 
 def load_model(
@@ -245,37 +297,48 @@ def load_model(
 
     folder = Path(folder)
     meta = read_sidecar(folder)
+    sidecar = folder / SIDECAR
     try:
         window = WindowConfig(**meta["window"])
         net_cfg = NetworkConfig(**meta["network"])
         in_scaler = Scaler.from_dict(meta["input_scaler"])
         out_scaler = Scaler.from_dict(meta["target_scaler"])
-        model_dt = float(meta["dt"])
-        stored_features = tuple(meta["features"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ModelFileError(f"{folder / SIDECAR}: bad or missing field: {exc}") from None
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise _fail(sidecar, f"bad or missing field: {exc}") from None
+    model_dt = float(meta["dt"])
+    stored_features = tuple(meta["features"])
     if stored_features != feature_names(net_cfg.n_features // 4):
-        raise ModelFileError(f"{folder / SIDECAR}: features {list(stored_features)} do not match the network")
+        raise _fail(sidecar, f"features {list(stored_features)} do not match the network")
+    for key, expected in (("history", window.history), ("horizon", window.horizon)):
+        if key in meta and meta[key] != expected:
+            raise _fail(sidecar, f"{key!r} is {json.dumps(meta[key])} but the window says {expected}")
     weights_path = folder / WEIGHTS
     if not weights_path.is_file():
-        raise ModelFileError(f"{weights_path}: not found")
+        raise _fail(weights_path, "not found")
     raw = weights_path.read_bytes()
-    if _sha256(raw) != meta.get("weights_sha256"):
-        raise ModelFileError(f"{weights_path}: does not match the hash in {SIDECAR} (files from different saves?)")
+    if _sha256(raw) != meta["weights_sha256"]:
+        raise _fail(weights_path, f"does not match the hash in {SIDECAR} (files from different saves?)")
     net = IntentNet(net_cfg)
     try:
-        net.load_state_dict(st_load(raw), strict=True)
+        net.load_state_dict(_tensors(weights_path, raw), strict=True)
     except RuntimeError as exc:
-        raise ModelFileError(f"{weights_path}: tensors do not fit the network in {SIDECAR}: {exc}") from None
+        raise _fail(weights_path, f"tensors do not fit the network in {SIDECAR}: {exc}") from None
     ridge = None
-    if meta.get("ridge_sha256"):
-        rraw = (folder / RIDGE).read_bytes() if (folder / RIDGE).is_file() else b""
+    if meta["ridge_sha256"]:
+        ridge_path = folder / RIDGE
+        rraw = ridge_path.read_bytes() if ridge_path.is_file() else b""
         if _sha256(rraw) != meta["ridge_sha256"]:
-            raise ModelFileError(f"{folder / RIDGE}: missing or does not match the hash in {SIDECAR}")
-        ridge = RidgeBaseline.from_state_dict(st_load(rraw), window, in_scaler, out_scaler, model_dt)
+            raise _fail(ridge_path, f"missing or does not match the hash in {SIDECAR}")
+        try:
+            ridge = RidgeBaseline.from_state_dict(_tensors(ridge_path, rraw), window, in_scaler, out_scaler, model_dt)
+        except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+            raise _fail(ridge_path, f"tensors do not fit the ridge baseline: {exc}") from None
     skip = {"format", "features", "n_dof", "dt", "history", "horizon", "window", "network", "input_scaler",
             "target_scaler", "weights_sha256", "ridge_sha256"}  # fmt: skip
     info = {k: v for k, v in meta.items() if k not in skip}
-    model = IntentModel(net, window, in_scaler, out_scaler, model_dt, info, ridge)
+    try:
+        model = IntentModel(net, window, in_scaler, out_scaler, model_dt, info, ridge)
+    except ValueError as exc:
+        raise _fail(sidecar, f"inconsistent model: {exc}") from None
     model.check_compatible(features, dt)
     return model

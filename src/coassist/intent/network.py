@@ -4,6 +4,10 @@ An LSTM reads the window (B, steps, features); its last hidden state goes throug
 fully connected layers to the H·d outputs (the predicted trajectory in the chosen
 target parameterisation, scaled to [−1, 1]). The thesis network is
 LSTM 3 × 250 → FC 250 → 200 → 2·50 with SiLU between FC layers, Xavier init.
+
+With ``lstm_layers = 0`` the network is its linear skip alone, y = W x + b on the
+flattened window: the ridge predictor in the same model format (training fits it in
+closed form, ``training.train_model``).
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ class NetworkConfig:
     """Sizes of the network.
 
     n_features : inputs per step (4·d).  n_outputs : H·d.
-    lstm_layers, hidden : the LSTM.  fc : widths of the hidden FC layers after the LSTM
+    lstm_layers, hidden : the LSTM; 0 layers: no LSTM and no FC layers, only the linear skip.  fc : widths of the hidden FC layers after the LSTM
     (thesis: (200,), i.e. two FC layers 250 → 200 → 100).  activation : between FC layers.
     skip_inputs : 0 (the thesis) or steps·n_features: adds a linear map from the flattened
     window straight to the outputs, so the LSTM+FC learns a correction on top of a linear
@@ -48,7 +52,7 @@ class NetworkConfig:
     def __post_init__(self) -> None:
         _int(self.n_features, "network.n_features", 1)
         _int(self.n_outputs, "network.n_outputs", 1)
-        _int(self.lstm_layers, "network.lstm_layers", 1)
+        _int(self.lstm_layers, "network.lstm_layers", 0)
         _int(self.hidden, "network.hidden", 1)
         fc = tuple(self.fc) if isinstance(self.fc, (list, tuple)) else self.fc
         if not isinstance(fc, tuple):
@@ -59,6 +63,8 @@ class NetworkConfig:
         _int(self.skip_inputs, "network.skip_inputs", 0)
         if self.skip_inputs and self.skip_inputs % self.n_features:
             raise ValueError(f"network.skip_inputs must be steps·n_features, got {self.skip_inputs}")
+        if self.lstm_layers == 0 and not self.skip_inputs:
+            raise ValueError("network.lstm_layers = 0 (a linear predictor) needs the linear skip (network.skip_inputs > 0)")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"network.activation must be one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
 
@@ -74,14 +80,17 @@ class IntentNet(nn.Module):
     def __init__(self, config: NetworkConfig) -> None:
         super().__init__()
         self.config = config
-        self.lstm = nn.LSTM(config.n_features, config.hidden, config.lstm_layers, batch_first=True)
-        widths = (config.hidden, *config.fc, config.n_outputs)
-        layers: list[nn.Module] = []
-        for i, (a, b) in enumerate(zip(widths[:-1], widths[1:])):
-            if i:
-                layers.append(ACTIVATIONS[config.activation]())
-            layers.append(nn.Linear(a, b))
-        self.head = nn.Sequential(*layers)
+        self.lstm: nn.LSTM | None = None
+        self.head: nn.Sequential | None = None
+        if config.lstm_layers:
+            self.lstm = nn.LSTM(config.n_features, config.hidden, config.lstm_layers, batch_first=True)
+            widths = (config.hidden, *config.fc, config.n_outputs)
+            layers: list[nn.Module] = []
+            for i, (a, b) in enumerate(zip(widths[:-1], widths[1:])):
+                if i:
+                    layers.append(ACTIVATIONS[config.activation]())
+                layers.append(nn.Linear(a, b))
+            self.head = nn.Sequential(*layers)
         self.skip = nn.Linear(config.skip_inputs, config.n_outputs) if config.skip_inputs else None
         self.reset_parameters()
 
@@ -93,23 +102,34 @@ class IntentNet(nn.Module):
             else:
                 nn.init.zeros_(p)
 
+    @property
+    def is_linear(self) -> bool:
+        """No LSTM: the network is its linear skip."""
+        return self.lstm is None
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.lstm is None:
+            return self.skip(x.flatten(1))
         return self.forward_head(self.lstm_features(x), x.flatten(1))
 
     def lstm_features(self, x: torch.Tensor) -> torch.Tensor:
-        """Last hidden state of the top LSTM layer, (B, hidden)."""
+        """Last hidden state of the top LSTM layer, (B, hidden); (B, 0) for a linear network."""
+        if self.lstm is None:
+            return x.new_zeros((x.shape[0], 0))
         out, _ = self.lstm(x)
         return out[:, -1]
 
     def forward_head(self, h: torch.Tensor, x_flat: torch.Tensor | None) -> torch.Tensor:
         """FC layers on the LSTM features (B, hidden), plus the skip on the flat window (B, steps·features)."""
+        if self.head is None:
+            return self.skip(x_flat)
         y = self.head(h)
         if self.skip is not None:
             y = y + self.skip(x_flat)
         return y
 
     def lstm_parameters(self) -> list[nn.Parameter]:
-        return list(self.lstm.parameters())
+        return [] if self.lstm is None else list(self.lstm.parameters())
 
     def head_parameters(self) -> list[nn.Parameter]:
         """Everything but the LSTM: the FC layers and the linear skip (what transfer trains)."""
@@ -123,6 +143,7 @@ class IntentNet(nn.Module):
             raise ValueError("network has no linear skip (network.skip_inputs = 0)")
         self.skip.weight.copy_(weight)
         self.skip.bias.copy_(bias)
-        last = self.head[-1]
-        last.weight.zero_()
-        last.bias.zero_()
+        if self.head is not None:
+            last = self.head[-1]
+            last.weight.zero_()
+            last.bias.zero_()

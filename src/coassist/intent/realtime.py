@@ -311,7 +311,8 @@ class RealtimePredictor:
         self.horizon, self.n_dof, self.n_features = model.horizon, model.n_dof, 4 * model.n_dof
         self.history = model.history
         self.dt = model.dt
-        self._buf = np.zeros((model.history, self.n_features))
+        # A ring twice the history long: every window is one contiguous slice (no roll per tick).
+        self._ring = np.zeros((2 * model.history, self.n_features))
         self._lock = threading.Condition()
         # (generation, k, window) / (generation, k, positions): a worker result from before a
         # reset() carries an old generation and is dropped, never served to the new trial.
@@ -379,11 +380,13 @@ class RealtimePredictor:
             self._held = 0
             self._last_good = row
         if row is not None:
-            self._buf = np.roll(self._buf, -1, axis=0)
-            self._buf[-1] = row
-            self._filled = min(self._filled + 1, len(self._buf))
-            if self._filled == len(self._buf):
-                window = self._buf.copy()
+            L = self.history
+            i = self._k % L
+            self._ring[i] = row
+            self._ring[i + L] = row
+            self._filled = min(self._filled + 1, L)
+            if self._filled == L:
+                window = self._ring[i + 1 : i + 1 + L].copy()
                 if self.config.threaded:
                     with self._lock:
                         self._pending = (self._generation, self._k, window)

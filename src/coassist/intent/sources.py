@@ -1,6 +1,7 @@
 """Where training and evaluation trials come from: dataset folders or real recordings.
 
 A path may be
+- one trial file written by :func:`coassist.data.write_trial` (``.parquet``);
 - a dataset folder written by :func:`coassist.data.write_dataset` (has ``manifest.json``);
 - a real user's folder of recordings (``trial_*`` subfolders of rosbag CSVs, e.g.
   ``.../ur5-thesis/user-a``);
@@ -13,11 +14,12 @@ recorded in the model's sidecar.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import NamedTuple
 
-from coassist.data import Trial, load_ros_trial, load_ros_user, read_dataset
+from coassist.data import RecordingError, Trial, load_ros_trial, read_dataset
+from coassist.data.rosbag_csv import recording_folders
 from coassist.data.store import MANIFEST_NAME
 
 __all__ = ["LabeledTrial", "load_trials"]
@@ -29,29 +31,55 @@ class LabeledTrial(NamedTuple):
     trial: Trial
 
 
-def _load_one(path: Path) -> list[LabeledTrial]:
+def _load_one(path: Path, on_bad: Callable[[str, str], None] | None) -> list[LabeledTrial]:
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file or folder")
+    if path.is_file():  # one trial file (coassist collect / drive / play write them)
+        from coassist.data import read_trial
+
+        dataset = path.absolute().parent.name
+        return [LabeledTrial(f"{dataset}/{path.stem}", dataset, read_trial(path))]
     if (path / MANIFEST_NAME).is_file():
-        ds = read_dataset(path)
-        files = [Path(e["file"]).stem for e in ds.manifest["trials"]]
-        return [LabeledTrial(f"{ds.id}/{f}", ds.id, t) for f, t in zip(files, ds.trials)]
+        ds = read_dataset(path, skip_bad=on_bad is not None)
+        for name, reason in ds.skipped:
+            on_bad(str(path / name), reason)  # type: ignore[misc]
+        return [LabeledTrial(f"{ds.id}/{Path(f).stem}", ds.id, t) for f, t in zip(ds.files, ds.trials)]
     if (path / "current_pose.csv").is_file():
         dataset = f"{path.absolute().parent.parent.name}/{path.absolute().parent.name}"
         t = load_ros_trial(path)
         return [LabeledTrial(f"{dataset}/{path.name}", dataset, t)]
     if path.is_dir() and any(p.is_dir() and p.name.startswith("trial_") for p in path.iterdir()):
         dataset = f"{path.absolute().parent.name}/{path.name}"
-        return [LabeledTrial(f"{dataset}/{t.meta.extra['recording']}", dataset, t) for t in load_ros_user(path)]
+        out = []
+        for folder in recording_folders(path):
+            try:
+                t = load_ros_trial(folder, user=path.name)
+            except RecordingError as exc:
+                if on_bad is None:
+                    raise
+                on_bad(str(folder), str(exc))
+                continue
+            out.append(LabeledTrial(f"{dataset}/{t.meta.extra['recording']}", dataset, t))
+        return out
     raise FileNotFoundError(
         f"{path}: not a dataset folder ({MANIFEST_NAME}), a recording folder (current_pose.csv) "
         "or a folder of trial_* recordings"
     )
 
 
-def load_trials(paths: Iterable[str | os.PathLike[str]]) -> list[LabeledTrial]:
-    """Load every trial under ``paths``, in the order given; ids must not repeat."""
+def load_trials(
+    paths: Iterable[str | os.PathLike[str]],
+    *,
+    on_bad: Callable[[str, str], None] | None = None,
+) -> list[LabeledTrial]:
+    """Load every trial under ``paths``, in the order given; ids must not repeat.
+
+    ``on_bad``: None stops at the first unreadable trial (the error names it); a callable
+    leaves such trials out and is told ``on_bad(where, reason)`` for each.
+    """
     out: list[LabeledTrial] = []
     for p in paths:
-        out.extend(_load_one(Path(p)))
+        out.extend(_load_one(Path(p), on_bad))
     if not out:
         raise ValueError("no trials given")
     seen: set[str] = set()

@@ -3,13 +3,16 @@
 The search never sees the test trials: the training trials of the usual split are split
 again into fit and validation trials, and the objective is the validation e_RMS at the
 model's full horizon (m). Studies live in any database Optuna accepts; the default is
-SQLite (``sqlite:///study.db``), so a search can be stopped and resumed.
+SQLite (``sqlite:///study.db``), so a search can be stopped and resumed. A study records
+the trials it fits and validates on; resuming it on other data is refused
+(:class:`StudyMismatchError`), since its trials would not be comparable.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 from coassist.intent.evaluation import evaluate_model
@@ -17,7 +20,48 @@ from coassist.intent.features import split_trials
 from coassist.intent.sources import LabeledTrial
 from coassist.intent.training import Preset, train_model
 
-__all__ = ["run_study"]
+__all__ = ["StudyMismatchError", "check_storage", "run_study", "train_options"]
+
+_DATA_KEY = "coassist_trials"  # study user attribute: the fit and validation trial ids
+
+
+class StudyMismatchError(ValueError):
+    """An existing study was run on other trials than the ones given."""
+
+
+def check_storage(url: str) -> Path | None:
+    """Check an Optuna storage URL before any work; return the SQLite file it names, if any.
+
+    Raises ``ValueError`` saying what is wrong (not a URL, an unknown database kind, a
+    driver that is not installed).
+    """
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+
+    try:
+        parsed = make_url(url)
+    except (ArgumentError, ValueError):
+        raise ValueError("not a database URL (e.g. sqlite:///study.db or postgresql://user@host/db)") from None
+    try:
+        parsed.get_dialect()
+    except NoSuchModuleError:
+        raise ValueError(f"unknown database kind {parsed.drivername!r} (e.g. sqlite:///study.db)") from None
+    except ImportError as exc:
+        raise ValueError(f"the database driver for {parsed.drivername!r} is not installed ({exc.name})") from None
+    if parsed.get_backend_name() == "sqlite" and parsed.database not in (None, "", ":memory:"):
+        return Path(parsed.database)
+    return None
+
+
+def train_options(best_params: dict[str, Any]) -> list[str]:
+    """The ``coassist train`` options that reproduce a study's best parameters."""
+    names = {"optimizer": "--optimizer", "lr": "--lr", "lstm_layers": "--layers", "hidden": "--hidden", "fc": "--fc"}
+    out: list[str] = []
+    for key, option in names.items():
+        if key in best_params:
+            value = best_params[key]
+            out += [option, f"{value:.4g}" if isinstance(value, float) else str(value)]
+    return out
 
 
 def run_study(
@@ -68,6 +112,21 @@ def run_study(
     sampler = optuna.samplers.TPESampler(seed=seed)
     study = optuna.create_study(storage=storage, study_name=study_name, direction="minimize", sampler=sampler,
                                 load_if_exists=True)  # fmt: skip
+    data = {"fit": [lt.id for lt in fit], "validation": [lt.id for lt in val]}
+    recorded = study.user_attrs.get(_DATA_KEY)
+    if recorded is None and study.trials:
+        raise StudyMismatchError(
+            f"study {study_name!r} in {storage} already has {len(study.trials)} trials and no record of its data; "
+            "give another study name"
+        )
+    if recorded is not None and recorded != data:
+        datasets = sorted({i.rsplit("/", 1)[0] for i in recorded["fit"] + recorded["validation"]})
+        raise StudyMismatchError(
+            f"study {study_name!r} in {storage} was run on other trials (datasets {', '.join(datasets)}); "
+            "resuming it would mix incomparable results: give another study name or storage"
+        )
+    if recorded is None:
+        study.set_user_attr(_DATA_KEY, data)
     study.optimize(objective, n_trials=n_trials, show_progress_bar=progress)
     return {
         "best_params": study.best_params,

@@ -117,6 +117,8 @@ class RealtimeIntent:
         ``worker_alive``, ``model_id``).
     stall_ticks : consecutive fallback ticks, after the history has filled, that make
         the predictor stalled (≥ 1; default 25 = 0.2 s at 125 Hz).
+    model_id : the id logged with the trial; None: the predictor's ``model_id``, else
+        ``"realtime"``.
     """
 
     nominal = False

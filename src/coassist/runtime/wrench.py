@@ -217,7 +217,9 @@ def payload_wrench(mass: float, com: ArrayLike, gravity: ArrayLike, rotation: Ar
 
     Parameters
     ----------
-    mass : [kg]. com : (3,) [m], sensor frame. gravity : (3,) [m/s²], base frame.
+    mass : [kg].
+    com : (3,) the centre of mass [m], sensor frame.
+    gravity : (3,) [m/s²], base frame.
     rotation : (3, 3) sensor orientation in the base frame (columns: sensor axes), or a
         stack (..., 3, 3).
 

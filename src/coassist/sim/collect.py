@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import asdict
 from pathlib import Path
 
-from coassist.data import write_dataset
+from coassist.data import DatasetWriter
+from coassist.data.store import FORMAT_VERSION, digest
 from coassist.sim.world import TrialSpec, run_trials
 
 
@@ -53,19 +55,41 @@ def collect_dataset(
     progress: bool = True,
     ray_address: str | None = None,
     overwrite: bool = False,
+    say: Callable[[str], None] | None = None,
     **spec_options,
 ) -> Path:
     """Simulate the trials of :func:`dataset_specs` (``spec_options``) and write them as a dataset.
 
     ``dataset_id`` defaults to the folder's name. Returns the dataset folder.
+
+    The output is checked and locked before anything is simulated. Each trial is
+    written as soon as it finishes (:class:`coassist.data.DatasetWriter`), so memory
+    does not grow with the trial count and a killed run loses only the trials in
+    flight: running the same collection again continues where it stopped (``say``
+    is told how many trials it found). The dataset replaces an old one in ``out``
+    (``overwrite=True``) only once it is complete.
     """
     specs = dataset_specs(**spec_options)
     out = Path(out)
-    trials = run_trials(specs, workers=workers, progress=progress, ray_address=ray_address)
     s0 = specs[0]
     description = (
         f"simulated: controller={s0.controller} preset={s0.preset} intent={s0.intent} "
         f"users={sorted({s.user for s in specs})} tasks={sorted({s.task for s in specs})} "
         f"objects={sorted({s.object for s in specs})} seeds {specs[0].seed}..{specs[-1].seed}"
     )
-    return write_dataset(trials, out, dataset_id or out.name, description, overwrite=overwrite)
+    dataset_id = dataset_id or out.name
+    # What is collected, so that a re-run continues only the same collection.
+    model_file = Path(s0.intent) / "model.json"
+    model_hash = digest(model_file.read_bytes().hex()) if s0.intent not in ("nominal", "oracle") and model_file.is_file() else None
+    key = digest({"specs": [asdict(s) for s in specs], "dataset_id": dataset_id, "format": FORMAT_VERSION,
+                  "model": model_hash})  # fmt: skip
+    with DatasetWriter(out, dataset_id, n_trials=len(specs), key=key, description=description,
+                       overwrite=overwrite) as writer:  # fmt: skip
+        if say and writer.discarded:
+            say(f"removed the unfinished trials of a different collection in {writer.partial}")
+        if say and writer.resumed:
+            say(f"continuing: {len(writer.resumed)} of {len(specs)} trials were already written in {writer.partial}")
+        todo = [i for i in range(len(specs)) if not writer.has(i)]
+        run_trials([specs[i] for i in todo], workers=workers, progress=progress, ray_address=ray_address,
+                   on_result=lambda j, trial: writer.add(todo[j], trial))  # fmt: skip
+        return writer.finish()

@@ -93,15 +93,13 @@ def plot_trial(trial: Trial, out: str | Path, *, n_predictions: int = 6, title: 
 
 def load_for_show(path: str | Path, index: int = 0) -> Trial:
     """A trial from a trial file, a dataset folder (its ``index``-th trial) or a ROS CSV recording folder."""
-    from coassist.data import load_ros_trial, read_dataset, read_trial
+    from coassist.data import load_ros_trial, read_trial
+    from coassist.data.store import read_dataset_trial
 
     path = Path(path)
     if path.is_dir():
         if (path / "manifest.json").exists():
-            dataset = read_dataset(path)
-            if not 0 <= index < len(dataset):
-                raise ValueError(f"{path}: index must be in [0, {len(dataset)}), got {index}")
-            return dataset.trials[index]
+            return read_dataset_trial(path, index)  # a bad other trial does not matter here
         if (path / "current_pose.csv").exists():
             return load_ros_trial(path)
         raise ValueError(f"{path}: neither a dataset (manifest.json) nor a recording (current_pose.csv)")

@@ -42,13 +42,14 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from coassist.config import THESIS_APPLICATION, THESIS_EVALUATION, ControlPreset
+from coassist.control.arbitration import ArbitratedController, ArbitrationParameters
 from coassist.control.controllers import AssistiveController, ImpedanceControl, ManualGuidance
 from coassist.control.game import cooperative_game
 from coassist.data import Trial, TrialMeta
@@ -65,8 +66,9 @@ from coassist.sim.objects import CarriedObject, ForceSensor, get_object
 from coassist.sim.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise, operator_profile
 from coassist.sim.tasks import TASK_KINDS, Task, make_task
 
-#: Controller kinds of :class:`TrialSpec`.
-CONTROLLER_KINDS = ("cooperative", "impedance", "manual")
+#: Controller kinds of :class:`TrialSpec`. "cooperative-arbitrated": the cooperative game with
+#: α set every tick from the hand force (coassist.control.arbitration, default law).
+CONTROLLER_KINDS = ("cooperative", "impedance", "manual", "cooperative-arbitrated")
 #: Spring of the IMP baseline toward the nominal reference [N/m] (eq. 5.4). The thesis
 #: does not give it (its K_i = 0 would make IMP equal MG); 200 N/m pulls back with
 #: 10 N at a 5 cm deviation, about what the operators push with.
@@ -85,12 +87,23 @@ def scale_positions(preset: ControlPreset, scale: float, name: str) -> ControlPr
     return replace(preset, name=name, game=game)
 
 
-#: Presets by name: the thesis' (SI units) and the same in decimetres ("-dm").
+#: Position scale of the "thesis-application-damped" preset. A learned predictor predicts
+#: the tool's future pose, to first order an extrapolation of the robot's own motion, so
+#: the robot's gain on it is velocity feedback (coassist.control.game.extrapolation_feedback):
+#: in decimetres (scale 10) it removes 67.5 of the plant's 100 N·s/m and the coupled loop
+#: with the operator's arm (550–1300 N/m, 80 ms reflex delay) rings at every turn. Scale 5
+#: is the largest round scale that leaves at least half (53.6 N·s/m): derived from the
+#: gains, not tuned on trials (tests/control/test_game.py checks both numbers).
+APPLICATION_DAMPED_SCALE = 5.0
+
+#: Presets by name: the thesis' (SI units), the same in decimetres ("-dm"), and the
+#: application weights at APPLICATION_DAMPED_SCALE ("-damped").
 PRESETS: dict[str, ControlPreset] = {
     THESIS_EVALUATION.name: THESIS_EVALUATION,
     THESIS_APPLICATION.name: THESIS_APPLICATION,
     "thesis-evaluation-dm": scale_positions(THESIS_EVALUATION, 10.0, "thesis-evaluation-dm"),
     "thesis-application-dm": scale_positions(THESIS_APPLICATION, 10.0, "thesis-application-dm"),
+    "thesis-application-damped": scale_positions(THESIS_APPLICATION, APPLICATION_DAMPED_SCALE, "thesis-application-damped"),
 }
 
 
@@ -112,6 +125,9 @@ def make_controller(kind: str, preset: ControlPreset):
     model = plant_model(preset)
     if kind == "cooperative":
         return AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
+    if kind == "cooperative-arbitrated":
+        assistive = AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
+        return ArbitratedController(assistive, ArbitrationParameters())
     if kind == "impedance":
         return ImpedanceControl(model, IMPEDANCE_STIFFNESS * np.eye(model.n_dof), effort_limit=preset.effort_limit)
     if kind == "manual":
@@ -336,6 +352,9 @@ def run_trial(
     Hs = int(source.horizon)
     if Hs < H:
         raise ValueError(f"intent source horizon ({Hs}) must be >= the controller's ({H})")
+    reset = getattr(controller, "reset", None)
+    if callable(reset):  # a stateful controller (an online-α arbitration) starts every trial afresh
+        reset()
     if time_limit is None:
         time_limit = 2.0 * task.planner.end_time + 10.0
     n_max = int(math.ceil(float(time_limit) / dt))
@@ -482,6 +501,12 @@ def _from_payload(payload: tuple[dict, dict]) -> Trial:
 
 
 def _run_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
+    """A worker process's batch. A model in the loop gets one torch thread: this process is
+    one of one-per-core, and more threads would oversubscribe them."""
+    if any(spec.intent not in ("nominal", "oracle") for spec in specs):
+        import torch
+
+        torch.set_num_threads(1)
     controllers: dict = {}  # one game per (kind, preset) per batch
     return [_to_payload(run_spec(spec, controllers)) for spec in specs]
 
@@ -501,6 +526,7 @@ def run_trials(
     workers: int | None = None,
     progress: bool = True,
     ray_address: str | None = None,
+    on_result: Callable[[int, Trial], None] | None = None,
 ) -> list[Trial]:
     """Run many trials; results in the order of ``specs``, identical to running them one by one.
 
@@ -512,6 +538,8 @@ def run_trials(
     progress : show a rich progress bar.
     ray_address : run on a Ray cluster instead (e.g. "auto" or "ray://host:10001");
         needs the optional extra ``pip install coassist[cluster]``.
+    on_result : called as ``on_result(i, trial)`` as each trial finishes (any order), e.g.
+        to write it at once; the trials are then not kept and the list returned is empty.
     """
     specs = list(specs)
     for i, s in enumerate(specs):
@@ -520,21 +548,28 @@ def run_trials(
     if not specs:
         return []
     if ray_address is not None:
-        return _run_ray(specs, ray_address, progress)
+        return _run_ray(specs, ray_address, progress, on_result)
     if workers is None:
         workers = os.cpu_count() or 1
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
         raise ValueError(f"workers must be an int >= 1, got {workers!r}")
     workers = min(int(workers), len(specs))
     results: list[Trial | None] = [None] * len(specs)
+
+    def deliver(i: int, trial: Trial) -> None:
+        if on_result is None:
+            results[i] = trial
+        else:
+            on_result(i, trial)
+
     if workers == 1:
         controllers: dict = {}
         with _progress(progress, len(specs)) as bar:
             task_id = bar.add_task("trials", total=len(specs))
             for i, spec in enumerate(specs):
-                results[i] = run_spec(spec, controllers)
+                deliver(i, run_spec(spec, controllers))
                 bar.advance(task_id)
-        return results  # type: ignore[return-value]
+        return [] if on_result else results  # type: ignore[return-value]
 
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -554,12 +589,13 @@ def run_trials(
             task_id = bar.add_task("trials", total=len(specs))
             for fut in as_completed(futures):
                 for i, payload in zip(futures[fut], fut.result()):
-                    results[i] = _from_payload(payload)
+                    deliver(i, _from_payload(payload))
                 bar.advance(task_id, len(futures[fut]))
-    return results  # type: ignore[return-value]
+    return [] if on_result else results  # type: ignore[return-value]
 
 
-def _run_ray(specs: list[TrialSpec], address: str, progress: bool) -> list[Trial]:
+def _run_ray(specs: list[TrialSpec], address: str, progress: bool,
+             on_result: Callable[[int, Trial], None] | None = None) -> list[Trial]:  # fmt: skip
     try:
         import ray  # optional extra
     except ImportError:
@@ -578,6 +614,10 @@ def _run_ray(specs: list[TrialSpec], address: str, progress: bool) -> list[Trial
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
             for ref in done:
-                results[index[ref]] = _from_payload(ray.get(ref)[0])
+                trial = _from_payload(ray.get(ref)[0])
+                if on_result is None:
+                    results[index[ref]] = trial
+                else:
+                    on_result(index[ref], trial)
                 bar.advance(task_id)
-    return results  # type: ignore[return-value]
+    return [] if on_result else results  # type: ignore[return-value]

@@ -1,0 +1,194 @@
+"""Online assistance level: α of the cooperative game set every tick (the thesis' future work).
+
+α is the share of the human's cost in the shared objective (eq. 3.17): α → 1 the robot
+helps toward the predicted human reference ŷ_ref,h, α → 0 toward its own plan y_ref,r.
+An arbitration law maps what the robot measures to α ∈ [α_min, α_max]:
+
+- ``"hand_force"``: the harder the operator pushes, the more the robot follows them::
+
+      α* = α_min + (α_max − α_min) · min(1, ||w|| / f_s)
+
+  (w the measured hand force [N], f_s ``force_scale``). A passive operator leaves the
+  robot on its plan, whose end is the target; one who pushes away from it is followed.
+- ``"confidence"``: the robot trusts the prediction as far as it has come true. At tick k
+  it compares the position predicted ``error_lag`` = d ticks ago for now with the
+  measured one, e(k) = ||x̂_{k−d}(k) − x(k)||, filters it (time constant τ) into ē and::
+
+      c = exp(−ē / e_s),   α* = α_min + (α_max − α_min) · c
+
+Either target α* is then low-pass filtered, α(k) = α(k−1) + (dt/τ)(α* − α(k−1)), so the
+gains never jump; with :meth:`CooperativeGame.set_alpha` a new α costs microseconds
+(:mod:`coassist.control.game`, "Online α").
+
+:class:`ArbitratedController` wraps an :class:`~coassist.control.controllers.AssistiveController`
+on a cooperative game and sets the game's α before each guarded step. A non-finite
+input leaves α where it was (the guard then refuses the tick as before).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from coassist._checks import check_int_at_least, check_positive_scalar
+from coassist.control.controllers import AssistiveController, ControlStep
+from coassist.control.game import CooperativeGame
+
+__all__ = ["ARBITRATION_LAWS", "AlphaArbiter", "ArbitratedController", "ArbitrationParameters", "target_alpha"]
+
+#: The arbitration laws of :class:`ArbitrationParameters`.
+ARBITRATION_LAWS = ("hand_force", "confidence")
+
+
+@dataclass(frozen=True)
+class ArbitrationParameters:
+    """An arbitration law and its constants (module docstring). SI units.
+
+    law : one of :data:`ARBITRATION_LAWS`.
+    alpha_min, alpha_max : the range of α, 0 ≤ α_min ≤ α_max ≤ 1.
+    force_scale : f_s [N], the hand force at which the ``hand_force`` law reaches α_max.
+    error_scale : e_s [m], the filtered prediction error at which the ``confidence``
+        law's trust has fallen to 1/e.
+    error_lag : d [ticks] ≥ 1, how old the prediction checked against the pose is.
+    time_constant : τ [s], of the α filter and of the error filter.
+    """
+
+    law: str = "hand_force"
+    alpha_min: float = 0.6
+    alpha_max: float = 0.95
+    force_scale: float = 5.0
+    error_scale: float = 0.005
+    error_lag: int = 10
+    time_constant: float = 0.2
+
+    def __post_init__(self) -> None:
+        if self.law not in ARBITRATION_LAWS:
+            raise ValueError(f"arbitration.law must be one of {ARBITRATION_LAWS}, got {self.law!r}")
+        for name in ("alpha_min", "alpha_max"):
+            try:
+                v = float(getattr(self, name))
+            except (TypeError, ValueError):
+                raise ValueError(f"arbitration.{name} must be a number in [0, 1], got {getattr(self, name)!r}") from None
+            if not 0.0 <= v <= 1.0:
+                raise ValueError(f"arbitration.{name} must be in [0, 1], got {getattr(self, name)!r}")
+            object.__setattr__(self, name, v)
+        if self.alpha_min > self.alpha_max:
+            raise ValueError(f"arbitration.alpha_min ({self.alpha_min}) must be <= arbitration.alpha_max ({self.alpha_max})")
+        for name in ("force_scale", "error_scale", "time_constant"):
+            object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"arbitration.{name}"))
+        object.__setattr__(self, "error_lag", check_int_at_least(self.error_lag, "arbitration.error_lag", 1))
+
+
+def target_alpha(params: ArbitrationParameters, signal: float) -> float:
+    """α* of the law for its signal: ||w|| [N] (``hand_force``) or ē [m] (``confidence``)."""
+    span = params.alpha_max - params.alpha_min
+    if params.law == "hand_force":
+        return params.alpha_min + span * min(1.0, signal / params.force_scale)
+    return params.alpha_min + span * math.exp(-signal / params.error_scale)
+
+
+class AlphaArbiter:
+    """The stateful part of a law: the α filter, the error filter and the recent predictions.
+
+    Parameters
+    ----------
+    params : the law.
+    n_dof : n, the controlled DOFs (z is [Δx; v], (2n,)).
+    dt : the tick [s].
+    alpha0 : α at the start of a run (also where :meth:`reset` returns).
+    """
+
+    def __init__(self, params: ArbitrationParameters, n_dof: int, dt: float, alpha0: float) -> None:
+        if not isinstance(params, ArbitrationParameters):
+            raise ValueError(f"params must be ArbitrationParameters, got {type(params).__name__}")
+        self.params = params
+        self.n = check_int_at_least(n_dof, "n_dof", 1)
+        self.dt = check_positive_scalar(dt, "dt")
+        self.alpha0 = min(max(float(alpha0), params.alpha_min), params.alpha_max)
+        self._gain = min(1.0, self.dt / params.time_constant)
+        d = params.error_lag
+        self._pred = np.full((d, self.n), np.nan)  # ring: the position predicted for k+d at tick k
+        self.reset()
+
+    def reset(self) -> None:
+        """A new run: α back to α0, no prediction history, no error."""
+        self.alpha = self.alpha0
+        self.error = 0.0
+        self._pred[:] = np.nan
+        self._k = 0
+
+    def update(self, z: np.ndarray, ref_h: np.ndarray, wrench: np.ndarray) -> float:
+        """α for this tick from z (2n,), ref_h (H, 2n) and the hand force (n,) [N]. Never raises."""
+        p, n = self.params, self.n
+        try:
+            if p.law == "hand_force":
+                w = np.asarray(wrench, dtype=float).reshape(-1)[:n]
+                signal = float(math.sqrt(float(np.dot(w, w))))
+            else:
+                x = np.asarray(z, dtype=float).reshape(-1)[:n]
+                ref = np.asarray(ref_h, dtype=float)
+                d = p.error_lag
+                slot = self._k % d
+                old = self._pred[slot]  # predicted d ticks ago for now
+                if np.isfinite(old).all() and np.isfinite(x).all():
+                    e = float(np.linalg.norm(old - x))
+                    self.error += self._gain * (e - self.error)
+                row = ref[d - 1, :n] if ref.ndim == 2 and ref.shape[0] >= d else np.full(n, np.nan)
+                self._pred[slot] = row
+                self._k += 1
+                signal = self.error
+            if not math.isfinite(signal):
+                return self.alpha
+            self.alpha += self._gain * (target_alpha(p, signal) - self.alpha)
+        except Exception:  # unusable input (e.g. an object array): α stays where it was, the tick goes on
+            pass
+        return self.alpha
+
+
+class ArbitratedController:
+    """An assistive controller on a cooperative game whose α an :class:`AlphaArbiter` sets each tick.
+
+    Parameters
+    ----------
+    controller : an :class:`AssistiveController` on a :class:`CooperativeGame`; its
+        game's α changes at run time (:meth:`CooperativeGame.set_alpha`).
+    params : the arbitration law.
+
+    ``alpha`` is the α in use; :meth:`reset` starts a new run (α back to the game's
+    initial α, clipped to the law's range).
+    """
+
+    def __init__(self, controller: AssistiveController, params: ArbitrationParameters) -> None:
+        if not isinstance(controller, AssistiveController) or not isinstance(controller.game, CooperativeGame):
+            raise ValueError("controller must be an AssistiveController on a CooperativeGame (α is the cooperative game's)")
+        self.controller = controller
+        self.game: CooperativeGame = controller.game
+        self.name = f"{controller.name}+{params.law}"
+        self.model = controller.model
+        self.horizon = controller.horizon
+        self.effort_limit = controller.effort_limit
+        self._alpha_start = self.game.alpha
+        self.game.prepare_alpha_changes()  # before the loop: no tick pays for it
+        self.arbiter = AlphaArbiter(params, self.model.n_dof, float(self.model.dt), self._alpha_start)
+        self.reset()
+
+    @property
+    def alpha(self) -> float:
+        return self.game.alpha
+
+    def reset(self) -> None:
+        self.arbiter.reset()
+        self.game.set_alpha(self.arbiter.alpha)
+
+    def step(self, z: ArrayLike, ref_h: ArrayLike, ref_r: ArrayLike, wrench: ArrayLike) -> ControlStep:
+        """One tick: α from the law, then the guarded assistive step (same contract: never raises)."""
+        alpha = self.arbiter.update(z, ref_h, wrench)
+        if alpha != self.game.alpha:
+            try:
+                self.game.set_alpha(alpha)
+            except Exception:  # keep the previous gains; the step below still runs and never raises
+                pass
+        return self.controller.step(z, ref_h, ref_r, wrench)

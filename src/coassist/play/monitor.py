@@ -1,0 +1,128 @@
+"""The page, read-only, on a ``coassist drive`` run: a UR5 in MuJoCo or a real one.
+
+:class:`DriveMonitor` is a :class:`~coassist.play.session.PlaySession` whose trial is
+:func:`coassist.robot.drive.drive` instead of the point-mass world: the drive's own loop
+calls ``on_tick(k, state, out)`` every period and the monitor turns that into the page's
+frame (tool x-y, the measured hand force, the prediction in use, the reference, the robot's
+effort, fault flags), at most 125 frames a second. The page only watches: its pointer,
+start and abort messages are dropped (counted as ``"watcher"``). The run is written to the
+session folder like a played trial, and scored the same way.
+
+The MuJoCo UR5 runs paced to the wall clock (so the page shows it at its real speed); a
+real arm is paced by its controller. The task is the drive's (same seed); where the drive
+lays the plan out from the arm's start pose (a real UR5), the scene is shifted to match the
+first frame's reference.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from coassist.play.session import (
+    PREDICTION_STRIDE,
+    PlayConfig,
+    PlaySession,
+    TrialResult,
+    fault_names,
+)
+from coassist.robot.drive import TASK_HEIGHT, DriveConfig, drive
+from coassist.sim.tasks import make_task
+
+__all__ = ["DriveMonitor"]
+
+#: Most frames a second sent to the page (a 500 Hz drive sends every 4th tick).
+MONITOR_RATE = 125.0
+
+
+class DriveMonitor(PlaySession):
+    """Watch one ``coassist drive`` run (module docstring).
+
+    drive_config : the run.  config : the session (user, out folder; its controllers and
+    intent are taken from ``drive_config``).  host : the real arm's address (world ``ur``).
+    confirm : as :func:`~coassist.robot.drive.drive`'s, asked before a real arm moves.
+    """
+
+    watch_only = True
+
+    def __init__(self, drive_config: DriveConfig, config: PlayConfig, *, host: str | None = None, confirm: Any = None) -> None:
+        if not isinstance(drive_config, DriveConfig):
+            raise ValueError(f"drive_config must be a DriveConfig, got {type(drive_config).__name__}")
+        self.drive_config, self.robot_host, self.confirm = drive_config, host, confirm
+        super().__init__(config)
+
+    def next_task(self):
+        c = self.drive_config
+        return make_task(c.task, np.random.default_rng(np.random.SeedSequence([c.seed, 0])))
+
+    def start(self) -> bool:
+        """Start the drive run (the monitor's only trial)."""
+        return self.start_trial(self.drive_config.controller)
+
+    def _run_trial(self, task, name: str, controller) -> TrialResult | None:
+        c = self.drive_config
+        every = max(1, int(round(c.rate_hz / MONITOR_RATE)))
+        shift: list[np.ndarray] = []
+
+        def on_tick(k: int, state, out) -> None:
+            if not shift:  # the plan may be laid out from the arm's start pose: match the scene to it
+                shift.append(np.asarray(out.reference[:2], dtype=float) - task.planner.reference(k * c.dt)[:2])
+                if np.linalg.norm(shift[0]) > 1e-9:
+                    scene = _shifted(self.scene(task), shift[0])
+                    self.current = {"controller": name, "scene": scene}
+                    pts = np.asarray(scene["path"])
+                    lo, hi = pts.min(axis=0) - 0.12, pts.max(axis=0) + 0.12
+                    self.bounds = (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
+                    self.publish({"type": "started", "controller": name, "scene": scene, "bounds": self.bounds})
+            if k % every:
+                return
+            pred = out.prediction
+            frame = {
+                "type": "frame", "index": len(self.results), "k": k + 1, "t": (k + 1) * c.dt,
+                "x": float(out.pose[0]), "y": float(out.pose[1]), "vx": float(out.velocity[0]), "vy": float(out.velocity[1]),
+                "fh": [float(out.wrench[0]), float(out.wrench[1])], "ur": [float(v) for v in out.u_r[:2]],
+                "ref": [float(v) for v in out.reference[:2]],
+                "prediction": [] if pred is None else np.vstack([pred[::PREDICTION_STRIDE], pred[-1:]]).tolist(),
+                "predicted": pred is not None, "faults": fault_names(int(out.fault)), "seq": -1, "held": False,
+                "controller": name, "misses": 0, "world": c.world,
+            }  # fmt: skip
+            self.frame = frame
+            self.publish(frame)
+
+        world = None
+        if c.world == "mujoco":  # paced to the wall clock, so the page shows the run at its real speed
+            from coassist.robot.mujoco_world import MujocoUR5World
+
+            world = MujocoUR5World(c.object, control_dt=c.dt, start=(float(task.start[0]), float(task.start[1]), TASK_HEIGHT),
+                                   seed=c.seed, view=False, realtime=True)  # fmt: skip
+        try:
+            trial = drive(c, world=world, host=self.robot_host, confirm=self.confirm, on_tick=on_tick)
+        finally:
+            if world is not None:
+                world.close()
+        trial = _with_controller_name(trial, name)
+        return self._save(trial)
+
+
+def _shifted(scene: dict, d: np.ndarray) -> dict:
+    dx, dy = float(d[0]), float(d[1])
+    out = dict(scene)
+    out["path"] = [[x + dx, y + dy] for x, y in scene["path"]]
+    out["start"] = [scene["start"][0] + dx, scene["start"][1] + dy]
+    out["target"] = [scene["target"][0] + dx, scene["target"][1] + dy]
+    ob = scene["obstacle"]
+    out["obstacle"] = {"center": [ob["center"][0] + dx, ob["center"][1] + dy], "size": ob["size"]}
+    return out
+
+
+def _with_controller_name(trial, name: str):
+    """The drive's trial with the page's controller name in meta.extra (for the running means)."""
+    from dataclasses import replace
+
+    from coassist.data import TrialMeta
+
+    extra = dict(trial.meta.extra)
+    extra["controller_name"] = name
+    meta = TrialMeta(**{**trial.meta.to_dict(), "extra": extra})
+    return replace(trial, meta=meta)

@@ -1,0 +1,117 @@
+"""The page ↔ server messages, and the validation every client message passes.
+
+Client → server (JSON text frames of at most :data:`MAX_MESSAGE_BYTES`)::
+
+    {"type": "pointer", "x": m, "y": m, "down": bool, "seq": int}   where the hand is (task plane)
+    {"type": "start", "controller": name}                            start the next trial
+    {"type": "abort"}                                                stop the trial, keep nothing
+    {"type": "ping", "seq": int}                                     answered with a pong (latency floor)
+
+A message that is not exactly one of these — not JSON, too long, an unknown type, a
+missing or extra field, a wrong type, a non-finite or out-of-view number — raises
+:class:`InvalidMessage`; the server drops it, counts it and goes on. No message names a
+file or a folder: where trials are written is fixed when the server starts.
+
+Server → client: ``init`` (the scene and the session), ``frame`` (the live state, once
+per control period), ``result`` (a trial's f_RMS and σ and the running averages),
+``status`` and ``pong``; see :mod:`coassist.play.server`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+__all__ = ["MAX_MESSAGE_BYTES", "Abort", "InvalidMessage", "Ping", "Pointer", "Start", "parse_message"]
+
+#: Longest client message accepted [bytes]; a pointer message is about 70.
+MAX_MESSAGE_BYTES = 512
+_MAX_SEQ = 2**53  # JavaScript's largest exact integer
+
+
+class InvalidMessage(ValueError):
+    """A client message that is dropped; the text says why (counted per reason)."""
+
+
+@dataclass(frozen=True)
+class Pointer:
+    x: float
+    y: float
+    down: bool
+    seq: int
+
+
+@dataclass(frozen=True)
+class Start:
+    controller: str
+
+
+@dataclass(frozen=True)
+class Abort:
+    pass
+
+
+@dataclass(frozen=True)
+class Ping:
+    seq: int
+
+
+_FIELDS = {"pointer": {"type", "x", "y", "down", "seq"}, "start": {"type", "controller"}, "abort": {"type"},
+           "ping": {"type", "seq"}}  # fmt: skip
+
+
+def _number(value, name: str, lo: float, hi: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InvalidMessage(f"{name} is not a number")
+    v = float(value)
+    if not math.isfinite(v) or not lo <= v <= hi:
+        raise InvalidMessage(f"{name} out of range")
+    return v
+
+
+def _seq(value) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < _MAX_SEQ:
+        raise InvalidMessage("seq is not an int in [0, 2^53)")
+    return value
+
+
+def parse_message(text, bounds: tuple[float, float, float, float], controllers: tuple[str, ...]):
+    """The validated message (module docstring) or :class:`InvalidMessage`.
+
+    bounds : (x_min, x_max, y_min, y_max) [m] a pointer may be in (the page's view).
+    controllers : the names a ``start`` may ask for.
+    """
+    if not isinstance(text, str):
+        raise InvalidMessage("not a text frame")
+    if len(text) > MAX_MESSAGE_BYTES or len(text.encode("utf-8", "surrogatepass")) > MAX_MESSAGE_BYTES:
+        raise InvalidMessage("too long")
+    try:
+        msg = json.loads(text, parse_constant=_reject_constant)
+    except (ValueError, RecursionError):
+        raise InvalidMessage("not JSON") from None
+    if not isinstance(msg, dict):
+        raise InvalidMessage("not a JSON object")
+    kind = msg.get("type")
+    if not isinstance(kind, str) or kind not in _FIELDS:
+        raise InvalidMessage("unknown type")
+    if set(msg) != _FIELDS[kind]:
+        raise InvalidMessage(f"{kind}: wrong fields")
+    if kind == "pointer":
+        x = _number(msg["x"], "x", bounds[0], bounds[1])
+        y = _number(msg["y"], "y", bounds[2], bounds[3])
+        if not isinstance(msg["down"], bool):
+            raise InvalidMessage("down is not a boolean")
+        return Pointer(x, y, msg["down"], _seq(msg["seq"]))
+    if kind == "start":
+        name = msg["controller"]
+        if not isinstance(name, str) or name not in controllers:
+            raise InvalidMessage("start: unknown controller")
+        return Start(name)
+    if kind == "ping":
+        return Ping(_seq(msg["seq"]))
+    return Abort()
+
+
+def _reject_constant(name: str):
+    raise ValueError(f"{name} is not JSON")

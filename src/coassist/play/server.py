@@ -1,0 +1,316 @@
+"""The web server of ``coassist play``: a Starlette app on uvicorn, one websocket per page.
+
+Routes: ``/`` the page, ``/static/*`` its script and style (package data), ``/ws`` the
+live link. The control loop runs in the session's own thread
+(:class:`~coassist.play.session.PlaySession`); this module only carries messages:
+
+- page → loop: every text message is validated (:func:`coassist.play.protocol.parse_message`);
+  an invalid one is dropped and counted by reason, never raised into the loop. The first
+  page to connect is the hand; later ones watch (their input is dropped, counted as
+  ``"watcher"``). More than :data:`MAX_RATE` messages a second from one page are dropped.
+  When the hand's link closes the hand lets go at once (:meth:`BrowserHand.release`).
+- loop → page: the loop thread hands each frame to :class:`Hub` through
+  ``call_soon_threadsafe``; each page's sender sends queued messages in order and only
+  the newest frame (a slow page skips frames, it never delays the loop).
+
+Security: the server binds 127.0.0.1 unless told otherwise; a non-loopback bind requires
+a token, which the websocket must present (``/ws?token=…``, compared in constant time).
+A websocket whose ``Origin`` is not this server's own is refused (a web page elsewhere
+cannot drive the robot through the person's browser). Frames above
+:data:`WS_MAX_SIZE` bytes close the link at the protocol level.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import json
+import secrets
+import socket
+import threading
+import time
+from collections import Counter, deque
+from importlib.resources import files
+from typing import Any
+
+from coassist.play.protocol import (
+    Abort,
+    InvalidMessage,
+    Ping,
+    Pointer,
+    Start,
+    parse_message,
+)
+from coassist.play.session import PlaySession
+
+__all__ = ["Hub", "PlayServer", "create_app", "is_loopback"]
+
+#: Messages a second one page may send before the rest of that second is dropped.
+MAX_RATE = 1000
+#: Largest websocket frame the server reads at all [bytes]; larger ones close the link.
+WS_MAX_SIZE = 65536
+
+
+def is_loopback(host: str) -> bool:
+    """True for 127.0.0.0/8, ::1 and ``localhost``."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+class _Client:
+    def __init__(self, websocket) -> None:
+        self.websocket = websocket
+        self.queue: deque[dict] = deque()
+        self.frame: dict | None = None
+        self.wake = asyncio.Event()
+        self.window_start = time.monotonic()
+        self.window_count = 0
+
+
+class Hub:
+    """The pages connected to one session, and the counters the page shows."""
+
+    def __init__(self, session: PlaySession) -> None:
+        self.session = session
+        self.clients: list[_Client] = []
+        self.hand: _Client | None = None
+        self.dropped: Counter[str] = Counter()
+        self.loop: asyncio.AbstractEventLoop | None = None
+        session.publish = self.publish
+
+    # called from the loop thread
+    def publish(self, message: dict) -> None:
+        loop = self.loop
+        if loop is not None and not loop.is_closed():
+            try:
+                loop.call_soon_threadsafe(self._deliver, message)
+            except RuntimeError:  # the event loop is shutting down
+                pass
+
+    def _deliver(self, message: dict) -> None:
+        for c in self.clients:
+            if message.get("type") == "frame":
+                c.frame = message  # only the newest frame waits: a slow page skips frames
+            else:
+                if c.frame is not None:  # keep the order: the frames before a result go first
+                    c.queue.append(self._stamp(c.frame))
+                    c.frame = None
+                c.queue.append(message)
+            c.wake.set()
+
+    def _stamp(self, frame: dict) -> dict:
+        return dict(frame, dropped=sum(self.dropped.values()))
+
+    def drop(self, reason: str) -> None:
+        self.dropped[reason] += 1
+
+    def init_message(self, client: _Client) -> dict[str, Any]:
+        s = self.session
+        cur = s.current
+        return {
+            "type": "init", "role": "hand" if client is self.hand else "watcher", "user": s.config.user,
+            "mode": "monitor" if getattr(s, "watch_only", False) else "play",
+            "folder": str(s.config.folder), "bounds": s.bounds, "controllers": list(s.config.controllers),
+            "model": s.source.model_id, "preset": s.config.preset, "running": s.running,
+            "scene": cur["scene"] if cur else s.scene(), "controller": cur["controller"] if cur else None,
+            "results": [r.to_json() for r in s.results], "summary": s.summary(),
+        }  # fmt: skip
+
+
+def create_app(session: PlaySession, *, token: str | None = None, frame_rate: float | None = None):
+    """The Starlette app of ``session`` (module docstring).
+
+    token : required on /ws when given.  frame_rate : [1/s] send frames at most this often
+    (None: every control period, the default; a fixed 30/s is the benchmark's naive baseline).
+    """
+    from starlette.applications import Starlette
+    from starlette.responses import HTMLResponse
+    from starlette.routing import Mount, Route, WebSocketRoute
+    from starlette.staticfiles import StaticFiles
+    from starlette.websockets import WebSocket, WebSocketDisconnect
+
+    static = files("coassist.play") / "static"
+    page = (static / "index.html").read_text(encoding="utf-8")
+    hub = Hub(session)
+    bounds, controllers = session.bounds, session.config.controllers
+
+    async def index(request):
+        return HTMLResponse(page, headers={"Cache-Control": "no-store"})
+
+    async def ws_endpoint(websocket: WebSocket) -> None:
+        presented = websocket.query_params.get("token", "").encode("utf-8", "surrogatepass")
+        if token is not None and not secrets.compare_digest(presented, token.encode("utf-8")):
+            await websocket.close(code=1008)
+            return
+        origin = websocket.headers.get("origin")
+        host = websocket.headers.get("host", "")
+        if origin is not None and origin not in (f"http://{host}", f"https://{host}"):
+            await websocket.close(code=1008)
+            return
+        await websocket.accept()
+        hub.loop = asyncio.get_running_loop()
+        client = _Client(websocket)
+        hub.clients.append(client)
+        if hub.hand is None and not getattr(session, "watch_only", False):
+            hub.hand = client
+            session.hand_back()
+        sender = asyncio.create_task(_send(client))
+        client.queue.append(hub.init_message(client))
+        client.wake.set()
+        try:
+            while True:
+                message = await websocket.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                _handle(client, message.get("text"))
+        except WebSocketDisconnect:
+            pass
+        finally:
+            sender.cancel()
+            hub.clients.remove(client)
+            if hub.hand is client:  # the hand let go: zero force now, the trial waits `grace` for it
+                hub.hand = None
+                session.hand_left()
+
+    def _handle(client: _Client, text: str | None) -> None:
+        now = time.monotonic()
+        if now - client.window_start >= 1.0:
+            client.window_start, client.window_count = now, 0
+        client.window_count += 1
+        if client.window_count > MAX_RATE:
+            hub.drop("rate")
+            return
+        try:
+            msg = parse_message(text, bounds, controllers)
+        except InvalidMessage as exc:
+            hub.drop(str(exc))
+            return
+        if isinstance(msg, Ping):
+            client.queue.append({"type": "pong", "seq": msg.seq})
+            client.wake.set()
+            return
+        if client is not hub.hand:
+            hub.drop("watcher")
+            return
+        if isinstance(msg, Pointer):
+            session.hand.set_pointer(msg.x, msg.y, msg.down, msg.seq)
+        elif isinstance(msg, Start):
+            if not session.start_trial(msg.controller):  # start_trial tells the pages
+                hub.drop("start while running")
+        elif isinstance(msg, Abort):
+            session.abort()
+
+    async def _send(client: _Client) -> None:
+        ws = client.websocket
+        gap = 0.0 if frame_rate is None else 1.0 / frame_rate
+        next_frame = 0.0
+        try:
+            while True:
+                await client.wake.wait()
+                client.wake.clear()
+                while client.queue:
+                    await ws.send_text(json.dumps(client.queue.popleft()))
+                if gap and client.frame is not None:
+                    now = time.monotonic()
+                    if now < next_frame:
+                        await asyncio.sleep(next_frame - now)
+                    next_frame = max(now, next_frame) + gap
+                frame, client.frame = client.frame, None
+                if frame is not None:
+                    await ws.send_text(json.dumps(hub._stamp(frame)))
+        except (WebSocketDisconnect, RuntimeError, OSError):  # the page is gone; the receiver cleans up
+            return
+
+    app = Starlette(routes=[
+        Route("/", index),
+        Mount("/static", app=StaticFiles(directory=str(static)), name="static"),
+        WebSocketRoute("/ws", ws_endpoint),
+    ])  # fmt: skip
+    app.state.hub = hub
+    return app
+
+
+class PlayServer:
+    """uvicorn serving :func:`create_app` on ``host:port`` (port 0: any free one).
+
+    ``run()`` serves in this thread until interrupted (the CLI); ``start()`` serves in a
+    background thread and returns once it listens (tests, the benchmark); ``stop()``
+    aborts a running trial and shuts down.
+    """
+
+    def __init__(self, session: PlaySession, host: str = "127.0.0.1", port: int = 8765, token: str | None = None,
+                 frame_rate: float | None = None) -> None:  # fmt: skip
+        import uvicorn
+
+        if not is_loopback(host) and not token:
+            raise ValueError(f"binding {host} (not this machine only) needs a token: pass --token or let coassist make one")
+        self.session, self.host, self.token = session, host, token
+        self.app = create_app(session, token=token, frame_rate=frame_rate)
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        self._sock = socket.socket(family, socket.SOCK_STREAM)
+        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            self._sock.bind((host, port))
+        except OSError as exc:
+            self._sock.close()
+            raise ValueError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+        self.port = int(self._sock.getsockname()[1])
+        config = uvicorn.Config(self.app, log_level="warning", access_log=False, ws="websockets-sansio",
+                                ws_max_size=WS_MAX_SIZE, ws_per_message_deflate=False, lifespan="off")  # fmt: skip
+        self._server = uvicorn.Server(config)
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        query = f"?token={self.token}" if self.token else ""
+        return f"http://{host}:{self.port}/{query}"
+
+    @property
+    def hub(self) -> Hub:
+        return self.app.state.hub
+
+    def run(self) -> None:
+        try:
+            self._server.run(sockets=[self._sock])
+        finally:
+            self._shutdown_session()
+
+    def start(self, timeout: float = 10.0) -> PlayServer:
+        self._thread = threading.Thread(target=lambda: asyncio.run(self._server.serve(sockets=[self._sock])),
+                                        name="coassist-play-server", daemon=True)  # fmt: skip
+        self._thread.start()
+        t_end = time.monotonic() + timeout
+        while not self._server.started:
+            if time.monotonic() > t_end or not self._thread.is_alive():
+                raise RuntimeError("the play server did not start")
+            time.sleep(0.01)
+        return self
+
+    def stop(self) -> None:
+        self._server.should_exit = True
+        if self._thread is not None:
+            self._thread.join(10.0)
+        self._shutdown_session()
+
+    def _shutdown_session(self) -> None:
+        if self.session.running:
+            self.session.abort("server_stopped")
+            self.session.wait(10.0)
+        self.session.close()
+        self._sock.close()
+
+    def __enter__(self) -> PlayServer:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def new_token() -> str:
+    """A random token for a non-local bind (128 bits, URL-safe)."""
+    return secrets.token_urlsafe(16)

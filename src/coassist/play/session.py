@@ -1,0 +1,426 @@
+"""A person's session: the thesis' protocol of trials, each run through the control tick and saved.
+
+One session belongs to one user id and one folder, ``<out>/<user>/``, which is a
+dataset (:mod:`coassist.data.store`: ``trial_*.parquet`` + ``manifest.json``, id
+``play-<user>``) that ``coassist train`` reads as it is. Restarting ``coassist play``
+with the same folder and user resumes the session: trials are appended.
+
+Protocol (thesis §5.2.2, for a person): trial i follows the path ``tasks[i mod n]``
+(linear, curved, sinusoidal, Z) with a box obstacle at a random place along it (seed
+``seed + i``); the planner's reference moves along the path at the thesis' pace, and
+the trial ends once that motion is over and the tool has stayed within
+``arrive_radius`` of the target for ``dwell`` seconds (or at the time limit, or on a
+safety stop). The person picks the controller before each trial.
+
+Each trial runs on :class:`~coassist.play.world.PlayWorld` through the same
+:class:`~coassist.runtime.tick.ControlTick` and :func:`~coassist.runtime.loop.run_loop`
+as every other world, in its own thread, paced at 1/dt. After it, the session writes
+the trial and scores it (thesis §5.2.4)::
+
+    f_RMS = (1/T) Σ_k ‖w(k)‖                     eq. 5.9, w the measured hand wrench [N]
+    σ     = mean of ‖x(i) − x_final‖ over τ = 3 s from first entering the ε-ball   eq. 5.10–5.11 [m]
+
+and keeps the running means per controller over the user's trials in the folder.
+
+A trial whose hand was gone (the page closed or the link dropped) for longer than
+``grace`` seconds is aborted and not written; so is one the person aborts.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from coassist._checks import check_positive_scalar
+from coassist.data import Trial, TrialMeta, append_to_dataset, write_dataset
+from coassist.data.store import MANIFEST_NAME, read_dataset
+from coassist.interfaces import FEATURES, Fault, TrialContext
+from coassist.metrics import f_rms, precision_sigma
+from coassist.play.hand import BrowserHand, SpringDamper
+from coassist.play.world import PlayWorld
+from coassist.robot.drive import CONTROLLERS
+from coassist.runtime.intent import RealtimeIntent, WindowIntent
+from coassist.runtime.loop import LoopLog, TargetDwell, run_loop
+from coassist.runtime.safety import SafetyLayer
+from coassist.runtime.tick import ControlTick, Plan
+from coassist.runtime.wrench import WrenchPipeline
+from coassist.sim.intent_source import load_intent_source
+from coassist.sim.tasks import TASK_KINDS, Task, make_task
+from coassist.sim.world import (
+    POINT_MASS_LIMITS,
+    POINT_MASS_WRENCH,
+    get_preset,
+    make_controller,
+)
+
+__all__ = ["PlayConfig", "PlaySession", "TrialResult", "view_bounds"]
+
+_USER = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,31}$")
+#: σ's averaging window τ [s] (thesis eq. 5.11).
+SIGMA_TAU = 3.0
+#: Every how many rows of the (H, 2) prediction a frame carries (H = 50 → 11 points).
+PREDICTION_STRIDE = 5
+
+
+@dataclass(frozen=True)
+class PlayConfig:
+    """One person's session (every field validated; errors name ``PlayConfig.<field>``).
+
+    user : the person's id: letters, digits, ``-`` and ``_``, at most 32 (it names the folder).
+    out : the parent folder; the session lives in ``out/user``.
+    controllers : the controllers the page offers, from ``assistive``, ``imp``, ``mg``.
+    intent : ``nominal`` or a model folder written by ``coassist train``.
+    preset : control preset (default the main job's, thesis-application-dm).
+    tasks : the protocol's paths, in order (repeated).
+    seed : the obstacle of trial i is drawn from seed + i.
+    motion_time : [s] the planner's motion time for every path; None: the thesis' per path.
+    arrive_radius : [m] the target ball (σ's ε).  dwell : [s] inside it that ends a trial.
+    time_limit : [s] per trial; None: 2 × the plan's end + 10 s.
+    grace : [s] a trial waits this long for a hand that left before it is aborted.
+    arm : the virtual arm between pointer and tool.
+    paced : run the loop in real time (False only for tests of the bookkeeping).
+    """
+
+    user: str
+    out: Path
+    controllers: tuple[str, ...] = ("mg", "imp", "assistive")
+    intent: str = "nominal"
+    preset: str = "thesis-application-dm"
+    tasks: tuple[str, ...] = TASK_KINDS
+    seed: int = 0
+    motion_time: float | None = None
+    arrive_radius: float = 0.025
+    dwell: float = 3.0
+    time_limit: float | None = None
+    grace: float = 3.0
+    arm: SpringDamper = field(default_factory=SpringDamper)
+    paced: bool = True
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.user, str) or not _USER.match(self.user):
+            raise ValueError(f"PlayConfig.user must be 1-32 letters, digits, '-' or '_' (it names a folder), got {self.user!r}")
+        object.__setattr__(self, "out", Path(self.out))
+        ctrl = tuple(self.controllers)
+        if not ctrl or len(set(ctrl)) != len(ctrl) or any(c not in CONTROLLERS for c in ctrl):
+            raise ValueError(f"PlayConfig.controllers must be distinct names from {tuple(CONTROLLERS)}, got {self.controllers!r}")
+        object.__setattr__(self, "controllers", ctrl)
+        if not isinstance(self.intent, str) or not self.intent or self.intent == "oracle":
+            raise ValueError(f"PlayConfig.intent must be 'nominal' or a model folder (a person has no oracle), got {self.intent!r}")
+        try:
+            get_preset(self.preset)
+        except ValueError as exc:
+            raise ValueError(f"PlayConfig.{exc}") from None
+        tasks = tuple(self.tasks)
+        if not tasks or any(t not in TASK_KINDS for t in tasks):
+            raise ValueError(f"PlayConfig.tasks must be names from {TASK_KINDS}, got {self.tasks!r}")
+        object.__setattr__(self, "tasks", tasks)
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise ValueError(f"PlayConfig.seed must be an int >= 0, got {self.seed!r}")
+        for name in ("motion_time", "time_limit"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"PlayConfig.{name}"))
+        for name in ("arrive_radius", "dwell", "grace"):
+            object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"PlayConfig.{name}"))
+        if not isinstance(self.arm, SpringDamper):
+            raise ValueError(f"PlayConfig.arm must be a SpringDamper, got {type(self.arm).__name__}")
+
+    @property
+    def folder(self) -> Path:
+        return self.out / self.user
+
+    @property
+    def dataset_id(self) -> str:
+        return f"play-{self.user}"
+
+
+@dataclass(frozen=True)
+class TrialResult:
+    """One finished trial: where it was written, its scores, why it ended."""
+
+    file: str
+    index: int
+    task: str
+    controller: str
+    f_rms: float
+    sigma: float | None  # None: the target was never reached
+    ended: str
+    n_ticks: int
+    deadline_misses: int
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+def view_bounds(tasks: tuple[str, ...], margin: float = 0.12) -> tuple[float, float, float, float]:
+    """(x_min, x_max, y_min, y_max) [m] of the view: every protocol path ± margin, square-ish."""
+    from coassist.sim.tasks import nominal_path
+
+    pts = np.concatenate([nominal_path(t).points for t in tasks])
+    lo, hi = pts.min(axis=0) - margin, pts.max(axis=0) + margin
+    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
+
+
+def fault_names(value: int) -> list[str]:
+    return [f.name for f in Fault if f and (value & f) == f and f.name]
+
+
+class PlaySession:
+    """The session's state and its trials (module docstring).
+
+    The server calls :meth:`start_trial`, :meth:`abort`, :meth:`hand_left` and
+    :meth:`hand_back`; the loop thread calls ``publish(message)`` with each frame and
+    each result (set :attr:`publish` before the first trial; it must not block).
+    """
+
+    def __init__(self, config: PlayConfig, hand: BrowserHand | None = None) -> None:
+        if not isinstance(config, PlayConfig):
+            raise ValueError(f"config must be a PlayConfig, got {type(config).__name__}")
+        self.config = config
+        self.results: list[TrialResult] = []
+        self._resume()  # a folder that is not a session fails here, before anything is built
+        self.hand = hand or BrowserHand(config.arm)
+        self.preset = get_preset(config.preset)
+        self.bounds = view_bounds(config.tasks)
+        # the game's gains are computed once per session, before the first trial
+        self._controllers = {name: make_controller(CONTROLLERS[name], self.preset) for name in config.controllers}
+        H = int(self.preset.game.horizon)
+        self.source = load_intent_source(config.intent, horizon=max(H, 2))
+        if int(self.source.horizon) < H:
+            raise ValueError(f"the intent model predicts {self.source.horizon} steps; the controller needs {H}")
+        model = getattr(self.source, "model", None)
+        if model is not None:  # refuse a model of other features or another rate now, not in the first trial
+            model.check_compatible(FEATURES, float(self.preset.impedance.dt), what="coassist play")
+        # A person plays against the wall clock: the model runs in a worker process and the tick
+        # never waits for it (computed inside the tick it made 7-13 % of the periods late).
+        self._realtime = None
+        if model is not None and config.paced:
+            from coassist.intent.realtime import RealtimeConfig, RealtimePredictor
+
+            self._realtime = RealtimePredictor(model, RealtimeConfig(backend="process"))
+        self.publish: Callable[[dict], None] = lambda message: None
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._abort: str | None = None
+        self._left_at: float | None = None
+        self.running = False
+        self.current: dict[str, Any] | None = None
+        self.frame: dict[str, Any] | None = None
+
+    # ------------------------------------------------------------------ the folder
+    def _resume(self) -> None:
+        folder = self.config.folder
+        if folder.exists() and not folder.is_dir():
+            raise ValueError(f"{folder} exists and is not a folder")
+        if (folder / MANIFEST_NAME).is_file():
+            ds = read_dataset(folder)
+            for entry, trial in zip(ds.manifest["trials"], ds.trials):
+                self.results.append(_score(trial, entry["file"], len(self.results)))
+        elif folder.is_dir() and any(folder.iterdir()):
+            raise ValueError(f"{folder} is not empty and holds no {MANIFEST_NAME}: not a play session; pick another --out or --user")
+
+    # ------------------------------------------------------------------ the protocol
+    def next_task(self) -> Task:
+        """The task of the next trial (the same until a trial is written)."""
+        i = len(self.results)
+        kind = self.config.tasks[i % len(self.config.tasks)]
+        rng = np.random.default_rng(np.random.SeedSequence([self.config.seed + i, 0]))
+        return make_task(kind, rng, motion_time=self.config.motion_time)
+
+    def scene(self, task: Task | None = None) -> dict[str, Any]:
+        """What the page draws that does not move: path, obstacle, start, target, timing."""
+        task = task or self.next_task()
+        pts = task.path.points[:: max(1, len(task.path.points) // 400)]
+        pts = np.vstack([pts, task.path.points[-1:]])
+        return {
+            "index": len(self.results), "task": task.kind, "path": np.round(pts, 5).tolist(),
+            "obstacle": task.obstacle.to_dict(), "start": task.start.tolist(), "target": task.target.tolist(),
+            "arrive_radius": self.config.arrive_radius, "dwell": self.config.dwell,
+            "motion_start": task.planner.start_delay, "motion_end": task.planner.end_time,
+        }
+
+    def summary(self) -> dict[str, Any]:
+        """The running means per controller over this user's trials (f_RMS [N], σ [m])."""
+        out: dict[str, Any] = {}
+        for name in CONTROLLERS:
+            rows = [r for r in self.results if r.controller == name]
+            if not rows:
+                continue
+            sig = [r.sigma for r in rows if r.sigma is not None]
+            out[name] = {"trials": len(rows), "f_rms": float(np.mean([r.f_rms for r in rows])),
+                         "sigma": float(np.mean(sig)) if sig else None, "reached": len(sig)}  # fmt: skip
+        return out
+
+    def controller(self, name: str):
+        if name not in self._controllers:
+            raise ValueError(f"controller must be one of {self.config.controllers}, got {name!r}")
+        return self._controllers[name]
+
+    # ------------------------------------------------------------------ the hand's link
+    def hand_left(self) -> None:
+        self.hand.release()
+        self._left_at = time.monotonic()
+
+    def hand_back(self) -> None:
+        self._left_at = None
+
+    def abort(self, reason: str = "aborted") -> None:
+        self._abort = reason
+
+    # ------------------------------------------------------------------ one trial
+    def start_trial(self, controller: str) -> bool:
+        """Start the next trial with ``controller`` in a thread; False when one is running."""
+        with self._lock:
+            if self.running:
+                return False
+            ctrl = self.controller(controller)
+            self.running = True
+            self._abort = None
+        task = self.next_task()
+        self.current = {"controller": controller, "scene": self.scene(task)}
+        self.publish({"type": "started", "controller": controller, "scene": self.current["scene"]})
+        self._thread = threading.Thread(target=self._run, args=(task, controller, ctrl), name="coassist-play-loop",
+                                        daemon=True)  # fmt: skip
+        self._thread.start()
+        return True
+
+    def close(self) -> None:
+        """Stop the model's worker process (the session's trials are all on disk already)."""
+        if self._realtime is not None:
+            self._realtime.close()
+            self._realtime = None
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait for the running trial's thread; True when none is running."""
+        t = self._thread
+        if t is not None:
+            t.join(timeout)
+        return not self.running
+
+    def _run(self, task: Task, name: str, controller) -> None:
+        try:
+            result = self._run_trial(task, name, controller)
+        except Exception as exc:  # never leave the server with a dead trial: say why
+            result = None
+            self.publish({"type": "status", "level": "error", "text": f"the trial failed: {exc}"})
+        finally:
+            self.running = False
+            self.current = None
+        if result is not None:
+            self.publish({"type": "result", "result": result.to_json(), "summary": self.summary(),
+                          "next": self.scene()})  # fmt: skip
+
+    def _run_trial(self, task: Task, name: str, controller) -> TrialResult | None:
+        cfg = self.config
+        model = controller.model
+        dt = float(model.dt)
+        H = int(controller.horizon)
+        Hs = int(self.source.horizon)
+        time_limit = cfg.time_limit if cfg.time_limit is not None else 2.0 * task.planner.end_time + 10.0
+        n_max = int(math.ceil(time_limit / dt))
+        ref_abs = task.planner.grid(n_max + Hs + 1, dt)
+        x0 = np.array(task.start, dtype=float)
+        world = PlayWorld(model, self.hand, x0, paced=cfg.paced)
+        context = TrialContext(dt=dt, horizon=H, start=x0.copy(), target=np.array(task.target, dtype=float),
+                               reference=ref_abs, task=task.kind, user=cfg.user, object="none")  # fmt: skip
+        intent = (WindowIntent(self.source, H) if self._realtime is None
+                  else RealtimeIntent(self._realtime, model_id=self.source.model_id))  # fmt: skip
+        tick = ControlTick(controller, intent, WrenchPipeline(POINT_MASS_WRENCH, dt),
+                           SafetyLayer(POINT_MASS_LIMITS, dt, 6), command_space="effort")  # fmt: skip
+        tick.reset(Plan(ref_abs, np.array((x0[0], x0[1], 0.0, 0.0, 0.0, 0.0))), context)
+        dwell = TargetDwell(task.target, cfg.arrive_radius, int(math.ceil(cfg.dwell / dt)),
+                            int(math.ceil(task.planner.end_time / dt)))  # fmt: skip
+        index = len(self.results)
+
+        def termination(k: int, pose: np.ndarray) -> bool:
+            left = self._left_at
+            if left is not None and time.monotonic() - left > cfg.grace:
+                self._abort = "operator_left"
+            return self._abort is not None or dwell(k, pose)
+
+        def on_tick(k: int, state, out) -> None:
+            pred = out.prediction if out.prediction is not None else ref_abs[k + 1 : k + 1 + H, :2]
+            p = pred[::PREDICTION_STRIDE]
+            frame = {
+                "type": "frame", "index": index, "k": k + 1, "t": (k + 1) * dt, "x": world.x, "y": world.y,
+                "vx": world.vx, "vy": world.vy, "fh": world.fh, "ur": out.command.effort.tolist() if out.command.effort is not None else [0.0, 0.0],
+                "ref": ref_abs[k + 1, :2].tolist(), "prediction": np.vstack([p, pred[-1:]]).tolist(),
+                "predicted": out.prediction is not None, "faults": fault_names(int(out.fault)),
+                "seq": self.hand.seq, "held": self.hand.held, "controller": name, "misses": world.overruns,
+            }  # fmt: skip
+            self.frame = frame
+            self.publish(frame)
+
+        log = run_loop(world, tick, n_max, termination, on_tick=on_tick)
+        if self._abort is not None:
+            self.publish({"type": "status", "level": "warn",
+                          "text": "trial aborted (nothing written)" if self._abort == "aborted"
+                          else "the hand left for too long: trial aborted (nothing written)"})  # fmt: skip
+            return None
+        trial = self._trial(task, name, controller, log, ref_abs, index, world.overruns)
+        return self._save(trial)
+
+    def _trial(self, task: Task, name: str, controller, log: LoopLog, ref_abs: np.ndarray, index: int,
+               misses: int) -> Trial:  # fmt: skip
+        cfg = self.config
+        n, dt, Hs = log.n, float(controller.model.dt), int(self.source.horizon)
+        if n == 0:
+            raise RuntimeError(f"the run ended before its first tick: {log.message or log.ended}")
+        if log.prediction is None:
+            windows = np.lib.stride_tricks.sliding_window_view(ref_abs[1 : n + Hs, :2], Hs, axis=0)
+            prediction = np.ascontiguousarray(windows.transpose(0, 2, 1))
+        else:
+            prediction = log.prediction
+        extra = task.to_extra()
+        arm = cfg.arm
+        extra.update({
+            "ended": log.ended, "stop_message": log.message, "preset": cfg.preset, "operator": "person",
+            "hand": "browser", "world": "play", "arm": {"stiffness": arm.stiffness, "damping": arm.damping,
+                                                       "force_limit": arm.force_limit},
+            "arrive_radius": cfg.arrive_radius, "dwell": cfg.dwell, "features": list(FEATURES),
+            "controller_name": name, "trial_index": index, "deadline_misses": int(misses),
+            "mean_tick_seconds": float(np.mean(log.compute)),
+        })  # fmt: skip
+        meta = TrialMeta(user=cfg.user, task=task.kind, object="none", controller=controller.name,
+                         model_id=self.source.model_id, seed=cfg.seed + index, source="sim", dt=dt, extra=extra)  # fmt: skip
+        return Trial(meta=meta, time=np.arange(n) * dt, pose=log.pose, velocity=log.velocity, wrench=log.wrench,
+                     reference=log.reference, prediction=prediction, effort_h=log.effort_h, effort_r=log.effort_r,
+                     fault=log.fault)  # fmt: skip
+
+    def _save(self, trial: Trial) -> TrialResult:
+        folder = self.config.folder
+        if (folder / MANIFEST_NAME).is_file():
+            append_to_dataset([trial], folder)
+        else:
+            write_dataset([trial], folder, self.config.dataset_id,
+                          f"played in a browser by {self.config.user} (coassist play)")  # fmt: skip
+        files = read_manifest_files(folder)
+        result = _score(trial, files[-1], len(self.results))
+        self.results.append(result)
+        return result
+
+
+def read_manifest_files(folder: Path) -> list[str]:
+    """The trial files a dataset folder's manifest lists, in order."""
+    return [e["file"] for e in json.loads((folder / MANIFEST_NAME).read_text())["trials"]]
+
+
+def _score(trial: Trial, file: str, index: int) -> TrialResult:
+    """f_RMS (eq. 5.9) and σ (eq. 5.10–5.11) of a trial, with how it ended."""
+    extra = trial.meta.extra
+    target = np.asarray(extra["target"], dtype=float)
+    eps = float(extra.get("arrive_radius", 0.025))
+    sigma = precision_sigma(trial.pose, target, trial.meta.dt, epsilon=eps, tau=SIGMA_TAU)
+    return TrialResult(
+        file=file, index=index, task=trial.meta.task, controller=str(extra.get("controller_name", trial.meta.controller)),
+        f_rms=f_rms(trial.wrench), sigma=None if math.isnan(sigma) else float(sigma), ended=str(extra.get("ended", "")),
+        n_ticks=trial.n_samples, deadline_misses=int(extra.get("deadline_misses", 0)),
+    )  # fmt: skip

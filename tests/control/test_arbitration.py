@@ -1,0 +1,112 @@
+"""The online-α arbitration against hand-computed values and a fresh game at the same α."""
+
+import math
+
+import numpy as np
+import pytest
+
+from coassist.control import AssistiveController, CooperativeGame, Fault
+from coassist.control.arbitration import AlphaArbiter, ArbitratedController, ArbitrationParameters, target_alpha
+from coassist.model import ImpedanceModel
+
+DT = 0.008
+
+
+def thesis_game(alpha=0.9, horizon=20):
+    model = ImpedanceModel([10, 10], [100, 100], 0, DT)
+    Q = 100 * np.diag([1, 1, 1e-4, 1e-4])
+    return CooperativeGame(model, Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[1e-4, 1e-4], alpha=alpha, horizon=horizon)
+
+
+def test_target_alpha_of_each_law_by_hand():
+    p = ArbitrationParameters(law="hand_force", alpha_min=0.5, alpha_max=0.9, force_scale=4.0)
+    assert target_alpha(p, 0.0) == pytest.approx(0.5)
+    assert target_alpha(p, 2.0) == pytest.approx(0.7)
+    assert target_alpha(p, 40.0) == pytest.approx(0.9)
+    c = ArbitrationParameters(law="confidence", alpha_min=0.5, alpha_max=0.9, error_scale=0.01)
+    assert target_alpha(c, 0.0) == pytest.approx(0.9)
+    assert target_alpha(c, 0.01) == pytest.approx(0.5 + 0.4 / math.e)
+
+
+def test_alpha_follows_a_constant_hand_force_as_a_first_order_filter():
+    p = ArbitrationParameters(law="hand_force", alpha_min=0.5, alpha_max=0.9, force_scale=4.0, time_constant=0.1)
+    arb = AlphaArbiter(p, 2, DT, alpha0=0.6)
+    g = DT / 0.1
+    z, ref = np.zeros(4), np.zeros((20, 4))
+    for k in range(1, 31):
+        a = arb.update(z, ref, np.array([3.0, 4.0]))  # |w| = 5 N ≥ f_s: α* = 0.9
+        assert a == pytest.approx(0.9 + (0.6 - 0.9) * (1 - g) ** k, rel=1e-12)
+    # a non-finite force leaves α where it was
+    assert arb.update(z, ref, np.array([np.nan, 0.0])) == a
+    assert arb.update(z, ref, np.array(["x", object()], dtype=object)) == a
+    arb.reset()
+    assert arb.alpha == 0.6
+
+
+def test_confidence_law_scores_the_prediction_made_d_ticks_ago():
+    p = ArbitrationParameters(law="confidence", alpha_min=0.5, alpha_max=0.9, error_scale=0.01, error_lag=3, time_constant=0.2)
+    g = DT / 0.2
+    path = lambda k: np.array([0.001 * k, 0.0])  # the tool moves 1 mm per tick along x
+    for offset, expected_error in ((0.0, 0.0), (0.02, 0.02)):
+        arb = AlphaArbiter(p, 2, DT, alpha0=0.9)
+        error, alpha = 0.0, 0.9
+        for k in range(60):
+            ref = np.zeros((10, 4))
+            ref[2, :2] = path(k + 3) + np.array([0.0, offset])  # row d−1 = 2: the position for tick k + 3
+            arb.update(np.r_[path(k), 0.0, 0.0], ref, np.zeros(2))
+            if k >= 3:  # from tick d on, the prediction made d ticks ago is scored
+                error += g * (expected_error - error)
+            alpha += g * (target_alpha(p, error) - alpha)
+            assert arb.error == pytest.approx(error, abs=1e-12)
+            assert arb.alpha == pytest.approx(alpha, abs=1e-12)
+        assert (arb.alpha > 0.89) if offset == 0.0 else (arb.alpha < 0.75)
+
+
+def test_arbitrated_step_is_the_fresh_equilibrium_at_the_arbitrated_alpha():
+    rng = np.random.default_rng(3)
+    params = ArbitrationParameters(law="hand_force", alpha_min=0.6, alpha_max=0.95, force_scale=5.0, time_constant=0.05)
+    ctrl = ArbitratedController(AssistiveController(thesis_game(0.9), effort_limit=np.inf), params)
+    assert ctrl.alpha == 0.9
+    for _ in range(5):
+        z, ref_h, ref_r = rng.normal(size=4) * 0.01, rng.normal(size=(20, 4)) * 0.01, rng.normal(size=(20, 4)) * 0.01
+        wrench = rng.normal(size=2) * 3.0
+        step = ctrl.step(z, ref_h, ref_r, wrench)
+        fresh = thesis_game(ctrl.alpha)  # a new game built at the α the arbiter chose
+        u_h, u_r = fresh.solve(z, ref_h, ref_r)
+        np.testing.assert_allclose(step.u_r, u_r, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(step.u_h_model, u_h, rtol=1e-9, atol=1e-9)
+    assert ctrl.alpha != 0.9
+    before = ctrl.alpha
+    bad = ctrl.step(np.zeros(4), np.zeros((20, 4)), np.zeros((20, 4)), np.array([np.inf, 0.0]))
+    assert bad.fault & Fault.NONFINITE_WRENCH and not bad.u_r.any() and ctrl.alpha == before
+    ctrl.reset()
+    assert ctrl.alpha == 0.9
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (dict(law="magic"), "arbitration.law"),
+        (dict(alpha_min=0.9, alpha_max=0.5), "alpha_min"),
+        (dict(alpha_max=1.5), r"arbitration.alpha_max must be in \[0, 1\]"),
+        (dict(force_scale=0.0), "arbitration.force_scale"),
+        (dict(error_lag=0), "arbitration.error_lag"),
+    ],
+)
+def test_parameters_name_the_bad_field(change, message):
+    with pytest.raises(ValueError, match=message):
+        ArbitrationParameters(**change)
+
+
+def test_a_cached_arbitrated_controller_gives_the_same_trial_every_time():
+    """run_spec reuses controllers within a batch: the arbitration must start every trial afresh."""
+    from coassist.sim.world import TrialSpec, run_spec
+
+    spec = TrialSpec(task="linear", object="handle", controller="cooperative-arbitrated", preset="thesis-application-dm", seed=3)
+    other = TrialSpec(task="curved", object="board", controller="cooperative-arbitrated", preset="thesis-application-dm", seed=4)
+    alone = run_spec(spec)
+    cache: dict = {}
+    run_spec(other, cache)
+    after_other = run_spec(spec, cache)
+    np.testing.assert_array_equal(alone.pose, after_other.pose)
+    assert alone.meta.controller == "cooperative+hand_force"

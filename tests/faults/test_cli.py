@@ -1,0 +1,306 @@
+"""Fault injection on the ``coassist`` command: one clear line naming the culprit, never a traceback.
+
+Each case is one of issue 12's ("The CLI", "The README's other rough edges"): bad
+outputs are refused before any work starts, options are named as typed (``--epochs``,
+not ``train.epochs``), names that are close to a valid one get a "did you mean", and
+``train``, ``evaluate`` and ``show`` read the same kinds of input.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import stat
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from coassist.cli import app
+from coassist.data import default_real_data
+
+COASSIST = Path(sys.executable).with_name("coassist")
+RUNNER = CliRunner()
+
+
+def run(*args: str, cwd: Path | None = None):
+    """Invoke the command in-process (from ``cwd``); returns click's Result."""
+    old = Path.cwd()
+    if cwd is not None:
+        os.chdir(cwd)
+    try:
+        return RUNNER.invoke(app, [str(a) for a in args], terminal_width=80)
+    finally:
+        os.chdir(old)
+
+
+def assert_one_line_error(result, *expected: str, code: int | None = None) -> str:
+    """Non-zero exit, no traceback, and an ``error:`` line holding every expected piece."""
+    out = result.output
+    assert result.exit_code != 0, out
+    if code is not None:
+        assert result.exit_code == code, out
+    assert "Traceback" not in out, out
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    lines = [ln for ln in out.splitlines() if ln.startswith(("error:", "Error:"))]
+    assert len(lines) == 1, out
+    for piece in expected:
+        assert piece in lines[0], f"{piece!r} not in {lines[0]!r}"
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def work():
+    """A folder others can read: a 3-trial dataset (written by collect) and a 1-epoch model."""
+    root = Path(tempfile.mkdtemp(prefix="coassist-cli-faults-"))
+    root.chmod(0o755)
+    res = run("collect", "--out", root / "D", "--trials", "3", "--tasks", "linear", "--workers", "1")
+    assert res.exit_code == 0, res.output
+    res = run("train", root / "D", "--out", root / "m", "--epochs", "1", "--threads", "1", "--hidden", "8",
+              "--layers", "1", "--fc", "8", "--batch-size", "256")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    (root / "afile").write_text("not a folder\n")
+    yield root
+    shutil.rmtree(root, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- outputs checked first
+
+
+def test_collect_out_below_a_file(work):
+    res = run("collect", "--out", work / "afile" / "sub", "--trials", "1", "--tasks", "linear", "--workers", "1")
+    assert_one_line_error(res, "--out", "afile", "is a file, not a folder")
+    assert "simulating" not in res.output  # refused before simulating anything
+
+
+def test_train_out_is_an_existing_file(work):
+    res = run("train", work / "D", "--out", work / "afile", "--epochs", "1")
+    assert_one_line_error(res, "--out", "afile")
+    assert "epoch" not in res.output and (work / "afile").read_text() == "not a folder\n"
+
+
+def test_train_device_cuda_without_cuda(work):
+    torch = pytest.importorskip("torch")
+    if torch.cuda.is_available():
+        pytest.skip("this machine has CUDA: the case is a machine without it")
+    res = run("train", work / "D", "--out", work / "m_cuda", "--device", "cuda", "--epochs", "1")
+    assert_one_line_error(res, "--device cuda", "CUDA is not available", "--device cpu")
+    assert not (work / "m_cuda").exists()
+
+
+def test_train_device_not_a_device(work):
+    res = run("train", work / "D", "--out", work / "m_x", "--device", "gpu0")
+    assert_one_line_error(res, "--device", "gpu0")
+
+
+@pytest.mark.parametrize("command", ["evaluate", "show"])
+def test_out_is_a_folder_writes_the_default_name_inside(work, command, tmp_path):
+    if command == "evaluate":
+        res = run("evaluate", "--model", work / "m", "--data", work / "D", "--out", tmp_path)
+        written = tmp_path / "evaluation.json"
+        assert json.loads(written.read_text())["model"] == str(work / "m")
+    else:
+        res = run("show", work / "D", "--out", tmp_path, "--index", "1")
+        written = tmp_path / "D_1.png"
+        assert written.read_bytes()[:4] == b"\x89PNG"
+    assert res.exit_code == 0, res.output
+    assert f"wrote {written}" in res.output
+
+
+@pytest.mark.parametrize(
+    ("storage", "message"),
+    [("bogus://x", "unknown database kind 'bogus'"), ("not a url", "not a database URL")],
+)
+def test_tune_bad_storage(work, storage, message):
+    res = run("tune", work / "D", "--storage", storage, "--trials", "1")
+    assert_one_line_error(res, f"--storage {storage}", message, code=2)
+
+
+@pytest.mark.parametrize("option", ["--epochs", "--trials"])
+def test_tune_zero_is_refused(work, option, tmp_path):
+    res = run("tune", work / "D", option, "0", "--storage", f"sqlite:///{tmp_path / 's.db'}")
+    assert_one_line_error(res, f"{option} must be >= 1, got 0", code=2)
+    assert not (tmp_path / "s.db").exists()
+
+
+#: Every command that writes, with an output inside a read-only folder ``ro``.
+READ_ONLY_CASES = {
+    "collect": ["collect", "--out", "ro/D", "--trials", "1"],
+    "train": ["train", "D", "--out", "ro/m"],
+    "evaluate": ["evaluate", "--model", "m", "--data", "D", "--out", "ro/e.json"],
+    "show": ["show", "D", "--out", "ro/x.png"],
+    "tune": ["tune", "D", "--storage", "sqlite:///ro/study.db"],
+    "sweep": ["sweep", "--out", "ro/sweep"],
+    "reproduce": ["reproduce", "--out", "ro/rep", "--preset", "tiny"],
+    "drive": ["drive", "--out", "ro/trial.parquet"],
+}
+
+
+@pytest.mark.parametrize("command", list(READ_ONLY_CASES))
+def test_read_only_output_folder(work, command):
+    """Refused at once, naming the option and the folder (root ignores modes: run as nobody)."""
+    ro = work / "ro"
+    ro.mkdir(exist_ok=True)
+    ro.chmod(stat.S_IRUSR | stat.S_IXUSR | stat.S_IRGRP | stat.S_IXGRP | stat.S_IROTH | stat.S_IXOTH)
+    args = READ_ONLY_CASES[command]
+    if os.geteuid() != 0:
+        res = run(*args, cwd=work)
+        line = assert_one_line_error(res)
+    else:
+        setpriv = shutil.which("setpriv")
+        if setpriv is None:
+            pytest.skip("running as root, and no setpriv to run the command as an unprivileged user")
+        proc = subprocess.run(
+            [setpriv, "--reuid=65534", "--regid=65534", "--clear-groups", str(COASSIST), *args],
+            cwd=work, capture_output=True, text=True, timeout=120, env={**os.environ, "HOME": str(work)},
+        )  # fmt: skip
+        assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr
+        lines = [ln for ln in (proc.stdout + proc.stderr).splitlines() if ln.startswith("error:")]
+        assert len(lines) == 1, proc.stdout + proc.stderr
+        line = lines[0]
+    option = "--storage" if command == "tune" else "--out"
+    assert line.startswith(f"error: {option} ro/") and "not writable (permission denied)" in line, line
+    assert list(ro.iterdir()) == []
+
+
+# --------------------------------------------------------------------------- options named as typed
+
+
+def test_train_names_options_as_typed(work):
+    line = assert_one_line_error(run("train", work / "D", "--out", work / "m0", "--epochs", "0"), "--epochs", code=2)
+    assert "train." not in line
+    line = assert_one_line_error(run("train", work / "D", "--out", work / "m0", "--lr", "-1"), "--lr", code=2)
+    assert "train." not in line
+    line = assert_one_line_error(run("train", work / "D", "--out", work / "m0", "--hidden", "0"), "--hidden", code=2)
+    assert "network." not in line
+    assert_one_line_error(run("train", work / "D", "--out", work / "m0", "--optimizer", "adamm"), "--optimizer")
+
+
+def test_network_sizes_only_from_scratch(work):
+    res = run("train", work / "D", "--out", work / "m0", "--hidden", "8", "--init", f"resume:{work / 'm'}")
+    assert_one_line_error(res, "--hidden", "--init scratch only", code=2)
+
+
+def test_sweep_names_its_option(work):
+    assert_one_line_error(run("sweep", "--out", work / "sw", "--duration", "0"), "--duration", code=2)
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["collect", "--out", "X", "--preset", "thesis-eval"], "--preset 'thesis-eval': no such control preset; did you mean 'thesis-evaluation'?"),
+        (["collect", "--out", "X", "--controller", "cooperativ"], "--controller 'cooperativ': no such controller; did you mean 'cooperative'?"),
+        (["collect", "--out", "X", "--tasks", "linear,curvd"], "--tasks 'curvd': no such task; did you mean 'curved'?"),
+        (["collect", "--out", "X", "--objects", "bord"], "--objects 'bord': no such object; did you mean 'board'?"),
+        (["train", "D", "--out", "X", "--preset", "thesi"], "--preset 'thesi': no such intent-model preset; did you mean 'thesis'?"),
+        (["tune", "D", "--preset", "defualt"], "--preset 'defualt': no such intent-model preset; did you mean 'default'?"),
+        (["reproduce", "--out", "X", "--preset", "tinny"], "--preset 'tinny': no such reproduce preset; did you mean 'tiny'?"),
+        (["reproduce", "--out", "X", "--preset", "zzz"], "--preset 'zzz': no such reproduce preset (choose from: default, tiny, thesis)"),
+    ],
+)  # fmt: skip
+def test_presets_and_names_did_you_mean(work, args, expected):
+    res = run(*args, cwd=work)
+    assert_one_line_error(res, expected, code=2)
+    assert not (work / "X").exists()
+
+
+def test_collect_intent_must_be_a_model(work):
+    res = run("collect", "--out", work / "Y", "--intent", work / "nomodel", "--trials", "1")
+    assert_one_line_error(res, "--intent", "nomodel", "model folder")
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+def test_missing_paths_are_called_missing(work):
+    for args in (["train", work / "nothere", "--out", work / "m9"], ["show", work / "nothere"],
+                 ["evaluate", "--model", work / "m", "--data", work / "nothere"]):  # fmt: skip
+        assert_one_line_error(run(*args), "nothere", "no such file or folder")
+    assert_one_line_error(run("evaluate", "--model", work / "nomodel", "--data", work / "D"), "--model", "no such folder")
+
+
+def test_brackets_in_messages_are_printed(work):
+    line = assert_one_line_error(run("show", work / "[s]-trial"))
+    assert "[s]-trial" in line
+
+
+def test_train_evaluate_show_read_the_same_inputs(work, tmp_path):
+    """A dataset folder, one trial file, one recording folder, a folder of recordings."""
+    trial_file = sorted((work / "D").glob("*.parquet"))[0]
+    inputs = {"dataset": work / "D", "trial file": trial_file}
+    real = default_real_data() / "user-a"
+    if (real / "trial_1").is_dir():  # a copy of one real recording (the data stay outside the repository)
+        user = tmp_path / "user-r"
+        shutil.copytree(real / "trial_1", user / "trial_1")
+        inputs["recording folder"] = user / "trial_1"
+        inputs["folder of recordings"] = user
+    for kind, path in inputs.items():
+        res = run("show", path, "--out", tmp_path / f"{kind}.png")
+        assert res.exit_code == 0, f"show {kind}: {res.output}"
+        res = run("evaluate", "--model", work / "m", "--data", path, "--include-training", "--out",
+                  tmp_path / f"{kind}.json")  # fmt: skip
+        assert res.exit_code == 0, f"evaluate {kind}: {res.output}"
+        assert json.loads((tmp_path / f"{kind}.json").read_text())["trials"]
+    # train on a single trial file plus the dataset (the file's trial id is new: the folder is not D)
+    single = tmp_path / "extra" / "one.parquet"
+    single.parent.mkdir()
+    shutil.copy(trial_file, single)
+    res = run("train", work / "D", single, "--out", tmp_path / "m2", "--epochs", "1", "--threads", "1", "--hidden",
+              "8", "--layers", "1", "--fc", "8", "--batch-size", "256")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    info = json.loads((tmp_path / "m2" / "model.json").read_text())
+    ids = info.get("train_trials", []) + info.get("test_trials", [])
+    assert "extra/one" in ids and len(ids) == 4
+
+
+# --------------------------------------------------------------------------- tune → train
+
+
+def test_tune_best_parameters_are_train_options(work, tmp_path):
+    from coassist.intent.tuning import train_options
+
+    options = train_options({"optimizer": "rmsprop", "lr": 0.00123456, "lstm_layers": 1, "hidden": 12, "fc": 10})
+    assert options == ["--optimizer", "rmsprop", "--lr", "0.001235", "--layers", "1", "--hidden", "12", "--fc", "10"]
+    res = run("train", work / "D", "--out", tmp_path / "m", "--epochs", "1", "--threads", "1", *options)
+    assert res.exit_code == 0, res.output
+    info = json.loads((tmp_path / "m" / "model.json").read_text())
+    net = info["network"]
+    assert (net["lstm_layers"], net["hidden"], list(net["fc"])) == (1, 12, [10])
+    cfg = info["info"]["train_config"] if "info" in info else info["train_config"]
+    assert cfg["optimizer"] == "rmsprop" and cfg["lr"] == pytest.approx(0.001235)
+
+
+def test_tune_never_resumes_a_study_on_other_data(work, tmp_path):
+    optuna = pytest.importorskip("optuna")
+    storage = f"sqlite:///{tmp_path / 'study.db'}"
+    other = optuna.create_study(storage=storage, study_name="intent")
+    other.set_user_attr("coassist_trials", {"fit": ["E9/trial_0", "E9/trial_1"], "validation": ["E9/trial_2"]})
+    res = run("tune", work / "D", "--storage", storage, "--trials", "1", "--epochs", "1")
+    assert_one_line_error(res, "--study-name intent", "was run on other trials (datasets E9)", code=2)
+    legacy = optuna.create_study(storage=storage, study_name="old")
+    legacy.enqueue_trial({"lr": 1e-3})
+    legacy.ask()  # a study with a trial and no record of its data
+    res = run("tune", work / "D", "--storage", storage, "--study-name", "old", "--trials", "1", "--epochs", "1")
+    assert_one_line_error(res, "--study-name old", "no record of its data", code=2)
+    assert len(optuna.load_study(study_name="old", storage=storage).trials) == 1  # nothing ran
+
+
+# --------------------------------------------------------------------------- help
+
+
+def test_help_is_plain_and_fits_80_columns():
+    commands = [c.name or c.callback.__name__ for c in app.registered_commands]
+    assert {"train", "evaluate", "show", "collect", "tune", "sweep", "reproduce", "drive"} <= set(commands)
+    for name in [None, *commands]:
+        res = RUNNER.invoke(app, ([name] if name else []) + ["--help"], terminal_width=80, env={"COLUMNS": "80"})
+        assert res.exit_code == 0, res.output
+        long = [ln for ln in res.output.splitlines() if len(ln) > 80]
+        assert not long, f"{name}: lines over 80 columns: {long}"
+    sweep_help = RUNNER.invoke(app, ["sweep", "--help"], terminal_width=80).output
+    assert "Simulated time per case [s]." in " ".join(sweep_help.split())
+    collect_help = RUNNER.invoke(app, ["collect", "--help"], terminal_width=80).output
+    assert "coassist[cluster]" in " ".join(collect_help.split())

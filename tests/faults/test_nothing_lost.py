@@ -1,0 +1,556 @@
+"""Nothing lost: kills in the middle of every write, concurrent writers, modes, resumes.
+
+Two kinds of kill, both real:
+
+- *SIGKILL*: a child process runs the write and sends itself SIGKILL at a chosen point
+  (no ``finally``, no ``atexit``; the same as ``kill -9`` or the OOM killer), then the
+  test checks what is on disk;
+- *injected exception*: the write is interrupted by an exception at each of its steps
+  in turn (every trial file, the manifest, the swap).
+
+After each, the old dataset or model must still load, equal to what was there, and
+what the dead writer left (``*.tmp`` files, ``*.new`` folders) is removed by the next
+write. A second run on a locked output gets one clear error; files and folders get
+the user's umask; ``collect`` and ``train`` continue where a killed run stopped, with
+the result of a run never stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from coassist import _io
+from coassist._io import OutputBusyError, OutputLock, atomic_write, atomic_write_bytes, partial_folder, remove_stale
+from coassist.cli import app
+from coassist.data import read_dataset, write_dataset
+from coassist.data import store as store_mod
+
+from ..intent.conftest import TINY, labeled, make_trial
+
+pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals, flock and renameat2")
+
+
+def run_child(code: str, *, expect_kill: bool = True, timeout: float = 120) -> subprocess.CompletedProcess:
+    """Run ``code`` in a fresh interpreter; with ``expect_kill`` it must die of SIGKILL."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    res = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True,
+                         timeout=timeout, env=env)  # fmt: skip
+    if expect_kill:
+        assert res.returncode == -signal.SIGKILL, res.stderr
+    else:
+        assert res.returncode == 0, res.stderr
+    return res
+
+
+KILL = "os.kill(os.getpid(), signal.SIGKILL)"
+
+
+def leftovers(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir() if p.name.endswith((".tmp", ".new", ".old")))
+
+
+# --------------------------------------------------------------------------- one file
+
+
+@pytest.mark.parametrize("step", ["write", "fsync", "replace"])
+def test_atomic_write_interrupted_at_each_step_keeps_the_old_file(tmp_path, monkeypatch, step):
+    path = tmp_path / "f.json"
+    atomic_write_bytes(path, b"old")
+
+    def boom(*args, **kwargs):
+        raise RuntimeError(f"injected at {step}")
+
+    if step == "write":
+        writer = lambda fh: (fh.write(b"ne"), boom())  # noqa: E731 (half written, then the failure)
+    else:
+        writer = lambda fh: fh.write(b"new")  # noqa: E731
+        monkeypatch.setattr(os, {"fsync": "fsync", "replace": "replace"}[step], boom)
+    with pytest.raises(RuntimeError, match="injected"):
+        atomic_write(path, writer)
+    monkeypatch.undo()
+    assert path.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.json"]
+
+
+def test_atomic_write_killed_mid_write_keeps_the_old_file_and_the_next_write_sweeps_the_temp(tmp_path):
+    path = tmp_path / "f.bin"
+    atomic_write_bytes(path, b"old")
+    run_child(f"""
+        import os, signal
+        from coassist._io import atomic_write
+        def half(fh):
+            fh.write(b"x" * 1_000_000)
+            fh.flush()
+            {KILL}
+        atomic_write({str(path)!r}, half)
+    """)
+    assert path.read_bytes() == b"old"
+    stray = leftovers(tmp_path)
+    assert len(stray) == 1 and stray[0].startswith(".f.bin.") and stray[0].endswith(".tmp")  # a dead writer's
+    assert (tmp_path / stray[0]).stat().st_size == 1_000_000
+    atomic_write_bytes(path, b"new")
+    assert path.read_bytes() == b"new" and leftovers(tmp_path) == []
+
+
+def test_remove_stale_spares_a_live_writer(tmp_path):
+    mine = tmp_path / f".f.{os.getpid()}.0123abcd.tmp"
+    mine.write_bytes(b"being written")
+    dead = tmp_path / ".f.999999999.0123abcd.tmp"  # above any pid_max: no such process
+    dead.write_bytes(b"left behind")
+    assert remove_stale(tmp_path) == [dead]
+    assert mine.exists() and not dead.exists()
+
+
+# --------------------------------------------------------------------------- datasets
+
+
+def trials(n: int, seed0: int = 0):
+    return [make_trial(seed0 + i, n=60) for i in range(n)]
+
+
+@pytest.fixture
+def old_dataset(tmp_path) -> Path:
+    return write_dataset(trials(6), tmp_path / "D", "OLD")
+
+
+@pytest.fixture
+def new_source(tmp_path) -> Path:
+    """The trials of the NEW dataset, for a child to read (it need not import torch)."""
+    return write_dataset(trials(5, seed0=100), tmp_path / "src", "NEW")
+
+
+def assert_old(folder: Path) -> None:
+    ds = read_dataset(folder)
+    assert ds.id == "OLD" and len(ds) == 6
+    assert all(t.equals(u) for t, u in zip(ds.trials, trials(6)))
+
+
+@pytest.mark.parametrize("at", [f"trial {i}" for i in range(5)] + ["manifest", "swap"])
+def test_overwrite_interrupted_at_each_step_keeps_the_old_dataset(old_dataset, monkeypatch, at):
+    calls = {"n": 0}
+    real_write_trial, real_manifest, real_swap = store_mod.write_trial, store_mod._write_manifest, _io.swap_in
+
+    def write_trial(trial, path):
+        if at == f"trial {calls['n']}":
+            raise RuntimeError("injected")
+        calls["n"] += 1
+        return real_write_trial(trial, path)
+
+    def manifest(folder, m):
+        if at == "manifest":
+            raise RuntimeError("injected")
+        real_manifest(folder, m)
+
+    def swap(staging, dest):
+        if at == "swap":
+            raise RuntimeError("injected")
+        return real_swap(staging, dest)
+
+    monkeypatch.setattr(store_mod, "write_trial", write_trial)
+    monkeypatch.setattr(store_mod, "_write_manifest", manifest)
+    monkeypatch.setattr(_io, "swap_in", swap)
+    with pytest.raises(RuntimeError, match="injected"):
+        write_dataset(trials(5, seed0=100), old_dataset, "NEW", overwrite=True)
+    monkeypatch.undo()
+    assert_old(old_dataset)
+    assert leftovers(old_dataset.parent) == [] and leftovers(old_dataset) == []
+
+
+@pytest.mark.parametrize("after_files", [0, 2, 4])
+def test_overwrite_killed_mid_way_keeps_the_old_dataset(old_dataset, new_source, after_files):
+    """The issue's case: 13 of 30 files replaced and the folder no longer loads. Now the
+    new files go to a folder beside, so any kill leaves the old dataset whole."""
+    run_child(f"""
+        import os, signal
+        from coassist.data import store
+        new = store.read_dataset({str(new_source)!r}).trials
+        real, n = store.write_trial, [0]
+        def write_trial(trial, path):
+            if n[0] == {after_files}:
+                {KILL}
+            n[0] += 1
+            return real(trial, path)
+        store.write_trial = write_trial
+        store.write_dataset(new, {str(old_dataset)!r}, "NEW", overwrite=True)
+    """)
+    assert_old(old_dataset)
+    assert len(leftovers(old_dataset.parent)) == 1  # the dead writer's .new folder ...
+    write_dataset(trials(2, seed0=50), old_dataset, "NEXT", overwrite=True)  # ... swept by the next write of D
+    assert leftovers(old_dataset.parent) == [] and read_dataset(old_dataset).id == "NEXT"
+
+
+@pytest.mark.parametrize(("exchange", "kill_at_rename"), [(True, 1), (False, 1), (False, 2)],
+                         ids=["renameat2-after-exchange", "fallback-before-first-rename", "fallback-between-renames"])  # fmt: skip
+def test_swap_killed_between_its_renames(old_dataset, new_source, exchange, kill_at_rename):
+    """Kill inside swap_in: after the exchange (or the fallback's first rename) and before
+    the next rename. The destination then holds the old or the new dataset, whole, and
+    the next sweep leaves nothing behind (the fallback's .old folder is put back)."""
+    run_child(f"""
+        import os, signal, sys
+        from coassist import _io
+        from coassist.data import read_dataset, write_dataset
+        new = read_dataset({str(new_source)!r}).trials
+        if not {exchange}:
+            _io._exchange = lambda a, b: False
+        real, n = os.rename, [0]
+        def rename(a, b):
+            if "swap_in" in [f.f_code.co_name for f in [sys._getframe(1)]]:
+                n[0] += 1
+                if n[0] == {kill_at_rename}:
+                    {KILL}
+            return real(a, b)
+        os.rename = rename
+        write_dataset(new, {str(old_dataset)!r}, "NEW", overwrite=True)
+    """)
+    if (exchange, kill_at_rename) == (False, 2):
+        assert not old_dataset.exists()  # the worst moment: the old folder is aside, the new not yet in place
+    remove_stale(old_dataset.parent)
+    ds = read_dataset(old_dataset)
+    if ds.id == "OLD":
+        assert_old(old_dataset)
+    else:
+        assert ds.id == "NEW" and all(t.equals(u) for t, u in zip(ds.trials, trials(5, seed0=100)))
+    # With renameat2 the first rename after the exchange moves the old folder aside: the new one is in place.
+    if exchange:
+        assert ds.id == "NEW"
+    assert leftovers(old_dataset.parent) == []
+
+
+# --------------------------------------------------------------------------- models
+
+
+@pytest.fixture(scope="module")
+def two_models():
+    from coassist.intent.training import train_model
+
+    data = labeled(3)
+    a = train_model(data, TINY, replace(TINY.train, epochs=1))
+    b = train_model(data, TINY, replace(TINY.train, epochs=1, seed=7))
+    return a, b
+
+
+def same_weights(m1, m2) -> bool:
+    s1, s2 = m1.net.state_dict(), m2.net.state_dict()
+    return s1.keys() == s2.keys() and all(torch.equal(s1[k], s2[k]) for k in s1)
+
+
+@pytest.mark.parametrize("fail_on", ["weights.safetensors", "ridge.safetensors", "model.json"])
+def test_model_save_interrupted_between_its_files_keeps_the_old_model(tmp_path, monkeypatch, two_models, fail_on):
+    """The issue's case: a crash between the weights and model.json destroyed the old model."""
+    from coassist.intent import load_model, save_model
+    from coassist.intent import model as model_mod
+
+    old, new = two_models
+    save_model(old, tmp_path / "m")
+    real = model_mod.atomic_write_bytes
+
+    def write(path, data):
+        if Path(path).name == fail_on:
+            raise RuntimeError("injected")
+        return real(path, data)
+
+    monkeypatch.setattr(model_mod, "atomic_write_bytes", write)
+    with pytest.raises(RuntimeError, match="injected"):
+        save_model(new, tmp_path / "m")
+    monkeypatch.undo()
+    assert same_weights(load_model(tmp_path / "m"), old) and not same_weights(old, new)
+    assert leftovers(tmp_path) == []
+
+
+def test_model_save_killed_between_weights_and_sidecar_keeps_the_old_model(tmp_path, two_models):
+    from coassist.intent import load_model, save_model
+
+    old, new = two_models
+    save_model(old, tmp_path / "m")
+    save_model(new, tmp_path / "new")
+    run_child(f"""
+        import os, signal
+        from coassist.intent import load_model, save_model
+        from coassist.intent import model as model_mod
+        real = model_mod.atomic_write_bytes
+        def write(path, data):
+            if path.name == "model.json":
+                {KILL}
+            return real(path, data)
+        model_mod.atomic_write_bytes = write
+        save_model(load_model({str(tmp_path / "new")!r}), {str(tmp_path / "m")!r})
+    """)
+    assert same_weights(load_model(tmp_path / "m"), old)
+    save_model(new, tmp_path / "m")  # the next save sweeps the dead one's folder
+    assert same_weights(load_model(tmp_path / "m"), new) and leftovers(tmp_path) == []
+
+
+def test_train_refuses_an_existing_model_before_any_work(tmp_path, two_models):
+    from coassist.intent import load_model, save_model
+
+    old, _ = two_models
+    save_model(old, tmp_path / "m")
+    write_dataset([make_trial(i, n=220) for i in range(5)], tmp_path / "D0", "D0")
+    runner = CliRunner()
+    args = ["train", str(tmp_path / "D0"), "--out", str(tmp_path / "m"), "--epochs", "1", "--threads", "1",
+            "--batch-size", "256"]  # fmt: skip
+    res = runner.invoke(app, args)
+    assert res.exit_code == 2 and "--overwrite" in res.output and "Traceback" not in res.output
+    assert same_weights(load_model(tmp_path / "m"), old)
+    res = runner.invoke(app, [*args, "--overwrite"])
+    assert res.exit_code == 0, res.output
+    assert not same_weights(load_model(tmp_path / "m"), old)
+    assert not partial_folder(tmp_path / "m").exists()  # the run's checkpoint is cleaned up
+
+
+# --------------------------------------------------------------------------- one writer at a time
+
+
+def hold_lock_in_child(path: Path, ready: Path) -> subprocess.Popen:
+    code = f"""
+        import time
+        from pathlib import Path
+        from coassist._io import OutputLock
+        with OutputLock({str(path)!r}):
+            Path({str(ready)!r}).write_text("locked")
+            time.sleep(60)
+    """
+    child = subprocess.Popen([sys.executable, "-c", textwrap.dedent(code)])
+    for _ in range(600):
+        if ready.exists() or child.poll() is not None:
+            break
+        import time
+
+        time.sleep(0.05)
+    assert ready.exists(), "the child never took the lock"
+    return child
+
+
+def test_a_second_writer_gets_a_clear_error_and_a_dead_ones_lock_is_free(tmp_path, old_dataset):
+    """The issue's case: two `collect --overwrite` into one folder both printed "wrote"."""
+    child = hold_lock_in_child(old_dataset, tmp_path / "ready")
+    try:
+        with pytest.raises(OutputBusyError, match=rf"{old_dataset} is being written by another coassist run \(pid {child.pid}\)"):
+            write_dataset(trials(2, seed0=100), old_dataset, "NEW", overwrite=True)
+        res = CliRunner().invoke(app, ["collect", "--out", str(old_dataset), "--overwrite", "--trials", "1",
+                                       "--tasks", "linear", "--workers", "1"])  # fmt: skip
+        assert res.exit_code == 1 and f"pid {child.pid}" in res.output.replace("\n", "") and "Traceback" not in res.output
+        assert_old(old_dataset)
+    finally:
+        child.send_signal(signal.SIGKILL)
+        child.wait()
+    # Killed while holding it: the kernel released the lock, the next writer proceeds.
+    write_dataset(trials(2, seed0=100), old_dataset, "NEW", overwrite=True)
+    assert read_dataset(old_dataset).id == "NEW"
+    assert not (old_dataset.parent / ".D.lock").exists()
+
+
+def test_a_second_train_into_the_same_folder_gets_a_clear_error(tmp_path):
+    write_dataset([make_trial(i, n=220) for i in range(5)], tmp_path / "D0", "D0")
+    child = hold_lock_in_child(tmp_path / "m", tmp_path / "ready")
+    try:
+        res = CliRunner().invoke(app, ["train", str(tmp_path / "D0"), "--out", str(tmp_path / "m"), "--epochs", "1",
+                                       "--threads", "1"])  # fmt: skip
+    finally:
+        child.send_signal(signal.SIGKILL)
+        child.wait()
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    assert f"is being written by another coassist run (pid {child.pid})" in res.output.replace("\n", "")
+    assert not (tmp_path / "m").exists()
+
+
+def test_lock_nests_within_a_process(tmp_path):
+    with OutputLock(tmp_path / "x"), OutputLock(tmp_path / "x"):
+        assert (tmp_path / ".x.lock").read_text().strip() == str(os.getpid())
+    assert not (tmp_path / ".x.lock").exists()
+
+
+# --------------------------------------------------------------------------- modes
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o002, 0o077])
+def test_outputs_follow_the_umask(tmp_path, two_models, umask):
+    from coassist.intent import save_model
+
+    old_umask = os.umask(umask)
+    try:
+        folder = write_dataset(trials(2), tmp_path / "D", "D")
+        model = save_model(two_models[0], tmp_path / "m")
+    finally:
+        os.umask(old_umask)
+    for path in [folder / "manifest.json", folder / "trial_00000.parquet", model / "model.json", model / "weights.safetensors"]:
+        assert path.stat().st_mode & 0o777 == 0o666 & ~umask, path
+    for path in (folder, model):
+        assert path.stat().st_mode & 0o777 == 0o777 & ~umask, path
+
+
+# --------------------------------------------------------------------------- collect continues
+
+
+COLLECT = dict(controller="cooperative", users=[0], tasks=["linear"], objects=["handle"], trials=4, seed=3)
+
+
+def test_collect_killed_after_two_trials_continues_and_matches_an_unbroken_run(tmp_path):
+    from coassist.sim import collect as collect_mod
+    from coassist.sim.collect import collect_dataset
+
+    out = tmp_path / "D"
+    run_child(f"""
+        import os, signal
+        from coassist.data import store
+        from coassist.sim.collect import collect_dataset
+        real, n = store.DatasetWriter.add, [0]
+        def add(self, index, trial):
+            path = real(self, index, trial)
+            n[0] += 1
+            if n[0] == 2:
+                {KILL}
+            return path
+        store.DatasetWriter.add = add
+        collect_dataset({str(out)!r}, workers=1, progress=False, **{COLLECT!r})
+    """)
+    assert not out.exists()
+    partial = partial_folder(out)
+    assert sorted(p.name for p in partial.glob("trial_*.parquet")) == ["trial_00000.parquet", "trial_00001.parquet"]
+
+    said, ran = [], []
+    real_run = collect_mod.run_trials
+
+    def counting_run(specs, **kw):
+        ran.extend(specs)
+        return real_run(specs, **kw)
+
+    collect_mod.run_trials = counting_run
+    try:
+        collect_dataset(out, workers=1, progress=False, say=said.append, **COLLECT)
+    finally:
+        collect_mod.run_trials = real_run
+    assert said == [f"continuing: 2 of 4 trials were already written in {partial}"]
+    assert [s.seed for s in ran] == [5, 6]  # only the two trials the killed run had not written
+    assert not partial.exists()
+    unbroken = collect_dataset(tmp_path / "U", workers=1, progress=False, **COLLECT)
+    a, b = read_dataset(out), read_dataset(unbroken)
+    assert len(a) == 4 and all(x.equals(y) for x, y in zip(a.trials, b.trials))
+
+
+def test_collect_with_other_options_does_not_reuse_a_partial_folder(tmp_path):
+    from coassist.data import DatasetWriter
+    from coassist.sim.collect import collect_dataset
+
+    out = tmp_path / "D"
+    with DatasetWriter(out, "D", n_trials=4, key="another collection") as w:
+        w.add(0, make_trial(0))  # then "killed": no finish()
+    said = []
+    collect_dataset(out, workers=1, progress=False, say=said.append, **{**COLLECT, "trials": 1})
+    assert said == [f"removed the unfinished trials of a different collection in {partial_folder(out)}"]
+    assert read_dataset(out).trials[0].meta.task == "linear"
+
+
+def test_collect_checks_the_output_before_simulating(tmp_path):
+    (tmp_path / "afile").write_text("x")
+    res = CliRunner().invoke(app, ["collect", "--out", str(tmp_path / "afile" / "sub"), "--trials", "1"])
+    assert res.exit_code != 0 and "is a file" in res.output and "Traceback" not in res.output
+
+
+# --------------------------------------------------------------------------- train continues
+
+
+def _weights(model) -> dict[str, torch.Tensor]:
+    return {k: v.clone() for k, v in model.net.state_dict().items()}
+
+
+@pytest.mark.parametrize("optimizer", ["adam", pytest.param("sgd", marks=pytest.mark.slow)])
+def test_train_two_epochs_then_resume_two_equals_four(tmp_path, optimizer):
+    """A 4-epoch run killed (SIGKILL) after epoch 2 and resumed ends bit-identical to an
+    unbroken 4-epoch run. Tolerance: none. On the CPU with a fixed thread count the resumed
+    run replays the same floating-point operations in the same order (same weights,
+    Adam/momentum state, learning-rate step, batch order and mirror signs), so any
+    difference is a resume bug. A GPU run may need a tolerance (non-deterministic kernels);
+    not tested here. Control: resuming without the optimizer state does differ."""
+    from coassist.intent.training import train_model
+
+    data = labeled(4)
+    cfg = replace(TINY.train, epochs=4, optimizer=optimizer, mirror=True)
+    unbroken = _weights(train_model(data, TINY, cfg))
+    out = tmp_path / "m"
+    run_child(f"""
+        import os, signal, sys
+        from dataclasses import replace
+        sys.path.insert(0, {str(Path(__file__).parents[1])!r})
+        from intent.conftest import TINY, labeled
+        from coassist.intent.training import train_model
+        def on_epoch(record):
+            if record["epoch"] == 2:
+                {KILL}
+        cfg = replace(TINY.train, epochs=4, optimizer={optimizer!r}, mirror=True)
+        train_model(labeled(4), TINY, cfg, checkpoint_to={str(out)!r}, on_epoch=on_epoch)
+    """)
+    ckpt = json.loads((partial_folder(out) / "checkpoint.json").read_text())
+    assert ckpt["epoch"] == 2 and ckpt["scheduler"]["last_epoch"] > 0
+    resumed = train_model(data, TINY, replace(cfg, init=f"resume:{out}"), checkpoint_to=out)
+    assert [r["epoch"] for r in resumed.info["training_history"]] == [1, 2, 3, 4]
+    assert resumed.info["continued_after_epoch"] == [2] and resumed.info["init"] == "scratch"
+    got = _weights(resumed)
+    assert all(torch.equal(unbroken[k], got[k]) for k in unbroken)
+
+    # Control: the same weights at epoch 2 without the optimizer/schedule/RNG state do not get there.
+    (partial_folder(out) / "checkpoint.json").unlink()
+    naive = _weights(train_model(data, TINY, replace(cfg, epochs=2, init=f"resume:{partial_folder(out)}")))
+    assert max(float((unbroken[k] - naive[k]).abs().max()) for k in unbroken) > 1e-4
+
+
+def test_resume_of_an_interrupted_run_with_other_data_is_refused(tmp_path):
+    from coassist.intent.training import train_model
+
+    class Stop(Exception):
+        pass
+
+    def stop(record):
+        if record["epoch"] == 1:
+            raise Stop
+
+    cfg = replace(TINY.train, epochs=3)
+    with pytest.raises(Stop):
+        train_model(labeled(4), TINY, cfg, checkpoint_to=tmp_path / "m", on_epoch=stop)
+    with pytest.raises(ValueError, match="interrupted run on 4 other trials"):
+        train_model(labeled(4, prefix="X"), TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
+
+
+@pytest.mark.slow  # ~11 s: two trainings and a child process; the library test above covers the resume itself
+def test_cli_train_resumes_a_killed_run(tmp_path):
+    """`coassist train` killed after epoch 1 of 2; the same command with --init resume:<out> finishes it."""
+    from coassist.intent import load_model
+
+    write_dataset([make_trial(i, n=220) for i in range(5)], tmp_path / "D0", "D0")
+    out = tmp_path / "m"
+    args = ["train", str(tmp_path / "D0"), "--out", str(out), "--preset", "lstm", "--epochs", "2", "--threads", "1",
+            "--batch-size", "64"]  # fmt: skip
+    run_child(f"""
+        import os, signal
+        from coassist.intent import training
+        real = training._checkpoint_files
+        def files(*a, epoch, **kw):
+            if epoch == 2:
+                {KILL}
+            return real(*a, epoch=epoch, **kw)
+        training._checkpoint_files = files
+        from coassist.cli import app
+        app({args!r}, standalone_mode=False)
+    """)
+    assert not out.exists() and (partial_folder(out) / "checkpoint.json").is_file()
+    res = CliRunner().invoke(app, [*args, "--init", f"resume:{out}"])
+    assert res.exit_code == 0, res.output
+    resumed = load_model(out)
+    assert [r["epoch"] for r in resumed.info["training_history"]] == [1, 2]
+    res = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "u")])
+    unbroken = load_model(tmp_path / "u")
+    assert same_weights(resumed, unbroken)
+    assert np.allclose([r["train_loss"] for r in resumed.info["training_history"]],
+                       [r["train_loss"] for r in unbroken.info["training_history"]], rtol=0, atol=0)  # fmt: skip

@@ -1,0 +1,156 @@
+"""The evaluation's comparison with the best baseline: per-trial spread, gain, and what evaluate prints."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from coassist.cli import app
+from coassist.data import default_real_data, write_dataset
+from coassist.intent import evaluate_model, load_trials, split_trials, train_model
+from coassist.intent.evaluation import BASELINES, best_baselines, comparison_lines
+
+from .conftest import make_trial
+
+
+def test_best_baseline_and_per_trial_spread(trials, tiny):
+    from dataclasses import replace
+
+    p = replace(tiny, train=replace(tiny.train, test_fraction=0.4))
+    model = train_model(trials, p, p.train)
+    assert model.info["baselines"]["ridge"]["tuned"] and model.info["baselines"]["constant_acceleration"]["tuned"]
+    res = evaluate_model(model, trials)
+    assert len(res["trials"]) == 2
+    for h in ("5", "10"):
+        cands = {b: res["results"][b][h]["e_rms"] for b in BASELINES}
+        best = res["best_baseline"][h]
+        assert best["name"] == min(cands, key=cands.get) and best["e_rms"] == min(cands.values())
+        me = res["results"]["model"][h]["e_rms"]
+        assert best["gain"] == pytest.approx((best["e_rms"] - me) / best["e_rms"])
+        per = res["results"]["model"][h]["e_rms_trials"]
+        assert sorted(per) == sorted(res["trials"])
+        assert res["results"]["model"][h]["trial_min"] == min(per.values())
+        bt = res["results"][best["name"]][h]["e_rms_trials"]
+        assert best["trials_model_better"] == sum(per[k] < bt[k] for k in per)
+    # Pooled e_RMS weighs trials by their scored ticks: it lies within the per-trial range.
+    r = res["results"]["ridge"]["10"]
+    assert r["trial_min"] <= r["e_rms"] <= r["trial_max"]
+    assert res["baselines"]["ridge"]["alpha"] == model.ridge.alpha
+
+
+def test_comparison_lines_state_the_best_baseline_in_mm():
+    res = {"dt": 0.01, "horizons": [5], "baselines": {"ridge": {"alpha": 1e-3, "tuned": True}},
+           "results": {"model": {"5": {"e_rms": 0.0008, "e_rms_trials": {"a": 0.0007, "b": 0.0011}}},
+                       "ridge": {"5": {"e_rms": 0.0010, "e_rms_trials": {"a": 0.0009, "b": 0.0010}}},
+                       "constant_velocity": {"5": {"e_rms": 0.0020, "e_rms_trials": {"a": 0.002, "b": 0.002}}}}}
+    assert best_baselines(res)["5"]["gain"] == pytest.approx(0.2)
+    (line,) = comparison_lines(res)
+    assert line.startswith("0.05 s: best baseline ridge (α = 1e-03, tuned on validation trials) e_RMS 1 mm")
+    assert "model 0.8 mm: 20.0 % better (+0.2 mm), model better on 1 of 2 trials" in line
+
+
+def test_evaluate_prints_the_best_baseline_per_horizon(tmp_path):
+    write_dataset([make_trial(i, n=220) for i in range(5)], tmp_path / "D0", "D0")
+    runner = CliRunner()
+    res = runner.invoke(app, ["train", str(tmp_path / "D0"), "--out", str(tmp_path / "m"), "--epochs", "1",
+                              "--threads", "1", "--batch-size", "256"])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["evaluate", "--model", str(tmp_path / "m"), "--data", str(tmp_path / "D0")],
+                        terminal_width=250)
+    assert res.exit_code == 0, res.output
+    out = json.loads((tmp_path / "m" / "evaluation.json").read_text())
+    lines = [ln for ln in res.output.splitlines() if "best baseline" in ln]
+    assert len(lines) == len(out["horizons"])
+    for ln, h in zip(lines, out["horizons"]):
+        b = out["best_baseline"][str(h)]
+        assert ln.startswith(f"{h * out['dt']:.2f} s: best baseline")
+        assert f"e_RMS {1e3 * b['e_rms']:.3g} mm" in ln and f"{abs(100 * b['gain']):.1f} %" in ln
+    assert "errors in mm" in " ".join(res.output.split())  # the table says its unit
+
+
+USER_A = default_real_data() / "user-a"
+
+
+@pytest.mark.real_data
+@pytest.mark.skipif(not USER_A.is_dir(), reason=f"real recordings not found at {USER_A}")
+def test_tuned_ridge_beats_the_fixed_alpha_on_held_out_user_a():
+    """On held-out user-a trials the validation-tuned α is no worse at 0.4 s than the former fixed α = 1."""
+    from coassist.intent import RidgeBaseline, WindowSet
+    from coassist.intent.baselines import fit_tuned_baselines
+    from coassist.intent.training import PRESETS
+
+    w = PRESETS["default"].window
+    trials = load_trials([USER_A])
+    train_idx, test_idx = split_trials([lt.id for lt in trials], 0.2, seed=0)
+    train = [trials[i].trial for i in train_idx]
+    ws = WindowSet(train, w, 0.008, stride=8)
+    sin, sout = ws.fit_scalers()
+    tuned, kalman, rec = fit_tuned_baselines(train, [trials[i].id for i in train_idx], w, 0.008, sin, sout, seed=0,
+                                             stride=8)
+    assert set(rec["validation_trials"]).isdisjoint(trials[i].id for i in test_idx)
+    fixed = RidgeBaseline.fit(ws, sin, sout, 1.0)
+    test = WindowSet([trials[i].trial for i in test_idx], w, 0.008, stride=4)
+    sel = np.arange(len(test))
+
+    def rms50(r):
+        x = r.input_scaler.transform(test.raw_inputs(sel))
+        from coassist.intent.features import decode_target, unscale_targets
+
+        pose, vel = test.anchors(sel)
+        pred = decode_target(unscale_targets(r.target_scaler, r.predict_scaled(x), 50, 2), pose, vel, w, 0.008)
+        return float(np.mean(np.sqrt(np.mean(np.sum((pred - test.future(sel)) ** 2, axis=2), axis=1))))
+
+    assert tuned.alpha < 1.0 and rms50(tuned) < rms50(fixed)
+    assert kalman.tuned
+
+
+def test_linear_preset_is_the_tuned_ridge_in_the_model_format(trials, tmp_path):
+    from dataclasses import replace
+
+    from coassist.intent import load_model, save_model
+    from coassist.intent.training import PRESETS
+
+    lin = PRESETS["linear"]
+    p = replace(lin, window=replace(lin.window, history=20, decimation=2, horizon=10),
+                train=replace(lin.train, threads=1, train_stride=2))
+    model = train_model(trials, p, p.train)
+    assert model.net.is_linear and model.net.lstm is None
+    hist = model.info["training_history"]
+    assert len(hist) == 1 and hist[0]["closed_form"] and hist[0]["lr"] == 0.0
+    save_model(model, tmp_path / "lin")
+    back = load_model(tmp_path / "lin")
+    t = trials[0].trial
+    a, b = back.predict_trial(t), model.ridge.predict_trial(t)
+    ok = np.isfinite(a[:, 0, 0])
+    assert ok.sum() > 200 and np.allclose(a[ok], b[ok], atol=1e-6)  # float32 network vs float64 ridge, positions in m
+    res = evaluate_model(back, trials)
+    for h in ("5", "10"):  # same predictions, same ticks: the same error to float32 precision
+        assert res["results"]["model"][h]["e_rms"] == pytest.approx(res["results"]["ridge"][h]["e_rms"], rel=1e-3)
+
+
+@pytest.mark.slow
+@pytest.mark.real_data
+@pytest.mark.skipif(not USER_A.is_dir(), reason=f"real recordings not found at {USER_A}")
+def test_default_predictor_is_no_worse_than_the_best_tuned_baseline_on_held_out_user_a():
+    """The shipped default against its tuned baselines on user-a's held-out trials (split seed 0; ~2 min).
+
+    Measured (docs/intent-baselines.md): better than the tuned ridge at every horizon in each of
+    3 seeds, by 2–5 %; the issue's 15 % at 0.4 s is not reached, and this test does not claim it.
+    """
+    from dataclasses import replace
+
+    import torch
+
+    from coassist.intent.training import PRESETS
+
+    torch.set_num_threads(1)
+    p = PRESETS["default"]
+    trials = load_trials([USER_A])
+    model = train_model(trials, p, replace(p.train, threads=1))
+    res = evaluate_model(model, trials)
+    assert set(res["trials"]).isdisjoint(model.info["baselines"]["validation_trials"])
+    for h, best in res["best_baseline"].items():
+        assert best["name"] == "ridge" and best["gain"] > 0, (h, best)

@@ -1,0 +1,53 @@
+"""The session's configuration and its folder: clear errors, no writes outside ``<out>/<user>``."""
+
+from __future__ import annotations
+
+import pytest
+from typer.testing import CliRunner
+
+from coassist.play.session import PlayConfig, PlaySession, view_bounds
+from coassist.sim.tasks import TASK_KINDS, nominal_path
+
+
+@pytest.mark.parametrize("field, value", [
+    ("user", "../escape"), ("user", "a/b"), ("user", ""), ("user", "x" * 33), ("controllers", ("mg", "oracle")),
+    ("controllers", ()), ("intent", "oracle"), ("preset", "nope"), ("tasks", ("circle",)), ("seed", -1),
+    ("motion_time", 0.0), ("dwell", -1.0), ("grace", float("nan")),
+])  # fmt: skip
+def test_bad_configuration_names_the_field(tmp_path, field, value):
+    with pytest.raises(ValueError, match=f"PlayConfig.{field}"):
+        PlayConfig(**{"user": "bob", "out": tmp_path, field: value})
+
+
+def test_the_session_folder_is_out_slash_user_and_a_foreign_folder_is_refused(tmp_path):
+    config = PlayConfig(user="bob", out=tmp_path)
+    assert config.folder == tmp_path / "bob" and config.dataset_id == "play-bob"
+    (tmp_path / "bob").mkdir()
+    (tmp_path / "bob" / "notes.txt").write_text("mine")
+    with pytest.raises(ValueError, match="not a play session"):
+        PlaySession(config)
+
+
+def test_the_protocol_cycles_the_paths_with_a_seeded_obstacle(tmp_path):
+    session = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("mg",), seed=3))
+    t0 = session.next_task()
+    again = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("mg",), seed=3)).next_task()
+    assert t0.kind == "linear" and t0.obstacle == again.obstacle  # the same seed, the same box
+    scene = session.scene()
+    assert scene["path"][0] == pytest.approx(list(t0.start)) and scene["path"][-1] == pytest.approx(list(t0.target))
+
+
+def test_the_view_holds_every_path():
+    x0, x1, y0, y1 = view_bounds(TASK_KINDS)
+    for kind in TASK_KINDS:
+        p = nominal_path(kind).points
+        assert p[:, 0].min() > x0 and p[:, 0].max() < x1 and p[:, 1].min() > y0 and p[:, 1].max() < y1
+
+
+def test_the_cli_says_what_is_wrong_in_one_line(tmp_path):
+    from coassist.cli import app
+
+    result = CliRunner().invoke(app, ["play", "--user", "../x", "--out", str(tmp_path), "--no-open"])
+    assert result.exit_code == 1 and "PlayConfig.user" in result.output and "Traceback" not in result.output
+    result = CliRunner().invoke(app, ["play", "--intent", str(tmp_path / "missing"), "--out", str(tmp_path), "--no-open"])
+    assert result.exit_code == 1 and "missing" in result.output and "Traceback" not in result.output

@@ -1,0 +1,238 @@
+"""Every shell and Python block of the README runs, as a reader would run it.
+
+The blocks are taken from README.md as they are (nothing is filled in by hand) and run in
+document order in one fresh folder, so a block may use what an earlier one wrote
+(``models/M1`` of the step-by-step, for instance); shell blocks run under ``bash -e``
+with this interpreter's ``bin`` folder first on ``PATH`` (where ``coassist`` is).
+
+An HTML comment on the line before a block's fence says how it is tested:
+
+- no mark: runs on every test run (``test_fast_blocks_run``; together well under a minute);
+- ``<!-- readme-test: slow -->``: runs with ``pytest -m slow`` (minutes: the main job, the
+  step-by-step pipeline at its real sizes); blocks that call ``./dev`` run from the
+  repository root, since ``./dev`` is the repository's;
+- ``<!-- readme-test: parse-only (why) -->``: needs what a test machine lacks (a robot
+  arm, a person at a browser): each ``coassist`` line is parsed by the command's own
+  option parser (unknown options, bad values and missing arguments fail) and the
+  block is checked by ``bash -n``; it is not run;
+- ``<!-- readme-test: output -->`` on a ``text`` block: the exact output of the Python
+  block before it (checked wherever that block runs).
+
+The claims count of "What the main job measured" is checked against its table.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+import typer
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+SHELL = ("bash", "sh", "shell")
+PYTHON = ("python", "py")
+MARKS = ("slow", "parse-only", "output")
+BLOCK_TIMEOUT_S = 1800
+
+
+@dataclass(frozen=True)
+class Block:
+    line: int  # 1-based line of the opening fence
+    language: str
+    mark: str | None
+    code: str
+
+    @property
+    def where(self) -> str:
+        return f"README.md:{self.line} ({self.language} block{'' if self.mark is None else ', ' + self.mark})"
+
+
+def readme_blocks(text: str | None = None) -> list[Block]:
+    """Every fenced block of the README with its language and its readme-test mark."""
+    lines = (README.read_text(encoding="utf-8") if text is None else text).splitlines()
+    blocks, i = [], 0
+    while i < len(lines):
+        fence = re.match(r"^(`{3,})\s*([\w+-]*)\s*$", lines[i])
+        if not fence:
+            i += 1
+            continue
+        ticks, language = fence.group(1), fence.group(2).lower()
+        prev = next((lines[j] for j in range(i - 1, -1, -1) if lines[j].strip()), "")
+        mark = re.match(r"^<!--\s*readme-test:\s*([\w-]+)", prev.strip())
+        end = next((j for j in range(i + 1, len(lines)) if lines[j].strip() == ticks), None)
+        if end is None:
+            raise AssertionError(f"README.md:{i + 1}: the code block is never closed")
+        blocks.append(Block(i + 1, language, mark.group(1) if mark else None, "\n".join(lines[i + 1 : end]) + "\n"))
+        i = end + 1
+    return blocks
+
+
+def runnable(blocks: list[Block]) -> list[Block]:
+    return [b for b in blocks if b.language in SHELL + PYTHON]
+
+
+def expected_output(blocks: list[Block], block: Block) -> str | None:
+    """The text of an ``output`` block right after ``block``, if there is one."""
+    index = blocks.index(block)
+    if index + 1 < len(blocks) and blocks[index + 1].mark == "output":
+        return blocks[index + 1].code
+    return None
+
+
+def run_block(block: Block, cwd: Path, expected: str | None = None) -> None:
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
+           "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1"), "MPLBACKEND": "Agg"}  # fmt: skip
+    if block.language in SHELL:
+        argv = ["bash", "-e", "-o", "pipefail", "-c", block.code]
+        run_in = ROOT if re.search(r"(^|\s)\./dev\b", block.code) else cwd
+    else:
+        argv = [sys.executable, "-c", block.code]
+        run_in = cwd
+    start = time.perf_counter()
+    proc = subprocess.run(argv, cwd=run_in, env=env, capture_output=True, text=True, timeout=BLOCK_TIMEOUT_S)
+    print(f"{block.where}: {time.perf_counter() - start:.0f} s\n{proc.stdout[-2000:]}")  # shown with pytest -s
+    assert proc.returncode == 0, (
+        f"{block.where} failed (exit {proc.returncode}) in {run_in}:\n{block.code}\n"
+        f"--- stdout\n{proc.stdout[-4000:]}\n--- stderr\n{proc.stderr[-4000:]}"
+    )
+    assert "Traceback" not in proc.stderr, f"{block.where} printed a traceback:\n{proc.stderr[-4000:]}"
+    if expected is not None:
+        assert proc.stdout == expected, f"{block.where}: output differs from the README's:\n{proc.stdout}"
+
+
+# --------------------------------------------------------------------------- every run
+
+
+def test_every_block_is_accounted_for():
+    blocks = readme_blocks()
+    assert len(runnable(blocks)) >= 4
+    for b in blocks:
+        assert b.mark in (None, *MARKS), f"{b.where}: unknown readme-test mark {b.mark!r} (known: {MARKS})"
+        if b.mark == "output":
+            before = blocks[blocks.index(b) - 1]
+            assert before.language in PYTHON, f"{b.where}: an output block must follow a Python block"
+        if re.search(r"(^|\s)\./dev\b", b.code):
+            assert b.mark == "slow", f"{b.where}: ./dev runs for minutes; mark the block slow"
+        if b.mark == "parse-only":
+            assert b.language in SHELL, f"{b.where}: only shell blocks can be parse-only"
+
+
+def test_blocks_and_marks_are_read_as_meant():
+    """The extractor on a hand-written README: marks, languages, nested fences, blank lines."""
+    text = "\n".join([
+        "intro", "```bash", "echo one", "```", "",
+        "<!-- readme-test: slow -->", "", "```python", "print(2)", "```",
+        "<!-- readme-test: output -->", "```text", "2", "```",
+        "````markdown", "```bash", "not a block", "```", "````",
+    ])  # fmt: skip
+    blocks = readme_blocks(text)
+    assert [(b.line, b.language, b.mark, b.code) for b in blocks] == [
+        (2, "bash", None, "echo one\n"),
+        (8, "python", "slow", "print(2)\n"),
+        (12, "text", "output", "2\n"),
+        (15, "markdown", None, "```bash\nnot a block\n```\n"),
+    ]
+    assert expected_output(blocks, blocks[1]) == "2\n"
+
+
+def test_fast_blocks_run(tmp_path):
+    """The unmarked blocks, in order, in one folder (the first look, the library snippet)."""
+    blocks = readme_blocks()
+    fast = [b for b in runnable(blocks) if b.mark is None]
+    assert fast, "no block runs on every test run"
+    for block in fast:
+        run_block(block, tmp_path, expected_output(blocks, block))
+
+
+def _parse_coassist(words: list[str], where: str) -> None:
+    """Parse one ``coassist …`` command line with the CLI's own parser, without running it."""
+    from coassist.cli import app
+
+    group = typer.main.get_command(app)
+    parent = group.context_class(group, info_name="coassist")  # typer's own (vendored) click
+    command = group.get_command(parent, words[0]) if words else None
+    if command is None:
+        raise AssertionError(f"{where}: `coassist {' '.join(words)}`: no such command")
+    try:
+        command.make_context(words[0], list(words[1:]), parent=parent)
+    except Exception as exc:  # noqa: BLE001 -- typer vendors click: its UsageError is not click's
+        message = exc.format_message() if hasattr(exc, "format_message") else repr(exc)
+        raise AssertionError(f"{where}: `coassist {' '.join(words)}`: {message}") from None
+
+
+def test_parse_only_blocks_parse():
+    blocks = [b for b in readme_blocks() if b.mark == "parse-only"]
+    for block in blocks:
+        syntax = subprocess.run(["bash", "-n", "-c", block.code], capture_output=True, text=True)
+        assert syntax.returncode == 0, f"{block.where}: {syntax.stderr}"
+        commands = 0
+        for line in block.code.splitlines():
+            words = shlex.split(line, comments=True)
+            if words and Path(words[0]).name == "coassist":
+                _parse_coassist(words[1:], block.where)
+                commands += 1
+        assert commands, f"{block.where}: a parse-only block without a coassist command"
+
+
+def test_parse_only_catches_bad_lines():
+    """The parser check is not vacuous: a misspelt option or a bad value is caught."""
+    for words in (["drive", "--wrold", "mujoco"], ["drive", "--rate", "fast"], ["train", "--out", "m"]):
+        with pytest.raises(AssertionError, match="coassist"):
+            _parse_coassist(words, "test")
+    _parse_coassist(["drive", "--world", "mujoco", "--rate", "500"], "test")
+
+
+def _claim_counts(text: str) -> tuple[int, int, int]:
+    """(held, total) as the sentence states them, and held as the table's rows count them."""
+    section = text[text.index("## What the main job measured") :]
+    section = section[: section.index("\n## ", 5)]
+    stated = re.search(r"(\d+) of the (\d+) claims checked hold", section)
+    assert stated, "the claims sentence is missing"
+    held = total = 0
+    for row in re.findall(r"^\|(.+)\|$", section, flags=re.M):
+        cells = [c.strip() for c in row.split("|")]
+        if len(cells) < 3 or cells[1] in ("verdict", "---") or set(cells[1]) <= {"-"}:
+            continue
+        n = int(m.group(1)) if (m := re.search(r"\((\d+) claims\)", cells[0])) else 2 if "(board, heavy)" in cells[0] else 1
+        total += n
+        held += n if cells[1].strip("*") in ("holds", "hold") else 0
+    assert total == int(stated.group(2)), f"the table has {total} claims, the sentence says {stated.group(2)}"
+    return int(stated.group(1)), total, held
+
+
+def test_claims_count_agrees_with_the_table():
+    stated, total, held = _claim_counts(README.read_text(encoding="utf-8"))
+    assert stated == held, f"the sentence says {stated} of {total} hold, the table's verdicts count {held}"
+
+
+# --------------------------------------------------------------------------- pytest -m slow
+
+
+@pytest.mark.slow
+def test_all_blocks_run(tmp_path):
+    """Every block but parse-only ones, in order, in one folder: what a reader following the README runs.
+
+    The ``./dev`` block (the main job, 10 minutes, and the whole test suite) is run by
+    :func:`test_dev_entry_points`.
+    """
+    blocks = readme_blocks()
+    for block in runnable(blocks):
+        if block.mark == "parse-only" or re.search(r"(^|\s)\./dev\b", block.code):
+            continue
+        run_block(block, tmp_path, expected_output(blocks, block))
+
+
+@pytest.mark.slow
+def test_dev_entry_points():
+    """The set-up block (``./dev run``, ``./dev test``), from the repository root, as written."""
+    for block in runnable(readme_blocks()):
+        if re.search(r"(^|\s)\./dev\b", block.code):
+            run_block(block, ROOT)
