@@ -180,6 +180,10 @@ class MujocoUR5World:
     gravity : False turns gravity off (tests).
     realtime : pace :meth:`apply` to the wall clock (a viewer).
     view : open MuJoCo's passive viewer (needs a display), synced every period.
+    q_seed : (6,) the joint configuration the start IK begins from [rad]; None:
+        :data:`~coassist.robot.ur5_mjcf.Q_SEED`.
+    servo_bandwidth : [Hz] the bandwidth of the computed-torque servo's critically damped
+        position/velocity loop (ω = 2π·bandwidth: how stiffly each joint tracks its reference).
     """
 
     command_space = "joint_velocity"
