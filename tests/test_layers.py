@@ -13,7 +13,7 @@ from pathlib import Path
 import coassist
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("(root)", "_checks", "_io", "interfaces", "config", "spatial"),  # shared vocabulary and rigid-body math
+    ("(root)", "_checks", "_io", "interfaces", "config", "spatial", "registry"),  # shared vocabulary and rigid-body math
     ("model", "data", "metrics"),  # the impedance model; trials on disk; metrics
     ("control",),  # games, baselines, guarded controllers (pure control laws)
     ("intent", "runtime"),  # the predictor; the control loop, wrench pipeline, safety
@@ -23,7 +23,9 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("cli",),  # the command line
 )
 #: Imports between packages of the same layer that are allowed.
-SIBLINGS_ALLOWED: set[tuple[str, str]] = {("config", "_checks"), ("spatial", "_checks")}
+SIBLINGS_ALLOWED: set[tuple[str, str]] = {
+    ("config", "_checks"), ("spatial", "_checks"), ("interfaces", "_checks"), ("config", "registry"),
+}  # fmt: skip
 
 RANK = {name: i for i, layer in enumerate(LAYERS) for name in layer}
 SRC = Path(coassist.__file__).parent

@@ -1,7 +1,9 @@
 """Input validation shared by the parameter classes.
 
 Every check raises ``ValueError`` whose message names the offending field, so a
-user who mistypes one entry of a config learns which one.
+user who mistypes one entry of a config learns which one. An integer is a Python or
+NumPy integer, never a ``bool``; :func:`is_integer` and :func:`is_real_number` are the
+predicates for callers that word their own errors (manifests, wire messages).
 """
 
 from __future__ import annotations
@@ -63,9 +65,40 @@ def check_positive_scalar(value: float, name: str) -> float:
     return out
 
 
-def check_int_at_least(value: int, name: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+def is_integer(value: object) -> bool:
+    """True for a Python or NumPy integer; ``bool`` (an ``int`` subclass) is not one."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+def is_real_number(value: object) -> bool:
+    """True for a Python or NumPy integer or float (not ``bool``); finiteness is not checked."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+
+
+def check_int(value: int, name: str, minimum: int | None = None, maximum: int | None = None) -> int:
+    """Return ``value`` as a Python ``int`` if it is an integer in [minimum, maximum].
+
+    NumPy integers are accepted, ``bool`` is not (``True`` is no count). Either bound
+    may be left out.
+    """
+    if not is_integer(value):
         raise ValueError(f"{name} must be an integer, got {value!r}")
-    if value < minimum:
+    if minimum is not None and value < minimum:
         raise ValueError(f"{name} must be >= {minimum}, got {value}")
+    if maximum is not None and value > maximum:
+        raise ValueError(f"{name} must be <= {maximum}, got {value}")
     return int(value)
+
+
+def check_int_at_least(value: int, name: str, minimum: int) -> int:
+    """Return ``value`` as a Python ``int`` if it is an integer >= ``minimum``."""
+    return check_int(value, name, minimum)
+
+
+def check_optional_int(value: int | None, name: str, minimum: int | None = None) -> int | None:
+    """``None``, or ``value`` as a Python ``int`` if it is an integer >= ``minimum``."""
+    if value is None:
+        return None
+    if not is_integer(value):
+        raise ValueError(f"{name} must be an integer or None, got {value!r}")
+    return check_int(value, name, minimum)

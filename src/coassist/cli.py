@@ -6,16 +6,19 @@ library; no computation lives here.
 
 from __future__ import annotations
 
-import difflib
 import os
 import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import NoReturn
+from typing import NoReturn, TypeVar
 
 import typer
 from rich.console import Console
 from rich.markup import escape
+
+from coassist.registry import Registry, UnknownNameError, unknown_name_message
+
+T = TypeVar("T")
 
 app = typer.Typer(
     help="coassist — assistive pHRI: cooperative game-theoretic MPC with learned human intent.",
@@ -56,9 +59,15 @@ def _choose(value: str, choices: Iterable[str], option: str, what: str) -> str:
     choices = list(choices)
     if value in choices:
         return value
-    close = difflib.get_close_matches(value, choices, n=1, cutoff=0.5)
-    hint = f"; did you mean {close[0]!r}?" if close else ""
-    _fail(f"{option} {value!r}: no such {what}{hint} (choose from: {', '.join(choices)})", 2)
+    _fail(f"{option} {unknown_name_message(value, choices, what)}", 2)
+
+
+def _lookup(registry: Registry[T], name: str, option: str) -> T:
+    """The preset ``name`` of ``registry`` (any kind), else fail naming the option, with a "did you mean"."""
+    try:
+        return registry.lookup(name)
+    except UnknownNameError as exc:
+        _fail(f"{option} {exc}", 2)
 
 
 def _existing_ancestor(path: Path) -> Path:
@@ -122,6 +131,13 @@ def _check_device(device: str | None, option: str = "--device") -> None:
         _fail(f"{option} {device}: use cpu, cuda or cuda:<n>", 2)
 
 
+def _set_torch_threads(threads: int) -> None:
+    """Torch's intra-op thread count for this process: the command's choice (the library never sets it)."""
+    import torch
+
+    torch.set_num_threads(threads)
+
+
 def _wrote(text: str) -> None:
     console.print(f"[green]wrote[/] {escape(text)}", highlight=False, soft_wrap=True)  # paths stay whole
 
@@ -167,9 +183,9 @@ def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, 
 
     from coassist.intent.training import PRESETS, with_overrides
 
-    _choose(preset, PRESETS, "--preset", "intent-model preset")
+    chosen = _lookup(PRESETS, preset, "--preset")
     try:
-        p = with_overrides(PRESETS[preset], **overrides)
+        p = with_overrides(chosen, **overrides)
         sizes = {k: v for k, v in (network or {}).items() if v is not None}
         if sizes:
             p = replace(p, **sizes)
@@ -261,6 +277,7 @@ def train(
                        test_fraction=test_fraction, init=init, device=device, optimizer=optimizer)  # fmt: skip
     _check_device(device)
     trials = _intent_trials(data, skip_bad_trials)
+    _set_torch_threads(p.train.threads)
     try:
         with OutputLock(out):
             model = train_model(trials, p, p.train, progress=True, checkpoint_to=out)
@@ -349,6 +366,7 @@ def tune(
         _file_out(sqlite_file, "--storage", "study.db")
     p = _intent_preset(preset)
     trials = _intent_trials(data)
+    _set_torch_threads(p.train.threads)
     try:
         result = run_study(trials, p, n_trials=n_trials, storage=storage, study_name=study_name, epochs=epochs,
                            seed=seed, progress=True)  # fmt: skip
@@ -419,7 +437,7 @@ def collect(
     from coassist.sim.collect import collect_dataset
 
     _choose(controller, CONTROLLER_KINDS, "--controller", "controller")
-    _choose(preset, PRESETS, "--preset", "control preset")
+    _lookup(PRESETS, preset, "--preset")
     for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
         if value is not None and value < minimum:
             _fail(f"{option} must be >= {minimum}, got {value}", 2)
@@ -487,7 +505,7 @@ def drive(
 
     _choose(world, WORLDS, "--world", "world")
     _choose(controller, CONTROLLERS, "--controller", "controller")
-    _choose(preset, CONTROL_PRESETS, "--preset", "control preset")
+    _lookup(CONTROL_PRESETS, preset, "--preset")
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
         config = DriveConfig(world=world, controller=controller, task=task, object=obj, preset=preset, intent=intent,
@@ -647,7 +665,7 @@ def reproduce(
 
     from coassist.experiments import reproduce as rep
 
-    _choose(preset, rep.PRESETS, "--preset", "reproduce preset")
+    chosen = _lookup(rep.PRESETS, preset, "--preset")
     _check_device(device)
     changes = {"seed": seed}
     if workers is not None:
@@ -661,11 +679,12 @@ def reproduce(
             _fail(f"--real-data {real_data}: has no user-a/ folder of recordings", 2)
         changes["real_data"] = str(real_data)
     try:
-        config = replace(rep.PRESETS[preset], **changes)
+        config = replace(chosen, **changes)
     except ValueError as exc:
         _fail(_typed(str(exc), {"reproduce.seed": "--seed", "reproduce.workers": "--workers",
                                 "reproduce.device": "--device"}), 2)  # fmt: skip
     _folder_out(out, "--out")
+    _set_torch_threads(config.threads)  # training runs in this process
     summary = rep.run_reproduce(config, out, progress=True, say=lambda line: console.print(line, highlight=False))
     held = sum(1 for c in summary["claims"] if c["holds"])
     console.print(f"claims: {held} of {len(summary['claims'])} hold")

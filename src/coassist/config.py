@@ -6,11 +6,12 @@ field. Matrices that are diagonal in the thesis are given as their diagonals.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from coassist._checks import check_int_at_least, check_positive_scalar
+from coassist.registry import Registry
 
 
 def _diag(values, name: str, length: int | None = None, *, positive: bool = False) -> tuple[float, ...]:
@@ -127,3 +128,38 @@ THESIS_EVALUATION = ControlPreset(name="thesis-evaluation")
 THESIS_APPLICATION = ControlPreset(
     name="thesis-application", game=GameParameters(alpha=0.9, R_r=(1e-4, 1e-4))
 )
+
+
+def scale_positions(preset: ControlPreset, scale: float, name: str) -> ControlPreset:
+    """The preset with outputs in units of 1/scale m: every Q multiplied by scale².
+
+    The thesis' weights in SI units make the robot's effort tiny (≈0.06 N per cm of
+    error, see coassist.experiments.dmpc_study); in decimetres (scale 10) the robot
+    assists with a few N per cm, like the thesis' figures.
+    """
+    g = preset.game
+    s2 = float(scale) ** 2
+    game = replace(g, **{q: tuple(s2 * v for v in getattr(g, q)) for q in ("Q_hh", "Q_hr", "Q_rh", "Q_rr")})
+    return replace(preset, name=name, game=game)
+
+
+#: Position scale of the "-dm" presets: positions in decimetres.
+DECIMETRE_SCALE = 10.0
+#: Position scale of the "thesis-application-damped" preset. A learned predictor predicts
+#: the tool's future pose, to first order an extrapolation of the robot's own motion, so
+#: the robot's gain on it is velocity feedback (coassist.control.game.extrapolation_feedback):
+#: in decimetres (scale 10) it removes 67.5 of the plant's 100 N·s/m and the coupled loop
+#: with the operator's arm (550–1300 N/m, 80 ms reflex delay) rings at every turn. Scale 5
+#: is the largest round scale that leaves at least half (53.6 N·s/m): derived from the
+#: gains, not tuned on trials (tests/control/test_game.py checks both numbers).
+APPLICATION_DAMPED_SCALE = 5.0
+
+#: Control presets by name: the thesis' (SI units), the same in decimetres ("-dm"), and the
+#: application weights at APPLICATION_DAMPED_SCALE ("-damped").
+CONTROL_PRESETS: Registry[ControlPreset] = Registry("control preset", {
+    THESIS_EVALUATION.name: THESIS_EVALUATION,
+    THESIS_APPLICATION.name: THESIS_APPLICATION,
+    "thesis-evaluation-dm": scale_positions(THESIS_EVALUATION, DECIMETRE_SCALE, "thesis-evaluation-dm"),
+    "thesis-application-dm": scale_positions(THESIS_APPLICATION, DECIMETRE_SCALE, "thesis-application-dm"),
+    "thesis-application-damped": scale_positions(THESIS_APPLICATION, APPLICATION_DAMPED_SCALE, "thesis-application-damped"),
+})  # fmt: skip

@@ -30,6 +30,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from coassist._checks import is_real_number
+
 __all__ = [
     "FEATURES",
     "Fault",
@@ -181,8 +183,9 @@ class PlausibilityLimits:
     def __post_init__(self) -> None:
         for name in ("max_distance", "max_speed"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
+            if not is_real_number(v) or not np.isfinite(v) or v <= 0:
                 raise ValueError(f"PlausibilityLimits.{name} must be a finite number > 0, got {v!r}")
+            object.__setattr__(self, name, float(v))
 
 
 def prediction_plausible(positions: np.ndarray, pose: np.ndarray, dt: float,

@@ -29,7 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from coassist._checks import check_positive_scalar
+from coassist._checks import check_positive_scalar, is_integer
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike
 
@@ -107,7 +107,7 @@ def _as_prediction(prediction: ArrayLike, pose: np.ndarray) -> np.ndarray:
 
 
 def _check_horizon(horizon: int, available: int) -> int:
-    if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)):
+    if not is_integer(horizon):
         raise ValueError(f"horizon must be an integer number of samples, got {horizon!r}")
     if not 1 <= horizon <= available:
         raise ValueError(f"horizon must be between 1 and the prediction's H = {available}, got {horizon}")

@@ -1,12 +1,54 @@
-"""The whole pipeline on the tiny preset: every stage runs, the report and summary agree."""
+"""The whole pipeline on the tiny preset: every stage runs, the report and summary agree,
+and every claim's verdict and numbers are recomputed here from the summary.
+
+Also (fast): the seed plan gives no two collections a common trial seed.
+"""
 
 import json
 import re
 from dataclasses import replace
+from itertools import pairwise
 
+import numpy as np
 import pytest
 
+from coassist.experiments import pipeline
 from coassist.experiments import reproduce as rep
+from coassist.experiments.transfer import transfer_targets
+
+
+def _collections(cfg):
+    """(name, first seed, trial count) of every simulated collection of a run, from the seed plan."""
+    n_tasks = len(pipeline.ITERATION_TASKS)
+    out = [(f"D{k}", pipeline.iteration_seed(cfg.seed, k), n_tasks * cfg.trials_per_task) for k in range(cfg.iterations + 1)]
+    for i, (name, t) in enumerate(transfer_targets(cfg).items()):
+        train, test = pipeline.transfer_seeds(cfg.seed, i)
+        per = len(t.tasks) * len(t.users) * len(t.objects)
+        out += [(f"TL {name}", train, per * t.trials), (f"TL {name} test", test, per * t.test_trials)]
+    out.append(("TL heavy", pipeline.heavy_transfer_seed(cfg.seed), n_tasks * max(1, cfg.transfer_trials // 3)))
+    for j in range(2):  # every controller of object j reuses the same seeds on purpose
+        out.append((f"application {j}", pipeline.application_seed(cfg.seed, j), cfg.application_trials))
+    return out
+
+
+# Known overlap, kept so that runs stay comparable with earlier ones (reported in issue 12):
+# with 4 iterations D_4 starts at seed + 500_000, where the "z trajectory" transfer target starts.
+_D4_OVERLAP = pytest.mark.xfail(strict=True, reason="D_4 and the z-trajectory transfer set share seeds 500000..")
+
+
+@pytest.mark.parametrize("name", [pytest.param("default", marks=_D4_OVERLAP), "tiny", pytest.param("thesis", marks=_D4_OVERLAP)])
+def test_no_two_collections_share_a_trial_seed(name):
+    spans = sorted(_collections(pipeline.PRESETS[name]), key=lambda c: c[1])
+    for (a, sa, na), (b, sb, _) in pairwise(spans):
+        assert sa + na <= sb, f"{a} (seeds {sa}..{sa + na - 1}) overlaps {b} (from {sb})"
+
+
+def test_seed_plan_reproduces_the_former_offsets():
+    # The offsets the pipeline used before they were named: the same seeds give the same datasets.
+    assert pipeline.iteration_seed(7, 2) == 7 + 300_000
+    assert pipeline.transfer_seeds(7, 2) == (7 + 540_000, 7 + 550_000)
+    assert pipeline.heavy_transfer_seed(7) == 7 + 800_000
+    assert pipeline.application_seed(7, 1) == 7 + 901_000
 
 
 @pytest.fixture(scope="module")
@@ -26,6 +68,7 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
     for errors in it["in_loop_errors"].values():
         assert set(errors) == {5, 10, 20, 50} and all(v["e_rms"] > 0 for v in errors.values())
     assert len(it["deltas_e_rms_50"]) == 1
+    assert it["m0_on_d1_e_rms_50"] > 0
     assert set(summary["transfer"]) >= {"z trajectory", "new users", "board"}
     for target in ("z trajectory", "new users", "board"):
         assert set(summary["transfer"][target]["e_rms"]) == {"M_prev", "transfer", "finetune_all", "scratch", "nominal", "constant_velocity", "constant_acceleration", "ridge"}
@@ -34,8 +77,88 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
     for result in summary["application"].values():  # the smoothness and stability measures, per trial
         for name in ("f_rms", "sigma", "overshoot", "jerk_rms", "tracking_error_rms", "peak_effort_ratio"):
             assert len(result[f"{name}_trials"]) == rep.PRESETS["tiny"].application_trials
+            finite = [v for v in result[f"{name}_trials"] if np.isfinite(v)]
+            if finite:  # the mean is over the trials' finite values (σ: those that reached the target)
+                assert result[name] == pytest.approx(np.mean(finite))
     for key in ("M0", "M1", "TL-board-transfer", "TL-heavy-transfer"):
         assert (out / "models" / key / "history.json").is_file()
+
+
+def inf(x):
+    """NaN (no trial reached the target) as +inf, for "smaller than" comparisons."""
+    return np.inf if not np.isfinite(x) else x
+
+
+def _mm(x, digits=1):
+    return f"{x * 1000:.{digits}f}"
+
+
+def _expected_claims(summary):
+    """Each claim's verdict and the numbers its evidence must print, recomputed from the summary."""
+    out = {}
+    obs = summary["dmpc_sweep"]["observations"]
+    for key, text in (("higher_alpha_tracks_human_reference", "Higher α"), ("lower_R_r_tracks_better", "Lower R_r"),
+                      ("longer_horizon_tracks_better", "A longer prediction horizon")):
+        out[text] = (bool(obs[key]["holds"]), [])
+    it = summary["iterative"]
+    err = it["in_loop_errors"]
+    models = [k for k in err if k != "nominal"]
+    e50 = [err[m][50]["e_rms"] for m in models]
+    drops = [a - b for a, b in pairwise(e50)]
+    out["Iterating lowers e_RMS"] = (e50[-1] < e50[0] and drops[0] == max(drops) and drops[0] > 0,
+                                     [f"M{k} {_mm(e)} mm" for k, e in enumerate(e50)] + [_mm(err["nominal"][50]["e_rms"])])
+    hs = sorted(err["M0"])
+    grows = all(err[m][a]["e_rms"] < err[m][b]["e_rms"] for m in models for a, b in pairwise(hs))
+    out["e_RMS grows with the prediction horizon"] = (grows, [_mm(err[m][h]["e_rms"]) for m in models for h in hs])
+    tr = {k: v for k, v in summary["transfer"].items() if k != "iteration_seconds"}
+    out["Transfer with"] = (all(r["e_rms"]["transfer"][50] < r["e_rms"]["M_prev"][50] for r in tr.values()),
+                            [_mm(r["e_rms"][p][50]) for r in tr.values() for p in ("M_prev", "transfer")])
+    own = it["final_model_offline_e_rms"][50]
+    it_trials = sum(w["trials"] for w in it["work"])
+    it_windows = sum(w["windows_trained"] for w in it["work"])
+    out["Transfer approaches"] = (
+        all(r["e_rms"]["transfer"][50] <= 1.25 * own and r["work"]["trials"] / it_trials < 0.5
+            and r["work"]["windows_trained"] / it_windows < 0.5 for r in tr.values()),
+        [_mm(own), f"{it_trials} trials", f"{it_windows} windows"] + [f"{r['work']['trials']} trials" for r in tr.values()])
+    out["Freezing the LSTM"] = (all(r["e_rms"]["transfer"][50] <= r["e_rms"]["scratch"][50] for r in tr.values()),
+                                [_mm(r["e_rms"][p][50]) for r in tr.values() for p in ("transfer", "finetune_all", "scratch")])
+    app = summary["application"]
+    for obj in ("board", "heavy"):
+        a, i, m = (app[f"{obj}/{c}"] for c in ("cooperative", "impedance", "manual"))
+        forces = [f"{a['f_rms']:.2f} N", f"{m['f_rms']:.2f} N", f"{i['f_rms']:.2f} N"]
+        out[f"{obj}: the assistive controller needs less"] = (a["f_rms"] < min(m["f_rms"], i["f_rms"]), forces)
+        out[f"{obj}: manual guidance needs less"] = (m["f_rms"] < i["f_rms"], forces)
+        out[f"{obj}: the assistive controller reaches"] = (
+            bool(np.isfinite(a["sigma"]) and a["sigma"] < inf(m["sigma"]) and a["sigma"] < inf(i["sigma"])
+                 and a["reached"] >= max(m["reached"], i["reached"])), [f"{a['reached']}/", f"{m['reached']}/"])
+        for variant in ("cooperative", "cooperative-arbitrated"):
+            v = app[f"{obj}/{variant}"]
+            saving = 1 - v["f_rms"] / m["f_rms"]
+            out[f"{obj}: {variant} needs ≥"] = (
+                bool(saving >= 0.30 and np.isfinite(v["sigma"]) and v["sigma"] <= inf(m["sigma"])
+                     and v["reached"] >= m["reached"] and v["overshoot"] <= m["overshoot"]),
+                [f"force {100 * saving:.0f} %", f"{v['jerk_rms']:.2f} vs MG {m['jerk_rms']:.2f}"])
+    if "user_a" in summary["real"]:
+        ev = summary["real"]["user_a"]
+        best = ev["best_baseline"]
+        out["On held-out real user-a data the model is no worse"] = (
+            all(b["gain"] >= 0 for b in best.values()), [f"{b['model_e_rms'] * 1e3:.3f} mm" for b in best.values()])
+        ridge, model = ev["results"]["ridge"]["50"]["e_rms"], ev["results"]["model"]["50"]["e_rms"]
+        out["On held-out real user-a data the model beats"] = (
+            model <= 0.85 * ridge, [f"model {model * 1e3:.3f} mm", f"{ridge * 1e3:.3f} mm", f"{100 * (ridge - model) / ridge:+.1f} %"])
+    return out
+
+
+def test_every_claim_agrees_with_the_summary(tiny_run):
+    _, summary = tiny_run
+    expected = _expected_claims(summary)
+    claims = summary["claims"]
+    assert len(claims) == len(expected)
+    for prefix, (holds, numbers) in expected.items():
+        (claim,) = [c for c in claims if c["claim"].startswith(prefix)]
+        assert claim["holds"] is holds, claim["claim"]
+        for number in numbers:
+            assert number in claim["evidence"], (claim["claim"], number, claim["evidence"])
 
 
 def test_report_is_complete_and_consistent_with_the_summary(tiny_run):
@@ -55,3 +178,7 @@ def test_report_is_complete_and_consistent_with_the_summary(tiny_run):
     assert top.count("class='holds'") == sum(c["holds"] for c in claims)
     assert top.count("class='fails'") == sum(not c["holds"] for c in claims)
     assert len(re.findall(r"data:image/png;base64,", html)) >= 6
+    # numbers the prose derives from the run, not from text
+    m0 = summary["iterative"]["m0_on_d1_e_rms_50"]
+    assert f"in this run: {m0 * 1000:.1f} mm" in html
+    assert "200 N/m spring" in html  # coassist.sim.world.IMPEDANCE_STIFFNESS

@@ -34,3 +34,19 @@ def test_bad_options_are_reported(tmp_path):
     assert res.exit_code != 0 and "--preset 'huge': no such intent-model preset" in res.output
     res = runner.invoke(app, ["train", str(tmp_path), "--out", str(tmp_path / "m"), "--init", "warm:x"])
     assert res.exit_code != 0 and "--init must be" in res.output and "train.init" not in res.output
+
+
+def test_train_command_sets_the_torch_threads_it_is_given(tmp_path):
+    # train_model leaves torch's global state alone; the command is where --threads applies.
+    import torch
+
+    write_dataset([make_trial(i, n=220) for i in range(3)], tmp_path / "D0", "D0")
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        res = CliRunner().invoke(app, ["train", str(tmp_path / "D0"), "--out", str(tmp_path / "m"), "--epochs", "1",
+                                       "--threads", "2", "--batch-size", "256"])  # fmt: skip
+        assert res.exit_code == 0, res.output
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)

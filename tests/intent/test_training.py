@@ -96,6 +96,26 @@ def test_xavier_init_and_zero_biases():
     assert all(float(p.detach().abs().max()) == 0.0 for n, p in net.named_parameters() if "bias" in n)
 
 
+def test_initial_weights_come_from_the_given_generator_only():
+    cfg = NetworkConfig(n_features=4, n_outputs=6, lstm_layers=2, hidden=5, fc=(7,), skip_inputs=12)
+    global_state = torch.get_rng_state()
+    a, b, c = (IntentNet(cfg, generator=torch.Generator().manual_seed(s)) for s in (3, 3, 4))
+    assert torch.equal(torch.get_rng_state(), global_state)  # building a network draws nothing from it
+    sa, sb, sc = a.state_dict(), b.state_dict(), c.state_dict()
+    assert all(torch.equal(sa[k], sb[k]) for k in sa)
+    assert not torch.equal(sa["lstm.weight_ih_l0"], sc["lstm.weight_ih_l0"])
+
+
+def test_training_leaves_torch_global_state_alone(trials, tiny):
+    threads = torch.get_num_threads()
+    cfg = TrainConfig(**{**tiny.train.__dict__, "threads": threads + 1})
+    torch.manual_seed(123)
+    global_state = torch.get_rng_state()
+    train_model(trials, tiny, cfg)
+    assert torch.get_num_threads() == threads  # the thread count is the CLI's to set
+    assert torch.equal(torch.get_rng_state(), global_state)
+
+
 def test_thesis_preset_is_the_thesis_network():
     from coassist.intent import PRESETS
 

@@ -105,6 +105,8 @@ def _as_numbers(value: object) -> np.ndarray | None:
     pass as numbers. Anything that fails to convert (``__float__`` raising, an int too
     large for a float, a torch tensor requiring grad) is refused too.
     """
+    if type(value) is np.ndarray and value.dtype == np.float64:
+        return value  # the loop's own arrays: already what the law needs (the common, per-tick case)
     try:
         if isinstance(value, np.ndarray):
             arr = value
@@ -207,23 +209,23 @@ class _GuardedController:
                 and self._ref_ok(ref_r)
             ):
                 return self._refuse(Fault.INVALID_INPUT)
-            fault = Fault.NONE
-            if not np.isfinite(z).all():
-                fault |= Fault.NONFINITE_STATE
-            if not (np.isfinite(ref_h).all() and np.isfinite(ref_r).all()):
-                fault |= Fault.NONFINITE_REFERENCE
-            if not np.isfinite(wrench).all():
-                fault |= Fault.NONFINITE_WRENCH
-            if fault:
-                return self._refuse(fault)
             bound = self._state_bound
+            # NaN fails every comparison: inputs within their bounds are finite too (one pass per
+            # array in the common case); otherwise find out which input is bad, and how.
             if not (
                 (np.abs(z) <= bound).all()
                 and (np.abs(ref_h) <= bound).all()
                 and (np.abs(ref_r) <= bound).all()
                 and (np.abs(wrench) <= self.bounds.wrench).all()
             ):
-                return self._refuse(Fault.INVALID_INPUT)
+                fault = Fault.NONE
+                if not np.isfinite(z).all():
+                    fault |= Fault.NONFINITE_STATE
+                if not (np.isfinite(ref_h).all() and np.isfinite(ref_r).all()):
+                    fault |= Fault.NONFINITE_REFERENCE
+                if not np.isfinite(wrench).all():
+                    fault |= Fault.NONFINITE_WRENCH
+                return self._refuse(fault or Fault.INVALID_INPUT)
             if self._reads_first_row_only:
                 ref_h, ref_r = ref_h[:1], ref_r[:1]
             u_h, u_r = self._law(z, ref_h, ref_r)

@@ -43,6 +43,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 import coassist
+from coassist._checks import check_int, is_integer
 from coassist._io import OutputLock, atomic_write, partial_folder, remove_stale, staged_folder, swap_in
 from coassist.data.trial import MAX_DOF, Trial, TrialMeta
 
@@ -314,7 +315,7 @@ def _read_manifest(folder: Path) -> dict[str, Any]:
     if manifest.get("format") != DATASET_FORMAT:
         raise ManifestError(f"{path}: 'format' is {manifest.get('format')!r}, expected {DATASET_FORMAT!r}")
     version = manifest["format_version"]
-    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+    if not is_integer(version) or version < 1:
         raise ManifestError(f"{path}: 'format_version' must be an integer >= 1, got {json.dumps(version)}")
     if version > FORMAT_VERSION:
         raise ManifestError(f"{path}: format version {version} is newer than this coassist reads ({FORMAT_VERSION})")
@@ -520,7 +521,7 @@ def read_dataset_trial(folder: str | os.PathLike[str], index: int) -> Trial:
     """Only trial ``index`` (manifest order) of a dataset folder: other trials are not read."""
     folder = Path(folder)
     entries = _read_manifest(folder)["trials"]
-    if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < len(entries):
+    if not is_integer(index) or not 0 <= index < len(entries):
         raise ValueError(f"{folder}: index must be in [0, {len(entries)}), got {index!r}")
     return _read_entry(folder, entries[index])
 
@@ -560,8 +561,7 @@ class DatasetWriter:
     ) -> None:
         self.folder = Path(folder)
         self.dataset_id = _check_id(dataset_id)
-        if isinstance(n_trials, bool) or not isinstance(n_trials, int) or n_trials < 1:
-            raise ValueError(f"n_trials must be an int >= 1, got {n_trials!r}")
+        n_trials = check_int(n_trials, "n_trials", 1)
         if not isinstance(key, str) or not key:
             raise ValueError(f"key must be a non-empty string, got {key!r}")
         self.n_trials, self.key, self.description, self.overwrite = n_trials, key, description, overwrite
@@ -621,7 +621,7 @@ class DatasetWriter:
 
     def add(self, index: int, trial: Trial) -> Path:
         """Write trial ``index`` (0 … n_trials−1) now."""
-        if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < self.n_trials:
+        if not is_integer(index) or not 0 <= index < self.n_trials:
             raise ValueError(f"index must be an int in [0, {self.n_trials}), got {index!r}")
         path = write_trial(trial, self.partial / _trial_file_name(index))
         self._done.add(index)

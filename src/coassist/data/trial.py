@@ -28,6 +28,8 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
+
+from coassist._checks import check_optional_int
 from numpy.typing import ArrayLike
 
 __all__ = ["GAP_FACTOR", "MAX_DOF", "SOURCES", "Trial", "TrialMeta", "time_gaps"]
@@ -113,10 +115,7 @@ class TrialMeta:
         _require_str(self.controller, "controller")
         if self.model_id is not None:
             _require_str(self.model_id, "model_id")
-        if self.seed is not None:
-            if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
-                raise ValueError(f"TrialMeta.seed must be an int or None, got {self.seed!r}")
-            object.__setattr__(self, "seed", int(self.seed))
+        object.__setattr__(self, "seed", check_optional_int(self.seed, "TrialMeta.seed"))
         if self.source not in SOURCES:
             raise ValueError(f"TrialMeta.source must be one of {SOURCES}, got {self.source!r}")
         if isinstance(self.dt, bool):

@@ -116,6 +116,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--train-stride", type=int, default=4, help="keep every n-th training window (as coassist reproduce)")
     ap.add_argument("--out", type=Path, default=Path("docs/intent-parameterisation.md"))
     args = ap.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(args.threads)  # a command's choice: the library leaves torch's threads alone
     from coassist.data import default_real_data
 
     args.data = args.data or default_real_data() / "user-a"

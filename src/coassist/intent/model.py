@@ -31,6 +31,7 @@ from safetensors import SafetensorError
 from safetensors.torch import load as st_load
 from safetensors.torch import save as st_save
 
+from coassist._checks import is_real_number
 from coassist._io import OutputLock, atomic_write_bytes, staged_folder
 from coassist.data import Trial
 from coassist.intent.features import (
@@ -258,7 +259,7 @@ def read_sidecar(folder: str | os.PathLike[str]) -> dict[str, Any]:
     if meta.get("format") != FORMAT:
         raise _fail(path, f"format {meta.get('format')!r}, expected {FORMAT!r}")
     dt = meta.get("dt")
-    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt <= 0:
+    if not is_real_number(dt) or not math.isfinite(dt) or dt <= 0:
         raise _fail(path, f"'dt' must be a finite number > 0 (s), got {json.dumps(dt)}")
     for key in ("window", "network", "input_scaler", "target_scaler"):
         if not isinstance(meta.get(key), dict):

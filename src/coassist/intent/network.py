@@ -18,15 +18,11 @@ from typing import Any
 import torch
 from torch import nn
 
+from coassist._checks import check_int
+
 __all__ = ["ACTIVATIONS", "IntentNet", "NetworkConfig"]
 
 ACTIVATIONS = {"silu": nn.SiLU, "relu": nn.ReLU, "tanh": nn.Tanh}
-
-
-def _int(value: Any, name: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return value
 
 
 @dataclass(frozen=True)
@@ -50,17 +46,16 @@ class NetworkConfig:
     skip_inputs: int = 0
 
     def __post_init__(self) -> None:
-        _int(self.n_features, "network.n_features", 1)
-        _int(self.n_outputs, "network.n_outputs", 1)
-        _int(self.lstm_layers, "network.lstm_layers", 0)
-        _int(self.hidden, "network.hidden", 1)
+        object.__setattr__(self, "n_features", check_int(self.n_features, "network.n_features", 1))
+        object.__setattr__(self, "n_outputs", check_int(self.n_outputs, "network.n_outputs", 1))
+        object.__setattr__(self, "lstm_layers", check_int(self.lstm_layers, "network.lstm_layers", 0))
+        object.__setattr__(self, "hidden", check_int(self.hidden, "network.hidden", 1))
         fc = tuple(self.fc) if isinstance(self.fc, (list, tuple)) else self.fc
         if not isinstance(fc, tuple):
             raise ValueError(f"network.fc must be a list of layer widths, got {self.fc!r}")
-        for i, w in enumerate(fc):
-            _int(w, f"network.fc[{i}]", 1)
+        fc = tuple(check_int(w, f"network.fc[{i}]", 1) for i, w in enumerate(fc))
         object.__setattr__(self, "fc", fc)
-        _int(self.skip_inputs, "network.skip_inputs", 0)
+        object.__setattr__(self, "skip_inputs", check_int(self.skip_inputs, "network.skip_inputs", 0))
         if self.skip_inputs and self.skip_inputs % self.n_features:
             raise ValueError(f"network.skip_inputs must be steps·n_features, got {self.skip_inputs}")
         if self.lstm_layers == 0 and not self.skip_inputs:
@@ -75,30 +70,37 @@ class NetworkConfig:
 
 
 class IntentNet(nn.Module):
-    """LSTM then FC: (B, steps, n_features) -> (B, n_outputs)."""
+    """LSTM then FC: (B, steps, n_features) -> (B, n_outputs).
 
-    def __init__(self, config: NetworkConfig) -> None:
+    ``generator`` draws the initial weights (:meth:`reset_parameters`); ``None`` uses
+    torch's global generator (fine when the weights are loaded afterwards).
+    """
+
+    def __init__(self, config: NetworkConfig, generator: torch.Generator | None = None) -> None:
         super().__init__()
         self.config = config
         self.lstm: nn.LSTM | None = None
         self.head: nn.Sequential | None = None
-        if config.lstm_layers:
-            self.lstm = nn.LSTM(config.n_features, config.hidden, config.lstm_layers, batch_first=True)
-            widths = (config.hidden, *config.fc, config.n_outputs)
-            layers: list[nn.Module] = []
-            for i, (a, b) in enumerate(zip(widths[:-1], widths[1:])):
-                if i:
-                    layers.append(ACTIVATIONS[config.activation]())
-                layers.append(nn.Linear(a, b))
-            self.head = nn.Sequential(*layers)
-        self.skip = nn.Linear(config.skip_inputs, config.n_outputs) if config.skip_inputs else None
-        self.reset_parameters()
+        # The layers' own default initialisation draws from torch's global generator and is
+        # overwritten below: restore that generator so building a network leaves it alone.
+        with torch.random.fork_rng(devices=[]):
+            if config.lstm_layers:
+                self.lstm = nn.LSTM(config.n_features, config.hidden, config.lstm_layers, batch_first=True)
+                widths = (config.hidden, *config.fc, config.n_outputs)
+                layers: list[nn.Module] = []
+                for i, (a, b) in enumerate(zip(widths[:-1], widths[1:])):
+                    if i:
+                        layers.append(ACTIVATIONS[config.activation]())
+                    layers.append(nn.Linear(a, b))
+                self.head = nn.Sequential(*layers)
+            self.skip = nn.Linear(config.skip_inputs, config.n_outputs) if config.skip_inputs else None
+        self.reset_parameters(generator)
 
-    def reset_parameters(self) -> None:
-        """Xavier/Glorot-uniform weights, zero biases (thesis ref. [25])."""
+    def reset_parameters(self, generator: torch.Generator | None = None) -> None:
+        """Xavier/Glorot-uniform weights drawn from ``generator``, zero biases (thesis ref. [25])."""
         for name, p in self.named_parameters():
             if p.dim() >= 2:
-                nn.init.xavier_uniform_(p)
+                nn.init.xavier_uniform_(p, generator=generator)
             else:
                 nn.init.zeros_(p)
 

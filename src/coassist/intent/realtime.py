@@ -59,6 +59,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import torch
 
+from coassist._checks import check_int, check_optional_int
 from coassist.interfaces import FEATURES, Fault, PlausibilityLimits, prediction_plausible
 from coassist.intent.model import IntentModel
 
@@ -97,16 +98,13 @@ class RealtimeConfig:
     plausibility: PlausibilityLimits = field(default_factory=PlausibilityLimits)
 
     def __post_init__(self) -> None:
-        if self.max_age is not None and (isinstance(self.max_age, bool) or not isinstance(self.max_age, int) or self.max_age < 0):
-            raise ValueError(f"realtime.max_age must be an integer >= 0, got {self.max_age!r}")
+        object.__setattr__(self, "max_age", check_optional_int(self.max_age, "realtime.max_age", 0))
         if self.backend not in BACKENDS:
             raise ValueError(f"realtime.backend must be one of {BACKENDS}, got {self.backend!r}")
-        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 1:
-            raise ValueError(f"realtime.threads must be an integer >= 1, got {self.threads!r}")
+        object.__setattr__(self, "threads", check_int(self.threads, "realtime.threads", 1))
         if not isinstance(self.threaded, bool):
             raise ValueError(f"realtime.threaded must be a bool, got {self.threaded!r}")
-        if isinstance(self.max_hold, bool) or not isinstance(self.max_hold, int) or self.max_hold < 0:
-            raise ValueError(f"realtime.max_hold must be an integer >= 0, got {self.max_hold!r}")
+        object.__setattr__(self, "max_hold", check_int(self.max_hold, "realtime.max_hold", 0))
         if not isinstance(self.plausibility, PlausibilityLimits):
             raise ValueError(f"realtime.plausibility must be a PlausibilityLimits, got {self.plausibility!r}")
 
@@ -393,8 +391,7 @@ class RealtimePredictor:
                         self._lock.notify()
                 else:
                     self._store(self._generation, self._k, window)
-        with self._lock:
-            latest = self._latest
+        latest = self._latest  # one attribute read: the worker replaces the tuple whole, never edits it
         age = -1 if latest is None else self._k - latest[1]
         if not 0 <= age <= self.max_age:
             return self._fallback(nominal, flags)

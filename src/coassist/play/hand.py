@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coassist._checks import check_positive_scalar
+from coassist._checks import check_positive_scalar, is_real_number
 
 __all__ = ["BrowserHand", "SpringDamper"]
 
@@ -49,7 +49,7 @@ class SpringDamper:
         for name in ("stiffness", "force_limit", "stale_after"):
             object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"SpringDamper.{name}"))
         c = self.damping
-        if isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c) or c < 0.0:
+        if not is_real_number(c) or not math.isfinite(c) or c < 0.0:
             raise ValueError(f"SpringDamper.damping must be a finite number >= 0 [N·s/m], got {c!r}")
         object.__setattr__(self, "damping", float(c))
 

@@ -23,6 +23,8 @@ import json
 import math
 from dataclasses import dataclass
 
+from coassist._checks import is_integer, is_real_number
+
 __all__ = ["MAX_MESSAGE_BYTES", "Abort", "InvalidMessage", "Ping", "Pointer", "Start", "parse_message"]
 
 #: Longest client message accepted [bytes]; a pointer message is about 70.
@@ -62,7 +64,7 @@ _FIELDS = {"pointer": {"type", "x", "y", "down", "seq"}, "start": {"type", "cont
 
 
 def _number(value, name: str, lo: float, hi: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if not is_real_number(value):
         raise InvalidMessage(f"{name} is not a number")
     v = float(value)
     if not math.isfinite(v) or not lo <= v <= hi:
@@ -71,9 +73,9 @@ def _number(value, name: str, lo: float, hi: float) -> float:
 
 
 def _seq(value) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < _MAX_SEQ:
+    if not is_integer(value) or not 0 <= value < _MAX_SEQ:
         raise InvalidMessage("seq is not an int in [0, 2^53)")
-    return value
+    return int(value)
 
 
 def parse_message(text, bounds: tuple[float, float, float, float], controllers: tuple[str, ...]):

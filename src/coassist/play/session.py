@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from coassist._checks import check_positive_scalar
+from coassist._checks import check_int, check_positive_scalar
 from coassist.data import Trial, TrialMeta, append_to_dataset, write_dataset
 from coassist.data.store import MANIFEST_NAME, read_dataset
 from coassist.interfaces import FEATURES, Fault, TrialContext
@@ -123,8 +123,7 @@ class PlayConfig:
         if not tasks or any(t not in TASK_KINDS for t in tasks):
             raise ValueError(f"PlayConfig.tasks must be names from {TASK_KINDS}, got {self.tasks!r}")
         object.__setattr__(self, "tasks", tasks)
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
-            raise ValueError(f"PlayConfig.seed must be an int >= 0, got {self.seed!r}")
+        object.__setattr__(self, "seed", check_int(self.seed, "PlayConfig.seed", 0))
         for name in ("motion_time", "time_limit"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"PlayConfig.{name}"))

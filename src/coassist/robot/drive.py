@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from coassist._checks import is_integer
 from coassist.config import ImpedanceParameters
 from coassist.data import Trial, TrialMeta
 from coassist.interfaces import FEATURES, TrialContext
@@ -111,7 +112,7 @@ class DriveConfig:
             raise bad("intent", "a model or 'nominal' on the real arm (the oracle knows the simulated operator's mind)")
         for name in ("user", "seed"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            if not is_integer(v) or v < 0:
                 raise bad(name, "an int >= 0")
         if self.rate_hz not in (125, 500):
             raise bad("rate_hz", "125 or 500")

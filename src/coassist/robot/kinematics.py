@@ -49,7 +49,7 @@ from numpy.typing import ArrayLike
 
 # The pure math lives below the runtime, so the loop can use it without the robot extra;
 # re-exported here because it is half of what a user of this module wants.
-from coassist._checks import check_positive_scalar
+from coassist._checks import check_int, check_positive_scalar
 from coassist.spatial import (
     _as_rotation,
     _as_vector,
@@ -373,8 +373,7 @@ def solve_ik(
     tol_position = check_positive_scalar(tol_position, "tol_position")
     tol_rotation = check_positive_scalar(tol_rotation, "tol_rotation")
     max_step = check_positive_scalar(max_step, "max_step")
-    if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) or max_iterations < 1:
-        raise ValueError(f"max_iterations must be an integer >= 1, got {max_iterations!r}")
+    max_iterations = check_int(max_iterations, "max_iterations", 1)
     lower, upper = kin.joint_position_limit[:, 0], kin.joint_position_limit[:, 1]
     err_p = err_r = math.inf
     for _ in range(int(max_iterations)):

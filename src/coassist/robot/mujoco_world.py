@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from coassist._checks import check_optional_int
 from coassist.robot.ur5_mjcf import Q_SEED, TOOLS, VELOCITY_LIMITS, build_ur5_model
 from coassist.runtime.world import Command, HandOperator, RobotState
 from coassist.spatial import _rotation_vector, rotation_vector  # rotation_vector: re-exported
@@ -241,8 +242,7 @@ class MujocoUR5World:
         q0 = Q_SEED if q_seed is None else np.asarray(q_seed, dtype=float)
         if q0.shape != (6,) or not np.isfinite(q0).all():
             raise ValueError(f"q_seed must be 6 finite joint angles [rad], got {q_seed!r}")
-        if isinstance(seed, bool) or not (seed is None or isinstance(seed, (int, np.integer))):
-            raise ValueError(f"seed must be an int or None, got {seed!r}")
+        seed = check_optional_int(seed, "seed")
 
         self.tool = tool
         self.dt = control_dt

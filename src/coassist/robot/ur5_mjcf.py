@@ -65,6 +65,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from coassist._checks import check_positive_scalar
 from coassist.robot.kinematics import ur5_urdf_path  # one place knows where the URDF is installed
 from coassist.sim.objects import get_object
 
@@ -185,16 +186,6 @@ def _patched_urdf() -> str:
     return text
 
 
-def _check_positive(value, name: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not (np.isfinite(v) and v > 0.0):
-        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
-    return v
-
-
 def _as_point(value, name: str) -> np.ndarray:
     arr = np.asarray(value, dtype=float)
     if arr.shape != (3,) or not np.isfinite(arr).all():
@@ -218,8 +209,8 @@ def build_ur5_spec(
     gravity : False sets gravity to zero.
     """
     geometry = tool_geometry(tool)
-    physics_dt = _check_positive(physics_dt, "physics_dt")
-    servo_time_constant = _check_positive(servo_time_constant, "servo_time_constant")
+    physics_dt = check_positive_scalar(physics_dt, "physics_dt")
+    servo_time_constant = check_positive_scalar(servo_time_constant, "servo_time_constant")
     tcp = np.asarray(geometry.tcp) if tcp_offset is None else _as_point(tcp_offset, "tcp_offset")
 
     spec = mujoco.MjSpec.from_string(_patched_urdf())

@@ -31,6 +31,7 @@ __all__ = ["RealtimeIntent", "TickIntent", "WindowIntent"]
 
 _N_FEATURES = len(FEATURES)
 _FALLBACK = Fault.PREDICTION_FALLBACK
+_FALLBACK_I, _STALE_I, _STALLED_I = int(_FALLBACK), int(Fault.PREDICTION_STALE), int(Fault.PREDICTOR_STALLED)
 
 
 class TickIntent(Protocol):
@@ -148,20 +149,20 @@ class RealtimeIntent:
         self._sample[:] = row
         try:
             pos, fault, _age = self.predictor.tick(self._sample, nominal)
-            fault = Fault(int(fault))
+            fault = int(fault)  # plain ints on the hot path: IntFlag arithmetic costs microseconds
         except Exception:
-            pos, fault = None, _FALLBACK
+            pos, fault = None, _FALLBACK_I
         errors = int(getattr(self.predictor, "errors", 0))
         new_errors, self._errors = errors > self._errors, errors
         alive = bool(getattr(self.predictor, "worker_alive", True))
-        usable = not (fault & _FALLBACK) and pos is not None
+        arr = None
+        usable = not (fault & _FALLBACK_I) and pos is not None
         if usable:
             arr = np.asarray(pos, dtype=float)
             usable = arr.shape == (self.horizon, 2) and bool(np.isfinite(arr).all())
         warm = k >= self.history  # before the window fills the fallback is expected
         self._bad = 0 if usable else self._bad + (1 if warm else 0)
-        flags = Fault.NONE if usable else _FALLBACK
-        flags |= fault & Fault.PREDICTION_STALE
+        flags = (0 if usable else _FALLBACK_I) | (fault & _STALE_I)
         if not alive or new_errors or self._bad > self.stall_ticks:
-            flags |= Fault.PREDICTOR_STALLED
-        return (arr if usable else None), flags
+            flags |= _STALLED_I
+        return (arr if usable else None), Fault(flags)

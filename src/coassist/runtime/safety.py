@@ -88,7 +88,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coassist._checks import check_int_at_least, check_positive_scalar
+from coassist._checks import check_int_at_least, check_positive_scalar, is_integer
 from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault
 
 try:  # numpy's determinant kernel without np.linalg.det's Python checks (≈ 2 µs less per tick)
@@ -350,7 +350,7 @@ def _matrix(x, n: int) -> np.ndarray | None:
 
 def _fault_word(x) -> int | None:
     """A fault word as a non-negative int, or None when it is not one."""
-    if isinstance(x, (int, np.integer)) and x >= 0:
+    if is_integer(x) and x >= 0:
         return int(x)
     return None
 

@@ -53,7 +53,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from coassist._checks import check_positive_scalar
+from coassist._checks import check_positive_scalar, is_integer
 from coassist.interfaces import Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
 from coassist import spatial as _spatial
@@ -113,7 +113,7 @@ class TickConfig:
     def __post_init__(self) -> None:
         dofs = tuple(self.dofs)
         if not dofs or len(set(dofs)) != len(dofs) or any(
-            isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not 0 <= i < 6 for i in dofs
+            not is_integer(i) or not 0 <= i < 6 for i in dofs
         ):
             raise ValueError(f"TickConfig.dofs must be distinct pose indices in 0..5, got {self.dofs!r}")
         if dofs[:2] != (0, 1):

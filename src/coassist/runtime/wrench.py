@@ -71,6 +71,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
+from coassist._checks import check_int, is_real_number
 from coassist.interfaces import Fault
 
 __all__ = ["WrenchConfig", "WrenchPipeline", "WrenchReading", "payload_wrench"]
@@ -101,7 +102,7 @@ class WrenchReading(NamedTuple):
 
 
 def _finite_float(value: object, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+    if not is_real_number(value):
         raise ValueError(f"{name} must be a number, got {value!r}")
     out = float(value)
     if not math.isfinite(out):
@@ -201,11 +202,7 @@ class WrenchConfig:
         put("gravity", _vector3(self.gravity, name("gravity")))
         for field in ("spike_hold", "zero_samples"):
             value = getattr(self, field)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-                raise ValueError(f"{name(field)} must be an integer, got {value!r}")
-            if value < 1:
-                raise ValueError(f"{name(field)} must be >= 1, got {value!r}")
-            put(field, int(value))
+            put(field, check_int(value, name(field), 1))
 
 
 def payload_wrench(mass: float, com: ArrayLike, gravity: ArrayLike, rotation: ArrayLike) -> np.ndarray:
@@ -354,9 +351,7 @@ class WrenchPipeline:
         """
         if n is None:
             n = self.config.zero_samples
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f"n must be an integer >= 1, got {n!r}")
-        self._zero_left = int(n)
+        self._zero_left = check_int(n, "n", 1)
         self._zero_n = 0
         self._zero_sum = [0.0] * 6
         self._y = list(_ZERO6)
@@ -390,7 +385,7 @@ class WrenchPipeline:
         fault = _NO_FAULT
         # --- time and sample counter
         if type(t) is not float:
-            t = float(t) if isinstance(t, (int, np.integer, np.floating)) and not isinstance(t, bool) else math.nan
+            t = float(t) if is_real_number(t) else math.nan
         if type(seq) is not int:
             seq = int(seq) if isinstance(seq, np.integer) else None
         new = stale = False

@@ -6,6 +6,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict
 from pathlib import Path
 
+from coassist._checks import check_int
 from coassist.data import DatasetWriter
 from coassist.data.store import FORMAT_VERSION, digest
 from coassist.sim.world import TrialSpec, run_trials
@@ -28,10 +29,8 @@ def dataset_specs(
     Every trial has its own seed, so two datasets with different ``seed`` share no
     trial as long as the seed ranges do not overlap (a 60-trial dataset uses seed … seed+59).
     """
-    if isinstance(trials, bool) or not isinstance(trials, int) or trials < 1:
-        raise ValueError(f"trials must be an int >= 1 (per user, object and task), got {trials!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"seed must be an int >= 0, got {seed!r}")
+    trials = check_int(trials, "trials", 1)  # per user, object and task
+    seed = check_int(seed, "seed", 0)
     for name, values in (("users", users), ("tasks", tasks), ("objects", objects)):
         if len(values) == 0:
             raise ValueError(f"{name} must not be empty")

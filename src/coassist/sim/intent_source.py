@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from coassist._checks import check_int
 from coassist.interfaces import IntentSource, TrialContext
 
 
@@ -48,9 +49,7 @@ class NominalIntent:
     model_id = None
 
     def __init__(self, horizon: int = 50) -> None:
-        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
-            raise ValueError(f"NominalIntent.horizon must be an int >= 1, got {horizon!r}")
-        self.horizon = int(horizon)
+        self.horizon = check_int(horizon, "NominalIntent.horizon", 1)
         self._ref: np.ndarray | None = None
         self._k = 0
 
@@ -72,9 +71,7 @@ class OracleIntent:
     model_id = "oracle"
 
     def __init__(self, horizon: int = 50) -> None:
-        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
-            raise ValueError(f"OracleIntent.horizon must be an int >= 1, got {horizon!r}")
-        self.horizon = int(horizon)
+        self.horizon = check_int(horizon, "OracleIntent.horizon", 1)
         self._intent: np.ndarray | None = None
         self._k = 0
 

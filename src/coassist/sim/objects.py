@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coassist._checks import check_positive_scalar
+from coassist._checks import check_int, check_positive_scalar
 
 GRAVITY = 9.81  # m/s²
 
@@ -186,8 +186,7 @@ class ForceSensor:
         object.__setattr__(self, "tilt", _nonneg(self.tilt, "ForceSensor.tilt"))
         if self.rate_hz is not None:
             object.__setattr__(self, "rate_hz", check_positive_scalar(self.rate_hz, "ForceSensor.rate_hz"))
-        if isinstance(self.zero_samples, bool) or not isinstance(self.zero_samples, (int, np.integer)) or self.zero_samples < 1:
-            raise ValueError(f"ForceSensor.zero_samples must be an int >= 1, got {self.zero_samples!r}")
+        object.__setattr__(self, "zero_samples", check_int(self.zero_samples, "ForceSensor.zero_samples", 1))
         object.__setattr__(self, "saturation", check_positive_scalar(self.saturation, "ForceSensor.saturation"))
 
     def raw_bias(self, obj: CarriedObject, rng: np.random.Generator) -> np.ndarray:

@@ -54,6 +54,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from coassist._checks import check_int
 from coassist.sim.tasks import Task, _quintic
 
 
@@ -143,10 +144,8 @@ def operator_profile(user_index: int, population_seed: int = 0) -> OperatorProfi
     ×/÷ 1.5, clearance 0.01–0.05 m, anticipation 0.05–0.2 m, pace ×/÷ 1.15, force
     limit 30–60 N, left preference 0.1–0.9.
     """
-    if isinstance(user_index, bool) or not isinstance(user_index, (int, np.integer)) or user_index < 0:
-        raise ValueError(f"user_index must be an int >= 0, got {user_index!r}")
-    if isinstance(population_seed, bool) or not isinstance(population_seed, (int, np.integer)) or population_seed < 0:
-        raise ValueError(f"population_seed must be an int >= 0, got {population_seed!r}")
+    user_index = check_int(user_index, "user_index", 0)
+    population_seed = check_int(population_seed, "population_seed", 0)
     if user_index == 0:
         return AUTHOR
     rng = np.random.default_rng(np.random.SeedSequence([int(population_seed), int(user_index)]))

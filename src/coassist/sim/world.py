@@ -43,17 +43,25 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from coassist.config import THESIS_APPLICATION, THESIS_EVALUATION, ControlPreset
+from coassist._checks import check_int
+from coassist.config import (  # noqa: F401  (APPLICATION_DAMPED_SCALE, scale_positions: re-exported)
+    APPLICATION_DAMPED_SCALE,
+    CONTROL_PRESETS,
+    THESIS_EVALUATION,
+    ControlPreset,
+    scale_positions,
+)
 from coassist.control.arbitration import ArbitratedController, ArbitrationParameters
 from coassist.control.controllers import AssistiveController, ImpedanceControl, ManualGuidance
 from coassist.control.game import cooperative_game
 from coassist.data import Trial, TrialMeta
 from coassist.model.impedance import ImpedanceModel
+from coassist.registry import UnknownNameError
 from coassist.runtime.intent import WindowIntent
 from coassist.runtime.loop import TargetDwell, run_loop
 from coassist.runtime.safety import SafetyLayer, SafetyLimits
@@ -74,44 +82,18 @@ CONTROLLER_KINDS = ("cooperative", "impedance", "manual", "cooperative-arbitrate
 #: 10 N at a 5 cm deviation, about what the operators push with.
 IMPEDANCE_STIFFNESS = 200.0
 
-def scale_positions(preset: ControlPreset, scale: float, name: str) -> ControlPreset:
-    """The preset with outputs in units of 1/scale m: every Q multiplied by scale².
-
-    The thesis' weights in SI units make the robot's effort tiny (≈0.06 N per cm of
-    error, see coassist.experiments.dmpc_study); in decimetres (scale 10) the robot
-    assists with a few N per cm, like the thesis' figures.
-    """
-    g = preset.game
-    s2 = float(scale) ** 2
-    game = replace(g, **{q: tuple(s2 * v for v in getattr(g, q)) for q in ("Q_hh", "Q_hr", "Q_rh", "Q_rr")})
-    return replace(preset, name=name, game=game)
-
-
-#: Position scale of the "thesis-application-damped" preset. A learned predictor predicts
-#: the tool's future pose, to first order an extrapolation of the robot's own motion, so
-#: the robot's gain on it is velocity feedback (coassist.control.game.extrapolation_feedback):
-#: in decimetres (scale 10) it removes 67.5 of the plant's 100 N·s/m and the coupled loop
-#: with the operator's arm (550–1300 N/m, 80 ms reflex delay) rings at every turn. Scale 5
-#: is the largest round scale that leaves at least half (53.6 N·s/m): derived from the
-#: gains, not tuned on trials (tests/control/test_game.py checks both numbers).
-APPLICATION_DAMPED_SCALE = 5.0
-
-#: Presets by name: the thesis' (SI units), the same in decimetres ("-dm"), and the
-#: application weights at APPLICATION_DAMPED_SCALE ("-damped").
-PRESETS: dict[str, ControlPreset] = {
-    THESIS_EVALUATION.name: THESIS_EVALUATION,
-    THESIS_APPLICATION.name: THESIS_APPLICATION,
-    "thesis-evaluation-dm": scale_positions(THESIS_EVALUATION, 10.0, "thesis-evaluation-dm"),
-    "thesis-application-dm": scale_positions(THESIS_APPLICATION, 10.0, "thesis-application-dm"),
-    "thesis-application-damped": scale_positions(THESIS_APPLICATION, APPLICATION_DAMPED_SCALE, "thesis-application-damped"),
-}
+# The control presets, scale_positions and the position scales live with the thesis' presets
+# in coassist.config (layer 0, below every user of them); re-exported here for sim's users.
+#: Control presets by name (a :class:`coassist.registry.Registry`).
+PRESETS = CONTROL_PRESETS
 
 
 def get_preset(name: str) -> ControlPreset:
+    """The control preset ``name``; ``ValueError`` "preset '<name>': no such control preset; did you mean …"."""
     try:
-        return PRESETS[name]
-    except KeyError:
-        raise ValueError(f"preset must be one of {tuple(PRESETS)}, got {name!r}") from None
+        return PRESETS.lookup(name)
+    except UnknownNameError as exc:
+        raise ValueError(f"preset {exc}") from None
 
 
 def plant_model(preset: ControlPreset) -> ImpedanceModel:
@@ -136,9 +118,7 @@ def make_controller(kind: str, preset: ControlPreset):
 
 
 def _check_seed(seed: Any) -> int:
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be an int >= 0, got {seed!r}")
-    return int(seed)
+    return check_int(seed, "seed", 0)
 
 
 def _diag2(matrix: np.ndarray, name: str) -> None:
@@ -449,16 +429,13 @@ class TrialSpec:
     def __post_init__(self) -> None:
         if self.task not in TASK_KINDS:
             raise ValueError(f"TrialSpec.task must be one of {TASK_KINDS}, got {self.task!r}")
-        if isinstance(self.user, bool) or not isinstance(self.user, (int, np.integer)) or self.user < 0:
-            raise ValueError(f"TrialSpec.user must be an int >= 0, got {self.user!r}")
+        object.__setattr__(self, "user", check_int(self.user, "TrialSpec.user", 0))
         get_object(self.object)
         if self.controller not in CONTROLLER_KINDS:
             raise ValueError(f"TrialSpec.controller must be one of {CONTROLLER_KINDS}, got {self.controller!r}")
         get_preset(self.preset)
         for name in ("seed", "population_seed"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-                raise ValueError(f"TrialSpec.{name} must be an int >= 0, got {v!r}")
+            object.__setattr__(self, name, check_int(getattr(self, name), f"TrialSpec.{name}", 0))
         if not isinstance(self.intent, str) or not self.intent:
             raise ValueError(f"TrialSpec.intent must be 'nominal', 'oracle' or a model path, got {self.intent!r}")
 
@@ -551,9 +528,7 @@ def run_trials(
         return _run_ray(specs, ray_address, progress, on_result)
     if workers is None:
         workers = os.cpu_count() or 1
-    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
-        raise ValueError(f"workers must be an int >= 1, got {workers!r}")
-    workers = min(int(workers), len(specs))
+    workers = min(check_int(workers, "workers", 1), len(specs))
     results: list[Trial | None] = [None] * len(specs)
 
     def deliver(i: int, trial: Trial) -> None:

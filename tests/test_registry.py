@@ -1,0 +1,57 @@
+"""coassist.registry: one lookup and one "did you mean" error for every kind of preset."""
+
+import pytest
+
+from coassist.registry import Registry, UnknownNameError, unknown_name_message
+
+
+def test_lookup_and_mapping_behaviour():
+    r = Registry("widget", {"alpha": 1, "beta": 2})
+    assert r.lookup("beta") == 2 and r["alpha"] == 1
+    assert list(r) == ["alpha", "beta"] and len(r) == 2
+    assert "alpha" in r and "gamma" not in r
+    assert r.get("gamma") is None  # Mapping.get: an unknown name is a KeyError underneath
+
+
+def test_unknown_name_says_what_and_the_closest_name():
+    r = Registry("widget", {"alpha": 1, "beta": 2})
+    with pytest.raises(UnknownNameError) as info:
+        r.lookup("alpah")
+    assert str(info.value) == "'alpah': no such widget; did you mean 'alpha'? (choose from: alpha, beta)"
+    assert isinstance(info.value, ValueError) and isinstance(info.value, KeyError)
+    # nothing close: no hint
+    assert unknown_name_message("zzz", ["alpha", "beta"], "widget") == "'zzz': no such widget (choose from: alpha, beta)"
+
+
+def test_registry_is_read_only_and_validated():
+    entries = {"a": 1}
+    r = Registry("widget", entries)
+    entries["b"] = 2  # a later change to the source dict does not leak in
+    assert list(r) == ["a"]
+    with pytest.raises(TypeError):
+        r["c"] = 3  # type: ignore[index]
+    with pytest.raises(ValueError, match="widget names must be non-empty strings"):
+        Registry("widget", {"": 1})
+
+
+def test_the_three_preset_kinds_are_registries_with_their_own_names():
+    from coassist.config import CONTROL_PRESETS, DECIMETRE_SCALE, THESIS_EVALUATION
+    from coassist.experiments.pipeline import PRESETS as REPRODUCE_PRESETS
+    from coassist.sim.world import PRESETS as SIM_PRESETS
+    from coassist.sim.world import get_preset
+
+    assert SIM_PRESETS is CONTROL_PRESETS
+    kinds = {CONTROL_PRESETS.what, REPRODUCE_PRESETS.what}
+    try:
+        from coassist.intent.training import PRESETS as INTENT_PRESETS
+
+        kinds.add(INTENT_PRESETS.what)
+        assert isinstance(INTENT_PRESETS, Registry)
+    except ImportError:  # torch missing
+        pass
+    assert {"control preset", "reproduce preset"} <= kinds
+    # the decimetre preset is the SI one with every Q scaled by 10² (positions in dm)
+    dm = CONTROL_PRESETS["thesis-evaluation-dm"]
+    assert dm.game.Q_hh == tuple(DECIMETRE_SCALE**2 * q for q in THESIS_EVALUATION.game.Q_hh)
+    with pytest.raises(ValueError, match=r"^preset 'thesis-eval': no such control preset; did you mean 'thesis-evaluation'\?"):
+        get_preset("thesis-eval")
