@@ -32,17 +32,7 @@ import coassist
 
 # Known mismatches left alone, each with why. An entry that no longer mismatches fails
 # the test (remove it then), so the list cannot go stale.
-ALLOWED_MISMATCHES: dict[str, str] = {
-    # Files another engineer was rewriting while this test landed (issue 12): the
-    # functions' signatures and docstrings were in their uncommitted diff, so a
-    # docstring edit here would have collided. Document the missing parameters there.
-    "coassist.data.store.read_dataset": "mid-edit (issue 12, skip_bad): `folder` undocumented",
-    "coassist.intent.evaluation.evaluate_model": "mid-edit (issue 12): `model`, `trials`, `horizons` undocumented",
-    "coassist.intent.model.load_model": "mid-edit (issue 12): `folder` undocumented",
-    # New, uncommitted module of another engineer: `params` shares a line with `dt`
-    # ("dt : period [s].  params : G parameter sets."); one entry per line fixes it.
-    "coassist.intent.kalman.kalman_ca_filter": "new module mid-edit: `params` not on a line of its own",
-}
+ALLOWED_MISMATCHES: dict[str, str] = {}
 
 _PACKAGE_DIR = Path(coassist.__file__).parent
 _UNDERLINE = re.compile(r"^-{3,}$")

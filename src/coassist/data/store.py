@@ -483,6 +483,7 @@ def read_dataset(
 
     Parameters
     ----------
+    folder : the dataset folder (holds ``manifest.json`` and the trial files).
     skip_bad : bool
         False: the first unreadable trial file raises (:class:`TrialFileError` or
         ``FileNotFoundError``, naming it). True: such trials are left out and listed in

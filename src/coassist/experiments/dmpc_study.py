@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from coassist._checks import check_positive_scalar
+from coassist._checks import check_positive_scalar, is_real_number
 from coassist._io import atomic_write_text, save_figure
 from coassist.control.game import CooperativeGame
 from coassist.model.impedance import ImpedanceModel
@@ -79,7 +79,7 @@ def _values(values, name: str, ok, requirement: str) -> tuple[float, ...]:
         raise ValueError(f"{name} must be a list of numbers, got {values!r}")
     out = []
     for v in values:
-        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v) or not ok(v):
+        if not is_real_number(v) or not np.isfinite(v) or not ok(v):
             raise ValueError(f"{name} must be {requirement}, got {values!r}")
         out.append(float(v))
     if not out:

@@ -29,6 +29,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable, Generic, Mapping, TypeVar
 
+from coassist._checks import is_integer
+
 Model = TypeVar("Model")
 Data = TypeVar("Data")
 
@@ -94,7 +96,7 @@ def iterative_training(
     Each model is then measured in the loop on the next dataset; the last model on one
     extra collection, so every model has an in-loop error.
     """
-    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
+    if not is_integer(iterations) or iterations < 1:
         raise ValueError(f"iterations must be an integer >= 1, got {iterations!r}")
     if not tol > 0:
         raise ValueError(f"tol must be > 0, got {tol!r}")

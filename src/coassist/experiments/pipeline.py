@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from coassist._checks import is_integer
 from coassist.registry import Registry
 
 ITERATION_TASKS = ("linear", "curved", "sinusoidal")
@@ -67,7 +68,7 @@ class ReproduceConfig:
         for name in ("trials_per_task", "iterations", "epochs", "resume_epochs", "transfer_epochs", "train_stride",
                      "transfer_trials", "test_trials", "application_trials", "real_epochs", "workers", "threads"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            if not is_integer(v) or v < 1:
                 raise ValueError(f"reproduce.{name} must be an integer >= 1, got {v!r}")
         if self.transfer_trials < 3:
             raise ValueError(f"reproduce.transfer_trials must be >= 3 (one per task), got {self.transfer_trials}")
@@ -77,7 +78,7 @@ class ReproduceConfig:
             raise ValueError(f"reproduce.tol must be > 0, got {self.tol!r}")
         if not self.new_users or any(u < 1 for u in self.new_users):
             raise ValueError(f"reproduce.new_users must be user indices >= 1 (0 is the author), got {self.new_users!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+        if not is_integer(self.seed) or self.seed < 0:
             raise ValueError(f"reproduce.seed must be an integer >= 0, got {self.seed!r}")
 
 

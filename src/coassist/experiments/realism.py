@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from coassist._checks import is_integer
 from coassist._io import atomic_write_text
 from coassist.data import Trial, load_ros_user
 from coassist.metrics import f_rms
@@ -152,7 +153,7 @@ def run_realism(
     progress: bool = True,
 ) -> RealismResult:
     """Simulate ``trials_per_task`` trials per task and preset and load the real recordings."""
-    if isinstance(trials_per_task, bool) or not isinstance(trials_per_task, int) or trials_per_task < 1:
+    if not is_integer(trials_per_task) or trials_per_task < 1:
         raise ValueError(f"trials_per_task must be an int >= 1, got {trials_per_task!r}")
     real_trials = load_ros_user(real_folder)
     specs = [

@@ -67,6 +67,9 @@ def evaluate_model(
 
     Parameters
     ----------
+    model : the model to score.
+    trials : the labelled trials to score it on (the baselines are scored on the same ticks).
+    horizons : the prediction horizons [ticks] to report.
     held_out_only : bool
         Skip trials the model was trained on (its sidecar's ``train_trials``); the
         skipped ids are listed in the result.

@@ -120,7 +120,8 @@ def kalman_ca_filter(
     Parameters
     ----------
     pose, velocity : (T, d) measured position [m] and velocity [m/s].
-    dt : period [s].  params : G parameter sets.
+    dt : period [s].
+    params : G parameter sets.
 
     Returns
     -------

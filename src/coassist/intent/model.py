@@ -291,6 +291,7 @@ def load_model(
 
     Parameters
     ----------
+    folder : the model folder (``model.json`` and the weights).
     features, dt : optional
         What the caller will feed the model; a mismatch raises :class:`ModelMismatchError`.
     """

@@ -37,6 +37,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from coassist._checks import is_integer, is_real_number
 from coassist._io import partial_folder, save_figure
 from coassist.intent.baselines import RidgeBaseline, fit_tuned_baselines, tune_ridge_alpha
 from coassist.intent.features import WindowConfig, WindowSet, feature_names, scale_targets, split_trials
@@ -118,8 +119,9 @@ class TrainConfig:
         for name, minimum in (("epochs", 1), ("batch_size", 1), ("threads", 1), ("train_stride", 1),
                               ("eval_stride", 1), ("seed", 0)):  # fmt: skip
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
+            if not is_integer(v) or v < minimum:
                 raise ValueError(f"train.{name} must be an integer >= {minimum}, got {v!r}")
+            object.__setattr__(self, name, int(v))
         for name, ok, what in (
             ("lr", lambda v: v > 0, "> 0"),
             ("lr_final_ratio", lambda v: 0 < v <= 1, "in (0, 1]"),
@@ -132,7 +134,7 @@ class TrainConfig:
             v = getattr(self, name)
             if v is None and name in ("ridge_alpha", "skip_alpha"):  # None: tuned on validation trials
                 continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not ok(v):
+            if not is_real_number(v) or not math.isfinite(v) or not ok(v):
                 raise ValueError(f"train.{name} must be a finite number {what}, got {v!r}")
             object.__setattr__(self, name, float(v))
         if self.optimizer not in OPTIMIZERS:
