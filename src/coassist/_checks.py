@@ -102,3 +102,31 @@ def check_optional_int(value: int | None, name: str, minimum: int | None = None)
     if not is_integer(value):
         raise ValueError(f"{name} must be an integer or None, got {value!r}")
     return check_int(value, name, minimum)
+
+
+def as_real_array(value: object) -> np.ndarray | None:
+    """``value`` as a float64 array if it is plainly numeric (real ints or floats), else None.
+
+    Booleans, strings, object arrays and complex numbers are refused rather than
+    converted: ``np.asarray(["1.5"], float)`` or ``[True, False]`` would otherwise
+    pass as numbers. Anything that fails to convert (``__float__`` raising, an int too
+    large for a float, a torch tensor requiring grad) is refused too.
+    """
+    if type(value) is np.ndarray and value.dtype == np.float64:
+        return value  # the loop's own arrays (the common, per-tick case): returned as they are, not copied
+    try:
+        if isinstance(value, np.ndarray):
+            arr = value
+        else:
+            arr = np.asarray(value)
+            if arr.dtype.kind in "fiu" and arr.size and not isinstance(value, (int, float, np.generic)):
+                # A nested sequence mixing bools with numbers converts to float: look inside.
+                items = np.asarray(value, dtype=object).ravel()
+                if any(isinstance(v, (bool, np.bool_)) for v in items):
+                    return None
+        if arr.dtype.kind not in "fiu":
+            return None
+        with np.errstate(over="ignore"):  # float128 beyond float64 becomes inf: flagged as non-finite
+            return arr.astype(float, copy=False)
+    except Exception:  # noqa: BLE001 -- any failure to convert is bad input, not a crash of the loop
+        return None

@@ -516,9 +516,7 @@ def drive(
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
     out = _file_out(out, "--out", "trial.parquet")
     if intent not in ("nominal", "oracle"):
-        import torch
-
-        torch.set_num_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
+        _set_torch_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
 
     def confirm(text: str) -> bool:
         console.print("[bold]Limits in force[/] (coassist's safety layer, on top of the robot's own safety system):", markup=True)

@@ -193,7 +193,7 @@ def test_absurd_or_jumping_predictions_are_rejected_and_counted(model):
     H, d = model.horizon, model.n_dof
     good = np.full((H, d), 0.02)
     jump = good.copy()
-    jump[H // 2 :] += 1.0 * 0.45  # 0.45 m in one tick: within 0.5 m of the pose, far beyond 3 m/s
+    jump[H // 2 :] += 0.45  # 0.45 m in one tick: within 0.5 m of the pose, far beyond 3 m/s
     outputs = iter([np.full((H, d), 1e6), jump, good])
     x = samples(model, model.history + 2)
     with RealtimePredictor(model, RealtimeConfig(threaded=False), runner=lambda w: next(outputs)) as rt:

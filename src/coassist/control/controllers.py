@@ -42,7 +42,7 @@ from typing import NamedTuple, Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from coassist._checks import as_square_matrix, check_positive_scalar, check_positive_semidefinite
+from coassist._checks import as_real_array, as_square_matrix, check_positive_scalar, check_positive_semidefinite
 from coassist.control.game import CooperativeGame, NashGame
 from coassist.interfaces import Fault
 from coassist.model.impedance import ImpedanceModel
@@ -95,34 +95,6 @@ class InputBounds:
     def __post_init__(self) -> None:
         for name in ("position", "velocity", "wrench"):
             object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"InputBounds.{name}"))
-
-
-def _as_numbers(value: object) -> np.ndarray | None:
-    """``value`` as a float64 array if it is plainly numeric (real ints or floats), else None.
-
-    Booleans, strings, object arrays and complex numbers are refused rather than
-    converted: ``np.asarray(["1.5"], float)`` or ``[True, False]`` would otherwise
-    pass as numbers. Anything that fails to convert (``__float__`` raising, an int too
-    large for a float, a torch tensor requiring grad) is refused too.
-    """
-    if type(value) is np.ndarray and value.dtype == np.float64:
-        return value  # the loop's own arrays: already what the law needs (the common, per-tick case)
-    try:
-        if isinstance(value, np.ndarray):
-            arr = value
-        else:
-            arr = np.asarray(value)
-            if arr.dtype.kind in "fiu" and arr.size and not isinstance(value, (int, float, np.generic)):
-                # A nested sequence mixing bools with numbers converts to float: look inside.
-                items = np.asarray(value, dtype=object).ravel()
-                if any(isinstance(v, (bool, np.bool_)) for v in items):
-                    return None
-        if arr.dtype.kind not in "fiu":
-            return None
-        with np.errstate(over="ignore"):  # float128 beyond float64 becomes inf: flagged as non-finite
-            return arr.astype(float, copy=False)
-    except Exception:  # noqa: BLE001 -- any failure to convert is bad input, not a crash of the loop
-        return None
 
 
 def saturate(u: np.ndarray, limit: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -198,7 +170,7 @@ class _GuardedController:
         """One guarded tick: z (2n,) [m, m/s], ref_h and ref_r (horizon, 2n) [m, m/s]
         (IMP and MG: any rows ≥ 1), wrench (n,) [N]. Never raises."""
         try:
-            arrays = [_as_numbers(a) for a in (z, ref_h, ref_r, wrench)]
+            arrays = [as_real_array(a) for a in (z, ref_h, ref_r, wrench)]
             if any(a is None for a in arrays):
                 return self._refuse(Fault.INVALID_INPUT)
             z, ref_h, ref_r, wrench = arrays

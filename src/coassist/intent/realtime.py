@@ -59,7 +59,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import torch
 
-from coassist._checks import check_int, check_optional_int
+from coassist._checks import as_real_array, check_int, check_optional_int
 from coassist.interfaces import FEATURES, Fault, PlausibilityLimits, prediction_plausible
 from coassist.intent.model import IntentModel
 
@@ -147,15 +147,12 @@ class PredictorHealth(NamedTuple):
 
 
 def _as_sample(x: Any, n: int) -> np.ndarray | None:
-    """A finite float (n,) row, or None for anything else (strings, booleans, objects, NaN)."""
-    try:
-        a = np.asarray(x)
-        if a.shape != (n,) or a.dtype.kind not in "iuf":
-            return None
-        a = a.astype(np.float64)
-    except Exception:  # objects whose conversion raises: bad input, not a crash
+    """A finite float (n,) row (a copy: the caller may reuse its buffer), or None for anything
+    else (strings, booleans, objects, NaN; :func:`coassist._checks.as_real_array`)."""
+    a = as_real_array(x)
+    if a is None or a.shape != (n,) or not np.isfinite(a).all():
         return None
-    return a if np.isfinite(a).all() else None
+    return a.copy()
 
 
 # ---------------------------------------------------------------------- backends
