@@ -16,6 +16,13 @@ nominal plan. Prints median and p99 [ms] and the ratio.
 ``--realtime-seconds S`` also runs the MuJoCo world at 500 Hz paced to the wall clock for S
 seconds and counts deadline misses (the tick's own work over 2 ms) and periods the
 world could not keep (physics + tick over 2 ms). One BLAS thread: one core.
+
+Each row is measured twice: **back to back** (the world is stepped as fast as it goes:
+the tick's own work on one core, the issue's measure) and **paced** (the world sleeps
+to the wall clock between periods, as on a robot). On a VM the first instructions after
+a sleep run slowly (cold caches and TLB): the **platform reference** row times a fixed
+workload of small numpy and Python operations the same two ways, so the paced/back-to-back
+ratio of the tick can be read against the machine's own.
 """
 
 from __future__ import annotations
@@ -58,8 +65,35 @@ def naive_dls(J, twist, thr, damp):
     return np.linalg.pinv(J) @ twist, 0.0
 
 
+def reference_work(a: np.ndarray, M: np.ndarray) -> float:
+    """A fixed workload the size of a tick: small numpy operations and Python arithmetic."""
+    s = 0.0
+    for i in range(40):
+        b = M @ a
+        s += float(b[i % 6]) if np.isfinite(b).all() else 0.0
+        a = np.clip(b, -1.0, 1.0)
+    return s
+
+
+def measure_reference(n: int, period: float) -> dict:
+    """The platform reference: ``reference_work`` back to back and with a sleep of one period before each call."""
+    rng = np.random.default_rng(0)
+    a, M = rng.normal(size=6), rng.normal(size=(6, 6)) / 3
+    out = {}
+    for name, pause in (("back_to_back", 0.0), ("paced", period)):
+        t = []
+        for _ in range(n):
+            if pause:
+                time.sleep(pause)
+            t0 = time.perf_counter()
+            reference_work(a, M)
+            t.append(time.perf_counter() - t0)
+        out[name] = np.array(t[50:])
+    return out
+
+
 def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtime: bool = False,
-            backend: str = "process", task_kind: str = "z") -> dict:  # fmt: skip
+            backend: str = "process", task_kind: str = "z", paced: bool = True) -> dict:  # fmt: skip
     times: list[float] = []
     dt = 1.0 / rate
     config = DriveConfig(controller="assistive", task=task_kind, intent=model or "nominal", rate_hz=rate,
@@ -95,10 +129,10 @@ def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtim
         from coassist.sim.tasks import make_task
 
         world = None
-        if realtime or model:  # a real-time predictor: pace the world to the wall clock, as on a robot
+        if realtime or model:  # a real-time predictor: the world paced to the wall clock as on a robot, or back to back
             task = make_task(task_kind, np.random.default_rng(np.random.SeedSequence([0, 0])))
             world = MujocoUR5World("handle", control_dt=dt, start=(float(task.start[0]), float(task.start[1]), 0.2),
-                                   realtime=True)  # fmt: skip
+                                   realtime=bool(realtime or paced))  # fmt: skip
         t_wall = time.perf_counter()
         trial = drive_mod.drive(config, world=world)
         wall = time.perf_counter() - t_wall
@@ -123,18 +157,28 @@ def main() -> None:
     ap.add_argument("--realtime-seconds", type=float, default=0.0)
     a = ap.parse_args()
     backends = a.backends.split(",") if a.model else ["process"]
-    slow = measure(a.naive_ticks, a.model, naive=True, backend=backends[0])
+    slow = measure(a.naive_ticks, a.model, naive=True, backend=backends[0], paced=False)
     sm, sp = _stats(slow["times"][20:])
+    ref = measure_reference(a.ticks, 1.0 / 125)
+    rbm, rbp = _stats(ref["back_to_back"])
+    rpm, rpp = _stats(ref["paced"])
     print(f"intent: {'RealtimePredictor on ' + a.model if a.model else 'nominal plan'}; 125 Hz; assistive; z task")
-    print("| tick.step (no physics) | median ms | p99 ms | ticks > 8 ms | ratio naive/this (median, p99) |")
-    print("|---|---|---|---|---|")
+    print("| tick.step (no physics) | back to back: median ms | p99 ms | paced: median ms | p99 ms | "
+          "paced/back-to-back p99 | ticks > 8 ms | ratio naive/this (median, p99) |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|")
     for backend in backends:
-        fast = measure(a.ticks, a.model, naive=False, backend=backend)
-        fm, fp = _stats(fast["times"][50:])
+        hot = measure(a.ticks, a.model, naive=False, backend=backend, paced=False)
+        fm, fp = _stats(hot["times"][50:])
+        paced = measure(a.ticks, a.model, naive=False, backend=backend, paced=True) if a.model else hot
+        pm, pp = _stats(paced["times"][50:])
         name = f"coassist, predictor backend {backend}" if a.model else "coassist"
-        print(f"| {name} | {fm:.3f} | {fp:.3f} | {fast['misses']}/{len(fast['times'])} | {sm / fm:.0f}x, {sp / fp:.0f}x |")
-    print(f"| naive (gains + pinv every tick; backend {backends[0]}) | {sm:.3f} | {sp:.3f} | "
+        misses = hot["misses"] + paced["misses"]
+        print(f"| {name} | {fm:.3f} | {fp:.3f} | {pm:.3f} | {pp:.3f} | {pp / fp:.1f} | "
+              f"{misses}/{len(hot['times']) + len(paced['times'])} | {sm / fm:.0f}x, {sp / fp:.0f}x |")  # fmt: skip
+    print(f"| naive (gains + pinv every tick; backend {backends[0]}) | {sm:.3f} | {sp:.3f} | | | | "
           f"{slow['misses']}/{len(slow['times'])} | 1x |")  # fmt: skip
+    print(f"| platform reference (fixed workload, not coassist) | {rbm:.3f} | {rbp:.3f} | {rpm:.3f} | {rpp:.3f} | "
+          f"{rpp / rbp:.1f} | | |")  # fmt: skip
     if a.realtime_seconds > 0:
         # Trials end at their target: run one task after another until the time is filled.
         n = int(math.ceil(a.realtime_seconds * 500))
