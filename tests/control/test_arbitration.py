@@ -26,6 +26,29 @@ def test_target_alpha_of_each_law_by_hand():
     c = ArbitrationParameters(law="confidence", alpha_min=0.5, alpha_max=0.9, error_scale=0.01)
     assert target_alpha(c, 0.0) == pytest.approx(0.9)
     assert target_alpha(c, 0.01) == pytest.approx(0.5 + 0.4 / math.e)
+    t = ArbitrationParameters(law="target", alpha_min=0.3, alpha_max=0.9, target_scale=0.05)
+    assert target_alpha(t, 0.0) == pytest.approx(0.3)
+    assert target_alpha(t, 0.02) == pytest.approx(0.3 + 0.6 * 0.4)
+    assert target_alpha(t, 0.5) == pytest.approx(0.9)
+
+
+def test_target_law_reads_the_distance_to_the_plans_horizon_end():
+    """e = ||x − y_ref,r(k+H)||: the tool 3 cm from the plan's last row gives α* = 0.3 + 0.6·0.6;
+    the filter moves α by dt/τ of the step each tick; NaN in the plan leaves α alone."""
+    p = ArbitrationParameters(law="target", alpha_min=0.3, alpha_max=0.9, target_scale=0.05, time_constant=0.08)
+    arb = AlphaArbiter(p, 2, DT, alpha0=0.9)
+    ref_r = np.zeros((20, 4))
+    ref_r[-1, :2] = [0.40, 0.20]  # the plan's horizon ends here (relative to x0, like z)
+    z = np.array([0.40, 0.23, 0.0, 0.0])  # 3 cm short of it
+    target = 0.3 + 0.6 * 0.6
+    a1 = arb.update(z, ref_r, np.zeros(2), ref_r)
+    assert a1 == pytest.approx(0.9 + 0.1 * (target - 0.9))  # dt/τ = 0.008/0.08
+    bad = ref_r.copy()
+    bad[-1, 0] = np.nan
+    assert arb.update(z, ref_r, np.zeros(2), bad) == a1
+    for _ in range(400):
+        a = arb.update(z, ref_r, np.zeros(2), ref_r)
+    assert a == pytest.approx(target, abs=1e-9)
 
 
 def test_alpha_follows_a_constant_hand_force_as_a_first_order_filter():
@@ -109,4 +132,4 @@ def test_a_cached_arbitrated_controller_gives_the_same_trial_every_time():
     run_spec(other, cache)
     after_other = run_spec(spec, cache)
     np.testing.assert_array_equal(alone.pose, after_other.pose)
-    assert alone.meta.controller == "cooperative+hand_force"
+    assert alone.meta.controller == "cooperative+target"

@@ -16,6 +16,16 @@ An arbitration law maps what the robot measures to α ∈ [α_min, α_max]:
 
       c = exp(−ē / e_s),   α* = α_min + (α_max − α_min) · c
 
+- ``"target"``: the robot's plan ends at the target, a physical point it knows better
+  than any prediction. Far from where the plan's horizon ends the robot follows the
+  person; close to it, it homes in on its plan::
+
+      e = ||x − y_ref,r(k+H)||,   α* = α_min + (α_max − α_min) · min(1, e / e_t)
+
+  (x the tool position, y_ref,r(k+H) the plan's last row in the horizon, e_t
+  ``target_scale``). Mid-task the plan's horizon lies ahead of the tool and α stays high;
+  once the plan rests at the target and the tool comes within e_t of it, α falls.
+
 Either target α* is then low-pass filtered, α(k) = α(k−1) + (dt/τ)(α* − α(k−1)), so the
 gains never jump; with :meth:`CooperativeGame.set_alpha` a new α costs microseconds
 (:mod:`coassist.control.game`, "Online α").
@@ -40,7 +50,7 @@ from coassist.control.game import CooperativeGame
 __all__ = ["ARBITRATION_LAWS", "AlphaArbiter", "ArbitratedController", "ArbitrationParameters", "target_alpha"]
 
 #: The arbitration laws of :class:`ArbitrationParameters`.
-ARBITRATION_LAWS = ("hand_force", "confidence")
+ARBITRATION_LAWS = ("hand_force", "confidence", "target")
 
 
 @dataclass(frozen=True)
@@ -53,6 +63,8 @@ class ArbitrationParameters:
     error_scale : e_s [m], the filtered prediction error at which the ``confidence``
         law's trust has fallen to 1/e.
     error_lag : d [ticks] ≥ 1, how old the prediction checked against the pose is.
+    target_scale : e_t [m], the distance from the plan's horizon end below which the
+        ``target`` law lowers α (α_min at the plan's end itself).
     time_constant : τ [s], of the α filter and of the error filter.
     """
 
@@ -62,6 +74,7 @@ class ArbitrationParameters:
     force_scale: float = 5.0
     error_scale: float = 0.005
     error_lag: int = 10
+    target_scale: float = 0.05
     time_constant: float = 0.2
 
     def __post_init__(self) -> None:
@@ -77,16 +90,18 @@ class ArbitrationParameters:
             object.__setattr__(self, name, v)
         if self.alpha_min > self.alpha_max:
             raise ValueError(f"arbitration.alpha_min ({self.alpha_min}) must be <= arbitration.alpha_max ({self.alpha_max})")
-        for name in ("force_scale", "error_scale", "time_constant"):
+        for name in ("force_scale", "error_scale", "target_scale", "time_constant"):
             object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"arbitration.{name}"))
         object.__setattr__(self, "error_lag", check_int_at_least(self.error_lag, "arbitration.error_lag", 1))
 
 
 def target_alpha(params: ArbitrationParameters, signal: float) -> float:
-    """α* of the law for its signal: ||w|| [N] (``hand_force``) or ē [m] (``confidence``)."""
+    """α* of the law for its signal: ||w|| [N] (``hand_force``), ē [m] (``confidence``) or e [m] (``target``)."""
     span = params.alpha_max - params.alpha_min
     if params.law == "hand_force":
         return params.alpha_min + span * min(1.0, signal / params.force_scale)
+    if params.law == "target":
+        return params.alpha_min + span * min(1.0, signal / params.target_scale)
     return params.alpha_min + span * math.exp(-signal / params.error_scale)
 
 
@@ -120,13 +135,18 @@ class AlphaArbiter:
         self._pred[:] = np.nan
         self._k = 0
 
-    def update(self, z: np.ndarray, ref_h: np.ndarray, wrench: np.ndarray) -> float:
-        """α for this tick from z (2n,), ref_h (H, 2n) and the hand force (n,) [N]. Never raises."""
+    def update(self, z: np.ndarray, ref_h: np.ndarray, wrench: np.ndarray, ref_r: np.ndarray | None = None) -> float:
+        """α for this tick from z (2n,), ref_h (H, 2n), the hand force (n,) [N] and the
+        robot's plan ref_r (H, 2n; the ``target`` law). Never raises."""
         p, n = self.params, self.n
         try:
             if p.law == "hand_force":
                 w = np.asarray(wrench, dtype=float).reshape(-1)[:n]
                 signal = float(math.sqrt(float(np.dot(w, w))))
+            elif p.law == "target":
+                x = np.asarray(z, dtype=float).reshape(-1)[:n]
+                end = np.asarray(ref_r, dtype=float)[-1, :n]
+                signal = float(np.linalg.norm(x - end))
             else:
                 x = np.asarray(z, dtype=float).reshape(-1)[:n]
                 ref = np.asarray(ref_h, dtype=float)
@@ -185,7 +205,7 @@ class ArbitratedController:
 
     def step(self, z: ArrayLike, ref_h: ArrayLike, ref_r: ArrayLike, wrench: ArrayLike) -> ControlStep:
         """One tick: α from the law, then the guarded assistive step (same contract: never raises)."""
-        alpha = self.arbiter.update(z, ref_h, wrench)
+        alpha = self.arbiter.update(z, ref_h, wrench, ref_r)
         if alpha != self.game.alpha:
             try:
                 self.game.set_alpha(alpha)

@@ -1,9 +1,11 @@
 """The application scenario (thesis §5.2.3, §5.3.3, Fig. 5.24–5.31): a large and a heavy object.
 
-User 0 carries the board and the heavy load past an obstacle to a target with the
-assistive controller (on each object's transferred model), the same with α arbitrated
-from the hand force, impedance control (IMP) and manual guidance (MG). Every controller
-meets the same trials (same seeds). :func:`run_application` returns an
+Three simulated operators carry the board and the heavy load past an obstacle to a
+target with the assistive controller (on each object's transferred model), the same with
+α arbitrated online (law :data:`coassist.sim.world.ARBITRATION`), impedance control (IMP)
+and manual guidance (MG). Every controller meets the same trials (same operators and
+seeds), so each assistive trial is compared with MG's on the same seed
+(:func:`paired_difference`). :func:`run_application` returns an
 :class:`ApplicationResult`; :func:`application_section` turns it into the report's section.
 """
 
@@ -39,7 +41,8 @@ class ApplicationResult:
     models: dict[str, Path]  # each object's transferred model
     task: str
     control_preset: str  # of the assistive controllers
-    trials_per_controller: int
+    trials_per_controller: int  # per object, over all operators
+    users: tuple[int, ...] = (0,)
 
     def summary(self) -> dict[str, Any]:
         return {f"{o}/{c}": v for (o, c), v in self.metrics.items()}
@@ -59,11 +62,73 @@ def run_application(ws: Workspace, final_model: Path, board_model: Path) -> Appl
         for controller in CONTROLLERS:
             intent = str(models[obj]) if controller.startswith("cooperative") else "nominal"
             _, ds = ws.collect(f"app-{obj}-{controller}", tasks=(cfg.application_task,), objects=(obj,),
-                               trials=cfg.application_trials, seed=application_seed(cfg.seed, j),
-                               controller=controller, preset=cfg.application_preset, intent=intent)
-            metrics[(obj, controller)] = application_metrics(ds.trials)
-            trials[(obj, controller)] = ds.trials
-    return ApplicationResult(metrics, trials, models, cfg.application_task, cfg.application_preset, cfg.application_trials)
+                               users=cfg.application_users, trials=cfg.application_trials,
+                               seed=application_seed(cfg.seed, j), controller=controller,
+                               preset=cfg.application_preset, intent=intent)
+            ordered = sorted(ds.trials, key=_pair_key)  # the same order for every controller: trial i meets trial i
+            metrics[(obj, controller)] = application_metrics(ordered)
+            trials[(obj, controller)] = ordered
+    return ApplicationResult(metrics, trials, models, cfg.application_task, cfg.application_preset,
+                             cfg.application_trials * len(cfg.application_users), tuple(cfg.application_users))
+
+
+def _pair_key(trial) -> tuple[str, int]:
+    """(operator, seed): what makes two controllers' trials the same trial."""
+    return (str(trial.meta.user), -1 if trial.meta.seed is None else int(trial.meta.seed))
+
+
+def paired_difference(a, b, confidence: float = 0.95) -> tuple[float, float, float, int]:
+    """Mean of a_i − b_i over the pairs where both are finite, and its Student-t interval.
+
+    ``a`` and ``b`` are per-trial values of two controllers on the same trials (same
+    order). Returns (mean, low, high, n); the interval is NaN with fewer than 2 pairs.
+    """
+    from scipy import stats
+
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.shape != b.shape:
+        raise ValueError(f"paired values need the same shape, got {a.shape} and {b.shape}")
+    d = (a - b)[np.isfinite(a) & np.isfinite(b)]
+    n = int(d.size)
+    if n == 0:
+        return float("nan"), float("nan"), float("nan"), 0
+    mean = float(d.mean())
+    if n < 2:
+        return mean, float("nan"), float("nan"), n
+    half = float(stats.t.ppf(0.5 + confidence / 2, n - 1) * d.std(ddof=1) / np.sqrt(n))
+    return mean, mean - half, mean + half, n
+
+
+def force_saving(assistive, baseline) -> tuple[float, float]:
+    """Per-trial force saving 1 − f_RMS/f_RMS,baseline on paired trials: (mean, std) as fractions."""
+    a, b = np.asarray(assistive, dtype=float), np.asarray(baseline, dtype=float)
+    ok = np.isfinite(a) & np.isfinite(b) & (b > 0)
+    r = 1.0 - a[ok] / b[ok]
+    return (float(r.mean()), float(r.std())) if r.size else (float("nan"), float("nan"))
+
+
+def headline_table(result: ApplicationResult) -> tuple[str, list[str], list[list[Any]]]:
+    """The report's first-screen answer: per object and assistive variant, force saved
+    against MG and IMP (mean ± std over paired trials), σ, overshoot and jerk against MG."""
+    rows = []
+    for obj in OBJECTS:
+        m, i_ = result.metrics[(obj, "manual")], result.metrics[(obj, "impedance")]
+        for variant in ("cooperative", "cooperative-arbitrated"):
+            v = result.metrics[(obj, variant)]
+            s_mg, sd_mg = force_saving(v["f_rms_trials"], m["f_rms_trials"])
+            s_imp, sd_imp = force_saving(v["f_rms_trials"], i_["f_rms_trials"])
+            ds, lo_s, hi_s, _ = paired_difference(v["sigma_trials"], m["sigma_trials"])
+            do, lo_o, hi_o, _ = paired_difference(v["overshoot_trials"], m["overshoot_trials"])
+            rows.append([obj, variant, f"{100 * s_mg:.0f} ± {100 * sd_mg:.0f} %", f"{100 * s_imp:.0f} ± {100 * sd_imp:.0f} %",
+                         f"{v['sigma'] * 1e3:.2f} vs {m['sigma'] * 1e3:.2f} ({ds * 1e3:+.2f} [{lo_s * 1e3:+.2f}, {hi_s * 1e3:+.2f}])",
+                         f"{v['overshoot'] * 1e3:.1f} vs {m['overshoot'] * 1e3:.1f} ({do * 1e3:+.1f} [{lo_o * 1e3:+.1f}, {hi_o * 1e3:+.1f}])",
+                         f"{v['jerk_rms']:.2f} vs {m['jerk_rms']:.2f}"])
+    caption = (f"Application scenario, {result.trials_per_controller} paired trials per object and controller "
+               f"(operators {', '.join(str(u) for u in result.users)}): force saved per trial (mean ± std), and the "
+               "assistive controller against MG with the paired difference and its 95 % interval")
+    header = ["object", "assistive variant", "force saved vs MG", "force saved vs IMP", "σ at target [mm]",
+              "overshoot past intent [mm]", "jerk RMS [m/s³]"]
+    return caption, header, rows
 
 
 def application_metrics(trials) -> dict[str, Any]:
@@ -101,6 +166,12 @@ def application_metrics(trials) -> dict[str, Any]:
     return out
 
 
+def _ci(a, b, scale: float, digits: int) -> str:
+    """'+d [lo, hi]': the paired difference a − b and its 95 % interval, in the table's unit."""
+    d, lo, hi, _ = paired_difference(a, b)
+    return f"{d * scale:+.{digits}f} [{lo * scale:+.{digits}f}, {hi * scale:+.{digits}f}]"
+
+
 def _pm(result: dict[str, Any], name: str, scale: float, digits: int) -> str:
     """'mean ± std' of a metric in the table's unit."""
     return f"{result[name] * scale:.{digits}f} ± {result[name + '_std'] * scale:.{digits}f}"
@@ -109,18 +180,19 @@ def _pm(result: dict[str, Any], name: str, scale: float, digits: int) -> str:
 def application_section(result: ApplicationResult) -> Section:
     """The report's section 4 and its claims; the controllers' constants come from their configs."""
     from coassist.config import CONTROL_PRESETS
-    from coassist.control.arbitration import ArbitrationParameters
-    from coassist.sim.world import IMPEDANCE_STIFFNESS
+    from coassist.sim.world import ARBITRATION, IMPEDANCE_STIFFNESS
 
     preset = CONTROL_PRESETS.lookup(result.control_preset)
-    arbitration = ArbitrationParameters()  # the law sim.world.make_controller gives "cooperative-arbitrated"
+    arbitration = ARBITRATION  # the law sim.world.make_controller gives "cooperative-arbitrated"
     damping = preset.impedance.D[0]
     s = Section("4. Application: carrying a large and a heavy object (thesis §5.2.3, §5.3.3)")
     s.paragraphs.append(
-        f"User 0 carries each object along the '{result.task}' path past the obstacle to the target, "
-        f"{result.trials_per_controller} trials per controller: the assistive controller (preset '{result.control_preset}': "
-        f"α = {preset.game.alpha:g}, R_r = {preset.game.R_r[0]:g}, the object's transferred model), the same with α set every "
-        f"tick from the hand force (α {arbitration.alpha_min:g}–{arbitration.alpha_max:g}, coassist.control.arbitration), "
+        f"Simulated operators {', '.join(str(u) for u in result.users)} carry each object along the '{result.task}' path past "
+        f"the obstacle to the target, {result.trials_per_controller} trials per object and controller: the assistive controller "
+        f"(preset '{result.control_preset}': α = {preset.game.alpha:g}, R_r = {preset.game.R_r[0]:g}, the object's transferred "
+        f"model), the same with α set every tick by the '{arbitration.law}' law (α {arbitration.alpha_min:g}–"
+        f"{arbitration.alpha_max:g}, falling within {arbitration.target_scale * 100:g} cm of where the robot's plan ends: the "
+        "target; coassist.control.arbitration), "
         f"impedance control (a {IMPEDANCE_STIFFNESS:g} N/m spring toward the nominal path) and manual guidance. "
         "Every controller meets the same trials (same seeds). Smoothness and stability: the tool's jerk RMS, its overshoot "
         "past the operator's intent at the intent's turns, its RMS distance from the intent, and the robot's peak effort "
@@ -172,8 +244,10 @@ def application_section(result: ApplicationResult) -> Section:
                 "precisely and overshoots the operator's intent no more (beyond the thesis)",
                 bool(saving >= FORCE_SAVING and np.isfinite(v["sigma"]) and v["sigma"] <= np.nan_to_num(m["sigma"], nan=np.inf)
                      and v["reached"] >= m["reached"] and v["overshoot"] <= m["overshoot"]),
-                f"force {100 * saving:.0f} % below MG; σ {v['sigma'] * 1000:.2f} vs MG {m['sigma'] * 1000:.2f} mm; overshoot "
-                f"{v['overshoot'] * 1000:.1f} vs MG {m['overshoot'] * 1000:.1f} mm; jerk RMS {v['jerk_rms']:.2f} vs MG "
+                f"force {100 * saving:.0f} % below MG; σ {v['sigma'] * 1000:.2f} vs MG {m['sigma'] * 1000:.2f} mm "
+                f"(paired {_ci(v['sigma_trials'], m['sigma_trials'], 1000.0, 2)} mm); overshoot "
+                f"{v['overshoot'] * 1000:.1f} vs MG {m['overshoot'] * 1000:.1f} mm "
+                f"(paired {_ci(v['overshoot_trials'], m['overshoot_trials'], 1000.0, 1)} mm); jerk RMS {v['jerk_rms']:.2f} vs MG "
                 f"{m['jerk_rms']:.2f} m/s³",
                 reason="the learned prediction extrapolates the tool's own motion, so tracking it removes damping and feeds the "
                 "prediction's tick-to-tick jitter into the tool",

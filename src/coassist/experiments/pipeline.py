@@ -54,7 +54,10 @@ class ReproduceConfig:
     transfer_trials: int = 15  # thesis: 15 per transfer target
     test_trials: int = 6  # held-out trials per transfer target, for the comparison
     new_users: tuple[int, ...] = (1, 2, 3, 4, 5)
-    application_trials: int = 3  # per object and controller (thesis: three)
+    # Per operator, object and controller (thesis: three, one operator); three operators give
+    # 18 trials per object and controller, enough for a paired confidence interval against MG.
+    application_trials: int = 6
+    application_users: tuple[int, ...] = (0, 1, 2)
     application_task: str = "curved"
     real_data: str | None = None  # folder holding user-a/ and user-b/ recordings
     real_epochs: int = 15
@@ -78,6 +81,8 @@ class ReproduceConfig:
             raise ValueError(f"reproduce.tol must be > 0, got {self.tol!r}")
         if not self.new_users or any(u < 1 for u in self.new_users):
             raise ValueError(f"reproduce.new_users must be user indices >= 1 (0 is the author), got {self.new_users!r}")
+        if not self.application_users or any(not is_integer(u) or u < 0 for u in self.application_users):
+            raise ValueError(f"reproduce.application_users must be user indices >= 0, got {self.application_users!r}")
         if not is_integer(self.seed) or self.seed < 0:
             raise ValueError(f"reproduce.seed must be an integer >= 0, got {self.seed!r}")
 
@@ -87,7 +92,8 @@ PRESETS: Registry[ReproduceConfig] = Registry("reproduce preset", {
     "default": ReproduceConfig(),
     "tiny": ReproduceConfig(
         name="tiny", trials_per_task=2, iterations=2, epochs=1, resume_epochs=1, transfer_epochs=1, train_stride=25,
-        transfer_trials=3, test_trials=2, new_users=(1,), application_trials=1, real_epochs=1, sweep_duration=1.0,
+        transfer_trials=3, test_trials=2, new_users=(1,), application_trials=1, application_users=(0,), real_epochs=1,
+        sweep_duration=1.0,
     ),
     "thesis": ReproduceConfig(
         name="thesis", intent_preset="thesis", real_intent_preset="thesis", epochs=25, resume_epochs=25, transfer_epochs=25, train_stride=1,
@@ -106,7 +112,8 @@ PRESETS: Registry[ReproduceConfig] = Registry("reproduce preset", {
 ITERATION_SEED_STEP = 100_000
 #: Transfer target i's training trials: seed + TRANSFER_SEED_OFFSET + TRANSFER_SEED_STEP·i;
 #: its held-out test trials TRANSFER_TEST_SEED_OFFSET further on.
-TRANSFER_SEED_OFFSET, TRANSFER_SEED_STEP, TRANSFER_TEST_SEED_OFFSET = 500_000, 20_000, 10_000
+# (600_000: D_4 of a four-iteration run starts at 500_000, where the targets started before.)
+TRANSFER_SEED_OFFSET, TRANSFER_SEED_STEP, TRANSFER_TEST_SEED_OFFSET = 600_000, 20_000, 10_000
 #: The heavy load's own transfer dataset (application stage).
 HEAVY_TRANSFER_SEED_OFFSET = 800_000
 #: Application trials of object j: seed + APPLICATION_SEED_OFFSET + APPLICATION_SEED_STEP·j

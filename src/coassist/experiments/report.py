@@ -65,9 +65,25 @@ figure{margin:1em 0}figure img{max-width:100%;border:1px solid #ddd}figcaption{f
 """
 
 
-def render_html(title: str, intro: str, sections: Sequence[Section]) -> str:
+def _tables(parts: list[str], tables) -> None:
+    for caption, header, rows in tables:
+        parts.append(f"<table><caption>{html.escape(caption)}</caption><tr>")
+        parts.extend(f"<th>{html.escape(str(h))}</th>" for h in header)
+        parts.append("</tr>")
+        for row in rows:
+            parts.append("<tr>" + "".join(f"<td>{_cell(v)}</td>" for v in row) + "</tr>")
+        parts.append("</table>")
+
+
+def render_html(title: str, intro: str, sections: Sequence[Section], headline: Section | None = None) -> str:
+    """The report page: title, intro, the ``headline`` (the answer, first screen), the
+    claims table, then every section."""
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title><style>{_STYLE}</style></head><body>"]
     parts.append(f"<h1>{html.escape(title)}</h1><p>{html.escape(intro)}</p>")
+    if headline is not None:
+        parts.append(f"<h2>{html.escape(headline.title)}</h2>")
+        _tables(parts, headline.tables)
+        parts.extend(f"<p>{html.escape(p)}</p>" for p in headline.paragraphs)
     all_claims = [c for s in sections for c in s.claims]
     if all_claims:
         parts.append("<h2>The thesis' claims, checked</h2><table><tr><th>claim</th><th>verdict</th><th>evidence</th></tr>")
@@ -82,13 +98,7 @@ def render_html(title: str, intro: str, sections: Sequence[Section]) -> str:
             verdict = "<span class='holds'>holds</span>" if c.holds else "<span class='fails'>does not hold</span>"
             reason = f" Likely reason: {html.escape(c.reason)}" if (c.reason and not c.holds) else ""
             parts.append(f"<div class='claim'>{html.escape(c.text)} — {verdict}. {html.escape(c.evidence)}{reason}</div>")
-        for caption, header, rows in s.tables:
-            parts.append(f"<table><caption>{html.escape(caption)}</caption><tr>")
-            parts.extend(f"<th>{html.escape(str(h))}</th>" for h in header)
-            parts.append("</tr>")
-            for row in rows:
-                parts.append("<tr>" + "".join(f"<td>{_cell(v)}</td>" for v in row) + "</tr>")
-            parts.append("</table>")
+        _tables(parts, s.tables)
         for caption, png in s.figures:
             data = base64.b64encode(png).decode("ascii")
             parts.append(f"<figure><img alt='{html.escape(caption)}' src='data:image/png;base64,{data}'><figcaption>{html.escape(caption)}</figcaption></figure>")
@@ -96,7 +106,7 @@ def render_html(title: str, intro: str, sections: Sequence[Section]) -> str:
     return "".join(parts)
 
 
-def write_report(path: Path, title: str, intro: str, sections: Sequence[Section]) -> Path:
+def write_report(path: Path, title: str, intro: str, sections: Sequence[Section], headline: Section | None = None) -> Path:
     """Write the report atomically; returns its path."""
-    atomic_write_text(Path(path), render_html(title, intro, sections))
+    atomic_write_text(Path(path), render_html(title, intro, sections, headline))
     return Path(path)

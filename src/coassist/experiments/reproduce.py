@@ -150,9 +150,43 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
         f"(intent model preset '{config.intent_preset}', control preset '{config.control_preset}'), "
         f"seed {config.seed}; total time {ctx.summary['total_seconds']:.0f} s. Every number below was measured in this run."
     )
-    write_report(out / "report.html", "coassist — the thesis' experiments, reproduced", intro, ctx.sections)
+    headline = headline_section(application, transfer, real, _sim_dt(config))
+    ctx.summary["headline"] = {"table": headline.tables[0], "prediction": headline.paragraphs}
+    write_report(out / "report.html", "coassist — the thesis' experiments, reproduced", intro, ctx.sections, headline)
     atomic_write_text(out / "summary.json", json.dumps(_jsonable(ctx.summary), indent=1, allow_nan=False))
     return ctx.summary
+
+
+def _sim_dt(config: ReproduceConfig) -> float:
+    from coassist.sim.world import get_preset
+
+    return float(get_preset(config.control_preset).impedance.dt)
+
+
+def headline_section(application, transfer, real, sim_dt: float) -> Section:
+    """The report's first screen: per object, force saved against MG and IMP with its spread,
+    precision and smoothness against MG; then whether the prediction beats its best simple
+    baseline (the simulated transfer targets and the real recordings), in mm."""
+    from coassist.experiments.application import headline_table
+
+    s = Section("The answer: does the assistance help?")
+    s.tables.append(headline_table(application))
+
+    def line(where: str, best: dict, model: str, dt: float) -> str:
+        h = max(best, key=lambda k: int(k))
+        b = best[h]
+        verdict = "helps" if b["gain"] > 0 else "does not help"
+        return (f"{where}: at {int(h) * dt:.2f} s the {model} {verdict} over the best simple baseline ({b['name']}): "
+                f"{b['model_e_rms'] * 1e3:.2f} vs {b['e_rms'] * 1e3:.2f} mm ({100 * b['gain']:+.1f} %)")
+
+    for name, t in transfer.targets.items():
+        s.paragraphs.append("Prediction, simulated transfer to " + line(name, t.best_baseline, "transferred model", sim_dt))
+    if not real.skipped:
+        s.paragraphs.append("Prediction, real recordings, " + line("user-a held out", real.user_a["best_baseline"], "model",
+                                                                  real.user_a["dt"]))
+        s.paragraphs.append("Prediction, real recordings, " + line("user-b transferred", real.user_b["M_TL"]["best_baseline"],
+                                                                  "transferred model", real.user_a["dt"]))
+    return s
 
 
 def _jsonable(obj):

@@ -75,8 +75,12 @@ from coassist.sim.operator import OperatorArm, OperatorProfile, intent_trajector
 from coassist.sim.tasks import TASK_KINDS, Task, make_task
 
 #: Controller kinds of :class:`TrialSpec`. "cooperative-arbitrated": the cooperative game with
-#: α set every tick from the hand force (coassist.control.arbitration, default law).
+#: α set every tick by the law :data:`ARBITRATION`.
 CONTROLLER_KINDS = ("cooperative", "impedance", "manual", "cooperative-arbitrated")
+#: The arbitration law of "cooperative-arbitrated": α from the distance to where the robot's
+#: plan ends (coassist.control.arbitration, law "target"). Chosen on validation seeds of the
+#: application scenario (docs/assistance.md), against the hand-force law.
+ARBITRATION = ArbitrationParameters(law="target", alpha_min=0.3, alpha_max=0.9, target_scale=0.05)
 #: Spring of the IMP baseline toward the nominal reference [N/m] (eq. 5.4). The thesis
 #: does not give it (its K_i = 0 would make IMP equal MG); 200 N/m pulls back with
 #: 10 N at a 5 cm deviation, about what the operators push with.
@@ -109,7 +113,7 @@ def make_controller(kind: str, preset: ControlPreset):
         return AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
     if kind == "cooperative-arbitrated":
         assistive = AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
-        return ArbitratedController(assistive, ArbitrationParameters())
+        return ArbitratedController(assistive, ARBITRATION)
     if kind == "impedance":
         return ImpedanceControl(model, IMPEDANCE_STIFFNESS * np.eye(model.n_dof), effort_limit=preset.effort_limit)
     if kind == "manual":
