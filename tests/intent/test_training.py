@@ -51,6 +51,29 @@ def test_transfer_freezes_the_lstm_bit_for_bit(tmp_path, trials, tiny):
     assert not torch.equal(_state(ft)["lstm.weight_hh_l0"], sb["lstm.weight_hh_l0"])
 
 
+def test_transfer_refits_a_frozen_skip_to_the_new_datas_ridge(tmp_path, trials, tiny):
+    """freeze_skip: the residual is over the ridge of the data trained on. In transfer the skip
+    is the ridge fitted on the new trials in the source's scalers (recomputed here), not the
+    source's ridge, which extrapolates on a new user."""
+    from dataclasses import replace
+
+    from coassist.intent import RidgeBaseline
+    from coassist.intent.features import WindowSet, split_trials
+
+    preset = replace(tiny, skip=True, train=replace(tiny.train, freeze_skip=True, skip_alpha=0.5))
+    base = train_model(trials, preset, preset.train)
+    save_model(base, tmp_path / "base")
+    new_user = labeled(4, prefix="U")
+    cfg = replace(preset.train, init=f"transfer:{tmp_path / 'base'}")
+    tl = train_model(new_user, preset, cfg)
+    train_idx, _ = split_trials([t.id for t in new_user], cfg.test_fraction, cfg.seed)
+    ws = WindowSet([new_user[i].trial for i in train_idx], base.window, base.dt)
+    ridge = RidgeBaseline.fit(ws, base.input_scaler, base.target_scaler, 0.5)
+    np.testing.assert_allclose(tl.net.skip.weight.detach().numpy(), ridge.W.T, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(tl.net.skip.bias.detach().numpy(), ridge.b, rtol=1e-5, atol=1e-6)
+    assert not torch.equal(tl.net.skip.weight, base.net.skip.weight)
+
+
 def test_resume_continues_the_history(tmp_path, trials, tiny):
     base = train_model(trials, tiny, tiny.train)
     save_model(base, tmp_path / "m0")
