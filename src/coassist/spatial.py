@@ -18,6 +18,7 @@ __all__ = [
     "damped_pseudo_inverse",
     "dls_joint_velocity",
     "joint_velocity",
+    "continuous_rotation_vector",
     "manipulability",
     "orientation_error",
     "rotation_matrix",
@@ -160,6 +161,41 @@ def orientation_error(R_desired: ArrayLike, R_actual: ArrayLike) -> np.ndarray:
     Rd = _as_rotation(R_desired, "R_desired")
     Ra = _as_rotation(R_actual, "R_actual")
     return rotation_vector(Rd @ Ra.T)
+
+
+def continuous_rotation_vector(rv: ArrayLike, previous: ArrayLike) -> np.ndarray:
+    """The rotation vector of the same rotation as ``rv`` nearest to ``previous``.
+
+    A rotation by θ about the unit axis n is also (θ + 2πk)·n for every integer k.
+    :func:`rotation_vector` returns the one with |rv| ≤ π, which jumps from ≈ +π·n to
+    ≈ −π·n when a rotation crosses π (a UR tool pointing down sits at |rv| ≈ π). Like
+    ``numpy.unwrap`` for angles, this picks the k that keeps a sequence continuous::
+
+        n = rv/|rv|,   k = round((n·previous − |rv|) / 2π),   rv' = (|rv| + 2πk)·n
+
+    (k minimises ||(|rv| + 2πk)·n − previous||). ``rv`` unchanged when |rv| = 0 or either
+    input is not finite.
+
+    Parameters
+    ----------
+    rv, previous : array_like, shape (3,)
+        This sample's rotation vector and the previous (already continuous) one, in rad.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        The continuous rotation vector, in rad (its norm may exceed π).
+    """
+    r = np.asarray(rv, dtype=float)
+    if r.shape != (3,):
+        raise ValueError(f"rv must have shape (3,), got {r.shape}")
+    p = np.asarray(previous, dtype=float).reshape(-1)
+    theta = float(np.linalg.norm(r))
+    if theta == 0.0 or p.shape != (3,) or not (np.isfinite(r).all() and np.isfinite(p).all()):
+        return r.copy()
+    n = r / theta
+    k = round((float(n @ p) - theta) / (2.0 * math.pi))
+    return (theta + 2.0 * math.pi * k) * n
 
 
 # ----------------------------------------------------------------------------

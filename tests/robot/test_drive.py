@@ -3,6 +3,8 @@ the assistive controller saves force, the sensor reads the hand, and a run is a 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -122,6 +124,16 @@ def test_full_pose_control_holds_orientation_as_a_rotation_vector():
     assert tr.velocity[-30:, 5].mean() == pytest.approx(0.2, rel=0.1)
     assert np.abs(tr.pose[:, 2] - tr.pose[0, 2]).max() < 0.005
     assert not (np.bitwise_or.reduce(tr.fault) & int(Fault.STOPPED))
+
+
+def test_full_pose_rotation_columns_stay_continuous_through_pi():
+    # The start orientation is π about x (tool down): a torque about x tilts it past π, where the
+    # plain rotation vector jumps from +π·x to −π·x. The logged column keeps counting the angle.
+    tr = drive(DriveConfig(controller="mg", task="linear", full_pose=True, time_limit=1.0),
+               operator=ScriptedForce.constant((0.0, 0.0, 0.0, 1.0, 0.0, 0.0)))
+    rx = tr.pose[:, 3]
+    assert rx[0] == pytest.approx(math.pi, abs=1e-6) and rx[-1] > math.pi + 0.05
+    assert np.abs(np.diff(tr.pose[:, 3:6], axis=0)).max() < 0.01  # no 2π jump
 
 
 def test_config_validation_names_the_field():

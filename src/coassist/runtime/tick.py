@@ -151,7 +151,8 @@ class TickOutput(NamedTuple):
     """One tick's command and log row (d = controlled DOFs, H = intent horizon).
 
     command : what the world is sent.  pose, velocity, wrench : (d,) measured pose and
-    twist and the hand wrench used [m, m/s, N].  reference : (d,) nominal at k.
+    twist and the hand wrench used [m, m/s, N]; controlled rotations in the pose are
+    rotation vectors kept continuous from tick to tick (they may pass ±π) [rad].  reference : (d,) nominal at k.
     prediction : (H, 2) positions in use (the nominal rows on fallback), or None when
     the source is the nominal plan.  u_r, u_h_model : (d,) [N].  fault : the tick's flags.
     """
@@ -237,6 +238,7 @@ class ControlTick:
         self.safety.reset()
         self._za = np.zeros(2 * d)
         self._R_start = _spatial.rotation_matrix(start[3:6])
+        self._rv_log = start[3:6].copy()
         self._J = None
         self._inv_dt = 1.0 / self.dt
 
@@ -254,6 +256,12 @@ class ControlTick:
         if not (np.isfinite(pose).all() and np.isfinite(twist).all()):
             fault |= Fault.NONFINITE_STATE
         x = pose[dofs]
+        if self._ctrl_rot:  # logged rotations: continuous through ±π (spatial.continuous_rotation_vector)
+            rv = _spatial.continuous_rotation_vector(pose[3:6], self._rv_log)
+            if np.isfinite(rv).all():
+                self._rv_log = rv
+            for j in self._ctrl_rot:
+                x[j] = rv[dofs[j] - 3]
         v = twist[dofs]
         w = hand[dofs]
         # 2. intent
