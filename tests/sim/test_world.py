@@ -217,3 +217,23 @@ def test_spec_validation_names_the_field():
         TrialSpec(task="linear", seed=-1)
     with pytest.raises(ValueError, match="intent"):
         run_spec(TrialSpec(task="linear", intent="/nonexistent/model.safetensors"))
+
+
+def test_the_applications_large_obstacle_makes_a_wide_detour_that_still_ends_at_the_target():
+    """obstacle="large" (thesis §5.2.3): a 12 cm box midway; the operator passes it farther
+    from the nominal path than the evaluation's 6 cm box, and still settles on the target."""
+    from coassist.experiments.realism import trial_stats
+    from coassist.metrics import distance_to_target
+    from coassist.sim.tasks import OBSTACLES
+    from coassist.sim.world import TrialSpec, run_spec
+
+    dev = {}
+    for name in ("small", "large"):
+        t = run_spec(TrialSpec(task="curved", object="board", controller="manual", preset="thesis-application-damped",
+                               seed=11, obstacle=name))
+        assert tuple(t.meta.extra["obstacle"]["size"]) == OBSTACLES[name][0]
+        assert distance_to_target(t.pose, np.asarray(t.meta.extra["target"], float))[-1] < 0.025
+        dev[name] = trial_stats(t)["peak_deviation"]
+    assert dev["large"] > dev["small"] + 0.02 and dev["large"] > 0.07
+    with pytest.raises(ValueError, match="TrialSpec.obstacle"):
+        TrialSpec(task="curved", obstacle="huge")

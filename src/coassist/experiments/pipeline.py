@@ -162,7 +162,8 @@ class Workspace:
     say: Callable[[str], None]
 
     def collect(self, name: str, *, tasks, users=(0,), objects=("handle",), trials: int, seed: int,
-                controller: str = "cooperative", preset: str | None = None, intent: str = "nominal"):
+                controller: str = "cooperative", preset: str | None = None, intent: str = "nominal",
+                obstacle: str = "small"):
         """Simulate a dataset into ``out/datasets/<name>``; return its folder and the dataset read back."""
         from coassist.data import read_dataset
         from coassist.sim.collect import collect_dataset
@@ -170,7 +171,7 @@ class Workspace:
         folder = collect_dataset(
             self.out / "datasets" / name, dataset_id=name, workers=self.config.workers, progress=self.progress,
             overwrite=True, controller=controller, users=list(users), tasks=list(tasks), objects=list(objects),
-            trials=trials, seed=seed, preset=preset or self.config.control_preset, intent=intent,
+            trials=trials, seed=seed, preset=preset or self.config.control_preset, intent=intent, obstacle=obstacle,
         )
         return folder, read_dataset(folder)
 

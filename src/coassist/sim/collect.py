@@ -23,6 +23,7 @@ def dataset_specs(
     preset: str = "thesis-evaluation",
     intent: str = "nominal",
     population_seed: int = 0,
+    obstacle: str = "small",
 ) -> list[TrialSpec]:
     """One spec per (user, object, task, repetition); trial i of the list gets seed ``seed + i``.
 
@@ -42,6 +43,7 @@ def dataset_specs(
                     specs.append(TrialSpec(
                         task=task, user=user, object=obj, controller=controller, preset=preset,
                         seed=seed + len(specs), intent=intent, population_seed=population_seed,
+                        obstacle=obstacle,
                     ))
     return specs
 

@@ -72,7 +72,7 @@ from coassist.interfaces import FEATURES, IntentSource, TrialContext
 from coassist.sim.intent_source import NominalIntent, load_intent_source
 from coassist.sim.objects import CarriedObject, ForceSensor, get_object
 from coassist.sim.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise, operator_profile
-from coassist.sim.tasks import TASK_KINDS, Task, make_task
+from coassist.sim.tasks import OBSTACLES, TASK_KINDS, Task, make_task
 
 #: Controller kinds of :class:`TrialSpec`. "cooperative-arbitrated": the cooperative game with
 #: α set every tick by the law :data:`ARBITRATION`.
@@ -419,6 +419,7 @@ class TrialSpec:
     :data:`CONTROLLER_KINDS`. preset : one of :data:`PRESETS`. seed : int ≥ 0.
     intent : "nominal" | "oracle" | a model path (loaded in the worker).
     population_seed : which population the user is drawn from.
+    obstacle : a name of :data:`coassist.sim.tasks.OBSTACLES` ("small": the evaluation's box).
     """
 
     task: str
@@ -429,8 +430,11 @@ class TrialSpec:
     seed: int = 0
     intent: str = "nominal"
     population_seed: int = 0
+    obstacle: str = "small"
 
     def __post_init__(self) -> None:
+        if self.obstacle not in OBSTACLES:
+            raise ValueError(f"TrialSpec.obstacle must be one of {tuple(OBSTACLES)}, got {self.obstacle!r}")
         if self.task not in TASK_KINDS:
             raise ValueError(f"TrialSpec.task must be one of {TASK_KINDS}, got {self.task!r}")
         object.__setattr__(self, "user", check_int(self.user, "TrialSpec.user", 0))
@@ -451,7 +455,9 @@ def run_spec(spec: TrialSpec, _controllers: dict | None = None) -> Trial:
     runners pass to reuse the game's gains across trials (building them costs far more
     than a tick); the result does not depend on it.
     """
-    task = make_task(spec.task, np.random.default_rng(np.random.SeedSequence([spec.seed, 0])))
+    size, placement = OBSTACLES[spec.obstacle]
+    task = make_task(spec.task, np.random.default_rng(np.random.SeedSequence([spec.seed, 0])),
+                     obstacle_size=size, obstacle_range=placement)
     preset = get_preset(spec.preset)
     key = (spec.controller, spec.preset)
     if _controllers is not None and key in _controllers:
