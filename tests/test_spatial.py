@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from coassist.spatial import continuous_rotation_vector, rotation_matrix, rotation_vector
+from coassist.spatial import continuous_rotation_vector, rotation_matrix, rotation_vector, unwrap_rotation_vectors
 
 
 def test_a_rotation_through_pi_stays_continuous_and_is_the_same_rotation():
@@ -33,3 +33,15 @@ def test_continuous_rotation_vector_by_hand():
     np.testing.assert_array_equal(continuous_rotation_vector([0.1, 0.2, 0.3], [np.nan, 0.0, 0.0]), [0.1, 0.2, 0.3])
     with pytest.raises(ValueError, match=r"rv must have shape \(3,\)"):
         continuous_rotation_vector([0.1, 0.2], [0.0, 0.0, 0.0])
+
+
+def test_unwrap_rotation_vectors_matches_the_row_by_row_chain_and_skips_nan_rows():
+    angles = np.linspace(math.pi - 0.2, math.pi + 0.4, 31)
+    raw = np.array([rotation_vector(Rotation.from_rotvec([0.0, a, 0.0]).as_matrix()) for a in angles])
+    raw[10] = np.nan  # a dropped sample: kept as it is, the chain goes on from the row before
+    out = unwrap_rotation_vectors(raw, [0.0, math.pi - 0.2, 0.0])
+    keep = np.arange(31) != 10
+    np.testing.assert_allclose(out[keep, 1], angles[keep], atol=1e-9)
+    assert np.isnan(out[10]).all()
+    with pytest.raises(ValueError, match=r"rvs must have shape \(n, 3\)"):
+        unwrap_rotation_vectors(np.zeros((4, 2)), [0.0, 0.0, 0.0])

@@ -23,6 +23,7 @@ __all__ = [
     "orientation_error",
     "rotation_matrix",
     "rotation_vector",
+    "unwrap_rotation_vectors",
 ]
 
 
@@ -196,6 +197,20 @@ def continuous_rotation_vector(rv: ArrayLike, previous: ArrayLike) -> np.ndarray
     n = r / theta
     k = round((float(n @ p) - theta) / (2.0 * math.pi))
     return (theta + 2.0 * math.pi * k) * n
+
+
+def unwrap_rotation_vectors(rvs: ArrayLike, start: ArrayLike) -> np.ndarray:
+    """A sequence of rotation vectors (n, 3) made continuous from ``start`` (3,), row by row
+    with :func:`continuous_rotation_vector` (a row that is not finite is kept and skipped)."""
+    a = np.array(rvs, dtype=float)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"rvs must have shape (n, 3), got {a.shape}")
+    prev = np.asarray(start, dtype=float)
+    for i in range(a.shape[0]):
+        a[i] = continuous_rotation_vector(a[i], prev)
+        if np.isfinite(a[i]).all():
+            prev = a[i]
+    return a
 
 
 # ----------------------------------------------------------------------------

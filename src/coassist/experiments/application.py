@@ -120,11 +120,10 @@ def headline_table(result: ApplicationResult) -> tuple[str, list[str], list[list
             v = result.metrics[(obj, variant)]
             s_mg, sd_mg = force_saving(v["f_rms_trials"], m["f_rms_trials"])
             s_imp, sd_imp = force_saving(v["f_rms_trials"], i_["f_rms_trials"])
-            ds, lo_s, hi_s, _ = paired_difference(v["sigma_trials"], m["sigma_trials"])
-            do, lo_o, hi_o, _ = paired_difference(v["overshoot_trials"], m["overshoot_trials"])
             rows.append([obj, variant, f"{100 * s_mg:.0f} ± {100 * sd_mg:.0f} %", f"{100 * s_imp:.0f} ± {100 * sd_imp:.0f} %",
-                         f"{v['sigma'] * 1e3:.2f} vs {m['sigma'] * 1e3:.2f} ({ds * 1e3:+.2f} [{lo_s * 1e3:+.2f}, {hi_s * 1e3:+.2f}])",
-                         f"{v['overshoot'] * 1e3:.1f} vs {m['overshoot'] * 1e3:.1f} ({do * 1e3:+.1f} [{lo_o * 1e3:+.1f}, {hi_o * 1e3:+.1f}])",
+                         f"{v['sigma'] * 1e3:.2f} vs {m['sigma'] * 1e3:.2f} ({_ci(v['sigma_trials'], m['sigma_trials'], 1e3, 2)})",
+                         f"{v['overshoot'] * 1e3:.1f} vs {m['overshoot'] * 1e3:.1f} "
+                         f"({_ci(v['overshoot_trials'], m['overshoot_trials'], 1e3, 1)})",
                          f"{v['jerk_rms']:.2f} vs {m['jerk_rms']:.2f}"])
     caption = (f"Application scenario, {result.trials_per_controller} paired trials per object and controller "
                f"(operators {', '.join(str(u) for u in result.users)}): force saved per trial (mean ± std), and the "

@@ -42,7 +42,7 @@ from coassist.sim.objects import get_object
 from coassist.sim.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
 from coassist.sim.tasks import TASK_KINDS, make_task
 from coassist.sim.world import get_preset, make_controller
-from coassist.spatial import rotation_vector
+from coassist.spatial import rotation_vector, unwrap_rotation_vectors
 
 __all__ = ["CONTROLLERS", "DriveConfig", "WORLDS", "drive", "workspace_for"]
 
@@ -323,6 +323,10 @@ def _trial(config: DriveConfig, log: LoopLog, ref_abs, H, intent, task, obj, use
     })  # fmt: skip
     meta = TrialMeta(user=user, task=task.kind, object=obj.name, controller=controller_name, model_id=model_id,
                      seed=config.seed, source="mujoco" if config.world == "mujoco" else "ur5", dt=config.dt, extra=extra)  # fmt: skip
-    return Trial(meta=meta, time=np.arange(n) * config.dt, pose=log.pose, velocity=log.velocity, wrench=log.wrench,
+    pose = log.pose
+    if config.full_pose:  # rotation vectors continuous through ±π: a tool pointing down sits at |rv| ≈ π
+        pose = pose.copy()
+        pose[:, 3:6] = unwrap_rotation_vectors(pose[:, 3:6], start_pose[3:6])
+    return Trial(meta=meta, time=np.arange(n) * config.dt, pose=pose, velocity=log.velocity, wrench=log.wrench,
                  reference=ref, prediction=pred, intent=intent_d, effort_h=log.effort_h, effort_r=log.effort_r,
                  fault=log.fault, joints=log.joints, joint_velocity=log.joint_velocity)  # fmt: skip

@@ -151,8 +151,8 @@ class TickOutput(NamedTuple):
     """One tick's command and log row (d = controlled DOFs, H = intent horizon).
 
     command : what the world is sent.  pose, velocity, wrench : (d,) measured pose and
-    twist and the hand wrench used [m, m/s, N]; controlled rotations in the pose are
-    rotation vectors kept continuous from tick to tick (they may pass ±π) [rad].  reference : (d,) nominal at k.
+    twist and the hand wrench used [m, m/s, N] (rotations as the world reports them, |rv| ≤ π;
+    ``robot.drive`` makes the trial's columns continuous).  reference : (d,) nominal at k.
     prediction : (H, 2) positions in use (the nominal rows on fallback), or None when
     the source is the nominal plan.  u_r, u_h_model : (d,) [N].  fault : the tick's flags.
     """
@@ -216,7 +216,8 @@ class ControlTick:
 
     # ------------------------------------------------------------------ per run
     def reset(self, plan: Plan, context: TrialContext, state: RobotState | None = None) -> None:
-        """Start a run: the plan's grids, the intent, a zero admittance state, the safety layer."""
+        """Start a run: the plan's grids, the intent, a zero admittance state, the safety layer, and
+        the controller when it keeps state between ticks (an online-α arbitration)."""
         if not isinstance(plan, Plan):
             raise ValueError(f"plan must be a Plan, got {type(plan).__name__}")
         d = self.d
@@ -233,12 +234,14 @@ class ControlTick:
         ref_ctrl = ref_abs.copy()
         ref_ctrl[:, :d] -= self._x0
         self._ref_ctrl = ref_ctrl
+        controller_reset = getattr(self.controller, "reset", None)
+        if callable(controller_reset):
+            controller_reset()
         self.intent.reset(context)
         self.wrench.reset()
         self.safety.reset()
         self._za = np.zeros(2 * d)
         self._R_start = _spatial.rotation_matrix(start[3:6])
-        self._rv_log = start[3:6].copy()
         self._J = None
         self._inv_dt = 1.0 / self.dt
 
@@ -256,12 +259,6 @@ class ControlTick:
         if not (np.isfinite(pose).all() and np.isfinite(twist).all()):
             fault |= Fault.NONFINITE_STATE
         x = pose[dofs]
-        if self._ctrl_rot:  # logged rotations: continuous through ±π (spatial.continuous_rotation_vector)
-            rv = _spatial.continuous_rotation_vector(pose[3:6], self._rv_log)
-            if np.isfinite(rv).all():
-                self._rv_log = rv
-            for j in self._ctrl_rot:
-                x[j] = rv[dofs[j] - 3]
         v = twist[dofs]
         w = hand[dofs]
         # 2. intent

@@ -309,8 +309,8 @@ OBSTACLE_RANGE = (0.3, 0.7)
 #: Obstacles by name: (size [m], range of its position along the path as fractions of its
 #: length). "small" is the evaluation's box beside the shown path (§5.2.2). "large" is the
 #: application's (§5.2.3): a real object midway between start and target with no path
-#: shown, around which the person detours widely (7–12 cm from the nominal path against
-#: 3–8 cm; user-a's recordings deviate up to 0.1 m, user-b's up to 0.5 m). It stays near
+#: shown, around which the person detours widely (8–12 cm from the nominal path against
+#: 4–7 cm; user-a's recordings deviate up to 0.1 m, user-b's up to 0.5 m). It stays near
 #: the middle so the detour has returned to the path before the target.
 OBSTACLES = {"small": (OBSTACLE_SIZE, OBSTACLE_RANGE), "large": ((0.12, 0.12), (0.45, 0.55))}
 

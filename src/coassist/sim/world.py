@@ -336,9 +336,6 @@ def run_trial(
     Hs = int(source.horizon)
     if Hs < H:
         raise ValueError(f"intent source horizon ({Hs}) must be >= the controller's ({H})")
-    reset = getattr(controller, "reset", None)
-    if callable(reset):  # a stateful controller (an online-α arbitration) starts every trial afresh
-        reset()
     if time_limit is None:
         time_limit = 2.0 * task.planner.end_time + 10.0
     n_max = int(math.ceil(float(time_limit) / dt))
