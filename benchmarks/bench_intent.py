@@ -15,7 +15,7 @@ the full 125-sample window in the same run:
   pay per tick; shown for reference: a window-trained LSTM is not exact when streamed);
 - ``baselines``: the tuned ridge (one matrix product on the decimated window) and the
   constant-acceleration Kalman predictor (one filter step), ratios against the ``lstm``
-  network's ``eager full``. The ``default`` preset is that ridge in the model format.
+  network's ``eager full``. The ``linear`` preset is that ridge in the model format.
 
 Targets (issue 4): lstm ≤ 2 ms p99, thesis-size ≤ 8 ms p99.
 

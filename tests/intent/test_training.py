@@ -205,3 +205,26 @@ def test_skip_alpha_shrinks_the_skip_and_leaves_the_baseline_alone(trials, tiny)
     ws_strided = WindowSet([trials[i].trial for i in train_idx], p.window, m.dt, stride=p.train.train_stride)
     baseline = RidgeBaseline.fit(ws_strided, m.input_scaler, m.target_scaler, 1.0)
     np.testing.assert_allclose(trained.ridge.W, baseline.W, rtol=1e-10, atol=1e-12)
+
+
+def test_the_ridge_alpha_search_runs_once_per_training(monkeypatch, trials, tiny):
+    """The skip's α and the baselines' α come from the same search on the same trials: it runs
+    once, and both use its answer."""
+    from dataclasses import replace
+
+    from coassist.intent import baselines, training
+
+    calls = []
+    real = baselines.tune_ridge_alpha
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(training, "tune_ridge_alpha", counting)
+    monkeypatch.setattr(baselines, "tune_ridge_alpha", counting)
+    preset = replace(tiny, skip=True, train=replace(tiny.train, freeze_skip=True))
+    m = train_model(trials, preset, preset.train)
+    assert len(calls) == 1
+    ridge = m.info["baselines"]["ridge"]
+    assert ridge["tuned"] and ridge["alpha"] == ridge["alphas"][int(np.argmin(ridge["validation_mse"]))]

@@ -178,6 +178,10 @@ class RidgeBaseline:
             raise ValueError(f"ridge weights miss tensor {exc}") from None
 
 
+#: The ridge's α where there is nothing to validate on (fewer than two training trials).
+UNTUNED_RIDGE_ALPHA = 1.0
+
+
 def tune_ridge_alpha(
     trials: Sequence[Trial],
     ids: Sequence[str],
@@ -219,7 +223,8 @@ def fit_tuned_baselines(
     seed: int,
     stride: int = 1,
     alpha: float | None = None,
-    fallback_alpha: float = 1.0,
+    fallback_alpha: float = UNTUNED_RIDGE_ALPHA,
+    tuned: tuple[float, dict[str, Any]] | None = None,
 ) -> tuple[RidgeBaseline, KalmanCA, dict[str, Any]]:
     """The ridge and the Kalman predictor, tuned on validation trials from the training trials.
 
@@ -228,7 +233,9 @@ def fit_tuned_baselines(
     :func:`coassist.intent.kalman.tune_kalman` on the same validation trials. The ridge
     is then refitted on all training windows (every ``stride``-th). With fewer than two
     training trials there is nothing to validate on: α = ``fallback_alpha`` (or
-    ``alpha``) and the Kalman defaults, recorded as untuned.
+    ``alpha``) and the Kalman defaults, recorded as untuned. ``tuned``: what
+    :func:`tune_ridge_alpha` already returned for these very arguments (training tunes
+    the skip's α first), so the search is not run twice.
 
     Returns (ridge, kalman, record) — the record is JSON-ready for the model's sidecar.
     """
@@ -243,8 +250,8 @@ def fit_tuned_baselines(
         alpha_used, ridge_rec = (fallback_alpha if alpha is None else alpha), {"tuned": False}
     else:
         if alpha is None:
-            alpha_used, search = tune_ridge_alpha(trials, ids, window, dt, input_scaler, target_scaler, seed=seed,
-                                                  stride=stride)  # fmt: skip
+            alpha_used, search = tuned or tune_ridge_alpha(trials, ids, window, dt, input_scaler, target_scaler,
+                                                           seed=seed, stride=stride)  # fmt: skip
             ridge_rec = {"tuned": True, **search}
         else:
             alpha_used, ridge_rec = float(alpha), {"tuned": False, "fixed_by": "train.ridge_alpha"}

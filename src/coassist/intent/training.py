@@ -39,7 +39,7 @@ from torch import nn
 
 from coassist._checks import is_integer, is_real_number
 from coassist._io import partial_folder, save_figure
-from coassist.intent.baselines import RidgeBaseline, fit_tuned_baselines, tune_ridge_alpha
+from coassist.intent.baselines import UNTUNED_RIDGE_ALPHA, RidgeBaseline, fit_tuned_baselines, tune_ridge_alpha
 from coassist.intent.features import WindowConfig, WindowSet, feature_names, scale_targets, split_trials
 from coassist.intent.model import IntentModel, load_model, save_model
 from coassist.intent.network import IntentNet, NetworkConfig
@@ -237,41 +237,55 @@ def _common_dt(trials: Sequence[LabeledTrial]) -> float:
     return round(dt, 6)
 
 
+#: tune_ridge_alpha's (α, record) for a model's training trials, kept so the baselines reuse it.
+_Tuning = tuple[float, dict[str, Any]] | None
+
+
 def build_model(preset: Preset, trials: Sequence[LabeledTrial], config: TrainConfig) -> IntentModel:
     """The starting model: fresh (scalers fitted on the training split) or loaded from ``init``."""
+    return _build_model(preset, trials, config)[0]
+
+
+def _build_model(preset: Preset, trials: Sequence[LabeledTrial], config: TrainConfig) -> tuple[IntentModel, _Tuning]:
+    """:func:`build_model`, and the ridge α search run for its skip (None when none ran)."""
     mode, path = config.start
     d = trials[0].trial.n_dof
     dt = _common_dt(trials)
     if mode != "scratch":
-        return load_model(path, features=feature_names(d), dt=dt)
+        return load_model(path, features=feature_names(d), dt=dt), None
     ids = [lt.id for lt in trials]
     train_idx, _ = split_trials(ids, config.test_fraction, config.seed)
     ws = WindowSet([trials[i].trial for i in train_idx], preset.window, dt)
     in_scaler, out_scaler = ws.fit_scalers()
     net = IntentNet(preset.network(d), generator=torch.Generator().manual_seed(config.seed))
-    if net.skip is not None:
-        _fit_skip(net, trials, train_idx, ws, preset.window, dt, in_scaler, out_scaler, config)
-    return IntentModel(net, preset.window, in_scaler, out_scaler, dt)
+    tuning = None
+    if net.skip is not None and not net.is_linear:  # a linear model's skip is set to the tuned ridge after "training"
+        tuning = _fit_skip(net, trials, train_idx, ws, preset.window, dt, in_scaler, out_scaler, config)
+    return IntentModel(net, preset.window, in_scaler, out_scaler, dt), tuning
 
 
 def _fit_skip(net: IntentNet, trials: Sequence[LabeledTrial], train_idx: Sequence[int], ws: WindowSet,
-              window: WindowConfig, dt: float, in_scaler, out_scaler, config: TrainConfig) -> None:  # fmt: skip
-    """Set the network's linear skip to the ridge solution on ``ws`` (α from :func:`_skip_alpha`)."""
-    ridge = RidgeBaseline.fit(ws, in_scaler, out_scaler, _skip_alpha(trials, train_idx, window, dt, in_scaler, out_scaler,
-                                                                      config))  # fmt: skip
+              window: WindowConfig, dt: float, in_scaler, out_scaler, config: TrainConfig) -> _Tuning:  # fmt: skip
+    """Set the network's linear skip to the ridge solution on ``ws`` (α from :func:`_skip_alpha`);
+    returns the α search when one ran."""
+    alpha, tuning = _skip_alpha(trials, train_idx, window, dt, in_scaler, out_scaler, config)
+    ridge = RidgeBaseline.fit(ws, in_scaler, out_scaler, alpha)
     net.init_skip(torch.from_numpy(ridge.W.T.astype(np.float32)), torch.from_numpy(ridge.b.astype(np.float32)))
+    return tuning
 
 
 def _skip_alpha(trials: Sequence[LabeledTrial], train_idx: Sequence[int], window: WindowConfig, dt: float,
-                in_scaler, out_scaler, config: TrainConfig) -> float:  # fmt: skip
-    """The α of the ridge the skip starts from: skip_alpha, else ridge_alpha, else tuned on validation trials."""
+                in_scaler, out_scaler, config: TrainConfig) -> tuple[float, _Tuning]:  # fmt: skip
+    """The α of the ridge the skip starts from: skip_alpha, else ridge_alpha, else tuned on
+    validation trials (then also the search: the baselines' ridge is tuned the same way)."""
     for alpha in (config.skip_alpha, config.ridge_alpha):
         if alpha is not None:
-            return alpha
+            return alpha, None
     if len(train_idx) < 2:
-        return 1.0  # nothing to validate on: the former fixed default
-    return tune_ridge_alpha([trials[i].trial for i in train_idx], [trials[i].id for i in train_idx], window, dt,
-                            in_scaler, out_scaler, seed=config.seed, stride=config.train_stride)[0]  # fmt: skip
+        return UNTUNED_RIDGE_ALPHA, None  # nothing to validate on
+    tuning = tune_ridge_alpha([trials[i].trial for i in train_idx], [trials[i].id for i in train_idx], window, dt,
+                              in_scaler, out_scaler, seed=config.seed, stride=config.train_stride)  # fmt: skip
+    return tuning[0], tuning
 
 
 def _batch(model: IntentModel, ws: WindowSet, sel: np.ndarray, signs: np.ndarray | None = None
@@ -369,7 +383,7 @@ def train_model(
     mode, base_path = config.start
     if mode == "resume" and (partial_folder(base_path) / CHECKPOINT_JSON).is_file():
         base_path = str(partial_folder(base_path))  # an interrupted run on that folder: newer than it
-    base = build_model(preset, trials, replace(config, init=f"resume:{base_path}") if mode == "resume" else config)
+    base, tuning = _build_model(preset, trials, replace(config, init=f"resume:{base_path}") if mode == "resume" else config)
     ids = [lt.id for lt in trials]
     ckpt = _read_checkpoint(Path(base_path)) if mode == "resume" and not base.info.get("finished", True) else None
     if ckpt is not None:
@@ -401,9 +415,9 @@ def train_model(
     if config.freeze_skip and net.skip is not None:  # residual learning over the fixed (tuned) ridge
         if frozen and ckpt is None:
             # The residual is over the ridge of *this* data: the source's ridge, frozen, would
-            # extrapolate on a new user's windows (user-b: 78.9 mm at 0.4 s against 5.5 mm).
-            _fit_skip(net, trials, train_idx, WindowSet([trials[i].trial for i in train_idx], window, dt), window, dt,
-                      model.input_scaler, model.target_scaler, config)  # fmt: skip
+            # extrapolate on a new user's windows (user-b: 78.9 mm at 0.4 s against 5.5 mm; README).
+            tuning = _fit_skip(net, trials, train_idx, WindowSet([trials[i].trial for i in train_idx], window, dt), window,
+                               dt, model.input_scaler, model.target_scaler, config)  # fmt: skip
         net.skip.requires_grad_(False)
     net.to(config.device)
     train_data = _Windows(model, train_ws, frozen, device=config.device)
@@ -500,7 +514,8 @@ def train_model(
     t_fit = time.perf_counter()
     model.ridge, _, baselines = fit_tuned_baselines(
         [trials[i].trial for i in train_idx], [ids[i] for i in train_idx], window, dt, model.input_scaler,
-        model.target_scaler, seed=config.seed, stride=config.train_stride, alpha=config.ridge_alpha)
+        model.target_scaler, seed=config.seed, stride=config.train_stride, alpha=config.ridge_alpha,
+        tuned=tuning if ckpt is None else None)
     if net.is_linear:  # the linear predictor is the tuned ridge: one closed-form pass, recorded as one epoch
         net.init_skip(torch.from_numpy(model.ridge.W.T.astype(np.float32)).to(config.device),
                       torch.from_numpy(model.ridge.b.astype(np.float32)).to(config.device))  # fmt: skip

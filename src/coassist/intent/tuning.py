@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from coassist.intent.evaluation import evaluate_model
-from coassist.intent.features import split_trials
+from coassist.intent.features import split_trials, validation_split
 from coassist.intent.sources import LabeledTrial
 from coassist.intent.training import Preset, train_model
 
@@ -88,7 +88,7 @@ def run_study(
     pool = [trials[i] for i in train_idx]
     if len(pool) < 2:
         raise ValueError("tuning needs at least two training trials (one to fit, one to validate)")
-    fit_idx, val_idx = split_trials([lt.id for lt in pool], 0.25, seed + 1)
+    fit_idx, val_idx = validation_split([lt.id for lt in pool], seed)
     fit = [pool[i] for i in fit_idx]
     val = [pool[i] for i in val_idx]
     horizon = preset.window.horizon

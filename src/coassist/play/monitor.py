@@ -16,6 +16,8 @@ first frame's reference.
 
 from __future__ import annotations
 
+import dataclasses
+
 from typing import Any
 
 import numpy as np
@@ -50,7 +52,9 @@ class DriveMonitor(PlaySession):
         if not isinstance(drive_config, DriveConfig):
             raise ValueError(f"drive_config must be a DriveConfig, got {type(drive_config).__name__}")
         self.drive_config, self.robot_host, self.confirm = drive_config, host, confirm
-        super().__init__(config)
+        # The drive builds its own controller and predictor: the session's paced predictor
+        # process would start and never be used.
+        super().__init__(dataclasses.replace(config, paced=False))
 
     def next_task(self):
         c = self.drive_config

@@ -168,8 +168,16 @@ def view_bounds(tasks: tuple[str, ...], margin: float = 0.12) -> tuple[float, fl
     return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
 
+#: (bit, name) of every single fault flag, built once: fault_names runs every tick.
+_FAULT_BITS = tuple((int(f), f.name) for f in Fault if f and f.name)
+
+
 def fault_names(value: int) -> list[str]:
-    return [f.name for f in Fault if f and (value & f) == f and f.name]
+    """The names of the flags set in ``value`` (nothing to look up on a clean tick)."""
+    value = int(value)
+    if not value:
+        return []
+    return [name for bit, name in _FAULT_BITS if value & bit == bit]
 
 
 class PlaySession:
