@@ -129,7 +129,7 @@ def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtim
         from coassist.sim.tasks import make_task
 
         world = None
-        if realtime or model:  # a real-time predictor: the world paced to the wall clock as on a robot, or back to back
+        if realtime or model or paced:  # paced to the wall clock as on a robot, or (a model's run) back to back
             task = make_task(task_kind, np.random.default_rng(np.random.SeedSequence([0, 0])))
             world = MujocoUR5World("handle", control_dt=dt, start=(float(task.start[0]), float(task.start[1]), 0.2),
                                    realtime=bool(realtime or paced))  # fmt: skip
@@ -169,7 +169,7 @@ def main() -> None:
     for backend in backends:
         hot = measure(a.ticks, a.model, naive=False, backend=backend, paced=False)
         fm, fp = _stats(hot["times"][50:])
-        paced = measure(a.ticks, a.model, naive=False, backend=backend, paced=True) if a.model else hot
+        paced = measure(a.ticks, a.model, naive=False, backend=backend, paced=True)
         pm, pp = _stats(paced["times"][50:])
         name = f"coassist, predictor backend {backend}" if a.model else "coassist"
         misses = hot["misses"] + paced["misses"]

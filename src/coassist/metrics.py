@@ -408,7 +408,7 @@ def overshoot(pose: ArrayLike, intent: ArrayLike, *, tol: float = 1e-3) -> float
         turns = _turning_points(ref[:, axis], tol)
         bounds = [0] + [i for i, _ in turns] + [x.shape[0] - 1]
         for e, (i, s) in enumerate(turns):
-            lo, hi = bounds[e], bounds[e + 2] if e + 1 < len(turns) else x.shape[0] - 1
+            lo, hi = bounds[e], bounds[e + 2]  # from the turn before to the turn after (or the ends)
             worst = max(worst, float(np.max(s * (x[lo : hi + 1, axis] - ref[i, axis]))))
     return worst
 

@@ -98,11 +98,10 @@ class ArbitrationParameters:
 def target_alpha(params: ArbitrationParameters, signal: float) -> float:
     """α* of the law for its signal: ||w|| [N] (``hand_force``), ē [m] (``confidence``) or e [m] (``target``)."""
     span = params.alpha_max - params.alpha_min
-    if params.law == "hand_force":
-        return params.alpha_min + span * min(1.0, signal / params.force_scale)
-    if params.law == "target":
-        return params.alpha_min + span * min(1.0, signal / params.target_scale)
-    return params.alpha_min + span * math.exp(-signal / params.error_scale)
+    if params.law == "confidence":
+        return params.alpha_min + span * math.exp(-signal / params.error_scale)
+    scale = params.force_scale if params.law == "hand_force" else params.target_scale
+    return params.alpha_min + span * min(1.0, signal / scale)
 
 
 class AlphaArbiter:
@@ -190,9 +189,9 @@ class ArbitratedController:
         self.model = controller.model
         self.horizon = controller.horizon
         self.effort_limit = controller.effort_limit
-        self._alpha_start = self.game.alpha
+        alpha_start = self.game.alpha
         self.game.prepare_alpha_changes()  # before the loop: no tick pays for it
-        self.arbiter = AlphaArbiter(params, self.model.n_dof, float(self.model.dt), self._alpha_start)
+        self.arbiter = AlphaArbiter(params, self.model.n_dof, float(self.model.dt), alpha_start)
         self.reset()
 
     @property

@@ -44,8 +44,12 @@ class ApplicationResult:
     models: dict[str, Path]  # each object's transferred model
     task: str
     control_preset: str  # of the assistive controllers
-    trials_per_controller: int  # per object, over all operators
-    users: tuple[int, ...] = (0,)
+    users: tuple[int, ...]  # the simulated operators
+
+    @property
+    def trials_per_controller(self) -> int:
+        """Trials per object and controller, over all operators (every pair meets the same trials)."""
+        return len(next(iter(self.trials.values())))
 
     def summary(self) -> dict[str, Any]:
         return {f"{o}/{c}": v for (o, c), v in self.metrics.items()}
@@ -72,7 +76,7 @@ def run_application(ws: Workspace, final_model: Path, board_model: Path) -> Appl
             metrics[(obj, controller)] = application_metrics(ordered)
             trials[(obj, controller)] = ordered
     return ApplicationResult(metrics, trials, models, cfg.application_task, cfg.application_preset,
-                             cfg.application_trials * len(cfg.application_users), tuple(cfg.application_users))
+                             tuple(cfg.application_users))
 
 
 def _pair_key(trial) -> tuple[str, int]:

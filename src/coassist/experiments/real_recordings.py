@@ -15,7 +15,6 @@ from typing import Any
 from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace
 from coassist.experiments.report import Claim, Section
 
-BASELINES = ("nominal", "constant_velocity", "constant_acceleration", "ridge")
 #: user-b's first this-many recordings train the transfer; the rest test it.
 USER_B_TRANSFER_TRIALS = 2
 #: Issue #11's bar: the model's e_RMS at the longest horizon at most (1 − this) × the tuned ridge's.
@@ -74,7 +73,7 @@ def _trial_range(first: int, last: int) -> str:
 
 def real_recordings_section(result: RealRecordingsResult) -> Section:
     """The report's section 5 and its claims."""
-    from coassist.intent.evaluation import comparison_lines
+    from coassist.intent.evaluation import BASELINES, comparison_lines
 
     s = Section("5. The real UR5 recordings")
     if result.skipped:

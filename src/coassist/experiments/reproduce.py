@@ -45,11 +45,7 @@ from typing import Any
 import numpy as np
 
 from coassist._io import atomic_write_text
-from coassist.experiments.application import (
-    application_metrics,
-    application_section,
-    run_application,
-)
+from coassist.experiments.application import application_section, run_application
 from coassist.experiments.pipeline import (
     EVAL_HORIZONS,
     ITERATION_TASKS,
@@ -74,7 +70,6 @@ __all__ = [
     "ITERATION_TASKS",
     "PRESETS",
     "ReproduceConfig",
-    "application_metrics",
     "default_real_data",
     "in_loop_errors",
     "run_reproduce",

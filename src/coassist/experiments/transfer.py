@@ -29,7 +29,6 @@ from coassist.experiments.report import Claim, Section
 
 #: Predictors in the e_RMS table of each target: the models, then the baselines.
 MODELS = ("M_prev", "transfer", "finetune_all", "scratch")
-BASELINES = ("nominal", "constant_velocity", "constant_acceleration", "ridge")
 #: "Approaches the fully iterated model": M_TL's e_RMS@50 at most this times the final model's own.
 APPROACH_RATIO = 1.25
 #: "A fraction of the work": under this share of the iterative trials and windows trained.
@@ -101,7 +100,7 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
     """Collect, train and score every target of :func:`transfer_targets` (datasets ``TL-<target>``)."""
     from coassist.experiments.iterative import transfer_learning
     from coassist.intent import evaluate_model, load_model, load_trials
-    from coassist.intent.evaluation import comparison_lines
+    from coassist.intent.evaluation import BASELINES, comparison_lines
 
     cfg = ws.config
     targets = {}
@@ -121,7 +120,7 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
             epochs = cfg.transfer_epochs if start != "scratch" else max(cfg.transfer_epochs, cfg.epochs)
             return ws.train(f"TL-{slug}-{start}", [folders["train"]], init=init, epochs=epochs, test_fraction=0.0)
 
-        outcome, _ = transfer_learning(name, collect, train)
+        outcome, dataset = transfer_learning(name, collect, train)
         test_folder, _ = ws.collect(f"TL-{slug}-test", tasks=target.tasks, users=target.users, objects=target.objects,
                                     trials=target.test_trials, seed=test_seed, intent=str(final_model))
         test = load_trials([test_folder])
@@ -133,7 +132,7 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
             table[base] = {h: evals["transfer"]["results"][base][str(h)]["e_rms"] for h in EVAL_HORIZONS}
         targets[name] = TargetResult(
             e_rms=table, collect_s=outcome.collect_s, train_s=dict(outcome.train_s),
-            trials=len(load_trials([folders["train"]])), windows_trained=windows_trained(outcome.models["transfer"]),
+            trials=len(dataset.trials), windows_trained=windows_trained(outcome.models["transfer"]),
             best_baseline=evals["transfer"]["best_baseline"], comparison=tuple(comparison_lines(evals["transfer"], "M_TL")),
             models=dict(outcome.models),
         )
@@ -147,6 +146,8 @@ def transfer_section(result: TransferResult, final_own_e_rms_50: float, iterativ
     final_own_e_rms_50 : the final iterative model's e_RMS@50 [m] on the data of its own loop.
     iterative_trials, iterative_windows : the iterative stage's work (trials collected, windows trained).
     """
+    from coassist.intent.evaluation import BASELINES
+
     targets = result.targets
     n = result.transfer_trials
     s = Section("3. Transfer learning (Algorithm 4.2, thesis §5.3.2)")

@@ -49,13 +49,7 @@ from typing import Any
 import numpy as np
 
 from coassist._checks import check_int
-from coassist.config import (  # noqa: F401  (APPLICATION_DAMPED_SCALE, scale_positions: re-exported)
-    APPLICATION_DAMPED_SCALE,
-    CONTROL_PRESETS,
-    THESIS_EVALUATION,
-    ControlPreset,
-    scale_positions,
-)
+from coassist.config import CONTROL_PRESETS, THESIS_EVALUATION, ControlPreset
 from coassist.control.arbitration import ArbitratedController, ArbitrationParameters
 from coassist.control.controllers import AssistiveController, ImpedanceControl, ManualGuidance
 from coassist.control.game import cooperative_game
@@ -86,8 +80,8 @@ ARBITRATION = ArbitrationParameters(law="target", alpha_min=0.3, alpha_max=0.9, 
 #: 10 N at a 5 cm deviation, about what the operators push with.
 IMPEDANCE_STIFFNESS = 200.0
 
-# The control presets, scale_positions and the position scales live with the thesis' presets
-# in coassist.config (layer 0, below every user of them); re-exported here for sim's users.
+# The control presets and the position scales live with the thesis' presets in
+# coassist.config (layer 0, below every user of them); the registry is re-exported here.
 #: Control presets by name (a :class:`coassist.registry.Registry`).
 PRESETS = CONTROL_PRESETS
 
