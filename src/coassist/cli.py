@@ -592,9 +592,16 @@ def play(
     if token is None and not is_loopback(host):
         token = new_token()
     try:
-        config = PlayConfig(user=user, out=out, controllers=tuple(v.strip() for v in controller.split(",") if v.strip()),
-                            intent="nominal" if drive and intent == "oracle" else intent, preset=preset, tasks=tuple(v.strip() for v in tasks.split(",") if v.strip()),
-                            seed=seed, motion_time=motion_time)  # fmt: skip
+        from coassist.robot.drive import CONTROLLERS
+        from coassist.sim import PRESETS as CONTROL_PRESETS
+        from coassist.sim import TASK_KINDS
+
+        _lookup(CONTROL_PRESETS, preset, "--preset")
+        config = PlayConfig(user=user, out=out,
+                            controllers=tuple(_name_list(controller, "--controller", tuple(CONTROLLERS), "controller")),
+                            intent="nominal" if drive and intent == "oracle" else intent, preset=preset,
+                            tasks=tuple(_name_list(tasks, "--tasks", TASK_KINDS, "task")), seed=seed,
+                            motion_time=motion_time)  # fmt: skip
         if drive is None:
             session = PlaySession(config)
         else:

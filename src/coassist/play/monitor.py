@@ -28,6 +28,7 @@ from coassist.play.session import (
     PlaySession,
     TrialResult,
     fault_names,
+    points_bounds,
 )
 from coassist.robot.drive import TASK_HEIGHT, DriveConfig, drive
 from coassist.sim.tasks import make_task
@@ -75,9 +76,7 @@ class DriveMonitor(PlaySession):
                 if np.linalg.norm(shift[0]) > 1e-9:
                     scene = _shifted(self.scene(task), shift[0])
                     self.current = {"controller": name, "scene": scene}
-                    pts = np.asarray(scene["path"])
-                    lo, hi = pts.min(axis=0) - 0.12, pts.max(axis=0) + 0.12
-                    self.bounds = (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
+                    self.bounds = points_bounds(np.asarray(scene["path"]))
                     self.publish({"type": "started", "controller": name, "scene": scene, "bounds": self.bounds})
             if k % every:
                 return

@@ -163,7 +163,12 @@ def view_bounds(tasks: tuple[str, ...], margin: float = 0.12) -> tuple[float, fl
     """(x_min, x_max, y_min, y_max) [m] of the view: every protocol path ± margin, square-ish."""
     from coassist.sim.tasks import nominal_path
 
-    pts = np.concatenate([nominal_path(t).points for t in tasks])
+    return points_bounds(np.concatenate([nominal_path(t).points for t in tasks]), margin)
+
+
+def points_bounds(points: np.ndarray, margin: float = 0.12) -> tuple[float, float, float, float]:
+    """(x_min, x_max, y_min, y_max) [m] of (n, 2) points ± margin."""
+    pts = np.asarray(points, dtype=float)
     lo, hi = pts.min(axis=0) - margin, pts.max(axis=0) + margin
     return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
@@ -381,11 +386,7 @@ class PlaySession:
         n, dt, Hs = log.n, float(controller.model.dt), int(self.source.horizon)
         if n == 0:
             raise RuntimeError(f"the run ended before its first tick: {log.message or log.ended}")
-        if log.prediction is None:
-            windows = np.lib.stride_tricks.sliding_window_view(ref_abs[1 : n + Hs, :2], Hs, axis=0)
-            prediction = np.ascontiguousarray(windows.transpose(0, 2, 1))
-        else:
-            prediction = log.prediction
+        prediction = log.prediction_or_plan(ref_abs, Hs)
         extra = task.to_extra()
         arm = cfg.arm
         extra.update({

@@ -74,10 +74,8 @@ class PlayWorld:
         self._clock, self._sleep = clock, sleep
         self.x, self.y = float(s[0]), float(s[1])
         self.vx = self.vy = 0.0
-        self.fh = (0.0, 0.0)
-        self._w = (0.0, 0.0)
-        self._seq = 0
-        self.k = 0
+        self.fh = (0.0, 0.0)  # the hand force of the last period: what the sensor reads now
+        self.k = 0  # periods applied (also the sensor's sample number)
         self._stopped = False
         self._t0: float | None = None
         self.last_overrun = 0.0
@@ -90,7 +88,7 @@ class PlayWorld:
             t=self.k * self.dt, q=_NO_JOINTS, qd=_NO_JOINTS,
             tool_pose=np.array((self.x, self.y, 0.0, 0.0, 0.0, 0.0)),
             tool_twist=np.array((self.vx, self.vy, 0.0, 0.0, 0.0, 0.0)),
-            wrench=np.array((self._w[0], self._w[1], 0.0, 0.0, 0.0, 0.0)), wrench_seq=self._seq,
+            wrench=np.array((self.fh[0], self.fh[1], 0.0, 0.0, 0.0, 0.0)), wrench_seq=self.k,
         )  # fmt: skip
 
     def hand_force(self) -> tuple[float, float]:
@@ -118,8 +116,6 @@ class PlayWorld:
         else:
             z = self._Ad @ np.array((x, y, vx, vy)) + self._Bd @ np.array((fhx + urx, fhy + ury))
             self.x, self.y, self.vx, self.vy = float(z[0]), float(z[1]), float(z[2]), float(z[3])
-        self._w = (fhx, fhy)
-        self._seq += 1
         self.k += 1
 
     def _wait(self) -> None:

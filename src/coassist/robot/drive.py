@@ -297,11 +297,7 @@ def _trial(config: DriveConfig, log: LoopLog, ref_abs, H, intent, task, obj, use
         raise RuntimeError(f"the run ended before its first tick: {log.message or log.ended}")
     d = len(dofs)
     ref = log.reference
-    if log.prediction is None:
-        windows = np.lib.stride_tricks.sliding_window_view(ref_abs[1 : n + H, :2], H, axis=0)
-        pred2 = np.ascontiguousarray(windows.transpose(0, 2, 1))
-    else:
-        pred2 = log.prediction
+    pred2 = log.prediction_or_plan(ref_abs, H)
     if d > 2:
         pred = np.empty((n, pred2.shape[1], d))
         pred[:, :, :2] = pred2

@@ -91,6 +91,15 @@ class LoopLog:
     def n(self) -> int:
         return int(self.fault.shape[0])
 
+    def prediction_or_plan(self, plan_xy: np.ndarray, horizon: int) -> np.ndarray:
+        """(n, H, 2): the logged prediction, or where the source was the nominal plan (eq. 4.7)
+        the plan's next H rows at every tick, ``plan_xy[k+1 … k+H]`` (plan_xy (≥ n+H, 2) [m])."""
+        if self.prediction is not None:
+            return self.prediction
+        n, H = self.n, int(horizon)
+        windows = np.lib.stride_tricks.sliding_window_view(np.asarray(plan_xy)[1 : n + H, :2], H, axis=0)  # (n, 2, H)
+        return np.ascontiguousarray(windows.transpose(0, 2, 1))
+
 
 def run_loop(
     world: World,

@@ -357,11 +357,7 @@ def run_trial(
     n = log.n
     ended = log.ended
     ref_pos = ref_abs[:, :2]
-    if log.prediction is None:
-        windows = np.lib.stride_tricks.sliding_window_view(ref_pos[1 : n + Hs], Hs, axis=0)  # (n, 2, Hs)
-        prediction = np.ascontiguousarray(windows.transpose(0, 2, 1))
-    else:
-        prediction = log.prediction
+    prediction = log.prediction_or_plan(ref_pos, Hs)
     extra = task.to_extra()
     extra.update(
         {
