@@ -59,6 +59,7 @@ __all__ = [
     "TrialFileError",
     "append_to_dataset",
     "digest",
+    "manifest_files",
     "read_dataset",
     "read_dataset_trial",
     "read_trial",
@@ -294,6 +295,11 @@ def _confined(folder: Path, name: Any, where: str, path: Path) -> str:
     if Path(name).is_absolute() or not target.is_relative_to(root) or target == root:
         raise ManifestError(f"{path}: {where} 'file' {name!r} points outside the dataset folder {folder}")
     return name
+
+
+def manifest_files(folder: str | os.PathLike[str]) -> list[str]:
+    """The trial files a dataset folder's validated manifest lists, in order."""
+    return [str(e["file"]) for e in _read_manifest(Path(folder))["trials"]]
 
 
 def _read_manifest(folder: Path) -> dict[str, Any]:

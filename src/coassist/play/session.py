@@ -28,7 +28,6 @@ A trial whose hand was gone (the page closed or the link dropped) for longer tha
 
 from __future__ import annotations
 
-import json
 import math
 import re
 import threading
@@ -42,7 +41,7 @@ import numpy as np
 
 from coassist._checks import check_int, check_positive_scalar
 from coassist.data import Trial, TrialMeta, append_to_dataset, write_dataset
-from coassist.data.store import MANIFEST_NAME, read_dataset
+from coassist.data.store import MANIFEST_NAME, manifest_files, read_dataset
 from coassist.interfaces import FEATURES, Fault, TrialContext
 from coassist.metrics import f_rms, precision_sigma
 from coassist.play.hand import BrowserHand, SpringDamper
@@ -234,8 +233,8 @@ class PlaySession:
             raise ValueError(f"{folder} exists and is not a folder")
         if (folder / MANIFEST_NAME).is_file():
             ds = read_dataset(folder)
-            for entry, trial in zip(ds.manifest["trials"], ds.trials):
-                self.results.append(_score(trial, entry["file"], len(self.results)))
+            for file, trial in zip(ds.files, ds.trials):
+                self.results.append(_score(trial, file, len(self.results)))
         elif folder.is_dir() and any(folder.iterdir()):
             raise ValueError(f"{folder} is not empty and holds no {MANIFEST_NAME}: not a play session; pick another --out or --user")
 
@@ -410,15 +409,9 @@ class PlaySession:
         else:
             write_dataset([trial], folder, self.config.dataset_id,
                           f"played in a browser by {self.config.user} (coassist play)")  # fmt: skip
-        files = read_manifest_files(folder)
-        result = _score(trial, files[-1], len(self.results))
+        result = _score(trial, manifest_files(folder)[-1], len(self.results))
         self.results.append(result)
         return result
-
-
-def read_manifest_files(folder: Path) -> list[str]:
-    """The trial files a dataset folder's manifest lists, in order."""
-    return [e["file"] for e in json.loads((folder / MANIFEST_NAME).read_text())["trials"]]
 
 
 def _score(trial: Trial, file: str, index: int) -> TrialResult:
