@@ -22,7 +22,8 @@ the tick's own work on one core, the issue's measure) and **paced** (the world s
 to the wall clock between periods, as on a robot). On a VM the first instructions after
 a sleep run slowly (cold caches and TLB): the **platform reference** row times a fixed
 workload of small numpy and Python operations the same two ways, so the paced/back-to-back
-ratio of the tick can be read against the machine's own.
+ratio of the tick can be read against the machine's own. Two single calls the tick makes
+(``np.isfinite`` on 8 numbers, a worker process's ``is_alive``) are timed the same two ways.
 """
 
 from __future__ import annotations
@@ -89,6 +90,34 @@ def measure_reference(n: int, period: float) -> dict:
             reference_work(a, M)
             t.append(time.perf_counter() - t0)
         out[name] = np.array(t[50:])
+    return out
+
+
+def measure_cold_calls(n: int, period: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Single calls the tick makes, timed back to back and right after a sleep of one period:
+    ``np.isfinite(a).all()`` on 8 numbers and ``multiprocessing.Process.is_alive()`` (a waitpid)."""
+    import multiprocessing
+
+    proc = multiprocessing.get_context("spawn").Process(target=time.sleep, args=(3600.0,), daemon=True)
+    proc.start()
+    a = np.zeros(8)
+    out = {}
+    try:
+        for name, call in (("np.isfinite(a).all()", lambda: np.isfinite(a).all()), ("Process.is_alive()", proc.is_alive)):
+            runs = []
+            for pause in (0.0, period):
+                t = []
+                for _ in range(n):
+                    if pause:
+                        time.sleep(pause)
+                    t0 = time.perf_counter()
+                    call()
+                    t.append(time.perf_counter() - t0)
+                runs.append(np.array(t[20:]))
+            out[name] = (runs[0], runs[1])
+    finally:
+        proc.kill()
+        proc.join(timeout=5.0)
     return out
 
 
@@ -179,6 +208,9 @@ def main() -> None:
           f"{slow['misses']}/{len(slow['times'])} | 1x |")  # fmt: skip
     print(f"| platform reference (fixed workload, not coassist) | {rbm:.3f} | {rbp:.3f} | {rpm:.3f} | {rpp:.3f} | "
           f"{rpp / rbp:.1f} | | |")  # fmt: skip
+    for name, (hot, cold) in measure_cold_calls(400, 1.0 / 125).items():
+        print(f"one call of {name}: back to back median {np.median(hot) * 1e6:.1f} µs, p99 {np.percentile(hot, 99) * 1e6:.1f} µs; "
+              f"after an 8 ms sleep median {np.median(cold) * 1e6:.1f} µs, p99 {np.percentile(cold, 99) * 1e6:.1f} µs")  # fmt: skip
     if a.realtime_seconds > 0:
         # Trials end at their target: run one task after another until the time is filled.
         n = int(math.ceil(a.realtime_seconds * 500))

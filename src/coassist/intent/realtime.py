@@ -165,8 +165,9 @@ class ProcessRunner:
     bytes over a pipe. A call blocks on the pipe (GIL released) until the answer comes.
 
     ``liveness_interval`` [s]: :meth:`alive` asks the OS at most this often and answers
-    from the last check in between. The control loop asks every tick, and a ``waitpid``
-    right after the loop's sleep costs 30–120 µs on this VM; a death is still seen
+    from the last check in between. The control loop asks every tick, and ``is_alive``
+    right after the loop's sleep costs 10–40 µs on a VM, against 2 µs back to back
+    (``benchmarks/bench_tick.py``); a death is still seen
     within 50 ms, inside the 0.2 s the loop allows before it flags the predictor
     stalled, and a call into a dead process fails at once.
     """
