@@ -35,7 +35,7 @@ class ReproduceConfig:
     intent_preset: str = "lstm"  # coassist.intent.training.PRESETS, for the simulated stages (as measured there)
     real_intent_preset: str = "default"  # the shipped default predictor, on the real recordings
     control_preset: str = "thesis-evaluation-dm"
-    # Positions ×5, not ×10: in decimetres the robot's gain on the learned prediction (an extrapolation of its
+    # Positions ×3.5, not ×10: in decimetres the robot's gain on the learned prediction (an extrapolation of its
     # own motion) removes 2/3 of the plant's damping and the tool rings (coassist.config.APPLICATION_DAMPED_SCALE).
     application_preset: str = "thesis-application-damped"
     trials_per_task: int = 20  # thesis: 60 trials = 20 per trajectory

@@ -13,7 +13,7 @@ Stages, in order (each writes its data under ``out/`` and a section of the repor
    and transferred to user-b.
 
 Control preset. The closed loops use the thesis' weights with positions scaled: in
-decimetres for data collection (``thesis-evaluation-dm``) and ×5 for the application
+decimetres for data collection (``thesis-evaluation-dm``) and ×3.5 for the application
 (``thesis-application-damped``): in SI units the robot's effort is too small to change
 what the operator does (see the dMPC study and the sim package), and iterative training
 would have nothing to iterate on; in decimetres the application's robot, tracking a
