@@ -9,8 +9,10 @@ For 2 and 6 DOFs and horizons 5, 20, 50 it prints median and p99 of:
 and the ratio. Then the gains for a new α (online assistance level, issue #11):
 ``set_alpha`` after ``prepare_alpha_changes`` against a fresh computation of the
 gains (assemble, Cholesky, solve: what ``set_alpha`` did before), on the thesis'
-weights and on random weights where the gains are not affine in α; every online
-gain is checked against the fresh one (max |difference| / max |gain| ≤ 1e-9).
+weights and on random weights where the gains are not affine in α (there the online
+path reads a Chebyshev series per stretch of α, and the exact eigen-sum it was fitted to
+is timed too); every online gain is checked against the fresh one (max |difference| /
+max |gain| ≤ 1e-9).
 Targets: 6-DOF Np = 50 tick p99 ≤ 20 µs and ≥ 1000× faster than naive (issue #2);
 gains for a new α p99 ≤ 50 µs (issue #11). One BLAS thread, so the numbers
 describe one core.
@@ -108,18 +110,21 @@ def main() -> None:
     print()
     alpha_rows = []
     print(f"{'gains for a new α':<34}{'rank':>6}{'prep [s]':>10}{'online med':>12}{'p99 [µs]':>10}"
-          f"{'fresh med':>11}{'p99 [µs]':>10}{'ratio (p99)':>13}{'max rel diff':>14}")
+          f"{'eigen-sum med':>15}{'p99 [µs]':>10}{'fresh med':>11}{'p99 [µs]':>10}{'ratio (p99)':>13}{'max rel diff':>14}  series degrees")
     for weights in ("thesis", "random"):
         for n, horizon in ((2, 50), (6, 50)):
             alpha_rows.append(bench_alpha(n, horizon, weights, args.alpha_changes, args.fresh_changes))
             r = alpha_rows[-1]
             print(f"{weights + f' {n}-DOF Np={horizon}':<34}{r['rank']:>6}{r['prepare_s']:>10.2f}{r['online_median_us']:>12.1f}"
-                  f"{r['online_p99_us']:>10.1f}{r['fresh_median_us']:>11.0f}{r['fresh_p99_us']:>10.0f}"
-                  f"{r['fresh_p99_us'] / r['online_p99_us']:>13.0f}{r['max_rel_diff']:>14.1e}")
-    t = next(r for r in alpha_rows if r["weights"] == "thesis" and r["n_dof"] == 6)
+                  f"{r['online_p99_us']:>10.1f}{r['exact_sum_median_us']:>15.1f}{r['exact_sum_p99_us']:>10.1f}"
+                  f"{r['fresh_median_us']:>11.0f}{r['fresh_p99_us']:>10.0f}"
+                  f"{r['fresh_p99_us'] / r['online_p99_us']:>13.0f}{r['max_rel_diff']:>14.1e}  "
+                  f"{r['chebyshev_degrees'] or '-'}" + (f" ({r['exact_stretches']} exact)" if r['exact_stretches'] else ""))
     print()
-    print(f"6-DOF Np=50, thesis weights: gains for a new α p99 {t['online_p99_us']:.1f} µs (target ≤ 50), "
-          f"fresh {t['fresh_p99_us'] / 1e3:.1f} ms; agreement {t['max_rel_diff']:.1e} (target ≤ 1e-9)")
+    for weights in ("thesis", "random"):
+        t = next(r for r in alpha_rows if r["weights"] == weights and r["n_dof"] == 6)
+        print(f"6-DOF Np=50, {weights} weights: gains for a new α p99 {t['online_p99_us']:.1f} µs (target ≤ 50), "
+              f"fresh {t['fresh_p99_us'] / 1e3:.1f} ms; agreement {t['max_rel_diff']:.1e} (target ≤ 1e-9)")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"tick": rows, "alpha": alpha_rows}, fh, indent=2)
@@ -168,11 +173,20 @@ def bench_alpha(n: int, horizon: int, weights: str, changes: int, fresh_changes:
         worst = max(worst, float(np.abs(g_online - g_fresh).max() / np.abs(g_fresh).max()))
     if worst > 1e-9:
         raise SystemExit(f"online gains disagree with the fresh computation ({worst:.1e}) for {weights} n={n} Np={horizon}")
+    family = game._alpha_family
+    exact = np.empty(min(changes, 1000), dtype=np.int64)  # the eigen-sum without the series (rank > 0 only)
+    for i, a in enumerate(alphas[: exact.shape[0]]):
+        t0 = clock()
+        family._exact(float(a))
+        exact[i] = clock() - t0
     o_med, o_p99 = percentiles(online)
     f_med, f_p99 = percentiles(fresh)
-    return dict(weights=weights, n_dof=n, horizon=horizon, rank=game._alpha_family.rank, prepare_s=prepare_s,
+    e_med, e_p99 = percentiles(exact)
+    degrees = sorted({p[1].shape[0] - 1 for p in family.pieces if p is not None})
+    return dict(weights=weights, n_dof=n, horizon=horizon, rank=family.rank, prepare_s=prepare_s,
                 online_median_us=o_med, online_p99_us=o_p99, fresh_median_us=f_med, fresh_p99_us=f_p99,
-                max_rel_diff=worst)
+                exact_sum_median_us=e_med, exact_sum_p99_us=e_p99, chebyshev_degrees=degrees,
+                exact_stretches=sum(p is None for p in family.pieces), max_rel_diff=worst)
 
 
 if __name__ == "__main__":

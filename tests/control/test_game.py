@@ -257,6 +257,56 @@ def test_online_alpha_gains_equal_a_fresh_computation(n, Np, Nc, weights, input_
         assert rank > 0
 
 
+def _random_weights_game(alpha=0.8, n=2, Np=12, Nc=12):
+    rng = np.random.default_rng(77)
+    model, Q, R_h, R_r, *_ = random_instance(rng, n, Np, Nc)
+    return CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=alpha, horizon=Np, control_horizon=Nc)
+
+
+def test_online_alpha_chebyshev_stretches_match_the_exact_sum_and_a_fresh_computation():
+    """With rank > 0 every stretch of [0, 1] gets a series, and α anywhere (nodes, ends, between) matches."""
+    game = _random_weights_game()
+    game.prepare_alpha_changes()
+    family = game._alpha_family
+    assert family.rank > 0
+    assert len(family.pieces) == family.PIECES and all(p is not None for p in family.pieces)
+    alphas = np.concatenate([np.random.default_rng(3).uniform(0.0, 1.0, 40), np.linspace(0.0, 1.0, 9)])
+    for a in alphas:
+        exact = family._exact(a)
+        assert np.abs(family.gains(a) - exact).max() <= 1e-10 * np.abs(exact).max()
+    for a in (0.0, 0.3, 0.77, 1.0):
+        game.set_alpha(a)
+        fresh = _random_weights_game(alpha=a)
+        online = np.hstack([game.gains.G_z, game.gains.G_h, game.gains.G_r])
+        ref = np.hstack([fresh.gains.G_z, fresh.gains.G_h, fresh.gains.G_r])
+        assert np.abs(online - ref).max() <= 1e-9 * np.abs(ref).max()
+
+
+def test_online_alpha_stretch_without_a_matching_series_keeps_the_exact_sum(monkeypatch):
+    from coassist.control import game as game_module
+
+    monkeypatch.setattr(game_module._AlphaFamily, "MATCH", 0.0)  # no series can match: every stretch exact
+    game = _random_weights_game()
+    game.prepare_alpha_changes()
+    family = game._alpha_family
+    assert family.pieces == [None] * family.PIECES
+    np.testing.assert_array_equal(family.gains(0.41), family._exact(0.41))
+
+
+def test_online_alpha_series_is_chebyshev_of_the_documented_degree():
+    """The stretch's coefficients reproduce numpy's Chebyshev interpolant at the same points."""
+    game = _random_weights_game()
+    game.prepare_alpha_changes()
+    family = game._alpha_family
+    a, coef = family.pieces[3]
+    K = coef.shape[0] - 1
+    assert K in family.DEGREES
+    nodes = np.cos(np.pi * (np.arange(K + 1) + 0.5) / (K + 1))
+    values = np.stack([family._exact(a + 0.5 * (t + 1.0) / family.PIECES).ravel() for t in nodes])
+    reference = np.polynomial.chebyshev.chebfit(nodes, values, K)
+    np.testing.assert_allclose(coef, reference, rtol=1e-9, atol=1e-12 * np.abs(values).max())
+
+
 def test_horizon_solution_after_an_online_alpha_change_is_the_joint_minimiser():
     rng = np.random.default_rng(8)
     model, Q, R_h, R_r, z, ref_h, ref_r = random_instance(rng, 2, 8, 4)

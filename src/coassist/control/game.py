@@ -59,6 +59,18 @@ so that H(α)⁻¹ = V (I + βΛ)⁻¹ V' and the first-step gains are::
 Directions with λ_j = 0 fold into the constant C₀, C₁; with the thesis' weights
 (Q_hh = Q_rr, Q_hr = Q_rh = 0, shared input weights) ΔH = 0 and the gains are exactly
 affine in α, so a new α costs one scaled add of the (2n, 2n + 2·Np·2n) gain matrix.
+
+With other weights the sum above costs 2n·r·p multiply-adds per α (r up to N, p the
+gains' columns: 4.4 M at 6 DOF, Np = 50). Its poles β = −1/λ_j lie outside the α range,
+where H(α) is positive definite, so on each of ``pieces`` equal stretches of [0, 1] the
+gains are a Chebyshev series of low degree K::
+
+    G(α) = Σ_{k=0…K} c_k T_k(t),   t = 2(α − a)/w − 1 on the stretch [a, a + w]
+
+fitted at the K + 1 Chebyshev points of the stretch and accepted only where it matches the
+exact sum to 1e-11 (relative to the stretch's largest gain) at the midpoints between the
+points and at both ends; a stretch where no degree up to 16 does (a pole too close) keeps
+the exact sum. A new α then costs (K + 1)·2n·p multiply-adds.
 """
 
 from __future__ import annotations
@@ -345,10 +357,10 @@ class CooperativeGame(_LinearQuadraticGame):
         """Change α at run time; the new gains are swapped in at once.
 
         The new gains are the equilibrium for the new α (module docstring, "Online α";
-        equal to a fresh computation to ~1e-12 relative), so the next effort is the new
-        optimum: it changes by no more than the optimum itself does. After
-        :meth:`prepare_alpha_changes` (done by the first call if not before) a change
-        costs microseconds with the thesis' weights (benchmarks/bench_game.py).
+        equal to a fresh computation to about 1e-11 relative, the match each stretch's
+        series is held to), so the next effort is the new optimum: it changes by no more
+        than the optimum itself does. After :meth:`prepare_alpha_changes` (done by the
+        first call if not before) a change costs microseconds (benchmarks/bench_game.py).
         """
         a = self._check_alpha(alpha)
         family = self._alpha_family
@@ -363,8 +375,9 @@ class CooperativeGame(_LinearQuadraticGame):
         """Precompute the gains as a function of α (module docstring, "Online α").
 
         One generalized symmetric eigendecomposition of the (2N, 2N) equilibrium matrix,
-        N = n·Nc, at the current α (0.1–1 s at 6 DOF, Nc = 50, one core): do it before the loop
-        starts so that no tick pays for it.
+        N = n·Nc, at the current α, and where the gains are not affine in α a Chebyshev
+        series per stretch of [0, 1] (0.1–1 s at 6 DOF, Nc = 50, one core): do it before
+        the loop starts so that no tick pays for it.
         """
         self._alpha_family = _AlphaFamily(self, self.alpha)
 
@@ -401,7 +414,9 @@ class _AlphaFamily:
 
     Built at α₀ (where H(α₀) is known to be positive definite). Stores, for β = α − α₀:
     C₀, C₁ (2n, p) from the directions with λ_j = 0, and A (2n, r), B₀, B₁ (r, p), λ (r,)
-    for the r others; p = 2n + 2·Np·2n columns [G_z | G_h | G_r].
+    for the r others; p = 2n + 2·Np·2n columns [G_z | G_h | G_r]. With r > 0, ``pieces``
+    holds per stretch [a, a + 1/PIECES] of α its start a and Chebyshev coefficients
+    (K + 1, 2n·p), or None where the exact sum is kept.
     """
 
     #: |λ_j| below this folds into C₀ + β C₁: with |β| ≤ 1 the neglected factor
@@ -442,6 +457,37 @@ class _AlphaFamily:
             self.B0, self.B1 = np.ascontiguousarray(B0[keep]), np.ascontiguousarray(B1[keep])
             self.lam = lam[keep]
         self.alpha0 = float(alpha0)
+        self._shape = (2 * n, T0.shape[1])
+        self.pieces: list[tuple[float, np.ndarray] | None] = []
+        if self.rank and self.PIECES * (self.DEGREES[-1] + 1) * self.C0.size * 8 <= self.MAX_BYTES:
+            self.pieces = [self._fit_piece(i / self.PIECES, 1.0 / self.PIECES) for i in range(self.PIECES)]
+
+    #: Stretches of [0, 1] with their own Chebyshev series, the degrees tried on each (the
+    #: first that matches is kept), the match required (relative), and the memory allowed.
+    PIECES = 16
+    DEGREES = (4, 6, 10, 16)
+    MATCH = 1e-11
+    MAX_BYTES = 64 * 2**20
+
+    def _fit_piece(self, a: float, w: float) -> tuple[float, np.ndarray] | None:
+        """(a, coefficients (K + 1, 2n·p)) of the stretch [a, a + w], or None to keep the exact sum there."""
+        for K in self.DEGREES:
+            j = np.arange(K + 1)
+            nodes = np.cos(np.pi * (j + 0.5) / (K + 1))  # Chebyshev points of the first kind, in (−1, 1)
+            checks = np.concatenate([[-1.0, 1.0], np.cos(np.pi * (j[1:]) / (K + 1))])  # ends, and between the points
+            try:
+                values = np.stack([self._exact(a + 0.5 * w * (t + 1.0)).ravel() for t in nodes])
+                wanted = np.stack([self._exact(a + 0.5 * w * (t + 1.0)).ravel() for t in checks])
+            except ValueError:  # H(α) not positive definite somewhere on the stretch
+                return None
+            # Discrete orthogonality at these points: c_k = (2 − δ_k0)/(K + 1) Σ_j f(t_j) T_k(t_j).
+            T = np.cos(np.outer(j, np.pi * (j + 0.5) / (K + 1)))  # T[k, j] = T_k(t_j)
+            coef = (2.0 / (K + 1)) * (T @ values)
+            coef[0] *= 0.5
+            got = np.polynomial.chebyshev.chebvander(checks, K) @ coef
+            if np.abs(got - wanted).max() <= self.MATCH * np.abs(wanted).max():
+                return a, np.ascontiguousarray(coef)
+        return None
 
     @staticmethod
     def _system(game: "CooperativeGame", alpha: float) -> tuple[np.ndarray, np.ndarray]:
@@ -458,8 +504,23 @@ class _AlphaFamily:
     def gains(self, alpha: float) -> np.ndarray:
         """G(α) (2n, p), a new array (published gains are never written to again).
 
-        Raises ValueError where H(α) is not positive definite (1 + βλ_j ≤ 0 for some j).
+        From the stretch's Chebyshev series where it has one, else the exact sum. Raises
+        ValueError where H(α) is not positive definite (1 + βλ_j ≤ 0 for some j).
         """
+        alpha = float(alpha)
+        if self.pieces and 0.0 <= alpha <= 1.0:
+            piece = self.pieces[min(int(alpha * self.PIECES), self.PIECES - 1)]
+            if piece is not None:
+                a, coef = piece
+                t = 2.0 * self.PIECES * (alpha - a) - 1.0
+                T = [1.0, t]  # T_k(t) by the three-term recurrence: K multiply-adds of floats
+                for _ in range(coef.shape[0] - 2):
+                    T.append(2.0 * t * T[-1] - T[-2])
+                return np.dot(T[: coef.shape[0]], coef).reshape(self._shape)
+        return self._exact(alpha)
+
+    def _exact(self, alpha: float) -> np.ndarray:
+        """G(α) from the eigen-sum (the module docstring's formula)."""
         beta = float(alpha) - self.alpha0
         G = np.multiply(self.C1, beta)
         np.add(G, self.C0, out=G)
