@@ -270,6 +270,9 @@ def test_online_alpha_chebyshev_stretches_match_the_exact_sum_and_a_fresh_comput
     family = game._alpha_family
     assert family.rank > 0
     assert len(family.pieces) == family.PIECES and all(p is not None for p in family.pieces)
+    import coassist.control.game as game_module
+
+    assert f"``_AlphaFamily.PIECES`` ({family.PIECES})" in game_module.__doc__  # the docstring's count is the code's
     alphas = np.concatenate([np.random.default_rng(3).uniform(0.0, 1.0, 40), np.linspace(0.0, 1.0, 9)])
     for a in alphas:
         exact = family._exact(a)

@@ -62,7 +62,7 @@ affine in α, so a new α costs one scaled add of the (2n, 2n + 2·Np·2n) gain 
 
 With other weights the sum above costs 2n·r·p multiply-adds per α (r up to N, p the
 gains' columns: 4.4 M at 6 DOF, Np = 50). Its poles β = −1/λ_j lie outside the α range,
-where H(α) is positive definite, so on each of ``pieces`` equal stretches of [0, 1] the
+where H(α) is positive definite, so on each of ``_AlphaFamily.PIECES`` (16) equal stretches of [0, 1] the
 gains are a Chebyshev series of low degree K::
 
     G(α) = Σ_{k=0…K} c_k T_k(t),   t = 2(α − a)/w − 1 on the stretch [a, a + w]
