@@ -296,6 +296,22 @@ def test_online_alpha_stretch_without_a_matching_series_keeps_the_exact_sum(monk
     np.testing.assert_array_equal(family.gains(0.41), family._exact(0.41))
 
 
+def test_online_alpha_series_over_the_memory_allowance_is_not_built(monkeypatch):
+    from coassist.control import game as game_module
+
+    game = _random_weights_game()
+    family_bytes = game_module._AlphaFamily.PIECES * (game_module._AlphaFamily.DEGREES[-1] + 1) * 8 * (
+        2 * game.n_dof * (2 * game.n_dof + 2 * game.reference_shape[0] * game.reference_shape[1]))
+    monkeypatch.setattr(game_module._AlphaFamily, "MAX_BYTES", family_bytes - 1)
+    game.prepare_alpha_changes()
+    family = game._alpha_family
+    assert family.rank > 0 and family.pieces == []
+    np.testing.assert_array_equal(family.gains(0.41), family._exact(0.41))
+    monkeypatch.setattr(game_module._AlphaFamily, "MAX_BYTES", family_bytes)  # exactly at the allowance: built
+    game.prepare_alpha_changes()
+    assert len(game._alpha_family.pieces) == game_module._AlphaFamily.PIECES
+
+
 def test_online_alpha_series_is_chebyshev_of_the_documented_degree():
     """The stretch's coefficients reproduce numpy's Chebyshev interpolant at the same points."""
     game = _random_weights_game()

@@ -60,17 +60,19 @@ Directions with λ_j = 0 fold into the constant C₀, C₁; with the thesis' wei
 (Q_hh = Q_rr, Q_hr = Q_rh = 0, shared input weights) ΔH = 0 and the gains are exactly
 affine in α, so a new α costs one scaled add of the (2n, 2n + 2·Np·2n) gain matrix.
 
-With other weights the sum above costs 2n·r·p multiply-adds per α (r up to N, p the
-gains' columns: 4.4 M at 6 DOF, Np = 50). Its poles β = −1/λ_j lie outside the α range,
-where H(α) is positive definite, so on each of ``_AlphaFamily.PIECES`` (16) equal stretches of [0, 1] the
-gains are a Chebyshev series of low degree K::
+With other weights the sum above costs about 2n·r·p multiply-adds per α (r up to 2N, p
+the gains' columns: 4.4 M at 6 DOF, Np = 50, r = 300). Its poles β = −1/λ_j lie outside the
+α range, where H(α) is positive definite, so on each of ``_AlphaFamily.PIECES`` (16) equal
+stretches of [0, 1] the gains are a Chebyshev series of low degree K::
 
     G(α) = Σ_{k=0…K} c_k T_k(t),   t = 2(α − a)/w − 1 on the stretch [a, a + w]
 
 fitted at the K + 1 Chebyshev points of the stretch and accepted only where it matches the
-exact sum to 1e-11 (relative to the stretch's largest gain) at the midpoints between the
-points and at both ends; a stretch where no degree up to 16 does (a pole too close) keeps
-the exact sum. A new α then costs (K + 1)·2n·p multiply-adds.
+exact sum to 1e-11 (relative to the stretch's largest gain) at both ends and at the
+extrema of T_{K+1}, which fall between the points; a stretch where no degree up to 16
+does (a pole too close) keeps the exact sum. A new α then costs (K + 1)·2n·p
+multiply-adds. Where the series would take more than ``_AlphaFamily.MAX_BYTES`` (64 MiB)
+every α uses the exact sum.
 """
 
 from __future__ import annotations
@@ -376,8 +378,9 @@ class CooperativeGame(_LinearQuadraticGame):
 
         One generalized symmetric eigendecomposition of the (2N, 2N) equilibrium matrix,
         N = n·Nc, at the current α, and where the gains are not affine in α a Chebyshev
-        series per stretch of [0, 1] (0.1–1 s at 6 DOF, Nc = 50, one core): do it before
-        the loop starts so that no tick pays for it.
+        series per stretch of [0, 1] (0.2–0.9 s measured at 6 DOF, Nc = 50, one core; a few
+        seconds if every stretch needed degree 16): do it before the loop starts so that no
+        tick pays for it.
         """
         self._alpha_family = _AlphaFamily(self, self.alpha)
 
