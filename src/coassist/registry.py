@@ -75,6 +75,13 @@ class Registry(Mapping[str, T], Generic[T]):
     def __getitem__(self, name: str) -> T:
         return self.lookup(name)
 
+    def __contains__(self, name: object) -> bool:
+        # Mapping's default goes through __getitem__, which would build the did-you-mean message on every miss.
+        try:
+            return name in self._entries
+        except TypeError:  # an unhashable name is in no registry
+            return False
+
     def __iter__(self) -> Iterator[str]:
         return iter(self._entries)
 

@@ -185,6 +185,22 @@ def test_preset_with_skip_starts_as_the_ridge_predictor(trials, tiny):
     assert ok.sum() > 100 and np.allclose(a[ok], b[ok], atol=1e-4)  # float32 network vs float64 ridge (positions ~0.1 m)
 
 
+def test_linear_preset_starts_as_the_ridge_predictor(trials, tiny):
+    """build_model fits a linear preset's skip too (train_model alone defers it to its closed form)."""
+    from dataclasses import replace
+
+    from coassist.intent import RidgeBaseline, WindowSet, split_trials
+    from coassist.intent.training import build_model
+
+    p = replace(tiny, lstm_layers=0, hidden=1, fc=(), skip=True, train=replace(tiny.train, ridge_alpha=1.0))
+    m = build_model(p, trials, p.train)
+    assert m.net.is_linear
+    train_idx, _ = split_trials([lt.id for lt in trials], p.train.test_fraction, p.train.seed)
+    ws = WindowSet([trials[i].trial for i in train_idx], p.window, m.dt)
+    ridge = RidgeBaseline.fit(ws, m.input_scaler, m.target_scaler, 1.0)
+    np.testing.assert_allclose(m.net.skip.weight.detach().numpy(), ridge.W.T, rtol=1e-5, atol=1e-6)
+
+
 def test_skip_alpha_shrinks_the_skip_and_leaves_the_baseline_alone(trials, tiny):
     """skip_alpha sets the ridge the skip starts from; ridge_alpha alone sets the baseline."""
     from dataclasses import replace

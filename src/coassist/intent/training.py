@@ -242,12 +242,17 @@ _Tuning = tuple[float, dict[str, Any]] | None
 
 
 def build_model(preset: Preset, trials: Sequence[LabeledTrial], config: TrainConfig) -> IntentModel:
-    """The starting model: fresh (scalers fitted on the training split) or loaded from ``init``."""
+    """The starting model: fresh (scalers fitted on the training split, the skip set to the
+    ridge solution) or loaded from ``init``."""
     return _build_model(preset, trials, config)[0]
 
 
-def _build_model(preset: Preset, trials: Sequence[LabeledTrial], config: TrainConfig) -> tuple[IntentModel, _Tuning]:
-    """:func:`build_model`, and the ridge α search run for its skip (None when none ran)."""
+def _build_model(preset: Preset, trials: Sequence[LabeledTrial], config: TrainConfig, *,
+                 fit_linear_skip: bool = True) -> tuple[IntentModel, _Tuning]:  # fmt: skip
+    """:func:`build_model`, and the ridge α search run for its skip (None when none ran).
+
+    ``fit_linear_skip=False``: a linear preset's skip is left as initialised, for
+    :func:`train_model`, which sets it to the tuned ridge in closed form afterwards."""
     mode, path = config.start
     d = trials[0].trial.n_dof
     dt = _common_dt(trials)
@@ -259,16 +264,16 @@ def _build_model(preset: Preset, trials: Sequence[LabeledTrial], config: TrainCo
     in_scaler, out_scaler = ws.fit_scalers()
     net = IntentNet(preset.network(d), generator=torch.Generator().manual_seed(config.seed))
     tuning = None
-    if net.skip is not None and not net.is_linear:  # a linear model's skip is set to the tuned ridge after "training"
-        tuning = _fit_skip(net, trials, train_idx, ws, preset.window, dt, in_scaler, out_scaler, config)
+    if net.skip is not None and (fit_linear_skip or not net.is_linear):
+        tuning = _fit_skip(net, trials, train_idx, ws, in_scaler, out_scaler, config)
     return IntentModel(net, preset.window, in_scaler, out_scaler, dt), tuning
 
 
 def _fit_skip(net: IntentNet, trials: Sequence[LabeledTrial], train_idx: Sequence[int], ws: WindowSet,
-              window: WindowConfig, dt: float, in_scaler, out_scaler, config: TrainConfig) -> _Tuning:  # fmt: skip
+              in_scaler, out_scaler, config: TrainConfig) -> _Tuning:  # fmt: skip
     """Set the network's linear skip to the ridge solution on ``ws`` (α from :func:`_skip_alpha`);
     returns the α search when one ran."""
-    alpha, tuning = _skip_alpha(trials, train_idx, window, dt, in_scaler, out_scaler, config)
+    alpha, tuning = _skip_alpha(trials, train_idx, ws.window, ws.dt, in_scaler, out_scaler, config)
     ridge = RidgeBaseline.fit(ws, in_scaler, out_scaler, alpha)
     net.init_skip(torch.from_numpy(ridge.W.T.astype(np.float32)), torch.from_numpy(ridge.b.astype(np.float32)))
     return tuning
@@ -383,7 +388,8 @@ def train_model(
     mode, base_path = config.start
     if mode == "resume" and (partial_folder(base_path) / CHECKPOINT_JSON).is_file():
         base_path = str(partial_folder(base_path))  # an interrupted run on that folder: newer than it
-    base, tuning = _build_model(preset, trials, replace(config, init=f"resume:{base_path}") if mode == "resume" else config)
+    base, tuning = _build_model(preset, trials, replace(config, init=f"resume:{base_path}") if mode == "resume" else config,
+                                fit_linear_skip=False)
     ids = [lt.id for lt in trials]
     ckpt = _read_checkpoint(Path(base_path)) if mode == "resume" and not base.info.get("finished", True) else None
     if ckpt is not None:
@@ -416,8 +422,8 @@ def train_model(
         if frozen and ckpt is None:
             # The residual is over the ridge of *this* data: the source's ridge, frozen, would
             # extrapolate on a new user's windows (user-b: 78.9 mm at 0.4 s against 5.5 mm; README).
-            tuning = _fit_skip(net, trials, train_idx, WindowSet([trials[i].trial for i in train_idx], window, dt), window,
-                               dt, model.input_scaler, model.target_scaler, config)  # fmt: skip
+            tuning = _fit_skip(net, trials, train_idx, WindowSet([trials[i].trial for i in train_idx], window, dt),
+                               model.input_scaler, model.target_scaler, config)  # fmt: skip
         net.skip.requires_grad_(False)
     net.to(config.device)
     train_data = _Windows(model, train_ws, frozen, device=config.device)
@@ -515,7 +521,7 @@ def train_model(
     model.ridge, _, baselines = fit_tuned_baselines(
         [trials[i].trial for i in train_idx], [ids[i] for i in train_idx], window, dt, model.input_scaler,
         model.target_scaler, seed=config.seed, stride=config.train_stride, alpha=config.ridge_alpha,
-        tuned=tuning if ckpt is None else None)
+        tuned=tuning)  # None on resume: _build_model only searches for a fresh model
     if net.is_linear:  # the linear predictor is the tuned ridge: one closed-form pass, recorded as one epoch
         net.init_skip(torch.from_numpy(model.ridge.W.T.astype(np.float32)).to(config.device),
                       torch.from_numpy(model.ridge.b.astype(np.float32)).to(config.device))  # fmt: skip
