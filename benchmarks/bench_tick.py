@@ -17,13 +17,14 @@ nominal plan. Prints median and p99 [ms] and the ratio.
 seconds and counts deadline misses (the tick's own work over 2 ms) and periods the
 world could not keep (physics + tick over 2 ms). One BLAS thread: one core.
 
-Each row is measured twice: **back to back** (the world is stepped as fast as it goes:
-the tick's own work on one core, the issue's measure) and **paced** (the world sleeps
-to the wall clock between periods, as on a robot). On a VM the first instructions after
+Each row but the naive one is measured twice: **back to back** (the world is stepped as
+fast as it goes: the tick's own work on one core, the issue's measure) and **paced** (the
+world sleeps to the wall clock between periods, as on a robot). On a VM the first instructions after
 a sleep run slowly (cold caches and TLB): the **platform reference** row times a fixed
 workload of small numpy and Python operations the same two ways, so the paced/back-to-back
-ratio of the tick can be read against the machine's own. Two single calls the tick makes
-(``np.isfinite`` on 8 numbers, a worker process's ``is_alive``) are timed the same two ways.
+ratio of the tick can be read against the machine's own. Two single calls the tick
+path makes (``np.isfinite`` on 8 numbers every tick; a worker process's ``is_alive``, which
+the process backend asks at most every 50 ms) are timed the same two ways.
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ def naive_dls(J, twist, thr, damp):
 
 
 def reference_work(a: np.ndarray, M: np.ndarray) -> float:
-    """A fixed workload the size of a tick: small numpy operations and Python arithmetic."""
+    """A fixed workload of small numpy operations and Python arithmetic, in the tick's style."""
     s = 0.0
     for i in range(40):
         b = M @ a

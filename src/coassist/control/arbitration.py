@@ -145,7 +145,8 @@ class AlphaArbiter:
             elif p.law == "target":
                 x = np.asarray(z, dtype=float).reshape(-1)[:n]
                 end = np.asarray(ref_r, dtype=float)[-1, :n]
-                signal = float(np.linalg.norm(x - end))
+                d = x - end
+                signal = float(math.sqrt(float(np.dot(d, d))))  # np.linalg.norm costs ~2 µs more per tick
             else:
                 x = np.asarray(z, dtype=float).reshape(-1)[:n]
                 ref = np.asarray(ref_h, dtype=float)

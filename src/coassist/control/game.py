@@ -460,7 +460,6 @@ class _AlphaFamily:
             self.B0, self.B1 = np.ascontiguousarray(B0[keep]), np.ascontiguousarray(B1[keep])
             self.lam = lam[keep]
         self.alpha0 = float(alpha0)
-        self._shape = (2 * n, T0.shape[1])
         self.pieces: list[tuple[float, np.ndarray] | None] = []
         if self.rank and self.PIECES * (self.DEGREES[-1] + 1) * self.C0.size * 8 <= self.MAX_BYTES:
             self.pieces = [self._fit_piece(i / self.PIECES, 1.0 / self.PIECES) for i in range(self.PIECES)]
@@ -484,8 +483,7 @@ class _AlphaFamily:
             except ValueError:  # H(α) not positive definite somewhere on the stretch
                 return None
             # Discrete orthogonality at these points: c_k = (2 − δ_k0)/(K + 1) Σ_j f(t_j) T_k(t_j).
-            T = np.cos(np.outer(j, np.pi * (j + 0.5) / (K + 1)))  # T[k, j] = T_k(t_j)
-            coef = (2.0 / (K + 1)) * (T @ values)
+            coef = (2.0 / (K + 1)) * (np.polynomial.chebyshev.chebvander(nodes, K).T @ values)
             coef[0] *= 0.5
             got = np.polynomial.chebyshev.chebvander(checks, K) @ coef
             if np.abs(got - wanted).max() <= self.MATCH * np.abs(wanted).max():
@@ -519,7 +517,7 @@ class _AlphaFamily:
                 T = [1.0, t]  # T_k(t) by the three-term recurrence: K multiply-adds of floats
                 for _ in range(coef.shape[0] - 2):
                     T.append(2.0 * t * T[-1] - T[-2])
-                return np.dot(T[: coef.shape[0]], coef).reshape(self._shape)
+                return np.dot(T, coef).reshape(self.C0.shape)
         return self._exact(alpha)
 
     def _exact(self, alpha: float) -> np.ndarray:

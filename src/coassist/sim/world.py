@@ -44,7 +44,6 @@ import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -113,10 +112,6 @@ def make_controller(kind: str, preset: ControlPreset):
     if kind == "manual":
         return ManualGuidance(model)
     raise ValueError(f"controller must be one of {CONTROLLER_KINDS}, got {kind!r}")
-
-
-def _check_seed(seed: Any) -> int:
-    return check_int(seed, "seed", 0)
 
 
 def _diag2(matrix: np.ndarray, name: str) -> None:
@@ -317,7 +312,7 @@ def run_trial(
         raise ValueError(f"operator must be an OperatorProfile, got {type(operator).__name__}")
     if not isinstance(obj, CarriedObject):
         raise ValueError(f"obj must be a CarriedObject, got {type(obj).__name__}")
-    seed = _check_seed(seed)
+    seed = check_int(seed, "seed", 0)
     sensor = ForceSensor() if sensor is None else sensor
     model: ImpedanceModel = controller.model
     _diag2(model.M, "M")
