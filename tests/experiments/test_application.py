@@ -5,7 +5,7 @@ import pytest
 from scipy import stats
 
 from coassist.experiments.application import force_saving, paired_difference
-from coassist.experiments.report import Section, render_html
+from coassist.experiments.report import Claim, Section, render_html
 
 
 def test_paired_difference_equals_scipys_paired_t_interval():
@@ -41,5 +41,6 @@ def test_the_answer_comes_before_the_claims_and_sections():
     head = Section("The answer: does the assistance help?")
     head.tables.append(("caption", ["object"], [["board"]]))
     body = Section("1. A section")
+    body.claims.append(Claim("a claim", True, "evidence"))  # so that the claims table is rendered at all
     page = render_html("t", "intro", [body], head)
-    assert page.index("The answer") < page.index("1. A section")
+    assert page.index("The answer") < page.index("The thesis' claims, checked") < page.index("1. A section")

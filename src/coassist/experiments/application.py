@@ -41,7 +41,6 @@ class ApplicationResult:
 
     metrics: dict[tuple[str, str], dict[str, Any]]
     trials: dict[tuple[str, str], list]
-    models: dict[str, Path]  # each object's transferred model
     task: str
     control_preset: str  # of the assistive controllers
     users: tuple[int, ...]  # the simulated operators
@@ -75,7 +74,7 @@ def run_application(ws: Workspace, final_model: Path, board_model: Path) -> Appl
             ordered = sorted(ds.trials, key=_pair_key)  # the same order for every controller: trial i meets trial i
             metrics[(obj, controller)] = application_metrics(ordered)
             trials[(obj, controller)] = ordered
-    return ApplicationResult(metrics, trials, models, cfg.application_task, cfg.application_preset,
+    return ApplicationResult(metrics, trials, cfg.application_task, cfg.application_preset,
                              tuple(cfg.application_users))
 
 
@@ -191,7 +190,6 @@ def application_section(result: ApplicationResult) -> Section:
 
     size = OBSTACLES[OBSTACLE][0]
     preset = CONTROL_PRESETS.lookup(result.control_preset)
-    arbitration = ARBITRATION  # the law sim.world.make_controller gives "cooperative-arbitrated"
     damping = preset.impedance.D[0]
     s = Section("4. Application: carrying a large and a heavy object (thesis §5.2.3, §5.3.3)")
     s.paragraphs.append(
@@ -199,8 +197,8 @@ def application_section(result: ApplicationResult) -> Section:
         f"around a {size[0] * 100:g} × {size[1] * 100:g} cm obstacle midway (no path shown: they detour widely) to the "
         f"target, {result.trials_per_controller} trials per object and controller: the assistive controller "
         f"(preset '{result.control_preset}': α = {preset.game.alpha:g}, R_r = {preset.game.R_r[0]:g}, the object's transferred "
-        f"model), the same with α set every tick by the '{arbitration.law}' law (α {arbitration.alpha_min:g}–"
-        f"{arbitration.alpha_max:g}, falling within {arbitration.target_scale * 100:g} cm of where the robot's plan ends: the "
+        f"model), the same with α set every tick by the '{ARBITRATION.law}' law (α {ARBITRATION.alpha_min:g}–"
+        f"{ARBITRATION.alpha_max:g}, falling within {ARBITRATION.target_scale * 100:g} cm of where the robot's plan ends: the "
         "target; coassist.control.arbitration), "
         f"impedance control (a {IMPEDANCE_STIFFNESS:g} N/m spring toward the nominal path) and manual guidance. "
         "Every controller meets the same trials (same seeds). Smoothness and stability: the tool's jerk RMS, its overshoot "

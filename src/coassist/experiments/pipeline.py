@@ -10,7 +10,6 @@ returning a typed result from which its report section is built.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -159,7 +158,6 @@ class Workspace:
     config: ReproduceConfig
     out: Path
     progress: bool
-    say: Callable[[str], None]
 
     def collect(self, name: str, *, tasks, users=(0,), objects=("handle",), trials: int, seed: int,
                 controller: str = "cooperative", preset: str | None = None, intent: str = "nominal",

@@ -120,7 +120,7 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     say = say or (lambda message: None)
-    ctx = _Context(Workspace(config, out, progress, say), _Stage(say))
+    ctx = _Context(Workspace(config, out, progress), _Stage(say))
     t0 = time.perf_counter()
     ctx.summary["config"] = asdict(config)
     ctx.stage.run("dMPC study", _stage_sweep, ctx)
@@ -182,7 +182,7 @@ def headline_section(application, transfer, real, sim_dt: float) -> Section:
         s.paragraphs.append("Prediction, real recordings, " + line("user-a held out", real.user_a["best_baseline"], "model",
                                                                   real.user_a["dt"]))
         s.paragraphs.append("Prediction, real recordings, " + line("user-b transferred", real.user_b["M_TL"]["best_baseline"],
-                                                                  "transferred model", real.user_a["dt"]))
+                                                                  "transferred model", real.user_b["M_TL"]["dt"]))
     return s
 
 

@@ -109,13 +109,13 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
         seed, test_seed = transfer_seeds(cfg.seed, i)
         folders = {}
 
-        def collect(target=target, slug=slug, seed=seed, folders=folders):
+        def collect():  # transfer_learning calls both at once, inside this iteration
             folder, ds = ws.collect(f"TL-{slug}", tasks=target.tasks, users=target.users, objects=target.objects,
                                     trials=target.trials, seed=seed, intent=str(final_model))
             folders["train"] = folder
             return ds
 
-        def train(start, dataset, slug=slug, folders=folders):
+        def train(start, dataset):
             init = {"transfer": f"transfer:{final_model}", "finetune_all": f"finetune:{final_model}", "scratch": "scratch"}[start]
             epochs = cfg.transfer_epochs if start != "scratch" else max(cfg.transfer_epochs, cfg.epochs)
             return ws.train(f"TL-{slug}-{start}", [folders["train"]], init=init, epochs=epochs, test_fraction=0.0)
