@@ -13,6 +13,7 @@ from coassist.metrics import (
     e_max,
     e_rms,
     f_rms,
+    intent_rms_error,
     jerk_rms,
     overshoot,
     peak_effort_ratio,
@@ -50,6 +51,22 @@ def test_hand_example_horizon_2():
     np.testing.assert_allclose(errs.max, [5.0, 2.0], rtol=1e-15)
     assert e_rms(pred, pose, 2) == pytest.approx((3.5355339059327378 + 1.5811388300841898) / 2, rel=1e-14)
     assert e_max(pred, pose, 2) == (pytest.approx(3.5, rel=1e-14), pytest.approx(5.0, rel=1e-14))
+
+
+def test_intent_error_scores_against_the_intent_not_the_tool():
+    """The tool sits still at the origin; the intent moves 1 m per tick along x. The prediction
+    (the intent itself, offset by (0, 0.3) m) is 0.3 m from the intent at every step and
+    far from the tool. By hand, H = 2: e_int = 0.3 m at each of the two scored ticks."""
+    tool = np.zeros((4, 2))
+    intent = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]])
+    pred = np.full((4, 2, 2), GARBAGE)
+    for k in range(2):
+        pred[k] = intent[k + 1 : k + 3] + [0.0, 0.3]
+    assert intent_rms_error(pred, intent, 2) == pytest.approx(0.3, rel=1e-14)
+    # Against the tool the same prediction is off by sqrt(mean(|(k+i, 0.3)|²)) at tick k:
+    # k=0: sqrt((1.09 + 4.09) / 2), k=1: sqrt((4.09 + 9.09) / 2).
+    by_hand = (math.sqrt(2.59) + math.sqrt(6.59)) / 2
+    assert e_rms(pred, tool, 2) == pytest.approx(by_hand, rel=1e-14)
 
 
 def test_hand_example_horizon_1():

@@ -16,6 +16,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
+from coassist.interfaces import NAMED_INTENTS
 from coassist.registry import Registry, UnknownNameError, unknown_name_message
 
 T = TypeVar("T")
@@ -253,6 +254,7 @@ def train(
     layers: int = typer.Option(None, help="LSTM layers (--init scratch; default: the preset's)."),
     hidden: int = typer.Option(None, help="LSTM hidden size (--init scratch)."),
     fc: str = typer.Option(None, help="Widths of the FC layers after the LSTM, comma-separated (--init scratch)."),
+    label: str = typer.Option(None, help="What the model predicts (--init scratch; default: the preset's): tool (the measured future pose, the thesis), hand_alone (the robot's own effort removed: needs trials that log u_r) or intent (the simulated operator's true intent)."),
     overwrite: bool = typer.Option(False, help="Replace the model already in --out (only once the new one is complete)."),
     skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
 ) -> None:
@@ -270,11 +272,20 @@ def train(
         _choose(optimizer, OPTIMIZERS, "--optimizer", "optimiser")
     sizes = {"lstm_layers": layers, "hidden": hidden, "fc": None if fc is None else tuple(_int_list(fc, "--fc"))}
     given = [TRAIN_OPTIONS[f"network.{k}"] for k, v in sizes.items() if v is not None]
+    if label is not None:
+        from coassist.intent.features import LABELS
+
+        _choose(label, LABELS, "--label", "label")
+        given.append("--label")
     if given and init != "scratch":
-        _fail(f"{', '.join(given)}: network sizes apply to --init scratch only; {init.partition(':')[0]}: keeps the "
-              "starting model's", 2)  # fmt: skip
+        _fail(f"{', '.join(given)}: network sizes and the label apply to --init scratch only; {init.partition(':')[0]}: "
+              "keeps the starting model's", 2)  # fmt: skip
     p = _intent_preset(preset, network=sizes, epochs=epochs, lr=lr, batch_size=batch_size, seed=seed, threads=threads,
                        test_fraction=test_fraction, init=init, device=device, optimizer=optimizer)  # fmt: skip
+    if label is not None:
+        from dataclasses import replace
+
+        p = replace(p, window=replace(p.window, label=label))
     _check_device(device)
     trials = _intent_trials(data, skip_bad_trials)
     _set_torch_threads(p.train.threads)
@@ -421,7 +432,7 @@ def collect(
     trials: int = typer.Option(20, help="Trials per user, object and task."),
     seed: int = typer.Option(0, help="Seed of the first trial; trial i uses seed + i."),
     preset: str = typer.Option("thesis-evaluation-dm", help="Control preset: thesis-evaluation-dm (the main job's), thesis-application-dm, or either without -dm (SI units: the robot barely helps)."),
-    intent: str = typer.Option("nominal", help="nominal | oracle | path of an intent model."),
+    intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle | path of an intent model."),
     dataset_id: str = typer.Option(None, help="Dataset id (default: the folder's name)."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
     ray_address: str = typer.Option(None, help="Run on a Ray cluster at this address (needs coassist[cluster])."),
@@ -444,8 +455,8 @@ def collect(
     user_list = _int_list(users, "--users")
     task_list = _name_list(tasks, "--tasks", TASK_KINDS, "task")
     object_list = _name_list(objects, "--objects", tuple(OBJECTS), "object")
-    if intent not in ("nominal", "oracle") and not (Path(intent) / "model.json").is_file():
-        _fail(f"--intent {intent}: not nominal, oracle or a model folder (no model.json there)", 2)
+    if intent not in NAMED_INTENTS and not (Path(intent) / "model.json").is_file():
+        _fail(f"--intent {intent}: not one of {', '.join(NAMED_INTENTS)} or a model folder (no model.json there)", 2)
     _folder_out(out, "--out")
     try:
         folder = collect_dataset(
@@ -479,7 +490,7 @@ def drive(
     controller: str = typer.Option("assistive", help="assistive (the cooperative game) | imp (impedance control) | mg (manual guidance)."),
     task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
-    intent: str = typer.Option("nominal", help="nominal | oracle (MuJoCo) | path of an intent model (coassist train)."),
+    intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle (MuJoCo) | path of an intent model (coassist train)."),
     realtime_intent: bool = typer.Option(None, help="Run the model off the control thread, never waiting for it (default: on for --world ur, off in MuJoCo, where runs are then deterministic)."),
     predictor_backend: str = typer.Option("process", help="Where a real-time model runs: process (own worker process), onnx (ONNX Runtime thread) or torch (thread)."),
     preset: str = typer.Option("thesis-application-dm", help="Control preset (the main job's by default)."),
@@ -515,7 +526,7 @@ def drive(
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
     out = _file_out(out, "--out", "trial.parquet")
-    if intent not in ("nominal", "oracle"):
+    if intent not in NAMED_INTENTS:
         _set_torch_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
 
     def confirm(text: str) -> bool:

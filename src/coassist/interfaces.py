@@ -33,6 +33,7 @@ import numpy as np
 from coassist._checks import is_real_number
 
 __all__ = [
+    "NAMED_INTENTS",
     "FEATURES",
     "Fault",
     "IntentSource",
@@ -106,6 +107,10 @@ SAFETY_FAULTS = (
 
 #: The per-tick history features, in the thesis' order.
 FEATURES = ("x", "y", "vx", "vy", "fx", "fy", "x_ref", "y_ref")
+#: Intent sources named rather than loaded from a model folder (``sim.intent_source``): the
+#: nominal plan (eq. 4.7), the tool's constant-velocity extrapolation, and the simulated
+#: operator's true intent ("oracle", simulation only).
+NAMED_INTENTS = ("nominal", "constant-velocity", "oracle")
 
 
 @dataclass(frozen=True, eq=False)

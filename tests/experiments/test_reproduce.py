@@ -59,7 +59,8 @@ def tiny_run(tmp_path_factory):
 
 def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
     out, summary = tiny_run
-    assert set(summary["stage_seconds"]) == {"dMPC study", "iterative training", "transfer learning", "application scenario", "real recordings"}
+    assert set(summary["stage_seconds"]) == {"dMPC study", "iterative training", "transfer learning", "application scenario",
+                                             "real recordings", "intent ablation"}
     it = summary["iterative"]
     assert list(it["in_loop_errors"]) == ["nominal", "M0", "M1"]
     for errors in it["in_loop_errors"].values():
@@ -80,6 +81,17 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
                 assert result[name] == pytest.approx(np.mean(finite))
     for key in ("M0", "M1", "TL-board-transfer", "TL-heavy-transfer"):
         assert (out / "models" / key / "history.json").is_file()
+    # The ablation: every (object, controller, source) cell in the point-mass world (the tiny preset leaves MuJoCo out),
+    # each model saying what it predicts.
+    from coassist.experiments.ablation import CONTROLLERS, SOURCES
+
+    ab = summary["ablation"]
+    assert set(ab["cells"]) == {f"point-mass/{o}/{c}/{s}" for o in ("board", "heavy") for c in CONTROLLERS for s in SOURCES}
+    assert "mujoco" in ab["skipped"]
+    labels = {"ridge": "tool", "lstm-tool": "tool", "lstm-hand-alone": "hand_alone", "lstm-intent": "intent"}
+    for source, label in labels.items():
+        side = json.loads((out / "models" / f"ablation-{source}" / "model.json").read_text())
+        assert side["window"]["label"] == label and side["predicts"]
 
 
 def inf(x):
@@ -136,6 +148,12 @@ def _expected_claims(summary):
                 bool(saving >= 0.30 and np.isfinite(v["sigma"]) and v["sigma"] <= inf(m["sigma"])
                      and v["reached"] >= m["reached"] and v["overshoot"] <= m["overshoot"]),
                 [f"force {100 * saving:.0f} %", f"{v['jerk_rms']:.2f} vs MG {m['jerk_rms']:.2f}"])
+    for key, cell in summary["ablation"]["cells"].items():
+        world, obj, controller, source = key.split("/")
+        if world == "point-mass" and controller == "cooperative-arbitrated" and source.startswith("lstm-"):
+            f, o = cell["oracle_share_force"][0], cell["oracle_share_overshoot"][0]
+            out[f"{obj}: the arbitrated controller with {source} in the loop"] = (
+                bool(np.isfinite(f) and np.isfinite(o) and f >= 0.8 and o >= 0.8), [])
     if "user_a" in summary["real"]:
         ev = summary["real"]["user_a"]
         best = ev["best_baseline"]
@@ -145,6 +163,21 @@ def _expected_claims(summary):
         out["On held-out real user-a data the model beats"] = (
             model <= 0.85 * ridge, [f"model {model * 1e3:.3f} mm", f"{ridge * 1e3:.3f} mm", f"{100 * (ridge - model) / ridge:+.1f} %"])
     return out
+
+
+def test_ablation_cells_meet_the_same_trials(tiny_run):
+    """Every (object, controller, source) cell of the ablation ran MG's trials: same operators, same seeds."""
+    from coassist.data import read_dataset
+    from coassist.experiments.ablation import CONTROLLERS, SOURCES
+
+    out, _ = tiny_run
+    for obj in ("board", "heavy"):
+        mg = sorted((t.meta.user, t.meta.seed) for t in read_dataset(out / "datasets" / f"ablation-{obj}-manual").trials)
+        assert mg
+        for controller in CONTROLLERS:
+            for source in SOURCES:
+                ds = read_dataset(out / "datasets" / f"ablation-{obj}-{controller}-{source}")
+                assert sorted((t.meta.user, t.meta.seed) for t in ds.trials) == mg, (obj, controller, source)
 
 
 def test_every_claim_agrees_with_the_summary(tiny_run):
@@ -164,7 +197,8 @@ def test_report_is_complete_and_consistent_with_the_summary(tiny_run):
     html = (out / "report.html").read_text()
     on_disk = json.loads((out / "summary.json").read_text())
     assert on_disk["claims"] == summary["claims"]
-    for title in ("1. The dMPC study", "2. Iterative training", "3. Transfer learning", "4. Application", "5. The real UR5 recordings"):
+    for title in ("1. The dMPC study", "2. Iterative training", "3. Transfer learning", "4. Application", "5. The real UR5 recordings",
+                  "6. Which intent makes assistance better?"):
         assert title in html
     claims = summary["claims"]
     assert len(claims) >= 10

@@ -58,6 +58,9 @@ class ReproduceConfig:
     application_trials: int = 6
     application_users: tuple[int, ...] = (0, 1, 2)
     application_task: str = "curved"
+    # The intent-source ablation on the MuJoCo UR5 (experiments.ablation): trials per operator, object, controller
+    # and source (the point-mass world runs application_trials); 0 leaves the MuJoCo world out.
+    ablation_mujoco_trials: int = 1
     real_data: str | None = None  # folder holding user-a/ and user-b/ recordings
     real_epochs: int = 15
     workers: int = 2
@@ -72,6 +75,11 @@ class ReproduceConfig:
             v = getattr(self, name)
             if not is_integer(v) or v < 1:
                 raise ValueError(f"reproduce.{name} must be an integer >= 1, got {v!r}")
+        if not is_integer(self.ablation_mujoco_trials) or self.ablation_mujoco_trials < 0:
+            raise ValueError(f"reproduce.ablation_mujoco_trials must be an integer >= 0, got {self.ablation_mujoco_trials!r}")
+        if self.ablation_mujoco_trials > self.application_trials:
+            raise ValueError(f"reproduce.ablation_mujoco_trials ({self.ablation_mujoco_trials}) must be <= "
+                             f"reproduce.application_trials ({self.application_trials}): its trials are theirs")
         if self.transfer_trials < 3:
             raise ValueError(f"reproduce.transfer_trials must be >= 3 (one per task), got {self.transfer_trials}")
         if not (isinstance(self.skip_alpha, (int, float)) and self.skip_alpha >= 0):
@@ -92,6 +100,7 @@ PRESETS: Registry[ReproduceConfig] = Registry("reproduce preset", {
     "tiny": ReproduceConfig(
         name="tiny", trials_per_task=2, iterations=2, epochs=1, resume_epochs=1, transfer_epochs=1, train_stride=25,
         transfer_trials=3, test_trials=2, new_users=(1,), application_trials=1, application_users=(0,), real_epochs=1,
+        ablation_mujoco_trials=0,
         sweep_duration=1.0,
     ),
     "thesis": ReproduceConfig(

@@ -10,7 +10,11 @@ Stages, in order (each writes its data under ``out/`` and a section of the repor
 4. the application scenario (§5.2.3, §5.3.3, Fig. 5.24–5.31): the board and the heavy
    load carried past an obstacle with the assistive controller, IMP and MG;
 5. the real UR5 recordings: the predictor trained on user-a against its baselines,
-   and transferred to user-b.
+   and transferred to user-b;
+6. the in-loop ablation of intent sources (issue 18): nominal, constant velocity, the
+   tuned ridge, the LSTM+FC trained on the tool's future, on the hand-alone path and on
+   the true intent, and the oracle, in the point-mass world and on the MuJoCo UR5
+   (:mod:`~coassist.experiments.ablation`).
 
 Control preset. The closed loops use the thesis' weights with positions scaled: in
 decimetres for data collection (``thesis-evaluation-dm``) and ×3.5 for the application
@@ -47,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from coassist._io import atomic_write_text
+from coassist.experiments.ablation import ablation_section, run_ablation
 from coassist.experiments.application import application_section, run_application
 from coassist.experiments.pipeline import (
     EVAL_HORIZONS,
@@ -138,6 +143,9 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
     real = ctx.stage.run("real recordings", run_real_recordings, ctx.ws, config.real_data or default_real_data())
     ctx.sections.append(real_recordings_section(real))
     ctx.summary["real"] = real.summary()
+    ablation = ctx.stage.run("intent ablation", run_ablation, ctx.ws)
+    ctx.sections.append(ablation_section(ablation))
+    ctx.summary["ablation"] = ablation.summary()
     ctx.summary["stage_seconds"] = ctx.stage.times
     ctx.summary["total_seconds"] = time.perf_counter() - t0
     claims = [c.to_dict() for s in ctx.sections for c in s.claims]
@@ -147,8 +155,9 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
         f"(intent model preset '{config.intent_preset}', control preset '{config.control_preset}'), "
         f"seed {config.seed}; total time {ctx.summary['total_seconds']:.0f} s. Every number below was measured in this run."
     )
-    headline = headline_section(application, transfer, real, _sim_dt(config))
-    ctx.summary["headline"] = {"table": headline.tables[0], "prediction": headline.paragraphs}
+    headline = headline_section(application, transfer, real, _sim_dt(config), ablation)
+    ctx.summary["headline"] = {"table": headline.tables[0], "intent_sources": headline.tables[1],
+                               "prediction": headline.paragraphs}
     write_report(out / "report.html", "coassist — the thesis' experiments, reproduced", intro, ctx.sections, headline)
     atomic_write_text(out / "summary.json", json.dumps(_jsonable(ctx.summary), indent=1, allow_nan=False))
     return ctx.summary
@@ -160,14 +169,17 @@ def _sim_dt(config: ReproduceConfig) -> float:
     return float(get_preset(config.control_preset).impedance.dt)
 
 
-def headline_section(application, transfer, real, sim_dt: float) -> Section:
+def headline_section(application, transfer, real, sim_dt: float, ablation) -> Section:
     """The report's first screen: per object, force saved against MG and IMP with its spread,
-    precision and smoothness against MG; then whether the prediction beats its best simple
+    precision and smoothness against MG; the share of the oracle's benefit each intent source
+    gets in the loop (the ablation); then whether the prediction beats its best simple
     baseline (the simulated transfer targets and the real recordings), in mm."""
+    from coassist.experiments.ablation import headline_rows
     from coassist.experiments.application import headline_table
 
     s = Section("The answer: does the assistance help?")
     s.tables.append(headline_table(application))
+    s.tables.append(headline_rows(ablation))
 
     def line(where: str, best: dict, model: str, dt: float) -> str:
         h = max(best, key=lambda k: int(k))

@@ -18,6 +18,25 @@ Two choices here are ours, both measured on real data (docs/intent-results.md):
   ``"relative"``  x(k+i) − x(k);
   ``"residual"``  x(k+i) − (x(k) + i·dt·ẋ(k))   (over constant-velocity extrapolation).
 
+What the future positions x(k+i) *are* is the window's ``label`` (issue 18: under
+assistance the tool's future contains the robot's own push, so a predictor of it feeds
+the robot's motion back into itself as negative damping, docs/assistance.md):
+
+- ``"tool"``: the measured future pose x(k+i) (the thesis);
+- ``"hand_alone"``: the pose the hand alone would have produced from the same state at
+  k, the robot's effort removed through the impedance the world rendered (linear and
+  known; ``Trial.meta.extra["plant"]``)::
+
+      x_h(k+i) = x(k+i) − Σ_{j=0}^{i−1} C_x A_d^{i−1−j} B_d u_r(k+j)
+               = x(k+i) − [z_r(k+i) − A_d^i z_r(k)]_x,   z_r(k+1) = A_d z_r(k) + B_d u_r(k), z_r(0) = 0
+
+  with (A_d, B_d) the exact ZOH discretisation of M a + D v + K Δx = u and [·]_x the
+  position rows (:func:`robot_state`, :func:`free_response`). Where u_r ≡ 0 (manual
+  guidance) it equals ``"tool"``;
+- ``"intent"``: the operator's true desired position x_ref,h(k+i) (``Trial.intent``,
+  simulated trials only): what a predictor of intent should output, to score against
+  and as an upper bound on what can be learned.
+
 Inputs and targets are scaled to [−1, 1] by a :class:`Scaler` fitted on the training
 windows only (one range per feature; one range per axis for targets).
 """
@@ -25,7 +44,7 @@ windows only (one range per feature; one range per axis for targets).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -34,15 +53,18 @@ import numpy as np
 from coassist._checks import check_int_at_least
 from coassist.data import Trial
 from coassist.data.trial import time_gaps
+from coassist.model.impedance import ImpedanceModel
 
 __all__ = [
     "AXES",
     "INPUT_FRAMES",
+    "LABELS",
     "TARGETS",
     "Scaler",
     "WindowConfig",
     "WindowSet",
     "feature_names",
+    "robot_state",
     "split_trials",
     "trial_features",
     "validation_split",
@@ -54,6 +76,7 @@ VALIDATION_FRACTION = 0.25
 AXES = ("x", "y", "z", "rx", "ry", "rz")
 INPUT_FRAMES = ("absolute", "relative")
 TARGETS = ("absolute", "relative", "residual")
+LABELS = ("tool", "hand_alone", "intent")
 TARGET_SCALINGS = ("axis", "step")
 
 
@@ -93,6 +116,11 @@ class WindowConfig:
     target_scaling : str
         ``"axis"``: one [−1, 1] range per axis over all H steps (the thesis);
         ``"step"``: one range per step and axis, so the MSE weighs near and far steps alike.
+    label : str
+        What the future positions are: ``"tool"`` (the measured pose, the thesis),
+        ``"hand_alone"`` (the robot's effort removed) or ``"intent"`` (the simulated
+        operator's true intent); see the module docstring. A model records it in its
+        ``model.json`` (``window.label``); files from before it existed read as ``"tool"``.
     """
 
     history: int = 125
@@ -101,6 +129,7 @@ class WindowConfig:
     input_frame: str = "absolute"
     target: str = "absolute"
     target_scaling: str = "axis"
+    label: str = "tool"
 
     def __post_init__(self) -> None:
         check_int_at_least(self.history, "window.history", 1)
@@ -114,6 +143,8 @@ class WindowConfig:
             raise ValueError(f"window.input_frame must be one of {INPUT_FRAMES}, got {self.input_frame!r}")
         if self.target not in TARGETS:
             raise ValueError(f"window.target must be one of {TARGETS}, got {self.target!r}")
+        if self.label not in LABELS:
+            raise ValueError(f"window.label must be one of {LABELS}, got {self.label!r}")
         if self.target_scaling not in TARGET_SCALINGS:
             raise ValueError(f"window.target_scaling must be one of {TARGET_SCALINGS}, got {self.target_scaling!r}")
 
@@ -236,9 +267,17 @@ class WindowSet:
         check_int_at_least(stride, "stride", 1)
         self.window, self.dt, self.n_dof = window, float(dt), d
         feats, ends, owner, start = [], [], [], 0
+        labels: list[np.ndarray] = []
+        free: list[np.ndarray] = []
         first = window.history - 1
         for i, t in enumerate(trials):
             f = trial_features(t)
+            if window.label == "intent" and need_future:
+                labels.append(_label_series(t, window.label))
+            elif window.label == "hand_alone" and need_future:
+                plant = trial_plant(t)
+                labels.append(robot_state(plant, _label_series(t, window.label)))
+                free.append(free_response(plant, window.horizon))
             ahead = window.horizon if need_future else 0
             last = t.n_samples - 1 - ahead
             ks = np.arange(first, last + 1, stride)
@@ -253,6 +292,10 @@ class WindowSet:
             owner.append(np.full(ks.size, i))
             start += t.n_samples
         self.features = np.concatenate(feats)
+        # "intent": the true intent positions (ΣT, d); "hand_alone": the state z_r the robot's
+        # effort alone drives (ΣT, 2d), and each trial's free response C_x A_d^i (n_trials, H, d, 2d).
+        self._label = np.concatenate(labels) if labels else None
+        self._free = np.stack(free) if free else None
         self.ends = np.concatenate(ends).astype(np.int64)
         self.trial = np.concatenate(owner)
         if self.ends.size == 0:
@@ -279,9 +322,21 @@ class WindowSet:
         return f[:, :d], f[:, d : 2 * d]
 
     def future(self, sel: np.ndarray) -> np.ndarray:
-        """Measured poses x(k+1) … x(k+H), (B, H, d)."""
+        """The labelled future positions for ticks k+1 … k+H, (B, H, d), m (``window.label``)."""
         idx = self.ends[sel][:, None] + np.arange(1, self.window.horizon + 1)[None, :]
-        return self.features[idx][:, :, : self.n_dof]
+        label = self.window.label
+        if label == "tool":
+            return self.features[idx][:, :, : self.n_dof]
+        if self._label is None:
+            raise ValueError("this WindowSet was cut without futures (need_future=False)")
+        if label == "intent":
+            return self._label[idx]
+        d = self.n_dof
+        pose = self.features[idx][:, :, :d]
+        # What u_r(k) … u_r(k+i−1) moved the tool from rest at k: z_r(k+i) − C_x A_d^i z_r(k).
+        z_k = self._label[self.ends[sel]]
+        pushed = self._label[idx][:, :, :d] - np.einsum("biam,bm->bia", self._free[self.trial[sel]], z_k)
+        return pose - pushed
 
     def raw_targets(self, sel: np.ndarray) -> np.ndarray:
         """Training targets in the configured parameterisation, (B, H, d), m."""
@@ -354,6 +409,64 @@ def constant_velocity(pose: np.ndarray, vel: np.ndarray, horizon: int, dt: float
     """x(k) + i·dt·ẋ(k) for i = 1 … H: (B, d), (B, d) -> (B, H, d)."""
     steps = dt * np.arange(1, horizon + 1)[None, :, None]
     return pose[:, None, :] + steps * vel[:, None, :]
+
+
+def robot_state(model: ImpedanceModel, effort: np.ndarray) -> np.ndarray:
+    """The state the robot's effort alone drives the plant to, from rest at tick 0: (T, 2d).
+
+    z_r(0) = 0, z_r(k+1) = A_d z_r(k) + B_d u_r(k) (exact ZOH). By linearity the motion that
+    u_r(k) … u_r(k+i−1) cause from rest at tick k is z_r(k+i) − A_d^i z_r(k) (positions:
+    the first d rows), which is what the ``hand_alone`` label removes. A non-finite effort
+    (a tick the world never applied) counts as 0.
+    """
+    u = np.nan_to_num(np.asarray(effort, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    Ad, Bd = np.asarray(model.Ad), np.asarray(model.Bd)
+    z = np.zeros((u.shape[0], Ad.shape[0]))
+    drive = u @ Bd.T  # B_d u_r(k) for every k at once
+    for k in range(u.shape[0] - 1):  # T small matrix products: ~1 ms per 1000 ticks
+        z[k + 1] = Ad @ z[k] + drive[k]
+    return z
+
+
+def free_response(model: ImpedanceModel, horizon: int) -> np.ndarray:
+    """C_x A_d^i for i = 1 … H: where a state's positions go in i ticks with no input, (H, d, 2d)."""
+    horizon = check_int_at_least(horizon, "horizon", 1)
+    d = model.n_dof
+    out = np.empty((horizon, d, 2 * d))
+    P = np.asarray(model.Ad, dtype=np.float64)
+    for i in range(horizon):
+        out[i] = P[:d]
+        P = model.Ad @ P
+    return out
+
+
+def trial_plant(trial: Trial) -> ImpedanceModel:
+    """The impedance a trial's world rendered between effort and motion (``meta.extra["plant"]``:
+    diagonals ``M``, ``D``, ``K``; dt from the meta). Simulated and driven trials record it."""
+    plant = trial.meta.extra.get("plant")
+    where = f"trial {trial.meta.user}/{trial.meta.task}/seed {trial.meta.seed}"
+    if not isinstance(plant, Mapping) or not all(k in plant for k in ("M", "D", "K")):
+        raise ValueError(
+            f"label 'hand_alone' needs the rendered impedance (meta.extra['plant'] with M, D, K); {where} has none "
+            "(recordings without the robot's effort can only be labelled 'tool'; re-collect older simulated data)"
+        )
+    try:
+        return ImpedanceModel(np.diag(plant["M"]), np.diag(plant["D"]), np.diag(plant["K"]), trial.meta.dt)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: malformed meta.extra['plant']: {exc}") from None
+
+
+def _label_series(trial: Trial, label: str) -> np.ndarray:
+    """The per-tick series a label needs: the true intent ("intent") or u_r ("hand_alone"), (T, d)."""
+    name = "intent" if label == "intent" else "effort_r"
+    series = getattr(trial, name)
+    if series is None or not np.isfinite(series).any():
+        what = "the operator's true intent (simulated trials only)" if label == "intent" else "the robot's effort u_r"
+        raise ValueError(
+            f"label {label!r} needs {what}, but trial {trial.meta.user}/{trial.meta.task}/seed {trial.meta.seed} "
+            f"has no {name}; label 'tool' works on any trial"
+        )
+    return np.asarray(series, dtype=np.float64)
 
 
 def check_dt(dt: float) -> float:

@@ -186,6 +186,8 @@ class IntentModel:
             "history": self.window.history,
             "horizon": self.window.horizon,
             "window": self.window.to_dict(),
+            # What the output positions are (features.LABELS); read back from window.label.
+            "predicts": PREDICTS[self.window.label],
             "network": self.net.config.to_dict(),
             "input_scaler": self.input_scaler.to_dict(),
             "target_scaler": self.target_scaler.to_dict(),
@@ -193,6 +195,14 @@ class IntentModel:
             "ridge_sha256": ridge_sha256,
             **self.info,
         }
+
+
+#: model.json's "predicts", per window label: what the model's output positions are.
+PREDICTS = {
+    "tool": "the measured future tool pose x(k+1..k+H) (the thesis)",
+    "hand_alone": "the future tool pose with the robot's own effort removed: the path the hand alone would produce",
+    "intent": "the simulated operator's true intended positions x_ref,h(k+1..k+H)",
+}
 
 
 def trial_features_names(trial: Trial) -> tuple[str, ...]:
@@ -336,7 +346,7 @@ def load_model(
         except (KeyError, TypeError, ValueError, RuntimeError) as exc:
             raise _fail(ridge_path, f"tensors do not fit the ridge baseline: {exc}") from None
     skip = {"format", "features", "n_dof", "dt", "history", "horizon", "window", "network", "input_scaler",
-            "target_scaler", "weights_sha256", "ridge_sha256"}  # fmt: skip
+            "target_scaler", "weights_sha256", "ridge_sha256", "predicts"}  # fmt: skip
     info = {k: v for k, v in meta.items() if k not in skip}
     try:
         model = IntentModel(net, window, in_scaler, out_scaler, model_dt, info, ridge)

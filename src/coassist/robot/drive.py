@@ -30,7 +30,7 @@ import numpy as np
 from coassist._checks import is_integer
 from coassist.config import ImpedanceParameters
 from coassist.data import Trial, TrialMeta
-from coassist.interfaces import FEATURES, TrialContext
+from coassist.interfaces import FEATURES, NAMED_INTENTS, TrialContext
 from coassist.runtime.intent import RealtimeIntent, WindowIntent
 from coassist.runtime.loop import LoopLog, TargetDwell, run_loop
 from coassist.runtime.safety import SafetyLayer, SafetyLimits
@@ -40,14 +40,15 @@ from coassist.sim.hand import SimulatedHand
 from coassist.sim.intent_source import load_intent_source
 from coassist.sim.objects import get_object
 from coassist.sim.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
-from coassist.sim.tasks import TASK_KINDS, make_task
+from coassist.sim.tasks import OBSTACLES, TASK_KINDS, make_task
 from coassist.sim.world import get_preset, make_controller
 from coassist.spatial import rotation_vector, unwrap_rotation_vectors
 
 __all__ = ["CONTROLLERS", "DriveConfig", "WORLDS", "drive", "workspace_for"]
 
 #: Controller names of the drive command → the simulator's controller kinds.
-CONTROLLERS = {"assistive": "cooperative", "imp": "impedance", "mg": "manual"}
+CONTROLLERS = {"assistive": "cooperative", "assistive-arbitrated": "cooperative-arbitrated", "imp": "impedance",
+               "mg": "manual"}  # fmt: skip
 WORLDS = ("mujoco", "ur")
 #: Where the real-time predictor runs (coassist.intent.realtime.BACKENDS).
 PREDICTOR_BACKENDS = ("process", "onnx", "torch")
@@ -62,11 +63,14 @@ ROTATIONAL_DAMPING = 5.0
 class DriveConfig:
     """One run on a UR5 (every field validated, errors name it as ``DriveConfig.<field>``).
 
-    world : "mujoco" or "ur".  controller : "assistive", "imp" or "mg".
+    world : "mujoco" or "ur".  controller : "assistive", "assistive-arbitrated" (α set every
+        tick by the simulator's arbitration law), "imp" or "mg".
     task : a task kind (linear, curved, sinusoidal, z).  object : handle, board or heavy.
     preset : a control preset (default the main job's, thesis-application-dm).
     intent : "nominal", "oracle" (MuJoCo only) or a model folder.
     user : simulated operator index (MuJoCo).  seed : task, operator and sensor seed.
+    obstacle : the obstacle the operator goes around (coassist.sim.tasks.OBSTACLES; "small"
+        is the evaluation's box, "large" the application's).
     rate_hz : 125 (UR CB3) or 500 (e-Series); the MuJoCo world runs either.
     full_pose : control all 6 DOFs (orientation error as a rotation vector) instead of x-y.
     time_limit : [s]; None: 2 × the plan's duration + 10 s.
@@ -87,6 +91,7 @@ class DriveConfig:
     intent: str = "nominal"
     user: int = 0
     seed: int = 0
+    obstacle: str = "small"
     rate_hz: int = 125
     full_pose: bool = False
     time_limit: float | None = None
@@ -106,6 +111,8 @@ class DriveConfig:
             raise bad("task", f"one of {TASK_KINDS}")
         get_object(self.object)
         get_preset(self.preset)
+        if self.obstacle not in OBSTACLES:
+            raise bad("obstacle", f"one of {tuple(OBSTACLES)}")
         if not isinstance(self.intent, str) or not self.intent:
             raise bad("intent", "'nominal', 'oracle' or a model folder")
         if self.intent == "oracle" and self.world == "ur":
@@ -174,7 +181,9 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
     dt = config.dt
     controller = _controller(config)
     H = int(controller.horizon)
-    task = make_task(config.task, np.random.default_rng(np.random.SeedSequence([config.seed, 0])))
+    size, placement = OBSTACLES[config.obstacle]
+    task = make_task(config.task, np.random.default_rng(np.random.SeedSequence([config.seed, 0])),
+                     obstacle_size=size, obstacle_range=placement)  # the simulator's draw (sim.world.run_spec)
     profile = operator_profile(config.user)
     obj = get_object(config.object)
     time_limit = config.time_limit if config.time_limit is not None else 2.0 * task.planner.end_time + 10.0
@@ -248,7 +257,7 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
             if close is not None:
                 close()
     return _trial(config, log, ref_abs, H, intent_traj.positions if config.world == "mujoco" else None, task, obj,
-                  profile.name if config.world == "mujoco" else "operator", model_id, controller.name, dofs, start_pose,
+                  profile.name if config.world == "mujoco" else "operator", model_id, controller, dofs, start_pose,
                   wrench.bias)  # fmt: skip
 
 
@@ -273,7 +282,7 @@ def _intent_stage(config: DriveConfig, H: int, source: Any):
         if hasattr(source, "tick"):
             return RealtimeIntent(source), getattr(source, "model_id", "realtime")
         return WindowIntent(source, H), source.model_id
-    if config.intent in ("nominal", "oracle"):
+    if config.intent in NAMED_INTENTS:
         src = load_intent_source(config.intent, horizon=max(H, 2))
         return WindowIntent(src, H), src.model_id
     if realtime:
@@ -290,7 +299,7 @@ def _intent_stage(config: DriveConfig, H: int, source: Any):
     return WindowIntent(src, H), src.model_id
 
 
-def _trial(config: DriveConfig, log: LoopLog, ref_abs, H, intent, task, obj, user, model_id, controller_name, dofs,
+def _trial(config: DriveConfig, log: LoopLog, ref_abs, H, intent, task, obj, user, model_id, controller, dofs,
            start_pose, bias) -> Trial:  # fmt: skip
     n = log.n
     if n == 0:
@@ -313,11 +322,13 @@ def _trial(config: DriveConfig, log: LoopLog, ref_abs, H, intent, task, obj, use
     extra = task.to_extra()
     extra.update({
         "ended": log.ended, "stop_message": log.message, "preset": config.preset, "world": config.world,
+        # The admittance the tick integrates from wrench + u_r (the label 'hand_alone' removes u_r through it).
+        "plant": {name: [float(v) for v in np.diag(getattr(controller.model, name))] for name in ("M", "D", "K")},
         "object": obj.to_extra(), "rate_hz": config.rate_hz, "full_pose": config.full_pose,
         "start_pose": [float(v) for v in start_pose], "sensor_bias": [float(v) for v in bias],
         "limits": config.limits.describe(), "features": list(FEATURES), "dofs": list(dofs),
     })  # fmt: skip
-    meta = TrialMeta(user=user, task=task.kind, object=obj.name, controller=controller_name, model_id=model_id,
+    meta = TrialMeta(user=user, task=task.kind, object=obj.name, controller=controller.name, model_id=model_id,
                      seed=config.seed, source="mujoco" if config.world == "mujoco" else "ur5", dt=config.dt, extra=extra)  # fmt: skip
     pose = log.pose
     if config.full_pose:  # rotation vectors continuous through ±π: a tool pointing down sits at |rv| ≈ π

@@ -9,6 +9,7 @@ from pathlib import Path
 from coassist._checks import check_int
 from coassist.data import DatasetWriter
 from coassist.data.store import FORMAT_VERSION, digest
+from coassist.interfaces import NAMED_INTENTS
 from coassist.sim.world import TrialSpec, run_trials
 
 
@@ -81,7 +82,7 @@ def collect_dataset(
     dataset_id = dataset_id or out.name
     # What is collected, so that a re-run continues only the same collection.
     model_file = Path(s0.intent) / "model.json"
-    model_hash = digest(model_file.read_bytes().hex()) if s0.intent not in ("nominal", "oracle") and model_file.is_file() else None
+    model_hash = digest(model_file.read_bytes().hex()) if s0.intent not in NAMED_INTENTS and model_file.is_file() else None
     key = digest({"specs": [asdict(s) for s in specs], "dataset_id": dataset_id, "format": FORMAT_VERSION,
                   "model": model_hash})  # fmt: skip
     with DatasetWriter(out, dataset_id, n_trials=len(specs), key=key, description=description,

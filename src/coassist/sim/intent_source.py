@@ -88,6 +88,28 @@ class OracleIntent:
         return _rows(self._intent, k, self.horizon)
 
 
+class ConstantVelocityIntent:
+    """ŷ_ref,h(k+i) = x(k) + i·dt·ẋ(k): the tool's constant-velocity extrapolation, the
+    simplest learned-free predictor (and to first order what a forecast of the tool
+    becomes under assistance, docs/assistance.md). Reads the last feature row only."""
+
+    history = 1
+    model_id = "constant-velocity"
+
+    def __init__(self, horizon: int = 50) -> None:
+        self.horizon = check_int(horizon, "ConstantVelocityIntent.horizon", 1)
+        self._steps: np.ndarray | None = None
+
+    def reset(self, context: TrialContext) -> None:
+        self._steps = float(context.dt) * np.arange(1, self.horizon + 1)[:, None]
+
+    def predict(self, history: np.ndarray) -> np.ndarray:
+        if self._steps is None:
+            raise RuntimeError("ConstantVelocityIntent.predict called before reset")
+        row = history[-1]
+        return row[0:2] + self._steps * row[2:4]
+
+
 def _rows(grid: np.ndarray, k: int, horizon: int) -> np.ndarray:
     """Rows k+1 … k+horizon of a (n, d) grid, holding the last row past the end."""
     n = grid.shape[0]
@@ -100,7 +122,8 @@ def _rows(grid: np.ndarray, k: int, horizon: int) -> np.ndarray:
 def load_intent_source(spec: str, horizon: int = 50) -> IntentSource:
     """An intent source from its name or model path.
 
-    ``"nominal"`` → :class:`NominalIntent`; ``"oracle"`` → :class:`OracleIntent`; any
+    ``"nominal"`` → :class:`NominalIntent`; ``"oracle"`` → :class:`OracleIntent`;
+    ``"constant-velocity"`` → :class:`ConstantVelocityIntent`; any
     other string is a model path handed to ``coassist.intent.load_intent_source``
     (imported lazily, so the simulator works without the learning stack).
     """
@@ -110,6 +133,8 @@ def load_intent_source(spec: str, horizon: int = 50) -> IntentSource:
         return NominalIntent(horizon)
     if spec == "oracle":
         return OracleIntent(horizon)
+    if spec == "constant-velocity":
+        return ConstantVelocityIntent(horizon)
     try:
         from coassist.intent import load_intent_source as load_model_source  # type: ignore[attr-defined]
     except ImportError as exc:

@@ -61,7 +61,7 @@ from coassist.runtime.safety import SafetyLayer, SafetyLimits
 from coassist.runtime.tick import ControlTick, Plan
 from coassist.runtime.world import Command, RobotState
 from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
-from coassist.interfaces import FEATURES, IntentSource, TrialContext
+from coassist.interfaces import FEATURES, NAMED_INTENTS, IntentSource, TrialContext
 from coassist.sim.intent_source import NominalIntent, load_intent_source
 from coassist.sim.objects import CarriedObject, ForceSensor, get_object
 from coassist.sim.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise, operator_profile
@@ -368,6 +368,9 @@ def run_trial(
             "sensor_residual_bias": [float(v) for v in world.residual],
             "arrive_radius": float(arrive_radius),
             "features": list(FEATURES),
+            # What the effort drives: (M + m) a + D v = u (the label 'hand_alone' removes u_r through it).
+            "plant": {"M": [float(v) + obj.mass for v in np.diag(model.M)], "D": [float(v) for v in np.diag(model.D)],
+                      "K": [0.0, 0.0]},
         }
     )
     meta = TrialMeta(
@@ -399,7 +402,7 @@ class TrialSpec:
     task : one of :data:`~coassist.sim.tasks.TASK_KINDS`. user : operator index (0 = the
     author). object : "handle" | "board" | "heavy". controller : one of
     :data:`CONTROLLER_KINDS`. preset : one of :data:`PRESETS`. seed : int ≥ 0.
-    intent : "nominal" | "oracle" | a model path (loaded in the worker).
+    intent : one of :data:`~coassist.interfaces.NAMED_INTENTS` or a model path (loaded in the worker).
     population_seed : which population the user is drawn from.
     obstacle : a name of :data:`coassist.sim.tasks.OBSTACLES` ("small": the evaluation's box).
     """
@@ -472,7 +475,7 @@ def _from_payload(payload: tuple[dict, dict]) -> Trial:
 def _run_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
     """A worker process's batch. A model in the loop gets one torch thread: this process is
     one of one-per-core, and more threads would oversubscribe them."""
-    if any(spec.intent not in ("nominal", "oracle") for spec in specs):
+    if any(spec.intent not in NAMED_INTENTS for spec in specs):
         import torch
 
         torch.set_num_threads(1)
