@@ -241,7 +241,7 @@ def _check_model_out(out: Path, overwrite: bool, init: str) -> None:
 def train(
     data: list[Path] = typer.Argument(..., help="Dataset folders, real-recording folders (e.g. .../ur5-thesis/user-a) or single recordings."),
     out: Path = typer.Option(..., "--out", "-o", help="Model folder to write (weights, model.json, history.json, loss.png)."),
-    preset: str = typer.Option("default", help="Starting configuration: 'default' (LSTM 2×64 learning the residual over the validation-tuned ridge), 'lstm' (the same, skip trained too), 'linear' (the tuned ridge alone, closed form) or 'thesis' (exact §5.2.2)."),
+    preset: str = typer.Option("default", help="Starting configuration: 'default' (LSTM 2×64 learning the residual over the validation-tuned ridge), 'lstm' (the same, skip trained too), 'intent' (lstm learning the simulated operator's true intent: simulated data only), 'linear' (the tuned ridge alone, closed form) or 'thesis' (exact §5.2.2)."),
     init: str = typer.Option("scratch", help="scratch | resume:<model> | finetune:<model> | transfer:<model> (LSTM frozen)."),
     epochs: int = typer.Option(None, help="Override the preset's epochs."),
     lr: float = typer.Option(None, help="Override the initial learning rate."),

@@ -191,6 +191,8 @@ class Preset:
 #: learns only the residual over that linear predictor (``train.freeze_skip``).
 #: ``linear``: the same window with no LSTM — the validation-tuned ridge in the model
 #: format, fitted in closed form.
+#: ``intent``: ``lstm`` learning the simulated operator's true intent instead of the tool's
+#: future (issue 18; needs simulated trials).
 #: Held-out real recordings, 3 seeds/folds (docs/intent-baselines.md, issue 11): ``default``
 #: beats the tuned ridge at every horizon in every run, but by 2–5 %, not the 15 % asked:
 #: e_RMS at 0.4 s (median) user-a 1.658 mm against 1.744, user-b 5.277 against 5.379 mm.
@@ -214,6 +216,9 @@ PRESETS: Registry[Preset] = Registry("intent-model preset", {
     "default": replace(_LSTM, name="default", train=replace(_LSTM.train, freeze_skip=True)),
     "linear": Preset("linear", _LSTM.window, lstm_layers=0, hidden=1, fc=(), skip=True,
                      train=TrainConfig(epochs=1, train_stride=4)),  # fmt: skip
+    # ``intent``: ``lstm`` trained on the simulated operator's true intent (window.label "intent"),
+    # the intent source that wins the in-loop ablation (docs/intent-labels.md); simulated data only.
+    "intent": replace(_LSTM, name="intent", window=replace(_LSTM.window, label="intent")),
 })
 
 
