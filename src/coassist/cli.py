@@ -214,6 +214,8 @@ def _intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DAT
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             trials = load_trials(paths, on_bad=skipped if skip_bad else None)
+    except ImportError as exc:  # a bag without the bags extra
+        _fail(f"{option}: {exc}", 2)
     except (FileNotFoundError, ValueError) as exc:
         one_trial = isinstance(exc, (TrialFileError, RecordingError)) and not isinstance(exc, ManifestError)
         hint = " (--skip-bad-trials leaves unreadable trials out)" if one_trial and not skip_bad else ""
