@@ -198,6 +198,14 @@ def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, 
 SKIP_BAD_HELP = "Leave out trials that cannot be read, saying which and why (default: stop at the first)."
 
 
+def _need_bags(option: str) -> None:
+    """Refuse ``option`` before any work when rosbags (the bags extra) is missing."""
+    try:
+        import rosbags  # noqa: F401
+    except ImportError:
+        _fail(f"{option} needs the bags extra (rosbags): pip install 'coassist[bags]'", 2)
+
+
 def _intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA"):
     import warnings
 
@@ -496,6 +504,7 @@ def drive(
     yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before a real arm moves (scripts)."),
     view: bool = typer.Option(False, help="Open MuJoCo's passive viewer (needs a display) and run in real time."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
+    mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap: ROS 2 messages (poses, wrench, prediction, alpha, faults) that Foxglove opens and train reads."),
 ) -> None:
     """Run the assistive controller, IMP or MG on a UR5: in MuJoCo, or on a real arm."""
     from coassist.data import write_trial
@@ -517,6 +526,8 @@ def drive(
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
     out = _file_out(out, "--out", "trial.parquet")
+    if mcap:
+        _need_bags("--mcap")
     if intent not in ("nominal", "oracle"):
         _set_torch_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
 
@@ -535,6 +546,12 @@ def drive(
     _wrote(f"{path}: {trial.n_samples} ticks, ended: {extra['ended']}")
     if extra.get("stop_message"):
         console.print(f"[yellow]{escape(extra['stop_message'])}[/]", highlight=False)
+    if mcap:
+        from coassist.data.trial_mcap import write_trial_mcap
+        from coassist.robot.ros2_world import UR_JOINT_NAMES
+
+        alpha = CONTROL_PRESETS.lookup(preset).game.alpha if controller == "assistive" else None
+        _wrote(str(write_trial_mcap(trial, path.with_suffix(".mcap"), alpha=alpha, joint_names=UR_JOINT_NAMES)))
     if plot:
         from coassist.sim.monitor import plot_trial
 
@@ -579,6 +596,7 @@ def play(
     open_browser: bool = typer.Option(True, "--open/--no-open", help="Open the page in your web browser."),
     drive: str = typer.Option(None, help="Watch a coassist drive run instead (read-only): mujoco | ur; uses the first --controller and --tasks."),
     robot_host: str = typer.Option(None, help="The real arm's IP address (--drive ur)."),
+    mcap: bool = typer.Option(False, help="Also write each trial as <trial>.mcap beside its Parquet file (ROS 2 messages Foxglove opens)."),
 ) -> None:
     """Be the operator: a live page where your mouse, touch screen or gamepad is the hand on the robot."""
     try:
@@ -591,6 +609,8 @@ def play(
         _fail(f"coassist play needs the web extra ({exc.name} missing): pip install 'coassist[web]'")
     if not 0 <= port <= 65535:
         raise typer.BadParameter(f"must be 0..65535, got {port}", param_hint="--port")
+    if mcap:
+        _need_bags("--mcap")
     if token is None and not is_loopback(host):
         token = new_token()
     try:
@@ -603,7 +623,7 @@ def play(
                             controllers=tuple(_name_list(controller, "--controller", tuple(CONTROLLERS), "controller")),
                             intent="nominal" if drive and intent == "oracle" else intent, preset=preset,
                             tasks=tuple(_name_list(tasks, "--tasks", TASK_KINDS, "task")), seed=seed,
-                            motion_time=motion_time)  # fmt: skip
+                            motion_time=motion_time, mcap=mcap)  # fmt: skip
         if drive is None:
             session = PlaySession(config)
         else:
