@@ -33,7 +33,7 @@ frame). ``wrench_seq`` counts wrench messages with a newer header stamp.
 
 Link rules, those of :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`: a wrench or a
 joint state older than ``stale_after`` [s] (wall clock since the last new message),
-nothing at all within ``connect_timeout`` of start, makes :meth:`Ros2World.read` raise
+nothing at all within ``connect_timeout`` of start (or no subscriber to the commands), makes :meth:`Ros2World.read` raise
 :class:`~coassist.robot.ur_rtde_world.RobotLinkError`; the loop stops the run and
 :meth:`Ros2World.stop` sends zero velocities. Messages with a non-finite value or
 missing joints are dropped (counted in ``rejected_messages``): they never reach the
@@ -43,8 +43,9 @@ of the period (``pace``), like RTDE's ``waitPeriod``, and reports overruns in
 ``last_overrun`` (the loop flags DEADLINE_MISS).
 
 Lockstep (``lockstep=True``) is for simulated robots that step once per command:
-:meth:`read` then waits (at most ``stale_after``) for a joint state and a wrench stamped
-later than the last ones it used, so a run is as deterministic as the simulator.
+:meth:`read` after an :meth:`apply` then waits (at most ``stale_after``) for a joint state
+and a wrench stamped later than the last ones it used, so a run is as deterministic as
+the simulator.
 
 ROS isolation: ``domain_id`` (default ``$ROS_DOMAIN_ID``, else 0) and, where the
 environment sets ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, loopback only. The node
@@ -248,6 +249,7 @@ class Ros2World:
         self._wrench_seq = 0
         self._used_js = -1
         self._used_wr = -1
+        self._await_fresh = False  # lockstep: a command went out, so the next read waits for its state
         self._t0_ns: int | None = None
         self._last_t = -math.inf
         self._period_start: float | None = None
@@ -347,6 +349,14 @@ class Ros2World:
                         "driver running, on the same ROS_DOMAIN_ID, with these topic names?"
                     )
                 self._cond.wait(left)
+        # A command sent before the controller's subscription is matched would be lost.
+        while self._cmd_pub.get_subscription_count() == 0:
+            if time.monotonic() > deadline:
+                raise RobotLinkError(
+                    f"nothing subscribes to {self.config.command_topic} within {self.config.connect_timeout:g} s: "
+                    "is the forward velocity controller loaded and active?"
+                )
+            time.sleep(0.005)
 
     # -- World -----------------------------------------------------------------------
 
@@ -356,7 +366,7 @@ class Ros2World:
             raise RobotLinkError("read() on a closed Ros2World; build a new one")
         c = self.config
         with self._cond:
-            if c.lockstep:
+            if c.lockstep and self._await_fresh:
                 deadline = time.monotonic() + c.stale_after
                 while not (self._js[0] > self._used_js and self._wr[0] >= self._js[0] and self._wr[0] > self._used_wr):
                     left = deadline - time.monotonic()
@@ -378,6 +388,7 @@ class Ros2World:
                     "is lost; the arm is stopped. Check the driver and the network, then rerun."
                 )
         self._used_js, self._used_wr = js_stamp, wr_stamp
+        self._await_fresh = False
         if self._period_start is None:
             self._period_start = time.perf_counter()
         if self._t0_ns is None:
@@ -414,6 +425,7 @@ class Ros2World:
                 if self.rejected_commands == 1 or self.rejected_commands % 1000 == 0:
                     log.warning("Ros2World: command %r is not %d finite values; sent zeros", command.qd, self.n_joints)
         self._publish_command(np.zeros(self.n_joints) if qd is None else qd)
+        self._await_fresh = True
         if self.config.pace:
             start = self._period_start if self._period_start is not None else time.perf_counter()
             end = start + self.dt
