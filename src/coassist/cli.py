@@ -507,7 +507,6 @@ def drive(
     mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap: ROS 2 messages (poses, wrench, prediction, alpha, faults) that Foxglove opens and train reads."),
 ) -> None:
     """Run the assistive controller, IMP or MG on a UR5: in MuJoCo, or on a real arm."""
-    from coassist.data import write_trial
     from coassist.robot.drive import DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.robot.drive import CONTROLLERS, WORLDS
@@ -541,6 +540,20 @@ def drive(
         trial = run_drive(config, host=host, view=view, confirm=confirm if world == "ur" else None)
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
         _fail(str(exc))
+    _write_run(trial, out, alpha=_run_alpha(preset, controller) if mcap else None, mcap=mcap, plot=plot)
+
+
+def _run_alpha(preset: str, controller: str) -> float | None:
+    """The game's α of a drive/ros2 run (the assistive controller's preset), None for IMP and MG."""
+    from coassist.sim import PRESETS as CONTROL_PRESETS
+
+    return CONTROL_PRESETS.lookup(preset).game.alpha if controller == "assistive" else None
+
+
+def _write_run(trial, out: Path, *, alpha: float | None, mcap: bool, plot: bool) -> None:
+    """Write a drive/ros2 run: the trial file, how it ended, and <out>.mcap / <out>.png on request."""
+    from coassist.data import write_trial
+
     path = write_trial(trial, out)
     extra = trial.meta.extra
     _wrote(f"{path}: {trial.n_samples} ticks, ended: {extra['ended']}")
@@ -550,12 +563,106 @@ def drive(
         from coassist.data.trial_mcap import write_trial_mcap
         from coassist.robot.ros2_world import UR_JOINT_NAMES
 
-        alpha = CONTROL_PRESETS.lookup(preset).game.alpha if controller == "assistive" else None
         _wrote(str(write_trial_mcap(trial, path.with_suffix(".mcap"), alpha=alpha, joint_names=UR_JOINT_NAMES)))
     if plot:
         from coassist.sim.monitor import plot_trial
 
-        _wrote(str(plot_trial(trial, path.with_suffix('.png'))))
+        _wrote(str(plot_trial(trial, path.with_suffix(".png"))))
+
+
+ROS2_OPTIONS = {
+    **DRIVE_OPTIONS,
+    **{f"Ros2Config.{name}": f"--{name.replace('_', '-')}" for name in (
+        "wrench_topic", "joint_state_topic", "command_topic", "base_frame", "joint_names", "domain_id", "stale_after",
+        "tcp_offset", "node_name", "namespace", "connect_timeout")},
+    "Ros2Config.rate_hz": "--rate",
+}  # fmt: skip
+
+
+def _floats(text: str | None, option: str) -> tuple[float, ...] | None:
+    if text is None:
+        return None
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        _fail(f"{option}: expected comma-separated numbers, got {text!r}", 2)
+
+
+@app.command()
+def ros2(
+    out: Path = typer.Option(Path("runs/ros2/trial.parquet"), help="Trial file to write (as coassist drive writes)."),
+    controller: str = typer.Option("assistive", help="assistive (the cooperative game) | imp (impedance control) | mg (manual guidance)."),
+    task: str = typer.Option("linear", help="Nominal path, laid out from where the tool is: linear, curved, sinusoidal, z."),
+    obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
+    intent: str = typer.Option("nominal", help="nominal | path of an intent model (coassist train)."),
+    predictor_backend: str = typer.Option("process", help="Where a model runs: process (own worker process), onnx or torch (thread)."),
+    preset: str = typer.Option("thesis-application-dm", help="Control preset (the main job's by default)."),
+    rate: int = typer.Option(125, help="Control rate in Hz: 125 (UR CB3) or 500 (e-Series)."),
+    full_pose: bool = typer.Option(False, help="Control all 6 DOFs instead of the x-y plane."),
+    time_limit: float = typer.Option(None, help="Longest run in seconds (default: 2 x the plan + 10 s)."),
+    tool_speed: float = typer.Option(0.25, help="Safety: largest tool speed in m/s."),
+    contact_force: float = typer.Option(120.0, help="Safety: hand force in N that makes a protective stop."),
+    wrench_topic: str = typer.Option("/force_torque_sensor_broadcaster/wrench", help="geometry_msgs/WrenchStamped in: the F/T reading (sensor frame)."),
+    joint_state_topic: str = typer.Option("/joint_states", help="sensor_msgs/JointState in."),
+    command_topic: str = typer.Option("/forward_velocity_controller/commands", help="std_msgs/Float64MultiArray out: joint velocities."),
+    joint_names: str = typer.Option(None, help="Joint order of the commands, comma-separated (default: the UR's, shoulder_pan_joint … wrist_3_joint)."),
+    base_frame: str = typer.Option("base", help="frame_id of the published poses."),
+    wrench_in_base: bool = typer.Option(False, help="The wrench topic is in the base frame (default: the sensor/flange frame)."),
+    tcp_offset: str = typer.Option(None, help="TCP in the flange frame: x,y,z,rx,ry,rz [m, rad] (default 0)."),
+    node_name: str = typer.Option("coassist", help="The node's name (monitor topics go to /<node>/…)."),
+    namespace: str = typer.Option("", help="The node's namespace."),
+    domain_id: int = typer.Option(None, help="ROS_DOMAIN_ID (default: the environment's)."),
+    stale_after: float = typer.Option(0.1, help="A wrench or joint state older than this (s) stops the arm."),
+    connect_timeout: float = typer.Option(5.0, help="Wait this long (s) for the first messages."),
+    lockstep: bool = typer.Option(False, help="A simulated robot that steps once per command: wait for its answer every tick."),
+    yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before the robot moves (scripts)."),
+    mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap (ROS 2 messages Foxglove opens)."),
+    plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
+) -> None:
+    """Run the assistive controller, IMP or MG as a ROS 2 node: ros2_control's forward velocity controller."""
+    try:
+        import rclpy  # noqa: F401  (the ros2 extra, checked before anything starts)
+    except ImportError as exc:
+        _fail(f"coassist ros2 needs the ros2 extra ({exc.name} missing): pip install 'coassist[ros2]'", 2)
+    from coassist.robot.drive import DriveConfig
+    from coassist.robot.drive import drive as run_drive
+    from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World
+    from coassist.runtime.safety import SafetyLimits
+
+    try:
+        limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
+        config = DriveConfig(world="ur", controller=controller, task=task, object=obj, preset=preset, intent=intent,
+                             rate_hz=rate, full_pose=full_pose, time_limit=time_limit, limits=limits,
+                             predictor_backend=predictor_backend)  # fmt: skip
+        rcfg = Ros2Config(node_name=node_name, namespace=namespace, wrench_topic=wrench_topic,
+                          joint_state_topic=joint_state_topic, command_topic=command_topic, base_frame=base_frame,
+                          joint_names=UR_JOINT_NAMES if joint_names is None else tuple(n.strip() for n in joint_names.split(",")),
+                          wrench_in_base=wrench_in_base,
+                          rate_hz=float(rate), stale_after=stale_after, connect_timeout=connect_timeout,
+                          lockstep=lockstep, pace=not lockstep, domain_id=domain_id,
+                          tcp_offset=_floats(tcp_offset, "--tcp-offset") or (0.0,) * 6)  # fmt: skip
+    except ValueError as exc:
+        _fail(_typed(str(exc), ROS2_OPTIONS), 2)
+    out = _file_out(out, "--out", "trial.parquet")
+    if mcap:
+        _need_bags("--mcap")
+
+    def confirm(text: str) -> bool:
+        console.print("[bold]Limits in force[/] (coassist's safety layer, on top of the robot's own safety system):", markup=True)
+        console.print(text, markup=False)
+        console.print("Keep the emergency stop within reach.", markup=False)
+        return yes or typer.confirm("Move the robot?", default=False)
+
+    alpha = _run_alpha(preset, controller)
+    try:
+        world = Ros2World(rcfg, alpha=alpha)
+        try:
+            trial = run_drive(config, world=world, confirm=confirm, on_tick=world.publish_monitor)
+        finally:
+            world.close()
+    except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
+        _fail(str(exc))
+    _write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot)
 
 
 @app.command()

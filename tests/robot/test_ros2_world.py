@@ -190,3 +190,107 @@ def test_config_names_the_field():
         Ros2Config(stale_after=0)
     with pytest.raises(ValueError, match=r"Ros2Config.domain_id"):
         Ros2Config(domain_id=300)
+
+
+class Listener:
+    """An operator's monitor: subscribes to the node's monitor topics."""
+
+    TOPICS = {"/coassist/tool_pose": "geometry_msgs.msg.PoseStamped", "/coassist/prediction": "nav_msgs.msg.Path",
+              "/coassist/alpha": "std_msgs.msg.Float64", "/coassist/hand_force": "geometry_msgs.msg.WrenchStamped",
+              "/diagnostics": "diagnostic_msgs.msg.DiagnosticArray"}  # fmt: skip
+
+    def __init__(self) -> None:
+        import importlib
+
+        self.got: dict[str, list] = {t: [] for t in self.TOPICS}
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx, domain_id=DOMAIN)
+        self.node = rclpy.create_node("monitor", context=self.ctx)
+        for topic, kind in self.TOPICS.items():
+            module, name = kind.rsplit(".", 1)
+            cls = getattr(importlib.import_module(module), name)
+            self.node.create_subscription(cls, topic, lambda m, t=topic: self.got[t].append(m), 1000)
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+        self.running = True
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        while self.running:
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def close(self) -> None:
+        time.sleep(0.3)  # what is in flight arrives
+        self.running = False
+        self.thread.join(timeout=2)
+        self.executor.shutdown(timeout_sec=1)
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.ctx)
+
+
+def test_the_monitor_topics_carry_the_run():
+    from coassist.sim.intent_source import OracleIntent
+
+    listener = Listener()
+    try:
+        config = DriveConfig(world="ur", controller="assistive", task="linear", time_limit=0.6, seed=1)
+        sim = mujoco_world(config)
+        robot = SimRobot(sim)
+        mass, com = sim.tool_mass_and_com()
+        cfg = Ros2Config(domain_id=DOMAIN, lockstep=True, pace=False, stale_after=0.5, tcp_offset=tuple(_kinematics_for(sim).tcp_offset),
+                         payload=(mass, tuple(com)), connect_timeout=10.0)  # fmt: skip
+        world = Ros2World(cfg, alpha=0.8)
+        deadline = time.monotonic() + 5.0  # the monitor's subscriptions are matched before the run
+        while world._pubs["tool_pose"].get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        try:
+            trial = drive(config, world=world, on_tick=world.publish_monitor, intent_source=OracleIntent(60))
+        finally:
+            world.close()
+            robot.close()
+    finally:
+        listener.close()
+    n = trial.n_samples  # 75 ticks at 125 Hz, the monitor at 25 Hz: every 5th tick, from tick 0
+    poses = listener.got["/coassist/tool_pose"]
+    assert len(poses) == len(range(0, n, 5)) == 15
+    np.testing.assert_array_equal([[p.pose.position.x, p.pose.position.y] for p in poses], trial.pose[::5])
+    assert all(p.header.frame_id == "base" for p in poses)
+    paths = listener.got["/coassist/prediction"]
+    assert len(paths) == 15 and all(len(p.poses) == 50 for p in paths)  # 0.4 s at 8 ms
+    np.testing.assert_array_equal([[q.pose.position.x, q.pose.position.y] for q in paths[3].poses], trial.prediction[15, :50, :2])
+    assert [m.data for m in listener.got["/coassist/alpha"]] == [0.8] * 15
+    forces = listener.got["/coassist/hand_force"]
+    np.testing.assert_array_equal([[f.wrench.force.x, f.wrench.force.y] for f in forces], trial.wrench[::5])
+    diags = listener.got["/diagnostics"]
+    flagged = int(np.count_nonzero(trial.fault))
+    assert len(diags) == 15 + int(np.count_nonzero(trial.fault[np.arange(n) % 5 != 0]))
+    assert all(d.status[0].name == "coassist: fault flags" for d in diags) and flagged == sum(d.status[0].level != b"\x00" for d in diags)
+
+
+def test_coassist_ros2_drives_the_simulated_robot_and_writes_the_run(tmp_path):
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+    from coassist.data import read_trial
+
+    config = DriveConfig(world="ur", controller="mg", task="linear", time_limit=0.4, seed=0)
+    sim = mujoco_world(config)
+    robot = SimRobot(sim)
+    offset = ",".join(repr(float(v)) for v in _kinematics_for(sim).tcp_offset)
+    try:
+        result = CliRunner().invoke(app, [
+            "ros2", "--controller", "mg", "--time-limit", "0.4", "--domain-id", str(DOMAIN), "--lockstep", "--yes",
+            "--tcp-offset", offset, "--stale-after", "0.5", "--out", str(tmp_path / "run.parquet"), "--mcap", "--no-plot"])  # fmt: skip
+    finally:
+        time.sleep(0.05)
+        robot.close()
+    assert result.exit_code == 0, result.output
+    trial = read_trial(tmp_path / "run.parquet")
+    assert trial.n_samples == 50 and trial.meta.extra["ended"] == "time_limit"
+    np.testing.assert_array_equal(np.asarray(robot.commands[:50]), trial.joint_velocity)
+    from coassist.data.bags import load_bag_trial
+
+    assert load_bag_trial(tmp_path / "run.mcap").pose.tobytes() == trial.pose.tobytes()
+    bad = CliRunner().invoke(app, ["ros2", "--wrench-topic", "no spaces", "--yes"])
+    assert bad.exit_code == 2 and "--wrench-topic must be a ROS topic name" in bad.output

@@ -253,7 +253,7 @@ class Ros2World:
         self._t0_ns: int | None = None
         self._last_t = -math.inf
         self._period_start: float | None = None
-        self._last_monitor = -math.inf
+        self._monitor_every = max(1, round(config.rate_hz / config.monitor_rate_hz))
         self._closed = False
         self._stopped_sent = False
 
@@ -479,14 +479,15 @@ class Ros2World:
     # -- monitor ---------------------------------------------------------------------
 
     def publish_monitor(self, k: int, state: RobotState, out: Any) -> None:
-        """The loop's ``on_tick``: tool pose, prediction, α, hand force and fault flags at ``monitor_rate_hz``.
+        """The loop's ``on_tick``: tool pose, prediction, α, hand force and fault flags at ``monitor_rate_hz``
+        (every ``round(rate_hz / monitor_rate_hz)``-th tick, from tick 0).
 
         ``out`` is the tick's :class:`~coassist.runtime.tick.TickOutput`. Faults go out on
         every tick that has one (and at the monitor rate otherwise), so none is missed.
         """
         if self._closed:
             return
-        due = state.t - self._last_monitor >= 1.0 / self.config.monitor_rate_hz - 1e-9
+        due = k % self._monitor_every == 0
         flags = int(out.fault)
         if not due and not flags:
             return
@@ -495,7 +496,6 @@ class Ros2World:
             self._pubs["diagnostics"].publish(self._diagnostics(stamp, flags))
         if not due:
             return
-        self._last_monitor = state.t
         frame = self.config.base_frame
         pose = np.asarray(state.tool_pose, dtype=float)
         if "tool_pose" in self._pubs:
