@@ -206,7 +206,28 @@ def _need_bags(option: str) -> None:
         _fail(f"{option} needs the bags extra (rosbags): pip install 'coassist[bags]'", 2)
 
 
-def _intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA"):
+BAG_TOPICS_HELP = ("Topics of bags, where they differ from the thesis' (/current_pose, /current_velocity, /human_wrench, "
+                   "/robot_ref_pos): e.g. wrench=/ft/wrench,pose=/tcp_pose.")
+
+
+def _bag_topics(text: str | None) -> dict[str, str] | None:
+    """``--bag-topics field=/topic,…`` checked before any work."""
+    if text is None:
+        return None
+    from coassist.data.bags import resolve_topics
+
+    pairs = [item.partition("=") for item in text.split(",") if item.strip()]
+    if not pairs or any(not sep for _, sep, _ in pairs):
+        _fail(f"--bag-topics: expected field=/topic pairs separated by commas, got {text!r}", 2)
+    topics = {k.strip(): v.strip() for k, _, v in pairs}
+    try:
+        resolve_topics(topics)
+    except ValueError as exc:
+        _fail(f"--bag-topics: {exc}", 2)
+    return topics
+
+
+def _intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA", bag_topics: str | None = None):
     import warnings
 
     from coassist.intent import load_trials
@@ -221,7 +242,7 @@ def _intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DAT
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            trials = load_trials(paths, on_bad=skipped if skip_bad else None)
+            trials = load_trials(paths, on_bad=skipped if skip_bad else None, bag_topics=_bag_topics(bag_topics))
     except ImportError as exc:  # a bag without the bags extra
         _fail(f"{option}: {exc}", 2)
     except (FileNotFoundError, ValueError) as exc:
@@ -265,6 +286,7 @@ def train(
     fc: str = typer.Option(None, help="Widths of the FC layers after the LSTM, comma-separated (--init scratch)."),
     overwrite: bool = typer.Option(False, help="Replace the model already in --out (only once the new one is complete)."),
     skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
+    bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
 ) -> None:
     """Train the intent predictor (thesis §5.2.2; Algorithm 4.1 with resume:, 4.2 with transfer:).
 
@@ -286,7 +308,7 @@ def train(
     p = _intent_preset(preset, network=sizes, epochs=epochs, lr=lr, batch_size=batch_size, seed=seed, threads=threads,
                        test_fraction=test_fraction, init=init, device=device, optimizer=optimizer)  # fmt: skip
     _check_device(device)
-    trials = _intent_trials(data, skip_bad_trials)
+    trials = _intent_trials(data, skip_bad_trials, bag_topics=bag_topics)
     _set_torch_threads(p.train.threads)
     try:
         with OutputLock(out):
@@ -313,6 +335,7 @@ def evaluate(
     out: Path = typer.Option(None, help="JSON file for the results, or a folder for evaluation.json (default: <model>/evaluation.json)."),
     include_training: bool = typer.Option(False, help="Also score trials the model was trained on."),
     skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
+    bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
 ) -> None:
     """e_RMS and e_MAX per horizon [mm] for the model and the baselines (nominal, constant velocity, tuned constant
     acceleration and ridge), and the best baseline per horizon with the model's gain over it."""
@@ -329,7 +352,7 @@ def evaluate(
         m = load_model(model)
     except (ModelFileError, OSError) as exc:
         _fail(f"--model {model}: {exc}", 2)
-    trials = _intent_trials(data, skip_bad_trials, "--data")
+    trials = _intent_trials(data, skip_bad_trials, "--data", bag_topics=bag_topics)
     try:
         result = evaluate_model(m, trials, held_out_only=not include_training)
     except (ModelMismatchError, ValueError) as exc:
@@ -671,13 +694,14 @@ def show(
     out: Path = typer.Option(None, help="PNG to write, or a folder for it (default: <name>.png in the current folder)."),
     index: int = typer.Option(0, help="Which trial of a dataset or folder of recordings (0 = the first)."),
     skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP + " --index then counts the readable ones."),
+    bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
 ) -> None:
     """The monitor view of a trial (thesis Fig. 5.7–5.8) and its force over time."""
     from coassist.sim.monitor import plot_trial
 
     name = f"{path.resolve().name}{'' if index == 0 else f'_{index}'}.png"
     out = _file_out(Path(name) if out is None else out, "--out", name)
-    trials = _intent_trials([path], skip_bad_trials, option="PATH")
+    trials = _intent_trials([path], skip_bad_trials, option="PATH", bag_topics=bag_topics)
     if not 0 <= index < len(trials):
         _fail(f"--index {index}: {path} holds {len(trials)} trial(s), so it must be in 0 … {len(trials) - 1}", 2)
     try:

@@ -254,3 +254,20 @@ def test_load_trials_reads_a_bag_and_a_folder_of_bags(tmp_path):
     assert [lt.trial.n_samples for lt in got] == [6, 7] and len(bad) == 1 and bad[0][0].endswith("run_3")
     one = load_trials([folder / "run_2"])
     assert [(lt.id, lt.dataset) for lt in one] == [("user-s/run_2", "user-s")]
+
+
+def test_show_reads_bags_with_renamed_topics(tmp_path):
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+
+    folder = tmp_path / "user-s"
+    synthetic_bag(folder / "run_1", n=30)
+    res = CliRunner().invoke(app, ["show", str(folder), "--out", str(tmp_path / "s.png"),
+                                   "--bag-topics", "pose=/robot_ref_pos,reference=/current_pose"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "s.png").stat().st_size > 1000
+    res = CliRunner().invoke(app, ["show", str(folder), "--bag-topics", "wrench=/ft"])
+    assert res.exit_code == 2 and "PATH: " in res.output and "no topic /ft" in res.output
+    res = CliRunner().invoke(app, ["show", str(folder), "--bag-topics", "wrench"])
+    assert res.exit_code == 2 and "--bag-topics: expected field=/topic pairs" in res.output

@@ -46,7 +46,7 @@ import pandas as pd
 from coassist.data.rosbag_csv import TOPIC_FILES, RecordingError, _check_dofs, _natural_key, assemble_recording
 from coassist.data.trial import Trial
 
-__all__ = ["BAG_SUFFIXES", "BAG_TOPICS", "BAG_TYPES", "bag_paths", "is_bag", "load_bag_trial"]
+__all__ = ["BAG_SUFFIXES", "BAG_TOPICS", "BAG_TYPES", "bag_paths", "is_bag", "load_bag_trial", "resolve_topics"]
 
 #: Trial field -> default topic (the thesis' topic names, as in the CSV export).
 BAG_TOPICS: Mapping[str, str] = {
@@ -88,7 +88,8 @@ def bag_paths(folder: str | os.PathLike[str]) -> list[Path]:
     return sorted((p for p in folder.iterdir() if is_bag(p)), key=_natural_key)
 
 
-def _topics(topics: Mapping[str, str] | None) -> dict[str, str]:
+def resolve_topics(topics: Mapping[str, str] | None) -> dict[str, str]:
+    """:data:`BAG_TOPICS` with ``topics`` (field -> topic name) over it; ValueError naming a bad entry."""
     out = dict(BAG_TOPICS)
     if topics is None:
         return out
@@ -201,7 +202,7 @@ def load_bag_trial(
     """
     path = Path(path)
     dofs = _check_dofs(dofs)
-    names = _topics(topics)
+    names = resolve_topics(topics)
     try:
         from rosbags.highlevel import AnyReader, AnyReaderError
         from rosbags.typesys import Stores, get_typestore

@@ -16,7 +16,7 @@ recorded in the model's sidecar.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import NamedTuple
 
@@ -34,12 +34,12 @@ class LabeledTrial(NamedTuple):
     trial: Trial
 
 
-def _load_one(path: Path, on_bad: Callable[[str, str], None] | None) -> list[LabeledTrial]:
+def _load_one(path: Path, on_bad: Callable[[str, str], None] | None, bag_topics: Mapping[str, str] | None) -> list[LabeledTrial]:
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file or folder")
     if is_bag(path):
         dataset = path.absolute().parent.name
-        return [LabeledTrial(f"{dataset}/{path.stem if path.is_file() else path.name}", dataset, load_bag_trial(path))]
+        return [LabeledTrial(f"{dataset}/{path.stem if path.is_file() else path.name}", dataset, load_bag_trial(path, topics=bag_topics))]
     if path.is_file():  # one trial file (coassist collect / drive / play write them)
         from coassist.data import read_trial
 
@@ -60,7 +60,7 @@ def _load_one(path: Path, on_bad: Callable[[str, str], None] | None) -> list[Lab
         out = []
         for bag in bags:
             try:
-                t = load_bag_trial(bag, user=path.name)
+                t = load_bag_trial(bag, user=path.name, topics=bag_topics)
             except RecordingError as exc:
                 if on_bad is None:
                     raise
@@ -91,15 +91,17 @@ def load_trials(
     paths: Iterable[str | os.PathLike[str]],
     *,
     on_bad: Callable[[str, str], None] | None = None,
+    bag_topics: Mapping[str, str] | None = None,
 ) -> list[LabeledTrial]:
     """Load every trial under ``paths``, in the order given; ids must not repeat.
 
     ``on_bad``: None stops at the first unreadable trial (the error names it); a callable
     leaves such trials out and is told ``on_bad(where, reason)`` for each.
+    ``bag_topics``: field -> topic name for bags (:func:`coassist.data.bags.load_bag_trial`).
     """
     out: list[LabeledTrial] = []
     for p in paths:
-        out.extend(_load_one(Path(p), on_bad))
+        out.extend(_load_one(Path(p), on_bad, bag_topics))
     if not out:
         raise ValueError("no trials given")
     seen: set[str] = set()
