@@ -257,8 +257,12 @@ def test_the_monitor_topics_carry_the_run():
     np.testing.assert_array_equal([[p.pose.position.x, p.pose.position.y] for p in poses], trial.pose[::5])
     assert all(p.header.frame_id == "base" for p in poses)
     paths = listener.got["/coassist/prediction"]
-    assert len(paths) == 15 and all(len(p.poses) == 50 for p in paths)  # 0.4 s at 8 ms
-    np.testing.assert_array_equal([[q.pose.position.x, q.pose.position.y] for q in paths[3].poses], trial.prediction[15, :50, :2])
+    # 0.4 s at 8 ms = 50 rows, every 5th drawn (rows 4, 9, …, 49), stamped at t + (i + 1)·dt
+    rows = list(range(4, 50, 5))
+    assert len(paths) == 15 and all(len(p.poses) == len(rows) for p in paths)
+    np.testing.assert_array_equal([[q.pose.position.x, q.pose.position.y] for q in paths[3].poses], trial.prediction[15, rows, :2])
+    t0 = paths[3].header.stamp.sec * 10**9 + paths[3].header.stamp.nanosec
+    assert [q.header.stamp.sec * 10**9 + q.header.stamp.nanosec - t0 for q in paths[3].poses] == [(i + 1) * 8_000_000 for i in rows]
     assert [m.data for m in listener.got["/coassist/alpha"]] == [0.8] * 15
     forces = listener.got["/coassist/hand_force"]
     np.testing.assert_array_equal([[f.wrench.force.x, f.wrench.force.y] for f in forces], trial.wrench[::5])
