@@ -32,8 +32,10 @@ from coassist.runtime.operators import ScriptedForce  # noqa: E402
 from coassist.runtime.world import Command  # noqa: E402
 from coassist.sim.tasks import make_task  # noqa: E402
 
-# A domain of its own (0 … 232), per xdist worker, so parallel runs never see each other.
-DOMAIN = 140 + (os.getpid() % 90)
+# A domain of its own (140 … 229 of 0 … 232): the xdist worker's index sets the parity, so the
+# two workers of a run never share one; the pid keeps other runs on this machine apart.
+_WORKER = os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")
+DOMAIN = 140 + ((os.getpid() % 45) * 2 + (int(_WORKER) % 2 if _WORKER.isdigit() else 0)) % 90
 #: [s] input age that stops the arm in the silence tests (generous: the CI machine is shared).
 STALE = 0.25
 PUSH = ScriptedForce.steps([(0.0, (8.0, 0.0, 0.0, 0.0, 0.0, 0.0)), (0.6, (0.0, -6.0, 0.0, 0.0, 0.0, 0.0))])
