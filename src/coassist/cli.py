@@ -199,7 +199,36 @@ def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, 
 SKIP_BAD_HELP = "Leave out trials that cannot be read, saying which and why (default: stop at the first)."
 
 
-def _intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA"):
+def _need_bags(option: str) -> None:
+    """Refuse ``option`` before any work when rosbags (the bags extra) is missing."""
+    try:
+        import rosbags  # noqa: F401
+    except ImportError:
+        _fail(f"{option} needs the bags extra (rosbags): pip install 'coassist[bags]'", 2)
+
+
+BAG_TOPICS_HELP = ("Topics of bags, where they differ from the thesis' (/current_pose, /current_velocity, /human_wrench, "
+                   "/robot_ref_pos): e.g. wrench=/ft/wrench,pose=/tcp_pose.")
+
+
+def _bag_topics(text: str | None) -> dict[str, str] | None:
+    """``--bag-topics field=/topic,…`` checked before any work."""
+    if text is None:
+        return None
+    from coassist.data.bags import resolve_topics
+
+    pairs = [item.partition("=") for item in text.split(",") if item.strip()]
+    if not pairs or any(not sep for _, sep, _ in pairs):
+        _fail(f"--bag-topics: expected field=/topic pairs separated by commas, got {text!r}", 2)
+    topics = {k.strip(): v.strip() for k, _, v in pairs}
+    try:
+        resolve_topics(topics)
+    except ValueError as exc:
+        _fail(f"--bag-topics: {exc}", 2)
+    return topics
+
+
+def _intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA", bag_topics: str | None = None):
     import warnings
 
     from coassist.intent import load_trials
@@ -214,7 +243,9 @@ def _intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DAT
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            trials = load_trials(paths, on_bad=skipped if skip_bad else None)
+            trials = load_trials(paths, on_bad=skipped if skip_bad else None, bag_topics=_bag_topics(bag_topics))
+    except ImportError as exc:  # a bag without the bags extra
+        _fail(f"{option}: {exc}", 2)
     except (FileNotFoundError, ValueError) as exc:
         one_trial = isinstance(exc, (TrialFileError, RecordingError)) and not isinstance(exc, ManifestError)
         hint = " (--skip-bad-trials leaves unreadable trials out)" if one_trial and not skip_bad else ""
@@ -257,6 +288,7 @@ def train(
     label: str = typer.Option(None, help="What the model predicts (--init scratch; default: the preset's): tool (the measured future pose, the thesis), hand_alone (the robot's own effort removed: needs trials that log u_r) or intent (the simulated operator's true intent)."),
     overwrite: bool = typer.Option(False, help="Replace the model already in --out (only once the new one is complete)."),
     skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
+    bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
 ) -> None:
     """Train the intent predictor (thesis §5.2.2; Algorithm 4.1 with resume:, 4.2 with transfer:).
 
@@ -287,7 +319,7 @@ def train(
 
         p = replace(p, window=replace(p.window, label=label))
     _check_device(device)
-    trials = _intent_trials(data, skip_bad_trials)
+    trials = _intent_trials(data, skip_bad_trials, bag_topics=bag_topics)
     _set_torch_threads(p.train.threads)
     try:
         with OutputLock(out):
@@ -314,6 +346,7 @@ def evaluate(
     out: Path = typer.Option(None, help="JSON file for the results, or a folder for evaluation.json (default: <model>/evaluation.json)."),
     include_training: bool = typer.Option(False, help="Also score trials the model was trained on."),
     skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
+    bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
 ) -> None:
     """e_RMS and e_MAX per horizon [mm] for the model and the baselines (nominal, constant velocity, tuned constant
     acceleration and ridge), and the best baseline per horizon with the model's gain over it."""
@@ -330,7 +363,7 @@ def evaluate(
         m = load_model(model)
     except (ModelFileError, OSError) as exc:
         _fail(f"--model {model}: {exc}", 2)
-    trials = _intent_trials(data, skip_bad_trials, "--data")
+    trials = _intent_trials(data, skip_bad_trials, "--data", bag_topics=bag_topics)
     try:
         result = evaluate_model(m, trials, held_out_only=not include_training)
     except (ModelMismatchError, ValueError) as exc:
@@ -505,9 +538,9 @@ def drive(
     yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before a real arm moves (scripts)."),
     view: bool = typer.Option(False, help="Open MuJoCo's passive viewer (needs a display) and run in real time."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
+    mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap: ROS 2 messages (poses, wrench, prediction, alpha, faults) that Foxglove opens and train reads."),
 ) -> None:
     """Run the assistive controller, IMP or MG on a UR5: in MuJoCo, or on a real arm."""
-    from coassist.data import write_trial
     from coassist.robot.drive import DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.robot.drive import CONTROLLERS, WORLDS
@@ -526,6 +559,8 @@ def drive(
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
     out = _file_out(out, "--out", "trial.parquet")
+    if mcap:
+        _need_bags("--mcap")
     if intent not in NAMED_INTENTS:
         _set_torch_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
 
@@ -539,15 +574,129 @@ def drive(
         trial = run_drive(config, host=host, view=view, confirm=confirm if world == "ur" else None)
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
         _fail(str(exc))
+    _write_run(trial, out, alpha=_run_alpha(preset, controller) if mcap else None, mcap=mcap, plot=plot)
+
+
+def _run_alpha(preset: str, controller: str) -> float | None:
+    """The game's α of a drive/ros2 run (the assistive controller's preset), None for IMP and MG."""
+    from coassist.sim import PRESETS as CONTROL_PRESETS
+
+    return CONTROL_PRESETS.lookup(preset).game.alpha if controller == "assistive" else None
+
+
+def _write_run(trial, out: Path, *, alpha: float | None, mcap: bool, plot: bool) -> None:
+    """Write a drive/ros2 run: the trial file, how it ended, and <out>.mcap / <out>.png on request."""
+    from coassist.data import write_trial
+
     path = write_trial(trial, out)
     extra = trial.meta.extra
     _wrote(f"{path}: {trial.n_samples} ticks, ended: {extra['ended']}")
     if extra.get("stop_message"):
         console.print(f"[yellow]{escape(extra['stop_message'])}[/]", highlight=False)
+    if mcap:
+        from coassist.data.trial_mcap import write_trial_mcap
+        from coassist.robot.ros2_world import UR_JOINT_NAMES
+
+        _wrote(str(write_trial_mcap(trial, path.with_suffix(".mcap"), alpha=alpha, joint_names=UR_JOINT_NAMES)))
     if plot:
         from coassist.sim.monitor import plot_trial
 
-        _wrote(str(plot_trial(trial, path.with_suffix('.png'))))
+        _wrote(str(plot_trial(trial, path.with_suffix(".png"))))
+
+
+ROS2_OPTIONS = {
+    **DRIVE_OPTIONS,
+    **{f"Ros2Config.{name}": f"--{name.replace('_', '-')}" for name in (
+        "wrench_topic", "joint_state_topic", "command_topic", "base_frame", "joint_names", "domain_id", "stale_after",
+        "tcp_offset", "node_name", "namespace", "connect_timeout")},
+    "Ros2Config.rate_hz": "--rate",
+}  # fmt: skip
+
+
+def _floats(text: str | None, option: str) -> tuple[float, ...] | None:
+    if text is None:
+        return None
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        _fail(f"{option}: expected comma-separated numbers, got {text!r}", 2)
+
+
+@app.command()
+def ros2(
+    out: Path = typer.Option(Path("runs/ros2/trial.parquet"), help="Trial file to write (as coassist drive writes)."),
+    controller: str = typer.Option("assistive", help="assistive (the cooperative game) | imp (impedance control) | mg (manual guidance)."),
+    task: str = typer.Option("linear", help="Nominal path, laid out from where the tool is: linear, curved, sinusoidal, z."),
+    obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
+    intent: str = typer.Option("nominal", help="nominal | path of an intent model (coassist train)."),
+    predictor_backend: str = typer.Option("process", help="Where a model runs: process (own worker process), onnx or torch (thread)."),
+    preset: str = typer.Option("thesis-application-dm", help="Control preset (the main job's by default)."),
+    rate: int = typer.Option(125, help="Control rate in Hz: 125 (UR CB3) or 500 (e-Series)."),
+    full_pose: bool = typer.Option(False, help="Control all 6 DOFs instead of the x-y plane."),
+    time_limit: float = typer.Option(None, help="Longest run in seconds (default: 2 x the plan + 10 s)."),
+    tool_speed: float = typer.Option(0.25, help="Safety: largest tool speed in m/s."),
+    contact_force: float = typer.Option(120.0, help="Safety: hand force in N that makes a protective stop."),
+    wrench_topic: str = typer.Option("/force_torque_sensor_broadcaster/wrench", help="geometry_msgs/WrenchStamped in: the F/T reading (sensor frame)."),
+    joint_state_topic: str = typer.Option("/joint_states", help="sensor_msgs/JointState in."),
+    command_topic: str = typer.Option("/forward_velocity_controller/commands", help="std_msgs/Float64MultiArray out: joint velocities."),
+    joint_names: str = typer.Option(None, help="Joint order of the commands, comma-separated (default: the UR's, shoulder_pan_joint … wrist_3_joint)."),
+    base_frame: str = typer.Option("base", help="frame_id of the published poses."),
+    wrench_in_base: bool = typer.Option(False, help="The wrench topic is in the base frame (default: the sensor/flange frame)."),
+    tcp_offset: str = typer.Option(None, help="TCP in the flange frame: x,y,z,rx,ry,rz [m, rad] (default 0)."),
+    node_name: str = typer.Option("coassist", help="The node's name (monitor topics go to /<node>/…)."),
+    namespace: str = typer.Option("", help="The node's namespace."),
+    domain_id: int = typer.Option(None, help="ROS_DOMAIN_ID (default: the environment's)."),
+    stale_after: float = typer.Option(0.1, help="A wrench or joint state older than this (s) stops the arm."),
+    connect_timeout: float = typer.Option(5.0, help="Wait this long (s) for the first messages."),
+    lockstep: bool = typer.Option(False, help="A simulated robot that steps once per command: wait for its answer every tick."),
+    yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before the robot moves (scripts)."),
+    mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap (ROS 2 messages Foxglove opens)."),
+    plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
+) -> None:
+    """Run the assistive controller, IMP or MG as a ROS 2 node: ros2_control's forward velocity controller."""
+    try:
+        import rclpy  # noqa: F401  (the ros2 extra, checked before anything starts)
+    except ImportError as exc:
+        _fail(f"coassist ros2 needs the ros2 extra ({exc.name} missing): pip install 'coassist[ros2]'", 2)
+    from coassist.robot.drive import DriveConfig
+    from coassist.robot.drive import drive as run_drive
+    from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World
+    from coassist.runtime.safety import SafetyLimits
+
+    try:
+        limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
+        config = DriveConfig(world="ur", controller=controller, task=task, object=obj, preset=preset, intent=intent,
+                             rate_hz=rate, full_pose=full_pose, time_limit=time_limit, limits=limits,
+                             predictor_backend=predictor_backend)  # fmt: skip
+        rcfg = Ros2Config(node_name=node_name, namespace=namespace, wrench_topic=wrench_topic,
+                          joint_state_topic=joint_state_topic, command_topic=command_topic, base_frame=base_frame,
+                          joint_names=UR_JOINT_NAMES if joint_names is None else tuple(n.strip() for n in joint_names.split(",")),
+                          wrench_in_base=wrench_in_base,
+                          rate_hz=float(rate), stale_after=stale_after, connect_timeout=connect_timeout,
+                          lockstep=lockstep, pace=not lockstep, domain_id=domain_id,
+                          tcp_offset=_floats(tcp_offset, "--tcp-offset") or (0.0,) * 6)  # fmt: skip
+    except ValueError as exc:
+        _fail(_typed(str(exc), ROS2_OPTIONS), 2)
+    out = _file_out(out, "--out", "trial.parquet")
+    if mcap:
+        _need_bags("--mcap")
+
+    def confirm(text: str) -> bool:
+        console.print("[bold]Limits in force[/] (coassist's safety layer, on top of the robot's own safety system):", markup=True)
+        console.print(text, markup=False)
+        console.print("Keep the emergency stop within reach.", markup=False)
+        return yes or typer.confirm("Move the robot?", default=False)
+
+    alpha = _run_alpha(preset, controller)
+    try:
+        world = Ros2World(rcfg, alpha=alpha)
+        try:
+            trial = run_drive(config, world=world, confirm=confirm, on_tick=world.publish_monitor)
+        finally:
+            world.close()
+    except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
+        _fail(str(exc))
+    _write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot)
 
 
 @app.command()
@@ -556,13 +705,14 @@ def show(
     out: Path = typer.Option(None, help="PNG to write, or a folder for it (default: <name>.png in the current folder)."),
     index: int = typer.Option(0, help="Which trial of a dataset or folder of recordings (0 = the first)."),
     skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP + " --index then counts the readable ones."),
+    bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
 ) -> None:
     """The monitor view of a trial (thesis Fig. 5.7–5.8) and its force over time."""
     from coassist.sim.monitor import plot_trial
 
     name = f"{path.resolve().name}{'' if index == 0 else f'_{index}'}.png"
     out = _file_out(Path(name) if out is None else out, "--out", name)
-    trials = _intent_trials([path], skip_bad_trials, option="PATH")
+    trials = _intent_trials([path], skip_bad_trials, option="PATH", bag_topics=bag_topics)
     if not 0 <= index < len(trials):
         _fail(f"--index {index}: {path} holds {len(trials)} trial(s), so it must be in 0 … {len(trials) - 1}", 2)
     try:
@@ -588,6 +738,7 @@ def play(
     open_browser: bool = typer.Option(True, "--open/--no-open", help="Open the page in your web browser."),
     drive: str = typer.Option(None, help="Watch a coassist drive run instead (read-only): mujoco | ur; uses the first --controller and --tasks."),
     robot_host: str = typer.Option(None, help="The real arm's IP address (--drive ur)."),
+    mcap: bool = typer.Option(False, help="Also write each trial as <trial>.mcap beside its Parquet file (ROS 2 messages Foxglove opens)."),
 ) -> None:
     """Be the operator: a live page where your mouse, touch screen or gamepad is the hand on the robot."""
     try:
@@ -600,6 +751,8 @@ def play(
         _fail(f"coassist play needs the web extra ({exc.name} missing): pip install 'coassist[web]'")
     if not 0 <= port <= 65535:
         raise typer.BadParameter(f"must be 0..65535, got {port}", param_hint="--port")
+    if mcap:
+        _need_bags("--mcap")
     if token is None and not is_loopback(host):
         token = new_token()
     try:
@@ -612,7 +765,7 @@ def play(
                             controllers=tuple(_name_list(controller, "--controller", tuple(CONTROLLERS), "controller")),
                             intent="nominal" if drive and intent == "oracle" else intent, preset=preset,
                             tasks=tuple(_name_list(tasks, "--tasks", TASK_KINDS, "task")), seed=seed,
-                            motion_time=motion_time)  # fmt: skip
+                            motion_time=motion_time, mcap=mcap)  # fmt: skip
         if drive is None:
             session = PlaySession(config)
         else:

@@ -41,6 +41,7 @@ __all__ = [
     "SAFETY_FAULTS",
     "TrialContext",
     "ZERO_EFFORT_FAULTS",
+    "fault_names",
     "prediction_plausible",
 ]
 
@@ -80,6 +81,18 @@ class Fault(enum.IntFlag):
     STOPPED = 1 << 21  # the safety layer has stopped the robot (zero command until the run ends)
     ROBOT_PROTECTIVE_STOP = 1 << 22  # the robot controller reports a protective stop
     ROBOT_EMERGENCY_STOP = 1 << 23  # the robot controller reports an emergency stop
+
+
+#: (bit, name) of every single fault flag, built once: fault_names runs every tick.
+_FAULT_BITS = tuple((int(f), f.name) for f in Fault if f and f.name)
+
+
+def fault_names(value: int) -> list[str]:
+    """The names of the flags set in ``value``, lowest bit first (nothing to look up on a clean tick)."""
+    value = int(value)
+    if not value:
+        return []
+    return [name for bit, name in _FAULT_BITS if value & bit == bit]
 
 
 #: Faults after which the robot effort was forced to zero.

@@ -21,8 +21,10 @@ __all__ = [
     "continuous_rotation_vector",
     "manipulability",
     "orientation_error",
+    "quaternion_from_rotation_vector",
     "rotation_matrix",
     "rotation_vector",
+    "rotation_vector_from_quaternion",
     "unwrap_rotation_vectors",
 ]
 
@@ -359,3 +361,33 @@ def joint_velocity(
 # ----------------------------------------------------------------------------
 # The UR5 model
 # ----------------------------------------------------------------------------
+
+
+def quaternion_from_rotation_vector(rv: ArrayLike) -> np.ndarray:
+    """Unit quaternion ``[x, y, z, w]`` (ROS order) of a rotation vector, ``w >= 0`` for ``|rv| <= π``.
+
+    ``q = [sin(θ/2) r/θ, cos(θ/2)]`` with ``θ = |r|``; ``sin(θ/2)/θ`` from its Taylor
+    series ``1/2 − θ²/48`` for small θ. Inverse: :func:`rotation_vector_from_quaternion`.
+    """
+    x, y, z = _as_vector(rv, "rv", 3).tolist()
+    t2 = x * x + y * y + z * z
+    if t2 < 1e-8:
+        s, w = 0.5 - t2 / 48.0, 1.0 - t2 / 8.0
+    else:
+        t = math.sqrt(t2)
+        s, w = math.sin(0.5 * t) / t, math.cos(0.5 * t)
+    return np.array([s * x, s * y, s * z, w])
+
+
+def rotation_vector_from_quaternion(q: ArrayLike) -> np.ndarray:
+    """Rotation vector of a quaternion ``[x, y, z, w]`` (normalised here), angle in [0, π]."""
+    x, y, z, w = _as_vector(q, "q", 4).tolist()
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if n == 0.0:
+        raise ValueError("q must not be zero")
+    x, y, z, w = x / n, y / n, z / n, w / n
+    if w < 0.0:
+        x, y, z, w = -x, -y, -z, -w
+    vn = math.sqrt(x * x + y * y + z * z)
+    scale = 2.0 / w * (1.0 - vn * vn / (3.0 * w * w)) if vn < 1e-8 else 2.0 * math.atan2(vn, w) / vn
+    return np.array([x * scale, y * scale, z * scale])

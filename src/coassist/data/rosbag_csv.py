@@ -35,7 +35,7 @@ from __future__ import annotations
 import os
 import re
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from functools import reduce
 from pathlib import Path
 
@@ -51,6 +51,7 @@ __all__ = [
     "TOPIC_FILES",
     "RecordingError",
     "RecordingWarning",
+    "assemble_recording",
     "default_real_data",
     "load_ros_trial",
     "load_ros_user",
@@ -86,24 +87,24 @@ class RecordingWarning(UserWarning):
     """A recording that loads but holds implausible data; the message names the folder."""
 
 
-def _warn_implausible(folder: Path, time: np.ndarray, dt: float, wrench: np.ndarray) -> None:
+def _warn_implausible(where: str, wrench_source: str, time: np.ndarray, dt: float, wrench: np.ndarray) -> None:
     peak = np.abs(wrench).max(axis=0)
     for j in np.flatnonzero(peak > PLAUSIBLE_FORCE):
         k = int(np.argmax(np.abs(wrench[:, j])))
         warnings.warn(
-            f"{folder / TOPIC_FILES['wrench'][0]}: force {LINEAR_DOFS[j]} = {wrench[k, j]:.4g} N at t = {time[k]:.3f} s "
+            f"{wrench_source}: force {LINEAR_DOFS[j]} = {wrench[k, j]:.4g} N at t = {time[k]:.3f} s "
             f"exceeds the plausible {PLAUSIBLE_FORCE:g} N (sensor fault?)",
             RecordingWarning,
-            stacklevel=3,
+            stacklevel=4,
         )
     gaps = time_gaps(time, dt)
     if gaps.size:
         k = int(gaps[np.argmax(np.diff(time)[gaps])])
         warnings.warn(
-            f"{folder}: {gaps.size} time gap(s) longer than {GAP_FACTOR:g} periods; the longest, "
+            f"{where}: {gaps.size} time gap(s) longer than {GAP_FACTOR:g} periods; the longest, "
             f"{time[k + 1] - time[k]:.4g} s, at t = {time[k]:.3f} s (training windows do not span gaps)",
             RecordingWarning,
-            stacklevel=3,
+            stacklevel=4,
         )
 
 
@@ -195,11 +196,40 @@ def load_ros_trial(
     frames: dict[str, pd.DataFrame] = {}
     for field_name, (file_name, pattern) in TOPIC_FILES.items():
         frames[field_name] = _read_topic(folder / file_name, [pattern.format(ax=ax) for ax in dofs])
+    sources = {name: str(folder / file_name) for name, (file_name, _) in TOPIC_FILES.items()}
+    lengths = {TOPIC_FILES[name][0]: len(df) for name, df in frames.items()}
+    return assemble_recording(frames, where=str(folder), sources=sources, lengths=lengths, user=user, dofs=dofs,
+                              recording=folder.name)  # fmt: skip
 
-    seqs = reduce(np.intersect1d, (df[_SEQ].to_numpy() for df in frames.values()))
+
+def assemble_recording(
+    frames: Mapping[str, pd.DataFrame],
+    *,
+    where: str,
+    sources: Mapping[str, str],
+    lengths: Mapping[str, int],
+    user: str,
+    dofs: tuple[str, ...],
+    recording: str,
+    key: str = _SEQ,
+) -> Trial:
+    """Join the four topics of one recording on ``key`` and build its :class:`Trial`.
+
+    Shared by the CSV export (:func:`load_ros_trial`) and the bag reader
+    (:mod:`coassist.data.bags`), so both align and clean the data the same way.
+    ``frames[field]`` (field as in :data:`TOPIC_FILES`) holds the integer column
+    ``key`` (``header.seq``, or the header stamp in ns where a ROS 2 header has no
+    seq), ``header.stamp.secs``/``nsecs``, the value columns of :data:`TOPIC_FILES`
+    and optionally ``Time`` (receive time [s]); rows unique in ``key``, sorted by it.
+    ``sources[field]`` names the file or topic in errors and warnings, ``where`` the
+    recording; ``lengths`` maps a source name to its row count before the join.
+    With ``key`` other than ``header.seq``, ``seq_gaps``/``seq_first``/``seq_last``
+    in ``meta.extra`` are None.
+    """
+    seqs = reduce(np.intersect1d, (df[key].to_numpy() for df in frames.values()))
     if seqs.size == 0:
-        raise RecordingError(f"{folder}: the topic files share no {_SEQ!r} value")
-    aligned = {name: df[df[_SEQ].isin(seqs)].reset_index(drop=True) for name, df in frames.items()}
+        raise RecordingError(f"{where}: the topics share no {key!r} value")
+    aligned = {name: df[df[key].isin(seqs)].reset_index(drop=True) for name, df in frames.items()}
 
     # Integer nanoseconds: a float of 1.67e9 s keeps only ~0.2 µs, so subtract first.
     stamps = {
@@ -211,9 +241,7 @@ def load_ros_trial(
     steps = np.diff(time)
     if np.any(steps <= 0.0):
         k = int(np.argmax(steps <= 0.0))
-        raise RecordingError(
-            f"{folder / TOPIC_FILES['pose'][0]}: header stamps do not increase at seq {int(seqs[k + 1])}"
-        )
+        raise RecordingError(f"{sources['pose']}: header stamps do not increase at {'seq' if key == _SEQ else key} {int(seqs[k + 1])}")
     mismatch = max(int(np.max(np.abs(s - ns))) for s in stamps.values()) * 1e-9
     receive = aligned["pose"][_RECEIVE].to_numpy(float) if _RECEIVE in aligned["pose"] else None
 
@@ -225,23 +253,23 @@ def load_ros_trial(
         n_denormals += int(tiny.sum())
         arrays[field_name] = np.where(tiny, 0.0, values)
 
-    lengths = {TOPIC_FILES[name][0]: len(df) for name, df in frames.items()}
+    by_seq = key == _SEQ
     extra = {
-        "recording": folder.name,
+        "recording": recording,
         "dofs": list(dofs),
         "rows_dropped": max(lengths.values()) - int(seqs.size),
         "rows_dropped_per_file": {f: n - int(seqs.size) for f, n in lengths.items()},
         "max_gap_s": float(steps.max()) if steps.size else 0.0,
         "max_receive_gap_s": float(np.max(np.diff(receive))) if receive is not None and receive.size > 1 else None,
-        "seq_gaps": int(np.sum(np.diff(seqs) - 1)),
+        "seq_gaps": int(np.sum(np.diff(seqs) - 1)) if by_seq else None,
         "stamp_mismatch_max_s": mismatch,
         "n_denormals_zeroed": n_denormals,
-        "seq_first": int(seqs[0]),
-        "seq_last": int(seqs[-1]),
+        "seq_first": int(seqs[0]) if by_seq else None,
+        "seq_last": int(seqs[-1]) if by_seq else None,
     }
     # A single-row recording has no period; fall back to the UR5 CB3 tick.
     dt = float(np.median(steps)) if steps.size else 0.008
-    _warn_implausible(folder, time, dt, arrays["wrench"])
+    _warn_implausible(where, sources["wrench"], time, dt, arrays["wrench"])
     meta = TrialMeta(
         user=user,
         task="real",

@@ -5,7 +5,9 @@ A path may be
 - a dataset folder written by :func:`coassist.data.write_dataset` (has ``manifest.json``);
 - a real user's folder of recordings (``trial_*`` subfolders of rosbag CSVs, e.g.
   ``.../ur5-thesis/user-a``);
-- one recording folder (``current_pose.csv`` and friends).
+- one recording folder (``current_pose.csv`` and friends);
+- one ROS 1 or ROS 2 bag (``.bag``, ``.mcap``, ``.db3`` or a ROS 2 bag folder), or a
+  folder of bags (:mod:`coassist.data.bags`, the same topics as the CSV export).
 
 Each trial gets a stable id, ``<dataset id>/<trial name>``, used to split by trial and
 recorded in the model's sidecar.
@@ -14,11 +16,12 @@ recorded in the model's sidecar.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import NamedTuple
 
 from coassist.data import RecordingError, Trial, load_ros_trial, read_dataset
+from coassist.data.bags import bag_paths, is_bag, load_bag_trial
 from coassist.data.rosbag_csv import recording_folders
 from coassist.data.store import MANIFEST_NAME
 
@@ -31,9 +34,12 @@ class LabeledTrial(NamedTuple):
     trial: Trial
 
 
-def _load_one(path: Path, on_bad: Callable[[str, str], None] | None) -> list[LabeledTrial]:
+def _load_one(path: Path, on_bad: Callable[[str, str], None] | None, bag_topics: Mapping[str, str] | None) -> list[LabeledTrial]:
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file or folder")
+    if is_bag(path):
+        dataset = path.absolute().parent.name
+        return [LabeledTrial(f"{dataset}/{path.stem if path.is_file() else path.name}", dataset, load_bag_trial(path, topics=bag_topics))]
     if path.is_file():  # one trial file (coassist collect / drive / play write them)
         from coassist.data import read_trial
 
@@ -48,6 +54,20 @@ def _load_one(path: Path, on_bad: Callable[[str, str], None] | None) -> list[Lab
         dataset = f"{path.absolute().parent.parent.name}/{path.absolute().parent.name}"
         t = load_ros_trial(path)
         return [LabeledTrial(f"{dataset}/{path.name}", dataset, t)]
+    bags = bag_paths(path)
+    if bags:
+        dataset = f"{path.absolute().parent.name}/{path.name}"
+        out = []
+        for bag in bags:
+            try:
+                t = load_bag_trial(bag, user=path.name, topics=bag_topics)
+            except RecordingError as exc:
+                if on_bad is None:
+                    raise
+                on_bad(str(bag), str(exc))
+                continue
+            out.append(LabeledTrial(f"{dataset}/{t.meta.extra['recording']}", dataset, t))
+        return out
     if path.is_dir() and any(p.is_dir() and p.name.startswith("trial_") for p in path.iterdir()):
         dataset = f"{path.absolute().parent.name}/{path.name}"
         out = []
@@ -62,8 +82,8 @@ def _load_one(path: Path, on_bad: Callable[[str, str], None] | None) -> list[Lab
             out.append(LabeledTrial(f"{dataset}/{t.meta.extra['recording']}", dataset, t))
         return out
     raise FileNotFoundError(
-        f"{path}: not a dataset folder ({MANIFEST_NAME}), a recording folder (current_pose.csv) "
-        "or a folder of trial_* recordings"
+        f"{path}: not a dataset folder ({MANIFEST_NAME}), a recording folder (current_pose.csv), "
+        "a folder of trial_* recordings, a bag or a folder of bags"
     )
 
 
@@ -71,15 +91,17 @@ def load_trials(
     paths: Iterable[str | os.PathLike[str]],
     *,
     on_bad: Callable[[str, str], None] | None = None,
+    bag_topics: Mapping[str, str] | None = None,
 ) -> list[LabeledTrial]:
     """Load every trial under ``paths``, in the order given; ids must not repeat.
 
     ``on_bad``: None stops at the first unreadable trial (the error names it); a callable
     leaves such trials out and is told ``on_bad(where, reason)`` for each.
+    ``bag_topics``: field -> topic name for bags (:func:`coassist.data.bags.load_bag_trial`).
     """
     out: list[LabeledTrial] = []
     for p in paths:
-        out.extend(_load_one(Path(p), on_bad))
+        out.extend(_load_one(Path(p), on_bad, bag_topics))
     if not out:
         raise ValueError("no trials given")
     seen: set[str] = set()

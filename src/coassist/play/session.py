@@ -42,7 +42,7 @@ import numpy as np
 from coassist._checks import check_int, check_positive_scalar
 from coassist.data import Trial, TrialMeta, append_to_dataset, write_dataset
 from coassist.data.store import MANIFEST_NAME, manifest_files, read_dataset
-from coassist.interfaces import FEATURES, Fault, TrialContext
+from coassist.interfaces import FEATURES, TrialContext, fault_names
 from coassist.metrics import f_rms, precision_sigma
 from coassist.play.hand import BrowserHand, SpringDamper
 from coassist.play.world import PlayWorld
@@ -87,6 +87,8 @@ class PlayConfig:
     grace : [s] a trial waits this long for a hand that left before it is aborted.
     arm : the virtual arm between pointer and tool.
     paced : run the loop in real time (False only for tests of the bookkeeping).
+    mcap : also write each trial as ``<trial>.mcap`` beside its Parquet file (ROS 2
+        messages Foxglove opens, :mod:`coassist.data.trial_mcap`; the bags extra).
     """
 
     user: str
@@ -103,6 +105,7 @@ class PlayConfig:
     grace: float = 3.0
     arm: SpringDamper = field(default_factory=SpringDamper)
     paced: bool = True
+    mcap: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.user, str) or not _USER.match(self.user):
@@ -170,18 +173,6 @@ def points_bounds(points: np.ndarray, margin: float = 0.12) -> tuple[float, floa
     pts = np.asarray(points, dtype=float)
     lo, hi = pts.min(axis=0) - margin, pts.max(axis=0) + margin
     return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
-
-
-#: (bit, name) of every single fault flag, built once: fault_names runs every tick.
-_FAULT_BITS = tuple((int(f), f.name) for f in Fault if f and f.name)
-
-
-def fault_names(value: int) -> list[str]:
-    """The names of the flags set in ``value`` (nothing to look up on a clean tick)."""
-    value = int(value)
-    if not value:
-        return []
-    return [name for bit, name in _FAULT_BITS if value & bit == bit]
 
 
 class PlaySession:
@@ -409,6 +400,11 @@ class PlaySession:
         else:
             write_dataset([trial], folder, self.config.dataset_id,
                           f"played in a browser by {self.config.user} (coassist play)")  # fmt: skip
+        if self.config.mcap:
+            from coassist.data.trial_mcap import write_trial_mcap
+
+            alpha = self.preset.game.alpha if trial.meta.controller == "cooperative" else None
+            write_trial_mcap(trial, (folder / manifest_files(folder)[-1]).with_suffix(".mcap"), alpha=alpha)
         result = _score(trial, manifest_files(folder)[-1], len(self.results))
         self.results.append(result)
         return result

@@ -1,0 +1,228 @@
+"""Write a trial as an MCAP file of standard ROS 2 messages (Foxglove, ``ros2 bag``, coassist).
+
+One MCAP file per trial, ROS 2 ``cdr`` messages with their ``ros2msg`` schemas embedded
+(written with rosbags), so Foxglove Studio and ``ros2 bag play`` open it without the
+message packages. Every message of tick k carries the header stamp
+``start_ns + round(t_k · 1e9)`` and is logged at that time; ``frame_id`` (default
+``"base"``, the UR driver's base frame) is the frame of every pose.
+
+=================================  =====================================  ====================================
+topic                              type                                   content
+=================================  =====================================  ====================================
+``/current_pose``                  geometry_msgs/PoseStamped              measured tool pose
+``/current_velocity``              geometry_msgs/TwistStamped             measured tool twist
+``/human_wrench``                  geometry_msgs/WrenchStamped            hand force (and torque) used
+``/robot_ref_pos``                 geometry_msgs/PoseStamped              the nominal reference
+``/prediction``                    nav_msgs/Path                          intent prediction, pose i at t_k + i·dt
+``/alpha``                         std_msgs/Float64                       the game's α (when given)
+``/faults``                        diagnostic_msgs/DiagnosticArray        the tick's fault flags
+``/joint_states``                  sensor_msgs/JointState                 measured joint positions
+``/forward_velocity_controller/    std_msgs/Float64MultiArray             commanded joint velocities
+commands``
+=================================  =====================================  ====================================
+
+The first four are the topics of the thesis' recordings, so the file reads back as a
+training trial (:func:`coassist.data.bags.load_bag_trial`). A trial on fewer than 3 or 6
+DOFs fills the pose's missing axes from ``meta.extra["start_pose"]`` when there is one
+(the drive's start pose), else 0 and the identity orientation. Ticks whose prediction is
+NaN (none in use) publish no path. Fault levels: OK with no flag, ERROR when the safety
+layer stopped the robot (STOPPED, CONTACT_FORCE_LIMIT or a robot stop), WARN otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from coassist._io import atomic_write
+from coassist.data.trial import Trial
+from coassist.interfaces import Fault, fault_names
+from coassist.spatial import quaternion_from_rotation_vector
+
+__all__ = ["FAULT_STATUS_NAME", "MCAP_TOPICS", "fault_array", "fault_level", "float64_multi_array", "write_trial_mcap"]
+
+#: Topic -> message type of what :func:`write_trial_mcap` writes.
+MCAP_TOPICS: dict[str, str] = {
+    "/current_pose": "geometry_msgs/msg/PoseStamped",
+    "/current_velocity": "geometry_msgs/msg/TwistStamped",
+    "/human_wrench": "geometry_msgs/msg/WrenchStamped",
+    "/robot_ref_pos": "geometry_msgs/msg/PoseStamped",
+    "/prediction": "nav_msgs/msg/Path",
+    "/alpha": "std_msgs/msg/Float64",
+    "/faults": "diagnostic_msgs/msg/DiagnosticArray",
+    "/joint_states": "sensor_msgs/msg/JointState",
+    "/forward_velocity_controller/commands": "std_msgs/msg/Float64MultiArray",
+}
+#: ``DiagnosticStatus.name`` of the fault flags.
+FAULT_STATUS_NAME = "coassist: fault flags"
+_STOPS = Fault.STOPPED | Fault.CONTACT_FORCE_LIMIT | Fault.ROBOT_PROTECTIVE_STOP | Fault.ROBOT_EMERGENCY_STOP
+_INSTALL_HINT = "writing MCAP needs rosbags: pip install 'coassist[bags]'"
+
+
+def fault_level(flags: int) -> int:
+    """``DiagnosticStatus`` level of a tick's flags: 0 OK, 1 WARN, 2 ERROR (module docstring)."""
+    f = Fault(int(flags))
+    if f & _STOPS:
+        return 2
+    return 1 if f else 0
+
+
+def _full(rows: np.ndarray, fill: np.ndarray) -> np.ndarray:
+    """(T, 6) poses from (T, d) rows: the missing axes from ``fill`` (6,)."""
+    out = np.tile(fill, (rows.shape[0], 1))
+    out[:, : rows.shape[1]] = rows
+    return out
+
+
+class _Messages:
+    """Builds the messages from a rosbags typestore (``ts.types[...]``)."""
+
+    def __init__(self, ts: Any, frame_id: str) -> None:
+        self.ts, self.frame_id = ts, frame_id
+        t = ts.types
+        self.Time, self.Header = t["builtin_interfaces/msg/Time"], t["std_msgs/msg/Header"]
+        self.Point, self.Quat, self.Pose = t["geometry_msgs/msg/Point"], t["geometry_msgs/msg/Quaternion"], t["geometry_msgs/msg/Pose"]
+        self.V3 = t["geometry_msgs/msg/Vector3"]
+
+    def header(self, ns: int) -> Any:
+        return self.Header(stamp=self.Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=self.frame_id)
+
+    def pose(self, p6: np.ndarray) -> Any:
+        q = quaternion_from_rotation_vector(p6[3:6])
+        return self.Pose(position=self.Point(*map(float, p6[:3])), orientation=self.Quat(*map(float, q)))
+
+    def pose_stamped(self, ns: int, p6: np.ndarray) -> Any:
+        return self.ts.types["geometry_msgs/msg/PoseStamped"](header=self.header(ns), pose=self.pose(p6))
+
+    def v3(self, v: np.ndarray) -> Any:
+        return self.V3(*map(float, v))
+
+
+def write_trial_mcap(
+    trial: Trial,
+    path: str | os.PathLike[str],
+    *,
+    alpha: float | Sequence[float] | np.ndarray | None = None,
+    joint_names: Sequence[str] | None = None,
+    frame_id: str = "base",
+    start_ns: int = 0,
+) -> Path:
+    """Write ``trial`` to ``path`` (``.mcap``) atomically: the whole file or none.
+
+    Parameters
+    ----------
+    trial : the trial (any source).
+    path : the file to write; parent folders are created.
+    alpha : the game's α, one number for the run or one per tick (n,); None: no ``/alpha``.
+    joint_names : names for ``/joint_states`` (default ``joint_1 …``); used when the trial has joints.
+    frame_id : frame of the poses and wrenches.
+    start_ns : header stamp of tick 0 [ns since the epoch] (0: the trial's own clock).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    try:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError as exc:
+        raise ImportError(f"{_INSTALL_HINT} ({exc})") from exc
+    path = Path(path)
+    if path.suffix != ".mcap":
+        raise ValueError(f"{path}: an MCAP file must end in .mcap")
+    if not isinstance(frame_id, str):
+        raise ValueError(f"frame_id must be a string, got {frame_id!r}")
+    if isinstance(start_ns, bool) or not isinstance(start_ns, (int, np.integer)) or start_ns < 0:
+        raise ValueError(f"start_ns must be an int >= 0, got {start_ns!r}")
+    n = trial.n_samples
+    alphas = None
+    if alpha is not None:
+        alphas = np.broadcast_to(np.asarray(alpha, dtype=float), (n,)) if np.ndim(alpha) == 0 else np.asarray(alpha, dtype=float)
+        if alphas.shape != (n,):
+            raise ValueError(f"alpha must be one number or {n} (one per tick), got shape {alphas.shape}")
+    joints = trial.joints
+    if joints is not None:
+        names = list(joint_names) if joint_names is not None else [f"joint_{i + 1}" for i in range(joints.shape[1])]
+        if len(names) != joints.shape[1] or not all(isinstance(s, str) for s in names):
+            raise ValueError(f"joint_names must be {joints.shape[1]} strings, got {joint_names!r}")
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    m = _Messages(ts, frame_id)
+    T = ts.types
+    start = np.zeros(6)
+    sp = trial.meta.extra.get("start_pose")
+    if sp is not None and len(sp) == 6:
+        start = np.asarray(sp, dtype=float)
+    pose6, ref6 = _full(trial.pose, start), _full(trial.reference, start)
+    vel6 = _full(trial.velocity, np.zeros(6))
+    wr6 = _full(trial.wrench, np.zeros(6))
+    stamps = [int(start_ns) + round(float(t) * 1e9) for t in trial.time]
+    dt_ns = round(trial.meta.dt * 1e9)
+
+    with tempfile.TemporaryDirectory(prefix="coassist-mcap-") as tmp:
+        bag = Path(tmp) / "bag"
+        with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+            conn = {topic: w.add_connection(topic, msgtype, typestore=ts) for topic, msgtype in MCAP_TOPICS.items()
+                    if (topic != "/alpha" or alphas is not None)
+                    and (topic not in ("/joint_states", "/forward_velocity_controller/commands") or joints is not None)
+                    and (topic != "/prediction" or trial.prediction is not None)}  # fmt: skip
+
+            def put(topic: str, ns: int, msg: Any) -> None:
+                w.write(conn[topic], ns, ts.serialize_cdr(msg, MCAP_TOPICS[topic]))
+
+            for k in range(n):
+                ns = stamps[k]
+                put("/current_pose", ns, m.pose_stamped(ns, pose6[k]))
+                put("/current_velocity", ns, T["geometry_msgs/msg/TwistStamped"](
+                    header=m.header(ns), twist=T["geometry_msgs/msg/Twist"](linear=m.v3(vel6[k, :3]), angular=m.v3(vel6[k, 3:]))))
+                put("/human_wrench", ns, T["geometry_msgs/msg/WrenchStamped"](
+                    header=m.header(ns), wrench=T["geometry_msgs/msg/Wrench"](force=m.v3(wr6[k, :3]), torque=m.v3(wr6[k, 3:]))))
+                put("/robot_ref_pos", ns, m.pose_stamped(ns, ref6[k]))
+                if trial.prediction is not None and np.all(np.isfinite(trial.prediction[k])):
+                    rows = _full(trial.prediction[k], pose6[k])
+                    path_msg = T["nav_msgs/msg/Path"](header=m.header(ns), poses=[
+                        m.pose_stamped(ns + (i + 1) * dt_ns, rows[i]) for i in range(rows.shape[0])])  # fmt: skip
+                    put("/prediction", ns, path_msg)
+                if alphas is not None and math.isfinite(alphas[k]):
+                    put("/alpha", ns, T["std_msgs/msg/Float64"](data=float(alphas[k])))
+                put("/faults", ns, fault_array(ts, m.header(ns), 0 if trial.fault is None else int(trial.fault[k])))
+                if joints is not None:
+                    put("/joint_states", ns, T["sensor_msgs/msg/JointState"](
+                        header=m.header(ns), name=names, position=np.asarray(joints[k], dtype=np.float64),
+                        velocity=np.zeros(0), effort=np.zeros(0)))  # fmt: skip
+                    qd = trial.joint_velocity[k] if trial.joint_velocity is not None else np.zeros(joints.shape[1])
+                    put("/forward_velocity_controller/commands", ns, float64_multi_array(ts, qd))
+        inner = bag / "bag.mcap"
+
+        def copy(fh: Any) -> None:
+            with open(inner, "rb") as src:
+                shutil.copyfileobj(src, fh)
+
+        return atomic_write(path, copy)
+
+
+def fault_array(ts: Any, header: Any, flags: int) -> Any:
+    """``diagnostic_msgs/DiagnosticArray`` of one tick's flags: one status, a KeyValue per flag set."""
+    t = ts.types
+    names = fault_names(flags)
+    status = t["diagnostic_msgs/msg/DiagnosticStatus"](
+        level=fault_level(flags), name=FAULT_STATUS_NAME, message=", ".join(names) or "ok", hardware_id="coassist",
+        values=[t["diagnostic_msgs/msg/KeyValue"](key="flags", value=str(int(flags)))]
+        + [t["diagnostic_msgs/msg/KeyValue"](key=name, value="1") for name in names])  # fmt: skip
+    return t["diagnostic_msgs/msg/DiagnosticArray"](header=header, status=[status])
+
+
+def float64_multi_array(ts: Any, values: np.ndarray) -> Any:
+    """``std_msgs/Float64MultiArray`` with a one-dimensional layout (what ros2_control's forward controllers take)."""
+    t = ts.types
+    data = np.asarray(values, dtype=np.float64)
+    layout = t["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
+    return t["std_msgs/msg/Float64MultiArray"](layout=layout, data=data)
