@@ -466,6 +466,7 @@ def collect(
     seed: int = typer.Option(0, help="Seed of the first trial; trial i uses seed + i."),
     preset: str = typer.Option("thesis-evaluation-dm", help="Control preset: thesis-evaluation-dm (the main job's), thesis-application-dm, or either without -dm (SI units: the robot barely helps)."),
     intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle | path of an intent model."),
+    obstacle: str = typer.Option("small", help="The obstacle the operators go around: small (the evaluation's box) or large (the application's 12 cm box, no path shown)."),
     dataset_id: str = typer.Option(None, help="Dataset id (default: the folder's name)."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
     ray_address: str = typer.Option(None, help="Run on a Ray cluster at this address (needs coassist[cluster])."),
@@ -479,8 +480,10 @@ def collect(
     from coassist._io import OutputBusyError
     from coassist.sim import CONTROLLER_KINDS, OBJECTS, PRESETS, TASK_KINDS
     from coassist.sim.collect import collect_dataset
+    from coassist.sim.tasks import OBSTACLES
 
     _choose(controller, CONTROLLER_KINDS, "--controller", "controller")
+    _choose(obstacle, OBSTACLES, "--obstacle", "obstacle")
     _lookup(PRESETS, preset, "--preset")
     for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
         if value is not None and value < minimum:
@@ -495,7 +498,7 @@ def collect(
         folder = collect_dataset(
             out, dataset_id=dataset_id, workers=workers, progress=True, ray_address=ray_address, overwrite=overwrite,
             controller=controller, users=user_list, tasks=task_list, objects=object_list, trials=trials, seed=seed,
-            preset=preset,
+            preset=preset, obstacle=obstacle,
             intent=intent, say=lambda line: console.print(line, highlight=False),
         )
     except (ValueError, FileExistsError, NotADirectoryError, RuntimeError, OutputBusyError) as exc:
@@ -509,7 +512,7 @@ def collect(
 #: drive's options as typed, for the DriveConfig / SafetyLimits fields they set.
 DRIVE_OPTIONS = {
     **{f"DriveConfig.{name}": f"--{name.replace('_', '-')}" for name in (
-        "world", "controller", "task", "preset", "intent", "user", "seed", "full_pose", "time_limit",
+        "world", "controller", "task", "preset", "intent", "user", "seed", "obstacle", "full_pose", "time_limit",
         "predictor_backend")},
     "DriveConfig.object": "--object", "DriveConfig.rate_hz": "--rate",
     "SafetyLimits.tool_speed": "--tool-speed", "SafetyLimits.contact_force": "--contact-force",
@@ -520,7 +523,7 @@ DRIVE_OPTIONS = {
 def drive(
     out: Path = typer.Option(Path("runs/drive/trial.parquet"), help="Trial file to write (the same format as collect's trials, plus joint columns)."),
     world: str = typer.Option("mujoco", help="mujoco (a UR5 in MuJoCo physics) | ur (a real UR5 through ur-rtde)."),
-    controller: str = typer.Option("assistive", help="assistive (the cooperative game) | imp (impedance control) | mg (manual guidance)."),
+    controller: str = typer.Option("assistive", help="assistive (the cooperative game) | assistive-arbitrated (α set every tick by the target law) | imp (impedance control) | mg (manual guidance)."),
     task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
     intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle (MuJoCo) | path of an intent model (coassist train)."),
@@ -529,6 +532,7 @@ def drive(
     preset: str = typer.Option("thesis-application-dm", help="Control preset (the main job's by default)."),
     user: int = typer.Option(0, help="Simulated operator (MuJoCo world)."),
     seed: int = typer.Option(0, help="Seed of the task, the simulated operator and the sensor noise."),
+    obstacle: str = typer.Option("small", help="The obstacle the simulated operator goes around: small or large (the application's)."),
     rate: int = typer.Option(125, help="Control rate in Hz: 125 (UR CB3) or 500 (e-Series)."),
     full_pose: bool = typer.Option(False, help="Control all 6 DOFs instead of the x-y plane."),
     time_limit: float = typer.Option(None, help="Longest run in seconds (default: 2 x the plan + 10 s)."),
@@ -553,7 +557,7 @@ def drive(
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
         config = DriveConfig(world=world, controller=controller, task=task, object=obj, preset=preset, intent=intent,
-                             user=user, seed=seed, rate_hz=rate, full_pose=full_pose, time_limit=time_limit,
+                             user=user, seed=seed, obstacle=obstacle, rate_hz=rate, full_pose=full_pose, time_limit=time_limit,
                              limits=limits, realtime_intent=realtime_intent,
                              predictor_backend=predictor_backend)  # fmt: skip
     except ValueError as exc:

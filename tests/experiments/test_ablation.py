@@ -36,3 +36,28 @@ def test_undefined_share_and_bad_input():
     assert share == pytest.approx((1.0 + 2.0) / (2.0 + 2.0))
     with pytest.raises(ValueError, match="one shape"):
         oracle_share([1.0, 2.0], [1.0], [1.0, 2.0])
+
+
+@pytest.mark.slow
+def test_mujoco_cells_meet_mgs_trials(tmp_path):
+    """Both worlds on a one-operator, one-trial plan (minutes: every cell is a MuJoCo run): every cell
+    is filled, paired with MG's trials, and its shares are finite where the oracle gains."""
+    pytest.importorskip("mujoco")
+    pytest.importorskip("torch")
+    from dataclasses import replace
+
+    from coassist.experiments import pipeline
+    from coassist.experiments.ablation import CONTROLLERS, LEARNED, SOURCES, run_ablation
+
+    cfg = replace(pipeline.PRESETS["tiny"], ablation_mujoco_trials=1, workers=1, threads=1)
+    ws = pipeline.Workspace(cfg, tmp_path, progress=False)
+    # One tool-labelled model stands in for every learned source: the cells' plumbing is what is tested.
+    folder, _ = ws.collect("D0", tasks=("curved",), trials=2, seed=1, preset=cfg.application_preset, obstacle="large")
+    model = ws.train("m", [folder], init="scratch", epochs=1)
+    result = run_ablation(ws, {s: str(model) for s in LEARNED})
+    assert not result.skipped
+    for obj in ("board", "heavy"):
+        assert len(result.pairs[("mujoco", obj)]) == len(cfg.application_users)
+        for controller in CONTROLLERS:
+            for source in SOURCES:
+                assert ("mujoco", obj, controller, source) in result.metrics
