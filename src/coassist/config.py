@@ -1,4 +1,4 @@
-"""Typed, validated parameter sets and the thesis' values (thesis §5.2, DESIGN.md §3).
+"""Typed, validated parameter sets and the thesis' values (thesis §5.2; docs/architecture.md, *Parameters from the thesis*).
 
 Parameters are frozen dataclasses checked on construction; each error names the
 field. Matrices that are diagonal in the thesis are given as their diagonals.

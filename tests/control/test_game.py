@@ -2,7 +2,7 @@
 
 The reference is built the thesis' way, from the augmented system of eq. 3.7
 (two copies of the state, output [y; y], stacked errors E_gt of eq. 3.18 with the
-DESIGN.md §2 indexing), with prediction matrices obtained by simulating impulse
+docs/architecture.md's indexing), with prediction matrices obtained by simulating impulse
 responses — no code shared with the library beyond the impedance model.
 """
 

@@ -9,7 +9,7 @@ Y_h and Y_r stack the human's and the robot's *reference outputs* y_ref,h, y_ref
 k+1…k+Np, each (Np·2n,) [m, m/s]. Effort weights are R_h, R_r (n, n) [1/N²] and
 R̃_p = blkdiag(R_p, …, R_p) over the control horizon (eq. 3.21–3.22). Each player scores
 the predicted output against both references (y(k+i) against the references at k+i,
-DESIGN.md §2)::
+docs/architecture.md's conventions)::
 
     J_p = Σ_i e_h(k+i)' W_p,h e_h(k+i) + e_r(k+i)' W_p,r e_r(k+i) + U_p' R̃_p U_p
     e_h = y − y_ref,h,   e_r = y − y_ref,r                       (eq. 3.15–3.16)
@@ -283,11 +283,6 @@ class _LinearQuadraticGame:
         U = self._solve_factored(factor, rhs)
         N = self._n * self.control_horizon
         return U[:N].reshape(-1, self._n), U[N:].reshape(-1, self._n)
-
-    def predict_output(self, z: ArrayLike, U_h: ArrayLike, U_r: ArrayLike) -> np.ndarray:
-        """Predicted outputs Y = F z + Φ (U_h + U_r), shape (Np, 2n) (eq. 3.9)."""
-        U = np.asarray(U_h, dtype=float).reshape(-1) + np.asarray(U_r, dtype=float).reshape(-1)
-        return (self.F @ np.asarray(z, dtype=float) + self.Phi @ U).reshape(self._ref_shape)
 
 
 def _add(a: dict[str, float], b: dict[str, float]) -> dict[str, float]:

@@ -1,4 +1,4 @@
-"""Trials and datasets on disk (DESIGN.md §6).
+"""Trials and datasets on disk (docs/architecture.md, *Formats*).
 
 One trial = one Parquet file. Columns, for the d controlled DOFs named
 ``x, y, z, rx, ry, rz`` in order::

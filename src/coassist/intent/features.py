@@ -354,9 +354,3 @@ def constant_velocity(pose: np.ndarray, vel: np.ndarray, horizon: int, dt: float
     """x(k) + i·dt·ẋ(k) for i = 1 … H: (B, d), (B, d) -> (B, H, d)."""
     steps = dt * np.arange(1, horizon + 1)[None, :, None]
     return pose[:, None, :] + steps * vel[:, None, :]
-
-
-def check_dt(dt: float) -> float:
-    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a finite number > 0 (s), got {dt!r}")
-    return float(dt)

@@ -133,10 +133,6 @@ class IntentNet(nn.Module):
     def lstm_parameters(self) -> list[nn.Parameter]:
         return [] if self.lstm is None else list(self.lstm.parameters())
 
-    def head_parameters(self) -> list[nn.Parameter]:
-        """Everything but the LSTM: the FC layers and the linear skip (what transfer trains)."""
-        return [p for n, p in self.named_parameters() if not n.startswith("lstm.")]
-
     @torch.no_grad()
     def init_skip(self, weight: torch.Tensor, bias: torch.Tensor) -> None:
         """Set the linear skip to a given map (e.g. the ridge solution) and zero the last FC

@@ -16,7 +16,7 @@ with sampling time dt (eq. 3.5)::
 
     z(k+1) = A_d z(k) + B_d (u_h(k) + u_r(k))
 
-by an exact zero-order hold (the default, DESIGN.md §2) or the bilinear (Tustin)
+by an exact zero-order hold (the default, docs/architecture.md, *Conventions for the math*) or the bilinear (Tustin)
 transform that the thesis group's own code uses.
 """
 
