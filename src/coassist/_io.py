@@ -33,6 +33,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
+from coassist.errors import CoassistError
 
 __all__ = [
     "OutputBusyError",
@@ -53,7 +54,7 @@ __all__ = [
 _TEMP = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.(?P<token>[0-9a-f]{8})\.(?P<kind>tmp|new|old)$")
 
 
-class OutputBusyError(RuntimeError):
+class OutputBusyError(CoassistError, RuntimeError):
     """Another run is writing the same output; the message names it and the lock file."""
 
 

@@ -46,6 +46,7 @@ import coassist
 from coassist._checks import check_int, is_integer
 from coassist._io import OutputLock, atomic_write, partial_folder, remove_stale, staged_folder, swap_in
 from coassist.data.trial import MAX_DOF, Trial, TrialMeta
+from coassist.errors import CoassistError
 
 __all__ = [
     "AXES",
@@ -82,7 +83,7 @@ _OPTIONAL = {"intent": "intent", "effort_h": "effort_h", "effort_r": "effort_r"}
 _JOINT = {"joints": "q", "joint_velocity": "qd_cmd"}
 
 
-class TrialFileError(ValueError):
+class TrialFileError(CoassistError, ValueError):
     """A trial file or dataset folder that cannot be read; the message names the file."""
 
 

@@ -24,7 +24,6 @@ windows only (one range per feature; one range per axis for targets).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any

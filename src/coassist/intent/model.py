@@ -44,6 +44,7 @@ from coassist.intent.features import (
     unscale_targets,
 )
 from coassist.intent.network import IntentNet, NetworkConfig
+from coassist.errors import CoassistError
 
 __all__ = ["FORMAT", "IntentModel", "ModelFileError", "ModelMismatchError", "load_model", "save_model"]
 
@@ -55,11 +56,11 @@ SIDECAR = "model.json"
 DT_RTOL = 0.01
 
 
-class ModelMismatchError(ValueError):
+class ModelMismatchError(CoassistError, ValueError):
     """The model was trained on other features or another sampling period."""
 
 
-class ModelFileError(ValueError):
+class ModelFileError(CoassistError, ValueError):
     """A model folder that is missing files or inconsistent."""
 
 

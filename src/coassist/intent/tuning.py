@@ -19,13 +19,14 @@ from coassist.intent.evaluation import evaluate_model
 from coassist.intent.features import split_trials, validation_split
 from coassist.intent.sources import LabeledTrial
 from coassist.intent.training import Preset, train_model
+from coassist.errors import CoassistError
 
 __all__ = ["StudyMismatchError", "check_storage", "run_study", "train_options"]
 
 _DATA_KEY = "coassist_trials"  # study user attribute: the fit and validation trial ids
 
 
-class StudyMismatchError(ValueError):
+class StudyMismatchError(CoassistError, ValueError):
     """An existing study was run on other trials than the ones given."""
 
 

@@ -60,6 +60,7 @@ from coassist.spatial import (
     rotation_matrix,
     rotation_vector,
 )
+from coassist.errors import CoassistError
 
 __all__ = [
     "IKConvergenceError",
@@ -310,7 +311,7 @@ class UR5Kinematics:
 # ----------------------------------------------------------------------------
 
 
-class IKConvergenceError(RuntimeError):
+class IKConvergenceError(CoassistError, RuntimeError):
     """:func:`solve_ik` did not reach the requested tolerance."""
 
 
