@@ -40,6 +40,6 @@ def test_the_old_built_in_bases_still_catch():
     with pytest.raises(ValueError):
         raise ManifestError("x")
     with pytest.raises(KeyError):
-        raise UnknownNameError("x")
+        raise UnknownNameError("x", "x")
     with pytest.raises(CoassistError):
         raise ManifestError("x")
