@@ -16,6 +16,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
+from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET
 from coassist.registry import Registry, UnknownNameError, unknown_name_message
 
 T = TypeVar("T")
@@ -420,7 +421,7 @@ def collect(
     objects: str = typer.Option("handle", help="Objects: handle, board, heavy."),
     trials: int = typer.Option(20, help="Trials per user, object and task."),
     seed: int = typer.Option(0, help="Seed of the first trial; trial i uses seed + i."),
-    preset: str = typer.Option("thesis-evaluation-dm", help="Control preset: thesis-evaluation-dm (the main job's), thesis-application-dm, or either without -dm (SI units: the robot barely helps)."),
+    preset: str = typer.Option(COLLECTION_PRESET, help=f"Control preset: {COLLECTION_PRESET} (the main job's for collection), {APPLICATION_PRESET} (the main job's with a learned model in the loop), thesis-application-dm, or one without -dm (SI units: the robot barely helps)."),
     intent: str = typer.Option("nominal", help="nominal | oracle | path of an intent model."),
     dataset_id: str = typer.Option(None, help="Dataset id (default: the folder's name)."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
@@ -482,7 +483,7 @@ def drive(
     intent: str = typer.Option("nominal", help="nominal | oracle (MuJoCo) | path of an intent model (coassist train)."),
     realtime_intent: bool = typer.Option(None, help="Run the model off the control thread, never waiting for it (default: on for --world ur, off in MuJoCo, where runs are then deterministic)."),
     predictor_backend: str = typer.Option("process", help="Where a real-time model runs: process (own worker process), onnx (ONNX Runtime thread) or torch (thread)."),
-    preset: str = typer.Option("thesis-application-dm", help="Control preset (the main job's by default)."),
+    preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; the -dm presets ring with one)."),
     user: int = typer.Option(0, help="Simulated operator (MuJoCo world)."),
     seed: int = typer.Option(0, help="Seed of the task, the simulated operator and the sensor noise."),
     rate: int = typer.Option(125, help="Control rate in Hz: 125 (UR CB3) or 500 (e-Series)."),
@@ -567,7 +568,7 @@ def play(
     out: Path = typer.Option(Path("runs/play"), help="Parent folder of the session folders (each a dataset coassist train reads)."),
     controller: str = typer.Option("mg,imp,assistive", help="Controllers the page offers, comma-separated: mg, imp, assistive."),
     intent: str = typer.Option("nominal", help="nominal | a model folder written by coassist train (its prediction is drawn live)."),
-    preset: str = typer.Option("thesis-application-dm", help="Control preset (thesis-evaluation[-dm], thesis-application[-dm])."),
+    preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; also thesis-evaluation[-dm], thesis-application[-dm])."),
     tasks: str = typer.Option("linear,curved,sinusoidal,z", help="The protocol's paths, in order (repeated)."),
     seed: int = typer.Option(0, help="Trial i's obstacle is drawn from seed + i."),
     motion_time: float = typer.Option(None, help="Planned motion time of every path in seconds (default: the thesis' per path)."),
