@@ -202,10 +202,9 @@ SKIP_BAD_HELP = "Leave out trials that cannot be read, saying which and why (def
 def _intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA"):
     import warnings
 
-    from coassist.intent import load_trials
-
     from coassist.data import RecordingError, TrialFileError
     from coassist.data.store import ManifestError
+    from coassist.intent import load_trials
 
     def skipped(where: str, reason: str) -> None:
         reason = reason.removeprefix(f"{where}: ")  # the reason usually names the file already
@@ -498,9 +497,8 @@ def drive(
 ) -> None:
     """Run the assistive controller, IMP or MG on a UR5: in MuJoCo, or on a real arm."""
     from coassist.data import write_trial
-    from coassist.robot.drive import DriveConfig
+    from coassist.robot.drive import CONTROLLERS, WORLDS, DriveConfig
     from coassist.robot.drive import drive as run_drive
-    from coassist.robot.drive import CONTROLLERS, WORLDS
     from coassist.runtime.safety import SafetyLimits
     from coassist.sim import PRESETS as CONTROL_PRESETS
 
@@ -638,9 +636,8 @@ def realism(
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
 ) -> None:
     """Simulated trials (user 0, handle, cooperative, nominal intent) side by side with real user-a trials."""
-    from coassist.experiments import realism as realism_exp
-
     from coassist.data import default_real_data
+    from coassist.experiments import realism as realism_exp
 
     for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
         if value is not None and value < minimum:

@@ -28,10 +28,10 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
-
-from coassist._checks import check_positive_scalar, is_integer
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike
+
+from coassist._checks import check_positive_scalar, is_integer
 
 __all__ = [
     "HORIZONS",

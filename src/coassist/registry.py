@@ -16,6 +16,7 @@ import difflib
 from collections.abc import Iterable, Iterator, Mapping
 from types import MappingProxyType
 from typing import Generic, TypeVar
+
 from coassist.errors import CoassistError
 
 __all__ = ["Registry", "UnknownNameError", "unknown_name_message"]

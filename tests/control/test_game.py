@@ -160,8 +160,13 @@ def test_nash_efforts_are_mutual_best_responses(n, Np, Nc):
     model, Q, R_h, R_r, z, ref_h, ref_r = random_instance(rng, n, Np, Nc)
     game = NashGame(model, **Q, R_h=R_h, R_r=R_r, horizon=Np, control_horizon=Nc)
     U_h, U_r = game.solve_horizon(z, ref_h, ref_r)
-    J_h = lambda Uh: player_cost(model, Q["Q_hh"], Q["Q_hr"], R_h, Np, Nc, z, ref_h, ref_r, Uh, U_r, "h")
-    J_r = lambda Ur: player_cost(model, Q["Q_rh"], Q["Q_rr"], R_r, Np, Nc, z, ref_h, ref_r, U_h, Ur, "r")
+
+    def J_h(Uh):
+        return player_cost(model, Q["Q_hh"], Q["Q_hr"], R_h, Np, Nc, z, ref_h, ref_r, Uh, U_r, "h")
+
+    def J_r(Ur):
+        return player_cost(model, Q["Q_rh"], Q["Q_rr"], R_r, Np, Nc, z, ref_h, ref_r, U_h, Ur, "r")
+
     base_h, base_r = J_h(U_h), J_r(U_r)
     for _ in range(20):
         d = rng.normal(size=U_h.shape) * rng.choice([1e-3, 1e-1, 1.0])

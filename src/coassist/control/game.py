@@ -89,8 +89,8 @@ from coassist._checks import (
     check_positive_definite,
     check_positive_semidefinite,
 )
-from coassist.control.prediction import prediction_matrices
 from coassist.config import GameParameters
+from coassist.control.prediction import prediction_matrices
 from coassist.model.impedance import ImpedanceModel
 
 InputWeighting = Literal["shared", "alpha_scaled"]
@@ -421,7 +421,7 @@ class _AlphaFamily:
     #: 1/(1 + βλ_j) − 1 is below 1e-12.
     ZERO_EIGENVALUE = 1e-12
 
-    def __init__(self, game: "CooperativeGame", alpha0: float) -> None:
+    def __init__(self, game: CooperativeGame, alpha0: float) -> None:
         n, N = game._n, game._n * game.control_horizon
         H0, T0 = self._system(game, alpha0)
         H1, T1 = self._system(game, alpha0 + 1.0)
@@ -486,7 +486,7 @@ class _AlphaFamily:
         return None
 
     @staticmethod
-    def _system(game: "CooperativeGame", alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    def _system(game: CooperativeGame, alpha: float) -> tuple[np.ndarray, np.ndarray]:
         """H(α) (2N, 2N) and the stacked right-hand sides T(α) (2N, p) = [−Φ'W̄F | Φ'Ŵ_·,h | Φ'Ŵ_·,r] per player."""
         H, ref_h_terms, ref_r_terms, state_terms = game._assemble(alpha)
         T = np.vstack([np.hstack([-state_terms[p], ref_h_terms[p], ref_r_terms[p]]) for p in (0, 1)])

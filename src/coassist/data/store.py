@@ -360,7 +360,7 @@ def _new_manifest(dataset_id: str, description: str, entries: list[dict[str, Any
         "format_version": FORMAT_VERSION,
         "dataset_id": dataset_id,
         "description": description,
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "coassist_version": coassist.__version__,
         "n_trials": len(entries),
         "trials": entries,
@@ -473,7 +473,7 @@ def append_to_dataset(trials: Iterable[Trial], folder: str | os.PathLike[str]) -
             used.add(name)
         manifest["trials"] = entries
         manifest["n_trials"] = len(entries)
-        manifest["modified"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        manifest["modified"] = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
         _write_manifest(folder, manifest)
     return folder
 

@@ -28,9 +28,9 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from coassist._checks import check_optional_int
-from numpy.typing import ArrayLike
 
 __all__ = ["GAP_FACTOR", "MAX_DOF", "SOURCES", "Trial", "TrialMeta", "time_gaps"]
 

@@ -317,11 +317,11 @@ def _stage_iterative(ctx: _Context):
             reason="the simulated operator is stationary and the default model small; once the model predicts well, "
             "new in-loop data adds little beyond the first retraining, and training noise is as large as the gains",
         ))
-    grows = all(all(errors[l][a]["e_rms"] < errors[l][b]["e_rms"] for a, b in pairwise(EVAL_HORIZONS))
-                for l in labels[1:])
+    grows = all(all(errors[m][a]["e_rms"] < errors[m][b]["e_rms"] for a, b in pairwise(EVAL_HORIZONS))
+                for m in labels[1:])
     s.claims.append(Claim(
         "e_RMS grows with the prediction horizon", grows,
-        "; ".join(f"{l}: " + " < ".join(f"{errors[l][h]['e_rms'] * 1000:.1f}" for h in EVAL_HORIZONS) + " mm" for l in labels[1:]),
+        "; ".join(f"{m}: " + " < ".join(f"{errors[m][h]['e_rms'] * 1000:.1f}" for h in EVAL_HORIZONS) + " mm" for m in labels[1:]),
         reason="a model predicting short horizons no better than long ones",
     ))
     ctx.summary["iterative"]["work"] = work

@@ -34,6 +34,7 @@ from safetensors.torch import save as st_save
 from coassist._checks import is_real_number
 from coassist._io import OutputLock, atomic_write_bytes, staged_folder
 from coassist.data import Trial
+from coassist.errors import CoassistError
 from coassist.intent.features import (
     Scaler,
     WindowConfig,
@@ -44,7 +45,6 @@ from coassist.intent.features import (
     unscale_targets,
 )
 from coassist.intent.network import IntentNet, NetworkConfig
-from coassist.errors import CoassistError
 
 __all__ = ["FORMAT", "IntentModel", "ModelFileError", "ModelMismatchError", "load_model", "save_model"]
 

@@ -98,7 +98,7 @@ class IntentNet(nn.Module):
 
     def reset_parameters(self, generator: torch.Generator | None = None) -> None:
         """Xavier/Glorot-uniform weights drawn from ``generator``, zero biases (thesis ref. [25])."""
-        for name, p in self.named_parameters():
+        for p in self.parameters():
             if p.dim() >= 2:
                 nn.init.xavier_uniform_(p, generator=generator)
             else:

@@ -15,11 +15,11 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from coassist.errors import CoassistError
 from coassist.intent.evaluation import evaluate_model
 from coassist.intent.features import split_trials, validation_split
 from coassist.intent.sources import LabeledTrial
 from coassist.intent.training import Preset, train_model
-from coassist.errors import CoassistError
 
 __all__ = ["StudyMismatchError", "check_storage", "run_study", "train_options"]
 

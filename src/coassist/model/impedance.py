@@ -137,7 +137,7 @@ class ImpedanceModel:
         """State size 2n (position and velocity)."""
         return 2 * self.n_dof
 
-    def with_stiffness(self, K: ArrayLike) -> "ImpedanceModel":
+    def with_stiffness(self, K: ArrayLike) -> ImpedanceModel:
         """The same model with another stiffness (e.g. K = 0 for manual guidance)."""
         return ImpedanceModel(self.M, self.D, K, self.dt, self.discretization)
 

@@ -50,6 +50,7 @@ from numpy.typing import ArrayLike
 # The pure math lives below the runtime, so the loop can use it without the robot extra;
 # re-exported here because it is half of what a user of this module wants.
 from coassist._checks import check_int, check_positive_scalar
+from coassist.errors import CoassistError
 from coassist.spatial import (
     _as_rotation,
     _as_vector,
@@ -60,7 +61,6 @@ from coassist.spatial import (
     rotation_matrix,
     rotation_vector,
 )
-from coassist.errors import CoassistError
 
 __all__ = [
     "IKConvergenceError",

@@ -84,9 +84,9 @@ from typing import Any
 
 import numpy as np
 
+from coassist.errors import CoassistError
 from coassist.runtime.world import Command, RobotState
 from coassist.spatial import rotation_matrix
-from coassist.errors import CoassistError
 
 __all__ = ["RobotLinkError", "SafetyStatus", "URRTDEWorld", "stop_message"]
 
