@@ -324,14 +324,13 @@ def evaluate(
         result = evaluate_model(m, trials, held_out_only=not include_training)
     except (ModelMismatchError, ValueError) as exc:
         _fail(str(exc), 2)
-    result["model"] = str(model)
-    console.print(results_table(result, f"{model}: {len(result['trials'])} trials, {result['n_ticks']} ticks"))
+    console.print(results_table(result, f"{model}: {len(result.trials)} trials, {result.n_ticks} ticks"))
     for line in comparison_lines(result):
         console.print(line, highlight=False, soft_wrap=True)
-    if result["skipped"]:
-        console.print(f"skipped {len(result['skipped'])} training trials (use --include-training to score them)")
+    if result.skipped:
+        console.print(f"skipped {len(result.skipped)} training trials (use --include-training to score them)")
     try:
-        atomic_write_text(dest, json.dumps(result, indent=1) + "\n")
+        atomic_write_text(dest, json.dumps({**result.to_dict(), "model": str(model)}, indent=1) + "\n")
     except OSError as exc:
         _fail(f"--out {dest}: cannot write ({exc.strerror})")
     _wrote(str(dest))

@@ -65,15 +65,15 @@ def test_ridge_matches_the_closed_form_solve(trials):
 def test_evaluation_scores_every_predictor_on_the_same_ticks(trials, tiny):
     model = train_model(trials, tiny, tiny.train)
     res = evaluate_model(model, trials)
-    assert set(res["trials"]).isdisjoint(model.info["train_trials"]) and res["skipped"]
-    assert res["horizons"] == [5, 10]  # horizons beyond the model's 10 samples are dropped
-    assert set(res["results"]) == {"model", "nominal", "constant_velocity", "constant_acceleration", "ridge"}
+    assert set(res.trials).isdisjoint(model.info["train_trials"]) and res.skipped
+    assert res.horizons == (5, 10)  # horizons beyond the model's 10 samples are dropped
+    assert set(res.results) == {"model", "nominal", "constant_velocity", "constant_acceleration", "ridge"}
     # Hand check of constant velocity's e_RMS on the scored ticks of the held-out trial.
-    lt = next(lt for lt in trials if lt.id in res["trials"])
+    lt = next(lt for lt in trials if lt.id in res.trials)
     t = lt.trial
     ks = np.arange(tiny.window.history - 1, t.n_samples - 5)
     err = [np.sqrt(np.mean(np.sum((t.pose[k] + np.outer(np.arange(1, 6) * 0.008, t.velocity[k]) - t.pose[k + 1 : k + 6]) ** 2, axis=1))) for k in ks]
-    assert res["results"]["constant_velocity"]["5"]["e_rms"] == pytest.approx(np.mean(err), rel=1e-12)
+    assert res.results["constant_velocity"][5]["e_rms"] == pytest.approx(np.mean(err), rel=1e-12)
     with pytest.raises(ValueError, match="nothing held out"):
         evaluate_model(model, [lt for lt in trials if lt.id in model.info["train_trials"]])
 

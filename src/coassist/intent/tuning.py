@@ -108,7 +108,7 @@ def run_study(
         )
         model = train_model(fit, p, p.train)
         result = evaluate_model(model, val, horizons=(horizon,), held_out_only=False)
-        return result["results"]["model"][str(horizon)]["e_rms"]
+        return result.results["model"][horizon]["e_rms"]
 
     sampler = optuna.samplers.TPESampler(seed=seed)
     study = optuna.create_study(storage=storage, study_name=study_name, direction="minimize", sampler=sampler,
