@@ -43,9 +43,9 @@ import torch  # noqa: E402
 
 from coassist.data import Trial, TrialMeta  # noqa: E402
 from coassist.intent import PRESETS, IntentModel, IntentNet, LabeledTrial, Scaler, save_model, train_model  # noqa: E402
+from coassist.intent.features import WindowSet  # noqa: E402
 from coassist.intent.realtime import make_runner  # noqa: E402
 from coassist.intent.training import _Windows  # noqa: E402
-from coassist.intent.features import WindowSet  # noqa: E402
 
 
 def percentiles(samples_ns) -> tuple[float, float]:

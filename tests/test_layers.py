@@ -1,4 +1,4 @@
-"""The package's layers: a module imports only from layers below its own (DESIGN §5, §7).
+"""The package's layers: a module imports only from layers below its own (docs/architecture.md, *Layers*).
 
 Parses every module's imports (function-local ones included, since a lazy import is
 still a dependency) and fails when a layer imports one above it, or a sibling on the
@@ -13,7 +13,7 @@ from pathlib import Path
 import coassist
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("(root)", "_checks", "_io", "interfaces", "config", "spatial", "registry"),  # shared vocabulary and rigid-body math
+    ("(root)", "errors", "_checks", "_io", "interfaces", "config", "spatial", "registry"),  # shared vocabulary and rigid-body math
     ("model", "data", "metrics"),  # the impedance model; trials on disk; metrics
     ("control",),  # games, baselines, guarded controllers (pure control laws)
     ("intent", "runtime"),  # the predictor; the control loop, wrench pipeline, safety
@@ -25,6 +25,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 #: Imports between packages of the same layer that are allowed.
 SIBLINGS_ALLOWED: set[tuple[str, str]] = {
     ("config", "_checks"), ("spatial", "_checks"), ("interfaces", "_checks"), ("config", "registry"),
+    ("_io", "errors"), ("registry", "errors"),
 }  # fmt: skip
 
 RANK = {name: i for i, layer in enumerate(LAYERS) for name in layer}

@@ -18,9 +18,9 @@ from coassist.metrics import (
     overshoot,
     peak_effort_ratio,
     precision_sigma,
-    tracking_error_rms,
     prediction_errors,
     time_to_target,
+    tracking_error_rms,
 )
 
 GARBAGE = 1e3  # predictions that must never be scored

@@ -34,6 +34,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
+from coassist.errors import CoassistError
+
 __all__ = [
     "OutputBusyError",
     "OutputLock",
@@ -53,7 +55,7 @@ __all__ = [
 _TEMP = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.(?P<token>[0-9a-f]{8})\.(?P<kind>tmp|new|old)$")
 
 
-class OutputBusyError(RuntimeError):
+class OutputBusyError(CoassistError, RuntimeError):
     """Another run is writing the same output; the message names it and the lock file."""
 
 

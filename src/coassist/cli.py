@@ -16,6 +16,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
+from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET
 from coassist.interfaces import NAMED_INTENTS
 from coassist.registry import Registry, UnknownNameError, unknown_name_message
 
@@ -231,10 +232,9 @@ def _bag_topics(text: str | None) -> dict[str, str] | None:
 def _intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA", bag_topics: str | None = None):
     import warnings
 
-    from coassist.intent import load_trials
-
     from coassist.data import RecordingError, TrialFileError
     from coassist.data.store import ManifestError
+    from coassist.intent import load_trials
 
     def skipped(where: str, reason: str) -> None:
         reason = reason.removeprefix(f"{where}: ")  # the reason usually names the file already
@@ -368,14 +368,13 @@ def evaluate(
         result = evaluate_model(m, trials, held_out_only=not include_training)
     except (ModelMismatchError, ValueError) as exc:
         _fail(str(exc), 2)
-    result["model"] = str(model)
-    console.print(results_table(result, f"{model}: {len(result['trials'])} trials, {result['n_ticks']} ticks"))
+    console.print(results_table(result, f"{model}: {len(result.trials)} trials, {result.n_ticks} ticks"))
     for line in comparison_lines(result):
         console.print(line, highlight=False, soft_wrap=True)
-    if result["skipped"]:
-        console.print(f"skipped {len(result['skipped'])} training trials (use --include-training to score them)")
+    if result.skipped:
+        console.print(f"skipped {len(result.skipped)} training trials (use --include-training to score them)")
     try:
-        atomic_write_text(dest, json.dumps(result, indent=1) + "\n")
+        atomic_write_text(dest, json.dumps({**result.to_dict(), "model": str(model)}, indent=1) + "\n")
     except OSError as exc:
         _fail(f"--out {dest}: cannot write ({exc.strerror})")
     _wrote(str(dest))
@@ -464,7 +463,7 @@ def collect(
     objects: str = typer.Option("handle", help="Objects: handle, board, heavy."),
     trials: int = typer.Option(20, help="Trials per user, object and task."),
     seed: int = typer.Option(0, help="Seed of the first trial; trial i uses seed + i."),
-    preset: str = typer.Option("thesis-evaluation-dm", help="Control preset: thesis-evaluation-dm (the main job's), thesis-application-dm, or either without -dm (SI units: the robot barely helps)."),
+    preset: str = typer.Option(COLLECTION_PRESET, help=f"Control preset: {COLLECTION_PRESET} (the main job's for collection), {APPLICATION_PRESET} (the main job's with a learned model in the loop), thesis-application-dm, or one without -dm (SI units: the robot barely helps)."),
     intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle | path of an intent model."),
     obstacle: str = typer.Option("small", help="The obstacle the operators go around: small (the evaluation's box) or large (the application's 12 cm box, no path shown)."),
     dataset_id: str = typer.Option(None, help="Dataset id (default: the folder's name)."),
@@ -529,7 +528,7 @@ def drive(
     intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle (MuJoCo) | path of an intent model (coassist train)."),
     realtime_intent: bool = typer.Option(None, help="Run the model off the control thread, never waiting for it (default: on for --world ur, off in MuJoCo, where runs are then deterministic)."),
     predictor_backend: str = typer.Option("process", help="Where a real-time model runs: process (own worker process), onnx (ONNX Runtime thread) or torch (thread)."),
-    preset: str = typer.Option("thesis-application-dm", help="Control preset (the main job's by default)."),
+    preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; the -dm presets ring with one)."),
     user: int = typer.Option(0, help="Simulated operator (MuJoCo world)."),
     seed: int = typer.Option(0, help="Seed of the task, the simulated operator and the sensor noise."),
     obstacle: str = typer.Option("small", help="The obstacle the simulated operator goes around: small or large (the application's)."),
@@ -545,9 +544,9 @@ def drive(
     mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap: ROS 2 messages (poses, wrench, prediction, alpha, faults) that Foxglove opens and train reads."),
 ) -> None:
     """Run the assistive controller, IMP or MG on a UR5: in MuJoCo, or on a real arm."""
-    from coassist.robot.drive import DriveConfig
+    from coassist.data import write_trial
+    from coassist.robot.drive import CONTROLLERS, WORLDS, DriveConfig
     from coassist.robot.drive import drive as run_drive
-    from coassist.robot.drive import CONTROLLERS, WORLDS
     from coassist.runtime.safety import SafetyLimits
     from coassist.sim import PRESETS as CONTROL_PRESETS
 
@@ -732,7 +731,7 @@ def play(
     out: Path = typer.Option(Path("runs/play"), help="Parent folder of the session folders (each a dataset coassist train reads)."),
     controller: str = typer.Option("mg,imp,assistive", help="Controllers the page offers, comma-separated: mg, imp, assistive."),
     intent: str = typer.Option("nominal", help="nominal | a model folder written by coassist train (its prediction is drawn live)."),
-    preset: str = typer.Option("thesis-application-dm", help="Control preset (thesis-evaluation[-dm], thesis-application[-dm])."),
+    preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; also thesis-evaluation[-dm], thesis-application[-dm])."),
     tasks: str = typer.Option("linear,curved,sinusoidal,z", help="The protocol's paths, in order (repeated)."),
     seed: int = typer.Option(0, help="Trial i's obstacle is drawn from seed + i."),
     motion_time: float = typer.Option(None, help="Planned motion time of every path in seconds (default: the thesis' per path)."),
@@ -805,9 +804,8 @@ def realism(
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
 ) -> None:
     """Simulated trials (user 0, handle, cooperative, nominal intent) side by side with real user-a trials."""
-    from coassist.experiments import realism as realism_exp
-
     from coassist.data import default_real_data
+    from coassist.experiments import realism as realism_exp
 
     for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
         if value is not None and value < minimum:

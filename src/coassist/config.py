@@ -1,4 +1,4 @@
-"""Typed, validated parameter sets and the thesis' values (thesis §5.2, DESIGN.md §3).
+"""Typed, validated parameter sets and the thesis' values (thesis §5.2; docs/architecture.md, *Parameters from the thesis*).
 
 Parameters are frozen dataclasses checked on construction; each error names the
 field. Matrices that are diagonal in the thesis are given as their diagonals.
@@ -166,3 +166,12 @@ CONTROL_PRESETS: Registry[ControlPreset] = Registry("control preset", {
     "thesis-application-dm": scale_positions(THESIS_APPLICATION, DECIMETRE_SCALE, "thesis-application-dm"),
     "thesis-application-damped": scale_positions(THESIS_APPLICATION, APPLICATION_DAMPED_SCALE, "thesis-application-damped"),
 })  # fmt: skip
+
+#: The preset of data collection: the main job's datasets D_0 … D_k (``coassist collect``'s
+#: default). The predictor in the loop there is the nominal path or M_k being evaluated.
+COLLECTION_PRESET = "thesis-evaluation-dm"
+#: The preset wherever a learned predictor can be in the loop and the robot is to help:
+#: the main job's application stage, ``coassist drive`` and ``coassist play``. Not the
+#: "-dm" weights: with a learned prediction in the loop they remove 2/3 of the plant's
+#: damping and the arm rings at the operator's turns (see APPLICATION_DAMPED_SCALE).
+APPLICATION_PRESET = "thesis-application-damped"

@@ -168,7 +168,10 @@ class IntentSource(Protocol):
 
     history: int
     horizon: int
-    model_id: str | None
+
+    @property
+    def model_id(self) -> str | None:  # read-only here, so a source may narrow it (None, or a str)
+        ...
 
     def reset(self, context: TrialContext) -> None:
         """Called once before tick 0 of every trial (clear any carried state here)."""

@@ -6,7 +6,7 @@ path, :func:`overshoot` of the tool past the operator's intent at each of its tu
 :func:`peak_effort_ratio` of the robot's peak effort to the hand's.
 
 Pure functions on arrays (SI units). Conventions, where the thesis is loose
-(DESIGN.md §2):
+(docs/architecture.md, *Conventions for the math*):
 
 - ``prediction[k, i - 1]`` is the position predicted at tick ``k`` for tick ``k + i``,
   ``i = 1 … H`` (the layout of :attr:`coassist.data.Trial.prediction`). The prediction
@@ -28,10 +28,10 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
-
-from coassist._checks import check_positive_scalar, is_integer
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike
+
+from coassist._checks import check_positive_scalar, is_integer
 
 __all__ = [
     "HORIZONS",
@@ -202,7 +202,8 @@ def e_max(prediction: ArrayLike, pose: ArrayLike, horizon: int) -> EMax:
     ||x̂_k(k+i) − x(k+i)|| (eq. 5.7). The thesis then disagrees with itself: its text
     takes "the maximum from all the values obtained before", its eq. 5.8 takes the
     *sum* over the trajectory — which grows with the trajectory's length and so cannot
-    compare trials. We report both readings that are comparable (DESIGN.md §2):
+    compare trials. We report both readings that are comparable (docs/architecture.md,
+    *Conventions for the math*):
 
     - ``mean``: the mean of e_MAX,k over the scored ticks (the sum of eq. 5.8 divided
       by L);
@@ -223,8 +224,9 @@ def f_rms(wrench: ArrayLike, *, axes: Sequence[int] | None = None) -> float:
         f_RMS = (1/T) Σ_k sqrt( f_x(k)² + f_y(k)² )
 
     Eq. 5.9 writes only the norm sqrt(f_x² + f_y²) and says the index is a mean value;
-    despite its name it is a mean norm, not a root mean square (DESIGN.md §2). The
-    thesis then averages it over three trials: do that over the returned values.
+    despite its name it is a mean norm, not a root mean square (docs/architecture.md,
+    *Conventions for the math*). The thesis then averages it over three trials: do that
+    over the returned values.
 
     Parameters
     ----------
@@ -300,8 +302,8 @@ def precision_sigma(
     ball of radius ε around the target, and the n ticks cover [t_k0, t_k0 + τ).
 
     - ε is in **metres** (default 0.025 m = 2.5 cm). The thesis writes "0.025cm",
-      which read literally (0.25 mm) is below the robot's tracking noise; DESIGN.md §2
-      fixes metres.
+      which read literally (0.25 mm) is below the robot's tracking noise;
+      docs/architecture.md (*Conventions for the math*) fixes metres.
     - If the pose never enters the ball, σ is undefined: returns NaN (count such
       trials separately, e.g. with :func:`time_to_target`).
     - If fewer than n ticks remain after k0 (the trial ends less than τ after

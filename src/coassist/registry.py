@@ -17,6 +17,8 @@ from collections.abc import Iterable, Iterator, Mapping
 from types import MappingProxyType
 from typing import Generic, TypeVar
 
+from coassist.errors import CoassistError
+
 __all__ = ["Registry", "UnknownNameError", "unknown_name_message"]
 
 T = TypeVar("T")
@@ -34,7 +36,7 @@ def unknown_name_message(value: str, choices: Iterable[str], what: str) -> str:
     return f"{value!r}: no such {what}{hint} (choose from: {', '.join(choices)})"
 
 
-class UnknownNameError(KeyError, ValueError):
+class UnknownNameError(CoassistError, KeyError, ValueError):
     """A name that is not in a :class:`Registry`; ``str()`` is :func:`unknown_name_message`'s line.
 
     A ``KeyError`` (``registry[name]`` semantics) and a ``ValueError`` (bad input) at once.

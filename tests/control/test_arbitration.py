@@ -69,7 +69,10 @@ def test_alpha_follows_a_constant_hand_force_as_a_first_order_filter():
 def test_confidence_law_scores_the_prediction_made_d_ticks_ago():
     p = ArbitrationParameters(law="confidence", alpha_min=0.5, alpha_max=0.9, error_scale=0.01, error_lag=3, time_constant=0.2)
     g = DT / 0.2
-    path = lambda k: np.array([0.001 * k, 0.0])  # the tool moves 1 mm per tick along x
+
+    def path(k):  # the tool moves 1 mm per tick along x
+        return np.array([0.001 * k, 0.0])
+
     for offset, expected_error in ((0.0, 0.0), (0.02, 0.02)):
         arb = AlphaArbiter(p, 2, DT, alpha0=0.9)
         error, alpha = 0.0, 0.9

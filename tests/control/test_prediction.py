@@ -1,4 +1,4 @@
-"""F and Φ (eq. 3.9–3.12, DESIGN.md §2 indexing) against step-by-step simulation."""
+"""F and Φ (eq. 3.9–3.12, docs/architecture.md's indexing) against step-by-step simulation."""
 
 import numpy as np
 import pytest

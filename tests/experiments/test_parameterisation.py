@@ -34,9 +34,9 @@ def test_variants_are_trained_as_labelled_and_scored_like_evaluate(monkeypatch):
     preset = replace(TINY, window=replace(TINY.window, **w), **p,
                      train=replace(TINY.train, epochs=1, threads=1, train_stride=3, seed=0, **t))  # fmt: skip
     ev = evaluate_model(real_train(trials, preset, preset.train), trials)
-    for h, v in ev["results"]["model"].items():
+    for h, v in ev.results["model"].items():
         assert result["rows"][-1]["e_rms"][int(h)] == pytest.approx(v["e_rms"], rel=1e-12)
     ridge = next(b for b in result["baselines"] if b["predictor"] == "ridge")
-    assert ridge["e_rms"][10] == pytest.approx(ev["results"]["ridge"]["10"]["e_rms"], rel=1e-12)
+    assert ridge["e_rms"][10] == pytest.approx(ev.results["ridge"][10]["e_rms"], rel=1e-12)
     text = par.markdown(result, "T")
     assert text.count("\n| ") == len(result["rows"]) + len(result["baselines"]) + 1  # rows + header

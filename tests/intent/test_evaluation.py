@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 from coassist.cli import app
 from coassist.data import default_real_data, write_dataset
 from coassist.intent import evaluate_model, load_trials, split_trials, train_model
-from coassist.intent.evaluation import BASELINES, best_baselines, comparison_lines
+from coassist.intent.evaluation import BASELINES, ModelEvaluation, best_baselines, comparison_lines
 
 from .conftest import make_trial
 
@@ -23,30 +23,38 @@ def test_best_baseline_and_per_trial_spread(trials, tiny):
     model = train_model(trials, p, p.train)
     assert model.info["baselines"]["ridge"]["tuned"] and model.info["baselines"]["constant_acceleration"]["tuned"]
     res = evaluate_model(model, trials)
-    assert len(res["trials"]) == 2
-    for h in ("5", "10"):
-        cands = {b: res["results"][b][h]["e_rms"] for b in BASELINES}
-        best = res["best_baseline"][h]
+    assert len(res.trials) == 2 and res.horizons == (5, 10)
+    for h in (5, 10):
+        cands = {b: res.results[b][h]["e_rms"] for b in BASELINES}
+        best = res.best_baseline[h]
         assert best["name"] == min(cands, key=cands.get) and best["e_rms"] == min(cands.values())
-        me = res["results"]["model"][h]["e_rms"]
+        me = res.results["model"][h]["e_rms"]
         assert best["gain"] == pytest.approx((best["e_rms"] - me) / best["e_rms"])
-        per = res["results"]["model"][h]["e_rms_trials"]
-        assert sorted(per) == sorted(res["trials"])
-        assert res["results"]["model"][h]["trial_min"] == min(per.values())
-        bt = res["results"][best["name"]][h]["e_rms_trials"]
+        per = res.results["model"][h]["e_rms_trials"]
+        assert sorted(per) == sorted(res.trials)
+        assert res.results["model"][h]["trial_min"] == min(per.values())
+        bt = res.results[best["name"]][h]["e_rms_trials"]
         assert best["trials_model_better"] == sum(per[k] < bt[k] for k in per)
     # Pooled e_RMS weighs trials by their scored ticks: it lies within the per-trial range.
-    r = res["results"]["ridge"]["10"]
+    r = res.results["ridge"][10]
     assert r["trial_min"] <= r["e_rms"] <= r["trial_max"]
-    assert res["baselines"]["ridge"]["alpha"] == model.ridge.alpha
+    assert res.baselines["ridge"]["alpha"] == model.ridge.alpha
+    # The JSON record: the layout evaluation.json and summary.json have always had ("5", not 5).
+    record = json.loads(json.dumps(res.to_dict()))
+    assert list(record) == ["trials", "skipped", "n_ticks", "horizons", "dt", "unit", "baselines", "results",
+                            "best_baseline"]
+    assert record["horizons"] == [5, 10] and record["results"]["ridge"]["10"]["e_rms"] == r["e_rms"]
+    assert record["best_baseline"]["5"]["name"] == res.best_baseline[5]["name"]
 
 
 def test_comparison_lines_state_the_best_baseline_in_mm():
-    res = {"dt": 0.01, "horizons": [5], "baselines": {"ridge": {"alpha": 1e-3, "tuned": True}},
-           "results": {"model": {"5": {"e_rms": 0.0008, "e_rms_trials": {"a": 0.0007, "b": 0.0011}}},
-                       "ridge": {"5": {"e_rms": 0.0010, "e_rms_trials": {"a": 0.0009, "b": 0.0010}}},
-                       "constant_velocity": {"5": {"e_rms": 0.0020, "e_rms_trials": {"a": 0.002, "b": 0.002}}}}}
-    assert best_baselines(res)["5"]["gain"] == pytest.approx(0.2)
+    results = {"model": {5: {"e_rms": 0.0008, "e_rms_trials": {"a": 0.0007, "b": 0.0011}}},
+               "ridge": {5: {"e_rms": 0.0010, "e_rms_trials": {"a": 0.0009, "b": 0.0010}}},
+               "constant_velocity": {5: {"e_rms": 0.0020, "e_rms_trials": {"a": 0.002, "b": 0.002}}}}
+    best = best_baselines(results, (5,))
+    assert best[5]["gain"] == pytest.approx(0.2)
+    res = ModelEvaluation(trials=("a", "b"), skipped=(), n_ticks=10, horizons=(5,), dt=0.01,
+                          baselines={"ridge": {"alpha": 1e-3, "tuned": True}}, results=results, best_baseline=best)
     (line,) = comparison_lines(res)
     assert line.startswith("0.05 s: best baseline ridge (α = 1e-03, tuned on validation trials) e_RMS 1 mm")
     assert "model 0.8 mm: 20.0 % better (+0.2 mm), model better on 1 of 2 trials" in line
@@ -127,8 +135,8 @@ def test_linear_preset_is_the_tuned_ridge_in_the_model_format(trials, tmp_path):
     ok = np.isfinite(a[:, 0, 0])
     assert ok.sum() > 200 and np.allclose(a[ok], b[ok], atol=1e-6)  # float32 network vs float64 ridge, positions in m
     res = evaluate_model(back, trials)
-    for h in ("5", "10"):  # same predictions, same ticks: the same error to float32 precision
-        assert res["results"]["model"][h]["e_rms"] == pytest.approx(res["results"]["ridge"][h]["e_rms"], rel=1e-3)
+    for h in (5, 10):  # same predictions, same ticks: the same error to float32 precision
+        assert res.results["model"][h]["e_rms"] == pytest.approx(res.results["ridge"][h]["e_rms"], rel=1e-3)
 
 
 @pytest.mark.slow
@@ -151,6 +159,6 @@ def test_default_predictor_is_no_worse_than_the_best_tuned_baseline_on_held_out_
     trials = load_trials([USER_A])
     model = train_model(trials, p, replace(p.train, threads=1))
     res = evaluate_model(model, trials)
-    assert set(res["trials"]).isdisjoint(model.info["baselines"]["validation_trials"])
-    for h, best in res["best_baseline"].items():
+    assert set(res.trials).isdisjoint(model.info["baselines"]["validation_trials"])
+    for h, best in res.best_baseline.items():
         assert best["name"] == "ridge" and best["gain"] > 0, (h, best)

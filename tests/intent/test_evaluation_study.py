@@ -5,15 +5,17 @@ from __future__ import annotations
 import pytest
 
 from coassist.experiments.predictors import parse_variant, summarise
+from coassist.intent.evaluation import ModelEvaluation
 
 
 def _record(seed, model, ridge, cv):
     def r(v):
-        return {"50": {"e_rms": v}}
+        return {50: {"e_rms": v}}
 
     best = min((ridge, "ridge"), (cv, "constant_velocity"))
-    ev = {"horizons": [50], "results": {"model": r(model), "ridge": r(ridge), "constant_velocity": r(cv)},
-          "best_baseline": {"50": {"name": best[1], "gain": (best[0] - model) / best[0]}}}  # fmt: skip
+    ev = ModelEvaluation(trials=("a",), skipped=(), n_ticks=1, horizons=(50,), dt=0.008, baselines={},
+                         results={"model": r(model), "ridge": r(ridge), "constant_velocity": r(cv)},
+                         best_baseline={50: {"name": best[1], "gain": (best[0] - model) / best[0]}})  # fmt: skip
     return {"protocol": "user-a", "variant": "lstm", "seed": seed, "evaluation": ev}
 
 

@@ -93,7 +93,7 @@ def test_the_best_parameters_reproduce_the_best_value(study):
     model = train_model(fit, preset, preset.train)
     horizon = TINY.window.horizon
     scored = evaluate_model(model, val, horizons=(horizon,), held_out_only=False)
-    assert scored["results"]["model"][str(horizon)]["e_rms"] == pytest.approx(result["best_value"], rel=1e-9)
+    assert scored.results["model"][horizon]["e_rms"] == pytest.approx(result["best_value"], rel=1e-9)
 
 
 def test_a_study_on_other_trials_is_not_resumed(study):

@@ -86,8 +86,9 @@ def test_a_trained_model_in_the_loop_needs_less_force_than_mg(tmp_path):
     """The thesis' first iteration on the UR5: M0 trained on D0 (six point-mass trials with
     the nominal reference in the loop, thesis-evaluation preset, curved/linear/sinusoidal),
     then driving the MuJoCo UR5 with M0 in the loop (the WindowIntent path: the same model,
-    computed inside the tick, deterministic). Measured: 2.04 / 1.93 / 2.00 N (seeds 1–3) against
-    MG's 4.02 / 3.93 N (seeds 1–2)."""
+    computed inside the tick, deterministic), on the default preset (the damped application
+    preset, which gives up some assistance so that the loop does not ring). Measured: 2.82 N
+    against MG's 4.02 N (seed 1); 2.04 / 1.93 / 2.00 N (seeds 1–3) on thesis-application-dm."""
     from coassist.intent import LabeledTrial, save_model, train_model
     from coassist.intent.training import PRESETS, with_overrides
     from coassist.sim import TrialSpec, run_spec
@@ -103,7 +104,7 @@ def test_a_trained_model_in_the_loop_needs_less_force_than_mg(tmp_path):
         assert not np.any(tr.fault & int(Fault.PREDICTION_FALLBACK)) and tr.meta.model_id == (
             None if intent == "nominal" else f"M0@{tr.meta.model_id.split('@')[1]}")
         force[ctrl] = f_rms(tr.effort_h)
-    assert force["assistive"] < 0.7 * force["mg"], force
+    assert force["assistive"] < 0.8 * force["mg"], force
 
 
 def test_same_seed_same_run_and_the_trial_round_trips(tmp_path):

@@ -11,7 +11,6 @@ from coassist.sim import AUTHOR, ForceSensor, get_preset, make_controller, make_
 from coassist.sim.objects import GRAVITY, OBJECTS, CarriedObject, get_object
 from coassist.sim.world import plant_model
 
-
 # ------------------------------------------------------------------ the three objects
 
 

@@ -9,7 +9,7 @@ Y_h and Y_r stack the human's and the robot's *reference outputs* y_ref,h, y_ref
 k+1…k+Np, each (Np·2n,) [m, m/s]. Effort weights are R_h, R_r (n, n) [1/N²] and
 R̃_p = blkdiag(R_p, …, R_p) over the control horizon (eq. 3.21–3.22). Each player scores
 the predicted output against both references (y(k+i) against the references at k+i,
-DESIGN.md §2)::
+docs/architecture.md's conventions)::
 
     J_p = Σ_i e_h(k+i)' W_p,h e_h(k+i) + e_r(k+i)' W_p,r e_r(k+i) + U_p' R̃_p U_p
     e_h = y − y_ref,h,   e_r = y − y_ref,r                       (eq. 3.15–3.16)
@@ -89,8 +89,8 @@ from coassist._checks import (
     check_positive_definite,
     check_positive_semidefinite,
 )
-from coassist.control.prediction import prediction_matrices
 from coassist.config import GameParameters
+from coassist.control.prediction import prediction_matrices
 from coassist.model.impedance import ImpedanceModel
 
 InputWeighting = Literal["shared", "alpha_scaled"]
@@ -284,11 +284,6 @@ class _LinearQuadraticGame:
         N = self._n * self.control_horizon
         return U[:N].reshape(-1, self._n), U[N:].reshape(-1, self._n)
 
-    def predict_output(self, z: ArrayLike, U_h: ArrayLike, U_r: ArrayLike) -> np.ndarray:
-        """Predicted outputs Y = F z + Φ (U_h + U_r), shape (Np, 2n) (eq. 3.9)."""
-        U = np.asarray(U_h, dtype=float).reshape(-1) + np.asarray(U_r, dtype=float).reshape(-1)
-        return (self.F @ np.asarray(z, dtype=float) + self.Phi @ U).reshape(self._ref_shape)
-
 
 def _add(a: dict[str, float], b: dict[str, float]) -> dict[str, float]:
     out = dict(a)
@@ -426,7 +421,7 @@ class _AlphaFamily:
     #: 1/(1 + βλ_j) − 1 is below 1e-12.
     ZERO_EIGENVALUE = 1e-12
 
-    def __init__(self, game: "CooperativeGame", alpha0: float) -> None:
+    def __init__(self, game: CooperativeGame, alpha0: float) -> None:
         n, N = game._n, game._n * game.control_horizon
         H0, T0 = self._system(game, alpha0)
         H1, T1 = self._system(game, alpha0 + 1.0)
@@ -491,7 +486,7 @@ class _AlphaFamily:
         return None
 
     @staticmethod
-    def _system(game: "CooperativeGame", alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    def _system(game: CooperativeGame, alpha: float) -> tuple[np.ndarray, np.ndarray]:
         """H(α) (2N, 2N) and the stacked right-hand sides T(α) (2N, p) = [−Φ'W̄F | Φ'Ŵ_·,h | Φ'Ŵ_·,r] per player."""
         H, ref_h_terms, ref_r_terms, state_terms = game._assemble(alpha)
         T = np.vstack([np.hstack([-state_terms[p], ref_h_terms[p], ref_r_terms[p]]) for p in (0, 1)])

@@ -1,4 +1,4 @@
-"""Prediction matrices of the MPC (thesis eq. 3.8–3.12, indexing of DESIGN.md §2).
+"""Prediction matrices of the MPC (thesis eq. 3.8–3.12, indexing of docs/architecture.md's conventions).
 
 Over a prediction horizon Np and control horizon Nc ≤ Np::
 

@@ -43,6 +43,7 @@ import numpy as np
 import pandas as pd
 
 from coassist.data.trial import GAP_FACTOR, Trial, TrialMeta, time_gaps
+from coassist.errors import CoassistError
 
 __all__ = [
     "DENORMAL_THRESHOLD",
@@ -79,7 +80,7 @@ _NSECS = "header.stamp.nsecs"
 _RECEIVE = "Time"
 
 
-class RecordingError(ValueError):
+class RecordingError(CoassistError, ValueError):
     """A recording folder that cannot be loaded; the message names the file and column."""
 
 

@@ -1,4 +1,4 @@
-"""Trials and datasets on disk (DESIGN.md §6).
+"""Trials and datasets on disk (docs/architecture.md, *Formats*).
 
 One trial = one Parquet file. Columns, for the d controlled DOFs named
 ``x, y, z, rx, ry, rz`` in order::
@@ -46,6 +46,7 @@ import coassist
 from coassist._checks import check_int, is_integer
 from coassist._io import OutputLock, atomic_write, partial_folder, remove_stale, staged_folder, swap_in
 from coassist.data.trial import MAX_DOF, Trial, TrialMeta
+from coassist.errors import CoassistError
 
 __all__ = [
     "AXES",
@@ -82,7 +83,7 @@ _OPTIONAL = {"intent": "intent", "effort_h": "effort_h", "effort_r": "effort_r"}
 _JOINT = {"joints": "q", "joint_velocity": "qd_cmd"}
 
 
-class TrialFileError(ValueError):
+class TrialFileError(CoassistError, ValueError):
     """A trial file or dataset folder that cannot be read; the message names the file."""
 
 
@@ -359,7 +360,7 @@ def _new_manifest(dataset_id: str, description: str, entries: list[dict[str, Any
         "format_version": FORMAT_VERSION,
         "dataset_id": dataset_id,
         "description": description,
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "coassist_version": coassist.__version__,
         "n_trials": len(entries),
         "trials": entries,
@@ -472,7 +473,7 @@ def append_to_dataset(trials: Iterable[Trial], folder: str | os.PathLike[str]) -
             used.add(name)
         manifest["trials"] = entries
         manifest["n_trials"] = len(entries)
-        manifest["modified"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        manifest["modified"] = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
         _write_manifest(folder, manifest)
     return folder
 

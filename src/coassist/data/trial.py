@@ -5,7 +5,7 @@ the real-recording loader builds one per rosbag export, the intent model trains 
 windows cut from a set of them (a dataset D_k, thesis Algorithm 4.1), and the metrics of
 thesis §5.2.4 are computed on them.
 
-Conventions (DESIGN.md §2):
+Conventions (docs/architecture.md, *Conventions for the math*):
 
 - SI units: s, m, m/s, N.
 - ``d`` is the number of controlled Cartesian DOFs (1 to 6). Axis ``j`` of every
@@ -28,9 +28,9 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from coassist._checks import check_optional_int
-from numpy.typing import ArrayLike
 
 __all__ = ["GAP_FACTOR", "MAX_DOF", "SOURCES", "Trial", "TrialMeta", "time_gaps"]
 

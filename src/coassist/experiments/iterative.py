@@ -26,8 +26,9 @@ report can show what freezing buys.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Callable, Generic, Mapping, TypeVar
+from typing import Generic, TypeVar
 
 from coassist._checks import is_integer
 

@@ -82,13 +82,13 @@ def compare_parameterisations(
             model = train_model(trials, p, p.train)
             seconds = time.perf_counter() - t0
             ev = evaluate_model(model, trials, held_out_only=True)
-            e = {int(h): v["e_rms"] for h, v in ev["results"]["model"].items()}
+            e = {h: v["e_rms"] for h, v in ev.results["model"].items()}
             rows.append({"variant": label, "seed": seed, "e_rms": e, "seconds": seconds})
             say(f"seed {seed} {label}: " + ", ".join(f"{h}: {1e3 * v:.2f} mm" for h, v in e.items()) + f" ({seconds:.0f} s)")
-        test_trials[seed] = ev["trials"]
+        test_trials[seed] = list(ev.trials)
         for name in BASELINES:
             baselines.append({"predictor": name, "seed": seed,
-                              "e_rms": {int(h): v["e_rms"] for h, v in ev["results"][name].items()}})
+                              "e_rms": {h: v["e_rms"] for h, v in ev.results[name].items()}})
     return {"rows": rows, "baselines": baselines, "test_trials": test_trials}
 
 

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from coassist._checks import is_integer
+from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET
 from coassist.registry import Registry
 
 ITERATION_TASKS = ("linear", "curved", "sinusoidal")
@@ -33,10 +34,10 @@ class ReproduceConfig:
     name: str = "default"
     intent_preset: str = "lstm"  # coassist.intent.training.PRESETS, for the simulated stages (as measured there)
     real_intent_preset: str = "default"  # the shipped default predictor, on the real recordings
-    control_preset: str = "thesis-evaluation-dm"
+    control_preset: str = COLLECTION_PRESET
     # Positions ×3.5, not ×10: in decimetres the robot's gain on the learned prediction (an extrapolation of its
     # own motion) removes 2/3 of the plant's damping and the tool rings (coassist.config.APPLICATION_DAMPED_SCALE).
-    application_preset: str = "thesis-application-damped"
+    application_preset: str = APPLICATION_PRESET
     trials_per_task: int = 20  # thesis: 60 trials = 20 per trajectory
     iterations: int = 4  # models M_0 … M_3, as the thesis
     tol: float = 2.5e-4  # stop criterion on e_RMS at 50 samples [m] (eq. 4.13): a quarter millimetre

@@ -99,11 +99,11 @@ def summarise(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
         recs = [
             r for r in records if r["protocol"] == protocol and r["variant"] == variant
         ]
-        horizons = recs[0]["evaluation"]["horizons"]
-        for p in recs[0]["evaluation"]["results"]:
+        horizons = recs[0]["evaluation"].horizons
+        for p in recs[0]["evaluation"].results:
             for h in horizons:
                 v = np.array(
-                    [r["evaluation"]["results"][p][str(h)]["e_rms"] for r in recs]
+                    [r["evaluation"].results[p][h]["e_rms"] for r in recs]
                 )
                 rows.append(
                     {
@@ -119,12 +119,12 @@ def summarise(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 )
         for h in horizons:
             gain_best = np.array(
-                [r["evaluation"]["best_baseline"][str(h)]["gain"] for r in recs]
+                [r["evaluation"].best_baseline[h]["gain"] for r in recs]
             )
-            res = [r["evaluation"]["results"] for r in recs]
-            gain_ridge = np.array([(x["ridge"][str(h)]["e_rms"] - x["model"][str(h)]["e_rms"]) / x["ridge"][str(h)]["e_rms"]
+            res = [r["evaluation"].results for r in recs]
+            gain_ridge = np.array([(x["ridge"][h]["e_rms"] - x["model"][h]["e_rms"]) / x["ridge"][h]["e_rms"]
                                    for x in res])  # fmt: skip
-            best = [r["evaluation"]["best_baseline"][str(h)]["name"] for r in recs]
+            best = [r["evaluation"].best_baseline[h]["name"] for r in recs]
             rows.append({"protocol": protocol, "variant": variant, "predictor": "gain", "horizon": h,
                          "over_best_median": float(np.median(gain_best)), "over_best_min": float(gain_best.min()),
                          "over_best_max": float(gain_best.max()), "over_ridge_median": float(np.median(gain_ridge)),
@@ -183,13 +183,14 @@ def main() -> None:
         raise SystemExit(f"error: {exc}") from None
     records = run(args.data, variants, seeds, protocols, args.threads)
     rows = summarise(records)
-    _print(rows, records[0]["evaluation"]["dt"])
+    _print(rows, records[0]["evaluation"].dt)
     if args.json:
         from coassist._io import atomic_write_text
 
         atomic_write_text(
             args.json,
-            json.dumps({"records": records, "summary": rows}, indent=1) + "\n",
+            json.dumps({"records": [{**r, "evaluation": r["evaluation"].to_dict()} for r in records], "summary": rows},
+                       indent=1) + "\n",
         )
 
 

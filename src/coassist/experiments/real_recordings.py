@@ -10,10 +10,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace
 from coassist.experiments.report import Claim, Section
+
+if TYPE_CHECKING:  # the learning stack is imported only when the stage runs
+    from coassist.intent.evaluation import ModelEvaluation
 
 #: user-b's first this-many recordings train the transfer; the rest test it.
 USER_B_TRANSFER_TRIALS = 2
@@ -27,8 +30,8 @@ class RealRecordingsResult:
     user_b: "M_a" and "M_TL" scored on user-b's test recordings. ``skipped``: why nothing ran."""
 
     intent_preset: str
-    user_a: dict[str, Any] | None = None
-    user_b: dict[str, dict[str, Any]] | None = None
+    user_a: ModelEvaluation | None = None
+    user_b: dict[str, ModelEvaluation] | None = None
     user_a_trials: int = 0  # recordings of user-a in all (trained on, validated on and held out)
     user_b_trials: int = 0
     skipped: str = ""
@@ -36,7 +39,8 @@ class RealRecordingsResult:
     def summary(self) -> dict[str, Any]:
         if self.skipped:
             return {"skipped": self.skipped}
-        return {"user_a": self.user_a, "user_b": self.user_b}
+        assert self.user_a is not None and self.user_b is not None  # set together when not skipped
+        return {"user_a": self.user_a.to_dict(), "user_b": {k: v.to_dict() for k, v in self.user_b.items()}}
 
 
 def run_real_recordings(ws: Workspace, real: str | None) -> RealRecordingsResult:
@@ -80,15 +84,16 @@ def real_recordings_section(result: RealRecordingsResult) -> Section:
         s.paragraphs.append("Skipped: no recordings found (set COASSIST_REAL_DATA or place ../shared/data/ur5-thesis).")
         return s
     ev_a, ev_b = result.user_a, result.user_b
-    dt = ev_a["dt"]
+    assert ev_a is not None and ev_b is not None  # set together when not skipped
+    dt = ev_a.dt
     longest = EVAL_HORIZONS[-1]
     k = USER_B_TRANSFER_TRIALS
     b_test = _trial_range(k + 1, result.user_b_trials)
 
     def row(ev, name, label):
-        r = ev["results"][name]
-        return [label] + [r[str(h)]["e_rms"] * 1e3 for h in EVAL_HORIZONS] + [
-            f"{r[str(longest)]['trial_min'] * 1e3:.2f}–{r[str(longest)]['trial_max'] * 1e3:.2f}"]
+        r = ev.results[name]
+        return [label] + [r[h]["e_rms"] * 1e3 for h in EVAL_HORIZONS] + [
+            f"{r[longest]['trial_min'] * 1e3:.2f}–{r[longest]['trial_max'] * 1e3:.2f}"]
 
     def table(ev, label):
         return [row(ev, "model", label)] + [row(ev, base, base) for base in BASELINES]
@@ -96,7 +101,7 @@ def real_recordings_section(result: RealRecordingsResult) -> Section:
     cols = ["predictor"] + [f"{h * dt:.2f} s" for h in EVAL_HORIZONS] + [f"{longest * dt:.2f} s, range over trials"]
     s.paragraphs.append(
         f"The predictor ({result.intent_preset} preset) trained on user-a's recordings, split by trial; errors on its held-out "
-        f"trials ({', '.join(ev_a['trials'])}). Then transferred (LSTM frozen) to user-b with {_trial_range(1, k)} and tested "
+        f"trials ({', '.join(ev_a.trials)}). Then transferred (LSTM frozen) to user-b with {_trial_range(1, k)} and tested "
         f"on {b_test}. Every baseline is scored on the same ticks; the ridge's α and the Kalman filter's noise are chosen on "
         "validation trials split from the training trials (never on the test trials). The shipped default predictor (intent "
         "preset 'default') is an LSTM learning only the residual over that tuned ridge; the claims below say by how much it "
@@ -108,22 +113,22 @@ def real_recordings_section(result: RealRecordingsResult) -> Section:
                      + table(ev_b["M_TL"], "M_TL (transferred)")))
     s.paragraphs.append("user-a, the model against its best tuned baseline: " + "; ".join(comparison_lines(ev_a)))
     s.paragraphs.append(f"user-b {b_test}, M_TL against its best tuned baseline: " + "; ".join(comparison_lines(ev_b["M_TL"], "M_TL")))
-    best = ev_a["best_baseline"]
-    n_train = result.user_a_trials - len(ev_a["trials"])
+    best = ev_a.best_baseline
+    n_train = result.user_a_trials - len(ev_a.trials)
     s.claims.append(Claim(
         "On held-out real user-a data the model is no worse than the best tuned baseline at any horizon",
         all(b["gain"] >= 0 for b in best.values()),
-        "; ".join(f"{int(h) * dt:.2f} s: {b['name']} {b['e_rms'] * 1e3:.3f} mm, model {b['model_e_rms'] * 1e3:.3f} mm "
+        "; ".join(f"{h * dt:.2f} s: {b['name']} {b['e_rms'] * 1e3:.3f} mm, model {b['model_e_rms'] * 1e3:.3f} mm "
                   f"({100 * b['gain']:+.1f} %)" for h, b in best.items()),
         reason="the network adds little over the linear map its skip starts from; with "
         f"{n_train} recordings to train and validate on it can overfit where the validation-tuned ridge does not",
     ))
-    ridge_l, model_l = ev_a["results"]["ridge"][str(longest)]["e_rms"], ev_a["results"]["model"][str(longest)]["e_rms"]
+    ridge_l, model_l = ev_a.results["ridge"][longest]["e_rms"], ev_a.results["model"][longest]["e_rms"]
     s.claims.append(Claim(
         f"On held-out real user-a data the model beats the tuned ridge by at least {100 * RIDGE_MARGIN:.0f} % at "
         f"{longest * dt:.1f} s",
         model_l <= (1 - RIDGE_MARGIN) * ridge_l,
-        f"{longest * dt:.1f} s: model {model_l * 1e3:.3f} mm, ridge (α = {ev_a['baselines']['ridge']['alpha']:.0e}) "
+        f"{longest * dt:.1f} s: model {model_l * 1e3:.3f} mm, ridge (α = {ev_a.baselines['ridge']['alpha']:.0e}) "
         f"{ridge_l * 1e3:.3f} mm: {100 * (ridge_l - model_l) / ridge_l:+.1f} %",
         reason=f"most of the remaining error at {longest * dt:.1f} s is what the person will do next; a tuned linear "
         "predictor of the same window captures nearly all that the window tells",

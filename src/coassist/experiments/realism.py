@@ -191,7 +191,7 @@ def _overlap(sim: list[float], real: list[float]) -> str:
 def summary_table(result: RealismResult) -> str:
     """Markdown table: per statistic, the real range and each preset's simulated range."""
     digits = {"duration": 1, "path_length": 2, "peak_force": 1, "mean_force": 1, "peak_deviation": 3}
-    header = "| statistic | real user-a (n = %d) |" % len(result.real)
+    header = f"| statistic | real user-a (n = {len(result.real)}) |"
     sep = "| --- | --- |"
     for preset in result.sim:
         header += f" sim {preset} |"
@@ -203,7 +203,7 @@ def summary_table(result: RealismResult) -> str:
         real = [r[stat] for r in result.real]
         row = f"| {LABELS[stat]} [{UNITS[stat]}] | {_range(real, digits[stat])} |"
         overlaps = ""
-        for preset, by_task in result.sim.items():
+        for by_task in result.sim.values():
             values = [s[stat] for task in by_task.values() for s in task]
             row += f" {_range(values, digits[stat])} |"
             overlaps += f" {_overlap(values, real)} |"

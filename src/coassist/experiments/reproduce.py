@@ -53,6 +53,7 @@ import numpy as np
 from coassist._io import atomic_write_text
 from coassist.experiments.ablation import ablation_section, run_ablation
 from coassist.experiments.application import application_section, run_application
+from coassist.experiments.iterative import IterativeResult
 from coassist.experiments.pipeline import (
     EVAL_HORIZONS,
     ITERATION_TASKS,
@@ -129,12 +130,14 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
     t0 = time.perf_counter()
     ctx.summary["config"] = asdict(config)
     ctx.stage.run("dMPC study", _stage_sweep, ctx)
-    final_model, iter_time = ctx.stage.run("iterative training", _stage_iterative, ctx)
-    transfer = ctx.stage.run("transfer learning", run_transfer, ctx.ws, final_model, iter_time)
-    it = ctx.summary["iterative"]
+    iterative = ctx.stage.run("iterative training", run_iterative_stage, ctx.ws, ctx.stage.say)
+    ctx.sections.append(iterative_section(iterative))
+    ctx.summary["iterative"] = iterative.summary()
+    final_model = iterative.final_model
+    transfer = ctx.stage.run("transfer learning", run_transfer, ctx.ws, final_model, iterative.iteration_seconds)
     ctx.sections.append(transfer_section(
-        transfer, it["final_model_offline_e_rms"][50], sum(w["trials"] for w in it["work"]),
-        sum(w["windows_trained"] for w in it["work"])))
+        transfer, iterative.final_model_offline_e_rms[50], sum(w["trials"] for w in iterative.work),
+        sum(w["windows_trained"] for w in iterative.work)))
     ctx.summary["transfer"] = transfer.summary()
     application = ctx.stage.run("application scenario", run_application, ctx.ws, final_model,
                                 transfer.transfer_models["board"])
@@ -181,20 +184,20 @@ def headline_section(application, transfer, real, sim_dt: float, ablation) -> Se
     s.tables.append(headline_table(application))
     s.tables.append(headline_rows(ablation))
 
-    def line(where: str, best: dict, model: str, dt: float) -> str:
-        h = max(best, key=lambda k: int(k))
+    def line(where: str, best: dict[int, dict], model: str, dt: float) -> str:
+        h = max(best)
         b = best[h]
         verdict = "helps" if b["gain"] > 0 else "does not help"
-        return (f"{where}: at {int(h) * dt:.2f} s the {model} {verdict} over the best simple baseline ({b['name']}): "
+        return (f"{where}: at {h * dt:.2f} s the {model} {verdict} over the best simple baseline ({b['name']}): "
                 f"{b['model_e_rms'] * 1e3:.2f} vs {b['e_rms'] * 1e3:.2f} mm ({100 * b['gain']:+.1f} %)")
 
     for name, t in transfer.targets.items():
         s.paragraphs.append("Prediction, simulated transfer to " + line(name, t.best_baseline, "transferred model", sim_dt))
     if not real.skipped:
-        s.paragraphs.append("Prediction, real recordings, " + line("user-a held out", real.user_a["best_baseline"], "model",
-                                                                  real.user_a["dt"]))
-        s.paragraphs.append("Prediction, real recordings, " + line("user-b transferred", real.user_b["M_TL"]["best_baseline"],
-                                                                  "transferred model", real.user_b["M_TL"]["dt"]))
+        s.paragraphs.append("Prediction, real recordings, " + line("user-a held out", real.user_a.best_baseline, "model",
+                                                                  real.user_a.dt))
+        s.paragraphs.append("Prediction, real recordings, " + line("user-b transferred", real.user_b["M_TL"].best_baseline,
+                                                                  "transferred model", real.user_b["M_TL"].dt))
     return s
 
 
@@ -249,57 +252,110 @@ def _stage_sweep(ctx: _Context) -> None:
 # ----------------------------------------------------------------------------- 2. iterative training
 
 
-def _stage_iterative(ctx: _Context):
-    """Algorithm 4.1: collect D_k with M_{k−1} in the loop, train M_k; section 2. Returns (M_last, mean s per step)."""
+@dataclass(frozen=True)
+class IterativeStageResult:
+    """The main job's Algorithm 4.1 (section 2): errors in m, horizons in ticks, times in s.
+
+    run : the algorithm's own record (datasets D_k, models M_k, the stop criterion's deltas).
+    labels : "nominal", "M0", …: who predicted in the loop while each dataset was collected.
+    errors : label -> horizon -> in-loop e_RMS, e_MAX (coassist.experiments.pipeline.in_loop_errors).
+    times : per step k, collect_s and train_s.  work : per step k, trials collected and
+        windows trained (machine-independent, unlike times).
+    final_model_offline_e_rms : the last model's e_RMS per horizon on the dataset collected
+        with it in the loop (which it was not trained on).
+    m0_on_d1_e_rms_50, constant_velocity_on_d1_e_rms_50 : M_0 and constant velocity on D_1
+        at 50 ticks (the input shift the skip's shrinkage is chosen for).
+    skip_alpha, trials_per_task, tol : the configuration the section reports.
+    dt : the datasets' tick [s].  iteration_seconds : mean collect + train time of one step.
+    """
+
+    run: IterativeResult
+    labels: tuple[str, ...]
+    errors: dict[str, dict[int, dict[str, float]]]
+    times: tuple[dict[str, Any], ...]
+    work: tuple[dict[str, Any], ...]
+    final_model_offline_e_rms: dict[int, float]
+    m0_on_d1_e_rms_50: float
+    constant_velocity_on_d1_e_rms_50: float
+    skip_alpha: float
+    trials_per_task: int
+    tol: float
+    dt: float
+    iteration_seconds: float
+
+    @property
+    def final_model(self) -> Path:
+        """The last model M_{K−1}: where transfer and the application start from."""
+        return Path(self.run.models[-1])
+
+    def summary(self) -> dict[str, Any]:
+        """summary.json's "iterative" record."""
+        return {
+            "final_model_offline_e_rms": self.final_model_offline_e_rms,
+            "in_loop_errors": self.errors, "deltas_e_rms_50": list(self.run.deltas), "tol": self.tol,
+            "converged_at": self.run.converged_at, "times": list(self.times), "models": [str(m) for m in self.run.models],
+            "m0_on_d1_e_rms_50": self.m0_on_d1_e_rms_50,
+            "constant_velocity_on_d1_e_rms_50": self.constant_velocity_on_d1_e_rms_50, "work": list(self.work),
+        }  # fmt: skip
+
+
+def run_iterative_stage(ws: Workspace, say: Callable[[str], None]) -> IterativeStageResult:
+    """Algorithm 4.1: collect D_k with M_{k−1} in the loop, train M_k, score every model."""
     from coassist.experiments.iterative import iterative_training
     from coassist.intent import evaluate_model, load_model, load_trials
 
-    cfg = ctx.config
+    cfg = ws.config
     folders: dict[int, Path] = {}
 
     def collect(k, model_path):
-        folder, ds = ctx.ws.collect(f"D{k}", tasks=ITERATION_TASKS, trials=cfg.trials_per_task,
-                                    seed=iteration_seed(cfg.seed, k), intent=str(model_path) if model_path else "nominal")
+        folder, ds = ws.collect(f"D{k}", tasks=ITERATION_TASKS, trials=cfg.trials_per_task,
+                                seed=iteration_seed(cfg.seed, k), intent=str(model_path) if model_path else "nominal")
         folders[k] = folder
         return ds
 
     def train(k, dataset, start):
         init = "scratch" if start is None else f"resume:{start}"
-        return ctx.ws.train(f"M{k}", [folders[k]], init=init, epochs=cfg.epochs if start is None else cfg.resume_epochs)
+        return ws.train(f"M{k}", [folders[k]], init=init, epochs=cfg.epochs if start is None else cfg.resume_epochs)
 
     def online(dataset):
         return {h: v["e_rms"] for h, v in in_loop_errors(dataset.trials).items()}
 
     result = iterative_training(collect, train, online, iterations=cfg.iterations, tol=cfg.tol,
-                                criterion_horizon=50, progress=lambda m: ctx.stage.say("  " + m))
-    labels = ["nominal"] + [f"M{k}" for k in range(cfg.iterations)]
+                                criterion_horizon=50, progress=lambda m: say("  " + m))
+    labels = ("nominal", *(f"M{k}" for k in range(cfg.iterations)))
     datasets = [it.dataset for it in result.iterations] + [result.final_dataset]
     errors = {label: in_loop_errors(ds.trials) for label, ds in zip(labels, datasets)}
-    times = [{"k": it.k, "collect_s": it.collect_s, "train_s": it.train_s} for it in result.iterations]
-    iter_time = float(np.mean([t["collect_s"] + t["train_s"] for t in times]))
+    times = tuple({"k": it.k, "collect_s": it.collect_s, "train_s": it.train_s} for it in result.iterations)
     # Measured work, not wall-clock (which depends on the machine's load): trials collected, windows trained.
-    work = [{"k": it.k, "trials": len(it.dataset.trials), "windows_trained": windows_trained(it.model)}
-            for it in result.iterations]
+    work = tuple({"k": it.k, "trials": len(it.dataset.trials), "windows_trained": windows_trained(it.model)}
+                 for it in result.iterations)
     final_eval = evaluate_model(load_model(result.models[-1]), load_trials([folders[cfg.iterations]]), held_out_only=False)
     # The skip's shrinkage is chosen for the input shift between D_k and D_{k+1}: how M_0,
     # trained on D_0, predicts on D_1 (collected with M_0 in the loop).
     shifted = evaluate_model(load_model(result.models[0]), load_trials([folders[1]]), held_out_only=False)
-    m0_on_d1 = shifted["results"]["model"]["50"]["e_rms"]
-    cv_on_d1 = shifted["results"]["constant_velocity"]["50"]["e_rms"]
-    dt = result.final_dataset.trials[0].meta.dt
-    ctx.summary["iterative"] = {
-        "final_model_offline_e_rms": {int(h): v["e_rms"] for h, v in final_eval["results"]["model"].items()},
-        "in_loop_errors": errors, "deltas_e_rms_50": list(result.deltas), "tol": cfg.tol,
-        "converged_at": result.converged_at, "times": times, "models": [str(m) for m in result.models],
-        "m0_on_d1_e_rms_50": m0_on_d1, "constant_velocity_on_d1_e_rms_50": cv_on_d1,
-    }
+    return IterativeStageResult(
+        run=result, labels=labels, errors=errors, times=times, work=work,
+        final_model_offline_e_rms={h: v["e_rms"] for h, v in final_eval.results["model"].items()},
+        m0_on_d1_e_rms_50=shifted.results["model"][50]["e_rms"],
+        constant_velocity_on_d1_e_rms_50=shifted.results["constant_velocity"][50]["e_rms"],
+        skip_alpha=cfg.skip_alpha, trials_per_task=cfg.trials_per_task, tol=cfg.tol,
+        dt=result.final_dataset.trials[0].meta.dt,
+        iteration_seconds=float(np.mean([t["collect_s"] + t["train_s"] for t in times])),
+    )
+
+
+def iterative_section(it: IterativeStageResult) -> Section:
+    """The report's section 2 and its claims."""
+    result, labels, errors, dt = it.run, list(it.labels), it.errors, it.dt
+    iterations = len(result.iterations)
+    m0_on_d1, cv_on_d1 = it.m0_on_d1_e_rms_50, it.constant_velocity_on_d1_e_rms_50
     s = Section("2. Iterative training (Algorithm 4.1, thesis §5.3.1)")
     s.paragraphs.append(
-        f"D0 ({len(ITERATION_TASKS) * cfg.trials_per_task} trials: user 0, handle, {'/'.join(ITERATION_TASKS)}) is collected with the nominal "
+        f"D0 ({len(ITERATION_TASKS) * it.trials_per_task} trials: user 0, handle, {'/'.join(ITERATION_TASKS)}) is collected with the nominal "
         "assumption ŷ_ref,h = y_ref,r; M_k is trained on D_k starting from M_{k−1}; D_{k+1} is collected with M_k in the "
         "loop. Each model's error is the one it achieved in the loop: measured on the dataset collected with it (the "
         "predictions it made at every tick against the measured future poses). In the simulated stages the "
-        f"network's linear skip starts from a strongly shrunk ridge solution (skip_alpha = {cfg.skip_alpha:g}): each model "
+        f"network's linear skip starts from a strongly shrunk ridge solution (skip_alpha = {it.skip_alpha:g}): each model "
         "meets data collected with another model in the loop, and a weakly regularised linear map extrapolates badly "
         f"there (M_0 trained on D_0 and scored on D_1, in this run: {m0_on_d1 * 1000:.1f} mm at {50 * dt:.2f} s; "
         f"constant velocity {cv_on_d1 * 1000:.1f} mm)."
@@ -309,15 +365,15 @@ def _stage_iterative(ctx: _Context):
     s.tables.append(("In-loop e_RMS [m] per horizon, and mean e_MAX at 50 samples (Fig. 5.14, 5.16)",
                      ["model", "5", "10", "20", "50", "e_MAX mean @50 [m]"], rows))
     s.tables.append(("Time per iteration (Table 5.1)", ["iteration", "collect [s]", "train [s]"],
-                     [[t["k"], t["collect_s"], t["train_s"]] for t in times]))
+                     [[t["k"], t["collect_s"], t["train_s"]] for t in it.times]))
     s.paragraphs.append(
         "Stop criterion |e_RMS^{k+1} − e_RMS^k| < "
-        f"{cfg.tol * 1000:.1f} mm at 50 samples: "
+        f"{it.tol * 1000:.1f} mm at 50 samples: "
         + (f"first met between M{result.converged_at} and M{result.converged_at + 1}" if result.converged_at is not None else "not met")
         + f" (successive changes {', '.join(f'{d * 1000:.2f}' for d in result.deltas)} mm); all iterations run, as in the thesis."
     )
     _plot_iterative(s, labels, errors, result, dt)
-    e50 = [errors[f"M{k}"][50]["e_rms"] for k in range(cfg.iterations)]
+    e50 = [errors[f"M{k}"][50]["e_rms"] for k in range(iterations)]
     drops = [a - b for a, b in pairwise(e50)]
     if drops:
         holds = e50[-1] < e50[0] and drops[0] == max(drops) and drops[0] > 0
@@ -329,16 +385,14 @@ def _stage_iterative(ctx: _Context):
             reason="the simulated operator is stationary and the default model small; once the model predicts well, "
             "new in-loop data adds little beyond the first retraining, and training noise is as large as the gains",
         ))
-    grows = all(all(errors[l][a]["e_rms"] < errors[l][b]["e_rms"] for a, b in pairwise(EVAL_HORIZONS))
-                for l in labels[1:])
+    grows = all(all(errors[m][a]["e_rms"] < errors[m][b]["e_rms"] for a, b in pairwise(EVAL_HORIZONS))
+                for m in labels[1:])
     s.claims.append(Claim(
         "e_RMS grows with the prediction horizon", grows,
-        "; ".join(f"{l}: " + " < ".join(f"{errors[l][h]['e_rms'] * 1000:.1f}" for h in EVAL_HORIZONS) + " mm" for l in labels[1:]),
+        "; ".join(f"{m}: " + " < ".join(f"{errors[m][h]['e_rms'] * 1000:.1f}" for h in EVAL_HORIZONS) + " mm" for m in labels[1:]),
         reason="a model predicting short horizons no better than long ones",
     ))
-    ctx.summary["iterative"]["work"] = work
-    ctx.sections.append(s)
-    return result.models[-1], iter_time
+    return s
 
 
 def _plot_iterative(s: Section, labels, errors, result, dt: float) -> None:

@@ -68,7 +68,7 @@ class TargetResult:
     train_s: dict[str, float]
     trials: int  # trials collected to train on
     windows_trained: int  # epochs × training windows of M_TL
-    best_baseline: dict[str, Any]
+    best_baseline: dict[int, dict[str, Any]]  # ModelEvaluation.best_baseline of M_TL
     comparison: tuple[str, ...]  # M_TL against its best tuned baseline, per horizon (prose)
     models: dict[str, Path]  # "transfer", "finetune_all", "scratch"
 
@@ -127,13 +127,13 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
         evals = {"M_prev": evaluate_model(load_model(final_model), test, held_out_only=False)}
         for start, path in outcome.models.items():
             evals[start] = evaluate_model(load_model(path), test, held_out_only=False)
-        table = {label: {h: ev["results"]["model"][str(h)]["e_rms"] for h in EVAL_HORIZONS} for label, ev in evals.items()}
+        table = {label: {h: ev.results["model"][h]["e_rms"] for h in EVAL_HORIZONS} for label, ev in evals.items()}
         for base in BASELINES:
-            table[base] = {h: evals["transfer"]["results"][base][str(h)]["e_rms"] for h in EVAL_HORIZONS}
+            table[base] = {h: evals["transfer"].results[base][h]["e_rms"] for h in EVAL_HORIZONS}
         targets[name] = TargetResult(
             e_rms=table, collect_s=outcome.collect_s, train_s=dict(outcome.train_s),
             trials=len(dataset.trials), windows_trained=windows_trained(outcome.models["transfer"]),
-            best_baseline=evals["transfer"]["best_baseline"], comparison=tuple(comparison_lines(evals["transfer"], "M_TL")),
+            best_baseline=evals["transfer"].best_baseline, comparison=tuple(comparison_lines(evals["transfer"], "M_TL")),
             models=dict(outcome.models),
         )
     return TransferResult(Path(final_model), targets, float(iteration_seconds), cfg.transfer_trials)

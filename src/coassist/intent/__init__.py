@@ -2,7 +2,7 @@
 transfer, evaluation against baselines, and the real-time predictor."""
 
 from coassist.intent.baselines import RidgeBaseline, constant_velocity_prediction, nominal_prediction
-from coassist.intent.evaluation import PREDICTORS, evaluate_model, results_table
+from coassist.intent.evaluation import PREDICTORS, ModelEvaluation, evaluate_model, results_table
 from coassist.intent.features import Scaler, WindowConfig, WindowSet, feature_names, split_trials, trial_features
 from coassist.intent.model import IntentModel, ModelFileError, ModelMismatchError, load_model, save_model
 from coassist.intent.network import IntentNet, NetworkConfig
@@ -37,6 +37,7 @@ __all__ = [
     "nominal_prediction",
     "plot_losses",
     "results_table",
+    "ModelEvaluation",
     "save_model",
     "split_trials",
     "train_model",

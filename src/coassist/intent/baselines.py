@@ -247,7 +247,8 @@ def fit_tuned_baselines(
                               "(features.validation_split); criterion: mean squared position error over the whole horizon"}  # fmt: skip
     if len(trials) < 2:
         record["protocol"] = "untuned: fewer than two training trials, no validation trial"
-        alpha_used, ridge_rec = (fallback_alpha if alpha is None else alpha), {"tuned": False}
+        ridge_rec: dict[str, Any] = {"tuned": False}
+        alpha_used = fallback_alpha if alpha is None else alpha
     else:
         if alpha is None:
             alpha_used, search = tuned or tune_ridge_alpha(trials, ids, window, dt, input_scaler, target_scaler,

@@ -21,7 +21,8 @@ pooled e_RMS there; the model's gain over it is (e_best − e_model) / e_best.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -40,6 +41,7 @@ from coassist.metrics import HORIZONS, prediction_errors
 __all__ = [
     "BASELINES",
     "PREDICTORS",
+    "ModelEvaluation",
     "best_baselines",
     "comparison_lines",
     "evaluate_model",
@@ -48,6 +50,43 @@ __all__ = [
 
 PREDICTORS = ("model", "nominal", "constant_velocity", "constant_acceleration", "ridge")
 BASELINES = PREDICTORS[1:]
+
+
+#: Scores of one predictor at one horizon: e_rms, e_max_mean, e_max_max [m], e_rms_trials
+#: {trial id: e_RMS}, trial_median, trial_min, trial_max [m].
+Scores = dict[str, Any]
+
+
+@dataclass(frozen=True)
+class ModelEvaluation:
+    """What :func:`evaluate_model` measured (errors in m, horizons in ticks).
+
+    trials : the scored trial ids.  skipped : the ids left out (the model trained on them).
+    n_ticks : ticks scored per horizon (the model's, every predictor on the same ones).
+    horizons : the horizons [ticks] reported, ascending.  dt : [s] per tick.
+    baselines : how the baselines were set up (the ridge's α, the Kalman filter's noise, the
+        tuning protocol).
+    results : predictor -> horizon -> :data:`Scores`.
+    best_baseline : horizon -> the best baseline there and the model's gain over it
+        (:func:`best_baselines`).
+    """
+
+    trials: tuple[str, ...]
+    skipped: tuple[str, ...]
+    n_ticks: int
+    horizons: tuple[int, ...]
+    dt: float
+    baselines: dict[str, Any]
+    results: dict[str, dict[int, Scores]]
+    best_baseline: dict[int, dict[str, Any]]
+    unit: str = "m"
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (``coassist evaluate``'s evaluation.json, the report's summary.json);
+        ``json.dumps`` writes the integer horizons as the keys "5", "10", …."""
+        return {"trials": list(self.trials), "skipped": list(self.skipped), "n_ticks": self.n_ticks,
+                "horizons": list(self.horizons), "dt": self.dt, "unit": self.unit, "baselines": self.baselines,
+                "results": self.results, "best_baseline": self.best_baseline}  # fmt: skip
 
 
 def model_kalman(model: IntentModel) -> KalmanCA:
@@ -62,7 +101,7 @@ def evaluate_model(
     *,
     horizons: Sequence[int] = HORIZONS,
     held_out_only: bool = True,
-) -> dict[str, Any]:
+) -> ModelEvaluation:
     """e_RMS and e_MAX per horizon for the model and the baselines, in m.
 
     Parameters
@@ -76,11 +115,9 @@ def evaluate_model(
 
     Returns
     -------
-    dict
-        ``{"trials", "skipped", "n_ticks", "horizons", "dt", "baselines", "results":
-        {predictor: {str(N): {"e_rms", "e_max_mean", "e_max_max", "e_rms_trials":
-        {trial id: e_RMS}, "trial_median", "trial_min", "trial_max"}}}, "best_baseline":
-        {str(N): {...}}}`` — see :func:`best_baselines`.
+    ModelEvaluation
+        Per predictor and horizon N (an int): e_RMS, e_MAX and their spread over trials;
+        per horizon the best baseline (:func:`best_baselines`).
     """
     horizons = [int(h) for h in horizons if int(h) <= model.horizon]
     if not horizons:
@@ -131,7 +168,7 @@ def evaluate_model(
                 per[p][h]["max"].append(e.max)
                 per_trial[p][h][lt.id] = float(e.rms.mean())
         n_ticks += int(np.sum(~mask[: max(0, t.n_samples - max(horizons))]))
-    results: dict[str, dict[str, dict[str, Any]]] = {}
+    results: dict[str, dict[int, Scores]] = {}
     for p in names:
         results[p] = {}
         for h in horizons:
@@ -139,7 +176,7 @@ def evaluate_model(
                 continue
             rms, mx = np.concatenate(per[p][h]["rms"]), np.concatenate(per[p][h]["max"])
             spread = np.array(list(per_trial[p][h].values()))
-            results[p][str(h)] = {
+            results[p][h] = {
                 "e_rms": float(rms.mean()), "e_max_mean": float(mx.mean()), "e_max_max": float(mx.max()),
                 "e_rms_trials": per_trial[p][h], "trial_median": float(np.median(spread)),
                 "trial_min": float(spread.min()), "trial_max": float(spread.max()),
@@ -153,38 +190,29 @@ def evaluate_model(
             "tuned": bool(tuned.get("ridge", {}).get("tuned", False)),
         }
     )
-    result = {
-        "trials": [lt.id for lt in used],
-        "skipped": skipped,
-        "n_ticks": n_ticks,
-        "horizons": horizons,
-        "dt": model.dt,
-        "unit": "m",
-        "baselines": {
-            "ridge": ridge_info,
-            "constant_acceleration": kalman.to_dict(),
-            "protocol": tuned.get(
-                "protocol", "untuned (the model records no baseline tuning)"
-            ),
-        },
-        "results": results,
+    baselines = {
+        "ridge": ridge_info,
+        "constant_acceleration": kalman.to_dict(),
+        "protocol": tuned.get("protocol", "untuned (the model records no baseline tuning)"),
     }
-    result["best_baseline"] = best_baselines(result)
-    return result
+    return ModelEvaluation(trials=tuple(lt.id for lt in used), skipped=tuple(skipped), n_ticks=n_ticks,
+                           horizons=tuple(horizons), dt=model.dt, baselines=baselines, results=results,
+                           best_baseline=best_baselines(results, horizons))  # fmt: skip
 
 
 def best_baselines(
-    result: dict[str, Any], model: str = "model"
-) -> dict[str, dict[str, Any]]:
+    results: Mapping[str, Mapping[int, Scores]], horizons: Sequence[int], model: str = "model"
+) -> dict[int, dict[str, Any]]:
     """Per horizon: the baseline with the lowest pooled e_RMS and how the model compares.
 
-    Returns ``{str(N): {"name", "e_rms", "model_e_rms", "gain", "trials_model_better",
-    "n_trials"}}``; ``gain`` = (e_best − e_model) / e_best (> 0: the model is better),
-    ``trials_model_better`` counts trials whose own e_RMS is lower for the model.
+    ``results`` is :attr:`ModelEvaluation.results`. Returns ``{N: {"name", "e_rms",
+    "model_e_rms", "gain", "trials_model_better", "n_trials"}}``; ``gain`` = (e_best −
+    e_model) / e_best (> 0: the model is better), ``trials_model_better`` counts trials
+    whose own e_RMS is lower for the model.
     """
-    res = result["results"]
-    out: dict[str, dict[str, Any]] = {}
-    for h in (str(h) for h in result["horizons"]):
+    res = results
+    out: dict[int, dict[str, Any]] = {}
+    for h in horizons:
         cands = [(res[b][h]["e_rms"], b) for b in BASELINES if b in res and h in res[b]]
         if not cands or h not in res.get(model, {}):
             continue
@@ -199,8 +227,8 @@ def best_baselines(
     return out
 
 
-def _baseline_label(result: dict[str, Any], name: str) -> str:
-    info = result.get("baselines", {})
+def _baseline_label(result: ModelEvaluation, name: str) -> str:
+    info = result.baselines
     if name == "ridge" and info.get("ridge"):
         r = info["ridge"]
         return f"ridge (α = {r['alpha']:.0e}, {'tuned on validation trials' if r['tuned'] else 'not tuned'})"
@@ -216,38 +244,38 @@ def _mm(metres: float) -> str:
     return f"{1e3 * metres:.3g}"
 
 
-def comparison_lines(result: dict[str, Any], model: str = "model") -> list[str]:
+def comparison_lines(result: ModelEvaluation, model: str = "model") -> list[str]:
     """One line per horizon: the best baseline, its e_RMS, and the model's gain over it, in mm and %."""
-    dt = result["dt"]
+    dt = result.dt
     lines = []
-    for h, b in best_baselines(result, model).items():
+    for h, b in best_baselines(result.results, result.horizons, model).items():
         diff = 1e3 * (b["e_rms"] - b["model_e_rms"])
         verdict = "better" if diff > 0 else "worse" if diff < 0 else "equal"
         lines.append(
-            f"{int(h) * dt:.2f} s: best baseline {_baseline_label(result, b['name'])} e_RMS {_mm(b['e_rms'])} mm; "
+            f"{h * dt:.2f} s: best baseline {_baseline_label(result, b['name'])} e_RMS {_mm(b['e_rms'])} mm; "
             f"{model} {_mm(b['model_e_rms'])} mm: {abs(100 * b['gain']):.1f} % {verdict} ({diff:+.3g} mm), "
             f"{model} better on {b['trials_model_better']} of {b['n_trials']} trials"
         )
     return lines
 
 
-def results_table(result: dict[str, Any], title: str = "") -> Any:
+def results_table(result: ModelEvaluation, title: str = "") -> Any:
     """A rich Table: predictors × e_RMS per horizon with its per-trial range, and mean e_MAX, in mm."""
     from rich.table import Table
 
-    hs = [str(h) for h in result["horizons"]]
-    dt = result["dt"]
-    table = Table(title=(title or f"held-out trials: {len(result['trials'])}, ticks scored: {result['n_ticks']}")
+    hs = result.horizons
+    dt = result.dt
+    table = Table(title=(title or f"held-out trials: {len(result.trials)}, ticks scored: {result.n_ticks}")
                   + " — errors in mm; e_RMS pooled over ticks (min–max over trials)")  # fmt: skip
     table.add_column("predictor")
     for h in hs:
-        table.add_column(f"e_RMS {int(h) * dt:.2f}s [mm]", justify="right")
+        table.add_column(f"e_RMS {h * dt:.2f}s [mm]", justify="right")
     for h in hs:
-        table.add_column(f"e_MAX {int(h) * dt:.2f}s [mm]", justify="right")
+        table.add_column(f"e_MAX {h * dt:.2f}s [mm]", justify="right")
     best = {
-        h: min(r[h]["e_rms"] for r in result["results"].values() if h in r) for h in hs
+        h: min(r[h]["e_rms"] for r in result.results.values() if h in r) for h in hs
     }
-    for p, r in result["results"].items():
+    for p, r in result.results.items():
         cells = []
         for h in hs:
             if h not in r:

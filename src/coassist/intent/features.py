@@ -43,7 +43,6 @@ windows only (one range per feature; one range per axis for targets).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -467,9 +466,3 @@ def _label_series(trial: Trial, label: str) -> np.ndarray:
             f"has no {name}; label 'tool' works on any trial"
         )
     return np.asarray(series, dtype=np.float64)
-
-
-def check_dt(dt: float) -> float:
-    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a finite number > 0 (s), got {dt!r}")
-    return float(dt)

@@ -34,6 +34,7 @@ from safetensors.torch import save as st_save
 from coassist._checks import is_real_number
 from coassist._io import OutputLock, atomic_write_bytes, staged_folder
 from coassist.data import Trial
+from coassist.errors import CoassistError
 from coassist.intent.features import (
     Scaler,
     WindowConfig,
@@ -55,11 +56,11 @@ SIDECAR = "model.json"
 DT_RTOL = 0.01
 
 
-class ModelMismatchError(ValueError):
+class ModelMismatchError(CoassistError, ValueError):
     """The model was trained on other features or another sampling period."""
 
 
-class ModelFileError(ValueError):
+class ModelFileError(CoassistError, ValueError):
     """A model folder that is missing files or inconsistent."""
 
 

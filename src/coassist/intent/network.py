@@ -98,7 +98,7 @@ class IntentNet(nn.Module):
 
     def reset_parameters(self, generator: torch.Generator | None = None) -> None:
         """Xavier/Glorot-uniform weights drawn from ``generator``, zero biases (thesis ref. [25])."""
-        for name, p in self.named_parameters():
+        for p in self.parameters():
             if p.dim() >= 2:
                 nn.init.xavier_uniform_(p, generator=generator)
             else:
@@ -132,10 +132,6 @@ class IntentNet(nn.Module):
 
     def lstm_parameters(self) -> list[nn.Parameter]:
         return [] if self.lstm is None else list(self.lstm.parameters())
-
-    def head_parameters(self) -> list[nn.Parameter]:
-        """Everything but the LSTM: the FC layers and the linear skip (what transfer trains)."""
-        return [p for n, p in self.named_parameters() if not n.startswith("lstm.")]
 
     @torch.no_grad()
     def init_skip(self, weight: torch.Tensor, bias: torch.Tensor) -> None:

@@ -61,8 +61,8 @@ import numpy as np
 import torch
 
 from coassist._checks import as_real_array, check_int, check_optional_int
-from coassist.interfaces import FEATURES, Fault, PlausibilityLimits, prediction_plausible
 from coassist.intent.model import IntentModel
+from coassist.interfaces import FEATURES, Fault, PlausibilityLimits, prediction_plausible
 
 __all__ = [
     "BACKENDS",

@@ -15,6 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from coassist.errors import CoassistError
 from coassist.intent.evaluation import evaluate_model
 from coassist.intent.features import split_trials, validation_split
 from coassist.intent.sources import LabeledTrial
@@ -25,7 +26,7 @@ __all__ = ["StudyMismatchError", "check_storage", "run_study", "train_options"]
 _DATA_KEY = "coassist_trials"  # study user attribute: the fit and validation trial ids
 
 
-class StudyMismatchError(ValueError):
+class StudyMismatchError(CoassistError, ValueError):
     """An existing study was run on other trials than the ones given."""
 
 
@@ -107,7 +108,7 @@ def run_study(
         )
         model = train_model(fit, p, p.train)
         result = evaluate_model(model, val, horizons=(horizon,), held_out_only=False)
-        return result["results"]["model"][str(horizon)]["e_rms"]
+        return result.results["model"][horizon]["e_rms"]
 
     sampler = optuna.samplers.TPESampler(seed=seed)
     study = optuna.create_study(storage=storage, study_name=study_name, direction="minimize", sampler=sampler,

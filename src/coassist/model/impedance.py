@@ -16,7 +16,7 @@ with sampling time dt (eq. 3.5)::
 
     z(k+1) = A_d z(k) + B_d (u_h(k) + u_r(k))
 
-by an exact zero-order hold (the default, DESIGN.md §2) or the bilinear (Tustin)
+by an exact zero-order hold (the default, docs/architecture.md, *Conventions for the math*) or the bilinear (Tustin)
 transform that the thesis group's own code uses.
 """
 
@@ -137,7 +137,7 @@ class ImpedanceModel:
         """State size 2n (position and velocity)."""
         return 2 * self.n_dof
 
-    def with_stiffness(self, K: ArrayLike) -> "ImpedanceModel":
+    def with_stiffness(self, K: ArrayLike) -> ImpedanceModel:
         """The same model with another stiffness (e.g. K = 0 for manual guidance)."""
         return ImpedanceModel(self.M, self.D, K, self.dt, self.discretization)
 

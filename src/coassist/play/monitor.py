@@ -17,7 +17,6 @@ first frame's reference.
 from __future__ import annotations
 
 import dataclasses
-
 from typing import Any
 
 import numpy as np

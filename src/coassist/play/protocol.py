@@ -24,6 +24,7 @@ import math
 from dataclasses import dataclass
 
 from coassist._checks import is_integer, is_real_number
+from coassist.errors import CoassistError
 
 __all__ = ["MAX_MESSAGE_BYTES", "Abort", "InvalidMessage", "Ping", "Pointer", "Start", "parse_message"]
 
@@ -32,7 +33,7 @@ MAX_MESSAGE_BYTES = 512
 _MAX_SEQ = 2**53  # JavaScript's largest exact integer
 
 
-class InvalidMessage(ValueError):
+class InvalidMessage(CoassistError, ValueError):
     """A client message that is dropped; the text says why (counted per reason)."""
 
 

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from coassist._checks import check_int, check_positive_scalar
+from coassist.config import APPLICATION_PRESET
 from coassist.data import Trial, TrialMeta, append_to_dataset, write_dataset
 from coassist.data.store import MANIFEST_NAME, manifest_files, read_dataset
 from coassist.interfaces import FEATURES, TrialContext, fault_names
@@ -78,7 +79,8 @@ class PlayConfig:
     out : the parent folder; the session lives in ``out/user``.
     controllers : the controllers the page offers, from ``assistive``, ``imp``, ``mg``.
     intent : ``nominal`` or a model folder written by ``coassist train``.
-    preset : control preset (default the main job's, thesis-application-dm).
+    preset : control preset (default :data:`coassist.config.APPLICATION_PRESET`, the main job's
+        application preset, safe with a learned predictor in the loop).
     tasks : the protocol's paths, in order (repeated).
     seed : the obstacle of trial i is drawn from seed + i.
     motion_time : [s] the planner's motion time for every path; None: the thesis' per path.
@@ -95,7 +97,7 @@ class PlayConfig:
     out: Path
     controllers: tuple[str, ...] = ("mg", "imp", "assistive")
     intent: str = "nominal"
-    preset: str = "thesis-application-dm"
+    preset: str = APPLICATION_PRESET
     tasks: tuple[str, ...] = TASK_KINDS
     seed: int = 0
     motion_time: float | None = None

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from coassist._checks import is_integer
-from coassist.config import ImpedanceParameters
+from coassist.config import APPLICATION_PRESET, ImpedanceParameters
 from coassist.data import Trial, TrialMeta
 from coassist.interfaces import FEATURES, NAMED_INTENTS, TrialContext
 from coassist.runtime.intent import RealtimeIntent, WindowIntent
@@ -66,7 +66,8 @@ class DriveConfig:
     world : "mujoco" or "ur".  controller : "assistive", "assistive-arbitrated" (α set every
         tick by the simulator's arbitration law), "imp" or "mg".
     task : a task kind (linear, curved, sinusoidal, z).  object : handle, board or heavy.
-    preset : a control preset (default the main job's, thesis-application-dm).
+    preset : a control preset (default :data:`coassist.config.APPLICATION_PRESET`, the main
+        job's application preset, safe with a learned predictor in the loop).
     intent : "nominal", "oracle" (MuJoCo only) or a model folder.
     user : simulated operator index (MuJoCo).  seed : task, operator and sensor seed.
     obstacle : the obstacle the operator goes around (coassist.sim.tasks.OBSTACLES; "small"
@@ -87,7 +88,7 @@ class DriveConfig:
     controller: str = "assistive"
     task: str = "linear"
     object: str = "handle"
-    preset: str = "thesis-application-dm"
+    preset: str = APPLICATION_PRESET
     intent: str = "nominal"
     user: int = 0
     seed: int = 0

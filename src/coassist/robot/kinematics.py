@@ -50,6 +50,7 @@ from numpy.typing import ArrayLike
 # The pure math lives below the runtime, so the loop can use it without the robot extra;
 # re-exported here because it is half of what a user of this module wants.
 from coassist._checks import check_int, check_positive_scalar
+from coassist.errors import CoassistError
 from coassist.spatial import (
     _as_rotation,
     _as_vector,
@@ -310,7 +311,7 @@ class UR5Kinematics:
 # ----------------------------------------------------------------------------
 
 
-class IKConvergenceError(RuntimeError):
+class IKConvergenceError(CoassistError, RuntimeError):
     """:func:`solve_ik` did not reach the requested tolerance."""
 
 

@@ -469,9 +469,6 @@ class MujocoUR5World:
         """Simulate the controller's protective stop: the flag is set and the arm brakes to rest."""
         self.protective_stop = True
 
-    def clear_protective_stop(self) -> None:
-        self.protective_stop = False
-
     def _command_target(self, command: Command) -> np.ndarray:
         """The servo's target joint velocity: command.qd clipped to the joint speed limits,
         zero when stopping; a missing, mis-shaped or non-finite qd is counted and read as zero."""

@@ -128,10 +128,6 @@ class ToolGeometry:
     def mass(self) -> float:
         return float(sum(p.mass for p in self.parts))
 
-    @property
-    def object_mass(self) -> float:
-        return float(sum(p.mass for p in self.parts[1:]))
-
 
 def tool_geometry(tool: str) -> ToolGeometry:
     """The geometry of ``tool`` (one of :data:`TOOLS`), masses from :mod:`coassist.sim.objects`."""

@@ -84,6 +84,7 @@ from typing import Any
 
 import numpy as np
 
+from coassist.errors import CoassistError
 from coassist.runtime.world import Command, RobotState
 from coassist.spatial import rotation_matrix
 
@@ -98,7 +99,7 @@ _MAX_FREQUENCY = 500.0
 _INSTALL_HINT = "the real robot needs ur-rtde: pip install 'coassist[robot]'"
 
 
-class RobotLinkError(ConnectionError):
+class RobotLinkError(CoassistError, ConnectionError):
     """The RTDE link to the robot failed (or the controller stopped taking commands).
 
     A ``ConnectionError``, so a loop can catch it without importing this module.

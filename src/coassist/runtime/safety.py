@@ -249,7 +249,7 @@ class SafetyLimits:
                 if a.shape != (3,) or not np.all(np.isfinite(a)):
                     raise ValueError(f"SafetyLimits.{name} must be 3 finite numbers [m], got {val!r}")
                 box.append(tuple(float(v) for v in a))
-            if not all(l < h for l, h in zip(*box)):
+            if not all(lo < hi for lo, hi in zip(*box)):
                 raise ValueError(f"SafetyLimits.workspace_upper must exceed workspace_lower on every axis, got {box[0]} and {box[1]}")
             object.__setattr__(self, "workspace_lower", box[0])
             object.__setattr__(self, "workspace_upper", box[1])

@@ -53,10 +53,10 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from coassist import spatial as _spatial
 from coassist._checks import check_positive_scalar, is_integer
 from coassist.interfaces import Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
-from coassist import spatial as _spatial
 from coassist.runtime.world import COMMAND_SPACES, Command, RobotState
 
 __all__ = ["ControlTick", "Plan", "TickConfig", "TickOutput", "UPSTREAM_BAD"]

@@ -1,6 +1,6 @@
 """The simulated world: tasks and objects, the simulated operator, the closed loop, batches.
 
-See DESIGN.md §4. Entry points: :func:`run_trial` (one trial from built parts),
+See docs/architecture.md, *The simulated world*. Entry points: :func:`run_trial` (one trial from built parts),
 :class:`TrialSpec` + :func:`run_spec` / :func:`run_trials` (by name, in parallel).
 """
 

@@ -136,7 +136,7 @@ def load_intent_source(spec: str, horizon: int = 50) -> IntentSource:
     if spec == "constant-velocity":
         return ConstantVelocityIntent(horizon)
     try:
-        from coassist.intent import load_intent_source as load_model_source  # type: ignore[attr-defined]
+        from coassist.intent import load_intent_source as load_model_source
     except ImportError as exc:
         raise ValueError(
             f"intent {spec!r} is a model path, but coassist.intent.load_intent_source is not available ({exc})"

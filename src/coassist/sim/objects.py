@@ -1,7 +1,7 @@
 """Objects between the operator's hand and the force sensor, and the sensor itself.
 
-Physics (planar, small yaw angles; DESIGN.md §4)
--------------------------------------------------
+Physics (planar, small yaw angles; docs/architecture.md, *The simulated world*)
+-------------------------------------------------------------------------------------
 The robot renders the admittance M a + D v = F_s + u_r (eq. 3.1, K = 0), where F_s is
 the force the sensor measures. An object of mass m sits between the hand and the
 sensor, so the sensor does not see the hand force F_h but what is left after

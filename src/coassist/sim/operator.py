@@ -1,7 +1,7 @@
 """The simulated operator: intent around the obstacle, an arm that pulls toward it, a population.
 
-Intent (DESIGN.md §4)
----------------------
+Intent (docs/architecture.md, *The simulated world*)
+----------------------------------------------------
 The operator wants the nominal path deformed smoothly around the obstacle, which
 only they can see. Along the arc length s the path is shifted sideways, along the path's
 left normal n_o at the obstacle, by::
@@ -17,8 +17,8 @@ until it does not). The operator times it with their own minimum-jerk pace: thei
 motion starts ``start_delay`` after the planner's and lasts T_plan / pace (pace
 jittered per trial), so the intent can lead or lag the robot's reference.
 
-Arm (thesis eq. 4.1, the physically meaningful sign of DESIGN.md §2)
----------------------------------------------------------------------
+Arm (thesis eq. 4.1, the physical sign of docs/architecture.md's conventions)
+-----------------------------------------------------------------------------
 ::
 
     u_h(k) = K_h(k) [(1 − β) e(k) + β e(k − d)] − C_h ṗ(k) + n(k),   e = x_ref,h − p

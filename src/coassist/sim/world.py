@@ -53,6 +53,7 @@ from coassist.control.arbitration import ArbitratedController, ArbitrationParame
 from coassist.control.controllers import AssistiveController, ImpedanceControl, ManualGuidance
 from coassist.control.game import cooperative_game
 from coassist.data import Trial, TrialMeta
+from coassist.interfaces import FEATURES, NAMED_INTENTS, IntentSource, TrialContext
 from coassist.model.impedance import ImpedanceModel
 from coassist.registry import UnknownNameError
 from coassist.runtime.intent import WindowIntent
@@ -61,7 +62,6 @@ from coassist.runtime.safety import SafetyLayer, SafetyLimits
 from coassist.runtime.tick import ControlTick, Plan
 from coassist.runtime.world import Command, RobotState
 from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
-from coassist.interfaces import FEATURES, NAMED_INTENTS, IntentSource, TrialContext
 from coassist.sim.intent_source import NominalIntent, load_intent_source
 from coassist.sim.objects import CarriedObject, ForceSensor, get_object
 from coassist.sim.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise, operator_profile
@@ -484,7 +484,14 @@ def _run_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
 
 
 def _progress(enabled: bool, total: int):
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     progress = Progress(
         TextColumn("simulating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
