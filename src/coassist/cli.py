@@ -544,7 +544,6 @@ def drive(
     mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap: ROS 2 messages (poses, wrench, prediction, alpha, faults) that Foxglove opens and train reads."),
 ) -> None:
     """Run the assistive controller, IMP or MG on a UR5: in MuJoCo, or on a real arm."""
-    from coassist.data import write_trial
     from coassist.robot.drive import CONTROLLERS, WORLDS, DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.runtime.safety import SafetyLimits

@@ -326,15 +326,15 @@ class WindowSet:
         label = self.window.label
         if label == "tool":
             return self.features[idx][:, :, : self.n_dof]
-        if self._label is None:
+        series, free = self._label, self._free
+        if series is None:
             raise ValueError("this WindowSet was cut without futures (need_future=False)")
-        if label == "intent":
-            return self._label[idx]
+        if label == "intent" or free is None:
+            return series[idx]
         d = self.n_dof
         pose = self.features[idx][:, :, :d]
         # What u_r(k) … u_r(k+i−1) moved the tool from rest at k: z_r(k+i) − C_x A_d^i z_r(k).
-        z_k = self._label[self.ends[sel]]
-        pushed = self._label[idx][:, :, :d] - np.einsum("biam,bm->bia", self._free[self.trial[sel]], z_k)
+        pushed = series[idx][:, :, :d] - np.einsum("biam,bm->bia", free[self.trial[sel]], series[self.ends[sel]])
         return pose - pushed
 
     def raw_targets(self, sel: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ topic (default)                                   type                          
 ``/forward_velocity_controller/commands``         std_msgs/Float64MultiArray         out: joint velocities [rad/s], one per
                                                                                      joint in ``joint_names`` order
 ``~/tool_pose``                                   geometry_msgs/PoseStamped          monitor: TCP pose, ``base_frame``
-``~/prediction``                                  nav_msgs/Path                      monitor: the next 0.4 s of the intent  
+``~/prediction``                                  nav_msgs/Path                      monitor: the next 0.4 s of the intent
 ``~/alpha``                                       std_msgs/Float64                   monitor: the game's α
 ``~/hand_force``                                  geometry_msgs/WrenchStamped        monitor: the hand wrench the tick used
 ``/diagnostics``                                  diagnostic_msgs/DiagnosticArray    monitor: the tick's fault flags
@@ -230,11 +230,11 @@ class Ros2World:
             raise ValueError(f"config must be a Ros2Config, got {type(config).__name__}")
         try:
             import rclpy
-            from rclpy.executors import SingleThreadedExecutor
-            from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
             from diagnostic_msgs.msg import DiagnosticArray
             from geometry_msgs.msg import PoseStamped, WrenchStamped
             from nav_msgs.msg import Path
+            from rclpy.executors import SingleThreadedExecutor
+            from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
             from sensor_msgs.msg import JointState
             from std_msgs.msg import Float64, Float64MultiArray
         except ImportError as exc:
