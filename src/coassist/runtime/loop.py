@@ -135,6 +135,7 @@ def run_loop(
     overrun_of = getattr(world, "last_overrun", None) is not None
     upstream = Fault.NONE
     ended, message, n = "time_limit", "", n_max
+    held_q = np.zeros(nj)  # the joints logged for a glitch at tick 0 (nothing good seen yet)
     for k in range(n_max):
         try:
             t0 = clock()
@@ -165,8 +166,12 @@ def run_loop(
         eff_h[k] = hand_of()[:d] if hand_of is not None else out.wrench
         fault[k] = int(out.fault)
         if nj:
-            joints[k] = state.q
             jvel[k] = out.command.qd if out.command.qd is not None else 0.0
+            q = _finite_or_none(state.q, nj)
+            if q is not None:
+                joints[k] = q
+            else:  # a glitch: the tick flagged it (NONFINITE_STATE); the log holds the last good row
+                joints[k] = joints[k - 1] if k else held_q
         if on_tick is not None:
             on_tick(k, state, out)
         if out.command.stop:
@@ -186,6 +191,15 @@ def run_loop(
         fault=fault[:n], joints=None if joints is None else joints[:n],
         joint_velocity=None if jvel is None else jvel[:n], compute=compute[:n], ended=ended, message=message,
     )
+
+
+def _finite_or_none(x: object, n: int) -> np.ndarray | None:
+    """x as a finite (n,) float64 array, or None (None, wrong shape, NaN or ±inf)."""
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return a if a.shape == (n,) and np.isfinite(a).all() else None
 
 
 def _hand_reader(world: World) -> Callable[[], object] | None:

@@ -63,13 +63,16 @@ limit even as J changes between ticks).
       command is the point of the segment [q̇_b, q̇] closest to q̇ that is inside —
       both ends respect the acceleration limit, so the command does too.
    c. Else (only if q̇⁻ is outside the sets, since q̇_b is a contraction of it toward
-      0), after trying (a) on q̇_b, no command found respects both the velocity limits
-      and the acceleration limit: the layer keeps the velocity limits and scales q̇_b
-      toward 0 until it is inside. This is the documented *residual case*: the step
-      from q̇⁻ then exceeds a dt, but only toward rest —
-      q̇ ∈ conv({0} ∪ {x : ‖x − q̇⁻‖∞ ≤ a dt}) — and it is counted in
-      ``limit_conflicts``. :func:`within_limits` accepts exactly this, and only when
-      q̇⁻ itself violates a velocity set for the current J and pose.
+      0), after trying (a) on q̇_b, no command respects both the state-dependent sets
+      (tool speed with the new J, workspace with the new pose) and the acceleration
+      limit. This is the documented *residual case*: the command is q̇_b, braking at
+      the acceleration limit, inside the joint speed limits, and it is counted in
+      ``limit_conflicts``. The joint speed and acceleration limits hold whatever the
+      state says: a reported pose or J that jumps (a glitch, or a real jump) could
+      otherwise make the layer send a joint step of any size (a 1 m jump of the
+      reported pose once asked for 0.24 rad/s in one tick against 0.064).
+      :func:`within_limits` accepts a tool-speed or workspace excess only here: q̇⁻
+      itself outside that set for the current J and pose, q̇ one step toward rest.
 
    The flags of the violated sets are reported; the command is always finite.
 7. q̇ becomes q̇⁻. Any exception inside the method gives the ramp of q̇⁻ toward 0
@@ -420,25 +423,13 @@ def _violations(b: _Bounds, x: np.ndarray, J: np.ndarray | None, pl: list | None
     return bad
 
 
-def _in_ramp_hull(x: list, prev: list, step: float) -> bool:
-    """x ∈ conv({0} ∪ {y : ‖y − prev‖∞ ≤ step}): some σ ∈ [0, 1] has |x_i − σ prev_i| ≤ σ step.
-
-    Each joint bounds σ linearly: σ (prev_i − step) ≤ x_i ≤ σ (prev_i + step).
-    """
-    lo, hi = 0.0, 1.0
-    for xi, pi in zip(x, prev):
-        for c, upper in ((pi + step, True), (pi - step, False)):
-            # upper: x_i ≤ σ c ; lower: σ c ≤ x_i
-            if c == 0.0:
-                if (upper and xi > 0.0) or (not upper and xi < 0.0):
-                    return False
-                continue
-            r = xi / c
-            if (c > 0.0) == upper:
-                lo = max(lo, r)
-            else:
-                hi = min(hi, r)
-    return lo <= hi + 1e-12
+def _braking(x: list, prev: list, tol: float) -> bool:
+    """x = σ prev for some σ ∈ [0, 1) (to tol per joint): prev slowed down along its own direction."""
+    pp = sum(p * p for p in prev)
+    if pp == 0.0:
+        return False
+    sigma = sum(a * p for a, p in zip(x, prev)) / pp
+    return 0.0 <= sigma < 1.0 and all(abs(a - sigma * p) <= tol for a, p in zip(x, prev))
 
 
 def within_limits(qd, qd_prev, J, pose, limits: SafetyLimits, dt: float, tol: float = _TOL) -> list[str]:
@@ -452,9 +443,10 @@ def within_limits(qd, qd_prev, J, pose, limits: SafetyLimits, dt: float, tol: fl
         of the wrong shape, the tool (or workspace) limits cannot be evaluated and are
         skipped: the layer did not know them either.
 
-    The acceleration limit ‖qd − qd_prev‖∞ ≤ a dt holds, except in the residual case of
-    the module docstring (step 6c): qd_prev itself is outside the velocity sets for
-    this J and pose, and qd is a step of at most a dt from qd_prev scaled toward zero.
+    The joint speed and acceleration limits ‖qd − qd_prev‖∞ ≤ a dt always hold. A tool
+    speed or workspace excess is accepted only in the residual case of the module
+    docstring (step 6c): qd_prev itself violates that set for this J and pose, and qd
+    is a step of at most a dt from qd_prev toward zero.
     The returned strings start with the name of the violated SafetyLimits field.
     """
     with np.errstate(all="ignore"):
@@ -484,12 +476,15 @@ def _within_limits(qd, qd_prev, J, pose, limits, dt, tol):
         xl, pv = x.tolist(), prev.tolist()
         step = max(abs(a - c) for a, c in zip(xl, pv))
         if step > b.acc + tol:
-            residual = _violations(b, prev, Jm, pl, tol) != 0 and _in_ramp_hull(xl, pv, b.acc + tol)
-            if not residual:
-                notes.append(
-                    f"joint_acceleration: a step of {step:.6g} rad/s in one tick, limit {b.acc:.6g} "
-                    f"({limits.joint_acceleration:.6g} rad/s² × {dt:.6g} s)"
-                )
+            notes.append(
+                f"joint_acceleration: a step of {step:.6g} rad/s in one tick, limit {b.acc:.6g} "
+                f"({limits.joint_acceleration:.6g} rad/s² × {dt:.6g} s)"
+            )
+        elif _braking(xl, pv, tol):  # step 6c: braking from a command the new state put outside
+            inherited = _violations(b, prev, Jm, pl, tol)
+            for flag, field in ((_TS, "tool_"), (_WS, "workspace")):
+                if inherited & flag:
+                    notes = [note for note in notes if not note.startswith(field)]
     return notes
 
 
@@ -883,13 +878,9 @@ class SafetyLayer:
         out = self._face_correction(brake, J, pl)
         if feasible(out):
             return out
-        # 6c: the residual case (module docstring): keep the velocity limits
+        # 6c: the residual case (module docstring): brake at the acceleration limit
         self.limit_conflicts += 1
-        sigma = self._segment(np.zeros(self._n), brake, J, pl)
-        out = sigma * brake
-        if _violations(b, out, J, pl, _TOL):  # rounding at the boundary: rest is always inside
-            out = np.zeros(self._n)
-        return out
+        return brake
 
     def _face_correction(self, x: np.ndarray, J: np.ndarray | None, pl: list | None) -> np.ndarray | None:
         """x minus the least-norm joint change that brings the tool velocity toward every face it

@@ -244,6 +244,8 @@ class ControlTick:
         self._R_start = _spatial.rotation_matrix(start[3:6])
         self._J = None
         self._inv_dt = 1.0 / self.dt
+        self._last_pose = start.copy()  # held over a glitch of the state (step())
+        self._last_twist = np.zeros(6)
 
     # ------------------------------------------------------------------ per tick
     def step(self, k: int, state: RobotState, upstream: Fault = Fault.NONE) -> TickOutput:
@@ -254,10 +256,20 @@ class ControlTick:
         reading = self.wrench.update(state.wrench, state.sensor_rotation, state.wrench_seq, state.t)
         hand = reading.hand
         fault |= reading.fault
-        pose = state.tool_pose
-        twist = state.tool_twist
-        if not (np.isfinite(pose).all() and np.isfinite(twist).all()):
+        # a glitch (NaN, ±inf, None, a wrong shape) is flagged and the last good value held,
+        # so the intent, the controller and the log never see it (the safety layer decelerates)
+        pose = _finite6(state.tool_pose)
+        if pose is None:
+            pose = self._last_pose
             fault |= Fault.NONFINITE_STATE
+        else:
+            self._last_pose = pose.copy()
+        twist = _finite6(state.tool_twist)
+        if twist is None:
+            twist = self._last_twist
+            fault |= Fault.NONFINITE_STATE
+        else:
+            self._last_twist = twist.copy()
         x = pose[dofs]
         v = twist[dofs]
         w = hand[dofs]
@@ -316,10 +328,10 @@ class ControlTick:
     def _arm(self, state: RobotState, u_r, w, hand, upstream: Fault) -> tuple[Command, Fault]:
         cfg, d, dofs = self.config, self.d, self.config.dofs
         f = Fault.NONE
-        q = np.asarray(state.q, dtype=float)
+        q = _finite_array(state.q)
         J = self._J
         R_meas = p_meas = None
-        if q.shape == (self.kinematics.n_joints,) and np.isfinite(q).all():
+        if q is not None and q.shape == (self.kinematics.n_joints,):
             try:
                 p_meas, R_meas, J = self.kinematics.forward_and_jacobian(q)
                 self._J = J
@@ -327,8 +339,10 @@ class ControlTick:
                 f |= Fault.INTERNAL_ERROR
         else:
             f |= Fault.NONFINITE_STATE
-        pose = np.asarray(state.tool_pose, dtype=float)
-        pose_ok = pose.shape == (6,) and bool(np.isfinite(pose).all())
+        pose = _finite6(state.tool_pose)
+        pose_ok = pose is not None
+        if pose is None:
+            pose = np.full(6, np.nan)  # the safety layer treats the tick as bad (decelerates)
         bad = (upstream | f) & UPSTREAM_BAD
         qd = np.zeros(self.kinematics.n_joints)
         sf = Fault.NONE
@@ -372,3 +386,18 @@ class ControlTick:
         return Command(qd=qd, twist=twist_cmd, stop=stop), sf
 
 
+
+
+def _finite_array(x) -> np.ndarray | None:
+    """x as a finite float64 array, or None (None, not numeric, NaN or ±inf anywhere)."""
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return a if a.ndim and np.isfinite(a).all() else None
+
+
+def _finite6(x) -> np.ndarray | None:
+    """x as a finite (6,) float64 array, or None."""
+    a = _finite_array(x)
+    return a if a is not None and a.shape == (6,) else None
