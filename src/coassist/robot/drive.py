@@ -35,7 +35,7 @@ from coassist.runtime.intent import RealtimeIntent, WindowIntent
 from coassist.runtime.loop import LoopLog, TargetDwell, run_loop
 from coassist.runtime.safety import SafetyLayer, SafetyLimits
 from coassist.runtime.tick import ControlTick, Plan, TickConfig
-from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
+from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPipeline
 from coassist.sim.hand import SimulatedHand
 from coassist.sim.intent_source import load_intent_source
 from coassist.sim.objects import get_object
@@ -218,7 +218,11 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
             world.operator = operator
         kin = _kinematics_for(world)
         mass, com = world.tool_mass_and_com() if hasattr(world, "tool_mass_and_com") else (0.0, np.zeros(3))
-        wrench = WrenchPipeline(WrenchConfig(tool_mass=mass, tool_com=tuple(com)), dt)
+        # a noise-free simulated sensor repeats exactly on a constant push: no frozen-sensor check there
+        sensor = getattr(world, "sensor", None)
+        noise_free = sensor is not None and not (getattr(sensor, "noise_force", 1.0) or getattr(sensor, "noise_torque", 1.0))
+        wrench = WrenchPipeline(WrenchConfig(tool_mass=mass, tool_com=tuple(com),
+                                             max_frozen_time=None if noise_free else MEASURED_FROZEN_TIME), dt)  # fmt: skip
         limits = config.limits
         if limits.workspace_lower is None:
             lo, hi = workspace_for(ref_abs, start_pose)
