@@ -131,6 +131,7 @@ _DC = int(Fault.DECELERATING)
 _ST = int(Fault.STOPPED)
 _IE = int(Fault.INTERNAL_ERROR)
 _II = int(Fault.INVALID_INPUT)
+_NE = int(Fault.NONFINITE_EFFORT)
 
 #: The flags the layer raises, counted in ``SafetyLayer.interventions``.
 _COUNTED = (
@@ -339,6 +340,18 @@ def _vector(x, n: int) -> np.ndarray | None:
     return a if np.isfinite(a).all() else None
 
 
+def _finite_vector(x, at_least: int) -> np.ndarray | None:
+    """x as a finite float64 1-D array of at least ``at_least`` entries, or None."""
+    try:
+        a = np.asarray(x)
+        if a.dtype.kind not in "fiu" or a.ndim != 1 or a.shape[0] < at_least:
+            return None
+        a = a.astype(np.float64)
+    except Exception:
+        return None
+    return a if np.isfinite(a).all() else None
+
+
 def _matrix(x, n: int) -> np.ndarray | None:
     """x as a finite float64 (6, n) array, or None."""
     try:
@@ -525,6 +538,7 @@ class SafetyLayer:
         self._wmin = limits.min_manipulability
         self._box = limits.workspace_lower is not None
         self._zeros = [0.0] * n
+        self._effort_d = 2  # limit_effort's output length until it has seen a good u_r
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -581,33 +595,63 @@ class SafetyLayer:
                      robot_stop: Fault = Fault.NONE) -> tuple[np.ndarray, Fault, bool]:  # fmt: skip
         """The stage for ``effort`` worlds (the point-mass world renders the admittance itself).
 
-        u_r : (d,) the robot's effort [N]; v : (d,) the tool's velocity [m/s] (x-y first);
-        hand : (6,) the hand wrench [N, N·m]. Returns (effort, flags, stop):
+        u_r : (d,) the robot's effort [N]; v : (≥ 2,) the tool's velocity [m/s] (x-y first);
+        hand : the hand wrench [N, N·m], (6,) or its first (≥ 2,) force entries. Returns
+        (effort, flags, stop), effort a new finite (d,) array:
 
         - a robot stop, or a hand force over ``contact_force``, latches STOPPED: zero
           effort and ``stop`` from now on (the world brakes);
+        - u_r not a finite vector: zero effort, NONFINITE_EFFORT (INVALID_INPUT when it
+          is not a vector at all); v or hand missing, short or non-finite: zero effort,
+          INVALID_INPUT (the contact and speed checks cannot be made);
         - with an upstream fault that zeroed the effort, the effort passes as it is;
         - above ``tool_speed`` the effort may only brake: its component along v, if it
           pushes forward, is removed (TOOL_SPEED_LIMIT).
+
+        Never raises (as the joint stage); d is u_r's length, or the last good call's.
         """
+        try:
+            with np.errstate(all="ignore"):
+                return self._limit_effort(u_r, v, hand, upstream, robot_stop)
+        except Exception:  # pragma: no cover - defensive: nothing above is expected to raise
+            self._count(_IE)
+            return np.zeros(self._effort_d), _fault(_IE), False
+
+    def _limit_effort(self, u_r, v, hand, upstream, robot_stop) -> tuple[np.ndarray, Fault, bool]:
         lim = self.limits
-        f = robot_stop
-        force = math.sqrt(float(hand[0] * hand[0] + hand[1] * hand[1] + hand[2] * hand[2]))
-        if force > lim.contact_force:
-            f |= Fault.CONTACT_FORCE_LIMIT
+        up, rs = _fault_word(upstream), _fault_word(robot_stop)
+        u = _finite_vector(u_r, 1)
+        if u is not None:
+            self._effort_d = u.shape[0]
+        f = (rs or 0) & _ROBOT_STOPS
+        w = _finite_vector(hand, 2)
+        if w is not None and float(np.dot(w[:3], w[:3])) > self._f2:
+            f |= _CF
         if f or self._stopped:
             self.latch_stop()
-            return np.zeros_like(u_r), f | Fault.STOPPED, True
-        if upstream & ZERO_EFFORT_FAULTS:
-            return u_r, f, False
-        speed = math.sqrt(float(v[0] * v[0] + v[1] * v[1]))
-        if speed > lim.tool_speed:
-            along = float(u_r[0] * v[0] + u_r[1] * v[1])
+            self._count(f | _ST)
+            return np.zeros(self._effort_d), _fault(f | _ST), True
+        vel = _finite_vector(v, 2)
+        bad = 0
+        if u is None:
+            bad |= _NE if np.ndim(u_r) == 1 and np.size(u_r) else _II
+        if vel is None or w is None or up is None or rs is None:
+            bad |= _II
+        if bad:
+            self._count(bad & _II)
+            return np.zeros(self._effort_d), _fault(bad), False
+        u = u.copy()
+        if up & int(ZERO_EFFORT_FAULTS):
+            return u, Fault.NONE, False
+        speed = math.sqrt(float(vel[0] * vel[0] + vel[1] * vel[1]))
+        flags = 0
+        if speed > lim.tool_speed and u.shape[0] >= 2:
+            along = float(u[0] * vel[0] + u[1] * vel[1])
             if along > 0.0:
-                u_r = u_r.copy()
-                u_r[:2] -= along / (speed * speed) * v[:2]
-            f |= Fault.TOOL_SPEED_LIMIT
-        return u_r, f, False
+                u[:2] -= along / (speed * speed) * vel[:2]
+                flags |= _TS
+                self._count(flags)
+        return u, _fault(flags), False
 
     # ------------------------------------------------------------------ Cartesian stage
     def limit_twist(self, twist, pose) -> tuple[np.ndarray, Fault]:

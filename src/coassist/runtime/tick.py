@@ -259,17 +259,18 @@ class ControlTick:
         # a glitch (NaN, ±inf, None, a wrong shape) is flagged and the last good value held,
         # so the intent, the controller and the log never see it (the safety layer decelerates)
         pose = _finite6(state.tool_pose)
+        twist = _finite6(state.tool_twist)
+        state_bad = pose is None or twist is None
         if pose is None:
             pose = self._last_pose
-            fault |= Fault.NONFINITE_STATE
         else:
             self._last_pose = pose.copy()
-        twist = _finite6(state.tool_twist)
         if twist is None:
             twist = self._last_twist
-            fault |= Fault.NONFINITE_STATE
         else:
             self._last_twist = twist.copy()
+        if state_bad:
+            fault |= Fault.NONFINITE_STATE
         x = pose[dofs]
         v = twist[dofs]
         w = hand[dofs]
@@ -308,6 +309,8 @@ class ControlTick:
             z[:] = self._za
         u_r, u_h_model, cf = self.controller.step(z, ref_h, ref_r, w)
         fault |= cf
+        if state_bad:  # as the controller does on a non-finite state: no effort from a held one
+            u_r = np.zeros(d)
         if self.command_space == "effort":
             effort, sf, stop = self.safety.limit_effort(u_r, v, hand, fault, self._robot_stop(state))
             command = Command(effort=effort, stop=stop)
