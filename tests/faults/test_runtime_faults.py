@@ -256,6 +256,10 @@ def run_case(case: Case):
             prev = qd[k - 1] if k else np.zeros(6)
             bad = within_limits(qd[k], prev, J, world.poses[k], LIMITS, DT)
             violations.extend(f"tick {k}: {b}" for b in bad)
+            # the acceleration limit by hand, whatever the state said (within_limits allows no exception to it)
+            step = float(np.max(np.abs(qd[k] - prev)))
+            if step > LIMITS.joint_acceleration * DT + 1e-9:
+                violations.append(f"tick {k}: a joint step of {step:.4g} rad/s")
     finally:
         world.close()
     return trial, violations

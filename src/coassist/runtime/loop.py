@@ -13,6 +13,11 @@ real-time world reports that its period overran (``world.last_overrun > 0``). Th
 lands on the next tick because the late command has already been sent; the safety
 layer then decelerates (and stops after too many in a row).
 
+A glitch of the robot state (a NaN, ±inf or ``None`` pose, twist or joint vector) is
+flagged NONFINITE_STATE by the tick, which holds the last good value (the safety layer
+decelerates); the log holds the last good row too, so the run's file stays finite and its
+fault column says which ticks were bad.
+
 The run ends when the termination rule says so (e.g. the tool has dwelt at the
 target), at ``n_max`` ticks, or when the safety layer has stopped the robot (the loop
 then lets the world brake, logs ``ended = "safety_stop"`` and returns; a robot
