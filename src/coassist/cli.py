@@ -494,6 +494,7 @@ def drive(
     yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before a real arm moves (scripts)."),
     view: bool = typer.Option(False, help="Open MuJoCo's passive viewer (needs a display) and run in real time."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
+    overwrite: bool = typer.Option(False, help="Replace an existing trial file at --out."),
 ) -> None:
     """Run the assistive controller, IMP or MG on a UR5: in MuJoCo, or on a real arm."""
     from coassist.data import write_trial
@@ -515,6 +516,8 @@ def drive(
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
     out = _file_out(out, "--out", "trial.parquet")
+    if (out.exists() or out.is_symlink()) and not overwrite:  # a recorded run is not replaced silently
+        _fail(f"--out {out} exists; pass --overwrite to replace it", 2)
     if intent not in ("nominal", "oracle"):
         _set_torch_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
 
