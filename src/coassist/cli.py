@@ -401,14 +401,17 @@ def _print_forces(folder: Path) -> None:
     """The hand's and the robot's f_RMS (eq. 5.9) over a dataset: how much the robot helped."""
     import numpy as np
 
-    from coassist.data import read_dataset
+    from coassist.data.store import manifest_files, read_dataset_trial
     from coassist.metrics import f_rms
 
-    trials = read_dataset(folder).trials
-    hand = float(np.mean([f_rms(t.wrench) for t in trials]))
-    robot = float(np.mean([f_rms(t.effort_r) for t in trials]))
-    console.print(f"f_RMS (eq. 5.9), mean over {len(trials)} trials: hand {hand:.2f} N, robot {robot:.2f} N",
-                  highlight=False)  # fmt: skip
+    # one trial in memory at a time: the summary's memory does not grow with the dataset
+    hand, robot = [], []
+    for i in range(len(manifest_files(folder))):
+        trial = read_dataset_trial(folder, i)
+        hand.append(f_rms(trial.wrench))
+        robot.append(f_rms(trial.effort_r))
+    console.print(f"f_RMS (eq. 5.9), mean over {len(hand)} trials: hand {float(np.mean(hand)):.2f} N, "
+                  f"robot {float(np.mean(robot)):.2f} N", highlight=False)  # fmt: skip
 
 
 @app.command()
