@@ -35,7 +35,7 @@ import numpy as np
 
 from coassist.interfaces import Fault
 from coassist.runtime.tick import ControlTick
-from coassist.runtime.world import RobotState, World
+from coassist.runtime.world import RobotState, World, finite_vector
 
 __all__ = ["LoopLog", "TargetDwell", "run_loop"]
 
@@ -172,7 +172,7 @@ def run_loop(
         fault[k] = int(out.fault)
         if nj:
             jvel[k] = out.command.qd if out.command.qd is not None else 0.0
-            q = _finite_or_none(state.q, nj)
+            q = finite_vector(state.q, nj)
             if q is not None:
                 joints[k] = q
             else:  # a glitch: the tick flagged it (NONFINITE_STATE); the log holds the last good row
@@ -196,15 +196,6 @@ def run_loop(
         fault=fault[:n], joints=None if joints is None else joints[:n],
         joint_velocity=None if jvel is None else jvel[:n], compute=compute[:n], ended=ended, message=message,
     )
-
-
-def _finite_or_none(x: object, n: int) -> np.ndarray | None:
-    """x as a finite (n,) float64 array, or None (None, wrong shape, NaN or ±inf)."""
-    try:
-        a = np.asarray(x, dtype=float)
-    except (TypeError, ValueError):
-        return None
-    return a if a.shape == (n,) and np.isfinite(a).all() else None
 
 
 def _hand_reader(world: World) -> Callable[[], object] | None:

@@ -515,8 +515,9 @@ class SafetyLayer:
     ----------
     interventions : dict flag name → calls (of either stage) that raised it since ``reset``.
     bad_ticks : consecutive bad ticks so far.
-    limit_conflicts : ticks of the residual case (step 6c): the acceleration limit was
-        exceeded, toward rest, to keep a velocity limit after J or the pose jumped.
+    limit_conflicts : ticks of the residual case (step 6c): J or the pose jumped so that
+        no command within the acceleration limit kept the tool speed or workspace set;
+        the layer braked at the acceleration limit.
     """
 
     def __init__(self, limits: SafetyLimits, dt: float, n_joints: int) -> None:

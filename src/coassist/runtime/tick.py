@@ -57,7 +57,7 @@ from coassist._checks import check_positive_scalar, is_integer
 from coassist.interfaces import Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
 from coassist import spatial as _spatial
-from coassist.runtime.world import COMMAND_SPACES, Command, RobotState
+from coassist.runtime.world import COMMAND_SPACES, Command, RobotState, finite_vector
 
 __all__ = ["ControlTick", "Plan", "TickConfig", "TickOutput", "UPSTREAM_BAD"]
 
@@ -258,8 +258,8 @@ class ControlTick:
         fault |= reading.fault
         # a glitch (NaN, ±inf, None, a wrong shape) is flagged and the last good value held,
         # so the intent, the controller and the log never see it (the safety layer decelerates)
-        pose = _finite6(state.tool_pose)
-        twist = _finite6(state.tool_twist)
+        pose = finite_vector(state.tool_pose, 6)
+        twist = finite_vector(state.tool_twist, 6)
         state_bad = pose is None or twist is None
         if pose is None:
             pose = self._last_pose
@@ -331,10 +331,10 @@ class ControlTick:
     def _arm(self, state: RobotState, u_r, w, hand, upstream: Fault) -> tuple[Command, Fault]:
         cfg, d, dofs = self.config, self.d, self.config.dofs
         f = Fault.NONE
-        q = _finite_array(state.q)
+        q = finite_vector(state.q, self.kinematics.n_joints)
         J = self._J
         R_meas = p_meas = None
-        if q is not None and q.shape == (self.kinematics.n_joints,):
+        if q is not None:
             try:
                 p_meas, R_meas, J = self.kinematics.forward_and_jacobian(q)
                 self._J = J
@@ -342,7 +342,7 @@ class ControlTick:
                 f |= Fault.INTERNAL_ERROR
         else:
             f |= Fault.NONFINITE_STATE
-        pose = _finite6(state.tool_pose)
+        pose = finite_vector(state.tool_pose, 6)
         pose_ok = pose is not None
         if pose is None:
             pose = np.full(6, np.nan)  # the safety layer treats the tick as bad (decelerates)
@@ -387,20 +387,3 @@ class ControlTick:
                 for j in self._ctrl_rot:
                     self._za[j] = dr[dofs[j] - 3]
         return Command(qd=qd, twist=twist_cmd, stop=stop), sf
-
-
-
-
-def _finite_array(x) -> np.ndarray | None:
-    """x as a finite float64 array, or None (None, not numeric, NaN or ±inf anywhere)."""
-    try:
-        a = np.asarray(x, dtype=float)
-    except (TypeError, ValueError):
-        return None
-    return a if a.ndim and np.isfinite(a).all() else None
-
-
-def _finite6(x) -> np.ndarray | None:
-    """x as a finite (6,) float64 array, or None."""
-    a = _finite_array(x)
-    return a if a is not None and a.shape == (6,) else None
