@@ -242,7 +242,8 @@ def _alive(pid: int) -> bool:
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc (Linux)")
 def test_an_interrupted_collect_resumes_to_the_same_dataset(tmp_path):
     """SIGKILL after some trials are kept; the same command finishes the run from them, and
-    the dataset equals an uninterrupted run's bit for bit (trials are seeded one by one)."""
+    the dataset equals an uninterrupted run's bit for bit (trials are seeded one by one).
+    Run once more, the same command finds the dataset complete and does nothing."""
     out = tmp_path / "D"
     partial = tmp_path / ".D.partial"
     proc = subprocess.Popen([str(COASSIST), *COLLECT, "--out", str(out), "--workers", "1"], env=_env(),
@@ -261,6 +262,9 @@ def test_an_interrupted_collect_resumes_to_the_same_dataset(tmp_path):
     whole = subprocess.run([str(COASSIST), *COLLECT, "--out", str(tmp_path / "W"), "--workers", "1"], env=_env(),
                            capture_output=True, text=True, timeout=300)  # fmt: skip
     assert whole.returncode == 0, whole.stderr
+    done = subprocess.run([str(COASSIST), *COLLECT, "--out", str(out), "--workers", "1"], env=_env(),
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 0 and "this collection, complete" in " ".join(done.stdout.split()), done.stdout
     a, b = read_dataset(out).trials, read_dataset(tmp_path / "W").trials
     assert len(a) == len(b) == 6
     for ta, tb in zip(a, b):
