@@ -444,14 +444,17 @@ def _print_forces(folder: Path) -> None:
     """The hand's and the robot's f_RMS (eq. 5.9) over a dataset: how much the robot helped."""
     import numpy as np
 
-    from coassist.data import read_dataset
+    from coassist.data.store import manifest_files, read_dataset_trial
     from coassist.metrics import f_rms
 
-    trials = read_dataset(folder).trials
-    hand = float(np.mean([f_rms(t.wrench) for t in trials]))
-    robot = float(np.mean([f_rms(t.effort_r) for t in trials]))
-    console.print(f"f_RMS (eq. 5.9), mean over {len(trials)} trials: hand {hand:.2f} N, robot {robot:.2f} N",
-                  highlight=False)  # fmt: skip
+    # one trial in memory at a time: the summary's memory does not grow with the dataset
+    hand, robot = [], []
+    for i in range(len(manifest_files(folder))):
+        trial = read_dataset_trial(folder, i)
+        hand.append(f_rms(trial.wrench))
+        robot.append(f_rms(trial.effort_r))
+    console.print(f"f_RMS (eq. 5.9), mean over {len(hand)} trials: hand {float(np.mean(hand)):.2f} N, "
+                  f"robot {float(np.mean(robot)):.2f} N", highlight=False)  # fmt: skip
 
 
 @app.command()
@@ -542,6 +545,7 @@ def drive(
     view: bool = typer.Option(False, help="Open MuJoCo's passive viewer (needs a display) and run in real time."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
     mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap: ROS 2 messages (poses, wrench, prediction, alpha, faults) that Foxglove opens and train reads."),
+    overwrite: bool = typer.Option(False, help="Replace an existing trial file at --out."),
 ) -> None:
     """Run the assistive controller, IMP or MG on a UR5: in MuJoCo, or on a real arm."""
     from coassist.robot.drive import CONTROLLERS, WORLDS, DriveConfig
@@ -561,6 +565,8 @@ def drive(
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
     out = _file_out(out, "--out", "trial.parquet")
+    if (out.exists() or out.is_symlink()) and not overwrite:  # a recorded run is not replaced silently
+        _fail(f"--out {out} exists; pass --overwrite to replace it", 2)
     if mcap:
         _need_bags("--mcap")
     if intent not in NAMED_INTENTS:

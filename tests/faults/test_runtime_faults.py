@@ -37,7 +37,7 @@ class FaultyWorld:
         self.inner, self.inject, self.overrun_ticks = inner, inject, overrun_ticks
         self.dt, self.command_space, self.n_joints, self.realtime = inner.dt, "joint_velocity", 6, False
         self.k = 0
-        self.poses: list[np.ndarray] = []
+        self.poses: dict[int, np.ndarray] = {}  # tick → the pose the tick read (drive's first read is overwritten)
         self.last_overrun = 0.0
 
     operator = property(lambda self: self.inner.operator, lambda self, v: setattr(self.inner, "operator", v))
@@ -58,7 +58,7 @@ class FaultyWorld:
         state = self.inner.read()
         if self.inject is not None:
             self.inject(self.k, state)
-        self.poses.append(np.array(state.tool_pose, dtype=float))
+        self.poses[self.k] = np.array(state.tool_pose, dtype=float)
         return state
 
     def apply(self, command):
@@ -147,6 +147,34 @@ def _frozen(start):
     return inject
 
 
+def _frozen_live(start):
+    """A stuck sensor whose messages still arrive: bit-identical values, a counter that moves."""
+    held = {}
+
+    def inject(k, state):
+        if k == start:
+            held["w"] = state.wrench.copy()
+        if k >= start:
+            state.wrench = held["w"].copy()
+
+    return inject
+
+
+def _nan_field(name):
+    def fn(k, s):
+        getattr(s, name)[:] = np.nan
+
+    return fn
+
+
+def _none_state(k, s):
+    s.tool_pose = s.tool_twist = s.q = None
+
+
+def _pose_jump(k, s):
+    s.tool_pose = s.tool_pose + np.array([1.0, 0, 0, 0, 0, 0])  # the reported TCP 1 m away in x; the joints disagree
+
+
 @dataclass
 class Case:
     name: str
@@ -172,6 +200,15 @@ def _spike(k, s):
     s.wrench[0] = 5000.0
 
 
+#: Robot-state glitches: flagged, held, logged; the trial is still written (test below).
+GLITCH_TICKS = range(100, 110)
+GLITCHES = [
+    Case("NaN tool pose (10 ticks)", Fault.NONFINITE_STATE | Fault.DECELERATING, _set(GLITCH_TICKS, _nan_field("tool_pose"))),
+    Case("NaN joints (10 ticks)", Fault.NONFINITE_STATE | Fault.DECELERATING, _set(GLITCH_TICKS, _nan_field("q"))),
+    Case("NaN tool twist (10 ticks)", Fault.NONFINITE_STATE | Fault.DECELERATING, _set(GLITCH_TICKS, _nan_field("tool_twist"))),
+    Case("state None (1 tick)", Fault.NONFINITE_STATE | Fault.DECELERATING, _set(GLITCH_TICKS[:1], _none_state)),
+]
+
 CASES = [
     Case("NaN wrench (10 ticks)", Fault.NONFINITE_WRENCH | Fault.DECELERATING, _set(range(100, 110), _nan)),
     Case("±inf wrench (10 ticks)", Fault.NONFINITE_WRENCH | Fault.DECELERATING, _set(range(100, 110), _inf)),
@@ -191,6 +228,11 @@ CASES = [
          operator=ScriptedForce.steps([(0.0, (40.0, 0, 0, 0, 0, 0)), (1.2, (0, 0, 0, 0, 0, 0))])),  # fmt: skip
     Case("50 consecutive deadline misses", Fault.DEADLINE_MISS | Fault.DECELERATING | Fault.STOPPED,
          overrun=range(100, 150), stops=True),  # fmt: skip
+    Case("frozen sensor, live counter (hand lets go at 0.8 s)", Fault.SENSOR_STALE | Fault.DECELERATING | Fault.STOPPED,
+         _frozen_live(50), operator=ScriptedForce.steps([(0.0, (15.0, 0, 0, 0, 0, 0)), (0.8, (0, 0, 0, 0, 0, 0))]),
+         stops=True),  # fmt: skip
+    Case("reported pose jumps +1 m in x (20 ticks)", Fault.WORKSPACE_LIMIT, _set(range(100, 120), _pose_jump)),
+    *GLITCHES,
 ]
 
 
@@ -214,6 +256,10 @@ def run_case(case: Case):
             prev = qd[k - 1] if k else np.zeros(6)
             bad = within_limits(qd[k], prev, J, world.poses[k], LIMITS, DT)
             violations.extend(f"tick {k}: {b}" for b in bad)
+            # the acceleration limit by hand, whatever the state said (within_limits allows no exception to it)
+            step = float(np.max(np.abs(qd[k] - prev)))
+            if step > LIMITS.joint_acceleration * DT + 1e-9:
+                violations.append(f"tick {k}: a joint step of {step:.4g} rad/s")
     finally:
         world.close()
     return trial, violations
@@ -227,6 +273,24 @@ def test_fault_is_flagged_and_no_command_leaves_the_limits(case):
     seen = Fault(int(np.bitwise_or.reduce(trial.fault)))
     assert seen & case.expect == case.expect, f"expected {case.expect!r}, saw {seen!r}"
     assert (trial.meta.extra["ended"] == "safety_stop") == case.stops, trial.meta.extra["ended"]
+
+
+@pytest.mark.parametrize("case", GLITCHES, ids=[c.name for c in GLITCHES])
+def test_a_state_glitch_is_held_and_the_file_says_which_ticks(case, tmp_path):
+    """drive() returns the trial, it is written and read back, and its fault column flags
+    NONFINITE_STATE on exactly the glitch's ticks; a bad pose or joint row holds the last good one."""
+    from coassist.data import read_trial, write_trial
+
+    trial, _ = run_case(case)
+    back = read_trial(write_trial(trial, tmp_path / "t.parquet"))
+    rows = list(GLITCH_TICKS[:1] if case.name.startswith("state None") else GLITCH_TICKS)
+    assert np.flatnonzero(back.fault & int(Fault.NONFINITE_STATE)).tolist() == rows
+    if "pose" in case.name or "None" in case.name:
+        for k in rows:
+            np.testing.assert_array_equal(back.pose[k], back.pose[rows[0] - 1])
+    if "joints" in case.name or "None" in case.name:
+        for k in rows:
+            np.testing.assert_array_equal(back.joints[k], back.joints[rows[0] - 1])
 
 
 if __name__ == "__main__":

@@ -343,8 +343,9 @@ def test_reset_ramps_from_the_given_velocity():
 
 
 # ---------------------------------------------------------------------- the residual case
-def test_jacobian_jump_keeps_the_velocity_limits():
-    """q̇⁻ was inside for the old J but J grew ×20: the layer keeps the tool speed, toward rest."""
+def test_jacobian_jump_brakes_at_the_acceleration_limit():
+    """q̇⁻ was inside for the old J but J grew ×20: no command within the acceleration limit
+    keeps the tool speed, so the layer brakes at that limit (step 6c), never beyond it."""
     lim = SafetyLimits(min_manipulability=0.0)
     layer = SafetyLayer(lim, DT, 6)
     J = 0.1 * I6
@@ -353,6 +354,10 @@ def test_jacobian_jump_keeps_the_velocity_limits():
     assert flags & Fault.TOOL_SPEED_LIMIT
     assert within_limits(out, prev, 20 * J, POSE, lim, DT) == []  # accepted as the residual case
     assert layer.limit_conflicts == 1 and parallel(out, prev) and np.all(out < prev)
+    # one margin acceleration step toward rest (hand: m a dt = 0.98 · 8 · 0.008)
+    assert np.max(np.abs(out - prev)) == pytest.approx(lim.margin * lim.joint_acceleration * DT, rel=1e-12)
+    # a command that speeds up along the violated set is not braking: rejected
+    assert within_limits(1.01 * prev, prev, 20 * J, POSE, lim, DT)
     # a milder jump (+5 %) while the request turns: the ramp toward the new target would
     # still be too fast, one braking step is not; the acceleration limit is kept (6b)
     layer.reset()

@@ -106,7 +106,9 @@ def saturate(u: np.ndarray, limit: np.ndarray) -> tuple[np.ndarray, bool]:
     ratio = np.max(np.abs(u) / limit)
     if ratio <= 1.0:
         return u, False
-    return u / ratio, True
+    # u / ratio can land one ulp past the limit (the division rounds up): clip that ulp,
+    # which moves the direction by a relative 1e-16 at most
+    return np.clip(u / ratio, -limit, limit), True
 
 
 class _GuardedController:

@@ -11,8 +11,12 @@ One trial = one Parquet file. Columns, for the d controlled DOFs named
     prediction_<ax>                        fixed_size_list<float64>[H]   optional
 
 The :class:`~coassist.data.trial.TrialMeta` is JSON in the Arrow schema metadata under
-``coassist.trial_meta``, next to ``coassist.format_version``. Values are stored as
-raw float64, so a read gives back the written arrays bit for bit.
+``coassist.trial_meta``, next to ``coassist.format_version`` and ``coassist.sha256``, a
+SHA-256 of the columns' values written with them: a read recomputes it, so bytes
+damaged inside a page that Parquet still decodes (into a 6e307 N wrench) are refused.
+Files written before the checksum load with a plausibility check only (every value
+within :data:`PLAUSIBLE_MAGNITUDE`). Values are stored as raw float64, so a read gives
+back the written arrays bit for bit.
 
 A dataset (the thesis' D_k, Algorithm 4.1) is a folder of trial files plus
 ``manifest.json`` (id, description, the trial files with their meta, creation time,
@@ -72,6 +76,11 @@ __all__ = [
 AXES = ("x", "y", "z", "rx", "ry", "rz")[:MAX_DOF]
 META_KEY = b"coassist.trial_meta"
 VERSION_KEY = b"coassist.format_version"
+#: SHA-256 of the columns' values (:func:`_table_checksum`), recorded at write time.
+CHECKSUM_KEY = b"coassist.sha256"
+#: Largest magnitude of any value in a trial [SI units]: 1000 km, 1 MN, 1e6 s. Finite
+#: values beyond it (a wrench of 6e307 N from damaged bytes) are not a recording.
+PLAUSIBLE_MAGNITUDE = 1e6
 FORMAT_VERSION = 1
 MANIFEST_NAME = "manifest.json"
 DATASET_FORMAT = "coassist.dataset"
@@ -119,8 +128,22 @@ def _trial_table(trial: Trial) -> pa.Table:
             cols[f"prediction_{AXES[j]}"] = pa.FixedSizeListArray.from_arrays(flat, horizon)
     table = pa.table(cols)
     return table.replace_schema_metadata(
-        {META_KEY: trial.meta.to_json().encode(), VERSION_KEY: str(FORMAT_VERSION).encode()}
+        {META_KEY: trial.meta.to_json().encode(), VERSION_KEY: str(FORMAT_VERSION).encode(),
+         CHECKSUM_KEY: _table_checksum(table).encode()}  # fmt: skip
     )
+
+
+def _table_checksum(table: pa.Table) -> str:
+    """SHA-256 over every column's name and values (the float64/int64 bytes, in order),
+    so a read can tell damaged bytes that Parquet itself decoded into other numbers."""
+    h = hashlib.sha256()
+    for name in table.column_names:
+        col = table.column(name).combine_chunks()
+        if pa.types.is_fixed_size_list(col.type):
+            col = col.flatten()
+        h.update(name.encode())
+        h.update(np.ascontiguousarray(col.to_numpy(zero_copy_only=False)).tobytes())
+    return h.hexdigest()
 
 
 def write_trial(trial: Trial, path: str | os.PathLike[str]) -> Path:
@@ -233,6 +256,21 @@ def read_trial(path: str | os.PathLike[str]) -> Trial:
             values = col.flatten().to_numpy(zero_copy_only=False)
             per_axis.append(values.reshape(len(col), horizon))
         kwargs["prediction"] = np.stack(per_axis, axis=-1)
+    # after the structure's checks, so a missing column is named as such
+    recorded = md.get(CHECKSUM_KEY)  # files written before the checksum have none: plausibility only
+    try:
+        actual = None if recorded is None else _table_checksum(table)
+    except (pa.ArrowException, ValueError) as exc:
+        raise TrialFileError(f"{path}: columns cannot be read ({exc})") from None
+    if recorded is not None and recorded.decode("ascii", "replace") != actual:
+        raise TrialFileError(f"{path}: the values do not match the checksum written with them (damaged bytes)")
+    for name, value in kwargs.items():
+        if isinstance(value, np.ndarray) and value.dtype.kind == "f":
+            with np.errstate(invalid="ignore"):
+                big = np.abs(value) > PLAUSIBLE_MAGNITUDE  # NaN (an unused prediction row) is not big
+            if big.any():
+                raise TrialFileError(f"{path}: {name} holds {value[big].flat[0]:.3g}, beyond any recording "
+                                     f"(|value| <= {PLAUSIBLE_MAGNITUDE:g} in SI units); damaged bytes?")  # fmt: skip
     try:
         return Trial(**kwargs)
     except ValueError as exc:

@@ -13,12 +13,24 @@ leaves the old model or the new one, never a mix. :func:`load_model` validates t
 sidecar, checks the weights against its hash and refuses a model whose features or dt
 differ from what the caller expects (:class:`ModelMismatchError`); every defect of the
 files is one :class:`ModelFileError` naming the file.
+
+Tampering with the sidecar. The weights file's safetensors metadata records
+``sidecar_sha256``, a SHA-256 of the sidecar's numeric and structural content (features,
+dt, window, network, both scalers' ranges, the ridge's hash; not the descriptive
+history). An edit of ``model.json`` alone (a ``target_scaler`` ×30 once made the robot
+push 100 N) no longer matches it and the model is refused. Models saved before this
+record (no ``sidecar_sha256`` in their weights) still load with every field checked as
+before, and a warning is logged: re-save them to get the check. Before any
+tensor is allocated the network's size is checked against the weights file (a float32
+parameter is 4 bytes), so ``hidden`` = 100 000 is one error, not a 160 GB allocation;
+a sidecar nested too deep or larger than :data:`MAX_SIDECAR_BYTES` is refused unparsed.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -54,6 +66,14 @@ RIDGE = "ridge.safetensors"
 SIDECAR = "model.json"
 #: Relative tolerance on dt when checking a model against a controller or data.
 DT_RTOL = 0.01
+#: Largest model.json read [bytes] (a real one, history included, is tens of kB).
+MAX_SIDECAR_BYTES = 16 * 2**20
+#: The sidecar fields covered by ``sidecar_sha256`` (module docstring).
+_HASHED = ("features", "n_dof", "dt", "history", "horizon", "window", "network", "input_scaler", "target_scaler",
+           "ridge_sha256")  # fmt: skip
+_SIDECAR_HASH_KEY = "sidecar_sha256"
+
+log = logging.getLogger(__name__)
 
 
 class ModelMismatchError(CoassistError, ValueError):
@@ -229,10 +249,13 @@ def save_model(
     """
     folder = Path(folder)
     state = {k: v.detach().cpu().contiguous() for k, v in model.net.state_dict().items()}
-    weights = st_save(state)
     ridge = st_save(model.ridge.state_dict()) if model.ridge is not None else None
-    text = json.dumps(model.sidecar(_sha256(weights), None if ridge is None else _sha256(ridge)), indent=1,
-                      allow_nan=False)  # fmt: skip
+    meta = model.sidecar("", None if ridge is None else _sha256(ridge))
+    # the hash of the content as load_model will parse it back (JSON round trip)
+    sidecar_hash = _sidecar_hash(json.loads(json.dumps(meta, allow_nan=False)))
+    weights = st_save(state, metadata={_SIDECAR_HASH_KEY: sidecar_hash})
+    meta["weights_sha256"] = _sha256(weights)
+    text = json.dumps(meta, indent=1, allow_nan=False)
     files = {WEIGHTS: weights, **({RIDGE: ridge} if ridge is not None else {}), **dict(extra_files or {})}
     files[SIDECAR] = (text + "\n").encode("utf-8")
     if folder.exists() and not folder.is_dir():
@@ -258,7 +281,11 @@ def read_sidecar(folder: str | os.PathLike[str]) -> dict[str, Any]:
     if not path.is_file():
         raise _fail(path, f"not found (is {folder} a model folder?)")
     try:
+        if path.stat().st_size > MAX_SIDECAR_BYTES:
+            raise _fail(path, f"larger than {MAX_SIDECAR_BYTES // 2**20} MiB: not a model sidecar")
         meta = json.loads(path.read_bytes().decode("utf-8"))
+    except RecursionError:
+        raise _fail(path, "JSON nested too deeply: not a model sidecar") from None
     except UnicodeDecodeError as exc:
         raise _fail(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except json.JSONDecodeError as exc:
@@ -283,6 +310,47 @@ def read_sidecar(folder: str | os.PathLike[str]) -> dict[str, Any]:
         if not (isinstance(value, str) or (key == "ridge_sha256" and value is None)):
             raise _fail(path, f"{key!r} must be a hex digest, got {json.dumps(value)}")
     return meta
+
+
+def _sidecar_hash(meta: Mapping[str, Any]) -> str:
+    """SHA-256 of the sidecar's numeric and structural content (:data:`_HASHED`), canonical JSON."""
+    content = {k: meta[k] for k in _HASHED if k in meta}
+    return _sha256(json.dumps(content, sort_keys=True, separators=(",", ":"), allow_nan=False).encode("utf-8"))
+
+
+def _safetensors_metadata(raw: bytes) -> dict[str, Any]:
+    """The ``__metadata__`` of a safetensors file's header ({} when absent or unreadable:
+    the parser then names the damage)."""
+    try:
+        n = int.from_bytes(raw[:8], "little")
+        if len(raw) < 8 + n:
+            return {}
+        header = json.loads(raw[8 : 8 + n].decode("utf-8"))
+        meta = header.get("__metadata__") if isinstance(header, dict) else None
+    except (ValueError, RecursionError):
+        return {}
+    return meta if isinstance(meta, dict) else {}
+
+
+def _warn_legacy(folder: Path) -> None:
+    log.warning("%s was saved without a sidecar hash: model.json cannot be checked for edits; re-save it", folder)
+
+
+def _n_parameters(cfg: NetworkConfig) -> int:
+    """Parameters of ``IntentNet(cfg)``, from its sizes alone (nothing allocated).
+
+    LSTM layer l: 4h (in_l + h) weights + 8h biases (in_0 = n_features, else h); each
+    linear layer a → b: a b + b; the skip: skip_inputs · n_outputs + n_outputs.
+    """
+    n, h = 0, cfg.hidden
+    if cfg.lstm_layers:
+        for layer in range(cfg.lstm_layers):
+            n += 4 * h * ((cfg.n_features if layer == 0 else h) + h) + 8 * h
+        widths = (h, *cfg.fc, cfg.n_outputs)
+        n += sum(a * b + b for a, b in zip(widths[:-1], widths[1:]))
+    if cfg.skip_inputs:
+        n += cfg.skip_inputs * cfg.n_outputs + cfg.n_outputs
+    return n
 
 
 def _tensors(path: Path, raw: bytes) -> dict[str, torch.Tensor]:
@@ -328,6 +396,11 @@ def load_model(
     weights_path = folder / WEIGHTS
     if not weights_path.is_file():
         raise _fail(weights_path, "not found")
+    n_params = _n_parameters(net_cfg)
+    size = weights_path.stat().st_size
+    if 4 * n_params > size:  # before any allocation: the network must fit its float32 weights
+        raise _fail(sidecar, f"the network {json.dumps(meta['network'])} has {n_params} parameters "
+                             f"({4 * n_params} bytes as float32) but {WEIGHTS} holds {size} bytes")  # fmt: skip
     raw = weights_path.read_bytes()
     if _sha256(raw) != meta["weights_sha256"]:
         raise _fail(weights_path, f"does not match the hash in {SIDECAR} (files from different saves?)")
@@ -346,8 +419,14 @@ def load_model(
             ridge = RidgeBaseline.from_state_dict(_tensors(ridge_path, rraw), window, in_scaler, out_scaler, model_dt)
         except (KeyError, TypeError, ValueError, RuntimeError) as exc:
             raise _fail(ridge_path, f"tensors do not fit the ridge baseline: {exc}") from None
+    recorded = _safetensors_metadata(raw).get(_SIDECAR_HASH_KEY)
+    if recorded is None:
+        _warn_legacy(folder)
+    elif recorded != _sidecar_hash(meta):
+        raise _fail(sidecar, f"its content does not match the hash recorded in {WEIGHTS} at save time "
+                             "(edited after saving?); restore it or retrain")  # fmt: skip
     skip = {"format", "features", "n_dof", "dt", "history", "horizon", "window", "network", "input_scaler",
-            "target_scaler", "weights_sha256", "ridge_sha256", "predicts"}  # fmt: skip
+            "target_scaler", "weights_sha256", "ridge_sha256", _SIDECAR_HASH_KEY, "predicts"}  # fmt: skip
     info = {k: v for k, v in meta.items() if k not in skip}
     try:
         model = IntentModel(net, window, in_scaler, out_scaler, model_dt, info, ridge)

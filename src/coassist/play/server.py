@@ -15,7 +15,10 @@ live link. The control loop runs in the session's own thread
 
 Security: the server binds 127.0.0.1 unless told otherwise; a non-loopback bind requires
 a token, which the websocket must present (``/ws?token=…``, compared in constant time).
-A websocket whose ``Origin`` is not this server's own is refused (a web page elsewhere
+A request whose ``Host`` is not one this server was started for is refused
+(:func:`host_allowed`: against DNS rebinding, where a page on another site re-points its
+own name at 127.0.0.1 and sends ``Host`` and ``Origin`` both naming itself), and a
+websocket whose ``Origin`` is not the server's own is refused (a web page elsewhere
 cannot drive the robot through the person's browser). Frames above
 :data:`WS_MAX_SIZE` bytes close the link at the protocol level.
 """
@@ -43,12 +46,63 @@ from coassist.play.protocol import (
 )
 from coassist.play.session import PlaySession
 
-__all__ = ["Hub", "PlayServer", "create_app", "is_loopback"]
+__all__ = ["Hub", "PlayServer", "create_app", "host_allowed", "is_loopback"]
 
 #: Messages a second one page may send before the rest of that second is dropped.
 MAX_RATE = 1000
 #: Largest websocket frame the server reads at all [bytes]; larger ones close the link.
 WS_MAX_SIZE = 65536
+
+
+def _split_host(header: str) -> tuple[str, int | None] | None:
+    """A Host header's (name, port): ``name``, ``name:port``, ``[v6]`` or ``[v6]:port``; None when malformed."""
+    header = header.strip().lower()
+    if header.startswith("["):
+        name, sep, rest = header[1:].partition("]")
+        if not sep or (rest and not rest.startswith(":")):
+            return None
+        port_text = rest[1:] if rest else None
+    else:
+        name, sep, port_text = header.rpartition(":")
+        if not sep:
+            name, port_text = header, None
+    if not name:
+        return None
+    if port_text is None:
+        return name, None
+    if not port_text.isdigit() or len(port_text) > 5:
+        return None
+    return name, int(port_text)
+
+
+def _is_ip(name: str) -> bool:
+    try:
+        ipaddress.ip_address(name)
+    except ValueError:
+        return False
+    return True
+
+
+def host_allowed(header: str | None, bind_host: str, port: int) -> bool:
+    """Whether a request's ``Host`` header names this server (bound to ``bind_host:port``).
+
+    The port must be the server's. The name must be an IP address literal or
+    ``localhost`` — names no attacker can point elsewhere — and for a loopback bind a
+    loopback one; for a bind to a specific address, that address (or this machine's
+    host name for 0.0.0.0 / ::, where the page may be opened by name). Any other name
+    is what DNS rebinding sends: ``evil.example`` resolved to 127.0.0.1.
+    """
+    parsed = _split_host(header or "")
+    if parsed is None:
+        return False
+    name, p = parsed
+    if (p if p is not None else 80) != port:
+        return False
+    if is_loopback(bind_host):
+        return is_loopback(name)
+    if bind_host in ("0.0.0.0", "::"):
+        return _is_ip(name) or name == "localhost" or name in {socket.gethostname().lower(), socket.getfqdn().lower()}
+    return name == bind_host.lower() or (_is_ip(name) and ipaddress.ip_address(name) == ipaddress.ip_address(bind_host))
 
 
 def is_loopback(host: str) -> bool:
@@ -121,14 +175,17 @@ class Hub:
         }  # fmt: skip
 
 
-def create_app(session: PlaySession, *, token: str | None = None, frame_rate: float | None = None):
+def create_app(session: PlaySession, *, bind: tuple[str, int], token: str | None = None,
+               frame_rate: float | None = None):  # fmt: skip
     """The Starlette app of ``session`` (module docstring).
 
+    bind : (host, port) the server listens on; a request whose ``Host`` does not name it
+    (:func:`host_allowed`) gets 421 (the page) or a closed websocket.
     token : required on /ws when given.  frame_rate : [1/s] send frames at most this often
     (None: every control period, the default; a fixed 30/s is the benchmark's naive baseline).
     """
     from starlette.applications import Starlette
-    from starlette.responses import HTMLResponse
+    from starlette.responses import HTMLResponse, PlainTextResponse
     from starlette.routing import Mount, Route, WebSocketRoute
     from starlette.staticfiles import StaticFiles
     from starlette.websockets import WebSocket, WebSocketDisconnect
@@ -138,10 +195,17 @@ def create_app(session: PlaySession, *, token: str | None = None, frame_rate: fl
     hub = Hub(session)
     bounds, controllers = session.bounds, session.config.controllers
 
+    bind_host, bind_port = bind
+
     async def index(request):
+        if not host_allowed(request.headers.get("host"), bind_host, bind_port):
+            return PlainTextResponse("unknown host", status_code=421)
         return HTMLResponse(page, headers={"Cache-Control": "no-store"})
 
     async def ws_endpoint(websocket: WebSocket) -> None:
+        if not host_allowed(websocket.headers.get("host"), bind_host, bind_port):
+            await websocket.close(code=1008)
+            return
         presented = websocket.query_params.get("token", "").encode("utf-8", "surrogatepass")
         if token is not None and not secrets.compare_digest(presented, token.encode("utf-8")):
             await websocket.close(code=1008)
@@ -249,7 +313,6 @@ class PlayServer:
         if not is_loopback(host) and not token:
             raise ValueError(f"binding {host} (not this machine only) needs a token: pass --token or let coassist make one")
         self.session, self.host, self.token = session, host, token
-        self.app = create_app(session, token=token, frame_rate=frame_rate)
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._sock = socket.socket(family, socket.SOCK_STREAM)
         self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -259,6 +322,7 @@ class PlayServer:
             self._sock.close()
             raise ValueError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
         self.port = int(self._sock.getsockname()[1])
+        self.app = create_app(session, bind=(host, self.port), token=token, frame_rate=frame_rate)
         config = uvicorn.Config(self.app, log_level="warning", access_log=False, ws="websockets-sansio",
                                 ws_max_size=WS_MAX_SIZE, ws_per_message_deflate=False, lifespan="off")  # fmt: skip
         self._server = uvicorn.Server(config)

@@ -13,6 +13,11 @@ real-time world reports that its period overran (``world.last_overrun > 0``). Th
 lands on the next tick because the late command has already been sent; the safety
 layer then decelerates (and stops after too many in a row).
 
+A glitch of the robot state (a NaN, ±inf or ``None`` pose, twist or joint vector) is
+flagged NONFINITE_STATE by the tick, which holds the last good value (the safety layer
+decelerates); the log holds the last good row too, so the run's file stays finite and its
+fault column says which ticks were bad.
+
 The run ends when the termination rule says so (e.g. the tool has dwelt at the
 target), at ``n_max`` ticks, or when the safety layer has stopped the robot (the loop
 then lets the world brake, logs ``ended = "safety_stop"`` and returns; a robot
@@ -30,7 +35,7 @@ import numpy as np
 
 from coassist.interfaces import Fault
 from coassist.runtime.tick import ControlTick
-from coassist.runtime.world import RobotState, World
+from coassist.runtime.world import RobotState, World, finite_vector
 
 __all__ = ["LoopLog", "TargetDwell", "run_loop"]
 
@@ -135,6 +140,7 @@ def run_loop(
     overrun_of = getattr(world, "last_overrun", None) is not None
     upstream = Fault.NONE
     ended, message, n = "time_limit", "", n_max
+    held_q = np.zeros(nj)  # the joints logged for a glitch at tick 0 (nothing good seen yet)
     for k in range(n_max):
         try:
             t0 = clock()
@@ -165,8 +171,12 @@ def run_loop(
         eff_h[k] = hand_of()[:d] if hand_of is not None else out.wrench
         fault[k] = int(out.fault)
         if nj:
-            joints[k] = state.q
             jvel[k] = out.command.qd if out.command.qd is not None else 0.0
+            q = finite_vector(state.q, nj)
+            if q is not None:
+                joints[k] = q
+            else:  # a glitch: the tick flagged it (NONFINITE_STATE); the log holds the last good row
+                joints[k] = joints[k - 1] if k else held_q
         if on_tick is not None:
             on_tick(k, state, out)
         if out.command.stop:

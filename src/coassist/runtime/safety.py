@@ -63,13 +63,16 @@ limit even as J changes between ticks).
       command is the point of the segment [q̇_b, q̇] closest to q̇ that is inside —
       both ends respect the acceleration limit, so the command does too.
    c. Else (only if q̇⁻ is outside the sets, since q̇_b is a contraction of it toward
-      0), after trying (a) on q̇_b, no command found respects both the velocity limits
-      and the acceleration limit: the layer keeps the velocity limits and scales q̇_b
-      toward 0 until it is inside. This is the documented *residual case*: the step
-      from q̇⁻ then exceeds a dt, but only toward rest —
-      q̇ ∈ conv({0} ∪ {x : ‖x − q̇⁻‖∞ ≤ a dt}) — and it is counted in
-      ``limit_conflicts``. :func:`within_limits` accepts exactly this, and only when
-      q̇⁻ itself violates a velocity set for the current J and pose.
+      0), after trying (a) on q̇_b, no command respects both the state-dependent sets
+      (tool speed with the new J, workspace with the new pose) and the acceleration
+      limit. This is the documented *residual case*: the command is q̇_b, braking at
+      the acceleration limit, inside the joint speed limits, and it is counted in
+      ``limit_conflicts``. The joint speed and acceleration limits hold whatever the
+      state says: a reported pose or J that jumps (a glitch, or a real jump) could
+      otherwise make the layer send a joint step of any size (a 1 m jump of the
+      reported pose once asked for 0.24 rad/s in one tick against 0.064).
+      :func:`within_limits` accepts a tool-speed or workspace excess only here: q̇⁻
+      itself outside that set for the current J and pose, q̇ one step toward rest.
 
    The flags of the violated sets are reported; the command is always finite.
 7. q̇ becomes q̇⁻. Any exception inside the method gives the ramp of q̇⁻ toward 0
@@ -128,6 +131,7 @@ _DC = int(Fault.DECELERATING)
 _ST = int(Fault.STOPPED)
 _IE = int(Fault.INTERNAL_ERROR)
 _II = int(Fault.INVALID_INPUT)
+_NE = int(Fault.NONFINITE_EFFORT)
 
 #: The flags the layer raises, counted in ``SafetyLayer.interventions``.
 _COUNTED = (
@@ -336,6 +340,18 @@ def _vector(x, n: int) -> np.ndarray | None:
     return a if np.isfinite(a).all() else None
 
 
+def _finite_vector(x, at_least: int) -> np.ndarray | None:
+    """x as a finite float64 1-D array of at least ``at_least`` entries, or None."""
+    try:
+        a = np.asarray(x)
+        if a.dtype.kind not in "fiu" or a.ndim != 1 or a.shape[0] < at_least:
+            return None
+        a = a.astype(np.float64)
+    except Exception:
+        return None
+    return a if np.isfinite(a).all() else None
+
+
 def _matrix(x, n: int) -> np.ndarray | None:
     """x as a finite float64 (6, n) array, or None."""
     try:
@@ -420,25 +436,13 @@ def _violations(b: _Bounds, x: np.ndarray, J: np.ndarray | None, pl: list | None
     return bad
 
 
-def _in_ramp_hull(x: list, prev: list, step: float) -> bool:
-    """x ∈ conv({0} ∪ {y : ‖y − prev‖∞ ≤ step}): some σ ∈ [0, 1] has |x_i − σ prev_i| ≤ σ step.
-
-    Each joint bounds σ linearly: σ (prev_i − step) ≤ x_i ≤ σ (prev_i + step).
-    """
-    lo, hi = 0.0, 1.0
-    for xi, pi in zip(x, prev):
-        for c, upper in ((pi + step, True), (pi - step, False)):
-            # upper: x_i ≤ σ c ; lower: σ c ≤ x_i
-            if c == 0.0:
-                if (upper and xi > 0.0) or (not upper and xi < 0.0):
-                    return False
-                continue
-            r = xi / c
-            if (c > 0.0) == upper:
-                lo = max(lo, r)
-            else:
-                hi = min(hi, r)
-    return lo <= hi + 1e-12
+def _braking(x: list, prev: list, tol: float) -> bool:
+    """x = σ prev for some σ ∈ [0, 1) (to tol per joint): prev slowed down along its own direction."""
+    pp = sum(p * p for p in prev)
+    if pp == 0.0:
+        return False
+    sigma = sum(a * p for a, p in zip(x, prev)) / pp
+    return 0.0 <= sigma < 1.0 and all(abs(a - sigma * p) <= tol for a, p in zip(x, prev))
 
 
 def within_limits(qd, qd_prev, J, pose, limits: SafetyLimits, dt: float, tol: float = _TOL) -> list[str]:
@@ -452,9 +456,10 @@ def within_limits(qd, qd_prev, J, pose, limits: SafetyLimits, dt: float, tol: fl
         of the wrong shape, the tool (or workspace) limits cannot be evaluated and are
         skipped: the layer did not know them either.
 
-    The acceleration limit ‖qd − qd_prev‖∞ ≤ a dt holds, except in the residual case of
-    the module docstring (step 6c): qd_prev itself is outside the velocity sets for
-    this J and pose, and qd is a step of at most a dt from qd_prev scaled toward zero.
+    The joint speed and acceleration limits ‖qd − qd_prev‖∞ ≤ a dt always hold. A tool
+    speed or workspace excess is accepted only in the residual case of the module
+    docstring (step 6c): qd_prev itself violates that set for this J and pose, and qd
+    is a step of at most a dt from qd_prev toward zero.
     The returned strings start with the name of the violated SafetyLimits field.
     """
     with np.errstate(all="ignore"):
@@ -484,12 +489,15 @@ def _within_limits(qd, qd_prev, J, pose, limits, dt, tol):
         xl, pv = x.tolist(), prev.tolist()
         step = max(abs(a - c) for a, c in zip(xl, pv))
         if step > b.acc + tol:
-            residual = _violations(b, prev, Jm, pl, tol) != 0 and _in_ramp_hull(xl, pv, b.acc + tol)
-            if not residual:
-                notes.append(
-                    f"joint_acceleration: a step of {step:.6g} rad/s in one tick, limit {b.acc:.6g} "
-                    f"({limits.joint_acceleration:.6g} rad/s² × {dt:.6g} s)"
-                )
+            notes.append(
+                f"joint_acceleration: a step of {step:.6g} rad/s in one tick, limit {b.acc:.6g} "
+                f"({limits.joint_acceleration:.6g} rad/s² × {dt:.6g} s)"
+            )
+        elif _braking(xl, pv, tol):  # step 6c: braking from a command the new state put outside
+            inherited = _violations(b, prev, Jm, pl, tol)
+            for flag, field in ((_TS, "tool_"), (_WS, "workspace")):
+                if inherited & flag:
+                    notes = [note for note in notes if not note.startswith(field)]
     return notes
 
 
@@ -507,8 +515,9 @@ class SafetyLayer:
     ----------
     interventions : dict flag name → calls (of either stage) that raised it since ``reset``.
     bad_ticks : consecutive bad ticks so far.
-    limit_conflicts : ticks of the residual case (step 6c): the acceleration limit was
-        exceeded, toward rest, to keep a velocity limit after J or the pose jumped.
+    limit_conflicts : ticks of the residual case (step 6c): J or the pose jumped so that
+        no command within the acceleration limit kept the tool speed or workspace set;
+        the layer braked at the acceleration limit.
     """
 
     def __init__(self, limits: SafetyLimits, dt: float, n_joints: int) -> None:
@@ -530,6 +539,7 @@ class SafetyLayer:
         self._wmin = limits.min_manipulability
         self._box = limits.workspace_lower is not None
         self._zeros = [0.0] * n
+        self._effort_d = 2  # limit_effort's output length until it has seen a good u_r
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -586,33 +596,63 @@ class SafetyLayer:
                      robot_stop: Fault = Fault.NONE) -> tuple[np.ndarray, Fault, bool]:  # fmt: skip
         """The stage for ``effort`` worlds (the point-mass world renders the admittance itself).
 
-        u_r : (d,) the robot's effort [N]; v : (d,) the tool's velocity [m/s] (x-y first);
-        hand : (6,) the hand wrench [N, N·m]. Returns (effort, flags, stop):
+        u_r : (d,) the robot's effort [N]; v : (≥ 2,) the tool's velocity [m/s] (x-y first);
+        hand : the hand wrench [N, N·m], (6,) or its first (≥ 2,) force entries. Returns
+        (effort, flags, stop), effort a new finite (d,) array:
 
         - a robot stop, or a hand force over ``contact_force``, latches STOPPED: zero
           effort and ``stop`` from now on (the world brakes);
+        - u_r not a finite vector: zero effort, NONFINITE_EFFORT (INVALID_INPUT when it
+          is not a vector at all); v or hand missing, short or non-finite: zero effort,
+          INVALID_INPUT (the contact and speed checks cannot be made);
         - with an upstream fault that zeroed the effort, the effort passes as it is;
         - above ``tool_speed`` the effort may only brake: its component along v, if it
           pushes forward, is removed (TOOL_SPEED_LIMIT).
+
+        Never raises (as the joint stage); d is u_r's length, or the last good call's.
         """
+        try:
+            with np.errstate(all="ignore"):
+                return self._limit_effort(u_r, v, hand, upstream, robot_stop)
+        except Exception:  # pragma: no cover - defensive: nothing above is expected to raise
+            self._count(_IE)
+            return np.zeros(self._effort_d), _fault(_IE), False
+
+    def _limit_effort(self, u_r, v, hand, upstream, robot_stop) -> tuple[np.ndarray, Fault, bool]:
         lim = self.limits
-        f = robot_stop
-        force = math.sqrt(float(hand[0] * hand[0] + hand[1] * hand[1] + hand[2] * hand[2]))
-        if force > lim.contact_force:
-            f |= Fault.CONTACT_FORCE_LIMIT
+        up, rs = _fault_word(upstream), _fault_word(robot_stop)
+        u = _finite_vector(u_r, 1)
+        if u is not None:
+            self._effort_d = u.shape[0]
+        f = (rs or 0) & _ROBOT_STOPS
+        w = _finite_vector(hand, 2)
+        if w is not None and float(np.dot(w[:3], w[:3])) > self._f2:
+            f |= _CF
         if f or self._stopped:
             self.latch_stop()
-            return np.zeros_like(u_r), f | Fault.STOPPED, True
-        if upstream & ZERO_EFFORT_FAULTS:
-            return u_r, f, False
-        speed = math.sqrt(float(v[0] * v[0] + v[1] * v[1]))
-        if speed > lim.tool_speed:
-            along = float(u_r[0] * v[0] + u_r[1] * v[1])
+            self._count(f | _ST)
+            return np.zeros(self._effort_d), _fault(f | _ST), True
+        vel = _finite_vector(v, 2)
+        bad = 0
+        if u is None:
+            bad |= _NE if np.ndim(u_r) == 1 and np.size(u_r) else _II
+        if vel is None or w is None or up is None or rs is None:
+            bad |= _II
+        if bad:
+            self._count(bad & _II)
+            return np.zeros(self._effort_d), _fault(bad), False
+        u = u.copy()
+        if up & int(ZERO_EFFORT_FAULTS):
+            return u, Fault.NONE, False
+        speed = math.sqrt(float(vel[0] * vel[0] + vel[1] * vel[1]))
+        flags = 0
+        if speed > lim.tool_speed and u.shape[0] >= 2:
+            along = float(u[0] * vel[0] + u[1] * vel[1])
             if along > 0.0:
-                u_r = u_r.copy()
-                u_r[:2] -= along / (speed * speed) * v[:2]
-            f |= Fault.TOOL_SPEED_LIMIT
-        return u_r, f, False
+                u[:2] -= along / (speed * speed) * vel[:2]
+                flags |= _TS
+                self._count(flags)
+        return u, _fault(flags), False
 
     # ------------------------------------------------------------------ Cartesian stage
     def limit_twist(self, twist, pose) -> tuple[np.ndarray, Fault]:
@@ -883,13 +923,9 @@ class SafetyLayer:
         out = self._face_correction(brake, J, pl)
         if feasible(out):
             return out
-        # 6c: the residual case (module docstring): keep the velocity limits
+        # 6c: the residual case (module docstring): brake at the acceleration limit
         self.limit_conflicts += 1
-        sigma = self._segment(np.zeros(self._n), brake, J, pl)
-        out = sigma * brake
-        if _violations(b, out, J, pl, _TOL):  # rounding at the boundary: rest is always inside
-            out = np.zeros(self._n)
-        return out
+        return brake
 
     def _face_correction(self, x: np.ndarray, J: np.ndarray | None, pl: list | None) -> np.ndarray | None:
         """x minus the least-norm joint change that brings the tool velocity toward every face it

@@ -57,7 +57,8 @@ from coassist import spatial as _spatial
 from coassist._checks import check_positive_scalar, is_integer
 from coassist.interfaces import Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
-from coassist.runtime.world import COMMAND_SPACES, Command, RobotState
+from coassist import spatial as _spatial
+from coassist.runtime.world import COMMAND_SPACES, Command, RobotState, finite_vector
 
 __all__ = ["ControlTick", "Plan", "TickConfig", "TickOutput", "UPSTREAM_BAD"]
 
@@ -244,6 +245,8 @@ class ControlTick:
         self._R_start = _spatial.rotation_matrix(start[3:6])
         self._J = None
         self._inv_dt = 1.0 / self.dt
+        self._last_pose = start.copy()  # held over a glitch of the state (step())
+        self._last_twist = np.zeros(6)
 
     # ------------------------------------------------------------------ per tick
     def step(self, k: int, state: RobotState, upstream: Fault = Fault.NONE) -> TickOutput:
@@ -254,9 +257,20 @@ class ControlTick:
         reading = self.wrench.update(state.wrench, state.sensor_rotation, state.wrench_seq, state.t)
         hand = reading.hand
         fault |= reading.fault
-        pose = state.tool_pose
-        twist = state.tool_twist
-        if not (np.isfinite(pose).all() and np.isfinite(twist).all()):
+        # a glitch (NaN, ±inf, None, a wrong shape) is flagged and the last good value held,
+        # so the intent, the controller and the log never see it (the safety layer decelerates)
+        pose = finite_vector(state.tool_pose, 6)
+        twist = finite_vector(state.tool_twist, 6)
+        state_bad = pose is None or twist is None
+        if pose is None:
+            pose = self._last_pose
+        else:
+            self._last_pose = pose.copy()
+        if twist is None:
+            twist = self._last_twist
+        else:
+            self._last_twist = twist.copy()
+        if state_bad:
             fault |= Fault.NONFINITE_STATE
         x = pose[dofs]
         v = twist[dofs]
@@ -296,6 +310,8 @@ class ControlTick:
             z[:] = self._za
         u_r, u_h_model, cf = self.controller.step(z, ref_h, ref_r, w)
         fault |= cf
+        if state_bad:  # as the controller does on a non-finite state: no effort from a held one
+            u_r = np.zeros(d)
         if self.command_space == "effort":
             effort, sf, stop = self.safety.limit_effort(u_r, v, hand, fault, self._robot_stop(state))
             command = Command(effort=effort, stop=stop)
@@ -316,10 +332,10 @@ class ControlTick:
     def _arm(self, state: RobotState, u_r, w, hand, upstream: Fault) -> tuple[Command, Fault]:
         cfg, d, dofs = self.config, self.d, self.config.dofs
         f = Fault.NONE
-        q = np.asarray(state.q, dtype=float)
+        q = finite_vector(state.q, self.kinematics.n_joints)
         J = self._J
         R_meas = p_meas = None
-        if q.shape == (self.kinematics.n_joints,) and np.isfinite(q).all():
+        if q is not None:
             try:
                 p_meas, R_meas, J = self.kinematics.forward_and_jacobian(q)
                 self._J = J
@@ -327,8 +343,10 @@ class ControlTick:
                 f |= Fault.INTERNAL_ERROR
         else:
             f |= Fault.NONFINITE_STATE
-        pose = np.asarray(state.tool_pose, dtype=float)
-        pose_ok = pose.shape == (6,) and bool(np.isfinite(pose).all())
+        pose = finite_vector(state.tool_pose, 6)
+        pose_ok = pose is not None
+        if pose is None:
+            pose = np.full(6, np.nan)  # the safety layer treats the tick as bad (decelerates)
         bad = (upstream | f) & UPSTREAM_BAD
         qd = np.zeros(self.kinematics.n_joints)
         sf = Fault.NONE
@@ -370,5 +388,3 @@ class ControlTick:
                 for j in self._ctrl_rot:
                     self._za[j] = dr[dofs[j] - 3]
         return Command(qd=qd, twist=twist_cmd, stop=stop), sf
-
-

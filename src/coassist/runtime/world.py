@@ -27,7 +27,9 @@ from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["COMMAND_SPACES", "Command", "HandOperator", "RobotState", "World"]
+from coassist._checks import as_real_array
+
+__all__ = ["COMMAND_SPACES", "Command", "HandOperator", "RobotState", "World", "finite_vector"]
 
 CommandSpace = Literal["joint_velocity", "effort"]
 COMMAND_SPACES: tuple[str, ...] = ("joint_velocity", "effort")
@@ -62,6 +64,15 @@ class RobotState:
     wrench_seq: int = 0
     protective_stop: bool = False
     emergency_stop: bool = False
+
+
+def finite_vector(x: object, n: int) -> np.ndarray | None:
+    """A state field as a finite float64 (n,) array, or None (a glitch: None, not numeric,
+    another shape, NaN or ±inf anywhere); the loop and the tick hold the last good value then."""
+    a = as_real_array(x)
+    if a is None or a.shape != (n,) or not np.isfinite(a).all():
+        return None
+    return a
 
 
 @dataclass(slots=True)

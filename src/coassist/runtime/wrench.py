@@ -11,7 +11,8 @@ counter and the tick time. It returns :class:`WrenchReading`: the hand wrench
 Stages, in order::
 
     1. validate      w_raw not 6 finite reals         → 0, NONFINITE_WRENCH / INVALID_INPUT
-    2. stale         seq unchanged for > max_sample_age → 0, SENSOR_STALE
+    2. stale         seq unchanged for > max_sample_age, or new samples
+                     bit-identical for > max_frozen_time → 0, SENSOR_STALE
     3. spike         |w_raw,i| > 1.5·range, or |Δw_raw,i| > spike_jump (sample to sample)
                                                        → hold, WRENCH_SPIKE
     4. saturation    |w_raw,i| ≥ range                  → hold, SENSOR_SATURATED
@@ -74,13 +75,16 @@ from numpy.typing import ArrayLike
 from coassist._checks import check_int, is_real_number
 from coassist.interfaces import Fault
 
-__all__ = ["WrenchConfig", "WrenchPipeline", "WrenchReading", "payload_wrench"]
+__all__ = ["MEASURED_FROZEN_TIME", "WrenchConfig", "WrenchPipeline", "WrenchReading", "payload_wrench"]
 
 log = logging.getLogger(__name__)
 
 #: A reading beyond this multiple of the sensor's range cannot be physical (a corrupted
 #: packet, a 5 kN value): it is a spike however long it lasts.
 IMPLAUSIBLE_RANGE_FACTOR = 1.5
+#: WrenchConfig.max_frozen_time for a measured sensor [s]: a real F/T sensor's noise moves
+#: some channel every sample, so 0.1 s of bit-identical samples is a stuck sensor.
+MEASURED_FROZEN_TIME = 0.1
 #: Relative margin under the range at which a channel counts as saturated (the sensor
 #: clips exactly at its range; float noise must not hide it).
 _SATURATION_MARGIN = 1e-6
@@ -158,6 +162,17 @@ class WrenchConfig:
     spike_jump_torque : the same for a torque channel [N·m], > 0.
     spike_hold : number of consecutive samples a jump must persist to be accepted as a
         real step, ≥ 1 (the first ``spike_hold − 1`` are rejected; 1: no jump test).
+    max_frozen_time : longest time [s] the sensor may send new samples (``seq`` moving)
+        whose six values are bit-identical to the previous sample's before it counts as
+        stale (a stuck sensor with a live counter), > 0, or None to turn the check off.
+        A real force/torque sensor is never bit-identical from sample to sample: its
+        noise (FT300 ≈ 0.05 N rms, several counts of its resolution) moves some channel
+        every sample, so :data:`MEASURED_FROZEN_TIME` = 0.1 s (10 samples at 100 Hz) of
+        identical values is never noise, and it bounds how long a stuck 15 N can drive
+        the admittance; the arm worlds (``robot.drive``: the real UR, MuJoCo with sensor
+        noise) set it. The default None is for noise-free inputs, which repeat exactly
+        on a constant push (the point-mass world, the browser hand, a MuJoCo sensor with
+        zero noise, synthetic signals).
     zero_samples : number of accepted samples averaged by
         :meth:`WrenchPipeline.request_zero` to measure the bias, ≥ 1 (25: 0.25 s at 100 Hz).
     """
@@ -174,6 +189,7 @@ class WrenchConfig:
     spike_jump_force: float = 150.0
     spike_jump_torque: float = 15.0
     spike_hold: int = 3
+    max_frozen_time: float | None = None
     zero_samples: int = 25
 
     def __post_init__(self) -> None:
@@ -193,6 +209,11 @@ class WrenchConfig:
             if value <= 0.0:
                 raise ValueError(f"{name(field)} must be > 0, got {value!r}")
             put(field, value)
+        if self.max_frozen_time is not None:
+            value = _finite_float(self.max_frozen_time, name("max_frozen_time"))
+            if value <= 0.0:
+                raise ValueError(f"{name('max_frozen_time')} must be > 0 or None, got {value!r}")
+            put("max_frozen_time", value)
         if self.cutoff_hz is not None:
             value = _finite_float(self.cutoff_hz, name("cutoff_hz"))
             if value <= 0.0:
@@ -278,6 +299,7 @@ class WrenchPipeline:
         # 1 ns of slack: a tick time on an exact multiple of max_sample_age must not be
         # decided by float rounding of k·dt.
         self._max_age = c.max_sample_age + 1e-9
+        self._max_frozen = None if c.max_frozen_time is None else c.max_frozen_time + 1e-9
         self._bias = _ZERO6
         self._error_logged = False
         self.reset()
@@ -294,6 +316,9 @@ class WrenchPipeline:
         self._cand_n = 0  # consecutive, mutually consistent jump samples so far
         self._seq: object = None
         self._seq_t = 0.0  # tick time at which the current seq was first seen
+        self._last_raw: tuple[float, ...] | None = None  # the previous new sample's raw values
+        self._same_t = 0.0  # tick time of the first sample with those values
+        self._frozen = False  # those values have repeated for longer than max_frozen_time
         self._zero_left = 0
         self._zero_n = 0
         self._zero_sum = [0.0] * 6
@@ -422,7 +447,15 @@ class WrenchPipeline:
             if s != s:
                 fault |= Fault.NONFINITE_WRENCH
 
-        # --- 2. stale sensor
+        # --- 2. stale sensor: no new sample, or new samples that repeat bit for bit
+        if new and not fault and self._max_frozen is not None:
+            if w == self._last_raw:
+                self._frozen = t - self._same_t > self._max_frozen
+            else:
+                self._last_raw = w
+                self._same_t = t
+                self._frozen = False
+        stale = stale or self._frozen  # also on the ticks between samples, until the values move
         if stale:
             fault |= Fault.SENSOR_STALE
         if fault:

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Sequence
 from dataclasses import asdict
 from pathlib import Path
 
 from coassist._checks import check_int
 from coassist.data import DatasetWriter
-from coassist.data.store import FORMAT_VERSION, digest
+from coassist.data.store import FORMAT_VERSION, MANIFEST_NAME, digest
 from coassist.interfaces import NAMED_INTENTS
 from coassist.sim.world import TrialSpec, run_trials
 
@@ -68,8 +69,9 @@ def collect_dataset(
     written as soon as it finishes (:class:`coassist.data.DatasetWriter`), so memory
     does not grow with the trial count and a killed run loses only the trials in
     flight: running the same collection again continues where it stopped (``say``
-    is told how many trials it found). The dataset replaces an old one in ``out``
-    (``overwrite=True``) only once it is complete.
+    is told how many trials it found), and once it has finished, running it again
+    finds the complete dataset and does nothing. The dataset replaces an old one in
+    ``out`` (``overwrite=True``) only once it is complete.
     """
     specs = dataset_specs(**spec_options)
     out = Path(out)
@@ -85,6 +87,10 @@ def collect_dataset(
     model_hash = digest(model_file.read_bytes().hex()) if s0.intent not in NAMED_INTENTS and model_file.is_file() else None
     key = digest({"specs": [asdict(s) for s in specs], "dataset_id": dataset_id, "format": FORMAT_VERSION,
                   "model": model_hash})  # fmt: skip
+    if not overwrite and _holds_collection(out, key, len(specs)):
+        if say:
+            say(f"{out} already holds this collection, complete ({len(specs)} trials): nothing to do")
+        return out
     with DatasetWriter(out, dataset_id, n_trials=len(specs), key=key, description=description,
                        overwrite=overwrite) as writer:  # fmt: skip
         if say and writer.discarded:
@@ -95,3 +101,13 @@ def collect_dataset(
         run_trials([specs[i] for i in todo], workers=workers, progress=progress, ray_address=ray_address,
                    on_result=lambda j, trial: writer.add(todo[j], trial))  # fmt: skip
         return writer.finish()
+
+
+def _holds_collection(out: Path, key: str, n_trials: int) -> bool:
+    """Whether ``out`` is the finished dataset of the collection ``key`` (its manifest says so)."""
+    try:
+        manifest = json.loads((out / MANIFEST_NAME).read_text("utf-8"))
+    except (OSError, ValueError):
+        return False
+    return (isinstance(manifest, dict) and manifest.get("collection_key") == key
+            and isinstance(manifest.get("trials"), list) and len(manifest["trials"]) == n_trials)  # fmt: skip

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -472,6 +473,30 @@ def _from_payload(payload: tuple[dict, dict]) -> Trial:
     return Trial(meta=TrialMeta.from_dict(meta), **arrays)
 
 
+#: How often a worker process checks that its parent is alive [s].
+PARENT_POLL = 0.2
+
+
+def _watch_parent(parent: int) -> None:
+    """Worker initializer: end this worker when the process that started it is gone.
+
+    A killed ``collect`` (SIGKILL, or SIGTERM, which Python does not turn into a clean
+    shutdown) cannot tell its pool to stop, and the workers, which hold the pool's
+    queue themselves, would wait on it for good. A daemon thread polls the parent's pid
+    every :data:`PARENT_POLL` seconds (an orphan is re-parented, so getppid() changes)
+    and ends the worker at once; portable, unlike Linux's PR_SET_PDEATHSIG, which also
+    fires when the *thread* that started the worker ends.
+    """
+    import threading
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(PARENT_POLL)
+        os._exit(1)  # no clean-up to do: the parent that would take the results is gone
+
+    threading.Thread(target=watch, name="coassist-parent-watch", daemon=True).start()
+
+
 def _run_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
     """A worker process's batch. A model in the loop gets one torch thread: this process is
     one of one-per-core, and more threads would oversubscribe them."""
@@ -560,7 +585,8 @@ def run_trials(
     # the parent's BLAS thread settings (inherited environment): the game's gains, and
     # so every trial, are bit-identical only for the same BLAS thread count.
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_watch_parent,
+                             initargs=(os.getpid(),)) as pool:  # fmt: skip
         futures = {pool.submit(_run_batch, [specs[i] for i in batch]): batch for batch in batches}
         with _progress(progress, len(specs)) as bar:
             task_id = bar.add_task("trials", total=len(specs))
