@@ -475,7 +475,7 @@ DRIVE_OPTIONS = {
 @app.command()
 def drive(
     out: Path = typer.Option(Path("runs/drive/trial.parquet"), help="Trial file to write (the same format as collect's trials, plus joint columns)."),
-    world: str = typer.Option("mujoco", help="mujoco (a UR5 in MuJoCo physics) | ur (a real UR5 through ur-rtde)."),
+    world: str = typer.Option("mujoco", help="mujoco (a UR5 in MuJoCo physics) | ur (a real UR5 through ur-rtde) | franka (a Franka Panda/FR3 through franky)."),
     controller: str = typer.Option("assistive", help="assistive (the cooperative game) | imp (impedance control) | mg (manual guidance)."),
     task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
@@ -490,7 +490,7 @@ def drive(
     time_limit: float = typer.Option(None, help="Longest run in seconds (default: 2 x the plan + 10 s)."),
     tool_speed: float = typer.Option(0.25, help="Safety: largest tool speed in m/s."),
     contact_force: float = typer.Option(120.0, help="Safety: hand force in N that makes a protective stop."),
-    host: str = typer.Option(None, help="The real arm's IP address (--world ur)."),
+    host: str = typer.Option(None, help="The real arm's IP address (--world ur; the FCI address for --world franka)."),
     yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before a real arm moves (scripts)."),
     view: bool = typer.Option(False, help="Open MuJoCo's passive viewer (needs a display) and run in real time."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
@@ -525,7 +525,7 @@ def drive(
         return yes or typer.confirm("Move the robot?", default=False)
 
     try:
-        trial = run_drive(config, host=host, view=view, confirm=confirm if world == "ur" else None)
+        trial = run_drive(config, host=host, view=view, confirm=confirm if world != "mujoco" else None)
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
         _fail(str(exc))
     path = write_trial(trial, out)

@@ -48,7 +48,7 @@ __all__ = ["CONTROLLERS", "DriveConfig", "WORLDS", "drive", "workspace_for"]
 
 #: Controller names of the drive command → the simulator's controller kinds.
 CONTROLLERS = {"assistive": "cooperative", "imp": "impedance", "mg": "manual"}
-WORLDS = ("mujoco", "ur")
+WORLDS = ("mujoco", "ur", "franka")
 #: Where the real-time predictor runs (coassist.intent.realtime.BACKENDS).
 PREDICTOR_BACKENDS = ("process", "onnx", "torch")
 #: Height of the task plane above the base [m] in the MuJoCo world (the TCP at the handle).
@@ -108,7 +108,7 @@ class DriveConfig:
         get_preset(self.preset)
         if not isinstance(self.intent, str) or not self.intent:
             raise bad("intent", "'nominal', 'oracle' or a model folder")
-        if self.intent == "oracle" and self.world == "ur":
+        if self.intent == "oracle" and self.world != "mujoco":
             raise bad("intent", "a model or 'nominal' on the real arm (the oracle knows the simulated operator's mind)")
         for name in ("user", "seed"):
             v = getattr(self, name)
@@ -194,16 +194,22 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
             # A real-time predictor runs against the wall clock: so must the world it serves.
             world = MujocoUR5World(config.object, control_dt=dt, start=start, seed=config.seed, view=view,
                                    realtime=view or bool(config.realtime_intent))  # fmt: skip
-        else:
+        elif config.world == "ur":
             from coassist.robot.ur_rtde_world import URRTDEWorld
 
             if not host:
                 raise ValueError("the real arm needs --host (the robot's IP address)")
             world = URRTDEWorld(host, frequency=float(config.rate_hz))
+        elif config.world == "franka":
+            from coassist.robot.franka_world import FrankaWorld
+
+            if not host:
+                raise ValueError("the Franka needs --host (the robot's FCI address)")
+            world = FrankaWorld(host, frequency=float(config.rate_hz))
     try:
         state0 = world.read()
         start_pose = np.asarray(state0.tool_pose, dtype=float).copy()
-        if config.world == "ur":
+        if config.world != "mujoco":
             # lay the task out from where the TCP is: shift the plan and the intent
             shift = start_pose[:2] - ref_abs[0, :2]
             ref_abs = ref_abs.copy()
@@ -223,7 +229,7 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
         if limits.workspace_lower is None:
             lo, hi = workspace_for(ref_abs, start_pose)
             limits = replace(limits, workspace_lower=tuple(lo), workspace_upper=tuple(hi))
-        safety = SafetyLayer(limits, dt, 6)
+        safety = SafetyLayer(limits, dt, int(getattr(world, "n_joints", 6)))
         intent_stage, model_id = _intent_stage(config, H, intent_source)
         dofs = (0, 1, 2, 3, 4, 5) if config.full_pose else (0, 1)
         tick = ControlTick(controller, intent_stage, wrench, safety, command_space="joint_velocity",
@@ -240,6 +246,9 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
         termination = TargetDwell(ref_abs[-1, :2], 0.025, int(math.ceil(5.0 / dt)), int(math.ceil(t_done / dt)))
         log = run_loop(world, tick, n_max, termination, deadline=dt if getattr(world, "realtime", False) else None,
                        on_tick=on_tick)  # fmt: skip
+        detail = getattr(world, "stop_detail", None)  # a world that knows why the robot stopped says so
+        if detail and log.ended in ("robot_stop", "safety_stop"):
+            log.message = detail
     finally:
         if built_here:
             world.close()
@@ -253,8 +262,12 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
 
 
 def _kinematics_for(world: Any):
-    """UR5 kinematics with the world's TCP (the MuJoCo model's tcp site, or the real arm's TCP offset)."""
+    """The world's own kinematics where it has them (another arm), else UR5 kinematics with the
+    world's TCP (the MuJoCo model's tcp site, or the real arm's TCP offset)."""
     from coassist.robot.kinematics import UR5Kinematics
+
+    if callable(getattr(world, "kinematics", None)):
+        return world.kinematics()
 
     offset = getattr(world, "tcp_offset_pose", None)
     if offset is None and hasattr(world, "model") and hasattr(world, "data"):
@@ -268,7 +281,7 @@ def _kinematics_for(world: Any):
 
 
 def _intent_stage(config: DriveConfig, H: int, source: Any):
-    realtime = config.realtime_intent if config.realtime_intent is not None else config.world == "ur"
+    realtime = config.realtime_intent if config.realtime_intent is not None else config.world != "mujoco"
     if source is not None:
         if hasattr(source, "tick"):
             return RealtimeIntent(source), getattr(source, "model_id", "realtime")
@@ -318,7 +331,7 @@ def _trial(config: DriveConfig, log: LoopLog, ref_abs, H, intent, task, obj, use
         "limits": config.limits.describe(), "features": list(FEATURES), "dofs": list(dofs),
     })  # fmt: skip
     meta = TrialMeta(user=user, task=task.kind, object=obj.name, controller=controller_name, model_id=model_id,
-                     seed=config.seed, source="mujoco" if config.world == "mujoco" else "ur5", dt=config.dt, extra=extra)  # fmt: skip
+                     seed=config.seed, source={"mujoco": "mujoco", "ur": "ur5"}.get(config.world, config.world), dt=config.dt, extra=extra)  # fmt: skip
     pose = log.pose
     if config.full_pose:  # rotation vectors continuous through ±π: a tool pointing down sits at |rv| ≈ π
         pose = pose.copy()
