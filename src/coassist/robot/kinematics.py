@@ -173,12 +173,14 @@ class ArmKinematics:
 
     Parameters
     ----------
-    urdf_path : the URDF file.  tip_frame : the flange frame's name in it.
+    urdf_path : the URDF file.
+    tip_frame : the flange frame's name in it.
     n_joints : the arm's joints (checked against the model).
     tcp_offset : (6,) TCP pose in the flange frame, ``[x, y, z, rx, ry, rz]`` [m, rad].
     base_signs : (3,) the diagonal of the base rotation, each ±1.
-    joint_velocity_limit : (n,) [rad/s].  joint_position_limit : (n, 2) [rad]; None:
-        the URDF's ``lower``/``upper``.  locked : joint names fixed at 0.
+    joint_velocity_limit : (n,) [rad/s].
+    joint_position_limit : (n, 2) [rad]; None: the URDF's ``lower``/``upper``.
+    locked : joint names fixed at 0.
 
     Notes
     -----
