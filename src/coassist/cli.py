@@ -466,7 +466,7 @@ def collect(
 DRIVE_OPTIONS = {
     **{f"DriveConfig.{name}": f"--{name.replace('_', '-')}" for name in (
         "world", "controller", "task", "preset", "intent", "user", "seed", "full_pose", "time_limit",
-        "predictor_backend")},
+        "predictor_backend", "robot")},
     "DriveConfig.object": "--object", "DriveConfig.rate_hz": "--rate",
     "SafetyLimits.tool_speed": "--tool-speed", "SafetyLimits.contact_force": "--contact-force",
 }  # fmt: skip
@@ -475,7 +475,8 @@ DRIVE_OPTIONS = {
 @app.command()
 def drive(
     out: Path = typer.Option(Path("runs/drive/trial.parquet"), help="Trial file to write (the same format as collect's trials, plus joint columns)."),
-    world: str = typer.Option("mujoco", help="mujoco (a UR5 in MuJoCo physics) | ur (a real UR5 through ur-rtde) | franka (a Franka Panda/FR3 through franky)."),
+    world: str = typer.Option("mujoco", help="mujoco (an arm in MuJoCo physics) | ur (a real UR5 through ur-rtde) | franka (a Franka Panda/FR3 through franky)."),
+    robot: str = typer.Option(None, help="The arm: ur5 or panda (--world mujoco), ur5 (ur), panda or fr3 (franka); default the world's first."),
     controller: str = typer.Option("assistive", help="assistive (the cooperative game) | imp (impedance control) | mg (manual guidance)."),
     task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
@@ -511,7 +512,7 @@ def drive(
         config = DriveConfig(world=world, controller=controller, task=task, object=obj, preset=preset, intent=intent,
                              user=user, seed=seed, rate_hz=rate, full_pose=full_pose, time_limit=time_limit,
                              limits=limits, realtime_intent=realtime_intent,
-                             predictor_backend=predictor_backend)  # fmt: skip
+                             predictor_backend=predictor_backend, robot=robot)  # fmt: skip
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
     out = _file_out(out, "--out", "trial.parquet")

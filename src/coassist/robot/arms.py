@@ -48,6 +48,11 @@ class ArmDescription:
     joint_velocity_limit : (n,) [rad/s] (datasheet).  joint_position_limit : (n, 2)
         [rad]; None: the URDF's.
     home : (n,) a comfortable start posture [rad] (the MuJoCo worlds' IK seed).
+    mujoco_drop : URDF links left out of the MuJoCo model, with their subtrees (ROS
+        frames, a gripper: the tools are mounted on the flange; :mod:`coassist.robot.arm_mjcf`).
+    task_centre : (3,) [m] where the MuJoCo worlds put the tasks, in the base frame: the
+        centre of their x-y area and the height of their plane (the tasks are laid out
+        for the UR5: (0.15, −0.615) at 0.2 m; an arm with another reach moves them).
     """
 
     name: str
@@ -59,6 +64,8 @@ class ArmDescription:
     locked: tuple[str, ...] = ()
     base_signs: tuple[float, float, float] = (1.0, 1.0, 1.0)
     joint_position_limit: tuple[tuple[float, float], ...] | None = None
+    mujoco_drop: tuple[str, ...] = ()
+    task_centre: tuple[float, float, float] = (0.15, -0.615, 0.20)
 
     def __post_init__(self) -> None:
         n = self.n_joints
@@ -68,6 +75,9 @@ class ArmDescription:
             v = np.asarray(getattr(self, name), dtype=float)
             if v.shape != (n,) or not np.isfinite(v).all():
                 raise ValueError(f"ArmDescription.{name} must be {n} finite numbers, got {getattr(self, name)!r}")
+        c = np.asarray(self.task_centre, dtype=float)
+        if c.shape != (3,) or not np.isfinite(c).all():
+            raise ValueError(f"ArmDescription.task_centre must be 3 finite numbers [m], got {self.task_centre!r}")
         if any(abs(s) != 1.0 for s in self.base_signs) or self.base_signs[2] != 1.0:
             raise ValueError(f"ArmDescription.base_signs must be (1, 1, 1) or (-1, -1, 1), got {self.base_signs!r}")
 
@@ -78,6 +88,7 @@ ARMS: dict[str, ArmDescription] = {
         name="ur5", urdf=("ur_description", "urdf", "ur5_robot.urdf"), tip_frame="tool0", n_joints=6,
         joint_velocity_limit=(np.pi,) * 6, home=(-1.1583, -1.9627, -1.5428, -1.2068, 1.5708, -2.7291),
         base_signs=(-1.0, -1.0, 1.0), joint_position_limit=((-2.0 * np.pi, 2.0 * np.pi),) * 6,
+        mujoco_drop=("base",),  # the ROS "base" frame: the world frame is it already
     ),  # fmt: skip
     # Franka Emika Panda: libfranka's base frame (O) is the URDF's panda_link0; the flange
     # (F) is panda_link8. Speed limits: Franka's datasheet (the URDF's velocity=).
@@ -88,7 +99,8 @@ ARMS: dict[str, ArmDescription] = {
         name="panda", urdf=("panda_description", "urdf", "panda.urdf"), tip_frame="panda_link8", n_joints=7,
         joint_velocity_limit=(2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61),
         home=(0.0, -0.785398, 0.0, -2.356194, 0.0, 1.570796, 0.785398),
-        locked=("panda_finger_joint1", "panda_finger_joint2"),
+        locked=("panda_finger_joint1", "panda_finger_joint2"), mujoco_drop=("panda_hand",),
+        task_centre=(0.5, 0.0, 0.4),  # every task point reachable tool-down, > 0.2 rad from a limit
     ),  # fmt: skip
 }
 

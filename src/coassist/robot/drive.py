@@ -1,4 +1,4 @@
-"""Drive a UR5 with the assistive controller (or IMP / MG): MuJoCo physics or a real arm.
+"""Drive an arm (a UR5, a Franka Panda) with the assistive controller (or IMP / MG): MuJoCo physics or a real arm.
 
 This is the environment of the runtime for arm worlds: it builds a world, the task
 and its plan, the controller, the intent stage, the wrench pipeline, the safety layer
@@ -8,8 +8,10 @@ joint columns), so ``coassist train``, ``evaluate`` and ``show`` read it unchang
 
 Worlds:
 
-- ``"mujoco"``: :class:`~coassist.robot.mujoco_world.MujocoUR5World` with the simulated
-  operator lifted to 3-D (:class:`~coassist.sim.hand.SimulatedHand`) or any
+- ``"mujoco"``: :class:`~coassist.robot.mujoco_world.MujocoUR5World` (``robot="panda"``:
+  :class:`~coassist.robot.mujoco_world.MujocoArmWorld`, the tasks moved into the arm's
+  reach by :func:`move_tasks`) with the simulated operator lifted to 3-D
+  (:class:`~coassist.sim.hand.SimulatedHand`) or any
   :class:`~coassist.runtime.world.HandOperator`; deterministic for a seed.
 - ``"ur"``: :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`; the person at the handle
   is the operator. The task is laid out from wherever the TCP is when the run starts
@@ -44,11 +46,13 @@ from coassist.sim.tasks import TASK_KINDS, make_task
 from coassist.sim.world import get_preset, make_controller
 from coassist.spatial import rotation_vector, unwrap_rotation_vectors
 
-__all__ = ["CONTROLLERS", "DriveConfig", "WORLDS", "drive", "workspace_for"]
+__all__ = ["CONTROLLERS", "DriveConfig", "WORLDS", "WORLD_ROBOTS", "drive", "move_tasks", "workspace_for"]
 
 #: Controller names of the drive command → the simulator's controller kinds.
 CONTROLLERS = {"assistive": "cooperative", "imp": "impedance", "mg": "manual"}
 WORLDS = ("mujoco", "ur", "franka")
+#: The arms (``--robot``, :data:`coassist.robot.arms.ARMS`) each world drives; the first is its default.
+WORLD_ROBOTS = {"mujoco": ("ur5", "panda"), "ur": ("ur5",), "franka": ("panda", "fr3")}
 #: Where the real-time predictor runs (coassist.intent.realtime.BACKENDS).
 PREDICTOR_BACKENDS = ("process", "onnx", "torch")
 #: Height of the task plane above the base [m] in the MuJoCo world (the TCP at the handle).
@@ -62,7 +66,9 @@ ROTATIONAL_DAMPING = 5.0
 class DriveConfig:
     """One run on a UR5 (every field validated, errors name it as ``DriveConfig.<field>``).
 
-    world : "mujoco" or "ur".  controller : "assistive", "imp" or "mg".
+    world : "mujoco", "ur" or "franka".  controller : "assistive", "imp" or "mg".
+    robot : the arm (:data:`WORLD_ROBOTS`: "ur5" or "panda" in MuJoCo, "ur5" on "ur",
+        "panda" or "fr3" on "franka"); None: the world's first.
     task : a task kind (linear, curved, sinusoidal, z).  object : handle, board or heavy.
     preset : a control preset (default the main job's, thesis-application-dm).
     intent : "nominal", "oracle" (MuJoCo only) or a model folder.
@@ -93,6 +99,7 @@ class DriveConfig:
     limits: SafetyLimits = field(default_factory=SafetyLimits)
     realtime_intent: bool | None = None
     predictor_backend: str = "process"
+    robot: str | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, what: str) -> ValueError:
@@ -100,6 +107,10 @@ class DriveConfig:
 
         if self.world not in WORLDS:
             raise bad("world", f"one of {WORLDS}")
+        if self.robot is None:
+            object.__setattr__(self, "robot", WORLD_ROBOTS[self.world][0])
+        elif self.robot not in WORLD_ROBOTS[self.world]:
+            raise bad("robot", f"one of {WORLD_ROBOTS[self.world]} with world {self.world!r}")
         if self.controller not in CONTROLLERS:
             raise bad("controller", f"one of {tuple(CONTROLLERS)}")
         if self.task not in TASK_KINDS:
@@ -186,14 +197,21 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
 
     built_here = world is None
     intent_stage = None
+    intent_pos = intent_traj.positions
+    start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
+    if config.world == "mujoco" and config.robot != "ur5":  # the tasks, laid out for the UR5, moved to this arm
+        ref_abs, intent_pos, start = move_tasks(config.robot, ref_abs, intent_pos)
     if world is None:
         if config.world == "mujoco":
-            from coassist.robot.mujoco_world import MujocoUR5World
+            from coassist.robot.mujoco_world import MujocoArmWorld, MujocoUR5World
 
-            start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
-            # A real-time predictor runs against the wall clock: so must the world it serves.
-            world = MujocoUR5World(config.object, control_dt=dt, start=start, seed=config.seed, view=view,
-                                   realtime=view or bool(config.realtime_intent))  # fmt: skip
+            if config.robot == "ur5":
+                # A real-time predictor runs against the wall clock: so must the world it serves.
+                world = MujocoUR5World(config.object, control_dt=dt, start=start, seed=config.seed, view=view,
+                                       realtime=view or bool(config.realtime_intent))  # fmt: skip
+            else:
+                world = MujocoArmWorld(config.object, robot=config.robot, control_dt=dt, start=start, seed=config.seed,
+                                       view=view, realtime=view or bool(config.realtime_intent))  # fmt: skip
         elif config.world == "ur":
             from coassist.robot.ur_rtde_world import URRTDEWorld
 
@@ -205,7 +223,7 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
 
             if not host:
                 raise ValueError("the Franka needs --host (the robot's FCI address)")
-            world = FrankaWorld(host, frequency=float(config.rate_hz))
+            world = FrankaWorld(host, frequency=float(config.rate_hz), arm=config.robot)
     try:
         state0 = world.read()
         start_pose = np.asarray(state0.tool_pose, dtype=float).copy()
@@ -216,7 +234,7 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
             ref_abs[:, :2] += shift
         if operator is None and config.world == "mujoco" and hasattr(world, "operator"):
             noise = motor_noise(profile, rng_motor, n_grid, dt)  # as long as the intent: stop() may step on
-            arm = OperatorArm(profile, intent_traj.positions, dt, noise)
+            arm = OperatorArm(profile, intent_pos, dt, noise)
             hand_pose, _ = world.hand_pose()
             operator = SimulatedHand(arm, dt, hand_pose, full_pose=config.full_pose,
                                      offset=hand_pose[:2] - start_pose[:2])  # fmt: skip
@@ -236,7 +254,7 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
                            kinematics=kin, config=TickConfig(dofs=dofs))  # fmt: skip
         context = TrialContext(dt=dt, horizon=H, start=start_pose[:2].copy(), target=ref_abs[-1, :2].copy(),
                                reference=ref_abs, task=task.kind, user=profile.name, object=obj.name,
-                               true_intent=intent_traj.positions)  # fmt: skip
+                               true_intent=intent_pos)  # fmt: skip
         tick.reset(Plan(ref_abs, start_pose), context)
         # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
         wrench.zero(np.asarray(state0.wrench, dtype=float)[None], np.asarray(state0.sensor_rotation, dtype=float)[None])
@@ -256,9 +274,22 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
             close = getattr(intent_stage.predictor, "close", None)
             if close is not None:
                 close()
-    return _trial(config, log, ref_abs, H, intent_traj.positions if config.world == "mujoco" else None, task, obj,
+    return _trial(config, log, ref_abs, H, intent_pos if config.world == "mujoco" else None, task, obj,
                   profile.name if config.world == "mujoco" else "operator", model_id, controller.name, dofs, start_pose,
                   wrench.bias)  # fmt: skip
+
+
+def move_tasks(robot: str, ref_abs: np.ndarray, intent: np.ndarray):
+    """The plan and the intent moved (x-y) from the UR5's task area to ``robot``'s
+    (``ArmDescription.task_centre``), and the start TCP position (3,) at its task height [m]."""
+    from coassist.robot.arms import get_arm
+
+    ur5, arm = get_arm("ur5").task_centre, get_arm(robot).task_centre
+    shift = np.array(arm[:2]) - np.array(ur5[:2])
+    ref_abs, intent = ref_abs.copy(), intent.copy()
+    ref_abs[:, :2] += shift
+    intent[:, :2] += shift
+    return ref_abs, intent, (float(ref_abs[0, 0]), float(ref_abs[0, 1]), float(arm[2]))
 
 
 def _kinematics_for(world: Any):
