@@ -113,3 +113,21 @@ def test_model_check_names_the_mismatch(panda):
 def test_unknown_arm_names_the_known_ones():
     with pytest.raises(ValueError, match="unknown robot 'kuka'.*panda.*ur5"):
         get_arm("kuka")
+
+
+def test_the_posture_never_moves_the_tool_near_a_singularity(panda):
+    # Stretched out along −y (where the fault table's push ends): σ_min(J) < 0.05, so the
+    # task inverse is damped (λ > 0) and I − J⁺J is no projector; the posture term must use
+    # the exact one. Without a task twist the tool must not move: J q̇ = 0 to rounding.
+    from coassist.spatial import damped_pseudo_inverse
+
+    q = np.array([1.56, -1.18, -1.78, -0.47, -1.21, 1.31, -1.1])
+    _, _, J = panda.forward_and_jacobian(q)
+    J_pinv, lam = damped_pseudo_inverse(J, sigma_threshold=0.05, max_damping=0.05)
+    assert lam > 0.0
+    home = np.array(get_arm("panda").home)
+    pull = home - q
+    assert np.linalg.norm(J @ (pull - J_pinv @ J @ pull)) > 1e-3  # the damped "projector" leaks
+    qd0 = NullSpacePosture(panda, home, gain=1.0, limit_margin=1e-6).redundant_joint_velocity(q, J, np.zeros(6))
+    np.testing.assert_allclose(J @ qd0, 0.0, atol=1e-12)
+    assert qd0 @ pull > 0.0

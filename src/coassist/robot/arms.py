@@ -11,10 +11,12 @@ Redundancy (n > 6 joints). Eq. 3.6 gives the joint velocity of the task twist �
 7-DOF arm a one-dimensional null space is left, used to hold the posture the run started
 in (:class:`NullSpacePosture`)::
 
-    q̇ = J⁺ ẋ + (I − J⁺ J) k_n (q₀ − q)          J⁺ = Jᵀ (J Jᵀ + λ² I)⁻¹
+    q̇ = J⁺ ẋ + (I − V Vᵀ) k_n (q₀ − q)          J⁺ = Jᵀ (J Jᵀ + λ² I)⁻¹
 
 with λ the damping of :func:`coassist.spatial.damped_pseudo_inverse` (0 away from a
-singularity, so J q̇ = ẋ exactly and the posture term does not move the tool). Joint
+singularity, so J q̇ = ẋ exactly) and V (n, 6) the right singular vectors of J: I − V Vᵀ
+is the exact projector onto J's null space (= I − J⁺J when λ = 0), so the posture term
+never moves the tool, near a singularity either. Joint
 position limits: the command is then scaled uniformly (its direction, hence the tool's
 direction of motion, kept) so that no joint gets closer than ``limit_margin`` to a limit
 within ``limit_horizon`` seconds: |q̇_i| τ ≤ max(distance to the limit − margin, 0) for
@@ -187,7 +189,12 @@ class NullSpacePosture:
         """(n,) q̇ [rad/s] for the task twist (6,) at q (n,) with J (6, n): posture and limits (module docstring)."""
         J_pinv, _ = damped_pseudo_inverse(J, sigma_threshold=self.sigma_threshold, max_damping=self.max_damping)
         qd = J_pinv @ twist
-        qd += (np.eye(self.n_joints) - J_pinv @ J) @ (self.gain * (self.posture - q))
+        # The null-space projector from the exact row space of J (its right singular vectors),
+        # not I − J⁺J with the damped J⁺: near a singularity that one is no projector and leaks
+        # the posture pull into the tool's motion (J (I − J⁺J) ≠ 0 once λ > 0).
+        row = np.linalg.svd(J)[2][:6]
+        pull = self.gain * (self.posture - q)
+        qd += pull - row.T @ (row @ pull)
         return self.limit_to_joint_range(q, qd)
 
     def limit_to_joint_range(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:

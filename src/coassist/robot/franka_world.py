@@ -178,7 +178,7 @@ class FrankaWorld:
             seq = self._seq
         else:
             wrench, R, seq = self.ft_sensor.read()
-            wrench, R = np.asarray(wrench, dtype=float), np.asarray(R, dtype=float)
+            wrench, R = np.array(wrench, dtype=float), np.array(R, dtype=float)  # ours: the tick may flag it in place
         mode = s.robot_mode
         user_stop = mode == self._fr.RobotMode.UserStopped
         errors = s.current_errors
