@@ -131,3 +131,21 @@ def test_the_posture_never_moves_the_tool_near_a_singularity(panda):
     qd0 = NullSpacePosture(panda, home, gain=1.0, limit_margin=1e-6).redundant_joint_velocity(q, J, np.zeros(6))
     np.testing.assert_allclose(J @ qd0, 0.0, atol=1e-12)
     assert qd0 @ pull > 0.0
+
+
+def test_fr3_limits_are_the_fr3_urdf_and_its_kinematics_the_pandas(panda):
+    # The reference: Franka's FR3 URDF as franky-sim ships it (franky_sim/assets/fr3.urdf).
+    franky_sim = pytest.importorskip("franky_sim", reason="the FR3 URDF comes with franky-sim: pip install 'coassist[franka]'")
+    import xml.etree.ElementTree as ET
+    from importlib.resources import files
+
+    root = ET.parse(str(files(franky_sim) / "assets" / "fr3.urdf")).getroot()
+    limits = {j.get("name"): j.find("limit") for j in root.iter("joint") if j.get("type") == "revolute"}
+    names = [f"fr3_joint{i}" for i in range(1, 8)]
+    fr3 = arm_kinematics("fr3")
+    np.testing.assert_array_equal(fr3.joint_position_limit,
+                                  [(float(limits[n].get("lower")), float(limits[n].get("upper"))) for n in names])
+    np.testing.assert_array_equal(fr3.joint_velocity_limit, [float(limits[n].get("velocity")) for n in names])
+    assert not np.array_equal(fr3.joint_position_limit, panda.joint_position_limit)  # joints 4 and 6 differ
+    q = np.array(get_arm("fr3").home) + 0.1
+    assert np.array_equal(fr3.pose(q), panda.pose(q))  # the same model: the same numbers

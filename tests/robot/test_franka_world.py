@@ -23,6 +23,8 @@ pytest.importorskip("pinocchio", reason="the Panda kinematics need the robot ext
 
 import franky  # noqa: E402
 
+from coassist.robot import franka_world  # noqa: E402
+from coassist.robot.arms import arm_kinematics  # noqa: E402
 from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.franka_world import FrankaLinkError, FrankaWorld  # noqa: E402
 from coassist.runtime.safety import SafetyLimits  # noqa: E402
@@ -187,3 +189,26 @@ def test_bad_arguments_name_the_option(server):
         FrankaWorld(server.host, ft_sensor=object())
     with pytest.raises(FrankaLinkError, match="could not connect"):
         FrankaWorld("127.0.0.254")
+
+
+def test_the_world_takes_the_limits_of_the_arm_it_is_told(server, monkeypatch):
+    # franky-sim simulates an FR3: told "fr3", the world holds the FR3's joint range and speeds
+    world = FrankaWorld(server.host, arm="fr3")
+    fr3, panda = arm_kinematics("fr3"), arm_kinematics("panda")
+    np.testing.assert_array_equal(world.kinematics().joint_position_limit, fr3.joint_position_limit)
+    np.testing.assert_array_equal(world._vmax, fr3.joint_velocity_limit)
+    assert world.kinematics().joint_position_limit[5, 0] != panda.joint_position_limit[5, 0]
+    world.close()
+    with pytest.raises(ValueError, match=r"arm must be one of \('panda', 'fr3'\), got 'ur5'"):
+        FrankaWorld(server.host, arm="ur5")
+    # drive --world franka --robot fr3 builds the world for the FR3
+    seen = []
+
+    class Spy(FrankaWorld):
+        def __init__(self, host, *, frequency, arm):
+            seen.append(arm)
+            super().__init__(host, frequency=frequency, arm=arm)
+
+    monkeypatch.setattr(franka_world, "FrankaWorld", Spy)
+    trial = drive(DriveConfig(world="franka", robot="fr3", controller="mg", time_limit=0.2), host=server.host)
+    assert seen == ["fr3"] and trial.meta.extra["ended"] == "time_limit"

@@ -94,15 +94,28 @@ ARMS: dict[str, ArmDescription] = {
     ),  # fmt: skip
     # Franka Emika Panda: libfranka's base frame (O) is the URDF's panda_link0; the flange
     # (F) is panda_link8. Speed limits: Franka's datasheet (the URDF's velocity=).
-    # Position limits: the URDF's (the datasheet's). The FR3 has the same kinematics
-    # (DH table) but narrower limits on joints 4 and 6 — an FR3 entry is this one with
-    # its own joint_position_limit.
+    # Position limits: the URDF's (the datasheet's).
     "panda": ArmDescription(
         name="panda", urdf=("panda_description", "urdf", "panda.urdf"), tip_frame="panda_link8", n_joints=7,
         joint_velocity_limit=(2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61),
         home=(0.0, -0.785398, 0.0, -2.356194, 0.0, 1.570796, 0.785398),
         locked=("panda_finger_joint1", "panda_finger_joint2"), mujoco_drop=("panda_hand",),
         task_centre=(0.5, 0.0, 0.4),  # every task point reachable tool-down, > 0.2 rad from a limit
+    ),  # fmt: skip
+    # Franka Research 3: the Panda's kinematics (the same DH table and flange; franky-sim's
+    # FR3 matches the Panda model to 1e-4 m, tests/robot/test_franka_world.py) with its own
+    # joint limits: position and speed from the FR3 URDF of Franka's franka_description, as
+    # shipped in the installed franky-sim 1.0.4 (franky_sim/assets/fr3.urdf, <limit lower=
+    # upper= velocity=>; checked against that file in tests/robot/test_arms.py). Narrower
+    # than the Panda's on joint 4 (upper −0.1169) and shifted on joint 6 ([0.4398, 4.6216]).
+    # No MuJoCo model of its own (the MuJoCo worlds drive the Panda).
+    "fr3": ArmDescription(
+        name="fr3", urdf=("panda_description", "urdf", "panda.urdf"), tip_frame="panda_link8", n_joints=7,
+        joint_velocity_limit=(2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26),
+        home=(0.0, -0.785398, 0.0, -2.356194, 0.0, 1.570796, 0.785398),
+        locked=("panda_finger_joint1", "panda_finger_joint2"),
+        joint_position_limit=((-2.9007, 2.9007), (-1.8361, 1.8361), (-2.9007, 2.9007), (-3.077, -0.1169),
+                              (-2.8763, 2.8763), (0.4398, 4.6216), (-3.0508, 3.0508)),
     ),  # fmt: skip
 }
 

@@ -54,7 +54,10 @@ from coassist.robot.arms import NullSpacePosture, arm_kinematics, check_model_ma
 from coassist.runtime.world import Command, RobotState
 from coassist.spatial import rotation_vector
 
-__all__ = ["FrankaLinkError", "FrankaWorld", "pose_from_franka"]
+__all__ = ["FRANKA_ARMS", "FrankaLinkError", "FrankaWorld", "pose_from_franka"]
+
+#: The registered arms (coassist.robot.arms.ARMS) a FrankaWorld drives.
+FRANKA_ARMS = ("panda", "fr3")
 
 _INSTALL_HINT = "the Franka world needs franky: pip install 'coassist[franka]'"
 
@@ -89,7 +92,9 @@ class FrankaWorld:
 
     host : the robot's FCI address.  frequency : the control rate [Hz] (≤ 1000).
     robot : a connected ``franky.Robot`` (None: ``franky.Robot(host)``).
-    arm : the registered arm (``"panda"``; an FR3 has the same kinematics).
+    arm : the registered arm, ``"panda"`` or ``"fr3"`` (the same kinematics, each its own
+        joint limits: :data:`coassist.robot.arms.ARMS`); the start posture must lie inside
+        its joint range, and every command is clipped to its joint speeds.
     ft_sensor : an external F/T sensor (module docstring); None: ``O_F_ext_hat_K``.
     hold_ms : each motion's hold time [ms] (the hang watchdog).
     link_timeout : [s] without a new robot state before the link counts as lost.
@@ -110,6 +115,8 @@ class FrankaWorld:
             raise ValueError(f"hold_ms must be an int in [1, 1000] ms, got {hold_ms!r}")
         if not isinstance(link_timeout, (int, float)) or not link_timeout > 0:
             raise ValueError(f"link_timeout must be a number of seconds > 0, got {link_timeout!r}")
+        if arm not in FRANKA_ARMS:
+            raise ValueError(f"arm must be one of {FRANKA_ARMS}, got {arm!r}")
         if ft_sensor is not None and not callable(getattr(ft_sensor, "read", None)):
             raise ValueError("ft_sensor must have a read() -> (wrench, sensor_rotation, seq) method")
         self._fr = _franky()
@@ -137,6 +144,13 @@ class FrankaWorld:
         self._kin = arm_kinematics(self.arm.name, F_T_EE)
         q0 = np.asarray(state.q, dtype=float)
         check_model_matches(self._kin, q0, pose_from_franka(state.O_T_EE), what=f"the Franka at {host}")
+        lim = self._kin.joint_position_limit
+        outside = np.flatnonzero((q0 < lim[:, 0]) | (q0 > lim[:, 1]))
+        if outside.size:  # an FR3 told it is a Panda, or the other way round
+            i = int(outside[0])
+            raise ValueError(f"the Franka at {host} has joint {i + 1} at {q0[i]:.4f} rad, outside the {self.arm.name}'s "
+                             f"range [{lim[i, 0]}, {lim[i, 1]}]; is --robot the arm it is ({', '.join(FRANKA_ARMS)})?")  # fmt: skip
+        self._vmax = np.array(self.arm.joint_velocity_limit, dtype=float)
         self.tcp_offset_pose = F_T_EE
         self.posture_gain = posture_gain
         self._q0 = q0.copy()
@@ -200,8 +214,8 @@ class FrankaWorld:
         if command.stop or self.stop_detail is not None or qd is None or qd.shape != (self.n_joints,) \
                 or not np.isfinite(qd).all():  # fmt: skip
             self._send(np.zeros(self.n_joints))
-        else:
-            self._send(qd)
+        else:  # the arm's own speeds: a last guard (the safety layer's limits are lower by default)
+            self._send(np.clip(qd, -self._vmax, self._vmax))
         self._wait_period()
 
     def _wait_period(self) -> None:
@@ -253,3 +267,5 @@ class FrankaWorld:
             return
         self.stop()
         self._closed = True
+        # franky's Robot holds the FCI connection until it is collected (one client at a time)
+        self.robot = None
