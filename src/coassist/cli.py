@@ -496,7 +496,7 @@ def drive(
     view: bool = typer.Option(False, help="Open MuJoCo's passive viewer (needs a display) and run in real time."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
 ) -> None:
-    """Run the assistive controller, IMP or MG on a UR5: in MuJoCo, or on a real arm."""
+    """Run the assistive controller, IMP or MG on an arm (UR5, Panda): in MuJoCo, or on a real one."""
     from coassist.data import write_trial
     from coassist.robot.drive import DriveConfig
     from coassist.robot.drive import drive as run_drive

@@ -5,10 +5,13 @@ posture in the tick), and the cases that concern what the robot link delivers (t
 wrench faults, the missed deadlines, a hand letting go at speed) run again on
 :class:`~coassist.robot.franka_world.FrankaWorld`: the real franky client against
 franky-sim on loopback (the predictor cases do not touch the world; the singular-pose
-case pushes for 5 s of wall time — both stay on MuJoCo to keep the suite fast). The
+case pushes for 5 s of wall time — both stay on MuJoCo to keep the suite fast; franky-sim
+runs are cut to 1.6 s). The
 check is the UR's: the loop does not crash, the fault is flagged, the run stops where the
 case says, and no joint velocity command sent is outside a limit
 (:func:`coassist.runtime.safety.within_limits` with the Jacobian and pose the layer saw).
+
+Run as a script for the table of cases: ``python tests/faults/test_arm_faults.py``.
 """
 
 from __future__ import annotations
@@ -90,9 +93,8 @@ def _check(case, trial, violations) -> None:
     assert (trial.meta.extra["ended"] == "safety_stop") == case.stops, trial.meta.extra["ended"]
 
 
-@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
-@pytest.mark.parametrize("case", table.CASES, ids=[c.name for c in table.CASES])
-def test_mujoco_panda(case):
+def run_mujoco(case):
+    """One case on the MuJoCo Panda; returns (trial, violations)."""
     limits = _limits(START)
     config = DriveConfig(robot="panda", controller="mg", task="linear", time_limit=case.time_limit, limits=limits)
     inner = MujocoArmWorld("handle", robot="panda", control_dt=DT, operator=case.operator, start=START)
@@ -103,6 +105,13 @@ def test_mujoco_panda(case):
         violations = _violations(trial, inner.kinematics(), world.poses, limits)
     finally:
         world.close()
+    return trial, violations
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
+@pytest.mark.parametrize("case", table.CASES, ids=[c.name for c in table.CASES])
+def test_mujoco_panda(case):
+    trial, violations = run_mujoco(case)
     assert trial.joint_velocity.shape[1] == 7
     _check(case, trial, violations)
 
@@ -169,12 +178,11 @@ def franky_sim():
     return _load(TESTS / "robot" / "test_franka_world.py")
 
 
-@pytest.mark.parametrize("case", [c for c in table.CASES if c.name in ON_FRANKY], ids=list(ON_FRANKY))
-def test_franka_through_franky_sim(case, franky_sim):
+def run_franky(case, franky_sim):
+    """One case on FrankaWorld against franky-sim (``franky_sim``: test_franka_world's module);
+    returns (trial, violations)."""
     from coassist.robot.franka_world import FrankaWorld
 
-    # 1.6 s: every one of these faults starts by tick 150 (1.2 s) and is flagged within a tick
-    case = replace(case, time_limit=min(case.time_limit, 1.6))
     server = franky_sim.SimServer()
     try:
         inner = FrankaWorld(server.host, ft_sensor=ScriptedSensor(server, case.operator))
@@ -189,5 +197,28 @@ def test_franka_through_franky_sim(case, franky_sim):
             world.close()
     finally:
         server.close()
+    return trial, violations
+
+
+@pytest.mark.parametrize("case", [c for c in table.CASES if c.name in ON_FRANKY], ids=list(ON_FRANKY))
+def test_franka_through_franky_sim(case, franky_sim):
+    # 1.6 s: every one of these faults starts by tick 150 (1.2 s) and is flagged within a tick
+    case = replace(case, time_limit=min(case.time_limit, 1.6))
+    trial, violations = run_franky(case, franky_sim)
     assert trial.meta.source == "franka" and trial.joint_velocity.shape[1] == 7
     _check(case, trial, violations)
+
+
+if __name__ == "__main__":
+    franky = _load(TESTS / "robot" / "test_franka_world.py")
+    print("| case | world | flags raised | ended | commands | outside a limit |")
+    print("|---|---|---|---|---|---|")
+    for case in table.CASES:
+        runs = [("MuJoCo Panda", run_mujoco(case))]
+        if case.name in ON_FRANKY:
+            runs.append(("franky-sim", run_franky(replace(case, time_limit=min(case.time_limit, 1.6)), franky)))
+        for where, (trial, violations) in runs:
+            seen = Fault(int(np.bitwise_or.reduce(trial.fault)))
+            names = ", ".join(f.name for f in Fault if f and f & seen)
+            print(f"| {case.name} | {where} | {names} | {trial.meta.extra['ended']} | {trial.n_samples} | "
+                  f"{len(violations)} |")
