@@ -357,7 +357,7 @@ def _trial(config: DriveConfig, log: LoopLog, ref_abs, H, intent, task, obj, use
     extra = task.to_extra()
     extra.update({
         "ended": log.ended, "stop_message": log.message, "preset": config.preset, "world": config.world,
-        "object": obj.to_extra(), "rate_hz": config.rate_hz, "full_pose": config.full_pose,
+        "robot": config.robot, "object": obj.to_extra(), "rate_hz": config.rate_hz, "full_pose": config.full_pose,
         "start_pose": [float(v) for v in start_pose], "sensor_bias": [float(v) for v in bias],
         "limits": config.limits.describe(), "features": list(FEATURES), "dofs": list(dofs),
     })  # fmt: skip
