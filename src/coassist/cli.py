@@ -515,7 +515,7 @@ def collect(
 DRIVE_OPTIONS = {
     **{f"DriveConfig.{name}": f"--{name.replace('_', '-')}" for name in (
         "world", "controller", "task", "preset", "intent", "user", "seed", "obstacle", "full_pose", "time_limit",
-        "predictor_backend")},
+        "predictor_backend", "robot")},
     "DriveConfig.object": "--object", "DriveConfig.rate_hz": "--rate",
     "SafetyLimits.tool_speed": "--tool-speed", "SafetyLimits.contact_force": "--contact-force",
 }  # fmt: skip
@@ -524,7 +524,8 @@ DRIVE_OPTIONS = {
 @app.command()
 def drive(
     out: Path = typer.Option(Path("runs/drive/trial.parquet"), help="Trial file to write (the same format as collect's trials, plus joint columns)."),
-    world: str = typer.Option("mujoco", help="mujoco (a UR5 in MuJoCo physics) | ur (a real UR5 through ur-rtde)."),
+    world: str = typer.Option("mujoco", help="mujoco (an arm in MuJoCo physics) | ur (a real UR5 through ur-rtde) | franka (a Franka Panda/FR3 through franky)."),
+    robot: str = typer.Option(None, help="The arm: ur5 or panda (--world mujoco), ur5 (ur), panda or fr3 (franka); default the world's first."),
     controller: str = typer.Option("assistive", help="assistive (the cooperative game) | assistive-arbitrated (α set every tick by the target law) | imp (impedance control) | mg (manual guidance)."),
     task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
@@ -540,14 +541,14 @@ def drive(
     time_limit: float = typer.Option(None, help="Longest run in seconds (default: 2 x the plan + 10 s)."),
     tool_speed: float = typer.Option(0.25, help="Safety: largest tool speed in m/s."),
     contact_force: float = typer.Option(120.0, help="Safety: hand force in N that makes a protective stop."),
-    host: str = typer.Option(None, help="The real arm's IP address (--world ur)."),
+    host: str = typer.Option(None, help="The real arm's IP address (--world ur; the FCI address for --world franka)."),
     yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before a real arm moves (scripts)."),
     view: bool = typer.Option(False, help="Open MuJoCo's passive viewer (needs a display) and run in real time."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
     mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap: ROS 2 messages (poses, wrench, prediction, alpha, faults) that Foxglove opens and train reads."),
     overwrite: bool = typer.Option(False, help="Replace an existing trial file at --out."),
 ) -> None:
-    """Run the assistive controller, IMP or MG on a UR5: in MuJoCo, or on a real arm."""
+    """Run the assistive controller, IMP or MG on an arm (UR5, Panda): in MuJoCo, or on a real one."""
     from coassist.robot.drive import CONTROLLERS, WORLDS, DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.runtime.safety import SafetyLimits
@@ -561,7 +562,7 @@ def drive(
         config = DriveConfig(world=world, controller=controller, task=task, object=obj, preset=preset, intent=intent,
                              user=user, seed=seed, obstacle=obstacle, rate_hz=rate, full_pose=full_pose, time_limit=time_limit,
                              limits=limits, realtime_intent=realtime_intent,
-                             predictor_backend=predictor_backend)  # fmt: skip
+                             predictor_backend=predictor_backend, robot=robot)  # fmt: skip
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
     out = _file_out(out, "--out", "trial.parquet")
@@ -579,7 +580,7 @@ def drive(
         return yes or typer.confirm("Move the robot?", default=False)
 
     try:
-        trial = run_drive(config, host=host, view=view, confirm=confirm if world == "ur" else None)
+        trial = run_drive(config, host=host, view=view, confirm=confirm if world != "mujoco" else None)
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
         _fail(str(exc))
     _write_run(trial, out, alpha=_run_alpha(preset, controller) if mcap else None, mcap=mcap, plot=plot)

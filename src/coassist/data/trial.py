@@ -40,7 +40,7 @@ MAX_DOF = 6
 #: late tick: the UR5 recordings' late ticks reach 2.3 periods (18.6 ms at 8 ms).
 GAP_FACTOR = 5.0
 #: Where a trial comes from.
-SOURCES = ("sim", "real", "mujoco", "ur5")
+SOURCES = ("sim", "real", "mujoco", "ur5", "franka")
 
 
 def _require_str(value: Any, name: str, *, allow_empty: bool = False) -> str:

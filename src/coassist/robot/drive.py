@@ -1,4 +1,4 @@
-"""Drive a UR5 with the assistive controller (or IMP / MG): MuJoCo physics or a real arm.
+"""Drive an arm (a UR5, a Franka Panda) with the assistive controller (or IMP / MG): MuJoCo physics or a real arm.
 
 This is the environment of the runtime for arm worlds: it builds a world, the task
 and its plan, the controller, the intent stage, the wrench pipeline, the safety layer
@@ -8,8 +8,10 @@ joint columns), so ``coassist train``, ``evaluate`` and ``show`` read it unchang
 
 Worlds:
 
-- ``"mujoco"``: :class:`~coassist.robot.mujoco_world.MujocoUR5World` with the simulated
-  operator lifted to 3-D (:class:`~coassist.sim.hand.SimulatedHand`) or any
+- ``"mujoco"``: :class:`~coassist.robot.mujoco_world.MujocoUR5World` (``robot="panda"``:
+  :class:`~coassist.robot.mujoco_world.MujocoArmWorld`, the tasks moved into the arm's
+  reach by :func:`move_tasks`) with the simulated operator lifted to 3-D
+  (:class:`~coassist.sim.hand.SimulatedHand`) or any
   :class:`~coassist.runtime.world.HandOperator`; deterministic for a seed.
 - ``"ur"``: :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`; the person at the handle
   is the operator. The task is laid out from wherever the TCP is when the run starts
@@ -44,12 +46,14 @@ from coassist.sim.tasks import OBSTACLES, TASK_KINDS, make_task
 from coassist.sim.world import get_preset, make_controller
 from coassist.spatial import rotation_vector, unwrap_rotation_vectors
 
-__all__ = ["CONTROLLERS", "DriveConfig", "WORLDS", "drive", "workspace_for"]
+__all__ = ["CONTROLLERS", "DriveConfig", "WORLDS", "WORLD_ROBOTS", "drive", "move_tasks", "workspace_for"]
 
 #: Controller names of the drive command → the simulator's controller kinds.
 CONTROLLERS = {"assistive": "cooperative", "assistive-arbitrated": "cooperative-arbitrated", "imp": "impedance",
                "mg": "manual"}  # fmt: skip
-WORLDS = ("mujoco", "ur")
+WORLDS = ("mujoco", "ur", "franka")
+#: The arms (``--robot``, :data:`coassist.robot.arms.ARMS`) each world drives; the first is its default.
+WORLD_ROBOTS = {"mujoco": ("ur5", "panda"), "ur": ("ur5",), "franka": ("panda", "fr3")}
 #: Where the real-time predictor runs (coassist.intent.realtime.BACKENDS).
 PREDICTOR_BACKENDS = ("process", "onnx", "torch")
 #: Height of the task plane above the base [m] in the MuJoCo world (the TCP at the handle).
@@ -69,8 +73,10 @@ MAX_TIME_LIMIT = 600.0
 class DriveConfig:
     """One run on a UR5 (every field validated, errors name it as ``DriveConfig.<field>``).
 
-    world : "mujoco" or "ur".  controller : "assistive", "assistive-arbitrated" (α set every
-        tick by the simulator's arbitration law), "imp" or "mg".
+    world : "mujoco", "ur" or "franka".  controller : "assistive", "assistive-arbitrated" (α set
+        every tick by the simulator's arbitration law), "imp" or "mg".
+    robot : the arm (:data:`WORLD_ROBOTS`: "ur5" or "panda" in MuJoCo, "ur5" on "ur",
+        "panda" or "fr3" on "franka"); None: the world's first.
     task : a task kind (linear, curved, sinusoidal, z).  object : handle, board or heavy.
     preset : a control preset (default :data:`coassist.config.APPLICATION_PRESET`, the main
         job's application preset, safe with a learned predictor in the loop).
@@ -105,6 +111,7 @@ class DriveConfig:
     limits: SafetyLimits = field(default_factory=SafetyLimits)
     realtime_intent: bool | None = None
     predictor_backend: str = "process"
+    robot: str | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, what: str) -> ValueError:
@@ -112,6 +119,10 @@ class DriveConfig:
 
         if self.world not in WORLDS:
             raise bad("world", f"one of {WORLDS}")
+        if self.robot is None:
+            object.__setattr__(self, "robot", WORLD_ROBOTS[self.world][0])
+        elif self.robot not in WORLD_ROBOTS[self.world]:
+            raise bad("robot", f"one of {WORLD_ROBOTS[self.world]} with world {self.world!r}")
         if self.controller not in CONTROLLERS:
             raise bad("controller", f"one of {tuple(CONTROLLERS)}")
         if self.task not in TASK_KINDS:
@@ -122,7 +133,7 @@ class DriveConfig:
             raise bad("obstacle", f"one of {tuple(OBSTACLES)}")
         if not isinstance(self.intent, str) or not self.intent:
             raise bad("intent", "'nominal', 'oracle' or a model folder")
-        if self.intent == "oracle" and self.world == "ur":
+        if self.intent == "oracle" and self.world != "mujoco":
             raise bad("intent", "a model or 'nominal' on the real arm (the oracle knows the simulated operator's mind)")
         for name in ("user", "seed"):
             v = getattr(self, name)
@@ -203,31 +214,44 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
 
     built_here = world is None
     intent_stage = None
+    intent_pos = intent_traj.positions
+    start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
+    if config.world == "mujoco" and config.robot != "ur5":  # the tasks, laid out for the UR5, moved to this arm
+        ref_abs, intent_pos, start = move_tasks(config.robot, ref_abs, intent_pos)
     if world is None:
         if config.world == "mujoco":
-            from coassist.robot.mujoco_world import MujocoUR5World
+            from coassist.robot.mujoco_world import MujocoArmWorld, MujocoUR5World
 
-            start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
-            # A real-time predictor runs against the wall clock: so must the world it serves.
-            world = MujocoUR5World(config.object, control_dt=dt, start=start, seed=config.seed, view=view,
-                                   realtime=view or bool(config.realtime_intent))  # fmt: skip
-        else:
+            if config.robot == "ur5":
+                # A real-time predictor runs against the wall clock: so must the world it serves.
+                world = MujocoUR5World(config.object, control_dt=dt, start=start, seed=config.seed, view=view,
+                                       realtime=view or bool(config.realtime_intent))  # fmt: skip
+            else:
+                world = MujocoArmWorld(config.object, robot=config.robot, control_dt=dt, start=start, seed=config.seed,
+                                       view=view, realtime=view or bool(config.realtime_intent))  # fmt: skip
+        elif config.world == "ur":
             from coassist.robot.ur_rtde_world import URRTDEWorld
 
             if not host:
                 raise ValueError("the real arm needs --host (the robot's IP address)")
             world = URRTDEWorld(host, frequency=float(config.rate_hz))
+        elif config.world == "franka":
+            from coassist.robot.franka_world import FrankaWorld
+
+            if not host:
+                raise ValueError("the Franka needs --host (the robot's FCI address)")
+            world = FrankaWorld(host, frequency=float(config.rate_hz), arm=config.robot)
     try:
         state0 = world.read()
         start_pose = np.asarray(state0.tool_pose, dtype=float).copy()
-        if config.world == "ur":
+        if config.world != "mujoco":
             # lay the task out from where the TCP is: shift the plan and the intent
             shift = start_pose[:2] - ref_abs[0, :2]
             ref_abs = ref_abs.copy()
             ref_abs[:, :2] += shift
         if operator is None and config.world == "mujoco" and hasattr(world, "operator"):
             noise = motor_noise(profile, rng_motor, n_grid, dt)  # as long as the intent: stop() may step on
-            arm = OperatorArm(profile, intent_traj.positions, dt, noise)
+            arm = OperatorArm(profile, intent_pos, dt, noise)
             hand_pose, _ = world.hand_pose()
             operator = SimulatedHand(arm, dt, hand_pose, full_pose=config.full_pose,
                                      offset=hand_pose[:2] - start_pose[:2])  # fmt: skip
@@ -244,14 +268,14 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
         if limits.workspace_lower is None:
             lo, hi = workspace_for(ref_abs, start_pose)
             limits = replace(limits, workspace_lower=tuple(lo), workspace_upper=tuple(hi))
-        safety = SafetyLayer(limits, dt, 6)
+        safety = SafetyLayer(limits, dt, int(getattr(world, "n_joints", 6)))
         intent_stage, model_id = _intent_stage(config, H, intent_source)
         dofs = (0, 1, 2, 3, 4, 5) if config.full_pose else (0, 1)
         tick = ControlTick(controller, intent_stage, wrench, safety, command_space="joint_velocity",
                            kinematics=kin, config=TickConfig(dofs=dofs))  # fmt: skip
         context = TrialContext(dt=dt, horizon=H, start=start_pose[:2].copy(), target=ref_abs[-1, :2].copy(),
                                reference=ref_abs, task=task.kind, user=profile.name, object=obj.name,
-                               true_intent=intent_traj.positions)  # fmt: skip
+                               true_intent=intent_pos)  # fmt: skip
         tick.reset(Plan(ref_abs, start_pose), context)
         # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
         wrench.zero(np.asarray(state0.wrench, dtype=float)[None], np.asarray(state0.sensor_rotation, dtype=float)[None])
@@ -261,6 +285,9 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
         termination = TargetDwell(ref_abs[-1, :2], 0.025, int(math.ceil(5.0 / dt)), int(math.ceil(t_done / dt)))
         log = run_loop(world, tick, n_max, termination, deadline=dt if getattr(world, "realtime", False) else None,
                        on_tick=on_tick)  # fmt: skip
+        detail = getattr(world, "stop_detail", None)  # a world that knows why the robot stopped says so
+        if detail and log.ended in ("robot_stop", "safety_stop"):
+            log.message = detail
     finally:
         if built_here:
             world.close()
@@ -268,14 +295,31 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
             close = getattr(intent_stage.predictor, "close", None)
             if close is not None:
                 close()
-    return _trial(config, log, ref_abs, H, intent_traj.positions if config.world == "mujoco" else None, task, obj,
+    return _trial(config, log, ref_abs, H, intent_pos if config.world == "mujoco" else None, task, obj,
                   profile.name if config.world == "mujoco" else "operator", model_id, controller, dofs, start_pose,
                   wrench.bias)  # fmt: skip
 
 
+def move_tasks(robot: str, ref_abs: np.ndarray, intent: np.ndarray):
+    """The plan and the intent moved (x-y) from the UR5's task area to ``robot``'s
+    (``ArmDescription.task_centre``), and the start TCP position (3,) at its task height [m]."""
+    from coassist.robot.arms import get_arm
+
+    ur5, arm = get_arm("ur5").task_centre, get_arm(robot).task_centre
+    shift = np.array(arm[:2]) - np.array(ur5[:2])
+    ref_abs, intent = ref_abs.copy(), intent.copy()
+    ref_abs[:, :2] += shift
+    intent[:, :2] += shift
+    return ref_abs, intent, (float(ref_abs[0, 0]), float(ref_abs[0, 1]), float(arm[2]))
+
+
 def _kinematics_for(world: Any):
-    """UR5 kinematics with the world's TCP (the MuJoCo model's tcp site, or the real arm's TCP offset)."""
+    """The world's own kinematics where it has them (another arm), else UR5 kinematics with the
+    world's TCP (the MuJoCo model's tcp site, or the real arm's TCP offset)."""
     from coassist.robot.kinematics import UR5Kinematics
+
+    if callable(getattr(world, "kinematics", None)):
+        return world.kinematics()
 
     offset = getattr(world, "tcp_offset_pose", None)
     if offset is None and hasattr(world, "model") and hasattr(world, "data"):
@@ -289,7 +333,7 @@ def _kinematics_for(world: Any):
 
 
 def _intent_stage(config: DriveConfig, H: int, source: Any):
-    realtime = config.realtime_intent if config.realtime_intent is not None else config.world == "ur"
+    realtime = config.realtime_intent if config.realtime_intent is not None else config.world != "mujoco"
     if source is not None:
         if hasattr(source, "tick"):
             return RealtimeIntent(source), getattr(source, "model_id", "realtime")
@@ -336,12 +380,12 @@ def _trial(config: DriveConfig, log: LoopLog, ref_abs, H, intent, task, obj, use
         "ended": log.ended, "stop_message": log.message, "preset": config.preset, "world": config.world,
         # The admittance the tick integrates from wrench + u_r (the label 'hand_alone' removes u_r through it).
         "plant": {name: [float(v) for v in np.diag(getattr(controller.model, name))] for name in ("M", "D", "K")},
-        "object": obj.to_extra(), "rate_hz": config.rate_hz, "full_pose": config.full_pose,
+        "robot": config.robot, "object": obj.to_extra(), "rate_hz": config.rate_hz, "full_pose": config.full_pose,
         "start_pose": [float(v) for v in start_pose], "sensor_bias": [float(v) for v in bias],
         "limits": config.limits.describe(), "features": list(FEATURES), "dofs": list(dofs),
     })  # fmt: skip
     meta = TrialMeta(user=user, task=task.kind, object=obj.name, controller=controller.name, model_id=model_id,
-                     seed=config.seed, source="mujoco" if config.world == "mujoco" else "ur5", dt=config.dt, extra=extra)  # fmt: skip
+                     seed=config.seed, source={"mujoco": "mujoco", "ur": "ur5"}.get(config.world, config.world), dt=config.dt, extra=extra)  # fmt: skip
     pose = log.pose
     if config.full_pose:  # rotation vectors continuous through ±π: a tool pointing down sits at |rv| ≈ π
         pose = pose.copy()

@@ -1,4 +1,4 @@
-"""UR5 kinematics: forward kinematics, the TCP Jacobian and the joint-velocity map.
+"""Arm kinematics (the UR5 here; others in :mod:`coassist.robot.arms`): FK, the TCP Jacobian, IK.
 
 Each control tick turns a Cartesian twist command of the tool centre point (TCP)
 into joint velocities with thesis eq. 3.6,
@@ -63,9 +63,11 @@ from coassist.spatial import (
 )
 
 __all__ = [
+    "ArmKinematics",
     "IKConvergenceError",
     "UR5Kinematics",
     "damped_pseudo_inverse",
+    "robot_data_path",
     "joint_velocity",
     "manipulability",
     "orientation_error",
@@ -76,14 +78,9 @@ __all__ = [
 ]
 
 _INSTALL_HINT = "install the robot extra: pip install 'coassist[robot]'"
-_URDF_RELATIVE = Path("cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf")
+_ROBOTS_RELATIVE = Path("cmeel.prefix/share/example-robot-data/robots")
 _URDF_SUFFIX = ("ur_description", "urdf", "ur5_robot.urdf")
 
-# base_link -> base: rotation by pi about z. Applied as sign flips of the x and y rows.
-_BASE_ROTATION = np.diag([-1.0, -1.0, 1.0])
-_SIGN3 = np.array([-1.0, -1.0, 1.0])
-_SIGN3_COL = _SIGN3[:, None].copy()
-_SIGN6_COL = np.array([-1.0, -1.0, 1.0, -1.0, -1.0, 1.0])[:, None].copy()
 
 _TCP_FRAME_NAME = "coassist_tcp"
 
@@ -110,21 +107,32 @@ def ur5_urdf_path() -> Path:
     FileNotFoundError
         If the distribution is installed but holds no UR5 URDF.
     """
+    return robot_data_path(_URDF_SUFFIX, "the UR5 model")
+
+
+def robot_data_path(parts: tuple[str, ...], what: str) -> Path:
+    """Path of ``robots/<parts...>`` in the installed ``example-robot-data`` (nothing downloaded).
+
+    ``parts`` : the last path components, e.g. ``("panda_description", "urdf", "panda.urdf")``;
+    ``what`` names the model in the errors (ImportError: the package is missing;
+    FileNotFoundError: it holds no such file).
+    """
     try:
         dist = metadata.distribution("example-robot-data")
     except metadata.PackageNotFoundError:
-        raise ImportError(f"the UR5 model needs the example-robot-data package; {_INSTALL_HINT}") from None
-    path = Path(dist.locate_file(_URDF_RELATIVE))
+        raise ImportError(f"{what} needs the example-robot-data package; {_INSTALL_HINT}") from None
+    path = Path(dist.locate_file(_ROBOTS_RELATIVE.joinpath(*parts)))
     if path.is_file():
         return path
     # Other layouts of the wheel: search its file list.
+    n = len(parts)
     for entry in dist.files or ():
-        if tuple(entry.parts[-3:]) == _URDF_SUFFIX:
+        if tuple(entry.parts[-n:]) == tuple(parts):
             candidate = Path(dist.locate_file(entry))
             if candidate.is_file():
                 return candidate
     raise FileNotFoundError(
-        f"example-robot-data {dist.version} is installed but holds no ur_description/urdf/ur5_robot.urdf; "
+        f"example-robot-data {dist.version} is installed but holds no {'/'.join(parts)}; "
         f"reinstall it: pip install --force-reinstall 'coassist[robot]'"
     )
 
@@ -138,7 +146,7 @@ def _import_pinocchio():
     try:
         import pinocchio
     except ImportError as exc:
-        raise ImportError(f"UR5Kinematics needs pinocchio (the 'pin' package); {_INSTALL_HINT}") from exc
+        raise ImportError(f"arm kinematics need pinocchio (the 'pin' package); {_INSTALL_HINT}") from exc
     return pinocchio
 
 
@@ -155,7 +163,165 @@ def _check_tcp_offset(tcp_offset: ArrayLike) -> np.ndarray:
     return arr
 
 
-class UR5Kinematics:
+class ArmKinematics:
+    """Forward kinematics and TCP Jacobian of a serial arm, in its controller's base frame.
+
+    The shared part of every arm (the UR5 here, the Panda in :mod:`coassist.robot.arms`):
+    a pinocchio model of the URDF with the joints of ``locked`` fixed at 0 (a gripper's
+    fingers), a TCP frame added at ``tcp_offset`` from ``tip_frame`` (the flange), and
+    the results re-expressed in the base frame by the constant sign flips ``base_signs``
+    (a rotation of the URDF root about z by 0 or π: (1, 1, 1) or (−1, −1, 1)).
+
+    Parameters
+    ----------
+    urdf_path : the URDF file.
+    tip_frame : the flange frame's name in it.
+    n_joints : the arm's joints (checked against the model).
+    tcp_offset : (6,) TCP pose in the flange frame, ``[x, y, z, rx, ry, rz]`` [m, rad].
+    base_signs : (3,) the diagonal of the base rotation, each ±1.
+    joint_velocity_limit : (n,) [rad/s].
+    joint_position_limit : (n, 2) [rad]; None: the URDF's ``lower``/``upper``.
+    locked : joint names fixed at 0.
+
+    Notes
+    -----
+    One instance owns one pinocchio ``Data``; calls are not thread-safe. Every returned
+    array is a fresh copy.
+    """
+
+    def __init__(self, urdf_path: Path, tip_frame: str, *, n_joints: int, tcp_offset: ArrayLike,
+                 base_signs: ArrayLike = (1.0, 1.0, 1.0), joint_velocity_limit: ArrayLike,
+                 joint_position_limit: ArrayLike | None = None, locked: tuple[str, ...] = ()) -> None:  # fmt: skip
+        self.tcp_offset = _check_tcp_offset(tcp_offset)
+        pin = _import_pinocchio()
+        self._pin = pin
+        self.urdf_path = Path(urdf_path)
+        self.n_joints = n = int(n_joints)
+        model = pin.buildModelFromUrdf(str(self.urdf_path))
+        if locked:
+            ids = [model.getJointId(name) for name in locked]
+            model = pin.buildReducedModel(model, ids, pin.neutral(model))
+        if model.nq != n or model.nv != n:
+            raise RuntimeError(f"{self.urdf_path} is not a {n}-joint arm (nq={model.nq}, nv={model.nv})")
+        if not model.existFrame(tip_frame):
+            raise RuntimeError(f"{self.urdf_path} has no frame {tip_frame!r}")
+        tip = model.getFrameId(tip_frame)
+        tool_frame = model.frames[tip]
+        offset = pin.SE3(rotation_matrix(self.tcp_offset[3:]), self.tcp_offset[:3].copy())
+        placement = tool_frame.placement * offset
+        self._frame_id = model.addFrame(
+            pin.Frame(_TCP_FRAME_NAME, tool_frame.parentJoint, tip, placement, pin.FrameType.OP_FRAME)
+        )
+        self._model = model
+        self._data = model.createData()
+        self._reference = pin.LOCAL_WORLD_ALIGNED
+        self._compute_jacobian = pin.computeFrameJacobian
+        self._frames_fk = pin.framesForwardKinematics
+        signs = np.array(base_signs, dtype=float)
+        self._sign3 = signs
+        self._sign3_col = signs[:, None].copy()
+        self._sign6_col = np.concatenate((signs, signs))[:, None].copy()
+
+        vel = np.array(joint_velocity_limit, dtype=float)
+        vel.setflags(write=False)
+        self.joint_velocity_limit = vel
+        if joint_position_limit is None:
+            pos = np.stack((model.lowerPositionLimit, model.upperPositionLimit), axis=1).astype(float)
+        else:
+            pos = np.array(joint_position_limit, dtype=float)
+        pos.setflags(write=False)
+        self.joint_position_limit = pos
+
+    def _as_q(self, q: ArrayLike) -> np.ndarray:
+        arr = np.asarray(q, dtype=np.float64)
+        if arr.shape != (self.n_joints,):
+            raise ValueError(f"q must have shape ({self.n_joints},), got {arr.shape}")
+        if not np.isfinite(arr).all():
+            raise ValueError("q has non-finite entries")
+        return arr
+
+    def forward(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """TCP position and orientation in the base frame.
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Joint positions, rad.
+
+        Returns
+        -------
+        position : ndarray, shape (3,)
+            TCP position, m.
+        rotation : ndarray, shape (3, 3)
+            TCP rotation matrix (columns: TCP axes in the base frame).
+        """
+        q = self._as_q(q)
+        self._frames_fk(self._model, self._data, q)
+        M = self._data.oMf[self._frame_id]
+        return M.translation * self._sign3, M.rotation * self._sign3_col
+
+    def pose(self, q: ArrayLike) -> np.ndarray:
+        """TCP pose ``[x, y, z, rx, ry, rz]`` in the base frame (m, rotation vector rad).
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Joint positions, rad.
+
+        Returns
+        -------
+        pose : ndarray, shape (6,)
+            Same convention as the UR controller's ``getActualTCPPose``.
+        """
+        p, R = self.forward(q)
+        return np.concatenate((p, rotation_vector(R)))
+
+    def jacobian(self, q: ArrayLike) -> np.ndarray:
+        """TCP Jacobian, world-aligned, in the base frame.
+
+        ``[v; ω] = J(q) q̇`` where ``v`` is the velocity of the TCP point and ``ω``
+        the angular velocity of the tool, both in base-frame coordinates
+        (pinocchio's ``LOCAL_WORLD_ALIGNED`` re-expressed in the base frame).
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Joint positions, rad.
+
+        Returns
+        -------
+        J : ndarray, shape (6, n)
+            Rows ``[v (m/s); ω (rad/s)]`` per rad/s of each joint.
+        """
+        q = self._as_q(q)
+        J = self._compute_jacobian(self._model, self._data, q, self._frame_id, self._reference)
+        return J * self._sign6_col
+
+    def forward_and_jacobian(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`forward` and :meth:`jacobian` in one pinocchio pass (one per tick).
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Joint positions, rad.
+
+        Returns
+        -------
+        position : ndarray, shape (3,)
+            TCP position in the base frame, m.
+        rotation : ndarray, shape (3, 3)
+            TCP rotation matrix in the base frame.
+        J : ndarray, shape (6, n)
+            World-aligned TCP Jacobian in the base frame, see :meth:`jacobian`.
+        """
+        q = self._as_q(q)
+        # computeFrameJacobian runs the forward pass and updates data.oMf[frame_id].
+        J = self._compute_jacobian(self._model, self._data, q, self._frame_id, self._reference)
+        M = self._data.oMf[self._frame_id]
+        return M.translation * self._sign3, M.rotation * self._sign3_col, J * self._sign6_col
+
+
+class UR5Kinematics(ArmKinematics):
     """Forward kinematics and TCP Jacobian of the UR5, in the UR base frame.
 
     Parameters
@@ -176,134 +342,20 @@ class UR5Kinematics:
         The offset given to the constructor.
     urdf_path : pathlib.Path
         The URDF the model was built from.
-
-    Notes
-    -----
-    One instance owns one pinocchio ``Data``; calls are not thread-safe. Every
-    returned array is a fresh copy.
     """
 
     n_joints = 6
 
     def __init__(self, tcp_offset: ArrayLike = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)) -> None:
-        self.tcp_offset = _check_tcp_offset(tcp_offset)
-        pin = _import_pinocchio()
-        self._pin = pin
-        self.urdf_path = ur5_urdf_path()
-        model = pin.buildModelFromUrdf(str(self.urdf_path))
-        if model.nq != 6 or model.nv != 6:
-            raise RuntimeError(f"{self.urdf_path} is not a 6-joint arm (nq={model.nq}, nv={model.nv})")
-        tool0 = model.getFrameId("tool0")
-        tool_frame = model.frames[tool0]
-        offset = pin.SE3(rotation_matrix(self.tcp_offset[3:]), self.tcp_offset[:3].copy())
-        placement = tool_frame.placement * offset
-        self._frame_id = model.addFrame(
-            pin.Frame(_TCP_FRAME_NAME, tool_frame.parentJoint, tool0, placement, pin.FrameType.OP_FRAME)
-        )
-        self._model = model
-        self._data = model.createData()
-        self._reference = pin.LOCAL_WORLD_ALIGNED
-        self._compute_jacobian = pin.computeFrameJacobian
-        self._frames_fk = pin.framesForwardKinematics
+        from coassist.robot.arms import ARMS  # the registry builds on this module
 
-        vel = np.full(6, np.pi)
-        vel.setflags(write=False)
-        self.joint_velocity_limit = vel
-        pos = np.tile([-2.0 * np.pi, 2.0 * np.pi], (6, 1))
-        pos.setflags(write=False)
-        self.joint_position_limit = pos
+        arm = ARMS["ur5"]
+        super().__init__(ur5_urdf_path(), arm.tip_frame, n_joints=6, tcp_offset=tcp_offset, base_signs=arm.base_signs,
+                         joint_velocity_limit=arm.joint_velocity_limit,
+                         joint_position_limit=arm.joint_position_limit)  # fmt: skip
 
     def __repr__(self) -> str:
         return f"UR5Kinematics(tcp_offset={self.tcp_offset.tolist()})"
-
-    @staticmethod
-    def _as_q(q: ArrayLike) -> np.ndarray:
-        arr = np.asarray(q, dtype=np.float64)
-        if arr.shape != (6,):
-            raise ValueError(f"q must have shape (6,), got {arr.shape}")
-        if not np.isfinite(arr).all():
-            raise ValueError("q has non-finite entries")
-        return arr
-
-    def forward(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """TCP position and orientation in the base frame.
-
-        Parameters
-        ----------
-        q : array_like, shape (6,)
-            Joint positions, rad.
-
-        Returns
-        -------
-        position : ndarray, shape (3,)
-            TCP position, m.
-        rotation : ndarray, shape (3, 3)
-            TCP rotation matrix (columns: TCP axes in the base frame).
-        """
-        q = self._as_q(q)
-        self._frames_fk(self._model, self._data, q)
-        M = self._data.oMf[self._frame_id]
-        return M.translation * _SIGN3, M.rotation * _SIGN3_COL
-
-    def pose(self, q: ArrayLike) -> np.ndarray:
-        """TCP pose ``[x, y, z, rx, ry, rz]`` in the base frame (m, rotation vector rad).
-
-        Parameters
-        ----------
-        q : array_like, shape (6,)
-            Joint positions, rad.
-
-        Returns
-        -------
-        pose : ndarray, shape (6,)
-            Same convention as the UR controller's ``getActualTCPPose``.
-        """
-        p, R = self.forward(q)
-        return np.concatenate((p, rotation_vector(R)))
-
-    def jacobian(self, q: ArrayLike) -> np.ndarray:
-        """TCP Jacobian, world-aligned, in the base frame.
-
-        ``[v; ω] = J(q) q̇`` where ``v`` is the velocity of the TCP point and ``ω``
-        the angular velocity of the tool, both in base-frame coordinates
-        (pinocchio's ``LOCAL_WORLD_ALIGNED`` re-expressed in the base frame).
-
-        Parameters
-        ----------
-        q : array_like, shape (6,)
-            Joint positions, rad.
-
-        Returns
-        -------
-        J : ndarray, shape (6, 6)
-            Rows ``[v (m/s); ω (rad/s)]`` per rad/s of each joint.
-        """
-        q = self._as_q(q)
-        J = self._compute_jacobian(self._model, self._data, q, self._frame_id, self._reference)
-        return J * _SIGN6_COL
-
-    def forward_and_jacobian(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`forward` and :meth:`jacobian` in one pinocchio pass (one per tick).
-
-        Parameters
-        ----------
-        q : array_like, shape (6,)
-            Joint positions, rad.
-
-        Returns
-        -------
-        position : ndarray, shape (3,)
-            TCP position in the base frame, m.
-        rotation : ndarray, shape (3, 3)
-            TCP rotation matrix in the base frame.
-        J : ndarray, shape (6, 6)
-            World-aligned TCP Jacobian in the base frame, see :meth:`jacobian`.
-        """
-        q = self._as_q(q)
-        # computeFrameJacobian runs the forward pass and updates data.oMf[frame_id].
-        J = self._compute_jacobian(self._model, self._data, q, self._frame_id, self._reference)
-        M = self._data.oMf[self._frame_id]
-        return M.translation * _SIGN3, M.rotation * _SIGN3_COL, J * _SIGN6_COL
 
 
 # ----------------------------------------------------------------------------
@@ -316,7 +368,7 @@ class IKConvergenceError(CoassistError, RuntimeError):
 
 
 def solve_ik(
-    kin: UR5Kinematics,
+    kin: ArmKinematics,
     position: ArrayLike,
     rotation: ArrayLike | None,
     q0: ArrayLike,

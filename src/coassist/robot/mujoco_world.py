@@ -1,11 +1,16 @@
-"""A UR5 in MuJoCo as a :class:`coassist.runtime.world.World` (``joint_velocity`` commands).
+"""An arm in MuJoCo (the UR5, the Panda) as a :class:`coassist.runtime.world.World` (``joint_velocity`` commands).
 
-The physics is :func:`coassist.robot.ur5_mjcf.build_ur5_model`: the UR5 of
-example-robot-data with a force/torque sensor at the flange and the carried object
-below it; the MuJoCo world frame is the UR base frame. Frames, units and signs are
-those of :mod:`coassist.runtime.world`.
+The physics is :func:`coassist.robot.arm_mjcf.build_arm_model`: the arm of
+example-robot-data (:data:`coassist.robot.arms.ARMS`, ``robot=``) with a force/torque
+sensor at the flange and the carried object below it; the MuJoCo world frame is the
+arm's base frame. Frames, units and signs are those of :mod:`coassist.runtime.world`.
+:class:`MujocoUR5World` is the UR5 (the default ``robot``); the servo, the sensor and the
+operator below are the same for every arm, with the arm's own joint count, torque and
+speed limits (its URDF's) and start seed (its ``home``). A redundant arm (the Panda's
+7 joints) resolves eq. 3.6 with the start posture held in the null space
+(:meth:`MujocoArmWorld.kinematics`, :class:`coassist.robot.arms.NullSpacePosture`).
 
-One :meth:`MujocoUR5World.apply` is one control period: the operator (a
+One :meth:`MujocoArmWorld.apply` is one control period: the operator (a
 :class:`~coassist.runtime.world.HandOperator`) is asked once, at the start of the
 period, for its wrench given the handle's pose and twist; that wrench (base frame, at
 the handle point) is applied for the whole period; the physics then runs
@@ -13,7 +18,7 @@ the handle point) is applied for the whole period; the physics then runs
 ``speedJ``) moves its reference joint velocity toward the command with a first-order
 lag of ``servo_time_constant`` and tracks it by computed torque (the arm's inertia,
 gravity and Coriolis terms, and a critically damped position/velocity loop at
-``servo_bandwidth``; :mod:`coassist.robot.ur5_mjcf`), clipped to the UR5's joint
+``servo_bandwidth``; :mod:`coassist.robot.ur5_mjcf`), clipped to the arm's joint
 torques. So the joints follow the command with that lag and the hand does not
 back-drive them (a 10 N push deflects the arm by a fraction of a milliradian), as on
 the real geared arm.
@@ -27,7 +32,7 @@ sensors at ``rate_hz`` (100 Hz, a Robotiq FT300), adds a constant bias and white
 drawn from ``np.random.default_rng(seed)``, and clips to its range; a sample is held
 until the next one and ``RobotState.wrench_seq`` counts them. The reading has the sign
 of the force the tool applies to the sensor (at rest: the tool's weight, m Rᵀ g with
-g = (0, 0, −9.81)), in the sensor frame (the flange frame, ``tool0``).
+g = (0, 0, −9.81)), in the sensor frame (the flange frame, ``tool0`` on the UR5).
 
 Determinism: the physics is deterministic and the only randomness is the sensor noise,
 so the same seed and the same commands give bit-identical states.
@@ -44,11 +49,14 @@ import mujoco
 import numpy as np
 
 from coassist._checks import check_optional_int
-from coassist.robot.ur5_mjcf import Q_SEED, TOOLS, VELOCITY_LIMITS, build_ur5_model
+from coassist.robot.arm_mjcf import TOOLS, build_arm_model, urdf_joint_limits
+from coassist.robot.arms import NullSpacePosture, arm_kinematics, get_arm
+from coassist.robot.ur5_mjcf import Q_SEED
 from coassist.runtime.world import Command, HandOperator, RobotState
 from coassist.spatial import _rotation_vector, rotation_vector  # rotation_vector: re-exported
 
-__all__ = ["DEFAULT_START", "FTSensorModel", "MujocoUR5World", "TOOL_DOWN", "rotation_vector", "tool_down_ik"]
+__all__ = ["DEFAULT_START", "FTSensorModel", "MujocoArmWorld", "MujocoUR5World", "TOOL_DOWN", "rotation_vector",
+           "tool_down_ik"]  # fmt: skip
 
 #: The default start TCP position [m] (base frame): the tasks' START at 0.2 m height.
 DEFAULT_START = (-0.10, -0.615, 0.20)
@@ -159,19 +167,22 @@ def tool_down_ik(model: mujoco.MjModel, position, q_seed=None, *, site: str = "t
     return q
 
 
-class MujocoUR5World:
-    """The MuJoCo UR5 world (module docstring); implements :class:`~coassist.runtime.world.World`.
+class MujocoArmWorld:
+    """An arm in MuJoCo (module docstring); implements :class:`~coassist.runtime.world.World`.
 
     Parameters
     ----------
     tool : the carried object, one of ``("handle", "board", "heavy")``.
+    robot : the arm, a key of :data:`coassist.robot.arms.ARMS` with a MuJoCo model
+        ("ur5", "panda").
     control_dt : the control period [s] (0.008 at 125 Hz, 0.002 at 500 Hz); a positive
         multiple of ``physics_dt``.
     physics_dt : the MuJoCo step [s]; None: 0.002 s, or the largest divisor of
         control_dt under it.
     start : (3,) the start TCP position [m] in the base frame; the tool points straight
         down (:data:`TOOL_DOWN`). The joints come from a damped-least-squares IK from
-        ``q_seed`` (default: elbow up, wrist down, :data:`~coassist.robot.ur5_mjcf.Q_SEED`).
+        ``q_seed`` (default: the arm's ``home``; the UR5's elbow up, wrist down,
+        :data:`~coassist.robot.ur5_mjcf.Q_SEED`).
     servo_time_constant : [s] first-order lag of the joint velocity behind the command.
     sensor : the :class:`FTSensorModel` (default: 0.05 N noise at 100 Hz, no bias).
     operator : the :class:`~coassist.runtime.world.HandOperator`, or None (no hand).
@@ -181,19 +192,20 @@ class MujocoUR5World:
     gravity : False turns gravity off (tests).
     realtime : pace :meth:`apply` to the wall clock (a viewer).
     view : open MuJoCo's passive viewer (needs a display), synced every period.
-    q_seed : (6,) the joint configuration the start IK begins from [rad]; None:
-        :data:`~coassist.robot.ur5_mjcf.Q_SEED`.
+    q_seed : (n,) the joint configuration the start IK begins from [rad]; None: the
+        arm's ``home``.
     servo_bandwidth : [Hz] the bandwidth of the computed-torque servo's critically damped
         position/velocity loop (ω = 2π·bandwidth: how stiffly each joint tracks its reference).
+    posture_gain : k_n [1/s] of the null-space posture of a redundant arm.
     """
 
     command_space = "joint_velocity"
-    n_joints = 6
 
     def __init__(
         self,
         tool: str = "handle",
         *,
+        robot: str = "ur5",
         control_dt: float = 0.008,
         physics_dt: float | None = None,
         start=DEFAULT_START,
@@ -207,7 +219,10 @@ class MujocoUR5World:
         view: bool = False,
         q_seed=None,
         servo_bandwidth: float = 25.0,
+        posture_gain: float = 1.0,
     ) -> None:
+        arm = get_arm(robot)
+        n = arm.n_joints
         if tool not in TOOLS:
             raise ValueError(f"tool must be one of {TOOLS}, got {tool!r}")
         control_dt = _number(control_dt, "control_dt")
@@ -239,12 +254,15 @@ class MujocoUR5World:
         start_arr = np.asarray(start, dtype=float)
         if start_arr.shape != (3,) or not np.isfinite(start_arr).all():
             raise ValueError(f"start must be 3 finite numbers [m] (base frame), got {start!r}")
-        q0 = Q_SEED if q_seed is None else np.asarray(q_seed, dtype=float)
-        if q0.shape != (6,) or not np.isfinite(q0).all():
-            raise ValueError(f"q_seed must be 6 finite joint angles [rad], got {q_seed!r}")
+        q0 = np.array(arm.home) if q_seed is None else np.asarray(q_seed, dtype=float)
+        if q0.shape != (n,) or not np.isfinite(q0).all():
+            raise ValueError(f"q_seed must be {n} finite joint angles [rad], got {q_seed!r}")
         seed = check_optional_int(seed, "seed")
 
         self.tool = tool
+        self.robot, self.n_joints = arm.name, n
+        self.posture_gain = float(posture_gain)
+        self.velocity_limits = urdf_joint_limits(arm.name)[2]
         self.dt = control_dt
         self.physics_dt = physics_dt
         self.n_substeps = int(n_sub)
@@ -253,8 +271,8 @@ class MujocoUR5World:
         self.operator = operator
         self.realtime = bool(realtime)
         self.servo_bandwidth = bandwidth
-        self.model = build_ur5_model(
-            tool, physics_dt=physics_dt, servo_time_constant=tau, tcp_offset=tcp_offset, gravity=gravity,
+        self.model = build_arm_model(
+            arm.name, tool, physics_dt=physics_dt, servo_time_constant=tau, tcp_offset=tcp_offset, gravity=gravity,
         )
         self.data = mujoco.MjData(self.model)
         m = self.model
@@ -262,7 +280,7 @@ class MujocoUR5World:
         self._handle = m.site("handle").id
         self._ft = m.site("ft_sensor").id
         self._tool_body = m.body("tool").id
-        self._tool0 = m.body("tool0").id
+        self._tool0 = m.body(arm.tip_frame).id  # the flange
         self._force_adr = int(m.sensor("ft_force").adr[0])
         self._torque_adr = int(m.sensor("ft_torque").adr[0])
         omega = 2.0 * math.pi * bandwidth
@@ -276,20 +294,20 @@ class MujocoUR5World:
 
         self.q_start = tool_down_ik(self.model, start_arr, q0)
         # Servo state: the lagged reference velocity and its integral.
-        self._v_ref = [0.0] * 6  # lists of floats: the servo runs on plain floats
+        self._v_ref = [0.0] * n  # lists of floats: the servo runs on plain floats
         self._q_ref = self.q_start.tolist()
-        self._target = [0.0] * 6
-        self._u_list = [0.0] * 6
+        self._target = [0.0] * n
+        self._u_list = [0.0] * n
         self._hand = np.zeros(6)
         self._hand_list = [0.0] * 6
         self._hand_active = False
-        self._u = np.zeros(6)
+        self._u = np.zeros(n)
         self._inv_dt = 1.0 / physics_dt
         #: times the servo's position error reached MAX_TRACKING_ERROR (torque limits, a
         #: hard push) and its reference was pulled back to the arm (no wind-up).
         self.tracking_limit_events = 0
-        self._jacp = np.zeros((3, 6))
-        self._jacr = np.zeros((3, 6))
+        self._jacp = np.zeros((3, n))
+        self._jacr = np.zeros((3, n))
         self._vel6 = np.zeros(6)
         self._steps = 0
         self._sample_index = 0
@@ -345,7 +363,7 @@ class MujocoUR5World:
         v_ref, q_ref, target = self._v_ref, self._q_ref, self._target
         qd, q = self._qvel.tolist(), self._qpos.tolist()
         u = self._u_list
-        for i in range(6):
+        for i in range(self.n_joints):
             v = v_ref[i]
             dv = 0.0 if hold else alpha * (target[i] - v)
             u[i] = dv / h + kd * (v - qd[i]) + kp * (q_ref[i] - q[i])
@@ -418,7 +436,7 @@ class MujocoUR5World:
 
     def apply(self, command: Command) -> None:
         if self._closed:
-            raise RuntimeError("MujocoUR5World.apply after close()")
+            raise RuntimeError(f"{type(self).__name__}.apply after close()")
         self._target = self._command_target(command).tolist()
         self._hand = self._hand_wrench()
         q = self._qpos.tolist()
@@ -472,19 +490,20 @@ class MujocoUR5World:
     def _command_target(self, command: Command) -> np.ndarray:
         """The servo's target joint velocity: command.qd clipped to the joint speed limits,
         zero when stopping; a missing, mis-shaped or non-finite qd is counted and read as zero."""
+        n = self.n_joints
         if self.protective_stop or self.emergency_stop or getattr(command, "stop", False):
-            return np.zeros(6)
+            return np.zeros(n)
         qd = getattr(command, "qd", None)
         try:
             arr = np.asarray(qd, dtype=float)
-            ok = qd is not None and arr.shape == (6,) and math.isfinite(float(np.add.reduce(arr)))
+            ok = qd is not None and arr.shape == (n,) and math.isfinite(float(np.add.reduce(arr)))
         except (TypeError, ValueError):
             ok = False
         if not ok:
             self.invalid_commands += 1
-            return np.zeros(6)
-        out = np.maximum(arr, -VELOCITY_LIMITS)
-        return np.minimum(out, VELOCITY_LIMITS, out=out)
+            return np.zeros(n)
+        out = np.maximum(arr, -self.velocity_limits)
+        return np.minimum(out, self.velocity_limits, out=out)
 
     def _hand_wrench(self) -> np.ndarray:
         if self.operator is None:
@@ -523,13 +542,35 @@ class MujocoUR5World:
         com = R.T @ (d.subtree_com[self._tool0] - d.site_xpos[self._ft])
         return float(self.model.body_subtreemass[self._tool0]), com
 
+    def flange_to_tcp(self) -> np.ndarray:
+        """(6,) the TCP pose in the flange frame ``[x, y, z, rx, ry, rz]`` [m, rad] (the kinematics' TCP offset)."""
+        d = self.data
+        R0 = d.xmat[self._tool0].reshape(3, 3)
+        rel = R0.T @ (d.site_xpos[self._tcp] - d.xpos[self._tool0])
+        Rrel = R0.T @ d.site_xmat[self._tcp].reshape(3, 3)
+        return np.concatenate([rel, rotation_vector(Rrel)])
+
+    def kinematics(self):
+        """The arm's kinematics with this world's TCP (eq. 3.6 of the tick): an
+        :class:`~coassist.robot.kinematics.ArmKinematics`, or on a redundant arm a
+        :class:`~coassist.robot.arms.NullSpacePosture` holding the start posture."""
+        kin = arm_kinematics(self.robot, self.flange_to_tcp())
+        if self.n_joints > 6:
+            return NullSpacePosture(kin, self.q_start, gain=self.posture_gain)
+        return kin
+
     def tcp_jacobian(self) -> np.ndarray:
-        """(6, 6) TCP Jacobian [linear; angular] in the base frame at the current joints."""
+        """(6, n) TCP Jacobian [linear; angular] in the base frame at the current joints."""
         mujoco.mj_jacSite(self.model, self.data, self._jacp, self._jacr, self._tcp)
         return np.vstack([self._jacp, self._jacr])
 
-    def __enter__(self) -> MujocoUR5World:
+    def __enter__(self) -> MujocoArmWorld:
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class MujocoUR5World(MujocoArmWorld):
+    """The MuJoCo UR5 world: :class:`MujocoArmWorld` with its default ``robot="ur5"``
+    (the name the UR5 code, the live monitor and the fault tests use)."""

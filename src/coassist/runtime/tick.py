@@ -200,6 +200,8 @@ class ControlTick:
             raise ValueError(f"intent horizon ({intent.horizon}) must be >= the controller's ({controller.horizon})")
         self.controller, self.intent, self.wrench, self.safety = controller, intent, wrench, safety
         self.kinematics, self.command_space = kinematics, command_space
+        # a redundant arm (n > 6) resolves eq. 3.6 itself (null-space posture, joint limits)
+        self._redundant = getattr(kinematics, "redundant_joint_velocity", None)
         self.model, self.d, self.dt = model, d, float(model.dt)
         self._dofs = np.array(self.config.dofs)
         self._rot = [i for i in self.config.dofs if i in _ROTATION]
@@ -373,7 +375,10 @@ class ControlTick:
                 tw[dofs[j]] += za[d + j]
             tw, sf = self.safety.limit_twist(tw, pose)
             # 5. eq. 3.6 with the damped least-squares pseudo-inverse
-            qd, _ = _spatial.dls_joint_velocity(J, tw, cfg.dls_threshold, cfg.dls_damping)
+            if self._redundant is None:
+                qd, _ = _spatial.dls_joint_velocity(J, tw, cfg.dls_threshold, cfg.dls_damping)
+            else:
+                qd = self._redundant(q, J, tw)
         Jc = J if J is not None else np.zeros((6, self.kinematics.n_joints))
         qd, lf, stop = self.safety.limit_joint_velocity(qd, Jc, pose, hand, upstream | f, self._robot_stop(state))
         sf |= lf | f

@@ -1,0 +1,271 @@
+"""A Franka Panda (or FR3) as a :class:`~coassist.runtime.world.World`, through franky.
+
+franky (``franky-control``) talks libfranka's network protocol to the arm's controller
+(FCI). This world sends each tick's joint velocity as a franky ``JointVelocityMotion``,
+asynchronously: a new motion replaces the running one, and franky's trajectory
+generator (Ruckig) ramps to it within the robot's dynamics limits.
+
+**Tested against franky-sim 1.0.4** (a simulator that speaks the same protocol, MuJoCo
+behind it) on loopback, with the real franky 2.0.0 client
+(``tests/robot/test_franka_world.py``). **Never run on a real arm.** Untried on
+hardware: the sign and frame of ``O_F_ext_hat_K`` (below), the timing of the 1 kHz link
+under load, the reflex thresholds, and recovery after a reflex.
+
+The loop
+--------
+``read()`` takes ``robot.state`` (libfranka's last 1 kHz state); ``apply()`` sends the
+motion and then waits until the *robot's* clock (``state.time``, 1 ms steps) has moved
+on by dt from the state read: the robot paces the loop, so a simulator running slower
+than real time slows it too and the admittance stays in the robot's time. Each motion's ``duration``
+(``hold_ms``, default 50 ms) is how long the robot keeps the velocity after reaching it
+when no newer motion comes: if this process hangs, the arm brakes to rest on its own.
+
+The wrench
+----------
+Without an external sensor, the wrench is libfranka's estimate ``O_F_ext_hat_K``: the
+external wrench acting on the stiffness frame K, in base-frame axes, from the joint
+torque sensors. Taken here as the wrench the environment (the hand) applies, so a hand
+pushing the tool along +x_base reads +f_x, coassist's sign (:mod:`coassist.runtime.world`),
+with ``sensor_rotation`` = I. An external F/T sensor is any object with
+``read() -> (wrench (6,), sensor_rotation (3, 3), seq)`` in coassist's convention
+(``ft_sensor=``). franky-sim 1.0.4 reports ``O_F_ext_hat_K`` = 0 always, so the tests
+use the sensor path.
+
+Stops
+-----
+A reflex (the robot's own force or speed limits) or a user stop makes franky raise
+``franky.ControlException`` on the next motion: the world reports
+``RobotState.protective_stop`` (``emergency_stop`` for the user stop button), keeps no
+motion running, and :attr:`FrankaWorld.stop_detail` says what happened and what to do
+next. A lost link (a ``franky.NetworkException``, or no new robot state for
+``link_timeout`` s) raises :class:`FrankaLinkError`, a ``ConnectionError``: the loop
+ends with ``"link_lost"``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from coassist.robot.arms import NullSpacePosture, arm_kinematics, check_model_matches, get_arm
+from coassist.runtime.world import Command, RobotState
+from coassist.spatial import rotation_vector
+
+__all__ = ["FRANKA_ARMS", "FrankaLinkError", "FrankaWorld", "pose_from_franka"]
+
+#: The registered arms (coassist.robot.arms.ARMS) a FrankaWorld drives.
+FRANKA_ARMS = ("panda", "fr3")
+
+_INSTALL_HINT = "the Franka world needs franky: pip install 'coassist[franka]'"
+
+#: What to do after the robot stopped with a reflex (libfranka's error list goes first).
+REFLEX_NEXT = ("check the workspace and the person, then clear the error (Franka Desk, or franky's "
+               "robot.recover_from_errors()) and rerun")  # fmt: skip
+USER_STOP_NEXT = "release the user stop button, make the workspace safe, unlock the joints in Desk, then rerun"
+
+
+class FrankaLinkError(ConnectionError):
+    """The link to the Franka controller failed (a ``ConnectionError``: the loop ends with ``link_lost``)."""
+
+
+def pose_from_franka(T: Any) -> np.ndarray:
+    """(6,) ``[x, y, z, rx, ry, rz]`` of a transform: franky's ``Affine`` (``.matrix``, 4 × 4) or a 4 × 4 array."""
+    M = np.asarray(getattr(T, "matrix", T), dtype=float)
+    if M.shape != (4, 4):
+        raise ValueError(f"a transform is a 4 x 4 matrix, got shape {M.shape}")
+    return np.concatenate((M[:3, 3], rotation_vector(M[:3, :3])))
+
+
+def _franky():
+    try:
+        import franky
+    except ImportError as exc:
+        raise ImportError(f"{_INSTALL_HINT} ({exc})") from exc
+    return franky
+
+
+class FrankaWorld:
+    """A Franka arm through franky (module docstring).
+
+    host : the robot's FCI address.  frequency : the control rate [Hz] (≤ 1000).
+    robot : a connected ``franky.Robot`` (None: ``franky.Robot(host)``).
+    arm : the registered arm, ``"panda"`` or ``"fr3"`` (the same kinematics, each its own
+        joint limits: :data:`coassist.robot.arms.ARMS`); the start posture must lie inside
+        its joint range, and every command is clipped to its joint speeds.
+    ft_sensor : an external F/T sensor (module docstring); None: ``O_F_ext_hat_K``.
+    hold_ms : each motion's hold time [ms] (the hang watchdog).
+    link_timeout : [s] without a new robot state before the link counts as lost.
+    posture_gain : k_n [1/s] of the null-space posture (arms.NullSpacePosture).
+    """
+
+    command_space = "joint_velocity"
+    realtime = True
+
+    def __init__(self, host: str, *, frequency: float = 125.0, robot: Any = None, arm: str = "panda",
+                 ft_sensor: Any = None, hold_ms: int = 50, link_timeout: float = 0.1,
+                 posture_gain: float = 1.0) -> None:  # fmt: skip
+        if not isinstance(host, str) or not host:
+            raise ValueError(f"host must be the robot's FCI address, got {host!r}")
+        if not isinstance(frequency, (int, float)) or not 0.0 < frequency <= 1000.0:
+            raise ValueError(f"frequency must be in (0, 1000] Hz, got {frequency!r}")
+        if not isinstance(hold_ms, int) or not 1 <= hold_ms <= 1000:
+            raise ValueError(f"hold_ms must be an int in [1, 1000] ms, got {hold_ms!r}")
+        if not isinstance(link_timeout, (int, float)) or not link_timeout > 0:
+            raise ValueError(f"link_timeout must be a number of seconds > 0, got {link_timeout!r}")
+        if arm not in FRANKA_ARMS:
+            raise ValueError(f"arm must be one of {FRANKA_ARMS}, got {arm!r}")
+        if ft_sensor is not None and not callable(getattr(ft_sensor, "read", None)):
+            raise ValueError("ft_sensor must have a read() -> (wrench, sensor_rotation, seq) method")
+        self._fr = _franky()
+        self.host, self.dt = host, 1.0 / float(frequency)
+        self.arm = get_arm(arm)
+        self.n_joints = self.arm.n_joints
+        self.ft_sensor, self.hold_ms, self.link_timeout = ft_sensor, hold_ms, float(link_timeout)
+        self.stop_detail: str | None = None
+        self.commands_sent = 0
+        self._closed = False
+        self._moving = False
+        self._seq = 0
+        self._last_t = -math.inf
+        self._last_new = time.monotonic()
+        if robot is None:
+            try:
+                robot = self._fr.Robot(host, realtime_config=self._fr.RealtimeConfig.Ignore)
+            except Exception as exc:  # franky.NetworkException, IncompatibleVersionException
+                raise FrankaLinkError(f"could not connect to the Franka at {host}: {exc}; check the address, "
+                                      "that FCI is activated in Desk and the joints are unlocked") from exc  # fmt: skip
+        self.robot = robot
+        state = self._state()
+        # the TCP is libfranka's end effector: flange -> EE as set in Desk (F_T_EE)
+        F_T_EE = pose_from_franka(state.F_T_EE)
+        self._kin = arm_kinematics(self.arm.name, F_T_EE)
+        q0 = np.asarray(state.q, dtype=float)
+        check_model_matches(self._kin, q0, pose_from_franka(state.O_T_EE), what=f"the Franka at {host}")
+        lim = self._kin.joint_position_limit
+        outside = np.flatnonzero((q0 < lim[:, 0]) | (q0 > lim[:, 1]))
+        if outside.size:  # an FR3 told it is a Panda, or the other way round
+            i = int(outside[0])
+            raise ValueError(f"the Franka at {host} has joint {i + 1} at {q0[i]:.4f} rad, outside the {self.arm.name}'s "
+                             f"range [{lim[i, 0]}, {lim[i, 1]}]; is --robot the arm it is ({', '.join(FRANKA_ARMS)})?")  # fmt: skip
+        self._vmax = np.array(self.arm.joint_velocity_limit, dtype=float)
+        self.tcp_offset_pose = F_T_EE
+        self.posture_gain = posture_gain
+        self._q0 = q0.copy()
+
+    # ------------------------------------------------------------------ kinematics
+    def kinematics(self) -> NullSpacePosture:
+        """The arm's kinematics with the start posture held in the null space (eq. 3.6, 7 joints)."""
+        return NullSpacePosture(self._kin, self._q0, gain=self.posture_gain)
+
+    # ------------------------------------------------------------------ World
+    def _state(self) -> Any:
+        try:
+            return self.robot.state
+        except Exception as exc:  # franky.NetworkException and friends
+            raise FrankaLinkError(f"reading the Franka's state failed: {exc}") from exc
+
+    def read(self) -> RobotState:
+        """The robot's latest state (module docstring); FrankaLinkError when it stopped coming."""
+        if self._closed:
+            raise FrankaLinkError(f"read on a closed FrankaWorld ({self.host}); build a new one")
+        s = self._state()
+        t = float(s.time.to_sec())
+        now = time.monotonic()
+        if t > self._last_t:
+            self._last_t, self._last_new = t, now
+        elif now - self._last_new > self.link_timeout:
+            raise FrankaLinkError(f"no new state from the Franka at {self.host} for {now - self._last_new:.3f} s")
+        q = np.asarray(s.q, dtype=float)
+        qd = np.asarray(s.dq, dtype=float)
+        pose = pose_from_franka(s.O_T_EE)
+        try:
+            J = self._kin.jacobian(q)
+            twist = J @ qd
+        except ValueError:  # a non-finite q: the tick flags it and brakes
+            twist = np.full(6, np.nan)
+        if self.ft_sensor is None:
+            wrench, R = np.asarray(s.O_F_ext_hat_K, dtype=float), np.eye(3)
+            self._seq += 1
+            seq = self._seq
+        else:
+            wrench, R, seq = self.ft_sensor.read()
+            wrench, R = np.array(wrench, dtype=float), np.array(R, dtype=float)  # ours: the tick may flag it in place
+        mode = s.robot_mode
+        user_stop = mode == self._fr.RobotMode.UserStopped
+        errors = s.current_errors
+        # franky's Errors: 41 flags, libfranka's error list (a reflex sets one; its bool is always True)
+        reflex = mode == self._fr.RobotMode.Reflex or any(errors.__getstate__()) or (
+            self.stop_detail is not None and not user_stop)  # fmt: skip
+        if reflex and self.stop_detail is None:
+            self.stop_detail = f"the Franka stopped with a reflex ({errors!r}): {REFLEX_NEXT}"
+        if user_stop and self.stop_detail is None:
+            self.stop_detail = f"the Franka's user stop is pressed: {USER_STOP_NEXT}"
+        return RobotState(t=t, q=q, qd=qd, tool_pose=pose, tool_twist=twist, wrench=wrench, sensor_rotation=R,
+                          wrench_seq=int(seq), protective_stop=bool(reflex), emergency_stop=bool(user_stop))  # fmt: skip
+
+    def apply(self, command: Command) -> None:
+        """Send the command's joint velocity as a franky motion, then wait for the period's end."""
+        if self._closed:
+            raise FrankaLinkError(f"apply on a closed FrankaWorld ({self.host}); build a new one")
+        qd = None if command.qd is None else np.asarray(command.qd, dtype=float)
+        if command.stop or self.stop_detail is not None or qd is None or qd.shape != (self.n_joints,) \
+                or not np.isfinite(qd).all():  # fmt: skip
+            self._send(np.zeros(self.n_joints))
+        else:  # the arm's own speeds: a last guard (the safety layer's limits are lower by default)
+            self._send(np.clip(qd, -self._vmax, self._vmax))
+        self._wait_period()
+
+    def _wait_period(self) -> None:
+        """Sleep until the robot's clock has advanced by dt since the last read (its 1 kHz
+        clock paces the loop, so a simulator slower than real time slows the loop with it)."""
+        target = self._last_t + self.dt - 5e-4  # the robot's clock ticks in whole ms
+        give_up = time.monotonic() + self.dt + self.link_timeout
+        while True:
+            t = float(self._state().time.to_sec())
+            if t >= target:
+                return
+            now = time.monotonic()
+            if now > give_up:
+                raise FrankaLinkError(f"the Franka at {self.host} sent no new state for {now - self._last_new:.3f} s")
+            time.sleep(min(5e-4, max(target - t, 0.0)))
+
+    def _send(self, qd: np.ndarray) -> None:
+        if self.stop_detail is not None and not self._moving:
+            return  # stopped by the robot: nothing is sent until a person recovers it
+        fr = self._fr
+        motion = fr.JointVelocityMotion(qd, duration=fr.Duration(self.hold_ms))
+        try:
+            self.robot.move(motion, asynchronous=True)
+            self.commands_sent += 1
+            self._moving = bool(np.any(qd != 0.0))
+        except fr.ControlException as exc:  # a reflex: the motion before this one failed
+            self._moving = False
+            self.stop_detail = f"the Franka stopped with a reflex ({exc}): {REFLEX_NEXT}"
+        except fr.NetworkException as exc:
+            self._moving = False
+            raise FrankaLinkError(f"the link to the Franka at {self.host} dropped: {exc}") from exc
+
+    def stop(self) -> None:
+        """Bring the arm to rest (a zero-velocity motion, ramped by franky) and wait for it; safe twice."""
+        if self._closed:
+            return
+        try:
+            if self._moving:
+                self.robot.move(self._fr.JointVelocityMotion(np.zeros(self.n_joints), duration=self._fr.Duration(10)),
+                                asynchronous=True)  # fmt: skip
+            self.robot.join_motion(2.0)
+        except Exception:  # noqa: BLE001 - a reflex or a dead link: the robot brakes on its own
+            pass
+        self._moving = False
+
+    def close(self) -> None:
+        """Stop, then drop the reference to the robot (franky disconnects when it is collected)."""
+        if self._closed:
+            return
+        self.stop()
+        self._closed = True
+        # franky's Robot holds the FCI connection until it is collected (one client at a time)
+        self.robot = None
