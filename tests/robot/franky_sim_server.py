@@ -9,7 +9,6 @@ tests/robot/test_franka_world.py; not part of coassist.
 from __future__ import annotations
 
 import sys
-import threading
 
 import mujoco
 import numpy as np

@@ -216,8 +216,9 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
     intent_stage = None
     intent_pos = intent_traj.positions
     start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
-    if config.world == "mujoco" and config.robot != "ur5":  # the tasks, laid out for the UR5, moved to this arm
-        ref_abs, intent_pos, start = move_tasks(config.robot, ref_abs, intent_pos)
+    robot = config.robot or WORLD_ROBOTS[config.world][0]  # set by DriveConfig; the default for type checkers
+    if config.world == "mujoco" and robot != "ur5":  # the tasks, laid out for the UR5, moved to this arm
+        ref_abs, intent_pos, start = move_tasks(robot, ref_abs, intent_pos)
     if world is None:
         if config.world == "mujoco":
             from coassist.robot.mujoco_world import MujocoArmWorld, MujocoUR5World
@@ -227,7 +228,7 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
                 world = MujocoUR5World(config.object, control_dt=dt, start=start, seed=config.seed, view=view,
                                        realtime=view or bool(config.realtime_intent))  # fmt: skip
             else:
-                world = MujocoArmWorld(config.object, robot=config.robot, control_dt=dt, start=start, seed=config.seed,
+                world = MujocoArmWorld(config.object, robot=robot, control_dt=dt, start=start, seed=config.seed,
                                        view=view, realtime=view or bool(config.realtime_intent))  # fmt: skip
         elif config.world == "ur":
             from coassist.robot.ur_rtde_world import URRTDEWorld
@@ -240,7 +241,7 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
 
             if not host:
                 raise ValueError("the Franka needs --host (the robot's FCI address)")
-            world = FrankaWorld(host, frequency=float(config.rate_hz), arm=config.robot)
+            world = FrankaWorld(host, frequency=float(config.rate_hz), arm=robot)
     try:
         state0 = world.read()
         start_pose = np.asarray(state0.tool_pose, dtype=float).copy()

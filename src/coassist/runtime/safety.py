@@ -638,7 +638,7 @@ class SafetyLayer:
             bad |= _NE if np.ndim(u_r) == 1 and np.size(u_r) else _II
         if vel is None or w is None or up is None or rs is None:
             bad |= _II
-        if bad:
+        if bad or u is None or vel is None or w is None or up is None or rs is None:  # (the Nones set bad)
             self._count(bad & _II)
             return np.zeros(self._effort_d), _fault(bad), False
         u = u.copy()

@@ -57,7 +57,6 @@ from coassist import spatial as _spatial
 from coassist._checks import check_positive_scalar, is_integer
 from coassist.interfaces import Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
-from coassist import spatial as _spatial
 from coassist.runtime.world import COMMAND_SPACES, Command, RobotState, finite_vector
 
 __all__ = ["ControlTick", "Plan", "TickConfig", "TickOutput", "UPSTREAM_BAD"]
