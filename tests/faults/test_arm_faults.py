@@ -123,16 +123,21 @@ class ScriptedSensor:
     """An F/T sensor on franky-sim's hand: the case's scripted hand force, applied to the simulated
     hand body at the same time (zero at the first reading, with which the pipeline zeroes)."""
 
+    #: Reading noise [N, N·m], seeded: a real sensor's noise moves some channel every sample, so the
+    #: pipeline's frozen-sensor check (on for measured sensors) only trips on the frozen case.
+    NOISE = 0.05
+
     def __init__(self, server, operator) -> None:
         self.server, self.operator, self.n, self.sent = server, operator, 0, np.zeros(3)
+        self.rng = np.random.default_rng(0)
 
     def read(self):
         self.n += 1
         w = np.zeros(6) if self.n == 1 else np.asarray(self.operator.force((self.n - 2) * DT, None, None), dtype=float)
         if (w[:3] != self.sent).any():
-            self.server.push(w[:3])
+            self.server.push(w[:3])  # the hand pushes the clean force; the sensor reads it with noise
             self.sent = w[:3].copy()
-        return w, np.eye(3), self.n
+        return w + self.rng.normal(0.0, self.NOISE, 6), np.eye(3), self.n
 
 
 class FaultyFranka:

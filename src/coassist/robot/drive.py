@@ -260,8 +260,9 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
             world.operator = operator
         kin = _kinematics_for(world)
         mass, com = world.tool_mass_and_com() if hasattr(world, "tool_mass_and_com") else (0.0, np.zeros(3))
-        # a noise-free simulated sensor repeats exactly on a constant push: no frozen-sensor check there
-        sensor = getattr(world, "sensor", None)
+        # a noise-free simulated sensor (noise_force = noise_torque = 0: MuJoCo's, a test's external F/T)
+        # repeats exactly on a constant push: no frozen-sensor check there
+        sensor = getattr(world, "sensor", None) or getattr(world, "ft_sensor", None)
         noise_free = sensor is not None and not (getattr(sensor, "noise_force", 1.0) or getattr(sensor, "noise_torque", 1.0))
         wrench = WrenchPipeline(WrenchConfig(tool_mass=mass, tool_com=tuple(com),
                                              max_frozen_time=None if noise_free else MEASURED_FROZEN_TIME), dt)  # fmt: skip

@@ -50,6 +50,7 @@ from typing import Any
 
 import numpy as np
 
+from coassist.errors import CoassistError
 from coassist.robot.arms import NullSpacePosture, arm_kinematics, check_model_matches, get_arm
 from coassist.runtime.world import Command, RobotState
 from coassist.spatial import rotation_vector
@@ -67,7 +68,7 @@ REFLEX_NEXT = ("check the workspace and the person, then clear the error (Franka
 USER_STOP_NEXT = "release the user stop button, make the workspace safe, unlock the joints in Desk, then rerun"
 
 
-class FrankaLinkError(ConnectionError):
+class FrankaLinkError(CoassistError, ConnectionError):
     """The link to the Franka controller failed (a ``ConnectionError``: the loop ends with ``link_lost``)."""
 
 
