@@ -197,7 +197,10 @@ def _claim_counts(text: str) -> tuple[int, int, int]:
     stated = re.search(r"(\d+) of the (\d+) claims checked hold", section)
     assert stated, "the claims sentence is missing"
     held = total = 0
-    for row in re.findall(r"^\|(.+)\|$", section, flags=re.M):
+    # The claims table: the first table of the section (later tables there are measurements, not claims).
+    table = section[section.index("| thesis claim |") :]
+    table = table[: table.index("\n\n")] if "\n\n" in table else table
+    for row in re.findall(r"^\|(.+)\|$", table, flags=re.M):
         cells = [c.strip() for c in row.split("|")]
         if len(cells) < 3 or cells[1] in ("verdict", "---") or set(cells[1]) <= {"-"}:
             continue
