@@ -1,0 +1,248 @@
+"""ControlTick and run_loop on fake kinematics and scripted worlds (no MuJoCo, no pinocchio).
+
+Each check has a reference computed here, independently of the tick: the admittance
+with scipy's exact ZOH (``cont2discrete``), the twist law of the tick's docstring with
+scipy's rotations, q̇ = J⁻¹ ẋ by a linear solve, u_r = K (x_ref(k+1) − x) by hand, the
+dwell rule's end tick by counting, and the safety layer's ramp toward rest.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.signal import cont2discrete
+from scipy.spatial.transform import Rotation
+
+from coassist.control.controllers import ImpedanceControl, ManualGuidance
+from coassist.errors import CoassistError
+from coassist.interfaces import Fault, TrialContext
+from coassist.model.impedance import ImpedanceModel
+from coassist.runtime.loop import TargetDwell, run_loop
+from coassist.runtime.safety import SafetyLayer, SafetyLimits
+from coassist.runtime.tick import ControlTick, Plan, TickConfig
+from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
+
+from .fakes import DT, FakeArmWorld, LinearKinematics, NominalStage, ScriptedEffortWorld, well_conditioned_jacobian
+
+M = np.array([4.0, 6.0])  # [kg] x, y
+D = np.array([30.0, 20.0])  # [N·s/m]
+H = 3
+N_REF = 200
+POSE0 = np.array([0.4, -0.1, 0.3, 0.2, -0.1, 0.3])  # [m, rad] a tilted tool
+OFFSET = np.array([0.002, -0.001, 0.005, 0.02, -0.01, 0.015])  # [m, rad]
+# the raw reading is the hand wrench: sensor frame = base frame, no bias, no payload, no filter, no deadband
+CLEAN = WrenchConfig(cutoff_hz=None, deadband_force=0.0, deadband_torque=0.0)
+WIDE = SafetyLimits(joint_velocity=100.0, joint_acceleration=1e4, tool_speed=100.0, tool_angular_speed=100.0,
+                    min_manipulability=0.0)  # fmt: skip  # nothing binds: the tick's own law is seen
+
+
+def _context(ref: np.ndarray) -> TrialContext:
+    return TrialContext(dt=DT, horizon=H, start=ref[0, :2].copy(), target=ref[-1, :2].copy(), reference=ref,
+                        task="test", user="fake", object="none")  # fmt: skip
+
+
+def _reference(start_xy, velocity=(0.0, 0.0)) -> np.ndarray:
+    t = np.arange(N_REF)[:, None] * DT
+    ref = np.zeros((N_REF, 4))
+    ref[:, :2] = np.asarray(start_xy) + t * np.asarray(velocity)
+    ref[:, 2:] = velocity
+    return ref
+
+
+def _arm_tick(kin: LinearKinematics, limits: SafetyLimits, config: TickConfig | None = None) -> ControlTick:
+    model = ImpedanceModel(M, D, 0.0, DT)
+    tick = ControlTick(ManualGuidance(model), NominalStage(H), WrenchPipeline(CLEAN, DT), SafetyLayer(limits, DT, 6),
+                       command_space="joint_velocity", kinematics=kin, config=config)  # fmt: skip
+    ref = _reference(POSE0[:2])
+    tick.reset(Plan(ref, POSE0), _context(ref))
+    return tick
+
+
+def _zoh_reference() -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 3.5 for M a + D v = f (K = 0), z = [Δx; v], exactly (matrix exponential), by scipy."""
+    A = np.block([[np.zeros((2, 2)), np.eye(2)], [np.zeros((2, 2)), -np.diag(D / M)]])
+    B = np.vstack([np.zeros((2, 2)), np.diag(1.0 / M)])
+    Ad, Bd, *_ = cont2discrete((A, B, np.eye(4), np.zeros((4, 2))), DT, method="zoh")
+    return Ad, Bd
+
+
+# ---------------------------------------------------------------------------- the arm tick
+
+
+def test_joint_velocity_is_J_inverse_of_the_twist_from_the_exact_admittance():
+    J = well_conditioned_jacobian()
+    # the arm starts off the plan's start pose (2 mm, 5 mm, 0.02 rad), so the pull and hold terms act too
+    kin = LinearKinematics(J, POSE0 + OFFSET)
+    hand = np.array([5.0, -3.0, 0.0, 0.0, 0.0, 0.0])  # [N] a constant push in the x-y plane
+    world = FakeArmWorld(kin, lambda k: hand)
+    cfg = TickConfig()
+    tick = _arm_tick(kin, WIDE, cfg)
+    Ad, Bd = _zoh_reference()
+    za = np.zeros(4)
+    R_start = Rotation.from_rotvec(POSE0[3:])
+    for k in range(12):
+        state = world.read()
+        out = tick.step(k, state)
+        world.apply(out.command)
+        # reference: the admittance driven by the hand alone (MG: u_r = 0), then the twist law
+        za = Ad @ za + Bd @ hand[:2]
+        p = state.tool_pose
+        tw = np.empty(6)
+        tw[0:3] = cfg.hold_gain * (POSE0[:3] - p[:3])
+        tw[0:2] = za[2:] + cfg.position_gain * (POSE0[:2] + za[:2] - p[:2])
+        tw[3:6] = cfg.hold_rotation_gain * (R_start * Rotation.from_rotvec(p[3:]).inv()).as_rotvec()
+        qd = np.linalg.solve(J, tw)
+        assert out.fault == Fault.NONE, f"tick {k}: {out.fault!r}"
+        np.testing.assert_array_equal(out.u_r, 0.0)
+        np.testing.assert_array_equal(out.wrench, hand[:2])
+        # cond(J) = 3.3, ‖A_d‖ ≤ 1 and 12 ticks: rounding stays near 1e2·cond·eps ≈ 1e-13 of |q̇| ≈ 0.1;
+        # 1e-10 leaves room for any expm / LAPACK build
+        np.testing.assert_allclose(out.command.qd, qd, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(out.command.twist, tw, rtol=0, atol=1e-10)
+        assert not out.command.stop
+    # the push moved the tool: the check above was not on a resting arm
+    assert np.linalg.norm(world.commands[-1].qd) > 0.05
+    # z is held: J q̇ = ẋ exactly here, so its error shrinks by (1 − k_hold dt) a tick, by hand
+    z_end = world.kin.pose(world.q)[2]
+    np.testing.assert_allclose(z_end - POSE0[2], OFFSET[2] * (1.0 - cfg.hold_gain * DT) ** 12, rtol=1e-9)
+
+
+def test_a_nan_wrench_is_flagged_and_the_command_ramps_to_rest_within_the_acceleration_limit():
+    J = well_conditioned_jacobian()
+    kin = LinearKinematics(J, POSE0)
+    push = np.array([40.0, 25.0, 0.0, 0.0, 0.0, 0.0])
+    bad = range(40, 43)
+    world = FakeArmWorld(kin, lambda k: np.full(6, np.nan) if k in bad else push)
+    limits = SafetyLimits(tool_speed=2.0, min_manipulability=0.0)  # the UR's 8 rad/s², π/2 rad/s
+    tick = _arm_tick(kin, limits)
+    step_max = limits.margin * limits.joint_acceleration * DT  # the ramp's step [rad/s]
+    faults, cmds = [], [np.zeros(6)]
+    for k in range(50):
+        out = tick.step(k, world.read())
+        world.apply(out.command)
+        faults.append(out.fault)
+        cmds.append(np.array(out.command.qd))
+        assert np.isfinite(out.command.qd).all() and np.isfinite(out.wrench).all()
+    qd = np.array(cmds)  # qd[k + 1] is tick k's command
+    assert np.max(np.abs(qd[40])) > 4 * step_max, "the arm must be moving when the NaN arrives"
+    # no tick, good or bad, moves any joint by more than the true limit a·dt
+    assert np.max(np.abs(np.diff(qd, axis=0))) <= limits.joint_acceleration * DT + 1e-12
+    for k in bad:
+        assert faults[k] & Fault.NONFINITE_WRENCH and faults[k] & Fault.DECELERATING, f"tick {k}: {faults[k]!r}"
+        assert not faults[k] & Fault.STOPPED
+        prev = qd[k]
+        # the ramp toward rest: along the previous command, its largest joint one margin·a·dt smaller
+        np.testing.assert_allclose(qd[k + 1], prev * (1.0 - step_max / np.max(np.abs(prev))), rtol=0, atol=1e-12)
+    for k in (*range(40), *range(44, 50)):
+        assert not faults[k] & (Fault.NONFINITE_WRENCH | Fault.DECELERATING), f"tick {k}: {faults[k]!r}"
+
+
+# ---------------------------------------------------------------------------- the effort tick
+
+
+def test_an_effort_world_gets_the_controllers_u_r_unchanged_within_the_limits():
+    K = np.diag([120.0, 80.0])  # [N/m]
+    model = ImpedanceModel(M, D, 0.0, DT)
+    start = np.array([0.1, 0.2])
+    ref = _reference(start, velocity=(0.05, -0.02))
+    # the tool lags the plan by a few mm, at the plan's speed (0.054 m/s: below the 0.25 m/s tool speed)
+    poses = ref[:20, :2] - np.array([0.003, -0.002])
+    world = ScriptedEffortWorld(poses)
+    tick = ControlTick(ImpedanceControl(model, K, effort_limit=50.0), NominalStage(H), WrenchPipeline(CLEAN, DT),
+                       SafetyLayer(SafetyLimits(), DT, 6), command_space="effort")  # fmt: skip
+    tick.reset(Plan(ref, np.array([*start, 0.0, 0.0, 0.0, 0.0])), _context(ref))
+    for k in range(15):
+        out = tick.step(k, world.read())
+        world.apply(out.command)
+        # eq. 5.4 by hand: the spring toward the plan's next row, on the measured position
+        u = K @ (ref[k + 1, :2] - poses[k])
+        np.testing.assert_allclose(out.u_r, u, rtol=1e-12, atol=1e-12)  # a 2x2 product of O(0.1) numbers
+        np.testing.assert_array_equal(world.efforts[-1], out.u_r)  # unchanged by the safety layer
+        assert out.fault == Fault.NONE and out.command.qd is None and not out.command.stop
+    assert np.all(np.abs(np.array(world.efforts)) > 0.1)  # a real effort was passed, not zeros
+
+
+# ---------------------------------------------------------------------------- run_loop
+
+
+def _effort_tick(ref: np.ndarray) -> ControlTick:
+    tick = ControlTick(ManualGuidance(ImpedanceModel(M, D, 0.0, DT)), NominalStage(H), WrenchPipeline(CLEAN, DT),
+                       SafetyLayer(SafetyLimits(), DT, 6), command_space="effort")  # fmt: skip
+    tick.reset(Plan(ref, np.array([*ref[0, :2], 0.0, 0.0, 0.0, 0.0])), _context(ref))
+    return tick
+
+
+@pytest.mark.parametrize(
+    ("inside", "after_tick", "dwell", "last_tick"),
+    [
+        # inside from tick 3, but the rule may count only from tick 6: ticks 6, 7, 8, 9
+        (lambda k: k >= 3, 6, 4, 9),
+        # inside from tick 8, past after_tick: ticks 8, 9, 10, 11
+        (lambda k: k >= 8, 6, 4, 11),
+        # inside 6-7, out at 8 (the count restarts), inside from 9: ticks 9, 10, 11, 12
+        (lambda k: k >= 6 and k != 8, 2, 4, 12),
+    ],
+)
+def test_the_run_ends_at_the_hand_counted_dwell_tick(inside, after_tick, dwell, last_tick):
+    target = np.array([0.3, 0.1])
+    radius = 0.01
+    far = target + np.array([0.0, 2 * radius])
+    poses = np.array([target if inside(k) else far for k in range(40)])
+    world = ScriptedEffortWorld(poses)
+    ref = _reference(target)
+    log = run_loop(world, _effort_tick(ref), 30, TargetDwell(target, radius, dwell, after_tick))
+    assert log.ended == "target"
+    assert log.n == last_tick + 1 == len(world.efforts)
+    np.testing.assert_array_equal(log.pose, poses[: log.n])
+
+
+def test_the_run_ends_at_the_time_limit_when_the_target_is_never_held():
+    target = np.array([0.3, 0.1])
+    poses = np.tile(target + 0.05, (40, 1))
+    world = ScriptedEffortWorld(poses)
+    log = run_loop(world, _effort_tick(_reference(target)), 17, TargetDwell(target, 0.01, 3, 0))
+    assert log.ended == "time_limit" and log.n == 17 == len(world.efforts)
+    assert log.compute.shape == (17,) and np.all(log.compute >= 0.0)
+
+
+class _LinkError(CoassistError, ConnectionError):
+    """As the robot worlds' link errors (RobotLinkError, FrankaLinkError): a CoassistError and a ConnectionError."""
+
+
+@pytest.mark.parametrize("where", ["read", "apply"])
+def test_a_lost_link_ends_the_run_and_stops_the_arm(where):
+    kin = LinearKinematics(well_conditioned_jacobian(), POSE0)
+    fail = {"fail_read_at": 7} if where == "read" else {"fail_apply_at": 7}
+    world = FakeArmWorld(kin, lambda k: np.array([5.0, 0.0, 0.0, 0.0, 0.0, 0.0]), link_error=_LinkError, **fail)
+    tick = _arm_tick(kin, SafetyLimits(min_manipulability=0.0))
+    log = run_loop(world, tick, 50)
+    assert log.ended == "link_lost" and log.n == 7  # ticks 0-6 were sent and logged, tick 7 was not
+    assert "link to the robot was lost" in log.message
+    assert world.stops == 1 and len(world.commands) == 7
+    assert log.joints.shape == (7, 6) and log.joint_velocity.shape == (7, 6)
+    np.testing.assert_array_equal(log.joint_velocity, [c.qd for c in world.commands])
+
+
+def test_a_tick_over_the_deadline_flags_the_next_tick():
+    spent = np.full(12, 0.002)
+    spent[3] = 0.012  # over the 8 ms budget
+    calls = []
+
+    def clock() -> float:  # two calls per tick: before read, after step
+        k, second = divmod(len(calls), 2)
+        calls.append(None)
+        return 10.0 * k + (spent[k] if second else 0.0)
+
+    target = np.array([0.3, 0.1])
+    world = ScriptedEffortWorld(np.tile(target, (20, 1)), overrun_at=7)
+    log = run_loop(world, _effort_tick(_reference(target)), 12, deadline=DT, clock=clock)
+    assert log.n == 12 and len(calls) == 24
+    np.testing.assert_allclose(log.compute, spent, rtol=0, atol=1e-12)  # 10 k + s − 10 k: rounding of 1e2
+    # the late tick's command was already sent: the flag lands on the next one; tick 7's world overran
+    missed = [k for k in range(12) if log.fault[k] & int(Fault.DEADLINE_MISS)]
+    assert missed == [4, 8]
+    # without a deadline the clock flags nothing (the world's own overrun still does)
+    calls.clear()
+    world = ScriptedEffortWorld(np.tile(target, (20, 1)), overrun_at=7)
+    log = run_loop(world, _effort_tick(_reference(target)), 12, clock=clock)
+    assert [k for k in range(12) if log.fault[k] & int(Fault.DEADLINE_MISS)] == [8]
