@@ -246,3 +246,13 @@ def test_a_tick_over_the_deadline_flags_the_next_tick():
     world = ScriptedEffortWorld(np.tile(target, (20, 1)), overrun_at=7)
     log = run_loop(world, _effort_tick(_reference(target)), 12, clock=clock)
     assert [k for k in range(12) if log.fault[k] & int(Fault.DEADLINE_MISS)] == [8]
+
+
+def test_a_contact_force_over_the_threshold_ends_the_run_with_a_safety_stop():
+    target = np.array([0.3, 0.1])
+    world = ScriptedEffortWorld(np.tile(target, (20, 1)), wrench=np.array([100.0, 80.0, 0.0, 0.0, 0.0, 0.0]))
+    log = run_loop(world, _effort_tick(_reference(target)), 12)  # |f| = 128 N > the 120 N contact threshold
+    assert log.ended == "safety_stop" and log.n == 1 and world.stops == 1
+    assert log.fault[0] & int(Fault.CONTACT_FORCE_LIMIT) and log.fault[0] & int(Fault.STOPPED)
+    np.testing.assert_array_equal(world.efforts[0], 0.0)
+    assert "contact threshold" in log.message
