@@ -55,36 +55,31 @@ def _load_one(path: Path, on_bad: Callable[[str, str], None] | None, bag_topics:
         t = load_ros_trial(path)
         return [LabeledTrial(f"{dataset}/{path.name}", dataset, t)]
     bags = bag_paths(path)
+    dataset = f"{path.absolute().parent.name}/{path.name}"
     if bags:
-        dataset = f"{path.absolute().parent.name}/{path.name}"
-        out = []
-        for bag in bags:
-            try:
-                t = load_bag_trial(bag, user=path.name, topics=bag_topics)
-            except RecordingError as exc:
-                if on_bad is None:
-                    raise
-                on_bad(str(bag), str(exc))
-                continue
-            out.append(LabeledTrial(f"{dataset}/{t.meta.extra['recording']}", dataset, t))
-        return out
+        return _load_each(bags, lambda bag: load_bag_trial(bag, user=path.name, topics=bag_topics), dataset, on_bad)
     if path.is_dir() and any(p.is_dir() and p.name.startswith("trial_") for p in path.iterdir()):
-        dataset = f"{path.absolute().parent.name}/{path.name}"
-        out = []
-        for folder in recording_folders(path):
-            try:
-                t = load_ros_trial(folder, user=path.name)
-            except RecordingError as exc:
-                if on_bad is None:
-                    raise
-                on_bad(str(folder), str(exc))
-                continue
-            out.append(LabeledTrial(f"{dataset}/{t.meta.extra['recording']}", dataset, t))
-        return out
+        return _load_each(recording_folders(path), lambda folder: load_ros_trial(folder, user=path.name), dataset, on_bad)
     raise FileNotFoundError(
         f"{path}: not a dataset folder ({MANIFEST_NAME}), a recording folder (current_pose.csv), "
         "a folder of trial_* recordings, a bag or a folder of bags"
     )
+
+
+def _load_each(paths, load: Callable[[Path], Trial], dataset: str,
+               on_bad: Callable[[str, str], None] | None) -> list[LabeledTrial]:  # fmt: skip
+    """``load`` each recording or bag of a folder; an unreadable one raises, or goes to ``on_bad`` and is left out."""
+    out = []
+    for item in paths:
+        try:
+            t = load(item)
+        except RecordingError as exc:
+            if on_bad is None:
+                raise
+            on_bad(str(item), str(exc))
+            continue
+        out.append(LabeledTrial(f"{dataset}/{t.meta.extra['recording']}", dataset, t))
+    return out
 
 
 def load_trials(
