@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from coassist.experiments.application import OBJECTS, _pair_key, application_metrics, paired_difference
-from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_seed
+from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_seed, in_loop_errors
 from coassist.experiments.report import Claim, Section
 
 SOURCES = ("nominal", "constant-velocity", "ridge", "lstm-tool", "lstm-hand-alone", "lstm-intent", "oracle")
@@ -102,7 +102,15 @@ class AblationResult:
     errors: dict[tuple[str, str, str, str], dict[int, dict[str, float]]]
 
     def shares(self, world: str, obj: str, controller: str, source: str) -> dict[str, tuple[float, float, float]]:
-        """The share of the oracle's benefit for force and for overshoot (:func:`oracle_share`)."""
+        """The share of the oracle's benefit for force and for overshoot (:func:`oracle_share`); each
+        cell's bootstrap runs once (the summary, the section and the first screen all ask)."""
+        key = (world, obj, controller, source)
+        cache = self.__dict__.setdefault("_shares", {})  # frozen: the cache is not a field
+        if key not in cache:
+            cache[key] = self._shares_of(*key)
+        return cache[key]
+
+    def _shares_of(self, world: str, obj: str, controller: str, source: str) -> dict[str, tuple[float, float, float]]:
         mg = self.mg[(world, obj)]
         x = self.metrics[(world, obj, controller, source)]
         o = self.metrics[(world, obj, controller, "oracle")]
@@ -188,21 +196,11 @@ def run_ablation(ws: Workspace, models: dict[str, str] | None = None) -> Ablatio
 
 def prediction_errors_against_intent(trials, horizons=EVAL_HORIZONS) -> dict[int, dict[str, float]]:
     """e_RMS per horizon of the predictions the loop used, against the measured future pose
-    ("tool", eq. 5.6) and against the operator's true intent ("intent",
-    :func:`coassist.metrics.intent_rms_error`), pooled over the trials' scored ticks [m]."""
-    from coassist.metrics import prediction_errors
-
-    out = {}
-    for h in horizons:
-        pooled: dict[str, list[np.ndarray]] = {"tool": [], "intent": []}
-        for t in trials:
-            if t.prediction is None or t.prediction.shape[1] < h or t.intent is None:
-                continue
-            pooled["tool"].append(prediction_errors(t.prediction, t.pose, h).rms)
-            pooled["intent"].append(prediction_errors(t.prediction, t.intent, h).rms)
-        if pooled["tool"]:
-            out[int(h)] = {k: float(np.concatenate(v).mean()) for k, v in pooled.items()}
-    return out
+    ("tool", eq. 5.6) and against the operator's true intent ("intent"), pooled over the
+    trials' scored ticks [m] (:func:`~coassist.experiments.pipeline.in_loop_errors`)."""
+    trials = [t for t in trials if t.intent is not None]  # both columns over the same ticks
+    tool, intent = (in_loop_errors(trials, horizons, against=a) for a in ("pose", "intent"))
+    return {int(h): {"tool": tool[h]["e_rms"], "intent": intent[h]["e_rms"]} for h in tool}
 
 
 def _mujoco_unavailable() -> str | None:

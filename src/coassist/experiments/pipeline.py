@@ -206,21 +206,27 @@ class Workspace:
 # ----------------------------------------------------------------------------- measures
 
 
-def in_loop_errors(trials, horizons=EVAL_HORIZONS) -> dict[int, dict[str, float]]:
+def in_loop_errors(trials, horizons=EVAL_HORIZONS, against: str = "pose") -> dict[int, dict[str, float]]:
     """e_RMS and e_MAX per horizon of the predictions the loop used (Trial.prediction), pooled over trials.
 
     Per-tick errors of all trials are averaged together (eq. 5.6 over the concatenated
     trajectories); e_MAX: mean and max over ticks of the per-tick maximum (eq. 5.7–5.8).
+    ``against``: ``"pose"``, the measured future poses (the thesis), or ``"intent"``, the
+    simulated operator's true intent (:func:`coassist.metrics.intent_rms_error`; trials
+    without one are left out).
     """
     from coassist.metrics import prediction_errors
 
+    if against not in ("pose", "intent"):
+        raise ValueError(f"against must be 'pose' or 'intent', got {against!r}")
     out = {}
     for h in horizons:
         rms, mx = [], []
         for t in trials:
-            if t.prediction is None or t.prediction.shape[1] < h:
+            reference = getattr(t, against)
+            if t.prediction is None or t.prediction.shape[1] < h or reference is None:
                 continue
-            e = prediction_errors(t.prediction, t.pose, h)
+            e = prediction_errors(t.prediction, reference, h)
             rms.append(e.rms)
             mx.append(e.max)
         if rms:
