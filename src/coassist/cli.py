@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import NoReturn, TypeVar
 
@@ -573,17 +573,17 @@ def drive(
     if intent not in NAMED_INTENTS:
         _set_torch_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
 
-    def confirm(text: str) -> bool:
-        console.print("[bold]Limits in force[/] (coassist's safety layer, on top of the robot's own safety system):", markup=True)
-        console.print(text, markup=False)
-        console.print("Keep the teach pendant's emergency stop within reach.", markup=False)
-        return yes or typer.confirm("Move the robot?", default=False)
-
+    confirm = _confirm_move(yes, "the teach pendant's emergency stop")
     try:
         trial = run_drive(config, host=host, view=view, confirm=confirm if world != "mujoco" else None)
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
         _fail(str(exc))
-    _write_run(trial, out, alpha=_run_alpha(preset, controller) if mcap else None, mcap=mcap, plot=plot)
+    from coassist.robot.ros2_world import UR_JOINT_NAMES  # (no rclpy needed for the names)
+
+    # The UR's joint names; another arm's joints are named joint_1 … joint_n in the MCAP.
+    names = UR_JOINT_NAMES if config.robot == "ur5" else None
+    _write_run(trial, out, alpha=_run_alpha(preset, controller) if mcap else None, mcap=mcap, plot=plot,
+               joint_names=names)  # fmt: skip
 
 
 def _run_alpha(preset: str, controller: str) -> float | None:
@@ -593,8 +593,22 @@ def _run_alpha(preset: str, controller: str) -> float | None:
     return CONTROL_PRESETS.lookup(preset).game.alpha if controller == "assistive" else None
 
 
-def _write_run(trial, out: Path, *, alpha: float | None, mcap: bool, plot: bool) -> None:
-    """Write a drive/ros2 run: the trial file, how it ended, and <out>.mcap / <out>.png on request."""
+def _confirm_move(yes: bool, stop_hint: str):
+    """The question drive and ros2 ask before an arm moves: the limits in force, then "Move the robot?"."""
+
+    def confirm(text: str) -> bool:
+        console.print("[bold]Limits in force[/] (coassist's safety layer, on top of the robot's own safety system):", markup=True)
+        console.print(text, markup=False)
+        console.print(f"Keep {stop_hint} within reach.", markup=False)
+        return yes or typer.confirm("Move the robot?", default=False)
+
+    return confirm
+
+
+def _write_run(trial, out: Path, *, alpha: float | None, mcap: bool, plot: bool,
+               joint_names: Sequence[str] | None) -> None:  # fmt: skip
+    """Write a drive/ros2 run: the trial file, how it ended, and <out>.mcap / <out>.png on request.
+    ``joint_names``: the arm's, in the trial's joint order (None: joint_1 … joint_n in the MCAP)."""
     from coassist.data import write_trial
 
     path = write_trial(trial, out)
@@ -604,9 +618,8 @@ def _write_run(trial, out: Path, *, alpha: float | None, mcap: bool, plot: bool)
         console.print(f"[yellow]{escape(extra['stop_message'])}[/]", highlight=False)
     if mcap:
         from coassist.data.trial_mcap import write_trial_mcap
-        from coassist.robot.ros2_world import UR_JOINT_NAMES
 
-        _wrote(str(write_trial_mcap(trial, path.with_suffix(".mcap"), alpha=alpha, joint_names=UR_JOINT_NAMES)))
+        _wrote(str(write_trial_mcap(trial, path.with_suffix(".mcap"), alpha=alpha, joint_names=joint_names)))
     if plot:
         from coassist.sim.monitor import plot_trial
 
@@ -690,12 +703,7 @@ def ros2(
     if mcap:
         _need_bags("--mcap")
 
-    def confirm(text: str) -> bool:
-        console.print("[bold]Limits in force[/] (coassist's safety layer, on top of the robot's own safety system):", markup=True)
-        console.print(text, markup=False)
-        console.print("Keep the emergency stop within reach.", markup=False)
-        return yes or typer.confirm("Move the robot?", default=False)
-
+    confirm = _confirm_move(yes, "the emergency stop")
     alpha = _run_alpha(preset, controller)
     try:
         world = Ros2World(rcfg, alpha=alpha)
@@ -705,7 +713,7 @@ def ros2(
             world.close()
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
         _fail(str(exc))
-    _write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot)
+    _write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=rcfg.joint_names)
 
 
 @app.command()

@@ -138,3 +138,17 @@ def test_robot_is_checked_against_the_world(world, robot, known):
 
 def test_the_world_default_robots():
     assert DriveConfig().robot == "ur5" and DriveConfig(world="franka").robot == "panda"
+
+
+def test_a_panda_run_is_written_as_mcap_with_its_seven_joints(tmp_path):
+    pytest.importorskip("rosbags", reason="MCAP needs the bags extra")
+    from coassist.data.bags import load_bag_trial
+    from coassist.data import read_trial
+
+    out = tmp_path / "p.parquet"
+    result = CliRunner().invoke(app, ["drive", "--robot", "panda", "--controller", "mg", "--time-limit", "0.5",
+                                      "--out", str(out), "--mcap", "--no-plot"])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    trial, back = read_trial(out), load_bag_trial(tmp_path / "p.mcap")
+    assert trial.joints.shape[1] == 7
+    assert back.pose.tobytes() == trial.pose.tobytes()
