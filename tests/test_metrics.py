@@ -13,7 +13,6 @@ from coassist.metrics import (
     e_max,
     e_rms,
     f_rms,
-    intent_rms_error,
     jerk_rms,
     overshoot,
     peak_effort_ratio,
@@ -62,7 +61,7 @@ def test_intent_error_scores_against_the_intent_not_the_tool():
     pred = np.full((4, 2, 2), GARBAGE)
     for k in range(2):
         pred[k] = intent[k + 1 : k + 3] + [0.0, 0.3]
-    assert intent_rms_error(pred, intent, 2) == pytest.approx(0.3, rel=1e-14)
+    assert e_rms(pred, intent, 2) == pytest.approx(0.3, rel=1e-14)  # e_RMS against the intent
     # Against the tool the same prediction is off by sqrt(mean(|(k+i, 0.3)|²)) at tick k:
     # k=0: sqrt((1.09 + 4.09) / 2), k=1: sqrt((4.09 + 9.09) / 2).
     by_hand = (math.sqrt(2.59) + math.sqrt(6.59)) / 2

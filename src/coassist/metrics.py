@@ -42,7 +42,6 @@ __all__ = [
     "e_rms",
     "f_rms",
     "jerk_rms",
-    "intent_rms_error",
     "overshoot",
     "peak_effort_ratio",
     "precision_sigma",
@@ -178,21 +177,6 @@ def e_rms(prediction: ArrayLike, pose: ArrayLike, horizon: int) -> float:
     are scored).
     """
     return float(np.mean(prediction_errors(prediction, pose, horizon).rms))
-
-
-def intent_rms_error(prediction: ArrayLike, intent: ArrayLike, horizon: int) -> float:
-    """e_RMS of a prediction against the operator's *true intent* (simulated trials), in m.
-
-    The same measure as :func:`e_rms` (eq. 5.6), with the intended positions
-    x_ref,h(k+i) in place of the measured poses x(k+i)::
-
-        e_int = (1/L) Σ_k sqrt( (1/N) Σ_{i=1..N} ||x̂_k(k+i) − x_ref,h(k+i)||² )
-
-    ``intent`` (T, d) is ``Trial.intent``. Under assistance the tool's future contains
-    the robot's own push, so a predictor can be close to the tool and far from the intent
-    (docs/assistance.md); this is the error that says how well intent is predicted.
-    """
-    return float(np.mean(prediction_errors(prediction, intent, horizon).rms))
 
 
 def e_max(prediction: ArrayLike, pose: ArrayLike, horizon: int) -> EMax:

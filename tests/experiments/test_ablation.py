@@ -41,7 +41,7 @@ def test_undefined_share_and_bad_input():
 @pytest.mark.slow
 def test_mujoco_cells_meet_mgs_trials(tmp_path):
     """Both worlds on a one-operator, one-trial plan (minutes: every cell is a MuJoCo run): every cell
-    is filled, paired with MG's trials, and its shares are finite where the oracle gains."""
+    is filled and paired with MG's trials."""
     pytest.importorskip("mujoco")
     pytest.importorskip("torch")
     from dataclasses import replace

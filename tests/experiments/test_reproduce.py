@@ -172,7 +172,7 @@ def test_ablation_cells_meet_the_same_trials(tiny_run):
 
     out, _ = tiny_run
     for obj in ("board", "heavy"):
-        mg = sorted((t.meta.user, t.meta.seed) for t in read_dataset(out / "datasets" / f"ablation-{obj}-manual").trials)
+        mg = sorted((t.meta.user, t.meta.seed) for t in read_dataset(out / "datasets" / f"app-{obj}-manual").trials)
         assert mg
         for controller in CONTROLLERS:
             for source in SOURCES:

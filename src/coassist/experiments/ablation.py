@@ -34,13 +34,13 @@ than MG.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from coassist.experiments.application import OBJECTS, _pair_key, application_metrics, paired_difference
+from coassist.experiments.application import OBJECTS, OBSTACLE, _pair_key, application_metrics, paired_difference
 from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_seed, in_loop_errors
 from coassist.experiments.report import Claim, Section
 
@@ -119,7 +119,9 @@ class AblationResult:
 
     def summary(self) -> dict[str, Any]:
         out: dict[str, Any] = {"preset": self.preset, "models": self.models, "skipped": self.skipped, "cells": {},
-                               "pairs": {f"{w}/{o}": p for (w, o), p in self.pairs.items()}}
+                               "pairs": {f"{w}/{o}": p for (w, o), p in self.pairs.items()},
+                               "mg": {f"{w}/{o}": {k: v for k, v in m.items() if not k.endswith("_trials")}
+                                      for (w, o), m in self.mg.items()}}  # fmt: skip
         for (world, obj, controller, source), r in self.metrics.items():
             sh = self.shares(world, obj, controller, source)
             out["cells"][f"{world}/{obj}/{controller}/{source}"] = {
@@ -144,25 +146,21 @@ def training_datasets(ws: Workspace) -> list[Path]:
 def train_sources(ws: Workspace, datasets: list[Path]) -> dict[str, str]:
     """Train every learned source on ``datasets`` (module docstring); model folders by source."""
     from coassist.intent import PRESETS as INTENT_PRESETS
-    from coassist.intent import load_trials, train_model, write_model
 
-    cfg = ws.config
-    trials = load_trials(datasets)
     models = {}
     for source, (preset_name, label) in LEARNED.items():
-        preset = INTENT_PRESETS[preset_name or cfg.intent_preset]
-        preset = replace(preset, window=replace(preset.window, label=label))
-        train = replace(preset.train, epochs=cfg.epochs if preset_name is None else preset.train.epochs, seed=cfg.seed,
-                        threads=cfg.threads, train_stride=cfg.train_stride, eval_stride=cfg.train_stride,
-                        device=cfg.device, skip_alpha=cfg.skip_alpha)  # fmt: skip
-        path = ws.out / "models" / f"ablation-{source}"
-        write_model(train_model(trials, preset, train, progress=ws.progress), path)
-        models[source] = str(path)
+        epochs = ws.config.epochs if preset_name is None else INTENT_PRESETS[preset_name].train.epochs
+        models[source] = str(ws.train(f"ablation-{source}", datasets, init="scratch", epochs=epochs,
+                                      preset_name=preset_name, label=label))  # fmt: skip
     return models
 
 
-def run_ablation(ws: Workspace, models: dict[str, str] | None = None) -> AblationResult:
-    """Train the learned sources (unless ``models`` are given), then run every cell in both worlds."""
+def run_ablation(ws: Workspace, models: dict[str, str] | None = None,
+                 mg_trials: dict[str, list] | None = None) -> AblationResult:  # fmt: skip
+    """Train the learned sources (unless ``models`` are given), then run every cell in both worlds.
+
+    ``mg_trials``: object → the application stage's MG trials, which are these cells' MG
+    (the same seeds and settings); None collects them here."""
     cfg = ws.config
     models = dict(models) if models is not None else train_sources(ws, training_datasets(ws))
     intents = {s: models.get(s, s) for s in SOURCES}
@@ -173,10 +171,13 @@ def run_ablation(ws: Workspace, models: dict[str, str] | None = None) -> Ablatio
         def collect(name: str, controller: str, intent: str, obj: str = obj, seed: int = seed):
             _, ds = ws.collect(name, tasks=(cfg.application_task,), objects=(obj,), users=cfg.application_users,
                                trials=cfg.application_trials, seed=seed, controller=controller,
-                               preset=cfg.application_preset, intent=intent, obstacle="large")  # fmt: skip
+                               preset=cfg.application_preset, intent=intent, obstacle=OBSTACLE)  # fmt: skip
             return sorted(ds.trials, key=_pair_key)
 
-        base = collect(f"ablation-{obj}-manual", "manual", "nominal")
+        if mg_trials is None:
+            base = collect(f"ablation-{obj}-manual", "manual", "nominal")
+        else:
+            base = sorted(mg_trials[obj], key=_pair_key)
         mg[("point-mass", obj)] = application_metrics(base)
         pairs[("point-mass", obj)] = [_pair_key(t) for t in base]
         for controller in CONTROLLERS:
@@ -215,13 +216,16 @@ def _mujoco_unavailable() -> str | None:
 
 def _mujoco_configs(cfg, obj: str, seed0: int, controller: str, intent: str) -> list:
     from coassist.robot.drive import DriveConfig
+    from coassist.sim.collect import dataset_specs
 
     ctl = {"manual": "mg", "cooperative": "assistive", "cooperative-arbitrated": "assistive-arbitrated"}[controller]
     # The first trials of each operator in the point-mass cells (the same seeds: the same task and intent draws).
-    return [DriveConfig(world="mujoco", controller=ctl, task=cfg.application_task, object=obj,
-                        preset=cfg.application_preset, intent=intent, user=int(u),
-                        seed=seed0 + i * cfg.application_trials + r, obstacle="large")  # fmt: skip
-            for i, u in enumerate(cfg.application_users) for r in range(cfg.ablation_mujoco_trials)]
+    specs = dataset_specs(controller=controller, users=cfg.application_users, tasks=(cfg.application_task,),
+                          objects=(obj,), trials=cfg.application_trials, seed=seed0, preset=cfg.application_preset,
+                          obstacle=OBSTACLE)  # fmt: skip
+    return [DriveConfig(world="mujoco", controller=ctl, task=s.task, object=obj, preset=s.preset, intent=intent,
+                        user=s.user, seed=s.seed, obstacle=s.obstacle)  # fmt: skip
+            for n, s in enumerate(specs) if n % cfg.application_trials < cfg.ablation_mujoco_trials]
 
 
 def _drive_batch(configs: list) -> list[tuple[dict, dict]]:

@@ -184,14 +184,17 @@ class Workspace:
         return folder, read_dataset(folder)
 
     def train(self, name: str, datasets: list[Path], *, init: str, epochs: int, test_fraction: float = 0.2,
-              simulated: bool = True, preset_name: str | None = None) -> Path:
+              simulated: bool = True, preset_name: str | None = None, label: str | None = None) -> Path:
         """Train and save a model. ``test_fraction=0`` when the model is scored on a separate
-        test set anyway: then every trial collected for training is trained on."""
+        test set anyway: then every trial collected for training is trained on. ``label``:
+        what a fresh model learns to predict (``WindowConfig.label``; None: the preset's)."""
         from coassist.intent import PRESETS as INTENT_PRESETS
         from coassist.intent import load_trials, train_model, write_model
 
         cfg = self.config
         preset = INTENT_PRESETS[preset_name or cfg.intent_preset]
+        if label is not None:
+            preset = replace(preset, window=replace(preset.window, label=label))
         train_cfg = replace(preset.train, epochs=epochs, init=init, seed=cfg.seed, threads=cfg.threads,
                             train_stride=cfg.train_stride, eval_stride=cfg.train_stride, device=cfg.device,
                             test_fraction=test_fraction)
@@ -212,7 +215,7 @@ def in_loop_errors(trials, horizons=EVAL_HORIZONS, against: str = "pose") -> dic
     Per-tick errors of all trials are averaged together (eq. 5.6 over the concatenated
     trajectories); e_MAX: mean and max over ticks of the per-tick maximum (eq. 5.7–5.8).
     ``against``: ``"pose"``, the measured future poses (the thesis), or ``"intent"``, the
-    simulated operator's true intent (:func:`coassist.metrics.intent_rms_error`; trials
+    simulated operator's true intent (eq. 5.6 with x_ref,h(k+i) in place of x(k+i); trials
     without one are left out).
     """
     from coassist.metrics import prediction_errors

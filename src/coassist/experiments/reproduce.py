@@ -52,7 +52,7 @@ import numpy as np
 
 from coassist._io import atomic_write_text
 from coassist.experiments.ablation import ablation_section, run_ablation
-from coassist.experiments.application import application_section, run_application
+from coassist.experiments.application import OBJECTS, application_section, run_application
 from coassist.experiments.iterative import IterativeResult
 from coassist.experiments.pipeline import (
     EVAL_HORIZONS,
@@ -146,7 +146,8 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
     real = ctx.stage.run("real recordings", run_real_recordings, ctx.ws, config.real_data or default_real_data())
     ctx.sections.append(real_recordings_section(real))
     ctx.summary["real"] = real.summary()
-    ablation = ctx.stage.run("intent ablation", run_ablation, ctx.ws)
+    ablation = ctx.stage.run("intent ablation", run_ablation, ctx.ws,
+                             mg_trials={o: application.trials[(o, "manual")] for o in OBJECTS})  # fmt: skip
     ctx.sections.append(ablation_section(ablation))
     ctx.summary["ablation"] = ablation.summary()
     ctx.summary["stage_seconds"] = ctx.stage.times

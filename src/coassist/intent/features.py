@@ -329,8 +329,10 @@ class WindowSet:
         series, free = self._label, self._free
         if series is None:
             raise ValueError("this WindowSet was cut without futures (need_future=False)")
-        if label == "intent" or free is None:
+        if label == "intent":
             return series[idx]
+        if free is None:
+            raise ValueError("this WindowSet was cut without futures (need_future=False)")
         d = self.n_dof
         pose = self.features[idx][:, :, :d]
         # What u_r(k) … u_r(k+i−1) moved the tool from rest at k: z_r(k+i) − C_x A_d^i z_r(k).
