@@ -142,8 +142,8 @@ def test_the_world_default_robots():
 
 def test_a_panda_run_is_written_as_mcap_with_its_seven_joints(tmp_path):
     pytest.importorskip("rosbags", reason="MCAP needs the bags extra")
-    from coassist.data.bags import load_bag_trial
     from coassist.data import read_trial
+    from coassist.data.bags import load_bag_trial
 
     out = tmp_path / "p.parquet"
     result = CliRunner().invoke(app, ["drive", "--robot", "panda", "--controller", "mg", "--time-limit", "0.5",
