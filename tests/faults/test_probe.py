@@ -144,3 +144,5 @@ def test_host_allowed_by_bind():
     assert not host_allowed("evil.example:8765", "0.0.0.0", 8765)
     assert host_allowed("10.0.0.2:80", "10.0.0.2", 80) and host_allowed("10.0.0.2", "10.0.0.2", 80)
     assert not host_allowed("10.0.0.3:80", "10.0.0.2", 80)
+    # A server bound to a host name answers to that name only, and refuses an address (it raised before).
+    assert host_allowed("myhost.lan:80", "myhost.lan", 80) and not host_allowed("10.0.0.2:80", "myhost.lan", 80)

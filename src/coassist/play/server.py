@@ -26,6 +26,7 @@ cannot drive the robot through the person's browser). Frames above
 from __future__ import annotations
 
 import asyncio
+import functools
 import ipaddress
 import json
 import secrets
@@ -101,8 +102,17 @@ def host_allowed(header: str | None, bind_host: str, port: int) -> bool:
     if is_loopback(bind_host):
         return is_loopback(name)
     if bind_host in ("0.0.0.0", "::"):
-        return _is_ip(name) or name == "localhost" or name in {socket.gethostname().lower(), socket.getfqdn().lower()}
-    return name == bind_host.lower() or (_is_ip(name) and ipaddress.ip_address(name) == ipaddress.ip_address(bind_host))
+        return _is_ip(name) or name == "localhost" or name in _own_names()
+    # A bind to a host name: only that name (an address literal cannot be compared with it).
+    return name == bind_host.lower() or (
+        _is_ip(name) and _is_ip(bind_host) and ipaddress.ip_address(name) == ipaddress.ip_address(bind_host))
+
+
+@functools.cache
+def _own_names() -> frozenset[str]:
+    """This machine's host names, looked up once: getfqdn is a reverse DNS query that can take
+    seconds, and host_allowed runs on the event loop for every request."""
+    return frozenset({socket.gethostname().lower(), socket.getfqdn().lower()})
 
 
 def is_loopback(host: str) -> bool:
