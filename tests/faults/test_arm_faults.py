@@ -140,40 +140,18 @@ class ScriptedSensor:
         return w + self.rng.normal(0.0, self.NOISE, 6), np.eye(3), self.n
 
 
-class FaultyFranka:
-    """FrankaWorld with the case's fault injected into what the tick reads (and the loop's clock).
-    ``realtime`` is off: the robot's clock still paces the loop, but a loaded test machine's
-    own late ticks would add deadline misses that are not the case's fault."""
-
-    command_space, realtime = "joint_velocity", False
+class FaultyFranka(table.FaultInjector):
+    """FrankaWorld with the case's fault injected into what the tick reads (and the loop's clock);
+    the robot's clock still paces the loop."""
 
     def __init__(self, inner, inject=None, overrun_ticks=range(0)) -> None:
-        self.inner, self.inject, self.overrun_ticks = inner, inject, overrun_ticks
-        self.dt, self.n_joints, self.tcp_offset_pose = inner.dt, inner.n_joints, inner.tcp_offset_pose
-        self.k, self.poses, self.last_overrun = 0, [], 0.0
+        super().__init__(inner, inject, overrun_ticks)
+        self.tcp_offset_pose = inner.tcp_offset_pose
 
     stop_detail = property(lambda self: self.inner.stop_detail)
 
     def kinematics(self):
         return self.inner.kinematics()
-
-    def read(self):
-        state = self.inner.read()
-        if self.inject is not None:
-            self.inject(self.k, state)
-        self.poses.append(np.array(state.tool_pose, dtype=float))
-        return state
-
-    def apply(self, command):
-        self.last_overrun = 0.004 if self.k in self.overrun_ticks else 0.0
-        self.inner.apply(command)
-        self.k += 1
-
-    def stop(self):
-        self.inner.stop()
-
-    def close(self):
-        self.inner.close()
 
 
 @pytest.fixture(scope="module")

@@ -30,29 +30,19 @@ LIMITS = SafetyLimits(workspace_lower=(-0.6, -1.1, 0.0), workspace_upper=(0.7, -
 PUSH = ScriptedForce.constant((15.0, 0.0, 0.0, 0.0, 0.0, 0.0))
 
 
-class FaultyWorld:
-    """A MuJoCo world with a fault injected into what the tick reads (and the loop's clock)."""
+class FaultInjector:
+    """Any joint-velocity world with a fault injected into what the tick reads (and the loop's clock).
+    ``realtime`` is off: a loaded test machine's own late ticks would add deadline misses that are
+    not the case's fault."""
 
-    def __init__(self, inner: MujocoUR5World, inject=None, overrun_ticks=range(0)) -> None:
+    command_space, realtime = "joint_velocity", False
+
+    def __init__(self, inner, inject=None, overrun_ticks=range(0)) -> None:
         self.inner, self.inject, self.overrun_ticks = inner, inject, overrun_ticks
-        self.dt, self.command_space, self.n_joints, self.realtime = inner.dt, "joint_velocity", 6, False
+        self.dt, self.n_joints = inner.dt, inner.n_joints
         self.k = 0
         self.poses: dict[int, np.ndarray] = {}  # tick → the pose the tick read (drive's first read is overwritten)
         self.last_overrun = 0.0
-
-    operator = property(lambda self: self.inner.operator, lambda self, v: setattr(self.inner, "operator", v))
-    model = property(lambda self: self.inner.model)
-    data = property(lambda self: self.inner.data)
-
-    def hand_pose(self):
-        return self.inner.hand_pose()
-
-    def tool_mass_and_com(self):
-        return self.inner.tool_mass_and_com()
-
-    @property
-    def hand_wrench(self):
-        return self.inner.hand_wrench
 
     def read(self):
         state = self.inner.read()
@@ -71,6 +61,27 @@ class FaultyWorld:
 
     def close(self):
         self.inner.close()
+
+
+class FaultyWorld(FaultInjector):
+    """The MuJoCo UR5 world with a fault injected (the MuJoCo parts drive reads passed through)."""
+
+    def __init__(self, inner: MujocoUR5World, inject=None, overrun_ticks=range(0)) -> None:
+        super().__init__(inner, inject, overrun_ticks)
+
+    operator = property(lambda self: self.inner.operator, lambda self, v: setattr(self.inner, "operator", v))
+    model = property(lambda self: self.inner.model)
+    data = property(lambda self: self.inner.data)
+
+    def hand_pose(self):
+        return self.inner.hand_pose()
+
+    def tool_mass_and_com(self):
+        return self.inner.tool_mass_and_com()
+
+    @property
+    def hand_wrench(self):
+        return self.inner.hand_wrench
 
 
 class FakeRealtimePredictor:
