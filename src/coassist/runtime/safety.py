@@ -346,7 +346,7 @@ def _finite_vector(x, at_least: int) -> np.ndarray | None:
         a = np.asarray(x)
         if a.dtype.kind not in "fiu" or a.ndim != 1 or a.shape[0] < at_least:
             return None
-        a = a.astype(np.float64)
+        a = a.astype(np.float64, copy=False)
     except Exception:
         return None
     return a if np.isfinite(a).all() else None

@@ -246,7 +246,7 @@ class ControlTick:
         self._R_start = _spatial.rotation_matrix(start[3:6])
         self._J = None
         self._inv_dt = 1.0 / self.dt
-        self._last_pose = start.copy()  # held over a glitch of the state (step())
+        self._last_pose = np.array(start, dtype=np.float64)  # held over a glitch of the state (step()); a buffer of its own
         self._last_twist = np.zeros(6)
 
     # ------------------------------------------------------------------ per tick
@@ -266,11 +266,11 @@ class ControlTick:
         if pose is None:
             pose = self._last_pose
         else:
-            self._last_pose = pose.copy()
+            np.copyto(self._last_pose, pose)  # held in the tick's own buffer: no per-tick allocation
         if twist is None:
             twist = self._last_twist
         else:
-            self._last_twist = twist.copy()
+            np.copyto(self._last_twist, twist)
         if state_bad:
             fault |= Fault.NONFINITE_STATE
         x = pose[dofs]

@@ -69,6 +69,10 @@ class RobotState:
 def finite_vector(x: object, n: int) -> np.ndarray | None:
     """A state field as a finite float64 (n,) array, or None (a glitch: None, not numeric,
     another shape, NaN or ±inf anywhere); the loop and the tick hold the last good value then."""
+    if type(x) is np.ndarray and x.dtype.char == "d" and x.shape == (n,):  # the per-tick case: no allocation
+        s = sum(x.tolist())
+        if s - s == 0.0:  # NaN and ±inf survive the sum (inf − inf = NaN); an overflow is re-checked below
+            return x
     a = as_real_array(x)
     if a is None or a.shape != (n,) or not np.isfinite(a).all():
         return None
