@@ -32,7 +32,7 @@ from numpy.typing import ArrayLike
 
 from coassist._checks import check_positive_scalar
 from coassist.robot.kinematics import ArmKinematics, robot_data_path
-from coassist.spatial import damped_pseudo_inverse
+from coassist.spatial import _damped_svd
 
 __all__ = ["ARMS", "ArmDescription", "NullSpacePosture", "arm_kinematics", "check_model_matches", "get_arm"]
 
@@ -200,12 +200,12 @@ class NullSpacePosture:
 
     def redundant_joint_velocity(self, q: np.ndarray, J: np.ndarray, twist: np.ndarray) -> np.ndarray:
         """(n,) q̇ [rad/s] for the task twist (6,) at q (n,) with J (6, n): posture and limits (module docstring)."""
-        J_pinv, _ = damped_pseudo_inverse(J, sigma_threshold=self.sigma_threshold, max_damping=self.max_damping)
-        qd = J_pinv @ twist
-        # The null-space projector from the exact row space of J (its right singular vectors),
+        # One SVD per tick serves both: the damped J⁺ (spatial.damped_pseudo_inverse's rule) and
+        # the null-space projector from the exact row space of J (its right singular vectors),
         # not I − J⁺J with the damped J⁺: near a singularity that one is no projector and leaks
         # the posture pull into the tool's motion (J (I − J⁺J) ≠ 0 once λ > 0).
-        row = np.linalg.svd(J)[2][:6]
+        U, inv_s, row, _ = _damped_svd(J, self.sigma_threshold, self.max_damping)
+        qd = row.T @ (inv_s * (U.T @ twist))
         pull = self.gain * (self.posture - q)
         qd += pull - row.T @ (row @ pull)
         return self.limit_to_joint_range(q, qd)
