@@ -27,6 +27,7 @@ def test_drive_play_and_the_main_job_agree_on_the_application_preset():
     assert PlayConfig(user="me", out=Path("unused")).preset == main_job
     assert _cli_default("drive") == main_job
     assert _cli_default("play") == main_job
+    assert _cli_default("ros2") == main_job  # the ROS 2 node drives a real arm, a model possibly in the loop
 
 
 def test_collect_defaults_to_the_main_jobs_collection_preset():

@@ -652,7 +652,7 @@ def ros2(
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
     intent: str = typer.Option("nominal", help="nominal | path of an intent model (coassist train)."),
     predictor_backend: str = typer.Option("process", help="Where a model runs: process (own worker process), onnx or torch (thread)."),
-    preset: str = typer.Option("thesis-application-dm", help="Control preset (the main job's by default)."),
+    preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; the -dm presets ring with one)."),
     rate: int = typer.Option(125, help="Control rate in Hz: 125 (UR CB3) or 500 (e-Series)."),
     full_pose: bool = typer.Option(False, help="Control all 6 DOFs instead of the x-y plane."),
     time_limit: float = typer.Option(None, help="Longest run in seconds (default: 2 x the plan + 10 s)."),
