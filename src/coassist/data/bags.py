@@ -43,7 +43,17 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from coassist.data.rosbag_csv import TOPIC_FILES, RecordingError, _check_dofs, _natural_key, assemble_recording
+from coassist.data.rosbag_csv import (
+    _NSECS,
+    _RECEIVE,
+    _SECS,
+    _SEQ,
+    TOPIC_FILES,
+    RecordingError,
+    _check_dofs,
+    _natural_key,
+    assemble_recording,
+)
 from coassist.data.trial import Trial
 
 __all__ = ["BAG_SUFFIXES", "BAG_TOPICS", "BAG_TYPES", "bag_paths", "is_bag", "load_bag_trial", "resolve_topics"]
@@ -65,7 +75,7 @@ BAG_TYPES: Mapping[str, str] = {
 #: File suffixes read as bags: ROS 1, ROS 2 MCAP, ROS 2 sqlite3.
 BAG_SUFFIXES = (".bag", ".mcap", ".db3")
 _INSTALL_HINT = "reading bags needs rosbags: pip install 'coassist[bags]'"
-_SEQ, _SECS, _NSECS, _RECEIVE, _STAMP = "header.seq", "header.stamp.secs", "header.stamp.nsecs", "Time", "stamp_ns"
+_STAMP = "stamp_ns"  # the CSV export's column names (_SEQ … _RECEIVE) are the CSV loader's: one assembly reads both
 
 
 def is_bag(path: str | os.PathLike[str]) -> bool:

@@ -216,20 +216,17 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
     intent_stage = None
     intent_pos = intent_traj.positions
     start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
-    robot = config.robot or WORLD_ROBOTS[config.world][0]  # set by DriveConfig; the default for type checkers
+    robot = config.robot or WORLD_ROBOTS[config.world][0]  # DriveConfig sets it; `or` for the type checker
     if config.world == "mujoco" and robot != "ur5":  # the tasks, laid out for the UR5, moved to this arm
         ref_abs, intent_pos, start = move_tasks(robot, ref_abs, intent_pos)
     if world is None:
         if config.world == "mujoco":
             from coassist.robot.mujoco_world import MujocoArmWorld, MujocoUR5World
 
-            if config.robot == "ur5":
-                # A real-time predictor runs against the wall clock: so must the world it serves.
-                world = MujocoUR5World(config.object, control_dt=dt, start=start, seed=config.seed, view=view,
-                                       realtime=view or bool(config.realtime_intent))  # fmt: skip
-            else:
-                world = MujocoArmWorld(config.object, robot=robot, control_dt=dt, start=start, seed=config.seed,
-                                       view=view, realtime=view or bool(config.realtime_intent))  # fmt: skip
+            # A real-time predictor runs against the wall clock: so must the world it serves.
+            world = (MujocoUR5World if robot == "ur5" else MujocoArmWorld)(
+                config.object, robot=robot, control_dt=dt, start=start, seed=config.seed, view=view,
+                realtime=view or bool(config.realtime_intent))  # fmt: skip
         elif config.world == "ur":
             from coassist.robot.ur_rtde_world import URRTDEWorld
 
