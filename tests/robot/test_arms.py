@@ -149,3 +149,11 @@ def test_fr3_limits_are_the_fr3_urdf_and_its_kinematics_the_pandas(panda):
     assert not np.array_equal(fr3.joint_position_limit, panda.joint_position_limit)  # joints 4 and 6 differ
     q = np.array(get_arm("fr3").home) + 0.1
     assert np.array_equal(fr3.pose(q), panda.pose(q))  # the same model: the same numbers
+
+
+def test_the_ros2_nodes_ur_joint_names_are_the_urdfs():
+    # ros2_world keeps its own copy (the ROS side never imports MuJoCo); it must stay the URDF's.
+    from coassist.robot.arm_mjcf import arm_joint_names
+    from coassist.robot.ros2_world import UR_JOINT_NAMES
+
+    assert UR_JOINT_NAMES == arm_joint_names("ur5")

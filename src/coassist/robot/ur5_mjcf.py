@@ -62,7 +62,16 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from coassist.robot.arm_mjcf import MOUNT_MASS, TOOLS, ToolGeometry, build_arm_model, build_arm_spec, tool_geometry
+from coassist.robot.arm_mjcf import (
+    MOUNT_MASS,
+    TOOLS,
+    ToolGeometry,
+    build_arm_model,
+    build_arm_spec,
+    tool_geometry,
+    urdf_joint_limits,
+)
+from coassist.robot.arms import get_arm
 from coassist.robot.kinematics import ur5_urdf_path  # one place knows where the URDF is installed
 
 __all__ = [
@@ -80,16 +89,17 @@ __all__ = [
     "ur5_urdf_path",
 ]
 
-JOINT_NAMES = (
-    "shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint",
-)
+# The UR5's joints and limits as its URDF gives them (the arm registry reads them; copies here,
+# writable like the literals they replace, for the names the UR5 code and its tests import).
+_names, _effort, _velocity = urdf_joint_limits("ur5")
+JOINT_NAMES = tuple(_names)
 #: UR5 joint torque limits [N·m] (the URDF's ``effort``, what the model's motors clip to).
-TORQUE_LIMITS = np.array([150.0, 150.0, 150.0, 28.0, 28.0, 28.0])
+TORQUE_LIMITS = np.array(_effort)
 #: UR5 joint speed limits of the URDF [rad/s].
-VELOCITY_LIMITS = np.array([3.15, 3.15, 3.15, 3.2, 3.2, 3.2])
+VELOCITY_LIMITS = np.array(_velocity)
 #: The seed of the start pose's IK: elbow up, wrist down, tool down, the handle's TCP at
-#: the middle of the tasks' workspace ((0.15, −0.615, 0.2) m); the registry's UR5 home.
-Q_SEED = np.array([-1.1583, -1.9627, -1.5428, -1.2068, 1.5708, -2.7291])
+#: the middle of the tasks' workspace ((0.15, −0.615, 0.2) m): the registry's UR5 home.
+Q_SEED = np.array(get_arm("ur5").home)
 
 
 def build_ur5_spec(
