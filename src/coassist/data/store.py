@@ -264,7 +264,9 @@ def read_trial(path: str | os.PathLike[str]) -> Trial:
         raise TrialFileError(f"{path}: columns cannot be read ({exc})") from None
     if recorded is not None and recorded.decode("ascii", "replace") != actual:
         raise TrialFileError(f"{path}: the values do not match the checksum written with them (damaged bytes)")
-    for name, value in kwargs.items():
+    # A matching checksum says the values are the ones written; only a file without one
+    # (written before the checksum existed) needs the plausibility check.
+    for name, value in kwargs.items() if recorded is None else ():
         if isinstance(value, np.ndarray) and value.dtype.kind == "f":
             with np.errstate(invalid="ignore"):
                 big = np.abs(value) > PLAUSIBLE_MAGNITUDE  # NaN (an unused prediction row) is not big
