@@ -36,7 +36,7 @@ from coassist.data import (
 from coassist.data.rosbag_csv import PLAUSIBLE_FORCE
 from coassist.data.trial import GAP_FACTOR, time_gaps
 
-from ..intent.conftest import TINY, labeled, make_trial
+from ..intent.conftest import make_trial
 
 # --------------------------------------------------------------------------- trial files
 
@@ -132,17 +132,6 @@ def test_manifest_not_utf8(dataset):
 
 
 # --------------------------------------------------------------------------- model folders
-
-
-@pytest.fixture(scope="module")
-def model_dir(tmp_path_factory) -> Path:
-    from dataclasses import replace
-
-    from coassist.intent.training import train_model, write_model
-
-    out = tmp_path_factory.mktemp("model") / "m"
-    write_model(train_model(labeled(3), TINY, replace(TINY.train, epochs=1)), out)
-    return out
 
 
 def _copy(model_dir: Path, tmp_path: Path) -> Path:

@@ -24,8 +24,6 @@ from typer.testing import CliRunner
 from coassist.cli import app
 from coassist.data import Trial, TrialFileError, TrialMeta, read_dataset, read_trial, write_dataset, write_trial
 
-from ..intent.conftest import TINY, labeled
-
 RUNNER = CliRunner()
 
 
@@ -38,17 +36,6 @@ def _one_line_error(result, *pieces: str) -> str:
 
 
 # --------------------------------------------------------------------------- model sidecars
-@pytest.fixture(scope="module")
-def model_dir(tmp_path_factory):
-    from dataclasses import replace
-
-    from coassist.intent.training import train_model, write_model
-
-    out = tmp_path_factory.mktemp("model") / "m"
-    write_model(train_model(labeled(3), TINY, replace(TINY.train, epochs=1)), out)
-    return out
-
-
 def _copy(model_dir: Path, tmp_path: Path) -> Path:
     import shutil
 
