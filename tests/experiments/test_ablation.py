@@ -47,7 +47,8 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     from dataclasses import replace
 
     from coassist.experiments import pipeline
-    from coassist.experiments.ablation import CONTROLLERS, LEARNED, SOURCES, run_ablation
+    from coassist.experiments.ablation import CONTROLLERS, SOURCES, run_ablation
+    from coassist.experiments.intent_sources import LEARNED
 
     cfg = replace(pipeline.PRESETS["tiny"], ablation_mujoco_trials=1, workers=1, threads=1)
     ws = pipeline.Workspace(cfg, tmp_path, progress=False)

@@ -79,7 +79,7 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
             finite = [v for v in result[f"{name}_trials"] if np.isfinite(v)]
             if finite:  # the mean is over the trials' finite values (σ: those that reached the target)
                 assert result[name] == pytest.approx(np.mean(finite))
-    for key in ("M0", "M1", "TL-board-transfer", "TL-heavy-transfer"):
+    for key in ("M0", "M1", "TL-board-transfer", "lstm-intent"):
         assert (out / "models" / key / "history.json").is_file()
     # The ablation: every (object, controller, source) cell in the point-mass world (the tiny preset leaves MuJoCo out),
     # each model saying what it predicts.
@@ -90,7 +90,7 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
     assert "mujoco" in ab["skipped"]
     labels = {"ridge": "tool", "lstm-tool": "tool", "lstm-hand-alone": "hand_alone", "lstm-intent": "intent"}
     for source, label in labels.items():
-        side = json.loads((out / "models" / f"ablation-{source}" / "model.json").read_text())
+        side = json.loads((out / "models" / source / "model.json").read_text())
         assert side["window"]["label"] == label and side["predicts"]
 
 

@@ -16,10 +16,9 @@ resolve). The sources:
   (``label="intent"``; simulation only: real recordings have no intent label);
 - ``oracle``: the operator's true intent itself, the best any predictor could do.
 
-Every learned source is trained from scratch on the same datasets (the iterative stage's
-D_k and the transfer datasets of the board and the heavy load) by the same protocol (the
-run's intent preset, epochs, seed and skip shrinkage); only the label differs, and the
-ridge's model class.
+Every learned source is trained from scratch on the same datasets by the same protocol; only
+the label differs, and the ridge's model class (:mod:`coassist.experiments.intent_sources`,
+trained in the application stage, whose assistive rows use one of them and are reused here).
 
 Per cell (world, object, controller, source): :func:`~coassist.experiments.application.application_metrics`,
 and the **share of the oracle's benefit** for force and for overshoot::
@@ -35,7 +34,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -47,9 +45,6 @@ from coassist.experiments.report import Claim, Section
 SOURCES = ("nominal", "constant-velocity", "ridge", "lstm-tool", "lstm-hand-alone", "lstm-intent", "oracle")
 CONTROLLERS = ("cooperative", "cooperative-arbitrated")
 WORLDS = ("point-mass", "mujoco")
-#: The learned sources: (intent preset or None for the run's, window label).
-LEARNED = {"ridge": ("linear", "tool"), "lstm-tool": (None, "tool"), "lstm-hand-alone": (None, "hand_alone"),
-           "lstm-intent": (None, "intent")}  # fmt: skip
 #: Issue 18's bar: a learned predictor in the loop gets this share of the oracle's benefit over MG.
 ORACLE_SHARE_BAR = 0.8
 #: Bootstrap resamples of the share's interval (seeded: the same run gives the same interval).
@@ -132,38 +127,18 @@ class AblationResult:
         return out
 
 
-def training_datasets(ws: Workspace) -> list[Path]:
-    """The datasets every learned source is trained on: the iterative stage's D_k and the
-    board's and heavy load's transfer datasets (collected with the run's models in the loop)."""
-    root = ws.out / "datasets"
-    names = sorted(p.name for p in root.glob("D*") if p.name[1:].isdigit())
-    names += [n for n in ("TL-board", "TL-heavy") if (root / n).is_dir()]
-    if not names:
-        raise ValueError(f"no training datasets in {root}: run the iterative stage first")
-    return [root / n for n in names]
+def run_ablation(ws: Workspace, models: dict[str, str], known: dict[tuple[str, str, str], list] | None = None,
+                 ) -> AblationResult:  # fmt: skip
+    """Run every cell in both worlds with the learned sources' ``models`` (source → model folder,
+    :func:`~coassist.experiments.intent_sources.train_sources`).
 
-
-def train_sources(ws: Workspace, datasets: list[Path]) -> dict[str, str]:
-    """Train every learned source on ``datasets`` (module docstring); model folders by source."""
-    from coassist.intent import PRESETS as INTENT_PRESETS
-
-    models = {}
-    for source, (preset_name, label) in LEARNED.items():
-        epochs = ws.config.epochs if preset_name is None else INTENT_PRESETS[preset_name].train.epochs
-        models[source] = str(ws.train(f"ablation-{source}", datasets, init="scratch", epochs=epochs,
-                                      preset_name=preset_name, label=label))  # fmt: skip
-    return models
-
-
-def run_ablation(ws: Workspace, models: dict[str, str] | None = None,
-                 mg_trials: dict[str, list] | None = None) -> AblationResult:  # fmt: skip
-    """Train the learned sources (unless ``models`` are given), then run every cell in both worlds.
-
-    ``mg_trials``: object → the application stage's MG trials, which are these cells' MG
-    (the same seeds and settings); None collects them here."""
+    ``known``: (object, controller, source) → trials the application stage already ran with the
+    same seeds, settings and model (its MG trials under ``(object, "manual", "nominal")`` and its
+    assistive rows under the application's source); those cells reuse them instead of running
+    them again. Without them every cell, MG's included, is collected here."""
     cfg = ws.config
-    models = dict(models) if models is not None else train_sources(ws, training_datasets(ws))
     intents = {s: models.get(s, s) for s in SOURCES}
+    known = known or {}
     metrics, mg, pairs, skipped, errors = {}, {}, {}, {}, {}
     for j, obj in enumerate(OBJECTS):
         seed = application_seed(cfg.seed, j)
@@ -174,15 +149,16 @@ def run_ablation(ws: Workspace, models: dict[str, str] | None = None,
                                preset=cfg.application_preset, intent=intent, obstacle=OBSTACLE)  # fmt: skip
             return sorted(ds.trials, key=_pair_key)
 
-        if mg_trials is None:
-            base = collect(f"ablation-{obj}-manual", "manual", "nominal")
-        else:
-            base = sorted(mg_trials[obj], key=_pair_key)
+        base = known.get((obj, "manual", "nominal"))
+        base = collect(f"ablation-{obj}-manual", "manual", "nominal") if base is None else sorted(base, key=_pair_key)
         mg[("point-mass", obj)] = application_metrics(base)
         pairs[("point-mass", obj)] = [_pair_key(t) for t in base]
         for controller in CONTROLLERS:
             for source in SOURCES:
-                trials = collect(f"ablation-{obj}-{controller}-{source}", controller, intents[source])
+                trials = known.get((obj, controller, source))
+                if trials is None:
+                    trials = collect(f"ablation-{obj}-{controller}-{source}", controller, intents[source])
+                trials = sorted(trials, key=_pair_key)
                 if [_pair_key(t) for t in trials] != pairs[("point-mass", obj)]:
                     raise RuntimeError(f"ablation cell {obj}/{controller}/{source} did not meet MG's trials")
                 metrics[("point-mass", obj, controller, source)] = application_metrics(trials)

@@ -8,7 +8,10 @@ Stages, in order (each writes its data under ``out/`` and a section of the repor
    trajectory, five new users and the board, each against a model trained from
    scratch and one fine-tuned in all layers on the same trials;
 4. the application scenario (§5.2.3, §5.3.3, Fig. 5.24–5.31): the board and the heavy
-   load carried past an obstacle with the assistive controller, IMP and MG;
+   load carried past an obstacle with the assistive controller, IMP and MG; the assistive
+   controller's intent source is the LSTM+FC trained on the operator's intent, the source
+   that won the in-loop ablation on validation seeds
+   (:mod:`~coassist.experiments.intent_sources`, ``docs/intent-labels.md``);
 5. the real UR5 recordings: the predictor trained on user-a against its baselines,
    and transferred to user-b;
 6. the in-loop ablation of intent sources (issue 18): nominal, constant velocity, the
@@ -52,7 +55,7 @@ import numpy as np
 
 from coassist._io import atomic_write_text
 from coassist.experiments.ablation import ablation_section, run_ablation
-from coassist.experiments.application import OBJECTS, application_section, run_application
+from coassist.experiments.application import application_section, run_application
 from coassist.experiments.iterative import IterativeResult
 from coassist.experiments.pipeline import (
     EVAL_HORIZONS,
@@ -139,15 +142,13 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
         transfer, iterative.final_model_offline_e_rms[50], sum(w["trials"] for w in iterative.work),
         sum(w["windows_trained"] for w in iterative.work)))
     ctx.summary["transfer"] = transfer.summary()
-    application = ctx.stage.run("application scenario", run_application, ctx.ws, final_model,
-                                transfer.transfer_models["board"])
+    application = ctx.stage.run("application scenario", run_application, ctx.ws, final_model)
     ctx.sections.append(application_section(application))
     ctx.summary["application"] = application.summary()
     real = ctx.stage.run("real recordings", run_real_recordings, ctx.ws, config.real_data or default_real_data())
     ctx.sections.append(real_recordings_section(real))
     ctx.summary["real"] = real.summary()
-    ablation = ctx.stage.run("intent ablation", run_ablation, ctx.ws,
-                             mg_trials={o: application.trials[(o, "manual")] for o in OBJECTS})  # fmt: skip
+    ablation = ctx.stage.run("intent ablation", run_ablation, ctx.ws, application.models, application.cells())
     ctx.sections.append(ablation_section(ablation))
     ctx.summary["ablation"] = ablation.summary()
     ctx.summary["stage_seconds"] = ctx.stage.times

@@ -1,0 +1,58 @@
+"""The learned intent sources of the simulated stages, and which one the application uses.
+
+Every learned source is trained from scratch on the same datasets (the iterative stage's
+D_k and the board's and heavy load's transfer datasets, all collected with the run's
+models in the loop) by the same protocol (the run's intent preset, epochs, seed and skip
+shrinkage); only what it learns to predict differs, and the ridge's model class:
+
+- ``ridge``: the validation-tuned ridge (the ``linear`` preset) on the tool's future pose;
+- ``lstm-tool``: the LSTM+FC on the tool's future pose (the thesis' label);
+- ``lstm-hand-alone``: the LSTM+FC on the path the hand alone would have produced (the
+  robot's logged effort removed through the known impedance, ``label="hand_alone"``);
+- ``lstm-intent``: the LSTM+FC on the simulated operator's true intent (``label="intent"``).
+
+:data:`APPLICATION_SOURCE` is the one the application scenario's assistive controllers
+use: the source that got the largest share of the oracle's benefit in the in-loop
+ablation on validation seeds the report never uses (``docs/intent-labels.md``; the
+report's own ablation, :mod:`coassist.experiments.ablation`, measures all of them again on
+the report's trials).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from coassist.experiments.pipeline import Workspace
+
+__all__ = ["APPLICATION_SOURCE", "LEARNED", "train_sources", "training_datasets"]
+
+#: The learned sources: (intent preset or None for the run's, window label).
+LEARNED = {"ridge": ("linear", "tool"), "lstm-tool": (None, "tool"), "lstm-hand-alone": (None, "hand_alone"),
+           "lstm-intent": (None, "intent")}  # fmt: skip
+#: The application's intent source (module docstring): on the validation seeds the LSTM+FC
+#: on the intent label got 92 / 96 % of the oracle's force saving with the arbitrated
+#: controller, the tool label 71 / 73 % (board / heavy; docs/intent-labels.md).
+APPLICATION_SOURCE = "lstm-intent"
+
+
+def training_datasets(ws: Workspace) -> list[Path]:
+    """The datasets every learned source is trained on: the iterative stage's D_k and the
+    board's and heavy load's transfer datasets (collected with the run's models in the loop)."""
+    root = ws.out / "datasets"
+    names = sorted(p.name for p in root.glob("D*") if p.name[1:].isdigit())
+    names += [n for n in ("TL-board", "TL-heavy") if (root / n).is_dir()]
+    if not names:
+        raise ValueError(f"no training datasets in {root}: run the iterative stage first")
+    return [root / n for n in names]
+
+
+def train_sources(ws: Workspace, datasets: list[Path]) -> dict[str, str]:
+    """Train every learned source on ``datasets`` (module docstring) into ``models/<source>``; model folders by source."""
+    from coassist.intent import PRESETS as INTENT_PRESETS
+
+    models = {}
+    for source, (preset_name, label) in LEARNED.items():
+        epochs = ws.config.epochs if preset_name is None else INTENT_PRESETS[preset_name].train.epochs
+        models[source] = str(ws.train(source, datasets, init="scratch", epochs=epochs,
+                                      preset_name=preset_name, label=label))  # fmt: skip
+    return models
