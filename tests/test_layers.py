@@ -16,9 +16,10 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("(root)", "errors", "_checks", "_io", "interfaces", "config", "spatial", "registry"),  # shared vocabulary and rigid-body math
     ("model", "data", "metrics"),  # the impedance model; trials on disk; metrics
     ("control",),  # games, baselines, guarded controllers (pure control laws)
-    ("intent", "runtime"),  # the predictor; the control loop, wrench pipeline, safety
-    ("sim",),  # the point-mass world, tasks, objects, simulated operators
-    ("robot",),  # kinematics, MuJoCo UR5, the real UR5
+    ("intent",),  # the predictor
+    ("scenario",),  # what every world runs: tasks, objects, simulated operators and hand, intent sources, seeds
+    ("runtime",),  # the control tick and loop, wrench pipeline, safety, one episode assembly for every world
+    ("sim", "robot"),  # the worlds: the point-mass simulator; arms in MuJoCo or real (neither imports the other)
     ("experiments", "play"),  # thesis experiments, reports; a person in the loop (the live page)
     ("cli",),  # the command line
 )

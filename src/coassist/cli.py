@@ -183,9 +183,9 @@ def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, 
     """The intent preset named by --preset, with the training (and network-size) options applied."""
     from dataclasses import replace
 
-    from coassist.intent.training import PRESETS, with_overrides
+    from coassist.intent.training import MODEL_PRESETS, with_overrides
 
-    chosen = _lookup(PRESETS, preset, "--preset")
+    chosen = _lookup(MODEL_PRESETS, preset, "--preset")
     try:
         p = with_overrides(chosen, **overrides)
         sizes = {k: v for k, v in (network or {}).items() if v is not None}
@@ -480,13 +480,14 @@ def collect(
     continues where it stopped.
     """
     from coassist._io import OutputBusyError
-    from coassist.sim import CONTROLLER_KINDS, OBJECTS, PRESETS, TASK_KINDS
+    from coassist.config import CONTROL_PRESETS
+    from coassist.control.presets import CONTROLLER_KINDS
+    from coassist.scenario import OBJECTS, OBSTACLES, TASK_KINDS
     from coassist.sim.collect import collect_dataset
-    from coassist.sim.tasks import OBSTACLES
 
     _choose(controller, CONTROLLER_KINDS, "--controller", "controller")
     _choose(obstacle, OBSTACLES, "--obstacle", "obstacle")
-    _lookup(PRESETS, preset, "--preset")
+    _lookup(CONTROL_PRESETS, preset, "--preset")
     for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
         if value is not None and value < minimum:
             _fail(f"{option} must be >= {minimum}, got {value}", 2)
@@ -549,13 +550,14 @@ def drive(
     overwrite: bool = typer.Option(False, help="Replace an existing trial file at --out."),
 ) -> None:
     """Run the assistive controller, IMP or MG on an arm (UR5, Panda): in MuJoCo, or on a real one."""
-    from coassist.robot.drive import CONTROLLERS, WORLDS, DriveConfig
+    from coassist.config import CONTROL_PRESETS
+    from coassist.control.presets import CONTROLLER_NAMES
+    from coassist.robot.drive import WORLDS, DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.runtime.safety import SafetyLimits
-    from coassist.sim import PRESETS as CONTROL_PRESETS
 
     _choose(world, WORLDS, "--world", "world")
-    _choose(controller, CONTROLLERS, "--controller", "controller")
+    _choose(controller, CONTROLLER_NAMES, "--controller", "controller")
     _lookup(CONTROL_PRESETS, preset, "--preset")
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
@@ -588,7 +590,7 @@ def drive(
 
 def _run_alpha(preset: str, controller: str) -> float | None:
     """The game's α of a drive/ros2 run (the assistive controller's preset), None for IMP and MG."""
-    from coassist.sim import PRESETS as CONTROL_PRESETS
+    from coassist.config import CONTROL_PRESETS
 
     return CONTROL_PRESETS.lookup(preset).game.alpha if controller == "assistive" else None
 
@@ -773,13 +775,13 @@ def play(
     if token is None and not is_loopback(host):
         token = new_token()
     try:
-        from coassist.robot.drive import CONTROLLERS
-        from coassist.sim import PRESETS as CONTROL_PRESETS
-        from coassist.sim import TASK_KINDS
+        from coassist.config import CONTROL_PRESETS
+        from coassist.control.presets import CONTROLLER_NAMES
+        from coassist.scenario import TASK_KINDS
 
         _lookup(CONTROL_PRESETS, preset, "--preset")
         config = PlayConfig(user=user, out=out,
-                            controllers=tuple(_name_list(controller, "--controller", tuple(CONTROLLERS), "controller")),
+                            controllers=tuple(_name_list(controller, "--controller", tuple(CONTROLLER_NAMES), "controller")),
                             intent="nominal" if drive and intent == "oracle" else intent, preset=preset,
                             tasks=tuple(_name_list(tasks, "--tasks", TASK_KINDS, "task")), seed=seed,
                             motion_time=motion_time, mcap=mcap)  # fmt: skip
@@ -850,7 +852,7 @@ def reproduce(
 
     from coassist.experiments import reproduce as rep
 
-    chosen = _lookup(rep.PRESETS, preset, "--preset")
+    chosen = _lookup(rep.REPRODUCE_PRESETS, preset, "--preset")
     _check_device(device)
     changes = {"seed": seed}
     if workers is not None:

@@ -17,10 +17,10 @@ from scipy.linalg import expm
 pytest.importorskip("starlette", reason="coassist play needs the web extra (pip install 'coassist[web]')")
 websockets = pytest.importorskip("websockets", reason="the websocket client needs the web extra")
 
+from coassist.control.presets import get_preset  # noqa: E402
 from coassist.data import read_dataset  # noqa: E402
 from coassist.play.server import PlayServer  # noqa: E402
 from coassist.play.session import PlayConfig, PlaySession  # noqa: E402
-from coassist.sim.world import get_preset  # noqa: E402
 
 
 def short_config(tmp_path, **kw) -> PlayConfig:

@@ -6,7 +6,7 @@ import pytest
 from typer.testing import CliRunner
 
 from coassist.play.session import PlayConfig, PlaySession, view_bounds
-from coassist.sim.tasks import TASK_KINDS, nominal_path
+from coassist.scenario.tasks import TASK_KINDS, nominal_path
 
 
 @pytest.mark.parametrize("field, value", [

@@ -90,11 +90,11 @@ def test_a_trained_model_in_the_loop_needs_less_force_than_mg(tmp_path):
     preset, which gives up some assistance so that the loop does not ring). Measured: 2.82 N
     against MG's 4.02 N (seed 1); 2.04 / 1.93 / 2.00 N (seeds 1–3) on thesis-application-dm."""
     from coassist.intent import LabeledTrial, save_model, train_model
-    from coassist.intent.training import PRESETS, with_overrides
+    from coassist.intent.training import MODEL_PRESETS, with_overrides
     from coassist.sim import TrialSpec, run_spec
 
     d0 = [run_spec(TrialSpec(task=("curved", "linear", "sinusoidal")[s % 3], seed=s)) for s in range(6)]
-    preset = with_overrides(PRESETS["default"], epochs=5, threads=1)
+    preset = with_overrides(MODEL_PRESETS["default"], epochs=5, threads=1)
     model = train_model([LabeledTrial(f"D0/t{i}", "D0", t) for i, t in enumerate(d0)], preset, preset.train)
     save_model(model, tmp_path / "M0")
     force = {}

@@ -30,7 +30,7 @@ from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World  # n
 from coassist.robot.ur_rtde_world import RobotLinkError  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
 from coassist.runtime.world import Command  # noqa: E402
-from coassist.sim.tasks import make_task  # noqa: E402
+from coassist.scenario.tasks import make_task  # noqa: E402
 
 # A domain of its own (140 … 229 of 0 … 232): the xdist worker's index sets the parity, so the
 # two workers of a run never share one; the pid keeps other runs on this machine apart.
@@ -232,7 +232,7 @@ class Listener:
 
 
 def test_the_monitor_topics_carry_the_run():
-    from coassist.sim.intent_source import OracleIntent
+    from coassist.scenario.intent_source import OracleIntent
 
     listener = Listener()
     try:
