@@ -254,7 +254,9 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
             labels=EpisodeLabels(user=profile.name if simulated else "operator", object=obj.name, seed=config.seed,
                                  source={"mujoco": "mujoco", "ur": "ur5"}.get(config.world, config.world),
                                  preset=config.preset, model_id=model_id),
-            true_intent=intent_pos if simulated else None, intent_end_time=intent_traj.end_time if simulated else None,
+            # the simulated operator's intent: the oracle's in any world (a test's simulated arm behind a
+            # real-arm link), the Trial's intent column only where that operator held the handle
+            true_intent=intent_pos, intent_end_time=intent_traj.end_time, log_intent=simulated,
             kinematics=kin, tick_config=TickConfig(dofs=dofs),
             extra={
                 "world": config.world,

@@ -117,6 +117,8 @@ class Episode:
     world, tick, n_max, termination : run_loop's arguments (the tick is reset for this run).
     task, plan : the task and its (n, 4) plan grid, absolute [m, m/s].  start_pose : (6,).
     true_intent : (≥ n, 2) the simulated operator's intent [m], or None.
+    log_intent : whether the Trial keeps true_intent as its intent column (not where a person,
+    not the simulated operator, held the handle).
     labels : :class:`EpisodeLabels`.  arrive_radius [m], dwell [s] : the termination's ball.
     extra : the world's own meta fields.
     """
@@ -129,6 +131,7 @@ class Episode:
     plan: np.ndarray
     start_pose: np.ndarray
     true_intent: np.ndarray | None
+    log_intent: bool
     labels: EpisodeLabels
     arrive_radius: float
     dwell: float
@@ -162,7 +165,7 @@ class Episode:
             full[:, :, 2:] = held
             pred = full
         intent = None
-        if self.true_intent is not None:
+        if self.true_intent is not None and self.log_intent:
             intent = np.empty((n, d))
             intent[:, :2] = self.true_intent[:n]
             intent[:, 2:] = held
@@ -201,6 +204,7 @@ def build_episode(
     target: np.ndarray | None = None,
     true_intent: np.ndarray | None = None,
     intent_end_time: float | None = None,
+    log_intent: bool = True,
     arrive_radius: float = ARRIVE_RADIUS,
     dwell: float = DWELL,
     kinematics: Any = None,
@@ -213,7 +217,8 @@ def build_episode(
     the command space is the world's.  plan : (≥ n_max + H_s + 1, 4) from :func:`plan_grid`,
     moved wherever the world lays the task out.  start_pose : (6,) the TCP pose the run starts from.
     target : (2,) [m] where the plan ends; None: the task's target.  true_intent : the simulated
-    operator's (n, 2) intent, and intent_end_time [s] when its motion ends (the run may not end before).
+    operator's (n, 2) intent (the oracle reads it from the context), and intent_end_time [s] when its
+    motion ends (the run may not end before); log_intent: keep it as the Trial's intent column.
     kinematics, tick_config : for joint-velocity worlds.  extra : the world's meta fields.
     """
     tick = ControlTick(controller, intent, wrench, safety, command_space=world.command_space, kinematics=kinematics,
@@ -227,7 +232,7 @@ def build_episode(
     t_done = float(task.planner.end_time) if intent_end_time is None else max(task.planner.end_time, intent_end_time)
     termination = TargetDwell(target, arrive_radius, int(math.ceil(float(dwell) / dt)), int(math.ceil(t_done / dt)))
     return Episode(world=world, tick=tick, n_max=int(n_max), termination=termination, task=task, plan=plan,
-                   start_pose=start_pose, true_intent=true_intent, labels=labels, arrive_radius=float(arrive_radius),
+                   start_pose=start_pose, true_intent=true_intent, log_intent=bool(log_intent), labels=labels, arrive_radius=float(arrive_radius),
                    dwell=float(dwell), extra=dict(extra or {}))  # fmt: skip
 
 
