@@ -126,7 +126,7 @@ def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtim
             backend: str = "process", task_kind: str = "z", paced: bool = True) -> dict:  # fmt: skip
     times: list[float] = []
     dt = 1.0 / rate
-    config = DriveConfig(controller="assistive", task=task_kind, intent=model or "nominal", rate_hz=rate,
+    config = DriveConfig(controller="cooperative", task=task_kind, intent=model or "nominal", rate_hz=rate,
                          time_limit=ticks * dt, realtime_intent=True if model else None,
                          predictor_backend=backend)  # fmt: skip
     # time read + step by wrapping the tick's step (the loop's own clock does the same)

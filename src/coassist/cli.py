@@ -527,7 +527,7 @@ def drive(
     out: Path = typer.Option(Path("runs/drive/trial.parquet"), help="Trial file to write (the same format as collect's trials, plus joint columns)."),
     world: str = typer.Option("mujoco", help="mujoco (an arm in MuJoCo physics) | ur (a real UR5 through ur-rtde) | franka (a Franka Panda/FR3 through franky)."),
     robot: str = typer.Option(None, help="The arm: ur5 or panda (--world mujoco), ur5 (ur), panda or fr3 (franka); default the world's first."),
-    controller: str = typer.Option("assistive", help="assistive (the cooperative game) | assistive-arbitrated (α set every tick by the target law) | imp (impedance control) | mg (manual guidance)."),
+    controller: str = typer.Option("cooperative", help="cooperative (the assistive controller: the cooperative game) | cooperative-arbitrated (α set every tick by the target law) | impedance (IMP) | manual (MG, manual guidance)."),
     task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
     intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle (MuJoCo) | path of an intent model (coassist train)."),
@@ -551,13 +551,13 @@ def drive(
 ) -> None:
     """Run the assistive controller, IMP or MG on an arm (UR5, Panda): in MuJoCo, or on a real one."""
     from coassist.config import CONTROL_PRESETS
-    from coassist.control.presets import CONTROLLER_NAMES
+    from coassist.control.presets import CONTROLLER_KINDS
     from coassist.robot.drive import WORLDS, DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.runtime.safety import SafetyLimits
 
     _choose(world, WORLDS, "--world", "world")
-    _choose(controller, CONTROLLER_NAMES, "--controller", "controller")
+    _choose(controller, CONTROLLER_KINDS, "--controller", "controller")
     _lookup(CONTROL_PRESETS, preset, "--preset")
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
@@ -592,7 +592,7 @@ def _run_alpha(preset: str, controller: str) -> float | None:
     """The game's α of a drive/ros2 run (the assistive controller's preset), None for IMP and MG."""
     from coassist.config import CONTROL_PRESETS
 
-    return CONTROL_PRESETS.lookup(preset).game.alpha if controller == "assistive" else None
+    return CONTROL_PRESETS.lookup(preset).game.alpha if controller == "cooperative" else None
 
 
 def _confirm_move(yes: bool, stop_hint: str):
@@ -649,7 +649,7 @@ def _floats(text: str | None, option: str) -> tuple[float, ...] | None:
 @app.command()
 def ros2(
     out: Path = typer.Option(Path("runs/ros2/trial.parquet"), help="Trial file to write (as coassist drive writes)."),
-    controller: str = typer.Option("assistive", help="assistive (the cooperative game) | imp (impedance control) | mg (manual guidance)."),
+    controller: str = typer.Option("cooperative", help="cooperative (the assistive controller: the cooperative game) | impedance (IMP) | manual (MG, manual guidance)."),
     task: str = typer.Option("linear", help="Nominal path, laid out from where the tool is: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
     intent: str = typer.Option("nominal", help="nominal | path of an intent model (coassist train)."),
@@ -745,7 +745,7 @@ def show(
 def play(
     user: str = typer.Option("me", help="Your id (letters, digits, - and _): it names your session folder <out>/<user>."),
     out: Path = typer.Option(Path("runs/play"), help="Parent folder of the session folders (each a dataset coassist train reads)."),
-    controller: str = typer.Option("mg,imp,assistive", help="Controllers the page offers, comma-separated: mg, imp, assistive."),
+    controller: str = typer.Option("manual,impedance,cooperative", help="Controllers the page offers, comma-separated: manual (MG), impedance (IMP), cooperative (assistive), cooperative-arbitrated."),
     intent: str = typer.Option("nominal", help="nominal | a model folder written by coassist train (its prediction is drawn live)."),
     preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; also thesis-evaluation[-dm], thesis-application[-dm])."),
     tasks: str = typer.Option("linear,curved,sinusoidal,z", help="The protocol's paths, in order (repeated)."),
@@ -776,12 +776,12 @@ def play(
         token = new_token()
     try:
         from coassist.config import CONTROL_PRESETS
-        from coassist.control.presets import CONTROLLER_NAMES
+        from coassist.control.presets import CONTROLLER_KINDS
         from coassist.scenario import TASK_KINDS
 
         _lookup(CONTROL_PRESETS, preset, "--preset")
         config = PlayConfig(user=user, out=out,
-                            controllers=tuple(_name_list(controller, "--controller", tuple(CONTROLLER_NAMES), "controller")),
+                            controllers=tuple(_name_list(controller, "--controller", tuple(CONTROLLER_KINDS), "controller")),
                             intent="nominal" if drive and intent == "oracle" else intent, preset=preset,
                             tasks=tuple(_name_list(tasks, "--tasks", TASK_KINDS, "task")), seed=seed,
                             motion_time=motion_time, mcap=mcap)  # fmt: skip

@@ -10,7 +10,7 @@ from coassist.scenario.tasks import TASK_KINDS, nominal_path
 
 
 @pytest.mark.parametrize("field, value", [
-    ("user", "../escape"), ("user", "a/b"), ("user", ""), ("user", "x" * 33), ("controllers", ("mg", "oracle")),
+    ("user", "../escape"), ("user", "a/b"), ("user", ""), ("user", "x" * 33), ("controllers", ("manual", "oracle")),
     ("controllers", ()), ("intent", "oracle"), ("preset", "nope"), ("tasks", ("circle",)), ("seed", -1),
     ("motion_time", 0.0), ("dwell", -1.0), ("grace", float("nan")),
 ])  # fmt: skip
@@ -29,9 +29,9 @@ def test_the_session_folder_is_out_slash_user_and_a_foreign_folder_is_refused(tm
 
 
 def test_the_protocol_cycles_the_paths_with_a_seeded_obstacle(tmp_path):
-    session = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("mg",), seed=3))
+    session = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("manual",), seed=3))
     t0 = session.next_task()
-    again = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("mg",), seed=3)).next_task()
+    again = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("manual",), seed=3)).next_task()
     assert t0.kind == "linear" and t0.obstacle == again.obstacle  # the same seed, the same box
     scene = session.scene()
     assert scene["path"][0] == pytest.approx(list(t0.start)) and scene["path"][-1] == pytest.approx(list(t0.target))

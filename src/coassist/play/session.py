@@ -41,7 +41,7 @@ import numpy as np
 
 from coassist._checks import check_int, check_positive_scalar
 from coassist.config import APPLICATION_PRESET
-from coassist.control.presets import CONTROLLER_NAMES, get_preset, make_controller
+from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
 from coassist.data import Trial, append_to_dataset, write_dataset
 from coassist.data.store import MANIFEST_NAME, manifest_files, read_dataset
 from coassist.interfaces import FEATURES, fault_names
@@ -78,7 +78,7 @@ class PlayConfig:
 
     user : the person's id: letters, digits, ``-`` and ``_``, at most 32 (it names the folder).
     out : the parent folder; the session lives in ``out/user``.
-    controllers : the controllers the page offers, from ``assistive``, ``imp``, ``mg``.
+    controllers : the controllers the page offers (:data:`coassist.control.presets.CONTROLLER_KINDS`).
     intent : ``nominal`` or a model folder written by ``coassist train``.
     preset : control preset (default :data:`coassist.config.APPLICATION_PRESET`, the main job's
         application preset, safe with a learned predictor in the loop).
@@ -96,7 +96,7 @@ class PlayConfig:
 
     user: str
     out: Path
-    controllers: tuple[str, ...] = ("mg", "imp", "assistive")
+    controllers: tuple[str, ...] = ("manual", "impedance", "cooperative")
     intent: str = "nominal"
     preset: str = APPLICATION_PRESET
     tasks: tuple[str, ...] = TASK_KINDS
@@ -115,8 +115,8 @@ class PlayConfig:
             raise ValueError(f"PlayConfig.user must be 1-32 letters, digits, '-' or '_' (it names a folder), got {self.user!r}")
         object.__setattr__(self, "out", Path(self.out))
         ctrl = tuple(self.controllers)
-        if not ctrl or len(set(ctrl)) != len(ctrl) or any(c not in CONTROLLER_NAMES for c in ctrl):
-            raise ValueError(f"PlayConfig.controllers must be distinct names from {tuple(CONTROLLER_NAMES)}, got {self.controllers!r}")
+        if not ctrl or len(set(ctrl)) != len(ctrl) or any(c not in CONTROLLER_KINDS for c in ctrl):
+            raise ValueError(f"PlayConfig.controllers must be distinct names from {tuple(CONTROLLER_KINDS)}, got {self.controllers!r}")
         object.__setattr__(self, "controllers", ctrl)
         if not isinstance(self.intent, str) or not self.intent or self.intent == "oracle":
             raise ValueError(f"PlayConfig.intent must be 'nominal' or a model folder (a person has no oracle), got {self.intent!r}")
@@ -252,7 +252,7 @@ class PlaySession:
     def summary(self) -> dict[str, Any]:
         """The running means per controller over this user's trials (f_RMS [N], σ [m])."""
         out: dict[str, Any] = {}
-        for name in CONTROLLER_NAMES:
+        for name in CONTROLLER_KINDS:
             rows = [r for r in self.results if r.controller == name]
             if not rows:
                 continue
@@ -392,6 +392,11 @@ class PlaySession:
         return result
 
 
+#: The page's controller names before they became the kinds (sessions recorded then still resume).
+_LEGACY_NAMES = {"assistive": "cooperative", "assistive-arbitrated": "cooperative-arbitrated", "imp": "impedance",
+                 "mg": "manual"}  # fmt: skip
+
+
 def _score(trial: Trial, file: str, index: int) -> TrialResult:
     """f_RMS (eq. 5.9) and σ (eq. 5.10–5.11) of a trial, with how it ended."""
     extra = trial.meta.extra
@@ -399,7 +404,8 @@ def _score(trial: Trial, file: str, index: int) -> TrialResult:
     eps = float(extra.get("arrive_radius", 0.025))
     sigma = precision_sigma(trial.pose, target, trial.meta.dt, epsilon=eps, tau=SIGMA_TAU)
     return TrialResult(
-        file=file, index=index, task=trial.meta.task, controller=str(extra.get("controller_name", trial.meta.controller)),
+        file=file, index=index, task=trial.meta.task,
+        controller=_LEGACY_NAMES.get(name, name) if isinstance(name := extra.get("controller_name"), str) else trial.meta.controller,
         f_rms=f_rms(trial.wrench), sigma=None if math.isnan(sigma) else float(sigma), ended=str(extra.get("ended", "")),
         n_ticks=trial.n_samples, deadline_misses=int(extra.get("deadline_misses", 0)),
     )  # fmt: skip

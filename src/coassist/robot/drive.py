@@ -17,8 +17,9 @@ Worlds:
   is the operator. The task is laid out from wherever the TCP is when the run starts
   (coassist never moves a real arm to a start pose on its own).
 
-Controllers by name: ``assistive`` (the cooperative game), ``imp`` (impedance control,
-eq. 5.4), ``mg`` (manual guidance, eq. 5.5).
+Controllers by kind (:data:`coassist.control.presets.CONTROLLER_KINDS`): ``cooperative`` (the
+assistive controller, the cooperative game), ``cooperative-arbitrated``, ``impedance`` (IMP, eq. 5.4),
+``manual`` (MG, eq. 5.5).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import numpy as np
 
 from coassist._checks import is_integer
 from coassist.config import APPLICATION_PRESET, ImpedanceParameters
-from coassist.control.presets import CONTROLLER_NAMES, get_preset, make_controller
+from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
 from coassist.data import Trial
 from coassist.interfaces import FEATURES, NAMED_INTENTS
 from coassist.runtime.episode import EpisodeLabels, build_episode, episode_ticks, plan_grid
@@ -70,8 +71,8 @@ MAX_TIME_LIMIT = 600.0
 class DriveConfig:
     """One run on a UR5 (every field validated, errors name it as ``DriveConfig.<field>``).
 
-    world : "mujoco", "ur" or "franka".  controller : "assistive", "assistive-arbitrated" (α set
-        every tick by the simulator's arbitration law), "imp" or "mg".
+    world : "mujoco", "ur" or "franka".  controller : "cooperative", "cooperative-arbitrated" (α set
+        every tick by the simulator's arbitration law), "impedance" or "manual".
     robot : the arm (:data:`WORLD_ROBOTS`: "ur5" or "panda" in MuJoCo, "ur5" on "ur",
         "panda" or "fr3" on "franka"); None: the world's first.
     task : a task kind (linear, curved, sinusoidal, z).  object : handle, board or heavy.
@@ -94,7 +95,7 @@ class DriveConfig:
     """
 
     world: str = "mujoco"
-    controller: str = "assistive"
+    controller: str = "cooperative"
     task: str = "linear"
     object: str = "handle"
     preset: str = APPLICATION_PRESET
@@ -120,8 +121,8 @@ class DriveConfig:
             object.__setattr__(self, "robot", WORLD_ROBOTS[self.world][0])
         elif self.robot not in WORLD_ROBOTS[self.world]:
             raise bad("robot", f"one of {WORLD_ROBOTS[self.world]} with world {self.world!r}")
-        if self.controller not in CONTROLLER_NAMES:
-            raise bad("controller", f"one of {tuple(CONTROLLER_NAMES)}")
+        if self.controller not in CONTROLLER_KINDS:
+            raise bad("controller", f"one of {tuple(CONTROLLER_KINDS)}")
         if self.task not in TASK_KINDS:
             raise bad("task", f"one of {TASK_KINDS}")
         get_object(self.object)
