@@ -316,7 +316,7 @@ class TrialSpec:
 
     task : one of :data:`~coassist.scenario.tasks.TASK_KINDS`. user : operator index (0 = the
     author). object : "handle" | "board" | "heavy". controller : one of
-    :data:`CONTROLLER_KINDS`. preset : one of :data:`PRESETS`. seed : int ≥ 0.
+    :data:`~coassist.control.presets.CONTROLLER_KINDS`. preset : a name of :data:`coassist.config.CONTROL_PRESETS`. seed : int ≥ 0.
     intent : one of :data:`~coassist.interfaces.NAMED_INTENTS` or a model path (loaded in the worker).
     population_seed : which population the user is drawn from.
     obstacle : a name of :data:`coassist.scenario.tasks.OBSTACLES` ("small": the evaluation's box).
