@@ -12,9 +12,9 @@ the trial ends once that motion is over and the tool has stayed within
 ``arrive_radius`` of the target for ``dwell`` seconds (or at the time limit, or on a
 safety stop). The person picks the controller before each trial.
 
-Each trial runs on :class:`~coassist.play.world.PlayWorld` through the same
-:class:`~coassist.runtime.tick.ControlTick` and :func:`~coassist.runtime.loop.run_loop`
-as every other world, in its own thread, paced at 1/dt. After it, the session writes
+Each trial runs on :class:`~coassist.play.world.PlayWorld` through the same episode
+assembly (:mod:`coassist.runtime.episode`: the tick, :func:`~coassist.runtime.loop.run_loop`,
+the Trial) as every other world, in its own thread, paced at 1/dt. After it, the session writes
 the trial and scores it (thesis §5.2.4)::
 
     f_RMS = (1/T) Σ_k ‖w(k)‖                     eq. 5.9, w the measured hand wrench [N]

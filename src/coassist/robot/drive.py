@@ -1,10 +1,12 @@
 """Drive an arm (a UR5, a Franka Panda) with the assistive controller (or IMP / MG): MuJoCo physics or a real arm.
 
-This is the environment of the runtime for arm worlds: it builds a world, the task
-and its plan, the controller, the intent stage, the wrench pipeline, the safety layer
-and the tick, runs :func:`coassist.runtime.loop.run_loop`, and returns the run as a
-:class:`~coassist.data.Trial` in the same format as the point-mass world (plus the
-joint columns), so ``coassist train``, ``evaluate`` and ``show`` read it unchanged.
+This is the environment of the runtime for arm worlds: it builds what is the arm's own
+(the world, the simulated hand, the kinematics, the wrench pipeline for the tool's payload,
+the safety limits and workspace) and hands the rest to the episode assembly every world
+shares (:mod:`coassist.runtime.episode`: the task of the seed, the plan, the tick, the
+termination, :func:`~coassist.runtime.loop.run_loop` and the :class:`~coassist.data.Trial`,
+in the same format as the point-mass world plus the joint columns), so ``coassist train``,
+``evaluate`` and ``show`` read it unchanged.
 
 Worlds:
 
@@ -72,7 +74,7 @@ class DriveConfig:
     """One run on a UR5 (every field validated, errors name it as ``DriveConfig.<field>``).
 
     world : "mujoco", "ur" or "franka".  controller : "cooperative", "cooperative-arbitrated" (α set
-        every tick by the simulator's arbitration law), "impedance" or "manual".
+        every tick by coassist.control.presets.ARBITRATION), "impedance" or "manual".
     robot : the arm (:data:`WORLD_ROBOTS`: "ur5" or "panda" in MuJoCo, "ur5" on "ur",
         "panda" or "fr3" on "franka"); None: the world's first.
     task : a task kind (linear, curved, sinusoidal, z).  object : handle, board or heavy.
@@ -153,7 +155,7 @@ class DriveConfig:
 
 
 def _controller(config: DriveConfig):
-    """The preset's controller at the run's rate, on 2 (x-y) or 6 DOFs (the simulator's make_controller)."""
+    """The preset's controller at the run's rate, on 2 (x-y) or 6 DOFs (coassist.control.presets.make_controller)."""
     preset = get_preset(config.preset)
     imp, game = preset.impedance, preset.game
     dt = config.dt
