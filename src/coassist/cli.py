@@ -57,10 +57,16 @@ def _typed(message: str, options: Mapping[str, str]) -> str:
 
 
 def _choose(value: str, choices: Iterable[str], option: str, what: str) -> str:
-    """``value`` if it is one of ``choices``, else fail naming the option, with a "did you mean"."""
+    """``value`` if it is one of ``choices``, else fail naming the option, with a "did you mean"
+    (for a controller's former name, its kind: ``coassist.control.presets.FORMER_NAMES``)."""
     choices = list(choices)
     if value in choices:
         return value
+    if what == "controller":
+        from coassist.control.presets import FORMER_NAMES
+
+        if FORMER_NAMES.get(value) in choices:
+            _fail(f"{option} {value!r} is now called {FORMER_NAMES[value]!r} (choose from: {', '.join(choices)})", 2)
     _fail(f"{option} {unknown_name_message(value, choices, what)}", 2)
 
 

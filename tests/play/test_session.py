@@ -51,3 +51,22 @@ def test_the_cli_says_what_is_wrong_in_one_line(tmp_path):
     assert result.exit_code == 1 and "PlayConfig.user" in result.output and "Traceback" not in result.output
     result = CliRunner().invoke(app, ["play", "--intent", str(tmp_path / "missing"), "--out", str(tmp_path), "--no-open"])
     assert result.exit_code == 1 and "missing" in result.output and "Traceback" not in result.output
+    # the controllers' former names (before drive and play took the kinds) are named, not guessed at
+    result = CliRunner().invoke(app, ["play", "--controller", "mg,imp", "--out", str(tmp_path), "--no-open"])
+    assert result.exit_code == 2 and "'mg' is now called 'manual'" in result.output
+
+
+def test_a_session_recorded_under_the_former_controller_names_scores_by_kind():
+    import numpy as np
+
+    from coassist.data import Trial, TrialMeta
+    from coassist.play.session import _score
+
+    n = 400
+    t = np.arange(n) * 0.008
+    pose = np.column_stack([np.minimum(t, 1.0) * 0.5, np.zeros(n)])
+    for former, kind in (("mg", "manual"), ("assistive", "cooperative"), ("impedance", "impedance")):
+        meta = TrialMeta(user="bob", task="linear", object="none", controller="x", model_id=None, seed=0, source="sim",
+                         dt=0.008, extra={"target": [0.5, 0.0], "controller_name": former, "ended": "target"})  # fmt: skip
+        trial = Trial(meta=meta, time=t, pose=pose, velocity=np.zeros((n, 2)), wrench=np.ones((n, 2)), reference=pose)
+        assert _score(trial, "trial_00000.parquet", 0).controller == kind

@@ -41,7 +41,7 @@ import numpy as np
 
 from coassist._checks import check_int, check_positive_scalar
 from coassist.config import APPLICATION_PRESET
-from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
+from coassist.control.presets import CONTROLLER_KINDS, FORMER_NAMES, get_preset, make_controller
 from coassist.data import Trial, append_to_dataset, write_dataset
 from coassist.data.store import MANIFEST_NAME, manifest_files, read_dataset
 from coassist.interfaces import FEATURES, fault_names
@@ -392,11 +392,6 @@ class PlaySession:
         return result
 
 
-#: The page's controller names before they became the kinds (sessions recorded then still resume).
-_LEGACY_NAMES = {"assistive": "cooperative", "assistive-arbitrated": "cooperative-arbitrated", "imp": "impedance",
-                 "mg": "manual"}  # fmt: skip
-
-
 def _score(trial: Trial, file: str, index: int) -> TrialResult:
     """f_RMS (eq. 5.9) and σ (eq. 5.10–5.11) of a trial, with how it ended."""
     extra = trial.meta.extra
@@ -405,7 +400,7 @@ def _score(trial: Trial, file: str, index: int) -> TrialResult:
     sigma = precision_sigma(trial.pose, target, trial.meta.dt, epsilon=eps, tau=SIGMA_TAU)
     return TrialResult(
         file=file, index=index, task=trial.meta.task,
-        controller=_LEGACY_NAMES.get(name, name) if isinstance(name := extra.get("controller_name"), str) else trial.meta.controller,
+        controller=FORMER_NAMES.get(name, name) if isinstance(name := extra.get("controller_name"), str) else trial.meta.controller,
         f_rms=f_rms(trial.wrench), sigma=None if math.isnan(sigma) else float(sigma), ended=str(extra.get("ended", "")),
         n_ticks=trial.n_samples, deadline_misses=int(extra.get("deadline_misses", 0)),
     )  # fmt: skip
