@@ -42,7 +42,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from coassist.data import Trial, TrialMeta  # noqa: E402
-from coassist.intent import PRESETS, IntentModel, IntentNet, LabeledTrial, Scaler, save_model, train_model  # noqa: E402
+from coassist.intent import MODEL_PRESETS, IntentModel, IntentNet, LabeledTrial, Scaler, save_model, train_model  # noqa: E402
 from coassist.intent.features import WindowSet  # noqa: E402
 from coassist.intent.realtime import make_runner  # noqa: E402
 from coassist.intent.training import _Windows  # noqa: E402
@@ -66,7 +66,7 @@ def time_calls(f, calls: int, warmup: int = 20) -> tuple[float, float]:
 
 def random_model(layers: int, hidden: int, fc: tuple[int, ...], decimation: int, skip: bool) -> IntentModel:
     """A model with random weights and plausible scalers (latency does not depend on training)."""
-    base = PRESETS["lstm"]
+    base = MODEL_PRESETS["lstm"]
     window = replace(base.window, decimation=decimation)
     p = replace(base, window=window, lstm_layers=layers, hidden=hidden, fc=fc, skip=skip)
     torch.manual_seed(0)
@@ -80,7 +80,7 @@ def latency(calls: int) -> list[dict]:
     rng = np.random.default_rng(0)
     history = rng.normal(scale=0.05, size=(125, 8))
     rows = []
-    lstm_preset = PRESETS["lstm"]
+    lstm_preset = MODEL_PRESETS["lstm"]
     for name, layers, hidden, fc, skip in (("lstm", lstm_preset.lstm_layers, lstm_preset.hidden, lstm_preset.fc, lstm_preset.skip),
                                            ("thesis-size", 3, 250, (200,), False)):  # fmt: skip
         variants = {}
@@ -170,7 +170,7 @@ def throughput(trials: list[LabeledTrial], batches: int) -> list[dict]:
     torch.set_num_threads(2)
     rows = []
     for name in ("lstm", "thesis"):
-        p = PRESETS[name]
+        p = MODEL_PRESETS[name]
         from coassist.intent.training import build_model
 
         model = build_model(p, trials, replace(p.train, threads=2))
@@ -196,10 +196,10 @@ def throughput(trials: list[LabeledTrial], batches: int) -> list[dict]:
 
 def full_train(trials: list[LabeledTrial]) -> dict:
     """The default preset's training as ``coassist reproduce`` runs it (its epochs and window stride)."""
-    from coassist.experiments.reproduce import PRESETS as PIPELINE
+    from coassist.experiments.reproduce import REPRODUCE_PRESETS as PIPELINE
 
     cfg = PIPELINE["default"]
-    p = PRESETS["lstm"]
+    p = MODEL_PRESETS["lstm"]
     t0 = time.perf_counter()
     model = train_model(trials, p, replace(p.train, threads=2, epochs=cfg.epochs, train_stride=cfg.train_stride))
     train_s = time.perf_counter() - t0

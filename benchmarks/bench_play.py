@@ -1,6 +1,6 @@
 """`coassist play` end to end: pointer event → force in the loop → new state → frame drawn.
 
-    .venv/bin/python benchmarks/bench_play.py [--seconds 12] [--controller assistive] [--model MODEL]
+    .venv/bin/python benchmarks/bench_play.py [--seconds 12] [--controller cooperative] [--model MODEL]
                                               [--screenshot docs/figures/play.png]
 
 Runs the real server (uvicorn, the loop thread paced at 125 Hz through the control tick)
@@ -121,7 +121,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=10.0, help="seconds of dragging per run")
     ap.add_argument("--repeats", type=int, default=2, help="runs of each design, alternating (the machine's load drifts)")
-    ap.add_argument("--controller", default="assistive", choices=("assistive", "imp", "mg"))
+    ap.add_argument("--controller", default="cooperative", choices=("cooperative", "impedance", "manual"))
     ap.add_argument("--model", default=None, help="an intent model folder (default: the nominal plan)")
     ap.add_argument("--screenshot", type=Path, default=None, help="write a screenshot of the page mid-trial (PNG)")
     args = ap.parse_args()

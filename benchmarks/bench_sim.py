@@ -27,7 +27,9 @@ import time
 import numpy as np
 
 from coassist.control import AssistiveController
-from coassist.sim import AUTHOR, TrialSpec, get_object, get_preset, make_controller, make_task, run_trial, run_trials
+from coassist.control.presets import get_preset, make_controller
+from coassist.scenario import AUTHOR, get_object, make_task
+from coassist.sim import TrialSpec, run_trial, run_trials
 
 
 class _Timed:

@@ -126,7 +126,7 @@ def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtim
             backend: str = "process", task_kind: str = "z", paced: bool = True) -> dict:  # fmt: skip
     times: list[float] = []
     dt = 1.0 / rate
-    config = DriveConfig(controller="assistive", task=task_kind, intent=model or "nominal", rate_hz=rate,
+    config = DriveConfig(controller="cooperative", task=task_kind, intent=model or "nominal", rate_hz=rate,
                          time_limit=ticks * dt, realtime_intent=True if model else None,
                          predictor_backend=backend)  # fmt: skip
     # time read + step by wrapping the tick's step (the loop's own clock does the same)
@@ -142,7 +142,7 @@ def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtim
 
     tick_mod.ControlTick.step = timed_step
     if naive:
-        from coassist.sim.world import get_preset
+        from coassist.control.presets import get_preset
 
         def naive_controller(cfg):
             c = orig_ctrl(cfg)
@@ -156,7 +156,7 @@ def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtim
         tick_mod._spatial.dls_joint_velocity = naive_dls
     try:
         from coassist.robot.mujoco_world import MujocoUR5World
-        from coassist.sim.tasks import make_task
+        from coassist.scenario.tasks import make_task
 
         world = None
         if realtime or model or paced:  # paced to the wall clock as on a robot, or (a model's run) back to back

@@ -116,13 +116,13 @@ def _network_config(**kw):
 
 
 def _trial_spec(**kw):
-    from coassist.sim.world import TrialSpec
+    from coassist.sim import TrialSpec
 
     return TrialSpec(task="linear", **kw)
 
 
 def _force_sensor(**kw):
-    from coassist.sim.objects import ForceSensor
+    from coassist.scenario.objects import ForceSensor
 
     return ForceSensor(**kw)
 
@@ -161,9 +161,9 @@ def test_configs_reject_bool_naming_the_field(make, field, name):
 
 
 def test_functions_accept_numpy_integers():
+    from coassist.scenario.intent_source import NominalIntent
+    from coassist.scenario.operator import operator_profile
     from coassist.sim.collect import dataset_specs
-    from coassist.sim.intent_source import NominalIntent
-    from coassist.sim.operator import operator_profile
 
     assert operator_profile(np.int64(3), np.int64(1)) == operator_profile(3, 1)
     assert NominalIntent(np.int32(5)).horizon == 5

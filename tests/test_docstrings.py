@@ -166,15 +166,15 @@ def test_allowed_mismatches_still_exist():
 
 def test_the_walk_sees_the_package():
     """The check is not vacuous: it reaches the documented API across the package."""
-    assert "coassist.model.impedance" in MODULES and "coassist.sim.objects" in MODULES
+    assert "coassist.model.impedance" in MODULES and "coassist.scenario.objects" in MODULES
     checked = []
-    for name in ("coassist.model.impedance", "coassist.metrics", "coassist.sim.objects", "coassist.sim.world",
+    for name in ("coassist.model.impedance", "coassist.metrics", "coassist.scenario.objects", "coassist.sim.world",
                  "coassist.runtime.wrench", "coassist.runtime.safety"):  # fmt: skip
         module = importlib.import_module(name)
         checked += [qual for qual, obj in public_callables(module) if documented_parameters(obj.__doc__) is not None]
     # ImpedanceModel, the metrics' functions, CarriedObject, ForceSensor, run_trial, …
     assert {"coassist.model.impedance.ImpedanceModel", "coassist.metrics.prediction_errors",
-            "coassist.sim.objects.CarriedObject", "coassist.sim.objects.ForceSensor",
+            "coassist.scenario.objects.CarriedObject", "coassist.scenario.objects.ForceSensor",
             "coassist.sim.world.run_trial", "coassist.runtime.wrench.payload_wrench"} <= set(checked)  # fmt: skip
     assert len(checked) >= 12
 

@@ -16,9 +16,10 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("(root)", "errors", "_checks", "_io", "interfaces", "config", "spatial", "registry"),  # shared vocabulary and rigid-body math
     ("model", "data", "metrics"),  # the impedance model; trials on disk; metrics
     ("control",),  # games, baselines, guarded controllers (pure control laws)
-    ("intent", "runtime"),  # the predictor; the control loop, wrench pipeline, safety
-    ("sim",),  # the point-mass world, tasks, objects, simulated operators
-    ("robot",),  # kinematics, MuJoCo UR5, the real UR5
+    ("intent",),  # the predictor
+    ("scenario",),  # what every world runs: tasks, objects, simulated operators and hand, intent sources, seeds
+    ("runtime",),  # the control tick and loop, wrench pipeline, safety, one episode assembly for every world
+    ("sim", "robot"),  # the worlds: the point-mass simulator; arms in MuJoCo or real (neither imports the other)
     ("experiments", "play"),  # thesis experiments, reports; a person in the loop (the live page)
     ("cli",),  # the command line
 )
@@ -27,6 +28,11 @@ SIBLINGS_ALLOWED: set[tuple[str, str]] = {
     ("config", "_checks"), ("spatial", "_checks"), ("interfaces", "_checks"), ("config", "registry"),
     ("_io", "errors"), ("registry", "errors"),
 }  # fmt: skip
+
+#: Imports a layer rule would allow but that are forbidden: the arm worlds and the page share
+#: nothing with the point-mass simulator but what sits below all three (scenario, control's
+#: presets, runtime's episode assembly), so `sim` is not a hub.
+FORBIDDEN: set[tuple[str, str]] = {("robot", "sim"), ("play", "sim")}
 
 RANK = {name: i for i, layer in enumerate(LAYERS) for name in layer}
 SRC = Path(coassist.__file__).parent
@@ -54,7 +60,7 @@ def _imports(path: Path, src: Path) -> list[tuple[str, int]]:
 
 
 def layering_violations(src: Path) -> list[str]:
-    """Every import under the package folder ``src`` that goes up a layer or sideways."""
+    """Every import under the package folder ``src`` that goes up a layer, sideways, or is :data:`FORBIDDEN`."""
     bad = []
     for path in sorted(src.rglob("*.py")):
         here = _package(path.relative_to(src).with_suffix("").parts)
@@ -64,6 +70,8 @@ def layering_violations(src: Path) -> list[str]:
                 continue
             if RANK[there] > RANK[here] or (RANK[there] == RANK[here] and (here, there) not in SIBLINGS_ALLOWED):
                 bad.append(f"{path.relative_to(src.parent)}:{line}: {here} (layer {RANK[here]}) imports {mod} (layer {RANK[there]})")
+            elif (here, there) in FORBIDDEN:
+                bad.append(f"{path.relative_to(src.parent)}:{line}: {here} imports {mod} (forbidden: {here} must not import {there})")
     return bad
 
 
@@ -89,3 +97,17 @@ def test_the_checker_catches_upward_lazy_and_sideways_imports(tmp_path):
     assert len(bad) == 2
     assert "control (layer 2) imports coassist.sim" in bad[0] and "law.py:2" in bad[0]
     assert "intent (layer 3) imports coassist.runtime" in bad[1]
+
+
+def test_the_checker_forbids_the_arm_worlds_and_the_page_from_importing_the_simulator(tmp_path):
+    # robot and sim share a layer (sideways: caught by the rank rule); play sits above sim, so
+    # only FORBIDDEN catches it. Both must be reported, lazy or not; scenario stays allowed.
+    src = tmp_path / "coassist"
+    (src / "robot").mkdir(parents=True)
+    (src / "play").mkdir()
+    (src / "robot" / "drive.py").write_text("from coassist.sim.world import run_trial\n")
+    (src / "play" / "session.py").write_text("def f():\n    from coassist.sim import world\nfrom coassist.scenario import tasks\n")
+    bad = layering_violations(src)
+    assert len(bad) == 2
+    assert "play/session.py:2: play imports coassist.sim (forbidden" in bad[0]
+    assert "robot/drive.py:1: robot (layer 6) imports coassist.sim.world (layer 6)" in bad[1]

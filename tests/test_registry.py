@@ -36,17 +36,15 @@ def test_registry_is_read_only_and_validated():
 
 def test_the_three_preset_kinds_are_registries_with_their_own_names():
     from coassist.config import CONTROL_PRESETS, DECIMETRE_SCALE, THESIS_EVALUATION
-    from coassist.experiments.pipeline import PRESETS as REPRODUCE_PRESETS
-    from coassist.sim.world import PRESETS as SIM_PRESETS
-    from coassist.sim.world import get_preset
+    from coassist.control.presets import get_preset
+    from coassist.experiments.pipeline import REPRODUCE_PRESETS
 
-    assert SIM_PRESETS is CONTROL_PRESETS
     kinds = {CONTROL_PRESETS.what, REPRODUCE_PRESETS.what}
     try:
-        from coassist.intent.training import PRESETS as INTENT_PRESETS
+        from coassist.intent.training import MODEL_PRESETS
 
-        kinds.add(INTENT_PRESETS.what)
-        assert isinstance(INTENT_PRESETS, Registry)
+        kinds.add(MODEL_PRESETS.what)
+        assert isinstance(MODEL_PRESETS, Registry)
     except ImportError:  # torch missing
         pass
     assert {"control preset", "reproduce preset"} <= kinds

@@ -57,10 +57,16 @@ def _typed(message: str, options: Mapping[str, str]) -> str:
 
 
 def _choose(value: str, choices: Iterable[str], option: str, what: str) -> str:
-    """``value`` if it is one of ``choices``, else fail naming the option, with a "did you mean"."""
+    """``value`` if it is one of ``choices``, else fail naming the option, with a "did you mean"
+    (for a controller's former name, its kind: ``coassist.control.presets.FORMER_NAMES``)."""
     choices = list(choices)
     if value in choices:
         return value
+    if what == "controller":
+        from coassist.control.presets import FORMER_NAMES
+
+        if FORMER_NAMES.get(value) in choices:
+            _fail(f"{option} {value!r} is now called {FORMER_NAMES[value]!r} (choose from: {', '.join(choices)})", 2)
     _fail(f"{option} {unknown_name_message(value, choices, what)}", 2)
 
 
@@ -183,9 +189,9 @@ def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, 
     """The intent preset named by --preset, with the training (and network-size) options applied."""
     from dataclasses import replace
 
-    from coassist.intent.training import PRESETS, with_overrides
+    from coassist.intent.training import MODEL_PRESETS, with_overrides
 
-    chosen = _lookup(PRESETS, preset, "--preset")
+    chosen = _lookup(MODEL_PRESETS, preset, "--preset")
     try:
         p = with_overrides(chosen, **overrides)
         sizes = {k: v for k, v in (network or {}).items() if v is not None}
@@ -480,13 +486,14 @@ def collect(
     continues where it stopped.
     """
     from coassist._io import OutputBusyError
-    from coassist.sim import CONTROLLER_KINDS, OBJECTS, PRESETS, TASK_KINDS
+    from coassist.config import CONTROL_PRESETS
+    from coassist.control.presets import CONTROLLER_KINDS
+    from coassist.scenario import OBJECTS, OBSTACLES, TASK_KINDS
     from coassist.sim.collect import collect_dataset
-    from coassist.sim.tasks import OBSTACLES
 
     _choose(controller, CONTROLLER_KINDS, "--controller", "controller")
     _choose(obstacle, OBSTACLES, "--obstacle", "obstacle")
-    _lookup(PRESETS, preset, "--preset")
+    _lookup(CONTROL_PRESETS, preset, "--preset")
     for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
         if value is not None and value < minimum:
             _fail(f"{option} must be >= {minimum}, got {value}", 2)
@@ -526,7 +533,7 @@ def drive(
     out: Path = typer.Option(Path("runs/drive/trial.parquet"), help="Trial file to write (the same format as collect's trials, plus joint columns)."),
     world: str = typer.Option("mujoco", help="mujoco (an arm in MuJoCo physics) | ur (a real UR5 through ur-rtde) | franka (a Franka Panda/FR3 through franky)."),
     robot: str = typer.Option(None, help="The arm: ur5 or panda (--world mujoco), ur5 (ur), panda or fr3 (franka); default the world's first."),
-    controller: str = typer.Option("assistive", help="assistive (the cooperative game) | assistive-arbitrated (α set every tick by the target law) | imp (impedance control) | mg (manual guidance)."),
+    controller: str = typer.Option("cooperative", help="cooperative (the assistive controller: the cooperative game) | cooperative-arbitrated (α set every tick by the target law) | impedance (IMP) | manual (MG, manual guidance)."),
     task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
     intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle (MuJoCo) | path of an intent model (coassist train)."),
@@ -549,13 +556,14 @@ def drive(
     overwrite: bool = typer.Option(False, help="Replace an existing trial file at --out."),
 ) -> None:
     """Run the assistive controller, IMP or MG on an arm (UR5, Panda): in MuJoCo, or on a real one."""
-    from coassist.robot.drive import CONTROLLERS, WORLDS, DriveConfig
+    from coassist.config import CONTROL_PRESETS
+    from coassist.control.presets import CONTROLLER_KINDS
+    from coassist.robot.drive import WORLDS, DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.runtime.safety import SafetyLimits
-    from coassist.sim import PRESETS as CONTROL_PRESETS
 
     _choose(world, WORLDS, "--world", "world")
-    _choose(controller, CONTROLLERS, "--controller", "controller")
+    _choose(controller, CONTROLLER_KINDS, "--controller", "controller")
     _lookup(CONTROL_PRESETS, preset, "--preset")
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
@@ -588,9 +596,9 @@ def drive(
 
 def _run_alpha(preset: str, controller: str) -> float | None:
     """The game's α of a drive/ros2 run (the assistive controller's preset), None for IMP and MG."""
-    from coassist.sim import PRESETS as CONTROL_PRESETS
+    from coassist.config import CONTROL_PRESETS
 
-    return CONTROL_PRESETS.lookup(preset).game.alpha if controller == "assistive" else None
+    return CONTROL_PRESETS.lookup(preset).game.alpha if controller == "cooperative" else None
 
 
 def _confirm_move(yes: bool, stop_hint: str):
@@ -647,7 +655,7 @@ def _floats(text: str | None, option: str) -> tuple[float, ...] | None:
 @app.command()
 def ros2(
     out: Path = typer.Option(Path("runs/ros2/trial.parquet"), help="Trial file to write (as coassist drive writes)."),
-    controller: str = typer.Option("assistive", help="assistive (the cooperative game) | imp (impedance control) | mg (manual guidance)."),
+    controller: str = typer.Option("cooperative", help="cooperative (the assistive controller: the cooperative game) | impedance (IMP) | manual (MG, manual guidance)."),
     task: str = typer.Option("linear", help="Nominal path, laid out from where the tool is: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
     intent: str = typer.Option("nominal", help="nominal | path of an intent model (coassist train)."),
@@ -743,7 +751,7 @@ def show(
 def play(
     user: str = typer.Option("me", help="Your id (letters, digits, - and _): it names your session folder <out>/<user>."),
     out: Path = typer.Option(Path("runs/play"), help="Parent folder of the session folders (each a dataset coassist train reads)."),
-    controller: str = typer.Option("mg,imp,assistive", help="Controllers the page offers, comma-separated: mg, imp, assistive."),
+    controller: str = typer.Option("manual,impedance,cooperative", help="Controllers the page offers, comma-separated: manual (MG), impedance (IMP), cooperative (assistive), cooperative-arbitrated."),
     intent: str = typer.Option("nominal", help="nominal | a model folder written by coassist train (its prediction is drawn live)."),
     preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; also thesis-evaluation[-dm], thesis-application[-dm])."),
     tasks: str = typer.Option("linear,curved,sinusoidal,z", help="The protocol's paths, in order (repeated)."),
@@ -773,13 +781,13 @@ def play(
     if token is None and not is_loopback(host):
         token = new_token()
     try:
-        from coassist.robot.drive import CONTROLLERS
-        from coassist.sim import PRESETS as CONTROL_PRESETS
-        from coassist.sim import TASK_KINDS
+        from coassist.config import CONTROL_PRESETS
+        from coassist.control.presets import CONTROLLER_KINDS
+        from coassist.scenario import TASK_KINDS
 
         _lookup(CONTROL_PRESETS, preset, "--preset")
         config = PlayConfig(user=user, out=out,
-                            controllers=tuple(_name_list(controller, "--controller", tuple(CONTROLLERS), "controller")),
+                            controllers=tuple(_name_list(controller, "--controller", tuple(CONTROLLER_KINDS), "controller")),
                             intent="nominal" if drive and intent == "oracle" else intent, preset=preset,
                             tasks=tuple(_name_list(tasks, "--tasks", TASK_KINDS, "task")), seed=seed,
                             motion_time=motion_time, mcap=mcap)  # fmt: skip
@@ -850,7 +858,7 @@ def reproduce(
 
     from coassist.experiments import reproduce as rep
 
-    chosen = _lookup(rep.PRESETS, preset, "--preset")
+    chosen = _lookup(rep.REPRODUCE_PRESETS, preset, "--preset")
     _check_device(device)
     changes = {"seed": seed}
     if workers is not None:

@@ -120,7 +120,7 @@ SAFETY_FAULTS = (
 
 #: The per-tick history features, in the thesis' order.
 FEATURES = ("x", "y", "vx", "vy", "fx", "fy", "x_ref", "y_ref")
-#: Intent sources named rather than loaded from a model folder (``sim.intent_source``): the
+#: Intent sources named rather than loaded from a model folder (``scenario.intent_source``): the
 #: nominal plan (eq. 4.7), the tool's constant-velocity extrapolation, and the simulated
 #: operator's true intent ("oracle", simulation only).
 NAMED_INTENTS = ("nominal", "constant-velocity", "oracle")

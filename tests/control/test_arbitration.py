@@ -126,7 +126,7 @@ def test_parameters_name_the_bad_field(change, message):
 
 def test_a_cached_arbitrated_controller_gives_the_same_trial_every_time():
     """run_spec reuses controllers within a batch: the arbitration must start every trial afresh."""
-    from coassist.sim.world import TrialSpec, run_spec
+    from coassist.sim import TrialSpec, run_spec
 
     spec = TrialSpec(task="linear", object="handle", controller="cooperative-arbitrated", preset="thesis-application-dm", seed=3)
     other = TrialSpec(task="curved", object="board", controller="cooperative-arbitrated", preset="thesis-application-dm", seed=4)

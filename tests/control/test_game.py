@@ -425,7 +425,7 @@ def test_extrapolation_feedback_is_the_effort_of_a_constant_velocity_reference()
 def test_application_presets_damping_left_by_a_pose_extrapolating_prediction():
     """At the presets' α = 0.9 the "-dm" application preset removes 2/3 of the plant's damping; the damped one
     leaves more than 2/3 (config.APPLICATION_DAMPED_SCALE)."""
-    from coassist.sim.world import get_preset, make_controller
+    from coassist.control.presets import get_preset, make_controller
 
     left = {}
     for name in ("thesis-application-dm", "thesis-application-damped"):

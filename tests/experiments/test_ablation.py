@@ -50,7 +50,7 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     from coassist.experiments.ablation import CONTROLLERS, SOURCES, run_ablation
     from coassist.experiments.intent_sources import LEARNED
 
-    cfg = replace(pipeline.PRESETS["tiny"], ablation_mujoco_trials=1, workers=1, threads=1)
+    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1, threads=1)
     ws = pipeline.Workspace(cfg, tmp_path, progress=False)
     # One tool-labelled model stands in for every learned source: the cells' plumbing is what is tested.
     folder, _ = ws.collect("D0", tasks=("curved",), trials=2, seed=1, preset=cfg.application_preset, obstacle="large")

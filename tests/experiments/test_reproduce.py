@@ -34,7 +34,7 @@ def _collections(cfg):
 
 @pytest.mark.parametrize("name", ["default", "tiny", "thesis"])
 def test_no_two_collections_share_a_trial_seed(name):
-    spans = sorted(_collections(pipeline.PRESETS[name]), key=lambda c: c[1])
+    spans = sorted(_collections(pipeline.REPRODUCE_PRESETS[name]), key=lambda c: c[1])
     for (a, sa, na), (b, sb, _) in pairwise(spans):
         assert sa + na <= sb, f"{a} (seeds {sa}..{sa + na - 1}) overlaps {b} (from {sb})"
 
@@ -52,7 +52,7 @@ def test_seed_plan_offsets():
 def tiny_run(tmp_path_factory):
     pytest.importorskip("torch")
     out = tmp_path_factory.mktemp("reproduce")
-    config = replace(rep.PRESETS["tiny"], workers=1, threads=1)
+    config = replace(rep.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
     summary = rep.run_reproduce(config, out, progress=False)
     return out, summary
 
@@ -74,7 +74,7 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
     assert set(summary["application"]) == {f"{o}/{c}" for o in ("board", "heavy") for c in controllers}
     for result in summary["application"].values():  # the smoothness and stability measures, per trial
         for name in ("f_rms", "sigma", "overshoot", "jerk_rms", "tracking_error_rms", "peak_effort_ratio"):
-            tiny = rep.PRESETS["tiny"]
+            tiny = rep.REPRODUCE_PRESETS["tiny"]
             assert len(result[f"{name}_trials"]) == tiny.application_trials * len(tiny.application_users)
             finite = [v for v in result[f"{name}_trials"] if np.isfinite(v)]
             if finite:  # the mean is over the trials' finite values (σ: those that reached the target)
@@ -213,7 +213,7 @@ def test_report_is_complete_and_consistent_with_the_summary(tiny_run):
     # numbers the prose derives from the run, not from text
     m0 = summary["iterative"]["m0_on_d1_e_rms_50"]
     assert f"in this run: {m0 * 1000:.1f} mm" in html
-    assert "200 N/m spring" in html  # coassist.sim.world.IMPEDANCE_STIFFNESS
+    assert "200 N/m spring" in html  # coassist.control.presets.IMPEDANCE_STIFFNESS
     # the first screen answers the question: per object and assistive variant, the force saved against MG and IMP
     answer = html.split("The thesis' claims, checked")[0]
     assert "The answer: does the assistance help?" in answer

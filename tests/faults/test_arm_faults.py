@@ -96,7 +96,7 @@ def _check(case, trial, violations) -> None:
 def run_mujoco(case):
     """One case on the MuJoCo Panda; returns (trial, violations)."""
     limits = _limits(START)
-    config = DriveConfig(robot="panda", controller="mg", task="linear", time_limit=case.time_limit, limits=limits)
+    config = DriveConfig(robot="panda", controller="manual", task="linear", time_limit=case.time_limit, limits=limits)
     inner = MujocoArmWorld("handle", robot="panda", control_dt=DT, operator=case.operator, start=START)
     world = FaultyArm(inner, case.inject, case.overrun)
     source = None if case.predictor is None else case.predictor(50)
@@ -171,7 +171,7 @@ def run_franky(case, franky_sim):
         inner = FrankaWorld(server.host, ft_sensor=ScriptedSensor(server, case.operator))
         limits = _limits(inner.read().tool_pose[:3])
         world = FaultyFranka(inner, case.inject, case.overrun)
-        config = DriveConfig(world="franka", controller="mg", task="linear", time_limit=case.time_limit,
+        config = DriveConfig(world="franka", controller="manual", task="linear", time_limit=case.time_limit,
                              limits=limits)  # fmt: skip
         try:
             trial = drive(config, world=world)

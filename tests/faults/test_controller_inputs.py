@@ -32,9 +32,9 @@ def controllers():
     game = CooperativeGame(MODEL, Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[1e-4, 1e-4],
                            alpha=0.9, horizon=H)  # fmt: skip
     return {
-        "assistive": AssistiveController(game, effort_limit=100.0),
-        "imp": ImpedanceControl(MODEL, K_IMP, effort_limit=100.0),
-        "mg": ManualGuidance(MODEL),
+        "cooperative": AssistiveController(game, effort_limit=100.0),
+        "impedance": ImpedanceControl(MODEL, K_IMP, effort_limit=100.0),
+        "manual": ManualGuidance(MODEL),
     }
 
 
@@ -114,7 +114,7 @@ def bad_cases():
 BAD = bad_cases()
 
 
-@pytest.mark.parametrize("name", ["assistive", "imp", "mg"])
+@pytest.mark.parametrize("name", ["cooperative", "impedance", "manual"])
 @pytest.mark.parametrize("case", BAD, ids=[c[0] for c in BAD])
 def test_bad_input_is_flagged_never_raised(name, case):
     _, index, value, flag = case
@@ -128,7 +128,7 @@ def test_bad_input_is_flagged_never_raised(name, case):
 
 def test_torch_tensors():
     torch = pytest.importorskip("torch")
-    controller = controllers()["assistive"]
+    controller = controllers()["cooperative"]
     z, ref_h, ref_r, w = good_inputs()
     reference = controller.step(z, ref_h, ref_r, w)
     assert reference.fault == Fault.NONE and np.abs(reference.u_r).max() > 0.1
@@ -140,7 +140,7 @@ def test_torch_tensors():
 
 
 def test_lists_and_ints_are_numbers():
-    controller = controllers()["assistive"]
+    controller = controllers()["cooperative"]
     z, ref_h, ref_r, w = good_inputs()
     reference = controller.step(z, ref_h, ref_r, w)
     as_lists = controller.step(z.tolist(), ref_h.tolist(), ref_r.tolist(), [2, 0])
@@ -152,7 +152,7 @@ def test_lists_and_ints_are_numbers():
 
 def test_inputs_just_inside_the_bounds_are_used():
     bounds = InputBounds()
-    controller = controllers()["imp"]
+    controller = controllers()["impedance"]
     z = np.array([bounds.position, 0.0, bounds.velocity, 0.0])  # exactly at the bound: plausible
     step = controller.step(z, np.zeros((1, 4)), np.zeros((1, 4)), np.array([bounds.wrench, 0.0]))
     assert not step.fault & Fault.INVALID_INPUT
@@ -178,20 +178,20 @@ def test_baselines_take_the_assistive_controllers_references():
     z, ref_h, ref_r, w = good_inputs()
     ref_r = ref_r.copy()
     ref_r[:, 0] = np.linspace(0.03, 0.2, H)  # nominal ahead of the tool; only row 0 (x_ref,r(k+1)) matters
-    imp = c["imp"].step(z, ref_h, ref_r, w)
+    imp = c["impedance"].step(z, ref_h, ref_r, w)
     assert imp.fault == Fault.NONE
     np.testing.assert_allclose(imp.u_r, [200.0 * (0.03 - 0.01), 0.0])  # K (x_ref,r(k+1) − x), by hand: 4 N
-    one_row = c["imp"].step(z, ref_h[:1], ref_r[:1], w)
+    one_row = c["impedance"].step(z, ref_h[:1], ref_r[:1], w)
     np.testing.assert_array_equal(one_row.u_r, imp.u_r)
-    mg = c["mg"].step(z, ref_h, ref_r, w)
+    mg = c["manual"].step(z, ref_h, ref_r, w)
     assert mg.fault == Fault.NONE
     np.testing.assert_array_equal(mg.u_r, np.zeros(2))
     # the assistive controller itself still wants exactly `horizon` rows
-    assert c["assistive"].step(z, ref_h[:10], ref_r[:10], w).fault == Fault.INVALID_INPUT
+    assert c["cooperative"].step(z, ref_h[:10], ref_r[:10], w).fault == Fault.INVALID_INPUT
 
 
 def test_a_bad_tick_does_not_poison_the_next():
-    controller = controllers()["assistive"]
+    controller = controllers()["cooperative"]
     args = good_inputs()
     before = controller.step(*args)
     for _, index, value, _flag in BAD:

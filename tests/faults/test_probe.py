@@ -121,7 +121,7 @@ def test_dns_rebinding_host_and_origin_of_another_site_are_refused(tmp_path):
     from coassist.play.server import PlayServer
     from coassist.play.session import PlayConfig, PlaySession
 
-    config = PlayConfig(user="alice", out=tmp_path, controllers=("mg",), motion_time=1.0, dwell=0.5, grace=0.5)
+    config = PlayConfig(user="alice", out=tmp_path, controllers=("manual",), motion_time=1.0, dwell=0.5, grace=0.5)
     with PlayServer(PlaySession(config), port=0) as server:
         p = server.port
         evil = f"evil.example:{p}"

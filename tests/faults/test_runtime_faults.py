@@ -249,7 +249,7 @@ CASES = [
 
 def run_case(case: Case):
     """Run one case; returns (trial, violations, world)."""
-    config = DriveConfig(controller="mg", task="linear", time_limit=case.time_limit, limits=LIMITS)
+    config = DriveConfig(controller="manual", task="linear", time_limit=case.time_limit, limits=LIMITS)
     kwargs = {} if case.start is None else {"start": case.start}
     inner = MujocoUR5World("handle", control_dt=DT, operator=case.operator, **kwargs)
     world = FaultyWorld(inner, case.inject, case.overrun)

@@ -88,9 +88,9 @@ def test_tuned_ridge_beats_the_fixed_alpha_on_held_out_user_a():
     """On held-out user-a trials the validation-tuned α is no worse at 0.4 s than the former fixed α = 1."""
     from coassist.intent import RidgeBaseline, WindowSet
     from coassist.intent.baselines import fit_tuned_baselines
-    from coassist.intent.training import PRESETS
+    from coassist.intent.training import MODEL_PRESETS
 
-    w = PRESETS["default"].window
+    w = MODEL_PRESETS["default"].window
     trials = load_trials([USER_A])
     train_idx, test_idx = split_trials([lt.id for lt in trials], 0.2, seed=0)
     train = [trials[i].trial for i in train_idx]
@@ -119,9 +119,9 @@ def test_linear_preset_is_the_tuned_ridge_in_the_model_format(trials, tmp_path):
     from dataclasses import replace
 
     from coassist.intent import load_model, save_model
-    from coassist.intent.training import PRESETS
+    from coassist.intent.training import MODEL_PRESETS
 
-    lin = PRESETS["linear"]
+    lin = MODEL_PRESETS["linear"]
     p = replace(lin, window=replace(lin.window, history=20, decimation=2, horizon=10),
                 train=replace(lin.train, threads=1, train_stride=2))
     model = train_model(trials, p, p.train)
@@ -152,10 +152,10 @@ def test_default_predictor_is_no_worse_than_the_best_tuned_baseline_on_held_out_
 
     import torch
 
-    from coassist.intent.training import PRESETS
+    from coassist.intent.training import MODEL_PRESETS
 
     torch.set_num_threads(1)
-    p = PRESETS["default"]
+    p = MODEL_PRESETS["default"]
     trials = load_trials([USER_A])
     model = train_model(trials, p, replace(p.train, threads=1))
     res = evaluate_model(model, trials)

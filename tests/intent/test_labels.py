@@ -130,11 +130,11 @@ def test_labels_say_what_they_need():
 
 
 def test_point_mass_trials_record_the_plant_their_effort_drives():
-    from coassist.sim.world import TrialSpec, run_spec
+    from coassist.sim import TrialSpec, run_spec
 
     trial = run_spec(TrialSpec(task="linear", object="heavy", controller="cooperative", seed=4))
     plant = trial.meta.extra["plant"]
-    from coassist.sim.objects import get_object
+    from coassist.scenario.objects import get_object
 
     assert list(plant["M"]) == [10.0 + get_object("heavy").mass] * 2  # the meta holds tuples, read-only
     assert list(plant["D"]) == [100.0, 100.0]

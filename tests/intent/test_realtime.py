@@ -106,7 +106,7 @@ def test_config_errors_name_the_field(model):
 def test_a_model_drives_the_simulated_loop(tmp_path):
     """A model folder as the world's intent source: the logged prediction at tick k is
     the model's prediction on the logged feature rows k − history + 1 … k."""
-    from coassist.intent import ModelIntent, Preset, TrainConfig, WindowConfig, load_intent_source, save_model
+    from coassist.intent import ModelIntent, Preset, TrainConfig, WindowConfig, load_model_intent, save_model
     from coassist.intent.model import ModelMismatchError
     from coassist.sim import TrialSpec, run_spec
 
@@ -115,7 +115,7 @@ def test_a_model_drives_the_simulated_loop(tmp_path):
     preset = Preset("h50", WindowConfig(history=30, decimation=3, horizon=50, input_frame="relative", target="residual"),
                     lstm_layers=1, hidden=8, fc=(8,), train=TrainConfig(epochs=1, batch_size=64, threads=1, train_stride=4))
     save_model(train_model(labeled(3, n=200), preset, preset.train), tmp_path / "M")
-    source = load_intent_source(str(tmp_path / "M"))
+    source = load_model_intent(str(tmp_path / "M"))
     assert isinstance(source, ModelIntent) and source.model_id.startswith("M@") and len(source.model_id) == 14
     trial = run_spec(TrialSpec(task="linear", seed=3, intent=str(tmp_path / "M")))
     assert trial.meta.model_id == source.model_id

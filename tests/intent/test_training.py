@@ -140,9 +140,9 @@ def test_training_leaves_torch_global_state_alone(trials, tiny):
 
 
 def test_thesis_preset_is_the_thesis_network():
-    from coassist.intent import PRESETS
+    from coassist.intent import MODEL_PRESETS
 
-    p = PRESETS["thesis"]
+    p = MODEL_PRESETS["thesis"]
     net = IntentNet(p.network(2))
     assert (net.lstm.num_layers, net.lstm.hidden_size) == (3, 250)
     linears = [m for m in net.head if isinstance(m, torch.nn.Linear)]

@@ -79,7 +79,7 @@ def test_a_scripted_drag_in_chromium_plays_a_trial(tmp_path):
     from coassist.play.session import PlayConfig, PlaySession
 
     model = tiny_model(tmp_path / "M0")
-    config = PlayConfig(user="carol", out=tmp_path / "runs", controllers=("assistive", "mg"), intent=str(model),
+    config = PlayConfig(user="carol", out=tmp_path / "runs", controllers=("cooperative", "manual"), intent=str(model),
                         motion_time=2.0, dwell=1.0)  # fmt: skip
     with PlayServer(PlaySession(config), port=0) as server, sync_api.sync_playwright() as pw:
         context = launch(pw, tmp_path / "profile")
@@ -89,7 +89,7 @@ def test_a_scripted_drag_in_chromium_plays_a_trial(tmp_path):
             page.wait_for_function("window.coassist && window.coassist.ready", timeout=15000)
             assert page.title().startswith("coassist play")
             assert page.locator("#controller option").count() == 2
-            page.select_option("#controller", "assistive")
+            page.select_option("#controller", "cooperative")
             page.click("#start")
             page.wait_for_function("window.coassist.frame !== null", timeout=10000)
             start = page.evaluate("window.coassist.scene.start")
@@ -145,7 +145,7 @@ def test_a_gamepad_is_a_hand_too(tmp_path):
     from coassist.play.server import PlayServer
     from coassist.play.session import PlayConfig, PlaySession
 
-    config = PlayConfig(user="dave", out=tmp_path / "runs", controllers=("mg",), motion_time=2.0, dwell=1.0)
+    config = PlayConfig(user="dave", out=tmp_path / "runs", controllers=("manual",), motion_time=2.0, dwell=1.0)
     session = PlaySession(config)
     with PlayServer(session, port=0) as server, sync_api.sync_playwright() as pw:
         context = launch(pw, tmp_path / "profile")

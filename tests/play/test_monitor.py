@@ -21,8 +21,8 @@ from coassist.robot.drive import DriveConfig  # noqa: E402
 
 
 def test_a_watcher_sees_the_drive_run_live_and_cannot_steer_it(tmp_path):
-    drive = DriveConfig(world="mujoco", controller="mg", task="linear", time_limit=2.0, seed=1)
-    monitor = DriveMonitor(drive, PlayConfig(user="lab", out=tmp_path, controllers=("mg",), tasks=("linear",)))
+    drive = DriveConfig(world="mujoco", controller="manual", task="linear", time_limit=2.0, seed=1)
+    monitor = DriveMonitor(drive, PlayConfig(user="lab", out=tmp_path, controllers=("manual",), tasks=("linear",)))
 
     async def watch(port: int) -> tuple[dict, list[dict], dict, int]:
         async with websockets.connect(f"ws://127.0.0.1:{port}/ws") as ws:
@@ -36,7 +36,7 @@ def test_a_watcher_sees_the_drive_run_live_and_cannot_steer_it(tmp_path):
                     dropped = m["dropped"]
                     if len(frames) % 20 == 0:  # a watcher's hand and start are dropped
                         await ws.send(json.dumps({"type": "pointer", "x": m["x"], "y": m["y"] + 0.05, "down": True, "seq": 1}))
-                        await ws.send(json.dumps({"type": "start", "controller": "mg"}))
+                        await ws.send(json.dumps({"type": "start", "controller": "manual"}))
                 elif m["type"] == "result":
                     return init, frames, m, dropped
                 elif m["type"] == "status" and m["level"]:
@@ -45,7 +45,7 @@ def test_a_watcher_sees_the_drive_run_live_and_cannot_steer_it(tmp_path):
     with PlayServer(monitor, port=0) as server:
         init, frames, result, dropped = asyncio.run(watch(server.port))
     assert init["mode"] == "monitor" and init["role"] == "watcher"
-    assert result["result"]["ended"] == "time_limit" and result["result"]["controller"] == "mg"
+    assert result["result"]["ended"] == "time_limit" and result["result"]["controller"] == "manual"
     trial = read_dataset(tmp_path / "lab").trials[0]
     assert trial.meta.source == "mujoco" and trial.joints is not None and trial.joints.shape[1] == 6
     # the frames are the drive's own rows: frame k shows tick k − 1's measured pose and hand wrench

@@ -17,7 +17,7 @@ from coassist.play.protocol import (
 )
 
 BOUNDS = (-0.2, 0.5, -0.9, -0.3)
-CONTROLLERS = ("mg", "assistive")
+CONTROLLERS = ("manual", "cooperative")
 
 
 def parse(obj):
@@ -27,7 +27,7 @@ def parse(obj):
 def test_the_four_messages_parse():
     assert parse({"type": "pointer", "x": 0.1, "y": -0.6, "down": True, "seq": 3}) == Pointer(0.1, -0.6, True, 3)
     assert parse({"type": "pointer", "x": 0, "y": -0.5, "down": False, "seq": 0}) == Pointer(0.0, -0.5, False, 0)
-    assert parse({"type": "start", "controller": "assistive"}) == Start("assistive")
+    assert parse({"type": "start", "controller": "cooperative"}) == Start("cooperative")
     assert parse({"type": "abort"}) == Abort()
     assert parse({"type": "ping", "seq": 12}) == Ping(12)
 
@@ -48,8 +48,8 @@ HOSTILE = [
     {"type": "pointer", "x": 0.1, "y": -0.6, "down": True},  # missing field
     {"type": "pointer", "x": 0.1, "y": -0.6, "down": True, "seq": 1, "path": "../../etc/passwd"},  # extra field
     {"type": "start", "controller": "oracle"},
-    {"type": "start", "controller": ["mg"]},
-    {"type": "start", "controller": "mg", "out": "/tmp/x"},
+    {"type": "start", "controller": ["manual"]},
+    {"type": "start", "controller": "manual", "out": "/tmp/x"},
     {"type": "save", "file": "../x.parquet"},
     {"type": {"nested": 1}},
     {"x": 1},

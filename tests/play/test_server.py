@@ -17,14 +17,14 @@ from scipy.linalg import expm
 pytest.importorskip("starlette", reason="coassist play needs the web extra (pip install 'coassist[web]')")
 websockets = pytest.importorskip("websockets", reason="the websocket client needs the web extra")
 
+from coassist.control.presets import get_preset  # noqa: E402
 from coassist.data import read_dataset  # noqa: E402
 from coassist.play.server import PlayServer  # noqa: E402
 from coassist.play.session import PlayConfig, PlaySession  # noqa: E402
-from coassist.sim.world import get_preset  # noqa: E402
 
 
 def short_config(tmp_path, **kw) -> PlayConfig:
-    base = {"user": "alice", "out": tmp_path, "controllers": ("assistive", "mg"), "motion_time": 1.0, "dwell": 0.5, "grace": 0.5}
+    base = {"user": "alice", "out": tmp_path, "controllers": ("cooperative", "manual"), "motion_time": 1.0, "dwell": 0.5, "grace": 0.5}
     base.update(kw)
     return PlayConfig(**base)
 
@@ -67,10 +67,10 @@ def test_a_websocket_client_plays_a_whole_trial_and_it_is_saved_as_a_dataset(tmp
     session = PlaySession(short_config(tmp_path))
     with PlayServer(session, port=0) as server:
         t0 = time.perf_counter()
-        seen = asyncio.run(play_trial(server.port, "assistive", junk=True))
+        seen = asyncio.run(play_trial(server.port, "cooperative", junk=True))
         wall = time.perf_counter() - t0
     r = seen["result"]["result"]
-    assert r["ended"] == "target" and r["controller"] == "assistive" and r["file"] == "trial_00000.parquet"
+    assert r["ended"] == "target" and r["controller"] == "cooperative" and r["file"] == "trial_00000.parquet"
     # the file: a dataset coassist train reads, with one row per control period
     ds = read_dataset(tmp_path / "alice")
     assert ds.id == "play-alice" and len(ds) == 1 and sorted(p.name for p in (tmp_path / "alice").iterdir()) == [
@@ -101,7 +101,7 @@ def test_a_websocket_client_plays_a_whole_trial_and_it_is_saved_as_a_dataset(tmp
     dist = np.linalg.norm(trial.pose - target, axis=1)
     k0 = int(np.flatnonzero(dist <= 0.025)[0])
     assert r["sigma"] == pytest.approx(dist[k0 : k0 + 375].mean(), rel=1e-12)
-    assert seen["result"]["summary"]["assistive"]["trials"] == 1
+    assert seen["result"]["summary"]["cooperative"]["trials"] == 1
     # the hostile messages were dropped and counted, and nothing was written anywhere else
     assert seen["dropped"] >= 4
     assert not list(tmp_path.rglob("escape*"))
@@ -114,16 +114,16 @@ def test_a_websocket_client_plays_a_whole_trial_and_it_is_saved_as_a_dataset(tmp
 
 def test_the_session_resumes_and_keeps_running_means_per_controller(tmp_path):
     with PlayServer(PlaySession(short_config(tmp_path)), port=0) as server:
-        first = asyncio.run(play_trial(server.port, "mg"))
+        first = asyncio.run(play_trial(server.port, "manual"))
     assert first["result"]["result"]["file"] == "trial_00000.parquet"
     session = PlaySession(short_config(tmp_path))  # a new server on the same folder: trial 1 follows
     assert len(session.results) == 1 and session.next_task().kind == "curved"
     with PlayServer(session, port=0) as server:
-        second = asyncio.run(play_trial(server.port, "mg"))
+        second = asyncio.run(play_trial(server.port, "manual"))
     res = second["result"]
     assert res["result"]["file"] == "trial_00001.parquet" and res["result"]["task"] == "curved"
     f = [first["result"]["result"]["f_rms"], res["result"]["f_rms"]]
-    assert res["summary"]["mg"]["trials"] == 2 and res["summary"]["mg"]["f_rms"] == pytest.approx(np.mean(f))
+    assert res["summary"]["manual"]["trials"] == 2 and res["summary"]["manual"]["f_rms"] == pytest.approx(np.mean(f))
     assert len(read_dataset(tmp_path / "alice")) == 2
 
 
@@ -134,7 +134,7 @@ def test_a_dropped_link_lets_go_at_once_and_aborts_the_trial_after_the_grace(tmp
         async with websockets.connect(f"ws://127.0.0.1:{port}/ws") as ws:
             init = json.loads(await ws.recv())
             x, y = init["scene"]["start"]
-            await ws.send(json.dumps({"type": "start", "controller": "mg"}))
+            await ws.send(json.dumps({"type": "start", "controller": "manual"}))
             for seq in range(1, 40):  # pull 5 cm to the side: 20 N
                 m = json.loads(await ws.recv())
                 await ws.send(json.dumps({"type": "pointer", "x": x, "y": y + 0.05, "down": True, "seq": seq}))

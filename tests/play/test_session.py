@@ -6,11 +6,11 @@ import pytest
 from typer.testing import CliRunner
 
 from coassist.play.session import PlayConfig, PlaySession, view_bounds
-from coassist.sim.tasks import TASK_KINDS, nominal_path
+from coassist.scenario.tasks import TASK_KINDS, nominal_path
 
 
 @pytest.mark.parametrize("field, value", [
-    ("user", "../escape"), ("user", "a/b"), ("user", ""), ("user", "x" * 33), ("controllers", ("mg", "oracle")),
+    ("user", "../escape"), ("user", "a/b"), ("user", ""), ("user", "x" * 33), ("controllers", ("manual", "oracle")),
     ("controllers", ()), ("intent", "oracle"), ("preset", "nope"), ("tasks", ("circle",)), ("seed", -1),
     ("motion_time", 0.0), ("dwell", -1.0), ("grace", float("nan")),
 ])  # fmt: skip
@@ -29,9 +29,9 @@ def test_the_session_folder_is_out_slash_user_and_a_foreign_folder_is_refused(tm
 
 
 def test_the_protocol_cycles_the_paths_with_a_seeded_obstacle(tmp_path):
-    session = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("mg",), seed=3))
+    session = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("manual",), seed=3))
     t0 = session.next_task()
-    again = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("mg",), seed=3)).next_task()
+    again = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("manual",), seed=3)).next_task()
     assert t0.kind == "linear" and t0.obstacle == again.obstacle  # the same seed, the same box
     scene = session.scene()
     assert scene["path"][0] == pytest.approx(list(t0.start)) and scene["path"][-1] == pytest.approx(list(t0.target))
@@ -51,3 +51,22 @@ def test_the_cli_says_what_is_wrong_in_one_line(tmp_path):
     assert result.exit_code == 1 and "PlayConfig.user" in result.output and "Traceback" not in result.output
     result = CliRunner().invoke(app, ["play", "--intent", str(tmp_path / "missing"), "--out", str(tmp_path), "--no-open"])
     assert result.exit_code == 1 and "missing" in result.output and "Traceback" not in result.output
+    # the controllers' former names (before drive and play took the kinds) are named, not guessed at
+    result = CliRunner().invoke(app, ["play", "--controller", "mg,imp", "--out", str(tmp_path), "--no-open"])
+    assert result.exit_code == 2 and "'mg' is now called 'manual'" in result.output
+
+
+def test_a_session_recorded_under_the_former_controller_names_scores_by_kind():
+    import numpy as np
+
+    from coassist.data import Trial, TrialMeta
+    from coassist.play.session import _score
+
+    n = 400
+    t = np.arange(n) * 0.008
+    pose = np.column_stack([np.minimum(t, 1.0) * 0.5, np.zeros(n)])
+    for former, kind in (("mg", "manual"), ("assistive", "cooperative"), ("impedance", "impedance")):
+        meta = TrialMeta(user="bob", task="linear", object="none", controller="x", model_id=None, seed=0, source="sim",
+                         dt=0.008, extra={"target": [0.5, 0.0], "controller_name": former, "ended": "target"})  # fmt: skip
+        trial = Trial(meta=meta, time=t, pose=pose, velocity=np.zeros((n, 2)), wrench=np.ones((n, 2)), reference=pose)
+        assert _score(trial, "trial_00000.parquet", 0).controller == kind

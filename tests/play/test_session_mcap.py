@@ -14,7 +14,7 @@ pytest.importorskip("rosbags", reason="the bags extra (rosbags) is not installed
 def test_saved_trials_are_written_as_mcap_too(tmp_path):
     from coassist.data.bags import load_bag_trial
 
-    session = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("assistive",), mcap=True))
+    session = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("cooperative",), mcap=True))
     n = 30
     t = np.arange(n) * 0.008
     pose = np.column_stack([0.1 * t, -0.05 * t])

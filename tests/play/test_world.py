@@ -8,9 +8,9 @@ import time
 import numpy as np
 import pytest
 
+from coassist.control.presets import get_preset, plant_model
 from coassist.play.world import PlayWorld
 from coassist.runtime.world import Command, World
-from coassist.sim.world import get_preset, plant_model
 
 
 class ConstantHand:

@@ -24,7 +24,7 @@ PUSH_X = ScriptedForce.constant((10.0, 0.0, 0.0, 0.0, 0.0, 0.0))
 
 @pytest.fixture(scope="module")
 def mg_push():
-    return drive(DriveConfig(controller="mg", task="linear", time_limit=2.0), operator=PUSH_X)
+    return drive(DriveConfig(controller="manual", task="linear", time_limit=2.0), operator=PUSH_X)
 
 
 def test_mg_renders_the_promised_admittance(mg_push):
@@ -61,25 +61,25 @@ def test_kinematics_and_mujoco_agree_on_the_tcp():
 def test_imp_pulls_back_to_the_reference_and_mg_does_not():
     side_push = ScriptedForce.steps([(0.0, (0, 10.0, 0, 0, 0, 0)), (1.0, (0, 0, 0, 0, 0, 0))])
     out = {}
-    for ctrl in ("imp", "mg"):
+    for ctrl in ("impedance", "manual"):
         tr = drive(DriveConfig(controller=ctrl, task="linear", time_limit=4.0), operator=side_push)
         out[ctrl] = tr.pose[:, 1] - tr.reference[:, 1]
     # both are pushed off the path while the hand pushes …
-    assert out["imp"][120] > 0.02 and out["mg"][120] > 0.05
+    assert out["impedance"][120] > 0.02 and out["manual"][120] > 0.05
     # … IMP's spring brings the tool back, MG leaves it where the hand left it
-    assert abs(out["imp"][-1]) < 0.005
-    assert out["mg"][-1] > 0.05
+    assert abs(out["impedance"][-1]) < 0.005
+    assert out["manual"][-1] > 0.05
 
 
 def test_assistive_controller_saves_the_operator_force_against_mg():
     # The simulated operator (user 0) on the linear task; the assistive controller with the
     # oracle intent (the best a predictor can do) against manual guidance.
     force = {}
-    for ctrl, intent in (("assistive", "oracle"), ("mg", "nominal")):
+    for ctrl, intent in (("cooperative", "oracle"), ("manual", "nominal")):
         tr = drive(DriveConfig(controller=ctrl, task="linear", intent=intent, seed=1))
         assert tr.meta.extra["ended"] in ("target", "time_limit")
         force[ctrl] = f_rms(tr.effort_h)
-    assert force["assistive"] < 0.7 * force["mg"], force
+    assert force["cooperative"] < 0.7 * force["manual"], force
 
 
 def test_a_trained_model_in_the_loop_needs_less_force_than_mg(tmp_path):
@@ -90,25 +90,25 @@ def test_a_trained_model_in_the_loop_needs_less_force_than_mg(tmp_path):
     preset, which gives up some assistance so that the loop does not ring). Measured: 2.82 N
     against MG's 4.02 N (seed 1); 2.04 / 1.93 / 2.00 N (seeds 1–3) on thesis-application-dm."""
     from coassist.intent import LabeledTrial, save_model, train_model
-    from coassist.intent.training import PRESETS, with_overrides
+    from coassist.intent.training import MODEL_PRESETS, with_overrides
     from coassist.sim import TrialSpec, run_spec
 
     d0 = [run_spec(TrialSpec(task=("curved", "linear", "sinusoidal")[s % 3], seed=s)) for s in range(6)]
-    preset = with_overrides(PRESETS["default"], epochs=5, threads=1)
+    preset = with_overrides(MODEL_PRESETS["default"], epochs=5, threads=1)
     model = train_model([LabeledTrial(f"D0/t{i}", "D0", t) for i, t in enumerate(d0)], preset, preset.train)
     save_model(model, tmp_path / "M0")
     force = {}
-    for ctrl, intent in (("assistive", str(tmp_path / "M0")), ("mg", "nominal")):
+    for ctrl, intent in (("cooperative", str(tmp_path / "M0")), ("manual", "nominal")):
         tr = drive(DriveConfig(controller=ctrl, task="linear", intent=intent, seed=1))
         assert tr.meta.extra["ended"] == "target"
         assert not np.any(tr.fault & int(Fault.PREDICTION_FALLBACK)) and tr.meta.model_id == (
             None if intent == "nominal" else f"M0@{tr.meta.model_id.split('@')[1]}")
         force[ctrl] = f_rms(tr.effort_h)
-    assert force["assistive"] < 0.8 * force["mg"], force
+    assert force["cooperative"] < 0.8 * force["manual"], force
 
 
 def test_same_seed_same_run_and_the_trial_round_trips(tmp_path):
-    cfg = DriveConfig(controller="assistive", task="curved", object="board", time_limit=1.5, seed=3)
+    cfg = DriveConfig(controller="cooperative", task="curved", object="board", time_limit=1.5, seed=3)
     a, b = drive(cfg), drive(cfg)
     assert a.equals(b)
     assert a.joints.shape == (a.n_samples, 6) and a.joint_velocity.shape == (a.n_samples, 6)
@@ -119,7 +119,7 @@ def test_same_seed_same_run_and_the_trial_round_trips(tmp_path):
 def test_full_pose_control_holds_orientation_as_a_rotation_vector():
     # 6-DOF: a 1 N·m twist about z turns the tool; z height and tilt stay held by the hand's own hold
     twist = ScriptedForce.constant((0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
-    tr = drive(DriveConfig(controller="mg", task="linear", full_pose=True, time_limit=1.5), operator=twist)
+    tr = drive(DriveConfig(controller="manual", task="linear", full_pose=True, time_limit=1.5), operator=twist)
     assert tr.pose.shape[1] == 6
     # ω_z = τ/D_rot = 1/5 rad/s at steady state, about the base z axis
     assert tr.velocity[-30:, 5].mean() == pytest.approx(0.2, rel=0.1)
@@ -130,7 +130,7 @@ def test_full_pose_control_holds_orientation_as_a_rotation_vector():
 def test_full_pose_rotation_columns_stay_continuous_through_pi():
     # The start orientation is π about x (tool down): a torque about x tilts it past π, where the
     # plain rotation vector jumps from +π·x to −π·x. The logged column keeps counting the angle.
-    tr = drive(DriveConfig(controller="mg", task="linear", full_pose=True, time_limit=1.0),
+    tr = drive(DriveConfig(controller="manual", task="linear", full_pose=True, time_limit=1.0),
                operator=ScriptedForce.constant((0.0, 0.0, 0.0, 1.0, 0.0, 0.0)))
     rx = tr.pose[:, 3]
     assert rx[0] == pytest.approx(math.pi, abs=1e-6) and rx[-1] > math.pi + 0.05

@@ -99,7 +99,7 @@ def mg_run():
     try:
         world = FrankaWorld(s.host, ft_sensor=PushSensor(s, (10.0, 0.0, 0.0)))
         sent = []
-        trial = drive(DriveConfig(world="franka", controller="mg", time_limit=1.4), world=world,
+        trial = drive(DriveConfig(world="franka", controller="manual", time_limit=1.4), world=world,
                       on_tick=lambda k, st, out: sent.append(np.asarray(out.command.qd, dtype=float).copy()))  # fmt: skip
         world.close()
     finally:
@@ -144,7 +144,7 @@ def test_a_lost_link_ends_the_run_with_what_to_do(server):
         if k == 40:
             server.kill()
 
-    trial = drive(DriveConfig(world="franka", controller="mg", time_limit=3.0), world=world, on_tick=cut)
+    trial = drive(DriveConfig(world="franka", controller="manual", time_limit=3.0), world=world, on_tick=cut)
     assert trial.meta.extra["ended"] == "link_lost"
     assert "check the cable and the robot, then rerun" in trial.meta.extra["stop_message"]
     assert 40 <= len(trial.time) <= 42
@@ -177,7 +177,7 @@ def test_a_reflex_ends_the_run_safely_with_what_to_do(server):
     robot = ReflexAfter(real, 30)
     world = FrankaWorld(server.host, robot=robot, ft_sensor=PushSensor(server, (5.0, 0.0, 0.0)))
     sent = []
-    trial = drive(DriveConfig(world="franka", controller="mg", time_limit=3.0), world=world,
+    trial = drive(DriveConfig(world="franka", controller="manual", time_limit=3.0), world=world,
                   on_tick=lambda k, st, out: sent.append(out.command))  # fmt: skip
     assert trial.meta.extra["ended"] == "robot_stop"
     msg = trial.meta.extra["stop_message"]
@@ -215,7 +215,7 @@ def test_the_world_takes_the_limits_of_the_arm_it_is_told(server, monkeypatch):
             super().__init__(host, frequency=frequency, arm=arm)
 
     monkeypatch.setattr(franka_world, "FrankaWorld", Spy)
-    trial = drive(DriveConfig(world="franka", robot="fr3", controller="mg", time_limit=0.2), host=server.host)
+    trial = drive(DriveConfig(world="franka", robot="fr3", controller="manual", time_limit=0.2), host=server.host)
     assert seen == ["fr3"] and trial.meta.extra["ended"] == "time_limit"
 
 
@@ -224,7 +224,7 @@ def test_the_assistive_controller_through_franky_sim(server):
     world = FrankaWorld(server.host, ft_sensor=PushSensor(server, (10.0, 0.0, 0.0)))
     seen = []
     # The preset this comparison's 1.5 mm was measured with (nominal intent: no learned predictor in the loop).
-    config = DriveConfig(world="franka", controller="assistive", preset="thesis-application-dm", time_limit=2.0)
+    config = DriveConfig(world="franka", controller="cooperative", preset="thesis-application-dm", time_limit=2.0)
     trial = drive(config, world=world, on_tick=lambda k, st, out: seen.append(
         (np.asarray(out.command.qd, dtype=float).copy(), st.q.copy(), np.asarray(st.tool_pose, dtype=float).copy())))
     # it ends cleanly: at the time limit, nothing flagged, every tick's command sent, the arm at rest after stop
@@ -243,6 +243,6 @@ def test_the_assistive_controller_through_franky_sim(server):
     # the same controller and push on the MuJoCo Panda move the tool the same way: the game holds
     # the tool near the plan (which starts to move at 1.5 s), so both creep 17 mm. 1.5 mm: the push
     # here starts a tick late and franky-sim's joint velocity loop lags its command
-    mj = drive(DriveConfig(robot="panda", controller="assistive", preset="thesis-application-dm", time_limit=2.0),
+    mj = drive(DriveConfig(robot="panda", controller="cooperative", preset="thesis-application-dm", time_limit=2.0),
                operator=ScriptedForce.constant((10.0, 0.0, 0.0, 0.0, 0.0, 0.0)))
     np.testing.assert_allclose(trial.pose[:, 0] - trial.pose[0, 0], mj.pose[:, 0] - mj.pose[0, 0], atol=1.5e-3)

@@ -46,7 +46,7 @@ def _inside_joint_limits(trial) -> None:
 
 @pytest.fixture(scope="module")
 def mg_push():
-    return drive(DriveConfig(robot="panda", controller="mg", time_limit=2.0), operator=PUSH_X)
+    return drive(DriveConfig(robot="panda", controller="manual", time_limit=2.0), operator=PUSH_X)
 
 
 def test_the_model_is_the_panda_with_its_limits():
@@ -92,7 +92,7 @@ def test_the_null_space_pulls_the_posture_back_with_the_tool_still():
             return NullSpacePosture(k.kinematics, self.q_start + self.delta, gain=self.posture_gain)
 
     zero = ScriptedForce.constant((0.0,) * 6)
-    config = DriveConfig(robot="panda", controller="mg", time_limit=3.0)
+    config = DriveConfig(robot="panda", controller="manual", time_limit=3.0)
     quiet = FTSensorModel(noise_force=0.0, noise_torque=0.0)
     # (0.25, 0, 0.4): the linear task's start moved to the Panda (drive.move_tasks)
     world = Offset("handle", robot="panda", operator=zero, start=(0.25, 0.0, 0.4), sensor=quiet)
@@ -115,12 +115,12 @@ def test_the_assistive_controller_saves_force_on_the_panda():
     # the simulated operator (user 0) on the linear task moved to the Panda's reach; measured:
     # 1.01 N (assistive, oracle intent) against MG's 4.02 N (seed 1)
     force = {}
-    for ctrl, intent in (("assistive", "oracle"), ("mg", "nominal")):
+    for ctrl, intent in (("cooperative", "oracle"), ("manual", "nominal")):
         tr = drive(DriveConfig(robot="panda", controller=ctrl, intent=intent, seed=1))
         assert tr.meta.extra["ended"] == "target" and tr.fault.max() == 0
         _inside_joint_limits(tr)
         force[ctrl] = f_rms(tr.effort_h)
-    assert force["assistive"] < 0.7 * force["mg"], force
+    assert force["cooperative"] < 0.7 * force["manual"], force
 
 
 @pytest.mark.parametrize(("world", "robot", "known"), [
@@ -146,7 +146,7 @@ def test_a_panda_run_is_written_as_mcap_with_its_seven_joints(tmp_path):
     from coassist.data.bags import load_bag_trial
 
     out = tmp_path / "p.parquet"
-    result = CliRunner().invoke(app, ["drive", "--robot", "panda", "--controller", "mg", "--time-limit", "0.5",
+    result = CliRunner().invoke(app, ["drive", "--robot", "panda", "--controller", "manual", "--time-limit", "0.5",
                                       "--out", str(out), "--mcap", "--no-plot"])  # fmt: skip
     assert result.exit_code == 0, result.output
     trial, back = read_trial(out), load_bag_trial(tmp_path / "p.mcap")

@@ -1,7 +1,7 @@
 """Tests of the MuJoCo UR5 world (coassist.robot.mujoco_world, coassist.robot.ur5_mjcf).
 
 Independent references: UR's published standard-DH table (forward kinematics by hand),
-the masses and sizes of coassist.sim.objects with the tool geometry's centres (statics
+the masses and sizes of coassist.scenario.objects with the tool geometry's centres (statics
 by hand), finite differences of the reported poses, scipy's Rotation, and the
 admittance's analytic steady state F/D.
 """
@@ -38,8 +38,8 @@ from coassist.robot.ur5_mjcf import (  # noqa: E402
     ur5_mjcf_xml,
 )
 from coassist.runtime.world import Command, RobotState, World  # noqa: E402
-from coassist.sim.objects import OBJECTS  # noqa: E402
-from coassist.sim.tasks import TASK_KINDS, nominal_path  # noqa: E402
+from coassist.scenario.objects import OBJECTS  # noqa: E402
+from coassist.scenario.tasks import TASK_KINDS, nominal_path  # noqa: E402
 
 G = np.array([0.0, 0.0, -9.81])
 QUIET = FTSensorModel(noise_force=0.0, noise_torque=0.0, rate_hz=None)

@@ -30,7 +30,7 @@ from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World  # n
 from coassist.robot.ur_rtde_world import RobotLinkError  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
 from coassist.runtime.world import Command  # noqa: E402
-from coassist.sim.tasks import make_task  # noqa: E402
+from coassist.scenario.tasks import make_task  # noqa: E402
 
 # A domain of its own (140 … 229 of 0 … 232): the xdist worker's index sets the parity, so the
 # two workers of a run never share one; the pid keeps other runs on this machine apart.
@@ -137,7 +137,7 @@ def ros_run(config: DriveConfig, *, stale_after=0.5, silent_after=None, silent_t
     return trial, robot, world
 
 
-@pytest.mark.parametrize("controller", ["mg", "assistive"])
+@pytest.mark.parametrize("controller", ["manual", "cooperative"])
 def test_a_ros2_run_matches_the_in_process_mujoco_drive(controller):
     base = dict(controller=controller, task="linear", time_limit=1.2, seed=2)
     ref = drive(DriveConfig(world="mujoco", **base), operator=PUSH)
@@ -167,7 +167,7 @@ def test_a_ros2_run_matches_the_in_process_mujoco_drive(controller):
 def test_silent_topics_stop_the_arm(topic, lockstep):
     # Lockstep: the robot stops answering after its 40th command, read() waits stale_after
     # for it. Free-running (paced at 125 Hz): the last message ages past stale_after.
-    config = DriveConfig(world="ur", controller="mg", task="linear", time_limit=2.0, seed=0)
+    config = DriveConfig(world="ur", controller="manual", task="linear", time_limit=2.0, seed=0)
     trial, robot, world = ros_run(config, stale_after=STALE, silent_after=40, silent_topic=topic, lockstep=lockstep)
     assert trial.meta.extra["ended"] == "link_lost"
     name = "/force_torque_sensor_broadcaster/wrench" if topic == "wrench" else "/joint_states"
@@ -232,11 +232,11 @@ class Listener:
 
 
 def test_the_monitor_topics_carry_the_run():
-    from coassist.sim.intent_source import OracleIntent
+    from coassist.scenario.intent_source import OracleIntent
 
     listener = Listener()
     try:
-        config = DriveConfig(world="ur", controller="assistive", task="linear", time_limit=0.6, seed=1)
+        config = DriveConfig(world="ur", controller="cooperative", task="linear", time_limit=0.6, seed=1)
         sim = mujoco_world(config)
         robot = SimRobot(sim)
         mass, com = sim.tool_mass_and_com()
@@ -280,13 +280,13 @@ def test_coassist_ros2_drives_the_simulated_robot_and_writes_the_run(tmp_path):
     from coassist.cli import app
     from coassist.data import read_trial
 
-    config = DriveConfig(world="ur", controller="mg", task="linear", time_limit=0.4, seed=0)
+    config = DriveConfig(world="ur", controller="manual", task="linear", time_limit=0.4, seed=0)
     sim = mujoco_world(config)
     robot = SimRobot(sim)
     offset = ",".join(repr(float(v)) for v in _kinematics_for(sim).tcp_offset)
     try:
         result = CliRunner().invoke(app, [
-            "ros2", "--controller", "mg", "--time-limit", "0.4", "--domain-id", str(DOMAIN), "--lockstep", "--yes",
+            "ros2", "--controller", "manual", "--time-limit", "0.4", "--domain-id", str(DOMAIN), "--lockstep", "--yes",
             "--tcp-offset", offset, "--stale-after", "0.5", "--out", str(tmp_path / "run.parquet"), "--mcap", "--no-plot"])  # fmt: skip
     finally:
         time.sleep(0.05)

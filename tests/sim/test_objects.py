@@ -1,4 +1,4 @@
-"""The carried objects and the force sensor (coassist.sim.objects) against hand computation."""
+"""The carried objects and the force sensor (coassist.scenario.objects) against hand computation."""
 
 from __future__ import annotations
 
@@ -7,9 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from coassist.sim import AUTHOR, ForceSensor, get_preset, make_controller, make_task, run_trial
-from coassist.sim.objects import GRAVITY, OBJECTS, CarriedObject, get_object
-from coassist.sim.world import plant_model
+from coassist.control.presets import get_preset, make_controller, plant_model
+from coassist.scenario import AUTHOR, ForceSensor, make_task
+from coassist.scenario.objects import GRAVITY, OBJECTS, CarriedObject, get_object
+from coassist.sim import run_trial
 
 # ------------------------------------------------------------------ the three objects
 

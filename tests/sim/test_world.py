@@ -7,20 +7,10 @@ import numpy as np
 import pytest
 
 from coassist.control import Fault
-from coassist.sim import (
-    AUTHOR,
-    FEATURES,
-    ForceSensor,
-    NominalIntent,
-    TrialSpec,
-    get_object,
-    get_preset,
-    make_controller,
-    make_task,
-    run_spec,
-    run_trial,
-    run_trials,
-)
+from coassist.control.presets import get_preset, make_controller
+from coassist.interfaces import FEATURES
+from coassist.scenario import AUTHOR, ForceSensor, NominalIntent, get_object, make_task
+from coassist.sim import TrialSpec, run_spec, run_trial, run_trials
 
 
 @pytest.fixture(scope="module")
@@ -224,8 +214,8 @@ def test_the_applications_large_obstacle_makes_a_wide_detour_that_still_ends_at_
     from the nominal path than the evaluation's 6 cm box, and still settles on the target."""
     from coassist.experiments.realism import trial_stats
     from coassist.metrics import distance_to_target
-    from coassist.sim.tasks import OBSTACLES
-    from coassist.sim.world import TrialSpec, run_spec
+    from coassist.scenario.tasks import OBSTACLES
+    from coassist.sim import TrialSpec, run_spec
 
     dev = {}
     for name in ("small", "large"):

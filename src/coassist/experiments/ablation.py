@@ -194,12 +194,11 @@ def _mujoco_configs(cfg, obj: str, seed0: int, controller: str, intent: str) -> 
     from coassist.robot.drive import DriveConfig
     from coassist.sim.collect import dataset_specs
 
-    ctl = {"manual": "mg", "cooperative": "assistive", "cooperative-arbitrated": "assistive-arbitrated"}[controller]
     # The first trials of each operator in the point-mass cells (the same seeds: the same task and intent draws).
     specs = dataset_specs(controller=controller, users=cfg.application_users, tasks=(cfg.application_task,),
                           objects=(obj,), trials=cfg.application_trials, seed=seed0, preset=cfg.application_preset,
                           obstacle=OBSTACLE)  # fmt: skip
-    return [DriveConfig(world="mujoco", controller=ctl, task=s.task, object=obj, preset=s.preset, intent=intent,
+    return [DriveConfig(world="mujoco", controller=controller, task=s.task, object=obj, preset=s.preset, intent=intent,
                         user=s.user, seed=s.seed, obstacle=s.obstacle)  # fmt: skip
             for n, s in enumerate(specs) if n % cfg.application_trials < cfg.ablation_mujoco_trials]
 

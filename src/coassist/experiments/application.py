@@ -2,12 +2,13 @@
 
 Three simulated operators carry the board and the heavy load past an obstacle to a
 target with the assistive controller, the same with
-α arbitrated online (law :data:`coassist.sim.world.ARBITRATION`), impedance control (IMP)
+α arbitrated online (law :data:`coassist.control.presets.ARBITRATION`), impedance control (IMP)
 and manual guidance (MG). The assistive controllers' prediction is the learned source
 :data:`~coassist.experiments.intent_sources.APPLICATION_SOURCE` (the LSTM+FC trained on the
 operator's intent, the source that won the in-loop ablation on validation seeds; the thesis
 used each object's transferred model, trained on the tool's future). Every controller meets
-the same trials (same operators and seeds), so each assistive trial is compared with MG's on the same seed
+the same trials (same operators and seeds), so each assistive trial is compared with MG's on
+the same seed
 (:func:`paired_difference`). :func:`run_application` returns an
 :class:`ApplicationResult`; :func:`application_section` turns it into the report's section.
 """
@@ -32,7 +33,7 @@ from coassist.experiments.report import Claim, Section
 
 OBJECTS = ("board", "heavy")
 CONTROLLERS = ("cooperative", "cooperative-arbitrated", "impedance", "manual")
-#: The application's obstacle (coassist.sim.tasks.OBSTACLES): a real object midway between
+#: The application's obstacle (coassist.scenario.tasks.OBSTACLES): a real object midway between
 #: start and target, no path shown, a wide detour (thesis §5.2.3).
 OBSTACLE = "large"
 #: Issue #11's bar for an assistive controller that helps: this much less force than MG.
@@ -204,8 +205,8 @@ def _pm(result: dict[str, Any], name: str, scale: float, digits: int) -> str:
 def application_section(result: ApplicationResult) -> Section:
     """The report's section 4 and its claims; the controllers' constants come from their configs."""
     from coassist.config import CONTROL_PRESETS
-    from coassist.sim.tasks import OBSTACLES
-    from coassist.sim.world import ARBITRATION, IMPEDANCE_STIFFNESS
+    from coassist.control.presets import ARBITRATION, IMPEDANCE_STIFFNESS
+    from coassist.scenario.tasks import OBSTACLES
 
     size = OBSTACLES[OBSTACLE][0]
     preset = CONTROL_PRESETS.lookup(result.control_preset)

@@ -48,11 +48,11 @@ def training_datasets(ws: Workspace) -> list[Path]:
 
 def train_sources(ws: Workspace, datasets: list[Path]) -> dict[str, str]:
     """Train every learned source on ``datasets`` (module docstring) into ``models/<source>``; model folders by source."""
-    from coassist.intent import PRESETS as INTENT_PRESETS
+    from coassist.intent import MODEL_PRESETS
 
     models = {}
     for source, (preset_name, label) in LEARNED.items():
-        epochs = ws.config.epochs if preset_name is None else INTENT_PRESETS[preset_name].train.epochs
+        epochs = ws.config.epochs if preset_name is None else MODEL_PRESETS[preset_name].train.epochs
         models[source] = str(ws.train(source, datasets, init="scratch", epochs=epochs,
                                       preset_name=preset_name, label=label))  # fmt: skip
     return models

@@ -105,11 +105,11 @@ def markdown(result: dict[str, Any], title: str, notes: str = "") -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    from coassist.intent import PRESETS, load_trials
+    from coassist.intent import MODEL_PRESETS, load_trials
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=None, help="recordings folder (default: user-a of the real recordings)")
-    ap.add_argument("--preset", default="lstm", choices=sorted(PRESETS))  # its variants are LSTM variants
+    ap.add_argument("--preset", default="lstm", choices=sorted(MODEL_PRESETS))  # its variants are LSTM variants
     ap.add_argument("--epochs", type=int, default=None)
     ap.add_argument("--seeds", default="0", help="comma-separated seeds (each: another split and initialisation)")
     ap.add_argument("--threads", type=int, default=2)
@@ -123,7 +123,7 @@ def main(argv: Sequence[str] | None = None) -> None:
 
     args.data = args.data or default_real_data() / "user-a"
     seeds = [int(s) for s in args.seeds.split(",")]
-    preset = PRESETS[args.preset]
+    preset = MODEL_PRESETS[args.preset]
     result = compare_parameterisations(load_trials([args.data]), preset, seeds=seeds, epochs=args.epochs,
                                        threads=args.threads, train_stride=args.train_stride)
     notes = (f"Measured with `python -m coassist.experiments.parameterisation --data {args.data.name} --preset {args.preset} "

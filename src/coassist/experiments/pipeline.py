@@ -32,7 +32,7 @@ class ReproduceConfig:
     """
 
     name: str = "default"
-    intent_preset: str = "lstm"  # coassist.intent.training.PRESETS, for the simulated stages (as measured there)
+    intent_preset: str = "lstm"  # coassist.intent.training.MODEL_PRESETS, for the simulated stages (as measured there)
     real_intent_preset: str = "default"  # the shipped default predictor, on the real recordings
     control_preset: str = COLLECTION_PRESET
     # Positions ×3.5, not ×10: in decimetres the robot's gain on the learned prediction (an extrapolation of its
@@ -96,7 +96,7 @@ class ReproduceConfig:
 
 
 #: Reproduce presets by name.
-PRESETS: Registry[ReproduceConfig] = Registry("reproduce preset", {
+REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry("reproduce preset", {
     "default": ReproduceConfig(),
     "tiny": ReproduceConfig(
         name="tiny", trials_per_task=2, iterations=2, epochs=1, resume_epochs=1, transfer_epochs=1, train_stride=25,
@@ -188,11 +188,10 @@ class Workspace:
         """Train and save a model. ``test_fraction=0`` when the model is scored on a separate
         test set anyway: then every trial collected for training is trained on. ``label``:
         what a fresh model learns to predict (``WindowConfig.label``; None: the preset's)."""
-        from coassist.intent import PRESETS as INTENT_PRESETS
-        from coassist.intent import load_trials, train_model, write_model
+        from coassist.intent import MODEL_PRESETS, load_trials, train_model, write_model
 
         cfg = self.config
-        preset = INTENT_PRESETS[preset_name or cfg.intent_preset]
+        preset = MODEL_PRESETS[preset_name or cfg.intent_preset]
         if label is not None:
             preset = replace(preset, window=replace(preset.window, label=label))
         train_cfg = replace(preset.train, epochs=epochs, init=init, seed=cfg.seed, threads=cfg.threads,

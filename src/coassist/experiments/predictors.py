@@ -9,7 +9,7 @@ Protocols (split by trial, never tuned on a test trial):
 - ``user-b``: user-a's recordings plus two of user-b's for training, the third user-b
   recording held out; seed s holds out user-b trial s (mod 3).
 
-Each variant (a preset from :data:`coassist.intent.training.PRESETS`, optionally with
+Each variant (a preset from :data:`coassist.intent.training.MODEL_PRESETS`, optionally with
 TrainConfig overrides ``field=value``) is trained from scratch per seed; its baselines
 (ridge α, Kalman noise) are tuned on validation trials split from the training trials
 (``baselines.fit_tuned_baselines``), and everything is scored on the same ticks
@@ -35,12 +35,12 @@ PROTOCOLS = ("user-a", "user-b")
 
 def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
     """``preset[:field=value,...]`` -> (preset name, TrainConfig overrides); values parsed as JSON."""
-    from coassist.intent.training import PRESETS, TrainConfig
+    from coassist.intent.training import MODEL_PRESETS, TrainConfig
 
     name, _, rest = text.partition(":")
-    if name not in PRESETS:
+    if name not in MODEL_PRESETS:
         raise ValueError(
-            f"--variant {text!r}: unknown preset {name!r}; choose one of {sorted(PRESETS)}"
+            f"--variant {text!r}: unknown preset {name!r}; choose one of {sorted(MODEL_PRESETS)}"
         )
     known = {f.name for f in fields(TrainConfig)}
     overrides: dict[str, Any] = {}
@@ -63,7 +63,7 @@ def run(data: Path, variants: list[str], seeds: list[int], protocols: tuple[str,
     import torch
 
     from coassist.intent import evaluate_model, load_trials, train_model
-    from coassist.intent.training import PRESETS
+    from coassist.intent.training import MODEL_PRESETS
 
     torch.set_num_threads(threads)
     a = load_trials([data / "user-a"])
@@ -71,7 +71,7 @@ def run(data: Path, variants: list[str], seeds: list[int], protocols: tuple[str,
     out = []
     for text in variants:
         name, overrides = parse_variant(text)
-        preset = PRESETS[name]
+        preset = MODEL_PRESETS[name]
         for protocol in protocols:
             for seed in seeds:
                 cfg = replace(preset.train, seed=seed, threads=threads, **overrides)

@@ -46,7 +46,7 @@ DEFAULT_PRESETS = ("thesis-evaluation", "thesis-evaluation-dm")
 #: The discussion appended to docs/realism.md (see the report for the numbers).
 NOTES = """## How the simulated operator was tuned, and where it differs
 
-**Model** (details in the docstrings of `coassist.sim.operator`, `coassist.sim.objects`,
+**Model** (details in the docstrings of `coassist.scenario.operator`, `coassist.scenario.objects`,
 `coassist.sim.world`). User 0 ("the author"): arm stiffness 550 N/m relaxed, up to
 1300 N/m when co-contracting (κ = 12 000 N/m per m of filtered error, τ_a = 0.4 s),
 damping 10 N·s/m, half of the stiffness acting through an 80 ms reaction delay, force

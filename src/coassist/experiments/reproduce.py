@@ -60,7 +60,7 @@ from coassist.experiments.iterative import IterativeResult
 from coassist.experiments.pipeline import (
     EVAL_HORIZONS,
     ITERATION_TASKS,
-    PRESETS,
+    REPRODUCE_PRESETS,
     ReproduceConfig,
     Workspace,
     default_real_data,
@@ -79,7 +79,7 @@ from coassist.experiments.transfer import run_transfer, transfer_section
 __all__ = [
     "EVAL_HORIZONS",
     "ITERATION_TASKS",
-    "PRESETS",
+    "REPRODUCE_PRESETS",
     "ReproduceConfig",
     "default_real_data",
     "in_loop_errors",
@@ -169,7 +169,7 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
 
 
 def _sim_dt(config: ReproduceConfig) -> float:
-    from coassist.sim.world import get_preset
+    from coassist.control.presets import get_preset
 
     return float(get_preset(config.control_preset).impedance.dt)
 

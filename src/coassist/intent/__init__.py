@@ -6,13 +6,13 @@ from coassist.intent.evaluation import PREDICTORS, ModelEvaluation, evaluate_mod
 from coassist.intent.features import Scaler, WindowConfig, WindowSet, feature_names, split_trials, trial_features
 from coassist.intent.model import IntentModel, ModelFileError, ModelMismatchError, load_model, save_model
 from coassist.intent.network import IntentNet, NetworkConfig
-from coassist.intent.realtime import ModelIntent, RealtimeConfig, RealtimePredictor, load_intent_source
+from coassist.intent.realtime import ModelIntent, RealtimeConfig, RealtimePredictor, load_model_intent
 from coassist.intent.sources import LabeledTrial, load_trials
-from coassist.intent.training import PRESETS, Preset, TrainConfig, plot_losses, train_model, write_model
+from coassist.intent.training import MODEL_PRESETS, Preset, TrainConfig, plot_losses, train_model, write_model
 
 __all__ = [
     "PREDICTORS",
-    "PRESETS",
+    "MODEL_PRESETS",
     "IntentModel",
     "IntentNet",
     "LabeledTrial",
@@ -31,7 +31,7 @@ __all__ = [
     "constant_velocity_prediction",
     "evaluate_model",
     "feature_names",
-    "load_intent_source",
+    "load_model_intent",
     "load_model",
     "load_trials",
     "nominal_prediction",

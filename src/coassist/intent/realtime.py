@@ -72,7 +72,7 @@ __all__ = [
     "ProcessRunner",
     "RealtimeConfig",
     "RealtimePredictor",
-    "load_intent_source",
+    "load_model_intent",
     "make_runner",
 ]
 
@@ -492,7 +492,7 @@ class RealtimePredictor:
 
 
 class ModelIntent:
-    """A trained model as the simulator's intent source (``coassist.sim.IntentSource``).
+    """A trained model as the simulator's intent source (``coassist.interfaces.IntentSource``).
 
     The world calls :meth:`predict` once per tick with the last ``history`` feature rows
     and handles a raising or non-finite prediction itself (nominal fallback, flagged);
@@ -516,7 +516,7 @@ class ModelIntent:
         return self.model.predict(history)
 
 
-def load_intent_source(path: str) -> ModelIntent:
+def load_model_intent(path: str) -> ModelIntent:
     """A model folder as an intent source for the simulated loop (see :class:`ModelIntent`).
 
     Leaves torch's thread count alone: the simulator's worker processes set one thread

@@ -48,7 +48,7 @@ from coassist.registry import Registry
 
 __all__ = [
     "OPTIMIZERS",
-    "PRESETS",
+    "MODEL_PRESETS",
     "Preset",
     "TrainConfig",
     "build_model",
@@ -205,7 +205,7 @@ _LSTM = Preset(
     train=TrainConfig(epochs=15, batch_size=64, lr=3e-3, lr_final_ratio=0.05, optimizer="adam", mirror=True,
                       train_stride=4),
 )  # fmt: skip
-PRESETS: Registry[Preset] = Registry("intent-model preset", {
+MODEL_PRESETS: Registry[Preset] = Registry("intent-model preset", {
     "thesis": Preset(
         "thesis",
         WindowConfig(history=125, decimation=1, horizon=50, input_frame="absolute", target="absolute"),

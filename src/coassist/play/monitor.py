@@ -30,7 +30,7 @@ from coassist.play.session import (
     points_bounds,
 )
 from coassist.robot.drive import TASK_HEIGHT, DriveConfig, drive
-from coassist.sim.tasks import make_task
+from coassist.scenario.tasks import task_for_seed
 
 __all__ = ["DriveMonitor"]
 
@@ -58,7 +58,7 @@ class DriveMonitor(PlaySession):
 
     def next_task(self):
         c = self.drive_config
-        return make_task(c.task, np.random.default_rng(np.random.SeedSequence([c.seed, 0])))
+        return task_for_seed(c.task, c.seed)
 
     def start(self) -> bool:
         """Start the drive run (the monitor's only trial)."""

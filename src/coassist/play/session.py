@@ -12,9 +12,9 @@ the trial ends once that motion is over and the tool has stayed within
 ``arrive_radius`` of the target for ``dwell`` seconds (or at the time limit, or on a
 safety stop). The person picks the controller before each trial.
 
-Each trial runs on :class:`~coassist.play.world.PlayWorld` through the same
-:class:`~coassist.runtime.tick.ControlTick` and :func:`~coassist.runtime.loop.run_loop`
-as every other world, in its own thread, paced at 1/dt. After it, the session writes
+Each trial runs on :class:`~coassist.play.world.PlayWorld` through the same episode
+assembly (:mod:`coassist.runtime.episode`: the tick, :func:`~coassist.runtime.loop.run_loop`,
+the Trial) as every other world, in its own thread, paced at 1/dt. After it, the session writes
 the trial and scores it (thesis §5.2.4)::
 
     f_RMS = (1/T) Σ_k ‖w(k)‖                     eq. 5.9, w the measured hand wrench [N]
@@ -41,26 +41,27 @@ import numpy as np
 
 from coassist._checks import check_int, check_positive_scalar
 from coassist.config import APPLICATION_PRESET
-from coassist.data import Trial, TrialMeta, append_to_dataset, write_dataset
+from coassist.control.presets import CONTROLLER_KINDS, FORMER_NAMES, get_preset, make_controller
+from coassist.data import Trial, append_to_dataset, write_dataset
 from coassist.data.store import MANIFEST_NAME, manifest_files, read_dataset
-from coassist.interfaces import FEATURES, TrialContext, fault_names
+from coassist.interfaces import FEATURES, fault_names
 from coassist.metrics import f_rms, precision_sigma
 from coassist.play.hand import BrowserHand, SpringDamper
 from coassist.play.world import PlayWorld
-from coassist.robot.drive import CONTROLLERS
-from coassist.runtime.intent import RealtimeIntent, WindowIntent
-from coassist.runtime.loop import LoopLog, TargetDwell, run_loop
-from coassist.runtime.safety import SafetyLayer
-from coassist.runtime.tick import ControlTick, Plan
-from coassist.runtime.wrench import WrenchPipeline
-from coassist.sim.intent_source import load_intent_source
-from coassist.sim.tasks import TASK_KINDS, Task, make_task
-from coassist.sim.world import (
+from coassist.runtime.episode import (
     POINT_MASS_LIMITS,
     POINT_MASS_WRENCH,
-    get_preset,
-    make_controller,
+    EpisodeLabels,
+    build_episode,
+    episode_ticks,
+    plan_grid,
 )
+from coassist.runtime.intent import RealtimeIntent, WindowIntent
+from coassist.runtime.loop import run_loop
+from coassist.runtime.safety import SafetyLayer
+from coassist.runtime.wrench import WrenchPipeline
+from coassist.scenario.intent_source import load_intent_source
+from coassist.scenario.tasks import TASK_KINDS, Task, nominal_path, task_for_seed
 
 __all__ = ["PlayConfig", "PlaySession", "TrialResult", "view_bounds"]
 
@@ -77,7 +78,7 @@ class PlayConfig:
 
     user : the person's id: letters, digits, ``-`` and ``_``, at most 32 (it names the folder).
     out : the parent folder; the session lives in ``out/user``.
-    controllers : the controllers the page offers, from ``assistive``, ``imp``, ``mg``.
+    controllers : the controllers the page offers (:data:`coassist.control.presets.CONTROLLER_KINDS`).
     intent : ``nominal`` or a model folder written by ``coassist train``.
     preset : control preset (default :data:`coassist.config.APPLICATION_PRESET`, the main job's
         application preset, safe with a learned predictor in the loop).
@@ -95,7 +96,7 @@ class PlayConfig:
 
     user: str
     out: Path
-    controllers: tuple[str, ...] = ("mg", "imp", "assistive")
+    controllers: tuple[str, ...] = ("manual", "impedance", "cooperative")
     intent: str = "nominal"
     preset: str = APPLICATION_PRESET
     tasks: tuple[str, ...] = TASK_KINDS
@@ -114,8 +115,8 @@ class PlayConfig:
             raise ValueError(f"PlayConfig.user must be 1-32 letters, digits, '-' or '_' (it names a folder), got {self.user!r}")
         object.__setattr__(self, "out", Path(self.out))
         ctrl = tuple(self.controllers)
-        if not ctrl or len(set(ctrl)) != len(ctrl) or any(c not in CONTROLLERS for c in ctrl):
-            raise ValueError(f"PlayConfig.controllers must be distinct names from {tuple(CONTROLLERS)}, got {self.controllers!r}")
+        if not ctrl or len(set(ctrl)) != len(ctrl) or any(c not in CONTROLLER_KINDS for c in ctrl):
+            raise ValueError(f"PlayConfig.controllers must be distinct names from {tuple(CONTROLLER_KINDS)}, got {self.controllers!r}")
         object.__setattr__(self, "controllers", ctrl)
         if not isinstance(self.intent, str) or not self.intent or self.intent == "oracle":
             raise ValueError(f"PlayConfig.intent must be 'nominal' or a model folder (a person has no oracle), got {self.intent!r}")
@@ -165,8 +166,6 @@ class TrialResult:
 
 def view_bounds(tasks: tuple[str, ...], margin: float = 0.12) -> tuple[float, float, float, float]:
     """(x_min, x_max, y_min, y_max) [m] of the view: every protocol path ± margin, square-ish."""
-    from coassist.sim.tasks import nominal_path
-
     return points_bounds(np.concatenate([nominal_path(t).points for t in tasks]), margin)
 
 
@@ -195,7 +194,7 @@ class PlaySession:
         self.preset = get_preset(config.preset)
         self.bounds = view_bounds(config.tasks)
         # the game's gains are computed once per session, before the first trial
-        self._controllers = {name: make_controller(CONTROLLERS[name], self.preset) for name in config.controllers}
+        self._controllers = {name: make_controller(name, self.preset) for name in config.controllers}
         H = int(self.preset.game.horizon)
         self.source = load_intent_source(config.intent, horizon=max(H, 2))
         if int(self.source.horizon) < H:
@@ -236,8 +235,7 @@ class PlaySession:
         """The task of the next trial (the same until a trial is written)."""
         i = len(self.results)
         kind = self.config.tasks[i % len(self.config.tasks)]
-        rng = np.random.default_rng(np.random.SeedSequence([self.config.seed + i, 0]))
-        return make_task(kind, rng, motion_time=self.config.motion_time)
+        return task_for_seed(kind, self.config.seed + i, motion_time=self.config.motion_time)
 
     def scene(self, task: Task | None = None) -> dict[str, Any]:
         """What the page draws that does not move: path, obstacle, start, target, timing."""
@@ -254,7 +252,7 @@ class PlaySession:
     def summary(self) -> dict[str, Any]:
         """The running means per controller over this user's trials (f_RMS [N], σ [m])."""
         out: dict[str, Any] = {}
-        for name in CONTROLLERS:
+        for name in CONTROLLER_KINDS:
             rows = [r for r in self.results if r.controller == name]
             if not rows:
                 continue
@@ -327,22 +325,26 @@ class PlaySession:
         model = controller.model
         dt = float(model.dt)
         H = int(controller.horizon)
-        Hs = int(self.source.horizon)
-        time_limit = cfg.time_limit if cfg.time_limit is not None else 2.0 * task.planner.end_time + 10.0
-        n_max = int(math.ceil(time_limit / dt))
-        ref_abs = task.planner.grid(n_max + Hs + 1, dt)
+        n_max = episode_ticks(task, dt, cfg.time_limit)
+        ref_abs = plan_grid(task, dt, n_max, int(self.source.horizon))
         x0 = np.array(task.start, dtype=float)
         world = PlayWorld(model, self.hand, x0, paced=cfg.paced)
-        context = TrialContext(dt=dt, horizon=H, start=x0.copy(), target=np.array(task.target, dtype=float),
-                               reference=ref_abs, task=task.kind, user=cfg.user, object="none")  # fmt: skip
         intent = (WindowIntent(self.source, H) if self._realtime is None
                   else RealtimeIntent(self._realtime, model_id=self.source.model_id))  # fmt: skip
-        tick = ControlTick(controller, intent, WrenchPipeline(POINT_MASS_WRENCH, dt),
-                           SafetyLayer(POINT_MASS_LIMITS, dt, 6), command_space="effort")  # fmt: skip
-        tick.reset(Plan(ref_abs, np.array((x0[0], x0[1], 0.0, 0.0, 0.0, 0.0))), context)
-        dwell = TargetDwell(task.target, cfg.arrive_radius, int(math.ceil(cfg.dwell / dt)),
-                            int(math.ceil(task.planner.end_time / dt)))  # fmt: skip
         index = len(self.results)
+        arm = cfg.arm
+        episode = build_episode(
+            world=world, controller=controller, intent=intent, wrench=WrenchPipeline(POINT_MASS_WRENCH, dt),
+            safety=SafetyLayer(POINT_MASS_LIMITS, dt, 6), task=task, plan=ref_abs,
+            start_pose=np.array((x0[0], x0[1], 0.0, 0.0, 0.0, 0.0)), n_max=n_max,
+            labels=EpisodeLabels(user=cfg.user, object="none", seed=cfg.seed + index, source="sim", preset=cfg.preset,
+                                 model_id=self.source.model_id),
+            arrive_radius=cfg.arrive_radius, dwell=cfg.dwell,
+            extra={"operator": "person", "hand": "browser", "world": "play",
+                   "arm": {"stiffness": arm.stiffness, "damping": arm.damping, "force_limit": arm.force_limit},
+                   "controller_name": name, "trial_index": index},
+        )  # fmt: skip
+        dwell = episode.termination
 
         def termination(k: int, pose: np.ndarray) -> bool:
             left = self._left_at
@@ -363,37 +365,15 @@ class PlaySession:
             self.frame = frame
             self.publish(frame)
 
-        log = run_loop(world, tick, n_max, termination, on_tick=on_tick)
+        log = run_loop(episode.world, episode.tick, episode.n_max, termination, on_tick=on_tick)
         if self._abort is not None:
             self.publish({"type": "status", "level": "warn",
                           "text": "trial aborted (nothing written)" if self._abort == "aborted"
                           else "the hand left for too long: trial aborted (nothing written)"})  # fmt: skip
             return None
-        trial = self._trial(task, name, controller, log, ref_abs, index, world.overruns)
+        trial = episode.finish(log, {"deadline_misses": int(world.overruns),
+                                     "mean_tick_seconds": float(np.mean(log.compute))})  # fmt: skip
         return self._save(trial)
-
-    def _trial(self, task: Task, name: str, controller, log: LoopLog, ref_abs: np.ndarray, index: int,
-               misses: int) -> Trial:  # fmt: skip
-        cfg = self.config
-        n, dt, Hs = log.n, float(controller.model.dt), int(self.source.horizon)
-        if n == 0:
-            raise RuntimeError(f"the run ended before its first tick: {log.message or log.ended}")
-        prediction = log.prediction_or_plan(ref_abs, Hs)
-        extra = task.to_extra()
-        arm = cfg.arm
-        extra.update({
-            "ended": log.ended, "stop_message": log.message, "preset": cfg.preset, "operator": "person",
-            "hand": "browser", "world": "play", "arm": {"stiffness": arm.stiffness, "damping": arm.damping,
-                                                       "force_limit": arm.force_limit},
-            "arrive_radius": cfg.arrive_radius, "dwell": cfg.dwell, "features": list(FEATURES),
-            "controller_name": name, "trial_index": index, "deadline_misses": int(misses),
-            "mean_tick_seconds": float(np.mean(log.compute)),
-        })  # fmt: skip
-        meta = TrialMeta(user=cfg.user, task=task.kind, object="none", controller=controller.name,
-                         model_id=self.source.model_id, seed=cfg.seed + index, source="sim", dt=dt, extra=extra)  # fmt: skip
-        return Trial(meta=meta, time=np.arange(n) * dt, pose=log.pose, velocity=log.velocity, wrench=log.wrench,
-                     reference=log.reference, prediction=prediction, effort_h=log.effort_h, effort_r=log.effort_r,
-                     fault=log.fault)  # fmt: skip
 
     def _save(self, trial: Trial) -> TrialResult:
         folder = self.config.folder
@@ -419,7 +399,8 @@ def _score(trial: Trial, file: str, index: int) -> TrialResult:
     eps = float(extra.get("arrive_radius", 0.025))
     sigma = precision_sigma(trial.pose, target, trial.meta.dt, epsilon=eps, tau=SIGMA_TAU)
     return TrialResult(
-        file=file, index=index, task=trial.meta.task, controller=str(extra.get("controller_name", trial.meta.controller)),
+        file=file, index=index, task=trial.meta.task,
+        controller=FORMER_NAMES.get(name, name) if isinstance(name := extra.get("controller_name"), str) else trial.meta.controller,
         f_rms=f_rms(trial.wrench), sigma=None if math.isnan(sigma) else float(sigma), ended=str(extra.get("ended", "")),
         n_ticks=trial.n_samples, deadline_misses=int(extra.get("deadline_misses", 0)),
     )  # fmt: skip

@@ -18,7 +18,7 @@ flange (``tip_frame``, z out of the flange)::
 
 The tools, in the flange frame (the worlds start with the tool straight down and tool
 x = base x, so tool y = −base y and the objects' base-frame offsets of
-:mod:`coassist.sim.objects` enter with y flipped):
+:mod:`coassist.scenario.objects` enter with y flipped):
 
 - ``handle``: a 3D-printed cylinder handle, MOUNT_MASS kg, 0.12 m long; hand and TCP
   at its middle (0, 0, 0.06).
@@ -50,7 +50,7 @@ import numpy as np
 from coassist._checks import check_positive_scalar
 from coassist.robot.arms import get_arm
 from coassist.robot.kinematics import robot_data_path
-from coassist.sim.objects import get_object
+from coassist.scenario.objects import get_object
 
 __all__ = [
     "MOUNT_MASS",
@@ -99,7 +99,7 @@ class ToolGeometry:
 
 
 def tool_geometry(tool: str) -> ToolGeometry:
-    """The geometry of ``tool`` (one of :data:`TOOLS`), masses from :mod:`coassist.sim.objects`."""
+    """The geometry of ``tool`` (one of :data:`TOOLS`), masses from :mod:`coassist.scenario.objects`."""
     if tool not in TOOLS:
         raise ValueError(f"tool must be one of {TOOLS}, got {tool!r}")
     obj = get_object(tool)

@@ -1,29 +1,31 @@
 """Drive an arm (a UR5, a Franka Panda) with the assistive controller (or IMP / MG): MuJoCo physics or a real arm.
 
-This is the environment of the runtime for arm worlds: it builds a world, the task
-and its plan, the controller, the intent stage, the wrench pipeline, the safety layer
-and the tick, runs :func:`coassist.runtime.loop.run_loop`, and returns the run as a
-:class:`~coassist.data.Trial` in the same format as the point-mass world (plus the
-joint columns), so ``coassist train``, ``evaluate`` and ``show`` read it unchanged.
+This is the environment of the runtime for arm worlds: it builds what is the arm's own
+(the world, the simulated hand, the kinematics, the wrench pipeline for the tool's payload,
+the safety limits and workspace) and hands the rest to the episode assembly every world
+shares (:mod:`coassist.runtime.episode`: the task of the seed, the plan, the tick, the
+termination, :func:`~coassist.runtime.loop.run_loop` and the :class:`~coassist.data.Trial`,
+in the same format as the point-mass world plus the joint columns), so ``coassist train``,
+``evaluate`` and ``show`` read it unchanged.
 
 Worlds:
 
 - ``"mujoco"``: :class:`~coassist.robot.mujoco_world.MujocoUR5World` (``robot="panda"``:
   :class:`~coassist.robot.mujoco_world.MujocoArmWorld`, the tasks moved into the arm's
   reach by :func:`move_tasks`) with the simulated operator lifted to 3-D
-  (:class:`~coassist.sim.hand.SimulatedHand`) or any
+  (:class:`~coassist.scenario.hand.SimulatedHand`) or any
   :class:`~coassist.runtime.world.HandOperator`; deterministic for a seed.
 - ``"ur"``: :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`; the person at the handle
   is the operator. The task is laid out from wherever the TCP is when the run starts
   (coassist never moves a real arm to a start pose on its own).
 
-Controllers by name: ``assistive`` (the cooperative game), ``imp`` (impedance control,
-eq. 5.4), ``mg`` (manual guidance, eq. 5.5).
+Controllers by kind (:data:`coassist.control.presets.CONTROLLER_KINDS`): ``cooperative`` (the
+assistive controller, the cooperative game), ``cooperative-arbitrated``, ``impedance`` (IMP, eq. 5.4),
+``manual`` (MG, eq. 5.5).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -31,26 +33,24 @@ import numpy as np
 
 from coassist._checks import is_integer
 from coassist.config import APPLICATION_PRESET, ImpedanceParameters
-from coassist.data import Trial, TrialMeta
-from coassist.interfaces import FEATURES, NAMED_INTENTS, TrialContext
+from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
+from coassist.data import Trial
+from coassist.interfaces import FEATURES, NAMED_INTENTS
+from coassist.runtime.episode import EpisodeLabels, build_episode, episode_ticks, plan_grid
 from coassist.runtime.intent import RealtimeIntent, WindowIntent
-from coassist.runtime.loop import LoopLog, TargetDwell, run_loop
 from coassist.runtime.safety import SafetyLayer, SafetyLimits
-from coassist.runtime.tick import ControlTick, Plan, TickConfig
+from coassist.runtime.tick import TickConfig
 from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPipeline
-from coassist.sim.hand import SimulatedHand
-from coassist.sim.intent_source import load_intent_source
-from coassist.sim.objects import get_object
-from coassist.sim.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
-from coassist.sim.tasks import OBSTACLES, TASK_KINDS, make_task
-from coassist.sim.world import get_preset, make_controller
-from coassist.spatial import rotation_vector, unwrap_rotation_vectors
+from coassist.scenario.hand import SimulatedHand
+from coassist.scenario.intent_source import load_intent_source
+from coassist.scenario.objects import get_object
+from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
+from coassist.scenario.seeds import trial_rngs
+from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, task_for_seed
+from coassist.spatial import rotation_vector
 
-__all__ = ["CONTROLLERS", "DriveConfig", "WORLDS", "WORLD_ROBOTS", "drive", "move_tasks", "workspace_for"]
+__all__ = ["DriveConfig", "WORLDS", "WORLD_ROBOTS", "drive", "move_tasks", "workspace_for"]
 
-#: Controller names of the drive command → the simulator's controller kinds.
-CONTROLLERS = {"assistive": "cooperative", "assistive-arbitrated": "cooperative-arbitrated", "imp": "impedance",
-               "mg": "manual"}  # fmt: skip
 WORLDS = ("mujoco", "ur", "franka")
 #: The arms (``--robot``, :data:`coassist.robot.arms.ARMS`) each world drives; the first is its default.
 WORLD_ROBOTS = {"mujoco": ("ur5", "panda"), "ur": ("ur5",), "franka": ("panda", "fr3")}
@@ -73,8 +73,8 @@ MAX_TIME_LIMIT = 600.0
 class DriveConfig:
     """One run on a UR5 (every field validated, errors name it as ``DriveConfig.<field>``).
 
-    world : "mujoco", "ur" or "franka".  controller : "assistive", "assistive-arbitrated" (α set
-        every tick by the simulator's arbitration law), "imp" or "mg".
+    world : "mujoco", "ur" or "franka".  controller : "cooperative", "cooperative-arbitrated" (α set
+        every tick by coassist.control.presets.ARBITRATION), "impedance" or "manual".
     robot : the arm (:data:`WORLD_ROBOTS`: "ur5" or "panda" in MuJoCo, "ur5" on "ur",
         "panda" or "fr3" on "franka"); None: the world's first.
     task : a task kind (linear, curved, sinusoidal, z).  object : handle, board or heavy.
@@ -82,7 +82,7 @@ class DriveConfig:
         job's application preset, safe with a learned predictor in the loop).
     intent : "nominal", "oracle" (MuJoCo only) or a model folder.
     user : simulated operator index (MuJoCo).  seed : task, operator and sensor seed.
-    obstacle : the obstacle the operator goes around (coassist.sim.tasks.OBSTACLES; "small"
+    obstacle : the obstacle the operator goes around (coassist.scenario.tasks.OBSTACLES; "small"
         is the evaluation's box, "large" the application's).
     rate_hz : 125 (UR CB3) or 500 (e-Series); the MuJoCo world runs either.
     full_pose : control all 6 DOFs (orientation error as a rotation vector) instead of x-y.
@@ -97,7 +97,7 @@ class DriveConfig:
     """
 
     world: str = "mujoco"
-    controller: str = "assistive"
+    controller: str = "cooperative"
     task: str = "linear"
     object: str = "handle"
     preset: str = APPLICATION_PRESET
@@ -123,8 +123,8 @@ class DriveConfig:
             object.__setattr__(self, "robot", WORLD_ROBOTS[self.world][0])
         elif self.robot not in WORLD_ROBOTS[self.world]:
             raise bad("robot", f"one of {WORLD_ROBOTS[self.world]} with world {self.world!r}")
-        if self.controller not in CONTROLLERS:
-            raise bad("controller", f"one of {tuple(CONTROLLERS)}")
+        if self.controller not in CONTROLLER_KINDS:
+            raise bad("controller", f"one of {tuple(CONTROLLER_KINDS)}")
         if self.task not in TASK_KINDS:
             raise bad("task", f"one of {TASK_KINDS}")
         get_object(self.object)
@@ -155,7 +155,7 @@ class DriveConfig:
 
 
 def _controller(config: DriveConfig):
-    """The preset's controller at the run's rate, on 2 (x-y) or 6 DOFs (the simulator's make_controller)."""
+    """The preset's controller at the run's rate, on 2 (x-y) or 6 DOFs (coassist.control.presets.make_controller)."""
     preset = get_preset(config.preset)
     imp, game = preset.impedance, preset.game
     dt = config.dt
@@ -174,7 +174,7 @@ def _controller(config: DriveConfig):
         gp = replace(gp, Q_hh=six(gp.Q_hh), Q_hr=six(gp.Q_hr), Q_rh=six(gp.Q_rh), Q_rr=six(gp.Q_rr),
                      R_h=gp.R_h + (gp.R_h[0],) * 4, R_r=gp.R_r + (gp.R_r[0],) * 4)  # fmt: skip
     impedance = ImpedanceParameters(M=M, D=D, K=(0.0,) * len(M), dt=dt)
-    return make_controller(CONTROLLERS[config.controller], replace(preset, impedance=impedance, game=gp))
+    return make_controller(config.controller, replace(preset, impedance=impedance, game=gp))
 
 
 def workspace_for(reference: np.ndarray, start_pose: np.ndarray, margin: float = 0.25, z_margin: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
@@ -200,55 +200,37 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
     dt = config.dt
     controller = _controller(config)
     H = int(controller.horizon)
-    size, placement = OBSTACLES[config.obstacle]
-    task = make_task(config.task, np.random.default_rng(np.random.SeedSequence([config.seed, 0])),
-                     obstacle_size=size, obstacle_range=placement)  # the simulator's draw (sim.world.run_spec)
+    task = task_for_seed(config.task, config.seed, obstacle=config.obstacle)  # the same draw in every world
     profile = operator_profile(config.user)
     obj = get_object(config.object)
-    time_limit = config.time_limit if config.time_limit is not None else 2.0 * task.planner.end_time + 10.0
-    n_max = int(math.ceil(time_limit / dt))
-    n_grid = n_max + max(H, 64) + 1
-    ref_abs = task.planner.grid(n_grid, dt)
-    rng_intent, rng_motor = (np.random.default_rng(s) for s in np.random.SeedSequence([config.seed, 1]).spawn(2))
-    intent_traj = intent_trajectory(task, profile, rng_intent, n_grid, dt)
-
+    simulated = config.world == "mujoco"
+    n_max = episode_ticks(task, dt, config.time_limit)
     built_here = world is None
     intent_stage = None
-    intent_pos = intent_traj.positions
-    start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
-    robot = config.robot or WORLD_ROBOTS[config.world][0]  # DriveConfig sets it; `or` for the type checker
-    if config.world == "mujoco" and robot != "ur5":  # the tasks, laid out for the UR5, moved to this arm
-        ref_abs, intent_pos, start = move_tasks(robot, ref_abs, intent_pos)
-    if world is None:
-        if config.world == "mujoco":
-            from coassist.robot.mujoco_world import MujocoArmWorld, MujocoUR5World
-
-            # A real-time predictor runs against the wall clock: so must the world it serves.
-            world = (MujocoUR5World if robot == "ur5" else MujocoArmWorld)(
-                config.object, robot=robot, control_dt=dt, start=start, seed=config.seed, view=view,
-                realtime=view or bool(config.realtime_intent))  # fmt: skip
-        elif config.world == "ur":
-            from coassist.robot.ur_rtde_world import URRTDEWorld
-
-            if not host:
-                raise ValueError("the real arm needs --host (the robot's IP address)")
-            world = URRTDEWorld(host, frequency=float(config.rate_hz))
-        elif config.world == "franka":
-            from coassist.robot.franka_world import FrankaWorld
-
-            if not host:
-                raise ValueError("the Franka needs --host (the robot's FCI address)")
-            world = FrankaWorld(host, frequency=float(config.rate_hz), arm=robot)
     try:
+        intent_stage, model_id = _intent_stage(config, H, intent_source)
+        ref_abs = plan_grid(task, dt, n_max, max(H, int(intent_stage.horizon)))
+        rng_intent, rng_motor = trial_rngs(config.seed, 2)
+        intent_traj = intent_trajectory(task, profile, rng_intent, ref_abs.shape[0], dt)
+        intent_pos = intent_traj.positions
+        target = np.array(task.target, dtype=float)
+        start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
+        robot = config.robot or WORLD_ROBOTS[config.world][0]  # DriveConfig sets it; `or` for the type checker
+        if simulated and robot != "ur5":  # the tasks, laid out for the UR5, moved to this arm
+            ref_abs, intent_pos, start = move_tasks(robot, ref_abs, intent_pos)
+            target = target + _task_shift(robot)
+        if world is None:
+            world = _build_world(config, robot, start, host, view)
         state0 = world.read()
         start_pose = np.asarray(state0.tool_pose, dtype=float).copy()
-        if config.world != "mujoco":
-            # lay the task out from where the TCP is: shift the plan and the intent
+        if not simulated:
+            # lay the task out from where the TCP is: shift the plan
             shift = start_pose[:2] - ref_abs[0, :2]
             ref_abs = ref_abs.copy()
             ref_abs[:, :2] += shift
-        if operator is None and config.world == "mujoco" and hasattr(world, "operator"):
-            noise = motor_noise(profile, rng_motor, n_grid, dt)  # as long as the intent: stop() may step on
+            target = target + shift
+        if operator is None and simulated and hasattr(world, "operator"):
+            noise = motor_noise(profile, rng_motor, ref_abs.shape[0], dt)  # as long as the intent: stop() may step on
             arm = OperatorArm(profile, intent_pos, dt, noise)
             hand_pose, _ = world.hand_pose()
             operator = SimulatedHand(arm, dt, hand_pose, full_pose=config.full_pose,
@@ -267,36 +249,64 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
         if limits.workspace_lower is None:
             lo, hi = workspace_for(ref_abs, start_pose)
             limits = replace(limits, workspace_lower=tuple(lo), workspace_upper=tuple(hi))
-        safety = SafetyLayer(limits, dt, int(getattr(world, "n_joints", 6)))
-        intent_stage, model_id = _intent_stage(config, H, intent_source)
         dofs = (0, 1, 2, 3, 4, 5) if config.full_pose else (0, 1)
-        tick = ControlTick(controller, intent_stage, wrench, safety, command_space="joint_velocity",
-                           kinematics=kin, config=TickConfig(dofs=dofs))  # fmt: skip
-        context = TrialContext(dt=dt, horizon=H, start=start_pose[:2].copy(), target=ref_abs[-1, :2].copy(),
-                               reference=ref_abs, task=task.kind, user=profile.name, object=obj.name,
-                               true_intent=intent_pos)  # fmt: skip
-        tick.reset(Plan(ref_abs, start_pose), context)
+        episode = build_episode(
+            world=world, controller=controller, intent=intent_stage, wrench=wrench,
+            safety=SafetyLayer(limits, dt, int(getattr(world, "n_joints", 6))), task=task, plan=ref_abs,
+            start_pose=start_pose, n_max=n_max, target=target,
+            labels=EpisodeLabels(user=profile.name if simulated else "operator", object=obj.name, seed=config.seed,
+                                 source={"mujoco": "mujoco", "ur": "ur5"}.get(config.world, config.world),
+                                 preset=config.preset, model_id=model_id),
+            # the simulated operator's intent: the oracle's in any world (a test's simulated arm behind a
+            # real-arm link), the Trial's intent column only where that operator held the handle
+            true_intent=intent_pos, intent_end_time=intent_traj.end_time, log_intent=simulated,
+            kinematics=kin, tick_config=TickConfig(dofs=dofs),
+            extra={
+                "world": config.world,
+                # The admittance the tick integrates from wrench + u_r (the label 'hand_alone' removes u_r through it).
+                "plant": {name: [float(v) for v in np.diag(getattr(controller.model, name))] for name in ("M", "D", "K")},
+                "robot": config.robot, "object": obj.to_extra(), "rate_hz": config.rate_hz,
+                "full_pose": config.full_pose, "start_pose": [float(v) for v in start_pose],
+                "limits": config.limits.describe(),
+                "dofs": list(dofs),
+            },
+        )  # fmt: skip
         # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
         wrench.zero(np.asarray(state0.wrench, dtype=float)[None], np.asarray(state0.sensor_rotation, dtype=float)[None])
         if confirm is not None and not confirm(limits.describe()):
             raise RuntimeError("not confirmed: the robot was not moved")
-        t_done = max(task.planner.end_time, intent_traj.end_time)
-        termination = TargetDwell(ref_abs[-1, :2], 0.025, int(math.ceil(5.0 / dt)), int(math.ceil(t_done / dt)))
-        log = run_loop(world, tick, n_max, termination, deadline=dt if getattr(world, "realtime", False) else None,
-                       on_tick=on_tick)  # fmt: skip
-        detail = getattr(world, "stop_detail", None)  # a world that knows why the robot stopped says so
-        if detail and log.ended in ("robot_stop", "safety_stop"):
-            log.message = detail
+        log = episode.run(deadline=dt if getattr(world, "realtime", False) else None, on_tick=on_tick)
     finally:
-        if built_here:
+        if built_here and world is not None:
             world.close()
         if isinstance(intent_stage, RealtimeIntent):
             close = getattr(intent_stage.predictor, "close", None)
             if close is not None:
                 close()
-    return _trial(config, log, ref_abs, H, intent_pos if config.world == "mujoco" else None, task, obj,
-                  profile.name if config.world == "mujoco" else "operator", model_id, controller, dofs, start_pose,
-                  wrench.bias)  # fmt: skip
+    return episode.finish(log, {"sensor_bias": [float(v) for v in wrench.bias]})
+
+
+def _build_world(config: DriveConfig, robot: str, start: tuple[float, float, float], host: str | None, view: bool):
+    """The world ``config.world`` for ``robot``: MuJoCo with the TCP at ``start``, or the real arm at ``host``."""
+    dt = config.dt
+    if config.world == "mujoco":
+        from coassist.robot.mujoco_world import MujocoArmWorld, MujocoUR5World
+
+        # A real-time predictor runs against the wall clock: so must the world it serves.
+        return (MujocoUR5World if robot == "ur5" else MujocoArmWorld)(
+            config.object, robot=robot, control_dt=dt, start=start, seed=config.seed, view=view,
+            realtime=view or bool(config.realtime_intent))  # fmt: skip
+    if config.world == "ur":
+        from coassist.robot.ur_rtde_world import URRTDEWorld
+
+        if not host:
+            raise ValueError("the real arm needs --host (the robot's IP address)")
+        return URRTDEWorld(host, frequency=float(config.rate_hz))
+    from coassist.robot.franka_world import FrankaWorld
+
+    if not host:
+        raise ValueError("the Franka needs --host (the robot's FCI address)")
+    return FrankaWorld(host, frequency=float(config.rate_hz), arm=robot)
 
 
 def move_tasks(robot: str, ref_abs: np.ndarray, intent: np.ndarray):
@@ -304,12 +314,19 @@ def move_tasks(robot: str, ref_abs: np.ndarray, intent: np.ndarray):
     (``ArmDescription.task_centre``), and the start TCP position (3,) at its task height [m]."""
     from coassist.robot.arms import get_arm
 
-    ur5, arm = get_arm("ur5").task_centre, get_arm(robot).task_centre
-    shift = np.array(arm[:2]) - np.array(ur5[:2])
+    shift = _task_shift(robot)
     ref_abs, intent = ref_abs.copy(), intent.copy()
     ref_abs[:, :2] += shift
     intent[:, :2] += shift
-    return ref_abs, intent, (float(ref_abs[0, 0]), float(ref_abs[0, 1]), float(arm[2]))
+    return ref_abs, intent, (float(ref_abs[0, 0]), float(ref_abs[0, 1]), float(get_arm(robot).task_centre[2]))
+
+
+def _task_shift(robot: str) -> np.ndarray:
+    """(2,) [m] from the UR5's task centre to ``robot``'s (x-y)."""
+    from coassist.robot.arms import get_arm
+
+    ur5, arm = get_arm("ur5").task_centre, get_arm(robot).task_centre
+    return np.array(arm[:2]) - np.array(ur5[:2])
 
 
 def _kinematics_for(world: Any):
@@ -352,43 +369,3 @@ def _intent_stage(config: DriveConfig, H: int, source: Any):
         return RealtimeIntent(predictor, model_id=mid), mid
     src = load_intent_source(config.intent, horizon=max(H, 2))
     return WindowIntent(src, H), src.model_id
-
-
-def _trial(config: DriveConfig, log: LoopLog, ref_abs, H, intent, task, obj, user, model_id, controller, dofs,
-           start_pose, bias) -> Trial:  # fmt: skip
-    n = log.n
-    if n == 0:
-        raise RuntimeError(f"the run ended before its first tick: {log.message or log.ended}")
-    d = len(dofs)
-    ref = log.reference
-    pred2 = log.prediction_or_plan(ref_abs, H)
-    if d > 2:
-        pred = np.empty((n, pred2.shape[1], d))
-        pred[:, :, :2] = pred2
-        pred[:, :, 2:] = start_pose[list(dofs[2:])]
-    else:
-        pred = pred2
-    intent_d = None
-    if intent is not None:
-        intent_d = np.empty((n, d))
-        intent_d[:, :2] = intent[:n]
-        if d > 2:
-            intent_d[:, 2:] = start_pose[list(dofs[2:])]
-    extra = task.to_extra()
-    extra.update({
-        "ended": log.ended, "stop_message": log.message, "preset": config.preset, "world": config.world,
-        # The admittance the tick integrates from wrench + u_r (the label 'hand_alone' removes u_r through it).
-        "plant": {name: [float(v) for v in np.diag(getattr(controller.model, name))] for name in ("M", "D", "K")},
-        "robot": config.robot, "object": obj.to_extra(), "rate_hz": config.rate_hz, "full_pose": config.full_pose,
-        "start_pose": [float(v) for v in start_pose], "sensor_bias": [float(v) for v in bias],
-        "limits": config.limits.describe(), "features": list(FEATURES), "dofs": list(dofs),
-    })  # fmt: skip
-    meta = TrialMeta(user=user, task=task.kind, object=obj.name, controller=controller.name, model_id=model_id,
-                     seed=config.seed, source={"mujoco": "mujoco", "ur": "ur5"}.get(config.world, config.world), dt=config.dt, extra=extra)  # fmt: skip
-    pose = log.pose
-    if config.full_pose:  # rotation vectors continuous through ±π: a tool pointing down sits at |rv| ≈ π
-        pose = pose.copy()
-        pose[:, 3:6] = unwrap_rotation_vectors(pose[:, 3:6], start_pose[3:6])
-    return Trial(meta=meta, time=np.arange(n) * config.dt, pose=pose, velocity=log.velocity, wrench=log.wrench,
-                 reference=ref, prediction=pred, intent=intent_d, effort_h=log.effort_h, effort_r=log.effort_r,
-                 fault=log.fault, joints=log.joints, joint_velocity=log.joint_velocity)  # fmt: skip

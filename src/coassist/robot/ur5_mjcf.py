@@ -22,7 +22,7 @@ Below the flange (``tool0``, z out of the flange)::
 The force and torque sensors measure the interaction between the subtree below the
 sensor (tool0 + tool) and the wrist. The tools, in the tool0 frame (the world chooses
 a start pose with the tool straight down and tool x = base x, so tool y = −base y and
-the objects' base-frame offsets of :mod:`coassist.sim.objects` enter with y flipped):
+the objects' base-frame offsets of :mod:`coassist.scenario.objects` enter with y flipped):
 
 - ``handle``: a 3D-printed cylinder handle, MOUNT_MASS kg, 0.12 m long; hand and TCP
   at its middle (0, 0, 0.06).

@@ -2,7 +2,7 @@
 
 A :class:`~coassist.runtime.world.HandOperator` returns the (6,) wrench the hand applies
 at the handle, base frame [N, N·m]. The simulated operator lives with the simulator
-(:class:`coassist.sim.hand.SimulatedHand`); a person in a browser is another one.
+(:class:`coassist.scenario.hand.SimulatedHand`); a person in a browser is another one.
 """
 
 from __future__ import annotations

@@ -4,14 +4,14 @@ Every tick k (t = k·dt, dt = the controller model's, 0.008 s in the presets):
 
 1. the robot reads its tip pose x(k), velocity v(k) and the force sensor's latest
    reading w(k) (the force transmitted through the object, see
-   :mod:`coassist.sim.objects`); the planner gives the nominal reference;
+   :mod:`coassist.scenario.objects`); the planner gives the nominal reference;
 2. the intent source predicts the operator's positions for k+1 … k+H from the last
    ``history`` samples of [pose, velocity, wrench, reference]
-   (:mod:`coassist.sim.intent_source`), and the world turns them into ref_h;
+   (:mod:`coassist.scenario.intent_source`), and the world turns them into ref_h;
 3. the controller gives the robot effort u_r(k) = ``controller.step(z, ref_h, ref_r, w)``
    with z = [x − x0; v], x0 the start point (refs are shifted the same way);
 4. the operator's arm gives the hand force u_h(k) (eq. 4.1 with delay, adaptation and
-   noise, :mod:`coassist.sim.operator`);
+   noise, :mod:`coassist.scenario.operator`);
 5. the plant (M + m) a + D v = u_h + u_r + sensor noise + residual bias (the object's
    mass m adds to the rendered inertia) is integrated exactly over dt (zero-order hold);
    the sensor's next reading is u_h − m a (+ the board's yaw term) + noise + residual
@@ -26,9 +26,11 @@ The trial ends when both the planner and the operator's own motion are over and 
 tip has stayed within ``arrive_radius`` of the target for ``dwell`` seconds, or at
 the time limit (meta.extra["ended"] says which).
 
-Determinism: every random draw comes from Generators spawned from the trial seed
-(SeedSequence([seed, 1]) for the trial, SeedSequence([seed, 0]) for the task in
-:func:`run_spec`), and the loop has no other source of variation: the same seed gives
+The trial is assembled, run and logged by :mod:`coassist.runtime.episode`, as in every
+other world; this module builds the world (:class:`PointMassWorld`) and the batches.
+
+Determinism: every random draw comes from Generators of the trial seed
+(:mod:`coassist.scenario.seeds`: the trial's stream here, the task's in :func:`run_spec`), and the loop has no other source of variation: the same seed gives
 the same Trial bit for bit, in any process with the same numpy/BLAS build and BLAS
 thread count (the game's gains come from LAPACK/BLAS, whose rounding depends on how
 the work is split between threads: OPENBLAS_NUM_THREADS=1 vs 2 differ in the last bits).
@@ -49,86 +51,36 @@ from dataclasses import dataclass
 import numpy as np
 
 from coassist._checks import check_int
-from coassist.config import CONTROL_PRESETS, THESIS_EVALUATION, ControlPreset
-from coassist.control.arbitration import ArbitratedController, ArbitrationParameters
-from coassist.control.controllers import AssistiveController, ImpedanceControl, ManualGuidance
-from coassist.control.game import cooperative_game
+from coassist.config import THESIS_EVALUATION
+from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
 from coassist.data import Trial, TrialMeta
-from coassist.interfaces import FEATURES, NAMED_INTENTS, IntentSource, TrialContext
+from coassist.interfaces import NAMED_INTENTS, IntentSource
 from coassist.model.impedance import ImpedanceModel
-from coassist.registry import UnknownNameError
+from coassist.runtime.episode import (
+    ARRIVE_RADIUS,
+    DWELL,
+    POINT_MASS_LIMITS,
+    POINT_MASS_WRENCH,
+    EpisodeLabels,
+    build_episode,
+    episode_ticks,
+    plan_grid,
+    run_episode,
+)
 from coassist.runtime.intent import WindowIntent
-from coassist.runtime.loop import TargetDwell, run_loop
-from coassist.runtime.safety import SafetyLayer, SafetyLimits
-from coassist.runtime.tick import ControlTick, Plan
+from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.world import Command, RobotState
-from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
-from coassist.sim.intent_source import NominalIntent, load_intent_source
-from coassist.sim.objects import CarriedObject, ForceSensor, get_object
-from coassist.sim.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise, operator_profile
-from coassist.sim.tasks import OBSTACLES, TASK_KINDS, Task, make_task
-
-#: Controller kinds of :class:`TrialSpec`. "cooperative-arbitrated": the cooperative game with
-#: α set every tick by the law :data:`ARBITRATION`.
-CONTROLLER_KINDS = ("cooperative", "impedance", "manual", "cooperative-arbitrated")
-#: The arbitration law of "cooperative-arbitrated": α from the distance to where the robot's
-#: plan ends (coassist.control.arbitration, law "target"). Chosen on validation seeds of the
-#: application scenario (docs/assistance.md), against the hand-force law.
-ARBITRATION = ArbitrationParameters(law="target", alpha_min=0.3, alpha_max=0.9, target_scale=0.05)
-#: Spring of the IMP baseline toward the nominal reference [N/m] (eq. 5.4). The thesis
-#: does not give it (its K_i = 0 would make IMP equal MG); 200 N/m pulls back with
-#: 10 N at a 5 cm deviation, about what the operators push with.
-IMPEDANCE_STIFFNESS = 200.0
-
-# The control presets and the position scales live with the thesis' presets in
-# coassist.config (layer 0, below every user of them); the registry is re-exported here.
-#: Control presets by name (a :class:`coassist.registry.Registry`).
-PRESETS = CONTROL_PRESETS
-
-
-def get_preset(name: str) -> ControlPreset:
-    """The control preset ``name``; ``ValueError`` "preset '<name>': no such control preset; did you mean …"."""
-    try:
-        return PRESETS.lookup(name)
-    except UnknownNameError as exc:
-        raise ValueError(f"preset {exc}") from None
-
-
-def plant_model(preset: ControlPreset) -> ImpedanceModel:
-    """The free plant M a + D v = u (K = 0) of a preset."""
-    imp = preset.impedance
-    return ImpedanceModel(np.diag(imp.M), np.diag(imp.D), np.zeros((imp.n_dof, imp.n_dof)), imp.dt)
-
-
-def make_controller(kind: str, preset: ControlPreset):
-    """A controller of ``kind`` (one of :data:`CONTROLLER_KINDS`) built from ``preset``."""
-    model = plant_model(preset)
-    if kind == "cooperative":
-        return AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
-    if kind == "cooperative-arbitrated":
-        assistive = AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
-        return ArbitratedController(assistive, ARBITRATION)
-    if kind == "impedance":
-        return ImpedanceControl(model, IMPEDANCE_STIFFNESS * np.eye(model.n_dof), effort_limit=preset.effort_limit)
-    if kind == "manual":
-        return ManualGuidance(model)
-    raise ValueError(f"controller must be one of {CONTROLLER_KINDS}, got {kind!r}")
+from coassist.runtime.wrench import WrenchPipeline
+from coassist.scenario.intent_source import NominalIntent, load_intent_source
+from coassist.scenario.objects import CarriedObject, ForceSensor, get_object
+from coassist.scenario.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise, operator_profile
+from coassist.scenario.seeds import trial_rngs
+from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, Task, task_for_seed
 
 
 def _diag2(matrix: np.ndarray, name: str) -> None:
     if matrix.shape != (2, 2) or matrix[0, 1] != 0.0 or matrix[1, 0] != 0.0:
         raise ValueError(f"the simulator needs a 2-DOF (x-y) plant with diagonal {name}, got {matrix.tolist()}")
-
-
-#: The point-mass world's sensor reading is already zeroed and carries no payload (the
-#: object's mass acts physically): its wrench pipeline only checks (stale, spike,
-#: saturation, non-finite) and neither filters nor shrinks, so the thesis' loop is kept.
-POINT_MASS_WRENCH = WrenchConfig(cutoff_hz=None, deadband_force=0.0, deadband_torque=0.0, force_range=327.67,
-                                 torque_range=30.0)  # fmt: skip
-#: The point-mass world is an ideal admittance robot, not an arm: no joints, and its
-#: simulated operators move up to ~0.4 m/s, so its tool-speed limit is the UR's 1 m/s
-#: (coassist's arm worlds default to 0.25 m/s).
-POINT_MASS_LIMITS = SafetyLimits(tool_speed=1.0)
 
 
 class PointMassWorld:
@@ -137,7 +89,7 @@ class PointMassWorld:
     An ``effort`` world (:mod:`coassist.runtime.world`): it renders the impedance model
     physically, (M + m) a + D v = u_h + u_r + n_s + b_res (module docstring, step 5),
     so the tick sends it the robot's effort u_r. It owns time (tick k), the operator's
-    arm (:class:`~coassist.sim.operator.OperatorArm`, called inside :meth:`apply`), the
+    arm (:class:`~coassist.scenario.operator.OperatorArm`, called inside :meth:`apply`), the
     board's yaw and the force sensor. All randomness comes from ``seed`` exactly as
     before this world was split out of the loop, so trials are bit-identical.
     """
@@ -150,7 +102,7 @@ class PointMassWorld:
                  n_max: int, n_grid: int, sensor: ForceSensor) -> None:  # fmt: skip
         dt = float(model.dt)
         self.dt = dt
-        rng_intent, rng_motor, rng_sensor = (np.random.default_rng(s) for s in np.random.SeedSequence([seed, 1]).spawn(3))
+        rng_intent, rng_motor, rng_sensor = trial_rngs(seed, 3)
         self.intent = intent_trajectory(task, operator, rng_intent, n_grid, dt)
         noise_h = motor_noise(operator, rng_motor, n_max, dt)
         self.raw_bias = sensor.raw_bias(obj, rng_sensor)
@@ -281,8 +233,8 @@ def run_trial(
     seed: int = 0,
     *,
     sensor: ForceSensor | None = None,
-    arrive_radius: float = 0.025,
-    dwell: float = 5.0,
+    arrive_radius: float = ARRIVE_RADIUS,
+    dwell: float = DWELL,
     time_limit: float | None = None,
     preset_name: str | None = None,
 ) -> Trial:
@@ -326,39 +278,19 @@ def run_trial(
     Hs = int(source.horizon)
     if Hs < H:
         raise ValueError(f"intent source horizon ({Hs}) must be >= the controller's ({H})")
-    if time_limit is None:
-        time_limit = 2.0 * task.planner.end_time + 10.0
-    n_max = int(math.ceil(float(time_limit) / dt))
-    if n_max < 2:
-        raise ValueError(f"time_limit must cover at least 2 ticks of {dt} s, got {time_limit!r}")
-
-    # ---- precomputed grids (absolute frame), with H rows past the end for the horizon
-    n_grid = n_max + Hs + 1
-    x0 = np.array(task.start, dtype=float)
-    ref_abs = task.planner.grid(n_grid, dt)  # (n_grid, 4)
-    world = PointMassWorld(task, operator, obj, model, seed, n_max, n_grid, sensor)
+    n_max = episode_ticks(task, dt, time_limit)
+    ref_abs = plan_grid(task, dt, n_max, Hs)
+    world = PointMassWorld(task, operator, obj, model, seed, n_max, ref_abs.shape[0], sensor)
     intent = world.intent
-    context = TrialContext(
-        dt=dt, horizon=H, start=x0.copy(), target=np.array(task.target, dtype=float), reference=ref_abs,
-        task=task.kind, user=operator.name, object=obj.name, true_intent=intent.positions,
-    )
-    tick = ControlTick(
-        controller, WindowIntent(source, H), WrenchPipeline(POINT_MASS_WRENCH, dt),
-        SafetyLayer(POINT_MASS_LIMITS, dt, 6), command_space="effort",
-    )  # fmt: skip
-    tick.reset(Plan(ref_abs, np.array((x0[0], x0[1], 0.0, 0.0, 0.0, 0.0))), context)
-    t_done = max(task.planner.end_time, intent.end_time)
-    termination = TargetDwell(task.target, arrive_radius, int(math.ceil(float(dwell) / dt)), int(math.ceil(t_done / dt)))
-    log = run_loop(world, tick, n_max, termination)
-    n = log.n
-    ended = log.ended
-    ref_pos = ref_abs[:, :2]
-    prediction = log.prediction_or_plan(ref_pos, Hs)
-    extra = task.to_extra()
-    extra.update(
-        {
-            "ended": ended,
-            "preset": preset_name,
+    x0 = np.array(task.start, dtype=float)
+    episode = build_episode(
+        world=world, controller=controller, intent=WindowIntent(source, H), wrench=WrenchPipeline(POINT_MASS_WRENCH, dt),
+        safety=SafetyLayer(POINT_MASS_LIMITS, dt, 6), task=task, plan=ref_abs,
+        start_pose=np.array((x0[0], x0[1], 0.0, 0.0, 0.0, 0.0)), n_max=n_max,
+        labels=EpisodeLabels(user=operator.name, object=obj.name, seed=seed, source="sim", preset=preset_name,
+                             model_id=source.model_id),
+        true_intent=intent.positions, intent_end_time=intent.end_time, arrive_radius=arrive_radius, dwell=dwell,
+        extra={
             "object": obj.to_extra(),
             "operator": operator.to_extra(),
             "intent_side": intent.side,
@@ -367,30 +299,12 @@ def run_trial(
             "intent_end_time": intent.end_time,
             "sensor_raw_bias": [float(v) for v in world.raw_bias],
             "sensor_residual_bias": [float(v) for v in world.residual],
-            "arrive_radius": float(arrive_radius),
-            "features": list(FEATURES),
             # What the effort drives: (M + m) a + D v = u (the label 'hand_alone' removes u_r through it).
             "plant": {"M": [float(v) + obj.mass for v in np.diag(model.M)], "D": [float(v) for v in np.diag(model.D)],
                       "K": [0.0, 0.0]},
-        }
-    )
-    meta = TrialMeta(
-        user=operator.name, task=task.kind, object=obj.name, controller=controller.name,
-        model_id=source.model_id, seed=seed, source="sim", dt=dt, extra=extra,
-    )
-    return Trial(
-        meta=meta,
-        time=np.arange(n) * dt,
-        pose=log.pose,
-        velocity=log.velocity,
-        wrench=log.wrench,
-        reference=ref_pos[:n],
-        prediction=prediction,
-        intent=intent.positions[:n],
-        effort_h=log.effort_h,
-        effort_r=log.effort_r,
-        fault=log.fault,
-    )
+        },
+    )  # fmt: skip
+    return run_episode(episode)
 
 
 # --------------------------------------------------------------------------- batches
@@ -400,12 +314,12 @@ def run_trial(
 class TrialSpec:
     """One trial to run, small enough to send to a worker process.
 
-    task : one of :data:`~coassist.sim.tasks.TASK_KINDS`. user : operator index (0 = the
+    task : one of :data:`~coassist.scenario.tasks.TASK_KINDS`. user : operator index (0 = the
     author). object : "handle" | "board" | "heavy". controller : one of
-    :data:`CONTROLLER_KINDS`. preset : one of :data:`PRESETS`. seed : int ≥ 0.
+    :data:`~coassist.control.presets.CONTROLLER_KINDS`. preset : a name of :data:`coassist.config.CONTROL_PRESETS`. seed : int ≥ 0.
     intent : one of :data:`~coassist.interfaces.NAMED_INTENTS` or a model path (loaded in the worker).
     population_seed : which population the user is drawn from.
-    obstacle : a name of :data:`coassist.sim.tasks.OBSTACLES` ("small": the evaluation's box).
+    obstacle : a name of :data:`coassist.scenario.tasks.OBSTACLES` ("small": the evaluation's box).
     """
 
     task: str
@@ -441,9 +355,7 @@ def run_spec(spec: TrialSpec, _controllers: dict | None = None) -> Trial:
     runners pass to reuse the game's gains across trials (building them costs far more
     than a tick); the result does not depend on it.
     """
-    size, placement = OBSTACLES[spec.obstacle]
-    task = make_task(spec.task, np.random.default_rng(np.random.SeedSequence([spec.seed, 0])),
-                     obstacle_size=size, obstacle_range=placement)
+    task = task_for_seed(spec.task, spec.seed, obstacle=spec.obstacle)
     preset = get_preset(spec.preset)
     key = (spec.controller, spec.preset)
     if _controllers is not None and key in _controllers:

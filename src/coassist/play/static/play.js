@@ -5,11 +5,12 @@
   const COLOR = { path: "#1f77b4", pred: "#ff7f0e", obstacle: "#7f7f7f", target: "#2ca02c", force: "#d62728",
                   tool: "#111111", hand: "#9467bd", grid: "#eeeeee" };
   const EXPLAIN = {
-    mg: "Manual guidance: the robot only renders its inertia and damping; all the work is yours (eq. 5.5).",
-    imp: "Impedance control: a spring pulls the tool back onto the plan, so it pushes against you around the obstacle (eq. 5.4).",
-    assistive: "Assistive: a cooperative game shares the effort toward where the robot expects you to go (eq. 3.27–3.31).",
+    manual: "Manual guidance: the robot only renders its inertia and damping; all the work is yours (eq. 5.5).",
+    impedance: "Impedance control: a spring pulls the tool back onto the plan, so it pushes against you around the obstacle (eq. 5.4).",
+    cooperative: "Assistive: a cooperative game shares the effort toward where the robot expects you to go (eq. 3.27–3.31).",
   };
-  const NAMES = { mg: "manual guidance (MG)", imp: "impedance control (IMP)", assistive: "assistive (cooperative game)" };
+  const NAMES = { manual: "manual guidance (MG)", impedance: "impedance control (IMP)", cooperative: "assistive (cooperative game)",
+                  "cooperative-arbitrated": "assistive, α arbitrated online" };
   const FORCE_PX_PER_N = 3;   // arrow length
   const GAMEPAD_REACH = 0.08; // [m] hand offset at full stick deflection (≈ 32 N with the default spring)
   const HEARTBEAT_MS = 50;    // while held, the hand is re-sent: the server lets go after 0.25 s of silence

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from coassist.sim.operator import (
+from coassist.scenario.operator import (
     AUTHOR,
     OperatorArm,
     OperatorProfile,
@@ -11,7 +11,7 @@ from coassist.sim.operator import (
     intent_trajectory,
     operator_profile,
 )
-from coassist.sim.tasks import make_task
+from coassist.scenario.tasks import make_task
 
 DT = 0.008
 

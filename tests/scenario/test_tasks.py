@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from coassist.sim.tasks import (
+from coassist.scenario.tasks import (
     END,
     START,
     TASK_KINDS,

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from coassist._checks import check_positive_scalar
+from coassist.scenario.seeds import task_rng
 
 #: Path kinds: the three of the iterative experiments and the transfer one.
 TASK_KINDS = ("linear", "curved", "sinusoidal", "z")
@@ -353,3 +354,13 @@ def make_task(
     center = path.position(s_obs)
     box = Box((float(center[0]), float(center[1])), tuple(obstacle_size))
     return Task(kind=kind, planner=planner, obstacle=box, obstacle_arc=s_obs)
+
+
+def task_for_seed(kind: str, seed: int, *, obstacle: str = "small", motion_time: float | None = None) -> Task:
+    """The task ``kind`` of trial seed ``seed`` in every world: the obstacle ``obstacle`` (a name of
+    :data:`OBSTACLES`) placed from :func:`coassist.scenario.seeds.task_rng`."""
+    if obstacle not in OBSTACLES:
+        raise ValueError(f"obstacle must be one of {tuple(OBSTACLES)}, got {obstacle!r}")
+    size, placement = OBSTACLES[obstacle]
+    return make_task(kind, task_rng(seed), obstacle_size=size, obstacle_range=placement, motion_time=motion_time)
+

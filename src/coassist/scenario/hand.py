@@ -1,6 +1,6 @@
 """The simulated operator as the hand of an arm world (the MuJoCo UR5): the 2-D arm lifted to 3-D.
 
-x-y as in the thesis: :class:`~coassist.sim.operator.OperatorArm` (eq. 4.1 with delay,
+x-y as in the thesis: :class:`~coassist.scenario.operator.OperatorArm` (eq. 4.1 with delay,
 adaptation, noise and force limit) pulls the handle toward the operator's intent. The
 other DOFs:
 
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from coassist.sim.operator import OperatorArm
+from coassist.scenario.operator import OperatorArm
 from coassist.spatial import orientation_error, rotation_matrix
 
 __all__ = ["SimulatedHand"]

@@ -55,7 +55,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from coassist._checks import check_int
-from coassist.sim.tasks import Task, _quintic
+from coassist.scenario.tasks import Task, _quintic
 
 
 def _num(value, name: str, lo: float = 0.0, hi: float = math.inf, *, lo_open: bool = False) -> float:

@@ -26,7 +26,7 @@ Fallback: if ``predict`` raises, or returns anything other than a finite array o
 ``Fault.PREDICTION_FALLBACK`` in Trial.fault.
 
 Model-backed sources travel to worker processes as a path (see :func:`load_intent_source`),
-never as an object: the intent package provides ``coassist.intent.load_intent_source(path)
+never as an object: the intent package provides ``coassist.intent.load_model_intent(path)
 -> IntentSource``.
 """
 
@@ -124,7 +124,7 @@ def load_intent_source(spec: str, horizon: int = 50) -> IntentSource:
 
     ``"nominal"`` → :class:`NominalIntent`; ``"oracle"`` → :class:`OracleIntent`;
     ``"constant-velocity"`` → :class:`ConstantVelocityIntent`; any
-    other string is a model path handed to ``coassist.intent.load_intent_source``
+    other string is a model path handed to ``coassist.intent.load_model_intent``
     (imported lazily, so the simulator works without the learning stack).
     """
     if not isinstance(spec, str) or not spec:
@@ -136,12 +136,12 @@ def load_intent_source(spec: str, horizon: int = 50) -> IntentSource:
     if spec == "constant-velocity":
         return ConstantVelocityIntent(horizon)
     try:
-        from coassist.intent import load_intent_source as load_model_source
+        from coassist.intent import load_model_intent
     except ImportError as exc:
         raise ValueError(
-            f"intent {spec!r} is a model path, but coassist.intent.load_intent_source is not available ({exc})"
+            f"intent {spec!r} is a model path, but coassist.intent.load_model_intent is not available ({exc})"
         ) from None
     try:
-        return load_model_source(spec)
+        return load_model_intent(spec)
     except (OSError, ValueError) as exc:  # missing folder, bad sidecar, features or dt that do not match
         raise ValueError(f"intent {spec!r} could not be loaded as a model: {exc}") from None

@@ -1,0 +1,79 @@
+"""The controllers by kind, built from a control preset: the one controller vocabulary of every world.
+
+A *control preset* (:data:`coassist.config.CONTROL_PRESETS`: impedance M, D at the control
+period dt, the game's weights and horizon, the effort limit) and a *controller kind* give
+one controller on the preset's free plant M a + D v = u (K = 0):
+
+==========================  ==============================================================
+kind                        controller (the thesis' name)
+==========================  ==============================================================
+``cooperative``             the assistive controller: the cooperative game (eq. 3.27–3.31)
+``cooperative-arbitrated``  the same with α set every tick by :data:`ARBITRATION`
+``impedance``               IMP, impedance control toward the plan (eq. 5.4)
+``manual``                  MG, manual guidance, u_r = 0 (eq. 5.5)
+==========================  ==============================================================
+
+Every world and command names its controller by kind: a simulated batch
+(``TrialSpec.controller``, ``coassist collect``), ``coassist drive`` / ``ros2``
+(``DriveConfig.controller``) and ``coassist play`` and its page (``PlayConfig.controllers``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from coassist.config import CONTROL_PRESETS, ControlPreset
+from coassist.control.arbitration import ArbitratedController, ArbitrationParameters
+from coassist.control.controllers import AssistiveController, ImpedanceControl, ManualGuidance
+from coassist.control.game import cooperative_game
+from coassist.model.impedance import ImpedanceModel
+from coassist.registry import UnknownNameError
+
+__all__ = [
+    "ARBITRATION", "CONTROLLER_KINDS", "FORMER_NAMES", "IMPEDANCE_STIFFNESS", "get_preset", "make_controller", "plant_model",
+]  # fmt: skip
+
+#: Controller kinds. "cooperative-arbitrated": the cooperative game with α set every tick
+#: by the law :data:`ARBITRATION`.
+CONTROLLER_KINDS = ("cooperative", "impedance", "manual", "cooperative-arbitrated")
+#: The names drive and play used before they took the kinds (old session files, muscle memory):
+#: read in play's recorded sessions, and named in the command line's error for an old name.
+FORMER_NAMES = {"assistive": "cooperative", "assistive-arbitrated": "cooperative-arbitrated", "imp": "impedance",
+                "mg": "manual"}  # fmt: skip
+#: The arbitration law of "cooperative-arbitrated": α from the distance to where the robot's
+#: plan ends (coassist.control.arbitration, law "target"). Chosen on validation seeds of the
+#: application scenario (docs/assistance.md), against the hand-force law.
+ARBITRATION = ArbitrationParameters(law="target", alpha_min=0.3, alpha_max=0.9, target_scale=0.05)
+#: Spring of the IMP baseline toward the nominal reference [N/m] (eq. 5.4). The thesis
+#: does not give it (its K_i = 0 would make IMP equal MG); 200 N/m pulls back with
+#: 10 N at a 5 cm deviation, about what the operators push with.
+IMPEDANCE_STIFFNESS = 200.0
+
+
+def get_preset(name: str) -> ControlPreset:
+    """The control preset ``name``; ``ValueError`` "preset '<name>': no such control preset; did you mean …"."""
+    try:
+        return CONTROL_PRESETS.lookup(name)
+    except UnknownNameError as exc:
+        raise ValueError(f"preset {exc}") from None
+
+
+def plant_model(preset: ControlPreset) -> ImpedanceModel:
+    """The free plant M a + D v = u (K = 0) of a preset."""
+    imp = preset.impedance
+    return ImpedanceModel(np.diag(imp.M), np.diag(imp.D), np.zeros((imp.n_dof, imp.n_dof)), imp.dt)
+
+
+def make_controller(kind: str, preset: ControlPreset):
+    """A controller of ``kind`` (one of :data:`CONTROLLER_KINDS`) built from ``preset``."""
+    model = plant_model(preset)
+    if kind == "cooperative":
+        return AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
+    if kind == "cooperative-arbitrated":
+        assistive = AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
+        return ArbitratedController(assistive, ARBITRATION)
+    if kind == "impedance":
+        return ImpedanceControl(model, IMPEDANCE_STIFFNESS * np.eye(model.n_dof), effort_limit=preset.effort_limit)
+    if kind == "manual":
+        return ManualGuidance(model)
+    raise ValueError(f"controller must be one of {CONTROLLER_KINDS}, got {kind!r}")
