@@ -18,6 +18,12 @@ The two alternate in blocks of 10 steps, so a machine shared with other work slo
 alike. Reported per path: median and p99 of one step (ms), windows/s (batch size over the
 median step, and over the whole run) and the ratio device/numpy; and the batch assembly
 alone (median, p99), which is what the two paths differ in.
+
+``--rounds N`` also compares whole processes, N rounds of two child runs each: today's
+(``OMP_WAIT_POLICY`` unset, libgomp's spin-then-sleep default; the NumPy path) against
+the ``coassist`` command's (``OMP_WAIT_POLICY=PASSIVE``, set by ``coassist.cli``; the
+device path). On a 2-core machine shared with other work that setting, not the batch
+path, is what moves CPU training (issue 19).
 """
 
 from __future__ import annotations
@@ -28,7 +34,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -38,7 +46,6 @@ import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_intent import synthetic_trials  # noqa: E402
-
 from coassist.intent import PRESETS  # noqa: E402
 from coassist.intent.batches import DeviceWindows  # noqa: E402
 from coassist.intent.features import WindowSet  # noqa: E402
@@ -133,6 +140,37 @@ def bench_preset(name: str, trials, steps: int, device: torch.device, batch_size
     }
 
 
+def compare_processes(args: argparse.Namespace) -> None:
+    """Today's process (policy unset, NumPy batches) against the command's (PASSIVE, device batches)."""
+    common = [sys.executable, __file__, "--steps", str(args.steps), "--thesis-steps", str(args.thesis_steps),
+              "--threads", str(args.threads), "--device", args.device]  # fmt: skip
+    if args.batch_size:
+        common += ["--batch-size", str(args.batch_size)]
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    runs: dict[str, list[dict]] = {"unset": [], "PASSIVE": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(args.rounds):
+            for policy in runs:
+                out = Path(tmp) / f"{policy}-{r}.json"
+                child_env = env if policy == "unset" else {**env, "OMP_WAIT_POLICY": policy}
+                subprocess.run([*common, "--json", str(out)], env=child_env, check=True, stdout=subprocess.DEVNULL)
+                runs[policy].append(json.loads(out.read_text()))
+    print(f"whole processes, {args.rounds} round(s) each, {args.threads} thread(s): windows/s over each run, median of rounds")
+    rows = []
+    for i, first in enumerate(runs["unset"][0]["runs"]):
+        name = first["preset"]
+        med = {(pol, path): float(np.median([rr["runs"][i]["paths"][path]["windows_per_s_run"] for rr in runs[pol]]))
+               for pol in runs for path in ("numpy", "device")}  # fmt: skip
+        for (pol, path), v in med.items():
+            print(f"  {name:8s} OMP_WAIT_POLICY={pol:8s} {path:7s} {v:9.0f} windows/s")
+        ratio = med[("PASSIVE", "device")] / med[("unset", "numpy")]
+        print(f"  {name:8s} {first['network']}: the command's process / today's x{ratio:.2f}")
+        rows.append({"preset": name, "windows_per_s": {f"{k[0]}/{k[1]}": v for k, v in med.items()}, "ratio": ratio})
+    if args.json:
+        Path(args.json).write_text(json.dumps({"rounds": args.rounds, "threads": args.threads, "processes": rows,
+                                               "children": runs}, indent=1) + "\n")  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--steps", type=int, default=300, help="training steps per path, default preset")
@@ -141,7 +179,11 @@ def main() -> None:
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--batch-size", type=int, default=None, help="override the presets' batch size")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--rounds", type=int, default=0, help="also compare whole processes (see above), N rounds")
     args = ap.parse_args()
+    if args.rounds:
+        compare_processes(args)
+        return
     torch.set_num_threads(args.threads)
     device = torch.device(args.device)
     trials = synthetic_trials(60)

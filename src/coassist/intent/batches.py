@@ -119,4 +119,3 @@ class DeviceWindows:
         else:
             y = 2.0 * (y.reshape(b, h * d) - self.out_lo) / self.out_span - 1.0
         return x.to(torch.float32).contiguous(), y.to(torch.float32).contiguous()
-
