@@ -38,12 +38,16 @@ class DeviceWindows:
 
     ``batch(sel, signs)`` returns (inputs (B, steps, 4·d), targets (B, H·d)), float32,
     scaled by ``input_scaler`` and ``target_scaler``; ``sel`` (B,) int64 window indices
-    and ``signs`` (B, d) of ±1 (mirroring each axis; None: none), both on ``device``.
+    and ``signs`` (B, d) float64 of ±1 (mirroring each axis; None: none), both on
+    ``self.device`` (``device``, except the CPU for MPS).
     """
 
     def __init__(self, ws: WindowSet, input_scaler: Scaler, target_scaler: Scaler,
                  device: str | torch.device = "cpu") -> None:  # fmt: skip
-        dev = torch.device(device)
+        # Apple's MPS has no float64: there the windows are cut on the CPU, the same way, and
+        # each batch is copied over (the path of before, for that device only).
+        self.out_device = torch.device(device)
+        dev = torch.device("cpu") if self.out_device.type == "mps" else self.out_device
         w, d = ws.window, ws.n_dof
 
         def f64(a: np.ndarray) -> torch.Tensor:
@@ -118,4 +122,7 @@ class DeviceWindows:
             y = (2.0 * (y - self.out_lo) / self.out_span - 1.0).reshape(b, h * d)
         else:
             y = 2.0 * (y.reshape(b, h * d) - self.out_lo) / self.out_span - 1.0
-        return x.to(torch.float32).contiguous(), y.to(torch.float32).contiguous()
+        x, y = x.to(torch.float32).contiguous(), y.to(torch.float32).contiguous()
+        if self.out_device != self.device:
+            return x.to(self.out_device), y.to(self.out_device)
+        return x, y

@@ -93,6 +93,8 @@ class TrainConfig:
         source model's scalers; the frozen LSTM and the retrained FC layers then learn the
         residual over the new data's own linear predictor.
     device : torch device to train on (``"cpu"``, ``"cuda"``); the model returned is on the CPU.
+        The trials' features go there once and every batch is cut there
+        (``intent.batches.DeviceWindows``, bit-identical to cutting it with NumPy).
     mirror : data augmentation: each training window is mirrored along each axis with
         probability 1/2 (all positions, velocities, forces and the target of that axis
         negated). The planar admittance M a + D v = f is symmetric under it; it needs the
@@ -338,8 +340,9 @@ class _Windows:
         return len(self.windows)
 
     def chunks(self, size: int) -> list[torch.Tensor]:
-        """All window indices in order, on the device, in about equal chunks of at most ``size``."""
-        return list(torch.arange(len(self), device=self.device).tensor_split(max(1, math.ceil(len(self) / size))))
+        """All window indices in order, where the windows are cut, in about equal chunks of at most ``size``."""
+        idx = torch.arange(len(self), device=self.windows.device)
+        return list(idx.tensor_split(max(1, math.ceil(len(self) / size))))
 
     def loss(self, sel: torch.Tensor, reduction: str = "mean", signs: torch.Tensor | None = None) -> torch.Tensor:
         """The MSE of the windows ``sel`` (int64 on the device); ``signs`` (B, d) mirror them."""
@@ -505,7 +508,8 @@ def train_model(
             if mode == "transfer":
                 net.lstm.eval()
             perm, signs = _epoch_order(rng, len(train_ws), config.batch_size, model.n_dof if mirror else 0)
-            perm, signs = perm.to(config.device), None if signs is None else signs.to(config.device)
+            on = train_data.windows.device  # the training device (the CPU for MPS, batches.DeviceWindows)
+            perm, signs = perm.to(on), None if signs is None else signs.to(on)
             running, seen = 0.0, 0
             for s in range(steps_per_epoch):
                 a, b = s * config.batch_size, min((s + 1) * config.batch_size, len(train_ws))
@@ -694,6 +698,23 @@ def _json(obj: Any) -> str:
     import json
 
     return json.dumps(obj, indent=1, allow_nan=False) + "\n"
+
+
+def with_batch_size(train: TrainConfig, batch_size: int) -> TrainConfig:
+    """``train`` with another batch size and its learning rate scaled by the square-root rule,
+    lr' = lr · √(batch_size / train.batch_size) (opt-in; the presets keep their batches).
+
+    Why √ and not linear: for Adam the update's noise scales with 1/√B, and the rule that
+    keeps its stochastic dynamics the same is the square root (Malladi et al. 2022, *On the
+    SDEs and scaling rules for adaptive gradient algorithms*); the linear rule (Goyal et al.
+    2017) is SGD's. The decay to ``lr_final_ratio`` still spans the whole run (fewer steps).
+    Checked on validation loss for the default preset: docs/intent-training-speed.md.
+    A bigger batch is fewer, larger matrix products per window: more windows/s on a device
+    with parallel width to fill, different (not worse, there) weights than the preset's.
+    """
+    if not is_integer(batch_size) or batch_size < 1:
+        raise ValueError(f"train.batch_size must be an integer >= 1, got {batch_size!r}")
+    return replace(train, batch_size=int(batch_size), lr=train.lr * math.sqrt(batch_size / train.batch_size))
 
 
 def with_overrides(preset: Preset, **train_overrides: Any) -> Preset:
