@@ -184,7 +184,7 @@ def throughput(trials: list[LabeledTrial], batches: int) -> list[dict]:
         for i in range(n_batches + 2):
             if i == 2:
                 t0 = time.perf_counter()
-            loss = data.loss(rng.integers(0, len(ws), bs))
+            loss = data.loss(torch.from_numpy(rng.integers(0, len(ws), bs)))
             opt.zero_grad()
             loss.backward()
             opt.step()

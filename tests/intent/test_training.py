@@ -244,3 +244,16 @@ def test_the_ridge_alpha_search_runs_once_per_training(monkeypatch, trials, tiny
     assert len(calls) == 1
     ridge = m.info["baselines"]["ridge"]
     assert ridge["tuned"] and ridge["alpha"] == ridge["alphas"][int(np.argmin(ridge["validation_mse"]))]
+
+
+def test_a_bigger_batch_scales_the_learning_rate_by_the_square_root_rule():
+    from coassist.intent.training import with_batch_size
+
+    base = TrainConfig(batch_size=64, lr=3e-3)
+    big = with_batch_size(base, 256)
+    assert big.batch_size == 256 and big.lr == pytest.approx(6e-3, rel=1e-15)  # 3e-3 · √4
+    assert with_batch_size(base, 16).lr == pytest.approx(1.5e-3, rel=1e-15)
+    assert {k: v for k, v in big.__dict__.items() if k not in ("batch_size", "lr")} == {
+        k: v for k, v in base.__dict__.items() if k not in ("batch_size", "lr")}
+    with pytest.raises(ValueError, match="train.batch_size"):
+        with_batch_size(base, 0)

@@ -183,6 +183,11 @@ class Scaler:
             a.setflags(write=False)
         self.lo, self.hi, self._span = lo_a, hi_a, span
 
+    @property
+    def span(self) -> np.ndarray:
+        """hi − lo per column, 1 where the column is constant (read-only)."""
+        return self._span
+
     @classmethod
     def fit(cls, values: np.ndarray) -> Scaler:
         """Ranges of the columns of ``values`` (..., n)."""
@@ -336,8 +341,14 @@ class WindowSet:
         d = self.n_dof
         pose = self.features[idx][:, :, :d]
         # What u_r(k) … u_r(k+i−1) moved the tool from rest at k: z_r(k+i) − C_x A_d^i z_r(k).
-        pushed = series[idx][:, :, :d] - np.einsum("biam,bm->bia", free[self.trial[sel]], series[self.ends[sel]])
+        pushed = series[idx][:, :, :d] - free_motion(free[self.trial[sel]], series[self.ends[sel]])
         return pose - pushed
+
+    def label_arrays(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """What the labels beyond ``"tool"`` are computed from: the true intent (ΣT, d) or the
+        robot-driven state z_r (ΣT, 2d), and for ``"hand_alone"`` each trial's free response
+        C_x A_d^i (n_trials, H, d, 2d); None where the label needs none (read-only views)."""
+        return self._label, self._free
 
     def raw_targets(self, sel: np.ndarray) -> np.ndarray:
         """Training targets in the configured parameterisation, (B, H, d), m."""
@@ -410,6 +421,21 @@ def constant_velocity(pose: np.ndarray, vel: np.ndarray, horizon: int, dt: float
     """x(k) + i·dt·ẋ(k) for i = 1 … H: (B, d), (B, d) -> (B, H, d)."""
     steps = dt * np.arange(1, horizon + 1)[None, :, None]
     return pose[:, None, :] + steps * vel[:, None, :]
+
+
+def free_motion(free, z):
+    """Where the state z(k) alone moves the positions in i ticks, C_x A_d^i z(k):
+    free (B, H, d, 2d), z (B, 2d) -> (B, H, d).
+
+    Summed over the state's 2d entries in order, one product and one sum at a time, with
+    operations NumPy arrays and torch tensors share: the training device's batches
+    (``intent.batches``) call it on tensors and round exactly as the NumPy windows do (a
+    BLAS-backed ``einsum`` may sum in any order).
+    """
+    acc = free[..., 0] * z[:, None, None, 0]
+    for m in range(1, z.shape[-1]):
+        acc = acc + free[..., m] * z[:, None, None, m]
+    return acc
 
 
 def robot_state(model: ImpedanceModel, effort: np.ndarray) -> np.ndarray:

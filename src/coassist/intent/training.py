@@ -40,6 +40,7 @@ from torch import nn
 from coassist._checks import is_integer, is_real_number
 from coassist._io import partial_folder, save_figure
 from coassist.intent.baselines import UNTUNED_RIDGE_ALPHA, RidgeBaseline, fit_tuned_baselines, tune_ridge_alpha
+from coassist.intent.batches import DeviceWindows
 from coassist.intent.features import WindowConfig, WindowSet, feature_names, scale_targets, split_trials
 from coassist.intent.model import IntentModel, load_model, save_model
 from coassist.intent.network import IntentNet, NetworkConfig
@@ -92,6 +93,8 @@ class TrainConfig:
         source model's scalers; the frozen LSTM and the retrained FC layers then learn the
         residual over the new data's own linear predictor.
     device : torch device to train on (``"cpu"``, ``"cuda"``); the model returned is on the CPU.
+        The trials' features go there once and every batch is cut there
+        (``intent.batches.DeviceWindows``, bit-identical to cutting it with NumPy).
     mirror : data augmentation: each training window is mirrored along each axis with
         probability 1/2 (all positions, velocities, forces and the target of that axis
         negated). The planar admittance M a + D v = f is symmetric under it; it needs the
@@ -298,9 +301,10 @@ def _skip_alpha(trials: Sequence[LabeledTrial], train_idx: Sequence[int], window
     return tuning[0], tuning
 
 
-def _batch(model: IntentModel, ws: WindowSet, sel: np.ndarray, signs: np.ndarray | None = None
-           ) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
-    """Scaled inputs (B, steps, 4·d) and targets (B, H·d); ``signs`` (B, d) of ±1 mirror the axes."""
+def _numpy_batch(model: IntentModel, ws: WindowSet, sel: np.ndarray, signs: np.ndarray | None = None
+                 ) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+    """The NumPy reference of :meth:`DeviceWindows.batch` (how batches were cut before issue 19),
+    kept for the tests and the benchmark only: scaled inputs (B, steps, 4·d) and targets (B, H·d)."""
     x, y = ws.raw_inputs(sel), ws.raw_targets(sel)
     if signs is not None:
         x = x * np.tile(signs, 4)[:, None, :]
@@ -309,7 +313,7 @@ def _batch(model: IntentModel, ws: WindowSet, sel: np.ndarray, signs: np.ndarray
 
 
 class _Windows:
-    """Batches of (network input, scaled target) for one split.
+    """Batches of (network input, scaled target) for one split, cut on the training device.
 
     With ``frozen_lstm`` the LSTM's output is computed once per window and cached: the
     frozen LSTM maps a window to the same features every epoch, so transfer learning
@@ -318,12 +322,13 @@ class _Windows:
 
     def __init__(self, model: IntentModel, ws: WindowSet, frozen_lstm: bool, chunk: int = 1024,
                  device: str = "cpu") -> None:  # fmt: skip
-        self.model, self.ws, self.cached, self.device = model, ws, frozen_lstm, torch.device(device)
+        self.model, self.cached, self.device = model, frozen_lstm, torch.device(device)
+        self.windows = DeviceWindows(ws, model.input_scaler, model.target_scaler, self.device)
         if frozen_lstm:
             hs, xs, ys = [], [], []
             with torch.no_grad():
-                for sel in np.array_split(np.arange(len(ws)), max(1, math.ceil(len(ws) / chunk))):
-                    x, y = (t.to(self.device) for t in _batch(model, ws, sel))
+                for sel in self.chunks(chunk):
+                    x, y = self.windows.batch(sel)
                     hs.append(model.net.lstm_features(x))
                     xs.append(x.flatten(1) if model.net.skip is not None else None)
                     ys.append(y)
@@ -332,16 +337,21 @@ class _Windows:
             self.y = torch.cat(ys)
 
     def __len__(self) -> int:
-        return len(self.ws)
+        return len(self.windows)
 
-    def loss(self, sel: np.ndarray, reduction: str = "mean", signs: np.ndarray | None = None) -> torch.Tensor:
+    def chunks(self, size: int) -> list[torch.Tensor]:
+        """All window indices in order, where the windows are cut, in about equal chunks of at most ``size``."""
+        idx = torch.arange(len(self), device=self.windows.device)
+        return list(idx.tensor_split(max(1, math.ceil(len(self) / size))))
+
+    def loss(self, sel: torch.Tensor, reduction: str = "mean", signs: torch.Tensor | None = None) -> torch.Tensor:
+        """The MSE of the windows ``sel`` (int64 on the device); ``signs`` (B, d) mirror them."""
         net = self.model.net
         if self.cached:
-            t = torch.from_numpy(sel).to(self.device)
-            pred = net.forward_head(self.h[t], None if self.x is None else self.x[t])
-            y = self.y[t]
+            pred = net.forward_head(self.h[sel], None if self.x is None else self.x[sel])
+            y = self.y[sel]
         else:
-            x, y = (t.to(self.device, non_blocking=True) for t in _batch(self.model, self.ws, sel, signs))
+            x, y = self.windows.batch(sel, signs)
             pred = net(x)
         return nn.functional.mse_loss(pred, y, reduction=reduction)
 
@@ -352,10 +362,23 @@ def _mean_loss(data: _Windows | None, batch: int = 1024) -> float | None:
         return None
     data.model.net.eval()
     total, n = 0.0, 0
-    for sel in np.array_split(np.arange(len(data)), max(1, math.ceil(len(data) / batch))):
+    for sel in data.chunks(batch):
         total += float(data.loss(sel, reduction="sum")) / data.model.net.config.n_outputs
-        n += sel.size
+        n += sel.numel()
     return total / n
+
+
+def _epoch_order(rng: np.random.Generator, n: int, batch_size: int, n_dof: int
+                 ) -> tuple[torch.Tensor, torch.Tensor | None]:  # fmt: skip
+    """An epoch's window order (n,) and mirror signs (n, d) of ±1 (None when ``n_dof`` is 0),
+    drawn as the batches were always drawn: the permutation, then each batch's signs in
+    turn, so the generator's stream (and a checkpoint's state of it) is the same. One
+    host→device copy per epoch, not per batch."""
+    perm = torch.from_numpy(rng.permutation(n))
+    if not n_dof:
+        return perm, None
+    signs = [rng.choice([-1.0, 1.0], size=(min(batch_size, n - a), n_dof)) for a in range(0, n, batch_size)]
+    return perm, torch.from_numpy(np.concatenate(signs))
 
 
 def train_model(
@@ -484,20 +507,21 @@ def train_model(
             net.train()
             if mode == "transfer":
                 net.lstm.eval()
-            perm = rng.permutation(len(train_ws))
+            perm, signs = _epoch_order(rng, len(train_ws), config.batch_size, model.n_dof if mirror else 0)
+            on = train_data.windows.device  # the training device (the CPU for MPS, batches.DeviceWindows)
+            perm, signs = perm.to(on), None if signs is None else signs.to(on)
             running, seen = 0.0, 0
             for s in range(steps_per_epoch):
-                sel = perm[s * config.batch_size : (s + 1) * config.batch_size]
-                signs = rng.choice([-1.0, 1.0], size=(sel.size, model.n_dof)) if mirror else None
-                loss = train_data.loss(sel, signs=signs)
+                a, b = s * config.batch_size, min((s + 1) * config.batch_size, len(train_ws))
+                loss = train_data.loss(perm[a:b], signs=None if signs is None else signs[a:b])
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
                 if config.grad_clip:
                     nn.utils.clip_grad_norm_(params, config.grad_clip)
                 opt.step()
                 sched.step()
-                running += loss.detach() * sel.size  # no device sync per step
-                seen += sel.size
+                running += loss.detach() * (b - a)  # no device sync per step
+                seen += b - a
                 if bar and (s % 20 == 0 or s == steps_per_epoch - 1):
                     bar.update(task, completed=(epoch - 1) * steps_per_epoch + s + 1,
                                description=f"epoch {epoch}/{config.epochs} loss {float(running) / seen:.2e}")  # fmt: skip
@@ -674,6 +698,23 @@ def _json(obj: Any) -> str:
     import json
 
     return json.dumps(obj, indent=1, allow_nan=False) + "\n"
+
+
+def with_batch_size(train: TrainConfig, batch_size: int) -> TrainConfig:
+    """``train`` with another batch size and its learning rate scaled by the square-root rule,
+    lr' = lr · √(batch_size / train.batch_size) (opt-in; the presets keep their batches).
+
+    Why √ and not linear: for Adam the update's noise scales with 1/√B, and the rule that
+    keeps its stochastic dynamics the same is the square root (Malladi et al. 2022, *On the
+    SDEs and scaling rules for adaptive gradient algorithms*); the linear rule (Goyal et al.
+    2017) is SGD's. The decay to ``lr_final_ratio`` still spans the whole run (fewer steps).
+    Checked on validation loss for the default preset: docs/intent-training-speed.md.
+    A bigger batch is fewer, larger matrix products per window: more windows/s on a device
+    with parallel width to fill, different (not worse, there) weights than the preset's.
+    """
+    if not is_integer(batch_size) or batch_size < 1:
+        raise ValueError(f"train.batch_size must be an integer >= 1, got {batch_size!r}")
+    return replace(train, batch_size=int(batch_size), lr=train.lr * math.sqrt(batch_size / train.batch_size))
 
 
 def with_overrides(preset: Preset, **train_overrides: Any) -> Preset:
