@@ -135,8 +135,10 @@ class IntentModel:
 
     # ------------------------------------------------------------------ inference
     def scale_inputs(self, x: np.ndarray) -> torch.Tensor:
-        """Raw windows (B, steps, 4·d) in the model's frame -> scaled float32 tensor."""
-        return torch.from_numpy(self.input_scaler.transform(x).astype(np.float32))
+        """Raw windows (B, steps, 4·d) in the model's frame -> scaled tensor in the network's
+        dtype (float32 as trained and saved; float64 where a caller converted the network)."""
+        dtype = np.float64 if next(self.net.parameters()).dtype == torch.float64 else np.float32
+        return torch.from_numpy(self.input_scaler.transform(x).astype(dtype))
 
     def outputs_to_positions(self, out: np.ndarray, pose: np.ndarray, vel: np.ndarray) -> np.ndarray:
         """Network outputs (B, H·d), scaled -> predicted positions (B, H, d) in m."""
@@ -157,7 +159,8 @@ class IntentModel:
         h = np.asarray(history, dtype=np.float64)
         if h.ndim != 3 or h.shape[1:] != (self.history, 4 * self.n_dof):
             raise ValueError(f"history must have shape (B, {self.history}, {4 * self.n_dof}), got {h.shape}")
-        self.net.eval()
+        if self.net.training:  # toggled only when needed: eval() walks every module, a cost per tick
+            self.net.eval()
         out = self.net(self.scale_inputs(self.prepare(h))).numpy()
         d = self.n_dof
         return self.outputs_to_positions(out, h[:, -1, :d], h[:, -1, d : 2 * d])

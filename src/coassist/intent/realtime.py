@@ -515,6 +515,13 @@ class ModelIntent:
     def predict(self, history: np.ndarray) -> np.ndarray:
         return self.model.predict(history)
 
+    @property
+    def batcher(self) -> IntentModel:
+        """The model: ``predict_batch(histories (B, history, 8))`` serves many trials' ticks in one
+        network call (coassist.runtime.lockstep); row b is ``predict(histories[b])`` up to the
+        float32 rounding of batched kernels. Stateless, so trials may share it."""
+        return self.model
+
 
 def load_model_intent(path: str) -> ModelIntent:
     """A model folder as an intent source for the simulated loop (see :class:`ModelIntent`).

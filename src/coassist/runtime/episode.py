@@ -42,6 +42,7 @@ import numpy as np
 
 from coassist.data import Trial, TrialMeta
 from coassist.interfaces import FEATURES, TrialContext
+from coassist.runtime.lockstep import Loop
 from coassist.runtime.loop import LoopLog, TargetDwell, Termination, run_loop
 from coassist.runtime.safety import SafetyLimits
 from coassist.runtime.tick import ControlTick, Plan, TickConfig
@@ -136,6 +137,11 @@ class Episode:
     arrive_radius: float
     dwell: float
     extra: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def loop(self) -> Loop:
+        """run_loop's arguments, for :func:`~coassist.runtime.lockstep.run_loops` (many episodes in lockstep)."""
+        return Loop(self.world, self.tick, self.n_max, self.termination)
 
     def run(self, *, deadline: float | None = None,
             on_tick: Callable[[int, RobotState, object], None] | None = None) -> LoopLog:  # fmt: skip

@@ -84,22 +84,42 @@ class WindowIntent:
         self._bad = 0
 
     def update(self, k: int, row: tuple[float, ...], nominal: np.ndarray) -> tuple[np.ndarray | None, Fault]:
-        L = self.history
-        if L > 0:
-            hist = self._hist
-            if k == 0:
-                hist[:] = row  # pad: the robot was at rest before tick 0
-            i = k % L
-            hist[i] = row
-            hist[i + L] = row
-            window = hist[i + 1 : i + 1 + L]
-        else:
-            window = self._empty
+        window = self.push(k, row)
         try:
             pred = self.source.predict(window)
+        except Exception:  # a failing predictor must not stop the loop
+            pred = None
+        return self.accept(pred)
+
+    # The two halves of :meth:`update`, for a runner that batches the network call over
+    # trials (coassist.runtime.lockstep): push the row, predict elsewhere, accept the result.
+    @property
+    def batcher(self) -> Any:
+        """The object whose ``predict_batch(windows (B, history, 8)) -> (B, horizon, 2)`` serves
+        this stage's predictions, row for row what ``source.predict`` gives (up to the float
+        rounding of batched kernels); None when the source has none (it is called alone)."""
+        return getattr(self.source, "batcher", None)
+
+    def push(self, k: int, row: tuple[float, ...]) -> np.ndarray:
+        """Store tick k's feature row; the window the source predicts from, (history, 8), oldest
+        first: a view of the ring buffer, valid until the next push."""
+        L = self.history
+        if L <= 0:
+            return self._empty
+        hist = self._hist
+        if k == 0:
+            hist[:] = row  # pad: the robot was at rest before tick 0
+        i = k % L
+        hist[i] = row
+        hist[i + L] = row
+        return hist[i + 1 : i + 1 + L]
+
+    def accept(self, pred: Any) -> tuple[np.ndarray | None, Fault]:
+        """The source's answer for the last pushed window (None: it raised) → (positions or None, flags)."""
+        try:
             ok = isinstance(pred, np.ndarray) and pred.ndim == 2 and pred.shape[0] >= self.need and pred.shape[1] == 2
             ok = ok and bool(np.isfinite(pred[: self.horizon]).all())
-        except Exception:  # a failing predictor must not stop the loop
+        except Exception:  # a malformed answer is a fallback like any other
             ok = False
         if ok:
             self._bad = 0

@@ -37,7 +37,7 @@ from coassist.interfaces import Fault
 from coassist.runtime.tick import ControlTick
 from coassist.runtime.world import RobotState, World, finite_vector
 
-__all__ = ["LoopLog", "TargetDwell", "run_loop"]
+__all__ = ["LINK_LOST", "LoopLog", "LoopRun", "TargetDwell", "run_loop"]
 
 Termination = Callable[[int, np.ndarray], bool]
 
@@ -123,79 +123,150 @@ def run_loop(
     clock). ``on_tick(k, state, out)`` is called after each command (a monitor; it must
     not block). Returns the :class:`LoopLog`; the world is left at rest but not closed.
     """
-    d, Hs = tick.d, tick.Hs
-    nj = int(world.n_joints)
-    pose = np.empty((n_max, d))
-    vel = np.empty((n_max, d))
-    wrench = np.empty((n_max, d))
-    ref = np.empty((n_max, d))
-    pred = None if tick.intent.nominal else np.full((n_max, Hs, 2), np.nan)
-    eff_h = np.empty((n_max, d))
-    eff_r = np.empty((n_max, d))
-    fault = np.zeros(n_max, dtype=np.int64)
-    joints = np.empty((n_max, nj)) if nj else None
-    jvel = np.empty((n_max, nj)) if nj else None
-    compute = np.empty(n_max)
-    hand_of = _hand_reader(world)
-    overrun_of = getattr(world, "last_overrun", None) is not None
-    upstream = Fault.NONE
-    ended, message, n = "time_limit", "", n_max
-    held_q = np.zeros(nj)  # the joints logged for a glitch at tick 0 (nothing good seen yet)
+    run = LoopRun(world, tick, n_max, termination, deadline=deadline, on_tick=on_tick, clock=clock)
     for k in range(n_max):
+        row = run.sense(k)
+        if row is LINK_LOST:
+            break
+        if run.act(k, None if row is None else run.tick.predict(k, row)):
+            break
+    return run.log()
+
+
+#: What :meth:`LoopRun.sense` returns when the link to the robot dropped (the run is over).
+LINK_LOST = object()
+
+
+class LoopRun:
+    """One run of the loop, a tick at a time: :func:`run_loop`'s state and body.
+
+    ``split``: the runner does other runs' work between :meth:`sense` and :meth:`act`, so
+    each part is timed alone (two more clock reads a tick) and :meth:`charge` adds the
+    rest; otherwise a tick costs two clock reads, before the read and after the decision.
+
+    Tick k is ``row = sense(k)`` (read the world, the tick's first stage; the intent's
+    feature row, None for the nominal intent, or :data:`LINK_LOST`), then
+    ``over = act(k, intent)`` with ``intent = tick.predict(k, row)`` (or an answer
+    computed elsewhere for that row, e.g. in one network call for many runs:
+    :mod:`coassist.runtime.lockstep`), which commands the world, logs row k and says
+    whether the run has ended. :meth:`log` gives the :class:`LoopLog`.
+    """
+
+    def __init__(self, world: World, tick: ControlTick, n_max: int, termination: Termination | None = None, *,
+                 deadline: float | None = None, on_tick: Callable[[int, RobotState, object], None] | None = None,
+                 clock: Callable[[], float] = time.perf_counter, split: bool = False) -> None:  # fmt: skip
+        self.split = bool(split)
+        self.world, self.tick, self.n_max, self.termination = world, tick, int(n_max), termination
+        self.deadline, self.on_tick, self.clock = deadline, on_tick, clock
+        d, Hs, n_max = tick.d, tick.Hs, self.n_max
+        self.nj = nj = int(world.n_joints)
+        self.pose = np.empty((n_max, d))
+        self.vel = np.empty((n_max, d))
+        self.wrench = np.empty((n_max, d))
+        self.ref = np.empty((n_max, d))
+        self.pred = None if tick.intent.nominal else np.full((n_max, Hs, 2), np.nan)
+        self.eff_h = np.empty((n_max, d))
+        self.eff_r = np.empty((n_max, d))
+        self.fault = np.zeros(n_max, dtype=np.int64)
+        self.joints = np.empty((n_max, nj)) if nj else None
+        self.jvel = np.empty((n_max, nj)) if nj else None
+        self.compute = np.zeros(n_max)
+        self.hand_of = _hand_reader(world)
+        self.overrun_of = getattr(world, "last_overrun", None) is not None
+        self.upstream = Fault.NONE
+        self.ended, self.message, self.n = "time_limit", "", n_max
+        self.held_q = np.zeros(nj)  # the joints logged for a glitch at tick 0 (nothing good seen yet)
+        self._state: RobotState | None = None
+        self._t0 = self._spent = 0.0
+
+    def sense(self, k: int) -> object:
+        """Read the world and begin tick k (class docstring)."""
         try:
-            t0 = clock()
-            state = world.read()
-            out = tick.step(k, state, upstream)
-            spent = clock() - t0  # sense + decide; apply() simulates or waits for the period
+            self._t0 = self.clock()
+            self._state = self.world.read()
+            row = self.tick.sense(k, self._state, self.upstream)
+            if self.split:  # other runs' work follows: time this part alone
+                self._spent = self.clock() - self._t0
+        except ConnectionError as exc:
+            self._link_lost(k, exc)
+            return LINK_LOST
+        return row
+
+    def act(self, k: int, intent: object) -> bool:
+        """Finish tick k with the intent's answer, command the world, log; True when the run is over."""
+        world, state = self.world, self._state
+        try:
+            t1 = self.clock() if self.split else self._t0
+            out = self.tick.decide(intent)
+            # read → command (the intent included); apply() simulates or waits for the period
+            spent = self.clock() - t1 + (self._spent if self.split else 0.0)
             world.apply(out.command)
         except ConnectionError as exc:  # the robot link dropped: nothing more can be sent
-            n, ended, message = k, "link_lost", f"the link to the robot was lost ({exc}); check the cable and the robot, then rerun"
-            try:
-                world.stop()
-            except Exception:
-                pass
-            break
-        compute[k] = spent
+            self._link_lost(k, exc)
+            return True
+        self.compute[k] = spent
         upstream = Fault.NONE
-        if deadline is not None and spent > deadline:
+        if self.deadline is not None and spent > self.deadline:
             upstream |= Fault.DEADLINE_MISS
-        if overrun_of and float(getattr(world, "last_overrun", 0.0) or 0.0) > 0.0:
+        if self.overrun_of and float(getattr(world, "last_overrun", 0.0) or 0.0) > 0.0:
             upstream |= Fault.DEADLINE_MISS
-        pose[k] = out.pose
-        vel[k] = out.velocity
-        wrench[k] = out.wrench
-        ref[k] = out.reference
-        if pred is not None and out.prediction is not None:
-            pred[k, : out.prediction.shape[0]] = out.prediction
-        eff_r[k] = out.u_r if out.command.effort is None else out.command.effort
-        eff_h[k] = hand_of()[:d] if hand_of is not None else out.wrench
-        fault[k] = int(out.fault)
+        self.upstream = upstream
+        d = self.tick.d
+        self.pose[k] = out.pose
+        self.vel[k] = out.velocity
+        self.wrench[k] = out.wrench
+        self.ref[k] = out.reference
+        if self.pred is not None and out.prediction is not None:
+            self.pred[k, : out.prediction.shape[0]] = out.prediction
+        self.eff_r[k] = out.u_r if out.command.effort is None else out.command.effort
+        self.eff_h[k] = self.hand_of()[:d] if self.hand_of is not None else out.wrench
+        self.fault[k] = int(out.fault)
+        nj = self.nj
         if nj:
-            jvel[k] = out.command.qd if out.command.qd is not None else 0.0
+            self.jvel[k] = out.command.qd if out.command.qd is not None else 0.0
             q = finite_vector(state.q, nj)
             if q is not None:
-                joints[k] = q
+                self.joints[k] = q
             else:  # a glitch: the tick flagged it (NONFINITE_STATE); the log holds the last good row
-                joints[k] = joints[k - 1] if k else held_q
-        if on_tick is not None:
-            on_tick(k, state, out)
+                self.joints[k] = self.joints[k - 1] if k else self.held_q
+        if self.on_tick is not None:
+            self.on_tick(k, state, out)
         if out.command.stop:
-            n = k + 1
+            self.n = k + 1
             robot = out.fault & (Fault.ROBOT_PROTECTIVE_STOP | Fault.ROBOT_EMERGENCY_STOP)
-            ended = "robot_stop" if robot else "safety_stop"
-            message = _stop_message(Fault(out.fault))
+            self.ended = "robot_stop" if robot else "safety_stop"
+            self.message = _stop_message(Fault(out.fault))
             world.stop()
-            break
-        if termination is not None and termination(k, pose[k]):
-            n = k + 1
-            ended = "target"
-            break
-    return LoopLog(
-        pose=pose[:n], velocity=vel[:n], wrench=wrench[:n], reference=ref[:n],
-        prediction=None if pred is None else pred[:n], effort_h=eff_h[:n], effort_r=eff_r[:n],
-        fault=fault[:n], joints=None if joints is None else joints[:n],
-        joint_velocity=None if jvel is None else jvel[:n], compute=compute[:n], ended=ended, message=message,
-    )
+            return True
+        if self.termination is not None and self.termination(k, self.pose[k]):
+            self.n = k + 1
+            self.ended = "target"
+            return True
+        return False
+
+    def charge(self, seconds: float) -> None:
+        """Charge the current tick with work done for it elsewhere (a share of a batched network
+        call); ``split`` runs only, between :meth:`sense` and :meth:`act`."""
+        self._spent += seconds
+
+    def _link_lost(self, k: int, exc: ConnectionError) -> None:
+        self.n, self.ended = k, "link_lost"
+        self.message = f"the link to the robot was lost ({exc}); check the cable and the robot, then rerun"
+        try:
+            self.world.stop()
+        except Exception:
+            pass
+
+    def log(self) -> LoopLog:
+        """The rows logged so far (all of them once the run is over)."""
+        n, pred, joints, jvel = self.n, self.pred, self.joints, self.jvel
+        return LoopLog(
+            pose=self.pose[:n], velocity=self.vel[:n], wrench=self.wrench[:n], reference=self.ref[:n],
+            prediction=None if pred is None else pred[:n], effort_h=self.eff_h[:n], effort_r=self.eff_r[:n],
+            fault=self.fault[:n], joints=None if joints is None else joints[:n],
+            joint_velocity=None if jvel is None else jvel[:n], compute=self.compute[:n], ended=self.ended,
+            message=self.message,
+        )
 
 
 def _hand_reader(world: World) -> Callable[[], object] | None:

@@ -252,7 +252,16 @@ class ControlTick:
     # ------------------------------------------------------------------ per tick
     def step(self, k: int, state: RobotState, upstream: Fault = Fault.NONE) -> TickOutput:
         """Tick k: the command for this period and the log row (module docstring)."""
-        d, dofs = self.d, self._dofs
+        row = self.sense(k, state, upstream)
+        return self.decide(None if row is None else self.predict(k, row))
+
+    # step() in three parts, so a runner can batch the intent's network call over many
+    # trials between sense() and decide() (coassist.runtime.lockstep); step() is their
+    # composition, so the per-trial and the batched loops run the same code.
+    def sense(self, k: int, state: RobotState, upstream: Fault = Fault.NONE) -> tuple[float, ...] | None:
+        """Stage 1 and the intent's feature row of tick k (8 floats, FEATURES order), or None
+        when the intent is the nominal plan (nothing to predict). Then call :meth:`decide`."""
+        dofs = self._dofs
         fault = Fault(upstream)
         # 1. the hand wrench
         reading = self.wrench.update(state.wrench, state.sensor_rotation, state.wrench_seq, state.t)
@@ -276,16 +285,29 @@ class ControlTick:
         x = pose[dofs]
         v = twist[dofs]
         w = hand[dofs]
+        self._pending = (k, state, x, v, w, hand, fault, state_bad)
+        if self.intent.nominal:
+            return None
+        ref_pos = self._ref_pos
+        return (x[0], x[1], v[0], v[1], w[0], w[1], ref_pos[k, 0], ref_pos[k, 1])
+
+    def predict(self, k: int, row: tuple[float, ...]) -> tuple[np.ndarray | None, Fault]:
+        """The intent stage's answer for tick k's feature row: (positions (≥H, 2) or None, flags)."""
+        return self.intent.update(k, row, self._ref_xy[k + 1 : k + 1 + self.Hs])
+
+    def decide(self, intent: tuple[np.ndarray | None, Fault] | None) -> TickOutput:
+        """Stages 2–6 of the tick :meth:`sense` began, given the intent's (positions or None,
+        flags) for its row (None for the nominal intent)."""
+        k, state, x, v, w, hand, fault, state_bad = self._pending
+        d = self.d
         # 2. intent
         ref_pos = self._ref_pos
-        row = (x[0], x[1], v[0], v[1], w[0], w[1], ref_pos[k, 0], ref_pos[k, 1])
         ref_r = self._ref_ctrl[k + 1 : k + 1 + self.H]
         prediction = None
-        if self.intent.nominal:
+        if intent is None:
             ref_h = ref_r  # eq. 4.7: the plan's own rows; nothing to predict
         else:
-            nominal = self._ref_xy[k + 1 : k + 1 + self.Hs]
-            pred, pf = self.intent.update(k, row, nominal)
+            pred, pf = intent
             fault |= pf
             if pred is not None:
                 buf = self._ref_h_buf
@@ -301,7 +323,7 @@ class ControlTick:
                 prediction = pred
             else:
                 ref_h = ref_r
-                prediction = nominal
+                prediction = self._ref_xy[k + 1 : k + 1 + self.Hs]
         # 3. controller, on the measured state (effort worlds) or the admittance's (arm worlds)
         z = self._z
         if self.command_space == "effort":

@@ -1,0 +1,134 @@
+"""Speed of collecting one dataset with a model in the loop: lockstep against the per-trial path, in one run.
+
+Measures:
+
+1. the network's work per simulated tick for a group of B trials (median, p99 over
+   ticks): one batched ``predict_batch`` call (lockstep) against B batch-1 calls (the
+   per-trial path, ``ModelIntent.predict``), on real feature windows;
+2. one 60-trial dataset — the iterative stage's: the tasks of
+   ``coassist.experiments.pipeline.ITERATION_TASKS`` × 20 trials, cooperative controller,
+   preset thesis-evaluation-dm — with the model in the loop, ``run_trials(...,
+   lockstep=False)`` (every trial alone, one network call per trial and tick) against
+   the default lockstep path (one batched call per tick per worker), on ``--workers``
+   processes; wall time median and p99 over ``--repeats`` (the per-trial path once
+   unless ``--baseline-repeats``), and the ratio (target: ≤ 10 s on 2 cores);
+3. the same dataset with the nominal intent (no network; the per-trial path).
+
+The model: ``--model PATH``, or an ``lstm``-preset model trained here for one epoch on
+six nominal trials (its accuracy does not matter; its size does: LSTM 2 × 64, the
+default and lstm presets' network).
+
+Usage: ``.venv/bin/python benchmarks/bench_collect.py [--workers 2] [--repeats 3] [--model PATH]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+
+def train_small_model(folder: Path) -> str:
+    from coassist.intent import LabeledTrial
+    from coassist.intent.training import PRESETS, train_model, write_model
+    from coassist.sim.world import TrialSpec, run_spec
+
+    specs = [TrialSpec(task=t, seed=s, user=s % 3, preset="thesis-evaluation-dm") for t in ("linear", "curved", "sinusoidal")
+             for s in (900, 901)]  # fmt: skip
+    labeled = [LabeledTrial(f"B0/trial_{i:02d}", "B0", run_spec(spec)) for i, spec in enumerate(specs)]
+    preset = PRESETS.lookup("lstm")
+    write_model(train_model(labeled, preset, replace(preset.train, epochs=1, threads=1)), folder)
+    return str(folder)
+
+
+def network_ticks(model_path: str, batch: int, ticks: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-tick seconds of the network work for ``batch`` trials: batched, and one call per trial."""
+    import torch
+
+    from coassist.intent import load_intent_source
+    from coassist.sim.world import TrialSpec, run_spec
+
+    torch.set_num_threads(1)
+    source = load_intent_source(model_path)
+    trial = run_spec(TrialSpec(task="curved", seed=7, preset="thesis-evaluation-dm"))
+    rows = np.column_stack([trial.pose, trial.velocity, trial.wrench, trial.reference])
+    L = source.history
+    starts = np.linspace(0, rows.shape[0] - L - batch - ticks - 1, batch).astype(int)
+    batched, alone = [], []
+    for k in range(ticks):
+        windows = np.stack([rows[s + k : s + k + L] for s in starts])
+        t0 = time.perf_counter()
+        source.batcher.predict_batch(windows)
+        t1 = time.perf_counter()
+        for w in windows:
+            source.predict(w)
+        t2 = time.perf_counter()
+        batched.append(t1 - t0)
+        alone.append(t2 - t1)
+    return np.asarray(batched), np.asarray(alone)
+
+
+def dataset_seconds(specs, workers: int, lockstep: bool, repeats: int) -> np.ndarray:
+    from coassist.sim.world import run_trials
+
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        run_trials(specs, workers=workers, progress=False, lockstep=lockstep)
+        out.append(time.perf_counter() - t0)
+    return np.asarray(out)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--workers", type=int, default=2, help="processes for the dataset runs")
+    parser.add_argument("--repeats", type=int, default=3, help="runs of the lockstep and nominal datasets")
+    parser.add_argument("--baseline-repeats", type=int, default=1, help="runs of the per-trial dataset (~1 min each)")
+    parser.add_argument("--trials", type=int, default=20, help="trials per task")
+    parser.add_argument("--model", default=None, help="a model folder (default: train a small lstm-preset one)")
+    parser.add_argument("--ticks", type=int, default=300, help="ticks timed in the network comparison")
+    args = parser.parse_args()
+    from coassist.experiments.pipeline import ITERATION_TASKS
+    from coassist.sim.collect import dataset_specs
+
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, python {platform.python_version()}")
+    print(f"load average before: {os.getloadavg()[0]:.2f} (other processes on the machine inflate every number)")
+    with tempfile.TemporaryDirectory() as tmp:
+        model = args.model or train_small_model(Path(tmp) / "m")
+        B = -(-len(ITERATION_TASKS) * args.trials // args.workers)  # one lockstep group per worker
+        batched, alone = network_ticks(model, B, args.ticks)
+        print(f"\nnetwork work per tick for {B} trials (one worker's group), {args.ticks} ticks:")
+        print(f"  lockstep, one batched call  median {np.median(batched) * 1e3:6.2f} ms   "
+              f"p99 {np.percentile(batched, 99) * 1e3:6.2f} ms")
+        print(f"  per trial, {B} calls         median {np.median(alone) * 1e3:6.2f} ms   p99 {np.percentile(alone, 99) * 1e3:6.2f} ms")
+        print(f"  speed-up (median)           {np.median(alone) / np.median(batched):.1f}x")
+
+        common = dict(controller="cooperative", users=(0,), tasks=ITERATION_TASKS, objects=("handle",),
+                      trials=args.trials, seed=1000, preset="thesis-evaluation-dm")  # fmt: skip
+        with_model = dataset_specs(intent=model, **common)
+        nominal = dataset_specs(intent="nominal", **common)
+        n = len(with_model)
+        per_trial = dataset_seconds(with_model, args.workers, False, args.baseline_repeats)
+        lock = dataset_seconds(with_model, args.workers, True, args.repeats)
+        nom = dataset_seconds(nominal, args.workers, False, args.repeats)
+
+        def fmt(x: np.ndarray) -> str:
+            return f"median {np.median(x):6.1f} s   p99 {np.percentile(x, 99):6.1f} s   ({x.size} runs)"
+
+        print(f"\none {n}-trial dataset ({', '.join(ITERATION_TASKS)} × {args.trials}, thesis-evaluation-dm) on {args.workers} workers:")
+        print(f"  model in the loop, per trial   {fmt(per_trial)}")
+        print(f"  model in the loop, lockstep    {fmt(lock)}   (target <= 10 s on 2 cores)")
+        print(f"  nominal intent                 {fmt(nom)}")
+        print(f"  speed-up (median)              {np.median(per_trial) / np.median(lock):.1f}x; "
+              f"lockstep / nominal {np.median(lock) / np.median(nom):.2f}")
+    print(f"load average after: {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,134 @@
+"""Many runs of the loop in lockstep: one batched network call per tick for all of them.
+
+:func:`run_loops` runs every episode's loop as :func:`~coassist.runtime.loop.run_loop`
+would, one period at a time for all of them together::
+
+    for k = 0, 1, …:                                        every run still going
+        row_i = run_i.sense(k)                              read, wrench, feature row
+        windows of the runs whose intent shares a network → one predict_batch(B, history, 8)
+        the other runs' intent stages alone                 (nominal, oracle, a real-time predictor)
+        over_i = run_i.act(k, intent_i)                     decide, command, log, end?
+
+A run that ends (its termination rule, ``n_max``, a safety or robot stop, a lost link)
+drops out of the batch at once. Runs whose intent stages share a ``batcher`` (the
+:class:`~coassist.runtime.intent.WindowIntent` of a source with one, e.g. one loaded
+model in the loop of many simulated trials) are served by one call per tick; distinct
+batchers get one call each. Every other part of a tick is the per-trial code itself
+(:class:`~coassist.runtime.loop.LoopRun`, :meth:`ControlTick.sense <coassist.runtime.tick.ControlTick.sense>`
+/ ``decide``), so the two runners cannot drift.
+
+Exactness. Nominal and oracle intents, and any batcher whose rows do not depend on the
+batch, give the per-trial logs bit for bit. A float32 network evaluated by BLAS does
+depend on it: torch's CPU kernels (MKL) take other code paths for other batch sizes
+(measured: an LSTM's row at batch 1 differs from the same row in any batch ≥ 2 by up to
+~3e-8, a 200-input linear layer's by ~1e-6 between batches 1, 2–3 and ≥ 4), so a run's
+predictions equal its per-trial ones to float32 rounding, and the trajectory follows
+them to that rounding times the loop's gain from prediction to pose (tests/runtime/
+test_lockstep.py measures both; in float64 the runs agree to 1e-12). For the same
+episodes in the same order the result is deterministic.
+
+If a batched call raises, that tick's windows are predicted one by one, as the
+per-trial loop would (a failing row falls back alone, flagged).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from coassist.runtime.loop import LINK_LOST, LoopLog, LoopRun, Termination
+from coassist.runtime.tick import ControlTick
+from coassist.runtime.world import World
+
+__all__ = ["Loop", "run_loops"]
+
+
+class Loop(NamedTuple):
+    """What :func:`~coassist.runtime.loop.run_loop` takes for one run: a world, a tick that
+    has been reset for this run, at most ``n_max`` periods, the termination rule."""
+
+    world: World
+    tick: ControlTick
+    n_max: int
+    termination: Termination | None = None
+
+
+def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_counter) -> list[LoopLog]:
+    """Run every episode's loop in lockstep (module docstring); their logs, in order.
+
+    Each log is what ``run_loop(*episode)`` gives (no deadline, no monitor: simulated
+    worlds), up to the float rounding of batched network calls. ``compute`` is each
+    tick's own work plus its share of the batched call.
+    """
+    runs = []
+    for i, ep in enumerate(episodes):
+        if not isinstance(ep, Loop):
+            raise ValueError(f"episodes[{i}] must be a Loop (world, tick, n_max, termination), got {type(ep).__name__}")
+        runs.append(LoopRun(ep.world, ep.tick, ep.n_max, ep.termination, clock=clock, split=True))
+    batchers = [_batcher(run.tick) for run in runs]
+    active = [i for i, run in enumerate(runs) if run.n_max > 0]
+    k = 0
+    while active:
+        answers: dict[int, Any] = {}
+        groups: dict[int, tuple[Any, list[int], list[np.ndarray]]] = {}
+        going = []
+        for i in active:
+            run = runs[i]
+            row = run.sense(k)
+            if row is LINK_LOST:
+                continue
+            going.append(i)
+            if row is None:
+                answers[i] = None
+                continue
+            batcher = batchers[i]
+            if batcher is None:
+                t0 = clock()
+                answers[i] = run.tick.predict(k, row)
+                run.charge(clock() - t0)
+                continue
+            _, members, windows = groups.setdefault(id(batcher), (batcher, [], []))
+            members.append(i)
+            windows.append(run.tick.intent.push(k, row))
+        for batcher, members, windows in groups.values():
+            t0 = clock()
+            preds = _predict(batcher, windows, [runs[i].tick.intent for i in members])
+            share = (clock() - t0) / len(members)
+            for i, pred in zip(members, preds):
+                runs[i].charge(share)
+                answers[i] = runs[i].tick.intent.accept(pred)
+        active = []
+        for i in going:
+            if not runs[i].act(k, answers[i]) and k + 1 < runs[i].n_max:
+                active.append(i)
+        k += 1
+    return [run.log() for run in runs]
+
+
+def _batcher(tick: ControlTick) -> Any:
+    """The tick's intent's batcher, or None where its intent stage is called alone."""
+    intent = tick.intent
+    if intent.nominal or not all(hasattr(intent, a) for a in ("push", "accept")):
+        return None
+    batcher = getattr(intent, "batcher", None)
+    return batcher if callable(getattr(batcher, "predict_batch", None)) else None
+
+
+def _predict(batcher: Any, windows: list[np.ndarray], intents: list[Any]) -> list[Any]:
+    """Row i's prediction (or None where the source raised) for every window."""
+    try:
+        out = batcher.predict_batch(np.stack(windows))
+        if isinstance(out, np.ndarray) and out.ndim == 3 and out.shape[0] == len(windows):
+            return list(out)
+    except Exception:  # one row's fault must not fail the others: predict them alone
+        pass
+    preds: list[Any] = []
+    for intent, window in zip(intents, windows):
+        try:
+            preds.append(intent.source.predict(window))
+        except Exception:
+            preds.append(None)
+    return preds

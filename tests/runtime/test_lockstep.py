@@ -1,0 +1,179 @@
+"""Lockstep runs (coassist.runtime.lockstep) against the per-trial loop, on the simulator's trials.
+
+The reference is the per-trial path itself (``run_loop`` on the same episode): nominal,
+oracle and any row-invariant batched source must give the same Trial bit for bit; a
+model in float64 to 1e-12; a float32 model to its batched kernels' rounding (see
+test_a_float32_model_agrees_to_its_rounding for the bound and why).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from coassist.runtime.lockstep import Loop, run_loops
+from coassist.runtime.loop import run_loop
+from coassist.sim.intent_source import ConstantVelocityIntent
+from coassist.sim.world import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
+
+from ..intent.conftest import TINY, labeled
+
+PRESET = "thesis-evaluation-dm"
+#: Trials of different lengths (so runs drop out of the batch at different ticks) and users.
+CASES = (("linear", 3, 0), ("curved", 4, 1), ("sinusoidal", 5, 2))
+HORIZON = get_preset(PRESET).game.horizon  # the key spec_episode caches sources under
+FIELDS = ("pose", "velocity", "wrench", "prediction", "effort_h", "effort_r")
+
+
+def _specs(intent: str) -> list[TrialSpec]:
+    return [TrialSpec(task=t, seed=s, user=u, intent=intent, preset=PRESET) for t, s, u in CASES]
+
+
+def _alone(specs, sources=None):
+    out = []
+    for spec in specs:
+        ep = spec_episode(spec, None, sources)
+        out.append(ep.finish(run_loop(*ep.loop)))
+    return out
+
+
+def _together(specs, sources=None):
+    eps = [spec_episode(spec, None, sources) for spec in specs]
+    return [ep.finish(log) for ep, log in zip(eps, run_loops([ep.loop for ep in eps]))]
+
+
+@pytest.fixture(scope="module")
+def tiny_model(tmp_path_factory) -> str:
+    from coassist.intent.training import train_model, write_model
+
+    out = tmp_path_factory.mktemp("model") / "tiny"
+    # the tiny network, predicting the controller's 50 ticks (the loop needs ≥ its horizon)
+    preset = replace(TINY, window=replace(TINY.window, horizon=HORIZON))
+    write_model(train_model(labeled(3), preset, replace(TINY.train, epochs=1)), out)
+    return str(out)
+
+
+@pytest.mark.parametrize("intent", ["nominal", "oracle"])
+def test_named_intents_run_in_lockstep_exactly_as_alone(intent):
+    specs = _specs(intent)
+    alone = [run_spec(spec) for spec in specs]
+    together = run_spec_lockstep(specs)
+    assert len({t.n_samples for t in alone}) == len(alone)  # they end at different ticks
+    for a, b in zip(alone, together):
+        assert a.equals(b)
+
+
+class CountingBatched(ConstantVelocityIntent):
+    """Constant velocity with a batcher: row b of the batch is computed exactly as predict() does
+    (elementwise, no reduction), so lockstep must equal the per-trial path bit for bit."""
+
+    model_id = "constant-velocity-batched"
+
+    def __init__(self, horizon: int, fail: bool = False) -> None:
+        super().__init__(horizon)
+        self.calls: list[int] = []
+        self.fail = fail
+
+    @property
+    def batcher(self):
+        return self
+
+    def predict_batch(self, windows: np.ndarray) -> np.ndarray:
+        self.calls.append(windows.shape[0])
+        if self.fail:
+            raise RuntimeError("batched call failed")
+        return np.stack([self.predict(w) for w in windows])
+
+
+@pytest.mark.parametrize("fail", [False, True])
+def test_one_batched_call_per_tick_and_the_same_trials(fail):
+    specs = _specs("constant-velocity")
+    src = CountingBatched(HORIZON, fail=fail)  # shared; every trial's tick.reset resets it (dt only)
+    sources = {("constant-velocity", HORIZON): src}
+    alone = _alone(specs, sources)
+    src.calls.clear()
+    together = _together(specs, sources)
+    for a, b in zip(alone, together):
+        assert a.equals(b)
+    # one call per tick while any run goes on; each run drops out of the batch when it ends
+    lengths = sorted(t.n_samples for t in together)
+    assert len(src.calls) == lengths[-1]
+    expected = [sum(n > k for n in lengths) for k in range(lengths[-1])]
+    assert src.calls == expected
+
+
+def test_a_model_in_float64_agrees_to_1e12(tiny_model):
+    from coassist.intent import load_intent_source
+
+    specs = _specs(tiny_model)
+    src = load_intent_source(tiny_model)
+    src.model.net.double()  # float64 network: batched and batch-1 kernels differ only at 1e-16
+    sources = {(tiny_model, HORIZON): src}
+    alone = _alone(specs, sources)
+    together = _together(specs, sources)
+    for a, b in zip(alone, together):
+        assert a.n_samples == b.n_samples and a.meta.model_id == b.meta.model_id
+        for name in FIELDS:
+            np.testing.assert_allclose(getattr(b, name), getattr(a, name), rtol=0, atol=1e-12, err_msg=name)
+
+
+def test_a_float32_model_agrees_to_its_rounding(tiny_model):
+    # torch's CPU kernels round a row differently at batch 1 and in a batch (MKL takes other
+    # paths: measured up to ~3e-8 on an LSTM output, ~1e-6 on a 200-input linear layer at
+    # O(1) inputs). The network's outputs are scaled to [−1, 1]; a few float32 ulps (6e-8)
+    # times the target scaler's span (centimetres) is ~1e-8 m on a prediction. The loop's
+    # gain from ref_h to the pose over a trial is below 1 (the pose moved ~1e-10 m for
+    # ~3e-8 m predictions with the lstm preset), so 1e-6 m and 1e-7 m bound both with margin
+    # while a real bookkeeping error (a wrong row, a tick late) moves them by millimetres.
+    specs = _specs(tiny_model)
+    alone = [run_spec(spec) for spec in specs]
+    together = run_spec_lockstep(specs)
+    for a, b in zip(alone, together):
+        assert a.n_samples == b.n_samples and a.meta.extra["ended"] == b.meta.extra["ended"]
+        np.testing.assert_array_equal(a.fault, b.fault)
+        np.testing.assert_allclose(b.prediction, a.prediction, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(b.pose, a.pose, rtol=0, atol=1e-7)
+        np.testing.assert_allclose(b.effort_r, a.effort_r, rtol=0, atol=1e-4)
+
+
+class DropLink:
+    """A world whose link drops at tick ``at`` (read), everything else the wrapped world's."""
+
+    def __init__(self, world, at: int) -> None:
+        self._w, self._at, self._k = world, at, 0
+
+    def __getattr__(self, name):
+        return getattr(self._w, name)
+
+    def read(self):
+        if self._k == self._at:
+            raise ConnectionError("cable pulled")
+        self._k += 1
+        return self._w.read()
+
+
+def test_a_lost_link_ends_only_its_run_as_alone():
+    specs = _specs("oracle")
+    logs_alone = []
+    for i, spec in enumerate(specs):
+        ep = spec_episode(spec)
+        e = ep.loop
+        if i == 1:
+            e = Loop(DropLink(e.world, 40), e.tick, e.n_max, e.termination)
+        logs_alone.append(run_loop(*e))
+    eps = [spec_episode(s) for s in specs]
+    episodes = [ep.loop for ep in eps]
+    episodes[1] = Loop(DropLink(episodes[1].world, 40), *episodes[1][1:])
+    logs = run_loops(episodes)
+    assert logs[1].ended == "link_lost" and logs[1].n == 40 and "cable pulled" in logs[1].message
+    for a, b in zip(logs_alone, logs):
+        assert a.n == b.n and a.ended == b.ended
+        np.testing.assert_array_equal(a.pose, b.pose)
+        np.testing.assert_array_equal(a.fault, b.fault)
+
+
+def test_run_loops_refuses_what_is_not_a_loop():
+    with pytest.raises(ValueError, match=r"episodes\[0\] must be a Loop"):
+        run_loops([(1, 2, 3, None)])
