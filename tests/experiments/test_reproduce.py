@@ -166,18 +166,25 @@ def _expected_claims(summary):
 
 
 def test_ablation_cells_meet_the_same_trials(tiny_run):
-    """Every (object, controller, source) cell of the ablation ran MG's trials: same operators, same seeds."""
+    """Every (object, controller, source) cell of the ablation ran MG's trials: same operators, same seeds.
+    The cells of the application's own source are the application's assistive trials, reused."""
     from coassist.data import read_dataset
     from coassist.experiments.ablation import CONTROLLERS, SOURCES
+    from coassist.experiments.intent_sources import APPLICATION_SOURCE
 
-    out, _ = tiny_run
+    out, summary = tiny_run
     for obj in ("board", "heavy"):
         mg = sorted((t.meta.user, t.meta.seed) for t in read_dataset(out / "datasets" / f"app-{obj}-manual").trials)
         assert mg
         for controller in CONTROLLERS:
             for source in SOURCES:
-                ds = read_dataset(out / "datasets" / f"ablation-{obj}-{controller}-{source}")
+                name = f"app-{obj}-{controller}" if source == APPLICATION_SOURCE else f"ablation-{obj}-{controller}-{source}"
+                ds = read_dataset(out / "datasets" / name)
                 assert sorted((t.meta.user, t.meta.seed) for t in ds.trials) == mg, (obj, controller, source)
+            # the reused cell is the application's row: the same numbers
+            cell = summary["ablation"]["cells"][f"point-mass/{obj}/{controller}/{APPLICATION_SOURCE}"]
+            assert cell["f_rms"] == summary["application"][f"{obj}/{controller}"]["f_rms"]
+            assert not (out / "datasets" / f"ablation-{obj}-{controller}-{APPLICATION_SOURCE}").exists()
 
 
 def test_every_claim_agrees_with_the_summary(tiny_run):

@@ -30,6 +30,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -179,7 +180,7 @@ class LoopRun:
         self._state: RobotState | None = None
         self._t0 = self._spent = 0.0
 
-    def sense(self, k: int) -> object:
+    def sense(self, k: int) -> Any:  # the feature row, None, or LINK_LOST
         """Read the world and begin tick k (class docstring)."""
         try:
             self._t0 = self.clock()
@@ -192,9 +193,11 @@ class LoopRun:
             return LINK_LOST
         return row
 
-    def act(self, k: int, intent: object) -> bool:
+    def act(self, k: int, intent: Any) -> bool:
         """Finish tick k with the intent's answer, command the world, log; True when the run is over."""
         world, state = self.world, self._state
+        if state is None:
+            raise RuntimeError(f"LoopRun.act({k}) before sense({k})")
         try:
             t1 = self.clock() if self.split else self._t0
             out = self.tick.decide(intent)
