@@ -19,11 +19,11 @@ alike. Reported per path: median and p99 of one step (ms), windows/s (batch size
 median step, and over the whole run) and the ratio device/numpy; and the batch assembly
 alone (median, p99), which is what the two paths differ in.
 
-``--rounds N`` also compares whole processes, N rounds of two child runs each: today's
-(``OMP_WAIT_POLICY`` unset, libgomp's spin-then-sleep default; the NumPy path) against
-the ``coassist`` command's (``OMP_WAIT_POLICY=PASSIVE``, set by ``coassist.cli``; the
-device path). On a 2-core machine shared with other work that setting, not the batch
-path, is what moves CPU training (issue 19).
+``--rounds N`` also compares whole processes, N rounds of two child runs each: OpenMP's
+wait policy unset (libgomp spins, then sleeps, at every barrier; today's) against
+``OMP_WAIT_POLICY=PASSIVE`` (threads sleep at once). libgomp reads it once, when torch
+loads, so it takes a process each. On a 2-core machine shared with other work the policy,
+not the batch path, is what moves 2-thread CPU training (docs/intent-training-speed.md).
 """
 
 from __future__ import annotations
@@ -141,7 +141,7 @@ def bench_preset(name: str, trials, steps: int, device: torch.device, batch_size
 
 
 def compare_processes(args: argparse.Namespace) -> None:
-    """Today's process (policy unset, NumPy batches) against the command's (PASSIVE, device batches)."""
+    """Child processes with OpenMP's wait policy unset (today's) and PASSIVE, both batch paths in each."""
     common = [sys.executable, __file__, "--steps", str(args.steps), "--thesis-steps", str(args.thesis_steps),
               "--threads", str(args.threads), "--device", args.device]  # fmt: skip
     if args.batch_size:
@@ -164,7 +164,7 @@ def compare_processes(args: argparse.Namespace) -> None:
         for (pol, path), v in med.items():
             print(f"  {name:8s} OMP_WAIT_POLICY={pol:8s} {path:7s} {v:9.0f} windows/s")
         ratio = med[("PASSIVE", "device")] / med[("unset", "numpy")]
-        print(f"  {name:8s} {first['network']}: the command's process / today's x{ratio:.2f}")
+        print(f"  {name:8s} {first['network']}: PASSIVE + device batches / unset + NumPy batches x{ratio:.2f}")
         rows.append({"preset": name, "windows_per_s": {f"{k[0]}/{k[1]}": v for k, v in med.items()}, "ratio": ratio})
     if args.json:
         Path(args.json).write_text(json.dumps({"rounds": args.rounds, "threads": args.threads, "processes": rows,

@@ -22,15 +22,6 @@ from coassist.registry import Registry, UnknownNameError, unknown_name_message
 
 T = TypeVar("T")
 
-# Torch's OpenMP threads sleep between parallel regions instead of spinning first (libgomp's
-# default). On a 2-core machine shared with anything else (a simulation worker, another
-# command) a spinning thread holds the core its partner needs, and every barrier then waits
-# for a scheduler slice: training the default preset on 2 threads ran 6-9x slower that way
-# (benchmarks/bench_training.py, issue 19). libgomp reads it once, when torch loads it, so it
-# is set here, before any command imports torch (none of the imports above does); a value
-# the user set wins.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
 app = typer.Typer(
     help="coassist — assistive pHRI: cooperative game-theoretic MPC with learned human intent.",
     no_args_is_help=True,

@@ -100,7 +100,7 @@ class _NumpyWindows:
     """``DeviceWindows``' interface served by the NumPy reference path."""
 
     def __init__(self, ws, input_scaler, target_scaler, device="cpu") -> None:
-        self.ws, self.model = ws, _Model(input_scaler, target_scaler)
+        self.ws, self.model, self.device = ws, _Model(input_scaler, target_scaler), torch.device(device)
 
     def __len__(self) -> int:
         return len(self.ws)

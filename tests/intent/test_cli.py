@@ -50,19 +50,3 @@ def test_train_command_sets_the_torch_threads_it_is_given(tmp_path):
         assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(before)
-
-
-def test_the_command_makes_torch_threads_wait_passively_unless_told_otherwise():
-    """OMP_WAIT_POLICY is read once, when torch loads libgomp: the CLI sets it before any import
-    of torch (a user's own value wins)."""
-    import os
-    import subprocess
-    import sys
-
-    code = "import os, sys, coassist.cli; print(os.environ['OMP_WAIT_POLICY'], 'torch' in sys.modules)"
-    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
-    assert out.split() == ["PASSIVE", "False"]
-    out = subprocess.run([sys.executable, "-c", code], env={**env, "OMP_WAIT_POLICY": "ACTIVE"}, capture_output=True,
-                         text=True, check=True).stdout  # fmt: skip
-    assert out.split() == ["ACTIVE", "False"]

@@ -348,6 +348,7 @@ class _Windows:
         """The MSE of the windows ``sel`` (int64 on the device); ``signs`` (B, d) mirror them."""
         net = self.model.net
         if self.cached:
+            sel = sel.to(self.y.device)  # no-op but on MPS, where the windows are cut on the CPU
             pred = net.forward_head(self.h[sel], None if self.x is None else self.x[sel])
             y = self.y[sel]
         else:
