@@ -105,10 +105,10 @@ def test_one_batched_call_per_tick_and_the_same_trials(fail):
 
 
 def test_a_model_in_float64_agrees_to_1e12(tiny_model):
-    from coassist.intent import load_intent_source
+    from coassist.intent import load_model_intent
 
     specs = _specs(tiny_model)
-    src = load_intent_source(tiny_model)
+    src = load_model_intent(tiny_model)
     src.model.net.double()  # float64 network: batched and batch-1 kernels differ only at 1e-16
     sources = {(tiny_model, HORIZON): src}
     alone = _alone(specs, sources)
