@@ -36,13 +36,13 @@ import numpy as np
 
 def train_small_model(folder: Path) -> str:
     from coassist.intent import LabeledTrial
-    from coassist.intent.training import PRESETS, train_model, write_model
+    from coassist.intent.training import MODEL_PRESETS, train_model, write_model
     from coassist.sim.world import TrialSpec, run_spec
 
     specs = [TrialSpec(task=t, seed=s, user=s % 3, preset="thesis-evaluation-dm") for t in ("linear", "curved", "sinusoidal")
              for s in (900, 901)]  # fmt: skip
     labeled = [LabeledTrial(f"B0/trial_{i:02d}", "B0", run_spec(spec)) for i, spec in enumerate(specs)]
-    preset = PRESETS.lookup("lstm")
+    preset = MODEL_PRESETS.lookup("lstm")
     write_model(train_model(labeled, preset, replace(preset.train, epochs=1, threads=1)), folder)
     return str(folder)
 

@@ -46,7 +46,7 @@ import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_intent import synthetic_trials  # noqa: E402
-from coassist.intent import PRESETS  # noqa: E402
+from coassist.intent import MODEL_PRESETS  # noqa: E402
 from coassist.intent.batches import DeviceWindows  # noqa: E402
 from coassist.intent.features import WindowSet  # noqa: E402
 from coassist.intent.training import _numpy_batch, _optimizer, build_model  # noqa: E402
@@ -66,7 +66,7 @@ def stats(ns: list[int]) -> tuple[float, float]:
 
 
 def bench_preset(name: str, trials, steps: int, device: torch.device, batch_size: int | None) -> dict:
-    p = PRESETS[name]
+    p = MODEL_PRESETS[name]
     # A fixed α: no ridge search (not what is timed).
     cfg = replace(p.train, skip_alpha=1e-3, ridge_alpha=1e-3, batch_size=batch_size or p.train.batch_size)
     model = build_model(p, trials, cfg)

@@ -69,8 +69,13 @@ class ReproduceConfig:
     device: str = "cpu"
     seed: int = 0
     sweep_duration: float = 10.0
+    # Trials with a model in the loop advance in lockstep, one network call per tick for all of them
+    # (coassist.runtime.lockstep); False: each trial alone, the reference path (benchmarks/bench_reproduce.py).
+    lockstep: bool = True
 
     def __post_init__(self) -> None:
+        if not isinstance(self.lockstep, bool):
+            raise ValueError(f"reproduce.lockstep must be true or false, got {self.lockstep!r}")
         for name in ("trials_per_task", "iterations", "epochs", "resume_epochs", "transfer_epochs", "train_stride",
                      "transfer_trials", "test_trials", "application_trials", "real_epochs", "workers", "threads"):
             v = getattr(self, name)
@@ -178,7 +183,7 @@ class Workspace:
 
         folder = collect_dataset(
             self.out / "datasets" / name, dataset_id=name, workers=self.config.workers, progress=self.progress,
-            overwrite=True, controller=controller, users=list(users), tasks=list(tasks), objects=list(objects),
+            overwrite=True, lockstep=self.config.lockstep, controller=controller, users=list(users), tasks=list(tasks), objects=list(objects),
             trials=trials, seed=seed, preset=preset or self.config.control_preset, intent=intent, obstacle=obstacle,
         )
         return folder, read_dataset(folder)

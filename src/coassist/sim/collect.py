@@ -59,11 +59,13 @@ def collect_dataset(
     ray_address: str | None = None,
     overwrite: bool = False,
     say: Callable[[str], None] | None = None,
+    lockstep: bool = True,
     **spec_options,
 ) -> Path:
     """Simulate the trials of :func:`dataset_specs` (``spec_options``) and write them as a dataset.
 
-    ``dataset_id`` defaults to the folder's name. Returns the dataset folder.
+    ``dataset_id`` defaults to the folder's name. Returns the dataset folder. ``lockstep``:
+    :func:`~coassist.sim.world.run_trials`' (trials with a model in the loop advance together).
 
     The output is checked and locked before anything is simulated. Each trial is
     written as soon as it finishes (:class:`coassist.data.DatasetWriter`), so memory
@@ -99,7 +101,7 @@ def collect_dataset(
             say(f"continuing: {len(writer.resumed)} of {len(specs)} trials were already written in {writer.partial}")
         todo = [i for i in range(len(specs)) if not writer.has(i)]
         run_trials([specs[i] for i in todo], workers=workers, progress=progress, ray_address=ray_address,
-                   on_result=lambda j, trial: writer.add(todo[j], trial))  # fmt: skip
+                   lockstep=lockstep, on_result=lambda j, trial: writer.add(todo[j], trial))  # fmt: skip
         return writer.finish()
 
 
