@@ -171,6 +171,23 @@ def test_parallel_run_equals_serial_run():
         assert a.meta.seed == spec.seed and a.meta.task == spec.task
 
 
+def test_a_kept_pool_serves_call_after_call_and_stays_up():
+    """run_trials(pool=...) runs on the caller's processes, gives what a fresh pool gives, and leaves
+    them running for the next call (coassist reproduce keeps one pool for its ~40 collections)."""
+    from coassist.sim.world import worker_pool
+
+    specs = [TrialSpec(task=t, seed=s) for t, s in (("linear", 11), ("curved", 12), ("z", 13))]
+    serial = run_trials(specs, workers=1, progress=False)
+    with worker_pool(2) as pool:
+        first = run_trials(specs, workers=2, progress=False, pool=pool)
+        second = run_trials(specs[::-1], workers=2, progress=False, pool=pool)  # the same processes again
+        assert pool.submit(int, "7").result() == 7  # not shut down by run_trials
+    for a, b, c in zip(serial, first, second[::-1]):
+        assert a.equals(b) and a.equals(c)
+    with pytest.raises(ValueError, match="workers"):
+        worker_pool(0)
+
+
 def test_baselines_apply_their_laws_in_the_loop():
     # IMP (eq. 5.4): u_r(k) = K (x_ref,r(k+1) − x(k)), the spring toward the next nominal
     # point; recomputed here from the logged pose and reference. MG (eq. 5.5): u_r = 0.

@@ -220,10 +220,10 @@ def _drive_batch(configs: list) -> list[tuple[dict, dict]]:
 
 def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict, pairs: dict, errors: dict) -> None:
     """The same cells on the MuJoCo UR5 (fewer trials: ``ablation_mujoco_trials`` per operator)."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    import contextlib
 
     from coassist.data import Trial, TrialMeta
+    from coassist.sim.world import worker_pool
 
     cfg = ws.config
     jobs = []
@@ -234,8 +234,8 @@ def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict,
             for source in SOURCES:
                 jobs.append(((obj, controller, source), _mujoco_configs(cfg, obj, seed0, controller, intents[source])))
     workers = max(1, min(cfg.workers, os.cpu_count() or 1))
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    # the run's simulation processes where it has them (started once), else a pool for these runs
+    with contextlib.nullcontext(ws.pool) if ws.pool is not None else worker_pool(workers) as pool:
         futures = [(key, pool.submit(_drive_batch, configs)) for key, configs in jobs]
         for (obj, controller, source), fut in futures:
             trials = [Trial(meta=TrialMeta.from_dict(m), **a) for m, a in fut.result()]

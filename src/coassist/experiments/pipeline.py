@@ -10,6 +10,7 @@ returning a typed result from which its report section is built.
 from __future__ import annotations
 
 import json
+from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -173,6 +174,9 @@ class Workspace:
     config: ReproduceConfig
     out: Path
     progress: bool
+    #: The simulation processes every collection runs on (coassist.sim.world.worker_pool), started
+    #: once for the run; None: each collection starts its own.
+    pool: Executor | None = None
 
     def collect(self, name: str, *, tasks, users=(0,), objects=("handle",), trials: int, seed: int,
                 controller: str = "cooperative", preset: str | None = None, intent: str = "nominal",
@@ -183,7 +187,7 @@ class Workspace:
 
         folder = collect_dataset(
             self.out / "datasets" / name, dataset_id=name, workers=self.config.workers, progress=self.progress,
-            overwrite=True, lockstep=self.config.lockstep, controller=controller, users=list(users), tasks=list(tasks), objects=list(objects),
+            overwrite=True, lockstep=self.config.lockstep, pool=self.pool, controller=controller, users=list(users), tasks=list(tasks), objects=list(objects),
             trials=trials, seed=seed, preset=preset or self.config.control_preset, intent=intent, obstacle=obstacle,
         )
         return folder, read_dataset(folder)

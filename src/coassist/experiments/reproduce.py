@@ -43,6 +43,7 @@ Modules: the shared config, presets, seed plan and workspace are
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from collections.abc import Callable
@@ -124,48 +125,57 @@ class _Context:
         return self.ws.out
 
 
+def _simulation_pool(config: ReproduceConfig):
+    """One pool of simulation processes for the whole run (coassist.sim.world.worker_pool):
+    started once, not once per collection; none where the run simulates in this process."""
+    from coassist.sim.world import worker_pool
+
+    return worker_pool(config.workers) if config.workers > 1 else contextlib.nullcontext(None)
+
+
 def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, say: Callable[[str], None] | None = None) -> dict:
     """Run every stage; write ``report.html`` and ``summary.json`` in ``out``; return the summary."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     say = say or (lambda message: None)
-    ctx = _Context(Workspace(config, out, progress), _Stage(say))
-    t0 = time.perf_counter()
-    ctx.summary["config"] = asdict(config)
-    ctx.stage.run("dMPC study", _stage_sweep, ctx)
-    iterative = ctx.stage.run("iterative training", run_iterative_stage, ctx.ws, ctx.stage.say)
-    ctx.sections.append(iterative_section(iterative))
-    ctx.summary["iterative"] = iterative.summary()
-    final_model = iterative.final_model
-    transfer = ctx.stage.run("transfer learning", run_transfer, ctx.ws, final_model, iterative.iteration_seconds)
-    ctx.sections.append(transfer_section(
-        transfer, iterative.final_model_offline_e_rms[50], sum(w["trials"] for w in iterative.work),
-        sum(w["windows_trained"] for w in iterative.work)))
-    ctx.summary["transfer"] = transfer.summary()
-    application = ctx.stage.run("application scenario", run_application, ctx.ws, final_model)
-    ctx.sections.append(application_section(application))
-    ctx.summary["application"] = application.summary()
-    real = ctx.stage.run("real recordings", run_real_recordings, ctx.ws, config.real_data or default_real_data())
-    ctx.sections.append(real_recordings_section(real))
-    ctx.summary["real"] = real.summary()
-    ablation = ctx.stage.run("intent ablation", run_ablation, ctx.ws, application.models, application.cells())
-    ctx.sections.append(ablation_section(ablation))
-    ctx.summary["ablation"] = ablation.summary()
-    ctx.summary["stage_seconds"] = ctx.stage.times
-    ctx.summary["total_seconds"] = time.perf_counter() - t0
-    claims = [c.to_dict() for s in ctx.sections for c in s.claims]
-    ctx.summary["claims"] = claims
-    intro = (
-        f"coassist reproduction of the thesis' experiments in simulation, preset '{config.name}' "
-        f"(intent model preset '{config.intent_preset}', control preset '{config.control_preset}'), "
-        f"seed {config.seed}; total time {ctx.summary['total_seconds']:.0f} s. Every number below was measured in this run."
-    )
-    headline = headline_section(application, transfer, real, _sim_dt(config), ablation)
-    ctx.summary["headline"] = {"table": headline.tables[0], "intent_sources": headline.tables[1],
-                               "prediction": headline.paragraphs}
-    write_report(out / "report.html", "coassist — the thesis' experiments, reproduced", intro, ctx.sections, headline)
-    atomic_write_text(out / "summary.json", json.dumps(_jsonable(ctx.summary), indent=1, allow_nan=False))
-    return ctx.summary
+    with _simulation_pool(config) as pool:
+        ctx = _Context(Workspace(config, out, progress, pool), _Stage(say))
+        t0 = time.perf_counter()
+        ctx.summary["config"] = asdict(config)
+        ctx.stage.run("dMPC study", _stage_sweep, ctx)
+        iterative = ctx.stage.run("iterative training", run_iterative_stage, ctx.ws, ctx.stage.say)
+        ctx.sections.append(iterative_section(iterative))
+        ctx.summary["iterative"] = iterative.summary()
+        final_model = iterative.final_model
+        transfer = ctx.stage.run("transfer learning", run_transfer, ctx.ws, final_model, iterative.iteration_seconds)
+        ctx.sections.append(transfer_section(
+            transfer, iterative.final_model_offline_e_rms[50], sum(w["trials"] for w in iterative.work),
+            sum(w["windows_trained"] for w in iterative.work)))
+        ctx.summary["transfer"] = transfer.summary()
+        application = ctx.stage.run("application scenario", run_application, ctx.ws, final_model)
+        ctx.sections.append(application_section(application))
+        ctx.summary["application"] = application.summary()
+        real = ctx.stage.run("real recordings", run_real_recordings, ctx.ws, config.real_data or default_real_data())
+        ctx.sections.append(real_recordings_section(real))
+        ctx.summary["real"] = real.summary()
+        ablation = ctx.stage.run("intent ablation", run_ablation, ctx.ws, application.models, application.cells())
+        ctx.sections.append(ablation_section(ablation))
+        ctx.summary["ablation"] = ablation.summary()
+        ctx.summary["stage_seconds"] = ctx.stage.times
+        ctx.summary["total_seconds"] = time.perf_counter() - t0
+        claims = [c.to_dict() for s in ctx.sections for c in s.claims]
+        ctx.summary["claims"] = claims
+        intro = (
+            f"coassist reproduction of the thesis' experiments in simulation, preset '{config.name}' "
+            f"(intent model preset '{config.intent_preset}', control preset '{config.control_preset}'), "
+            f"seed {config.seed}; total time {ctx.summary['total_seconds']:.0f} s. Every number below was measured in this run."
+        )
+        headline = headline_section(application, transfer, real, _sim_dt(config), ablation)
+        ctx.summary["headline"] = {"table": headline.tables[0], "intent_sources": headline.tables[1],
+                                   "prediction": headline.paragraphs}
+        write_report(out / "report.html", "coassist — the thesis' experiments, reproduced", intro, ctx.sections, headline)
+        atomic_write_text(out / "summary.json", json.dumps(_jsonable(ctx.summary), indent=1, allow_nan=False))
+        return ctx.summary
 
 
 def _sim_dt(config: ReproduceConfig) -> float:

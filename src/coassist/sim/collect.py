@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
 from dataclasses import asdict
 from pathlib import Path
 
@@ -60,12 +61,14 @@ def collect_dataset(
     overwrite: bool = False,
     say: Callable[[str], None] | None = None,
     lockstep: bool = True,
+    pool: Executor | None = None,
     **spec_options,
 ) -> Path:
     """Simulate the trials of :func:`dataset_specs` (``spec_options``) and write them as a dataset.
 
-    ``dataset_id`` defaults to the folder's name. Returns the dataset folder. ``lockstep``:
-    :func:`~coassist.sim.world.run_trials`' (trials with a model in the loop advance together).
+    ``dataset_id`` defaults to the folder's name. Returns the dataset folder. ``lockstep``,
+    ``pool``: :func:`~coassist.sim.world.run_trials`' (trials with a model in the loop advance
+    together; processes kept across collections).
 
     The output is checked and locked before anything is simulated. Each trial is
     written as soon as it finishes (:class:`coassist.data.DatasetWriter`), so memory
@@ -101,7 +104,7 @@ def collect_dataset(
             say(f"continuing: {len(writer.resumed)} of {len(specs)} trials were already written in {writer.partial}")
         todo = [i for i in range(len(specs)) if not writer.has(i)]
         run_trials([specs[i] for i in todo], workers=workers, progress=progress, ray_address=ray_address,
-                   lockstep=lockstep, on_result=lambda j, trial: writer.add(todo[j], trial))  # fmt: skip
+                   lockstep=lockstep, pool=pool, on_result=lambda j, trial: writer.add(todo[j], trial))  # fmt: skip
         return writer.finish()
 
 

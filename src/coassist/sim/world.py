@@ -42,10 +42,12 @@ precomputed reference grids. See benchmarks/bench_sim.py.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import numpy as np
@@ -508,6 +510,27 @@ def _progress(enabled: bool, total: int):
     return progress
 
 
+def worker_pool(workers: int) -> Executor:
+    """``workers`` simulation processes to pass to :func:`run_trials` (``pool``) call after call.
+
+    Each :func:`run_trials` without a pool starts its own processes, and a fresh
+    interpreter importing numpy, scipy and torch costs seconds: a pipeline of many small
+    collections (``coassist reproduce``: ~40) spends more time starting workers than
+    simulating. One pool for the whole run pays it once. spawn: a clean interpreter per
+    worker (no inherited threads, locks or torch state); callers' scripts need the usual
+    ``if __name__ == "__main__":`` guard. Workers keep the parent's BLAS thread settings
+    (inherited environment): the game's gains, and so every trial, are bit-identical
+    only for the same BLAS thread count. Use it as a context manager (it shuts down).
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    workers = check_int(workers, "workers", 1)
+    ctx = multiprocessing.get_context("spawn")
+    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_watch_parent,
+                               initargs=(os.getpid(),))  # fmt: skip
+
+
 def run_trials(
     specs: Sequence[TrialSpec],
     workers: int | None = None,
@@ -515,6 +538,7 @@ def run_trials(
     ray_address: str | None = None,
     on_result: Callable[[int, Trial], None] | None = None,
     lockstep: bool = True,
+    pool: Executor | None = None,
 ) -> list[Trial]:
     """Run many trials; results in the order of ``specs``, identical to running them one by one
     (with a model in the loop and ``lockstep``: to the network's float32 rounding, below).
@@ -537,6 +561,8 @@ def run_trials(
         which trials share its batch: deterministic for the same specs and workers, not
         bit for bit across other groupings); trials with named intents only are exact
         either way. False: every trial alone (the reference path). Ray runs trials alone.
+    pool : the processes to run on (:func:`worker_pool`, kept by the caller across calls);
+        None: ``workers`` processes started for this call.
     """
     specs = list(specs)
     for i, s in enumerate(specs):
@@ -558,7 +584,7 @@ def run_trials(
             on_result(i, trial)
 
     if lockstep and any(spec.intent not in NAMED_INTENTS for spec in specs):
-        return _run_lockstep_groups(specs, workers, progress, deliver, on_result is not None, results)
+        return _run_lockstep_groups(specs, workers, progress, deliver, on_result is not None, results, pool)
     if workers == 1:
         controllers: dict = {}
         with _progress(progress, len(specs)) as bar:
@@ -568,21 +594,14 @@ def run_trials(
                 bar.advance(task_id)
         return [] if on_result else results  # type: ignore[return-value]
 
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
 
     # Batches of a few trials: each worker builds a game once per batch, and results
     # stream back often enough for the progress bar.
     size = max(1, min(16, len(specs) // (4 * workers)))
     batches = [list(range(i, min(i + size, len(specs)))) for i in range(0, len(specs), size)]
-    # spawn: a clean interpreter per worker (no inherited threads, locks or torch state);
-    # callers' scripts need the usual `if __name__ == "__main__":` guard. Workers keep
-    # the parent's BLAS thread settings (inherited environment): the game's gains, and
-    # so every trial, are bit-identical only for the same BLAS thread count.
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_watch_parent,
-                             initargs=(os.getpid(),)) as pool:  # fmt: skip
-        futures = {pool.submit(_run_batch, [specs[i] for i in batch]): batch for batch in batches}
+    with _pool_for(pool, workers) as executor:
+        futures = {executor.submit(_run_batch, [specs[i] for i in batch]): batch for batch in batches}
         with _progress(progress, len(specs)) as bar:
             task_id = bar.add_task("trials", total=len(specs))
             for fut in as_completed(futures):
@@ -592,8 +611,13 @@ def run_trials(
     return [] if on_result else results  # type: ignore[return-value]
 
 
+def _pool_for(pool: Executor | None, workers: int):
+    """The caller's pool, left running, or a new one of ``workers`` processes, shut down after use."""
+    return worker_pool(workers) if pool is None else contextlib.nullcontext(pool)
+
+
 def _run_lockstep_groups(specs: list[TrialSpec], workers: int, progress: bool, deliver: Callable[[int, Trial], None],
-                         streaming: bool, results: list) -> list[Trial]:  # fmt: skip
+                         streaming: bool, results: list, pool: Executor | None = None) -> list[Trial]:  # fmt: skip
     """:func:`run_trials`' lockstep path: group g holds specs g, g + workers, … (the tasks mix, so the
     groups' lengths balance), each run by :func:`_run_lockstep_batch` in its own process."""
     groups = [list(range(g, len(specs), workers)) for g in range(workers)]
@@ -604,13 +628,10 @@ def _run_lockstep_groups(specs: list[TrialSpec], workers: int, progress: bool, d
                 deliver(i, trial)
             bar.advance(task_id, len(specs))
             return [] if streaming else results
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+        from concurrent.futures import as_completed
 
-        ctx = multiprocessing.get_context("spawn")  # as run_trials' per-trial pool (see there)
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_watch_parent,
-                                 initargs=(os.getpid(),)) as pool:  # fmt: skip
-            futures = {pool.submit(_run_lockstep_batch, [specs[i] for i in group]): group for group in groups}
+        with _pool_for(pool, workers) as executor:
+            futures = {executor.submit(_run_lockstep_batch, [specs[i] for i in group]): group for group in groups}
             for fut in as_completed(futures):
                 for i, payload in zip(futures[fut], fut.result()):
                     deliver(i, _from_payload(payload))
