@@ -168,6 +168,43 @@ def test_kalman_first_update_matches_the_hand_computation():
     np.testing.assert_allclose(k.predict(pose, vel, 2, 1.0)[1, :, 0], [3.6, 7.0], atol=1e-9)
 
 
+def test_kalman_filter_equals_the_textbook_recursion_whatever_ran_before():
+    """The gains are computed once per (dt, parameters) and reused (a memo of a data-free
+    recursion): trials of any length, in any order, filter exactly as the textbook loop that
+    updates P alongside the state."""
+    from coassist.intent import kalman
+    from coassist.intent.kalman import KalmanCA, kalman_ca_filter
+
+    params = [KalmanCA(jerk_psd=3.0, velocity_noise=0.02), KalmanCA(jerk_psd=50.0, velocity_noise=0.005)]
+    dt = 0.008
+
+    def textbook(pose, vel):
+        F, Q1 = kalman._model(dt)
+        H = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+        out = []
+        for p in params:
+            R = np.diag([p.position_noise**2, p.velocity_noise**2])
+            P = np.diag([p.position_noise**2, p.velocity_noise**2, p.initial_acceleration**2])
+            s = np.stack([pose[0], vel[0], np.zeros(pose.shape[1])])
+            rows = [s]
+            for k in range(1, len(pose)):
+                s, P = F @ s, F @ P @ F.T + p.jerk_psd * Q1
+                K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+                s = s + K @ (np.stack([pose[k], vel[k]]) - H @ s)
+                P = (np.eye(3) - K @ H) @ P @ (np.eye(3) - K @ H).T + K @ R @ K.T
+                rows.append(s)
+            out.append(np.array(rows))
+        return np.array(out)
+
+    rng = np.random.default_rng(4)
+    kalman._GAIN_MEMO.clear()
+    for n in (40, 300, 7, 301):  # shorter after longer: the memo's prefix; longer: it grows
+        pose = np.cumsum(rng.normal(size=(n, 2)), axis=0) * 1e-3
+        vel = rng.normal(size=(n, 2)) * 1e-2
+        # different operation order from the vectorised filter: agreement to rounding of O(1) mm states
+        np.testing.assert_allclose(kalman_ca_filter(pose, vel, dt, params), textbook(pose, vel), rtol=1e-9, atol=1e-12)
+
+
 def test_kalman_constant_acceleration_is_exact_on_a_parabola():
     from coassist.intent.kalman import KalmanCA
 

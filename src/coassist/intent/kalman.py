@@ -135,6 +135,44 @@ def kalman_ca_filter(
     dt = check_positive_scalar(dt, "dt")
     t, d = pose.shape
     g = len(params)
+    F, _ = _model(dt)
+    # The gains do not depend on the measurements (P's recursion is data-free): computed once
+    # per (dt, parameter sets) and reused by every trial; the state update is the only per-trial loop.
+    gains = _gains(dt, tuple(params), t)  # (T, G, 3, 2)
+    s = np.zeros((g, 3, d))
+    s[:, 0], s[:, 1] = pose[0], velocity[0]
+    out = np.empty((g, t, 3, d))
+    out[:, 0] = s
+    z = np.stack([pose, velocity], axis=1)  # (T, 2, d)
+    for k in range(1, t):
+        s = F @ s
+        s = s + gains[k] @ (z[k] - s[:, :2])
+        out[:, k] = s
+    return out
+
+
+#: (dt, parameter sets) → the longest gain sequence computed so far (T, G, 3, 2); a memo of
+#: the pure function :func:`_gain_sequence`, bounded (a run uses a handful of keys).
+_GAIN_MEMO: dict[tuple[float, tuple[KalmanCA, ...]], np.ndarray] = {}
+_GAIN_MEMO_SIZE = 16
+
+
+def _gains(dt: float, params: tuple[KalmanCA, ...], t: int) -> np.ndarray:
+    """The first ``t`` Kalman gains of :func:`_gain_sequence`, from the memo where it holds them."""
+    key = (float(dt), params)
+    known = _GAIN_MEMO.get(key)
+    if known is None or known.shape[0] < t:
+        known = _gain_sequence(dt, params, max(t, 0 if known is None else 2 * known.shape[0]))
+        if len(_GAIN_MEMO) >= _GAIN_MEMO_SIZE:
+            _GAIN_MEMO.pop(next(iter(_GAIN_MEMO)))
+        _GAIN_MEMO[key] = known
+    return known[:t]
+
+
+def _gain_sequence(dt: float, params: Sequence[KalmanCA], t: int) -> np.ndarray:
+    """(T, G, 3, 2) the gains K_k = P_k⁻ H' (H P_k⁻ H' + R)⁻¹ of ticks k = 1 … T−1 (row 0 unused),
+    from P_0 = diag(r_p², r_v², a_0²) and the Joseph-form covariance update."""
+    g = len(params)
     F, Q1 = _model(dt)
     Q = np.array([p.jerk_psd for p in params])[:, None, None] * Q1
     R = np.zeros((g, 2, 2))
@@ -145,25 +183,16 @@ def kalman_ca_filter(
     P = np.zeros((g, 3, 3))
     P[:, :2, :2] = R
     P[:, 2, 2] = [p.initial_acceleration**2 for p in params]
-    s = np.zeros((g, 3, d))
-    s[:, 0], s[:, 1] = pose[0], velocity[0]
-    out = np.empty((g, t, 3, d))
-    out[:, 0] = s
-    z = np.stack([pose, velocity], axis=1)  # (T, 2, d)
+    gains = np.zeros((t, g, 3, 2))
     for k in range(1, t):
-        s = F @ s
         P = F @ P @ F.T + Q
         S = P[:, :2, :2] + R  # H P H' + R, H selecting p and v
-        K = np.linalg.solve(S, P[:, :2, :]).transpose(
-            0, 2, 1
-        )  # P H' S⁻¹, (G, 3, 2); S symmetric
-        s = s + K @ (z[k] - s[:, :2])
+        K = np.linalg.solve(S, P[:, :2, :]).transpose(0, 2, 1)  # P H' S⁻¹, (G, 3, 2); S symmetric
         IKH = eye - K @ Hm
-        P = IKH @ P @ IKH.transpose(0, 2, 1) + K @ R @ K.transpose(
-            0, 2, 1
-        )  # Joseph form: stays symmetric PSD
-        out[:, k] = s
-    return out
+        P = IKH @ P @ IKH.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)  # Joseph form: stays symmetric PSD
+        gains[k] = K
+    gains.setflags(write=False)
+    return gains
 
 
 def constant_acceleration(states: np.ndarray, horizon: int, dt: float) -> np.ndarray:
