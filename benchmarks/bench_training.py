@@ -1,7 +1,7 @@
 """Training throughput: batches cut on the device against today's NumPy batches (issue 19).
 
     .venv/bin/python benchmarks/bench_training.py [--steps 300] [--thesis-steps 100]
-        [--threads 2] [--device cpu] [--json out.json]
+        [--threads 2] [--device cpu] [--batch-size B] [--rounds N] [--json out.json]
 
 For the ``default`` preset (LSTM 2 × 64, 25-step windows, mirrored, skip frozen) and the
 ``thesis`` one (LSTM 3 × 250, 125-step windows), on a synthetic simulated-size dataset
