@@ -22,6 +22,7 @@ except metadata.PackageNotFoundError:
 
 from scipy.spatial.transform import Rotation  # noqa: E402
 
+from coassist.robot.arm_mjcf import build_arm_model, build_arm_spec  # noqa: E402
 from coassist.robot.mujoco_world import (  # noqa: E402
     DEFAULT_START,
     TOOL_DOWN,
@@ -30,13 +31,7 @@ from coassist.robot.mujoco_world import (  # noqa: E402
     rotation_vector,
     tool_down_ik,
 )
-from coassist.robot.ur5_mjcf import (  # noqa: E402
-    MOUNT_MASS,
-    TORQUE_LIMITS,
-    build_ur5_model,
-    tool_geometry,
-    ur5_mjcf_xml,
-)
+from coassist.robot.ur5_mjcf import MOUNT_MASS, TORQUE_LIMITS, tool_geometry  # noqa: E402
 from coassist.runtime.world import Command, RobotState, World  # noqa: E402
 from coassist.scenario.objects import OBJECTS  # noqa: E402
 from coassist.scenario.tasks import TASK_KINDS, nominal_path  # noqa: E402
@@ -91,7 +86,7 @@ def hold(world: MujocoUR5World, seconds: float) -> RobotState:
 
 
 def test_model_frames_match_the_dh_table():
-    model = build_ur5_model("handle")
+    model = build_arm_model("ur5", "handle")
     data = mujoco.MjData(model)
     assert model.nq == 6 and model.nv == 6 and model.nu == 6
     tool0 = model.body("tool0").id
@@ -113,7 +108,7 @@ def test_model_frames_match_the_dh_table():
 
 @pytest.mark.parametrize("tool", ["handle", "board", "heavy"])
 def test_tool_mass_below_the_sensor(tool):
-    model = build_ur5_model(tool)
+    model = build_arm_model("ur5", tool)
     mass_below = model.body_subtreemass[model.body("tool0").id]
     assert mass_below == pytest.approx(OBJECTS[tool].mass + MOUNT_MASS, rel=1e-9)
     world = MujocoUR5World(tool, sensor=QUIET)
@@ -131,11 +126,13 @@ def test_tool_mass_below_the_sensor(tool):
 
 
 def test_model_has_no_contacts_and_ur5_torque_limits():
-    model = build_ur5_model("board")
+    model = build_arm_model("ur5", "board")
     assert np.all(model.geom_contype == 0) and np.all(model.geom_conaffinity == 0)
     np.testing.assert_allclose(model.actuator_forcerange, np.c_[-TORQUE_LIMITS, TORQUE_LIMITS])
     assert model.numeric("servo_time_constant").data[0] == 0.02
-    xml = ur5_mjcf_xml("handle")
+    spec = build_arm_spec("ur5", "handle")
+    spec.compile()
+    xml = spec.to_xml()
     assert "ft_sensor" in xml and "<force" in xml and "<torque" in xml
     assert mujoco.MjModel.from_xml_string(xml).nq == 6
 
@@ -159,7 +156,7 @@ def test_start_pose_is_the_requested_tcp_pointing_down():
 
 
 def test_the_tasks_are_reachable_on_one_branch():
-    model = build_ur5_model("handle")
+    model = build_arm_model("ur5", "handle")
     data = mujoco.MjData(model)
     site = model.site("tcp").id
     jp, jr = np.zeros((3, 6)), np.zeros((3, 6))

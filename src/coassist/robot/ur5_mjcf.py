@@ -1,7 +1,8 @@
 """The MuJoCo model of the UR5 with its force/torque sensor and the carried object.
 
 The UR5 entry of :mod:`coassist.robot.arm_mjcf` (which builds every arm of the registry
-the same way, and holds the tools); this module keeps the UR5's names and constants.
+the same way, and holds the tools: ``build_arm_model("ur5", tool)``); this module keeps
+the UR5's names and constants.
 
 Source: example-robot-data's ``ur5_robot.urdf`` (the installed ``example-robot-data``
 package; its DAE visuals are dropped, the STL collision meshes are kept as visuals).
@@ -59,15 +60,12 @@ Collisions are off (contype = conaffinity = 0 on every geom): free-space pHRI.
 
 from __future__ import annotations
 
-import mujoco
 import numpy as np
 
 from coassist.robot.arm_mjcf import (
     MOUNT_MASS,
     TOOLS,
     ToolGeometry,
-    build_arm_model,
-    build_arm_spec,
     tool_geometry,
     urdf_joint_limits,
 )
@@ -82,10 +80,7 @@ __all__ = [
     "TORQUE_LIMITS",
     "VELOCITY_LIMITS",
     "ToolGeometry",
-    "build_ur5_model",
-    "build_ur5_spec",
     "tool_geometry",
-    "ur5_mjcf_xml",
     "ur5_urdf_path",
 ]
 
@@ -100,47 +95,3 @@ VELOCITY_LIMITS = np.array(_velocity)
 #: The seed of the start pose's IK: elbow up, wrist down, tool down, the handle's TCP at
 #: the middle of the tasks' workspace ((0.15, −0.615, 0.2) m): the registry's UR5 home.
 Q_SEED = np.array(get_arm("ur5").home)
-
-
-def build_ur5_spec(
-    tool: str = "handle",
-    *,
-    physics_dt: float = 0.002,
-    servo_time_constant: float = 0.02,
-    tcp_offset=None,
-    gravity: bool = True,
-) -> mujoco.MjSpec:
-    """The :class:`mujoco.MjSpec` of the UR5 with sensor, ``tool`` and servos (module docstring).
-
-    servo_time_constant : [s] the lag of the joint velocity behind the command; stored
-    in the model as the numeric ``servo_time_constant`` (the world applies it).
-    tcp_offset : (3,) the TCP in the tool0 frame [m]; None: the tool's default.
-    gravity : False sets gravity to zero.
-    """
-    return build_arm_spec("ur5", tool, physics_dt=physics_dt, servo_time_constant=servo_time_constant,
-                          tcp_offset=tcp_offset, gravity=gravity)  # fmt: skip
-
-
-def ur5_mjcf_xml(tool: str = "handle", **kwargs) -> str:
-    """The MJCF text of :func:`build_ur5_model` (for inspection; mesh paths are absolute)."""
-    spec = build_ur5_spec(tool, **kwargs)
-    spec.compile()
-    return spec.to_xml()
-
-
-def build_ur5_model(
-    tool: str = "handle",
-    *,
-    physics_dt: float = 0.002,
-    servo_time_constant: float = 0.02,
-    tcp_offset=None,
-    gravity: bool = True,
-) -> mujoco.MjModel:
-    """The compiled MuJoCo model of the UR5 carrying ``tool`` (module docstring).
-
-    The joint motors take torques; the world
-    (:class:`coassist.robot.mujoco_world.MujocoUR5World`) closes the servo loop each
-    physics step with the model's ``servo_time_constant`` numeric.
-    """
-    return build_arm_model("ur5", tool, physics_dt=physics_dt, servo_time_constant=servo_time_constant,
-                           tcp_offset=tcp_offset, gravity=gravity)  # fmt: skip
