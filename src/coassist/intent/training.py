@@ -23,6 +23,7 @@ the batch order from a NumPy generator, and the caller (the CLI) sets the thread
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import math
 import os
@@ -39,6 +40,7 @@ from torch import nn
 
 from coassist._checks import is_integer, is_real_number
 from coassist._io import partial_folder, save_figure
+from coassist._progress import progress_bar
 from coassist.intent.baselines import UNTUNED_RIDGE_ALPHA, RidgeBaseline, fit_tuned_baselines, tune_ridge_alpha
 from coassist.intent.batches import DeviceWindows
 from coassist.intent.features import WindowConfig, WindowSet, feature_names, scale_targets, split_trials
@@ -497,11 +499,11 @@ def train_model(
             out["continued_after_epoch"] = [*base.info.get("continued_after_epoch", []), done]
         return out
 
-    bar = _progress_bar(progress)
+    bar = progress_bar(True) if progress else None
     task = bar.add_task("training", total=total_steps) if bar else None
     if bar:
         bar.update(task, completed=done * steps_per_epoch)
-    with bar if bar else _nullcontext():
+    with bar if bar else contextlib.nullcontext():
         # A linear network (no LSTM) is the tuned ridge, fitted in closed form below: no gradient epochs.
         for epoch in range(done + 1, (0 if net.is_linear else config.epochs) + 1):
             t0 = time.perf_counter()
@@ -630,30 +632,6 @@ def _restore(ckpt: dict[str, Any], opt: torch.optim.Optimizer, sched: Any, rng: 
     opt.load_state_dict({"state": per_param, "param_groups": ckpt["optimizer"]["param_groups"]})
     sched.load_state_dict({**ckpt["scheduler"], "lr_lambdas": [None] * len(opt.param_groups)})
     rng.bit_generator.state = ckpt["numpy_rng"]
-
-
-class _nullcontext:
-    def __enter__(self) -> None:
-        return None
-
-    def __exit__(self, *exc: object) -> None:
-        return None
-
-
-def _progress_bar(enabled: bool):
-    if not enabled:
-        return None
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                    TimeRemainingColumn())  # fmt: skip
 
 
 def plot_losses(history: Sequence[dict[str, Any]], path: Path | IO[bytes], title: str = "") -> None:

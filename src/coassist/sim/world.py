@@ -53,6 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from coassist._checks import check_int
+from coassist._progress import progress_bar
 from coassist.config import THESIS_EVALUATION
 from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
 from coassist.data import Trial, TrialMeta
@@ -493,23 +494,6 @@ def _run_lockstep_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
     return [_to_payload(trial) for trial in run_spec_lockstep(specs)]
 
 
-def _progress(enabled: bool, total: int):
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    progress = Progress(
-        TextColumn("simulating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
-        disable=not enabled, transient=False,
-    )
-    return progress
-
-
 def worker_pool(workers: int) -> Executor:
     """``workers`` simulation processes to pass to :func:`run_trials` (``pool``) call after call.
 
@@ -587,8 +571,8 @@ def run_trials(
         return _run_lockstep_groups(specs, workers, progress, deliver, on_result is not None, results, pool)
     if workers == 1:
         controllers: dict = {}
-        with _progress(progress, len(specs)) as bar:
-            task_id = bar.add_task("trials", total=len(specs))
+        with progress_bar(progress) as bar:
+            task_id = bar.add_task("simulating", total=len(specs))
             for i, spec in enumerate(specs):
                 deliver(i, run_spec(spec, controllers))
                 bar.advance(task_id)
@@ -602,8 +586,8 @@ def run_trials(
     batches = [list(range(i, min(i + size, len(specs)))) for i in range(0, len(specs), size)]
     with _pool_for(pool, workers) as executor:
         futures = {executor.submit(_run_batch, [specs[i] for i in batch]): batch for batch in batches}
-        with _progress(progress, len(specs)) as bar:
-            task_id = bar.add_task("trials", total=len(specs))
+        with progress_bar(progress) as bar:
+            task_id = bar.add_task("simulating", total=len(specs))
             for fut in as_completed(futures):
                 for i, payload in zip(futures[fut], fut.result()):
                     deliver(i, _from_payload(payload))
@@ -621,8 +605,8 @@ def _run_lockstep_groups(specs: list[TrialSpec], workers: int, progress: bool, d
     """:func:`run_trials`' lockstep path: group g holds specs g, g + workers, … (the tasks mix, so the
     groups' lengths balance), each run by :func:`_run_lockstep_batch` in its own process."""
     groups = [list(range(g, len(specs), workers)) for g in range(workers)]
-    with _progress(progress, len(specs)) as bar:
-        task_id = bar.add_task("trials", total=len(specs))
+    with progress_bar(progress) as bar:
+        task_id = bar.add_task("simulating", total=len(specs))
         if workers == 1:
             for i, trial in zip(groups[0], run_spec_lockstep(specs)):
                 deliver(i, trial)
@@ -654,8 +638,8 @@ def _run_ray(specs: list[TrialSpec], address: str, progress: bool,
     index = {ref: i for i, ref in enumerate(refs)}
     results: list[Trial | None] = [None] * len(specs)
     pending = list(refs)
-    with _progress(progress, len(specs)) as bar:
-        task_id = bar.add_task("trials", total=len(specs))
+    with progress_bar(progress) as bar:
+        task_id = bar.add_task("simulating", total=len(specs))
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
             for ref in done:
