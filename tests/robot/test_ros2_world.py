@@ -48,21 +48,15 @@ def loopback(monkeypatch):
     monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
 
 
-class SimRobot:
-    """The robot's side: a MuJoCo UR5 behind ros2_control's topics, stepped once per command."""
+class _SpunNode:
+    """A node in its own rclpy context, spun by a daemon thread (:meth:`_start`), torn down by :meth:`close`."""
 
-    def __init__(self, world: MujocoUR5World, *, silent_after: int | None = None, silent_topic: str = "both") -> None:
-        self.world = world
-        self.silent_after, self.silent_topic = silent_after, silent_topic
-        self.commands: list[np.ndarray] = []
-        self.started = False
+    def _open(self, name: str) -> None:
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx, domain_id=DOMAIN)
-        self.node = rclpy.create_node("ur5_sim", context=self.ctx)
-        self.js_pub = self.node.create_publisher(JointState, "/joint_states", 10)
-        self.w_pub = self.node.create_publisher(WrenchStamped, "/force_torque_sensor_broadcaster/wrench", 10)
-        self.node.create_subscription(Float64MultiArray, "/forward_velocity_controller/commands", self._on_command, 10)
-        self.node.create_timer(0.02, self._announce)  # the state at rest, until the first command
+        self.node = rclpy.create_node(name, context=self.ctx)
+
+    def _start(self) -> None:
         self.executor = rclpy.executors.SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
         self.running = True
@@ -72,6 +66,29 @@ class SimRobot:
     def _spin(self) -> None:
         while self.running:
             self.executor.spin_once(timeout_sec=0.01)
+
+    def close(self) -> None:
+        self.running = False
+        self.thread.join(timeout=2)
+        self.executor.shutdown(timeout_sec=1)
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.ctx)
+
+
+class SimRobot(_SpunNode):
+    """The robot's side: a MuJoCo UR5 behind ros2_control's topics, stepped once per command."""
+
+    def __init__(self, world: MujocoUR5World, *, silent_after: int | None = None, silent_topic: str = "both") -> None:
+        self.world = world
+        self.silent_after, self.silent_topic = silent_after, silent_topic
+        self.commands: list[np.ndarray] = []
+        self.started = False
+        self._open("ur5_sim")
+        self.js_pub = self.node.create_publisher(JointState, "/joint_states", 10)
+        self.w_pub = self.node.create_publisher(WrenchStamped, "/force_torque_sensor_broadcaster/wrench", 10)
+        self.node.create_subscription(Float64MultiArray, "/forward_velocity_controller/commands", self._on_command, 10)
+        self.node.create_timer(0.02, self._announce)  # the state at rest, until the first command
+        self._start()
 
     def _announce(self) -> None:
         if not self.started:
@@ -104,13 +121,6 @@ class SimRobot:
             js.position = [float(s.q[i]) for i in order]
             js.velocity = [float(s.qd[i]) for i in order]
             self.js_pub.publish(js)
-
-    def close(self) -> None:
-        self.running = False
-        self.thread.join(timeout=2)
-        self.executor.shutdown(timeout_sec=1)
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.ctx)
 
 
 def mujoco_world(config: DriveConfig) -> MujocoUR5World:
@@ -194,7 +204,7 @@ def test_config_names_the_field():
         Ros2Config(domain_id=300)
 
 
-class Listener:
+class Listener(_SpunNode):
     """An operator's monitor: subscribes to the node's monitor topics."""
 
     TOPICS = {"/coassist/tool_pose": "geometry_msgs.msg.PoseStamped", "/coassist/prediction": "nav_msgs.msg.Path",
@@ -205,30 +215,16 @@ class Listener:
         import importlib
 
         self.got: dict[str, list] = {t: [] for t in self.TOPICS}
-        self.ctx = rclpy.Context()
-        rclpy.init(context=self.ctx, domain_id=DOMAIN)
-        self.node = rclpy.create_node("monitor", context=self.ctx)
+        self._open("monitor")
         for topic, kind in self.TOPICS.items():
             module, name = kind.rsplit(".", 1)
             cls = getattr(importlib.import_module(module), name)
             self.node.create_subscription(cls, topic, lambda m, t=topic: self.got[t].append(m), 1000)
-        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.ctx)
-        self.executor.add_node(self.node)
-        self.running = True
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self) -> None:
-        while self.running:
-            self.executor.spin_once(timeout_sec=0.01)
+        self._start()
 
     def close(self) -> None:
         time.sleep(0.3)  # what is in flight arrives
-        self.running = False
-        self.thread.join(timeout=2)
-        self.executor.shutdown(timeout_sec=1)
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.ctx)
+        super().close()
 
 
 def test_the_monitor_topics_carry_the_run():
