@@ -320,6 +320,7 @@ def test_online_alpha_series_over_the_memory_allowance_is_not_built(monkeypatch)
     assert family.rank > 0 and family.pieces == []
     np.testing.assert_array_equal(family.gains(0.41), family._exact(0.41))
     monkeypatch.setattr(game_module._AlphaFamily, "MAX_BYTES", family_bytes)  # exactly at the allowance: built
+    game._families.clear()  # the game keeps the family it prepared at this α; build it again
     game.prepare_alpha_changes()
     assert len(game._alpha_family.pieces) == game_module._AlphaFamily.PIECES
 
@@ -435,3 +436,32 @@ def test_application_presets_damping_left_by_a_pose_extrapolating_prediction():
     assert left["thesis-application-dm"] == pytest.approx(32.5, abs=0.1)
     assert left["thesis-application-damped"] == pytest.approx(68.7, abs=0.1)
     assert left["thesis-application-damped"] >= 2 / 3 * get_preset("thesis-application-damped").impedance.D[0]
+
+
+def test_games_of_one_preset_share_the_work_not_the_alpha():
+    """cooperative_game builds once per (model, parameters): the copies it hands out have the
+    gains of a game built alone, bit for bit, and each its own α."""
+    from coassist.config import GameParameters
+    from coassist.control import game as game_module
+    from coassist.control.game import CooperativeGame, cooperative_game
+
+    model = ImpedanceModel(np.diag([8.0, 8.0]), np.diag([30.0, 30.0]), np.zeros((2, 2)), 0.008)
+    params = GameParameters(Q_hr=(0.2, 0.2, 0.0, 0.0), horizon=12, control_horizon=6)
+    game_module._GAME_MEMO.clear()
+    a, b = cooperative_game(model, params), cooperative_game(model, params)
+    alone = CooperativeGame(model, Q_hh=params.Q_hh, Q_hr=params.Q_hr, Q_rh=params.Q_rh, Q_rr=params.Q_rr,
+                            R_h=params.R_h, R_r=params.R_r, alpha=params.alpha, horizon=12, control_horizon=6)
+    assert a is not b and len(game_module._GAME_MEMO) == 1
+    for g in (a, b):
+        for name in ("G_z", "G_h", "G_r"):
+            np.testing.assert_array_equal(getattr(g.gains, name), getattr(alone.gains, name))
+    a.set_alpha(0.3)  # prepares the family once; b's α stays
+    assert b.alpha == params.alpha and a.alpha == 0.3
+    b.prepare_alpha_changes()
+    assert b._alpha_family is a._alpha_family  # shared, not rebuilt
+    b.set_alpha(0.3)
+    alone.set_alpha(0.3)
+    np.testing.assert_array_equal(b.gains.G_h, alone.gains.G_h)
+    # another model: another game
+    other = ImpedanceModel(np.diag([9.0, 9.0]), np.diag([30.0, 30.0]), np.zeros((2, 2)), 0.008)
+    assert not np.array_equal(cooperative_game(other, params).gains.G_z, a.gains.G_z)

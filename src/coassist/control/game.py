@@ -77,6 +77,7 @@ every α uses the exact sum.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from typing import Literal
 
@@ -332,7 +333,20 @@ class CooperativeGame(_LinearQuadraticGame):
         )
         self.input_weighting = input_weighting
         self._alpha_family: _AlphaFamily | None = None
+        # α₀ → its _AlphaFamily, shared with the copies of this game (:meth:`copy`): the
+        # family is a pure function of the game's matrices and α₀, which copies share.
+        self._families: dict[float, _AlphaFamily] = {}
         self._compute_gains(self._check_alpha(alpha))
+
+    def copy(self) -> CooperativeGame:
+        """A game equal to this one with its own α: the weights, factor and gains are shared
+        (never written in place; :meth:`set_alpha` swaps its own state), and so are the
+        α-families prepared by either (:meth:`prepare_alpha_changes`). Costs microseconds
+        where building the game costs a factorisation and preparing α changes an
+        eigendecomposition."""
+        twin = copy.copy(self)
+        twin._alpha_family = None
+        return twin
 
     def _check_alpha(self, alpha: float) -> float:
         try:
@@ -377,7 +391,10 @@ class CooperativeGame(_LinearQuadraticGame):
         seconds if every stretch needed degree 16): do it before the loop starts so that no
         tick pays for it.
         """
-        self._alpha_family = _AlphaFamily(self, self.alpha)
+        family = self._families.get(self.alpha)
+        if family is None:
+            family = self._families[self.alpha] = _AlphaFamily(self, self.alpha)
+        self._alpha_family = family
 
     def _player_weights(self, alpha):
         a = alpha
@@ -599,12 +616,31 @@ def extrapolation_feedback(game: _LinearQuadraticGame) -> tuple[np.ndarray, np.n
     return -feedback[:, :n], -feedback[:, n:]
 
 
+#: (model, parameters) → a game built from them, of which :func:`cooperative_game` hands out
+#: copies: a memo of a pure construction, bounded (a process meets a handful of presets).
+_GAME_MEMO: dict[tuple, CooperativeGame] = {}
+_GAME_MEMO_SIZE = 16
+
+
 def cooperative_game(model: ImpedanceModel, params: GameParameters) -> CooperativeGame:
-    """Build the :class:`CooperativeGame` of a validated :class:`~coassist.config.GameParameters`."""
-    return CooperativeGame(
-        model,
-        Q_hh=params.Q_hh, Q_hr=params.Q_hr, Q_rh=params.Q_rh, Q_rr=params.Q_rr,
-        R_h=params.R_h, R_r=params.R_r, alpha=params.alpha,
-        horizon=params.horizon, control_horizon=params.control_horizon,
-        input_weighting=params.input_weighting,  # type: ignore[arg-type]
-    )
+    """The :class:`CooperativeGame` of a validated :class:`~coassist.config.GameParameters`.
+
+    Each call returns a game of its own (its α changes alone), a :meth:`~CooperativeGame.copy`
+    of one built once per (model, parameters) in this process: a simulation worker that
+    runs many trials with the same preset factorises, and prepares online α, once.
+    """
+    key = (params, float(model.dt), *(np.asarray(a, float).tobytes() for a in (model.M, model.D, model.K)),
+           np.shape(model.M))  # fmt: skip
+    template = _GAME_MEMO.get(key)
+    if template is None:
+        template = CooperativeGame(
+            model,
+            Q_hh=params.Q_hh, Q_hr=params.Q_hr, Q_rh=params.Q_rh, Q_rr=params.Q_rr,
+            R_h=params.R_h, R_r=params.R_r, alpha=params.alpha,
+            horizon=params.horizon, control_horizon=params.control_horizon,
+            input_weighting=params.input_weighting,  # type: ignore[arg-type]
+        )  # fmt: skip
+        if len(_GAME_MEMO) >= _GAME_MEMO_SIZE:
+            _GAME_MEMO.pop(next(iter(_GAME_MEMO)))
+        _GAME_MEMO[key] = template
+    return template.copy()

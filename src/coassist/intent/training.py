@@ -228,10 +228,13 @@ MODEL_PRESETS: Registry[Preset] = Registry("intent-model preset", {
 
 
 def _optimizer(name: str, params: list[nn.Parameter], lr: float, weight_decay: float) -> torch.optim.Optimizer:
+    # fused: one kernel per step for all parameters (CPU and CUDA), instead of ~10 small ops per
+    # tensor; at the default preset's size the optimizer step falls from ~6 % of a training step
+    # to ~2 % (benchmarks/bench_training.py).
     if name == "adam":
-        return torch.optim.Adam(params, lr=lr, weight_decay=weight_decay)
+        return torch.optim.Adam(params, lr=lr, weight_decay=weight_decay, fused=True)
     if name == "adamw":
-        return torch.optim.AdamW(params, lr=lr, weight_decay=weight_decay)
+        return torch.optim.AdamW(params, lr=lr, weight_decay=weight_decay, fused=True)
     if name == "rmsprop":
         return torch.optim.RMSprop(params, lr=lr, weight_decay=weight_decay)
     return torch.optim.SGD(params, lr=lr, momentum=0.9, weight_decay=weight_decay)
