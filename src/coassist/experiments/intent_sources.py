@@ -3,7 +3,7 @@
 Every learned source is trained from scratch on the same datasets (the iterative stage's
 D_k and the board's and heavy load's transfer datasets, all collected with the run's
 models in the loop) by the same protocol (the run's intent preset, epochs, seed and skip
-shrinkage); only what it learns to predict differs, and the ridge's model class:
+shrinkage, every ``source_stride``-th window); only what it learns to predict differs, and the ridge's model class:
 
 - ``ridge``: the validation-tuned ridge (the ``linear`` preset) on the tool's future pose;
 - ``lstm-tool``: the LSTM+FC on the tool's future pose (the thesis' label);
@@ -53,6 +53,6 @@ def train_sources(ws: Workspace, datasets: list[Path]) -> dict[str, str]:
     models = {}
     for source, (preset_name, label) in LEARNED.items():
         epochs = ws.config.epochs if preset_name is None else MODEL_PRESETS[preset_name].train.epochs
-        models[source] = str(ws.train(source, datasets, init="scratch", epochs=epochs,
-                                      preset_name=preset_name, label=label))  # fmt: skip
+        models[source] = str(ws.train(source, datasets, init="scratch", epochs=epochs, preset_name=preset_name,
+                                      label=label, stride=ws.config.source_stride))  # fmt: skip
     return models
