@@ -204,18 +204,16 @@ def _mujoco_configs(cfg, obj: str, seed0: int, controller: str, intent: str) -> 
 
 
 def _drive_batch(configs: list) -> list[tuple[dict, dict]]:
-    """A worker's MuJoCo runs (spawned process; one torch thread, like the simulator's workers)."""
+    """A worker's MuJoCo runs, in lockstep (one network call per tick for those sharing a model;
+    spawned process, one torch thread like the simulator's workers)."""
     import torch
 
-    from coassist.robot.drive import drive
+    from coassist.robot.drive import drive_lockstep
 
     torch.set_num_threads(1)
-    out = []
-    for c in configs:
-        t = drive(c)
-        out.append((t.meta.to_dict(), {n: getattr(t, n) for n in ("time", "pose", "velocity", "wrench", "reference",
-                                                                    "prediction", "intent", "effort_h", "effort_r")}))
-    return out
+    return [(t.meta.to_dict(), {n: getattr(t, n) for n in ("time", "pose", "velocity", "wrench", "reference",
+                                                          "prediction", "intent", "effort_h", "effort_r")})
+            for t in drive_lockstep(configs)]  # fmt: skip
 
 
 def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict, pairs: dict, errors: dict) -> None:
@@ -226,19 +224,29 @@ def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict,
     from coassist.sim.world import worker_pool
 
     cfg = ws.config
-    jobs = []
+    # One job per intent source: its cells (objects × controllers) run in lockstep in one
+    # worker, so a model in the loop is called once per tick for all of them.
+    jobs: dict[str, list[tuple[tuple[str, str, str], list]]] = {}
     for j, obj in enumerate(OBJECTS):
         seed0 = application_seed(cfg.seed, j)
-        jobs.append(((obj, "manual", "nominal"), _mujoco_configs(cfg, obj, seed0, "manual", "nominal")))
+        jobs.setdefault("nominal-mg", []).append(((obj, "manual", "nominal"),
+                                                  _mujoco_configs(cfg, obj, seed0, "manual", "nominal")))  # fmt: skip
         for controller in CONTROLLERS:
             for source in SOURCES:
-                jobs.append(((obj, controller, source), _mujoco_configs(cfg, obj, seed0, controller, intents[source])))
+                jobs.setdefault(source, []).append(((obj, controller, source),
+                                                    _mujoco_configs(cfg, obj, seed0, controller, intents[source])))  # fmt: skip
     workers = max(1, min(cfg.workers, os.cpu_count() or 1))
     # the run's simulation processes where it has them (started once), else a pool for these runs
     with contextlib.nullcontext(ws.pool) if ws.pool is not None else worker_pool(workers) as pool:
-        futures = [(key, pool.submit(_drive_batch, configs)) for key, configs in jobs]
-        for (obj, controller, source), fut in futures:
-            trials = [Trial(meta=TrialMeta.from_dict(m), **a) for m, a in fut.result()]
+        futures = [(cells, pool.submit(_drive_batch, [c for _, configs in cells for c in configs]))
+                   for cells in jobs.values()]  # fmt: skip
+        done = []
+        for cells, fut in futures:
+            runs = iter(fut.result())
+            for key, configs in cells:
+                done.append((key, [next(runs) for _ in configs]))
+        for (obj, controller, source), payloads in done:
+            trials = [Trial(meta=TrialMeta.from_dict(m), **a) for m, a in payloads]
             trials = sorted(trials, key=_pair_key)
             if controller == "manual":
                 mg[("mujoco", obj)] = application_metrics(trials)

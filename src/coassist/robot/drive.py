@@ -26,6 +26,7 @@ assistive controller, the cooperative game), ``cooperative-arbitrated``, ``imped
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -49,7 +50,7 @@ from coassist.scenario.seeds import trial_rngs
 from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, task_for_seed
 from coassist.spatial import rotation_vector
 
-__all__ = ["DriveConfig", "WORLDS", "WORLD_ROBOTS", "drive", "move_tasks", "workspace_for"]
+__all__ = ["DriveConfig", "WORLDS", "WORLD_ROBOTS", "drive", "drive_lockstep", "move_tasks", "workspace_for"]
 
 WORLDS = ("mujoco", "ur", "franka")
 #: The arms (``--robot``, :data:`coassist.robot.arms.ARMS`) each world drives; the first is its default.
@@ -195,6 +196,73 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
         must return True to go on (the CLI asks the person at the robot).
     intent_source : an IntentSource or RealtimePredictor to use instead of ``config.intent``.
     """
+    run = _prepare(config, operator=operator, world=world, host=host, view=view, intent_source=intent_source)
+    try:
+        if confirm is not None and not confirm(run.limits.describe()):
+            raise RuntimeError("not confirmed: the robot was not moved")
+        log = run.episode.run(deadline=config.dt if getattr(run.world, "realtime", False) else None, on_tick=on_tick)
+    finally:
+        run.close()
+    return run.finish(log)
+
+
+def drive_lockstep(configs: Sequence[DriveConfig]) -> list[Trial]:
+    """Simulated drives (world ``"mujoco"``, each its own world) run in lockstep
+    (:func:`coassist.runtime.lockstep.run_loops`): one network call per tick for the runs
+    with the same model in the loop. Each trial is its :func:`drive` to the float32 rounding
+    of batched network calls (bit for bit with a named intent); in ``configs``' order."""
+    from coassist.runtime.lockstep import run_loops
+
+    for i, c in enumerate(configs):
+        if not isinstance(c, DriveConfig) or c.world != "mujoco" or c.realtime_intent:
+            raise ValueError(f"configs[{i}] must be a DriveConfig of the mujoco world without a real-time predictor")
+    sources: dict[tuple[str, int], Any] = {}
+    runs: list[_PreparedDrive] = []
+    try:
+        for c in configs:
+            runs.append(_prepare(c, sources=sources))
+        logs = run_loops([r.episode.loop for r in runs])
+    finally:
+        for r in runs:
+            r.close()
+    return [r.finish(log) for r, log in zip(runs, logs)]
+
+
+@dataclass
+class _PreparedDrive:
+    """A drive built and not yet run: its episode, and what :meth:`close` and :meth:`finish` need."""
+
+    episode: Any
+    world: Any
+    limits: SafetyLimits
+    wrench: WrenchPipeline
+    built_here: bool
+    intent_stage: Any
+
+    def close(self) -> None:
+        """Close the world if the drive built it, and a real-time predictor's worker."""
+        try:
+            if self.built_here and self.world is not None:
+                self.world.close()
+        finally:
+            _close_intent(self.intent_stage)
+
+    def finish(self, log: Any) -> Trial:
+        return self.episode.finish(log, {"sensor_bias": [float(v) for v in self.wrench.bias]})
+
+
+def _close_intent(intent_stage: Any) -> None:
+    if isinstance(intent_stage, RealtimeIntent):
+        close = getattr(intent_stage.predictor, "close", None)
+        if close is not None:
+            close()
+
+
+def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, host: str | None = None,
+             view: bool = False, intent_source: Any = None, sources: dict | None = None) -> _PreparedDrive:  # fmt: skip
+    """Build :func:`drive`'s episode (world, hand, kinematics, wrench, safety, tick) with the
+    sensor zeroed; on failure, close what was built. ``sources``: a cache (intent, horizon) →
+    loaded source that runs in lockstep share (those with a ``batcher``: stateless)."""
     if not isinstance(config, DriveConfig):
         raise ValueError(f"config must be a DriveConfig, got {type(config).__name__}")
     dt = config.dt
@@ -208,7 +276,7 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
     built_here = world is None
     intent_stage = None
     try:
-        intent_stage, model_id = _intent_stage(config, H, intent_source)
+        intent_stage, model_id = _intent_stage(config, H, intent_source, sources)
         ref_abs = plan_grid(task, dt, n_max, max(H, int(intent_stage.horizon)))
         rng_intent, rng_motor = trial_rngs(config.seed, 2)
         intent_traj = intent_trajectory(task, profile, rng_intent, ref_abs.shape[0], dt)
@@ -273,17 +341,12 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
         )  # fmt: skip
         # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
         wrench.zero(np.asarray(state0.wrench, dtype=float)[None], np.asarray(state0.sensor_rotation, dtype=float)[None])
-        if confirm is not None and not confirm(limits.describe()):
-            raise RuntimeError("not confirmed: the robot was not moved")
-        log = episode.run(deadline=dt if getattr(world, "realtime", False) else None, on_tick=on_tick)
-    finally:
+    except BaseException:
         if built_here and world is not None:
             world.close()
-        if isinstance(intent_stage, RealtimeIntent):
-            close = getattr(intent_stage.predictor, "close", None)
-            if close is not None:
-                close()
-    return episode.finish(log, {"sensor_bias": [float(v) for v in wrench.bias]})
+        _close_intent(intent_stage)
+        raise
+    return _PreparedDrive(episode, world, limits, wrench, built_here, intent_stage)
 
 
 def _build_world(config: DriveConfig, robot: str, start: tuple[float, float, float], host: str | None, view: bool):
@@ -348,7 +411,7 @@ def _kinematics_for(world: Any):
     return UR5Kinematics(tcp_offset=np.zeros(6) if offset is None else offset)
 
 
-def _intent_stage(config: DriveConfig, H: int, source: Any):
+def _intent_stage(config: DriveConfig, H: int, source: Any, sources: dict | None = None):
     realtime = config.realtime_intent if config.realtime_intent is not None else config.world != "mujoco"
     if source is not None:
         if hasattr(source, "tick"):
@@ -367,5 +430,9 @@ def _intent_stage(config: DriveConfig, H: int, source: Any):
         mid = f"{config.intent.rstrip('/').split('/')[-1]}@{digest}"
         predictor = RealtimePredictor(model, RealtimeConfig(threaded=True, backend=config.predictor_backend))
         return RealtimeIntent(predictor, model_id=mid), mid
-    src = load_intent_source(config.intent, horizon=max(H, 2))
+    key = (config.intent, max(H, 2))
+    shared = None if sources is None else sources.get(key)
+    src = shared if shared is not None else load_intent_source(config.intent, horizon=max(H, 2))
+    if sources is not None and shared is None and getattr(src, "batcher", None) is not None:
+        sources[key] = src
     return WindowIntent(src, H), src.model_id

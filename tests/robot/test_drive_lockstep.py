@@ -1,0 +1,81 @@
+"""MuJoCo drives in lockstep (coassist.robot.drive.drive_lockstep) against drive() one by one.
+
+The reference is :func:`drive` itself on the same configs: named intents must give the same
+Trial bit for bit (nothing is batched); a float32 model in the loop agrees to its batched
+kernels' rounding (tests/runtime/test_lockstep.py explains the bound), and is loaded once
+and called once per tick for every run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra: pip install 'coassist[robot]'")
+pytest.importorskip("pinocchio", reason="the UR5 kinematics need the robot extra: pip install 'coassist[robot]'")
+
+from coassist.robot import drive as drive_module  # noqa: E402
+from coassist.robot.drive import DriveConfig, drive, drive_lockstep  # noqa: E402
+
+from ..intent.conftest import TINY, labeled  # noqa: E402
+
+#: Runs of different lengths (so they leave the batch at different ticks), users and controllers.
+CASES = (("linear", 1, 0, "cooperative", 1.2), ("curved", 2, 1, "cooperative-arbitrated", 1.6),
+         ("sinusoidal", 3, 2, "cooperative", 1.0))  # fmt: skip
+
+
+def _configs(intent: str) -> list[DriveConfig]:
+    return [DriveConfig(world="mujoco", controller=c, task=t, seed=s, user=u, intent=intent, time_limit=tl)
+            for t, s, u, c, tl in CASES]  # fmt: skip
+
+
+def test_named_intents_drive_in_lockstep_exactly_as_alone():
+    configs = _configs("oracle")[:2] + [replace(_configs("nominal")[2], controller="manual")]
+    together = drive_lockstep(configs)
+    for config, b in zip(configs, together):
+        a = drive(config)
+        assert a.n_samples > 100 and a.equals(b), config
+
+
+@pytest.fixture(scope="module")
+def tiny_model(tmp_path_factory) -> str:
+    from coassist.intent.training import train_model, write_model
+
+    out = tmp_path_factory.mktemp("model") / "tiny"
+    # the loop needs the controller's horizon (the default preset's game, 50 ticks at 125 Hz)
+    preset = replace(TINY, window=replace(TINY.window, horizon=50))
+    write_model(train_model(labeled(3), preset, replace(TINY.train, epochs=1)), out)
+    return str(out)
+
+
+def test_a_model_drives_in_lockstep_to_its_rounding_with_one_call_per_tick(tiny_model, monkeypatch):
+    configs = _configs(tiny_model)
+    alone = [drive(c) for c in configs]
+    loads, calls = [], []
+    real_load = drive_module.load_intent_source
+
+    def counting_load(intent, horizon):
+        src = real_load(intent, horizon=horizon)
+        loads.append(intent)
+        batch = src.batcher.predict_batch
+        src.batcher.predict_batch = lambda windows: (calls.append(len(windows)), batch(windows))[1]
+        return src
+
+    monkeypatch.setattr(drive_module, "load_intent_source", counting_load)
+    together = drive_lockstep(configs)
+    assert loads == [tiny_model]  # one model for the three runs
+    lengths = sorted(t.n_samples for t in together)
+    assert len(calls) == lengths[-1] and calls[0] == 3  # one call per tick, every run still going in it
+    for a, b in zip(alone, together):
+        assert a.n_samples == b.n_samples and a.meta.extra["ended"] == b.meta.extra["ended"]
+        np.testing.assert_array_equal(a.fault, b.fault)
+        # float32 rounding of batched kernels (tests/runtime/test_lockstep.py), through the arm's loop
+        np.testing.assert_allclose(b.prediction, a.prediction, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(b.pose, a.pose, rtol=0, atol=1e-7)
+
+
+def test_lockstep_takes_simulated_drives_only():
+    with pytest.raises(ValueError, match=r"configs\[1\] must be a DriveConfig of the mujoco world"):
+        drive_lockstep([DriveConfig(), DriveConfig(world="ur")])
