@@ -12,7 +12,10 @@ gains (assemble, Cholesky, solve: what ``set_alpha`` did before), on the thesis'
 weights and on random weights where the gains are not affine in α (there the online
 path reads a Chebyshev series per stretch of α, and the exact eigen-sum it was fitted to
 is timed too); every online gain is checked against the fresh one (max |difference| /
-max |gain| ≤ 1e-9).
+max |gain| ≤ 1e-9). Last, a controller per simulated trial (``make_controller`` of the
+pipeline's presets): built from scratch each time (the naive baseline: what every
+arbitrated trial and every MuJoCo drive paid before) against a copy of the game built
+once per process (``cooperative_game``'s memo), gains checked bit for bit.
 Targets: 6-DOF Np = 50 tick p99 ≤ 20 µs and ≥ 1000× faster than naive (issue #2);
 gains for a new α p99 ≤ 50 µs (issue #11). One BLAS thread, so the numbers
 describe one core.
@@ -69,6 +72,7 @@ def main() -> None:
     parser.add_argument("--naive-ticks", type=int, default=30, help="timed calls of the naive baseline per case")
     parser.add_argument("--alpha-changes", type=int, default=5000, help="timed α changes per case (online gains)")
     parser.add_argument("--fresh-changes", type=int, default=40, help="timed fresh gain computations per case")
+    parser.add_argument("--controllers", type=int, default=5, help="timed fresh controller builds per case")
     parser.add_argument("--json", type=str, default=None, help="also write the figures to this file")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
@@ -125,9 +129,46 @@ def main() -> None:
         t = next(r for r in alpha_rows if r["weights"] == weights and r["n_dof"] == 6)
         print(f"6-DOF Np=50, {weights} weights: gains for a new α p99 {t['online_p99_us']:.1f} µs (target ≤ 50), "
               f"fresh {t['fresh_p99_us'] / 1e3:.1f} ms; agreement {t['max_rel_diff']:.1e} (target ≤ 1e-9)")
+    print()
+    controller_rows = bench_controllers(args.controllers)
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({"tick": rows, "alpha": alpha_rows}, fh, indent=2)
+            json.dump({"tick": rows, "alpha": alpha_rows, "controller": controller_rows}, fh, indent=2)
+
+
+def bench_controllers(fresh_builds: int) -> list[dict]:
+    """A controller per trial: built from scratch against a copy of the memoised game."""
+    from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET
+    from coassist.control import game as game_module
+    from coassist.control.presets import get_preset, make_controller
+
+    def gains(c) -> np.ndarray:
+        g = (c.controller if hasattr(c, "controller") else c).game.gains
+        return np.hstack([g.G_z, g.G_h, g.G_r])
+
+    print(f"{'a controller per trial':<48}{'fresh med':>10}{'p99 [ms]':>10}{'memo med':>10}{'p99 [ms]':>10}{'ratio (med)':>13}")
+    out = []
+    for preset_name in (COLLECTION_PRESET, APPLICATION_PRESET):
+        preset = get_preset(preset_name)
+        for kind in ("cooperative", "cooperative-arbitrated"):
+            fresh, memo = np.empty(fresh_builds, dtype=np.int64), np.empty(10 * fresh_builds, dtype=np.int64)
+            for i in range(fresh_builds):
+                game_module._GAME_MEMO.clear()
+                t0 = time.perf_counter_ns()
+                reference = make_controller(kind, preset)
+                fresh[i] = time.perf_counter_ns() - t0
+            for i in range(memo.shape[0]):
+                t0 = time.perf_counter_ns()
+                c = make_controller(kind, preset)
+                memo[i] = time.perf_counter_ns() - t0
+            if not np.array_equal(gains(c), gains(reference)):
+                raise SystemExit(f"the memoised {kind} controller's gains differ from a fresh one ({preset_name})")
+            (f_med, f_p99), (m_med, m_p99) = (np.median(fresh) / 1e6, np.percentile(fresh, 99) / 1e6), (
+                np.median(memo) / 1e6, np.percentile(memo, 99) / 1e6)
+            print(f"{kind + ' ' + preset_name:<48}{f_med:>10.1f}{f_p99:>10.1f}{m_med:>10.2f}{m_p99:>10.2f}{f_med / m_med:>13.0f}")
+            out.append(dict(preset=preset_name, kind=kind, fresh_median_ms=f_med, fresh_p99_ms=f_p99,
+                            memo_median_ms=m_med, memo_p99_ms=m_p99))
+    return out
 
 
 def random_weights_game(n: int, horizon: int, alpha: float) -> CooperativeGame:

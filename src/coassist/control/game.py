@@ -84,6 +84,7 @@ from typing import Literal
 import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike
+from threadpoolctl import threadpool_limits
 
 from coassist._checks import (
     as_square_matrix,
@@ -393,7 +394,8 @@ class CooperativeGame(_LinearQuadraticGame):
         """
         family = self._families.get(self.alpha)
         if family is None:
-            family = self._families[self.alpha] = _AlphaFamily(self, self.alpha)
+            with threadpool_limits(1, user_api="blas"):  # as in cooperative_game: same rounding in every process
+                family = self._families[self.alpha] = _AlphaFamily(self, self.alpha)
         self._alpha_family = family
 
     def _player_weights(self, alpha):
@@ -633,13 +635,18 @@ def cooperative_game(model: ImpedanceModel, params: GameParameters) -> Cooperati
            np.shape(model.M))  # fmt: skip
     template = _GAME_MEMO.get(key)
     if template is None:
-        template = CooperativeGame(
-            model,
-            Q_hh=params.Q_hh, Q_hr=params.Q_hr, Q_rh=params.Q_rh, Q_rr=params.Q_rr,
-            R_h=params.R_h, R_r=params.R_r, alpha=params.alpha,
-            horizon=params.horizon, control_horizon=params.control_horizon,
-            input_weighting=params.input_weighting,  # type: ignore[arg-type]
-        )  # fmt: skip
+        # One BLAS thread: the gains then round the same in every process whatever its BLAS
+        # threads (a simulation worker, the main process, a test), and building them does not
+        # stall at the barriers of threads competing for cores with other work (measured
+        # 1-2 s against ~15 ms for an arbitrated controller on a loaded 2-core machine).
+        with threadpool_limits(1, user_api="blas"):
+            template = CooperativeGame(
+                model,
+                Q_hh=params.Q_hh, Q_hr=params.Q_hr, Q_rh=params.Q_rh, Q_rr=params.Q_rr,
+                R_h=params.R_h, R_r=params.R_r, alpha=params.alpha,
+                horizon=params.horizon, control_horizon=params.control_horizon,
+                input_weighting=params.input_weighting,  # type: ignore[arg-type]
+            )  # fmt: skip
         if len(_GAME_MEMO) >= _GAME_MEMO_SIZE:
             _GAME_MEMO.pop(next(iter(_GAME_MEMO)))
         _GAME_MEMO[key] = template
