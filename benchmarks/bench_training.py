@@ -24,6 +24,13 @@ wait policy unset (libgomp spins, then sleeps, at every barrier; today's) agains
 ``OMP_WAIT_POLICY=PASSIVE`` (threads sleep at once). libgomp reads it once, when torch
 loads, so it takes a process each. On a 2-core machine shared with other work the policy,
 not the batch path, is what moves 2-thread CPU training (docs/intent-training-speed.md).
+
+``--pairs N`` compares, N rounds, what the pipeline does with independent trainings (the
+application's intent sources, ``experiments.intent_sources.train_sources``): two child
+processes of one thread each training at the same time, against one child of two threads
+(the naive baseline: the trainings one after the other, each on both cores); windows/s
+of the pair (sum over the two, each over its own run) against the single run's, default
+preset, device path.
 """
 
 from __future__ import annotations
@@ -171,6 +178,30 @@ def compare_processes(args: argparse.Namespace) -> None:
                                                "children": runs}, indent=1) + "\n")  # fmt: skip
 
 
+def compare_pairs(args: argparse.Namespace) -> None:
+    """Two concurrent 1-thread trainings against one 2-thread training (module docstring)."""
+    common = [sys.executable, __file__, "--steps", str(args.steps), "--thesis-steps", "0", "--device", args.device]
+    if args.batch_size:
+        common += ["--batch-size", str(args.batch_size)]
+    pair, single = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(args.pairs):
+            outs = [Path(tmp) / f"pair-{r}-{i}.json" for i in range(2)]
+            procs = [subprocess.Popen([*common, "--threads", "1", "--json", str(o)], stdout=subprocess.DEVNULL)
+                     for o in outs]  # fmt: skip
+            if any(p.wait() for p in procs):
+                raise SystemExit("a child run failed")
+            pair.append(sum(json.loads(o.read_text())["runs"][0]["paths"]["device"]["windows_per_s_run"] for o in outs))
+            out = Path(tmp) / f"single-{r}.json"
+            subprocess.run([*common, "--threads", "2", "--json", str(out)], check=True, stdout=subprocess.DEVNULL)
+            single.append(json.loads(out.read_text())["runs"][0]["paths"]["device"]["windows_per_s_run"])
+    print(f"independent trainings, default preset, {args.steps} steps per run, {args.pairs} round(s), load average "
+          f"{os.getloadavg()[0]:.1f}: windows/s per round")  # fmt: skip
+    print(f"  two 1-thread processes at once  {' '.join(f'{v:7.0f}' for v in pair)}   median {np.median(pair):7.0f}")
+    print(f"  one 2-thread process            {' '.join(f'{v:7.0f}' for v in single)}   median {np.median(single):7.0f}")
+    print(f"  ratio of medians x{np.median(pair) / np.median(single):.2f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--steps", type=int, default=300, help="training steps per path, default preset")
@@ -180,9 +211,13 @@ def main() -> None:
     ap.add_argument("--batch-size", type=int, default=None, help="override the presets' batch size")
     ap.add_argument("--json", default=None)
     ap.add_argument("--rounds", type=int, default=0, help="also compare whole processes (see above), N rounds")
+    ap.add_argument("--pairs", type=int, default=0, help="compare two 1-thread trainings at once with one 2-thread (see above)")
     args = ap.parse_args()
     if args.rounds:
         compare_processes(args)
+        return
+    if args.pairs:
+        compare_pairs(args)
         return
     torch.set_num_threads(args.threads)
     device = torch.device(args.device)
