@@ -215,6 +215,74 @@ class _GuardedController:
             return ControlStep(np.zeros(n), np.zeros(n), Fault.INTERNAL_ERROR)
 
 
+    def step_batch(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray) -> list[ControlStep]:
+        """:meth:`step` for B ticks at once (many trials in lockstep sharing this controller):
+        z (B, 2n), ref_h and ref_r (B, rows, 2n), wrench (B, n), float64 arrays.
+
+        Row b is ``step(z[b], ref_h[b], ref_r[b], wrench[b])`` bit for bit: the checks and the
+        saturation are elementwise (or exact reductions, max and all) over the batch, the law
+        is :meth:`_law_batch` (row for row the law's own arithmetic), and a row the batch
+        finds bad — out of bounds, non-finite, a non-finite effort — goes through
+        :meth:`step` itself, which refuses it with its flag and its one warning. Anything
+        else (other shapes or dtypes, a law that raises) falls back to :meth:`step` per row.
+        Never raises.
+        """
+        try:
+            fast = self._batch_ok(z, ref_h, ref_r, wrench)
+        except Exception:  # noqa: BLE001 -- whatever it is, step() per row handles it
+            fast = False
+        if not fast:
+            return [self.step(*row) for row in zip(z, ref_h, ref_r, wrench)]
+        try:
+            bound = self._state_bound
+            ok = (np.abs(z) <= bound).all(axis=1)
+            ok &= (np.abs(ref_h) <= bound).all(axis=(1, 2))
+            ok &= (np.abs(ref_r) <= bound).all(axis=(1, 2))
+            ok &= (np.abs(wrench) <= self.bounds.wrench).all(axis=1)
+            good = np.flatnonzero(ok)
+            rh, rr = (ref_h[good, :1], ref_r[good, :1]) if self._reads_first_row_only else (ref_h[good], ref_r[good])
+            u_h, u_r = self._law_batch(z[good], rh, rr)
+            fine = np.isfinite(u_r).all(axis=1) & np.isfinite(u_h).all(axis=1)
+            limit = self.effort_limit
+            with np.errstate(invalid="ignore"):  # rows with a non-finite effort are redone by step()
+                ratio = np.max(np.abs(u_r) / limit, axis=1)
+        except Exception:  # noqa: BLE001 -- step() per row reports the fault as it always does
+            return [self.step(*row) for row in zip(z, ref_h, ref_r, wrench)]
+        out: list[ControlStep | None] = [None] * z.shape[0]
+        for j, b in enumerate(good.tolist()):
+            if not fine[j]:
+                continue
+            r = ratio[j]
+            if r <= 1.0:
+                out[b] = ControlStep(u_r[j], u_h[j], Fault.NONE)
+            else:  # as saturate()
+                out[b] = ControlStep(np.clip(u_r[j] / r, -limit, limit), u_h[j], Fault.SATURATED)
+        return [s if s is not None else self.step(z[b], ref_h[b], ref_r[b], wrench[b]) for b, s in enumerate(out)]
+
+    def _batch_ok(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray) -> bool:
+        """Whether :meth:`step_batch` may take its batched path: float64 arrays of the shapes
+        :meth:`step` accepts, one row per tick."""
+        arrays = (z, ref_h, ref_r, wrench)
+        if not all(type(a) is np.ndarray and a.dtype == np.float64 for a in arrays):
+            return False
+        B = z.shape[0]
+        return (
+            z.shape == (B, *self._state_bound.shape)
+            and wrench.shape == (B, *self._wrench_shape)
+            and ref_h.ndim == 3 and ref_h.shape[0] == B and self._ref_ok(ref_h[0])
+            and ref_r.ndim == 3 and ref_r.shape[0] == B and self._ref_ok(ref_r[0])
+        )  # fmt: skip
+
+    def _law_batch(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The law for B rows, (u_h (B, n), u_r (B, n)); row b must equal ``_law`` on row b bit
+        for bit (here: the law itself, row by row)."""
+        n = self._zero.shape[0]
+        u_h, u_r = np.empty((z.shape[0], n)), np.empty((z.shape[0], n))
+        for b in range(z.shape[0]):
+            u_h[b], u_r[b] = self._law(z[b], ref_h[b], ref_r[b])
+        return u_h, u_r
+
+
 class AssistiveController(_GuardedController):
     """The assistive controller: the robot applies its equilibrium effort u_r(k) of a game.
 
@@ -237,6 +305,9 @@ class AssistiveController(_GuardedController):
 
     def _law(self, z, ref_h, ref_r):
         return self.game.solve(z, ref_h, ref_r)
+
+    def _law_batch(self, z, ref_h, ref_r):
+        return self.game.solve_batch(z, ref_h, ref_r)
 
 
 class ImpedanceControl(_GuardedController):

@@ -268,6 +268,35 @@ class _LinearQuadraticGame:
         u += dot(g.G_r, ref_r.reshape(-1))
         return u[: self._n], u[self._n :]
 
+    def solve_batch(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`solve` for B states at once (trials in lockstep sharing these gains):
+        z (B, 2n), ref_h and ref_r (B, Np, 2n) float64 → (u_h (B, n), u_r (B, n)) [N or N·m].
+
+        Row b equals ``solve(z[b], ref_h[b], ref_r[b])`` bit for bit: each row takes the same
+        three matrix-vector products in the same order. One matrix-matrix product over the
+        batch would be faster but rounds differently (BLAS's gemm and gemv kernels sum in
+        other orders), and the lockstep runner must reproduce the per-trial one exactly; the
+        gain over :meth:`solve` is the checks and conversions done once per batch.
+        """
+        z = np.asarray(z, dtype=float)
+        ref_h = np.asarray(ref_h, dtype=float)
+        ref_r = np.asarray(ref_r, dtype=float)
+        B = z.shape[0]
+        if z.shape != (B, *self._z_shape) or ref_h.shape != (B, *self._ref_shape) or ref_r.shape != (B, *self._ref_shape):
+            raise ValueError(f"z, ref_h, ref_r must have shapes (B, {self._z_shape[0]}) and (B, {self._ref_shape[0]}, "
+                             f"{self._ref_shape[1]}), got {z.shape}, {ref_h.shape}, {ref_r.shape}")  # fmt: skip
+        g = self._state[0]
+        G_z, G_h, G_r = g.G_z, g.G_h, g.G_r
+        rh, rr = ref_h.reshape(B, -1), ref_r.reshape(B, -1)
+        u = np.empty((B, G_z.shape[0]))
+        dot = np.dot
+        for b in range(B):
+            ub = dot(G_z, z[b])
+            ub += dot(G_h, rh[b])
+            ub += dot(G_r, rr[b])
+            u[b] = ub
+        return u[:, : self._n], u[:, self._n :]
+
     def solve_horizon(self, z: ArrayLike, ref_h: ArrayLike, ref_r: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """The whole equilibrium input sequences U_h, U_r, each (Nc, n) (for analysis, not the tick)."""
         z = np.asarray(z, dtype=float)

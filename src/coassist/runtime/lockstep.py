@@ -69,6 +69,7 @@ def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_c
             raise ValueError(f"episodes[{i}] must be a Loop (world, tick, n_max, termination), got {type(ep).__name__}")
         runs.append(LoopRun(ep.world, ep.tick, ep.n_max, ep.termination, clock=clock, split=True))
     batchers = [_batcher(run.tick) for run in runs]
+    steppers = [_stepper(run.tick) for run in runs]
     active = [i for i, run in enumerate(runs) if run.n_max > 0]
     k = 0
     while active:
@@ -100,9 +101,10 @@ def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_c
             for i, pred in zip(members, preds):
                 runs[i].charge(share)
                 answers[i] = runs[i].tick.intent.accept(pred)
+        controls = _step_controllers(runs, going, answers, steppers, clock)
         active = []
         for i in going:
-            if not runs[i].act(k, answers[i]) and k + 1 < runs[i].n_max:
+            if not runs[i].act(k, answers[i], controls.get(i)) and k + 1 < runs[i].n_max:
                 active.append(i)
         k += 1
     return [run.log() for run in runs]
@@ -115,6 +117,42 @@ def _batcher(tick: ControlTick) -> Any:
         return None
     batcher = getattr(intent, "batcher", None)
     return batcher if callable(getattr(batcher, "predict_batch", None)) else None
+
+
+def _stepper(tick: ControlTick) -> Any:
+    """The tick's controller where runs may share one ``step_batch`` call (it keeps no state
+    between ticks: no ``reset``), else None (the tick steps it itself)."""
+    controller = tick.controller
+    if callable(getattr(controller, "reset", None)) or not callable(getattr(controller, "step_batch", None)):
+        return None
+    return controller
+
+
+def _step_controllers(runs: list[LoopRun], going: list[int], answers: dict[int, Any], steppers: list[Any],
+                      clock: Callable[[], float]) -> dict[int, Any]:  # fmt: skip
+    """Run i's controller step for this tick, for the runs whose controller is shared: one
+    ``step_batch`` per controller (row for row its ``step``, bit for bit), each run charged
+    its inputs' time and its share of the call."""
+    groups: dict[int, tuple[Any, list[int], list[tuple[np.ndarray, ...]]]] = {}
+    for i in going:
+        controller = steppers[i]
+        if controller is None:
+            continue
+        t0 = clock()
+        inputs = runs[i].tick.control_inputs(answers[i])
+        runs[i].charge(clock() - t0)
+        _, members, rows = groups.setdefault(id(controller), (controller, [], []))
+        members.append(i)
+        rows.append(inputs)
+    controls: dict[int, Any] = {}
+    for controller, members, rows in groups.values():
+        t0 = clock()
+        steps = controller.step_batch(*(np.stack(column) for column in zip(*rows)))
+        share = (clock() - t0) / len(members)
+        for i, step in zip(members, steps):
+            runs[i].charge(share)
+            controls[i] = step
+    return controls
 
 
 def _predict(batcher: Any, windows: list[np.ndarray], intents: list[Any]) -> list[Any]:

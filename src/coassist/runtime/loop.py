@@ -193,14 +193,20 @@ class LoopRun:
             return LINK_LOST
         return row
 
-    def act(self, k: int, intent: Any) -> bool:
-        """Finish tick k with the intent's answer, command the world, log; True when the run is over."""
+    def act(self, k: int, intent: Any, control: Any = None) -> bool:
+        """Finish tick k with the intent's answer, command the world, log; True when the run is over.
+
+        ``control``: the controller's step for this tick computed elsewhere (``split`` runs:
+        :meth:`ControlTick.control_inputs <coassist.runtime.tick.ControlTick.control_inputs>`
+        was called with ``intent`` and the runner stepped the controller, e.g. in one call for
+        many runs); None: the tick steps it itself.
+        """
         world, state = self.world, self._state
         if state is None:
             raise RuntimeError(f"LoopRun.act({k}) before sense({k})")
         try:
             t1 = self.clock() if self.split else self._t0
-            out = self.tick.decide(intent)
+            out = self.tick.decide(intent) if control is None else self.tick.finish(control)
             # read → command (the intent included); apply() simulates or waits for the period
             spent = self.clock() - t1 + (self._spent if self.split else 0.0)
             world.apply(out.command)

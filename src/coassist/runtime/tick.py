@@ -298,10 +298,17 @@ class ControlTick:
     def decide(self, intent: tuple[np.ndarray | None, Fault] | None) -> TickOutput:
         """Stages 2–6 of the tick :meth:`sense` began, given the intent's (positions or None,
         flags) for its row (None for the nominal intent)."""
+        return self.finish(self.controller.step(*self.control_inputs(intent)))
+
+    # decide() in two parts around the controller, so a runner can serve many trials that
+    # share one controller in one call (controller.step_batch, coassist.runtime.lockstep).
+    def control_inputs(self, intent: tuple[np.ndarray | None, Fault] | None) -> tuple[np.ndarray, ...]:
+        """Stage 2 of the tick :meth:`sense` began: the controller's arguments (z (2d,), ref_h
+        and ref_r (H, 2d), w (d,)) for the intent's answer; views of the tick's buffers, valid
+        until its next tick. Then :meth:`finish` with the controller's step for them."""
         k, state, x, v, w, hand, fault, state_bad = self._pending
         d = self.d
         # 2. intent
-        ref_pos = self._ref_pos
         ref_r = self._ref_ctrl[k + 1 : k + 1 + self.H]
         prediction = None
         if intent is None:
@@ -331,7 +338,16 @@ class ControlTick:
             z[d:] = v
         else:
             z[:] = self._za
-        u_r, u_h_model, cf = self.controller.step(z, ref_h, ref_r, w)
+        self._decided = (fault, prediction)
+        return z, ref_h, ref_r, w
+
+    def finish(self, control: tuple[np.ndarray, np.ndarray, Fault]) -> TickOutput:
+        """Stages 3–6 of the tick: the controller's (u_r, u_h_model, flags) for the arguments
+        :meth:`control_inputs` gave → the command and the log row."""
+        k, state, x, v, w, hand, _, state_bad = self._pending
+        fault, prediction = self._decided
+        d = self.d
+        u_r, u_h_model, cf = control
         fault |= cf
         if state_bad:  # as the controller does on a non-finite state: no effort from a held one
             u_r = np.zeros(d)
@@ -341,7 +357,7 @@ class ControlTick:
         else:
             command, sf = self._arm(state, u_r, w, hand, fault)
         fault |= sf
-        return TickOutput(command, x, v, w, ref_pos[k], prediction, u_r, u_h_model, fault)
+        return TickOutput(command, x, v, w, self._ref_pos[k], prediction, u_r, u_h_model, fault)
 
     # ------------------------------------------------------------------ stages
     def _robot_stop(self, state: RobotState) -> Fault:
