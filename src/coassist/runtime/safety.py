@@ -342,6 +342,10 @@ def _vector(x, n: int) -> np.ndarray | None:
 
 def _finite_vector(x, at_least: int) -> np.ndarray | None:
     """x as a finite float64 1-D array of at least ``at_least`` entries, or None."""
+    if type(x) is np.ndarray and x.dtype.char == "d" and x.ndim == 1 and x.shape[0] >= at_least:
+        s = sum(x.tolist())  # the per-tick case: a plain sum is cheaper than isfinite().all()
+        if s - s == 0.0:  # NaN and ±inf survive the sum (inf − inf = NaN); overflow is re-checked below
+            return x
     try:
         a = np.asarray(x)
         if a.dtype.kind not in "fiu" or a.ndim != 1 or a.shape[0] < at_least:

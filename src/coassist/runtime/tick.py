@@ -262,11 +262,12 @@ class ControlTick:
         """Stage 1 and the intent's feature row of tick k (8 floats, FEATURES order), or None
         when the intent is the nominal plan (nothing to predict). Then call :meth:`decide`."""
         dofs = self._dofs
-        fault = Fault(upstream)
+        fault = upstream if type(upstream) is Fault else Fault(upstream)
         # 1. the hand wrench
         reading = self.wrench.update(state.wrench, state.sensor_rotation, state.wrench_seq, state.t)
         hand = reading.hand
-        fault |= reading.fault
+        if reading.fault:  # (IntFlag arithmetic costs a microsecond; most ticks have no flag)
+            fault |= reading.fault
         # a glitch (NaN, ±inf, None, a wrong shape) is flagged and the last good value held,
         # so the intent, the controller and the log never see it (the safety layer decelerates)
         pose = finite_vector(state.tool_pose, 6)
@@ -315,7 +316,8 @@ class ControlTick:
             ref_h = ref_r  # eq. 4.7: the plan's own rows; nothing to predict
         else:
             pred, pf = intent
-            fault |= pf
+            if pf:
+                fault |= pf
             if pred is not None:
                 buf = self._ref_h_buf
                 m = pred.shape[0]
@@ -348,7 +350,8 @@ class ControlTick:
         fault, prediction = self._decided
         d = self.d
         u_r, u_h_model, cf = control
-        fault |= cf
+        if cf:
+            fault |= cf
         if state_bad:  # as the controller does on a non-finite state: no effort from a held one
             u_r = np.zeros(d)
         if self.command_space == "effort":
@@ -356,7 +359,8 @@ class ControlTick:
             command = Command(effort=effort, stop=stop)
         else:
             command, sf = self._arm(state, u_r, w, hand, fault)
-        fault |= sf
+        if sf:
+            fault |= sf
         return TickOutput(command, x, v, w, self._ref_pos[k], prediction, u_r, u_h_model, fault)
 
     # ------------------------------------------------------------------ stages

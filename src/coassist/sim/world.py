@@ -150,7 +150,8 @@ class PointMassWorld:
             t=self.k * self.dt, q=_NO_JOINTS, qd=_NO_JOINTS,
             tool_pose=np.array((self.x, self.y, 0.0, 0.0, 0.0, 0.0)),
             tool_twist=np.array((self.vx, self.vy, 0.0, 0.0, 0.0, 0.0)),
-            wrench=np.array((self.wx, self.wy, 0.0, 0.0, 0.0, 0.0)), wrench_seq=self._seq,
+            wrench=np.array((self.wx, self.wy, 0.0, 0.0, 0.0, 0.0)), sensor_rotation=_SENSOR_ROTATION,
+            wrench_seq=self._seq,
         )  # fmt: skip
 
     def hand_force(self) -> tuple[float, float]:
@@ -227,6 +228,8 @@ class PointMassWorld:
 
 _NO_JOINTS = np.zeros(0)
 _NO_JOINTS.setflags(write=False)
+_SENSOR_ROTATION = np.eye(3)  # the sensor's frame is the base frame; one read-only array, not one per tick
+_SENSOR_ROTATION.setflags(write=False)
 
 
 def run_trial(
