@@ -159,3 +159,75 @@ def test_effort_limit_is_validated(plant, limit, message):
 def test_effort_limit_is_required(plant):
     with pytest.raises(TypeError):
         AssistiveController(cooperative_game(plant, THESIS_EVALUATION.game))
+
+
+# ---------------------------------------------------------------------- step_batch (lockstep runs)
+def _batch(rng, B=12, horizon=50):  # B ≥ 8: the rows below
+    """B ticks' inputs: ordinary rows and, at fixed rows, each kind of input the guard refuses or
+    saturates, so every branch of step() is met inside one batch."""
+    z = rng.normal(size=(B, 4)) * 0.01
+    ref_h = rng.normal(size=(B, horizon, 4)) * 0.01
+    ref_r = rng.normal(size=(B, horizon, 4)) * 0.01
+    wrench = rng.normal(size=(B, 2))
+    z[1, 0] = np.nan  # NONFINITE_STATE
+    ref_h[2, 1, 3] = np.inf  # NONFINITE_REFERENCE
+    ref_r[3, 0, 1] = 1e3  # finite, beyond InputBounds: INVALID_INPUT
+    wrench[4, 1] = -np.inf  # NONFINITE_WRENCH
+    ref_r[5:8] += 2.0  # references 2 m away, the tool at 3 m/s: efforts past the limits (SATURATED)
+    ref_h[5:8] += 2.0
+    z[5:8, 2:] = -3.0
+    return z, ref_h, ref_r, wrench
+
+
+def _controllers(plant):
+    return {
+        "cooperative": AssistiveController(cooperative_game(plant, THESIS_EVALUATION.game), effort_limit=[10.0, 12.0]),
+        "impedance": ImpedanceControl(plant, [800.0, 400.0], effort_limit=20.0),
+        "manual": ManualGuidance(plant),
+    }
+
+
+@pytest.mark.parametrize("kind", ["cooperative", "impedance", "manual"])
+def test_step_batch_is_step_row_for_row_bit_for_bit(plant, kind, caplog):
+    ctrl = _controllers(plant)[kind]
+    z, ref_h, ref_r, wrench = _batch(np.random.default_rng(11))
+    ref_rows = ref_h.shape[1] if kind == "cooperative" else 3  # IMP and MG take any rows ≥ 1
+    ref_h, ref_r = ref_h[:, :ref_rows].copy(), ref_r[:, :ref_rows].copy()
+    reference = _controllers(plant)[kind]  # a twin: warnings are per controller, once each
+    expected = [reference.step(*row) for row in zip(z, ref_h, ref_r, wrench)]
+    got = ctrl.step_batch(z, ref_h, ref_r, wrench)
+    assert len(got) == len(expected)
+    for b, (e, g) in enumerate(zip(expected, got)):
+        assert g.fault == e.fault, b
+        np.testing.assert_array_equal(g.u_r, e.u_r, err_msg=f"row {b}")
+        np.testing.assert_array_equal(g.u_h_model, e.u_h_model, err_msg=f"row {b}")
+    faults = [e.fault for e in expected]
+    assert faults[1] & Fault.NONFINITE_STATE and faults[2] & Fault.NONFINITE_REFERENCE
+    assert faults[3] == Fault.INVALID_INPUT and faults[4] & Fault.NONFINITE_WRENCH
+    if kind != "manual":  # the rows the law pushes past the limit are scaled, as step() scales them
+        assert all(faults[b] == Fault.SATURATED for b in (5, 7)) and faults[0] == Fault.NONE
+    assert ctrl._warned == reference._warned  # the refused rows were reported as step() reports them
+
+
+def test_step_batch_falls_back_to_step_for_other_inputs(assistive):
+    """float32 rows, a wrong shape, a law that raises: step() per row decides, as alone."""
+    z, ref_h, ref_r, wrench = (a[:4] for a in _batch(np.random.default_rng(12)))
+    z32 = z.astype(np.float32)
+    for got, want in zip(assistive.step_batch(z32, ref_h, ref_r, wrench), [assistive.step(*r) for r in zip(z32, ref_h, ref_r, wrench)]):
+        assert got.fault == want.fault
+        np.testing.assert_array_equal(got.u_r, want.u_r)
+    short = ref_h[:, :10]
+    assert all(s.fault == Fault.INVALID_INPUT for s in assistive.step_batch(z, short, ref_r, wrench))
+
+
+def test_step_batch_survives_a_law_that_raises(assistive, monkeypatch):
+    def broken(z, rh, rr):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(assistive.game, "solve", broken)
+    monkeypatch.setattr(assistive.game, "solve_batch", broken)
+    z, ref_h, ref_r, wrench = (a[:3] for a in _batch(np.random.default_rng(13)))
+    out = assistive.step_batch(z, ref_h, ref_r, wrench)
+    assert [s.fault for s in out] == [Fault.INTERNAL_ERROR, Fault.NONFINITE_STATE, Fault.NONFINITE_REFERENCE]
+    for s in out:
+        np.testing.assert_array_equal(s.u_r, [0.0, 0.0])

@@ -409,6 +409,30 @@ def test_reference_and_state_shapes_are_checked():
         game.solve_horizon(np.zeros((4, 1)), np.zeros((5, 4)), np.zeros((5, 4)))
 
 
+@pytest.mark.parametrize("kind", ["cooperative", "nash"])
+def test_solve_batch_is_solve_row_for_row_bit_for_bit(kind):
+    """Trials in lockstep share one game: each row must get exactly what solve() gives it alone
+    (the lockstep runner reproduces the per-trial loop bit for bit), also from a non-contiguous
+    batch."""
+    rng = np.random.default_rng(7)
+    model, Q, R_h, R_r, _, _, _ = random_instance(rng, 2, 10, 4)
+    if kind == "cooperative":
+        game = CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=0.7, horizon=10, control_horizon=4)
+    else:
+        game = NashGame(model, **Q, R_h=R_h, R_r=R_r, horizon=10, control_horizon=4)
+    B = 9
+    z = rng.normal(size=(B, 4)) * 0.1
+    ref_h, ref_r = rng.normal(size=(2, B, 10, 4)) * 0.1  # slices of one array: ref_r[b] is not ref_h's neighbour
+    u_h, u_r = game.solve_batch(z, ref_h, ref_r)
+    assert u_h.shape == u_r.shape == (B, 2)
+    for b in range(B):
+        e_h, e_r = game.solve(z[b], ref_h[b], ref_r[b])
+        np.testing.assert_array_equal(u_h[b], e_h)
+        np.testing.assert_array_equal(u_r[b], e_r)
+    with pytest.raises(ValueError, match=r"z, ref_h, ref_r must have shapes \(B, 4\) and \(B, 10, 4\)"):
+        game.solve_batch(z, ref_h[:, :5], ref_r)
+
+
 def test_extrapolation_feedback_is_the_effort_of_a_constant_velocity_reference():
     """[−K, −D] against solve() with ref_h built row by row from the state (rows k+1 … k+Np)."""
     rng = np.random.default_rng(21)

@@ -40,8 +40,33 @@ def _alone(specs, sources=None):
 
 
 def _together(specs, sources=None):
-    eps = [spec_episode(spec, None, sources) for spec in specs]
+    """In lockstep; the trials share their (stateless) controller, as run_spec_lockstep builds them,
+    so one step_batch call serves them all every tick."""
+    controllers: dict = {}
+    eps = [spec_episode(spec, controllers, sources) for spec in specs]
     return [ep.finish(log) for ep, log in zip(eps, run_loops([ep.loop for ep in eps]))]
+
+
+@pytest.fixture
+def step_batch_rows(monkeypatch) -> list[int]:
+    """The rows of every ``step_batch`` call a guarded controller (game, IMP, MG) makes."""
+    from coassist.control.controllers import _GuardedController
+
+    rows: list[int] = []
+    inner = _GuardedController.step_batch
+
+    def counting(self, z, *args):
+        rows.append(z.shape[0])
+        return inner(self, z, *args)
+
+    monkeypatch.setattr(_GuardedController, "step_batch", counting)
+    return rows
+
+
+def _one_call_per_tick(trials) -> list[int]:
+    """The rows of one call per tick over every run still going."""
+    lengths = [t.n_samples for t in trials]
+    return [sum(n > k for n in lengths) for k in range(max(lengths))]
 
 
 @pytest.fixture(scope="module")
@@ -104,7 +129,7 @@ def test_one_batched_call_per_tick_and_the_same_trials(fail):
     assert src.calls == expected
 
 
-def test_a_model_in_float64_agrees_to_1e12(tiny_model):
+def test_a_model_in_float64_agrees_to_1e12(tiny_model, step_batch_rows):
     from coassist.intent import load_model_intent
 
     specs = _specs(tiny_model)
@@ -112,11 +137,26 @@ def test_a_model_in_float64_agrees_to_1e12(tiny_model):
     src.model.net.double()  # float64 network: batched and batch-1 kernels differ only at 1e-16
     sources = {(tiny_model, HORIZON): src}
     alone = _alone(specs, sources)
+    step_batch_rows.clear()
     together = _together(specs, sources)
     for a, b in zip(alone, together):
         assert a.n_samples == b.n_samples and a.meta.model_id == b.meta.model_id
         for name in FIELDS:
             np.testing.assert_allclose(getattr(b, name), getattr(a, name), rtol=0, atol=1e-12, err_msg=name)
+    assert step_batch_rows == _one_call_per_tick(together)  # the shared game served them all each tick
+
+
+@pytest.mark.parametrize("controller", ["impedance", "manual", "cooperative-arbitrated"])
+def test_every_controller_kind_runs_in_lockstep_exactly_as_alone(controller, step_batch_rows):
+    """IMP and MG are shared (one step_batch per tick, row for row their step); the online-α
+    arbitration keeps state between ticks, so each run steps its own, as alone."""
+    specs = [replace(s, controller=controller) for s in _specs("oracle")]
+    alone = [run_spec(spec) for spec in specs]
+    step_batch_rows.clear()
+    together = run_spec_lockstep(specs)
+    for a, b in zip(alone, together):
+        assert a.equals(b)
+    assert step_batch_rows == ([] if controller == "cooperative-arbitrated" else _one_call_per_tick(together))
 
 
 def test_a_float32_model_agrees_to_its_rounding(tiny_model):
