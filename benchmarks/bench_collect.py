@@ -12,13 +12,18 @@ Measures:
    the default lockstep path (one batched call per tick per worker), on ``--workers``
    processes; wall time median and p99 over ``--repeats`` (the per-trial path once
    unless ``--baseline-repeats``), and the ratio (target: ≤ 10 s on 2 cores);
-3. the same dataset with the nominal intent (no network; the per-trial path).
+3. the same dataset with the nominal intent (no network; the per-trial path);
+4. per tick: one worker's lockstep group (every ``--workers``-th trial of the dataset)
+   run in this process (one torch thread, as a worker), ``--repeats`` times: wall and CPU
+   seconds (CPU time is less inflated by other processes on a shared machine), the
+   number of lockstep ticks and trial-ticks, µs per trial-tick and ms per lockstep tick
+   (all of the group's trials: sense, one network call, one controller call, act).
 
 The model: ``--model PATH``, or an ``lstm``-preset model trained here for one epoch on
 six nominal trials (its accuracy does not matter; its size does: LSTM 2 × 64, the
 default and lstm presets' network).
 
-Usage: ``.venv/bin/python benchmarks/bench_collect.py [--workers 2] [--repeats 3] [--model PATH]``
+Usage: ``.venv/bin/python benchmarks/bench_collect.py [--workers 2] [--repeats 3] [--baseline-repeats 1] [--model PATH]``
 """
 
 from __future__ import annotations
@@ -51,11 +56,11 @@ def network_ticks(model_path: str, batch: int, ticks: int) -> tuple[np.ndarray, 
     """Per-tick seconds of the network work for ``batch`` trials: batched, and one call per trial."""
     import torch
 
-    from coassist.intent import load_intent_source
+    from coassist.intent import load_model_intent
     from coassist.sim.world import TrialSpec, run_spec
 
     torch.set_num_threads(1)
-    source = load_intent_source(model_path)
+    source = load_model_intent(model_path)
     trial = run_spec(TrialSpec(task="curved", seed=7, preset="thesis-evaluation-dm"))
     rows = np.column_stack([trial.pose, trial.velocity, trial.wrench, trial.reference])
     L = source.history
@@ -85,11 +90,29 @@ def dataset_seconds(specs, workers: int, lockstep: bool, repeats: int) -> np.nda
     return np.asarray(out)
 
 
+def group_seconds(specs, repeats: int) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Wall and CPU seconds of running ``specs`` in lockstep in this process; lockstep ticks, trial-ticks."""
+    import torch
+
+    from coassist.sim.world import run_spec_lockstep
+
+    torch.set_num_threads(1)
+    run_spec_lockstep(specs[:2])  # warm: imports, the game's gains, the model's first call
+    wall, cpu = [], []
+    for _ in range(repeats):
+        c0, t0 = time.process_time(), time.perf_counter()
+        trials = run_spec_lockstep(specs)
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    lengths = [t.n_samples for t in trials]
+    return np.asarray(wall), np.asarray(cpu), max(lengths), sum(lengths)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", type=int, default=2, help="processes for the dataset runs")
     parser.add_argument("--repeats", type=int, default=3, help="runs of the lockstep and nominal datasets")
-    parser.add_argument("--baseline-repeats", type=int, default=1, help="runs of the per-trial dataset (~1 min each)")
+    parser.add_argument("--baseline-repeats", type=int, default=1, help="runs of the per-trial dataset (~1 min each; 0: skip)")
     parser.add_argument("--trials", type=int, default=20, help="trials per task")
     parser.add_argument("--model", default=None, help="a model folder (default: train a small lstm-preset one)")
     parser.add_argument("--ticks", type=int, default=300, help="ticks timed in the network comparison")
@@ -114,19 +137,27 @@ def main() -> None:
         with_model = dataset_specs(intent=model, **common)
         nominal = dataset_specs(intent="nominal", **common)
         n = len(with_model)
+        group = with_model[:: args.workers]
+        g_wall, g_cpu, g_ticks, g_trial_ticks = group_seconds(group, args.repeats)
+        print(f"\none worker's lockstep group ({len(group)} trials, {g_ticks} ticks, {g_trial_ticks} trial-ticks) in this process:")
+        for name, x in (("wall", g_wall), ("CPU", g_cpu)):
+            print(f"  {name:4s} median {np.median(x):6.2f} s   p99 {np.percentile(x, 99):6.2f} s   "
+                  f"{np.median(x) / g_trial_ticks * 1e6:5.1f} us per trial-tick   {np.median(x) / g_ticks * 1e3:5.2f} ms per tick")
         per_trial = dataset_seconds(with_model, args.workers, False, args.baseline_repeats)
         lock = dataset_seconds(with_model, args.workers, True, args.repeats)
         nom = dataset_seconds(nominal, args.workers, False, args.repeats)
 
         def fmt(x: np.ndarray) -> str:
+            if not x.size:
+                return "not run (--baseline-repeats 0)"
             return f"median {np.median(x):6.1f} s   p99 {np.percentile(x, 99):6.1f} s   ({x.size} runs)"
 
         print(f"\none {n}-trial dataset ({', '.join(ITERATION_TASKS)} × {args.trials}, thesis-evaluation-dm) on {args.workers} workers:")
         print(f"  model in the loop, per trial   {fmt(per_trial)}")
         print(f"  model in the loop, lockstep    {fmt(lock)}   (target <= 10 s on 2 cores)")
         print(f"  nominal intent                 {fmt(nom)}")
-        print(f"  speed-up (median)              {np.median(per_trial) / np.median(lock):.1f}x; "
-              f"lockstep / nominal {np.median(lock) / np.median(nom):.2f}")
+        speed_up = f"{np.median(per_trial) / np.median(lock):.1f}x" if per_trial.size else "n/a"
+        print(f"  speed-up (median)              {speed_up}; lockstep / nominal {np.median(lock) / np.median(nom):.2f}")
     print(f"load average after: {os.getloadavg()[0]:.2f}")
 
 

@@ -7,7 +7,9 @@ would, one period at a time for all of them together::
         row_i = run_i.sense(k)                              read, wrench, feature row
         windows of the runs whose intent shares a network → one predict_batch(B, history, 8)
         the other runs' intent stages alone                 (nominal, oracle, a real-time predictor)
-        over_i = run_i.act(k, intent_i)                     decide, command, log, end?
+        args_i = run_i.tick.control_inputs(intent_i)        z, ref_h, ref_r, w
+        runs sharing a controller → one step_batch(B rows)  (the game's gains are shared)
+        over_i = run_i.act(k, intent_i, control_i)          safety, command, log, end?
 
 A run that ends (its termination rule, ``n_max``, a safety or robot stop, a lost link)
 drops out of the batch at once. Runs whose intent stages share a ``batcher`` (the
@@ -16,6 +18,13 @@ model in the loop of many simulated trials) are served by one call per tick; dis
 batchers get one call each. Every other part of a tick is the per-trial code itself
 (:class:`~coassist.runtime.loop.LoopRun`, :meth:`ControlTick.sense <coassist.runtime.tick.ControlTick.sense>`
 / ``decide``), so the two runners cannot drift.
+
+Runs whose controller is one object without state between ticks (no ``reset``: the
+game controller, IMP and MG of a batch; ``run_spec_lockstep`` shares them) are stepped by
+one ``step_batch`` call per tick, which gives row for row what ``step`` gives, bit for bit
+(the guard's checks once over the batch, the game's three matrix-vector products per row:
+a matrix-matrix product over the batch would round differently). A controller that keeps
+state (the online-α arbitration) is stepped by its own tick.
 
 Exactness. Nominal and oracle intents, and any batcher whose rows do not depend on the
 batch, give the per-trial logs bit for bit. A float32 network evaluated by BLAS does
