@@ -156,7 +156,10 @@ def _step_controllers(runs: list[LoopRun], going: list[int], answers: dict[int, 
     controls: dict[int, Any] = {}
     for controller, members, rows in groups.values():
         t0 = clock()
-        steps = controller.step_batch(*(np.stack(column) for column in zip(*rows)))
+        if len(members) == 1:  # a controller of its own (a drive builds one per run): its step, the same rows
+            steps = [controller.step(*rows[0])]
+        else:
+            steps = controller.step_batch(*(np.stack(column) for column in zip(*rows)))
         share = (clock() - t0) / len(members)
         for i, step in zip(members, steps):
             runs[i].charge(share)
