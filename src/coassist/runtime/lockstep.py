@@ -80,6 +80,7 @@ def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_c
     batchers = [_batcher(run.tick) for run in runs]
     steppers = [_stepper(run.tick) for run in runs]
     active = [i for i, run in enumerate(runs) if run.n_max > 0]
+    stacks = _Stacks()
     k = 0
     while active:
         answers: dict[int, Any] = {}
@@ -105,12 +106,12 @@ def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_c
             windows.append(run.tick.intent.push(k, row))
         for batcher, members, windows in groups.values():
             t0 = clock()
-            preds = _predict(batcher, windows, [runs[i].tick.intent for i in members])
+            preds = _predict(batcher, windows, [runs[i].tick.intent for i in members], stacks)
             share = (clock() - t0) / len(members)
             for i, pred in zip(members, preds):
                 runs[i].charge(share)
                 answers[i] = runs[i].tick.intent.accept(pred)
-        controls = _step_controllers(runs, going, answers, steppers, clock)
+        controls = _step_controllers(runs, going, answers, steppers, clock, stacks)
         active = []
         for i in going:
             if not runs[i].act(k, answers[i], controls.get(i)) and k + 1 < runs[i].n_max:
@@ -128,6 +129,27 @@ def _batcher(tick: ControlTick) -> Any:
     return batcher if callable(getattr(batcher, "predict_batch", None)) else None
 
 
+class _Stacks:
+    """``np.stack`` into arrays kept from tick to tick (one per key: a batcher's windows, a
+    controller's arguments), so a tick allocates no batch. What :meth:`stack` returns is
+    valid until the next call with its key, as a window from ``WindowIntent.push`` is."""
+
+    def __init__(self) -> None:
+        self._buffers: dict[Any, np.ndarray] = {}
+
+    def stack(self, key: Any, arrays: Sequence[np.ndarray]) -> np.ndarray:
+        first = arrays[0]
+        dtype = getattr(first, "dtype", None)
+        if not all(type(a) is np.ndarray and a.dtype == dtype for a in arrays):
+            return np.stack(arrays)  # mixed types: np.stack's own promotion, no buffer (which would cast)
+        buf = self._buffers.get(key)
+        if buf is None or buf.shape[0] < len(arrays) or buf.shape[1:] != first.shape or buf.dtype != dtype:
+            buf = self._buffers[key] = np.empty((len(arrays), *first.shape), dtype=dtype)
+        out = buf[: len(arrays)]
+        np.stack(arrays, out=out)  # equal shapes, or it raises as np.stack(arrays) would
+        return out
+
+
 def _stepper(tick: ControlTick) -> Any:
     """The tick's controller where runs may share one ``step_batch`` call (it keeps no state
     between ticks: no ``reset``), else None (the tick steps it itself)."""
@@ -138,7 +160,7 @@ def _stepper(tick: ControlTick) -> Any:
 
 
 def _step_controllers(runs: list[LoopRun], going: list[int], answers: dict[int, Any], steppers: list[Any],
-                      clock: Callable[[], float]) -> dict[int, Any]:  # fmt: skip
+                      clock: Callable[[], float], stacks: _Stacks) -> dict[int, Any]:  # fmt: skip
     """Run i's controller step for this tick, for the runs whose controller is shared: one
     ``step_batch`` per controller (row for row its ``step``, bit for bit), each run charged
     its inputs' time and its share of the call."""
@@ -159,7 +181,7 @@ def _step_controllers(runs: list[LoopRun], going: list[int], answers: dict[int, 
         if len(members) == 1:  # a controller of its own (a drive builds one per run): its step, the same rows
             steps = [controller.step(*rows[0])]
         else:
-            steps = controller.step_batch(*(np.stack(column) for column in zip(*rows)))
+            steps = controller.step_batch(*(stacks.stack((id(controller), j), column) for j, column in enumerate(zip(*rows))))
         share = (clock() - t0) / len(members)
         for i, step in zip(members, steps):
             runs[i].charge(share)
@@ -167,10 +189,10 @@ def _step_controllers(runs: list[LoopRun], going: list[int], answers: dict[int, 
     return controls
 
 
-def _predict(batcher: Any, windows: list[np.ndarray], intents: list[Any]) -> list[Any]:
+def _predict(batcher: Any, windows: list[np.ndarray], intents: list[Any], stacks: _Stacks) -> list[Any]:
     """Row i's prediction (or None where the source raised) for every window."""
     try:
-        out = batcher.predict_batch(np.stack(windows))
+        out = batcher.predict_batch(stacks.stack(id(batcher), windows))
         if isinstance(out, np.ndarray) and out.ndim == 3 and out.shape[0] == len(windows):
             return list(out)
     except Exception:  # one row's fault must not fail the others: predict them alone
