@@ -243,3 +243,22 @@ def test_collect_per_trial_and_lockstep_options(tiny_model, tmp_path):
         for a, b in zip(sorted(trials, key=lambda t: t.meta.seed), got, strict=True):
             for name in FIELDS:
                 np.testing.assert_array_equal(getattr(b, name), getattr(a, name), err_msg=f"{flag} {name}")
+
+
+def test_stacks_reuse_their_arrays_and_never_cast():
+    from coassist.runtime.lockstep import _Stacks
+
+    stacks = _Stacks()
+    rng = np.random.default_rng(0)
+    rows = [rng.normal(size=(5, 8)) for _ in range(4)]
+    first = stacks.stack("w", rows)
+    np.testing.assert_array_equal(first, np.stack(rows))
+    fewer = stacks.stack("w", rows[:2])  # a run ended: the same array, fewer rows
+    assert np.shares_memory(first, fewer) and fewer.shape == (2, 5, 8)
+    np.testing.assert_array_equal(fewer, np.stack(rows[:2]))
+    mixed = [rows[0], rows[1].astype(np.float32)]  # promoted as np.stack promotes, not cast into the buffer
+    out = stacks.stack("w", mixed)
+    assert out.dtype == np.float64 and not np.shares_memory(out, first)
+    np.testing.assert_array_equal(out, np.stack(mixed))
+    with pytest.raises(ValueError):
+        stacks.stack("w", [rows[0], rows[1][:3]])
