@@ -291,6 +291,7 @@ class ControlTick:
         v = twist[dofs]
         w = hand[dofs]
         self._pending = (k, state, x, v, w, hand, fault, state_bad)
+        self._decided = None  # control_inputs() of this tick has not run yet
         if self.intent.nominal:
             return None
         ref_pos = self._ref_pos
@@ -358,6 +359,8 @@ class ControlTick:
         """Stages 3–6 of the tick: the controller's (u_r, u_h_model, flags) for the arguments
         :meth:`control_inputs` gave → the command and the log row."""
         k, state, x, v, w, hand, _, state_bad = self._pending
+        if self._decided is None:
+            raise RuntimeError(f"ControlTick.finish() of tick {k} before its control_inputs()")
         fault, prediction = self._decided
         d = self.d
         u_r, u_h_model, cf = control
