@@ -218,6 +218,7 @@ class ControlTick:
         # the views control_inputs() writes a full-horizon prediction through (made once, not per tick)
         self._ref_h_parts = (buf[:, :2], buf[1:, d : d + 2], buf[0, d : d + 2], buf[1, d : d + 2]) if Hs >= 2 else None
         self._z = np.zeros(2 * d)
+        self._decided: tuple[Fault, np.ndarray | None] | None = None  # control_inputs()'s flags and prediction
 
     # ------------------------------------------------------------------ per run
     def reset(self, plan: Plan, context: TrialContext, state: RobotState | None = None) -> None:
