@@ -7,7 +7,13 @@ before, and what a textbook filter does): here, the same call with the memo empt
 before it. Both give the same states bit for bit (checked). Prints median and p99 per
 trial and the ratio of the medians.
 
-Usage: ``.venv/bin/python benchmarks/bench_kalman.py [--ticks 2000] [--repeats 30]``
+Then the tuning of (q, r_v) on validation trials (:func:`~coassist.intent.kalman.tune_kalman`,
+the 15 × 7 grid, 0.4 s horizon) over ``--tune-trials`` trials: the library's quadratic
+form in the filtered state against the naive direct sum (every grid point's H-step
+extrapolation formed and compared with the future poses, what tune_kalman did before), the
+validation errors checked equal to 1e-9 relative.
+
+Usage: ``.venv/bin/python benchmarks/bench_kalman.py [--ticks 2000] [--repeats 30] [--tune-trials 6]``
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--ticks", type=int, default=2000, help="samples per trial (2000: a 16 s trial at 125 Hz)")
     parser.add_argument("--repeats", type=int, default=30, help="timed trials per form")
+    parser.add_argument("--tune-trials", type=int, default=6, help="validation trials of the tuning comparison (0: skip)")
     args = parser.parse_args()
     if args.ticks < 2 or args.repeats < 1:
         parser.error("--ticks must be >= 2 and --repeats >= 1")
@@ -52,6 +59,48 @@ def main() -> None:
     print(f"one {args.ticks}-tick trial, gains recomputed (naive): median {np.median(n):.2f} ms, p99 {np.percentile(n, 99):.2f} ms")
     print(f"one {args.ticks}-tick trial, gains reused:           median {np.median(r):.2f} ms, p99 {np.percentile(r, 99):.2f} ms")
     print(f"ratio of medians: {np.median(n) / np.median(r):.1f}x (same states bit for bit)")
+    if args.tune_trials:
+        bench_tuning(rng, args.ticks, args.tune_trials, max(3, args.repeats // 10))
+
+
+def naive_tuning_mse(trials, horizon: int, dt: float, grid) -> np.ndarray:
+    """The validation MSE per grid point as a direct sum over the horizon (the naive baseline)."""
+    sse, n = np.zeros(len(grid)), 0
+    for pose, vel in trials:
+        ks = np.arange(0, pose.shape[0] - horizon)
+        states = kalman_ca_filter(pose, vel, dt, grid)[:, ks]
+        future = pose[ks[:, None] + np.arange(1, horizon + 1)[None, :]]
+        for gi in range(len(grid)):
+            e = kalman.constant_acceleration(states[gi], horizon, dt) - future
+            sse[gi] += float(np.sum(e * e)) / horizon
+        n += ks.size
+    return sse / n
+
+
+def bench_tuning(rng: np.random.Generator, ticks: int, n_trials: int, repeats: int) -> None:
+    from types import SimpleNamespace
+
+    horizon, dt = 50, 0.008
+    raw = [(np.cumsum(rng.normal(size=(ticks, 2)), axis=0) * 1e-3, rng.normal(size=(ticks, 2)) * 1e-2)
+           for _ in range(n_trials)]  # fmt: skip
+    trials = [SimpleNamespace(pose=p, velocity=v) for p, v in raw]
+    grid = [KalmanCA(q, rv, 1e-4, tuned=True) for q in kalman.JERK_PSD_GRID for rv in kalman.VELOCITY_NOISE_GRID]
+    naive, fast = [], []
+    for _ in range(repeats):  # alternating; the gain memo is warm for both
+        t0 = time.perf_counter()
+        want = naive_tuning_mse(raw, horizon, dt, grid)
+        naive.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        _, record = kalman.tune_kalman(trials, horizon, dt)
+        fast.append(time.perf_counter() - t0)
+        got = np.array(record["validation_mse"]).ravel()
+        if np.max(np.abs(got - want) / want) > 1e-9:
+            raise SystemExit("the tuning's validation errors disagree with the direct sum")
+    n, f = np.array(naive), np.array(fast)
+    print(f"Kalman tuning, {len(grid)} grid points, {n_trials} trials of {ticks} ticks, horizon {horizon}:")
+    print(f"  direct sum (naive):   median {np.median(n):.2f} s, p99 {np.percentile(n, 99):.2f} s")
+    print(f"  quadratic form:       median {np.median(f):.2f} s, p99 {np.percentile(f, 99):.2f} s")
+    print(f"  ratio of medians: {np.median(n) / np.median(f):.1f}x (validation errors equal to 1e-9)")
 
 
 if __name__ == "__main__":
