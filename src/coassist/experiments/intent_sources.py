@@ -46,15 +46,18 @@ def training_datasets(ws: Workspace) -> list[Path]:
     return [root / n for n in names]
 
 
-def train_sources(ws: Workspace, datasets: list[Path]) -> dict[str, str]:
+def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None = None) -> dict[str, str]:
     """Train every learned source on ``datasets`` (module docstring) into ``models/<source>``; model folders by source.
 
-    The sources are independent: each trains in one of the run's simulation processes
-    (``ws.pool``, or ``workers`` started here) on one torch thread, ``workers`` at once.
-    On this 2-core machine two 1-thread trainings do ~1.3x the work of one 2-thread
-    training (small LSTM kernels split badly over threads), and a process that shares the
-    cores with others does not stall at OpenMP barriers. One thread each, pool or not: the
-    weights do not depend on how many workers ran them.
+    On a CPU they train in the run's worker processes (``processes`` at a time; None:
+    ``reproduce.workers``), each on one torch thread. Small LSTM kernels split badly over
+    threads: on this 2-core machine two 1-thread trainings do 1.34x the work of one
+    2-thread training (``benchmarks/bench_training.py --pairs``); four at once on the 2
+    cores took 125.9 s against 124.4 s two at a time (the main job's datasets, measured
+    one after the other), so no more processes than cores. A process that shares the cores does not stall at OpenMP
+    barriers either. One thread each, however many at a time: the weights do not depend
+    on it. On an accelerator (``reproduce.device``) they train one after the other on it,
+    in this process.
     """
     import contextlib
 
@@ -66,12 +69,18 @@ def train_sources(ws: Workspace, datasets: list[Path]) -> dict[str, str]:
     for source, (preset_name, label) in LEARNED.items():
         epochs = ws.config.epochs if preset_name is None else MODEL_PRESETS[preset_name].train.epochs
         jobs.append((source, epochs, preset_name, label))
+    if ws.config.device != "cpu":
+        return {source: str(ws.train(source, datasets, init="scratch", epochs=epochs, preset_name=preset_name,
+                                     label=label, stride=ws.config.source_stride))
+                for source, epochs, preset_name, label in jobs}  # fmt: skip
     jobs.sort(key=lambda job: job[2] == "linear")  # the LSTM+FC ones first: the closed-form ridge is quick
-    workers = max(1, min(ws.config.workers, len(jobs)))
-    with contextlib.nullcontext(ws.pool) if ws.pool is not None else worker_pool(workers) as pool:
+    n = max(1, min(ws.config.workers if processes is None else int(processes), len(jobs)))
+    # the run's pool where it has as many processes, else n started for these trainings
+    shared = ws.pool if ws.pool is not None and n <= ws.config.workers else None
+    with contextlib.nullcontext(shared) if shared is not None else worker_pool(n) as pool:
         futures = {job[0]: pool.submit(_train_source, ws.config, ws.out, datasets, *job) for job in jobs}
         with progress_bar(ws.progress) as bar:
-            task = bar.add_task(f"training {len(jobs)} intent sources", total=len(jobs))
+            task = bar.add_task(f"training {len(jobs)} intent sources, {n} at a time", total=len(jobs))
             for future in futures.values():
                 future.add_done_callback(lambda _: bar.advance(task))
             models = {source: future.result() for source, future in futures.items()}

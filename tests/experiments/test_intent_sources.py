@@ -1,0 +1,39 @@
+"""The learned intent sources (coassist.experiments.intent_sources): each trains on one torch
+thread in a worker process, so how many train at a time does not change a single weight."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+from safetensors.numpy import load_file
+
+from coassist.experiments.intent_sources import LEARNED, train_sources
+from coassist.experiments.pipeline import ITERATION_TASKS, REPRODUCE_PRESETS, Workspace
+
+
+@pytest.fixture(scope="module")
+def datasets(tmp_path_factory):
+    cfg = REPRODUCE_PRESETS["tiny"]
+    out = tmp_path_factory.mktemp("sources")
+    ws = Workspace(cfg, out, progress=False)
+    folder, _ = ws.collect("D0", tasks=ITERATION_TASKS, trials=cfg.trials_per_task, seed=1)
+    return cfg, out, [folder]
+
+
+def test_sources_train_alike_one_or_two_at_a_time(datasets, tmp_path):
+    cfg, out, folders = datasets
+    weights = {}
+    for processes in (1, 2):
+        run = tmp_path / f"p{processes}"
+        (run / "datasets").mkdir(parents=True)
+        (run / "datasets" / "D0").symlink_to(folders[0])
+        ws = Workspace(replace(cfg, workers=2), run, progress=False)
+        models = train_sources(ws, [run / "datasets" / "D0"], processes=processes)
+        assert list(models) == list(LEARNED)
+        weights[processes] = {s: load_file(f"{m}/weights.safetensors") for s, m in models.items()}
+    for source in LEARNED:
+        one, two = weights[1][source], weights[2][source]
+        assert one.keys() == two.keys()
+        for name in one:
+            assert (one[name] == two[name]).all(), (source, name)  # bit for bit: one thread each either way
