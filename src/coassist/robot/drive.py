@@ -43,7 +43,7 @@ from coassist.runtime.safety import SafetyLayer, SafetyLimits
 from coassist.runtime.tick import TickConfig
 from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPipeline
 from coassist.scenario.hand import SimulatedHand
-from coassist.scenario.intent_source import load_intent_source
+from coassist.scenario.intent_source import load_intent_source, shared_intent_source
 from coassist.scenario.objects import get_object
 from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
 from coassist.scenario.seeds import trial_rngs
@@ -240,22 +240,22 @@ class _PreparedDrive:
     intent_stage: Any
 
     def close(self) -> None:
-        """Close the world if the drive built it, and a real-time predictor's worker."""
-        try:
-            if self.built_here and self.world is not None:
-                self.world.close()
-        finally:
-            _close_intent(self.intent_stage)
+        _release(self.world, self.built_here, self.intent_stage)
 
     def finish(self, log: Any) -> Trial:
         return self.episode.finish(log, {"sensor_bias": [float(v) for v in self.wrench.bias]})
 
 
-def _close_intent(intent_stage: Any) -> None:
-    if isinstance(intent_stage, RealtimeIntent):
-        close = getattr(intent_stage.predictor, "close", None)
-        if close is not None:
-            close()
+def _release(world: Any, built_here: bool, intent_stage: Any) -> None:
+    """Close the world if the drive built it, and a real-time predictor's worker."""
+    try:
+        if built_here and world is not None:
+            world.close()
+    finally:
+        if isinstance(intent_stage, RealtimeIntent):
+            close = getattr(intent_stage.predictor, "close", None)
+            if close is not None:
+                close()
 
 
 def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, host: str | None = None,
@@ -342,9 +342,7 @@ def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, ho
         # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
         wrench.zero(np.asarray(state0.wrench, dtype=float)[None], np.asarray(state0.sensor_rotation, dtype=float)[None])
     except BaseException:
-        if built_here and world is not None:
-            world.close()
-        _close_intent(intent_stage)
+        _release(world, built_here, intent_stage)
         raise
     return _PreparedDrive(episode, world, limits, wrench, built_here, intent_stage)
 
@@ -430,9 +428,5 @@ def _intent_stage(config: DriveConfig, H: int, source: Any, sources: dict | None
         mid = f"{config.intent.rstrip('/').split('/')[-1]}@{digest}"
         predictor = RealtimePredictor(model, RealtimeConfig(threaded=True, backend=config.predictor_backend))
         return RealtimeIntent(predictor, model_id=mid), mid
-    key = (config.intent, max(H, 2))
-    shared = None if sources is None else sources.get(key)
-    src = shared if shared is not None else load_intent_source(config.intent, horizon=max(H, 2))
-    if sources is not None and shared is None and getattr(src, "batcher", None) is not None:
-        sources[key] = src
+    src = shared_intent_source(config.intent, max(H, 2), sources)
     return WindowIntent(src, H), src.model_id

@@ -145,3 +145,18 @@ def load_intent_source(spec: str, horizon: int = 50) -> IntentSource:
         return load_model_intent(spec)
     except (OSError, ValueError) as exc:  # missing folder, bad sidecar, features or dt that do not match
         raise ValueError(f"intent {spec!r} could not be loaded as a model: {exc}") from None
+
+
+def shared_intent_source(spec: str, horizon: int, cache: dict[tuple[str, int], IntentSource] | None) -> IntentSource:
+    """:func:`load_intent_source` through ``cache`` ((spec, horizon) → source), for runs in
+    lockstep: a source with a ``batcher`` (a loaded model: stateless) is loaded once and
+    shared, so one network call per tick serves every run; the others keep per-run state
+    and are loaded per call. ``cache`` None: always loaded."""
+    key = (spec, horizon)
+    shared = None if cache is None else cache.get(key)
+    if shared is not None:
+        return shared
+    source = load_intent_source(spec, horizon=horizon)
+    if cache is not None and getattr(source, "batcher", None) is not None:
+        cache[key] = source
+    return source

@@ -76,7 +76,7 @@ from coassist.runtime.lockstep import run_loops
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.world import Command, RobotState
 from coassist.runtime.wrench import WrenchPipeline
-from coassist.scenario.intent_source import NominalIntent, load_intent_source
+from coassist.scenario.intent_source import NominalIntent, shared_intent_source
 from coassist.scenario.objects import CarriedObject, ForceSensor, get_object
 from coassist.scenario.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise, operator_profile
 from coassist.scenario.seeds import trial_rngs
@@ -406,11 +406,7 @@ def spec_episode(spec: TrialSpec, _controllers: dict | None = None, _sources: di
         if _controllers is not None:
             _controllers[key] = controller
     horizon = max(controller.horizon, preset.game.horizon)
-    source = None if _sources is None else _sources.get((spec.intent, horizon))
-    if source is None:
-        source = load_intent_source(spec.intent, horizon=horizon)
-        if _sources is not None and getattr(source, "batcher", None) is not None:
-            _sources[(spec.intent, horizon)] = source
+    source = shared_intent_source(spec.intent, horizon, _sources)
     return build_trial(
         task, operator_profile(spec.user, spec.population_seed), get_object(spec.object), controller,
         source, spec.seed, preset_name=preset.name,
