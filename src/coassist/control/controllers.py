@@ -214,7 +214,6 @@ class _GuardedController:
             n = self._zero.shape[0]
             return ControlStep(np.zeros(n), np.zeros(n), Fault.INTERNAL_ERROR)
 
-
     def step_batch(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray) -> list[ControlStep]:
         """:meth:`step` for B ticks at once (many trials in lockstep sharing this controller):
         z (B, 2n), ref_h and ref_r (B, rows, 2n), wrench (B, n), float64 arrays.

@@ -214,9 +214,6 @@ class ControlTick:
         self.Hs = int(intent.horizon)
         self._ref_h_buf = np.zeros((self.Hs, 2 * d))
         self._ref_h_view = self._ref_h_buf[: self.H]
-        buf, Hs = self._ref_h_buf, self.Hs
-        # the views control_inputs() writes a full-horizon prediction through (made once, not per tick)
-        self._ref_h_parts = (buf[:, :2], buf[1:, d : d + 2], buf[0, d : d + 2], buf[1, d : d + 2]) if Hs >= 2 else None
         self._z = np.zeros(2 * d)
         self._decided: tuple[Fault, np.ndarray | None] | None = None  # control_inputs()'s flags and prediction
 
@@ -230,7 +227,6 @@ class ControlTick:
         start = plan.start_pose
         self._start = start.copy()
         self._x0 = start[self._dofs].copy()
-        self._x0_xy = self._x0[:2]
         n = plan.reference.shape[0]
         ref_abs = np.zeros((n, 2 * d))  # the controller's reference [positions; velocities], absolute
         ref_abs[:, :d] = start[self._dofs]
@@ -327,19 +323,12 @@ class ControlTick:
             if pred is not None:
                 buf = self._ref_h_buf
                 m = pred.shape[0]
-                if m == self.Hs and self._ref_h_parts is not None:  # the usual case: the same arithmetic, through made views
-                    pos, vel, vel0, vel1 = self._ref_h_parts
-                    np.subtract(pred, self._x0_xy, out=pos)
-                    np.subtract(pred[1:], pred[:-1], out=vel)
-                    vel *= self._inv_dt
-                    vel0[:] = vel1
-                elif m >= 2:
-                    np.subtract(pred, self._x0_xy, out=buf[:m, :2])
+                np.subtract(pred, self._x0[:2], out=buf[:m, :2])
+                if m >= 2:
                     np.subtract(pred[1:], pred[:-1], out=buf[1:m, d : d + 2])
                     buf[1:m, d : d + 2] *= self._inv_dt
                     buf[0, d : d + 2] = buf[1, d : d + 2]
                 else:
-                    np.subtract(pred, self._x0_xy, out=buf[:m, :2])
                     buf[0, d : d + 2] = 0.0
                 ref_h = self._ref_h_view
                 prediction = pred
