@@ -49,15 +49,15 @@ def training_datasets(ws: Workspace) -> list[Path]:
 def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None = None) -> dict[str, str]:
     """Train every learned source on ``datasets`` (module docstring) into ``models/<source>``; model folders by source.
 
-    On a CPU they train in the run's worker processes (``processes`` at a time; None:
-    ``reproduce.workers``), each on one torch thread. Small LSTM kernels split badly over
-    threads: on this 2-core machine two 1-thread trainings do 1.34x the work of one
-    2-thread training (``benchmarks/bench_training.py --pairs``); four at once on the 2
-    cores took 125.9 s against 124.4 s two at a time (the main job's datasets, measured
-    one after the other), so no more processes than cores. A process that shares the cores does not stall at OpenMP
-    barriers either. One thread each, however many at a time: the weights do not depend
-    on it. On an accelerator (``reproduce.device``) they train one after the other on it,
-    in this process.
+    On a CPU they train in worker processes, ``processes`` at a time (None: in the run's
+    pool, ``reproduce.workers`` at a time), each on one torch thread. Small LSTM kernels
+    split badly over threads: on this 2-core machine two 1-thread trainings do 1.34x the
+    work of one 2-thread training (``benchmarks/bench_training.py --pairs``), and four at
+    once took 125.9 s against 124.4 s two at a time (the main job's datasets, one run
+    each), so no more processes than cores. A process that shares the cores does not stall
+    at OpenMP barriers either. One thread each, however many at a time: the weights do not
+    depend on it. On an accelerator (``reproduce.device``) they train one after the other
+    on it, in this process.
     """
     import contextlib
 
@@ -75,8 +75,8 @@ def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None 
                 for source, epochs, preset_name, label in jobs}  # fmt: skip
     jobs.sort(key=lambda job: job[2] == "linear")  # the LSTM+FC ones first: the closed-form ridge is quick
     n = max(1, min(ws.config.workers if processes is None else int(processes), len(jobs)))
-    # the run's pool where it has as many processes, else n started for these trainings
-    shared = ws.pool if ws.pool is not None and n <= ws.config.workers else None
+    # the run's pool (workers processes) unless another count is asked for: then n started here
+    shared = ws.pool if processes is None else None
     with contextlib.nullcontext(shared) if shared is not None else worker_pool(n) as pool:
         futures = {job[0]: pool.submit(_train_source, ws.config, ws.out, datasets, *job) for job in jobs}
         with progress_bar(ws.progress) as bar:

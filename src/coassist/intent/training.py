@@ -229,8 +229,8 @@ MODEL_PRESETS: Registry[Preset] = Registry("intent-model preset", {
 
 def _optimizer(name: str, params: list[nn.Parameter], lr: float, weight_decay: float) -> torch.optim.Optimizer:
     # fused: one kernel per step for all parameters (CPU and CUDA), instead of ~10 small ops per
-    # tensor; at the default preset's size the optimizer step falls from ~6 % of a training step
-    # to ~2 % (benchmarks/bench_training.py).
+    # tensor. Timed once for an LSTM 2 × 64 at batch 64 on 2 threads: the optimizer step took
+    # 0.45 ms of a 7.8 ms training step, fused 0.12 ms.
     if name == "adam":
         return torch.optim.Adam(params, lr=lr, weight_decay=weight_decay, fused=True)
     if name == "adamw":
