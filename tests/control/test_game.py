@@ -465,6 +465,8 @@ def test_application_presets_damping_left_by_a_pose_extrapolating_prediction():
 def test_games_of_one_preset_share_the_work_not_the_alpha():
     """cooperative_game builds once per (model, parameters): the copies it hands out have the
     gains of a game built alone, bit for bit, and each its own α."""
+    from threadpoolctl import threadpool_limits
+
     from coassist.config import GameParameters
     from coassist.control import game as game_module
     from coassist.control.game import CooperativeGame, cooperative_game
@@ -473,8 +475,10 @@ def test_games_of_one_preset_share_the_work_not_the_alpha():
     params = GameParameters(Q_hr=(0.2, 0.2, 0.0, 0.0), horizon=12, control_horizon=6)
     game_module._GAME_MEMO.clear()
     a, b = cooperative_game(model, params), cooperative_game(model, params)
-    alone = CooperativeGame(model, Q_hh=params.Q_hh, Q_hr=params.Q_hr, Q_rh=params.Q_rh, Q_rr=params.Q_rr,
-                            R_h=params.R_h, R_r=params.R_r, alpha=params.alpha, horizon=12, control_horizon=6)
+    # built as cooperative_game builds, on one BLAS thread: bit for bit on any BLAS build
+    with threadpool_limits(1, user_api="blas"):
+        alone = CooperativeGame(model, Q_hh=params.Q_hh, Q_hr=params.Q_hr, Q_rh=params.Q_rh, Q_rr=params.Q_rr,
+                                R_h=params.R_h, R_r=params.R_r, alpha=params.alpha, horizon=12, control_horizon=6)
     assert a is not b and len(game_module._GAME_MEMO) == 1
     for g in (a, b):
         for name in ("G_z", "G_h", "G_r"):
