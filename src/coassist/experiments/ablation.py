@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from coassist.experiments.application import OBJECTS, OBSTACLE, _pair_key, application_metrics, paired_difference
+from coassist.experiments.intent_sources import LEARNED
 from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_seed, in_loop_errors
 from coassist.experiments.report import Claim, Section
 
@@ -141,12 +142,9 @@ def run_ablation(ws: Workspace, models: dict[str, str], known: dict[tuple[str, s
     known = known or {}
     metrics, mg, pairs, skipped, errors = {}, {}, {}, {}, {}
     for j, obj in enumerate(OBJECTS):
-        seed = application_seed(cfg.seed, j)
 
-        def collect(name: str, controller: str, intent: str, obj: str = obj, seed: int = seed):
-            _, ds = ws.collect(name, tasks=(cfg.application_task,), objects=(obj,), users=cfg.application_users,
-                               trials=cfg.application_trials, seed=seed, controller=controller,
-                               preset=cfg.application_preset, intent=intent, obstacle=OBSTACLE)  # fmt: skip
+        def collect(name: str, controller: str, intent: str, j: int = j, obj: str = obj):
+            _, ds = ws.collect(name, **_cell_options(cfg, j, obj, controller, intent))
             return sorted(ds.trials, key=_pair_key)
 
         base = known.get((obj, "manual", "nominal"))
@@ -169,6 +167,49 @@ def run_ablation(ws: Workspace, models: dict[str, str], known: dict[tuple[str, s
     else:
         skipped["mujoco"] = why or "reproduce.ablation_mujoco_trials is 0"
     return AblationResult(metrics, mg, pairs, models, skipped, cfg.application_preset, errors)
+
+
+def _cell_options(cfg, j: int, obj: str, controller: str, intent: str) -> dict[str, Any]:
+    """:meth:`Workspace.collect`'s options for a point-mass cell: object ``j`` of OBJECTS, the application's trials."""
+    return {"tasks": (cfg.application_task,), "objects": (obj,), "users": cfg.application_users,
+            "trials": cfg.application_trials, "seed": application_seed(cfg.seed, j), "controller": controller,
+            "preset": cfg.application_preset, "intent": intent, "obstacle": OBSTACLE}  # fmt: skip
+
+
+class AblationAhead:
+    """Puts the ablation's simulations on the run's pool before the ablation stage asks for them.
+
+    Called with the learned sources written so far (source → model folder; the application
+    stage calls it while the sources train, :func:`~coassist.experiments.application.run_application`'s
+    ``ahead``), it starts every cell whose source can run and has not started yet: the named
+    sources' at the first call, each learned source's once it is written. The point-mass cells
+    are prefetched datasets (:meth:`Workspace.prefetch`, the same options as :func:`run_ablation`'s
+    collections: the same trials bit for bit), the MuJoCo UR5's one lockstep job per source
+    (:meth:`Workspace.submit`). ``reused``: the (object, controller, source) cells the
+    application stage collects and hands to :func:`run_ablation` as ``known``; not started here.
+    """
+
+    def __init__(self, ws: Workspace, reused: set[tuple[str, str, str]]) -> None:
+        self.ws, self.reused = ws, set(reused)
+        self.started: set[str] = set()
+        cfg = ws.config
+        self.mujoco = _mujoco_unavailable() is None and cfg.ablation_mujoco_trials > 0
+
+    def __call__(self, models: dict[str, str]) -> None:
+        cfg = self.ws.config
+        intents = {s: models.get(s, s) for s in SOURCES if s in models or s not in LEARNED}
+        for source in [s for s in (MG_JOB, *SOURCES) if s not in self.started and (s == MG_JOB or s in intents)]:
+            self.started.add(source)
+            for j, obj in enumerate(OBJECTS):
+                cells = [("manual", "nominal")] if source == MG_JOB else [(c, source) for c in CONTROLLERS]
+                for controller, src in cells:
+                    if (obj, controller, src) in self.reused:
+                        continue
+                    name = f"ablation-{obj}-manual" if source == MG_JOB else f"ablation-{obj}-{controller}-{src}"
+                    self.ws.prefetch(name, **_cell_options(cfg, j, obj, controller, intents.get(src, src)))
+            if self.mujoco:
+                job = _mujoco_jobs(cfg, {**{s: s for s in SOURCES}, **intents})[source]
+                self.ws.submit(f"mujoco:{source}", _drive_batch, [c for _, configs in job for c in configs])
 
 
 def prediction_errors_against_intent(trials, horizons=EVAL_HORIZONS) -> dict[int, dict[str, float]]:
@@ -216,6 +257,26 @@ def _drive_batch(configs: list) -> list[tuple[dict, dict]]:
             for t in drive_lockstep(configs)]  # fmt: skip
 
 
+#: The MuJoCo job of MG's trials (its cells have no intent source).
+MG_JOB = "nominal-mg"
+
+
+def _mujoco_jobs(cfg, intents: dict[str, str]) -> dict[str, list[tuple[tuple[str, str, str], list]]]:
+    """One job per intent source (and MG's, :data:`MG_JOB`): its cells (objects × controllers), each
+    (object, controller, source) with its drive configs; the job's cells run in lockstep in one
+    worker, so a model in the loop is called once per tick for all of them."""
+    jobs: dict[str, list[tuple[tuple[str, str, str], list]]] = {}
+    for j, obj in enumerate(OBJECTS):
+        seed0 = application_seed(cfg.seed, j)
+        jobs.setdefault(MG_JOB, []).append(((obj, "manual", "nominal"),
+                                            _mujoco_configs(cfg, obj, seed0, "manual", "nominal")))  # fmt: skip
+        for controller in CONTROLLERS:
+            for source in SOURCES:
+                jobs.setdefault(source, []).append(((obj, controller, source),
+                                                    _mujoco_configs(cfg, obj, seed0, controller, intents[source])))  # fmt: skip
+    return jobs
+
+
 def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict, pairs: dict, errors: dict) -> None:
     """The same cells on the MuJoCo UR5 (fewer trials: ``ablation_mujoco_trials`` per operator)."""
     import contextlib
@@ -224,22 +285,13 @@ def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict,
     from coassist.sim.world import worker_pool
 
     cfg = ws.config
-    # One job per intent source: its cells (objects × controllers) run in lockstep in one
-    # worker, so a model in the loop is called once per tick for all of them.
-    jobs: dict[str, list[tuple[tuple[str, str, str], list]]] = {}
-    for j, obj in enumerate(OBJECTS):
-        seed0 = application_seed(cfg.seed, j)
-        jobs.setdefault("nominal-mg", []).append(((obj, "manual", "nominal"),
-                                                  _mujoco_configs(cfg, obj, seed0, "manual", "nominal")))  # fmt: skip
-        for controller in CONTROLLERS:
-            for source in SOURCES:
-                jobs.setdefault(source, []).append(((obj, controller, source),
-                                                    _mujoco_configs(cfg, obj, seed0, controller, intents[source])))  # fmt: skip
+    jobs = _mujoco_jobs(cfg, intents)
     workers = max(1, min(cfg.workers, os.cpu_count() or 1))
     # the run's simulation processes where it has them (started once), else a pool for these runs
     with contextlib.nullcontext(ws.pool) if ws.pool is not None else worker_pool(workers) as pool:
-        futures = [(cells, pool.submit(_drive_batch, [c for _, configs in cells for c in configs]))
-                   for cells in jobs.values()]  # fmt: skip
+        # a job AblationAhead started is taken, not run again
+        futures = [(cells, ws.take(f"mujoco:{source}") or pool.submit(_drive_batch, [c for _, configs in cells for c in configs]))
+                   for source, cells in jobs.items()]  # fmt: skip
         done = []
         for cells, fut in futures:
             runs = iter(fut.result())

@@ -15,6 +15,7 @@ the same seed
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -74,23 +75,50 @@ class ApplicationResult:
         return {f"{o}/{c}": v for (o, c), v in self.metrics.items()}
 
 
-def run_application(ws: Workspace, final_model: Path) -> ApplicationResult:
+def handed_to_ablation() -> set[tuple[str, str, str]]:
+    """The (object, controller, intent source) cells :meth:`ApplicationResult.cells` hands to the
+    ablation: MG's (source "nominal") and the assistive controllers' (:data:`APPLICATION_SOURCE`)."""
+    return {(obj, c, "nominal" if c == "manual" else APPLICATION_SOURCE)
+            for obj in OBJECTS for c in CONTROLLERS if c == "manual" or c.startswith("cooperative")}  # fmt: skip
+
+
+def run_application(ws: Workspace, final_model: Path,
+                    ahead: Callable[[dict[str, str]], None] | None = None) -> ApplicationResult:  # fmt: skip
     """Collect the heavy load's transfer dataset (with the final model in the loop, as the thesis
     collects each object's), train the learned intent sources on every simulated dataset
     (:func:`~coassist.experiments.intent_sources.train_sources`), then collect every (object,
-    controller) pair's trials, the assistive ones with :data:`~coassist.experiments.intent_sources.APPLICATION_SOURCE`."""
+    controller) pair's trials, the assistive ones with :data:`~coassist.experiments.intent_sources.APPLICATION_SOURCE`.
+
+    While the sources train, the pairs' simulations are put on the run's pool behind them
+    (:meth:`Workspace.prefetch`): MG's and IMP's at once, the assistive ones once their source
+    is written. ``ahead(models)`` is called at the same moments with the sources written so
+    far, for a later stage to put its own simulations there too (the ablation's)."""
     cfg = ws.config
     ws.collect("TL-heavy", tasks=ITERATION_TASKS, objects=("heavy",), trials=max(1, cfg.transfer_trials // 3),
                seed=heavy_transfer_seed(cfg.seed), intent=str(final_model))
-    models = train_sources(ws, training_datasets(ws))
+
+    def cell(j: int, obj: str, controller: str, models: dict[str, str]) -> dict[str, Any]:
+        intent = models[APPLICATION_SOURCE] if controller.startswith("cooperative") else "nominal"
+        return {"tasks": (cfg.application_task,), "objects": (obj,), "users": cfg.application_users,
+                "trials": cfg.application_trials, "seed": application_seed(cfg.seed, j), "controller": controller,
+                "preset": cfg.application_preset, "intent": intent, "obstacle": OBSTACLE}  # fmt: skip
+
+    started: set[tuple[str, str]] = set()
+
+    def on_models(models: dict[str, str]) -> None:
+        for j, obj in enumerate(OBJECTS):
+            for controller in CONTROLLERS:
+                if (obj, controller) not in started and (APPLICATION_SOURCE in models or not controller.startswith("cooperative")):
+                    started.add((obj, controller))
+                    ws.prefetch(f"app-{obj}-{controller}", **cell(j, obj, controller, models))
+        if ahead is not None:
+            ahead(models)
+
+    models = train_sources(ws, training_datasets(ws), on_models=on_models)
     metrics, trials = {}, {}
     for j, obj in enumerate(OBJECTS):
         for controller in CONTROLLERS:
-            intent = models[APPLICATION_SOURCE] if controller.startswith("cooperative") else "nominal"
-            _, ds = ws.collect(f"app-{obj}-{controller}", tasks=(cfg.application_task,), objects=(obj,),
-                               users=cfg.application_users, trials=cfg.application_trials,
-                               seed=application_seed(cfg.seed, j), controller=controller,
-                               preset=cfg.application_preset, intent=intent, obstacle=OBSTACLE)
+            _, ds = ws.collect(f"app-{obj}-{controller}", **cell(j, obj, controller, models))
             ordered = sorted(ds.trials, key=_pair_key)  # the same order for every controller: trial i meets trial i
             metrics[(obj, controller)] = application_metrics(ordered)
             trials[(obj, controller)] = ordered

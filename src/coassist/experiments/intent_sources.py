@@ -20,6 +20,7 @@ the report's trials).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from coassist.experiments.pipeline import Workspace
@@ -46,7 +47,8 @@ def training_datasets(ws: Workspace) -> list[Path]:
     return [root / n for n in names]
 
 
-def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None = None) -> dict[str, str]:
+def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None = None,
+                  on_models: Callable[[dict[str, str]], None] | None = None) -> dict[str, str]:
     """Train every learned source on ``datasets`` (module docstring) into ``models/<source>``; model folders by source.
 
     On a CPU they train in worker processes, ``processes`` at a time (None: in the run's
@@ -58,8 +60,15 @@ def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None 
     at OpenMP barriers either. One thread each, however many at a time: the weights do not
     depend on it. On an accelerator (``reproduce.device``) they train one after the other
     on it, in this process.
+
+    ``on_models(models)`` is called in this process with the sources written so far
+    (source → folder): once with none as soon as the trainings are on the pool, then as
+    each one is written. A caller can put simulations that need no learned source, then
+    those with each source in the loop, on the pool behind the trainings, so that a
+    worker whose training ended early does not sit idle.
     """
     import contextlib
+    from concurrent.futures import as_completed
 
     from coassist._progress import progress_bar
     from coassist.intent import MODEL_PRESETS
@@ -69,21 +78,28 @@ def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None 
     for source, (preset_name, label) in LEARNED.items():
         epochs = ws.config.epochs if preset_name is None else MODEL_PRESETS[preset_name].train.epochs
         jobs.append((source, epochs, preset_name, label))
+    told = on_models or (lambda models: None)
+    models: dict[str, str] = {}
     if ws.config.device != "cpu":
-        return {source: str(ws.train(source, datasets, init="scratch", epochs=epochs, preset_name=preset_name,
-                                     label=label, stride=ws.config.source_stride))
-                for source, epochs, preset_name, label in jobs}  # fmt: skip
+        told({})
+        for source, epochs, preset_name, label in jobs:
+            models[source] = str(ws.train(source, datasets, init="scratch", epochs=epochs, preset_name=preset_name,
+                                          label=label, stride=ws.config.source_stride))  # fmt: skip
+            told(dict(models))
+        return models
     jobs.sort(key=lambda job: job[2] == "linear")  # the LSTM+FC ones first: the closed-form ridge is quick
     n = max(1, min(ws.config.workers if processes is None else int(processes), len(jobs)))
     # the run's pool (workers processes) unless another count is asked for: then n started here
     shared = ws.pool if processes is None else None
     with contextlib.nullcontext(shared) if shared is not None else worker_pool(n) as pool:
-        futures = {job[0]: pool.submit(_train_source, ws.config, ws.out, datasets, *job) for job in jobs}
+        futures = {pool.submit(_train_source, ws.config, ws.out, datasets, *job): job[0] for job in jobs}
+        told({})
         with progress_bar(ws.progress) as bar:
             task = bar.add_task(f"training {len(jobs)} intent sources, {n} at a time", total=len(jobs))
-            for future in futures.values():
-                future.add_done_callback(lambda _: bar.advance(task))
-            models = {source: future.result() for source, future in futures.items()}
+            for future in as_completed(futures):
+                models[futures[future]] = future.result()
+                bar.advance(task)
+                told(dict(models))
     return {source: models[source] for source in LEARNED}
 
 

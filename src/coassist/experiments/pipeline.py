@@ -10,9 +10,11 @@ returning a typed result from which its report section is built.
 from __future__ import annotations
 
 import json
-from concurrent.futures import Executor
-from dataclasses import dataclass, replace
+from collections.abc import Callable
+from concurrent.futures import Executor, Future
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -183,19 +185,66 @@ class Workspace:
     #: once for the run; None: each collection starts its own.
     pool: Executor | None = None
 
+    #: Collections put on the pool ahead of time (:meth:`prefetch`), by dataset name; and other
+    #: jobs a later stage will ask for (:meth:`submit`, by key). Not part of the value.
+    _pending: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+
     def collect(self, name: str, *, tasks, users=(0,), objects=("handle",), trials: int, seed: int,
                 controller: str = "cooperative", preset: str | None = None, intent: str = "nominal",
                 obstacle: str = "small"):
-        """Simulate a dataset into ``out/datasets/<name>``; return its folder and the dataset read back."""
+        """Simulate a dataset into ``out/datasets/<name>``; return its folder and the dataset read back.
+
+        A collection :meth:`prefetch` put on the pool with the same options is waited for
+        and written, not run again (the same trials bit for bit: the same jobs)."""
         from coassist.data import read_dataset
         from coassist.sim.collect import collect_dataset
 
+        options = self._spec_options(tasks, users, objects, trials, seed, controller, preset, intent, obstacle)
+        submitted = self._pending.pop(f"dataset:{name}", None)
+        if submitted is not None and submitted[0] != options:
+            submitted[1].cancel()  # another collection under this name: run the one asked for
+            submitted = None
         folder = collect_dataset(
             self.out / "datasets" / name, dataset_id=name, workers=self.config.workers, progress=self.progress,
-            overwrite=True, lockstep=self.config.lockstep, pool=self.pool, controller=controller, users=list(users), tasks=list(tasks), objects=list(objects),
-            trials=trials, seed=seed, preset=preset or self.config.control_preset, intent=intent, obstacle=obstacle,
+            overwrite=True, lockstep=self.config.lockstep, pool=self.pool,
+            submitted=None if submitted is None else submitted[1], **options,
         )
         return folder, read_dataset(folder)
+
+    def prefetch(self, name: str, *, tasks, users=(0,), objects=("handle",), trials: int, seed: int,
+                 controller: str = "cooperative", preset: str | None = None, intent: str = "nominal",
+                 obstacle: str = "small") -> None:
+        """Start :meth:`collect`'s simulations for these options on the run's pool now and
+        return at once; the :meth:`collect` with the same name and options takes them. The
+        pool runs jobs in the order they were submitted, so a stage can keep the cores busy
+        with simulations a later stage needs while its own work leaves one idle. A model in
+        the loop must already be written. Without a pool (one worker) it does nothing."""
+        from coassist.sim.collect import dataset_specs
+        from coassist.sim.world import submit_trials
+
+        if self.pool is None:
+            return
+        options = self._spec_options(tasks, users, objects, trials, seed, controller, preset, intent, obstacle)
+        self._pending[f"dataset:{name}"] = (options, submit_trials(
+            dataset_specs(**options), self.pool, workers=self.config.workers, lockstep=self.config.lockstep))
+
+    def submit(self, key: str, fn: Callable[..., Any], *args: Any) -> Future | None:
+        """Run ``fn(*args)`` on the run's pool, for a later :meth:`take` of ``key`` (None without a pool)."""
+        if self.pool is None:
+            return None
+        future = self.pool.submit(fn, *args)
+        self._pending[f"job:{key}"] = future
+        return future
+
+    def take(self, key: str) -> Future | None:
+        """The future :meth:`submit` started under ``key`` (removed), or None."""
+        return self._pending.pop(f"job:{key}", None)
+
+    def _spec_options(self, tasks, users, objects, trials, seed, controller, preset, intent, obstacle) -> dict[str, Any]:
+        # coassist.sim.collect.dataset_specs' keyword arguments
+        return {"controller": controller, "users": list(users), "tasks": list(tasks), "objects": list(objects),
+                "trials": trials, "seed": seed, "preset": preset or self.config.control_preset, "intent": intent,
+                "obstacle": obstacle}  # fmt: skip
 
     def train(self, name: str, datasets: list[Path], *, init: str, epochs: int, test_fraction: float = 0.2,
               simulated: bool = True, preset_name: str | None = None, label: str | None = None,

@@ -55,8 +55,8 @@ from typing import Any
 import numpy as np
 
 from coassist._io import atomic_write_text
-from coassist.experiments.ablation import ablation_section, run_ablation
-from coassist.experiments.application import application_section, run_application
+from coassist.experiments.ablation import AblationAhead, ablation_section, run_ablation
+from coassist.experiments.application import application_section, handed_to_ablation, run_application
 from coassist.experiments.iterative import IterativeResult
 from coassist.experiments.pipeline import (
     EVAL_HORIZONS,
@@ -152,10 +152,14 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
             transfer, iterative.final_model_offline_e_rms[50], sum(w["trials"] for w in iterative.work),
             sum(w["windows_trained"] for w in iterative.work)))
         ctx.summary["transfer"] = transfer.summary()
-        application = ctx.stage.run("application scenario", run_application, ctx.ws, final_model)
+        # Before the application: its training uses this process's torch threads, and from the
+        # application on the pool's workers are kept busy (OpenMP threads sharing cores stall).
+        real = ctx.stage.run("real recordings", run_real_recordings, ctx.ws, config.real_data or default_real_data())
+        # The ablation's simulations go on the pool while the application's intent sources train.
+        ahead = AblationAhead(ctx.ws, handed_to_ablation())
+        application = ctx.stage.run("application scenario", run_application, ctx.ws, final_model, ahead)
         ctx.sections.append(application_section(application))
         ctx.summary["application"] = application.summary()
-        real = ctx.stage.run("real recordings", run_real_recordings, ctx.ws, config.real_data or default_real_data())
         ctx.sections.append(real_recordings_section(real))
         ctx.summary["real"] = real.summary()
         ablation = ctx.stage.run("intent ablation", run_ablation, ctx.ws, application.models, application.cells())

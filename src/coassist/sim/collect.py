@@ -12,7 +12,7 @@ from coassist._checks import check_int
 from coassist.data import DatasetWriter
 from coassist.data.store import FORMAT_VERSION, MANIFEST_NAME, digest
 from coassist.interfaces import NAMED_INTENTS
-from coassist.sim.world import TrialSpec, run_trials
+from coassist.sim.world import SubmittedTrials, TrialSpec, run_trials
 
 
 def dataset_specs(
@@ -62,13 +62,16 @@ def collect_dataset(
     say: Callable[[str], None] | None = None,
     lockstep: bool = True,
     pool: Executor | None = None,
+    submitted: SubmittedTrials | None = None,
     **spec_options,
 ) -> Path:
     """Simulate the trials of :func:`dataset_specs` (``spec_options``) and write them as a dataset.
 
     ``dataset_id`` defaults to the folder's name. Returns the dataset folder. ``lockstep``,
     ``pool``: :func:`~coassist.sim.world.run_trials`' (trials with a model in the loop advance
-    together; processes kept across collections).
+    together; processes kept across collections). ``submitted``: this collection's trials,
+    already put on a pool by :func:`~coassist.sim.world.submit_trials` (its specs must be
+    :func:`dataset_specs` of ``spec_options``): they are waited for instead of run again.
 
     The output is checked and locked before anything is simulated. Each trial is
     written as soon as it finishes (:class:`coassist.data.DatasetWriter`), so memory
@@ -79,6 +82,8 @@ def collect_dataset(
     ``out`` (``overwrite=True``) only once it is complete.
     """
     specs = dataset_specs(**spec_options)
+    if submitted is not None and submitted.specs != tuple(specs):
+        raise ValueError("collect_dataset(submitted=...): the submitted trials are not this collection's specs")
     out = Path(out)
     s0 = specs[0]
     description = (
@@ -103,6 +108,9 @@ def collect_dataset(
         if say and writer.resumed:
             say(f"continuing: {len(writer.resumed)} of {len(specs)} trials were already written in {writer.partial}")
         todo = [i for i in range(len(specs)) if not writer.has(i)]
+        if submitted is not None:
+            submitted.gather(lambda i, trial: writer.add(i, trial) if not writer.has(i) else None, progress)
+            return writer.finish()
         run_trials([specs[i] for i in todo], workers=workers, progress=progress, ray_address=ray_address,
                    lockstep=lockstep, pool=pool, on_result=lambda j, trial: writer.add(todo[j], trial))  # fmt: skip
         return writer.finish()

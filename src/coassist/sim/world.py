@@ -47,7 +47,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import Executor
+from concurrent.futures import Executor, Future
 from dataclasses import dataclass
 
 import numpy as np
@@ -566,9 +566,7 @@ def run_trials(
         else:
             on_result(i, trial)
 
-    if lockstep and any(spec.intent not in NAMED_INTENTS for spec in specs):
-        return _run_lockstep_groups(specs, workers, progress, deliver, on_result is not None, results, pool)
-    if workers == 1:
+    if workers == 1 and not (lockstep and _has_model(specs)):
         controllers: dict = {}
         with progress_bar(progress) as bar:
             task_id = bar.add_task("simulating", total=len(specs))
@@ -576,22 +574,20 @@ def run_trials(
                 deliver(i, run_spec(spec, controllers))
                 bar.advance(task_id)
         return [] if on_result else results  # type: ignore[return-value]
-
-    from concurrent.futures import as_completed
-
-    # Batches of a few trials: each worker builds a game once per batch, and results
-    # stream back often enough for the progress bar.
-    size = max(1, min(16, len(specs) // (4 * workers)))
-    batches = [list(range(i, min(i + size, len(specs)))) for i in range(0, len(specs), size)]
-    with _pool_for(pool, workers) as executor:
-        futures = {executor.submit(_run_batch, [specs[i] for i in batch]): batch for batch in batches}
+    if workers == 1:  # one lockstep group, in this process
         with progress_bar(progress) as bar:
             task_id = bar.add_task("simulating", total=len(specs))
-            for fut in as_completed(futures):
-                for i, payload in zip(futures[fut], fut.result()):
-                    deliver(i, _from_payload(payload))
-                bar.advance(task_id, len(futures[fut]))
+            for i, trial in enumerate(run_spec_lockstep(specs)):
+                deliver(i, trial)
+            bar.advance(task_id, len(specs))
+        return [] if on_result else results  # type: ignore[return-value]
+    with _pool_for(pool, workers) as executor:
+        submit_trials(specs, executor, workers=workers, lockstep=lockstep).gather(deliver, progress)
     return [] if on_result else results  # type: ignore[return-value]
+
+
+def _has_model(specs: Sequence[TrialSpec]) -> bool:
+    return any(spec.intent not in NAMED_INTENTS for spec in specs)
 
 
 def _pool_for(pool: Executor | None, workers: int):
@@ -599,27 +595,55 @@ def _pool_for(pool: Executor | None, workers: int):
     return worker_pool(workers) if pool is None else contextlib.nullcontext(pool)
 
 
-def _run_lockstep_groups(specs: list[TrialSpec], workers: int, progress: bool, deliver: Callable[[int, Trial], None],
-                         streaming: bool, results: list, pool: Executor | None = None) -> list[Trial]:  # fmt: skip
-    """:func:`run_trials`' lockstep path: group g holds specs g, g + workers, … (the tasks mix, so the
-    groups' lengths balance), each run by :func:`_run_lockstep_batch` in its own process."""
-    groups = [list(range(g, len(specs), workers)) for g in range(workers)]
-    with progress_bar(progress) as bar:
-        task_id = bar.add_task("simulating", total=len(specs))
-        if workers == 1:
-            for i, trial in zip(groups[0], run_spec_lockstep(specs)):
-                deliver(i, trial)
-            bar.advance(task_id, len(specs))
-            return [] if streaming else results
+@dataclass(frozen=True)
+class SubmittedTrials:
+    """Trials running on a pool (:func:`submit_trials`): their specs, and per job the
+    future of its payloads and the indices (into ``specs``) of the trials it runs."""
+
+    specs: tuple[TrialSpec, ...]
+    jobs: tuple[tuple[Future, tuple[int, ...]], ...]
+
+    def gather(self, deliver: Callable[[int, Trial], None], progress: bool = False) -> None:
+        """Wait for the jobs and call ``deliver(i, trial)`` for every trial as its job finishes (any order)."""
         from concurrent.futures import as_completed
 
-        with _pool_for(pool, workers) as executor:
-            futures = {executor.submit(_run_lockstep_batch, [specs[i] for i in group]): group for group in groups}
-            for fut in as_completed(futures):
-                for i, payload in zip(futures[fut], fut.result()):
+        index = {fut: idx for fut, idx in self.jobs}
+        with progress_bar(progress) as bar:
+            task_id = bar.add_task("simulating", total=len(self.specs))
+            for fut in as_completed(index):
+                for i, payload in zip(index[fut], fut.result()):
                     deliver(i, _from_payload(payload))
-                bar.advance(task_id, len(futures[fut]))
-    return [] if streaming else results
+                bar.advance(task_id, len(index[fut]))
+
+    def cancel(self) -> None:
+        """Cancel the jobs that have not started (those running finish, unread)."""
+        for fut, _ in self.jobs:
+            fut.cancel()
+
+
+def submit_trials(specs: Sequence[TrialSpec], pool: Executor, *, workers: int, lockstep: bool = True) -> SubmittedTrials:
+    """Put the trials of ``specs`` on ``pool`` now, in the jobs :func:`run_trials` would run
+    (the same grouping, so the same numbers), and return at once; :meth:`SubmittedTrials.gather`
+    takes the results. Lets a caller start simulations that a later step needs while this
+    one still computes: the pool runs jobs in the order they were submitted.
+
+    With a model in the loop of some trial and ``lockstep``: ``workers`` lockstep groups,
+    group g holding specs g, g + workers, … (the tasks mix, so the groups' lengths balance),
+    each run by :func:`run_spec_lockstep` in one process. Otherwise batches of a few trials:
+    each worker builds a game once per batch, and results stream back often enough for a
+    progress bar.
+    """
+    specs = tuple(specs)
+    workers = min(check_int(workers, "workers", 1), max(1, len(specs)))
+    if lockstep and _has_model(specs):
+        groups = [tuple(range(g, len(specs), workers)) for g in range(workers)]
+        fn: Callable = _run_lockstep_batch
+    else:
+        size = max(1, min(16, len(specs) // (4 * workers)))
+        groups = [tuple(range(i, min(i + size, len(specs)))) for i in range(0, len(specs), size)]
+        fn = _run_batch
+    jobs = tuple((pool.submit(fn, [specs[i] for i in group]), group) for group in groups if group)
+    return SubmittedTrials(specs, jobs)
 
 
 def _run_ray(specs: list[TrialSpec], address: str, progress: bool,

@@ -1,0 +1,112 @@
+"""Simulations started ahead of time (issue 19): ``Workspace.prefetch`` and the ablation's
+``AblationAhead`` put a later step's trials on the run's pool early; what they give must be
+exactly what the later step would have run itself, and nothing may be left unused."""
+
+from concurrent.futures import Future
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from coassist.experiments import pipeline
+from coassist.experiments.ablation import CONTROLLERS, MG_JOB, OBJECTS, SOURCES, AblationAhead, _mujoco_jobs
+from coassist.experiments.application import handed_to_ablation
+from coassist.experiments.intent_sources import APPLICATION_SOURCE, LEARNED
+from coassist.sim.world import worker_pool
+
+ARRAYS = ("time", "pose", "velocity", "wrench", "reference", "prediction", "intent", "effort_h", "effort_r", "fault")
+
+
+class _RecordingPool:
+    """An executor that runs nothing: it records what was submitted."""
+
+    def __init__(self):
+        self.calls = []
+
+    def submit(self, fn, *args):
+        self.calls.append((fn.__name__, args))
+        future = Future()
+        future.set_result([])
+        return future
+
+
+def _same_trials(a, b):
+    assert len(a.trials) == len(b.trials)
+    for ta, tb in zip(a.trials, b.trials):
+        assert ta.meta.seed == tb.meta.seed
+        for name in ARRAYS:
+            x, y = getattr(ta, name), getattr(tb, name)
+            assert (x is None) == (y is None), name
+            if x is not None:
+                np.testing.assert_array_equal(x, y, err_msg=name)  # bit for bit: the same jobs
+
+
+def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
+    """Named sources at the first call, each learned one once written; never a cell the
+    application hands over; never twice; the MuJoCo jobs are those ``_run_mujoco`` takes."""
+    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1)
+    pool = _RecordingPool()
+    ws = pipeline.Workspace(cfg, tmp_path, progress=False, pool=pool)
+    ahead = AblationAhead(ws, handed_to_ablation())
+    models = {s: f"/models/{s}" for s in LEARNED}
+
+    ahead({})
+    named = [s for s in SOURCES if s not in LEARNED]
+    expect = {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c in CONTROLLERS for s in named}
+    if ahead.mujoco:
+        expect |= {f"job:mujoco:{s}" for s in (MG_JOB, *named)}
+    assert set(ws._pending) == expect  # MG's point-mass cells come from the application: not started
+
+    ahead({"lstm-tool": models["lstm-tool"]})
+    ahead({"lstm-tool": models["lstm-tool"]})  # again: nothing new
+    expect |= {f"dataset:ablation-{o}-{c}-lstm-tool" for o in OBJECTS for c in CONTROLLERS}
+    if ahead.mujoco:
+        expect.add("job:mujoco:lstm-tool")
+    assert set(ws._pending) == expect
+
+    ahead(models)
+    expect |= {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c in CONTROLLERS for s in LEARNED
+               if s != APPLICATION_SOURCE}  # fmt: skip
+    if ahead.mujoco:
+        expect |= {f"job:mujoco:{s}" for s in LEARNED}
+    assert set(ws._pending) == expect
+    # each prefetched cell carries its source's model
+    options, _ = ws._pending["dataset:ablation-board-cooperative-ridge"]
+    assert options["intent"] == models["ridge"] and options["controller"] == "cooperative"
+    if ahead.mujoco:
+        jobs = _mujoco_jobs(cfg, {s: models.get(s, s) for s in SOURCES})
+        drives = [args[0] for name, args in pool.calls if name == "_drive_batch"]
+        assert drives == [[c for _, configs in jobs[s] for c in configs] for s in (MG_JOB, *named, "lstm-tool",
+                          *[s for s in LEARNED if s != "lstm-tool"])]  # fmt: skip
+
+
+@pytest.mark.parametrize("with_model", [False, True])
+def test_prefetched_collection_is_the_collection(tmp_path, with_model):
+    """prefetch + collect writes the same trials, bit for bit, as collect alone (named intent,
+    and a model in the loop in lockstep groups); a prefetch under the same name with other
+    options is dropped and the collection asked for runs."""
+    pytest.importorskip("torch")
+    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=2, threads=1)
+    plain = pipeline.Workspace(cfg, tmp_path / "plain", progress=False)
+    intent = "nominal"
+    if with_model:
+        folder, _ = plain.collect("D0", tasks=("curved",), trials=2, seed=1)
+        intent = str(plain.train("m", [folder], init="scratch", epochs=1))
+    options = {"tasks": ("curved", "linear"), "users": (0, 1), "trials": 2, "seed": 7, "intent": intent}
+    with worker_pool(2) as pool:
+        _, reference = pipeline.Workspace(cfg, tmp_path / "ref", progress=False, pool=pool).collect("x", **options)
+        ws = pipeline.Workspace(cfg, tmp_path / "ahead", progress=False, pool=pool)
+        ws.prefetch("x", **options)
+        ws.prefetch("y", **{**options, "seed": 99})
+        _, ahead = ws.collect("x", **options)
+        _, other = ws.collect("y", **options)  # not the prefetched seeds: those are dropped
+        assert ws._pending == {}
+    _same_trials(reference, ahead)
+    _same_trials(reference, other)
+    assert [t.meta.seed for t in ahead.trials] == list(range(7, 7 + 8))
+
+
+def test_prefetch_without_a_pool_does_nothing(tmp_path):
+    ws = pipeline.Workspace(pipeline.REPRODUCE_PRESETS["tiny"], tmp_path, progress=False)
+    ws.prefetch("x", tasks=("curved",), trials=1, seed=1)
+    assert ws._pending == {} and ws.submit("k", int, "1") is None and ws.take("k") is None
