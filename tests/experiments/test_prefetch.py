@@ -110,3 +110,37 @@ def test_prefetch_without_a_pool_does_nothing(tmp_path):
     ws = pipeline.Workspace(pipeline.REPRODUCE_PRESETS["tiny"], tmp_path, progress=False)
     ws.prefetch("x", tasks=("curved",), trials=1, seed=1)
     assert ws._pending == {} and ws.submit("k", int, "1") is None and ws.take("k") is None
+
+
+def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path):
+    """run_transfer's jobs on the run's pool (one torch thread each, the longest first, each
+    model scored in its worker) give the models and scores of the one-after-the-other path in
+    this process on one thread, exactly; the train times are the jobs' own."""
+    pytest.importorskip("torch")
+    import torch
+
+    from coassist.experiments.transfer import run_transfer
+
+    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=2, threads=1)
+    base = pipeline.Workspace(cfg, tmp_path / "base", progress=False)
+    folder, _ = base.collect("D0", tasks=("curved",), trials=2, seed=1)
+    prev = base.train("M0", [folder], init="scratch", epochs=1)
+    threads = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        here = run_transfer(pipeline.Workspace(cfg, tmp_path / "here", progress=False), prev, 1.0)
+    finally:
+        torch.set_num_threads(threads)
+    with worker_pool(2) as pool:
+        ws = pipeline.Workspace(cfg, tmp_path / "pool", progress=False, pool=pool)
+        on_pool = run_transfer(ws, prev, 1.0)
+    assert list(on_pool.targets) == list(here.targets)
+    for name, target in on_pool.targets.items():
+        assert target.e_rms == here.targets[name].e_rms  # every model and baseline, every horizon, exactly
+        assert target.trials == here.targets[name].trials
+        assert set(target.train_s) == {"transfer", "finetune_all", "scratch"} and all(s > 0 for s in target.train_s.values())
+        for start, path in target.models.items():
+            assert path.parent.parent == tmp_path / "pool"
+            a = (path / "weights.safetensors").read_bytes()
+            b = (here.targets[name].models[start] / "weights.safetensors").read_bytes()
+            assert a == b, (name, start)

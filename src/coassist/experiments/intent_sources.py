@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from coassist.experiments.pipeline import Workspace
+from coassist.experiments.pipeline import Workspace, train_in_worker
 
 __all__ = ["APPLICATION_SOURCE", "LEARNED", "train_sources", "training_datasets"]
 
@@ -92,25 +92,14 @@ def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None 
     # the run's pool (workers processes) unless another count is asked for: then n started here
     shared = ws.pool if processes is None else None
     with contextlib.nullcontext(shared) if shared is not None else worker_pool(n) as pool:
-        futures = {pool.submit(_train_source, ws.config, ws.out, datasets, *job): job[0] for job in jobs}
+        futures = {pool.submit(train_in_worker, ws.config, ws.out, source, datasets, init="scratch", epochs=epochs,
+                               preset_name=preset_name, label=label, stride=ws.config.source_stride): source
+                   for source, epochs, preset_name, label in jobs}  # fmt: skip
         told({})
         with progress_bar(ws.progress) as bar:
             task = bar.add_task(f"training {len(jobs)} intent sources, {n} at a time", total=len(jobs))
             for future in as_completed(futures):
-                models[futures[future]] = future.result()
+                models[futures[future]] = future.result()[0]
                 bar.advance(task)
                 told(dict(models))
     return {source: models[source] for source in LEARNED}
-
-
-def _train_source(config, out: Path, datasets: list[Path], source: str, epochs: int, preset_name: str | None,
-                  label: str) -> str:  # fmt: skip
-    """One source's training in a worker process, on one torch thread."""
-    from dataclasses import replace
-
-    import torch
-
-    torch.set_num_threads(1)
-    ws = Workspace(replace(config, threads=1), out, progress=False)
-    return str(ws.train(source, datasets, init="scratch", epochs=epochs, preset_name=preset_name, label=label,
-                        stride=config.source_stride))  # fmt: skip

@@ -97,44 +97,76 @@ class TransferResult:
 
 
 def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> TransferResult:
-    """Collect, train and score every target of :func:`transfer_targets` (datasets ``TL-<target>``)."""
-    from coassist.experiments.iterative import transfer_learning
+    """Collect, train and score every target of :func:`transfer_targets` (datasets ``TL-<target>``).
+
+    Algorithm 4.2 (:func:`~coassist.experiments.iterative.transfer_learning`) for every target
+    at once: each target's training and test trials are collected (one after the other, on
+    every worker), then the targets' models train and are scored as independent jobs on the
+    run's pool, one torch thread each, the longest first (:func:`~coassist.experiments.pipeline.train_in_worker`);
+    the train times are those jobs' own. Without a pool, or on an accelerator, they train
+    one after the other in this process.
+    """
+    import time
+    from concurrent.futures import Future
+
+    from coassist.experiments.iterative import TRANSFER_STARTS
+    from coassist.experiments.pipeline import evaluate_in_worker, train_in_worker
     from coassist.intent import evaluate_model, load_model, load_trials
     from coassist.intent.evaluation import BASELINES, comparison_lines
 
     cfg = ws.config
-    targets = {}
+    on_pool = ws.pool is not None and cfg.device == "cpu"
+
+    def done(value) -> Future:
+        future: Future = Future()
+        future.set_result(value)
+        return future
+
+    def evaluate(model, test: Path) -> Future:
+        if on_pool:
+            return ws.pool.submit(evaluate_in_worker, model, [test])  # type: ignore[union-attr]
+        return done(evaluate_model(load_model(model), load_trials([test]), held_out_only=False))
+
+    def train(name: str, folder: Path, test: Path, init: str, epochs: int) -> Future:
+        if on_pool:
+            return ws.pool.submit(train_in_worker, cfg, ws.out, name, [folder], init=init, epochs=epochs,  # type: ignore[union-attr]
+                                  test_fraction=0.0, evaluate_on=[test])  # fmt: skip
+        t0 = time.perf_counter()
+        path = ws.train(name, [folder], init=init, epochs=epochs, test_fraction=0.0)
+        seconds = time.perf_counter() - t0
+        return done((str(path), seconds, evaluate_model(load_model(path), load_trials([test]), held_out_only=False)))
+
+    collected = {}
     for i, (name, target) in enumerate(transfer_targets(cfg).items()):
         slug = name.replace(" ", "-")
         seed, test_seed = transfer_seeds(cfg.seed, i)
-        folders = {}
-
-        def collect():  # transfer_learning calls both at once, inside this iteration
-            folder, ds = ws.collect(f"TL-{slug}", tasks=target.tasks, users=target.users, objects=target.objects,
-                                    trials=target.trials, seed=seed, intent=str(final_model))
-            folders["train"] = folder
-            return ds
-
-        def train(start, dataset):
-            init = {"transfer": f"transfer:{final_model}", "finetune_all": f"finetune:{final_model}", "scratch": "scratch"}[start]
-            epochs = cfg.transfer_epochs if start != "scratch" else max(cfg.transfer_epochs, cfg.epochs)
-            return ws.train(f"TL-{slug}-{start}", [folders["train"]], init=init, epochs=epochs, test_fraction=0.0)
-
-        outcome, dataset = transfer_learning(name, collect, train)
-        test_folder, _ = ws.collect(f"TL-{slug}-test", tasks=target.tasks, users=target.users, objects=target.objects,
-                                    trials=target.test_trials, seed=test_seed, intent=str(final_model))
-        test = load_trials([test_folder])
-        evals = {"M_prev": evaluate_model(load_model(final_model), test, held_out_only=False)}
-        for start, path in outcome.models.items():
-            evals[start] = evaluate_model(load_model(path), test, held_out_only=False)
+        t0 = time.perf_counter()
+        folder, dataset = ws.collect(f"TL-{slug}", tasks=target.tasks, users=target.users, objects=target.objects,
+                                     trials=target.trials, seed=seed, intent=str(final_model))
+        collect_s = time.perf_counter() - t0
+        test, _ = ws.collect(f"TL-{slug}-test", tasks=target.tasks, users=target.users, objects=target.objects,
+                             trials=target.test_trials, seed=test_seed, intent=str(final_model))
+        collected[name] = (slug, folder, test, len(dataset.trials), collect_s)
+    init = {"transfer": f"transfer:{final_model}", "finetune_all": f"finetune:{final_model}", "scratch": "scratch"}
+    epochs = {start: cfg.transfer_epochs if start != "scratch" else max(cfg.transfer_epochs, cfg.epochs) for start in init}
+    # the longest first (from scratch, then all layers; the frozen LSTM's FC layers are quick), then the scoring
+    order = sorted(TRANSFER_STARTS, key=("scratch", "finetune_all", "transfer").index)
+    jobs = {(name, start): train(f"TL-{slug}-{start}", folder, test, init[start], epochs[start])
+            for start in order for name, (slug, folder, test, _, _) in collected.items()}  # fmt: skip
+    prev = {name: evaluate(final_model, test) for name, (_, _, test, _, _) in collected.items()}
+    targets = {}
+    for name, (_, _, _, n_trials, collect_s) in collected.items():
+        runs = {start: jobs[(name, start)].result() for start in TRANSFER_STARTS}
+        models = {start: Path(path) for start, (path, _, _) in runs.items()}
+        evals = {"M_prev": prev[name].result(), **{start: ev for start, (_, _, ev) in runs.items()}}
         table = {label: {h: ev.results["model"][h]["e_rms"] for h in EVAL_HORIZONS} for label, ev in evals.items()}
         for base in BASELINES:
             table[base] = {h: evals["transfer"].results[base][h]["e_rms"] for h in EVAL_HORIZONS}
         targets[name] = TargetResult(
-            e_rms=table, collect_s=outcome.collect_s, train_s=dict(outcome.train_s),
-            trials=len(dataset.trials), windows_trained=windows_trained(outcome.models["transfer"]),
+            e_rms=table, collect_s=collect_s, train_s={start: seconds for start, (_, seconds, _) in runs.items()},
+            trials=n_trials, windows_trained=windows_trained(models["transfer"]),
             best_baseline=evals["transfer"].best_baseline, comparison=tuple(comparison_lines(evals["transfer"], "M_TL")),
-            models=dict(outcome.models),
+            models=models,
         )
     return TransferResult(Path(final_model), targets, float(iteration_seconds), cfg.transfer_trials)
 
