@@ -144,3 +144,23 @@ def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path):
             a = (path / "weights.safetensors").read_bytes()
             b = (here.targets[name].models[start] / "weights.safetensors").read_bytes()
             assert a == b, (name, start)
+
+
+def test_prefetch_errors_reach_collect(tmp_path):
+    """A prefetched collection that fails raises in the collect that asks for it (not lost in
+    its thread); the same name prefetched twice is refused."""
+    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=2)
+    with worker_pool(2) as pool:
+        ws = pipeline.Workspace(cfg, tmp_path, progress=False, pool=pool)
+        options = {"tasks": ("curved",), "trials": 1, "seed": 1}
+        ws.prefetch("x", **options)
+        with pytest.raises(ValueError, match="already being prefetched"):
+            ws.prefetch("x", **options)
+        ws.collect("x", **options)
+        broken = tmp_path / "broken-model"
+        broken.mkdir()
+        (broken / "model.json").write_text("{not json")  # fails in the worker, when the trials load it
+        ws.prefetch("y", **options, intent=str(broken))
+        with pytest.raises(Exception, match="model.json|JSON|json"):
+            ws.collect("y", **options, intent=str(broken))
+        assert ws._pending == {}

@@ -9,7 +9,9 @@ returning a typed result from which its report section is built.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import threading
 from collections.abc import Callable
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field, replace
@@ -194,20 +196,22 @@ class Workspace:
                 obstacle: str = "small"):
         """Simulate a dataset into ``out/datasets/<name>``; return its folder and the dataset read back.
 
-        A collection :meth:`prefetch` put on the pool with the same options is waited for
-        and written, not run again (the same trials bit for bit: the same jobs)."""
+        A collection :meth:`prefetch` started with the same options is waited for, not run
+        again (the same trials bit for bit: the same jobs); one started under this name with
+        other options is let finish, then replaced by the one asked for."""
         from coassist.data import read_dataset
         from coassist.sim.collect import collect_dataset
 
         options = self._spec_options(tasks, users, objects, trials, seed, controller, preset, intent, obstacle)
-        submitted = self._pending.pop(f"dataset:{name}", None)
-        if submitted is not None and submitted[0] != options:
-            submitted[1].cancel()  # another collection under this name: run the one asked for
-            submitted = None
+        written = self._pending.pop(f"dataset:{name}", None)
+        if written is not None:
+            if written[0] == options:
+                return written[1].result()
+            with contextlib.suppress(Exception):  # another collection under this name: let it end, then replace it
+                written[1].result()
         folder = collect_dataset(
             self.out / "datasets" / name, dataset_id=name, workers=self.config.workers, progress=self.progress,
-            overwrite=True, lockstep=self.config.lockstep, pool=self.pool,
-            submitted=None if submitted is None else submitted[1], **options,
+            overwrite=True, lockstep=self.config.lockstep, pool=self.pool, **options,
         )
         return folder, read_dataset(folder)
 
@@ -215,18 +219,36 @@ class Workspace:
                  controller: str = "cooperative", preset: str | None = None, intent: str = "nominal",
                  obstacle: str = "small") -> None:
         """Start :meth:`collect`'s simulations for these options on the run's pool now and
-        return at once; the :meth:`collect` with the same name and options takes them. The
-        pool runs jobs in the order they were submitted, so a stage can keep the cores busy
-        with simulations a later stage needs while its own work leaves one idle. A model in
-        the loop must already be written. Without a pool (one worker) it does nothing."""
-        from coassist.sim.collect import dataset_specs
+        return at once; a thread of this process writes the dataset as the jobs end, and the
+        :meth:`collect` with the same name and options returns it. The pool runs jobs in the
+        order they were submitted, so a stage can keep the cores busy with simulations a
+        later stage needs while its own work leaves one idle. A model in the loop must
+        already be written. Without a pool (one worker) it does nothing."""
+        from coassist.data import read_dataset
+        from coassist.sim.collect import collect_dataset, dataset_specs
         from coassist.sim.world import submit_trials
 
         if self.pool is None:
             return
+        if f"dataset:{name}" in self._pending:
+            raise ValueError(f"dataset {name!r} is already being prefetched: collect it first")
         options = self._spec_options(tasks, users, objects, trials, seed, controller, preset, intent, obstacle)
-        self._pending[f"dataset:{name}"] = (options, submit_trials(
-            dataset_specs(**options), self.pool, workers=self.config.workers, lockstep=self.config.lockstep))
+        submitted = submit_trials(dataset_specs(**options), self.pool, workers=self.config.workers,
+                                  lockstep=self.config.lockstep)  # fmt: skip
+        written: Future = Future()
+
+        def write() -> None:
+            # Written as the jobs end, in this thread: the stage that asks for it later finds it
+            # on disk and read back, instead of writing ~20 datasets in a row while the pool idles.
+            try:
+                folder = collect_dataset(self.out / "datasets" / name, dataset_id=name, progress=False,
+                                         overwrite=True, submitted=submitted, **options)  # fmt: skip
+                written.set_result((folder, read_dataset(folder)))
+            except BaseException as exc:  # handed to collect(), which raises it
+                written.set_exception(exc)
+
+        threading.Thread(target=write, name=f"coassist-write-{name}", daemon=True).start()
+        self._pending[f"dataset:{name}"] = (options, written)
 
     def submit(self, key: str, fn: Callable[..., Any], *args: Any) -> Future | None:
         """Run ``fn(*args)`` on the run's pool, for a later :meth:`take` of ``key`` (None without a pool)."""
