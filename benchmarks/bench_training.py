@@ -17,7 +17,10 @@ in the same run:
 The two alternate in blocks of 10 steps, so a machine shared with other work slows both
 alike. Reported per path: median and p99 of one step (ms), windows/s (batch size over the
 median step, and over the whole run) and the ratio device/numpy; and the batch assembly
-alone (median, p99), which is what the two paths differ in.
+alone (median, p99), which is what the two paths differ in. And the roofline: the
+network's matrix-product FLOPs per window (``training_flops_per_window``, a lower bound),
+the GFLOP/s the device path reaches, and a large float32 matrix product's GFLOP/s on the
+same device and threads, the most this machine's arithmetic gives.
 
 ``--rounds N`` also compares whole processes, N rounds of two child runs each: OpenMP's
 wait policy unset (libgomp spins, then sleeps, at every barrier; today's) against
@@ -59,6 +62,34 @@ from coassist.intent.features import WindowSet  # noqa: E402
 from coassist.intent.training import _numpy_batch, _optimizer, build_model  # noqa: E402
 
 BLOCK = 10  # steps per block; the paths alternate block by block
+
+
+def training_flops_per_window(preset, n_dof: int) -> float:
+    """Multiply-add FLOPs of one window's training step in the network's matrix products:
+    the LSTM's gates, 4·h·(in + h)·2 per layer and step, and the FC head; backward taken as
+    twice forward (two products per forward one). Elementwise gate work is left out, so
+    this is a lower bound on the arithmetic."""
+    features, h = 4 * n_dof, preset.hidden
+    lstm = sum(4 * h * ((features if layer == 0 else h) + h) * 2 for layer in range(preset.lstm_layers))
+    widths = [h if preset.lstm_layers else preset.window.steps * features, *preset.fc, preset.window.horizon * n_dof]
+    head = sum(2 * a * b for a, b in zip(widths, widths[1:]))
+    return 3.0 * (lstm * preset.window.steps + head)
+
+
+def gemm_ceiling(device: torch.device, n: int = 1024, repeats: int = 20) -> float:
+    """Median GFLOP/s of one large float32 matrix product on ``device`` with the current
+    threads: what this machine's arithmetic allows, the roofline a training step meets."""
+    a, b = torch.randn(n, n, device=device), torch.randn(n, n, device=device)
+    for _ in range(3):
+        a @ b
+    times = []
+    for _ in range(repeats):
+        _sync(device)
+        t0 = time.perf_counter()
+        a @ b
+        _sync(device)
+        times.append(time.perf_counter() - t0)
+    return 2 * n**3 / float(np.median(times)) / 1e9
 
 
 def _sync(device: torch.device) -> None:
@@ -135,7 +166,10 @@ def bench_preset(name: str, trials, steps: int, device: torch.device, batch_size
                        "windows_per_s_run": bs * len(times[label]) / (sum(times[label]) / 1e9),
                        "batch_median_ms": amed, "batch_p99_ms": ap99}  # fmt: skip
     base, new = rows["numpy"], rows["device"]
+    flops = training_flops_per_window(p, d)
     return {
+        "flops_per_window": flops,
+        "gflops_device_run": flops * new["windows_per_s_run"] / 1e9,
         "preset": name,
         "network": f"LSTM {p.lstm_layers}x{p.hidden}, {p.window.steps} steps, batch {bs}",
         "steps": len(times["device"]),
@@ -227,6 +261,8 @@ def main() -> None:
     print(f"training throughput, {args.threads} thread(s), {device}, torch {torch.__version__}")
     print(f"  {'preset':8s} {'path':7s} {'step med':>9s} {'step p99':>9s} {'win/s med':>10s} {'win/s run':>10s}"
           f" {'batch med':>10s} {'batch p99':>10s}")  # fmt: skip
+    ceiling = gemm_ceiling(device)
+    print(f"  a 1024 x 1024 float32 matrix product here: {ceiling:.0f} GFLOP/s (the arithmetic's ceiling)")
     for name, steps in runs:
         r = bench_preset(name, trials, steps, device, args.batch_size)
         out.append(r)
@@ -237,9 +273,12 @@ def main() -> None:
         print(f"  {name:8s} {r['network']}: device/numpy windows/s x{r['ratio_windows_per_s_median']:.2f} (median step), "
               f"x{r['ratio_windows_per_s_run']:.2f} (whole run), p99 step x{r['ratio_step_p99']:.2f}, "
               f"batch assembly x{r['ratio_batch_median']:.1f}")  # fmt: skip
+        print(f"  {name:8s} matrix products: {r['flops_per_window'] / 1e6:.2f} MFLOP per window, "
+              f"{r['gflops_device_run']:.0f} GFLOP/s on the device path = {100 * r['gflops_device_run'] / ceiling:.0f} % "
+              f"of the ceiling; 3x would need {3 * r['gflops_device_run']:.0f}")  # fmt: skip
     if args.json:
         Path(args.json).write_text(json.dumps({"threads": args.threads, "device": str(device), "torch": torch.__version__,
-                                               "runs": out}, indent=1) + "\n")  # fmt: skip
+                                               "gemm_gflops": ceiling, "runs": out}, indent=1) + "\n")  # fmt: skip
 
 
 if __name__ == "__main__":
