@@ -38,7 +38,14 @@ from typing import Any
 
 import numpy as np
 
-from coassist.experiments.application import OBJECTS, OBSTACLE, _pair_key, application_metrics, paired_difference
+from coassist.experiments.application import (
+    OBJECTS,
+    OBSTACLE,
+    _pair_key,
+    application_metrics,
+    cell_options,
+    paired_difference,
+)
 from coassist.experiments.intent_sources import LEARNED
 from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_seed, in_loop_errors
 from coassist.experiments.report import Claim, Section
@@ -144,7 +151,7 @@ def run_ablation(ws: Workspace, models: dict[str, str], known: dict[tuple[str, s
     for j, obj in enumerate(OBJECTS):
 
         def collect(name: str, controller: str, intent: str, j: int = j, obj: str = obj):
-            _, ds = ws.collect(name, **_cell_options(cfg, j, obj, controller, intent))
+            _, ds = ws.collect(name, **cell_options(cfg, j, obj, controller, intent))
             return sorted(ds.trials, key=_pair_key)
 
         base = known.get((obj, "manual", "nominal"))
@@ -167,13 +174,6 @@ def run_ablation(ws: Workspace, models: dict[str, str], known: dict[tuple[str, s
     else:
         skipped["mujoco"] = why or "reproduce.ablation_mujoco_trials is 0"
     return AblationResult(metrics, mg, pairs, models, skipped, cfg.application_preset, errors)
-
-
-def _cell_options(cfg, j: int, obj: str, controller: str, intent: str) -> dict[str, Any]:
-    """:meth:`Workspace.collect`'s options for a point-mass cell: object ``j`` of OBJECTS, the application's trials."""
-    return {"tasks": (cfg.application_task,), "objects": (obj,), "users": cfg.application_users,
-            "trials": cfg.application_trials, "seed": application_seed(cfg.seed, j), "controller": controller,
-            "preset": cfg.application_preset, "intent": intent, "obstacle": OBSTACLE}  # fmt: skip
 
 
 class AblationAhead:
@@ -206,7 +206,7 @@ class AblationAhead:
                     if (obj, controller, src) in self.reused:
                         continue
                     name = f"ablation-{obj}-manual" if source == MG_JOB else f"ablation-{obj}-{controller}-{src}"
-                    self.ws.prefetch(name, **_cell_options(cfg, j, obj, controller, intents.get(src, src)))
+                    self.ws.prefetch(name, **cell_options(cfg, j, obj, controller, intents.get(src, src)))
             if self.mujoco:
                 job = _mujoco_jobs(cfg, {**{s: s for s in SOURCES}, **intents})[source]
                 self.ws.submit(f"mujoco:{source}", _drive_batch, [c for _, configs in job for c in configs])

@@ -75,6 +75,15 @@ class ApplicationResult:
         return {f"{o}/{c}": v for (o, c), v in self.metrics.items()}
 
 
+def cell_options(cfg, j: int, obj: str, controller: str, intent: str) -> dict[str, Any]:
+    """:meth:`Workspace.collect`'s options for one (object, controller, intent) cell of the
+    application's trials, object ``j`` of :data:`OBJECTS`: every cell of an object meets the
+    same operators and seeds (the ablation's point-mass cells too)."""
+    return {"tasks": (cfg.application_task,), "objects": (obj,), "users": cfg.application_users,
+            "trials": cfg.application_trials, "seed": application_seed(cfg.seed, j), "controller": controller,
+            "preset": cfg.application_preset, "intent": intent, "obstacle": OBSTACLE}  # fmt: skip
+
+
 def handed_to_ablation() -> set[tuple[str, str, str]]:
     """The (object, controller, intent source) cells :meth:`ApplicationResult.cells` hands to the
     ablation: MG's (source "nominal") and the assistive controllers' (:data:`APPLICATION_SOURCE`)."""
@@ -99,9 +108,7 @@ def run_application(ws: Workspace, final_model: Path,
 
     def cell(j: int, obj: str, controller: str, models: dict[str, str]) -> dict[str, Any]:
         intent = models[APPLICATION_SOURCE] if controller.startswith("cooperative") else "nominal"
-        return {"tasks": (cfg.application_task,), "objects": (obj,), "users": cfg.application_users,
-                "trials": cfg.application_trials, "seed": application_seed(cfg.seed, j), "controller": controller,
-                "preset": cfg.application_preset, "intent": intent, "obstacle": OBSTACLE}  # fmt: skip
+        return cell_options(cfg, j, obj, controller, intent)
 
     started: set[tuple[str, str]] = set()
 

@@ -292,39 +292,49 @@ class Workspace:
         return path
 
 
-def train_in_worker(config: ReproduceConfig, out: Path, name: str, datasets: list[Path], *, init: str, epochs: int,
+def train_and_score(ws: Workspace, name: str, datasets: list[Path], *, init: str, epochs: int,
                     test_fraction: float = 0.2, preset_name: str | None = None, label: str | None = None,
                     stride: int | None = None, evaluate_on: list[Path] | None = None,
                     ) -> tuple[str, float, Any]:  # fmt: skip
-    """:meth:`Workspace.train` as a job for a worker process of the run's pool, on one torch
-    thread (two 1-thread trainings at once do 1.34x the work of one 2-thread training on this
-    machine's 2 cores, ``benchmarks/bench_training.py --pairs``).
-
-    Returns (model folder, seconds the training took here, and, with ``evaluate_on``, the
-    model's :func:`~coassist.intent.evaluate_model` on those datasets, every trial scored; else None).
-    """
+    """:meth:`Workspace.train`, timed, then the model scored (:func:`score_model`) on
+    ``evaluate_on`` when given: (model folder, training seconds, evaluation or None)."""
     import time
 
-    import torch
-
-    torch.set_num_threads(1)
-    ws = Workspace(replace(config, threads=1), out, progress=False)
     t0 = time.perf_counter()
     path = ws.train(name, datasets, init=init, epochs=epochs, test_fraction=test_fraction, preset_name=preset_name,
                     label=label, stride=stride)  # fmt: skip
     seconds = time.perf_counter() - t0
-    return str(path), seconds, None if evaluate_on is None else evaluate_in_worker(path, evaluate_on)
+    return str(path), seconds, None if evaluate_on is None else score_model(path, evaluate_on)
+
+
+def score_model(model: str | Path, datasets: list[Path]) -> Any:
+    """:func:`~coassist.intent.evaluate_model` of the saved ``model`` on every trial of ``datasets``."""
+    from coassist.intent import evaluate_model, load_model, load_trials
+
+    return evaluate_model(load_model(model), load_trials(datasets), held_out_only=False)
+
+
+def train_in_worker(config: ReproduceConfig, out: Path, name: str, datasets: list[Path], *, init: str, epochs: int,
+                    test_fraction: float = 0.2, preset_name: str | None = None, label: str | None = None,
+                    stride: int | None = None, evaluate_on: list[Path] | None = None,
+                    ) -> tuple[str, float, Any]:  # fmt: skip
+    """:func:`train_and_score` as a job for a worker process of the run's pool, on one torch
+    thread (two 1-thread trainings at once do 1.34x the work of one 2-thread training on this
+    machine's 2 cores, ``benchmarks/bench_training.py --pairs``)."""
+    import torch
+
+    torch.set_num_threads(1)
+    return train_and_score(Workspace(replace(config, threads=1), out, progress=False), name, datasets, init=init,
+                           epochs=epochs, test_fraction=test_fraction, preset_name=preset_name, label=label,
+                           stride=stride, evaluate_on=evaluate_on)  # fmt: skip
 
 
 def evaluate_in_worker(model: str | Path, datasets: list[Path]) -> Any:
-    """:func:`~coassist.intent.evaluate_model` of the saved ``model`` on every trial of ``datasets``,
-    on one torch thread: a job for the run's pool (or this process)."""
+    """:func:`score_model` as a job for a worker process of the run's pool, on one torch thread."""
     import torch
 
-    from coassist.intent import evaluate_model, load_model, load_trials
-
     torch.set_num_threads(1)
-    return evaluate_model(load_model(model), load_trials(datasets), held_out_only=False)
+    return score_model(model, datasets)
 
 
 # ----------------------------------------------------------------------------- measures

@@ -110,12 +110,11 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
     from concurrent.futures import Future
 
     from coassist.experiments.iterative import TRANSFER_STARTS
-    from coassist.experiments.pipeline import evaluate_in_worker, train_in_worker
-    from coassist.intent import evaluate_model, load_model, load_trials
+    from coassist.experiments.pipeline import evaluate_in_worker, score_model, train_and_score, train_in_worker
     from coassist.intent.evaluation import BASELINES, comparison_lines
 
     cfg = ws.config
-    on_pool = ws.pool is not None and cfg.device == "cpu"
+    pool = ws.pool if cfg.device == "cpu" else None  # jobs on the pool; else here, one after the other
 
     def done(value) -> Future:
         future: Future = Future()
@@ -123,18 +122,13 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
         return future
 
     def evaluate(model, test: Path) -> Future:
-        if on_pool:
-            return ws.pool.submit(evaluate_in_worker, model, [test])  # type: ignore[union-attr]
-        return done(evaluate_model(load_model(model), load_trials([test]), held_out_only=False))
+        return pool.submit(evaluate_in_worker, model, [test]) if pool is not None else done(score_model(model, [test]))
 
     def train(name: str, folder: Path, test: Path, init: str, epochs: int) -> Future:
-        if on_pool:
-            return ws.pool.submit(train_in_worker, cfg, ws.out, name, [folder], init=init, epochs=epochs,  # type: ignore[union-attr]
-                                  test_fraction=0.0, evaluate_on=[test])  # fmt: skip
-        t0 = time.perf_counter()
-        path = ws.train(name, [folder], init=init, epochs=epochs, test_fraction=0.0)
-        seconds = time.perf_counter() - t0
-        return done((str(path), seconds, evaluate_model(load_model(path), load_trials([test]), held_out_only=False)))
+        if pool is not None:
+            return pool.submit(train_in_worker, cfg, ws.out, name, [folder], init=init, epochs=epochs,
+                               test_fraction=0.0, evaluate_on=[test])  # fmt: skip
+        return done(train_and_score(ws, name, [folder], init=init, epochs=epochs, test_fraction=0.0, evaluate_on=[test]))
 
     collected = {}
     for i, (name, target) in enumerate(transfer_targets(cfg).items()):

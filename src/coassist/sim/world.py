@@ -566,23 +566,18 @@ def run_trials(
         else:
             on_result(i, trial)
 
-    if workers == 1 and not (lockstep and _has_model(specs)):
+    if workers == 1:  # in this process: one lockstep group, or trial by trial
         controllers: dict = {}
         with progress_bar(progress) as bar:
             task_id = bar.add_task("simulating", total=len(specs))
-            for i, spec in enumerate(specs):
-                deliver(i, run_spec(spec, controllers))
-                bar.advance(task_id)
-        return [] if on_result else results  # type: ignore[return-value]
-    if workers == 1:  # one lockstep group, in this process
-        with progress_bar(progress) as bar:
-            task_id = bar.add_task("simulating", total=len(specs))
-            for i, trial in enumerate(run_spec_lockstep(specs)):
+            trials = (run_spec_lockstep(specs) if lockstep and _has_model(specs)
+                      else (run_spec(spec, controllers) for spec in specs))  # fmt: skip
+            for i, trial in enumerate(trials):
                 deliver(i, trial)
-            bar.advance(task_id, len(specs))
-        return [] if on_result else results  # type: ignore[return-value]
-    with _pool_for(pool, workers) as executor:
-        submit_trials(specs, executor, workers=workers, lockstep=lockstep).gather(deliver, progress)
+                bar.advance(task_id)
+    else:
+        with _pool_for(pool, workers) as executor:
+            submit_trials(specs, executor, workers=workers, lockstep=lockstep).gather(deliver, progress)
     return [] if on_result else results  # type: ignore[return-value]
 
 
@@ -614,11 +609,6 @@ class SubmittedTrials:
                 for i, payload in zip(index[fut], fut.result()):
                     deliver(i, _from_payload(payload))
                 bar.advance(task_id, len(index[fut]))
-
-    def cancel(self) -> None:
-        """Cancel the jobs that have not started (those running finish, unread)."""
-        for fut, _ in self.jobs:
-            fut.cancel()
 
 
 def submit_trials(specs: Sequence[TrialSpec], pool: Executor, *, workers: int, lockstep: bool = True) -> SubmittedTrials:
