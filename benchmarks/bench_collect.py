@@ -30,13 +30,14 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+
+from bench_common import machine_line
 
 
 def train_small_model(folder: Path) -> str:
@@ -120,7 +121,7 @@ def main() -> None:
     from coassist.experiments.pipeline import ITERATION_TASKS
     from coassist.sim.collect import dataset_specs
 
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, python {platform.python_version()}")
+    print(machine_line())
     print(f"load average before: {os.getloadavg()[0]:.2f} (other processes on the machine inflate every number)")
     with tempfile.TemporaryDirectory() as tmp:
         model = args.model or train_small_model(Path(tmp) / "m")

@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import time
 
 import numpy as np
 
+from bench_common import machine_line
 from coassist.intent import kalman
 from coassist.intent.kalman import KalmanCA, kalman_ca_filter
 
@@ -37,7 +37,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.ticks < 2 or args.repeats < 1:
         parser.error("--ticks must be >= 2 and --repeats >= 1")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, python {platform.python_version()}")
+    print(machine_line())
     print(f"load average before: {os.getloadavg()[0]:.2f}")
     rng = np.random.default_rng(0)
     pose = np.cumsum(rng.normal(size=(args.ticks, 2)), axis=0) * 1e-3

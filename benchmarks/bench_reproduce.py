@@ -23,13 +23,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import tempfile
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from bench_common import machine_line
 from coassist.experiments.pipeline import REPRODUCE_PRESETS
 from coassist.experiments.reproduce import run_reproduce
 
@@ -50,7 +50,7 @@ def main() -> None:
     config = REPRODUCE_PRESETS.lookup(args.preset)
     if args.workers is not None:
         config = replace(config, workers=args.workers)
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, python {platform.python_version()}")
+    print(machine_line())
     print(f"load average before: {os.getloadavg()[0]:.2f} (other processes on the machine inflate every number)")
     print(f"preset {config.name}: workers {config.workers}, torch threads {config.threads}, device {config.device}")
     times: dict[bool, list[dict[str, float]]] = {False: [], True: []}

@@ -21,11 +21,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import time
 
 import numpy as np
 
+from bench_common import machine_line
 from coassist.control import AssistiveController
 from coassist.control.presets import get_preset, make_controller
 from coassist.scenario import AUTHOR, get_object, make_task
@@ -71,7 +71,7 @@ def main() -> None:
     parser.add_argument("--tick-trials", type=int, default=6, help="trials timed tick by tick (per loop)")
     args = parser.parse_args()
     preset = get_preset("thesis-evaluation")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, python {platform.python_version()}")
+    print(machine_line())
     print(f"load average before: {os.getloadavg()[0]:.2f} (other processes on the machine inflate every number)")
 
     fast = make_controller("cooperative", preset)
