@@ -479,7 +479,7 @@ def collect(
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
     ray_address: str = typer.Option(None, help="Run on a Ray cluster at this address (needs coassist[cluster])."),
     overwrite: bool = typer.Option(False, help="Replace an existing dataset folder (only once the new one is complete)."),
-    lockstep: bool = typer.Option(True, "--lockstep/--per-trial", help="With a model in the loop, advance each worker's trials together, one network call per tick for all (~6x faster; equal to the per-trial run to the network's float32 rounding). --per-trial: every trial alone, bit for bit the same whatever else runs (e.g. across a resumed collection)."),
+    lockstep: bool = typer.Option(True, "--lockstep/--per-trial", help="Advance each worker's trials together: one controller call and, with a model in the loop, one network call per tick for all (~6x faster with a model, ~2x without; with a model equal to the per-trial run to the network's float32 rounding, without it bit for bit). --per-trial: every trial alone, bit for bit the same whatever else runs (e.g. across a resumed collection)."),
 ) -> None:
     """Simulate trials and write them as a dataset (thesis §5.2.2; default: D0, 60 trials).
 

@@ -171,6 +171,36 @@ def test_parallel_run_equals_serial_run():
         assert a.meta.seed == spec.seed and a.meta.task == spec.task
 
 
+def test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone():
+    """With named intents, run_trials' lockstep groups (the default) give every controller kind's
+    trials bit for bit what the per-trial path gives, on a pool and in this process; in this
+    process each trial is delivered as it ends (shortest first), not when the group ends."""
+    from coassist.control.presets import CONTROLLER_KINDS
+    from coassist.sim.world import NAMED_GROUP, submit_trials
+
+    specs = [TrialSpec(task=t, seed=s, user=s % 3, controller=c, intent=i)
+             for s, (t, c, i) in enumerate(zip(("linear", "curved", "z", "linear", "sinusoidal", "curved", "z", "linear"),
+                                               CONTROLLER_KINDS * 2, ("nominal", "oracle") * 4))]  # fmt: skip
+    alone = run_trials(specs, workers=1, progress=False, lockstep=False)
+    pooled = run_trials(specs, workers=2, progress=False)
+    order: list[int] = []
+    here = run_trials(specs, workers=1, progress=False, on_result=lambda i, t: order.append(i)) or None
+    assert here is None and sorted(order) == list(range(len(specs)))
+    lengths = [t.n_samples for t in alone]
+    assert [lengths[i] for i in order] == sorted(lengths)  # as each ends
+    for a, b in zip(alone, pooled, strict=True):
+        assert a.equals(b)
+    # groups: 2·workers of them for a short list, of at most NAMED_GROUP trials for a long one
+    class Pool:
+        def submit(self, fn, batch):
+            return batch
+
+    assert [len(g) for _, g in submit_trials(specs, Pool(), workers=2).jobs] == [2, 2, 2, 2]
+    many = submit_trials([specs[0]] * (5 * NAMED_GROUP + 1), Pool(), workers=2).jobs
+    assert len(many) == 6 and max(len(g) for _, g in many) <= NAMED_GROUP
+    assert sorted(i for _, g in many for i in g) == list(range(5 * NAMED_GROUP + 1))
+
+
 def test_a_kept_pool_serves_call_after_call_and_stays_up():
     """run_trials(pool=...) runs on the caller's processes, gives what a fresh pool gives, and leaves
     them running for the next call (coassist reproduce keeps one pool for its ~40 collections)."""

@@ -164,8 +164,11 @@ def write_trial(trial: Trial, path: str | os.PathLike[str]) -> Path:
         raise ValueError(f"write_trial expects a Trial, got {type(trial).__name__}")
     path = Path(path)
     table = _trial_table(trial)
-    # zstd: lossless and compact; the float64 bits are stored unchanged.
-    atomic_write(path, lambda fh: pq.write_table(table, fh, compression="zstd"))
+    # zstd: lossless and compact; the float64 bits are stored unchanged. No dictionary
+    # encoding: measured on 40 of the main job's trials, dictionaries of float samples that
+    # hardly repeat cost 3x the write time (0.65 s against 0.23 s) for larger files (76 MB
+    # against 60 MB), and reading them back took 0.18 s against 0.13 s.
+    atomic_write(path, lambda fh: pq.write_table(table, fh, compression="zstd", use_dictionary=False))
     return path
 
 

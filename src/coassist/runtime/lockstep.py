@@ -65,12 +65,14 @@ class Loop(NamedTuple):
     termination: Termination | None = None
 
 
-def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_counter) -> list[LoopLog]:
+def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_counter,
+              on_end: Callable[[int, LoopLog], None] | None = None) -> list[LoopLog]:  # fmt: skip
     """Run every episode's loop in lockstep (module docstring); their logs, in order.
 
     Each log is what ``run_loop(*episode)`` gives (no deadline, no monitor: simulated
     worlds), up to the float rounding of batched network calls. ``compute`` is each
-    tick's own work plus its share of the batched call.
+    tick's own work plus its share of the batched call. ``on_end(i, log)`` is called as
+    run i ends, while the others go on (so a caller can write each trial at once).
     """
     runs = []
     for i, ep in enumerate(episodes):
@@ -80,6 +82,10 @@ def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_c
     batchers = [_batcher(run.tick) for run in runs]
     steppers = [_stepper(run.tick) for run in runs]
     active = [i for i, run in enumerate(runs) if run.n_max > 0]
+    if on_end is not None:
+        for i, run in enumerate(runs):
+            if run.n_max <= 0:
+                on_end(i, run.log())
     stacks = _Stacks()
     k = 0
     while active:
@@ -90,6 +96,8 @@ def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_c
             run = runs[i]
             row = run.sense(k)
             if row is LINK_LOST:
+                if on_end is not None:
+                    on_end(i, run.log())
                 continue
             going.append(i)
             if row is None:
@@ -116,6 +124,8 @@ def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_c
         for i in going:
             if not runs[i].act(k, answers[i], controls.get(i)) and k + 1 < runs[i].n_max:
                 active.append(i)
+            elif on_end is not None:
+                on_end(i, runs[i].log())
         k += 1
     return [run.log() for run in runs]
 

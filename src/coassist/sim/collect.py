@@ -68,8 +68,8 @@ def collect_dataset(
     """Simulate the trials of :func:`dataset_specs` (``spec_options``) and write them as a dataset.
 
     ``dataset_id`` defaults to the folder's name. Returns the dataset folder. ``lockstep``,
-    ``pool``: :func:`~coassist.sim.world.run_trials`' (trials with a model in the loop advance
-    together; processes kept across collections). ``submitted``: this collection's trials,
+    ``pool``: :func:`~coassist.sim.world.run_trials`' (trials advance together in lockstep
+    groups; processes kept across collections). ``submitted``: this collection's trials,
     already put on a pool by :func:`~coassist.sim.world.submit_trials` (its specs must be
     :func:`dataset_specs` of ``spec_options``): they are waited for instead of run again.
 
