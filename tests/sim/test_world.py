@@ -190,12 +190,12 @@ def test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone()
     assert [lengths[i] for i in order] == sorted(lengths)  # as each ends
     for a, b in zip(alone, pooled, strict=True):
         assert a.equals(b)
-    # groups: 2·workers of them for a short list, of at most NAMED_GROUP trials for a long one
+    # groups: one per worker for a short list, of at most NAMED_GROUP trials for a long one
     class Pool:
         def submit(self, fn, batch):
             return batch
 
-    assert [len(g) for _, g in submit_trials(specs, Pool(), workers=2).jobs] == [2, 2, 2, 2]
+    assert [g for _, g in submit_trials(specs, Pool(), workers=2).jobs] == [(0, 2, 4, 6), (1, 3, 5, 7)]
     many = submit_trials([specs[0]] * (5 * NAMED_GROUP + 1), Pool(), workers=2).jobs
     assert len(many) == 6 and max(len(g) for _, g in many) <= NAMED_GROUP
     assert sorted(i for _, g in many for i in g) == list(range(5 * NAMED_GROUP + 1))

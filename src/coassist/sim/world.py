@@ -637,16 +637,18 @@ def submit_trials(specs: Sequence[TrialSpec], pool: Executor, *, workers: int, l
     lengths balance). With a model in the loop of some trial, n = ``workers``: one group per
     process, so the batched network call is as wide as it can be, and the grouping (which
     sets the float32 rounding) is fixed by ``workers``. With named intents only (exact in
-    any grouping), n = 2·``workers`` groups of at most :data:`NAMED_GROUP` trials: a
-    group's trials share one controller call per tick (measured: 60 nominal trials in
-    groups of 15 cost 0.46× their per-trial CPU time, in groups of 4 0.69×), and results
-    stream back often enough for a progress bar and for a writer. Without ``lockstep``:
+    any grouping), n = ``workers`` groups, more where a group would hold over
+    :data:`NAMED_GROUP` trials (a killed run loses at most that many, and results stream
+    back often enough for a progress bar and a writer): a group's trials share one
+    controller call per tick (measured, one process: 60 nominal trials cost 0.43× their
+    per-trial CPU time in groups of 30, 0.46× in groups of 15, 0.69× in groups of 4).
+    Without ``lockstep``:
     batches of a few trials run one by one, each worker building a game once per batch.
     """
     specs = tuple(specs)
     workers = min(check_int(workers, "workers", 1), max(1, len(specs)))
     if lockstep:
-        n = workers if _has_model(specs) else max(2 * workers, math.ceil(len(specs) / NAMED_GROUP))
+        n = workers if _has_model(specs) else max(workers, math.ceil(len(specs) / NAMED_GROUP))
         groups = [tuple(range(g, len(specs), n)) for g in range(n)]
         fn: Callable = _run_lockstep_batch
     else:
