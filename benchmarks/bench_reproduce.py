@@ -64,7 +64,9 @@ def main() -> None:
                 stages["total"] = float(summary["total_seconds"])
                 times[lockstep].append(stages)
                 verdicts.setdefault(lockstep, [bool(c["holds"]) for c in summary["claims"]])
-                print(f"  run {r + 1}, {'lockstep' if lockstep else 'per-trial'}: {stages['total']:.0f} s "
+                cpu = summary["cpu_seconds"]
+                used = "" if cpu["workers"] is None else f", {cpu['main'] + cpu['workers']:.0f} CPU-s"
+                print(f"  run {r + 1}, {'lockstep' if lockstep else 'per-trial'}: {stages['total']:.0f} s{used} "
                       f"(load {os.getloadavg()[0]:.2f})", flush=True)
     print(f"\n{'stage':<24}{'per-trial median':>18}{'p99':>9}{'lockstep median':>18}{'p99':>9}{'ratio':>8}")
     for stage in times[True][0]:

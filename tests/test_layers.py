@@ -13,7 +13,7 @@ from pathlib import Path
 import coassist
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("(root)", "errors", "_checks", "_io", "_progress", "interfaces", "config", "spatial", "registry"),  # shared vocabulary and rigid-body math
+    ("(root)", "errors", "_checks", "_io", "_progress", "_cpu", "interfaces", "config", "spatial", "registry"),  # shared vocabulary and rigid-body math
     ("model", "data", "metrics"),  # the impedance model; trials on disk; metrics
     ("control",),  # games, baselines, guarded controllers (pure control laws)
     ("intent",),  # the predictor

@@ -5,6 +5,7 @@ Also (fast): the seed plan gives no two collections a common trial seed.
 """
 
 import json
+import os
 import re
 from dataclasses import replace
 from itertools import pairwise
@@ -61,6 +62,11 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
     out, summary = tiny_run
     assert set(summary["stage_seconds"]) == {"dMPC study", "iterative training", "transfer learning", "application scenario",
                                              "real recordings", "intent ablation"}
+    # the work done, per stage and in all: this process's CPU seconds (workers=1: no pool)
+    assert set(summary["stage_cpu_seconds"]) == set(summary["stage_seconds"])
+    cpu = summary["cpu_seconds"]
+    stage_main = sum(c["main"] for c in summary["stage_cpu_seconds"].values())
+    assert 0 < stage_main <= cpu["main"] <= (os.cpu_count() or 1) * summary["total_seconds"] + 1.0  # no more than the cores give
     it = summary["iterative"]
     assert list(it["in_loop_errors"]) == ["nominal", "M0", "M1"]
     for errors in it["in_loop_errors"].values():

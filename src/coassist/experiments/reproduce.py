@@ -54,6 +54,7 @@ from typing import Any
 
 import numpy as np
 
+from coassist._cpu import CpuSeconds, run_cpu_seconds
 from coassist._io import atomic_write_text
 from coassist.experiments.ablation import AblationAhead, ablation_section, run_ablation
 from coassist.experiments.application import application_section, handed_to_ablation, run_application
@@ -89,18 +90,24 @@ __all__ = [
 
 
 class _Stage:
-    """Timing and terminal progress for one stage."""
+    """Timing and terminal progress for one stage: wall seconds, and the CPU seconds this
+    process and the pool's workers used meanwhile (``coassist._cpu``; stages overlap on the
+    pool, since a stage puts work there that a later one takes, so a stage's CPU seconds are
+    those spent while it ran, whichever stage they served)."""
 
     def __init__(self, say: Callable[[str], None]) -> None:
         self.say = say
         self.times: dict[str, float] = {}
+        self.cpu: dict[str, CpuSeconds] = {}
 
     def run(self, name: str, fn, *args, **kwargs):
         self.say(f"[bold]{name}[/]")
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), run_cpu_seconds()
         out = fn(*args, **kwargs)
         self.times[name] = time.perf_counter() - t0
-        self.say(f"  {name} done in {self.times[name]:.0f} s")
+        self.cpu[name] = cpu = run_cpu_seconds().since(c0)
+        used = "" if cpu.total is None else f" ({cpu.total:.0f} CPU-s)"
+        self.say(f"  {name} done in {self.times[name]:.0f} s{used}")
         return out
 
 
@@ -140,7 +147,7 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
     say = say or (lambda message: None)
     with _simulation_pool(config) as pool:
         ctx = _Context(Workspace(config, out, progress, pool), _Stage(say))
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), run_cpu_seconds()
         ctx.summary["config"] = asdict(config)
         ctx.stage.run("dMPC study", _stage_sweep, ctx)
         iterative = ctx.stage.run("iterative training", run_iterative_stage, ctx.ws, ctx.stage.say)
@@ -167,12 +174,17 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
         ctx.summary["ablation"] = ablation.summary()
         ctx.summary["stage_seconds"] = ctx.stage.times
         ctx.summary["total_seconds"] = time.perf_counter() - t0
+        # The work done, less sensitive to the machine's load than the wall time above.
+        ctx.summary["stage_cpu_seconds"] = {name: c.to_dict() for name, c in ctx.stage.cpu.items()}
+        cpu = run_cpu_seconds().since(c0)
+        ctx.summary["cpu_seconds"] = cpu.to_dict()
+        used = "" if cpu.total is None else f", {cpu.total:.0f} CPU-seconds"
         claims = [c.to_dict() for s in ctx.sections for c in s.claims]
         ctx.summary["claims"] = claims
         intro = (
             f"coassist reproduction of the thesis' experiments in simulation, preset '{config.name}' "
             f"(intent model preset '{config.intent_preset}', control preset '{config.control_preset}'), "
-            f"seed {config.seed}; total time {ctx.summary['total_seconds']:.0f} s. Every number below was measured in this run."
+            f"seed {config.seed}; total time {ctx.summary['total_seconds']:.0f} s{used}. Every number below was measured in this run."
         )
         headline = headline_section(application, transfer, real, _sim_dt(config), ablation)
         ctx.summary["headline"] = {"table": headline.tables[0], "intent_sources": headline.tables[1],
