@@ -574,7 +574,6 @@ def run_trials(
             on_result(i, trial)
 
     if workers == 1:  # in this process: one lockstep group, or trial by trial
-        controllers: dict = {}
         with progress_bar(progress) as bar:
             task_id = bar.add_task("simulating", total=len(specs))
             def each(i: int, trial: Trial) -> None:
@@ -584,6 +583,7 @@ def run_trials(
             if lockstep:  # each trial delivered as it ends, while the others go on
                 run_spec_lockstep(specs, on_result=each)
             else:
+                controllers: dict = {}  # one game per (kind, preset), as a worker's batch
                 for i, spec in enumerate(specs):
                     each(i, run_spec(spec, controllers))
     else:
@@ -638,12 +638,12 @@ def submit_trials(specs: Sequence[TrialSpec], pool: Executor, *, workers: int, l
     process, so the batched network call is as wide as it can be, and the grouping (which
     sets the float32 rounding) is fixed by ``workers``. With named intents only (exact in
     any grouping), n = ``workers`` groups, more where a group would hold over
-    :data:`NAMED_GROUP` trials (a killed run loses at most that many, and results stream
-    back often enough for a progress bar and a writer): a group's trials share one
-    controller call per tick (measured, one process: 60 nominal trials cost 0.43× their
-    per-trial CPU time in groups of 30, 0.46× in groups of 15, 0.69× in groups of 4).
-    Without ``lockstep``:
-    batches of a few trials run one by one, each worker building a game once per batch.
+    :data:`NAMED_GROUP` trials (a job's trials come back when it ends: a killed run loses
+    the jobs in flight, and a progress bar or a writer hears of each job): a group's trials
+    share one controller call per tick (measured, one process: 60 nominal trials cost 0.43×
+    their per-trial CPU time in groups of 30, 0.46× in groups of 15, 0.69× in groups of 4).
+    Without ``lockstep``: batches of a few trials run one by one, each worker building a
+    game once per batch.
     """
     specs = tuple(specs)
     workers = min(check_int(workers, "workers", 1), max(1, len(specs)))
