@@ -75,7 +75,12 @@ class ReproduceConfig:
     real_data: str | None = None  # folder holding user-a/ and user-b/ recordings
     real_epochs: int = 15
     workers: int = 2
-    threads: int = 2  # torch threads for training
+    # Torch threads for the trainings in this process (the iterative stage's M_k). One: the pool's
+    # workers run other work beside them (the real recordings, the scoring), and OpenMP threads
+    # that share a core with another process stall at every barrier; and on this 2-core machine a
+    # second thread hardly speeds the default network up (7.3k windows/s on one thread, 7.6k on
+    # two in the main job). Every other training runs in a worker on one thread.
+    threads: int = 1
     device: str = "cpu"
     seed: int = 0
     sweep_duration: float = 10.0
@@ -261,6 +266,12 @@ class Workspace:
     def take(self, key: str) -> Future | None:
         """The future :meth:`submit` started under ``key`` (removed), or None."""
         return self._pending.pop(f"job:{key}", None)
+
+    def result_of(self, key: str, fn: Callable[..., Any], *args: Any) -> Any:
+        """What the job :meth:`submit` started under ``key`` returned (waited for); where none was
+        started (no pool), ``fn(*args)`` run here: the same work in this process."""
+        future = self.take(key)
+        return fn(*args) if future is None else future.result()
 
     def _spec_options(self, tasks, users, objects, trials, seed, controller, preset, intent, obstacle) -> dict[str, Any]:
         # coassist.sim.collect.dataset_specs' keyword arguments

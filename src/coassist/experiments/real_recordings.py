@@ -8,11 +8,11 @@ report's section.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace
+from coassist.experiments.pipeline import EVAL_HORIZONS, ReproduceConfig, Workspace
 from coassist.experiments.report import Claim, Section
 
 if TYPE_CHECKING:  # the learning stack is imported only when the stage runs
@@ -69,6 +69,16 @@ def run_real_recordings(ws: Workspace, real: str | None) -> RealRecordingsResult
     ev_b = {"M_a": evaluate_model(model_a, test_b, held_out_only=False),
             "M_TL": evaluate_model(load_model(b_model), test_b, held_out_only=False)}
     return RealRecordingsResult(cfg.real_intent_preset, ev_a, ev_b, len(trials_a), len(b_trials))
+
+
+def real_recordings_in_worker(config: ReproduceConfig, out: Path, real: str | None) -> RealRecordingsResult:
+    """:func:`run_real_recordings` as a job for a worker process of the run's pool, on one torch
+    thread: the stage needs nothing simulated, so the main job runs it on one core while
+    the iterative stage trains M_k on the other (:func:`coassist.experiments.reproduce.run_reproduce`)."""
+    import torch
+
+    torch.set_num_threads(1)
+    return run_real_recordings(Workspace(replace(config, threads=1), out, progress=False), real)
 
 
 def _trial_range(first: int, last: int) -> str:

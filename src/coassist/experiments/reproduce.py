@@ -66,12 +66,15 @@ from coassist.experiments.pipeline import (
     ReproduceConfig,
     Workspace,
     default_real_data,
+    evaluate_in_worker,
     in_loop_errors,
     iteration_seed,
     pyplot,
+    score_model,
     windows_trained,
 )
 from coassist.experiments.real_recordings import (
+    real_recordings_in_worker,
     real_recordings_section,
     run_real_recordings,
 )
@@ -150,7 +153,13 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
         t0, c0 = time.perf_counter(), run_cpu_seconds()
         ctx.summary["config"] = asdict(config)
         ctx.stage.run("dMPC study", _stage_sweep, ctx)
-        iterative = ctx.stage.run("iterative training", run_iterative_stage, ctx.ws, ctx.stage.say)
+        real_data = config.real_data or default_real_data()
+
+        def real_ahead() -> None:
+            # The real recordings need nothing simulated: on the pool, beside M_k's training.
+            ctx.ws.submit("real recordings", real_recordings_in_worker, config, out, real_data)
+
+        iterative = ctx.stage.run("iterative training", run_iterative_stage, ctx.ws, ctx.stage.say, real_ahead)
         ctx.sections.append(iterative_section(iterative))
         ctx.summary["iterative"] = iterative.summary()
         final_model = iterative.final_model
@@ -159,9 +168,8 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
             transfer, iterative.final_model_offline_e_rms[50], sum(w["trials"] for w in iterative.work),
             sum(w["windows_trained"] for w in iterative.work)))
         ctx.summary["transfer"] = transfer.summary()
-        # Before the application: its training uses this process's torch threads, and from the
-        # application on the pool's workers are kept busy (OpenMP threads sharing cores stall).
-        real = ctx.stage.run("real recordings", run_real_recordings, ctx.ws, config.real_data or default_real_data())
+        # Started on the pool during the iterative stage (without a pool: run here, now).
+        real = ctx.stage.run("real recordings", ctx.ws.result_of, "real recordings", run_real_recordings, ctx.ws, real_data)
         # The ablation's simulations go on the pool while the application's intent sources train.
         ahead = AblationAhead(ctx.ws, handed_to_ablation())
         application = ctx.stage.run("application scenario", run_application, ctx.ws, final_model, ahead)
@@ -327,10 +335,15 @@ class IterativeStageResult:
         }  # fmt: skip
 
 
-def run_iterative_stage(ws: Workspace, say: Callable[[str], None]) -> IterativeStageResult:
-    """Algorithm 4.1: collect D_k with M_{k−1} in the loop, train M_k, score every model."""
+def run_iterative_stage(ws: Workspace, say: Callable[[str], None],
+                        ahead: Callable[[], None] | None = None) -> IterativeStageResult:  # fmt: skip
+    """Algorithm 4.1: collect D_k with M_{k−1} in the loop, train M_k, score every model.
+
+    M_k trains in this process while the run's pool would idle, so the pool gets what needs
+    no later model: ``ahead()`` is called once D_0 is collected (for a later stage's own
+    work, e.g. the real recordings), and M_0's score on D_1 goes there as soon as D_1 is
+    written, beside M_1's training; M_{K−1}'s on the last dataset beside the in-loop errors."""
     from coassist.experiments.iterative import iterative_training
-    from coassist.intent import evaluate_model, load_model, load_trials
 
     cfg = ws.config
     folders: dict[int, Path] = {}
@@ -339,28 +352,36 @@ def run_iterative_stage(ws: Workspace, say: Callable[[str], None]) -> IterativeS
         folder, ds = ws.collect(f"D{k}", tasks=ITERATION_TASKS, trials=cfg.trials_per_task,
                                 seed=iteration_seed(cfg.seed, k), intent=str(model_path) if model_path else "nominal")
         folders[k] = folder
+        if k == 0 and ahead is not None:
+            ahead()
+        if k == 1:
+            # The skip's shrinkage is chosen for the input shift between D_k and D_{k+1}: how
+            # M_0, trained on D_0, predicts on D_1 (collected with M_0 in the loop).
+            ws.submit("iterative: M0 on D1", evaluate_in_worker, model_path, [folder])
         return ds
 
     def train(k, dataset, start):
         init = "scratch" if start is None else f"resume:{start}"
         return ws.train(f"M{k}", [folders[k]], init=init, epochs=cfg.epochs if start is None else cfg.resume_epochs)
 
+    measured: dict[int, dict[int, dict[str, float]]] = {}  # id(dataset) → its in-loop errors, computed once
+
     def online(dataset):
-        return {h: v["e_rms"] for h, v in in_loop_errors(dataset.trials).items()}
+        measured[id(dataset)] = errors = in_loop_errors(dataset.trials)
+        return {h: v["e_rms"] for h, v in errors.items()}
 
     result = iterative_training(collect, train, online, iterations=cfg.iterations, tol=cfg.tol,
                                 criterion_horizon=50, progress=lambda m: say("  " + m))
+    ws.submit("iterative: final model offline", evaluate_in_worker, result.models[-1], [folders[cfg.iterations]])
     labels = ("nominal", *(f"M{k}" for k in range(cfg.iterations)))
     datasets = [it.dataset for it in result.iterations] + [result.final_dataset]
-    errors = {label: in_loop_errors(ds.trials) for label, ds in zip(labels, datasets)}
+    errors = {label: measured[id(ds)] for label, ds in zip(labels, datasets)}
     times = tuple({"k": it.k, "collect_s": it.collect_s, "train_s": it.train_s} for it in result.iterations)
     # Measured work, not wall-clock (which depends on the machine's load): trials collected, windows trained.
     work = tuple({"k": it.k, "trials": len(it.dataset.trials), "windows_trained": windows_trained(it.model)}
                  for it in result.iterations)
-    final_eval = evaluate_model(load_model(result.models[-1]), load_trials([folders[cfg.iterations]]), held_out_only=False)
-    # The skip's shrinkage is chosen for the input shift between D_k and D_{k+1}: how M_0,
-    # trained on D_0, predicts on D_1 (collected with M_0 in the loop).
-    shifted = evaluate_model(load_model(result.models[0]), load_trials([folders[1]]), held_out_only=False)
+    final_eval = ws.result_of("iterative: final model offline", score_model, result.models[-1], [folders[cfg.iterations]])
+    shifted = ws.result_of("iterative: M0 on D1", score_model, result.models[0], [folders[1]])
     return IterativeStageResult(
         run=result, labels=labels, errors=errors, times=times, work=work,
         final_model_offline_e_rms={h: v["e_rms"] for h, v in final_eval.results["model"].items()},
