@@ -33,6 +33,7 @@ than MG.
 from __future__ import annotations
 
 import os
+from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Any
 
@@ -195,10 +196,13 @@ class AblationAhead:
         cfg = ws.config
         self.mujoco = _mujoco_unavailable() is None and cfg.ablation_mujoco_trials > 0
 
-    def __call__(self, models: dict[str, str]) -> None:
+    def __call__(self, models: dict[str, str], only: Collection[str] | None = None) -> None:
+        """Start what ``models`` lets run and has not started; ``only``: of these sources (and
+        :data:`MG_JOB`) alone, so that a caller can spread the work over its own idle spells."""
         cfg = self.ws.config
         intents = {s: models.get(s, s) for s in SOURCES if s in models or s not in LEARNED}
-        for source in [s for s in (MG_JOB, *SOURCES) if s not in self.started and (s == MG_JOB or s in intents)]:
+        for source in [s for s in (MG_JOB, *SOURCES) if s not in self.started and (s == MG_JOB or s in intents)
+                       and (only is None or s in only)]:
             self.started.add(source)
             for j, obj in enumerate(OBJECTS):
                 cells = [("manual", "nominal")] if source == MG_JOB else [(c, source) for c in CONTROLLERS]

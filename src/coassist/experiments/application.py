@@ -91,6 +91,15 @@ def handed_to_ablation() -> set[tuple[str, str, str]]:
             for obj in OBJECTS for c in CONTROLLERS if c == "manual" or c.startswith("cooperative")}  # fmt: skip
 
 
+def prefetch_model_free(ws: Workspace) -> None:
+    """Put the pairs' simulations that need no learned source (IMP's and MG's) on the run's
+    pool now (:meth:`Workspace.prefetch`; :func:`run_application` then finds them there)."""
+    for j, obj in enumerate(OBJECTS):
+        for controller in CONTROLLERS:
+            if not controller.startswith("cooperative"):
+                ws.prefetch(f"app-{obj}-{controller}", **cell_options(ws.config, j, obj, controller, "nominal"))
+
+
 def run_application(ws: Workspace, final_model: Path,
                     ahead: Callable[[dict[str, str]], None] | None = None) -> ApplicationResult:  # fmt: skip
     """Collect the heavy load's transfer dataset (with the final model in the loop, as the thesis

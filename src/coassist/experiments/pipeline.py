@@ -235,9 +235,12 @@ class Workspace:
 
         if self.pool is None:
             return
-        if f"dataset:{name}" in self._pending:
-            raise ValueError(f"dataset {name!r} is already being prefetched: collect it first")
         options = self._spec_options(tasks, users, objects, trials, seed, controller, preset, intent, obstacle)
+        pending = self._pending.get(f"dataset:{name}")
+        if pending is not None:
+            if pending[0] == options:
+                return  # already on its way: the same trials
+            raise ValueError(f"dataset {name!r} is already being prefetched with other options: collect it first")
         submitted = submit_trials(dataset_specs(**options), self.pool, workers=self.config.workers,
                                   lockstep=self.config.lockstep)  # fmt: skip
         written: Future = Future()

@@ -56,8 +56,13 @@ import numpy as np
 
 from coassist._cpu import CpuSeconds, run_cpu_seconds
 from coassist._io import atomic_write_text
-from coassist.experiments.ablation import AblationAhead, ablation_section, run_ablation
-from coassist.experiments.application import application_section, handed_to_ablation, run_application
+from coassist.experiments.ablation import MG_JOB, AblationAhead, ablation_section, run_ablation
+from coassist.experiments.application import (
+    application_section,
+    handed_to_ablation,
+    prefetch_model_free,
+    run_application,
+)
 from coassist.experiments.iterative import IterativeResult
 from coassist.experiments.pipeline import (
     EVAL_HORIZONS,
@@ -154,12 +159,11 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
         ctx.summary["config"] = asdict(config)
         ctx.stage.run("dMPC study", _stage_sweep, ctx)
         real_data = config.real_data or default_real_data()
-
-        def real_ahead() -> None:
-            # The real recordings need nothing simulated: on the pool, beside M_k's training.
-            ctx.ws.submit("real recordings", real_recordings_in_worker, config, out, real_data)
-
-        iterative = ctx.stage.run("iterative training", run_iterative_stage, ctx.ws, ctx.stage.say, real_ahead)
+        # The ablation's simulations go on the pool before the ablation: the named sources' while
+        # the iterative stage trains, the learned ones' while the application's sources train.
+        ablation_ahead = AblationAhead(ctx.ws, handed_to_ablation())
+        iterative = ctx.stage.run("iterative training", run_iterative_stage, ctx.ws, ctx.stage.say,
+                                  _beside_training(ctx.ws, real_data, ablation_ahead))  # fmt: skip
         ctx.sections.append(iterative_section(iterative))
         ctx.summary["iterative"] = iterative.summary()
         final_model = iterative.final_model
@@ -170,9 +174,7 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
         ctx.summary["transfer"] = transfer.summary()
         # Started on the pool during the iterative stage (without a pool: run here, now).
         real = ctx.stage.run("real recordings", ctx.ws.result_of, "real recordings", run_real_recordings, ctx.ws, real_data)
-        # The ablation's simulations go on the pool while the application's intent sources train.
-        ahead = AblationAhead(ctx.ws, handed_to_ablation())
-        application = ctx.stage.run("application scenario", run_application, ctx.ws, final_model, ahead)
+        application = ctx.stage.run("application scenario", run_application, ctx.ws, final_model, ablation_ahead)
         ctx.sections.append(application_section(application))
         ctx.summary["application"] = application.summary()
         ctx.sections.append(real_recordings_section(real))
@@ -200,6 +202,30 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
         write_report(out / "report.html", "coassist — the thesis' experiments, reproduced", intro, ctx.sections, headline)
         atomic_write_text(out / "summary.json", json.dumps(_jsonable(ctx.summary), indent=1, allow_nan=False))
         return ctx.summary
+
+
+def _beside_training(ws: Workspace, real_data: str | None, ablation_ahead: AblationAhead) -> Callable[[int], None]:
+    """The iterative stage's ``ahead(k)``: while M_k trains in this process on one core, later
+    stages' work that needs no model keeps the other busy. A share per training, not all at
+    once: the pool runs its jobs in order, and D_{k+1}'s collection, submitted when M_k is
+    done, waits behind what is queued; once it is collected the pool idles again beside
+    M_{k+1}'s training unless some is left for then. In order: the real recordings (beside
+    M_0, the longest training), the application's IMP and MG pairs, then the ablation's named
+    sources (MG's MuJoCo trials and the nominal intent, then constant velocity and the oracle).
+    Whatever a short run's last training has not started is started there."""
+    shares: list[Callable[[], object]] = [
+        lambda: ws.submit("real recordings", real_recordings_in_worker, ws.config, ws.out, real_data),
+        lambda: prefetch_model_free(ws),
+        lambda: ablation_ahead({}, only=(MG_JOB, "nominal")),
+        lambda: ablation_ahead({}, only=("constant-velocity", "oracle")),
+    ]
+    last = ws.config.iterations - 1
+
+    def ahead(k: int) -> None:
+        for share in shares[k:] if k == last else shares[k : k + 1]:
+            share()
+
+    return ahead
 
 
 def _sim_dt(config: ReproduceConfig) -> float:
@@ -336,13 +362,14 @@ class IterativeStageResult:
 
 
 def run_iterative_stage(ws: Workspace, say: Callable[[str], None],
-                        ahead: Callable[[], None] | None = None) -> IterativeStageResult:  # fmt: skip
+                        ahead: Callable[[int], None] | None = None) -> IterativeStageResult:  # fmt: skip
     """Algorithm 4.1: collect D_k with M_{k−1} in the loop, train M_k, score every model.
 
-    M_k trains in this process while the run's pool would idle, so the pool gets what needs
-    no later model: ``ahead()`` is called once D_0 is collected (for a later stage's own
-    work, e.g. the real recordings), and M_0's score on D_1 goes there as soon as D_1 is
-    written, beside M_1's training; M_{K−1}'s on the last dataset beside the in-loop errors."""
+    M_k trains in this process, on one core, while the run's pool would idle, so the pool
+    gets work that needs no later model: ``ahead(k)`` is called as M_k's training starts
+    (for later stages' own work: :func:`run_reproduce` spreads it over the trainings), and
+    M_0's score on D_1 goes there as soon as D_1 is written; M_{K−1}'s on the last dataset
+    beside the in-loop errors."""
     from coassist.experiments.iterative import iterative_training
 
     cfg = ws.config
@@ -352,8 +379,6 @@ def run_iterative_stage(ws: Workspace, say: Callable[[str], None],
         folder, ds = ws.collect(f"D{k}", tasks=ITERATION_TASKS, trials=cfg.trials_per_task,
                                 seed=iteration_seed(cfg.seed, k), intent=str(model_path) if model_path else "nominal")
         folders[k] = folder
-        if k == 0 and ahead is not None:
-            ahead()
         if k == 1:
             # The skip's shrinkage is chosen for the input shift between D_k and D_{k+1}: how
             # M_0, trained on D_0, predicts on D_1 (collected with M_0 in the loop).
@@ -361,6 +386,8 @@ def run_iterative_stage(ws: Workspace, say: Callable[[str], None],
         return ds
 
     def train(k, dataset, start):
+        if ahead is not None:
+            ahead(k)
         init = "scratch" if start is None else f"resume:{start}"
         return ws.train(f"M{k}", [folders[k]], init=init, epochs=cfg.epochs if start is None else cfg.resume_epochs)
 
