@@ -112,6 +112,59 @@ def test_prefetch_without_a_pool_does_nothing(tmp_path):
     assert ws._pending == {} and ws.submit("k", int, "1") is None and ws.take("k") is None
 
 
+def test_result_of_waits_for_the_job_or_runs_it_here(tmp_path):
+    """``result_of`` gives the submitted job's result without running ``fn`` again; without a
+    pool (nothing submitted) it runs ``fn`` in this process."""
+    calls = []
+
+    def fn(x):
+        calls.append(x)
+        return x + 1
+
+    alone = pipeline.Workspace(pipeline.REPRODUCE_PRESETS["tiny"], tmp_path, progress=False)
+    alone.submit("k", fn, 1)
+    assert alone.result_of("k", fn, 1) == 2 and calls == [1]
+    pool = _RecordingPool()  # its futures hold []
+    ws = pipeline.Workspace(pipeline.REPRODUCE_PRESETS["tiny"], tmp_path, progress=False, pool=pool)
+    ws.submit("k", fn, 1)
+    assert ws.result_of("k", fn, 1) == [] and calls == [1] and ws._pending == {}
+
+
+@pytest.mark.parametrize("iterations", [4, 2, 1])
+def test_beside_training_starts_each_later_share_once_and_all_by_the_last_training(tmp_path, iterations):
+    """The iterative stage's ``ahead(k)`` (reproduce._beside_training): the real recordings
+    beside M_0, then one share per training; every share exactly once, all of them by the last
+    training however few there are; and only cells the application and the ablation collect."""
+    from coassist.experiments.application import CONTROLLERS as APP_CONTROLLERS
+    from coassist.experiments.reproduce import _beside_training
+
+    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], iterations=iterations, ablation_mujoco_trials=1)
+    pool = _RecordingPool()
+    ws = pipeline.Workspace(cfg, tmp_path, progress=False, pool=pool)
+    ablation_ahead = AblationAhead(ws, handed_to_ablation())
+    ahead = _beside_training(ws, "/real", ablation_ahead)
+    seen = []
+    for k in range(iterations):
+        before = set(ws._pending)
+        ahead(k)
+        seen.append(set(ws._pending) - before)
+    assert seen[0] >= {"job:real recordings"}
+    if iterations == 4:
+        assert seen[0] == {"job:real recordings"}
+        assert seen[1] == {f"dataset:app-{o}-{c}" for o in OBJECTS for c in APP_CONTROLLERS if not c.startswith("cooperative")}
+        assert all(seen[k] for k in range(4))
+    named = [s for s in SOURCES if s not in LEARNED]
+    expect = {"job:real recordings"}
+    expect |= {f"dataset:app-{o}-{c}" for o in OBJECTS for c in APP_CONTROLLERS if not c.startswith("cooperative")}
+    expect |= {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c in CONTROLLERS for s in named}
+    if ablation_ahead.mujoco:
+        expect |= {f"job:mujoco:{s}" for s in (MG_JOB, *named)}
+    assert set().union(*seen) == set(ws._pending) == expect
+    n = len(pool.calls)
+    ablation_ahead({})  # the application stage's first call: nothing named left to start
+    assert len(pool.calls) == n
+
+
 def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path):
     """run_transfer's jobs on the run's pool (one torch thread each, the longest first, each
     model scored in its worker) give the models and scores of the one-after-the-other path in
@@ -148,14 +201,17 @@ def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path):
 
 def test_prefetch_errors_reach_collect(tmp_path):
     """A prefetched collection that fails raises in the collect that asks for it (not lost in
-    its thread); the same name prefetched twice is refused."""
+    its thread); the same name prefetched again is a no-op with the same options, refused with others."""
     cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=2)
     with worker_pool(2) as pool:
         ws = pipeline.Workspace(cfg, tmp_path, progress=False, pool=pool)
         options = {"tasks": ("curved",), "trials": 1, "seed": 1}
         ws.prefetch("x", **options)
-        with pytest.raises(ValueError, match="already being prefetched"):
-            ws.prefetch("x", **options)
+        pending = ws._pending["dataset:x"]
+        ws.prefetch("x", **options)  # the same trials already on their way: nothing more started
+        assert ws._pending["dataset:x"] is pending
+        with pytest.raises(ValueError, match="already being prefetched with other options"):
+            ws.prefetch("x", **{**options, "seed": 2})
         ws.collect("x", **options)
         broken = tmp_path / "broken-model"
         broken.mkdir()
