@@ -244,6 +244,37 @@ def test_kalman_tuning_picks_the_grid_minimum(trials, horizon):
     assert (best.jerk_psd, best.velocity_noise) == min(by_hand, key=by_hand.get) and best.tuned
 
 
+@pytest.mark.parametrize("first_tick", [0, 7])
+def test_kalman_tuning_of_trials_of_every_length_equals_the_direct_sum(first_tick):
+    """All trials are filtered at once (kalman._validation_sse); trials of different lengths,
+    in no order, one too short to score and one that scores a single tick, give each grid
+    point the direct sum over the horizon of KalmanCA.predict's (per-trial, matrix-product)
+    filter, and the ticks counted by hand."""
+    from types import SimpleNamespace
+
+    from coassist.intent.kalman import KalmanCA, tune_kalman
+
+    rng = np.random.default_rng(11)
+    horizon, dt = 12, 0.008
+    lengths = (60, first_tick + horizon, 95, first_tick + horizon + 1, 41)  # the 2nd scores nothing, the 4th one tick
+    trials = [SimpleNamespace(pose=0.4 + np.cumsum(rng.normal(size=(n, 2)), axis=0) * 1e-3,
+                              velocity=rng.normal(size=(n, 2)) * 1e-2) for n in lengths]  # fmt: skip
+    qs, rvs = (1e-1, 1e3), (1e-4, 3e-3, 1e-2)
+    _, rec = tune_kalman(trials, horizon, dt, first_tick=first_tick, jerk_psd_grid=qs, velocity_noise_grid=rvs)
+    want, ticks = [], sum(max(0, n - horizon - first_tick) for n in lengths)
+    for q in qs:
+        for rv in rvs:
+            sse = 0.0
+            for t in trials:
+                p = KalmanCA(q, rv, tuned=True).predict(t.pose, t.velocity, horizon, dt)
+                for k in range(first_tick, t.pose.shape[0] - horizon):
+                    sse += np.sum((p[k] - t.pose[k + 1 : k + 1 + horizon]) ** 2) / horizon
+            want.append(sse / ticks)
+    assert rec["validation_ticks"] == ticks
+    # the quadratic form loses ~3 of 16 digits to cancellation (see the test above)
+    np.testing.assert_allclose(np.array(rec["validation_mse"]).ravel(), want, rtol=1e-9)
+
+
 def test_kalman_parameters_are_validated():
     from coassist.intent.kalman import KalmanCA
 

@@ -230,31 +230,7 @@ def tune_kalman(
     ]
     if not grid:
         raise ValueError("the Kalman tuning grid is empty")
-    sse, n = np.zeros(len(grid)), 0
-    # Σ_i ||x̂(k+i) − x(k+i)||² is a quadratic form in the filtered state, per axis:
-    # with φ_i = [1, τ_i, τ_i²/2], e_i = φ_i·δ − g_i, δ = [p̂ − x(k), v̂, â] and
-    # g_i = x(k+i) − x(k), Σ_i e_i² = δ'Aδ − 2 δ'b + c with A = Σ φ_i φ_i', b = Σ φ_i g_i,
-    # c = Σ g_i². A, b, c come from the data once per trial; each grid point then costs
-    # O(K) instead of O(K·H). Both sides are taken relative to x(k) so the three terms stay
-    # the size of the motion over a horizon, not of the workspace (the sum loses ~3 digits
-    # of 16 to cancellation, against the direct sum: tests/intent/test_baselines.py).
-    tau = dt * np.arange(1, horizon + 1)
-    phi = np.stack([np.ones_like(tau), tau, 0.5 * tau**2], axis=1)  # (H, 3)
-    A = phi.T @ phi
-    for tr in trials:
-        pose, vel = np.asarray(tr.pose, np.float64), np.asarray(tr.velocity, np.float64)
-        ks = np.arange(first_tick, pose.shape[0] - horizon)
-        if ks.size == 0:
-            continue
-        states = kalman_ca_filter(pose, vel, dt, grid)[:, ks]  # (G, K, 3, d)
-        ahead = pose[ks[:, None] + np.arange(1, horizon + 1)[None, :]] - pose[ks][:, None]  # g: (K, H, d)
-        k, d = ahead.shape[0], ahead.shape[2]
-        b = (phi.T @ ahead.transpose(1, 0, 2).reshape(horizon, k * d)).reshape(3, 1, k * d)  # Σ φ_i g_i
-        delta = states.transpose(2, 0, 1, 3).reshape(3, len(grid), k * d)  # (3, G, K·d), a copy
-        delta[0] -= pose[ks].reshape(-1)
-        a_delta = (A @ delta.reshape(3, -1)).reshape(delta.shape)
-        sse += (np.sum(delta * (a_delta - 2.0 * b), axis=(0, 2)) + float(np.sum(ahead * ahead))) / horizon
-        n += ks.size
+    sse, n = _validation_sse(trials, horizon, dt, grid, first_tick)
     if n == 0:
         raise ValueError(
             f"no validation trial is longer than first_tick + horizon = {first_tick + horizon} samples"
@@ -271,3 +247,82 @@ def tune_kalman(
     if not math.isfinite(float(mse.min())):
         raise ValueError("Kalman tuning produced no finite validation error")
     return best, record
+
+
+def _validation_sse(trials: Sequence[Any], horizon: int, dt: float, grid: Sequence[KalmanCA],
+                    first_tick: int) -> tuple[np.ndarray, int]:  # fmt: skip
+    """(G,) Σ over the trials' ticks k ≥ ``first_tick`` (with a full measured horizon) of
+    Σ_i ||x̂(k+i) − x(k+i)||² / H per grid point, and the number of ticks summed.
+
+    Σ_i ||x̂(k+i) − x(k+i)||² is a quadratic form in the filtered state, per axis: with
+    φ_i = [1, τ_i, τ_i²/2], e_i = φ_i·δ − g_i, δ = [p̂ − x(k), v̂, â] and g_i = x(k+i) − x(k),
+    Σ_i e_i² = δ'Aδ − 2 δ'b + c with A = Σ φ_i φ_i', b = Σ φ_i g_i, c = Σ g_i². A, b, c come
+    from the data once per trial; a grid point then costs O(K) instead of O(K·H). Both sides
+    are taken relative to x(k) so the three terms stay the size of the motion over a horizon,
+    not of the workspace (the sum loses ~3 digits of 16 to cancellation, against the direct
+    sum: tests/intent/test_baselines.py).
+
+    Every grid point and every trial is filtered at once, tick by tick, as (G, N, d) arrays
+    of p̂, v̂ and â, and δ'(Aδ − 2b) is summed as it comes: the filter's recursion written out
+    per element (predict with F, update with the gain of :func:`_gains`; the same arithmetic
+    whatever the number of trials), so one tick costs a few dozen array operations for all
+    of them, where :func:`kalman_ca_filter` per trial cost two stacked matrix products of G
+    small matrices each. Its states equal :func:`kalman_ca_filter`'s to rounding (~1e-14
+    relative: ``F @ s`` sums in another order); trials still running are a prefix once they
+    are sorted by length, so a trial's last tick ends its share of the work.
+    """
+    tau = dt * np.arange(1, horizon + 1)
+    phi = np.stack([np.ones_like(tau), tau, 0.5 * tau**2], axis=1)  # (H, 3)
+    A = phi.T @ phi
+    steps = np.arange(1, horizon + 1)
+    kept = []
+    for tr in trials:
+        pose, vel = np.asarray(tr.pose, np.float64), np.asarray(tr.velocity, np.float64)
+        if pose.shape[0] - horizon > first_tick:
+            kept.append((pose, vel))
+    if not kept:
+        return np.zeros(len(grid)), 0
+    kept.sort(key=lambda pv: -pv[0].shape[0])  # longest first: the trials still running are a prefix
+    n_trials, d, g = len(kept), kept[0][0].shape[1], len(grid)
+    last = np.array([pose.shape[0] - horizon - 1 for pose, _ in kept])  # each trial's last scored tick
+    t_max = int(last[0]) + 1
+    zp, zv = np.zeros((t_max, n_trials, d)), np.zeros((t_max, n_trials, d))
+    b = np.zeros((t_max, 3, n_trials, d))  # Σ_i φ_i g_i(k) per tick, trial and axis (0 where not scored)
+    c = 0.0
+    for j, (pose, vel) in enumerate(kept):
+        zp[: last[j] + 1, j], zv[: last[j] + 1, j] = pose[: last[j] + 1], vel[: last[j] + 1]
+        ks = np.arange(first_tick, last[j] + 1)
+        ahead = pose[ks[:, None] + steps[None, :]] - pose[ks][:, None]  # g: (K, H, d)
+        b[ks, :, j] = np.einsum("hi,khd->kid", phi, ahead)
+        c += float(np.sum(ahead * ahead))
+    gains = _gains(dt, tuple(grid), t_max).transpose(0, 2, 3, 1)[..., None, None]  # (T, 3, 2, G, 1, 1)
+    p = np.broadcast_to(zp[0], (g, n_trials, d)).copy()
+    v = np.broadcast_to(zv[0], (g, n_trials, d)).copy()
+    a = np.zeros((g, n_trials, d))
+    c1, c2 = dt, 0.5 * dt * dt  # F's entries: p += dt v + dt²/2 a, v += dt a
+    (a00, a01, a02), (_, a11, a12), (_, _, a22) = A.tolist()
+    sse = np.zeros(g)
+    m = n_trials
+    for k in range(1, t_max):
+        while last[m - 1] < k:
+            m -= 1
+        P, V, Acc = p[:, :m], v[:, :m], a[:, :m]
+        x, K = zp[k, :m], gains[k]
+        pp = P + c1 * V + c2 * Acc
+        vv = V + c1 * Acc
+        ep, ev = x - pp, zv[k, :m] - vv
+        P[...] = pp + K[0, 0] * ep + K[0, 1] * ev
+        V[...] = vv + K[1, 0] * ep + K[1, 1] * ev
+        Acc += K[2, 0] * ep + K[2, 1] * ev
+        if k >= first_tick:
+            bk = b[k, :, :m]
+            d0 = P - x
+            t0 = a00 * d0 + a01 * V + a02 * Acc - 2.0 * bk[0]
+            t1 = a01 * d0 + a11 * V + a12 * Acc - 2.0 * bk[1]
+            t2 = a02 * d0 + a12 * V + a22 * Acc - 2.0 * bk[2]
+            sse += np.sum(d0 * t0 + V * t1 + Acc * t2, axis=(1, 2))
+    if first_tick == 0:  # tick 0's state is the first measurement: δ = [0, v(0), 0]
+        v0 = zv[0]
+        sse += float(np.sum(v0 * (a11 * v0 - 2.0 * b[0, 1])))
+    n = int(np.sum(last - first_tick + 1))
+    return (sse + c) / horizon, n
