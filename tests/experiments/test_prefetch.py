@@ -165,25 +165,35 @@ def test_beside_training_starts_each_later_share_once_and_all_by_the_last_traini
     assert len(pool.calls) == n
 
 
-def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path):
+def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch):
     """run_transfer's jobs on the run's pool (one torch thread each, the longest first, each
     model scored in its worker) give the models and scores of the one-after-the-other path in
-    this process on one thread, exactly; the train times are the jobs' own."""
+    this process on one thread, exactly; the train times are the jobs' own. The datasets are
+    collected once, in this process, and the pool's run is handed the same folders (what this
+    test compares is the trainings and scorings; prefetched and pooled collections equal
+    in-process ones in the tests above and in tests/sim/test_world.py)."""
     pytest.importorskip("torch")
     import torch
 
+    from coassist.data import read_dataset
     from coassist.experiments.transfer import run_transfer
 
     cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=2, threads=1)
-    base = pipeline.Workspace(cfg, tmp_path / "base", progress=False)
+    alone = replace(cfg, workers=1)  # collections in this process: no worker processes to start
+    base = pipeline.Workspace(alone, tmp_path / "base", progress=False)
     folder, _ = base.collect("D0", tasks=("curved",), trials=2, seed=1)
     prev = base.train("M0", [folder], init="scratch", epochs=1)
     threads = torch.get_num_threads()
     try:
         torch.set_num_threads(1)
-        here = run_transfer(pipeline.Workspace(cfg, tmp_path / "here", progress=False), prev, 1.0)
+        here = run_transfer(pipeline.Workspace(alone, tmp_path / "here", progress=False), prev, 1.0)
     finally:
         torch.set_num_threads(threads)
+
+    def collected_here(self, name, **options):
+        return tmp_path / "here" / "datasets" / name, read_dataset(tmp_path / "here" / "datasets" / name)
+
+    monkeypatch.setattr(pipeline.Workspace, "collect", collected_here)
     with worker_pool(2) as pool:
         ws = pipeline.Workspace(cfg, tmp_path / "pool", progress=False, pool=pool)
         on_pool = run_transfer(ws, prev, 1.0)
