@@ -17,11 +17,13 @@ Measures:
    ``--baseline-repeats``), and the ratio (target: ≤ 10 s on 2 cores);
 3. the same dataset with the nominal intent (no network), per trial and in lockstep
    groups (bit for bit the same trials);
-4. per tick: one worker's lockstep group (every ``--workers``-th trial of the dataset)
-   run in this process (one torch thread, as a worker), ``--repeats`` times: wall and CPU
-   seconds (CPU time is less inflated by other processes on a shared machine), the
-   number of lockstep ticks and trial-ticks, µs per trial-tick and ms per lockstep tick
-   (all of the group's trials: sense, one network call, one controller call, act).
+4. per tick: one worker's lockstep group (every ``--workers``-th trial of the dataset),
+   with the model and with the nominal intent, run in this process (one torch thread, as
+   a worker), ``--repeats`` times, two ways: ``run_loops`` over the per-trial objects and
+   as arrays (:mod:`coassist.sim.lockstep`, the default; the same trials bit for bit):
+   wall and CPU seconds (CPU time is less inflated by other processes on a shared
+   machine), the number of lockstep ticks and trial-ticks, µs per trial-tick and ms per
+   lockstep tick, and the ratio.
 
 The model: ``--model PATH``, or an ``lstm``-preset model trained here for one epoch on
 six nominal trials (its accuracy does not matter; its size does: LSTM 2 × 64, the
@@ -102,18 +104,19 @@ def dataset_seconds(specs, workers: int, lockstep: bool, repeats: int, kept_pool
     return np.asarray(out)
 
 
-def group_seconds(specs, repeats: int) -> tuple[np.ndarray, np.ndarray, int, int]:
-    """Wall and CPU seconds of running ``specs`` in lockstep in this process; lockstep ticks, trial-ticks."""
+def group_seconds(specs, repeats: int, arrays: bool = True) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Wall and CPU seconds of running ``specs`` in lockstep in this process (``arrays``: as
+    arrays, coassist.sim.lockstep; else run_loops over the per-trial objects); lockstep ticks, trial-ticks."""
     import torch
 
     from coassist.sim.world import run_spec_lockstep
 
     torch.set_num_threads(1)
-    run_spec_lockstep(specs[:2])  # warm: imports, the game's gains, the model's first call
+    run_spec_lockstep(specs[:2], arrays=arrays)  # warm: imports, the game's gains, the model's first call
     wall, cpu = [], []
     for _ in range(repeats):
         c0, t0 = time.process_time(), time.perf_counter()
-        trials = run_spec_lockstep(specs)
+        trials = run_spec_lockstep(specs, arrays=arrays)
         wall.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
     lengths = [t.n_samples for t in trials]
@@ -149,12 +152,19 @@ def main() -> None:
         with_model = dataset_specs(intent=model, **common)
         nominal = dataset_specs(intent="nominal", **common)
         n = len(with_model)
-        group = with_model[:: args.workers]
-        g_wall, g_cpu, g_ticks, g_trial_ticks = group_seconds(group, args.repeats)
-        print(f"\none worker's lockstep group ({len(group)} trials, {g_ticks} ticks, {g_trial_ticks} trial-ticks) in this process:")
-        for name, x in (("wall", g_wall), ("CPU", g_cpu)):
-            print(f"  {name:4s} median {np.median(x):6.2f} s   p99 {np.percentile(x, 99):6.2f} s   "
-                  f"{np.median(x) / g_trial_ticks * 1e6:5.1f} us per trial-tick   {np.median(x) / g_ticks * 1e3:5.2f} ms per tick")
+        for label, specs in (("model in the loop", with_model), ("nominal intent", nominal)):
+            group = specs[:: args.workers]
+            print(f"\none worker's lockstep group, {label} ({len(group)} trials), in this process:")
+            cpu_of = {}
+            for arrays in (False, True):
+                g_wall, g_cpu, g_ticks, g_trial_ticks = group_seconds(group, args.repeats, arrays)
+                cpu_of[arrays] = np.median(g_cpu)
+                name = "as arrays (coassist.sim.lockstep)" if arrays else "run_loops over per-trial objects"
+                print(f"  {name}: {g_ticks} ticks, {g_trial_ticks} trial-ticks")
+                for what, x in (("wall", g_wall), ("CPU", g_cpu)):
+                    print(f"    {what:4s} median {np.median(x):6.2f} s   p99 {np.percentile(x, 99):6.2f} s   "
+                          f"{np.median(x) / g_trial_ticks * 1e6:5.1f} us per trial-tick   {np.median(x) / g_ticks * 1e3:5.2f} ms per tick")
+            print(f"  speed-up (median CPU)  {cpu_of[False] / cpu_of[True]:.2f}x")
         per_trial = dataset_seconds(with_model, args.workers, False, args.baseline_repeats)
         lock = dataset_seconds(with_model, args.workers, True, args.repeats)
         lock_kept = dataset_seconds(with_model, args.workers, True, args.repeats, kept_pool=True)

@@ -59,7 +59,7 @@ from coassist.interfaces import Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
 from coassist.runtime.world import COMMAND_SPACES, Command, RobotState, finite_vector
 
-__all__ = ["ControlTick", "Plan", "TickConfig", "TickOutput", "UPSTREAM_BAD"]
+__all__ = ["ControlTick", "Plan", "TickConfig", "TickOutput", "TickReferences", "UPSTREAM_BAD"]
 
 #: Faults of the stages before the safety layer that make a tick "bad" for it.
 UPSTREAM_BAD = (
@@ -168,6 +168,21 @@ class TickOutput(NamedTuple):
     fault: Fault
 
 
+class TickReferences(NamedTuple):
+    """The grids a reset tick reads from (n plan rows, d controlled DOFs); read-only views.
+
+    ref_ctrl : (n, 2d) the controller's reference [Δx; v], positions relative to x0 [m, m/s].
+    ref_pos : (n, d) the nominal positions, absolute (the log's reference column) [m].
+    ref_xy : (n, 2) the plan's x-y positions (the intent's nominal rows) [m].
+    x0 : (d,) the start of the controlled DOFs [m, rad].
+    """
+
+    ref_ctrl: np.ndarray
+    ref_pos: np.ndarray
+    ref_xy: np.ndarray
+    x0: np.ndarray
+
+
 class ControlTick:
     """The tick (module docstring) for one controller, intent stage, wrench pipeline and safety layer.
 
@@ -249,6 +264,16 @@ class ControlTick:
         self._inv_dt = 1.0 / self.dt
         self._last_pose = np.array(start, dtype=np.float64)  # held over a glitch of the state (step()); a buffer of its own
         self._last_twist = np.zeros(6)
+
+    def references(self) -> TickReferences:
+        """This run's grids (:class:`TickReferences`), for a runner that does the tick's
+        arithmetic for many runs at once (:mod:`coassist.sim.lockstep`)."""
+        views = []
+        for a in (self._ref_ctrl, self._ref_pos, self._ref_xy, self._x0):
+            view = a.view()
+            view.setflags(write=False)
+            views.append(view)
+        return TickReferences(*views)
 
     # ------------------------------------------------------------------ per tick
     def step(self, k: int, state: RobotState, upstream: Fault = Fault.NONE) -> TickOutput:

@@ -73,6 +73,7 @@ from coassist.runtime.episode import (
 )
 from coassist.runtime.intent import WindowIntent
 from coassist.runtime.lockstep import run_loops
+from coassist.runtime.loop import LoopLog
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.world import Command, RobotState
 from coassist.runtime.wrench import WrenchPipeline
@@ -81,6 +82,7 @@ from coassist.scenario.objects import CarriedObject, ForceSensor, get_object
 from coassist.scenario.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise, operator_profile
 from coassist.scenario.seeds import trial_rngs
 from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, Task, task_for_seed
+from coassist.sim.lockstep import fast_path_eligible, run_point_mass_lockstep
 
 
 def _diag2(matrix: np.ndarray, name: str) -> None:
@@ -413,7 +415,8 @@ def spec_episode(spec: TrialSpec, _controllers: dict | None = None, _sources: di
     )
 
 
-def run_spec_lockstep(specs: Sequence[TrialSpec], on_result: Callable[[int, Trial], None] | None = None) -> list[Trial]:
+def run_spec_lockstep(specs: Sequence[TrialSpec], on_result: Callable[[int, Trial], None] | None = None, *,
+                      arrays: bool = True) -> list[Trial]:  # fmt: skip
     """The trials of ``specs``, run in lockstep (:func:`coassist.runtime.lockstep.run_loops`):
     one network call per tick for all the trials with the same model in the loop.
 
@@ -425,20 +428,48 @@ def run_spec_lockstep(specs: Sequence[TrialSpec], on_result: Callable[[int, Tria
 
     ``on_result(i, trial)`` is called as trial i ends, while the others go on; the trials
     are then not kept and the list returned is empty.
+
+    ``arrays``: run the trials that can as arrays (:mod:`coassist.sim.lockstep`: every stage
+    of the tick for all of them at once, the same trials bit for bit); a trial in which
+    something unusual happens (any fault flag) leaves that path and runs again here on
+    :func:`~coassist.runtime.lockstep.run_loops`. False: every trial on ``run_loops``.
     """
     controllers: dict = {}
     sources: dict = {}
-    episodes = []
-    for spec in specs:
+
+    def build(spec: TrialSpec) -> Episode:
         episode = spec_episode(spec, controllers, sources)
         if callable(getattr(episode.tick.controller, "reset", None)):  # state between ticks: this trial's alone
             controllers.pop((spec.controller, spec.preset), None)
-        episodes.append(episode)
-    if on_result is not None:
-        run_loops([ep.loop for ep in episodes], on_end=lambda i, log: on_result(i, episodes[i].finish(log)))
-        return []
-    logs = run_loops([ep.loop for ep in episodes])
-    return [ep.finish(log) for ep, log in zip(episodes, logs)]
+        return episode
+
+    episodes = [build(spec) for spec in specs]
+    trials: list[Trial | None] = [None] * len(specs)
+
+    def keep(i: int, trial: Trial) -> None:
+        if on_result is not None:
+            on_result(i, trial)
+        else:
+            trials[i] = trial
+
+    fast = [i for i, ep in enumerate(episodes) if arrays and fast_path_eligible(ep.loop)]
+    rest = sorted(set(range(len(specs))) - set(fast))
+    by_dt: dict[float, list[int]] = {}  # one array batch per period (the presets share one: one batch)
+    for i in fast:
+        by_dt.setdefault(float(episodes[i].world.dt), []).append(i)
+    for batch in by_dt.values():
+
+        def done(j: int, log: LoopLog, batch: list[int] = batch) -> None:
+            keep(batch[j], episodes[batch[j]].finish(log))
+
+        for i, log in zip(batch, run_point_mass_lockstep([episodes[i].loop for i in batch], on_end=done)):
+            if log is None:  # it left the array path (something unusual happened): the reference path, afresh
+                episodes[i] = build(specs[i])
+                rest.append(i)
+    rest.sort()
+    if rest:
+        run_loops([episodes[i].loop for i in rest], on_end=lambda j, log: keep(rest[j], episodes[rest[j]].finish(log)))
+    return [] if on_result is not None else [t for t in trials if t is not None]
 
 
 def _to_payload(trial: Trial) -> tuple[dict, dict]:

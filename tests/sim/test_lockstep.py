@@ -1,0 +1,175 @@
+"""Point-mass trials as arrays (coassist.sim.lockstep) against the reference paths.
+
+The references: every trial alone (``run_loop`` on its episode, :func:`run_spec`) and the
+lockstep runner of per-trial objects (``run_loops``, ``run_spec_lockstep(arrays=False)``).
+Named intents must give the same Trial bit for bit; a model in the loop the same bit for bit
+as ``run_loops`` (the same batches) and, in float64, to 1e-12 as alone; a trial in which a
+fault is raised must leave the array path and come back as the reference path's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from coassist.control.presets import CONTROLLER_KINDS
+from coassist.interfaces import Fault
+from coassist.runtime.lockstep import Loop
+from coassist.runtime.loop import run_loop
+from coassist.runtime.safety import SafetyLimits
+from coassist.runtime.world import Command
+from coassist.scenario.intent_source import ConstantVelocityIntent
+from coassist.sim.lockstep import fast_path_eligible, run_point_mass_lockstep
+from coassist.sim.world import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
+
+from ..intent.conftest import TINY, labeled
+
+PRESET = "thesis-evaluation-dm"
+HORIZON = get_preset(PRESET).game.horizon
+FIELDS = ("pose", "velocity", "wrench", "reference", "prediction", "effort_h", "effort_r", "fault")
+TASKS = ("linear", "curved", "sinusoidal", "z")
+
+
+def _specs(intent: str, n: int = 8, objects=("handle", "board", "heavy")) -> list[TrialSpec]:
+    """Every controller kind, the three objects (the board's yaw), three users, trials of different lengths."""
+    return [TrialSpec(task=TASKS[i % 4], seed=40 + i, user=i % 3, object=objects[i % len(objects)],
+                      controller=CONTROLLER_KINDS[i % 4], intent=intent, preset=PRESET) for i in range(n)]  # fmt: skip
+
+
+def _episodes(specs, sources=None):
+    controllers: dict = {}
+    eps = []
+    for spec in specs:
+        ep = spec_episode(spec, controllers, sources)
+        if callable(getattr(ep.tick.controller, "reset", None)):
+            controllers.pop((spec.controller, spec.preset), None)
+        eps.append(ep)
+    return eps
+
+
+@pytest.fixture(scope="module")
+def tiny_model(tmp_path_factory) -> str:
+    from coassist.intent.training import train_model, write_model
+
+    out = tmp_path_factory.mktemp("model") / "tiny"
+    preset = replace(TINY, window=replace(TINY.window, horizon=HORIZON))
+    write_model(train_model(labeled(3), preset, replace(TINY.train, epochs=1)), out)
+    return str(out)
+
+
+def test_named_intents_as_arrays_equal_every_trial_alone_bit_for_bit():
+    """Nominal, oracle and constant velocity; every controller kind (the shared game, IMP and
+    MG through one step_batch, the online-α arbitration stepping its own); the three objects."""
+    intents = ("nominal", "oracle", "constant-velocity")
+    specs = [replace(spec, intent=intents[i % 3]) for i, spec in enumerate(_specs("nominal", n=9))]
+    eps = _episodes(specs)
+    assert all(fast_path_eligible(ep.loop) for ep in eps)
+    logs = run_point_mass_lockstep([ep.loop for ep in eps])
+    assert all(log is not None for log in logs)  # none left the array path: it did the work
+    arrays = [ep.finish(log) for ep, log in zip(eps, logs)]
+    alone = [run_spec(spec) for spec in specs]
+    assert len({t.n_samples for t in alone}) > 1  # runs drop out of the batch at different ticks
+    assert all(np.abs(t.effort_r).max() > 0.5 for t in alone if t.meta.controller != "manual")  # the controllers act
+    for spec, a, b in zip(specs, alone, arrays):
+        assert a.equals(b), spec
+        assert a.meta.to_dict() == b.meta.to_dict()
+    # and through run_spec_lockstep, each delivered as it ends
+    order: list[int] = []
+    got: dict[int, object] = {}
+    assert run_spec_lockstep(specs, on_result=lambda i, t: (order.append(i), got.__setitem__(i, t))) == []
+    lengths = [t.n_samples for t in alone]
+    assert sorted(order) == list(range(len(specs))) and [lengths[i] for i in order] == sorted(lengths)
+    for i, a in enumerate(alone):
+        assert a.equals(got[i])
+
+
+def test_a_model_in_the_loop_as_arrays_equals_run_loops_bit_for_bit(tiny_model):
+    """The same trials in the same batches as run_loops: the float32 network gets the same
+    windows in the same batch, so every row is the same bit for bit."""
+    specs = _specs(tiny_model, n=4)
+    reference = run_spec_lockstep(specs, arrays=False)
+    arrays = run_spec_lockstep(specs)
+    for spec, a, b in zip(specs, reference, arrays, strict=True):
+        assert a.equals(b), spec
+        assert np.isfinite(b.prediction).all()
+
+
+def test_a_model_in_float64_as_arrays_agrees_with_alone_to_1e12(tiny_model):
+    from coassist.intent import load_model_intent
+
+    specs = _specs(tiny_model, n=2)
+    src = load_model_intent(tiny_model)
+    src.model.net.double()  # float64 network: batched and batch-1 kernels differ only at 1e-16
+    sources = {(tiny_model, HORIZON): src}
+    alone = []
+    for spec in specs:
+        ep = spec_episode(spec, None, sources)
+        alone.append(ep.finish(run_loop(*ep.loop)))
+    eps = _episodes(specs, sources)
+    logs = run_point_mass_lockstep([ep.loop for ep in eps])
+    assert all(log is not None for log in logs)
+    for a, ep, log in zip(alone, eps, logs):
+        b = ep.finish(log)
+        assert a.n_samples == b.n_samples and a.meta.extra["ended"] == b.meta.extra["ended"]
+        for name in FIELDS:
+            np.testing.assert_allclose(getattr(b, name), getattr(a, name), rtol=0, atol=1e-12, err_msg=name)
+
+
+def test_a_trial_with_a_fault_leaves_the_array_path_and_is_the_reference_paths(monkeypatch):
+    """A tool-speed limit low enough that some trials hit it (TOOL_SPEED_LIMIT, the effort
+    braked): those leave the array path at that tick and are run again on run_loops; the
+    result is the reference path's, trial for trial."""
+    import coassist.sim.world as sim_world
+
+    monkeypatch.setattr(sim_world, "POINT_MASS_LIMITS", SafetyLimits(tool_speed=0.12))
+    specs = _specs("oracle", n=8, objects=("handle",))
+    reference = run_spec_lockstep(specs, arrays=False)
+    flagged = [bool(np.any(t.fault & int(Fault.TOOL_SPEED_LIMIT))) for t in reference]
+    assert any(flagged) and not all(flagged)  # the case mixes both kinds of trial
+    eps = _episodes(specs)
+    logs = run_point_mass_lockstep([ep.loop for ep in eps])
+    assert [log is None for log in logs] == flagged  # exactly the trials with a fault left
+    arrays = run_spec_lockstep(specs)
+    for a, b in zip(reference, arrays, strict=True):
+        assert a.equals(b)
+
+
+class FailingBatched(ConstantVelocityIntent):
+    """Constant velocity with a batcher that raises: the per-trial path falls back (flagged)."""
+
+    model_id = "constant-velocity-failing"
+
+    @property
+    def batcher(self):
+        return self
+
+    def predict_batch(self, windows: np.ndarray) -> np.ndarray:
+        raise RuntimeError("batched call failed")
+
+
+def test_a_failing_batched_source_sends_its_trials_to_the_reference_path():
+    specs = _specs("constant-velocity", n=3, objects=("handle",))
+    sources = {("constant-velocity", HORIZON): FailingBatched(HORIZON)}
+    eps = _episodes(specs, sources)
+    assert run_point_mass_lockstep([ep.loop for ep in eps]) == [None, None, None]
+
+
+def test_only_fresh_point_mass_runs_take_the_array_path():
+    ep = _episodes([TrialSpec(task="linear", seed=1, preset=PRESET)])[0]
+    assert fast_path_eligible(ep.loop)
+    assert not fast_path_eligible(Loop(ep.world, ep.tick, ep.n_max, lambda k, pose: False))  # another termination rule
+
+    class Wrapped:  # any other world
+        def __init__(self, world):
+            self._w = world
+
+        def __getattr__(self, name):
+            return getattr(self._w, name)
+
+    assert not fast_path_eligible(Loop(Wrapped(ep.world), ep.tick, ep.n_max, ep.termination))
+    with pytest.raises(ValueError, match=r"loops\[1\]"):
+        run_point_mass_lockstep([ep.loop, Loop(Wrapped(ep.world), ep.tick, ep.n_max, ep.termination)])
+    ep.world.apply(Command(effort=np.zeros(2)))
+    assert not fast_path_eligible(ep.loop)  # a world that has already run a period
