@@ -15,7 +15,9 @@ is timed too); every online gain is checked against the fresh one (max |differen
 max |gain| ≤ 1e-9). Last, a controller per simulated trial (``make_controller`` of the
 pipeline's presets): built from scratch each time (the naive baseline: what every
 arbitrated trial and every MuJoCo drive paid before) against a copy of the game built
-once per process (``cooperative_game``'s memo), gains checked bit for bit.
+once per process (``cooperative_game``'s memo), gains checked bit for bit. And
+``solve_batch`` for a lockstep group of 30 trials (numpy's stacked matmul, one gemv per
+row in C) against the same products in a Python loop of ``np.dot``, rows bit for bit.
 Targets: 6-DOF Np = 50 tick p99 ≤ 20 µs and ≥ 1000× faster than naive (issue #2);
 gains for a new α p99 ≤ 50 µs (issue #11). One BLAS thread, so the numbers
 describe one core.
@@ -73,6 +75,7 @@ def main() -> None:
     parser.add_argument("--alpha-changes", type=int, default=5000, help="timed α changes per case (online gains)")
     parser.add_argument("--fresh-changes", type=int, default=40, help="timed fresh gain computations per case")
     parser.add_argument("--controllers", type=int, default=5, help="timed fresh controller builds per case")
+    parser.add_argument("--batch-calls", type=int, default=2000, help="timed solve_batch calls per case (B = 30)")
     parser.add_argument("--json", type=str, default=None, help="also write the figures to this file")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
@@ -130,10 +133,58 @@ def main() -> None:
         print(f"6-DOF Np=50, {weights} weights: gains for a new α p99 {t['online_p99_us']:.1f} µs (target ≤ 50), "
               f"fresh {t['fresh_p99_us'] / 1e3:.1f} ms; agreement {t['max_rel_diff']:.1e} (target ≤ 1e-9)")
     print()
+    batch_rows = bench_batch(args.batch_calls)
+    print()
     controller_rows = bench_controllers(args.controllers)
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({"tick": rows, "alpha": alpha_rows, "controller": controller_rows}, fh, indent=2)
+            json.dump({"tick": rows, "alpha": alpha_rows, "batch": batch_rows, "controller": controller_rows}, fh, indent=2)
+
+
+def loop_solve_batch(game: CooperativeGame, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray):
+    """The baseline: ``solve_batch``'s three products per row as ``np.dot`` in a Python loop (as before)."""
+    g, n, B = game._state[0], game.model.n_dof, z.shape[0]
+    rh, rr = ref_h.reshape(B, -1), ref_r.reshape(B, -1)
+    u = np.empty((B, g.G_z.shape[0]))
+    for b in range(B):
+        ub = np.dot(g.G_z, z[b])
+        ub += np.dot(g.G_h, rh[b])
+        ub += np.dot(g.G_r, rr[b])
+        u[b] = ub
+    return u[:, :n], u[:, n:]
+
+
+def bench_batch(calls: int, B: int = 30) -> list[dict]:
+    """``solve_batch`` for a lockstep group of B trials (numpy's stacked matmul: one gemv per
+    row in C) against :func:`loop_solve_batch`; the rows must agree bit for bit."""
+    rng = np.random.default_rng(1)
+    out = []
+    print(f"{'solve_batch, B = ' + str(B):<22}{'stacked med':>12}{'p99 [µs]':>10}{'loop med':>10}{'p99 [µs]':>10}{'ratio (med)':>13}")
+    for n, horizon in ((2, 50), (6, 50)):
+        game = build_game(n, horizon)
+        args = (rng.normal(size=(B, 2 * n)), *rng.normal(size=(2, B, horizon, 2 * n)))
+        for a, b in zip(game.solve_batch(*args), loop_solve_batch(game, *args)):
+            if not np.array_equal(a, b):
+                raise SystemExit(f"solve_batch and the per-row loop differ for n={n}, Np={horizon}")
+        stacked = time_calls(game.solve_batch, args, calls)
+        loop = time_calls(loop_solve_batch, (game, *args), calls)
+        (s_med, s_p99), (l_med, l_p99) = stacked, loop
+        out.append(dict(n_dof=n, horizon=horizon, batch=B, stacked_median_us=s_med, stacked_p99_us=s_p99,
+                        loop_median_us=l_med, loop_p99_us=l_p99))  # fmt: skip
+        print(f"{f'{n}-DOF Np={horizon}':<22}{s_med:>12.1f}{s_p99:>10.1f}{l_med:>10.1f}{l_p99:>10.1f}{l_med / s_med:>13.1f}")
+    return out
+
+
+def time_calls(fn, args: tuple, calls: int) -> tuple[float, float]:
+    """Median and p99 [µs] of ``fn(*args)`` over ``calls`` calls, after 100 warm-up calls."""
+    for _ in range(100):
+        fn(*args)
+    t = np.empty(calls, dtype=np.int64)
+    for i in range(calls):
+        t0 = time.perf_counter_ns()
+        fn(*args)
+        t[i] = time.perf_counter_ns() - t0
+    return percentiles(t)
 
 
 def bench_controllers(fresh_builds: int) -> list[dict]:

@@ -410,26 +410,29 @@ def test_reference_and_state_shapes_are_checked():
 
 
 @pytest.mark.parametrize("kind", ["cooperative", "nash"])
-def test_solve_batch_is_solve_row_for_row_bit_for_bit(kind):
+@pytest.mark.parametrize(("horizon", "control_horizon", "B"), [(10, 4, 9), (50, 10, 33)])
+def test_solve_batch_is_solve_row_for_row_bit_for_bit(kind, horizon, control_horizon, B):
     """Trials in lockstep share one game: each row must get exactly what solve() gives it alone
     (the lockstep runner reproduces the per-trial loop bit for bit), also from a non-contiguous
-    batch."""
+    batch; at a toy size and at the presets' (Np = 50, a worker's group of 33)."""
     rng = np.random.default_rng(7)
-    model, Q, R_h, R_r, _, _, _ = random_instance(rng, 2, 10, 4)
+    model, Q, R_h, R_r, _, _, _ = random_instance(rng, 2, horizon, control_horizon)
     if kind == "cooperative":
-        game = CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=0.7, horizon=10, control_horizon=4)
+        game = CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=0.7, horizon=horizon, control_horizon=control_horizon)
     else:
-        game = NashGame(model, **Q, R_h=R_h, R_r=R_r, horizon=10, control_horizon=4)
-    B = 9
+        game = NashGame(model, **Q, R_h=R_h, R_r=R_r, horizon=horizon, control_horizon=control_horizon)
     z = rng.normal(size=(B, 4)) * 0.1
-    ref_h, ref_r = rng.normal(size=(2, B, 10, 4)) * 0.1  # slices of one array: ref_r[b] is not ref_h's neighbour
+    ref_h, ref_r = rng.normal(size=(2, B, horizon, 4)) * 0.1  # slices of one array: ref_r[b] is not ref_h's neighbour
     u_h, u_r = game.solve_batch(z, ref_h, ref_r)
+    strided = game.solve_batch(z[::-1], ref_h[::-1, :, ::1], ref_r[::-1])  # rows in reverse: negative strides
+    np.testing.assert_array_equal(strided[0], u_h[::-1])
+    np.testing.assert_array_equal(strided[1], u_r[::-1])
     assert u_h.shape == u_r.shape == (B, 2)
     for b in range(B):
         e_h, e_r = game.solve(z[b], ref_h[b], ref_r[b])
         np.testing.assert_array_equal(u_h[b], e_h)
         np.testing.assert_array_equal(u_r[b], e_r)
-    with pytest.raises(ValueError, match=r"z, ref_h, ref_r must have shapes \(B, 4\) and \(B, 10, 4\)"):
+    with pytest.raises(ValueError, match=rf"z, ref_h, ref_r must have shapes \(B, 4\) and \(B, {horizon}, 4\)"):
         game.solve_batch(z, ref_h[:, :5], ref_r)
 
 
