@@ -183,6 +183,7 @@ def run_franky(case, franky_sim):
     return trial, violations
 
 
+@pytest.mark.realtime  # franky-sim's loop: run alone (tests/robot/test_franka_world.py)
 @pytest.mark.parametrize("case", [c for c in table.CASES if c.name in ON_FRANKY], ids=list(ON_FRANKY))
 def test_franka_through_franky_sim(case, franky_sim):
     # 1.6 s: every one of these faults starts by tick 150 (1.2 s) and is flagged within a tick
