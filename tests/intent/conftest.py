@@ -43,3 +43,15 @@ def trials() -> list[LabeledTrial]:
 @pytest.fixture
 def tiny() -> Preset:
     return TINY
+
+
+def write_loop_model(folder, horizon: int) -> str:
+    """The tiny network trained for one epoch on three labeled trials and written to ``folder``,
+    predicting ``horizon`` ticks (a simulated loop needs at least its controller's horizon)."""
+    from dataclasses import replace as _replace
+
+    from coassist.intent.training import train_model, write_model
+
+    preset = _replace(TINY, window=_replace(TINY.window, horizon=horizon))
+    write_model(train_model(labeled(3), preset, _replace(TINY.train, epochs=1)), folder)
+    return str(folder)

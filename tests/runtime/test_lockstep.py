@@ -18,7 +18,7 @@ from coassist.runtime.loop import run_loop
 from coassist.scenario.intent_source import ConstantVelocityIntent
 from coassist.sim.world import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
 
-from ..intent.conftest import TINY, labeled
+from ..intent.conftest import write_loop_model
 
 PRESET = "thesis-evaluation-dm"
 #: Trials of different lengths (so runs drop out of the batch at different ticks) and users.
@@ -73,13 +73,7 @@ def _one_call_per_tick(trials) -> list[int]:
 
 @pytest.fixture(scope="module")
 def tiny_model(tmp_path_factory) -> str:
-    from coassist.intent.training import train_model, write_model
-
-    out = tmp_path_factory.mktemp("model") / "tiny"
-    # the tiny network, predicting the controller's 50 ticks (the loop needs ≥ its horizon)
-    preset = replace(TINY, window=replace(TINY.window, horizon=HORIZON))
-    write_model(train_model(labeled(3), preset, replace(TINY.train, epochs=1)), out)
-    return str(out)
+    return write_loop_model(tmp_path_factory.mktemp("model") / "tiny", HORIZON)
 
 
 @pytest.mark.parametrize("intent", ["nominal", "oracle"])

@@ -24,7 +24,7 @@ from coassist.scenario.intent_source import ConstantVelocityIntent
 from coassist.sim.lockstep import fast_path_eligible, run_point_mass_lockstep
 from coassist.sim.world import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
 
-from ..intent.conftest import TINY, labeled
+from ..intent.conftest import write_loop_model
 
 PRESET = "thesis-evaluation-dm"
 HORIZON = get_preset(PRESET).game.horizon
@@ -51,12 +51,7 @@ def _episodes(specs, sources=None):
 
 @pytest.fixture(scope="module")
 def tiny_model(tmp_path_factory) -> str:
-    from coassist.intent.training import train_model, write_model
-
-    out = tmp_path_factory.mktemp("model") / "tiny"
-    preset = replace(TINY, window=replace(TINY.window, horizon=HORIZON))
-    write_model(train_model(labeled(3), preset, replace(TINY.train, epochs=1)), out)
-    return str(out)
+    return write_loop_model(tmp_path_factory.mktemp("model") / "tiny", HORIZON)
 
 
 def test_named_intents_as_arrays_equal_every_trial_alone_bit_for_bit():

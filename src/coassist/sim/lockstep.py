@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from coassist.runtime.lockstep import Loop
+from coassist.runtime.lockstep import Loop, _batcher, _stepper
 from coassist.runtime.loop import LoopLog, TargetDwell
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.wrench import WrenchPipeline
@@ -188,7 +188,7 @@ class _Batch:
         self.f2 = f([t.safety._f2 for t in ticks])
         self.controllers = _groups([_stepper(t) for t in ticks])
         self.nominal = np.array([bool(t.intent.nominal) for t in ticks])
-        batchers = [None if t.intent.nominal else _batcher(t) for t in ticks]
+        batchers = [_batcher(t) for t in ticks]  # None: nominal, or an intent stage called alone
         self.model_groups = {key: g for key, g in _groups(batchers).items() if g[0] is not None}
         self.alone = [i for i in range(B) if not self.nominal[i] and batchers[i] is None]
         self.rings = {key: _Ring(ticks[members[0]].intent.history, members) for key, (_, members) in self.model_groups.items()}
@@ -500,18 +500,3 @@ def _groups(keys: Sequence[Any]) -> dict[int, tuple[Any, list[int]]]:
     for i, key in enumerate(keys):
         out.setdefault(id(key), (key, []))[1].append(i)
     return out
-
-
-def _stepper(tick: Any) -> Any:
-    controller = tick.controller
-    if callable(getattr(controller, "reset", None)) or not callable(getattr(controller, "step_batch", None)):
-        return None
-    return controller
-
-
-def _batcher(tick: Any) -> Any:
-    intent = tick.intent
-    if not all(hasattr(intent, a) for a in ("push", "accept")):
-        return None
-    batcher = getattr(intent, "batcher", None)
-    return batcher if callable(getattr(batcher, "predict_batch", None)) else None
