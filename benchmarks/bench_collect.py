@@ -3,13 +3,16 @@
 Measures:
 
 1. the network's work per simulated tick for a group of B trials (median, p99 over
-   ticks): one batched ``predict_batch`` call (lockstep) against B batch-1 calls (the
-   per-trial path, ``ModelIntent.predict``), on real feature windows;
+   ticks): one batched ``predict_batch`` call (lockstep) on ONNX Runtime (the default
+   where the onnx extra is installed, ``coassist.intent.onnx_network``) and on torch,
+   against B batch-1 torch calls (the per-trial path, ``ModelIntent.predict``), on real
+   feature windows;
 2. one 60-trial dataset — the iterative stage's: the tasks of
    ``coassist.experiments.pipeline.ITERATION_TASKS`` × 20 trials, cooperative controller,
    preset thesis-evaluation-dm — with the model in the loop, ``run_trials(...,
    lockstep=False)`` (every trial alone, one network call per trial and tick) against
-   the default lockstep path (one batched call per tick per worker), on ``--workers``
+   the default lockstep path (one batched call per tick per worker; and the network on
+   torch instead of ONNX Runtime, on the kept pool), on ``--workers``
    processes started for the call (as ``coassist collect`` does) and on a kept pool
    (as ``coassist reproduce`` does: its ~40 collections share one pool, so a collection
    does not pay the workers' start, ~3 s of importing numpy, scipy and torch); wall time
@@ -19,8 +22,9 @@ Measures:
    groups (bit for bit the same trials);
 4. per tick: one worker's lockstep group (every ``--workers``-th trial of the dataset),
    with the model and with the nominal intent, run in this process (one torch thread, as
-   a worker), ``--repeats`` times, two ways: ``run_loops`` over the per-trial objects and
-   as arrays (:mod:`coassist.sim.lockstep`, the default; the same trials bit for bit):
+   a worker), ``--repeats`` times: ``run_loops`` over the per-trial objects and as arrays
+   (:mod:`coassist.sim.lockstep`, the default; the same trials bit for bit), with the
+   model's network on torch and on ONNX Runtime (``TrialSpec.network``):
    wall and CPU seconds (CPU time is less inflated by other processes on a shared
    machine), the number of lockstep ticks and trial-ticks, µs per trial-tick and ms per
    lockstep tick, and the ratio.
@@ -59,31 +63,36 @@ def train_small_model(folder: Path) -> str:
     return str(folder)
 
 
-def network_ticks(model_path: str, batch: int, ticks: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per-tick seconds of the network work for ``batch`` trials: batched, and one call per trial."""
+def network_ticks(model_path: str, batch: int, ticks: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-tick seconds of the network work for ``batch`` trials: batched on ONNX Runtime,
+    batched on torch, and one torch call per trial."""
     import torch
 
     from coassist.intent import load_model_intent
     from coassist.sim.world import TrialSpec, run_spec
 
     torch.set_num_threads(1)
-    source = load_model_intent(model_path)
+    source = load_model_intent(model_path, backend="torch")
+    onnx = load_model_intent(model_path, backend="onnx")
     trial = run_spec(TrialSpec(task="curved", seed=7, preset="thesis-evaluation-dm"))
     rows = np.column_stack([trial.pose, trial.velocity, trial.wrench, trial.reference])
     L = source.history
     starts = np.linspace(0, rows.shape[0] - L - batch - ticks - 1, batch).astype(int)
-    batched, alone = [], []
+    on_onnx, batched, alone = [], [], []
     for k in range(ticks):
         windows = np.stack([rows[s + k : s + k + L] for s in starts])
         t0 = time.perf_counter()
-        source.batcher.predict_batch(windows)
+        onnx.batcher.predict_batch(windows)
         t1 = time.perf_counter()
+        source.batcher.predict_batch(windows)
+        t2 = time.perf_counter()
         for w in windows:
             source.predict(w)
-        t2 = time.perf_counter()
-        batched.append(t1 - t0)
-        alone.append(t2 - t1)
-    return np.asarray(batched), np.asarray(alone)
+        t3 = time.perf_counter()
+        on_onnx.append(t1 - t0)
+        batched.append(t2 - t1)
+        alone.append(t3 - t2)
+    return np.asarray(on_onnx), np.asarray(batched), np.asarray(alone)
 
 
 def dataset_seconds(specs, workers: int, lockstep: bool, repeats: int, kept_pool: bool = False) -> np.ndarray:
@@ -140,12 +149,13 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         model = args.model or train_small_model(Path(tmp) / "m")
         B = -(-len(ITERATION_TASKS) * args.trials // args.workers)  # one lockstep group per worker
-        batched, alone = network_ticks(model, B, args.ticks)
+        on_onnx, batched, alone = network_ticks(model, B, args.ticks)
         print(f"\nnetwork work per tick for {B} trials (one worker's group), {args.ticks} ticks:")
-        print(f"  lockstep, one batched call  median {np.median(batched) * 1e3:6.2f} ms   "
-              f"p99 {np.percentile(batched, 99) * 1e3:6.2f} ms")
-        print(f"  per trial, {B} calls         median {np.median(alone) * 1e3:6.2f} ms   p99 {np.percentile(alone, 99) * 1e3:6.2f} ms")
-        print(f"  speed-up (median)           {np.median(alone) / np.median(batched):.1f}x")
+        for name, x in (("lockstep, one batched call, ONNX Runtime", on_onnx), ("lockstep, one batched call, torch", batched),
+                        (f"per trial, {B} torch calls", alone)):  # fmt: skip
+            print(f"  {name:42s} median {np.median(x) * 1e3:6.2f} ms   p99 {np.percentile(x, 99) * 1e3:6.2f} ms")
+        print(f"  speed-up (median): batched torch / ONNX {np.median(batched) / np.median(on_onnx):.2f}x, "
+              f"per-trial torch / batched torch {np.median(alone) / np.median(batched):.1f}x")
 
         common = dict(controller="cooperative", users=(0,), tasks=ITERATION_TASKS, objects=("handle",),
                       trials=args.trials, seed=1000, preset="thesis-evaluation-dm")  # fmt: skip
@@ -156,18 +166,26 @@ def main() -> None:
             group = specs[:: args.workers]
             print(f"\none worker's lockstep group, {label} ({len(group)} trials), in this process:")
             cpu_of = {}
-            for arrays in (False, True):
-                g_wall, g_cpu, g_ticks, g_trial_ticks = group_seconds(group, args.repeats, arrays)
-                cpu_of[arrays] = np.median(g_cpu)
+            ways = [(False, "torch"), (True, "torch"), (True, "onnx")] if label == "model in the loop" else [(False, "torch"), (True, "torch")]
+            for arrays, network in ways:
+                g_wall, g_cpu, g_ticks, g_trial_ticks = group_seconds([replace(s, network=network) for s in group],
+                                                                      args.repeats, arrays)  # fmt: skip
+                cpu_of[arrays, network] = np.median(g_cpu)
                 name = "as arrays (coassist.sim.lockstep)" if arrays else "run_loops over per-trial objects"
+                if label == "model in the loop":
+                    name += f", network on {network}"
                 print(f"  {name}: {g_ticks} ticks, {g_trial_ticks} trial-ticks")
                 for what, x in (("wall", g_wall), ("CPU", g_cpu)):
                     print(f"    {what:4s} median {np.median(x):6.2f} s   p99 {np.percentile(x, 99):6.2f} s   "
                           f"{np.median(x) / g_trial_ticks * 1e6:5.1f} us per trial-tick   {np.median(x) / g_ticks * 1e3:5.2f} ms per tick")
-            print(f"  speed-up (median CPU)  {cpu_of[False] / cpu_of[True]:.2f}x")
+            print(f"  speed-up (median CPU): arrays / run_loops {cpu_of[False, 'torch'] / cpu_of[True, 'torch']:.2f}x"
+                  + (f", ONNX / torch {cpu_of[True, 'torch'] / cpu_of[True, 'onnx']:.2f}x, both "
+                     f"{cpu_of[False, 'torch'] / cpu_of[True, 'onnx']:.2f}x" if (True, "onnx") in cpu_of else ""))
         per_trial = dataset_seconds(with_model, args.workers, False, args.baseline_repeats)
         lock = dataset_seconds(with_model, args.workers, True, args.repeats)
         lock_kept = dataset_seconds(with_model, args.workers, True, args.repeats, kept_pool=True)
+        on_torch = [replace(s, network="torch") for s in with_model]
+        lock_kept_torch = dataset_seconds(on_torch, args.workers, True, args.repeats, kept_pool=True)
         nom = dataset_seconds(nominal, args.workers, False, args.repeats)
         nom_lock = dataset_seconds(nominal, args.workers, True, args.repeats)
         nom_kept = dataset_seconds(nominal, args.workers, True, args.repeats, kept_pool=True)
@@ -181,6 +199,8 @@ def main() -> None:
         print(f"  model in the loop, per trial              {fmt(per_trial)}")
         print(f"  model in the loop, lockstep               {fmt(lock)}   (target <= 10 s on 2 cores)")
         print(f"  model in the loop, lockstep, kept pool    {fmt(lock_kept)}")
+        print(f"    the same, network on torch              {fmt(lock_kept_torch)}   "
+              f"(x{np.median(lock_kept_torch) / np.median(lock_kept):.2f} the default's time)")
         print(f"  nominal intent, per trial                 {fmt(nom)}")
         print(f"  nominal intent, lockstep                  {fmt(nom_lock)}")
         print(f"  nominal intent, lockstep, kept pool       {fmt(nom_kept)}")

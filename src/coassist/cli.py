@@ -17,7 +17,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET
-from coassist.interfaces import NAMED_INTENTS
+from coassist.interfaces import NAMED_INTENTS, NETWORK_BACKENDS
 from coassist.registry import Registry, UnknownNameError, unknown_name_message
 
 T = TypeVar("T")
@@ -480,6 +480,7 @@ def collect(
     ray_address: str = typer.Option(None, help="Run on a Ray cluster at this address (needs coassist[cluster])."),
     overwrite: bool = typer.Option(False, help="Replace an existing dataset folder (only once the new one is complete)."),
     lockstep: bool = typer.Option(True, "--lockstep/--per-trial", help="Advance each worker's trials together: one controller call and, with a model in the loop, one network call per tick for all (~6x faster with a model, ~2x without; with a model equal to the per-trial run to the network's float32 rounding, without it bit for bit). --per-trial: every trial alone, bit for bit the same whatever else runs (e.g. across a resumed collection)."),
+    network: str = typer.Option("auto", help="What evaluates a model's network: onnx (ONNX Runtime, 1.7-2.3x faster in the loop; the onnx extra), torch, or auto (onnx where installed). The two agree to float32 rounding; each trial records which ran."),
 ) -> None:
     """Simulate trials and write them as a dataset (thesis §5.2.2; default: D0, 60 trials).
 
@@ -494,6 +495,7 @@ def collect(
 
     _choose(controller, CONTROLLER_KINDS, "--controller", "controller")
     _choose(obstacle, OBSTACLES, "--obstacle", "obstacle")
+    _choose(network, NETWORK_BACKENDS, "--network", "network backend")
     _lookup(CONTROL_PRESETS, preset, "--preset")
     for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
         if value is not None and value < minimum:
@@ -508,7 +510,7 @@ def collect(
         folder = collect_dataset(
             out, dataset_id=dataset_id, workers=workers, progress=True, ray_address=ray_address, overwrite=overwrite,
             controller=controller, users=user_list, tasks=task_list, objects=object_list, trials=trials, seed=seed,
-            preset=preset, obstacle=obstacle, lockstep=lockstep,
+            preset=preset, obstacle=obstacle, lockstep=lockstep, network=network,
             intent=intent, say=lambda line: console.print(line, highlight=False),
         )
     except (ValueError, FileExistsError, NotADirectoryError, RuntimeError, OutputBusyError) as exc:

@@ -34,6 +34,7 @@ from coassist._checks import is_real_number
 
 __all__ = [
     "NAMED_INTENTS",
+    "NETWORK_BACKENDS",
     "FEATURES",
     "Fault",
     "IntentSource",
@@ -124,6 +125,11 @@ FEATURES = ("x", "y", "vx", "vy", "fx", "fy", "x_ref", "y_ref")
 #: nominal plan (eq. 4.7), the tool's constant-velocity extrapolation, and the simulated
 #: operator's true intent ("oracle", simulation only).
 NAMED_INTENTS = ("nominal", "constant-velocity", "oracle")
+#: What evaluates a model-backed source's network in a simulated loop
+#: (``coassist.intent.load_model_intent``): torch eager, ONNX Runtime (the ``onnx`` extra;
+#: ``coassist.intent.onnx_network``), or "auto": ONNX Runtime where it is installed, else
+#: torch. The two agree to float32 rounding.
+NETWORK_BACKENDS = ("auto", "torch", "onnx")
 
 
 @dataclass(frozen=True, eq=False)

@@ -71,8 +71,9 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
         expect |= {f"job:mujoco:{s}" for s in LEARNED}
     assert set(ws._pending) == expect
     # each prefetched cell carries its source's model
-    options, _ = ws._pending["dataset:ablation-board-cooperative-ridge"]
+    (options, groups), _ = ws._pending["dataset:ablation-board-cooperative-ridge"]
     assert options["intent"] == models["ridge"] and options["controller"] == "cooperative"
+    assert groups == 1  # a cell is one lockstep group: the pool holds many at once
     if ahead.mujoco:
         jobs = _mujoco_jobs(cfg, {s: models.get(s, s) for s in SOURCES})
         drives = [args[0] for name, args in pool.calls if name == "_drive_batch"]

@@ -119,10 +119,11 @@ def test_a_model_drives_the_simulated_loop(tmp_path):
     assert isinstance(source, ModelIntent) and source.model_id.startswith("M@") and len(source.model_id) == 14
     trial = run_spec(TrialSpec(task="linear", seed=3, intent=str(tmp_path / "M")))
     assert trial.meta.model_id == source.model_id
+    assert trial.meta.extra["network"] == source.network  # which backend evaluated the network
     assert not np.any(trial.fault & int(Fault.PREDICTION_FALLBACK))
     feats = np.column_stack([trial.pose, trial.velocity, trial.wrench, trial.reference])
     for k in (30, 31, 200, trial.n_samples - 1):
-        expected = source.model.predict(feats[k - 29 : k + 1])
+        expected = source.predict(feats[k - 29 : k + 1])  # the source's own backend, batch 1 as in the loop
         np.testing.assert_allclose(trial.prediction[k], expected, rtol=0, atol=1e-12)
 
     class Context:  # what the world hands reset(); only dt is read

@@ -56,8 +56,8 @@ def test_a_model_drives_in_lockstep_to_its_rounding_with_one_call_per_tick(tiny_
     loads, calls = [], []
     real_load = intent_source_module.load_intent_source
 
-    def counting_load(intent, horizon):
-        src = real_load(intent, horizon=horizon)
+    def counting_load(intent, horizon, network):
+        src = real_load(intent, horizon=horizon, network=network)
         loads.append(intent)
         batch = src.batcher.predict_batch
         src.batcher.predict_batch = lambda windows: (calls.append(len(windows)), batch(windows))[1]

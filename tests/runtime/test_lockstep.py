@@ -27,8 +27,8 @@ HORIZON = get_preset(PRESET).game.horizon  # the key spec_episode caches sources
 FIELDS = ("pose", "velocity", "wrench", "prediction", "effort_h", "effort_r")
 
 
-def _specs(intent: str) -> list[TrialSpec]:
-    return [TrialSpec(task=t, seed=s, user=u, intent=intent, preset=PRESET) for t, s, u in CASES]
+def _specs(intent: str, network: str = "auto") -> list[TrialSpec]:
+    return [TrialSpec(task=t, seed=s, user=u, intent=intent, preset=PRESET, network=network) for t, s, u in CASES]
 
 
 def _alone(specs, sources=None):
@@ -112,7 +112,7 @@ class CountingBatched(ConstantVelocityIntent):
 def test_one_batched_call_per_tick_and_the_same_trials(fail):
     specs = _specs("constant-velocity")
     src = CountingBatched(HORIZON, fail=fail)  # shared; every trial's tick.reset resets it (dt only)
-    sources = {("constant-velocity", HORIZON): src}
+    sources = {("constant-velocity", HORIZON, "auto"): src}  # spec_episode's cache key: (intent, horizon, network)
     alone = _alone(specs, sources)
     src.calls.clear()
     together = _together(specs, sources)
@@ -128,10 +128,10 @@ def test_one_batched_call_per_tick_and_the_same_trials(fail):
 def test_a_model_in_float64_agrees_to_1e12(tiny_model, step_batch_rows):
     from coassist.intent import load_model_intent
 
-    specs = _specs(tiny_model)
-    src = load_model_intent(tiny_model)
+    specs = _specs(tiny_model, network="torch")
+    src = load_model_intent(tiny_model, backend="torch")
     src.model.net.double()  # float64 network: batched and batch-1 kernels differ only at 1e-16
-    sources = {(tiny_model, HORIZON): src}
+    sources = {(tiny_model, HORIZON, "torch"): src}
     alone = _alone(specs, sources)
     step_batch_rows.clear()
     together = _together(specs, sources)
@@ -155,7 +155,8 @@ def test_every_controller_kind_runs_in_lockstep_exactly_as_alone(controller, ste
     assert step_batch_rows == ([] if controller == "cooperative-arbitrated" else _one_call_per_tick(together))
 
 
-def test_a_float32_model_agrees_to_its_rounding(tiny_model):
+@pytest.mark.parametrize("network", ["torch", "onnx"])
+def test_a_float32_model_agrees_to_its_rounding(tiny_model, network):
     # torch's CPU kernels round a row differently at batch 1 and in a batch (MKL takes other
     # paths: measured up to ~3e-8 on an LSTM output, ~1e-6 on a 200-input linear layer at
     # O(1) inputs). The network's outputs are scaled to [−1, 1]; a few float32 ulps (6e-8)
@@ -163,7 +164,10 @@ def test_a_float32_model_agrees_to_its_rounding(tiny_model):
     # gain from ref_h to the pose over a trial is below 1 (the pose moved ~1e-10 m for
     # ~3e-8 m predictions with the lstm preset), so 1e-6 m and 1e-7 m bound both with margin
     # while a real bookkeeping error (a wrong row, a tick late) moves them by millimetres.
-    specs = _specs(tiny_model)
+    # ONNX Runtime's kernels (coassist.intent.onnx_network) round within the same bounds.
+    if network == "onnx":
+        pytest.importorskip("onnxruntime", reason="the onnx extra is not installed")
+    specs = _specs(tiny_model, network)
     alone = [run_spec(spec) for spec in specs]
     together = run_spec_lockstep(specs)
     for a, b in zip(alone, together):
@@ -172,6 +176,40 @@ def test_a_float32_model_agrees_to_its_rounding(tiny_model):
         np.testing.assert_allclose(b.prediction, a.prediction, rtol=0, atol=1e-6)
         np.testing.assert_allclose(b.pose, a.pose, rtol=0, atol=1e-7)
         np.testing.assert_allclose(b.effort_r, a.effort_r, rtol=0, atol=1e-4)
+
+
+def test_the_network_backends_give_the_same_trials_to_float32_rounding(tiny_model):
+    """torch and ONNX Runtime evaluate the same float32 network (bounds as in the test above);
+    each trial records which one ran."""
+    pytest.importorskip("onnxruntime", reason="the onnx extra is not installed")
+    with_torch = run_spec_lockstep(_specs(tiny_model, "torch"))
+    with_onnx = run_spec_lockstep(_specs(tiny_model, "onnx"))
+    for a, b in zip(with_torch, with_onnx):
+        assert a.meta.extra["network"].startswith("torch ") and b.meta.extra["network"].startswith("onnxruntime ")
+        assert a.n_samples == b.n_samples and a.meta.extra["ended"] == b.meta.extra["ended"]
+        np.testing.assert_array_equal(a.fault, b.fault)
+        np.testing.assert_allclose(b.prediction, a.prediction, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(b.pose, a.pose, rtol=0, atol=1e-7)
+        np.testing.assert_allclose(b.effort_r, a.effort_r, rtol=0, atol=1e-4)
+    with pytest.raises(ValueError, match="TrialSpec.network"):
+        TrialSpec(task="linear", intent=tiny_model, network="tensorrt")
+
+
+def test_a_model_on_onnx_runtime_runs_in_lockstep_bit_for_bit_as_alone(tiny_model):
+    """ONNX Runtime's CPU kernels give a row the same bits at any batch size (measured on the
+    project's machines; checked first here, skipped where it does not hold): then a lockstep
+    group's trials with a float32 model in the loop are bit for bit the per-trial ones."""
+    pytest.importorskip("onnxruntime", reason="the onnx extra is not installed")
+    from coassist.intent import load_model_intent
+
+    src = load_model_intent(tiny_model, backend="onnx")
+    windows = np.random.default_rng(5).normal(scale=0.05, size=(9, src.history, 8))
+    if not np.array_equal(src.batcher.predict_batch(windows), np.stack([src.predict(w) for w in windows])):
+        pytest.skip("ONNX Runtime's kernels are not batch-invariant on this CPU: lockstep agrees to float32 rounding")
+    specs = _specs(tiny_model, "onnx")
+    alone = [run_spec(spec) for spec in specs]
+    for a, b in zip(alone, run_spec_lockstep(specs), strict=True):
+        assert a.equals(b)
 
 
 class DropLink:

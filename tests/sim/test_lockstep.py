@@ -94,10 +94,10 @@ def test_a_model_in_the_loop_as_arrays_equals_run_loops_bit_for_bit(tiny_model):
 def test_a_model_in_float64_as_arrays_agrees_with_alone_to_1e12(tiny_model):
     from coassist.intent import load_model_intent
 
-    specs = _specs(tiny_model, n=2)
-    src = load_model_intent(tiny_model)
+    specs = [replace(spec, network="torch") for spec in _specs(tiny_model, n=2)]
+    src = load_model_intent(tiny_model, backend="torch")
     src.model.net.double()  # float64 network: batched and batch-1 kernels differ only at 1e-16
-    sources = {(tiny_model, HORIZON): src}
+    sources = {(tiny_model, HORIZON, "torch"): src}
     alone = []
     for spec in specs:
         ep = spec_episode(spec, None, sources)
@@ -146,7 +146,7 @@ class FailingBatched(ConstantVelocityIntent):
 
 def test_a_failing_batched_source_sends_its_trials_to_the_reference_path():
     specs = _specs("constant-velocity", n=3, objects=("handle",))
-    sources = {("constant-velocity", HORIZON): FailingBatched(HORIZON)}
+    sources = {("constant-velocity", HORIZON, "auto"): FailingBatched(HORIZON)}
     eps = _episodes(specs, sources)
     assert run_point_mass_lockstep([ep.loop for ep in eps]) == [None, None, None]
 

@@ -199,6 +199,15 @@ def test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone()
     many = submit_trials([specs[0]] * (5 * NAMED_GROUP + 1), Pool(), workers=2).jobs
     assert len(many) == 6 and max(len(g) for _, g in many) <= NAMED_GROUP
     assert sorted(i for _, g in many for i in g) == list(range(5 * NAMED_GROUP + 1))
+    # groups= overrides the rule (a prefetching caller keeps the pool busy itself), at most one per trial
+    assert [g for _, g in submit_trials(specs, Pool(), workers=2, groups=1).jobs] == [tuple(range(8))]
+    assert [g for _, g in submit_trials(specs, Pool(), workers=2, groups=3).jobs] == [(0, 3, 6), (1, 4, 7), (2, 5)]
+    assert len(submit_trials(specs[:2], Pool(), workers=2, groups=5).jobs) == 2
+    with pytest.raises(ValueError, match="groups must be >= 1"):
+        submit_trials(specs, Pool(), workers=2, groups=0)
+    one_group = run_trials(specs, workers=2, progress=False, groups=1)
+    for a, b in zip(alone, one_group, strict=True):
+        assert a.equals(b)
 
 
 def test_a_kept_pool_serves_call_after_call_and_stays_up():

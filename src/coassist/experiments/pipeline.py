@@ -198,9 +198,11 @@ class Workspace:
 
     def collect(self, name: str, *, tasks, users=(0,), objects=("handle",), trials: int, seed: int,
                 controller: str = "cooperative", preset: str | None = None, intent: str = "nominal",
-                obstacle: str = "small"):
+                obstacle: str = "small", groups: int | None = None):
         """Simulate a dataset into ``out/datasets/<name>``; return its folder and the dataset read back.
 
+        ``groups``: how many lockstep groups the trials are split into on the pool
+        (:func:`~coassist.sim.world.submit_trials`; None: its rule), an option like the others.
         A collection :meth:`prefetch` started with the same options is waited for, not run
         again (the same trials bit for bit: the same jobs); one started under this name with
         other options is let finish, then replaced by the one asked for."""
@@ -210,19 +212,19 @@ class Workspace:
         options = self._spec_options(tasks, users, objects, trials, seed, controller, preset, intent, obstacle)
         written = self._pending.pop(f"dataset:{name}", None)
         if written is not None:
-            if written[0] == options:
+            if written[0] == (options, groups):
                 return written[1].result()
             with contextlib.suppress(Exception):  # another collection under this name: let it end, then replace it
                 written[1].result()
         folder = collect_dataset(
             self.out / "datasets" / name, dataset_id=name, workers=self.config.workers, progress=self.progress,
-            overwrite=True, lockstep=self.config.lockstep, pool=self.pool, **options,
+            overwrite=True, lockstep=self.config.lockstep, pool=self.pool, groups=groups, **options,
         )
         return folder, read_dataset(folder)
 
     def prefetch(self, name: str, *, tasks, users=(0,), objects=("handle",), trials: int, seed: int,
                  controller: str = "cooperative", preset: str | None = None, intent: str = "nominal",
-                 obstacle: str = "small") -> None:
+                 obstacle: str = "small", groups: int | None = None) -> None:
         """Start :meth:`collect`'s simulations for these options on the run's pool now and
         return at once; a thread of this process writes the dataset as the jobs end, and the
         :meth:`collect` with the same name and options returns it. The pool runs jobs in the
@@ -238,11 +240,11 @@ class Workspace:
         options = self._spec_options(tasks, users, objects, trials, seed, controller, preset, intent, obstacle)
         pending = self._pending.get(f"dataset:{name}")
         if pending is not None:
-            if pending[0] == options:
+            if pending[0] == (options, groups):
                 return  # already on its way: the same trials
             raise ValueError(f"dataset {name!r} is already being prefetched with other options: collect it first")
         submitted = submit_trials(dataset_specs(**options), self.pool, workers=self.config.workers,
-                                  lockstep=self.config.lockstep)  # fmt: skip
+                                  lockstep=self.config.lockstep, groups=groups)  # fmt: skip
         written: Future = Future()
 
         def write() -> None:
@@ -256,7 +258,7 @@ class Workspace:
                 written.set_exception(exc)
 
         threading.Thread(target=write, name=f"coassist-write-{name}", daemon=True).start()
-        self._pending[f"dataset:{name}"] = (options, written)
+        self._pending[f"dataset:{name}"] = ((options, groups), written)
 
     def submit(self, key: str, fn: Callable[..., Any], *args: Any) -> Future | None:
         """Run ``fn(*args)`` on the run's pool, for a later :meth:`take` of ``key`` (None without a pool)."""

@@ -150,20 +150,29 @@ class IntentModel:
         x = np.asarray(history, dtype=np.float64)[:, self.window.offsets + self.window.history - 1]
         return to_relative(x, self.n_dof) if self.window.input_frame == "relative" else x
 
+    def checked_history(self, history: np.ndarray) -> np.ndarray:
+        """Raw histories as float64 (B, history, 4·d); ValueError naming the expected shape otherwise."""
+        h = np.asarray(history, dtype=np.float64)
+        if h.ndim != 3 or h.shape[1:] != (self.history, 4 * self.n_dof):
+            raise ValueError(f"history must have shape (B, {self.history}, {4 * self.n_dof}), got {h.shape}")
+        return h
+
+    def history_positions(self, out: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """Network outputs (B, H·d) for checked histories ``h`` -> positions (B, H, d) in m,
+        anchored at each history's current sample (pose and velocity of ``h[:, -1]``)."""
+        d = self.n_dof
+        return self.outputs_to_positions(out, h[:, -1, :d], h[:, -1, d : 2 * d])
+
     @torch.inference_mode()
     def predict_batch(self, history: np.ndarray) -> np.ndarray:
         """Predicted positions (B, H, d) in m from raw histories (B, history, 4·d).
 
         ``history[b, -1]`` is the current sample x(k); prediction i is for tick k+i.
         """
-        h = np.asarray(history, dtype=np.float64)
-        if h.ndim != 3 or h.shape[1:] != (self.history, 4 * self.n_dof):
-            raise ValueError(f"history must have shape (B, {self.history}, {4 * self.n_dof}), got {h.shape}")
+        h = self.checked_history(history)
         if self.net.training:  # toggled only when needed: eval() walks every module, a cost per tick
             self.net.eval()
-        out = self.net(self.scale_inputs(self.prepare(h))).numpy()
-        d = self.n_dof
-        return self.outputs_to_positions(out, h[:, -1, :d], h[:, -1, d : 2 * d])
+        return self.history_positions(self.net(self.scale_inputs(self.prepare(h))).numpy(), h)
 
     def predict(self, history: np.ndarray) -> np.ndarray:
         """One prediction: raw history (history, 4·d) -> (H, d) positions in m.

@@ -45,13 +45,11 @@ Backends (``benchmarks/bench_intent.py`` and ``benchmarks/bench_tick.py`` measur
 
 from __future__ import annotations
 
-import io
 import math
 import multiprocessing
 import tempfile
 import threading
 import time
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -62,7 +60,7 @@ import torch
 
 from coassist._checks import as_real_array, check_int, check_optional_int
 from coassist.intent.model import IntentModel
-from coassist.interfaces import FEATURES, Fault, PlausibilityLimits, prediction_plausible
+from coassist.interfaces import FEATURES, NETWORK_BACKENDS, Fault, PlausibilityLimits, prediction_plausible
 
 __all__ = [
     "BACKENDS",
@@ -274,34 +272,9 @@ def make_runner(model: IntentModel, backend: str = "torch", threads: int = 1) ->
         return ProcessRunner(model, threads)
     if backend != "onnx":
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-    try:
-        import onnxruntime as ort
-    except ImportError:
-        raise ImportError("backend 'onnx' needs onnxruntime (pip install onnxruntime==1.31.1)") from None
-    steps, nf = model.window.steps, 4 * model.n_dof
-    buf = io.BytesIO()
-    net = model.net.eval()
-    try:
-        # The tracer's warnings concern shapes we fix (batch 1, ``steps`` rows): not the user's to act on.
-        with torch.no_grad(), warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            torch.onnx.export(net, (torch.zeros(1, steps, nf),), buf, input_names=["x"], output_names=["y"],
-                              dynamo=False)  # fmt: skip
-    except Exception as exc:  # the exporter reports a missing 'onnx' package this way
-        raise ImportError(f"ONNX export failed (is the 'onnx' package installed?): {exc}") from None
-    opts = ort.SessionOptions()
-    opts.intra_op_num_threads = threads
-    opts.inter_op_num_threads = 1
-    session = ort.InferenceSession(buf.getvalue(), opts, providers=["CPUExecutionProvider"])
-    d = model.n_dof
+    from coassist.intent.onnx_network import OnnxIntentModel
 
-    def run(history: np.ndarray) -> np.ndarray:
-        h = np.asarray(history, dtype=np.float64)[None]
-        x = model.input_scaler.transform(model.prepare(h)).astype(np.float32)
-        out = session.run(None, {"x": x})[0]
-        return model.outputs_to_positions(out, h[:, -1, :d], h[:, -1, d : 2 * d])[0]
-
-    return run
+    return OnnxIntentModel(model, threads).predict
 
 
 class RealtimePredictor:
@@ -501,11 +474,25 @@ class ModelIntent:
 
     ``model_id`` is ``<folder name>@<first 12 hex digits of the weights' SHA-256>``: the
     id recorded in every trial collected with this model in the loop (thesis D_{k+1}).
+    ``backend``: what evaluates the network, "torch" or "onnx"
+    (:mod:`coassist.intent.onnx_network`); ``network`` names it with its version, for the
+    trial's record.
     """
 
-    def __init__(self, model: IntentModel, model_id: str) -> None:
+    def __init__(self, model: IntentModel, model_id: str, backend: str = "torch") -> None:
+        if backend not in ("torch", "onnx"):
+            raise ValueError(f"backend must be 'torch' or 'onnx', got {backend!r}")
         self.model = model
         self.history, self.horizon, self.model_id = model.history, model.horizon, model_id
+        if backend == "onnx":
+            from coassist.intent.onnx_network import OnnxIntentModel
+
+            onnx = OnnxIntentModel(model)
+            self._batcher: Any = onnx
+            self.network = onnx.network.runtime
+        else:
+            self._batcher = model
+            self.network = f"torch {torch.__version__}"
 
     def reset(self, context: Any = None) -> None:
         """Refuse a trial whose sampling period differs from the model's."""
@@ -513,24 +500,38 @@ class ModelIntent:
             self.model.check_compatible(None, context.dt, what="the simulated loop")
 
     def predict(self, history: np.ndarray) -> np.ndarray:
-        return self.model.predict(history)
+        return self._batcher.predict(history)
 
     @property
-    def batcher(self) -> IntentModel:
-        """The model: ``predict_batch(histories (B, history, 8))`` serves many trials' ticks in one
-        network call (coassist.runtime.lockstep); row b is ``predict(histories[b])`` up to the
-        float32 rounding of batched kernels. Stateless, so trials may share it."""
-        return self.model
+    def batcher(self) -> Any:
+        """``predict_batch(histories (B, history, 8))``, the model's on the chosen backend: serves
+        many trials' ticks in one network call (coassist.runtime.lockstep); row b is
+        ``predict(histories[b])`` up to the float32 rounding of batched kernels. Stateless,
+        so trials may share it."""
+        return self._batcher
 
 
-def load_model_intent(path: str) -> ModelIntent:
+def load_model_intent(path: str, backend: str = "auto") -> ModelIntent:
     """A model folder as an intent source for the simulated loop (see :class:`ModelIntent`).
+
+    ``backend``: what evaluates the network, one of
+    :data:`~coassist.interfaces.NETWORK_BACKENDS`: "torch", "onnx" (ONNX Runtime,
+    1.7–2.3× faster at the loop's batch sizes, :mod:`coassist.intent.onnx_network`) or
+    "auto": ONNX Runtime where the ``onnx`` extra is installed, else torch. The two agree
+    to float32 rounding; each simulated trial records which one ran
+    (``Trial.meta.extra["network"]``).
 
     Leaves torch's thread count alone: the simulator's worker processes set one thread
     each (one process per core); a single-process caller chooses its own.
     """
     from coassist.intent.model import load_model, read_sidecar
 
+    if backend not in NETWORK_BACKENDS:
+        raise ValueError(f"network backend must be one of {NETWORK_BACKENDS}, got {backend!r}")
+    if backend == "auto":
+        from coassist.intent.onnx_network import onnx_runtime_available
+
+        backend = "onnx" if onnx_runtime_available() else "torch"
     model = load_model(path, features=FEATURES)
     digest = str(read_sidecar(path).get("weights_sha256", ""))[:12]
-    return ModelIntent(model, f"{Path(path).name}@{digest}")
+    return ModelIntent(model, f"{Path(path).name}@{digest}", backend)

@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from coassist._checks import check_int
-from coassist.interfaces import IntentSource, TrialContext
+from coassist.interfaces import NETWORK_BACKENDS, IntentSource, TrialContext
 
 
 class NominalIntent:
@@ -119,16 +119,19 @@ def _rows(grid: np.ndarray, k: int, horizon: int) -> np.ndarray:
     return grid[idx]
 
 
-def load_intent_source(spec: str, horizon: int = 50) -> IntentSource:
+def load_intent_source(spec: str, horizon: int = 50, network: str = "auto") -> IntentSource:
     """An intent source from its name or model path.
 
     ``"nominal"`` → :class:`NominalIntent`; ``"oracle"`` → :class:`OracleIntent`;
     ``"constant-velocity"`` → :class:`ConstantVelocityIntent`; any
     other string is a model path handed to ``coassist.intent.load_model_intent``
-    (imported lazily, so the simulator works without the learning stack).
+    (imported lazily, so the simulator works without the learning stack), its network
+    evaluated by ``network`` (:data:`~coassist.interfaces.NETWORK_BACKENDS`).
     """
     if not isinstance(spec, str) or not spec:
         raise ValueError(f"intent must be 'nominal', 'oracle' or a model path, got {spec!r}")
+    if network not in NETWORK_BACKENDS:
+        raise ValueError(f"network must be one of {NETWORK_BACKENDS}, got {network!r}")
     if spec == "nominal":
         return NominalIntent(horizon)
     if spec == "oracle":
@@ -142,21 +145,22 @@ def load_intent_source(spec: str, horizon: int = 50) -> IntentSource:
             f"intent {spec!r} is a model path, but coassist.intent.load_model_intent is not available ({exc})"
         ) from None
     try:
-        return load_model_intent(spec)
+        return load_model_intent(spec, backend=network)
     except (OSError, ValueError) as exc:  # missing folder, bad sidecar, features or dt that do not match
         raise ValueError(f"intent {spec!r} could not be loaded as a model: {exc}") from None
 
 
-def shared_intent_source(spec: str, horizon: int, cache: dict[tuple[str, int], IntentSource] | None) -> IntentSource:
-    """:func:`load_intent_source` through ``cache`` ((spec, horizon) → source), for runs in
+def shared_intent_source(spec: str, horizon: int, cache: dict[tuple[str, int, str], IntentSource] | None,
+                         network: str = "auto") -> IntentSource:  # fmt: skip
+    """:func:`load_intent_source` through ``cache`` ((spec, horizon, network) → source), for runs in
     lockstep: a source with a ``batcher`` (a loaded model: stateless) is loaded once and
     shared, so one network call per tick serves every run; the others keep per-run state
     and are loaded per call. ``cache`` None: always loaded."""
-    key = (spec, horizon)
+    key = (spec, horizon, network)
     shared = None if cache is None else cache.get(key)
     if shared is not None:
         return shared
-    source = load_intent_source(spec, horizon=horizon)
+    source = load_intent_source(spec, horizon=horizon, network=network)
     if cache is not None and getattr(source, "batcher", None) is not None:
         cache[key] = source
     return source

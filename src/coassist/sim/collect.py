@@ -27,8 +27,10 @@ def dataset_specs(
     intent: str = "nominal",
     population_seed: int = 0,
     obstacle: str = "small",
+    network: str = "auto",
 ) -> list[TrialSpec]:
     """One spec per (user, object, task, repetition); trial i of the list gets seed ``seed + i``.
+    ``network``: what evaluates a model's network (:attr:`TrialSpec.network <coassist.sim.world.TrialSpec>`).
 
     Every trial has its own seed, so two datasets with different ``seed`` share no
     trial as long as the seed ranges do not overlap (a 60-trial dataset uses seed … seed+59).
@@ -46,7 +48,7 @@ def dataset_specs(
                     specs.append(TrialSpec(
                         task=task, user=user, object=obj, controller=controller, preset=preset,
                         seed=seed + len(specs), intent=intent, population_seed=population_seed,
-                        obstacle=obstacle,
+                        obstacle=obstacle, network=network,
                     ))
     return specs
 
@@ -63,6 +65,7 @@ def collect_dataset(
     lockstep: bool = True,
     pool: Executor | None = None,
     submitted: SubmittedTrials | None = None,
+    groups: int | None = None,
     **spec_options,
 ) -> Path:
     """Simulate the trials of :func:`dataset_specs` (``spec_options``) and write them as a dataset.
@@ -72,6 +75,7 @@ def collect_dataset(
     groups; processes kept across collections). ``submitted``: this collection's trials,
     already put on a pool by :func:`~coassist.sim.world.submit_trials` (its specs must be
     :func:`dataset_specs` of ``spec_options``): they are waited for instead of run again.
+    ``groups``: :func:`~coassist.sim.world.run_trials`' (lockstep groups on the processes).
 
     The output is checked and locked before anything is simulated. Each trial is
     written as soon as it finishes (:class:`coassist.data.DatasetWriter`), so memory
@@ -112,7 +116,8 @@ def collect_dataset(
             submitted.gather(lambda i, trial: writer.add(i, trial) if not writer.has(i) else None, progress)
             return writer.finish()
         run_trials([specs[i] for i in todo], workers=workers, progress=progress, ray_address=ray_address,
-                   lockstep=lockstep, pool=pool, on_result=lambda j, trial: writer.add(todo[j], trial))  # fmt: skip
+                   lockstep=lockstep, pool=pool, groups=groups,
+                   on_result=lambda j, trial: writer.add(todo[j], trial))  # fmt: skip
         return writer.finish()
 
 

@@ -57,7 +57,7 @@ from coassist._progress import progress_bar
 from coassist.config import THESIS_EVALUATION
 from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
 from coassist.data import Trial, TrialMeta
-from coassist.interfaces import NAMED_INTENTS, IntentSource
+from coassist.interfaces import NAMED_INTENTS, NETWORK_BACKENDS, IntentSource
 from coassist.model.impedance import ImpedanceModel
 from coassist.runtime.episode import (
     ARRIVE_RADIUS,
@@ -334,6 +334,9 @@ def build_trial(
             # What the effort drives: (M + m) a + D v = u (the label 'hand_alone' removes u_r through it).
             "plant": {"M": [float(v) + obj.mass for v in np.diag(model.M)], "D": [float(v) for v in np.diag(model.D)],
                       "K": [0.0, 0.0]},
+            # What evaluated a model's network (torch or ONNX Runtime, with its version): the two
+            # agree to float32 rounding, which the trajectory carries (coassist.intent.onnx_network).
+            **({"network": network} if isinstance(network := getattr(source, "network", None), str) else {}),
         },
     )  # fmt: skip
 
@@ -351,6 +354,8 @@ class TrialSpec:
     intent : one of :data:`~coassist.interfaces.NAMED_INTENTS` or a model path (loaded in the worker).
     population_seed : which population the user is drawn from.
     obstacle : a name of :data:`coassist.scenario.tasks.OBSTACLES` ("small": the evaluation's box).
+    network : what evaluates a model path's network, one of :data:`~coassist.interfaces.NETWORK_BACKENDS`
+    ("auto": ONNX Runtime where installed, else torch; they agree to float32 rounding).
     """
 
     task: str
@@ -362,8 +367,11 @@ class TrialSpec:
     intent: str = "nominal"
     population_seed: int = 0
     obstacle: str = "small"
+    network: str = "auto"
 
     def __post_init__(self) -> None:
+        if self.network not in NETWORK_BACKENDS:
+            raise ValueError(f"TrialSpec.network must be one of {NETWORK_BACKENDS}, got {self.network!r}")
         if self.obstacle not in OBSTACLES:
             raise ValueError(f"TrialSpec.obstacle must be one of {tuple(OBSTACLES)}, got {self.obstacle!r}")
         if self.task not in TASK_KINDS:
@@ -408,7 +416,7 @@ def spec_episode(spec: TrialSpec, _controllers: dict | None = None, _sources: di
         if _controllers is not None:
             _controllers[key] = controller
     horizon = max(controller.horizon, preset.game.horizon)
-    source = shared_intent_source(spec.intent, horizon, _sources)
+    source = shared_intent_source(spec.intent, horizon, _sources, spec.network)
     return build_trial(
         task, operator_profile(spec.user, spec.population_seed), get_object(spec.object), controller,
         source, spec.seed, preset_name=preset.name,
@@ -559,6 +567,7 @@ def run_trials(
     on_result: Callable[[int, Trial], None] | None = None,
     lockstep: bool = True,
     pool: Executor | None = None,
+    groups: int | None = None,
 ) -> list[Trial]:
     """Run many trials; results in the order of ``specs``, identical to running them one by one
     (with a model in the loop and ``lockstep``: to the network's float32 rounding, below).
@@ -577,13 +586,17 @@ def run_trials(
         :func:`submit_trials`): one controller call per tick for a group's trials that share
         a controller and, with a model in the loop, one batched network call, instead of
         one of each per trial and tick (~6× faster with a model, ~2× with a named intent).
-        With a model a trial's numbers then equal its :func:`run_spec` to float32 rounding
-        of the network (~1e-8 m on the pose, set by which trials share its batch:
+        With a model on torch a trial's numbers then equal its :func:`run_spec` to float32
+        rounding of the network (~1e-8 m on the pose, set by which trials share its batch:
         deterministic for the same specs and workers, not bit for bit across other
-        groupings); trials with named intents only are bit for bit the same either way.
+        groupings); on ONNX Runtime (``TrialSpec.network``, the default where installed),
+        whose kernels are batch-invariant on the project's machines, and with named intents
+        only, bit for bit the same either way.
         False: every trial alone (the reference path). Ray runs trials alone.
     pool : the processes to run on (:func:`worker_pool`, kept by the caller across calls);
         None: ``workers`` processes started for this call.
+    groups : how many lockstep groups (jobs) the trials are split into on the processes
+        (:func:`submit_trials`); None: its rule. Ignored with ``workers`` = 1 (one group here).
     """
     specs = list(specs)
     for i, s in enumerate(specs):
@@ -619,7 +632,7 @@ def run_trials(
                     each(i, run_spec(spec, controllers))
     else:
         with _pool_for(pool, workers) as executor:
-            submit_trials(specs, executor, workers=workers, lockstep=lockstep).gather(deliver, progress)
+            submit_trials(specs, executor, workers=workers, lockstep=lockstep, groups=groups).gather(deliver, progress)
     return [] if on_result else results  # type: ignore[return-value]
 
 
@@ -657,7 +670,8 @@ class SubmittedTrials:
 NAMED_GROUP = 32
 
 
-def submit_trials(specs: Sequence[TrialSpec], pool: Executor, *, workers: int, lockstep: bool = True) -> SubmittedTrials:
+def submit_trials(specs: Sequence[TrialSpec], pool: Executor, *, workers: int, lockstep: bool = True,
+                  groups: int | None = None) -> SubmittedTrials:  # fmt: skip
     """Put the trials of ``specs`` on ``pool`` now, in the jobs :func:`run_trials` would run
     (the same grouping, so the same numbers), and return at once; :meth:`SubmittedTrials.gather`
     takes the results. Lets a caller start simulations that a later step needs while this
@@ -673,20 +687,25 @@ def submit_trials(specs: Sequence[TrialSpec], pool: Executor, *, workers: int, l
     the jobs in flight, and a progress bar or a writer hears of each job): a group's trials
     share one controller call per tick (measured, one process: 60 nominal trials cost 0.43×
     their per-trial CPU time in groups of 30, 0.46× in groups of 15, 0.69× in groups of 4).
-    Without ``lockstep``: batches of a few trials run one by one, each worker building a
-    game once per batch.
+    ``groups`` overrides n (at most one group per trial): a caller that keeps the pool busy
+    with other collections at the same time (``Workspace.prefetch`` of the application's
+    18-trial cells) asks for fewer, wider groups, each sharing a tick's fixed cost over more
+    trials. Without ``lockstep``: batches of a few trials run one by one, each worker
+    building a game once per batch.
     """
     specs = tuple(specs)
     workers = min(check_int(workers, "workers", 1), max(1, len(specs)))
+    asked = None if groups is None else check_int(groups, "groups", 1)
     if lockstep:
         n = workers if _has_model(specs) else max(workers, math.ceil(len(specs) / NAMED_GROUP))
-        groups = [tuple(range(g, len(specs), n)) for g in range(n)]
+        n = min(n if asked is None else asked, max(1, len(specs)))
+        members = [tuple(range(g, len(specs), n)) for g in range(n)]
         fn: Callable = _run_lockstep_batch
     else:
         size = max(1, min(16, len(specs) // (4 * workers)))
-        groups = [tuple(range(i, min(i + size, len(specs)))) for i in range(0, len(specs), size)]
+        members = [tuple(range(i, min(i + size, len(specs)))) for i in range(0, len(specs), size)]
         fn = _run_batch
-    jobs = tuple((pool.submit(fn, [specs[i] for i in group]), group) for group in groups if group)
+    jobs = tuple((pool.submit(fn, [specs[i] for i in group]), group) for group in members if group)
     return SubmittedTrials(specs, jobs)
 
 
