@@ -27,7 +27,19 @@ Measures:
    model's network on torch and on ONNX Runtime (``TrialSpec.network``):
    wall and CPU seconds (CPU time is less inflated by other processes on a shared
    machine), the number of lockstep ticks and trial-ticks, µs per trial-tick and ms per
-   lockstep tick, and the ratio.
+   lockstep tick, and the ratio;
+5. ``sweep``: one network call at batch 1, 9, 18, 30 and 60 (random windows, one thread),
+   torch eager against ONNX Runtime, median and p99 of ``--calls`` calls, and each
+   backend's largest difference between a batch's rows and the same windows one at a time
+   (0: batch-invariant, what makes lockstep bit for bit);
+6. ``cells``: one of the main job's application cells (the board, 18 trials, the
+   application preset; MG, the nominal intent, and with ``--cell-model`` the model in the
+   loop, plain and arbitrated) in this process, as two lockstep groups of 9 (one per
+   worker, the rule for a lone collection) against one group of 18 (``cell_options``'
+   ``groups``), CPU seconds, the lower of ``--repeats`` runs each.
+
+``--only network,groups,datasets,sweep,cells`` runs some of them (default: all; the
+numbers above are the sections' order: network = 1, datasets = 2 and 3, groups = 4).
 
 The model: ``--model PATH``, or an ``lstm``-preset model trained here for one epoch on
 six nominal trials (its accuracy does not matter; its size does: LSTM 2 × 64, the
@@ -42,6 +54,7 @@ import argparse
 import os
 import tempfile
 import time
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -113,6 +126,67 @@ def dataset_seconds(specs, workers: int, lockstep: bool, repeats: int, kept_pool
     return np.asarray(out)
 
 
+def sweep_calls(model_path: str, batches: Sequence[int], calls: int) -> list[tuple[int, np.ndarray, np.ndarray, float, float]]:
+    """Seconds of one network call per batch size: (B, torch, ONNX Runtime, and each one's
+    largest |row in the batch − the window alone|), ``calls`` each, on the same random
+    scaled windows, one thread."""
+    import torch
+
+    from coassist.intent.model import load_model
+    from coassist.intent.onnx_network import OnnxNetwork
+
+    torch.set_num_threads(1)
+    model = load_model(model_path)
+    net = model.net.eval()
+    onnx = OnnxNetwork(net, model.window.steps)
+    rng = np.random.default_rng(0)
+    out = []
+    for B in batches:
+        x = rng.uniform(-1.0, 1.0, size=(B, model.window.steps, net.config.n_features)).astype(np.float32)
+        xt = torch.from_numpy(x)
+        times: dict[str, list[float]] = {"torch": [], "onnx": []}
+        with torch.inference_mode():
+            for _ in range(10):  # warm both
+                net(xt), onnx(x)
+            for _ in range(calls):
+                t0 = time.perf_counter()
+                net(xt)
+                t1 = time.perf_counter()
+                onnx(x)
+                t2 = time.perf_counter()
+                times["torch"].append(t1 - t0)
+                times["onnx"].append(t2 - t1)
+            alone_torch = np.concatenate([net(xt[b : b + 1]).numpy() for b in range(B)])
+            alone_onnx = np.concatenate([onnx(x[b : b + 1]) for b in range(B)])
+            d_torch = float(np.abs(net(xt).numpy() - alone_torch).max())
+            d_onnx = float(np.abs(onnx(x) - alone_onnx).max())
+        out.append((B, np.asarray(times["torch"]), np.asarray(times["onnx"]), d_torch, d_onnx))
+    return out
+
+
+def cell_cpu_seconds(specs, repeats: int) -> tuple[float, float]:
+    """CPU seconds of an application cell's trials in this process, the lower of ``repeats``
+    runs: as two lockstep groups (every other trial, :func:`submit_trials`' rule for two
+    workers) and as one group."""
+    import torch
+
+    from coassist.sim.world import run_spec_lockstep
+
+    torch.set_num_threads(1)
+    run_spec_lockstep(specs[:1])  # warm: imports, the game's gains, the model's first call
+    two, one = [], []
+    for _ in range(repeats):
+        c0 = time.process_time()
+        for group in (specs[0::2], specs[1::2]):
+            run_spec_lockstep(group)
+        c1 = time.process_time()
+        run_spec_lockstep(specs)
+        c2 = time.process_time()
+        two.append(c1 - c0)
+        one.append(c2 - c1)
+    return min(two), min(one)
+
+
 def group_seconds(specs, repeats: int, arrays: bool = True) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Wall and CPU seconds of running ``specs`` in lockstep in this process (``arrays``: as
     arrays, coassist.sim.lockstep; else run_loops over the per-trial objects); lockstep ticks, trial-ticks."""
@@ -140,7 +214,15 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=20, help="trials per task")
     parser.add_argument("--model", default=None, help="a model folder (default: train a small lstm-preset one)")
     parser.add_argument("--ticks", type=int, default=300, help="ticks timed in the network comparison")
+    parser.add_argument("--calls", type=int, default=200, help="calls per batch size in the sweep")
+    parser.add_argument("--cell-model", default=None, help="a model folder for the cells section's assistive cells "
+                        "(the main job's lstm-intent; default: --model, or the small one trained here)")  # fmt: skip
+    parser.add_argument("--only", default="network,datasets,groups,sweep,cells", help="sections to run (docstring)")
     args = parser.parse_args()
+    only = {name.strip() for name in args.only.split(",") if name.strip()}
+    unknown = only - {"network", "datasets", "groups", "sweep", "cells"}
+    if unknown:
+        parser.error(f"--only: unknown sections {sorted(unknown)}; choose from network, datasets, groups, sweep, cells")
     from coassist.experiments.pipeline import ITERATION_TASKS
     from coassist.sim.collect import dataset_specs
 
@@ -149,66 +231,105 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         model = args.model or train_small_model(Path(tmp) / "m")
         B = -(-len(ITERATION_TASKS) * args.trials // args.workers)  # one lockstep group per worker
-        on_onnx, batched, alone = network_ticks(model, B, args.ticks)
-        print(f"\nnetwork work per tick for {B} trials (one worker's group), {args.ticks} ticks:")
-        for name, x in (("lockstep, one batched call, ONNX Runtime", on_onnx), ("lockstep, one batched call, torch", batched),
-                        (f"per trial, {B} torch calls", alone)):  # fmt: skip
-            print(f"  {name:42s} median {np.median(x) * 1e3:6.2f} ms   p99 {np.percentile(x, 99) * 1e3:6.2f} ms")
-        print(f"  speed-up (median): batched torch / ONNX {np.median(batched) / np.median(on_onnx):.2f}x, "
-              f"per-trial torch / batched torch {np.median(alone) / np.median(batched):.1f}x")
+        if "sweep" in only:
+            print(f"\none network call, one thread, {args.calls} calls per batch size (random scaled windows):")
+            for b, t_torch, t_onnx, d_torch, d_onnx in sweep_calls(model, (1, 9, 18, 30, 60), args.calls):
+                print(f"  B = {b:2d}   torch median {np.median(t_torch) * 1e3:6.2f} ms  p99 {np.percentile(t_torch, 99) * 1e3:6.2f} ms"
+                      f"   ONNX Runtime median {np.median(t_onnx) * 1e3:6.2f} ms  p99 {np.percentile(t_onnx, 99) * 1e3:6.2f} ms"
+                      f"   torch / ONNX {np.median(t_torch) / np.median(t_onnx):.2f}x"
+                      f"   rows vs alone: torch {d_torch:.1e}, ONNX {d_onnx:.1e}")  # fmt: skip
+        if "cells" in only:
+            from coassist.experiments.application import cell_options
+            from coassist.experiments.pipeline import ReproduceConfig
 
+            cfg = ReproduceConfig()
+            cell_model = args.cell_model or model
+            cells = [("manual", "nominal"), ("cooperative", "nominal"), ("cooperative", cell_model),
+                     ("cooperative-arbitrated", cell_model)]  # fmt: skip
+            print(f"\none application cell (board, {len(cfg.application_users) * cfg.application_trials} trials), this "
+                  f"process, CPU s, the lower of {args.repeats} runs: two groups of 9 against one of 18")
+            for controller, intent in cells:
+                options = cell_options(cfg, 0, "board", controller, intent)
+                options.pop("groups")
+                two, one = cell_cpu_seconds(dataset_specs(**options), args.repeats)
+                label = f"{controller}, {'model' if intent == cell_model else intent}"
+                print(f"  {label:34s} two groups {two:6.2f} s   one group {one:6.2f} s   ratio {one / two:.2f}")
+        if "network" in only:
+            network_section(model, B, args.ticks)
         common = dict(controller="cooperative", users=(0,), tasks=ITERATION_TASKS, objects=("handle",),
                       trials=args.trials, seed=1000, preset="thesis-evaluation-dm")  # fmt: skip
         with_model = dataset_specs(intent=model, **common)
         nominal = dataset_specs(intent="nominal", **common)
-        n = len(with_model)
-        for label, specs in (("model in the loop", with_model), ("nominal intent", nominal)):
-            group = specs[:: args.workers]
-            print(f"\none worker's lockstep group, {label} ({len(group)} trials), in this process:")
-            cpu_of = {}
-            ways = [(False, "torch"), (True, "torch"), (True, "onnx")] if label == "model in the loop" else [(False, "torch"), (True, "torch")]
-            for arrays, network in ways:
-                g_wall, g_cpu, g_ticks, g_trial_ticks = group_seconds([replace(s, network=network) for s in group],
-                                                                      args.repeats, arrays)  # fmt: skip
-                cpu_of[arrays, network] = np.median(g_cpu)
-                name = "as arrays (coassist.sim.lockstep)" if arrays else "run_loops over per-trial objects"
-                if label == "model in the loop":
-                    name += f", network on {network}"
-                print(f"  {name}: {g_ticks} ticks, {g_trial_ticks} trial-ticks")
-                for what, x in (("wall", g_wall), ("CPU", g_cpu)):
-                    print(f"    {what:4s} median {np.median(x):6.2f} s   p99 {np.percentile(x, 99):6.2f} s   "
-                          f"{np.median(x) / g_trial_ticks * 1e6:5.1f} us per trial-tick   {np.median(x) / g_ticks * 1e3:5.2f} ms per tick")
-            print(f"  speed-up (median CPU): arrays / run_loops {cpu_of[False, 'torch'] / cpu_of[True, 'torch']:.2f}x"
-                  + (f", ONNX / torch {cpu_of[True, 'torch'] / cpu_of[True, 'onnx']:.2f}x, both "
-                     f"{cpu_of[False, 'torch'] / cpu_of[True, 'onnx']:.2f}x" if (True, "onnx") in cpu_of else ""))
-        per_trial = dataset_seconds(with_model, args.workers, False, args.baseline_repeats)
-        lock = dataset_seconds(with_model, args.workers, True, args.repeats)
-        lock_kept = dataset_seconds(with_model, args.workers, True, args.repeats, kept_pool=True)
-        on_torch = [replace(s, network="torch") for s in with_model]
-        lock_kept_torch = dataset_seconds(on_torch, args.workers, True, args.repeats, kept_pool=True)
-        nom = dataset_seconds(nominal, args.workers, False, args.repeats)
-        nom_lock = dataset_seconds(nominal, args.workers, True, args.repeats)
-        nom_kept = dataset_seconds(nominal, args.workers, True, args.repeats, kept_pool=True)
-
-        def fmt(x: np.ndarray) -> str:
-            if not x.size:
-                return "not run (--baseline-repeats 0)"
-            return f"median {np.median(x):6.1f} s   p99 {np.percentile(x, 99):6.1f} s   ({x.size} runs)"
-
-        print(f"\none {n}-trial dataset ({', '.join(ITERATION_TASKS)} × {args.trials}, thesis-evaluation-dm) on {args.workers} workers:")
-        print(f"  model in the loop, per trial              {fmt(per_trial)}")
-        print(f"  model in the loop, lockstep               {fmt(lock)}   (target <= 10 s on 2 cores)")
-        print(f"  model in the loop, lockstep, kept pool    {fmt(lock_kept)}")
-        print(f"    the same, network on torch              {fmt(lock_kept_torch)}   "
-              f"(x{np.median(lock_kept_torch) / np.median(lock_kept):.2f} the default's time)")
-        print(f"  nominal intent, per trial                 {fmt(nom)}")
-        print(f"  nominal intent, lockstep                  {fmt(nom_lock)}")
-        print(f"  nominal intent, lockstep, kept pool       {fmt(nom_kept)}")
-        speed_up = f"{np.median(per_trial) / np.median(lock):.1f}x" if per_trial.size else "n/a"
-        print(f"  speed-up (median)                         with a model {speed_up}, nominal "
-              f"{np.median(nom) / np.median(nom_lock):.1f}x; a kept pool saves {np.median(lock) - np.median(lock_kept):.1f} s; "
-              f"lockstep with a model / nominal {np.median(lock) / np.median(nom_lock):.2f}")
+        if "groups" in only:
+            groups_section(with_model, nominal, args.workers, args.repeats)
+        if "datasets" in only:
+            datasets_section(with_model, nominal, args)
     print(f"load average after: {os.getloadavg()[0]:.2f}")
+
+
+def network_section(model: str, B: int, ticks: int) -> None:
+    on_onnx, batched, alone = network_ticks(model, B, ticks)
+    print(f"\nnetwork work per tick for {B} trials (one worker's group), {ticks} ticks:")
+    for name, x in (("lockstep, one batched call, ONNX Runtime", on_onnx), ("lockstep, one batched call, torch", batched),
+                    (f"per trial, {B} torch calls", alone)):  # fmt: skip
+        print(f"  {name:42s} median {np.median(x) * 1e3:6.2f} ms   p99 {np.percentile(x, 99) * 1e3:6.2f} ms")
+    print(f"  speed-up (median): batched torch / ONNX {np.median(batched) / np.median(on_onnx):.2f}x, "
+          f"per-trial torch / batched torch {np.median(alone) / np.median(batched):.1f}x")
+
+
+def groups_section(with_model, nominal, workers: int, repeats: int) -> None:
+    for label, specs in (("model in the loop", with_model), ("nominal intent", nominal)):
+        group = specs[::workers]
+        print(f"\none worker's lockstep group, {label} ({len(group)} trials), in this process:")
+        cpu_of = {}
+        ways = [(False, "torch"), (True, "torch"), (True, "onnx")] if label == "model in the loop" else [(False, "torch"), (True, "torch")]
+        for arrays, network in ways:
+            g_wall, g_cpu, g_ticks, g_trial_ticks = group_seconds([replace(s, network=network) for s in group],
+                                                                  repeats, arrays)  # fmt: skip
+            cpu_of[arrays, network] = np.median(g_cpu)
+            name = "as arrays (coassist.sim.lockstep)" if arrays else "run_loops over per-trial objects"
+            if label == "model in the loop":
+                name += f", network on {network}"
+            print(f"  {name}: {g_ticks} ticks, {g_trial_ticks} trial-ticks")
+            for what, x in (("wall", g_wall), ("CPU", g_cpu)):
+                print(f"    {what:4s} median {np.median(x):6.2f} s   p99 {np.percentile(x, 99):6.2f} s   "
+                      f"{np.median(x) / g_trial_ticks * 1e6:5.1f} us per trial-tick   {np.median(x) / g_ticks * 1e3:5.2f} ms per tick")
+        print(f"  speed-up (median CPU): arrays / run_loops {cpu_of[False, 'torch'] / cpu_of[True, 'torch']:.2f}x"
+              + (f", ONNX / torch {cpu_of[True, 'torch'] / cpu_of[True, 'onnx']:.2f}x, both "
+                 f"{cpu_of[False, 'torch'] / cpu_of[True, 'onnx']:.2f}x" if (True, "onnx") in cpu_of else ""))
+
+
+def datasets_section(with_model, nominal, args) -> None:
+    from coassist.experiments.pipeline import ITERATION_TASKS
+
+    n = len(with_model)
+    per_trial = dataset_seconds(with_model, args.workers, False, args.baseline_repeats)
+    lock = dataset_seconds(with_model, args.workers, True, args.repeats)
+    lock_kept = dataset_seconds(with_model, args.workers, True, args.repeats, kept_pool=True)
+    on_torch = [replace(s, network="torch") for s in with_model]
+    lock_kept_torch = dataset_seconds(on_torch, args.workers, True, args.repeats, kept_pool=True)
+    nom = dataset_seconds(nominal, args.workers, False, args.repeats)
+    nom_lock = dataset_seconds(nominal, args.workers, True, args.repeats)
+    nom_kept = dataset_seconds(nominal, args.workers, True, args.repeats, kept_pool=True)
+
+    def fmt(x: np.ndarray) -> str:
+        if not x.size:
+            return "not run (--baseline-repeats 0)"
+        return f"median {np.median(x):6.1f} s   p99 {np.percentile(x, 99):6.1f} s   ({x.size} runs)"
+
+    print(f"\none {n}-trial dataset ({', '.join(ITERATION_TASKS)} × {args.trials}, thesis-evaluation-dm) on {args.workers} workers:")
+    print(f"  model in the loop, per trial              {fmt(per_trial)}")
+    print(f"  model in the loop, lockstep               {fmt(lock)}   (target <= 10 s on 2 cores)")
+    print(f"  model in the loop, lockstep, kept pool    {fmt(lock_kept)}")
+    print(f"    the same, network on torch              {fmt(lock_kept_torch)}   "
+          f"(x{np.median(lock_kept_torch) / np.median(lock_kept):.2f} the default's time)")
+    print(f"  nominal intent, per trial                 {fmt(nom)}")
+    print(f"  nominal intent, lockstep                  {fmt(nom_lock)}")
+    print(f"  nominal intent, lockstep, kept pool       {fmt(nom_kept)}")
+    speed_up = f"{np.median(per_trial) / np.median(lock):.1f}x" if per_trial.size else "n/a"
+    print(f"  speed-up (median)                         with a model {speed_up}, nominal "
+          f"{np.median(nom) / np.median(nom_lock):.1f}x; a kept pool saves {np.median(lock) - np.median(lock_kept):.1f} s; "
+          f"lockstep with a model / nominal {np.median(lock) / np.median(nom_lock):.2f}")
 
 
 if __name__ == "__main__":

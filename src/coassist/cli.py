@@ -480,7 +480,7 @@ def collect(
     ray_address: str = typer.Option(None, help="Run on a Ray cluster at this address (needs coassist[cluster])."),
     overwrite: bool = typer.Option(False, help="Replace an existing dataset folder (only once the new one is complete)."),
     lockstep: bool = typer.Option(True, "--lockstep/--per-trial", help="Advance each worker's trials together: one controller call and, with a model in the loop, one network call per tick for all (~6x faster with a model, ~2x without; with a model equal to the per-trial run to the network's float32 rounding, without it bit for bit). --per-trial: every trial alone, bit for bit the same whatever else runs (e.g. across a resumed collection)."),
-    network: str = typer.Option("auto", help="What evaluates a model's network: onnx (ONNX Runtime, 1.7-2.3x faster in the loop; the onnx extra), torch, or auto (onnx where installed). The two agree to float32 rounding; each trial records which ran."),
+    network: str = typer.Option("auto", help="What evaluates a model's network: onnx (ONNX Runtime, 1.6-1.9x faster at the loop's batch sizes; the onnx extra), torch, or auto (onnx where installed). The two agree to float32 rounding; each trial records which ran."),
 ) -> None:
     """Simulate trials and write them as a dataset (thesis §5.2.2; default: D0, 60 trials).
 

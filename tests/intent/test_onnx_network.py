@@ -15,10 +15,11 @@ from coassist.intent.realtime import ModelIntent, load_model_intent, make_runner
 
 from .conftest import TINY, labeled, write_loop_model  # noqa: E402
 
-#: Float32 rounding: both kernels sum dot products of at most 128 terms (2 × hidden 64 in the
-#: widest LSTM layer below) in different orders; n·ε = 128 × 1.19e-7 = 1.5e-5 bounds the
-#: difference of one such sum of O(1) terms (gates saturate, the recurrence contracts).
-OUTPUT_ATOL = 1.5e-5
+#: Float32 rounding: both kernels sum dot products of at most 200 terms (the skip's
+#: 25 × 8 inputs; the widest LSTM gate sums 2 × 64) in different orders; n·ε = 200 ×
+#: 1.19e-7 = 2.4e-5 bounds the difference of one such sum of O(1) terms (gates saturate,
+#: the recurrence contracts).
+OUTPUT_ATOL = 2.4e-5
 
 
 def windows(rng, batch: int, steps: int, features: int) -> np.ndarray:

@@ -83,8 +83,9 @@ def cell_options(cfg, j: int, obj: str, controller: str, intent: str) -> dict[st
     A cell runs as one lockstep group (two or more past :data:`~coassist.sim.world.NAMED_GROUP`
     trials): the run prefetches the cells, ~30 of them, so the pool's processes are kept busy
     by other cells, and a group shares each tick's fixed cost over all of its trials (an
-    18-trial board cell, one process: 0.59× the CPU time of two groups of 9 with MG or the
-    nominal intent, 0.74× with the LSTM in the loop, 0.82× arbitrated). With a named intent,
+    18-trial board cell, one process, ``benchmarks/bench_collect.py --only cells``: 0.58–0.59×
+    the CPU time of two groups of 9 with MG or the nominal intent, 0.78× with the LSTM in the
+    loop, 0.82× arbitrated). With a named intent,
     or a model on ONNX Runtime where its kernels are batch-invariant
     (:mod:`coassist.runtime.lockstep`), the trials are the same bit for bit in any grouping."""
     from coassist.sim.world import NAMED_GROUP

@@ -516,7 +516,7 @@ def load_model_intent(path: str, backend: str = "auto") -> ModelIntent:
 
     ``backend``: what evaluates the network, one of
     :data:`~coassist.interfaces.NETWORK_BACKENDS`: "torch", "onnx" (ONNX Runtime,
-    1.7–2.3× faster at the loop's batch sizes, :mod:`coassist.intent.onnx_network`) or
+    1.6–1.9× faster at the loop's batch sizes, :mod:`coassist.intent.onnx_network`) or
     "auto": ONNX Runtime where the ``onnx`` extra is installed, else torch. The two agree
     to float32 rounding; each simulated trial records which one ran
     (``Trial.meta.extra["network"]``).

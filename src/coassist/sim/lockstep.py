@@ -34,7 +34,8 @@ does), which handles every branch. The result is the reference path's trial eith
 With a model in the loop the network's float32 rows depend on the batch (see
 :mod:`coassist.runtime.lockstep`): here the batch holds the same trials in the same order as
 ``run_loops``' for as long as none leaves early, so the trials equal ``run_loops``' bit for
-bit; after a trial leaves, the others' rows may round differently.
+bit; after a trial leaves, the others' rows may round differently on torch (ONNX Runtime's
+rows do not depend on the batch on the project's machines: there they stay bit for bit).
 """
 
 from __future__ import annotations
