@@ -17,7 +17,9 @@ pipeline's presets): built from scratch each time (the naive baseline: what ever
 arbitrated trial and every MuJoCo drive paid before) against a copy of the game built
 once per process (``cooperative_game``'s memo), gains checked bit for bit. And
 ``solve_batch`` for a lockstep group of 30 trials (numpy's stacked matmul, one gemv per
-row in C) against the same products in a Python loop of ``np.dot``, rows bit for bit.
+row in C) against the same products in a Python loop of ``np.dot``, rows bit for bit; and
+a lockstep group's guarded steps (B = 18): the shared game's ``effort_batch`` and the
+online-α ``arbitrated_effort_batch`` against ``step`` per row, efforts bit for bit.
 Targets: 6-DOF Np = 50 tick p99 ≤ 20 µs and ≥ 1000× faster than naive (issue #2);
 gains for a new α p99 ≤ 50 µs (issue #11). One BLAS thread, so the numbers
 describe one core.
@@ -135,10 +137,12 @@ def main() -> None:
     print()
     batch_rows = bench_batch(args.batch_calls)
     print()
+    step_rows = bench_group_steps(args.batch_calls)
+    print()
     controller_rows = bench_controllers(args.controllers)
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({"tick": rows, "alpha": alpha_rows, "batch": batch_rows, "controller": controller_rows}, fh, indent=2)
+            json.dump({"tick": rows, "alpha": alpha_rows, "batch": batch_rows, "steps": step_rows, "controller": controller_rows}, fh, indent=2)
 
 
 def loop_solve_batch(game: CooperativeGame, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray):
@@ -219,6 +223,50 @@ def bench_controllers(fresh_builds: int) -> list[dict]:
             print(f"{kind + ' ' + preset_name:<48}{f_med:>10.1f}{f_p99:>10.1f}{m_med:>10.2f}{m_p99:>10.2f}{f_med / m_med:>13.0f}")
             out.append(dict(preset=preset_name, kind=kind, fresh_median_ms=f_med, fresh_p99_ms=f_p99,
                             memo_median_ms=m_med, memo_p99_ms=m_p99))
+    return out
+
+
+def bench_group_steps(calls: int, B: int = 18) -> list[dict]:
+    """A lockstep group's guarded controller steps, as :mod:`coassist.sim.lockstep` takes them
+    (B = 18, an application cell; the application preset): the shared game's ``step`` per
+    row in a Python loop (the naive baseline) against ``effort_batch``; the online-α
+    arbitration's ``step`` per run against ``arbitrated_effort_batch`` (each run its own α).
+    Efforts checked bit for bit against the loop first (twin controllers)."""
+    from coassist.config import APPLICATION_PRESET
+    from coassist.control.arbitration import arbitrated_effort_batch
+    from coassist.control.presets import get_preset, make_controller
+
+    preset = get_preset(APPLICATION_PRESET)
+    rng = np.random.default_rng(2)
+    H = preset.game.horizon
+    z = rng.normal(size=(B, 4)) * 0.02
+    ref_h = rng.normal(size=(B, H, 4)) * 0.02
+    ref_r = rng.normal(size=(B, H, 4)) * 0.02 + z[:, None, :]
+    w = rng.normal(size=(B, 2)) * 3.0
+    print(f"{'controller steps, B = ' + str(B):<30}{'batched med':>12}{'p99 [µs]':>10}{'loop med':>10}{'p99 [µs]':>10}{'ratio (med)':>13}")
+    out = []
+    shared = make_controller("cooperative", preset)
+    arbitrated = [make_controller("cooperative-arbitrated", preset) for _ in range(B)]
+    twins = [make_controller("cooperative-arbitrated", preset) for _ in range(B)]
+    u, clean = arbitrated_effort_batch(arbitrated, z, ref_h, ref_r, w)
+    want = [c.step(*row) for c, row in zip(twins, zip(z, ref_h, ref_r, w))]
+    u2, clean2 = shared.effort_batch(z, ref_h, ref_r, w)
+    want2 = [shared.step(*row) for row in zip(z, ref_h, ref_r, w)]
+    for got, ok, expected in ((u, clean, want), (u2, clean2, want2)):
+        if not ok.all() or not all(np.array_equal(got[b], e.u_r) for b, e in enumerate(expected)):
+            raise SystemExit("a batched controller step differs from the per-row step")
+
+    def loop(controllers):
+        for c, row in zip(controllers, zip(z, ref_h, ref_r, w)):
+            c.step(*row)
+
+    cases = (("cooperative (shared game)", shared.effort_batch, (z, ref_h, ref_r, w), loop, ([shared] * B,)),
+             ("cooperative-arbitrated", arbitrated_effort_batch, (arbitrated, z, ref_h, ref_r, w), loop, (arbitrated,)))
+    for name, batched, b_args, naive, n_args in cases:
+        (b_med, b_p99), (l_med, l_p99) = time_calls(batched, b_args, calls), time_calls(naive, n_args, calls)
+        out.append(dict(controller=name, batch=B, batched_median_us=b_med, batched_p99_us=b_p99,
+                        loop_median_us=l_med, loop_p99_us=l_p99))  # fmt: skip
+        print(f"{name:<30}{b_med:>12.1f}{b_p99:>10.1f}{l_med:>10.1f}{l_p99:>10.1f}{l_med / b_med:>13.1f}")
     return out
 
 

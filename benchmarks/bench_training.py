@@ -55,6 +55,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
+from bench_common import network_forward_flops  # noqa: E402
 from bench_intent import synthetic_trials  # noqa: E402
 from coassist.intent import MODEL_PRESETS  # noqa: E402
 from coassist.intent.batches import DeviceWindows  # noqa: E402
@@ -69,11 +70,9 @@ def training_flops_per_window(preset, n_dof: int) -> float:
     the LSTM's gates, 4·h·(in + h)·2 per layer and step, and the FC head; backward taken as
     twice forward (two products per forward one). Elementwise gate work is left out, so
     this is a lower bound on the arithmetic."""
-    features, h = 4 * n_dof, preset.hidden
-    lstm = sum(4 * h * ((features if layer == 0 else h) + h) * 2 for layer in range(preset.lstm_layers))
-    widths = [h if preset.lstm_layers else preset.window.steps * features, *preset.fc, preset.window.horizon * n_dof]
-    head = sum(2 * a * b for a, b in zip(widths, widths[1:]))
-    return 3.0 * (lstm * preset.window.steps + head)
+    lstm, head = network_forward_flops(4 * n_dof, preset.window.horizon * n_dof, preset.lstm_layers, preset.hidden,
+                                       preset.fc, preset.window.steps)  # fmt: skip
+    return 3.0 * (lstm + head)
 
 
 def gemm_ceiling(device: torch.device, n: int = 1024, repeats: int = 20) -> float:

@@ -136,3 +136,42 @@ def test_a_cached_arbitrated_controller_gives_the_same_trial_every_time():
     after_other = run_spec(spec, cache)
     np.testing.assert_array_equal(alone.pose, after_other.pose)
     assert alone.meta.controller == "cooperative+target"
+
+
+@pytest.mark.parametrize("law", ["target", "hand_force", "confidence"])
+def test_arbitrated_effort_batch_is_each_controllers_step_bit_for_bit(law):
+    """B runs, each with its own controller and α history, stepped together for 30 ticks against
+    twins stepped one by one: the same clean efforts bit for bit, the same α after every
+    tick, and the rows the guard refuses or saturates are not clean (their α moved as step's)."""
+    from coassist.control.arbitration import arbitrated_effort_batch, guard_key
+
+    params = ArbitrationParameters(law=law, alpha_min=0.3, alpha_max=0.9, target_scale=0.05, force_scale=4.0,
+                                   error_scale=0.01, error_lag=3)  # fmt: skip
+    base = thesis_game(alpha=0.7)
+    B = 6
+
+    def controllers():
+        return [ArbitratedController(AssistiveController(base.copy(), effort_limit=[10.0, 12.0]), params) for _ in range(B)]
+
+    batch, alone = controllers(), controllers()
+    assert len({guard_key(c) for c in batch}) == 1
+    rng = np.random.default_rng(5)
+    offsets = rng.normal(size=(B, 4)) * 0.05  # each run its own distance to the plan: its own α
+    for k in range(30):
+        z = offsets + 0.001 * k
+        ref_h = rng.normal(size=(B, 20, 4)) * 0.01
+        ref_r = rng.normal(size=(B, 20, 4)) * 0.01 + offsets[:, None, :]
+        wrench = rng.normal(size=(B, 2)) * 3.0
+        if k == 10:
+            z[1, 0] = np.nan  # refused (NONFINITE_STATE)
+            ref_r[2] += 2.0  # 2 m away: saturated
+            ref_h[2] += 2.0
+        expected = [c.step(*row) for c, row in zip(alone, zip(z, ref_h, ref_r, wrench))]
+        u, clean = arbitrated_effort_batch(batch, z, ref_h, ref_r, wrench)
+        np.testing.assert_array_equal(clean, [e.fault == Fault.NONE for e in expected])
+        for b in np.flatnonzero(clean):
+            np.testing.assert_array_equal(u[b], expected[b].u_r, err_msg=f"tick {k} row {b}")
+        assert [c.alpha for c in batch] == [c.alpha for c in alone]
+        if k == 10:
+            assert not clean[1] and not clean[2]
+    assert len({c.alpha for c in batch}) == B  # the runs' α differ: each row had its own gains

@@ -209,6 +209,29 @@ def test_step_batch_is_step_row_for_row_bit_for_bit(plant, kind, caplog):
     assert ctrl._warned == reference._warned  # the refused rows were reported as step() reports them
 
 
+@pytest.mark.parametrize("kind", ["cooperative", "impedance", "manual"])
+def test_effort_batch_gives_the_clean_steps_efforts_bit_for_bit(plant, kind):
+    """The array path's call: clean[b] exactly where step() carries no flag (refused and
+    saturated rows are not clean), and there u_r[b] is step()'s bit for bit; nothing warned."""
+    ctrl = _controllers(plant)[kind]
+    z, ref_h, ref_r, wrench = _batch(np.random.default_rng(14))
+    expected = [_controllers(plant)[kind].step(*row) for row in zip(z, ref_h, ref_r, wrench)]
+    u, clean = ctrl.effort_batch(z, ref_h, ref_r, wrench)
+    assert u.shape == (z.shape[0], 2) and clean.dtype == bool
+    np.testing.assert_array_equal(clean, [e.fault == Fault.NONE for e in expected])
+    assert clean[0] and not clean[1:5].any() and (kind == "manual" or not clean[5:8].any())
+    for b in np.flatnonzero(clean):
+        np.testing.assert_array_equal(u[b], expected[b].u_r, err_msg=f"row {b}")
+    np.testing.assert_array_equal(u[~clean], 0.0)
+    assert ctrl._warned == Fault.NONE  # a row that is not clean was not stepped here
+    # odd inputs (float32 rows): step() per row decides, the same answer
+    u32, clean32 = ctrl.effort_batch(z.astype(np.float32), ref_h, ref_r, wrench)
+    want32 = [_controllers(plant)[kind].step(*row) for row in zip(z.astype(np.float32), ref_h, ref_r, wrench)]
+    np.testing.assert_array_equal(clean32, [e.fault == Fault.NONE for e in want32])
+    for b in np.flatnonzero(clean32):
+        np.testing.assert_array_equal(u32[b], want32[b].u_r)
+
+
 def test_step_batch_falls_back_to_step_for_other_inputs(assistive):
     """float32 rows, a wrong shape, a law that raises: step() per row decides, as alone."""
     z, ref_h, ref_r, wrench = (a[:4] for a in _batch(np.random.default_rng(12)))

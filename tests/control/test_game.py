@@ -496,3 +496,25 @@ def test_games_of_one_preset_share_the_work_not_the_alpha():
     # another model: another game
     other = ImpedanceModel(np.diag([9.0, 9.0]), np.diag([30.0, 30.0]), np.zeros((2, 2)), 0.008)
     assert not np.array_equal(cooperative_game(other, params).gains.G_z, a.gains.G_z)
+
+
+def test_solve_with_gains_is_each_games_solve_bit_for_bit():
+    """Rows with their own gains (games at different α) against each game's own solve."""
+    from coassist.control.game import solve_with_gains
+
+    model = ImpedanceModel([10, 10], [100, 100], 0, 0.008)
+    Q = 100 * np.diag([1, 1, 1e-4, 1e-4])
+    base = CooperativeGame(model, Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[1e-4, 1e-4], alpha=0.5, horizon=20)
+    games = [base.copy() for _ in range(5)]
+    for g, a in zip(games, (0.3, 0.45, 0.6, 0.75, 0.9)):
+        g.set_alpha(a)
+    rng = np.random.default_rng(3)
+    z, ref_h, ref_r = rng.normal(size=(5, 4)), rng.normal(size=(5, 20, 4)), rng.normal(size=(5, 20, 4))
+    u_h, u_r = solve_with_gains([g.gains for g in games], z, ref_h, ref_r)
+    for b, g in enumerate(games):
+        eh, er = g.solve(z[b], ref_h[b], ref_r[b])
+        np.testing.assert_array_equal(u_h[b], eh)
+        np.testing.assert_array_equal(u_r[b], er)
+    assert np.abs(u_r[0] - u_r[-1]).max() > 1e-3  # the α differ enough to matter
+    with pytest.raises(ValueError, match="one gain set per row"):
+        solve_with_gains([games[0].gains], z, ref_h, ref_r)

@@ -49,17 +49,19 @@ def _together(specs, sources=None):
 
 @pytest.fixture
 def step_batch_rows(monkeypatch) -> list[int]:
-    """The rows of every ``step_batch`` call a guarded controller (game, IMP, MG) makes."""
+    """The rows of every batched call a guarded controller (game, IMP, MG) serves: ``step_batch``
+    (run_loops) or ``effort_batch`` (the point-mass array path)."""
     from coassist.control.controllers import _GuardedController
 
     rows: list[int] = []
-    inner = _GuardedController.step_batch
+    for name in ("step_batch", "effort_batch"):
+        inner = getattr(_GuardedController, name)
 
-    def counting(self, z, *args):
-        rows.append(z.shape[0])
-        return inner(self, z, *args)
+        def counting(self, z, *args, _inner=inner):
+            rows.append(z.shape[0])
+            return _inner(self, z, *args)
 
-    monkeypatch.setattr(_GuardedController, "step_batch", counting)
+        monkeypatch.setattr(_GuardedController, name, counting)
     return rows
 
 

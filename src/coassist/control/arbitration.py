@@ -45,9 +45,10 @@ from numpy.typing import ArrayLike
 
 from coassist._checks import check_int_at_least, check_positive_scalar
 from coassist.control.controllers import AssistiveController, ControlStep
-from coassist.control.game import CooperativeGame
+from coassist.control.game import CooperativeGame, solve_with_gains
 
-__all__ = ["ARBITRATION_LAWS", "AlphaArbiter", "ArbitratedController", "ArbitrationParameters", "target_alpha"]
+__all__ = ["ARBITRATION_LAWS", "AlphaArbiter", "ArbitratedController", "ArbitrationParameters", "arbitrated_effort_batch",
+           "guard_key", "target_alpha"]
 
 #: The arbitration laws of :class:`ArbitrationParameters`.
 ARBITRATION_LAWS = ("hand_force", "confidence", "target")
@@ -212,3 +213,43 @@ class ArbitratedController:
             except Exception:  # keep the previous gains; the step below still runs and never raises
                 pass
         return self.controller.step(z, ref_h, ref_r, wrench)
+
+
+def guard_key(controller: ArbitratedController) -> tuple:
+    """What :func:`arbitrated_effort_batch` needs its controllers to share: the assistive
+    controller's guard (type, horizon, bounds, effort limit, shapes) and the game's class."""
+    inner = controller.controller
+    return (type(inner), type(controller.game), inner.horizon, inner.bounds, inner._ref_shape, inner._wrench_shape,
+            np.asarray(inner.effort_limit, dtype=float).tobytes(), inner._state_bound.tobytes())  # fmt: skip
+
+
+def arbitrated_effort_batch(controllers: list[ArbitratedController], z: np.ndarray, ref_h: np.ndarray,
+                            ref_r: np.ndarray, wrench: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """:meth:`ArbitratedController.step` for B runs at once, run b with its own controller
+    (its α and the arbiter's state), answered as
+    :meth:`~coassist.control.controllers._GuardedController.effort_batch` answers.
+
+    z (B, 2n), ref_h and ref_r (B, Np, 2n), wrench (B, n). Row b first updates
+    ``controllers[b]``'s arbiter and sets its game's α, exactly as its ``step`` does (that
+    happens whatever the guard then finds); then the guarded step runs for all rows at once,
+    row b on its own gains (:func:`~coassist.control.game.solve_with_gains`). Returns
+    (u_r (B, n), clean (B,) bool): where ``clean[b]``, ``u_r[b]`` is what
+    ``controllers[b].step(z[b], ref_h[b], ref_r[b], wrench[b])`` gives, bit for bit, and
+    that step carries no fault flag; elsewhere the row's effort is not given (the caller
+    steps it on its reference path). The controllers must share :func:`guard_key`. Never raises.
+    """
+    for b, c in enumerate(controllers):
+        alpha = c.arbiter.update(z[b], ref_h[b], wrench[b], ref_r[b])
+        if alpha != c.game.alpha:
+            try:
+                c.game.set_alpha(alpha)
+            except Exception:  # keep the previous gains, as step() does
+                pass
+    gains = [c.game.gains for c in controllers]
+
+    def law(good: np.ndarray, zg: np.ndarray, rh: np.ndarray, rr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return solve_with_gains([gains[i] for i in good.tolist()], zg, rh, rr)
+
+    inner = controllers[0].controller
+    core = inner._batch_core(z, ref_h, ref_r, wrench, law=law)
+    return inner._clean_efforts(core, z, ref_h, ref_r, wrench, [c.controller.step for c in controllers])

@@ -226,27 +226,11 @@ class _GuardedController:
         else (other shapes or dtypes, a law that raises) falls back to :meth:`step` per row.
         Never raises.
         """
-        try:
-            fast = self._batch_ok(z, ref_h, ref_r, wrench)
-        except Exception:  # noqa: BLE001 -- whatever it is, step() per row handles it
-            fast = False
-        if not fast:
+        core = self._batch_core(z, ref_h, ref_r, wrench)
+        if core is None:
             return [self.step(*row) for row in zip(z, ref_h, ref_r, wrench)]
-        try:
-            bound = self._state_bound
-            ok = (np.abs(z) <= bound).all(axis=1)
-            ok &= (np.abs(ref_h) <= bound).all(axis=(1, 2))
-            ok &= (np.abs(ref_r) <= bound).all(axis=(1, 2))
-            ok &= (np.abs(wrench) <= self.bounds.wrench).all(axis=1)
-            good = np.flatnonzero(ok)
-            rh, rr = (ref_h[good, :1], ref_r[good, :1]) if self._reads_first_row_only else (ref_h[good], ref_r[good])
-            u_h, u_r = self._law_batch(z[good], rh, rr)
-            fine = np.isfinite(u_r).all(axis=1) & np.isfinite(u_h).all(axis=1)
-            limit = self.effort_limit
-            with np.errstate(invalid="ignore"):  # rows with a non-finite effort are redone by step()
-                ratio = np.max(np.abs(u_r) / limit, axis=1)
-        except Exception:  # noqa: BLE001 -- step() per row reports the fault as it always does
-            return [self.step(*row) for row in zip(z, ref_h, ref_r, wrench)]
+        good, u_h, u_r, fine, ratio = core
+        limit = self.effort_limit
         out: list[ControlStep | None] = [None] * z.shape[0]
         for j, b in enumerate(good.tolist()):
             if not fine[j]:
@@ -257,6 +241,64 @@ class _GuardedController:
             else:  # as saturate()
                 out[b] = ControlStep(np.clip(u_r[j] / r, -limit, limit), u_h[j], Fault.SATURATED)
         return [s if s is not None else self.step(z[b], ref_h[b], ref_r[b], wrench[b]) for b, s in enumerate(out)]
+
+    def effort_batch(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The robot efforts of :meth:`step_batch`'s clean rows, as arrays, for a runner that
+        only goes on with ticks that carry no flag (:mod:`coassist.sim.lockstep`).
+
+        Returns (u_r (B, n), clean (B,) bool): where ``clean[b]``, ``u_r[b]`` is
+        ``step(z[b], ref_h[b], ref_r[b], wrench[b]).u_r`` bit for bit and that step carries
+        no fault flag (not even SATURATED); elsewhere ``u_r[b]`` is 0 and the caller must
+        not use it (step that row itself, which reports it). Nothing is logged or warned
+        here: a row that is not clean has not been stepped. Never raises.
+        """
+        return self._clean_efforts(self._batch_core(z, ref_h, ref_r, wrench), z, ref_h, ref_r, wrench, [self.step] * z.shape[0])
+
+    def _clean_efforts(self, core, z, ref_h, ref_r, wrench, steps: list) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`effort_batch`'s answer from :meth:`_batch_core`'s; where that is None, row b
+        goes through ``steps[b]`` (a guarded step) and is clean where it carries no flag."""
+        B, n = z.shape[0], self._zero.shape[0]
+        u = np.zeros((B, n))
+        clean = np.zeros(B, dtype=bool)
+        if core is None:  # odd inputs: step() per row decides (and warns, as it always does)
+            for b, step in enumerate(steps):
+                s = step(z[b], ref_h[b], ref_r[b], wrench[b])
+                if s.fault == Fault.NONE:
+                    u[b], clean[b] = s.u_r, True
+            return u, clean
+        good, _, u_r, fine, ratio = core
+        ok = fine & (ratio <= 1.0)
+        rows = good[ok]
+        u[rows] = u_r[ok]
+        clean[rows] = True
+        return u, clean
+
+    def _batch_core(self, z, ref_h, ref_r, wrench, law=None) -> tuple[np.ndarray, ...] | None:
+        """The batched half of :meth:`step_batch`: (good rows (the guard's bounds hold), u_h,
+        u_r (of the good rows), fine (finite efforts), ratio (largest |u_r| / limit)), or
+        None where the rows must go through :meth:`step` one by one. ``law(good, z, ref_h,
+        ref_r)`` replaces :meth:`_law_batch` for the good rows (their indices first)."""
+        try:
+            fast = self._batch_ok(z, ref_h, ref_r, wrench)
+        except Exception:  # noqa: BLE001 -- whatever it is, step() per row handles it
+            fast = False
+        if not fast:
+            return None
+        try:
+            bound = self._state_bound
+            ok = (np.abs(z) <= bound).all(axis=1)
+            ok &= (np.abs(ref_h) <= bound).all(axis=(1, 2))
+            ok &= (np.abs(ref_r) <= bound).all(axis=(1, 2))
+            ok &= (np.abs(wrench) <= self.bounds.wrench).all(axis=1)
+            good = np.flatnonzero(ok)
+            rh, rr = (ref_h[good, :1], ref_r[good, :1]) if self._reads_first_row_only else (ref_h[good], ref_r[good])
+            u_h, u_r = self._law_batch(z[good], rh, rr) if law is None else law(good, z[good], rh, rr)
+            fine = np.isfinite(u_r).all(axis=1) & np.isfinite(u_h).all(axis=1)
+            with np.errstate(invalid="ignore"):  # rows with a non-finite effort are redone by step()
+                ratio = np.max(np.abs(u_r) / self.effort_limit, axis=1)
+        except Exception:  # noqa: BLE001 -- step() per row reports the fault as it always does
+            return None
+        return good, u_h, u_r, fine, ratio
 
     def _batch_ok(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray) -> bool:
         """Whether :meth:`step_batch` may take its batched path: float64 arrays of the shapes

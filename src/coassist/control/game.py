@@ -318,6 +318,32 @@ class _LinearQuadraticGame:
         return U[:N].reshape(-1, self._n), U[N:].reshape(-1, self._n)
 
 
+def solve_with_gains(gains: list[EquilibriumGains], z: np.ndarray, ref_h: np.ndarray,
+                     ref_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """:meth:`~_LinearQuadraticGame.solve` for B rows, row b with its own gains ``gains[b]``
+    (trials in lockstep whose α differs: :func:`coassist.control.arbitration.arbitrated_effort_batch`):
+    z (B, 2n), ref_h and ref_r (B, Np, 2n) float64 → (u_h (B, n), u_r (B, n)).
+
+    Row b equals a game's ``solve(z[b], ref_h[b], ref_r[b])`` with those gains bit for bit:
+    the same three matrix-vector products in the same order, one BLAS gemv per row (numpy's
+    stacked ``matmul`` with (B, k, 1) vectors, as in ``solve_batch``; the gains are stacked
+    into contiguous arrays, which changes no row's sum: a gemv sums each row of the
+    matrix the same way whatever its leading dimension).
+    """
+    B = z.shape[0]
+    if len(gains) != B:
+        raise ValueError(f"one gain set per row: {len(gains)} for {B} rows")
+    n = gains[0].G_z.shape[0] // 2
+    G_z = np.stack([g.G_z for g in gains])
+    G_h = np.stack([g.G_h for g in gains])
+    G_r = np.stack([g.G_r for g in gains])
+    u = np.matmul(G_z, np.ascontiguousarray(z)[:, :, None])
+    u += np.matmul(G_h, np.ascontiguousarray(ref_h).reshape(B, -1, 1))
+    u += np.matmul(G_r, np.ascontiguousarray(ref_r).reshape(B, -1, 1))
+    u = u[:, :, 0]
+    return u[:, :n], u[:, n:]
+
+
 def _add(a: dict[str, float], b: dict[str, float]) -> dict[str, float]:
     out = dict(a)
     for k, v in b.items():

@@ -11,7 +11,8 @@ trials of a group advance as arrays of shape (B, ·): per tick k, for the trials
     intent    rows (B, 8) → one ring buffer per model → one predict_batch call (models);
               the tick's own intent stage per trial (oracle, constant velocity); none (nominal)
     control   z = [x − x0; v], ref_h from the predictions, ref_r from the plan → one
-              step_batch per shared controller (a stateful one: its own step per trial)
+              effort_batch per shared controller; one arbitrated_effort_batch per group of
+              online-α runs (each its own α); any other stateful one: its own step per trial
     safety    contact force, tool speed (the effort stage)
     world     operator arm (eq. 4.1: delay, adaptation, noise, force limit), board yaw,
               exact ZOH plant, the sensor's next sample
@@ -20,7 +21,9 @@ trials of a group advance as arrays of shape (B, ·): per tick k, for the trials
 Every formula is the scalar code's own, written elementwise in the same order of
 operations (numpy's elementwise + − × ÷ and sqrt are IEEE operations, as Python's), so a
 trial here gives what the per-trial loop gives bit for bit. The controller is the same
-object's ``step_batch`` (row for row its ``step``), the network the same batcher.
+object's ``effort_batch`` (row for row its ``step``; the online-α ones
+:func:`~coassist.control.arbitration.arbitrated_effort_batch`, row for row each run's
+``step``), the network the same batcher.
 
 The fast path covers the fault-free tick, which is every tick of every simulated trial
 in practice (no fault bit in any of 138 trials sampled from a full ``coassist reproduce``).
@@ -46,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from coassist.control.arbitration import ArbitratedController, arbitrated_effort_batch, guard_key
 from coassist.runtime.lockstep import Loop, _batcher, _stepper
 from coassist.runtime.loop import LoopLog, TargetDwell
 from coassist.runtime.safety import SafetyLayer
@@ -187,16 +191,38 @@ class _Batch:
         self.ref_xy = _ragged_rows([r.ref_xy for r in refs], rows)
         self.safety_speed = f([t.safety.limits.tool_speed for t in ticks])
         self.f2 = f([t.safety._f2 for t in ticks])
-        self.controllers = _groups([_stepper(t) for t in ticks])
+        # Groups as arrays: run i's shared controller is self.ctrl_list[self.ctrl_gid[i]] (None:
+        # each run steps its own), its model self.model_list[self.model_gid[i]] (−1: none shared).
+        self.ctrl_list = [c for c, _ in _groups([_stepper(t) for t in ticks]).values()]
+        self.ctrl_gid = np.empty(B, dtype=np.intp)
+        for g, (_, members) in enumerate(_groups([_stepper(t) for t in ticks]).values()):
+            self.ctrl_gid[members] = g
+        # runs with the online-α arbitration (stateful: no shared step_batch) sharing a guard:
+        # one arbitrated_effort_batch per group and tick, each run on its own α
+        self.arb_gid = np.full(B, -1, dtype=np.intp)
+        keys: dict[tuple, int] = {}
+        for i, t in enumerate(ticks):
+            if self.ctrl_list[self.ctrl_gid[i]] is None and type(t.controller) is ArbitratedController:
+                self.arb_gid[i] = keys.setdefault(guard_key(t.controller), len(keys))
+        self.n_arb = len(keys)
         self.nominal = np.array([bool(t.intent.nominal) for t in ticks])
+        self.need = np.array([int(getattr(t.intent, "need", 0)) for t in ticks], dtype=np.intp)
         batchers = [_batcher(t) for t in ticks]  # None: nominal, or an intent stage called alone
-        self.model_groups = {key: g for key, g in _groups(batchers).items() if g[0] is not None}
-        self.alone = [i for i in range(B) if not self.nominal[i] and batchers[i] is None]
-        self.rings = {key: _Ring(ticks[members[0]].intent.history, members) for key, (_, members) in self.model_groups.items()}
-        for key, (_, members) in self.model_groups.items():
+        model_groups = [g for g in _groups(batchers).values() if g[0] is not None]
+        self.model_list = [batcher for batcher, _ in model_groups]
+        self.model_gid = np.full(B, -1, dtype=np.intp)
+        self.rings = []
+        for g, (_, members) in enumerate(model_groups):
+            self.model_gid[members] = g
+            ring = _Ring(ticks[members[0]].intent.history, members, B)
             for i in members:
-                if int(ticks[i].intent.history) != self.rings[key].L:
+                if int(ticks[i].intent.history) != ring.L:
                     raise ValueError("runs sharing a model in the loop must share its history")
+                if int(ticks[i].intent.horizon) != int(ticks[members[0]].intent.horizon):
+                    raise ValueError("runs sharing a model in the loop must share its horizon")
+            self.rings.append(ring)
+        self.model_Hs = [int(ticks[members[0]].intent.horizon) for _, members in model_groups]
+        self.alone = [i for i in range(B) if not self.nominal[i] and batchers[i] is None]
         # --- termination
         terms: list[Any] = [lp.termination for lp in loops]  # TargetDwell or None (fast_path_eligible)
         self.has_term = np.array([t is not None for t in terms])
@@ -255,90 +281,102 @@ class _Batch:
         # the state's glitch check (tick.sense): a non-finite pose or twist is flagged
         left |= ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
         ref_pos = self.ref_pos[act, k]
-        # 2. intent
+        # 2. intent: the controllers' ref_h (B, Hmax, 4), the plan's rows where nothing is predicted
         B = act.size
-        pos = {}  # run index -> (Hs, 2) positions in use
-        where = {int(i): j for j, i in enumerate(act.tolist())}
-        rows = None
-        for key, (batcher, members) in self.model_groups.items():
-            ring = self.rings[key]
-            js = [where[i] for i in members if i in where]
-            if not js:
-                continue
-            if rows is None:
-                rows = np.concatenate([x, v, hand[:, :2], ref_pos], axis=1)
-            windows = ring.push(k, ring.slots(act[js]), rows[js])
-            try:
-                out = batcher.predict_batch(windows)
-            except Exception:  # the reference path predicts these rows one by one (and flags the failures)
-                out = None
-            if not (isinstance(out, np.ndarray) and out.ndim == 3 and out.shape[0] == len(js)):
-                left[js] = True
-                continue
-            for j, p in zip(js, out):
-                tick = self.ticks[act[j]]
-                need, Hs = tick.intent.need, tick.intent.horizon
-                if p.shape[0] >= need and p.shape[1] == 2 and np.isfinite(p[:Hs]).all():
-                    pos[j] = p[:Hs]
-                else:
-                    left[j] = True
-        for i in self.alone:
-            if i not in where:
-                continue
-            j = where[i]
-            row = (x[j, 0], x[j, 1], v[j, 0], v[j, 1], hand[j, 0], hand[j, 1], ref_pos[j, 0], ref_pos[j, 1])
-            p, pf = self.ticks[i].predict(k, row)
-            if pf or p is None:
-                left[j] = True
-            else:
-                pos[j] = p
-        # 3. the controllers' arguments (ControlTick.control_inputs) and steps
         H = self.H[act]
         Hmax = int(H.max())
         ref_r_all = self.ref_ctrl[act, k + 1 : k + 1 + Hmax]
+        ref_h_all = ref_r_all
+        predicted: list[tuple[np.ndarray, np.ndarray]] = []  # (positions in act, positions (n, m, 2) in use)
+        if self.model_list:
+            gid = self.model_gid[act]
+            rows = np.concatenate([x, v, hand[:, :2], ref_pos], axis=1)
+            for g, batcher in enumerate(self.model_list):
+                js = np.flatnonzero(gid == g)
+                if not js.size:
+                    continue
+                ring = self.rings[g]
+                windows = ring.push(k, ring.slot[act[js]], rows[js])
+                try:
+                    out = batcher.predict_batch(windows)
+                    # WindowIntent.accept, row for row: ≥ need rows of (x, y), the first Hs finite
+                    if not (isinstance(out, np.ndarray) and out.ndim == 3 and out.shape[0] == js.size and out.shape[2] == 2):
+                        raise ValueError("malformed predictions")
+                    p = out[:, : self.model_Hs[g]]
+                    ok = (out.shape[1] >= self.need[act[js]]) & np.isfinite(p).all(axis=(1, 2))
+                except Exception:  # the reference path predicts these rows one by one (and flags the failures)
+                    left[js] = True
+                    continue
+                left[js[~ok]] = True
+                if ok.any():
+                    predicted.append((js[ok], p[ok]))
+        if self.alone:
+            at = np.full(self.H.size, -1, dtype=np.intp)
+            at[act] = np.arange(B)
+            for i in self.alone:
+                j = int(at[i])
+                if j < 0:
+                    continue
+                row = (x[j, 0], x[j, 1], v[j, 0], v[j, 1], hand[j, 0], hand[j, 1], ref_pos[j, 0], ref_pos[j, 1])
+                answer, pf = self.ticks[i].predict(k, row)
+                if pf or answer is None:
+                    left[j] = True
+                else:
+                    predicted.append((np.array([j]), answer[None]))
+        # 3. the controllers' arguments (ControlTick.control_inputs) and steps
         z = np.empty((B, 4))
         np.subtract(x, self.x0[act], out=z[:, :2])
         z[:, 2:] = v
         w2 = np.ascontiguousarray(hand[:, :2])
         u_r = np.zeros((B, 2))
-        pred_rows: dict[int, np.ndarray] = {}
-        for j, p in pos.items():
-            i = int(act[j])
-            m, h = p.shape[0], int(self.H[i])
-            buf = np.zeros((m, 4))
-            np.subtract(p, self.x0[i], out=buf[:, :2])
+        for js, p in predicted:  # ref_h from the positions: [x̂ − x0; finite-difference velocity]
+            if ref_h_all is ref_r_all:
+                ref_h_all = ref_r_all.copy()
+            m = p.shape[1]
+            buf = np.zeros((js.size, m, 4))
+            np.subtract(p, self.x0[act[js]][:, None, :], out=buf[:, :, :2])
             if m >= 2:
-                np.subtract(p[1:], p[:-1], out=buf[1:, 2:4])
-                buf[1:, 2:4] *= 1.0 / self.dt
-                buf[0, 2:4] = buf[1, 2:4]
-            pred_rows[j] = buf[:h]
-        for controller, members in self.controllers.values():
-            js = [where[i] for i in members if i in where]
-            js = [j for j in js if not left[j]]
-            if not js:
+                np.subtract(p[:, 1:], p[:, :-1], out=buf[:, 1:, 2:4])
+                buf[:, 1:, 2:4] *= 1.0 / self.dt
+                buf[:, 0, 2:4] = buf[:, 1, 2:4]
+            h = min(m, Hmax)
+            ref_h_all[js, :h] = buf[:, :h]
+        cg = self.ctrl_gid[act]
+        for g, controller in enumerate(self.ctrl_list):
+            js = np.flatnonzero((cg == g) & ~left)
+            if not js.size:
                 continue
-            if controller is None:  # each run's own controller (state between ticks): its step, its horizon
-                steps = []
-                for j in js:
-                    h = int(self.H[act[j]])
-                    rr = ref_r_all[j, :h]
-                    steps.append(self.ticks[act[j]].controller.step(z[j], pred_rows.get(j, rr), rr, w2[j]))
-            else:
-                h = int(self.H[act[js[0]]])  # one controller, one horizon
-                rr = ref_r_all[js, :h]
-                rh = rr.copy()
-                for n, j in enumerate(js):
-                    if j in pred_rows:
-                        rh[n] = pred_rows[j]
-                if len(js) == 1:
-                    steps = [controller.step(z[js[0]], rh[0], rr[0], w2[js[0]])]
-                else:
-                    steps = controller.step_batch(z[js], rh, rr, w2[js])
-            for j, s in zip(js, steps):
+            if controller is None:  # each run's own controller (state between ticks)
+                ag = self.arb_gid[act[js]]
+                for a in range(self.n_arb):  # the arbitrated runs sharing a guard: one batched step, each its own α
+                    sel = js[ag == a]
+                    if sel.size:
+                        h = int(H[sel[0]])
+                        u, clean = arbitrated_effort_batch([self.ticks[i].controller for i in act[sel].tolist()], z[sel],
+                                                           ref_h_all[sel, :h], ref_r_all[sel, :h], w2[sel])  # fmt: skip
+                        left[sel[~clean]] = True
+                        u_r[sel[clean]] = u[clean]
+                for j in js[ag < 0].tolist():  # any other: its own step, its horizon
+                    h = int(H[j])
+                    s = self.ticks[act[j]].controller.step(z[j], ref_h_all[j, :h], ref_r_all[j, :h], w2[j])
+                    if s[2]:
+                        left[j] = True
+                    else:
+                        u_r[j] = s[0]
+                continue
+            h = int(H[js[0]])  # one controller, one horizon
+            rr = ref_r_all[js, :h]
+            rh = ref_h_all[js, :h]
+            if js.size == 1:
+                s = controller.step(z[js[0]], rh[0], rr[0], w2[js[0]])
                 if s[2]:
-                    left[j] = True
+                    left[js[0]] = True
                 else:
-                    u_r[j] = s[0]
+                    u_r[js[0]] = s[0]
+            else:
+                u, clean = controller.effort_batch(z[js], rh, rr, w2[js])
+                left[js[~clean]] = True
+                u_r[js[clean]] = u[clean]
         # 4. safety, effort stage (SafetyLayer.limit_effort on a fault-free tick)
         f2 = hand[:, 0] * hand[:, 0] + hand[:, 1] * hand[:, 1] + hand[:, 2] * hand[:, 2]
         lim2 = self.f2[act]
@@ -354,8 +392,8 @@ class _Batch:
         self.vel_log[act, k] = v
         self.wrench_log[act, k] = hand[:, :2]
         self.ref_log[act, k] = ref_pos
-        for j, p in pos.items():
-            self.pred_log[act[j], k, : p.shape[0]] = p
+        for js, p in predicted:
+            self.pred_log[act[js], k, : p.shape[1]] = p
         self.eff_r_log[act, k] = u_r
         self.eff_h_log[act, k] = fh
         ended: list[tuple[int, str]] = []
@@ -366,17 +404,11 @@ class _Batch:
         self.inside[act] = count
         done_target = term & inside & (count >= self.dwell_ticks[act])
         done_time = k + 1 >= self.n_max[act]
-        keep = []
-        for j, i in enumerate(act.tolist()):
-            if left[j]:
-                continue
-            if done_target[j]:
-                ended.append((i, "target"))
-            elif done_time[j]:
-                ended.append((i, "time_limit"))
-            else:
-                keep.append(i)
-        return np.array(keep, dtype=np.intp), ended
+        go = ~left
+        stop = go & (done_target | done_time)
+        for j in np.flatnonzero(stop).tolist():
+            ended.append((int(act[j]), "target" if done_target[j] else "time_limit"))
+        return act[go & ~stop], ended
 
     def _world(self, k: int, act: np.ndarray, x: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray:
         """One period of every run's world (PointMassWorld.apply); the hand forces u_h(k) (B, 2)."""
@@ -456,13 +488,11 @@ class _Batch:
 class _Ring:
     """The feature windows of the runs sharing one model: (B, 2L, 8), ``WindowIntent.push``'s layout."""
 
-    def __init__(self, L: int, members: list[int]) -> None:
+    def __init__(self, L: int, members: list[int], n_runs: int) -> None:
         self.L = int(L)
-        self.slot = {int(i): n for n, i in enumerate(members)}
+        self.slot = np.full(n_runs, -1, dtype=np.intp)  # run index -> its row here
+        self.slot[members] = np.arange(len(members))
         self.hist = np.zeros((len(members), 2 * self.L, 8))
-
-    def slots(self, runs: np.ndarray) -> np.ndarray:
-        return np.array([self.slot[int(i)] for i in runs], dtype=np.intp)
 
     def push(self, k: int, slots: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Store tick k's rows (len(slots), 8); the runs' windows (len(slots), L, 8), oldest first."""
