@@ -15,9 +15,9 @@ def network_forward_flops(n_features: int, n_outputs: int, lstm_layers: int, hid
                           skip_inputs: int = 0) -> tuple[float, float]:  # fmt: skip
     """Multiply-add FLOPs of one window's forward pass through an ``IntentNet`` in its matrix
     products, (LSTM, head): the LSTM's gates, 4·h·(in + h)·2 per layer and step, over
-    ``steps``; the FC head (from the last hidden state, or the flattened window without an
-    LSTM) and the linear skip. Elementwise work is left out: a lower bound."""
+    ``steps``; the FC head from the last hidden state, and the linear skip (with no LSTM
+    the network is the skip alone, ``IntentNet``'s rule). Elementwise work is left out."""
     lstm = sum(4 * hidden * ((n_features if layer == 0 else hidden) + hidden) * 2 for layer in range(lstm_layers)) * steps
-    widths = [hidden if lstm_layers else steps * n_features, *fc, n_outputs]
+    widths = [hidden, *fc, n_outputs] if lstm_layers else []
     head = sum(2 * a * b for a, b in zip(widths, widths[1:])) + 2 * skip_inputs * n_outputs
     return float(lstm), float(head)

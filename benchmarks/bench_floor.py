@@ -6,8 +6,9 @@ Reads what the run did (nothing is re-run):
 
 - every trained network (``models/*/model.json``): windows × epochs, and the matrix-product
   FLOPs of one window's training step (``bench_common.network_forward_flops``: the LSTM's
-  gates, the FC head and the linear skip; backward as twice forward; a transfer with the
-  LSTM frozen pays the LSTM's forward only);
+  gates, the FC head and the linear skip; backward as twice forward, which overcounts a
+  little where the skip is frozen; a transfer with the LSTM frozen computes the LSTM once
+  per window and trains the head);
 - every dataset collected with a learned network in the loop (``datasets/*/manifest.json``):
   its trial-ticks, each one forward pass of that network;
 
@@ -45,15 +46,22 @@ from coassist.intent import MODEL_PRESETS  # noqa: E402
 
 
 def network_flops(meta: dict) -> tuple[float, float]:
-    """(training-step FLOPs per window, forward FLOPs per window) of a saved model's network
-    (its model.json): backward taken as twice forward; a transfer with the LSTM frozen pays
-    the LSTM's forward only."""
+    """(LSTM, head) forward FLOPs per window of a saved model's network (its model.json)."""
     net, window = meta["network"], meta["window"]
     steps = int(window["history"]) // int(window["decimation"])
-    lstm, head = network_forward_flops(int(net["n_features"]), int(net["n_outputs"]), int(net["lstm_layers"]),
-                                       int(net["hidden"]), net["fc"], steps, int(net.get("skip_inputs") or 0))  # fmt: skip
-    frozen = "lstm" in (meta.get("frozen") or [])
-    return (lstm + 3.0 * head) if frozen else 3.0 * (lstm + head), lstm + head
+    return network_forward_flops(int(net["n_features"]), int(net["n_outputs"]), int(net["lstm_layers"]),
+                                 int(net["hidden"]), net["fc"], steps, int(net.get("skip_inputs") or 0))  # fmt: skip
+
+
+def training_flops(meta: dict) -> float:
+    """FLOPs of a saved model's training: windows × epochs training steps, backward taken as
+    twice forward; a transfer with the LSTM frozen computes the LSTM once per window
+    (``training._Windows`` caches its features) and trains the head on them."""
+    lstm, head = network_flops(meta)
+    n, epochs = int(meta["n_train_windows"]), int(meta["train_config"]["epochs"])
+    if "lstm" in (meta.get("frozen") or []):
+        return n * lstm + epochs * n * 3.0 * head
+    return epochs * n * 3.0 * (lstm + head)
 
 
 def _default_meta() -> dict:
@@ -75,11 +83,9 @@ def run_work(run: Path) -> tuple[float, float, int, int, dict[str, float]]:
     for name, meta in metas.items():
         if not meta["network"]["lstm_layers"]:
             continue  # the ridge: closed form, no training steps
-        w = int(meta["train_config"]["epochs"]) * int(meta["n_train_windows"])
-        step, _ = network_flops(meta)
-        by_model[name] = w * step
-        train_flops += w * step
-        windows += w
+        by_model[name] = flops = training_flops(meta)
+        train_flops += flops
+        windows += int(meta["train_config"]["epochs"]) * int(meta["n_train_windows"])
     fwd_flops, ticks = 0.0, 0
     for path in sorted((run / "datasets").glob("*/manifest.json")):
         manifest = json.loads(path.read_text("utf-8"))
@@ -88,8 +94,7 @@ def run_work(run: Path) -> tuple[float, float, int, int, dict[str, float]]:
             meta = metas.get(model_id.split("@")[0])
             if meta is None or not meta["network"]["lstm_layers"]:
                 continue  # nominal, oracle, constant velocity, the ridge: no network worth counting
-            _, fwd = network_flops(meta)
-            fwd_flops += int(entry["n_samples"]) * fwd
+            fwd_flops += int(entry["n_samples"]) * sum(network_flops(meta))
             ticks += int(entry["n_samples"])
     return train_flops, fwd_flops, windows, ticks, by_model
 
@@ -114,8 +119,8 @@ def training_rate(batches: int = 60) -> float:
         opt.step()
         if i >= 5:
             times.append(time.perf_counter() - t0)
-    step, _ = network_flops(_default_meta())
-    return B * step / float(np.median(times)) / 1e9
+    lstm, head = network_flops(_default_meta())
+    return B * 3.0 * (lstm + head) / float(np.median(times)) / 1e9
 
 
 def forward_rate(batch: int = 30, calls: int = 200) -> tuple[float, str]:
@@ -143,7 +148,7 @@ def forward_rate(batch: int = 30, calls: int = 200) -> tuple[float, str]:
         call(x)
         if i >= 10:
             times.append(time.perf_counter() - t0)
-    _, fwd = network_flops(_default_meta())
+    fwd = sum(network_flops(_default_meta()))
     return batch * fwd / float(np.median(times)) / 1e9, backend
 
 

@@ -175,3 +175,5 @@ def test_arbitrated_effort_batch_is_each_controllers_step_bit_for_bit(law):
         if k == 10:
             assert not clean[1] and not clean[2]
     assert len({c.alpha for c in batch}) == B  # the runs' α differ: each row had its own gains
+    u0, clean0 = arbitrated_effort_batch([], np.zeros((0, 4)), np.zeros((0, 20, 4)), np.zeros((0, 20, 4)), np.zeros((0, 2)))
+    assert u0.shape == (0, 2) and clean0.shape == (0,)

@@ -518,3 +518,5 @@ def test_solve_with_gains_is_each_games_solve_bit_for_bit():
     assert np.abs(u_r[0] - u_r[-1]).max() > 1e-3  # the α differ enough to matter
     with pytest.raises(ValueError, match="one gain set per row"):
         solve_with_gains([games[0].gains], z, ref_h, ref_r)
+    e_h, e_r = solve_with_gains([], z[:0], ref_h[:0], ref_r[:0])
+    assert e_h.shape == e_r.shape == (0, 2)

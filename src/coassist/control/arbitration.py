@@ -235,9 +235,15 @@ def arbitrated_effort_batch(controllers: list[ArbitratedController], z: np.ndarr
     row b on its own gains (:func:`~coassist.control.game.solve_with_gains`). Returns
     (u_r (B, n), clean (B,) bool): where ``clean[b]``, ``u_r[b]`` is what
     ``controllers[b].step(z[b], ref_h[b], ref_r[b], wrench[b])`` gives, bit for bit, and
-    that step carries no fault flag; elsewhere the row's effort is not given (the caller
-    steps it on its reference path). The controllers must share :func:`guard_key`. Never raises.
+    that step carries no fault flag; elsewhere the row's effort is not given, and its
+    arbiter has already advanced for this tick: the caller must not call that controller's
+    ``step`` for the tick again (the lockstep runner rebuilds such a run and reruns it on
+    the reference path). The controllers must share :func:`guard_key` and must be B
+    distinct objects on B distinct games (every α is set before any gains are read).
+    Never raises.
     """
+    if not controllers:
+        return np.zeros((0, z.shape[1] // 2 if np.ndim(z) == 2 else 0)), np.zeros(0, dtype=bool)
     for b, c in enumerate(controllers):
         alpha = c.arbiter.update(z[b], ref_h[b], wrench[b], ref_r[b])
         if alpha != c.game.alpha:

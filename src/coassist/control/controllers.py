@@ -249,8 +249,10 @@ class _GuardedController:
         Returns (u_r (B, n), clean (B,) bool): where ``clean[b]``, ``u_r[b]`` is
         ``step(z[b], ref_h[b], ref_r[b], wrench[b]).u_r`` bit for bit and that step carries
         no fault flag (not even SATURATED); elsewhere ``u_r[b]`` is 0 and the caller must
-        not use it (step that row itself, which reports it). Nothing is logged or warned
-        here: a row that is not clean has not been stepped. Never raises.
+        not use it (step that row itself, which reports it). On the batched path nothing is
+        logged or warned: a row that is not clean has not been stepped. Inputs the batch
+        cannot take (other dtypes or shapes) go through :meth:`step` row by row, which
+        warns as it always does. Never raises.
         """
         return self._clean_efforts(self._batch_core(z, ref_h, ref_r, wrench), z, ref_h, ref_r, wrench, [self.step] * z.shape[0])
 

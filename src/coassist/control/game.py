@@ -333,6 +333,9 @@ def solve_with_gains(gains: list[EquilibriumGains], z: np.ndarray, ref_h: np.nda
     B = z.shape[0]
     if len(gains) != B:
         raise ValueError(f"one gain set per row: {len(gains)} for {B} rows")
+    if B == 0:
+        n = z.shape[1] // 2
+        return np.zeros((0, n)), np.zeros((0, n))
     n = gains[0].G_z.shape[0] // 2
     G_z = np.stack([g.G_z for g in gains])
     G_h = np.stack([g.G_h for g in gains])

@@ -193,17 +193,26 @@ class _Batch:
         self.f2 = f([t.safety._f2 for t in ticks])
         # Groups as arrays: run i's shared controller is self.ctrl_list[self.ctrl_gid[i]] (None:
         # each run steps its own), its model self.model_list[self.model_gid[i]] (−1: none shared).
-        self.ctrl_list = [c for c, _ in _groups([_stepper(t) for t in ticks]).values()]
+        ctrl_groups = list(_groups([_stepper(t) for t in ticks]).values())
+        self.ctrl_list = [c for c, _ in ctrl_groups]
         self.ctrl_gid = np.empty(B, dtype=np.intp)
-        for g, (_, members) in enumerate(_groups([_stepper(t) for t in ticks]).values()):
+        for g, (_, members) in enumerate(ctrl_groups):
             self.ctrl_gid[members] = g
         # runs with the online-α arbitration (stateful: no shared step_batch) sharing a guard:
         # one arbitrated_effort_batch per group and tick, each run on its own α
+        # (a controller or game shared by two runs keeps the per-run order of update and step)
         self.arb_gid = np.full(B, -1, dtype=np.intp)
         keys: dict[tuple, int] = {}
-        for i, t in enumerate(ticks):
-            if self.ctrl_list[self.ctrl_gid[i]] is None and type(t.controller) is ArbitratedController:
-                self.arb_gid[i] = keys.setdefault(guard_key(t.controller), len(keys))
+        arbitrated = [i for i, t in enumerate(ticks)
+                      if self.ctrl_list[self.ctrl_gid[i]] is None and type(t.controller) is ArbitratedController]  # fmt: skip
+        uses: dict[int, int] = {}
+        for i in arbitrated:
+            for obj in (ticks[i].controller, ticks[i].controller.game):
+                uses[id(obj)] = uses.get(id(obj), 0) + 1
+        for i in arbitrated:
+            c = ticks[i].controller
+            if uses[id(c)] == 1 and uses[id(c.game)] == 1:
+                self.arb_gid[i] = keys.setdefault(guard_key(c), len(keys))
         self.n_arb = len(keys)
         self.nominal = np.array([bool(t.intent.nominal) for t in ticks])
         self.need = np.array([int(getattr(t.intent, "need", 0)) for t in ticks], dtype=np.intp)
@@ -303,7 +312,8 @@ class _Batch:
                     if not (isinstance(out, np.ndarray) and out.ndim == 3 and out.shape[0] == js.size and out.shape[2] == 2):
                         raise ValueError("malformed predictions")
                     p = out[:, : self.model_Hs[g]]
-                    ok = (out.shape[1] >= self.need[act[js]]) & np.isfinite(p).all(axis=(1, 2))
+                    # fewer rows than the controller's horizon: the reference path decides
+                    ok = (out.shape[1] >= np.maximum(self.need[act[js]], H[js])) & np.isfinite(p).all(axis=(1, 2))
                 except Exception:  # the reference path predicts these rows one by one (and flags the failures)
                     left[js] = True
                     continue
@@ -319,7 +329,7 @@ class _Batch:
                     continue
                 row = (x[j, 0], x[j, 1], v[j, 0], v[j, 1], hand[j, 0], hand[j, 1], ref_pos[j, 0], ref_pos[j, 1])
                 answer, pf = self.ticks[i].predict(k, row)
-                if pf or answer is None:
+                if pf or answer is None or answer.shape[0] < H[j]:
                     left[j] = True
                 else:
                     predicted.append((np.array([j]), answer[None]))
