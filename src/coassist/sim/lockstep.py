@@ -215,7 +215,8 @@ class _Batch:
                 self.arb_gid[i] = keys.setdefault(guard_key(c), len(keys))
         self.n_arb = len(keys)
         self.nominal = np.array([bool(t.intent.nominal) for t in ticks])
-        self.need = np.array([int(getattr(t.intent, "need", 0)) for t in ticks], dtype=np.intp)
+        # rows a prediction must have: the intent stage's need and the controller's horizon
+        self.rows_needed = np.maximum([int(getattr(t.intent, "need", 0)) for t in ticks], self.H)
         batchers = [_batcher(t) for t in ticks]  # None: nominal, or an intent stage called alone
         model_groups = [g for g in _groups(batchers).values() if g[0] is not None]
         self.model_list = [batcher for batcher, _ in model_groups]
@@ -230,7 +231,6 @@ class _Batch:
                 if int(ticks[i].intent.horizon) != int(ticks[members[0]].intent.horizon):
                     raise ValueError("runs sharing a model in the loop must share its horizon")
             self.rings.append(ring)
-        self.model_Hs = [int(ticks[members[0]].intent.horizon) for _, members in model_groups]
         self.alone = [i for i in range(B) if not self.nominal[i] and batchers[i] is None]
         # --- termination
         terms: list[Any] = [lp.termination for lp in loops]  # TargetDwell or None (fast_path_eligible)
@@ -311,9 +311,9 @@ class _Batch:
                     # WindowIntent.accept, row for row: ≥ need rows of (x, y), the first Hs finite
                     if not (isinstance(out, np.ndarray) and out.ndim == 3 and out.shape[0] == js.size and out.shape[2] == 2):
                         raise ValueError("malformed predictions")
-                    p = out[:, : self.model_Hs[g]]
+                    p = out[:, : self.Hs[act[js[0]]]]  # the group's runs share the model's horizon
                     # fewer rows than the controller's horizon: the reference path decides
-                    ok = (out.shape[1] >= np.maximum(self.need[act[js]], H[js])) & np.isfinite(p).all(axis=(1, 2))
+                    ok = (out.shape[1] >= self.rows_needed[act[js]]) & np.isfinite(p).all(axis=(1, 2))
                 except Exception:  # the reference path predicts these rows one by one (and flags the failures)
                     left[js] = True
                     continue
@@ -329,7 +329,7 @@ class _Batch:
                     continue
                 row = (x[j, 0], x[j, 1], v[j, 0], v[j, 1], hand[j, 0], hand[j, 1], ref_pos[j, 0], ref_pos[j, 1])
                 answer, pf = self.ticks[i].predict(k, row)
-                if pf or answer is None or answer.shape[0] < H[j]:
+                if pf or answer is None or answer.shape[0] < self.rows_needed[i]:
                     left[j] = True
                 else:
                     predicted.append((np.array([j]), answer[None]))
