@@ -265,3 +265,22 @@ def test_tracking_error_and_peak_effort_ratio_by_hand():
     assert math.isnan(peak_effort_ratio(u_r, np.zeros((2, 2))))
     with pytest.raises(ValueError, match="intent has shape"):
         tracking_error_rms(pose, np.zeros((3, 2)))
+
+
+def test_clearance_against_hand_computation():
+    from coassist.metrics import clearance, clearance_deficit
+
+    center, size = (0.5, 0.0), (0.1, 0.2)  # the box spans x 0.45…0.55, y −0.1…0.1
+    # passing above the box 5 cm up: the nearest point of the path is (0.5, 0.15) → 0.05 m
+    above = np.stack([np.linspace(0, 1, 101), np.full(101, 0.15)], axis=1)
+    assert clearance(above, center, size) == pytest.approx(0.05, abs=1e-15)
+    # a single point diagonally off a corner: 3-4-5 triangle from (0.55, 0.1)
+    assert clearance([[0.58, 0.14]], center, size) == pytest.approx(0.05, abs=1e-15)
+    # inside, 2 cm from the nearest face (x = 0.55): −0.02
+    assert clearance([[0.53, 0.0]], center, size) == pytest.approx(-0.02, abs=1e-15)
+    # the tool 1 cm closer than the intent at its nearest point: deficit +0.01; farther: negative
+    closer = above - [0.0, 0.01]
+    assert clearance_deficit(closer, above, center, size) == pytest.approx(0.01, abs=1e-15)
+    assert clearance_deficit(above, closer, center, size) == pytest.approx(-0.01, abs=1e-15)
+    with pytest.raises(ValueError, match="size"):
+        clearance(above, center, (0.1, 0.0))

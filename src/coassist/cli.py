@@ -473,7 +473,8 @@ def collect(
     trials: int = typer.Option(20, help="Trials per user, object and task."),
     seed: int = typer.Option(0, help="Seed of the first trial; trial i uses seed + i."),
     preset: str = typer.Option(COLLECTION_PRESET, help=f"Control preset: {COLLECTION_PRESET} (the main job's for collection), {APPLICATION_PRESET} (the main job's with a learned model in the loop), thesis-application-dm, or one without -dm (SI units: the robot barely helps)."),
-    intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle | path of an intent model."),
+    intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle | present | paths | path of an intent "
+                               "model or of a path-hypotheses calibration."),
     obstacle: str = typer.Option("small", help="The obstacle the operators go around: small (the evaluation's box) or large (the application's 12 cm box, no path shown)."),
     dataset_id: str = typer.Option(None, help="Dataset id (default: the folder's name)."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
@@ -503,8 +504,9 @@ def collect(
     user_list = _int_list(users, "--users")
     task_list = _name_list(tasks, "--tasks", TASK_KINDS, "task")
     object_list = _name_list(objects, "--objects", tuple(OBJECTS), "object")
-    if intent not in NAMED_INTENTS and not (Path(intent) / "model.json").is_file():
-        _fail(f"--intent {intent}: not one of {', '.join(NAMED_INTENTS)} or a model folder (no model.json there)", 2)
+    if intent not in NAMED_INTENTS and not any((Path(intent) / f).is_file() for f in ("model.json", "path-hypotheses.json")):
+        _fail(f"--intent {intent}: not one of {', '.join(NAMED_INTENTS)}, a model folder (model.json) or a path-hypotheses "
+              "calibration (path-hypotheses.json)", 2)
     _folder_out(out, "--out")
     try:
         folder = collect_dataset(
@@ -539,7 +541,8 @@ def drive(
     controller: str = typer.Option("cooperative", help="cooperative (the assistive controller: the cooperative game) | cooperative-arbitrated (α set every tick by the target law) | impedance (IMP) | manual (MG, manual guidance)."),
     task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
-    intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle (MuJoCo) | path of an intent model (coassist train)."),
+    intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle (MuJoCo) | present | paths | path of an "
+                               "intent model (coassist train) or of a path-hypotheses calibration."),
     realtime_intent: bool = typer.Option(None, help="Run the model off the control thread, never waiting for it (default: on for --world ur, off in MuJoCo, where runs are then deterministic)."),
     predictor_backend: str = typer.Option("process", help="Where a real-time model runs: process (own worker process), onnx (ONNX Runtime thread) or torch (thread)."),
     preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; the -dm presets ring with one)."),
@@ -845,6 +848,53 @@ def realism(
         _fail(str(exc))
     console.print(realism_exp.summary_table(result))
     _wrote(str(realism_exp.write_report(result, out, realism_exp.NOTES)))
+
+
+@app.command("compare-intents")
+def compare_intents(
+    source: list[str] = typer.Option(..., help="LABEL=INTENT, repeatable: a named source (present, paths, …), a model "
+                                     "folder or a calibration folder; paths alone is calibrated on each base's trials."),
+    out: Path = typer.Option(Path("runs/compare-intents"), help="Folder for the datasets, table.md and summary.json."),
+    bases: str = typer.Option("50000,60000", help="Validation seed bases (application_seed(base, j); never the report's 0)."),
+    damped: str = typer.Option("", help="Labels to run with the cooperative-damped controller instead of the arbitrated one."),
+    trials: int = typer.Option(4, help="Trials per operator, object and base."),
+    workers: int = typer.Option(2, help="Simulation processes."),
+) -> None:
+    """Intent sources in the loop on validation seeds, paired against MG and the oracle (docs/precision.md)."""
+    import json
+
+    from coassist._io import atomic_write_text
+    from coassist.experiments.precision import compare_intents as run
+    from coassist.experiments.precision import comparison_table
+    from coassist.experiments.reproduce import _jsonable
+
+    pairs = {}
+    for item in source:
+        label, sep, spec = item.partition("=")
+        if not sep or not label or not spec:
+            _fail(f"--source {item!r}: expected LABEL=INTENT", 2)
+        if label in pairs:
+            _fail(f"--source {label}: given twice", 2)
+        pairs[label] = spec
+    seeds = _int_list(bases, "--bases")
+    labels = [d for d in damped.split(",") if d]
+    for label in labels:
+        if label not in pairs:
+            _fail(f"--damped {label}: not a --source label", 2)
+    for value, option in ((trials, "--trials"), (workers, "--workers")):
+        if value < 1:
+            _fail(f"{option} must be >= 1, got {value}", 2)
+    out = _folder_out(out, "--out")
+    try:
+        result = run(pairs, out, bases=seeds, controllers={label: "cooperative-damped" for label in labels}, trials=trials,
+                     workers=workers)  # fmt: skip
+    except ValueError as exc:
+        _fail(str(exc), 2)
+    table = comparison_table(result)
+    console.print(table)
+    atomic_write_text(out / "table.md", table + "\n")
+    atomic_write_text(out / "summary.json", json.dumps(_jsonable(result.summary()), indent=1, allow_nan=True))
+    _wrote(str(out / "table.md"))
 
 
 @app.command()

@@ -122,9 +122,11 @@ SAFETY_FAULTS = (
 #: The per-tick history features, in the thesis' order.
 FEATURES = ("x", "y", "vx", "vy", "fx", "fy", "x_ref", "y_ref")
 #: Intent sources named rather than loaded from a model folder (``scenario.intent_source``): the
-#: nominal plan (eq. 4.7), the tool's constant-velocity extrapolation, and the simulated
-#: operator's true intent ("oracle", simulation only).
-NAMED_INTENTS = ("nominal", "constant-velocity", "oracle")
+#: nominal plan (eq. 4.7), the tool's constant-velocity extrapolation, the simulated operator's
+#: true intent ("oracle", simulation only), the present estimate from the hand force
+#: ("present") and the path hypotheses round the obstacles the robot is told of ("paths", with
+#: a typical person's detour; a calibrated one is a folder, ``scenario.path_hypotheses``).
+NAMED_INTENTS = ("nominal", "constant-velocity", "oracle", "present", "paths")
 #: What evaluates a model-backed source's network in a simulated loop
 #: (``coassist.intent.load_model_intent``): torch eager, ONNX Runtime (the ``onnx`` extra;
 #: ``coassist.intent.onnx_network``), or "auto": ONNX Runtime where it is installed, else
@@ -142,6 +144,10 @@ class TrialContext:
     task : the task kind. user, object : names.
     true_intent : (n, 2) the operator's desired positions — simulation only, for the
     oracle baseline; a real predictor must not read it.
+    path : (P, 2) the nominal path's polyline [m] in the plan's frame (public, like the
+        reference), or None when the world has none.
+    obstacles : the boxes the robot is told of, each ((x, y) centre, (width, depth) size) [m] in
+        the plan's frame; empty when it is told of none (the person may still see some).
     """
 
     dt: float
@@ -153,6 +159,8 @@ class TrialContext:
     user: str
     object: str
     true_intent: np.ndarray | None = None
+    path: np.ndarray | None = None
+    obstacles: tuple[tuple[tuple[float, float], tuple[float, float]], ...] = ()
 
 
 @runtime_checkable

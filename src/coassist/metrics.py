@@ -3,7 +3,9 @@
 Smoothness and stability (beyond the thesis, issue #11): :func:`jerk_rms` of the tool
 path, :func:`overshoot` of the tool past the operator's intent at each of its turns,
 :func:`tracking_error_rms` of the tool against that intent, and
-:func:`peak_effort_ratio` of the robot's peak effort to the hand's.
+:func:`peak_effort_ratio` of the robot's peak effort to the hand's. Around an obstacle
+(issue 34): :func:`clearance` of a path from a box, and :func:`clearance_deficit`, how much
+closer the tool passes than the operator meant to.
 
 Pure functions on arrays (SI units). Conventions, where the thesis is loose
 (docs/architecture.md, *Conventions for the math*):
@@ -37,6 +39,8 @@ __all__ = [
     "HORIZONS",
     "EMax",
     "PredictionErrors",
+    "clearance",
+    "clearance_deficit",
     "distance_to_target",
     "e_max",
     "e_rms",
@@ -413,6 +417,37 @@ def overshoot(pose: ArrayLike, intent: ArrayLike, *, tol: float = 1e-3) -> float
             lo, hi = bounds[e], bounds[e + 2]  # from the turn before to the turn after (or the ends)
             worst = max(worst, float(np.max(s * (x[lo : hi + 1, axis] - ref[i, axis]))))
     return worst
+
+
+def clearance(positions: ArrayLike, center: ArrayLike, size: ArrayLike) -> float:
+    """min_k d(x(k), box) [m]: the smallest signed distance of a path from an axis-aligned box.
+
+    d is the Euclidean distance to the box's surface outside it and minus the distance to the
+    surface inside it (the box of :class:`coassist.scenario.tasks.Box`: ``center`` (d,),
+    ``size`` (d,) its full widths [m]). Negative: the path went into the box.
+
+    Parameters
+    ----------
+    positions : array_like, shape (T, d), in m.
+    center, size : array_like, shape (d,), in m; size > 0.
+    """
+    x = _as_positions(positions, "positions")
+    c = np.asarray(center, dtype=float)
+    half = 0.5 * np.asarray(size, dtype=float)
+    if c.shape != (x.shape[1],) or half.shape != (x.shape[1],):
+        raise ValueError(f"center and size must have shape ({x.shape[1]},), got {c.shape} and {half.shape}")
+    if not (np.isfinite(c).all() and np.isfinite(half).all() and (half > 0).all()):
+        raise ValueError(f"center must be finite and size finite and > 0, got {center!r}, {size!r}")
+    q = np.abs(x - c) - half
+    outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
+    inside = np.minimum(np.max(q, axis=1), 0.0)
+    return float(np.min(outside + inside))
+
+
+def clearance_deficit(pose: ArrayLike, intent: ArrayLike, center: ArrayLike, size: ArrayLike) -> float:
+    """clearance(intent) − clearance(pose) [m]: how much closer to the box the tool passed than the
+    operator meant it to (> 0: closer; ≤ 0: at least as far)."""
+    return clearance(intent, center, size) - clearance(pose, center, size)
 
 
 def peak_effort_ratio(effort_r: ArrayLike, effort_h: ArrayLike) -> float:

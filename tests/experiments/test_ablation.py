@@ -47,18 +47,22 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     from dataclasses import replace
 
     from coassist.experiments import pipeline
-    from coassist.experiments.ablation import CONTROLLERS, SOURCES, run_ablation
-    from coassist.experiments.intent_sources import LEARNED
+    from coassist.experiments.ablation import ARBITRATED, ablation_cells, run_ablation, run_sources
+    from coassist.experiments.intent_sources import seed_names
+    from coassist.scenario.path_hypotheses import write_calibration
 
     cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1, threads=1)
     ws = pipeline.Workspace(cfg, tmp_path, progress=False)
     # One tool-labelled model stands in for every learned source: the cells' plumbing is what is tested.
     folder, _ = ws.collect("D0", tasks=("curved",), trials=2, seed=1, preset=cfg.application_preset, obstacle="large")
     model = ws.train("m", [folder], init="scratch", epochs=1)
-    result = run_ablation(ws, {s: str(model) for s in LEARNED})
+    models = {n: str(model) for s in cfg.learned_sources for n in seed_names(s, cfg.source_seeds)}
+    models["paths"] = str(write_calibration(tmp_path / "paths", {}))
+    result = run_ablation(ws, models)
     assert not result.skipped
     for obj in ("board", "heavy"):
         assert len(result.pairs[("mujoco", obj)]) == len(cfg.application_users)
-        for controller in CONTROLLERS:
-            for source in SOURCES:
-                assert ("mujoco", obj, controller, source) in result.metrics
+        for source in run_sources(cfg):
+            assert ("mujoco", obj, ARBITRATED, source) in result.metrics
+        for controller, source in ablation_cells(cfg):
+            assert ("point-mass", obj, controller, source) in result.metrics

@@ -9,9 +9,18 @@ import numpy as np
 import pytest
 
 from coassist.experiments import pipeline
-from coassist.experiments.ablation import CONTROLLERS, MG_JOB, OBJECTS, SOURCES, AblationAhead, _mujoco_jobs
+from coassist.experiments.ablation import (
+    CONTROLLERS,
+    MG_JOB,
+    OBJECTS,
+    AblationAhead,
+    _mujoco_jobs,
+    ablation_cells,
+    base_source,
+    run_sources,
+)
 from coassist.experiments.application import handed_to_ablation
-from coassist.experiments.intent_sources import APPLICATION_SOURCE, LEARNED
+from coassist.experiments.intent_sources import LEARNED, seed_names
 from coassist.sim.world import worker_pool
 
 ARRAYS = ("time", "pose", "velocity", "wrench", "reference", "prediction", "intent", "effort_h", "effort_r", "fault")
@@ -41,18 +50,25 @@ def _same_trials(a, b):
                 np.testing.assert_array_equal(x, y, err_msg=name)  # bit for bit: the same jobs
 
 
+def _named_cells(cfg):
+    """The ablation's cells whose source needs no model or calibration, per object."""
+    return [(c, s) for c, s in ablation_cells(cfg) if base_source(s) not in LEARNED and s != "paths"]
+
+
 def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
-    """Named sources at the first call, each learned one once written; never a cell the
-    application hands over; never twice; the MuJoCo jobs are those ``_run_mujoco`` takes."""
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1)
+    """Named sources at the first call, each learned one (and each of its trainings) once written;
+    never a cell the application hands over; never twice; the MuJoCo jobs are those ``_run_mujoco``
+    takes."""
+    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, source_seeds=2)
     pool = _RecordingPool()
     ws = pipeline.Workspace(cfg, tmp_path, progress=False, pool=pool)
     ahead = AblationAhead(ws, handed_to_ablation())
-    models = {s: f"/models/{s}" for s in LEARNED}
+    models = {n: f"/models/{n}" for s in cfg.learned_sources for n in seed_names(s, cfg.source_seeds)}
+    models["paths"] = "/models/paths"
 
     ahead({})
-    named = [s for s in SOURCES if s not in LEARNED]
-    expect = {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c in CONTROLLERS for s in named}
+    named = [s for s in run_sources(cfg) if s not in LEARNED and s != "paths"]
+    expect = {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c, s in _named_cells(cfg)}
     if ahead.mujoco:
         expect |= {f"job:mujoco:{s}" for s in (MG_JOB, *named)}
     assert set(ws._pending) == expect  # MG's point-mass cells come from the application: not started
@@ -63,22 +79,26 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
     if ahead.mujoco:
         expect.add("job:mujoco:lstm-tool")
     assert set(ws._pending) == expect
+    ahead({"lstm-tool-s1": models["lstm-tool-s1"]})  # a second training: its arbitrated cell alone
+    expect |= {f"dataset:ablation-{o}-cooperative-arbitrated-lstm-tool-s1" for o in OBJECTS}
+    assert set(ws._pending) == expect
 
     ahead(models)
-    expect |= {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c in CONTROLLERS for s in LEARNED
-               if s != APPLICATION_SOURCE}  # fmt: skip
+    expect |= {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c, s in ablation_cells(cfg)
+               if (o, c, s) not in handed_to_ablation()}  # fmt: skip
     if ahead.mujoco:
-        expect |= {f"job:mujoco:{s}" for s in LEARNED}
+        expect |= {f"job:mujoco:{s}" for s in run_sources(cfg)}
     assert set(ws._pending) == expect
+    assert "dataset:ablation-board-cooperative-damped-paths" in expect  # the damped controller's: not the application's
     # each prefetched cell carries its source's model
     (options, groups), _ = ws._pending["dataset:ablation-board-cooperative-ridge"]
     assert options["intent"] == models["ridge"] and options["controller"] == "cooperative"
     assert groups == 1  # a cell is one lockstep group: the pool holds many at once
     if ahead.mujoco:
-        jobs = _mujoco_jobs(cfg, {s: models.get(s, s) for s in SOURCES})
+        jobs = _mujoco_jobs(cfg, {s: models.get(s, s) for s in run_sources(cfg)})
         drives = [args[0] for name, args in pool.calls if name == "_drive_batch"]
-        assert drives == [[c for _, configs in jobs[s] for c in configs] for s in (MG_JOB, *named, "lstm-tool",
-                          *[s for s in LEARNED if s != "lstm-tool"])]  # fmt: skip
+        order = (MG_JOB, *named, "lstm-tool", *[s for s in run_sources(cfg) if s not in (*named, "lstm-tool")])
+        assert drives == [[c for _, configs in jobs[s] for c in configs] for s in order]
 
 
 @pytest.mark.parametrize("with_model", [False, True])
@@ -152,12 +172,13 @@ def test_beside_training_starts_each_later_share_once_and_all_by_the_last_traini
     assert seen[0] >= {"job:real recordings"}
     if iterations == 4:
         assert seen[0] == {"job:real recordings"}
-        assert seen[1] == {f"dataset:app-{o}-{c}" for o in OBJECTS for c in APP_CONTROLLERS if not c.startswith("cooperative")}
+        assert seen[1] == {f"dataset:app-{o}-{c}" for o in OBJECTS for c in APP_CONTROLLERS
+                           if not c.startswith("cooperative")} | {"dataset:calibration"}  # fmt: skip
         assert all(seen[k] for k in range(4))
-    named = [s for s in SOURCES if s not in LEARNED]
-    expect = {"job:real recordings"}
+    named = [s for s in run_sources(cfg) if s not in LEARNED and s != "paths"]
+    expect = {"job:real recordings", "dataset:calibration"}
     expect |= {f"dataset:app-{o}-{c}" for o in OBJECTS for c in APP_CONTROLLERS if not c.startswith("cooperative")}
-    expect |= {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c in CONTROLLERS for s in named}
+    expect |= {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c, s in _named_cells(cfg)}
     if ablation_ahead.mujoco:
         expect |= {f"job:mujoco:{s}" for s in (MG_JOB, *named)}
     assert set().union(*seen) == set(ws._pending) == expect

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from coassist.data import Trial, TrialMeta, default_real_data
-from coassist.experiments.realism import run_realism, summary_table, trial_stats, write_report
+from coassist.experiments.realism import run_realism, summary_table, trial_stats, turn_stats, write_report
 
 REAL = default_real_data() / "user-a"
 
@@ -31,6 +31,29 @@ def test_trial_stats_by_hand():
     assert s["peak_deviation"] == pytest.approx(0.05, abs=2e-3)
     expected_length = np.sum(np.linalg.norm(np.diff(_trial().pose, axis=0), axis=1))
     assert s["path_length"] == pytest.approx(expected_length)
+
+
+def test_turn_stats_by_hand():
+    # a circle of radius 0.1 m at 0.05 m/s: sideways acceleration v²/R = 0.025 m/s² (a cubic Savitzky-Golay
+    # filter differentiates the circle to ~1e-4 relative over a 0.2 s window: 0.5 % tolerance)
+    t = np.arange(0.0, 6.0, 0.008)
+    R, v = 0.1, 0.05
+    circle = R * np.column_stack([np.cos(v / R * t), np.sin(v / R * t)])
+    s = turn_stats(t, circle, np.zeros(len(t)))
+    assert s["peak_sideways_accel"] == pytest.approx(v * v / R, rel=5e-3)
+    assert s["submovements"] == 0  # constant speed: no peak
+    # two minimum-jerk strokes one after the other: two speed peaks; a straight line: no sideways acceleration
+    tau = np.clip(t / 3.0, 0, 1)
+    stroke = tau**3 * (10 - 15 * tau + 6 * tau**2)
+    x = 0.1 * stroke + 0.1 * np.clip(np.where(t > 3.0, (t - 3.0) / 3.0, 0.0), 0, 1) ** 3 * (
+        10 - 15 * np.clip((t - 3.0) / 3.0, 0, 1) + 6 * np.clip((t - 3.0) / 3.0, 0, 1) ** 2)
+    line = np.column_stack([x, np.zeros_like(x)])
+    s = turn_stats(t, line, np.zeros(len(t)))
+    assert s["submovements"] == 2 and s["peak_sideways_accel"] == pytest.approx(0.0, abs=1e-9)
+    # return overshoot: out to +5 cm, back through the path to −1.2 cm, then on it
+    dev = np.interp(t, [0, 2, 4, 5, 6], [0.0, 0.05, -0.012, 0.0, 0.0])
+    assert turn_stats(t, line, dev)["return_overshoot"] == pytest.approx(0.012, abs=1e-12)
+    assert turn_stats(t, line, -dev)["return_overshoot"] == pytest.approx(0.012, abs=1e-12)  # the other side alike
 
 
 @pytest.mark.real_data

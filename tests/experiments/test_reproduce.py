@@ -27,6 +27,7 @@ def _collections(cfg):
         per = len(t.tasks) * len(t.users) * len(t.objects)
         out += [(f"TL {name}", train, per * t.trials), (f"TL {name} test", test, per * t.test_trials)]
     out.append(("TL heavy", pipeline.heavy_transfer_seed(cfg.seed), n_tasks * max(1, cfg.transfer_trials // 3)))
+    out.append(("calibration", pipeline.calibration_seed(cfg.seed), cfg.calibration_trials * len(cfg.application_users)))
     for j in range(2):  # every controller of object j reuses the same seeds on purpose
         out.append((f"application {j}", pipeline.application_seed(cfg.seed, j),
                     cfg.application_trials * len(cfg.application_users)))
@@ -47,6 +48,7 @@ def test_seed_plan_offsets():
     assert pipeline.transfer_seeds(7, 2) == (7 + 640_000, 7 + 650_000)
     assert pipeline.heavy_transfer_seed(7) == 7 + 800_000
     assert pipeline.application_seed(7, 1) == 7 + 901_000
+    assert pipeline.calibration_seed(7) == 7 + 880_000
 
 
 @pytest.fixture(scope="module")
@@ -89,15 +91,21 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
         assert (out / "models" / key / "history.json").is_file()
     # The ablation: every (object, controller, source) cell in the point-mass world (the tiny preset leaves MuJoCo out),
     # each model saying what it predicts.
-    from coassist.experiments.ablation import CONTROLLERS, SOURCES
+    from coassist.experiments.ablation import ablation_cells
 
     ab = summary["ablation"]
-    assert set(ab["cells"]) == {f"point-mass/{o}/{c}/{s}" for o in ("board", "heavy") for c in CONTROLLERS for s in SOURCES}
+    tiny = rep.REPRODUCE_PRESETS["tiny"]
+    assert set(ab["cells"]) == {f"point-mass/{o}/{c}/{s}" for o in ("board", "heavy") for c, s in ablation_cells(tiny)}
     assert "mujoco" in ab["skipped"]
-    labels = {"ridge": "tool", "lstm-tool": "tool", "lstm-hand-alone": "hand_alone", "lstm-intent": "intent"}
+    labels = {"ridge": "tool", "ridge-intent": "intent", "lstm-tool": "tool", "lstm-intent": "intent"}
+    assert set(labels) == set(tiny.learned_sources)
     for source, label in labels.items():
         side = json.loads((out / "models" / source / "model.json").read_text())
         assert side["window"]["label"] == label and side["predicts"]
+    # the path hypotheses' calibration: one shape per application operator, fitted to their trials
+    calibration = json.loads((out / "models" / "paths" / "path-hypotheses.json").read_text())
+    assert set(calibration["shapes"]) == {f"user-{u}" for u in tiny.application_users}
+    assert all(v["trials"] == tiny.calibration_trials for v in calibration["shapes"].values())
 
 
 def inf(x):
@@ -154,12 +162,27 @@ def _expected_claims(summary):
                 bool(saving >= 0.30 and np.isfinite(v["sigma"]) and v["sigma"] <= inf(m["sigma"])
                      and v["reached"] >= m["reached"] and v["overshoot"] <= m["overshoot"]),
                 [f"force {100 * saving:.0f} %", f"{v['jerk_rms']:.2f} vs MG {m['jerk_rms']:.2f}"])
-    for key, cell in summary["ablation"]["cells"].items():
+    cells = summary["ablation"]["cells"]
+    for key, cell in cells.items():
         world, obj, controller, source = key.split("/")
-        if world == "point-mass" and controller == "cooperative-arbitrated" and source.startswith("lstm-"):
+        if world == "point-mass" and controller == "cooperative-arbitrated" and source in ("lstm-tool", "lstm-intent"):
             f, o = cell["oracle_share_force"][0], cell["oracle_share_overshoot"][0]
             out[f"{obj}: the arbitrated controller with {source} in the loop"] = (
                 bool(np.isfinite(f) and np.isfinite(o) and f >= 0.8 and o >= 0.8), [])
+    # issue 34's goals for the application's source ("paths"), from the summary's cells
+    mg_cells = summary["ablation"]["mg"]
+    for obj in ("board", "heavy"):
+        cell = cells[f"point-mass/{obj}/cooperative-arbitrated/paths"]
+        f, o, o_lo = cell["oracle_share_force"][0], cell["oracle_share_overshoot"][0], cell["oracle_share_overshoot"][1]
+        out[f"{obj}: with 'paths' the arbitrated controller gets"] = (
+            bool(np.isfinite(f) and np.isfinite(o) and np.isfinite(o_lo) and f >= 0.85 and o >= 0.6 and o_lo >= 0.3), [])
+        for metric, what in (("overshoot", "overshoots the intent"), ("clearance_deficit", "passes closer to the obstacle")):
+            sides = cell["by_side"]
+            ok = all(sides[s][metric]["trials"] >= 2 and np.isfinite(sides[s][metric]["high"])
+                     and sides[s][metric]["high"] <= 0.0 for s in ("left", "right"))
+            out[f"{obj}: with 'paths' the arbitrated controller {what}"] = (bool(ok), [])
+        jerk, jerk_mg = cell["jerk_rms"], mg_cells[f"point-mass/{obj}"]["jerk_rms"]
+        out[f"{obj}: with 'paths' the arbitrated controller's jerk"] = (bool(jerk <= 1.2 * jerk_mg), [f"{jerk:.2f} vs MG {jerk_mg:.2f}"])
     if "user_a" in summary["real"]:
         ev = summary["real"]["user_a"]
         best = ev["best_baseline"]
@@ -175,18 +198,19 @@ def test_ablation_cells_meet_the_same_trials(tiny_run):
     """Every (object, controller, source) cell of the ablation ran MG's trials: same operators, same seeds.
     The cells of the application's own source are the application's assistive trials, reused."""
     from coassist.data import read_dataset
-    from coassist.experiments.ablation import CONTROLLERS, SOURCES
+    from coassist.experiments.ablation import CONTROLLERS, ablation_cells
     from coassist.experiments.intent_sources import APPLICATION_SOURCE
 
     out, summary = tiny_run
     for obj in ("board", "heavy"):
         mg = sorted((t.meta.user, t.meta.seed) for t in read_dataset(out / "datasets" / f"app-{obj}-manual").trials)
         assert mg
+        for controller, source in ablation_cells(rep.REPRODUCE_PRESETS["tiny"]):
+            reused = source == APPLICATION_SOURCE and controller in CONTROLLERS
+            name = f"app-{obj}-{controller}" if reused else f"ablation-{obj}-{controller}-{source}"
+            ds = read_dataset(out / "datasets" / name)
+            assert sorted((t.meta.user, t.meta.seed) for t in ds.trials) == mg, (obj, controller, source)
         for controller in CONTROLLERS:
-            for source in SOURCES:
-                name = f"app-{obj}-{controller}" if source == APPLICATION_SOURCE else f"ablation-{obj}-{controller}-{source}"
-                ds = read_dataset(out / "datasets" / name)
-                assert sorted((t.meta.user, t.meta.seed) for t in ds.trials) == mg, (obj, controller, source)
             # the reused cell is the application's row: the same numbers
             cell = summary["ablation"]["cells"][f"point-mass/{obj}/{controller}/{APPLICATION_SOURCE}"]
             assert cell["f_rms"] == summary["application"][f"{obj}/{controller}"]["f_rms"]

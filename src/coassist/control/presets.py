@@ -9,6 +9,8 @@ kind                        controller (the thesis' name)
 ==========================  ==============================================================
 ``cooperative``             the assistive controller: the cooperative game (eq. 3.27–3.31)
 ``cooperative-arbitrated``  the same with α set every tick by :data:`ARBITRATION`
+``cooperative-damped``      ``cooperative-arbitrated`` plus damping while the tool slows down
+                            (:data:`DECELERATION_DAMPING`, :mod:`coassist.control.deceleration_damping`)
 ``impedance``               IMP, impedance control toward the plan (eq. 5.4)
 ``manual``                  MG, manual guidance, u_r = 0 (eq. 5.5)
 ==========================  ==============================================================
@@ -25,17 +27,18 @@ import numpy as np
 from coassist.config import CONTROL_PRESETS, ControlPreset
 from coassist.control.arbitration import ArbitratedController, ArbitrationParameters
 from coassist.control.controllers import AssistiveController, ImpedanceControl, ManualGuidance
+from coassist.control.deceleration_damping import DampingParameters, DecelerationDamping
 from coassist.control.game import cooperative_game
 from coassist.model.impedance import ImpedanceModel
 from coassist.registry import UnknownNameError
 
 __all__ = [
-    "ARBITRATION", "CONTROLLER_KINDS", "FORMER_NAMES", "IMPEDANCE_STIFFNESS", "get_preset", "make_controller", "plant_model",
+    "ARBITRATION", "CONTROLLER_KINDS", "DECELERATION_DAMPING", "FORMER_NAMES", "IMPEDANCE_STIFFNESS", "get_preset", "make_controller", "plant_model",
 ]  # fmt: skip
 
 #: Controller kinds. "cooperative-arbitrated": the cooperative game with α set every tick
 #: by the law :data:`ARBITRATION`.
-CONTROLLER_KINDS = ("cooperative", "impedance", "manual", "cooperative-arbitrated")
+CONTROLLER_KINDS = ("cooperative", "impedance", "manual", "cooperative-arbitrated", "cooperative-damped")
 #: The names drive and play used before they took the kinds (old session files, muscle memory):
 #: read in play's recorded sessions, and named in the command line's error for an old name.
 FORMER_NAMES = {"assistive": "cooperative", "assistive-arbitrated": "cooperative-arbitrated", "imp": "impedance",
@@ -44,6 +47,9 @@ FORMER_NAMES = {"assistive": "cooperative", "assistive-arbitrated": "cooperative
 #: plan ends (coassist.control.arbitration, law "target"). Chosen on validation seeds of the
 #: application scenario (docs/assistance.md), against the hand-force law.
 ARBITRATION = ArbitrationParameters(law="target", alpha_min=0.3, alpha_max=0.9, target_scale=0.05)
+#: The extra damping of "cooperative-damped": 40 N·s/m at full gate (40 % of the plant's 100), the gate
+#: fully open at 0.3 m/s² of deceleration (docs/precision.md: the lever's force and jerk cost).
+DECELERATION_DAMPING = DampingParameters(gain=40.0, decel_ref=0.3, accel_time=0.02)
 #: Spring of the IMP baseline toward the nominal reference [N/m] (eq. 5.4). The thesis
 #: does not give it (its K_i = 0 would make IMP equal MG); 200 N/m pulls back with
 #: 10 N at a 5 cm deviation, about what the operators push with.
@@ -72,6 +78,9 @@ def make_controller(kind: str, preset: ControlPreset):
     if kind == "cooperative-arbitrated":
         assistive = AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
         return ArbitratedController(assistive, ARBITRATION)
+    if kind == "cooperative-damped":
+        assistive = AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
+        return DecelerationDamping(ArbitratedController(assistive, ARBITRATION), DECELERATION_DAMPING)
     if kind == "impedance":
         return ImpedanceControl(model, IMPEDANCE_STIFFNESS * np.eye(model.n_dof), effort_limit=preset.effort_limit)
     if kind == "manual":

@@ -3,10 +3,11 @@
 Three simulated operators carry the board and the heavy load past an obstacle to a
 target with the assistive controller, the same with
 α arbitrated online (law :data:`coassist.control.presets.ARBITRATION`), impedance control (IMP)
-and manual guidance (MG). The assistive controllers' prediction is the learned source
-:data:`~coassist.experiments.intent_sources.APPLICATION_SOURCE` (the LSTM+FC trained on the
-operator's intent, the source that won the in-loop ablation on validation seeds; the thesis
-used each object's transferred model, trained on the tool's future). Every controller meets
+and manual guidance (MG). The assistive controllers' prediction is the source
+:data:`~coassist.experiments.intent_sources.APPLICATION_SOURCE` (the path hypotheses round the
+obstacle the robot is told of, calibrated to each operator, the source that did best in the
+in-loop ablation on validation seeds; the thesis used each object's transferred model, trained
+on the tool's future). Every controller meets
 the same trials (same operators and seeds), so each assistive trial is compared with MG's on
 the same seed
 (:func:`paired_difference`). :func:`run_application` returns an
@@ -22,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from coassist.experiments.intent_sources import APPLICATION_SOURCE, train_sources, training_datasets
+from coassist.experiments.intent_sources import APPLICATION_SOURCE, calibrate_paths, train_sources, training_datasets
 from coassist.experiments.pipeline import (
     ITERATION_TASKS,
     Workspace,
@@ -105,8 +106,15 @@ def handed_to_ablation() -> set[tuple[str, str, str]]:
 
 
 def prefetch_model_free(ws: Workspace) -> None:
-    """Put the pairs' simulations that need no learned source (IMP's and MG's) on the run's
-    pool now (:meth:`Workspace.prefetch`; :func:`run_application` then finds them there)."""
+    """Put the pairs' simulations that need no learned source (IMP's and MG's) and the operators'
+    calibration trials on the run's pool now (:meth:`Workspace.prefetch`; :func:`run_application`
+    then finds them there)."""
+    from coassist.experiments.pipeline import calibration_seed
+
+    cfg = ws.config
+    ws.prefetch("calibration", tasks=(cfg.application_task,), users=cfg.application_users, objects=("handle",),
+                trials=cfg.calibration_trials, seed=calibration_seed(cfg.seed), controller="manual",
+                preset=cfg.application_preset, intent="nominal", obstacle=OBSTACLE)  # fmt: skip
     for j, obj in enumerate(OBJECTS):
         for controller in CONTROLLERS:
             if not controller.startswith("cooperative"):
@@ -116,9 +124,11 @@ def prefetch_model_free(ws: Workspace) -> None:
 def run_application(ws: Workspace, final_model: Path,
                     ahead: Callable[[dict[str, str]], None] | None = None) -> ApplicationResult:  # fmt: skip
     """Collect the heavy load's transfer dataset (with the final model in the loop, as the thesis
-    collects each object's), train the learned intent sources on every simulated dataset
-    (:func:`~coassist.experiments.intent_sources.train_sources`), then collect every (object,
-    controller) pair's trials, the assistive ones with :data:`~coassist.experiments.intent_sources.APPLICATION_SOURCE`.
+    collects each object's), calibrate the path hypotheses to the operators
+    (:func:`~coassist.experiments.intent_sources.calibrate_paths`), train the learned intent sources on
+    every simulated dataset (:func:`~coassist.experiments.intent_sources.train_sources`), then collect
+    every (object, controller) pair's trials, the assistive ones with
+    :data:`~coassist.experiments.intent_sources.APPLICATION_SOURCE`.
 
     While the sources train, the pairs' simulations are put on the run's pool behind them
     (:meth:`Workspace.prefetch`): MG's and IMP's at once, the assistive ones once their source
@@ -143,7 +153,11 @@ def run_application(ws: Workspace, final_model: Path,
         if ahead is not None:
             ahead(models)
 
-    models = train_sources(ws, training_datasets(ws), on_models=on_models)
+    # the path hypotheses need no training: their calibration first, so that their pairs run beside the trainings
+    paths = calibrate_paths(ws)
+    on_models({"paths": paths})
+    models = train_sources(ws, training_datasets(ws), on_models=lambda learned: on_models({**learned, "paths": paths}))
+    models["paths"] = paths
     metrics, trials = {}, {}
     for j, obj in enumerate(OBJECTS):
         for controller in CONTROLLERS:
@@ -215,7 +229,9 @@ def headline_table(result: ApplicationResult) -> tuple[str, list[str], list[list
 
 def application_metrics(trials) -> dict[str, Any]:
     """Per-trial f_RMS [N], σ [m], overshoot past the intent [m], jerk RMS [m/s³], RMS distance from the
-    intent [m] and peak robot/hand effort ratio of simulated trials, with their means and standard deviations.
+    intent [m], peak robot/hand effort ratio and clearance deficit at the obstacle [m]
+    (:func:`~coassist.metrics.clearance_deficit`) of simulated trials, with their means and standard
+    deviations; ``side``: each trial's detour side (+1 left of the path, −1 right, 0 unknown).
 
     σ's mean is over the trials that reached the target (``reached`` counts them); the
     other means are over all trials.
@@ -236,6 +252,7 @@ def application_metrics(trials) -> dict[str, Any]:
         "jerk_rms": [jerk_rms(t.pose, t.meta.dt) for t in trials],
         "tracking_error_rms": [tracking_error_rms(t.pose, t.intent) for t in trials],
         "peak_effort_ratio": [peak_effort_ratio(t.effort_r, t.effort_h) for t in trials],
+        "clearance_deficit": [_clearance_deficit(t) for t in trials],
     }
     out: dict[str, Any] = {}
     for name, values in per_trial.items():
@@ -245,7 +262,22 @@ def application_metrics(trials) -> dict[str, Any]:
         out[f"{name}_std"] = float(ok.std()) if ok.size else float("nan")
         out[f"{name}_trials"] = [float(v) for v in values]
     out["reached"] = int(np.isfinite(per_trial["sigma"]).sum())
+    out["side"] = [int(t.meta.extra.get("intent_side", 0)) for t in trials]
     return out
+
+
+def _clearance_deficit(trial) -> float:
+    """The trial's clearance deficit at its obstacle [m]; NaN without an obstacle or an intent. The
+    obstacle is recorded in the task's frame; a world that laid the task out elsewhere logged the
+    plan moved by the same translation (its first reference row against the task's start)."""
+    from coassist.metrics import clearance_deficit
+
+    box = trial.meta.extra.get("obstacle")
+    start = trial.meta.extra.get("start")
+    if trial.intent is None or not box or start is None:
+        return float("nan")
+    shift = np.asarray(trial.reference[0], dtype=float) - np.asarray(start, dtype=float)
+    return clearance_deficit(trial.pose, trial.intent, np.asarray(box["center"], dtype=float) + shift, box["size"])
 
 
 def _ci(a, b, scale: float, digits: int) -> str:
@@ -335,14 +367,18 @@ def application_section(result: ApplicationResult) -> Section:
                 f"{v['overshoot'] * 1000:.1f} vs MG {m['overshoot'] * 1000:.1f} mm "
                 f"(paired {_ci(v['overshoot_trials'], m['overshoot_trials'], 1000.0, 1)} mm); jerk RMS {v['jerk_rms']:.2f} vs MG "
                 f"{m['jerk_rms']:.2f} m/s³",
-                reason="a causal prediction cannot anticipate every turn of the operator's intent: the robot pushes past "
-                "the turns it misses (section 6 compares every intent source on these trials)",
+                reason="the prediction does not know where the operator wants the tool at every turn: the robot pushes "
+                "past the turns it misses (section 6 compares every intent source on these trials)",
             ))
     return s
 
 
 #: How the report names each learned source the assistive controllers may use.
 _SOURCE_TEXT = {
+    "paths": "path hypotheses round the obstacle the robot is told of (coassist.scenario.path_hypotheses): the nominal "
+             "path deformed to either side, each operator's detour shape fitted to four trials of theirs with MG, a "
+             "filter that decides the side from the hand force and runs the rows along the likely path; the source "
+             "that did best in the in-loop ablation on validation seeds this report never uses",
     "lstm-intent": "the LSTM+FC trained from scratch on every simulated dataset to predict the operator's intent; the "
                    "source that got the largest share of the oracle's benefit in the in-loop ablation on validation "
                    "seeds this report never uses",

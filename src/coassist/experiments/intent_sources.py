@@ -1,21 +1,29 @@
-"""The learned intent sources of the simulated stages, and which one the application uses.
+"""The intent sources of the simulated stages, and which one the application uses.
 
-Every learned source is trained from scratch on the same datasets (the iterative stage's
-D_k and the board's and heavy load's transfer datasets, all collected with the run's
-models in the loop) by the same protocol (the run's intent preset, epochs, seed and skip
-shrinkage, every ``source_stride``-th window); only what it learns to predict differs, and the ridge's model class:
+Learned sources. Every one is trained from scratch on the same datasets (the iterative stage's
+D_k and the board's and heavy load's transfer datasets, all collected with the run's models in
+the loop) by the same protocol (the run's intent preset, epochs and skip shrinkage, every
+``source_stride``-th window); only what it learns to predict differs, and the ridge's model class:
 
 - ``ridge``: the validation-tuned ridge (the ``linear`` preset) on the tool's future pose;
+- ``ridge-intent``: the same ridge on the simulated operator's true intent (``label="intent"``);
 - ``lstm-tool``: the LSTM+FC on the tool's future pose (the thesis' label);
 - ``lstm-hand-alone``: the LSTM+FC on the path the hand alone would have produced (the
-  robot's logged effort removed through the known impedance, ``label="hand_alone"``);
+  robot's logged effort removed through the known impedance, ``label="hand_alone"``; the
+  ``thesis`` preset only: it never beat the intent label, docs/intent-labels.md);
 - ``lstm-intent``: the LSTM+FC on the simulated operator's true intent (``label="intent"``).
 
-:data:`APPLICATION_SOURCE` is the one the application scenario's assistive controllers
-use: the source that got the largest share of the oracle's benefit in the in-loop
-ablation on validation seeds the report never uses (``docs/intent-labels.md``; the
-report's own ablation, :mod:`coassist.experiments.ablation`, measures all of them again on
-the report's trials).
+Each LSTM source is trained ``source_seeds`` times (seeds ``seed``, ``seed + 1``, …): the first
+is ``<source>``, the others ``<source>-s1``, ``<source>-s2``, … (:func:`seed_names`).
+
+The path-hypotheses source ``paths`` (:mod:`coassist.scenario.path_hypotheses`) is not trained:
+:func:`calibrate_paths` fits each application operator's detour (clearance, anticipation, side
+preference) to ``calibration_trials`` trials of theirs with MG and writes its calibration.
+
+:data:`APPLICATION_SOURCE` is the one the application scenario's assistive controllers use:
+the source that did best in the in-loop ablation on validation seeds the report never uses
+(docs/precision.md; the report's own ablation, :mod:`coassist.experiments.ablation`, measures
+all of them again on the report's trials).
 """
 
 from __future__ import annotations
@@ -25,15 +33,45 @@ from pathlib import Path
 
 from coassist.experiments.pipeline import Workspace, train_in_worker
 
-__all__ = ["APPLICATION_SOURCE", "LEARNED", "train_sources", "training_datasets"]
+__all__ = ["APPLICATION_SOURCE", "LEARNED", "calibrate_paths", "seed_names", "train_sources", "training_datasets"]
 
 #: The learned sources: (intent preset or None for the run's, window label).
-LEARNED = {"ridge": ("linear", "tool"), "lstm-tool": (None, "tool"), "lstm-hand-alone": (None, "hand_alone"),
-           "lstm-intent": (None, "intent")}  # fmt: skip
-#: The application's intent source (module docstring): on the validation seeds the LSTM+FC
-#: on the intent label got 92 / 96 % of the oracle's force saving with the arbitrated
-#: controller, the tool label 71 / 73 % (board / heavy; docs/intent-labels.md).
-APPLICATION_SOURCE = "lstm-intent"
+LEARNED = {"ridge": ("linear", "tool"), "ridge-intent": ("linear", "intent"), "lstm-tool": (None, "tool"),
+           "lstm-hand-alone": (None, "hand_alone"), "lstm-intent": (None, "intent")}  # fmt: skip
+#: The application's intent source (module docstring). On the validation seeds (application_seed(50000, j)
+#: and (60000, j), 24 trials per object, the arbitrated controller; docs/precision.md) the calibrated
+#: path hypotheses got 88 / 91 % of the oracle's force saving and 69 / 72 % of its overshoot reduction
+#: (board / heavy), the LSTM+FC on the intent label 88 / 90 % and 0 / −10 %.
+APPLICATION_SOURCE = "paths"
+
+
+def seed_names(source: str, seeds: int) -> list[str]:
+    """The model names of a learned source's trainings: ``source`` for the first seed, ``source-s<k>``
+    for the others; a ridge is trained once (its closed form does not depend on a seed)."""
+    if LEARNED[source][0] == "linear":
+        return [source]
+    return [source] + [f"{source}-s{k}" for k in range(1, seeds)]
+
+
+def calibrate_paths(ws: Workspace) -> str:
+    """Collect ``calibration_trials`` MG trials per application operator (the handle, the application's
+    task and obstacle, :func:`~coassist.experiments.pipeline.calibration_seed`), fit each detour
+    (:func:`~coassist.scenario.path_hypotheses.fit_detour`) and write every operator's shape into
+    ``models/paths`` (:func:`~coassist.scenario.path_hypotheses.write_calibration`); the folder."""
+    from coassist.experiments.application import OBSTACLE
+    from coassist.experiments.pipeline import calibration_seed
+    from coassist.scenario.path_hypotheses import calibrate, fit_detour, write_calibration
+    from coassist.scenario.tasks import task_for_seed
+
+    cfg = ws.config
+    _, ds = ws.collect("calibration", tasks=(cfg.application_task,), users=cfg.application_users, objects=("handle",),
+                       trials=cfg.calibration_trials, seed=calibration_seed(cfg.seed), controller="manual",
+                       preset=cfg.application_preset, intent="nominal", obstacle=OBSTACLE)  # fmt: skip
+    fits: dict[str, list[tuple[int, float, float]]] = {}
+    for trial in ds.trials:
+        task = task_for_seed(trial.meta.task, int(trial.meta.seed), obstacle=OBSTACLE)
+        fits.setdefault(str(trial.meta.user), []).append(fit_detour(task, trial.pose))
+    return str(write_calibration(ws.out / "models" / "paths", {user: calibrate(f) for user, f in sorted(fits.items())}))
 
 
 def training_datasets(ws: Workspace) -> list[Path]:
@@ -49,7 +87,8 @@ def training_datasets(ws: Workspace) -> list[Path]:
 
 def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None = None,
                   on_models: Callable[[dict[str, str]], None] | None = None) -> dict[str, str]:
-    """Train every learned source on ``datasets`` (module docstring) into ``models/<source>``; model folders by source.
+    """Train every learned source of ``reproduce.learned_sources`` on ``datasets`` (module docstring), each
+    LSTM+FC once per training seed, into ``models/<name>``; model folders by name (:func:`seed_names`).
 
     On a CPU they train in worker processes, ``processes`` at a time (None: in the run's
     pool, ``reproduce.workers`` at a time), each on one torch thread. Small LSTM kernels
@@ -75,26 +114,29 @@ def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None 
     from coassist.sim.world import worker_pool
 
     jobs = []
-    for source, (preset_name, label) in LEARNED.items():
+    for source in ws.config.learned_sources:
+        preset_name, label = LEARNED[source]
         epochs = ws.config.epochs if preset_name is None else MODEL_PRESETS[preset_name].train.epochs
-        jobs.append((source, epochs, preset_name, label))
+        for k, name in enumerate(seed_names(source, ws.config.source_seeds)):
+            jobs.append((name, epochs, preset_name, label, ws.config.seed + k))
     told = on_models or (lambda models: None)
     models: dict[str, str] = {}
     if ws.config.device != "cpu":
         told({})
-        for source, epochs, preset_name, label in jobs:
-            models[source] = str(ws.train(source, datasets, init="scratch", epochs=epochs, preset_name=preset_name,
-                                          label=label, stride=ws.config.source_stride))  # fmt: skip
+        for name, epochs, preset_name, label, seed in jobs:
+            models[name] = str(ws.train(name, datasets, init="scratch", epochs=epochs, preset_name=preset_name,
+                                        label=label, stride=ws.config.source_stride, seed=seed))  # fmt: skip
             told(dict(models))
         return models
-    jobs.sort(key=lambda job: job[2] == "linear")  # the LSTM+FC ones first: the closed-form ridge is quick
+    # the first seed of each LSTM+FC first (their cells wait for them), then the other seeds; the ridges last
+    jobs.sort(key=lambda job: (job[2] == "linear", job[4]))
     n = max(1, min(ws.config.workers if processes is None else int(processes), len(jobs)))
     # the run's pool (workers processes) unless another count is asked for: then n started here
     shared = ws.pool if processes is None else None
     with contextlib.nullcontext(shared) if shared is not None else worker_pool(n) as pool:
-        futures = {pool.submit(train_in_worker, ws.config, ws.out, source, datasets, init="scratch", epochs=epochs,
-                               preset_name=preset_name, label=label, stride=ws.config.source_stride): source
-                   for source, epochs, preset_name, label in jobs}  # fmt: skip
+        futures = {pool.submit(train_in_worker, ws.config, ws.out, name, datasets, init="scratch", epochs=epochs,
+                               preset_name=preset_name, label=label, stride=ws.config.source_stride, seed=seed): name
+                   for name, epochs, preset_name, label, seed in jobs}  # fmt: skip
         told({})
         with progress_bar(ws.progress) as bar:
             task = bar.add_task(f"training {len(jobs)} intent sources, {n} at a time", total=len(jobs))
@@ -102,4 +144,4 @@ def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None 
                 models[futures[future]] = future.result()[0]
                 bar.advance(task)
                 told(dict(models))
-    return {source: models[source] for source in LEARNED}
+    return {name: models[name] for name, *_ in sorted(jobs, key=lambda job: job[0])}

@@ -28,6 +28,10 @@ ITERATION_TASKS = ("linear", "curved", "sinusoidal")
 EVAL_HORIZONS = (5, 10, 20, 50)
 
 
+#: The learned intent sources a run may train (coassist.experiments.intent_sources.LEARNED's names).
+LEARNED_SOURCES = ("ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone", "lstm-intent")
+
+
 @dataclass(frozen=True)
 class ReproduceConfig:
     """Sizes of the pipeline. Presets: ``default`` (≤ 15 min on 2 CPU cores), ``tiny``
@@ -51,10 +55,20 @@ class ReproduceConfig:
     transfer_epochs: int = 8
     train_stride: int = 4  # every n-th window (consecutive windows overlap almost entirely)
     # The application's learned intent sources (experiments.intent_sources) train on every simulated
-    # dataset, 5.5x the data of M_0: every 16th window keeps an epoch the size of the iterative
-    # stage's. Measured on 5a89abb's datasets (lstm-intent, 6 epochs, test loss on the same held-out
-    # trials): 0.00677 at stride 16 against 0.00693 at stride 4 (epoch-to-epoch spread ~0.0001).
-    source_stride: int = 16
+    # dataset, 5.5x the data of M_0. Measured on 5a89abb's datasets (lstm-intent, 6 epochs, test loss
+    # on the same held-out trials): 0.00677 at stride 16 against 0.00693 at stride 4 (epoch-to-epoch
+    # spread ~0.0001); on the issue-34 operator's datasets 0.00569 / 0.00567 / 0.00561 at stride
+    # 16 / 32 / 48. Every 48th window: each LSTM source is trained source_seeds times for less
+    # arithmetic than three sources once at stride 16 (docs/precision.md).
+    source_stride: int = 48
+    # The learned sources of the in-loop ablation (experiments.intent_sources.LEARNED); the thesis preset
+    # adds lstm-hand-alone, whose negative result docs/intent-labels.md records.
+    learned_sources: tuple[str, ...] = ("ridge", "ridge-intent", "lstm-tool", "lstm-intent")
+    # Training seeds of each LSTM source (the arbitrated ablation cells run every one; the others the first).
+    source_seeds: int = 3
+    # Calibration trials per application operator for the path-hypotheses source (MG, the handle, the
+    # application's task and obstacle): their detours give the person's shape (scenario.path_hypotheses).
+    calibration_trials: int = 4
     # Shrinkage of the linear skip's ridge start in the simulated stages. M_k meets data collected
     # with M_k in the loop, i.e. inputs shifted from its training data; a weakly regularised linear
     # map extrapolates badly there (measured once, M_0 trained on D_0 and scored on D_1, e_RMS@50:
@@ -65,8 +79,9 @@ class ReproduceConfig:
     test_trials: int = 6  # held-out trials per transfer target, for the comparison
     new_users: tuple[int, ...] = (1, 2, 3, 4, 5)
     # Per operator, object and controller (thesis: three, one operator); three operators give
-    # 18 trials per object and controller, enough for a paired confidence interval against MG.
-    application_trials: int = 6
+    # 24 trials per object and controller, enough for a paired confidence interval against MG and
+    # for each side of the detour (issue 34: ≥ 24).
+    application_trials: int = 8
     application_users: tuple[int, ...] = (0, 1, 2)
     application_task: str = "curved"
     # The intent-source ablation on the MuJoCo UR5 (experiments.ablation): trials per operator, object, controller
@@ -92,7 +107,8 @@ class ReproduceConfig:
         if not isinstance(self.lockstep, bool):
             raise ValueError(f"reproduce.lockstep must be true or false, got {self.lockstep!r}")
         for name in ("trials_per_task", "iterations", "epochs", "resume_epochs", "transfer_epochs", "train_stride",
-                     "source_stride", "transfer_trials", "test_trials", "application_trials", "real_epochs", "workers", "threads"):
+                     "source_stride", "transfer_trials", "test_trials", "application_trials", "real_epochs", "workers", "threads",
+                     "source_seeds", "calibration_trials"):
             v = getattr(self, name)
             if not is_integer(v) or v < 1:
                 raise ValueError(f"reproduce.{name} must be an integer >= 1, got {v!r}")
@@ -111,6 +127,9 @@ class ReproduceConfig:
             raise ValueError(f"reproduce.new_users must be user indices >= 1 (0 is the author), got {self.new_users!r}")
         if not self.application_users or any(not is_integer(u) or u < 0 for u in self.application_users):
             raise ValueError(f"reproduce.application_users must be user indices >= 0, got {self.application_users!r}")
+        if (not isinstance(self.learned_sources, tuple) or len(set(self.learned_sources)) != len(self.learned_sources)
+                or any(src not in LEARNED_SOURCES for src in self.learned_sources)):
+            raise ValueError(f"reproduce.learned_sources must be distinct names of {LEARNED_SOURCES}, got {self.learned_sources!r}")
         if not is_integer(self.seed) or self.seed < 0:
             raise ValueError(f"reproduce.seed must be an integer >= 0, got {self.seed!r}")
 
@@ -121,12 +140,12 @@ REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry("reproduce preset", {
     "tiny": ReproduceConfig(
         name="tiny", trials_per_task=2, iterations=2, epochs=1, resume_epochs=1, transfer_epochs=1, train_stride=25, source_stride=25,
         transfer_trials=3, test_trials=2, new_users=(1,), application_trials=1, application_users=(0,), real_epochs=1,
-        ablation_mujoco_trials=0,
+        ablation_mujoco_trials=0, source_seeds=1, calibration_trials=1,
         sweep_duration=1.0,
     ),
     "thesis": ReproduceConfig(
         name="thesis", intent_preset="thesis", real_intent_preset="thesis", epochs=25, resume_epochs=25, transfer_epochs=25, train_stride=1, source_stride=1,
-        real_epochs=25, device="cuda",
+        real_epochs=25, device="cuda", learned_sources=("ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone", "lstm-intent"),
     ),
 })  # fmt: skip
 
@@ -145,6 +164,8 @@ ITERATION_SEED_STEP = 100_000
 TRANSFER_SEED_OFFSET, TRANSFER_SEED_STEP, TRANSFER_TEST_SEED_OFFSET = 600_000, 20_000, 10_000
 #: The heavy load's own transfer dataset (application stage).
 HEAVY_TRANSFER_SEED_OFFSET = 800_000
+#: The application operators' calibration trials (the path-hypotheses source's person shapes).
+CALIBRATION_SEED_OFFSET = 880_000
 #: Application trials of object j: seed + APPLICATION_SEED_OFFSET + APPLICATION_SEED_STEP·j
 #: (every controller meets the same trials: the same seeds).
 APPLICATION_SEED_OFFSET, APPLICATION_SEED_STEP = 900_000, 1000
@@ -164,6 +185,11 @@ def transfer_seeds(seed: int, i: int) -> tuple[int, int]:
 def heavy_transfer_seed(seed: int) -> int:
     """First trial seed of the heavy load's transfer dataset."""
     return seed + HEAVY_TRANSFER_SEED_OFFSET
+
+
+def calibration_seed(seed: int) -> int:
+    """First trial seed of the application operators' calibration trials."""
+    return seed + CALIBRATION_SEED_OFFSET
 
 
 def application_seed(seed: int, j: int) -> int:
@@ -286,18 +312,19 @@ class Workspace:
 
     def train(self, name: str, datasets: list[Path], *, init: str, epochs: int, test_fraction: float = 0.2,
               simulated: bool = True, preset_name: str | None = None, label: str | None = None,
-              stride: int | None = None) -> Path:
+              stride: int | None = None, seed: int | None = None) -> Path:
         """Train and save a model. ``test_fraction=0`` when the model is scored on a separate
         test set anyway: then every trial collected for training is trained on. ``label``:
         what a fresh model learns to predict (``WindowConfig.label``; None: the preset's).
-        ``stride``: every n-th window, for training and the per-epoch test loss (None: ``train_stride``)."""
+        ``stride``: every n-th window, for training and the per-epoch test loss (None: ``train_stride``).
+        ``seed``: the training's seed (initial weights, split, batch order; None: the run's)."""
         from coassist.intent import MODEL_PRESETS, load_trials, train_model, write_model
 
         cfg = self.config
         preset = MODEL_PRESETS[preset_name or cfg.intent_preset]
         if label is not None:
             preset = replace(preset, window=replace(preset.window, label=label))
-        train_cfg = replace(preset.train, epochs=epochs, init=init, seed=cfg.seed, threads=cfg.threads,
+        train_cfg = replace(preset.train, epochs=epochs, init=init, seed=cfg.seed if seed is None else seed, threads=cfg.threads,
                             train_stride=stride or cfg.train_stride, eval_stride=stride or cfg.train_stride, device=cfg.device,
                             test_fraction=test_fraction)
         if simulated:
@@ -310,7 +337,7 @@ class Workspace:
 
 def train_and_score(ws: Workspace, name: str, datasets: list[Path], *, init: str, epochs: int,
                     test_fraction: float = 0.2, preset_name: str | None = None, label: str | None = None,
-                    stride: int | None = None, evaluate_on: list[Path] | None = None,
+                    stride: int | None = None, evaluate_on: list[Path] | None = None, seed: int | None = None,
                     ) -> tuple[str, float, Any]:  # fmt: skip
     """:meth:`Workspace.train`, timed, then the model scored (:func:`score_model`) on
     ``evaluate_on`` when given: (model folder, training seconds, evaluation or None)."""
@@ -318,7 +345,7 @@ def train_and_score(ws: Workspace, name: str, datasets: list[Path], *, init: str
 
     t0 = time.perf_counter()
     path = ws.train(name, datasets, init=init, epochs=epochs, test_fraction=test_fraction, preset_name=preset_name,
-                    label=label, stride=stride)  # fmt: skip
+                    label=label, stride=stride, seed=seed)  # fmt: skip
     seconds = time.perf_counter() - t0
     return str(path), seconds, None if evaluate_on is None else score_model(path, evaluate_on)
 
@@ -332,7 +359,7 @@ def score_model(model: str | Path, datasets: list[Path]) -> Any:
 
 def train_in_worker(config: ReproduceConfig, out: Path, name: str, datasets: list[Path], *, init: str, epochs: int,
                     test_fraction: float = 0.2, preset_name: str | None = None, label: str | None = None,
-                    stride: int | None = None, evaluate_on: list[Path] | None = None,
+                    stride: int | None = None, evaluate_on: list[Path] | None = None, seed: int | None = None,
                     ) -> tuple[str, float, Any]:  # fmt: skip
     """:func:`train_and_score` as a job for a worker process of the run's pool, on one torch
     thread (two 1-thread trainings at once do 1.34x the work of one 2-thread training on this
@@ -342,7 +369,7 @@ def train_in_worker(config: ReproduceConfig, out: Path, name: str, datasets: lis
     torch.set_num_threads(1)
     return train_and_score(Workspace(replace(config, threads=1), out, progress=False), name, datasets, init=init,
                            epochs=epochs, test_fraction=test_fraction, preset_name=preset_name, label=label,
-                           stride=stride, evaluate_on=evaluate_on)  # fmt: skip
+                           stride=stride, evaluate_on=evaluate_on, seed=seed)  # fmt: skip
 
 
 def evaluate_in_worker(model: str | Path, datasets: list[Path]) -> Any:

@@ -9,14 +9,15 @@ Stages, in order (each writes its data under ``out/`` and a section of the repor
    scratch and one fine-tuned in all layers on the same trials;
 4. the application scenario (§5.2.3, §5.3.3, Fig. 5.24–5.31): the board and the heavy
    load carried past an obstacle with the assistive controller, IMP and MG; the assistive
-   controller's intent source is the LSTM+FC trained on the operator's intent, the source
-   that won the in-loop ablation on validation seeds
-   (:mod:`~coassist.experiments.intent_sources`, ``docs/intent-labels.md``);
+   controller's intent source is the path hypotheses round the obstacle, calibrated to each
+   operator, the source that did best in the in-loop ablation on validation seeds
+   (:mod:`~coassist.experiments.intent_sources`, ``docs/precision.md``);
 5. the real UR5 recordings: the predictor trained on user-a against its baselines,
    and transferred to user-b;
-6. the in-loop ablation of intent sources (issue 18): nominal, constant velocity, the
-   tuned ridge, the LSTM+FC trained on the tool's future, on the hand-alone path and on
-   the true intent, and the oracle, in the point-mass world and on the MuJoCo UR5
+6. the in-loop ablation of intent sources (issues 18, 34): nominal, constant velocity, the
+   present estimate, the tuned ridge on the tool's future and on the true intent, the LSTM+FC
+   on both (three training seeds), the path hypotheses, with and without deceleration-gated
+   damping, and the oracle, in the point-mass world and on the MuJoCo UR5
    (:mod:`~coassist.experiments.ablation`).
 
 Control preset. The closed loops use the thesis' weights with positions scaled: in
@@ -210,14 +211,15 @@ def _beside_training(ws: Workspace, real_data: str | None, ablation_ahead: Ablat
     once: the pool runs its jobs in order, and D_{k+1}'s collection, submitted when M_k is
     done, waits behind what is queued; once it is collected the pool idles again beside
     M_{k+1}'s training unless some is left for then. In order: the real recordings (beside
-    M_0, the longest training), the application's IMP and MG pairs, then the ablation's named
-    sources (MG's MuJoCo trials and the nominal intent, then constant velocity and the oracle).
+    M_0, the longest training), the application's IMP and MG pairs and the operators' calibration
+    trials, then the ablation's named sources (MG's MuJoCo trials and the nominal intent, then constant
+    velocity, the present estimate and the oracle).
     Whatever a short run's last training has not started is started there."""
     shares: list[Callable[[], object]] = [
         lambda: ws.submit("real recordings", real_recordings_in_worker, ws.config, ws.out, real_data),
         lambda: prefetch_model_free(ws),
         lambda: ablation_ahead({}, only=(MG_JOB, "nominal")),
-        lambda: ablation_ahead({}, only=("constant-velocity", "oracle")),
+        lambda: ablation_ahead({}, only=("constant-velocity", "present", "oracle")),
     ]
     last = ws.config.iterations - 1
 

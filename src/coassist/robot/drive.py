@@ -43,7 +43,7 @@ from coassist.runtime.safety import SafetyLayer, SafetyLimits
 from coassist.runtime.tick import TickConfig
 from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPipeline
 from coassist.scenario.hand import SimulatedHand
-from coassist.scenario.intent_source import load_intent_source, shared_intent_source
+from coassist.scenario.intent_source import is_path_hypotheses, load_intent_source, shared_intent_source
 from coassist.scenario.objects import get_object
 from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
 from coassist.scenario.seeds import trial_rngs
@@ -415,7 +415,7 @@ def _intent_stage(config: DriveConfig, H: int, source: Any, sources: dict | None
         if hasattr(source, "tick"):
             return RealtimeIntent(source), getattr(source, "model_id", "realtime")
         return WindowIntent(source, H), source.model_id
-    if config.intent in NAMED_INTENTS:
+    if config.intent in NAMED_INTENTS or is_path_hypotheses(config.intent):  # computed in the tick: no network
         src = load_intent_source(config.intent, horizon=max(H, 2))
         return WindowIntent(src, H), src.model_id
     if realtime:

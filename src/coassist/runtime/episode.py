@@ -216,6 +216,7 @@ def build_episode(
     kinematics: Any = None,
     tick_config: TickConfig | None = None,
     extra: Mapping[str, Any] | None = None,
+    tell_obstacles: bool = True,
 ) -> Episode:
     """The tick of ``world``'s stages reset for ``task`` and the termination rule (module docstring, step 2).
 
@@ -226,14 +227,20 @@ def build_episode(
     operator's (n, 2) intent (the oracle reads it from the context), and intent_end_time [s] when its
     motion ends (the run may not end before); log_intent: keep it as the Trial's intent column.
     kinematics, tick_config : for joint-velocity worlds.  extra : the world's meta fields.
+    tell_obstacles : whether the intent source is told where the task's obstacle is
+    (:attr:`TrialContext.obstacles <coassist.interfaces.TrialContext>`); the operator sees it either way.
     """
     tick = ControlTick(controller, intent, wrench, safety, command_space=world.command_space, kinematics=kinematics,
                        config=tick_config)  # fmt: skip
     dt = tick.dt
     start_pose = np.array(start_pose, dtype=float)
     target = np.array(task.target if target is None else target, dtype=float)
+    # What the robot is told of the scene, in the plan's frame (worlds move the task by a translation).
+    shift = np.asarray(plan[0, :2], dtype=float) - np.asarray(task.start, dtype=float)
+    told = ((tuple(float(c) for c in np.asarray(task.obstacle.center) + shift), tuple(task.obstacle.size)),) if tell_obstacles else ()
     context = TrialContext(dt=dt, horizon=tick.H, start=start_pose[:2].copy(), target=target.copy(), reference=plan,
-                           task=task.kind, user=labels.user, object=labels.object, true_intent=true_intent)  # fmt: skip
+                           task=task.kind, user=labels.user, object=labels.object, true_intent=true_intent,
+                           path=task.path.points + shift, obstacles=told)  # type: ignore[arg-type]  # fmt: skip
     tick.reset(Plan(plan, start_pose), context)
     t_done = float(task.planner.end_time) if intent_end_time is None else max(task.planner.end_time, intent_end_time)
     termination = TargetDwell(target, arrive_radius, int(math.ceil(float(dwell) / dt)), int(math.ceil(t_done / dt)))

@@ -110,6 +110,15 @@ class ConstantVelocityIntent:
         return row[0:2] + self._steps * row[2:4]
 
 
+def is_path_hypotheses(spec: str) -> bool:
+    """Whether ``spec`` is a folder holding a calibrated ``paths`` source (not a trained model)."""
+    from pathlib import Path
+
+    from coassist.scenario.path_hypotheses import CALIBRATION_FILE
+
+    return spec not in ("", "nominal", "oracle", "constant-velocity") and (Path(spec) / CALIBRATION_FILE).is_file()
+
+
 def _rows(grid: np.ndarray, k: int, horizon: int) -> np.ndarray:
     """Rows k+1 … k+horizon of a (n, d) grid, holding the last row past the end."""
     n = grid.shape[0]
@@ -123,7 +132,9 @@ def load_intent_source(spec: str, horizon: int = 50, network: str = "auto") -> I
     """An intent source from its name or model path.
 
     ``"nominal"`` → :class:`NominalIntent`; ``"oracle"`` → :class:`OracleIntent`;
-    ``"constant-velocity"`` → :class:`ConstantVelocityIntent`; any
+    ``"constant-velocity"`` → :class:`ConstantVelocityIntent`; ``"present"`` and ``"paths"``
+    → :class:`~coassist.scenario.path_hypotheses.PathHypothesesIntent` (a folder holding its
+    calibration, ``path-hypotheses.json``, → the calibrated one); any
     other string is a model path handed to ``coassist.intent.load_model_intent``
     (imported lazily, so the simulator works without the learning stack), its network
     evaluated by ``network`` (:data:`~coassist.interfaces.NETWORK_BACKENDS`).
@@ -138,6 +149,12 @@ def load_intent_source(spec: str, horizon: int = 50, network: str = "auto") -> I
         return OracleIntent(horizon)
     if spec == "constant-velocity":
         return ConstantVelocityIntent(horizon)
+    if spec in ("present", "paths") or is_path_hypotheses(spec):
+        from coassist.scenario.path_hypotheses import PathHypothesesIntent, read_calibration
+
+        if spec == "present":
+            return PathHypothesesIntent(horizon, use_obstacles=False)
+        return PathHypothesesIntent(horizon) if spec == "paths" else read_calibration(spec, horizon)
     try:
         from coassist.intent import load_model_intent
     except ImportError as exc:

@@ -13,9 +13,21 @@ left normal n_o at the obstacle, by::
 where h_t is the box's half-extent along the path and the amplitude A is the box's
 half-extent along the normal plus the operator's clearance, on the side they pick
 (if the deformed path still comes closer to the box than half the clearance, A grows
-until it does not). The operator times it with their own minimum-jerk pace: their
-motion starts ``start_delay`` after the planner's and lasts T_plan / pace (pace
-jittered per trial), so the intent can lead or lag the robot's reference.
+until it does not).
+
+Timing: the operator plans a minimum-jerk motion (Flash & Hogan 1985) of the *nominal*
+length with their own pace: it starts ``start_delay`` after the planner's and lasts
+T = T_plan / pace (pace jittered per trial), so the intent can lead or lag the robot's
+reference. Up to the detour's onset (where the shift b(s) starts to rise) their path is
+the nominal one, and so is their progress along it, s(t) = L σ((t − t₀)/T), whichever
+side they will take. At the onset they commit to a side and re-plan the rest as the
+minimum-jerk motion over their own path's remaining length D (a quintic in time from the
+onset's arc length, speed and acceleration to the end at rest) lasting
+T_r = T_rest,nominal · (D / D_nominal)^κ, κ = :data:`DETOUR_TIME_EXPONENT`: a longer
+detour takes somewhat longer (κ = 1 would keep the mean speed, κ = 0 the duration, the
+isochrony of human movements; Viviani & McCollum 1983). So nothing in the intent before
+the onset says which side comes (timing the whole detoured path with one profile, as
+before, made an operator going round the longer side run ahead from the start).
 
 Arm (thesis eq. 4.1, the physical sign of docs/architecture.md's conventions)
 -----------------------------------------------------------------------------
@@ -85,6 +97,8 @@ class OperatorProfile:
         the operator moves aside before (and back after) the obstacle.
     pace : > 0, the operator's speed relative to the planner (1 = same);
         pace_jitter : trial-to-trial standard deviation of the pace (relative).
+    shape_jitter : trial-to-trial standard deviation (relative, log-normal) of the
+        clearance and the anticipation: nobody walks round an obstacle the same way twice.
     start_delay : [s] from the planner's start to the operator's.
     left_preference : probability of passing the obstacle on the left of the path.
     """
@@ -104,6 +118,7 @@ class OperatorProfile:
     anticipation: float = 0.06
     pace: float = 1.0
     pace_jitter: float = 0.04
+    shape_jitter: float = 0.2
     start_delay: float = 0.4
     left_preference: float = 0.5
 
@@ -118,6 +133,7 @@ class OperatorProfile:
             ("motor_noise", 0.0, math.inf, False), ("motor_noise_time", 0.0, math.inf, True),
             ("clearance", 0.0, math.inf, False), ("anticipation", 0.0, math.inf, True),
             ("pace", 0.0, math.inf, True), ("pace_jitter", 0.0, 0.5, False),
+            ("shape_jitter", 0.0, 1.0, False),
             ("start_delay", 0.0, math.inf, False), ("left_preference", 0.0, 1.0, False),
         ):
             object.__setattr__(self, name, _num(getattr(self, name), name, lo, hi, lo_open=lo_open))
@@ -174,6 +190,11 @@ def operator_profile(user_index: int, population_seed: int = 0) -> OperatorProfi
         start_delay=float(rng.uniform(0.1, 0.5)),
         left_preference=float(rng.uniform(0.1, 0.9)),
     )
+
+
+#: κ of the detour's re-planned duration (module docstring): between isochrony (0) and
+#: constant mean speed (1).
+DETOUR_TIME_EXPONENT = 0.5
 
 
 def _smoothstep(u: np.ndarray) -> np.ndarray:
@@ -234,29 +255,89 @@ def deformed_path(task: Task, side: int, clearance: float, anticipation: float) 
     return pts, abs(A), -side
 
 
+def trial_shape(profile: OperatorProfile, rng: np.random.Generator) -> tuple[float, float]:
+    """This trial's (clearance, anticipation) [m]: the profile's, each ×/÷ exp(N(0, shape_jitter))."""
+    jitter = rng.normal(0.0, profile.shape_jitter, 2)
+    return profile.clearance * float(np.exp(jitter[0])), profile.anticipation * float(np.exp(jitter[1]))
+
+
+def _quintic_to_rest(s0: float, v0: float, a0: float, s1: float, duration: float,
+                     t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The minimum-jerk motion from (s0, v0, a0) to (s1, 0, 0) over ``duration`` [s], at times t ≥ 0.
+
+    q(t) = s0 + v0 t + a0 t²/2 + c3 t³ + c4 t⁴ + c5 t⁵, with c3…c5 from the three end
+    conditions; held at s1 after ``duration``. Returns (q, q̇).
+    """
+    T = float(duration)
+    A = np.array([[T**3, T**4, T**5], [3 * T**2, 4 * T**3, 5 * T**4], [6 * T, 12 * T**2, 20 * T**3]])
+    b = np.array([s1 - s0 - v0 * T - 0.5 * a0 * T * T, -v0 - a0 * T, -a0])
+    c3, c4, c5 = np.linalg.solve(A, b)
+    tc = np.clip(t, 0.0, T)
+    q = s0 + tc * (v0 + tc * (0.5 * a0 + tc * (c3 + tc * (c4 + tc * c5))))
+    qd = v0 + tc * (a0 + tc * (3 * c3 + tc * (4 * c4 + tc * 5 * c5)))
+    return q, np.where(t < T, qd, 0.0)
+
+
+def detour_onset(task: Task, points: np.ndarray) -> int:
+    """Index of the last point of the nominal path's polyline that ``points`` (a deformed path on the
+    same samples) still shares: the detour's onset (0 when it departs from the start)."""
+    differs = np.any(points != task.path.points, axis=1)
+    return max(int(np.argmax(differs)) - 1, 0) if differs.any() else len(points) - 1
+
+
 def intent_trajectory(task: Task, profile: OperatorProfile, rng: np.random.Generator, n: int, dt: float) -> Intent:
     """The operator's intent for this trial on n ticks of dt [s] (module docstring).
 
-    ``rng`` draws the trial's side and pace jitter (in that order).
+    ``rng`` draws the trial's side, pace jitter and shape jitter (clearance, anticipation), in
+    that order. Up to the detour's onset the intent is the same, bit for bit, whichever side is
+    drawn.
     """
     side = 1 if rng.random() < profile.left_preference else -1
     pace = profile.pace * float(np.exp(rng.normal(0.0, profile.pace_jitter)))
-    pts, amp, side = deformed_path(task, side, profile.clearance, profile.anticipation)
+    clearance, anticipation = trial_shape(profile, rng)
+    pts, amp, side = deformed_path(task, side, clearance, anticipation)
+    path = task.path
     seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
     arc = np.concatenate([[0.0], np.cumsum(seg)])
+    L, Ld = path.length, float(arc[-1])
     t0 = task.planner.start_delay + profile.start_delay
     T = task.planner.duration / pace
     t = np.arange(int(n)) * float(dt)
-    sigma, dsigma, _ = _quintic((t - t0) / T)
-    # Time the deformed path by its own arc length: the detour costs the operator time.
-    s = arc[-1] * sigma
+    # the nominal plan: progress along the (shared) path before the onset
+    sigma, dsigma, ddsigma = _quintic((t - t0) / T)
+    inside = ((t - t0) > 0.0) & ((t - t0) < T)
+    s = L * sigma
+    sdot = np.where(inside, dsigma * L / T, 0.0)
+    i_on = detour_onset(task, pts)
+    s_on = float(path.arc[i_on])
+    if i_on < len(pts) - 1:
+        # the onset's phase on the nominal profile (σ is monotone on [0, 1]: bisection to the last bit)
+        lo, hi = 0.0, 1.0
+        target = s_on / L
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if _quintic(np.array(mid))[0] < target else (lo, mid)
+        tau_on = lo
+        sig_on, dsig_on, ddsig_on = (float(v) for v in _quintic(np.array(tau_on)))
+        t_on = t0 + tau_on * T
+        v_on, a_on = (dsig_on * L / T, ddsig_on * L / T**2) if 0.0 < tau_on < 1.0 else (0.0, 0.0)
+        remaining, remaining_nominal = Ld - s_on, L - s_on
+        T_r = (1.0 - tau_on) * T * (remaining / remaining_nominal) ** DETOUR_TIME_EXPONENT
+        after = t >= t_on
+        q, qd = _quintic_to_rest(s_on, v_on, a_on, Ld, T_r, t[after] - t_on)
+        s = np.where(after, 0.0, s)
+        sdot = np.where(after, 0.0, sdot)
+        s[after], sdot[after] = np.clip(q, s_on, Ld), np.maximum(qd, 0.0)
+        end_time = t_on + T_r
+    else:
+        end_time = t0 + T
     pos = np.stack([np.interp(s, arc, pts[:, 0]), np.interp(s, arc, pts[:, 1])], axis=1)
     tan = np.gradient(pts, arc, axis=0)
     tan /= np.linalg.norm(tan, axis=1, keepdims=True)
-    inside = ((t - t0) > 0.0) & ((t - t0) < T)
-    sdot = np.where(inside, dsigma * arc[-1] / T, 0.0)
+    # before the onset the nominal path's own tangents: the shared part's velocities do not see the detour
+    tan[: i_on + 1] = path.tangents[: i_on + 1]
     vel = np.stack([np.interp(s, arc, tan[:, 0]), np.interp(s, arc, tan[:, 1])], axis=1) * sdot[:, None]
-    return Intent(positions=pos, velocities=vel, side=side, amplitude=amp, pace=pace, end_time=t0 + T)
+    return Intent(positions=pos, velocities=vel, side=side, amplitude=amp, pace=pace, end_time=end_time)
 
 
 class OperatorArm:

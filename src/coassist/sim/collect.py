@@ -98,6 +98,8 @@ def collect_dataset(
     dataset_id = dataset_id or out.name
     # What is collected, so that a re-run continues only the same collection.
     model_file = Path(s0.intent) / "model.json"
+    if not model_file.is_file():  # a calibrated path-hypotheses source: its calibration is what runs
+        model_file = Path(s0.intent) / "path-hypotheses.json"
     model_hash = digest(model_file.read_bytes().hex()) if s0.intent not in NAMED_INTENTS and model_file.is_file() else None
     key = digest({"specs": [asdict(s) for s in specs], "dataset_id": dataset_id, "format": FORMAT_VERSION,
                   "model": model_hash})  # fmt: skip

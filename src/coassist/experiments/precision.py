@@ -1,0 +1,119 @@
+"""Intent sources compared in the loop on validation seeds (issue 34): the tables docs/precision.md shows.
+
+The application scenario's trials (the curved path, the large obstacle, operators 0, 1 and 2,
+the board and the heavy load) on seeds the report never uses:
+``application_seed(base, j)`` for each ``base`` given (50000 and 60000 in docs/precision.md:
+disjoint trial seeds), every source with the same controller, paired against MG and the oracle on
+the same trials, as the report's ablation pairs them
+(:class:`~coassist.experiments.ablation.AblationResult`: shares of the oracle's benefit, overshoot
+and clearance deficit per side of the detour). ``paths`` needs a calibration: with
+``calibrate=True`` the operators' calibration trials of each base
+(:func:`~coassist.experiments.pipeline.calibration_seed`) are collected and fitted first
+(:func:`~coassist.experiments.intent_sources.calibrate_paths`), one calibration per base.
+
+:func:`compare_intents` runs it; ``coassist compare-intents`` is its command.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from coassist.experiments.ablation import ARBITRATED, DAMPED, SIDES, AblationResult, _seeds_text, _share_text
+from coassist.experiments.application import OBJECTS, OBSTACLE, _pair_key, application_metrics
+from coassist.experiments.intent_sources import calibrate_paths
+from coassist.experiments.pipeline import REPRODUCE_PRESETS, Workspace, application_seed
+
+__all__ = ["compare_intents", "comparison_table"]
+
+
+def compare_intents(sources: Mapping[str, str], out: str | Path, *, bases: Sequence[int] = (50000, 60000),
+                    controllers: Mapping[str, str] | None = None, trials: int = 4, users: Sequence[int] = (0, 1, 2),
+                    calibrate: bool = True, workers: int = 2, progress: bool = True) -> AblationResult:  # fmt: skip
+    """Every source of ``sources`` (label → intent: a named source, a model folder, a calibration folder or
+    ``"paths"`` to use each base's fitted calibration) on the validation trials of ``bases``, with the
+    arbitrated controller or ``controllers[label]``; MG and the oracle (arbitrated) on the same trials.
+    Datasets go under ``out``. The result is keyed like the ablation's (world "point-mass",
+    controller, label), the bases' trials pooled in one cell."""
+    if not sources:
+        raise ValueError("compare_intents needs at least one source")
+    if not bases or len(set(bases)) != len(bases) or any(int(b) < 0 for b in bases):
+        raise ValueError(f"bases must be distinct seeds >= 0, got {bases!r}")
+    controllers = dict(controllers or {})
+    unknown = set(controllers) - set(sources)
+    if unknown:
+        raise ValueError(f"controllers names sources that are not compared: {sorted(unknown)}")
+    bad = {k: v for k, v in controllers.items() if v not in (ARBITRATED, DAMPED)}
+    if bad:
+        raise ValueError(f"controllers must be {ARBITRATED!r} or {DAMPED!r} (their oracle is the arbitrated one), got {bad}")
+    reserved = {"MG", "oracle"} & set(sources)
+    if reserved:
+        raise ValueError(f"source labels {sorted(reserved)} are taken by the baselines every comparison runs")
+    out = Path(out)
+    cfg = replace(REPRODUCE_PRESETS["default"], application_users=tuple(users), application_trials=int(trials),
+                  workers=int(workers))  # fmt: skip
+    cells: dict[tuple[str, str, str], list] = {}
+    calibrations: dict[str, str] = {}
+    for base in bases:
+        ws = Workspace(replace(cfg, seed=int(base)), out / f"base-{base}", progress)
+        paths = calibrate_paths(ws) if calibrate else "paths"
+        calibrations[str(base)] = paths
+        plan = [("MG", "manual", "nominal"), ("oracle", ARBITRATED, "oracle")]
+        plan += [(label, controllers.get(label, ARBITRATED), paths if spec == "paths" else spec)
+                 for label, spec in sources.items()]  # fmt: skip
+        for j, obj in enumerate(OBJECTS):
+            for label, controller, intent in plan:
+                _, ds = ws.collect(f"{obj}-{label}", tasks=(cfg.application_task,), users=cfg.application_users,
+                                   objects=(obj,), trials=cfg.application_trials, seed=application_seed(int(base), j),
+                                   controller=controller, preset=cfg.application_preset, intent=intent,
+                                   obstacle=OBSTACLE)  # fmt: skip
+                cells.setdefault((obj, label, controller), []).extend(sorted(ds.trials, key=_pair_key))
+    metrics, mg, pairs = {}, {}, {}
+    for (obj, label, controller), trials_ in cells.items():
+        if label == "MG":
+            mg[("point-mass", obj)] = application_metrics(trials_)
+            pairs[("point-mass", obj)] = [_pair_key(t) for t in trials_]
+            continue
+        if [_pair_key(t) for t in trials_] != pairs[("point-mass", obj)]:
+            raise RuntimeError(f"{obj}/{label} did not meet MG's trials")
+        metrics[("point-mass", obj, controller, label)] = application_metrics(trials_)
+    errors: dict[tuple[str, str, str, str], dict[int, dict[str, float]]] = {key: {} for key in metrics}
+    models = {f"paths@{base}": folder for base, folder in calibrations.items()}
+    return AblationResult(metrics, mg, pairs, models, {}, cfg.application_preset, errors)
+
+
+def comparison_table(result: AblationResult) -> str:
+    """A markdown table per object: MG, then every compared cell (f_RMS, force share, overshoot per side and
+    its share, clearance deficit per side with the paired difference from MG, jerk against MG's, σ)."""
+    lines = []
+    for obj in OBJECTS:
+        m = result.mg[("point-mass", obj)]
+        side = np.asarray(m["side"])
+        n = {s: int((side == s).sum()) for s in SIDES}
+        lines += [f"**{obj}** ({len(side)} paired trials: {n[1]} left, {n[-1]} right of the path)", "",
+                  "| source | controller | f_RMS [N] | force share | overshoot L / R [mm] | overshoot share | "
+                  "clearance deficit L / R [mm] (vs MG, 95 %) | jerk RMS [m/s³] | σ [mm] |",
+                  "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]  # fmt: skip
+
+        def sided(values: Any, side: np.ndarray = side) -> str:
+            v = np.asarray(values, float)
+            return " / ".join(f"{1e3 * np.nanmean(v[side == s]):.1f}" for s in SIDES if (side == s).any())
+
+        lines.append(f"| MG | manual | {m['f_rms']:.2f} | | {sided(m['overshoot_trials'])} | | "
+                     f"{sided(m['clearance_deficit_trials'])} | {m['jerk_rms']:.2f} | {1e3 * m['sigma']:.2f} |")  # fmt: skip
+        for (world, o, controller, label), r in result.metrics.items():
+            if o != obj:
+                continue
+            cd = result.by_side(world, obj, controller, label, "clearance_deficit")
+            clear = " / ".join(f"{1e3 * v[0]:.1f} ({1e3 * v[1]:+.1f} [{1e3 * v[2]:+.1f}, {1e3 * v[3]:+.1f}])"
+                               for v in cd.values() if v[4] >= 2)  # fmt: skip
+            lines.append(f"| {label} | {controller} | {r['f_rms']:.2f} | "
+                         f"{_seeds_text(result, world, obj, controller, label, 'f_rms')} | {sided(r['overshoot_trials'])} | "
+                         f"{_share_text(result.shares(world, obj, controller, label)['overshoot'])} | {clear} | "
+                         f"{r['jerk_rms']:.2f} ({r['jerk_rms'] / m['jerk_rms']:.2f}×) | {1e3 * r['sigma']:.2f} |")  # fmt: skip
+        lines.append("")
+    return "\n".join(lines)

@@ -1,0 +1,485 @@
+"""Where the person wants the tool *now*, and the paths people take round the obstacles the robot is told of.
+
+Two intent sources that read only what the robot measures (the last feature row: tool
+position p, velocity v, wrench w) and what it is told (the nominal path, the obstacles,
+the object's mass), with no trained network:
+
+``present`` — the present estimate, extrapolated at constant velocity::
+
+    p̂(k) = p + (w + m a + Ĉ v) / K̂          (the arm of eq. 4.1 solved for the intent)
+    ŷ(k+i) = p̂(k) + i·dt·v                  i = 1 … H
+
+``a`` is the tool's acceleration (dv/dt, low-pass filtered over ``accel_time``) and m the
+carried object's mass: the sensor measures the hand force less m·a (coassist.scenario.objects),
+so m·a puts back what accelerating the object took. K̂ and Ĉ are a typical arm's stiffness
+and damping (:class:`ArmGuess`); an arm that is stiffer or delayed makes p̂ lag and shrink.
+
+``paths`` — path hypotheses and a filter over them (issue 34): the person goes round each
+known obstacle on one side, along the nominal path deformed by the detour model of
+:func:`coassist.scenario.operator.deformed_path` (a shift of A·b(s) along the path's normal
+at the obstacle; A = half the box plus the clearance c, b rising over the anticipation
+distance a). One hypothesis per side and per shape (c, a) of a small grid around the
+person's own shape (:class:`PersonShape`, fitted to a few calibration trials by
+:func:`calibrate`). Every tick:
+
+1. each hypothesis n gives the tool's phase on it, sₙ (the nearest point of the curve), and
+   its present estimate of the intent, qₙ = curveₙ(sₙ + ℓₙ) with the lead
+   ℓₙ = tₙ·(w + m a + Ĉ v)/K̂ along the curve's tangent tₙ;
+2. **side.** Before the detour both sides' curves are the nominal path; the lateral offset of
+   p̂ from it then is a bias b (the tool riding beside the path) and is learnt, with an
+   exponential average over ``bias_time``, while the rows follow that shared path, and
+   clipped to ±``bias_limit`` (a larger offset is a detour that starts early, not a bias).
+   Once the mean-shape curves of the two sides are D ≥ ``divergence`` apart, the log-odds
+   of the left side grow by
+   κ·(z − b)·D/σ² per tick (z: p̂'s offset from their midpoint towards the left curve; the
+   Gaussian log-likelihood ratio of the two curves, discounted by κ for the correlation of
+   successive ticks); they start at the person's side preference;
+3. **shape.** Each hypothesis accumulates κ·(rₙ − min r)/(2σ²), rₙ = ‖p̂ − b·n_o − qₙ‖², as its
+   negative log-likelihood relative to its side's best, while its side's curves are apart;
+4. **rows.** Once |log-odds| > ``decide``, the rows run along the likely shapes of the more
+   likely side from their present estimates at the tool's speed along the curve,
+   ŷ(k+i) = Σₙ wₙ curveₙ(sₙ + ℓₙ + i·dt·max(tₙ·v, 0)), wₙ ∝ the likelihoods of the
+   :data:`MIXTURE` most likely shapes (those within a factor 100 of the best). While the two
+   sides' rows over the horizon are more than ``divergence`` apart and the side is not
+   decided, the rows are the present estimate's, p̂ + ``hedge_velocity``·i·dt·v (neither side,
+   and never the nominal plan through the obstacle); before the detour, the (shared) nominal
+   curve's. The rows cross-fade between the two over ``blend_time``, so the robot's effort
+   never steps.
+
+Without an obstacle (or with ``use_obstacles=False``) ``paths`` is ``present``. What the
+robot is told comes from :class:`~coassist.interfaces.TrialContext` (``path``, ``obstacles``,
+``object``); a person's shape from a calibration file (:func:`write_calibration`), whose
+folder is given as the intent (``intent="<folder>"``: ``path-hypotheses.json``).
+
+The detour model is the simulated operator's own (the hypotheses are its family of paths):
+in simulation the filter knows the form of every path an operator can take, not its shape
+in a trial (each trial draws its clearance and anticipation, ``OperatorProfile.shape_jitter``).
+How far real detours follow that family is unknown (docs/realism.md).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from coassist._checks import check_int
+from coassist._io import atomic_write_text
+from coassist.interfaces import TrialContext
+from coassist.scenario.objects import OBJECTS
+from coassist.scenario.operator import deformed_path
+from coassist.scenario.tasks import Box, MotionPlanner, NominalPath, Task
+
+__all__ = [
+    "CALIBRATION_FILE",
+    "ArmGuess",
+    "FilterSettings",
+    "PathHypothesesIntent",
+    "PersonShape",
+    "calibrate",
+    "fit_detour",
+    "read_calibration",
+    "write_calibration",
+]
+
+#: The most shapes whose rows a decided side mixes (module docstring, step 4).
+MIXTURE = 4
+#: The calibration file of a ``paths`` source folder.
+CALIBRATION_FILE = "path-hypotheses.json"
+_FORMAT = "coassist-path-hypotheses-1"
+
+
+def _number(value: Any, name: str, lo: float, hi: float = math.inf, *, open_lo: bool = False) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v < lo or v > hi or (open_lo and v == lo):
+        raise ValueError(f"{name} must be finite and {'>' if open_lo else '>='} {lo}"
+                         + (f" and <= {hi}" if hi < math.inf else "") + f", got {value!r}")  # fmt: skip
+    return v
+
+
+@dataclass(frozen=True)
+class PersonShape:
+    """How one person goes round an obstacle: clearance c [m] kept from it, anticipation a [m] of
+    path over which they move aside, and the probability they pass on the left of the path
+    (``left_preference`` ∈ (0, 1)); ``trials``: how many calibration trials it was fitted to (0: a
+    guess)."""
+
+    clearance: float = 0.025
+    anticipation: float = 0.06
+    left_preference: float = 0.5
+    trials: int = 0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "clearance", _number(self.clearance, "PersonShape.clearance", 0.0, 0.5, open_lo=True))
+        object.__setattr__(self, "anticipation",
+                           _number(self.anticipation, "PersonShape.anticipation", 0.0, 2.0, open_lo=True))  # fmt: skip
+        lp = _number(self.left_preference, "PersonShape.left_preference", 0.0, 1.0)
+        if not 0.0 < lp < 1.0:
+            raise ValueError(f"PersonShape.left_preference must be strictly between 0 and 1, got {lp!r}")
+        object.__setattr__(self, "left_preference", lp)
+        object.__setattr__(self, "trials", check_int(self.trials, "PersonShape.trials", 0))
+
+
+@dataclass(frozen=True)
+class ArmGuess:
+    """The arm the present estimate assumes (eq. 4.1): stiffness K̂ [N/m] and damping Ĉ [N·s/m].
+
+    The defaults are the simulated author's relaxed-to-mid stiffness and damping
+    (coassist.scenario.operator.AUTHOR: 550–1300 N/m, 10 N·s/m)."""
+
+    stiffness: float = 800.0
+    damping: float = 10.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "stiffness", _number(self.stiffness, "ArmGuess.stiffness", 0.0, open_lo=True))
+        object.__setattr__(self, "damping", _number(self.damping, "ArmGuess.damping", 0.0))
+
+
+@dataclass(frozen=True)
+class FilterSettings:
+    """The filter's constants (module docstring), chosen on validation seeds (docs/precision.md).
+
+    sigma : σ [m], the present estimate's noise in the likelihoods.
+    kappa : κ ∈ (0, 1], the discount for the correlation of successive ticks.
+    decide : the log-odds of a side at which the rows follow it.
+    divergence : [m] the distance at which two curves (or two sides' rows) count as apart.
+    bias_time : [s] the averaging time of the lateral bias before the detour.
+    bias_limit : [m] the largest lateral bias learnt.
+    accel_time : [s] the low-pass time of the acceleration estimate.
+    blend_time : [s] the cross-fade between the present estimate's rows and a curve's (0: a switch).
+    hedge_velocity : while the sides disagree, the rows are p̂ + hedge_velocity·i·dt·v: 1 extrapolates
+        the tool's velocity, 0 holds the present estimate (no push along the old direction).
+    search_window : [m] of each curve searched for the tool's nearest point, either side of the last
+        one (a tool moves < 1 mm per tick; the whole curve is searched when it is longer than the path).
+    shape_grid : factors on the person's clearance and anticipation, one hypothesis per pair.
+    """
+
+    sigma: float = 0.002
+    kappa: float = 0.2
+    decide: float = 1.0
+    divergence: float = 0.0005
+    bias_time: float = 0.4
+    bias_limit: float = 0.005
+    accel_time: float = 0.02
+    blend_time: float = 0.1
+    hedge_velocity: float = 0.5
+    search_window: float = 0.02
+    shape_grid: tuple[float, ...] = (0.6, 0.8, 1.0, 1.25, 1.6)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sigma", _number(self.sigma, "FilterSettings.sigma", 0.0, open_lo=True))
+        object.__setattr__(self, "kappa", _number(self.kappa, "FilterSettings.kappa", 0.0, 1.0, open_lo=True))
+        object.__setattr__(self, "decide", _number(self.decide, "FilterSettings.decide", 0.0))
+        object.__setattr__(self, "divergence", _number(self.divergence, "FilterSettings.divergence", 0.0, open_lo=True))
+        object.__setattr__(self, "bias_time", _number(self.bias_time, "FilterSettings.bias_time", 0.0, open_lo=True))
+        object.__setattr__(self, "bias_limit", _number(self.bias_limit, "FilterSettings.bias_limit", 0.0))
+        object.__setattr__(self, "accel_time", _number(self.accel_time, "FilterSettings.accel_time", 0.0))
+        object.__setattr__(self, "blend_time", _number(self.blend_time, "FilterSettings.blend_time", 0.0))
+        object.__setattr__(self, "hedge_velocity", _number(self.hedge_velocity, "FilterSettings.hedge_velocity", 0.0, 1.0))
+        object.__setattr__(self, "search_window",
+                           _number(self.search_window, "FilterSettings.search_window", 0.0, open_lo=True))  # fmt: skip
+        grid = tuple(_number(g, "FilterSettings.shape_grid", 0.0, open_lo=True) for g in self.shape_grid)
+        if not grid:
+            raise ValueError("FilterSettings.shape_grid must not be empty")
+        object.__setattr__(self, "shape_grid", grid)
+
+
+def _scene_task(path: np.ndarray, obstacle: tuple[Sequence[float], Sequence[float]]) -> Task:
+    """A :class:`Task` for :func:`deformed_path` from what the robot is told: the nominal path's
+    polyline and one box (centre, size); the obstacle's arc length is where the path passes
+    nearest its centre. The timing is not used."""
+    pts = np.asarray(path, dtype=float)
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(pts, axis=0), axis=1) > 0.0])
+    nominal = NominalPath("told", pts[keep])
+    box = Box(tuple(obstacle[0]), tuple(obstacle[1]))  # type: ignore[arg-type]
+    arc = float(nominal.arc[int(np.argmin(np.linalg.norm(nominal.points - np.asarray(box.center), axis=1)))])
+    return Task(kind="told", planner=MotionPlanner(nominal, 1.0, 0.0), obstacle=box, obstacle_arc=arc)
+
+
+class _Hypotheses:
+    """The curves of one trial: (N, P, 2) points on the nominal path's samples, their arc
+    lengths (N, P) and unit tangents (N, P, 2); sides (N,); the mean shape's index per side."""
+
+    def __init__(self, task: Task, shape: PersonShape, grid: tuple[float, ...]) -> None:
+        curves, sides, shapes = [], [], []
+        for side in (1, -1):
+            for gc in grid:
+                for ga in grid:
+                    pts, _, taken = deformed_path(task, side, shape.clearance * gc, shape.anticipation * ga)
+                    curves.append(pts)
+                    sides.append(taken)
+                    shapes.append((gc, ga))
+        self.points = np.stack(curves)
+        seg = np.linalg.norm(np.diff(self.points, axis=1), axis=2)
+        self.arc = np.concatenate([np.zeros((len(curves), 1)), np.cumsum(seg, axis=1)], axis=1)
+        tan = np.gradient(self.points, axis=1)
+        self.tangents = tan / np.linalg.norm(tan, axis=2, keepdims=True)
+        self.sides = np.asarray(sides)
+        self.n_o = task.path.normal(task.obstacle_arc)
+        mid = grid.index(1.0) if 1.0 in grid else len(grid) // 2
+        centre = mid * len(grid) + mid
+        self.centre = {1: centre, -1: len(grid) ** 2 + centre}
+        # at a sharp corner a side may be impossible (deformed_path goes round the other way)
+        self.centre = {s: i if self.sides[i] == s else self.centre[-s] for s, i in self.centre.items()}
+        self.step = float(task.path.length) / (self.points.shape[1] - 1)
+
+    def at(self, n: int, s: np.ndarray) -> np.ndarray:
+        """Points of curve n at its arc lengths s (clipped to the curve)."""
+        arc, pts = self.arc[n], self.points[n]
+        return np.stack([np.interp(s, arc, pts[:, 0]), np.interp(s, arc, pts[:, 1])], axis=-1)
+
+
+class PathHypothesesIntent:
+    """The ``present`` and ``paths`` intent sources (module docstring): an
+    :class:`~coassist.interfaces.IntentSource` with state between ticks (one per trial).
+
+    Parameters
+    ----------
+    horizon : rows predicted.
+    shapes : person name (TrialContext.user) → :class:`PersonShape`; a person not in it gets ``default``.
+    default : the shape of a person nobody calibrated.
+    arm : the arm of the present estimate.
+    settings : the filter's constants.
+    use_obstacles : False: ``present`` (never reads the obstacles).
+    model_id : what trials record as the source (default ``"paths"`` or ``"present"``).
+    """
+
+    history = 1
+
+    def __init__(self, horizon: int = 50, *, shapes: Mapping[str, PersonShape] | None = None,
+                 default: PersonShape | None = None, arm: ArmGuess | None = None,
+                 settings: FilterSettings | None = None, use_obstacles: bool = True, model_id: str | None = None,
+                 ) -> None:  # fmt: skip
+        self.horizon = check_int(horizon, "PathHypothesesIntent.horizon", 1)
+        self.shapes = dict(shapes or {})
+        for name, shape in self.shapes.items():
+            if not isinstance(shape, PersonShape):
+                raise ValueError(f"PathHypothesesIntent.shapes[{name!r}] must be a PersonShape, got {type(shape).__name__}")
+        self.default = PersonShape() if default is None else default
+        self.arm = ArmGuess() if arm is None else arm
+        self.settings = FilterSettings() if settings is None else settings
+        self.use_obstacles = bool(use_obstacles)
+        self.model_id = model_id or ("paths" if self.use_obstacles else "present")
+        self._hyp: _Hypotheses | None = None
+        self._ready = False
+
+    # -- per trial -------------------------------------------------------------------------
+    def reset(self, context: TrialContext) -> None:
+        st = self.settings
+        self.dt = float(context.dt)
+        self._steps = self.dt * np.arange(1, self.horizon + 1)
+        obj = OBJECTS.get(context.object)
+        self._mass = float(obj.mass) if obj is not None else 0.0
+        self._a_gain = 1.0 - math.exp(-self.dt / st.accel_time) if st.accel_time > 0 else 1.0
+        self._b_gain = 1.0 - math.exp(-self.dt / st.bias_time)
+        self._v_prev: np.ndarray | None = None
+        self._acc = np.zeros(2)
+        self._hyp = None
+        obstacles = tuple(context.obstacles) if self.use_obstacles else ()
+        if obstacles and context.path is not None:
+            path = np.asarray(context.path, dtype=float)
+            # the obstacle the path passes nearest: one detour per trial (the scenarios have one box)
+            near = min(obstacles, key=lambda o: float(np.min(np.linalg.norm(path - np.asarray(o[0]), axis=1))))
+            shape = self.shapes.get(context.user, self.default)
+            self._hyp = _Hypotheses(_scene_task(path, near), shape, st.shape_grid)
+            n = len(self._hyp.sides)
+            self._idx = np.zeros(n, dtype=int)
+            self._loglik = np.zeros(n)
+            self._log_odds = math.log(shape.left_preference / (1.0 - shape.left_preference))
+            self._bias = 0.0
+            self._side = 0
+            self._mix = 1.0
+            self._mix_step = self.dt / st.blend_time if st.blend_time > 0.0 else 1.0
+        self._ready = True
+
+    @property
+    def curves(self) -> tuple[np.ndarray, np.ndarray]:
+        """This trial's hypotheses: (sides (N,), points (N, P, 2) [m]); empty without an obstacle."""
+        if self._hyp is None:
+            return np.zeros(0, dtype=int), np.zeros((0, 0, 2))
+        return self._hyp.sides.copy(), self._hyp.points.copy()
+
+    @property
+    def side(self) -> int:
+        """The side the rows follow: +1 left of the path, −1 right, 0 undecided (or no obstacle)."""
+        return self._side if self._hyp is not None else 0
+
+    def predict(self, history: np.ndarray) -> np.ndarray:
+        if not self._ready:
+            raise RuntimeError("PathHypothesesIntent.predict called before reset")
+        row = history[-1]
+        p, v, w = row[0:2], row[2:4], row[4:6]
+        if self._v_prev is not None:
+            self._acc += self._a_gain * ((v - self._v_prev) / self.dt - self._acc)
+        self._v_prev = v.copy()
+        u_h = w + self._mass * self._acc  # the hand's force, the object's inertia put back
+        K, C = self.arm.stiffness, self.arm.damping
+        present = p + (u_h + C * v) / K
+        if self._hyp is None:
+            return present + self._steps[:, None] * v
+        return self._filter(self._hyp, p, v, u_h, present)
+
+    def _filter(self, hyp: _Hypotheses, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray) -> np.ndarray:
+        st = self.settings
+        K, C = self.arm.stiffness, self.arm.damping
+        n_curves, n_pts = hyp.points.shape[:2]
+        # 1. the tool's phase on every curve: the nearest point in a window around the last one
+        half = min(n_pts, max(2, int(math.ceil(st.search_window / hyp.step))))
+        ids = np.clip(self._idx[:, None] + np.arange(-half, half + 1)[None, :], 0, n_pts - 1)
+        rows = np.arange(n_curves)[:, None]
+        d2 = np.sum((hyp.points[rows, ids] - p) ** 2, axis=2)
+        self._idx = ids[np.arange(n_curves), np.argmin(d2, axis=1)]
+        every = np.arange(n_curves)
+        tan = hyp.tangents[every, self._idx]
+        lead = (tan @ u_h + C * (tan @ v)) / K
+        q = hyp.points[every, self._idx] + lead[:, None] * tan  # each curve's present estimate
+        s_lead = hyp.arc[every, self._idx] + lead
+        # 2. side
+        cl, cr = hyp.centre[1], hyp.centre[-1]
+        sep = q[cl] - q[cr]
+        D = float(np.hypot(sep[0], sep[1]))
+        mid = 0.5 * (q[cl] + q[cr])
+        if D < st.divergence:
+            # learnt only while the rows follow the shared path (a person who leaves it earlier than their
+            # mean shape is detouring, not riding beside it), and never more than bias_limit
+            if self._mix >= 1.0:
+                self._bias += self._b_gain * (float((present - mid) @ hyp.n_o) - self._bias)
+                self._bias = min(max(self._bias, -st.bias_limit), st.bias_limit)
+        else:
+            z = float((present - mid) @ sep) / D
+            self._log_odds += st.kappa * (z - self._bias) * D / st.sigma**2
+            self._log_odds = min(max(self._log_odds, -50.0), 50.0)
+        # 3. shape, within each side while its curves are apart
+        corrected = present - self._bias * hyp.n_o
+        r2 = np.sum((corrected - q) ** 2, axis=1)
+        for s in (1, -1):
+            on = hyp.sides == s
+            spread = float(np.max(np.linalg.norm(q[on] - q[on].mean(axis=0), axis=1)))
+            if spread >= st.divergence:
+                self._loglik[on] -= st.kappa * (r2[on] - r2[on].min()) / (2 * st.sigma**2)
+                self._loglik[on] -= self._loglik[on].max()
+        np.maximum(self._loglik, -60.0, out=self._loglik)
+        if abs(self._log_odds) > st.decide:
+            side = 1 if self._log_odds > 0 else -1
+            if side != self._side and self._side != 0:
+                self._mix = 0.0  # a change of mind goes through the present estimate, not across the obstacle
+            self._side = side
+        # 4. rows
+        def along(n: int) -> np.ndarray:
+            speed = max(float(tan[n] @ v), 0.0)
+            return hyp.at(n, s_lead[n] + self._steps * speed)
+
+        hedge = present + (st.hedge_velocity * self._steps)[:, None] * v
+        if self._side != 0:
+            on = np.flatnonzero(hyp.sides == self._side)
+            weight = np.exp(self._loglik[on])
+            # the shapes that still matter (at most MIXTURE, each ≥ 1 % of the best): their rows, weighted,
+            # so the rows slide from one shape to the next instead of jumping
+            best = np.argsort(weight)[::-1][:MIXTURE]
+            best = best[weight[best] >= 0.01 * weight[best[0]]]
+            w = weight[best] / weight[best].sum()
+            rows = w[0] * along(int(on[best[0]]))
+            for wt, n in zip(w[1:], on[best[1:]]):
+                rows += wt * along(int(n))
+            target = 1.0
+        else:
+            rows = along(cl)
+            # the sides disagree over the horizon: the present estimate alone
+            target = 0.0 if float(np.max(np.linalg.norm(rows - along(cr), axis=1))) >= st.divergence else 1.0
+        # cross-fade between the curve's rows and the present estimate's (no step in the robot's effort)
+        self._mix = target if self._mix_step >= 1.0 else min(max(self._mix + np.sign(target - self._mix) * self._mix_step, 0.0), 1.0)
+        if self._mix >= 1.0:
+            return rows
+        if self._mix <= 0.0:
+            return hedge
+        return self._mix * rows + (1.0 - self._mix) * hedge
+
+
+# ----------------------------------------------------------------------------- calibration
+
+
+def fit_detour(task: Task, pose: np.ndarray, *, clearances: Sequence[float] | None = None,
+               anticipations: Sequence[float] | None = None) -> tuple[int, float, float]:  # fmt: skip
+    """(side, clearance [m], anticipation [m]) of the detour curve nearest a logged tool path.
+
+    The side is where the tool passes the obstacle (its offset along the path's normal there);
+    clearance and anticipation minimise the mean squared distance from the tool's positions
+    (every 12th: 0.1 s apart at 125 Hz) to the curve's vertices (every 4th: about 1 mm apart), on
+    log-spaced grids (5 mm–8 cm, 3–30 cm; 13 values each). The tool
+    cuts the person's corners a little, so the fit leans toward a smaller clearance and a longer
+    anticipation; the filter's shape grid covers that.
+    """
+    pose = np.asarray(pose, dtype=float)
+    if pose.ndim != 2 or pose.shape[1] != 2 or pose.shape[0] < 2:
+        raise ValueError(f"pose must have shape (T >= 2, 2), got {pose.shape}")
+    cs = np.geomspace(0.005, 0.08, 13) if clearances is None else np.asarray(clearances, dtype=float)
+    as_ = np.geomspace(0.03, 0.30, 13) if anticipations is None else np.asarray(anticipations, dtype=float)
+    n_o = task.path.normal(task.obstacle_arc)
+    centre = np.asarray(task.obstacle.center)
+    near = int(np.argmin(np.linalg.norm(pose - centre, axis=1)))
+    side = 1 if float((pose[near] - task.path.position(task.obstacle_arc)) @ n_o) > 0.0 else -1
+    sample = pose[::12]
+    best = (math.inf, float(cs[0]), float(as_[0]))
+    for c in cs:
+        for a in as_:
+            pts, _, taken = deformed_path(task, side, float(c), float(a))
+            if taken != side:
+                continue
+            cost = float(np.mean(np.min(np.sum((sample[:, None, :] - pts[None, ::4, :]) ** 2, axis=2), axis=1)))
+            if cost < best[0]:
+                best = (cost, float(c), float(a))
+    return side, best[1], best[2]
+
+
+def calibrate(fits: Iterable[tuple[int, float, float]]) -> PersonShape:
+    """A person's shape from their fitted detours (:func:`fit_detour`): the geometric medians of
+    clearance and anticipation, and the left preference (n_left + 1)/(n + 2) (Laplace's rule:
+    never certain of a side after a few trials)."""
+    fits = list(fits)
+    if not fits:
+        raise ValueError("calibrate needs at least one fitted trial")
+    left = sum(1 for side, _, _ in fits if side > 0)
+    c = float(np.exp(np.median(np.log([f[1] for f in fits]))))
+    a = float(np.exp(np.median(np.log([f[2] for f in fits]))))
+    return PersonShape(clearance=c, anticipation=a, left_preference=(left + 1) / (len(fits) + 2), trials=len(fits))
+
+
+def write_calibration(folder: str | Path, shapes: Mapping[str, PersonShape], *, arm: ArmGuess | None = None,
+                      settings: FilterSettings | None = None, default: PersonShape | None = None) -> Path:  # fmt: skip
+    """Write a ``paths`` source folder (``path-hypotheses.json``, atomically); returns the folder."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    doc = {"format": _FORMAT, "shapes": {k: asdict(v) for k, v in shapes.items()},
+           "default": asdict(default or PersonShape()), "arm": asdict(arm or ArmGuess()),
+           "settings": asdict(settings or FilterSettings())}  # fmt: skip
+    atomic_write_text(folder / CALIBRATION_FILE, json.dumps(doc, indent=1) + "\n")
+    return folder
+
+
+def read_calibration(folder: str | Path, horizon: int = 50) -> PathHypothesesIntent:
+    """The ``paths`` source a folder written by :func:`write_calibration` holds (errors name the file and field)."""
+    path = Path(folder) / CALIBRATION_FILE
+    try:
+        doc = json.loads(path.read_text("utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: not a path-hypotheses calibration ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != _FORMAT:
+        raise ValueError(f"{path}: format must be {_FORMAT!r}")
+    try:
+        shapes = {str(k): PersonShape(**v) for k, v in dict(doc.get("shapes", {})).items()}
+        settings = dict(doc.get("settings", {}))
+        if "shape_grid" in settings:
+            settings["shape_grid"] = tuple(settings["shape_grid"])
+        return PathHypothesesIntent(horizon, shapes=shapes, default=PersonShape(**doc.get("default", {})),
+                                    arm=ArmGuess(**doc.get("arm", {})), settings=FilterSettings(**settings),
+                                    model_id=f"paths:{Path(folder).name}")  # fmt: skip
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: {exc}") from None

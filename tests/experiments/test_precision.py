@@ -1,0 +1,33 @@
+"""compare_intents: the validation comparison of docs/precision.md, on a one-trial plan."""
+
+import numpy as np
+import pytest
+
+from coassist.experiments.ablation import ARBITRATED, oracle_share
+from coassist.experiments.precision import compare_intents, comparison_table
+
+
+def test_comparison_pairs_every_source_with_mg_and_the_oracle(tmp_path):
+    result = compare_intents({"cv": "constant-velocity"}, tmp_path, bases=(50000,), trials=1, users=(0,),
+                             calibrate=False, workers=1, progress=False)
+    for obj in ("board", "heavy"):
+        mg, cv, oracle = (result.mg[("point-mass", obj)], result.metrics[("point-mass", obj, ARBITRATED, "cv")],
+                          result.metrics[("point-mass", obj, ARBITRATED, "oracle")])
+        assert len(mg["f_rms_trials"]) == len(cv["f_rms_trials"]) == 1
+        assert result.pairs[("point-mass", obj)] == [("user-0", 950000 + 1000 * ("board", "heavy").index(obj))]
+        share = oracle_share(mg["f_rms_trials"], cv["f_rms_trials"], oracle["f_rms_trials"])
+        assert result.shares("point-mass", obj, ARBITRATED, "cv")["f_rms"][0] == share[0]
+        assert np.isfinite(cv["clearance_deficit"])
+    table = comparison_table(result)
+    assert table.count("| MG | manual |") == 2 and table.count("| cv | cooperative-arbitrated |") == 2
+
+
+def test_bad_requests_name_what_is_wrong(tmp_path):
+    with pytest.raises(ValueError, match="at least one source"):
+        compare_intents({}, tmp_path)
+    with pytest.raises(ValueError, match="bases"):
+        compare_intents({"a": "present"}, tmp_path, bases=(1, 1))
+    with pytest.raises(ValueError, match="taken by the baselines"):
+        compare_intents({"oracle": "oracle"}, tmp_path)
+    with pytest.raises(ValueError, match="cooperative-damped"):
+        compare_intents({"a": "present"}, tmp_path, controllers={"a": "manual"})
