@@ -776,7 +776,7 @@ def play(
         import starlette  # noqa: F401  (the web extra, checked before anything starts)
         import uvicorn  # noqa: F401
 
-        from coassist.play.server import PlayServer, is_loopback, new_token
+        from coassist.play.server import PlayServer, check_token, is_loopback, new_token
         from coassist.play.session import PlayConfig, PlaySession
     except ImportError as exc:
         _fail(f"coassist play needs the web extra ({exc.name} missing): pip install 'coassist[web]'")
@@ -786,6 +786,10 @@ def play(
         _need_bags("--mcap")
     if token is None and not is_loopback(host):
         token = new_token()
+    try:
+        check_token(token, host)
+    except ValueError as exc:
+        _fail(f"{exc}", 2)
     try:
         from coassist.config import CONTROL_PRESETS
         from coassist.control.presets import CONTROLLER_KINDS

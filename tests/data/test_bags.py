@@ -139,8 +139,13 @@ TS2 = get_typestore(Stores.ROS2_HUMBLE)
 S0 = 1_700_000_000
 
 
+#: The synthetic bags' unit (a power of two: scaling by it is exact), so their values stay
+#: physically plausible (below 5 m, 5 m/s and 330 N: coassist.data.rosbag_csv.check_plausible).
+UNIT = 1 / 64
+
+
 def synthetic_bag(path: Path, *, n=20, types=None, skip=(), values=None, stamps=None, storage="mcap") -> Path:
-    """A ROS 2 bag with the four topics, 8 ms apart; value of axis j at tick k of topic i: (i+1)·k + j/10.
+    """A ROS 2 bag with the four topics, 8 ms apart; value of axis j at tick k of topic i: ((i+1)·k + j/10)·UNIT.
 
     types: topic -> message type override; skip: topics left out; values: (topic, k) -> x value;
     stamps: topic -> list of stamp ns offsets replacing 0, 8 ms, 16 ms, ….
@@ -157,8 +162,8 @@ def synthetic_bag(path: Path, *, n=20, types=None, skip=(), values=None, stamps=
             conn = w.add_connection(topic, msgtype, typestore=TS2)
             offsets = (stamps or {}).get(topic, [k * 8_000_000 for k in range(n)])
             for k, off in enumerate(offsets):
-                x = (values or {}).get((topic, k), (i + 1) * k)
-                vec = [x, (i + 1) * k + 0.1, (i + 1) * k + 0.2]
+                x = (values or {}).get((topic, k), (i + 1) * k * UNIT)
+                vec = [x, ((i + 1) * k + 0.1) * UNIT, ((i + 1) * k + 0.2) * UNIT]
                 header = Header(stamp=Time(sec=S0 + off // 10**9, nanosec=off % 10**9), frame_id="base")
                 if msgtype == "geometry_msgs/msg/PoseStamped":
                     msg = TS2.types[msgtype](header=header, pose=Pose(position=Point(*vec), orientation=Quat(0.0, 0.0, 0.0, 1.0)))
@@ -181,10 +186,10 @@ def test_synthetic_bag_values_and_alignment(tmp_path, storage):
     trial = load_bag_trial(bag)
     k = np.arange(2, 20)
     assert trial.n_samples == 18 and trial.n_dof == 2
-    np.testing.assert_array_equal(trial.pose, np.column_stack([k, k + 0.1]).astype(float))
-    np.testing.assert_array_equal(trial.velocity, np.column_stack([2 * k, 2 * k + 0.1]).astype(float))
+    np.testing.assert_array_equal(trial.pose, np.column_stack([k, k + 0.1]) * UNIT)
+    np.testing.assert_array_equal(trial.velocity, np.column_stack([2 * k, 2 * k + 0.1]) * UNIT)
     # the wrench's tick k was written as its message k-2, with x = 3·(k-2): aligned by stamp
-    np.testing.assert_array_equal(trial.wrench, np.column_stack([3 * (k - 2), 3 * (k - 2) + 0.1]).astype(float))
+    np.testing.assert_array_equal(trial.wrench, np.column_stack([3 * (k - 2), 3 * (k - 2) + 0.1]) * UNIT)
     np.testing.assert_array_equal(trial.time, (k - 2) * 8_000_000 * 1e-9)
     assert trial.meta.dt == pytest.approx(0.008, abs=1e-15)
     assert trial.meta.user == "user-s" and trial.meta.extra["recording"] == "run_1"

@@ -161,7 +161,7 @@ def test_repeated_seq_and_no_overlap(tmp_path):
         load_ros_trial(make_recording(tmp_path / "a", seqs=seqs))
     seqs = {"current_pose.csv": range(100, 103), "current_velocity.csv": range(100, 103),
             "human_wrench.csv": range(200, 203), "robot_ref_pos.csv": range(100, 103)}
-    with pytest.raises(RecordingError, match="share no"):
+    with pytest.raises(RecordingError, match=r"human_wrench\.csv shares no header\.seq value with current_pose\.csv"):
         load_ros_trial(make_recording(tmp_path / "b", seqs=seqs))
 
 

@@ -21,6 +21,7 @@ from typer.testing import CliRunner
 
 from coassist.cli import app
 from coassist.data import (
+    RecordingError,
     RecordingWarning,
     Trial,
     TrialFileError,
@@ -240,11 +241,11 @@ def make_recording(folder: Path, n: int = 400, *, gap_after: int | None = None, 
     return folder
 
 
-def test_five_kilonewton_force_warns_naming_the_file(tmp_path):
+def test_five_kilonewton_force_is_refused_naming_the_file(tmp_path):
+    """Issue 37: it loaded with a warning; a force beyond the sensor's range is no measurement."""
     rec = make_recording(tmp_path / "user-x" / "trial_1", force_spike=5000.0)
-    with pytest.warns(RecordingWarning, match=r"trial_1/human_wrench\.csv: force x = 5000 N at t = 1\.600 s exceeds"):
-        trial = load_ros_trial(rec)
-    assert trial.wrench.max() == 5000.0  # loaded as recorded, not altered
+    with pytest.raises(RecordingError, match=r"trial_1/human_wrench\.csv: data row 200 \(seq 200\): wrench\.force\.x = 5000 N"):
+        load_ros_trial(rec)
 
 
 def test_one_hour_gap_warns(tmp_path):
@@ -380,11 +381,14 @@ def test_load_for_show_reads_only_the_trial_it_shows(tmp_path, dataset_with_a_tr
         load_for_show(dataset_with_a_truncated_trial, 2)
 
 
-def test_cli_train_warns_about_implausible_recordings(tmp_path):
+def test_cli_train_refuses_or_skips_implausible_recordings(tmp_path):
     user = tmp_path / "user-x"
     for i in (1, 2, 3):
         make_recording(user / f"trial_{i}", n=300, force_spike=5000.0 if i == 2 else None)
-    res = CliRunner().invoke(app, ["train", str(user), "--out", str(tmp_path / "m"), "--epochs", "1", "--threads",
-                                   "1", "--preset", "default", "--batch-size", "256"])  # fmt: skip
-    assert f"warning: {user}/trial_2/human_wrench.csv: force x = 5000 N" in _flat(res.output)
+    common = ["--out", str(tmp_path / "m"), "--epochs", "1", "--threads", "1", "--preset", "default", "--batch-size", "256"]
+    res = CliRunner().invoke(app, ["train", str(user), *common])
+    assert res.exit_code != 0 and f"{user}/trial_2/human_wrench.csv: data row 150" in _flat(res.output)
+    _no_traceback(res)
+    res = CliRunner().invoke(app, ["train", str(user), "--skip-bad-trials", *common])
+    assert res.exit_code == 0 and "skipped" in res.output and "trial_2/human_wrench.csv" in _flat(res.output), res.output
     assert PLAUSIBLE_FORCE < 5000.0

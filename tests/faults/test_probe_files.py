@@ -8,7 +8,6 @@ kill, no orphaned workers, a closing summary whose memory does not grow per tria
 from __future__ import annotations
 
 import json
-import logging
 import os
 import signal
 import subprocess
@@ -61,25 +60,6 @@ def test_a_tampered_target_scaler_is_refused(model_dir, tmp_path):
     _edit(folder, times30)
     with pytest.raises(ModelFileError, match=r"m/model\.json: its content does not match the hash recorded"):
         load_model(folder)
-
-
-def test_a_model_saved_before_the_sidecar_hash_loads_with_a_warning(model_dir, tmp_path, caplog):
-    """Decided: old models (no hash in their weights) still load, every field checked, and say so."""
-    import hashlib
-
-    from safetensors.torch import load as st_load
-    from safetensors.torch import save as st_save
-
-    from coassist.intent import load_model
-
-    folder = _copy(model_dir, tmp_path)
-    legacy = st_save(st_load((folder / "weights.safetensors").read_bytes()))  # no metadata
-    (folder / "weights.safetensors").write_bytes(legacy)
-    _edit(folder, lambda m: {**m, "weights_sha256": hashlib.sha256(legacy).hexdigest()})
-    with caplog.at_level(logging.WARNING, logger="coassist.intent.model"):
-        model = load_model(folder)
-    assert model.horizon == load_model(model_dir).horizon
-    assert "without a sidecar hash" in caplog.text
 
 
 def test_a_deeply_nested_sidecar_is_one_clear_error(model_dir, tmp_path):

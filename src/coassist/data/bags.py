@@ -28,8 +28,20 @@ header stamps, the receive time (``Time`` in the CSV) from the bag's log time, a
 
 Bad input gets one line naming the bag, the topic and the problem
 (:class:`~coassist.data.rosbag_csv.RecordingError`): a missing or empty topic, a topic
-of the wrong type, a NaN or infinite value, a repeated or decreasing header stamp (or
-``seq``). Reading needs the ``bags`` extra (``rosbags``).
+of the wrong type, a NaN or infinite value, an implausible one
+(:func:`~coassist.data.rosbag_csv.check_plausible`), a repeated or decreasing header
+stamp (or ``seq``), topics whose stamps never align, a malformed ``metadata.yaml``.
+
+A damaged file. What each format lets a reader verify is verified: an MCAP chunk's CRC
+(rosbags checks it; ROS 2's own writer and :func:`coassist.data.trial_mcap.write_trial_mcap`
+write it), and for every format the number of messages of each topic the bag's index
+records (a ROS 2 bag's ``metadata.yaml``, an MCAP's summary, a ROS 1 bag's chunk
+index) against the number read: a file that lost messages is refused, never loaded
+short. Whatever else a damaged file makes the reader raise (its internals: ``OverflowError``,
+``struct.error``, a decoder's error) is one line naming the file. Not decidable: a
+value changed inside a message of a format without checksums (ROS 1, sqlite3, an MCAP
+written without CRCs) loads if it is finite and plausible. Reading needs the ``bags``
+extra (``rosbags``).
 """
 
 from __future__ import annotations
@@ -53,6 +65,7 @@ from coassist.data.rosbag_csv import (
     _check_dofs,
     _natural_key,
     assemble_recording,
+    check_plausible,
 )
 from coassist.data.trial import Trial
 
@@ -123,7 +136,8 @@ def _receive_seconds(ns: list[int]) -> np.ndarray:
     return np.array([n / 1_000_000_000 for n in ns], dtype=np.float64)
 
 
-def _read_topic(reader: Any, connections: list, where: str, topic: str, columns: list[str], ros1: bool) -> pd.DataFrame:
+def _read_topic(reader: Any, connections: list, where: str, field_name: str, topic: str, columns: list[str],
+                ros1: bool) -> pd.DataFrame:  # fmt: skip
     paths = [c.split(".") for c in columns]
     rows: list[list[float]] = []
     secs: list[int] = []
@@ -151,7 +165,13 @@ def _read_topic(reader: Any, connections: list, where: str, topic: str, columns:
         log_ns.append(int(timestamp))
     if not rows:
         raise RecordingError(f"{where}: topic {topic} has no messages")
-    df = pd.DataFrame(rows, columns=columns)
+    indexed = sum(int(c.msgcount) for c in connections)
+    if len(rows) != indexed:
+        raise RecordingError(f"{where}: topic {topic}: {len(rows)} messages read, the bag's index records {indexed} "
+                             "(the file is damaged or was cut off)")  # fmt: skip
+    values = np.asarray(rows, dtype=np.float64)
+    check_plausible(field_name, values, columns, f"{where}: topic {topic}", lambda r: f"message {r}")
+    df = pd.DataFrame(values, columns=columns)
     df[_SECS] = np.asarray(secs, dtype=np.int64)
     df[_NSECS] = np.asarray(nsecs, dtype=np.int64)
     df[_STAMP] = df[_SECS] * 1_000_000_000 + df[_NSECS]
@@ -174,6 +194,29 @@ def _read_topic(reader: Any, connections: list, where: str, topic: str, columns:
                 f"{where}: topic {topic}: {what} {problem} at message {k + 1} ({a_s} then {b_s})"
             )
     return df
+
+
+def _one_line(exc: BaseException, limit: int = 200) -> str:
+    """An exception's text on one line, at most ``limit`` characters."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+def _check_metadata_yaml(path: Path) -> None:
+    """A ROS 2 bag's ``metadata.yaml`` parses as YAML (else one line: where and what, not the parser's dump)."""
+    from ruamel.yaml import YAML
+    from ruamel.yaml.error import MarkedYAMLError, YAMLError
+
+    try:
+        YAML(typ="safe").load(path.read_bytes())
+    except MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        raise RecordingError(f"{path}: not valid YAML ({exc.problem or exc.context}{at})") from None
+    except (YAMLError, UnicodeDecodeError, RecursionError) as exc:
+        raise RecordingError(f"{path}: not valid YAML ({_one_line(exc)})") from None
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot be read: {exc.strerror}") from None
 
 
 def load_bag_trial(
@@ -224,6 +267,8 @@ def load_bag_trial(
     if user is None:
         user = path.absolute().parent.name
     recording = path.stem if path.is_file() else path.name
+    if path.is_dir():
+        _check_metadata_yaml(path / "metadata.yaml")
     frames: dict[str, pd.DataFrame] = {}
     try:
         # The default typestore serves ROS 2 bags that do not carry their message definitions.
@@ -241,9 +286,14 @@ def load_bag_trial(
                     if c.msgtype != BAG_TYPES[field_name]:
                         raise RecordingError(f"{where}: topic {topic} is {c.msgtype}, expected {BAG_TYPES[field_name]}")
                 pattern = TOPIC_FILES[field_name][1]
-                frames[field_name] = _read_topic(reader, conns, where, topic, [pattern.format(ax=ax) for ax in dofs], ros1)
+                frames[field_name] = _read_topic(reader, conns, where, field_name, topic,
+                                                 [pattern.format(ax=ax) for ax in dofs], ros1)  # fmt: skip
+    except RecordingError:
+        raise
     except AnyReaderError as exc:
-        raise RecordingError(f"{where}: cannot read the bag ({exc})") from None
+        raise RecordingError(f"{where}: cannot read the bag ({_one_line(exc)})") from None
+    except Exception as exc:  # noqa: BLE001 - a damaged file makes the reader's internals raise anything
+        raise RecordingError(f"{where}: cannot read the bag, it is damaged ({type(exc).__name__}: {_one_line(exc)})") from None
     key = _SEQ if ros1 else _STAMP
     sources = {name: f"{where}: topic {topic}" for name, topic in names.items()}
     lengths = {names[name]: len(df) for name, df in frames.items()}

@@ -23,20 +23,31 @@ about it:
   not resampled, since resampling would invent measurements.
 - Values like 5e-324 or 1e-182 are denormal noise from the export: any value with
   magnitude below 1e-100 is set to 0.
-- Implausible data loads but warns (:class:`RecordingWarning`, naming the folder): a
-  force beyond :data:`PLAUSIBLE_FORCE` (the CB3's force estimate saturates at
-  ±327.67 N, so larger is no measurement) and a time gap longer than
-  :data:`coassist.data.trial.GAP_FACTOR` periods. Training windows never span a gap
+- A value no sensor of this setup can have measured is refused (:class:`RecordingError`,
+  one line naming the file, the column, the data row and its ``seq``): a force beyond
+  :data:`PLAUSIBLE_FORCE`, a position beyond :data:`PLAUSIBLE_POSITION`, a velocity
+  beyond :data:`PLAUSIBLE_SPEED` (each per axis; why these bounds: at the constants).
+  Such a value is a fault of the sensor, the driver or the file, and a model trained or
+  a controller tuned on it learns the fault.
+- A file whose last line ends without a line break is refused: the export was cut off
+  mid-write (a kill), and the cut can fall inside a number (−0.6 read for −0.6130), a
+  value that parses and is wrong. What is decidable: every line a CSV writer finishes
+  ends with a line break, so a missing one marks the cut; a cut that falls exactly on a
+  line break leaves whole rows only, which load (the join reports the shorter file). A
+  number's count of digits is not a test (``repr`` writes 0.5 as ``0.5``).
+- A recording needs :data:`MIN_TICKS` ticks the four topics share (one tick has no period).
+- A time gap longer than :data:`coassist.data.trial.GAP_FACTOR` periods loads but warns
+  (:class:`RecordingWarning`, naming the folder). Training windows never span a gap
   (:class:`coassist.intent.features.WindowSet`).
 """
 
 from __future__ import annotations
 
+import io
 import os
 import re
 import warnings
-from collections.abc import Mapping, Sequence
-from functools import reduce
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -48,11 +59,15 @@ from coassist.errors import CoassistError
 __all__ = [
     "DENORMAL_THRESHOLD",
     "LINEAR_DOFS",
+    "MIN_TICKS",
     "PLAUSIBLE_FORCE",
+    "PLAUSIBLE_POSITION",
+    "PLAUSIBLE_SPEED",
     "TOPIC_FILES",
     "RecordingError",
     "RecordingWarning",
     "assemble_recording",
+    "check_plausible",
     "default_real_data",
     "load_ros_trial",
     "load_ros_user",
@@ -70,9 +85,27 @@ TOPIC_FILES: dict[str, tuple[str, str]] = {
 LINEAR_DOFS = ("x", "y", "z")
 #: Magnitudes below this are export noise and read as 0.
 DENORMAL_THRESHOLD = 1e-100
-#: Largest plausible hand force magnitude per axis in N (above the CB3's ±327.67 N range;
-#: the recordings peak at 31 N).
+#: Largest plausible hand force per axis in N: the Robotiq FT300 the thesis used and the
+#: CB3's own force estimate both saturate at ±327.67 N, so a larger value is no
+#: measurement (the recordings peak at 31 N; ISO/TS 15066's quasi-static hand limit is 140 N).
 PLAUSIBLE_FORCE = 330.0
+#: Largest plausible tool (or reference) position per axis in m: a UR-class arm reaches
+#: 0.85 m (UR5, Panda 0.855 m) to 1.75 m (UR20) from its base; 5 m leaves room for a frame
+#: placed away from the base (a table or world frame). The recordings stay within 0.8 m.
+PLAUSIBLE_POSITION = 5.0
+#: Largest plausible tool speed per axis in m/s: a UR5 at its 180 °/s joint limits moves a
+#: tool at 0.85 m about 3 m/s, the Panda's Cartesian limit is 1.7 m/s. The recordings stay
+#: within 0.55 m/s.
+PLAUSIBLE_SPEED = 5.0
+#: Fewest ticks a recording's four topics must share: one tick has no period.
+MIN_TICKS = 2
+#: Trial field -> (bound, unit) of :func:`check_plausible`.
+PLAUSIBLE_BOUNDS: dict[str, tuple[float, str]] = {
+    "pose": (PLAUSIBLE_POSITION, "m"),
+    "velocity": (PLAUSIBLE_SPEED, "m/s"),
+    "wrench": (PLAUSIBLE_FORCE, "N"),
+    "reference": (PLAUSIBLE_POSITION, "m"),
+}
 
 _SEQ = "header.seq"
 _SECS = "header.stamp.secs"
@@ -85,19 +118,29 @@ class RecordingError(CoassistError, ValueError):
 
 
 class RecordingWarning(UserWarning):
-    """A recording that loads but holds implausible data; the message names the folder."""
+    """A recording that loads but has time gaps (training windows skip them); the message names the folder."""
 
 
-def _warn_implausible(where: str, wrench_source: str, time: np.ndarray, dt: float, wrench: np.ndarray) -> None:
-    peak = np.abs(wrench).max(axis=0)
-    for j in np.flatnonzero(peak > PLAUSIBLE_FORCE):
-        k = int(np.argmax(np.abs(wrench[:, j])))
-        warnings.warn(
-            f"{wrench_source}: force {LINEAR_DOFS[j]} = {wrench[k, j]:.4g} N at t = {time[k]:.3f} s "
-            f"exceeds the plausible {PLAUSIBLE_FORCE:g} N (sensor fault?)",
-            RecordingWarning,
-            stacklevel=4,
+def check_plausible(field_name: str, values: np.ndarray, columns: Sequence[str], where: str,
+                    row: Callable[[int], str]) -> None:  # fmt: skip
+    """Refuse values beyond the field's physical bound (:data:`PLAUSIBLE_BOUNDS`), in one line.
+
+    ``values`` (n, k) are the rows of one topic in the order of its file, ``columns`` their
+    names, ``where`` the file (and topic), ``row(r)`` how row r is named (``"data row 12 (seq
+    57481)"``, ``"message 12"``). The first offending row is named, and the count.
+    """
+    bound, unit = PLAUSIBLE_BOUNDS[field_name]
+    bad = np.abs(values) > bound
+    if bad.any():
+        r, c = (int(i) for i in np.argwhere(bad)[0])
+        raise RecordingError(
+            f"{where}: {row(r)}: {columns[c]} = {values[r, c]:.6g} {unit} is beyond the plausible "
+            f"±{bound:g} {unit} ({int(bad.any(axis=1).sum())} such row(s)): no measurement of this "
+            "setup; a fault of the sensor, the driver or the file"
         )
+
+
+def _warn_gaps(where: str, time: np.ndarray, dt: float) -> None:
     gaps = time_gaps(time, dt)
     if gaps.size:
         k = int(gaps[np.argmax(np.diff(time)[gaps])])
@@ -119,15 +162,25 @@ def _check_dofs(dofs: Sequence[str]) -> tuple[str, ...]:
     return dofs
 
 
-def _read_topic(path: Path, value_cols: list[str]) -> pd.DataFrame:
+def _read_topic(path: Path, field_name: str, value_cols: list[str]) -> pd.DataFrame:
     if not path.is_file():
         raise RecordingError(f"{path}: file not found")
     try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot be read: {exc.strerror}") from None
+    if raw and not raw.endswith(b"\n"):
+        # The export was cut off mid-line (module docstring): the last values may be cut short.
+        line = raw.count(b"\n") + 1
+        raise RecordingError(f"{path}: line {line}, the last, ends without a line break: the export was cut off "
+                             "mid-write and its values may be cut short (-0.6 for -0.6130); export the recording "
+                             "again, or delete that line to load the rest")  # fmt: skip
+    try:
         # pandas 3's default parser reads repr()'d doubles back exactly (checked on all
         # 1.9 M values of the UR5 recordings; ``float_precision`` is deprecated).
-        df = pd.read_csv(path)
+        df = pd.read_csv(io.BytesIO(raw))
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise RecordingError(f"{path}: cannot parse CSV: {exc}") from None
+        raise RecordingError(f"{path}: cannot parse CSV: {' '.join(str(exc).split())}") from None
     for col in [_SEQ, _SECS, _NSECS, *value_cols]:
         if col not in df.columns:
             raise RecordingError(f"{path}: missing column {col!r}")
@@ -147,6 +200,9 @@ def _read_topic(path: Path, value_cols: list[str]) -> pd.DataFrame:
     dup = df[_SEQ].duplicated()
     if dup.any():
         raise RecordingError(f"{path}: column {_SEQ!r} repeats value {int(df[_SEQ][dup].iloc[0])}")
+    seq = df[_SEQ].to_numpy()
+    check_plausible(field_name, df[value_cols].to_numpy(np.float64), value_cols, str(path),
+                    lambda r: f"data row {r} (seq {int(seq[r])})")  # fmt: skip
     return df.sort_values(_SEQ, kind="stable").reset_index(drop=True)
 
 
@@ -185,7 +241,8 @@ def load_ros_trial(
     ------
     RecordingError
         A missing file or column (both named), unparseable values, repeated seq
-        numbers, no common seq, or stamps that do not increase.
+        numbers, fewer than :data:`MIN_TICKS` common seq, stamps that do not increase,
+        an implausible value (:func:`check_plausible`) or a file cut off mid-line.
     """
     folder = Path(folder)
     dofs = _check_dofs(dofs)
@@ -196,7 +253,7 @@ def load_ros_trial(
 
     frames: dict[str, pd.DataFrame] = {}
     for field_name, (file_name, pattern) in TOPIC_FILES.items():
-        frames[field_name] = _read_topic(folder / file_name, [pattern.format(ax=ax) for ax in dofs])
+        frames[field_name] = _read_topic(folder / file_name, field_name, [pattern.format(ax=ax) for ax in dofs])
     sources = {name: str(folder / file_name) for name, (file_name, _) in TOPIC_FILES.items()}
     lengths = {TOPIC_FILES[name][0]: len(df) for name, df in frames.items()}
     return assemble_recording(frames, where=str(folder), sources=sources, lengths=lengths, user=user, dofs=dofs,
@@ -227,9 +284,22 @@ def assemble_recording(
     With ``key`` other than ``header.seq``, ``seq_gaps``/``seq_first``/``seq_last``
     in ``meta.extra`` are None.
     """
-    seqs = reduce(np.intersect1d, (df[key].to_numpy() for df in frames.values()))
-    if seqs.size == 0:
-        raise RecordingError(f"{where}: the topics share no {key!r} value")
+    what = "header.seq value" if key == _SEQ else "header stamp"
+    seqs = np.asarray(frames["pose"][key].to_numpy())
+    joined = ["pose"]
+    for field_name, df in frames.items():
+        if field_name == "pose":
+            continue
+        common = np.intersect1d(seqs, df[key].to_numpy())
+        if common.size == 0:
+            others = ", ".join(_name(sources[f], where) for f in joined)
+            raise RecordingError(f"{where}: {_name(sources[field_name], where)} shares no {what} with {others} "
+                                 "(its stamps never align with theirs)")  # fmt: skip
+        seqs = common
+        joined.append(field_name)
+    if seqs.size < MIN_TICKS:
+        raise RecordingError(f"{where}: the topics share {seqs.size} tick(s) ({what}); a recording needs at least "
+                             f"{MIN_TICKS} (one tick has no period)")  # fmt: skip
     aligned = {name: df[df[key].isin(seqs)].reset_index(drop=True) for name, df in frames.items()}
 
     # Integer nanoseconds: a float of 1.67e9 s keeps only ~0.2 µs, so subtract first.
@@ -268,9 +338,8 @@ def assemble_recording(
         "seq_first": int(seqs[0]) if by_seq else None,
         "seq_last": int(seqs[-1]) if by_seq else None,
     }
-    # A single-row recording has no period; fall back to the UR5 CB3 tick.
-    dt = float(np.median(steps)) if steps.size else 0.008
-    _warn_implausible(where, sources["wrench"], time, dt, arrays["wrench"])
+    dt = float(np.median(steps))  # MIN_TICKS >= 2: a period exists
+    _warn_gaps(where, time, dt)
     meta = TrialMeta(
         user=user,
         task="real",
@@ -283,6 +352,13 @@ def assemble_recording(
         extra=extra,
     )
     return Trial(meta=meta, time=time, **arrays)
+
+
+def _name(source: str, where: str) -> str:
+    """A source (``<folder>/current_pose.csv``, ``<bag>: topic /x``) without its recording's prefix."""
+    if source.startswith(where):
+        return source[len(where) :].lstrip("/: ") or source
+    return source
 
 
 def _natural_key(path: Path) -> tuple:

@@ -46,7 +46,8 @@ from coassist.data.trial import Trial
 from coassist.interfaces import Fault, fault_names
 from coassist.spatial import quaternion_from_rotation_vector
 
-__all__ = ["FAULT_STATUS_NAME", "MCAP_TOPICS", "fault_array", "fault_level", "float64_multi_array", "write_trial_mcap"]
+__all__ = ["FAULT_STATUS_NAME", "MCAP_TOPICS", "fault_array", "fault_level", "float64_multi_array", "write_chunk_crcs",
+           "write_trial_mcap"]  # fmt: skip
 
 #: Topic -> message type of what :func:`write_trial_mcap` writes.
 MCAP_TOPICS: dict[str, str] = {
@@ -201,12 +202,53 @@ def write_trial_mcap(
                     qd = trial.joint_velocity[k] if trial.joint_velocity is not None else np.zeros(joints.shape[1])
                     put("/forward_velocity_controller/commands", ns, float64_multi_array(ts, qd))
         inner = bag / "bag.mcap"
+        write_chunk_crcs(inner)
 
         def copy(fh: Any) -> None:
             with open(inner, "rb") as src:
                 shutil.copyfileobj(src, fh)
 
         return atomic_write(path, copy)
+
+
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def write_chunk_crcs(path: str | os.PathLike[str]) -> int:
+    """Fill in the CRC-32 of every uncompressed chunk of the MCAP file ``path``, in place; returns how many.
+
+    rosbags' writer leaves a chunk's ``uncompressed_crc`` 0 ("not computed"), so a reader
+    cannot tell a damaged message from a good one; with it, every reader that checks
+    chunk CRCs (rosbags, the ``mcap`` library, Foxglove) refuses a chunk whose bytes
+    changed. Layout (MCAP spec, chunk record 0x06): opcode u8, length u64, then start
+    u64, end u64, uncompressed size u64, uncompressed CRC u32, compression (u32 length +
+    text), records length u64, records. Compressed chunks are left as they are.
+    """
+    import struct
+    import zlib
+
+    with open(path, "r+b") as fh:
+        data = fh.read()
+        if not data.startswith(_MCAP_MAGIC):
+            raise ValueError(f"{path}: not an MCAP file")
+        pos, n = len(_MCAP_MAGIC), 0
+        while pos + 9 <= len(data):
+            opcode = data[pos]
+            (length,) = struct.unpack_from("<Q", data, pos + 1)
+            body = pos + 9
+            if opcode == 0x02:  # footer: the end
+                break
+            if opcode == 0x06:
+                (compression_len,) = struct.unpack_from("<I", data, body + 28)
+                compression = data[body + 32 : body + 32 + compression_len]
+                records_at = body + 32 + compression_len + 8
+                (records_len,) = struct.unpack_from("<Q", data, records_at - 8)
+                if not compression:
+                    fh.seek(body + 24)
+                    fh.write(struct.pack("<I", zlib.crc32(data[records_at : records_at + records_len])))
+                    n += 1
+            pos = body + length
+    return n
 
 
 def fault_array(ts: Any, header: Any, flags: int) -> Any:

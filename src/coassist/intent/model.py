@@ -18,9 +18,13 @@ Tampering with the sidecar. The weights file's safetensors metadata records
 ``sidecar_sha256``, a SHA-256 of the sidecar's numeric and structural content (features,
 dt, window, network, both scalers' ranges, the ridge's hash; not the descriptive
 history). An edit of ``model.json`` alone (a ``target_scaler`` ×30 once made the robot
-push 100 N) no longer matches it and the model is refused. Models saved before this
-record (no ``sidecar_sha256`` in their weights) still load with every field checked as
-before, and a warning is logged: re-save them to get the check. Before any
+push 100 N) no longer matches it and the model is refused. A weights file without this
+record (one re-saved by ``safetensors``' own ``save_file``, which drops the metadata, or
+a model saved before the record existed) cannot be verified and is refused too: a
+sidecar that cannot be checked is one a scaled ``target_scaler`` hides in (the probe's
+×30 pushed 100 N). Every model coassist writes (``train``, ``transfer``, the
+training checkpoints, the real-time predictor's copy; :func:`save_model`) carries the
+record; the error says to retrain or re-export the model with coassist. Before any
 tensor is allocated the network's size is checked against the weights file (a float32
 parameter is 4 bytes), so ``hidden`` = 100 000 is one error, not a 160 GB allocation;
 a sidecar nested too deep or larger than :data:`MAX_SIDECAR_BYTES` is refused unparsed.
@@ -30,7 +34,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import logging
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -72,8 +75,6 @@ MAX_SIDECAR_BYTES = 16 * 2**20
 _HASHED = ("features", "n_dof", "dt", "history", "horizon", "window", "network", "input_scaler", "target_scaler",
            "ridge_sha256")  # fmt: skip
 _SIDECAR_HASH_KEY = "sidecar_sha256"
-
-log = logging.getLogger(__name__)
 
 
 class ModelMismatchError(CoassistError, ValueError):
@@ -344,10 +345,6 @@ def _safetensors_metadata(raw: bytes) -> dict[str, Any]:
     return meta if isinstance(meta, dict) else {}
 
 
-def _warn_legacy(folder: Path) -> None:
-    log.warning("%s was saved without a sidecar hash: model.json cannot be checked for edits; re-save it", folder)
-
-
 def _n_parameters(cfg: NetworkConfig) -> int:
     """Parameters of ``IntentNet(cfg)``, from its sizes alone (nothing allocated).
 
@@ -433,8 +430,10 @@ def load_model(
             raise _fail(ridge_path, f"tensors do not fit the ridge baseline: {exc}") from None
     recorded = _safetensors_metadata(raw).get(_SIDECAR_HASH_KEY)
     if recorded is None:
-        _warn_legacy(folder)
-    elif recorded != _sidecar_hash(meta):
+        raise _fail(weights_path, f"carries no {_SIDECAR_HASH_KEY!r} in its metadata (re-saved without it, e.g. by "
+                                  f"safetensors' save_file?), so {SIDECAR} cannot be verified; retrain the model "
+                                  "or re-export it with coassist (coassist.intent.save_model)")  # fmt: skip
+    if recorded != _sidecar_hash(meta):
         raise _fail(sidecar, f"its content does not match the hash recorded in {WEIGHTS} at save time "
                              "(edited after saving?); restore it or retrain")  # fmt: skip
     skip = {"format", "features", "n_dof", "dt", "history", "horizon", "window", "network", "input_scaler",

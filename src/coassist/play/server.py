@@ -15,6 +15,10 @@ live link. The control loop runs in the session's own thread
 
 Security: the server binds 127.0.0.1 unless told otherwise; a non-loopback bind requires
 a token, which the websocket must present (``/ws?token=…``, compared in constant time).
+A token given for a non-loopback bind must be one a peer on the network cannot guess
+online (:func:`check_token`: at least :data:`MIN_TOKEN_CHARS` characters and
+:data:`MIN_TOKEN_BITS` bits by the estimate there); the one coassist makes
+(:func:`new_token`) has 128 random bits.
 A request whose ``Host`` is not one this server was started for is refused
 (:func:`host_allowed`: against DNS rebinding, where a page on another site re-points its
 own name at 127.0.0.1 and sends ``Host`` and ``Origin`` both naming itself), and a
@@ -29,6 +33,7 @@ import asyncio
 import functools
 import ipaddress
 import json
+import math
 import secrets
 import socket
 import threading
@@ -47,7 +52,17 @@ from coassist.play.protocol import (
 )
 from coassist.play.session import PlaySession
 
-__all__ = ["Hub", "PlayServer", "create_app", "host_allowed", "is_loopback"]
+__all__ = ["MIN_TOKEN_BITS", "MIN_TOKEN_CHARS", "Hub", "PlayServer", "check_token", "create_app", "host_allowed",
+           "is_loopback", "new_token"]  # fmt: skip
+
+#: Fewest characters of a token guarding a non-loopback bind.
+MIN_TOKEN_CHARS = 16
+#: Fewest bits of a token guarding a non-loopback bind, estimated as length · log2(distinct
+#: characters): an upper bound on the entropy of a token drawn uniformly from its own
+#: characters. 2^64 guesses at 10^4 websocket handshakes a second take 5·10^7 years.
+MIN_TOKEN_BITS = 64.0
+#: Characters a token may hold: RFC 3986's unreserved set, so the URL carries it unescaped.
+_TOKEN_CHARS = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-._~")
 
 #: Messages a second one page may send before the rest of that second is dropped.
 MAX_RATE = 1000
@@ -320,8 +335,7 @@ class PlayServer:
                  frame_rate: float | None = None) -> None:  # fmt: skip
         import uvicorn
 
-        if not is_loopback(host) and not token:
-            raise ValueError(f"binding {host} (not this machine only) needs a token: pass --token or let coassist make one")
+        check_token(token, host)
         self.session, self.host, self.token = session, host, token
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._sock = socket.socket(family, socket.SOCK_STREAM)
@@ -388,3 +402,30 @@ class PlayServer:
 def new_token() -> str:
     """A random token for a non-local bind (128 bits, URL-safe)."""
     return secrets.token_urlsafe(16)
+
+
+def check_token(token: str | None, host: str) -> None:
+    """Refuse a token that cannot guard a bind to ``host`` (ValueError, one line naming ``--token``).
+
+    Any bind: a given token holds only URL-safe characters (:data:`_TOKEN_CHARS`). A
+    non-loopback bind needs a token of at least :data:`MIN_TOKEN_CHARS` characters and
+    ``len(token) · log2(distinct characters) >= MIN_TOKEN_BITS`` (so ``"x"``, a short
+    word and ``"aaaa…"`` are refused; a 16-character token needs 16 distinct characters).
+    A loopback bind needs no token: only this machine reaches it.
+    """
+    if token is not None:
+        if not isinstance(token, str):
+            raise ValueError(f"--token must be a string, got {type(token).__name__}")
+        odd = sorted(set(token) - _TOKEN_CHARS)
+        if odd:
+            raise ValueError(f"--token may hold only letters, digits and - . _ ~ (it travels in the page's URL), got {odd[0]!r}")
+    if is_loopback(host):
+        return
+    if not token:
+        raise ValueError(f"binding {host} (not this machine only) needs a token: pass --token or let coassist make one")
+    bits = len(token) * math.log2(len(set(token))) if len(set(token)) > 1 else 0.0
+    if len(token) < MIN_TOKEN_CHARS or bits < MIN_TOKEN_BITS:
+        raise ValueError(f"--token is too weak for --host {host} (anyone on the network may guess it): at least "
+                         f"{MIN_TOKEN_CHARS} characters and {MIN_TOKEN_BITS:g} bits (length x log2 of distinct "
+                         f"characters), got {len(token)} characters, {bits:.0f} bits; leave --token out and "
+                         "coassist makes a 128-bit one")  # fmt: skip
