@@ -302,7 +302,9 @@ class Ros2World:
     tcp_offset_pose : the TCP in the flange frame (the drive builds its kinematics from it).
     last_overrun : [s] how far the last period ran over ``dt`` (0.0 on time).
     rejected_messages : dropped inputs (non-finite, missing joints).
-    rejected_commands : commands replaced by zeros.
+    rejected_commands : commands replaced by zeros (not n_joints finite numbers).
+    stale_commands : commands replaced by zeros because their state was older than
+        ``stale_after`` when they were sent.
     """
 
     command_space = "joint_velocity"
