@@ -66,3 +66,14 @@ def test_ros2_refuses_options_before_starting(args, option, words, tmp_path):
     pytest.importorskip("rclpy", reason="the ros2 extra (ros-rclpy and the message packages) is not installed")
     line = _refused([*ROS2, "--out", str(tmp_path / "t.parquet"), *args], option)
     assert words in line
+
+
+@pytest.mark.parametrize("command", ["drive", "ros2"])
+def test_a_recorded_run_is_not_replaced_without_overwrite(command, tmp_path):
+    if command == "ros2":
+        pytest.importorskip("rclpy", reason="the ros2 extra (ros-rclpy and the message packages) is not installed")
+    out = tmp_path / "t.parquet"
+    out.write_bytes(b"a recorded run")
+    args = ROS2[1:] if command == "ros2" else ["--time-limit", "0.2", "--no-plot"]
+    _refused([command, *args, "--out", str(out)], "--overwrite")
+    assert out.read_bytes() == b"a recorded run"

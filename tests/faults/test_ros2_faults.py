@@ -357,3 +357,59 @@ def test_the_watchdog_stops_the_robot_when_the_commands_stop():
     # watchdog it gets zeros after 50 ms (+ one 8 ms check) and the UR5 brakes: a few mm
     assert held > 0.025  # measured 35-48 mm (the robot's own 125 Hz timer slips under load)
     assert stopped < 0.012  # measured 3.2-6.5 mm
+
+
+class _CommandPeer(ros._SpunNode):
+    """Publishes commands to the watchdog's input and records what reaches the controller's topic."""
+
+    def __init__(self, relay_in: str) -> None:
+        self.got: list[list[float]] = []
+        self._open("command_peer")
+        self.pub = self.node.create_publisher(Float64MultiArray, relay_in, 10)
+        self.node.create_subscription(Float64MultiArray, COMMANDS, lambda m: self.got.append(list(m.data)), 10)
+        self._start()
+
+    def send(self, values) -> None:
+        self.pub.publish(Float64MultiArray(data=[float(v) for v in values]))
+
+
+def test_the_watchdog_forwards_good_commands_and_sends_zeros_for_bad_ones_and_silence():
+    from coassist.robot.ros2_watchdog import CommandWatchdog, WatchdogConfig
+
+    relay_in = "/coassist/joint_velocity_command"
+    peer = _CommandPeer(relay_in)
+    dog = CommandWatchdog(WatchdogConfig(input_topic=relay_in, domain_id=DOMAIN, timeout=0.2, period=0.02))
+    try:
+        deadline = time.monotonic() + 5.0  # matched both ways before the first command
+        while (dog._pub.get_subscription_count() == 0 or peer.pub.get_subscription_count() == 0) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(0.3)  # both ends of both matches settled (a match is reported on one side first)
+        peer.send([0.1] * 6)
+        time.sleep(0.05)  # well inside the timeout: forwarded, nothing else
+        assert peer.got[:1] == [[0.1] * 6]
+        peer.send([float("nan")] + [0.1] * 5)  # malformed: not forwarded, zeros instead
+        time.sleep(0.05)  # (the watchdog keeps the newest command only: depth 1, as the controller)
+        peer.send([0.1] * 5)  # the wrong length: the same
+        time.sleep(0.05)
+        assert peer.got[1:3] == [[0.0] * 6, [0.0] * 6] and dog.malformed == 2
+        peer.send([0.2] * 6)
+        time.sleep(0.6)  # silence: zeros from timeout on, one per period
+        i = peer.got.index([0.2] * 6)  # (zeros went on between: a malformed command starts a silence)
+        assert all(g == [0.0] * 6 for g in peer.got[2:i]) and all(g == [0.0] * 6 for g in peer.got[i + 1 :])
+        assert len(peer.got) - i - 1 >= 3  # ≈ (0.6 − 0.2) s / 0.02 s of zeros, at least a few on a loaded machine
+        assert dog.timeouts == 1 and dog.forwarded == 2
+    finally:
+        dog.close()
+        peer.close()
+
+
+def test_the_watchdog_refuses_bad_options_in_one_line():
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+
+    for args, option in ((["--timeout", "5"], "--timeout"), (["--period", "0.3", "--timeout", "0.1"], "--period"),
+                         (["--input", COMMANDS], "--output")):  # fmt: skip
+        res = CliRunner().invoke(app, ["ros2-watchdog", *args])
+        errors = [line for line in res.output.splitlines() if line.startswith("error:")]
+        assert res.exit_code == 2 and len(errors) == 1 and option in errors[0], res.output
