@@ -579,11 +579,7 @@ def drive(
                              predictor_backend=predictor_backend, robot=robot)  # fmt: skip
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
-    out = _file_out(out, "--out", "trial.parquet")
-    if (out.exists() or out.is_symlink()) and not overwrite:  # a recorded run is not replaced silently
-        _fail(f"--out {out} exists; pass --overwrite to replace it", 2)
-    if mcap:
-        _need_bags("--mcap")
+    out = _run_out(out, overwrite, mcap)
     if intent not in NAMED_INTENTS:
         _set_torch_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
 
@@ -598,6 +594,21 @@ def drive(
     names = UR_JOINT_NAMES if config.robot == "ur5" else None
     _write_run(trial, out, alpha=_run_alpha(preset, controller) if mcap else None, mcap=mcap, plot=plot,
                joint_names=names)  # fmt: skip
+
+
+def _run_out(out: Path, overwrite: bool, mcap: bool) -> Path:
+    """The trial file of a drive/ros2 run: a recorded run (its trial, or the MCAP beside it) is not
+    replaced without --overwrite, checked before the robot moves."""
+    out = _file_out(out, "--out", "trial.parquet")
+    if out.suffix == ".mcap":
+        _fail(f"--out {out}: give the trial file (e.g. trial.parquet); --mcap writes the .mcap beside it", 2)
+    if not overwrite:
+        for path in (out, out.with_suffix(".mcap")):
+            if path.exists() or path.is_symlink():  # a recorded run is not replaced silently
+                _fail(f"--out {out}: {path} exists; pass --overwrite to replace the run", 2)
+    if mcap:
+        _need_bags("--mcap")
+    return out
 
 
 def _run_alpha(preset: str, controller: str) -> float | None:
@@ -623,17 +634,18 @@ def _write_run(trial, out: Path, *, alpha: float | None, mcap: bool, plot: bool,
                joint_names: Sequence[str] | None) -> None:  # fmt: skip
     """Write a drive/ros2 run: the trial file, how it ended, and <out>.mcap / <out>.png on request.
     ``joint_names``: the arm's, in the trial's joint order (None: joint_1 … joint_n in the MCAP)."""
-    from coassist.data import write_trial
+    from coassist.data.run_pair import write_run_pair
 
-    path = write_trial(trial, out)
+    # the trial and its MCAP as one pair: no crash leaves a trial beside another run's MCAP
+    path, mcap_path = write_run_pair(trial, out, mcap=mcap, alpha=alpha, joint_names=joint_names)
     extra = trial.meta.extra
     _wrote(f"{path}: {trial.n_samples} ticks, ended: {extra['ended']}")
     if extra.get("stop_message"):
         console.print(f"[yellow]{escape(extra['stop_message'])}[/]", highlight=False)
-    if mcap:
-        from coassist.data.trial_mcap import write_trial_mcap
-
-        _wrote(str(write_trial_mcap(trial, path.with_suffix(".mcap"), alpha=alpha, joint_names=joint_names)))
+    if extra.get("log_note"):
+        console.print(f"[yellow]{escape(extra['log_note'])}[/]", highlight=False)
+    if mcap_path is not None:
+        _wrote(str(mcap_path))
     if plot:
         from coassist.sim.monitor import plot_trial
 
@@ -644,7 +656,7 @@ ROS2_OPTIONS = {
     **DRIVE_OPTIONS,
     **{f"Ros2Config.{name}": f"--{name.replace('_', '-')}" for name in (
         "wrench_topic", "joint_state_topic", "command_topic", "base_frame", "joint_names", "domain_id", "stale_after",
-        "tcp_offset", "node_name", "namespace", "connect_timeout")},
+        "tcp_offset", "node_name", "namespace", "connect_timeout", "wrench_frame")},
     "Ros2Config.rate_hz": "--rate",
 }  # fmt: skip
 
@@ -676,18 +688,20 @@ def ros2(
     joint_state_topic: str = typer.Option("/joint_states", help="sensor_msgs/JointState in."),
     command_topic: str = typer.Option("/forward_velocity_controller/commands", help="std_msgs/Float64MultiArray out: joint velocities."),
     joint_names: str = typer.Option(None, help="Joint order of the commands, comma-separated (default: the UR's, shoulder_pan_joint … wrist_3_joint)."),
-    base_frame: str = typer.Option("base", help="frame_id of the published poses."),
-    wrench_in_base: bool = typer.Option(False, help="The wrench topic is in the base frame (default: the sensor/flange frame)."),
+    base_frame: str = typer.Option("base", help="frame_id of the published poses (a wrench in it is rotated into the sensor's)."),
+    wrench_frame: str = typer.Option("tool0", help="frame_id of a wrench in the sensor frame (the flange's axes); a wrench in any other frame but --base-frame stops the run."),
+    wrench_in_base: bool = typer.Option(False, help="Kept for scripts: each wrench message's frame_id says its frame."),
     tcp_offset: str = typer.Option(None, help="TCP in the flange frame: x,y,z,rx,ry,rz [m, rad] (default 0)."),
     node_name: str = typer.Option("coassist", help="The node's name (monitor topics go to /<node>/…)."),
     namespace: str = typer.Option("", help="The node's namespace."),
     domain_id: int = typer.Option(None, help="ROS_DOMAIN_ID (default: the environment's)."),
-    stale_after: float = typer.Option(0.1, help="A wrench or joint state older than this (s) stops the arm."),
+    stale_after: float = typer.Option(0.1, help="A wrench or joint state older than this (s, at most 0.5) stops the arm."),
     connect_timeout: float = typer.Option(5.0, help="Wait this long (s) for the first messages."),
     lockstep: bool = typer.Option(False, help="A simulated robot that steps once per command: wait for its answer every tick."),
     yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before the robot moves (scripts)."),
     mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap (ROS 2 messages Foxglove opens)."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
+    overwrite: bool = typer.Option(False, help="Replace an existing run at --out (its trial and its .mcap)."),
 ) -> None:
     """Run the assistive controller, IMP or MG as a ROS 2 node: ros2_control's forward velocity controller."""
     try:
@@ -706,6 +720,7 @@ def ros2(
                              predictor_backend=predictor_backend)  # fmt: skip
         rcfg = Ros2Config(node_name=node_name, namespace=namespace, wrench_topic=wrench_topic,
                           joint_state_topic=joint_state_topic, command_topic=command_topic, base_frame=base_frame,
+                          wrench_frame=wrench_frame,
                           joint_names=UR_JOINT_NAMES if joint_names is None else tuple(n.strip() for n in joint_names.split(",")),
                           wrench_in_base=wrench_in_base,
                           rate_hz=float(rate), stale_after=stale_after, connect_timeout=connect_timeout,
@@ -713,9 +728,7 @@ def ros2(
                           tcp_offset=_floats(tcp_offset, "--tcp-offset") or (0.0,) * 6)  # fmt: skip
     except ValueError as exc:
         _fail(_typed(str(exc), ROS2_OPTIONS), 2)
-    out = _file_out(out, "--out", "trial.parquet")
-    if mcap:
-        _need_bags("--mcap")
+    out = _run_out(out, overwrite, mcap)
 
     confirm = _confirm_move(yes, "the emergency stop")
     alpha = _run_alpha(preset, controller)
@@ -728,6 +741,43 @@ def ros2(
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
         _fail(str(exc))
     _write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=rcfg.joint_names)
+
+
+@app.command("ros2-watchdog")
+def ros2_watchdog(
+    input_topic: str = typer.Option("/coassist/joint_velocity_command", "--input", help="Where coassist ros2 sends its commands (its --command-topic)."),
+    output_topic: str = typer.Option("/forward_velocity_controller/commands", "--output", help="The forward velocity controller's command topic."),
+    joints: int = typer.Option(6, help="Joints per command."),
+    timeout: float = typer.Option(0.05, help="Seconds without a command after which zeros are sent (at most 0.5)."),
+    period: float = typer.Option(0.008, help="How often (s) the silence is checked and zeros repeated."),
+    domain_id: int = typer.Option(None, help="ROS_DOMAIN_ID (default: the environment's)."),
+) -> None:
+    """Relay commands to ros2_control's forward velocity controller; send zeros when they stop (run it beside the controller)."""
+    try:
+        import rclpy  # noqa: F401  (the ros2 extra, checked before anything starts)
+    except ImportError as exc:
+        _fail(f"coassist ros2-watchdog needs the ros2 extra ({exc.name} missing): pip install 'coassist[ros2]'", 2)
+    import time
+
+    from coassist.robot.ros2_watchdog import CommandWatchdog, WatchdogConfig
+
+    options = {"WatchdogConfig.input_topic": "--input", "WatchdogConfig.output_topic": "--output",
+               "WatchdogConfig.n_joints": "--joints", "WatchdogConfig.timeout": "--timeout",
+               "WatchdogConfig.period": "--period", "WatchdogConfig.domain_id": "--domain-id"}  # fmt: skip
+    try:
+        config = WatchdogConfig(input_topic=input_topic, output_topic=output_topic, n_joints=joints, timeout=timeout,
+                                period=period, domain_id=domain_id)  # fmt: skip
+    except ValueError as exc:
+        _fail(_typed(str(exc), options), 2)
+    console.print(f"relaying {input_topic} -> {output_topic}; zeros after {timeout:g} s without a command (Ctrl-C ends it)",
+                  markup=False)  # fmt: skip
+    with CommandWatchdog(config) as dog:
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
+        console.print(f"forwarded {dog.forwarded} commands, {dog.timeouts} silences, {dog.malformed} malformed", markup=False)
 
 
 @app.command()

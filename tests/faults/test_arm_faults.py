@@ -168,10 +168,10 @@ def run_franky(case, franky_sim):
 
     server = franky_sim.SimServer()
     try:
-        inner = FrankaWorld(server.host, ft_sensor=ScriptedSensor(server, case.operator))
+        inner = FrankaWorld(server.host, arm="fr3", ft_sensor=ScriptedSensor(server, case.operator))  # franky-sim is an FR3
         limits = _limits(inner.read().tool_pose[:3])
         world = FaultyFranka(inner, case.inject, case.overrun)
-        config = DriveConfig(world="franka", controller="manual", task="linear", time_limit=case.time_limit,
+        config = DriveConfig(world="franka", robot="fr3", controller="manual", task="linear", time_limit=case.time_limit,
                              limits=limits)  # fmt: skip
         try:
             trial = drive(config, world=world)

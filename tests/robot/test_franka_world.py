@@ -100,9 +100,9 @@ def server():
 def mg_run():
     s = SimServer()
     try:
-        world = FrankaWorld(s.host, ft_sensor=PushSensor(s, (10.0, 0.0, 0.0)))
+        world = FrankaWorld(s.host, arm="fr3", ft_sensor=PushSensor(s, (10.0, 0.0, 0.0)))
         sent = []
-        trial = drive(DriveConfig(world="franka", controller="manual", time_limit=1.4), world=world,
+        trial = drive(DriveConfig(world="franka", robot="fr3", controller="manual", time_limit=1.4), world=world,
                       on_tick=lambda k, st, out: sent.append(np.asarray(out.command.qd, dtype=float).copy()))  # fmt: skip
         world.close()
     finally:
@@ -113,7 +113,7 @@ def mg_run():
 def test_the_model_matches_the_simulated_arm(server):
     # Start-up check: the Panda model with libfranka's F_T_EE puts the TCP where the robot reports it
     # (FrankaWorld raises otherwise); the FR3 simulated by franky-sim has the Panda's DH table.
-    world = FrankaWorld(server.host)
+    world = FrankaWorld(server.host, arm="fr3")
     s = world.read()
     p, _ = world.kinematics().forward(s.q)
     np.testing.assert_allclose(p, s.tool_pose[:3], atol=1e-4)
@@ -141,13 +141,13 @@ def test_mg_with_a_constant_push_settles_at_f_over_d(mg_run):
 
 
 def test_a_lost_link_ends_the_run_with_what_to_do(server):
-    world = FrankaWorld(server.host, ft_sensor=PushSensor(server, (5.0, 0.0, 0.0)), link_timeout=0.1)
+    world = FrankaWorld(server.host, arm="fr3", ft_sensor=PushSensor(server, (5.0, 0.0, 0.0)), link_timeout=0.1)
 
     def cut(k, state, out):
         if k == 40:
             server.kill()
 
-    trial = drive(DriveConfig(world="franka", controller="manual", time_limit=3.0), world=world, on_tick=cut)
+    trial = drive(DriveConfig(world="franka", robot="fr3", controller="manual", time_limit=3.0), world=world, on_tick=cut)
     assert trial.meta.extra["ended"] == "link_lost"
     assert "check the cable and the robot, then rerun" in trial.meta.extra["stop_message"]
     assert 40 <= len(trial.time) <= 42
@@ -178,9 +178,9 @@ class ReflexAfter:
 def test_a_reflex_ends_the_run_safely_with_what_to_do(server):
     real = franky.Robot(server.host, realtime_config=franky.RealtimeConfig.Ignore)
     robot = ReflexAfter(real, 30)
-    world = FrankaWorld(server.host, robot=robot, ft_sensor=PushSensor(server, (5.0, 0.0, 0.0)))
+    world = FrankaWorld(server.host, robot=robot, arm="fr3", ft_sensor=PushSensor(server, (5.0, 0.0, 0.0)))
     sent = []
-    trial = drive(DriveConfig(world="franka", controller="manual", time_limit=3.0), world=world,
+    trial = drive(DriveConfig(world="franka", robot="fr3", controller="manual", time_limit=3.0), world=world,
                   on_tick=lambda k, st, out: sent.append(out.command))  # fmt: skip
     assert trial.meta.extra["ended"] == "robot_stop"
     msg = trial.meta.extra["stop_message"]
@@ -224,10 +224,10 @@ def test_the_world_takes_the_limits_of_the_arm_it_is_told(server, monkeypatch):
 
 def test_the_assistive_controller_through_franky_sim(server):
     # A short assistive run (the cooperative game, nominal intent) with a 10 N push along +x.
-    world = FrankaWorld(server.host, ft_sensor=PushSensor(server, (10.0, 0.0, 0.0)))
+    world = FrankaWorld(server.host, arm="fr3", ft_sensor=PushSensor(server, (10.0, 0.0, 0.0)))
     seen = []
     # The preset this comparison's 1.5 mm was measured with (nominal intent: no learned predictor in the loop).
-    config = DriveConfig(world="franka", controller="cooperative", preset="thesis-application-dm", time_limit=2.0)
+    config = DriveConfig(world="franka", robot="fr3", controller="cooperative", preset="thesis-application-dm", time_limit=2.0)
     trial = drive(config, world=world, on_tick=lambda k, st, out: seen.append(
         (np.asarray(out.command.qd, dtype=float).copy(), st.q.copy(), np.asarray(st.tool_pose, dtype=float).copy())))
     # it ends cleanly: at the time limit, nothing flagged, every tick's command sent, the arm at rest after stop

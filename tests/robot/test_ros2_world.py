@@ -38,6 +38,8 @@ _WORKER = os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")
 DOMAIN = 140 + ((os.getpid() % 45) * 2 + (int(_WORKER) % 2 if _WORKER.isdigit() else 0)) % 90
 #: [s] input age that stops the arm in the silence tests (generous: the CI machine is shared).
 STALE = 0.25
+#: [ns] the simulated robot's clock at t = 0 (a driver stamps with the ROS clock; a stamp of 0 is refused).
+EPOCH_NS = 1_700_000_000 * 10**9
 PUSH = ScriptedForce.steps([(0.0, (8.0, 0.0, 0.0, 0.0, 0.0, 0.0)), (0.6, (0.0, -6.0, 0.0, 0.0, 0.0, 0.0))])
 
 
@@ -104,7 +106,7 @@ class SimRobot(_SpunNode):
     def _publish(self) -> None:
         s = self.world.read()
         n = len(self.commands)
-        ns = round(s.t * 1e9)
+        ns = EPOCH_NS + round(s.t * 1e9)  # stamped as a driver does, on the ROS clock (never 0)
         stamp = rclpy.time.Time(nanoseconds=ns).to_msg()
         silent = self.silent_after is not None and n > self.silent_after
         if not (silent and self.silent_topic in ("both", "wrench")):

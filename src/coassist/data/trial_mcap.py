@@ -34,14 +34,13 @@ from __future__ import annotations
 import math
 import os
 import shutil
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from coassist._io import atomic_write
+from coassist._io import _temp_name, atomic_write, remove_stale
 from coassist.data.trial import Trial
 from coassist.interfaces import Fault, fault_names
 from coassist.spatial import quaternion_from_rotation_vector
@@ -168,8 +167,14 @@ def write_trial_mcap(
     stamps = [int(start_ns) + round(float(t) * 1e9) for t in trial.time]
     dt_ns = round(trial.meta.dt * 1e9)
 
-    with tempfile.TemporaryDirectory(prefix="coassist-mcap-") as tmp:
-        bag = Path(tmp) / "bag"
+    # rosbags writes a bag folder: a pid-named one beside the file (not in /tmp), so what a killed
+    # writer leaves is removed by the next write there (coassist._io.remove_stale)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale(path.parent, path.name)
+    tmp = path.parent / _temp_name(path.name, "new")
+    os.mkdir(tmp)
+    try:
+        bag = tmp / "bag"
         with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as w:
             conn = {topic: w.add_connection(topic, msgtype, typestore=ts) for topic, msgtype in MCAP_TOPICS.items()
                     if (topic != "/alpha" or alphas is not None)
@@ -209,6 +214,8 @@ def write_trial_mcap(
                 shutil.copyfileobj(src, fh)
 
         return atomic_write(path, copy)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 _MCAP_MAGIC = b"\x89MCAP0\r\n"

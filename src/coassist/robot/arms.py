@@ -52,6 +52,8 @@ class ArmDescription:
     home : (n,) a comfortable start posture [rad] (the MuJoCo worlds' IK seed).
     mujoco_drop : URDF links left out of the MuJoCo model, with their subtrees (ROS
         frames, a gripper: the tools are mounted on the flange; :mod:`coassist.robot.arm_mjcf`).
+    tool_speed_limit : [m/s] the arm's own largest TCP speed (the datasheet's; a safety
+        limit above it is refused: it would limit nothing).
     task_centre : (3,) [m] where the MuJoCo worlds put the tasks, in the base frame: the
         centre of their x-y area and the height of their plane (the tasks are laid out
         for the UR5: (0.15, −0.615) at 0.2 m; an arm with another reach moves them).
@@ -68,6 +70,7 @@ class ArmDescription:
     joint_position_limit: tuple[tuple[float, float], ...] | None = None
     mujoco_drop: tuple[str, ...] = ()
     task_centre: tuple[float, float, float] = (0.15, -0.615, 0.20)
+    tool_speed_limit: float = 1.0
 
     def __post_init__(self) -> None:
         n = self.n_joints
@@ -77,6 +80,8 @@ class ArmDescription:
             v = np.asarray(getattr(self, name), dtype=float)
             if v.shape != (n,) or not np.isfinite(v).all():
                 raise ValueError(f"ArmDescription.{name} must be {n} finite numbers, got {getattr(self, name)!r}")
+        if not (isinstance(self.tool_speed_limit, float) and 0.0 < self.tool_speed_limit < 10.0):
+            raise ValueError(f"ArmDescription.tool_speed_limit must be a speed in (0, 10) m/s, got {self.tool_speed_limit!r}")
         c = np.asarray(self.task_centre, dtype=float)
         if c.shape != (3,) or not np.isfinite(c).all():
             raise ValueError(f"ArmDescription.task_centre must be 3 finite numbers [m], got {self.task_centre!r}")
@@ -91,6 +96,7 @@ ARMS: dict[str, ArmDescription] = {
         joint_velocity_limit=(np.pi,) * 6, home=(-1.1583, -1.9627, -1.5428, -1.2068, 1.5708, -2.7291),
         base_signs=(-1.0, -1.0, 1.0), joint_position_limit=((-2.0 * np.pi, 2.0 * np.pi),) * 6,
         mujoco_drop=("base",),  # the ROS "base" frame: the world frame is it already
+        tool_speed_limit=1.0,  # UR5 datasheet: typical TCP speed 1 m/s
     ),  # fmt: skip
     # Franka Emika Panda: libfranka's base frame (O) is the URDF's panda_link0; the flange
     # (F) is panda_link8. Speed limits: Franka's datasheet (the URDF's velocity=).
@@ -101,6 +107,7 @@ ARMS: dict[str, ArmDescription] = {
         home=(0.0, -0.785398, 0.0, -2.356194, 0.0, 1.570796, 0.785398),
         locked=("panda_finger_joint1", "panda_finger_joint2"), mujoco_drop=("panda_hand",),
         task_centre=(0.5, 0.0, 0.4),  # every task point reachable tool-down, > 0.2 rad from a limit
+        tool_speed_limit=1.7,  # libfranka's Cartesian translation limit (franky: translation_velocity_limit.max)
     ),  # fmt: skip
     # Franka Research 3: the Panda's kinematics (the same DH table and flange; franky-sim's
     # FR3 matches the Panda model to 1e-4 m, tests/robot/test_franka_world.py) with its own
@@ -116,6 +123,7 @@ ARMS: dict[str, ArmDescription] = {
         locked=("panda_finger_joint1", "panda_finger_joint2"),
         joint_position_limit=((-2.9007, 2.9007), (-1.8361, 1.8361), (-2.9007, 2.9007), (-3.077, -0.1169),
                               (-2.8763, 2.8763), (0.4398, 4.6216), (-3.0508, 3.0508)),
+        tool_speed_limit=1.7,  # what franky reports for franky-sim's FR3 (translation_velocity_limit.max)
     ),  # fmt: skip
 }
 

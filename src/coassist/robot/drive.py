@@ -88,7 +88,9 @@ class DriveConfig:
     rate_hz : 125 (UR CB3) or 500 (e-Series); the MuJoCo world runs either.
     full_pose : control all 6 DOFs (orientation error as a rotation vector) instead of x-y.
     time_limit : [s], at most :data:`MAX_TIME_LIMIT`; None: 2 × the plan's duration + 10 s.
-    limits : the safety layer's limits (the workspace box defaults to the task's).
+    limits : the safety layer's limits (the workspace box defaults to the task's); speeds
+        beyond the arm's own (``ArmDescription.tool_speed_limit``, its joint speeds) and a
+        contact force beyond :data:`MAX_CONTACT_FORCE` are refused.
     realtime_intent : run the predictor off the control thread (RealtimePredictor); the
         default is on for the real arm and off in MuJoCo, where a deterministic run is
         worth more than wall-clock realism.
@@ -147,12 +149,38 @@ class DriveConfig:
             raise bad("time_limit", f"a number of seconds in (0, {MAX_TIME_LIMIT:g}] or None")
         if not isinstance(self.limits, SafetyLimits):
             raise bad("limits", "a SafetyLimits")
+        _check_limits_for_arm(self.limits, self.robot)
         if self.predictor_backend not in PREDICTOR_BACKENDS:
             raise bad("predictor_backend", f"one of {PREDICTOR_BACKENDS}")
 
     @property
     def dt(self) -> float:
         return 1.0 / self.rate_hz
+
+
+#: [N] the largest contact force limit: the F/T sensor's range (FT300: 300 N per axis,
+#: runtime.wrench.WrenchConfig.force_range). Above it the protective stop could never trip.
+MAX_CONTACT_FORCE = 300.0
+
+
+def _check_limits_for_arm(limits: SafetyLimits, robot: str | None) -> None:
+    """Refuse limits that would switch a protection off: speeds beyond the arm's own hard
+    limits (they limit nothing) and a contact force beyond what the sensor can measure."""
+    from coassist.robot.arms import get_arm
+
+    arm = get_arm(robot or "ur5")
+    if limits.tool_speed > arm.tool_speed_limit:
+        raise ValueError(f"SafetyLimits.tool_speed must be at most {arm.tool_speed_limit:g} m/s, the {arm.name}'s own "
+                         f"tool speed limit, got {limits.tool_speed!r}")  # fmt: skip
+    vmax = np.asarray(arm.joint_velocity_limit, dtype=float)
+    jv = limits.joint_velocity_array(vmax.size)  # raises naming the field when a per-joint tuple has another length
+    if np.any(jv > vmax):
+        shown = ", ".join(f"{v:.4g}" for v in vmax)
+        raise ValueError(f"SafetyLimits.joint_velocity must be at most the {arm.name}'s own joint speeds ({shown}) "
+                         f"rad/s, got {limits.joint_velocity!r}")  # fmt: skip
+    if limits.contact_force > MAX_CONTACT_FORCE:
+        raise ValueError(f"SafetyLimits.contact_force must be at most {MAX_CONTACT_FORCE:g} N, the force sensor's range "
+                         f"(above it the protective stop could never trip), got {limits.contact_force!r}")  # fmt: skip
 
 
 def _controller(config: DriveConfig):

@@ -19,6 +19,11 @@ on by dt from the state read: the robot paces the loop, so a simulator running s
 than real time slows it too and the admittance stays in the robot's time. Each motion's ``duration``
 (``hold_ms``, default 50 ms) is how long the robot keeps the velocity after reaching it
 when no newer motion comes: if this process hangs, the arm brakes to rest on its own.
+A stalled loop (a garbage collection, a swapped-out page, a monitor that blocked) shows on
+the robot's clock: when two reads with a command between them lie more than
+dt + max(dt/2, 2 ms) apart, :attr:`FrankaWorld.last_overrun` says by how much and the loop
+flags that tick DEADLINE_MISS; the safety layer then ramps from the joint velocity the arm
+measures (it may have braked to rest meanwhile), not from its own last command.
 
 The wrench
 ----------
@@ -39,12 +44,18 @@ A reflex (the robot's own force or speed limits) or a user stop makes franky rai
 motion running, and :attr:`FrankaWorld.stop_detail` says what happened and what to do
 next. A lost link (a ``franky.NetworkException``, or no new robot state for
 ``link_timeout`` s) raises :class:`FrankaLinkError`, a ``ConnectionError``: the loop
-ends with ``"link_lost"``.
+ends with ``"link_lost"``. An external F/T sensor whose ``read()`` raises (a read
+timeout) gives a NaN wrench for that tick (``sensor_errors`` counts them): the tick flags
+NONFINITE_WRENCH and brakes, and the safety layer stops the arm if it lasts; any other
+exception of the world ends the run in a controlled stop with its trial kept
+(:mod:`coassist.runtime.loop`).
 """
 
 from __future__ import annotations
 
+import logging
 import math
+import re
 import time
 from typing import Any
 
@@ -55,10 +66,12 @@ from coassist.robot.arms import NullSpacePosture, arm_kinematics, check_model_ma
 from coassist.runtime.world import Command, RobotState
 from coassist.spatial import rotation_vector
 
-__all__ = ["FRANKA_ARMS", "FrankaLinkError", "FrankaWorld", "pose_from_franka"]
+__all__ = ["FRANKA_ARMS", "FrankaLinkError", "FrankaWorld", "pose_from_franka", "reported_arm"]
 
 #: The registered arms (coassist.robot.arms.ARMS) a FrankaWorld drives.
 FRANKA_ARMS = ("panda", "fr3")
+
+log = logging.getLogger(__name__)
 
 _INSTALL_HINT = "the Franka world needs franky: pip install 'coassist[franka]'"
 
@@ -66,6 +79,11 @@ _INSTALL_HINT = "the Franka world needs franky: pip install 'coassist[franka]'"
 REFLEX_NEXT = ("check the workspace and the person, then clear the error (Franka Desk, or franky's "
                "robot.recover_from_errors()) and rerun")  # fmt: skip
 USER_STOP_NEXT = "release the user stop button, make the workspace safe, unlock the joints in Desk, then rerun"
+
+
+#: [s] the least a period may run over before :attr:`FrankaWorld.last_overrun` reports it (the robot's
+#: clock ticks in whole ms; a loop on time reads it exactly dt apart on franky-sim, 249 of 249 periods).
+OVERRUN_TOLERANCE_MIN = 0.002
 
 
 class FrankaLinkError(CoassistError, ConnectionError):
@@ -78,6 +96,31 @@ def pose_from_franka(T: Any) -> np.ndarray:
     if M.shape != (4, 4):
         raise ValueError(f"a transform is a 4 x 4 matrix, got shape {M.shape}")
     return np.concatenate((M[:3, 3], rotation_vector(M[:3, :3])))
+
+
+def reported_arm(robot: Any) -> tuple[str, str] | None:
+    """(arm, name): which of :data:`FRANKA_ARMS` the connected robot says it is, from the robot
+    name of the model URDF it serves (franky's ``Robot.model_urdf``, libfranka's
+    ``getRobotModel``: ``<robot name="fr3">``; a Panda's is ``panda`` or ``fer``), or None
+    when the robot serves none (older system images): then only the start-up joint-range
+    check tells the arms apart. A name that is neither raises ValueError."""
+    try:
+        urdf = robot.model_urdf
+    except Exception:  # noqa: BLE001 - not served (older firmware), or not a franky.Robot
+        return None
+    if not isinstance(urdf, str):
+        return None
+    m = re.search(r"<robot\b[^>]*\bname\s*=\s*[\"']([^\"']*)[\"']", urdf)
+    if m is None:
+        return None
+    name = m.group(1)
+    low = name.lower()
+    if "fr3" in low:
+        return "fr3", name
+    if "panda" in low or low == "fer" or low.startswith("fer_"):
+        return "panda", name
+    raise ValueError(f"the connected Franka reports the model {name!r}, which is neither a Panda nor an FR3 "
+                     f"({', '.join(FRANKA_ARMS)}); coassist has no kinematics for it")  # fmt: skip
 
 
 def _franky():
@@ -98,6 +141,8 @@ class FrankaWorld:
         its joint range, and every command is clipped to its joint speeds.
     ft_sensor : an external F/T sensor (module docstring); None: ``O_F_ext_hat_K``.
     hold_ms : each motion's hold time [ms] (the hang watchdog).
+    last_overrun : [s] how far the robot's clock ran past dt between the last two reads
+        (0.0 on time; module docstring).
     link_timeout : [s] without a new robot state before the link counts as lost.
     posture_gain : k_n [1/s] of the null-space posture (arms.NullSpacePosture).
     """
@@ -127,18 +172,42 @@ class FrankaWorld:
         self.ft_sensor, self.hold_ms, self.link_timeout = ft_sensor, hold_ms, float(link_timeout)
         self.stop_detail: str | None = None
         self.commands_sent = 0
+        self.sensor_errors = 0
+        self.last_sensor_error: str | None = None
         self._closed = False
         self._moving = False
         self._seq = 0
+        self._sensor_seq = 0
+        self.last_overrun = 0.0
+        self._overrun_tolerance = max(0.5 * self.dt, OVERRUN_TOLERANCE_MIN)
+        self._applied = False
+        self._read_t = 0.0
         self._last_t = -math.inf
         self._last_new = time.monotonic()
         if robot is None:
-            try:
-                robot = self._fr.Robot(host, realtime_config=self._fr.RealtimeConfig.Ignore)
+            try:  # never bound to a local: a refused robot must not outlive this call in a traceback's frame
+                self.robot = self._fr.Robot(host, realtime_config=self._fr.RealtimeConfig.Ignore)
             except Exception as exc:  # franky.NetworkException, IncompatibleVersionException
                 raise FrankaLinkError(f"could not connect to the Franka at {host}: {exc}; check the address, "
                                       "that FCI is activated in Desk and the joints are unlocked") from exc  # fmt: skip
-        self.robot = robot
+        else:
+            self.robot = robot
+        try:
+            self._check_arm(host, arm, posture_gain)
+        except BaseException:
+            # franky's Robot holds the FCI connection (one client at a time) until it is collected
+            self.robot = None
+            raise
+
+    def _check_arm(self, host: str, arm: str, posture_gain: float) -> None:
+        """At connect: the arm the robot reports is ``arm``, the model's TCP is where the robot
+        says, and the joints lie inside the arm's range (module docstring)."""
+        reported = reported_arm(self.robot)
+        if reported is not None and reported[0] != arm:
+            model, name = reported
+            label = {"fr3": "Franka Research 3", "panda": "Panda"}[model]
+            raise ValueError(f"the Franka at {host} is a {label} (the model it reports is {name!r}), not a {arm}: "
+                             f"pass --robot {model}")  # fmt: skip
         state = self._state()
         # the TCP is libfranka's end effector: flange -> EE as set in Desk (F_T_EE)
         F_T_EE = pose_from_franka(state.F_T_EE)
@@ -179,6 +248,11 @@ class FrankaWorld:
             self._last_t, self._last_new = t, now
         elif now - self._last_new > self.link_timeout:
             raise FrankaLinkError(f"no new state from the Franka at {self.host} for {now - self._last_new:.3f} s")
+        if self._applied:  # the robot's clock since the last read: a stalled loop shows here, wherever it stalled
+            excess = t - self._read_t - self.dt
+            self.last_overrun = excess if excess > self._overrun_tolerance else 0.0
+            self._applied = False
+        self._read_t = t
         q = np.asarray(s.q, dtype=float)
         qd = np.asarray(s.dq, dtype=float)
         pose = pose_from_franka(s.O_T_EE)
@@ -192,8 +266,7 @@ class FrankaWorld:
             self._seq += 1
             seq = self._seq
         else:
-            wrench, R, seq = self.ft_sensor.read()
-            wrench, R = np.array(wrench, dtype=float), np.array(R, dtype=float)  # ours: the tick may flag it in place
+            wrench, R, seq = self._read_sensor()
         mode = s.robot_mode
         user_stop = mode == self._fr.RobotMode.UserStopped
         errors = s.current_errors
@@ -207,10 +280,30 @@ class FrankaWorld:
         return RobotState(t=t, q=q, qd=qd, tool_pose=pose, tool_twist=twist, wrench=wrench, sensor_rotation=R,
                           wrench_seq=int(seq), protective_stop=bool(reflex), emergency_stop=bool(user_stop))  # fmt: skip
 
+    def _read_sensor(self) -> tuple[np.ndarray, np.ndarray, int]:
+        """The external F/T sensor's (wrench, R, seq); a sensor that raises (a read timeout, a
+        dropped socket) or answers garbage gives a NaN wrench for this tick: the tick flags it and
+        brakes, and the safety layer stops the arm if it lasts (``sensor_errors`` counts them)."""
+        try:
+            wrench, R, seq = self.ft_sensor.read()
+            # copies of our own: the tick may flag them in place
+            out = np.array(wrench, dtype=float), np.array(R, dtype=float), int(seq)
+            self._sensor_seq = out[2]
+            return out
+        except Exception as exc:  # noqa: BLE001 - whatever the driver raises, the loop goes on safely
+            self.sensor_errors += 1
+            self.last_sensor_error = f"{type(exc).__name__}: {exc}"
+            if self.sensor_errors == 1 or self.sensor_errors % 1000 == 0:
+                log.warning("the F/T sensor's read() failed (%s; %d so far): NaN wrench, the arm brakes",
+                            self.last_sensor_error, self.sensor_errors)  # fmt: skip
+            return np.full(6, np.nan), np.eye(3), self._sensor_seq
+
     def apply(self, command: Command) -> None:
         """Send the command's joint velocity as a franky motion, then wait for the period's end."""
         if self._closed:
             raise FrankaLinkError(f"apply on a closed FrankaWorld ({self.host}); build a new one")
+        self.last_overrun = 0.0  # reported by read() for the tick it returns (the loop checks it there)
+        self._applied = True
         qd = None if command.qd is None else np.asarray(command.qd, dtype=float)
         if command.stop or self.stop_detail is not None or qd is None or qd.shape != (self.n_joints,) \
                 or not np.isfinite(qd).all():  # fmt: skip

@@ -25,22 +25,45 @@ are read with the sensor-data QoS (best effort, depth 5: a late sample is worth 
 a fresh one, and a best-effort subscriber matches a reliable publisher); commands go out
 reliable, depth 1 (what ros2_control's forward controllers subscribe with).
 
-State. ``q`` and ``q̇`` come from the latest joint state (reordered by ``joint_names``);
-the TCP pose and twist from the UR5 kinematics (``tcp_offset``), ``t`` from the joint
-state's header stamp. The wrench is in the sensor frame (the flange, ``tool0``, as the UR
-driver publishes it; ``wrench_in_base=True`` for a driver that publishes it in the base
-frame). ``wrench_seq`` counts wrench messages with a newer header stamp.
+State. ``q`` and ``q̇`` come from the newest joint state (reordered by ``joint_names``,
+the UR5's six joints); the TCP pose and twist from the UR5 kinematics (``tcp_offset``),
+``t`` from the joint state's header stamp. The wrench's ``frame_id`` says its frame: the
+sensor's (``wrench_frame``, default ``tool0`` as the UR driver publishes it: the flange's
+axes) or the base's (``base_frame``: rotated into the sensor frame with the flange's
+orientation from the kinematics, so the bias and the payload stay where they are
+constant; ``wrench_in_base`` used to declare it). A wrench in any other frame cannot be rotated
+into the base frame: :meth:`Ros2World.read` raises :class:`Ros2InputError` naming the
+topic and the frame, and the run stops (at connect: it does not start). ``wrench_seq``
+counts wrench messages with a newer header stamp.
+
+Trust in the inputs. A message replaces the newest one of its topic only when its header
+stamp is newer: a late message (stamped before the newest) never does, the same stamp
+again is no news (a sign of life only), and a stamp of 0 — a driver that does not stamp
+— is refused. A joint state that names a joint twice, lacks one of ``joint_names``, or
+has not one position and one velocity per name is refused, as is any message with a
+non-finite value. Refused messages are counted (``rejected_messages``) and never reach
+the tick; if nothing valid follows, the topic goes stale and the arm stops, with the
+reason in the message (``"12 message(s) on /joint_states arrived but were refused: a
+joint state needs one position and one velocity per name …"``, not "no message").
 
 Link rules, those of :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`: a wrench or a
-joint state older than ``stale_after`` [s] (wall clock since the last new message),
-nothing at all within ``connect_timeout`` of start (or no subscriber to the commands), makes :meth:`Ros2World.read` raise
+joint state older than ``stale_after`` [s] (wall clock since the last accepted message;
+at most :data:`MAX_STALE_AFTER`), nothing at all within ``connect_timeout`` of start (or
+no subscriber to the commands), makes :meth:`Ros2World.read` raise
 :class:`~coassist.robot.ur_rtde_world.RobotLinkError`; the loop stops the run and
-:meth:`Ros2World.stop` sends zero velocities. Messages with a non-finite value or
-missing joints are dropped (counted in ``rejected_messages``): they never reach the
-tick, and if nothing valid follows, the topic goes stale and the arm stops. A command
-that is not ``n_joints`` finite numbers is replaced by zeros. ``apply`` waits for the end
+:meth:`Ros2World.stop` sends zero velocities. A command that is not ``n_joints`` finite
+numbers is replaced by zeros, and so is one computed from state older than
+``stale_after`` when it is sent (the loop stalled between read and apply; counted in
+``stale_commands``; the next tick is flagged DEADLINE_MISS). ``apply`` waits for the end
 of the period (``pace``), like RTDE's ``waitPeriod``, and reports overruns in
 ``last_overrun`` (the loop flags DEADLINE_MISS).
+
+The robot side must stop on its own when the commands stop: ros2_control's forward
+velocity controller holds the last command for ever (a 0.5 s hang of this process moved
+the tool 48 mm; a dead process would not stop it). Run :mod:`coassist.robot.ros2_watchdog`
+(``coassist ros2-watchdog``) on the robot's computer between this node and the
+controller: it forwards the commands and sends zeros once none came for its
+``timeout``.
 
 Cost. The monitor topics are built and published in the loop's ``on_tick``, on the
 control thread: measured on this project's 2-core machine, 0.8 ms median and 1.7 ms p99
@@ -71,18 +94,24 @@ from typing import Any
 
 import numpy as np
 
+from coassist.errors import CoassistError
 from coassist.interfaces import fault_names
 from coassist.robot.ur_rtde_world import RobotLinkError
 from coassist.runtime.world import Command, RobotState
 from coassist.spatial import quaternion_from_rotation_vector, rotation_matrix, rotation_vector
 
-__all__ = ["UR_JOINT_NAMES", "Ros2Config", "Ros2World"]
+__all__ = ["MAX_STALE_AFTER", "MAX_TCP_OFFSET", "UR_JOINT_NAMES", "Ros2Config", "Ros2InputError", "Ros2World", "resolve_topic"]
 
 log = logging.getLogger(__name__)
 
 #: The UR arms' joint names (ur_description), in kinematic order.
 UR_JOINT_NAMES = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint")
 _INSTALL_HINT = "coassist ros2 needs the ros2 extra (rclpy and the message packages): pip install 'coassist[ros2]'"
+#: [s] the longest ``stale_after``: the stop on a lost link. At the 0.25 m/s tool speed a silent
+#: driver lets the tool go at most 125 mm before the arm stops; beyond it the stop is no stop.
+MAX_STALE_AFTER = 0.5
+#: [m] the farthest a TCP may lie from the flange: a hand-guided tool, not a typo of mm for m.
+MAX_TCP_OFFSET = 0.5
 _TOPIC = re.compile(r"^~?/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$|^~$")
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -96,17 +125,24 @@ class Ros2Config:
     tool_pose_topic, prediction_topic, alpha_topic, hand_force_topic, diagnostics_topic :
         the monitor topics ("" leaves one out).
     base_frame : ``frame_id`` of the published poses (the UR driver's ``base``).
-    joint_names : the order of ``q`` and of the command.
-    wrench_in_base : the wrench topic is in the base frame (default: the sensor/flange frame).
+    wrench_frame : ``frame_id`` of a wrench in the sensor frame, whose axes are the
+        flange's (the UR driver's ``tool0``). A wrench stamped in ``base_frame`` is
+        rotated from there instead; any other frame is refused and stops the run.
+    joint_names : the order of ``q`` and of the command: the UR5's 6 joints.
+    wrench_in_base : kept for scripts that set it: each wrench message's ``frame_id`` now
+        says whether it is in the base frame or the sensor's (module docstring).
     sensor_reliable : subscribe to the sensor topics reliable (default best effort).
     command_depth : history depth of the command publisher.
-    rate_hz : control rate [Hz].  stale_after : [s] input age that stops the arm.
+    rate_hz : control rate [Hz].  stale_after : [s] input age that stops the arm, at most
+        :data:`MAX_STALE_AFTER`; a command computed from state older than it is not sent
+        (zeros go out instead).
     connect_timeout : [s] wait for the first messages.  monitor_rate_hz : monitor topics' rate.
     prediction_seconds : [s] how much of the prediction ``~/prediction`` carries.
     prediction_stride : ``~/prediction`` carries every stride-th row of it, and the last.
     lockstep : wait for fresh state each tick (simulated robots).  pace : wait for the period's end.
     domain_id : ROS_DOMAIN_ID (None: the environment's).
-    tcp_offset : TCP pose in the flange frame ``[x, y, z, rx, ry, rz]``.
+    tcp_offset : TCP pose in the flange frame ``[x, y, z, rx, ry, rz]``, at most
+        :data:`MAX_TCP_OFFSET` from the flange.
     payload : ``(mass [kg], (cx, cy, cz) [m])`` of the tool below the sensor, for the
         wrench pipeline's gravity compensation (0: the driver compensates already).
     """
@@ -122,6 +158,7 @@ class Ros2Config:
     hand_force_topic: str = "~/hand_force"
     diagnostics_topic: str = "/diagnostics"
     base_frame: str = "base"
+    wrench_frame: str = "tool0"
     joint_names: tuple[str, ...] = UR_JOINT_NAMES
     wrench_in_base: bool = False
     sensor_reliable: bool = False
@@ -154,11 +191,17 @@ class Ros2Config:
             v = getattr(self, name)
             if not isinstance(v, str) or (v and not _TOPIC.match(v)):
                 raise bad(name, "'' (off) or a ROS topic name such as ~/tool_pose")
-        if not isinstance(self.base_frame, str) or not self.base_frame:
-            raise bad("base_frame", "a frame id")
+        for name in ("base_frame", "wrench_frame"):
+            v = getattr(self, name)
+            if not isinstance(v, str) or not v.strip():
+                raise bad(name, "a frame id")
+        if self.base_frame == self.wrench_frame:
+            raise bad("wrench_frame", f"the sensor's frame, not the base frame {self.base_frame!r}")
         names = tuple(self.joint_names) if isinstance(self.joint_names, (list, tuple)) else None
         if not names or len(set(names)) != len(names) or not all(isinstance(n, str) and n for n in names):
             raise bad("joint_names", "distinct joint names")
+        if len(names) != len(UR_JOINT_NAMES):
+            raise bad("joint_names", f"{len(UR_JOINT_NAMES)} names, one per joint of the UR5 (got {len(names)})")
         object.__setattr__(self, "joint_names", names)
         for name in ("wrench_in_base", "sensor_reliable", "lockstep", "pace"):
             if not isinstance(getattr(self, name), bool):
@@ -171,12 +214,16 @@ class Ros2Config:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise bad(name, "a finite number > 0")
+        if self.stale_after > MAX_STALE_AFTER:
+            raise bad("stale_after", f"at most {MAX_STALE_AFTER:g} s (the stop on a lost link; longer is no stop at all)")
         if self.domain_id is not None and (isinstance(self.domain_id, bool) or not isinstance(self.domain_id, int)
                                            or not 0 <= self.domain_id <= 232):  # fmt: skip
             raise bad("domain_id", "None or an int in 0 … 232")
         off = np.asarray(self.tcp_offset, dtype=float) if _numbers(self.tcp_offset) else None
         if off is None or off.shape != (6,) or not np.isfinite(off).all():
             raise bad("tcp_offset", "6 finite numbers [x, y, z, rx, ry, rz]")
+        if float(np.linalg.norm(off[:3])) > MAX_TCP_OFFSET:
+            raise bad("tcp_offset", f"a TCP within {MAX_TCP_OFFSET:g} m of the flange (x, y, z in metres)")
         object.__setattr__(self, "tcp_offset", tuple(float(v) for v in off))
         try:
             mass, com = self.payload
@@ -187,10 +234,41 @@ class Ros2Config:
         if not math.isfinite(mass) or mass < 0 or len(com) != 3 or not all(math.isfinite(c) for c in com):
             raise bad("payload", "(mass >= 0 [kg], 3 finite numbers [m])")
         object.__setattr__(self, "payload", (mass, com))
+        self._check_topics()
+
+    def _check_topics(self) -> None:
+        """No two roles on one topic (as the middleware resolves the names): an input on the node's
+        own command or monitor topic, or two inputs on one topic, is refused before anything starts."""
+        roles = [name for name in _TOPIC_FIELDS if getattr(self, name)]
+        seen: dict[str, str] = {}
+        for name in roles:
+            full = resolve_topic(getattr(self, name), self.node_name, self.namespace)
+            if full in seen:
+                raise ValueError(f"Ros2Config.{name} {getattr(self, name)!r} is {full}, the topic of "
+                                 f"Ros2Config.{seen[full]} too: give each its own topic")  # fmt: skip
+            seen[full] = name
 
     @property
     def dt(self) -> float:
         return 1.0 / self.rate_hz
+
+
+#: The topic fields, inputs first (an error names the later of two that clash).
+_TOPIC_FIELDS = ("wrench_topic", "joint_state_topic", "command_topic", "tool_pose_topic", "prediction_topic",
+                 "alpha_topic", "hand_force_topic", "diagnostics_topic")  # fmt: skip
+
+
+def resolve_topic(name: str, node_name: str, namespace: str = "") -> str:
+    """The fully qualified name ROS 2 gives ``name`` on node ``node_name`` in ``namespace``:
+    ``/x`` stays, ``~/x`` is ``<ns>/<node>/x``, a relative ``x`` is ``<ns>/x``."""
+    ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
+    if name.startswith("/"):
+        full = name
+    elif name == "~" or name.startswith("~/"):
+        full = f"{ns}/{node_name}{name[1:]}"
+    else:
+        full = f"{ns}/{name}"
+    return "/" + "/".join(part for part in full.split("/") if part)
 
 
 def _numbers(value: Any) -> bool:
@@ -203,6 +281,11 @@ def _numbers(value: Any) -> bool:
 
 def _stamp_ns(stamp: Any) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+class Ros2InputError(CoassistError, ValueError):
+    """What arrives on an input topic cannot be used (a wrench in an unknown frame, joint states that
+    are all refused): one line naming the topic and what is wrong; the run stops, or does not start."""
 
 
 class Ros2World:
@@ -219,7 +302,9 @@ class Ros2World:
     tcp_offset_pose : the TCP in the flange frame (the drive builds its kinematics from it).
     last_overrun : [s] how far the last period ran over ``dt`` (0.0 on time).
     rejected_messages : dropped inputs (non-finite, missing joints).
-    rejected_commands : commands replaced by zeros.
+    rejected_commands : commands replaced by zeros (not n_joints finite numbers).
+    stale_commands : commands replaced by zeros because their state was older than
+        ``stale_after`` when they were sent.
     """
 
     command_space = "joint_velocity"
@@ -255,7 +340,11 @@ class Ros2World:
                      "Float64MultiArray": Float64MultiArray, "DiagnosticArray": DiagnosticArray}  # fmt: skip
         self._cond = threading.Condition()
         self._js: tuple[int, np.ndarray, np.ndarray, float] | None = None  # stamp ns, q, qd, receive time
-        self._wr: tuple[int, np.ndarray, float] | None = None
+        self._wr: tuple[int, np.ndarray, float, bool] | None = None  # stamp ns, wrench, receive time, in base
+        self._refused: dict[str, tuple[int, str]] = {}  # topic -> (refused since its last good message, why)
+        self._input_error: str | None = None  # an input that cannot be used at all (a wrench's unknown frame)
+        self._state_rx = math.inf  # receive time of the older input read() used (the command's state)
+        self.stale_commands = 0
         self._wrench_seq = 0
         self._used_js = -1
         self._used_wr = -1
@@ -309,61 +398,117 @@ class Ros2World:
                     log.warning("Ros2World: executor stopped: %s", exc)
                 return
 
-    def _reject(self, what: str) -> None:
+    def _reject(self, topic: str, why: str) -> None:
+        """Drop a message on ``topic``, remembering why: a topic that goes silent for it says so."""
         self.rejected_messages += 1
+        n = self._refused.get(topic, (0, ""))[0] + 1
+        self._refused[topic] = (n, why)
         if self.rejected_messages == 1 or self.rejected_messages % 1000 == 0:
-            log.warning("Ros2World: dropped %s (%d dropped so far)", what, self.rejected_messages)
+            log.warning("Ros2World: dropped a message on %s: %s (%d dropped so far)", topic, why, self.rejected_messages)
+
+    def _why_silent(self, topic: str) -> str:
+        """What was wrong with the messages of ``topic`` since its last good one ("" if none came)."""
+        n, why = self._refused.get(topic, (0, ""))
+        return f"{n} message(s) on {topic} arrived but were refused: {why}" if n else ""
 
     def _on_joint_state(self, msg: Any) -> None:
+        topic = self.config.joint_state_topic
         names = list(msg.name)
+        if len(set(names)) != len(names):
+            twice = sorted({n for n in names if names.count(n) > 1})
+            self._reject(topic, f"a joint state names {', '.join(twice)} more than once")
+            return
         try:
             idx = [names.index(n) for n in self.config.joint_names]
         except ValueError:
-            self._reject(f"a joint state on {self.config.joint_state_topic} without all of {self.config.joint_names}")
+            missing = [n for n in self.config.joint_names if n not in names]
+            self._reject(topic, f"a joint state without {', '.join(missing)} (--joint-names)")
             return
         pos = np.asarray(msg.position, dtype=float)
         vel = np.asarray(msg.velocity, dtype=float)
         if pos.shape != (len(names),) or vel.shape != (len(names),):
-            self._reject(f"a joint state on {self.config.joint_state_topic} without one position and velocity per joint")
+            self._reject(topic, f"a joint state needs one position and one velocity per name ({len(names)} names, "
+                                f"{pos.size} positions, {vel.size} velocities)")  # fmt: skip
             return
         q, qd = pos[idx], vel[idx]
         if not (np.isfinite(q).all() and np.isfinite(qd).all()):
-            self._reject(f"a joint state on {self.config.joint_state_topic} with a non-finite value")
-            return
-        with self._cond:
-            self._js = (_stamp_ns(msg.header.stamp), q, qd, time.monotonic())
-            self._cond.notify_all()
-
-    def _on_wrench(self, msg: Any) -> None:
-        f, tq = msg.wrench.force, msg.wrench.torque
-        w = np.array([f.x, f.y, f.z, tq.x, tq.y, tq.z], dtype=float)
-        if not np.isfinite(w).all():
-            self._reject(f"a wrench on {self.config.wrench_topic} with a non-finite value")
+            self._reject(topic, "a joint state with a non-finite value")
             return
         stamp = _stamp_ns(msg.header.stamp)
         with self._cond:
-            if self._wr is None or stamp > self._wr[0]:
+            if not self._fresh(topic, stamp, None if self._js is None else self._js[0]):
+                return
+            self._refused.pop(topic, None)
+            self._js = (stamp, q, qd, time.monotonic())
+            self._cond.notify_all()
+
+    def _fresh(self, topic: str, stamp: int, newest: int | None) -> bool:
+        """Whether a message stamped ``stamp`` replaces the newest one (stamped ``newest``): a stamp of 0
+        (a driver that does not stamp) or older than the newest (a late message) is refused; the same
+        stamp again (a driver repeating its last sample) is no news, but counts as a sign of life."""
+        if stamp <= 0:
+            self._reject(topic, "header stamp 0: the driver does not stamp its messages, and coassist orders and "
+                                "ages them by their stamp")  # fmt: skip
+            return False
+        if newest is not None and stamp < newest:
+            self._reject(topic, f"a late message, stamped {(newest - stamp) * 1e-9:.3f} s before the newest")
+            return False
+        return True
+
+    def _on_wrench(self, msg: Any) -> None:
+        c = self.config
+        topic = c.wrench_topic
+        frame = msg.header.frame_id
+        if frame not in (c.wrench_frame, c.base_frame):
+            with self._cond:
+                if self._input_error is None:
+                    self._input_error = (
+                        f"the wrench on {topic} is in frame {frame!r}, not the sensor's ({c.wrench_frame!r}, "
+                        f"--wrench-frame) or the base ({c.base_frame!r}, --base-frame): coassist cannot rotate it "
+                        "into the base frame; publish it in one of these, or name the sensor's frame")  # fmt: skip
+                self._cond.notify_all()
+            return
+        f, tq = msg.wrench.force, msg.wrench.torque
+        w = np.array([f.x, f.y, f.z, tq.x, tq.y, tq.z], dtype=float)
+        if not np.isfinite(w).all():
+            self._reject(topic, "a wrench with a non-finite value")
+            return
+        stamp = _stamp_ns(msg.header.stamp)
+        with self._cond:
+            newest = None if self._wr is None else self._wr[0]
+            if not self._fresh(topic, stamp, newest):
+                return
+            self._refused.pop(topic, None)
+            if newest is None or stamp > newest:
                 self._wrench_seq += 1
-            self._wr = (stamp, w, time.monotonic())
+                self._wr = (stamp, w, time.monotonic(), frame == c.base_frame)
+            else:  # the same sample again: alive, no news
+                self._wr = (*self._wr[:2], time.monotonic(), self._wr[3])
             self._cond.notify_all()
 
     def _wait_first(self) -> None:
-        deadline = time.monotonic() + self.config.connect_timeout
+        c = self.config
+        deadline = time.monotonic() + c.connect_timeout
         with self._cond:
             while self._js is None or self._wr is None:
+                if self._input_error is not None:
+                    raise Ros2InputError(self._input_error)
                 left = deadline - time.monotonic()
                 if left <= 0:
-                    missing = [t for t, v in ((self.config.joint_state_topic, self._js), (self.config.wrench_topic, self._wr)) if v is None]
+                    missing = [t for t, v in ((c.joint_state_topic, self._js), (c.wrench_topic, self._wr)) if v is None]
+                    refused = [self._why_silent(t) for t in missing if self._why_silent(t)]
+                    if refused:  # messages come, and something is wrong with them: say what
+                        raise Ros2InputError("; ".join(refused) + " (nothing was moved)")
                     raise RobotLinkError(
-                        f"no message on {' and '.join(missing)} within {self.config.connect_timeout:g} s: is the robot "
+                        f"no message on {' and '.join(missing)} within {c.connect_timeout:g} s: is the robot "
                         "driver running, on the same ROS_DOMAIN_ID, with these topic names?"
                     )
-                self._cond.wait(left)
+                self._cond.wait(min(left, 0.05))
         # A command sent before the controller's subscription is matched would be lost.
         while self._cmd_pub.get_subscription_count() == 0:
             if time.monotonic() > deadline:
                 raise RobotLinkError(
-                    f"nothing subscribes to {self.config.command_topic} within {self.config.connect_timeout:g} s: "
+                    f"nothing subscribes to {c.command_topic} within {c.connect_timeout:g} s: "
                     "is the forward velocity controller loaded and active?"
                 )
             time.sleep(0.005)
@@ -376,27 +521,34 @@ class Ros2World:
             raise RobotLinkError("read() on a closed Ros2World; build a new one")
         c = self.config
         with self._cond:
+            if self._input_error is not None:
+                raise Ros2InputError(self._input_error)
             if c.lockstep and self._await_fresh:
                 deadline = time.monotonic() + c.stale_after
                 while not (self._js[0] > self._used_js and self._wr[0] >= self._js[0] and self._wr[0] > self._used_wr):
+                    if self._input_error is not None:
+                        raise Ros2InputError(self._input_error)
                     left = deadline - time.monotonic()
                     if left <= 0:
                         stale = c.joint_state_topic if self._js[0] <= self._used_js else c.wrench_topic
+                        why = self._why_silent(stale)
                         raise RobotLinkError(
                             f"no new message on {stale} for {c.stale_after:g} s (lockstep): the robot stopped "
-                            "answering; the arm is stopped"
+                            "answering; the arm is stopped" + (f" ({why})" if why else "")
                         )
                     self._cond.wait(left)
             js_stamp, q, qd, js_rx = self._js
-            wr_stamp, w, wr_rx = self._wr
+            wr_stamp, w, wr_rx, wr_in_base = self._wr
             seq = self._wrench_seq
         now = time.monotonic()
         for topic, rx in ((c.joint_state_topic, js_rx), (c.wrench_topic, wr_rx)):
             if now - rx > c.stale_after:
+                why = self._why_silent(topic)
                 raise RobotLinkError(
-                    f"no new message on {topic} for {now - rx:.3f} s (stale_after {c.stale_after:g} s): the link "
-                    "is lost; the arm is stopped. Check the driver and the network, then rerun."
+                    f"no new message on {topic} for {now - rx:.3f} s (stale_after {c.stale_after:g} s)"
+                    + (f": {why}" if why else "") + "; the arm is stopped. Check the driver and the network, then rerun."
                 )
+        self._state_rx = min(js_rx, wr_rx)
         self._used_js, self._used_wr = js_stamp, wr_stamp
         self._await_fresh = False
         if self._period_start is None:
@@ -409,7 +561,9 @@ class Ros2World:
         p, R, J = self._kin.forward_and_jacobian(q)
         pose = np.concatenate([p, rotation_vector(R)])
         twist = J @ qd
-        R_sensor = np.eye(3) if c.wrench_in_base else R @ self._R_offset.T  # the flange's orientation
+        R_sensor = R @ self._R_offset.T  # the flange's orientation: the sensor frame's axes in the base frame
+        if wr_in_base:  # stamped in the base frame: into the sensor frame, where the bias and the payload live
+            w = np.concatenate([R_sensor.T @ w[:3], R_sensor.T @ w[3:]])
         return RobotState(t=t, q=q.copy(), qd=qd.copy(), tool_pose=pose, tool_twist=twist, wrench=w.copy(),
                           sensor_rotation=R_sensor, wrench_seq=seq)  # fmt: skip
 
@@ -434,6 +588,13 @@ class Ros2World:
                 self.rejected_commands += 1
                 if self.rejected_commands == 1 or self.rejected_commands % 1000 == 0:
                     log.warning("Ros2World: command %r is not %d finite values; sent zeros", command.qd, self.n_joints)
+        # never a command computed from stale state: the loop stalled between read() and here
+        state_age = time.monotonic() - self._state_rx
+        stale = qd is not None and state_age > self.config.stale_after
+        if stale:
+            self.stale_commands += 1
+            qd = None
+            log.warning("Ros2World: a command computed from state %.3f s old was not sent (zeros instead)", state_age)
         self._publish_command(np.zeros(self.n_joints) if qd is None else qd)
         self._await_fresh = True
         if self.config.pace:
@@ -448,6 +609,9 @@ class Ros2World:
             self._period_start = max(end, time.perf_counter() - self.dt)
         else:
             self._period_start = time.perf_counter()
+            self.last_overrun = 0.0
+        if stale:  # the loop flags the next tick DEADLINE_MISS: the safety layer ramps from the measured q̇
+            self.last_overrun = max(self.last_overrun, state_age)
 
     def stop(self) -> None:
         """Send zero joint velocities; safe to call twice; a no-op after :meth:`close`."""

@@ -25,7 +25,11 @@ each keeps only how its world, wrench pipeline and safety limits are built:
    next H_s rows where the source was the nominal plan, eq. 4.7), the true intent where a
    simulated operator had one, the columns of uncontrolled DOFs held at the start pose, and
    meta (the task's description, why the run ended, the preset, the target ball, the
-   world's own fields).
+   world's own fields). A logged row that is not finite (a sensor's NaN or a 1e300
+   rotation that made the hand wrench infinite) is still written, never dropped with the
+   run: the row holds the last finite one, its tick carries the column's flag
+   (NONFINITE_WRENCH, NONFINITE_STATE, NONFINITE_EFFORT, NONFINITE_REFERENCE), and
+   ``meta.extra["nonfinite_rows"]`` and ``["log_note"]`` say which columns and ticks.
 
 :func:`run_episode` is build's result → run → finish. The seed scheme (task and trial
 streams of one seed) is :mod:`coassist.scenario.seeds`.
@@ -41,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from coassist.data import Trial, TrialMeta
-from coassist.interfaces import FEATURES, TrialContext
+from coassist.interfaces import FEATURES, Fault, TrialContext
 from coassist.runtime.lockstep import Loop
 from coassist.runtime.loop import LoopLog, TargetDwell, Termination, run_loop
 from coassist.runtime.safety import SafetyLimits
@@ -175,7 +179,8 @@ class Episode:
             intent = np.empty((n, d))
             intent[:, :2] = self.true_intent[:n]
             intent[:, 2:] = held
-        pose = log.pose
+        columns, fault, nonfinite = _hold_nonfinite(log)
+        pose = columns["pose"]
         if d == 6:  # rotation vectors continuous through ±π: a tool pointing down sits at |rv| ≈ π
             pose = pose.copy()
             pose[:, 3:6] = unwrap_rotation_vectors(pose[:, 3:6], self.start_pose[3:6])
@@ -188,11 +193,61 @@ class Episode:
         meta_extra.update(self.extra)
         if extra:
             meta_extra.update(extra)
+        if nonfinite:
+            meta_extra["nonfinite_rows"] = nonfinite
+            meta_extra["log_note"] = (
+                "the log held non-finite values (" + ", ".join(
+                    f"{name}: {v['ticks']} tick(s) from tick {v['first_tick']}" for name, v in nonfinite.items())
+                + "); those rows hold the last finite row and are flagged in the fault column")  # fmt: skip
         meta = TrialMeta(user=labels.user, task=self.task.kind, object=labels.object, controller=tick.controller.name,
                          model_id=labels.model_id, seed=labels.seed, source=labels.source, dt=dt, extra=meta_extra)  # fmt: skip
-        return Trial(meta=meta, time=np.arange(n) * dt, pose=pose, velocity=log.velocity, wrench=log.wrench,
-                     reference=log.reference, prediction=pred, intent=intent, effort_h=log.effort_h,
-                     effort_r=log.effort_r, fault=log.fault, joints=log.joints, joint_velocity=log.joint_velocity)  # fmt: skip
+        c = columns
+        return Trial(meta=meta, time=np.arange(n) * dt, pose=pose, velocity=c["velocity"], wrench=c["wrench"],
+                     reference=c["reference"], prediction=pred, intent=intent, effort_h=c["effort_h"],
+                     effort_r=c["effort_r"], fault=fault, joints=c["joints"], joint_velocity=c["joint_velocity"])  # fmt: skip
+
+
+#: The log's columns that must be finite, and the flag a row held over a non-finite value gets.
+_FINITE_COLUMNS = (
+    ("pose", Fault.NONFINITE_STATE), ("velocity", Fault.NONFINITE_STATE), ("wrench", Fault.NONFINITE_WRENCH),
+    ("reference", Fault.NONFINITE_REFERENCE), ("effort_h", Fault.NONFINITE_WRENCH),
+    ("effort_r", Fault.NONFINITE_EFFORT), ("joints", Fault.NONFINITE_STATE),
+    ("joint_velocity", Fault.NONFINITE_EFFORT),
+)  # fmt: skip
+
+
+def _hold_nonfinite(log: LoopLog) -> tuple[dict[str, Any], np.ndarray, dict[str, dict[str, int]]]:
+    """The log's columns with every non-finite row replaced by the last finite one before it
+    (the first finite one after it at the start; zeros if none), the fault column with that
+    column's flag on those ticks, and {column: {"first_tick", "ticks"}} of what was replaced.
+    On a finite log: the columns and the fault column themselves (no copy)."""
+    columns: dict[str, Any] = {name: getattr(log, name) for name, _ in _FINITE_COLUMNS}
+    fault = log.fault
+    held: dict[str, dict[str, int]] = {}
+    for name, flag in _FINITE_COLUMNS:
+        a = columns[name]
+        if a is None:
+            continue
+        with np.errstate(all="ignore"):
+            good = np.isfinite(a).all(axis=1)
+        if good.all():
+            continue
+        bad = np.flatnonzero(~good)
+        held[name] = {"first_tick": int(bad[0]), "ticks": int(bad.size)}
+        a = a.copy()
+        idx = np.where(good, np.arange(a.shape[0]), -1)
+        np.maximum.accumulate(idx, out=idx)  # the last good row at or before each row
+        first = int(np.argmax(good)) if good.any() else -1
+        idx[idx < 0] = first
+        if first < 0:
+            a[:] = 0.0
+        else:
+            a[:] = a[idx]
+        columns[name] = a
+        if fault is log.fault:
+            fault = fault.copy()
+        fault[bad] |= int(flag)
+    return columns, fault, held
 
 
 def build_episode(

@@ -23,6 +23,11 @@ target), at ``n_max`` ticks, or when the safety layer has stopped the robot (the
 then lets the world brake, logs ``ended = "safety_stop"`` and returns; a robot
 protective or emergency stop ends it the same way, with ``ended = "robot_stop"``; a
 lost link to the robot (a ``ConnectionError`` from the world) with ``"link_lost"``).
+Any other exception from the world's ``read`` or ``apply`` (a sensor driver's read
+timeout, an ``OSError`` of its socket) ends the run the same controlled way, with
+``"world_error"``; one from the tick or the ``on_tick`` monitor with ``"internal_error"``:
+the loop calls ``world.stop()``, keeps every row logged so far and says in ``message``
+what raised where, so the run's record is written and no traceback reaches the user.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from coassist.errors import CoassistError
 from coassist.interfaces import Fault
 from coassist.runtime.tick import ControlTick
 from coassist.runtime.world import RobotState, World, finite_vector
@@ -185,12 +191,20 @@ class LoopRun:
         try:
             self._t0 = self.clock()
             self._state = self.world.read()
-            row = self.tick.sense(k, self._state, self.upstream)
-            if self.split:  # other runs' work follows: time this part alone
-                self._spent = self.clock() - self._t0
-        except ConnectionError as exc:
-            self._link_lost(k, exc)
+        except Exception as exc:  # noqa: BLE001 - a lost link, a driver's error: a controlled stop
+            self._world_failed(k, exc, "read")
             return LINK_LOST
+        upstream = self.upstream
+        if self.overrun_of and float(getattr(self.world, "last_overrun", 0.0) or 0.0) > 0.0:
+            # a world that measures the gap at read (the robot's own clock): this tick is late too
+            upstream |= Fault.DEADLINE_MISS
+        try:
+            row = self.tick.sense(k, self._state, upstream)
+        except Exception as exc:  # noqa: BLE001 - a bug of a stage: stop, keep what was logged
+            self._failed(k, "internal_error", f"the control tick failed at tick {k} ({_what(exc)}); the arm was stopped")
+            return LINK_LOST
+        if self.split:  # other runs' work follows: time this part alone
+            self._spent = self.clock() - self._t0
         return row
 
     def act(self, k: int, intent: Any, control: Any = None) -> bool:
@@ -207,11 +221,15 @@ class LoopRun:
         try:
             t1 = self.clock() if self.split else self._t0
             out = self.tick.decide(intent) if control is None else self.tick.finish(control)
-            # read → command (the intent included); apply() simulates or waits for the period
-            spent = self.clock() - t1 + (self._spent if self.split else 0.0)
+        except Exception as exc:  # noqa: BLE001 - a bug of a stage: stop, keep what was logged
+            self._failed(k, "internal_error", f"the control tick failed at tick {k} ({_what(exc)}); the arm was stopped")
+            return True
+        # read → command (the intent included); apply() simulates or waits for the period
+        spent = self.clock() - t1 + (self._spent if self.split else 0.0)
+        try:
             world.apply(out.command)
-        except ConnectionError as exc:  # the robot link dropped: nothing more can be sent
-            self._link_lost(k, exc)
+        except Exception as exc:  # noqa: BLE001 - the link dropped, or the driver failed: nothing more is sent
+            self._world_failed(k, exc, "apply")
             return True
         self.compute[k] = spent
         upstream = Fault.NONE
@@ -239,7 +257,12 @@ class LoopRun:
             else:  # a glitch: the tick flagged it (NONFINITE_STATE); the log holds the last good row
                 self.joints[k] = self.joints[k - 1] if k else self.held_q
         if self.on_tick is not None:
-            self.on_tick(k, state, out)
+            try:
+                self.on_tick(k, state, out)
+            except Exception as exc:  # noqa: BLE001 - a monitor's failure stops the run, not the process
+                self._failed(k + 1, "internal_error",
+                             f"the monitor (on_tick) failed at tick {k} ({_what(exc)}); the arm was stopped")  # fmt: skip
+                return True
         if out.command.stop:
             self.n = k + 1
             robot = out.fault & (Fault.ROBOT_PROTECTIVE_STOP | Fault.ROBOT_EMERGENCY_STOP)
@@ -258,12 +281,22 @@ class LoopRun:
         call); ``split`` runs only, between :meth:`sense` and :meth:`act`."""
         self._spent += seconds
 
-    def _link_lost(self, k: int, exc: ConnectionError) -> None:
-        self.n, self.ended = k, "link_lost"
-        self.message = f"the link to the robot was lost ({exc}); check the cable and the robot, then rerun"
+    def _world_failed(self, k: int, exc: Exception, where: str) -> None:
+        """The world's ``read`` or ``apply`` of tick k raised: end the run with rows 0 … k−1."""
+        if isinstance(exc, ConnectionError):  # the robot link dropped
+            self._failed(k, "link_lost", f"the link to the robot was lost ({exc}); check the cable and the robot, then rerun")
+        elif isinstance(exc, CoassistError):  # coassist's own words (a refused input): they say what to do
+            self._failed(k, "world_error", f"{exc} (at tick {k}; the arm was stopped)")
+        else:
+            self._failed(k, "world_error", f"the robot's {where}() failed at tick {k} ({_what(exc)}); the arm was "
+                                           "stopped: check the robot, its sensor and their drivers, then rerun")  # fmt: skip
+
+    def _failed(self, n: int, ended: str, message: str) -> None:
+        """End the run after ``n`` logged rows: stop the world (whatever it says), keep the rows."""
+        self.n, self.ended, self.message = n, ended, message
         try:
             self.world.stop()
-        except Exception:
+        except Exception:  # noqa: BLE001 - a dead link: the robot's own watchdog brakes it
             pass
 
     def log(self) -> LoopLog:
@@ -288,6 +321,12 @@ def _hand_reader(world: World) -> Callable[[], object] | None:
     if hasattr(type(world), "hand_wrench"):
         return lambda: world.hand_wrench
     return None
+
+
+def _what(exc: BaseException) -> str:
+    """``Type: text`` of an exception, on one line."""
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def _stop_message(f: Fault) -> str:

@@ -27,6 +27,13 @@ limit even as J changes between ticks).
    hand wrench non-finite or of the wrong shape: the target becomes 0 (DECELERATING),
    reached along the acceleration ramp of step 5. ``max_bad_ticks`` bad ticks in a row
    latch STOPPED; a good tick resets the count.
+   *After a stall* (DEADLINE_MISS upstream, with the measured joint velocity q̇ₘ given):
+   if ‖q̇ₘ − q̇⁻‖∞ > 2 m a dt — more than tracking lag explains: the robot did not keep
+   the last command while the loop was away (a Franka brakes to rest when its 50 ms hold
+   runs out) — q̇⁻ becomes q̇ₘ (scaled into the joint speed limits), so every step from
+   here on is an acceleration step from what the arm really does. Otherwise q̇⁻ is kept
+   (the MuJoCo UR5 lags its command by at most 0.095 rad/s on the fault table's deadline
+   ticks, against 2 m a dt = 0.125 rad/s at 125 Hz); ``resumed_from_measured`` counts them.
 3. *Manipulability* (Yoshikawa) w = ∏ σ_i(J) (= |det J| for n = 6, √det(J Jᵀ) for n > 6,
    √det(Jᵀ J) for n < 6). Below w_min the target is scaled by
    clip((w − w_min/2)/(w_min/2), 0, 1): zero at half the guard (SINGULARITY).
@@ -132,6 +139,7 @@ _ST = int(Fault.STOPPED)
 _IE = int(Fault.INTERNAL_ERROR)
 _II = int(Fault.INVALID_INPUT)
 _NE = int(Fault.NONFINITE_EFFORT)
+_DM = int(Fault.DEADLINE_MISS)
 
 #: The flags the layer raises, counted in ``SafetyLayer.interventions``.
 _COUNTED = (
@@ -522,6 +530,8 @@ class SafetyLayer:
     limit_conflicts : ticks of the residual case (step 6c): J or the pose jumped so that
         no command within the acceleration limit kept the tool speed or workspace set;
         the layer braked at the acceleration limit.
+    resumed_from_measured : ticks after a stall on which q̇⁻ became the measured joint
+        velocity (step 2).
     """
 
     def __init__(self, limits: SafetyLimits, dt: float, n_joints: int) -> None:
@@ -567,6 +577,7 @@ class SafetyLayer:
         self._decelerating = False
         self.bad_ticks = 0
         self.limit_conflicts = 0
+        self.resumed_from_measured = 0
         self.interventions = {name: 0 for _, name in _COUNTED_BITS}
 
     @property
@@ -714,18 +725,21 @@ class SafetyLayer:
 
     # ------------------------------------------------------------------ joint stage
     def limit_joint_velocity(self, qd, J, pose, hand_wrench, upstream: Fault = Fault.NONE,
-                             robot_stop: Fault = Fault.NONE) -> tuple[np.ndarray, Fault, bool]:
+                             robot_stop: Fault = Fault.NONE, measured=None) -> tuple[np.ndarray, Fault, bool]:  # fmt: skip
         """The joint velocity command to send: (command (n,) [rad/s], flags, stop).
 
         qd : (n,) the requested joint velocity; J : (6, n) the Jacobian at the measured
         q; pose : (6,) the measured TCP pose; hand_wrench : (6,) the hand wrench [N, N·m]
         (any frame: only its norms are used); upstream : the tick's faults so far;
-        robot_stop : the robot's own stop flags. Stages in the module docstring. Never
-        raises; the command is always a new finite array.
+        robot_stop : the robot's own stop flags; measured : (n,) the measured joint
+        velocity [rad/s] on a tick after a stall (DEADLINE_MISS; step 2), else None.
+        Stages in the module docstring. Never raises; the command is always a new finite array.
         """
         try:
             # garbage in (1e300 · 1e300) is handled, not warned about on every tick
             with np.errstate(all="ignore"):
+                if measured is not None:
+                    self._resume_from(measured, upstream)
                 return self._limit_joint_velocity(qd, J, pose, hand_wrench, upstream, robot_stop)
         except Exception:
             # Something unforeseen: treat it as a bad tick and ramp toward rest from the
@@ -746,6 +760,21 @@ class SafetyLayer:
                 return np.array(out, dtype=float), _fault(flags), stop
             except Exception:  # pragma: no cover - last resort
                 return np.zeros(self._n), Fault.INTERNAL_ERROR | Fault.STOPPED, True
+
+    def _resume_from(self, measured, upstream) -> None:
+        """After a stall, q̇⁻ := the measured q̇ when the robot did not keep the last command (step 2)."""
+        up = _fault_word(upstream)
+        if up is None or not up & _DM or self._stopped:
+            return
+        m = _vector(measured, self._n)
+        if m is None:
+            return
+        ml = m.tolist()
+        if max(abs(a - c) for a, c in zip(ml, self._prev)) <= 2.0 * self._acc_m:
+            return
+        r = max(abs(v) * iv for v, iv in zip(ml, self._inv_vmax_m))
+        self._prev = [v / r for v in ml] if r > 1.0 else ml
+        self.resumed_from_measured += 1
 
     def _ramp_to_rest(self, prev: list) -> list:
         """prev moved one (margin) acceleration step toward 0, along its own direction."""

@@ -85,6 +85,7 @@ _RESET_ADMITTANCE = (
     | Fault.STOPPED
 )
 _ROTATION = (3, 4, 5)
+_DEADLINE_MISS = int(Fault.DEADLINE_MISS)
 
 
 @dataclass(frozen=True)
@@ -450,7 +451,10 @@ class ControlTick:
             else:
                 qd = self._redundant(q, J, tw)
         Jc = J if J is not None else np.zeros((6, self.kinematics.n_joints))
-        qd, lf, stop = self.safety.limit_joint_velocity(qd, Jc, pose, hand, upstream | f, self._robot_stop(state))
+        # after a stall the layer ramps from what the arm measures (it may have braked on its own)
+        measured = state.qd if int(upstream) & _DEADLINE_MISS else None
+        qd, lf, stop = self.safety.limit_joint_velocity(qd, Jc, pose, hand, upstream | f, self._robot_stop(state),
+                                                        measured=measured)  # fmt: skip
         sf |= lf | f
         twist_cmd = Jc @ qd
         if (sf & _RESET_ADMITTANCE) or bad:

@@ -10,7 +10,8 @@ counter and the tick time. It returns :class:`WrenchReading`: the hand wrench
 
 Stages, in order::
 
-    1. validate      w_raw not 6 finite reals         → 0, NONFINITE_WRENCH / INVALID_INPUT
+    1. validate      w_raw not 6 finite reals, or R not finite with |r_ij| ≤ 1
+                                                       → 0, NONFINITE_WRENCH / INVALID_INPUT
     2. stale         seq unchanged for > max_sample_age, or new samples
                      bit-identical for > max_frozen_time → 0, SENSOR_STALE
     3. spike         |w_raw,i| > 1.5·range, or |Δw_raw,i| > spike_jump (sample to sample)
@@ -85,6 +86,9 @@ IMPLAUSIBLE_RANGE_FACTOR = 1.5
 #: WrenchConfig.max_frozen_time for a measured sensor [s]: a real F/T sensor's noise moves
 #: some channel every sample, so 0.1 s of bit-identical samples is a stuck sensor.
 MEASURED_FROZEN_TIME = 0.1
+#: Largest entry of a sensor rotation accepted (a rotation's entries are cosines, |r_ij| ≤ 1;
+#: the margin covers rounding of a composed or quaternion-made matrix).
+_R_MAX = 1.0 + 1e-6
 #: Relative margin under the range at which a channel counts as saturated (the sensor
 #: clips exactly at its range; float noise must not hide it).
 _SATURATION_MARGIN = 1e-6
@@ -435,6 +439,9 @@ class WrenchPipeline:
             # x·0 is 0 for a finite x and NaN for ±inf/NaN: one comparison checks all nine.
             s = (r00 + r01 + r02 + r10 + r11 + r12 + r20 + r21 + r22) * 0.0
             if s != s:
+                fault |= Fault.INVALID_INPUT
+            elif max(abs(r00), abs(r01), abs(r02), abs(r10), abs(r11), abs(r12), abs(r20), abs(r21), abs(r22)) > _R_MAX:
+                # not a rotation (its entries are cosines): a 1e300 would poison the filter for seconds
                 fault |= Fault.INVALID_INPUT
         w = raw
         if not (type(w) is np.ndarray and w.shape == (6,) and w.dtype.kind == "f"):
