@@ -102,9 +102,11 @@ def _int(value: Any, name: str, lo: int, hi: int | None = None) -> int:
     return int(value)
 
 
-def _seconds(value: Any, name: str, *, positive: bool = False, optional: bool = False) -> float | None:
-    if value is None and optional:
-        return None
+def _opt_seconds(value: Any, name: str) -> float | None:
+    return None if value is None else _seconds(value, name, positive=True)
+
+
+def _seconds(value: Any, name: str, *, positive: bool = False) -> float:
     if not is_real_number(value) or not math.isfinite(value) or value < 0 or (positive and value == 0):
         raise PlanError(f"{name} must be a finite number of seconds {'> 0' if positive else '>= 0'}, got {value!r}")
     return float(value)
@@ -346,21 +348,21 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     obj = _choice(t.get("object", "handle"), "trials.object", tuple(OBJECTS), "object")
     if world == "play" and obj != "handle":
         raise PlanError(f"trials.object must be 'handle' in the play world (the page's robot carries nothing), got {obj!r}")
-    motion_time = _seconds(t.get("motion_time"), "trials.motion_time", positive=True, optional=True)
+    motion_time = _opt_seconds(t.get("motion_time"), "trials.motion_time")
     if motion_time is not None and world != "play":
         raise PlanError("trials.motion_time applies to the play world only (the arm worlds plan the thesis' motion times)")
     trials = TrialsPlan(
         tasks=tasks, per_condition=_int(t.get("per_condition", 3), "trials.per_condition", 1, 1000),
         practice=_int(t.get("practice", 1), "trials.practice", 0, 100), object=obj,
         obstacle=_choice(t.get("obstacle", "small"), "trials.obstacle", tuple(OBSTACLES), "obstacle"),
-        motion_time=motion_time, dwell=float(_seconds(t.get("dwell", 3.0), "trials.dwell", positive=True)),
+        motion_time=motion_time, dwell=_seconds(t.get("dwell", 3.0), "trials.dwell", positive=True),
         arrive_radius=_number(t.get("arrive_radius", 0.025), "trials.arrive_radius", "in (0, 0.5] m", lambda v: 0 < v <= 0.5),
-        time_limit=_seconds(t.get("time_limit"), "trials.time_limit", positive=True, optional=True), preset=preset,
+        time_limit=_opt_seconds(t.get("time_limit"), "trials.time_limit"), preset=preset,
     )  # fmt: skip
 
     r = _table(data, "rest", ("between_conditions", "between_trials"))
-    rest = RestPlan(float(_seconds(r.get("between_conditions", 60.0), "rest.between_conditions")),
-                    float(_seconds(r.get("between_trials", 0.0), "rest.between_trials")))  # fmt: skip
+    rest = RestPlan(_seconds(r.get("between_conditions", 60.0), "rest.between_conditions"),
+                    _seconds(r.get("between_trials", 0.0), "rest.between_trials"))  # fmt: skip
 
     q = _table(data, "questionnaire", ("tlx", "likert", "likert_points"))
     likert = q.get("likert", list(DEFAULT_LIKERT))
@@ -398,15 +400,15 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
         tab = _table(data, protocol, ("source_model", "trials", "controller"))
         if "source_model" not in tab:
             raise PlanError(f"{protocol}.source_model is missing (the model the participant starts from)")
-        kw = {"source_model": _model_path(tab["source_model"], f"{protocol}.source_model", base),
-              "trials": _int(tab.get("trials", 15), f"{protocol}.trials", 2, 1000),
-              "controller": _choice(tab.get("controller", "cooperative"), f"{protocol}.controller", CONTROLLER_KINDS, "controller")}  # fmt: skip
-        if not kw["controller"].startswith("cooperative"):
-            raise PlanError(f"{protocol}.controller must use the model (cooperative or cooperative-arbitrated), got {kw['controller']!r}")
+        source = _model_path(tab["source_model"], f"{protocol}.source_model", base)
+        n = _int(tab.get("trials", 15), f"{protocol}.trials", 2, 1000)
+        controller = _choice(tab.get("controller", "cooperative"), f"{protocol}.controller", CONTROLLER_KINDS, "controller")
+        if not controller.startswith("cooperative"):
+            raise PlanError(f"{protocol}.controller must use the model (cooperative or cooperative-arbitrated), got {controller!r}")
         if protocol == "transfer":
-            transfer = TransferPlan(**kw)
+            transfer = TransferPlan(source, n, controller)
         else:
-            online = OnlinePlan(**kw)
+            online = OnlinePlan(source, n, controller)
     return StudyPlan(name=name, protocol=protocol, world=world, participants=participants, seed=seed,
                      conditions=conditions, trials=trials, rest=rest, questionnaire=questionnaire, training=training,
                      iterative=iterative, transfer=transfer, online=online)  # fmt: skip

@@ -227,11 +227,11 @@ class ParticipantRun:
             self._ensure_model(name)
             return str(self._model_dir(name)), name
         if ref == "latest:online":
-            name = self._newest_online()
-            if name is None:
+            newest = self._newest_online()
+            if newest is None:
                 assert self.plan.online is not None
                 return self.plan.online.source_model, None
-            return str(self._model_dir(name)), name
+            return str(self._model_dir(newest)), newest
         return ref, None
 
     # models -------------------------------------------------------------------------------------
@@ -289,6 +289,7 @@ class ParticipantRun:
         name = step["model"]
         if step["init"] == "online" and self.training.busy(self._online_models()):
             return {"model": name, "deferred": True}  # the loop never waits: the next update takes these trials too
+        assert self.plan.training is not None  # plans that train have [training]
         job = TrainJob(data=tuple(str(self.folder.block(b)) for b in step["data"]), out=str(self._model_dir(name)),
                        init=self._init(step), training=self.plan.training)  # fmt: skip
         if not model_ready(job.out):

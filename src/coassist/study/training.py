@@ -44,11 +44,10 @@ def _preset(job: TrainJob):
     t = job.training
     p = with_overrides(MODEL_PRESETS.lookup(t.preset), epochs=t.epochs, lr=t.lr, batch_size=t.batch_size, seed=t.seed,
                        threads=t.threads, test_fraction=t.test_fraction, init=job.init, optimizer=t.optimizer)  # fmt: skip
-    if job.init == "scratch":
-        sizes = {k: v for k, v in (("lstm_layers", t.layers), ("hidden", t.hidden), ("fc", t.fc)) if v is not None}
-        if sizes:
-            p = replace(p, **sizes)
-            p.network(2)  # validates the sizes
+    if job.init == "scratch" and (t.layers, t.hidden, t.fc) != (None, None, None):
+        p = replace(p, lstm_layers=p.lstm_layers if t.layers is None else t.layers,
+                    hidden=p.hidden if t.hidden is None else t.hidden, fc=p.fc if t.fc is None else t.fc)  # fmt: skip
+        p.network(2)  # validates the sizes
     return p
 
 
