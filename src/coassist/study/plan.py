@@ -349,8 +349,11 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     if world == "play" and obj != "handle":
         raise PlanError(f"trials.object must be 'handle' in the play world (the page's robot carries nothing), got {obj!r}")
     motion_time = _opt_seconds(t.get("motion_time"), "trials.motion_time")
-    if motion_time is not None and world != "play":
-        raise PlanError("trials.motion_time applies to the play world only (the arm worlds plan the thesis' motion times)")
+    if world != "play":  # coassist drive plans the thesis' motion times and ends a trial after 5 s in the 2.5 cm ball
+        for key in ("motion_time", "dwell", "arrive_radius"):
+            if key in t:
+                raise PlanError(f"trials.{key} applies to the play world only (the arm worlds run coassist drive's "
+                                "trials: the thesis' motion times, 5 s in the 2.5 cm target ball)")  # fmt: skip
     trials = TrialsPlan(
         tasks=tasks, per_condition=_int(t.get("per_condition", 3), "trials.per_condition", 1, 1000),
         practice=_int(t.get("practice", 1), "trials.practice", 0, 100), object=obj,
