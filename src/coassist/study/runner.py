@@ -196,7 +196,8 @@ class ParticipantRun:
         page_name = step["label"] or "go"
         meta = {"study": plan.name, "study_participant": self.id, "study_step": k, "study_block": step["block"],
                 "study_condition": step["condition"], "study_label": step["label"], "study_position": step["position"],
-                "study_practice": step["practice"], "study_model": model_name}  # fmt: skip
+                "study_practice": step["practice"], "study_model": model_name,
+                "study_operator": None if operator is None else simulated_profile(operator, plan.seed).name}  # fmt: skip
         setup = TrialSetup(step=k, page_name=page_name, controller=step["controller"], intent=intent, task=task,
                            seed=step["seed"], meta=meta, operator=operator if self.page is None else None, hand=hand)  # fmt: skip
         what = "practice trial" if step["practice"] else "trial"
