@@ -78,7 +78,9 @@
   api.extend = (m) => {
     if (m.type === "init" && m.study) show(m.study);
     else if (m.type === "step") show(m);
-    else if (api.study && (m.type === "result" || m.type === "started" || m.type === "status")) {
+    else if (api.study && m.type === "result") {  // the trial is done: nothing to start until the next step comes
+      api.study = Object.assign({}, api.study, { kind: "wait" }); api.startName = null; $("start").disabled = true;
+    } else if (api.study && (m.type === "started" || m.type === "status")) {
       $("start").disabled = api.study.kind !== "trial" || api.running || api.role !== "hand";
     }
   };
