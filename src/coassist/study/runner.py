@@ -25,6 +25,7 @@ started again when its model is next needed (training is deterministic: same mod
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -37,7 +38,7 @@ from coassist.play.session import PlayConfig
 from coassist.scenario.tasks import task_for_seed
 from coassist.study.protocols import participant_steps
 from coassist.study.questionnaires import form_for
-from coassist.study.store import ParticipantFolder, StudyFolder, StudyFolderError, step_key, trial_record
+from coassist.study.store import ParticipantFolder, StudyFolder, StudyFolderError, step_key, trial_record, utc_now
 from coassist.study.training import BackgroundTraining, TrainJob, model_ready, train_command
 
 __all__ = ["ParticipantRun", "simulated_ids"]
@@ -160,7 +161,7 @@ class ParticipantRun:
             k = len(self.done)
             step = self.steps[k]
             record = getattr(self, f"_{step['kind']}")(k, step)
-            record = {"step": k, "kind": step["kind"], "key": step_key(step), **record}
+            record = {"step": k, "kind": step["kind"], "key": step_key(step), **record, "t": utc_now()}
             self.folder.append(record)
             self.done.append(record)
         for name in self._train_jobs():  # every model this participant's study trains, finished
@@ -184,7 +185,9 @@ class ParticipantRun:
 
         plan = self.plan
         tp = plan.trials
-        intent, model_name = self._intent(step["intent"])
+        t0 = time.monotonic()
+        intent, model_name = self._intent(step["intent"])  # a model still training is waited for here
+        waited = time.monotonic() - t0
         task = task_for_seed(step["task"], step["seed"], obstacle=tp.obstacle,
                              motion_time=tp.motion_time if plan.world == "play" else None)  # fmt: skip
         hand = None
@@ -214,7 +217,7 @@ class ParticipantRun:
         file = manifest_files(folder)[-1]
         self.say(f"{self.id}: step {k + 1}/{len(self.steps)} {step['block']} trial {step['index'] + 1}: "
                  f"{trial.meta.extra.get('ended')}")  # fmt: skip
-        rec = trial_record(k, step, file, trial.meta.to_dict(), model=model_name)
+        rec = trial_record(k, step, file, trial.meta.to_dict(), model=model_name, waited_for_model_s=round(waited, 3))
         return {key: v for key, v in rec.items() if key not in ("step", "kind", "key")}
 
     def _intent(self, ref: str) -> tuple[str, str | None]:
@@ -293,12 +296,14 @@ class ParticipantRun:
         assert self.plan.training is not None  # plans that train have [training]
         job = TrainJob(data=tuple(str(self.folder.block(b)) for b in step["data"]), out=str(self._model_dir(name)),
                        init=self._init(step), training=self.plan.training)  # fmt: skip
-        if not model_ready(job.out):
+        ready = model_ready(job.out)
+        if not ready:
             self.training.submit(name, job)
             self.say(f"{self.id}: training {name} in the background ({job.init})")
         if step.get("wait"):
             self._ensure_model(name)
-        return {"model": name, "init": job.init, "data": list(job.data), "command": train_command(job)}
+        return {"model": name, "init": job.init, "data": list(job.data), "command": train_command(job),
+                "ready_when_recorded": model_ready(job.out) and not self.training.running(name), "was_ready": ready}  # fmt: skip
 
     def _freeze(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
         for name in self._online_models():  # the last update, if one is still training
@@ -336,8 +341,6 @@ class ParticipantRun:
         return f, (float(np.mean(sig)) if sig else None)
 
     def _rest(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
-        import time
-
         t0 = time.monotonic()
         seconds = float(step["seconds"]) if self.page is not None else 0.0
         view = self._view(k, step, seconds=seconds, ready=False,

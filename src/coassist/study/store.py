@@ -70,7 +70,7 @@ def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def _now() -> str:
+def utc_now() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
@@ -113,7 +113,7 @@ def init_study(plan_file: str | Path, out: str | Path) -> StudyFolder:
         labels = blinding_labels(max(len(_condition_names(plan)), 1), plan.seed)
         record = {
             "format": FORMAT, "name": plan.name, "protocol": plan.protocol, "world": plan.world,
-            "plan_sha256": _sha256(raw), "plan_dir": str(plan_file.parent.resolve()), "created": _now(),
+            "plan_sha256": _sha256(raw), "plan_dir": str(plan_file.parent.resolve()), "created": utc_now(),
             "coassist_version": coassist.__version__,
             # the blinding key: condition -> label shown on the page (kept here only)
             "labels": dict(zip(_condition_names(plan), labels)),
@@ -210,7 +210,7 @@ class StudyFolder:
                                            f"{'add' if rec.get('simulated') else 'leave out'} --simulate")  # fmt: skip
                 return rec
             number = len(table) + 1
-            rec = {"number": number, "row": number - 1, "simulated": bool(simulated), "registered": _now()}
+            rec = {"number": number, "row": number - 1, "simulated": bool(simulated), "registered": utc_now()}
             table[participant] = rec
             atomic_write_text(self.folder / PARTICIPANTS_NAME, _json(table))
             return rec
@@ -322,7 +322,7 @@ def trial_record(k: int, step: Mapping[str, Any], file: str, meta: Mapping[str, 
     """The progress line of trial step ``k`` written as ``file`` of its block."""
     extra = meta.get("extra", {})
     return {"step": k, "kind": "trial", "key": step_key(step), "block": step["block"], "file": file,
-            "model_id": meta.get("model_id"), "ended": extra.get("ended"), "t": _now(), **more}  # fmt: skip
+            "model_id": meta.get("model_id"), "ended": extra.get("ended"), "t": utc_now(), **more}  # fmt: skip
 
 
 def step_key(step: Mapping[str, Any]) -> str:
