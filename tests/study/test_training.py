@@ -87,6 +87,10 @@ def test_an_iterative_study_of_two_rounds_trains_what_coassist_train_trains(tmp_
     _cli_train(str(pf.block("round-1")), "--out", str(tmp_path / "cli-M1"), "--init", f"resume:{m0}", *TRAIN_OPTIONS)
     _same_weights(m1, tmp_path / "cli-M1")
     assert lines[11]["command"][:2] == ["coassist", "train"] and f"resume:{m0}" in lines[11]["command"]
+    from coassist.study.report import write_report
+
+    html, _ = write_report(study.folder)
+    assert "the stop criterion (eq. 4.13)" in html.read_text() and "M1" in html.read_text()
 
 
 @pytest.fixture
@@ -132,3 +136,47 @@ def test_a_transfer_study_trains_the_frozen_lstm_transfer_as_coassist_train(tmp_
     lstm = [k for k in src if k.startswith("lstm")]
     assert lstm and all(np.array_equal(src[k], tl[k]) for k in lstm)
     assert any(not np.array_equal(src[k], tl[k]) for k in src if k.startswith("head"))
+    from coassist.study.report import write_report
+
+    html, _ = write_report(study.folder)
+    assert "transferred (" in html.read_text() and "transfer-set" in html.read_text()
+
+
+def test_online_adaptation_never_delays_the_loop_and_meets_the_offline_transfer(tmp_path, source_model):
+    plan = tmp_path / "online.toml"
+    plan.write_text('[study]\nname = "online"\nprotocol = "online"\nworld = "play"\nparticipants = 2\n\n'
+                    f'[online]\nsource_model = "{source_model}"\ntrials = 4\n' + TRIALS + TRAINING)  # fmt: skip
+    study = init_study(plan, tmp_path / "study")
+    with ParticipantRun(study, "S01", simulate=True) as run:
+        run.run()
+    pf = study.participant("S01")
+    lines = pf.progress()
+    adaptation = [r for r in lines if r["kind"] == "trial" and r["block"] == "adaptation"]
+    updates = [r for r in lines if r["kind"] == "train" and r["model"].startswith("online-")]
+    assert len(adaptation) == 4 and len(updates) == 3
+    started = set()
+    for r in lines:
+        if r["kind"] == "train" and not r.get("deferred"):
+            started.add(r["model"])
+        if r in adaptation:
+            assert r["waited_for_model_s"] < 0.1  # a trial takes the newest model ready, it never waits
+            assert r["model"] is None or r["model"] in started  # the source, or an update started before it
+    first = updates[0]
+    assert not first.get("deferred") and first["init"] == f"transfer:{source_model}"
+    assert first["data"] == [str(pf.block("adaptation") / "trial_00000.parquet")]  # the trials so far, as files
+    freeze = next(r for r in lines if r["kind"] == "freeze")
+    offline = next(r for r in lines if r["kind"] == "train" and r["model"] == "offline")
+    assert offline["init"] == f"transfer:{source_model}" and len(offline["data"]) == 4
+    # the online and the offline models are each coassist train's on the same trial files
+    _cli_train(*first["data"], "--out", str(tmp_path / "cli-online-1"), "--init", f"transfer:{source_model}", *TRAIN_OPTIONS)
+    _same_weights(pf.folder / "models" / "online-1", tmp_path / "cli-online-1")
+    _cli_train(*offline["data"], "--out", str(tmp_path / "cli-offline"), "--init", f"transfer:{source_model}", *TRAIN_OPTIONS)
+    _same_weights(pf.folder / "models" / "offline", tmp_path / "cli-offline")
+    # then the last online model against the offline transfer, blinded
+    online = read_dataset(pf.block("online")).trials[0]
+    assert online.meta.model_id.startswith(f"{freeze['model_from']}@")
+    assert read_dataset(pf.block("offline")).trials[0].meta.model_id.startswith("offline@")
+    from coassist.study.report import write_report
+
+    _, summary = write_report(study.folder)
+    assert '"blocks": [\n  "online",\n  "offline"\n ]' in summary.read_text()

@@ -251,9 +251,21 @@ class ParticipantRun:
         step = self.steps[k]
         rec = self.done[k] if k < len(self.done) else None
         init = rec["init"] if rec is not None else self._init(step)
-        data = rec["data"] if rec is not None else [str(self.folder.block(b)) for b in step["data"]]
+        data = rec["data"] if rec is not None else self._data(step["data"])
         assert self.plan.training is not None  # plans that train have [training]
         return TrainJob(data=tuple(data), out=str(self._model_dir(name)), init=init, training=self.plan.training)
+
+    def _data(self, blocks: list[str]) -> tuple[str, ...]:
+        """What a train step trains on: the blocks' folders, or, for the online blocks that still grow while a
+        model trains, their trial files as they are now (so the job sees exactly these)."""
+        out: list[str] = []
+        for b in blocks:
+            folder = self.folder.block(b)
+            if b == "adaptation":
+                out += [str(folder / f) for f in manifest_files(folder)]
+            else:
+                out.append(str(folder))
+        return tuple(out)
 
     def _init(self, step: dict[str, Any]) -> str:
         init = step["init"]
@@ -294,8 +306,8 @@ class ParticipantRun:
         if step["init"] == "online" and self.training.busy(self._online_models()):
             return {"model": name, "deferred": True}  # the loop never waits: the next update takes these trials too
         assert self.plan.training is not None  # plans that train have [training]
-        job = TrainJob(data=tuple(str(self.folder.block(b)) for b in step["data"]), out=str(self._model_dir(name)),
-                       init=self._init(step), training=self.plan.training)  # fmt: skip
+        job = TrainJob(data=self._data(step["data"]), out=str(self._model_dir(name)), init=self._init(step),
+                       training=self.plan.training)  # fmt: skip
         ready = model_ready(job.out)
         if not ready:
             self.training.submit(name, job)
