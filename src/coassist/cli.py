@@ -976,6 +976,8 @@ def study_run(
 
                         webbrowser.open(run.url)
                 run.run()
+        except KeyboardInterrupt:
+            _fail(f"{pid}: stopped; what finished is kept, and the same command continues where it stopped", 130)
         except (StudyFolderError, PlanError, OutputBusyError, ValueError, RuntimeError, OSError) as exc:
             _fail(f"{pid}: {exc}")
         console.print(f"{pid}: complete", highlight=False)

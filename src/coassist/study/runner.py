@@ -86,12 +86,12 @@ class ParticipantRun:
         try:
             self._open()
         except BaseException:
-            self.close()
+            self.close(interrupted=True)
             raise
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def __exit__(self, exc_type: object, *exc: object) -> None:
+        self.close(interrupted=exc_type is not None)
 
     def _open(self) -> None:
         plan, rec = self.plan, self.record
@@ -134,9 +134,9 @@ class ParticipantRun:
     def url(self) -> str | None:
         return None if self.server is None else self.server.url
 
-    def close(self) -> None:
+    def close(self, *, interrupted: bool = False) -> None:
         try:
-            self.training.close()
+            self.training.close(interrupted=interrupted)
         finally:
             if self.server is not None:
                 self.server.stop()  # closes the session too

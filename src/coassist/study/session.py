@@ -238,6 +238,11 @@ class StudySession(PlaySession):
         """Run ``setup``'s trial and return it. ``wait_for_page``: the page's Start begins it (a trial the
         person aborts, or whose hand left, is shown again); else it starts at once."""
         if self.world == "play":
+            for other in [i for i in self._realtimes if i != setup.intent]:  # one model worker process at a time
+                rt = self._realtimes.pop(other)
+                self._sources.pop(other, None)
+                if rt is not None:
+                    rt.close()
             self.source, self._realtime = self._source(setup.intent)
         self.setup = setup
         self.hand = setup.hand if setup.hand is not None else self._page_hand

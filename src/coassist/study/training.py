@@ -120,10 +120,16 @@ class BackgroundTraining:
         """The job's record once it finished (its exception if it failed)."""
         return self._jobs[name].result()
 
-    def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
+    def close(self, *, interrupted: bool = False) -> None:
+        """Shut the worker down; ``interrupted`` (the run was stopped): end a training in progress now
+        instead of waiting for it (its model is trained again, the same, when next needed)."""
+        if self._pool is None:
+            return
+        if interrupted:
+            for proc in list(getattr(self._pool, "_processes", {}).values()):  # no public kill before Python 3.14
+                proc.terminate()
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._pool = None
 
 
 def model_ready(folder: str | Path) -> bool:
