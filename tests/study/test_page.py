@@ -12,6 +12,7 @@ import json
 import threading
 import time
 
+import numpy as np
 import pytest
 
 pytest.importorskip("starlette", reason="the study's page needs the web extra")
@@ -102,3 +103,25 @@ def test_the_page_is_blinded_and_a_simulated_hand_drives_the_study(tmp_path):
     # the answers entered on the page are the ones stored, per condition
     stored = {r["step"]: list(r["answers"].values()) for r in pf.progress() if r["kind"] == "questionnaire"}
     assert stored == {int(k): v for k, v in entered["answers"].items()}
+
+
+@pytest.mark.slow
+def test_the_page_is_the_hand_on_the_mujoco_ur5(tmp_path):
+    """The same page drives the MuJoCo UR5 (thesis' motion times, paced to the wall clock: ~16 s a trial)."""
+    pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra")
+    plan = comparison_plan(tmp_path / "plans", world="mujoco", per_condition=1, practice=0, timing="")
+    plan.write_text(plan.read_text().replace("between_conditions = 30.0", "between_conditions = 0.5")
+                    .replace('tasks = ["linear", "curved"]', 'tasks = ["linear"]'))  # fmt: skip
+    study = init_study(plan, tmp_path / "study")
+    received: list[str] = []
+    with ParticipantRun(study, "S01", simulate=True, page=("127.0.0.1", 0, None)) as run:
+        done = threading.Thread(target=run.run, daemon=True)
+        done.start()
+        play_page(run.url, OperatorPath(study.folder, "S01"), received, timeout=180)
+        done.join(30)
+        assert run.complete
+    assert not [s for s in SECRETS if any(s in text for text in received)]
+    for name in ("assistive", "impedance", "manual"):
+        trial = read_dataset(study.participant("S01").block(name)).trials[0]
+        assert trial.meta.source == "mujoco" and trial.meta.extra["ended"] == "target"
+        assert float(np.abs(trial.wrench[:, 0]).max()) > 1.0  # the page's hand pushed the arm
