@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from coassist.data import Trial, TrialMeta
+from coassist.errors import CoassistError
 from coassist.interfaces import fault_names
 from coassist.play.session import PREDICTION_STRIDE, PlayConfig, PlaySession, TrialResult, _score
 from coassist.scenario.tasks import Task, task_for_seed
@@ -58,8 +59,8 @@ class TrialSetup:
     hand: Any = None  # the page world's simulated hand (OperatorHand); None: the page's pointer
 
 
-class _Aborted(Exception):
-    pass
+class _Aborted(CoassistError, RuntimeError):
+    """The page aborted an arm world's trial (raised from drive's on_tick to end its loop)."""
 
 
 class StudySession(PlaySession):
