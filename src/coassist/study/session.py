@@ -174,7 +174,9 @@ class StudySession(PlaySession):
         every = max(1, int(round(config.rate_hz / 125.0)))
 
         def on_tick(k: int, state, out) -> None:
-            if self._abort is not None:
+            if self._abort is not None and self.world == "mujoco":
+                # a simulated arm stops where it is; a real arm's run is never cut from the page (its own
+                # stop and coassist drive's safety layer end it)
                 raise _Aborted(self._abort)
             if k % every:
                 return
