@@ -21,6 +21,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("runtime",),  # the control tick and loop, wrench pipeline, safety, one episode assembly for every world
     ("sim", "robot"),  # the worlds: the point-mass simulator; arms in MuJoCo or real (neither imports the other)
     ("experiments", "play"),  # thesis experiments, reports; a person in the loop (the live page)
+    ("study",),  # people in the loop, end to end: plans, protocols, the study folder, statistics, reports
     ("cli",),  # the command line
 )
 #: Imports between packages of the same layer that are allowed.

@@ -994,5 +994,118 @@ def reproduce(
     _wrote(f"{out / 'report.html'} and {out / 'summary.json'} in {summary['total_seconds']:.0f} s")
 
 
+# --------------------------------------------------------------------------- study
+
+study_app = typer.Typer(help="Run a study with people (or simulated participants): plan, run, report.",
+                        no_args_is_help=True, rich_markup_mode=None)
+app.add_typer(study_app, name="study")
+
+
+@study_app.command("init")
+def study_init(
+    plan: Path = typer.Argument(..., help="The study plan (TOML; docs/study.md)."),
+    out: Path = typer.Option(..., "--out", "-o", help="The study folder to make (e.g. studies/<name>)."),
+) -> None:
+    """Validate a study plan and make its study folder (the plan, its hash, the blinding key, the Latin square)."""
+    from coassist.study.plan import PlanError
+    from coassist.study.store import StudyFolderError, init_study
+
+    _folder_out(out, "--out")
+    try:
+        study = init_study(plan, out)
+    except PlanError as exc:
+        _fail(f"{plan}: {exc}", 2)
+    except StudyFolderError as exc:
+        _fail(str(exc), 2)
+    rec = study.record
+    console.print(f"study {rec['name']!r}: protocol {rec['protocol']}, world {rec['world']}"
+                  + (f", conditions shown as {', '.join(sorted(rec['labels'].values()))}" if rec["labels"] else ""),
+                  highlight=False, markup=False)  # fmt: skip
+    _wrote(str(out))
+
+
+@study_app.command("run")
+def study_run(
+    folder: Path = typer.Argument(..., help="The study folder (coassist study init)."),
+    participant: str = typer.Option(None, "--participant", "-p", help="The participant's pseudonymous id (e.g. P07; nothing personal). With --simulate, default: every planned participant, S01, S02, …"),
+    simulate: bool = typer.Option(False, help="Simulated participants from the operator population stand in for people (a dry run)."),
+    page: bool = typer.Option(None, "--page/--no-page", help="Serve the page (default: on for a person, off with --simulate)."),
+    realtime: bool = typer.Option(False, help="Pace simulated participants to the wall clock, as a person's trials."),
+    host: str = typer.Option("127.0.0.1", help="Address the page listens on; anything but this machine needs --token."),
+    port: int = typer.Option(8765, help="Port of the page (0: any free port)."),
+    token: str = typer.Option(None, help="Token the page must present (made for you on a non-local --host)."),
+    robot_host: str = typer.Option(None, help="The real arm's address (world ur or franka)."),
+    open_browser: bool = typer.Option(True, "--open/--no-open", help="Open the page in your web browser."),
+    yes: bool = typer.Option(False, "--yes", help="Do not ask before a real arm moves (scripts)."),
+) -> None:
+    """Run a participant's steps in their recorded order (continuing where they stopped)."""
+    from coassist._io import OutputBusyError
+    from coassist.study.plan import PlanError
+    from coassist.study.runner import ParticipantRun, simulated_ids
+    from coassist.study.store import StudyFolder, StudyFolderError
+
+    if not 0 <= port <= 65535:
+        _fail(f"--port must be 0..65535, got {port}", 2)
+    use_page = (not simulate) if page is None else page
+    try:
+        study = StudyFolder(folder)
+        plan = study.plan()
+    except (StudyFolderError, PlanError) as exc:
+        _fail(str(exc), 2)
+    if participant is None and not simulate:
+        _fail("--participant is needed for a person (a pseudonymous id such as P07)", 2)
+    ids = [participant] if participant is not None else simulated_ids(plan.participants)
+    if use_page:
+        try:
+            import starlette  # noqa: F401  (the web extra)
+
+            from coassist.play.server import is_loopback, new_token
+        except ImportError as exc:
+            _fail(f"the page needs the web extra ({exc.name} missing): pip install 'coassist[web]'")
+        if token is None and not is_loopback(host):
+            token = new_token()
+    confirm = _confirm_move(yes, "the emergency stop") if plan.world in ("ur", "franka") else None
+    for pid in ids:
+        try:
+            with ParticipantRun(study, pid, simulate=simulate, page=(host, port, token) if use_page else None,
+                                realtime=realtime, host=robot_host, confirm=confirm,
+                                say=lambda line: console.print(line, highlight=False, markup=False)) as run:  # fmt: skip
+                if run.complete:
+                    console.print(f"{pid}: already complete", highlight=False)
+                    continue
+                if run.url is not None:
+                    console.print(f"{pid}: open {run.url} (Ctrl+C stops; the same command continues)", highlight=False)
+                    if open_browser:
+                        import webbrowser
+
+                        webbrowser.open(run.url)
+                run.run()
+        except KeyboardInterrupt:
+            _fail(f"{pid}: stopped; what finished is kept, and the same command continues where it stopped", 130)
+        except (StudyFolderError, PlanError, OutputBusyError, ValueError, RuntimeError, OSError) as exc:
+            _fail(f"{pid}: {exc}")
+        console.print(f"{pid}: complete", highlight=False)
+    _wrote(str(folder))
+
+
+@study_app.command("report")
+def study_report(
+    folder: Path = typer.Argument(..., help="The study folder."),
+    out: Path = typer.Option(None, help="Folder for report.html and summary.json (default: <folder>/report)."),
+) -> None:
+    """The study's report: per participant and pooled measures, paired tests, questionnaires, order effects."""
+    from coassist.study.plan import PlanError
+    from coassist.study.report import write_report
+    from coassist.study.store import StudyFolderError
+
+    if out is not None:
+        _folder_out(out, "--out")
+    try:
+        html_path, json_path = write_report(folder, out)
+    except (StudyFolderError, PlanError) as exc:
+        _fail(str(exc), 2)
+    _wrote(f"{html_path} and {json_path}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     app()

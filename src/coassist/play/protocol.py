@@ -6,6 +6,8 @@ Client → server (JSON text frames of at most :data:`MAX_MESSAGE_BYTES`)::
     {"type": "start", "controller": name}                            start the next trial
     {"type": "abort"}                                                stop the trial, keep nothing
     {"type": "ping", "seq": int}                                     answered with a pong (latency floor)
+    {"type": "answers", "step": int, "values": [number, …]}          a study's questionnaire, in its items' order
+    {"type": "next", "step": int}                                    a study's rest is over: go on
 
 A message that is not exactly one of these — not JSON, too long, an unknown type, a
 missing or extra field, a wrong type, a non-finite or out-of-view number — raises
@@ -26,11 +28,14 @@ from dataclasses import dataclass
 from coassist._checks import is_integer, is_real_number
 from coassist.errors import CoassistError
 
-__all__ = ["MAX_MESSAGE_BYTES", "Abort", "InvalidMessage", "Ping", "Pointer", "Start", "parse_message"]
+__all__ = ["MAX_ANSWERS", "MAX_MESSAGE_BYTES", "Abort", "Answers", "InvalidMessage", "Next", "Ping", "Pointer", "Start",
+           "parse_message"]
 
 #: Longest client message accepted [bytes]; a pointer message is about 70.
 MAX_MESSAGE_BYTES = 512
 _MAX_SEQ = 2**53  # JavaScript's largest exact integer
+#: Most answers one questionnaire message may carry (six TLX subscales and twelve Likert items fit).
+MAX_ANSWERS = 32
 
 
 class InvalidMessage(CoassistError, ValueError):
@@ -60,8 +65,19 @@ class Ping:
     seq: int
 
 
+@dataclass(frozen=True)
+class Answers:
+    step: int
+    values: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class Next:
+    step: int
+
+
 _FIELDS = {"pointer": {"type", "x", "y", "down", "seq"}, "start": {"type", "controller"}, "abort": {"type"},
-           "ping": {"type", "seq"}}  # fmt: skip
+           "ping": {"type", "seq"}, "answers": {"type", "step", "values"}, "next": {"type", "step"}}  # fmt: skip
 
 
 def _number(value, name: str, lo: float, hi: float) -> float:
@@ -84,6 +100,9 @@ def parse_message(text, bounds: tuple[float, float, float, float], controllers: 
 
     bounds : (x_min, x_max, y_min, y_max) [m] a pointer may be in (the page's view).
     controllers : the names a ``start`` may ask for.
+
+    A study's answers are numbers in [0, 100] (a TLX subscale or a Likert point); whether they
+    fit the questionnaire asked is the study's check.
     """
     if not isinstance(text, str):
         raise InvalidMessage("not a text frame")
@@ -113,6 +132,13 @@ def parse_message(text, bounds: tuple[float, float, float, float], controllers: 
         return Start(name)
     if kind == "ping":
         return Ping(_seq(msg["seq"]))
+    if kind == "answers":
+        values = msg["values"]
+        if not isinstance(values, list) or len(values) > MAX_ANSWERS:
+            raise InvalidMessage(f"answers: values is not a list of at most {MAX_ANSWERS}")
+        return Answers(_seq(msg["step"]), tuple(_number(v, "answer", 0.0, 100.0) for v in values))
+    if kind == "next":
+        return Next(_seq(msg["step"]))
     return Abort()
 
 

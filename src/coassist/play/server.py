@@ -44,7 +44,9 @@ from typing import Any
 
 from coassist.play.protocol import (
     Abort,
+    Answers,
     InvalidMessage,
+    Next,
     Ping,
     Pointer,
     Start,
@@ -165,6 +167,7 @@ class Hub:
     def publish(self, message: dict) -> None:
         loop = self.loop
         if loop is not None and not loop.is_closed():
+            message = self.session.for_page(message)  # what a page may see of it (a study blinds it)
             try:
                 loop.call_soon_threadsafe(self._deliver, message)
             except RuntimeError:  # the event loop is shutting down
@@ -190,14 +193,14 @@ class Hub:
     def init_message(self, client: _Client) -> dict[str, Any]:
         s = self.session
         cur = s.current
-        return {
+        return s.for_page({
             "type": "init", "role": "hand" if client is self.hand else "watcher", "user": s.config.user,
             "mode": "monitor" if getattr(s, "watch_only", False) else "play",
             "folder": str(s.config.folder), "bounds": s.bounds, "controllers": list(s.config.controllers),
             "model": s.source.model_id, "preset": s.config.preset, "running": s.running,
             "scene": cur["scene"] if cur else s.scene(), "controller": cur["controller"] if cur else None,
             "results": [r.to_json() for r in s.results], "summary": s.summary(),
-        }  # fmt: skip
+        })  # fmt: skip
 
 
 def create_app(session: PlaySession, *, bind: tuple[str, int], token: str | None = None,
@@ -218,7 +221,6 @@ def create_app(session: PlaySession, *, bind: tuple[str, int], token: str | None
     static = files("coassist.play") / "static"
     page = (static / "index.html").read_text(encoding="utf-8")
     hub = Hub(session)
-    bounds, controllers = session.bounds, session.config.controllers
 
     bind_host, bind_port = bind
 
@@ -274,7 +276,7 @@ def create_app(session: PlaySession, *, bind: tuple[str, int], token: str | None
             hub.drop("rate")
             return
         try:
-            msg = parse_message(text, bounds, controllers)
+            msg = parse_message(text, session.bounds, session.page_choices())
         except InvalidMessage as exc:
             hub.drop(str(exc))
             return
@@ -292,6 +294,12 @@ def create_app(session: PlaySession, *, bind: tuple[str, int], token: str | None
                 hub.drop("start while running")
         elif isinstance(msg, Abort):
             session.abort()
+        elif isinstance(msg, Answers):
+            if not session.answer(msg.step, list(msg.values)):
+                hub.drop("answers: none asked")
+        elif isinstance(msg, Next):
+            if not session.proceed(msg.step):
+                hub.drop("next: nothing to go on to")
 
     async def _send(client: _Client) -> None:
         ws = client.websocket

@@ -261,6 +261,23 @@ class PlaySession:
                          "sigma": float(np.mean(sig)) if sig else None, "reached": len(sig)}  # fmt: skip
         return out
 
+    # ------------------------------------------------------------------ what a page is told and may ask
+    def page_choices(self) -> tuple[str, ...]:
+        """The names a page's ``start`` may ask for (the controllers offered)."""
+        return self.config.controllers
+
+    def for_page(self, message: dict[str, Any]) -> dict[str, Any]:
+        """``message`` as a page receives it; every message to a page passes here (a study blinds it)."""
+        return message
+
+    def answer(self, step: int, values: list[float]) -> bool:
+        """A questionnaire's answers from the page; False: none is asked (a study asks)."""
+        return False
+
+    def proceed(self, step: int) -> bool:
+        """The page's "go on" after a rest; False: nothing waits for it (a study's rests do)."""
+        return False
+
     def controller(self, name: str):
         if name not in self._controllers:
             raise ValueError(f"controller must be one of {self.config.controllers}, got {name!r}")

@@ -40,6 +40,8 @@
     };
   }
   function send(obj) { if (ws && ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify(obj)); }
+  api.send = send;
+  api.startName = null;  // a study names the step's condition (its label) instead of the picked controller
   function sendHand(eventTime) {
     seq += 1;
     if (eventTime !== null) {
@@ -89,6 +91,7 @@
       const t0 = pings.get(m.seq); pings.delete(m.seq);
       if (t0 !== undefined) api.pongs.push(performance.now() - t0);
     }
+    if (api.extend) api.extend(m);  // a study's own messages and its view of the others (study.js)
   }
 
   // ------------------------------------------------------------------ page
@@ -96,7 +99,7 @@
   function setRunning(on) { api.running = on; $("start").disabled = on || api.role !== "hand"; $("abort").disabled = !on || api.role !== "hand"; }
   function explain() { $("explain").textContent = EXPLAIN[$("controller").value] || ""; }
   $("controller").addEventListener("change", explain);
-  $("start").addEventListener("click", () => send({ type: "start", controller: $("controller").value }));
+  $("start").addEventListener("click", () => send({ type: "start", controller: api.startName || $("controller").value }));
   $("abort").addEventListener("click", () => send({ type: "abort" }));
   function renderResults() {
     const body = $("results").querySelector("tbody"); body.innerHTML = "";

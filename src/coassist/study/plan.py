@@ -1,0 +1,504 @@
+"""A study is a file: the TOML plan of ``coassist study``, read into frozen, validated dataclasses.
+
+Every error is one :class:`PlanError` line naming the field as written in the plan
+(``trials.per_condition must be an integer >= 1, got 0``; an unknown key gets a "did you
+mean"), so ``coassist study init`` can print it as it is. The plan of a comparison::
+
+    [study]
+    name = "comparison"
+    protocol = "comparison"        # comparison | iterative | transfer | online
+    world = "play"                 # play (the page) | mujoco (UR5 in MuJoCo) | ur | franka (a real arm)
+    participants = 4               # planned: the balanced Latin square is filled in this many rows
+    seed = 0
+
+    [[condition]]                  # comparison: two or more; shown on the page as A, B, C…
+    name = "assistive"
+    controller = "cooperative"     # coassist.control.presets.CONTROLLER_KINDS
+    intent = "nominal"             # nominal | a model folder (relative to the plan's folder)
+    [[condition]]
+    name = "impedance"
+    controller = "impedance"
+    [[condition]]
+    name = "manual"
+    controller = "manual"
+
+    [trials]
+    tasks = ["linear", "curved", "sinusoidal"]   # measured trial j follows tasks[j mod n]
+    per_condition = 3
+    practice = 1                   # practice trials before each condition's (not analysed)
+
+    [rest]
+    between_conditions = 60.0      # [s]
+
+    [questionnaire]                # after each condition
+    tlx = true                     # raw NASA-TLX, six items 0-100
+    likert = ["helped me", "I felt in control", "the motion was smooth", "I trusted it"]
+    likert_points = 7
+
+The other protocols add one table each (``[iterative]``, ``[transfer]``, ``[online]``)
+and ``[training]``, the options of ``coassist train`` the study's models are trained with
+(docs/study.md). Nothing personal goes into a plan: participants are pseudonymous ids
+given at run time.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from coassist._checks import is_integer, is_real_number
+from coassist.config import APPLICATION_PRESET, CONTROL_PRESETS
+from coassist.control.presets import CONTROLLER_KINDS
+from coassist.errors import CoassistError
+from coassist.registry import unknown_name_message
+from coassist.scenario.objects import OBJECTS
+from coassist.scenario.tasks import OBSTACLES, TASK_KINDS
+
+__all__ = [
+    "PROTOCOLS",
+    "WORLDS",
+    "Condition",
+    "IterativePlan",
+    "OnlinePlan",
+    "PlanError",
+    "QuestionnairePlan",
+    "RestPlan",
+    "StudyPlan",
+    "TrainingPlan",
+    "TransferPlan",
+    "TrialsPlan",
+    "load_plan",
+    "parse_plan",
+]
+
+PROTOCOLS = ("comparison", "iterative", "transfer", "online")
+#: play: the page's point-mass robot (the browser is the hand); mujoco: the UR5 in MuJoCo (the
+#: page as the hand, or a simulated participant); ur, franka: a real arm through ``coassist drive``.
+WORLDS = ("play", "mujoco", "ur", "franka")
+#: The Likert items of the issue (thesis' journal version asked the participants these).
+DEFAULT_LIKERT = ("helped me", "I felt in control", "the motion was smooth", "I trusted it")
+#: Folder names the study keeps for itself inside a participant's folder.
+RESERVED_NAMES = frozenset({"practice", "models", "answers", "transfer-set", "adaptation"})
+_NAME = re.compile(r"^[a-z0-9][a-z0-9_-]{0,31}$")
+_MAX_CONDITIONS = 26  # labelled A … Z
+
+
+class PlanError(CoassistError, ValueError):
+    """A study plan that cannot be run; the text is one line naming the field."""
+
+
+# ----------------------------------------------------------------------------- field checks
+
+
+def _int(value: Any, name: str, lo: int, hi: int | None = None) -> int:
+    if not is_integer(value) or value < lo or (hi is not None and value > hi):
+        rng = f">= {lo}" if hi is None else f"in {lo} … {hi}"
+        raise PlanError(f"{name} must be an integer {rng}, got {value!r}")
+    return int(value)
+
+
+def _opt_seconds(value: Any, name: str) -> float | None:
+    return None if value is None else _seconds(value, name, positive=True)
+
+
+def _seconds(value: Any, name: str, *, positive: bool = False) -> float:
+    if not is_real_number(value) or not math.isfinite(value) or value < 0 or (positive and value == 0):
+        raise PlanError(f"{name} must be a finite number of seconds {'> 0' if positive else '>= 0'}, got {value!r}")
+    return float(value)
+
+
+def _number(value: Any, name: str, what: str, ok) -> float:
+    if not is_real_number(value) or not math.isfinite(value) or not ok(value):
+        raise PlanError(f"{name} must be a finite number {what}, got {value!r}")
+    return float(value)
+
+
+def _choice(value: Any, name: str, choices, what: str) -> str:
+    if not isinstance(value, str) or value not in choices:
+        raise PlanError(f"{name}: {unknown_name_message(str(value), choices, what)}")
+    return value
+
+
+def _bool(value: Any, name: str) -> bool:
+    if not isinstance(value, bool):
+        raise PlanError(f"{name} must be true or false, got {value!r}")
+    return value
+
+
+def _table(data: Mapping[str, Any], key: str, fields: tuple[str, ...], where: str = "") -> dict[str, Any]:
+    """``data[key]`` as a table whose keys are all in ``fields`` (else one line naming the unknown key)."""
+    name = f"{where}{key}"
+    value = data.get(key, {})
+    if not isinstance(value, Mapping):
+        raise PlanError(f"{name} must be a table ([{name}]), got {type(value).__name__}")
+    for k in value:
+        if k not in fields:
+            raise PlanError(f"{name}.{k}: {unknown_name_message(k, fields, 'field')}")
+    return dict(value)
+
+
+def _model_path(value: Any, name: str, base: Path) -> str:
+    """A model folder named in the plan, relative to the plan's folder: its absolute path, checked now."""
+    if not isinstance(value, str) or not value:
+        raise PlanError(f"{name} must be a model folder written by coassist train, got {value!r}")
+    path = Path(value) if Path(value).is_absolute() else base / value
+    if not (path / "model.json").is_file():
+        raise PlanError(f"{name}: {value!r} is not a model folder (no model.json in {path})")
+    return str(path.resolve())
+
+
+def _intent(value: Any, name: str, base: Path) -> str:
+    if value == "nominal":
+        return "nominal"
+    if value == "oracle":
+        raise PlanError(f"{name}: a person has no oracle; use 'nominal' or a model folder")
+    return _model_path(value, name, base)
+
+
+# ----------------------------------------------------------------------------- the tables
+
+
+@dataclass(frozen=True)
+class Condition:
+    """One condition under test: its name (researcher-side only), the controller kind and its intent source.
+
+    name : letters, digits, ``-``, ``_`` (it names the condition's folder; the page never sees it).
+    controller : one of :data:`coassist.control.presets.CONTROLLER_KINDS`.
+    intent : ``"nominal"`` or the absolute path of a model folder.
+    """
+
+    name: str
+    controller: str
+    intent: str = "nominal"
+
+
+@dataclass(frozen=True)
+class TrialsPlan:
+    """The trials of every block.
+
+    tasks : the paths, measured trial j follows ``tasks[j mod n]`` (the same j in every condition:
+        conditions meet the same tasks and obstacles, so they are paired).
+    per_condition : measured trials per condition (comparison and the comparison phase of transfer/online).
+    practice : practice trials before each condition's measured ones (kept, not analysed).
+    object : carried object (arm worlds; the page's world has the handle only).
+    obstacle : ``small`` (the evaluation's box) or ``large`` (the application's).
+    motion_time : [s] planned motion time of every path (play world only; None: the thesis' per path).
+    dwell : [s] in the target ball that ends a trial (play world; the arm worlds dwell 5 s).
+    arrive_radius : [m] the target ball (σ's ε).
+    time_limit : [s] per trial; None: 2 × the plan's end + 10 s.
+    preset : control preset (:data:`coassist.config.CONTROL_PRESETS`).
+    """
+
+    tasks: tuple[str, ...] = ("linear", "curved", "sinusoidal")
+    per_condition: int = 3
+    practice: int = 1
+    object: str = "handle"
+    obstacle: str = "small"
+    motion_time: float | None = None
+    dwell: float = 3.0
+    arrive_radius: float = 0.025
+    time_limit: float | None = None
+    preset: str = APPLICATION_PRESET
+
+
+@dataclass(frozen=True)
+class RestPlan:
+    """Rests [s]: between conditions (and rounds), and between trials."""
+
+    between_conditions: float = 60.0
+    between_trials: float = 0.0
+
+
+@dataclass(frozen=True)
+class QuestionnairePlan:
+    """What the page asks after each condition: raw NASA-TLX (six items 0–100) and Likert items."""
+
+    tlx: bool = True
+    likert: tuple[str, ...] = DEFAULT_LIKERT
+    likert_points: int = 7
+
+    @property
+    def asked(self) -> bool:
+        return self.tlx or bool(self.likert)
+
+
+@dataclass(frozen=True)
+class TrainingPlan:
+    """The options of ``coassist train`` the study's models are trained with (the same names).
+
+    preset : an intent-model preset.  epochs, lr, batch_size, seed, threads, test_fraction,
+    optimizer : as ``coassist train``'s options (None: the preset's).  layers, hidden, fc :
+    the network's sizes (a model trained from scratch only).
+    """
+
+    preset: str = "default"
+    epochs: int | None = None
+    lr: float | None = None
+    batch_size: int | None = None
+    seed: int | None = None
+    threads: int | None = 1
+    test_fraction: float | None = None
+    optimizer: str | None = None
+    layers: int | None = None
+    hidden: int | None = None
+    fc: tuple[int, ...] | None = None
+
+
+@dataclass(frozen=True)
+class IterativePlan:
+    """Algorithm 4.1 with a person: round k collects ``trials_per_round`` with M_{k−1} in the loop
+    (round 0: the nominal plan), M_k trains in the background while the participant rests.
+
+    rounds : the most rounds.  tolerance : [m] the stop criterion of eq. 4.13 on the in-loop
+    e_RMS at ``criterion_horizon`` samples.  stop_at_criterion : end the study once it is met.
+    controller : the controller the models assist.
+    """
+
+    rounds: int = 3
+    trials_per_round: int = 6
+    tolerance: float = 1e-3
+    criterion_horizon: int = 50
+    stop_at_criterion: bool = True
+    controller: str = "cooperative"
+
+
+@dataclass(frozen=True)
+class TransferPlan:
+    """Algorithm 4.2 with a new participant: ``trials`` with the source model in the loop, the
+    frozen-LSTM transfer trained on them in the background, then the transferred model against
+    the source model (blinded, counterbalanced, ``[trials]`` per condition)."""
+
+    source_model: str
+    trials: int = 15
+    controller: str = "cooperative"
+
+
+@dataclass(frozen=True)
+class OnlinePlan:
+    """Online adaptation (thesis ch. 6): ``trials`` with the model in the loop while its FC head is
+    updated (frozen-LSTM transfer from ``source_model`` on the participant's trials so far) in a
+    background process after each trial; a trial takes the newest model ready when it starts,
+    never waiting. Then the last online model against the offline transfer on the same trials."""
+
+    source_model: str
+    trials: int = 15
+    controller: str = "cooperative"
+
+
+@dataclass(frozen=True)
+class StudyPlan:
+    """The whole plan (module docstring). ``base`` is the plan file's folder (model paths are relative to it)."""
+
+    name: str
+    protocol: str
+    world: str
+    participants: int
+    seed: int
+    conditions: tuple[Condition, ...]
+    trials: TrialsPlan = field(default_factory=TrialsPlan)
+    rest: RestPlan = field(default_factory=RestPlan)
+    questionnaire: QuestionnairePlan = field(default_factory=QuestionnairePlan)
+    training: TrainingPlan | None = None
+    iterative: IterativePlan | None = None
+    transfer: TransferPlan | None = None
+    online: OnlinePlan | None = None
+
+    def model_paths(self) -> tuple[str, ...]:
+        """Every model folder the plan names (their weights are recorded at ``study init``)."""
+        out = [c.intent for c in self.conditions if c.intent != "nominal"]
+        for extra in (self.transfer, self.online):
+            if extra is not None:
+                out.append(extra.source_model)
+        return tuple(dict.fromkeys(out))
+
+
+_TOP = ("study", "condition", "trials", "rest", "questionnaire", "training", "iterative", "transfer", "online")
+
+
+def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
+    """The :class:`StudyPlan` of a parsed TOML document; :class:`PlanError` naming the field."""
+    base = Path(base)
+    for k in data:
+        if k not in _TOP:
+            raise PlanError(f"{k}: {unknown_name_message(k, _TOP, 'table')}")
+    s = _table(data, "study", ("name", "protocol", "world", "participants", "seed"))
+    if "name" not in s:
+        raise PlanError("study.name is missing (a short name: letters, digits, - and _)")
+    name = s["name"]
+    if not isinstance(name, str) or not re.match(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$", name):
+        raise PlanError(f"study.name must be 1-64 letters, digits, '-' or '_', got {name!r}")
+    protocol = _choice(s.get("protocol", "comparison"), "study.protocol", PROTOCOLS, "protocol")
+    world = _choice(s.get("world", "play"), "study.world", WORLDS, "world")
+    participants = _int(s.get("participants", 4), "study.participants", 1, 999)
+    seed = _int(s.get("seed", 0), "study.seed", 0)
+
+    t = _table(data, "trials", tuple(TrialsPlan.__dataclass_fields__))
+    tasks = t.get("tasks", list(TrialsPlan.tasks))
+    if not isinstance(tasks, list) or not tasks:
+        raise PlanError(f"trials.tasks must be a list of paths from {TASK_KINDS}, got {tasks!r}")
+    tasks = tuple(_choice(v, f"trials.tasks[{i}]", TASK_KINDS, "task") for i, v in enumerate(tasks))
+    preset = t.get("preset", APPLICATION_PRESET)
+    if not isinstance(preset, str) or preset not in CONTROL_PRESETS:
+        raise PlanError(f"trials.preset: {unknown_name_message(str(preset), CONTROL_PRESETS, 'control preset')}")
+    obj = _choice(t.get("object", "handle"), "trials.object", tuple(OBJECTS), "object")
+    if world == "play" and obj != "handle":
+        raise PlanError(f"trials.object must be 'handle' in the play world (the page's robot carries nothing), got {obj!r}")
+    motion_time = _opt_seconds(t.get("motion_time"), "trials.motion_time")
+    if world != "play":  # coassist drive plans the thesis' motion times and ends a trial after 5 s in the 2.5 cm ball
+        for key in ("motion_time", "dwell", "arrive_radius"):
+            if key in t:
+                raise PlanError(f"trials.{key} applies to the play world only (the arm worlds run coassist drive's "
+                                "trials: the thesis' motion times, 5 s in the 2.5 cm target ball)")  # fmt: skip
+    trials = TrialsPlan(
+        tasks=tasks, per_condition=_int(t.get("per_condition", 3), "trials.per_condition", 1, 1000),
+        practice=_int(t.get("practice", 1), "trials.practice", 0, 100), object=obj,
+        obstacle=_choice(t.get("obstacle", "small"), "trials.obstacle", tuple(OBSTACLES), "obstacle"),
+        motion_time=motion_time, dwell=_seconds(t.get("dwell", 3.0), "trials.dwell", positive=True),
+        arrive_radius=_number(t.get("arrive_radius", 0.025), "trials.arrive_radius", "in (0, 0.5] m", lambda v: 0 < v <= 0.5),
+        time_limit=_opt_seconds(t.get("time_limit"), "trials.time_limit"), preset=preset,
+    )  # fmt: skip
+
+    r = _table(data, "rest", ("between_conditions", "between_trials"))
+    rest = RestPlan(_seconds(r.get("between_conditions", 60.0), "rest.between_conditions"),
+                    _seconds(r.get("between_trials", 0.0), "rest.between_trials"))  # fmt: skip
+
+    q = _table(data, "questionnaire", ("tlx", "likert", "likert_points"))
+    likert = q.get("likert", list(DEFAULT_LIKERT))
+    if not isinstance(likert, list) or len(likert) > 12:
+        raise PlanError(f"questionnaire.likert must be a list of at most 12 statements, got {likert!r}")
+    for i, item in enumerate(likert):
+        if not isinstance(item, str) or not item.strip() or len(item) > 120:
+            raise PlanError(f"questionnaire.likert[{i}] must be a statement of 1-120 characters, got {item!r}")
+    if len(set(likert)) != len(likert):
+        raise PlanError("questionnaire.likert must not repeat a statement")
+    questionnaire = QuestionnairePlan(_bool(q.get("tlx", True), "questionnaire.tlx"), tuple(likert),
+                                      _int(q.get("likert_points", 7), "questionnaire.likert_points", 3, 11))  # fmt: skip
+
+    conditions = _conditions(data, protocol, base)
+    training = _training(data) if protocol != "comparison" else None
+    if protocol == "comparison" and "training" in data:
+        raise PlanError("training: a comparison trains no model; leave [training] out")
+    iterative = transfer = online = None
+    for other in ("iterative", "transfer", "online"):
+        if other in data and other != protocol:
+            raise PlanError(f"{other}: the plan's protocol is {protocol!r}; leave [{other}] out")
+    if protocol == "iterative":
+        it = _table(data, "iterative", tuple(IterativePlan.__dataclass_fields__))
+        iterative = IterativePlan(
+            rounds=_int(it.get("rounds", 3), "iterative.rounds", 1, 50),
+            trials_per_round=_int(it.get("trials_per_round", 6), "iterative.trials_per_round", 1, 1000),
+            tolerance=_number(it.get("tolerance", 1e-3), "iterative.tolerance", "> 0 [m]", lambda v: v > 0),
+            criterion_horizon=_int(it.get("criterion_horizon", 50), "iterative.criterion_horizon", 1),
+            stop_at_criterion=_bool(it.get("stop_at_criterion", True), "iterative.stop_at_criterion"),
+            controller=_choice(it.get("controller", "cooperative"), "iterative.controller", CONTROLLER_KINDS, "controller"),
+        )  # fmt: skip
+        if not iterative.controller.startswith("cooperative"):
+            raise PlanError(f"iterative.controller must use the model (cooperative or cooperative-arbitrated), got {iterative.controller!r}")
+    elif protocol in ("transfer", "online"):
+        tab = _table(data, protocol, ("source_model", "trials", "controller"))
+        if "source_model" not in tab:
+            raise PlanError(f"{protocol}.source_model is missing (the model the participant starts from)")
+        source = _model_path(tab["source_model"], f"{protocol}.source_model", base)
+        n = _int(tab.get("trials", 15), f"{protocol}.trials", 2, 1000)
+        controller = _choice(tab.get("controller", "cooperative"), f"{protocol}.controller", CONTROLLER_KINDS, "controller")
+        if not controller.startswith("cooperative"):
+            raise PlanError(f"{protocol}.controller must use the model (cooperative or cooperative-arbitrated), got {controller!r}")
+        if protocol == "transfer":
+            transfer = TransferPlan(source, n, controller)
+        else:
+            online = OnlinePlan(source, n, controller)
+    return StudyPlan(name=name, protocol=protocol, world=world, participants=participants, seed=seed,
+                     conditions=conditions, trials=trials, rest=rest, questionnaire=questionnaire, training=training,
+                     iterative=iterative, transfer=transfer, online=online)  # fmt: skip
+
+
+def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Condition, ...]:
+    raw = data.get("condition", [])
+    if protocol != "comparison":
+        if raw:
+            raise PlanError(f"condition: the {protocol} protocol sets its own conditions; leave [[condition]] out")
+        return ()
+    if not isinstance(raw, list) or len(raw) < 2:
+        raise PlanError("condition: a comparison needs two or more [[condition]] tables")
+    if len(raw) > _MAX_CONDITIONS:
+        raise PlanError(f"condition: at most {_MAX_CONDITIONS} conditions (labelled A … Z), got {len(raw)}")
+    out = []
+    for i, c in enumerate(raw):
+        where = f"condition[{i}]"
+        if not isinstance(c, Mapping):
+            raise PlanError(f"{where} must be a table ([[condition]]), got {type(c).__name__}")
+        for k in c:
+            if k not in ("name", "controller", "intent"):
+                raise PlanError(f"{where}.{k}: {unknown_name_message(k, ('name', 'controller', 'intent'), 'field')}")
+        name = c.get("name")
+        if not isinstance(name, str) or not _NAME.match(name) or name in RESERVED_NAMES or name.startswith("round-"):
+            raise PlanError(f"{where}.name must be 1-32 lower-case letters, digits, '-' or '_' (not one of "
+                            f"{sorted(RESERVED_NAMES)} or round-*), got {name!r}")  # fmt: skip
+        controller = _choice(c.get("controller"), f"{where}.controller", CONTROLLER_KINDS, "controller")
+        out.append(Condition(name, controller, _intent(c.get("intent", "nominal"), f"{where}.intent", base)))
+    names = [c.name for c in out]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise PlanError(f"condition: the name {dup!r} is used twice")
+    pairs = [(c.controller, c.intent) for c in out]
+    if len(set(pairs)) != len(pairs):
+        raise PlanError("condition: two conditions have the same controller and intent (nothing to compare)")
+    return tuple(out)
+
+
+def _training(data: Mapping[str, Any]) -> TrainingPlan:
+    from coassist.intent.training import MODEL_PRESETS, OPTIMIZERS  # the learn extra, only for a plan that trains
+
+    tr = _table(data, "training", tuple(TrainingPlan.__dataclass_fields__))
+    preset = tr.get("preset", "default")
+    if not isinstance(preset, str) or preset not in MODEL_PRESETS:
+        raise PlanError(f"training.preset: {unknown_name_message(str(preset), MODEL_PRESETS, 'intent-model preset')}")
+
+    def opt_int(key: str, lo: int) -> int | None:
+        return None if tr.get(key) is None else _int(tr[key], f"training.{key}", lo)
+
+    fc = tr.get("fc")
+    if fc is not None:
+        if not isinstance(fc, list) or not all(is_integer(v) and v >= 1 for v in fc):
+            raise PlanError(f"training.fc must be a list of layer widths >= 1, got {fc!r}")
+        fc = tuple(int(v) for v in fc)
+    optimizer = tr.get("optimizer")
+    if optimizer is not None:
+        optimizer = _choice(optimizer, "training.optimizer", OPTIMIZERS, "optimiser")
+    lr = tr.get("lr")
+    tf = tr.get("test_fraction")
+    return TrainingPlan(
+        preset=preset, epochs=opt_int("epochs", 1), batch_size=opt_int("batch_size", 1), seed=opt_int("seed", 0),
+        threads=_int(tr.get("threads", 1), "training.threads", 1, 256), layers=opt_int("layers", 0),
+        hidden=opt_int("hidden", 1), fc=fc, optimizer=optimizer,
+        lr=None if lr is None else _number(lr, "training.lr", "> 0", lambda v: v > 0),
+        test_fraction=None if tf is None else _number(tf, "training.test_fraction", "in [0, 1)", lambda v: 0 <= v < 1),
+    )  # fmt: skip
+
+
+def load_plan(path: str | Path) -> StudyPlan:
+    """Read and validate the plan file ``path`` (:class:`PlanError` for a file that is not a plan)."""
+    path = Path(path)
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise PlanError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise PlanError(f"{path}: is a folder; give the plan's .toml file") from None
+    except UnicodeDecodeError:
+        raise PlanError(f"{path}: not UTF-8 text") from None
+    return plan_from_text(text, path.parent)
+
+
+def plan_from_text(text: str, base: str | Path) -> StudyPlan:
+    """The plan of TOML ``text`` whose relative model paths are relative to ``base``."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise PlanError(f"not TOML: {exc}") from None
+    return parse_plan(data, base)

@@ -1,0 +1,154 @@
+"""The protocols as step lists: what one participant does, in order, fixed at their first run.
+
+A step is a small JSON object (so the order is recorded in the study folder as it is, and a
+resumed run follows the record, not a recomputation)::
+
+    trial          {block, index, condition, label, position, controller, intent, task, seed, practice}
+    questionnaire  {block, index, condition, label}      after a condition (or a round)
+    rest           {block, index, seconds, why}           the participant rests (a model may train meanwhile)
+    train          {block: "models", index, model, data, init, wait}   a model trained in a background process
+    check          {block, index, round}                  Algorithm 4.1's stop criterion (eq. 4.13)
+    freeze         {block: "models", index, model}        online: the last online model becomes a condition
+
+``intent`` is ``"nominal"``, a model folder of the plan, ``"model:<name>"`` (a model this
+participant's study trained, in ``models/<name>``; a trial that needs it waits for it) or
+``"latest:online"`` (the newest online model ready when the trial starts; it never waits).
+
+Protocols (thesis §5.2.3 and Algorithms 4.1 and 4.2):
+
+- ``comparison``: conditions in the participant's row of the balanced Latin square
+  (:mod:`coassist.study.design`); per condition ``practice`` practice trials, then
+  ``per_condition`` measured trials, then the questionnaire, then a rest. Measured trial j
+  follows ``tasks[j mod n]`` with seed ``base + j`` in every condition: the conditions meet
+  the same paths and obstacles, paired.
+- ``iterative``: round k collects ``trials_per_round`` with M_{k−1} in the loop (round 0 with
+  the nominal plan, D_0 of eq. 4.7); from round 1 on, the stop criterion
+  |e_RMS^k − e_RMS^{k−1}| < tol on the in-loop errors (eq. 4.12–4.13); then M_k trains on D_k
+  (``scratch`` for M_0, ``resume:`` M_{k−1} after, eq. 4.11) while the participant rests.
+- ``transfer``: the participant's ``trials`` with the source model in the loop (D_TL), the
+  frozen-LSTM transfer trained on them (``transfer:`` source, eq. 4.14) while they rest, then
+  a comparison of ``transferred`` against ``source``.
+- ``online``: ``trials`` with the newest online model in the loop; after each, the FC head is
+  updated in the background from the previous online model on the trials it has not seen
+  (``transfer:`` previous, frozen LSTM); then the offline transfer from the source model on
+  the same trials trains while they rest, and ``online`` (the last update) is compared with
+  ``offline``.
+
+Seeds: participant number p gets ``base = 10⁶·seed + 10⁴·p``; measured comparison trial j
+``base + j``, practice trial i ``base + 5000 + i``, iterative round k trial j
+``base + k·trials_per_round + j``, collection trial j (transfer, online) ``base + 2000 + j``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from coassist.study.design import participant_order
+from coassist.study.plan import Condition, StudyPlan
+
+__all__ = ["participant_steps", "trial_seed_base"]
+
+
+def trial_seed_base(plan: StudyPlan, number: int) -> int:
+    """``base`` of participant ``number`` (module docstring)."""
+    return 1_000_000 * plan.seed + 10_000 * int(number)
+
+
+def participant_steps(plan: StudyPlan, labels: dict[str, str], number: int, row: int) -> list[dict[str, Any]]:
+    """The participant's steps (module docstring): ``labels`` the blinding key, ``number`` their number
+    (1, 2, … in order of arrival), ``row`` their row of the Latin square."""
+    base = trial_seed_base(plan, number)
+    steps: list[dict[str, Any]] = []
+    if plan.protocol == "comparison":
+        _compare(steps, plan, list(plan.conditions), labels, row, base)
+    elif plan.protocol == "iterative":
+        _iterative(steps, plan, base)
+    elif plan.protocol == "transfer":
+        assert plan.transfer is not None  # parse_plan sets it for this protocol
+        t = plan.transfer
+        _collect(steps, plan, "transfer-set", t.trials, t.controller, t.source_model, base + 2000)
+        _add(steps, "train", block="models", model="transferred", data=["transfer-set"], init=f"transfer:{t.source_model}",
+             wait=False)  # fmt: skip
+        _rest(steps, plan, "the transfer trains")
+        conditions = [Condition("source", t.controller, t.source_model),
+                      Condition("transferred", t.controller, "model:transferred")]  # fmt: skip
+        _compare(steps, plan, conditions, labels, row, base)
+    else:
+        assert plan.online is not None
+        o = plan.online
+        for j in range(o.trials):
+            _add(steps, "trial", block="adaptation", index=j, condition="adaptation", label=None, position=0,
+                 controller=o.controller, intent="latest:online", task=_task(plan, j), seed=base + 2000 + j, practice=False)  # fmt: skip
+            if j < o.trials - 1:
+                _add(steps, "train", block="models", model=f"online-{j + 1}", data=["adaptation"], init="online",
+                     wait=False)  # fmt: skip
+        _add(steps, "freeze", block="models", model="online")
+        _add(steps, "train", block="models", model="offline", data=["adaptation"], init=f"transfer:{o.source_model}",
+             wait=False)  # fmt: skip
+        _rest(steps, plan, "the offline transfer trains")
+        conditions = [Condition("online", o.controller, "model:online"), Condition("offline", o.controller, "model:offline")]
+        _compare(steps, plan, conditions, labels, row, base)
+    return steps
+
+
+def _add(steps: list[dict[str, Any]], kind: str, **fields: Any) -> None:
+    index = fields.pop("index", sum(1 for s in steps if s["kind"] == kind))
+    steps.append({"kind": kind, "index": index, **fields})
+
+
+def _task(plan: StudyPlan, j: int) -> str:
+    return plan.trials.tasks[j % len(plan.trials.tasks)]
+
+
+def _rest(steps: list[dict[str, Any]], plan: StudyPlan, why: str) -> None:
+    _add(steps, "rest", block="rest", seconds=plan.rest.between_conditions, why=why)
+
+
+def _collect(steps, plan: StudyPlan, block: str, n: int, controller: str, intent: str, seed0: int) -> None:
+    for j in range(n):
+        _add(steps, "trial", block=block, index=j, condition=block, label=None, position=0, controller=controller,
+             intent=intent, task=_task(plan, j), seed=seed0 + j, practice=False)  # fmt: skip
+        if j < n - 1 and plan.rest.between_trials > 0:
+            _add(steps, "rest", block="rest", seconds=plan.rest.between_trials, why="between trials")
+
+
+def _compare(steps, plan: StudyPlan, conditions: list[Condition], labels: dict[str, str], row: int, base: int) -> None:
+    tp = plan.trials
+    order = participant_order(row, len(conditions))
+    practice = sum(1 for s in steps if s["kind"] == "trial" and s["practice"])
+    for pos, ci in enumerate(order):
+        c = conditions[ci]
+        label = labels[c.name]
+        for _ in range(tp.practice):
+            _add(steps, "trial", block="practice", index=practice, condition=c.name, label=label, position=pos,
+                 controller=c.controller, intent=c.intent, task=_task(plan, practice), seed=base + 5000 + practice,
+                 practice=True)  # fmt: skip
+            practice += 1
+        for j in range(tp.per_condition):
+            _add(steps, "trial", block=c.name, index=j, condition=c.name, label=label, position=pos,
+                 controller=c.controller, intent=c.intent, task=_task(plan, j), seed=base + j, practice=False)  # fmt: skip
+            if j < tp.per_condition - 1 and plan.rest.between_trials > 0:
+                _add(steps, "rest", block="rest", seconds=plan.rest.between_trials, why="between trials")
+        if plan.questionnaire.asked:
+            _add(steps, "questionnaire", block=c.name, index=pos, condition=c.name, label=label)
+        if pos < len(order) - 1 and plan.rest.between_conditions > 0:
+            _rest(steps, plan, "between conditions")
+
+
+def _iterative(steps, plan: StudyPlan, base: int) -> None:
+    it = plan.iterative
+    assert it is not None
+    for k in range(it.rounds):
+        block = f"round-{k}"
+        intent = "nominal" if k == 0 else f"model:M{k - 1}"
+        for j in range(it.trials_per_round):
+            _add(steps, "trial", block=block, index=j, condition=block, label=None, position=k, controller=it.controller,
+                 intent=intent, task=_task(plan, j), seed=base + k * it.trials_per_round + j, practice=False)  # fmt: skip
+        if k >= 1:
+            _add(steps, "check", block=block, index=k, round=k)
+        if plan.questionnaire.asked:
+            _add(steps, "questionnaire", block=block, index=k, condition=block, label=None)
+        init = "scratch" if k == 0 else "resume:model:M" + str(k - 1)
+        _add(steps, "train", block="models", model=f"M{k}", data=[block], init=init, wait=k == it.rounds - 1)
+        if k < it.rounds - 1:
+            _rest(steps, plan, f"M{k} trains")

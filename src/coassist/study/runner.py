@@ -1,0 +1,379 @@
+"""``coassist study run``: one participant's steps, in their recorded order, resumed where they stopped.
+
+:class:`ParticipantRun` registers the participant (number and Latin-square row, in order
+of arrival), fixes their steps at the first run (:func:`coassist.study.protocols.participant_steps`,
+written to ``order.json``), and runs the steps not yet on record
+(:class:`~coassist.study.store.ParticipantFolder`), each committed as it finishes:
+
+- ``trial``: through :class:`~coassist.study.session.StudySession`, on the page (the person
+  presses Start; an aborted trial, or one whose hand left, is shown again) or with the
+  simulated operator; written into its block's dataset, then its progress line;
+- ``questionnaire``: on the page, or the simulated participant's answers;
+- ``rest``: the page counts down and goes on once the person says so and the model the next
+  trials need is ready; a simulated participant does not rest (it only waits for the model);
+- ``train``: started in the background (:class:`~coassist.study.training.BackgroundTraining`);
+  a trial that needs the model waits for it, a trial that takes "the newest online model"
+  never does; an online update whose predecessor is still training is deferred (the next
+  one trains on every trial so far);
+- ``check``: Algorithm 4.1's stop criterion on the in-loop e_RMS (eq. 4.12–4.13);
+- ``freeze``: the newest online model becomes the ``online`` condition.
+
+A kill loses at most the step in progress; a background training that was cut off is
+started again when its model is next needed (training is deterministic: same model).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from coassist.data import append_to_dataset, read_dataset, write_dataset
+from coassist.data.store import MANIFEST_NAME, manifest_files
+from coassist.play.session import PlayConfig
+from coassist.scenario.tasks import task_for_seed
+from coassist.study.protocols import participant_steps
+from coassist.study.questionnaires import form_for
+from coassist.study.store import ParticipantFolder, StudyFolder, StudyFolderError, step_key, trial_record, utc_now
+from coassist.study.training import BackgroundTraining, TrainJob, model_ready, train_command
+
+__all__ = ["ParticipantRun", "simulated_ids"]
+
+
+def simulated_ids(n: int) -> list[str]:
+    """The ids of ``n`` simulated participants: S01, S02, …"""
+    return [f"S{i:02d}" for i in range(1, n + 1)]
+
+
+class ParticipantRun:
+    """One participant's run (module docstring); use as a context manager, then :meth:`run`.
+
+    study : the study folder.  participant : the pseudonymous id.  simulate : a simulated
+    operator stands in (no page needed).  page : serve the page (host, port, token) — a person,
+    or a browser automation moving the pointer along the simulated operator's path.
+    realtime : pace a simulated participant's trials to the wall clock (a person's pace).
+    host : a real arm's address.  confirm : asked before a real arm moves.  say : progress lines.
+    """
+
+    def __init__(self, study: StudyFolder, participant: str, *, simulate: bool = False,
+                 page: tuple[str, int, str | None] | None = None, realtime: bool = False, host: str | None = None,
+                 confirm: Any = None, say: Callable[[str], None] | None = None) -> None:  # fmt: skip
+        self.study = study
+        self.plan = study.plan()
+        if page is None and not simulate:
+            raise StudyFolderError("a person takes part through the page: run without --no-page (or --simulate)")
+        if self.plan.world in ("ur", "franka") and simulate:
+            raise StudyFolderError(f"--simulate: the {self.plan.world} world is a real arm; rehearse on mujoco or play")
+        self.id = participant
+        self.simulate, self.page, self.realtime = simulate, page, realtime
+        self.host, self.confirm = host, confirm
+        self.say = say or (lambda line: None)
+        self.record = study.register(participant, simulated=simulate)
+        self.folder: ParticipantFolder = study.participant(participant)
+        self.session: Any = None
+        self.server: Any = None
+        self.training = BackgroundTraining()
+        self._lock: Any = None
+
+    # ------------------------------------------------------------------ set up and tear down
+    def __enter__(self) -> ParticipantRun:
+        self._lock = self.folder.lock()
+        self._lock.__enter__()
+        try:
+            self._open()
+        except BaseException:
+            self.close(interrupted=True)
+            raise
+        return self
+
+    def __exit__(self, exc_type: object, *exc: object) -> None:
+        self.close(interrupted=exc_type is not None)
+
+    def _open(self) -> None:
+        plan, rec = self.plan, self.record
+        order = self.folder.order()
+        if order is None:
+            steps = participant_steps(plan, self.study.labels, rec["number"], rec["row"])
+            order = {"participant": self.id, "number": rec["number"], "row": rec["row"],
+                     "operator": rec["number"] if self.simulate else None, "steps": steps}  # fmt: skip
+            self.folder.write_order(order)
+        self.order = order
+        self.steps: list[dict[str, Any]] = order["steps"]
+        if self.folder.reconcile(self.steps):
+            self.say(f"{self.id}: recovered the last trial's record (the run stopped while writing it)")
+        done = self.folder.progress()
+        for i, rec_i in enumerate(done):
+            if i >= len(self.steps) or rec_i.get("key") != step_key(self.steps[i]):
+                raise StudyFolderError(f"{self.folder.progress_file}: line {i + 1} is not step {i} of {self.folder.folder / 'order.json'}"
+                                       " (edited by hand?)")  # fmt: skip
+        self.done = done
+        tp = plan.trials
+        kinds = sorted({s["controller"] for s in self.steps if s["kind"] == "trial"})
+        config = PlayConfig(user=self.id, out=self.folder.folder.parent, controllers=tuple(kinds), preset=tp.preset,
+                            tasks=tp.tasks, seed=0, motion_time=tp.motion_time, arrive_radius=tp.arrive_radius,
+                            dwell=tp.dwell, time_limit=tp.time_limit, paced=self.page is not None or self.realtime)  # fmt: skip
+        from coassist.control.presets import CONTROLLER_KINDS, FORMER_NAMES
+        from coassist.study.session import StudySession
+
+        secrets = (*CONTROLLER_KINDS, *FORMER_NAMES, *(c.name for c in plan.conditions), *plan.model_paths(),
+                   "source", "transferred", "online", "offline", str(self.folder.folder / "models"))  # fmt: skip
+        drive = {"object": tp.object, "obstacle": tp.obstacle, "preset": tp.preset, "time_limit": tp.time_limit}
+        self.session = StudySession(config, world=plan.world, secrets=secrets, drive=drive, host=self.host,
+                                    confirm=self.confirm)  # fmt: skip
+        if self.page is not None:
+            from coassist.play.server import PlayServer
+
+            host, port, token = self.page
+            self.server = PlayServer(self.session, host=host, port=port, token=token).start()
+
+    @property
+    def url(self) -> str | None:
+        return None if self.server is None else self.server.url
+
+    def close(self, *, interrupted: bool = False) -> None:
+        try:
+            self.training.close(interrupted=interrupted)
+        finally:
+            if self.server is not None:
+                self.server.stop()  # closes the session too
+                self.server = None
+            elif self.session is not None:
+                self.session.close()
+            self.session = None
+            if self._lock is not None:
+                self._lock.__exit__(None, None, None)
+                self._lock = None
+
+    # ------------------------------------------------------------------ the steps
+    @property
+    def complete(self) -> bool:
+        return len(self.done) == len(self.steps) or bool(self.done and self.done[-1].get("stop"))
+
+    def run(self) -> bool:
+        """Run the steps not yet on record; True once the participant has done all of them."""
+        if self.done:
+            self.say(f"{self.id}: resuming at step {len(self.done) + 1} of {len(self.steps)}")
+        while not self.complete:
+            k = len(self.done)
+            step = self.steps[k]
+            record = getattr(self, f"_{step['kind']}")(k, step)
+            record = {"step": k, "kind": step["kind"], "key": step_key(step), **record, "t": utc_now()}
+            self.folder.append(record)
+            self.done.append(record)
+        for name in self._train_jobs():  # every model this participant's study trains, finished
+            self._ensure_model(name)
+        self._show({"kind": "done", "text": "Thank you: the session is over."})
+        return True
+
+    def _view(self, k: int, step: dict[str, Any], **more: Any) -> dict[str, Any]:
+        return {"step": k, "of": len(self.steps), "kind": step["kind"], "label": step.get("label"),
+                "practice": bool(step.get("practice", False)), **more}  # fmt: skip
+
+    def _show(self, view: dict[str, Any]) -> None:
+        if self.session is not None:
+            self.session.show(view)
+
+    # trial ------------------------------------------------------------------------------------
+    def _trial(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
+        from coassist.runtime.episode import episode_ticks
+        from coassist.study.participants import OperatorHand, simulated_profile
+        from coassist.study.session import TrialSetup
+
+        plan = self.plan
+        tp = plan.trials
+        t0 = time.monotonic()
+        intent, model_name = self._intent(step["intent"])  # a model still training is waited for here
+        waited = time.monotonic() - t0
+        task = task_for_seed(step["task"], step["seed"], obstacle=tp.obstacle,
+                             motion_time=tp.motion_time if plan.world == "play" else None)  # fmt: skip
+        hand = None
+        operator = self.record["number"] if self.simulate else None
+        if operator is not None and self.page is None and plan.world == "play":
+            dt = float(self.session.preset.impedance.dt)
+            hand = OperatorHand(task, step["seed"], simulated_profile(operator, plan.seed), dt,
+                                episode_ticks(task, dt, tp.time_limit) + 1)  # fmt: skip
+        page_name = step["label"] or "go"
+        meta = {"study": plan.name, "study_participant": self.id, "study_step": k, "study_block": step["block"],
+                "study_condition": step["condition"], "study_label": step["label"], "study_position": step["position"],
+                "study_practice": step["practice"], "study_model": model_name,
+                "study_operator": None if operator is None else simulated_profile(operator, plan.seed).name}  # fmt: skip
+        setup = TrialSetup(step=k, page_name=page_name, controller=step["controller"], intent=intent, task=task,
+                           seed=step["seed"], meta=meta, operator=operator if self.page is None else None, hand=hand)  # fmt: skip
+        what = "practice trial" if step["practice"] else "trial"
+        label = f"condition {step['label']}" if step["label"] else step["block"].replace("-", " ")
+        self.session.view = self._view(k, step, text=f"{label}: {what} {step['index'] + 1} — press Start, then "
+                                                     "follow the plan, avoid the box and hold in the target")  # fmt: skip
+        trial = self.session.run(setup, wait_for_page=self.page is not None)
+        folder = self.folder.block(step["block"])
+        if (folder / MANIFEST_NAME).is_file():
+            append_to_dataset([trial], folder)
+        else:
+            write_dataset([trial], folder, f"{self.id}/{step['block']}",
+                          f"study {plan.name}, participant {self.id}, {step['block']} (coassist study)")  # fmt: skip
+        file = manifest_files(folder)[-1]
+        self.say(f"{self.id}: step {k + 1}/{len(self.steps)} {step['block']} trial {step['index'] + 1}: "
+                 f"{trial.meta.extra.get('ended')}")  # fmt: skip
+        rec = trial_record(k, step, file, trial.meta.to_dict(), model=model_name, waited_for_model_s=round(waited, 3))
+        return {key: v for key, v in rec.items() if key not in ("step", "kind", "key")}
+
+    def _intent(self, ref: str) -> tuple[str, str | None]:
+        """(intent source for the session, the study model's name or None) of a step's ``intent``."""
+        if ref == "nominal":
+            return "nominal", None
+        if ref.startswith("model:"):
+            name = ref.removeprefix("model:")
+            if name == "online":
+                name = self._frozen_online()
+            self._ensure_model(name)
+            return str(self._model_dir(name)), name
+        if ref == "latest:online":
+            newest = self._newest_online()
+            if newest is None:
+                assert self.plan.online is not None
+                return self.plan.online.source_model, None
+            return str(self._model_dir(newest)), newest
+        return ref, None
+
+    # models -------------------------------------------------------------------------------------
+    def _model_dir(self, name: str) -> Path:
+        return self.folder.folder / "models" / name
+
+    def _train_jobs(self) -> list[str]:
+        """The models of the train steps on record (started or done)."""
+        return [self.steps[i]["model"] for i, r in enumerate(self.done) if r["kind"] == "train" and not r.get("deferred")]
+
+    def _job(self, name: str) -> TrainJob:
+        k = next(i for i, s in enumerate(self.steps) if s["kind"] == "train" and s["model"] == name)
+        step = self.steps[k]
+        rec = self.done[k] if k < len(self.done) else None
+        init = rec["init"] if rec is not None else self._init(step)
+        data = rec["data"] if rec is not None else self._data(step["data"])
+        assert self.plan.training is not None  # plans that train have [training]
+        return TrainJob(data=tuple(data), out=str(self._model_dir(name)), init=init, training=self.plan.training)
+
+    def _data(self, blocks: list[str]) -> tuple[str, ...]:
+        """What a train step trains on: the blocks' folders, or, for the online blocks that still grow while a
+        model trains, their trial files as they are now (so the job sees exactly these)."""
+        out: list[str] = []
+        for b in blocks:
+            folder = self.folder.block(b)
+            if b == "adaptation":
+                out += [str(folder / f) for f in manifest_files(folder)]
+            else:
+                out.append(str(folder))
+        return tuple(out)
+
+    def _init(self, step: dict[str, Any]) -> str:
+        init = step["init"]
+        if init.startswith("resume:model:"):
+            return f"resume:{self._model_dir(init.removeprefix('resume:model:'))}"
+        if init == "online":  # from the newest online model, or the source
+            assert self.plan.online is not None
+            prev = self._newest_online()
+            return f"transfer:{self._model_dir(prev) if prev else self.plan.online.source_model}"
+        return init
+
+    def _ensure_model(self, name: str) -> None:
+        """Wait for the model ``name`` (started again if its training was cut off by a stop)."""
+        if model_ready(self._model_dir(name)) and not self.training.running(name):
+            return
+        if not self.training.has(name):
+            self.training.submit(name, self._job(name))
+        if self.training.running(name):
+            self._show({"kind": "wait", "text": "the robot is learning from your trials: a moment…"})
+            self.say(f"{self.id}: waiting for model {name}")
+        self.training.wait(name)
+
+    def _online_models(self) -> list[str]:
+        return [s["model"] for s in self.steps if s["kind"] == "train" and s["model"].startswith("online-")]
+
+    def _newest_online(self) -> str | None:
+        ready = [n for n in self._online_models() if model_ready(self._model_dir(n)) and not self.training.running(n)]
+        return ready[-1] if ready else None
+
+    def _frozen_online(self) -> str:
+        for r in self.done:
+            if r["kind"] == "freeze":
+                return str(r["model_from"])
+        raise StudyFolderError("the online condition is used before the online model was frozen")
+
+    def _train(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
+        name = step["model"]
+        if step["init"] == "online" and self.training.busy(self._online_models()):
+            return {"model": name, "deferred": True}  # the loop never waits: the next update takes these trials too
+        assert self.plan.training is not None  # plans that train have [training]
+        job = TrainJob(data=self._data(step["data"]), out=str(self._model_dir(name)), init=self._init(step),
+                       training=self.plan.training)  # fmt: skip
+        ready = model_ready(job.out)
+        if not ready:
+            self.training.submit(name, job)
+            self.say(f"{self.id}: training {name} in the background ({job.init})")
+        if step.get("wait"):
+            self._ensure_model(name)
+        return {"model": name, "init": job.init, "data": list(job.data), "command": train_command(job),
+                "ready_when_recorded": model_ready(job.out) and not self.training.running(name), "was_ready": ready}  # fmt: skip
+
+    def _freeze(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
+        for name in self._online_models():  # the last update, if one is still training
+            if self.training.running(name):
+                self.training.wait(name)
+        newest = self._newest_online()
+        if newest is None:
+            raise StudyFolderError("no online model was trained (every update failed?)")
+        return {"model": step["model"], "model_from": newest}
+
+    # questionnaire, rest, check --------------------------------------------------------------------
+    def _questionnaire(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
+        form = form_for(self.plan.questionnaire)
+        if self.page is None:
+            from coassist.study.participants import simulated_answers, simulated_profile
+
+            f, s = self._block_scores(step["block"])
+            values = simulated_answers(form, f, s, simulated_profile(self.record["number"], self.plan.seed),
+                                       np.random.default_rng([self.plan.seed, self.record["number"], k]))  # fmt: skip
+            answers = form.check(values)
+        else:
+            what = f"condition {step['label']}" if step["label"] else step["block"].replace("-", " ")
+            answers = self.session.ask(self._view(k, step, form=form.to_page(), text=f"About {what}: how was it?"),
+                                       form.check)  # fmt: skip
+        return {"block": step["block"], "condition": step["condition"], "label": step["label"], "answers": answers}
+
+    def _block_scores(self, block: str) -> tuple[float, float | None]:
+        from coassist.metrics import f_rms, precision_sigma
+
+        trials = read_dataset(self.folder.block(block)).trials
+        f = float(np.mean([f_rms(t.wrench) for t in trials]))
+        sig = [precision_sigma(t.pose, np.asarray(t.meta.extra["target"], float), t.meta.dt,
+                               epsilon=float(t.meta.extra.get("arrive_radius", 0.025))) for t in trials]  # fmt: skip
+        sig = [v for v in sig if math.isfinite(v)]
+        return f, (float(np.mean(sig)) if sig else None)
+
+    def _rest(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
+        t0 = time.monotonic()
+        seconds = float(step["seconds"]) if self.page is not None else 0.0
+        view = self._view(k, step, seconds=seconds, ready=False,
+                          text="Rest. The next part starts when you are ready (and the robot has learned).")  # fmt: skip
+        self.session.rest(view, lambda: not self.training.busy(), wait_for_page=self.page is not None, seconds=seconds)
+        return {"rested_s": round(time.monotonic() - t0, 3)}
+
+    def _check(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
+        from coassist.experiments.pipeline import in_loop_errors
+
+        it = self.plan.iterative
+        assert it is not None
+        h = it.criterion_horizon
+        rounds = {}
+        for r in (step["round"] - 1, step["round"]):
+            err = in_loop_errors(read_dataset(self.folder.block(f"round-{r}")).trials, horizons=(h,))
+            rounds[r] = err[h]["e_rms"] if h in err else math.nan
+        e_prev, e_now = rounds[step["round"] - 1], rounds[step["round"]]
+        delta = abs(e_now - e_prev)
+        met = bool(delta < it.tolerance)
+        self.say(f"{self.id}: round {step['round']}: in-loop e_RMS {1e3 * e_now:.2f} mm (was {1e3 * e_prev:.2f}); "
+                 f"criterion {'met' if met else 'not met'}")  # fmt: skip
+        return {"round": step["round"], "e_rms": e_now, "e_rms_before": e_prev, "delta": delta, "tolerance": it.tolerance,
+                "met": met, "stop": met and it.stop_at_criterion and step["round"] < it.rounds - 1}  # fmt: skip

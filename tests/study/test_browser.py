@@ -1,0 +1,118 @@
+"""The comparison study in a real headless Chromium (Debian's, driven by Playwright's Python API).
+
+Four simulated participants × three conditions: for each, the page is opened, Start is pressed
+for the step shown, the mouse moves along the simulated operator's intended path (the hand the
+page's spring-damper pulls the tool with), the questionnaires are answered with the page's own
+sliders and radio buttons, and the rests are ended with its Continue button. Then the report is
+written. Every websocket frame the browser receives is kept: none names a controller or a
+condition. Skips, saying why, only where no Chromium (or no Playwright) can be had.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("starlette", reason="the study's page needs the web extra (pip install 'coassist[web]')")
+sync_api = pytest.importorskip("playwright.sync_api", reason="the browser test needs Playwright (the dev extra)")
+
+from coassist.study.report import write_report  # noqa: E402
+from coassist.study.runner import ParticipantRun  # noqa: E402
+from coassist.study.store import init_study  # noqa: E402
+
+from .conftest import comparison_plan  # noqa: E402
+from .pagedriver import SECRETS, OperatorPath  # noqa: E402
+
+CHROMIUM = Path("/usr/bin/chromium")
+if not CHROMIUM.is_file():
+    CHROMIUM = Path(shutil.which("chromium") or "/nonexistent")
+pytestmark = pytest.mark.skipif(not CHROMIUM.is_file(), reason="no Chromium at /usr/bin/chromium (apt-get install chromium)")
+
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]  # fmt: skip
+
+
+def _participant(page, url: str, path: OperatorPath, received: list[str]) -> dict:
+    """Take part in the study on ``page`` until it says it is done; returns what was entered."""
+    page.on("websocket", lambda ws: ws.on("framereceived", lambda payload: received.append(str(payload))))
+    page.goto(url)
+    page.wait_for_function("window.coassist && window.coassist.ready && window.coassist.study", timeout=15000)
+    entered: dict = {"answers": {}, "starts": []}
+    t_end = time.monotonic() + 120
+    while time.monotonic() < t_end:
+        view = page.evaluate("window.coassist.study")
+        if view["kind"] == "done":
+            return entered
+        if view["kind"] == "trial" and not page.evaluate("window.coassist.running") and page.is_enabled("#start"):
+            k = view["step"]
+            entered["starts"].append(view["label"])
+            page.click("#start")
+            page.wait_for_function("window.coassist.frame !== null", timeout=10000)
+            x, y = page.evaluate(f"window.coassist.toPixels(...{json.dumps(path.at(k, 0.0))})")
+            page.mouse.move(x, y)
+            page.mouse.down()
+            while (f := page.evaluate("window.coassist.frame")) is not None:  # the result replaces the frame
+                x, y = page.evaluate(f"window.coassist.toPixels(...{json.dumps(path.at(k, f['t'] + 0.03))})")
+                page.mouse.move(x, y)
+                time.sleep(0.015)
+            page.mouse.up()
+        elif view["kind"] == "questionnaire" and page.locator("#study-submit").count():
+            values = path.answers(view["step"], view["form"]["items"])
+            for item, v in zip(view["form"]["items"], values):
+                if item["scale"] == "tlx":
+                    page.locator(f"input[name='{item['key']}']").fill(str(v))
+                else:
+                    page.locator(f"input[name='{item['key']}'][value='{v}']").check()
+            entered["answers"][view["step"]] = values
+            page.click("#study-submit")
+            page.wait_for_function(f"window.coassist.study.step !== {view['step']}", timeout=10000)
+        elif view["kind"] == "rest" and page.is_visible("#study-next") and page.is_enabled("#study-next"):
+            page.click("#study-next")
+            page.wait_for_function(f"window.coassist.study.step !== {view['step']}", timeout=10000)
+        else:
+            time.sleep(0.05)
+    raise AssertionError("the participant's session did not end in 120 s")
+
+
+def test_four_simulated_participants_take_the_comparison_in_chromium(tmp_path):
+    plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0, timing="motion_time = 1.5\ndwell = 0.5")
+    plan.write_text(plan.read_text().replace("between_conditions = 30.0", "between_conditions = 0.5"))
+    study = init_study(plan, tmp_path / "study")
+    received: list[str] = []
+    entered = {}
+    with sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+        try:
+            for pid in ("S01", "S02", "S03", "S04"):
+                with ParticipantRun(study, pid, simulate=True, page=("127.0.0.1", 0, None)) as run:
+                    worker = threading.Thread(target=run.run, daemon=True)
+                    worker.start()
+                    page = browser.new_page(viewport={"width": 1300, "height": 900})
+                    try:
+                        entered[pid] = _participant(page, run.url, OperatorPath(study.folder, pid), received)
+                    finally:
+                        page.close()
+                    worker.join(30)
+                    assert not worker.is_alive() and run.complete
+        finally:
+            browser.close()
+    html_path, json_path = write_report(study.folder)
+    summary = json.loads(json_path.read_text())
+    labels = study.labels
+    assert summary["n_complete"] == 4 and html_path.is_file()
+    assert received and not [s for s in SECRETS if any(s in text for text in received)]
+    for pid, got in entered.items():
+        p = summary["participants"][pid]
+        assert got["starts"] == [labels[c] for c in p["order"]]  # the page started the conditions in the square's order
+        assert set(p["means"]) == {"assistive", "impedance", "manual"}
+        stored = {r["step"]: list(r["answers"].values()) for r in study.participant(pid).progress()
+                  if r["kind"] == "questionnaire"}  # fmt: skip
+        assert stored == {int(k): v for k, v in got["answers"].items()} and len(stored) == 3
+    # the drag carried the tool to the target in every trial
+    ended = [r["ended"] for pid in entered for r in study.participant(pid).progress() if r["kind"] == "trial"]
+    assert ended == ["target"] * 12

@@ -1,0 +1,127 @@
+"""The study on its page, over the page's own websocket: blinded, driven by a simulated hand.
+
+A websocket client plays the page (no browser needed): it presses Start for the step shown,
+moves the hand along the simulated operator's intended path, answers the questionnaires and
+goes on after the rests. Every message the server sends is kept: none may name a controller,
+a condition or a model. (tests/study/test_browser.py does the same in a real Chromium.)
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("starlette", reason="the study's page needs the web extra")
+ws_client = pytest.importorskip("websockets.sync.client", reason="the test client needs websockets (the web extra)")
+
+from coassist.data import read_dataset  # noqa: E402
+from coassist.study.runner import ParticipantRun  # noqa: E402
+from coassist.study.store import init_study  # noqa: E402
+
+from .conftest import comparison_plan  # noqa: E402
+from .pagedriver import SECRETS, OperatorPath  # noqa: E402
+
+
+def play_page(url: str, path: OperatorPath, received: list[str], timeout: float = 120.0) -> dict:
+    """Be the page until the study says it is done; returns what was entered per step."""
+    entered: dict = {"answers": {}, "starts": []}
+    ws_url = url.replace("http://", "ws://").rstrip("/").split("?")[0] + "/ws"
+    with ws_client.connect(ws_url, open_timeout=10) as ws:
+        bounds, view, running, seq, k = None, None, False, 0, -1
+        t_end = time.monotonic() + timeout
+        while time.monotonic() < t_end:
+            try:
+                text = ws.recv(timeout=5)
+            except TimeoutError:
+                continue
+            received.append(text)
+            m = json.loads(text)
+            kind = m["type"]
+            if kind == "init":
+                bounds = m["bounds"]
+                view = m.get("study")
+            elif kind == "step":
+                view = m
+                if m["kind"] == "done":
+                    return entered
+            elif kind == "started":
+                running = True
+            elif kind == "result":
+                running = False
+                view = None
+            if kind == "frame" and running:
+                x, y = path.at(k, m["t"])
+                seq += 1
+                x = min(bounds[1], max(bounds[0], x))
+                y = min(bounds[3], max(bounds[2], y))
+                ws.send(json.dumps({"type": "pointer", "x": x, "y": y, "down": True, "seq": seq}))
+                continue
+            if view is None or running:
+                continue
+            if view["kind"] == "trial":
+                ws.send(json.dumps({"type": "start", "controller": view["label"] or "go"}))
+                entered["starts"].append(view["label"])
+                k = view["step"]
+                view = None
+            elif view["kind"] == "questionnaire":
+                values = path.answers(view["step"], view["form"]["items"])
+                entered["answers"][view["step"]] = values
+                ws.send(json.dumps({"type": "answers", "step": view["step"], "values": values}))
+                view = None
+            elif view["kind"] == "rest" and view.get("ready"):
+                ws.send(json.dumps({"type": "next", "step": view["step"]}))
+                view = None
+    raise AssertionError("the study did not end in time")
+
+
+def test_the_page_is_blinded_and_a_simulated_hand_drives_the_study(tmp_path):
+    plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0, timing="motion_time = 1.5\ndwell = 0.5")
+    plan.write_text(plan.read_text().replace("between_conditions = 30.0", "between_conditions = 0.5"))
+    study = init_study(plan, tmp_path / "study")
+    received: list[str] = []
+    with ParticipantRun(study, "S01", simulate=True, page=("127.0.0.1", 0, None)) as run:
+        done = threading.Thread(target=run.run, daemon=True)
+        done.start()
+        entered = play_page(run.url, OperatorPath(study.folder, "S01"), received)
+        done.join(30)
+        assert not done.is_alive() and run.complete
+    labels = study.labels
+    # blinding: not one message names a controller kind or a condition
+    assert received and not [s for s in SECRETS if any(s in text for text in received)]
+    frames = [json.loads(t) for t in received if '"type": "frame"' in t]
+    assert len(frames) > 300 and {f["controller"] for f in frames} <= set(labels.values())
+    # the page started each condition by its label, in the participant's order (row 0: the plan's order)
+    assert entered["starts"] == [labels["assistive"], labels["impedance"], labels["manual"]]
+    pf = study.participant("S01")
+    for name in ("assistive", "impedance", "manual"):
+        trial = read_dataset(pf.block(name)).trials[0]
+        assert trial.meta.extra["controller_name"] == labels[name] and trial.meta.extra["ended"] == "target"
+    # the answers entered on the page are the ones stored, per condition
+    stored = {r["step"]: list(r["answers"].values()) for r in pf.progress() if r["kind"] == "questionnaire"}
+    assert stored == {int(k): v for k, v in entered["answers"].items()}
+
+
+@pytest.mark.slow
+def test_the_page_is_the_hand_on_the_mujoco_ur5(tmp_path):
+    """The same page drives the MuJoCo UR5 (thesis' motion times, paced to the wall clock: ~16 s a trial)."""
+    pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra")
+    plan = comparison_plan(tmp_path / "plans", world="mujoco", per_condition=1, practice=0, timing="")
+    plan.write_text(plan.read_text().replace("between_conditions = 30.0", "between_conditions = 0.5")
+                    .replace('tasks = ["linear", "curved"]', 'tasks = ["linear"]'))  # fmt: skip
+    study = init_study(plan, tmp_path / "study")
+    received: list[str] = []
+    with ParticipantRun(study, "S01", simulate=True, page=("127.0.0.1", 0, None)) as run:
+        done = threading.Thread(target=run.run, daemon=True)
+        done.start()
+        play_page(run.url, OperatorPath(study.folder, "S01"), received, timeout=180)
+        done.join(30)
+        assert run.complete
+    assert not [s for s in SECRETS if any(s in text for text in received)]
+    for name in ("assistive", "impedance", "manual"):
+        trial = read_dataset(study.participant("S01").block(name)).trials[0]
+        assert trial.meta.source == "mujoco" and trial.meta.extra["ended"] == "target"
+        assert float(np.abs(trial.wrench[:, 0]).max()) > 1.0  # the page's hand pushed the arm

@@ -1,0 +1,72 @@
+"""The plan: a valid one reads into its dataclasses; a bad one is one line naming the field (via the CLI too)."""
+
+from __future__ import annotations
+
+import pytest
+from typer.testing import CliRunner
+
+from coassist.cli import app
+from coassist.study.plan import PlanError, load_plan, plan_from_text
+
+from .conftest import COMPARISON
+
+
+def _plan(**fmt) -> str:
+    args = {"world": "play", "per_condition": 2, "practice": 1, "timing": ""}
+    args.update(fmt)
+    return COMPARISON.format(**args)
+
+
+def test_a_valid_plan_reads_into_its_fields(comparison_file):
+    plan = load_plan(comparison_file)
+    assert plan.protocol == "comparison" and plan.world == "play" and plan.participants == 4 and plan.seed == 3
+    assert [c.name for c in plan.conditions] == ["assistive", "impedance", "manual"]
+    assert [c.controller for c in plan.conditions] == ["cooperative", "impedance", "manual"]
+    assert plan.trials.tasks == ("linear", "curved") and plan.trials.per_condition == 2 and plan.trials.motion_time == 3.0
+    assert plan.questionnaire.tlx and len(plan.questionnaire.likert) == 4
+    assert plan.training is None
+
+
+@pytest.mark.parametrize(("edit", "field"), [
+    (lambda t: t.replace("per_condition = 2", "per_condition = 0"), "trials.per_condition"),
+    (lambda t: t.replace("per_condition = 2", "per_conditon = 2"), "trials.per_conditon"),
+    (lambda t: t.replace('controller = "impedance"', 'controller = "imp"'), "condition[1].controller"),
+    (lambda t: t.replace('world = "play"', 'world = "gazebo"'), "study.world"),
+    (lambda t: t.replace('protocol = "comparison"', 'protocol = "abba"'), "study.protocol"),
+    (lambda t: t.replace('tasks = ["linear", "curved"]', 'tasks = ["linear", "spiral"]'), "trials.tasks[1]"),
+    (lambda t: t.replace('name = "manual"', 'name = "impedance"'), "condition"),
+    (lambda t: t.replace("between_conditions = 30.0", "between_conditions = -1"), "rest.between_conditions"),
+    (lambda t: t + '\n[questionnaire]\nlikert_points = 2\n', "questionnaire.likert_points"),
+    (lambda t: t.replace('world = "play"', 'world = "mujoco"') + "\n", "trials.motion_time"),
+    (lambda t: t.replace("[rest]", "[rests]"), "rests"),
+    (lambda t: t + '\n[training]\nepochs = 1\n', "training"),
+    (lambda t: t + '\n[[condition]]\nname = "again"\ncontroller = "cooperative"\n', "condition"),
+    (lambda t: t.replace('name = "comparison"', 'name = "a b"'), "study.name"),
+    (lambda t: t.replace('[study]', '[study]\nparticipants = 1\n'), None),  # duplicate key: TOML's own error
+])  # fmt: skip
+def test_a_bad_plan_is_one_line_naming_the_field(edit, field):
+    text = edit(_plan(timing="motion_time = 3.0"))
+    with pytest.raises(PlanError) as err:
+        plan_from_text(text, ".")
+    message = str(err.value)
+    assert "\n" not in message
+    if field is None:
+        assert message.startswith("not TOML")
+    else:
+        assert message.startswith(field), message
+
+
+def test_a_model_the_plan_names_must_exist(tmp_path):
+    text = _plan().replace('controller = "cooperative"', 'controller = "cooperative"\nintent = "models/M9"')
+    with pytest.raises(PlanError, match=r"^condition\[0\]\.intent: 'models/M9' is not a model folder"):
+        plan_from_text(text, tmp_path)
+
+
+def test_the_cli_prints_the_plan_error_on_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(_plan().replace("per_condition = 2", "per_condition = 0"))
+    result = CliRunner().invoke(app, ["study", "init", str(bad), "--out", str(tmp_path / "s")])
+    assert result.exit_code == 2
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert lines == [f"error: {bad}: trials.per_condition must be an integer in 1 … 1000, got 0"]
+    assert not (tmp_path / "s" / "study.json").exists()

@@ -1,0 +1,182 @@
+"""Iterative (two rounds) and transfer studies with simulated participants: the models train in a background
+process while the next trials wait, and each equals what ``coassist train`` makes from the same trials."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+pytest.importorskip("torch", reason="the study's models need the learn extra")
+
+from safetensors.numpy import load_file  # noqa: E402
+
+from coassist.cli import app  # noqa: E402
+from coassist.data import read_dataset  # noqa: E402
+from coassist.study.runner import ParticipantRun  # noqa: E402
+from coassist.study.store import init_study  # noqa: E402
+
+TRAINING = """
+[training]
+preset = "default"
+epochs = 1
+seed = 0
+threads = 1
+layers = 1
+hidden = 8
+fc = [8]
+"""
+TRIALS = """
+[trials]
+tasks = ["linear", "curved"]
+per_condition = 1
+practice = 0
+motion_time = 3.0
+dwell = 1.0
+
+[rest]
+between_conditions = 30.0
+"""
+TRAIN_OPTIONS = ["--preset", "default", "--epochs", "1", "--seed", "0", "--threads", "1"]
+SIZES = ["--layers", "1", "--hidden", "8", "--fc", "8"]
+
+
+def _same_weights(a: Path, b: Path) -> None:
+    """The network's weights and the ridge baseline's, tensor by tensor, bit for bit."""
+    for name in ("weights.safetensors", "ridge.safetensors"):
+        wa, wb = load_file(str(a / name)), load_file(str(b / name))
+        assert wa.keys() == wb.keys() and wa
+        for k in wa:
+            assert np.array_equal(wa[k], wb[k]), f"{name}: {k}"
+
+
+def _cli_train(*args: str) -> None:
+    result = CliRunner().invoke(app, ["train", *args])
+    assert result.exit_code == 0, result.output
+
+
+def test_an_iterative_study_of_two_rounds_trains_what_coassist_train_trains(tmp_path):
+    plan = tmp_path / "iterative.toml"
+    plan.write_text('[study]\nname = "iter"\nprotocol = "iterative"\nworld = "play"\nparticipants = 1\n\n'
+                    "[iterative]\nrounds = 2\ntrials_per_round = 3\ntolerance = 1e-9\n" + TRIALS + TRAINING)  # fmt: skip
+    study = init_study(plan, tmp_path / "study")
+    with ParticipantRun(study, "S01", simulate=True) as run:
+        run.run()
+        assert run.complete
+    pf = study.participant("S01")
+    lines = pf.progress()
+    kinds = [r["kind"] for r in lines]
+    assert kinds == ["trial"] * 3 + ["questionnaire", "train", "rest"] + ["trial"] * 3 + ["check", "questionnaire", "train"]
+    train0 = lines[4]
+    assert train0["model"] == "M0" and train0["init"] == "scratch"
+    assert train0["ready_when_recorded"] is False  # the runner went on while M0 trained in its own process
+    first_of_round1 = lines[6]
+    assert first_of_round1["model"] == "M0"  # round 1 collected with M0 in the loop, once it was ready
+    round1 = read_dataset(pf.block("round-1")).trials
+    assert all(t.meta.model_id and t.meta.model_id.startswith("M0@") for t in round1)
+    assert all(t.meta.model_id is None for t in read_dataset(pf.block("round-0")).trials)  # D0: the nominal plan
+    check = lines[9]
+    assert check["round"] == 1 and check["met"] is False  # the criterion of eq. 4.13 (a tolerance nobody meets)
+    assert abs(check["e_rms"] - check["e_rms_before"]) == pytest.approx(check["delta"])
+    # the models equal coassist train's from the same trials
+    m0, m1 = pf.folder / "models" / "M0", pf.folder / "models" / "M1"
+    _cli_train(str(pf.block("round-0")), "--out", str(tmp_path / "cli-M0"), *TRAIN_OPTIONS, *SIZES)
+    _same_weights(m0, tmp_path / "cli-M0")
+    _cli_train(str(pf.block("round-1")), "--out", str(tmp_path / "cli-M1"), "--init", f"resume:{m0}", *TRAIN_OPTIONS)
+    _same_weights(m1, tmp_path / "cli-M1")
+    assert lines[11]["command"][:2] == ["coassist", "train"] and f"resume:{m0}" in lines[11]["command"]
+    from coassist.study.report import write_report
+
+    html, _ = write_report(study.folder)
+    assert "the stop criterion (eq. 4.13)" in html.read_text() and "M1" in html.read_text()
+
+
+@pytest.fixture
+def source_model(tmp_path) -> Path:
+    """A small model of the default preset's window (1 x 8 LSTM) trained by coassist train on a simulated study's trials."""
+    plan = tmp_path / "collect.toml"
+    plan.write_text('[study]\nname = "d0"\nprotocol = "comparison"\nworld = "play"\nparticipants = 1\n\n'
+                    '[[condition]]\nname = "a"\ncontroller = "cooperative"\n[[condition]]\nname = "m"\ncontroller = "manual"\n'
+                    + TRIALS.replace("per_condition = 1", "per_condition = 3"))  # fmt: skip
+    study = init_study(plan, tmp_path / "d0")
+    with ParticipantRun(study, "S09", simulate=True) as run:
+        run.run()
+    pf = study.participant("S09")
+    _cli_train(str(pf.block("a")), str(pf.block("m")), "--out", str(tmp_path / "source"), *TRAIN_OPTIONS, *SIZES)
+    return tmp_path / "source"
+
+
+def test_a_transfer_study_trains_the_frozen_lstm_transfer_as_coassist_train(tmp_path, source_model):
+    plan = tmp_path / "transfer.toml"
+    plan.write_text('[study]\nname = "tl"\nprotocol = "transfer"\nworld = "play"\nparticipants = 2\n\n'
+                    f'[transfer]\nsource_model = "{source_model}"\ntrials = 3\n' + TRIALS + TRAINING)  # fmt: skip
+    study = init_study(plan, tmp_path / "study")
+    with ParticipantRun(study, "S01", simulate=True) as run:
+        run.run()
+    pf = study.participant("S01")
+    lines = pf.progress()
+    assert [r["kind"] for r in lines][:5] == ["trial"] * 3 + ["train", "rest"]
+    assert lines[3]["init"] == f"transfer:{source_model}" and lines[3]["ready_when_recorded"] is False
+    # the transfer set was collected with the source model in the loop
+    assert all(t.meta.model_id.startswith("source@") for t in read_dataset(pf.block("transfer-set")).trials)
+    # then the transferred model against the source model, blinded: each a condition with its own label
+    labels = study.labels
+    assert sorted(labels) == ["source", "transferred"] and sorted(labels.values()) == ["A", "B"]
+    trials = {c: read_dataset(pf.block(c)).trials[0] for c in ("source", "transferred")}
+    assert trials["transferred"].meta.model_id.startswith("transferred@")
+    assert trials["source"].meta.extra["controller_name"] == labels["source"]
+    _cli_train(str(pf.block("transfer-set")), "--out", str(tmp_path / "cli-TL"), "--init", f"transfer:{source_model}",
+               *TRAIN_OPTIONS)  # fmt: skip
+    _same_weights(pf.folder / "models" / "transferred", tmp_path / "cli-TL")
+    # the frozen LSTM is the source's, bit for bit; the FC head was trained
+    src = load_file(str(source_model / "weights.safetensors"))
+    tl = load_file(str(pf.folder / "models" / "transferred" / "weights.safetensors"))
+    lstm = [k for k in src if k.startswith("lstm")]
+    assert lstm and all(np.array_equal(src[k], tl[k]) for k in lstm)
+    assert any(not np.array_equal(src[k], tl[k]) for k in src if k.startswith("head"))
+    from coassist.study.report import write_report
+
+    html, _ = write_report(study.folder)
+    assert "transferred (" in html.read_text() and "transfer-set" in html.read_text()
+
+
+def test_online_adaptation_never_delays_the_loop_and_meets_the_offline_transfer(tmp_path, source_model):
+    plan = tmp_path / "online.toml"
+    plan.write_text('[study]\nname = "online"\nprotocol = "online"\nworld = "play"\nparticipants = 2\n\n'
+                    f'[online]\nsource_model = "{source_model}"\ntrials = 4\n' + TRIALS + TRAINING)  # fmt: skip
+    study = init_study(plan, tmp_path / "study")
+    with ParticipantRun(study, "S01", simulate=True) as run:
+        run.run()
+    pf = study.participant("S01")
+    lines = pf.progress()
+    adaptation = [r for r in lines if r["kind"] == "trial" and r["block"] == "adaptation"]
+    updates = [r for r in lines if r["kind"] == "train" and r["model"].startswith("online-")]
+    assert len(adaptation) == 4 and len(updates) == 3
+    started = set()
+    for r in lines:
+        if r["kind"] == "train" and not r.get("deferred"):
+            started.add(r["model"])
+        if r in adaptation:
+            assert r["waited_for_model_s"] < 0.1  # a trial takes the newest model ready, it never waits
+            assert r["model"] is None or r["model"] in started  # the source, or an update started before it
+    first = updates[0]
+    assert not first.get("deferred") and first["init"] == f"transfer:{source_model}"
+    assert first["data"] == [str(pf.block("adaptation") / "trial_00000.parquet")]  # the trials so far, as files
+    freeze = next(r for r in lines if r["kind"] == "freeze")
+    offline = next(r for r in lines if r["kind"] == "train" and r["model"] == "offline")
+    assert offline["init"] == f"transfer:{source_model}" and len(offline["data"]) == 4
+    # the online and the offline models are each coassist train's on the same trial files
+    _cli_train(*first["data"], "--out", str(tmp_path / "cli-online-1"), "--init", f"transfer:{source_model}", *TRAIN_OPTIONS)
+    _same_weights(pf.folder / "models" / "online-1", tmp_path / "cli-online-1")
+    _cli_train(*offline["data"], "--out", str(tmp_path / "cli-offline"), "--init", f"transfer:{source_model}", *TRAIN_OPTIONS)
+    _same_weights(pf.folder / "models" / "offline", tmp_path / "cli-offline")
+    # then the last online model against the offline transfer, blinded
+    online = read_dataset(pf.block("online")).trials[0]
+    assert online.meta.model_id.startswith(f"{freeze['model_from']}@")
+    assert read_dataset(pf.block("offline")).trials[0].meta.model_id.startswith("offline@")
+    from coassist.study.report import write_report
+
+    _, summary = write_report(study.folder)
+    assert '"blocks": [\n  "online",\n  "offline"\n ]' in summary.read_text()
