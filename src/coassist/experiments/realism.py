@@ -133,9 +133,9 @@ intent than the nominal path; 12 paired trials, 3 tasks × 4 seeds, user 0, hand
 
 | preset | mean ‖u_h‖, nominal intent | mean ‖u_h‖, true intent | change | trials where true intent wins |
 | --- | --- | --- | --- | --- |
-| thesis-evaluation (SI) | 4.18 N | 4.24 N | +1 % | 0 / 12 |
-| thesis-evaluation-dm | 3.28 N | 1.55 N | −53 % | 12 / 12 |
-| thesis-application-dm | 8.24 N | 1.13 N | −86 % | 12 / 12 |
+| thesis-evaluation (SI) | 4.05 N | 4.14 N | +2 % | 0 / 12 |
+| thesis-evaluation-dm | 4.80 N | 1.35 N | −72 % | 12 / 12 |
+| thesis-application-dm | 11.18 N | 1.36 N | −88 % | 12 / 12 |
 
 With the thesis' weights in SI units the claim does not hold: the robot's effort is too
 small to matter, and the nominal reference, which runs slightly ahead of the operator,
