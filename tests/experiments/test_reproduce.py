@@ -21,28 +21,37 @@ from coassist.experiments.transfer import transfer_targets
 def _collections(cfg):
     """(name, first seed, trial count) of every simulated collection of a run, from the seed plan."""
     n_tasks = len(pipeline.ITERATION_TASKS)
-    out = [(f"D{k}", pipeline.iteration_seed(cfg.seed, k), n_tasks * cfg.trials_per_task) for k in range(cfg.iterations + 1)]
+    base = pipeline.trial_seed_base(cfg.seed)
+    out = [(f"D{k}", pipeline.iteration_seed(base, k), n_tasks * cfg.trials_per_task) for k in range(cfg.iterations + 1)]
     for i, (name, t) in enumerate(transfer_targets(cfg).items()):
-        train, test = pipeline.transfer_seeds(cfg.seed, i)
+        train, test = pipeline.transfer_seeds(base, i)
         per = len(t.tasks) * len(t.users) * len(t.objects)
         out += [(f"TL {name}", train, per * t.trials), (f"TL {name} test", test, per * t.test_trials)]
-    out.append(("TL heavy", pipeline.heavy_transfer_seed(cfg.seed), n_tasks * max(1, cfg.transfer_trials // 3)))
-    out.append(("calibration", pipeline.calibration_seed(cfg.seed), cfg.calibration_trials * len(cfg.application_users)))
+    out.append(("TL heavy", pipeline.heavy_transfer_seed(base), n_tasks * max(1, cfg.transfer_trials // 3)))
+    out.append(("calibration", pipeline.calibration_seed(base), cfg.calibration_trials * len(cfg.application_users)))
     for j in range(2):  # every controller of object j reuses the same seeds on purpose
-        out.append((f"application {j}", pipeline.application_seed(cfg.seed, j),
+        out.append((f"application {j}", pipeline.application_seed(base, j),
                     cfg.application_trials * len(cfg.application_users)))
     return out
 
 
 @pytest.mark.parametrize("name", ["default", "tiny", "thesis"])
 def test_no_two_collections_share_a_trial_seed(name):
-    spans = sorted(_collections(pipeline.REPRODUCE_PRESETS[name]), key=lambda c: c[1])
-    for (a, sa, na), (b, sb, _) in pairwise(spans):
-        assert sa + na <= sb, f"{a} (seeds {sa}..{sa + na - 1}) overlaps {b} (from {sb})"
+    # one run, and the three runs of `reproduce --seeds 3` (seeds 0, 1, 2) together
+    for seeds in ((0,), (0, 1, 2)):
+        spans = sorted((c for s in seeds for c in _collections(replace(pipeline.REPRODUCE_PRESETS[name], seed=s))),
+                       key=lambda c: c[1])  # fmt: skip
+        for (a, sa, na), (b, sb, _) in pairwise(spans):
+            assert sa + na <= sb, f"{a} (seeds {sa}..{sa + na - 1}) overlaps {b} (from {sb}), run seeds {seeds}"
+    # and every run's collections stay inside its own block of trial seeds
+    for s in (0, 1, 2):
+        for a, sa, na in _collections(replace(pipeline.REPRODUCE_PRESETS[name], seed=s)):
+            assert s * pipeline.RUN_SEED_STRIDE <= sa and sa + na <= (s + 1) * pipeline.RUN_SEED_STRIDE, a
 
 
 def test_seed_plan_offsets():
     # The offsets as named; a change here changes every dataset of a run.
+    assert pipeline.trial_seed_base(0) == 0 and pipeline.trial_seed_base(2) == 2_000_000
     assert pipeline.iteration_seed(7, 2) == 7 + 300_000
     # The transfer targets moved from +500_000 to +600_000: D_4 of a 4-iteration run starts at +500_000.
     assert pipeline.transfer_seeds(7, 2) == (7 + 640_000, 7 + 650_000)

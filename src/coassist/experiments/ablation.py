@@ -58,7 +58,7 @@ from coassist.experiments.application import (
     paired_difference,
 )
 from coassist.experiments.intent_sources import APPLICATION_SOURCE, LEARNED, seed_names
-from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_seed, in_loop_errors
+from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_seed, in_loop_errors, trial_seed_base
 from coassist.experiments.report import Claim, Section
 
 SOURCES = ("nominal", "constant-velocity", "present", "ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone",
@@ -358,7 +358,7 @@ def _mujoco_cells(cfg, source: str, intent: str) -> list[tuple[tuple[str, str, s
     for :data:`MG_JOB`, else the arbitrated controller with ``source`` (its first training)."""
     controller = "manual" if source == MG_JOB else ARBITRATED
     name = "nominal" if source == MG_JOB else source
-    return [((obj, controller, name), _mujoco_configs(cfg, obj, application_seed(cfg.seed, j), controller, intent))
+    return [((obj, controller, name), _mujoco_configs(cfg, obj, application_seed(trial_seed_base(cfg.seed), j), controller, intent))
             for j, obj in enumerate(OBJECTS)]  # fmt: skip
 
 

@@ -30,6 +30,7 @@ from coassist.experiments.pipeline import (
     application_seed,
     heavy_transfer_seed,
     pyplot,
+    trial_seed_base,
 )
 from coassist.experiments.report import Claim, Section
 
@@ -93,7 +94,7 @@ def cell_options(cfg, j: int, obj: str, controller: str, intent: str) -> dict[st
 
     n_trials = len(cfg.application_users) * cfg.application_trials
     return {"tasks": (cfg.application_task,), "objects": (obj,), "users": cfg.application_users,
-            "trials": cfg.application_trials, "seed": application_seed(cfg.seed, j), "controller": controller,
+            "trials": cfg.application_trials, "seed": application_seed(trial_seed_base(cfg.seed), j), "controller": controller,
             "preset": cfg.application_preset, "intent": intent, "obstacle": OBSTACLE,
             "groups": -(-n_trials // NAMED_GROUP)}  # fmt: skip
 
@@ -109,11 +110,11 @@ def prefetch_model_free(ws: Workspace) -> None:
     """Put the pairs' simulations that need no learned source (IMP's and MG's) and the operators'
     calibration trials on the run's pool now (:meth:`Workspace.prefetch`; :func:`run_application`
     then finds them there)."""
-    from coassist.experiments.pipeline import calibration_seed
+    from coassist.experiments.pipeline import calibration_seed, trial_seed_base
 
     cfg = ws.config
     ws.prefetch("calibration", tasks=(cfg.application_task,), users=cfg.application_users, objects=("handle",),
-                trials=cfg.calibration_trials, seed=calibration_seed(cfg.seed), controller="manual",
+                trials=cfg.calibration_trials, seed=calibration_seed(trial_seed_base(cfg.seed)), controller="manual",
                 preset=cfg.application_preset, intent="nominal", obstacle=OBSTACLE)  # fmt: skip
     for j, obj in enumerate(OBJECTS):
         for controller in CONTROLLERS:
@@ -136,7 +137,7 @@ def run_application(ws: Workspace, final_model: Path,
     far, for a later stage to put its own simulations there too (the ablation's)."""
     cfg = ws.config
     ws.collect("TL-heavy", tasks=ITERATION_TASKS, objects=("heavy",), trials=max(1, cfg.transfer_trials // 3),
-               seed=heavy_transfer_seed(cfg.seed), intent=str(final_model))
+               seed=heavy_transfer_seed(trial_seed_base(cfg.seed)), intent=str(final_model))
 
     def cell(j: int, obj: str, controller: str, models: dict[str, str]) -> dict[str, Any]:
         intent = models[APPLICATION_SOURCE] if controller.startswith("cooperative") else "nominal"

@@ -13,8 +13,9 @@ the loop) by the same protocol (the run's intent preset, epochs and skip shrinka
   ``thesis`` preset only: it never beat the intent label, docs/intent-labels.md);
 - ``lstm-intent``: the LSTM+FC on the simulated operator's true intent (``label="intent"``).
 
-Each LSTM source is trained ``source_seeds`` times (seeds ``seed``, ``seed + 1``, …): the first
-is ``<source>``, the others ``<source>-s1``, ``<source>-s2``, … (:func:`seed_names`).
+Each LSTM source is trained ``source_seeds`` times: the first
+is ``<source>``, the others ``<source>-s1``, ``<source>-s2``, … (:func:`seed_names`), on the
+training seeds 1000·seed + k (no two runs' trainings share one).
 
 The path-hypotheses source ``paths`` (:mod:`coassist.scenario.path_hypotheses`) is not trained:
 :func:`calibrate_paths` fits each application operator's detour (clearance, anticipation, side
@@ -59,13 +60,13 @@ def calibrate_paths(ws: Workspace) -> str:
     (:func:`~coassist.scenario.path_hypotheses.fit_detour`) and write every operator's shape into
     ``models/paths`` (:func:`~coassist.scenario.path_hypotheses.write_calibration`); the folder."""
     from coassist.experiments.application import OBSTACLE
-    from coassist.experiments.pipeline import calibration_seed
+    from coassist.experiments.pipeline import calibration_seed, trial_seed_base
     from coassist.scenario.path_hypotheses import calibrate, fit_detour, write_calibration
     from coassist.scenario.tasks import task_for_seed
 
     cfg = ws.config
     _, ds = ws.collect("calibration", tasks=(cfg.application_task,), users=cfg.application_users, objects=("handle",),
-                       trials=cfg.calibration_trials, seed=calibration_seed(cfg.seed), controller="manual",
+                       trials=cfg.calibration_trials, seed=calibration_seed(trial_seed_base(cfg.seed)), controller="manual",
                        preset=cfg.application_preset, intent="nominal", obstacle=OBSTACLE)  # fmt: skip
     fits: dict[str, list[tuple[int, float, float]]] = {}
     for trial in ds.trials:
@@ -118,7 +119,8 @@ def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None 
         preset_name, label = LEARNED[source]
         epochs = ws.config.epochs if preset_name is None else MODEL_PRESETS[preset_name].train.epochs
         for k, name in enumerate(seed_names(source, ws.config.source_seeds)):
-            jobs.append((name, epochs, preset_name, label, ws.config.seed + k))
+            # training seeds seed·1000 + k: no two runs' trainings share one
+            jobs.append((name, epochs, preset_name, label, ws.config.seed * 1000 + k))
     told = on_models or (lambda models: None)
     models: dict[str, str] = {}
     if ws.config.device != "cpu":

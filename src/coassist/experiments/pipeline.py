@@ -152,9 +152,20 @@ REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry("reproduce preset", {
 
 # ----------------------------------------------------------------------------- the seed plan
 # A dataset of n trials collected with seed s uses the trial seeds s … s+n−1
-# (coassist.sim.collect). Each collection of the pipeline starts at the run's seed plus its
-# own offset; the offsets are far enough apart that no two collections share a trial seed
-# for any preset (tests/experiments/test_reproduce.py checks the thesis preset's sizes).
+# (coassist.sim.collect). Each collection of the pipeline starts at the run's trial-seed base
+# (run seed × RUN_SEED_STRIDE: seed 0's is 0) plus its own offset; the offsets are far enough
+# apart that no two collections share a trial seed for any preset, and every offset is below
+# the stride, so runs with different seeds share none either (tests/experiments/test_reproduce.py
+# checks the thesis preset's sizes and three seeds).
+
+#: The trial seeds of run seed k are k·RUN_SEED_STRIDE … (k + 1)·RUN_SEED_STRIDE − 1.
+RUN_SEED_STRIDE = 1_000_000
+
+
+def trial_seed_base(seed: int) -> int:
+    """The first trial seed of run seed ``seed`` (its collections' offsets are added to it)."""
+    return int(seed) * RUN_SEED_STRIDE
+
 
 #: D_k (iterative training, k = 0 … iterations): seed + ITERATION_SEED_STEP·(k+1).
 ITERATION_SEED_STEP = 100_000
@@ -171,30 +182,31 @@ CALIBRATION_SEED_OFFSET = 880_000
 APPLICATION_SEED_OFFSET, APPLICATION_SEED_STEP = 900_000, 1000
 
 
-def iteration_seed(seed: int, k: int) -> int:
-    """First trial seed of D_k."""
-    return seed + ITERATION_SEED_STEP * (k + 1)
+def iteration_seed(base: int, k: int) -> int:
+    """First trial seed of D_k; ``base``: the run's :func:`trial_seed_base` (or any base)."""
+    return base + ITERATION_SEED_STEP * (k + 1)
 
 
-def transfer_seeds(seed: int, i: int) -> tuple[int, int]:
-    """First trial seeds of transfer target i's training and test datasets."""
-    train = seed + TRANSFER_SEED_OFFSET + TRANSFER_SEED_STEP * i
+def transfer_seeds(base: int, i: int) -> tuple[int, int]:
+    """First trial seeds of transfer target i's training and test datasets (``base``: as :func:`iteration_seed`'s)."""
+    train = base + TRANSFER_SEED_OFFSET + TRANSFER_SEED_STEP * i
     return train, train + TRANSFER_TEST_SEED_OFFSET
 
 
-def heavy_transfer_seed(seed: int) -> int:
-    """First trial seed of the heavy load's transfer dataset."""
-    return seed + HEAVY_TRANSFER_SEED_OFFSET
+def heavy_transfer_seed(base: int) -> int:
+    """First trial seed of the heavy load's transfer dataset (``base``: as :func:`iteration_seed`'s)."""
+    return base + HEAVY_TRANSFER_SEED_OFFSET
 
 
-def calibration_seed(seed: int) -> int:
-    """First trial seed of the application operators' calibration trials."""
-    return seed + CALIBRATION_SEED_OFFSET
+def calibration_seed(base: int) -> int:
+    """First trial seed of the application operators' calibration trials (``base``: as :func:`iteration_seed`'s)."""
+    return base + CALIBRATION_SEED_OFFSET
 
 
-def application_seed(seed: int, j: int) -> int:
-    """First trial seed of the application trials with object j."""
-    return seed + APPLICATION_SEED_OFFSET + APPLICATION_SEED_STEP * j
+def application_seed(base: int, j: int) -> int:
+    """First trial seed of the application trials with object j (``base``: as :func:`iteration_seed`'s; the
+    validation trials of docs/precision.md are bases 50000 and 60000, which no run seed's collections use)."""
+    return base + APPLICATION_SEED_OFFSET + APPLICATION_SEED_STEP * j
 
 
 # ----------------------------------------------------------------------------- the workspace

@@ -77,6 +77,7 @@ from coassist.experiments.pipeline import (
     iteration_seed,
     pyplot,
     score_model,
+    trial_seed_base,
     windows_trained,
 )
 from coassist.experiments.real_recordings import (
@@ -379,7 +380,7 @@ def run_iterative_stage(ws: Workspace, say: Callable[[str], None],
 
     def collect(k, model_path):
         folder, ds = ws.collect(f"D{k}", tasks=ITERATION_TASKS, trials=cfg.trials_per_task,
-                                seed=iteration_seed(cfg.seed, k), intent=str(model_path) if model_path else "nominal")
+                                seed=iteration_seed(trial_seed_base(cfg.seed), k), intent=str(model_path) if model_path else "nominal")
         folders[k] = folder
         if k == 1:
             # The skip's shrinkage is chosen for the input shift between D_k and D_{k+1}: how

@@ -23,6 +23,7 @@ from coassist.experiments.pipeline import (
     Workspace,
     pyplot,
     transfer_seeds,
+    trial_seed_base,
     windows_trained,
 )
 from coassist.experiments.report import Claim, Section
@@ -133,7 +134,7 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
     collected = {}
     for i, (name, target) in enumerate(transfer_targets(cfg).items()):
         slug = name.replace(" ", "-")
-        seed, test_seed = transfer_seeds(cfg.seed, i)
+        seed, test_seed = transfer_seeds(trial_seed_base(cfg.seed), i)
         t0 = time.perf_counter()
         folder, dataset = ws.collect(f"TL-{slug}", tasks=target.tasks, users=target.users, objects=target.objects,
                                      trials=target.trials, seed=seed, intent=str(final_model))
