@@ -956,6 +956,8 @@ def reproduce(
     out: Path = typer.Option(Path("runs/reproduce"), help="Output folder: report.html, summary.json, datasets, models."),
     preset: str = typer.Option("default", help="default (≤ 15 min on 2 CPU cores), tiny (smoke run) or thesis (thesis sizes; GPU)."),
     seed: int = typer.Option(0, help="Seed of every dataset and training."),
+    seeds: str = typer.Option(None, help="Run on several seeds instead: a count N (seeds 0 … N-1) or a list like 0,1,2; "
+                              "one report says on how many seeds each claim holds."),
     workers: int = typer.Option(None, help="Simulation processes (default: the preset's)."),
     device: str = typer.Option(None, help="Torch device for training, e.g. cpu or cuda (default: the preset's)."),
     real_data: Path = typer.Option(None, help="Folder with user-a/ and user-b/ recordings (default: $COASSIST_REAL_DATA; see README)."),
@@ -964,6 +966,16 @@ def reproduce(
     from dataclasses import replace
 
     from coassist.experiments import reproduce as rep
+    from coassist.experiments import seeds as multi
+
+    seed_list = None
+    if seeds is not None:
+        if seed != 0:
+            _fail("give --seed or --seeds, not both", 2)
+        try:
+            seed_list = multi.parse_seeds(seeds)
+        except ValueError as exc:
+            _fail(str(exc), 2)
 
     chosen = _lookup(rep.REPRODUCE_PRESETS, preset, "--preset")
     _check_device(device)
@@ -985,6 +997,14 @@ def reproduce(
                                 "reproduce.device": "--device"}), 2)  # fmt: skip
     _folder_out(out, "--out")
     _set_torch_threads(config.threads)  # training runs in this process
+    if seed_list is not None:
+        across = multi.run_seeds(config, seed_list, out, progress=True, say=lambda line: console.print(line, highlight=False))
+        console.print(f"claims: {across['robust']} of {across['n_claims']} hold on every seed")
+        for c in across["claims"]:
+            mark = {"robust": "[green]robust[/]", "seed-dependent": "[yellow]seed-dependent[/]"}.get(c["status"], "[red]not holding[/]")
+            console.print(f"  {mark} ({c['holds_on']} of {c['checked_on']})  {escape(c['claim'])}", highlight=False)
+        _wrote(f"{out / 'report.html'} and {out / 'summary.json'} in {across['total_seconds']:.0f} s")
+        return
     summary = rep.run_reproduce(config, out, progress=True, say=lambda line: console.print(line, highlight=False))
     held = sum(1 for c in summary["claims"] if c["holds"])
     console.print(f"claims: {held} of {len(summary['claims'])} hold")

@@ -10,7 +10,6 @@ import pytest
 
 from coassist.experiments import pipeline
 from coassist.experiments.ablation import (
-    CONTROLLERS,
     MG_JOB,
     OBJECTS,
     AblationAhead,
@@ -75,7 +74,7 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
 
     ahead({"lstm-tool": models["lstm-tool"]})
     ahead({"lstm-tool": models["lstm-tool"]})  # again: nothing new
-    expect |= {f"dataset:ablation-{o}-{c}-lstm-tool" for o in OBJECTS for c in CONTROLLERS}
+    expect |= {f"dataset:ablation-{o}-{c}-lstm-tool" for o in OBJECTS for c, s in ablation_cells(cfg) if s == "lstm-tool"}
     if ahead.mujoco:
         expect.add("job:mujoco:lstm-tool")
     assert set(ws._pending) == expect
@@ -91,8 +90,9 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
     assert set(ws._pending) == expect
     assert "dataset:ablation-board-cooperative-damped-paths" in expect  # the damped controller's: not the application's
     # each prefetched cell carries its source's model
-    (options, groups), _ = ws._pending["dataset:ablation-board-cooperative-ridge"]
-    assert options["intent"] == models["ridge"] and options["controller"] == "cooperative"
+    (options, groups), _ = ws._pending["dataset:ablation-board-cooperative-arbitrated-ridge"]
+    assert options["intent"] == models["ridge"] and options["controller"] == "cooperative-arbitrated"
+    assert "dataset:ablation-board-cooperative-ridge" not in ws._pending  # the default leaves fixed-α learned cells out
     assert groups == 1  # a cell is one lockstep group: the pool holds many at once
     if ahead.mujoco:
         jobs = _mujoco_jobs(cfg, {s: models.get(s, s) for s in run_sources(cfg)})
@@ -223,7 +223,7 @@ def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch):
     for name, target in on_pool.targets.items():
         assert target.e_rms == here.targets[name].e_rms  # every model and baseline, every horizon, exactly
         assert target.trials == here.targets[name].trials
-        assert set(target.train_s) == {"transfer", "finetune_all", "scratch"} and all(s > 0 for s in target.train_s.values())
+        assert set(target.train_s) == set(cfg.transfer_starts) and all(s > 0 for s in target.train_s.values())
         for start, path in target.models.items():
             assert path.parent.parent == tmp_path / "pool"
             a = (path / "weights.safetensors").read_bytes()

@@ -23,7 +23,8 @@ intervals say what they resolve). The sources:
 Every learned source is trained from scratch on the same datasets by the same protocol; only
 the label differs, and the ridge's model class. Each LSTM source is trained ``source_seeds``
 times; the arbitrated controller runs every training (``<source>-s<k>``), the fixed-α one the
-first. The ``cooperative-damped`` controller (the arbitrated one with deceleration-gated
+first (and only where ``reproduce.fixed_alpha_learned``: the default preset leaves the fixed-α
+controller's learned cells out). The ``cooperative-damped`` controller (the arbitrated one with deceleration-gated
 damping, :mod:`coassist.control.deceleration_damping`) runs the ``paths`` and ``oracle`` cells: the
 lever's force, overshoot and jerk against the same sources without it.
 
@@ -91,8 +92,10 @@ def base_source(name: str) -> str:
 
 
 def ablation_cells(cfg) -> list[tuple[str, str]]:
-    """The (controller, source) cells of one object in the point-mass world (module docstring)."""
-    cells = [(c, s) for c in CONTROLLERS for s in run_sources(cfg)]
+    """The (controller, source) cells of one object in the point-mass world (module docstring); the fixed-α
+    controller runs the learned sources only where ``reproduce.fixed_alpha_learned`` says so."""
+    cells = [(c, s) for c in CONTROLLERS for s in run_sources(cfg)
+             if c == ARBITRATED or s not in LEARNED or cfg.fixed_alpha_learned]  # fmt: skip
     cells += [(ARBITRATED, name) for s in run_sources(cfg) if s in LEARNED for name in seed_names(s, cfg.source_seeds)[1:]]
     cells += [(DAMPED, s) for s in DAMPED_SOURCES]
     return cells

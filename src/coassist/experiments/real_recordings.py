@@ -53,7 +53,7 @@ def run_real_recordings(ws: Workspace, real: str | None) -> RealRecordingsResult
     from coassist.intent import evaluate_model, load_model, load_trials
 
     a = ws.train("real-user-a", [Path(real) / "user-a"], init="scratch", epochs=cfg.real_epochs, simulated=False,
-                 preset_name=cfg.real_intent_preset)
+                 preset_name=cfg.real_intent_preset, stride=cfg.real_stride)
     model_a = load_model(a)
     trials_a = load_trials([Path(real) / "user-a"])
     ev_a = evaluate_model(model_a, trials_a, held_out_only=True)
@@ -64,7 +64,7 @@ def run_real_recordings(ws: Workspace, real: str | None) -> RealRecordingsResult
     b_test = write_dataset(b_trials[k:], ws.out / "datasets" / "user-b-test", "user-b-test",
                            f"real user-b, trials {k + 1}-{len(b_trials)}", overwrite=True)
     b_model = ws.train("real-user-b-transfer", [b_train], init=f"transfer:{a}", epochs=cfg.transfer_epochs,
-                       test_fraction=0.0, simulated=False, preset_name=cfg.real_intent_preset)
+                       test_fraction=0.0, simulated=False, preset_name=cfg.real_intent_preset, stride=cfg.real_stride)
     test_b = load_trials([b_test])
     ev_b = {"M_a": evaluate_model(model_a, test_b, held_out_only=False),
             "M_TL": evaluate_model(load_model(b_model), test_b, held_out_only=False)}

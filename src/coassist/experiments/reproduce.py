@@ -150,12 +150,15 @@ def _simulation_pool(config: ReproduceConfig):
     return worker_pool(config.workers) if config.workers > 1 else contextlib.nullcontext(None)
 
 
-def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, say: Callable[[str], None] | None = None) -> dict:
-    """Run every stage; write ``report.html`` and ``summary.json`` in ``out``; return the summary."""
+def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, say: Callable[[str], None] | None = None,
+                  pool: Any = None) -> dict:  # fmt: skip
+    """Run every stage; write ``report.html`` and ``summary.json`` in ``out``; return the summary.
+    ``pool``: the simulation processes to run on (:func:`coassist.sim.world.worker_pool`, kept by the caller
+    across runs, e.g. :func:`coassist.experiments.seeds.run_seeds`); None: started for this run."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     say = say or (lambda message: None)
-    with _simulation_pool(config) as pool:
+    with contextlib.nullcontext(pool) if pool is not None else _simulation_pool(config) as pool:
         ctx = _Context(Workspace(config, out, progress, pool), _Stage(say))
         t0, c0 = time.perf_counter(), run_cpu_seconds()
         ctx.summary["config"] = asdict(config)

@@ -71,7 +71,7 @@ class TargetResult:
     windows_trained: int  # epochs × training windows of M_TL
     best_baseline: dict[int, dict[str, Any]]  # ModelEvaluation.best_baseline of M_TL
     comparison: tuple[str, ...]  # M_TL against its best tuned baseline, per horizon (prose)
-    models: dict[str, Path]  # "transfer", "finetune_all", "scratch"
+    models: dict[str, Path]  # "transfer", "scratch" and (reproduce.transfer_starts) "finetune_all"
 
     def summary(self) -> dict[str, Any]:
         return {"e_rms": self.e_rms, "collect_s": self.collect_s, "train_s": dict(self.train_s),
@@ -110,7 +110,6 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
     import time
     from concurrent.futures import Future
 
-    from coassist.experiments.iterative import TRANSFER_STARTS
     from coassist.experiments.pipeline import evaluate_in_worker, score_model, train_and_score, train_in_worker
     from coassist.intent.evaluation import BASELINES, comparison_lines
 
@@ -145,13 +144,13 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
     init = {"transfer": f"transfer:{final_model}", "finetune_all": f"finetune:{final_model}", "scratch": "scratch"}
     epochs = {start: cfg.transfer_epochs if start != "scratch" else max(cfg.transfer_epochs, cfg.epochs) for start in init}
     # the longest first (from scratch, then all layers; the frozen LSTM's FC layers are quick), then the scoring
-    order = sorted(TRANSFER_STARTS, key=("scratch", "finetune_all", "transfer").index)
+    order = sorted(cfg.transfer_starts, key=("scratch", "finetune_all", "transfer").index)
     jobs = {(name, start): train(f"TL-{slug}-{start}", folder, test, init[start], epochs[start])
             for start in order for name, (slug, folder, test, _, _) in collected.items()}  # fmt: skip
     prev = {name: evaluate(final_model, test) for name, (_, _, test, _, _) in collected.items()}
     targets = {}
     for name, (_, _, _, n_trials, collect_s) in collected.items():
-        runs = {start: jobs[(name, start)].result() for start in TRANSFER_STARTS}
+        runs = {start: jobs[(name, start)].result() for start in cfg.transfer_starts}
         models = {start: Path(path) for start, (path, _, _) in runs.items()}
         evals = {"M_prev": prev[name].result(), **{start: ev for start, (_, _, ev) in runs.items()}}
         table = {label: {h: ev.results["model"][h]["e_rms"] for h in EVAL_HORIZONS} for label, ev in evals.items()}
@@ -188,8 +187,9 @@ def transfer_section(result: TransferResult, final_own_e_rms_50: float, iterativ
     for name, t in targets.items():
         s.paragraphs.append(f"{name}, M_TL against its best tuned baseline: " + "; ".join(t.comparison))
         for label in MODELS + BASELINES:
-            rows.append([name, label] + [t.e_rms[label][h] for h in EVAL_HORIZONS])
-        time_rows.append([name, t.collect_s, t.train_s["transfer"], t.train_s["finetune_all"], t.train_s["scratch"]])
+            if label in t.e_rms:  # a preset may leave a comparison model out (reproduce.transfer_starts)
+                rows.append([name, label] + [t.e_rms[label][h] for h in EVAL_HORIZONS])
+        time_rows.append([name, t.collect_s] + [t.train_s.get(start, float("nan")) for start in ("transfer", "finetune_all", "scratch")])
     s.tables.append(("e_RMS [m] on held-out trials of each target (Fig. 5.18–5.23)", ["target", "predictor", "5", "10", "20", "50"], rows))
     s.tables.append(("Time [s] (Table 5.2); one iterative step took " + f"{result.iteration_seconds:.0f} s on average",
                      ["target", "collect", "train M_TL (frozen LSTM)", "fine-tune all", "from scratch"], time_rows))
@@ -220,12 +220,14 @@ def transfer_section(result: TransferResult, final_own_e_rms_50: float, iterativ
                     f"({100 * fraction[name][1]:.0f} %; the frozen LSTM runs forward once per window)" for name, t in targets.items()),
         reason=f"a new trajectory or object changes the motion more than {n} trials and frozen recurrent features can capture",
     ))
-    frozen_vs = {name: (t.e_rms["transfer"][50], t.e_rms["finetune_all"][50], t.e_rms["scratch"][50]) for name, t in targets.items()}
+    nan = float("nan")
+    frozen_vs = {name: (t.e_rms["transfer"][50], t.e_rms.get("finetune_all", {50: nan})[50], t.e_rms["scratch"][50])
+                 for name, t in targets.items()}  # fmt: skip
     s.claims.append(Claim(
         f"Freezing the LSTM is at least as good as training from scratch on the same {n} trials (beyond the thesis)",
         all(t <= sc for t, _, sc in frozen_vs.values()),
-        "; ".join(f"{name}: frozen {t * 1000:.1f}, all layers {f * 1000:.1f}, scratch {sc * 1000:.1f} mm"
-                  for name, (t, f, sc) in frozen_vs.items()),
+        "; ".join(f"{name}: frozen {t * 1000:.1f}, " + (f"all layers {f * 1000:.1f}, " if f == f else "")
+                  + f"scratch {sc * 1000:.1f} mm" for name, (t, f, sc) in frozen_vs.items()),
         reason="with few epochs a fresh network can fit a small, homogeneous dataset as well as a pretrained one",
     ))
     return s
@@ -233,7 +235,9 @@ def transfer_section(result: TransferResult, final_own_e_rms_50: float, iterativ
 
 def _plot(s: Section, targets: dict[str, TargetResult]) -> None:
     plt = pyplot()
-    labels = ("M_prev", "transfer", "finetune_all", "scratch", "constant_velocity", "ridge")
+    first = next(iter(targets.values()))
+    labels = tuple(label for label in ("M_prev", "transfer", "finetune_all", "scratch", "constant_velocity", "ridge")
+                   if label in first.e_rms)  # fmt: skip
     fig, axes = plt.subplots(1, len(targets), figsize=(5 * len(targets), 3.8), squeeze=False)
     for ax, (name, t) in zip(axes[0], targets.items()):
         width = 0.8 / len(labels)
