@@ -7,10 +7,11 @@ controller with the ``paths`` source in the loop), then replays them through fre
 times every ``predict`` call:
 
 - ``present``: the present estimate alone (no obstacle);
-- ``paths``, its default 5 × 5 shape grid per side (50 curves), each curve searched 2 cm either
-  side of the tool's last nearest point;
-- the same with the whole of every curve searched each tick (``search_window`` 10 m): the naive
-  baseline;
+- ``paths``, its default 5 × 5 shape grid per side (50 curves): each curve searched ±8 samples
+  around the tool's last nearest point (widened up to 2 cm while a nearest point is on the edge),
+  one curve standing for all where they coincide;
+- the naive baseline: the same filter searching the whole of every curve on every tick, all 50
+  curves every tick (``LOCAL`` and ``search_window`` past the path's length, no shared curve);
 - ``paths`` with one shape per side (2 curves).
 
 Prints median and p99 [µs] per tick, the ratio to the naive search, and the share of the control
@@ -32,6 +33,7 @@ import numpy as np  # noqa: E402
 from bench_common import machine_line  # noqa: E402
 from coassist.control.presets import get_preset, make_controller  # noqa: E402
 from coassist.runtime.episode import run_episode  # noqa: E402
+from coassist.scenario import path_hypotheses  # noqa: E402
 from coassist.scenario.objects import get_object  # noqa: E402
 from coassist.scenario.operator import operator_profile  # noqa: E402
 from coassist.scenario.path_hypotheses import FilterSettings, PathHypothesesIntent, PersonShape  # noqa: E402
@@ -75,16 +77,23 @@ def main() -> None:
     trial = run_episode(build_trial(task, profile, get_object("board"), make_controller("cooperative-arbitrated", preset),
                                     recorder, args.seed, preset_name=preset.name))  # fmt: skip
     print(f"one trial: {len(recorder.windows)} ticks, side {trial.meta.extra['intent_side']:+d}")
+    naive = PathHypothesesIntent(50, default=shape, settings=FilterSettings(search_window=10.0))
+    naive.shared_fast_path = False
     rows = [
         ("present (no obstacle)", PathHypothesesIntent(50, default=shape, use_obstacles=False)),
-        ("paths, 50 curves, 2 cm search", PathHypothesesIntent(50, default=shape)),
-        ("paths, 50 curves, whole curves searched (naive)",
-         PathHypothesesIntent(50, default=shape, settings=FilterSettings(search_window=10.0))),
+        ("paths, 50 curves", PathHypothesesIntent(50, default=shape)),
+        ("paths, 50 curves, whole curves every tick (naive)", naive),
         ("paths, 2 curves (one shape per side)", PathHypothesesIntent(50, default=shape, settings=FilterSettings(shape_grid=(1.0,)))),
     ]  # fmt: skip
     results = {}
     for label, source in rows:
-        runs = [_replay(source, recorder.context, recorder.windows) for _ in range(args.repeats)]
+        local = path_hypotheses.LOCAL
+        if source is naive:
+            path_hypotheses.LOCAL = 10**9  # the whole window at once: no local search
+        try:
+            runs = [_replay(source, recorder.context, recorder.windows) for _ in range(args.repeats)]
+        finally:
+            path_hypotheses.LOCAL = local
         results[label] = np.concatenate(runs)
     naive = np.median(results[rows[2][0]])
     print(f"{'per tick':50s} {'median µs':>10s} {'p99 µs':>8s} {'vs naive':>9s} {'of 8 ms':>8s} {'of 2 ms':>8s}")

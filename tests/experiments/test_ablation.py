@@ -47,7 +47,7 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     from dataclasses import replace
 
     from coassist.experiments import pipeline
-    from coassist.experiments.ablation import ARBITRATED, ablation_cells, run_ablation, run_sources
+    from coassist.experiments.ablation import ARBITRATED, ablation_cells, mujoco_sources, run_ablation
     from coassist.experiments.intent_sources import seed_names
     from coassist.scenario.path_hypotheses import write_calibration
 
@@ -62,7 +62,7 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     assert not result.skipped
     for obj in ("board", "heavy"):
         assert len(result.pairs[("mujoco", obj)]) == len(cfg.application_users)
-        for source in run_sources(cfg):
+        for source in mujoco_sources(cfg):
             assert ("mujoco", obj, ARBITRATED, source) in result.metrics
         for controller, source in ablation_cells(cfg):
             assert ("point-mass", obj, controller, source) in result.metrics

@@ -16,6 +16,7 @@ from coassist.experiments.ablation import (
     _mujoco_jobs,
     ablation_cells,
     base_source,
+    mujoco_sources,
     run_sources,
 )
 from coassist.experiments.application import handed_to_ablation
@@ -58,7 +59,7 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
     """Named sources at the first call, each learned one (and each of its trainings) once written;
     never a cell the application hands over; never twice; the MuJoCo jobs are those ``_run_mujoco``
     takes."""
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, source_seeds=2)
+    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, source_seeds=2, mujoco_sources=())
     pool = _RecordingPool()
     ws = pipeline.Workspace(cfg, tmp_path, progress=False, pool=pool)
     ahead = AblationAhead(ws, handed_to_ablation())
@@ -179,8 +180,9 @@ def test_beside_training_starts_each_later_share_once_and_all_by_the_last_traini
     expect = {"job:real recordings", "dataset:calibration"}
     expect |= {f"dataset:app-{o}-{c}" for o in OBJECTS for c in APP_CONTROLLERS if not c.startswith("cooperative")}
     expect |= {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c, s in _named_cells(cfg)}
-    if ablation_ahead.mujoco:
-        expect |= {f"job:mujoco:{s}" for s in (MG_JOB, *named)}
+    if ablation_ahead.mujoco:  # the default's MuJoCo sources: of the named ones, the oracle
+        expect |= {f"job:mujoco:{s}" for s in (MG_JOB, *named) if s == MG_JOB or s in mujoco_sources(cfg)}
+        assert "job:mujoco:nominal" not in expect and "job:mujoco:oracle" in expect
     assert set().union(*seen) == set(ws._pending) == expect
     n = len(pool.calls)
     ablation_ahead({})  # the application stage's first call: nothing named left to start

@@ -168,3 +168,27 @@ def test_calibration_file_round_trip_and_errors_name_the_field(tmp_path):
         PersonShape(clearance=-0.01)
     with pytest.raises(ValueError, match="FilterSettings.kappa"):
         FilterSettings(kappa=2.0)
+
+
+def test_one_curve_stands_for_all_where_they_coincide():
+    # The shared-curve shortcut gives the rows and the side of the whole filter (to rounding: a mixture of
+    # identical rows sums weights that add to one), over a scripted trial that starts, detours and ends.
+    shape = PersonShape(clearance=0.02, anticipation=0.1)
+    curve, _, _ = deformed_path(_task(), 1, 0.02, 0.1)
+    intent = curve[::2]
+    fast, full = PathHypothesesIntent(default=shape), PathHypothesesIntent(default=shape)
+    full.shared_fast_path = False
+    fast.reset(_context())
+    full.reset(_context())
+    shortcut = 0
+    for k in range(len(intent)):
+        tool = intent[max(k - 6, 0)]
+        vel = (intent[max(k - 6, 0)] - intent[max(k - 7, 0)]) / DT
+        w = 800.0 * (intent[k] - tool) - 10.0 * vel
+        row = np.array([[tool[0], tool[1], vel[0], vel[1], w[0], w[1], 0.0, 0.0]])
+        hyp = fast._hyp
+        i = int(fast._idx[0])
+        shortcut += bool(i + 100 < hyp.first_apart or i > hyp.last_apart + 100)
+        np.testing.assert_allclose(fast.predict(row), full.predict(row), rtol=0, atol=1e-12)
+        assert fast.side == full.side
+    assert shortcut > 300  # the shortcut was taken on both shared stretches

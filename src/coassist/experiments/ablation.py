@@ -3,8 +3,8 @@
 Every intent source drives the same assistive controllers on the same trials of the
 application scenario (the report's seeds, :func:`~coassist.experiments.pipeline.application_seed`),
 paired against manual guidance (MG) on those trials, in two worlds: the point-mass world
-and the MuJoCo UR5 (``coassist drive``'s world, the arbitrated controller; fewer trials, the
-intervals say what they resolve). The sources:
+and the MuJoCo UR5 (``coassist drive``'s world, the arbitrated controller, the sources of
+``reproduce.mujoco_sources``; fewer trials, the intervals say what they resolve). The sources:
 
 - ``nominal``: the robot's own plan as the intent (the thesis' M0 assumption, eq. 4.7);
 - ``constant-velocity``: the tool's constant-velocity extrapolation;
@@ -84,6 +84,12 @@ SIDES = {1: "left", -1: "right"}
 def run_sources(cfg) -> tuple[str, ...]:
     """This run's sources, in the tables' order: the named ones, ``paths`` and its learned ones."""
     return tuple(s for s in SOURCES if s not in LEARNED or s in cfg.learned_sources)
+
+
+def mujoco_sources(cfg) -> tuple[str, ...]:
+    """The sources of the MuJoCo UR5's cells (``reproduce.mujoco_sources``; empty: every source of the run)."""
+    chosen = tuple(cfg.mujoco_sources)
+    return tuple(s for s in run_sources(cfg) if not chosen or s in chosen)
 
 
 def base_source(name: str) -> str:
@@ -300,7 +306,7 @@ class AblationAhead:
                     self.ws.prefetch(f"ablation-{obj}-{controller}-{name}",
                                      **cell_options(cfg, j, obj, controller, intents[name]))  # fmt: skip
         if self.mujoco:
-            for source in run_sources(cfg):
+            for source in mujoco_sources(cfg):
                 key = f"mujoco:{source}"
                 if key not in self.started and _runnable(source, models) and wanted(source):
                     self.started.add(key)
@@ -373,7 +379,7 @@ def _mujoco_jobs(cfg, intents: dict[str, str]) -> dict[str, list[tuple[tuple[str
     """One job per intent source of the run (and MG's, :data:`MG_JOB`): its cells, which run in lockstep
     in one worker, so a model in the loop is called once per tick for all of them."""
     return {source: _mujoco_cells(cfg, source, "nominal" if source == MG_JOB else intents[source])
-            for source in (MG_JOB, *run_sources(cfg))}  # fmt: skip
+            for source in (MG_JOB, *mujoco_sources(cfg))}  # fmt: skip
 
 
 def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict, pairs: dict, errors: dict) -> None:

@@ -98,6 +98,10 @@ class ReproduceConfig:
     # The intent-source ablation on the MuJoCo UR5 (experiments.ablation): trials per operator, object, controller
     # and source (the point-mass world runs application_trials); 0 leaves the MuJoCo world out.
     ablation_mujoco_trials: int = 1
+    # The sources the MuJoCo UR5 runs (empty: every source of the point-mass cells). A MuJoCo trial costs
+    # what ~20 point-mass trials do; the claims read the application's source against MG there, and the
+    # LSTM and the oracle put it in context. The full and thesis presets run every source.
+    mujoco_sources: tuple[str, ...] = ("lstm-intent", "paths", "oracle")
     real_data: str | None = None  # folder holding user-a/ and user-b/ recordings
     real_epochs: int = 15
     workers: int = 2
@@ -144,6 +148,8 @@ class ReproduceConfig:
                 or not set(self.transfer_starts) <= set(TRANSFER_STARTS) or len(set(self.transfer_starts)) != len(self.transfer_starts)):
             raise ValueError(f"reproduce.transfer_starts must hold 'transfer' and 'scratch' (their claim compares them), and "
                              f"only names of {TRANSFER_STARTS}, once each; got {self.transfer_starts!r}")
+        if not isinstance(self.mujoco_sources, tuple) or not all(isinstance(x, str) and x for x in self.mujoco_sources):
+            raise ValueError(f"reproduce.mujoco_sources must be a tuple of source names, got {self.mujoco_sources!r}")
         if not isinstance(self.fixed_alpha_learned, bool):
             raise ValueError(f"reproduce.fixed_alpha_learned must be true or false, got {self.fixed_alpha_learned!r}")
         if (not isinstance(self.learned_sources, tuple) or len(set(self.learned_sources)) != len(self.learned_sources)
@@ -160,7 +166,7 @@ REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry("reproduce preset", {
     # the run at 1c264a8 plus issue 34's; 14.9 TFLOP of network arithmetic against the default's 8.6
     # (docs/performance.md: the verdicts of both on seeds 0, 1 and 2).
     "full": ReproduceConfig(name="full", train_stride=4, source_stride=48, transfer_starts=("transfer", "scratch", "finetune_all"),
-                            fixed_alpha_learned=True),
+                            fixed_alpha_learned=True, mujoco_sources=()),
     "tiny": ReproduceConfig(
         name="tiny", trials_per_task=2, iterations=2, epochs=1, resume_epochs=1, transfer_epochs=1, train_stride=25, source_stride=25,
         transfer_trials=3, test_trials=2, new_users=(1,), application_trials=1, application_users=(0,), real_epochs=1,
@@ -170,7 +176,7 @@ REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry("reproduce preset", {
     "thesis": ReproduceConfig(
         name="thesis", intent_preset="thesis", real_intent_preset="thesis", epochs=25, resume_epochs=25, transfer_epochs=25, train_stride=1, source_stride=1,
         real_epochs=25, device="cuda", learned_sources=("ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone", "lstm-intent"),
-        transfer_starts=("transfer", "scratch", "finetune_all"), fixed_alpha_learned=True,
+        transfer_starts=("transfer", "scratch", "finetune_all"), fixed_alpha_learned=True, mujoco_sources=(),
     ),
 })  # fmt: skip
 

@@ -89,6 +89,11 @@ __all__ = [
 
 #: The most shapes whose rows a decided side mixes (module docstring, step 4).
 MIXTURE = 4
+#: Samples of each curve searched either side of the tool's last nearest point before widening (step 1).
+LOCAL = 8
+#: [m] ahead of the tool within which a part of the curves makes a tick the whole filter's: where they
+#: are all the nominal path that far, one curve stands for every hypothesis (PathHypothesesIntent._shared).
+SHARED_REACH = 0.1
 #: The calibration file of a ``paths`` source folder.
 CALIBRATION_FILE = "path-hypotheses.json"
 _FORMAT = "coassist-path-hypotheses-1"
@@ -230,6 +235,10 @@ class _Hypotheses:
         # at a sharp corner a side may be impossible (deformed_path goes round the other way)
         self.centre = {s: i if self.sides[i] == s else self.centre[-s] for s, i in self.centre.items()}
         self.step = float(task.path.length) / (self.points.shape[1] - 1)
+        # where the curves part: outside [first, last] every curve is the nominal path, sample for sample
+        apart = np.flatnonzero(np.any(self.points != self.points[:1], axis=(0, 2)))
+        self.first_apart: int = int(apart[0]) if apart.size else self.points.shape[1]
+        self.last_apart: int = int(apart[-1]) if apart.size else -1
 
     def at(self, n: int, s: np.ndarray) -> np.ndarray:
         """Points of curve n at its arc lengths s (clipped to the curve)."""
@@ -253,6 +262,9 @@ class PathHypothesesIntent:
     """
 
     history = 1
+    #: One curve stands for all where they coincide (:meth:`_shared`); False: the whole filter every tick
+    #: (the same rows to rounding: tests/scenario/test_path_hypotheses.py).
+    shared_fast_path = True
 
     def __init__(self, horizon: int = 50, *, shapes: Mapping[str, PersonShape] | None = None,
                  default: PersonShape | None = None, arm: ArmGuess | None = None,
@@ -327,17 +339,73 @@ class PathHypothesesIntent:
             return present + self._steps[:, None] * v
         return self._filter(self._hyp, p, v, u_h, present)
 
+    def _shared(self, hyp: _Hypotheses, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray,
+                widest: int) -> np.ndarray | None:  # fmt: skip
+        """The filter's tick where every curve is the nominal path around the tool and over the rows'
+        reach: one curve's projection stands for all, nothing separates the hypotheses (no side or shape
+        evidence), and the rows are that curve's. None where the curves may part within reach."""
+        i = int(self._idx[0])
+        # the rows reach horizon·dt·speed ahead, plus the lead: SHARED_REACH [m] covers 0.4 s at 0.25 m/s
+        reach = widest + int(math.ceil(SHARED_REACH / hyp.step))
+        if not (i + reach < hyp.first_apart or i - widest > hyp.last_apart) or np.any(self._idx != i):
+            return None
+        st = self.settings
+        K, C = self.arm.stiffness, self.arm.damping
+        n_pts = hyp.points.shape[1]
+        half = min(LOCAL, widest)
+        while True:
+            ids = np.clip(i + np.arange(-half, half + 1), 0, n_pts - 1)
+            d2 = np.sum((hyp.points[0, ids] - p) ** 2, axis=1)
+            best = int(np.argmin(d2))
+            near = int(ids[best])
+            if half >= widest or not ((best == 0 and near > 0) or (best == 2 * half and near < n_pts - 1)):
+                break
+            half = min(2 * half, widest)
+        if not (near + reach < hyp.first_apart or near - widest > hyp.last_apart):
+            return None  # the nearest point moved next to the detour: the whole filter decides
+        self._idx[:] = near
+        tan = hyp.tangents[0, near]
+        lead = float(tan @ u_h + C * (tan @ v)) / K
+        if self._mix >= 1.0:  # as step 2 where the sides' curves coincide
+            q = hyp.points[0, near] + lead * tan
+            self._bias += self._b_gain * (float((present - q) @ hyp.n_o) - self._bias)
+            self._bias = min(max(self._bias, -st.bias_limit), st.bias_limit)
+        if abs(self._log_odds) > st.decide:
+            self._side = 1 if self._log_odds > 0 else -1
+        speed = max(float(tan @ v), 0.0)
+        rows = hyp.at(0, hyp.arc[0, near] + lead + self._steps * speed)
+        self._mix = 1.0 if self._mix_step >= 1.0 else min(self._mix + self._mix_step, 1.0)
+        if self._mix >= 1.0:
+            return rows
+        hedge = present + (st.hedge_velocity * self._steps)[:, None] * v
+        return self._mix * rows + (1.0 - self._mix) * hedge
+
     def _filter(self, hyp: _Hypotheses, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray) -> np.ndarray:
         st = self.settings
         K, C = self.arm.stiffness, self.arm.damping
         n_curves, n_pts = hyp.points.shape[:2]
-        # 1. the tool's phase on every curve: the nearest point in a window around the last one
-        half = min(n_pts, max(2, int(math.ceil(st.search_window / hyp.step))))
-        ids = np.clip(self._idx[:, None] + np.arange(-half, half + 1)[None, :], 0, n_pts - 1)
+        widest = min(n_pts, max(2, int(math.ceil(st.search_window / hyp.step))))
+        if self.shared_fast_path:
+            fast = self._shared(hyp, p, v, u_h, present, widest)
+            if fast is not None:
+                return fast
+        # 1. the tool's phase on every curve: the nearest point near the last one. A tool moves a
+        # millimetre or so per tick: search ±LOCAL samples, and widen (up to search_window) only while
+        # some curve's nearest point lies on the edge of what was searched.
+        half = min(LOCAL, widest)
         rows = np.arange(n_curves)[:, None]
-        d2 = np.sum((hyp.points[rows, ids] - p) ** 2, axis=2)
-        self._idx = ids[np.arange(n_curves), np.argmin(d2, axis=1)]
         every = np.arange(n_curves)
+        while True:
+            offsets = np.arange(-half, half + 1)
+            ids = np.clip(self._idx[:, None] + offsets[None, :], 0, n_pts - 1)
+            d2 = np.sum((hyp.points[rows, ids] - p) ** 2, axis=2)
+            best = np.argmin(d2, axis=1)
+            near = ids[every, best]
+            on_edge = ((best == 0) & (near > 0)) | ((best == 2 * half) & (near < n_pts - 1))
+            if half >= widest or not on_edge.any():
+                break
+            half = min(2 * half, widest)
+        self._idx = near
         tan = hyp.tangents[every, self._idx]
         lead = (tan @ u_h + C * (tan @ v)) / K
         q = hyp.points[every, self._idx] + lead[:, None] * tan  # each curve's present estimate
