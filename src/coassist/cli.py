@@ -945,7 +945,7 @@ def compare_intents(
     except ValueError as exc:
         _fail(str(exc), 2)
     table = comparison_table(result)
-    console.print(table)
+    console.print(table, markup=False, highlight=False)
     atomic_write_text(out / "table.md", table + "\n")
     atomic_write_text(out / "summary.json", json.dumps(_jsonable(result.summary()), indent=1, allow_nan=True))
     _wrote(str(out / "table.md"))

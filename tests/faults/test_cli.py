@@ -207,7 +207,7 @@ def test_sweep_names_its_option(work):
         (["train", "D", "--out", "X", "--preset", "thesi"], "--preset 'thesi': no such intent-model preset; did you mean 'thesis'?"),
         (["tune", "D", "--preset", "defualt"], "--preset 'defualt': no such intent-model preset; did you mean 'default'?"),
         (["reproduce", "--out", "X", "--preset", "tinny"], "--preset 'tinny': no such reproduce preset; did you mean 'tiny'?"),
-        (["reproduce", "--out", "X", "--preset", "zzz"], "--preset 'zzz': no such reproduce preset (choose from: default, tiny, thesis)"),
+        (["reproduce", "--out", "X", "--preset", "zzz"], "--preset 'zzz': no such reproduce preset (choose from: default, full, tiny, thesis)"),
     ],
 )  # fmt: skip
 def test_presets_and_names_did_you_mean(work, args, expected):

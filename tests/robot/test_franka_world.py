@@ -26,6 +26,7 @@ pytest.importorskip("pinocchio", reason="the Panda kinematics need the robot ext
 
 import franky  # noqa: E402
 
+from coassist.interfaces import Fault, fault_names  # noqa: E402
 from coassist.robot import franka_world  # noqa: E402
 from coassist.robot.arms import arm_kinematics  # noqa: E402
 from coassist.robot.drive import DriveConfig, drive  # noqa: E402
@@ -222,21 +223,46 @@ def test_the_world_takes_the_limits_of_the_arm_it_is_told(server, monkeypatch):
     assert seen == ["fr3"] and trial.meta.extra["ended"] == "time_limit"
 
 
-def test_the_assistive_controller_through_franky_sim(server):
+#: Flags a stall of this shared machine raises (the robot's clock ran > 12 ms between two reads, so the
+#: safety layer ramps): the loop reacting correctly to the machine, not the controller's doing.
+MACHINE_STALL = int(Fault.DEADLINE_MISS | Fault.DECELERATING)
+
+
+def _assistive_run():
+    """One assistive run through franky-sim; rerun (up to 3 tries, fresh simulator each time) while
+    a stall of the machine flagged it: on a loaded 2-core CI machine one 8 ms period in a few
+    hundred runs late. Any other flag fails at once."""
+    for attempt in range(3):
+        server = SimServer()
+        try:
+            world = FrankaWorld(server.host, arm="fr3", ft_sensor=PushSensor(server, (10.0, 0.0, 0.0)))
+            seen = []
+            # The preset this comparison's 1.5 mm was measured with (nominal intent: no learned predictor).
+            config = DriveConfig(world="franka", robot="fr3", controller="cooperative",
+                                 preset="thesis-application-dm", time_limit=2.0)  # fmt: skip
+            trial = drive(config, world=world, on_tick=lambda k, st, out, seen=seen: seen.append(
+                (np.asarray(out.command.qd, dtype=float).copy(), st.q.copy(), np.asarray(st.tool_pose, dtype=float).copy())))
+            flags = int(np.bitwise_or.reduce(trial.fault))
+            if flags & ~MACHINE_STALL or not flags or attempt == 2:
+                sent = world.commands_sent
+                world.stop()
+                rest = np.abs(world.robot.state.dq).max()
+                kin = world.kinematics()
+                world.close()
+                return trial, seen, sent, rest, kin
+            world.close()
+        finally:
+            server.close()
+    raise AssertionError("unreachable")
+
+
+def test_the_assistive_controller_through_franky_sim():
     # A short assistive run (the cooperative game, nominal intent) with a 10 N push along +x.
-    world = FrankaWorld(server.host, arm="fr3", ft_sensor=PushSensor(server, (10.0, 0.0, 0.0)))
-    seen = []
-    # The preset this comparison's 1.5 mm was measured with (nominal intent: no learned predictor in the loop).
-    config = DriveConfig(world="franka", robot="fr3", controller="cooperative", preset="thesis-application-dm", time_limit=2.0)
-    trial = drive(config, world=world, on_tick=lambda k, st, out: seen.append(
-        (np.asarray(out.command.qd, dtype=float).copy(), st.q.copy(), np.asarray(st.tool_pose, dtype=float).copy())))
+    trial, seen, sent, rest, kin = _assistive_run()
     # it ends cleanly: at the time limit, nothing flagged, every tick's command sent, the arm at rest after stop
-    assert trial.meta.extra["ended"] == "time_limit" and trial.fault.max() == 0
-    assert world.commands_sent == len(seen) == trial.n_samples
-    world.stop()
-    assert np.abs(world.robot.state.dq).max() < 0.01  # rad/s
-    kin = world.kinematics()
-    world.close()
+    assert trial.meta.extra["ended"] == "time_limit" and trial.fault.max() == 0, fault_names(int(trial.fault.max()))
+    assert sent == len(seen) == trial.n_samples
+    assert rest < 0.01  # rad/s
     # every command inside every limit, with the Jacobian and pose of the tick that sent it
     limits, prev, bad = SafetyLimits(), np.zeros(7), []
     for k, (qd, q, pose) in enumerate(seen):

@@ -123,11 +123,43 @@ def test_filter_stays_undecided_without_a_detour_and_follows_the_shared_path():
     np.testing.assert_allclose(first[:, 1], 0.0, atol=1e-12)
 
 
-def test_the_preferred_side_is_followed_from_the_start_when_the_prior_is_strong():
-    src = PathHypothesesIntent(default=PersonShape(clearance=0.02, anticipation=0.1, left_preference=0.2))
+def test_a_preference_alone_never_decides_and_a_person_going_straight_gets_no_detour():
+    # a strong preference for the right (4 of 4 calibration trials: 1/6) and a person who walks straight
+    # through where the box is: no evidence, no decision, and the rows stay on the straight path
+    src = PathHypothesesIntent(default=PersonShape(clearance=0.02, anticipation=0.1, left_preference=1 / 6))
     src.reset(_context())
-    sides, _ = _scripted(src, PATH[::2][:20])
-    assert (sides == -1).all()  # log-odds log(0.2/0.8) = −1.39 past the decision threshold 1
+    sides, first = _scripted(src, PATH[::2][:700])
+    assert (sides == 0).all()
+    # the rows leave the left curve's (the shared path's, while the sides agree) within the divergence
+    # tolerance (0.5 mm over the horizon) and fade to the present estimate as the sides part
+    assert np.max(np.abs(first[:, 1])) < PathHypothesesIntent().settings.divergence
+
+
+def test_no_single_tick_decides_and_the_side_is_kept_past_the_obstacle():
+    shape = PersonShape(clearance=0.02, anticipation=0.1)
+    src = PathHypothesesIntent(default=shape)
+    src.reset(_context())
+    cap = src.settings.evidence_rate * DT
+    curve, _, _ = deformed_path(_task(), 1, 0.02, 0.1)
+    intent = curve[::2][:450]
+    log_odds = []
+    for k in range(len(intent)):
+        _scripted_tick(src, intent, k)
+        log_odds.append(src._log_odds)
+    assert np.max(np.abs(np.diff(log_odds))) <= cap + 1e-12  # at most evidence_rate·dt per tick
+    assert src.side == 1
+    # past the obstacle (x > 0.5), a hand that pulls hard to the right changes nothing
+    for _ in range(50):
+        row = np.array([[0.6, 0.07, 0.1, 0.0, 0.0, -40.0, 0.0, 0.0]])
+        src.predict(row)
+    assert src.side == 1
+
+
+def _scripted_tick(src, intent, k, K=800.0, lag=6):
+    tool = intent[max(k - lag, 0)]
+    vel = (intent[max(k - lag, 0)] - intent[max(k - lag - 1, 0)]) / DT
+    w = K * (intent[k] - tool) - 10.0 * vel
+    return src.predict(np.array([[tool[0], tool[1], vel[0], vel[1], w[0], w[1], 0.0, 0.0]]))
 
 
 def _task():
@@ -168,6 +200,9 @@ def test_calibration_file_round_trip_and_errors_name_the_field(tmp_path):
         PersonShape(clearance=-0.01)
     with pytest.raises(ValueError, match="FilterSettings.kappa"):
         FilterSettings(kappa=2.0)
+    for grid in (1.0, "0.5", (1.0, 0.5), (0.5, 0.5), ()):
+        with pytest.raises(ValueError, match="FilterSettings.shape_grid"):
+            FilterSettings(shape_grid=grid)
 
 
 def test_one_curve_stands_for_all_where_they_coincide():

@@ -54,9 +54,10 @@ def seed_names(source: str, seeds: int) -> list[str]:
     return [source] + [f"{source}-s{k}" for k in range(1, seeds)]
 
 
-def calibrate_paths(ws: Workspace) -> str:
+def calibrate_paths(ws: Workspace, seed: int | None = None) -> str:
     """Collect ``calibration_trials`` MG trials per application operator (the handle, the application's
-    task and obstacle, :func:`~coassist.experiments.pipeline.calibration_seed`), fit each detour
+    task and obstacle; first trial seed ``seed``, default the run's
+    :func:`~coassist.experiments.pipeline.calibration_seed`), fit each detour
     (:func:`~coassist.scenario.path_hypotheses.fit_detour`) and write every operator's shape into
     ``models/paths`` (:func:`~coassist.scenario.path_hypotheses.write_calibration`); the folder."""
     from coassist.experiments.application import OBSTACLE
@@ -66,7 +67,8 @@ def calibrate_paths(ws: Workspace) -> str:
 
     cfg = ws.config
     _, ds = ws.collect("calibration", tasks=(cfg.application_task,), users=cfg.application_users, objects=("handle",),
-                       trials=cfg.calibration_trials, seed=calibration_seed(trial_seed_base(cfg.seed)), controller="manual",
+                       trials=cfg.calibration_trials,
+                       seed=calibration_seed(trial_seed_base(cfg.seed)) if seed is None else int(seed), controller="manual",
                        preset=cfg.application_preset, intent="nominal", obstacle=OBSTACLE)  # fmt: skip
     fits: dict[str, list[tuple[int, float, float]]] = {}
     for trial in ds.trials:

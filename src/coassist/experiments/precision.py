@@ -8,7 +8,7 @@ the same trials, as the report's ablation pairs them
 (:class:`~coassist.experiments.ablation.AblationResult`: shares of the oracle's benefit, overshoot
 and clearance deficit per side of the detour). ``paths`` needs a calibration: with
 ``calibrate=True`` the operators' calibration trials of each base
-(:func:`~coassist.experiments.pipeline.calibration_seed`) are collected and fitted first
+(``calibration_seed(base)``) are collected and fitted first
 (:func:`~coassist.experiments.intent_sources.calibrate_paths`), one calibration per base.
 
 :func:`compare_intents` runs it; ``coassist compare-intents`` is its command.
@@ -26,7 +26,18 @@ import numpy as np
 from coassist.experiments.ablation import ARBITRATED, DAMPED, SIDES, AblationResult, _seeds_text, _share_text
 from coassist.experiments.application import OBJECTS, OBSTACLE, _pair_key, application_metrics
 from coassist.experiments.intent_sources import calibrate_paths
-from coassist.experiments.pipeline import REPRODUCE_PRESETS, Workspace, application_seed
+from coassist.experiments.pipeline import (
+    REPRODUCE_PRESETS,
+    RUN_SEED_STRIDE,
+    Workspace,
+    application_seed,
+    calibration_seed,
+)
+
+#: The offsets (base mod RUN_SEED_STRIDE) a validation base may have: its calibration trials
+#: (base + 880000 …) and application trials (base + 900000 … + 1000 + trials) then stay clear of every
+#: run's collections (offsets up to 902000) and of the next run's block.
+VALIDATION_BASES = (25_000, 95_000)
 
 __all__ = ["compare_intents", "comparison_table"]
 
@@ -43,6 +54,18 @@ def compare_intents(sources: Mapping[str, str], out: str | Path, *, bases: Seque
         raise ValueError("compare_intents needs at least one source")
     if not bases or len(set(bases)) != len(bases) or any(int(b) < 0 for b in bases):
         raise ValueError(f"bases must be distinct seeds >= 0, got {bases!r}")
+    off = [b for b in bases if not VALIDATION_BASES[0] <= int(b) % RUN_SEED_STRIDE <= VALIDATION_BASES[1]]
+    if off:
+        raise ValueError(f"bases {off}: a validation base must be {VALIDATION_BASES[0]}–{VALIDATION_BASES[1]} past a multiple "
+                         f"of {RUN_SEED_STRIDE} (e.g. 50000), so that its trials are no run's own (the report's seeds)")
+    from coassist.scenario.intent_source import load_intent_source
+
+    for label, spec in sources.items():  # refuse a bad source before anything runs
+        if spec != "paths":
+            try:
+                load_intent_source(spec, horizon=50)
+            except ValueError as exc:
+                raise ValueError(f"source {label}: {exc}") from None
     controllers = dict(controllers or {})
     unknown = set(controllers) - set(sources)
     if unknown:
@@ -60,7 +83,7 @@ def compare_intents(sources: Mapping[str, str], out: str | Path, *, bases: Seque
     calibrations: dict[str, str] = {}
     for base in bases:
         ws = Workspace(replace(cfg, seed=int(base)), out / f"base-{base}", progress)
-        paths = calibrate_paths(ws) if calibrate else "paths"
+        paths = calibrate_paths(ws, seed=calibration_seed(int(base))) if calibrate else "paths"
         calibrations[str(base)] = paths
         plan = [("MG", "manual", "nominal"), ("oracle", ARBITRATED, "oracle")]
         plan += [(label, controllers.get(label, ARBITRATED), paths if spec == "paths" else spec)
@@ -109,8 +132,8 @@ def comparison_table(result: AblationResult) -> str:
             if o != obj:
                 continue
             cd = result.by_side(world, obj, controller, label, "clearance_deficit")
-            clear = " / ".join(f"{1e3 * v[0]:.1f} ({1e3 * v[1]:+.1f} [{1e3 * v[2]:+.1f}, {1e3 * v[3]:+.1f}])"
-                               for v in cd.values() if v[4] >= 2)  # fmt: skip
+            clear = " / ".join(f"{1e3 * v[0]:.1f} ({1e3 * v[1]:+.1f} [{1e3 * v[2]:+.1f}, {1e3 * v[3]:+.1f}])" if v[4] >= 2
+                               else (f"{1e3 * v[0]:.1f}" if v[4] else "—") for v in cd.values())  # fmt: skip
             lines.append(f"| {label} | {controller} | {r['f_rms']:.2f} | "
                          f"{_seeds_text(result, world, obj, controller, label, 'f_rms')} | {sided(r['overshoot_trials'])} | "
                          f"{_share_text(result.shares(world, obj, controller, label)['overshoot'])} | {clear} | "

@@ -81,7 +81,8 @@ class DriveConfig:
     task : a task kind (linear, curved, sinusoidal, z).  object : handle, board or heavy.
     preset : a control preset (default :data:`coassist.config.APPLICATION_PRESET`, the main
         job's application preset, safe with a learned predictor in the loop).
-    intent : "nominal", "oracle" (MuJoCo only) or a model folder.
+    intent : "nominal", "oracle" (MuJoCo only), "constant-velocity", "present", "paths", a model folder
+        or a path-hypotheses calibration folder (path-hypotheses.json).
     user : simulated operator index (MuJoCo).  seed : task, operator and sensor seed.
     obstacle : the obstacle the operator goes around (coassist.scenario.tasks.OBSTACLES; "small"
         is the evaluation's box, "large" the application's).
@@ -135,7 +136,8 @@ class DriveConfig:
         if self.obstacle not in OBSTACLES:
             raise bad("obstacle", f"one of {tuple(OBSTACLES)}")
         if not isinstance(self.intent, str) or not self.intent:
-            raise bad("intent", "'nominal', 'oracle' or a model folder")
+            raise bad("intent", "a named source (nominal, oracle, constant-velocity, present, paths), a model folder or a "
+                                "path-hypotheses calibration folder")
         if self.intent == "oracle" and self.world != "mujoco":
             raise bad("intent", "a model or 'nominal' on the real arm (the oracle knows the simulated operator's mind)")
         for name in ("user", "seed"):
@@ -356,6 +358,9 @@ def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, ho
             # the simulated operator's intent: the oracle's in any world (a test's simulated arm behind a
             # real-arm link), the Trial's intent column only where that operator held the handle
             true_intent=intent_pos, intent_end_time=intent_traj.end_time, log_intent=simulated,
+            # the robot is told of the obstacle only where the simulated operator goes round it: a person at a
+            # real arm sees no such box (the path-hypotheses source then is the present estimate alone)
+            tell_obstacles=simulated,
             kinematics=kin, tick_config=TickConfig(dofs=dofs),
             extra={
                 "world": config.world,

@@ -89,11 +89,12 @@ __all__ = [
 
 #: The most shapes whose rows a decided side mixes (module docstring, step 4).
 MIXTURE = 4
-#: Samples of each curve searched either side of the tool's last nearest point before widening (step 1).
-LOCAL = 8
-#: [m] ahead of the tool within which a part of the curves makes a tick the whole filter's: where they
-#: are all the nominal path that far, one curve stands for every hypothesis (PathHypothesesIntent._shared).
-SHARED_REACH = 0.1
+#: The control period [s] the filter's per-tick constants (κ) were chosen at: at another rate κ is
+#: scaled by dt / REFERENCE_DT, so the evidence gathered per second is the same.
+REFERENCE_DT = 0.008
+#: The share of ``decide`` the person's side preference may give the log-odds before any evidence: a
+#: preference alone never decides the side (a person may not detour at all).
+PRIOR_SHARE = 0.9
 #: The calibration file of a ``paths`` source folder.
 CALIBRATION_FILE = "path-hypotheses.json"
 _FORMAT = "coassist-path-hypotheses-1"
@@ -164,7 +165,13 @@ class FilterSettings:
         the tool's velocity, 0 holds the present estimate (no push along the old direction).
     search_window : [m] of each curve searched for the tool's nearest point, either side of the last
         one (a tool moves < 1 mm per tick; the whole curve is searched when it is longer than the path).
-    shape_grid : factors on the person's clearance and anticipation, one hypothesis per pair.
+    evidence_rate : [1/s] the most the side's log-odds may move per second (per tick: evidence_rate·dt),
+        so that no tick or two decide the side alone.
+    shape_grid : factors on the person's clearance and anticipation, one hypothesis per pair: distinct,
+        increasing.
+
+    σ, κ, decide and the times were chosen at 125 Hz; κ is scaled by dt / 0.008 s at other rates
+    (:data:`REFERENCE_DT`), so the evidence per second is the same.
     """
 
     sigma: float = 0.002
@@ -177,6 +184,7 @@ class FilterSettings:
     blend_time: float = 0.1
     hedge_velocity: float = 0.5
     search_window: float = 0.02
+    evidence_rate: float = 30.0
     shape_grid: tuple[float, ...] = (0.6, 0.8, 1.0, 1.25, 1.6)
 
     def __post_init__(self) -> None:
@@ -191,9 +199,12 @@ class FilterSettings:
         object.__setattr__(self, "hedge_velocity", _number(self.hedge_velocity, "FilterSettings.hedge_velocity", 0.0, 1.0))
         object.__setattr__(self, "search_window",
                            _number(self.search_window, "FilterSettings.search_window", 0.0, open_lo=True))  # fmt: skip
+        object.__setattr__(self, "evidence_rate", _number(self.evidence_rate, "FilterSettings.evidence_rate", 0.0, open_lo=True))
+        if isinstance(self.shape_grid, (str, bytes)) or not hasattr(self.shape_grid, "__iter__"):
+            raise ValueError(f"FilterSettings.shape_grid must be a list of factors > 0, got {self.shape_grid!r}")
         grid = tuple(_number(g, "FilterSettings.shape_grid", 0.0, open_lo=True) for g in self.shape_grid)
-        if not grid:
-            raise ValueError("FilterSettings.shape_grid must not be empty")
+        if not grid or list(grid) != sorted(set(grid)):
+            raise ValueError(f"FilterSettings.shape_grid must be distinct factors in increasing order, got {self.shape_grid!r}")
         object.__setattr__(self, "shape_grid", grid)
 
 
@@ -305,7 +316,14 @@ class PathHypothesesIntent:
             n = len(self._hyp.sides)
             self._idx = np.zeros(n, dtype=int)
             self._loglik = np.zeros(n)
-            self._log_odds = math.log(shape.left_preference / (1.0 - shape.left_preference))
+            prior = math.log(shape.left_preference / (1.0 - shape.left_preference))
+            bound = PRIOR_SHARE * st.decide
+            self._log_odds = min(max(prior, -bound), bound)
+            self._kappa = st.kappa * self.dt / REFERENCE_DT
+            self._step_cap = st.evidence_rate * self.dt
+            # the nominal sample where the obstacle sits: side evidence stops once the tool is past it
+            self._obstacle_index = int(np.searchsorted(np.cumsum(np.r_[0.0, np.linalg.norm(np.diff(path, axis=0), axis=1)]),
+                                                       _scene_task(path, near).obstacle_arc))
             self._bias = 0.0
             self._side = 0
             self._mix = 1.0
@@ -341,44 +359,35 @@ class PathHypothesesIntent:
 
     def _shared(self, hyp: _Hypotheses, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray,
                 widest: int) -> np.ndarray | None:  # fmt: skip
-        """The filter's tick where every curve is the nominal path around the tool and over the rows'
+        """The filter's tick where every curve is the nominal path around the tool and as far as the rows
         reach: one curve's projection stands for all, nothing separates the hypotheses (no side or shape
         evidence), and the rows are that curve's. None where the curves may part within reach."""
         i = int(self._idx[0])
-        # the rows reach horizon·dt·speed ahead, plus the lead: SHARED_REACH [m] covers 0.4 s at 0.25 m/s
-        reach = widest + int(math.ceil(SHARED_REACH / hyp.step))
-        if not (i + reach < hyp.first_apart or i - widest > hyp.last_apart) or np.any(self._idx != i):
+        n_pts = hyp.points.shape[1]
+        if np.any(self._idx != i) or hyp.first_apart <= i + 2 * widest <= hyp.last_apart + 3 * widest:
             return None
         st = self.settings
         K, C = self.arm.stiffness, self.arm.damping
-        n_pts = hyp.points.shape[1]
-        half = min(LOCAL, widest)
-        while True:
-            ids = np.clip(i + np.arange(-half, half + 1), 0, n_pts - 1)
-            d2 = np.sum((hyp.points[0, ids] - p) ** 2, axis=1)
-            best = int(np.argmin(d2))
-            near = int(ids[best])
-            if half >= widest or not ((best == 0 and near > 0) or (best == 2 * half and near < n_pts - 1)):
-                break
-            half = min(2 * half, widest)
-        if not (near + reach < hyp.first_apart or near - widest > hyp.last_apart):
-            return None  # the nearest point moved next to the detour: the whole filter decides
-        self._idx[:] = near
+        ids = np.clip(i + np.arange(-widest, widest + 1), 0, n_pts - 1)
+        near = int(ids[np.argmin(np.sum((hyp.points[0, ids] - p) ** 2, axis=1))])
         tan = hyp.tangents[0, near]
         lead = float(tan @ u_h + C * (tan @ v)) / K
+        speed = max(float(tan @ v), 0.0)
+        # the window searched next tick and the rows' reach must lie where every curve is the nominal path
+        reach = int(math.ceil((max(lead, 0.0) + float(self._steps[-1]) * speed) / hyp.step)) + 2
+        if not (near + max(widest, reach) < hyp.first_apart or near - widest > hyp.last_apart):
+            return None
+        self._idx[:] = near
         if self._mix >= 1.0:  # as step 2 where the sides' curves coincide
             q = hyp.points[0, near] + lead * tan
             self._bias += self._b_gain * (float((present - q) @ hyp.n_o) - self._bias)
             self._bias = min(max(self._bias, -st.bias_limit), st.bias_limit)
-        if abs(self._log_odds) > st.decide:
-            self._side = 1 if self._log_odds > 0 else -1
-        speed = max(float(tan @ v), 0.0)
-        rows = hyp.at(0, hyp.arc[0, near] + lead + self._steps * speed)
+        ahead = hyp.at(0, hyp.arc[0, near] + lead + self._steps * speed)
         self._mix = 1.0 if self._mix_step >= 1.0 else min(self._mix + self._mix_step, 1.0)
         if self._mix >= 1.0:
-            return rows
+            return ahead
         hedge = present + (st.hedge_velocity * self._steps)[:, None] * v
-        return self._mix * rows + (1.0 - self._mix) * hedge
+        return self._mix * ahead + (1.0 - self._mix) * hedge
 
     def _filter(self, hyp: _Hypotheses, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray) -> np.ndarray:
         st = self.settings
@@ -389,27 +398,16 @@ class PathHypothesesIntent:
             fast = self._shared(hyp, p, v, u_h, present, widest)
             if fast is not None:
                 return fast
-        # 1. the tool's phase on every curve: the nearest point near the last one. A tool moves a
-        # millimetre or so per tick: search ±LOCAL samples, and widen (up to search_window) only while
-        # some curve's nearest point lies on the edge of what was searched.
-        half = min(LOCAL, widest)
-        rows = np.arange(n_curves)[:, None]
-        every = np.arange(n_curves)
-        while True:
-            offsets = np.arange(-half, half + 1)
-            ids = np.clip(self._idx[:, None] + offsets[None, :], 0, n_pts - 1)
-            d2 = np.sum((hyp.points[rows, ids] - p) ** 2, axis=2)
-            best = np.argmin(d2, axis=1)
-            near = ids[every, best]
-            on_edge = ((best == 0) & (near > 0)) | ((best == 2 * half) & (near < n_pts - 1))
-            if half >= widest or not on_edge.any():
-                break
-            half = min(2 * half, widest)
+        # 1. the tool's phase on every curve: its nearest point within search_window of the last one
+        curves = np.arange(n_curves)
+        ids = np.clip(self._idx[:, None] + np.arange(-widest, widest + 1)[None, :], 0, n_pts - 1)
+        d2 = np.sum((hyp.points[curves[:, None], ids] - p) ** 2, axis=2)
+        near = ids[curves, np.argmin(d2, axis=1)]
         self._idx = near
-        tan = hyp.tangents[every, self._idx]
+        tan = hyp.tangents[curves, near]
         lead = (tan @ u_h + C * (tan @ v)) / K
-        q = hyp.points[every, self._idx] + lead[:, None] * tan  # each curve's present estimate
-        s_lead = hyp.arc[every, self._idx] + lead
+        q = hyp.points[curves, near] + lead[:, None] * tan  # each curve's present estimate
+        s_lead = hyp.arc[curves, near] + lead
         # 2. side
         cl, cr = hyp.centre[1], hyp.centre[-1]
         sep = q[cl] - q[cr]
@@ -421,9 +419,12 @@ class PathHypothesesIntent:
             if self._mix >= 1.0:
                 self._bias += self._b_gain * (float((present - mid) @ hyp.n_o) - self._bias)
                 self._bias = min(max(self._bias, -st.bias_limit), st.bias_limit)
-        else:
+        elif self._side == 0 or int(near[cl]) < self._obstacle_index:
+            # evidence until the tool is level with the obstacle (after it, the return toward the path says
+            # nothing of the side taken), at most step_cap per tick: no single tick decides
             z = float((present - mid) @ sep) / D
-            self._log_odds += st.kappa * (z - self._bias) * D / st.sigma**2
+            gain = self._kappa * (z - self._bias) * D / st.sigma**2
+            self._log_odds += min(max(gain, -self._step_cap), self._step_cap)
             self._log_odds = min(max(self._log_odds, -50.0), 50.0)
         # 3. shape, within each side while its curves are apart
         corrected = present - self._bias * hyp.n_o
@@ -432,7 +433,7 @@ class PathHypothesesIntent:
             on = hyp.sides == s
             spread = float(np.max(np.linalg.norm(q[on] - q[on].mean(axis=0), axis=1)))
             if spread >= st.divergence:
-                self._loglik[on] -= st.kappa * (r2[on] - r2[on].min()) / (2 * st.sigma**2)
+                self._loglik[on] -= self._kappa * (r2[on] - r2[on].min()) / (2 * st.sigma**2)
                 self._loglik[on] -= self._loglik[on].max()
         np.maximum(self._loglik, -60.0, out=self._loglik)
         if abs(self._log_odds) > st.decide:
@@ -454,21 +455,21 @@ class PathHypothesesIntent:
             best = np.argsort(weight)[::-1][:MIXTURE]
             best = best[weight[best] >= 0.01 * weight[best[0]]]
             w = weight[best] / weight[best].sum()
-            rows = w[0] * along(int(on[best[0]]))
+            ahead = w[0] * along(int(on[best[0]]))
             for wt, n in zip(w[1:], on[best[1:]]):
-                rows += wt * along(int(n))
+                ahead += wt * along(int(n))
             target = 1.0
         else:
-            rows = along(cl)
+            ahead = along(cl)
             # the sides disagree over the horizon: the present estimate alone
-            target = 0.0 if float(np.max(np.linalg.norm(rows - along(cr), axis=1))) >= st.divergence else 1.0
+            target = 0.0 if float(np.max(np.linalg.norm(ahead - along(cr), axis=1))) >= st.divergence else 1.0
         # cross-fade between the curve's rows and the present estimate's (no step in the robot's effort)
         self._mix = target if self._mix_step >= 1.0 else min(max(self._mix + np.sign(target - self._mix) * self._mix_step, 0.0), 1.0)
         if self._mix >= 1.0:
-            return rows
+            return ahead
         if self._mix <= 0.0:
             return hedge
-        return self._mix * rows + (1.0 - self._mix) * hedge
+        return self._mix * ahead + (1.0 - self._mix) * hedge
 
 
 # ----------------------------------------------------------------------------- calibration
@@ -508,9 +509,10 @@ def fit_detour(task: Task, pose: np.ndarray, *, clearances: Sequence[float] | No
 
 
 def calibrate(fits: Iterable[tuple[int, float, float]]) -> PersonShape:
-    """A person's shape from their fitted detours (:func:`fit_detour`): the geometric medians of
-    clearance and anticipation, and the left preference (n_left + 1)/(n + 2) (Laplace's rule:
-    never certain of a side after a few trials)."""
+    """A person's shape from their fitted detours (:func:`fit_detour`): exp(median(log ·)) of the
+    clearances and of the anticipations (the median on a log scale: for an even count, the geometric
+    mean of the middle two), and the left preference (n_left + 1)/(n + 2) (Laplace's rule: never
+    certain of a side after a few trials)."""
     fits = list(fits)
     if not fits:
         raise ValueError("calibrate needs at least one fitted trial")
