@@ -82,3 +82,26 @@ def test_pacing_holds_the_period_and_reports_overruns():
     clock[0] = 0.041
     world.apply(Command(effort=np.zeros(2)))
     assert world.last_overrun == 0.0 and slept[-1] == pytest.approx(0.007)
+
+
+def test_the_play_world_integrates_the_simulators_plant_step():
+    """The play world steps the one point-mass plant (coassist.model.plant): its state after a
+    period is plant_step of the hand's and the robot's force, bit for bit; a model with a
+    spring (K != 0) is refused, since the plant is free."""
+    from coassist.model.impedance import ImpedanceModel
+    from coassist.model.plant import PointMassPlant, plant_step
+
+    model = plant_model(get_preset("thesis-application-dm"))
+    world = PlayWorld(model, ConstantHand(6.0, -3.0), (0.1, -0.5), paced=False)
+    plant = PointMassPlant.free(model)
+    assert world.plant == plant
+    x, y, vx, vy = 0.1, -0.5, 0.0, 0.0
+    for k in range(50):
+        effort = np.array([2.0 * np.sin(0.1 * k), -1.0])
+        world.apply(Command(effort=effort))
+        x, vx = plant_step(x, vx, 6.0 + float(effort[0]), plant.a_xv[0], plant.a_vv[0], plant.b_x[0], plant.b_v[0])
+        y, vy = plant_step(y, vy, -3.0 + float(effort[1]), plant.a_xv[1], plant.a_vv[1], plant.b_x[1], plant.b_v[1])
+        assert (world.x, world.y, world.vx, world.vy) == (x, y, vx, vy)
+    spring = ImpedanceModel(model.M, model.D, np.eye(2) * 100.0, model.dt)
+    with pytest.raises(ValueError, match="K != 0"):
+        PlayWorld(spring, ConstantHand(0.0, 0.0), (0.0, 0.0), paced=False)

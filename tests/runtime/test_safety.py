@@ -559,3 +559,43 @@ def test_effort_stage_brakes_above_the_tool_speed_and_latches_on_contact_force()
     np.testing.assert_array_equal(u, [0.0, 0.0])
     u, f, stop = layer.limit_effort(np.array([3.0, 4.0]), np.array([0.1, 0.0]), calm, Fault.NONE)
     assert stop and f & Fault.STOPPED and not u.any()
+
+
+def test_the_batch_effort_stage_passes_u_r_where_each_layer_does():
+    """SafetyLayerBatch.limit_effort row for row against each SafetyLayer.limit_effort on a tick
+    without an upstream fault: where the batch says clean the layer gives u_r back unchanged
+    (bit for bit) with no flag; where the layer changes it or flags anything (tool speed,
+    contact force, a non-finite u_r) the batch is not clean. Rows near both limits and
+    exactly at the contact force (where the layer's np.dot may round either way)."""
+    from coassist.runtime.safety import SafetyLayerBatch
+
+    rng = np.random.default_rng(5)
+    n = 400
+    limits = [SafetyLimits(tool_speed=0.25), SafetyLimits(tool_speed=1.0, contact_force=40.0)]
+    layers = [SafetyLayer(limits[i % 2], DT, 6) for i in range(n)]
+    batch = SafetyLayerBatch(layers)
+    u = rng.normal(0.0, 20.0, (n, 2))
+    u[::37] = np.nan
+    v = rng.normal(0.0, 0.3, (n, 2))
+    hand = np.zeros((n, 3))
+    hand[:, :2] = rng.normal(0.0, 25.0, (n, 2))
+    at_limit = np.arange(n)[5::41]  # a hand force exactly at the contact limit
+    for i in at_limit:
+        hand[i] = [layers[i].limits.contact_force, 0.0, 0.0]
+    clean = batch.limit_effort(np.arange(n), u, v, hand)
+    seen = Fault.NONE
+    for i in range(n):
+        w = np.array([*hand[i], 0.0, 0.0, 0.0])
+        effort, flags, stop = layers[i].limit_effort(u[i].copy(), v[i], w, Fault.NONE)
+        seen |= flags
+        passed = flags == Fault.NONE and not stop and effort.tolist() == u[i].tolist()
+        if clean[i]:
+            assert passed, (i, flags)
+        if not passed:
+            assert not clean[i], (i, flags)
+    assert seen & Fault.TOOL_SPEED_LIMIT and seen & Fault.STOPPED and seen & Fault.NONFINITE_EFFORT
+    assert 100 < int(clean.sum()) < n - 50  # both kinds of row, many of each
+    assert not clean[at_limit].any()
+    stopped = [layer for layer in layers if layer.stopped]  # the contact force latched STOPPED
+    assert stopped and not any(SafetyLayerBatch.accepts(layer) for layer in stopped)
+    assert SafetyLayerBatch.accepts(SafetyLayer(limits[0], DT, 6))

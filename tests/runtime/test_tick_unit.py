@@ -17,9 +17,9 @@ from coassist.control.controllers import ImpedanceControl, ManualGuidance
 from coassist.errors import CoassistError
 from coassist.interfaces import Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
-from coassist.runtime.loop import TargetDwell, run_loop
+from coassist.runtime.loop import TargetDwell, TargetDwellBatch, run_loop
 from coassist.runtime.safety import SafetyLayer, SafetyLimits
-from coassist.runtime.tick import ControlTick, Plan, TickConfig
+from coassist.runtime.tick import ControlTick, Plan, TickConfig, human_reference
 from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
 
 from .fakes import DT, FakeArmWorld, LinearKinematics, NominalStage, ScriptedEffortWorld, well_conditioned_jacobian
@@ -203,6 +203,60 @@ def test_the_run_ends_at_the_time_limit_when_the_target_is_never_held():
     log = run_loop(world, _effort_tick(_reference(target)), 17, TargetDwell(target, 0.01, 3, 0))
     assert log.ended == "time_limit" and log.n == 17 == len(world.efforts)
     assert log.compute.shape == (17,) and np.all(log.compute >= 0.0)
+
+
+def test_the_batch_dwell_rule_decides_as_each_rule():
+    """TargetDwellBatch row for row against each TargetDwell: targets, radii, dwell and start ticks
+    of their own, tools wandering in and out of the ball, a run without a rule, runs leaving."""
+    rng = np.random.default_rng(3)
+    n = 12
+    targets = rng.normal(0.0, 0.1, (n, 2))
+    rules = [TargetDwell(targets[i], 0.01 + 0.002 * i, 2 + i % 5, i % 7) for i in range(n)]
+    twins = [TargetDwell(targets[i], 0.01 + 0.002 * i, 2 + i % 5, i % 7) for i in range(n)]
+    twins[4] = rules[4] = None  # no rule: never ends on the target
+    batch = TargetDwellBatch(twins)
+    rows = np.arange(n)
+    ended = 0
+    for k in range(200):
+        if k == 50:
+            rows = rows[rows % 3 != 0]  # some runs left the batch
+        near = rng.random(rows.size) < 0.8
+        pose = targets[rows] + np.where(near[:, None], 0.5, 3.0) * rng.normal(0.0, 0.01, (rows.size, 2))
+        done = batch(k, rows, pose)
+        for j, i in enumerate(rows.tolist()):
+            want = rules[i](k, pose[j]) if rules[i] is not None else False
+            assert bool(done[j]) == want, (k, i)
+            assert rules[i] is None or batch.inside[i] == rules[i].inside
+        ended += int(done.sum())
+        rows = rows[~done]
+    assert ended >= 5 and 4 in rows.tolist()
+    assert not TargetDwellBatch.accepts(lambda k, pose: False) and TargetDwellBatch.accepts(None)
+
+
+@pytest.mark.parametrize("m", [1, 2, 5])
+def test_human_reference_is_the_docstrings_rows_for_one_tick_and_a_batch(m):
+    """ref_h[i] = [p̂(k+1+i) − x0, (p̂(k+1+i) − p̂(k+i))/dt] (the first velocity the second's, 0 for
+    one row), against a hand-written loop; a batch's rows equal each tick's own call bit for bit
+    (the tick and the array path build ref_h with this one function); the other DOFs' columns untouched."""
+    rng = np.random.default_rng(m)
+    dt = 0.008
+    positions = rng.normal(0.0, 0.2, (4, m, 2))
+    x0 = rng.normal(0.0, 0.2, (4, 2))
+    d = 3  # x, y and one more DOF: columns [x, y, z, vx, vy, vz]
+    batch = np.full((4, m + 2, 2 * d), 7.0)
+    human_reference(positions, x0, 1.0 / dt, batch)
+    for b in range(4):
+        one = np.full((m + 2, 2 * d), 7.0)
+        human_reference(positions[b], x0[b], 1.0 / dt, one)
+        assert one.tolist() == batch[b].tolist()
+        want = np.full((m + 2, 2 * d), 7.0)
+        for i in range(m):
+            want[i, :2] = positions[b, i] - x0[b]
+            if m >= 2:
+                want[i, d : d + 2] = (positions[b, max(i, 1)] - positions[b, max(i, 1) - 1]) / dt
+            else:
+                want[i, d : d + 2] = 0.0
+        np.testing.assert_allclose(one, want, rtol=1e-12, atol=1e-12)
 
 
 class _LinkError(CoassistError, ConnectionError):

@@ -512,3 +512,74 @@ def test_pipeline_validation():
         WrenchPipeline(WrenchConfig(), dt=0.0)
     with pytest.raises(ValueError, match="config"):
         WrenchPipeline({"cutoff_hz": 15.0}, dt=0.008)
+
+
+def test_the_batch_gives_each_pipelines_hand_force_on_every_clean_tick():
+    """WrenchPipelineBatch.update row for row against each WrenchPipeline.update: planar readings
+    through a tilted sensor with a bias; each tick a row gets a new sample, the same one again,
+    or (now and then) a spike, a saturated or impossible value, a NaN, an exact repeat with the
+    frozen check on, or a gap longer than max_sample_age. Where the batch says clean the
+    pipeline flags nothing and gives the same force bit for bit; where the pipeline flags
+    anything the batch is not clean (a row that is not clean leaves, as on the array path)."""
+    from coassist.runtime.wrench import WrenchPipelineBatch
+
+    rng = np.random.default_rng(11)
+    dt = 0.008
+    R = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix()
+    configs = [WrenchConfig(**PLAIN, force_range=300.0), WrenchConfig(**PLAIN, force_range=12.0, spike_jump_force=20.0),
+               WrenchConfig(**PLAIN, max_frozen_time=0.05)]  # fmt: skip
+    n_runs = 60
+    pipes, twins = [], []
+    for i in range(n_runs):
+        for group in (pipes, twins):
+            pipe = WrenchPipeline(configs[i % 3], dt)
+            pipe.zero(np.array([[0.3 * i % 2.0, -0.5, 0.2, 0.0, 0.0, 0.0]]), R)  # a bias, sensor frame
+            group.append(pipe)
+    assert all(WrenchPipelineBatch.accepts(p) for p in twins)
+    assert not WrenchPipelineBatch.accepts(WrenchPipeline(WrenchConfig(), dt))  # a filter: not for the batch
+    batch = WrenchPipelineBatch(twins, R)
+    seq = np.zeros(n_runs, dtype=np.int64)
+    last = rng.normal(0.0, 5.0, (n_runs, 2))
+    silent = np.zeros(n_runs, dtype=int)  # ticks a sensor still sends nothing new
+    rows = np.arange(n_runs)
+    kinds = {"held": 0, "clean": 0, "left": 0, "left_unflagged": 0}
+    flags = Fault.NONE
+    for k in range(150):
+        t = k * dt
+        raw = last[rows].copy()
+        for j, i in enumerate(rows.tolist()):
+            u = rng.random()
+            if silent[i] > 0:  # a sensor gone quiet: the same sample, on and on
+                silent[i] -= 1
+            elif u < 0.6:  # a new sample near the last
+                seq[i] += 1
+                raw[j] += rng.normal(0.0, 1.0, 2)
+            elif u < 0.985:  # the same sample again (a 100 Hz sensor read at 125 Hz)
+                kinds["held"] += 1
+            elif u < 0.99:  # no new sample for longer than max_sample_age
+                silent[i] = 8
+            else:  # a new sample that jumps, is saturated, impossible, NaN, or bit-identical to the last
+                seq[i] += 1
+                raw[j] = (last[i] + [200.0, 0.0], [configs[i % 3].force_range, 0.0], [1e4, 1.0], [np.nan, 0.0],
+                          last[i])[rng.integers(5)]  # fmt: skip  # a jump, saturated, impossible, NaN, a repeat
+        hand, clean = batch.update(rows, raw, seq[rows], t)
+        keep = []
+        for j, i in enumerate(rows.tolist()):
+            reading = pipes[i].update(np.array([raw[j, 0], raw[j, 1], 0.0, 0.0, 0.0, 0.0]), R, int(seq[i]), t)
+            if clean[j]:
+                assert reading.fault == Fault.NONE, (k, i, reading.fault)
+                assert hand[j].tolist() == reading.hand[:3].tolist(), (k, i)
+                kinds["clean"] += 1
+                keep.append(j)
+                last[i] = raw[j]
+            else:
+                kinds["left"] += 1
+                kinds["left_unflagged"] += reading.fault == Fault.NONE  # a repeat the frozen check may yet allow
+            if reading.fault:
+                assert not clean[j], (k, i, reading.fault)
+                flags |= reading.fault
+        rows = rows[keep]
+        if not rows.size:
+            break
+    assert kinds["clean"] > 1000 and kinds["held"] > 300 and kinds["left"] > 20 and kinds["left_unflagged"] > 0, kinds
+    assert flags == Fault.SENSOR_STALE | Fault.WRENCH_SPIKE | Fault.SENSOR_SATURATED | Fault.NONFINITE_WRENCH

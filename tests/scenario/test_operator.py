@@ -10,6 +10,7 @@ from coassist.scenario.operator import (
     AUTHOR,
     DETOUR_TIME_EXPONENT,
     OperatorArm,
+    OperatorArmBatch,
     OperatorProfile,
     deformed_path,
     detour_onset,
@@ -63,6 +64,38 @@ def test_stiffness_adapts_to_error_and_force_is_limited():
     assert large.stiffness == pytest.approx(1500.0)  # clipped at K_max
     assert np.hypot(*f_large) == pytest.approx(30.0)  # scaled to the limit ...
     assert f_large[0] == pytest.approx(f_large[1])  # ... keeping its direction
+
+
+def test_the_batch_arm_gives_each_arms_force_bit_for_bit():
+    """OperatorArmBatch.force row for row against each OperatorArm.force: five operators (delays
+    of 0 to ~17 ticks), one intent shorter than the run (its last row held), hand points far
+    enough off for the force limit to bind, rows leaving the batch as runs end."""
+    rng = np.random.default_rng(7)
+    profiles = [operator_profile(u, 3) for u in range(4)] + [
+        OperatorProfile("fast", reaction_delay=0.0, force_limit=5.0, stiffness_gain=40000.0)]
+    lengths = [120, 120, 60, 120, 120]  # arm 2's intent ends before the run does
+    arms, twins = [], []
+    for p, n in zip(profiles, lengths):
+        intent = np.cumsum(rng.normal(0.0, 0.002, (n, 2)), axis=0)
+        noise = rng.normal(0.0, 0.5, (n, 2))
+        arms.append(OperatorArm(p, intent, DT, noise))
+        twins.append(OperatorArm(p, intent, DT, noise))  # the batch's copy, untouched by the scalar calls
+    batch = OperatorArmBatch(twins)
+    assert sorted(set(batch.delay.tolist())) == sorted({a.delay_ticks for a in arms}) and max(batch.delay) > 5
+    rows = np.arange(5)
+    limited = 0
+    for k in range(100):
+        if k == 70:
+            rows = rows[[0, 2, 4]]  # two runs ended
+        p = rng.normal(0.0, 0.03, (rows.size, 2)) + batch.intent[rows, np.minimum(k, batch.n[rows] - 1)]
+        v = rng.normal(0.0, 0.1, (rows.size, 2))
+        got = batch.force(k, rows, p, v)
+        for j, i in enumerate(rows.tolist()):
+            want = arms[i].force(k, p[j, 0], p[j, 1], v[j, 0], v[j, 1])
+            assert got[j].tolist() == list(want), (k, i)
+            assert batch.stiffness[i] == arms[i].stiffness
+            limited += np.hypot(*want) == pytest.approx(arms[i].profile.force_limit)
+    assert limited > 10  # the force limit was reached on some ticks
 
 
 def test_profile_validation_names_the_field():

@@ -6,10 +6,13 @@ admittance, rendered physically in the x-y plane::
     M a + D v = u_h + u_r                                             (eq. 3.1, K = 0)
     z(k+1) = A_d z(k) + B_d (u_h(k) + u_r(k)),   z = [x, y, ẋ, ẏ]        (eq. 3.5, exact ZOH)
 
+axis by axis (M and D diagonal), with the one plant step of every point-mass world
+(:func:`coassist.model.plant.plant_step`, the simulator's too).
+
 u_r is the tick's effort command, u_h the hand's force (:class:`~coassist.play.hand.BrowserHand`,
 evaluated once per period at the start of the period). The force sensor is ideal and
 samples every period: the reading at tick k+1 is u_h(k). Unlike
-:class:`coassist.sim.world.PointMassWorld` there is no simulated operator, object or
+:class:`coassist.sim.point_mass.PointMassWorld` there is no simulated operator, object or
 sensor noise: the person is the operator.
 
 Pacing: with ``paced`` (the default) :meth:`apply` first waits for the period's
@@ -31,6 +34,7 @@ from collections.abc import Callable
 import numpy as np
 
 from coassist.model.impedance import ImpedanceModel
+from coassist.model.plant import PointMassPlant, plant_step
 from coassist.runtime.world import Command, RobotState
 
 __all__ = ["PlayWorld"]
@@ -44,7 +48,7 @@ class PlayWorld:
 
     Parameters
     ----------
-    model : the controller's impedance model (2 DOFs, x-y; its dt is the period).
+    model : the controller's impedance model (2 DOFs, x-y, diagonal M and D, K = 0; its dt is the period).
     hand : anything with ``force_xy(x, y, vx, vy) -> (fx, fy)`` [N].
     start : (2,) the tool's start position [m].
     paced : wait for the wall clock in :meth:`apply` (real time for a person).
@@ -66,10 +70,12 @@ class PlayWorld:
         s = np.asarray(start, dtype=float)
         if s.shape != (2,) or not np.isfinite(s).all():
             raise ValueError(f"start must be 2 finite numbers [m], got {start!r}")
+        if np.any(np.asarray(model.K) != 0.0):
+            raise ValueError("the play world renders the free plant M a + D v = u (K = 0): the controller's model has K != 0")
         self.dt = float(model.dt)
         self.realtime = bool(paced)
-        self._Ad = np.ascontiguousarray(model.Ad)
-        self._Bd = np.ascontiguousarray(model.Bd)
+        #: The plant M a + D v = u, per axis: the point-mass simulator's step (coassist.model.plant).
+        self.plant = PointMassPlant.free(model)
         self.hand = hand
         self._clock, self._sleep = clock, sleep
         self.x, self.y = float(s[0]), float(s[1])
@@ -114,8 +120,9 @@ class PlayWorld:
             self._stopped = True  # a stopped robot brakes and holds, whatever the hand does
             self.vx = self.vy = 0.0
         else:
-            z = self._Ad @ np.array((x, y, vx, vy)) + self._Bd @ np.array((fhx + urx, fhy + ury))
-            self.x, self.y, self.vx, self.vy = float(z[0]), float(z[1]), float(z[2]), float(z[3])
+            p = self.plant
+            self.x, self.vx = plant_step(x, vx, fhx + urx, p.a_xv[0], p.a_vv[0], p.b_x[0], p.b_v[0])
+            self.y, self.vy = plant_step(y, vy, fhy + ury, p.a_xv[1], p.a_vv[1], p.b_x[1], p.b_v[1])
         self.k += 1
 
     def _wait(self) -> None:

@@ -51,6 +51,7 @@ from numpy.typing import ArrayLike
 # re-exported here because it is half of what a user of this module wants.
 from coassist._checks import check_int, check_positive_scalar
 from coassist.errors import CoassistError
+from coassist.robot.arm_descriptions import ARMS
 from coassist.spatial import (
     _as_rotation,
     _as_vector,
@@ -347,8 +348,6 @@ class UR5Kinematics(ArmKinematics):
     n_joints = 6
 
     def __init__(self, tcp_offset: ArrayLike = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)) -> None:
-        from coassist.robot.arms import ARMS  # the registry builds on this module
-
         arm = ARMS["ur5"]
         super().__init__(ur5_urdf_path(), arm.tip_frame, n_joints=6, tcp_offset=tcp_offset, base_signs=arm.base_signs,
                          joint_velocity_limit=arm.joint_velocity_limit,

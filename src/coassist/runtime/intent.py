@@ -20,6 +20,7 @@ safety layer: the robot decelerates, and stops if it persists.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -27,7 +28,7 @@ import numpy as np
 from coassist._checks import check_int_at_least
 from coassist.interfaces import FEATURES, Fault, IntentSource, TrialContext
 
-__all__ = ["RealtimeIntent", "TickIntent", "WindowIntent"]
+__all__ = ["RealtimeIntent", "TickIntent", "WindowIntent", "WindowIntentBatch"]
 
 _N_FEATURES = len(FEATURES)
 _FALLBACK = Fault.PREDICTION_FALLBACK
@@ -126,6 +127,61 @@ class WindowIntent:
             return pred[: self.horizon], Fault.NONE
         self._bad += 1
         return None, (_FALLBACK | Fault.PREDICTOR_STALLED) if self._bad > self.stall_ticks else _FALLBACK
+
+
+class WindowIntentBatch:
+    """The ring buffers and the answer check of B :class:`WindowIntent` stages sharing one source: their array twin.
+
+    :meth:`push` stores each row's feature row and returns the windows, (B, history, 8),
+    row for row what each stage's :meth:`WindowIntent.push` returns (the same layout: a
+    ring twice as long, so every window is one contiguous slice); one ``predict_batch``
+    call on them serves the B stages. :meth:`accept` checks the answers as each stage's
+    :meth:`WindowIntent.accept` does (at least ``need`` rows of (x, y), the first
+    ``horizon`` finite) and says which rows pass; a row that does not is a fallback,
+    which the caller leaves to the stage itself (it counts its stalls).
+
+    Parameters
+    ----------
+    intents : the B stages, of one shared history and horizon.
+    """
+
+    def __init__(self, intents: Sequence[WindowIntent]) -> None:
+        if not intents or not all(type(i) is WindowIntent for i in intents):
+            raise ValueError("a WindowIntentBatch takes one or more WindowIntent stages")
+        first = intents[0]
+        for i in intents:
+            if i.history != first.history:
+                raise ValueError("runs sharing a model in the loop must share its history")
+            if i.horizon != first.horizon:
+                raise ValueError("runs sharing a model in the loop must share its horizon")
+        self.history, self.horizon = first.history, first.horizon
+        self._need = np.array([i.need for i in intents], dtype=np.intp)
+        self._hist = np.zeros((len(intents), 2 * self.history, _N_FEATURES))
+
+    def push(self, k: int, rows: np.ndarray, features: np.ndarray) -> np.ndarray:
+        """Store tick k's feature rows (len(rows), 8) of the stages ``rows`` (indices); their
+        windows (len(rows), history, 8), oldest first."""
+        L = self.history
+        if L <= 0:
+            return np.zeros((rows.size, 0, _N_FEATURES))
+        hist = self._hist
+        if k == 0:
+            hist[rows] = features[:, None, :]  # pad: the robot was at rest before tick 0
+        i = k % L
+        hist[rows, i] = features
+        hist[rows, i + L] = features
+        return hist[rows, i + 1 : i + 1 + L]
+
+    def accept(self, rows: np.ndarray, answer: object) -> tuple[np.ndarray, np.ndarray]:
+        """The source's answer (len(rows), m, 2) for the stages ``rows`` → (positions (len(rows),
+        min(m, horizon), 2), ok (len(rows),) bool: the stage would take its row).
+
+        Raises ValueError on an answer that is not such an array (every row would be a fallback)."""
+        if not (isinstance(answer, np.ndarray) and answer.ndim == 3 and answer.shape[0] == rows.size and answer.shape[2] == 2):
+            raise ValueError("malformed predictions")
+        positions = answer[:, : self.horizon]
+        ok = (answer.shape[1] >= self._need[rows]) & np.isfinite(positions).all(axis=(1, 2))
+        return positions, ok
 
 
 class RealtimeIntent:

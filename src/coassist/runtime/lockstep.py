@@ -55,7 +55,7 @@ from coassist.runtime.loop import LINK_LOST, LoopLog, LoopRun, Termination
 from coassist.runtime.tick import ControlTick
 from coassist.runtime.world import World
 
-__all__ = ["Loop", "run_loops"]
+__all__ = ["Loop", "intent_batcher", "run_loops", "shared_controller"]
 
 
 class Loop(NamedTuple):
@@ -82,8 +82,8 @@ def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_c
         if not isinstance(ep, Loop):
             raise ValueError(f"episodes[{i}] must be a Loop (world, tick, n_max, termination), got {type(ep).__name__}")
         runs.append(LoopRun(ep.world, ep.tick, ep.n_max, ep.termination, clock=clock, split=True))
-    batchers = [_batcher(run.tick) for run in runs]
-    steppers = [_stepper(run.tick) for run in runs]
+    batchers = [intent_batcher(run.tick) for run in runs]
+    steppers = [shared_controller(run.tick) for run in runs]
     active = [i for i, run in enumerate(runs) if run.n_max > 0]
     if on_end is not None:
         for i, run in enumerate(runs):
@@ -133,8 +133,10 @@ def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_c
     return [run.log() for run in runs]
 
 
-def _batcher(tick: ControlTick) -> Any:
-    """The tick's intent's batcher, or None where its intent stage is called alone."""
+def intent_batcher(tick: ControlTick) -> Any:
+    """The tick's intent stage's batcher (``predict_batch``), or None where the stage is called
+    alone (the nominal plan, a stage without ``push``/``accept``, a source without one).
+    Runs whose batchers are one object share one call per tick."""
     intent = tick.intent
     if intent.nominal or not all(hasattr(intent, a) for a in ("push", "accept")):
         return None
@@ -163,7 +165,7 @@ class _Stacks:
         return out
 
 
-def _stepper(tick: ControlTick) -> Any:
+def shared_controller(tick: ControlTick) -> Any:
     """The tick's controller where runs may share one ``step_batch`` call (it keeps no state
     between ticks: no ``reset``), else None (the tick steps it itself)."""
     controller = tick.controller

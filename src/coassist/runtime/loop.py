@@ -33,7 +33,7 @@ what raised where, so the run's record is written and no traceback reaches the u
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,7 +44,7 @@ from coassist.interfaces import Fault
 from coassist.runtime.tick import ControlTick
 from coassist.runtime.world import RobotState, World, finite_vector
 
-__all__ = ["LINK_LOST", "LoopLog", "LoopRun", "TargetDwell", "run_loop"]
+__all__ = ["LINK_LOST", "LoopLog", "LoopRun", "TargetDwell", "TargetDwellBatch", "run_loop"]
 
 Termination = Callable[[int, np.ndarray], bool]
 
@@ -73,6 +73,44 @@ class TargetDwell:
             return self.inside >= self.dwell_ticks
         self.inside = 0
         return False
+
+
+class TargetDwellBatch:
+    """:class:`TargetDwell` for B runs at once, row for row the same decisions: its array twin.
+
+    Parameters
+    ----------
+    rules : per run a :class:`TargetDwell` that has not counted a tick inside yet, or None
+        (no rule: the run goes on to its time limit). :meth:`accepts` says which can join.
+    """
+
+    @staticmethod
+    def accepts(rule: object) -> bool:
+        """Whether ``rule`` can join a batch: None, or a :class:`TargetDwell` with no tick inside counted."""
+        return rule is None or (type(rule) is TargetDwell and rule.inside == 0)
+
+    def __init__(self, rules: Sequence[TargetDwell | None]) -> None:
+        for i, rule in enumerate(rules):
+            if not self.accepts(rule):
+                raise ValueError(f"rules[{i}] cannot join a TargetDwellBatch (TargetDwellBatch.accepts is False)")
+        self._has_rule = np.array([r is not None for r in rules], dtype=bool)
+        self._target = np.array([(r.tx, r.ty) if r is not None else (0.0, 0.0) for r in rules], dtype=float).reshape(-1, 2)
+        self._r2 = np.array([r.r2 if r is not None else 0.0 for r in rules], dtype=float)
+        self._dwell_ticks = np.array([r.dwell_ticks if r is not None else 0 for r in rules], dtype=np.intp)
+        self._after_tick = np.array([r.after_tick if r is not None else 0 for r in rules], dtype=np.intp)
+        #: (B,) ticks inside the ball in a row so far, as each rule's ``inside``.
+        self.inside = np.zeros(len(rules), dtype=np.intp)
+
+    def __call__(self, k: int, rows: np.ndarray, pose: np.ndarray) -> np.ndarray:
+        """Tick k of the runs ``rows`` (indices) at their poses (len(rows), ≥ 2) [m]: (len(rows),) bool,
+        each what its rule's ``rule(k, pose)`` says (False without a rule)."""
+        counted = self._has_rule[rows] & (k >= self._after_tick[rows])
+        d = pose[:, :2] - self._target[rows]
+        inside = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) < self._r2[rows]
+        before = self.inside[rows]
+        count = np.where(counted, np.where(inside, before + 1, 0), before)
+        self.inside[rows] = count
+        return counted & inside & (count >= self._dwell_ticks[rows])
 
 
 @dataclass

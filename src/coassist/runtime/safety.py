@@ -94,6 +94,7 @@ p(k+1) = p(k) + J_v q̇ dt.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,7 +110,7 @@ try:  # numpy's determinant kernel without np.linalg.det's Python checks (≈ 2 
 except Exception:  # pragma: no cover - another numpy
     _det = np.linalg.det
 
-__all__ = ["BAD_TICK_FAULTS", "SafetyLayer", "SafetyLimits", "within_limits"]
+__all__ = ["BAD_TICK_FAULTS", "SafetyLayer", "SafetyLayerBatch", "SafetyLimits", "within_limits"]
 
 #: Upstream faults that make a tick "bad": the layer decelerates, and stops after
 #: ``SafetyLimits.max_bad_ticks`` of them in a row.
@@ -1021,3 +1022,43 @@ class SafetyLayer:
                         lam = min(lam, (lo - p - ul[i] * dt) / zi)
         # a hair inside, so the boundary point survives rounding
         return min(max(lam * (1.0 - 1e-12), 0.0), 1.0)
+
+
+class SafetyLayerBatch:
+    """:meth:`SafetyLayer.limit_effort` for B layers at once on the fault-free tick: its array twin.
+
+    On a tick without an upstream fault or a robot stop, a layer's effort stage passes u_r
+    as it is, with no flag, unless the hand force is over ``contact_force`` (STOPPED), u_r,
+    v or the hand is not finite, or the tool is over ``tool_speed`` with u_r pushing it on
+    (TOOL_SPEED_LIMIT). :meth:`limit_effort` says for each row whether it is such a clean
+    tick, on which the layer gives u_r back unchanged; a row that is not clean the caller
+    runs on the layer itself. At the contact limit itself the layer's ``np.dot`` may round
+    either way: rows within a relative 1e-12 of it are not clean either.
+
+    Parameters
+    ----------
+    layers : the B layers (:meth:`accepts`).
+    """
+
+    @staticmethod
+    def accepts(layer: object) -> bool:
+        """Whether ``layer`` can join a batch: a :class:`SafetyLayer` that has not stopped."""
+        return type(layer) is SafetyLayer and not layer.stopped
+
+    def __init__(self, layers: Sequence[SafetyLayer]) -> None:
+        for i, layer in enumerate(layers):
+            if not self.accepts(layer):
+                raise ValueError(f"layers[{i}] cannot join a SafetyLayerBatch (SafetyLayerBatch.accepts is False)")
+        self._contact2 = np.array([layer._f2 for layer in layers], dtype=float)  # contact_force², as the layer's
+        self._tool_speed = np.array([layer.limits.tool_speed for layer in layers], dtype=float)
+
+    def limit_effort(self, rows: np.ndarray, u_r: np.ndarray, v: np.ndarray, hand: np.ndarray) -> np.ndarray:
+        """clean (len(rows),) bool for the layers ``rows`` (indices), their efforts u_r (len(rows), 2)
+        [N], tool velocities v (len(rows), 2) [m/s] and hand forces (len(rows), 3) [N] (class docstring)."""
+        f2 = hand[:, 0] * hand[:, 0] + hand[:, 1] * hand[:, 1] + hand[:, 2] * hand[:, 2]
+        clean = ~(f2 > self._contact2[rows] * (1.0 - 1e-12))
+        speed = np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1])
+        along = u_r[:, 0] * v[:, 0] + u_r[:, 1] * v[:, 1]
+        clean &= ~((speed > self._tool_speed[rows]) & (along > 0.0))
+        clean &= np.isfinite(u_r).all(axis=1)
+        return clean

@@ -59,7 +59,7 @@ from coassist.interfaces import Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
 from coassist.runtime.world import COMMAND_SPACES, Command, RobotState, finite_vector
 
-__all__ = ["ControlTick", "Plan", "TickConfig", "TickOutput", "TickReferences", "UPSTREAM_BAD"]
+__all__ = ["ControlTick", "Plan", "TickConfig", "TickOutput", "TickReferences", "UPSTREAM_BAD", "human_reference"]
 
 #: Faults of the stages before the safety layer that make a tick "bad" for it.
 UPSTREAM_BAD = (
@@ -86,6 +86,29 @@ _RESET_ADMITTANCE = (
 )
 _ROTATION = (3, 4, 5)
 _DEADLINE_MISS = int(Fault.DEADLINE_MISS)
+
+
+def human_reference(positions: np.ndarray, x0: np.ndarray, inv_dt: float, out: np.ndarray) -> None:
+    """Write ref_h, the human reference of stage 2 (module docstring), from predicted positions.
+
+    ``out[..., i, :] = [p̂(k+1+i) − x0 on x-y, …, (p̂(k+1+i) − p̂(k+i)) · inv_dt on x-y, …]``
+    for i < m, the first row's velocity repeating the second's (0 when m = 1); the
+    other DOFs' columns are left as they are.
+
+    One tick or a batch of them alike: positions (..., m, 2) [m], x0 (..., 2) the start [m],
+    inv_dt = 1/dt [1/s], out (..., ≥ m, 2d) [m, m/s] with d = out.shape[-1] // 2 (x-y first).
+    The tick (:meth:`ControlTick.control_inputs`) and the point-mass array path
+    (:mod:`coassist.sim.lockstep`) both build ref_h here, so their rows are equal bit for bit.
+    """
+    m = positions.shape[-2]
+    d = out.shape[-1] // 2
+    np.subtract(positions, x0[..., None, :], out=out[..., :m, :2])
+    if m >= 2:
+        np.subtract(positions[..., 1:, :], positions[..., :-1, :], out=out[..., 1:m, d : d + 2])
+        out[..., 1:m, d : d + 2] *= inv_dt
+        out[..., 0, d : d + 2] = out[..., 1, d : d + 2]
+    else:
+        out[..., 0, d : d + 2] = 0.0
 
 
 @dataclass(frozen=True)
@@ -347,15 +370,7 @@ class ControlTick:
             if pf:
                 fault |= pf
             if pred is not None:
-                buf = self._ref_h_buf
-                m = pred.shape[0]
-                np.subtract(pred, self._x0[:2], out=buf[:m, :2])
-                if m >= 2:
-                    np.subtract(pred[1:], pred[:-1], out=buf[1:m, d : d + 2])
-                    buf[1:m, d : d + 2] *= self._inv_dt
-                    buf[0, d : d + 2] = buf[1, d : d + 2]
-                else:
-                    buf[0, d : d + 2] = 0.0
+                human_reference(pred, self._x0[:2], self._inv_dt, self._ref_h_buf)
                 ref_h = self._ref_h_view
                 prediction = pred
             else:

@@ -67,6 +67,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -76,7 +77,7 @@ from numpy.typing import ArrayLike
 from coassist._checks import check_int, is_real_number
 from coassist.interfaces import Fault
 
-__all__ = ["MEASURED_FROZEN_TIME", "WrenchConfig", "WrenchPipeline", "WrenchReading", "payload_wrench"]
+__all__ = ["MEASURED_FROZEN_TIME", "WrenchConfig", "WrenchPipeline", "WrenchPipelineBatch", "WrenchReading", "payload_wrench"]
 
 log = logging.getLogger(__name__)
 
@@ -602,3 +603,90 @@ class WrenchPipeline:
         if arr.dtype.kind not in "fiu" or arr.shape != shape:  # bool, complex, str, object
             return None
         return arr.astype(float)
+
+
+class WrenchPipelineBatch:
+    """:meth:`WrenchPipeline.update` for B pipelines at once on the fault-free tick: its array twin.
+
+    For planar readings (f_x, f_y; f_z and the torques 0, as the point-mass world's) into
+    pipelines without filter, deadband, payload or zeroing (:meth:`accepts`): what is left of
+    the stages is the sample tracking, the checks, the bias and the rotation, and on a tick
+    without a fault flag :meth:`update` gives row for row the same floats as each pipeline's
+    ``update(...).hand[:3]``. A row it cannot answer for is not ``clean``: a stale or
+    non-finite reading, an implausible, jumping or saturated sample, or a new sample equal
+    to the last accepted one while the frozen check is on (the pipeline may or may not call
+    that stale yet). A caller runs such a row on the pipeline itself (the point-mass array
+    path, :mod:`coassist.sim.lockstep`, runs the whole trial again on the reference path); the
+    batch's state for it is then no longer meaningful.
+
+    Parameters
+    ----------
+    pipes : the B pipelines (:meth:`accepts`), nothing seen yet.
+    rotation : (3, 3) the sensor's orientation in the base frame, shared by the B sensors.
+    """
+
+    @staticmethod
+    def accepts(pipe: object) -> bool:
+        """Whether ``pipe`` can join a batch: a :class:`WrenchPipeline` without filter, deadband or
+        payload, not zeroing, that has seen no sample yet."""
+        return (type(pipe) is WrenchPipeline and pipe._alpha is None and pipe._db_f == 0.0 and pipe._db_t == 0.0
+                and not pipe._has_payload and pipe._zero_left == 0 and pipe._seq is None and pipe._ref is None)  # fmt: skip
+
+    def __init__(self, pipes: Sequence[WrenchPipeline], rotation: np.ndarray) -> None:
+        for i, p in enumerate(pipes):
+            if not self.accepts(p):
+                raise ValueError(f"pipes[{i}] cannot join a WrenchPipelineBatch (WrenchPipelineBatch.accepts is False)")
+        R = np.asarray(rotation, dtype=float)
+        if R.shape != (3, 3) or not np.isfinite(R).all():
+            raise ValueError(f"rotation must be a finite (3, 3) matrix, got shape {R.shape}")
+        B = len(pipes)
+
+        def f(seq) -> np.ndarray:
+            return np.array(seq, dtype=float)
+
+        self._R = [[float(R[r, c]) for c in range(3)] for r in range(3)]
+        self._max_age = f([p._max_age for p in pipes])
+        self._frozen_checked = np.array([p._max_frozen is not None for p in pipes], dtype=bool)
+        self._max_f, self._sat_f, self._jump_f = f([p._max_f for p in pipes]), f([p._sat_f for p in pipes]), f([p._jump_f for p in pipes])
+        self._bias = f([p._bias for p in pipes]).reshape(B, 6)
+        self._seq = np.full(B, -1, dtype=np.int64)  # nothing seen yet (a sensor's counter starts at 0)
+        self._seq_t = np.zeros(B)
+        self._ref = np.zeros((B, 2))  # the last accepted sample (the spike test's reference)
+        self._has_ref = np.zeros(B, dtype=bool)
+        #: (B, 3) the hand force held by each pipeline [N], base frame.
+        self.hand = np.zeros((B, 3))
+
+    def update(self, rows: np.ndarray, raw: np.ndarray, seq: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """One tick of the pipelines ``rows`` (indices): raw readings (len(rows), 2) [N] (f_x, f_y;
+        the rest 0), sensor frame, their sample counters (len(rows),), the tick time t [s].
+
+        Returns (hand (len(rows), 3) [N] in the base frame, clean (len(rows),) bool): where
+        clean, each pipeline's ``update`` gives that force and no fault flag (class docstring).
+        """
+        new = seq != self._seq[rows]
+        clean = new | ~(t - self._seq_t[rows] > self._max_age[rows])  # no new sample for too long: stale
+        clean &= np.isfinite(raw).all(axis=1)
+        at = rows[new]
+        if at.size:
+            self._seq[at] = seq[new]
+            self._seq_t[at] = t
+            w = raw[new]
+            ref = self._ref[at]
+            has_ref = self._has_ref[at]
+            repeat = (w[:, 0] == ref[:, 0]) & (w[:, 1] == ref[:, 1]) & has_ref & self._frozen_checked[at]
+            # the reading's f_z and torques are 0 (below every range and jump, which are > 0)
+            mf = np.maximum(np.abs(w[:, 0]), np.abs(w[:, 1]))
+            jf = self._jump_f[at]
+            jump = has_ref & ((np.abs(w[:, 0] - ref[:, 0]) > jf) | (np.abs(w[:, 1] - ref[:, 1]) > jf))
+            bad = repeat | jump | (mf > self._max_f[at]) | (mf >= self._sat_f[at])
+            clean[np.flatnonzero(new)[bad]] = False
+            self._ref[at] = w
+            self._has_ref[at] = True
+            # bias (sensor frame), then into the base frame (WrenchPipeline._update's stages 5 and 7)
+            b = self._bias[at]
+            c0, c1, c2 = w[:, 0] - b[:, 0], w[:, 1] - b[:, 1], 0.0 - b[:, 2]
+            R = self._R
+            self.hand[at, 0] = R[0][0] * c0 + R[0][1] * c1 + R[0][2] * c2
+            self.hand[at, 1] = R[1][0] * c0 + R[1][1] * c1 + R[1][2] * c2
+            self.hand[at, 2] = R[2][0] * c0 + R[2][1] * c1 + R[2][2] * c2
+        return self.hand[rows], clean

@@ -62,6 +62,7 @@ users ≥ 1 are drawn from a seeded population around it.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -387,14 +388,95 @@ class OperatorArm:
             K = p.stiffness_max
         self.stiffness = K
         b = p.reflex_share
-        fx = K * ((1.0 - b) * ex + b * dx) - p.damping * vx + self._nx[i]
-        fy = K * ((1.0 - b) * ey + b * dy) - p.damping * vy + self._ny[i]
+        fx = _axis_force(K, b, ex, dx, p.damping, vx, self._nx[i])
+        fy = _axis_force(K, b, ey, dy, p.damping, vy, self._ny[i])
         norm = math.sqrt(fx * fx + fy * fy)
         if norm > p.force_limit:
             scale = p.force_limit / norm
             fx *= scale
             fy *= scale
         return fx, fy
+
+
+def _axis_force(K, b, e, e_delayed, damping, v, noise):
+    """Eq. 4.1 on one axis before the force limit: K [(1 − β) e + β e(k − d)] − C_h v + n.
+
+    Elementwise, floats or arrays: :class:`OperatorArm` and :class:`OperatorArmBatch` share it."""
+    return K * ((1.0 - b) * e + b * e_delayed) - damping * v + noise
+
+
+class OperatorArmBatch:
+    """:meth:`OperatorArm.force` for B arms at once, row for row the same floats: its array twin.
+
+    The point-mass array path (:mod:`coassist.sim.lockstep`) calls :meth:`force` once per
+    tick for the rows still going; each row keeps its arm's ring of errors, filtered error
+    ē and stiffness exactly as the arm would (the same formulas: :func:`_axis_force`, and
+    the others written elementwise in the arm's order of operations).
+
+    Parameters
+    ----------
+    arms : the B arms, none called yet (their next tick is 0).
+    """
+
+    def __init__(self, arms: Sequence[OperatorArm]) -> None:
+        if not all(type(a) is OperatorArm for a in arms):
+            raise ValueError("OperatorArmBatch takes OperatorArm objects")
+        B = len(arms)
+        self.n = np.array([a._n for a in arms], dtype=np.intp)
+        L = int(self.n.max()) if B else 0
+        self.intent = np.stack([_ragged([a._ix for a in arms], L), _ragged([a._iy for a in arms], L)], axis=2)
+        self.noise = np.stack([_ragged([a._nx for a in arms], L), _ragged([a._ny for a in arms], L)], axis=2)
+        self.delay = np.array([a.delay_ticks for a in arms], dtype=np.intp)
+        self._size = self.delay + 1
+        self._err = np.zeros((B, int(self._size.max()) if B else 1, 2))  # each row's ring of e, as the arm's
+        self.filtered_error = np.array([a._ebar for a in arms], dtype=float)
+        self._alpha = np.array([a._alpha for a in arms], dtype=float)
+        profiles = [a.profile for a in arms]
+
+        def column(name: str) -> np.ndarray:
+            return np.array([getattr(p, name) for p in profiles], dtype=float)
+
+        self._k_min, self._k_gain, self._k_max = column("stiffness_min"), column("stiffness_gain"), column("stiffness_max")
+        self._reflex, self._damping, self._force_limit = column("reflex_share"), column("damping"), column("force_limit")
+        self.stiffness = np.array([a.stiffness for a in arms], dtype=float)
+
+    def force(self, k: int, rows: np.ndarray, p: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """u_h(k) [N], (len(rows), 2), of the arms ``rows`` (indices) for their hand points p and
+        velocities v, (len(rows), 2) [m, m/s]: each row what its arm's ``force(k, …)`` gives."""
+        n = self.n[rows]
+        i = np.minimum(k, n - 1)
+        e = self.intent[rows, i] - p
+        size = self._size[rows]
+        self._err[rows, k % size] = e
+        # the oldest slot of the ring is e(k − d) (e(0) before d ticks have passed: at rest)
+        old = np.where(k >= self.delay[rows], (k + 1) % size, 0)
+        de = self._err[rows, old]
+        ebar = self.filtered_error[rows]
+        ebar = ebar + self._alpha[rows] * (np.sqrt(e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1]) - ebar)
+        self.filtered_error[rows] = ebar
+        K = self._k_min[rows] + self._k_gain[rows] * ebar
+        k_max = self._k_max[rows]
+        K = np.where(K > k_max, k_max, K)
+        self.stiffness[rows] = K
+        b, damping, noise = self._reflex[rows], self._damping[rows], self.noise[rows, i]
+        f = np.empty_like(e)
+        f[:, 0] = _axis_force(K, b, e[:, 0], de[:, 0], damping, v[:, 0], noise[:, 0])
+        f[:, 1] = _axis_force(K, b, e[:, 1], de[:, 1], damping, v[:, 1], noise[:, 1])
+        norm = np.sqrt(f[:, 0] * f[:, 0] + f[:, 1] * f[:, 1])
+        limit = self._force_limit[rows]
+        over = norm > limit
+        if over.any():
+            f[over] *= (limit[over] / norm[over])[:, None]
+        return f
+
+
+def _ragged(seqs: Sequence[Sequence[float]], n: int) -> np.ndarray:
+    """(len(seqs), n): each sequence's first n values, zero-padded."""
+    out = np.zeros((len(seqs), n))
+    for b, s in enumerate(seqs):
+        m = min(len(s), n)
+        out[b, :m] = s[:m]
+    return out
 
 
 def motor_noise(profile: OperatorProfile, rng: np.random.Generator, n: int, dt: float) -> np.ndarray:

@@ -6,6 +6,7 @@ See docs/architecture.md, *The simulated world*. Entry points: :func:`run_trial`
 :mod:`coassist.control.presets`.
 """
 
-from coassist.sim.world import PointMassWorld, TrialSpec, run_spec, run_trial, run_trials
+from coassist.sim.point_mass import PointMassWorld
+from coassist.sim.world import TrialSpec, run_spec, run_trial, run_trials
 
 __all__ = ["PointMassWorld", "TrialSpec", "run_spec", "run_trial", "run_trials"]

@@ -27,7 +27,13 @@ tip has stayed within ``arrive_radius`` of the target for ``dwell`` seconds, or 
 the time limit (meta.extra["ended"] says which).
 
 The trial is assembled, run and logged by :mod:`coassist.runtime.episode`, as in every
-other world; this module builds the world (:class:`PointMassWorld`) and the batches.
+other world. This module holds the trials by name (:class:`TrialSpec`), their assembly
+(:func:`build_trial`, :func:`spec_episode`) and their runs: one (:func:`run_trial`,
+:func:`run_spec`), a lockstep group (:func:`run_spec_lockstep`, on the point-mass array
+path of :mod:`coassist.sim.lockstep` where it can), many (:func:`run_trials`,
+:func:`submit_trials`). The world itself (steps 4–5) is :mod:`coassist.sim.point_mass`; the
+worker processes and Ray are :mod:`coassist.sim.pool`; both modules' public names are
+importable from here too.
 
 Determinism: every random draw comes from Generators of the trial seed
 (:mod:`coassist.scenario.seeds`: the trial's stream here, the task's in :func:`run_spec`), and the loop has no other source of variation: the same seed gives
@@ -42,13 +48,11 @@ precomputed reference grids. See benchmarks/bench_sim.py.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import math
 import os
-import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import Executor, Future
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,7 +61,7 @@ from coassist._checks import check_int
 from coassist._progress import progress_bar
 from coassist.config import THESIS_EVALUATION
 from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
-from coassist.data import Trial, TrialMeta
+from coassist.data import Trial
 from coassist.interfaces import NAMED_INTENTS, NETWORK_BACKENDS, IntentSource
 from coassist.model.impedance import ImpedanceModel
 from coassist.runtime.episode import (
@@ -76,163 +80,33 @@ from coassist.runtime.intent import WindowIntent
 from coassist.runtime.lockstep import run_loops
 from coassist.runtime.loop import LoopLog
 from coassist.runtime.safety import SafetyLayer
-from coassist.runtime.world import Command, RobotState
 from coassist.runtime.wrench import WrenchPipeline
 from coassist.scenario.intent_source import NominalIntent, shared_intent_source
 from coassist.scenario.objects import CarriedObject, ForceSensor, get_object
-from coassist.scenario.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise, operator_profile
-from coassist.scenario.seeds import trial_rngs
+from coassist.scenario.operator import OperatorProfile, operator_profile
 from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, Task, task_for_seed
 from coassist.sim.lockstep import fast_path_eligible, run_point_mass_lockstep
+
+# The world and the processes live in their own modules; their names stay importable from here.
+from coassist.sim.point_mass import PointMassWorld
+from coassist.sim.pool import (
+    PARENT_POLL,
+    SubmittedTrials,
+    pool_for,
+    run_on_ray,
+    trial_payload,
+    worker_pool,
+)
+
+__all__ = [
+    "NAMED_GROUP", "PARENT_POLL", "PointMassWorld", "SubmittedTrials", "TrialSpec", "build_trial",
+    "run_spec", "run_spec_lockstep", "run_trial", "run_trials", "spec_episode", "submit_trials", "worker_pool",
+]  # fmt: skip
 
 
 def _diag2(matrix: np.ndarray, name: str) -> None:
     if matrix.shape != (2, 2) or matrix[0, 1] != 0.0 or matrix[1, 0] != 0.0:
         raise ValueError(f"the simulator needs a 2-DOF (x-y) plant with diagonal {name}, got {matrix.tolist()}")
-
-
-class PointMassWorld:
-    """The 2-D point-mass world: the thesis' robot as an ideal admittance, with object, sensor and operator.
-
-    An ``effort`` world (:mod:`coassist.runtime.world`): it renders the impedance model
-    physically, (M + m) a + D v = u_h + u_r + n_s + b_res (module docstring, step 5),
-    so the tick sends it the robot's effort u_r. It owns time (tick k), the operator's
-    arm (:class:`~coassist.scenario.operator.OperatorArm`, called inside :meth:`apply`), the
-    board's yaw and the force sensor. All randomness comes from ``seed`` exactly as
-    before this world was split out of the loop, so trials are bit-identical.
-    """
-
-    command_space = "effort"
-    n_joints = 0
-    realtime = False
-
-    def __init__(self, task: Task, operator: OperatorProfile, obj: CarriedObject, model: ImpedanceModel, seed: int,
-                 n_max: int, n_grid: int, sensor: ForceSensor) -> None:  # fmt: skip
-        dt = float(model.dt)
-        self.dt = dt
-        rng_intent, rng_motor, rng_sensor = trial_rngs(seed, 3)
-        self.intent = intent_trajectory(task, operator, rng_intent, n_grid, dt)
-        noise_h = motor_noise(operator, rng_motor, n_max, dt)
-        self.raw_bias = sensor.raw_bias(obj, rng_sensor)
-        residual = self.raw_bias - sensor.zero(self.raw_bias, rng_sensor)  # what zeroing leaves behind
-        self.residual = residual
-        noise_s = rng_sensor.normal(0.0, sensor.noise, (n_max + 1, 2))
-        self._fresh = sensor.sample_ticks(n_max + 1, dt).tolist()
-        self._sat = sensor.saturation
-        # plant: per-axis exact ZOH of (M + m) a + D v = f
-        eff = ImpedanceModel(np.diag(np.diag(model.M) + obj.mass), model.D, np.zeros((2, 2)), dt)
-        Ad, Bd = eff.Ad, eff.Bd
-        self._axv = (float(Ad[0, 2]), float(Ad[1, 3]))
-        self._avv = (float(Ad[2, 2]), float(Ad[3, 3]))
-        self._bx = (float(Bd[0, 0]), float(Bd[1, 1]))
-        self._bv = (float(Bd[2, 0]), float(Bd[3, 1]))
-        self._m = obj.mass
-        self._yaw = obj.has_yaw
-        self._rh = obj.grasp_offset
-        self._rc = obj.center_offset
-        self._k_th, self._c_th = obj.yaw_stiffness, obj.yaw_damping
-        self._I_c = obj.yaw_inertia if obj.has_yaw else 1.0
-        self._arm = OperatorArm(operator, self.intent.positions, dt, noise_h)
-        sat = self._sat
-        self._nsx, self._nsy = noise_s[:, 0].tolist(), noise_s[:, 1].tolist()
-        self._bres = (float(residual[0]), float(residual[1]))
-        x0 = task.start
-        self.x, self.y = float(x0[0]), float(x0[1])
-        self.vx = self.vy = 0.0
-        self._th = self._thd = self._thdd = 0.0
-        self._ax_prev = self._ay_prev = 0.0
-        self.wx = float(np.clip(residual[0] + noise_s[0, 0], -sat, sat))
-        self.wy = float(np.clip(residual[1] + noise_s[0, 1], -sat, sat))
-        self._seq = 0
-        self.k = 0
-        self._fh = (0.0, 0.0)
-        self._stopped = False
-
-    def read(self) -> RobotState:
-        return RobotState(
-            t=self.k * self.dt, q=_NO_JOINTS, qd=_NO_JOINTS,
-            tool_pose=np.array((self.x, self.y, 0.0, 0.0, 0.0, 0.0)),
-            tool_twist=np.array((self.vx, self.vy, 0.0, 0.0, 0.0, 0.0)),
-            wrench=np.array((self.wx, self.wy, 0.0, 0.0, 0.0, 0.0)), sensor_rotation=_SENSOR_ROTATION,
-            wrench_seq=self._seq,
-        )  # fmt: skip
-
-    def hand_force(self) -> tuple[float, float]:
-        """The operator's force u_h(k) [N] applied during the last period."""
-        return self._fh
-
-    def apply(self, command: Command) -> None:
-        """One period: the operator's arm, the plant under u_h + u_r, the sensor's next reading."""
-        k = self.k
-        dt = self.dt
-        effort = command.effort
-        if command.stop or self._stopped or effort is None:
-            urx = ury = 0.0
-        else:
-            urx, ury = float(effort[0]), float(effort[1])
-            if not (math.isfinite(urx) and math.isfinite(ury)):  # never integrate garbage
-                urx = ury = 0.0
-        x, y, vx, vy = self.x, self.y, self.vx, self.vy
-        th, thd = self._th, self._thd
-        # the operator (the hand point moves with the board's yaw)
-        rhx, rhy = self._rh
-        if self._yaw:
-            px, py = x - th * rhy, y + th * rhx
-            pvx, pvy = vx - thd * rhy, vy + thd * rhx
-        else:
-            px, py, pvx, pvy = x, y, vx, vy
-        fhx, fhy = self._arm.force(k, px, py, pvx, pvy)
-        self._fh = (fhx, fhy)
-        # plant and sensor
-        m = self._m
-        nsx, nsy = self._nsx[k + 1], self._nsy[k + 1]
-        bres_x, bres_y = self._bres
-        cx = cy = 0.0
-        if self._yaw:
-            rcx, rcy = self._rc
-            tau = rhx * fhy - rhy * fhx - m * (rcx * self._ay_prev - rcy * self._ax_prev)
-            thdd = (tau - self._k_th * th - self._c_th * thd) / self._I_c
-            thd += thdd * dt
-            th += thd * dt
-            self._thdd, self._thd, self._th = thdd, thd, th
-            cx, cy = m * thdd * rcy, -m * thdd * rcx  # −m θ̈ J r_c
-        fx = fhx + urx + nsx + bres_x + cx
-        fy = fhy + ury + nsy + bres_y + cy
-        if command.stop or self._stopped:
-            # a stopped robot brakes: the tool holds where it is, whatever the hand does
-            self._stopped = True
-            vx_new = vy_new = 0.0
-            x_new, y_new = x, y
-        else:
-            vx_new = self._avv[0] * vx + self._bv[0] * fx
-            vy_new = self._avv[1] * vy + self._bv[1] * fy
-            x_new = x + self._axv[0] * vx + self._bx[0] * fx
-            y_new = y + self._axv[1] * vy + self._bx[1] * fy
-        inv_dt = 1.0 / dt
-        self._ax_prev = (vx_new - vx) * inv_dt
-        self._ay_prev = (vy_new - vy) * inv_dt
-        if self._fresh[k + 1]:
-            sat = self._sat
-            sx = fhx - m * self._ax_prev + cx + nsx + bres_x
-            sy = fhy - m * self._ay_prev + cy + nsy + bres_y
-            self.wx = sat if sx > sat else (-sat if sx < -sat else sx)
-            self.wy = sat if sy > sat else (-sat if sy < -sat else sy)
-            self._seq += 1
-        self.x, self.y, self.vx, self.vy = x_new, y_new, vx_new, vy_new
-        self.k = k + 1
-
-    def stop(self) -> None:
-        self._stopped = True
-        self.vx = self.vy = 0.0
-
-    def close(self) -> None:
-        pass
-
-
-_NO_JOINTS = np.zeros(0)
-_NO_JOINTS.setflags(write=False)
-_SENSOR_ROTATION = np.eye(3)  # the sensor's frame is the base frame; one read-only array, not one per tick
-_SENSOR_ROTATION.setflags(write=False)
 
 
 def run_trial(
@@ -481,44 +355,6 @@ def run_spec_lockstep(specs: Sequence[TrialSpec], on_result: Callable[[int, Tria
     return [] if on_result is not None else [t for t in trials if t is not None]
 
 
-def _to_payload(trial: Trial) -> tuple[dict, dict]:
-    # TrialMeta holds read-only mapping proxies, which do not pickle: ship plain data.
-    arrays = {
-        name: getattr(trial, name)
-        for name in ("time", "pose", "velocity", "wrench", "reference", "prediction", "intent", "effort_h", "effort_r", "fault")
-    }
-    return trial.meta.to_dict(), arrays
-
-
-def _from_payload(payload: tuple[dict, dict]) -> Trial:
-    meta, arrays = payload
-    return Trial(meta=TrialMeta.from_dict(meta), **arrays)
-
-
-#: How often a worker process checks that its parent is alive [s].
-PARENT_POLL = 0.2
-
-
-def _watch_parent(parent: int) -> None:
-    """Worker initializer: end this worker when the process that started it is gone.
-
-    A killed ``collect`` (SIGKILL, or SIGTERM, which Python does not turn into a clean
-    shutdown) cannot tell its pool to stop, and the workers, which hold the pool's
-    queue themselves, would wait on it for good. A daemon thread polls the parent's pid
-    every :data:`PARENT_POLL` seconds (an orphan is re-parented, so getppid() changes)
-    and ends the worker at once; portable, unlike Linux's PR_SET_PDEATHSIG, which also
-    fires when the *thread* that started the worker ends.
-    """
-    import threading
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(PARENT_POLL)
-        os._exit(1)  # no clean-up to do: the parent that would take the results is gone
-
-    threading.Thread(target=watch, name="coassist-parent-watch", daemon=True).start()
-
-
 def _run_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
     """A worker process's batch. A model in the loop gets one torch thread: this process is
     one of one-per-core, and more threads would oversubscribe them."""
@@ -527,7 +363,7 @@ def _run_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
 
         torch.set_num_threads(1)
     controllers: dict = {}  # one game per (kind, preset) per batch
-    return [_to_payload(run_spec(spec, controllers)) for spec in specs]
+    return [trial_payload(run_spec(spec, controllers)) for spec in specs]
 
 
 def _run_lockstep_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
@@ -536,28 +372,7 @@ def _run_lockstep_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
         import torch
 
         torch.set_num_threads(1)
-    return [_to_payload(trial) for trial in run_spec_lockstep(specs)]
-
-
-def worker_pool(workers: int) -> Executor:
-    """``workers`` simulation processes to pass to :func:`run_trials` (``pool``) call after call.
-
-    Each :func:`run_trials` without a pool starts its own processes, and a fresh
-    interpreter importing numpy, scipy and torch costs seconds: a pipeline of many small
-    collections (``coassist reproduce``: ~40) spends more time starting workers than
-    simulating. One pool for the whole run pays it once. spawn: a clean interpreter per
-    worker (no inherited threads, locks or torch state); callers' scripts need the usual
-    ``if __name__ == "__main__":`` guard. Workers keep the parent's BLAS thread settings
-    (inherited environment): the game's gains, and so every trial, are bit-identical
-    only for the same BLAS thread count. Use it as a context manager (it shuts down).
-    """
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    workers = check_int(workers, "workers", 1)
-    ctx = multiprocessing.get_context("spawn")
-    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_watch_parent,
-                               initargs=(os.getpid(),))  # fmt: skip
+    return [trial_payload(trial) for trial in run_spec_lockstep(specs)]
 
 
 def run_trials(
@@ -607,7 +422,7 @@ def run_trials(
     if not specs:
         return []
     if ray_address is not None:
-        return _run_ray(specs, ray_address, progress, on_result)
+        return run_on_ray(_run_batch, specs, ray_address, progress, on_result)
     if workers is None:
         workers = os.cpu_count() or 1
     workers = min(check_int(workers, "workers", 1), len(specs))
@@ -639,7 +454,7 @@ def run_trials(
                 for i, spec in enumerate(specs):
                     each(i, run_spec(spec, controllers))
     else:
-        with _pool_for(pool, workers) as executor:
+        with pool_for(pool, workers) as executor:
             submit_trials(specs, executor, workers=workers, lockstep=lockstep, groups=groups).gather(deliver, progress)
     return [] if on_result else results  # type: ignore[return-value]
 
@@ -651,47 +466,6 @@ def _shifted(deliver: Callable[[int, Trial], None], start: int, j: int, trial: T
 
 def _has_model(specs: Sequence[TrialSpec]) -> bool:
     return any(spec.intent not in NAMED_INTENTS for spec in specs)
-
-
-def _pool_for(pool: Executor | None, workers: int):
-    """The caller's pool, left running, or a new one of ``workers`` processes, shut down after use."""
-    return worker_pool(workers) if pool is None else contextlib.nullcontext(pool)
-
-
-@dataclass(eq=False)
-class SubmittedTrials:
-    """Trials running on a pool (:func:`submit_trials`): their specs, and per job the
-    future of its payloads and the indices (into ``specs``) of the trials it runs.
-
-    :meth:`gather` takes the jobs off this handle (``jobs`` is empty after it): a future
-    holds its job's trials for as long as it is referenced.
-    """
-
-    specs: tuple[TrialSpec, ...]
-    jobs: list[tuple[Future, tuple[int, ...]]]
-
-    def gather(self, deliver: Callable[[int, Trial], None], progress: bool = False) -> None:
-        """Wait for the jobs and call ``deliver(i, trial)`` for every trial as its job finishes (any order).
-
-        Each job's future is let go as soon as its trials are delivered, so what this
-        process holds is one job's trials, however many there are: held until the end,
-        the futures kept every trial of a collection (2 MB for a nominal trial; 240
-        trials made ``collect`` grow by about 1 GB).
-        """
-        from concurrent.futures import as_completed
-
-        index = dict(self.jobs)
-        self.jobs = []
-        with progress_bar(progress) as bar:
-            task_id = bar.add_task("simulating", total=len(self.specs))
-            for fut in as_completed(index):
-                members = index.pop(fut)
-                payloads = fut.result()
-                del fut  # as_completed keeps no reference to a future it has yielded
-                for i, payload in zip(members, payloads):
-                    deliver(i, _from_payload(payload))
-                del payloads
-                bar.advance(task_id, len(members))
 
 
 #: The most trials in one lockstep job with named intents only (:func:`submit_trials`).
@@ -735,32 +509,3 @@ def submit_trials(specs: Sequence[TrialSpec], pool: Executor, *, workers: int, l
         fn = _run_batch
     jobs = [(pool.submit(fn, [specs[i] for i in group]), group) for group in members if group]
     return SubmittedTrials(specs, jobs)
-
-
-def _run_ray(specs: list[TrialSpec], address: str, progress: bool,
-             on_result: Callable[[int, Trial], None] | None = None) -> list[Trial]:  # fmt: skip
-    try:
-        import ray  # optional extra
-    except ImportError:
-        raise RuntimeError(
-            "run_trials(ray_address=...) needs Ray, an optional extra: pip install coassist[cluster]"
-        ) from None
-    if not ray.is_initialized():
-        ray.init(address=address)
-    remote = ray.remote(_run_batch)
-    refs = [remote.remote([spec]) for spec in specs]
-    index = {ref: i for i, ref in enumerate(refs)}
-    results: list[Trial | None] = [None] * len(specs)
-    pending = list(refs)
-    with progress_bar(progress) as bar:
-        task_id = bar.add_task("simulating", total=len(specs))
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
-            for ref in done:
-                trial = _from_payload(ray.get(ref)[0])
-                if on_result is None:
-                    results[index[ref]] = trial
-                else:
-                    on_result(index[ref], trial)
-                bar.advance(task_id)
-    return [] if on_result else results  # type: ignore[return-value]
