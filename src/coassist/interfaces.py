@@ -2,7 +2,7 @@
 
 This module sits below ``control``, ``intent``, ``sim``, ``runtime`` and ``robot`` and
 imports nothing of coassist, so none of them needs another to agree on these names
-(DESIGN: one loop, several worlds; ``tests/test_layers.py`` enforces the order).
+(docs/architecture.md, *Layers*; ``tests/test_layers.py`` enforces the order).
 
 - :class:`Fault` — why a tick did not apply the plain control law; one int64 per tick
   in every logged trial (``Trial.fault``), flags combine.
@@ -39,7 +39,6 @@ __all__ = [
     "Fault",
     "IntentSource",
     "PlausibilityLimits",
-    "SAFETY_FAULTS",
     "TrialContext",
     "ZERO_EFFORT_FAULTS",
     "fault_names",
@@ -104,19 +103,6 @@ ZERO_EFFORT_FAULTS = (
     | Fault.NONFINITE_EFFORT
     | Fault.INTERNAL_ERROR
     | Fault.INVALID_INPUT
-)
-
-#: Interventions of the safety layer (every one is logged in the tick's row).
-SAFETY_FAULTS = (
-    Fault.JOINT_VELOCITY_LIMIT
-    | Fault.JOINT_ACCELERATION_LIMIT
-    | Fault.TOOL_SPEED_LIMIT
-    | Fault.WORKSPACE_LIMIT
-    | Fault.CONTACT_FORCE_LIMIT
-    | Fault.SINGULARITY
-    | Fault.DEADLINE_MISS
-    | Fault.DECELERATING
-    | Fault.STOPPED
 )
 
 #: The per-tick history features, in the thesis' order.

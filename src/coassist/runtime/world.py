@@ -4,7 +4,7 @@ A *world* owns time and physics: the point-mass simulator, the MuJoCo UR5, a rea
 through ur-rtde. An *operator* owns the hand: a simulated operator, a scripted force
 profile, a person in a browser. The tick (:mod:`coassist.runtime.tick`) owns neither;
 it reads a :class:`RobotState`, decides, and hands the world a :class:`Command`. This
-is dm_control's Physics / Task / Environment split (DESIGN: one loop, several worlds).
+is dm_control's Physics / Task / Environment split (docs/architecture.md, *One loop, several worlds*).
 
 Frames and units. The *base* frame is the robot's base (x forward, z up). A pose is
 ``[x, y, z, rx, ry, rz]``: the tool centre point (TCP) position [m] and its orientation
@@ -23,7 +23,7 @@ model physically and take the robot's Cartesian effort u_r instead.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -31,7 +31,6 @@ from coassist._checks import as_real_array
 
 __all__ = ["COMMAND_SPACES", "Command", "HandOperator", "RobotState", "World", "finite_vector"]
 
-CommandSpace = Literal["joint_velocity", "effort"]
 COMMAND_SPACES: tuple[str, ...] = ("joint_velocity", "effort")
 
 
