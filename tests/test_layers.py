@@ -112,3 +112,27 @@ def test_the_checker_forbids_the_arm_worlds_and_the_page_from_importing_the_simu
     assert len(bad) == 2
     assert "play/session.py:2: play imports coassist.sim (forbidden" in bad[0]
     assert "robot/drive.py:1: robot (layer 6) imports coassist.sim.world (layer 6)" in bad[1]
+
+
+#: The registries whose entries name what they build by an entry point ("package.module:attribute"),
+#: imported at run time where the import checker above cannot see it, and the attribute holding it.
+ENTRY_POINT_REGISTRIES = {
+    "coassist.robot.worlds": ("WORLDS", "build"),
+    "coassist.scenario.intent_registry": ("INTENT_SOURCES", "source"),
+}
+
+
+def test_registry_entry_points_respect_the_layers():
+    """An entry point is an import too: each may name a module of its registry's layer or below."""
+    import importlib
+
+    bad = []
+    for module_name, (table, field) in ENTRY_POINT_REGISTRIES.items():
+        here = _package(tuple(module_name.split(".")[1:]))
+        for name, entry in getattr(importlib.import_module(module_name), table).items():
+            target = getattr(entry, field).partition(":")[0]
+            assert target.startswith("coassist."), f"{module_name}.{table}[{name!r}] names {target}, outside coassist"
+            there = _package(tuple(target.split(".")[1:]))
+            if RANK[there] > RANK[here] or (RANK[there] == RANK[here] and there != here):
+                bad.append(f"{module_name}.{table}[{name!r}]: {here} (layer {RANK[here]}) names {target} (layer {RANK[there]})")
+    assert not bad, "entry points against the layering:\n" + "\n".join(bad)

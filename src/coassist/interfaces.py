@@ -33,7 +33,6 @@ import numpy as np
 from coassist._checks import is_real_number
 
 __all__ = [
-    "NAMED_INTENTS",
     "NETWORK_BACKENDS",
     "FEATURES",
     "Fault",
@@ -107,12 +106,6 @@ ZERO_EFFORT_FAULTS = (
 
 #: The per-tick history features, in the thesis' order.
 FEATURES = ("x", "y", "vx", "vy", "fx", "fy", "x_ref", "y_ref")
-#: Intent sources named rather than loaded from a model folder (``scenario.intent_source``): the
-#: nominal plan (eq. 4.7), the tool's constant-velocity extrapolation, the simulated operator's
-#: true intent ("oracle", simulation only), the present estimate from the hand force
-#: ("present") and the path hypotheses round the obstacles the robot is told of ("paths", with
-#: a typical person's detour; a calibrated one is a folder, ``scenario.path_hypotheses``).
-NAMED_INTENTS = ("nominal", "constant-velocity", "oracle", "present", "paths")
 #: What evaluates a model-backed source's network in a simulated loop
 #: (``coassist.intent.load_model_intent``): torch eager, ONNX Runtime (the ``onnx`` extra;
 #: ``coassist.intent.onnx_network``), or "auto": ONNX Runtime where it is installed, else

@@ -9,7 +9,7 @@ the same trials, as the report's ablation pairs them
 and clearance deficit per side of the detour). ``paths`` needs a calibration: with
 ``calibrate=True`` the operators' calibration trials of each base
 (:func:`~coassist.experiments.pipeline.calibration_seed`) are collected and fitted first
-(:func:`~coassist.experiments.intent_sources.calibrate_paths`), one calibration per base.
+(:func:`~coassist.experiments.source_training.calibrate_paths`), one calibration per base.
 
 :func:`compare_intents` runs it; ``coassist compare-intents`` is its command.
 """
@@ -25,8 +25,8 @@ import numpy as np
 
 from coassist.experiments.ablation import ARBITRATED, DAMPED, SIDES, AblationResult, _seeds_text, _share_text
 from coassist.experiments.application import OBJECTS, OBSTACLE, _pair_key, application_metrics
-from coassist.experiments.intent_sources import calibrate_paths
 from coassist.experiments.pipeline import REPRODUCE_PRESETS, Workspace, application_seed
+from coassist.experiments.source_training import calibrate_paths
 
 __all__ = ["compare_intents", "comparison_table"]
 

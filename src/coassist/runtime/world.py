@@ -28,10 +28,20 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from coassist._checks import as_real_array
+from coassist.errors import CoassistError
 
-__all__ = ["COMMAND_SPACES", "Command", "HandOperator", "RobotState", "World", "finite_vector"]
+__all__ = ["COMMAND_SPACES", "Command", "HandOperator", "RobotLinkError", "RobotState", "World", "finite_vector"]
 
 COMMAND_SPACES: tuple[str, ...] = ("joint_velocity", "effort")
+
+
+class RobotLinkError(CoassistError, ConnectionError):
+    """The link to a robot failed: its driver stopped answering, its state went stale, or its
+    controller stopped taking commands. Any world's :meth:`World.read` and :meth:`World.apply`
+    raise it (or a subclass); the loop ends the run with ``"link_lost"`` and stops the arm.
+
+    A ``ConnectionError``, so a loop can catch it without importing any world.
+    """
 
 
 @dataclass(slots=True)
@@ -114,11 +124,11 @@ class World(Protocol):
     realtime: bool
 
     def read(self) -> RobotState:
-        """The state at the start of the current period (cheap; no waiting)."""
+        """The state at the start of the current period (cheap; no waiting); :class:`RobotLinkError` when the link is lost."""
         ...
 
     def apply(self, command: Command) -> None:
-        """Send ``command`` and advance to the next period (simulate it, or wait for it)."""
+        """Send ``command`` and advance to the next period (simulate it, or wait for it); :class:`RobotLinkError` when the link is lost."""
         ...
 
     def stop(self) -> None:

@@ -58,7 +58,7 @@ from coassist._progress import progress_bar
 from coassist.config import THESIS_EVALUATION
 from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
 from coassist.data import Trial, TrialMeta
-from coassist.interfaces import NAMED_INTENTS, NETWORK_BACKENDS, IntentSource
+from coassist.interfaces import NETWORK_BACKENDS, IntentSource
 from coassist.model.impedance import ImpedanceModel
 from coassist.runtime.episode import (
     ARRIVE_RADIUS,
@@ -78,9 +78,10 @@ from coassist.runtime.loop import LoopLog
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.world import Command, RobotState
 from coassist.runtime.wrench import WrenchPipeline
-from coassist.scenario.intent_source import NominalIntent, shared_intent_source
+from coassist.scenario.intent_registry import NAMED_INTENTS, shared_intent_source
 from coassist.scenario.objects import CarriedObject, ForceSensor, get_object
 from coassist.scenario.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise, operator_profile
+from coassist.scenario.reference_intents import NominalIntent
 from coassist.scenario.seeds import trial_rngs
 from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, Task, task_for_seed
 from coassist.sim.lockstep import fast_path_eligible, run_point_mass_lockstep
