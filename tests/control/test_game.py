@@ -537,7 +537,7 @@ def test_game_weights_object_is_the_keywords_bit_for_bit():
          CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=0.7, horizon=10, control_horizon=5)),
         (NashGame(model, weights, horizon=10, control_horizon=5),
          NashGame(model, **Q, R_h=R_h, R_r=R_r, horizon=10, control_horizon=5)),
-    ):  # fmt: skip
+    ):
         for name in ("G_z", "G_h", "G_r"):
             np.testing.assert_array_equal(getattr(by_object.gains, name), getattr(by_keywords.gains, name))
     params = GameParameters(Q_hr=(0.2, 0.2, 0.0, 0.0), R_r=(1e-4, 2e-4))

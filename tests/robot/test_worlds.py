@@ -88,7 +88,7 @@ def test_the_real_ur_world_is_an_arm_world_without_a_handle():
 
     robot = fake_rtde.FakeRobot()
     world = URRTDEWorld("192.0.2.10", frequency=125.0, control_factory=robot.control_factory,
-                        receive_factory=robot.receive_factory)  # fmt: skip
+                        receive_factory=robot.receive_factory)
     try:
         assert isinstance(world, ArmWorld) and not isinstance(world, HandWorld)
         assert not world.noise_free_sensor
@@ -100,7 +100,7 @@ def test_the_real_ur_world_is_an_arm_world_without_a_handle():
 
 
 @pytest.mark.parametrize("module, cls", [("coassist.robot.franka_world", "FrankaWorld"),
-                                         ("coassist.robot.ros2_world", "Ros2World")])  # fmt: skip
+                                         ("coassist.robot.ros2_world", "Ros2World")])
 def test_the_other_real_worlds_offer_the_protocols_members(module, cls):
     klass = getattr(pytest.importorskip(module), cls)
     for member in ("kinematics", "tool_mass_and_com", "noise_free_sensor", "read", "apply", "stop", "close"):
@@ -123,7 +123,7 @@ def test_drive_refuses_a_world_without_the_protocol_in_one_line():
     with pytest.raises(ValueError) as info:
         drive(DriveConfig(world="ur"), world=OnlyAWorld())
     assert str(info.value) == ("world must be an arm world (coassist.robot.worlds.ArmWorld); a OnlyAWorld lacks "
-                               "kinematics, noise_free_sensor, tool_mass_and_com")  # fmt: skip
+                               "kinematics, noise_free_sensor, tool_mass_and_com")
 
 
 def test_drive_config_reads_the_registry():
@@ -162,14 +162,14 @@ def test_a_world_registered_by_one_line_drives_as_the_built_in_one(tmp_path, mon
     )
     monkeypatch.syspath_prepend(str(tmp_path))
     line = {"my-arm": WorldEntry("coassist_test_my_world:build_world", ("ur5",), "the MuJoCo UR5, built by a test",
-                                 simulated=True, host=None, extras=("robot",), source="mujoco")}  # fmt: skip
+                                 simulated=True, host=None, extras=("robot",), source="mujoco")}
     extended = Registry("world", {**WORLDS, **line})
     monkeypatch.setattr(worlds_module, "WORLDS", extended)
     monkeypatch.setattr(drive_module, "WORLDS", extended)  # drive's own name for the same table
     config = drive_module.DriveConfig(world="my-arm", controller="cooperative", intent="oracle", time_limit=0.6)
     mine = drive_module.drive(config)
     builtin = drive_module.drive(drive_module.DriveConfig(world="mujoco", controller="cooperative", intent="oracle",
-                                                          time_limit=0.6))  # fmt: skip
+                                                          time_limit=0.6))
     assert mine.meta.extra["world"] == "my-arm" and builtin.meta.extra["world"] == "mujoco"
     assert mine.n_samples == builtin.n_samples > 50
     for column in ("pose", "wrench", "effort_r", "joints", "joint_velocity", "fault"):

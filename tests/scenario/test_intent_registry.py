@@ -53,7 +53,7 @@ def test_each_name_builds_its_source_for_the_horizon(name):
 def test_a_registered_source_predicts_what_its_class_does():
     # constant velocity through the registry against the closed form x(k) + i·dt·ẋ(k)
     ctx = TrialContext(dt=0.008, horizon=4, start=np.zeros(2), target=np.ones(2), reference=np.zeros((10, 4)),
-                       task="linear", user="u", object="handle")  # fmt: skip
+                       task="linear", user="u", object="handle")
     src = load_intent_source("constant-velocity", horizon=4)
     src.reset(ctx)
     row = np.array([[0.1, 0.2, 0.5, -1.0, 0, 0, 0, 0]])
@@ -100,7 +100,7 @@ def test_check_intent_names_the_choices(tmp_path):
         check_intent(str(tmp_path / "nomodel"))
     assert str(info.value) == (f"{str(tmp_path / 'nomodel')!r}: not one of nominal, constant-velocity, oracle, present, paths, "
                                "a path-hypotheses calibration folder (path-hypotheses.json) or a model folder (coassist "
-                               "train) (model.json)")  # fmt: skip
+                               "train) (model.json)")
     with pytest.raises(ValueError, match="a simulation alone knows it"):
         check_intent("oracle", simulation=False)
     with pytest.raises(ValueError, match=r"not one of nominal, constant-velocity, present, paths, a path"):

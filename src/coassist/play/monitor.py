@@ -97,7 +97,7 @@ class DriveMonitor(PlaySession):
         if WORLDS[c.world].simulated:  # paced to the wall clock, so the page shows the run at its real speed
             start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
             world = build_world(c.world, WorldRequest(c.robot or WORLDS[c.world].arms[0], c.object, c.rate_hz, c.seed, start,
-                                                      realtime=True))  # fmt: skip
+                                                      realtime=True))
         try:
             trial = drive(c, world=world, host=self.robot_host, confirm=self.confirm, on_tick=on_tick)
         finally:

@@ -323,10 +323,10 @@ def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, ho
         if world is None:
             # A real-time predictor runs against the wall clock: so must the simulated world it serves.
             world = build_world(config.world, WorldRequest(robot, config.object, config.rate_hz, config.seed, start, host,
-                                                           view, realtime=view or bool(config.realtime_intent)))  # fmt: skip
+                                                           view, realtime=view or bool(config.realtime_intent)))
         if not isinstance(world, ArmWorld):
             raise ValueError(f"world must be an arm world (coassist.robot.worlds.ArmWorld); a {type(world).__name__} "
-                             f"lacks {', '.join(missing_members(world, ArmWorld))}")  # fmt: skip
+                             f"lacks {', '.join(missing_members(world, ArmWorld))}")
         state0 = world.read()
         start_pose = np.asarray(state0.tool_pose, dtype=float).copy()
         if not simulated:

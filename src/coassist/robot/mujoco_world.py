@@ -587,4 +587,4 @@ def build_world(request: WorldRequest) -> MujocoArmWorld:
     the TCP at ``request.start``, paced to the wall clock when ``request.realtime``."""
     return (MujocoUR5World if request.robot == "ur5" else MujocoArmWorld)(
         request.object, robot=request.robot, control_dt=1.0 / request.rate_hz, start=request.start, seed=request.seed,
-        view=request.view, realtime=request.realtime)  # fmt: skip
+        view=request.view, realtime=request.realtime)
