@@ -29,7 +29,7 @@ loads, so it takes a process each. On a 2-core machine shared with other work th
 not the batch path, is what moves 2-thread CPU training (docs/intent-training-speed.md).
 
 ``--pairs N`` compares, N rounds, what the pipeline does with independent trainings (the
-application's intent sources, ``experiments.intent_sources.train_sources``): two child
+application's intent sources, ``experiments.source_training.train_sources``): two child
 processes of one thread each training at the same time, against one child of two threads
 (the naive baseline: the trainings one after the other, each on both cores); windows/s
 of the pair (sum over the two, each over its own run) against the single run's, default

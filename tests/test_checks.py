@@ -161,8 +161,8 @@ def test_configs_reject_bool_naming_the_field(make, field, name):
 
 
 def test_functions_accept_numpy_integers():
-    from coassist.scenario.intent_source import NominalIntent
     from coassist.scenario.operator import operator_profile
+    from coassist.scenario.reference_intents import NominalIntent
     from coassist.sim.collect import dataset_specs
 
     assert operator_profile(np.int64(3), np.int64(1)) == operator_profile(3, 1)

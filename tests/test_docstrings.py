@@ -268,3 +268,36 @@ def test_parser_reads_both_styles():
 )
 def test_checker_reports_each_kind_of_mismatch(func, message):
     assert re.search(message, mismatch(func))
+
+
+#: A repository file a module cites: ``docs/…``, ``benchmarks/…`` or ``tests/…`` (up to the last word character).
+_CITED_FILE = re.compile(r"(?<![\w/.-])((?:docs|benchmarks|tests)/[\w./-]*\w)")
+
+
+def cited_files_missing(src: Path, root: Path) -> list[str]:
+    """``module: cited`` for every file of the repository ``root`` cited under ``src`` that is not there,
+    and every citation of DESIGN (the project's design notes live outside the repository)."""
+    out = []
+    for path in sorted(src.rglob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        where = path.relative_to(src.parent)
+        out += [f"{where}: {m.group(1)}" for m in _CITED_FILE.finditer(text) if not (root / m.group(1)).exists()]
+        out += [f"{where}: DESIGN" for _ in re.finditer(r"\bDESIGN\b", text)]
+    return out
+
+
+def test_docstrings_cite_only_files_the_repository_has():
+    root = _PACKAGE_DIR.parent.parent
+    if not (root / "pyproject.toml").is_file():
+        pytest.skip("coassist is installed, not checked out: the repository's docs are not beside it")
+    missing = cited_files_missing(_PACKAGE_DIR, root)
+    assert not missing, "cited files the repository lacks:\n" + "\n".join(missing)
+
+
+def test_the_citation_check_catches_a_missing_file_and_design(tmp_path):
+    src = tmp_path / "src" / "coassist"
+    src.mkdir(parents=True)
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "here.md").write_text("")
+    (src / "mod.py").write_text('"""See docs/here.md, docs/intent-results.md and DESIGN §7; not a citation: my_docs/x.md."""\n')
+    assert cited_files_missing(src, tmp_path) == ["coassist/mod.py: docs/intent-results.md", "coassist/mod.py: DESIGN"]

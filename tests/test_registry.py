@@ -2,7 +2,7 @@
 
 import pytest
 
-from coassist.registry import Registry, UnknownNameError, unknown_name_message
+from coassist.registry import Registry, UnknownNameError, load_entry_point, unknown_name_message
 
 
 def test_lookup_and_mapping_behaviour():
@@ -53,3 +53,16 @@ def test_the_three_preset_kinds_are_registries_with_their_own_names():
     assert dm.game.Q_hh == tuple(DECIMETRE_SCALE**2 * q for q in THESIS_EVALUATION.game.Q_hh)
     with pytest.raises(ValueError, match=r"^preset 'thesis-eval': no such control preset; did you mean 'thesis-evaluation'\?"):
         get_preset("thesis-eval")
+
+
+def test_an_entry_point_names_a_module_attribute_imported_when_asked():
+    from coassist.scenario.reference_intents import NominalIntent
+
+    assert load_entry_point("coassist.scenario.reference_intents:NominalIntent") is NominalIntent
+    for bad in ("coassist.scenario.reference_intents", ":NominalIntent", "coassist.scenario:", None):
+        with pytest.raises(ValueError, match="an entry point is 'package.module:attribute'"):
+            load_entry_point(bad)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"^entry point 'coassist.registry:Nothing': coassist.registry has no 'Nothing'$"):
+        load_entry_point("coassist.registry:Nothing")
+    with pytest.raises(ImportError):  # the caller names the extra to install
+        load_entry_point("coassist_no_such_module:thing")

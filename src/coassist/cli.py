@@ -17,8 +17,10 @@ from rich.console import Console
 from rich.markup import escape
 
 from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET
-from coassist.interfaces import NAMED_INTENTS, NETWORK_BACKENDS
+from coassist.interfaces import NETWORK_BACKENDS
 from coassist.registry import Registry, UnknownNameError, unknown_name_message
+from coassist.robot.worlds import WORLDS, arm_choices, world_choices
+from coassist.scenario.intent_registry import INTENT_SOURCES, check_intent, intent_choices
 
 T = TypeVar("T")
 
@@ -473,8 +475,7 @@ def collect(
     trials: int = typer.Option(20, help="Trials per user, object and task."),
     seed: int = typer.Option(0, help="Seed of the first trial; trial i uses seed + i."),
     preset: str = typer.Option(COLLECTION_PRESET, help=f"Control preset: {COLLECTION_PRESET} (the main job's for collection), {APPLICATION_PRESET} (the main job's with a learned model in the loop), thesis-application-dm, or one without -dm (SI units: the robot barely helps)."),
-    intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle | present | paths | path of an intent "
-                               "model or of a path-hypotheses calibration."),
+    intent: str = typer.Option("nominal", help=f"Intent source: {intent_choices()}."),
     obstacle: str = typer.Option("small", help="The obstacle the operators go around: small (the evaluation's box) or large (the application's 12 cm box, no path shown)."),
     dataset_id: str = typer.Option(None, help="Dataset id (default: the folder's name)."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
@@ -504,9 +505,10 @@ def collect(
     user_list = _int_list(users, "--users")
     task_list = _name_list(tasks, "--tasks", TASK_KINDS, "task")
     object_list = _name_list(objects, "--objects", tuple(OBJECTS), "object")
-    if intent not in NAMED_INTENTS and not any((Path(intent) / f).is_file() for f in ("model.json", "path-hypotheses.json")):
-        _fail(f"--intent {intent}: not one of {', '.join(NAMED_INTENTS)}, a model folder (model.json) or a path-hypotheses "
-              "calibration (path-hypotheses.json)", 2)
+    try:
+        check_intent(intent)
+    except ValueError as exc:
+        _fail(f"--intent {exc}", 2)
     _folder_out(out, "--out")
     try:
         folder = collect_dataset(
@@ -536,14 +538,14 @@ DRIVE_OPTIONS = {
 @app.command()
 def drive(
     out: Path = typer.Option(Path("runs/drive/trial.parquet"), help="Trial file to write (the same format as collect's trials, plus joint columns)."),
-    world: str = typer.Option("mujoco", help="mujoco (an arm in MuJoCo physics) | ur (a real UR5 through ur-rtde) | franka (a Franka Panda/FR3 through franky)."),
-    robot: str = typer.Option(None, help="The arm: ur5 or panda (--world mujoco), ur5 (ur), panda or fr3 (franka); default the world's first."),
+    world: str = typer.Option("mujoco", help=f"{world_choices()}."),
+    robot: str = typer.Option(None, help=f"The arm: {arm_choices()}; default the world's first."),
     controller: str = typer.Option("cooperative", help="cooperative (the assistive controller: the cooperative game) | cooperative-arbitrated (α set every tick by the target law) | impedance (IMP) | manual (MG, manual guidance)."),
     task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
-    intent: str = typer.Option("nominal", help="nominal | constant-velocity | oracle (MuJoCo) | present | paths | path of an "
-                               "intent model (coassist train) or of a path-hypotheses calibration."),
-    realtime_intent: bool = typer.Option(None, help="Run the model off the control thread, never waiting for it (default: on for --world ur, off in MuJoCo, where runs are then deterministic)."),
+    intent: str = typer.Option("nominal", help=f"Intent source: {intent_choices()} ("
+                               + ", ".join(n for n, e in INTENT_SOURCES.items() if e.simulation_only) + " in a simulated world only)."),
+    realtime_intent: bool = typer.Option(None, help="Run the model off the control thread, never waiting for it (default: on for a real arm, off in a simulated world, where runs are then deterministic)."),
     predictor_backend: str = typer.Option("process", help="Where a real-time model runs: process (own worker process), onnx (ONNX Runtime thread) or torch (thread)."),
     preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; the -dm presets ring with one)."),
     user: int = typer.Option(0, help="Simulated operator (MuJoCo world)."),
@@ -554,7 +556,7 @@ def drive(
     time_limit: float = typer.Option(None, help="Longest run in seconds (default: 2 x the plan + 10 s)."),
     tool_speed: float = typer.Option(0.25, help="Safety: largest tool speed in m/s."),
     contact_force: float = typer.Option(120.0, help="Safety: hand force in N that makes a protective stop."),
-    host: str = typer.Option(None, help="The real arm's IP address (--world ur; the FCI address for --world franka)."),
+    host: str = typer.Option(None, help="The real arm's address: " + ", ".join(f"{e.host} (--world {n})" for n, e in WORLDS.items() if e.host) + "."),
     yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before a real arm moves (scripts)."),
     view: bool = typer.Option(False, help="Open MuJoCo's passive viewer (needs a display) and run in real time."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
@@ -564,7 +566,7 @@ def drive(
     """Run the assistive controller, IMP or MG on an arm (UR5, Panda): in MuJoCo, or on a real one."""
     from coassist.config import CONTROL_PRESETS
     from coassist.control.presets import CONTROLLER_KINDS
-    from coassist.robot.drive import WORLDS, DriveConfig
+    from coassist.robot.drive import DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.runtime.safety import SafetyLimits
 
@@ -580,12 +582,12 @@ def drive(
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
     out = _run_out(out, overwrite, mcap)
-    if intent not in NAMED_INTENTS:
+    if intent not in INTENT_SOURCES:
         _set_torch_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
 
     confirm = _confirm_move(yes, "the teach pendant's emergency stop")
     try:
-        trial = run_drive(config, host=host, view=view, confirm=confirm if world != "mujoco" else None)
+        trial = run_drive(config, host=host, view=view, confirm=None if WORLDS[world].simulated else confirm)
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
         _fail(str(exc))
     from coassist.robot.ros2_world import UR_JOINT_NAMES  # (no rclpy needed for the names)
@@ -676,7 +678,7 @@ def ros2(
     controller: str = typer.Option("cooperative", help="cooperative (the assistive controller: the cooperative game) | impedance (IMP) | manual (MG, manual guidance)."),
     task: str = typer.Option("linear", help="Nominal path, laid out from where the tool is: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
-    intent: str = typer.Option("nominal", help="nominal | path of an intent model (coassist train)."),
+    intent: str = typer.Option("nominal", help=f"Intent source: {intent_choices(simulation=False)}."),
     predictor_backend: str = typer.Option("process", help="Where a model runs: process (own worker process), onnx or torch (thread)."),
     preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; the -dm presets ring with one)."),
     rate: int = typer.Option(125, help="Control rate in Hz: 125 (UR CB3) or 500 (e-Series)."),
@@ -715,7 +717,7 @@ def ros2(
 
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
-        config = DriveConfig(world="ur", controller=controller, task=task, object=obj, preset=preset, intent=intent,
+        config = DriveConfig(world="ros2", controller=controller, task=task, object=obj, preset=preset, intent=intent,
                              rate_hz=rate, full_pose=full_pose, time_limit=time_limit, limits=limits,
                              predictor_backend=predictor_backend)  # fmt: skip
         rcfg = Ros2Config(node_name=node_name, namespace=namespace, wrench_topic=wrench_topic,
@@ -803,12 +805,17 @@ def show(
     _wrote(str(written))
 
 
+def _simulation_only(intent: str) -> bool:
+    """Whether ``intent`` names a source only a simulation can run (the oracle)."""
+    return intent in INTENT_SOURCES and INTENT_SOURCES[intent].simulation_only
+
+
 @app.command()
 def play(
     user: str = typer.Option("me", help="Your id (letters, digits, - and _): it names your session folder <out>/<user>."),
     out: Path = typer.Option(Path("runs/play"), help="Parent folder of the session folders (each a dataset coassist train reads)."),
     controller: str = typer.Option("manual,impedance,cooperative", help="Controllers the page offers, comma-separated: manual (MG), impedance (IMP), cooperative (assistive), cooperative-arbitrated."),
-    intent: str = typer.Option("nominal", help="nominal | a model folder written by coassist train (its prediction is drawn live)."),
+    intent: str = typer.Option("nominal", help=f"Intent source (its prediction is drawn live): {intent_choices(simulation=False)}."),
     preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; also thesis-evaluation[-dm], thesis-application[-dm])."),
     tasks: str = typer.Option("linear,curved,sinusoidal,z", help="The protocol's paths, in order (repeated)."),
     seed: int = typer.Option(0, help="Trial i's obstacle is drawn from seed + i."),
@@ -817,8 +824,8 @@ def play(
     port: int = typer.Option(8765, help="Port to listen on (0: any free port)."),
     token: str = typer.Option(None, help="Token the page must present (made for you on a non-local --host)."),
     open_browser: bool = typer.Option(True, "--open/--no-open", help="Open the page in your web browser."),
-    drive: str = typer.Option(None, help="Watch a coassist drive run instead (read-only): mujoco | ur; uses the first --controller and --tasks."),
-    robot_host: str = typer.Option(None, help="The real arm's IP address (--drive ur)."),
+    drive: str = typer.Option(None, help=f"Watch a coassist drive run instead (read-only): {' | '.join(WORLDS)}; uses the first --controller and --tasks."),
+    robot_host: str = typer.Option(None, help="The real arm's address: " + ", ".join(f"{e.host} (--drive {n})" for n, e in WORLDS.items() if e.host) + "."),
     mcap: bool = typer.Option(False, help="Also write each trial as <trial>.mcap beside its Parquet file (ROS 2 messages Foxglove opens)."),
 ) -> None:
     """Be the operator: a live page where your mouse, touch screen or gamepad is the hand on the robot."""
@@ -848,7 +855,7 @@ def play(
         _lookup(CONTROL_PRESETS, preset, "--preset")
         config = PlayConfig(user=user, out=out,
                             controllers=tuple(_name_list(controller, "--controller", tuple(CONTROLLER_KINDS), "controller")),
-                            intent="nominal" if drive and intent == "oracle" else intent, preset=preset,
+                            intent="nominal" if drive and _simulation_only(intent) else intent, preset=preset,
                             tasks=tuple(_name_list(tasks, "--tasks", TASK_KINDS, "task")), seed=seed,
                             motion_time=motion_time, mcap=mcap)  # fmt: skip
         if drive is None:

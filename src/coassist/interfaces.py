@@ -2,7 +2,7 @@
 
 This module sits below ``control``, ``intent``, ``sim``, ``runtime`` and ``robot`` and
 imports nothing of coassist, so none of them needs another to agree on these names
-(DESIGN: one loop, several worlds; ``tests/test_layers.py`` enforces the order).
+(docs/architecture.md, *Layers*; ``tests/test_layers.py`` enforces the order).
 
 - :class:`Fault` — why a tick did not apply the plain control law; one int64 per tick
   in every logged trial (``Trial.fault``), flags combine.
@@ -33,13 +33,11 @@ import numpy as np
 from coassist._checks import is_real_number
 
 __all__ = [
-    "NAMED_INTENTS",
     "NETWORK_BACKENDS",
     "FEATURES",
     "Fault",
     "IntentSource",
     "PlausibilityLimits",
-    "SAFETY_FAULTS",
     "TrialContext",
     "ZERO_EFFORT_FAULTS",
     "fault_names",
@@ -106,27 +104,8 @@ ZERO_EFFORT_FAULTS = (
     | Fault.INVALID_INPUT
 )
 
-#: Interventions of the safety layer (every one is logged in the tick's row).
-SAFETY_FAULTS = (
-    Fault.JOINT_VELOCITY_LIMIT
-    | Fault.JOINT_ACCELERATION_LIMIT
-    | Fault.TOOL_SPEED_LIMIT
-    | Fault.WORKSPACE_LIMIT
-    | Fault.CONTACT_FORCE_LIMIT
-    | Fault.SINGULARITY
-    | Fault.DEADLINE_MISS
-    | Fault.DECELERATING
-    | Fault.STOPPED
-)
-
 #: The per-tick history features, in the thesis' order.
 FEATURES = ("x", "y", "vx", "vy", "fx", "fy", "x_ref", "y_ref")
-#: Intent sources named rather than loaded from a model folder (``scenario.intent_source``): the
-#: nominal plan (eq. 4.7), the tool's constant-velocity extrapolation, the simulated operator's
-#: true intent ("oracle", simulation only), the present estimate from the hand force
-#: ("present") and the path hypotheses round the obstacles the robot is told of ("paths", with
-#: a typical person's detour; a calibrated one is a folder, ``scenario.path_hypotheses``).
-NAMED_INTENTS = ("nominal", "constant-velocity", "oracle", "present", "paths")
 #: What evaluates a model-backed source's network in a simulated loop
 #: (``coassist.intent.load_model_intent``): torch eager, ONNX Runtime (the ``onnx`` extra;
 #: ``coassist.intent.onnx_network``), or "auto": ONNX Runtime where it is installed, else

@@ -8,18 +8,25 @@ have to sit above ``experiments`` and so could not be read by ``sim``; instead e
 is a :class:`Registry` declared next to the type it holds, and this layer-0 module gives
 them one type, one lookup (:meth:`Registry.lookup`) and one error message
 (:func:`unknown_name_message`, the command line's "did you mean").
+
+The registries of what a run plugs in (the arm worlds, :mod:`coassist.robot.worlds`; the
+named intent sources, :mod:`coassist.scenario.intent_registry`) name what each entry builds
+by an *entry point*, ``"package.module:attribute"`` (gymnasium's ``register(entry_point=...)``
+convention), imported only when the entry is built (:func:`load_entry_point`): a world whose
+optional extra is not installed is still listed and explained, and registering one is one line.
 """
 
 from __future__ import annotations
 
 import difflib
+import importlib
 from collections.abc import Iterable, Iterator, Mapping
 from types import MappingProxyType
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 from coassist.errors import CoassistError
 
-__all__ = ["Registry", "UnknownNameError", "unknown_name_message"]
+__all__ = ["Registry", "UnknownNameError", "load_entry_point", "unknown_name_message"]
 
 T = TypeVar("T")
 
@@ -92,3 +99,20 @@ class Registry(Mapping[str, T], Generic[T]):
 
     def __repr__(self) -> str:
         return f"Registry({self.what!r}, names={tuple(self._entries)!r})"
+
+
+def load_entry_point(entry_point: str) -> Any:
+    """The object an entry point ``"package.module:attribute"`` names, imported now.
+
+    Raises ValueError for a malformed entry point and for a module without that attribute;
+    an ImportError of the module (an optional extra not installed) goes to the caller, who
+    knows which extra to name.
+    """
+    module_name, sep, attribute = entry_point.partition(":") if isinstance(entry_point, str) else ("", "", "")
+    if not (sep and module_name and attribute):
+        raise ValueError(f"an entry point is 'package.module:attribute', got {entry_point!r}")
+    module = importlib.import_module(module_name)
+    try:
+        return getattr(module, attribute)
+    except AttributeError:
+        raise ValueError(f"entry point {entry_point!r}: {module_name} has no {attribute!r}") from None

@@ -520,3 +520,67 @@ def test_solve_with_gains_is_each_games_solve_bit_for_bit():
         solve_with_gains([games[0].gains], z, ref_h, ref_r)
     e_h, e_r = solve_with_gains([], z[:0], ref_h[:0], ref_r[:0])
     assert e_h.shape == e_r.shape == (0, 2)
+
+
+def test_game_weights_object_is_the_keywords_bit_for_bit():
+    """One GameWeights, validated once, builds the same game as the six keywords (cooperative
+    and Nash), and a preset's diagonals (GameWeights.from_parameters) the same as the keywords."""
+    from coassist.config import GameParameters
+    from coassist.control import GameWeights
+
+    rng = np.random.default_rng(11)
+    model, Q, R_h, R_r, *_ = random_instance(rng, 2, 10, 5)
+    weights = GameWeights(**Q, R_h=R_h, R_r=R_r)
+    assert weights.n_dof == 2 and weights.Q_hh.shape == (4, 4) and weights.R_r.shape == (2, 2)
+    for by_object, by_keywords in (
+        (CooperativeGame(model, weights, alpha=0.7, horizon=10, control_horizon=5),
+         CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=0.7, horizon=10, control_horizon=5)),
+        (NashGame(model, weights, horizon=10, control_horizon=5),
+         NashGame(model, **Q, R_h=R_h, R_r=R_r, horizon=10, control_horizon=5)),
+    ):
+        for name in ("G_z", "G_h", "G_r"):
+            np.testing.assert_array_equal(getattr(by_object.gains, name), getattr(by_keywords.gains, name))
+    params = GameParameters(Q_hr=(0.2, 0.2, 0.0, 0.0), R_r=(1e-4, 2e-4))
+    from_preset = GameWeights.from_parameters(params)
+    np.testing.assert_array_equal(from_preset.Q_hr, np.diag([0.2, 0.2, 0.0, 0.0]))
+    np.testing.assert_array_equal(from_preset.R_r, np.diag([1e-4, 2e-4]))
+    # a scalar is that multiple of the identity; the size comes from the first non-scalar weight
+    scalar = GameWeights(1.0, 0, 0, 1.0, [5e-4, 5e-4], 5e-4)
+    np.testing.assert_array_equal(scalar.Q_hh, np.eye(4))
+    np.testing.assert_array_equal(scalar.R_r, 5e-4 * np.eye(2))
+
+
+def test_game_weights_are_frozen_and_read_only():
+    import dataclasses
+
+    from coassist.control import GameWeights
+
+    w = GameWeights(np.eye(4), 0, 0, np.eye(4), [5e-4, 5e-4], [5e-4, 5e-4])
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        w.R_h = np.eye(2)  # type: ignore[misc]
+    with pytest.raises(ValueError, match="read-only"):
+        w.Q_hh[0, 0] = 2.0
+
+
+@pytest.mark.parametrize(
+    "build, message",
+    [
+        (lambda W, m: W(1.0, 0, 0, 1.0, 5e-4, 5e-4), "GameWeights.n_dof is needed when every weight is a scalar"),
+        (lambda W, m: W(1.0, 0, 0, 1.0, 5e-4, 5e-4, n_dof=0), "GameWeights.n_dof must be an int >= 1"),
+        (lambda W, m: W(np.eye(3), 0, 0, 1.0, [1, 1], [1, 1]), "Q_hh must be 4x4"),
+        (lambda W, m: W(np.eye(4), -np.eye(4), 0, 1.0, [1, 1], [1, 1]), "Q_hr must be positive semidefinite"),
+        (lambda W, m: W(np.eye(4), 0, 0, 1.0, [1, 1], [0, 1]), "R_r must be positive definite"),
+        (lambda W, m: CooperativeGame(m, W(1.0, 0, 0, 1.0, 1.0, 1.0, n_dof=3), alpha=0.5, horizon=5),
+         "weights are for 3 DOFs, the model has 2"),
+        (lambda W, m: CooperativeGame(m, W(1.0, 0, 0, 1.0, 1.0, 1.0, n_dof=2), Q_hh=1.0, alpha=0.5, horizon=5),
+         "not both \\(got weights and Q_hh\\)"),
+        (lambda W, m: NashGame(m, Q_hh=1.0, Q_rr=1.0, R_h=1.0, R_r=1.0, horizon=5), "the keywords Q_hr, Q_rh"),
+        (lambda W, m: NashGame(m, {"Q_hh": 1.0}, horizon=5), "weights must be a GameWeights, got dict"),
+    ],
+)  # fmt: skip
+def test_game_weights_validation_names_the_weight(build, message):
+    from coassist.control import GameWeights
+
+    model = ImpedanceModel([10, 10], [100, 100], 0, 0.008)
+    with pytest.raises(ValueError, match=message):
+        build(GameWeights, model)

@@ -48,7 +48,7 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
 
     from coassist.experiments import pipeline
     from coassist.experiments.ablation import ARBITRATED, ablation_cells, mujoco_sources, run_ablation
-    from coassist.experiments.intent_sources import seed_names
+    from coassist.experiments.source_training import seed_names
     from coassist.scenario.path_hypotheses import write_calibration
 
     cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1, threads=1)

@@ -20,7 +20,7 @@ from coassist.experiments.ablation import (
     run_sources,
 )
 from coassist.experiments.application import handed_to_ablation
-from coassist.experiments.intent_sources import LEARNED, seed_names
+from coassist.experiments.source_training import LEARNED, seed_names
 from coassist.sim.world import worker_pool
 
 ARRAYS = ("time", "pose", "velocity", "wrench", "reference", "prediction", "intent", "effort_h", "effort_r", "fault")

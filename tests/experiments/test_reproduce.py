@@ -210,7 +210,7 @@ def test_ablation_cells_meet_the_same_trials(tiny_run):
     The cells of the application's own source are the application's assistive trials, reused."""
     from coassist.data import read_dataset
     from coassist.experiments.ablation import CONTROLLERS, ablation_cells
-    from coassist.experiments.intent_sources import APPLICATION_SOURCE
+    from coassist.experiments.source_training import APPLICATION_SOURCE
 
     out, summary = tiny_run
     for obj in ("board", "heavy"):

@@ -40,7 +40,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from coassist.interfaces import Fault  # noqa: E402
-from coassist.robot.drive import DriveConfig, _kinematics_for, drive  # noqa: E402
+from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
 from coassist.runtime.world import Command  # noqa: E402
@@ -114,7 +114,7 @@ class Driver(ros.SimRobot):
 
 def _config(sim, **kw) -> Ros2Config:
     mass, com = sim.tool_mass_and_com()
-    base = dict(domain_id=DOMAIN, lockstep=True, pace=False, stale_after=0.5, tcp_offset=tuple(_kinematics_for(sim).tcp_offset),
+    base = dict(domain_id=DOMAIN, lockstep=True, pace=False, stale_after=0.5, tcp_offset=tuple(sim.kinematics().tcp_offset),
                 payload=(mass, tuple(com)), connect_timeout=10.0)  # fmt: skip
     base.update(kw)
     return Ros2Config(**base)

@@ -14,7 +14,7 @@ pytest.importorskip("pinocchio", reason="the UR5 kinematics need the robot extra
 from coassist.data import read_trial, write_trial  # noqa: E402
 from coassist.interfaces import Fault  # noqa: E402
 from coassist.metrics import f_rms  # noqa: E402
-from coassist.robot.drive import DriveConfig, _kinematics_for, drive  # noqa: E402
+from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.mujoco_world import MujocoUR5World  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
 
@@ -49,7 +49,7 @@ def test_sensor_reads_the_hand_force_while_the_arm_moves(mg_push):
 
 def test_kinematics_and_mujoco_agree_on_the_tcp():
     world = MujocoUR5World("board")
-    kin = _kinematics_for(world)
+    kin = world.kinematics()
     state = world.read()
     p, R, _ = kin.forward_and_jacobian(state.q)
     np.testing.assert_allclose(p, state.tool_pose[:3], atol=1e-6)

@@ -17,7 +17,7 @@ pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra: pi
 pytest.importorskip("pinocchio", reason="the UR5 kinematics need the robot extra: pip install 'coassist[robot]'")
 
 from coassist.robot.drive import DriveConfig, drive, drive_lockstep  # noqa: E402
-from coassist.scenario import intent_source as intent_source_module  # noqa: E402
+from coassist.scenario import intent_registry  # noqa: E402
 
 from ..intent.conftest import TINY, labeled  # noqa: E402
 
@@ -54,7 +54,7 @@ def test_a_model_drives_in_lockstep_to_its_rounding_with_one_call_per_tick(tiny_
     configs = _configs(tiny_model)
     alone = [drive(c) for c in configs]
     loads, calls = [], []
-    real_load = intent_source_module.load_intent_source
+    real_load = intent_registry.load_intent_source
 
     def counting_load(intent, horizon, network):
         src = real_load(intent, horizon=horizon, network=network)
@@ -63,7 +63,7 @@ def test_a_model_drives_in_lockstep_to_its_rounding_with_one_call_per_tick(tiny_
         src.batcher.predict_batch = lambda windows: (calls.append(len(windows)), batch(windows))[1]
         return src
 
-    monkeypatch.setattr(intent_source_module, "load_intent_source", counting_load)
+    monkeypatch.setattr(intent_registry, "load_intent_source", counting_load)
     together = drive_lockstep(configs)
     assert loads == [tiny_model]  # one model for the three runs
     lengths = sorted(t.n_samples for t in together)
@@ -77,5 +77,5 @@ def test_a_model_drives_in_lockstep_to_its_rounding_with_one_call_per_tick(tiny_
 
 
 def test_lockstep_takes_simulated_drives_only():
-    with pytest.raises(ValueError, match=r"configs\[1\] must be a DriveConfig of the mujoco world"):
+    with pytest.raises(ValueError, match=r"configs\[1\] must be a DriveConfig of a simulated world \(mujoco\)"):
         drive_lockstep([DriveConfig(), DriveConfig(world="ur")])

@@ -24,12 +24,11 @@ from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
-from coassist.robot.drive import TASK_HEIGHT, DriveConfig, _kinematics_for, drive  # noqa: E402
+from coassist.robot.drive import TASK_HEIGHT, DriveConfig, drive  # noqa: E402
 from coassist.robot.mujoco_world import MujocoUR5World  # noqa: E402
 from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World  # noqa: E402
-from coassist.robot.ur_rtde_world import RobotLinkError  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
-from coassist.runtime.world import Command  # noqa: E402
+from coassist.runtime.world import Command, RobotLinkError  # noqa: E402
 from coassist.scenario.tasks import make_task  # noqa: E402
 
 # A domain of its own (140 … 229 of 0 … 232): the xdist worker's index sets the parity, so the
@@ -135,7 +134,7 @@ def mujoco_world(config: DriveConfig) -> MujocoUR5World:
 def ros_run(config: DriveConfig, *, stale_after=0.5, silent_after=None, silent_topic="both", lockstep=True):
     sim = mujoco_world(config)
     robot = SimRobot(sim, silent_after=silent_after, silent_topic=silent_topic)
-    offset = _kinematics_for(sim).tcp_offset
+    offset = sim.kinematics().tcp_offset
     mass, com = sim.tool_mass_and_com()
     cfg = Ros2Config(domain_id=DOMAIN, lockstep=lockstep, pace=not lockstep, stale_after=stale_after, rate_hz=config.rate_hz,
                      tcp_offset=tuple(offset), payload=(mass, tuple(com)), connect_timeout=10.0)  # fmt: skip
@@ -230,7 +229,7 @@ class Listener(_SpunNode):
 
 
 def test_the_monitor_topics_carry_the_run():
-    from coassist.scenario.intent_source import OracleIntent
+    from coassist.scenario.reference_intents import OracleIntent
 
     listener = Listener()
     try:
@@ -238,7 +237,7 @@ def test_the_monitor_topics_carry_the_run():
         sim = mujoco_world(config)
         robot = SimRobot(sim)
         mass, com = sim.tool_mass_and_com()
-        cfg = Ros2Config(domain_id=DOMAIN, lockstep=True, pace=False, stale_after=0.5, tcp_offset=tuple(_kinematics_for(sim).tcp_offset),
+        cfg = Ros2Config(domain_id=DOMAIN, lockstep=True, pace=False, stale_after=0.5, tcp_offset=tuple(sim.kinematics().tcp_offset),
                          payload=(mass, tuple(com)), connect_timeout=10.0)  # fmt: skip
         world = Ros2World(cfg, alpha=0.8)
         deadline = time.monotonic() + 5.0  # the monitor's subscriptions are matched before the run
@@ -281,7 +280,7 @@ def test_coassist_ros2_drives_the_simulated_robot_and_writes_the_run(tmp_path):
     config = DriveConfig(world="ur", controller="manual", task="linear", time_limit=0.4, seed=0)
     sim = mujoco_world(config)
     robot = SimRobot(sim)
-    offset = ",".join(repr(float(v)) for v in _kinematics_for(sim).tcp_offset)
+    offset = ",".join(repr(float(v)) for v in sim.kinematics().tcp_offset)
     try:
         result = CliRunner().invoke(app, [
             "ros2", "--controller", "manual", "--time-limit", "0.4", "--domain-id", str(DOMAIN), "--lockstep", "--yes",

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from coassist.robot.ur_rtde_world import RobotLinkError, SafetyStatus, URRTDEWorld, stop_message
-from coassist.runtime.world import Command, RobotState, World
+from coassist.robot.ur_rtde_world import SafetyStatus, URRTDEWorld, stop_message
+from coassist.runtime.world import Command, RobotLinkError, RobotState, World
 
 # Loaded by path under a unique name: works with --import-mode=importlib and without
 # an __init__.py, and cannot clash with another test directory's helper module.

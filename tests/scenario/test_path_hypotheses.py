@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from coassist.interfaces import IntentSource, TrialContext
-from coassist.scenario.intent_source import load_intent_source
+from coassist.scenario.intent_registry import load_intent_source
 from coassist.scenario.objects import get_object
 from coassist.scenario.operator import deformed_path
 from coassist.scenario.path_hypotheses import (

@@ -20,7 +20,7 @@ from coassist.runtime.lockstep import Loop
 from coassist.runtime.loop import run_loop
 from coassist.runtime.safety import SafetyLimits
 from coassist.runtime.world import Command
-from coassist.scenario.intent_source import ConstantVelocityIntent
+from coassist.scenario.constant_velocity import ConstantVelocityIntent
 from coassist.sim.lockstep import fast_path_eligible, run_point_mass_lockstep
 from coassist.sim.world import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
 

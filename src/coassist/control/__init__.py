@@ -9,7 +9,7 @@ from coassist.control.controllers import (
     ManualGuidance,
     saturate,
 )
-from coassist.control.game import CooperativeGame, EquilibriumGains, NashGame, cooperative_game
+from coassist.control.game import CooperativeGame, EquilibriumGains, GameWeights, NashGame, cooperative_game
 from coassist.control.prediction import prediction_matrices
 from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault  # the flags live below control; re-exported
 
@@ -21,6 +21,7 @@ __all__ = [
     "CooperativeGame",
     "EquilibriumGains",
     "Fault",
+    "GameWeights",
     "ImpedanceControl",
     "InputBounds",
     "ManualGuidance",

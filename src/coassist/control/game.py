@@ -78,7 +78,7 @@ every α uses the exact sum.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -99,6 +99,88 @@ InputWeighting = Literal["shared", "alpha_scaled"]
 _Q_NAMES = ("Q_hh", "Q_hr", "Q_rh", "Q_rr")
 
 
+@dataclass(frozen=True, eq=False)
+class GameWeights:
+    """Both players' cost weights (eq. 3.15–3.17), validated once, read-only.
+
+    Q_hh, Q_hr : (2n, 2n) the human's weights on tracking its own and the robot's
+        reference (position then velocity). PSD.
+    Q_rh, Q_rr : (2n, 2n) the robot's weights on the human's and its own reference. PSD.
+    R_h, R_r : (n, n) effort weights [1/N²]; SPD. A lower R_r lets the robot assist harder.
+    n_dof : n, needed only when every weight is given as a scalar; None: read from the
+        first weight given as a vector or matrix (an R's size, or half a Q's).
+
+    Each weight may be given as a matrix, a vector (its diagonal) or a scalar (that
+    multiple of the identity); every one is stored as a read-only float64 matrix. An
+    error names the weight (``Q_hh must be 4x4 …``, ``R_r must be positive definite …``).
+    """
+
+    # stored as read-only float64 matrices, whatever array-like they were given as (__post_init__)
+    Q_hh: np.ndarray
+    Q_hr: np.ndarray
+    Q_rh: np.ndarray
+    Q_rr: np.ndarray
+    R_h: np.ndarray
+    R_r: np.ndarray
+    n_dof: int | None = field(default=None, kw_only=True)
+
+    def __post_init__(self) -> None:
+        n = self.n_dof
+        if n is None:
+            n = _size_of(self, ("R_h", "R_r"), 1) or _size_of(self, _Q_NAMES, 2)
+            if n is None:
+                raise ValueError("GameWeights.n_dof is needed when every weight is a scalar")
+        elif not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 1:
+            raise ValueError(f"GameWeights.n_dof must be an int >= 1, got {n!r}")
+        n = int(n)
+        for name in _Q_NAMES:  # the order the errors are checked in: the Q's, then the R's
+            Q = as_square_matrix(getattr(self, name), name, 2 * n)
+            check_positive_semidefinite(Q, name)
+            object.__setattr__(self, name, Q)
+        for name in ("R_h", "R_r"):
+            object.__setattr__(self, name, as_square_matrix(getattr(self, name), name, n))
+        check_positive_definite(self.R_h, "R_h")
+        check_positive_definite(self.R_r, "R_r")
+        object.__setattr__(self, "n_dof", n)
+
+    @classmethod
+    def from_parameters(cls, params: GameParameters) -> GameWeights:
+        """The diagonal weights of a :class:`~coassist.config.GameParameters` (a preset's game)."""
+        diagonals = [np.asarray(getattr(params, name), dtype=float) for name in (*_Q_NAMES, "R_h", "R_r")]
+        return cls(*diagonals, n_dof=params.n_dof)
+
+    @property
+    def Q(self) -> dict[str, np.ndarray]:
+        """The four state weights by name (``"Q_hh"``, ``"Q_hr"``, ``"Q_rh"``, ``"Q_rr"``)."""
+        return {name: getattr(self, name) for name in _Q_NAMES}
+
+
+def _size_of(weights: GameWeights, names: tuple[str, ...], per_dof: int) -> int | None:
+    """n from the first of ``names`` given as a vector or a matrix (its length / ``per_dof``), None if all are scalars."""
+    for name in names:
+        shape = np.shape(getattr(weights, name))
+        if shape:
+            return max(1, shape[0] // per_dof)
+    return None
+
+
+def _weights(weights: GameWeights | None, n_dof: int, given: dict[str, ArrayLike | None]) -> GameWeights:
+    """The game's weights: ``weights``, or a :class:`GameWeights` of the six keywords (``given``), not both."""
+    passed = [name for name, value in given.items() if value is not None]
+    if weights is not None:
+        if not isinstance(weights, GameWeights):
+            raise ValueError(f"weights must be a GameWeights, got {type(weights).__name__}")
+        if passed:
+            raise ValueError(f"give the weights as a GameWeights or as keywords, not both (got weights and {', '.join(passed)})")
+        if weights.n_dof != n_dof:
+            raise ValueError(f"weights are for {weights.n_dof} DOFs, the model has {n_dof}")
+        return weights
+    missing = [name for name, value in given.items() if value is None]
+    if missing:
+        raise ValueError(f"the game needs its weights: a GameWeights, or the keywords {', '.join(missing)}")
+    return GameWeights(**given, n_dof=n_dof)  # type: ignore[arg-type]
+
+
 @dataclass(frozen=True)
 class EquilibriumGains:
     """First-step gains of the equilibrium: [u_h(k); u_r(k)] = G_z z + G_h ref_h + G_r ref_r.
@@ -114,34 +196,16 @@ class EquilibriumGains:
 class _LinearQuadraticGame:
     """Shared machinery: prediction matrices, per-weight products, the equilibrium solve."""
 
-    def __init__(
-        self,
-        model: ImpedanceModel,
-        *,
-        Q_hh: ArrayLike,
-        Q_hr: ArrayLike,
-        Q_rh: ArrayLike,
-        Q_rr: ArrayLike,
-        R_h: ArrayLike,
-        R_r: ArrayLike,
-        horizon: int,
-        control_horizon: int | None,
-    ) -> None:
-        if not isinstance(model, ImpedanceModel):
-            raise ValueError(f"model must be an ImpedanceModel, got {type(model).__name__}")
-        self.model = model
+    def __init__(self, model: ImpedanceModel, weights: GameWeights, *, horizon: int, control_horizon: int | None) -> None:
         n, m = model.n_dof, model.C.shape[0]
+        if m != 2 * n:  # the weights are on [position; velocity] (ImpedanceModel's C = I)
+            raise ValueError(f"the game needs the model's output [position; velocity] (2n = {2 * n} rows), got {m}")
+        self.model = model
         self._n, self._m = n, m
-        Qs = {}
-        for name, value in zip(_Q_NAMES, (Q_hh, Q_hr, Q_rh, Q_rr)):
-            Q = as_square_matrix(value, name, m)
-            check_positive_semidefinite(Q, name)
-            Qs[name] = Q
+        self.weights = weights
+        Qs = weights.Q
         self.Q = Qs
-        self.R_h = as_square_matrix(R_h, "R_h", n)
-        self.R_r = as_square_matrix(R_r, "R_r", n)
-        check_positive_definite(self.R_h, "R_h")
-        check_positive_definite(self.R_r, "R_r")
+        self.R_h, self.R_r = weights.R_h, weights.R_r
         self.F, self.Phi = prediction_matrices(model.Ad, model.Bd, model.C, horizon, control_horizon)
         self.horizon = horizon
         self.control_horizon = horizon if control_horizon is None else control_horizon
@@ -347,6 +411,11 @@ def solve_with_gains(gains: list[EquilibriumGains], z: np.ndarray, ref_h: np.nda
     return u[:, :n], u[:, n:]
 
 
+def _check_model(model: object) -> None:
+    if not isinstance(model, ImpedanceModel):
+        raise ValueError(f"model must be an ImpedanceModel, got {type(model).__name__}")
+
+
 def _add(a: dict[str, float], b: dict[str, float]) -> dict[str, float]:
     out = dict(a)
     for k, v in b.items():
@@ -360,38 +429,38 @@ class CooperativeGame(_LinearQuadraticGame):
     Parameters
     ----------
     model : the impedance model both players act on.
-    Q_hh, Q_hr : (2n, 2n) the human's weights on tracking its own and the robot's
-        reference (position then velocity). PSD.
-    Q_rh, Q_rr : (2n, 2n) the robot's weights on the human's and its own reference. PSD.
-    R_h, R_r : (n, n) effort weights [1/N²]; SPD. A lower R_r lets the robot assist harder.
+    weights : both players' cost weights (:class:`GameWeights`); or give them as the
+        keywords ``Q_hh``, ``Q_hr``, ``Q_rh``, ``Q_rr``, ``R_h``, ``R_r`` (each as
+        :class:`GameWeights` reads it), not both.
     alpha : share of the human's cost in the common objective, 0 ≤ α ≤ 1 (0 < α < 1
         with ``input_weighting="alpha_scaled"``). α → 1 follows the human's reference.
     horizon : prediction horizon Np [samples].
     control_horizon : Nc ≤ Np [samples]; the input is held after Nc. None: Nc = Np.
     input_weighting : "shared" (eq. 3.17: R_h, R_r) or "alpha_scaled" (α R_h, (1 − α) R_r).
+    Q_hh, Q_hr, Q_rh, Q_rr, R_h, R_r : the weights as keywords (see ``weights``).
     """
 
     def __init__(
         self,
         model: ImpedanceModel,
+        weights: GameWeights | None = None,
         *,
-        Q_hh: ArrayLike,
-        Q_hr: ArrayLike,
-        Q_rh: ArrayLike,
-        Q_rr: ArrayLike,
-        R_h: ArrayLike,
-        R_r: ArrayLike,
         alpha: float,
         horizon: int,
         control_horizon: int | None = None,
         input_weighting: InputWeighting = "shared",
+        Q_hh: ArrayLike | None = None,
+        Q_hr: ArrayLike | None = None,
+        Q_rh: ArrayLike | None = None,
+        Q_rr: ArrayLike | None = None,
+        R_h: ArrayLike | None = None,
+        R_r: ArrayLike | None = None,
     ) -> None:
         if input_weighting not in ("shared", "alpha_scaled"):
             raise ValueError(f"input_weighting must be 'shared' or 'alpha_scaled', got {input_weighting!r}")
-        super().__init__(
-            model, Q_hh=Q_hh, Q_hr=Q_hr, Q_rh=Q_rh, Q_rr=Q_rr, R_h=R_h, R_r=R_r,
-            horizon=horizon, control_horizon=control_horizon,
-        )
+        _check_model(model)
+        weights = _weights(weights, model.n_dof, dict(Q_hh=Q_hh, Q_hr=Q_hr, Q_rh=Q_rh, Q_rr=Q_rr, R_h=R_h, R_r=R_r))
+        super().__init__(model, weights, horizon=horizon, control_horizon=control_horizon)
         self.input_weighting = input_weighting
         self._alpha_family: _AlphaFamily | None = None
         # α₀ → its _AlphaFamily, shared with the copies of this game (:meth:`copy`): the
@@ -611,26 +680,27 @@ class NashGame(_LinearQuadraticGame):
     """Non-cooperative Nash equilibrium: each player minimises its own cost (eq. 3.15–3.16).
 
     Q_h = blkdiag(Q_hh, Q_hr) for the human and Q_r = blkdiag(Q_rh, Q_rr) for the robot,
-    no α mixing. Same parameters and call as :class:`CooperativeGame` minus ``alpha``.
+    no α mixing. Same parameters and call as :class:`CooperativeGame` minus ``alpha``
+    and ``input_weighting``.
     """
 
     def __init__(
         self,
         model: ImpedanceModel,
+        weights: GameWeights | None = None,
         *,
-        Q_hh: ArrayLike,
-        Q_hr: ArrayLike,
-        Q_rh: ArrayLike,
-        Q_rr: ArrayLike,
-        R_h: ArrayLike,
-        R_r: ArrayLike,
         horizon: int,
         control_horizon: int | None = None,
+        Q_hh: ArrayLike | None = None,
+        Q_hr: ArrayLike | None = None,
+        Q_rh: ArrayLike | None = None,
+        Q_rr: ArrayLike | None = None,
+        R_h: ArrayLike | None = None,
+        R_r: ArrayLike | None = None,
     ) -> None:
-        super().__init__(
-            model, Q_hh=Q_hh, Q_hr=Q_hr, Q_rh=Q_rh, Q_rr=Q_rr, R_h=R_h, R_r=R_r,
-            horizon=horizon, control_horizon=control_horizon,
-        )
+        _check_model(model)
+        weights = _weights(weights, model.n_dof, dict(Q_hh=Q_hh, Q_hr=Q_hr, Q_rh=Q_rh, Q_rr=Q_rr, R_h=R_h, R_r=R_r))
+        super().__init__(model, weights, horizon=horizon, control_horizon=control_horizon)
         self._compute_gains()
 
     def _player_weights(self, alpha):
@@ -701,12 +771,9 @@ def cooperative_game(model: ImpedanceModel, params: GameParameters) -> Cooperati
         # 1-2 s against ~15 ms for an arbitrated controller on a loaded 2-core machine).
         with threadpool_limits(1, user_api="blas"):
             template = CooperativeGame(
-                model,
-                Q_hh=params.Q_hh, Q_hr=params.Q_hr, Q_rh=params.Q_rh, Q_rr=params.Q_rr,
-                R_h=params.R_h, R_r=params.R_r, alpha=params.alpha,
-                horizon=params.horizon, control_horizon=params.control_horizon,
-                input_weighting=params.input_weighting,  # type: ignore[arg-type]
-            )  # fmt: skip
+                model, GameWeights.from_parameters(params), alpha=params.alpha, horizon=params.horizon,
+                control_horizon=params.control_horizon, input_weighting=params.input_weighting,  # type: ignore[arg-type]
+            )
         if len(_GAME_MEMO) >= _GAME_MEMO_SIZE:
             _GAME_MEMO.pop(next(iter(_GAME_MEMO)))
         _GAME_MEMO[key] = template

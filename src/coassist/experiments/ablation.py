@@ -14,10 +14,10 @@ and the MuJoCo UR5 (``coassist drive``'s world, the arbitrated controller, the s
   the tool's future / on the simulated operator's true intent;
 - ``lstm-tool``: the LSTM+FC of the simulated stages trained on the tool's future (the thesis);
 - ``lstm-hand-alone``: the same network trained on the path the hand alone would have
-  produced (the ``thesis`` preset only, :mod:`coassist.experiments.intent_sources`);
+  produced (the ``thesis`` preset only, :mod:`coassist.experiments.source_training`);
 - ``lstm-intent``: the same network trained on the operator's true intent (simulation only);
 - ``paths``: the path hypotheses round the obstacle the robot is told of, calibrated to each
-  operator (:func:`~coassist.experiments.intent_sources.calibrate_paths`);
+  operator (:func:`~coassist.experiments.source_training.calibrate_paths`);
 - ``oracle``: the operator's true intent itself, the best any predictor could do.
 
 Every learned source is trained from scratch on the same datasets by the same protocol; only
@@ -58,9 +58,9 @@ from coassist.experiments.application import (
     cell_options,
     paired_difference,
 )
-from coassist.experiments.intent_sources import APPLICATION_SOURCE, LEARNED, seed_names
 from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_seed, in_loop_errors, trial_seed_base
 from coassist.experiments.report import Claim, Section
+from coassist.experiments.source_training import APPLICATION_SOURCE, LEARNED, seed_names
 
 SOURCES = ("nominal", "constant-velocity", "present", "ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone",
            "lstm-intent", "paths", "oracle")  # fmt: skip
@@ -225,7 +225,7 @@ def _runnable(name: str, models: dict[str, str]) -> bool:
 def run_ablation(ws: Workspace, models: dict[str, str], known: dict[tuple[str, str, str], list] | None = None,
                  ) -> AblationResult:  # fmt: skip
     """Run every cell in both worlds with the learned sources' ``models`` (name → model folder,
-    :func:`~coassist.experiments.intent_sources.train_sources`, and ``paths`` → its calibration).
+    :func:`~coassist.experiments.source_training.train_sources`, and ``paths`` → its calibration).
 
     ``known``: (object, controller, source) → trials the application stage already ran with the
     same seeds, settings and model (its MG trials under ``(object, "manual", "nominal")`` and its

@@ -4,7 +4,7 @@ Three simulated operators carry the board and the heavy load past an obstacle to
 target with the assistive controller, the same with
 α arbitrated online (law :data:`coassist.control.presets.ARBITRATION`), impedance control (IMP)
 and manual guidance (MG). The assistive controllers' prediction is the source
-:data:`~coassist.experiments.intent_sources.APPLICATION_SOURCE` (the path hypotheses round the
+:data:`~coassist.experiments.source_training.APPLICATION_SOURCE` (the path hypotheses round the
 obstacle the robot is told of, calibrated to each operator, the source that did best in the
 in-loop ablation on validation seeds; the thesis used each object's transferred model, trained
 on the tool's future). Every controller meets
@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from coassist.experiments.intent_sources import APPLICATION_SOURCE, calibrate_paths, train_sources, training_datasets
 from coassist.experiments.pipeline import (
     ITERATION_TASKS,
     Workspace,
@@ -33,6 +32,7 @@ from coassist.experiments.pipeline import (
     trial_seed_base,
 )
 from coassist.experiments.report import Claim, Section
+from coassist.experiments.source_training import APPLICATION_SOURCE, calibrate_paths, train_sources, training_datasets
 
 OBJECTS = ("board", "heavy")
 CONTROLLERS = ("cooperative", "cooperative-arbitrated", "impedance", "manual")
@@ -126,10 +126,10 @@ def run_application(ws: Workspace, final_model: Path,
                     ahead: Callable[[dict[str, str]], None] | None = None) -> ApplicationResult:  # fmt: skip
     """Collect the heavy load's transfer dataset (with the final model in the loop, as the thesis
     collects each object's), calibrate the path hypotheses to the operators
-    (:func:`~coassist.experiments.intent_sources.calibrate_paths`), train the learned intent sources on
-    every simulated dataset (:func:`~coassist.experiments.intent_sources.train_sources`), then collect
+    (:func:`~coassist.experiments.source_training.calibrate_paths`), train the learned intent sources on
+    every simulated dataset (:func:`~coassist.experiments.source_training.train_sources`), then collect
     every (object, controller) pair's trials, the assistive ones with
-    :data:`~coassist.experiments.intent_sources.APPLICATION_SOURCE`.
+    :data:`~coassist.experiments.source_training.APPLICATION_SOURCE`.
 
     While the sources train, the pairs' simulations are put on the run's pool behind them
     (:meth:`Workspace.prefetch`): MG's and IMP's at once, the assistive ones once their source

@@ -28,7 +28,7 @@ ITERATION_TASKS = ("linear", "curved", "sinusoidal")
 EVAL_HORIZONS = (5, 10, 20, 50)
 
 
-#: The learned intent sources a run may train (coassist.experiments.intent_sources.LEARNED's names).
+#: The learned intent sources a run may train (coassist.experiments.source_training.LEARNED's names).
 LEARNED_SOURCES = ("ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone", "lstm-intent")
 
 
@@ -58,14 +58,14 @@ class ReproduceConfig:
     train_stride: int = 8
     # The real recordings' models (the shipped default predictor, its published figures): every 4th window.
     real_stride: int = 4
-    # The application's learned intent sources (experiments.intent_sources) train on every simulated
+    # The application's learned intent sources (experiments.source_training) train on every simulated
     # dataset, 5.5x the data of M_0. Measured on 5a89abb's datasets (lstm-intent, 6 epochs, test loss
     # on the same held-out trials): 0.00677 at stride 16 against 0.00693 at stride 4 (epoch-to-epoch
     # spread ~0.0001); on the issue-34 operator's datasets 0.00569 / 0.00567 / 0.00561 / 0.00547 at
     # stride 16 / 32 / 48 / 96. Every 96th window since issue 35 (48 in the full preset): each LSTM
     # source is trained source_seeds times for a third of the arithmetic three sources took once at 16.
     source_stride: int = 96
-    # The learned sources of the in-loop ablation (experiments.intent_sources.LEARNED); the thesis preset
+    # The learned sources of the in-loop ablation (experiments.source_training.LEARNED); the thesis preset
     # adds lstm-hand-alone, whose negative result docs/intent-labels.md records.
     learned_sources: tuple[str, ...] = ("ridge", "ridge-intent", "lstm-tool", "lstm-intent")
     # Training seeds of each LSTM source (the arbitrated ablation cells run every one; the others the first).

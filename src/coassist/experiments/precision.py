@@ -9,7 +9,7 @@ the same trials, as the report's ablation pairs them
 and clearance deficit per side of the detour). ``paths`` needs a calibration: with
 ``calibrate=True`` the operators' calibration trials of each base
 (``calibration_seed(base)``) are collected and fitted first
-(:func:`~coassist.experiments.intent_sources.calibrate_paths`), one calibration per base.
+(:func:`~coassist.experiments.source_training.calibrate_paths`), one calibration per base.
 
 :func:`compare_intents` runs it; ``coassist compare-intents`` is its command.
 """
@@ -25,7 +25,6 @@ import numpy as np
 
 from coassist.experiments.ablation import ARBITRATED, DAMPED, SIDES, AblationResult, _seeds_text, _share_text
 from coassist.experiments.application import OBJECTS, OBSTACLE, _pair_key, application_metrics
-from coassist.experiments.intent_sources import calibrate_paths
 from coassist.experiments.pipeline import (
     REPRODUCE_PRESETS,
     RUN_SEED_STRIDE,
@@ -33,6 +32,7 @@ from coassist.experiments.pipeline import (
     application_seed,
     calibration_seed,
 )
+from coassist.experiments.source_training import calibrate_paths
 
 #: The offsets (base mod RUN_SEED_STRIDE) a validation base may have: its calibration trials
 #: (base + 880000 …) and application trials (base + 900000 … + 1000 + trials) then stay clear of every
@@ -58,7 +58,7 @@ def compare_intents(sources: Mapping[str, str], out: str | Path, *, bases: Seque
     if off:
         raise ValueError(f"bases {off}: a validation base must be {VALIDATION_BASES[0]}–{VALIDATION_BASES[1]} past a multiple "
                          f"of {RUN_SEED_STRIDE} (e.g. 50000), so that its trials are no run's own (the report's seeds)")
-    from coassist.scenario.intent_source import load_intent_source
+    from coassist.scenario.intent_registry import load_intent_source
 
     for label, spec in sources.items():  # refuse a bad source before anything runs
         if spec != "paths":

@@ -11,7 +11,7 @@ Stages, in order (each writes its data under ``out/`` and a section of the repor
    load carried past an obstacle with the assistive controller, IMP and MG; the assistive
    controller's intent source is the path hypotheses round the obstacle, calibrated to each
    operator, the source that did best in the in-loop ablation on validation seeds
-   (:mod:`~coassist.experiments.intent_sources`, ``docs/precision.md``);
+   (:mod:`~coassist.experiments.source_training`, ``docs/precision.md``);
 5. the real UR5 recordings: the predictor trained on user-a against its baselines,
    and transferred to user-b;
 6. the in-loop ablation of intent sources (issues 18, 34): nominal, constant velocity, the

@@ -88,11 +88,6 @@ class TransferResult:
     iteration_seconds: float  # mean time of one iterative step, for Table 5.2
     transfer_trials: int  # the config's trials per target
 
-    @property
-    def transfer_models(self) -> dict[str, Path]:
-        """M_TL of each target."""
-        return {name: t.models["transfer"] for name, t in self.targets.items()}
-
     def summary(self) -> dict[str, Any]:
         return {**{name: t.summary() for name, t in self.targets.items()}, "iteration_seconds": self.iteration_seconds}
 

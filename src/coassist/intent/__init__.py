@@ -7,8 +7,8 @@ from coassist.intent.features import Scaler, WindowConfig, WindowSet, feature_na
 from coassist.intent.model import IntentModel, ModelFileError, ModelMismatchError, load_model, save_model
 from coassist.intent.network import IntentNet, NetworkConfig
 from coassist.intent.realtime import ModelIntent, RealtimeConfig, RealtimePredictor, load_model_intent
-from coassist.intent.sources import LabeledTrial, load_trials
 from coassist.intent.training import MODEL_PRESETS, Preset, TrainConfig, plot_losses, train_model, write_model
+from coassist.intent.trials import LabeledTrial, load_trials
 
 __all__ = [
     "PREDICTORS",

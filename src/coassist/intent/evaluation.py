@@ -35,7 +35,7 @@ from coassist.intent.baselines import (
 from coassist.intent.features import feature_names
 from coassist.intent.kalman import KalmanCA
 from coassist.intent.model import IntentModel
-from coassist.intent.sources import LabeledTrial
+from coassist.intent.trials import LabeledTrial
 from coassist.metrics import HORIZONS, prediction_errors
 
 __all__ = [

@@ -8,7 +8,7 @@ thesis' order (eq. 4.3–4.6; for the x-y plane d = 2)::
 and predicts the human's desired positions at ticks k+1 … k+H. Training targets are
 the *measured* future poses (the thesis trains on what the person actually did).
 
-Two choices here are ours, both measured on real data (docs/intent-results.md):
+Two choices here are ours, both measured on real data (docs/intent-parameterisation.md):
 
 - ``input_frame``: ``"absolute"`` (the thesis: positions as recorded) or
   ``"relative"`` (pose and reference columns minus the current pose x(k), so the

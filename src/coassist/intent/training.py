@@ -46,7 +46,7 @@ from coassist.intent.batches import DeviceWindows
 from coassist.intent.features import WindowConfig, WindowSet, feature_names, scale_targets, split_trials
 from coassist.intent.model import IntentModel, load_model, save_model
 from coassist.intent.network import IntentNet, NetworkConfig
-from coassist.intent.sources import LabeledTrial
+from coassist.intent.trials import LabeledTrial
 from coassist.registry import Registry
 
 __all__ = [

@@ -8,8 +8,8 @@ effort, fault flags), at most 125 frames a second. The page only watches: its po
 start and abort messages are dropped (counted as ``"watcher"``). The run is written to the
 session folder like a played trial, and scored the same way.
 
-The MuJoCo UR5 runs paced to the wall clock (so the page shows it at its real speed); a
-real arm is paced by its controller. The task is the drive's (same seed); where the drive
+A simulated arm (the MuJoCo UR5) runs paced to the wall clock (so the page shows it at its
+real speed); a real arm is paced by its controller. The task is the drive's (same seed); where the drive
 lays the plan out from the arm's start pose (a real UR5), the scene is shifted to match the
 first frame's reference.
 """
@@ -30,6 +30,7 @@ from coassist.play.session import (
     points_bounds,
 )
 from coassist.robot.drive import TASK_HEIGHT, DriveConfig, drive
+from coassist.robot.worlds import WORLDS, WorldRequest, build_world
 from coassist.scenario.tasks import task_for_seed
 
 __all__ = ["DriveMonitor"]
@@ -42,7 +43,7 @@ class DriveMonitor(PlaySession):
     """Watch one ``coassist drive`` run (module docstring).
 
     drive_config : the run.  config : the session (user, out folder; its controllers and
-    intent are taken from ``drive_config``).  host : the real arm's address (world ``ur``).
+    intent are taken from ``drive_config``).  host : the real arm's address (the worlds that need one).
     confirm : as :func:`~coassist.robot.drive.drive`'s, asked before a real arm moves.
     """
 
@@ -93,11 +94,10 @@ class DriveMonitor(PlaySession):
             self.publish(frame)
 
         world = None
-        if c.world == "mujoco":  # paced to the wall clock, so the page shows the run at its real speed
-            from coassist.robot.mujoco_world import MujocoUR5World
-
-            world = MujocoUR5World(c.object, control_dt=c.dt, start=(float(task.start[0]), float(task.start[1]), TASK_HEIGHT),
-                                   seed=c.seed, view=False, realtime=True)  # fmt: skip
+        if WORLDS[c.world].simulated:  # paced to the wall clock, so the page shows the run at its real speed
+            start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
+            world = build_world(c.world, WorldRequest(c.robot or WORLDS[c.world].arms[0], c.object, c.rate_hz, c.seed, start,
+                                                      realtime=True))
         try:
             trial = drive(c, world=world, host=self.robot_host, confirm=self.confirm, on_tick=on_tick)
         finally:

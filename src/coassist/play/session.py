@@ -60,7 +60,7 @@ from coassist.runtime.intent import RealtimeIntent, WindowIntent
 from coassist.runtime.loop import run_loop
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.wrench import WrenchPipeline
-from coassist.scenario.intent_source import load_intent_source
+from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source
 from coassist.scenario.tasks import TASK_KINDS, Task, nominal_path, task_for_seed
 
 __all__ = ["PlayConfig", "PlaySession", "TrialResult", "view_bounds"]
@@ -79,7 +79,8 @@ class PlayConfig:
     user : the person's id: letters, digits, ``-`` and ``_``, at most 32 (it names the folder).
     out : the parent folder; the session lives in ``out/user``.
     controllers : the controllers the page offers (:data:`coassist.control.presets.CONTROLLER_KINDS`).
-    intent : ``nominal`` or a model folder written by ``coassist train``.
+    intent : a source a person's run can use (:data:`~coassist.scenario.intent_registry.INTENT_SOURCES`
+        but the simulation-only oracle), or a model folder written by ``coassist train``.
     preset : control preset (default :data:`coassist.config.APPLICATION_PRESET`, the main job's
         application preset, safe with a learned predictor in the loop).
     tasks : the protocol's paths, in order (repeated).
@@ -118,7 +119,7 @@ class PlayConfig:
         if not ctrl or len(set(ctrl)) != len(ctrl) or any(c not in CONTROLLER_KINDS for c in ctrl):
             raise ValueError(f"PlayConfig.controllers must be distinct names from {tuple(CONTROLLER_KINDS)}, got {self.controllers!r}")
         object.__setattr__(self, "controllers", ctrl)
-        if not isinstance(self.intent, str) or not self.intent or self.intent == "oracle":
+        if not isinstance(self.intent, str) or not self.intent or (self.intent in INTENT_SOURCES and INTENT_SOURCES[self.intent].simulation_only):
             raise ValueError(f"PlayConfig.intent must be 'nominal' or a model folder (a person has no oracle), got {self.intent!r}")
         try:
             get_preset(self.preset)

@@ -8,16 +8,18 @@ termination, :func:`~coassist.runtime.loop.run_loop` and the :class:`~coassist.d
 in the same format as the point-mass world plus the joint columns), so ``coassist train``,
 ``evaluate`` and ``show`` read it unchanged.
 
-Worlds:
+Worlds (:data:`coassist.robot.worlds.WORLDS`, one entry each; a world is an
+:class:`~coassist.robot.worlds.ArmWorld`):
 
-- ``"mujoco"``: :class:`~coassist.robot.mujoco_world.MujocoUR5World` (``robot="panda"``:
-  :class:`~coassist.robot.mujoco_world.MujocoArmWorld`, the tasks moved into the arm's
-  reach by :func:`move_tasks`) with the simulated operator lifted to 3-D
+- a simulated one (``"mujoco"``: :class:`~coassist.robot.mujoco_world.MujocoUR5World`, or for
+  ``robot="panda"`` :class:`~coassist.robot.mujoco_world.MujocoArmWorld`, the tasks moved into
+  the arm's reach by :func:`move_tasks`) with the simulated operator lifted to 3-D
   (:class:`~coassist.scenario.hand.SimulatedHand`) or any
-  :class:`~coassist.runtime.world.HandOperator`; deterministic for a seed.
-- ``"ur"``: :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`; the person at the handle
-  is the operator. The task is laid out from wherever the TCP is when the run starts
-  (coassist never moves a real arm to a start pose on its own).
+  :class:`~coassist.runtime.world.HandOperator` on its handle
+  (:class:`~coassist.robot.worlds.HandWorld`); deterministic for a seed.
+- a real arm (``"ur"``: :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`; ``"franka"``,
+  ``"ros2"``); the person at the handle is the operator. The task is laid out from wherever
+  the TCP is when the run starts (coassist never moves a real arm to a start pose on its own).
 
 Controllers by kind (:data:`coassist.control.presets.CONTROLLER_KINDS`): ``cooperative`` (the
 assistive controller, the cooperative game), ``cooperative-arbitrated``, ``impedance`` (IMP, eq. 5.4),
@@ -36,25 +38,22 @@ from coassist._checks import is_integer
 from coassist.config import APPLICATION_PRESET, ImpedanceParameters
 from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
 from coassist.data import Trial
-from coassist.interfaces import FEATURES, NAMED_INTENTS
+from coassist.interfaces import FEATURES
+from coassist.robot.worlds import WORLDS, ArmWorld, HandWorld, WorldRequest, build_world, missing_members
 from coassist.runtime.episode import EpisodeLabels, build_episode, episode_ticks, plan_grid
 from coassist.runtime.intent import RealtimeIntent, WindowIntent
 from coassist.runtime.safety import SafetyLayer, SafetyLimits
 from coassist.runtime.tick import TickConfig
 from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPipeline
 from coassist.scenario.hand import SimulatedHand
-from coassist.scenario.intent_source import is_path_hypotheses, load_intent_source, shared_intent_source
+from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source, needs_network, shared_intent_source
 from coassist.scenario.objects import get_object
 from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
 from coassist.scenario.seeds import trial_rngs
 from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, task_for_seed
-from coassist.spatial import rotation_vector
 
-__all__ = ["DriveConfig", "WORLDS", "WORLD_ROBOTS", "drive", "drive_lockstep", "move_tasks", "workspace_for"]
+__all__ = ["DriveConfig", "drive", "drive_lockstep", "move_tasks", "workspace_for"]
 
-WORLDS = ("mujoco", "ur", "franka")
-#: The arms (``--robot``, :data:`coassist.robot.arms.ARMS`) each world drives; the first is its default.
-WORLD_ROBOTS = {"mujoco": ("ur5", "panda"), "ur": ("ur5",), "franka": ("panda", "fr3")}
 #: Where the real-time predictor runs (coassist.intent.realtime.BACKENDS).
 PREDICTOR_BACKENDS = ("process", "onnx", "torch")
 #: Height of the task plane above the base [m] in the MuJoCo world (the TCP at the handle).
@@ -74,15 +73,16 @@ MAX_TIME_LIMIT = 600.0
 class DriveConfig:
     """One run on a UR5 (every field validated, errors name it as ``DriveConfig.<field>``).
 
-    world : "mujoco", "ur" or "franka".  controller : "cooperative", "cooperative-arbitrated" (α set
-        every tick by coassist.control.presets.ARBITRATION), "impedance" or "manual".
-    robot : the arm (:data:`WORLD_ROBOTS`: "ur5" or "panda" in MuJoCo, "ur5" on "ur",
-        "panda" or "fr3" on "franka"); None: the world's first.
+    world : a world of :data:`coassist.robot.worlds.WORLDS` ("mujoco", "ur", "franka", "ros2").
+    controller : "cooperative", "cooperative-arbitrated" (α set every tick by
+        coassist.control.presets.ARBITRATION), "impedance" or "manual".
+    robot : the arm, one of the world's ``arms`` ("ur5" or "panda" in MuJoCo, "ur5" on "ur"
+        and "ros2", "panda" or "fr3" on "franka"); None: the world's first.
     task : a task kind (linear, curved, sinusoidal, z).  object : handle, board or heavy.
     preset : a control preset (default :data:`coassist.config.APPLICATION_PRESET`, the main
         job's application preset, safe with a learned predictor in the loop).
-    intent : "nominal", "oracle" (MuJoCo only), "constant-velocity", "present", "paths", a model folder
-        or a path-hypotheses calibration folder (path-hypotheses.json).
+    intent : a name of :data:`coassist.scenario.intent_registry.INTENT_SOURCES` ("oracle" in a
+        simulated world only) or a folder (a model, a path-hypotheses calibration).
     user : simulated operator index (MuJoCo).  seed : task, operator and sensor seed.
     obstacle : the obstacle the operator goes around (coassist.scenario.tasks.OBSTACLES; "small"
         is the evaluation's box, "large" the application's).
@@ -122,11 +122,12 @@ class DriveConfig:
             return ValueError(f"DriveConfig.{name} must be {what}, got {getattr(self, name)!r}")
 
         if self.world not in WORLDS:
-            raise bad("world", f"one of {WORLDS}")
+            raise bad("world", f"one of {tuple(WORLDS)}")
+        world = WORLDS[self.world]
         if self.robot is None:
-            object.__setattr__(self, "robot", WORLD_ROBOTS[self.world][0])
-        elif self.robot not in WORLD_ROBOTS[self.world]:
-            raise bad("robot", f"one of {WORLD_ROBOTS[self.world]} with world {self.world!r}")
+            object.__setattr__(self, "robot", world.arms[0])
+        elif self.robot not in world.arms:
+            raise bad("robot", f"one of {world.arms} with world {self.world!r}")
         if self.controller not in CONTROLLER_KINDS:
             raise bad("controller", f"one of {tuple(CONTROLLER_KINDS)}")
         if self.task not in TASK_KINDS:
@@ -136,10 +137,10 @@ class DriveConfig:
         if self.obstacle not in OBSTACLES:
             raise bad("obstacle", f"one of {tuple(OBSTACLES)}")
         if not isinstance(self.intent, str) or not self.intent:
-            raise bad("intent", "a named source (nominal, oracle, constant-velocity, present, paths), a model folder or a "
-                                "path-hypotheses calibration folder")
-        if self.intent == "oracle" and self.world != "mujoco":
-            raise bad("intent", "a model or 'nominal' on the real arm (the oracle knows the simulated operator's mind)")
+            raise bad("intent", f"one of {', '.join(INTENT_SOURCES)} or a folder (a model, a path-hypotheses calibration)")
+        source = INTENT_SOURCES.get(self.intent)
+        if source is not None and source.simulation_only and not world.simulated:
+            raise bad("intent", f"a source a real arm can run, not {source.summary} (a simulation alone knows it)")
         for name in ("user", "seed"):
             v = getattr(self, name)
             if not is_integer(v) or v < 0:
@@ -221,7 +222,7 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
 
     operator : the MuJoCo world's hand; None: the simulated operator ``config.user``.
     world : a world built by the caller (tests inject faults this way); None: built here.
-    host : the real arm's address (world "ur").  view : MuJoCo's passive viewer.
+    host : the real arm's address (the worlds that need one: "ur", "franka").  view : MuJoCo's passive viewer.
     confirm : called with the text of the limits in force before a real arm moves; it
         must return True to go on (the CLI asks the person at the robot).
     intent_source : an IntentSource or RealtimePredictor to use instead of ``config.intent``.
@@ -230,22 +231,23 @@ def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host:
     try:
         if confirm is not None and not confirm(run.limits.describe()):
             raise RuntimeError("not confirmed: the robot was not moved")
-        log = run.episode.run(deadline=config.dt if getattr(run.world, "realtime", False) else None, on_tick=on_tick)
+        log = run.episode.run(deadline=config.dt if run.world.realtime else None, on_tick=on_tick)
     finally:
         run.close()
     return run.finish(log)
 
 
 def drive_lockstep(configs: Sequence[DriveConfig]) -> list[Trial]:
-    """Simulated drives (world ``"mujoco"``, each its own world) run in lockstep
+    """Simulated drives (a simulated world such as ``"mujoco"``, each its own) run in lockstep
     (:func:`coassist.runtime.lockstep.run_loops`): one network call per tick for the runs
     with the same model in the loop. Each trial is its :func:`drive` to the float32 rounding
     of batched network calls (bit for bit with a named intent); in ``configs``' order."""
     from coassist.runtime.lockstep import run_loops
 
     for i, c in enumerate(configs):
-        if not isinstance(c, DriveConfig) or c.world != "mujoco" or c.realtime_intent:
-            raise ValueError(f"configs[{i}] must be a DriveConfig of the mujoco world without a real-time predictor")
+        if not isinstance(c, DriveConfig) or not WORLDS[c.world].simulated or c.realtime_intent:
+            simulated = ", ".join(name for name, entry in WORLDS.items() if entry.simulated)
+            raise ValueError(f"configs[{i}] must be a DriveConfig of a simulated world ({simulated}) without a real-time predictor")
     sources: dict[tuple[str, int], Any] = {}
     runs: list[_PreparedDrive] = []
     try:
@@ -263,7 +265,7 @@ class _PreparedDrive:
     """A drive built and not yet run: its episode, and what :meth:`close` and :meth:`finish` need."""
 
     episode: Any
-    world: Any
+    world: ArmWorld
     limits: SafetyLimits
     wrench: WrenchPipeline
     built_here: bool
@@ -301,7 +303,8 @@ def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, ho
     task = task_for_seed(config.task, config.seed, obstacle=config.obstacle)  # the same draw in every world
     profile = operator_profile(config.user)
     obj = get_object(config.object)
-    simulated = config.world == "mujoco"
+    entry = WORLDS[config.world]
+    simulated = entry.simulated
     n_max = episode_ticks(task, dt, config.time_limit)
     built_here = world is None
     intent_stage = None
@@ -313,12 +316,17 @@ def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, ho
         intent_pos = intent_traj.positions
         target = np.array(task.target, dtype=float)
         start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
-        robot = config.robot or WORLD_ROBOTS[config.world][0]  # DriveConfig sets it; `or` for the type checker
+        robot = config.robot or entry.arms[0]  # DriveConfig sets it; `or` for the type checker
         if simulated and robot != "ur5":  # the tasks, laid out for the UR5, moved to this arm
             ref_abs, intent_pos, start = move_tasks(robot, ref_abs, intent_pos)
             target = target + _task_shift(robot)
         if world is None:
-            world = _build_world(config, robot, start, host, view)
+            # A real-time predictor runs against the wall clock: so must the simulated world it serves.
+            world = build_world(config.world, WorldRequest(robot, config.object, config.rate_hz, config.seed, start, host,
+                                                           view, realtime=view or bool(config.realtime_intent)))
+        if not isinstance(world, ArmWorld):
+            raise ValueError(f"world must be an arm world (coassist.robot.worlds.ArmWorld); a {type(world).__name__} "
+                             f"lacks {', '.join(missing_members(world, ArmWorld))}")
         state0 = world.read()
         start_pose = np.asarray(state0.tool_pose, dtype=float).copy()
         if not simulated:
@@ -327,22 +335,21 @@ def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, ho
             ref_abs = ref_abs.copy()
             ref_abs[:, :2] += shift
             target = target + shift
-        if operator is None and simulated and hasattr(world, "operator"):
+        hand: HandWorld | None = world if isinstance(world, HandWorld) else None  # a handle to hold
+        if operator is None and simulated and hand is not None:
             noise = motor_noise(profile, rng_motor, ref_abs.shape[0], dt)  # as long as the intent: stop() may step on
             arm = OperatorArm(profile, intent_pos, dt, noise)
-            hand_pose, _ = world.hand_pose()
+            hand_pose, _ = hand.hand_pose()
             operator = SimulatedHand(arm, dt, hand_pose, full_pose=config.full_pose,
                                      offset=hand_pose[:2] - start_pose[:2])  # fmt: skip
-        if operator is not None and hasattr(world, "operator"):
-            world.operator = operator
-        kin = _kinematics_for(world)
-        mass, com = world.tool_mass_and_com() if hasattr(world, "tool_mass_and_com") else (0.0, np.zeros(3))
-        # a noise-free simulated sensor (noise_force = noise_torque = 0: MuJoCo's, a test's external F/T)
-        # repeats exactly on a constant push: no frozen-sensor check there
-        sensor = getattr(world, "sensor", None) or getattr(world, "ft_sensor", None)
-        noise_free = sensor is not None and not (getattr(sensor, "noise_force", 1.0) or getattr(sensor, "noise_torque", 1.0))
+        if operator is not None and hand is not None:
+            hand.operator = operator
+        kin = world.kinematics()
+        mass, com = world.tool_mass_and_com()
+        # a noise-free simulated sensor (MuJoCo's without noise, a test's external F/T) repeats exactly
+        # on a constant push: no frozen-sensor check there
         wrench = WrenchPipeline(WrenchConfig(tool_mass=mass, tool_com=tuple(com),
-                                             max_frozen_time=None if noise_free else MEASURED_FROZEN_TIME), dt)  # fmt: skip
+                                             max_frozen_time=None if world.noise_free_sensor else MEASURED_FROZEN_TIME), dt)  # fmt: skip
         limits = config.limits
         if limits.workspace_lower is None:
             lo, hi = workspace_for(ref_abs, start_pose)
@@ -350,10 +357,10 @@ def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, ho
         dofs = (0, 1, 2, 3, 4, 5) if config.full_pose else (0, 1)
         episode = build_episode(
             world=world, controller=controller, intent=intent_stage, wrench=wrench,
-            safety=SafetyLayer(limits, dt, int(getattr(world, "n_joints", 6))), task=task, plan=ref_abs,
+            safety=SafetyLayer(limits, dt, int(world.n_joints)), task=task, plan=ref_abs,
             start_pose=start_pose, n_max=n_max, target=target,
             labels=EpisodeLabels(user=profile.name if simulated else "operator", object=obj.name, seed=config.seed,
-                                 source={"mujoco": "mujoco", "ur": "ur5"}.get(config.world, config.world),
+                                 source=entry.source,
                                  preset=config.preset, model_id=model_id),
             # the simulated operator's intent: the oracle's in any world (a test's simulated arm behind a
             # real-arm link), the Trial's intent column only where that operator held the handle
@@ -380,29 +387,6 @@ def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, ho
     return _PreparedDrive(episode, world, limits, wrench, built_here, intent_stage)
 
 
-def _build_world(config: DriveConfig, robot: str, start: tuple[float, float, float], host: str | None, view: bool):
-    """The world ``config.world`` for ``robot``: MuJoCo with the TCP at ``start``, or the real arm at ``host``."""
-    dt = config.dt
-    if config.world == "mujoco":
-        from coassist.robot.mujoco_world import MujocoArmWorld, MujocoUR5World
-
-        # A real-time predictor runs against the wall clock: so must the world it serves.
-        return (MujocoUR5World if robot == "ur5" else MujocoArmWorld)(
-            config.object, robot=robot, control_dt=dt, start=start, seed=config.seed, view=view,
-            realtime=view or bool(config.realtime_intent))  # fmt: skip
-    if config.world == "ur":
-        from coassist.robot.ur_rtde_world import URRTDEWorld
-
-        if not host:
-            raise ValueError("the real arm needs --host (the robot's IP address)")
-        return URRTDEWorld(host, frequency=float(config.rate_hz))
-    from coassist.robot.franka_world import FrankaWorld
-
-    if not host:
-        raise ValueError("the Franka needs --host (the robot's FCI address)")
-    return FrankaWorld(host, frequency=float(config.rate_hz), arm=robot)
-
-
 def move_tasks(robot: str, ref_abs: np.ndarray, intent: np.ndarray):
     """The plan and the intent moved (x-y) from the UR5's task area to ``robot``'s
     (``ArmDescription.task_centre``), and the start TCP position (3,) at its task height [m]."""
@@ -423,32 +407,13 @@ def _task_shift(robot: str) -> np.ndarray:
     return np.array(arm[:2]) - np.array(ur5[:2])
 
 
-def _kinematics_for(world: Any):
-    """The world's own kinematics where it has them (another arm), else UR5 kinematics with the
-    world's TCP (the MuJoCo model's tcp site, or the real arm's TCP offset)."""
-    from coassist.robot.kinematics import UR5Kinematics
-
-    if callable(getattr(world, "kinematics", None)):
-        return world.kinematics()
-
-    offset = getattr(world, "tcp_offset_pose", None)
-    if offset is None and hasattr(world, "model") and hasattr(world, "data"):
-        m, d = world.model, world.data
-        tool0, tcp = m.body("tool0").id, m.site("tcp").id
-        R0 = d.xmat[tool0].reshape(3, 3)
-        rel = R0.T @ (d.site_xpos[tcp] - d.xpos[tool0])
-        Rrel = R0.T @ d.site_xmat[tcp].reshape(3, 3)
-        offset = np.concatenate([rel, rotation_vector(Rrel)])
-    return UR5Kinematics(tcp_offset=np.zeros(6) if offset is None else offset)
-
-
 def _intent_stage(config: DriveConfig, H: int, source: Any, sources: dict | None = None):
-    realtime = config.realtime_intent if config.realtime_intent is not None else config.world != "mujoco"
+    realtime = config.realtime_intent if config.realtime_intent is not None else not WORLDS[config.world].simulated
     if source is not None:
         if hasattr(source, "tick"):
             return RealtimeIntent(source), getattr(source, "model_id", "realtime")
         return WindowIntent(source, H), source.model_id
-    if config.intent in NAMED_INTENTS or is_path_hypotheses(config.intent):  # computed in the tick: no network
+    if not needs_network(config.intent):  # a named source or a calibration, computed in the tick: no network
         src = load_intent_source(config.intent, horizon=max(H, 2))
         return WindowIntent(src, H), src.model_id
     if realtime:

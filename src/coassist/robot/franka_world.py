@@ -61,12 +61,12 @@ from typing import Any
 
 import numpy as np
 
-from coassist.errors import CoassistError
 from coassist.robot.arms import NullSpacePosture, arm_kinematics, check_model_matches, get_arm
-from coassist.runtime.world import Command, RobotState
+from coassist.robot.worlds import WorldRequest
+from coassist.runtime.world import Command, RobotLinkError, RobotState
 from coassist.spatial import rotation_vector
 
-__all__ = ["FRANKA_ARMS", "FrankaLinkError", "FrankaWorld", "pose_from_franka", "reported_arm"]
+__all__ = ["FRANKA_ARMS", "FrankaLinkError", "FrankaWorld", "build_world", "pose_from_franka", "reported_arm"]
 
 #: The registered arms (coassist.robot.arms.ARMS) a FrankaWorld drives.
 FRANKA_ARMS = ("panda", "fr3")
@@ -86,8 +86,9 @@ USER_STOP_NEXT = "release the user stop button, make the workspace safe, unlock 
 OVERRUN_TOLERANCE_MIN = 0.002
 
 
-class FrankaLinkError(CoassistError, ConnectionError):
-    """The link to the Franka controller failed (a ``ConnectionError``: the loop ends with ``link_lost``)."""
+class FrankaLinkError(RobotLinkError):
+    """The link to the Franka controller failed (a :class:`~coassist.runtime.world.RobotLinkError`:
+    the loop ends with ``link_lost``)."""
 
 
 def pose_from_franka(T: Any) -> np.ndarray:
@@ -230,6 +231,18 @@ class FrankaWorld:
         """The arm's kinematics with the start posture held in the null space (eq. 3.6, 7 joints)."""
         return NullSpacePosture(self._kin, self._q0, gain=self.posture_gain)
 
+    def tool_mass_and_com(self) -> tuple[float, np.ndarray]:
+        """(0.0, zeros): no payload is removed here (libfranka's estimate already leaves out the
+        load configured in Desk; an external sensor is zeroed with the tool on it)."""
+        return 0.0, np.zeros(3)
+
+    @property
+    def noise_free_sensor(self) -> bool:
+        """An external sensor that declares no noise (``noise_force`` and ``noise_torque`` both 0, a
+        test's simulated one): its reading repeats exactly on a constant push."""
+        sensor = self.ft_sensor
+        return sensor is not None and not (getattr(sensor, "noise_force", 1.0) or getattr(sensor, "noise_torque", 1.0))
+
     # ------------------------------------------------------------------ World
     def _state(self) -> Any:
         try:
@@ -363,3 +376,8 @@ class FrankaWorld:
         self._closed = True
         # franky's Robot holds the FCI connection until it is collected (one client at a time)
         self.robot = None
+
+
+def build_world(request: WorldRequest) -> FrankaWorld:
+    """The ``franka`` world of :data:`coassist.robot.worlds.WORLDS`: the ``request.robot`` at ``request.host``, at the run's rate."""
+    return FrankaWorld(request.host or "", frequency=float(request.rate_hz), arm=request.robot)  # "": named as missing

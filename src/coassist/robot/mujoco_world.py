@@ -52,11 +52,12 @@ from coassist._checks import check_optional_int
 from coassist.robot.arm_mjcf import TOOLS, build_arm_model, urdf_joint_limits
 from coassist.robot.arms import NullSpacePosture, arm_kinematics, get_arm
 from coassist.robot.ur5_mjcf import Q_SEED
+from coassist.robot.worlds import WorldRequest
 from coassist.runtime.world import Command, HandOperator, RobotState
 from coassist.spatial import _rotation_vector, rotation_vector  # rotation_vector: re-exported
 
-__all__ = ["DEFAULT_START", "FTSensorModel", "MujocoArmWorld", "MujocoUR5World", "TOOL_DOWN", "rotation_vector",
-           "tool_down_ik"]  # fmt: skip
+__all__ = ["DEFAULT_START", "FTSensorModel", "MujocoArmWorld", "MujocoUR5World", "TOOL_DOWN", "build_world",
+           "rotation_vector", "tool_down_ik"]  # fmt: skip
 
 #: The default start TCP position [m] (base frame): the tasks' START at 0.2 m height.
 DEFAULT_START = (-0.10, -0.615, 0.20)
@@ -535,6 +536,11 @@ class MujocoArmWorld:
         """The wrench the hand applies in the current period (base frame, at the handle)."""
         return self._hand.copy()
 
+    @property
+    def noise_free_sensor(self) -> bool:
+        """The sensor model has no noise (``noise_force`` = ``noise_torque`` = 0): it repeats exactly on a constant push."""
+        return not (self.sensor.noise_force or self.sensor.noise_torque)
+
     def tool_mass_and_com(self) -> tuple[float, np.ndarray]:
         """Mass [kg] of everything below the sensor and its centre of mass (3,) in the sensor frame [m]."""
         d = self.data
@@ -574,3 +580,11 @@ class MujocoArmWorld:
 class MujocoUR5World(MujocoArmWorld):
     """The MuJoCo UR5 world: :class:`MujocoArmWorld` with its default ``robot="ur5"``
     (the name the UR5 code, the live monitor and the fault tests use)."""
+
+
+def build_world(request: WorldRequest) -> MujocoArmWorld:
+    """The ``mujoco`` world of :data:`coassist.robot.worlds.WORLDS`: ``request.robot`` in MuJoCo with
+    the TCP at ``request.start``, paced to the wall clock when ``request.realtime``."""
+    return (MujocoUR5World if request.robot == "ur5" else MujocoArmWorld)(
+        request.object, robot=request.robot, control_dt=1.0 / request.rate_hz, start=request.start, seed=request.seed,
+        view=request.view, realtime=request.realtime)

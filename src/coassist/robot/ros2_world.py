@@ -50,7 +50,7 @@ Link rules, those of :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`: a wrenc
 joint state older than ``stale_after`` [s] (wall clock since the last accepted message;
 at most :data:`MAX_STALE_AFTER`), nothing at all within ``connect_timeout`` of start (or
 no subscriber to the commands), makes :meth:`Ros2World.read` raise
-:class:`~coassist.robot.ur_rtde_world.RobotLinkError`; the loop stops the run and
+:class:`~coassist.runtime.world.RobotLinkError`; the loop stops the run and
 :meth:`Ros2World.stop` sends zero velocities. A command that is not ``n_joints`` finite
 numbers is replaced by zeros, and so is one computed from state older than
 ``stale_after`` when it is sent (the loop stalled between read and apply; counted in
@@ -96,11 +96,12 @@ import numpy as np
 
 from coassist.errors import CoassistError
 from coassist.interfaces import fault_names
-from coassist.robot.ur_rtde_world import RobotLinkError
-from coassist.runtime.world import Command, RobotState
+from coassist.robot.worlds import WorldRequest
+from coassist.runtime.world import Command, RobotLinkError, RobotState
 from coassist.spatial import quaternion_from_rotation_vector, rotation_matrix, rotation_vector
 
-__all__ = ["MAX_STALE_AFTER", "MAX_TCP_OFFSET", "UR_JOINT_NAMES", "Ros2Config", "Ros2InputError", "Ros2World", "resolve_topic"]
+__all__ = ["MAX_STALE_AFTER", "MAX_TCP_OFFSET", "UR_JOINT_NAMES", "Ros2Config", "Ros2InputError", "Ros2World", "build_world",
+           "resolve_topic"]
 
 log = logging.getLogger(__name__)
 
@@ -308,6 +309,7 @@ class Ros2World:
     """
 
     command_space = "joint_velocity"
+    noise_free_sensor = False  # a real sensor behind the topic: the frozen-sensor check stays on
 
     def __init__(self, config: Ros2Config | None = None, *, alpha: float | None = None) -> None:
         self.config = config = config or Ros2Config()
@@ -650,6 +652,12 @@ class Ros2World:
         mass, com = self.config.payload
         return mass, np.asarray(com, dtype=float)
 
+    def kinematics(self):
+        """The UR5's kinematics with this node's TCP (``Ros2Config.tcp_offset``)."""
+        from coassist.robot.kinematics import UR5Kinematics
+
+        return UR5Kinematics(tcp_offset=self.tcp_offset_pose)
+
     # -- monitor ---------------------------------------------------------------------
 
     def publish_monitor(self, k: int, state: RobotState, out: Any) -> None:
@@ -728,3 +736,9 @@ class Ros2World:
         arr = self._msg["DiagnosticArray"]()
         arr.header.stamp, arr.status = stamp, [status]
         return arr
+
+
+def build_world(request: WorldRequest) -> Ros2World:
+    """The ``ros2`` world of :data:`coassist.robot.worlds.WORLDS` with ros2_control's default topics at the
+    run's rate (``coassist ros2`` builds it from its options instead and hands it to the drive)."""
+    return Ros2World(Ros2Config(rate_hz=float(request.rate_hz)))

@@ -73,25 +73,18 @@ from coassist.robot.arms import get_arm
 from coassist.robot.kinematics import ur5_urdf_path  # one place knows where the URDF is installed
 
 __all__ = [
-    "JOINT_NAMES",
     "MOUNT_MASS",
     "Q_SEED",
     "TOOLS",
     "TORQUE_LIMITS",
-    "VELOCITY_LIMITS",
     "ToolGeometry",
     "tool_geometry",
     "ur5_urdf_path",
 ]
 
-# The UR5's joints and limits as its URDF gives them (the arm registry reads them; copies here,
-# writable like the literals they replace, for the names the UR5 code and its tests import).
-_names, _effort, _velocity = urdf_joint_limits("ur5")
-JOINT_NAMES = tuple(_names)
-#: UR5 joint torque limits [N·m] (the URDF's ``effort``, what the model's motors clip to).
-TORQUE_LIMITS = np.array(_effort)
-#: UR5 joint speed limits of the URDF [rad/s].
-VELOCITY_LIMITS = np.array(_velocity)
+#: UR5 joint torque limits [N·m] (the URDF's ``effort``, what the model's motors clip to; the
+#: arm registry reads the URDF the same way).
+TORQUE_LIMITS = np.array(urdf_joint_limits("ur5")[1])
 #: The seed of the start pose's IK: elbow up, wrist down, tool down, the handle's TCP at
 #: the middle of the tasks' workspace ((0.15, −0.615, 0.2) m): the registry's UR5 home.
 Q_SEED = np.array(get_arm("ur5").home)

@@ -69,7 +69,7 @@ Link loss
 A reading that raises, an interface that reports it is disconnected, or a robot
 timestamp that has not advanced for ``link_timeout`` seconds (ur-rtde's receive thread
 keeps serving its last sample after the link drops) makes ``read()`` raise
-:class:`RobotLinkError` (a ``ConnectionError``); the loop turns it into a stop.
+:class:`~coassist.runtime.world.RobotLinkError` (a ``ConnectionError``); the loop turns it into a stop.
 Protective and emergency stops are not errors: ``read()`` reports them in
 :class:`~coassist.runtime.world.RobotState` and :func:`stop_message` says what to do.
 """
@@ -84,11 +84,11 @@ from typing import Any
 
 import numpy as np
 
-from coassist.errors import CoassistError
-from coassist.runtime.world import Command, RobotState
+from coassist.robot.worlds import WorldRequest
+from coassist.runtime.world import Command, RobotLinkError, RobotState
 from coassist.spatial import rotation_matrix
 
-__all__ = ["RobotLinkError", "SafetyStatus", "URRTDEWorld", "stop_message"]
+__all__ = ["SafetyStatus", "URRTDEWorld", "build_world", "stop_message"]
 
 log = logging.getLogger(__name__)
 
@@ -97,13 +97,6 @@ _MIN_AUTO_FREQUENCY = 100.0
 #: The RTDE interface runs at most at the e-Series controller rate.
 _MAX_FREQUENCY = 500.0
 _INSTALL_HINT = "the real robot needs ur-rtde: pip install 'coassist[robot]'"
-
-
-class RobotLinkError(CoassistError, ConnectionError):
-    """The RTDE link to the robot failed (or the controller stopped taking commands).
-
-    A ``ConnectionError``, so a loop can catch it without importing this module.
-    """
 
 
 class SafetyStatus:
@@ -237,6 +230,7 @@ class URRTDEWorld:
     command_space = "joint_velocity"
     n_joints = 6
     realtime = True
+    noise_free_sensor = False  # a real sensor: the frozen-sensor check stays on
 
     def __init__(
         self,
@@ -543,6 +537,17 @@ class URRTDEWorld:
             except Exception as exc:  # noqa: BLE001 - close must finish
                 log.warning("URRTDEWorld.close: %s failed: %s", name, exc)
 
+    def kinematics(self):
+        """The UR5's kinematics with a zero TCP offset: the drive builds this world without a
+        ``tcp_offset``, so the controller keeps its own (the flange, as shipped)."""
+        from coassist.robot.kinematics import UR5Kinematics
+
+        return UR5Kinematics(tcp_offset=np.zeros(6))
+
+    def tool_mass_and_com(self) -> tuple[float, np.ndarray]:
+        """(0.0, zeros): the controller removes the payload from ``getActualTCPForce`` itself (``setPayload``)."""
+        return 0.0, np.zeros(3)
+
     def __enter__(self) -> URRTDEWorld:
         return self
 
@@ -582,3 +587,8 @@ class URRTDEWorld:
             "payload_cog": ask(self._rtde_r, "getPayloadCog"),
             "controller_version": None,
         }
+
+
+def build_world(request: WorldRequest) -> URRTDEWorld:
+    """The ``ur`` world of :data:`coassist.robot.worlds.WORLDS`: the UR at ``request.host``, at the run's rate."""
+    return URRTDEWorld(request.host or "", frequency=float(request.rate_hz))  # "": URRTDEWorld names the missing host

@@ -1,1 +1,1 @@
-"""The runtime: one control loop, several worlds (DESIGN §7)."""
+"""The runtime: one control loop, several worlds (docs/architecture.md, *One loop, several worlds*)."""

@@ -4,7 +4,7 @@ A *world* owns time and physics: the point-mass simulator, the MuJoCo UR5, a rea
 through ur-rtde. An *operator* owns the hand: a simulated operator, a scripted force
 profile, a person in a browser. The tick (:mod:`coassist.runtime.tick`) owns neither;
 it reads a :class:`RobotState`, decides, and hands the world a :class:`Command`. This
-is dm_control's Physics / Task / Environment split (DESIGN: one loop, several worlds).
+is dm_control's Physics / Task / Environment split (docs/architecture.md, *One loop, several worlds*).
 
 Frames and units. The *base* frame is the robot's base (x forward, z up). A pose is
 ``[x, y, z, rx, ry, rz]``: the tool centre point (TCP) position [m] and its orientation
@@ -23,16 +23,25 @@ model physically and take the robot's Cartesian effort u_r instead.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from coassist._checks import as_real_array
+from coassist.errors import CoassistError
 
-__all__ = ["COMMAND_SPACES", "Command", "HandOperator", "RobotState", "World", "finite_vector"]
+__all__ = ["COMMAND_SPACES", "Command", "HandOperator", "RobotLinkError", "RobotState", "World", "finite_vector"]
 
-CommandSpace = Literal["joint_velocity", "effort"]
 COMMAND_SPACES: tuple[str, ...] = ("joint_velocity", "effort")
+
+
+class RobotLinkError(CoassistError, ConnectionError):
+    """The link to a robot failed: its driver stopped answering, its state went stale, or its
+    controller stopped taking commands. Any world's :meth:`World.read` and :meth:`World.apply`
+    raise it (or a subclass); the loop ends the run with ``"link_lost"`` and stops the arm.
+
+    A ``ConnectionError``, so a loop can catch it without importing any world.
+    """
 
 
 @dataclass(slots=True)
@@ -115,11 +124,11 @@ class World(Protocol):
     realtime: bool
 
     def read(self) -> RobotState:
-        """The state at the start of the current period (cheap; no waiting)."""
+        """The state at the start of the current period (cheap; no waiting); :class:`RobotLinkError` when the link is lost."""
         ...
 
     def apply(self, command: Command) -> None:
-        """Send ``command`` and advance to the next period (simulate it, or wait for it)."""
+        """Send ``command`` and advance to the next period (simulate it, or wait for it); :class:`RobotLinkError` when the link is lost."""
         ...
 
     def stop(self) -> None:

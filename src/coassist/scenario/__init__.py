@@ -5,7 +5,8 @@ See docs/architecture.md, *The scenario*. The point-mass world (:mod:`coassist.s
 worlds (:mod:`coassist.robot`) and the page (:mod:`coassist.play`) all draw their trials from here.
 """
 
-from coassist.scenario.intent_source import ConstantVelocityIntent, NominalIntent, OracleIntent, load_intent_source
+from coassist.scenario.constant_velocity import ConstantVelocityIntent
+from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source
 from coassist.scenario.objects import OBJECTS, CarriedObject, ForceSensor, get_object
 from coassist.scenario.operator import (
     AUTHOR,
@@ -15,6 +16,7 @@ from coassist.scenario.operator import (
     intent_trajectory,
     operator_profile,
 )
+from coassist.scenario.reference_intents import NominalIntent, OracleIntent
 from coassist.scenario.seeds import task_rng, trial_rngs
 from coassist.scenario.tasks import (
     OBSTACLES,
@@ -30,6 +32,7 @@ from coassist.scenario.tasks import (
 
 __all__ = [
     "AUTHOR",
+    "INTENT_SOURCES",
     "OBJECTS",
     "OBSTACLES",
     "TASK_KINDS",

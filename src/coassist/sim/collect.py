@@ -11,7 +11,7 @@ from pathlib import Path
 from coassist._checks import check_int
 from coassist.data import DatasetWriter
 from coassist.data.store import FORMAT_VERSION, MANIFEST_NAME, digest
-from coassist.interfaces import NAMED_INTENTS
+from coassist.scenario.intent_registry import NAMED_INTENTS
 from coassist.sim.world import SubmittedTrials, TrialSpec, run_trials
 
 

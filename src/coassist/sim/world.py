@@ -7,7 +7,7 @@ Every tick k (t = k·dt, dt = the controller model's, 0.008 s in the presets):
    :mod:`coassist.scenario.objects`); the planner gives the nominal reference;
 2. the intent source predicts the operator's positions for k+1 … k+H from the last
    ``history`` samples of [pose, velocity, wrench, reference]
-   (:mod:`coassist.scenario.intent_source`), and the world turns them into ref_h;
+   (:mod:`coassist.scenario.intent_registry`), and the world turns them into ref_h;
 3. the controller gives the robot effort u_r(k) = ``controller.step(z, ref_h, ref_r, w)``
    with z = [x − x0; v], x0 the start point (refs are shifted the same way);
 4. the operator's arm gives the hand force u_h(k) (eq. 4.1 with delay, adaptation and
@@ -62,7 +62,7 @@ from coassist._progress import progress_bar
 from coassist.config import THESIS_EVALUATION
 from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
 from coassist.data import Trial
-from coassist.interfaces import NAMED_INTENTS, NETWORK_BACKENDS, IntentSource
+from coassist.interfaces import NETWORK_BACKENDS, IntentSource
 from coassist.model.impedance import ImpedanceModel
 from coassist.runtime.episode import (
     ARRIVE_RADIUS,
@@ -81,9 +81,10 @@ from coassist.runtime.lockstep import run_loops
 from coassist.runtime.loop import LoopLog
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.wrench import WrenchPipeline
-from coassist.scenario.intent_source import NominalIntent, shared_intent_source
+from coassist.scenario.intent_registry import NAMED_INTENTS, shared_intent_source
 from coassist.scenario.objects import CarriedObject, ForceSensor, get_object
 from coassist.scenario.operator import OperatorProfile, operator_profile
+from coassist.scenario.reference_intents import NominalIntent
 from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, Task, task_for_seed
 from coassist.sim.lockstep import fast_path_eligible, run_point_mass_lockstep
 

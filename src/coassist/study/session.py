@@ -216,7 +216,7 @@ class StudySession(PlaySession):
     def _source(self, intent: str):
         """The intent source (and, paced, its real-time predictor) of ``intent``, loaded once."""
         from coassist.interfaces import FEATURES
-        from coassist.scenario.intent_source import load_intent_source
+        from coassist.scenario.intent_registry import load_intent_source
 
         if intent not in self._sources:
             H = int(self.preset.game.horizon)

@@ -1,4 +1,4 @@
-"""The learned intent sources (coassist.experiments.intent_sources): each trains on one torch
+"""The learned intent sources (coassist.experiments.source_training): each trains on one torch
 thread in a worker process, so how many train at a time does not change a single weight."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from dataclasses import replace
 import pytest
 from safetensors.numpy import load_file
 
-from coassist.experiments.intent_sources import seed_names, train_sources
 from coassist.experiments.pipeline import ITERATION_TASKS, REPRODUCE_PRESETS, Workspace
+from coassist.experiments.source_training import seed_names, train_sources
 
 
 @pytest.fixture(scope="module")

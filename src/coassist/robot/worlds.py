@@ -1,0 +1,165 @@
+"""The arm worlds, one entry each, and what an arm world offers the drive.
+
+:data:`WORLDS` holds every world ``coassist drive`` (``--world``), ``coassist ros2``,
+``coassist play --drive`` and :class:`~coassist.robot.drive.DriveConfig` accept; each entry
+names the function that builds the world (an entry point, imported only then: a world whose
+extra is not installed is still listed), the arms it drives, and what it needs::
+
+    world    builds                        arms          needs
+    mujoco   MujocoUR5World/MujocoArmWorld  ur5, panda    the robot extra (MuJoCo physics, the simulated operator)
+    ur       URRTDEWorld                    ur5           --host (the robot's IP address), the robot extra (ur-rtde)
+    franka   FrankaWorld                    panda, fr3    --host (the FCI address), the franka extra (franky)
+    ros2     Ros2World                      ur5           the ros2 extra (rclpy): ros2_control's topics
+
+Every world is a :class:`~coassist.runtime.world.World` (read / apply / stop / close, its
+period, its joints); :class:`ArmWorld` is what the drive needs of an arm beyond that (its
+kinematics, the payload the wrench pipeline removes, whether its sensor is noise free), and
+:class:`HandWorld` what a world with a simulated handle offers (the drive puts the simulated
+operator's hand on it). The drive asks ``isinstance(world, ArmWorld)`` once and then calls
+those members; it does not probe a world's attributes.
+
+docs/architecture.md, *Add a world*, is the recipe: one module with the world class and its
+``build_world(request: WorldRequest)``, one line here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from coassist.registry import Registry, load_entry_point
+from coassist.runtime.world import HandOperator, World
+
+__all__ = ["WORLDS", "ArmWorld", "HandWorld", "WorldEntry", "WorldRequest", "build_world", "missing_members"]
+
+
+@runtime_checkable
+class ArmWorld(World, Protocol):
+    """What the drive needs of an arm world besides :class:`~coassist.runtime.world.World`'s members.
+
+    noise_free_sensor : True when the F/T reading repeats exactly while the push is constant
+        (a noise-free simulated sensor): the wrench pipeline's frozen-sensor check would trip
+        on it, so the drive switches that check off.
+    """
+
+    noise_free_sensor: bool
+
+    def kinematics(self) -> Any:
+        """The arm's kinematics with this world's TCP, for the tick's eq. 3.6: an
+        :class:`~coassist.robot.kinematics.ArmKinematics`, or a
+        :class:`~coassist.robot.arms.NullSpacePosture` on a redundant arm."""
+        ...
+
+    def tool_mass_and_com(self) -> tuple[float, np.ndarray]:
+        """The payload below the sensor that the wrench pipeline removes: mass [kg] and centre
+        of mass (3,) in the sensor frame [m]; (0.0, zeros) where the robot's controller
+        removes it itself."""
+        ...
+
+
+@runtime_checkable
+class HandWorld(Protocol):
+    """A world with a simulated handle: the drive puts the (simulated) operator's hand on it.
+
+    operator : the hand the world asks for a wrench during its physics (None: nobody holds it).
+    """
+
+    operator: HandOperator | None
+
+    def hand_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The handle's pose (6,) and twist (6,) in the base frame."""
+        ...
+
+
+def missing_members(world: object, protocol: type) -> list[str]:
+    """The members of ``protocol`` (a Protocol class) that ``world`` lacks, for the error that names them."""
+    names = set()
+    for klass in protocol.__mro__:
+        if klass is object or klass is Protocol or klass.__module__ == "typing":
+            continue
+        names |= {n for n in getattr(klass, "__annotations__", {}) if not n.startswith("_")}
+        names |= {n for n, v in vars(klass).items() if callable(v) and not n.startswith("_")}
+    return sorted(n for n in names if not hasattr(world, n))
+
+
+@dataclass(frozen=True)
+class WorldRequest:
+    """What a world's builder gets: the run's arm, tool, rate and seed, where the TCP starts, the host.
+
+    robot : the arm (one of the entry's ``arms``).  object : the carried object.
+    rate_hz : the control rate [Hz].  seed : the run's seed (a simulated sensor's noise).
+    start : (3,) where a simulated TCP starts [m] (a real arm starts where it is).
+    host : the robot's address, or None.  view : open a viewer (MuJoCo).
+    realtime : pace a simulated world to the wall clock (a viewer, a real-time predictor).
+    """
+
+    robot: str
+    object: str
+    rate_hz: int
+    seed: int
+    start: tuple[float, float, float]
+    host: str | None = None
+    view: bool = False
+    realtime: bool = False
+
+
+@dataclass(frozen=True)
+class WorldEntry:
+    """One world the drive runs in.
+
+    build : entry point ``"package.module:function"`` of ``function(request: WorldRequest) -> ArmWorld``.
+    arms : the arms it drives (:data:`coassist.robot.arms.ARMS`); the first is its default.
+    summary : what it is, a phrase (the command line's help).
+    simulated : the simulated operator holds the handle (and the oracle may be used); a
+        run is deterministic for a seed. Otherwise a person does, on a real arm.
+    host : what ``--host`` is for this world ("the robot's IP address"), None when it takes none.
+    extras : the optional dependency groups it needs (``pip install 'coassist[<extra>]'``).
+    source : the trials' ``TrialMeta.source`` (where the data came from).
+    """
+
+    build: str
+    arms: tuple[str, ...]
+    summary: str
+    simulated: bool
+    host: str | None
+    extras: tuple[str, ...]
+    source: str
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.build, str) or self.build.count(":") != 1:
+            raise ValueError(f"WorldEntry.build must be 'package.module:function', got {self.build!r}")
+        if not self.arms or not all(isinstance(a, str) and a for a in self.arms):
+            raise ValueError(f"WorldEntry.arms must be one or more arm names, got {self.arms!r}")
+
+
+#: The worlds (module docstring), in the order the help lists them.
+WORLDS: Registry[WorldEntry] = Registry("world", {
+    "mujoco": WorldEntry("coassist.robot.mujoco_world:build_world", ("ur5", "panda"), "an arm in MuJoCo physics", simulated=True, host=None, extras=("robot",), source="mujoco"),
+    "ur": WorldEntry("coassist.robot.ur_rtde_world:build_world", ("ur5",), "a real UR5 through ur-rtde", simulated=False, host="the robot's IP address", extras=("robot",), source="ur5"),
+    "franka": WorldEntry("coassist.robot.franka_world:build_world", ("panda", "fr3"), "a Franka Panda/FR3 through franky", simulated=False, host="the robot's FCI address", extras=("franka",), source="franka"),
+    "ros2": WorldEntry("coassist.robot.ros2_world:build_world", ("ur5",), "a UR5 through ros2_control's topics, set by coassist ros2", simulated=False, host=None, extras=("ros2", "robot"), source="ur5"),
+})  # fmt: skip
+
+
+def build_world(name: str, request: WorldRequest) -> ArmWorld:
+    """The world ``name`` of :data:`WORLDS` for ``request``; ValueError naming what is missing
+    (an arm it does not drive, a host it needs)."""
+    entry = WORLDS[name]
+    if request.robot not in entry.arms:
+        raise ValueError(f"the {name} world drives {', '.join(entry.arms)}, not {request.robot!r}")
+    if entry.host is not None and not request.host:
+        raise ValueError(f"the {name} world needs --host ({entry.host})")
+    return load_entry_point(entry.build)(request)
+
+
+def world_choices() -> str:
+    """What ``--world`` may be, for the help: ``"mujoco (an arm in MuJoCo physics) | ur (…) | …"``."""
+    return " | ".join(f"{name} ({entry.summary})" for name, entry in WORLDS.items())
+
+
+def arm_choices() -> str:
+    """The arms of each world, for ``--robot``'s help: ``"ur5 or panda (--world mujoco), ur5 (ur), …"``."""
+    parts = [f"{' or '.join(entry.arms)} ({name})" for name, entry in WORLDS.items()]
+    return ", ".join(parts)
