@@ -41,8 +41,8 @@ LEARNED = {"ridge": ("linear", "tool"), "ridge-intent": ("linear", "intent"), "l
            "lstm-hand-alone": (None, "hand_alone"), "lstm-intent": (None, "intent")}  # fmt: skip
 #: The application's intent source (module docstring). On the validation seeds (application_seed(50000, j)
 #: and (60000, j), 24 trials per object, the arbitrated controller; docs/precision.md) the calibrated
-#: path hypotheses got 88 / 91 % of the oracle's force saving and 69 / 72 % of its overshoot reduction
-#: (board / heavy), the LSTM+FC on the intent label 88 / 90 % and 0 / −10 %.
+#: path hypotheses got 87 / 92 % of the oracle's force saving and 69 / 72 % of its overshoot reduction
+#: (board / heavy), the LSTM+FC on the intent label 87 / 90 % and −3 / −12 %.
 APPLICATION_SOURCE = "paths"
 
 
