@@ -68,8 +68,11 @@ def train_small_model(folder: Path) -> str:
     from coassist.intent.training import MODEL_PRESETS, train_model, write_model
     from coassist.sim.world import TrialSpec, run_spec
 
-    specs = [TrialSpec(task=t, seed=s, user=s % 3, preset="thesis-evaluation-dm") for t in ("linear", "curved", "sinusoidal")
-             for s in (900, 901)]  # fmt: skip
+    specs = [
+        TrialSpec(task=t, seed=s, user=s % 3, preset="thesis-evaluation-dm")
+        for t in ("linear", "curved", "sinusoidal")
+        for s in (900, 901)
+    ]
     labeled = [LabeledTrial(f"B0/trial_{i:02d}", "B0", run_spec(spec)) for i, spec in enumerate(specs)]
     preset = MODEL_PRESETS.lookup("lstm")
     write_model(train_model(labeled, preset, replace(preset.train, epochs=1, threads=1)), folder)
@@ -126,7 +129,9 @@ def dataset_seconds(specs, workers: int, lockstep: bool, repeats: int, kept_pool
     return np.asarray(out)
 
 
-def sweep_calls(model_path: str, batches: Sequence[int], calls: int) -> list[tuple[int, np.ndarray, np.ndarray, float, float]]:
+def sweep_calls(
+    model_path: str, batches: Sequence[int], calls: int
+) -> list[tuple[int, np.ndarray, np.ndarray, float, float]]:
     """Seconds of one network call per batch size: (B, torch, ONNX Runtime, and each one's
     largest |row in the batch − the window alone|), ``calls`` each, on the same random
     scaled windows, one thread."""
@@ -210,13 +215,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", type=int, default=2, help="processes for the dataset runs")
     parser.add_argument("--repeats", type=int, default=3, help="runs of the lockstep and nominal datasets")
-    parser.add_argument("--baseline-repeats", type=int, default=1, help="runs of the per-trial dataset (~1 min each; 0: skip)")
+    parser.add_argument(
+        "--baseline-repeats", type=int, default=1, help="runs of the per-trial dataset (~1 min each; 0: skip)"
+    )
     parser.add_argument("--trials", type=int, default=20, help="trials per task")
     parser.add_argument("--model", default=None, help="a model folder (default: train a small lstm-preset one)")
     parser.add_argument("--ticks", type=int, default=300, help="ticks timed in the network comparison")
     parser.add_argument("--calls", type=int, default=200, help="calls per batch size in the sweep")
-    parser.add_argument("--cell-model", default=None, help="a model folder for the cells section's assistive cells "
-                        "(the main job's lstm-intent; default: --model, or the small one trained here)")  # fmt: skip
+    parser.add_argument(
+        "--cell-model",
+        default=None,
+        help="a model folder for the cells section's assistive cells "
+        "(the main job's lstm-intent; default: --model, or the small one trained here)",
+    )
     parser.add_argument("--only", default="network,datasets,groups,sweep,cells", help="sections to run (docstring)")
     args = parser.parse_args()
     only = {name.strip() for name in args.only.split(",") if name.strip()}
@@ -234,20 +245,28 @@ def main() -> None:
         if "sweep" in only:
             print(f"\none network call, one thread, {args.calls} calls per batch size (random scaled windows):")
             for b, t_torch, t_onnx, d_torch, d_onnx in sweep_calls(model, (1, 9, 18, 30, 60), args.calls):
-                print(f"  B = {b:2d}   torch median {np.median(t_torch) * 1e3:6.2f} ms  p99 {np.percentile(t_torch, 99) * 1e3:6.2f} ms"
-                      f"   ONNX Runtime median {np.median(t_onnx) * 1e3:6.2f} ms  p99 {np.percentile(t_onnx, 99) * 1e3:6.2f} ms"
-                      f"   torch / ONNX {np.median(t_torch) / np.median(t_onnx):.2f}x"
-                      f"   rows vs alone: torch {d_torch:.1e}, ONNX {d_onnx:.1e}")  # fmt: skip
+                print(
+                    f"  B = {b:2d}   torch median {np.median(t_torch) * 1e3:6.2f} ms  p99 {np.percentile(t_torch, 99) * 1e3:6.2f} ms"
+                    f"   ONNX Runtime median {np.median(t_onnx) * 1e3:6.2f} ms  p99 {np.percentile(t_onnx, 99) * 1e3:6.2f} ms"
+                    f"   torch / ONNX {np.median(t_torch) / np.median(t_onnx):.2f}x"
+                    f"   rows vs alone: torch {d_torch:.1e}, ONNX {d_onnx:.1e}"
+                )
         if "cells" in only:
             from coassist.experiments.application import cell_options
             from coassist.experiments.pipeline import ReproduceConfig
 
             cfg = ReproduceConfig()
             cell_model = args.cell_model or model
-            cells = [("manual", "nominal"), ("cooperative", "nominal"), ("cooperative", cell_model),
-                     ("cooperative-arbitrated", cell_model)]  # fmt: skip
-            print(f"\none application cell (board, {len(cfg.application_users) * cfg.application_trials} trials), this "
-                  f"process, CPU s, the lower of {args.repeats} runs: two groups of 9 against one of 18")
+            cells = [
+                ("manual", "nominal"),
+                ("cooperative", "nominal"),
+                ("cooperative", cell_model),
+                ("cooperative-arbitrated", cell_model),
+            ]
+            print(
+                f"\none application cell (board, {len(cfg.application_users) * cfg.application_trials} trials), this "
+                f"process, CPU s, the lower of {args.repeats} runs: two groups of 9 against one of 18"
+            )
             for controller, intent in cells:
                 options = cell_options(cfg, 0, "board", controller, intent)
                 options.pop("groups")
@@ -256,8 +275,15 @@ def main() -> None:
                 print(f"  {label:34s} two groups {two:6.2f} s   one group {one:6.2f} s   ratio {one / two:.2f}")
         if "network" in only:
             network_section(model, B, args.ticks)
-        common = dict(controller="cooperative", users=(0,), tasks=ITERATION_TASKS, objects=("handle",),
-                      trials=args.trials, seed=1000, preset="thesis-evaluation-dm")  # fmt: skip
+        common = dict(
+            controller="cooperative",
+            users=(0,),
+            tasks=ITERATION_TASKS,
+            objects=("handle",),
+            trials=args.trials,
+            seed=1000,
+            preset="thesis-evaluation-dm",
+        )
         with_model = dataset_specs(intent=model, **common)
         nominal = dataset_specs(intent="nominal", **common)
         if "groups" in only:
@@ -270,11 +296,16 @@ def main() -> None:
 def network_section(model: str, B: int, ticks: int) -> None:
     on_onnx, batched, alone = network_ticks(model, B, ticks)
     print(f"\nnetwork work per tick for {B} trials (one worker's group), {ticks} ticks:")
-    for name, x in (("lockstep, one batched call, ONNX Runtime", on_onnx), ("lockstep, one batched call, torch", batched),
-                    (f"per trial, {B} torch calls", alone)):  # fmt: skip
+    for name, x in (
+        ("lockstep, one batched call, ONNX Runtime", on_onnx),
+        ("lockstep, one batched call, torch", batched),
+        (f"per trial, {B} torch calls", alone),
+    ):
         print(f"  {name:42s} median {np.median(x) * 1e3:6.2f} ms   p99 {np.percentile(x, 99) * 1e3:6.2f} ms")
-    print(f"  speed-up (median): batched torch / ONNX {np.median(batched) / np.median(on_onnx):.2f}x, "
-          f"per-trial torch / batched torch {np.median(alone) / np.median(batched):.1f}x")
+    print(
+        f"  speed-up (median): batched torch / ONNX {np.median(batched) / np.median(on_onnx):.2f}x, "
+        f"per-trial torch / batched torch {np.median(alone) / np.median(batched):.1f}x"
+    )
 
 
 def groups_section(with_model, nominal, workers: int, repeats: int) -> None:
@@ -282,21 +313,34 @@ def groups_section(with_model, nominal, workers: int, repeats: int) -> None:
         group = specs[::workers]
         print(f"\none worker's lockstep group, {label} ({len(group)} trials), in this process:")
         cpu_of = {}
-        ways = [(False, "torch"), (True, "torch"), (True, "onnx")] if label == "model in the loop" else [(False, "torch"), (True, "torch")]
+        ways = (
+            [(False, "torch"), (True, "torch"), (True, "onnx")]
+            if label == "model in the loop"
+            else [(False, "torch"), (True, "torch")]
+        )
         for arrays, network in ways:
-            g_wall, g_cpu, g_ticks, g_trial_ticks = group_seconds([replace(s, network=network) for s in group],
-                                                                  repeats, arrays)  # fmt: skip
+            g_wall, g_cpu, g_ticks, g_trial_ticks = group_seconds(
+                [replace(s, network=network) for s in group], repeats, arrays
+            )
             cpu_of[arrays, network] = np.median(g_cpu)
             name = "as arrays (coassist.sim.lockstep)" if arrays else "run_loops over per-trial objects"
             if label == "model in the loop":
                 name += f", network on {network}"
             print(f"  {name}: {g_ticks} ticks, {g_trial_ticks} trial-ticks")
             for what, x in (("wall", g_wall), ("CPU", g_cpu)):
-                print(f"    {what:4s} median {np.median(x):6.2f} s   p99 {np.percentile(x, 99):6.2f} s   "
-                      f"{np.median(x) / g_trial_ticks * 1e6:5.1f} us per trial-tick   {np.median(x) / g_ticks * 1e3:5.2f} ms per tick")
-        print(f"  speed-up (median CPU): arrays / run_loops {cpu_of[False, 'torch'] / cpu_of[True, 'torch']:.2f}x"
-              + (f", ONNX / torch {cpu_of[True, 'torch'] / cpu_of[True, 'onnx']:.2f}x, both "
-                 f"{cpu_of[False, 'torch'] / cpu_of[True, 'onnx']:.2f}x" if (True, "onnx") in cpu_of else ""))
+                print(
+                    f"    {what:4s} median {np.median(x):6.2f} s   p99 {np.percentile(x, 99):6.2f} s   "
+                    f"{np.median(x) / g_trial_ticks * 1e6:5.1f} us per trial-tick   {np.median(x) / g_ticks * 1e3:5.2f} ms per tick"
+                )
+        print(
+            f"  speed-up (median CPU): arrays / run_loops {cpu_of[False, 'torch'] / cpu_of[True, 'torch']:.2f}x"
+            + (
+                f", ONNX / torch {cpu_of[True, 'torch'] / cpu_of[True, 'onnx']:.2f}x, both "
+                f"{cpu_of[False, 'torch'] / cpu_of[True, 'onnx']:.2f}x"
+                if (True, "onnx") in cpu_of
+                else ""
+            )
+        )
 
 
 def datasets_section(with_model, nominal, args) -> None:
@@ -317,19 +361,25 @@ def datasets_section(with_model, nominal, args) -> None:
             return "not run (--baseline-repeats 0)"
         return f"median {np.median(x):6.1f} s   p99 {np.percentile(x, 99):6.1f} s   ({x.size} runs)"
 
-    print(f"\none {n}-trial dataset ({', '.join(ITERATION_TASKS)} × {args.trials}, thesis-evaluation-dm) on {args.workers} workers:")
+    print(
+        f"\none {n}-trial dataset ({', '.join(ITERATION_TASKS)} × {args.trials}, thesis-evaluation-dm) on {args.workers} workers:"
+    )
     print(f"  model in the loop, per trial              {fmt(per_trial)}")
     print(f"  model in the loop, lockstep               {fmt(lock)}   (target <= 10 s on 2 cores)")
     print(f"  model in the loop, lockstep, kept pool    {fmt(lock_kept)}")
-    print(f"    the same, network on torch              {fmt(lock_kept_torch)}   "
-          f"(x{np.median(lock_kept_torch) / np.median(lock_kept):.2f} the default's time)")
+    print(
+        f"    the same, network on torch              {fmt(lock_kept_torch)}   "
+        f"(x{np.median(lock_kept_torch) / np.median(lock_kept):.2f} the default's time)"
+    )
     print(f"  nominal intent, per trial                 {fmt(nom)}")
     print(f"  nominal intent, lockstep                  {fmt(nom_lock)}")
     print(f"  nominal intent, lockstep, kept pool       {fmt(nom_kept)}")
     speed_up = f"{np.median(per_trial) / np.median(lock):.1f}x" if per_trial.size else "n/a"
-    print(f"  speed-up (median)                         with a model {speed_up}, nominal "
-          f"{np.median(nom) / np.median(nom_lock):.1f}x; a kept pool saves {np.median(lock) - np.median(lock_kept):.1f} s; "
-          f"lockstep with a model / nominal {np.median(lock) / np.median(nom_lock):.2f}")
+    print(
+        f"  speed-up (median)                         with a model {speed_up}, nominal "
+        f"{np.median(nom) / np.median(nom_lock):.1f}x; a kept pool saves {np.median(lock) - np.median(lock_kept):.1f} s; "
+        f"lockstep with a model / nominal {np.median(lock) / np.median(nom_lock):.2f}"
+    )
 
 
 if __name__ == "__main__":

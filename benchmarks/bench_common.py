@@ -11,13 +11,16 @@ def machine_line() -> str:
     return f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, python {platform.python_version()}"
 
 
-def network_forward_flops(n_features: int, n_outputs: int, lstm_layers: int, hidden: int, fc, steps: int,
-                          skip_inputs: int = 0) -> tuple[float, float]:  # fmt: skip
+def network_forward_flops(
+    n_features: int, n_outputs: int, lstm_layers: int, hidden: int, fc, steps: int, skip_inputs: int = 0
+) -> tuple[float, float]:
     """Multiply-add FLOPs of one window's forward pass through an ``IntentNet`` in its matrix
     products, (LSTM, head): the LSTM's gates, 4·h·(in + h)·2 per layer and step, over
     ``steps``; the FC head from the last hidden state, and the linear skip (with no LSTM
     the network is the skip alone, ``IntentNet``'s rule). Elementwise work is left out."""
-    lstm = sum(4 * hidden * ((n_features if layer == 0 else hidden) + hidden) * 2 for layer in range(lstm_layers)) * steps
+    lstm = (
+        sum(4 * hidden * ((n_features if layer == 0 else hidden) + hidden) * 2 for layer in range(lstm_layers)) * steps
+    )
     widths = [hidden, *fc, n_outputs] if lstm_layers else []
     head = sum(2 * a * b for a, b in zip(widths, widths[1:])) + 2 * skip_inputs * n_outputs
     return float(lstm), float(head)

@@ -49,8 +49,15 @@ def network_flops(meta: dict) -> tuple[float, float]:
     """(LSTM, head) forward FLOPs per window of a saved model's network (its model.json)."""
     net, window = meta["network"], meta["window"]
     steps = int(window["history"]) // int(window["decimation"])
-    return network_forward_flops(int(net["n_features"]), int(net["n_outputs"]), int(net["lstm_layers"]),
-                                 int(net["hidden"]), net["fc"], steps, int(net.get("skip_inputs") or 0))  # fmt: skip
+    return network_forward_flops(
+        int(net["n_features"]),
+        int(net["n_outputs"]),
+        int(net["lstm_layers"]),
+        int(net["hidden"]),
+        net["fc"],
+        steps,
+        int(net.get("skip_inputs") or 0),
+    )
 
 
 def training_flops(meta: dict) -> float:
@@ -69,9 +76,17 @@ def _default_meta() -> dict:
     preset = MODEL_PRESETS.lookup("default")
     cfg = preset.network(2)
     w = preset.window
-    return {"network": {"n_features": cfg.n_features, "n_outputs": cfg.n_outputs, "lstm_layers": cfg.lstm_layers,
-                        "hidden": cfg.hidden, "fc": list(cfg.fc), "skip_inputs": cfg.skip_inputs},
-            "window": {"history": w.history, "decimation": w.decimation, "horizon": w.horizon}}  # fmt: skip
+    return {
+        "network": {
+            "n_features": cfg.n_features,
+            "n_outputs": cfg.n_outputs,
+            "lstm_layers": cfg.lstm_layers,
+            "hidden": cfg.hidden,
+            "fc": list(cfg.fc),
+            "skip_inputs": cfg.skip_inputs,
+        },
+        "window": {"history": w.history, "decimation": w.decimation, "horizon": w.horizon},
+    }
 
 
 def run_work(run: Path) -> tuple[float, float, int, int, dict[str, float]]:
@@ -137,6 +152,7 @@ def forward_rate(batch: int = 30, calls: int = 200) -> tuple[float, str]:
 
         call, backend = OnnxNetwork(net, preset.window.steps, 1), "ONNX Runtime"
     except ImportError:
+
         def call(a):
             with torch.inference_mode():
                 return net(torch.from_numpy(a)).numpy()
@@ -167,23 +183,33 @@ def main() -> None:
     ceiling = gemm_ceiling(torch.device("cpu"))
     train_rate = training_rate()
     fwd_rate, backend = forward_rate()
-    print(f"run {args.run}: {windows:,} windows trained, {train_flops / 1e12:.2f} TFLOP; "
-          f"{ticks:,} trial-ticks with a network in the loop, {fwd_flops / 1e12:.2f} TFLOP")  # fmt: skip
+    print(
+        f"run {args.run}: {windows:,} windows trained, {train_flops / 1e12:.2f} TFLOP; "
+        f"{ticks:,} trial-ticks with a network in the loop, {fwd_flops / 1e12:.2f} TFLOP"
+    )
     top = sorted(by_model.items(), key=lambda kv: -kv[1])[:5]
     print("  most training arithmetic: " + ", ".join(f"{n} {f / 1e12:.2f}" for n, f in top) + " TFLOP")
-    print(f"one thread: 1024^2 float32 matrix product {ceiling:.0f} GFLOP/s; default-preset training step "
-          f"{train_rate:.1f} GFLOP/s; forward at batch 30 ({backend}) {fwd_rate:.1f} GFLOP/s")  # fmt: skip
+    print(
+        f"one thread: 1024^2 float32 matrix product {ceiling:.0f} GFLOP/s; default-preset training step "
+        f"{train_rate:.1f} GFLOP/s; forward at batch 30 ({backend}) {fwd_rate:.1f} GFLOP/s"
+    )
     at_ceiling = (train_flops + fwd_flops) / (ceiling * 1e9)
     at_kernels = train_flops / (train_rate * 1e9) + fwd_flops / (fwd_rate * 1e9)
-    print(f"core-seconds of the network arithmetic: {at_ceiling:.0f} at the ceiling, {at_kernels:.0f} at the kernels' rates")
-    print(f"wall-clock floor on {args.cores} cores (that arithmetic only, perfectly parallel): "
-          f"{at_ceiling / args.cores:.0f} s at the ceiling, {at_kernels / args.cores:.0f} s at the kernels' rates")  # fmt: skip
+    print(
+        f"core-seconds of the network arithmetic: {at_ceiling:.0f} at the ceiling, {at_kernels:.0f} at the kernels' rates"
+    )
+    print(
+        f"wall-clock floor on {args.cores} cores (that arithmetic only, perfectly parallel): "
+        f"{at_ceiling / args.cores:.0f} s at the ceiling, {at_kernels / args.cores:.0f} s at the kernels' rates"
+    )
     summary = args.run / "summary.json"
     if summary.is_file():
         s = json.loads(summary.read_text("utf-8"))
         cpu = sum(v["main"] + v["workers"] for v in s.get("stage_cpu_seconds", {}).values())
-        print(f"the run itself: {s.get('total_seconds', float('nan')):.0f} s wall, {cpu:.0f} CPU-s "
-              f"(the network arithmetic at the kernels' rates: {at_kernels / cpu:.0%} of it)")  # fmt: skip
+        print(
+            f"the run itself: {s.get('total_seconds', float('nan')):.0f} s wall, {cpu:.0f} CPU-s "
+            f"(the network arithmetic at the kernels' rates: {at_kernels / cpu:.0%} of it)"
+        )
 
 
 if __name__ == "__main__":

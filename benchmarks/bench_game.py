@@ -46,7 +46,17 @@ from coassist.model import ImpedanceModel  # noqa: E402
 def build_game(n: int, horizon: int, alpha: float = 0.8) -> CooperativeGame:
     model = ImpedanceModel(np.full(n, 10.0), np.full(n, 100.0), 0.0, 0.008)
     Q = np.diag([1.0] * n + [1e-4] * n)
-    return CooperativeGame(model, Q_hh=Q, Q_hr=0.0, Q_rh=0.0, Q_rr=Q, R_h=np.full(n, 5e-4), R_r=np.full(n, 5e-4), alpha=alpha, horizon=horizon)
+    return CooperativeGame(
+        model,
+        Q_hh=Q,
+        Q_hr=0.0,
+        Q_rh=0.0,
+        Q_rr=Q,
+        R_h=np.full(n, 5e-4),
+        R_r=np.full(n, 5e-4),
+        alpha=alpha,
+        horizon=horizon,
+    )
 
 
 def naive_tick(game: CooperativeGame, z, ref_h, ref_r) -> tuple[np.ndarray, np.ndarray]:
@@ -82,7 +92,9 @@ def main() -> None:
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     rows = []
-    print(f"{'case':<14}{'solve med':>11}{'p99 [µs]':>10}{'naive med':>12}{'p99 [µs]':>11}{'ratio (med)':>13}{'ratio (p99)':>13}")
+    print(
+        f"{'case':<14}{'solve med':>11}{'p99 [µs]':>10}{'naive med':>12}{'p99 [µs]':>11}{'ratio (med)':>13}{'ratio (p99)':>13}"
+    )
     for n in (2, 6):
         for horizon in (5, 20, 50):
             game = build_game(n, horizon)
@@ -108,32 +120,51 @@ def main() -> None:
                 slow[i] = clock() - t0
             f_med, f_p99 = percentiles(fast)
             s_med, s_p99 = percentiles(slow)
-            row = dict(n_dof=n, horizon=horizon, solve_median_us=f_med, solve_p99_us=f_p99, naive_median_us=s_med,
-                       naive_p99_us=s_p99, ratio_median=s_med / f_med, ratio_p99=s_p99 / f_p99)
+            row = dict(
+                n_dof=n,
+                horizon=horizon,
+                solve_median_us=f_med,
+                solve_p99_us=f_p99,
+                naive_median_us=s_med,
+                naive_p99_us=s_p99,
+                ratio_median=s_med / f_med,
+                ratio_p99=s_p99 / f_p99,
+            )
             rows.append(row)
-            print(f"{n}-DOF Np={horizon:<5}{f_med:>11.2f}{f_p99:>10.2f}{s_med:>12.0f}{s_p99:>11.0f}{s_med / f_med:>13.0f}{s_p99 / f_p99:>13.0f}")
+            print(
+                f"{n}-DOF Np={horizon:<5}{f_med:>11.2f}{f_p99:>10.2f}{s_med:>12.0f}{s_p99:>11.0f}{s_med / f_med:>13.0f}{s_p99 / f_p99:>13.0f}"
+            )
     target = next(r for r in rows if r["n_dof"] == 6 and r["horizon"] == 50)
     print()
-    print(f"6-DOF Np=50: tick p99 {target['solve_p99_us']:.1f} µs (target ≤ 20), "
-          f"{target['ratio_median']:.0f}× faster than naive (target ≥ 1000)")
+    print(
+        f"6-DOF Np=50: tick p99 {target['solve_p99_us']:.1f} µs (target ≤ 20), "
+        f"{target['ratio_median']:.0f}× faster than naive (target ≥ 1000)"
+    )
     print()
     alpha_rows = []
-    print(f"{'gains for a new α':<34}{'rank':>6}{'prep [s]':>10}{'online med':>12}{'p99 [µs]':>10}"
-          f"{'eigen-sum med':>15}{'p99 [µs]':>10}{'fresh med':>11}{'p99 [µs]':>10}{'ratio (p99)':>13}{'max rel diff':>14}  series degrees")
+    print(
+        f"{'gains for a new α':<34}{'rank':>6}{'prep [s]':>10}{'online med':>12}{'p99 [µs]':>10}"
+        f"{'eigen-sum med':>15}{'p99 [µs]':>10}{'fresh med':>11}{'p99 [µs]':>10}{'ratio (p99)':>13}{'max rel diff':>14}  series degrees"
+    )
     for weights in ("thesis", "random"):
         for n, horizon in ((2, 50), (6, 50)):
             alpha_rows.append(bench_alpha(n, horizon, weights, args.alpha_changes, args.fresh_changes))
             r = alpha_rows[-1]
-            print(f"{weights + f' {n}-DOF Np={horizon}':<34}{r['rank']:>6}{r['prepare_s']:>10.2f}{r['online_median_us']:>12.1f}"
-                  f"{r['online_p99_us']:>10.1f}{r['exact_sum_median_us']:>15.1f}{r['exact_sum_p99_us']:>10.1f}"
-                  f"{r['fresh_median_us']:>11.0f}{r['fresh_p99_us']:>10.0f}"
-                  f"{r['fresh_p99_us'] / r['online_p99_us']:>13.0f}{r['max_rel_diff']:>14.1e}  "
-                  f"{r['chebyshev_degrees'] or '-'}" + (f" ({r['exact_stretches']} exact)" if r['exact_stretches'] else ""))
+            print(
+                f"{weights + f' {n}-DOF Np={horizon}':<34}{r['rank']:>6}{r['prepare_s']:>10.2f}{r['online_median_us']:>12.1f}"
+                f"{r['online_p99_us']:>10.1f}{r['exact_sum_median_us']:>15.1f}{r['exact_sum_p99_us']:>10.1f}"
+                f"{r['fresh_median_us']:>11.0f}{r['fresh_p99_us']:>10.0f}"
+                f"{r['fresh_p99_us'] / r['online_p99_us']:>13.0f}{r['max_rel_diff']:>14.1e}  "
+                f"{r['chebyshev_degrees'] or '-'}"
+                + (f" ({r['exact_stretches']} exact)" if r["exact_stretches"] else "")
+            )
     print()
     for weights in ("thesis", "random"):
         t = next(r for r in alpha_rows if r["weights"] == weights and r["n_dof"] == 6)
-        print(f"6-DOF Np=50, {weights} weights: gains for a new α p99 {t['online_p99_us']:.1f} µs (target ≤ 50), "
-              f"fresh {t['fresh_p99_us'] / 1e3:.1f} ms; agreement {t['max_rel_diff']:.1e} (target ≤ 1e-9)")
+        print(
+            f"6-DOF Np=50, {weights} weights: gains for a new α p99 {t['online_p99_us']:.1f} µs (target ≤ 50), "
+            f"fresh {t['fresh_p99_us'] / 1e3:.1f} ms; agreement {t['max_rel_diff']:.1e} (target ≤ 1e-9)"
+        )
     print()
     batch_rows = bench_batch(args.batch_calls)
     print()
@@ -142,7 +173,17 @@ def main() -> None:
     controller_rows = bench_controllers(args.controllers)
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({"tick": rows, "alpha": alpha_rows, "batch": batch_rows, "steps": step_rows, "controller": controller_rows}, fh, indent=2)
+            json.dump(
+                {
+                    "tick": rows,
+                    "alpha": alpha_rows,
+                    "batch": batch_rows,
+                    "steps": step_rows,
+                    "controller": controller_rows,
+                },
+                fh,
+                indent=2,
+            )
 
 
 def loop_solve_batch(game: CooperativeGame, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray):
@@ -163,7 +204,9 @@ def bench_batch(calls: int, B: int = 30) -> list[dict]:
     row in C) against :func:`loop_solve_batch`; the rows must agree bit for bit."""
     rng = np.random.default_rng(1)
     out = []
-    print(f"{'solve_batch, B = ' + str(B):<22}{'stacked med':>12}{'p99 [µs]':>10}{'loop med':>10}{'p99 [µs]':>10}{'ratio (med)':>13}")
+    print(
+        f"{'solve_batch, B = ' + str(B):<22}{'stacked med':>12}{'p99 [µs]':>10}{'loop med':>10}{'p99 [µs]':>10}{'ratio (med)':>13}"
+    )
     for n, horizon in ((2, 50), (6, 50)):
         game = build_game(n, horizon)
         args = (rng.normal(size=(B, 2 * n)), *rng.normal(size=(2, B, horizon, 2 * n)))
@@ -173,9 +216,20 @@ def bench_batch(calls: int, B: int = 30) -> list[dict]:
         stacked = time_calls(game.solve_batch, args, calls)
         loop = time_calls(loop_solve_batch, (game, *args), calls)
         (s_med, s_p99), (l_med, l_p99) = stacked, loop
-        out.append(dict(n_dof=n, horizon=horizon, batch=B, stacked_median_us=s_med, stacked_p99_us=s_p99,
-                        loop_median_us=l_med, loop_p99_us=l_p99))  # fmt: skip
-        print(f"{f'{n}-DOF Np={horizon}':<22}{s_med:>12.1f}{s_p99:>10.1f}{l_med:>10.1f}{l_p99:>10.1f}{l_med / s_med:>13.1f}")
+        out.append(
+            dict(
+                n_dof=n,
+                horizon=horizon,
+                batch=B,
+                stacked_median_us=s_med,
+                stacked_p99_us=s_p99,
+                loop_median_us=l_med,
+                loop_p99_us=l_p99,
+            )
+        )
+        print(
+            f"{f'{n}-DOF Np={horizon}':<22}{s_med:>12.1f}{s_p99:>10.1f}{l_med:>10.1f}{l_p99:>10.1f}{l_med / s_med:>13.1f}"
+        )
     return out
 
 
@@ -201,7 +255,9 @@ def bench_controllers(fresh_builds: int) -> list[dict]:
         g = (c.controller if hasattr(c, "controller") else c).game.gains
         return np.hstack([g.G_z, g.G_h, g.G_r])
 
-    print(f"{'a controller per trial':<48}{'fresh med':>10}{'p99 [ms]':>10}{'memo med':>10}{'p99 [ms]':>10}{'ratio (med)':>13}")
+    print(
+        f"{'a controller per trial':<48}{'fresh med':>10}{'p99 [ms]':>10}{'memo med':>10}{'p99 [ms]':>10}{'ratio (med)':>13}"
+    )
     out = []
     for preset_name in (COLLECTION_PRESET, APPLICATION_PRESET):
         preset = get_preset(preset_name)
@@ -218,11 +274,23 @@ def bench_controllers(fresh_builds: int) -> list[dict]:
                 memo[i] = time.perf_counter_ns() - t0
             if not np.array_equal(gains(c), gains(reference)):
                 raise SystemExit(f"the memoised {kind} controller's gains differ from a fresh one ({preset_name})")
-            (f_med, f_p99), (m_med, m_p99) = (np.median(fresh) / 1e6, np.percentile(fresh, 99) / 1e6), (
-                np.median(memo) / 1e6, np.percentile(memo, 99) / 1e6)
-            print(f"{kind + ' ' + preset_name:<48}{f_med:>10.1f}{f_p99:>10.1f}{m_med:>10.2f}{m_p99:>10.2f}{f_med / m_med:>13.0f}")
-            out.append(dict(preset=preset_name, kind=kind, fresh_median_ms=f_med, fresh_p99_ms=f_p99,
-                            memo_median_ms=m_med, memo_p99_ms=m_p99))
+            (f_med, f_p99), (m_med, m_p99) = (
+                (np.median(fresh) / 1e6, np.percentile(fresh, 99) / 1e6),
+                (np.median(memo) / 1e6, np.percentile(memo, 99) / 1e6),
+            )
+            print(
+                f"{kind + ' ' + preset_name:<48}{f_med:>10.1f}{f_p99:>10.1f}{m_med:>10.2f}{m_p99:>10.2f}{f_med / m_med:>13.0f}"
+            )
+            out.append(
+                dict(
+                    preset=preset_name,
+                    kind=kind,
+                    fresh_median_ms=f_med,
+                    fresh_p99_ms=f_p99,
+                    memo_median_ms=m_med,
+                    memo_p99_ms=m_p99,
+                )
+            )
     return out
 
 
@@ -243,7 +311,9 @@ def bench_group_steps(calls: int, B: int = 18) -> list[dict]:
     ref_h = rng.normal(size=(B, H, 4)) * 0.02
     ref_r = rng.normal(size=(B, H, 4)) * 0.02 + z[:, None, :]
     w = rng.normal(size=(B, 2)) * 3.0
-    print(f"{'controller steps, B = ' + str(B):<30}{'batched med':>12}{'p99 [µs]':>10}{'loop med':>10}{'p99 [µs]':>10}{'ratio (med)':>13}")
+    print(
+        f"{'controller steps, B = ' + str(B):<30}{'batched med':>12}{'p99 [µs]':>10}{'loop med':>10}{'p99 [µs]':>10}{'ratio (med)':>13}"
+    )
     out = []
     shared = make_controller("cooperative", preset)
     arbitrated = [make_controller("cooperative-arbitrated", preset) for _ in range(B)]
@@ -260,12 +330,22 @@ def bench_group_steps(calls: int, B: int = 18) -> list[dict]:
         for c, row in zip(controllers, zip(z, ref_h, ref_r, w)):
             c.step(*row)
 
-    cases = (("cooperative (shared game)", shared.effort_batch, (z, ref_h, ref_r, w), loop, ([shared] * B,)),
-             ("cooperative-arbitrated", arbitrated_effort_batch, (arbitrated, z, ref_h, ref_r, w), loop, (arbitrated,)))
+    cases = (
+        ("cooperative (shared game)", shared.effort_batch, (z, ref_h, ref_r, w), loop, ([shared] * B,)),
+        ("cooperative-arbitrated", arbitrated_effort_batch, (arbitrated, z, ref_h, ref_r, w), loop, (arbitrated,)),
+    )
     for name, batched, b_args, naive, n_args in cases:
         (b_med, b_p99), (l_med, l_p99) = time_calls(batched, b_args, calls), time_calls(naive, n_args, calls)
-        out.append(dict(controller=name, batch=B, batched_median_us=b_med, batched_p99_us=b_p99,
-                        loop_median_us=l_med, loop_p99_us=l_p99))  # fmt: skip
+        out.append(
+            dict(
+                controller=name,
+                batch=B,
+                batched_median_us=b_med,
+                batched_p99_us=b_p99,
+                loop_median_us=l_med,
+                loop_p99_us=l_p99,
+            )
+        )
         print(f"{name:<30}{b_med:>12.1f}{b_p99:>10.1f}{l_med:>10.1f}{l_p99:>10.1f}{l_med / b_med:>13.1f}")
     return out
 
@@ -285,7 +365,9 @@ def random_weights_game(n: int, horizon: int, alpha: float) -> CooperativeGame:
 
 def bench_alpha(n: int, horizon: int, weights: str, changes: int, fresh_changes: int) -> dict:
     """Online gains for random α ∈ [0.05, 0.95] against a fresh computation, and their agreement."""
-    build = (lambda a: build_game(n, horizon, a)) if weights == "thesis" else (lambda a: random_weights_game(n, horizon, a))
+    build = (
+        (lambda a: build_game(n, horizon, a)) if weights == "thesis" else (lambda a: random_weights_game(n, horizon, a))
+    )
     game = build(0.8)
     clock = time.perf_counter_ns
     t0 = clock()
@@ -312,7 +394,9 @@ def bench_alpha(n: int, horizon: int, weights: str, changes: int, fresh_changes:
         g_fresh = np.hstack([fresh_game.gains.G_z, fresh_game.gains.G_h, fresh_game.gains.G_r])
         worst = max(worst, float(np.abs(g_online - g_fresh).max() / np.abs(g_fresh).max()))
     if worst > 1e-9:
-        raise SystemExit(f"online gains disagree with the fresh computation ({worst:.1e}) for {weights} n={n} Np={horizon}")
+        raise SystemExit(
+            f"online gains disagree with the fresh computation ({worst:.1e}) for {weights} n={n} Np={horizon}"
+        )
     family = game._alpha_family
     e_med = e_p99 = float("nan")  # rank 0: the online path is the exact (affine) formula itself
     if family.rank:
@@ -325,10 +409,22 @@ def bench_alpha(n: int, horizon: int, weights: str, changes: int, fresh_changes:
     o_med, o_p99 = percentiles(online)
     f_med, f_p99 = percentiles(fresh)
     degrees = sorted({p[1].shape[0] - 1 for p in family.pieces if p is not None})
-    return dict(weights=weights, n_dof=n, horizon=horizon, rank=family.rank, prepare_s=prepare_s,
-                online_median_us=o_med, online_p99_us=o_p99, fresh_median_us=f_med, fresh_p99_us=f_p99,
-                exact_sum_median_us=e_med, exact_sum_p99_us=e_p99, chebyshev_degrees=degrees,
-                exact_stretches=sum(p is None for p in family.pieces), max_rel_diff=worst)
+    return dict(
+        weights=weights,
+        n_dof=n,
+        horizon=horizon,
+        rank=family.rank,
+        prepare_s=prepare_s,
+        online_median_us=o_med,
+        online_p99_us=o_p99,
+        fresh_median_us=f_med,
+        fresh_p99_us=f_p99,
+        exact_sum_median_us=e_med,
+        exact_sum_p99_us=e_p99,
+        chebyshev_degrees=degrees,
+        exact_stretches=sum(p is None for p in family.pieces),
+        max_rel_diff=worst,
+    )
 
 
 if __name__ == "__main__":

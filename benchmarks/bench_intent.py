@@ -72,7 +72,9 @@ def random_model(layers: int, hidden: int, fc: tuple[int, ...], decimation: int,
     torch.manual_seed(0)
     net = IntentNet(p.network(2)).eval()
     nsteps = window.horizon if window.target_scaling == "step" else 1
-    return IntentModel(net, window, Scaler([-1.0] * 8, [1.0] * 8), Scaler([-0.1] * 2 * nsteps, [0.1] * 2 * nsteps), 0.008)
+    return IntentModel(
+        net, window, Scaler([-1.0] * 8, [1.0] * 8), Scaler([-0.1] * 2 * nsteps, [0.1] * 2 * nsteps), 0.008
+    )
 
 
 def latency(calls: int) -> list[dict]:
@@ -81,8 +83,10 @@ def latency(calls: int) -> list[dict]:
     history = rng.normal(scale=0.05, size=(125, 8))
     rows = []
     lstm_preset = MODEL_PRESETS["lstm"]
-    for name, layers, hidden, fc, skip in (("lstm", lstm_preset.lstm_layers, lstm_preset.hidden, lstm_preset.fc, lstm_preset.skip),
-                                           ("thesis-size", 3, 250, (200,), False)):  # fmt: skip
+    for name, layers, hidden, fc, skip in (
+        ("lstm", lstm_preset.lstm_layers, lstm_preset.hidden, lstm_preset.fc, lstm_preset.skip),
+        ("thesis-size", 3, 250, (200,), False),
+    ):
         variants = {}
         for dec in (1, 5):
             m = random_model(layers, hidden, fc, dec, skip)
@@ -125,14 +129,26 @@ def baseline_latency(calls: int, naive: tuple[float, float]) -> list[dict]:
     history = rng.normal(scale=0.05, size=(125, 8))
     m = random_model(1, 8, (8,), 5, False)  # only its window and scalers are used
     w = m.window
-    ridge = RidgeBaseline(rng.normal(size=(w.steps * 8, w.horizon * 2)) * 1e-2, np.zeros(w.horizon * 2), 1e-4, w,
-                          m.input_scaler, m.target_scaler, m.dt)  # fmt: skip
+    ridge = RidgeBaseline(
+        rng.normal(size=(w.steps * 8, w.horizon * 2)) * 1e-2,
+        np.zeros(w.horizon * 2),
+        1e-4,
+        w,
+        m.input_scaler,
+        m.target_scaler,
+        m.dt,
+    )
 
     def ridge_once():
         x = to_relative(history[None, w.offsets + w.history - 1], 2)
         out = ridge.predict_scaled(ridge.input_scaler.transform(x))
-        decode_target(unscale_targets(ridge.target_scaler, out, w.horizon, 2), history[None, -1, :2],
-                      history[None, -1, 2:4], w, m.dt)  # fmt: skip
+        decode_target(
+            unscale_targets(ridge.target_scaler, out, w.horizon, 2),
+            history[None, -1, :2],
+            history[None, -1, 2:4],
+            w,
+            m.dt,
+        )
 
     kalman = KalmanCA(jerk_psd=1e3, velocity_noise=1e-3)
 
@@ -141,14 +157,27 @@ def baseline_latency(calls: int, naive: tuple[float, float]) -> list[dict]:
         constant_acceleration(states[0, -1], 50, 0.008)
 
     rows = []
-    for label, f in (("ridge (numpy, decimated window)", ridge_once), ("Kalman CA (1 filter step + extrapolation)", kalman_once)):
+    for label, f in (
+        ("ridge (numpy, decimated window)", ridge_once),
+        ("Kalman CA (1 filter step + extrapolation)", kalman_once),
+    ):
         med, p99 = time_calls(f, calls)
-        rows.append({"network": "baselines", "variant": label, "median_ms": med, "p99_ms": p99,
-                     "speedup_median": naive[0] / med, "speedup_p99": naive[1] / p99})  # fmt: skip
+        rows.append(
+            {
+                "network": "baselines",
+                "variant": label,
+                "median_ms": med,
+                "p99_ms": p99,
+                "speedup_median": naive[0] / med,
+                "speedup_p99": naive[1] / p99,
+            }
+        )
     return rows
 
 
-def synthetic_trials(n_trials: int, seconds: float = 18.0, dt: float = 0.008, prefix: str = "SIM") -> list[LabeledTrial]:
+def synthetic_trials(
+    n_trials: int, seconds: float = 18.0, dt: float = 0.008, prefix: str = "SIM"
+) -> list[LabeledTrial]:
     """Smooth random hand-guided motions the size of the simulator's trials."""
     out = []
     n = int(seconds / dt)
@@ -160,8 +189,9 @@ def synthetic_trials(n_trials: int, seconds: float = 18.0, dt: float = 0.008, pr
         pose = ref + dev
         vel = np.gradient(pose, dt, axis=0)
         meta = TrialMeta("user-0", "linear", "handle", "cooperative", None, i, "sim", dt)
-        tr = Trial(meta=meta, time=t, pose=pose, velocity=vel, wrench=100 * vel + rng.normal(0, 0.5, pose.shape),
-                   reference=ref)  # fmt: skip
+        tr = Trial(
+            meta=meta, time=t, pose=pose, velocity=vel, wrench=100 * vel + rng.normal(0, 0.5, pose.shape), reference=ref
+        )
         out.append(LabeledTrial(f"{prefix}/trial_{i:05d}", prefix, tr))
     return out
 
@@ -189,8 +219,15 @@ def throughput(trials: list[LabeledTrial], batches: int) -> list[dict]:
             loss.backward()
             opt.step()
         sec = time.perf_counter() - t0
-        rows.append({"preset": name, "windows_per_s": n_batches * bs / sec, "batch_size": bs, "batches": n_batches,
-                     "network": f"LSTM {p.lstm_layers}x{p.hidden}, {p.window.steps} steps"})  # fmt: skip
+        rows.append(
+            {
+                "preset": name,
+                "windows_per_s": n_batches * bs / sec,
+                "batch_size": bs,
+                "batches": n_batches,
+                "network": f"LSTM {p.lstm_layers}x{p.hidden}, {p.window.steps} steps",
+            }
+        )
     return rows
 
 
@@ -207,11 +244,22 @@ def full_train(trials: list[LabeledTrial]) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         save_model(model, tmp)
         t0 = time.perf_counter()
-        tl = train_model(transfer_set, p, replace(p.train, threads=2, init=f"transfer:{tmp}", epochs=cfg.transfer_epochs,
-                                                  train_stride=cfg.train_stride))  # fmt: skip
+        tl = train_model(
+            transfer_set,
+            p,
+            replace(
+                p.train, threads=2, init=f"transfer:{tmp}", epochs=cfg.transfer_epochs, train_stride=cfg.train_stride
+            ),
+        )
         transfer_s = time.perf_counter() - t0
-    return {"train_s": train_s, "train_windows": model.info["n_train_windows"], "epochs": cfg.epochs,
-            "transfer_s": transfer_s, "transfer_windows": tl.info["n_train_windows"], "transfer_epochs": cfg.transfer_epochs}
+    return {
+        "train_s": train_s,
+        "train_windows": model.info["n_train_windows"],
+        "epochs": cfg.epochs,
+        "transfer_s": transfer_s,
+        "transfer_windows": tl.info["n_train_windows"],
+        "transfer_epochs": cfg.transfer_epochs,
+    }
 
 
 def main() -> None:
@@ -228,8 +276,10 @@ def main() -> None:
     lat += baseline_latency(args.calls, (naive["median_ms"], naive["p99_ms"]))
     print(f"  {'network':12s} {'variant':34s} {'median':>8s} {'p99':>8s} {'x med':>7s} {'x p99':>7s}")
     for r in lat:
-        print(f"  {r['network']:12s} {r['variant']:34s} {r['median_ms']:8.3f} {r['p99_ms']:8.3f} "
-              f"{r['speedup_median']:7.1f} {r['speedup_p99']:7.1f}")  # fmt: skip
+        print(
+            f"  {r['network']:12s} {r['variant']:34s} {r['median_ms']:8.3f} {r['p99_ms']:8.3f} "
+            f"{r['speedup_median']:7.1f} {r['speedup_p99']:7.1f}"
+        )
     trials = synthetic_trials(60)
     print("training throughput, 2 threads")
     thr = throughput(trials, args.train_batches)
@@ -238,9 +288,11 @@ def main() -> None:
     result = {"latency": lat, "throughput": thr, "torch": torch.__version__}
     if args.full_train:
         full = full_train(trials)
-        print(f"default training on 60 simulated-size trials: {full['train_s']:.0f} s "
-              f"({full['train_windows']} windows x {full['epochs']} epochs); transfer on 15 trials: {full['transfer_s']:.1f} s "
-              f"({full['transfer_windows']} windows x {full['transfer_epochs']} epochs)")  # fmt: skip
+        print(
+            f"default training on 60 simulated-size trials: {full['train_s']:.0f} s "
+            f"({full['train_windows']} windows x {full['epochs']} epochs); transfer on 15 trials: {full['transfer_s']:.1f} s "
+            f"({full['transfer_windows']} windows x {full['transfer_epochs']} epochs)"
+        )
         result["full_train"] = full
     if args.json:
         with open(args.json, "w") as fh:

@@ -36,7 +36,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--ticks", type=int, default=2000, help="samples per trial (2000: a 16 s trial at 125 Hz)")
     parser.add_argument("--repeats", type=int, default=30, help="timed trials per form")
-    parser.add_argument("--tune-trials", type=int, default=6, help="validation trials of the tuning comparison (0: skip)")
+    parser.add_argument(
+        "--tune-trials", type=int, default=6, help="validation trials of the tuning comparison (0: skip)"
+    )
     args = parser.parse_args()
     if args.ticks < 2 or args.repeats < 1:
         parser.error("--ticks must be >= 2 and --repeats >= 1")
@@ -59,8 +61,12 @@ def main() -> None:
         if not (np.array_equal(a, reference) and np.array_equal(b, reference)):
             raise SystemExit("the two forms disagree")
     n, r = np.array(naive) * 1e3, np.array(reused) * 1e3
-    print(f"one {args.ticks}-tick trial, gains recomputed (naive): median {np.median(n):.2f} ms, p99 {np.percentile(n, 99):.2f} ms")
-    print(f"one {args.ticks}-tick trial, gains reused:           median {np.median(r):.2f} ms, p99 {np.percentile(r, 99):.2f} ms")
+    print(
+        f"one {args.ticks}-tick trial, gains recomputed (naive): median {np.median(n):.2f} ms, p99 {np.percentile(n, 99):.2f} ms"
+    )
+    print(
+        f"one {args.ticks}-tick trial, gains reused:           median {np.median(r):.2f} ms, p99 {np.percentile(r, 99):.2f} ms"
+    )
     print(f"ratio of medians: {np.median(n) / np.median(r):.1f}x (same states bit for bit)")
     if args.tune_trials:
         bench_tuning(rng, args.ticks, args.tune_trials, max(3, args.repeats // 10))
@@ -105,8 +111,10 @@ def bench_tuning(rng: np.random.Generator, ticks: int, n_trials: int, repeats: i
     from types import SimpleNamespace
 
     horizon, dt = 50, 0.008
-    raw = [(np.cumsum(rng.normal(size=(ticks, 2)), axis=0) * 1e-3, rng.normal(size=(ticks, 2)) * 1e-2)
-           for _ in range(n_trials)]  # fmt: skip
+    raw = [
+        (np.cumsum(rng.normal(size=(ticks, 2)), axis=0) * 1e-3, rng.normal(size=(ticks, 2)) * 1e-2)
+        for _ in range(n_trials)
+    ]
     trials = [SimpleNamespace(pose=p, velocity=v) for p, v in raw]
     grid = [KalmanCA(q, rv, 1e-4, tuned=True) for q in kalman.JERK_PSD_GRID for rv in kalman.VELOCITY_NOISE_GRID]
     naive, per_trial, fast = [], [], []
@@ -128,8 +136,10 @@ def bench_tuning(rng: np.random.Generator, ticks: int, n_trials: int, repeats: i
     print(f"  direct sum (naive):             median {np.median(n):.2f} s, p99 {np.percentile(n, 99):.2f} s")
     print(f"  quadratic form, trial by trial: median {np.median(p):.2f} s, p99 {np.percentile(p, 99):.2f} s")
     print(f"  quadratic form, all at once:    median {np.median(f):.2f} s, p99 {np.percentile(f, 99):.2f} s")
-    print(f"  ratio of medians: {np.median(n) / np.median(f):.1f}x against the direct sum, "
-          f"{np.median(p) / np.median(f):.1f}x against trial by trial (validation errors equal to 1e-9)")
+    print(
+        f"  ratio of medians: {np.median(n) / np.median(f):.1f}x against the direct sum, "
+        f"{np.median(p) / np.median(f):.1f}x against trial by trial (validation errors equal to 1e-9)"
+    )
 
 
 if __name__ == "__main__":

@@ -74,8 +74,17 @@ def main() -> None:
     profile = operator_profile(1)
     shape = PersonShape(profile.clearance, profile.anticipation, profile.left_preference, 4)
     recorder = _Recording(50, default=shape)
-    trial = run_episode(build_trial(task, profile, get_object("board"), make_controller("cooperative-arbitrated", preset),
-                                    recorder, args.seed, preset_name=preset.name))  # fmt: skip
+    trial = run_episode(
+        build_trial(
+            task,
+            profile,
+            get_object("board"),
+            make_controller("cooperative-arbitrated", preset),
+            recorder,
+            args.seed,
+            preset_name=preset.name,
+        )
+    )
     print(f"one trial: {len(recorder.windows)} ticks, side {trial.meta.extra['intent_side']:+d}")
     naive = PathHypothesesIntent(50, default=shape, settings=FilterSettings(search_window=10.0))
     naive.shared_fast_path = False
@@ -83,8 +92,11 @@ def main() -> None:
         ("present (no obstacle)", PathHypothesesIntent(50, default=shape, use_obstacles=False)),
         ("paths, 50 curves", PathHypothesesIntent(50, default=shape)),
         ("paths, 50 curves, whole curves every tick (naive)", naive),
-        ("paths, 2 curves (one shape per side)", PathHypothesesIntent(50, default=shape, settings=FilterSettings(shape_grid=(1.0,)))),
-    ]  # fmt: skip
+        (
+            "paths, 2 curves (one shape per side)",
+            PathHypothesesIntent(50, default=shape, settings=FilterSettings(shape_grid=(1.0,))),
+        ),
+    ]
     results = {}
     for label, source in rows:
         local = path_hypotheses.LOCAL
@@ -99,7 +111,9 @@ def main() -> None:
     print(f"{'per tick':50s} {'median µs':>10s} {'p99 µs':>8s} {'vs naive':>9s} {'of 8 ms':>8s} {'of 2 ms':>8s}")
     for label, t in results.items():
         med, p99 = np.median(t), np.percentile(t, 99)
-        print(f"{label:50s} {med:10.0f} {p99:8.0f} {med / naive:8.2f}x {100 * p99 / 8000:7.1f}% {100 * p99 / 2000:7.1f}%")
+        print(
+            f"{label:50s} {med:10.0f} {p99:8.0f} {med / naive:8.2f}x {100 * p99 / 8000:7.1f}% {100 * p99 / 2000:7.1f}%"
+        )
 
 
 if __name__ == "__main__":

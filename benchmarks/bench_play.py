@@ -43,8 +43,16 @@ from coassist.play.server import PlayServer  # noqa: E402
 from coassist.play.session import PlayConfig, PlaySession  # noqa: E402
 
 CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]  # fmt: skip
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 
 
 def _stats(ms) -> tuple[float, float]:
@@ -52,12 +60,18 @@ def _stats(ms) -> tuple[float, float]:
     return float(np.median(a)), float(np.percentile(a, 99))
 
 
-def drive_page(pw, url: str, session: PlaySession, seconds: float, controller: str, screenshot: Path | None,
-               profile: Path) -> dict:  # fmt: skip
+def drive_page(
+    pw, url: str, session: PlaySession, seconds: float, controller: str, screenshot: Path | None, profile: Path
+) -> dict:
     """Drag for ``seconds``; the script reads the live state from the session (in this process), so the
     only browser call per step is the mouse move itself."""
-    context = pw.chromium.launch_persistent_context(str(profile), executable_path=CHROMIUM, headless=True,
-                                                    args=CHROMIUM_ARGS, viewport={"width": 1360, "height": 820})  # fmt: skip
+    context = pw.chromium.launch_persistent_context(
+        str(profile),
+        executable_path=CHROMIUM,
+        headless=True,
+        args=CHROMIUM_ARGS,
+        viewport={"width": 1360, "height": 820},
+    )
     try:
         page = context.pages[0] if context.pages else context.new_page()
         page.goto(url)
@@ -95,9 +109,14 @@ def drive_page(pw, url: str, session: PlaySession, seconds: float, controller: s
         elapsed = time.perf_counter() - t0
         fps = (page.evaluate("window.coassist.draws") - draws0) / elapsed
         page.mouse.up()
-        return {"latency": page.evaluate("window.coassist.latencies"), "stages": page.evaluate("window.coassist.stages"),
-                "pong": page.evaluate("window.coassist.pongs"), "fps": fps,
-                "loop_hz": (k1 - k0) / (t1 - t0) if t1 > t0 else math.nan, "misses": f["misses"]}  # fmt: skip
+        return {
+            "latency": page.evaluate("window.coassist.latencies"),
+            "stages": page.evaluate("window.coassist.stages"),
+            "pong": page.evaluate("window.coassist.pongs"),
+            "fps": fps,
+            "loop_hz": (k1 - k0) / (t1 - t0) if t1 > t0 else math.nan,
+            "misses": f["misses"],
+        }
     finally:
         context.close()
 
@@ -107,7 +126,9 @@ def one_run(label: str, frame_rate: float | None, args, screenshot: Path | None)
 
     tmp = Path(tempfile.mkdtemp(prefix="bench-play-"))
     try:
-        config = PlayConfig(user="bench", out=tmp / "runs", controllers=(args.controller,), intent=args.model or "nominal")
+        config = PlayConfig(
+            user="bench", out=tmp / "runs", controllers=(args.controller,), intent=args.model or "nominal"
+        )
         session = PlaySession(config)
         with PlayServer(session, port=0, frame_rate=frame_rate) as server, sync_playwright() as pw:
             out = drive_page(pw, server.url, session, args.seconds, args.controller, screenshot, tmp / "profile")
@@ -120,7 +141,9 @@ def one_run(label: str, frame_rate: float | None, args, screenshot: Path | None)
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=10.0, help="seconds of dragging per run")
-    ap.add_argument("--repeats", type=int, default=2, help="runs of each design, alternating (the machine's load drifts)")
+    ap.add_argument(
+        "--repeats", type=int, default=2, help="runs of each design, alternating (the machine's load drifts)"
+    )
     ap.add_argument("--controller", default="cooperative", choices=("cooperative", "impedance", "manual"))
     ap.add_argument("--model", default=None, help="an intent model folder (default: the nominal plan)")
     ap.add_argument("--screenshot", type=Path, default=None, help="write a screenshot of the page mid-trial (PNG)")
@@ -138,27 +161,39 @@ def main() -> None:
         for label, rate in designs:
             shot = args.screenshot if (i == 0 and rate is None) else None
             runs[label].append(one_run(label, rate, args, shot))
-    print(f"pointer event → force → new state → frame drawn; {args.controller}, intent {args.model or 'nominal'}, "
-          f"{args.repeats} × {args.seconds:.0f} s of dragging per design; load average {load0:.1f} → {os.getloadavg()[0]:.1f} "
-          f"on {os.cpu_count()} CPUs")  # fmt: skip
-    print(f"{'run':24s} {'events':>6s} {'median ms':>10s} {'p99 ms':>8s} {'page fps':>9s} {'loop ticks/s':>13s} {'late ticks':>10s}")
+    print(
+        f"pointer event → force → new state → frame drawn; {args.controller}, intent {args.model or 'nominal'}, "
+        f"{args.repeats} × {args.seconds:.0f} s of dragging per design; load average {load0:.1f} → {os.getloadavg()[0]:.1f} "
+        f"on {os.cpu_count()} CPUs"
+    )
+    print(
+        f"{'run':24s} {'events':>6s} {'median ms':>10s} {'p99 ms':>8s} {'page fps':>9s} {'loop ticks/s':>13s} {'late ticks':>10s}"
+    )
     pooled = {}
     for label, rs in runs.items():
         for r in rs:
             med, p99 = _stats(r["latency"])
-            print(f"{label:24s} {len(r['latency']):6d} {med:10.1f} {p99:8.1f} {r['fps']:9.1f} {r['loop_hz']:13.1f} {r['misses']:10d}")
+            print(
+                f"{label:24s} {len(r['latency']):6d} {med:10.1f} {p99:8.1f} {r['fps']:9.1f} {r['loop_hz']:13.1f} {r['misses']:10d}"
+            )
         lat = np.concatenate([r["latency"] for r in rs])
         st = np.concatenate([np.asarray(r["stages"], dtype=float).reshape(-1, 2) for r in rs])
         pooled[label] = _stats(lat)
         (sm, sp), (rm, rp) = _stats(st[:, 0]), _stats(st[:, 1])
-        print(f"  {label}, all runs: median {pooled[label][0]:.1f} / p99 {pooled[label][1]:.1f} ms over {len(lat)} events; "
-              f"event → sent {sm:.1f} / {sp:.1f} ms, event → frame received {rm:.1f} / {rp:.1f} ms")  # fmt: skip
+        print(
+            f"  {label}, all runs: median {pooled[label][0]:.1f} / p99 {pooled[label][1]:.1f} ms over {len(lat)} events; "
+            f"event → sent {sm:.1f} / {sp:.1f} ms, event → frame received {rm:.1f} / {rp:.1f} ms"
+        )
     pong = np.concatenate([r["pong"] for r in runs[designs[0][0]]])
     floor_med, floor_p99 = _stats(pong)
-    print(f"{'transport floor (ping)':24s} {len(pong):6d} {floor_med:10.1f} {floor_p99:8.1f}   (round trip, nothing drawn)")
+    print(
+        f"{'transport floor (ping)':24s} {len(pong):6d} {floor_med:10.1f} {floor_p99:8.1f}   (round trip, nothing drawn)"
+    )
     (m0, p0), (m1, p1) = pooled[designs[0][0]], pooled[designs[1][0]]
-    print(f"ratio naive / per-tick: median {m1 / m0:.2f}, p99 {p1 / p0:.2f}; per-tick p99 {p0:.1f} ms "
-          f"{'≤' if p0 <= 50 else '>'} 50 ms target")  # fmt: skip
+    print(
+        f"ratio naive / per-tick: median {m1 / m0:.2f}, p99 {p1 / p0:.2f}; per-tick p99 {p0:.1f} ms "
+        f"{'≤' if p0 <= 50 else '>'} 50 ms target"
+    )
     if args.screenshot is not None:
         print(f"wrote {args.screenshot}")
 

@@ -60,7 +60,12 @@ def _run_row(run: Path) -> tuple[str, dict[str, tuple[float, float]], float, lis
     total_cpu = summary["cpu_seconds"]
     stages["total"] = (float(summary["total_seconds"]), float(total_cpu["main"]) + float(total_cpu["workers"] or 0.0))
     train, loop, *_ = run_work(run)
-    return summary["config"]["name"], stages, (train + loop) / 1e12, [(c["claim"], bool(c["holds"])) for c in summary["claims"]]
+    return (
+        summary["config"]["name"],
+        stages,
+        (train + loop) / 1e12,
+        [(c["claim"], bool(c["holds"])) for c in summary["claims"]],
+    )
 
 
 def headline_figures(run: Path) -> dict[str, tuple[float, float, float]]:
@@ -104,29 +109,45 @@ def compare_presets(runs: dict[str, list[Path]]) -> None:
     a, b = names
     print(f"\n{'stage':<22}" + "".join(f"{n + ' wall':>14}{n + ' CPU':>14}" for n in names) + f"{'CPU ratio':>11}")
     for stage in rows[a][0][1]:
-        med = {n: (float(np.median([r[1][stage][0] for r in rows[n]])), float(np.median([r[1][stage][1] for r in rows[n]])))
-               for n in names}  # fmt: skip
-        print(f"{stage:<22}" + "".join(f"{med[n][0]:>12.0f} s{med[n][1]:>12.0f} s" for n in names)
-              + f"{med[b][1] / med[a][1] if med[a][1] else float('nan'):>10.2f}×")
+        med = {
+            n: (
+                float(np.median([r[1][stage][0] for r in rows[n]])),
+                float(np.median([r[1][stage][1] for r in rows[n]])),
+            )
+            for n in names
+        }
+        print(
+            f"{stage:<22}"
+            + "".join(f"{med[n][0]:>12.0f} s{med[n][1]:>12.0f} s" for n in names)
+            + f"{med[b][1] / med[a][1] if med[a][1] else float('nan'):>10.2f}×"
+        )
     for n in names:
         tf = [r[2] for r in rows[n]]
         print(f"{n}: network arithmetic {np.median(tf):.2f} TFLOP (runs: {', '.join(f'{v:.2f}' for v in tf)})")
     for i, (ra, rb) in enumerate(zip(rows[a], rows[b])):
         same = [x == y for x, y in zip(ra[3], rb[3])]
-        print(f"pair {i + 1}: {sum(same)} of {len(same)} verdicts the same"
-              + ("" if all(same) else "; differ: " + "; ".join(t for (t, _), ok in zip(ra[3], same) if not ok)))
+        print(
+            f"pair {i + 1}: {sum(same)} of {len(same)} verdicts the same"
+            + ("" if all(same) else "; differ: " + "; ".join(t for (t, _), ok in zip(ra[3], same) if not ok))
+        )
         fa, fb = headline_figures(runs[a][i]), headline_figures(runs[b][i])
         outside = [k for k in fa if k in fb and np.isfinite(fa[k][1]) and not fa[k][1] <= fb[k][0] <= fa[k][2]]
-        print(f"  headline figures of {b} inside {a}'s 95 % interval: {len(fa) - len(outside)} of {len(fa)}"
-              + "".join(f"\n    outside: {k}: {fb[k][0]:.4g} vs {fa[k][0]:.4g} [{fa[k][1]:.4g}, {fa[k][2]:.4g}]" for k in outside))
+        print(
+            f"  headline figures of {b} inside {a}'s 95 % interval: {len(fa) - len(outside)} of {len(fa)}"
+            + "".join(
+                f"\n    outside: {k}: {fb[k][0]:.4g} vs {fa[k][0]:.4g} [{fa[k][1]:.4g}, {fa[k][2]:.4g}]"
+                for k in outside
+            )
+        )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--preset", default="default", help=f"reproduce preset: {', '.join(REPRODUCE_PRESETS)}")
     parser.add_argument("--presets", default=None, help="two presets to compare instead, e.g. full,default")
-    parser.add_argument("--from", dest="runs", nargs="+", type=Path, default=None,
-                        help="finished runs to tabulate by preset (no run)")
+    parser.add_argument(
+        "--from", dest="runs", nargs="+", type=Path, default=None, help="finished runs to tabulate by preset (no run)"
+    )
     parser.add_argument("--repeats", type=int, default=1, help="runs of each path (alternating)")
     parser.add_argument("--workers", type=int, default=None, help="simulation processes (default: the preset's)")
     args = parser.parse_args()
@@ -161,7 +182,10 @@ def main() -> None:
                 out = keep / f"{n}-{r}"
                 summary = run_reproduce(config, out, progress=False)
                 runs[n].append(out)
-                print(f"  run {r + 1}, {n}: {summary['total_seconds']:.0f} s (load {os.getloadavg()[0]:.2f}); {out}", flush=True)
+                print(
+                    f"  run {r + 1}, {n}: {summary['total_seconds']:.0f} s (load {os.getloadavg()[0]:.2f}); {out}",
+                    flush=True,
+                )
         compare_presets(runs)
         return
     config = REPRODUCE_PRESETS.lookup(args.preset)
@@ -183,16 +207,21 @@ def main() -> None:
                 verdicts.setdefault(lockstep, [bool(c["holds"]) for c in summary["claims"]])
                 cpu = summary["cpu_seconds"]
                 used = "" if cpu["workers"] is None else f", {cpu['main'] + cpu['workers']:.0f} CPU-s"
-                print(f"  run {r + 1}, {'lockstep' if lockstep else 'per-trial'}: {stages['total']:.0f} s{used} "
-                      f"(load {os.getloadavg()[0]:.2f})", flush=True)
+                print(
+                    f"  run {r + 1}, {'lockstep' if lockstep else 'per-trial'}: {stages['total']:.0f} s{used} "
+                    f"(load {os.getloadavg()[0]:.2f})",
+                    flush=True,
+                )
     print(f"\n{'stage':<24}{'per-trial median':>18}{'p99':>9}{'lockstep median':>18}{'p99':>9}{'ratio':>8}")
     for stage in times[True][0]:
         base, base99 = _stats([t[stage] for t in times[False]])
         fast, fast99 = _stats([t[stage] for t in times[True]])
         print(f"{stage:<24}{base:>16.1f} s{base99:>7.1f} s{fast:>16.1f} s{fast99:>7.1f} s{base / fast:>7.2f}×")
     same = verdicts[False] == verdicts[True]
-    print(f"\nclaims' verdicts: {'the same' if same else 'DIFFERENT'} on both paths "
-          f"({sum(verdicts[True])} of {len(verdicts[True])} hold with lockstep)")
+    print(
+        f"\nclaims' verdicts: {'the same' if same else 'DIFFERENT'} on both paths "
+        f"({sum(verdicts[True])} of {len(verdicts[True])} hold with lockstep)"
+    )
 
 
 if __name__ == "__main__":

@@ -54,7 +54,9 @@ class FullSolveController(AssistiveController):
         return U_h[0], U_r[0]
 
 
-def tick_times(controller, task_kind: str, seed: int, time_limit: float | None = None) -> tuple[np.ndarray, float, float]:
+def tick_times(
+    controller, task_kind: str, seed: int, time_limit: float | None = None
+) -> tuple[np.ndarray, float, float]:
     """Per-tick wall times [s], the trial's simulated duration [s] and its wall time [s]."""
     timed = _Timed(controller)
     task = make_task(task_kind, np.random.default_rng(seed))
@@ -99,13 +101,17 @@ def main() -> None:
     print()
     print(f"per-tick wall time over {ticks.size} ticks (cooperative, nominal intent, handle):")
     print(f"  coassist.sim loop  median {us(np.median(ticks)):7.1f} µs   p99 {us(np.percentile(ticks, 99)):7.1f} µs")
-    print(f"  naive full solve   median {us(np.median(naive)):7.1f} µs   p99 {us(np.percentile(naive, 99)):7.1f} µs"
-          f"   ({naive.size} ticks)")
+    print(
+        f"  naive full solve   median {us(np.median(naive)):7.1f} µs   p99 {us(np.percentile(naive, 99)):7.1f} µs"
+        f"   ({naive.size} ticks)"
+    )
     print(f"  speed-up (median)  {np.median(naive) / np.median(ticks):.1f}x")
     dt = fast.model.dt
     print(f"  real-time budget   {dt * 1e6:.0f} µs per tick")
-    print(f"throughput, one core: {sim_s / wall_s:.0f}x real time including trial set-up "
-          f"({sim_s:.0f} s simulated in {wall_s:.2f} s); loop only {dt / np.median(ticks):.0f}x")
+    print(
+        f"throughput, one core: {sim_s / wall_s:.0f}x real time including trial set-up "
+        f"({sim_s:.0f} s simulated in {wall_s:.2f} s); loop only {dt / np.median(ticks):.0f}x"
+    )
 
     specs = [TrialSpec(task=kinds[i % 3], seed=i) for i in range(args.trials)]
     t0 = time.perf_counter()
@@ -113,8 +119,10 @@ def main() -> None:
     elapsed = time.perf_counter() - t0
     simulated = sum(t.duration for t in trials)
     print()
-    print(f"dataset: {len(trials)} trials ({simulated:.0f} s simulated) on {args.workers} workers in {elapsed:.1f} s "
-          f"(target <= 20 s for 60): {simulated / elapsed:.0f}x real time")
+    print(
+        f"dataset: {len(trials)} trials ({simulated:.0f} s simulated) on {args.workers} workers in {elapsed:.1f} s "
+        f"(target <= 20 s for 60): {simulated / elapsed:.0f}x real time"
+    )
     print(f"load average after: {os.getloadavg()[0]:.2f}")
 
 

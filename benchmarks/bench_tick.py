@@ -104,7 +104,10 @@ def measure_cold_calls(n: int, period: float) -> dict[str, tuple[np.ndarray, np.
     a = np.zeros(8)
     out = {}
     try:
-        for name, call in (("np.isfinite(a).all()", lambda: np.isfinite(a).all()), ("Process.is_alive()", proc.is_alive)):
+        for name, call in (
+            ("np.isfinite(a).all()", lambda: np.isfinite(a).all()),
+            ("Process.is_alive()", proc.is_alive),
+        ):
             runs = []
             for pause in (0.0, period):
                 t = []
@@ -122,13 +125,27 @@ def measure_cold_calls(n: int, period: float) -> dict[str, tuple[np.ndarray, np.
     return out
 
 
-def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtime: bool = False,
-            backend: str = "process", task_kind: str = "z", paced: bool = True) -> dict:  # fmt: skip
+def measure(
+    ticks: int,
+    model: str | None,
+    naive: bool,
+    rate: int = 125,
+    realtime: bool = False,
+    backend: str = "process",
+    task_kind: str = "z",
+    paced: bool = True,
+) -> dict:
     times: list[float] = []
     dt = 1.0 / rate
-    config = DriveConfig(controller="cooperative", task=task_kind, intent=model or "nominal", rate_hz=rate,
-                         time_limit=ticks * dt, realtime_intent=True if model else None,
-                         predictor_backend=backend)  # fmt: skip
+    config = DriveConfig(
+        controller="cooperative",
+        task=task_kind,
+        intent=model or "nominal",
+        rate_hz=rate,
+        time_limit=ticks * dt,
+        realtime_intent=True if model else None,
+        predictor_backend=backend,
+    )
     # time read + step by wrapping the tick's step (the loop's own clock does the same)
     orig_step = tick_mod.ControlTick.step
     orig_dls = tick_mod._spatial.dls_joint_velocity
@@ -161,8 +178,12 @@ def measure(ticks: int, model: str | None, naive: bool, rate: int = 125, realtim
         world = None
         if realtime or model or paced:  # paced to the wall clock as on a robot, or (a model's run) back to back
             task = make_task(task_kind, np.random.default_rng(np.random.SeedSequence([0, 0])))
-            world = MujocoUR5World("handle", control_dt=dt, start=(float(task.start[0]), float(task.start[1]), 0.2),
-                                   realtime=bool(realtime or paced))  # fmt: skip
+            world = MujocoUR5World(
+                "handle",
+                control_dt=dt,
+                start=(float(task.start[0]), float(task.start[1]), 0.2),
+                realtime=bool(realtime or paced),
+            )
         t_wall = time.perf_counter()
         trial = drive_mod.drive(config, world=world)
         wall = time.perf_counter() - t_wall
@@ -193,8 +214,10 @@ def main() -> None:
     rbm, rbp = _stats(ref["back_to_back"])
     rpm, rpp = _stats(ref["paced"])
     print(f"intent: {'RealtimePredictor on ' + a.model if a.model else 'nominal plan'}; 125 Hz; assistive; z task")
-    print("| tick.step (no physics) | back to back: median ms | p99 ms | paced: median ms | p99 ms | "
-          "paced/back-to-back p99 | ticks > 8 ms | ratio naive/this (median, p99) |")  # fmt: skip
+    print(
+        "| tick.step (no physics) | back to back: median ms | p99 ms | paced: median ms | p99 ms | "
+        "paced/back-to-back p99 | ticks > 8 ms | ratio naive/this (median, p99) |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for backend in backends:
         hot = measure(a.ticks, a.model, naive=False, backend=backend, paced=False)
@@ -203,15 +226,23 @@ def main() -> None:
         pm, pp = _stats(paced["times"][50:])
         name = f"coassist, predictor backend {backend}" if a.model else "coassist"
         misses = hot["misses"] + paced["misses"]
-        print(f"| {name} | {fm:.3f} | {fp:.3f} | {pm:.3f} | {pp:.3f} | {pp / fp:.1f} | "
-              f"{misses}/{len(hot['times']) + len(paced['times'])} | {sm / fm:.0f}x, {sp / fp:.0f}x |")  # fmt: skip
-    print(f"| naive (gains + pinv every tick; backend {backends[0]}) | {sm:.3f} | {sp:.3f} | | | | "
-          f"{slow['misses']}/{len(slow['times'])} | 1x |")  # fmt: skip
-    print(f"| platform reference (fixed workload, not coassist) | {rbm:.3f} | {rbp:.3f} | {rpm:.3f} | {rpp:.3f} | "
-          f"{rpp / rbp:.1f} | | |")  # fmt: skip
+        print(
+            f"| {name} | {fm:.3f} | {fp:.3f} | {pm:.3f} | {pp:.3f} | {pp / fp:.1f} | "
+            f"{misses}/{len(hot['times']) + len(paced['times'])} | {sm / fm:.0f}x, {sp / fp:.0f}x |"
+        )
+    print(
+        f"| naive (gains + pinv every tick; backend {backends[0]}) | {sm:.3f} | {sp:.3f} | | | | "
+        f"{slow['misses']}/{len(slow['times'])} | 1x |"
+    )
+    print(
+        f"| platform reference (fixed workload, not coassist) | {rbm:.3f} | {rbp:.3f} | {rpm:.3f} | {rpp:.3f} | "
+        f"{rpp / rbp:.1f} | | |"
+    )
     for name, (hot, cold) in measure_cold_calls(400, 1.0 / 125).items():
-        print(f"one call of {name}: back to back median {np.median(hot) * 1e6:.1f} µs, p99 {np.percentile(hot, 99) * 1e6:.1f} µs; "
-              f"after an 8 ms sleep median {np.median(cold) * 1e6:.1f} µs, p99 {np.percentile(cold, 99) * 1e6:.1f} µs")  # fmt: skip
+        print(
+            f"one call of {name}: back to back median {np.median(hot) * 1e6:.1f} µs, p99 {np.percentile(hot, 99) * 1e6:.1f} µs; "
+            f"after an 8 ms sleep median {np.median(cold) * 1e6:.1f} µs, p99 {np.percentile(cold, 99) * 1e6:.1f} µs"
+        )
     if a.realtime_seconds > 0:
         # Trials end at their target: run one task after another until the time is filled.
         n = int(math.ceil(a.realtime_seconds * 500))
@@ -225,9 +256,11 @@ def main() -> None:
                 break
         arr = np.concatenate(times)
         m, p = _stats(arr)
-        print(f"500 Hz real time, {ticks} ticks ({ticks / 500:.1f} s; tasks {', '.join(tasks)}) in {wall:.1f} s wall: "
-              f"tick median {m:.3f} ms, p99 {p:.3f} ms, max {arr.max() * 1e3:.3f} ms; ticks over 2 ms: "
-              f"{int((arr > 0.002).sum())}; deadline misses flagged by the loop: {flagged}")  # fmt: skip
+        print(
+            f"500 Hz real time, {ticks} ticks ({ticks / 500:.1f} s; tasks {', '.join(tasks)}) in {wall:.1f} s wall: "
+            f"tick median {m:.3f} ms, p99 {p:.3f} ms, max {arr.max() * 1e3:.3f} ms; ticks over 2 ms: "
+            f"{int((arr > 0.002).sum())}; deadline misses flagged by the loop: {flagged}"
+        )
 
 
 if __name__ == "__main__":

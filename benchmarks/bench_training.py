@@ -70,8 +70,9 @@ def training_flops_per_window(preset, n_dof: int) -> float:
     the LSTM's gates, 4·h·(in + h)·2 per layer and step, and the FC head; backward taken as
     twice forward (two products per forward one). Elementwise gate work is left out, so
     this is a lower bound on the arithmetic."""
-    lstm, head = network_forward_flops(4 * n_dof, preset.window.horizon * n_dof, preset.lstm_layers, preset.hidden,
-                                       preset.fc, preset.window.steps)  # fmt: skip
+    lstm, head = network_forward_flops(
+        4 * n_dof, preset.window.horizon * n_dof, preset.lstm_layers, preset.hidden, preset.fc, preset.window.steps
+    )
     return 3.0 * (lstm + head)
 
 
@@ -127,7 +128,9 @@ def bench_preset(name: str, trials, steps: int, device: torch.device, batch_size
 
     # The device path's order and signs reach the device once per epoch in train_model: here once per run.
     pool = [draw() for _ in range(64)]
-    pool_dev = [(torch.from_numpy(s).to(device), None if g is None else torch.from_numpy(g).to(device)) for s, g in pool]
+    pool_dev = [
+        (torch.from_numpy(s).to(device), None if g is None else torch.from_numpy(g).to(device)) for s, g in pool
+    ]
 
     def device_batch(i):
         return dev.batch(*pool_dev[i % len(pool_dev)])
@@ -161,9 +164,14 @@ def bench_preset(name: str, trials, steps: int, device: torch.device, batch_size
     for label in feeds:
         med, p99 = stats(times[label])
         amed, ap99 = stats(assembly[label])
-        rows[label] = {"step_median_ms": med, "step_p99_ms": p99, "windows_per_s_median": bs / med * 1e3,
-                       "windows_per_s_run": bs * len(times[label]) / (sum(times[label]) / 1e9),
-                       "batch_median_ms": amed, "batch_p99_ms": ap99}  # fmt: skip
+        rows[label] = {
+            "step_median_ms": med,
+            "step_p99_ms": p99,
+            "windows_per_s_median": bs / med * 1e3,
+            "windows_per_s_run": bs * len(times[label]) / (sum(times[label]) / 1e9),
+            "batch_median_ms": amed,
+            "batch_p99_ms": ap99,
+        }
     base, new = rows["numpy"], rows["device"]
     flops = training_flops_per_window(p, d)
     return {
@@ -182,8 +190,18 @@ def bench_preset(name: str, trials, steps: int, device: torch.device, batch_size
 
 def compare_processes(args: argparse.Namespace) -> None:
     """Child processes with OpenMP's wait policy unset (today's) and PASSIVE, both batch paths in each."""
-    common = [sys.executable, __file__, "--steps", str(args.steps), "--thesis-steps", str(args.thesis_steps),
-              "--threads", str(args.threads), "--device", args.device]  # fmt: skip
+    common = [
+        sys.executable,
+        __file__,
+        "--steps",
+        str(args.steps),
+        "--thesis-steps",
+        str(args.thesis_steps),
+        "--threads",
+        str(args.threads),
+        "--device",
+        args.device,
+    ]
     if args.batch_size:
         common += ["--batch-size", str(args.batch_size)]
     env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
@@ -195,20 +213,27 @@ def compare_processes(args: argparse.Namespace) -> None:
                 child_env = env if policy == "unset" else {**env, "OMP_WAIT_POLICY": policy}
                 subprocess.run([*common, "--json", str(out)], env=child_env, check=True, stdout=subprocess.DEVNULL)
                 runs[policy].append(json.loads(out.read_text()))
-    print(f"whole processes, {args.rounds} round(s) each, {args.threads} thread(s): windows/s over each run, median of rounds")
+    print(
+        f"whole processes, {args.rounds} round(s) each, {args.threads} thread(s): windows/s over each run, median of rounds"
+    )
     rows = []
     for i, first in enumerate(runs["unset"][0]["runs"]):
         name = first["preset"]
-        med = {(pol, path): float(np.median([rr["runs"][i]["paths"][path]["windows_per_s_run"] for rr in runs[pol]]))
-               for pol in runs for path in ("numpy", "device")}  # fmt: skip
+        med = {
+            (pol, path): float(np.median([rr["runs"][i]["paths"][path]["windows_per_s_run"] for rr in runs[pol]]))
+            for pol in runs
+            for path in ("numpy", "device")
+        }
         for (pol, path), v in med.items():
             print(f"  {name:8s} OMP_WAIT_POLICY={pol:8s} {path:7s} {v:9.0f} windows/s")
         ratio = med[("PASSIVE", "device")] / med[("unset", "numpy")]
         print(f"  {name:8s} {first['network']}: PASSIVE + device batches / unset + NumPy batches x{ratio:.2f}")
         rows.append({"preset": name, "windows_per_s": {f"{k[0]}/{k[1]}": v for k, v in med.items()}, "ratio": ratio})
     if args.json:
-        Path(args.json).write_text(json.dumps({"rounds": args.rounds, "threads": args.threads, "processes": rows,
-                                               "children": runs}, indent=1) + "\n")  # fmt: skip
+        Path(args.json).write_text(
+            json.dumps({"rounds": args.rounds, "threads": args.threads, "processes": rows, "children": runs}, indent=1)
+            + "\n"
+        )
 
 
 def compare_pairs(args: argparse.Namespace) -> None:
@@ -220,18 +245,23 @@ def compare_pairs(args: argparse.Namespace) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(args.pairs):
             outs = [Path(tmp) / f"pair-{r}-{i}.json" for i in range(2)]
-            procs = [subprocess.Popen([*common, "--threads", "1", "--json", str(o)], stdout=subprocess.DEVNULL)
-                     for o in outs]  # fmt: skip
+            procs = [
+                subprocess.Popen([*common, "--threads", "1", "--json", str(o)], stdout=subprocess.DEVNULL) for o in outs
+            ]
             if any(p.wait() for p in procs):
                 raise SystemExit("a child run failed")
             pair.append(sum(json.loads(o.read_text())["runs"][0]["paths"]["device"]["windows_per_s_run"] for o in outs))
             out = Path(tmp) / f"single-{r}.json"
             subprocess.run([*common, "--threads", "2", "--json", str(out)], check=True, stdout=subprocess.DEVNULL)
             single.append(json.loads(out.read_text())["runs"][0]["paths"]["device"]["windows_per_s_run"])
-    print(f"independent trainings, default preset, {args.steps} steps per run, {args.pairs} round(s), load average "
-          f"{os.getloadavg()[0]:.1f}: windows/s per round")  # fmt: skip
+    print(
+        f"independent trainings, default preset, {args.steps} steps per run, {args.pairs} round(s), load average "
+        f"{os.getloadavg()[0]:.1f}: windows/s per round"
+    )
     print(f"  two 1-thread processes at once  {' '.join(f'{v:7.0f}' for v in pair)}   median {np.median(pair):7.0f}")
-    print(f"  one 2-thread process            {' '.join(f'{v:7.0f}' for v in single)}   median {np.median(single):7.0f}")
+    print(
+        f"  one 2-thread process            {' '.join(f'{v:7.0f}' for v in single)}   median {np.median(single):7.0f}"
+    )
     print(f"  ratio of medians x{np.median(pair) / np.median(single):.2f}")
 
 
@@ -244,7 +274,9 @@ def main() -> None:
     ap.add_argument("--batch-size", type=int, default=None, help="override the presets' batch size")
     ap.add_argument("--json", default=None)
     ap.add_argument("--rounds", type=int, default=0, help="also compare whole processes (see above), N rounds")
-    ap.add_argument("--pairs", type=int, default=0, help="compare two 1-thread trainings at once with one 2-thread (see above)")
+    ap.add_argument(
+        "--pairs", type=int, default=0, help="compare two 1-thread trainings at once with one 2-thread (see above)"
+    )
     args = ap.parse_args()
     if args.rounds:
         compare_processes(args)
@@ -258,26 +290,45 @@ def main() -> None:
     runs = [("default", args.steps)] + ([("thesis", args.thesis_steps)] if args.thesis_steps else [])
     out = []
     print(f"training throughput, {args.threads} thread(s), {device}, torch {torch.__version__}")
-    print(f"  {'preset':8s} {'path':7s} {'step med':>9s} {'step p99':>9s} {'win/s med':>10s} {'win/s run':>10s}"
-          f" {'batch med':>10s} {'batch p99':>10s}")  # fmt: skip
+    print(
+        f"  {'preset':8s} {'path':7s} {'step med':>9s} {'step p99':>9s} {'win/s med':>10s} {'win/s run':>10s}"
+        f" {'batch med':>10s} {'batch p99':>10s}"
+    )
     ceiling = gemm_ceiling(device)
     print(f"  a 1024 x 1024 float32 matrix product here: {ceiling:.0f} GFLOP/s (the arithmetic's ceiling)")
     for name, steps in runs:
         r = bench_preset(name, trials, steps, device, args.batch_size)
         out.append(r)
         for label, row in r["paths"].items():
-            print(f"  {name:8s} {label:7s} {row['step_median_ms']:9.2f} {row['step_p99_ms']:9.2f} "
-                  f"{row['windows_per_s_median']:10.0f} {row['windows_per_s_run']:10.0f} "
-                  f"{row['batch_median_ms']:10.3f} {row['batch_p99_ms']:10.3f}")  # fmt: skip
-        print(f"  {name:8s} {r['network']}: device/numpy windows/s x{r['ratio_windows_per_s_median']:.2f} (median step), "
-              f"x{r['ratio_windows_per_s_run']:.2f} (whole run), p99 step x{r['ratio_step_p99']:.2f}, "
-              f"batch assembly x{r['ratio_batch_median']:.1f}")  # fmt: skip
-        print(f"  {name:8s} matrix products: {r['flops_per_window'] / 1e6:.2f} MFLOP per window, "
-              f"{r['gflops_device_run']:.0f} GFLOP/s on the device path = {100 * r['gflops_device_run'] / ceiling:.0f} % "
-              f"of the ceiling; 3x would need {3 * r['gflops_device_run']:.0f}")  # fmt: skip
+            print(
+                f"  {name:8s} {label:7s} {row['step_median_ms']:9.2f} {row['step_p99_ms']:9.2f} "
+                f"{row['windows_per_s_median']:10.0f} {row['windows_per_s_run']:10.0f} "
+                f"{row['batch_median_ms']:10.3f} {row['batch_p99_ms']:10.3f}"
+            )
+        print(
+            f"  {name:8s} {r['network']}: device/numpy windows/s x{r['ratio_windows_per_s_median']:.2f} (median step), "
+            f"x{r['ratio_windows_per_s_run']:.2f} (whole run), p99 step x{r['ratio_step_p99']:.2f}, "
+            f"batch assembly x{r['ratio_batch_median']:.1f}"
+        )
+        print(
+            f"  {name:8s} matrix products: {r['flops_per_window'] / 1e6:.2f} MFLOP per window, "
+            f"{r['gflops_device_run']:.0f} GFLOP/s on the device path = {100 * r['gflops_device_run'] / ceiling:.0f} % "
+            f"of the ceiling; 3x would need {3 * r['gflops_device_run']:.0f}"
+        )
     if args.json:
-        Path(args.json).write_text(json.dumps({"threads": args.threads, "device": str(device), "torch": torch.__version__,
-                                               "gemm_gflops": ceiling, "runs": out}, indent=1) + "\n")  # fmt: skip
+        Path(args.json).write_text(
+            json.dumps(
+                {
+                    "threads": args.threads,
+                    "device": str(device),
+                    "torch": torch.__version__,
+                    "gemm_gflops": ceiling,
+                    "runs": out,
+                },
+                indent=1,
+            )
+            + "\n"
+        )
 
 
 if __name__ == "__main__":

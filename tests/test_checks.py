@@ -71,7 +71,9 @@ def test_check_int_errors(value, minimum, maximum, message):
         check_int(value, name, minimum, maximum)
 
 
-@pytest.mark.parametrize(("value", "minimum", "maximum"), [(1, 1, None), (5, 0, 5), (np.int8(-4), None, None), (0, 0, 0)])
+@pytest.mark.parametrize(
+    ("value", "minimum", "maximum"), [(1, 1, None), (5, 0, 5), (np.int8(-4), None, None), (0, 0, 0)]
+)
 def test_check_int_bounds_are_inclusive(value, minimum, maximum):
     assert check_int(value, "x", minimum, maximum) == int(value)
 
@@ -97,8 +99,12 @@ def test_check_optional_int():
 def test_check_positive_scalar():
     assert check_positive_scalar(np.float32(0.5), "dt") == 0.5
     assert check_positive_scalar(np.int64(2), "dt") == 2.0
-    for bad, message in ((0.0, "dt must be a finite number > 0"), (float("nan"), "finite number > 0"),
-                         (-1, "> 0, got -1"), ("abc", "dt must be a number, got 'abc'")):  # fmt: skip
+    for bad, message in (
+        (0.0, "dt must be a finite number > 0"),
+        (float("nan"), "finite number > 0"),
+        (-1, "> 0, got -1"),
+        ("abc", "dt must be a number, got 'abc'"),
+    ):
         with pytest.raises(ValueError, match=message):
             check_positive_scalar(bad, "dt")
 
@@ -169,8 +175,9 @@ def test_functions_accept_numpy_integers():
     assert NominalIntent(np.int32(5)).horizon == 5
     with pytest.raises(ValueError, match="^population_seed must be an integer, got True"):
         operator_profile(1, True)
-    specs = dataset_specs(controller="manual", users=[0], tasks=["linear"], objects=["handle"], trials=np.int64(2),
-                          seed=np.int64(5))  # fmt: skip
+    specs = dataset_specs(
+        controller="manual", users=[0], tasks=["linear"], objects=["handle"], trials=np.int64(2), seed=np.int64(5)
+    )
     assert [s.seed for s in specs] == [5, 6]
     with pytest.raises(ValueError, match="^trials must be an integer, got True"):
         dataset_specs(controller="manual", users=[0], tasks=["linear"], objects=["handle"], trials=True, seed=0)

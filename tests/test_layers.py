@@ -14,7 +14,18 @@ from pathlib import Path
 import coassist
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("(root)", "errors", "_checks", "_io", "_progress", "_cpu", "interfaces", "config", "spatial", "registry"),  # shared vocabulary and rigid-body math
+    (
+        "(root)",
+        "errors",
+        "_checks",
+        "_io",
+        "_progress",
+        "_cpu",
+        "interfaces",
+        "config",
+        "spatial",
+        "registry",
+    ),  # shared vocabulary and rigid-body math
     ("model", "data", "metrics"),  # the impedance model; trials on disk; metrics
     ("control",),  # games, baselines, guarded controllers (pure control laws)
     ("intent",),  # the predictor
@@ -27,9 +38,13 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 )
 #: Imports between packages of the same layer that are allowed.
 SIBLINGS_ALLOWED: set[tuple[str, str]] = {
-    ("config", "_checks"), ("spatial", "_checks"), ("interfaces", "_checks"), ("config", "registry"),
-    ("_io", "errors"), ("registry", "errors"),
-}  # fmt: skip
+    ("config", "_checks"),
+    ("spatial", "_checks"),
+    ("interfaces", "_checks"),
+    ("config", "registry"),
+    ("_io", "errors"),
+    ("registry", "errors"),
+}
 
 #: Imports a layer rule would allow but that are forbidden: the arm worlds and the page share
 #: nothing with the point-mass simulator but what sits below all three (scenario, control's
@@ -43,9 +58,10 @@ SRC = Path(coassist.__file__).parent
 #: Import circles between modules known and left alone, each with why. An entry that is no
 #: longer a circle fails the test (remove it then), so the list cannot go stale.
 KNOWN_CIRCLES: dict[frozenset[str], str] = {
-    frozenset({"coassist.experiments.application", "coassist.experiments.source_training"}):
-        "source_training reads application's OBSTACLE; experiments/ is being reworked (issue 36)",
-}  # fmt: skip
+    frozenset(
+        {"coassist.experiments.application", "coassist.experiments.source_training"}
+    ): "source_training reads application's OBSTACLE; experiments/ is being reworked (issue 36)",
+}
 
 
 def _package(parts: tuple[str, ...]) -> str:
@@ -79,9 +95,13 @@ def layering_violations(src: Path) -> list[str]:
             if there == here:
                 continue
             if RANK[there] > RANK[here] or (RANK[there] == RANK[here] and (here, there) not in SIBLINGS_ALLOWED):
-                bad.append(f"{path.relative_to(src.parent)}:{line}: {here} (layer {RANK[here]}) imports {mod} (layer {RANK[there]})")
+                bad.append(
+                    f"{path.relative_to(src.parent)}:{line}: {here} (layer {RANK[here]}) imports {mod} (layer {RANK[there]})"
+                )
             elif (here, there) in FORBIDDEN:
-                bad.append(f"{path.relative_to(src.parent)}:{line}: {here} imports {mod} (forbidden: {here} must not import {there})")
+                bad.append(
+                    f"{path.relative_to(src.parent)}:{line}: {here} imports {mod} (forbidden: {here} must not import {there})"
+                )
     return bad
 
 
@@ -116,7 +136,9 @@ def test_the_checker_forbids_the_arm_worlds_and_the_page_from_importing_the_simu
     (src / "robot").mkdir(parents=True)
     (src / "play").mkdir()
     (src / "robot" / "drive.py").write_text("from coassist.sim.world import run_trial\n")
-    (src / "play" / "session.py").write_text("def f():\n    from coassist.sim import world\nfrom coassist.scenario import tasks\n")
+    (src / "play" / "session.py").write_text(
+        "def f():\n    from coassist.sim import world\nfrom coassist.scenario import tasks\n"
+    )
     bad = layering_violations(src)
     assert len(bad) == 2
     assert "play/session.py:2: play imports coassist.sim (forbidden" in bad[0]
@@ -207,6 +229,8 @@ def test_the_circle_finder_sees_lazy_and_package_relative_imports(tmp_path):
     (src / "pkg" / "e.py").write_text("from .f import y\n")
     (src / "pkg" / "f.py").write_text("from . import e\n")
     assert sorted(import_circles(src)) == [["coassist.pkg.a", "coassist.pkg.b"], ["coassist.pkg.e", "coassist.pkg.f"]]
+
+
 #: The registries whose entries name what they build by an entry point ("package.module:attribute"),
 #: imported at run time where the import checker above cannot see it, and the attribute holding it.
 ENTRY_POINT_REGISTRIES = {
@@ -227,5 +251,7 @@ def test_registry_entry_points_respect_the_layers():
             assert target.startswith("coassist."), f"{module_name}.{table}[{name!r}] names {target}, outside coassist"
             there = _package(tuple(target.split(".")[1:]))
             if RANK[there] > RANK[here] or (RANK[there] == RANK[here] and there != here):
-                bad.append(f"{module_name}.{table}[{name!r}]: {here} (layer {RANK[here]}) names {target} (layer {RANK[there]})")
+                bad.append(
+                    f"{module_name}.{table}[{name!r}]: {here} (layer {RANK[here]}) names {target} (layer {RANK[there]})"
+                )
     assert not bad, "entry points against the layering:\n" + "\n".join(bad)

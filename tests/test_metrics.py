@@ -193,15 +193,20 @@ def test_sigma_thesis_window_is_375_samples():
     """dt = 8 ms, tau = 3 s: exactly 375 samples from the first entry."""
     dist = np.full(1000, 0.5)
     dist[10:385] = 0.01  # 375 samples at 1 cm
-    dist[385:] = 0.02    # would pull the mean up if a 376th sample were used
+    dist[385:] = 0.02  # would pull the mean up if a 376th sample were used
     pose = np.column_stack([dist, np.zeros_like(dist)])
     assert precision_sigma(pose, [0.0, 0.0], 0.008) == pytest.approx(0.01, rel=1e-12)
     assert time_to_target(pose, [0.0, 0.0], 0.008) == pytest.approx(0.08, rel=1e-12)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"dt": 0.0}, "dt"), ({"dt": 0.008, "epsilon": -1.0}, "epsilon"), ({"dt": 0.008, "tau": float("nan")}, "tau"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"dt": 0.0}, "dt"),
+        ({"dt": 0.008, "epsilon": -1.0}, "epsilon"),
+        ({"dt": 0.008, "tau": float("nan")}, "tau"),
+    ],
+)
 def test_sigma_validation(kwargs, message):
     with pytest.raises(ValueError, match=message):
         precision_sigma(np.zeros((5, 2)), [0.0, 0.0], **kwargs)

@@ -20,7 +20,9 @@ def test_unknown_name_says_what_and_the_closest_name():
     assert str(info.value) == "'alpah': no such widget; did you mean 'alpha'? (choose from: alpha, beta)"
     assert isinstance(info.value, ValueError) and isinstance(info.value, KeyError)
     # nothing close: no hint
-    assert unknown_name_message("zzz", ["alpha", "beta"], "widget") == "'zzz': no such widget (choose from: alpha, beta)"
+    assert (
+        unknown_name_message("zzz", ["alpha", "beta"], "widget") == "'zzz': no such widget (choose from: alpha, beta)"
+    )
 
 
 def test_registry_is_read_only_and_validated():
@@ -51,7 +53,9 @@ def test_the_three_preset_kinds_are_registries_with_their_own_names():
     # the decimetre preset is the SI one with every Q scaled by 10² (positions in dm)
     dm = CONTROL_PRESETS["thesis-evaluation-dm"]
     assert dm.game.Q_hh == tuple(DECIMETRE_SCALE**2 * q for q in THESIS_EVALUATION.game.Q_hh)
-    with pytest.raises(ValueError, match=r"^preset 'thesis-eval': no such control preset; did you mean 'thesis-evaluation'\?"):
+    with pytest.raises(
+        ValueError, match=r"^preset 'thesis-eval': no such control preset; did you mean 'thesis-evaluation'\?"
+    ):
         get_preset("thesis-eval")
 
 
@@ -62,7 +66,9 @@ def test_an_entry_point_names_a_module_attribute_imported_when_asked():
     for bad in ("coassist.scenario.reference_intents", ":NominalIntent", "coassist.scenario:", None):
         with pytest.raises(ValueError, match="an entry point is 'package.module:attribute'"):
             load_entry_point(bad)  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match=r"^entry point 'coassist.registry:Nothing': coassist.registry has no 'Nothing'$"):
+    with pytest.raises(
+        ValueError, match=r"^entry point 'coassist.registry:Nothing': coassist.registry has no 'Nothing'$"
+    ):
         load_entry_point("coassist.registry:Nothing")
     with pytest.raises(ImportError):  # the caller names the extra to install
         load_entry_point("coassist_no_such_module:thing")

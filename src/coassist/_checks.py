@@ -44,7 +44,9 @@ def check_positive_definite(arr: np.ndarray, name: str) -> None:
     try:
         np.linalg.cholesky(arr)
     except np.linalg.LinAlgError:
-        raise ValueError(f"{name} must be positive definite (smallest eigenvalue {np.linalg.eigvalsh(arr).min():.3g})") from None
+        raise ValueError(
+            f"{name} must be positive definite (smallest eigenvalue {np.linalg.eigvalsh(arr).min():.3g})"
+        ) from None
 
 
 def check_positive_semidefinite(arr: np.ndarray, name: str) -> None:

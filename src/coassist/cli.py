@@ -132,7 +132,9 @@ def _check_device(device: str | None, option: str = "--device") -> None:
     if dev.type == "cuda":
         if not torch.cuda.is_available():
             built = "built with CUDA, but no GPU is visible" if torch.backends.cuda.is_built() else "built without CUDA"
-            _fail(f"{option} {device}: CUDA is not available here (torch {torch.__version__} {built}); use --device cpu")
+            _fail(
+                f"{option} {device}: CUDA is not available here (torch {torch.__version__} {built}); use --device cpu"
+            )
         if dev.index is not None and dev.index >= torch.cuda.device_count():
             _fail(f"{option} {device}: this machine has {torch.cuda.device_count()} CUDA device(s)")
     elif dev.type == "mps" and not torch.backends.mps.is_available():
@@ -175,16 +177,19 @@ def sweep(
     _wrote(f"{out / 'summary.json'} and {out / 'dmpc_sweep.png'}")
 
 
-
 # --------------------------------------------------------------------------- intent model
 
 
 #: The training options as typed, for the fields of TrainConfig / NetworkConfig they set.
 TRAIN_OPTIONS = {
-    **{f"train.{name}": f"--{name.replace('_', '-')}" for name in (
-        "epochs", "lr", "batch_size", "seed", "threads", "test_fraction", "init", "device", "optimizer")},
-    "network.lstm_layers": "--layers", "network.hidden": "--hidden", "network.fc": "--fc",
-}  # fmt: skip
+    **{
+        f"train.{name}": f"--{name.replace('_', '-')}"
+        for name in ("epochs", "lr", "batch_size", "seed", "threads", "test_fraction", "init", "device", "optimizer")
+    },
+    "network.lstm_layers": "--layers",
+    "network.hidden": "--hidden",
+    "network.fc": "--fc",
+}
 
 
 def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, **overrides):
@@ -216,8 +221,10 @@ def _need_bags(option: str) -> None:
         _fail(f"{option} needs the bags extra (rosbags): pip install 'coassist[bags]'", 2)
 
 
-BAG_TOPICS_HELP = ("Topics of bags, where they differ from the thesis' (/current_pose, /current_velocity, /human_wrench, "
-                   "/robot_ref_pos): e.g. wrench=/ft/wrench,pose=/tcp_pose.")
+BAG_TOPICS_HELP = (
+    "Topics of bags, where they differ from the thesis' (/current_pose, /current_velocity, /human_wrench, "
+    "/robot_ref_pos): e.g. wrench=/ft/wrench,pose=/tcp_pose."
+)
 
 
 def _bag_topics(text: str | None) -> dict[str, str] | None:
@@ -272,16 +279,28 @@ def _check_model_out(out: Path, overwrite: bool, init: str) -> None:
         _fail(f"--out {out}: is a file; give a folder for the model", 2)
     continuing = init.startswith("resume:") and Path(init.partition(":")[2]).absolute() == out.absolute()
     if out.is_dir() and any(out.iterdir()) and not (overwrite or continuing):
-        _fail(f"--out {out}: already holds files; pass --overwrite to replace it (the old model stays until the new "
-              "one is complete)", 2)  # fmt: skip
+        _fail(
+            f"--out {out}: already holds files; pass --overwrite to replace it (the old model stays until the new "
+            "one is complete)",
+            2,
+        )
 
 
 @app.command()
 def train(
-    data: list[Path] = typer.Argument(..., help="Dataset folders, real-recording folders (e.g. .../ur5-thesis/user-a) or single recordings."),
-    out: Path = typer.Option(..., "--out", "-o", help="Model folder to write (weights, model.json, history.json, loss.png)."),
-    preset: str = typer.Option("default", help="Starting configuration: 'default' (LSTM 2×64 learning the residual over the validation-tuned ridge), 'lstm' (the same, skip trained too), 'intent' (lstm learning the simulated operator's true intent: simulated data only), 'linear' (the tuned ridge alone, closed form) or 'thesis' (exact §5.2.2)."),
-    init: str = typer.Option("scratch", help="scratch | resume:<model> | finetune:<model> | transfer:<model> (LSTM frozen)."),
+    data: list[Path] = typer.Argument(
+        ..., help="Dataset folders, real-recording folders (e.g. .../ur5-thesis/user-a) or single recordings."
+    ),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Model folder to write (weights, model.json, history.json, loss.png)."
+    ),
+    preset: str = typer.Option(
+        "default",
+        help="Starting configuration: 'default' (LSTM 2×64 learning the residual over the validation-tuned ridge), 'lstm' (the same, skip trained too), 'intent' (lstm learning the simulated operator's true intent: simulated data only), 'linear' (the tuned ridge alone, closed form) or 'thesis' (exact §5.2.2).",
+    ),
+    init: str = typer.Option(
+        "scratch", help="scratch | resume:<model> | finetune:<model> | transfer:<model> (LSTM frozen)."
+    ),
     epochs: int = typer.Option(None, help="Override the preset's epochs."),
     lr: float = typer.Option(None, help="Override the initial learning rate."),
     batch_size: int = typer.Option(None, help="Override the batch size."),
@@ -293,8 +312,13 @@ def train(
     layers: int = typer.Option(None, help="LSTM layers (--init scratch; default: the preset's)."),
     hidden: int = typer.Option(None, help="LSTM hidden size (--init scratch)."),
     fc: str = typer.Option(None, help="Widths of the FC layers after the LSTM, comma-separated (--init scratch)."),
-    label: str = typer.Option(None, help="What the model predicts (--init scratch; default: the preset's): tool (the measured future pose, the thesis), hand_alone (the robot's own effort removed: needs trials that log u_r) or intent (the simulated operator's true intent)."),
-    overwrite: bool = typer.Option(False, help="Replace the model already in --out (only once the new one is complete)."),
+    label: str = typer.Option(
+        None,
+        help="What the model predicts (--init scratch; default: the preset's): tool (the measured future pose, the thesis), hand_alone (the robot's own effort removed: needs trials that log u_r) or intent (the simulated operator's true intent).",
+    ),
+    overwrite: bool = typer.Option(
+        False, help="Replace the model already in --out (only once the new one is complete)."
+    ),
     skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
     bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
 ) -> None:
@@ -318,10 +342,24 @@ def train(
         _choose(label, LABELS, "--label", "label")
         given.append("--label")
     if given and init != "scratch":
-        _fail(f"{', '.join(given)}: network sizes and the label apply to --init scratch only; {init.partition(':')[0]}: "
-              "keeps the starting model's", 2)  # fmt: skip
-    p = _intent_preset(preset, network=sizes, epochs=epochs, lr=lr, batch_size=batch_size, seed=seed, threads=threads,
-                       test_fraction=test_fraction, init=init, device=device, optimizer=optimizer)  # fmt: skip
+        _fail(
+            f"{', '.join(given)}: network sizes and the label apply to --init scratch only; {init.partition(':')[0]}: "
+            "keeps the starting model's",
+            2,
+        )
+    p = _intent_preset(
+        preset,
+        network=sizes,
+        epochs=epochs,
+        lr=lr,
+        batch_size=batch_size,
+        seed=seed,
+        threads=threads,
+        test_fraction=test_fraction,
+        init=init,
+        device=device,
+        optimizer=optimizer,
+    )
     if label is not None:
         from dataclasses import replace
 
@@ -351,7 +389,9 @@ def train(
 def evaluate(
     model: Path = typer.Option(..., "--model", "-m", help="Model folder written by `coassist train`."),
     data: list[Path] = typer.Option(..., "--data", "-d", help="Dataset or recording folders to score on (repeatable)."),
-    out: Path = typer.Option(None, help="JSON file for the results, or a folder for evaluation.json (default: <model>/evaluation.json)."),
+    out: Path = typer.Option(
+        None, help="JSON file for the results, or a folder for evaluation.json (default: <model>/evaluation.json)."
+    ),
     include_training: bool = typer.Option(False, help="Also score trials the model was trained on."),
     skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
     bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
@@ -419,15 +459,28 @@ def tune(
     trials = _intent_trials(data)
     _set_torch_threads(p.train.threads)
     try:
-        result = run_study(trials, p, n_trials=n_trials, storage=storage, study_name=study_name, epochs=epochs,
-                           seed=seed, progress=True)  # fmt: skip
+        result = run_study(
+            trials,
+            p,
+            n_trials=n_trials,
+            storage=storage,
+            study_name=study_name,
+            epochs=epochs,
+            seed=seed,
+            progress=True,
+        )
     except StudyMismatchError as exc:
         _fail(f"--study-name {study_name}: {exc}", 2)
     except ValueError as exc:
         _fail(str(exc), 2)
     console.print(f"best validation e_RMS {1e3 * result['best_value']:.2f} mm", highlight=False)
-    console.print(f"train with them: coassist train {' '.join(map(str, data))} --out <model> "
-                  f"{' '.join(train_options(result['best_params']))}", markup=False, highlight=False, soft_wrap=True)  # fmt: skip
+    console.print(
+        f"train with them: coassist train {' '.join(map(str, data))} --out <model> "
+        f"{' '.join(train_options(result['best_params']))}",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
     console.print(f"study {result['study_name']!r} in {result['storage']} ({result['n_trials']} trials)", markup=False)
 
 
@@ -461,8 +514,11 @@ def _print_forces(folder: Path) -> None:
         trial = read_dataset_trial(folder, i)
         hand.append(f_rms(trial.wrench))
         robot.append(f_rms(trial.effort_r))
-    console.print(f"f_RMS (eq. 5.9), mean over {len(hand)} trials: hand {float(np.mean(hand)):.2f} N, "
-                  f"robot {float(np.mean(robot)):.2f} N", highlight=False)  # fmt: skip
+    console.print(
+        f"f_RMS (eq. 5.9), mean over {len(hand)} trials: hand {float(np.mean(hand)):.2f} N, "
+        f"robot {float(np.mean(robot)):.2f} N",
+        highlight=False,
+    )
 
 
 @app.command()
@@ -474,15 +530,30 @@ def collect(
     objects: str = typer.Option("handle", help="Objects: handle, board, heavy."),
     trials: int = typer.Option(20, help="Trials per user, object and task."),
     seed: int = typer.Option(0, help="Seed of the first trial; trial i uses seed + i."),
-    preset: str = typer.Option(COLLECTION_PRESET, help=f"Control preset: {COLLECTION_PRESET} (the main job's for collection), {APPLICATION_PRESET} (the main job's with a learned model in the loop), thesis-application-dm, or one without -dm (SI units: the robot barely helps)."),
+    preset: str = typer.Option(
+        COLLECTION_PRESET,
+        help=f"Control preset: {COLLECTION_PRESET} (the main job's for collection), {APPLICATION_PRESET} (the main job's with a learned model in the loop), thesis-application-dm, or one without -dm (SI units: the robot barely helps).",
+    ),
     intent: str = typer.Option("nominal", help=f"Intent source: {intent_choices()}."),
-    obstacle: str = typer.Option("small", help="The obstacle the operators go around: small (the evaluation's box) or large (the application's 12 cm box, no path shown)."),
+    obstacle: str = typer.Option(
+        "small",
+        help="The obstacle the operators go around: small (the evaluation's box) or large (the application's 12 cm box, no path shown).",
+    ),
     dataset_id: str = typer.Option(None, help="Dataset id (default: the folder's name)."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
     ray_address: str = typer.Option(None, help="Run on a Ray cluster at this address (needs coassist[cluster])."),
-    overwrite: bool = typer.Option(False, help="Replace an existing dataset folder (only once the new one is complete)."),
-    lockstep: bool = typer.Option(True, "--lockstep/--per-trial", help="Advance each worker's trials together: one controller call and, with a model in the loop, one network call per tick for all (~6x faster with a model, ~2x without; with a model equal to the per-trial run to the network's float32 rounding, without it bit for bit). --per-trial: every trial alone, bit for bit the same whatever else runs (e.g. across a resumed collection)."),
-    network: str = typer.Option("auto", help="What evaluates a model's network: onnx (ONNX Runtime, 1.6-1.9x faster at the loop's batch sizes; the onnx extra), torch, or auto (onnx where installed). The two agree to float32 rounding; each trial records which ran."),
+    overwrite: bool = typer.Option(
+        False, help="Replace an existing dataset folder (only once the new one is complete)."
+    ),
+    lockstep: bool = typer.Option(
+        True,
+        "--lockstep/--per-trial",
+        help="Advance each worker's trials together: one controller call and, with a model in the loop, one network call per tick for all (~6x faster with a model, ~2x without; with a model equal to the per-trial run to the network's float32 rounding, without it bit for bit). --per-trial: every trial alone, bit for bit the same whatever else runs (e.g. across a resumed collection).",
+    ),
+    network: str = typer.Option(
+        "auto",
+        help="What evaluates a model's network: onnx (ONNX Runtime, 1.6-1.9x faster at the loop's batch sizes; the onnx extra), torch, or auto (onnx where installed). The two agree to float32 rounding; each trial records which ran.",
+    ),
 ) -> None:
     """Simulate trials and write them as a dataset (thesis §5.2.2; default: D0, 60 trials).
 
@@ -512,10 +583,24 @@ def collect(
     _folder_out(out, "--out")
     try:
         folder = collect_dataset(
-            out, dataset_id=dataset_id, workers=workers, progress=True, ray_address=ray_address, overwrite=overwrite,
-            controller=controller, users=user_list, tasks=task_list, objects=object_list, trials=trials, seed=seed,
-            preset=preset, obstacle=obstacle, lockstep=lockstep, network=network,
-            intent=intent, say=lambda line: console.print(line, highlight=False),
+            out,
+            dataset_id=dataset_id,
+            workers=workers,
+            progress=True,
+            ray_address=ray_address,
+            overwrite=overwrite,
+            controller=controller,
+            users=user_list,
+            tasks=task_list,
+            objects=object_list,
+            trials=trials,
+            seed=seed,
+            preset=preset,
+            obstacle=obstacle,
+            lockstep=lockstep,
+            network=network,
+            intent=intent,
+            say=lambda line: console.print(line, highlight=False),
         )
     except (ValueError, FileExistsError, NotADirectoryError, RuntimeError, OutputBusyError) as exc:
         _fail(f"{exc}")
@@ -527,40 +612,85 @@ def collect(
 
 #: drive's options as typed, for the DriveConfig / SafetyLimits fields they set.
 DRIVE_OPTIONS = {
-    **{f"DriveConfig.{name}": f"--{name.replace('_', '-')}" for name in (
-        "world", "controller", "task", "preset", "intent", "user", "seed", "obstacle", "full_pose", "time_limit",
-        "predictor_backend", "robot")},
-    "DriveConfig.object": "--object", "DriveConfig.rate_hz": "--rate",
-    "SafetyLimits.tool_speed": "--tool-speed", "SafetyLimits.contact_force": "--contact-force",
-}  # fmt: skip
+    **{
+        f"DriveConfig.{name}": f"--{name.replace('_', '-')}"
+        for name in (
+            "world",
+            "controller",
+            "task",
+            "preset",
+            "intent",
+            "user",
+            "seed",
+            "obstacle",
+            "full_pose",
+            "time_limit",
+            "predictor_backend",
+            "robot",
+        )
+    },
+    "DriveConfig.object": "--object",
+    "DriveConfig.rate_hz": "--rate",
+    "SafetyLimits.tool_speed": "--tool-speed",
+    "SafetyLimits.contact_force": "--contact-force",
+}
 
 
 @app.command()
 def drive(
-    out: Path = typer.Option(Path("runs/drive/trial.parquet"), help="Trial file to write (the same format as collect's trials, plus joint columns)."),
+    out: Path = typer.Option(
+        Path("runs/drive/trial.parquet"),
+        help="Trial file to write (the same format as collect's trials, plus joint columns).",
+    ),
     world: str = typer.Option("mujoco", help=f"{world_choices()}."),
     robot: str = typer.Option(None, help=f"The arm: {arm_choices()}; default the world's first."),
-    controller: str = typer.Option("cooperative", help="cooperative (the assistive controller: the cooperative game) | cooperative-arbitrated (α set every tick by the target law) | impedance (IMP) | manual (MG, manual guidance)."),
+    controller: str = typer.Option(
+        "cooperative",
+        help="cooperative (the assistive controller: the cooperative game) | cooperative-arbitrated (α set every tick by the target law) | impedance (IMP) | manual (MG, manual guidance).",
+    ),
     task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
-    intent: str = typer.Option("nominal", help=f"Intent source: {intent_choices()} ("
-                               + ", ".join(n for n, e in INTENT_SOURCES.items() if e.simulation_only) + " in a simulated world only)."),
-    realtime_intent: bool = typer.Option(None, help="Run the model off the control thread, never waiting for it (default: on for a real arm, off in a simulated world, where runs are then deterministic)."),
-    predictor_backend: str = typer.Option("process", help="Where a real-time model runs: process (own worker process), onnx (ONNX Runtime thread) or torch (thread)."),
-    preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; the -dm presets ring with one)."),
+    intent: str = typer.Option(
+        "nominal",
+        help=f"Intent source: {intent_choices()} ("
+        + ", ".join(n for n, e in INTENT_SOURCES.items() if e.simulation_only)
+        + " in a simulated world only).",
+    ),
+    realtime_intent: bool = typer.Option(
+        None,
+        help="Run the model off the control thread, never waiting for it (default: on for a real arm, off in a simulated world, where runs are then deterministic).",
+    ),
+    predictor_backend: str = typer.Option(
+        "process",
+        help="Where a real-time model runs: process (own worker process), onnx (ONNX Runtime thread) or torch (thread).",
+    ),
+    preset: str = typer.Option(
+        APPLICATION_PRESET,
+        help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; the -dm presets ring with one).",
+    ),
     user: int = typer.Option(0, help="Simulated operator (MuJoCo world)."),
     seed: int = typer.Option(0, help="Seed of the task, the simulated operator and the sensor noise."),
-    obstacle: str = typer.Option("small", help="The obstacle the simulated operator goes around: small or large (the application's)."),
+    obstacle: str = typer.Option(
+        "small", help="The obstacle the simulated operator goes around: small or large (the application's)."
+    ),
     rate: int = typer.Option(125, help="Control rate in Hz: 125 (UR CB3) or 500 (e-Series)."),
     full_pose: bool = typer.Option(False, help="Control all 6 DOFs instead of the x-y plane."),
     time_limit: float = typer.Option(None, help="Longest run in seconds (default: 2 x the plan + 10 s)."),
     tool_speed: float = typer.Option(0.25, help="Safety: largest tool speed in m/s."),
     contact_force: float = typer.Option(120.0, help="Safety: hand force in N that makes a protective stop."),
-    host: str = typer.Option(None, help="The real arm's address: " + ", ".join(f"{e.host} (--world {n})" for n, e in WORLDS.items() if e.host) + "."),
+    host: str = typer.Option(
+        None,
+        help="The real arm's address: "
+        + ", ".join(f"{e.host} (--world {n})" for n, e in WORLDS.items() if e.host)
+        + ".",
+    ),
     yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before a real arm moves (scripts)."),
     view: bool = typer.Option(False, help="Open MuJoCo's passive viewer (needs a display) and run in real time."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
-    mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap: ROS 2 messages (poses, wrench, prediction, alpha, faults) that Foxglove opens and train reads."),
+    mcap: bool = typer.Option(
+        False,
+        help="Also write the run as <out>.mcap: ROS 2 messages (poses, wrench, prediction, alpha, faults) that Foxglove opens and train reads.",
+    ),
     overwrite: bool = typer.Option(False, help="Replace an existing trial file at --out."),
 ) -> None:
     """Run the assistive controller, IMP or MG on an arm (UR5, Panda): in MuJoCo, or on a real one."""
@@ -575,10 +705,24 @@ def drive(
     _lookup(CONTROL_PRESETS, preset, "--preset")
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
-        config = DriveConfig(world=world, controller=controller, task=task, object=obj, preset=preset, intent=intent,
-                             user=user, seed=seed, obstacle=obstacle, rate_hz=rate, full_pose=full_pose, time_limit=time_limit,
-                             limits=limits, realtime_intent=realtime_intent,
-                             predictor_backend=predictor_backend, robot=robot)  # fmt: skip
+        config = DriveConfig(
+            world=world,
+            controller=controller,
+            task=task,
+            object=obj,
+            preset=preset,
+            intent=intent,
+            user=user,
+            seed=seed,
+            obstacle=obstacle,
+            rate_hz=rate,
+            full_pose=full_pose,
+            time_limit=time_limit,
+            limits=limits,
+            realtime_intent=realtime_intent,
+            predictor_backend=predictor_backend,
+            robot=robot,
+        )
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
     out = _run_out(out, overwrite, mcap)
@@ -594,8 +738,9 @@ def drive(
 
     # The UR's joint names; another arm's joints are named joint_1 … joint_n in the MCAP.
     names = UR_JOINT_NAMES if config.robot == "ur5" else None
-    _write_run(trial, out, alpha=_run_alpha(preset, controller) if mcap else None, mcap=mcap, plot=plot,
-               joint_names=names)  # fmt: skip
+    _write_run(
+        trial, out, alpha=_run_alpha(preset, controller) if mcap else None, mcap=mcap, plot=plot, joint_names=names
+    )
 
 
 def _run_out(out: Path, overwrite: bool, mcap: bool) -> Path:
@@ -624,7 +769,9 @@ def _confirm_move(yes: bool, stop_hint: str):
     """The question drive and ros2 ask before an arm moves: the limits in force, then "Move the robot?"."""
 
     def confirm(text: str) -> bool:
-        console.print("[bold]Limits in force[/] (coassist's safety layer, on top of the robot's own safety system):", markup=True)
+        console.print(
+            "[bold]Limits in force[/] (coassist's safety layer, on top of the robot's own safety system):", markup=True
+        )
         console.print(text, markup=False)
         console.print(f"Keep {stop_hint} within reach.", markup=False)
         return yes or typer.confirm("Move the robot?", default=False)
@@ -632,8 +779,9 @@ def _confirm_move(yes: bool, stop_hint: str):
     return confirm
 
 
-def _write_run(trial, out: Path, *, alpha: float | None, mcap: bool, plot: bool,
-               joint_names: Sequence[str] | None) -> None:  # fmt: skip
+def _write_run(
+    trial, out: Path, *, alpha: float | None, mcap: bool, plot: bool, joint_names: Sequence[str] | None
+) -> None:
     """Write a drive/ros2 run: the trial file, how it ended, and <out>.mcap / <out>.png on request.
     ``joint_names``: the arm's, in the trial's joint order (None: joint_1 … joint_n in the MCAP)."""
     from coassist.data.run_pair import write_run_pair
@@ -656,11 +804,25 @@ def _write_run(trial, out: Path, *, alpha: float | None, mcap: bool, plot: bool,
 
 ROS2_OPTIONS = {
     **DRIVE_OPTIONS,
-    **{f"Ros2Config.{name}": f"--{name.replace('_', '-')}" for name in (
-        "wrench_topic", "joint_state_topic", "command_topic", "base_frame", "joint_names", "domain_id", "stale_after",
-        "tcp_offset", "node_name", "namespace", "connect_timeout", "wrench_frame")},
+    **{
+        f"Ros2Config.{name}": f"--{name.replace('_', '-')}"
+        for name in (
+            "wrench_topic",
+            "joint_state_topic",
+            "command_topic",
+            "base_frame",
+            "joint_names",
+            "domain_id",
+            "stale_after",
+            "tcp_offset",
+            "node_name",
+            "namespace",
+            "connect_timeout",
+            "wrench_frame",
+        )
+    },
     "Ros2Config.rate_hz": "--rate",
-}  # fmt: skip
+}
 
 
 def _floats(text: str | None, option: str) -> tuple[float, ...] | None:
@@ -675,31 +837,58 @@ def _floats(text: str | None, option: str) -> tuple[float, ...] | None:
 @app.command()
 def ros2(
     out: Path = typer.Option(Path("runs/ros2/trial.parquet"), help="Trial file to write (as coassist drive writes)."),
-    controller: str = typer.Option("cooperative", help="cooperative (the assistive controller: the cooperative game) | impedance (IMP) | manual (MG, manual guidance)."),
-    task: str = typer.Option("linear", help="Nominal path, laid out from where the tool is: linear, curved, sinusoidal, z."),
+    controller: str = typer.Option(
+        "cooperative",
+        help="cooperative (the assistive controller: the cooperative game) | impedance (IMP) | manual (MG, manual guidance).",
+    ),
+    task: str = typer.Option(
+        "linear", help="Nominal path, laid out from where the tool is: linear, curved, sinusoidal, z."
+    ),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
     intent: str = typer.Option("nominal", help=f"Intent source: {intent_choices(simulation=False)}."),
-    predictor_backend: str = typer.Option("process", help="Where a model runs: process (own worker process), onnx or torch (thread)."),
-    preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; the -dm presets ring with one)."),
+    predictor_backend: str = typer.Option(
+        "process", help="Where a model runs: process (own worker process), onnx or torch (thread)."
+    ),
+    preset: str = typer.Option(
+        APPLICATION_PRESET,
+        help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; the -dm presets ring with one).",
+    ),
     rate: int = typer.Option(125, help="Control rate in Hz: 125 (UR CB3) or 500 (e-Series)."),
     full_pose: bool = typer.Option(False, help="Control all 6 DOFs instead of the x-y plane."),
     time_limit: float = typer.Option(None, help="Longest run in seconds (default: 2 x the plan + 10 s)."),
     tool_speed: float = typer.Option(0.25, help="Safety: largest tool speed in m/s."),
     contact_force: float = typer.Option(120.0, help="Safety: hand force in N that makes a protective stop."),
-    wrench_topic: str = typer.Option("/force_torque_sensor_broadcaster/wrench", help="geometry_msgs/WrenchStamped in: the F/T reading (sensor frame)."),
+    wrench_topic: str = typer.Option(
+        "/force_torque_sensor_broadcaster/wrench",
+        help="geometry_msgs/WrenchStamped in: the F/T reading (sensor frame).",
+    ),
     joint_state_topic: str = typer.Option("/joint_states", help="sensor_msgs/JointState in."),
-    command_topic: str = typer.Option("/forward_velocity_controller/commands", help="std_msgs/Float64MultiArray out: joint velocities."),
-    joint_names: str = typer.Option(None, help="Joint order of the commands, comma-separated (default: the UR's, shoulder_pan_joint … wrist_3_joint)."),
-    base_frame: str = typer.Option("base", help="frame_id of the published poses (a wrench in it is rotated into the sensor's)."),
-    wrench_frame: str = typer.Option("tool0", help="frame_id of a wrench in the sensor frame (the flange's axes); a wrench in any other frame but --base-frame stops the run."),
+    command_topic: str = typer.Option(
+        "/forward_velocity_controller/commands", help="std_msgs/Float64MultiArray out: joint velocities."
+    ),
+    joint_names: str = typer.Option(
+        None,
+        help="Joint order of the commands, comma-separated (default: the UR's, shoulder_pan_joint … wrist_3_joint).",
+    ),
+    base_frame: str = typer.Option(
+        "base", help="frame_id of the published poses (a wrench in it is rotated into the sensor's)."
+    ),
+    wrench_frame: str = typer.Option(
+        "tool0",
+        help="frame_id of a wrench in the sensor frame (the flange's axes); a wrench in any other frame but --base-frame stops the run.",
+    ),
     wrench_in_base: bool = typer.Option(False, help="Kept for scripts: each wrench message's frame_id says its frame."),
     tcp_offset: str = typer.Option(None, help="TCP in the flange frame: x,y,z,rx,ry,rz [m, rad] (default 0)."),
     node_name: str = typer.Option("coassist", help="The node's name (monitor topics go to /<node>/…)."),
     namespace: str = typer.Option("", help="The node's namespace."),
     domain_id: int = typer.Option(None, help="ROS_DOMAIN_ID (default: the environment's)."),
-    stale_after: float = typer.Option(0.1, help="A wrench or joint state older than this (s, at most 0.5) stops the arm."),
+    stale_after: float = typer.Option(
+        0.1, help="A wrench or joint state older than this (s, at most 0.5) stops the arm."
+    ),
     connect_timeout: float = typer.Option(5.0, help="Wait this long (s) for the first messages."),
-    lockstep: bool = typer.Option(False, help="A simulated robot that steps once per command: wait for its answer every tick."),
+    lockstep: bool = typer.Option(
+        False, help="A simulated robot that steps once per command: wait for its answer every tick."
+    ),
     yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before the robot moves (scripts)."),
     mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap (ROS 2 messages Foxglove opens)."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
@@ -717,17 +906,37 @@ def ros2(
 
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
-        config = DriveConfig(world="ros2", controller=controller, task=task, object=obj, preset=preset, intent=intent,
-                             rate_hz=rate, full_pose=full_pose, time_limit=time_limit, limits=limits,
-                             predictor_backend=predictor_backend)  # fmt: skip
-        rcfg = Ros2Config(node_name=node_name, namespace=namespace, wrench_topic=wrench_topic,
-                          joint_state_topic=joint_state_topic, command_topic=command_topic, base_frame=base_frame,
-                          wrench_frame=wrench_frame,
-                          joint_names=UR_JOINT_NAMES if joint_names is None else tuple(n.strip() for n in joint_names.split(",")),
-                          wrench_in_base=wrench_in_base,
-                          rate_hz=float(rate), stale_after=stale_after, connect_timeout=connect_timeout,
-                          lockstep=lockstep, pace=not lockstep, domain_id=domain_id,
-                          tcp_offset=_floats(tcp_offset, "--tcp-offset") or (0.0,) * 6)  # fmt: skip
+        config = DriveConfig(
+            world="ros2",
+            controller=controller,
+            task=task,
+            object=obj,
+            preset=preset,
+            intent=intent,
+            rate_hz=rate,
+            full_pose=full_pose,
+            time_limit=time_limit,
+            limits=limits,
+            predictor_backend=predictor_backend,
+        )
+        rcfg = Ros2Config(
+            node_name=node_name,
+            namespace=namespace,
+            wrench_topic=wrench_topic,
+            joint_state_topic=joint_state_topic,
+            command_topic=command_topic,
+            base_frame=base_frame,
+            wrench_frame=wrench_frame,
+            joint_names=UR_JOINT_NAMES if joint_names is None else tuple(n.strip() for n in joint_names.split(",")),
+            wrench_in_base=wrench_in_base,
+            rate_hz=float(rate),
+            stale_after=stale_after,
+            connect_timeout=connect_timeout,
+            lockstep=lockstep,
+            pace=not lockstep,
+            domain_id=domain_id,
+            tcp_offset=_floats(tcp_offset, "--tcp-offset") or (0.0,) * 6,
+        )
     except ValueError as exc:
         _fail(_typed(str(exc), ROS2_OPTIONS), 2)
     out = _run_out(out, overwrite, mcap)
@@ -747,8 +956,14 @@ def ros2(
 
 @app.command("ros2-watchdog")
 def ros2_watchdog(
-    input_topic: str = typer.Option("/coassist/joint_velocity_command", "--input", help="Where coassist ros2 sends its commands (its --command-topic)."),
-    output_topic: str = typer.Option("/forward_velocity_controller/commands", "--output", help="The forward velocity controller's command topic."),
+    input_topic: str = typer.Option(
+        "/coassist/joint_velocity_command",
+        "--input",
+        help="Where coassist ros2 sends its commands (its --command-topic).",
+    ),
+    output_topic: str = typer.Option(
+        "/forward_velocity_controller/commands", "--output", help="The forward velocity controller's command topic."
+    ),
     joints: int = typer.Option(6, help="Joints per command."),
     timeout: float = typer.Option(0.05, help="Seconds without a command after which zeros are sent (at most 0.5)."),
     period: float = typer.Option(0.008, help="How often (s) the silence is checked and zeros repeated."),
@@ -763,29 +978,49 @@ def ros2_watchdog(
 
     from coassist.robot.ros2_watchdog import CommandWatchdog, WatchdogConfig
 
-    options = {"WatchdogConfig.input_topic": "--input", "WatchdogConfig.output_topic": "--output",
-               "WatchdogConfig.n_joints": "--joints", "WatchdogConfig.timeout": "--timeout",
-               "WatchdogConfig.period": "--period", "WatchdogConfig.domain_id": "--domain-id"}  # fmt: skip
+    options = {
+        "WatchdogConfig.input_topic": "--input",
+        "WatchdogConfig.output_topic": "--output",
+        "WatchdogConfig.n_joints": "--joints",
+        "WatchdogConfig.timeout": "--timeout",
+        "WatchdogConfig.period": "--period",
+        "WatchdogConfig.domain_id": "--domain-id",
+    }
     try:
-        config = WatchdogConfig(input_topic=input_topic, output_topic=output_topic, n_joints=joints, timeout=timeout,
-                                period=period, domain_id=domain_id)  # fmt: skip
+        config = WatchdogConfig(
+            input_topic=input_topic,
+            output_topic=output_topic,
+            n_joints=joints,
+            timeout=timeout,
+            period=period,
+            domain_id=domain_id,
+        )
     except ValueError as exc:
         _fail(_typed(str(exc), options), 2)
-    console.print(f"relaying {input_topic} -> {output_topic}; zeros after {timeout:g} s without a command (Ctrl-C ends it)",
-                  markup=False)  # fmt: skip
+    console.print(
+        f"relaying {input_topic} -> {output_topic}; zeros after {timeout:g} s without a command (Ctrl-C ends it)",
+        markup=False,
+    )
     with CommandWatchdog(config) as dog:
         try:
             while True:
                 time.sleep(1.0)
         except KeyboardInterrupt:
             pass
-        console.print(f"forwarded {dog.forwarded} commands, {dog.timeouts} silences, {dog.malformed} malformed", markup=False)
+        console.print(
+            f"forwarded {dog.forwarded} commands, {dog.timeouts} silences, {dog.malformed} malformed", markup=False
+        )
 
 
 @app.command()
 def show(
-    path: Path = typer.Argument(..., help="What train and evaluate read: a dataset folder, a folder of trial_* recordings, one recording folder or one trial file."),
-    out: Path = typer.Option(None, help="PNG to write, or a folder for it (default: <name>.png in the current folder)."),
+    path: Path = typer.Argument(
+        ...,
+        help="What train and evaluate read: a dataset folder, a folder of trial_* recordings, one recording folder or one trial file.",
+    ),
+    out: Path = typer.Option(
+        None, help="PNG to write, or a folder for it (default: <name>.png in the current folder)."
+    ),
     index: int = typer.Option(0, help="Which trial of a dataset or folder of recordings (0 = the first)."),
     skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP + " --index then counts the readable ones."),
     bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
@@ -812,21 +1047,45 @@ def _simulation_only(intent: str) -> bool:
 
 @app.command()
 def play(
-    user: str = typer.Option("me", help="Your id (letters, digits, - and _): it names your session folder <out>/<user>."),
-    out: Path = typer.Option(Path("runs/play"), help="Parent folder of the session folders (each a dataset coassist train reads)."),
-    controller: str = typer.Option("manual,impedance,cooperative", help="Controllers the page offers, comma-separated: manual (MG), impedance (IMP), cooperative (assistive), cooperative-arbitrated."),
-    intent: str = typer.Option("nominal", help=f"Intent source (its prediction is drawn live): {intent_choices(simulation=False)}."),
-    preset: str = typer.Option(APPLICATION_PRESET, help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; also thesis-evaluation[-dm], thesis-application[-dm])."),
+    user: str = typer.Option(
+        "me", help="Your id (letters, digits, - and _): it names your session folder <out>/<user>."
+    ),
+    out: Path = typer.Option(
+        Path("runs/play"), help="Parent folder of the session folders (each a dataset coassist train reads)."
+    ),
+    controller: str = typer.Option(
+        "manual,impedance,cooperative",
+        help="Controllers the page offers, comma-separated: manual (MG), impedance (IMP), cooperative (assistive), cooperative-arbitrated.",
+    ),
+    intent: str = typer.Option(
+        "nominal", help=f"Intent source (its prediction is drawn live): {intent_choices(simulation=False)}."
+    ),
+    preset: str = typer.Option(
+        APPLICATION_PRESET,
+        help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; also thesis-evaluation[-dm], thesis-application[-dm]).",
+    ),
     tasks: str = typer.Option("linear,curved,sinusoidal,z", help="The protocol's paths, in order (repeated)."),
     seed: int = typer.Option(0, help="Trial i's obstacle is drawn from seed + i."),
-    motion_time: float = typer.Option(None, help="Planned motion time of every path in seconds (default: the thesis' per path)."),
+    motion_time: float = typer.Option(
+        None, help="Planned motion time of every path in seconds (default: the thesis' per path)."
+    ),
     host: str = typer.Option("127.0.0.1", help="Address to listen on; anything but this machine needs --token."),
     port: int = typer.Option(8765, help="Port to listen on (0: any free port)."),
     token: str = typer.Option(None, help="Token the page must present (made for you on a non-local --host)."),
     open_browser: bool = typer.Option(True, "--open/--no-open", help="Open the page in your web browser."),
-    drive: str = typer.Option(None, help=f"Watch a coassist drive run instead (read-only): {' | '.join(WORLDS)}; uses the first --controller and --tasks."),
-    robot_host: str = typer.Option(None, help="The real arm's address: " + ", ".join(f"{e.host} (--drive {n})" for n, e in WORLDS.items() if e.host) + "."),
-    mcap: bool = typer.Option(False, help="Also write each trial as <trial>.mcap beside its Parquet file (ROS 2 messages Foxglove opens)."),
+    drive: str = typer.Option(
+        None,
+        help=f"Watch a coassist drive run instead (read-only): {' | '.join(WORLDS)}; uses the first --controller and --tasks.",
+    ),
+    robot_host: str = typer.Option(
+        None,
+        help="The real arm's address: "
+        + ", ".join(f"{e.host} (--drive {n})" for n, e in WORLDS.items() if e.host)
+        + ".",
+    ),
+    mcap: bool = typer.Option(
+        False, help="Also write each trial as <trial>.mcap beside its Parquet file (ROS 2 messages Foxglove opens)."
+    ),
 ) -> None:
     """Be the operator: a live page where your mouse, touch screen or gamepad is the hand on the robot."""
     try:
@@ -853,11 +1112,17 @@ def play(
         from coassist.scenario import TASK_KINDS
 
         _lookup(CONTROL_PRESETS, preset, "--preset")
-        config = PlayConfig(user=user, out=out,
-                            controllers=tuple(_name_list(controller, "--controller", tuple(CONTROLLER_KINDS), "controller")),
-                            intent="nominal" if drive and _simulation_only(intent) else intent, preset=preset,
-                            tasks=tuple(_name_list(tasks, "--tasks", TASK_KINDS, "task")), seed=seed,
-                            motion_time=motion_time, mcap=mcap)  # fmt: skip
+        config = PlayConfig(
+            user=user,
+            out=out,
+            controllers=tuple(_name_list(controller, "--controller", tuple(CONTROLLER_KINDS), "controller")),
+            intent="nominal" if drive and _simulation_only(intent) else intent,
+            preset=preset,
+            tasks=tuple(_name_list(tasks, "--tasks", TASK_KINDS, "task")),
+            seed=seed,
+            motion_time=motion_time,
+            mcap=mcap,
+        )
         if drive is None:
             session = PlaySession(config)
         else:
@@ -868,13 +1133,25 @@ def play(
                 console.print(text, markup=False)
                 return typer.confirm("Keep the emergency stop within reach. Move the robot?", default=False)
 
-            session = DriveMonitor(DriveConfig(world=drive, controller=config.controllers[0], task=config.tasks[0],
-                                               intent=intent, preset=preset, seed=seed), config,
-                                   host=robot_host, confirm=confirm)  # fmt: skip
+            session = DriveMonitor(
+                DriveConfig(
+                    world=drive,
+                    controller=config.controllers[0],
+                    task=config.tasks[0],
+                    intent=intent,
+                    preset=preset,
+                    seed=seed,
+                ),
+                config,
+                host=robot_host,
+                confirm=confirm,
+            )
         server = PlayServer(session, host=host, port=port, token=token)
     except (ValueError, OSError) as exc:
         _fail(f"{exc}")
-    console.print(f"coassist play: open [bold]{server.url}[/] (Ctrl+C to stop); trials go to {config.folder}", highlight=False)
+    console.print(
+        f"coassist play: open [bold]{server.url}[/] (Ctrl+C to stop); trials go to {config.folder}", highlight=False
+    )
     if open_browser:
         import webbrowser
 
@@ -887,7 +1164,9 @@ def play(
 @app.command()
 def realism(
     out: Path = typer.Option(Path("docs/realism.md"), help="Markdown report to write."),
-    real: Path = typer.Option(None, help="Folder of real trial_* recordings (default: $COASSIST_REAL_DATA/user-a; see README)."),
+    real: Path = typer.Option(
+        None, help="Folder of real trial_* recordings (default: $COASSIST_REAL_DATA/user-a; see README)."
+    ),
     trials: int = typer.Option(10, help="Simulated trials per task and preset."),
     seed: int = typer.Option(0, help="Seed of the first simulated trial."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
@@ -913,11 +1192,18 @@ def realism(
 
 @app.command("compare-intents")
 def compare_intents(
-    source: list[str] = typer.Option(..., help="LABEL=INTENT, repeatable: a named source (present, paths, …), a model "
-                                     "folder or a calibration folder; paths alone is calibrated on each base's trials."),
+    source: list[str] = typer.Option(
+        ...,
+        help="LABEL=INTENT, repeatable: a named source (present, paths, …), a model "
+        "folder or a calibration folder; paths alone is calibrated on each base's trials.",
+    ),
     out: Path = typer.Option(Path("runs/compare-intents"), help="Folder for the datasets, table.md and summary.json."),
-    bases: str = typer.Option("50000,60000", help="Validation seed bases (application_seed(base, j); never the report's 0)."),
-    damped: str = typer.Option("", help="Labels to run with the cooperative-damped controller instead of the arbitrated one."),
+    bases: str = typer.Option(
+        "50000,60000", help="Validation seed bases (application_seed(base, j); never the report's 0)."
+    ),
+    damped: str = typer.Option(
+        "", help="Labels to run with the cooperative-damped controller instead of the arbitrated one."
+    ),
     trials: int = typer.Option(4, help="Trials per operator, object and base."),
     workers: int = typer.Option(2, help="Simulation processes."),
 ) -> None:
@@ -947,8 +1233,14 @@ def compare_intents(
             _fail(f"{option} must be >= 1, got {value}", 2)
     out = _folder_out(out, "--out")
     try:
-        result = run(pairs, out, bases=seeds, controllers={label: "cooperative-damped" for label in labels}, trials=trials,
-                     workers=workers)  # fmt: skip
+        result = run(
+            pairs,
+            out,
+            bases=seeds,
+            controllers={label: "cooperative-damped" for label in labels},
+            trials=trials,
+            workers=workers,
+        )
     except ValueError as exc:
         _fail(str(exc), 2)
     table = comparison_table(result)
@@ -960,14 +1252,23 @@ def compare_intents(
 
 @app.command()
 def reproduce(
-    out: Path = typer.Option(Path("runs/reproduce"), help="Output folder: report.html, summary.json, datasets, models."),
-    preset: str = typer.Option("default", help="default (≤ 15 min on 2 CPU cores), tiny (smoke run) or thesis (thesis sizes; GPU)."),
+    out: Path = typer.Option(
+        Path("runs/reproduce"), help="Output folder: report.html, summary.json, datasets, models."
+    ),
+    preset: str = typer.Option(
+        "default", help="default (≤ 15 min on 2 CPU cores), tiny (smoke run) or thesis (thesis sizes; GPU)."
+    ),
     seed: int = typer.Option(0, help="Seed of every dataset and training."),
-    seeds: str = typer.Option(None, help="Run on several seeds instead: a count N (seeds 0 … N-1) or a list like 0,1,2; "
-                              "one report says on how many seeds each claim holds."),
+    seeds: str = typer.Option(
+        None,
+        help="Run on several seeds instead: a count N (seeds 0 … N-1) or a list like 0,1,2; "
+        "one report says on how many seeds each claim holds.",
+    ),
     workers: int = typer.Option(None, help="Simulation processes (default: the preset's)."),
     device: str = typer.Option(None, help="Torch device for training, e.g. cpu or cuda (default: the preset's)."),
-    real_data: Path = typer.Option(None, help="Folder with user-a/ and user-b/ recordings (default: $COASSIST_REAL_DATA; see README)."),
+    real_data: Path = typer.Option(
+        None, help="Folder with user-a/ and user-b/ recordings (default: $COASSIST_REAL_DATA; see README)."
+    ),
 ) -> None:
     """The thesis' experiments end to end in simulation (dMPC study, iterative training, transfer, application, real data): one HTML report."""
     from dataclasses import replace
@@ -1000,15 +1301,23 @@ def reproduce(
     try:
         config = replace(chosen, **changes)
     except ValueError as exc:
-        _fail(_typed(str(exc), {"reproduce.seed": "--seed", "reproduce.workers": "--workers",
-                                "reproduce.device": "--device"}), 2)  # fmt: skip
+        _fail(
+            _typed(
+                str(exc), {"reproduce.seed": "--seed", "reproduce.workers": "--workers", "reproduce.device": "--device"}
+            ),
+            2,
+        )
     _folder_out(out, "--out")
     _set_torch_threads(config.threads)  # training runs in this process
     if seed_list is not None:
-        across = multi.run_seeds(config, seed_list, out, progress=True, say=lambda line: console.print(line, highlight=False))
+        across = multi.run_seeds(
+            config, seed_list, out, progress=True, say=lambda line: console.print(line, highlight=False)
+        )
         console.print(f"claims: {across['robust']} of {across['n_claims']} hold on every seed")
         for c in across["claims"]:
-            mark = {"robust": "[green]robust[/]", "seed-dependent": "[yellow]seed-dependent[/]"}.get(c["status"], "[red]not holding[/]")
+            mark = {"robust": "[green]robust[/]", "seed-dependent": "[yellow]seed-dependent[/]"}.get(
+                c["status"], "[red]not holding[/]"
+            )
             console.print(f"  {mark} ({c['holds_on']} of {c['checked_on']})  {escape(c['claim'])}", highlight=False)
         _wrote(f"{out / 'report.html'} and {out / 'summary.json'} in {across['total_seconds']:.0f} s")
         return
@@ -1023,8 +1332,11 @@ def reproduce(
 
 # --------------------------------------------------------------------------- study
 
-study_app = typer.Typer(help="Run a study with people (or simulated participants): plan, run, report.",
-                        no_args_is_help=True, rich_markup_mode=None)
+study_app = typer.Typer(
+    help="Run a study with people (or simulated participants): plan, run, report.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
 app.add_typer(study_app, name="study")
 
 
@@ -1045,18 +1357,30 @@ def study_init(
     except StudyFolderError as exc:
         _fail(str(exc), 2)
     rec = study.record
-    console.print(f"study {rec['name']!r}: protocol {rec['protocol']}, world {rec['world']}"
-                  + (f", conditions shown as {', '.join(sorted(rec['labels'].values()))}" if rec["labels"] else ""),
-                  highlight=False, markup=False)  # fmt: skip
+    console.print(
+        f"study {rec['name']!r}: protocol {rec['protocol']}, world {rec['world']}"
+        + (f", conditions shown as {', '.join(sorted(rec['labels'].values()))}" if rec["labels"] else ""),
+        highlight=False,
+        markup=False,
+    )
     _wrote(str(out))
 
 
 @study_app.command("run")
 def study_run(
     folder: Path = typer.Argument(..., help="The study folder (coassist study init)."),
-    participant: str = typer.Option(None, "--participant", "-p", help="The participant's pseudonymous id (e.g. P07; nothing personal). With --simulate, default: every planned participant, S01, S02, …"),
-    simulate: bool = typer.Option(False, help="Simulated participants from the operator population stand in for people (a dry run)."),
-    page: bool = typer.Option(None, "--page/--no-page", help="Serve the page (default: on for a person, off with --simulate)."),
+    participant: str = typer.Option(
+        None,
+        "--participant",
+        "-p",
+        help="The participant's pseudonymous id (e.g. P07; nothing personal). With --simulate, default: every planned participant, S01, S02, …",
+    ),
+    simulate: bool = typer.Option(
+        False, help="Simulated participants from the operator population stand in for people (a dry run)."
+    ),
+    page: bool = typer.Option(
+        None, "--page/--no-page", help="Serve the page (default: on for a person, off with --simulate)."
+    ),
     realtime: bool = typer.Option(False, help="Pace simulated participants to the wall clock, as a person's trials."),
     host: str = typer.Option("127.0.0.1", help="Address the page listens on; anything but this machine needs --token."),
     port: int = typer.Option(8765, help="Port of the page (0: any free port)."),
@@ -1094,9 +1418,16 @@ def study_run(
     confirm = _confirm_move(yes, "the emergency stop") if plan.world in ("ur", "franka") else None
     for pid in ids:
         try:
-            with ParticipantRun(study, pid, simulate=simulate, page=(host, port, token) if use_page else None,
-                                realtime=realtime, host=robot_host, confirm=confirm,
-                                say=lambda line: console.print(line, highlight=False, markup=False)) as run:  # fmt: skip
+            with ParticipantRun(
+                study,
+                pid,
+                simulate=simulate,
+                page=(host, port, token) if use_page else None,
+                realtime=realtime,
+                host=robot_host,
+                confirm=confirm,
+                say=lambda line: console.print(line, highlight=False, markup=False),
+            ) as run:
                 if run.complete:
                     console.print(f"{pid}: already complete", highlight=False)
                     continue

@@ -96,7 +96,9 @@ class GameParameters:
         if self.control_horizon is not None:
             check_int_at_least(self.control_horizon, "game.control_horizon", 1)
             if self.control_horizon > self.horizon:
-                raise ValueError(f"game.control_horizon must be <= game.horizon ({self.horizon}), got {self.control_horizon}")
+                raise ValueError(
+                    f"game.control_horizon must be <= game.horizon ({self.horizon}), got {self.control_horizon}"
+                )
         if self.input_weighting not in ("shared", "alpha_scaled"):
             raise ValueError(f"game.input_weighting must be 'shared' or 'alpha_scaled', got {self.input_weighting!r}")
 
@@ -116,18 +118,14 @@ class ControlPreset:
 
     def __post_init__(self) -> None:
         if self.impedance.n_dof != self.game.n_dof:
-            raise ValueError(
-                f"impedance has {self.impedance.n_dof} DOFs but game.R_h has {self.game.n_dof} entries"
-            )
+            raise ValueError(f"impedance has {self.impedance.n_dof} DOFs but game.R_h has {self.game.n_dof} entries")
         object.__setattr__(self, "effort_limit", check_positive_scalar(self.effort_limit, "effort_limit"))
 
 
 #: Thesis §5.2: x-y impedance, evaluation of the prediction model (α = 0.8, R_r = 5e-4).
 THESIS_EVALUATION = ControlPreset(name="thesis-evaluation")
 #: Thesis §5.2.3: application scenario, more assistance (α = 0.9, R_r = 1e-4).
-THESIS_APPLICATION = ControlPreset(
-    name="thesis-application", game=GameParameters(alpha=0.9, R_r=(1e-4, 1e-4))
-)
+THESIS_APPLICATION = ControlPreset(name="thesis-application", game=GameParameters(alpha=0.9, R_r=(1e-4, 1e-4)))
 
 
 def scale_positions(preset: ControlPreset, scale: float, name: str) -> ControlPreset:
@@ -159,13 +157,18 @@ APPLICATION_DAMPED_SCALE = 3.5
 
 #: Control presets by name: the thesis' (SI units), the same in decimetres ("-dm"), and the
 #: application weights at APPLICATION_DAMPED_SCALE ("-damped").
-CONTROL_PRESETS: Registry[ControlPreset] = Registry("control preset", {
-    THESIS_EVALUATION.name: THESIS_EVALUATION,
-    THESIS_APPLICATION.name: THESIS_APPLICATION,
-    "thesis-evaluation-dm": scale_positions(THESIS_EVALUATION, DECIMETRE_SCALE, "thesis-evaluation-dm"),
-    "thesis-application-dm": scale_positions(THESIS_APPLICATION, DECIMETRE_SCALE, "thesis-application-dm"),
-    "thesis-application-damped": scale_positions(THESIS_APPLICATION, APPLICATION_DAMPED_SCALE, "thesis-application-damped"),
-})  # fmt: skip
+CONTROL_PRESETS: Registry[ControlPreset] = Registry(
+    "control preset",
+    {
+        THESIS_EVALUATION.name: THESIS_EVALUATION,
+        THESIS_APPLICATION.name: THESIS_APPLICATION,
+        "thesis-evaluation-dm": scale_positions(THESIS_EVALUATION, DECIMETRE_SCALE, "thesis-evaluation-dm"),
+        "thesis-application-dm": scale_positions(THESIS_APPLICATION, DECIMETRE_SCALE, "thesis-application-dm"),
+        "thesis-application-damped": scale_positions(
+            THESIS_APPLICATION, APPLICATION_DAMPED_SCALE, "thesis-application-damped"
+        ),
+    },
+)
 
 #: The preset of data collection: the main job's datasets D_0 … D_k (``coassist collect``'s
 #: default). The predictor in the loop there is the nominal path or M_k being evaluated.

@@ -202,8 +202,9 @@ class PlausibilityLimits:
             object.__setattr__(self, name, float(v))
 
 
-def prediction_plausible(positions: np.ndarray, pose: np.ndarray, dt: float,
-                         limits: PlausibilityLimits = PlausibilityLimits()) -> bool:  # fmt: skip
+def prediction_plausible(
+    positions: np.ndarray, pose: np.ndarray, dt: float, limits: PlausibilityLimits = PlausibilityLimits()
+) -> bool:
     """True when a prediction may be used: finite, near the tool, and no faster than a hand.
 
     positions : (H, d) predicted positions for ticks k+1 … k+H [m].

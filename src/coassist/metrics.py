@@ -104,7 +104,9 @@ def _as_prediction(prediction: ArrayLike, pose: np.ndarray) -> np.ndarray:
     if pred.ndim == 2 and d == 1:
         pred = pred[:, :, None]
     if pred.ndim != 3 or pred.shape[0] != t or pred.shape[2] != d or pred.shape[1] < 1:
-        raise ValueError(f"prediction has shape {np.shape(prediction)}, expected ({t}, H, {d}) to match pose {pose.shape}")
+        raise ValueError(
+            f"prediction has shape {np.shape(prediction)}, expected ({t}, H, {d}) to match pose {pose.shape}"
+        )
     if np.any(np.isinf(pred)):
         raise ValueError("prediction has infinite values")
     return pred

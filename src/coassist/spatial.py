@@ -310,8 +310,9 @@ def _damped_svd(
     return U, s / (s * s + lam * lam), Vt, lam
 
 
-def dls_joint_velocity(J: np.ndarray, twist: np.ndarray, sigma_threshold: float = 0.05,
-                       max_damping: float = 0.05) -> tuple[np.ndarray, float]:  # fmt: skip
+def dls_joint_velocity(
+    J: np.ndarray, twist: np.ndarray, sigma_threshold: float = 0.05, max_damping: float = 0.05
+) -> tuple[np.ndarray, float]:
     """Eq. 3.6 with the damping rule of :func:`damped_pseudo_inverse`, for a square J, fast.
 
     q̇ = Jᵀ (J Jᵀ + λ² I)⁻¹ ẋ, with σ_min² the smallest eigenvalue of J Jᵀ; when

@@ -15,7 +15,9 @@ DT = 0.008
 def thesis_game(alpha=0.9, horizon=20):
     model = ImpedanceModel([10, 10], [100, 100], 0, DT)
     Q = 100 * np.diag([1, 1, 1e-4, 1e-4])
-    return CooperativeGame(model, Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[1e-4, 1e-4], alpha=alpha, horizon=horizon)
+    return CooperativeGame(
+        model, Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[1e-4, 1e-4], alpha=alpha, horizon=horizon
+    )
 
 
 def test_target_alpha_of_each_law_by_hand():
@@ -67,7 +69,9 @@ def test_alpha_follows_a_constant_hand_force_as_a_first_order_filter():
 
 
 def test_confidence_law_scores_the_prediction_made_d_ticks_ago():
-    p = ArbitrationParameters(law="confidence", alpha_min=0.5, alpha_max=0.9, error_scale=0.01, error_lag=3, time_constant=0.2)
+    p = ArbitrationParameters(
+        law="confidence", alpha_min=0.5, alpha_max=0.9, error_scale=0.01, error_lag=3, time_constant=0.2
+    )
     g = DT / 0.2
 
     def path(k):  # the tool moves 1 mm per tick along x
@@ -128,8 +132,12 @@ def test_a_cached_arbitrated_controller_gives_the_same_trial_every_time():
     """run_spec reuses controllers within a batch: the arbitration must start every trial afresh."""
     from coassist.sim import TrialSpec, run_spec
 
-    spec = TrialSpec(task="linear", object="handle", controller="cooperative-arbitrated", preset="thesis-application-dm", seed=3)
-    other = TrialSpec(task="curved", object="board", controller="cooperative-arbitrated", preset="thesis-application-dm", seed=4)
+    spec = TrialSpec(
+        task="linear", object="handle", controller="cooperative-arbitrated", preset="thesis-application-dm", seed=3
+    )
+    other = TrialSpec(
+        task="curved", object="board", controller="cooperative-arbitrated", preset="thesis-application-dm", seed=4
+    )
     alone = run_spec(spec)
     cache: dict = {}
     run_spec(other, cache)
@@ -145,13 +153,16 @@ def test_arbitrated_effort_batch_is_each_controllers_step_bit_for_bit(law):
     tick, and the rows the guard refuses or saturates are not clean (their α moved as step's)."""
     from coassist.control.arbitration import arbitrated_effort_batch, guard_key
 
-    params = ArbitrationParameters(law=law, alpha_min=0.3, alpha_max=0.9, target_scale=0.05, force_scale=4.0,
-                                   error_scale=0.01, error_lag=3)  # fmt: skip
+    params = ArbitrationParameters(
+        law=law, alpha_min=0.3, alpha_max=0.9, target_scale=0.05, force_scale=4.0, error_scale=0.01, error_lag=3
+    )
     base = thesis_game(alpha=0.7)
     B = 6
 
     def controllers():
-        return [ArbitratedController(AssistiveController(base.copy(), effort_limit=[10.0, 12.0]), params) for _ in range(B)]
+        return [
+            ArbitratedController(AssistiveController(base.copy(), effort_limit=[10.0, 12.0]), params) for _ in range(B)
+        ]
 
     batch, alone = controllers(), controllers()
     assert len({guard_key(c) for c in batch}) == 1
@@ -175,5 +186,7 @@ def test_arbitrated_effort_batch_is_each_controllers_step_bit_for_bit(law):
         if k == 10:
             assert not clean[1] and not clean[2]
     assert len({c.alpha for c in batch}) == B  # the runs' α differ: each row had its own gains
-    u0, clean0 = arbitrated_effort_batch([], np.zeros((0, 4)), np.zeros((0, 20, 4)), np.zeros((0, 20, 4)), np.zeros((0, 2)))
+    u0, clean0 = arbitrated_effort_batch(
+        [], np.zeros((0, 4)), np.zeros((0, 20, 4)), np.zeros((0, 20, 4)), np.zeros((0, 2))
+    )
     assert u0.shape == (0, 2) and clean0.shape == (0,)

@@ -29,7 +29,12 @@ def assistive(plant):
 
 
 def inputs(rng, horizon=50):
-    return rng.normal(size=4) * 0.01, rng.normal(size=(horizon, 4)) * 0.01, rng.normal(size=(horizon, 4)) * 0.01, rng.normal(size=2)
+    return (
+        rng.normal(size=4) * 0.01,
+        rng.normal(size=(horizon, 4)) * 0.01,
+        rng.normal(size=(horizon, 4)) * 0.01,
+        rng.normal(size=2),
+    )
 
 
 def test_unsaturated_step_is_the_game_solution(assistive):
@@ -43,7 +48,12 @@ def test_unsaturated_step_is_the_game_solution(assistive):
 
 @pytest.mark.parametrize(
     "where, flag",
-    [("z", Fault.NONFINITE_STATE), ("ref_h", Fault.NONFINITE_REFERENCE), ("ref_r", Fault.NONFINITE_REFERENCE), ("wrench", Fault.NONFINITE_WRENCH)],
+    [
+        ("z", Fault.NONFINITE_STATE),
+        ("ref_h", Fault.NONFINITE_REFERENCE),
+        ("ref_r", Fault.NONFINITE_REFERENCE),
+        ("wrench", Fault.NONFINITE_WRENCH),
+    ],
 )
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
 def test_non_finite_input_gives_zero_effort_and_a_flag(assistive, where, flag, bad):
@@ -150,7 +160,14 @@ def test_manual_guidance_applies_no_effort(plant):
     assert out.fault == Fault.NONE
 
 
-@pytest.mark.parametrize("limit, message", [([10.0, 0.0], "effort_limit must be > 0"), ([1, 2, 3], "effort_limit must be a number or 2"), ("a", "effort_limit must be a number")])
+@pytest.mark.parametrize(
+    "limit, message",
+    [
+        ([10.0, 0.0], "effort_limit must be > 0"),
+        ([1, 2, 3], "effort_limit must be a number or 2"),
+        ("a", "effort_limit must be a number"),
+    ],
+)
 def test_effort_limit_is_validated(plant, limit, message):
     with pytest.raises(ValueError, match=message):
         ImpedanceControl(plant, 100.0, effort_limit=limit)
@@ -236,7 +253,9 @@ def test_step_batch_falls_back_to_step_for_other_inputs(assistive):
     """float32 rows, a wrong shape, a law that raises: step() per row decides, as alone."""
     z, ref_h, ref_r, wrench = (a[:4] for a in _batch(np.random.default_rng(12)))
     z32 = z.astype(np.float32)
-    for got, want in zip(assistive.step_batch(z32, ref_h, ref_r, wrench), [assistive.step(*r) for r in zip(z32, ref_h, ref_r, wrench)]):
+    for got, want in zip(
+        assistive.step_batch(z32, ref_h, ref_r, wrench), [assistive.step(*r) for r in zip(z32, ref_h, ref_r, wrench)]
+    ):
         assert got.fault == want.fault
         np.testing.assert_array_equal(got.u_r, want.u_r)
     short = ref_h[:, :10]

@@ -63,7 +63,9 @@ def test_wrapper_adds_the_law_with_the_tools_acceleration():
 
 
 def test_wrapper_saturates_keeping_the_direction():
-    ctrl = DecelerationDamping(_Constant(_model(), [29.0, 0.0]), DampingParameters(gain=1000.0, decel_ref=0.1, accel_time=0.0))
+    ctrl = DecelerationDamping(
+        _Constant(_model(), [29.0, 0.0]), DampingParameters(gain=1000.0, decel_ref=0.1, accel_time=0.0)
+    )
     ref = np.zeros((1, 4))
     ctrl.step(np.array([0, 0, -0.5, 0.5]), ref, ref, np.zeros(2))
     out = ctrl.step(np.array([0, 0, -0.4, 0.4]), ref, ref, np.zeros(2))

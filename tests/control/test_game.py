@@ -99,9 +99,18 @@ def test_cooperative_equilibrium_agrees_with_osqp(n, Np, Nc):
     N = H.shape[0]
     solver = osqp.OSQP()
     # No constraints binding: loose bounds, tight tolerances, polishing.
-    solver.setup(P=scipy.sparse.csc_matrix(np.triu(H)), q=-g, A=scipy.sparse.identity(N, format="csc"),
-                 l=np.full(N, -1e9), u=np.full(N, 1e9), eps_abs=1e-12, eps_rel=1e-12, max_iter=200000,
-                 polishing=True, verbose=False)
+    solver.setup(
+        P=scipy.sparse.csc_matrix(np.triu(H)),
+        q=-g,
+        A=scipy.sparse.identity(N, format="csc"),
+        l=np.full(N, -1e9),
+        u=np.full(N, 1e9),
+        eps_abs=1e-12,
+        eps_rel=1e-12,
+        max_iter=200000,
+        polishing=True,
+        verbose=False,
+    )
     result = solver.solve(raise_error=True)
     assert result.info.status == "solved", result.info.status
     U_h, U_r = game.solve_horizon(z, ref_h, ref_r)
@@ -183,7 +192,9 @@ def test_nash_efforts_are_mutual_best_responses(n, Np, Nc):
 def thesis_game(alpha, horizon=50, R_r=5e-4):
     model = ImpedanceModel([10, 10], [100, 100], 0, 0.008)
     Q = np.diag([1, 1, 1e-4, 1e-4])
-    return CooperativeGame(model, Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[R_r, R_r], alpha=alpha, horizon=horizon)
+    return CooperativeGame(
+        model, Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[R_r, R_r], alpha=alpha, horizon=horizon
+    )
 
 
 def test_set_alpha_gives_exactly_the_new_optimum_and_efforts_are_continuous_in_alpha():
@@ -245,8 +256,13 @@ def fresh_and_online(build, alphas):
 
 @pytest.mark.parametrize(
     "n, Np, Nc, weights, input_weighting",
-    [(2, 50, 50, "thesis", "shared"), (2, 12, 12, "random", "shared"), (3, 10, 4, "random", "shared"),
-     (2, 12, 6, "random", "alpha_scaled"), (2, 20, 20, "thesis", "alpha_scaled")],
+    [
+        (2, 50, 50, "thesis", "shared"),
+        (2, 12, 12, "random", "shared"),
+        (3, 10, 4, "random", "shared"),
+        (2, 12, 6, "random", "alpha_scaled"),
+        (2, 20, 20, "thesis", "alpha_scaled"),
+    ],
 )
 def test_online_alpha_gains_equal_a_fresh_computation(n, Np, Nc, weights, input_weighting):
     rng = np.random.default_rng(50 + n + Np)
@@ -256,8 +272,9 @@ def test_online_alpha_gains_equal_a_fresh_computation(n, Np, Nc, weights, input_
         Q = dict(Q_hh=q, Q_hr=np.zeros_like(q), Q_rh=np.zeros_like(q), Q_rr=q)
 
     def build(alpha):
-        return CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=alpha, horizon=Np, control_horizon=Nc,
-                               input_weighting=input_weighting)
+        return CooperativeGame(
+            model, **Q, R_h=R_h, R_r=R_r, alpha=alpha, horizon=Np, control_horizon=Nc, input_weighting=input_weighting
+        )
 
     lo = 0.02 if input_weighting == "alpha_scaled" else 0.0
     worst, rank = fresh_and_online(build, np.linspace(lo, 1.0 - lo, 13))
@@ -312,8 +329,12 @@ def test_online_alpha_series_over_the_memory_allowance_is_not_built(monkeypatch)
     from coassist.control import game as game_module
 
     game = _random_weights_game()
-    family_bytes = game_module._AlphaFamily.PIECES * (game_module._AlphaFamily.DEGREES[-1] + 1) * 8 * (
-        2 * game.n_dof * (2 * game.n_dof + 2 * game.reference_shape[0] * game.reference_shape[1]))
+    family_bytes = (
+        game_module._AlphaFamily.PIECES
+        * (game_module._AlphaFamily.DEGREES[-1] + 1)
+        * 8
+        * (2 * game.n_dof * (2 * game.n_dof + 2 * game.reference_shape[0] * game.reference_shape[1]))
+    )
     monkeypatch.setattr(game_module._AlphaFamily, "MAX_BYTES", family_bytes - 1)
     game.prepare_alpha_changes()
     family = game._alpha_family
@@ -348,7 +369,9 @@ def test_horizon_solution_after_an_online_alpha_change_is_the_joint_minimiser():
     U_h, U_r = game.solve_horizon(z, ref_h, ref_r)
     np.testing.assert_allclose(np.concatenate([U_h.reshape(-1), U_r.reshape(-1)]), U_ref, rtol=1e-8, atol=1e-10)
     u_h, u_r = game.solve(z, ref_h, ref_r)
-    np.testing.assert_allclose(np.concatenate([u_h, u_r]), np.concatenate([U_ref[:2], U_ref[8:10]]), rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(
+        np.concatenate([u_h, u_r]), np.concatenate([U_ref[:2], U_ref[8:10]]), rtol=1e-8, atol=1e-10
+    )
 
 
 def test_online_gains_are_read_only():
@@ -418,7 +441,9 @@ def test_solve_batch_is_solve_row_for_row_bit_for_bit(kind, horizon, control_hor
     rng = np.random.default_rng(7)
     model, Q, R_h, R_r, _, _, _ = random_instance(rng, 2, horizon, control_horizon)
     if kind == "cooperative":
-        game = CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=0.7, horizon=horizon, control_horizon=control_horizon)
+        game = CooperativeGame(
+            model, **Q, R_h=R_h, R_r=R_r, alpha=0.7, horizon=horizon, control_horizon=control_horizon
+        )
     else:
         game = NashGame(model, **Q, R_h=R_h, R_r=R_r, horizon=horizon, control_horizon=control_horizon)
     z = rng.normal(size=(B, 4)) * 0.1
@@ -480,8 +505,18 @@ def test_games_of_one_preset_share_the_work_not_the_alpha():
     a, b = cooperative_game(model, params), cooperative_game(model, params)
     # built as cooperative_game builds, on one BLAS thread: bit for bit on any BLAS build
     with threadpool_limits(1, user_api="blas"):
-        alone = CooperativeGame(model, Q_hh=params.Q_hh, Q_hr=params.Q_hr, Q_rh=params.Q_rh, Q_rr=params.Q_rr,
-                                R_h=params.R_h, R_r=params.R_r, alpha=params.alpha, horizon=12, control_horizon=6)
+        alone = CooperativeGame(
+            model,
+            Q_hh=params.Q_hh,
+            Q_hr=params.Q_hr,
+            Q_rh=params.Q_rh,
+            Q_rr=params.Q_rr,
+            R_h=params.R_h,
+            R_r=params.R_r,
+            alpha=params.alpha,
+            horizon=12,
+            control_horizon=6,
+        )
     assert a is not b and len(game_module._GAME_MEMO) == 1
     for g in (a, b):
         for name in ("G_z", "G_h", "G_r"):
@@ -504,7 +539,9 @@ def test_solve_with_gains_is_each_games_solve_bit_for_bit():
 
     model = ImpedanceModel([10, 10], [100, 100], 0, 0.008)
     Q = 100 * np.diag([1, 1, 1e-4, 1e-4])
-    base = CooperativeGame(model, Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[1e-4, 1e-4], alpha=0.5, horizon=20)
+    base = CooperativeGame(
+        model, Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[1e-4, 1e-4], alpha=0.5, horizon=20
+    )
     games = [base.copy() for _ in range(5)]
     for g, a in zip(games, (0.3, 0.45, 0.6, 0.75, 0.9)):
         g.set_alpha(a)
@@ -533,10 +570,14 @@ def test_game_weights_object_is_the_keywords_bit_for_bit():
     weights = GameWeights(**Q, R_h=R_h, R_r=R_r)
     assert weights.n_dof == 2 and weights.Q_hh.shape == (4, 4) and weights.R_r.shape == (2, 2)
     for by_object, by_keywords in (
-        (CooperativeGame(model, weights, alpha=0.7, horizon=10, control_horizon=5),
-         CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=0.7, horizon=10, control_horizon=5)),
-        (NashGame(model, weights, horizon=10, control_horizon=5),
-         NashGame(model, **Q, R_h=R_h, R_r=R_r, horizon=10, control_horizon=5)),
+        (
+            CooperativeGame(model, weights, alpha=0.7, horizon=10, control_horizon=5),
+            CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=0.7, horizon=10, control_horizon=5),
+        ),
+        (
+            NashGame(model, weights, horizon=10, control_horizon=5),
+            NashGame(model, **Q, R_h=R_h, R_r=R_r, horizon=10, control_horizon=5),
+        ),
     ):
         for name in ("G_z", "G_h", "G_r"):
             np.testing.assert_array_equal(getattr(by_object.gains, name), getattr(by_keywords.gains, name))
@@ -570,14 +611,18 @@ def test_game_weights_are_frozen_and_read_only():
         (lambda W, m: W(np.eye(3), 0, 0, 1.0, [1, 1], [1, 1]), "Q_hh must be 4x4"),
         (lambda W, m: W(np.eye(4), -np.eye(4), 0, 1.0, [1, 1], [1, 1]), "Q_hr must be positive semidefinite"),
         (lambda W, m: W(np.eye(4), 0, 0, 1.0, [1, 1], [0, 1]), "R_r must be positive definite"),
-        (lambda W, m: CooperativeGame(m, W(1.0, 0, 0, 1.0, 1.0, 1.0, n_dof=3), alpha=0.5, horizon=5),
-         "weights are for 3 DOFs, the model has 2"),
-        (lambda W, m: CooperativeGame(m, W(1.0, 0, 0, 1.0, 1.0, 1.0, n_dof=2), Q_hh=1.0, alpha=0.5, horizon=5),
-         "not both \\(got weights and Q_hh\\)"),
+        (
+            lambda W, m: CooperativeGame(m, W(1.0, 0, 0, 1.0, 1.0, 1.0, n_dof=3), alpha=0.5, horizon=5),
+            "weights are for 3 DOFs, the model has 2",
+        ),
+        (
+            lambda W, m: CooperativeGame(m, W(1.0, 0, 0, 1.0, 1.0, 1.0, n_dof=2), Q_hh=1.0, alpha=0.5, horizon=5),
+            "not both \\(got weights and Q_hh\\)",
+        ),
         (lambda W, m: NashGame(m, Q_hh=1.0, Q_rr=1.0, R_h=1.0, R_r=1.0, horizon=5), "the keywords Q_hr, Q_rh"),
         (lambda W, m: NashGame(m, {"Q_hh": 1.0}, horizon=5), "weights must be a GameWeights, got dict"),
     ],
-)  # fmt: skip
+)
 def test_game_weights_validation_names_the_weight(build, message):
     from coassist.control import GameWeights
 

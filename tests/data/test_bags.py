@@ -35,24 +35,36 @@ def _body(ts, msgtype: str, row) -> object:
     g = lambda c: float(row[c])  # noqa: E731
     if msgtype.endswith("PoseStamped"):
         Point, Quaternion, Pose = (ts.types[f"geometry_msgs/msg/{n}"] for n in ("Point", "Quaternion", "Pose"))
-        return Pose(position=Point(x=g("pose.position.x"), y=g("pose.position.y"), z=g("pose.position.z")),
-                    orientation=Quaternion(x=g("pose.orientation.x"), y=g("pose.orientation.y"),
-                                           z=g("pose.orientation.z"), w=g("pose.orientation.w")))  # fmt: skip
+        return Pose(
+            position=Point(x=g("pose.position.x"), y=g("pose.position.y"), z=g("pose.position.z")),
+            orientation=Quaternion(
+                x=g("pose.orientation.x"),
+                y=g("pose.orientation.y"),
+                z=g("pose.orientation.z"),
+                w=g("pose.orientation.w"),
+            ),
+        )
     Vector3 = ts.types["geometry_msgs/msg/Vector3"]
     if msgtype.endswith("TwistStamped"):
         Twist = ts.types["geometry_msgs/msg/Twist"]
-        return Twist(linear=Vector3(*(g(f"twist.linear.{a}") for a in "xyz")),
-                     angular=Vector3(*(g(f"twist.angular.{a}") for a in "xyz")))  # fmt: skip
+        return Twist(
+            linear=Vector3(*(g(f"twist.linear.{a}") for a in "xyz")),
+            angular=Vector3(*(g(f"twist.angular.{a}") for a in "xyz")),
+        )
     Wrench = ts.types["geometry_msgs/msg/Wrench"]
-    return Wrench(force=Vector3(*(g(f"wrench.force.{a}") for a in "xyz")),
-                  torque=Vector3(*(g(f"wrench.torque.{a}") for a in "xyz")))  # fmt: skip
+    return Wrench(
+        force=Vector3(*(g(f"wrench.force.{a}") for a in "xyz")),
+        torque=Vector3(*(g(f"wrench.torque.{a}") for a in "xyz")),
+    )
 
 
 def _message(ts, msgtype: str, row, ros1: bool) -> object:
     Time, Header = ts.types["builtin_interfaces/msg/Time"], ts.types["std_msgs/msg/Header"]
     stamp = Time(sec=int(row["header.stamp.secs"]), nanosec=int(row["header.stamp.nsecs"]))
     frame = "" if pd.isna(row["header.frame_id"]) else str(row["header.frame_id"])
-    header = Header(seq=int(row["header.seq"]), stamp=stamp, frame_id=frame) if ros1 else Header(stamp=stamp, frame_id=frame)
+    header = (
+        Header(seq=int(row["header.seq"]), stamp=stamp, frame_id=frame) if ros1 else Header(stamp=stamp, frame_id=frame)
+    )
     body = _body(ts, msgtype, row)
     cls = ts.types[msgtype]
     field = {"PoseStamped": "pose", "TwistStamped": "twist", "WrenchStamped": "wrench"}[msgtype.rsplit("/", 1)[1]]
@@ -98,7 +110,9 @@ REAL = default_real_data()
 
 
 @pytest.mark.real_data
-@pytest.mark.skipif(not (REAL / "user-a" / "trial_1").is_dir(), reason=f"real recordings not found at {REAL} (set COASSIST_REAL_DATA)")
+@pytest.mark.skipif(
+    not (REAL / "user-a" / "trial_1").is_dir(), reason=f"real recordings not found at {REAL} (set COASSIST_REAL_DATA)"
+)
 @pytest.mark.parametrize("recording", ["user-a/trial_1", "user-b/trial_2"])
 def test_real_recording_as_bags_loads_to_the_csv_trial(tmp_path, recording):
     folder = REAL / recording
@@ -115,7 +129,8 @@ def test_real_recording_as_bags_loads_to_the_csv_trial(tmp_path, recording):
         a, b = getattr(t1, name), getattr(csv_trial, name)
         assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), name
     assert _without_keys(t1.meta.to_dict()["extra"], ["rows_dropped_per_file"]) == _without_keys(
-        csv_trial.meta.to_dict()["extra"], ["rows_dropped_per_file"])
+        csv_trial.meta.to_dict()["extra"], ["rows_dropped_per_file"]
+    )
     meta1, meta0 = t1.meta.to_dict(), csv_trial.meta.to_dict()
     meta1.pop("extra"), meta0.pop("extra")
     assert meta1 == meta0
@@ -129,7 +144,9 @@ def test_real_recording_as_bags_loads_to_the_csv_trial(tmp_path, recording):
             assert getattr(t2, name).tobytes() == getattr(csv_trial, name).tobytes(), (kind, name)
         assert t2.meta.dt == csv_trial.meta.dt
         seqless = ["seq_first", "seq_last", "seq_gaps", "rows_dropped_per_file", "recording"]
-        assert _without_keys(t2.meta.to_dict()["extra"], seqless) == _without_keys(csv_trial.meta.to_dict()["extra"], seqless)
+        assert _without_keys(t2.meta.to_dict()["extra"], seqless) == _without_keys(
+            csv_trial.meta.to_dict()["extra"], seqless
+        )
         assert (t2.meta.extra["seq_first"], t2.meta.extra["seq_gaps"]) == (None, None)
 
 
@@ -151,14 +168,23 @@ def synthetic_bag(path: Path, *, n=20, types=None, skip=(), values=None, stamps=
     stamps: topic -> list of stamp ns offsets replacing 0, 8 ms, 16 ms, ….
     """
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
-    Time, Header, V3 = (TS2.types[n] for n in ("builtin_interfaces/msg/Time", "std_msgs/msg/Header", "geometry_msgs/msg/Vector3"))
+    Time, Header, V3 = (
+        TS2.types[n] for n in ("builtin_interfaces/msg/Time", "std_msgs/msg/Header", "geometry_msgs/msg/Vector3")
+    )
     Point, Quat, Pose = (TS2.types[f"geometry_msgs/msg/{n}"] for n in ("Point", "Quaternion", "Pose"))
     with Writer2(path, version=9, storage_plugin=plugin) as w:
         for i, (field, topic) in enumerate(BAG_TOPICS.items()):
             if topic in skip:
                 continue
-            msgtype = (types or {}).get(topic, {"pose": "geometry_msgs/msg/PoseStamped", "reference": "geometry_msgs/msg/PoseStamped",
-                                                 "velocity": "geometry_msgs/msg/TwistStamped", "wrench": "geometry_msgs/msg/WrenchStamped"}[field])  # fmt: skip
+            msgtype = (types or {}).get(
+                topic,
+                {
+                    "pose": "geometry_msgs/msg/PoseStamped",
+                    "reference": "geometry_msgs/msg/PoseStamped",
+                    "velocity": "geometry_msgs/msg/TwistStamped",
+                    "wrench": "geometry_msgs/msg/WrenchStamped",
+                }[field],
+            )
             conn = w.add_connection(topic, msgtype, typestore=TS2)
             offsets = (stamps or {}).get(topic, [k * 8_000_000 for k in range(n)])
             for k, off in enumerate(offsets):
@@ -166,11 +192,19 @@ def synthetic_bag(path: Path, *, n=20, types=None, skip=(), values=None, stamps=
                 vec = [x, ((i + 1) * k + 0.1) * UNIT, ((i + 1) * k + 0.2) * UNIT]
                 header = Header(stamp=Time(sec=S0 + off // 10**9, nanosec=off % 10**9), frame_id="base")
                 if msgtype == "geometry_msgs/msg/PoseStamped":
-                    msg = TS2.types[msgtype](header=header, pose=Pose(position=Point(*vec), orientation=Quat(0.0, 0.0, 0.0, 1.0)))
+                    msg = TS2.types[msgtype](
+                        header=header, pose=Pose(position=Point(*vec), orientation=Quat(0.0, 0.0, 0.0, 1.0))
+                    )
                 elif msgtype == "geometry_msgs/msg/TwistStamped":
-                    msg = TS2.types[msgtype](header=header, twist=TS2.types["geometry_msgs/msg/Twist"](linear=V3(*vec), angular=V3(0.0, 0.0, 0.0)))
+                    msg = TS2.types[msgtype](
+                        header=header,
+                        twist=TS2.types["geometry_msgs/msg/Twist"](linear=V3(*vec), angular=V3(0.0, 0.0, 0.0)),
+                    )
                 elif msgtype == "geometry_msgs/msg/WrenchStamped":
-                    msg = TS2.types[msgtype](header=header, wrench=TS2.types["geometry_msgs/msg/Wrench"](force=V3(*vec), torque=V3(0.0, 0.0, 0.0)))
+                    msg = TS2.types[msgtype](
+                        header=header,
+                        wrench=TS2.types["geometry_msgs/msg/Wrench"](force=V3(*vec), torque=V3(0.0, 0.0, 0.0)),
+                    )
                 else:  # a Vector3Stamped: the wrong type
                     msg = TS2.types[msgtype](header=header, vector=V3(*vec))
                 # received in the order written, 8 ms apart, whatever the header stamp says
@@ -193,7 +227,12 @@ def test_synthetic_bag_values_and_alignment(tmp_path, storage):
     np.testing.assert_array_equal(trial.time, (k - 2) * 8_000_000 * 1e-9)
     assert trial.meta.dt == pytest.approx(0.008, abs=1e-15)
     assert trial.meta.user == "user-s" and trial.meta.extra["recording"] == "run_1"
-    assert dict(trial.meta.extra["rows_dropped_per_file"]) == {"/current_pose": 2, "/current_velocity": 2, "/human_wrench": 0, "/robot_ref_pos": 2}
+    assert dict(trial.meta.extra["rows_dropped_per_file"]) == {
+        "/current_pose": 2,
+        "/current_velocity": 2,
+        "/human_wrench": 0,
+        "/robot_ref_pos": 2,
+    }
 
 
 def test_topics_are_configurable(tmp_path):
@@ -211,14 +250,26 @@ def test_topics_are_configurable(tmp_path):
     "kwargs, message",
     [
         (dict(skip=("/human_wrench",)), r"no topic /human_wrench"),
-        (dict(types={"/human_wrench": "geometry_msgs/msg/Vector3Stamped"}),
-         r"topic /human_wrench is geometry_msgs/msg/Vector3Stamped, expected geometry_msgs/msg/WrenchStamped"),
-        (dict(values={("/current_velocity", 5): float("nan")}), r"topic /current_velocity: message 5 has twist.linear.x = nan"),
-        (dict(values={("/robot_ref_pos", 3): float("inf")}), r"topic /robot_ref_pos: message 3 has pose.position.x = inf"),
-        (dict(stamps={"/current_pose": [0, 8_000_000, 8_000_000, 24_000_000]}),
-         r"topic /current_pose: header stamp duplicated at message 2 \(1700000000.008000000 s then 1700000000.008000000 s\)"),
-        (dict(stamps={"/human_wrench": [0, 16_000_000, 8_000_000, 24_000_000]}),
-         r"topic /human_wrench: header stamp out of order at message 2"),
+        (
+            dict(types={"/human_wrench": "geometry_msgs/msg/Vector3Stamped"}),
+            r"topic /human_wrench is geometry_msgs/msg/Vector3Stamped, expected geometry_msgs/msg/WrenchStamped",
+        ),
+        (
+            dict(values={("/current_velocity", 5): float("nan")}),
+            r"topic /current_velocity: message 5 has twist.linear.x = nan",
+        ),
+        (
+            dict(values={("/robot_ref_pos", 3): float("inf")}),
+            r"topic /robot_ref_pos: message 3 has pose.position.x = inf",
+        ),
+        (
+            dict(stamps={"/current_pose": [0, 8_000_000, 8_000_000, 24_000_000]}),
+            r"topic /current_pose: header stamp duplicated at message 2 \(1700000000.008000000 s then 1700000000.008000000 s\)",
+        ),
+        (
+            dict(stamps={"/human_wrench": [0, 16_000_000, 8_000_000, 24_000_000]}),
+            r"topic /human_wrench: header stamp out of order at message 2",
+        ),
     ],
 )
 def test_bad_bags_name_the_topic_and_the_problem(tmp_path, kwargs, message):
@@ -268,8 +319,17 @@ def test_show_reads_bags_with_renamed_topics(tmp_path):
 
     folder = tmp_path / "user-s"
     synthetic_bag(folder / "run_1", n=30)
-    res = CliRunner().invoke(app, ["show", str(folder), "--out", str(tmp_path / "s.png"),
-                                   "--bag-topics", "pose=/robot_ref_pos,reference=/current_pose"])  # fmt: skip
+    res = CliRunner().invoke(
+        app,
+        [
+            "show",
+            str(folder),
+            "--out",
+            str(tmp_path / "s.png"),
+            "--bag-topics",
+            "pose=/robot_ref_pos,reference=/current_pose",
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert (tmp_path / "s.png").stat().st_size > 1000
     res = CliRunner().invoke(app, ["show", str(folder), "--bag-topics", "wrench=/ft"])

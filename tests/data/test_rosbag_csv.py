@@ -17,10 +17,22 @@ NSECS0 = 980_000_000  # close to a second boundary: the stamps cross it at seq 1
 
 HEADER = "Time,header.seq,header.stamp.secs,header.stamp.nsecs,header.frame_id"
 COLUMNS = {
-    "current_pose.csv": ("pose.position", ["x", "y", "z"], ["pose.orientation.x", "pose.orientation.y", "pose.orientation.z", "pose.orientation.w"]),
-    "current_velocity.csv": ("twist.linear", ["x", "y", "z"], ["twist.angular.x", "twist.angular.y", "twist.angular.z"]),
+    "current_pose.csv": (
+        "pose.position",
+        ["x", "y", "z"],
+        ["pose.orientation.x", "pose.orientation.y", "pose.orientation.z", "pose.orientation.w"],
+    ),
+    "current_velocity.csv": (
+        "twist.linear",
+        ["x", "y", "z"],
+        ["twist.angular.x", "twist.angular.y", "twist.angular.z"],
+    ),
     "human_wrench.csv": ("wrench.force", ["x", "y", "z"], ["wrench.torque.x", "wrench.torque.y", "wrench.torque.z"]),
-    "robot_ref_pos.csv": ("pose.position", ["x", "y", "z"], ["pose.orientation.x", "pose.orientation.y", "pose.orientation.z", "pose.orientation.w"]),
+    "robot_ref_pos.csv": (
+        "pose.position",
+        ["x", "y", "z"],
+        ["pose.orientation.x", "pose.orientation.y", "pose.orientation.z", "pose.orientation.w"],
+    ),
 }
 # Value of axis j of each file at seq s: distinct per file so a misalignment shows.
 SCALE = {"current_pose.csv": 1e-3, "current_velocity.csv": 2e-3, "human_wrench.csv": 0.5, "robot_ref_pos.csv": -1e-3}
@@ -52,8 +64,8 @@ def write_csv(path: Path, seqs, *, drop_column: str | None = None, overrides=Non
         rows.reverse()
     if drop_column is not None:
         k = names.index(drop_column)
-        names = names[:k] + names[k + 1:]
-        rows = [r[:k] + r[k + 1:] for r in rows]
+        names = names[:k] + names[k + 1 :]
+        rows = [r[:k] + r[k + 1 :] for r in rows]
     path.write_text("\n".join([",".join(names)] + [",".join(r) for r in rows]) + "\n")
 
 
@@ -68,10 +80,13 @@ def make_recording(folder: Path, *, drop=None, overrides=None, seqs=None) -> Pat
         "robot_ref_pos.csv": range(100, 109),
     }
     for name, s in seqs.items():
-        write_csv(folder / name, s,
-                  drop_column=drop[1] if drop and drop[0] == name else None,
-                  overrides=(overrides or {}).get(name),
-                  reverse=name == "robot_ref_pos.csv")
+        write_csv(
+            folder / name,
+            s,
+            drop_column=drop[1] if drop and drop[0] == name else None,
+            overrides=(overrides or {}).get(name),
+            reverse=name == "robot_ref_pos.csv",
+        )
     return folder
 
 
@@ -83,8 +98,11 @@ def test_alignment_time_and_diagnostics(tmp_path):
     seq = np.arange(101, 109)
     assert trial.n_samples == 8 and trial.n_dof == 2
     # values line up by seq across the four files
-    for field, file in [("pose", "current_pose.csv"), ("velocity", "current_velocity.csv"),
-                        ("reference", "robot_ref_pos.csv")]:
+    for field, file in [
+        ("pose", "current_pose.csv"),
+        ("velocity", "current_velocity.csv"),
+        ("reference", "robot_ref_pos.csv"),
+    ]:
         expected = np.column_stack([[value(file, s, j) for s in seq] for j in range(2)])
         np.testing.assert_array_equal(getattr(trial, field), expected, err_msg=field)
     # time from the header stamps minus the first; the 20 ms gap is kept
@@ -94,11 +112,20 @@ def test_alignment_time_and_diagnostics(tmp_path):
     assert extra["max_gap_s"] == pytest.approx(0.020, abs=1e-12)
     assert extra["rows_dropped"] == 2
     assert dict(extra["rows_dropped_per_file"]) == {
-        "current_pose.csv": 2, "current_velocity.csv": 2, "human_wrench.csv": 1, "robot_ref_pos.csv": 1}
+        "current_pose.csv": 2,
+        "current_velocity.csv": 2,
+        "human_wrench.csv": 1,
+        "robot_ref_pos.csv": 1,
+    }
     assert (extra["seq_first"], extra["seq_last"], extra["seq_gaps"]) == (101, 108, 0)
     assert extra["stamp_mismatch_max_s"] == 0.0
     assert trial.meta.user == "user-q" and trial.meta.source == "real" and trial.meta.task == "real"
-    assert (trial.meta.object, trial.meta.controller, trial.meta.model_id, trial.meta.seed) == ("unknown", "unknown", None, None)
+    assert (trial.meta.object, trial.meta.controller, trial.meta.model_id, trial.meta.seed) == (
+        "unknown",
+        "unknown",
+        None,
+        None,
+    )
 
 
 def test_denormals_become_zero(tmp_path):
@@ -121,12 +148,15 @@ def test_three_dofs_and_one(tmp_path):
         load_ros_trial(folder, dofs=("x", "z"))
 
 
-@pytest.mark.parametrize("file, column", [
-    ("human_wrench.csv", "wrench.force.y"),
-    ("current_velocity.csv", "twist.linear.x"),
-    ("robot_ref_pos.csv", "header.seq"),
-    ("current_pose.csv", "header.stamp.nsecs"),
-])
+@pytest.mark.parametrize(
+    "file, column",
+    [
+        ("human_wrench.csv", "wrench.force.y"),
+        ("current_velocity.csv", "twist.linear.x"),
+        ("robot_ref_pos.csv", "header.seq"),
+        ("current_pose.csv", "header.stamp.nsecs"),
+    ],
+)
 def test_missing_column_names_file_and_column(tmp_path, file, column):
     folder = make_recording(tmp_path / "r", drop=(file, column))
     with pytest.raises(RecordingError, match=rf"{file}: missing column '{column}'"):
@@ -155,12 +185,20 @@ def test_non_numeric_value(tmp_path):
 
 
 def test_repeated_seq_and_no_overlap(tmp_path):
-    seqs = {"current_pose.csv": [100, 101, 101, 102], "current_velocity.csv": range(100, 103),
-            "human_wrench.csv": range(100, 103), "robot_ref_pos.csv": range(100, 103)}
+    seqs = {
+        "current_pose.csv": [100, 101, 101, 102],
+        "current_velocity.csv": range(100, 103),
+        "human_wrench.csv": range(100, 103),
+        "robot_ref_pos.csv": range(100, 103),
+    }
     with pytest.raises(RecordingError, match=r"current_pose\.csv: column 'header.seq' repeats value 101"):
         load_ros_trial(make_recording(tmp_path / "a", seqs=seqs))
-    seqs = {"current_pose.csv": range(100, 103), "current_velocity.csv": range(100, 103),
-            "human_wrench.csv": range(200, 203), "robot_ref_pos.csv": range(100, 103)}
+    seqs = {
+        "current_pose.csv": range(100, 103),
+        "current_velocity.csv": range(100, 103),
+        "human_wrench.csv": range(200, 203),
+        "robot_ref_pos.csv": range(100, 103),
+    }
     with pytest.raises(RecordingError, match=r"human_wrench\.csv shares no header\.seq value with current_pose\.csv"):
         load_ros_trial(make_recording(tmp_path / "b", seqs=seqs))
 

@@ -32,9 +32,17 @@ def full_trial(n: int = 50, d: int = 2, h: int = 5, seed: int = 0, **meta_change
     pose[0, 0] = -0.0  # the sign bit of zero must survive
     pose[1, 0] = 5e-324  # a denormal must survive
     pose[2, 0] = np.nextafter(1.0, 2.0)
-    meta = dict(user="user-0", task="curved", object="board", controller="cooperative",
-                model_id="M2", seed=seed, source="sim", dt=0.008,
-                extra={"target": [0.4, 0.1], "obstacle": {"lo": [0.1, 0.0], "hi": [0.2, 0.05]}})
+    meta = dict(
+        user="user-0",
+        task="curved",
+        object="board",
+        controller="cooperative",
+        model_id="M2",
+        seed=seed,
+        source="sim",
+        dt=0.008,
+        extra={"target": [0.4, 0.1], "obstacle": {"lo": [0.1, 0.0], "hi": [0.2, 0.05]}},
+    )
     meta.update(meta_changes)
     return Trial(
         meta=TrialMeta(**meta),
@@ -54,20 +62,47 @@ def full_trial(n: int = 50, d: int = 2, h: int = 5, seed: int = 0, **meta_change
 def minimal_trial(n: int = 20, d: int = 2) -> Trial:
     rng = np.random.default_rng(1)
     return Trial(
-        meta=TrialMeta(user="user-a", task="real", object="unknown", controller="unknown",
-                       model_id=None, seed=None, source="real", dt=0.007999973999999632),
+        meta=TrialMeta(
+            user="user-a",
+            task="real",
+            object="unknown",
+            controller="unknown",
+            model_id=None,
+            seed=None,
+            source="real",
+            dt=0.007999973999999632,
+        ),
         time=np.cumsum(rng.uniform(0.007, 0.013, size=n)) - 0.01,
-        pose=rng.normal(size=(n, d)), velocity=rng.normal(size=(n, d)),
-        wrench=rng.normal(size=(n, d)), reference=rng.normal(size=(n, d)),
+        pose=rng.normal(size=(n, d)),
+        velocity=rng.normal(size=(n, d)),
+        wrench=rng.normal(size=(n, d)),
+        reference=rng.normal(size=(n, d)),
     )
 
 
 def test_columns_and_schema(tmp_path):
     path = write_trial(full_trial(n=50, d=2, h=5), tmp_path / "t.parquet")
     schema = pq.read_schema(path)
-    expected = ["time", "pose_x", "pose_y", "vel_x", "vel_y", "wrench_x", "wrench_y", "ref_x", "ref_y",
-                "intent_x", "intent_y", "effort_h_x", "effort_h_y", "effort_r_x", "effort_r_y",
-                "fault", "prediction_x", "prediction_y"]
+    expected = [
+        "time",
+        "pose_x",
+        "pose_y",
+        "vel_x",
+        "vel_y",
+        "wrench_x",
+        "wrench_y",
+        "ref_x",
+        "ref_y",
+        "intent_x",
+        "intent_y",
+        "effort_h_x",
+        "effort_h_y",
+        "effort_r_x",
+        "effort_r_y",
+        "fault",
+        "prediction_x",
+        "prediction_y",
+    ]
     assert schema.names == expected
     assert schema.field("prediction_x").type == pa.list_(pa.float64(), 5)
     assert schema.field("fault").type == pa.int64()
@@ -96,7 +131,16 @@ def test_round_trip_without_optional_fields(tmp_path):
     assert back.prediction is None and back.intent is None and back.fault is None
     assert back.meta.dt == 0.007999973999999632
     assert pq.read_schema(tmp_path / "sub" / "t.parquet").names == [
-        "time", "pose_x", "pose_y", "vel_x", "vel_y", "wrench_x", "wrench_y", "ref_x", "ref_y"]
+        "time",
+        "pose_x",
+        "pose_y",
+        "vel_x",
+        "vel_y",
+        "wrench_x",
+        "wrench_y",
+        "ref_x",
+        "ref_y",
+    ]
 
 
 def test_write_is_atomic_and_leaves_no_temp_files(tmp_path, monkeypatch):

@@ -13,8 +13,14 @@ from coassist.data import Trial, TrialMeta
 
 def make_meta(**changes) -> TrialMeta:
     base = dict(
-        user="user-0", task="linear", object="handle", controller="cooperative",
-        model_id="M1", seed=7, source="sim", dt=0.008,
+        user="user-0",
+        task="linear",
+        object="handle",
+        controller="cooperative",
+        model_id="M1",
+        seed=7,
+        source="sim",
+        dt=0.008,
         extra={"target": (0.4, 0.1), "obstacle": {"center": [0.2, 0.05], "size": [0.05, 0.05]}},
     )
     base.update(changes)

@@ -28,11 +28,29 @@ def six_dof_trial(seed: int = 0) -> Trial:
     fault = np.zeros(N, dtype=np.int64)
     fault[3] = Fault.WRENCH_SPIKE | Fault.TOOL_SPEED_LIMIT
     fault[-1] = Fault.STOPPED | Fault.CONTACT_FORCE_LIMIT
-    meta = TrialMeta(user="u", task="linear", object="handle", controller="cooperative", model_id=None, seed=0,
-                     source="mujoco", dt=DT, extra={"start_pose": [0.4, -0.1, 0.2, 3.0, 0.1, -0.2]})  # fmt: skip
-    return Trial(meta=meta, time=np.arange(N) * DT, pose=pose, velocity=rng.normal(0, 0.1, (N, 6)),
-                 wrench=rng.normal(0, 5, (N, 6)), reference=pose + 0.001, prediction=pred,
-                 fault=fault, joints=rng.normal(0, 1, (N, 6)), joint_velocity=rng.normal(0, 0.1, (N, 6)))  # fmt: skip
+    meta = TrialMeta(
+        user="u",
+        task="linear",
+        object="handle",
+        controller="cooperative",
+        model_id=None,
+        seed=0,
+        source="mujoco",
+        dt=DT,
+        extra={"start_pose": [0.4, -0.1, 0.2, 3.0, 0.1, -0.2]},
+    )
+    return Trial(
+        meta=meta,
+        time=np.arange(N) * DT,
+        pose=pose,
+        velocity=rng.normal(0, 0.1, (N, 6)),
+        wrench=rng.normal(0, 5, (N, 6)),
+        reference=pose + 0.001,
+        prediction=pred,
+        fault=fault,
+        joints=rng.normal(0, 1, (N, 6)),
+        joint_velocity=rng.normal(0, 0.1, (N, 6)),
+    )
 
 
 def read_all(path):
@@ -49,8 +67,13 @@ def read_all(path):
 
 def test_a_trial_round_trips_through_mcap(tmp_path):
     trial = six_dof_trial()
-    path = write_trial_mcap(trial, tmp_path / "out" / "run.mcap", alpha=0.8,
-                            joint_names=[f"j{i}" for i in range(6)], start_ns=1_700_000_000_000_000_000)  # fmt: skip
+    path = write_trial_mcap(
+        trial,
+        tmp_path / "out" / "run.mcap",
+        alpha=0.8,
+        joint_names=[f"j{i}" for i in range(6)],
+        start_ns=1_700_000_000_000_000_000,
+    )
     assert path.is_file() and list(path.parent.iterdir()) == [path]  # no temporaries left
 
     # 1. read back as a training trial: the thesis topics, bit-exact positions/velocities/forces
@@ -70,8 +93,9 @@ def test_a_trial_round_trips_through_mcap(tmp_path):
         q = [m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w]
         assert abs(np.linalg.norm(q) - 1.0) < 1e-15 * 4
         # compare rotations, not vectors: the trial's vectors run past π (unwrapped), the quaternion's do not
-        np.testing.assert_allclose(rotation_matrix(rotation_vector_from_quaternion(q)), rotation_matrix(trial.pose[k, 3:]),
-                                   rtol=0, atol=1e-13)  # fmt: skip
+        np.testing.assert_allclose(
+            rotation_matrix(rotation_vector_from_quaternion(q)), rotation_matrix(trial.pose[k, 3:]), rtol=0, atol=1e-13
+        )
         assert m.header.frame_id == "base"
     w = msgs["/human_wrench"][5][1].wrench
     np.testing.assert_array_equal([w.torque.x, w.torque.y, w.torque.z], trial.wrench[5, 3:])
@@ -81,12 +105,16 @@ def test_a_trial_round_trips_through_mcap(tmp_path):
     assert 1_700_000_000_000_000_000 + 7 * 8_000_000 not in stamp_k
     _, p8 = paths[7]  # tick 8
     assert len(p8.poses) == H
-    np.testing.assert_array_equal([[ps.pose.position.x, ps.pose.position.y] for ps in p8.poses], trial.prediction[8, :, :2])
+    np.testing.assert_array_equal(
+        [[ps.pose.position.x, ps.pose.position.y] for ps in p8.poses], trial.prediction[8, :, :2]
+    )
     assert [ps.header.stamp.nanosec for ps in p8.poses] == [(8 + i) * 8_000_000 for i in range(1, H + 1)]
     assert [m.data for _, m in msgs["/alpha"]] == [0.8] * N
     statuses = [m.status[0] for _, m in msgs["/faults"]]
     assert [s.level for s in statuses[:5]] == [0, 0, 0, 1, 0] and statuses[-1].level == 2
-    assert statuses[3].name == FAULT_STATUS_NAME and statuses[3].message == "WRENCH_SPIKE, TOOL_SPEED_LIMIT"  # lowest bit first
+    assert (
+        statuses[3].name == FAULT_STATUS_NAME and statuses[3].message == "WRENCH_SPIKE, TOOL_SPEED_LIMIT"
+    )  # lowest bit first
     assert {kv.key: kv.value for kv in statuses[3].values}["flags"] == str(int(trial.fault[3]))
     js = msgs["/joint_states"]
     assert list(js[0][1].name) == [f"j{i}" for i in range(6)]
@@ -98,8 +126,14 @@ def test_a_trial_round_trips_through_mcap(tmp_path):
 def test_a_planar_trial_fills_the_pose_from_the_start_pose(tmp_path):
     full = six_dof_trial()
     meta = full.meta
-    planar = Trial(meta=meta, time=full.time, pose=full.pose[:, :2], velocity=full.velocity[:, :2],
-                   wrench=full.wrench[:, :2], reference=full.reference[:, :2])  # fmt: skip
+    planar = Trial(
+        meta=meta,
+        time=full.time,
+        pose=full.pose[:, :2],
+        velocity=full.velocity[:, :2],
+        wrench=full.wrench[:, :2],
+        reference=full.reference[:, :2],
+    )
     path = write_trial_mcap(planar, tmp_path / "p.mcap")
     _, msgs = read_all(path)
     assert "/alpha" not in msgs and "/prediction" not in msgs and "/joint_states" not in msgs

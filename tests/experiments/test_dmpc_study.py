@@ -83,8 +83,10 @@ def test_sweep_command_rejects_bad_options(tmp_path):
 
 def test_observation_on_a_single_valued_axis_is_not_applicable():
     cfg = SweepConfig(alphas=(0.5,), robot_effort_weights=(0.01,), horizons=(5, 20))
-    cases = tuple(CaseResult(0.5, 0.01, h, rms_error_human=e, rms_error_robot=0, rms_effort_human=0, rms_effort_robot=0)
-                  for h, e in ((5, 0.3), (20, 0.2)))
+    cases = tuple(
+        CaseResult(0.5, 0.01, h, rms_error_human=e, rms_error_robot=0, rms_effort_human=0, rms_effort_robot=0)
+        for h, e in ((5, 0.3), (20, 0.2))
+    )
     verdict = check_observations(cfg, cases)
     assert verdict["higher_alpha_tracks_human_reference"]["holds"] is None
     assert verdict["longer_horizon_tracks_better"]["holds"] is True
@@ -92,9 +94,18 @@ def test_observation_on_a_single_valued_axis_is_not_applicable():
 
 @pytest.mark.parametrize(
     "field, value",
-    [("alphas", (1.5,)), ("alphas", "0.5"), ("alphas", ()), ("horizons", (0,)), ("horizons", (5.5,)),
-     ("horizons", (float("nan"),)), ("robot_effort_weights", (float("inf"),)), ("position_scale", 0.0),
-     ("velocity_weight", float("nan")), ("human_amplitude", float("inf"))],
+    [
+        ("alphas", (1.5,)),
+        ("alphas", "0.5"),
+        ("alphas", ()),
+        ("horizons", (0,)),
+        ("horizons", (5.5,)),
+        ("horizons", (float("nan"),)),
+        ("robot_effort_weights", (float("inf"),)),
+        ("position_scale", 0.0),
+        ("velocity_weight", float("nan")),
+        ("human_amplitude", float("inf")),
+    ],
 )
 def test_config_validation(field, value):
     with pytest.raises(ValueError, match=field):

@@ -30,10 +30,14 @@ def test_algorithm_4_1_collects_with_the_previous_model_and_starts_from_it():
     world = FakeWorld({None: 0.10, "M0": 0.05, "M1": 0.045, "M2": 0.0449, "M3": 0.0448})
     result = iterative_training(world.collect, world.train, world.online_errors, iterations=4, tol=1e-3)
     assert world.calls == [
-        ("collect", 0, None), ("train", 0, 0, None),
-        ("collect", 1, "M0"), ("train", 1, 1, "M0"),
-        ("collect", 2, "M1"), ("train", 2, 2, "M1"),
-        ("collect", 3, "M2"), ("train", 3, 3, "M2"),
+        ("collect", 0, None),
+        ("train", 0, 0, None),
+        ("collect", 1, "M0"),
+        ("train", 1, 1, "M0"),
+        ("collect", 2, "M1"),
+        ("train", 2, 2, "M1"),
+        ("collect", 3, "M2"),
+        ("train", 3, 3, "M2"),
         ("collect", 4, "M3"),
     ]
     assert result.models == ("M0", "M1", "M2", "M3")
@@ -102,7 +106,10 @@ def test_transfer_timings_are_per_start(monkeypatch):
     assert outcome.collect_s == 5.0 and dict(outcome.train_s) == cost
 
 
-@pytest.mark.parametrize("kwargs, message", [(dict(iterations=0), "iterations"), (dict(tol=0), "tol"), (dict(criterion_horizon=7), "criterion_horizon=7")])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [(dict(iterations=0), "iterations"), (dict(tol=0), "tol"), (dict(criterion_horizon=7), "criterion_horizon=7")],
+)
 def test_arguments_are_checked(kwargs, message):
     world = FakeWorld({None: 0.1, "M0": 0.08})
     with pytest.raises(ValueError, match=message):

@@ -23,16 +23,21 @@ def test_variants_are_trained_as_labelled_and_scored_like_evaluate(monkeypatch):
     monkeypatch.setattr("coassist.intent.train_model", spy)
     trials = labeled(5)
     labels = ["thesis: absolute in / absolute out", "+ mirror augmentation (the lstm preset)"]
-    result = par.compare_parameterisations(trials, TINY, variants=labels, epochs=1, threads=1, train_stride=3,
-                                           say=lambda m: None)  # fmt: skip
+    result = par.compare_parameterisations(
+        trials, TINY, variants=labels, epochs=1, threads=1, train_stride=3, say=lambda m: None
+    )
     assert seen == [("absolute", "absolute", False, False, 3), ("relative", "residual", True, True, 3)]
     assert [r["variant"] for r in result["rows"]] == labels
     # the last row is the default-preset variant: its numbers are evaluate_model's on the held-out trials
     from dataclasses import replace
 
     w, p, t = par.VARIANTS[labels[-1]]
-    preset = replace(TINY, window=replace(TINY.window, **w), **p,
-                     train=replace(TINY.train, epochs=1, threads=1, train_stride=3, seed=0, **t))  # fmt: skip
+    preset = replace(
+        TINY,
+        window=replace(TINY.window, **w),
+        **p,
+        train=replace(TINY.train, epochs=1, threads=1, train_stride=3, seed=0, **t),
+    )
     ev = evaluate_model(real_train(trials, preset, preset.train), trials)
     for h, v in ev.results["model"].items():
         assert result["rows"][-1]["e_rms"][int(h)] == pytest.approx(v["e_rms"], rel=1e-12)

@@ -8,11 +8,22 @@ from coassist.experiments.precision import compare_intents, comparison_table
 
 
 def test_comparison_pairs_every_source_with_mg_and_the_oracle(tmp_path):
-    result = compare_intents({"cv": "constant-velocity"}, tmp_path, bases=(50000,), trials=1, users=(0,),
-                             calibrate=False, workers=1, progress=False)
+    result = compare_intents(
+        {"cv": "constant-velocity"},
+        tmp_path,
+        bases=(50000,),
+        trials=1,
+        users=(0,),
+        calibrate=False,
+        workers=1,
+        progress=False,
+    )
     for obj in ("board", "heavy"):
-        mg, cv, oracle = (result.mg[("point-mass", obj)], result.metrics[("point-mass", obj, ARBITRATED, "cv")],
-                          result.metrics[("point-mass", obj, ARBITRATED, "oracle")])
+        mg, cv, oracle = (
+            result.mg[("point-mass", obj)],
+            result.metrics[("point-mass", obj, ARBITRATED, "cv")],
+            result.metrics[("point-mass", obj, ARBITRATED, "oracle")],
+        )
         assert len(mg["f_rms_trials"]) == len(cv["f_rms_trials"]) == 1
         assert result.pairs[("point-mass", obj)] == [("user-0", 950000 + 1000 * ("board", "heavy").index(obj))]
         share = oracle_share(mg["f_rms_trials"], cv["f_rms_trials"], oracle["f_rms_trials"])

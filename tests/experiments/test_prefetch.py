@@ -75,7 +75,9 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
 
     ahead({"lstm-tool": models["lstm-tool"]})
     ahead({"lstm-tool": models["lstm-tool"]})  # again: nothing new
-    expect |= {f"dataset:ablation-{o}-{c}-lstm-tool" for o in OBJECTS for c, s in ablation_cells(cfg) if s == "lstm-tool"}
+    expect |= {
+        f"dataset:ablation-{o}-{c}-lstm-tool" for o in OBJECTS for c, s in ablation_cells(cfg) if s == "lstm-tool"
+    }
     if ahead.mujoco:
         expect.add("job:mujoco:lstm-tool")
     assert set(ws._pending) == expect
@@ -84,8 +86,12 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
     assert set(ws._pending) == expect
 
     ahead(models)
-    expect |= {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c, s in ablation_cells(cfg)
-               if (o, c, s) not in handed_to_ablation()}  # fmt: skip
+    expect |= {
+        f"dataset:ablation-{o}-{c}-{s}"
+        for o in OBJECTS
+        for c, s in ablation_cells(cfg)
+        if (o, c, s) not in handed_to_ablation()
+    }
     if ahead.mujoco:
         expect |= {f"job:mujoco:{s}" for s in run_sources(cfg)}
     assert set(ws._pending) == expect
@@ -173,8 +179,9 @@ def test_beside_training_starts_each_later_share_once_and_all_by_the_last_traini
     assert seen[0] >= {"job:real recordings"}
     if iterations == 4:
         assert seen[0] == {"job:real recordings"}
-        assert seen[1] == {f"dataset:app-{o}-{c}" for o in OBJECTS for c in APP_CONTROLLERS
-                           if not c.startswith("cooperative")} | {"dataset:calibration"}  # fmt: skip
+        assert seen[1] == {
+            f"dataset:app-{o}-{c}" for o in OBJECTS for c in APP_CONTROLLERS if not c.startswith("cooperative")
+        } | {"dataset:calibration"}
         assert all(seen[k] for k in range(4))
     named = [s for s in run_sources(cfg) if s not in LEARNED and s != "paths"]
     expect = {"job:real recordings", "dataset:calibration"}

@@ -1,6 +1,5 @@
 """The realism statistics and report."""
 
-
 import numpy as np
 import pytest
 
@@ -18,8 +17,9 @@ def _trial():
     wrench = np.zeros((len(t), 2))
     wrench[:, 0] = 3.0
     wrench[50, 1] = 4.0  # one tick of |f| = 5 N
-    meta = TrialMeta(user="u", task="linear", object="handle", controller="c", model_id=None, seed=None,
-                     source="real", dt=0.01)
+    meta = TrialMeta(
+        user="u", task="linear", object="handle", controller="c", model_id=None, seed=None, source="real", dt=0.01
+    )
     return Trial(meta=meta, time=t, pose=pose, velocity=np.zeros_like(pose), wrench=wrench, reference=ref)
 
 
@@ -46,7 +46,8 @@ def test_turn_stats_by_hand():
     tau = np.clip(t / 3.0, 0, 1)
     stroke = tau**3 * (10 - 15 * tau + 6 * tau**2)
     x = 0.1 * stroke + 0.1 * np.clip(np.where(t > 3.0, (t - 3.0) / 3.0, 0.0), 0, 1) ** 3 * (
-        10 - 15 * np.clip((t - 3.0) / 3.0, 0, 1) + 6 * np.clip((t - 3.0) / 3.0, 0, 1) ** 2)
+        10 - 15 * np.clip((t - 3.0) / 3.0, 0, 1) + 6 * np.clip((t - 3.0) / 3.0, 0, 1) ** 2
+    )
     line = np.column_stack([x, np.zeros_like(x)])
     s = turn_stats(t, line, np.zeros(len(t)))
     assert s["submovements"] == 2 and s["peak_sideways_accel"] == pytest.approx(0.0, abs=1e-9)
@@ -59,7 +60,9 @@ def test_turn_stats_by_hand():
 @pytest.mark.real_data
 @pytest.mark.skipif(not REAL.exists(), reason="real recordings not available")
 def test_realism_report(tmp_path):
-    result = run_realism(REAL, presets=("thesis-evaluation",), tasks=("linear",), trials_per_task=1, workers=1, progress=False)
+    result = run_realism(
+        REAL, presets=("thesis-evaluation",), tasks=("linear",), trials_per_task=1, workers=1, progress=False
+    )
     assert len(result.real) == 15 and len(result.sim["thesis-evaluation"]["linear"]) == 1
     table = summary_table(result)
     assert "peak ‖f‖" in table and "thesis-evaluation" in table

@@ -22,7 +22,9 @@ def _collections(cfg):
     """(name, first seed, trial count) of every simulated collection of a run, from the seed plan."""
     n_tasks = len(pipeline.ITERATION_TASKS)
     base = pipeline.trial_seed_base(cfg.seed)
-    out = [(f"D{k}", pipeline.iteration_seed(base, k), n_tasks * cfg.trials_per_task) for k in range(cfg.iterations + 1)]
+    out = [
+        (f"D{k}", pipeline.iteration_seed(base, k), n_tasks * cfg.trials_per_task) for k in range(cfg.iterations + 1)
+    ]
     for i, (name, t) in enumerate(transfer_targets(cfg).items()):
         train, test = pipeline.transfer_seeds(base, i)
         per = len(t.tasks) * len(t.users) * len(t.objects)
@@ -30,8 +32,13 @@ def _collections(cfg):
     out.append(("TL heavy", pipeline.heavy_transfer_seed(base), n_tasks * max(1, cfg.transfer_trials // 3)))
     out.append(("calibration", pipeline.calibration_seed(base), cfg.calibration_trials * len(cfg.application_users)))
     for j in range(2):  # every controller of object j reuses the same seeds on purpose
-        out.append((f"application {j}", pipeline.application_seed(base, j),
-                    cfg.application_trials * len(cfg.application_users)))
+        out.append(
+            (
+                f"application {j}",
+                pipeline.application_seed(base, j),
+                cfg.application_trials * len(cfg.application_users),
+            )
+        )
     return out
 
 
@@ -39,8 +46,10 @@ def _collections(cfg):
 def test_no_two_collections_share_a_trial_seed(name):
     # one run, and the three runs of `reproduce --seeds 3` (seeds 0, 1, 2) together
     for seeds in ((0,), (0, 1, 2)):
-        spans = sorted((c for s in seeds for c in _collections(replace(pipeline.REPRODUCE_PRESETS[name], seed=s))),
-                       key=lambda c: c[1])  # fmt: skip
+        spans = sorted(
+            (c for s in seeds for c in _collections(replace(pipeline.REPRODUCE_PRESETS[name], seed=s))),
+            key=lambda c: c[1],
+        )
         for (a, sa, na), (b, sb, _) in pairwise(spans):
             assert sa + na <= sb, f"{a} (seeds {sa}..{sa + na - 1}) overlaps {b} (from {sb}), run seeds {seeds}"
     # and every run's collections stay inside its own block of trial seeds
@@ -71,13 +80,21 @@ def tiny_run(tmp_path_factory):
 
 def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
     out, summary = tiny_run
-    assert set(summary["stage_seconds"]) == {"dMPC study", "iterative training", "transfer learning", "application scenario",
-                                             "real recordings", "intent ablation"}
+    assert set(summary["stage_seconds"]) == {
+        "dMPC study",
+        "iterative training",
+        "transfer learning",
+        "application scenario",
+        "real recordings",
+        "intent ablation",
+    }
     # the work done, per stage and in all: this process's CPU seconds (workers=1: no pool)
     assert set(summary["stage_cpu_seconds"]) == set(summary["stage_seconds"])
     cpu = summary["cpu_seconds"]
     stage_main = sum(c["main"] for c in summary["stage_cpu_seconds"].values())
-    assert 0 < stage_main <= cpu["main"] <= (os.cpu_count() or 1) * summary["total_seconds"] + 1.0  # no more than the cores give
+    assert (
+        0 < stage_main <= cpu["main"] <= (os.cpu_count() or 1) * summary["total_seconds"] + 1.0
+    )  # no more than the cores give
     it = summary["iterative"]
     assert list(it["in_loop_errors"]) == ["nominal", "M0", "M1"]
     for errors in it["in_loop_errors"].values():
@@ -87,8 +104,14 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
     assert set(summary["transfer"]) >= {"z trajectory", "new users", "board"}
     for target in ("z trajectory", "new users", "board"):
         tiny = rep.REPRODUCE_PRESETS["tiny"]
-        assert set(summary["transfer"][target]["e_rms"]) == {"M_prev", *tiny.transfer_starts, "nominal", "constant_velocity",
-                                                             "constant_acceleration", "ridge"}  # fmt: skip
+        assert set(summary["transfer"][target]["e_rms"]) == {
+            "M_prev",
+            *tiny.transfer_starts,
+            "nominal",
+            "constant_velocity",
+            "constant_acceleration",
+            "ridge",
+        }
     controllers = ("cooperative", "cooperative-arbitrated", "impedance", "manual")
     assert set(summary["application"]) == {f"{o}/{c}" for o in ("board", "heavy") for c in controllers}
     for result in summary["application"].values():  # the smoothness and stability measures, per trial
@@ -132,31 +155,51 @@ def _expected_claims(summary):
     """Each claim's verdict and the numbers its evidence must print, recomputed from the summary."""
     out = {}
     obs = summary["dmpc_sweep"]["observations"]
-    for key, text in (("higher_alpha_tracks_human_reference", "Higher α"), ("lower_R_r_tracks_better", "Lower R_r"),
-                      ("longer_horizon_tracks_better", "A longer prediction horizon")):
+    for key, text in (
+        ("higher_alpha_tracks_human_reference", "Higher α"),
+        ("lower_R_r_tracks_better", "Lower R_r"),
+        ("longer_horizon_tracks_better", "A longer prediction horizon"),
+    ):
         out[text] = (bool(obs[key]["holds"]), [])
     it = summary["iterative"]
     err = it["in_loop_errors"]
     models = [k for k in err if k != "nominal"]
     e50 = [err[m][50]["e_rms"] for m in models]
     drops = [a - b for a, b in pairwise(e50)]
-    out["Iterating lowers e_RMS"] = (e50[-1] < e50[0] and drops[0] == max(drops) and drops[0] > 0,
-                                     [f"M{k} {_mm(e)} mm" for k, e in enumerate(e50)] + [_mm(err["nominal"][50]["e_rms"])])
+    out["Iterating lowers e_RMS"] = (
+        e50[-1] < e50[0] and drops[0] == max(drops) and drops[0] > 0,
+        [f"M{k} {_mm(e)} mm" for k, e in enumerate(e50)] + [_mm(err["nominal"][50]["e_rms"])],
+    )
     hs = sorted(err["M0"])
     grows = all(err[m][a]["e_rms"] < err[m][b]["e_rms"] for m in models for a, b in pairwise(hs))
     out["e_RMS grows with the prediction horizon"] = (grows, [_mm(err[m][h]["e_rms"]) for m in models for h in hs])
     tr = {k: v for k, v in summary["transfer"].items() if k != "iteration_seconds"}
-    out["Transfer with"] = (all(r["e_rms"]["transfer"][50] < r["e_rms"]["M_prev"][50] for r in tr.values()),
-                            [_mm(r["e_rms"][p][50]) for r in tr.values() for p in ("M_prev", "transfer")])
+    out["Transfer with"] = (
+        all(r["e_rms"]["transfer"][50] < r["e_rms"]["M_prev"][50] for r in tr.values()),
+        [_mm(r["e_rms"][p][50]) for r in tr.values() for p in ("M_prev", "transfer")],
+    )
     own = it["final_model_offline_e_rms"][50]
     it_trials = sum(w["trials"] for w in it["work"])
     it_windows = sum(w["windows_trained"] for w in it["work"])
     out["Transfer approaches"] = (
-        all(r["e_rms"]["transfer"][50] <= 1.25 * own and r["work"]["trials"] / it_trials < 0.5
-            and r["work"]["windows_trained"] / it_windows < 0.5 for r in tr.values()),
-        [_mm(own), f"{it_trials} trials", f"{it_windows} windows"] + [f"{r['work']['trials']} trials" for r in tr.values()])
-    out["Freezing the LSTM"] = (all(r["e_rms"]["transfer"][50] <= r["e_rms"]["scratch"][50] for r in tr.values()),
-                                [_mm(r["e_rms"][p][50]) for r in tr.values() for p in ("transfer", "finetune_all", "scratch") if p in r["e_rms"]])
+        all(
+            r["e_rms"]["transfer"][50] <= 1.25 * own
+            and r["work"]["trials"] / it_trials < 0.5
+            and r["work"]["windows_trained"] / it_windows < 0.5
+            for r in tr.values()
+        ),
+        [_mm(own), f"{it_trials} trials", f"{it_windows} windows"]
+        + [f"{r['work']['trials']} trials" for r in tr.values()],
+    )
+    out["Freezing the LSTM"] = (
+        all(r["e_rms"]["transfer"][50] <= r["e_rms"]["scratch"][50] for r in tr.values()),
+        [
+            _mm(r["e_rms"][p][50])
+            for r in tr.values()
+            for p in ("transfer", "finetune_all", "scratch")
+            if p in r["e_rms"]
+        ],
+    )
     app = summary["application"]
     for obj in ("board", "heavy"):
         a, i, m = (app[f"{obj}/{c}"] for c in ("cooperative", "impedance", "manual"))
@@ -164,44 +207,77 @@ def _expected_claims(summary):
         out[f"{obj}: the assistive controller needs less"] = (a["f_rms"] < min(m["f_rms"], i["f_rms"]), forces)
         out[f"{obj}: manual guidance needs less"] = (m["f_rms"] < i["f_rms"], forces)
         out[f"{obj}: the assistive controller reaches"] = (
-            bool(np.isfinite(a["sigma"]) and a["sigma"] < inf(m["sigma"]) and a["sigma"] < inf(i["sigma"])
-                 and a["reached"] >= max(m["reached"], i["reached"])), [f"{a['reached']}/", f"{m['reached']}/"])
+            bool(
+                np.isfinite(a["sigma"])
+                and a["sigma"] < inf(m["sigma"])
+                and a["sigma"] < inf(i["sigma"])
+                and a["reached"] >= max(m["reached"], i["reached"])
+            ),
+            [f"{a['reached']}/", f"{m['reached']}/"],
+        )
         for variant in ("cooperative", "cooperative-arbitrated"):
             v = app[f"{obj}/{variant}"]
             saving = 1 - v["f_rms"] / m["f_rms"]
             out[f"{obj}: {variant} needs ≥"] = (
-                bool(saving >= 0.30 and np.isfinite(v["sigma"]) and v["sigma"] <= inf(m["sigma"])
-                     and v["reached"] >= m["reached"] and v["overshoot"] <= m["overshoot"]),
-                [f"force {100 * saving:.0f} %", f"{v['jerk_rms']:.2f} vs MG {m['jerk_rms']:.2f}"])
+                bool(
+                    saving >= 0.30
+                    and np.isfinite(v["sigma"])
+                    and v["sigma"] <= inf(m["sigma"])
+                    and v["reached"] >= m["reached"]
+                    and v["overshoot"] <= m["overshoot"]
+                ),
+                [f"force {100 * saving:.0f} %", f"{v['jerk_rms']:.2f} vs MG {m['jerk_rms']:.2f}"],
+            )
     cells = summary["ablation"]["cells"]
     for key, cell in cells.items():
         world, obj, controller, source = key.split("/")
         if world == "point-mass" and controller == "cooperative-arbitrated" and source in ("lstm-tool", "lstm-intent"):
             f, o = cell["oracle_share_force"][0], cell["oracle_share_overshoot"][0]
             out[f"{obj}: the arbitrated controller with {source} in the loop"] = (
-                bool(np.isfinite(f) and np.isfinite(o) and f >= 0.8 and o >= 0.8), [])
+                bool(np.isfinite(f) and np.isfinite(o) and f >= 0.8 and o >= 0.8),
+                [],
+            )
     # issue 34's goals for the application's source ("paths"), from the summary's cells
     mg_cells = summary["ablation"]["mg"]
     for obj in ("board", "heavy"):
         cell = cells[f"point-mass/{obj}/cooperative-arbitrated/paths"]
         f, o, o_lo = cell["oracle_share_force"][0], cell["oracle_share_overshoot"][0], cell["oracle_share_overshoot"][1]
         out[f"{obj}: with 'paths' the arbitrated controller gets"] = (
-            bool(np.isfinite(f) and np.isfinite(o) and np.isfinite(o_lo) and f >= 0.85 and o >= 0.6 and o_lo >= 0.3), [])
-        for metric, what in (("overshoot", "overshoots the intent"), ("clearance_deficit", "passes closer to the obstacle")):
+            bool(np.isfinite(f) and np.isfinite(o) and np.isfinite(o_lo) and f >= 0.85 and o >= 0.6 and o_lo >= 0.3),
+            [],
+        )
+        for metric, what in (
+            ("overshoot", "overshoots the intent"),
+            ("clearance_deficit", "passes closer to the obstacle"),
+        ):
             sides = cell["by_side"]
-            ok = all(sides[s][metric]["trials"] >= 2 and np.isfinite(sides[s][metric]["high"])
-                     and sides[s][metric]["high"] <= 0.0 for s in ("left", "right"))
+            ok = all(
+                sides[s][metric]["trials"] >= 2
+                and np.isfinite(sides[s][metric]["high"])
+                and sides[s][metric]["high"] <= 0.0
+                for s in ("left", "right")
+            )
             out[f"{obj}: with 'paths' the arbitrated controller {what}"] = (bool(ok), [])
         jerk, jerk_mg = cell["jerk_rms"], mg_cells[f"point-mass/{obj}"]["jerk_rms"]
-        out[f"{obj}: with 'paths' the arbitrated controller's jerk"] = (bool(jerk <= 1.2 * jerk_mg), [f"{jerk:.2f} vs MG {jerk_mg:.2f}"])
+        out[f"{obj}: with 'paths' the arbitrated controller's jerk"] = (
+            bool(jerk <= 1.2 * jerk_mg),
+            [f"{jerk:.2f} vs MG {jerk_mg:.2f}"],
+        )
     if "user_a" in summary["real"]:
         ev = summary["real"]["user_a"]
         best = ev["best_baseline"]
         out["On held-out real user-a data the model is no worse"] = (
-            all(b["gain"] >= 0 for b in best.values()), [f"{b['model_e_rms'] * 1e3:.3f} mm" for b in best.values()])
-        ridge, model = ev["results"]["ridge"][50]["e_rms"], ev["results"]["model"][50]["e_rms"]  # in memory: int horizons
+            all(b["gain"] >= 0 for b in best.values()),
+            [f"{b['model_e_rms'] * 1e3:.3f} mm" for b in best.values()],
+        )
+        ridge, model = (
+            ev["results"]["ridge"][50]["e_rms"],
+            ev["results"]["model"][50]["e_rms"],
+        )  # in memory: int horizons
         out["On held-out real user-a data the model beats"] = (
-            model <= 0.85 * ridge, [f"model {model * 1e3:.3f} mm", f"{ridge * 1e3:.3f} mm", f"{100 * (ridge - model) / ridge:+.1f} %"])
+            model <= 0.85 * ridge,
+            [f"model {model * 1e3:.3f} mm", f"{ridge * 1e3:.3f} mm", f"{100 * (ridge - model) / ridge:+.1f} %"],
+        )
     return out
 
 
@@ -245,8 +321,14 @@ def test_report_is_complete_and_consistent_with_the_summary(tiny_run):
     html = (out / "report.html").read_text()
     on_disk = json.loads((out / "summary.json").read_text())
     assert on_disk["claims"] == summary["claims"]
-    for title in ("1. The dMPC study", "2. Iterative training", "3. Transfer learning", "4. Application", "5. The real UR5 recordings",
-                  "6. Which intent makes assistance better?"):
+    for title in (
+        "1. The dMPC study",
+        "2. Iterative training",
+        "3. Transfer learning",
+        "4. Application",
+        "5. The real UR5 recordings",
+        "6. Which intent makes assistance better?",
+    ):
         assert title in html
     claims = summary["claims"]
     assert len(claims) >= 10
@@ -266,7 +348,9 @@ def test_report_is_complete_and_consistent_with_the_summary(tiny_run):
     answer = html.split("The thesis' claims, checked")[0]
     assert "The answer: does the assistance help?" in answer
     rows = summary["headline"]["table"][2]
-    assert [r[:2] for r in rows] == [[o, v] for o in ("board", "heavy") for v in ("cooperative", "cooperative-arbitrated")]
+    assert [r[:2] for r in rows] == [
+        [o, v] for o in ("board", "heavy") for v in ("cooperative", "cooperative-arbitrated")
+    ]
     board = summary["application"]["board/cooperative"]["f_rms_trials"]
     mg = summary["application"]["board/manual"]["f_rms_trials"]
     saved = 1.0 - np.asarray(board) / np.asarray(mg)

@@ -24,7 +24,7 @@ def test_a_claim_that_holds_on_two_of_three_seeds_says_so():
     assert b.per_seed == {0: (True, "b0"), 1: (False, "b1"), 2: (True, "b2")}
     assert b.to_dict()["seeds"]["1"] == {"holds": False, "evidence": "b1"} and b.to_dict()["holds_on"] == 2
     section = seeds_section(claims, (0, 1, 2))
-    (_, header, rows), = section.tables
+    ((_, header, rows),) = section.tables
     assert header == ["claim", "holds on", "status", "seed 0", "seed 1", "seed 2"]
     assert rows[1] == ["B", "2 of 3", "seed-dependent", "holds: b0", "does not hold: b1", "holds: b2"]
 

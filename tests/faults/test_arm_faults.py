@@ -50,8 +50,14 @@ def _load(path: Path):
 table = _load(TESTS / "faults" / "test_runtime_faults.py")
 DT = table.DT
 #: The cases run on franky-sim too (module docstring).
-ON_FRANKY = ("NaN wrench (10 ticks)", "±inf wrench (10 ticks)", "5 kN spike (1 tick)", "frozen sensor",
-             "50 consecutive deadline misses", "hand lets go at full speed")  # fmt: skip
+ON_FRANKY = (
+    "NaN wrench (10 ticks)",
+    "±inf wrench (10 ticks)",
+    "5 kN spike (1 tick)",
+    "frozen sensor",
+    "50 consecutive deadline misses",
+    "hand lets go at full speed",
+)
 START = (0.25, 0.0, 0.4)  # the linear task's start moved to the Panda (robot.drive.move_tasks)
 
 
@@ -168,11 +174,14 @@ def run_franky(case, franky_sim):
 
     server = franky_sim.SimServer()
     try:
-        inner = FrankaWorld(server.host, arm="fr3", ft_sensor=ScriptedSensor(server, case.operator))  # franky-sim is an FR3
+        inner = FrankaWorld(
+            server.host, arm="fr3", ft_sensor=ScriptedSensor(server, case.operator)
+        )  # franky-sim is an FR3
         limits = _limits(inner.read().tool_pose[:3])
         world = FaultyFranka(inner, case.inject, case.overrun)
-        config = DriveConfig(world="franka", robot="fr3", controller="manual", task="linear", time_limit=case.time_limit,
-                             limits=limits)  # fmt: skip
+        config = DriveConfig(
+            world="franka", robot="fr3", controller="manual", task="linear", time_limit=case.time_limit, limits=limits
+        )
         try:
             trial = drive(config, world=world)
             violations = _violations(trial, inner.kinematics(), world.poses, limits)
@@ -204,5 +213,7 @@ if __name__ == "__main__":
         for where, (trial, violations) in runs:
             seen = Fault(int(np.bitwise_or.reduce(trial.fault)))
             names = ", ".join(f.name for f in Fault if f and f & seen)
-            print(f"| {case.name} | {where} | {names} | {trial.meta.extra['ended']} | {trial.n_samples} | "
-                  f"{len(violations)} |")
+            print(
+                f"| {case.name} | {where} | {names} | {trial.meta.extra['ended']} | {trial.n_samples} | "
+                f"{len(violations)} |"
+            )

@@ -59,8 +59,24 @@ def work():
     root = Path(tempfile.mkdtemp(prefix="coassist-cli-faults-"))
     res = run("collect", "--out", root / "D", "--trials", "3", "--tasks", "linear", "--workers", "1")
     assert res.exit_code == 0, res.output
-    res = run("train", root / "D", "--out", root / "m", "--epochs", "1", "--threads", "1", "--hidden", "8",
-              "--layers", "1", "--fc", "8", "--batch-size", "256")  # fmt: skip
+    res = run(
+        "train",
+        root / "D",
+        "--out",
+        root / "m",
+        "--epochs",
+        "1",
+        "--threads",
+        "1",
+        "--hidden",
+        "8",
+        "--layers",
+        "1",
+        "--fc",
+        "8",
+        "--batch-size",
+        "256",
+    )
     assert res.exit_code == 0, res.output
     (root / "afile").write_text("not a folder\n")
     yield root
@@ -164,8 +180,9 @@ def test_read_only_output_folder(work, command):
         probe = subprocess.run([setpriv, DROP_DAC, "--", "true"], capture_output=True, text=True, timeout=30)
         if probe.returncode != 0:  # no CAP_SETPCAP (a restricted container)
             pytest.skip(f"running as root and cannot drop CAP_DAC_OVERRIDE: {probe.stderr.strip()}")
-        proc = subprocess.run([setpriv, DROP_DAC, "--", str(COASSIST), *args],
-                              cwd=work, capture_output=True, text=True, timeout=120)  # fmt: skip
+        proc = subprocess.run(
+            [setpriv, DROP_DAC, "--", str(COASSIST), *args], cwd=work, capture_output=True, text=True, timeout=120
+        )
         assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr
         lines = [ln for ln in (proc.stdout + proc.stderr).splitlines() if ln.startswith("error:")]
         assert len(lines) == 1, proc.stdout + proc.stderr
@@ -200,16 +217,34 @@ def test_sweep_names_its_option(work):
 @pytest.mark.parametrize(
     ("args", "expected"),
     [
-        (["collect", "--out", "X", "--preset", "thesis-eval"], "--preset 'thesis-eval': no such control preset; did you mean 'thesis-evaluation'?"),
-        (["collect", "--out", "X", "--controller", "cooperativ"], "--controller 'cooperativ': no such controller; did you mean 'cooperative'?"),
+        (
+            ["collect", "--out", "X", "--preset", "thesis-eval"],
+            "--preset 'thesis-eval': no such control preset; did you mean 'thesis-evaluation'?",
+        ),
+        (
+            ["collect", "--out", "X", "--controller", "cooperativ"],
+            "--controller 'cooperativ': no such controller; did you mean 'cooperative'?",
+        ),
         (["collect", "--out", "X", "--tasks", "linear,curvd"], "--tasks 'curvd': no such task; did you mean 'curved'?"),
         (["collect", "--out", "X", "--objects", "bord"], "--objects 'bord': no such object; did you mean 'board'?"),
-        (["train", "D", "--out", "X", "--preset", "thesi"], "--preset 'thesi': no such intent-model preset; did you mean 'thesis'?"),
-        (["tune", "D", "--preset", "defualt"], "--preset 'defualt': no such intent-model preset; did you mean 'default'?"),
-        (["reproduce", "--out", "X", "--preset", "tinny"], "--preset 'tinny': no such reproduce preset; did you mean 'tiny'?"),
-        (["reproduce", "--out", "X", "--preset", "zzz"], "--preset 'zzz': no such reproduce preset (choose from: default, full, tiny, thesis)"),
+        (
+            ["train", "D", "--out", "X", "--preset", "thesi"],
+            "--preset 'thesi': no such intent-model preset; did you mean 'thesis'?",
+        ),
+        (
+            ["tune", "D", "--preset", "defualt"],
+            "--preset 'defualt': no such intent-model preset; did you mean 'default'?",
+        ),
+        (
+            ["reproduce", "--out", "X", "--preset", "tinny"],
+            "--preset 'tinny': no such reproduce preset; did you mean 'tiny'?",
+        ),
+        (
+            ["reproduce", "--out", "X", "--preset", "zzz"],
+            "--preset 'zzz': no such reproduce preset (choose from: default, full, tiny, thesis)",
+        ),
     ],
-)  # fmt: skip
+)
 def test_presets_and_names_did_you_mean(work, args, expected):
     res = run(*args, cwd=work)
     assert_one_line_error(res, expected, code=2)
@@ -225,10 +260,15 @@ def test_collect_intent_must_be_a_model(work):
 
 
 def test_missing_paths_are_called_missing(work):
-    for args in (["train", work / "nothere", "--out", work / "m9"], ["show", work / "nothere"],
-                 ["evaluate", "--model", work / "m", "--data", work / "nothere"]):  # fmt: skip
+    for args in (
+        ["train", work / "nothere", "--out", work / "m9"],
+        ["show", work / "nothere"],
+        ["evaluate", "--model", work / "m", "--data", work / "nothere"],
+    ):
         assert_one_line_error(run(*args), "nothere", "no such file or folder")
-    assert_one_line_error(run("evaluate", "--model", work / "nomodel", "--data", work / "D"), "--model", "no such folder")
+    assert_one_line_error(
+        run("evaluate", "--model", work / "nomodel", "--data", work / "D"), "--model", "no such folder"
+    )
 
 
 def test_brackets_in_messages_are_printed(work):
@@ -249,16 +289,34 @@ def test_train_evaluate_show_read_the_same_inputs(work, tmp_path):
     for kind, path in inputs.items():
         res = run("show", path, "--out", tmp_path / f"{kind}.png")
         assert res.exit_code == 0, f"show {kind}: {res.output}"
-        res = run("evaluate", "--model", work / "m", "--data", path, "--include-training", "--out",
-                  tmp_path / f"{kind}.json")  # fmt: skip
+        res = run(
+            "evaluate", "--model", work / "m", "--data", path, "--include-training", "--out", tmp_path / f"{kind}.json"
+        )
         assert res.exit_code == 0, f"evaluate {kind}: {res.output}"
         assert json.loads((tmp_path / f"{kind}.json").read_text())["trials"]
     # train on a single trial file plus the dataset (the file's trial id is new: the folder is not D)
     single = tmp_path / "extra" / "one.parquet"
     single.parent.mkdir()
     shutil.copy(trial_file, single)
-    res = run("train", work / "D", single, "--out", tmp_path / "m2", "--epochs", "1", "--threads", "1", "--hidden",
-              "8", "--layers", "1", "--fc", "8", "--batch-size", "256")  # fmt: skip
+    res = run(
+        "train",
+        work / "D",
+        single,
+        "--out",
+        tmp_path / "m2",
+        "--epochs",
+        "1",
+        "--threads",
+        "1",
+        "--hidden",
+        "8",
+        "--layers",
+        "1",
+        "--fc",
+        "8",
+        "--batch-size",
+        "256",
+    )
     assert res.exit_code == 0, res.output
     info = json.loads((tmp_path / "m2" / "model.json").read_text())
     ids = info.get("train_trials", []) + info.get("test_trials", [])

@@ -30,8 +30,14 @@ from coassist.sim.collect import dataset_specs
 from coassist.sim.world import run_spec, run_trials, worker_pool
 
 FEW, MANY, JOB = 10, 40, 5
-SPECS = dataset_specs(controller="cooperative", users=[0], tasks=["linear", "curved", "sinusoidal"],
-                      objects=["handle"], trials=MANY // 3 + 1, seed=0)[:MANY]  # fmt: skip
+SPECS = dataset_specs(
+    controller="cooperative",
+    users=[0],
+    tasks=["linear", "curved", "sinusoidal"],
+    objects=["handle"],
+    trials=MANY // 3 + 1,
+    seed=0,
+)[:MANY]
 ARRAYS = ("time", "pose", "velocity", "wrench", "reference", "prediction", "intent", "effort_h", "effort_r", "fault")
 
 
@@ -64,14 +70,23 @@ def test_collect_on_a_pool_does_not_hold_the_trials_it_delivered():
     with worker_pool(2) as pool:
 
         def run(specs, on_result):
-            run_trials(specs, workers=2, pool=pool, progress=False, lockstep=True, groups=len(specs) // JOB,
-                       on_result=on_result)  # fmt: skip
+            run_trials(
+                specs,
+                workers=2,
+                pool=pool,
+                progress=False,
+                lockstep=True,
+                groups=len(specs) // JOB,
+                on_result=on_result,
+            )
 
         few, size_few = _held(run, FEW)
         many, size_many = _held(run, MANY)
     size = min(size_few, size_many)
     assert size > 1e6  # a nominal trial's arrays, 1.9 MB: the unit of the bound
-    assert many - few < 15 * size, f"{FEW} trials held {few / 1e6:.1f} MB, {MANY} held {many / 1e6:.1f} MB ({size / 1e6:.2f} MB a trial)"
+    assert many - few < 15 * size, (
+        f"{FEW} trials held {few / 1e6:.1f} MB, {MANY} held {many / 1e6:.1f} MB ({size / 1e6:.2f} MB a trial)"
+    )
 
 
 def test_collect_in_one_process_runs_bounded_groups(monkeypatch):
@@ -94,8 +109,13 @@ def test_collect_in_one_process_runs_bounded_groups(monkeypatch):
     got: dict[int, Trial] = {}
     for n in (FEW, 2 * FEW):
         batch_bytes.clear()
-        run_trials(SPECS[:n], workers=1, progress=False, lockstep=True,
-                   on_result=lambda i, trial: got.__setitem__(i, trial) if i == later else None)  # fmt: skip
+        run_trials(
+            SPECS[:n],
+            workers=1,
+            progress=False,
+            lockstep=True,
+            on_result=lambda i, trial: got.__setitem__(i, trial) if i == later else None,
+        )
         largest[n] = max(batch_bytes)
     assert largest[2 * FEW] < 1.5 * largest[FEW], largest  # the old code's: 2x
     assert got[later].equals(run_spec(SPECS[later]))  # the numbers are the trial's alone, bit for bit

@@ -29,8 +29,9 @@ K_IMP = np.diag([200.0, 200.0])
 
 
 def controllers():
-    game = CooperativeGame(MODEL, Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[1e-4, 1e-4],
-                           alpha=0.9, horizon=H)  # fmt: skip
+    game = CooperativeGame(
+        MODEL, Q_hh=Q, Q_hr=0, Q_rh=0, Q_rr=Q, R_h=[5e-4, 5e-4], R_r=[1e-4, 1e-4], alpha=0.9, horizon=H
+    )
     return {
         "cooperative": AssistiveController(game, effort_limit=100.0),
         "impedance": ImpedanceControl(MODEL, K_IMP, effort_limit=100.0),
@@ -97,8 +98,12 @@ def bad_cases():
         ("z-1e200", 0, np.array([1e200, 0, 0, 0]), Fault.INVALID_INPUT),
         ("z-velocity-1e3", 0, np.array([0, 0, 1e3, 0]), Fault.INVALID_INPUT),
         ("ref_h-1e200", 1, np.full((H, 4), 1e200), Fault.INVALID_INPUT),
-        ("ref_r-1e200", 2, _replace((ref_r,), 0, np.where(np.arange(H)[:, None] == 3, 1e200, 0.0))[0],
-         Fault.INVALID_INPUT),
+        (
+            "ref_r-1e200",
+            2,
+            _replace((ref_r,), 0, np.where(np.arange(H)[:, None] == 3, 1e200, 0.0))[0],
+            Fault.INVALID_INPUT,
+        ),
         ("ref_h-1e6-m", 1, np.full((H, 4), 1e6), Fault.INVALID_INPUT),
         ("wrench-100-kN", 3, np.array([1e5, 0.0]), Fault.INVALID_INPUT),
         # non-finite: its own flag

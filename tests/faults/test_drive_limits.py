@@ -29,11 +29,14 @@ def _refused(args: list[str], option: str) -> str:
     return errors[0]
 
 
-@pytest.mark.parametrize("args, option", [
-    (["--tool-speed", "1e9"], "--tool-speed"),
-    (["--tool-speed", "1.5"], "--tool-speed"),  # beyond the UR5's 1 m/s
-    (["--contact-force", "1e9"], "--contact-force"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (["--tool-speed", "1e9"], "--tool-speed"),
+        (["--tool-speed", "1.5"], "--tool-speed"),  # beyond the UR5's 1 m/s
+        (["--contact-force", "1e9"], "--contact-force"),
+    ],
+)
 def test_drive_refuses_limits_that_switch_a_protection_off(args, option, tmp_path):
     line = _refused(["drive", "--time-limit", "0.2", "--no-plot", "--out", str(tmp_path / "t.parquet"), *args], option)
     assert not (tmp_path / "t.parquet").exists()
@@ -52,16 +55,19 @@ def test_the_arm_sets_the_tool_speed_ceiling():
 ROS2 = ["ros2", "--yes", "--no-plot", "--connect-timeout", "0.3"]
 
 
-@pytest.mark.parametrize("args, option, words", [
-    (["--tool-speed", "1e9"], "--tool-speed", "own tool speed limit"),
-    (["--stale-after", "1e9"], "--stale-after", "at most 0.5 s"),
-    (["--tcp-offset", "0,0,150,0,0,0"], "--tcp-offset", "within 0.5 m of the flange"),
-    (["--joint-names", "a,b,c"], "--joint-names", "6 names, one per joint of the UR5 (got 3)"),
-    (["--wrench-topic", "/forward_velocity_controller/commands"], "--wrench-topic", "--command-topic"),
-    (["--joint-state-topic", "/force_torque_sensor_broadcaster/wrench"], "--joint-state-topic", "--wrench-topic"),
-    (["--wrench-topic", "/coassist/tool_pose"], "--wrench-topic", "tool_pose_topic"),
-    (["--wrench-topic", "~/hand_force"], "--wrench-topic", "/coassist/hand_force"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "args, option, words",
+    [
+        (["--tool-speed", "1e9"], "--tool-speed", "own tool speed limit"),
+        (["--stale-after", "1e9"], "--stale-after", "at most 0.5 s"),
+        (["--tcp-offset", "0,0,150,0,0,0"], "--tcp-offset", "within 0.5 m of the flange"),
+        (["--joint-names", "a,b,c"], "--joint-names", "6 names, one per joint of the UR5 (got 3)"),
+        (["--wrench-topic", "/forward_velocity_controller/commands"], "--wrench-topic", "--command-topic"),
+        (["--joint-state-topic", "/force_torque_sensor_broadcaster/wrench"], "--joint-state-topic", "--wrench-topic"),
+        (["--wrench-topic", "/coassist/tool_pose"], "--wrench-topic", "tool_pose_topic"),
+        (["--wrench-topic", "~/hand_force"], "--wrench-topic", "/coassist/hand_force"),
+    ],
+)
 def test_ros2_refuses_options_before_starting(args, option, words, tmp_path):
     pytest.importorskip("rclpy", reason="the ros2 extra (ros-rclpy and the message packages) is not installed")
     line = _refused([*ROS2, "--out", str(tmp_path / "t.parquet"), *args], option)

@@ -44,8 +44,16 @@ from ..intent.conftest import make_trial
 
 def _trial(n: int = 40, d: int = 2, seed: int = 0) -> Trial:
     rng = np.random.default_rng(seed)
-    meta = TrialMeta(user="u", task="linear", object="handle", controller="impedance", model_id=None, seed=seed,
-                     source="sim", dt=0.008)  # fmt: skip
+    meta = TrialMeta(
+        user="u",
+        task="linear",
+        object="handle",
+        controller="impedance",
+        model_id=None,
+        seed=seed,
+        source="sim",
+        dt=0.008,
+    )
     arr = lambda: rng.normal(size=(n, d))  # noqa: E731
     return Trial(meta=meta, time=np.arange(n) * 0.008, pose=arr(), velocity=arr(), wrench=arr(), reference=arr())
 
@@ -80,16 +88,30 @@ def _edit_manifest(folder: Path, change) -> None:
 
 
 MANIFEST_CASES = {
-    "format_version null": (lambda m: {**m, "format_version": None}, r"'format_version' must be an integer >= 1, got null"),
-    "format_version 'one'": (lambda m: {**m, "format_version": "one"}, r"'format_version' must be an integer >= 1, got \"one\""),
-    "format_version true": (lambda m: {**m, "format_version": True}, r"'format_version' must be an integer >= 1, got true"),
+    "format_version null": (
+        lambda m: {**m, "format_version": None},
+        r"'format_version' must be an integer >= 1, got null",
+    ),
+    "format_version 'one'": (
+        lambda m: {**m, "format_version": "one"},
+        r"'format_version' must be an integer >= 1, got \"one\"",
+    ),
+    "format_version true": (
+        lambda m: {**m, "format_version": True},
+        r"'format_version' must be an integer >= 1, got true",
+    ),
     "format_version 99": (lambda m: {**m, "format_version": 99}, r"format version 99 is newer"),
     "trials null": (lambda m: {**m, "trials": None}, r"'trials' must be a list, got null"),
     "entry without file": (lambda m: {**m, "trials": [{"meta": {}}]}, r"trials\[0\] has no 'file'"),
     "entry not an object": (lambda m: {**m, "trials": [3]}, r"trials\[0\] must be an object"),
-    "file null": (lambda m: {**m, "trials": [{**m["trials"][0], "file": None}]}, r"trials\[0\] 'file' must be a file name"),
-    "file outside": (lambda m: {**m, "trials": [{**m["trials"][0], "file": "../../other/trial.parquet"}]},
-                     r"'\.\./\.\./other/trial\.parquet' points outside the dataset folder"),
+    "file null": (
+        lambda m: {**m, "trials": [{**m["trials"][0], "file": None}]},
+        r"trials\[0\] 'file' must be a file name",
+    ),
+    "file outside": (
+        lambda m: {**m, "trials": [{**m["trials"][0], "file": "../../other/trial.parquet"}]},
+        r"'\.\./\.\./other/trial\.parquet' points outside the dataset folder",
+    ),
     "absolute file": (lambda m: {**m, "trials": [{**m["trials"][0], "file": "/etc/passwd"}]}, r"points outside"),
     "file is the folder": (lambda m: {**m, "trials": [{**m["trials"][0], "file": "."}]}, r"points outside"),
     "file twice": (lambda m: {**m, "trials": [m["trials"][0], m["trials"][0]], "n_trials": 2}, r"a second time"),
@@ -113,7 +135,9 @@ def test_manifest_path_outside_loads_nothing_even_when_the_file_exists(tmp_path,
     # The issue's probe: a valid trial file outside the folder must not be loaded.
     other = write_trial(_trial(seed=9), tmp_path / "other" / "trial.parquet")
     assert other.is_file()
-    _edit_manifest(dataset, lambda m: {**m, "trials": [{**m["trials"][0], "file": "../other/trial.parquet"}], "n_trials": 1})
+    _edit_manifest(
+        dataset, lambda m: {**m, "trials": [{**m["trials"][0], "file": "../other/trial.parquet"}], "n_trials": 1}
+    )
     with pytest.raises(TrialFileError, match="points outside the dataset folder"):
         read_dataset(dataset)
 
@@ -221,8 +245,9 @@ FILES = {
 }
 
 
-def make_recording(folder: Path, n: int = 400, *, gap_after: int | None = None, gap_s: float = 3600.0,
-                   force_spike: float | None = None) -> Path:  # fmt: skip
+def make_recording(
+    folder: Path, n: int = 400, *, gap_after: int | None = None, gap_s: float = 3600.0, force_spike: float | None = None
+) -> Path:
     """n ticks at 8 ms; optionally a gap after tick ``gap_after`` and one force sample set to ``force_spike``."""
     folder.mkdir(parents=True)
     t = np.arange(n) * 0.008
@@ -244,13 +269,17 @@ def make_recording(folder: Path, n: int = 400, *, gap_after: int | None = None, 
 def test_five_kilonewton_force_is_refused_naming_the_file(tmp_path):
     """Issue 37: it loaded with a warning; a force beyond the sensor's range is no measurement."""
     rec = make_recording(tmp_path / "user-x" / "trial_1", force_spike=5000.0)
-    with pytest.raises(RecordingError, match=r"trial_1/human_wrench\.csv: data row 200 \(seq 200\): wrench\.force\.x = 5000 N"):
+    with pytest.raises(
+        RecordingError, match=r"trial_1/human_wrench\.csv: data row 200 \(seq 200\): wrench\.force\.x = 5000 N"
+    ):
         load_ros_trial(rec)
 
 
 def test_one_hour_gap_warns(tmp_path):
     rec = make_recording(tmp_path / "user-x" / "trial_1", gap_after=199)
-    with pytest.warns(RecordingWarning, match=r"trial_1: 1 time gap\(s\) longer than 5 periods; the longest, 3600 s, at t = 1\.592 s"):
+    with pytest.warns(
+        RecordingWarning, match=r"trial_1: 1 time gap\(s\) longer than 5 periods; the longest, 3600 s, at t = 1\.592 s"
+    ):
         load_ros_trial(rec)
 
 
@@ -291,8 +320,11 @@ def test_training_windows_never_span_a_gap(tmp_path, need_future):
     n0 = clean.n_samples
     ends = ws.ends[ws.trial == 1] - n0
     steps = np.diff(gapped.time)
-    ok = [k for k in range(window.history - 1, gapped.n_samples - ahead)
-          if np.all(steps[k - window.history + 1 : k + ahead] <= 5 * 0.008)]  # fmt: skip
+    ok = [
+        k
+        for k in range(window.history - 1, gapped.n_samples - ahead)
+        if np.all(steps[k - window.history + 1 : k + ahead] <= 5 * 0.008)
+    ]
     assert ends.tolist() == ok
     # Windows right up to the gap on both sides exist; the clean trial loses none.
     assert 199 - ahead in ok and 200 + window.history - 1 in ok and 199 - ahead + 1 not in ok
@@ -368,7 +400,9 @@ def test_cli_show_skips_bad_trials(tmp_path, dataset_with_a_truncated_trial):
     res = runner.invoke(app, ["show", str(folder), "--out", str(tmp_path / "s.png")])
     assert res.exit_code != 0 and "trial_00002.parquet: not a readable Parquet file" in _flat(res.output)
     _no_traceback(res)
-    res = runner.invoke(app, ["show", str(folder), "--out", str(tmp_path / "s.png"), "--index", "3", "--skip-bad-trials"])
+    res = runner.invoke(
+        app, ["show", str(folder), "--out", str(tmp_path / "s.png"), "--index", "3", "--skip-bad-trials"]
+    )
     assert res.exit_code == 0, res.output
     assert "skipped" in res.output and (tmp_path / "s.png").stat().st_size > 1000
 
@@ -385,10 +419,23 @@ def test_cli_train_refuses_or_skips_implausible_recordings(tmp_path):
     user = tmp_path / "user-x"
     for i in (1, 2, 3):
         make_recording(user / f"trial_{i}", n=300, force_spike=5000.0 if i == 2 else None)
-    common = ["--out", str(tmp_path / "m"), "--epochs", "1", "--threads", "1", "--preset", "default", "--batch-size", "256"]
+    common = [
+        "--out",
+        str(tmp_path / "m"),
+        "--epochs",
+        "1",
+        "--threads",
+        "1",
+        "--preset",
+        "default",
+        "--batch-size",
+        "256",
+    ]
     res = CliRunner().invoke(app, ["train", str(user), *common])
     assert res.exit_code != 0 and f"{user}/trial_2/human_wrench.csv: data row 150" in _flat(res.output)
     _no_traceback(res)
     res = CliRunner().invoke(app, ["train", str(user), "--skip-bad-trials", *common])
-    assert res.exit_code == 0 and "skipped" in res.output and "trial_2/human_wrench.csv" in _flat(res.output), res.output
+    assert res.exit_code == 0 and "skipped" in res.output and "trial_2/human_wrench.csv" in _flat(res.output), (
+        res.output
+    )
     assert PLAUSIBLE_FORCE < 5000.0

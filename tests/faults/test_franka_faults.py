@@ -165,7 +165,10 @@ def test_a_driver_error_on_a_command_is_a_controlled_stop_with_the_trial_kept(se
     back = _written(trial, tmp_path)
     extra = back.meta.extra
     assert extra["ended"] == "world_error" and back.n_samples == 59  # ticks 0 … 58 sent; tick 59's apply raised
-    assert "apply() failed at tick 59" in extra["stop_message"] and "motion generator already running" in extra["stop_message"]
+    assert (
+        "apply() failed at tick 59" in extra["stop_message"]
+        and "motion generator already running" in extra["stop_message"]
+    )
     assert "\n" not in extra["stop_message"]
     time.sleep(0.3)
     assert np.abs(np.asarray(robot.state.dq)).max() < 0.01  # stopped (the hold ran out, and stop() was sent)
@@ -217,11 +220,31 @@ def test_robot_panda_against_an_fr3_is_refused_at_connect(server, tmp_path):
 
     from coassist.cli import app
 
-    with pytest.raises(ValueError, match=r"is a Franka Research 3 \(the model it reports is 'fr3'\), not a panda: pass --robot fr3"):
+    with pytest.raises(
+        ValueError, match=r"is a Franka Research 3 \(the model it reports is 'fr3'\), not a panda: pass --robot fr3"
+    ):
         FrankaWorld(server.host, arm="panda")
     out = tmp_path / "run.parquet"
-    res = CliRunner().invoke(app, ["drive", "--world", "franka", "--robot", "panda", "--host", server.host, "--yes",
-                                   "--controller", "manual", "--time-limit", "0.5", "--out", str(out), "--no-plot"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "drive",
+            "--world",
+            "franka",
+            "--robot",
+            "panda",
+            "--host",
+            server.host,
+            "--yes",
+            "--controller",
+            "manual",
+            "--time-limit",
+            "0.5",
+            "--out",
+            str(out),
+            "--no-plot",
+        ],
+    )
     assert res.exit_code == 1, res.output
     line = [x for x in res.output.splitlines() if x.startswith("error:")]
     assert len(line) == 1 and "pass --robot fr3" in line[0] and not out.exists()

@@ -45,8 +45,9 @@ pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals, 
 def run_child(code: str, *, expect_kill: bool = True, timeout: float = 120) -> subprocess.CompletedProcess:
     """Run ``code`` in a fresh interpreter; with ``expect_kill`` it must die of SIGKILL."""
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    res = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True,
-                         timeout=timeout, env=env)  # fmt: skip
+    res = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=timeout, env=env
+    )
     if expect_kill:
         assert res.returncode == -signal.SIGKILL, res.stderr
     else:
@@ -191,8 +192,11 @@ def test_overwrite_killed_mid_way_keeps_the_old_dataset(old_dataset, new_source,
     assert leftovers(old_dataset.parent) == [] and read_dataset(old_dataset).id == "NEXT"
 
 
-@pytest.mark.parametrize(("exchange", "kill_at_rename"), [(True, 1), (False, 1), (False, 2)],
-                         ids=["renameat2-after-exchange", "fallback-before-first-rename", "fallback-between-renames"])  # fmt: skip
+@pytest.mark.parametrize(
+    ("exchange", "kill_at_rename"),
+    [(True, 1), (False, 1), (False, 2)],
+    ids=["renameat2-after-exchange", "fallback-before-first-rename", "fallback-between-renames"],
+)
 def test_swap_killed_between_its_renames(old_dataset, new_source, exchange, kill_at_rename):
     """Kill inside swap_in: after the exchange (or the fallback's first rename) and before
     the next rename. The destination then holds the old or the new dataset, whole, and
@@ -299,8 +303,18 @@ def test_train_refuses_an_existing_model_before_any_work(tmp_path, two_models):
     save_model(old, tmp_path / "m")
     write_dataset([make_trial(i, n=220) for i in range(5)], tmp_path / "D0", "D0")
     runner = CliRunner()
-    args = ["train", str(tmp_path / "D0"), "--out", str(tmp_path / "m"), "--epochs", "1", "--threads", "1",
-            "--batch-size", "256"]  # fmt: skip
+    args = [
+        "train",
+        str(tmp_path / "D0"),
+        "--out",
+        str(tmp_path / "m"),
+        "--epochs",
+        "1",
+        "--threads",
+        "1",
+        "--batch-size",
+        "256",
+    ]
     res = runner.invoke(app, args)
     assert res.exit_code == 2 and "--overwrite" in res.output and "Traceback" not in res.output
     assert same_weights(load_model(tmp_path / "m"), old)
@@ -337,11 +351,28 @@ def test_a_second_writer_gets_a_clear_error_and_a_dead_ones_lock_is_free(tmp_pat
     """The issue's case: two `collect --overwrite` into one folder both printed "wrote"."""
     child = hold_lock_in_child(old_dataset, tmp_path / "ready")
     try:
-        with pytest.raises(OutputBusyError, match=rf"{old_dataset} is being written by another coassist run \(pid {child.pid}\)"):
+        with pytest.raises(
+            OutputBusyError, match=rf"{old_dataset} is being written by another coassist run \(pid {child.pid}\)"
+        ):
             write_dataset(trials(2, seed0=100), old_dataset, "NEW", overwrite=True)
-        res = CliRunner().invoke(app, ["collect", "--out", str(old_dataset), "--overwrite", "--trials", "1",
-                                       "--tasks", "linear", "--workers", "1"])  # fmt: skip
-        assert res.exit_code == 1 and f"pid {child.pid}" in res.output.replace("\n", "") and "Traceback" not in res.output
+        res = CliRunner().invoke(
+            app,
+            [
+                "collect",
+                "--out",
+                str(old_dataset),
+                "--overwrite",
+                "--trials",
+                "1",
+                "--tasks",
+                "linear",
+                "--workers",
+                "1",
+            ],
+        )
+        assert (
+            res.exit_code == 1 and f"pid {child.pid}" in res.output.replace("\n", "") and "Traceback" not in res.output
+        )
         assert_old(old_dataset)
     finally:
         child.send_signal(signal.SIGKILL)
@@ -356,8 +387,9 @@ def test_a_second_train_into_the_same_folder_gets_a_clear_error(tmp_path):
     write_dataset([make_trial(i, n=220) for i in range(5)], tmp_path / "D0", "D0")
     child = hold_lock_in_child(tmp_path / "m", tmp_path / "ready")
     try:
-        res = CliRunner().invoke(app, ["train", str(tmp_path / "D0"), "--out", str(tmp_path / "m"), "--epochs", "1",
-                                       "--threads", "1"])  # fmt: skip
+        res = CliRunner().invoke(
+            app, ["train", str(tmp_path / "D0"), "--out", str(tmp_path / "m"), "--epochs", "1", "--threads", "1"]
+        )
     finally:
         child.send_signal(signal.SIGKILL)
         child.wait()
@@ -385,7 +417,12 @@ def test_outputs_follow_the_umask(tmp_path, two_models, umask):
         model = save_model(two_models[0], tmp_path / "m")
     finally:
         os.umask(old_umask)
-    for path in [folder / "manifest.json", folder / "trial_00000.parquet", model / "model.json", model / "weights.safetensors"]:
+    for path in [
+        folder / "manifest.json",
+        folder / "trial_00000.parquet",
+        model / "model.json",
+        model / "weights.safetensors",
+    ]:
         assert path.stat().st_mode & 0o777 == 0o666 & ~umask, path
     for path in (folder, model):
         assert path.stat().st_mode & 0o777 == 0o777 & ~umask, path
@@ -533,8 +570,20 @@ def test_cli_train_resumes_a_killed_run(tmp_path):
 
     write_dataset([make_trial(i, n=220) for i in range(5)], tmp_path / "D0", "D0")
     out = tmp_path / "m"
-    args = ["train", str(tmp_path / "D0"), "--out", str(out), "--preset", "lstm", "--epochs", "2", "--threads", "1",
-            "--batch-size", "64"]  # fmt: skip
+    args = [
+        "train",
+        str(tmp_path / "D0"),
+        "--out",
+        str(out),
+        "--preset",
+        "lstm",
+        "--epochs",
+        "2",
+        "--threads",
+        "1",
+        "--batch-size",
+        "64",
+    ]
     run_child(f"""
         import os, signal
         from coassist.intent import training
@@ -555,5 +604,9 @@ def test_cli_train_resumes_a_killed_run(tmp_path):
     res = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "u")])
     unbroken = load_model(tmp_path / "u")
     assert same_weights(resumed, unbroken)
-    assert np.allclose([r["train_loss"] for r in resumed.info["training_history"]],
-                       [r["train_loss"] for r in unbroken.info["training_history"]], rtol=0, atol=0)  # fmt: skip
+    assert np.allclose(
+        [r["train_loss"] for r in resumed.info["training_history"]],
+        [r["train_loss"] for r in unbroken.info["training_history"]],
+        rtol=0,
+        atol=0,
+    )

@@ -38,8 +38,14 @@ def _play(tmp_path, *args: str):
     return CliRunner().invoke(app, ["play", "--out", str(tmp_path), "--no-open", "--port", "0", *args])
 
 
-WEAK = ["x", "s3cret", "0123456789abcde", "aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa", "abababababababababababababababab",
-        "passwordpassword"]  # fmt: skip
+WEAK = [
+    "x",
+    "s3cret",
+    "0123456789abcde",
+    "aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa",
+    "abababababababababababababababab",
+    "passwordpassword",
+]
 
 
 @pytest.mark.parametrize("token", WEAK)
@@ -47,7 +53,9 @@ def test_a_weak_token_on_a_network_bind_is_one_line_and_nothing_serves(tmp_path,
     res = _play(tmp_path, "--host", "0.0.0.0", "--token", token)
     assert res.exit_code == 2 and "Traceback" not in res.output, res.output
     lines = [ln for ln in res.output.splitlines() if ln.startswith("error:")]
-    assert len(lines) == 1 and "--token" in lines[0] and f"at least {MIN_TOKEN_CHARS} characters" in lines[0], res.output
+    assert len(lines) == 1 and "--token" in lines[0] and f"at least {MIN_TOKEN_CHARS} characters" in lines[0], (
+        res.output
+    )
     assert served == []
 
 

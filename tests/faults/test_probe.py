@@ -101,8 +101,10 @@ def test_noise_of_one_ulp_is_not_frozen_and_noise_free_inputs_are_exempt():
 # ---------------------------------------------------------------------- DNS rebinding on the play server
 def _upgrade(port: int, host: str, origin: str | None) -> str:
     """The status line the server answers a websocket upgrade with (101: accepted)."""
-    request = (f"GET /ws HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-               "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n")  # fmt: skip
+    request = (
+        f"GET /ws HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+    )
     if origin is not None:
         request += f"Origin: {origin}\r\n"
     with socket.create_connection(("127.0.0.1", port), timeout=5) as s:

@@ -91,9 +91,11 @@ def test_the_parameter_count_from_sizes_matches_the_network():
     from coassist.intent.model import _n_parameters
     from coassist.intent.network import IntentNet, NetworkConfig
 
-    for cfg in (NetworkConfig(8, 20, lstm_layers=2, hidden=7, fc=(5, 3)),
-                NetworkConfig(8, 20, lstm_layers=0, skip_inputs=16),
-                NetworkConfig(8, 20, lstm_layers=1, hidden=4, fc=(), skip_inputs=24)):  # fmt: skip
+    for cfg in (
+        NetworkConfig(8, 20, lstm_layers=2, hidden=7, fc=(5, 3)),
+        NetworkConfig(8, 20, lstm_layers=0, skip_inputs=16),
+        NetworkConfig(8, 20, lstm_layers=1, hidden=4, fc=(), skip_inputs=24),
+    ):
         assert _n_parameters(cfg) == sum(p.numel() for p in IntentNet(cfg).parameters())
 
 
@@ -103,12 +105,29 @@ FIELDS = ("time", "pose", "velocity", "wrench", "reference", "effort_h", "effort
 
 def _trial(n: int = 400, seed: int = 0, horizon: int = 0) -> Trial:
     rng = np.random.default_rng(seed)
-    meta = TrialMeta(user="u", task="linear", object="handle", controller="impedance", model_id=None, seed=seed,
-                     source="sim", dt=0.008)  # fmt: skip
+    meta = TrialMeta(
+        user="u",
+        task="linear",
+        object="handle",
+        controller="impedance",
+        model_id=None,
+        seed=seed,
+        source="sim",
+        dt=0.008,
+    )
     arr = lambda: rng.normal(size=(n, 2))  # noqa: E731
     pred = rng.normal(size=(n, horizon, 2)) if horizon else None
-    return Trial(meta=meta, time=np.arange(n) * 0.008, pose=arr(), velocity=arr(), wrench=arr(), reference=arr(),
-                 effort_h=arr(), effort_r=arr(), prediction=pred)  # fmt: skip
+    return Trial(
+        meta=meta,
+        time=np.arange(n) * 0.008,
+        pose=arr(),
+        velocity=arr(),
+        wrench=arr(),
+        reference=arr(),
+        effort_h=arr(),
+        effort_r=arr(),
+        prediction=pred,
+    )
 
 
 def test_random_bytes_in_a_trial_file_never_load_as_other_values(tmp_path):
@@ -213,8 +232,12 @@ def test_an_interrupted_collect_resumes_to_the_same_dataset(tmp_path):
     Run once more, the same command finds the dataset complete and does nothing."""
     out = tmp_path / "D"
     partial = tmp_path / ".D.partial"
-    proc = subprocess.Popen([str(COASSIST), *COLLECT, "--out", str(out), "--workers", "1"], env=_env(),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    proc = subprocess.Popen(
+        [str(COASSIST), *COLLECT, "--out", str(out), "--workers", "1"],
+        env=_env(),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         _wait_for(lambda: len(list(partial.glob("trial_*.parquet"))) >= 2)
     finally:
@@ -222,15 +245,30 @@ def test_an_interrupted_collect_resumes_to_the_same_dataset(tmp_path):
         proc.wait()
     kept = sorted(p.name for p in partial.glob("trial_*.parquet"))
     assert 2 <= len(kept) < 6 and not out.exists()
-    again = subprocess.run([str(COASSIST), *COLLECT, "--out", str(out), "--workers", "1"], env=_env(),
-                           capture_output=True, text=True, timeout=300)  # fmt: skip
+    again = subprocess.run(
+        [str(COASSIST), *COLLECT, "--out", str(out), "--workers", "1"],
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert again.returncode == 0, again.stdout + again.stderr
     assert f"continuing: {len(kept)} of 6 trials" in again.stdout
-    whole = subprocess.run([str(COASSIST), *COLLECT, "--out", str(tmp_path / "W"), "--workers", "1"], env=_env(),
-                           capture_output=True, text=True, timeout=300)  # fmt: skip
+    whole = subprocess.run(
+        [str(COASSIST), *COLLECT, "--out", str(tmp_path / "W"), "--workers", "1"],
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert whole.returncode == 0, whole.stderr
-    done = subprocess.run([str(COASSIST), *COLLECT, "--out", str(out), "--workers", "1"], env=_env(),
-                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    done = subprocess.run(
+        [str(COASSIST), *COLLECT, "--out", str(out), "--workers", "1"],
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0 and "this collection, complete" in " ".join(done.stdout.split()), done.stdout
     a, b = read_dataset(out).trials, read_dataset(tmp_path / "W").trials
     assert len(a) == len(b) == 6
@@ -242,10 +280,15 @@ def test_an_interrupted_collect_resumes_to_the_same_dataset(tmp_path):
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc (Linux)")
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
 def test_killing_collect_leaves_no_worker_running(tmp_path, sig):
-    proc = subprocess.Popen([str(COASSIST), "collect", "--trials", "40", "--out", str(tmp_path / "D"),
-                             "--workers", "2"], env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    proc = subprocess.Popen(
+        [str(COASSIST), "collect", "--trials", "40", "--out", str(tmp_path / "D"), "--workers", "2"],
+        env=_env(),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     workers: list[int] = []
     try:
+
         def two_workers() -> bool:
             workers[:] = [p for p in _children(proc.pid) if "spawn_main" in Path(f"/proc/{p}/cmdline").read_text()]
             return len(workers) >= 2

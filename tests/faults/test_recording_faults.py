@@ -60,12 +60,15 @@ def _set_value(folder: Path, file: str, data_row: int, column: int, text: str) -
     path.write_text("".join(lines))
 
 
-@pytest.mark.parametrize("file, column, value, pattern", [
-    ("human_wrench.csv", 4, "5000.0", r"wrench\.force\.x = 5000 N is beyond the plausible ±330 N"),
-    ("current_pose.csv", 5, "1e300", r"pose\.position\.y = 1e\+300 m is beyond the plausible ±5 m"),
-    ("robot_ref_pos.csv", 4, "-7.5", r"pose\.position\.x = -7\.5 m is beyond the plausible ±5 m"),
-    ("current_velocity.csv", 5, "12.0", r"twist\.linear\.y = 12 m/s is beyond the plausible ±5 m/s"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "file, column, value, pattern",
+    [
+        ("human_wrench.csv", 4, "5000.0", r"wrench\.force\.x = 5000 N is beyond the plausible ±330 N"),
+        ("current_pose.csv", 5, "1e300", r"pose\.position\.y = 1e\+300 m is beyond the plausible ±5 m"),
+        ("robot_ref_pos.csv", 4, "-7.5", r"pose\.position\.x = -7\.5 m is beyond the plausible ±5 m"),
+        ("current_velocity.csv", 5, "12.0", r"twist\.linear\.y = 12 m/s is beyond the plausible ±5 m/s"),
+    ],
+)
 def test_an_implausible_value_is_refused_naming_file_column_and_row(tmp_path, file, column, value, pattern):
     """Old code: the 5 kN force loaded with a warning, the others silently."""
     folder = make_recording(tmp_path / "user-x" / "trial_1", n=50)
@@ -84,7 +87,9 @@ def test_the_bounds_are_the_sensor_range_the_reach_and_the_top_speed():
 def test_a_one_row_recording_is_refused(tmp_path):
     """Old code: loaded, with dt set to 8 ms from nothing."""
     folder = make_recording(tmp_path / "user-x" / "trial_1", n=1)
-    with pytest.raises(RecordingError, match=r"the topics share 1 tick\(s\) \(header\.seq value\); a recording needs at least 2") as err:
+    with pytest.raises(
+        RecordingError, match=r"the topics share 1 tick\(s\) \(header\.seq value\); a recording needs at least 2"
+    ) as err:
         load_ros_trial(folder)
     _one_line(err, folder)
     assert load_ros_trial(make_recording(tmp_path / "user-x" / "trial_2", n=2)).n_samples == 2
@@ -105,7 +110,9 @@ def test_a_csv_cut_mid_number_is_refused(tmp_path):
     text = pose.read_text()
     lost = _cut(pose, text.rindex("-0.6130") + len("-0.6"))
     assert lost.startswith(b"130")
-    with pytest.raises(RecordingError, match=r"current_pose\.csv: line 51, the last, ends without a line break: the export was cut off") as err:
+    with pytest.raises(
+        RecordingError, match=r"current_pose\.csv: line 51, the last, ends without a line break: the export was cut off"
+    ) as err:
         load_ros_trial(folder)
     _one_line(err, pose)
 
@@ -122,7 +129,10 @@ def test_a_cut_on_a_line_break_leaves_whole_rows_that_load(tmp_path):
 
 
 @pytest.mark.real_data
-@pytest.mark.skipif(not (default_real_data() / "user-a" / "trial_1").is_dir(), reason="real UR5 recordings not found (set COASSIST_REAL_DATA)")
+@pytest.mark.skipif(
+    not (default_real_data() / "user-a" / "trial_1").is_dir(),
+    reason="real UR5 recordings not found (set COASSIST_REAL_DATA)",
+)
 def test_a_real_recording_cut_mid_number_is_refused(tmp_path):
     folder = Path(shutil.copytree(default_real_data() / "user-a" / "trial_1", tmp_path / "user-a" / "trial_1"))
     whole = load_ros_trial(folder)
@@ -142,20 +152,29 @@ def test_a_real_recording_cut_mid_number_is_refused(tmp_path):
 
 TS2 = get_typestore(Stores.ROS2_HUMBLE)
 TS1 = get_typestore(Stores.ROS1_NOETIC)
-TYPES = {"pose": "geometry_msgs/msg/PoseStamped", "velocity": "geometry_msgs/msg/TwistStamped",
-         "wrench": "geometry_msgs/msg/WrenchStamped", "reference": "geometry_msgs/msg/PoseStamped"}  # fmt: skip
+TYPES = {
+    "pose": "geometry_msgs/msg/PoseStamped",
+    "velocity": "geometry_msgs/msg/TwistStamped",
+    "wrench": "geometry_msgs/msg/WrenchStamped",
+    "reference": "geometry_msgs/msg/PoseStamped",
+}
 S0 = 1_700_000_000
 
 
 def _message(ts, field: str, k: int, vec: list[float], stamp_ns: int, ros1: bool):
     t = ts.types
     stamp = t["builtin_interfaces/msg/Time"](sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
-    header = t["std_msgs/msg/Header"](seq=k, stamp=stamp, frame_id="base") if ros1 else t["std_msgs/msg/Header"](
-        stamp=stamp, frame_id="base")  # fmt: skip
+    header = (
+        t["std_msgs/msg/Header"](seq=k, stamp=stamp, frame_id="base")
+        if ros1
+        else t["std_msgs/msg/Header"](stamp=stamp, frame_id="base")
+    )
     v3 = t["geometry_msgs/msg/Vector3"](*vec)
     if field in ("pose", "reference"):
-        pose = t["geometry_msgs/msg/Pose"](position=t["geometry_msgs/msg/Point"](*vec),
-                                           orientation=t["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0))  # fmt: skip
+        pose = t["geometry_msgs/msg/Pose"](
+            position=t["geometry_msgs/msg/Point"](*vec),
+            orientation=t["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0),
+        )
         return t[TYPES[field]](header=header, pose=pose)
     if field == "velocity":
         return t[TYPES[field]](header=header, twist=t["geometry_msgs/msg/Twist"](linear=v3, angular=v3))
@@ -194,13 +213,20 @@ def write_bag(path: Path, kind: str, n: int = 400, *, value=None, offsets=None) 
 
 
 @pytest.mark.parametrize("kind", ["ros1", "mcap"])
-@pytest.mark.parametrize("field, x, pattern", [
-    ("wrench", 5000.0, r"topic /human_wrench: message 7: wrench\.force\.x = 5000 N is beyond the plausible ±330 N"),
-    ("pose", 1e300, r"topic /current_pose: message 7: pose\.position\.x = 1e\+300 m is beyond the plausible ±5 m"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "field, x, pattern",
+    [
+        ("wrench", 5000.0, r"topic /human_wrench: message 7: wrench\.force\.x = 5000 N is beyond the plausible ±330 N"),
+        ("pose", 1e300, r"topic /current_pose: message 7: pose\.position\.x = 1e\+300 m is beyond the plausible ±5 m"),
+    ],
+)
 def test_an_implausible_message_is_refused_naming_bag_topic_and_message(tmp_path, kind, field, x, pattern):
-    bag = write_bag(tmp_path / ("b.bag" if kind == "ros1" else "b"), kind, n=20,
-                    value=lambda f, k: x if (f, k) == (field, 7) else None)  # fmt: skip
+    bag = write_bag(
+        tmp_path / ("b.bag" if kind == "ros1" else "b"),
+        kind,
+        n=20,
+        value=lambda f, k: x if (f, k) == (field, 7) else None,
+    )
     with pytest.raises(RecordingError, match=pattern) as err:
         load_bag_trial(bag)
     _one_line(err, bag)
@@ -216,8 +242,11 @@ def test_a_one_message_bag_is_refused(tmp_path):
 def test_topics_whose_stamps_never_align_are_refused_naming_the_topic(tmp_path):
     """Old code: "the topics share no 'stamp_ns' value" — which of the four?"""
     bag = write_bag(tmp_path / "b", "mcap", n=20, offsets={"wrench": 1_000_000})  # the sensor's clock 1 ms off
-    with pytest.raises(RecordingError, match=r"b: topic /human_wrench shares no header stamp with topic /current_pose, "
-                                             r"topic /current_velocity \(its stamps never align") as err:  # fmt: skip
+    with pytest.raises(
+        RecordingError,
+        match=r"b: topic /human_wrench shares no header stamp with topic /current_pose, "
+        r"topic /current_velocity \(its stamps never align",
+    ) as err:
         load_bag_trial(bag)
     _one_line(err, bag)
 
@@ -243,7 +272,9 @@ def test_a_bag_that_lost_messages_is_refused_not_loaded_short(tmp_path):
     with sqlite3.connect(db) as con:
         (topic_id,) = con.execute("SELECT id FROM topics WHERE name = '/current_pose'").fetchone()
         con.execute("DELETE FROM messages WHERE id = (SELECT MAX(id) FROM messages WHERE topic_id = ?)", (topic_id,))
-    with pytest.raises(RecordingError, match=r"topic /current_pose: 19 messages read, the bag's index records 20") as err:
+    with pytest.raises(
+        RecordingError, match=r"topic /current_pose: 19 messages read, the bag's index records 20"
+    ) as err:
         load_bag_trial(bag)
     _one_line(err, bag)
 
@@ -254,10 +285,17 @@ def test_a_bag_that_lost_messages_is_refused_not_loaded_short(tmp_path):
 def _trial(n: int = 1992) -> Trial:
     t = np.arange(n) * 0.008
     pose = np.stack([0.1 * np.sin(t), -0.6 + 0.1 * np.cos(t)], axis=1)
-    meta = TrialMeta(user="u", task="real", object="unknown", controller="unknown", model_id=None, seed=None,
-                     source="real", dt=0.008)  # fmt: skip
-    return Trial(meta=meta, time=t, pose=pose, velocity=np.gradient(pose, axis=0) / 0.008,
-                 wrench=5.0 * np.sin(np.stack([t, t + 1.0], axis=1)), reference=pose)  # fmt: skip
+    meta = TrialMeta(
+        user="u", task="real", object="unknown", controller="unknown", model_id=None, seed=None, source="real", dt=0.008
+    )
+    return Trial(
+        meta=meta,
+        time=t,
+        pose=pose,
+        velocity=np.gradient(pose, axis=0) / 0.008,
+        wrench=5.0 * np.sin(np.stack([t, t + 1.0], axis=1)),
+        reference=pose,
+    )
 
 
 def _damaged(clean: Path, target: Path, copy_to: Path, seed: int, size: int = 4096) -> Path:
@@ -318,5 +356,8 @@ def test_one_changed_byte_in_a_coassist_mcap_is_refused(tmp_path):
     at = raw.index(struct.pack("<d", trial.pose[100, 0]))
     raw[at] ^= 0x01  # the lowest mantissa byte: a plausible value, 1 ulp away
     path.write_bytes(bytes(raw))
-    with pytest.raises(RecordingError, match=r"run\.mcap: cannot read the bag, it is damaged \(ReaderError: Chunk checksum mismatch\.\)"):
+    with pytest.raises(
+        RecordingError,
+        match=r"run\.mcap: cannot read the bag, it is damaged \(ReaderError: Chunk checksum mismatch\.\)",
+    ):
         load_bag_trial(path)

@@ -60,7 +60,11 @@ def _load(path: Path):
 
 ros = _load(TESTS / "robot" / "test_ros2_world.py")
 DOMAIN, EPOCH_NS = ros.DOMAIN, ros.EPOCH_NS
-WRENCH, JOINTS, COMMANDS = "/force_torque_sensor_broadcaster/wrench", "/joint_states", "/forward_velocity_controller/commands"
+WRENCH, JOINTS, COMMANDS = (
+    "/force_torque_sensor_broadcaster/wrench",
+    "/joint_states",
+    "/forward_velocity_controller/commands",
+)
 
 
 @pytest.fixture(autouse=True)
@@ -74,8 +78,9 @@ class Driver(ros.SimRobot):
     """SimRobot with one misbehaviour: the wrench's frame (from command ``after`` on), zero
     stamps (from command ``after`` on, 0: always), or a late copy of an older wrench."""
 
-    def __init__(self, world, *, frame: str = "tool0", zero_stamps: bool = False, late: bool = False,
-                 after: int = 0) -> None:  # fmt: skip
+    def __init__(
+        self, world, *, frame: str = "tool0", zero_stamps: bool = False, late: bool = False, after: int = 0
+    ) -> None:
         self.frame, self.zero_stamps, self.late, self.after = frame, zero_stamps, late, after
         self.history: list[tuple[int, np.ndarray]] = []  # (stamp, raw wrench) of every step
         super().__init__(world)
@@ -114,8 +119,15 @@ class Driver(ros.SimRobot):
 
 def _config(sim, **kw) -> Ros2Config:
     mass, com = sim.tool_mass_and_com()
-    base = dict(domain_id=DOMAIN, lockstep=True, pace=False, stale_after=0.5, tcp_offset=tuple(sim.kinematics().tcp_offset),
-                payload=(mass, tuple(com)), connect_timeout=10.0)  # fmt: skip
+    base = dict(
+        domain_id=DOMAIN,
+        lockstep=True,
+        pace=False,
+        stale_after=0.5,
+        tcp_offset=tuple(sim.kinematics().tcp_offset),
+        payload=(mass, tuple(com)),
+        connect_timeout=10.0,
+    )
     base.update(kw)
     return Ros2Config(**base)
 
@@ -180,7 +192,9 @@ def _connect(peer_kw: dict, **cfg_kw) -> str:
     peer = _Peer(**peer_kw)
     try:
         with pytest.raises(ValueError) as info:
-            Ros2World(Ros2Config(domain_id=DOMAIN, connect_timeout=cfg_kw.pop("connect_timeout", 1.5), **cfg_kw)).close()
+            Ros2World(
+                Ros2Config(domain_id=DOMAIN, connect_timeout=cfg_kw.pop("connect_timeout", 1.5), **cfg_kw)
+            ).close()
     finally:
         peer.close()
     return str(info.value)
@@ -214,7 +228,9 @@ def test_stamps_that_drop_to_0_mid_run_stop_the_arm_saying_why():
     config = DriveConfig(world="ur", controller="manual", task="linear", time_limit=1.2, seed=0)
     trial, robot, world = run_against({"zero_stamps": True, "after": 40}, config, stale_after=0.25)
     msg = trial.meta.extra["stop_message"]
-    assert trial.meta.extra["ended"] == "link_lost" and trial.n_samples == 40  # ticks 0 … 39: the answers to commands 0 … 39
+    assert (
+        trial.meta.extra["ended"] == "link_lost" and trial.n_samples == 40
+    )  # ticks 0 … 39: the answers to commands 0 … 39
     assert "header stamp 0" in msg and (JOINTS in msg or WRENCH in msg)
 
 
@@ -223,7 +239,9 @@ def test_a_late_wrench_never_replaces_the_newest():
     # 3 steps before at 4x. A constant 10 N push: the hand force the tick uses stays at the push.
     push = ScriptedForce.constant((10.0, 0.0, 0.0, 0.0, 0.0, 0.0))
     config = DriveConfig(world="ur", controller="manual", task="linear", time_limit=1.2, seed=0)
-    trial, robot, world = run_against({"late": True}, config, operator=push, lockstep=False, pace=True, stale_after=0.25)
+    trial, robot, world = run_against(
+        {"late": True}, config, operator=push, lockstep=False, pace=True, stale_after=0.25
+    )
     assert trial.meta.extra["ended"] == "time_limit"
     # 10 N less the pipeline's deadband, filtered: never above the push (1 N for the sensor's noise)
     assert np.abs(trial.wrench[:, 0]).max() < 11.0
@@ -327,8 +345,9 @@ def _hang_run(watchdog: bool) -> float:
     relay_in = "/coassist/joint_velocity_command"
     robot = HoldingRobot(sim, COMMANDS)
     dog = CommandWatchdog(WatchdogConfig(input_topic=relay_in, domain_id=DOMAIN, timeout=0.05)) if watchdog else None
-    world = Ros2World(_config(sim, lockstep=False, pace=True, stale_after=0.25,
-                              command_topic=relay_in if watchdog else COMMANDS))  # fmt: skip
+    world = Ros2World(
+        _config(sim, lockstep=False, pace=True, stale_after=0.25, command_topic=relay_in if watchdog else COMMANDS)
+    )
     hang = {}
 
     def on_tick(k, state, out):
@@ -381,7 +400,9 @@ def test_the_watchdog_forwards_good_commands_and_sends_zeros_for_bad_ones_and_si
     dog = CommandWatchdog(WatchdogConfig(input_topic=relay_in, domain_id=DOMAIN, timeout=0.2, period=0.02))
     try:
         deadline = time.monotonic() + 5.0  # matched both ways before the first command
-        while (dog._pub.get_subscription_count() == 0 or peer.pub.get_subscription_count() == 0) and time.monotonic() < deadline:
+        while (
+            dog._pub.get_subscription_count() == 0 or peer.pub.get_subscription_count() == 0
+        ) and time.monotonic() < deadline:
             time.sleep(0.01)
         time.sleep(0.3)  # both ends of both matches settled (a match is reported on one side first)
         peer.send([0.1] * 6)
@@ -408,8 +429,11 @@ def test_the_watchdog_refuses_bad_options_in_one_line():
 
     from coassist.cli import app
 
-    for args, option in ((["--timeout", "5"], "--timeout"), (["--period", "0.3", "--timeout", "0.1"], "--period"),
-                         (["--input", COMMANDS], "--output")):  # fmt: skip
+    for args, option in (
+        (["--timeout", "5"], "--timeout"),
+        (["--period", "0.3", "--timeout", "0.1"], "--period"),
+        (["--input", COMMANDS], "--output"),
+    ):
         res = CliRunner().invoke(app, ["ros2-watchdog", *args])
         errors = [line for line in res.output.splitlines() if line.startswith("error:")]
         assert res.exit_code == 2 and len(errors) == 1 and option in errors[0], res.output

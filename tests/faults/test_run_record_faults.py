@@ -138,8 +138,10 @@ def test_a_log_row_that_is_not_finite_is_held_flagged_and_said():
     finally:
         world.close()
     n = 8
-    cut = {name: getattr(log, name)[:n].copy() for name in ("pose", "velocity", "wrench", "reference", "effort_h",
-                                                            "effort_r", "joints", "joint_velocity")}  # fmt: skip
+    cut = {
+        name: getattr(log, name)[:n].copy()
+        for name in ("pose", "velocity", "wrench", "reference", "effort_h", "effort_r", "joints", "joint_velocity")
+    }
     cut["wrench"][3:5] = np.nan
     cut["velocity"][0, 1] = np.inf
     bad = LoopLog(prediction=None, fault=np.zeros(n, dtype=np.int64), compute=np.zeros(n), ended="time_limit", **cut)
@@ -150,7 +152,10 @@ def test_a_log_row_that_is_not_finite_is_held_flagged_and_said():
     assert np.flatnonzero(trial.fault & int(Fault.NONFINITE_WRENCH)).tolist() == [3, 4]
     assert np.flatnonzero(trial.fault & int(Fault.NONFINITE_STATE)).tolist() == [0]
     extra = trial.meta.extra
-    assert extra["nonfinite_rows"] == {"velocity": {"first_tick": 0, "ticks": 1}, "wrench": {"first_tick": 3, "ticks": 2}}
+    assert extra["nonfinite_rows"] == {
+        "velocity": {"first_tick": 0, "ticks": 1},
+        "wrench": {"first_tick": 3, "ticks": 2},
+    }
     assert "wrench: 2 tick(s) from tick 3" in extra["log_note"]
     np.testing.assert_array_equal(trial.pose, cut["pose"])  # the finite columns as they were
 
@@ -246,8 +251,13 @@ def test_a_kill_during_drive_mcap_never_leaves_a_trial_beside_another_runs_mcap(
     env = {**os.environ, "OMP_NUM_THREADS": "1", "TMPDIR": str(scratch)}
 
     def child(n: int, *args: str) -> int:
-        res = subprocess.run([sys.executable, "-c", textwrap.dedent(CHILD), str(n), *DRIVE, "--out", str(out), *args],
-                             capture_output=True, text=True, timeout=300, env=env)  # fmt: skip
+        res = subprocess.run(
+            [sys.executable, "-c", textwrap.dedent(CHILD), str(n), *DRIVE, "--out", str(out), *args],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            env=env,
+        )
         return res.returncode
 
     from coassist.data.run_pair import write_run_pair
@@ -267,8 +277,10 @@ def test_a_kill_during_drive_mcap_never_leaves_a_trial_beside_another_runs_mcap(
         (tmp_path / "run.mcap").write_bytes(old[1])
         rc = child(n, "--seed", "2", "--overwrite")
         trial_bytes, mcap = _pair(tmp_path)
-        state = ("old" if trial_bytes == old[0] else "new" if trial_bytes == new[0] else repr(trial_bytes)[:20],
-                 "old" if mcap == old[1] else "new" if mcap == new[1] else "none" if mcap is None else "?")  # fmt: skip
+        state = (
+            "old" if trial_bytes == old[0] else "new" if trial_bytes == new[0] else repr(trial_bytes)[:20],
+            "old" if mcap == old[1] else "new" if mcap == new[1] else "none" if mcap is None else "?",
+        )
         seen.add(state)
         assert state in {("old", "old"), ("old", "none"), ("new", "none"), ("new", "new")}, (n, state)
         assert list(scratch.iterdir()) == [], (n, list(scratch.iterdir()))  # nothing left in the temp folder

@@ -224,9 +224,17 @@ def _spike(k, s):
 #: Robot-state glitches: flagged, held, logged; the trial is still written (test below).
 GLITCH_TICKS = range(100, 110)
 GLITCHES = [
-    Case("NaN tool pose (10 ticks)", Fault.NONFINITE_STATE | Fault.DECELERATING, _set(GLITCH_TICKS, _nan_field("tool_pose"))),
+    Case(
+        "NaN tool pose (10 ticks)",
+        Fault.NONFINITE_STATE | Fault.DECELERATING,
+        _set(GLITCH_TICKS, _nan_field("tool_pose")),
+    ),
     Case("NaN joints (10 ticks)", Fault.NONFINITE_STATE | Fault.DECELERATING, _set(GLITCH_TICKS, _nan_field("q"))),
-    Case("NaN tool twist (10 ticks)", Fault.NONFINITE_STATE | Fault.DECELERATING, _set(GLITCH_TICKS, _nan_field("tool_twist"))),
+    Case(
+        "NaN tool twist (10 ticks)",
+        Fault.NONFINITE_STATE | Fault.DECELERATING,
+        _set(GLITCH_TICKS, _nan_field("tool_twist")),
+    ),
     Case("state None (1 tick)", Fault.NONFINITE_STATE | Fault.DECELERATING, _set(GLITCH_TICKS[:1], _none_state)),
 ]
 
@@ -235,23 +243,53 @@ CASES = [
     Case("±inf wrench (10 ticks)", Fault.NONFINITE_WRENCH | Fault.DECELERATING, _set(range(100, 110), _inf)),
     Case("5 kN spike (1 tick)", Fault.WRENCH_SPIKE | Fault.DECELERATING, _set(range(150, 151), _spike)),
     Case("frozen sensor", Fault.SENSOR_STALE | Fault.DECELERATING | Fault.STOPPED, _frozen(100), stops=True),
-    Case("predictor hangs 1 s", Fault.PREDICTOR_STALLED | Fault.DECELERATING | Fault.STOPPED,
-         predictor=lambda H: FakeRealtimePredictor(H, hang=range(100, 225)), stops=True),  # fmt: skip
-    Case("predictor returns NaN (5 ticks)", Fault.PREDICTOR_STALLED | Fault.DECELERATING,
-         predictor=lambda H: FakeRealtimePredictor(H, nan=range(100, 105))),  # fmt: skip
-    Case("predictor returns 1e6 m (finite, absurd)", Fault.PREDICTOR_STALLED | Fault.DECELERATING | Fault.STOPPED,
-         predictor=_real_predictor(_absurd), stops=True),  # fmt: skip
-    Case("predictor worker thread dies", Fault.PREDICTOR_STALLED | Fault.DECELERATING | Fault.STOPPED,
-         predictor=_real_predictor(_dies), stops=True),  # fmt: skip
-    Case("pushed into a singular pose (arm stretched)", Fault.TOOL_SPEED_LIMIT | Fault.SINGULARITY,
-         operator=ScriptedForce.constant((0.0, -40.0, 0.0, 0.0, 0.0, 0.0)), time_limit=5.0),  # fmt: skip
-    Case("hand lets go at full speed", Fault.TOOL_SPEED_LIMIT,
-         operator=ScriptedForce.steps([(0.0, (40.0, 0, 0, 0, 0, 0)), (1.2, (0, 0, 0, 0, 0, 0))])),  # fmt: skip
-    Case("50 consecutive deadline misses", Fault.DEADLINE_MISS | Fault.DECELERATING | Fault.STOPPED,
-         overrun=range(100, 150), stops=True),  # fmt: skip
-    Case("frozen sensor, live counter (hand lets go at 0.8 s)", Fault.SENSOR_STALE | Fault.DECELERATING | Fault.STOPPED,
-         _frozen_live(50), operator=ScriptedForce.steps([(0.0, (15.0, 0, 0, 0, 0, 0)), (0.8, (0, 0, 0, 0, 0, 0))]),
-         stops=True),  # fmt: skip
+    Case(
+        "predictor hangs 1 s",
+        Fault.PREDICTOR_STALLED | Fault.DECELERATING | Fault.STOPPED,
+        predictor=lambda H: FakeRealtimePredictor(H, hang=range(100, 225)),
+        stops=True,
+    ),
+    Case(
+        "predictor returns NaN (5 ticks)",
+        Fault.PREDICTOR_STALLED | Fault.DECELERATING,
+        predictor=lambda H: FakeRealtimePredictor(H, nan=range(100, 105)),
+    ),
+    Case(
+        "predictor returns 1e6 m (finite, absurd)",
+        Fault.PREDICTOR_STALLED | Fault.DECELERATING | Fault.STOPPED,
+        predictor=_real_predictor(_absurd),
+        stops=True,
+    ),
+    Case(
+        "predictor worker thread dies",
+        Fault.PREDICTOR_STALLED | Fault.DECELERATING | Fault.STOPPED,
+        predictor=_real_predictor(_dies),
+        stops=True,
+    ),
+    Case(
+        "pushed into a singular pose (arm stretched)",
+        Fault.TOOL_SPEED_LIMIT | Fault.SINGULARITY,
+        operator=ScriptedForce.constant((0.0, -40.0, 0.0, 0.0, 0.0, 0.0)),
+        time_limit=5.0,
+    ),
+    Case(
+        "hand lets go at full speed",
+        Fault.TOOL_SPEED_LIMIT,
+        operator=ScriptedForce.steps([(0.0, (40.0, 0, 0, 0, 0, 0)), (1.2, (0, 0, 0, 0, 0, 0))]),
+    ),
+    Case(
+        "50 consecutive deadline misses",
+        Fault.DEADLINE_MISS | Fault.DECELERATING | Fault.STOPPED,
+        overrun=range(100, 150),
+        stops=True,
+    ),
+    Case(
+        "frozen sensor, live counter (hand lets go at 0.8 s)",
+        Fault.SENSOR_STALE | Fault.DECELERATING | Fault.STOPPED,
+        _frozen_live(50),
+        operator=ScriptedForce.steps([(0.0, (15.0, 0, 0, 0, 0, 0)), (0.8, (0, 0, 0, 0, 0, 0))]),
+        stops=True,
+    ),
     Case("reported pose jumps +1 m in x (20 ticks)", Fault.WORKSPACE_LIMIT, _set(range(100, 120), _pose_jump)),
     *GLITCHES,
 ]

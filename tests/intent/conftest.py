@@ -14,12 +14,15 @@ def make_trial(seed: int, n: int = 260, d: int = 2, dt: float = 0.008, user: str
     rng = np.random.default_rng(seed)
     t = np.arange(n) * dt
     ref = np.stack([0.1 * t + 0.01 * a for a in range(d)], axis=1)
-    dev = np.stack([rng.uniform(0.01, 0.05) * np.sin(rng.uniform(1, 4) * t + rng.uniform(0, 6)) for _ in range(d)], axis=1)
+    dev = np.stack(
+        [rng.uniform(0.01, 0.05) * np.sin(rng.uniform(1, 4) * t + rng.uniform(0, 6)) for _ in range(d)], axis=1
+    )
     pose = ref + dev
     vel = np.gradient(pose, dt, axis=0)
     wrench = 100.0 * vel + rng.normal(0, 0.1, size=pose.shape)
-    meta = TrialMeta(user=user, task="linear", object="handle", controller="impedance", model_id=None, seed=seed,
-                     source="sim", dt=dt)
+    meta = TrialMeta(
+        user=user, task="linear", object="handle", controller="impedance", model_id=None, seed=seed, source="sim", dt=dt
+    )
     return Trial(meta=meta, time=t, pose=pose, velocity=vel, wrench=wrench, reference=ref)
 
 
@@ -30,7 +33,9 @@ def labeled(n_trials: int = 5, d: int = 2, dt: float = 0.008, n: int = 260, pref
 TINY = Preset(
     "tiny",
     WindowConfig(history=20, decimation=2, horizon=10, input_frame="relative", target="residual"),
-    lstm_layers=1, hidden=8, fc=(8,),
+    lstm_layers=1,
+    hidden=8,
+    fc=(8,),
     train=TrainConfig(epochs=2, batch_size=32, lr=3e-3, threads=1, train_stride=2, eval_stride=4),
 )
 

@@ -72,7 +72,16 @@ def test_evaluation_scores_every_predictor_on_the_same_ticks(trials, tiny):
     lt = next(lt for lt in trials if lt.id in res.trials)
     t = lt.trial
     ks = np.arange(tiny.window.history - 1, t.n_samples - 5)
-    err = [np.sqrt(np.mean(np.sum((t.pose[k] + np.outer(np.arange(1, 6) * 0.008, t.velocity[k]) - t.pose[k + 1 : k + 6]) ** 2, axis=1))) for k in ks]
+    err = [
+        np.sqrt(
+            np.mean(
+                np.sum(
+                    (t.pose[k] + np.outer(np.arange(1, 6) * 0.008, t.velocity[k]) - t.pose[k + 1 : k + 6]) ** 2, axis=1
+                )
+            )
+        )
+        for k in ks
+    ]
     assert res.results["constant_velocity"][5]["e_rms"] == pytest.approx(np.mean(err), rel=1e-12)
     with pytest.raises(ValueError, match="nothing held out"):
         evaluate_model(model, [lt for lt in trials if lt.id in model.info["train_trials"]])
@@ -104,7 +113,9 @@ def test_tuned_ridge_alpha_minimises_the_validation_error_over_the_grid(trials):
     from coassist.intent.baselines import fit_tuned_baselines, ridge_validation_errors
     from coassist.intent.features import validation_split
 
-    w = WindowConfig(history=6, decimation=2, horizon=4, input_frame="relative", target="residual", target_scaling="step")
+    w = WindowConfig(
+        history=6, decimation=2, horizon=4, input_frame="relative", target="residual", target_scaling="step"
+    )
     ids = [lt.id for lt in trials]
     tr = [lt.trial for lt in trials]
     sin, sout = WindowSet(tr, w, 0.008).fit_scalers()
@@ -257,8 +268,12 @@ def test_kalman_tuning_of_trials_of_every_length_equals_the_direct_sum(first_tic
     rng = np.random.default_rng(11)
     horizon, dt = 12, 0.008
     lengths = (60, first_tick + horizon, 95, first_tick + horizon + 1, 41)  # the 2nd scores nothing, the 4th one tick
-    trials = [SimpleNamespace(pose=0.4 + np.cumsum(rng.normal(size=(n, 2)), axis=0) * 1e-3,
-                              velocity=rng.normal(size=(n, 2)) * 1e-2) for n in lengths]  # fmt: skip
+    trials = [
+        SimpleNamespace(
+            pose=0.4 + np.cumsum(rng.normal(size=(n, 2)), axis=0) * 1e-3, velocity=rng.normal(size=(n, 2)) * 1e-2
+        )
+        for n in lengths
+    ]
     qs, rvs = (1e-1, 1e3), (1e-4, 3e-3, 1e-2)
     _, rec = tune_kalman(trials, horizon, dt, first_tick=first_tick, jerk_psd_grid=qs, velocity_noise_grid=rvs)
     want, ticks = [], sum(max(0, n - horizon - first_tick) for n in lengths)

@@ -39,8 +39,17 @@ def _sim_trial(seed: int, n: int = 300) -> Trial:
     intent = pose + rng.normal(0.0, 1e-3, (n, 2))
     extra = {"plant": {"M": [12.0, 13.5], "D": [100.0, 90.0], "K": [0.0, 0.0]}}
     meta = TrialMeta("user-0", "curved", "board", "cooperative", None, seed, "sim", DT, extra=extra)
-    return Trial(meta=meta, time=t, pose=pose, velocity=vel, wrench=50 * vel + rng.normal(0, 0.3, (n, 2)),
-                 reference=pose + 0.01, intent=intent, effort_h=-u_r, effort_r=u_r)  # fmt: skip
+    return Trial(
+        meta=meta,
+        time=t,
+        pose=pose,
+        velocity=vel,
+        wrench=50 * vel + rng.normal(0, 0.3, (n, 2)),
+        reference=pose + 0.01,
+        intent=intent,
+        effort_h=-u_r,
+        effort_r=u_r,
+    )
 
 
 class _Model:
@@ -54,12 +63,21 @@ class _Model:
 
 
 WINDOWS = [
-    WindowConfig(history=20, decimation=2, horizon=10, input_frame="relative", target="residual", target_scaling="step"),
+    WindowConfig(
+        history=20, decimation=2, horizon=10, input_frame="relative", target="residual", target_scaling="step"
+    ),
     WindowConfig(history=20, decimation=4, horizon=8, input_frame="relative", target="relative", label="hand_alone"),
-    WindowConfig(history=15, decimation=1, horizon=12, input_frame="relative", target="residual", label="intent",
-                 target_scaling="step"),
+    WindowConfig(
+        history=15,
+        decimation=1,
+        horizon=12,
+        input_frame="relative",
+        target="residual",
+        label="intent",
+        target_scaling="step",
+    ),
     WindowConfig(history=25, decimation=5, horizon=10, input_frame="absolute", target="absolute"),  # the thesis' frame
-]  # fmt: skip
+]
 
 
 @pytest.mark.parametrize("window", WINDOWS, ids=lambda w: f"{w.label}-{w.input_frame}-{w.target}-{w.target_scaling}")

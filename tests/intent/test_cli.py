@@ -15,8 +15,21 @@ from .conftest import make_trial
 def test_train_then_evaluate(tmp_path):
     write_dataset([make_trial(i, n=220) for i in range(5)], tmp_path / "D0", "D0")
     runner = CliRunner()
-    res = runner.invoke(app, ["train", str(tmp_path / "D0"), "--out", str(tmp_path / "m"), "--epochs", "1",
-                              "--threads", "1", "--batch-size", "256"])
+    res = runner.invoke(
+        app,
+        [
+            "train",
+            str(tmp_path / "D0"),
+            "--out",
+            str(tmp_path / "m"),
+            "--epochs",
+            "1",
+            "--threads",
+            "1",
+            "--batch-size",
+            "256",
+        ],
+    )
     assert res.exit_code == 0, res.output
     hist = json.loads((tmp_path / "m" / "history.json").read_text())
     assert len(hist) == 1 and (tmp_path / "m" / "loss.png").stat().st_size > 1000
@@ -44,8 +57,21 @@ def test_train_command_sets_the_torch_threads_it_is_given(tmp_path):
     before = torch.get_num_threads()
     try:
         torch.set_num_threads(1)
-        res = CliRunner().invoke(app, ["train", str(tmp_path / "D0"), "--out", str(tmp_path / "m"), "--epochs", "1",
-                                       "--threads", "2", "--batch-size", "256"])  # fmt: skip
+        res = CliRunner().invoke(
+            app,
+            [
+                "train",
+                str(tmp_path / "D0"),
+                "--out",
+                str(tmp_path / "m"),
+                "--epochs",
+                "1",
+                "--threads",
+                "2",
+                "--batch-size",
+                "256",
+            ],
+        )
         assert res.exit_code == 0, res.output
         assert torch.get_num_threads() == 2
     finally:

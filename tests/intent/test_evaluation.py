@@ -41,20 +41,39 @@ def test_best_baseline_and_per_trial_spread(trials, tiny):
     assert res.baselines["ridge"]["alpha"] == model.ridge.alpha
     # The JSON record: the layout evaluation.json and summary.json have always had ("5", not 5).
     record = json.loads(json.dumps(res.to_dict()))
-    assert list(record) == ["trials", "skipped", "n_ticks", "horizons", "dt", "unit", "baselines", "results",
-                            "best_baseline"]
+    assert list(record) == [
+        "trials",
+        "skipped",
+        "n_ticks",
+        "horizons",
+        "dt",
+        "unit",
+        "baselines",
+        "results",
+        "best_baseline",
+    ]
     assert record["horizons"] == [5, 10] and record["results"]["ridge"]["10"]["e_rms"] == r["e_rms"]
     assert record["best_baseline"]["5"]["name"] == res.best_baseline[5]["name"]
 
 
 def test_comparison_lines_state_the_best_baseline_in_mm():
-    results = {"model": {5: {"e_rms": 0.0008, "e_rms_trials": {"a": 0.0007, "b": 0.0011}}},
-               "ridge": {5: {"e_rms": 0.0010, "e_rms_trials": {"a": 0.0009, "b": 0.0010}}},
-               "constant_velocity": {5: {"e_rms": 0.0020, "e_rms_trials": {"a": 0.002, "b": 0.002}}}}
+    results = {
+        "model": {5: {"e_rms": 0.0008, "e_rms_trials": {"a": 0.0007, "b": 0.0011}}},
+        "ridge": {5: {"e_rms": 0.0010, "e_rms_trials": {"a": 0.0009, "b": 0.0010}}},
+        "constant_velocity": {5: {"e_rms": 0.0020, "e_rms_trials": {"a": 0.002, "b": 0.002}}},
+    }
     best = best_baselines(results, (5,))
     assert best[5]["gain"] == pytest.approx(0.2)
-    res = ModelEvaluation(trials=("a", "b"), skipped=(), n_ticks=10, horizons=(5,), dt=0.01,
-                          baselines={"ridge": {"alpha": 1e-3, "tuned": True}}, results=results, best_baseline=best)
+    res = ModelEvaluation(
+        trials=("a", "b"),
+        skipped=(),
+        n_ticks=10,
+        horizons=(5,),
+        dt=0.01,
+        baselines={"ridge": {"alpha": 1e-3, "tuned": True}},
+        results=results,
+        best_baseline=best,
+    )
     (line,) = comparison_lines(res)
     assert line.startswith("0.05 s: best baseline ridge (α = 1e-03, tuned on validation trials) e_RMS 1 mm")
     assert "model 0.8 mm: 20.0 % better (+0.2 mm), model better on 1 of 2 trials" in line
@@ -63,11 +82,25 @@ def test_comparison_lines_state_the_best_baseline_in_mm():
 def test_evaluate_prints_the_best_baseline_per_horizon(tmp_path):
     write_dataset([make_trial(i, n=220) for i in range(5)], tmp_path / "D0", "D0")
     runner = CliRunner()
-    res = runner.invoke(app, ["train", str(tmp_path / "D0"), "--out", str(tmp_path / "m"), "--epochs", "1",
-                              "--threads", "1", "--batch-size", "256"])
+    res = runner.invoke(
+        app,
+        [
+            "train",
+            str(tmp_path / "D0"),
+            "--out",
+            str(tmp_path / "m"),
+            "--epochs",
+            "1",
+            "--threads",
+            "1",
+            "--batch-size",
+            "256",
+        ],
+    )
     assert res.exit_code == 0, res.output
-    res = runner.invoke(app, ["evaluate", "--model", str(tmp_path / "m"), "--data", str(tmp_path / "D0")],
-                        terminal_width=250)
+    res = runner.invoke(
+        app, ["evaluate", "--model", str(tmp_path / "m"), "--data", str(tmp_path / "D0")], terminal_width=250
+    )
     assert res.exit_code == 0, res.output
     out = json.loads((tmp_path / "m" / "evaluation.json").read_text())
     lines = [ln for ln in res.output.splitlines() if "best baseline" in ln]
@@ -96,8 +129,9 @@ def test_tuned_ridge_beats_the_fixed_alpha_on_held_out_user_a():
     train = [trials[i].trial for i in train_idx]
     ws = WindowSet(train, w, 0.008, stride=8)
     sin, sout = ws.fit_scalers()
-    tuned, kalman, rec = fit_tuned_baselines(train, [trials[i].id for i in train_idx], w, 0.008, sin, sout, seed=0,
-                                             stride=8)
+    tuned, kalman, rec = fit_tuned_baselines(
+        train, [trials[i].id for i in train_idx], w, 0.008, sin, sout, seed=0, stride=8
+    )
     assert set(rec["validation_trials"]).isdisjoint(trials[i].id for i in test_idx)
     fixed = RidgeBaseline.fit(ws, sin, sout, 1.0)
     test = WindowSet([trials[i].trial for i in test_idx], w, 0.008, stride=4)
@@ -122,8 +156,11 @@ def test_linear_preset_is_the_tuned_ridge_in_the_model_format(trials, tmp_path):
     from coassist.intent.training import MODEL_PRESETS
 
     lin = MODEL_PRESETS["linear"]
-    p = replace(lin, window=replace(lin.window, history=20, decimation=2, horizon=10),
-                train=replace(lin.train, threads=1, train_stride=2))
+    p = replace(
+        lin,
+        window=replace(lin.window, history=20, decimation=2, horizon=10),
+        train=replace(lin.train, threads=1, train_stride=2),
+    )
     model = train_model(trials, p, p.train)
     assert model.net.is_linear and model.net.lstm is None
     hist = model.info["training_history"]

@@ -13,9 +13,16 @@ def _record(seed, model, ridge, cv):
         return {50: {"e_rms": v}}
 
     best = min((ridge, "ridge"), (cv, "constant_velocity"))
-    ev = ModelEvaluation(trials=("a",), skipped=(), n_ticks=1, horizons=(50,), dt=0.008, baselines={},
-                         results={"model": r(model), "ridge": r(ridge), "constant_velocity": r(cv)},
-                         best_baseline={50: {"name": best[1], "gain": (best[0] - model) / best[0]}})  # fmt: skip
+    ev = ModelEvaluation(
+        trials=("a",),
+        skipped=(),
+        n_ticks=1,
+        horizons=(50,),
+        dt=0.008,
+        baselines={},
+        results={"model": r(model), "ridge": r(ridge), "constant_velocity": r(cv)},
+        best_baseline={50: {"name": best[1], "gain": (best[0] - model) / best[0]}},
+    )
     return {"protocol": "user-a", "variant": "lstm", "seed": seed, "evaluation": ev}
 
 

@@ -87,7 +87,9 @@ def test_scalers_are_fitted_on_the_training_split_only(tiny):
 
     from coassist.data import Trial
 
-    loud = Trial(meta=t.meta, time=t.time, pose=t.pose, velocity=t.velocity, wrench=t.wrench * 1000, reference=t.reference)
+    loud = Trial(
+        meta=t.meta, time=t.time, pose=t.pose, velocity=t.velocity, wrench=t.wrench * 1000, reference=t.reference
+    )
     trials[big] = trials[big]._replace(trial=loud)
     model = build_model(tiny, trials, tiny.train)
     ws = WindowSet([trials[i].trial for i in train_idx], tiny.window, 0.008)
@@ -98,8 +100,12 @@ def test_scalers_are_fitted_on_the_training_split_only(tiny):
 
 @pytest.mark.parametrize(
     ("kwargs", "field"),
-    [({"history": 0}, "window.history"), ({"history": 10, "decimation": 3}, "window.decimation"),
-     ({"target": "polar"}, "window.target"), ({"input_frame": "world"}, "window.input_frame")],
+    [
+        ({"history": 0}, "window.history"),
+        ({"history": 10, "decimation": 3}, "window.decimation"),
+        ({"target": "polar"}, "window.target"),
+        ({"input_frame": "world"}, "window.input_frame"),
+    ],
 )
 def test_window_config_errors_name_the_field(kwargs, field):
     with pytest.raises(ValueError, match=field.replace(".", r"\.")):

@@ -45,8 +45,17 @@ def _trial(u_h, u_r, *, plant=True, intent=None):
     n = len(u_h)
     extra = {"plant": {"M": M.tolist(), "D": D.tolist(), "K": [0.0, 0.0]}} if plant else {}
     meta = TrialMeta("user-0", "curved", "board", "cooperative", None, 7, "sim", DT, extra=extra)
-    return Trial(meta=meta, time=np.arange(n) * DT, pose=z[:, :2], velocity=z[:, 2:], wrench=u_h,
-                 reference=z[:, :2], intent=intent, effort_h=u_h, effort_r=u_r)  # fmt: skip
+    return Trial(
+        meta=meta,
+        time=np.arange(n) * DT,
+        pose=z[:, :2],
+        velocity=z[:, 2:],
+        wrench=u_h,
+        reference=z[:, :2],
+        intent=intent,
+        effort_h=u_h,
+        effort_r=u_r,
+    )
 
 
 def _smooth_forces(rng, n, scale):
@@ -150,8 +159,21 @@ def _intent_trials(n_trials=4, n=260):
         t = make_trial(i, n=n)
         # An "intent" a few ticks ahead of the pose, as a simulated operator's would be.
         intent = np.concatenate([t.pose[5:], np.repeat(t.pose[-1:], 5, axis=0)])
-        out.append(LabeledTrial(f"S/trial_{i:02d}", "S", Trial(meta=t.meta, time=t.time, pose=t.pose, velocity=t.velocity,
-                                                               wrench=t.wrench, reference=t.reference, intent=intent)))
+        out.append(
+            LabeledTrial(
+                f"S/trial_{i:02d}",
+                "S",
+                Trial(
+                    meta=t.meta,
+                    time=t.time,
+                    pose=t.pose,
+                    velocity=t.velocity,
+                    wrench=t.wrench,
+                    reference=t.reference,
+                    intent=intent,
+                ),
+            )
+        )
     return out
 
 

@@ -29,8 +29,20 @@ def test_round_trip_gives_bit_identical_outputs(tmp_path, trained, trials):
     assert np.array_equal(a, b, equal_nan=True)
     assert np.array_equal(trained.ridge.predict_trial(t), back.ridge.predict_trial(t), equal_nan=True)
     side = json.loads((tmp_path / "m" / "model.json").read_text())
-    for key in ("features", "input_scaler", "target_scaler", "history", "horizon", "dt", "dataset_ids", "preset",
-                "network", "train_trials", "test_trials", "training_history"):
+    for key in (
+        "features",
+        "input_scaler",
+        "target_scaler",
+        "history",
+        "horizon",
+        "dt",
+        "dataset_ids",
+        "preset",
+        "network",
+        "train_trials",
+        "test_trials",
+        "training_history",
+    ):
         assert key in side, key
     assert side["features"] == ["x", "y", "vx", "vy", "fx", "fy", "x_ref", "y_ref"]
     assert back.info["training_history"] == trained.info["training_history"]

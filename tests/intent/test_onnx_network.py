@@ -26,11 +26,17 @@ def windows(rng, batch: int, steps: int, features: int) -> np.ndarray:
     return rng.uniform(-1.0, 1.0, size=(batch, steps, features)).astype(np.float32)
 
 
-@pytest.mark.parametrize("config", [
-    NetworkConfig(n_features=8, n_outputs=100, lstm_layers=2, hidden=64, fc=(64,), skip_inputs=25 * 8),  # the lstm preset
-    NetworkConfig(n_features=8, n_outputs=20, lstm_layers=1, hidden=8, fc=(8,)),
-    NetworkConfig(n_features=8, n_outputs=20, lstm_layers=0, skip_inputs=10 * 8),  # the ridge as a network
-], ids=["lstm-2x64-skip", "lstm-1x8", "linear"])  # fmt: skip
+@pytest.mark.parametrize(
+    "config",
+    [
+        NetworkConfig(
+            n_features=8, n_outputs=100, lstm_layers=2, hidden=64, fc=(64,), skip_inputs=25 * 8
+        ),  # the lstm preset
+        NetworkConfig(n_features=8, n_outputs=20, lstm_layers=1, hidden=8, fc=(8,)),
+        NetworkConfig(n_features=8, n_outputs=20, lstm_layers=0, skip_inputs=10 * 8),  # the ridge as a network
+    ],
+    ids=["lstm-2x64-skip", "lstm-1x8", "linear"],
+)
 def test_outputs_equal_torch_to_float32_rounding_at_every_batch_size(config):
     steps = config.skip_inputs // config.n_features if config.skip_inputs else 25
     net = IntentNet(config, torch.Generator().manual_seed(3)).eval()

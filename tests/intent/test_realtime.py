@@ -112,8 +112,14 @@ def test_a_model_drives_the_simulated_loop(tmp_path):
 
     from .conftest import labeled
 
-    preset = Preset("h50", WindowConfig(history=30, decimation=3, horizon=50, input_frame="relative", target="residual"),
-                    lstm_layers=1, hidden=8, fc=(8,), train=TrainConfig(epochs=1, batch_size=64, threads=1, train_stride=4))
+    preset = Preset(
+        "h50",
+        WindowConfig(history=30, decimation=3, horizon=50, input_frame="relative", target="residual"),
+        lstm_layers=1,
+        hidden=8,
+        fc=(8,),
+        train=TrainConfig(epochs=1, batch_size=64, threads=1, train_stride=4),
+    )
     save_model(train_model(labeled(3, n=200), preset, preset.train), tmp_path / "M")
     source = load_model_intent(str(tmp_path / "M"))
     assert isinstance(source, ModelIntent) and source.model_id.startswith("M@") and len(source.model_id) == 14
@@ -222,8 +228,18 @@ def test_plausibility_bounds_against_hand_computed_cases():
         PlausibilityLimits(max_speed=0.0)
 
 
-@pytest.mark.parametrize("bad", [np.zeros(7), np.zeros((8, 1)), "0.1", np.ones(8, dtype=bool), [np.nan] * 8,
-                                 np.array([10**400] * 8, dtype=object), None])  # fmt: skip
+@pytest.mark.parametrize(
+    "bad",
+    [
+        np.zeros(7),
+        np.zeros((8, 1)),
+        "0.1",
+        np.ones(8, dtype=bool),
+        [np.nan] * 8,
+        np.array([10**400] * 8, dtype=object),
+        None,
+    ],
+)
 def test_a_bad_sample_is_held_flagged_and_never_raises(model, bad):
     """One bad sample costs nothing: it is replaced by the previous row, the tick is
     flagged INVALID_INPUT and the next prediction uses exactly that held window."""

@@ -20,7 +20,9 @@ def test_same_seed_gives_bit_identical_weights(trials, tiny):
     b = train_model(trials, tiny, tiny.train)
     sa, sb = _state(a), _state(b)
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
-    assert a.info["training_history"] == [{**r, "seconds": s["seconds"]} for r, s in zip(b.info["training_history"], a.info["training_history"])]
+    assert a.info["training_history"] == [
+        {**r, "seconds": s["seconds"]} for r, s in zip(b.info["training_history"], a.info["training_history"])
+    ]
     c = train_model(trials, tiny, TrainConfig(**{**tiny.train.__dict__, "seed": 1}))
     assert not torch.equal(_state(c)["lstm.weight_ih_l0"], sa["lstm.weight_ih_l0"])
 
@@ -155,8 +157,14 @@ def test_thesis_preset_is_the_thesis_network():
 
 @pytest.mark.parametrize(
     ("kwargs", "field"),
-    [({"epochs": 0}, "train.epochs"), ({"lr": -1.0}, "train.lr"), ({"optimizer": "lbfgs"}, "train.optimizer"),
-     ({"init": "transfer:"}, "train.init"), ({"init": "warm:x"}, "train.init"), ({"test_fraction": 1.0}, "train.test_fraction")],
+    [
+        ({"epochs": 0}, "train.epochs"),
+        ({"lr": -1.0}, "train.lr"),
+        ({"optimizer": "lbfgs"}, "train.optimizer"),
+        ({"init": "transfer:"}, "train.init"),
+        ({"init": "warm:x"}, "train.init"),
+        ({"test_fraction": 1.0}, "train.test_fraction"),
+    ],
 )
 def test_train_config_errors_name_the_field(kwargs, field):
     with pytest.raises(ValueError, match=field.replace(".", r"\.")):
@@ -182,7 +190,9 @@ def test_preset_with_skip_starts_as_the_ridge_predictor(trials, tiny):
     t = trials[0].trial
     a, b = m.predict_trial(t), ridge_train.ridge.predict_trial(t)
     ok = np.isfinite(a[:, 0, 0])
-    assert ok.sum() > 100 and np.allclose(a[ok], b[ok], atol=1e-4)  # float32 network vs float64 ridge (positions ~0.1 m)
+    assert ok.sum() > 100 and np.allclose(
+        a[ok], b[ok], atol=1e-4
+    )  # float32 network vs float64 ridge (positions ~0.1 m)
 
 
 def test_linear_preset_starts_as_the_ridge_predictor(trials, tiny):
@@ -254,6 +264,7 @@ def test_a_bigger_batch_scales_the_learning_rate_by_the_square_root_rule():
     assert big.batch_size == 256 and big.lr == pytest.approx(6e-3, rel=1e-15)  # 3e-3 · √4
     assert with_batch_size(base, 16).lr == pytest.approx(1.5e-3, rel=1e-15)
     assert {k: v for k, v in big.__dict__.items() if k not in ("batch_size", "lr")} == {
-        k: v for k, v in base.__dict__.items() if k not in ("batch_size", "lr")}
+        k: v for k, v in base.__dict__.items() if k not in ("batch_size", "lr")
+    }
     with pytest.raises(ValueError, match="train.batch_size"):
         with_batch_size(base, 0)

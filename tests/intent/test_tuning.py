@@ -113,8 +113,10 @@ def test_a_study_without_a_data_record_is_not_resumed(tmp_path):
 
 @pytest.mark.parametrize(
     "kwargs, trials, message",
-    [(dict(n_trials=0), 6, "n_trials must be >= 1, got 0"),
-     (dict(n_trials=1), 2, "needs at least two training trials")],  # fmt: skip
+    [
+        (dict(n_trials=0), 6, "n_trials must be >= 1, got 0"),
+        (dict(n_trials=1), 2, "needs at least two training trials"),
+    ],
 )
 def test_bad_requests_fail_before_any_training(kwargs, trials, message, tmp_path):
     with pytest.raises(ValueError, match=message):

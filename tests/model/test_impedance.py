@@ -29,7 +29,9 @@ def test_discretisation_matches_scipy_cont2discrete(n, method, scipy_method):
     rng = np.random.default_rng(n)
     M, D, K = random_impedance(rng, n)
     model = ImpedanceModel(M, D, K, 0.008, discretization=method)
-    Ad, Bd, *_ = scipy.signal.cont2discrete((model.A, model.B, np.eye(2 * n), np.zeros((2 * n, n))), 0.008, method=scipy_method)
+    Ad, Bd, *_ = scipy.signal.cont2discrete(
+        (model.A, model.B, np.eye(2 * n), np.zeros((2 * n, n))), 0.008, method=scipy_method
+    )
     np.testing.assert_allclose(model.Ad, Ad, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(model.Bd, Bd, rtol=1e-10, atol=1e-14)
     np.testing.assert_array_equal(model.C, np.eye(2 * n))

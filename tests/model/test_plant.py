@@ -24,8 +24,9 @@ def test_the_plant_is_the_impedance_models_zoh_with_the_added_mass():
     rng = np.random.default_rng(0)
     for _ in range(20):
         z, u = rng.normal(0.0, 1.0, 4), rng.normal(0.0, 10.0, 2)
-        x, v = plant_step(z[:2], z[2:], u, np.array(plant.a_xv), np.array(plant.a_vv), np.array(plant.b_x),
-                          np.array(plant.b_v))  # fmt: skip
+        x, v = plant_step(
+            z[:2], z[2:], u, np.array(plant.a_xv), np.array(plant.a_vv), np.array(plant.b_x), np.array(plant.b_v)
+        )
         np.testing.assert_allclose(np.concatenate([x, v]), free.step(z, u), rtol=1e-13, atol=1e-15)
 
 
@@ -46,16 +47,27 @@ def test_rows_of_an_array_step_are_the_float_steps_bit_for_bit():
     """The one step serves floats (a per-trial world) and arrays (the array path): the same bits."""
     rng = np.random.default_rng(1)
     B = 50
-    plants = [PointMassPlant.free(ImpedanceModel(np.diag(rng.uniform(1, 20, 2)), np.diag(rng.uniform(5, 80, 2)),
-                                                 np.zeros((2, 2)), DT), added_mass=float(rng.uniform(0, 8)))
-              for _ in range(B)]  # fmt: skip
+    plants = [
+        PointMassPlant.free(
+            ImpedanceModel(np.diag(rng.uniform(1, 20, 2)), np.diag(rng.uniform(5, 80, 2)), np.zeros((2, 2)), DT),
+            added_mass=float(rng.uniform(0, 8)),
+        )
+        for _ in range(B)
+    ]
     coeffs = [np.array([getattr(p, name) for p in plants]) for name in ("a_xv", "a_vv", "b_x", "b_v")]
     x, v, f = rng.normal(0.0, 1.0, (B, 2)), rng.normal(0.0, 1.0, (B, 2)), rng.normal(0.0, 30.0, (B, 2))
     xa, va = plant_step(x, v, f, *coeffs)
     for b, p in enumerate(plants):
         for axis in range(2):
-            xs, vs = plant_step(float(x[b, axis]), float(v[b, axis]), float(f[b, axis]), p.a_xv[axis], p.a_vv[axis],
-                                p.b_x[axis], p.b_v[axis])  # fmt: skip
+            xs, vs = plant_step(
+                float(x[b, axis]),
+                float(v[b, axis]),
+                float(f[b, axis]),
+                p.a_xv[axis],
+                p.a_vv[axis],
+                p.b_x[axis],
+                p.b_v[axis],
+            )
             assert (xs, vs) == (xa[b, axis], va[b, axis])
 
 

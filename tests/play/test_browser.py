@@ -24,10 +24,20 @@ sync_api = pytest.importorskip("playwright.sync_api", reason="the browser test n
 CHROMIUM = Path("/usr/bin/chromium")
 if not CHROMIUM.is_file():
     CHROMIUM = Path(shutil.which("chromium") or "/nonexistent")
-pytestmark = pytest.mark.skipif(not CHROMIUM.is_file(), reason="no Chromium at /usr/bin/chromium (apt-get install chromium)")
+pytestmark = pytest.mark.skipif(
+    not CHROMIUM.is_file(), reason="no Chromium at /usr/bin/chromium (apt-get install chromium)"
+)
 
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]  # fmt: skip
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 PATH_RGB = (31, 119, 180)  # the page's colours (play.js COLOR)
 PREDICTION_RGB = (255, 127, 14)
 
@@ -51,11 +61,22 @@ def tiny_model(folder: Path) -> Path:
         ref = np.stack([-0.1 + 0.1 * t, np.full_like(t, -0.615)], axis=1)
         pose = ref + 0.02 * np.sin(rng.uniform(1, 3) * t + rng.uniform(0, 6))[:, None]
         vel = np.gradient(pose, 0.008, axis=0)
-        meta = TrialMeta(user="t", task="linear", object="none", controller="manual", model_id=None, seed=i, source="sim", dt=0.008)
-        trials.append(LabeledTrial(f"T/{i}", "T", Trial(meta=meta, time=t, pose=pose, velocity=vel, wrench=100 * vel, reference=ref)))
-    preset = Preset("tiny50", WindowConfig(history=20, decimation=2, horizon=50, input_frame="relative", target="residual"),
-                    lstm_layers=1, hidden=8, fc=(8,),
-                    train=TrainConfig(epochs=1, batch_size=64, lr=3e-3, threads=1, train_stride=4, eval_stride=8))  # fmt: skip
+        meta = TrialMeta(
+            user="t", task="linear", object="none", controller="manual", model_id=None, seed=i, source="sim", dt=0.008
+        )
+        trials.append(
+            LabeledTrial(
+                f"T/{i}", "T", Trial(meta=meta, time=t, pose=pose, velocity=vel, wrench=100 * vel, reference=ref)
+            )
+        )
+    preset = Preset(
+        "tiny50",
+        WindowConfig(history=20, decimation=2, horizon=50, input_frame="relative", target="residual"),
+        lstm_layers=1,
+        hidden=8,
+        fc=(8,),
+        train=TrainConfig(epochs=1, batch_size=64, lr=3e-3, threads=1, train_stride=4, eval_stride=8),
+    )
     model = train_model(trials, preset, preset.train)
     write_model(model, folder)
     return folder
@@ -63,8 +84,12 @@ def tiny_model(folder: Path) -> Path:
 
 def launch(playwright, profile: Path):
     return playwright.chromium.launch_persistent_context(
-        str(profile), executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS, viewport={"width": 1300, "height": 760},
-    )  # fmt: skip
+        str(profile),
+        executable_path=str(CHROMIUM),
+        headless=True,
+        args=CHROMIUM_ARGS,
+        viewport={"width": 1300, "height": 760},
+    )
 
 
 def colour_pixels(png: bytes, rgb: tuple[int, int, int]) -> int:
@@ -80,8 +105,14 @@ def test_a_scripted_drag_in_chromium_plays_a_trial(tmp_path):
     from coassist.play.session import PlayConfig, PlaySession
 
     model = tiny_model(tmp_path / "M0")
-    config = PlayConfig(user="carol", out=tmp_path / "runs", controllers=("cooperative", "manual"), intent=str(model),
-                        motion_time=2.0, dwell=1.0)  # fmt: skip
+    config = PlayConfig(
+        user="carol",
+        out=tmp_path / "runs",
+        controllers=("cooperative", "manual"),
+        intent=str(model),
+        motion_time=2.0,
+        dwell=1.0,
+    )
     with PlayServer(PlaySession(config), port=0) as server, sync_api.sync_playwright() as pw:
         context = launch(pw, tmp_path / "profile")
         try:

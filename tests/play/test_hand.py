@@ -32,8 +32,9 @@ def test_force_limit_scales_the_norm_and_keeps_the_direction():
     assert (fx, fy) == pytest.approx((24.0, 32.0))
 
 
-@pytest.mark.parametrize("field, value", [("stiffness", 0.0), ("damping", -1.0), ("force_limit", math.nan),
-                                          ("stale_after", math.inf)])  # fmt: skip
+@pytest.mark.parametrize(
+    "field, value", [("stiffness", 0.0), ("damping", -1.0), ("force_limit", math.nan), ("stale_after", math.inf)]
+)
 def test_bad_arm_parameters_name_the_field(field, value):
     with pytest.raises(ValueError, match=f"SpringDamper.{field}"):
         SpringDamper(**{field: value})

@@ -35,7 +35,9 @@ def test_a_watcher_sees_the_drive_run_live_and_cannot_steer_it(tmp_path):
                     frames.append(m)
                     dropped = m["dropped"]
                     if len(frames) % 20 == 0:  # a watcher's hand and start are dropped
-                        await ws.send(json.dumps({"type": "pointer", "x": m["x"], "y": m["y"] + 0.05, "down": True, "seq": 1}))
+                        await ws.send(
+                            json.dumps({"type": "pointer", "x": m["x"], "y": m["y"] + 0.05, "down": True, "seq": 1})
+                        )
                         await ws.send(json.dumps({"type": "start", "controller": "manual"}))
                 elif m["type"] == "result":
                     return init, frames, m, dropped

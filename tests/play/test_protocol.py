@@ -33,7 +33,14 @@ def test_the_four_messages_parse():
 
 
 HOSTILE = [
-    "", "not json", "[1, 2]", "null", "42", '"pointer"', "{", '{"type": "pointer"',
+    "",
+    "not json",
+    "[1, 2]",
+    "null",
+    "42",
+    '"pointer"',
+    "{",
+    '{"type": "pointer"',
     '{"type": "pointer", "x": NaN, "y": -0.6, "down": true, "seq": 1}',
     '{"type": "pointer", "x": Infinity, "y": -0.6, "down": true, "seq": 1}',
     '{"type": "pointer", "x": 1e999, "y": -0.6, "down": true, "seq": 1}',

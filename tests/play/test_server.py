@@ -24,7 +24,14 @@ from coassist.play.session import PlayConfig, PlaySession  # noqa: E402
 
 
 def short_config(tmp_path, **kw) -> PlayConfig:
-    base = {"user": "alice", "out": tmp_path, "controllers": ("cooperative", "manual"), "motion_time": 1.0, "dwell": 0.5, "grace": 0.5}
+    base = {
+        "user": "alice",
+        "out": tmp_path,
+        "controllers": ("cooperative", "manual"),
+        "motion_time": 1.0,
+        "dwell": 0.5,
+        "grace": 0.5,
+    }
     base.update(kw)
     return PlayConfig(**base)
 
@@ -47,8 +54,12 @@ async def play_trial(port: int, controller: str, *, junk: bool = False, token: s
                 x, y = target if m["t"] > t_end else m["ref"]
                 await ws.send(json.dumps({"type": "pointer", "x": x, "y": y, "down": True, "seq": seq}))
                 if junk and seq % 25 == 0:  # hostile input mid-trial: dropped and counted, the loop goes on
-                    for bad in ("{", '{"type": "pointer", "x": 1e999, "y": 0, "down": true, "seq": 1}',
-                                '{"type": "save", "file": "../../escape.parquet"}', "x" * 4000):  # fmt: skip
+                    for bad in (
+                        "{",
+                        '{"type": "pointer", "x": 1e999, "y": 0, "down": true, "seq": 1}',
+                        '{"type": "save", "file": "../../escape.parquet"}',
+                        "x" * 4000,
+                    ):
                         await ws.send(bad)
             elif m["type"] == "result":
                 return {"init": init, "frames": frames, "result": m, "dropped": dropped}
@@ -73,8 +84,11 @@ def test_a_websocket_client_plays_a_whole_trial_and_it_is_saved_as_a_dataset(tmp
     assert r["ended"] == "target" and r["controller"] == "cooperative" and r["file"] == "trial_00000.parquet"
     # the file: a dataset coassist train reads, with one row per control period
     ds = read_dataset(tmp_path / "alice")
-    assert ds.id == "play-alice" and len(ds) == 1 and sorted(p.name for p in (tmp_path / "alice").iterdir()) == [
-        "manifest.json", "trial_00000.parquet"]
+    assert (
+        ds.id == "play-alice"
+        and len(ds) == 1
+        and sorted(p.name for p in (tmp_path / "alice").iterdir()) == ["manifest.json", "trial_00000.parquet"]
+    )
     trial = ds.trials[0]
     dt = trial.meta.dt
     assert trial.meta.user == "alice" and trial.meta.task == "linear" and trial.meta.controller == "cooperative"

@@ -9,11 +9,24 @@ from coassist.play.session import PlayConfig, PlaySession, view_bounds
 from coassist.scenario.tasks import TASK_KINDS, nominal_path
 
 
-@pytest.mark.parametrize("field, value", [
-    ("user", "../escape"), ("user", "a/b"), ("user", ""), ("user", "x" * 33), ("controllers", ("manual", "oracle")),
-    ("controllers", ()), ("intent", "oracle"), ("preset", "nope"), ("tasks", ("circle",)), ("seed", -1),
-    ("motion_time", 0.0), ("dwell", -1.0), ("grace", float("nan")),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("user", "../escape"),
+        ("user", "a/b"),
+        ("user", ""),
+        ("user", "x" * 33),
+        ("controllers", ("manual", "oracle")),
+        ("controllers", ()),
+        ("intent", "oracle"),
+        ("preset", "nope"),
+        ("tasks", ("circle",)),
+        ("seed", -1),
+        ("motion_time", 0.0),
+        ("dwell", -1.0),
+        ("grace", float("nan")),
+    ],
+)
 def test_bad_configuration_names_the_field(tmp_path, field, value):
     with pytest.raises(ValueError, match=f"PlayConfig.{field}"):
         PlayConfig(**{"user": "bob", "out": tmp_path, field: value})
@@ -49,7 +62,9 @@ def test_the_cli_says_what_is_wrong_in_one_line(tmp_path):
 
     result = CliRunner().invoke(app, ["play", "--user", "../x", "--out", str(tmp_path), "--no-open"])
     assert result.exit_code == 1 and "PlayConfig.user" in result.output and "Traceback" not in result.output
-    result = CliRunner().invoke(app, ["play", "--intent", str(tmp_path / "missing"), "--out", str(tmp_path), "--no-open"])
+    result = CliRunner().invoke(
+        app, ["play", "--intent", str(tmp_path / "missing"), "--out", str(tmp_path), "--no-open"]
+    )
     assert result.exit_code == 1 and "missing" in result.output and "Traceback" not in result.output
     # the controllers' former names (before drive and play took the kinds) are named, not guessed at
     result = CliRunner().invoke(app, ["play", "--controller", "mg,imp", "--out", str(tmp_path), "--no-open"])
@@ -66,7 +81,16 @@ def test_a_session_recorded_under_the_former_controller_names_scores_by_kind():
     t = np.arange(n) * 0.008
     pose = np.column_stack([np.minimum(t, 1.0) * 0.5, np.zeros(n)])
     for former, kind in (("mg", "manual"), ("assistive", "cooperative"), ("impedance", "impedance")):
-        meta = TrialMeta(user="bob", task="linear", object="none", controller="x", model_id=None, seed=0, source="sim",
-                         dt=0.008, extra={"target": [0.5, 0.0], "controller_name": former, "ended": "target"})  # fmt: skip
+        meta = TrialMeta(
+            user="bob",
+            task="linear",
+            object="none",
+            controller="x",
+            model_id=None,
+            seed=0,
+            source="sim",
+            dt=0.008,
+            extra={"target": [0.5, 0.0], "controller_name": former, "ended": "target"},
+        )
         trial = Trial(meta=meta, time=t, pose=pose, velocity=np.zeros((n, 2)), wrench=np.ones((n, 2)), reference=pose)
         assert _score(trial, "trial_00000.parquet", 0).controller == kind

@@ -18,10 +18,25 @@ def test_saved_trials_are_written_as_mcap_too(tmp_path):
     n = 30
     t = np.arange(n) * 0.008
     pose = np.column_stack([0.1 * t, -0.05 * t])
-    meta = TrialMeta(user="bob", task="linear", object="none", controller="cooperative", model_id=None, seed=0,
-                     source="sim", dt=0.008, extra={"target": [0.5, 0.0], "arrive_radius": 0.025, "ended": "target"})  # fmt: skip
-    trial = Trial(meta=meta, time=t, pose=pose, velocity=np.tile([0.1, -0.05], (n, 1)), wrench=np.ones((n, 2)),
-                  reference=pose + 0.01)  # fmt: skip
+    meta = TrialMeta(
+        user="bob",
+        task="linear",
+        object="none",
+        controller="cooperative",
+        model_id=None,
+        seed=0,
+        source="sim",
+        dt=0.008,
+        extra={"target": [0.5, 0.0], "arrive_radius": 0.025, "ended": "target"},
+    )
+    trial = Trial(
+        meta=meta,
+        time=t,
+        pose=pose,
+        velocity=np.tile([0.1, -0.05], (n, 1)),
+        wrench=np.ones((n, 2)),
+        reference=pose + 0.01,
+    )
     session._save(trial)
     session._save(trial)
     folder = tmp_path / "bob"

@@ -12,8 +12,15 @@ from coassist.robot.arms import ARMS, NullSpacePosture, arm_kinematics, check_mo
 from coassist.robot.kinematics import UR5Kinematics  # noqa: E402
 
 # Franka's DH table (modified / Craig convention), frames 1..7 and the flange F: (a, d, alpha).
-_PANDA_DH = [(0.0, 0.333, 0.0), (0.0, 0.0, -np.pi / 2), (0.0, 0.316, np.pi / 2), (0.0825, 0.0, np.pi / 2),
-             (-0.0825, 0.384, -np.pi / 2), (0.0, 0.0, np.pi / 2), (0.088, 0.0, np.pi / 2)]  # fmt: skip
+_PANDA_DH = [
+    (0.0, 0.333, 0.0),
+    (0.0, 0.0, -np.pi / 2),
+    (0.0, 0.316, np.pi / 2),
+    (0.0825, 0.0, np.pi / 2),
+    (-0.0825, 0.384, -np.pi / 2),
+    (0.0, 0.0, np.pi / 2),
+    (0.088, 0.0, np.pi / 2),
+]
 _FLANGE_D = 0.107
 
 
@@ -135,7 +142,9 @@ def test_the_posture_never_moves_the_tool_near_a_singularity(panda):
 
 def test_fr3_limits_are_the_fr3_urdf_and_its_kinematics_the_pandas(panda):
     # The reference: Franka's FR3 URDF as franky-sim ships it (franky_sim/assets/fr3.urdf).
-    franky_sim = pytest.importorskip("franky_sim", reason="the FR3 URDF comes with franky-sim: pip install 'coassist[franka]'")
+    franky_sim = pytest.importorskip(
+        "franky_sim", reason="the FR3 URDF comes with franky-sim: pip install 'coassist[franka]'"
+    )
     import xml.etree.ElementTree as ET
     from importlib.resources import files
 
@@ -143,8 +152,9 @@ def test_fr3_limits_are_the_fr3_urdf_and_its_kinematics_the_pandas(panda):
     limits = {j.get("name"): j.find("limit") for j in root.iter("joint") if j.get("type") == "revolute"}
     names = [f"fr3_joint{i}" for i in range(1, 8)]
     fr3 = arm_kinematics("fr3")
-    np.testing.assert_array_equal(fr3.joint_position_limit,
-                                  [(float(limits[n].get("lower")), float(limits[n].get("upper"))) for n in names])
+    np.testing.assert_array_equal(
+        fr3.joint_position_limit, [(float(limits[n].get("lower")), float(limits[n].get("upper"))) for n in names]
+    )
     np.testing.assert_array_equal(fr3.joint_velocity_limit, [float(limits[n].get("velocity")) for n in names])
     assert not np.array_equal(fr3.joint_position_limit, panda.joint_position_limit)  # joints 4 and 6 differ
     q = np.array(get_arm("fr3").home) + 0.1

@@ -102,7 +102,8 @@ def test_a_trained_model_in_the_loop_needs_less_force_than_mg(tmp_path):
         tr = drive(DriveConfig(controller=ctrl, task="linear", intent=intent, seed=1))
         assert tr.meta.extra["ended"] == "target"
         assert not np.any(tr.fault & int(Fault.PREDICTION_FALLBACK)) and tr.meta.model_id == (
-            None if intent == "nominal" else f"M0@{tr.meta.model_id.split('@')[1]}")
+            None if intent == "nominal" else f"M0@{tr.meta.model_id.split('@')[1]}"
+        )
         force[ctrl] = f_rms(tr.effort_h)
     assert force["cooperative"] < 0.8 * force["manual"], force
 
@@ -130,15 +131,21 @@ def test_full_pose_control_holds_orientation_as_a_rotation_vector():
 def test_full_pose_rotation_columns_stay_continuous_through_pi():
     # The start orientation is π about x (tool down): a torque about x tilts it past π, where the
     # plain rotation vector jumps from +π·x to −π·x. The logged column keeps counting the angle.
-    tr = drive(DriveConfig(controller="manual", task="linear", full_pose=True, time_limit=1.0),
-               operator=ScriptedForce.constant((0.0, 0.0, 0.0, 1.0, 0.0, 0.0)))
+    tr = drive(
+        DriveConfig(controller="manual", task="linear", full_pose=True, time_limit=1.0),
+        operator=ScriptedForce.constant((0.0, 0.0, 0.0, 1.0, 0.0, 0.0)),
+    )
     rx = tr.pose[:, 3]
     assert rx[0] == pytest.approx(math.pi, abs=1e-6) and rx[-1] > math.pi + 0.05
     assert np.abs(np.diff(tr.pose[:, 3:6], axis=0)).max() < 0.01  # no 2π jump
 
 
 def test_config_validation_names_the_field():
-    for kwargs, field in (({"world": "moon"}, "world"), ({"controller": "pid"}, "controller"),
-                          ({"rate_hz": 100}, "rate_hz"), ({"task": "spiral"}, "task")):  # fmt: skip
+    for kwargs, field in (
+        ({"world": "moon"}, "world"),
+        ({"controller": "pid"}, "controller"),
+        ({"rate_hz": 100}, "rate_hz"),
+        ({"task": "spiral"}, "task"),
+    ):
         with pytest.raises(ValueError, match=f"DriveConfig.{field}"):
             DriveConfig(**kwargs)

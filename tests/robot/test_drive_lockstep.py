@@ -22,13 +22,18 @@ from coassist.scenario import intent_registry  # noqa: E402
 from ..intent.conftest import TINY, labeled  # noqa: E402
 
 #: Runs of different lengths (so they leave the batch at different ticks), users and controllers.
-CASES = (("linear", 1, 0, "cooperative", 1.2), ("curved", 2, 1, "cooperative-arbitrated", 1.6),
-         ("sinusoidal", 3, 2, "cooperative", 1.0))  # fmt: skip
+CASES = (
+    ("linear", 1, 0, "cooperative", 1.2),
+    ("curved", 2, 1, "cooperative-arbitrated", 1.6),
+    ("sinusoidal", 3, 2, "cooperative", 1.0),
+)
 
 
 def _configs(intent: str) -> list[DriveConfig]:
-    return [DriveConfig(world="mujoco", controller=c, task=t, seed=s, user=u, intent=intent, time_limit=tl)
-            for t, s, u, c, tl in CASES]  # fmt: skip
+    return [
+        DriveConfig(world="mujoco", controller=c, task=t, seed=s, user=u, intent=intent, time_limit=tl)
+        for t, s, u, c, tl in CASES
+    ]
 
 
 def test_named_intents_drive_in_lockstep_exactly_as_alone():

@@ -43,8 +43,9 @@ class SimServer:
 
     def __init__(self) -> None:
         env = dict(os.environ, OMP_NUM_THREADS="1")
-        self.proc = subprocess.Popen([sys.executable, str(SERVER)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     text=True, env=env)  # fmt: skip
+        self.proc = subprocess.Popen(
+            [sys.executable, str(SERVER)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env
+        )
         line = self.proc.stdout.readline().split()
         if line[:1] != ["HOST"]:
             self.proc.kill()
@@ -103,8 +104,11 @@ def mg_run():
     try:
         world = FrankaWorld(s.host, arm="fr3", ft_sensor=PushSensor(s, (10.0, 0.0, 0.0)))
         sent = []
-        trial = drive(DriveConfig(world="franka", robot="fr3", controller="manual", time_limit=1.4), world=world,
-                      on_tick=lambda k, st, out: sent.append(np.asarray(out.command.qd, dtype=float).copy()))  # fmt: skip
+        trial = drive(
+            DriveConfig(world="franka", robot="fr3", controller="manual", time_limit=1.4),
+            world=world,
+            on_tick=lambda k, st, out: sent.append(np.asarray(out.command.qd, dtype=float).copy()),
+        )
         world.close()
     finally:
         s.close()
@@ -148,7 +152,9 @@ def test_a_lost_link_ends_the_run_with_what_to_do(server):
         if k == 40:
             server.kill()
 
-    trial = drive(DriveConfig(world="franka", robot="fr3", controller="manual", time_limit=3.0), world=world, on_tick=cut)
+    trial = drive(
+        DriveConfig(world="franka", robot="fr3", controller="manual", time_limit=3.0), world=world, on_tick=cut
+    )
     assert trial.meta.extra["ended"] == "link_lost"
     assert "check the cable and the robot, then rerun" in trial.meta.extra["stop_message"]
     assert 40 <= len(trial.time) <= 42
@@ -169,7 +175,9 @@ class ReflexAfter:
     def move(self, motion, asynchronous=False):
         self.moves += 1
         if self.moves == self.n:
-            raise franky.ControlException("libfranka: Move command aborted: motion aborted by reflex! [cartesian_reflex]")
+            raise franky.ControlException(
+                "libfranka: Move command aborted: motion aborted by reflex! [cartesian_reflex]"
+            )
         return self.robot.move(motion, asynchronous=asynchronous)
 
     def join_motion(self, timeout=None):
@@ -181,8 +189,11 @@ def test_a_reflex_ends_the_run_safely_with_what_to_do(server):
     robot = ReflexAfter(real, 30)
     world = FrankaWorld(server.host, robot=robot, arm="fr3", ft_sensor=PushSensor(server, (5.0, 0.0, 0.0)))
     sent = []
-    trial = drive(DriveConfig(world="franka", robot="fr3", controller="manual", time_limit=3.0), world=world,
-                  on_tick=lambda k, st, out: sent.append(out.command))  # fmt: skip
+    trial = drive(
+        DriveConfig(world="franka", robot="fr3", controller="manual", time_limit=3.0),
+        world=world,
+        on_tick=lambda k, st, out: sent.append(out.command),
+    )
     assert trial.meta.extra["ended"] == "robot_stop"
     msg = trial.meta.extra["stop_message"]
     assert "reflex" in msg and "recover_from_errors" in msg
@@ -238,10 +249,20 @@ def _assistive_run():
             world = FrankaWorld(server.host, arm="fr3", ft_sensor=PushSensor(server, (10.0, 0.0, 0.0)))
             seen = []
             # The preset this comparison's 1.5 mm was measured with (nominal intent: no learned predictor).
-            config = DriveConfig(world="franka", robot="fr3", controller="cooperative",
-                                 preset="thesis-application-dm", time_limit=2.0)  # fmt: skip
-            trial = drive(config, world=world, on_tick=lambda k, st, out, seen=seen: seen.append(
-                (np.asarray(out.command.qd, dtype=float).copy(), st.q.copy(), np.asarray(st.tool_pose, dtype=float).copy())))
+            config = DriveConfig(
+                world="franka", robot="fr3", controller="cooperative", preset="thesis-application-dm", time_limit=2.0
+            )
+            trial = drive(
+                config,
+                world=world,
+                on_tick=lambda k, st, out, seen=seen: seen.append(
+                    (
+                        np.asarray(out.command.qd, dtype=float).copy(),
+                        st.q.copy(),
+                        np.asarray(st.tool_pose, dtype=float).copy(),
+                    )
+                ),
+            )
             flags = int(np.bitwise_or.reduce(trial.fault))
             if flags & ~MACHINE_STALL or not flags or attempt == 2:
                 sent = world.commands_sent
@@ -272,6 +293,8 @@ def test_the_assistive_controller_through_franky_sim():
     # the same controller and push on the MuJoCo Panda move the tool the same way: the game holds
     # the tool near the plan (which starts to move at 1.5 s), so both creep 17 mm. 1.5 mm: the push
     # here starts a tick late and franky-sim's joint velocity loop lags its command
-    mj = drive(DriveConfig(robot="panda", controller="cooperative", preset="thesis-application-dm", time_limit=2.0),
-               operator=ScriptedForce.constant((10.0, 0.0, 0.0, 0.0, 0.0, 0.0)))
+    mj = drive(
+        DriveConfig(robot="panda", controller="cooperative", preset="thesis-application-dm", time_limit=2.0),
+        operator=ScriptedForce.constant((10.0, 0.0, 0.0, 0.0, 0.0, 0.0)),
+    )
     np.testing.assert_allclose(trial.pose[:, 0] - trial.pose[0, 0], mj.pose[:, 0] - mj.pose[0, 0], atol=1.5e-3)

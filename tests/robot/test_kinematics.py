@@ -196,7 +196,14 @@ def test_tcp_offset_jacobian_matches_finite_differences(kin, kin_offset):
 
 @pytest.mark.parametrize(
     "bad",
-    [(0, 0, 0), (0, 0, 0, 0, 0, 0, 0), (0, 0, np.nan, 0, 0, 0), (0, 0, 0, np.inf, 0, 0), "abcdef", ((0, 0, 0), (0, 0, 0))],
+    [
+        (0, 0, 0),
+        (0, 0, 0, 0, 0, 0, 0),
+        (0, 0, np.nan, 0, 0, 0),
+        (0, 0, 0, np.inf, 0, 0),
+        "abcdef",
+        ((0, 0, 0), (0, 0, 0)),
+    ],
 )
 def test_tcp_offset_is_validated(bad):
     with pytest.raises(ValueError, match="tcp_offset"):

@@ -123,9 +123,14 @@ def test_the_assistive_controller_saves_force_on_the_panda():
     assert force["cooperative"] < 0.7 * force["manual"], force
 
 
-@pytest.mark.parametrize(("world", "robot", "known"), [
-    ("ur", "panda", "('ur5',)"), ("mujoco", "kuka", "('ur5', 'panda')"), ("franka", "ur5", "('panda', 'fr3')"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("world", "robot", "known"),
+    [
+        ("ur", "panda", "('ur5',)"),
+        ("mujoco", "kuka", "('ur5', 'panda')"),
+        ("franka", "ur5", "('panda', 'fr3')"),
+    ],
+)
 def test_robot_is_checked_against_the_world(world, robot, known):
     with pytest.raises(ValueError) as info:
         DriveConfig(world=world, robot=robot)
@@ -146,8 +151,22 @@ def test_a_panda_run_is_written_as_mcap_with_its_seven_joints(tmp_path):
     from coassist.data.bags import load_bag_trial
 
     out = tmp_path / "p.parquet"
-    result = CliRunner().invoke(app, ["drive", "--robot", "panda", "--controller", "manual", "--time-limit", "0.5",
-                                      "--out", str(out), "--mcap", "--no-plot"])  # fmt: skip
+    result = CliRunner().invoke(
+        app,
+        [
+            "drive",
+            "--robot",
+            "panda",
+            "--controller",
+            "manual",
+            "--time-limit",
+            "0.5",
+            "--out",
+            str(out),
+            "--mcap",
+            "--no-plot",
+        ],
+    )
     assert result.exit_code == 0, result.output
     trial, back = read_trial(out), load_bag_trial(tmp_path / "p.mcap")
     assert trial.joints.shape[1] == 7

@@ -136,8 +136,16 @@ def ros_run(config: DriveConfig, *, stale_after=0.5, silent_after=None, silent_t
     robot = SimRobot(sim, silent_after=silent_after, silent_topic=silent_topic)
     offset = sim.kinematics().tcp_offset
     mass, com = sim.tool_mass_and_com()
-    cfg = Ros2Config(domain_id=DOMAIN, lockstep=lockstep, pace=not lockstep, stale_after=stale_after, rate_hz=config.rate_hz,
-                     tcp_offset=tuple(offset), payload=(mass, tuple(com)), connect_timeout=10.0)  # fmt: skip
+    cfg = Ros2Config(
+        domain_id=DOMAIN,
+        lockstep=lockstep,
+        pace=not lockstep,
+        stale_after=stale_after,
+        rate_hz=config.rate_hz,
+        tcp_offset=tuple(offset),
+        payload=(mass, tuple(com)),
+        connect_timeout=10.0,
+    )
     world = Ros2World(cfg, alpha=0.8)
     try:
         trial = drive(config, world=world, on_tick=world.publish_monitor)
@@ -158,7 +166,7 @@ def test_a_ros2_run_matches_the_in_process_mujoco_drive(controller):
     # Every command the tick sent arrived, in order (reliable, lockstep), then the stop's zeros.
     sent = np.asarray(robot.commands[: trial.n_samples])
     np.testing.assert_array_equal(sent, trial.joint_velocity)
-    assert np.all(np.asarray(robot.commands[trial.n_samples:]) == 0.0)
+    assert np.all(np.asarray(robot.commands[trial.n_samples :]) == 0.0)
     # The only difference between the two runs: the ROS world computes the TCP (and the
     # sensor's orientation) from the joint states with the pinocchio UR5, the in-process run
     # reads MuJoCo's sites; they agree to ~1e-8 m here (test_drive bounds it by 1e-6). The
@@ -192,7 +200,9 @@ def test_silent_topics_stop_the_arm(topic, lockstep):
 
 def test_no_robot_is_a_clear_error():
     cfg = Ros2Config(domain_id=DOMAIN, connect_timeout=0.3, node_name="lonely")
-    with pytest.raises(RobotLinkError, match=r"no message on /joint_states and /force_torque_sensor_broadcaster/wrench within 0.3 s"):
+    with pytest.raises(
+        RobotLinkError, match=r"no message on /joint_states and /force_torque_sensor_broadcaster/wrench within 0.3 s"
+    ):
         Ros2World(cfg)
 
 
@@ -208,9 +218,13 @@ def test_config_names_the_field():
 class Listener(_SpunNode):
     """An operator's monitor: subscribes to the node's monitor topics."""
 
-    TOPICS = {"/coassist/tool_pose": "geometry_msgs.msg.PoseStamped", "/coassist/prediction": "nav_msgs.msg.Path",
-              "/coassist/alpha": "std_msgs.msg.Float64", "/coassist/hand_force": "geometry_msgs.msg.WrenchStamped",
-              "/diagnostics": "diagnostic_msgs.msg.DiagnosticArray"}  # fmt: skip
+    TOPICS = {
+        "/coassist/tool_pose": "geometry_msgs.msg.PoseStamped",
+        "/coassist/prediction": "nav_msgs.msg.Path",
+        "/coassist/alpha": "std_msgs.msg.Float64",
+        "/coassist/hand_force": "geometry_msgs.msg.WrenchStamped",
+        "/diagnostics": "diagnostic_msgs.msg.DiagnosticArray",
+    }
 
     def __init__(self) -> None:
         import importlib
@@ -237,8 +251,15 @@ def test_the_monitor_topics_carry_the_run():
         sim = mujoco_world(config)
         robot = SimRobot(sim)
         mass, com = sim.tool_mass_and_com()
-        cfg = Ros2Config(domain_id=DOMAIN, lockstep=True, pace=False, stale_after=0.5, tcp_offset=tuple(sim.kinematics().tcp_offset),
-                         payload=(mass, tuple(com)), connect_timeout=10.0)  # fmt: skip
+        cfg = Ros2Config(
+            domain_id=DOMAIN,
+            lockstep=True,
+            pace=False,
+            stale_after=0.5,
+            tcp_offset=tuple(sim.kinematics().tcp_offset),
+            payload=(mass, tuple(com)),
+            connect_timeout=10.0,
+        )
         world = Ros2World(cfg, alpha=0.8)
         deadline = time.monotonic() + 5.0  # the monitor's subscriptions are matched before the run
         while world._pubs["tool_pose"].get_subscription_count() == 0 and time.monotonic() < deadline:
@@ -259,16 +280,22 @@ def test_the_monitor_topics_carry_the_run():
     # 0.4 s at 8 ms = 50 rows, every 5th drawn (rows 4, 9, …, 49), stamped at t + (i + 1)·dt
     rows = list(range(4, 50, 5))
     assert len(paths) == 15 and all(len(p.poses) == len(rows) for p in paths)
-    np.testing.assert_array_equal([[q.pose.position.x, q.pose.position.y] for q in paths[3].poses], trial.prediction[15, rows, :2])
+    np.testing.assert_array_equal(
+        [[q.pose.position.x, q.pose.position.y] for q in paths[3].poses], trial.prediction[15, rows, :2]
+    )
     t0 = paths[3].header.stamp.sec * 10**9 + paths[3].header.stamp.nanosec
-    assert [q.header.stamp.sec * 10**9 + q.header.stamp.nanosec - t0 for q in paths[3].poses] == [(i + 1) * 8_000_000 for i in rows]
+    assert [q.header.stamp.sec * 10**9 + q.header.stamp.nanosec - t0 for q in paths[3].poses] == [
+        (i + 1) * 8_000_000 for i in rows
+    ]
     assert [m.data for m in listener.got["/coassist/alpha"]] == [0.8] * 15
     forces = listener.got["/coassist/hand_force"]
     np.testing.assert_array_equal([[f.wrench.force.x, f.wrench.force.y] for f in forces], trial.wrench[::5])
     diags = listener.got["/diagnostics"]
     flagged = int(np.count_nonzero(trial.fault))
     assert len(diags) == 15 + int(np.count_nonzero(trial.fault[np.arange(n) % 5 != 0]))
-    assert all(d.status[0].name == "coassist: fault flags" for d in diags) and flagged == sum(d.status[0].level != b"\x00" for d in diags)
+    assert all(d.status[0].name == "coassist: fault flags" for d in diags) and flagged == sum(
+        d.status[0].level != b"\x00" for d in diags
+    )
 
 
 def test_coassist_ros2_drives_the_simulated_robot_and_writes_the_run(tmp_path):
@@ -282,9 +309,28 @@ def test_coassist_ros2_drives_the_simulated_robot_and_writes_the_run(tmp_path):
     robot = SimRobot(sim)
     offset = ",".join(repr(float(v)) for v in sim.kinematics().tcp_offset)
     try:
-        result = CliRunner().invoke(app, [
-            "ros2", "--controller", "manual", "--time-limit", "0.4", "--domain-id", str(DOMAIN), "--lockstep", "--yes",
-            "--tcp-offset", offset, "--stale-after", "0.5", "--out", str(tmp_path / "run.parquet"), "--mcap", "--no-plot"])  # fmt: skip
+        result = CliRunner().invoke(
+            app,
+            [
+                "ros2",
+                "--controller",
+                "manual",
+                "--time-limit",
+                "0.4",
+                "--domain-id",
+                str(DOMAIN),
+                "--lockstep",
+                "--yes",
+                "--tcp-offset",
+                offset,
+                "--stale-after",
+                "0.5",
+                "--out",
+                str(tmp_path / "run.parquet"),
+                "--mcap",
+                "--no-plot",
+            ],
+        )
     finally:
         time.sleep(0.05)
         robot.close()

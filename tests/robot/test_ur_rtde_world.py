@@ -121,7 +121,12 @@ def test_close_stops_then_stops_script_and_disconnects_even_if_speed_stop_raises
     robot.raise_on = {"speedStop", "stopScript"}
     world.close()  # must not raise
     tail = [(c.source, c.name) for c in robot.calls[-4:]]
-    assert tail == [("control", "speedStop"), ("control", "stopScript"), ("control", "disconnect"), ("receive", "disconnect")]
+    assert tail == [
+        ("control", "speedStop"),
+        ("control", "stopScript"),
+        ("control", "disconnect"),
+        ("receive", "disconnect"),
+    ]
     assert "speedStop failed" in caplog.text
     n = len(robot.calls)
     world.close()  # idempotent

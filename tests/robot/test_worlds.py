@@ -34,7 +34,11 @@ REQUEST = WorldRequest(robot="ur5", object="handle", rate_hz=125, seed=0, start=
 def test_one_entry_per_world_with_its_arms_and_needs():
     assert tuple(WORLDS) == ("mujoco", "ur", "franka", "ros2")
     assert {name: e.arms for name, e in WORLDS.items()} == {
-        "mujoco": ("ur5", "panda"), "ur": ("ur5",), "franka": ("panda", "fr3"), "ros2": ("ur5",)}  # fmt: skip
+        "mujoco": ("ur5", "panda"),
+        "ur": ("ur5",),
+        "franka": ("panda", "fr3"),
+        "ros2": ("ur5",),
+    }
     assert [name for name, e in WORLDS.items() if e.simulated] == ["mujoco"]
     assert [name for name, e in WORLDS.items() if e.host] == ["ur", "franka"]
     for name, entry in WORLDS.items():
@@ -80,15 +84,18 @@ def test_the_simulated_world_is_an_arm_world_with_a_handle():
 
 def test_the_real_ur_world_is_an_arm_world_without_a_handle():
     pytest.importorskip("pinocchio", reason="the UR5 kinematics need the robot extra")
-    spec = importlib.util.spec_from_file_location("coassist_tests_fake_rtde_w", Path(__file__).with_name("fake_rtde.py"))
+    spec = importlib.util.spec_from_file_location(
+        "coassist_tests_fake_rtde_w", Path(__file__).with_name("fake_rtde.py")
+    )
     fake_rtde = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = fake_rtde
     spec.loader.exec_module(fake_rtde)
     from coassist.robot.ur_rtde_world import URRTDEWorld
 
     robot = fake_rtde.FakeRobot()
-    world = URRTDEWorld("192.0.2.10", frequency=125.0, control_factory=robot.control_factory,
-                        receive_factory=robot.receive_factory)
+    world = URRTDEWorld(
+        "192.0.2.10", frequency=125.0, control_factory=robot.control_factory, receive_factory=robot.receive_factory
+    )
     try:
         assert isinstance(world, ArmWorld) and not isinstance(world, HandWorld)
         assert not world.noise_free_sensor
@@ -99,8 +106,9 @@ def test_the_real_ur_world_is_an_arm_world_without_a_handle():
         world.close()
 
 
-@pytest.mark.parametrize("module, cls", [("coassist.robot.franka_world", "FrankaWorld"),
-                                         ("coassist.robot.ros2_world", "Ros2World")])
+@pytest.mark.parametrize(
+    "module, cls", [("coassist.robot.franka_world", "FrankaWorld"), ("coassist.robot.ros2_world", "Ros2World")]
+)
 def test_the_other_real_worlds_offer_the_protocols_members(module, cls):
     klass = getattr(pytest.importorskip(module), cls)
     for member in ("kinematics", "tool_mass_and_com", "noise_free_sensor", "read", "apply", "stop", "close"):
@@ -122,8 +130,10 @@ def test_drive_refuses_a_world_without_the_protocol_in_one_line():
 
     with pytest.raises(ValueError) as info:
         drive(DriveConfig(world="ur"), world=OnlyAWorld())
-    assert str(info.value) == ("world must be an arm world (coassist.robot.worlds.ArmWorld); a OnlyAWorld lacks "
-                               "kinematics, noise_free_sensor, tool_mass_and_com")
+    assert str(info.value) == (
+        "world must be an arm world (coassist.robot.worlds.ArmWorld); a OnlyAWorld lacks "
+        "kinematics, noise_free_sensor, tool_mass_and_com"
+    )
 
 
 def test_drive_config_reads_the_registry():
@@ -134,7 +144,9 @@ def test_drive_config_reads_the_registry():
     with pytest.raises(ValueError, match=r"DriveConfig.world must be one of \('mujoco', 'ur', 'franka', 'ros2'\)"):
         DriveConfig(world="gazebo")
     for world in ("ur", "franka", "ros2"):
-        with pytest.raises(ValueError, match="DriveConfig.intent must be a source a real arm can run, not the simulated"):
+        with pytest.raises(
+            ValueError, match="DriveConfig.intent must be a source a real arm can run, not the simulated"
+        ):
             DriveConfig(world=world, intent="oracle")
 
 
@@ -161,15 +173,25 @@ def test_a_world_registered_by_one_line_drives_as_the_built_in_one(tmp_path, mon
         "                          seed=request.seed, view=request.view, realtime=request.realtime)\n"
     )
     monkeypatch.syspath_prepend(str(tmp_path))
-    line = {"my-arm": WorldEntry("coassist_test_my_world:build_world", ("ur5",), "the MuJoCo UR5, built by a test",
-                                 simulated=True, host=None, extras=("robot",), source="mujoco")}
+    line = {
+        "my-arm": WorldEntry(
+            "coassist_test_my_world:build_world",
+            ("ur5",),
+            "the MuJoCo UR5, built by a test",
+            simulated=True,
+            host=None,
+            extras=("robot",),
+            source="mujoco",
+        )
+    }
     extended = Registry("world", {**WORLDS, **line})
     monkeypatch.setattr(worlds_module, "WORLDS", extended)
     monkeypatch.setattr(drive_module, "WORLDS", extended)  # drive's own name for the same table
     config = drive_module.DriveConfig(world="my-arm", controller="cooperative", intent="oracle", time_limit=0.6)
     mine = drive_module.drive(config)
-    builtin = drive_module.drive(drive_module.DriveConfig(world="mujoco", controller="cooperative", intent="oracle",
-                                                          time_limit=0.6))
+    builtin = drive_module.drive(
+        drive_module.DriveConfig(world="mujoco", controller="cooperative", intent="oracle", time_limit=0.6)
+    )
     assert mine.meta.extra["world"] == "my-arm" and builtin.meta.extra["world"] == "mujoco"
     assert mine.n_samples == builtin.n_samples > 50
     for column in ("pose", "wrench", "effort_r", "joints", "joint_velocity", "fault"):

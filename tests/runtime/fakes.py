@@ -58,9 +58,15 @@ class FakeArmWorld:
     command_space = "joint_velocity"
     realtime = False
 
-    def __init__(self, kin: LinearKinematics, wrench: Callable[[int], np.ndarray], *,
-                 link_error: type[Exception] = ConnectionError, fail_read_at: int | None = None,
-                 fail_apply_at: int | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        kin: LinearKinematics,
+        wrench: Callable[[int], np.ndarray],
+        *,
+        link_error: type[Exception] = ConnectionError,
+        fail_read_at: int | None = None,
+        fail_apply_at: int | None = None,
+    ) -> None:
         self.kin, self.wrench = kin, wrench
         self.n_joints = kin.n_joints
         self.dt = DT
@@ -75,9 +81,15 @@ class FakeArmWorld:
     def read(self) -> RobotState:
         if self.k == self.fail_read_at:
             raise self.link_error("read timed out")
-        state = RobotState(t=self.k * DT, q=self.q.copy(), qd=self.qd.copy(), tool_pose=self.kin.pose(self.q),
-                           tool_twist=self.kin.J @ self.qd, wrench=np.array(self.wrench(self.k), dtype=float),
-                           wrench_seq=self.k + 1)  # fmt: skip
+        state = RobotState(
+            t=self.k * DT,
+            q=self.q.copy(),
+            qd=self.qd.copy(),
+            tool_pose=self.kin.pose(self.q),
+            tool_twist=self.kin.J @ self.qd,
+            wrench=np.array(self.wrench(self.k), dtype=float),
+            wrench_seq=self.k + 1,
+        )
         self.states.append(state)
         return state
 
@@ -125,8 +137,15 @@ class ScriptedEffortWorld:
         pose[:2] = p
         twist = np.zeros(6)
         twist[:2] = v
-        return RobotState(t=self.k * DT, q=np.zeros(0), qd=np.zeros(0), tool_pose=pose, tool_twist=twist,
-                          wrench=self.raw.copy(), wrench_seq=self.k + 1)  # fmt: skip
+        return RobotState(
+            t=self.k * DT,
+            q=np.zeros(0),
+            qd=np.zeros(0),
+            tool_pose=pose,
+            tool_twist=twist,
+            wrench=self.raw.copy(),
+            wrench_seq=self.k + 1,
+        )
 
     def apply(self, command: Command) -> None:
         self.efforts.append(np.array(command.effort, dtype=float))

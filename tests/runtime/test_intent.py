@@ -45,7 +45,11 @@ def test_the_batch_pushes_the_stages_windows_and_accepts_as_they_do(history):
         assert windows.shape == (rows.size, history, 8)
         for j, i in enumerate(rows.tolist()):
             assert windows[j].tolist() == stages[i].push(k, tuple(features[j])).tolist()
-        answer = np.stack([source.predict(w) for w in windows]) if history else rng.normal(0.0, 1.0, (rows.size, horizon + 2, 2))
+        answer = (
+            np.stack([source.predict(w) for w in windows])
+            if history
+            else rng.normal(0.0, 1.0, (rows.size, horizon + 2, 2))
+        )
         answer[0, 1, 0] = np.nan  # row 0: a NaN in use (a fallback)
         if rows.size > 1:
             answer[1, horizon:, :] = np.nan  # row 1: NaNs only past the horizon (taken)

@@ -264,10 +264,30 @@ def test_collect_per_trial_and_lockstep_options(tiny_model, tmp_path):
     from coassist.data import read_dataset
     from coassist.sim.collect import dataset_specs
 
-    common = ["--tasks", "linear,curved", "--trials", "1", "--seed", "7", "--preset", PRESET, "--intent", tiny_model,
-              "--workers", "1"]  # fmt: skip
-    specs = dataset_specs(controller="cooperative", users=[0], objects=["handle"], tasks=["linear", "curved"], trials=1,
-                          seed=7, preset=PRESET, intent=tiny_model)
+    common = [
+        "--tasks",
+        "linear,curved",
+        "--trials",
+        "1",
+        "--seed",
+        "7",
+        "--preset",
+        PRESET,
+        "--intent",
+        tiny_model,
+        "--workers",
+        "1",
+    ]
+    specs = dataset_specs(
+        controller="cooperative",
+        users=[0],
+        objects=["handle"],
+        tasks=["linear", "curved"],
+        trials=1,
+        seed=7,
+        preset=PRESET,
+        intent=tiny_model,
+    )
     expected = {"--per-trial": [run_spec(s) for s in specs], "--lockstep": run_spec_lockstep(specs)}
     for flag, trials in expected.items():
         out = tmp_path / flag.strip("-")

@@ -7,8 +7,20 @@ from coassist.runtime.loop import LoopLog
 
 def _log(n, prediction=None):
     z = np.zeros((n, 2))
-    return LoopLog(pose=z, velocity=z, wrench=z, reference=z, prediction=prediction, effort_h=z, effort_r=z,
-                   fault=np.zeros(n, dtype=np.int64), joints=None, joint_velocity=None, compute=np.zeros(n), ended="target")
+    return LoopLog(
+        pose=z,
+        velocity=z,
+        wrench=z,
+        reference=z,
+        prediction=prediction,
+        effort_h=z,
+        effort_r=z,
+        fault=np.zeros(n, dtype=np.int64),
+        joints=None,
+        joint_velocity=None,
+        compute=np.zeros(n),
+        ended="target",
+    )
 
 
 def test_the_plans_next_rows_at_every_tick_or_the_logged_prediction():

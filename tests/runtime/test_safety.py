@@ -107,8 +107,11 @@ def test_tool_speed_with_random_jacobians():
         assert ang <= lim.margin * lim.tool_angular_speed * (1 + 1e-12)
         assert flags & (Fault.TOOL_SPEED_LIMIT | Fault.JOINT_VELOCITY_LIMIT)
         # the binding limit is reached exactly: the layer slows no more than it must
-        ratio = max(lin / (lim.margin * lim.tool_speed), ang / (lim.margin * lim.tool_angular_speed),
-                    np.max(np.abs(out)) / (lim.margin * lim.joint_velocity))
+        ratio = max(
+            lin / (lim.margin * lim.tool_speed),
+            ang / (lim.margin * lim.tool_angular_speed),
+            np.max(np.abs(out)) / (lim.margin * lim.joint_velocity),
+        )
         assert ratio == pytest.approx(1.0, rel=1e-9)
 
 
@@ -216,12 +219,15 @@ def test_manipulability_guard():
 
 
 # ---------------------------------------------------------------------- stops
-@pytest.mark.parametrize("hand, robot", [
-    (np.array([100.0, 80.0, 0, 0, 0, 0]), Fault.NONE),  # 128 N > 120 N
-    (np.array([0, 0, 0, 0, 0, 16.0]), Fault.NONE),  # 16 N·m > 15 N·m
-    (NO_HAND, Fault.ROBOT_PROTECTIVE_STOP),
-    (NO_HAND, Fault.ROBOT_EMERGENCY_STOP),
-])
+@pytest.mark.parametrize(
+    "hand, robot",
+    [
+        (np.array([100.0, 80.0, 0, 0, 0, 0]), Fault.NONE),  # 128 N > 120 N
+        (np.array([0, 0, 0, 0, 0, 16.0]), Fault.NONE),  # 16 N·m > 15 N·m
+        (NO_HAND, Fault.ROBOT_PROTECTIVE_STOP),
+        (NO_HAND, Fault.ROBOT_EMERGENCY_STOP),
+    ],
+)
 def test_contact_force_and_robot_stops_latch(hand, robot):
     layer = SafetyLayer(SafetyLimits(), DT, 6)
     run_to_steady(layer, np.full(6, 0.05), ticks=20)
@@ -279,15 +285,18 @@ def test_a_fault_that_is_not_bad_does_not_decelerate():
     assert flags == Fault.NONE and np.allclose(out, 0.05)
 
 
-@pytest.mark.parametrize("which, value", [
-    ("qd", np.array([np.nan, 0, 0, 0, 0, 0])),
-    ("qd", np.zeros(5)),
-    ("J", np.full((6, 6), np.inf)),
-    ("J", np.eye(5)),
-    ("pose", np.array([0, 0, np.nan, 0, 0, 0])),
-    ("hand", None),
-    ("upstream", "ok"),
-])
+@pytest.mark.parametrize(
+    "which, value",
+    [
+        ("qd", np.array([np.nan, 0, 0, 0, 0, 0])),
+        ("qd", np.zeros(5)),
+        ("J", np.full((6, 6), np.inf)),
+        ("J", np.eye(5)),
+        ("pose", np.array([0, 0, np.nan, 0, 0, 0])),
+        ("hand", None),
+        ("upstream", "ok"),
+    ],
+)
 def test_invalid_inputs_are_bad_ticks(which, value):
     layer = SafetyLayer(SafetyLimits(), DT, 6)
     run_to_steady(layer, np.full(6, 0.2), ticks=10)
@@ -441,10 +450,22 @@ def _garbage(rng, shape, scale):
 
 def test_randomised_inputs_never_raise_and_never_leave_the_limits():
     rng = np.random.default_rng(12345)
-    layers = [SafetyLayer(SafetyLimits(**BOX), DT, 6), SafetyLayer(SafetyLimits(), DT, 6),
-              SafetyLayer(SafetyLimits(joint_velocity=(1.0, 2.0, 0.5, 3.0, 3.0, 3.0, 1.0), **BOX), DT, 7)]
-    words = [Fault.NONE] * 12 + [Fault.DEADLINE_MISS, Fault.PREDICTION_STALE, Fault.SENSOR_STALE,
-                                 Fault.WRENCH_SPIKE | Fault.SATURATED, -1, None, "x", 2**70, 1.5]
+    layers = [
+        SafetyLayer(SafetyLimits(**BOX), DT, 6),
+        SafetyLayer(SafetyLimits(), DT, 6),
+        SafetyLayer(SafetyLimits(joint_velocity=(1.0, 2.0, 0.5, 3.0, 3.0, 3.0, 1.0), **BOX), DT, 7),
+    ]
+    words = [Fault.NONE] * 12 + [
+        Fault.DEADLINE_MISS,
+        Fault.PREDICTION_STALE,
+        Fault.SENSOR_STALE,
+        Fault.WRENCH_SPIKE | Fault.SATURATED,
+        -1,
+        None,
+        "x",
+        2**70,
+        1.5,
+    ]
     checked = moved = conflicts = 0
     kinds = Fault.NONE
     for i in range(5000):
@@ -482,20 +503,40 @@ def test_randomised_inputs_never_raise_and_never_leave_the_limits():
         tw, tf = layer.limit_twist(_garbage(rng, (6,), 1.0), pose)
         assert tw.shape == (6,) and np.all(np.isfinite(tw))
     assert checked > 3000 and moved > 1000, (checked, moved)  # the check was not vacuous
-    for f in (Fault.JOINT_VELOCITY_LIMIT, Fault.JOINT_ACCELERATION_LIMIT, Fault.TOOL_SPEED_LIMIT,
-              Fault.WORKSPACE_LIMIT, Fault.SINGULARITY, Fault.DECELERATING):
+    for f in (
+        Fault.JOINT_VELOCITY_LIMIT,
+        Fault.JOINT_ACCELERATION_LIMIT,
+        Fault.TOOL_SPEED_LIMIT,
+        Fault.WORKSPACE_LIMIT,
+        Fault.SINGULARITY,
+        Fault.DECELERATING,
+    ):
         assert kinds & f, f
     assert conflicts > 0  # the residual case did occur (J and the pose jump every call)
 
 
 # ---------------------------------------------------------------------- parameters
-@pytest.mark.parametrize("field, value", [
-    ("joint_velocity", 0.0), ("joint_velocity", (1.0, -1.0)), ("joint_velocity", "fast"), ("joint_velocity", [[1.0]]),
-    ("joint_acceleration", float("nan")), ("tool_speed", -0.1), ("tool_angular_speed", "x"),
-    ("contact_force", 0.0), ("contact_torque", float("inf")), ("min_manipulability", -1.0),
-    ("max_bad_ticks", 0), ("max_bad_ticks", 2.5), ("margin", 1.5), ("margin", 0.0),
-    ("workspace_lower", (0.0, 0.0, 0.0)), ("workspace_upper", (1.0, 1.0)),
-])
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("joint_velocity", 0.0),
+        ("joint_velocity", (1.0, -1.0)),
+        ("joint_velocity", "fast"),
+        ("joint_velocity", [[1.0]]),
+        ("joint_acceleration", float("nan")),
+        ("tool_speed", -0.1),
+        ("tool_angular_speed", "x"),
+        ("contact_force", 0.0),
+        ("contact_torque", float("inf")),
+        ("min_manipulability", -1.0),
+        ("max_bad_ticks", 0),
+        ("max_bad_ticks", 2.5),
+        ("margin", 1.5),
+        ("margin", 0.0),
+        ("workspace_lower", (0.0, 0.0, 0.0)),
+        ("workspace_upper", (1.0, 1.0)),
+    ],
+)
 def test_limits_validation_names_the_field(field, value):
     kwargs = {field: value}
     if field == "workspace_upper":
@@ -520,9 +561,19 @@ def test_layer_parameters():
 
 def test_describe_mentions_every_limit():
     text = SafetyLimits(**BOX).describe()
-    for part in ("joint speed ≤ 90 °/s", "joint acceleration ≤ 458 °/s²", "tool speed ≤ 0.25 m/s",
-                 "tool rotation ≤ 57 °/s", "x ∈ [-0.500, 0.500] m", "z ∈ [-0.500, 0.500] m", "120 N",
-                 "15 N·m", "manipulability 0.01", "25 bad ticks", "98%"):
+    for part in (
+        "joint speed ≤ 90 °/s",
+        "joint acceleration ≤ 458 °/s²",
+        "tool speed ≤ 0.25 m/s",
+        "tool rotation ≤ 57 °/s",
+        "x ∈ [-0.500, 0.500] m",
+        "z ∈ [-0.500, 0.500] m",
+        "120 N",
+        "15 N·m",
+        "manipulability 0.01",
+        "25 bad ticks",
+        "98%",
+    ):
         assert part in text, part
     assert "no box" in SafetyLimits().describe()
     assert "joints 1…6" in SafetyLimits(joint_velocity=(1.0,) * 6).describe()

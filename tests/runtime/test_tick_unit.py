@@ -32,13 +32,22 @@ POSE0 = np.array([0.4, -0.1, 0.3, 0.2, -0.1, 0.3])  # [m, rad] a tilted tool
 OFFSET = np.array([0.002, -0.001, 0.005, 0.02, -0.01, 0.015])  # [m, rad]
 # the raw reading is the hand wrench: sensor frame = base frame, no bias, no payload, no filter, no deadband
 CLEAN = WrenchConfig(cutoff_hz=None, deadband_force=0.0, deadband_torque=0.0)
-WIDE = SafetyLimits(joint_velocity=100.0, joint_acceleration=1e4, tool_speed=100.0, tool_angular_speed=100.0,
-                    min_manipulability=0.0)  # fmt: skip  # nothing binds: the tick's own law is seen
+WIDE = SafetyLimits(
+    joint_velocity=100.0, joint_acceleration=1e4, tool_speed=100.0, tool_angular_speed=100.0, min_manipulability=0.0
+)  # nothing binds: the tick's own law is seen
 
 
 def _context(ref: np.ndarray) -> TrialContext:
-    return TrialContext(dt=DT, horizon=H, start=ref[0, :2].copy(), target=ref[-1, :2].copy(), reference=ref,
-                        task="test", user="fake", object="none")  # fmt: skip
+    return TrialContext(
+        dt=DT,
+        horizon=H,
+        start=ref[0, :2].copy(),
+        target=ref[-1, :2].copy(),
+        reference=ref,
+        task="test",
+        user="fake",
+        object="none",
+    )
 
 
 def _reference(start_xy, velocity=(0.0, 0.0)) -> np.ndarray:
@@ -51,8 +60,15 @@ def _reference(start_xy, velocity=(0.0, 0.0)) -> np.ndarray:
 
 def _arm_tick(kin: LinearKinematics, limits: SafetyLimits, config: TickConfig | None = None) -> ControlTick:
     model = ImpedanceModel(M, D, 0.0, DT)
-    tick = ControlTick(ManualGuidance(model), NominalStage(H), WrenchPipeline(CLEAN, DT), SafetyLayer(limits, DT, 6),
-                       command_space="joint_velocity", kinematics=kin, config=config)  # fmt: skip
+    tick = ControlTick(
+        ManualGuidance(model),
+        NominalStage(H),
+        WrenchPipeline(CLEAN, DT),
+        SafetyLayer(limits, DT, 6),
+        command_space="joint_velocity",
+        kinematics=kin,
+        config=config,
+    )
     ref = _reference(POSE0[:2])
     tick.reset(Plan(ref, POSE0), _context(ref))
     return tick
@@ -148,8 +164,13 @@ def test_an_effort_world_gets_the_controllers_u_r_unchanged_within_the_limits():
     # the tool lags the plan by a few mm, at the plan's speed (0.054 m/s: below the 0.25 m/s tool speed)
     poses = ref[:20, :2] - np.array([0.003, -0.002])
     world = ScriptedEffortWorld(poses)
-    tick = ControlTick(ImpedanceControl(model, K, effort_limit=50.0), NominalStage(H), WrenchPipeline(CLEAN, DT),
-                       SafetyLayer(SafetyLimits(), DT, 6), command_space="effort")  # fmt: skip
+    tick = ControlTick(
+        ImpedanceControl(model, K, effort_limit=50.0),
+        NominalStage(H),
+        WrenchPipeline(CLEAN, DT),
+        SafetyLayer(SafetyLimits(), DT, 6),
+        command_space="effort",
+    )
     tick.reset(Plan(ref, np.array([*start, 0.0, 0.0, 0.0, 0.0])), _context(ref))
     for k in range(15):
         out = tick.step(k, world.read())
@@ -166,8 +187,13 @@ def test_an_effort_world_gets_the_controllers_u_r_unchanged_within_the_limits():
 
 
 def _effort_tick(ref: np.ndarray) -> ControlTick:
-    tick = ControlTick(ManualGuidance(ImpedanceModel(M, D, 0.0, DT)), NominalStage(H), WrenchPipeline(CLEAN, DT),
-                       SafetyLayer(SafetyLimits(), DT, 6), command_space="effort")  # fmt: skip
+    tick = ControlTick(
+        ManualGuidance(ImpedanceModel(M, D, 0.0, DT)),
+        NominalStage(H),
+        WrenchPipeline(CLEAN, DT),
+        SafetyLayer(SafetyLimits(), DT, 6),
+        command_space="effort",
+    )
     tick.reset(Plan(ref, np.array([*ref[0, :2], 0.0, 0.0, 0.0, 0.0])), _context(ref))
     return tick
 

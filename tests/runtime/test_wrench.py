@@ -38,7 +38,9 @@ def rot_x(deg):
 
 def test_payload_wrench_hand_computed_cases():
     # Sensor level, z up (R = I): a 2 kg tool's weight presses along −z_sensor.
-    np.testing.assert_allclose(payload_wrench(2.0, (0, 0, 0.1), (0, 0, -G), np.eye(3)), [0, 0, -2 * G, 0, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(
+        payload_wrench(2.0, (0, 0, 0.1), (0, 0, -G), np.eye(3)), [0, 0, -2 * G, 0, 0, 0], atol=1e-12
+    )
     # Tool hanging straight down (sensor turned 180° about x: z_sensor = −z_base): the
     # weight pulls along +z_sensor; a CoM offset along x_sensor twists it about −y_sensor:
     # τ = c × F = (0.05, 0, 0.1) × (0, 0, 2g) = (0, −0.05·2g, 0).
@@ -47,7 +49,9 @@ def test_payload_wrench_hand_computed_cases():
     )
     # Turned 90° about x: z_sensor = −y_base, y_sensor = +z_base. Gravity in the sensor
     # frame is (0, −g, 0); the CoM 0.1 m along z_sensor gives τ = (0.1 g, 0, 0).
-    np.testing.assert_allclose(payload_wrench(1.0, (0, 0, 0.1), (0, 0, -G), rot_x(90)), [0, -G, 0, 0.1 * G, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(
+        payload_wrench(1.0, (0, 0, 0.1), (0, 0, -G), rot_x(90)), [0, -G, 0, 0.1 * G, 0, 0], atol=1e-12
+    )
     # Same torque worked out in the base frame and turned back: r × F with r = R c.
     R = rot_x(90)
     tau_base = np.cross(R @ [0, 0, 0.1], [0, 0, -G])
@@ -112,7 +116,9 @@ def test_known_hand_wrench_on_a_rotating_tool_is_recovered_in_the_base_frame():
     hand_base = np.array([5.0, -3.0, 8.0, 0.4, -0.2, 0.1])
     Rs = Rotation.random(100, random_state=5).as_matrix()
     # What the sensor reads: the hand wrench turned into the sensor frame + weight + bias.
-    hand_sensor = np.concatenate([np.einsum("nji,j->ni", Rs, hand_base[:3]), np.einsum("nji,j->ni", Rs, hand_base[3:])], axis=1)
+    hand_sensor = np.concatenate(
+        [np.einsum("nji,j->ni", Rs, hand_base[:3]), np.einsum("nji,j->ni", Rs, hand_base[3:])], axis=1
+    )
     raw = bias + payload_wrench(cfg.tool_mass, cfg.tool_com, cfg.gravity, Rs) + hand_sensor
     out, fault, _ = run(pipe, raw, Rs, dt=0.002)
     assert not fault.any()
@@ -322,7 +328,9 @@ def test_bad_readings_give_zero_and_a_flag_without_raising(raw, flag):
     # The hand "let go": a good reading afterwards starts the filter from zero again.
     again = pipe.update(np.array([20.0, 0, 0, 0, 0, 0]), np.eye(3), 7, 0.048)
     assert again.fault == Fault.NONE
-    assert again.hand[0] == pytest.approx(20.0 * (1.0 - math.exp(-2 * math.pi * 5.0 * 0.008)) - pipe.config.deadband_force)
+    assert again.hand[0] == pytest.approx(
+        20.0 * (1.0 - math.exp(-2 * math.pi * 5.0 * 0.008)) - pipe.config.deadband_force
+    )
 
 
 @pytest.mark.parametrize(
@@ -410,7 +418,9 @@ def test_request_zero_measures_the_bias_from_the_next_accepted_samples():
     assert not pipe.zeroing
     np.testing.assert_allclose(pipe.bias, bias, atol=1e-10)
     hand = np.array([0.0, 12.0, 0.0, 0.0, 0.0, 0.5])
-    r = pipe.update(bias + payload_wrench(cfg.tool_mass, cfg.tool_com, cfg.gravity, np.eye(3)) + hand, np.eye(3), 100, 1.0)
+    r = pipe.update(
+        bias + payload_wrench(cfg.tool_mass, cfg.tool_com, cfg.gravity, np.eye(3)) + hand, np.eye(3), 100, 1.0
+    )
     np.testing.assert_allclose(r.hand, hand, atol=1e-10)
 
 
@@ -526,8 +536,11 @@ def test_the_batch_gives_each_pipelines_hand_force_on_every_clean_tick():
     rng = np.random.default_rng(11)
     dt = 0.008
     R = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix()
-    configs = [WrenchConfig(**PLAIN, force_range=300.0), WrenchConfig(**PLAIN, force_range=12.0, spike_jump_force=20.0),
-               WrenchConfig(**PLAIN, max_frozen_time=0.05)]  # fmt: skip
+    configs = [
+        WrenchConfig(**PLAIN, force_range=300.0),
+        WrenchConfig(**PLAIN, force_range=12.0, spike_jump_force=20.0),
+        WrenchConfig(**PLAIN, max_frozen_time=0.05),
+    ]
     n_runs = 60
     pipes, twins = [], []
     for i in range(n_runs):
@@ -560,8 +573,13 @@ def test_the_batch_gives_each_pipelines_hand_force_on_every_clean_tick():
                 silent[i] = 8
             else:  # a new sample that jumps, is saturated, impossible, NaN, or bit-identical to the last
                 seq[i] += 1
-                raw[j] = (last[i] + [200.0, 0.0], [configs[i % 3].force_range, 0.0], [1e4, 1.0], [np.nan, 0.0],
-                          last[i])[rng.integers(5)]  # fmt: skip  # a jump, saturated, impossible, NaN, a repeat
+                raw[j] = (
+                    last[i] + [200.0, 0.0],
+                    [configs[i % 3].force_range, 0.0],
+                    [1e4, 1.0],
+                    [np.nan, 0.0],
+                    last[i],
+                )[rng.integers(5)]  # a jump, saturated, impossible, NaN, a repeat
         hand, clean = batch.update(rows, raw, seq[rows], t)
         keep = []
         for j, i in enumerate(rows.tolist()):

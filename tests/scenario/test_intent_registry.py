@@ -30,9 +30,13 @@ from coassist.scenario.reference_intents import NominalIntent, OracleIntent
 ROOT = Path(__file__).resolve().parents[2]
 
 #: What each name built before the registry (the if-chain of load_intent_source): class and model_id.
-BEFORE = {"nominal": (NominalIntent, None), "constant-velocity": (ConstantVelocityIntent, "constant-velocity"),
-          "oracle": (OracleIntent, "oracle"), "present": (PathHypothesesIntent, "present"),
-          "paths": (PathHypothesesIntent, "paths")}  # fmt: skip
+BEFORE = {
+    "nominal": (NominalIntent, None),
+    "constant-velocity": (ConstantVelocityIntent, "constant-velocity"),
+    "oracle": (OracleIntent, "oracle"),
+    "present": (PathHypothesesIntent, "present"),
+    "paths": (PathHypothesesIntent, "paths"),
+}
 
 
 def test_the_names_are_the_ones_the_loop_knew():
@@ -52,8 +56,16 @@ def test_each_name_builds_its_source_for_the_horizon(name):
 
 def test_a_registered_source_predicts_what_its_class_does():
     # constant velocity through the registry against the closed form x(k) + i·dt·ẋ(k)
-    ctx = TrialContext(dt=0.008, horizon=4, start=np.zeros(2), target=np.ones(2), reference=np.zeros((10, 4)),
-                       task="linear", user="u", object="handle")
+    ctx = TrialContext(
+        dt=0.008,
+        horizon=4,
+        start=np.zeros(2),
+        target=np.ones(2),
+        reference=np.zeros((10, 4)),
+        task="linear",
+        user="u",
+        object="handle",
+    )
     src = load_intent_source("constant-velocity", horizon=4)
     src.reset(ctx)
     row = np.array([[0.1, 0.2, 0.5, -1.0, 0, 0, 0, 0]])
@@ -72,7 +84,13 @@ def test_folders_by_their_marker(tmp_path):
     assert intent_folder_kind(str(tmp_path / "nothing")) is None and intent_folder_kind("paths") is None
     loaded = load_intent_source(str(calib), horizon=9)
     assert type(loaded) is PathHypothesesIntent and loaded.horizon == 9
-    assert [needs_network(s) for s in ("nominal", "paths", str(calib), str(model), "elsewhere")] == [False, False, False, True, True]
+    assert [needs_network(s) for s in ("nominal", "paths", str(calib), str(model), "elsewhere")] == [
+        False,
+        False,
+        False,
+        True,
+        True,
+    ]
 
 
 def test_the_model_marker_is_the_sidecar_the_intent_package_writes():
@@ -98,9 +116,11 @@ def test_check_intent_names_the_choices(tmp_path):
     check_intent("oracle")
     with pytest.raises(ValueError) as info:
         check_intent(str(tmp_path / "nomodel"))
-    assert str(info.value) == (f"{str(tmp_path / 'nomodel')!r}: not one of nominal, constant-velocity, oracle, present, paths, "
-                               "a path-hypotheses calibration folder (path-hypotheses.json) or a model folder (coassist "
-                               "train) (model.json)")
+    assert str(info.value) == (
+        f"{str(tmp_path / 'nomodel')!r}: not one of nominal, constant-velocity, oracle, present, paths, "
+        "a path-hypotheses calibration folder (path-hypotheses.json) or a model folder (coassist "
+        "train) (model.json)"
+    )
     with pytest.raises(ValueError, match="a simulation alone knows it"):
         check_intent("oracle", simulation=False)
     with pytest.raises(ValueError, match=r"not one of nominal, constant-velocity, present, paths, a path"):
@@ -134,4 +154,7 @@ def test_the_intent_source_recipe_is_what_the_repository_does():
     added = [ln[1:].strip() for ln in recipe.splitlines() if ln.startswith("+") and "IntentSourceEntry(" in ln]
     registry = (ROOT / "src/coassist/scenario/intent_registry.py").read_text(encoding="utf-8")
     assert len(added) == 1 and added[0] in registry, added
-    assert '"constant-velocity": IntentSourceEntry("coassist.scenario.constant_velocity:ConstantVelocityIntent"' in added[0]
+    assert (
+        '"constant-velocity": IntentSourceEntry("coassist.scenario.constant_velocity:ConstantVelocityIntent"'
+        in added[0]
+    )

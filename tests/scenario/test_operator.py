@@ -30,8 +30,15 @@ def _arm(profile, intent, noise=None):
 
 
 def test_force_is_eq_4_1_without_delay_or_adaptation():
-    p = OperatorProfile("t", stiffness_min=700.0, stiffness_max=700.0, stiffness_gain=0.0, damping=12.0,
-                        reaction_delay=0.0, force_limit=1e6)
+    p = OperatorProfile(
+        "t",
+        stiffness_min=700.0,
+        stiffness_max=700.0,
+        stiffness_gain=0.0,
+        damping=12.0,
+        reaction_delay=0.0,
+        force_limit=1e6,
+    )
     intent = np.array([[0.3, -0.5]] * 3)
     arm = _arm(p, intent)
     # u_h = K_h (x_ref,h − x) − C_h ẋ, by hand
@@ -41,8 +48,16 @@ def test_force_is_eq_4_1_without_delay_or_adaptation():
 
 
 def test_delayed_share_uses_the_error_d_ticks_ago():
-    p = OperatorProfile("t", stiffness_min=500.0, stiffness_max=500.0, stiffness_gain=0.0, damping=0.0,
-                        reaction_delay=3 * DT, reflex_share=0.4, force_limit=1e6)
+    p = OperatorProfile(
+        "t",
+        stiffness_min=500.0,
+        stiffness_max=500.0,
+        stiffness_gain=0.0,
+        damping=0.0,
+        reaction_delay=3 * DT,
+        reflex_share=0.4,
+        force_limit=1e6,
+    )
     intent = np.zeros((10, 2))
     arm = _arm(p, intent)
     xs = [0.001 * (k + 1) for k in range(8)]
@@ -53,8 +68,16 @@ def test_delayed_share_uses_the_error_d_ticks_ago():
 
 
 def test_stiffness_adapts_to_error_and_force_is_limited():
-    p = OperatorProfile("t", stiffness_min=400.0, stiffness_max=1500.0, stiffness_gain=20000.0,
-                        adaptation_time=0.1, damping=0.0, reaction_delay=0.0, force_limit=30.0)
+    p = OperatorProfile(
+        "t",
+        stiffness_min=400.0,
+        stiffness_max=1500.0,
+        stiffness_gain=20000.0,
+        adaptation_time=0.1,
+        damping=0.0,
+        reaction_delay=0.0,
+        force_limit=30.0,
+    )
     n = 200
     small, large = _arm(p, np.zeros((n, 2))), _arm(p, np.zeros((n, 2)))
     for k in range(n):
@@ -72,7 +95,8 @@ def test_the_batch_arm_gives_each_arms_force_bit_for_bit():
     enough off for the force limit to bind, rows leaving the batch as runs end."""
     rng = np.random.default_rng(7)
     profiles = [operator_profile(u, 3) for u in range(4)] + [
-        OperatorProfile("fast", reaction_delay=0.0, force_limit=5.0, stiffness_gain=40000.0)]
+        OperatorProfile("fast", reaction_delay=0.0, force_limit=5.0, stiffness_gain=40000.0)
+    ]
     lengths = [120, 120, 60, 120, 120]  # arm 2's intent ends before the run does
     arms, twins = [], []
     for p, n in zip(profiles, lengths):

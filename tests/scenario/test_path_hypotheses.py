@@ -30,8 +30,18 @@ BOX = ((0.5, 0.0), (0.1, 0.1))
 
 def _context(obstacles=(BOX,), user="user-0", obj="handle", n=3000):
     ref = np.zeros((n, 4))
-    return TrialContext(dt=DT, horizon=50, start=PATH[0].copy(), target=PATH[-1].copy(), reference=ref, task="linear",
-                        user=user, object=obj, path=PATH, obstacles=obstacles)
+    return TrialContext(
+        dt=DT,
+        horizon=50,
+        start=PATH[0].copy(),
+        target=PATH[-1].copy(),
+        reference=ref,
+        task="linear",
+        user=user,
+        object=obj,
+        path=PATH,
+        obstacles=obstacles,
+    )
 
 
 def _smoothstep(u):
@@ -67,15 +77,21 @@ def test_present_estimate_is_the_arm_solved_for_the_intent():
     assert isinstance(src, IntentSource) and src.model_id == "present"
     src.reset(_context(obj="heavy"))
     m = get_object("heavy").mass
-    rows = [np.array([[0.1, 0.2, 0.05, -0.02, 3.0, -1.0, 0, 0]]), np.array([[0.1004, 0.1998, 0.06, -0.03, 4.0, 2.0, 0, 0]])]
+    rows = [
+        np.array([[0.1, 0.2, 0.05, -0.02, 3.0, -1.0, 0, 0]]),
+        np.array([[0.1004, 0.1998, 0.06, -0.03, 4.0, 2.0, 0, 0]]),
+    ]
     first = src.predict(rows[0])
     p, v, w = rows[0][0, :2], rows[0][0, 2:4], rows[0][0, 4:6]
-    np.testing.assert_allclose(first, p + (w + 20.0 * v) / 500.0 + DT * np.arange(1, 5)[:, None] * v, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        first, p + (w + 20.0 * v) / 500.0 + DT * np.arange(1, 5)[:, None] * v, rtol=0, atol=1e-15
+    )
     second = src.predict(rows[1])
     p, v, w = rows[1][0, :2], rows[1][0, 2:4], rows[1][0, 4:6]
     a = (v - rows[0][0, 2:4]) / DT
-    np.testing.assert_allclose(second, p + (w + m * a + 20.0 * v) / 500.0 + DT * np.arange(1, 5)[:, None] * v,
-                               rtol=0, atol=1e-14)
+    np.testing.assert_allclose(
+        second, p + (w + m * a + 20.0 * v) / 500.0 + DT * np.arange(1, 5)[:, None] * v, rtol=0, atol=1e-14
+    )
     # the obstacles are ignored by "present", whatever the context says
     src.reset(_context())
     assert src.curves[0].size == 0

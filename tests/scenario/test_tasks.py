@@ -99,5 +99,7 @@ def test_validation_names_the_field():
 
 def test_box_signed_distance():
     box = Box((0.0, 0.0), (0.2, 0.1))
-    np.testing.assert_allclose(box.signed_distance(np.array([[0.0, 0.0], [0.3, 0.0], [0.1, 0.05], [0.2, 0.15]])),
-                               [-0.05, 0.2, 0.0, np.hypot(0.1, 0.1)])
+    np.testing.assert_allclose(
+        box.signed_distance(np.array([[0.0, 0.0], [0.3, 0.0], [0.1, 0.05], [0.2, 0.15]])),
+        [-0.05, 0.2, 0.0, np.hypot(0.1, 0.1)],
+    )

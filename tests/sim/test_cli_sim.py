@@ -1,6 +1,5 @@
 """The thin CLI commands over the simulator: collect and show."""
 
-
 import pytest
 from typer.testing import CliRunner
 
@@ -13,8 +12,24 @@ runner = CliRunner()
 
 def test_collect_then_show(tmp_path):
     out = tmp_path / "D0"
-    res = runner.invoke(app, ["collect", "--out", str(out), "--tasks", "linear,curved", "--trials", "1",
-                              "--users", "0,1", "--seed", "5", "--workers", "1"])
+    res = runner.invoke(
+        app,
+        [
+            "collect",
+            "--out",
+            str(out),
+            "--tasks",
+            "linear,curved",
+            "--trials",
+            "1",
+            "--users",
+            "0,1",
+            "--seed",
+            "5",
+            "--workers",
+            "1",
+        ],
+    )
     assert res.exit_code == 0, res.output
     ds = read_dataset(out)
     assert ds.id == "D0" and len(ds) == 4

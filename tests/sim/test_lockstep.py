@@ -34,8 +34,18 @@ TASKS = ("linear", "curved", "sinusoidal", "z")
 
 def _specs(intent: str, n: int = 8, objects=("handle", "board", "heavy")) -> list[TrialSpec]:
     """Every controller kind, the three objects (the board's yaw), three users, trials of different lengths."""
-    return [TrialSpec(task=TASKS[i % 4], seed=40 + i, user=i % 3, object=objects[i % len(objects)],
-                      controller=CONTROLLER_KINDS[i % 4], intent=intent, preset=PRESET) for i in range(n)]  # fmt: skip
+    return [
+        TrialSpec(
+            task=TASKS[i % 4],
+            seed=40 + i,
+            user=i % 3,
+            object=objects[i % len(objects)],
+            controller=CONTROLLER_KINDS[i % 4],
+            intent=intent,
+            preset=PRESET,
+        )
+        for i in range(n)
+    ]
 
 
 def _episodes(specs, sources=None):

@@ -33,14 +33,30 @@ def _trial(*, simulated: bool = True, n: int = 300, horizon: int = 8, seed: int 
     extra: dict = {}
     kwargs: dict = {}
     if simulated:
-        extra = {"obstacle": {"center": [0.05, 0.02], "size": [0.02, 0.04]}, "target": [0.11, 0.0],
-                 "arrive_radius": 0.02}  # fmt: skip
+        extra = {
+            "obstacle": {"center": [0.05, 0.02], "size": [0.02, 0.04]},
+            "target": [0.11, 0.0],
+            "arrive_radius": 0.02,
+        }
         prediction = pose[:, None, :] + 0.01 * np.arange(1, horizon + 1)[None, :, None]
         prediction[:20] = np.nan  # no history yet: nothing predicted
-        kwargs = dict(prediction=prediction, intent=pose + 0.002, effort_h=wrench.copy(),
-                      effort_r=np.stack([1.5 * s, 0.5 * s], axis=1))  # fmt: skip
-    meta = TrialMeta(user="user-1", task="curved", object="board", controller="cooperative", model_id=None,
-                     seed=seed, source="sim" if simulated else "real", dt=dt, extra=extra)  # fmt: skip
+        kwargs = dict(
+            prediction=prediction,
+            intent=pose + 0.002,
+            effort_h=wrench.copy(),
+            effort_r=np.stack([1.5 * s, 0.5 * s], axis=1),
+        )
+    meta = TrialMeta(
+        user="user-1",
+        task="curved",
+        object="board",
+        controller="cooperative",
+        model_id=None,
+        seed=seed,
+        source="sim" if simulated else "real",
+        dt=dt,
+        extra=extra,
+    )
     return Trial(meta=meta, time=t, pose=pose, velocity=velocity, wrench=wrench, reference=reference, **kwargs)
 
 
@@ -194,8 +210,14 @@ def test_bad_input_is_one_clear_error(trial, message, tmp_path):
 
 def test_a_one_dof_trial_is_refused(tmp_path):
     t = _trial()
-    one = Trial(meta=t.meta, time=t.time, pose=t.pose[:, :1], velocity=t.velocity[:, :1], wrench=t.wrench[:, :1],
-                reference=t.reference[:, :1])  # fmt: skip
+    one = Trial(
+        meta=t.meta,
+        time=t.time,
+        pose=t.pose[:, :1],
+        velocity=t.velocity[:, :1],
+        wrench=t.wrench[:, :1],
+        reference=t.reference[:, :1],
+    )
     with pytest.raises(ValueError, match="needs x-y trials, got 1 DOF"):
         monitor.plot_trial(one, tmp_path / "x.png")
     assert not (tmp_path / "x.png").exists()

@@ -141,9 +141,13 @@ def test_zeroing_leaves_the_mean_of_the_rest_noise():
 
 @pytest.mark.parametrize(
     "kwargs, culprit",
-    [(dict(noise=-0.1), "ForceSensor.noise"), (dict(rate_hz=0.0), "ForceSensor.rate_hz"),
-     (dict(zero_samples=0), "ForceSensor.zero_samples"), (dict(zero_samples=True), "ForceSensor.zero_samples"),
-     (dict(saturation=-1.0), "ForceSensor.saturation")],  # fmt: skip
+    [
+        (dict(noise=-0.1), "ForceSensor.noise"),
+        (dict(rate_hz=0.0), "ForceSensor.rate_hz"),
+        (dict(zero_samples=0), "ForceSensor.zero_samples"),
+        (dict(zero_samples=True), "ForceSensor.zero_samples"),
+        (dict(saturation=-1.0), "ForceSensor.saturation"),
+    ],
 )
 def test_bad_sensors_name_the_field(kwargs, culprit):
     with pytest.raises(ValueError, match=culprit):

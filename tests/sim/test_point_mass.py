@@ -18,10 +18,18 @@ def test_the_batch_advances_each_world_bit_for_bit():
     """Handle, board (yaw, off-centre grasp) and heavy object, three operators: under the same
     efforts, every period's pose, velocity, sensor reading and sample counter and the hand force
     equal each world's own apply bit for bit, while runs leave the batch."""
-    specs = [TrialSpec(task=task, user=user, object=obj, seed=seed)
-             for seed, (task, user, obj) in enumerate([("linear", 0, "handle"), ("curved", 1, "board"),
-                                                       ("sinusoidal", 2, "heavy"), ("z", 0, "board"),
-                                                       ("linear", 3, "handle")])]  # fmt: skip
+    specs = [
+        TrialSpec(task=task, user=user, object=obj, seed=seed)
+        for seed, (task, user, obj) in enumerate(
+            [
+                ("linear", 0, "handle"),
+                ("curved", 1, "board"),
+                ("sinusoidal", 2, "heavy"),
+                ("z", 0, "board"),
+                ("linear", 3, "handle"),
+            ]
+        )
+    ]
     worlds = _worlds(specs)
     batch = PointMassWorldBatch(_worlds(specs))  # the same worlds, built again: the batch's own copies
     assert batch.dt == worlds[0].dt

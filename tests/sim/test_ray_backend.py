@@ -52,8 +52,9 @@ def test_ray_runner_gives_the_process_pools_trials(blas_one_thread, no_ray_runni
 
     # Streaming (collect writes each trial as it lands): every index once, nothing kept.
     delivered = {}
-    kept = run_trials(SPECS, ray_address="local", progress=False,
-                      on_result=lambda i, trial: delivered.setdefault(i, trial))  # fmt: skip
+    kept = run_trials(
+        SPECS, ray_address="local", progress=False, on_result=lambda i, trial: delivered.setdefault(i, trial)
+    )
     assert kept == []
     assert sorted(delivered) == list(range(len(SPECS)))
     for i, trial in delivered.items():

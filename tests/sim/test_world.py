@@ -52,9 +52,20 @@ def _quiet_sensor(**kw):
     return ForceSensor(**{"noise": 0.0, "offset": 0.0, "tilt": 0.0, "rate_hz": None, **kw})
 
 
-def _run(obj="handle", sensor=None, source=None, task="linear", seed=3, preset="thesis-evaluation", controller="cooperative", **kw):
+def _run(
+    obj="handle",
+    sensor=None,
+    source=None,
+    task="linear",
+    seed=3,
+    preset="thesis-evaluation",
+    controller="cooperative",
+    **kw,
+):
     c = make_controller(controller, get_preset(preset))
-    return run_trial(make_task(task, np.random.default_rng(seed)), AUTHOR, get_object(obj), c, source, seed, sensor=sensor, **kw)
+    return run_trial(
+        make_task(task, np.random.default_rng(seed)), AUTHOR, get_object(obj), c, source, seed, sensor=sensor, **kw
+    )
 
 
 def test_sensor_bias_is_zeroed_at_the_start():
@@ -162,7 +173,10 @@ def test_operator_pushes_less_when_the_robot_follows_the_true_intent():
 
 
 def test_parallel_run_equals_serial_run():
-    specs = [TrialSpec(task=t, seed=s, user=u) for t, s, u in (("linear", 1, 0), ("curved", 2, 1), ("z", 3, 2), ("linear", 4, 0))]
+    specs = [
+        TrialSpec(task=t, seed=s, user=u)
+        for t, s, u in (("linear", 1, 0), ("curved", 2, 1), ("z", 3, 2), ("linear", 4, 0))
+    ]
     serial = run_trials(specs, workers=1, progress=False)
     parallel = run_trials(specs, workers=2, progress=False)
     assert len(parallel) == len(specs)
@@ -178,9 +192,16 @@ def test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone()
     from coassist.control.presets import CONTROLLER_KINDS
     from coassist.sim.world import NAMED_GROUP, submit_trials
 
-    specs = [TrialSpec(task=t, seed=s, user=s % 3, controller=c, intent=i)
-             for s, (t, c, i) in enumerate(zip(("linear", "curved", "z", "linear", "sinusoidal", "curved", "z", "linear"),
-                                               CONTROLLER_KINDS * 2, ("nominal", "oracle") * 4))]  # fmt: skip
+    specs = [
+        TrialSpec(task=t, seed=s, user=s % 3, controller=c, intent=i)
+        for s, (t, c, i) in enumerate(
+            zip(
+                ("linear", "curved", "z", "linear", "sinusoidal", "curved", "z", "linear"),
+                CONTROLLER_KINDS * 2,
+                ("nominal", "oracle") * 4,
+            )
+        )
+    ]
     alone = run_trials(specs, workers=1, progress=False, lockstep=False)
     pooled = run_trials(specs, workers=2, progress=False)
     order: list[int] = []
@@ -190,6 +211,7 @@ def test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone()
     assert [lengths[i] for i in order] == sorted(lengths)  # as each ends
     for a, b in zip(alone, pooled, strict=True):
         assert a.equals(b)
+
     # groups: one per worker for a short list, of at most NAMED_GROUP trials for a long one
     class Pool:
         def submit(self, fn, batch):
@@ -275,8 +297,16 @@ def test_the_applications_large_obstacle_makes_a_wide_detour_that_still_ends_at_
 
     dev = {}
     for name in ("small", "large"):
-        t = run_spec(TrialSpec(task="curved", object="board", controller="manual", preset="thesis-application-damped",
-                               seed=11, obstacle=name))
+        t = run_spec(
+            TrialSpec(
+                task="curved",
+                object="board",
+                controller="manual",
+                preset="thesis-application-damped",
+                seed=11,
+                obstacle=name,
+            )
+        )
         assert tuple(t.meta.extra["obstacle"]["size"]) == OBSTACLES[name][0]
         assert distance_to_target(t.pose, np.asarray(t.meta.extra["target"], float))[-1] < 0.025
         dev[name] = trial_stats(t)["peak_deviation"]

@@ -37,8 +37,14 @@ between_conditions = 30.0
 """
 
 
-def comparison_plan(folder: Path, *, world: str = "play", per_condition: int = 2, practice: int = 1,
-                    timing: str = "motion_time = 3.0\ndwell = 1.0") -> Path:  # fmt: skip
+def comparison_plan(
+    folder: Path,
+    *,
+    world: str = "play",
+    per_condition: int = 2,
+    practice: int = 1,
+    timing: str = "motion_time = 3.0\ndwell = 1.0",
+) -> Path:
     """A 3-condition comparison plan written into ``folder``; returns the file."""
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "plan.toml"

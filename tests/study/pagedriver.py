@@ -42,7 +42,9 @@ class OperatorPath:
             dt = float(CONTROL_PRESETS.lookup(tp.preset).impedance.dt)
             task = task_for_seed(step["task"], step["seed"], obstacle=tp.obstacle, motion_time=tp.motion_time)
             self.dt = dt
-            self._paths[k] = hand_path(task, step["seed"], simulated_profile(order["number"], self.plan.seed), dt, 20000)
+            self._paths[k] = hand_path(
+                task, step["seed"], simulated_profile(order["number"], self.plan.seed), dt, 20000
+            )
         path = self._paths[k]
         i = min(len(path) - 1, max(0, int(round(t / self.dt))))
         return float(path[i, 0]), float(path[i, 1])
@@ -58,5 +60,6 @@ class OperatorPath:
         form = form_for(self.plan.questionnaire)
         assert [i.key for i in form.items] == [i["key"] for i in form_items]
         f = float(np.mean([f_rms(t.wrench[:, :2]) for t in trials]))
-        return simulated_answers(form, f, None, simulated_profile(order["number"], self.plan.seed),
-                                 np.random.default_rng([k, 1]))  # fmt: skip
+        return simulated_answers(
+            form, f, None, simulated_profile(order["number"], self.plan.seed), np.random.default_rng([k, 1])
+        )

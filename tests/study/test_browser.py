@@ -31,10 +31,20 @@ from .pagedriver import SECRETS, OperatorPath  # noqa: E402
 CHROMIUM = Path("/usr/bin/chromium")
 if not CHROMIUM.is_file():
     CHROMIUM = Path(shutil.which("chromium") or "/nonexistent")
-pytestmark = pytest.mark.skipif(not CHROMIUM.is_file(), reason="no Chromium at /usr/bin/chromium (apt-get install chromium)")
+pytestmark = pytest.mark.skipif(
+    not CHROMIUM.is_file(), reason="no Chromium at /usr/bin/chromium (apt-get install chromium)"
+)
 
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]  # fmt: skip
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 
 
 def _participant(page, url: str, path: OperatorPath, received: list[str]) -> dict:
@@ -110,8 +120,11 @@ def test_four_simulated_participants_take_the_comparison_in_chromium(tmp_path):
         p = summary["participants"][pid]
         assert got["starts"] == [labels[c] for c in p["order"]]  # the page started the conditions in the square's order
         assert set(p["means"]) == {"assistive", "impedance", "manual"}
-        stored = {r["step"]: list(r["answers"].values()) for r in study.participant(pid).progress()
-                  if r["kind"] == "questionnaire"}  # fmt: skip
+        stored = {
+            r["step"]: list(r["answers"].values())
+            for r in study.participant(pid).progress()
+            if r["kind"] == "questionnaire"
+        }
         assert stored == {int(k): v for k, v in got["answers"].items()} and len(stored) == 3
     # the drag carried the tool to the target in every trial
     ended = [r["ended"] for pid in entered for r in study.participant(pid).progress() if r["kind"] == "trial"]

@@ -22,8 +22,11 @@ from .conftest import comparison_plan
 def _run_study(tmp_path, plan):
     runner = CliRunner()
     folder = tmp_path / "study"
-    for args in (["study", "init", str(plan), "--out", str(folder)], ["study", "run", str(folder), "--simulate"],
-                 ["study", "report", str(folder)]):  # fmt: skip
+    for args in (
+        ["study", "init", str(plan), "--out", str(folder)],
+        ["study", "run", str(folder), "--simulate"],
+        ["study", "report", str(folder)],
+    ):
         result = runner.invoke(app, args)
         assert result.exit_code == 0, result.output
     return folder, json.loads((folder / "report" / "summary.json").read_text())
@@ -45,7 +48,9 @@ def _check_comparison(folder, summary, per_condition):
             # the summary's per-participant f_RMS is the mean of the trials' (eq. 5.9 recomputed here)
             assert p["means"][c]["f_rms"] == pytest.approx(np.mean([f_rms(t.wrench[:, :2]) for t in trials]), rel=1e-12)
     # the paired tests of the report are scipy's on the per-participant means
-    comp = next(c for c in summary["comparisons"] if c["metric"] == "f_rms" and c["a"] == "assistive" and c["b"] == "manual")
+    comp = next(
+        c for c in summary["comparisons"] if c["metric"] == "f_rms" and c["a"] == "assistive" and c["b"] == "manual"
+    )
     a = [summary["participants"][p]["means"]["assistive"]["f_rms"] for p in sorted(summary["participants"])]
     b = [summary["participants"][p]["means"]["manual"]["f_rms"] for p in sorted(summary["participants"])]
     assert comp["p_t"] == pytest.approx(stats.ttest_rel(a, b).pvalue, rel=1e-12)

@@ -110,8 +110,11 @@ def test_the_page_is_the_hand_on_the_mujoco_ur5(tmp_path):
     """The same page drives the MuJoCo UR5 (thesis' motion times, paced to the wall clock: ~16 s a trial)."""
     pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra")
     plan = comparison_plan(tmp_path / "plans", world="mujoco", per_condition=1, practice=0, timing="")
-    plan.write_text(plan.read_text().replace("between_conditions = 30.0", "between_conditions = 0.5")
-                    .replace('tasks = ["linear", "curved"]', 'tasks = ["linear"]'))  # fmt: skip
+    plan.write_text(
+        plan.read_text()
+        .replace("between_conditions = 30.0", "between_conditions = 0.5")
+        .replace('tasks = ["linear", "curved"]', 'tasks = ["linear"]')
+    )
     study = init_study(plan, tmp_path / "study")
     received: list[str] = []
     with ParticipantRun(study, "S01", simulate=True, page=("127.0.0.1", 0, None)) as run:

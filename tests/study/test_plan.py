@@ -22,28 +22,33 @@ def test_a_valid_plan_reads_into_its_fields(comparison_file):
     assert plan.protocol == "comparison" and plan.world == "play" and plan.participants == 4 and plan.seed == 3
     assert [c.name for c in plan.conditions] == ["assistive", "impedance", "manual"]
     assert [c.controller for c in plan.conditions] == ["cooperative", "impedance", "manual"]
-    assert plan.trials.tasks == ("linear", "curved") and plan.trials.per_condition == 2 and plan.trials.motion_time == 3.0
+    assert (
+        plan.trials.tasks == ("linear", "curved") and plan.trials.per_condition == 2 and plan.trials.motion_time == 3.0
+    )
     assert plan.questionnaire.tlx and len(plan.questionnaire.likert) == 4
     assert plan.training is None
 
 
-@pytest.mark.parametrize(("edit", "field"), [
-    (lambda t: t.replace("per_condition = 2", "per_condition = 0"), "trials.per_condition"),
-    (lambda t: t.replace("per_condition = 2", "per_conditon = 2"), "trials.per_conditon"),
-    (lambda t: t.replace('controller = "impedance"', 'controller = "imp"'), "condition[1].controller"),
-    (lambda t: t.replace('world = "play"', 'world = "gazebo"'), "study.world"),
-    (lambda t: t.replace('protocol = "comparison"', 'protocol = "abba"'), "study.protocol"),
-    (lambda t: t.replace('tasks = ["linear", "curved"]', 'tasks = ["linear", "spiral"]'), "trials.tasks[1]"),
-    (lambda t: t.replace('name = "manual"', 'name = "impedance"'), "condition"),
-    (lambda t: t.replace("between_conditions = 30.0", "between_conditions = -1"), "rest.between_conditions"),
-    (lambda t: t + '\n[questionnaire]\nlikert_points = 2\n', "questionnaire.likert_points"),
-    (lambda t: t.replace('world = "play"', 'world = "mujoco"') + "\n", "trials.motion_time"),
-    (lambda t: t.replace("[rest]", "[rests]"), "rests"),
-    (lambda t: t + '\n[training]\nepochs = 1\n', "training"),
-    (lambda t: t + '\n[[condition]]\nname = "again"\ncontroller = "cooperative"\n', "condition"),
-    (lambda t: t.replace('name = "comparison"', 'name = "a b"'), "study.name"),
-    (lambda t: t.replace('[study]', '[study]\nparticipants = 1\n'), None),  # duplicate key: TOML's own error
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("edit", "field"),
+    [
+        (lambda t: t.replace("per_condition = 2", "per_condition = 0"), "trials.per_condition"),
+        (lambda t: t.replace("per_condition = 2", "per_conditon = 2"), "trials.per_conditon"),
+        (lambda t: t.replace('controller = "impedance"', 'controller = "imp"'), "condition[1].controller"),
+        (lambda t: t.replace('world = "play"', 'world = "gazebo"'), "study.world"),
+        (lambda t: t.replace('protocol = "comparison"', 'protocol = "abba"'), "study.protocol"),
+        (lambda t: t.replace('tasks = ["linear", "curved"]', 'tasks = ["linear", "spiral"]'), "trials.tasks[1]"),
+        (lambda t: t.replace('name = "manual"', 'name = "impedance"'), "condition"),
+        (lambda t: t.replace("between_conditions = 30.0", "between_conditions = -1"), "rest.between_conditions"),
+        (lambda t: t + "\n[questionnaire]\nlikert_points = 2\n", "questionnaire.likert_points"),
+        (lambda t: t.replace('world = "play"', 'world = "mujoco"') + "\n", "trials.motion_time"),
+        (lambda t: t.replace("[rest]", "[rests]"), "rests"),
+        (lambda t: t + "\n[training]\nepochs = 1\n", "training"),
+        (lambda t: t + '\n[[condition]]\nname = "again"\ncontroller = "cooperative"\n', "condition"),
+        (lambda t: t.replace('name = "comparison"', 'name = "a b"'), "study.name"),
+        (lambda t: t.replace("[study]", "[study]\nparticipants = 1\n"), None),  # duplicate key: TOML's own error
+    ],
+)
 def test_a_bad_plan_is_one_line_naming_the_field(edit, field):
     text = edit(_plan(timing="motion_time = 3.0"))
     with pytest.raises(PlanError) as err:

@@ -99,7 +99,9 @@ def test_order_effect_equals_the_latin_square_anova_by_hand():
     g = y.mean()
     ss_rows = 4 * ((y.mean(axis=1) - g) ** 2).sum()
     ss_cols = 4 * ((y.mean(axis=0) - g) ** 2).sum()
-    cond_means = np.array([np.mean([y[i, j] for i in range(4) for j in range(4) if (i + j) % 4 == c]) for c in range(4)])
+    cond_means = np.array(
+        [np.mean([y[i, j] for i in range(4) for j in range(4) if (i + j) % 4 == c]) for c in range(4)]
+    )
     ss_treat = 4 * ((cond_means - g) ** 2).sum()
     ss_error = ((y - g) ** 2).sum() - ss_rows - ss_cols - ss_treat
     F = (ss_cols / 3) / (ss_error / 6)

@@ -34,11 +34,30 @@ def _trial_lines(pf) -> list[dict]:
 def test_kill_9_mid_trial_then_resume_keeps_every_finished_trial_and_the_order(tmp_path):
     plan = comparison_plan(tmp_path / "plans", timing="motion_time = 1.5\ndwell = 0.5")
     study = init_study(plan, tmp_path / "study")
-    env = {**os.environ, "PYTHONPATH": f"{SRC}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
-           "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}  # fmt: skip
+    env = {
+        **os.environ,
+        "PYTHONPATH": f"{SRC}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+        "OMP_NUM_THREADS": "1",
+        "OPENBLAS_NUM_THREADS": "1",
+    }
     # a simulated participant paced to the wall clock, as a person: each trial takes seconds
-    proc = subprocess.Popen([sys.executable, "-m", "coassist.cli", "study", "run", str(study.folder), "--participant",
-                             "S01", "--simulate", "--realtime"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)  # fmt: skip
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "coassist.cli",
+            "study",
+            "run",
+            str(study.folder),
+            "--participant",
+            "S01",
+            "--simulate",
+            "--realtime",
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+    )
     pf = study.participant("S01")
     try:
         t_end = time.monotonic() + 90
@@ -123,8 +142,23 @@ def test_one_run_per_participant_and_each_their_own_folder(tmp_path):
     env = {**os.environ, "PYTHONPATH": f"{SRC}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
     with ParticipantRun(study, "S01", simulate=True):
         # another process (a second terminal) on the same participant is refused at once, in one line
-        second = subprocess.run([sys.executable, "-m", "coassist.cli", "study", "run", str(study.folder), "--participant",
-                                 "S01", "--simulate"], env=env, capture_output=True, text=True, timeout=120)  # fmt: skip
+        second = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "coassist.cli",
+                "study",
+                "run",
+                str(study.folder),
+                "--participant",
+                "S01",
+                "--simulate",
+            ],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert second.returncode == 1
         assert second.stderr.startswith("error: S01: ") and "being written by another coassist run" in second.stderr
         assert len(second.stderr.strip().splitlines()) == 1

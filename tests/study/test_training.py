@@ -59,8 +59,10 @@ def _cli_train(*args: str) -> None:
 
 def test_an_iterative_study_of_two_rounds_trains_what_coassist_train_trains(tmp_path):
     plan = tmp_path / "iterative.toml"
-    plan.write_text('[study]\nname = "iter"\nprotocol = "iterative"\nworld = "play"\nparticipants = 1\n\n'
-                    "[iterative]\nrounds = 2\ntrials_per_round = 3\ntolerance = 1e-9\n" + TRIALS + TRAINING)  # fmt: skip
+    plan.write_text(
+        '[study]\nname = "iter"\nprotocol = "iterative"\nworld = "play"\nparticipants = 1\n\n'
+        "[iterative]\nrounds = 2\ntrials_per_round = 3\ntolerance = 1e-9\n" + TRIALS + TRAINING
+    )
     study = init_study(plan, tmp_path / "study")
     with ParticipantRun(study, "S01", simulate=True) as run:
         run.run()
@@ -68,7 +70,11 @@ def test_an_iterative_study_of_two_rounds_trains_what_coassist_train_trains(tmp_
     pf = study.participant("S01")
     lines = pf.progress()
     kinds = [r["kind"] for r in lines]
-    assert kinds == ["trial"] * 3 + ["questionnaire", "train", "rest"] + ["trial"] * 3 + ["check", "questionnaire", "train"]
+    assert kinds == ["trial"] * 3 + ["questionnaire", "train", "rest"] + ["trial"] * 3 + [
+        "check",
+        "questionnaire",
+        "train",
+    ]
     train0 = lines[4]
     assert train0["model"] == "M0" and train0["init"] == "scratch"
     assert train0["ready_when_recorded"] is False  # the runner went on while M0 trained in its own process
@@ -97,9 +103,11 @@ def test_an_iterative_study_of_two_rounds_trains_what_coassist_train_trains(tmp_
 def source_model(tmp_path) -> Path:
     """A small model of the default preset's window (1 x 8 LSTM) trained by coassist train on a simulated study's trials."""
     plan = tmp_path / "collect.toml"
-    plan.write_text('[study]\nname = "d0"\nprotocol = "comparison"\nworld = "play"\nparticipants = 1\n\n'
-                    '[[condition]]\nname = "a"\ncontroller = "cooperative"\n[[condition]]\nname = "m"\ncontroller = "manual"\n'
-                    + TRIALS.replace("per_condition = 1", "per_condition = 3"))  # fmt: skip
+    plan.write_text(
+        '[study]\nname = "d0"\nprotocol = "comparison"\nworld = "play"\nparticipants = 1\n\n'
+        '[[condition]]\nname = "a"\ncontroller = "cooperative"\n[[condition]]\nname = "m"\ncontroller = "manual"\n'
+        + TRIALS.replace("per_condition = 1", "per_condition = 3")
+    )
     study = init_study(plan, tmp_path / "d0")
     with ParticipantRun(study, "S09", simulate=True) as run:
         run.run()
@@ -110,8 +118,10 @@ def source_model(tmp_path) -> Path:
 
 def test_a_transfer_study_trains_the_frozen_lstm_transfer_as_coassist_train(tmp_path, source_model):
     plan = tmp_path / "transfer.toml"
-    plan.write_text('[study]\nname = "tl"\nprotocol = "transfer"\nworld = "play"\nparticipants = 2\n\n'
-                    f'[transfer]\nsource_model = "{source_model}"\ntrials = 3\n' + TRIALS + TRAINING)  # fmt: skip
+    plan.write_text(
+        '[study]\nname = "tl"\nprotocol = "transfer"\nworld = "play"\nparticipants = 2\n\n'
+        f'[transfer]\nsource_model = "{source_model}"\ntrials = 3\n' + TRIALS + TRAINING
+    )
     study = init_study(plan, tmp_path / "study")
     with ParticipantRun(study, "S01", simulate=True) as run:
         run.run()
@@ -127,8 +137,14 @@ def test_a_transfer_study_trains_the_frozen_lstm_transfer_as_coassist_train(tmp_
     trials = {c: read_dataset(pf.block(c)).trials[0] for c in ("source", "transferred")}
     assert trials["transferred"].meta.model_id.startswith("transferred@")
     assert trials["source"].meta.extra["controller_name"] == labels["source"]
-    _cli_train(str(pf.block("transfer-set")), "--out", str(tmp_path / "cli-TL"), "--init", f"transfer:{source_model}",
-               *TRAIN_OPTIONS)  # fmt: skip
+    _cli_train(
+        str(pf.block("transfer-set")),
+        "--out",
+        str(tmp_path / "cli-TL"),
+        "--init",
+        f"transfer:{source_model}",
+        *TRAIN_OPTIONS,
+    )
     _same_weights(pf.folder / "models" / "transferred", tmp_path / "cli-TL")
     # the frozen LSTM is the source's, bit for bit; the FC head was trained
     src = load_file(str(source_model / "weights.safetensors"))
@@ -144,8 +160,10 @@ def test_a_transfer_study_trains_the_frozen_lstm_transfer_as_coassist_train(tmp_
 
 def test_online_adaptation_never_delays_the_loop_and_meets_the_offline_transfer(tmp_path, source_model):
     plan = tmp_path / "online.toml"
-    plan.write_text('[study]\nname = "online"\nprotocol = "online"\nworld = "play"\nparticipants = 2\n\n'
-                    f'[online]\nsource_model = "{source_model}"\ntrials = 4\n' + TRIALS + TRAINING)  # fmt: skip
+    plan.write_text(
+        '[study]\nname = "online"\nprotocol = "online"\nworld = "play"\nparticipants = 2\n\n'
+        f'[online]\nsource_model = "{source_model}"\ntrials = 4\n' + TRIALS + TRAINING
+    )
     study = init_study(plan, tmp_path / "study")
     with ParticipantRun(study, "S01", simulate=True) as run:
         run.run()
@@ -168,9 +186,13 @@ def test_online_adaptation_never_delays_the_loop_and_meets_the_offline_transfer(
     offline = next(r for r in lines if r["kind"] == "train" and r["model"] == "offline")
     assert offline["init"] == f"transfer:{source_model}" and len(offline["data"]) == 4
     # the online and the offline models are each coassist train's on the same trial files
-    _cli_train(*first["data"], "--out", str(tmp_path / "cli-online-1"), "--init", f"transfer:{source_model}", *TRAIN_OPTIONS)
+    _cli_train(
+        *first["data"], "--out", str(tmp_path / "cli-online-1"), "--init", f"transfer:{source_model}", *TRAIN_OPTIONS
+    )
     _same_weights(pf.folder / "models" / "online-1", tmp_path / "cli-online-1")
-    _cli_train(*offline["data"], "--out", str(tmp_path / "cli-offline"), "--init", f"transfer:{source_model}", *TRAIN_OPTIONS)
+    _cli_train(
+        *offline["data"], "--out", str(tmp_path / "cli-offline"), "--init", f"transfer:{source_model}", *TRAIN_OPTIONS
+    )
     _same_weights(pf.folder / "models" / "offline", tmp_path / "cli-offline")
     # then the last online model against the offline transfer, blinded
     online = read_dataset(pf.block("online")).trials[0]

@@ -47,8 +47,15 @@ from coassist._checks import check_int_at_least, check_positive_scalar
 from coassist.control.controllers import AssistiveController, ControlStep
 from coassist.control.game import CooperativeGame, solve_with_gains
 
-__all__ = ["ARBITRATION_LAWS", "AlphaArbiter", "ArbitratedController", "ArbitrationParameters", "arbitrated_effort_batch",
-           "guard_key", "target_alpha"]
+__all__ = [
+    "ARBITRATION_LAWS",
+    "AlphaArbiter",
+    "ArbitratedController",
+    "ArbitrationParameters",
+    "arbitrated_effort_batch",
+    "guard_key",
+    "target_alpha",
+]
 
 #: The arbitration laws of :class:`ArbitrationParameters`.
 ARBITRATION_LAWS = ("hand_force", "confidence", "target")
@@ -85,12 +92,16 @@ class ArbitrationParameters:
             try:
                 v = float(getattr(self, name))
             except (TypeError, ValueError):
-                raise ValueError(f"arbitration.{name} must be a number in [0, 1], got {getattr(self, name)!r}") from None
+                raise ValueError(
+                    f"arbitration.{name} must be a number in [0, 1], got {getattr(self, name)!r}"
+                ) from None
             if not 0.0 <= v <= 1.0:
                 raise ValueError(f"arbitration.{name} must be in [0, 1], got {getattr(self, name)!r}")
             object.__setattr__(self, name, v)
         if self.alpha_min > self.alpha_max:
-            raise ValueError(f"arbitration.alpha_min ({self.alpha_min}) must be <= arbitration.alpha_max ({self.alpha_max})")
+            raise ValueError(
+                f"arbitration.alpha_min ({self.alpha_min}) must be <= arbitration.alpha_max ({self.alpha_max})"
+            )
         for name in ("force_scale", "error_scale", "target_scale", "time_constant"):
             object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"arbitration.{name}"))
         object.__setattr__(self, "error_lag", check_int_at_least(self.error_lag, "arbitration.error_lag", 1))
@@ -184,7 +195,9 @@ class ArbitratedController:
 
     def __init__(self, controller: AssistiveController, params: ArbitrationParameters) -> None:
         if not isinstance(controller, AssistiveController) or not isinstance(controller.game, CooperativeGame):
-            raise ValueError("controller must be an AssistiveController on a CooperativeGame (α is the cooperative game's)")
+            raise ValueError(
+                "controller must be an AssistiveController on a CooperativeGame (α is the cooperative game's)"
+            )
         self.controller = controller
         self.game: CooperativeGame = controller.game
         self.name = f"{controller.name}+{params.law}"
@@ -219,12 +232,21 @@ def guard_key(controller: ArbitratedController) -> tuple:
     """What :func:`arbitrated_effort_batch` needs its controllers to share: the assistive
     controller's guard (type, horizon, bounds, effort limit, shapes) and the game's class."""
     inner = controller.controller
-    return (type(inner), type(controller.game), inner.horizon, inner.bounds, inner._ref_shape, inner._wrench_shape,
-            np.asarray(inner.effort_limit, dtype=float).tobytes(), inner._state_bound.tobytes())  # fmt: skip
+    return (
+        type(inner),
+        type(controller.game),
+        inner.horizon,
+        inner.bounds,
+        inner._ref_shape,
+        inner._wrench_shape,
+        np.asarray(inner.effort_limit, dtype=float).tobytes(),
+        inner._state_bound.tobytes(),
+    )
 
 
-def arbitrated_effort_batch(controllers: list[ArbitratedController], z: np.ndarray, ref_h: np.ndarray,
-                            ref_r: np.ndarray, wrench: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def arbitrated_effort_batch(
+    controllers: list[ArbitratedController], z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`ArbitratedController.step` for B runs at once, run b with its own controller
     (its α and the arbiter's state), answered as
     :meth:`~coassist.control.controllers._GuardedController.effort_batch` answers.

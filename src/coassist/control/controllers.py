@@ -160,7 +160,9 @@ class _GuardedController:
         new = fault & ~self._warned & ~Fault.SATURATED
         if new:
             self._warned |= new
-            log.warning("%s: %s; robot effort set to zero (further occurrences are flagged, not logged)", self.name, repr(new))
+            log.warning(
+                "%s: %s; robot effort set to zero (further occurrences are flagged, not logged)", self.name, repr(new)
+            )
 
     def _ref_ok(self, ref: np.ndarray) -> bool:
         rows, cols = self._ref_shape
@@ -242,7 +244,9 @@ class _GuardedController:
                 out[b] = ControlStep(np.clip(u_r[j] / r, -limit, limit), u_h[j], Fault.SATURATED)
         return [s if s is not None else self.step(z[b], ref_h[b], ref_r[b], wrench[b]) for b, s in enumerate(out)]
 
-    def effort_batch(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def effort_batch(
+        self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The robot efforts of :meth:`step_batch`'s clean rows, as arrays, for a runner that
         only goes on with ticks that carry no flag (:mod:`coassist.sim.lockstep`).
 
@@ -254,7 +258,9 @@ class _GuardedController:
         cannot take (other dtypes or shapes) go through :meth:`step` row by row, which
         warns as it always does. Never raises.
         """
-        return self._clean_efforts(self._batch_core(z, ref_h, ref_r, wrench), z, ref_h, ref_r, wrench, [self.step] * z.shape[0])
+        return self._clean_efforts(
+            self._batch_core(z, ref_h, ref_r, wrench), z, ref_h, ref_r, wrench, [self.step] * z.shape[0]
+        )
 
     def _clean_efforts(self, core, z, ref_h, ref_r, wrench, steps: list) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`effort_batch`'s answer from :meth:`_batch_core`'s; where that is None, row b
@@ -312,9 +318,13 @@ class _GuardedController:
         return (
             z.shape == (B, *self._state_bound.shape)
             and wrench.shape == (B, *self._wrench_shape)
-            and ref_h.ndim == 3 and ref_h.shape[0] == B and self._ref_ok(ref_h[0])
-            and ref_r.ndim == 3 and ref_r.shape[0] == B and self._ref_ok(ref_r[0])
-        )  # fmt: skip
+            and ref_h.ndim == 3
+            and ref_h.shape[0] == B
+            and self._ref_ok(ref_h[0])
+            and ref_r.ndim == 3
+            and ref_r.shape[0] == B
+            and self._ref_ok(ref_r[0])
+        )
 
     def _law_batch(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The law for B rows, (u_h (B, n), u_r (B, n)); row b must equal ``_law`` on row b bit

@@ -49,7 +49,9 @@ class DampingParameters:
             except (TypeError, ValueError):
                 raise ValueError(f"DampingParameters.{name} must be a number, got {getattr(self, name)!r}") from None
             if not math.isfinite(v) or v < lo or (open_lo and v == lo):
-                raise ValueError(f"DampingParameters.{name} must be finite and {'>' if open_lo else '>='} {lo}, got {v!r}")
+                raise ValueError(
+                    f"DampingParameters.{name} must be finite and {'>' if open_lo else '>='} {lo}, got {v!r}"
+                )
             object.__setattr__(self, name, v)
 
 

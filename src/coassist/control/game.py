@@ -171,7 +171,9 @@ def _weights(weights: GameWeights | None, n_dof: int, given: dict[str, ArrayLike
         if not isinstance(weights, GameWeights):
             raise ValueError(f"weights must be a GameWeights, got {type(weights).__name__}")
         if passed:
-            raise ValueError(f"give the weights as a GameWeights or as keywords, not both (got weights and {', '.join(passed)})")
+            raise ValueError(
+                f"give the weights as a GameWeights or as keywords, not both (got weights and {', '.join(passed)})"
+            )
         if weights.n_dof != n_dof:
             raise ValueError(f"weights are for {weights.n_dof} DOFs, the model has {n_dof}")
         return weights
@@ -196,7 +198,9 @@ class EquilibriumGains:
 class _LinearQuadraticGame:
     """Shared machinery: prediction matrices, per-weight products, the equilibrium solve."""
 
-    def __init__(self, model: ImpedanceModel, weights: GameWeights, *, horizon: int, control_horizon: int | None) -> None:
+    def __init__(
+        self, model: ImpedanceModel, weights: GameWeights, *, horizon: int, control_horizon: int | None
+    ) -> None:
         n, m = model.n_dof, model.C.shape[0]
         if m != 2 * n:  # the weights are on [position; velocity] (ImpedanceModel's C = I)
             raise ValueError(f"the game needs the model's output [position; velocity] (2n = {2 * n} rows), got {m}")
@@ -231,7 +235,9 @@ class _LinearQuadraticGame:
         return self._ref_shape
 
     # -- weights of each player, as coefficients on (Q_hh, Q_hr, Q_rh, Q_rr) -------------
-    def _player_weights(self, alpha: float | None) -> tuple[dict[str, float], dict[str, float], dict[str, float], dict[str, float]]:
+    def _player_weights(
+        self, alpha: float | None
+    ) -> tuple[dict[str, float], dict[str, float], dict[str, float], dict[str, float]]:
         """(W_h,h, W_h,r, W_r,h, W_r,r) as linear combinations of the four Q's."""
         raise NotImplementedError
 
@@ -348,9 +354,15 @@ class _LinearQuadraticGame:
         ref_h = np.asarray(ref_h, dtype=float)
         ref_r = np.asarray(ref_r, dtype=float)
         B = z.shape[0]
-        if z.shape != (B, *self._z_shape) or ref_h.shape != (B, *self._ref_shape) or ref_r.shape != (B, *self._ref_shape):
-            raise ValueError(f"z, ref_h, ref_r must have shapes (B, {self._z_shape[0]}) and (B, {self._ref_shape[0]}, "
-                             f"{self._ref_shape[1]}), got {z.shape}, {ref_h.shape}, {ref_r.shape}")  # fmt: skip
+        if (
+            z.shape != (B, *self._z_shape)
+            or ref_h.shape != (B, *self._ref_shape)
+            or ref_r.shape != (B, *self._ref_shape)
+        ):
+            raise ValueError(
+                f"z, ref_h, ref_r must have shapes (B, {self._z_shape[0]}) and (B, {self._ref_shape[0]}, "
+                f"{self._ref_shape[1]}), got {z.shape}, {ref_h.shape}, {ref_r.shape}"
+            )
         g = self._state[0]
         G_z, G_h, G_r = g.G_z, g.G_h, g.G_r
         # contiguous rows: each row's gemv reads its vector as np.dot reads a contiguous row
@@ -382,8 +394,9 @@ class _LinearQuadraticGame:
         return U[:N].reshape(-1, self._n), U[N:].reshape(-1, self._n)
 
 
-def solve_with_gains(gains: list[EquilibriumGains], z: np.ndarray, ref_h: np.ndarray,
-                     ref_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def solve_with_gains(
+    gains: list[EquilibriumGains], z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`~_LinearQuadraticGame.solve` for B rows, row b with its own gains ``gains[b]``
     (trials in lockstep whose α differs: :func:`coassist.control.arbitration.arbitrated_effort_batch`):
     z (B, 2n), ref_h and ref_r (B, Np, 2n) float64 → (u_h (B, n), u_r (B, n)).
@@ -710,7 +723,9 @@ class NashGame(_LinearQuadraticGame):
         lu = scipy.linalg.lu_factor(H, check_finite=False)
         diag = np.abs(np.diag(lu[0]))
         if diag.min() <= 1e-13 * diag.max():
-            raise ValueError("the Nash game has no unique equilibrium for these weights (singular first-order conditions)")
+            raise ValueError(
+                "the Nash game has no unique equilibrium for these weights (singular first-order conditions)"
+            )
         return lu
 
     def _solve_factored(self, factor, rhs, transposed=False):
@@ -761,8 +776,12 @@ def cooperative_game(model: ImpedanceModel, params: GameParameters) -> Cooperati
     of one built once per (model, parameters) in this process: a simulation worker that
     runs many trials with the same preset factorises, and prepares online α, once.
     """
-    key = (params, float(model.dt), *(np.asarray(a, float).tobytes() for a in (model.M, model.D, model.K)),
-           np.shape(model.M))  # fmt: skip
+    key = (
+        params,
+        float(model.dt),
+        *(np.asarray(a, float).tobytes() for a in (model.M, model.D, model.K)),
+        np.shape(model.M),
+    )
     template = _GAME_MEMO.get(key)
     if template is None:
         # One BLAS thread: the gains then round the same in every process whatever its BLAS
@@ -771,8 +790,12 @@ def cooperative_game(model: ImpedanceModel, params: GameParameters) -> Cooperati
         # 1-2 s against ~15 ms for an arbitrated controller on a loaded 2-core machine).
         with threadpool_limits(1, user_api="blas"):
             template = CooperativeGame(
-                model, GameWeights.from_parameters(params), alpha=params.alpha, horizon=params.horizon,
-                control_horizon=params.control_horizon, input_weighting=params.input_weighting,  # type: ignore[arg-type]
+                model,
+                GameWeights.from_parameters(params),
+                alpha=params.alpha,
+                horizon=params.horizon,
+                control_horizon=params.control_horizon,
+                input_weighting=params.input_weighting,  # type: ignore[arg-type]
             )
         if len(_GAME_MEMO) >= _GAME_MEMO_SIZE:
             _GAME_MEMO.pop(next(iter(_GAME_MEMO)))

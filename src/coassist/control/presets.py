@@ -33,16 +33,27 @@ from coassist.model.impedance import ImpedanceModel
 from coassist.registry import UnknownNameError
 
 __all__ = [
-    "ARBITRATION", "CONTROLLER_KINDS", "DECELERATION_DAMPING", "FORMER_NAMES", "IMPEDANCE_STIFFNESS", "get_preset", "make_controller", "plant_model",
-]  # fmt: skip
+    "ARBITRATION",
+    "CONTROLLER_KINDS",
+    "DECELERATION_DAMPING",
+    "FORMER_NAMES",
+    "IMPEDANCE_STIFFNESS",
+    "get_preset",
+    "make_controller",
+    "plant_model",
+]
 
 #: Controller kinds. "cooperative-arbitrated": the cooperative game with α set every tick
 #: by the law :data:`ARBITRATION`.
 CONTROLLER_KINDS = ("cooperative", "impedance", "manual", "cooperative-arbitrated", "cooperative-damped")
 #: The names drive and play used before they took the kinds (old session files, muscle memory):
 #: read in play's recorded sessions, and named in the command line's error for an old name.
-FORMER_NAMES = {"assistive": "cooperative", "assistive-arbitrated": "cooperative-arbitrated", "imp": "impedance",
-                "mg": "manual"}  # fmt: skip
+FORMER_NAMES = {
+    "assistive": "cooperative",
+    "assistive-arbitrated": "cooperative-arbitrated",
+    "imp": "impedance",
+    "mg": "manual",
+}
 #: The arbitration law of "cooperative-arbitrated": α from the distance to where the robot's
 #: plan ends (coassist.control.arbitration, law "target"). Chosen on validation seeds of the
 #: application scenario (docs/assistance.md), against the hand-force law.

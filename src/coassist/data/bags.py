@@ -136,8 +136,9 @@ def _receive_seconds(ns: list[int]) -> np.ndarray:
     return np.array([n / 1_000_000_000 for n in ns], dtype=np.float64)
 
 
-def _read_topic(reader: Any, connections: list, where: str, field_name: str, topic: str, columns: list[str],
-                ros1: bool) -> pd.DataFrame:  # fmt: skip
+def _read_topic(
+    reader: Any, connections: list, where: str, field_name: str, topic: str, columns: list[str], ros1: bool
+) -> pd.DataFrame:
     paths = [c.split(".") for c in columns]
     rows: list[list[float]] = []
     secs: list[int] = []
@@ -167,8 +168,10 @@ def _read_topic(reader: Any, connections: list, where: str, field_name: str, top
         raise RecordingError(f"{where}: topic {topic} has no messages")
     indexed = sum(int(c.msgcount) for c in connections)
     if len(rows) != indexed:
-        raise RecordingError(f"{where}: topic {topic}: {len(rows)} messages read, the bag's index records {indexed} "
-                             "(the file is damaged or was cut off)")  # fmt: skip
+        raise RecordingError(
+            f"{where}: topic {topic}: {len(rows)} messages read, the bag's index records {indexed} "
+            "(the file is damaged or was cut off)"
+        )
     values = np.asarray(rows, dtype=np.float64)
     check_plausible(field_name, values, columns, f"{where}: topic {topic}", lambda r: f"message {r}")
     df = pd.DataFrame(values, columns=columns)
@@ -190,9 +193,7 @@ def _read_topic(reader: Any, connections: list, where: str, field_name: str, top
             else:
                 a_s, b_s = str(a), str(b)
             problem = "duplicated" if a == b else "out of order"
-            raise RecordingError(
-                f"{where}: topic {topic}: {what} {problem} at message {k + 1} ({a_s} then {b_s})"
-            )
+            raise RecordingError(f"{where}: topic {topic}: {what} {problem} at message {k + 1} ({a_s} then {b_s})")
     return df
 
 
@@ -286,16 +287,20 @@ def load_bag_trial(
                     if c.msgtype != BAG_TYPES[field_name]:
                         raise RecordingError(f"{where}: topic {topic} is {c.msgtype}, expected {BAG_TYPES[field_name]}")
                 pattern = TOPIC_FILES[field_name][1]
-                frames[field_name] = _read_topic(reader, conns, where, field_name, topic,
-                                                 [pattern.format(ax=ax) for ax in dofs], ros1)  # fmt: skip
+                frames[field_name] = _read_topic(
+                    reader, conns, where, field_name, topic, [pattern.format(ax=ax) for ax in dofs], ros1
+                )
     except RecordingError:
         raise
     except AnyReaderError as exc:
         raise RecordingError(f"{where}: cannot read the bag ({_one_line(exc)})") from None
     except Exception as exc:  # noqa: BLE001 - a damaged file makes the reader's internals raise anything
-        raise RecordingError(f"{where}: cannot read the bag, it is damaged ({type(exc).__name__}: {_one_line(exc)})") from None
+        raise RecordingError(
+            f"{where}: cannot read the bag, it is damaged ({type(exc).__name__}: {_one_line(exc)})"
+        ) from None
     key = _SEQ if ros1 else _STAMP
     sources = {name: f"{where}: topic {topic}" for name, topic in names.items()}
     lengths = {names[name]: len(df) for name, df in frames.items()}
-    return assemble_recording(frames, where=where, sources=sources, lengths=lengths, user=user, dofs=dofs,
-                              recording=recording, key=key)  # fmt: skip
+    return assemble_recording(
+        frames, where=where, sources=sources, lengths=lengths, user=user, dofs=dofs, recording=recording, key=key
+    )

@@ -121,8 +121,9 @@ class RecordingWarning(UserWarning):
     """A recording that loads but has time gaps (training windows skip them); the message names the folder."""
 
 
-def check_plausible(field_name: str, values: np.ndarray, columns: Sequence[str], where: str,
-                    row: Callable[[int], str]) -> None:  # fmt: skip
+def check_plausible(
+    field_name: str, values: np.ndarray, columns: Sequence[str], where: str, row: Callable[[int], str]
+) -> None:
     """Refuse values beyond the field's physical bound (:data:`PLAUSIBLE_BOUNDS`), in one line.
 
     ``values`` (n, k) are the rows of one topic in the order of its file, ``columns`` their
@@ -172,9 +173,11 @@ def _read_topic(path: Path, field_name: str, value_cols: list[str]) -> pd.DataFr
     if raw and not raw.endswith(b"\n"):
         # The export was cut off mid-line (module docstring): the last values may be cut short.
         line = raw.count(b"\n") + 1
-        raise RecordingError(f"{path}: line {line}, the last, ends without a line break: the export was cut off "
-                             "mid-write and its values may be cut short (-0.6 for -0.6130); export the recording "
-                             "again, or delete that line to load the rest")  # fmt: skip
+        raise RecordingError(
+            f"{path}: line {line}, the last, ends without a line break: the export was cut off "
+            "mid-write and its values may be cut short (-0.6 for -0.6130); export the recording "
+            "again, or delete that line to load the rest"
+        )
     try:
         # pandas 3's default parser reads repr()'d doubles back exactly (checked on all
         # 1.9 M values of the UR5 recordings; ``float_precision`` is deprecated).
@@ -191,7 +194,9 @@ def _read_topic(path: Path, field_name: str, value_cols: list[str]) -> pd.DataFr
         bad = values.isna() | ~np.isfinite(values.to_numpy(dtype=float, na_value=np.nan))
         if bad.any():
             row = int(np.flatnonzero(bad.to_numpy())[0])
-            raise RecordingError(f"{path}: column {col!r} has {int(bad.sum())} missing or non-numeric values (first at data row {row})")
+            raise RecordingError(
+                f"{path}: column {col!r} has {int(bad.sum())} missing or non-numeric values (first at data row {row})"
+            )
         df[col] = values
     for col in (_SEQ, _SECS, _NSECS):
         if np.any(df[col].to_numpy() != np.round(df[col].to_numpy())):
@@ -201,8 +206,13 @@ def _read_topic(path: Path, field_name: str, value_cols: list[str]) -> pd.DataFr
     if dup.any():
         raise RecordingError(f"{path}: column {_SEQ!r} repeats value {int(df[_SEQ][dup].iloc[0])}")
     seq = df[_SEQ].to_numpy()
-    check_plausible(field_name, df[value_cols].to_numpy(np.float64), value_cols, str(path),
-                    lambda r: f"data row {r} (seq {int(seq[r])})")  # fmt: skip
+    check_plausible(
+        field_name,
+        df[value_cols].to_numpy(np.float64),
+        value_cols,
+        str(path),
+        lambda r: f"data row {r} (seq {int(seq[r])})",
+    )
     return df.sort_values(_SEQ, kind="stable").reset_index(drop=True)
 
 
@@ -256,8 +266,9 @@ def load_ros_trial(
         frames[field_name] = _read_topic(folder / file_name, field_name, [pattern.format(ax=ax) for ax in dofs])
     sources = {name: str(folder / file_name) for name, (file_name, _) in TOPIC_FILES.items()}
     lengths = {TOPIC_FILES[name][0]: len(df) for name, df in frames.items()}
-    return assemble_recording(frames, where=str(folder), sources=sources, lengths=lengths, user=user, dofs=dofs,
-                              recording=folder.name)  # fmt: skip
+    return assemble_recording(
+        frames, where=str(folder), sources=sources, lengths=lengths, user=user, dofs=dofs, recording=folder.name
+    )
 
 
 def assemble_recording(
@@ -293,13 +304,17 @@ def assemble_recording(
         common = np.intersect1d(seqs, df[key].to_numpy())
         if common.size == 0:
             others = ", ".join(_name(sources[f], where) for f in joined)
-            raise RecordingError(f"{where}: {_name(sources[field_name], where)} shares no {what} with {others} "
-                                 "(its stamps never align with theirs)")  # fmt: skip
+            raise RecordingError(
+                f"{where}: {_name(sources[field_name], where)} shares no {what} with {others} "
+                "(its stamps never align with theirs)"
+            )
         seqs = common
         joined.append(field_name)
     if seqs.size < MIN_TICKS:
-        raise RecordingError(f"{where}: the topics share {seqs.size} tick(s) ({what}); a recording needs at least "
-                             f"{MIN_TICKS} (one tick has no period)")  # fmt: skip
+        raise RecordingError(
+            f"{where}: the topics share {seqs.size} tick(s) ({what}); a recording needs at least "
+            f"{MIN_TICKS} (one tick has no period)"
+        )
     aligned = {name: df[df[key].isin(seqs)].reset_index(drop=True) for name, df in frames.items()}
 
     # Integer nanoseconds: a float of 1.67e9 s keeps only ~0.2 µs, so subtract first.
@@ -312,7 +327,9 @@ def assemble_recording(
     steps = np.diff(time)
     if np.any(steps <= 0.0):
         k = int(np.argmax(steps <= 0.0))
-        raise RecordingError(f"{sources['pose']}: header stamps do not increase at {'seq' if key == _SEQ else key} {int(seqs[k + 1])}")
+        raise RecordingError(
+            f"{sources['pose']}: header stamps do not increase at {'seq' if key == _SEQ else key} {int(seqs[k + 1])}"
+        )
     mismatch = max(int(np.max(np.abs(s - ns))) for s in stamps.values()) * 1e-9
     receive = aligned["pose"][_RECEIVE].to_numpy(float) if _RECEIVE in aligned["pose"] else None
 

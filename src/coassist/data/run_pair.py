@@ -35,8 +35,14 @@ from coassist.data.trial import Trial
 __all__ = ["write_run_pair"]
 
 
-def write_run_pair(trial: Trial, path: str | os.PathLike[str], *, mcap: bool = False, alpha: float | None = None,
-                   joint_names: Sequence[str] | None = None) -> tuple[Path, Path | None]:  # fmt: skip
+def write_run_pair(
+    trial: Trial,
+    path: str | os.PathLike[str],
+    *,
+    mcap: bool = False,
+    alpha: float | None = None,
+    joint_names: Sequence[str] | None = None,
+) -> tuple[Path, Path | None]:
     """Write ``trial`` to ``path`` and, with ``mcap``, to ``path`` with suffix ``.mcap`` (module docstring).
 
     alpha, joint_names : :func:`~coassist.data.trial_mcap.write_trial_mcap`'s. Returns (trial

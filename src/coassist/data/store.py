@@ -128,8 +128,11 @@ def _trial_table(trial: Trial) -> pa.Table:
             cols[f"prediction_{AXES[j]}"] = pa.FixedSizeListArray.from_arrays(flat, horizon)
     table = pa.table(cols)
     return table.replace_schema_metadata(
-        {META_KEY: trial.meta.to_json().encode(), VERSION_KEY: str(FORMAT_VERSION).encode(),
-         CHECKSUM_KEY: _table_checksum(table).encode()}  # fmt: skip
+        {
+            META_KEY: trial.meta.to_json().encode(),
+            VERSION_KEY: str(FORMAT_VERSION).encode(),
+            CHECKSUM_KEY: _table_checksum(table).encode(),
+        }
     )
 
 
@@ -274,8 +277,10 @@ def read_trial(path: str | os.PathLike[str]) -> Trial:
             with np.errstate(invalid="ignore"):
                 big = np.abs(value) > PLAUSIBLE_MAGNITUDE  # NaN (an unused prediction row) is not big
             if big.any():
-                raise TrialFileError(f"{path}: {name} holds {value[big].flat[0]:.3g}, beyond any recording "
-                                     f"(|value| <= {PLAUSIBLE_MAGNITUDE:g} in SI units); damaged bytes?")  # fmt: skip
+                raise TrialFileError(
+                    f"{path}: {name} holds {value[big].flat[0]:.3g}, beyond any recording "
+                    f"(|value| <= {PLAUSIBLE_MAGNITUDE:g} in SI units); damaged bytes?"
+                )
     try:
         return Trial(**kwargs)
     except ValueError as exc:
@@ -370,7 +375,9 @@ def _read_manifest(folder: Path) -> dict[str, Any]:
     if version > FORMAT_VERSION:
         raise ManifestError(f"{path}: format version {version} is newer than this coassist reads ({FORMAT_VERSION})")
     if not isinstance(manifest["dataset_id"], str) or not manifest["dataset_id"].strip():
-        raise ManifestError(f"{path}: 'dataset_id' must be a non-empty string, got {json.dumps(manifest['dataset_id'])}")
+        raise ManifestError(
+            f"{path}: 'dataset_id' must be a non-empty string, got {json.dumps(manifest['dataset_id'])}"
+        )
     entries = manifest["trials"]
     if not isinstance(entries, list):
         raise ManifestError(f"{path}: 'trials' must be a list, got {json.dumps(entries)}")
@@ -416,7 +423,9 @@ def _check_destination(folder: Path, overwrite: bool) -> None:
         if not folder.is_dir():
             raise FileExistsError(f"{folder} exists and is not a folder")
         if any(folder.iterdir()) and not overwrite:
-            raise FileExistsError(f"{folder} exists and is not empty; pass overwrite=True (coassist collect --overwrite) to replace it")
+            raise FileExistsError(
+                f"{folder} exists and is not empty; pass overwrite=True (coassist collect --overwrite) to replace it"
+            )
     elif any(p.exists() and not p.is_dir() for p in folder.parents):
         bad = next(p for p in reversed(folder.parents) if p.exists() and not p.is_dir())
         raise NotADirectoryError(f"{folder}: {bad} is a file, not a folder")
@@ -552,8 +561,13 @@ def read_dataset(
             continue
         trials.append(trial)
         files.append(entry["file"])
-    return Dataset(id=str(manifest["dataset_id"]), trials=tuple(trials), manifest=manifest, files=tuple(files),
-                   skipped=tuple(skipped))  # fmt: skip
+    return Dataset(
+        id=str(manifest["dataset_id"]),
+        trials=tuple(trials),
+        manifest=manifest,
+        files=tuple(files),
+        skipped=tuple(skipped),
+    )
 
 
 def _read_entry(folder: Path, entry: Mapping[str, Any]) -> Trial:

@@ -196,9 +196,7 @@ def _float_array(value: ArrayLike, name: str) -> np.ndarray:
 
 
 def _check_shape(arr: np.ndarray, name: str, expected: tuple[int | str, ...]) -> None:
-    ok = arr.ndim == len(expected) and all(
-        isinstance(e, str) or a == e for a, e in zip(arr.shape, expected)
-    )
+    ok = arr.ndim == len(expected) and all(isinstance(e, str) or a == e for a, e in zip(arr.shape, expected))
     if not ok:
         shown = "(" + ", ".join(str(e) for e in expected) + ("," if len(expected) == 1 else "") + ")"
         raise ValueError(f"Trial.{name} has shape {arr.shape}, expected {shown}")
@@ -334,7 +332,9 @@ class Trial:
             if arr.ndim != 2 or arr.shape[0] != n or not 1 <= arr.shape[1] <= 12:
                 raise ValueError(f"Trial.{name} has shape {arr.shape}, expected ({n}, J) with 1 <= J <= 12")
             if n_joints is not None and arr.shape[1] != n_joints:
-                raise ValueError(f"Trial.joints and Trial.joint_velocity have different joint counts ({n_joints}, {arr.shape[1]})")
+                raise ValueError(
+                    f"Trial.joints and Trial.joint_velocity have different joint counts ({n_joints}, {arr.shape[1]})"
+                )
             n_joints = arr.shape[1]
             _check_finite(arr, name)
             set_(name, arr)

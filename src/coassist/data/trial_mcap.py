@@ -45,8 +45,15 @@ from coassist.data.trial import Trial
 from coassist.interfaces import Fault, fault_names
 from coassist.spatial import quaternion_from_rotation_vector
 
-__all__ = ["FAULT_STATUS_NAME", "MCAP_TOPICS", "fault_array", "fault_level", "float64_multi_array", "write_chunk_crcs",
-           "write_trial_mcap"]  # fmt: skip
+__all__ = [
+    "FAULT_STATUS_NAME",
+    "MCAP_TOPICS",
+    "fault_array",
+    "fault_level",
+    "float64_multi_array",
+    "write_chunk_crcs",
+    "write_trial_mcap",
+]
 
 #: Topic -> message type of what :func:`write_trial_mcap` writes.
 MCAP_TOPICS: dict[str, str] = {
@@ -88,7 +95,11 @@ class _Messages:
         self.ts, self.frame_id = ts, frame_id
         t = ts.types
         self.Time, self.Header = t["builtin_interfaces/msg/Time"], t["std_msgs/msg/Header"]
-        self.Point, self.Quat, self.Pose = t["geometry_msgs/msg/Point"], t["geometry_msgs/msg/Quaternion"], t["geometry_msgs/msg/Pose"]
+        self.Point, self.Quat, self.Pose = (
+            t["geometry_msgs/msg/Point"],
+            t["geometry_msgs/msg/Quaternion"],
+            t["geometry_msgs/msg/Pose"],
+        )
         self.V3 = t["geometry_msgs/msg/Vector3"]
 
     def header(self, ns: int) -> Any:
@@ -145,7 +156,11 @@ def write_trial_mcap(
     n = trial.n_samples
     alphas = None
     if alpha is not None:
-        alphas = np.broadcast_to(np.asarray(alpha, dtype=float), (n,)) if np.ndim(alpha) == 0 else np.asarray(alpha, dtype=float)
+        alphas = (
+            np.broadcast_to(np.asarray(alpha, dtype=float), (n,))
+            if np.ndim(alpha) == 0
+            else np.asarray(alpha, dtype=float)
+        )
         if alphas.shape != (n,):
             raise ValueError(f"alpha must be one number or {n} (one per tick), got shape {alphas.shape}")
     joints = trial.joints
@@ -176,10 +191,13 @@ def write_trial_mcap(
     try:
         bag = tmp / "bag"
         with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as w:
-            conn = {topic: w.add_connection(topic, msgtype, typestore=ts) for topic, msgtype in MCAP_TOPICS.items()
-                    if (topic != "/alpha" or alphas is not None)
-                    and (topic not in ("/joint_states", "/forward_velocity_controller/commands") or joints is not None)
-                    and (topic != "/prediction" or trial.prediction is not None)}  # fmt: skip
+            conn = {
+                topic: w.add_connection(topic, msgtype, typestore=ts)
+                for topic, msgtype in MCAP_TOPICS.items()
+                if (topic != "/alpha" or alphas is not None)
+                and (topic not in ("/joint_states", "/forward_velocity_controller/commands") or joints is not None)
+                and (topic != "/prediction" or trial.prediction is not None)
+            }
 
             def put(topic: str, ns: int, msg: Any) -> None:
                 w.write(conn[topic], ns, ts.serialize_cdr(msg, MCAP_TOPICS[topic]))
@@ -187,23 +205,45 @@ def write_trial_mcap(
             for k in range(n):
                 ns = stamps[k]
                 put("/current_pose", ns, m.pose_stamped(ns, pose6[k]))
-                put("/current_velocity", ns, T["geometry_msgs/msg/TwistStamped"](
-                    header=m.header(ns), twist=T["geometry_msgs/msg/Twist"](linear=m.v3(vel6[k, :3]), angular=m.v3(vel6[k, 3:]))))
-                put("/human_wrench", ns, T["geometry_msgs/msg/WrenchStamped"](
-                    header=m.header(ns), wrench=T["geometry_msgs/msg/Wrench"](force=m.v3(wr6[k, :3]), torque=m.v3(wr6[k, 3:]))))
+                put(
+                    "/current_velocity",
+                    ns,
+                    T["geometry_msgs/msg/TwistStamped"](
+                        header=m.header(ns),
+                        twist=T["geometry_msgs/msg/Twist"](linear=m.v3(vel6[k, :3]), angular=m.v3(vel6[k, 3:])),
+                    ),
+                )
+                put(
+                    "/human_wrench",
+                    ns,
+                    T["geometry_msgs/msg/WrenchStamped"](
+                        header=m.header(ns),
+                        wrench=T["geometry_msgs/msg/Wrench"](force=m.v3(wr6[k, :3]), torque=m.v3(wr6[k, 3:])),
+                    ),
+                )
                 put("/robot_ref_pos", ns, m.pose_stamped(ns, ref6[k]))
                 if trial.prediction is not None and np.all(np.isfinite(trial.prediction[k])):
                     rows = _full(trial.prediction[k], pose6[k])
-                    path_msg = T["nav_msgs/msg/Path"](header=m.header(ns), poses=[
-                        m.pose_stamped(ns + (i + 1) * dt_ns, rows[i]) for i in range(rows.shape[0])])  # fmt: skip
+                    path_msg = T["nav_msgs/msg/Path"](
+                        header=m.header(ns),
+                        poses=[m.pose_stamped(ns + (i + 1) * dt_ns, rows[i]) for i in range(rows.shape[0])],
+                    )
                     put("/prediction", ns, path_msg)
                 if alphas is not None and math.isfinite(alphas[k]):
                     put("/alpha", ns, T["std_msgs/msg/Float64"](data=float(alphas[k])))
                 put("/faults", ns, fault_array(ts, m.header(ns), 0 if trial.fault is None else int(trial.fault[k])))
                 if joints is not None:
-                    put("/joint_states", ns, T["sensor_msgs/msg/JointState"](
-                        header=m.header(ns), name=names, position=np.asarray(joints[k], dtype=np.float64),
-                        velocity=np.zeros(0), effort=np.zeros(0)))  # fmt: skip
+                    put(
+                        "/joint_states",
+                        ns,
+                        T["sensor_msgs/msg/JointState"](
+                            header=m.header(ns),
+                            name=names,
+                            position=np.asarray(joints[k], dtype=np.float64),
+                            velocity=np.zeros(0),
+                            effort=np.zeros(0),
+                        ),
+                    )
                     qd = trial.joint_velocity[k] if trial.joint_velocity is not None else np.zeros(joints.shape[1])
                     put("/forward_velocity_controller/commands", ns, float64_multi_array(ts, qd))
         inner = bag / "bag.mcap"
@@ -263,9 +303,13 @@ def fault_array(ts: Any, header: Any, flags: int) -> Any:
     t = ts.types
     names = fault_names(flags)
     status = t["diagnostic_msgs/msg/DiagnosticStatus"](
-        level=fault_level(flags), name=FAULT_STATUS_NAME, message=", ".join(names) or "ok", hardware_id="coassist",
+        level=fault_level(flags),
+        name=FAULT_STATUS_NAME,
+        message=", ".join(names) or "ok",
+        hardware_id="coassist",
         values=[t["diagnostic_msgs/msg/KeyValue"](key="flags", value=str(int(flags)))]
-        + [t["diagnostic_msgs/msg/KeyValue"](key=name, value="1") for name in names])  # fmt: skip
+        + [t["diagnostic_msgs/msg/KeyValue"](key=name, value="1") for name in names],
+    )
     return t["diagnostic_msgs/msg/DiagnosticArray"](header=header, status=[status])
 
 

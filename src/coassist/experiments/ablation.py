@@ -62,8 +62,18 @@ from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_
 from coassist.experiments.report import Claim, Section
 from coassist.experiments.source_training import APPLICATION_SOURCE, LEARNED, seed_names
 
-SOURCES = ("nominal", "constant-velocity", "present", "ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone",
-           "lstm-intent", "paths", "oracle")  # fmt: skip
+SOURCES = (
+    "nominal",
+    "constant-velocity",
+    "present",
+    "ridge",
+    "ridge-intent",
+    "lstm-tool",
+    "lstm-hand-alone",
+    "lstm-intent",
+    "paths",
+    "oracle",
+)
 ARBITRATED = "cooperative-arbitrated"
 DAMPED = "cooperative-damped"
 CONTROLLERS = ("cooperative", ARBITRATED)
@@ -100,9 +110,15 @@ def base_source(name: str) -> str:
 def ablation_cells(cfg) -> list[tuple[str, str]]:
     """The (controller, source) cells of one object in the point-mass world (module docstring); the fixed-α
     controller runs the learned sources only where ``reproduce.fixed_alpha_learned`` says so."""
-    cells = [(c, s) for c in CONTROLLERS for s in run_sources(cfg)
-             if c == ARBITRATED or s not in LEARNED or cfg.fixed_alpha_learned]  # fmt: skip
-    cells += [(ARBITRATED, name) for s in run_sources(cfg) if s in LEARNED for name in seed_names(s, cfg.source_seeds)[1:]]
+    cells = [
+        (c, s)
+        for c in CONTROLLERS
+        for s in run_sources(cfg)
+        if c == ARBITRATED or s not in LEARNED or cfg.fixed_alpha_learned
+    ]
+    cells += [
+        (ARBITRATED, name) for s in run_sources(cfg) if s in LEARNED for name in seed_names(s, cfg.source_seeds)[1:]
+    ]
     cells += [(DAMPED, s) for s in DAMPED_SOURCES]
     return cells
 
@@ -171,11 +187,16 @@ class AblationResult:
         mg = self.mg[(world, obj)]
         x = self.metrics[(world, obj, controller, source)]
         o = self.metrics[(world, obj, _oracle_of(controller), "oracle")]
-        return {m: oracle_share(mg[f"{m}_trials"], x[f"{m}_trials"], o[f"{m}_trials"])
-                for m in ("f_rms", "overshoot")}  # fmt: skip
+        return {m: oracle_share(mg[f"{m}_trials"], x[f"{m}_trials"], o[f"{m}_trials"]) for m in ("f_rms", "overshoot")}
 
-    def by_side(self, world: str, obj: str, controller: str, source: str, metric: str,
-                ) -> dict[int, tuple[float, float, float, float, int]]:  # fmt: skip
+    def by_side(
+        self,
+        world: str,
+        obj: str,
+        controller: str,
+        source: str,
+        metric: str,
+    ) -> dict[int, tuple[float, float, float, float, int]]:
         """Per side of the detour (:data:`SIDES`): (mean, paired difference from MG, its 95 % low and high,
         trials) of ``metric`` ("overshoot" or "clearance_deficit") [m]."""
         x = self.metrics[(world, obj, controller, source)]
@@ -191,25 +212,40 @@ class AblationResult:
 
     def seeds_of(self, world: str, obj: str, controller: str, source: str) -> list[str]:
         """The cells of ``source``'s trainings that ran with ``controller`` (one unless the arbitrated LSTM)."""
-        return sorted((s for (w, o, c, s) in self.metrics if (w, o, c) == (world, obj, controller)
-                       and base_source(s) == source), key=lambda s: (s != source, s))  # fmt: skip
+        return sorted(
+            (s for (w, o, c, s) in self.metrics if (w, o, c) == (world, obj, controller) and base_source(s) == source),
+            key=lambda s: (s != source, s),
+        )
 
     def summary(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"preset": self.preset, "models": self.models, "skipped": self.skipped, "cells": {},
-                               "pairs": {f"{w}/{o}": p for (w, o), p in self.pairs.items()},
-                               "mg": {f"{w}/{o}": {k: v for k, v in m.items() if not k.endswith("_trials")}
-                                      for (w, o), m in self.mg.items()}}  # fmt: skip
+        out: dict[str, Any] = {
+            "preset": self.preset,
+            "models": self.models,
+            "skipped": self.skipped,
+            "cells": {},
+            "pairs": {f"{w}/{o}": p for (w, o), p in self.pairs.items()},
+            "mg": {
+                f"{w}/{o}": {k: v for k, v in m.items() if not k.endswith("_trials")} for (w, o), m in self.mg.items()
+            },
+        }
         for (world, obj, controller, source), r in self.metrics.items():
             sh = self.shares(world, obj, controller, source)
             out["cells"][f"{world}/{obj}/{controller}/{source}"] = {
                 **{k: v for k, v in r.items() if not k.endswith("_trials")},
-                "oracle_share_force": sh["f_rms"], "oracle_share_overshoot": sh["overshoot"],
-                "by_side": {SIDES[s]: {m: dict(zip(("mean", "vs_mg", "low", "high", "trials"), v[s]))
-                                       for m, v in ((m, self.by_side(world, obj, controller, source, m))
-                                                    for m in ("overshoot", "clearance_deficit"))}
-                            for s in SIDES},
+                "oracle_share_force": sh["f_rms"],
+                "oracle_share_overshoot": sh["overshoot"],
+                "by_side": {
+                    SIDES[s]: {
+                        m: dict(zip(("mean", "vs_mg", "low", "high", "trials"), v[s]))
+                        for m, v in (
+                            (m, self.by_side(world, obj, controller, source, m))
+                            for m in ("overshoot", "clearance_deficit")
+                        )
+                    }
+                    for s in SIDES
+                },
                 "prediction_errors": self.errors[(world, obj, controller, source)],
-            }  # fmt: skip
+            }
         return out
 
 
@@ -222,8 +258,11 @@ def _runnable(name: str, models: dict[str, str]) -> bool:
     return name in models or (base_source(name) not in LEARNED and name != "paths")
 
 
-def run_ablation(ws: Workspace, models: dict[str, str], known: dict[tuple[str, str, str], list] | None = None,
-                 ) -> AblationResult:  # fmt: skip
+def run_ablation(
+    ws: Workspace,
+    models: dict[str, str],
+    known: dict[tuple[str, str, str], list] | None = None,
+) -> AblationResult:
     """Run every cell in both worlds with the learned sources' ``models`` (name → model folder,
     :func:`~coassist.experiments.source_training.train_sources`, and ``paths`` → its calibration).
 
@@ -303,8 +342,9 @@ class AblationAhead:
             self.started.add(key)
             for j, obj in enumerate(OBJECTS):
                 if (obj, controller, name) not in self.reused:
-                    self.ws.prefetch(f"ablation-{obj}-{controller}-{name}",
-                                     **cell_options(cfg, j, obj, controller, intents[name]))  # fmt: skip
+                    self.ws.prefetch(
+                        f"ablation-{obj}-{controller}-{name}", **cell_options(cfg, j, obj, controller, intents[name])
+                    )
         if self.mujoco:
             for source in mujoco_sources(cfg):
                 key = f"mujoco:{source}"
@@ -337,12 +377,31 @@ def _mujoco_configs(cfg, obj: str, seed0: int, controller: str, intent: str) -> 
     from coassist.sim.collect import dataset_specs
 
     # The first trials of each operator in the point-mass cells (the same seeds: the same task and intent draws).
-    specs = dataset_specs(controller=controller, users=cfg.application_users, tasks=(cfg.application_task,),
-                          objects=(obj,), trials=cfg.application_trials, seed=seed0, preset=cfg.application_preset,
-                          obstacle=OBSTACLE)  # fmt: skip
-    return [DriveConfig(world="mujoco", controller=controller, task=s.task, object=obj, preset=s.preset, intent=intent,
-                        user=s.user, seed=s.seed, obstacle=s.obstacle)  # fmt: skip
-            for n, s in enumerate(specs) if n % cfg.application_trials < cfg.ablation_mujoco_trials]
+    specs = dataset_specs(
+        controller=controller,
+        users=cfg.application_users,
+        tasks=(cfg.application_task,),
+        objects=(obj,),
+        trials=cfg.application_trials,
+        seed=seed0,
+        preset=cfg.application_preset,
+        obstacle=OBSTACLE,
+    )
+    return [
+        DriveConfig(
+            world="mujoco",
+            controller=controller,
+            task=s.task,
+            object=obj,
+            preset=s.preset,
+            intent=intent,
+            user=s.user,
+            seed=s.seed,
+            obstacle=s.obstacle,
+        )
+        for n, s in enumerate(specs)
+        if n % cfg.application_trials < cfg.ablation_mujoco_trials
+    ]
 
 
 def _drive_batch(configs: list) -> list[tuple[dict, dict]]:
@@ -353,9 +412,26 @@ def _drive_batch(configs: list) -> list[tuple[dict, dict]]:
     from coassist.robot.drive import drive_lockstep
 
     torch.set_num_threads(1)
-    return [(t.meta.to_dict(), {n: getattr(t, n) for n in ("time", "pose", "velocity", "wrench", "reference",
-                                                          "prediction", "intent", "effort_h", "effort_r")})
-            for t in drive_lockstep(configs)]  # fmt: skip
+    return [
+        (
+            t.meta.to_dict(),
+            {
+                n: getattr(t, n)
+                for n in (
+                    "time",
+                    "pose",
+                    "velocity",
+                    "wrench",
+                    "reference",
+                    "prediction",
+                    "intent",
+                    "effort_h",
+                    "effort_r",
+                )
+            },
+        )
+        for t in drive_lockstep(configs)
+    ]
 
 
 #: The MuJoCo job of MG's trials (its cells have no intent source).
@@ -367,8 +443,13 @@ def _mujoco_cells(cfg, source: str, intent: str) -> list[tuple[tuple[str, str, s
     for :data:`MG_JOB`, else the arbitrated controller with ``source`` (its first training)."""
     controller = "manual" if source == MG_JOB else ARBITRATED
     name = "nominal" if source == MG_JOB else source
-    return [((obj, controller, name), _mujoco_configs(cfg, obj, application_seed(trial_seed_base(cfg.seed), j), controller, intent))
-            for j, obj in enumerate(OBJECTS)]  # fmt: skip
+    return [
+        (
+            (obj, controller, name),
+            _mujoco_configs(cfg, obj, application_seed(trial_seed_base(cfg.seed), j), controller, intent),
+        )
+        for j, obj in enumerate(OBJECTS)
+    ]
 
 
 def _mujoco_job(cfg, source: str, intent: str) -> list:
@@ -378,8 +459,10 @@ def _mujoco_job(cfg, source: str, intent: str) -> list:
 def _mujoco_jobs(cfg, intents: dict[str, str]) -> dict[str, list[tuple[tuple[str, str, str], list]]]:
     """One job per intent source of the run (and MG's, :data:`MG_JOB`): its cells, which run in lockstep
     in one worker, so a model in the loop is called once per tick for all of them."""
-    return {source: _mujoco_cells(cfg, source, "nominal" if source == MG_JOB else intents[source])
-            for source in (MG_JOB, *mujoco_sources(cfg))}  # fmt: skip
+    return {
+        source: _mujoco_cells(cfg, source, "nominal" if source == MG_JOB else intents[source])
+        for source in (MG_JOB, *mujoco_sources(cfg))
+    }
 
 
 def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict, pairs: dict, errors: dict) -> None:
@@ -395,8 +478,13 @@ def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict,
     # the run's simulation processes where it has them (started once), else a pool for these runs
     with contextlib.nullcontext(ws.pool) if ws.pool is not None else worker_pool(workers) as pool:
         # a job AblationAhead started is taken, not run again
-        futures = [(cells, ws.take(f"mujoco:{source}") or pool.submit(_drive_batch, [c for _, configs in cells for c in configs]))
-                   for source, cells in jobs.items()]  # fmt: skip
+        futures = [
+            (
+                cells,
+                ws.take(f"mujoco:{source}") or pool.submit(_drive_batch, [c for _, configs in cells for c in configs]),
+            )
+            for source, cells in jobs.items()
+        ]
         done = []
         for cells, fut in futures:
             runs = iter(fut.result())
@@ -437,14 +525,23 @@ def _side_text(v: tuple[float, float, float, float, int]) -> str:
     mean, d, lo, hi, n = v
     if not n:
         return "—"
-    return f"{1e3 * mean:.1f} ({1e3 * d:+.1f} [{1e3 * lo:+.1f}, {1e3 * hi:+.1f}])" if np.isfinite(lo) else f"{1e3 * mean:.1f}"
+    return (
+        f"{1e3 * mean:.1f} ({1e3 * d:+.1f} [{1e3 * lo:+.1f}, {1e3 * hi:+.1f}])"
+        if np.isfinite(lo)
+        else f"{1e3 * mean:.1f}"
+    )
 
 
 #: The first screen's rows: (label, controller, source); the LSTM's and the ridge's as the previous
 #: application source and its simplest rival, the application's, and the oracle.
-HEADLINE = (("LSTM+FC, intent label", ARBITRATED, "lstm-intent"), ("ridge, intent label", ARBITRATED, "ridge-intent"),
-            ("present estimate", ARBITRATED, "present"), ("path hypotheses", ARBITRATED, "paths"),
-            ("path hypotheses + deceleration damping", DAMPED, "paths"), ("oracle (true intent)", ARBITRATED, "oracle"))  # fmt: skip
+HEADLINE = (
+    ("LSTM+FC, intent label", ARBITRATED, "lstm-intent"),
+    ("ridge, intent label", ARBITRATED, "ridge-intent"),
+    ("present estimate", ARBITRATED, "present"),
+    ("path hypotheses", ARBITRATED, "paths"),
+    ("path hypotheses + deceleration damping", DAMPED, "paths"),
+    ("oracle (true intent)", ARBITRATED, "oracle"),
+)
 
 
 def headline_rows(result: AblationResult, world: str = "point-mass") -> tuple[str, list[str], list[list[Any]]]:
@@ -462,23 +559,54 @@ def headline_rows(result: AblationResult, world: str = "point-mass") -> tuple[st
             v = np.asarray(values, float)
             return " / ".join(f"{1e3 * np.nanmean(v[side == s]):.1f}" if (side == s).any() else "—" for s in SIDES)
 
-        rows.append([obj, "MG", f"{m['f_rms']:.2f}", "", sided(m["overshoot_trials"]), "",
-                     sided(m["clearance_deficit_trials"]), f"{m['jerk_rms']:.2f}", f"{1e3 * m['sigma']:.2f}"])  # fmt: skip
+        rows.append(
+            [
+                obj,
+                "MG",
+                f"{m['f_rms']:.2f}",
+                "",
+                sided(m["overshoot_trials"]),
+                "",
+                sided(m["clearance_deficit_trials"]),
+                f"{m['jerk_rms']:.2f}",
+                f"{1e3 * m['sigma']:.2f}",
+            ]
+        )
         for label, controller, source in HEADLINE:
             if (world, obj, controller, source) not in result.metrics:
                 continue
             r = result.metrics[(world, obj, controller, source)]
             default = " (the application's)" if source == APPLICATION_SOURCE and controller == ARBITRATED else ""
-            rows.append([obj, label + default, f"{r['f_rms']:.2f}", _seeds_text(result, world, obj, controller, source, "f_rms"),
-                         sided(r["overshoot_trials"]), _seeds_text(result, world, obj, controller, source, "overshoot"),
-                         sided(r["clearance_deficit_trials"]), f"{r['jerk_rms']:.2f} ({r['jerk_rms'] / m['jerk_rms']:.2f}× MG)",
-                         f"{1e3 * r['sigma']:.2f}"])  # fmt: skip
+            rows.append(
+                [
+                    obj,
+                    label + default,
+                    f"{r['f_rms']:.2f}",
+                    _seeds_text(result, world, obj, controller, source, "f_rms"),
+                    sided(r["overshoot_trials"]),
+                    _seeds_text(result, world, obj, controller, source, "overshoot"),
+                    sided(r["clearance_deficit_trials"]),
+                    f"{r['jerk_rms']:.2f} ({r['jerk_rms'] / m['jerk_rms']:.2f}× MG)",
+                    f"{1e3 * r['sigma']:.2f}",
+                ]
+            )
     n = len(next(iter(result.pairs.values())))
-    caption = (f"Precision at the person's turns ({world} world, arbitrated controller, {n} paired trials per object; "
-               "shares of the oracle's benefit over MG with their 95 % bootstrap interval, and each training seed's for "
-               "a learned source; left / right: the detour's side, right being the inside of the arc)")  # fmt: skip
-    header = ["object", "intent source", "f_RMS [N]", "force: share of oracle's saving", "overshoot left / right [mm]",
-              "overshoot: share of oracle's reduction", "clearance deficit left / right [mm]", "jerk RMS [m/s³]", "σ [mm]"]
+    caption = (
+        f"Precision at the person's turns ({world} world, arbitrated controller, {n} paired trials per object; "
+        "shares of the oracle's benefit over MG with their 95 % bootstrap interval, and each training seed's for "
+        "a learned source; left / right: the detour's side, right being the inside of the arc)"
+    )
+    header = [
+        "object",
+        "intent source",
+        "f_RMS [N]",
+        "force: share of oracle's saving",
+        "overshoot left / right [mm]",
+        "overshoot: share of oracle's reduction",
+        "clearance deficit left / right [mm]",
+        "jerk RMS [m/s³]",
+        "σ [mm]",
+    ]
     return caption, header, rows
 
 
@@ -505,8 +633,24 @@ def ablation_section(result: AblationResult) -> Section:
             if (world, obj) not in result.mg:
                 continue
             m = result.mg[(world, obj)]
-            rows.append([obj, "—", "MG", f"{m['f_rms']:.2f}", f"{m['sigma'] * 1e3:.2f}", f"{m['overshoot'] * 1e3:.1f}", "", "",
-                         "", "", f"{m['jerk_rms']:.2f}", f"{m['peak_effort_ratio']:.2f}", "", ""])  # fmt: skip
+            rows.append(
+                [
+                    obj,
+                    "—",
+                    "MG",
+                    f"{m['f_rms']:.2f}",
+                    f"{m['sigma'] * 1e3:.2f}",
+                    f"{m['overshoot'] * 1e3:.1f}",
+                    "",
+                    "",
+                    "",
+                    "",
+                    f"{m['jerk_rms']:.2f}",
+                    f"{m['peak_effort_ratio']:.2f}",
+                    "",
+                    "",
+                ]
+            )
             for (w, ob, controller, source), r in result.metrics.items():
                 if (w, ob) != (world, obj):
                     continue
@@ -514,29 +658,65 @@ def ablation_section(result: AblationResult) -> Section:
                 d, lo, hi, _ = paired_difference(r["overshoot_trials"], m["overshoot_trials"])
                 os_side = result.by_side(world, obj, controller, source, "overshoot")
                 cd_side = result.by_side(world, obj, controller, source, "clearance_deficit")
-                rows.append([obj, controller, source, f"{r['f_rms']:.2f}", f"{r['sigma'] * 1e3:.2f}",
-                             f"{r['overshoot'] * 1e3:.1f} ({d * 1e3:+.1f} [{lo * 1e3:+.1f}, {hi * 1e3:+.1f}])",
-                             _side_text(os_side[1]), _side_text(os_side[-1]), _side_text(cd_side[1]), _side_text(cd_side[-1]),
-                             f"{r['jerk_rms']:.2f}", f"{r['peak_effort_ratio']:.2f}", _share_text(sh["f_rms"]),
-                             _share_text(sh["overshoot"])])  # fmt: skip
+                rows.append(
+                    [
+                        obj,
+                        controller,
+                        source,
+                        f"{r['f_rms']:.2f}",
+                        f"{r['sigma'] * 1e3:.2f}",
+                        f"{r['overshoot'] * 1e3:.1f} ({d * 1e3:+.1f} [{lo * 1e3:+.1f}, {hi * 1e3:+.1f}])",
+                        _side_text(os_side[1]),
+                        _side_text(os_side[-1]),
+                        _side_text(cd_side[1]),
+                        _side_text(cd_side[-1]),
+                        f"{r['jerk_rms']:.2f}",
+                        f"{r['peak_effort_ratio']:.2f}",
+                        _share_text(sh["f_rms"]),
+                        _share_text(sh["overshoot"]),
+                    ]
+                )
         if rows:
             n = len(result.pairs[(world, OBJECTS[0])])
-            s.tables.append((
-                f"{world} world, {n} paired trials per cell: f_RMS [N], σ [mm], overshoot past the intent [mm] (paired "
-                "difference from MG, 95 % interval), the same per side of the detour, the clearance deficit per side [mm], "
-                "jerk RMS [m/s³], peak robot/hand effort, share of the oracle's benefit",
-                ["object", "controller", "intent source", "f_RMS", "σ", "overshoot", "overshoot, left", "overshoot, right",
-                 "clearance deficit, left", "clearance deficit, right", "jerk RMS", "peak |u_r|/|u_h|",
-                 "oracle share: force", "oracle share: overshoot"], rows))  # fmt: skip
+            s.tables.append(
+                (
+                    f"{world} world, {n} paired trials per cell: f_RMS [N], σ [mm], overshoot past the intent [mm] (paired "
+                    "difference from MG, 95 % interval), the same per side of the detour, the clearance deficit per side [mm], "
+                    "jerk RMS [m/s³], peak robot/hand effort, share of the oracle's benefit",
+                    [
+                        "object",
+                        "controller",
+                        "intent source",
+                        "f_RMS",
+                        "σ",
+                        "overshoot",
+                        "overshoot, left",
+                        "overshoot, right",
+                        "clearance deficit, left",
+                        "clearance deficit, right",
+                        "jerk RMS",
+                        "peak |u_r|/|u_h|",
+                        "oracle share: force",
+                        "oracle share: overshoot",
+                    ],
+                    rows,
+                )
+            )
     rows = []
     for (world, obj, controller, source), e in result.errors.items():
         if world == "point-mass" and controller == ARBITRATED:
-            rows.append([source, obj] + [f"{1e3 * e[h]['tool']:.2f} / {1e3 * e[h]['intent']:.2f}" if h in e else "—"
-                                         for h in EVAL_HORIZONS])  # fmt: skip
-    s.tables.append((
-        "What each source predicted in the loop (point-mass world, arbitrated controller): e_RMS [mm] against the tool's "
-        "measured future pose / against the operator's true intent, per horizon",
-        ["intent source", "object"] + [f"{h} samples" for h in EVAL_HORIZONS], rows))
+            rows.append(
+                [source, obj]
+                + [f"{1e3 * e[h]['tool']:.2f} / {1e3 * e[h]['intent']:.2f}" if h in e else "—" for h in EVAL_HORIZONS]
+            )
+    s.tables.append(
+        (
+            "What each source predicted in the loop (point-mass world, arbitrated controller): e_RMS [mm] against the tool's "
+            "measured future pose / against the operator's true intent, per horizon",
+            ["intent source", "object"] + [f"{h} samples" for h in EVAL_HORIZONS],
+            rows,
+        )
+    )
     for obj in OBJECTS:
         for source in ("lstm-tool", "lstm-hand-alone", "lstm-intent"):
             key = ("point-mass", obj, ARBITRATED, source)
@@ -544,14 +724,16 @@ def ablation_section(result: AblationResult) -> Section:
                 continue
             sh = result.shares(*key)
             f, o = sh["f_rms"][0], sh["overshoot"][0]
-            s.claims.append(Claim(
-                f"{obj}: the arbitrated controller with {source} in the loop gets ≥ {100 * ORACLE_SHARE_BAR:.0f} % of the "
-                "oracle's force saving and of its overshoot reduction over MG (issue 18's bar; point-mass world)",
-                bool(np.isfinite(f) and np.isfinite(o) and f >= ORACLE_SHARE_BAR and o >= ORACLE_SHARE_BAR),
-                f"force {_share_text(sh['f_rms'])}, overshoot {_share_text(sh['overshoot'])} of the oracle's benefit",
-                reason="a network on the hand force learns where the tool goes, not where the person wants it now: at a "
-                "turn it runs past it (docs/precision.md)",
-            ))
+            s.claims.append(
+                Claim(
+                    f"{obj}: the arbitrated controller with {source} in the loop gets ≥ {100 * ORACLE_SHARE_BAR:.0f} % of the "
+                    "oracle's force saving and of its overshoot reduction over MG (issue 18's bar; point-mass world)",
+                    bool(np.isfinite(f) and np.isfinite(o) and f >= ORACLE_SHARE_BAR and o >= ORACLE_SHARE_BAR),
+                    f"force {_share_text(sh['f_rms'])}, overshoot {_share_text(sh['overshoot'])} of the oracle's benefit",
+                    reason="a network on the hand force learns where the tool goes, not where the person wants it now: at a "
+                    "turn it runs past it (docs/precision.md)",
+                )
+            )
     s.claims.extend(precision_claims(result))
     return s
 
@@ -566,46 +748,67 @@ def precision_claims(result: AblationResult, source: str = APPLICATION_SOURCE) -
             continue
         sh = result.shares(*key)
         (f, _, _), (o, o_lo, _) = sh["f_rms"], sh["overshoot"]
-        claims.append(Claim(
-            f"{obj}: with '{source}' the arbitrated controller gets ≥ {100 * FORCE_SHARE_BAR:.0f} % of the oracle's force "
-            f"saving and ≥ {100 * OVERSHOOT_SHARE_BAR:.0f} % of its overshoot reduction over MG, the latter's bootstrap "
-            f"lower bound ≥ {100 * SHARE_LOWER_BAR:.0f} % (issue 34)",
-            bool(np.isfinite(f) and np.isfinite(o) and np.isfinite(o_lo) and f >= FORCE_SHARE_BAR
-                 and o >= OVERSHOOT_SHARE_BAR and o_lo >= SHARE_LOWER_BAR),
-            f"force {_share_text(sh['f_rms'])}, overshoot {_share_text(sh['overshoot'])} of the oracle's benefit",
-            reason="the side of the detour is known only some 0.1 s after it starts, and the person's shape varies from "
-            "trial to trial: the robot follows the present estimate meanwhile",
-        ))
-        for metric, what in (("overshoot", "overshoots the intent"), ("clearance_deficit", "passes closer to the obstacle")):
+        claims.append(
+            Claim(
+                f"{obj}: with '{source}' the arbitrated controller gets ≥ {100 * FORCE_SHARE_BAR:.0f} % of the oracle's force "
+                f"saving and ≥ {100 * OVERSHOOT_SHARE_BAR:.0f} % of its overshoot reduction over MG, the latter's bootstrap "
+                f"lower bound ≥ {100 * SHARE_LOWER_BAR:.0f} % (issue 34)",
+                bool(
+                    np.isfinite(f)
+                    and np.isfinite(o)
+                    and np.isfinite(o_lo)
+                    and f >= FORCE_SHARE_BAR
+                    and o >= OVERSHOOT_SHARE_BAR
+                    and o_lo >= SHARE_LOWER_BAR
+                ),
+                f"force {_share_text(sh['f_rms'])}, overshoot {_share_text(sh['overshoot'])} of the oracle's benefit",
+                reason="the side of the detour is known only some 0.1 s after it starts, and the person's shape varies from "
+                "trial to trial: the robot follows the present estimate meanwhile",
+            )
+        )
+        for metric, what in (
+            ("overshoot", "overshoots the intent"),
+            ("clearance_deficit", "passes closer to the obstacle"),
+        ):
             sides = result.by_side(*key, metric)
             ok = all(n >= 2 and np.isfinite(hi) and hi <= 0.0 for _, _, _, hi, n in sides.values())
-            claims.append(Claim(
-                f"{obj}: with '{source}' the arbitrated controller {what} no more than MG on either side of the detour "
-                "(paired difference's 95 % upper bound ≤ 0; issue 34)",
-                bool(ok),
-                "; ".join(f"{SIDES[sd]} {_side_text(v)} mm vs MG" for sd, v in sides.items()),
-                reason="MG's heavy tool swings wide of the obstacle at the outside turn; a controller that follows the "
-                "intent closely passes nearer to it than MG does (the oracle too)" if metric == "clearance_deficit" else
-                "where the side is decided late, the tool follows the old direction for a moment",
-            ))
+            claims.append(
+                Claim(
+                    f"{obj}: with '{source}' the arbitrated controller {what} no more than MG on either side of the detour "
+                    "(paired difference's 95 % upper bound ≤ 0; issue 34)",
+                    bool(ok),
+                    "; ".join(f"{SIDES[sd]} {_side_text(v)} mm vs MG" for sd, v in sides.items()),
+                    reason="MG's heavy tool swings wide of the obstacle at the outside turn; a controller that follows the "
+                    "intent closely passes nearer to it than MG does (the oracle too)"
+                    if metric == "clearance_deficit"
+                    else "where the side is decided late, the tool follows the old direction for a moment",
+                )
+            )
         r, m = result.metrics[key], result.mg[("point-mass", obj)]
-        claims.append(Claim(
-            f"{obj}: with '{source}' the arbitrated controller's jerk RMS is ≤ {JERK_BAR:g} × MG's (issue 34)",
-            bool(r["jerk_rms"] <= JERK_BAR * m["jerk_rms"]),
-            f"jerk RMS {r['jerk_rms']:.2f} vs MG {m['jerk_rms']:.2f} m/s³ ({r['jerk_rms'] / m['jerk_rms']:.2f}×)",
-            reason="the rows change when the filter decides the side or the shape: the robot's effort changes with them",
-        ))
+        claims.append(
+            Claim(
+                f"{obj}: with '{source}' the arbitrated controller's jerk RMS is ≤ {JERK_BAR:g} × MG's (issue 34)",
+                bool(r["jerk_rms"] <= JERK_BAR * m["jerk_rms"]),
+                f"jerk RMS {r['jerk_rms']:.2f} vs MG {m['jerk_rms']:.2f} m/s³ ({r['jerk_rms'] / m['jerk_rms']:.2f}×)",
+                reason="the rows change when the filter decides the side or the shape: the robot's effort changes with them",
+            )
+        )
     if all(("mujoco", obj, ARBITRATED, source) in result.metrics for obj in OBJECTS):
         parts, ok = [], True
         for obj in OBJECTS:
             r, m = result.metrics[("mujoco", obj, ARBITRATED, source)], result.mg[("mujoco", obj)]
             ok &= bool(r["f_rms"] < m["f_rms"] and r["overshoot"] <= m["overshoot"])
-            parts.append(f"{obj}: f_RMS {r['f_rms']:.2f} vs MG {m['f_rms']:.2f} N, overshoot {1e3 * r['overshoot']:.1f} vs "
-                         f"MG {1e3 * m['overshoot']:.1f} mm")
-        claims.append(Claim(
-            f"on the MuJoCo UR5, '{source}' with the arbitrated controller needs less force than MG and overshoots no more, "
-            "on both objects (the point-mass result's direction; issue 34)",
-            ok, "; ".join(parts),
-            reason="the arm's joint limits and the safety layer's filters delay the robot's effort, and few trials run there",
-        ))
+            parts.append(
+                f"{obj}: f_RMS {r['f_rms']:.2f} vs MG {m['f_rms']:.2f} N, overshoot {1e3 * r['overshoot']:.1f} vs "
+                f"MG {1e3 * m['overshoot']:.1f} mm"
+            )
+        claims.append(
+            Claim(
+                f"on the MuJoCo UR5, '{source}' with the arbitrated controller needs less force than MG and overshoots no more, "
+                "on both objects (the point-mass result's direction; issue 34)",
+                ok,
+                "; ".join(parts),
+                reason="the arm's joint limits and the safety layer's filters delay the robot's effort, and few trials run there",
+            )
+        )
     return claims

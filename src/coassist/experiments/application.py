@@ -93,17 +93,29 @@ def cell_options(cfg, j: int, obj: str, controller: str, intent: str) -> dict[st
     from coassist.sim.world import NAMED_GROUP
 
     n_trials = len(cfg.application_users) * cfg.application_trials
-    return {"tasks": (cfg.application_task,), "objects": (obj,), "users": cfg.application_users,
-            "trials": cfg.application_trials, "seed": application_seed(trial_seed_base(cfg.seed), j), "controller": controller,
-            "preset": cfg.application_preset, "intent": intent, "obstacle": OBSTACLE,
-            "groups": -(-n_trials // NAMED_GROUP)}  # fmt: skip
+    return {
+        "tasks": (cfg.application_task,),
+        "objects": (obj,),
+        "users": cfg.application_users,
+        "trials": cfg.application_trials,
+        "seed": application_seed(trial_seed_base(cfg.seed), j),
+        "controller": controller,
+        "preset": cfg.application_preset,
+        "intent": intent,
+        "obstacle": OBSTACLE,
+        "groups": -(-n_trials // NAMED_GROUP),
+    }
 
 
 def handed_to_ablation() -> set[tuple[str, str, str]]:
     """The (object, controller, intent source) cells :meth:`ApplicationResult.cells` hands to the
     ablation: MG's (source "nominal") and the assistive controllers' (:data:`APPLICATION_SOURCE`)."""
-    return {(obj, c, "nominal" if c == "manual" else APPLICATION_SOURCE)
-            for obj in OBJECTS for c in CONTROLLERS if c == "manual" or c.startswith("cooperative")}  # fmt: skip
+    return {
+        (obj, c, "nominal" if c == "manual" else APPLICATION_SOURCE)
+        for obj in OBJECTS
+        for c in CONTROLLERS
+        if c == "manual" or c.startswith("cooperative")
+    }
 
 
 def prefetch_model_free(ws: Workspace) -> None:
@@ -113,17 +125,27 @@ def prefetch_model_free(ws: Workspace) -> None:
     from coassist.experiments.pipeline import calibration_seed, trial_seed_base
 
     cfg = ws.config
-    ws.prefetch("calibration", tasks=(cfg.application_task,), users=cfg.application_users, objects=("handle",),
-                trials=cfg.calibration_trials, seed=calibration_seed(trial_seed_base(cfg.seed)), controller="manual",
-                preset=cfg.application_preset, intent="nominal", obstacle=OBSTACLE)  # fmt: skip
+    ws.prefetch(
+        "calibration",
+        tasks=(cfg.application_task,),
+        users=cfg.application_users,
+        objects=("handle",),
+        trials=cfg.calibration_trials,
+        seed=calibration_seed(trial_seed_base(cfg.seed)),
+        controller="manual",
+        preset=cfg.application_preset,
+        intent="nominal",
+        obstacle=OBSTACLE,
+    )
     for j, obj in enumerate(OBJECTS):
         for controller in CONTROLLERS:
             if not controller.startswith("cooperative"):
                 ws.prefetch(f"app-{obj}-{controller}", **cell_options(ws.config, j, obj, controller, "nominal"))
 
 
-def run_application(ws: Workspace, final_model: Path,
-                    ahead: Callable[[dict[str, str]], None] | None = None) -> ApplicationResult:  # fmt: skip
+def run_application(
+    ws: Workspace, final_model: Path, ahead: Callable[[dict[str, str]], None] | None = None
+) -> ApplicationResult:
     """Collect the heavy load's transfer dataset (with the final model in the loop, as the thesis
     collects each object's), calibrate the path hypotheses to the operators
     (:func:`~coassist.experiments.source_training.calibrate_paths`), train the learned intent sources on
@@ -136,8 +158,14 @@ def run_application(ws: Workspace, final_model: Path,
     is written. ``ahead(models)`` is called at the same moments with the sources written so
     far, for a later stage to put its own simulations there too (the ablation's)."""
     cfg = ws.config
-    ws.collect("TL-heavy", tasks=ITERATION_TASKS, objects=("heavy",), trials=max(1, cfg.transfer_trials // 3),
-               seed=heavy_transfer_seed(trial_seed_base(cfg.seed)), intent=str(final_model))
+    ws.collect(
+        "TL-heavy",
+        tasks=ITERATION_TASKS,
+        objects=("heavy",),
+        trials=max(1, cfg.transfer_trials // 3),
+        seed=heavy_transfer_seed(trial_seed_base(cfg.seed)),
+        intent=str(final_model),
+    )
 
     def cell(j: int, obj: str, controller: str, models: dict[str, str]) -> dict[str, Any]:
         intent = models[APPLICATION_SOURCE] if controller.startswith("cooperative") else "nominal"
@@ -148,7 +176,9 @@ def run_application(ws: Workspace, final_model: Path,
     def on_models(models: dict[str, str]) -> None:
         for j, obj in enumerate(OBJECTS):
             for controller in CONTROLLERS:
-                if (obj, controller) not in started and (APPLICATION_SOURCE in models or not controller.startswith("cooperative")):
+                if (obj, controller) not in started and (
+                    APPLICATION_SOURCE in models or not controller.startswith("cooperative")
+                ):
                     started.add((obj, controller))
                     ws.prefetch(f"app-{obj}-{controller}", **cell(j, obj, controller, models))
         if ahead is not None:
@@ -166,8 +196,15 @@ def run_application(ws: Workspace, final_model: Path,
             ordered = sorted(ds.trials, key=_pair_key)  # the same order for every controller: trial i meets trial i
             metrics[(obj, controller)] = application_metrics(ordered)
             trials[(obj, controller)] = ordered
-    return ApplicationResult(metrics, trials, cfg.application_task, cfg.application_preset,
-                             tuple(cfg.application_users), models, APPLICATION_SOURCE)
+    return ApplicationResult(
+        metrics,
+        trials,
+        cfg.application_task,
+        cfg.application_preset,
+        tuple(cfg.application_users),
+        models,
+        APPLICATION_SOURCE,
+    )
 
 
 def _pair_key(trial) -> tuple[str, int]:
@@ -215,16 +252,32 @@ def headline_table(result: ApplicationResult) -> tuple[str, list[str], list[list
             v = result.metrics[(obj, variant)]
             s_mg, sd_mg = force_saving(v["f_rms_trials"], m["f_rms_trials"])
             s_imp, sd_imp = force_saving(v["f_rms_trials"], i_["f_rms_trials"])
-            rows.append([obj, variant, f"{100 * s_mg:.0f} ± {100 * sd_mg:.0f} %", f"{100 * s_imp:.0f} ± {100 * sd_imp:.0f} %",
-                         f"{v['sigma'] * 1e3:.2f} vs {m['sigma'] * 1e3:.2f} ({_ci(v['sigma_trials'], m['sigma_trials'], 1e3, 2)})",
-                         f"{v['overshoot'] * 1e3:.1f} vs {m['overshoot'] * 1e3:.1f} "
-                         f"({_ci(v['overshoot_trials'], m['overshoot_trials'], 1e3, 1)})",
-                         f"{v['jerk_rms']:.2f} vs {m['jerk_rms']:.2f}"])
-    caption = (f"Application scenario, {result.trials_per_controller} paired trials per object and controller "
-               f"(operators {', '.join(str(u) for u in result.users)}): force saved per trial (mean ± std), and the "
-               "assistive controller against MG with the paired difference and its 95 % interval")
-    header = ["object", "assistive variant", "force saved vs MG", "force saved vs IMP", "σ at target [mm]",
-              "overshoot past intent [mm]", "jerk RMS [m/s³]"]
+            rows.append(
+                [
+                    obj,
+                    variant,
+                    f"{100 * s_mg:.0f} ± {100 * sd_mg:.0f} %",
+                    f"{100 * s_imp:.0f} ± {100 * sd_imp:.0f} %",
+                    f"{v['sigma'] * 1e3:.2f} vs {m['sigma'] * 1e3:.2f} ({_ci(v['sigma_trials'], m['sigma_trials'], 1e3, 2)})",
+                    f"{v['overshoot'] * 1e3:.1f} vs {m['overshoot'] * 1e3:.1f} "
+                    f"({_ci(v['overshoot_trials'], m['overshoot_trials'], 1e3, 1)})",
+                    f"{v['jerk_rms']:.2f} vs {m['jerk_rms']:.2f}",
+                ]
+            )
+    caption = (
+        f"Application scenario, {result.trials_per_controller} paired trials per object and controller "
+        f"(operators {', '.join(str(u) for u in result.users)}): force saved per trial (mean ± std), and the "
+        "assistive controller against MG with the paired difference and its 95 % interval"
+    )
+    header = [
+        "object",
+        "assistive variant",
+        "force saved vs MG",
+        "force saved vs IMP",
+        "σ at target [mm]",
+        "overshoot past intent [mm]",
+        "jerk RMS [m/s³]",
+    ]
     return caption, header, rows
 
 
@@ -318,71 +371,114 @@ def application_section(result: ApplicationResult) -> Section:
     )
     rows = []
     for (obj, controller), r in result.metrics.items():
-        rows.append([obj, controller, _pm(r, "f_rms", 1.0, 2), _pm(r, "sigma", 1000.0, 2), f"{r['reached']}/{len(r['sigma_trials'])}",
-                     _pm(r, "overshoot", 1000.0, 1), _pm(r, "jerk_rms", 1.0, 2), _pm(r, "tracking_error_rms", 1000.0, 1),
-                     _pm(r, "peak_effort_ratio", 1.0, 2)])
-    s.tables.append(("Interaction force, precision, smoothness (Fig. 5.25, 5.27, 5.29, 5.31); mean ± std over trials",
-                     ["object", "controller", "f_RMS [N]", "σ [mm]", "reached target", "overshoot [mm]", "jerk RMS [m/s³]",
-                      "distance from intent RMS [mm]", "peak |u_r| / peak |u_h|"], rows))
+        rows.append(
+            [
+                obj,
+                controller,
+                _pm(r, "f_rms", 1.0, 2),
+                _pm(r, "sigma", 1000.0, 2),
+                f"{r['reached']}/{len(r['sigma_trials'])}",
+                _pm(r, "overshoot", 1000.0, 1),
+                _pm(r, "jerk_rms", 1.0, 2),
+                _pm(r, "tracking_error_rms", 1000.0, 1),
+                _pm(r, "peak_effort_ratio", 1.0, 2),
+            ]
+        )
+    s.tables.append(
+        (
+            "Interaction force, precision, smoothness (Fig. 5.25, 5.27, 5.29, 5.31); mean ± std over trials",
+            [
+                "object",
+                "controller",
+                "f_RMS [N]",
+                "σ [mm]",
+                "reached target",
+                "overshoot [mm]",
+                "jerk RMS [m/s³]",
+                "distance from intent RMS [mm]",
+                "peak |u_r| / peak |u_h|",
+            ],
+            rows,
+        )
+    )
     _plot(s, result)
     results = result.metrics
     for obj in OBJECTS:
         a, i_, m = (results[(obj, c)] for c in ("cooperative", "impedance", "manual"))
         # The thesis' ordering is two claims: checked apart, so the report says which half fails.
         forces = f"f_RMS: assistive {a['f_rms']:.2f} N, MG {m['f_rms']:.2f} N, IMP {i_['f_rms']:.2f} N"
-        s.claims.append(Claim(
-            f"{obj}: the assistive controller needs less interaction force than both manual guidance and impedance control",
-            a["f_rms"] < min(m["f_rms"], i_["f_rms"]), forces,
-            reason="the robot's help comes late or its prediction adds lag, so the operator pushes against it",
-        ))
-        s.claims.append(Claim(
-            f"{obj}: manual guidance needs less interaction force than impedance control",
-            m["f_rms"] < i_["f_rms"], forces,
-            reason="IMP's spring pulls the robot along the moving nominal path, which the simulated operator "
-            "follows except for the detour around the obstacle: it drags the object for them most of the way and "
-            f"resists only during the detour, while under MG the operator pushes the full admittance damping "
-            f"({damping:g} N·s/m) alone",
-        ))
+        s.claims.append(
+            Claim(
+                f"{obj}: the assistive controller needs less interaction force than both manual guidance and impedance control",
+                a["f_rms"] < min(m["f_rms"], i_["f_rms"]),
+                forces,
+                reason="the robot's help comes late or its prediction adds lag, so the operator pushes against it",
+            )
+        )
+        s.claims.append(
+            Claim(
+                f"{obj}: manual guidance needs less interaction force than impedance control",
+                m["f_rms"] < i_["f_rms"],
+                forces,
+                reason="IMP's spring pulls the robot along the moving nominal path, which the simulated operator "
+                "follows except for the detour around the obstacle: it drags the object for them most of the way and "
+                f"resists only during the detour, while under MG the operator pushes the full admittance damping "
+                f"({damping:g} N·s/m) alone",
+            )
+        )
         # σ averages only the trials that reached the target: the assistive controller must
         # also reach it at least as often, or a lucky single trial could win.
         n = len(a["sigma_trials"])
-        s.claims.append(Claim(
-            f"{obj}: the assistive controller reaches the target more precisely than both baselines",
-            bool(np.isfinite(a["sigma"]) and a["sigma"] < np.nan_to_num(m["sigma"], nan=np.inf)
-                 and a["sigma"] < np.nan_to_num(i_["sigma"], nan=np.inf) and a["reached"] >= max(m["reached"], i_["reached"])),
-            f"σ: assistive {a['sigma'] * 1000:.1f} mm ({a['reached']}/{n} reached), MG {m['sigma'] * 1000:.1f} mm "
-            f"({m['reached']}/{n}), IMP {i_['sigma'] * 1000:.1f} mm ({i_['reached']}/{n})",
-            reason="the simulated operator settles on the target alike with every controller; the precision is the operator's",
-        ))
+        s.claims.append(
+            Claim(
+                f"{obj}: the assistive controller reaches the target more precisely than both baselines",
+                bool(
+                    np.isfinite(a["sigma"])
+                    and a["sigma"] < np.nan_to_num(m["sigma"], nan=np.inf)
+                    and a["sigma"] < np.nan_to_num(i_["sigma"], nan=np.inf)
+                    and a["reached"] >= max(m["reached"], i_["reached"])
+                ),
+                f"σ: assistive {a['sigma'] * 1000:.1f} mm ({a['reached']}/{n} reached), MG {m['sigma'] * 1000:.1f} mm "
+                f"({m['reached']}/{n}), IMP {i_['sigma'] * 1000:.1f} mm ({i_['reached']}/{n})",
+                reason="the simulated operator settles on the target alike with every controller; the precision is the operator's",
+            )
+        )
         # Issue #11's bar for an assistive controller that helps without oscillating, for both variants.
         for variant in ("cooperative", "cooperative-arbitrated"):
             v = results[(obj, variant)]
             saving = 1.0 - v["f_rms"] / m["f_rms"]
-            s.claims.append(Claim(
-                f"{obj}: {variant} needs ≥ {100 * FORCE_SAVING:.0f} % less force than MG, reaches the target at least as "
-                "precisely and overshoots the operator's intent no more (beyond the thesis)",
-                bool(saving >= FORCE_SAVING and np.isfinite(v["sigma"]) and v["sigma"] <= np.nan_to_num(m["sigma"], nan=np.inf)
-                     and v["reached"] >= m["reached"] and v["overshoot"] <= m["overshoot"]),
-                f"force {100 * saving:.0f} % below MG; σ {v['sigma'] * 1000:.2f} vs MG {m['sigma'] * 1000:.2f} mm "
-                f"(paired {_ci(v['sigma_trials'], m['sigma_trials'], 1000.0, 2)} mm); overshoot "
-                f"{v['overshoot'] * 1000:.1f} vs MG {m['overshoot'] * 1000:.1f} mm "
-                f"(paired {_ci(v['overshoot_trials'], m['overshoot_trials'], 1000.0, 1)} mm); jerk RMS {v['jerk_rms']:.2f} vs MG "
-                f"{m['jerk_rms']:.2f} m/s³",
-                reason="the prediction does not know where the operator wants the tool at every turn: the robot pushes "
-                "past the turns it misses (section 6 compares every intent source on these trials)",
-            ))
+            s.claims.append(
+                Claim(
+                    f"{obj}: {variant} needs ≥ {100 * FORCE_SAVING:.0f} % less force than MG, reaches the target at least as "
+                    "precisely and overshoots the operator's intent no more (beyond the thesis)",
+                    bool(
+                        saving >= FORCE_SAVING
+                        and np.isfinite(v["sigma"])
+                        and v["sigma"] <= np.nan_to_num(m["sigma"], nan=np.inf)
+                        and v["reached"] >= m["reached"]
+                        and v["overshoot"] <= m["overshoot"]
+                    ),
+                    f"force {100 * saving:.0f} % below MG; σ {v['sigma'] * 1000:.2f} vs MG {m['sigma'] * 1000:.2f} mm "
+                    f"(paired {_ci(v['sigma_trials'], m['sigma_trials'], 1000.0, 2)} mm); overshoot "
+                    f"{v['overshoot'] * 1000:.1f} vs MG {m['overshoot'] * 1000:.1f} mm "
+                    f"(paired {_ci(v['overshoot_trials'], m['overshoot_trials'], 1000.0, 1)} mm); jerk RMS {v['jerk_rms']:.2f} vs MG "
+                    f"{m['jerk_rms']:.2f} m/s³",
+                    reason="the prediction does not know where the operator wants the tool at every turn: the robot pushes "
+                    "past the turns it misses (section 6 compares every intent source on these trials)",
+                )
+            )
     return s
 
 
 #: How the report names each learned source the assistive controllers may use.
 _SOURCE_TEXT = {
     "paths": "path hypotheses round the obstacle the robot is told of (coassist.scenario.path_hypotheses): the nominal "
-             "path deformed to either side, each operator's detour shape fitted to four trials of theirs with MG, a "
-             "filter that decides the side from the hand force and runs the rows along the likely path; the source "
-             "that did best in the in-loop ablation on validation seeds this report never uses",
+    "path deformed to either side, each operator's detour shape fitted to four trials of theirs with MG, a "
+    "filter that decides the side from the hand force and runs the rows along the likely path; the source "
+    "that did best in the in-loop ablation on validation seeds this report never uses",
     "lstm-intent": "the LSTM+FC trained from scratch on every simulated dataset to predict the operator's intent; the "
-                   "source that got the largest share of the oracle's benefit in the in-loop ablation on validation "
-                   "seeds this report never uses",
+    "source that got the largest share of the oracle's benefit in the in-loop ablation on validation "
+    "seeds this report never uses",
     "lstm-tool": "the LSTM+FC trained from scratch on every simulated dataset to predict the tool's future pose (the thesis' label)",
 }
 

@@ -59,16 +59,28 @@ class SweepConfig:
     position_scale: float = 10.0  # output in decimetres: see the module docstring
 
     def __post_init__(self) -> None:
-        for name in ("duration", "dt", "mass", "damping", "human_effort_weight", "position_scale", "position_weight",
-                     "human_amplitude", "robot_amplitude"):
+        for name in (
+            "duration",
+            "dt",
+            "mass",
+            "damping",
+            "human_effort_weight",
+            "position_scale",
+            "position_weight",
+            "human_amplitude",
+            "robot_amplitude",
+        ):
             object.__setattr__(self, name, check_positive_scalar(getattr(self, name), name))
         if self.duration < self.dt:
             raise ValueError(f"duration must be at least one sample (dt = {self.dt}), got {self.duration}")
         if not (np.isfinite(self.velocity_weight) and self.velocity_weight >= 0):
             raise ValueError(f"velocity_weight must be a finite number >= 0, got {self.velocity_weight}")
         object.__setattr__(self, "alphas", _values(self.alphas, "alphas", lambda a: 0.0 <= a <= 1.0, "in [0, 1]"))
-        object.__setattr__(self, "robot_effort_weights", _values(
-            self.robot_effort_weights, "robot_effort_weights", lambda r: 0.0 < r < np.inf, "finite and > 0"))
+        object.__setattr__(
+            self,
+            "robot_effort_weights",
+            _values(self.robot_effort_weights, "robot_effort_weights", lambda r: 0.0 < r < np.inf, "finite and > 0"),
+        )
         horizons = _values(self.horizons, "horizons", lambda h: h >= 1 and float(h).is_integer(), "integers >= 1")
         object.__setattr__(self, "horizons", tuple(int(h) for h in horizons))
 
@@ -126,8 +138,15 @@ def simulate_case(
     model = ImpedanceModel(config.mass, config.damping, 0.0, config.dt)
     Q = np.diag([config.position_weight, config.velocity_weight]) * position_scale**2
     game = CooperativeGame(
-        model, Q_hh=Q, Q_hr=0.0, Q_rh=0.0, Q_rr=Q,
-        R_h=config.human_effort_weight, R_r=R_r, alpha=alpha, horizon=horizon,
+        model,
+        Q_hh=Q,
+        Q_hr=0.0,
+        Q_rh=0.0,
+        Q_rr=Q,
+        R_h=config.human_effort_weight,
+        R_r=R_r,
+        alpha=alpha,
+        horizon=horizon,
     )
     T = int(round(config.duration / config.dt))
     ref_h, ref_r = references(config, T + horizon + 1)
@@ -151,7 +170,9 @@ def _sweep(config: SweepConfig, position_scale: float, progress=None, task=None)
         x, u_h, u_r = simulate_case(config, alpha, R_r, horizon, position_scale)
         cases.append(
             CaseResult(
-                alpha=alpha, R_r=R_r, horizon=horizon,
+                alpha=alpha,
+                R_r=R_r,
+                horizon=horizon,
                 rms_error_human=float(np.sqrt(np.mean((x - ref_h[1:, 0]) ** 2))),
                 rms_error_robot=float(np.sqrt(np.mean((x - ref_r[1:, 0]) ** 2))),
                 rms_effort_human=float(np.sqrt(np.mean(u_h**2))),
@@ -258,8 +279,14 @@ def write_outputs(result: SweepResult, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     cfg = result.config
     weights, horizons = cfg.robot_effort_weights, cfg.horizons
-    fig, axes = plt.subplots(len(weights), len(horizons), figsize=(4.2 * len(horizons), 3.0 * len(weights)),
-                             sharex=True, sharey=True, squeeze=False)
+    fig, axes = plt.subplots(
+        len(weights),
+        len(horizons),
+        figsize=(4.2 * len(horizons), 3.0 * len(weights)),
+        sharex=True,
+        sharey=True,
+        squeeze=False,
+    )
     t = result.time
     for i, R_r in enumerate(weights):
         for j, horizon in enumerate(horizons):
@@ -293,7 +320,11 @@ def print_summary(result: SweepResult, console) -> None:
     by_key = {(c.alpha, c.R_r, c.horizon): c for c in result.cases}
     for R_r in result.config.robot_effort_weights:
         for horizon in result.config.horizons:
-            table.add_row(f"{R_r:g}", str(horizon), *(f"{by_key[(a, R_r, horizon)].rms_error_human:.4f}" for a in result.config.alphas))
+            table.add_row(
+                f"{R_r:g}",
+                str(horizon),
+                *(f"{by_key[(a, R_r, horizon)].rms_error_human:.4f}" for a in result.config.alphas),
+            )
     console.print(table)
     for name, verdict in result.observations.items():
         if verdict["holds"] is None:

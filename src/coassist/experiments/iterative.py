@@ -105,13 +105,17 @@ def iterative_training(
     steps: list[Iteration] = []
     model = None
     for k in range(iterations):
-        say(f"iteration {k}: collecting D_{k} with {'M_' + str(k - 1) if model is not None else 'the nominal assumption'}")
+        say(
+            f"iteration {k}: collecting D_{k} with {'M_' + str(k - 1) if model is not None else 'the nominal assumption'}"
+        )
         t0 = time.perf_counter()
         dataset = collect(k, model)
         collect_s = time.perf_counter() - t0
         errors = dict(online_errors(dataset))
         if criterion_horizon not in errors:
-            raise ValueError(f"online_errors gave no e_RMS at criterion_horizon={criterion_horizon} (got {sorted(errors)})")
+            raise ValueError(
+                f"online_errors gave no e_RMS at criterion_horizon={criterion_horizon} (got {sorted(errors)})"
+            )
         say(f"iteration {k}: training M_{k} on D_{k}" + (f" from M_{k - 1}" if model is not None else " from scratch"))
         t0 = time.perf_counter()
         model = train(k, dataset, model)

@@ -36,17 +36,35 @@ from coassist._io import atomic_write_text
 #: label -> (window fields, preset fields, train fields) replaced in the base preset.
 VARIANTS: dict[str, tuple[dict[str, Any], dict[str, Any], dict[str, Any]]] = {
     "thesis: absolute in / absolute out": (
-        {"input_frame": "absolute", "target": "absolute", "target_scaling": "axis"}, {"skip": False}, {"mirror": False}),
+        {"input_frame": "absolute", "target": "absolute", "target_scaling": "axis"},
+        {"skip": False},
+        {"mirror": False},
+    ),
     "relative in / relative out": (
-        {"input_frame": "relative", "target": "relative", "target_scaling": "axis"}, {"skip": False}, {"mirror": False}),
+        {"input_frame": "relative", "target": "relative", "target_scaling": "axis"},
+        {"skip": False},
+        {"mirror": False},
+    ),
     "relative in / residual out": (
-        {"input_frame": "relative", "target": "residual", "target_scaling": "axis"}, {"skip": False}, {"mirror": False}),
+        {"input_frame": "relative", "target": "residual", "target_scaling": "axis"},
+        {"skip": False},
+        {"mirror": False},
+    ),
     "+ per-step target scaling": (
-        {"input_frame": "relative", "target": "residual", "target_scaling": "step"}, {"skip": False}, {"mirror": False}),
+        {"input_frame": "relative", "target": "residual", "target_scaling": "step"},
+        {"skip": False},
+        {"mirror": False},
+    ),
     "+ ridge-initialised linear skip": (
-        {"input_frame": "relative", "target": "residual", "target_scaling": "step"}, {"skip": True}, {"mirror": False}),
+        {"input_frame": "relative", "target": "residual", "target_scaling": "step"},
+        {"skip": True},
+        {"mirror": False},
+    ),
     "+ mirror augmentation (the lstm preset)": (
-        {"input_frame": "relative", "target": "residual", "target_scaling": "step"}, {"skip": True}, {"mirror": True}),
+        {"input_frame": "relative", "target": "residual", "target_scaling": "step"},
+        {"skip": True},
+        {"mirror": True},
+    ),
 }
 BASELINES = ("constant_velocity", "constant_acceleration", "ridge", "nominal")
 
@@ -75,20 +93,35 @@ def compare_parameterisations(
     for seed in seeds:
         for label in variants:
             window_kw, preset_kw, train_kw = VARIANTS[label]
-            p = replace(preset, window=replace(preset.window, **window_kw), **preset_kw,
-                        train=replace(preset.train, seed=seed, threads=threads, epochs=epochs or preset.train.epochs,
-                                      train_stride=train_stride, **train_kw))  # fmt: skip
+            p = replace(
+                preset,
+                window=replace(preset.window, **window_kw),
+                **preset_kw,
+                train=replace(
+                    preset.train,
+                    seed=seed,
+                    threads=threads,
+                    epochs=epochs or preset.train.epochs,
+                    train_stride=train_stride,
+                    **train_kw,
+                ),
+            )
             t0 = time.perf_counter()
             model = train_model(trials, p, p.train)
             seconds = time.perf_counter() - t0
             ev = evaluate_model(model, trials, held_out_only=True)
             e = {h: v["e_rms"] for h, v in ev.results["model"].items()}
             rows.append({"variant": label, "seed": seed, "e_rms": e, "seconds": seconds})
-            say(f"seed {seed} {label}: " + ", ".join(f"{h}: {1e3 * v:.2f} mm" for h, v in e.items()) + f" ({seconds:.0f} s)")
+            say(
+                f"seed {seed} {label}: "
+                + ", ".join(f"{h}: {1e3 * v:.2f} mm" for h, v in e.items())
+                + f" ({seconds:.0f} s)"
+            )
         test_trials[seed] = list(ev.trials)
         for name in BASELINES:
-            baselines.append({"predictor": name, "seed": seed,
-                              "e_rms": {h: v["e_rms"] for h, v in ev.results[name].items()}})
+            baselines.append(
+                {"predictor": name, "seed": seed, "e_rms": {h: v["e_rms"] for h, v in ev.results[name].items()}}
+            )
     return {"rows": rows, "baselines": baselines, "test_trials": test_trials}
 
 
@@ -98,9 +131,14 @@ def markdown(result: dict[str, Any], title: str, notes: str = "") -> str:
     head = "| predictor | seed | " + " | ".join(f"e_RMS@{h} [mm]" for h in horizons) + " |"
     lines = [f"# {title}", "", notes, "", head, "|" + "---|" * (len(horizons) + 2)]
     for r in rows:
-        lines.append(f"| {r['variant']} | {r['seed']} | " + " | ".join(f"{1e3 * r['e_rms'][h]:.3f}" for h in horizons) + " |")
-    lines += ["", "Held-out trials per seed: "
-              + "; ".join(f"seed {s}: {', '.join(t)}" for s, t in result["test_trials"].items()), ""]
+        lines.append(
+            f"| {r['variant']} | {r['seed']} | " + " | ".join(f"{1e3 * r['e_rms'][h]:.3f}" for h in horizons) + " |"
+        )
+    lines += [
+        "",
+        "Held-out trials per seed: " + "; ".join(f"seed {s}: {', '.join(t)}" for s, t in result["test_trials"].items()),
+        "",
+    ]
     return "\n".join(lines)
 
 
@@ -108,12 +146,16 @@ def main(argv: Sequence[str] | None = None) -> None:
     from coassist.intent import MODEL_PRESETS, load_trials
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--data", type=Path, default=None, help="recordings folder (default: user-a of the real recordings)")
+    ap.add_argument(
+        "--data", type=Path, default=None, help="recordings folder (default: user-a of the real recordings)"
+    )
     ap.add_argument("--preset", default="lstm", choices=sorted(MODEL_PRESETS))  # its variants are LSTM variants
     ap.add_argument("--epochs", type=int, default=None)
     ap.add_argument("--seeds", default="0", help="comma-separated seeds (each: another split and initialisation)")
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--train-stride", type=int, default=4, help="keep every n-th training window (as coassist reproduce)")
+    ap.add_argument(
+        "--train-stride", type=int, default=4, help="keep every n-th training window (as coassist reproduce)"
+    )
     ap.add_argument("--out", type=Path, default=Path("docs/intent-parameterisation.md"))
     args = ap.parse_args(argv)
     import torch
@@ -124,14 +166,24 @@ def main(argv: Sequence[str] | None = None) -> None:
     args.data = args.data or default_real_data() / "user-a"
     seeds = [int(s) for s in args.seeds.split(",")]
     preset = MODEL_PRESETS[args.preset]
-    result = compare_parameterisations(load_trials([args.data]), preset, seeds=seeds, epochs=args.epochs,
-                                       threads=args.threads, train_stride=args.train_stride)
-    notes = (f"Measured with `python -m coassist.experiments.parameterisation --data {args.data.name} --preset {args.preset} "
-             f"--seeds {args.seeds}{f' --epochs {args.epochs}' if args.epochs else ''} --train-stride {args.train_stride}`: preset `{args.preset}` "
-             f"({preset.lstm_layers} × {preset.hidden} LSTM, FC {list(preset.fc)}, {args.epochs or preset.train.epochs} "
-             f"epochs, every {args.train_stride}th window), trained on {args.data.name}'s recordings split 80/20 by trial, scored on the held-out trials' "
-             "every tick (e_RMS, eq. 5.6).")
-    atomic_write_text(args.out, markdown(result, "Input frame and output parameterisation of the intent predictor", notes))
+    result = compare_parameterisations(
+        load_trials([args.data]),
+        preset,
+        seeds=seeds,
+        epochs=args.epochs,
+        threads=args.threads,
+        train_stride=args.train_stride,
+    )
+    notes = (
+        f"Measured with `python -m coassist.experiments.parameterisation --data {args.data.name} --preset {args.preset} "
+        f"--seeds {args.seeds}{f' --epochs {args.epochs}' if args.epochs else ''} --train-stride {args.train_stride}`: preset `{args.preset}` "
+        f"({preset.lstm_layers} × {preset.hidden} LSTM, FC {list(preset.fc)}, {args.epochs or preset.train.epochs} "
+        f"epochs, every {args.train_stride}th window), trained on {args.data.name}'s recordings split 80/20 by trial, scored on the held-out trials' "
+        "every tick (e_RMS, eq. 5.6)."
+    )
+    atomic_write_text(
+        args.out, markdown(result, "Input frame and output parameterisation of the intent predictor", notes)
+    )
     atomic_write_text(args.out.with_suffix(".json"), json.dumps(result, indent=1, allow_nan=False) + "\n")
     print(f"wrote {args.out} and {args.out.with_suffix('.json')}")
 

@@ -121,17 +121,36 @@ class ReproduceConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.lockstep, bool):
             raise ValueError(f"reproduce.lockstep must be true or false, got {self.lockstep!r}")
-        for name in ("trials_per_task", "iterations", "epochs", "resume_epochs", "transfer_epochs", "train_stride",
-                     "source_stride", "real_stride", "transfer_trials", "test_trials", "application_trials", "real_epochs", "workers", "threads",
-                     "source_seeds", "calibration_trials"):
+        for name in (
+            "trials_per_task",
+            "iterations",
+            "epochs",
+            "resume_epochs",
+            "transfer_epochs",
+            "train_stride",
+            "source_stride",
+            "real_stride",
+            "transfer_trials",
+            "test_trials",
+            "application_trials",
+            "real_epochs",
+            "workers",
+            "threads",
+            "source_seeds",
+            "calibration_trials",
+        ):
             v = getattr(self, name)
             if not is_integer(v) or v < 1:
                 raise ValueError(f"reproduce.{name} must be an integer >= 1, got {v!r}")
         if not is_integer(self.ablation_mujoco_trials) or self.ablation_mujoco_trials < 0:
-            raise ValueError(f"reproduce.ablation_mujoco_trials must be an integer >= 0, got {self.ablation_mujoco_trials!r}")
+            raise ValueError(
+                f"reproduce.ablation_mujoco_trials must be an integer >= 0, got {self.ablation_mujoco_trials!r}"
+            )
         if self.ablation_mujoco_trials > self.application_trials:
-            raise ValueError(f"reproduce.ablation_mujoco_trials ({self.ablation_mujoco_trials}) must be <= "
-                             f"reproduce.application_trials ({self.application_trials}): its trials are theirs")
+            raise ValueError(
+                f"reproduce.ablation_mujoco_trials ({self.ablation_mujoco_trials}) must be <= "
+                f"reproduce.application_trials ({self.application_trials}): its trials are theirs"
+            )
         if self.transfer_trials < 3:
             raise ValueError(f"reproduce.transfer_trials must be >= 3 (one per task), got {self.transfer_trials}")
         if not (isinstance(self.skip_alpha, (int, float)) and self.skip_alpha >= 0):
@@ -144,41 +163,87 @@ class ReproduceConfig:
             raise ValueError(f"reproduce.application_users must be user indices >= 0, got {self.application_users!r}")
         from coassist.experiments.iterative import TRANSFER_STARTS
 
-        if (not isinstance(self.transfer_starts, tuple) or not {"transfer", "scratch"} <= set(self.transfer_starts)
-                or not set(self.transfer_starts) <= set(TRANSFER_STARTS) or len(set(self.transfer_starts)) != len(self.transfer_starts)):
-            raise ValueError(f"reproduce.transfer_starts must hold 'transfer' and 'scratch' (their claim compares them), and "
-                             f"only names of {TRANSFER_STARTS}, once each; got {self.transfer_starts!r}")
+        if (
+            not isinstance(self.transfer_starts, tuple)
+            or not {"transfer", "scratch"} <= set(self.transfer_starts)
+            or not set(self.transfer_starts) <= set(TRANSFER_STARTS)
+            or len(set(self.transfer_starts)) != len(self.transfer_starts)
+        ):
+            raise ValueError(
+                f"reproduce.transfer_starts must hold 'transfer' and 'scratch' (their claim compares them), and "
+                f"only names of {TRANSFER_STARTS}, once each; got {self.transfer_starts!r}"
+            )
         if not isinstance(self.mujoco_sources, tuple) or not all(isinstance(x, str) and x for x in self.mujoco_sources):
             raise ValueError(f"reproduce.mujoco_sources must be a tuple of source names, got {self.mujoco_sources!r}")
         if not isinstance(self.fixed_alpha_learned, bool):
             raise ValueError(f"reproduce.fixed_alpha_learned must be true or false, got {self.fixed_alpha_learned!r}")
-        if (not isinstance(self.learned_sources, tuple) or len(set(self.learned_sources)) != len(self.learned_sources)
-                or any(src not in LEARNED_SOURCES for src in self.learned_sources)):
-            raise ValueError(f"reproduce.learned_sources must be distinct names of {LEARNED_SOURCES}, got {self.learned_sources!r}")
+        if (
+            not isinstance(self.learned_sources, tuple)
+            or len(set(self.learned_sources)) != len(self.learned_sources)
+            or any(src not in LEARNED_SOURCES for src in self.learned_sources)
+        ):
+            raise ValueError(
+                f"reproduce.learned_sources must be distinct names of {LEARNED_SOURCES}, got {self.learned_sources!r}"
+            )
         if not is_integer(self.seed) or self.seed < 0:
             raise ValueError(f"reproduce.seed must be an integer >= 0, got {self.seed!r}")
 
 
 #: Reproduce presets by name.
-REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry("reproduce preset", {
-    "default": ReproduceConfig(),
-    # The default preset until issue 35 (2026-11-29): every window stride, comparison model and ablation cell of
-    # the run at 1c264a8 plus issue 34's; 14.9 TFLOP of network arithmetic against the default's 8.6
-    # (docs/performance.md: the verdicts of both on seeds 0, 1 and 2).
-    "full": ReproduceConfig(name="full", train_stride=4, source_stride=48, transfer_starts=("transfer", "scratch", "finetune_all"),
-                            fixed_alpha_learned=True, mujoco_sources=()),
-    "tiny": ReproduceConfig(
-        name="tiny", trials_per_task=2, iterations=2, epochs=1, resume_epochs=1, transfer_epochs=1, train_stride=25, source_stride=25,
-        transfer_trials=3, test_trials=2, new_users=(1,), application_trials=1, application_users=(0,), real_epochs=1,
-        ablation_mujoco_trials=0, source_seeds=1, calibration_trials=1, real_stride=25,
-        sweep_duration=1.0,
-    ),
-    "thesis": ReproduceConfig(
-        name="thesis", intent_preset="thesis", real_intent_preset="thesis", epochs=25, resume_epochs=25, transfer_epochs=25, train_stride=1, source_stride=1,
-        real_epochs=25, device="cuda", learned_sources=("ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone", "lstm-intent"),
-        transfer_starts=("transfer", "scratch", "finetune_all"), fixed_alpha_learned=True, mujoco_sources=(),
-    ),
-})  # fmt: skip
+REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry(
+    "reproduce preset",
+    {
+        "default": ReproduceConfig(),
+        # The default preset until issue 35 (2026-11-29): every window stride, comparison model and ablation cell of
+        # the run at 1c264a8 plus issue 34's; 14.9 TFLOP of network arithmetic against the default's 8.6
+        # (docs/performance.md: the verdicts of both on seeds 0, 1 and 2).
+        "full": ReproduceConfig(
+            name="full",
+            train_stride=4,
+            source_stride=48,
+            transfer_starts=("transfer", "scratch", "finetune_all"),
+            fixed_alpha_learned=True,
+            mujoco_sources=(),
+        ),
+        "tiny": ReproduceConfig(
+            name="tiny",
+            trials_per_task=2,
+            iterations=2,
+            epochs=1,
+            resume_epochs=1,
+            transfer_epochs=1,
+            train_stride=25,
+            source_stride=25,
+            transfer_trials=3,
+            test_trials=2,
+            new_users=(1,),
+            application_trials=1,
+            application_users=(0,),
+            real_epochs=1,
+            ablation_mujoco_trials=0,
+            source_seeds=1,
+            calibration_trials=1,
+            real_stride=25,
+            sweep_duration=1.0,
+        ),
+        "thesis": ReproduceConfig(
+            name="thesis",
+            intent_preset="thesis",
+            real_intent_preset="thesis",
+            epochs=25,
+            resume_epochs=25,
+            transfer_epochs=25,
+            train_stride=1,
+            source_stride=1,
+            real_epochs=25,
+            device="cuda",
+            learned_sources=("ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone", "lstm-intent"),
+            transfer_starts=("transfer", "scratch", "finetune_all"),
+            fixed_alpha_learned=True,
+            mujoco_sources=(),
+        ),
+    },
+)
 
 
 # ----------------------------------------------------------------------------- the seed plan
@@ -265,9 +330,21 @@ class Workspace:
     #: jobs a later stage will ask for (:meth:`submit`, by key). Not part of the value.
     _pending: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
 
-    def collect(self, name: str, *, tasks, users=(0,), objects=("handle",), trials: int, seed: int,
-                controller: str = "cooperative", preset: str | None = None, intent: str = "nominal",
-                obstacle: str = "small", groups: int | None = None):
+    def collect(
+        self,
+        name: str,
+        *,
+        tasks,
+        users=(0,),
+        objects=("handle",),
+        trials: int,
+        seed: int,
+        controller: str = "cooperative",
+        preset: str | None = None,
+        intent: str = "nominal",
+        obstacle: str = "small",
+        groups: int | None = None,
+    ):
         """Simulate a dataset into ``out/datasets/<name>``; return its folder and the dataset read back.
 
         ``groups``: how many lockstep groups the trials are split into on the pool
@@ -286,14 +363,33 @@ class Workspace:
             with contextlib.suppress(Exception):  # another collection under this name: let it end, then replace it
                 written[1].result()
         folder = collect_dataset(
-            self.out / "datasets" / name, dataset_id=name, workers=self.config.workers, progress=self.progress,
-            overwrite=True, lockstep=self.config.lockstep, pool=self.pool, groups=groups, **options,
+            self.out / "datasets" / name,
+            dataset_id=name,
+            workers=self.config.workers,
+            progress=self.progress,
+            overwrite=True,
+            lockstep=self.config.lockstep,
+            pool=self.pool,
+            groups=groups,
+            **options,
         )
         return folder, read_dataset(folder)
 
-    def prefetch(self, name: str, *, tasks, users=(0,), objects=("handle",), trials: int, seed: int,
-                 controller: str = "cooperative", preset: str | None = None, intent: str = "nominal",
-                 obstacle: str = "small", groups: int | None = None) -> None:
+    def prefetch(
+        self,
+        name: str,
+        *,
+        tasks,
+        users=(0,),
+        objects=("handle",),
+        trials: int,
+        seed: int,
+        controller: str = "cooperative",
+        preset: str | None = None,
+        intent: str = "nominal",
+        obstacle: str = "small",
+        groups: int | None = None,
+    ) -> None:
         """Start :meth:`collect`'s simulations for these options on the run's pool now and
         return at once; a thread of this process writes the dataset as the jobs end, and the
         :meth:`collect` with the same name and options returns it. The pool runs jobs in the
@@ -312,16 +408,27 @@ class Workspace:
             if pending[0] == (options, groups):
                 return  # already on its way: the same trials
             raise ValueError(f"dataset {name!r} is already being prefetched with other options: collect it first")
-        submitted = submit_trials(dataset_specs(**options), self.pool, workers=self.config.workers,
-                                  lockstep=self.config.lockstep, groups=groups)  # fmt: skip
+        submitted = submit_trials(
+            dataset_specs(**options),
+            self.pool,
+            workers=self.config.workers,
+            lockstep=self.config.lockstep,
+            groups=groups,
+        )
         written: Future = Future()
 
         def write() -> None:
             # Written as the jobs end, in this thread: the stage that asks for it later finds it
             # on disk and read back, instead of writing ~20 datasets in a row while the pool idles.
             try:
-                folder = collect_dataset(self.out / "datasets" / name, dataset_id=name, progress=False,
-                                         overwrite=True, submitted=submitted, **options)  # fmt: skip
+                folder = collect_dataset(
+                    self.out / "datasets" / name,
+                    dataset_id=name,
+                    progress=False,
+                    overwrite=True,
+                    submitted=submitted,
+                    **options,
+                )
                 written.set_result((folder, read_dataset(folder)))
             except BaseException as exc:  # handed to collect(), which raises it
                 written.set_exception(exc)
@@ -347,15 +454,36 @@ class Workspace:
         future = self.take(key)
         return fn(*args) if future is None else future.result()
 
-    def _spec_options(self, tasks, users, objects, trials, seed, controller, preset, intent, obstacle) -> dict[str, Any]:
+    def _spec_options(
+        self, tasks, users, objects, trials, seed, controller, preset, intent, obstacle
+    ) -> dict[str, Any]:
         # coassist.sim.collect.dataset_specs' keyword arguments
-        return {"controller": controller, "users": list(users), "tasks": list(tasks), "objects": list(objects),
-                "trials": trials, "seed": seed, "preset": preset or self.config.control_preset, "intent": intent,
-                "obstacle": obstacle}  # fmt: skip
+        return {
+            "controller": controller,
+            "users": list(users),
+            "tasks": list(tasks),
+            "objects": list(objects),
+            "trials": trials,
+            "seed": seed,
+            "preset": preset or self.config.control_preset,
+            "intent": intent,
+            "obstacle": obstacle,
+        }
 
-    def train(self, name: str, datasets: list[Path], *, init: str, epochs: int, test_fraction: float = 0.2,
-              simulated: bool = True, preset_name: str | None = None, label: str | None = None,
-              stride: int | None = None, seed: int | None = None) -> Path:
+    def train(
+        self,
+        name: str,
+        datasets: list[Path],
+        *,
+        init: str,
+        epochs: int,
+        test_fraction: float = 0.2,
+        simulated: bool = True,
+        preset_name: str | None = None,
+        label: str | None = None,
+        stride: int | None = None,
+        seed: int | None = None,
+    ) -> Path:
         """Train and save a model. ``test_fraction=0`` when the model is scored on a separate
         test set anyway: then every trial collected for training is trained on. ``label``:
         what a fresh model learns to predict (``WindowConfig.label``; None: the preset's).
@@ -367,9 +495,17 @@ class Workspace:
         preset = MODEL_PRESETS[preset_name or cfg.intent_preset]
         if label is not None:
             preset = replace(preset, window=replace(preset.window, label=label))
-        train_cfg = replace(preset.train, epochs=epochs, init=init, seed=cfg.seed if seed is None else seed, threads=cfg.threads,
-                            train_stride=stride or cfg.train_stride, eval_stride=stride or cfg.train_stride, device=cfg.device,
-                            test_fraction=test_fraction)
+        train_cfg = replace(
+            preset.train,
+            epochs=epochs,
+            init=init,
+            seed=cfg.seed if seed is None else seed,
+            threads=cfg.threads,
+            train_stride=stride or cfg.train_stride,
+            eval_stride=stride or cfg.train_stride,
+            device=cfg.device,
+            test_fraction=test_fraction,
+        )
         if simulated:
             train_cfg = replace(train_cfg, skip_alpha=cfg.skip_alpha)
         model = train_model(load_trials(datasets), preset, train_cfg, progress=self.progress)
@@ -378,17 +514,36 @@ class Workspace:
         return path
 
 
-def train_and_score(ws: Workspace, name: str, datasets: list[Path], *, init: str, epochs: int,
-                    test_fraction: float = 0.2, preset_name: str | None = None, label: str | None = None,
-                    stride: int | None = None, evaluate_on: list[Path] | None = None, seed: int | None = None,
-                    ) -> tuple[str, float, Any]:  # fmt: skip
+def train_and_score(
+    ws: Workspace,
+    name: str,
+    datasets: list[Path],
+    *,
+    init: str,
+    epochs: int,
+    test_fraction: float = 0.2,
+    preset_name: str | None = None,
+    label: str | None = None,
+    stride: int | None = None,
+    evaluate_on: list[Path] | None = None,
+    seed: int | None = None,
+) -> tuple[str, float, Any]:
     """:meth:`Workspace.train`, timed, then the model scored (:func:`score_model`) on
     ``evaluate_on`` when given: (model folder, training seconds, evaluation or None)."""
     import time
 
     t0 = time.perf_counter()
-    path = ws.train(name, datasets, init=init, epochs=epochs, test_fraction=test_fraction, preset_name=preset_name,
-                    label=label, stride=stride, seed=seed)  # fmt: skip
+    path = ws.train(
+        name,
+        datasets,
+        init=init,
+        epochs=epochs,
+        test_fraction=test_fraction,
+        preset_name=preset_name,
+        label=label,
+        stride=stride,
+        seed=seed,
+    )
     seconds = time.perf_counter() - t0
     return str(path), seconds, None if evaluate_on is None else score_model(path, evaluate_on)
 
@@ -400,19 +555,40 @@ def score_model(model: str | Path, datasets: list[Path]) -> Any:
     return evaluate_model(load_model(model), load_trials(datasets), held_out_only=False)
 
 
-def train_in_worker(config: ReproduceConfig, out: Path, name: str, datasets: list[Path], *, init: str, epochs: int,
-                    test_fraction: float = 0.2, preset_name: str | None = None, label: str | None = None,
-                    stride: int | None = None, evaluate_on: list[Path] | None = None, seed: int | None = None,
-                    ) -> tuple[str, float, Any]:  # fmt: skip
+def train_in_worker(
+    config: ReproduceConfig,
+    out: Path,
+    name: str,
+    datasets: list[Path],
+    *,
+    init: str,
+    epochs: int,
+    test_fraction: float = 0.2,
+    preset_name: str | None = None,
+    label: str | None = None,
+    stride: int | None = None,
+    evaluate_on: list[Path] | None = None,
+    seed: int | None = None,
+) -> tuple[str, float, Any]:
     """:func:`train_and_score` as a job for a worker process of the run's pool, on one torch
     thread (two 1-thread trainings at once do 1.34x the work of one 2-thread training on this
     machine's 2 cores, ``benchmarks/bench_training.py --pairs``)."""
     import torch
 
     torch.set_num_threads(1)
-    return train_and_score(Workspace(replace(config, threads=1), out, progress=False), name, datasets, init=init,
-                           epochs=epochs, test_fraction=test_fraction, preset_name=preset_name, label=label,
-                           stride=stride, evaluate_on=evaluate_on, seed=seed)  # fmt: skip
+    return train_and_score(
+        Workspace(replace(config, threads=1), out, progress=False),
+        name,
+        datasets,
+        init=init,
+        epochs=epochs,
+        test_fraction=test_fraction,
+        preset_name=preset_name,
+        label=label,
+        stride=stride,
+        evaluate_on=evaluate_on,
+        seed=seed,
+    )
 
 
 def evaluate_in_worker(model: str | Path, datasets: list[Path]) -> Any:
@@ -451,7 +627,11 @@ def in_loop_errors(trials, horizons=EVAL_HORIZONS, against: str = "pose") -> dic
             mx.append(e.max)
         if rms:
             rms_all, max_all = np.concatenate(rms), np.concatenate(mx)
-            out[h] = {"e_rms": float(rms_all.mean()), "e_max_mean": float(max_all.mean()), "e_max_max": float(max_all.max())}
+            out[h] = {
+                "e_rms": float(rms_all.mean()),
+                "e_max_mean": float(max_all.mean()),
+                "e_max_max": float(max_all.max()),
+            }
     return out
 
 

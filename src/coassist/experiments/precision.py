@@ -42,9 +42,18 @@ VALIDATION_BASES = (25_000, 95_000)
 __all__ = ["compare_intents", "comparison_table"]
 
 
-def compare_intents(sources: Mapping[str, str], out: str | Path, *, bases: Sequence[int] = (50000, 60000),
-                    controllers: Mapping[str, str] | None = None, trials: int = 4, users: Sequence[int] = (0, 1, 2),
-                    calibrate: bool = True, workers: int = 2, progress: bool = True) -> AblationResult:  # fmt: skip
+def compare_intents(
+    sources: Mapping[str, str],
+    out: str | Path,
+    *,
+    bases: Sequence[int] = (50000, 60000),
+    controllers: Mapping[str, str] | None = None,
+    trials: int = 4,
+    users: Sequence[int] = (0, 1, 2),
+    calibrate: bool = True,
+    workers: int = 2,
+    progress: bool = True,
+) -> AblationResult:
     """Every source of ``sources`` (label → intent: a named source, a model folder, a calibration folder or
     ``"paths"`` to use each base's fitted calibration) on the validation trials of ``bases``, with the
     arbitrated controller or ``controllers[label]``; MG and the oracle (arbitrated) on the same trials.
@@ -56,8 +65,10 @@ def compare_intents(sources: Mapping[str, str], out: str | Path, *, bases: Seque
         raise ValueError(f"bases must be distinct seeds >= 0, got {bases!r}")
     off = [b for b in bases if not VALIDATION_BASES[0] <= int(b) % RUN_SEED_STRIDE <= VALIDATION_BASES[1]]
     if off:
-        raise ValueError(f"bases {off}: a validation base must be {VALIDATION_BASES[0]}–{VALIDATION_BASES[1]} past a multiple "
-                         f"of {RUN_SEED_STRIDE} (e.g. 50000), so that its trials are no run's own (the report's seeds)")
+        raise ValueError(
+            f"bases {off}: a validation base must be {VALIDATION_BASES[0]}–{VALIDATION_BASES[1]} past a multiple "
+            f"of {RUN_SEED_STRIDE} (e.g. 50000), so that its trials are no run's own (the report's seeds)"
+        )
     from coassist.scenario.intent_registry import load_intent_source
 
     for label, spec in sources.items():  # refuse a bad source before anything runs
@@ -72,13 +83,19 @@ def compare_intents(sources: Mapping[str, str], out: str | Path, *, bases: Seque
         raise ValueError(f"controllers names sources that are not compared: {sorted(unknown)}")
     bad = {k: v for k, v in controllers.items() if v not in (ARBITRATED, DAMPED)}
     if bad:
-        raise ValueError(f"controllers must be {ARBITRATED!r} or {DAMPED!r} (their oracle is the arbitrated one), got {bad}")
+        raise ValueError(
+            f"controllers must be {ARBITRATED!r} or {DAMPED!r} (their oracle is the arbitrated one), got {bad}"
+        )
     reserved = {"MG", "oracle"} & set(sources)
     if reserved:
         raise ValueError(f"source labels {sorted(reserved)} are taken by the baselines every comparison runs")
     out = Path(out)
-    cfg = replace(REPRODUCE_PRESETS["default"], application_users=tuple(users), application_trials=int(trials),
-                  workers=int(workers))  # fmt: skip
+    cfg = replace(
+        REPRODUCE_PRESETS["default"],
+        application_users=tuple(users),
+        application_trials=int(trials),
+        workers=int(workers),
+    )
     cells: dict[tuple[str, str, str], list] = {}
     calibrations: dict[str, str] = {}
     for base in bases:
@@ -86,14 +103,24 @@ def compare_intents(sources: Mapping[str, str], out: str | Path, *, bases: Seque
         paths = calibrate_paths(ws, seed=calibration_seed(int(base))) if calibrate else "paths"
         calibrations[str(base)] = paths
         plan = [("MG", "manual", "nominal"), ("oracle", ARBITRATED, "oracle")]
-        plan += [(label, controllers.get(label, ARBITRATED), paths if spec == "paths" else spec)
-                 for label, spec in sources.items()]  # fmt: skip
+        plan += [
+            (label, controllers.get(label, ARBITRATED), paths if spec == "paths" else spec)
+            for label, spec in sources.items()
+        ]
         for j, obj in enumerate(OBJECTS):
             for label, controller, intent in plan:
-                _, ds = ws.collect(f"{obj}-{label}", tasks=(cfg.application_task,), users=cfg.application_users,
-                                   objects=(obj,), trials=cfg.application_trials, seed=application_seed(int(base), j),
-                                   controller=controller, preset=cfg.application_preset, intent=intent,
-                                   obstacle=OBSTACLE)  # fmt: skip
+                _, ds = ws.collect(
+                    f"{obj}-{label}",
+                    tasks=(cfg.application_task,),
+                    users=cfg.application_users,
+                    objects=(obj,),
+                    trials=cfg.application_trials,
+                    seed=application_seed(int(base), j),
+                    controller=controller,
+                    preset=cfg.application_preset,
+                    intent=intent,
+                    obstacle=OBSTACLE,
+                )
                 cells.setdefault((obj, label, controller), []).extend(sorted(ds.trials, key=_pair_key))
     metrics, mg, pairs = {}, {}, {}
     for (obj, label, controller), trials_ in cells.items():
@@ -117,26 +144,37 @@ def comparison_table(result: AblationResult) -> str:
         m = result.mg[("point-mass", obj)]
         side = np.asarray(m["side"])
         n = {s: int((side == s).sum()) for s in SIDES}
-        lines += [f"**{obj}** ({len(side)} paired trials: {n[1]} left, {n[-1]} right of the path)", "",
-                  "| source | controller | f_RMS [N] | force share | overshoot L / R [mm] | overshoot share | "
-                  "clearance deficit L / R [mm] (vs MG, 95 %) | jerk RMS [m/s³] | σ [mm] |",
-                  "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]  # fmt: skip
+        lines += [
+            f"**{obj}** ({len(side)} paired trials: {n[1]} left, {n[-1]} right of the path)",
+            "",
+            "| source | controller | f_RMS [N] | force share | overshoot L / R [mm] | overshoot share | "
+            "clearance deficit L / R [mm] (vs MG, 95 %) | jerk RMS [m/s³] | σ [mm] |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        ]
 
         def sided(values: Any, side: np.ndarray = side) -> str:
             v = np.asarray(values, float)
             return " / ".join(f"{1e3 * np.nanmean(v[side == s]):.1f}" for s in SIDES if (side == s).any())
 
-        lines.append(f"| MG | manual | {m['f_rms']:.2f} | | {sided(m['overshoot_trials'])} | | "
-                     f"{sided(m['clearance_deficit_trials'])} | {m['jerk_rms']:.2f} | {1e3 * m['sigma']:.2f} |")  # fmt: skip
+        lines.append(
+            f"| MG | manual | {m['f_rms']:.2f} | | {sided(m['overshoot_trials'])} | | "
+            f"{sided(m['clearance_deficit_trials'])} | {m['jerk_rms']:.2f} | {1e3 * m['sigma']:.2f} |"
+        )
         for (world, o, controller, label), r in result.metrics.items():
             if o != obj:
                 continue
             cd = result.by_side(world, obj, controller, label, "clearance_deficit")
-            clear = " / ".join(f"{1e3 * v[0]:.1f} ({1e3 * v[1]:+.1f} [{1e3 * v[2]:+.1f}, {1e3 * v[3]:+.1f}])" if v[4] >= 2
-                               else (f"{1e3 * v[0]:.1f}" if v[4] else "—") for v in cd.values())  # fmt: skip
-            lines.append(f"| {label} | {controller} | {r['f_rms']:.2f} | "
-                         f"{_seeds_text(result, world, obj, controller, label, 'f_rms')} | {sided(r['overshoot_trials'])} | "
-                         f"{_share_text(result.shares(world, obj, controller, label)['overshoot'])} | {clear} | "
-                         f"{r['jerk_rms']:.2f} ({r['jerk_rms'] / m['jerk_rms']:.2f}×) | {1e3 * r['sigma']:.2f} |")  # fmt: skip
+            clear = " / ".join(
+                f"{1e3 * v[0]:.1f} ({1e3 * v[1]:+.1f} [{1e3 * v[2]:+.1f}, {1e3 * v[3]:+.1f}])"
+                if v[4] >= 2
+                else (f"{1e3 * v[0]:.1f}" if v[4] else "—")
+                for v in cd.values()
+            )
+            lines.append(
+                f"| {label} | {controller} | {r['f_rms']:.2f} | "
+                f"{_seeds_text(result, world, obj, controller, label, 'f_rms')} | {sided(r['overshoot_trials'])} | "
+                f"{_share_text(result.shares(world, obj, controller, label)['overshoot'])} | {clear} | "
+                f"{r['jerk_rms']:.2f} ({r['jerk_rms'] / m['jerk_rms']:.2f}×) | {1e3 * r['sigma']:.2f} |"
+            )
         lines.append("")
     return "\n".join(lines)

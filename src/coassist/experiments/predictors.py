@@ -39,17 +39,13 @@ def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
 
     name, _, rest = text.partition(":")
     if name not in MODEL_PRESETS:
-        raise ValueError(
-            f"--variant {text!r}: unknown preset {name!r}; choose one of {sorted(MODEL_PRESETS)}"
-        )
+        raise ValueError(f"--variant {text!r}: unknown preset {name!r}; choose one of {sorted(MODEL_PRESETS)}")
     known = {f.name for f in fields(TrainConfig)}
     overrides: dict[str, Any] = {}
     for item in filter(None, rest.split(",")):
         key, sep, value = item.partition("=")
         if not sep or key not in known:
-            raise ValueError(
-                f"--variant {text!r}: {item!r} is not field=value with a TrainConfig field"
-            )
+            raise ValueError(f"--variant {text!r}: {item!r} is not field=value with a TrainConfig field")
         try:
             overrides[key] = json.loads(value)
         except json.JSONDecodeError:
@@ -57,8 +53,9 @@ def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
     return name, overrides
 
 
-def run(data: Path, variants: list[str], seeds: list[int], protocols: tuple[str, ...] = PROTOCOLS,
-        threads: int = 1) -> list[dict[str, Any]]:  # fmt: skip
+def run(
+    data: Path, variants: list[str], seeds: list[int], protocols: tuple[str, ...] = PROTOCOLS, threads: int = 1
+) -> list[dict[str, Any]]:
     """One record per (protocol, variant, seed): the evaluation, the training work and the split."""
     import torch
 
@@ -84,9 +81,19 @@ def run(data: Path, variants: list[str], seeds: list[int], protocols: tuple[str,
                     model = train_model(train, preset, replace(cfg, test_fraction=0.0))
                     ev = evaluate_model(model, test, held_out_only=False)
                 epochs = len(model.info["training_history"])
-                out.append({"protocol": protocol, "variant": text, "seed": seed, "evaluation": ev,
-                            "work": {"epochs": epochs, "windows": model.info["n_train_windows"],
-                                     "windows_trained": epochs * model.info["n_train_windows"]}})  # fmt: skip
+                out.append(
+                    {
+                        "protocol": protocol,
+                        "variant": text,
+                        "seed": seed,
+                        "evaluation": ev,
+                        "work": {
+                            "epochs": epochs,
+                            "windows": model.info["n_train_windows"],
+                            "windows_trained": epochs * model.info["n_train_windows"],
+                        },
+                    }
+                )
     return out
 
 
@@ -96,15 +103,11 @@ def summarise(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     rows = []
     keys = sorted({(r["protocol"], r["variant"]) for r in records})
     for protocol, variant in keys:
-        recs = [
-            r for r in records if r["protocol"] == protocol and r["variant"] == variant
-        ]
+        recs = [r for r in records if r["protocol"] == protocol and r["variant"] == variant]
         horizons = recs[0]["evaluation"].horizons
         for p in recs[0]["evaluation"].results:
             for h in horizons:
-                v = np.array(
-                    [r["evaluation"].results[p][h]["e_rms"] for r in recs]
-                )
+                v = np.array([r["evaluation"].results[p][h]["e_rms"] for r in recs])
                 rows.append(
                     {
                         "protocol": protocol,
@@ -118,18 +121,27 @@ def summarise(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
                     }
                 )
         for h in horizons:
-            gain_best = np.array(
-                [r["evaluation"].best_baseline[h]["gain"] for r in recs]
-            )
+            gain_best = np.array([r["evaluation"].best_baseline[h]["gain"] for r in recs])
             res = [r["evaluation"].results for r in recs]
-            gain_ridge = np.array([(x["ridge"][h]["e_rms"] - x["model"][h]["e_rms"]) / x["ridge"][h]["e_rms"]
-                                   for x in res])  # fmt: skip
+            gain_ridge = np.array(
+                [(x["ridge"][h]["e_rms"] - x["model"][h]["e_rms"]) / x["ridge"][h]["e_rms"] for x in res]
+            )
             best = [r["evaluation"].best_baseline[h]["name"] for r in recs]
-            rows.append({"protocol": protocol, "variant": variant, "predictor": "gain", "horizon": h,
-                         "over_best_median": float(np.median(gain_best)), "over_best_min": float(gain_best.min()),
-                         "over_best_max": float(gain_best.max()), "over_ridge_median": float(np.median(gain_ridge)),
-                         "over_ridge_min": float(gain_ridge.min()), "over_ridge_max": float(gain_ridge.max()),
-                         "best_baselines": best})  # fmt: skip
+            rows.append(
+                {
+                    "protocol": protocol,
+                    "variant": variant,
+                    "predictor": "gain",
+                    "horizon": h,
+                    "over_best_median": float(np.median(gain_best)),
+                    "over_best_min": float(gain_best.min()),
+                    "over_best_max": float(gain_best.max()),
+                    "over_ridge_median": float(np.median(gain_ridge)),
+                    "over_ridge_min": float(gain_ridge.min()),
+                    "over_ridge_max": float(gain_ridge.max()),
+                    "best_baselines": best,
+                }
+            )
     return rows
 
 
@@ -137,19 +149,21 @@ def _print(rows: list[dict[str, Any]], dt: float) -> None:
     for r in rows:
         head = f"{r['protocol']:7s} {r['variant']:34s} {r['horizon'] * dt:.2f} s"
         if r["predictor"] == "gain":
-            print(f"{head}  gain over best baseline {100 * r['over_best_median']:+.1f} % "
-                  f"[{100 * r['over_best_min']:+.1f}, {100 * r['over_best_max']:+.1f}], over ridge "
-                  f"{100 * r['over_ridge_median']:+.1f} % [{100 * r['over_ridge_min']:+.1f}, {100 * r['over_ridge_max']:+.1f}]"
-                  f"  (best: {', '.join(r['best_baselines'])})")  # fmt: skip
+            print(
+                f"{head}  gain over best baseline {100 * r['over_best_median']:+.1f} % "
+                f"[{100 * r['over_best_min']:+.1f}, {100 * r['over_best_max']:+.1f}], over ridge "
+                f"{100 * r['over_ridge_median']:+.1f} % [{100 * r['over_ridge_min']:+.1f}, {100 * r['over_ridge_max']:+.1f}]"
+                f"  (best: {', '.join(r['best_baselines'])})"
+            )
         else:
-            print(f"{head}  {r['predictor']:22s} e_RMS {1e3 * r['median']:8.4f} mm [{1e3 * r['min']:.4f}–{1e3 * r['max']:.4f}]"
-                  f" over {r['n']} seeds")  # fmt: skip
+            print(
+                f"{head}  {r['predictor']:22s} e_RMS {1e3 * r['median']:8.4f} mm [{1e3 * r['min']:.4f}–{1e3 * r['max']:.4f}]"
+                f" over {r['n']} seeds"
+            )
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
         "--data",
         type=Path,
@@ -171,9 +185,7 @@ def main() -> None:
         seeds = [int(s) for s in args.seeds.split(",")]
         protocols = tuple(p for p in args.protocols.split(",") if p)
         if any(p not in PROTOCOLS for p in protocols):
-            raise ValueError(
-                f"--protocols {args.protocols!r}: choose among {PROTOCOLS}"
-            )
+            raise ValueError(f"--protocols {args.protocols!r}: choose among {PROTOCOLS}")
         if not (args.data / "user-a").is_dir():
             raise ValueError(f"--data {args.data}: no user-a/ recordings there")
         variants = args.variant or ["default"]
@@ -189,8 +201,11 @@ def main() -> None:
 
         atomic_write_text(
             args.json,
-            json.dumps({"records": [{**r, "evaluation": r["evaluation"].to_dict()} for r in records], "summary": rows},
-                       indent=1) + "\n",
+            json.dumps(
+                {"records": [{**r, "evaluation": r["evaluation"].to_dict()} for r in records], "summary": rows},
+                indent=1,
+            )
+            + "\n",
         )
 
 

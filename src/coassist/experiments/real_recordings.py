@@ -52,22 +52,45 @@ def run_real_recordings(ws: Workspace, real: str | None) -> RealRecordingsResult
     from coassist.data.store import write_dataset
     from coassist.intent import evaluate_model, load_model, load_trials
 
-    a = ws.train("real-user-a", [Path(real) / "user-a"], init="scratch", epochs=cfg.real_epochs, simulated=False,
-                 preset_name=cfg.real_intent_preset, stride=cfg.real_stride)
+    a = ws.train(
+        "real-user-a",
+        [Path(real) / "user-a"],
+        init="scratch",
+        epochs=cfg.real_epochs,
+        simulated=False,
+        preset_name=cfg.real_intent_preset,
+        stride=cfg.real_stride,
+    )
     model_a = load_model(a)
     trials_a = load_trials([Path(real) / "user-a"])
     ev_a = evaluate_model(model_a, trials_a, held_out_only=True)
     b_trials = load_ros_user(Path(real) / "user-b")
     k = USER_B_TRANSFER_TRIALS
-    b_train = write_dataset(b_trials[:k], ws.out / "datasets" / "user-b-train", "user-b-train",
-                            f"real user-b, trials 1-{k}", overwrite=True)
-    b_test = write_dataset(b_trials[k:], ws.out / "datasets" / "user-b-test", "user-b-test",
-                           f"real user-b, trials {k + 1}-{len(b_trials)}", overwrite=True)
-    b_model = ws.train("real-user-b-transfer", [b_train], init=f"transfer:{a}", epochs=cfg.transfer_epochs,
-                       test_fraction=0.0, simulated=False, preset_name=cfg.real_intent_preset, stride=cfg.real_stride)
+    b_train = write_dataset(
+        b_trials[:k], ws.out / "datasets" / "user-b-train", "user-b-train", f"real user-b, trials 1-{k}", overwrite=True
+    )
+    b_test = write_dataset(
+        b_trials[k:],
+        ws.out / "datasets" / "user-b-test",
+        "user-b-test",
+        f"real user-b, trials {k + 1}-{len(b_trials)}",
+        overwrite=True,
+    )
+    b_model = ws.train(
+        "real-user-b-transfer",
+        [b_train],
+        init=f"transfer:{a}",
+        epochs=cfg.transfer_epochs,
+        test_fraction=0.0,
+        simulated=False,
+        preset_name=cfg.real_intent_preset,
+        stride=cfg.real_stride,
+    )
     test_b = load_trials([b_test])
-    ev_b = {"M_a": evaluate_model(model_a, test_b, held_out_only=False),
-            "M_TL": evaluate_model(load_model(b_model), test_b, held_out_only=False)}
+    ev_b = {
+        "M_a": evaluate_model(model_a, test_b, held_out_only=False),
+        "M_TL": evaluate_model(load_model(b_model), test_b, held_out_only=False),
+    }
     return RealRecordingsResult(cfg.real_intent_preset, ev_a, ev_b, len(trials_a), len(b_trials))
 
 
@@ -102,8 +125,11 @@ def real_recordings_section(result: RealRecordingsResult) -> Section:
 
     def row(ev, name, label):
         r = ev.results[name]
-        return [label] + [r[h]["e_rms"] * 1e3 for h in EVAL_HORIZONS] + [
-            f"{r[longest]['trial_min'] * 1e3:.2f}–{r[longest]['trial_max'] * 1e3:.2f}"]
+        return (
+            [label]
+            + [r[h]["e_rms"] * 1e3 for h in EVAL_HORIZONS]
+            + [f"{r[longest]['trial_min'] * 1e3:.2f}–{r[longest]['trial_max'] * 1e3:.2f}"]
+        )
 
     def table(ev, label):
         return [row(ev, "model", label)] + [row(ev, base, base) for base in BASELINES]
@@ -119,28 +145,42 @@ def real_recordings_section(result: RealRecordingsResult) -> Section:
         "several seeds and on user-b (docs/intent-baselines.md)."
     )
     s.tables.append(("user-a held-out: e_RMS [mm]", cols, table(ev_a, "model")))
-    s.tables.append((f"user-b {b_test}: e_RMS [mm]", cols, [row(ev_b["M_a"], "model", "M_a (no transfer)")]
-                     + table(ev_b["M_TL"], "M_TL (transferred)")))
+    s.tables.append(
+        (
+            f"user-b {b_test}: e_RMS [mm]",
+            cols,
+            [row(ev_b["M_a"], "model", "M_a (no transfer)")] + table(ev_b["M_TL"], "M_TL (transferred)"),
+        )
+    )
     s.paragraphs.append("user-a, the model against its best tuned baseline: " + "; ".join(comparison_lines(ev_a)))
-    s.paragraphs.append(f"user-b {b_test}, M_TL against its best tuned baseline: " + "; ".join(comparison_lines(ev_b["M_TL"], "M_TL")))
+    s.paragraphs.append(
+        f"user-b {b_test}, M_TL against its best tuned baseline: " + "; ".join(comparison_lines(ev_b["M_TL"], "M_TL"))
+    )
     best = ev_a.best_baseline
     n_train = result.user_a_trials - len(ev_a.trials)
-    s.claims.append(Claim(
-        "On held-out real user-a data the model is no worse than the best tuned baseline at any horizon",
-        all(b["gain"] >= 0 for b in best.values()),
-        "; ".join(f"{h * dt:.2f} s: {b['name']} {b['e_rms'] * 1e3:.3f} mm, model {b['model_e_rms'] * 1e3:.3f} mm "
-                  f"({100 * b['gain']:+.1f} %)" for h, b in best.items()),
-        reason="the network adds little over the linear map its skip starts from; with "
-        f"{n_train} recordings to train and validate on it can overfit where the validation-tuned ridge does not",
-    ))
+    s.claims.append(
+        Claim(
+            "On held-out real user-a data the model is no worse than the best tuned baseline at any horizon",
+            all(b["gain"] >= 0 for b in best.values()),
+            "; ".join(
+                f"{h * dt:.2f} s: {b['name']} {b['e_rms'] * 1e3:.3f} mm, model {b['model_e_rms'] * 1e3:.3f} mm "
+                f"({100 * b['gain']:+.1f} %)"
+                for h, b in best.items()
+            ),
+            reason="the network adds little over the linear map its skip starts from; with "
+            f"{n_train} recordings to train and validate on it can overfit where the validation-tuned ridge does not",
+        )
+    )
     ridge_l, model_l = ev_a.results["ridge"][longest]["e_rms"], ev_a.results["model"][longest]["e_rms"]
-    s.claims.append(Claim(
-        f"On held-out real user-a data the model beats the tuned ridge by at least {100 * RIDGE_MARGIN:.0f} % at "
-        f"{longest * dt:.1f} s",
-        model_l <= (1 - RIDGE_MARGIN) * ridge_l,
-        f"{longest * dt:.1f} s: model {model_l * 1e3:.3f} mm, ridge (α = {ev_a.baselines['ridge']['alpha']:.0e}) "
-        f"{ridge_l * 1e3:.3f} mm: {100 * (ridge_l - model_l) / ridge_l:+.1f} %",
-        reason=f"most of the remaining error at {longest * dt:.1f} s is what the person will do next; a tuned linear "
-        "predictor of the same window captures nearly all that the window tells",
-    ))
+    s.claims.append(
+        Claim(
+            f"On held-out real user-a data the model beats the tuned ridge by at least {100 * RIDGE_MARGIN:.0f} % at "
+            f"{longest * dt:.1f} s",
+            model_l <= (1 - RIDGE_MARGIN) * ridge_l,
+            f"{longest * dt:.1f} s: model {model_l * 1e3:.3f} mm, ridge (α = {ev_a.baselines['ridge']['alpha']:.0e}) "
+            f"{ridge_l * 1e3:.3f} mm: {100 * (ridge_l - model_l) / ridge_l:+.1f} %",
+            reason=f"most of the remaining error at {longest * dt:.1f} s is what the person will do next; a tuned linear "
+            "predictor of the same window captures nearly all that the window tells",
+        )
+    )
     return s

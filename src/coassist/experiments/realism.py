@@ -42,10 +42,26 @@ from coassist.data import Trial, load_ros_user
 from coassist.metrics import f_rms
 from coassist.sim.world import TrialSpec, run_trials
 
-STATS = ("duration", "path_length", "peak_force", "mean_force", "peak_deviation", "peak_sideways_accel", "submovements",
-         "return_overshoot")  # fmt: skip
-UNITS = {"duration": "s", "path_length": "m", "peak_force": "N", "mean_force": "N", "peak_deviation": "m",
-         "peak_sideways_accel": "m/s²", "submovements": "count", "return_overshoot": "m"}  # fmt: skip
+STATS = (
+    "duration",
+    "path_length",
+    "peak_force",
+    "mean_force",
+    "peak_deviation",
+    "peak_sideways_accel",
+    "submovements",
+    "return_overshoot",
+)
+UNITS = {
+    "duration": "s",
+    "path_length": "m",
+    "peak_force": "N",
+    "mean_force": "N",
+    "peak_deviation": "m",
+    "peak_sideways_accel": "m/s²",
+    "submovements": "count",
+    "return_overshoot": "m",
+}
 LABELS = {
     "duration": "duration",
     "path_length": "path length",
@@ -232,7 +248,9 @@ def run_realism(
         raise ValueError(f"trials_per_task must be an int >= 1, got {trials_per_task!r}")
     real_trials = load_ros_user(real_folder)
     specs = [
-        TrialSpec(task=task, user=0, object="handle", controller="cooperative", preset=preset, seed=seed + i, intent="nominal")
+        TrialSpec(
+            task=task, user=0, object="handle", controller="cooperative", preset=preset, seed=seed + i, intent="nominal"
+        )
         for preset in presets
         for task in tasks
         for i in range(trials_per_task)
@@ -265,8 +283,16 @@ def _overlap(sim: list[float], real: list[float]) -> str:
 
 def summary_table(result: RealismResult) -> str:
     """Markdown table: per statistic, the real range and each preset's simulated range."""
-    digits = {"duration": 1, "path_length": 2, "peak_force": 1, "mean_force": 1, "peak_deviation": 3,
-              "peak_sideways_accel": 2, "submovements": 0, "return_overshoot": 3}  # fmt: skip
+    digits = {
+        "duration": 1,
+        "path_length": 2,
+        "peak_force": 1,
+        "mean_force": 1,
+        "peak_deviation": 3,
+        "peak_sideways_accel": 2,
+        "submovements": 0,
+        "return_overshoot": 3,
+    }
     header = f"| statistic | real user-a (n = {len(result.real)}) |"
     sep = "| --- | --- |"
     for preset in result.sim:
@@ -289,7 +315,10 @@ def summary_table(result: RealismResult) -> str:
 
 def per_task_table(result: RealismResult, preset: str) -> str:
     """Markdown table of medians per task for one preset."""
-    rows = ["| task | " + " | ".join(f"{LABELS[s]} [{UNITS[s]}]" for s in STATS) + " |", "| --- |" + " --- |" * len(STATS)]
+    rows = [
+        "| task | " + " | ".join(f"{LABELS[s]} [{UNITS[s]}]" for s in STATS) + " |",
+        "| --- |" + " --- |" * len(STATS),
+    ]
     for task, stats in result.sim[preset].items():
         cells = []
         for s in STATS:
@@ -300,7 +329,10 @@ def per_task_table(result: RealismResult, preset: str) -> str:
 
 
 def real_table(result: RealismResult) -> str:
-    rows = ["| recording | " + " | ".join(f"{LABELS[s]} [{UNITS[s]}]" for s in STATS) + " |", "| --- |" + " --- |" * len(STATS)]
+    rows = [
+        "| recording | " + " | ".join(f"{LABELS[s]} [{UNITS[s]}]" for s in STATS) + " |",
+        "| --- |" + " --- |" * len(STATS),
+    ]
     for name, stats in zip(result.real_names, result.real):
         rows.append(f"| {name} | " + " | ".join(f"{stats[s]:.3g}" for s in STATS) + " |")
     return "\n".join(rows)
@@ -323,7 +355,12 @@ def write_report(result: RealismResult, out: str | Path, notes: str = "") -> Pat
         "",
     ]
     for preset in result.sim:
-        parts += [f"## Simulated, preset `{preset}`, per task: median (min–max)", "", per_task_table(result, preset), ""]
+        parts += [
+            f"## Simulated, preset `{preset}`, per task: median (min–max)",
+            "",
+            per_task_table(result, preset),
+            "",
+        ]
     parts += ["## Real user-a recordings", "", real_table(result), ""]
     if notes:
         parts += [notes.rstrip(), ""]

@@ -79,7 +79,9 @@ def _tables(parts: list[str], tables) -> None:
 def render_html(title: str, intro: str, sections: Sequence[Section], headline: Section | None = None) -> str:
     """The report page: title, intro, the ``headline`` (the answer, first screen), the
     claims table, then every section."""
-    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title><style>{_STYLE}</style></head><body>"]
+    parts = [
+        f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title><style>{_STYLE}</style></head><body>"
+    ]
     parts.append(f"<h1>{html.escape(title)}</h1><p>{html.escape(intro)}</p>")
     if headline is not None:
         parts.append(f"<h2>{html.escape(headline.title)}</h2>")
@@ -87,7 +89,9 @@ def render_html(title: str, intro: str, sections: Sequence[Section], headline: S
         parts.extend(f"<p>{html.escape(p)}</p>" for p in headline.paragraphs)
     all_claims = [c for s in sections for c in s.claims]
     if all_claims:
-        parts.append("<h2>The thesis' claims, checked</h2><table><tr><th>claim</th><th>verdict</th><th>evidence</th></tr>")
+        parts.append(
+            "<h2>The thesis' claims, checked</h2><table><tr><th>claim</th><th>verdict</th><th>evidence</th></tr>"
+        )
         for c in all_claims:
             verdict = "<span class='holds'>holds</span>" if c.holds else "<span class='fails'>does not hold</span>"
             parts.append(f"<tr><td>{html.escape(c.text)}</td><td>{verdict}</td><td>{html.escape(c.evidence)}</td></tr>")
@@ -98,16 +102,22 @@ def render_html(title: str, intro: str, sections: Sequence[Section], headline: S
         for c in s.claims:
             verdict = "<span class='holds'>holds</span>" if c.holds else "<span class='fails'>does not hold</span>"
             reason = f" Likely reason: {html.escape(c.reason)}" if (c.reason and not c.holds) else ""
-            parts.append(f"<div class='claim'>{html.escape(c.text)} — {verdict}. {html.escape(c.evidence)}{reason}</div>")
+            parts.append(
+                f"<div class='claim'>{html.escape(c.text)} — {verdict}. {html.escape(c.evidence)}{reason}</div>"
+            )
         _tables(parts, s.tables)
         for caption, png in s.figures:
             data = base64.b64encode(png).decode("ascii")
-            parts.append(f"<figure><img alt='{html.escape(caption)}' src='data:image/png;base64,{data}'><figcaption>{html.escape(caption)}</figcaption></figure>")
+            parts.append(
+                f"<figure><img alt='{html.escape(caption)}' src='data:image/png;base64,{data}'><figcaption>{html.escape(caption)}</figcaption></figure>"
+            )
     parts.append("</body></html>")
     return "".join(parts)
 
 
-def write_report(path: Path, title: str, intro: str, sections: Sequence[Section], headline: Section | None = None) -> Path:
+def write_report(
+    path: Path, title: str, intro: str, sections: Sequence[Section], headline: Section | None = None
+) -> Path:
     """Write the report atomically; returns its path."""
     atomic_write_text(Path(path), render_html(title, intro, sections, headline))
     return Path(path)

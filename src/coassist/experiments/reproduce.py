@@ -150,8 +150,14 @@ def _simulation_pool(config: ReproduceConfig):
     return worker_pool(config.workers) if config.workers > 1 else contextlib.nullcontext(None)
 
 
-def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, say: Callable[[str], None] | None = None,
-                  pool: Any = None) -> dict:  # fmt: skip
+def run_reproduce(
+    config: ReproduceConfig,
+    out: Path,
+    *,
+    progress: bool = True,
+    say: Callable[[str], None] | None = None,
+    pool: Any = None,
+) -> dict:
     """Run every stage; write ``report.html`` and ``summary.json`` in ``out``; return the summary.
     ``pool``: the simulation processes to run on (:func:`coassist.sim.world.worker_pool`, kept by the caller
     across runs, e.g. :func:`coassist.experiments.seeds.run_seeds`); None: started for this run."""
@@ -167,18 +173,30 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
         # The ablation's simulations go on the pool before the ablation: the named sources' while
         # the iterative stage trains, the learned ones' while the application's sources train.
         ablation_ahead = AblationAhead(ctx.ws, handed_to_ablation())
-        iterative = ctx.stage.run("iterative training", run_iterative_stage, ctx.ws, ctx.stage.say,
-                                  _beside_training(ctx.ws, real_data, ablation_ahead))  # fmt: skip
+        iterative = ctx.stage.run(
+            "iterative training",
+            run_iterative_stage,
+            ctx.ws,
+            ctx.stage.say,
+            _beside_training(ctx.ws, real_data, ablation_ahead),
+        )
         ctx.sections.append(iterative_section(iterative))
         ctx.summary["iterative"] = iterative.summary()
         final_model = iterative.final_model
         transfer = ctx.stage.run("transfer learning", run_transfer, ctx.ws, final_model, iterative.iteration_seconds)
-        ctx.sections.append(transfer_section(
-            transfer, iterative.final_model_offline_e_rms[50], sum(w["trials"] for w in iterative.work),
-            sum(w["windows_trained"] for w in iterative.work)))
+        ctx.sections.append(
+            transfer_section(
+                transfer,
+                iterative.final_model_offline_e_rms[50],
+                sum(w["trials"] for w in iterative.work),
+                sum(w["windows_trained"] for w in iterative.work),
+            )
+        )
         ctx.summary["transfer"] = transfer.summary()
         # Started on the pool during the iterative stage (without a pool: run here, now).
-        real = ctx.stage.run("real recordings", ctx.ws.result_of, "real recordings", run_real_recordings, ctx.ws, real_data)
+        real = ctx.stage.run(
+            "real recordings", ctx.ws.result_of, "real recordings", run_real_recordings, ctx.ws, real_data
+        )
         application = ctx.stage.run("application scenario", run_application, ctx.ws, final_model, ablation_ahead)
         ctx.sections.append(application_section(application))
         ctx.summary["application"] = application.summary()
@@ -202,9 +220,14 @@ def run_reproduce(config: ReproduceConfig, out: Path, *, progress: bool = True, 
             f"seed {config.seed}; total time {ctx.summary['total_seconds']:.0f} s{used}. Every number below was measured in this run."
         )
         headline = headline_section(application, transfer, real, _sim_dt(config), ablation)
-        ctx.summary["headline"] = {"table": headline.tables[0], "intent_sources": headline.tables[1],
-                                   "prediction": headline.paragraphs}
-        write_report(out / "report.html", "coassist — the thesis' experiments, reproduced", intro, ctx.sections, headline)
+        ctx.summary["headline"] = {
+            "table": headline.tables[0],
+            "intent_sources": headline.tables[1],
+            "prediction": headline.paragraphs,
+        }
+        write_report(
+            out / "report.html", "coassist — the thesis' experiments, reproduced", intro, ctx.sections, headline
+        )
         atomic_write_text(out / "summary.json", json.dumps(_jsonable(ctx.summary), indent=1, allow_nan=False))
         return ctx.summary
 
@@ -256,16 +279,24 @@ def headline_section(application, transfer, real, sim_dt: float, ablation) -> Se
         h = max(best)
         b = best[h]
         verdict = "helps" if b["gain"] > 0 else "does not help"
-        return (f"{where}: at {h * dt:.2f} s the {model} {verdict} over the best simple baseline ({b['name']}): "
-                f"{b['model_e_rms'] * 1e3:.2f} vs {b['e_rms'] * 1e3:.2f} mm ({100 * b['gain']:+.1f} %)")
+        return (
+            f"{where}: at {h * dt:.2f} s the {model} {verdict} over the best simple baseline ({b['name']}): "
+            f"{b['model_e_rms'] * 1e3:.2f} vs {b['e_rms'] * 1e3:.2f} mm ({100 * b['gain']:+.1f} %)"
+        )
 
     for name, t in transfer.targets.items():
-        s.paragraphs.append("Prediction, simulated transfer to " + line(name, t.best_baseline, "transferred model", sim_dt))
+        s.paragraphs.append(
+            "Prediction, simulated transfer to " + line(name, t.best_baseline, "transferred model", sim_dt)
+        )
     if not real.skipped:
-        s.paragraphs.append("Prediction, real recordings, " + line("user-a held out", real.user_a.best_baseline, "model",
-                                                                  real.user_a.dt))
-        s.paragraphs.append("Prediction, real recordings, " + line("user-b transferred", real.user_b["M_TL"].best_baseline,
-                                                                  "transferred model", real.user_b["M_TL"].dt))
+        s.paragraphs.append(
+            "Prediction, real recordings, "
+            + line("user-a held out", real.user_a.best_baseline, "model", real.user_a.dt)
+        )
+        s.paragraphs.append(
+            "Prediction, real recordings, "
+            + line("user-b transferred", real.user_b["M_TL"].best_baseline, "transferred model", real.user_b["M_TL"].dt)
+        )
     return s
 
 
@@ -292,8 +323,11 @@ def _stage_sweep(ctx: _Context) -> None:
     sweep = dmpc_study.SweepConfig(duration=ctx.config.sweep_duration)
     result = dmpc_study.run_sweep(sweep, ctx.out / "sweep")
     summary = dmpc_study.summary(result)
-    ctx.summary["dmpc_sweep"] = {"observations": summary["observations"], "cases": summary["cases"],
-                                 "si_spread": summary["si_units"]["spread_of_error_to_human_reference"]}
+    ctx.summary["dmpc_sweep"] = {
+        "observations": summary["observations"],
+        "cases": summary["cases"],
+        "si_spread": summary["si_units"]["spread_of_error_to_human_reference"],
+    }
     s = Section("1. The dMPC study (thesis §5.2.1, Fig. 5.2–5.4)")
     s.paragraphs.append(
         f"Both players apply their cooperative-equilibrium efforts on one DOF (M = {sweep.mass:g} kg, D = {sweep.damping:g} "
@@ -302,18 +336,34 @@ def _stage_sweep(ctx: _Context) -> None:
         f"tracks alike (RMS error {summary['si_units']['spread_of_error_to_human_reference'][0]:.3f}–"
         f"{summary['si_units']['spread_of_error_to_human_reference'][1]:.3f} m), because the effort cost dominates."
     )
-    s.figures.append((f"Tracking for α ∈ {{{', '.join(f'{a:g}' for a in sweep.alphas)}}} per R_r (rows) and horizon (columns).",
-                      (ctx.out / "sweep" / "dmpc_sweep.png").read_bytes()))
+    s.figures.append(
+        (
+            f"Tracking for α ∈ {{{', '.join(f'{a:g}' for a in sweep.alphas)}}} per R_r (rows) and horizon (columns).",
+            (ctx.out / "sweep" / "dmpc_sweep.png").read_bytes(),
+        )
+    )
     rows = [[c.R_r, c.horizon, c.alpha, c.rms_error_human, c.rms_error_robot, c.rms_effort_robot] for c in result.cases]
-    s.tables.append(("RMS errors [m] and robot effort [N]", ["R_r", "horizon [samples]", "α", "error to x_ref,h [m]", "error to x_ref,r [m]", "RMS u_r [N]"], rows))
+    s.tables.append(
+        (
+            "RMS errors [m] and robot effort [N]",
+            ["R_r", "horizon [samples]", "α", "error to x_ref,h [m]", "error to x_ref,r [m]", "RMS u_r [N]"],
+            rows,
+        )
+    )
     texts = {
         "higher_alpha_tracks_human_reference": "Higher α tracks the human's reference more closely",
         "lower_R_r_tracks_better": "Lower R_r makes the robot more responsive (smaller tracking error)",
         "longer_horizon_tracks_better": "A longer prediction horizon tracks better",
     }
     for key, verdict in result.observations.items():
-        ev = "in every combination of the other two parameters" if verdict["holds"] else f"counterexamples: {verdict['counterexamples']}"
-        s.claims.append(Claim(texts[key], bool(verdict["holds"]), ev, reason="" if verdict["holds"] else "see the table"))
+        ev = (
+            "in every combination of the other two parameters"
+            if verdict["holds"]
+            else f"counterexamples: {verdict['counterexamples']}"
+        )
+        s.claims.append(
+            Claim(texts[key], bool(verdict["holds"]), ev, reason="" if verdict["holds"] else "see the table")
+        )
     ctx.sections.append(s)
 
 
@@ -360,15 +410,21 @@ class IterativeStageResult:
         """summary.json's "iterative" record."""
         return {
             "final_model_offline_e_rms": self.final_model_offline_e_rms,
-            "in_loop_errors": self.errors, "deltas_e_rms_50": list(self.run.deltas), "tol": self.tol,
-            "converged_at": self.run.converged_at, "times": list(self.times), "models": [str(m) for m in self.run.models],
+            "in_loop_errors": self.errors,
+            "deltas_e_rms_50": list(self.run.deltas),
+            "tol": self.tol,
+            "converged_at": self.run.converged_at,
+            "times": list(self.times),
+            "models": [str(m) for m in self.run.models],
             "m0_on_d1_e_rms_50": self.m0_on_d1_e_rms_50,
-            "constant_velocity_on_d1_e_rms_50": self.constant_velocity_on_d1_e_rms_50, "work": list(self.work),
-        }  # fmt: skip
+            "constant_velocity_on_d1_e_rms_50": self.constant_velocity_on_d1_e_rms_50,
+            "work": list(self.work),
+        }
 
 
-def run_iterative_stage(ws: Workspace, say: Callable[[str], None],
-                        ahead: Callable[[int], None] | None = None) -> IterativeStageResult:  # fmt: skip
+def run_iterative_stage(
+    ws: Workspace, say: Callable[[str], None], ahead: Callable[[int], None] | None = None
+) -> IterativeStageResult:
     """Algorithm 4.1: collect D_k with M_{k−1} in the loop, train M_k, score every model.
 
     M_k trains in this process, on one core, while the run's pool would idle, so the pool
@@ -382,8 +438,13 @@ def run_iterative_stage(ws: Workspace, say: Callable[[str], None],
     folders: dict[int, Path] = {}
 
     def collect(k, model_path):
-        folder, ds = ws.collect(f"D{k}", tasks=ITERATION_TASKS, trials=cfg.trials_per_task,
-                                seed=iteration_seed(trial_seed_base(cfg.seed), k), intent=str(model_path) if model_path else "nominal")
+        folder, ds = ws.collect(
+            f"D{k}",
+            tasks=ITERATION_TASKS,
+            trials=cfg.trials_per_task,
+            seed=iteration_seed(trial_seed_base(cfg.seed), k),
+            intent=str(model_path) if model_path else "nominal",
+        )
         folders[k] = folder
         if k == 1:
             # The skip's shrinkage is chosen for the input shift between D_k and D_{k+1}: how
@@ -403,24 +464,41 @@ def run_iterative_stage(ws: Workspace, say: Callable[[str], None],
         measured[id(dataset)] = errors = in_loop_errors(dataset.trials)
         return {h: v["e_rms"] for h, v in errors.items()}
 
-    result = iterative_training(collect, train, online, iterations=cfg.iterations, tol=cfg.tol,
-                                criterion_horizon=50, progress=lambda m: say("  " + m))
+    result = iterative_training(
+        collect,
+        train,
+        online,
+        iterations=cfg.iterations,
+        tol=cfg.tol,
+        criterion_horizon=50,
+        progress=lambda m: say("  " + m),
+    )
     ws.submit("iterative: final model offline", evaluate_in_worker, result.models[-1], [folders[cfg.iterations]])
     labels = ("nominal", *(f"M{k}" for k in range(cfg.iterations)))
     datasets = [it.dataset for it in result.iterations] + [result.final_dataset]
     errors = {label: measured[id(ds)] for label, ds in zip(labels, datasets)}
     times = tuple({"k": it.k, "collect_s": it.collect_s, "train_s": it.train_s} for it in result.iterations)
     # Measured work, not wall-clock (which depends on the machine's load): trials collected, windows trained.
-    work = tuple({"k": it.k, "trials": len(it.dataset.trials), "windows_trained": windows_trained(it.model)}
-                 for it in result.iterations)
-    final_eval = ws.result_of("iterative: final model offline", score_model, result.models[-1], [folders[cfg.iterations]])
+    work = tuple(
+        {"k": it.k, "trials": len(it.dataset.trials), "windows_trained": windows_trained(it.model)}
+        for it in result.iterations
+    )
+    final_eval = ws.result_of(
+        "iterative: final model offline", score_model, result.models[-1], [folders[cfg.iterations]]
+    )
     shifted = ws.result_of("iterative: M0 on D1", score_model, result.models[0], [folders[1]])
     return IterativeStageResult(
-        run=result, labels=labels, errors=errors, times=times, work=work,
+        run=result,
+        labels=labels,
+        errors=errors,
+        times=times,
+        work=work,
         final_model_offline_e_rms={h: v["e_rms"] for h, v in final_eval.results["model"].items()},
         m0_on_d1_e_rms_50=shifted.results["model"][50]["e_rms"],
         constant_velocity_on_d1_e_rms_50=shifted.results["constant_velocity"][50]["e_rms"],
-        skip_alpha=cfg.skip_alpha, trials_per_task=cfg.trials_per_task, tol=cfg.tol,
+        skip_alpha=cfg.skip_alpha,
+        trials_per_task=cfg.trials_per_task,
+        tol=cfg.tol,
         dt=result.final_dataset.trials[0].meta.dt,
         iteration_seconds=float(np.mean([t["collect_s"] + t["train_s"] for t in times])),
     )
@@ -442,16 +520,34 @@ def iterative_section(it: IterativeStageResult) -> Section:
         f"there (M_0 trained on D_0 and scored on D_1, in this run: {m0_on_d1 * 1000:.1f} mm at {50 * dt:.2f} s; "
         f"constant velocity {cv_on_d1 * 1000:.1f} mm)."
     )
-    rows = [[label] + [errors[label].get(h, {}).get("e_rms", float("nan")) for h in EVAL_HORIZONS]
-            + [errors[label].get(50, {}).get("e_max_mean", float("nan"))] for label in labels]
-    s.tables.append(("In-loop e_RMS [m] per horizon, and mean e_MAX at 50 samples (Fig. 5.14, 5.16)",
-                     ["model", "5", "10", "20", "50", "e_MAX mean @50 [m]"], rows))
-    s.tables.append(("Time per iteration (Table 5.1)", ["iteration", "collect [s]", "train [s]"],
-                     [[t["k"], t["collect_s"], t["train_s"]] for t in it.times]))
+    rows = [
+        [label]
+        + [errors[label].get(h, {}).get("e_rms", float("nan")) for h in EVAL_HORIZONS]
+        + [errors[label].get(50, {}).get("e_max_mean", float("nan"))]
+        for label in labels
+    ]
+    s.tables.append(
+        (
+            "In-loop e_RMS [m] per horizon, and mean e_MAX at 50 samples (Fig. 5.14, 5.16)",
+            ["model", "5", "10", "20", "50", "e_MAX mean @50 [m]"],
+            rows,
+        )
+    )
+    s.tables.append(
+        (
+            "Time per iteration (Table 5.1)",
+            ["iteration", "collect [s]", "train [s]"],
+            [[t["k"], t["collect_s"], t["train_s"]] for t in it.times],
+        )
+    )
     s.paragraphs.append(
         "Stop criterion |e_RMS^{k+1} − e_RMS^k| < "
         f"{it.tol * 1000:.1f} mm at 50 samples: "
-        + (f"first met between M{result.converged_at} and M{result.converged_at + 1}" if result.converged_at is not None else "not met")
+        + (
+            f"first met between M{result.converged_at} and M{result.converged_at + 1}"
+            if result.converged_at is not None
+            else "not met"
+        )
         + f" (successive changes {', '.join(f'{d * 1000:.2f}' for d in result.deltas)} mm); all iterations run, as in the thesis."
     )
     _plot_iterative(s, labels, errors, result, dt)
@@ -459,21 +555,31 @@ def iterative_section(it: IterativeStageResult) -> Section:
     drops = [a - b for a, b in pairwise(e50)]
     if drops:
         holds = e50[-1] < e50[0] and drops[0] == max(drops) and drops[0] > 0
-        s.claims.append(Claim(
-            "Iterating lowers e_RMS: the largest drop is from M0 to M1, then it settles",
-            holds,
-            "e_RMS@50 in the loop: " + ", ".join(f"M{k} {e * 1000:.1f} mm" for k, e in enumerate(e50))
-            + f"; nominal assumption {errors['nominal'][50]['e_rms'] * 1000:.1f} mm",
-            reason="the simulated operator is stationary and the default model small; once the model predicts well, "
-            "new in-loop data adds little beyond the first retraining, and training noise is as large as the gains",
-        ))
-    grows = all(all(errors[m][a]["e_rms"] < errors[m][b]["e_rms"] for a, b in pairwise(EVAL_HORIZONS))
-                for m in labels[1:])
-    s.claims.append(Claim(
-        "e_RMS grows with the prediction horizon", grows,
-        "; ".join(f"{m}: " + " < ".join(f"{errors[m][h]['e_rms'] * 1000:.1f}" for h in EVAL_HORIZONS) + " mm" for m in labels[1:]),
-        reason="a model predicting short horizons no better than long ones",
-    ))
+        s.claims.append(
+            Claim(
+                "Iterating lowers e_RMS: the largest drop is from M0 to M1, then it settles",
+                holds,
+                "e_RMS@50 in the loop: "
+                + ", ".join(f"M{k} {e * 1000:.1f} mm" for k, e in enumerate(e50))
+                + f"; nominal assumption {errors['nominal'][50]['e_rms'] * 1000:.1f} mm",
+                reason="the simulated operator is stationary and the default model small; once the model predicts well, "
+                "new in-loop data adds little beyond the first retraining, and training noise is as large as the gains",
+            )
+        )
+    grows = all(
+        all(errors[m][a]["e_rms"] < errors[m][b]["e_rms"] for a, b in pairwise(EVAL_HORIZONS)) for m in labels[1:]
+    )
+    s.claims.append(
+        Claim(
+            "e_RMS grows with the prediction horizon",
+            grows,
+            "; ".join(
+                f"{m}: " + " < ".join(f"{errors[m][h]['e_rms'] * 1000:.1f}" for h in EVAL_HORIZONS) + " mm"
+                for m in labels[1:]
+            ),
+            reason="a model predicting short horizons no better than long ones",
+        )
+    )
     return s
 
 
@@ -533,6 +639,9 @@ def _plot_iterative(s: Section, labels, errors, result, dt: float) -> None:
     axes[1].set_ylabel("error at 0.4 s ahead [mm]")
     axes[1].grid(alpha=0.3)
     axes[1].legend(fontsize=7)
-    s.add_figure(fig, "One linear trial of the last collection (final model in the loop; no model trained on it): each model's "
-                    "prediction 0.4 s ahead (Fig. 5.13) and its point-wise error (Fig. 5.15, 5.17).")
+    s.add_figure(
+        fig,
+        "One linear trial of the last collection (final model in the loop; no model trained on it): each model's "
+        "prediction 0.4 s ahead (Fig. 5.13) and its point-wise error (Fig. 5.15, 5.17).",
+    )
     plt.close(fig)

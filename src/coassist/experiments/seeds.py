@@ -49,15 +49,21 @@ class SeedClaim:
 
     @property
     def status(self) -> str:
-        """"robust" (holds on every seed that checked it), "seed-dependent" (on some) or "not holding"."""
+        """ "robust" (holds on every seed that checked it), "seed-dependent" (on some) or "not holding"."""
         if self.checked and self.held == self.checked:
             return "robust"
         return "seed-dependent" if self.held else "not holding"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"claim": self.text, "status": self.status, "holds_on": self.held, "checked_on": self.checked,
-                "seeds": {str(k): None if v is None else {"holds": v[0], "evidence": v[1]}
-                          for k, v in self.per_seed.items()}}  # fmt: skip
+        return {
+            "claim": self.text,
+            "status": self.status,
+            "holds_on": self.held,
+            "checked_on": self.checked,
+            "seeds": {
+                str(k): None if v is None else {"holds": v[0], "evidence": v[1]} for k, v in self.per_seed.items()
+            },
+        }
 
 
 def parse_seeds(text: str) -> tuple[int, ...]:
@@ -109,27 +115,57 @@ def seeds_section(claims: Sequence[SeedClaim], seeds: Sequence[int]) -> Section:
             v = c.per_seed.get(k)
             row.append("—" if v is None else ("holds: " if v[0] else "does not hold: ") + v[1])
         rows.append(row)
-    s.tables.append(("Claims across seeds: on how many seeds each holds, and each seed's evidence",
-                     ["claim", "holds on", "status"] + [f"seed {k}" for k in seeds], rows))  # fmt: skip
+    s.tables.append(
+        (
+            "Claims across seeds: on how many seeds each holds, and each seed's evidence",
+            ["claim", "holds on", "status"] + [f"seed {k}" for k in seeds],
+            rows,
+        )
+    )
     return s
+
+
+def _verdict_text(verdict: tuple[bool, str] | None) -> str:
+    """One seed's verdict in a table cell: holds, does not hold, or — where the seed did not check it."""
+    if verdict is None:
+        return "—"
+    return "holds" if verdict[0] else "does not hold"
 
 
 def _headline(claims: Sequence[SeedClaim], seeds: Sequence[int]) -> Section:
     s = Section(f"Which claims hold whatever the seed ({len(seeds)} seeds)")
     by = {status: [c for c in claims if c.status == status] for status in ("robust", "seed-dependent", "not holding")}
-    s.tables.append((f"Robust: {len(by['robust'])} claims hold on every seed", ["claim"], [[c.text] for c in by["robust"]]))
-    s.tables.append((f"Seed-dependent: {len(by['seed-dependent'])} claims hold on some seeds only",
-                     ["claim", "holds on"] + [f"seed {k}" for k in seeds],
-                     [[c.text, f"{c.held} of {c.checked}"] + ["—" if c.per_seed.get(k) is None else
-                      ("holds" if c.per_seed[k][0] else "does not hold") for k in seeds]  # type: ignore[index]
-                      for c in by["seed-dependent"]]))  # fmt: skip
-    s.tables.append((f"Not holding: {len(by['not holding'])} claims hold on no seed", ["claim"],
-                     [[c.text] for c in by["not holding"]]))  # fmt: skip
+    s.tables.append(
+        (f"Robust: {len(by['robust'])} claims hold on every seed", ["claim"], [[c.text] for c in by["robust"]])
+    )
+    s.tables.append(
+        (
+            f"Seed-dependent: {len(by['seed-dependent'])} claims hold on some seeds only",
+            ["claim", "holds on"] + [f"seed {k}" for k in seeds],
+            [
+                [c.text, f"{c.held} of {c.checked}"] + [_verdict_text(c.per_seed.get(k)) for k in seeds]
+                for c in by["seed-dependent"]
+            ],
+        )
+    )
+    s.tables.append(
+        (
+            f"Not holding: {len(by['not holding'])} claims hold on no seed",
+            ["claim"],
+            [[c.text] for c in by["not holding"]],
+        )
+    )
     return s
 
 
-def run_seeds(config: ReproduceConfig, seeds: Sequence[int], out: str | Path, *, progress: bool = True,
-              say: Callable[[str], None] | None = None) -> dict[str, Any]:  # fmt: skip
+def run_seeds(
+    config: ReproduceConfig,
+    seeds: Sequence[int],
+    out: str | Path,
+    *,
+    progress: bool = True,
+    say: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
     """Run the pipeline on each seed (``out/seed-<k>``, one pool for all) and write ``out/report.html`` and
     ``out/summary.json`` (module docstring); returns the summary."""
     from coassist.experiments.reproduce import _simulation_pool, run_reproduce
@@ -145,22 +181,34 @@ def run_seeds(config: ReproduceConfig, seeds: Sequence[int], out: str | Path, *,
     with _simulation_pool(config) as pool:
         for k in seeds:
             say(f"[bold]seed {k}[/] ({len(summaries) + 1} of {len(seeds)})")
-            summaries[k] = run_reproduce(replace(config, seed=k), out / f"seed-{k}", progress=progress, say=say, pool=pool)
+            summaries[k] = run_reproduce(
+                replace(config, seed=k), out / f"seed-{k}", progress=progress, say=say, pool=pool
+            )
     claims = claims_across_seeds(summaries)
     total = time.perf_counter() - t0
     cpu = {k: s.get("cpu_seconds", {}) for k, s in summaries.items()}
     summary = {
-        "preset": config.name, "seeds": list(seeds), "total_seconds": total,
+        "preset": config.name,
+        "seeds": list(seeds),
+        "total_seconds": total,
         "seconds": {str(k): s["total_seconds"] for k, s in summaries.items()},
         "cpu_seconds": {str(k): v for k, v in cpu.items()},
         "claims": [c.to_dict() for c in claims],
-        "robust": sum(c.status == "robust" for c in claims), "n_claims": len(claims),
-    }  # fmt: skip
-    intro = (f"coassist reproduction of the thesis' experiments on seeds {', '.join(str(k) for k in seeds)}, preset "
-             f"'{config.name}'; total time {total:.0f} s ({', '.join(f'seed {k}: {s:.0f} s' for k, s in zip(seeds, (summaries[k]['total_seconds'] for k in seeds)))}). "
-             f"{summary['robust']} of {len(claims)} claims hold on every seed.")  # fmt: skip
-    write_report(out / "report.html", "coassist — the thesis' experiments on several seeds", intro,
-                 [seeds_section(claims, seeds)], _headline(claims, seeds))  # fmt: skip
+        "robust": sum(c.status == "robust" for c in claims),
+        "n_claims": len(claims),
+    }
+    intro = (
+        f"coassist reproduction of the thesis' experiments on seeds {', '.join(str(k) for k in seeds)}, preset "
+        f"'{config.name}'; total time {total:.0f} s ({', '.join(f'seed {k}: {s:.0f} s' for k, s in zip(seeds, (summaries[k]['total_seconds'] for k in seeds)))}). "
+        f"{summary['robust']} of {len(claims)} claims hold on every seed."
+    )
+    write_report(
+        out / "report.html",
+        "coassist — the thesis' experiments on several seeds",
+        intro,
+        [seeds_section(claims, seeds)],
+        _headline(claims, seeds),
+    )
     import json
 
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, allow_nan=False))

@@ -37,8 +37,13 @@ from coassist.experiments.pipeline import Workspace, train_in_worker
 __all__ = ["APPLICATION_SOURCE", "LEARNED", "calibrate_paths", "seed_names", "train_sources", "training_datasets"]
 
 #: The learned sources: (intent preset or None for the run's, window label).
-LEARNED = {"ridge": ("linear", "tool"), "ridge-intent": ("linear", "intent"), "lstm-tool": (None, "tool"),
-           "lstm-hand-alone": (None, "hand_alone"), "lstm-intent": (None, "intent")}  # fmt: skip
+LEARNED = {
+    "ridge": ("linear", "tool"),
+    "ridge-intent": ("linear", "intent"),
+    "lstm-tool": (None, "tool"),
+    "lstm-hand-alone": (None, "hand_alone"),
+    "lstm-intent": (None, "intent"),
+}
 #: The application's intent source (module docstring). On the validation seeds (application_seed(50000, j)
 #: and (60000, j), 24 trials per object, the arbitrated controller; docs/precision.md) the calibrated
 #: path hypotheses got 87 / 92 % of the oracle's force saving and 69 / 72 % of its overshoot reduction
@@ -66,10 +71,18 @@ def calibrate_paths(ws: Workspace, seed: int | None = None) -> str:
     from coassist.scenario.tasks import task_for_seed
 
     cfg = ws.config
-    _, ds = ws.collect("calibration", tasks=(cfg.application_task,), users=cfg.application_users, objects=("handle",),
-                       trials=cfg.calibration_trials,
-                       seed=calibration_seed(trial_seed_base(cfg.seed)) if seed is None else int(seed), controller="manual",
-                       preset=cfg.application_preset, intent="nominal", obstacle=OBSTACLE)  # fmt: skip
+    _, ds = ws.collect(
+        "calibration",
+        tasks=(cfg.application_task,),
+        users=cfg.application_users,
+        objects=("handle",),
+        trials=cfg.calibration_trials,
+        seed=calibration_seed(trial_seed_base(cfg.seed)) if seed is None else int(seed),
+        controller="manual",
+        preset=cfg.application_preset,
+        intent="nominal",
+        obstacle=OBSTACLE,
+    )
     fits: dict[str, list[tuple[int, float, float]]] = {}
     for trial in ds.trials:
         task = task_for_seed(trial.meta.task, int(trial.meta.seed), obstacle=OBSTACLE)
@@ -88,8 +101,13 @@ def training_datasets(ws: Workspace) -> list[Path]:
     return [root / n for n in names]
 
 
-def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None = None,
-                  on_models: Callable[[dict[str, str]], None] | None = None) -> dict[str, str]:
+def train_sources(
+    ws: Workspace,
+    datasets: list[Path],
+    *,
+    processes: int | None = None,
+    on_models: Callable[[dict[str, str]], None] | None = None,
+) -> dict[str, str]:
     """Train every learned source of ``reproduce.learned_sources`` on ``datasets`` (module docstring), each
     LSTM+FC once per training seed, into ``models/<name>``; model folders by name (:func:`seed_names`).
 
@@ -128,8 +146,18 @@ def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None 
     if ws.config.device != "cpu":
         told({})
         for name, epochs, preset_name, label, seed in jobs:
-            models[name] = str(ws.train(name, datasets, init="scratch", epochs=epochs, preset_name=preset_name,
-                                        label=label, stride=ws.config.source_stride, seed=seed))  # fmt: skip
+            models[name] = str(
+                ws.train(
+                    name,
+                    datasets,
+                    init="scratch",
+                    epochs=epochs,
+                    preset_name=preset_name,
+                    label=label,
+                    stride=ws.config.source_stride,
+                    seed=seed,
+                )
+            )
             told(dict(models))
         return models
     # the first seed of each LSTM+FC first (their cells wait for them), then the other seeds; the ridges last
@@ -138,9 +166,22 @@ def train_sources(ws: Workspace, datasets: list[Path], *, processes: int | None 
     # the run's pool (workers processes) unless another count is asked for: then n started here
     shared = ws.pool if processes is None else None
     with contextlib.nullcontext(shared) if shared is not None else worker_pool(n) as pool:
-        futures = {pool.submit(train_in_worker, ws.config, ws.out, name, datasets, init="scratch", epochs=epochs,
-                               preset_name=preset_name, label=label, stride=ws.config.source_stride, seed=seed): name
-                   for name, epochs, preset_name, label, seed in jobs}  # fmt: skip
+        futures = {
+            pool.submit(
+                train_in_worker,
+                ws.config,
+                ws.out,
+                name,
+                datasets,
+                init="scratch",
+                epochs=epochs,
+                preset_name=preset_name,
+                label=label,
+                stride=ws.config.source_stride,
+                seed=seed,
+            ): name
+            for name, epochs, preset_name, label, seed in jobs
+        }
         told({})
         with progress_bar(ws.progress) as bar:
             task = bar.add_task(f"training {len(jobs)} intent sources, {n} at a time", total=len(jobs))

@@ -54,8 +54,13 @@ def transfer_targets(cfg: ReproduceConfig) -> dict[str, TransferTarget]:
     n_users = len(cfg.new_users)
     return {
         "z trajectory": TransferTarget(("z",), (0,), ("handle",), cfg.transfer_trials, cfg.test_trials),
-        "new users": TransferTarget(ITERATION_TASKS, tuple(cfg.new_users), ("handle",),
-                                    max(1, cfg.transfer_trials // (3 * n_users)), max(1, cfg.test_trials // (3 * n_users))),
+        "new users": TransferTarget(
+            ITERATION_TASKS,
+            tuple(cfg.new_users),
+            ("handle",),
+            max(1, cfg.transfer_trials // (3 * n_users)),
+            max(1, cfg.test_trials // (3 * n_users)),
+        ),
         "board": TransferTarget(ITERATION_TASKS, (0,), ("board",), per_task, test_per_task),
     }
 
@@ -74,9 +79,13 @@ class TargetResult:
     models: dict[str, Path]  # "transfer", "scratch" and (reproduce.transfer_starts) "finetune_all"
 
     def summary(self) -> dict[str, Any]:
-        return {"e_rms": self.e_rms, "collect_s": self.collect_s, "train_s": dict(self.train_s),
-                "work": {"trials": self.trials, "windows_trained": self.windows_trained},
-                "best_baseline": self.best_baseline}
+        return {
+            "e_rms": self.e_rms,
+            "collect_s": self.collect_s,
+            "train_s": dict(self.train_s),
+            "work": {"trials": self.trials, "windows_trained": self.windows_trained},
+            "best_baseline": self.best_baseline,
+        }
 
 
 @dataclass(frozen=True)
@@ -121,27 +130,57 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
 
     def train(name: str, folder: Path, test: Path, init: str, epochs: int) -> Future:
         if pool is not None:
-            return pool.submit(train_in_worker, cfg, ws.out, name, [folder], init=init, epochs=epochs,
-                               test_fraction=0.0, evaluate_on=[test])  # fmt: skip
-        return done(train_and_score(ws, name, [folder], init=init, epochs=epochs, test_fraction=0.0, evaluate_on=[test]))
+            return pool.submit(
+                train_in_worker,
+                cfg,
+                ws.out,
+                name,
+                [folder],
+                init=init,
+                epochs=epochs,
+                test_fraction=0.0,
+                evaluate_on=[test],
+            )
+        return done(
+            train_and_score(ws, name, [folder], init=init, epochs=epochs, test_fraction=0.0, evaluate_on=[test])
+        )
 
     collected = {}
     for i, (name, target) in enumerate(transfer_targets(cfg).items()):
         slug = name.replace(" ", "-")
         seed, test_seed = transfer_seeds(trial_seed_base(cfg.seed), i)
         t0 = time.perf_counter()
-        folder, dataset = ws.collect(f"TL-{slug}", tasks=target.tasks, users=target.users, objects=target.objects,
-                                     trials=target.trials, seed=seed, intent=str(final_model))
+        folder, dataset = ws.collect(
+            f"TL-{slug}",
+            tasks=target.tasks,
+            users=target.users,
+            objects=target.objects,
+            trials=target.trials,
+            seed=seed,
+            intent=str(final_model),
+        )
         collect_s = time.perf_counter() - t0
-        test, _ = ws.collect(f"TL-{slug}-test", tasks=target.tasks, users=target.users, objects=target.objects,
-                             trials=target.test_trials, seed=test_seed, intent=str(final_model))
+        test, _ = ws.collect(
+            f"TL-{slug}-test",
+            tasks=target.tasks,
+            users=target.users,
+            objects=target.objects,
+            trials=target.test_trials,
+            seed=test_seed,
+            intent=str(final_model),
+        )
         collected[name] = (slug, folder, test, len(dataset.trials), collect_s)
     init = {"transfer": f"transfer:{final_model}", "finetune_all": f"finetune:{final_model}", "scratch": "scratch"}
-    epochs = {start: cfg.transfer_epochs if start != "scratch" else max(cfg.transfer_epochs, cfg.epochs) for start in init}
+    epochs = {
+        start: cfg.transfer_epochs if start != "scratch" else max(cfg.transfer_epochs, cfg.epochs) for start in init
+    }
     # the longest first (from scratch, then all layers; the frozen LSTM's FC layers are quick), then the scoring
     order = sorted(cfg.transfer_starts, key=("scratch", "finetune_all", "transfer").index)
-    jobs = {(name, start): train(f"TL-{slug}-{start}", folder, test, init[start], epochs[start])
-            for start in order for name, (slug, folder, test, _, _) in collected.items()}  # fmt: skip
+    jobs = {
+        (name, start): train(f"TL-{slug}-{start}", folder, test, init[start], epochs[start])
+        for start in order
+        for name, (slug, folder, test, _, _) in collected.items()
+    }
     prev = {name: evaluate(final_model, test) for name, (_, _, test, _, _) in collected.items()}
     targets = {}
     for name, (_, _, _, n_trials, collect_s) in collected.items():
@@ -152,16 +191,21 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
         for base in BASELINES:
             table[base] = {h: evals["transfer"].results[base][h]["e_rms"] for h in EVAL_HORIZONS}
         targets[name] = TargetResult(
-            e_rms=table, collect_s=collect_s, train_s={start: seconds for start, (_, seconds, _) in runs.items()},
-            trials=n_trials, windows_trained=windows_trained(models["transfer"]),
-            best_baseline=evals["transfer"].best_baseline, comparison=tuple(comparison_lines(evals["transfer"], "M_TL")),
+            e_rms=table,
+            collect_s=collect_s,
+            train_s={start: seconds for start, (_, seconds, _) in runs.items()},
+            trials=n_trials,
+            windows_trained=windows_trained(models["transfer"]),
+            best_baseline=evals["transfer"].best_baseline,
+            comparison=tuple(comparison_lines(evals["transfer"], "M_TL")),
             models=models,
         )
     return TransferResult(Path(final_model), targets, float(iteration_seconds), cfg.transfer_trials)
 
 
-def transfer_section(result: TransferResult, final_own_e_rms_50: float, iterative_trials: int,
-                     iterative_windows: int) -> Section:
+def transfer_section(
+    result: TransferResult, final_own_e_rms_50: float, iterative_trials: int, iterative_windows: int
+) -> Section:
     """The report's section 3 and its claims.
 
     final_own_e_rms_50 : the final iterative model's e_RMS@50 [m] on the data of its own loop.
@@ -184,60 +228,101 @@ def transfer_section(result: TransferResult, final_own_e_rms_50: float, iterativ
         for label in MODELS + BASELINES:
             if label in t.e_rms:  # a preset may leave a comparison model out (reproduce.transfer_starts)
                 rows.append([name, label] + [t.e_rms[label][h] for h in EVAL_HORIZONS])
-        time_rows.append([name, t.collect_s] + [t.train_s.get(start, float("nan")) for start in ("transfer", "finetune_all", "scratch")])
-    s.tables.append(("e_RMS [m] on held-out trials of each target (Fig. 5.18–5.23)", ["target", "predictor", "5", "10", "20", "50"], rows))
-    s.tables.append(("Time [s] (Table 5.2); one iterative step took " + f"{result.iteration_seconds:.0f} s on average",
-                     ["target", "collect", "train M_TL (frozen LSTM)", "fine-tune all", "from scratch"], time_rows))
+        time_rows.append(
+            [name, t.collect_s]
+            + [t.train_s.get(start, float("nan")) for start in ("transfer", "finetune_all", "scratch")]
+        )
+    s.tables.append(
+        (
+            "e_RMS [m] on held-out trials of each target (Fig. 5.18–5.23)",
+            ["target", "predictor", "5", "10", "20", "50"],
+            rows,
+        )
+    )
+    s.tables.append(
+        (
+            "Time [s] (Table 5.2); one iterative step took " + f"{result.iteration_seconds:.0f} s on average",
+            ["target", "collect", "train M_TL (frozen LSTM)", "fine-tune all", "from scratch"],
+            time_rows,
+        )
+    )
     _plot(s, targets)
     beats = {name: t.e_rms["transfer"][50] < t.e_rms["M_prev"][50] for name, t in targets.items()}
-    s.claims.append(Claim(
-        f"Transfer with {n} trials improves on the previous model for new trajectories, users and objects",
-        all(beats.values()),
-        "; ".join(f"{name}: M_prev {t.e_rms['M_prev'][50] * 1000:.1f} → M_TL {t.e_rms['transfer'][50] * 1000:.1f} mm @50"
-                  for name, t in targets.items()),
-        reason="where M_TL does not improve, the target differs little from the iterative data (M_prev already generalises) "
-        "or the FC layers alone cannot absorb the change",
-    ))
+    s.claims.append(
+        Claim(
+            f"Transfer with {n} trials improves on the previous model for new trajectories, users and objects",
+            all(beats.values()),
+            "; ".join(
+                f"{name}: M_prev {t.e_rms['M_prev'][50] * 1000:.1f} → M_TL {t.e_rms['transfer'][50] * 1000:.1f} mm @50"
+                for name, t in targets.items()
+            ),
+            reason="where M_TL does not improve, the target differs little from the iterative data (M_prev already generalises) "
+            "or the FC layers alone cannot absorb the change",
+        )
+    )
     # Scored like the transfer models (evaluate_model: same tick selection), on the dataset
     # collected with the final model in the loop, which it was not trained on.
     close = {name: t.e_rms["transfer"][50] <= APPROACH_RATIO * final_own_e_rms_50 for name, t in targets.items()}
     # Work, not wall-clock: trials collected and windows trained (epochs × training windows) are
     # what the time is made of, and they do not change with the machine's load.
-    fraction = {name: (t.trials / iterative_trials, t.windows_trained / iterative_windows) for name, t in targets.items()}
-    s.claims.append(Claim(
-        f"Transfer approaches the fully iterated model (within {100 * (APPROACH_RATIO - 1):.0f} % of its own e_RMS@50) with "
-        f"a fraction of the work (under {100 * WORK_FRACTION:.0f} % of the trials collected and windows trained)",
-        all(close.values()) and all(ft < WORK_FRACTION and fw < WORK_FRACTION for ft, fw in fraction.values()),
-        f"fully iterated model on the data of its own loop: {final_own_e_rms_50 * 1000:.1f} mm after {iterative_trials} "
-        f"trials and {iterative_windows} windows trained; "
-        + "; ".join(f"{name}: {t.e_rms['transfer'][50] * 1000:.1f} mm after {t.trials} trials "
-                    f"({100 * fraction[name][0]:.0f} %) and {t.windows_trained} windows "
-                    f"({100 * fraction[name][1]:.0f} %; the frozen LSTM runs forward once per window)" for name, t in targets.items()),
-        reason=f"a new trajectory or object changes the motion more than {n} trials and frozen recurrent features can capture",
-    ))
+    fraction = {
+        name: (t.trials / iterative_trials, t.windows_trained / iterative_windows) for name, t in targets.items()
+    }
+    s.claims.append(
+        Claim(
+            f"Transfer approaches the fully iterated model (within {100 * (APPROACH_RATIO - 1):.0f} % of its own e_RMS@50) with "
+            f"a fraction of the work (under {100 * WORK_FRACTION:.0f} % of the trials collected and windows trained)",
+            all(close.values()) and all(ft < WORK_FRACTION and fw < WORK_FRACTION for ft, fw in fraction.values()),
+            f"fully iterated model on the data of its own loop: {final_own_e_rms_50 * 1000:.1f} mm after {iterative_trials} "
+            f"trials and {iterative_windows} windows trained; "
+            + "; ".join(
+                f"{name}: {t.e_rms['transfer'][50] * 1000:.1f} mm after {t.trials} trials "
+                f"({100 * fraction[name][0]:.0f} %) and {t.windows_trained} windows "
+                f"({100 * fraction[name][1]:.0f} %; the frozen LSTM runs forward once per window)"
+                for name, t in targets.items()
+            ),
+            reason=f"a new trajectory or object changes the motion more than {n} trials and frozen recurrent features can capture",
+        )
+    )
     nan = float("nan")
-    frozen_vs = {name: (t.e_rms["transfer"][50], t.e_rms.get("finetune_all", {50: nan})[50], t.e_rms["scratch"][50])
-                 for name, t in targets.items()}  # fmt: skip
-    s.claims.append(Claim(
-        f"Freezing the LSTM is at least as good as training from scratch on the same {n} trials (beyond the thesis)",
-        all(t <= sc for t, _, sc in frozen_vs.values()),
-        "; ".join(f"{name}: frozen {t * 1000:.1f}, " + (f"all layers {f * 1000:.1f}, " if f == f else "")
-                  + f"scratch {sc * 1000:.1f} mm" for name, (t, f, sc) in frozen_vs.items()),
-        reason="with few epochs a fresh network can fit a small, homogeneous dataset as well as a pretrained one",
-    ))
+    frozen_vs = {
+        name: (t.e_rms["transfer"][50], t.e_rms.get("finetune_all", {50: nan})[50], t.e_rms["scratch"][50])
+        for name, t in targets.items()
+    }
+    s.claims.append(
+        Claim(
+            f"Freezing the LSTM is at least as good as training from scratch on the same {n} trials (beyond the thesis)",
+            all(t <= sc for t, _, sc in frozen_vs.values()),
+            "; ".join(
+                f"{name}: frozen {t * 1000:.1f}, "
+                + (f"all layers {f * 1000:.1f}, " if f == f else "")
+                + f"scratch {sc * 1000:.1f} mm"
+                for name, (t, f, sc) in frozen_vs.items()
+            ),
+            reason="with few epochs a fresh network can fit a small, homogeneous dataset as well as a pretrained one",
+        )
+    )
     return s
 
 
 def _plot(s: Section, targets: dict[str, TargetResult]) -> None:
     plt = pyplot()
     first = next(iter(targets.values()))
-    labels = tuple(label for label in ("M_prev", "transfer", "finetune_all", "scratch", "constant_velocity", "ridge")
-                   if label in first.e_rms)  # fmt: skip
+    labels = tuple(
+        label
+        for label in ("M_prev", "transfer", "finetune_all", "scratch", "constant_velocity", "ridge")
+        if label in first.e_rms
+    )
     fig, axes = plt.subplots(1, len(targets), figsize=(5 * len(targets), 3.8), squeeze=False)
     for ax, (name, t) in zip(axes[0], targets.items()):
         width = 0.8 / len(labels)
         for i, label in enumerate(labels):
-            ax.bar(np.arange(len(EVAL_HORIZONS)) + i * width, [t.e_rms[label][h] * 1000 for h in EVAL_HORIZONS], width, label=label)
+            ax.bar(
+                np.arange(len(EVAL_HORIZONS)) + i * width,
+                [t.e_rms[label][h] * 1000 for h in EVAL_HORIZONS],
+                width,
+                label=label,
+            )
         ax.set_xticks(np.arange(len(EVAL_HORIZONS)) + 0.4 - width / 2, [str(h) for h in EVAL_HORIZONS])
         ax.set_xlabel("horizon [samples]")
         ax.set_ylabel("e_RMS [mm]")

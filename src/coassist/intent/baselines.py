@@ -69,13 +69,16 @@ def constant_velocity_prediction(trial: Trial, horizon: int, dt: float | None = 
     return constant_velocity(trial.pose, trial.velocity, horizon, trial.meta.dt if dt is None else dt)
 
 
-def constant_acceleration_prediction(trial: Trial, horizon: int, params: KalmanCA, dt: float | None = None) -> np.ndarray:
+def constant_acceleration_prediction(
+    trial: Trial, horizon: int, params: KalmanCA, dt: float | None = None
+) -> np.ndarray:
     """ŷ(k+i) = p̂ + τ v̂ + τ²/2 â (τ = i·dt) from the constant-acceleration Kalman filter. (T, H, d)."""
     return params.predict(trial.pose, trial.velocity, horizon, trial.meta.dt if dt is None else dt)
 
 
-def _normal_equations(windows: WindowSet, input_scaler: Scaler, target_scaler: Scaler,
-                      chunk: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+def _normal_equations(
+    windows: WindowSet, input_scaler: Scaler, target_scaler: Scaler, chunk: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Centred Xc'Xc, Xc'Yc and the means of X and Y over the scaled windows, in chunks."""
     n = len(windows)
     sxx = sxy = sx = sy = None
@@ -135,14 +138,23 @@ class RidgeBaseline:
     The normal equations are accumulated in chunks, so any number of windows fits.
     """
 
-    def __init__(self, W: np.ndarray, b: np.ndarray, alpha: float, window: WindowConfig,
-                 input_scaler: Scaler, target_scaler: Scaler, dt: float) -> None:  # fmt: skip
+    def __init__(
+        self,
+        W: np.ndarray,
+        b: np.ndarray,
+        alpha: float,
+        window: WindowConfig,
+        input_scaler: Scaler,
+        target_scaler: Scaler,
+        dt: float,
+    ) -> None:
         self.W, self.b, self.alpha = np.asarray(W, np.float64), np.asarray(b, np.float64), float(alpha)
         self.window, self.input_scaler, self.target_scaler, self.dt = window, input_scaler, target_scaler, float(dt)
 
     @classmethod
-    def fit(cls, windows: WindowSet, input_scaler: Scaler, target_scaler: Scaler, alpha: float = 1.0,
-            chunk: int = 4096) -> RidgeBaseline:  # fmt: skip
+    def fit(
+        cls, windows: WindowSet, input_scaler: Scaler, target_scaler: Scaler, alpha: float = 1.0, chunk: int = 4096
+    ) -> RidgeBaseline:
         if not (math.isfinite(alpha) and alpha >= 0):
             raise ValueError(f"alpha must be a finite number >= 0, got {alpha!r}")
         cxx, cxy, mx, my = _normal_equations(windows, input_scaler, target_scaler, chunk)
@@ -165,15 +177,31 @@ class RidgeBaseline:
         return pred
 
     def state_dict(self) -> dict[str, torch.Tensor]:
-        return {"W": torch.from_numpy(self.W.copy()), "b": torch.from_numpy(self.b.copy()),
-                "alpha": torch.tensor([self.alpha], dtype=torch.float64)}  # fmt: skip
+        return {
+            "W": torch.from_numpy(self.W.copy()),
+            "b": torch.from_numpy(self.b.copy()),
+            "alpha": torch.tensor([self.alpha], dtype=torch.float64),
+        }
 
     @classmethod
-    def from_state_dict(cls, state: dict[str, torch.Tensor], window: WindowConfig, input_scaler: Scaler,
-                        target_scaler: Scaler, dt: float) -> RidgeBaseline:  # fmt: skip
+    def from_state_dict(
+        cls,
+        state: dict[str, torch.Tensor],
+        window: WindowConfig,
+        input_scaler: Scaler,
+        target_scaler: Scaler,
+        dt: float,
+    ) -> RidgeBaseline:
         try:
-            return cls(state["W"].numpy(), state["b"].numpy(), float(state["alpha"][0]), window, input_scaler,
-                       target_scaler, dt)  # fmt: skip
+            return cls(
+                state["W"].numpy(),
+                state["b"].numpy(),
+                float(state["alpha"][0]),
+                window,
+                input_scaler,
+                target_scaler,
+                dt,
+            )
         except KeyError as exc:
             raise ValueError(f"ridge weights miss tensor {exc}") from None
 
@@ -207,8 +235,12 @@ def tune_ridge_alpha(
     val_ws = WindowSet([trials[i] for i in val_idx], window, dt, stride=stride)
     alphas = [float(a) for a in alphas]
     errors = ridge_validation_errors(fit_ws, val_ws, input_scaler, target_scaler, alphas)
-    record = {"fit_trials": [ids[i] for i in fit_idx], "validation_trials": [ids[i] for i in val_idx],
-              "alphas": alphas, "validation_mse": [float(e) for e in errors]}  # fmt: skip
+    record = {
+        "fit_trials": [ids[i] for i in fit_idx],
+        "validation_trials": [ids[i] for i in val_idx],
+        "alphas": alphas,
+        "validation_mse": [float(e) for e in errors],
+    }
     return alphas[int(np.argmin(errors))], record
 
 
@@ -243,23 +275,27 @@ def fit_tuned_baselines(
         raise ValueError(f"need one id per training trial, got {len(trials)} trials and {len(ids)} ids")
     all_ws = WindowSet(list(trials), window, dt, stride=stride)
     kalman = KalmanCA()
-    record: dict[str, Any] = {"protocol": "validation trials split by trial from the training trials "
-                              "(features.validation_split); criterion: mean squared position error over the whole horizon"}  # fmt: skip
+    record: dict[str, Any] = {
+        "protocol": "validation trials split by trial from the training trials "
+        "(features.validation_split); criterion: mean squared position error over the whole horizon"
+    }
     if len(trials) < 2:
         record["protocol"] = "untuned: fewer than two training trials, no validation trial"
         ridge_rec: dict[str, Any] = {"tuned": False}
         alpha_used = fallback_alpha if alpha is None else alpha
     else:
         if alpha is None:
-            alpha_used, search = tuned or tune_ridge_alpha(trials, ids, window, dt, input_scaler, target_scaler,
-                                                           seed=seed, stride=stride)  # fmt: skip
+            alpha_used, search = tuned or tune_ridge_alpha(
+                trials, ids, window, dt, input_scaler, target_scaler, seed=seed, stride=stride
+            )
             ridge_rec = {"tuned": True, **search}
         else:
             alpha_used, ridge_rec = float(alpha), {"tuned": False, "fixed_by": "train.ridge_alpha"}
         fit_idx, val_idx = validation_split(ids, seed)
         record["fit_trials"], record["validation_trials"] = [ids[i] for i in fit_idx], [ids[i] for i in val_idx]
         kalman, record["constant_acceleration_search"] = tune_kalman(
-            [trials[i] for i in val_idx], window.horizon, dt, first_tick=window.history - 1)
+            [trials[i] for i in val_idx], window.horizon, dt, first_tick=window.history - 1
+        )
     ridge = RidgeBaseline.fit(all_ws, input_scaler, target_scaler, alpha_used)
     record["ridge"] = {"alpha": float(alpha_used), **ridge_rec}
     record["constant_acceleration"] = kalman.to_dict()

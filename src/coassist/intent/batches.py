@@ -42,8 +42,9 @@ class DeviceWindows:
     ``self.device`` (``device``, except the CPU for MPS).
     """
 
-    def __init__(self, ws: WindowSet, input_scaler: Scaler, target_scaler: Scaler,
-                 device: str | torch.device = "cpu") -> None:  # fmt: skip
+    def __init__(
+        self, ws: WindowSet, input_scaler: Scaler, target_scaler: Scaler, device: str | torch.device = "cpu"
+    ) -> None:
         # Apple's MPS has no float64: there the windows are cut on the CPU, the same way, and
         # each batch is copied over (the path of before, for that device only).
         self.out_device = torch.device(device)

@@ -84,9 +84,17 @@ class ModelEvaluation:
     def to_dict(self) -> dict[str, Any]:
         """The JSON record (``coassist evaluate``'s evaluation.json, the report's summary.json);
         ``json.dumps`` writes the integer horizons as the keys "5", "10", …."""
-        return {"trials": list(self.trials), "skipped": list(self.skipped), "n_ticks": self.n_ticks,
-                "horizons": list(self.horizons), "dt": self.dt, "unit": self.unit, "baselines": self.baselines,
-                "results": self.results, "best_baseline": self.best_baseline}  # fmt: skip
+        return {
+            "trials": list(self.trials),
+            "skipped": list(self.skipped),
+            "n_ticks": self.n_ticks,
+            "horizons": list(self.horizons),
+            "dt": self.dt,
+            "unit": self.unit,
+            "baselines": self.baselines,
+            "results": self.results,
+            "best_baseline": self.best_baseline,
+        }
 
 
 def model_kalman(model: IntentModel) -> KalmanCA:
@@ -121,24 +129,18 @@ def evaluate_model(
     """
     horizons = [int(h) for h in horizons if int(h) <= model.horizon]
     if not horizons:
-        raise ValueError(
-            f"no horizon fits the model's horizon of {model.horizon} samples"
-        )
+        raise ValueError(f"no horizon fits the model's horizon of {model.horizon} samples")
     trained_on = set(model.info.get("train_trials", [])) if held_out_only else set()
     used = [lt for lt in trials if lt.id not in trained_on]
     skipped = [lt.id for lt in trials if lt.id in trained_on]
     if not used:
-        raise ValueError(
-            f"every given trial was used to train the model ({len(skipped)} trials); nothing held out"
-        )
+        raise ValueError(f"every given trial was used to train the model ({len(skipped)} trials); nothing held out")
     kalman = model_kalman(model)
     names = [p for p in PREDICTORS if p != "ridge" or model.ridge is not None]
     per: dict[str, dict[int, dict[str, list[np.ndarray]]]] = {
         p: {h: {"rms": [], "max": []} for h in horizons} for p in names
     }
-    per_trial: dict[str, dict[int, dict[str, float]]] = {
-        p: {h: {} for h in horizons} for p in names
-    }
+    per_trial: dict[str, dict[int, dict[str, float]]] = {p: {h: {} for h in horizons} for p in names}
     n_ticks = 0
     for lt in used:
         t = lt.trial
@@ -148,12 +150,8 @@ def evaluate_model(
         preds = {
             "model": pm,
             "nominal": nominal_prediction(t, model.horizon),
-            "constant_velocity": constant_velocity_prediction(
-                t, model.horizon, model.dt
-            ),
-            "constant_acceleration": constant_acceleration_prediction(
-                t, model.horizon, kalman, model.dt
-            ),
+            "constant_velocity": constant_velocity_prediction(t, model.horizon, model.dt),
+            "constant_acceleration": constant_acceleration_prediction(t, model.horizon, kalman, model.dt),
         }
         if model.ridge is not None:
             preds["ridge"] = model.ridge.predict_trial(t)
@@ -177,10 +175,14 @@ def evaluate_model(
             rms, mx = np.concatenate(per[p][h]["rms"]), np.concatenate(per[p][h]["max"])
             spread = np.array(list(per_trial[p][h].values()))
             results[p][h] = {
-                "e_rms": float(rms.mean()), "e_max_mean": float(mx.mean()), "e_max_max": float(mx.max()),
-                "e_rms_trials": per_trial[p][h], "trial_median": float(np.median(spread)),
-                "trial_min": float(spread.min()), "trial_max": float(spread.max()),
-            }  # fmt: skip
+                "e_rms": float(rms.mean()),
+                "e_max_mean": float(mx.mean()),
+                "e_max_max": float(mx.max()),
+                "e_rms_trials": per_trial[p][h],
+                "trial_median": float(np.median(spread)),
+                "trial_min": float(spread.min()),
+                "trial_max": float(spread.max()),
+            }
     tuned = model.info.get("baselines", {})
     ridge_info = (
         None
@@ -195,9 +197,16 @@ def evaluate_model(
         "constant_acceleration": kalman.to_dict(),
         "protocol": tuned.get("protocol", "untuned (the model records no baseline tuning)"),
     }
-    return ModelEvaluation(trials=tuple(lt.id for lt in used), skipped=tuple(skipped), n_ticks=n_ticks,
-                           horizons=tuple(horizons), dt=model.dt, baselines=baselines, results=results,
-                           best_baseline=best_baselines(results, horizons))  # fmt: skip
+    return ModelEvaluation(
+        trials=tuple(lt.id for lt in used),
+        skipped=tuple(skipped),
+        n_ticks=n_ticks,
+        horizons=tuple(horizons),
+        dt=model.dt,
+        baselines=baselines,
+        results=results,
+        best_baseline=best_baselines(results, horizons),
+    )
 
 
 def best_baselines(
@@ -221,9 +230,13 @@ def best_baselines(
         mt, bt = res[model][h]["e_rms_trials"], res[best][h]["e_rms_trials"]
         common = [k for k in mt if k in bt]
         out[h] = {
-            "name": best, "e_rms": best_e, "model_e_rms": me, "gain": (best_e - me) / best_e if best_e > 0 else 0.0,
-            "trials_model_better": sum(mt[k] < bt[k] for k in common), "n_trials": len(common),
-        }  # fmt: skip
+            "name": best,
+            "e_rms": best_e,
+            "model_e_rms": me,
+            "gain": (best_e - me) / best_e if best_e > 0 else 0.0,
+            "trials_model_better": sum(mt[k] < bt[k] for k in common),
+            "n_trials": len(common),
+        }
     return out
 
 
@@ -234,8 +247,10 @@ def _baseline_label(result: ModelEvaluation, name: str) -> str:
         return f"ridge (α = {r['alpha']:.0e}, {'tuned on validation trials' if r['tuned'] else 'not tuned'})"
     if name == "constant_acceleration" and info.get("constant_acceleration"):
         k = info["constant_acceleration"]
-        return (f"constant acceleration (Kalman, q = {k['jerk_psd']:.0e} m²/s⁵, r_v = {k['velocity_noise']:.0e} m/s, "
-                f"{'tuned on validation trials' if k['tuned'] else 'not tuned'})")  # fmt: skip
+        return (
+            f"constant acceleration (Kalman, q = {k['jerk_psd']:.0e} m²/s⁵, r_v = {k['velocity_noise']:.0e} m/s, "
+            f"{'tuned on validation trials' if k['tuned'] else 'not tuned'})"
+        )
     return name.replace("_", " ")
 
 
@@ -265,16 +280,16 @@ def results_table(result: ModelEvaluation, title: str = "") -> Any:
 
     hs = result.horizons
     dt = result.dt
-    table = Table(title=(title or f"held-out trials: {len(result.trials)}, ticks scored: {result.n_ticks}")
-                  + " — errors in mm; e_RMS pooled over ticks (min–max over trials)")  # fmt: skip
+    table = Table(
+        title=(title or f"held-out trials: {len(result.trials)}, ticks scored: {result.n_ticks}")
+        + " — errors in mm; e_RMS pooled over ticks (min–max over trials)"
+    )
     table.add_column("predictor")
     for h in hs:
         table.add_column(f"e_RMS {h * dt:.2f}s [mm]", justify="right")
     for h in hs:
         table.add_column(f"e_MAX {h * dt:.2f}s [mm]", justify="right")
-    best = {
-        h: min(r[h]["e_rms"] for r in result.results.values() if h in r) for h in hs
-    }
+    best = {h: min(r[h]["e_rms"] for r in result.results.values() if h in r) for h in hs}
     for p, r in result.results.items():
         cells = []
         for h in hs:

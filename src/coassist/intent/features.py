@@ -172,7 +172,9 @@ class Scaler:
         lo_a = np.array(lo, dtype=np.float64).reshape(-1)
         hi_a = np.array(hi, dtype=np.float64).reshape(-1)
         if lo_a.shape != hi_a.shape or lo_a.size == 0:
-            raise ValueError(f"Scaler lo and hi must be non-empty and of equal length, got {lo_a.shape} and {hi_a.shape}")
+            raise ValueError(
+                f"Scaler lo and hi must be non-empty and of equal length, got {lo_a.shape} and {hi_a.shape}"
+            )
         if not (np.all(np.isfinite(lo_a)) and np.all(np.isfinite(hi_a))):
             raise ValueError("Scaler ranges must be finite")
         if np.any(hi_a < lo_a):
@@ -303,9 +305,7 @@ class WindowSet:
         self.ends = np.concatenate(ends).astype(np.int64)
         self.trial = np.concatenate(owner)
         if self.ends.size == 0:
-            raise ValueError(
-                f"no trial is long enough for history {window.history} + horizon {window.horizon} samples"
-            )
+            raise ValueError(f"no trial is long enough for history {window.history} + horizon {window.horizon} samples")
 
     def __len__(self) -> int:
         return int(self.ends.size)

@@ -69,9 +69,7 @@ class KalmanCA:
             "position_noise",
             "initial_acceleration",
         ):
-            object.__setattr__(
-                self, name, check_positive_scalar(getattr(self, name), f"kalman.{name}")
-            )
+            object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"kalman.{name}"))
         if not isinstance(self.tuned, bool):
             raise ValueError(f"kalman.tuned must be a bool, got {self.tuned!r}")
 
@@ -88,14 +86,10 @@ class KalmanCA:
             "tuned",
         )
         if not isinstance(data, dict) or any(k not in fields for k in data):
-            raise ValueError(
-                f"malformed Kalman parameters {data!r}: expected keys among {fields}"
-            )
+            raise ValueError(f"malformed Kalman parameters {data!r}: expected keys among {fields}")
         return cls(**data)
 
-    def predict(
-        self, pose: np.ndarray, velocity: np.ndarray, horizon: int, dt: float
-    ) -> np.ndarray:
+    def predict(self, pose: np.ndarray, velocity: np.ndarray, horizon: int, dt: float) -> np.ndarray:
         """(T, H, d) predictions of positions [m] from measured pose and velocity (T, d)."""
         states = kalman_ca_filter(pose, velocity, dt, [self])[0]
         return constant_acceleration(states, horizon, dt)
@@ -104,17 +98,17 @@ class KalmanCA:
 def _model(dt: float) -> tuple[np.ndarray, np.ndarray]:
     """F and the unit-q process covariance Q/q for period dt (module docstring)."""
     F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
-    Q1 = np.array([
-        [dt**5 / 20, dt**4 / 8, dt**3 / 6],
-        [dt**4 / 8, dt**3 / 3, dt**2 / 2],
-        [dt**3 / 6, dt**2 / 2, dt],
-    ])  # fmt: skip
+    Q1 = np.array(
+        [
+            [dt**5 / 20, dt**4 / 8, dt**3 / 6],
+            [dt**4 / 8, dt**3 / 3, dt**2 / 2],
+            [dt**3 / 6, dt**2 / 2, dt],
+        ]
+    )
     return F, Q1
 
 
-def kalman_ca_filter(
-    pose: np.ndarray, velocity: np.ndarray, dt: float, params: Sequence[KalmanCA]
-) -> np.ndarray:
+def kalman_ca_filter(pose: np.ndarray, velocity: np.ndarray, dt: float, params: Sequence[KalmanCA]) -> np.ndarray:
     """Filtered states for several parameter sets at once.
 
     Parameters
@@ -129,9 +123,7 @@ def kalman_ca_filter(
     """
     pose, velocity = np.asarray(pose, np.float64), np.asarray(velocity, np.float64)
     if pose.ndim != 2 or pose.shape != velocity.shape or pose.shape[0] == 0:
-        raise ValueError(
-            f"pose and velocity must be equal (T, d) arrays, got {pose.shape} and {velocity.shape}"
-        )
+        raise ValueError(f"pose and velocity must be equal (T, d) arrays, got {pose.shape} and {velocity.shape}")
     dt = check_positive_scalar(dt, "dt")
     t, d = pose.shape
     g = len(params)
@@ -223,18 +215,12 @@ def tune_kalman(
     "validation_mse": (Q × R nested list, m²)}``.
     """
     check_int_at_least(horizon, "horizon", 1)
-    grid = [
-        KalmanCA(q, rv, position_noise, tuned=True)
-        for q in jerk_psd_grid
-        for rv in velocity_noise_grid
-    ]
+    grid = [KalmanCA(q, rv, position_noise, tuned=True) for q in jerk_psd_grid for rv in velocity_noise_grid]
     if not grid:
         raise ValueError("the Kalman tuning grid is empty")
     sse, n = _validation_sse(trials, horizon, dt, grid, first_tick)
     if n == 0:
-        raise ValueError(
-            f"no validation trial is longer than first_tick + horizon = {first_tick + horizon} samples"
-        )
+        raise ValueError(f"no validation trial is longer than first_tick + horizon = {first_tick + horizon} samples")
     mse = sse / n
     best = grid[int(np.argmin(mse))]
     table = mse.reshape(len(jerk_psd_grid), len(velocity_noise_grid))
@@ -249,8 +235,9 @@ def tune_kalman(
     return best, record
 
 
-def _validation_sse(trials: Sequence[Any], horizon: int, dt: float, grid: Sequence[KalmanCA],
-                    first_tick: int) -> tuple[np.ndarray, int]:  # fmt: skip
+def _validation_sse(
+    trials: Sequence[Any], horizon: int, dt: float, grid: Sequence[KalmanCA], first_tick: int
+) -> tuple[np.ndarray, int]:
     """(G,) Σ over the trials' ticks k ≥ ``first_tick`` (with a full measured horizon) of
     Σ_i ||x̂(k+i) − x(k+i)||² / H per grid point, and the number of ticks summed.
 

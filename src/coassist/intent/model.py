@@ -72,8 +72,18 @@ DT_RTOL = 0.01
 #: Largest model.json read [bytes] (a real one, history included, is tens of kB).
 MAX_SIDECAR_BYTES = 16 * 2**20
 #: The sidecar fields covered by ``sidecar_sha256`` (module docstring).
-_HASHED = ("features", "n_dof", "dt", "history", "horizon", "window", "network", "input_scaler", "target_scaler",
-           "ridge_sha256")  # fmt: skip
+_HASHED = (
+    "features",
+    "n_dof",
+    "dt",
+    "history",
+    "horizon",
+    "window",
+    "network",
+    "input_scaler",
+    "target_scaler",
+    "ridge_sha256",
+)
 _SIDECAR_HASH_KEY = "sidecar_sha256"
 
 
@@ -118,7 +128,9 @@ class IntentModel:
         if input_scaler.lo.size != nf:
             raise ValueError(f"input scaler has {input_scaler.lo.size} ranges, the network {nf} features")
         if target_scaler.lo.size not in (self.n_dof, no):
-            raise ValueError(f"target scaler has {target_scaler.lo.size} ranges; expected {self.n_dof} (per axis) or {no} (per step)")
+            raise ValueError(
+                f"target scaler has {target_scaler.lo.size} ranges; expected {self.n_dof} (per axis) or {no} (per step)"
+            )
         self.net, self.window = net, window
         self.input_scaler, self.target_scaler = input_scaler, target_scaler
         self.dt = float(dt)
@@ -408,8 +420,11 @@ def load_model(
     n_params = _n_parameters(net_cfg)
     size = weights_path.stat().st_size
     if 4 * n_params > size:  # before any allocation: the network must fit its float32 weights
-        raise _fail(sidecar, f"the network {json.dumps(meta['network'])} has {n_params} parameters "
-                             f"({4 * n_params} bytes as float32) but {WEIGHTS} holds {size} bytes")  # fmt: skip
+        raise _fail(
+            sidecar,
+            f"the network {json.dumps(meta['network'])} has {n_params} parameters "
+            f"({4 * n_params} bytes as float32) but {WEIGHTS} holds {size} bytes",
+        )
     raw = weights_path.read_bytes()
     if _sha256(raw) != meta["weights_sha256"]:
         raise _fail(weights_path, f"does not match the hash in {SIDECAR} (files from different saves?)")
@@ -430,14 +445,34 @@ def load_model(
             raise _fail(ridge_path, f"tensors do not fit the ridge baseline: {exc}") from None
     recorded = _safetensors_metadata(raw).get(_SIDECAR_HASH_KEY)
     if recorded is None:
-        raise _fail(weights_path, f"carries no {_SIDECAR_HASH_KEY!r} in its metadata (re-saved without it, e.g. by "
-                                  f"safetensors' save_file?), so {SIDECAR} cannot be verified; retrain the model "
-                                  "or re-export it with coassist (coassist.intent.save_model)")  # fmt: skip
+        raise _fail(
+            weights_path,
+            f"carries no {_SIDECAR_HASH_KEY!r} in its metadata (re-saved without it, e.g. by "
+            f"safetensors' save_file?), so {SIDECAR} cannot be verified; retrain the model "
+            "or re-export it with coassist (coassist.intent.save_model)",
+        )
     if recorded != _sidecar_hash(meta):
-        raise _fail(sidecar, f"its content does not match the hash recorded in {WEIGHTS} at save time "
-                             "(edited after saving?); restore it or retrain")  # fmt: skip
-    skip = {"format", "features", "n_dof", "dt", "history", "horizon", "window", "network", "input_scaler",
-            "target_scaler", "weights_sha256", "ridge_sha256", _SIDECAR_HASH_KEY, "predicts"}  # fmt: skip
+        raise _fail(
+            sidecar,
+            f"its content does not match the hash recorded in {WEIGHTS} at save time "
+            "(edited after saving?); restore it or retrain",
+        )
+    skip = {
+        "format",
+        "features",
+        "n_dof",
+        "dt",
+        "history",
+        "horizon",
+        "window",
+        "network",
+        "input_scaler",
+        "target_scaler",
+        "weights_sha256",
+        "ridge_sha256",
+        _SIDECAR_HASH_KEY,
+        "predicts",
+    }
     info = {k: v for k, v in meta.items() if k not in skip}
     try:
         model = IntentModel(net, window, in_scaler, out_scaler, model_dt, info, ridge)

@@ -59,7 +59,9 @@ class NetworkConfig:
         if self.skip_inputs and self.skip_inputs % self.n_features:
             raise ValueError(f"network.skip_inputs must be steps·n_features, got {self.skip_inputs}")
         if self.lstm_layers == 0 and not self.skip_inputs:
-            raise ValueError("network.lstm_layers = 0 (a linear predictor) needs the linear skip (network.skip_inputs > 0)")
+            raise ValueError(
+                "network.lstm_layers = 0 (a linear predictor) needs the linear skip (network.skip_inputs > 0)"
+            )
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"network.activation must be one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
 

@@ -85,9 +85,15 @@ class OnnxNetwork:
             with torch.no_grad(), warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 # a file-like object is accepted (torch.onnx.export's docs), not in its annotation
-                torch.onnx.export(net, (torch.zeros(2, steps, self.n_features),), buf,  # type: ignore[arg-type]
-                                  input_names=["x"], output_names=["y"],
-                                  dynamic_axes={"x": {0: "batch"}, "y": {0: "batch"}}, dynamo=False)  # fmt: skip
+                torch.onnx.export(
+                    net,
+                    (torch.zeros(2, steps, self.n_features),),
+                    buf,  # type: ignore[arg-type]
+                    input_names=["x"],
+                    output_names=["y"],
+                    dynamic_axes={"x": {0: "batch"}, "y": {0: "batch"}},
+                    dynamo=False,
+                )
         except Exception as exc:  # the exporter reports a missing 'onnx' package this way
             raise ImportError(f"ONNX export failed (is the 'onnx' package installed?): {exc}") from None
         finally:

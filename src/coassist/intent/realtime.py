@@ -170,8 +170,9 @@ class ProcessRunner:
     stalled, and a call into a dead process fails at once.
     """
 
-    def __init__(self, model: IntentModel, threads: int = 1, start_timeout: float = 120.0,
-                 liveness_interval: float = 0.05) -> None:  # fmt: skip
+    def __init__(
+        self, model: IntentModel, threads: int = 1, start_timeout: float = 120.0, liveness_interval: float = 0.05
+    ) -> None:
         from coassist.intent.model import save_model
 
         self._tmp = tempfile.TemporaryDirectory(prefix="coassist-predictor-")
@@ -182,8 +183,9 @@ class ProcessRunner:
         self.window_shape = (model.history, 4 * model.n_dof)
         ctx = multiprocessing.get_context("spawn")  # no fork of a process holding threads and torch state
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_serve_model, args=(str(folder), threads, child), name="intent-predictor",
-                                 daemon=True)  # fmt: skip
+        self._proc = ctx.Process(
+            target=_serve_model, args=(str(folder), threads, child), name="intent-predictor", daemon=True
+        )
         self._proc.start()
         child.close()
         # Poll with the process in view: a child that dies while importing never closes the pipe's
@@ -201,7 +203,9 @@ class ProcessRunner:
         if not ready:
             code = self._proc.exitcode
             self.close()
-            why = f"it exited with code {code}" if code is not None else f"it did not answer within {start_timeout:.0f} s"
+            why = (
+                f"it exited with code {code}" if code is not None else f"it did not answer within {start_timeout:.0f} s"
+            )
             raise RuntimeError(f"the predictor's worker process did not start: {why} (its error is printed above)")
 
     def __call__(self, window: np.ndarray) -> np.ndarray:
@@ -283,8 +287,13 @@ class RealtimePredictor:
     Use as a context manager, or call :meth:`close`, to stop the worker thread (and process).
     """
 
-    def __init__(self, model: IntentModel, config: RealtimeConfig | None = None, *,
-                 runner: Callable[[np.ndarray], np.ndarray] | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: IntentModel,
+        config: RealtimeConfig | None = None,
+        *,
+        runner: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
         self.model = model
         self.config = config or RealtimeConfig()
         self.max_age = min(10, model.horizon - 1) if self.config.max_age is None else self.config.max_age

@@ -124,8 +124,14 @@ class TrainConfig:
     freeze_skip: bool = False
 
     def __post_init__(self) -> None:
-        for name, minimum in (("epochs", 1), ("batch_size", 1), ("threads", 1), ("train_stride", 1),
-                              ("eval_stride", 1), ("seed", 0)):  # fmt: skip
+        for name, minimum in (
+            ("epochs", 1),
+            ("batch_size", 1),
+            ("threads", 1),
+            ("train_stride", 1),
+            ("eval_stride", 1),
+            ("seed", 0),
+        ):
             v = getattr(self, name)
             if not is_integer(v) or v < minimum:
                 raise ValueError(f"train.{name} must be an integer >= {minimum}, got {v!r}")
@@ -155,7 +161,9 @@ class TrainConfig:
             raise ValueError(f"train.mirror must be a bool, got {self.mirror!r}")
         mode, _ = self.start
         if mode not in INIT_MODES:
-            raise ValueError(f"train.init must be 'scratch' or one of resume:/finetune:/transfer:<model>, got {self.init!r}")
+            raise ValueError(
+                f"train.init must be 'scratch' or one of resume:/finetune:/transfer:<model>, got {self.init!r}"
+            )
 
     @property
     def start(self) -> tuple[str, str | None]:
@@ -183,8 +191,9 @@ class Preset:
 
     def network(self, n_dof: int) -> NetworkConfig:
         skip = self.window.steps * 4 * n_dof if self.skip else 0
-        return NetworkConfig(4 * n_dof, self.window.horizon * n_dof, self.lstm_layers, self.hidden, self.fc,
-                             self.activation, skip)  # fmt: skip
+        return NetworkConfig(
+            4 * n_dof, self.window.horizon * n_dof, self.lstm_layers, self.hidden, self.fc, self.activation, skip
+        )
 
 
 #: ``thesis``: exactly §5.2.2 — 125 samples of absolute features, LSTM 3 × 250,
@@ -204,27 +213,44 @@ class Preset:
 #: ``lstm`` trails the ridge at 0.04 s (user-b −3.4 %).
 _LSTM = Preset(
     "lstm",
-    WindowConfig(history=125, decimation=5, horizon=50, input_frame="relative", target="residual",
-                 target_scaling="step"),
-    lstm_layers=2, hidden=64, fc=(64,), skip=True,
-    train=TrainConfig(epochs=15, batch_size=64, lr=3e-3, lr_final_ratio=0.05, optimizer="adam", mirror=True,
-                      train_stride=4),
-)  # fmt: skip
-MODEL_PRESETS: Registry[Preset] = Registry("intent-model preset", {
-    "thesis": Preset(
-        "thesis",
-        WindowConfig(history=125, decimation=1, horizon=50, input_frame="absolute", target="absolute"),
-        lstm_layers=3, hidden=250, fc=(200,),
-        train=TrainConfig(epochs=25, batch_size=64, lr=1e-3, lr_final_ratio=0.05, optimizer="adam"),
-    ),  # fmt: skip
-    "lstm": _LSTM,
-    "default": replace(_LSTM, name="default", train=replace(_LSTM.train, freeze_skip=True)),
-    "linear": Preset("linear", _LSTM.window, lstm_layers=0, hidden=1, fc=(), skip=True,
-                     train=TrainConfig(epochs=1, train_stride=4)),  # fmt: skip
-    # ``intent``: ``lstm`` trained on the simulated operator's true intent (window.label "intent"),
-    # the intent source that wins the in-loop ablation (docs/intent-labels.md); simulated data only.
-    "intent": replace(_LSTM, name="intent", window=replace(_LSTM.window, label="intent")),
-})
+    WindowConfig(
+        history=125, decimation=5, horizon=50, input_frame="relative", target="residual", target_scaling="step"
+    ),
+    lstm_layers=2,
+    hidden=64,
+    fc=(64,),
+    skip=True,
+    train=TrainConfig(
+        epochs=15, batch_size=64, lr=3e-3, lr_final_ratio=0.05, optimizer="adam", mirror=True, train_stride=4
+    ),
+)
+MODEL_PRESETS: Registry[Preset] = Registry(
+    "intent-model preset",
+    {
+        "thesis": Preset(
+            "thesis",
+            WindowConfig(history=125, decimation=1, horizon=50, input_frame="absolute", target="absolute"),
+            lstm_layers=3,
+            hidden=250,
+            fc=(200,),
+            train=TrainConfig(epochs=25, batch_size=64, lr=1e-3, lr_final_ratio=0.05, optimizer="adam"),
+        ),
+        "lstm": _LSTM,
+        "default": replace(_LSTM, name="default", train=replace(_LSTM.train, freeze_skip=True)),
+        "linear": Preset(
+            "linear",
+            _LSTM.window,
+            lstm_layers=0,
+            hidden=1,
+            fc=(),
+            skip=True,
+            train=TrainConfig(epochs=1, train_stride=4),
+        ),
+        # ``intent``: ``lstm`` trained on the simulated operator's true intent (window.label "intent"),
+        # the intent source that wins the in-loop ablation (docs/intent-labels.md); simulated data only.
+        "intent": replace(_LSTM, name="intent", window=replace(_LSTM.window, label="intent")),
+    },
+)
 
 
 def _optimizer(name: str, params: list[nn.Parameter], lr: float, weight_decay: float) -> torch.optim.Optimizer:
@@ -260,8 +286,9 @@ def build_model(preset: Preset, trials: Sequence[LabeledTrial], config: TrainCon
     return _build_model(preset, trials, config)[0]
 
 
-def _build_model(preset: Preset, trials: Sequence[LabeledTrial], config: TrainConfig, *,
-                 fit_linear_skip: bool = True) -> tuple[IntentModel, _Tuning]:  # fmt: skip
+def _build_model(
+    preset: Preset, trials: Sequence[LabeledTrial], config: TrainConfig, *, fit_linear_skip: bool = True
+) -> tuple[IntentModel, _Tuning]:
     """:func:`build_model`, and the ridge α search run for its skip (None when none ran).
 
     ``fit_linear_skip=False``: a linear preset's skip is left as initialised, for
@@ -282,8 +309,15 @@ def _build_model(preset: Preset, trials: Sequence[LabeledTrial], config: TrainCo
     return IntentModel(net, preset.window, in_scaler, out_scaler, dt), tuning
 
 
-def _fit_skip(net: IntentNet, trials: Sequence[LabeledTrial], train_idx: Sequence[int], ws: WindowSet,
-              in_scaler, out_scaler, config: TrainConfig) -> _Tuning:  # fmt: skip
+def _fit_skip(
+    net: IntentNet,
+    trials: Sequence[LabeledTrial],
+    train_idx: Sequence[int],
+    ws: WindowSet,
+    in_scaler,
+    out_scaler,
+    config: TrainConfig,
+) -> _Tuning:
     """Set the network's linear skip to the ridge solution on ``ws`` (α from :func:`_skip_alpha`);
     returns the α search when one ran."""
     alpha, tuning = _skip_alpha(trials, train_idx, ws.window, ws.dt, in_scaler, out_scaler, config)
@@ -292,8 +326,15 @@ def _fit_skip(net: IntentNet, trials: Sequence[LabeledTrial], train_idx: Sequenc
     return tuning
 
 
-def _skip_alpha(trials: Sequence[LabeledTrial], train_idx: Sequence[int], window: WindowConfig, dt: float,
-                in_scaler, out_scaler, config: TrainConfig) -> tuple[float, _Tuning]:  # fmt: skip
+def _skip_alpha(
+    trials: Sequence[LabeledTrial],
+    train_idx: Sequence[int],
+    window: WindowConfig,
+    dt: float,
+    in_scaler,
+    out_scaler,
+    config: TrainConfig,
+) -> tuple[float, _Tuning]:
     """The α of the ridge the skip starts from: skip_alpha, else ridge_alpha, else tuned on
     validation trials (then also the search: the baselines' ridge is tuned the same way)."""
     for alpha in (config.skip_alpha, config.ridge_alpha):
@@ -301,13 +342,22 @@ def _skip_alpha(trials: Sequence[LabeledTrial], train_idx: Sequence[int], window
             return alpha, None
     if len(train_idx) < 2:
         return UNTUNED_RIDGE_ALPHA, None  # nothing to validate on
-    tuning = tune_ridge_alpha([trials[i].trial for i in train_idx], [trials[i].id for i in train_idx], window, dt,
-                              in_scaler, out_scaler, seed=config.seed, stride=config.train_stride)  # fmt: skip
+    tuning = tune_ridge_alpha(
+        [trials[i].trial for i in train_idx],
+        [trials[i].id for i in train_idx],
+        window,
+        dt,
+        in_scaler,
+        out_scaler,
+        seed=config.seed,
+        stride=config.train_stride,
+    )
     return tuning[0], tuning
 
 
-def _numpy_batch(model: IntentModel, ws: WindowSet, sel: np.ndarray, signs: np.ndarray | None = None
-                 ) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+def _numpy_batch(
+    model: IntentModel, ws: WindowSet, sel: np.ndarray, signs: np.ndarray | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
     """The NumPy reference of :meth:`DeviceWindows.batch` (how batches were cut before issue 19),
     kept for the tests and the benchmark only: scaled inputs (B, steps, 4·d) and targets (B, H·d)."""
     x, y = ws.raw_inputs(sel), ws.raw_targets(sel)
@@ -325,8 +375,9 @@ class _Windows:
     (Algorithm 4.2) trains the FC layers on cached features, exactly and much faster.
     """
 
-    def __init__(self, model: IntentModel, ws: WindowSet, frozen_lstm: bool, chunk: int = 1024,
-                 device: str = "cpu") -> None:  # fmt: skip
+    def __init__(
+        self, model: IntentModel, ws: WindowSet, frozen_lstm: bool, chunk: int = 1024, device: str = "cpu"
+    ) -> None:
         self.model, self.cached, self.device = model, frozen_lstm, torch.device(device)
         self.windows = DeviceWindows(ws, model.input_scaler, model.target_scaler, self.device)
         if frozen_lstm:
@@ -374,8 +425,9 @@ def _mean_loss(data: _Windows | None, batch: int = 1024) -> float | None:
     return total / n
 
 
-def _epoch_order(rng: np.random.Generator, n: int, batch_size: int, n_dof: int
-                 ) -> tuple[torch.Tensor, torch.Tensor | None]:  # fmt: skip
+def _epoch_order(
+    rng: np.random.Generator, n: int, batch_size: int, n_dof: int
+) -> tuple[torch.Tensor, torch.Tensor | None]:
     """An epoch's window order (n,) and mirror signs (n, d) of ±1 (None when ``n_dof`` is 0),
     drawn as the batches were always drawn: the permutation, then each batch's signs in
     turn, so the generator's stream (and a checkpoint's state of it) is the same. One
@@ -422,8 +474,12 @@ def train_model(
     mode, base_path = config.start
     if mode == "resume" and (partial_folder(base_path) / CHECKPOINT_JSON).is_file():
         base_path = str(partial_folder(base_path))  # an interrupted run on that folder: newer than it
-    base, tuning = _build_model(preset, trials, replace(config, init=f"resume:{base_path}") if mode == "resume" else config,
-                                fit_linear_skip=False)
+    base, tuning = _build_model(
+        preset,
+        trials,
+        replace(config, init=f"resume:{base_path}") if mode == "resume" else config,
+        fit_linear_skip=False,
+    )
     ids = [lt.id for lt in trials]
     ckpt = _read_checkpoint(Path(base_path)) if mode == "resume" and not base.info.get("finished", True) else None
     if ckpt is not None:
@@ -435,14 +491,18 @@ def train_model(
         try:
             config = replace(TrainConfig(**ckpt["train_config"]), threads=config.threads, device=config.device)
         except TypeError as exc:  # a checkpoint of another coassist version
-            raise ValueError(f"{base_path}: checkpoint's training configuration is not this version's ({exc})") from None
+            raise ValueError(
+                f"{base_path}: checkpoint's training configuration is not this version's ({exc})"
+            ) from None
         mode = config.start[0]  # the interrupted run's own mode (a transfer stays frozen)
     model = IntentModel(copy.deepcopy(base.net), base.window, base.input_scaler, base.target_scaler, base.dt, {})
     net, window, dt = model.net, model.window, model.dt
 
     train_idx, test_idx = split_trials(ids, config.test_fraction, config.seed)
     train_ws = WindowSet([trials[i].trial for i in train_idx], window, dt, stride=config.train_stride)
-    test_ws = WindowSet([trials[i].trial for i in test_idx], window, dt, stride=config.eval_stride) if test_idx else None
+    test_ws = (
+        WindowSet([trials[i].trial for i in test_idx], window, dt, stride=config.eval_stride) if test_idx else None
+    )
 
     frozen = mode == "transfer"
     if config.mirror and (window.input_frame != "relative" or window.target == "absolute"):
@@ -456,8 +516,15 @@ def train_model(
         if frozen and ckpt is None:
             # The residual is over the ridge of *this* data: the source's ridge, frozen, would
             # extrapolate on a new user's windows (user-b: 78.9 mm at 0.4 s against 5.5 mm; README).
-            tuning = _fit_skip(net, trials, train_idx, WindowSet([trials[i].trial for i in train_idx], window, dt),
-                               model.input_scaler, model.target_scaler, config)  # fmt: skip
+            tuning = _fit_skip(
+                net,
+                trials,
+                train_idx,
+                WindowSet([trials[i].trial for i in train_idx], window, dt),
+                model.input_scaler,
+                model.target_scaler,
+                config,
+            )
         net.skip.requires_grad_(False)
     net.to(config.device)
     train_data = _Windows(model, train_ws, frozen, device=config.device)
@@ -466,7 +533,9 @@ def train_model(
     opt = _optimizer(config.optimizer, params, config.lr, config.weight_decay)
     steps_per_epoch = math.ceil(len(train_ws) / config.batch_size)
     total_steps = config.epochs * steps_per_epoch
-    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda s: config.lr_final_ratio ** (min(s, total_steps) / total_steps))
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda s: config.lr_final_ratio ** (min(s, total_steps) / total_steps)
+    )
     rng = np.random.default_rng(config.seed)  # batch order and mirroring
 
     history: list[dict[str, Any]] = list(base.info.get("training_history", [])) if mode == "resume" or ckpt else []
@@ -485,10 +554,14 @@ def train_model(
             "n_train_windows": len(train_ws),
             "n_test_windows": len(test_ws) if test_ws else 0,
             "init": config.init,
-            "parent": None if mode == "scratch" else {
-                "path": base_path, "dataset_ids": base.info.get("dataset_ids"), "preset": base.info.get("preset"),
+            "parent": None
+            if mode == "scratch"
+            else {
+                "path": base_path,
+                "dataset_ids": base.info.get("dataset_ids"),
+                "preset": base.info.get("preset"),
                 "train_trials": base.info.get("train_trials"),
-            },  # fmt: skip
+            },
             "frozen": ["lstm"] if frozen else [],
             "mirrored": mirror,
             "train_config": asdict(config),
@@ -529,8 +602,11 @@ def train_model(
                 running += loss.detach() * (b - a)  # no device sync per step
                 seen += b - a
                 if bar and (s % 20 == 0 or s == steps_per_epoch - 1):
-                    bar.update(task, completed=(epoch - 1) * steps_per_epoch + s + 1,
-                               description=f"epoch {epoch}/{config.epochs} loss {float(running) / seen:.2e}")  # fmt: skip
+                    bar.update(
+                        task,
+                        completed=(epoch - 1) * steps_per_epoch + s + 1,
+                        description=f"epoch {epoch}/{config.epochs} loss {float(running) / seen:.2e}",
+                    )
             record = {
                 "epoch": epoch0 + epoch,
                 "train_loss": float(running) / seen,
@@ -542,8 +618,11 @@ def train_model(
             if checkpoint_to is not None:
                 snapshot = IntentModel(net, window, model.input_scaler, model.target_scaler, dt, info(False))
                 files = _checkpoint_files(opt, sched, rng, epoch0=epoch0, epoch=epoch, trials=ids, config=config)
-                save_model(snapshot, partial_folder(checkpoint_to),
-                           extra_files={**files, "history.json": _json(history).encode()})  # fmt: skip
+                save_model(
+                    snapshot,
+                    partial_folder(checkpoint_to),
+                    extra_files={**files, "history.json": _json(history).encode()},
+                )
             if on_epoch:
                 on_epoch(record)
 
@@ -554,14 +633,32 @@ def train_model(
         net.skip.requires_grad_(True)
     t_fit = time.perf_counter()
     model.ridge, _, baselines = fit_tuned_baselines(
-        [trials[i].trial for i in train_idx], [ids[i] for i in train_idx], window, dt, model.input_scaler,
-        model.target_scaler, seed=config.seed, stride=config.train_stride, alpha=config.ridge_alpha,
-        tuned=tuning)  # None on resume: _build_model only searches for a fresh model
+        [trials[i].trial for i in train_idx],
+        [ids[i] for i in train_idx],
+        window,
+        dt,
+        model.input_scaler,
+        model.target_scaler,
+        seed=config.seed,
+        stride=config.train_stride,
+        alpha=config.ridge_alpha,
+        tuned=tuning,
+    )  # None on resume: _build_model only searches for a fresh model
     if net.is_linear:  # the linear predictor is the tuned ridge: one closed-form pass, recorded as one epoch
-        net.init_skip(torch.from_numpy(model.ridge.W.T.astype(np.float32)).to(config.device),
-                      torch.from_numpy(model.ridge.b.astype(np.float32)).to(config.device))  # fmt: skip
-        history.append({"epoch": epoch0 + 1, "train_loss": _mean_loss(train_data), "test_loss": _mean_loss(test_data),
-                        "lr": 0.0, "seconds": time.perf_counter() - t_fit, "closed_form": True})  # fmt: skip
+        net.init_skip(
+            torch.from_numpy(model.ridge.W.T.astype(np.float32)).to(config.device),
+            torch.from_numpy(model.ridge.b.astype(np.float32)).to(config.device),
+        )
+        history.append(
+            {
+                "epoch": epoch0 + 1,
+                "train_loss": _mean_loss(train_data),
+                "test_loss": _mean_loss(test_data),
+                "lr": 0.0,
+                "seconds": time.perf_counter() - t_fit,
+                "closed_form": True,
+            }
+        )
     net.cpu().eval()
     model.info = info(True)
     model.info["baselines"] = baselines  # tuned α and Kalman noise: evaluation scores with these
@@ -573,8 +670,16 @@ CHECKPOINT_JSON = "checkpoint.json"
 CHECKPOINT_FORMAT = "coassist-checkpoint/1"
 
 
-def _checkpoint_files(opt: torch.optim.Optimizer, sched: Any, rng: np.random.Generator, *, epoch0: int, epoch: int,
-                      trials: list[str], config: TrainConfig) -> dict[str, bytes]:  # fmt: skip
+def _checkpoint_files(
+    opt: torch.optim.Optimizer,
+    sched: Any,
+    rng: np.random.Generator,
+    *,
+    epoch0: int,
+    epoch: int,
+    trials: list[str],
+    config: TrainConfig,
+) -> dict[str, bytes]:
     """What a resume needs beyond the weights: optimizer tensors (safetensors) and the rest (JSON)."""
     from safetensors.torch import save as st_save
 

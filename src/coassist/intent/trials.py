@@ -34,12 +34,20 @@ class LabeledTrial(NamedTuple):
     trial: Trial
 
 
-def _load_one(path: Path, on_bad: Callable[[str, str], None] | None, bag_topics: Mapping[str, str] | None) -> list[LabeledTrial]:
+def _load_one(
+    path: Path, on_bad: Callable[[str, str], None] | None, bag_topics: Mapping[str, str] | None
+) -> list[LabeledTrial]:
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file or folder")
     if is_bag(path):
         dataset = path.absolute().parent.name
-        return [LabeledTrial(f"{dataset}/{path.stem if path.is_file() else path.name}", dataset, load_bag_trial(path, topics=bag_topics))]
+        return [
+            LabeledTrial(
+                f"{dataset}/{path.stem if path.is_file() else path.name}",
+                dataset,
+                load_bag_trial(path, topics=bag_topics),
+            )
+        ]
     if path.is_file():  # one trial file (coassist collect / drive / play write them)
         from coassist.data import read_trial
 
@@ -59,15 +67,18 @@ def _load_one(path: Path, on_bad: Callable[[str, str], None] | None, bag_topics:
     if bags:
         return _load_each(bags, lambda bag: load_bag_trial(bag, user=path.name, topics=bag_topics), dataset, on_bad)
     if path.is_dir() and any(p.is_dir() and p.name.startswith("trial_") for p in path.iterdir()):
-        return _load_each(recording_folders(path), lambda folder: load_ros_trial(folder, user=path.name), dataset, on_bad)
+        return _load_each(
+            recording_folders(path), lambda folder: load_ros_trial(folder, user=path.name), dataset, on_bad
+        )
     raise FileNotFoundError(
         f"{path}: not a dataset folder ({MANIFEST_NAME}), a recording folder (current_pose.csv), "
         "a folder of trial_* recordings, a bag or a folder of bags"
     )
 
 
-def _load_each(paths, load: Callable[[Path], Trial], dataset: str,
-               on_bad: Callable[[str, str], None] | None) -> list[LabeledTrial]:  # fmt: skip
+def _load_each(
+    paths, load: Callable[[Path], Trial], dataset: str, on_bad: Callable[[str, str], None] | None
+) -> list[LabeledTrial]:
     """``load`` each recording or bag of a folder; an unreadable one raises, or goes to ``on_bad`` and is left out."""
     out = []
     for item in paths:

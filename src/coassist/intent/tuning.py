@@ -111,8 +111,9 @@ def run_study(
         return result.results["model"][horizon]["e_rms"]
 
     sampler = optuna.samplers.TPESampler(seed=seed)
-    study = optuna.create_study(storage=storage, study_name=study_name, direction="minimize", sampler=sampler,
-                                load_if_exists=True)  # fmt: skip
+    study = optuna.create_study(
+        storage=storage, study_name=study_name, direction="minimize", sampler=sampler, load_if_exists=True
+    )
     data = {"fit": [lt.id for lt in fit], "validation": [lt.id for lt in val]}
     recorded = study.user_attrs.get(_DATA_KEY)
     if recorded is None and study.trials:

@@ -49,7 +49,9 @@ def continuous_matrices(M: np.ndarray, D: np.ndarray, K: np.ndarray) -> tuple[np
     return A, B
 
 
-def discretize(A: np.ndarray, B: np.ndarray, dt: float, method: Discretization = "zoh") -> tuple[np.ndarray, np.ndarray]:
+def discretize(
+    A: np.ndarray, B: np.ndarray, dt: float, method: Discretization = "zoh"
+) -> tuple[np.ndarray, np.ndarray]:
     """Discrete (A_d, B_d) of ż = A z + B u with sampling time ``dt`` [s] (eq. 3.5).
 
     ``"zoh"``: A_d = e^{A dt}, B_d = ∫₀^dt e^{A s} ds B, from one matrix exponential of
@@ -122,7 +124,17 @@ class ImpedanceModel:
             raise ValueError(f"discretization must be 'zoh' or 'tustin', got {self.discretization!r}")
         A, B = continuous_matrices(M, D, K)
         Ad, Bd = discretize(A, B, dt, self.discretization)
-        for name, value in (("M", M), ("D", D), ("K", K), ("dt", dt), ("A", A), ("B", B), ("Ad", Ad), ("Bd", Bd), ("C", np.eye(2 * n))):
+        for name, value in (
+            ("M", M),
+            ("D", D),
+            ("K", K),
+            ("dt", dt),
+            ("A", A),
+            ("B", B),
+            ("Ad", Ad),
+            ("Bd", Bd),
+            ("C", np.eye(2 * n)),
+        ):
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
             object.__setattr__(self, name, value)

@@ -12,5 +12,13 @@ from coassist.play.protocol import InvalidMessage, parse_message
 from coassist.play.session import PlayConfig, PlaySession, TrialResult
 from coassist.play.world import PlayWorld
 
-__all__ = ["BrowserHand", "InvalidMessage", "PlayConfig", "PlaySession", "PlayWorld", "SpringDamper", "TrialResult",
-           "parse_message"]
+__all__ = [
+    "BrowserHand",
+    "InvalidMessage",
+    "PlayConfig",
+    "PlaySession",
+    "PlayWorld",
+    "SpringDamper",
+    "TrialResult",
+    "parse_message",
+]

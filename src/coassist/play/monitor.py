@@ -49,7 +49,9 @@ class DriveMonitor(PlaySession):
 
     watch_only = True
 
-    def __init__(self, drive_config: DriveConfig, config: PlayConfig, *, host: str | None = None, confirm: Any = None) -> None:
+    def __init__(
+        self, drive_config: DriveConfig, config: PlayConfig, *, host: str | None = None, confirm: Any = None
+    ) -> None:
         if not isinstance(drive_config, DriveConfig):
             raise ValueError(f"drive_config must be a DriveConfig, got {type(drive_config).__name__}")
         self.drive_config, self.robot_host, self.confirm = drive_config, host, confirm
@@ -82,22 +84,36 @@ class DriveMonitor(PlaySession):
                 return
             pred = out.prediction
             frame = {
-                "type": "frame", "index": len(self.results), "k": k + 1, "t": (k + 1) * c.dt,
-                "x": float(out.pose[0]), "y": float(out.pose[1]), "vx": float(out.velocity[0]), "vy": float(out.velocity[1]),
-                "fh": [float(out.wrench[0]), float(out.wrench[1])], "ur": [float(v) for v in out.u_r[:2]],
+                "type": "frame",
+                "index": len(self.results),
+                "k": k + 1,
+                "t": (k + 1) * c.dt,
+                "x": float(out.pose[0]),
+                "y": float(out.pose[1]),
+                "vx": float(out.velocity[0]),
+                "vy": float(out.velocity[1]),
+                "fh": [float(out.wrench[0]), float(out.wrench[1])],
+                "ur": [float(v) for v in out.u_r[:2]],
                 "ref": [float(v) for v in out.reference[:2]],
                 "prediction": [] if pred is None else np.vstack([pred[::PREDICTION_STRIDE], pred[-1:]]).tolist(),
-                "predicted": pred is not None, "faults": fault_names(int(out.fault)), "seq": -1, "held": False,
-                "controller": name, "misses": 0, "world": c.world,
-            }  # fmt: skip
+                "predicted": pred is not None,
+                "faults": fault_names(int(out.fault)),
+                "seq": -1,
+                "held": False,
+                "controller": name,
+                "misses": 0,
+                "world": c.world,
+            }
             self.frame = frame
             self.publish(frame)
 
         world = None
         if WORLDS[c.world].simulated:  # paced to the wall clock, so the page shows the run at its real speed
             start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
-            world = build_world(c.world, WorldRequest(c.robot or WORLDS[c.world].arms[0], c.object, c.rate_hz, c.seed, start,
-                                                      realtime=True))
+            world = build_world(
+                c.world,
+                WorldRequest(c.robot or WORLDS[c.world].arms[0], c.object, c.rate_hz, c.seed, start, realtime=True),
+            )
         try:
             trial = drive(c, world=world, host=self.robot_host, confirm=self.confirm, on_tick=on_tick)
         finally:

@@ -28,8 +28,18 @@ from dataclasses import dataclass
 from coassist._checks import is_integer, is_real_number
 from coassist.errors import CoassistError
 
-__all__ = ["MAX_ANSWERS", "MAX_MESSAGE_BYTES", "Abort", "Answers", "InvalidMessage", "Next", "Ping", "Pointer", "Start",
-           "parse_message"]
+__all__ = [
+    "MAX_ANSWERS",
+    "MAX_MESSAGE_BYTES",
+    "Abort",
+    "Answers",
+    "InvalidMessage",
+    "Next",
+    "Ping",
+    "Pointer",
+    "Start",
+    "parse_message",
+]
 
 #: Longest client message accepted [bytes]; a pointer message is about 70.
 MAX_MESSAGE_BYTES = 512
@@ -76,8 +86,14 @@ class Next:
     step: int
 
 
-_FIELDS = {"pointer": {"type", "x", "y", "down", "seq"}, "start": {"type", "controller"}, "abort": {"type"},
-           "ping": {"type", "seq"}, "answers": {"type", "step", "values"}, "next": {"type", "step"}}  # fmt: skip
+_FIELDS = {
+    "pointer": {"type", "x", "y", "down", "seq"},
+    "start": {"type", "controller"},
+    "abort": {"type"},
+    "ping": {"type", "seq"},
+    "answers": {"type", "step", "values"},
+    "next": {"type", "step"},
+}
 
 
 def _number(value, name: str, lo: float, hi: float) -> float:

@@ -54,8 +54,17 @@ from coassist.play.protocol import (
 )
 from coassist.play.session import PlaySession
 
-__all__ = ["MIN_TOKEN_BITS", "MIN_TOKEN_CHARS", "Hub", "PlayServer", "check_token", "create_app", "host_allowed",
-           "is_loopback", "new_token"]  # fmt: skip
+__all__ = [
+    "MIN_TOKEN_BITS",
+    "MIN_TOKEN_CHARS",
+    "Hub",
+    "PlayServer",
+    "check_token",
+    "create_app",
+    "host_allowed",
+    "is_loopback",
+    "new_token",
+]
 
 #: Fewest characters of a token guarding a non-loopback bind.
 MIN_TOKEN_CHARS = 16
@@ -122,7 +131,8 @@ def host_allowed(header: str | None, bind_host: str, port: int) -> bool:
         return _is_ip(name) or name == "localhost" or name in _own_names()
     # A bind to a host name: only that name (an address literal cannot be compared with it).
     return name == bind_host.lower() or (
-        _is_ip(name) and _is_ip(bind_host) and ipaddress.ip_address(name) == ipaddress.ip_address(bind_host))
+        _is_ip(name) and _is_ip(bind_host) and ipaddress.ip_address(name) == ipaddress.ip_address(bind_host)
+    )
 
 
 @functools.cache
@@ -193,18 +203,29 @@ class Hub:
     def init_message(self, client: _Client) -> dict[str, Any]:
         s = self.session
         cur = s.current
-        return s.for_page({
-            "type": "init", "role": "hand" if client is self.hand else "watcher", "user": s.config.user,
-            "mode": "monitor" if getattr(s, "watch_only", False) else "play",
-            "folder": str(s.config.folder), "bounds": s.bounds, "controllers": list(s.config.controllers),
-            "model": s.source.model_id, "preset": s.config.preset, "running": s.running,
-            "scene": cur["scene"] if cur else s.scene(), "controller": cur["controller"] if cur else None,
-            "results": [r.to_json() for r in s.results], "summary": s.summary(),
-        })  # fmt: skip
+        return s.for_page(
+            {
+                "type": "init",
+                "role": "hand" if client is self.hand else "watcher",
+                "user": s.config.user,
+                "mode": "monitor" if getattr(s, "watch_only", False) else "play",
+                "folder": str(s.config.folder),
+                "bounds": s.bounds,
+                "controllers": list(s.config.controllers),
+                "model": s.source.model_id,
+                "preset": s.config.preset,
+                "running": s.running,
+                "scene": cur["scene"] if cur else s.scene(),
+                "controller": cur["controller"] if cur else None,
+                "results": [r.to_json() for r in s.results],
+                "summary": s.summary(),
+            }
+        )
 
 
-def create_app(session: PlaySession, *, bind: tuple[str, int], token: str | None = None,
-               frame_rate: float | None = None):  # fmt: skip
+def create_app(
+    session: PlaySession, *, bind: tuple[str, int], token: str | None = None, frame_rate: float | None = None
+):
     """The Starlette app of ``session`` (module docstring).
 
     bind : (host, port) the server listens on; a request whose ``Host`` does not name it
@@ -322,11 +343,13 @@ def create_app(session: PlaySession, *, bind: tuple[str, int], token: str | None
         except (WebSocketDisconnect, RuntimeError, OSError):  # the page is gone; the receiver cleans up
             return
 
-    app = Starlette(routes=[
-        Route("/", index),
-        Mount("/static", app=StaticFiles(directory=str(static)), name="static"),
-        WebSocketRoute("/ws", ws_endpoint),
-    ])  # fmt: skip
+    app = Starlette(
+        routes=[
+            Route("/", index),
+            Mount("/static", app=StaticFiles(directory=str(static)), name="static"),
+            WebSocketRoute("/ws", ws_endpoint),
+        ]
+    )
     app.state.hub = hub
     return app
 
@@ -339,8 +362,14 @@ class PlayServer:
     aborts a running trial and shuts down.
     """
 
-    def __init__(self, session: PlaySession, host: str = "127.0.0.1", port: int = 8765, token: str | None = None,
-                 frame_rate: float | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        session: PlaySession,
+        host: str = "127.0.0.1",
+        port: int = 8765,
+        token: str | None = None,
+        frame_rate: float | None = None,
+    ) -> None:
         import uvicorn
 
         check_token(token, host)
@@ -355,8 +384,15 @@ class PlayServer:
             raise ValueError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
         self.port = int(self._sock.getsockname()[1])
         self.app = create_app(session, bind=(host, self.port), token=token, frame_rate=frame_rate)
-        config = uvicorn.Config(self.app, log_level="warning", access_log=False, ws="websockets-sansio",
-                                ws_max_size=WS_MAX_SIZE, ws_per_message_deflate=False, lifespan="off")  # fmt: skip
+        config = uvicorn.Config(
+            self.app,
+            log_level="warning",
+            access_log=False,
+            ws="websockets-sansio",
+            ws_max_size=WS_MAX_SIZE,
+            ws_per_message_deflate=False,
+            lifespan="off",
+        )
         self._server = uvicorn.Server(config)
         self._thread: threading.Thread | None = None
 
@@ -377,8 +413,11 @@ class PlayServer:
             self._shutdown_session()
 
     def start(self, timeout: float = 10.0) -> PlayServer:
-        self._thread = threading.Thread(target=lambda: asyncio.run(self._server.serve(sockets=[self._sock])),
-                                        name="coassist-play-server", daemon=True)  # fmt: skip
+        self._thread = threading.Thread(
+            target=lambda: asyncio.run(self._server.serve(sockets=[self._sock])),
+            name="coassist-play-server",
+            daemon=True,
+        )
         self._thread.start()
         t_end = time.monotonic() + timeout
         while not self._server.started:
@@ -426,14 +465,18 @@ def check_token(token: str | None, host: str) -> None:
             raise ValueError(f"--token must be a string, got {type(token).__name__}")
         odd = sorted(set(token) - _TOKEN_CHARS)
         if odd:
-            raise ValueError(f"--token may hold only letters, digits and - . _ ~ (it travels in the page's URL), got {odd[0]!r}")
+            raise ValueError(
+                f"--token may hold only letters, digits and - . _ ~ (it travels in the page's URL), got {odd[0]!r}"
+            )
     if is_loopback(host):
         return
     if not token:
         raise ValueError(f"binding {host} (not this machine only) needs a token: pass --token or let coassist make one")
     bits = len(token) * math.log2(len(set(token))) if len(set(token)) > 1 else 0.0
     if len(token) < MIN_TOKEN_CHARS or bits < MIN_TOKEN_BITS:
-        raise ValueError(f"--token is too weak for --host {host} (anyone on the network may guess it): at least "
-                         f"{MIN_TOKEN_CHARS} characters and {MIN_TOKEN_BITS:g} bits (length x log2 of distinct "
-                         f"characters), got {len(token)} characters, {bits:.0f} bits; leave --token out and "
-                         "coassist makes a 128-bit one")  # fmt: skip
+        raise ValueError(
+            f"--token is too weak for --host {host} (anyone on the network may guess it): at least "
+            f"{MIN_TOKEN_CHARS} characters and {MIN_TOKEN_BITS:g} bits (length x log2 of distinct "
+            f"characters), got {len(token)} characters, {bits:.0f} bits; leave --token out and "
+            "coassist makes a 128-bit one"
+        )

@@ -113,14 +113,24 @@ class PlayConfig:
 
     def __post_init__(self) -> None:
         if not isinstance(self.user, str) or not _USER.match(self.user):
-            raise ValueError(f"PlayConfig.user must be 1-32 letters, digits, '-' or '_' (it names a folder), got {self.user!r}")
+            raise ValueError(
+                f"PlayConfig.user must be 1-32 letters, digits, '-' or '_' (it names a folder), got {self.user!r}"
+            )
         object.__setattr__(self, "out", Path(self.out))
         ctrl = tuple(self.controllers)
         if not ctrl or len(set(ctrl)) != len(ctrl) or any(c not in CONTROLLER_KINDS for c in ctrl):
-            raise ValueError(f"PlayConfig.controllers must be distinct names from {tuple(CONTROLLER_KINDS)}, got {self.controllers!r}")
+            raise ValueError(
+                f"PlayConfig.controllers must be distinct names from {tuple(CONTROLLER_KINDS)}, got {self.controllers!r}"
+            )
         object.__setattr__(self, "controllers", ctrl)
-        if not isinstance(self.intent, str) or not self.intent or (self.intent in INTENT_SOURCES and INTENT_SOURCES[self.intent].simulation_only):
-            raise ValueError(f"PlayConfig.intent must be 'nominal' or a model folder (a person has no oracle), got {self.intent!r}")
+        if (
+            not isinstance(self.intent, str)
+            or not self.intent
+            or (self.intent in INTENT_SOURCES and INTENT_SOURCES[self.intent].simulation_only)
+        ):
+            raise ValueError(
+                f"PlayConfig.intent must be 'nominal' or a model folder (a person has no oracle), got {self.intent!r}"
+            )
         try:
             get_preset(self.preset)
         except ValueError as exc:
@@ -229,7 +239,9 @@ class PlaySession:
             for file, trial in zip(ds.files, ds.trials):
                 self.results.append(_score(trial, file, len(self.results)))
         elif folder.is_dir() and any(folder.iterdir()):
-            raise ValueError(f"{folder} is not empty and holds no {MANIFEST_NAME}: not a play session; pick another --out or --user")
+            raise ValueError(
+                f"{folder} is not empty and holds no {MANIFEST_NAME}: not a play session; pick another --out or --user"
+            )
 
     # ------------------------------------------------------------------ the protocol
     def next_task(self) -> Task:
@@ -244,10 +256,16 @@ class PlaySession:
         pts = task.path.points[:: max(1, len(task.path.points) // 400)]
         pts = np.vstack([pts, task.path.points[-1:]])
         return {
-            "index": len(self.results), "task": task.kind, "path": np.round(pts, 5).tolist(),
-            "obstacle": task.obstacle.to_dict(), "start": task.start.tolist(), "target": task.target.tolist(),
-            "arrive_radius": self.config.arrive_radius, "dwell": self.config.dwell,
-            "motion_start": task.planner.start_delay, "motion_end": task.planner.end_time,
+            "index": len(self.results),
+            "task": task.kind,
+            "path": np.round(pts, 5).tolist(),
+            "obstacle": task.obstacle.to_dict(),
+            "start": task.start.tolist(),
+            "target": task.target.tolist(),
+            "arrive_radius": self.config.arrive_radius,
+            "dwell": self.config.dwell,
+            "motion_start": task.planner.start_delay,
+            "motion_end": task.planner.end_time,
         }
 
     def summary(self) -> dict[str, Any]:
@@ -258,8 +276,12 @@ class PlaySession:
             if not rows:
                 continue
             sig = [r.sigma for r in rows if r.sigma is not None]
-            out[name] = {"trials": len(rows), "f_rms": float(np.mean([r.f_rms for r in rows])),
-                         "sigma": float(np.mean(sig)) if sig else None, "reached": len(sig)}  # fmt: skip
+            out[name] = {
+                "trials": len(rows),
+                "f_rms": float(np.mean([r.f_rms for r in rows])),
+                "sigma": float(np.mean(sig)) if sig else None,
+                "reached": len(sig),
+            }
         return out
 
     # ------------------------------------------------------------------ what a page is told and may ask
@@ -307,8 +329,9 @@ class PlaySession:
         task = self.next_task()
         self.current = {"controller": controller, "scene": self.scene(task)}
         self.publish({"type": "started", "controller": controller, "scene": self.current["scene"]})
-        self._thread = threading.Thread(target=self._run, args=(task, controller, ctrl), name="coassist-play-loop",
-                                        daemon=True)  # fmt: skip
+        self._thread = threading.Thread(
+            target=self._run, args=(task, controller, ctrl), name="coassist-play-loop", daemon=True
+        )
         self._thread.start()
         return True
 
@@ -335,8 +358,9 @@ class PlaySession:
             self.running = False
             self.current = None
         if result is not None:
-            self.publish({"type": "result", "result": result.to_json(), "summary": self.summary(),
-                          "next": self.scene()})  # fmt: skip
+            self.publish(
+                {"type": "result", "result": result.to_json(), "summary": self.summary(), "next": self.scene()}
+            )
 
     def _run_trial(self, task: Task, name: str, controller) -> TrialResult | None:
         cfg = self.config
@@ -347,21 +371,42 @@ class PlaySession:
         ref_abs = plan_grid(task, dt, n_max, int(self.source.horizon))
         x0 = np.array(task.start, dtype=float)
         world = PlayWorld(model, self.hand, x0, paced=cfg.paced)
-        intent = (WindowIntent(self.source, H) if self._realtime is None
-                  else RealtimeIntent(self._realtime, model_id=self.source.model_id))  # fmt: skip
+        intent = (
+            WindowIntent(self.source, H)
+            if self._realtime is None
+            else RealtimeIntent(self._realtime, model_id=self.source.model_id)
+        )
         index = len(self.results)
         arm = cfg.arm
         episode = build_episode(
-            world=world, controller=controller, intent=intent, wrench=WrenchPipeline(POINT_MASS_WRENCH, dt),
-            safety=SafetyLayer(POINT_MASS_LIMITS, dt, 6), task=task, plan=ref_abs,
-            start_pose=np.array((x0[0], x0[1], 0.0, 0.0, 0.0, 0.0)), n_max=n_max,
-            labels=EpisodeLabels(user=cfg.user, object="none", seed=cfg.seed + index, source="sim", preset=cfg.preset,
-                                 model_id=self.source.model_id),
-            arrive_radius=cfg.arrive_radius, dwell=cfg.dwell,
-            extra={"operator": "person", "hand": "browser", "world": "play",
-                   "arm": {"stiffness": arm.stiffness, "damping": arm.damping, "force_limit": arm.force_limit},
-                   "controller_name": name, "trial_index": index},
-        )  # fmt: skip
+            world=world,
+            controller=controller,
+            intent=intent,
+            wrench=WrenchPipeline(POINT_MASS_WRENCH, dt),
+            safety=SafetyLayer(POINT_MASS_LIMITS, dt, 6),
+            task=task,
+            plan=ref_abs,
+            start_pose=np.array((x0[0], x0[1], 0.0, 0.0, 0.0, 0.0)),
+            n_max=n_max,
+            labels=EpisodeLabels(
+                user=cfg.user,
+                object="none",
+                seed=cfg.seed + index,
+                source="sim",
+                preset=cfg.preset,
+                model_id=self.source.model_id,
+            ),
+            arrive_radius=cfg.arrive_radius,
+            dwell=cfg.dwell,
+            extra={
+                "operator": "person",
+                "hand": "browser",
+                "world": "play",
+                "arm": {"stiffness": arm.stiffness, "damping": arm.damping, "force_limit": arm.force_limit},
+                "controller_name": name,
+                "trial_index": index,
+            },
+        )
         dwell = episode.termination
 
         def termination(k: int, pose: np.ndarray) -> bool:
@@ -374,23 +419,43 @@ class PlaySession:
             pred = out.prediction if out.prediction is not None else ref_abs[k + 1 : k + 1 + H, :2]
             p = pred[::PREDICTION_STRIDE]
             frame = {
-                "type": "frame", "index": index, "k": k + 1, "t": (k + 1) * dt, "x": world.x, "y": world.y,
-                "vx": world.vx, "vy": world.vy, "fh": world.fh, "ur": out.command.effort.tolist() if out.command.effort is not None else [0.0, 0.0],
-                "ref": ref_abs[k + 1, :2].tolist(), "prediction": np.vstack([p, pred[-1:]]).tolist(),
-                "predicted": out.prediction is not None, "faults": fault_names(int(out.fault)),
-                "seq": self.hand.seq, "held": self.hand.held, "controller": name, "misses": world.overruns,
-            }  # fmt: skip
+                "type": "frame",
+                "index": index,
+                "k": k + 1,
+                "t": (k + 1) * dt,
+                "x": world.x,
+                "y": world.y,
+                "vx": world.vx,
+                "vy": world.vy,
+                "fh": world.fh,
+                "ur": out.command.effort.tolist() if out.command.effort is not None else [0.0, 0.0],
+                "ref": ref_abs[k + 1, :2].tolist(),
+                "prediction": np.vstack([p, pred[-1:]]).tolist(),
+                "predicted": out.prediction is not None,
+                "faults": fault_names(int(out.fault)),
+                "seq": self.hand.seq,
+                "held": self.hand.held,
+                "controller": name,
+                "misses": world.overruns,
+            }
             self.frame = frame
             self.publish(frame)
 
         log = run_loop(episode.world, episode.tick, episode.n_max, termination, on_tick=on_tick)
         if self._abort is not None:
-            self.publish({"type": "status", "level": "warn",
-                          "text": "trial aborted (nothing written)" if self._abort == "aborted"
-                          else "the hand left for too long: trial aborted (nothing written)"})  # fmt: skip
+            self.publish(
+                {
+                    "type": "status",
+                    "level": "warn",
+                    "text": "trial aborted (nothing written)"
+                    if self._abort == "aborted"
+                    else "the hand left for too long: trial aborted (nothing written)",
+                }
+            )
             return None
-        trial = episode.finish(log, {"deadline_misses": int(world.overruns),
-                                     "mean_tick_seconds": float(np.mean(log.compute))})  # fmt: skip
+        trial = episode.finish(
+            log, {"deadline_misses": int(world.overruns), "mean_tick_seconds": float(np.mean(log.compute))}
+        )
         return self._save(trial)
 
     def _save(self, trial: Trial) -> TrialResult:
@@ -398,8 +463,9 @@ class PlaySession:
         if (folder / MANIFEST_NAME).is_file():
             append_to_dataset([trial], folder)
         else:
-            write_dataset([trial], folder, self.config.dataset_id,
-                          f"played in a browser by {self.config.user} (coassist play)")  # fmt: skip
+            write_dataset(
+                [trial], folder, self.config.dataset_id, f"played in a browser by {self.config.user} (coassist play)"
+            )
         if self.config.mcap:
             from coassist.data.trial_mcap import write_trial_mcap
 
@@ -417,8 +483,15 @@ def _score(trial: Trial, file: str, index: int) -> TrialResult:
     eps = float(extra.get("arrive_radius", 0.025))
     sigma = precision_sigma(trial.pose, target, trial.meta.dt, epsilon=eps, tau=SIGMA_TAU)
     return TrialResult(
-        file=file, index=index, task=trial.meta.task,
-        controller=FORMER_NAMES.get(name, name) if isinstance(name := extra.get("controller_name"), str) else trial.meta.controller,
-        f_rms=f_rms(trial.wrench), sigma=None if math.isnan(sigma) else float(sigma), ended=str(extra.get("ended", "")),
-        n_ticks=trial.n_samples, deadline_misses=int(extra.get("deadline_misses", 0)),
-    )  # fmt: skip
+        file=file,
+        index=index,
+        task=trial.meta.task,
+        controller=FORMER_NAMES.get(name, name)
+        if isinstance(name := extra.get("controller_name"), str)
+        else trial.meta.controller,
+        f_rms=f_rms(trial.wrench),
+        sigma=None if math.isnan(sigma) else float(sigma),
+        ended=str(extra.get("ended", "")),
+        n_ticks=trial.n_samples,
+        deadline_misses=int(extra.get("deadline_misses", 0)),
+    )

@@ -63,15 +63,25 @@ class PlayWorld:
     command_space = "effort"
     n_joints = 0
 
-    def __init__(self, model: ImpedanceModel, hand, start, *, paced: bool = True,
-                 clock: Callable[[], float] = time.perf_counter, sleep: Callable[[float], None] = time.sleep) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: ImpedanceModel,
+        hand,
+        start,
+        *,
+        paced: bool = True,
+        clock: Callable[[], float] = time.perf_counter,
+        sleep: Callable[[float], None] = time.sleep,
+    ) -> None:
         if model.n_dof != 2:
             raise ValueError(f"the play world is the x-y plane: the controller must have 2 DOFs, got {model.n_dof}")
         s = np.asarray(start, dtype=float)
         if s.shape != (2,) or not np.isfinite(s).all():
             raise ValueError(f"start must be 2 finite numbers [m], got {start!r}")
         if np.any(np.asarray(model.K) != 0.0):
-            raise ValueError("the play world renders the free plant M a + D v = u (K = 0): the controller's model has K != 0")
+            raise ValueError(
+                "the play world renders the free plant M a + D v = u (K = 0): the controller's model has K != 0"
+            )
         self.dt = float(model.dt)
         self.realtime = bool(paced)
         #: The plant M a + D v = u, per axis: the point-mass simulator's step (coassist.model.plant).
@@ -91,11 +101,14 @@ class PlayWorld:
         if self._t0 is None:
             self._t0 = self._clock()  # the schedule starts at the first read
         return RobotState(
-            t=self.k * self.dt, q=_NO_JOINTS, qd=_NO_JOINTS,
+            t=self.k * self.dt,
+            q=_NO_JOINTS,
+            qd=_NO_JOINTS,
             tool_pose=np.array((self.x, self.y, 0.0, 0.0, 0.0, 0.0)),
             tool_twist=np.array((self.vx, self.vy, 0.0, 0.0, 0.0, 0.0)),
-            wrench=np.array((self.fh[0], self.fh[1], 0.0, 0.0, 0.0, 0.0)), wrench_seq=self.k,
-        )  # fmt: skip
+            wrench=np.array((self.fh[0], self.fh[1], 0.0, 0.0, 0.0, 0.0)),
+            wrench_seq=self.k,
+        )
 
     def hand_force(self) -> tuple[float, float]:
         """u_h(k) [N] applied during the last period (the loop logs it as effort_h)."""

@@ -61,7 +61,9 @@ class ArmDescription:
             if v.shape != (n,) or not np.isfinite(v).all():
                 raise ValueError(f"ArmDescription.{name} must be {n} finite numbers, got {getattr(self, name)!r}")
         if not (isinstance(self.tool_speed_limit, float) and 0.0 < self.tool_speed_limit < 10.0):
-            raise ValueError(f"ArmDescription.tool_speed_limit must be a speed in (0, 10) m/s, got {self.tool_speed_limit!r}")
+            raise ValueError(
+                f"ArmDescription.tool_speed_limit must be a speed in (0, 10) m/s, got {self.tool_speed_limit!r}"
+            )
         c = np.asarray(self.task_centre, dtype=float)
         if c.shape != (3,) or not np.isfinite(c).all():
             raise ValueError(f"ArmDescription.task_centre must be 3 finite numbers [m], got {self.task_centre!r}")
@@ -72,23 +74,32 @@ class ArmDescription:
 ARMS: dict[str, ArmDescription] = {
     # UR5 (CB3): UR's base frame is the URDF base_link turned by π about z (kinematics.py).
     "ur5": ArmDescription(
-        name="ur5", urdf=("ur_description", "urdf", "ur5_robot.urdf"), tip_frame="tool0", n_joints=6,
-        joint_velocity_limit=(np.pi,) * 6, home=(-1.1583, -1.9627, -1.5428, -1.2068, 1.5708, -2.7291),
-        base_signs=(-1.0, -1.0, 1.0), joint_position_limit=((-2.0 * np.pi, 2.0 * np.pi),) * 6,
+        name="ur5",
+        urdf=("ur_description", "urdf", "ur5_robot.urdf"),
+        tip_frame="tool0",
+        n_joints=6,
+        joint_velocity_limit=(np.pi,) * 6,
+        home=(-1.1583, -1.9627, -1.5428, -1.2068, 1.5708, -2.7291),
+        base_signs=(-1.0, -1.0, 1.0),
+        joint_position_limit=((-2.0 * np.pi, 2.0 * np.pi),) * 6,
         mujoco_drop=("base",),  # the ROS "base" frame: the world frame is it already
         tool_speed_limit=1.0,  # UR5 datasheet: typical TCP speed 1 m/s
-    ),  # fmt: skip
+    ),
     # Franka Emika Panda: libfranka's base frame (O) is the URDF's panda_link0; the flange
     # (F) is panda_link8. Speed limits: Franka's datasheet (the URDF's velocity=).
     # Position limits: the URDF's (the datasheet's).
     "panda": ArmDescription(
-        name="panda", urdf=("panda_description", "urdf", "panda.urdf"), tip_frame="panda_link8", n_joints=7,
+        name="panda",
+        urdf=("panda_description", "urdf", "panda.urdf"),
+        tip_frame="panda_link8",
+        n_joints=7,
         joint_velocity_limit=(2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61),
         home=(0.0, -0.785398, 0.0, -2.356194, 0.0, 1.570796, 0.785398),
-        locked=("panda_finger_joint1", "panda_finger_joint2"), mujoco_drop=("panda_hand",),
+        locked=("panda_finger_joint1", "panda_finger_joint2"),
+        mujoco_drop=("panda_hand",),
         task_centre=(0.5, 0.0, 0.4),  # every task point reachable tool-down, > 0.2 rad from a limit
         tool_speed_limit=1.7,  # libfranka's Cartesian translation limit (franky: translation_velocity_limit.max)
-    ),  # fmt: skip
+    ),
     # Franka Research 3: the Panda's kinematics (the same DH table and flange; franky-sim's
     # FR3 matches the Panda model to 1e-4 m, tests/robot/test_franka_world.py) with its own
     # joint limits: position and speed from the FR3 URDF of Franka's franka_description, as
@@ -97,14 +108,24 @@ ARMS: dict[str, ArmDescription] = {
     # than the Panda's on joint 4 (upper −0.1169) and shifted on joint 6 ([0.4398, 4.6216]).
     # No MuJoCo model of its own (the MuJoCo worlds drive the Panda).
     "fr3": ArmDescription(
-        name="fr3", urdf=("panda_description", "urdf", "panda.urdf"), tip_frame="panda_link8", n_joints=7,
+        name="fr3",
+        urdf=("panda_description", "urdf", "panda.urdf"),
+        tip_frame="panda_link8",
+        n_joints=7,
         joint_velocity_limit=(2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26),
         home=(0.0, -0.785398, 0.0, -2.356194, 0.0, 1.570796, 0.785398),
         locked=("panda_finger_joint1", "panda_finger_joint2"),
-        joint_position_limit=((-2.9007, 2.9007), (-1.8361, 1.8361), (-2.9007, 2.9007), (-3.077, -0.1169),
-                              (-2.8763, 2.8763), (0.4398, 4.6216), (-3.0508, 3.0508)),
+        joint_position_limit=(
+            (-2.9007, 2.9007),
+            (-1.8361, 1.8361),
+            (-2.9007, 2.9007),
+            (-3.077, -0.1169),
+            (-2.8763, 2.8763),
+            (0.4398, 4.6216),
+            (-3.0508, 3.0508),
+        ),
         tool_speed_limit=1.7,  # what franky reports for franky-sim's FR3 (translation_velocity_limit.max)
-    ),  # fmt: skip
+    ),
 }
 
 

@@ -240,28 +240,44 @@ def build_arm_spec(
         kind = mujoco.mjtGeom.mjGEOM_CYLINDER if part.kind == "cylinder" else mujoco.mjtGeom.mjGEOM_BOX
         size = list(part.size) + [0.0] * (3 - len(part.size))
         body.add_geom(
-            name=part.name, type=kind, size=size, pos=list(part.pos), mass=part.mass,
-            contype=0, conaffinity=0, rgba=list(part.rgba),
+            name=part.name,
+            type=kind,
+            size=size,
+            pos=list(part.pos),
+            mass=part.mass,
+            contype=0,
+            conaffinity=0,
+            rgba=list(part.rgba),
         )
     body.add_site(name="handle", pos=list(geometry.handle), size=[0.015, 0.0, 0.0], rgba=[0.1, 0.8, 0.1, 1.0])
     body.add_site(name="tcp", pos=list(tcp), size=[0.008, 0.0, 0.0], rgba=[0.1, 0.1, 0.9, 1.0])
 
     spec.add_sensor(
-        name="ft_force", type=mujoco.mjtSensor.mjSENS_FORCE, objtype=mujoco.mjtObj.mjOBJ_SITE, objname="ft_sensor",
+        name="ft_force",
+        type=mujoco.mjtSensor.mjSENS_FORCE,
+        objtype=mujoco.mjtObj.mjOBJ_SITE,
+        objname="ft_sensor",
     )
     spec.add_sensor(
-        name="ft_torque", type=mujoco.mjtSensor.mjSENS_TORQUE, objtype=mujoco.mjtObj.mjOBJ_SITE, objname="ft_sensor",
+        name="ft_torque",
+        type=mujoco.mjtSensor.mjSENS_TORQUE,
+        objtype=mujoco.mjtObj.mjOBJ_SITE,
+        objname="ft_sensor",
     )
 
     spec.add_numeric(name="servo_time_constant", data=[servo_time_constant])
 
     for i, name in enumerate(joint_names):
         spec.add_actuator(
-            name=f"servo_{i}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT,
-            gaintype=mujoco.mjtGain.mjGAIN_FIXED, gainprm=[1.0] + [0.0] * 9,
+            name=f"servo_{i}",
+            target=name,
+            trntype=mujoco.mjtTrn.mjTRN_JOINT,
+            gaintype=mujoco.mjtGain.mjGAIN_FIXED,
+            gainprm=[1.0] + [0.0] * 9,
             biastype=mujoco.mjtBias.mjBIAS_NONE,
             ctrllimited=mujoco.mjtLimited.mjLIMITED_FALSE,
-            forcelimited=mujoco.mjtLimited.mjLIMITED_TRUE, forcerange=[-torque_limits[i], torque_limits[i]],
+            forcelimited=mujoco.mjtLimited.mjLIMITED_TRUE,
+            forcerange=[-torque_limits[i], torque_limits[i]],
         )
     return spec
 
@@ -277,11 +293,19 @@ def build_arm_model(
 ) -> mujoco.MjModel:
     """The compiled MuJoCo model of ``robot`` carrying ``tool`` (module docstring); its joints are
     the arm's (checked: a URDF joint the model keeps beyond them would be simulated but never driven)."""
-    spec = build_arm_spec(robot, tool, physics_dt=physics_dt, servo_time_constant=servo_time_constant,
-                          tcp_offset=tcp_offset, gravity=gravity)  # fmt: skip
+    spec = build_arm_spec(
+        robot,
+        tool,
+        physics_dt=physics_dt,
+        servo_time_constant=servo_time_constant,
+        tcp_offset=tcp_offset,
+        gravity=gravity,
+    )
     model = spec.compile()
     n = get_arm(robot).n_joints
     if model.nq != n or model.nv != n:
-        raise ValueError(f"the MuJoCo {robot} model has {model.nv} joints, the registry says {n} "
-                         "(leave the extra links out with ArmDescription.mujoco_drop)")  # fmt: skip
+        raise ValueError(
+            f"the MuJoCo {robot} model has {model.nv} joints, the registry says {n} "
+            "(leave the extra links out with ArmDescription.mujoco_drop)"
+        )
     return model

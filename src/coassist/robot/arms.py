@@ -40,14 +40,27 @@ __all__ = ["ARMS", "ArmDescription", "NullSpacePosture", "arm_kinematics", "chec
 def arm_kinematics(name: str, tcp_offset: ArrayLike = (0.0,) * 6) -> ArmKinematics:
     """:class:`ArmKinematics` of the registered arm ``name`` with the TCP at ``tcp_offset`` (flange frame)."""
     arm = get_arm(name)
-    return ArmKinematics(robot_data_path(arm.urdf, f"the {arm.name} model"), arm.tip_frame, n_joints=arm.n_joints,
-                         tcp_offset=tcp_offset, base_signs=arm.base_signs,
-                         joint_velocity_limit=arm.joint_velocity_limit,
-                         joint_position_limit=arm.joint_position_limit, locked=arm.locked)  # fmt: skip
+    return ArmKinematics(
+        robot_data_path(arm.urdf, f"the {arm.name} model"),
+        arm.tip_frame,
+        n_joints=arm.n_joints,
+        tcp_offset=tcp_offset,
+        base_signs=arm.base_signs,
+        joint_velocity_limit=arm.joint_velocity_limit,
+        joint_position_limit=arm.joint_position_limit,
+        locked=arm.locked,
+    )
 
 
-def check_model_matches(kin: ArmKinematics, q: ArrayLike, reported_pose: ArrayLike, *, tol_position: float = 1e-3,
-                        tol_rotation: float = 1e-2, what: str = "the robot") -> None:  # fmt: skip
+def check_model_matches(
+    kin: ArmKinematics,
+    q: ArrayLike,
+    reported_pose: ArrayLike,
+    *,
+    tol_position: float = 1e-3,
+    tol_rotation: float = 1e-2,
+    what: str = "the robot",
+) -> None:
     """Start-up check: the model's TCP pose at ``q`` equals the one ``what`` reports.
 
     ``reported_pose`` : (6,) ``[x, y, z, rx, ry, rz]`` [m, rad] in the base frame.
@@ -83,9 +96,17 @@ class NullSpacePosture:
     limit_horizon : τ [s].  sigma_threshold, max_damping : the damping rule.
     """
 
-    def __init__(self, kinematics: ArmKinematics, posture: ArrayLike, *, gain: float = 1.0,
-                 limit_margin: float = 0.05, limit_horizon: float = 0.1, sigma_threshold: float = 0.05,
-                 max_damping: float = 0.05) -> None:  # fmt: skip
+    def __init__(
+        self,
+        kinematics: ArmKinematics,
+        posture: ArrayLike,
+        *,
+        gain: float = 1.0,
+        limit_margin: float = 0.05,
+        limit_horizon: float = 0.1,
+        sigma_threshold: float = 0.05,
+        max_damping: float = 0.05,
+    ) -> None:
         self.kinematics = kinematics
         self.n_joints = kinematics.n_joints
         self.posture = kinematics._as_q(posture).copy()

@@ -137,7 +137,9 @@ class DriveConfig:
         if self.obstacle not in OBSTACLES:
             raise bad("obstacle", f"one of {tuple(OBSTACLES)}")
         if not isinstance(self.intent, str) or not self.intent:
-            raise bad("intent", f"one of {', '.join(INTENT_SOURCES)} or a folder (a model, a path-hypotheses calibration)")
+            raise bad(
+                "intent", f"one of {', '.join(INTENT_SOURCES)} or a folder (a model, a path-hypotheses calibration)"
+            )
         source = INTENT_SOURCES.get(self.intent)
         if source is not None and source.simulation_only and not world.simulated:
             raise bad("intent", f"a source a real arm can run, not {source.summary} (a simulation alone knows it)")
@@ -147,8 +149,9 @@ class DriveConfig:
                 raise bad(name, "an int >= 0")
         if self.rate_hz not in (125, 500):
             raise bad("rate_hz", "125 or 500")
-        if self.time_limit is not None and not (isinstance(self.time_limit, (int, float))
-                                                and 0 < self.time_limit <= MAX_TIME_LIMIT):  # fmt: skip
+        if self.time_limit is not None and not (
+            isinstance(self.time_limit, (int, float)) and 0 < self.time_limit <= MAX_TIME_LIMIT
+        ):
             raise bad("time_limit", f"a number of seconds in (0, {MAX_TIME_LIMIT:g}] or None")
         if not isinstance(self.limits, SafetyLimits):
             raise bad("limits", "a SafetyLimits")
@@ -173,17 +176,23 @@ def _check_limits_for_arm(limits: SafetyLimits, robot: str | None) -> None:
 
     arm = get_arm(robot or "ur5")
     if limits.tool_speed > arm.tool_speed_limit:
-        raise ValueError(f"SafetyLimits.tool_speed must be at most {arm.tool_speed_limit:g} m/s, the {arm.name}'s own "
-                         f"tool speed limit, got {limits.tool_speed!r}")  # fmt: skip
+        raise ValueError(
+            f"SafetyLimits.tool_speed must be at most {arm.tool_speed_limit:g} m/s, the {arm.name}'s own "
+            f"tool speed limit, got {limits.tool_speed!r}"
+        )
     vmax = np.asarray(arm.joint_velocity_limit, dtype=float)
     jv = limits.joint_velocity_array(vmax.size)  # raises naming the field when a per-joint tuple has another length
     if np.any(jv > vmax):
         shown = ", ".join(f"{v:.4g}" for v in vmax)
-        raise ValueError(f"SafetyLimits.joint_velocity must be at most the {arm.name}'s own joint speeds ({shown}) "
-                         f"rad/s, got {limits.joint_velocity!r}")  # fmt: skip
+        raise ValueError(
+            f"SafetyLimits.joint_velocity must be at most the {arm.name}'s own joint speeds ({shown}) "
+            f"rad/s, got {limits.joint_velocity!r}"
+        )
     if limits.contact_force > MAX_CONTACT_FORCE:
-        raise ValueError(f"SafetyLimits.contact_force must be at most {MAX_CONTACT_FORCE:g} N, the force sensor's range "
-                         f"(above it the protective stop could never trip), got {limits.contact_force!r}")  # fmt: skip
+        raise ValueError(
+            f"SafetyLimits.contact_force must be at most {MAX_CONTACT_FORCE:g} N, the force sensor's range "
+            f"(above it the protective stop could never trip), got {limits.contact_force!r}"
+        )
 
 
 def _controller(config: DriveConfig):
@@ -192,8 +201,11 @@ def _controller(config: DriveConfig):
     imp, game = preset.impedance, preset.game
     dt = config.dt
     ticks = lambda n: max(1, round(n * imp.dt / dt))  # noqa: E731 (the same look-ahead in seconds)
-    gp = replace(game, horizon=max(2, ticks(game.horizon)),
-                 control_horizon=None if game.control_horizon is None else ticks(game.control_horizon))  # fmt: skip
+    gp = replace(
+        game,
+        horizon=max(2, ticks(game.horizon)),
+        control_horizon=None if game.control_horizon is None else ticks(game.control_horizon),
+    )
     M, D = imp.M, imp.D
     if config.full_pose:
         # z like x; rotations with their own inertia and damping; the game weighs them like positions.
@@ -203,21 +215,39 @@ def _controller(config: DriveConfig):
         def six(q: tuple[float, ...]) -> tuple[float, ...]:
             return q[:2] + (q[0],) * 4 + q[2:] + (q[2],) * 4
 
-        gp = replace(gp, Q_hh=six(gp.Q_hh), Q_hr=six(gp.Q_hr), Q_rh=six(gp.Q_rh), Q_rr=six(gp.Q_rr),
-                     R_h=gp.R_h + (gp.R_h[0],) * 4, R_r=gp.R_r + (gp.R_r[0],) * 4)  # fmt: skip
+        gp = replace(
+            gp,
+            Q_hh=six(gp.Q_hh),
+            Q_hr=six(gp.Q_hr),
+            Q_rh=six(gp.Q_rh),
+            Q_rr=six(gp.Q_rr),
+            R_h=gp.R_h + (gp.R_h[0],) * 4,
+            R_r=gp.R_r + (gp.R_r[0],) * 4,
+        )
     impedance = ImpedanceParameters(M=M, D=D, K=(0.0,) * len(M), dt=dt)
     return make_controller(config.controller, replace(preset, impedance=impedance, game=gp))
 
 
-def workspace_for(reference: np.ndarray, start_pose: np.ndarray, margin: float = 0.25, z_margin: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
+def workspace_for(
+    reference: np.ndarray, start_pose: np.ndarray, margin: float = 0.25, z_margin: float = 0.15
+) -> tuple[np.ndarray, np.ndarray]:
     """The default workspace box: the plan's x-y extent ± margin, the start height ± z_margin [m]."""
     lo = np.array([reference[:, 0].min() - margin, reference[:, 1].min() - margin, start_pose[2] - z_margin])
     hi = np.array([reference[:, 0].max() + margin, reference[:, 1].max() + margin, start_pose[2] + z_margin])
     return lo, hi
 
 
-def drive(config: DriveConfig, *, operator: Any = None, world: Any = None, host: str | None = None,
-          view: bool = False, confirm: Any = None, on_tick: Any = None, intent_source: Any = None) -> Trial:  # fmt: skip
+def drive(
+    config: DriveConfig,
+    *,
+    operator: Any = None,
+    world: Any = None,
+    host: str | None = None,
+    view: bool = False,
+    confirm: Any = None,
+    on_tick: Any = None,
+    intent_source: Any = None,
+) -> Trial:
     """Run one trial on a UR5 (module docstring) and return it.
 
     operator : the MuJoCo world's hand; None: the simulated operator ``config.user``.
@@ -247,7 +277,9 @@ def drive_lockstep(configs: Sequence[DriveConfig]) -> list[Trial]:
     for i, c in enumerate(configs):
         if not isinstance(c, DriveConfig) or not WORLDS[c.world].simulated or c.realtime_intent:
             simulated = ", ".join(name for name, entry in WORLDS.items() if entry.simulated)
-            raise ValueError(f"configs[{i}] must be a DriveConfig of a simulated world ({simulated}) without a real-time predictor")
+            raise ValueError(
+                f"configs[{i}] must be a DriveConfig of a simulated world ({simulated}) without a real-time predictor"
+            )
     sources: dict[tuple[str, int], Any] = {}
     runs: list[_PreparedDrive] = []
     try:
@@ -290,8 +322,16 @@ def _release(world: Any, built_here: bool, intent_stage: Any) -> None:
                 close()
 
 
-def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, host: str | None = None,
-             view: bool = False, intent_source: Any = None, sources: dict | None = None) -> _PreparedDrive:  # fmt: skip
+def _prepare(
+    config: DriveConfig,
+    *,
+    operator: Any = None,
+    world: Any = None,
+    host: str | None = None,
+    view: bool = False,
+    intent_source: Any = None,
+    sources: dict | None = None,
+) -> _PreparedDrive:
     """Build :func:`drive`'s episode (world, hand, kinematics, wrench, safety, tick) with the
     sensor zeroed; on failure, close what was built. ``sources``: a cache (intent, horizon) →
     loaded source that runs in lockstep share (those with a ``batcher``: stateless)."""
@@ -322,11 +362,24 @@ def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, ho
             target = target + _task_shift(robot)
         if world is None:
             # A real-time predictor runs against the wall clock: so must the simulated world it serves.
-            world = build_world(config.world, WorldRequest(robot, config.object, config.rate_hz, config.seed, start, host,
-                                                           view, realtime=view or bool(config.realtime_intent)))
+            world = build_world(
+                config.world,
+                WorldRequest(
+                    robot,
+                    config.object,
+                    config.rate_hz,
+                    config.seed,
+                    start,
+                    host,
+                    view,
+                    realtime=view or bool(config.realtime_intent),
+                ),
+            )
         if not isinstance(world, ArmWorld):
-            raise ValueError(f"world must be an arm world (coassist.robot.worlds.ArmWorld); a {type(world).__name__} "
-                             f"lacks {', '.join(missing_members(world, ArmWorld))}")
+            raise ValueError(
+                f"world must be an arm world (coassist.robot.worlds.ArmWorld); a {type(world).__name__} "
+                f"lacks {', '.join(missing_members(world, ArmWorld))}"
+            )
         state0 = world.read()
         start_pose = np.asarray(state0.tool_pose, dtype=float).copy()
         if not simulated:
@@ -340,45 +393,72 @@ def _prepare(config: DriveConfig, *, operator: Any = None, world: Any = None, ho
             noise = motor_noise(profile, rng_motor, ref_abs.shape[0], dt)  # as long as the intent: stop() may step on
             arm = OperatorArm(profile, intent_pos, dt, noise)
             hand_pose, _ = hand.hand_pose()
-            operator = SimulatedHand(arm, dt, hand_pose, full_pose=config.full_pose,
-                                     offset=hand_pose[:2] - start_pose[:2])  # fmt: skip
+            operator = SimulatedHand(
+                arm, dt, hand_pose, full_pose=config.full_pose, offset=hand_pose[:2] - start_pose[:2]
+            )
         if operator is not None and hand is not None:
             hand.operator = operator
         kin = world.kinematics()
         mass, com = world.tool_mass_and_com()
         # a noise-free simulated sensor (MuJoCo's without noise, a test's external F/T) repeats exactly
         # on a constant push: no frozen-sensor check there
-        wrench = WrenchPipeline(WrenchConfig(tool_mass=mass, tool_com=tuple(com),
-                                             max_frozen_time=None if world.noise_free_sensor else MEASURED_FROZEN_TIME), dt)  # fmt: skip
+        wrench = WrenchPipeline(
+            WrenchConfig(
+                tool_mass=mass,
+                tool_com=tuple(com),
+                max_frozen_time=None if world.noise_free_sensor else MEASURED_FROZEN_TIME,
+            ),
+            dt,
+        )
         limits = config.limits
         if limits.workspace_lower is None:
             lo, hi = workspace_for(ref_abs, start_pose)
             limits = replace(limits, workspace_lower=tuple(lo), workspace_upper=tuple(hi))
         dofs = (0, 1, 2, 3, 4, 5) if config.full_pose else (0, 1)
         episode = build_episode(
-            world=world, controller=controller, intent=intent_stage, wrench=wrench,
-            safety=SafetyLayer(limits, dt, int(world.n_joints)), task=task, plan=ref_abs,
-            start_pose=start_pose, n_max=n_max, target=target,
-            labels=EpisodeLabels(user=profile.name if simulated else "operator", object=obj.name, seed=config.seed,
-                                 source=entry.source,
-                                 preset=config.preset, model_id=model_id),
+            world=world,
+            controller=controller,
+            intent=intent_stage,
+            wrench=wrench,
+            safety=SafetyLayer(limits, dt, int(world.n_joints)),
+            task=task,
+            plan=ref_abs,
+            start_pose=start_pose,
+            n_max=n_max,
+            target=target,
+            labels=EpisodeLabels(
+                user=profile.name if simulated else "operator",
+                object=obj.name,
+                seed=config.seed,
+                source=entry.source,
+                preset=config.preset,
+                model_id=model_id,
+            ),
             # the simulated operator's intent: the oracle's in any world (a test's simulated arm behind a
             # real-arm link), the Trial's intent column only where that operator held the handle
-            true_intent=intent_pos, intent_end_time=intent_traj.end_time, log_intent=simulated,
+            true_intent=intent_pos,
+            intent_end_time=intent_traj.end_time,
+            log_intent=simulated,
             # the robot is told of the obstacle only where the simulated operator goes round it: a person at a
             # real arm sees no such box (the path-hypotheses source then is the present estimate alone)
             tell_obstacles=simulated,
-            kinematics=kin, tick_config=TickConfig(dofs=dofs),
+            kinematics=kin,
+            tick_config=TickConfig(dofs=dofs),
             extra={
                 "world": config.world,
                 # The admittance the tick integrates from wrench + u_r (the label 'hand_alone' removes u_r through it).
-                "plant": {name: [float(v) for v in np.diag(getattr(controller.model, name))] for name in ("M", "D", "K")},
-                "robot": config.robot, "object": obj.to_extra(), "rate_hz": config.rate_hz,
-                "full_pose": config.full_pose, "start_pose": [float(v) for v in start_pose],
+                "plant": {
+                    name: [float(v) for v in np.diag(getattr(controller.model, name))] for name in ("M", "D", "K")
+                },
+                "robot": config.robot,
+                "object": obj.to_extra(),
+                "rate_hz": config.rate_hz,
+                "full_pose": config.full_pose,
+                "start_pose": [float(v) for v in start_pose],
                 "limits": config.limits.describe(),
                 "dofs": list(dofs),
             },
-        )  # fmt: skip
+        )
         # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
         wrench.zero(np.asarray(state0.wrench, dtype=float)[None], np.asarray(state0.sensor_rotation, dtype=float)[None])
     except BaseException:

@@ -76,8 +76,10 @@ log = logging.getLogger(__name__)
 _INSTALL_HINT = "the Franka world needs franky: pip install 'coassist[franka]'"
 
 #: What to do after the robot stopped with a reflex (libfranka's error list goes first).
-REFLEX_NEXT = ("check the workspace and the person, then clear the error (Franka Desk, or franky's "
-               "robot.recover_from_errors()) and rerun")  # fmt: skip
+REFLEX_NEXT = (
+    "check the workspace and the person, then clear the error (Franka Desk, or franky's "
+    "robot.recover_from_errors()) and rerun"
+)
 USER_STOP_NEXT = "release the user stop button, make the workspace safe, unlock the joints in Desk, then rerun"
 
 
@@ -120,8 +122,10 @@ def reported_arm(robot: Any) -> tuple[str, str] | None:
         return "fr3", name
     if "panda" in low or low == "fer" or low.startswith("fer_"):
         return "panda", name
-    raise ValueError(f"the connected Franka reports the model {name!r}, which is neither a Panda nor an FR3 "
-                     f"({', '.join(FRANKA_ARMS)}); coassist has no kinematics for it")  # fmt: skip
+    raise ValueError(
+        f"the connected Franka reports the model {name!r}, which is neither a Panda nor an FR3 "
+        f"({', '.join(FRANKA_ARMS)}); coassist has no kinematics for it"
+    )
 
 
 def _franky():
@@ -151,9 +155,18 @@ class FrankaWorld:
     command_space = "joint_velocity"
     realtime = True
 
-    def __init__(self, host: str, *, frequency: float = 125.0, robot: Any = None, arm: str = "panda",
-                 ft_sensor: Any = None, hold_ms: int = 50, link_timeout: float = 0.1,
-                 posture_gain: float = 1.0) -> None:  # fmt: skip
+    def __init__(
+        self,
+        host: str,
+        *,
+        frequency: float = 125.0,
+        robot: Any = None,
+        arm: str = "panda",
+        ft_sensor: Any = None,
+        hold_ms: int = 50,
+        link_timeout: float = 0.1,
+        posture_gain: float = 1.0,
+    ) -> None:
         if not isinstance(host, str) or not host:
             raise ValueError(f"host must be the robot's FCI address, got {host!r}")
         if not isinstance(frequency, (int, float)) or not 0.0 < frequency <= 1000.0:
@@ -189,8 +202,10 @@ class FrankaWorld:
             try:  # never bound to a local: a refused robot must not outlive this call in a traceback's frame
                 self.robot = self._fr.Robot(host, realtime_config=self._fr.RealtimeConfig.Ignore)
             except Exception as exc:  # franky.NetworkException, IncompatibleVersionException
-                raise FrankaLinkError(f"could not connect to the Franka at {host}: {exc}; check the address, "
-                                      "that FCI is activated in Desk and the joints are unlocked") from exc  # fmt: skip
+                raise FrankaLinkError(
+                    f"could not connect to the Franka at {host}: {exc}; check the address, "
+                    "that FCI is activated in Desk and the joints are unlocked"
+                ) from exc
         else:
             self.robot = robot
         try:
@@ -207,8 +222,10 @@ class FrankaWorld:
         if reported is not None and reported[0] != arm:
             model, name = reported
             label = {"fr3": "Franka Research 3", "panda": "Panda"}[model]
-            raise ValueError(f"the Franka at {host} is a {label} (the model it reports is {name!r}), not a {arm}: "
-                             f"pass --robot {model}")  # fmt: skip
+            raise ValueError(
+                f"the Franka at {host} is a {label} (the model it reports is {name!r}), not a {arm}: "
+                f"pass --robot {model}"
+            )
         state = self._state()
         # the TCP is libfranka's end effector: flange -> EE as set in Desk (F_T_EE)
         F_T_EE = pose_from_franka(state.F_T_EE)
@@ -219,8 +236,10 @@ class FrankaWorld:
         outside = np.flatnonzero((q0 < lim[:, 0]) | (q0 > lim[:, 1]))
         if outside.size:  # an FR3 told it is a Panda, or the other way round
             i = int(outside[0])
-            raise ValueError(f"the Franka at {host} has joint {i + 1} at {q0[i]:.4f} rad, outside the {self.arm.name}'s "
-                             f"range [{lim[i, 0]}, {lim[i, 1]}]; is --robot the arm it is ({', '.join(FRANKA_ARMS)})?")  # fmt: skip
+            raise ValueError(
+                f"the Franka at {host} has joint {i + 1} at {q0[i]:.4f} rad, outside the {self.arm.name}'s "
+                f"range [{lim[i, 0]}, {lim[i, 1]}]; is --robot the arm it is ({', '.join(FRANKA_ARMS)})?"
+            )
         self._vmax = np.array(self.arm.joint_velocity_limit, dtype=float)
         self.tcp_offset_pose = F_T_EE
         self.posture_gain = posture_gain
@@ -284,14 +303,27 @@ class FrankaWorld:
         user_stop = mode == self._fr.RobotMode.UserStopped
         errors = s.current_errors
         # franky's Errors: 41 flags, libfranka's error list (a reflex sets one; its bool is always True)
-        reflex = mode == self._fr.RobotMode.Reflex or any(errors.__getstate__()) or (
-            self.stop_detail is not None and not user_stop)  # fmt: skip
+        reflex = (
+            mode == self._fr.RobotMode.Reflex
+            or any(errors.__getstate__())
+            or (self.stop_detail is not None and not user_stop)
+        )
         if reflex and self.stop_detail is None:
             self.stop_detail = f"the Franka stopped with a reflex ({errors!r}): {REFLEX_NEXT}"
         if user_stop and self.stop_detail is None:
             self.stop_detail = f"the Franka's user stop is pressed: {USER_STOP_NEXT}"
-        return RobotState(t=t, q=q, qd=qd, tool_pose=pose, tool_twist=twist, wrench=wrench, sensor_rotation=R,
-                          wrench_seq=int(seq), protective_stop=bool(reflex), emergency_stop=bool(user_stop))  # fmt: skip
+        return RobotState(
+            t=t,
+            q=q,
+            qd=qd,
+            tool_pose=pose,
+            tool_twist=twist,
+            wrench=wrench,
+            sensor_rotation=R,
+            wrench_seq=int(seq),
+            protective_stop=bool(reflex),
+            emergency_stop=bool(user_stop),
+        )
 
     def _read_sensor(self) -> tuple[np.ndarray, np.ndarray, int]:
         """The external F/T sensor's (wrench, R, seq); a sensor that raises (a read timeout, a
@@ -307,8 +339,11 @@ class FrankaWorld:
             self.sensor_errors += 1
             self.last_sensor_error = f"{type(exc).__name__}: {exc}"
             if self.sensor_errors == 1 or self.sensor_errors % 1000 == 0:
-                log.warning("the F/T sensor's read() failed (%s; %d so far): NaN wrench, the arm brakes",
-                            self.last_sensor_error, self.sensor_errors)  # fmt: skip
+                log.warning(
+                    "the F/T sensor's read() failed (%s; %d so far): NaN wrench, the arm brakes",
+                    self.last_sensor_error,
+                    self.sensor_errors,
+                )
             return np.full(6, np.nan), np.eye(3), self._sensor_seq
 
     def apply(self, command: Command) -> None:
@@ -318,8 +353,13 @@ class FrankaWorld:
         self.last_overrun = 0.0  # reported by read() for the tick it returns (the loop checks it there)
         self._applied = True
         qd = None if command.qd is None else np.asarray(command.qd, dtype=float)
-        if command.stop or self.stop_detail is not None or qd is None or qd.shape != (self.n_joints,) \
-                or not np.isfinite(qd).all():  # fmt: skip
+        if (
+            command.stop
+            or self.stop_detail is not None
+            or qd is None
+            or qd.shape != (self.n_joints,)
+            or not np.isfinite(qd).all()
+        ):
             self._send(np.zeros(self.n_joints))
         else:  # the arm's own speeds: a last guard (the safety layer's limits are lower by default)
             self._send(np.clip(qd, -self._vmax, self._vmax))
@@ -361,8 +401,10 @@ class FrankaWorld:
             return
         try:
             if self._moving:
-                self.robot.move(self._fr.JointVelocityMotion(np.zeros(self.n_joints), duration=self._fr.Duration(10)),
-                                asynchronous=True)  # fmt: skip
+                self.robot.move(
+                    self._fr.JointVelocityMotion(np.zeros(self.n_joints), duration=self._fr.Duration(10)),
+                    asynchronous=True,
+                )
             self.robot.join_motion(2.0)
         except Exception:  # noqa: BLE001 - a reflex or a dead link: the robot brakes on its own
             pass

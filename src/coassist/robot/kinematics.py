@@ -190,9 +190,18 @@ class ArmKinematics:
     array is a fresh copy.
     """
 
-    def __init__(self, urdf_path: Path, tip_frame: str, *, n_joints: int, tcp_offset: ArrayLike,
-                 base_signs: ArrayLike = (1.0, 1.0, 1.0), joint_velocity_limit: ArrayLike,
-                 joint_position_limit: ArrayLike | None = None, locked: tuple[str, ...] = ()) -> None:  # fmt: skip
+    def __init__(
+        self,
+        urdf_path: Path,
+        tip_frame: str,
+        *,
+        n_joints: int,
+        tcp_offset: ArrayLike,
+        base_signs: ArrayLike = (1.0, 1.0, 1.0),
+        joint_velocity_limit: ArrayLike,
+        joint_position_limit: ArrayLike | None = None,
+        locked: tuple[str, ...] = (),
+    ) -> None:
         self.tcp_offset = _check_tcp_offset(tcp_offset)
         pin = _import_pinocchio()
         self._pin = pin
@@ -349,9 +358,15 @@ class UR5Kinematics(ArmKinematics):
 
     def __init__(self, tcp_offset: ArrayLike = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)) -> None:
         arm = ARMS["ur5"]
-        super().__init__(ur5_urdf_path(), arm.tip_frame, n_joints=6, tcp_offset=tcp_offset, base_signs=arm.base_signs,
-                         joint_velocity_limit=arm.joint_velocity_limit,
-                         joint_position_limit=arm.joint_position_limit)  # fmt: skip
+        super().__init__(
+            ur5_urdf_path(),
+            arm.tip_frame,
+            n_joints=6,
+            tcp_offset=tcp_offset,
+            base_signs=arm.base_signs,
+            joint_velocity_limit=arm.joint_velocity_limit,
+            joint_position_limit=arm.joint_position_limit,
+        )
 
     def __repr__(self) -> str:
         return f"UR5Kinematics(tcp_offset={self.tcp_offset.tolist()})"

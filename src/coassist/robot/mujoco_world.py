@@ -56,8 +56,16 @@ from coassist.robot.worlds import WorldRequest
 from coassist.runtime.world import Command, HandOperator, RobotState
 from coassist.spatial import _rotation_vector, rotation_vector  # rotation_vector: re-exported
 
-__all__ = ["DEFAULT_START", "FTSensorModel", "MujocoArmWorld", "MujocoUR5World", "TOOL_DOWN", "build_world",
-           "rotation_vector", "tool_down_ik"]  # fmt: skip
+__all__ = [
+    "DEFAULT_START",
+    "FTSensorModel",
+    "MujocoArmWorld",
+    "MujocoUR5World",
+    "TOOL_DOWN",
+    "build_world",
+    "rotation_vector",
+    "tool_down_ik",
+]
 
 #: The default start TCP position [m] (base frame): the tasks' START at 0.2 m height.
 DEFAULT_START = (-0.10, -0.615, 0.20)
@@ -144,8 +152,9 @@ def tool_down_ik(model: mujoco.MjModel, position, q_seed=None, *, site: str = "t
         mujoco.mj_kinematics(model, d)
         mujoco.mj_comPos(model, d)
         Re = TOOL_DOWN @ d.site_xmat[sid].reshape(3, 3).T
-        e = np.concatenate([p - d.site_xpos[sid], 0.5 * np.array(
-            [Re[2, 1] - Re[1, 2], Re[0, 2] - Re[2, 0], Re[1, 0] - Re[0, 1]])])
+        e = np.concatenate(
+            [p - d.site_xpos[sid], 0.5 * np.array([Re[2, 1] - Re[1, 2], Re[0, 2] - Re[2, 0], Re[1, 0] - Re[0, 1]])]
+        )
         if float(np.linalg.norm(e)) < 1e-12:
             break
         mujoco.mj_jacSite(model, d, jp, jr, sid)
@@ -273,7 +282,12 @@ class MujocoArmWorld:
         self.realtime = bool(realtime)
         self.servo_bandwidth = bandwidth
         self.model = build_arm_model(
-            arm.name, tool, physics_dt=physics_dt, servo_time_constant=tau, tcp_offset=tcp_offset, gravity=gravity,
+            arm.name,
+            tool,
+            physics_dt=physics_dt,
+            servo_time_constant=tau,
+            tcp_offset=tcp_offset,
+            gravity=gravity,
         )
         self.data = mujoco.MjData(self.model)
         m = self.model
@@ -388,10 +402,12 @@ class MujocoArmWorld:
 
     def _sample(self) -> np.ndarray:
         """A new sensor sample from MuJoCo's sensors (sign, bias, noise, saturation)."""
-        raw = np.concatenate((
-            self._sensordata[self._force_adr:self._force_adr + 3],
-            self._sensordata[self._torque_adr:self._torque_adr + 3],
-        ))
+        raw = np.concatenate(
+            (
+                self._sensordata[self._force_adr : self._force_adr + 3],
+                self._sensordata[self._torque_adr : self._torque_adr + 3],
+            )
+        )
         raw *= _MUJOCO_TO_COASSIST
         raw += self._bias
         noise = self._rng.standard_normal(6)
@@ -586,5 +602,11 @@ def build_world(request: WorldRequest) -> MujocoArmWorld:
     """The ``mujoco`` world of :data:`coassist.robot.worlds.WORLDS`: ``request.robot`` in MuJoCo with
     the TCP at ``request.start``, paced to the wall clock when ``request.realtime``."""
     return (MujocoUR5World if request.robot == "ur5" else MujocoArmWorld)(
-        request.object, robot=request.robot, control_dt=1.0 / request.rate_hz, start=request.start, seed=request.seed,
-        view=request.view, realtime=request.realtime)
+        request.object,
+        robot=request.robot,
+        control_dt=1.0 / request.rate_hz,
+        start=request.start,
+        seed=request.seed,
+        view=request.view,
+        realtime=request.realtime,
+    )

@@ -39,7 +39,9 @@ __all__ = ["CommandWatchdog", "WatchdogConfig"]
 
 log = logging.getLogger(__name__)
 
-_INSTALL_HINT = "coassist ros2-watchdog needs the ros2 extra (rclpy and the message packages): pip install 'coassist[ros2]'"
+_INSTALL_HINT = (
+    "coassist ros2-watchdog needs the ros2 extra (rclpy and the message packages): pip install 'coassist[ros2]'"
+)
 
 
 @dataclass(frozen=True)
@@ -83,8 +85,9 @@ class WatchdogConfig:
                 raise bad(name, f"a number of seconds in (0, {top:g}]")
         if self.period > self.timeout:
             raise bad("period", f"at most the timeout ({self.timeout:g} s)")
-        if self.domain_id is not None and (isinstance(self.domain_id, bool) or not isinstance(self.domain_id, int)
-                                           or not 0 <= self.domain_id <= 232):  # fmt: skip
+        if self.domain_id is not None and (
+            isinstance(self.domain_id, bool) or not isinstance(self.domain_id, int) or not 0 <= self.domain_id <= 232
+        ):
             raise bad("domain_id", "None or an int in 0 … 232")
 
 
@@ -169,8 +172,11 @@ class CommandWatchdog:
                 return
             if not self._quiet:
                 self.timeouts += 1
-                log.warning("CommandWatchdog: no command on %s for %g s: zero velocities sent",
-                            self.config.input_topic, self.config.timeout)  # fmt: skip
+                log.warning(
+                    "CommandWatchdog: no command on %s for %g s: zero velocities sent",
+                    self.config.input_topic,
+                    self.config.timeout,
+                )
             self._quiet = True
             if self.forwarded:  # nothing to stop before the first command
                 self.zeros_sent += 1
@@ -187,8 +193,11 @@ class CommandWatchdog:
         thread = getattr(self, "_thread", None)
         if thread is not None:
             thread.join(timeout=2.0)
-        for step in (lambda: self._executor.shutdown(timeout_sec=1.0), lambda: self.node.destroy_node(),
-                     lambda: self._rclpy.shutdown(context=self._context)):  # fmt: skip
+        for step in (
+            lambda: self._executor.shutdown(timeout_sec=1.0),
+            lambda: self.node.destroy_node(),
+            lambda: self._rclpy.shutdown(context=self._context),
+        ):
             try:
                 step()
             except Exception:  # noqa: BLE001 - partly built, or already shut down

@@ -100,13 +100,28 @@ from coassist.robot.worlds import WorldRequest
 from coassist.runtime.world import Command, RobotLinkError, RobotState
 from coassist.spatial import quaternion_from_rotation_vector, rotation_matrix, rotation_vector
 
-__all__ = ["MAX_STALE_AFTER", "MAX_TCP_OFFSET", "UR_JOINT_NAMES", "Ros2Config", "Ros2InputError", "Ros2World", "build_world",
-           "resolve_topic"]
+__all__ = [
+    "MAX_STALE_AFTER",
+    "MAX_TCP_OFFSET",
+    "UR_JOINT_NAMES",
+    "Ros2Config",
+    "Ros2InputError",
+    "Ros2World",
+    "build_world",
+    "resolve_topic",
+]
 
 log = logging.getLogger(__name__)
 
 #: The UR arms' joint names (ur_description), in kinematic order.
-UR_JOINT_NAMES = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint")
+UR_JOINT_NAMES = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
 _INSTALL_HINT = "coassist ros2 needs the ros2 extra (rclpy and the message packages): pip install 'coassist[ros2]'"
 #: [s] the longest ``stale_after``: the stop on a lost link. At the 0.25 m/s tool speed a silent
 #: driver lets the tool go at most 125 mm before the arm stops; beyond it the stop is no stop.
@@ -216,9 +231,12 @@ class Ros2Config:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise bad(name, "a finite number > 0")
         if self.stale_after > MAX_STALE_AFTER:
-            raise bad("stale_after", f"at most {MAX_STALE_AFTER:g} s (the stop on a lost link; longer is no stop at all)")
-        if self.domain_id is not None and (isinstance(self.domain_id, bool) or not isinstance(self.domain_id, int)
-                                           or not 0 <= self.domain_id <= 232):  # fmt: skip
+            raise bad(
+                "stale_after", f"at most {MAX_STALE_AFTER:g} s (the stop on a lost link; longer is no stop at all)"
+            )
+        if self.domain_id is not None and (
+            isinstance(self.domain_id, bool) or not isinstance(self.domain_id, int) or not 0 <= self.domain_id <= 232
+        ):
             raise bad("domain_id", "None or an int in 0 … 232")
         off = np.asarray(self.tcp_offset, dtype=float) if _numbers(self.tcp_offset) else None
         if off is None or off.shape != (6,) or not np.isfinite(off).all():
@@ -245,8 +263,10 @@ class Ros2Config:
         for name in roles:
             full = resolve_topic(getattr(self, name), self.node_name, self.namespace)
             if full in seen:
-                raise ValueError(f"Ros2Config.{name} {getattr(self, name)!r} is {full}, the topic of "
-                                 f"Ros2Config.{seen[full]} too: give each its own topic")  # fmt: skip
+                raise ValueError(
+                    f"Ros2Config.{name} {getattr(self, name)!r} is {full}, the topic of "
+                    f"Ros2Config.{seen[full]} too: give each its own topic"
+                )
             seen[full] = name
 
     @property
@@ -255,8 +275,16 @@ class Ros2Config:
 
 
 #: The topic fields, inputs first (an error names the later of two that clash).
-_TOPIC_FIELDS = ("wrench_topic", "joint_state_topic", "command_topic", "tool_pose_topic", "prediction_topic",
-                 "alpha_topic", "hand_force_topic", "diagnostics_topic")  # fmt: skip
+_TOPIC_FIELDS = (
+    "wrench_topic",
+    "joint_state_topic",
+    "command_topic",
+    "tool_pose_topic",
+    "prediction_topic",
+    "alpha_topic",
+    "hand_force_topic",
+    "diagnostics_topic",
+)
 
 
 def resolve_topic(name: str, node_name: str, namespace: str = "") -> str:
@@ -338,8 +366,14 @@ class Ros2World:
         self.rejected_commands = 0
         self._kin = UR5Kinematics(tcp_offset=self.tcp_offset_pose)
         self._R_offset = rotation_matrix(self.tcp_offset_pose[3:])
-        self._msg = {"PoseStamped": PoseStamped, "WrenchStamped": WrenchStamped, "Path": Path, "Float64": Float64,
-                     "Float64MultiArray": Float64MultiArray, "DiagnosticArray": DiagnosticArray}  # fmt: skip
+        self._msg = {
+            "PoseStamped": PoseStamped,
+            "WrenchStamped": WrenchStamped,
+            "Path": Path,
+            "Float64": Float64,
+            "Float64MultiArray": Float64MultiArray,
+            "DiagnosticArray": DiagnosticArray,
+        }
         self._cond = threading.Condition()
         self._js: tuple[int, np.ndarray, np.ndarray, float] | None = None  # stamp ns, q, qd, receive time
         self._wr: tuple[int, np.ndarray, float, bool] | None = None  # stamp ns, wrench, receive time, in base
@@ -366,19 +400,29 @@ class Ros2World:
         rclpy.init(**init_args)
         try:
             self.node = rclpy.create_node(config.node_name, namespace=config.namespace or None, context=self._context)
-            sensor_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5, reliability=ReliabilityPolicy.RELIABLE) \
-                if config.sensor_reliable else qos_profile_sensor_data  # fmt: skip
+            sensor_qos = (
+                QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5, reliability=ReliabilityPolicy.RELIABLE)
+                if config.sensor_reliable
+                else qos_profile_sensor_data
+            )
             self.node.create_subscription(JointState, config.joint_state_topic, self._on_joint_state, sensor_qos)
             self.node.create_subscription(WrenchStamped, config.wrench_topic, self._on_wrench, sensor_qos)
-            cmd_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=config.command_depth, reliability=ReliabilityPolicy.RELIABLE)
+            cmd_qos = QoSProfile(
+                history=HistoryPolicy.KEEP_LAST, depth=config.command_depth, reliability=ReliabilityPolicy.RELIABLE
+            )
             self._cmd_pub = self.node.create_publisher(Float64MultiArray, config.command_topic, cmd_qos)
             mon_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE)
             self._pubs = {
                 name: self.node.create_publisher(kind, getattr(config, f"{name}_topic"), mon_qos)
-                for name, kind in (("tool_pose", PoseStamped), ("prediction", Path), ("alpha", Float64),
-                                   ("hand_force", WrenchStamped), ("diagnostics", DiagnosticArray))
+                for name, kind in (
+                    ("tool_pose", PoseStamped),
+                    ("prediction", Path),
+                    ("alpha", Float64),
+                    ("hand_force", WrenchStamped),
+                    ("diagnostics", DiagnosticArray),
+                )
                 if getattr(config, f"{name}_topic")
-            }  # fmt: skip
+            }
             self._executor = SingleThreadedExecutor(context=self._context)
             self._executor.add_node(self.node)
             self._spinning = True
@@ -406,7 +450,9 @@ class Ros2World:
         n = self._refused.get(topic, (0, ""))[0] + 1
         self._refused[topic] = (n, why)
         if self.rejected_messages == 1 or self.rejected_messages % 1000 == 0:
-            log.warning("Ros2World: dropped a message on %s: %s (%d dropped so far)", topic, why, self.rejected_messages)
+            log.warning(
+                "Ros2World: dropped a message on %s: %s (%d dropped so far)", topic, why, self.rejected_messages
+            )
 
     def _why_silent(self, topic: str) -> str:
         """What was wrong with the messages of ``topic`` since its last good one ("" if none came)."""
@@ -429,8 +475,11 @@ class Ros2World:
         pos = np.asarray(msg.position, dtype=float)
         vel = np.asarray(msg.velocity, dtype=float)
         if pos.shape != (len(names),) or vel.shape != (len(names),):
-            self._reject(topic, f"a joint state needs one position and one velocity per name ({len(names)} names, "
-                                f"{pos.size} positions, {vel.size} velocities)")  # fmt: skip
+            self._reject(
+                topic,
+                f"a joint state needs one position and one velocity per name ({len(names)} names, "
+                f"{pos.size} positions, {vel.size} velocities)",
+            )
             return
         q, qd = pos[idx], vel[idx]
         if not (np.isfinite(q).all() and np.isfinite(qd).all()):
@@ -449,8 +498,11 @@ class Ros2World:
         (a driver that does not stamp) or older than the newest (a late message) is refused; the same
         stamp again (a driver repeating its last sample) is no news, but counts as a sign of life."""
         if stamp <= 0:
-            self._reject(topic, "header stamp 0: the driver does not stamp its messages, and coassist orders and "
-                                "ages them by their stamp")  # fmt: skip
+            self._reject(
+                topic,
+                "header stamp 0: the driver does not stamp its messages, and coassist orders and "
+                "ages them by their stamp",
+            )
             return False
         if newest is not None and stamp < newest:
             self._reject(topic, f"a late message, stamped {(newest - stamp) * 1e-9:.3f} s before the newest")
@@ -467,7 +519,8 @@ class Ros2World:
                     self._input_error = (
                         f"the wrench on {topic} is in frame {frame!r}, not the sensor's ({c.wrench_frame!r}, "
                         f"--wrench-frame) or the base ({c.base_frame!r}, --base-frame): coassist cannot rotate it "
-                        "into the base frame; publish it in one of these, or name the sensor's frame")  # fmt: skip
+                        "into the base frame; publish it in one of these, or name the sensor's frame"
+                    )
                 self._cond.notify_all()
             return
         f, tq = msg.wrench.force, msg.wrench.torque
@@ -548,7 +601,8 @@ class Ros2World:
                 why = self._why_silent(topic)
                 raise RobotLinkError(
                     f"no new message on {topic} for {now - rx:.3f} s (stale_after {c.stale_after:g} s)"
-                    + (f": {why}" if why else "") + "; the arm is stopped. Check the driver and the network, then rerun."
+                    + (f": {why}" if why else "")
+                    + "; the arm is stopped. Check the driver and the network, then rerun."
                 )
         self._state_rx = min(js_rx, wr_rx)
         self._used_js, self._used_wr = js_stamp, wr_stamp
@@ -566,8 +620,16 @@ class Ros2World:
         R_sensor = R @ self._R_offset.T  # the flange's orientation: the sensor frame's axes in the base frame
         if wr_in_base:  # stamped in the base frame: into the sensor frame, where the bias and the payload live
             w = np.concatenate([R_sensor.T @ w[:3], R_sensor.T @ w[3:]])
-        return RobotState(t=t, q=q.copy(), qd=qd.copy(), tool_pose=pose, tool_twist=twist, wrench=w.copy(),
-                          sensor_rotation=R_sensor, wrench_seq=seq)  # fmt: skip
+        return RobotState(
+            t=t,
+            q=q.copy(),
+            qd=qd.copy(),
+            tool_pose=pose,
+            tool_twist=twist,
+            wrench=w.copy(),
+            sensor_rotation=R_sensor,
+            wrench_seq=seq,
+        )
 
     def _publish_command(self, qd: Sequence[float]) -> None:
         msg = self._msg["Float64MultiArray"]()
@@ -634,8 +696,11 @@ class Ros2World:
         thread = getattr(self, "_thread", None)
         if thread is not None:
             thread.join(timeout=2.0)
-        for step in (lambda: self._executor.shutdown(timeout_sec=1.0), lambda: self.node.destroy_node(),
-                     lambda: self._rclpy.shutdown(context=self._context)):  # fmt: skip
+        for step in (
+            lambda: self._executor.shutdown(timeout_sec=1.0),
+            lambda: self.node.destroy_node(),
+            lambda: self._rclpy.shutdown(context=self._context),
+        ):
             try:
                 step()
             except Exception:  # noqa: BLE001 - partly built, or already shut down
@@ -706,7 +771,11 @@ class Ros2World:
             for i in rows:
                 ps = self._msg["PoseStamped"]()
                 ns = t0 + round((i + 1) * self.dt * 1e9)
-                ps.header.stamp.sec, ps.header.stamp.nanosec, ps.header.frame_id = ns // 1_000_000_000, ns % 1_000_000_000, frame
+                ps.header.stamp.sec, ps.header.stamp.nanosec, ps.header.frame_id = (
+                    ns // 1_000_000_000,
+                    ns % 1_000_000_000,
+                    frame,
+                )
                 xyz = pose[:3].copy()
                 xyz[: min(d, 3)] = out.prediction[i, : min(d, 3)]
                 pp = ps.pose
@@ -730,8 +799,12 @@ class Ros2World:
         from coassist.data.trial_mcap import FAULT_STATUS_NAME, fault_level
 
         names = fault_names(flags)
-        status = DiagnosticStatus(level=bytes([fault_level(flags)]), name=FAULT_STATUS_NAME,
-                                  message=", ".join(names) or "ok", hardware_id=self.config.node_name)  # fmt: skip
+        status = DiagnosticStatus(
+            level=bytes([fault_level(flags)]),
+            name=FAULT_STATUS_NAME,
+            message=", ".join(names) or "ok",
+            hardware_id=self.config.node_name,
+        )
         status.values = [KeyValue(key="flags", value=str(flags))] + [KeyValue(key=n, value="1") for n in names]
         arr = self._msg["DiagnosticArray"]()
         arr.header.stamp, arr.status = stamp, [status]

@@ -252,7 +252,9 @@ class URRTDEWorld:
             raise ValueError(f"host must be the robot's IP address or host name, got {host!r}")
         frequency = _check_number(frequency, "frequency", positive=False)
         if frequency != -1.0 and not 0.0 < frequency <= _MAX_FREQUENCY:
-            raise ValueError(f"frequency must be -1 (let ur-rtde choose) or in (0, {_MAX_FREQUENCY:g}] Hz, got {frequency!r}")
+            raise ValueError(
+                f"frequency must be -1 (let ur-rtde choose) or in (0, {_MAX_FREQUENCY:g}] Hz, got {frequency!r}"
+            )
         self.acceleration = _check_number(acceleration, "acceleration")
         self.deceleration = _check_number(deceleration, "deceleration")
         self.watchdog_hz = None if watchdog_hz is None else _check_number(watchdog_hz, "watchdog_hz")
@@ -438,7 +440,9 @@ class URRTDEWorld:
         value = self._call_r(name)
         arr = np.asarray(value, dtype=float)
         if arr.shape != (n,):
-            raise RobotLinkError(f"{name} from {self.host} returned {len(arr) if arr.ndim else arr!r} values, expected {n}")
+            raise RobotLinkError(
+                f"{name} from {self.host} returned {len(arr) if arr.ndim else arr!r} values, expected {n}"
+            )
         return arr
 
     def apply(self, command: Command) -> None:

@@ -135,12 +135,47 @@ class WorldEntry:
 
 
 #: The worlds (module docstring), in the order the help lists them.
-WORLDS: Registry[WorldEntry] = Registry("world", {
-    "mujoco": WorldEntry("coassist.robot.mujoco_world:build_world", ("ur5", "panda"), "an arm in MuJoCo physics", simulated=True, host=None, extras=("robot",), source="mujoco"),
-    "ur": WorldEntry("coassist.robot.ur_rtde_world:build_world", ("ur5",), "a real UR5 through ur-rtde", simulated=False, host="the robot's IP address", extras=("robot",), source="ur5"),
-    "franka": WorldEntry("coassist.robot.franka_world:build_world", ("panda", "fr3"), "a Franka Panda/FR3 through franky", simulated=False, host="the robot's FCI address", extras=("franka",), source="franka"),
-    "ros2": WorldEntry("coassist.robot.ros2_world:build_world", ("ur5",), "a UR5 through ros2_control's topics, set by coassist ros2", simulated=False, host=None, extras=("ros2", "robot"), source="ur5"),
-})  # fmt: skip
+WORLDS: Registry[WorldEntry] = Registry(
+    "world",
+    {
+        "mujoco": WorldEntry(
+            "coassist.robot.mujoco_world:build_world",
+            ("ur5", "panda"),
+            "an arm in MuJoCo physics",
+            simulated=True,
+            host=None,
+            extras=("robot",),
+            source="mujoco",
+        ),
+        "ur": WorldEntry(
+            "coassist.robot.ur_rtde_world:build_world",
+            ("ur5",),
+            "a real UR5 through ur-rtde",
+            simulated=False,
+            host="the robot's IP address",
+            extras=("robot",),
+            source="ur5",
+        ),
+        "franka": WorldEntry(
+            "coassist.robot.franka_world:build_world",
+            ("panda", "fr3"),
+            "a Franka Panda/FR3 through franky",
+            simulated=False,
+            host="the robot's FCI address",
+            extras=("franka",),
+            source="franka",
+        ),
+        "ros2": WorldEntry(
+            "coassist.robot.ros2_world:build_world",
+            ("ur5",),
+            "a UR5 through ros2_control's topics, set by coassist ros2",
+            simulated=False,
+            host=None,
+            extras=("ros2", "robot"),
+            source="ur5",
+        ),
+    },
+)
 
 
 def build_world(name: str, request: WorldRequest) -> ArmWorld:

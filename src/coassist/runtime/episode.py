@@ -56,9 +56,19 @@ from coassist.scenario.tasks import Task
 from coassist.spatial import unwrap_rotation_vectors
 
 __all__ = [
-    "ARRIVE_RADIUS", "DWELL", "MIN_LOOKAHEAD", "POINT_MASS_LIMITS", "POINT_MASS_WRENCH", "Episode", "EpisodeLabels",
-    "build_episode", "default_time_limit", "episode_ticks", "plan_grid", "run_episode",
-]  # fmt: skip
+    "ARRIVE_RADIUS",
+    "DWELL",
+    "MIN_LOOKAHEAD",
+    "POINT_MASS_LIMITS",
+    "POINT_MASS_WRENCH",
+    "Episode",
+    "EpisodeLabels",
+    "build_episode",
+    "default_time_limit",
+    "episode_ticks",
+    "plan_grid",
+    "run_episode",
+]
 
 #: [m] the target ball that ends a trial (σ's ε, thesis eq. 5.11).
 ARRIVE_RADIUS = 0.025
@@ -71,8 +81,9 @@ MIN_LOOKAHEAD = 64
 #: carries no payload (the object's mass acts physically): their wrench pipeline only checks
 #: (stale, spike, saturation, non-finite) and neither filters nor shrinks, so the thesis'
 #: loop is kept.
-POINT_MASS_WRENCH = WrenchConfig(cutoff_hz=None, deadband_force=0.0, deadband_torque=0.0, force_range=327.67,
-                                 torque_range=30.0)  # fmt: skip
+POINT_MASS_WRENCH = WrenchConfig(
+    cutoff_hz=None, deadband_force=0.0, deadband_torque=0.0, force_range=327.67, torque_range=30.0
+)
 #: A point-mass world is an ideal admittance robot, not an arm: no joints, and its
 #: simulated operators move up to ~0.4 m/s, so its tool-speed limit is the UR's 1 m/s
 #: (coassist's arm worlds default to 0.25 m/s).
@@ -147,8 +158,9 @@ class Episode:
         """run_loop's arguments, for :func:`~coassist.runtime.lockstep.run_loops` (many episodes in lockstep)."""
         return Loop(self.world, self.tick, self.n_max, self.termination)
 
-    def run(self, *, deadline: float | None = None,
-            on_tick: Callable[[int, RobotState, object], None] | None = None) -> LoopLog:  # fmt: skip
+    def run(
+        self, *, deadline: float | None = None, on_tick: Callable[[int, RobotState, object], None] | None = None
+    ) -> LoopLog:
         """:func:`~coassist.runtime.loop.run_loop` on this episode (``deadline``, ``on_tick``: its own)."""
         return run_loop(self.world, self.tick, self.n_max, self.termination, deadline=deadline, on_tick=on_tick)
 
@@ -186,34 +198,68 @@ class Episode:
             pose[:, 3:6] = unwrap_rotation_vectors(pose[:, 3:6], self.start_pose[3:6])
         labels = self.labels
         meta_extra = self.task.to_extra()
-        meta_extra.update({
-            "ended": log.ended, "stop_message": message, "preset": labels.preset,
-            "arrive_radius": float(self.arrive_radius), "dwell": float(self.dwell), "features": list(FEATURES),
-        })  # fmt: skip
+        meta_extra.update(
+            {
+                "ended": log.ended,
+                "stop_message": message,
+                "preset": labels.preset,
+                "arrive_radius": float(self.arrive_radius),
+                "dwell": float(self.dwell),
+                "features": list(FEATURES),
+            }
+        )
         meta_extra.update(self.extra)
         if extra:
             meta_extra.update(extra)
         if nonfinite:
             meta_extra["nonfinite_rows"] = nonfinite
             meta_extra["log_note"] = (
-                "the log held non-finite values (" + ", ".join(
-                    f"{name}: {v['ticks']} tick(s) from tick {v['first_tick']}" for name, v in nonfinite.items())
-                + "); those rows hold the last finite row and are flagged in the fault column")  # fmt: skip
-        meta = TrialMeta(user=labels.user, task=self.task.kind, object=labels.object, controller=tick.controller.name,
-                         model_id=labels.model_id, seed=labels.seed, source=labels.source, dt=dt, extra=meta_extra)  # fmt: skip
+                "the log held non-finite values ("
+                + ", ".join(
+                    f"{name}: {v['ticks']} tick(s) from tick {v['first_tick']}" for name, v in nonfinite.items()
+                )
+                + "); those rows hold the last finite row and are flagged in the fault column"
+            )
+        meta = TrialMeta(
+            user=labels.user,
+            task=self.task.kind,
+            object=labels.object,
+            controller=tick.controller.name,
+            model_id=labels.model_id,
+            seed=labels.seed,
+            source=labels.source,
+            dt=dt,
+            extra=meta_extra,
+        )
         c = columns
-        return Trial(meta=meta, time=np.arange(n) * dt, pose=pose, velocity=c["velocity"], wrench=c["wrench"],
-                     reference=c["reference"], prediction=pred, intent=intent, effort_h=c["effort_h"],
-                     effort_r=c["effort_r"], fault=fault, joints=c["joints"], joint_velocity=c["joint_velocity"])  # fmt: skip
+        return Trial(
+            meta=meta,
+            time=np.arange(n) * dt,
+            pose=pose,
+            velocity=c["velocity"],
+            wrench=c["wrench"],
+            reference=c["reference"],
+            prediction=pred,
+            intent=intent,
+            effort_h=c["effort_h"],
+            effort_r=c["effort_r"],
+            fault=fault,
+            joints=c["joints"],
+            joint_velocity=c["joint_velocity"],
+        )
 
 
 #: The log's columns that must be finite, and the flag a row held over a non-finite value gets.
 _FINITE_COLUMNS = (
-    ("pose", Fault.NONFINITE_STATE), ("velocity", Fault.NONFINITE_STATE), ("wrench", Fault.NONFINITE_WRENCH),
-    ("reference", Fault.NONFINITE_REFERENCE), ("effort_h", Fault.NONFINITE_WRENCH),
-    ("effort_r", Fault.NONFINITE_EFFORT), ("joints", Fault.NONFINITE_STATE),
+    ("pose", Fault.NONFINITE_STATE),
+    ("velocity", Fault.NONFINITE_STATE),
+    ("wrench", Fault.NONFINITE_WRENCH),
+    ("reference", Fault.NONFINITE_REFERENCE),
+    ("effort_h", Fault.NONFINITE_WRENCH),
+    ("effort_r", Fault.NONFINITE_EFFORT),
+    ("joints", Fault.NONFINITE_STATE),
     ("joint_velocity", Fault.NONFINITE_EFFORT),
-)  # fmt: skip
+)
 
 
 def _hold_nonfinite(log: LoopLog) -> tuple[dict[str, Any], np.ndarray, dict[str, dict[str, int]]]:
@@ -285,26 +331,54 @@ def build_episode(
     tell_obstacles : whether the intent source is told where the task's obstacle is
     (:attr:`TrialContext.obstacles <coassist.interfaces.TrialContext>`); the operator sees it either way.
     """
-    tick = ControlTick(controller, intent, wrench, safety, command_space=world.command_space, kinematics=kinematics,
-                       config=tick_config)  # fmt: skip
+    tick = ControlTick(
+        controller, intent, wrench, safety, command_space=world.command_space, kinematics=kinematics, config=tick_config
+    )
     dt = tick.dt
     start_pose = np.array(start_pose, dtype=float)
     target = np.array(task.target if target is None else target, dtype=float)
     # What the robot is told of the scene, in the plan's frame (worlds move the task by a translation).
     shift = np.asarray(plan[0, :2], dtype=float) - np.asarray(task.start, dtype=float)
-    told = ((tuple(float(c) for c in np.asarray(task.obstacle.center) + shift), tuple(task.obstacle.size)),) if tell_obstacles else ()
-    context = TrialContext(dt=dt, horizon=tick.H, start=start_pose[:2].copy(), target=target.copy(), reference=plan,
-                           task=task.kind, user=labels.user, object=labels.object, true_intent=true_intent,
-                           path=task.path.points + shift, obstacles=told)  # type: ignore[arg-type]  # fmt: skip
+    told = (
+        ((tuple(float(c) for c in np.asarray(task.obstacle.center) + shift), tuple(task.obstacle.size)),)
+        if tell_obstacles
+        else ()
+    )
+    context = TrialContext(
+        dt=dt,
+        horizon=tick.H,
+        start=start_pose[:2].copy(),
+        target=target.copy(),
+        reference=plan,
+        task=task.kind,
+        user=labels.user,
+        object=labels.object,
+        true_intent=true_intent,
+        path=task.path.points + shift,
+        obstacles=told,  # type: ignore[arg-type]
+    )
     tick.reset(Plan(plan, start_pose), context)
     t_done = float(task.planner.end_time) if intent_end_time is None else max(task.planner.end_time, intent_end_time)
     termination = TargetDwell(target, arrive_radius, int(math.ceil(float(dwell) / dt)), int(math.ceil(t_done / dt)))
-    return Episode(world=world, tick=tick, n_max=int(n_max), termination=termination, task=task, plan=plan,
-                   start_pose=start_pose, true_intent=true_intent, log_intent=bool(log_intent), labels=labels, arrive_radius=float(arrive_radius),
-                   dwell=float(dwell), extra=dict(extra or {}))  # fmt: skip
+    return Episode(
+        world=world,
+        tick=tick,
+        n_max=int(n_max),
+        termination=termination,
+        task=task,
+        plan=plan,
+        start_pose=start_pose,
+        true_intent=true_intent,
+        log_intent=bool(log_intent),
+        labels=labels,
+        arrive_radius=float(arrive_radius),
+        dwell=float(dwell),
+        extra=dict(extra or {}),
+    )
 
 
-def run_episode(episode: Episode, *, deadline: float | None = None,
-                on_tick: Callable[[int, RobotState, object], None] | None = None) -> Trial:  # fmt: skip
+def run_episode(
+    episode: Episode, *, deadline: float | None = None, on_tick: Callable[[int, RobotState, object], None] | None = None
+) -> Trial:
     """Run ``episode`` to its end and return it as a Trial: :meth:`Episode.run` then :meth:`Episode.finish`."""
     return episode.finish(episode.run(deadline=deadline, on_tick=on_tick))

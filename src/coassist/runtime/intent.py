@@ -177,7 +177,12 @@ class WindowIntentBatch:
         min(m, horizon), 2), ok (len(rows),) bool: the stage would take its row).
 
         Raises ValueError on an answer that is not such an array (every row would be a fallback)."""
-        if not (isinstance(answer, np.ndarray) and answer.ndim == 3 and answer.shape[0] == rows.size and answer.shape[2] == 2):
+        if not (
+            isinstance(answer, np.ndarray)
+            and answer.ndim == 3
+            and answer.shape[0] == rows.size
+            and answer.shape[2] == 2
+        ):
             raise ValueError("malformed predictions")
         positions = answer[:, : self.horizon]
         ok = (answer.shape[1] >= self._need[rows]) & np.isfinite(positions).all(axis=(1, 2))

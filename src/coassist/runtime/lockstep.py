@@ -68,8 +68,11 @@ class Loop(NamedTuple):
     termination: Termination | None = None
 
 
-def run_loops(episodes: Sequence[Loop], clock: Callable[[], float] = time.perf_counter,
-              on_end: Callable[[int, LoopLog], None] | None = None) -> list[LoopLog]:  # fmt: skip
+def run_loops(
+    episodes: Sequence[Loop],
+    clock: Callable[[], float] = time.perf_counter,
+    on_end: Callable[[int, LoopLog], None] | None = None,
+) -> list[LoopLog]:
     """Run every episode's loop in lockstep (module docstring); their logs, in order.
 
     Each log is what ``run_loop(*episode)`` gives (no deadline, no monitor: simulated
@@ -174,8 +177,14 @@ def shared_controller(tick: ControlTick) -> Any:
     return controller
 
 
-def _step_controllers(runs: list[LoopRun], going: list[int], answers: dict[int, Any], steppers: list[Any],
-                      clock: Callable[[], float], stacks: _Stacks) -> dict[int, Any]:  # fmt: skip
+def _step_controllers(
+    runs: list[LoopRun],
+    going: list[int],
+    answers: dict[int, Any],
+    steppers: list[Any],
+    clock: Callable[[], float],
+    stacks: _Stacks,
+) -> dict[int, Any]:
     """Run i's controller step for this tick, for the runs whose controller is shared: one
     ``step_batch`` per controller (row for row its ``step``, bit for bit), each run charged
     its inputs' time and its share of the call."""
@@ -196,7 +205,9 @@ def _step_controllers(runs: list[LoopRun], going: list[int], answers: dict[int, 
         if len(members) == 1:  # a controller of its own (a drive builds one per run): its step, the same rows
             steps = [controller.step(*rows[0])]
         else:
-            steps = controller.step_batch(*(stacks.stack((id(controller), j), column) for j, column in enumerate(zip(*rows))))
+            steps = controller.step_batch(
+                *(stacks.stack((id(controller), j), column) for j, column in enumerate(zip(*rows)))
+            )
         share = (clock() - t0) / len(members)
         for i, step in zip(members, steps):
             runs[i].charge(share)

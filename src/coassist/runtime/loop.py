@@ -94,7 +94,9 @@ class TargetDwellBatch:
             if not self.accepts(rule):
                 raise ValueError(f"rules[{i}] cannot join a TargetDwellBatch (TargetDwellBatch.accepts is False)")
         self._has_rule = np.array([r is not None for r in rules], dtype=bool)
-        self._target = np.array([(r.tx, r.ty) if r is not None else (0.0, 0.0) for r in rules], dtype=float).reshape(-1, 2)
+        self._target = np.array([(r.tx, r.ty) if r is not None else (0.0, 0.0) for r in rules], dtype=float).reshape(
+            -1, 2
+        )
         self._r2 = np.array([r.r2 if r is not None else 0.0 for r in rules], dtype=float)
         self._dwell_ticks = np.array([r.dwell_ticks if r is not None else 0 for r in rules], dtype=np.intp)
         self._after_tick = np.array([r.after_tick if r is not None else 0 for r in rules], dtype=np.intp)
@@ -197,9 +199,18 @@ class LoopRun:
     whether the run has ended. :meth:`log` gives the :class:`LoopLog`.
     """
 
-    def __init__(self, world: World, tick: ControlTick, n_max: int, termination: Termination | None = None, *,
-                 deadline: float | None = None, on_tick: Callable[[int, RobotState, object], None] | None = None,
-                 clock: Callable[[], float] = time.perf_counter, split: bool = False) -> None:  # fmt: skip
+    def __init__(
+        self,
+        world: World,
+        tick: ControlTick,
+        n_max: int,
+        termination: Termination | None = None,
+        *,
+        deadline: float | None = None,
+        on_tick: Callable[[int, RobotState, object], None] | None = None,
+        clock: Callable[[], float] = time.perf_counter,
+        split: bool = False,
+    ) -> None:
         self.split = bool(split)
         self.world, self.tick, self.n_max, self.termination = world, tick, int(n_max), termination
         self.deadline, self.on_tick, self.clock = deadline, on_tick, clock
@@ -239,7 +250,9 @@ class LoopRun:
         try:
             row = self.tick.sense(k, self._state, upstream)
         except Exception as exc:  # noqa: BLE001 - a bug of a stage: stop, keep what was logged
-            self._failed(k, "internal_error", f"the control tick failed at tick {k} ({_what(exc)}); the arm was stopped")
+            self._failed(
+                k, "internal_error", f"the control tick failed at tick {k} ({_what(exc)}); the arm was stopped"
+            )
             return LINK_LOST
         if self.split:  # other runs' work follows: time this part alone
             self._spent = self.clock() - self._t0
@@ -260,7 +273,9 @@ class LoopRun:
             t1 = self.clock() if self.split else self._t0
             out = self.tick.decide(intent) if control is None else self.tick.finish(control)
         except Exception as exc:  # noqa: BLE001 - a bug of a stage: stop, keep what was logged
-            self._failed(k, "internal_error", f"the control tick failed at tick {k} ({_what(exc)}); the arm was stopped")
+            self._failed(
+                k, "internal_error", f"the control tick failed at tick {k} ({_what(exc)}); the arm was stopped"
+            )
             return True
         # read → command (the intent included); apply() simulates or waits for the period
         spent = self.clock() - t1 + (self._spent if self.split else 0.0)
@@ -298,8 +313,11 @@ class LoopRun:
             try:
                 self.on_tick(k, state, out)
             except Exception as exc:  # noqa: BLE001 - a monitor's failure stops the run, not the process
-                self._failed(k + 1, "internal_error",
-                             f"the monitor (on_tick) failed at tick {k} ({_what(exc)}); the arm was stopped")  # fmt: skip
+                self._failed(
+                    k + 1,
+                    "internal_error",
+                    f"the monitor (on_tick) failed at tick {k} ({_what(exc)}); the arm was stopped",
+                )
                 return True
         if out.command.stop:
             self.n = k + 1
@@ -322,12 +340,18 @@ class LoopRun:
     def _world_failed(self, k: int, exc: Exception, where: str) -> None:
         """The world's ``read`` or ``apply`` of tick k raised: end the run with rows 0 … k−1."""
         if isinstance(exc, ConnectionError):  # the robot link dropped
-            self._failed(k, "link_lost", f"the link to the robot was lost ({exc}); check the cable and the robot, then rerun")
+            self._failed(
+                k, "link_lost", f"the link to the robot was lost ({exc}); check the cable and the robot, then rerun"
+            )
         elif isinstance(exc, CoassistError):  # coassist's own words (a refused input): they say what to do
             self._failed(k, "world_error", f"{exc} (at tick {k}; the arm was stopped)")
         else:
-            self._failed(k, "world_error", f"the robot's {where}() failed at tick {k} ({_what(exc)}); the arm was "
-                                           "stopped: check the robot, its sensor and their drivers, then rerun")  # fmt: skip
+            self._failed(
+                k,
+                "world_error",
+                f"the robot's {where}() failed at tick {k} ({_what(exc)}); the arm was "
+                "stopped: check the robot, its sensor and their drivers, then rerun",
+            )
 
     def _failed(self, n: int, ended: str, message: str) -> None:
         """End the run after ``n`` logged rows: stop the world (whatever it says), keep the rows."""
@@ -341,10 +365,18 @@ class LoopRun:
         """The rows logged so far (all of them once the run is over)."""
         n, pred, joints, jvel = self.n, self.pred, self.joints, self.jvel
         return LoopLog(
-            pose=self.pose[:n], velocity=self.vel[:n], wrench=self.wrench[:n], reference=self.ref[:n],
-            prediction=None if pred is None else pred[:n], effort_h=self.eff_h[:n], effort_r=self.eff_r[:n],
-            fault=self.fault[:n], joints=None if joints is None else joints[:n],
-            joint_velocity=None if jvel is None else jvel[:n], compute=self.compute[:n], ended=self.ended,
+            pose=self.pose[:n],
+            velocity=self.vel[:n],
+            wrench=self.wrench[:n],
+            reference=self.ref[:n],
+            prediction=None if pred is None else pred[:n],
+            effort_h=self.eff_h[:n],
+            effort_r=self.eff_r[:n],
+            fault=self.fault[:n],
+            joints=None if joints is None else joints[:n],
+            joint_velocity=None if jvel is None else jvel[:n],
+            compute=self.compute[:n],
+            ended=self.ended,
             message=self.message,
         )
 
@@ -371,8 +403,10 @@ def _stop_message(f: Fault) -> str:
     if f & Fault.ROBOT_EMERGENCY_STOP:
         return "the robot reports an emergency stop: release the e-stop, check the cell, power the arm on, then rerun"
     if f & Fault.ROBOT_PROTECTIVE_STOP:
-        return ("the robot reports a protective stop (its force limit or a collision): clear it on the teach pendant, "
-                "check the workspace, then rerun")  # fmt: skip
+        return (
+            "the robot reports a protective stop (its force limit or a collision): clear it on the teach pendant, "
+            "check the workspace, then rerun"
+        )
     if f & Fault.CONTACT_FORCE_LIMIT:
         return "the hand force exceeded the contact threshold: protective stop by coassist's safety layer"
     reasons = [flag.name for flag in Fault if flag and flag & f and flag.name]

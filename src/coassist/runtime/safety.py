@@ -263,15 +263,21 @@ class SafetyLimits:
                     raise ValueError(f"SafetyLimits.{name} must be 3 finite numbers [m], got {val!r}")
                 box.append(tuple(float(v) for v in a))
             if not all(lo < hi for lo, hi in zip(*box)):
-                raise ValueError(f"SafetyLimits.workspace_upper must exceed workspace_lower on every axis, got {box[0]} and {box[1]}")
+                raise ValueError(
+                    f"SafetyLimits.workspace_upper must exceed workspace_lower on every axis, got {box[0]} and {box[1]}"
+                )
             object.__setattr__(self, "workspace_lower", box[0])
             object.__setattr__(self, "workspace_upper", box[1])
         try:
             wmin = float(self.min_manipulability)
         except (TypeError, ValueError):
-            raise ValueError(f"SafetyLimits.min_manipulability must be a number, got {self.min_manipulability!r}") from None
+            raise ValueError(
+                f"SafetyLimits.min_manipulability must be a number, got {self.min_manipulability!r}"
+            ) from None
         if not math.isfinite(wmin) or wmin < 0:
-            raise ValueError(f"SafetyLimits.min_manipulability must be finite and >= 0, got {self.min_manipulability!r}")
+            raise ValueError(
+                f"SafetyLimits.min_manipulability must be finite and >= 0, got {self.min_manipulability!r}"
+            )
         object.__setattr__(self, "min_manipulability", wmin)
         check_int_at_least(self.max_bad_ticks, "SafetyLimits.max_bad_ticks", 1)
         object.__setattr__(self, "max_bad_ticks", int(self.max_bad_ticks))
@@ -288,7 +294,9 @@ class SafetyLimits:
         jv = self.joint_velocity
         if isinstance(jv, tuple):
             if len(jv) != n_joints:
-                raise ValueError(f"SafetyLimits.joint_velocity has {len(jv)} entries but the robot has {n_joints} joints")
+                raise ValueError(
+                    f"SafetyLimits.joint_velocity has {len(jv)} entries but the robot has {n_joints} joints"
+                )
             return np.array(jv)
         return np.full(n_joints, jv)
 
@@ -402,8 +410,9 @@ class _Bounds:
         self.hi = None if limits.workspace_upper is None else list(limits.workspace_upper)
 
 
-def _violations(b: _Bounds, x: np.ndarray, J: np.ndarray | None, pl: list | None, tol: float,
-                notes: list | None = None) -> int:
+def _violations(
+    b: _Bounds, x: np.ndarray, J: np.ndarray | None, pl: list | None, tol: float, notes: list | None = None
+) -> int:
     """Flags of the velocity sets (true limits + tol) that x violates; J, pl: valid or None.
 
     JOINT_VELOCITY_LIMIT: |x_i| > q̄̇_i; TOOL_SPEED_LIMIT: ‖J_v x‖ > v̄ or ‖J_ω x‖ > ω̄;
@@ -608,8 +617,9 @@ class SafetyLayer:
                 d[name] += 1
 
     # ------------------------------------------------------------------ effort worlds
-    def limit_effort(self, u_r: np.ndarray, v: np.ndarray, hand: np.ndarray, upstream: Fault,
-                     robot_stop: Fault = Fault.NONE) -> tuple[np.ndarray, Fault, bool]:  # fmt: skip
+    def limit_effort(
+        self, u_r: np.ndarray, v: np.ndarray, hand: np.ndarray, upstream: Fault, robot_stop: Fault = Fault.NONE
+    ) -> tuple[np.ndarray, Fault, bool]:
         """The stage for ``effort`` worlds (the point-mass world renders the admittance itself).
 
         u_r : (d,) the robot's effort [N]; v : (≥ 2,) the tool's velocity [m/s] (x-y first);
@@ -725,8 +735,9 @@ class SafetyLayer:
         return np.array(tl), _fault(flags)
 
     # ------------------------------------------------------------------ joint stage
-    def limit_joint_velocity(self, qd, J, pose, hand_wrench, upstream: Fault = Fault.NONE,
-                             robot_stop: Fault = Fault.NONE, measured=None) -> tuple[np.ndarray, Fault, bool]:  # fmt: skip
+    def limit_joint_velocity(
+        self, qd, J, pose, hand_wrench, upstream: Fault = Fault.NONE, robot_stop: Fault = Fault.NONE, measured=None
+    ) -> tuple[np.ndarray, Fault, bool]:
         """The joint velocity command to send: (command (n,) [rad/s], flags, stop).
 
         qd : (n,) the requested joint velocity; J : (6, n) the Jacobian at the measured
@@ -803,8 +814,10 @@ class SafetyLayer:
         flags = ((up or 0) | (rs or 0)) & _ROBOT_STOPS
         if w is not None:
             wl = w.tolist()
-            if (wl[0] * wl[0] + wl[1] * wl[1] + wl[2] * wl[2] > self._f2
-                    or wl[3] * wl[3] + wl[4] * wl[4] + wl[5] * wl[5] > self._t2):
+            if (
+                wl[0] * wl[0] + wl[1] * wl[1] + wl[2] * wl[2] > self._f2
+                or wl[3] * wl[3] + wl[4] * wl[4] + wl[5] * wl[5] > self._t2
+            ):
                 flags |= _CF
         if flags or self._stopped:
             return self._stop(flags)
@@ -827,8 +840,7 @@ class SafetyLayer:
             v = Jm.dot(q).tolist()
             if all(math.isfinite(x) for x in v):  # else J q overflowed: meaningless, a bad tick
                 v0 = v
-        bad = (up is None or rs is None or w is None or q is None or v0 is None or p is None
-               or (up & _BAD) != 0)
+        bad = up is None or rs is None or w is None or q is None or v0 is None or p is None or (up & _BAD) != 0
         pl = None if p is None else p.tolist()
         if bad:
             self.bad_ticks += 1
@@ -940,8 +952,9 @@ class SafetyLayer:
         prev = np.array(self._prev)
 
         def feasible(x: np.ndarray | None) -> bool:
-            return (x is not None and not _violations(b, x, J, pl, _TOL)
-                    and float(np.max(np.abs(x - prev))) <= b.acc + _TOL)
+            return (
+                x is not None and not _violations(b, x, J, pl, _TOL) and float(np.max(np.abs(x - prev))) <= b.acc + _TOL
+            )
 
         # A command sliding along a face whose J moved under it: remove the (tiny)
         # outward tool velocity with the least joint change, keep the rest.

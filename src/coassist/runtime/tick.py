@@ -136,12 +136,12 @@ class TickConfig:
 
     def __post_init__(self) -> None:
         dofs = tuple(self.dofs)
-        if not dofs or len(set(dofs)) != len(dofs) or any(
-            not is_integer(i) or not 0 <= i < 6 for i in dofs
-        ):
+        if not dofs or len(set(dofs)) != len(dofs) or any(not is_integer(i) or not 0 <= i < 6 for i in dofs):
             raise ValueError(f"TickConfig.dofs must be distinct pose indices in 0..5, got {self.dofs!r}")
         if dofs[:2] != (0, 1):
-            raise ValueError(f"TickConfig.dofs must start with x, y (0, 1): the intent predicts the x-y plane, got {dofs!r}")
+            raise ValueError(
+                f"TickConfig.dofs must start with x, y (0, 1): the intent predicts the x-y plane, got {dofs!r}"
+            )
         object.__setattr__(self, "dofs", tuple(int(i) for i in dofs))
         for name in ("position_gain", "hold_gain", "hold_rotation_gain", "dls_threshold", "dls_damping"):
             object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"TickConfig.{name}"))
@@ -223,8 +223,17 @@ class ControlTick:
     config : :class:`TickConfig`.
     """
 
-    def __init__(self, controller: Any, intent: Any, wrench: Any, safety: Any, *, command_space: str,
-                 kinematics: Any = None, config: TickConfig | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        controller: Any,
+        intent: Any,
+        wrench: Any,
+        safety: Any,
+        *,
+        command_space: str,
+        kinematics: Any = None,
+        config: TickConfig | None = None,
+    ) -> None:
         if command_space not in COMMAND_SPACES:
             raise ValueError(f"command_space must be one of {COMMAND_SPACES}, got {command_space!r}")
         self.config = config or TickConfig()
@@ -246,7 +255,9 @@ class ControlTick:
         self._ctrl_trans = [j for j, i in enumerate(self.config.dofs) if i < 3]
         self._ctrl_rot = [j for j, i in enumerate(self.config.dofs) if i >= 3]
         cfg = self.config
-        self._rot_gain = np.array([cfg.position_gain if i in self.config.dofs else cfg.hold_rotation_gain for i in _ROTATION])
+        self._rot_gain = np.array(
+            [cfg.position_gain if i in self.config.dofs else cfg.hold_rotation_gain for i in _ROTATION]
+        )
         self._Ad, self._Bd = np.ascontiguousarray(model.Ad), np.ascontiguousarray(model.Bd)
         self._tw = np.zeros(6)
         self.H = int(controller.horizon)
@@ -286,7 +297,9 @@ class ControlTick:
         self._R_start = _spatial.rotation_matrix(start[3:6])
         self._J = None
         self._inv_dt = 1.0 / self.dt
-        self._last_pose = np.array(start, dtype=np.float64)  # held over a glitch of the state (step()); a buffer of its own
+        self._last_pose = np.array(
+            start, dtype=np.float64
+        )  # held over a glitch of the state (step()); a buffer of its own
         self._last_twist = np.zeros(6)
 
     def references(self) -> TickReferences:
@@ -468,8 +481,9 @@ class ControlTick:
         Jc = J if J is not None else np.zeros((6, self.kinematics.n_joints))
         # after a stall the layer ramps from what the arm measures (it may have braked on its own)
         measured = state.qd if int(upstream) & _DEADLINE_MISS else None
-        qd, lf, stop = self.safety.limit_joint_velocity(qd, Jc, pose, hand, upstream | f, self._robot_stop(state),
-                                                        measured=measured)  # fmt: skip
+        qd, lf, stop = self.safety.limit_joint_velocity(
+            qd, Jc, pose, hand, upstream | f, self._robot_stop(state), measured=measured
+        )
         sf |= lf | f
         twist_cmd = Jc @ qd
         if (sf & _RESET_ADMITTANCE) or bad:

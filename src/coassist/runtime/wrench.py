@@ -77,7 +77,14 @@ from numpy.typing import ArrayLike
 from coassist._checks import check_int, is_real_number
 from coassist.interfaces import Fault
 
-__all__ = ["MEASURED_FROZEN_TIME", "WrenchConfig", "WrenchPipeline", "WrenchPipelineBatch", "WrenchReading", "payload_wrench"]
+__all__ = [
+    "MEASURED_FROZEN_TIME",
+    "WrenchConfig",
+    "WrenchPipeline",
+    "WrenchPipelineBatch",
+    "WrenchReading",
+    "payload_wrench",
+]
 
 log = logging.getLogger(__name__)
 
@@ -629,8 +636,16 @@ class WrenchPipelineBatch:
     def accepts(pipe: object) -> bool:
         """Whether ``pipe`` can join a batch: a :class:`WrenchPipeline` without filter, deadband or
         payload, not zeroing, that has seen no sample yet."""
-        return (type(pipe) is WrenchPipeline and pipe._alpha is None and pipe._db_f == 0.0 and pipe._db_t == 0.0
-                and not pipe._has_payload and pipe._zero_left == 0 and pipe._seq is None and pipe._ref is None)  # fmt: skip
+        return (
+            type(pipe) is WrenchPipeline
+            and pipe._alpha is None
+            and pipe._db_f == 0.0
+            and pipe._db_t == 0.0
+            and not pipe._has_payload
+            and pipe._zero_left == 0
+            and pipe._seq is None
+            and pipe._ref is None
+        )
 
     def __init__(self, pipes: Sequence[WrenchPipeline], rotation: np.ndarray) -> None:
         for i, p in enumerate(pipes):
@@ -647,7 +662,11 @@ class WrenchPipelineBatch:
         self._R = [[float(R[r, c]) for c in range(3)] for r in range(3)]
         self._max_age = f([p._max_age for p in pipes])
         self._frozen_checked = np.array([p._max_frozen is not None for p in pipes], dtype=bool)
-        self._max_f, self._sat_f, self._jump_f = f([p._max_f for p in pipes]), f([p._sat_f for p in pipes]), f([p._jump_f for p in pipes])
+        self._max_f, self._sat_f, self._jump_f = (
+            f([p._max_f for p in pipes]),
+            f([p._sat_f for p in pipes]),
+            f([p._jump_f for p in pipes]),
+        )
         self._bias = f([p._bias for p in pipes]).reshape(B, 6)
         self._seq = np.full(B, -1, dtype=np.int64)  # nothing seen yet (a sensor's counter starts at 0)
         self._seq_t = np.zeros(B)

@@ -41,9 +41,19 @@ class SimulatedHand:
     rotation_stiffness, rotation_damping : [N·m/rad], [N·m·s/rad] of the wrist's hold.
     """
 
-    def __init__(self, arm: OperatorArm, dt: float, start_pose: np.ndarray, *, full_pose: bool = False, offset=(0.0, 0.0),
-                 z_stiffness: float = 300.0, z_damping: float = 30.0, rotation_stiffness: float = 3.0,
-                 rotation_damping: float = 0.3) -> None:  # fmt: skip
+    def __init__(
+        self,
+        arm: OperatorArm,
+        dt: float,
+        start_pose: np.ndarray,
+        *,
+        full_pose: bool = False,
+        offset=(0.0, 0.0),
+        z_stiffness: float = 300.0,
+        z_damping: float = 30.0,
+        rotation_stiffness: float = 3.0,
+        rotation_damping: float = 0.3,
+    ) -> None:
         self.arm = arm
         self.dt = float(dt)
         self.start = np.asarray(start_pose, dtype=float).copy()

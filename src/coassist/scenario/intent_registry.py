@@ -88,13 +88,31 @@ class IntentSourceEntry:
 
 
 #: The named intent sources (module docstring), in the order the help lists them.
-INTENT_SOURCES: Registry[IntentSourceEntry] = Registry("intent source", {
-    "nominal": IntentSourceEntry("coassist.scenario.reference_intents:NominalIntent", "the planner's nominal path (no prediction, eq. 4.7)"),
-    "constant-velocity": IntentSourceEntry("coassist.scenario.constant_velocity:ConstantVelocityIntent", "the tool's constant-velocity extrapolation"),
-    "oracle": IntentSourceEntry("coassist.scenario.reference_intents:OracleIntent", "the simulated operator's true intent", simulation_only=True),
-    "present": IntentSourceEntry("coassist.scenario.path_hypotheses:PathHypothesesIntent", "the present estimate from the hand force", options=(("use_obstacles", False),)),
-    "paths": IntentSourceEntry("coassist.scenario.path_hypotheses:PathHypothesesIntent", "the path hypotheses round the obstacles the robot is told of"),
-})  # fmt: skip
+INTENT_SOURCES: Registry[IntentSourceEntry] = Registry(
+    "intent source",
+    {
+        "nominal": IntentSourceEntry(
+            "coassist.scenario.reference_intents:NominalIntent", "the planner's nominal path (no prediction, eq. 4.7)"
+        ),
+        "constant-velocity": IntentSourceEntry(
+            "coassist.scenario.constant_velocity:ConstantVelocityIntent", "the tool's constant-velocity extrapolation"
+        ),
+        "oracle": IntentSourceEntry(
+            "coassist.scenario.reference_intents:OracleIntent",
+            "the simulated operator's true intent",
+            simulation_only=True,
+        ),
+        "present": IntentSourceEntry(
+            "coassist.scenario.path_hypotheses:PathHypothesesIntent",
+            "the present estimate from the hand force",
+            options=(("use_obstacles", False),),
+        ),
+        "paths": IntentSourceEntry(
+            "coassist.scenario.path_hypotheses:PathHypothesesIntent",
+            "the path hypotheses round the obstacles the robot is told of",
+        ),
+    },
+)
 #: Their names: the sources computed in the tick, with no network to evaluate.
 NAMED_INTENTS: tuple[str, ...] = tuple(INTENT_SOURCES)
 
@@ -124,7 +142,9 @@ def _load_model(folder: str, horizon: int, network: str) -> IntentSource:
     try:
         from coassist.intent import load_model_intent
     except ImportError as exc:
-        raise ValueError(f"intent {folder!r} is a model path, but coassist.intent.load_model_intent is not available ({exc})") from None
+        raise ValueError(
+            f"intent {folder!r} is a model path, but coassist.intent.load_model_intent is not available ({exc})"
+        ) from None
     try:
         return load_model_intent(folder, backend=network)
     except (OSError, ValueError) as exc:  # missing folder, bad sidecar, features or dt that do not match
@@ -133,10 +153,17 @@ def _load_model(folder: str, horizon: int, network: str) -> IntentSource:
 
 #: The kinds of folder ``--intent`` may name, the first whose marker a folder holds wins; a
 #: string that is neither a name nor such a folder is tried as a model (its loader says why not).
-INTENT_FOLDERS: Registry[IntentFolderKind] = Registry("intent folder kind", {
-    "path-hypotheses": IntentFolderKind("path-hypotheses.json", "a path-hypotheses calibration folder", _load_calibration, network=False),
-    "model": IntentFolderKind("model.json", "a model folder (coassist train)", _load_model, network=True),  # intent.model.SIDECAR
-})  # fmt: skip
+INTENT_FOLDERS: Registry[IntentFolderKind] = Registry(
+    "intent folder kind",
+    {
+        "path-hypotheses": IntentFolderKind(
+            "path-hypotheses.json", "a path-hypotheses calibration folder", _load_calibration, network=False
+        ),
+        "model": IntentFolderKind(
+            "model.json", "a model folder (coassist train)", _load_model, network=True
+        ),  # intent.model.SIDECAR
+    },
+)
 
 
 def intent_folder_kind(spec: str) -> str | None:
@@ -201,8 +228,9 @@ def load_intent_source(spec: str, horizon: int = 50, network: str = "auto") -> I
     return INTENT_FOLDERS[intent_folder_kind(spec) or "model"].load(spec, horizon, network)
 
 
-def shared_intent_source(spec: str, horizon: int, cache: dict[tuple[str, int, str], IntentSource] | None,
-                         network: str = "auto") -> IntentSource:  # fmt: skip
+def shared_intent_source(
+    spec: str, horizon: int, cache: dict[tuple[str, int, str], IntentSource] | None, network: str = "auto"
+) -> IntentSource:
     """:func:`load_intent_source` through ``cache`` ((spec, horizon, network) → source), for runs in
     lockstep: a source with a ``batcher`` (a loaded model: stateless) is loaded once and
     shared, so one network call per tick serves every run; the others keep per-run state

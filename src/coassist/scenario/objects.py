@@ -119,9 +119,13 @@ class CarriedObject:
 
     def to_extra(self) -> dict:
         return {
-            "name": self.name, "mass": self.mass, "size": list(self.size),
-            "grasp_offset": list(self.grasp_offset), "center_offset": list(self.center_offset),
-            "yaw_stiffness": self.yaw_stiffness, "yaw_damping": self.yaw_damping,
+            "name": self.name,
+            "mass": self.mass,
+            "size": list(self.size),
+            "grasp_offset": list(self.grasp_offset),
+            "center_offset": list(self.center_offset),
+            "yaw_stiffness": self.yaw_stiffness,
+            "yaw_damping": self.yaw_damping,
         }
 
 
@@ -142,8 +146,13 @@ OBJECTS: dict[str, CarriedObject] = {
     # operator stands in front of the robot). Cup torsion: a soft rubber cup,
     # k_θ = 150 N·m/rad, lightly damped.
     "board": CarriedObject(
-        "board", mass=_BOARD_MASS, size=(1.06, 0.82), grasp_offset=(0.0, -0.61), center_offset=(0.0, -0.20),
-        yaw_stiffness=150.0, yaw_damping=8.0,
+        "board",
+        mass=_BOARD_MASS,
+        size=(1.06, 0.82),
+        grasp_offset=(0.0, -0.61),
+        center_offset=(0.0, -0.20),
+        yaw_stiffness=150.0,
+        yaw_damping=8.0,
     ),
     # Lumped weights 18 × 15.5 × 5 cm held at their centre: mass only, no lever arm.
     "heavy": CarriedObject("heavy", mass=_HEAVY_MASS, size=(0.18, 0.155)),

@@ -127,15 +127,23 @@ class OperatorProfile:
         if not isinstance(self.name, str) or not self.name:
             raise ValueError(f"OperatorProfile.name must be a non-empty string, got {self.name!r}")
         for name, lo, hi, lo_open in (
-            ("stiffness_min", 0.0, math.inf, True), ("stiffness_max", 0.0, math.inf, True),
-            ("stiffness_gain", 0.0, math.inf, False), ("adaptation_time", 0.0, math.inf, True),
-            ("damping", 0.0, math.inf, False), ("reaction_delay", 0.0, 1.0, False),
-            ("reflex_share", 0.0, 1.0, False), ("force_limit", 0.0, math.inf, True),
-            ("motor_noise", 0.0, math.inf, False), ("motor_noise_time", 0.0, math.inf, True),
-            ("clearance", 0.0, math.inf, False), ("anticipation", 0.0, math.inf, True),
-            ("pace", 0.0, math.inf, True), ("pace_jitter", 0.0, 0.5, False),
+            ("stiffness_min", 0.0, math.inf, True),
+            ("stiffness_max", 0.0, math.inf, True),
+            ("stiffness_gain", 0.0, math.inf, False),
+            ("adaptation_time", 0.0, math.inf, True),
+            ("damping", 0.0, math.inf, False),
+            ("reaction_delay", 0.0, 1.0, False),
+            ("reflex_share", 0.0, 1.0, False),
+            ("force_limit", 0.0, math.inf, True),
+            ("motor_noise", 0.0, math.inf, False),
+            ("motor_noise_time", 0.0, math.inf, True),
+            ("clearance", 0.0, math.inf, False),
+            ("anticipation", 0.0, math.inf, True),
+            ("pace", 0.0, math.inf, True),
+            ("pace_jitter", 0.0, 0.5, False),
             ("shape_jitter", 0.0, 1.0, False),
-            ("start_delay", 0.0, math.inf, False), ("left_preference", 0.0, 1.0, False),
+            ("start_delay", 0.0, math.inf, False),
+            ("left_preference", 0.0, 1.0, False),
         ):
             object.__setattr__(self, name, _num(getattr(self, name), name, lo, hi, lo_open=lo_open))
         if self.stiffness_max < self.stiffness_min:
@@ -262,8 +270,9 @@ def trial_shape(profile: OperatorProfile, rng: np.random.Generator) -> tuple[flo
     return profile.clearance * float(np.exp(jitter[0])), profile.anticipation * float(np.exp(jitter[1]))
 
 
-def _quintic_to_rest(s0: float, v0: float, a0: float, s1: float, duration: float,
-                     t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _quintic_to_rest(
+    s0: float, v0: float, a0: float, s1: float, duration: float, t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """The minimum-jerk motion from (s0, v0, a0) to (s1, 0, 0) over ``duration`` [s], at times t ≥ 0.
 
     q(t) = s0 + v0 t + a0 t²/2 + c3 t³ + c4 t⁴ + c5 t⁵, with c3…c5 from the three end
@@ -436,8 +445,16 @@ class OperatorArmBatch:
         def column(name: str) -> np.ndarray:
             return np.array([getattr(p, name) for p in profiles], dtype=float)
 
-        self._k_min, self._k_gain, self._k_max = column("stiffness_min"), column("stiffness_gain"), column("stiffness_max")
-        self._reflex, self._damping, self._force_limit = column("reflex_share"), column("damping"), column("force_limit")
+        self._k_min, self._k_gain, self._k_max = (
+            column("stiffness_min"),
+            column("stiffness_gain"),
+            column("stiffness_max"),
+        )
+        self._reflex, self._damping, self._force_limit = (
+            column("reflex_share"),
+            column("damping"),
+            column("force_limit"),
+        )
         self.stiffness = np.array([a.stiffness for a in arms], dtype=float)
 
     def force(self, k: int, rows: np.ndarray, p: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -106,8 +106,11 @@ def _number(value: Any, name: str, lo: float, hi: float = math.inf, *, open_lo: 
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a number, got {value!r}") from None
     if not math.isfinite(v) or v < lo or v > hi or (open_lo and v == lo):
-        raise ValueError(f"{name} must be finite and {'>' if open_lo else '>='} {lo}"
-                         + (f" and <= {hi}" if hi < math.inf else "") + f", got {value!r}")  # fmt: skip
+        raise ValueError(
+            f"{name} must be finite and {'>' if open_lo else '>='} {lo}"
+            + (f" and <= {hi}" if hi < math.inf else "")
+            + f", got {value!r}"
+        )
     return v
 
 
@@ -125,8 +128,9 @@ class PersonShape:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "clearance", _number(self.clearance, "PersonShape.clearance", 0.0, 0.5, open_lo=True))
-        object.__setattr__(self, "anticipation",
-                           _number(self.anticipation, "PersonShape.anticipation", 0.0, 2.0, open_lo=True))  # fmt: skip
+        object.__setattr__(
+            self, "anticipation", _number(self.anticipation, "PersonShape.anticipation", 0.0, 2.0, open_lo=True)
+        )
         lp = _number(self.left_preference, "PersonShape.left_preference", 0.0, 1.0)
         if not 0.0 < lp < 1.0:
             raise ValueError(f"PersonShape.left_preference must be strictly between 0 and 1, got {lp!r}")
@@ -196,15 +200,22 @@ class FilterSettings:
         object.__setattr__(self, "bias_limit", _number(self.bias_limit, "FilterSettings.bias_limit", 0.0))
         object.__setattr__(self, "accel_time", _number(self.accel_time, "FilterSettings.accel_time", 0.0))
         object.__setattr__(self, "blend_time", _number(self.blend_time, "FilterSettings.blend_time", 0.0))
-        object.__setattr__(self, "hedge_velocity", _number(self.hedge_velocity, "FilterSettings.hedge_velocity", 0.0, 1.0))
-        object.__setattr__(self, "search_window",
-                           _number(self.search_window, "FilterSettings.search_window", 0.0, open_lo=True))  # fmt: skip
-        object.__setattr__(self, "evidence_rate", _number(self.evidence_rate, "FilterSettings.evidence_rate", 0.0, open_lo=True))
+        object.__setattr__(
+            self, "hedge_velocity", _number(self.hedge_velocity, "FilterSettings.hedge_velocity", 0.0, 1.0)
+        )
+        object.__setattr__(
+            self, "search_window", _number(self.search_window, "FilterSettings.search_window", 0.0, open_lo=True)
+        )
+        object.__setattr__(
+            self, "evidence_rate", _number(self.evidence_rate, "FilterSettings.evidence_rate", 0.0, open_lo=True)
+        )
         if isinstance(self.shape_grid, (str, bytes)) or not hasattr(self.shape_grid, "__iter__"):
             raise ValueError(f"FilterSettings.shape_grid must be a list of factors > 0, got {self.shape_grid!r}")
         grid = tuple(_number(g, "FilterSettings.shape_grid", 0.0, open_lo=True) for g in self.shape_grid)
         if not grid or list(grid) != sorted(set(grid)):
-            raise ValueError(f"FilterSettings.shape_grid must be distinct factors in increasing order, got {self.shape_grid!r}")
+            raise ValueError(
+                f"FilterSettings.shape_grid must be distinct factors in increasing order, got {self.shape_grid!r}"
+            )
         object.__setattr__(self, "shape_grid", grid)
 
 
@@ -277,15 +288,24 @@ class PathHypothesesIntent:
     #: (the same rows to rounding: tests/scenario/test_path_hypotheses.py).
     shared_fast_path = True
 
-    def __init__(self, horizon: int = 50, *, shapes: Mapping[str, PersonShape] | None = None,
-                 default: PersonShape | None = None, arm: ArmGuess | None = None,
-                 settings: FilterSettings | None = None, use_obstacles: bool = True, model_id: str | None = None,
-                 ) -> None:  # fmt: skip
+    def __init__(
+        self,
+        horizon: int = 50,
+        *,
+        shapes: Mapping[str, PersonShape] | None = None,
+        default: PersonShape | None = None,
+        arm: ArmGuess | None = None,
+        settings: FilterSettings | None = None,
+        use_obstacles: bool = True,
+        model_id: str | None = None,
+    ) -> None:
         self.horizon = check_int(horizon, "PathHypothesesIntent.horizon", 1)
         self.shapes = dict(shapes or {})
         for name, shape in self.shapes.items():
             if not isinstance(shape, PersonShape):
-                raise ValueError(f"PathHypothesesIntent.shapes[{name!r}] must be a PersonShape, got {type(shape).__name__}")
+                raise ValueError(
+                    f"PathHypothesesIntent.shapes[{name!r}] must be a PersonShape, got {type(shape).__name__}"
+                )
         self.default = PersonShape() if default is None else default
         self.arm = ArmGuess() if arm is None else arm
         self.settings = FilterSettings() if settings is None else settings
@@ -322,8 +342,12 @@ class PathHypothesesIntent:
             self._kappa = st.kappa * self.dt / REFERENCE_DT
             self._step_cap = st.evidence_rate * self.dt
             # the nominal sample where the obstacle sits: side evidence stops once the tool is past it
-            self._obstacle_index = int(np.searchsorted(np.cumsum(np.r_[0.0, np.linalg.norm(np.diff(path, axis=0), axis=1)]),
-                                                       _scene_task(path, near).obstacle_arc))
+            self._obstacle_index = int(
+                np.searchsorted(
+                    np.cumsum(np.r_[0.0, np.linalg.norm(np.diff(path, axis=0), axis=1)]),
+                    _scene_task(path, near).obstacle_arc,
+                )
+            )
             self._bias = 0.0
             self._side = 0
             self._mix = 1.0
@@ -357,8 +381,9 @@ class PathHypothesesIntent:
             return present + self._steps[:, None] * v
         return self._filter(self._hyp, p, v, u_h, present)
 
-    def _shared(self, hyp: _Hypotheses, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray,
-                widest: int) -> np.ndarray | None:  # fmt: skip
+    def _shared(
+        self, hyp: _Hypotheses, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray, widest: int
+    ) -> np.ndarray | None:
         """The filter's tick where every curve is the nominal path around the tool and as far as the rows
         reach: one curve's projection stands for all, nothing separates the hypotheses (no side or shape
         evidence), and the rows are that curve's. None where the curves may part within reach."""
@@ -389,7 +414,9 @@ class PathHypothesesIntent:
         hedge = present + (st.hedge_velocity * self._steps)[:, None] * v
         return self._mix * ahead + (1.0 - self._mix) * hedge
 
-    def _filter(self, hyp: _Hypotheses, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray) -> np.ndarray:
+    def _filter(
+        self, hyp: _Hypotheses, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray
+    ) -> np.ndarray:
         st = self.settings
         K, C = self.arm.stiffness, self.arm.damping
         n_curves, n_pts = hyp.points.shape[:2]
@@ -441,6 +468,7 @@ class PathHypothesesIntent:
             if side != self._side and self._side != 0:
                 self._mix = 0.0  # a change of mind goes through the present estimate, not across the obstacle
             self._side = side
+
         # 4. rows
         def along(n: int) -> np.ndarray:
             speed = max(float(tan[n] @ v), 0.0)
@@ -464,7 +492,11 @@ class PathHypothesesIntent:
             # the sides disagree over the horizon: the present estimate alone
             target = 0.0 if float(np.max(np.linalg.norm(ahead - along(cr), axis=1))) >= st.divergence else 1.0
         # cross-fade between the curve's rows and the present estimate's (no step in the robot's effort)
-        self._mix = target if self._mix_step >= 1.0 else min(max(self._mix + np.sign(target - self._mix) * self._mix_step, 0.0), 1.0)
+        self._mix = (
+            target
+            if self._mix_step >= 1.0
+            else min(max(self._mix + np.sign(target - self._mix) * self._mix_step, 0.0), 1.0)
+        )
         if self._mix >= 1.0:
             return ahead
         if self._mix <= 0.0:
@@ -475,8 +507,13 @@ class PathHypothesesIntent:
 # ----------------------------------------------------------------------------- calibration
 
 
-def fit_detour(task: Task, pose: np.ndarray, *, clearances: Sequence[float] | None = None,
-               anticipations: Sequence[float] | None = None) -> tuple[int, float, float]:  # fmt: skip
+def fit_detour(
+    task: Task,
+    pose: np.ndarray,
+    *,
+    clearances: Sequence[float] | None = None,
+    anticipations: Sequence[float] | None = None,
+) -> tuple[int, float, float]:
     """(side, clearance [m], anticipation [m]) of the detour curve nearest a logged tool path.
 
     The side is where the tool passes the obstacle (its offset along the path's normal there);
@@ -522,14 +559,24 @@ def calibrate(fits: Iterable[tuple[int, float, float]]) -> PersonShape:
     return PersonShape(clearance=c, anticipation=a, left_preference=(left + 1) / (len(fits) + 2), trials=len(fits))
 
 
-def write_calibration(folder: str | Path, shapes: Mapping[str, PersonShape], *, arm: ArmGuess | None = None,
-                      settings: FilterSettings | None = None, default: PersonShape | None = None) -> Path:  # fmt: skip
+def write_calibration(
+    folder: str | Path,
+    shapes: Mapping[str, PersonShape],
+    *,
+    arm: ArmGuess | None = None,
+    settings: FilterSettings | None = None,
+    default: PersonShape | None = None,
+) -> Path:
     """Write a ``paths`` source folder (``path-hypotheses.json``, atomically); returns the folder."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    doc = {"format": _FORMAT, "shapes": {k: asdict(v) for k, v in shapes.items()},
-           "default": asdict(default or PersonShape()), "arm": asdict(arm or ArmGuess()),
-           "settings": asdict(settings or FilterSettings())}  # fmt: skip
+    doc = {
+        "format": _FORMAT,
+        "shapes": {k: asdict(v) for k, v in shapes.items()},
+        "default": asdict(default or PersonShape()),
+        "arm": asdict(arm or ArmGuess()),
+        "settings": asdict(settings or FilterSettings()),
+    }
     atomic_write_text(folder / CALIBRATION_FILE, json.dumps(doc, indent=1) + "\n")
     return folder
 
@@ -548,8 +595,13 @@ def read_calibration(folder: str | Path, horizon: int = 50) -> PathHypothesesInt
         settings = dict(doc.get("settings", {}))
         if "shape_grid" in settings:
             settings["shape_grid"] = tuple(settings["shape_grid"])
-        return PathHypothesesIntent(horizon, shapes=shapes, default=PersonShape(**doc.get("default", {})),
-                                    arm=ArmGuess(**doc.get("arm", {})), settings=FilterSettings(**settings),
-                                    model_id=f"paths:{Path(folder).name}")  # fmt: skip
+        return PathHypothesesIntent(
+            horizon,
+            shapes=shapes,
+            default=PersonShape(**doc.get("default", {})),
+            arm=ArmGuess(**doc.get("arm", {})),
+            settings=FilterSettings(**settings),
+            model_id=f"paths:{Path(folder).name}",
+        )
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{path}: {exc}") from None

@@ -117,7 +117,9 @@ class NominalPath:
     def tangent(self, s: np.ndarray | float) -> np.ndarray:
         """Unit tangent(s) at arc length s; shape s.shape + (2,)."""
         s = np.clip(np.asarray(s, dtype=float), 0.0, self.length)
-        t = np.stack([np.interp(s, self.arc, self.tangents[:, 0]), np.interp(s, self.arc, self.tangents[:, 1])], axis=-1)
+        t = np.stack(
+            [np.interp(s, self.arc, self.tangents[:, 0]), np.interp(s, self.arc, self.tangents[:, 1])], axis=-1
+        )
         return t / np.linalg.norm(t, axis=-1, keepdims=True)
 
     def normal(self, s: np.ndarray | float) -> np.ndarray:
@@ -363,4 +365,3 @@ def task_for_seed(kind: str, seed: int, *, obstacle: str = "small", motion_time:
         raise ValueError(f"obstacle must be one of {tuple(OBSTACLES)}, got {obstacle!r}")
     size, placement = OBSTACLES[obstacle]
     return make_task(kind, task_rng(seed), obstacle_size=size, obstacle_range=placement, motion_time=motion_time)
-

@@ -45,11 +45,20 @@ def dataset_specs(
         for obj in objects:
             for task in tasks:
                 for _ in range(trials):
-                    specs.append(TrialSpec(
-                        task=task, user=user, object=obj, controller=controller, preset=preset,
-                        seed=seed + len(specs), intent=intent, population_seed=population_seed,
-                        obstacle=obstacle, network=network,
-                    ))
+                    specs.append(
+                        TrialSpec(
+                            task=task,
+                            user=user,
+                            object=obj,
+                            controller=controller,
+                            preset=preset,
+                            seed=seed + len(specs),
+                            intent=intent,
+                            population_seed=population_seed,
+                            obstacle=obstacle,
+                            network=network,
+                        )
+                    )
     return specs
 
 
@@ -100,15 +109,19 @@ def collect_dataset(
     model_file = Path(s0.intent) / "model.json"
     if not model_file.is_file():  # a calibrated path-hypotheses source: its calibration is what runs
         model_file = Path(s0.intent) / "path-hypotheses.json"
-    model_hash = digest(model_file.read_bytes().hex()) if s0.intent not in NAMED_INTENTS and model_file.is_file() else None
-    key = digest({"specs": [asdict(s) for s in specs], "dataset_id": dataset_id, "format": FORMAT_VERSION,
-                  "model": model_hash})  # fmt: skip
+    model_hash = (
+        digest(model_file.read_bytes().hex()) if s0.intent not in NAMED_INTENTS and model_file.is_file() else None
+    )
+    key = digest(
+        {"specs": [asdict(s) for s in specs], "dataset_id": dataset_id, "format": FORMAT_VERSION, "model": model_hash}
+    )
     if not overwrite and _holds_collection(out, key, len(specs)):
         if say:
             say(f"{out} already holds this collection, complete ({len(specs)} trials): nothing to do")
         return out
-    with DatasetWriter(out, dataset_id, n_trials=len(specs), key=key, description=description,
-                       overwrite=overwrite) as writer:  # fmt: skip
+    with DatasetWriter(
+        out, dataset_id, n_trials=len(specs), key=key, description=description, overwrite=overwrite
+    ) as writer:
         if say and writer.discarded:
             say(f"removed the unfinished trials of a different collection in {writer.partial}")
         if say and writer.resumed:
@@ -117,9 +130,16 @@ def collect_dataset(
         if submitted is not None:
             submitted.gather(lambda i, trial: writer.add(i, trial) if not writer.has(i) else None, progress)
             return writer.finish()
-        run_trials([specs[i] for i in todo], workers=workers, progress=progress, ray_address=ray_address,
-                   lockstep=lockstep, pool=pool, groups=groups,
-                   on_result=lambda j, trial: writer.add(todo[j], trial))  # fmt: skip
+        run_trials(
+            [specs[i] for i in todo],
+            workers=workers,
+            progress=progress,
+            ray_address=ray_address,
+            lockstep=lockstep,
+            pool=pool,
+            groups=groups,
+            on_result=lambda j, trial: writer.add(todo[j], trial),
+        )
         return writer.finish()
 
 
@@ -129,5 +149,9 @@ def _holds_collection(out: Path, key: str, n_trials: int) -> bool:
         manifest = json.loads((out / MANIFEST_NAME).read_text("utf-8"))
     except (OSError, ValueError):
         return False
-    return (isinstance(manifest, dict) and manifest.get("collection_key") == key
-            and isinstance(manifest.get("trials"), list) and len(manifest["trials"]) == n_trials)  # fmt: skip
+    return (
+        isinstance(manifest, dict)
+        and manifest.get("collection_key") == key
+        and isinstance(manifest.get("trials"), list)
+        and len(manifest["trials"]) == n_trials
+    )

@@ -78,12 +78,18 @@ def fast_path_eligible(loop: Loop) -> bool:
     if tick.command_space != "effort" or tick.config.dofs != (0, 1):
         return False
     # any intent stage: nominal, a shared model's batcher, or the tick's own predict() per run
-    return (WrenchPipelineBatch.accepts(tick.wrench) and SafetyLayerBatch.accepts(tick.safety)
-            and TargetDwellBatch.accepts(loop.termination))  # fmt: skip
+    return (
+        WrenchPipelineBatch.accepts(tick.wrench)
+        and SafetyLayerBatch.accepts(tick.safety)
+        and TargetDwellBatch.accepts(loop.termination)
+    )
 
 
-def run_point_mass_lockstep(loops: Sequence[Loop], clock: Callable[[], float] = time.perf_counter,
-                            on_end: Callable[[int, LoopLog], None] | None = None) -> list[LoopLog | None]:  # fmt: skip
+def run_point_mass_lockstep(
+    loops: Sequence[Loop],
+    clock: Callable[[], float] = time.perf_counter,
+    on_end: Callable[[int, LoopLog], None] | None = None,
+) -> list[LoopLog | None]:
     """Run the loops (each :func:`fast_path_eligible`) as arrays (module docstring).
 
     Returns each run's :class:`~coassist.runtime.loop.LoopLog`, or None for a run that left
@@ -158,8 +164,11 @@ class _Batch:
         # (a controller or game shared by two runs keeps the per-run order of update and step)
         self.arb_gid = np.full(B, -1, dtype=np.intp)
         keys: dict[tuple, int] = {}
-        arbitrated = [i for i, t in enumerate(ticks)
-                      if self.ctrl_list[self.ctrl_gid[i]] is None and type(t.controller) is ArbitratedController]  # fmt: skip
+        arbitrated = [
+            i
+            for i, t in enumerate(ticks)
+            if self.ctrl_list[self.ctrl_gid[i]] is None and type(t.controller) is ArbitratedController
+        ]
         uses: dict[int, int] = {}
         for i in arbitrated:
             for obj in (ticks[i].controller, ticks[i].controller.game):
@@ -271,8 +280,13 @@ class _Batch:
                     sel = js[ag == a]
                     if sel.size:
                         h = int(H[sel[0]])
-                        u, ok = arbitrated_effort_batch([self.ticks[i].controller for i in act[sel].tolist()], z[sel],
-                                                        ref_h_all[sel, :h], ref_r_all[sel, :h], w2[sel])  # fmt: skip
+                        u, ok = arbitrated_effort_batch(
+                            [self.ticks[i].controller for i in act[sel].tolist()],
+                            z[sel],
+                            ref_h_all[sel, :h],
+                            ref_r_all[sel, :h],
+                            w2[sel],
+                        )
                         left[sel[~ok]] = True
                         u_r[sel[ok]] = u[ok]
                 for j in js[ag < 0].tolist():  # any other: its own step, its horizon
@@ -320,13 +334,19 @@ class _Batch:
         tick = self.ticks[i]
         Hs = int(self.Hs[i])
         return LoopLog(
-            pose=self.pose_log[i, :n].copy(), velocity=self.vel_log[i, :n].copy(), wrench=self.wrench_log[i, :n].copy(),
+            pose=self.pose_log[i, :n].copy(),
+            velocity=self.vel_log[i, :n].copy(),
+            wrench=self.wrench_log[i, :n].copy(),
             reference=self.ref_log[i, :n].copy(),
             prediction=None if tick.intent.nominal else self.pred_log[i, :n, :Hs].copy(),
-            effort_h=self.eff_h_log[i, :n].copy(), effort_r=self.eff_r_log[i, :n].copy(),
-            fault=np.zeros(n, dtype=np.int64), joints=None, joint_velocity=None, compute=self.compute[i, :n].copy(),
+            effort_h=self.eff_h_log[i, :n].copy(),
+            effort_r=self.eff_r_log[i, :n].copy(),
+            fault=np.zeros(n, dtype=np.int64),
+            joints=None,
+            joint_velocity=None,
+            compute=self.compute[i, :n].copy(),
             ended=ended,
-        )  # fmt: skip
+        )
 
 
 def _ragged_rows(arrays: Sequence[np.ndarray], n: int) -> np.ndarray:

@@ -59,8 +59,14 @@ def plot_trial(trial: Trial, out: str | Path, *, n_predictions: int = 6, title: 
             cmap = plt.get_cmap("plasma")
             for j, k in enumerate(chosen):
                 p = trial.prediction[k]
-                ax.plot(p[:, 0], p[:, 1], color=cmap(j / max(1, len(chosen) - 1)), lw=3, alpha=0.85,
-                        label="prediction horizon" if j == 0 else None)
+                ax.plot(
+                    p[:, 0],
+                    p[:, 1],
+                    color=cmap(j / max(1, len(chosen) - 1)),
+                    lw=3,
+                    alpha=0.85,
+                    label="prediction horizon" if j == 0 else None,
+                )
                 ax.plot(*trial.pose[k], marker=".", color=cmap(j / max(1, len(chosen) - 1)), ms=8)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
@@ -78,13 +84,21 @@ def plot_trial(trial: Trial, out: str | Path, *, n_predictions: int = 6, title: 
     axf.plot(trial.time, f[:, 0], color="tab:blue", lw=0.9, label="f_x")
     axf.plot(trial.time, f[:, 1], color="tab:red", lw=0.9, label="f_y")
     if trial.effort_r is not None:
-        axf.plot(trial.time, np.linalg.norm(trial.effort_r[:, :2], axis=1), color="tab:purple", lw=0.9, ls=":",
-                 label="‖u_r‖ (robot)")
+        axf.plot(
+            trial.time,
+            np.linalg.norm(trial.effort_r[:, :2], axis=1),
+            color="tab:purple",
+            lw=0.9,
+            ls=":",
+            label="‖u_r‖ (robot)",
+        )
     axf.set_xlabel("time [s]")
     axf.set_ylabel("force at the sensor [N]")
     axf.grid(alpha=0.3)
     axf.legend(loc="best", fontsize=8)
-    axf.set_title(f"duration {trial.duration:.1f} s, peak ‖f‖ {np.linalg.norm(f[:, :2], axis=1).max():.1f} N", fontsize=10)
+    axf.set_title(
+        f"duration {trial.duration:.1f} s, peak ‖f‖ {np.linalg.norm(f[:, :2], axis=1).max():.1f} N", fontsize=10
+    )
     fig.tight_layout()
     save_figure(fig, out)
     plt.close(fig)

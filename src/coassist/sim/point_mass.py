@@ -109,8 +109,17 @@ class PointMassWorld:
     n_joints = 0
     realtime = False
 
-    def __init__(self, task: Task, operator: OperatorProfile, obj: CarriedObject, model: ImpedanceModel, seed: int,
-                 n_max: int, n_grid: int, sensor: ForceSensor) -> None:  # fmt: skip
+    def __init__(
+        self,
+        task: Task,
+        operator: OperatorProfile,
+        obj: CarriedObject,
+        model: ImpedanceModel,
+        seed: int,
+        n_max: int,
+        n_grid: int,
+        sensor: ForceSensor,
+    ) -> None:
         dt = float(model.dt)
         self.dt = dt
         rng_intent, rng_motor, rng_sensor = trial_rngs(seed, 3)
@@ -126,8 +135,16 @@ class PointMassWorld:
         self.plant = PointMassPlant.free(model, obj.mass)
         self._yaw = obj.has_yaw
         rh, rc = obj.grasp_offset, obj.center_offset
-        self._board = _Board(rh[0], rh[1], rc[0], rc[1], obj.mass, obj.yaw_stiffness, obj.yaw_damping,
-                             obj.yaw_inertia if obj.has_yaw else 1.0)  # fmt: skip
+        self._board = _Board(
+            rh[0],
+            rh[1],
+            rc[0],
+            rc[1],
+            obj.mass,
+            obj.yaw_stiffness,
+            obj.yaw_damping,
+            obj.yaw_inertia if obj.has_yaw else 1.0,
+        )
         #: The operator's arm (called once per period by :meth:`apply`).
         self.arm = OperatorArm(operator, self.intent.positions, dt, noise_h)
         sat = self._sat
@@ -152,12 +169,15 @@ class PointMassWorld:
 
     def read(self) -> RobotState:
         return RobotState(
-            t=self.k * self.dt, q=_NO_JOINTS, qd=_NO_JOINTS,
+            t=self.k * self.dt,
+            q=_NO_JOINTS,
+            qd=_NO_JOINTS,
             tool_pose=np.array((self.x, self.y, 0.0, 0.0, 0.0, 0.0)),
             tool_twist=np.array((self.vx, self.vy, 0.0, 0.0, 0.0, 0.0)),
-            wrench=np.array((self.wx, self.wy, 0.0, 0.0, 0.0, 0.0)), sensor_rotation=SENSOR_ROTATION,
+            wrench=np.array((self.wx, self.wy, 0.0, 0.0, 0.0, 0.0)),
+            sensor_rotation=SENSOR_ROTATION,
             wrench_seq=self._seq,
-        )  # fmt: skip
+        )
 
     def hand_force(self) -> tuple[float, float]:
         """The operator's force u_h(k) [N] applied during the last period."""
@@ -314,7 +334,9 @@ class PointMassWorldBatch:
         c = np.zeros_like(x)
         if self._any_yaw and yaw.any():
             a_prev = self._a_prev[rows]
-            th_new, thd_new, thdd, cx, cy = _board_yaw(board, th, thd, fh[:, 0], fh[:, 1], a_prev[:, 0], a_prev[:, 1], dt)
+            th_new, thd_new, thdd, cx, cy = _board_yaw(
+                board, th, thd, fh[:, 0], fh[:, 1], a_prev[:, 0], a_prev[:, 1], dt
+            )
             self._thd[rows] = np.where(yaw, thd_new, thd)
             self._th[rows] = np.where(yaw, th_new, th)
             c = np.where(yaw[:, None], np.stack([cx, cy], axis=1), 0.0)

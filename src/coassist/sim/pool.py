@@ -21,8 +21,15 @@ from coassist._checks import check_int
 from coassist._progress import progress_bar
 from coassist.data import Trial, TrialMeta
 
-__all__ = ["PARENT_POLL", "SubmittedTrials", "pool_for", "run_on_ray", "trial_from_payload", "trial_payload",
-           "worker_pool"]  # fmt: skip
+__all__ = [
+    "PARENT_POLL",
+    "SubmittedTrials",
+    "pool_for",
+    "run_on_ray",
+    "trial_from_payload",
+    "trial_payload",
+    "worker_pool",
+]
 
 
 def trial_payload(trial: Trial) -> tuple[dict, dict]:
@@ -31,7 +38,18 @@ def trial_payload(trial: Trial) -> tuple[dict, dict]:
     TrialMeta holds read-only mapping proxies, which do not pickle: ship plain data."""
     arrays = {
         name: getattr(trial, name)
-        for name in ("time", "pose", "velocity", "wrench", "reference", "prediction", "intent", "effort_h", "effort_r", "fault")
+        for name in (
+            "time",
+            "pose",
+            "velocity",
+            "wrench",
+            "reference",
+            "prediction",
+            "intent",
+            "effort_h",
+            "effort_r",
+            "fault",
+        )
     }
     return trial.meta.to_dict(), arrays
 
@@ -83,8 +101,7 @@ def worker_pool(workers: int) -> Executor:
 
     workers = check_int(workers, "workers", 1)
     ctx = multiprocessing.get_context("spawn")
-    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_watch_parent,
-                               initargs=(os.getpid(),))  # fmt: skip
+    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_watch_parent, initargs=(os.getpid(),))
 
 
 def pool_for(pool: Executor | None, workers: int):
@@ -129,8 +146,13 @@ class SubmittedTrials:
                 bar.advance(task_id, len(members))
 
 
-def run_on_ray(job: Callable[[list[Any]], list[tuple[dict, dict]]], specs: Sequence[Any], address: str, progress: bool,
-               on_result: Callable[[int, Trial], None] | None = None) -> list[Trial]:  # fmt: skip
+def run_on_ray(
+    job: Callable[[list[Any]], list[tuple[dict, dict]]],
+    specs: Sequence[Any],
+    address: str,
+    progress: bool,
+    on_result: Callable[[int, Trial], None] | None = None,
+) -> list[Trial]:
     """Each spec as its own Ray task ``job([spec])`` (payloads, :func:`trial_payload`) on the
     cluster at ``address``; the trials in the order of ``specs`` (as :func:`~coassist.sim.world.run_trials`
     says), or ``on_result(i, trial)`` for each as it finishes and an empty list.

@@ -100,9 +100,20 @@ from coassist.sim.pool import (
 )
 
 __all__ = [
-    "NAMED_GROUP", "PARENT_POLL", "PointMassWorld", "SubmittedTrials", "TrialSpec", "build_trial",
-    "run_spec", "run_spec_lockstep", "run_trial", "run_trials", "spec_episode", "submit_trials", "worker_pool",
-]  # fmt: skip
+    "NAMED_GROUP",
+    "PARENT_POLL",
+    "PointMassWorld",
+    "SubmittedTrials",
+    "TrialSpec",
+    "build_trial",
+    "run_spec",
+    "run_spec_lockstep",
+    "run_trial",
+    "run_trials",
+    "spec_episode",
+    "submit_trials",
+    "worker_pool",
+]
 
 
 def _diag2(matrix: np.ndarray, name: str) -> None:
@@ -145,9 +156,21 @@ def run_trial(
     time_limit : [s]; default 2 × the planner's end time + 10 s.
     preset_name : recorded in meta.extra.
     """
-    return run_episode(build_trial(task, operator, obj, controller, intent_source, seed, sensor=sensor,
-                                   arrive_radius=arrive_radius, dwell=dwell, time_limit=time_limit,
-                                   preset_name=preset_name))  # fmt: skip
+    return run_episode(
+        build_trial(
+            task,
+            operator,
+            obj,
+            controller,
+            intent_source,
+            seed,
+            sensor=sensor,
+            arrive_radius=arrive_radius,
+            dwell=dwell,
+            time_limit=time_limit,
+            preset_name=preset_name,
+        )
+    )
 
 
 def build_trial(
@@ -192,12 +215,22 @@ def build_trial(
     intent = world.intent
     x0 = np.array(task.start, dtype=float)
     return build_episode(
-        world=world, controller=controller, intent=WindowIntent(source, H), wrench=WrenchPipeline(POINT_MASS_WRENCH, dt),
-        safety=SafetyLayer(POINT_MASS_LIMITS, dt, 6), task=task, plan=ref_abs,
-        start_pose=np.array((x0[0], x0[1], 0.0, 0.0, 0.0, 0.0)), n_max=n_max,
-        labels=EpisodeLabels(user=operator.name, object=obj.name, seed=seed, source="sim", preset=preset_name,
-                             model_id=source.model_id),
-        true_intent=intent.positions, intent_end_time=intent.end_time, arrive_radius=arrive_radius, dwell=dwell,
+        world=world,
+        controller=controller,
+        intent=WindowIntent(source, H),
+        wrench=WrenchPipeline(POINT_MASS_WRENCH, dt),
+        safety=SafetyLayer(POINT_MASS_LIMITS, dt, 6),
+        task=task,
+        plan=ref_abs,
+        start_pose=np.array((x0[0], x0[1], 0.0, 0.0, 0.0, 0.0)),
+        n_max=n_max,
+        labels=EpisodeLabels(
+            user=operator.name, object=obj.name, seed=seed, source="sim", preset=preset_name, model_id=source.model_id
+        ),
+        true_intent=intent.positions,
+        intent_end_time=intent.end_time,
+        arrive_radius=arrive_radius,
+        dwell=dwell,
         extra={
             "object": obj.to_extra(),
             "operator": operator.to_extra(),
@@ -208,13 +241,16 @@ def build_trial(
             "sensor_raw_bias": [float(v) for v in world.raw_bias],
             "sensor_residual_bias": [float(v) for v in world.residual],
             # What the effort drives: (M + m) a + D v = u (the label 'hand_alone' removes u_r through it).
-            "plant": {"M": [float(v) + obj.mass for v in np.diag(model.M)], "D": [float(v) for v in np.diag(model.D)],
-                      "K": [0.0, 0.0]},
+            "plant": {
+                "M": [float(v) + obj.mass for v in np.diag(model.M)],
+                "D": [float(v) for v in np.diag(model.D)],
+                "K": [0.0, 0.0],
+            },
             # What evaluated a model's network (torch or ONNX Runtime, with its version): the two
             # agree to float32 rounding, which the trajectory carries (coassist.intent.onnx_network).
             **({"network": network} if isinstance(network := getattr(source, "network", None), str) else {}),
         },
-    )  # fmt: skip
+    )
 
 
 # --------------------------------------------------------------------------- batches
@@ -294,13 +330,19 @@ def spec_episode(spec: TrialSpec, _controllers: dict | None = None, _sources: di
     horizon = max(controller.horizon, preset.game.horizon)
     source = shared_intent_source(spec.intent, horizon, _sources, spec.network)
     return build_trial(
-        task, operator_profile(spec.user, spec.population_seed), get_object(spec.object), controller,
-        source, spec.seed, preset_name=preset.name,
+        task,
+        operator_profile(spec.user, spec.population_seed),
+        get_object(spec.object),
+        controller,
+        source,
+        spec.seed,
+        preset_name=preset.name,
     )
 
 
-def run_spec_lockstep(specs: Sequence[TrialSpec], on_result: Callable[[int, Trial], None] | None = None, *,
-                      arrays: bool = True) -> list[Trial]:  # fmt: skip
+def run_spec_lockstep(
+    specs: Sequence[TrialSpec], on_result: Callable[[int, Trial], None] | None = None, *, arrays: bool = True
+) -> list[Trial]:
     """The trials of ``specs``, run in lockstep (:func:`coassist.runtime.lockstep.run_loops`):
     one network call per tick for all the trials with the same model in the loop.
 
@@ -438,6 +480,7 @@ def run_trials(
     if workers == 1:  # in this process: one lockstep group, or trial by trial
         with progress_bar(progress) as bar:
             task_id = bar.add_task("simulating", total=len(specs))
+
             def each(i: int, trial: Trial) -> None:
                 deliver(i, trial)
                 bar.advance(task_id)
@@ -473,8 +516,9 @@ def _has_model(specs: Sequence[TrialSpec]) -> bool:
 NAMED_GROUP = 32
 
 
-def submit_trials(specs: Sequence[TrialSpec], pool: Executor, *, workers: int, lockstep: bool = True,
-                  groups: int | None = None) -> SubmittedTrials:  # fmt: skip
+def submit_trials(
+    specs: Sequence[TrialSpec], pool: Executor, *, workers: int, lockstep: bool = True, groups: int | None = None
+) -> SubmittedTrials:
     """Put the trials of ``specs`` on ``pool`` now, in the jobs :func:`run_trials` would run
     (the same grouping, so the same numbers), and return at once; :meth:`SubmittedTrials.gather`
     takes the results. Lets a caller start simulations that a later step needs while this

@@ -69,8 +69,9 @@ def trial_measures(trial: Trial) -> dict[str, Any]:
     }
     inside = np.flatnonzero(np.linalg.norm(pose - target, axis=1) <= eps)
     u = _approach(np.asarray(trial.reference[:, :2]), target)
-    out["overshoot"] = (max(0.0, float(np.max((pose[inside[0]:] - target) @ u)))
-                        if inside.size and u is not None else math.nan)  # fmt: skip
+    out["overshoot"] = (
+        max(0.0, float(np.max((pose[inside[0] :] - target) @ u))) if inside.size and u is not None else math.nan
+    )
     e = math.nan
     if trial.prediction is not None and trial.prediction.shape[1] >= E_RMS_HORIZON:
         ok = np.isfinite(trial.prediction[:, :E_RMS_HORIZON, :2]).all(axis=(1, 2))

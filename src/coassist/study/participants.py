@@ -78,14 +78,21 @@ def hand_path(task: Task, seed: int, profile: OperatorProfile, dt: float, n: int
     return intent_trajectory(task, profile, rng_intent, n, dt).positions
 
 
-def simulated_answers(form: Form, f_rms: float, sigma: float | None, profile: OperatorProfile,
-                      rng: np.random.Generator) -> list[int]:  # fmt: skip
+def simulated_answers(
+    form: Form, f_rms: float, sigma: float | None, profile: OperatorProfile, rng: np.random.Generator
+) -> list[int]:
     """The simulated operator's answers to ``form`` after a condition (module docstring): ``f_rms`` [N] the
     mean of its measured trials' f_RMS, ``sigma`` [m] their mean σ (None: never reached the target)."""
     fbar = min(1.0, max(0.0, f_rms / profile.force_limit))
     perf = 1.0 if sigma is None or not math.isfinite(sigma) else min(1.0, sigma / 0.02)
-    tlx = {"mental": 30 + 60 * fbar, "temporal": 30 + 60 * fbar, "frustration": 30 + 60 * fbar,
-           "physical": 100 * fbar + 10, "effort": 100 * fbar + 10, "performance": 100 * perf}  # fmt: skip
+    tlx = {
+        "mental": 30 + 60 * fbar,
+        "temporal": 30 + 60 * fbar,
+        "frustration": 30 + 60 * fbar,
+        "physical": 100 * fbar + 10,
+        "effort": 100 * fbar + 10,
+        "performance": 100 * perf,
+    }
     out = []
     for item in form.items:
         if item.scale == "tlx":

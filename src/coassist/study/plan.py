@@ -347,25 +347,37 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
         raise PlanError(f"trials.preset: {unknown_name_message(str(preset), CONTROL_PRESETS, 'control preset')}")
     obj = _choice(t.get("object", "handle"), "trials.object", tuple(OBJECTS), "object")
     if world == "play" and obj != "handle":
-        raise PlanError(f"trials.object must be 'handle' in the play world (the page's robot carries nothing), got {obj!r}")
+        raise PlanError(
+            f"trials.object must be 'handle' in the play world (the page's robot carries nothing), got {obj!r}"
+        )
     motion_time = _opt_seconds(t.get("motion_time"), "trials.motion_time")
     if world != "play":  # coassist drive plans the thesis' motion times and ends a trial after 5 s in the 2.5 cm ball
         for key in ("motion_time", "dwell", "arrive_radius"):
             if key in t:
-                raise PlanError(f"trials.{key} applies to the play world only (the arm worlds run coassist drive's "
-                                "trials: the thesis' motion times, 5 s in the 2.5 cm target ball)")  # fmt: skip
+                raise PlanError(
+                    f"trials.{key} applies to the play world only (the arm worlds run coassist drive's "
+                    "trials: the thesis' motion times, 5 s in the 2.5 cm target ball)"
+                )
     trials = TrialsPlan(
-        tasks=tasks, per_condition=_int(t.get("per_condition", 3), "trials.per_condition", 1, 1000),
-        practice=_int(t.get("practice", 1), "trials.practice", 0, 100), object=obj,
+        tasks=tasks,
+        per_condition=_int(t.get("per_condition", 3), "trials.per_condition", 1, 1000),
+        practice=_int(t.get("practice", 1), "trials.practice", 0, 100),
+        object=obj,
         obstacle=_choice(t.get("obstacle", "small"), "trials.obstacle", tuple(OBSTACLES), "obstacle"),
-        motion_time=motion_time, dwell=_seconds(t.get("dwell", 3.0), "trials.dwell", positive=True),
-        arrive_radius=_number(t.get("arrive_radius", 0.025), "trials.arrive_radius", "in (0, 0.5] m", lambda v: 0 < v <= 0.5),
-        time_limit=_opt_seconds(t.get("time_limit"), "trials.time_limit"), preset=preset,
-    )  # fmt: skip
+        motion_time=motion_time,
+        dwell=_seconds(t.get("dwell", 3.0), "trials.dwell", positive=True),
+        arrive_radius=_number(
+            t.get("arrive_radius", 0.025), "trials.arrive_radius", "in (0, 0.5] m", lambda v: 0 < v <= 0.5
+        ),
+        time_limit=_opt_seconds(t.get("time_limit"), "trials.time_limit"),
+        preset=preset,
+    )
 
     r = _table(data, "rest", ("between_conditions", "between_trials"))
-    rest = RestPlan(_seconds(r.get("between_conditions", 60.0), "rest.between_conditions"),
-                    _seconds(r.get("between_trials", 0.0), "rest.between_trials"))  # fmt: skip
+    rest = RestPlan(
+        _seconds(r.get("between_conditions", 60.0), "rest.between_conditions"),
+        _seconds(r.get("between_trials", 0.0), "rest.between_trials"),
+    )
 
     q = _table(data, "questionnaire", ("tlx", "likert", "likert_points"))
     likert = q.get("likert", list(DEFAULT_LIKERT))
@@ -376,8 +388,11 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
             raise PlanError(f"questionnaire.likert[{i}] must be a statement of 1-120 characters, got {item!r}")
     if len(set(likert)) != len(likert):
         raise PlanError("questionnaire.likert must not repeat a statement")
-    questionnaire = QuestionnairePlan(_bool(q.get("tlx", True), "questionnaire.tlx"), tuple(likert),
-                                      _int(q.get("likert_points", 7), "questionnaire.likert_points", 3, 11))  # fmt: skip
+    questionnaire = QuestionnairePlan(
+        _bool(q.get("tlx", True), "questionnaire.tlx"),
+        tuple(likert),
+        _int(q.get("likert_points", 7), "questionnaire.likert_points", 3, 11),
+    )
 
     conditions = _conditions(data, protocol, base)
     training = _training(data) if protocol != "comparison" else None
@@ -395,26 +410,46 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
             tolerance=_number(it.get("tolerance", 1e-3), "iterative.tolerance", "> 0 [m]", lambda v: v > 0),
             criterion_horizon=_int(it.get("criterion_horizon", 50), "iterative.criterion_horizon", 1),
             stop_at_criterion=_bool(it.get("stop_at_criterion", True), "iterative.stop_at_criterion"),
-            controller=_choice(it.get("controller", "cooperative"), "iterative.controller", CONTROLLER_KINDS, "controller"),
-        )  # fmt: skip
+            controller=_choice(
+                it.get("controller", "cooperative"), "iterative.controller", CONTROLLER_KINDS, "controller"
+            ),
+        )
         if not iterative.controller.startswith("cooperative"):
-            raise PlanError(f"iterative.controller must use the model (cooperative or cooperative-arbitrated), got {iterative.controller!r}")
+            raise PlanError(
+                f"iterative.controller must use the model (cooperative or cooperative-arbitrated), got {iterative.controller!r}"
+            )
     elif protocol in ("transfer", "online"):
         tab = _table(data, protocol, ("source_model", "trials", "controller"))
         if "source_model" not in tab:
             raise PlanError(f"{protocol}.source_model is missing (the model the participant starts from)")
         source = _model_path(tab["source_model"], f"{protocol}.source_model", base)
         n = _int(tab.get("trials", 15), f"{protocol}.trials", 2, 1000)
-        controller = _choice(tab.get("controller", "cooperative"), f"{protocol}.controller", CONTROLLER_KINDS, "controller")
+        controller = _choice(
+            tab.get("controller", "cooperative"), f"{protocol}.controller", CONTROLLER_KINDS, "controller"
+        )
         if not controller.startswith("cooperative"):
-            raise PlanError(f"{protocol}.controller must use the model (cooperative or cooperative-arbitrated), got {controller!r}")
+            raise PlanError(
+                f"{protocol}.controller must use the model (cooperative or cooperative-arbitrated), got {controller!r}"
+            )
         if protocol == "transfer":
             transfer = TransferPlan(source, n, controller)
         else:
             online = OnlinePlan(source, n, controller)
-    return StudyPlan(name=name, protocol=protocol, world=world, participants=participants, seed=seed,
-                     conditions=conditions, trials=trials, rest=rest, questionnaire=questionnaire, training=training,
-                     iterative=iterative, transfer=transfer, online=online)  # fmt: skip
+    return StudyPlan(
+        name=name,
+        protocol=protocol,
+        world=world,
+        participants=participants,
+        seed=seed,
+        conditions=conditions,
+        trials=trials,
+        rest=rest,
+        questionnaire=questionnaire,
+        training=training,
+        iterative=iterative,
+        transfer=transfer,
+        online=online,
+    )
 
 
 def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Condition, ...]:
@@ -437,8 +472,10 @@ def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Con
                 raise PlanError(f"{where}.{k}: {unknown_name_message(k, ('name', 'controller', 'intent'), 'field')}")
         name = c.get("name")
         if not isinstance(name, str) or not _NAME.match(name) or name in RESERVED_NAMES or name.startswith("round-"):
-            raise PlanError(f"{where}.name must be 1-32 lower-case letters, digits, '-' or '_' (not one of "
-                            f"{sorted(RESERVED_NAMES)} or round-*), got {name!r}")  # fmt: skip
+            raise PlanError(
+                f"{where}.name must be 1-32 lower-case letters, digits, '-' or '_' (not one of "
+                f"{sorted(RESERVED_NAMES)} or round-*), got {name!r}"
+            )
         controller = _choice(c.get("controller"), f"{where}.controller", CONTROLLER_KINDS, "controller")
         out.append(Condition(name, controller, _intent(c.get("intent", "nominal"), f"{where}.intent", base)))
     names = [c.name for c in out]
@@ -473,12 +510,18 @@ def _training(data: Mapping[str, Any]) -> TrainingPlan:
     lr = tr.get("lr")
     tf = tr.get("test_fraction")
     return TrainingPlan(
-        preset=preset, epochs=opt_int("epochs", 1), batch_size=opt_int("batch_size", 1), seed=opt_int("seed", 0),
-        threads=_int(tr.get("threads", 1), "training.threads", 1, 256), layers=opt_int("layers", 0),
-        hidden=opt_int("hidden", 1), fc=fc, optimizer=optimizer,
+        preset=preset,
+        epochs=opt_int("epochs", 1),
+        batch_size=opt_int("batch_size", 1),
+        seed=opt_int("seed", 0),
+        threads=_int(tr.get("threads", 1), "training.threads", 1, 256),
+        layers=opt_int("layers", 0),
+        hidden=opt_int("hidden", 1),
+        fc=fc,
+        optimizer=optimizer,
         lr=None if lr is None else _number(lr, "training.lr", "> 0", lambda v: v > 0),
         test_fraction=None if tf is None else _number(tf, "training.test_fraction", "in [0, 1)", lambda v: 0 <= v < 1),
-    )  # fmt: skip
+    )
 
 
 def load_plan(path: str | Path) -> StudyPlan:

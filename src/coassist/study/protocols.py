@@ -67,26 +67,64 @@ def participant_steps(plan: StudyPlan, labels: dict[str, str], number: int, row:
         assert plan.transfer is not None  # parse_plan sets it for this protocol
         t = plan.transfer
         _collect(steps, plan, "transfer-set", t.trials, t.controller, t.source_model, base + 2000)
-        _add(steps, "train", block="models", model="transferred", data=["transfer-set"], init=f"transfer:{t.source_model}",
-             wait=False)  # fmt: skip
+        _add(
+            steps,
+            "train",
+            block="models",
+            model="transferred",
+            data=["transfer-set"],
+            init=f"transfer:{t.source_model}",
+            wait=False,
+        )
         _rest(steps, plan, "the transfer trains")
-        conditions = [Condition("source", t.controller, t.source_model),
-                      Condition("transferred", t.controller, "model:transferred")]  # fmt: skip
+        conditions = [
+            Condition("source", t.controller, t.source_model),
+            Condition("transferred", t.controller, "model:transferred"),
+        ]
         _compare(steps, plan, conditions, labels, row, base)
     else:
         assert plan.online is not None
         o = plan.online
         for j in range(o.trials):
-            _add(steps, "trial", block="adaptation", index=j, condition="adaptation", label=None, position=0,
-                 controller=o.controller, intent="latest:online", task=_task(plan, j), seed=base + 2000 + j, practice=False)  # fmt: skip
+            _add(
+                steps,
+                "trial",
+                block="adaptation",
+                index=j,
+                condition="adaptation",
+                label=None,
+                position=0,
+                controller=o.controller,
+                intent="latest:online",
+                task=_task(plan, j),
+                seed=base + 2000 + j,
+                practice=False,
+            )
             if j < o.trials - 1:
-                _add(steps, "train", block="models", model=f"online-{j + 1}", data=["adaptation"], init="online",
-                     wait=False)  # fmt: skip
+                _add(
+                    steps,
+                    "train",
+                    block="models",
+                    model=f"online-{j + 1}",
+                    data=["adaptation"],
+                    init="online",
+                    wait=False,
+                )
         _add(steps, "freeze", block="models", model="online")
-        _add(steps, "train", block="models", model="offline", data=["adaptation"], init=f"transfer:{o.source_model}",
-             wait=False)  # fmt: skip
+        _add(
+            steps,
+            "train",
+            block="models",
+            model="offline",
+            data=["adaptation"],
+            init=f"transfer:{o.source_model}",
+            wait=False,
+        )
         _rest(steps, plan, "the offline transfer trains")
-        conditions = [Condition("online", o.controller, "model:online"), Condition("offline", o.controller, "model:offline")]
+        conditions = [
+            Condition("online", o.controller, "model:online"),
+            Condition("offline", o.controller, "model:offline"),
+        ]
         _compare(steps, plan, conditions, labels, row, base)
     return steps
 
@@ -106,8 +144,20 @@ def _rest(steps: list[dict[str, Any]], plan: StudyPlan, why: str) -> None:
 
 def _collect(steps, plan: StudyPlan, block: str, n: int, controller: str, intent: str, seed0: int) -> None:
     for j in range(n):
-        _add(steps, "trial", block=block, index=j, condition=block, label=None, position=0, controller=controller,
-             intent=intent, task=_task(plan, j), seed=seed0 + j, practice=False)  # fmt: skip
+        _add(
+            steps,
+            "trial",
+            block=block,
+            index=j,
+            condition=block,
+            label=None,
+            position=0,
+            controller=controller,
+            intent=intent,
+            task=_task(plan, j),
+            seed=seed0 + j,
+            practice=False,
+        )
         if j < n - 1 and plan.rest.between_trials > 0:
             _add(steps, "rest", block="rest", seconds=plan.rest.between_trials, why="between trials")
 
@@ -120,13 +170,36 @@ def _compare(steps, plan: StudyPlan, conditions: list[Condition], labels: dict[s
         c = conditions[ci]
         label = labels[c.name]
         for _ in range(tp.practice):
-            _add(steps, "trial", block="practice", index=practice, condition=c.name, label=label, position=pos,
-                 controller=c.controller, intent=c.intent, task=_task(plan, practice), seed=base + 5000 + practice,
-                 practice=True)  # fmt: skip
+            _add(
+                steps,
+                "trial",
+                block="practice",
+                index=practice,
+                condition=c.name,
+                label=label,
+                position=pos,
+                controller=c.controller,
+                intent=c.intent,
+                task=_task(plan, practice),
+                seed=base + 5000 + practice,
+                practice=True,
+            )
             practice += 1
         for j in range(tp.per_condition):
-            _add(steps, "trial", block=c.name, index=j, condition=c.name, label=label, position=pos,
-                 controller=c.controller, intent=c.intent, task=_task(plan, j), seed=base + j, practice=False)  # fmt: skip
+            _add(
+                steps,
+                "trial",
+                block=c.name,
+                index=j,
+                condition=c.name,
+                label=label,
+                position=pos,
+                controller=c.controller,
+                intent=c.intent,
+                task=_task(plan, j),
+                seed=base + j,
+                practice=False,
+            )
             if j < tp.per_condition - 1 and plan.rest.between_trials > 0:
                 _add(steps, "rest", block="rest", seconds=plan.rest.between_trials, why="between trials")
         if plan.questionnaire.asked:
@@ -142,8 +215,20 @@ def _iterative(steps, plan: StudyPlan, base: int) -> None:
         block = f"round-{k}"
         intent = "nominal" if k == 0 else f"model:M{k - 1}"
         for j in range(it.trials_per_round):
-            _add(steps, "trial", block=block, index=j, condition=block, label=None, position=k, controller=it.controller,
-                 intent=intent, task=_task(plan, j), seed=base + k * it.trials_per_round + j, practice=False)  # fmt: skip
+            _add(
+                steps,
+                "trial",
+                block=block,
+                index=j,
+                condition=block,
+                label=None,
+                position=k,
+                controller=it.controller,
+                intent=intent,
+                task=_task(plan, j),
+                seed=base + k * it.trials_per_round + j,
+                practice=False,
+            )
         if k >= 1:
             _add(steps, "check", block=block, index=k, round=k)
         if plan.questionnaire.asked:

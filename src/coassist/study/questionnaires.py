@@ -29,7 +29,11 @@ TLX_ITEMS = (
     ("mental", "Mental demand", "How mentally demanding was the task?"),
     ("physical", "Physical demand", "How physically demanding was the task?"),
     ("temporal", "Temporal demand", "How hurried or rushed was the pace of the task?"),
-    ("performance", "Performance", "How successful were you in accomplishing what you were asked to do? (0 perfect, 100 failure)"),
+    (
+        "performance",
+        "Performance",
+        "How successful were you in accomplishing what you were asked to do? (0 perfect, 100 failure)",
+    ),
     ("effort", "Effort", "How hard did you have to work to accomplish your level of performance?"),
     ("frustration", "Frustration", "How insecure, discouraged, irritated, stressed and annoyed were you?"),
 )
@@ -55,8 +59,12 @@ class Form:
     items: tuple[Item, ...]
 
     def to_page(self) -> dict[str, Any]:
-        return {"items": [{"key": i.key, "text": i.text, "lo": i.lo, "hi": i.hi, "step": i.step, "scale": i.scale}
-                          for i in self.items]}  # fmt: skip
+        return {
+            "items": [
+                {"key": i.key, "text": i.text, "lo": i.lo, "hi": i.hi, "step": i.step, "scale": i.scale}
+                for i in self.items
+            ]
+        }
 
     def check(self, values: Any) -> dict[str, int]:
         """The answers as ``{key: value}``; ValueError (one line) when they do not fit the form."""

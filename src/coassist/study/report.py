@@ -65,10 +65,16 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str]) -> dict[s
     pf = study.participant(pid)
     order = pf.order() or {"steps": []}
     progress = pf.progress()
-    data: dict[str, Any] = {"complete": bool(order["steps"]) and (len(progress) == len(order["steps"]) or
-                                                                  bool(progress and progress[-1].get("stop"))),
-                            "steps_done": len(progress), "steps": len(order["steps"]), "blocks": {}, "answers": {},
-                            "positions": {}, "checks": [r for r in progress if r["kind"] == "check"]}  # fmt: skip
+    data: dict[str, Any] = {
+        "complete": bool(order["steps"])
+        and (len(progress) == len(order["steps"]) or bool(progress and progress[-1].get("stop"))),
+        "steps_done": len(progress),
+        "steps": len(order["steps"]),
+        "blocks": {},
+        "answers": {},
+        "positions": {},
+        "checks": [r for r in progress if r["kind"] == "check"],
+    }
     for s in order["steps"]:
         if s["kind"] == "trial" and not s["practice"]:
             data["positions"][s["block"]] = s["position"]
@@ -82,9 +88,12 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str]) -> dict[s
         trials = read_dataset(folder).trials
         per_trial = [trial_measures(t) for t in trials]
         forces = [(t.time - t.time[0], np.linalg.norm(t.wrench[:, :2], axis=1)) for t in trials]
-        data["blocks"][b] = {"trials": per_trial, "forces": forces,
-                             "means": {k: _nanmean(m[k] for m in per_trial) for k, *_ in MEASURES},
-                             "models": [t.meta.extra.get("study_model") for t in trials]}  # fmt: skip
+        data["blocks"][b] = {
+            "trials": per_trial,
+            "forces": forces,
+            "means": {k: _nanmean(m[k] for m in per_trial) for k, *_ in MEASURES},
+            "models": [t.meta.extra.get("study_model") for t in trials],
+        }
     return data
 
 
@@ -96,10 +105,17 @@ def sample_limits(n: int, n_tests: int, simulated: bool) -> list[str]:
     if n == 0:
         return ["No participant has finished a condition yet: nothing to compare."]
     smallest = 2.0 / 2**n
-    lines.append(f"{n} participant{'s' if n != 1 else ''}: the smallest two-sided p a Wilcoxon signed-rank test can "
-                 f"give is 2/2^{n} = {smallest:.3g}" + (" — it cannot reach 0.05 whatever the data; its p values show "
-                                                         "direction and consistency, not significance." if smallest > 0.05 else "."))  # fmt: skip
+    lines.append(
+        f"{n} participant{'s' if n != 1 else ''}: the smallest two-sided p a Wilcoxon signed-rank test can "
+        f"give is 2/2^{n} = {smallest:.3g}"
+        + (
+            " — it cannot reach 0.05 whatever the data; its p values show direction and consistency, not significance."
+            if smallest > 0.05
+            else "."
+        )
+    )
     if n >= 3:
+
         def power(d: float, alpha: float) -> float:
             df, nc = n - 1, d * math.sqrt(n)
             tc = stats.t.ppf(1 - alpha / 2, df)
@@ -113,22 +129,32 @@ def sample_limits(n: int, n_tests: int, simulated: bool) -> list[str]:
             return float(optimize.brentq(lambda d: power(d, alpha) - POWER, 1e-3, hi))
 
         d80, d80h = detectable(ALPHA), detectable(ALPHA / max(n_tests, 1))
-        lines.append(f"A paired t test on {n} participants detects, with {POWER:.0%} power at α = {ALPHA}, only effects "
-                     f"of Cohen's d_z ≥ {d80:.2f} (≥ {d80h:.2f} for the smallest p after Holm's correction over "
-                     f"{n_tests} tests): a smaller difference may be real and go unseen. It also assumes the differences "
-                     "are roughly normal, which so few cannot check.")  # fmt: skip
+        lines.append(
+            f"A paired t test on {n} participants detects, with {POWER:.0%} power at α = {ALPHA}, only effects "
+            f"of Cohen's d_z ≥ {d80:.2f} (≥ {d80h:.2f} for the smallest p after Holm's correction over "
+            f"{n_tests} tests): a smaller difference may be real and go unseen. It also assumes the differences "
+            "are roughly normal, which so few cannot check."
+        )
     else:
-        lines.append("Fewer than three participants: no test has a meaningful null distribution; read the individual lines.")
-    lines.append("What it can show: whether the differences point the same way for every participant (the lines), "
-                 "and how large they are, with bootstrap intervals that are wide at this size (and rest on so few "
-                 "distinct resamples that their ends are coarse).")  # fmt: skip
-    lines.append("What it cannot show: that a result holds for other people (the sample is small and not drawn at "
-                 "random), interactions between condition and order (a Latin square confounds them), or differences "
-                 "in rare events (safety stops, missed targets).")  # fmt: skip
+        lines.append(
+            "Fewer than three participants: no test has a meaningful null distribution; read the individual lines."
+        )
+    lines.append(
+        "What it can show: whether the differences point the same way for every participant (the lines), "
+        "and how large they are, with bootstrap intervals that are wide at this size (and rest on so few "
+        "distinct resamples that their ends are coarse)."
+    )
+    lines.append(
+        "What it cannot show: that a result holds for other people (the sample is small and not drawn at "
+        "random), interactions between condition and order (a Latin square confounds them), or differences "
+        "in rare events (safety stops, missed targets)."
+    )
     if simulated:
-        lines.append("These participants are simulated operators (coassist study run --simulate): the numbers rehearse "
-                     "the plan and its analysis; they are not evidence about people, and the questionnaire answers "
-                     "are a function of the measured force, not opinions.")  # fmt: skip
+        lines.append(
+            "These participants are simulated operators (coassist study run --simulate): the numbers rehearse "
+            "the plan and its analysis; they are not evidence about people, and the questionnaire answers "
+            "are a function of the measured force, not opinions."
+        )
     return lines
 
 
@@ -142,17 +168,22 @@ def study_summary(folder: str | Path) -> dict[str, Any]:
     labels = study.labels
     measured = {pid: d for pid, d in participants.items() if any(b in d["blocks"] for b in blocks)}
     # per participant (mean over their measured trials) and pooled (mean and sd over participants)
-    per_participant = {pid: {b: d["blocks"][b]["means"] for b in blocks if b in d["blocks"]} for pid, d in measured.items()}
+    per_participant = {
+        pid: {b: d["blocks"][b]["means"] for b in blocks if b in d["blocks"]} for pid, d in measured.items()
+    }
     pooled: dict[str, dict[str, Any]] = {}
     for b in blocks:
         pooled[b] = {}
         for key, *_ in MEASURES:
             vals = np.array([per_participant[p][b][key] for p in per_participant if b in per_participant[p]], float)
             vals = vals[np.isfinite(vals)]
-            pooled[b][key] = {"mean": float(vals.mean()) if vals.size else None,
-                              "sd": float(vals.std(ddof=1)) if vals.size > 1 else None, "n": int(vals.size)}  # fmt: skip
+            pooled[b][key] = {
+                "mean": float(vals.mean()) if vals.size else None,
+                "sd": float(vals.std(ddof=1)) if vals.size > 1 else None,
+                "n": int(vals.size),
+            }
     comparisons = []
-    pairs = [(a, b) for i, a in enumerate(blocks) for b in blocks[i + 1:]]
+    pairs = [(a, b) for i, a in enumerate(blocks) for b in blocks[i + 1 :]]
     for key, *_ in MEASURES:
         for a, b in pairs:
             va = {p: v[a][key] for p, v in per_participant.items() if a in v}
@@ -169,8 +200,11 @@ def study_summary(folder: str | Path) -> dict[str, Any]:
         q_pooled[b] = {}
         for qk in q_keys + [f"tlx_{k}" for k, *_ in TLX_ITEMS]:
             qv = [v for v in (_answer(answers[p].get(b), qk) for p in answers) if math.isfinite(v)]
-            q_pooled[b][qk] = {"mean": float(np.mean(qv)) if qv else None, "n": len(qv),
-                               "median": float(np.median(qv)) if qv else None}  # fmt: skip
+            q_pooled[b][qk] = {
+                "mean": float(np.mean(qv)) if qv else None,
+                "n": len(qv),
+                "median": float(np.median(qv)) if qv else None,
+            }
     for qk in q_keys:
         for a, b in pairs:
             va = {p: _answer(ans.get(a), qk) for p, ans in answers.items()}
@@ -178,31 +212,62 @@ def study_summary(folder: str | Path) -> dict[str, Any]:
             if any(math.isfinite(v) for v in va.values()) and any(math.isfinite(v) for v in vb.values()):
                 q_comparisons.append(paired_comparison(qk, a, b, va, vb, seed=plan.seed))
     q_comparisons = holm_family(q_comparisons)
-    order = {key: order_effect([(p, b, measured[p]["positions"].get(b, 0), per_participant[p][b][key])
-                                for p in per_participant for b in per_participant[p]])
-             for key, *_ in MEASURES} if plan.protocol != "iterative" else {}  # fmt: skip
+    order = (
+        {
+            key: order_effect(
+                [
+                    (p, b, measured[p]["positions"].get(b, 0), per_participant[p][b][key])
+                    for p in per_participant
+                    for b in per_participant[p]
+                ]
+            )
+            for key, *_ in MEASURES
+        }
+        if plan.protocol != "iterative"
+        else {}
+    )
     n_complete = sum(1 for d in participants.values() if d["complete"])
     simulated = bool(table) and all(r.get("simulated") for r in table.values())
     summary = {
-        "study": plan.name, "protocol": plan.protocol, "world": plan.world, "plan_sha256": study.record["plan_sha256"],
-        "labels": labels, "blocks": blocks,
-        "participants": {pid: {"number": table[pid]["number"], "row": table[pid]["row"], "simulated": table[pid]["simulated"],
-                               "complete": d["complete"], "steps_done": d["steps_done"], "steps": d["steps"],
-                               "order": [b for b, _ in sorted(d["positions"].items(), key=lambda kv: kv[1]) if b in blocks],
-                               "means": per_participant.get(pid, {}), "answers": d["answers"],
-                               "checks": d["checks"]}
-                         for pid, d in participants.items()},
-        "n_participants": len(participants), "n_complete": n_complete, "pooled": pooled,
-        "comparisons": [c.to_json() for c in comparisons], "questionnaire": {"pooled": q_pooled,
-                                                                              "comparisons": [c.to_json() for c in q_comparisons]},
-        "order_effects": order, "simulated": simulated,
+        "study": plan.name,
+        "protocol": plan.protocol,
+        "world": plan.world,
+        "plan_sha256": study.record["plan_sha256"],
+        "labels": labels,
+        "blocks": blocks,
+        "participants": {
+            pid: {
+                "number": table[pid]["number"],
+                "row": table[pid]["row"],
+                "simulated": table[pid]["simulated"],
+                "complete": d["complete"],
+                "steps_done": d["steps_done"],
+                "steps": d["steps"],
+                "order": [b for b, _ in sorted(d["positions"].items(), key=lambda kv: kv[1]) if b in blocks],
+                "means": per_participant.get(pid, {}),
+                "answers": d["answers"],
+                "checks": d["checks"],
+            }
+            for pid, d in participants.items()
+        },
+        "n_participants": len(participants),
+        "n_complete": n_complete,
+        "pooled": pooled,
+        "comparisons": [c.to_json() for c in comparisons],
+        "questionnaire": {"pooled": q_pooled, "comparisons": [c.to_json() for c in q_comparisons]},
+        "order_effects": order,
+        "simulated": simulated,
         "limits": sample_limits(len(per_participant), len(comparisons), simulated),
-        "collections": {pid: {b: {"e_rms": [m["e_rms"] for m in d["blocks"][b]["trials"]],
-                                  "models": d["blocks"][b]["models"]}
-                              for b in ("transfer-set", "adaptation") if b in d["blocks"]}
-                        for pid, d in participants.items()},
+        "collections": {
+            pid: {
+                b: {"e_rms": [m["e_rms"] for m in d["blocks"][b]["trials"]], "models": d["blocks"][b]["models"]}
+                for b in ("transfer-set", "adaptation")
+                if b in d["blocks"]
+            }
+            for pid, d in participants.items()
+        },
         "models": _models(study, participants),
-    }  # fmt: skip
+    }
     return _finite(summary)
 
 
@@ -224,9 +289,12 @@ def _models(study: StudyFolder, participants: dict[str, Any]) -> dict[str, Any]:
             meta = json.loads((m / "model.json").read_text("utf-8"))
             info = meta.get("info", meta)
             hist = info.get("training_history") or [{}]
-            out.setdefault(pid, {})[m.name] = {"init": info.get("init"), "train_seconds": info.get("train_seconds"),
-                                               "trials": len(info.get("train_trials", [])) + len(info.get("test_trials", [])),
-                                               "test_loss": hist[-1].get("test_loss")}  # fmt: skip
+            out.setdefault(pid, {})[m.name] = {
+                "init": info.get("init"),
+                "train_seconds": info.get("train_seconds"),
+                "trials": len(info.get("train_trials", [])) + len(info.get("test_trials", [])),
+                "test_loss": hist[-1].get("test_loss"),
+            }
     return out
 
 
@@ -274,8 +342,14 @@ def _lines_figure(summary: dict[str, Any], keys: list[tuple[str, str, str, float
             ys = [np.nan if y is None else y * scale for y in ys]
             ax.plot(range(len(blocks)), ys, "o-", color="0.6", lw=1, ms=3)
         pooled = [summary["pooled"][b][key]["mean"] for b in blocks]
-        ax.plot(range(len(blocks)), [np.nan if v is None else v * scale for v in pooled], "s-", color="C3", lw=2.5,
-                label="mean")  # fmt: skip
+        ax.plot(
+            range(len(blocks)),
+            [np.nan if v is None else v * scale for v in pooled],
+            "s-",
+            color="C3",
+            lw=2.5,
+            label="mean",
+        )
         ax.set_xticks(range(len(blocks)), [_name(summary, b) for b in blocks], rotation=20, fontsize=8)
         ax.set_title(f"{label} [{unit}]", fontsize=9)
         ax.grid(alpha=0.3)
@@ -317,7 +391,9 @@ def _questionnaire_figure(summary: dict[str, Any], plan) -> str | None:
     q = summary["questionnaire"]["pooled"]
     blocks = summary["blocks"]
     keys = ([("raw_tlx", "raw TLX (0-100, lower better)")] if plan.questionnaire.tlx else []) + [
-        (f"likert_{i}", f"“{t}” (1-{plan.questionnaire.likert_points})") for i, t in enumerate(plan.questionnaire.likert)]
+        (f"likert_{i}", f"“{t}” (1-{plan.questionnaire.likert_points})")
+        for i, t in enumerate(plan.questionnaire.likert)
+    ]
     if not keys or not any(q[b][k]["n"] for b in blocks for k, _ in keys):
         return None
     fig, axes = plt.subplots(1, len(keys), figsize=(2.6 * len(keys), 2.8), squeeze=False)
@@ -325,8 +401,13 @@ def _questionnaire_figure(summary: dict[str, Any], plan) -> str | None:
         for p in summary["participants"].values():
             ys = [_answer(p["answers"].get(b), key) for b in blocks]
             ax.plot(range(len(blocks)), ys, "o-", color="0.6", lw=1, ms=3)
-        ax.plot(range(len(blocks)), [np.nan if q[b][key]["mean"] is None else q[b][key]["mean"] for b in blocks], "s-",
-                color="C0", lw=2.5)  # fmt: skip
+        ax.plot(
+            range(len(blocks)),
+            [np.nan if q[b][key]["mean"] is None else q[b][key]["mean"] for b in blocks],
+            "s-",
+            color="C0",
+            lw=2.5,
+        )
         ax.set_xticks(range(len(blocks)), [summary["labels"].get(b, b) for b in blocks], fontsize=8)
         ax.set_title(title, fontsize=8)
         ax.grid(alpha=0.3)
@@ -350,24 +431,40 @@ def write_report(folder: str | Path, out: str | Path | None = None) -> tuple[Pat
     out = Path(out) if out is not None else folder / "report"
     blocks = summary["blocks"]
     e = html.escape
-    parts = [f"<h1>Study {e(summary['study'])}: {e(summary['protocol'])}, world {e(summary['world'])}</h1>",
-             f"<p class=lead>{summary['n_complete']} of {summary['n_participants']} participants complete "
-             f"({plan.participants} planned){' — simulated participants' if summary['simulated'] else ''}. "
-             + ("Conditions (label on the page): " + ", ".join(e(_name(summary, b)) for b in blocks) if summary["labels"]
-                else "Rounds: " + ", ".join(blocks)) + ".</p>"]  # fmt: skip
+    parts = [
+        f"<h1>Study {e(summary['study'])}: {e(summary['protocol'])}, world {e(summary['world'])}</h1>",
+        f"<p class=lead>{summary['n_complete']} of {summary['n_participants']} participants complete "
+        f"({plan.participants} planned){' — simulated participants' if summary['simulated'] else ''}. "
+        + (
+            "Conditions (label on the page): " + ", ".join(e(_name(summary, b)) for b in blocks)
+            if summary["labels"]
+            else "Rounds: " + ", ".join(blocks)
+        )
+        + ".</p>",
+    ]
     # the first screen: pooled means, the limits, the lines
     head = "".join(f"<th>{e(_name(summary, b))}</th>" for b in blocks)
     rows: list[str] = []
     for key, label, unit, scale in MEASURES:
-        cells = "".join(f"<td>{_fmt(summary['pooled'][b][key]['mean'], scale)} ± {_fmt(summary['pooled'][b][key]['sd'], scale)}"
-                        f" <span class=n>(n={summary['pooled'][b][key]['n']})</span></td>" for b in blocks)  # fmt: skip
+        cells = "".join(
+            f"<td>{_fmt(summary['pooled'][b][key]['mean'], scale)} ± {_fmt(summary['pooled'][b][key]['sd'], scale)}"
+            f" <span class=n>(n={summary['pooled'][b][key]['n']})</span></td>"
+            for b in blocks
+        )
         rows.append(f"<tr><th>{e(label)} [{e(unit)}]</th>{cells}</tr>")
-    parts.append(f"<table><caption>mean ± sd over participants (each the mean of their measured trials)</caption>"
-                 f"<tr><th></th>{head}</tr>{''.join(rows)}</table>")  # fmt: skip
-    parts.append("<div class=limits><h2>What this sample can and cannot show</h2><ul>"
-                 + "".join(f"<li>{e(line)}</li>" for line in summary["limits"]) + "</ul></div>")  # fmt: skip
+    parts.append(
+        f"<table><caption>mean ± sd over participants (each the mean of their measured trials)</caption>"
+        f"<tr><th></th>{head}</tr>{''.join(rows)}</table>"
+    )
+    parts.append(
+        "<div class=limits><h2>What this sample can and cannot show</h2><ul>"
+        + "".join(f"<li>{e(line)}</li>" for line in summary["limits"])
+        + "</ul></div>"
+    )
     if summary["pooled"] and any(summary["participants"][p]["means"] for p in summary["participants"]):
-        parts.append(f"<img src='{_lines_figure(summary, [m for m in MEASURES if m[0] in ('f_rms', 'sigma', 'time_to_target', 'e_rms')])}'>")
+        parts.append(
+            f"<img src='{_lines_figure(summary, [m for m in MEASURES if m[0] in ('f_rms', 'sigma', 'time_to_target', 'e_rms')])}'>"
+        )
     # paired comparisons
     if summary["comparisons"]:
         rows = []  # the paired comparisons' table rows
@@ -375,62 +472,99 @@ def write_report(folder: str | Path, out: str | Path | None = None) -> tuple[Pat
             scale = next(m[3] for m in MEASURES if m[0] == c["metric"])
             unit = next(m[2] for m in MEASURES if m[0] == c["metric"])
             ci = c["mean_diff_ci"]
-            rows.append(f"<tr><td>{e(c['metric'])}</td><td>{e(_name(summary, c['a']))} − {e(_name(summary, c['b']))}</td>"
-                        f"<td>{c['n']}</td><td>{_fmt(c['mean_diff'], scale)} [{_fmt(ci[0], scale)}, {_fmt(ci[1], scale)}] {e(unit)}</td>"
-                        f"<td>{_fmt(c['dz'])} [{_fmt(c['dz_ci'][0])}, {_fmt(c['dz_ci'][1])}]</td>"
-                        f"<td>{_fmt(c['rank_biserial'])}</td><td>{_p(c['p_wilcoxon'])} / {_p(c['p_wilcoxon_holm'])}</td>"
-                        f"<td>{_p(c['p_t'])} / {_p(c['p_t_holm'])}</td></tr>")  # fmt: skip
-        parts.append("<h2>Paired comparisons</h2><table><tr><th>measure</th><th>a − b</th><th>n</th><th>mean difference "
-                     "[95 % bootstrap]</th><th>d_z [95 % bootstrap]</th><th>rank-biserial r</th><th>Wilcoxon p / Holm</th>"
-                     "<th>paired t p / Holm</th></tr>" + "".join(rows) + "</table>")  # fmt: skip
+            rows.append(
+                f"<tr><td>{e(c['metric'])}</td><td>{e(_name(summary, c['a']))} − {e(_name(summary, c['b']))}</td>"
+                f"<td>{c['n']}</td><td>{_fmt(c['mean_diff'], scale)} [{_fmt(ci[0], scale)}, {_fmt(ci[1], scale)}] {e(unit)}</td>"
+                f"<td>{_fmt(c['dz'])} [{_fmt(c['dz_ci'][0])}, {_fmt(c['dz_ci'][1])}]</td>"
+                f"<td>{_fmt(c['rank_biserial'])}</td><td>{_p(c['p_wilcoxon'])} / {_p(c['p_wilcoxon_holm'])}</td>"
+                f"<td>{_p(c['p_t'])} / {_p(c['p_t_holm'])}</td></tr>"
+            )
+        parts.append(
+            "<h2>Paired comparisons</h2><table><tr><th>measure</th><th>a − b</th><th>n</th><th>mean difference "
+            "[95 % bootstrap]</th><th>d_z [95 % bootstrap]</th><th>rank-biserial r</th><th>Wilcoxon p / Holm</th>"
+            "<th>paired t p / Holm</th></tr>" + "".join(rows) + "</table>"
+        )
     parts.append(f"<h2>Force traces</h2><img src='{_force_figure(folder, summary)}'>")
     qfig = _questionnaire_figure(summary, plan)
     if qfig:
-        text = "".join(f"<tr><td>{e(c['metric'])}</td><td>{e(_name(summary, c['a']))} − {e(_name(summary, c['b']))}</td>"
-                       f"<td>{c['n']}</td><td>{_fmt(c['mean_diff'])}</td><td>{_fmt(c['rank_biserial'])}</td>"
-                       f"<td>{_p(c['p_wilcoxon'])} / {_p(c['p_wilcoxon_holm'])}</td></tr>"
-                       for c in summary["questionnaire"]["comparisons"])  # fmt: skip
-        parts.append(f"<h2>Questionnaires</h2><img src='{qfig}'><table><tr><th>item</th><th>a − b</th><th>n</th>"
-                     f"<th>mean difference</th><th>rank-biserial r</th><th>Wilcoxon p / Holm</th></tr>{text}</table>")  # fmt: skip
+        text = "".join(
+            f"<tr><td>{e(c['metric'])}</td><td>{e(_name(summary, c['a']))} − {e(_name(summary, c['b']))}</td>"
+            f"<td>{c['n']}</td><td>{_fmt(c['mean_diff'])}</td><td>{_fmt(c['rank_biserial'])}</td>"
+            f"<td>{_p(c['p_wilcoxon'])} / {_p(c['p_wilcoxon_holm'])}</td></tr>"
+            for c in summary["questionnaire"]["comparisons"]
+        )
+        parts.append(
+            f"<h2>Questionnaires</h2><img src='{qfig}'><table><tr><th>item</th><th>a − b</th><th>n</th>"
+            f"<th>mean difference</th><th>rank-biserial r</th><th>Wilcoxon p / Holm</th></tr>{text}</table>"
+        )
     if summary["order_effects"]:
-        text = "".join(f"<tr><td>{e(k)}</td><td>{_fmt(v['F'])}</td><td>{v['df1']}, {v['df2']}</td><td>{_p(v['p'])}</td></tr>"
-                       for k, v in summary["order_effects"].items())  # fmt: skip
-        parts.append("<h2>Order effects</h2><p>The position's F test in y ~ participant + condition + position "
-                     "(a learning or fatigue effect across the session). Condition × position cannot be separated in a "
-                     f"Latin square; the means per condition and position are in summary.json.</p><table><tr><th>measure</th>"
-                     f"<th>F</th><th>df</th><th>p</th></tr>{text}</table>")  # fmt: skip
+        text = "".join(
+            f"<tr><td>{e(k)}</td><td>{_fmt(v['F'])}</td><td>{v['df1']}, {v['df2']}</td><td>{_p(v['p'])}</td></tr>"
+            for k, v in summary["order_effects"].items()
+        )
+        parts.append(
+            "<h2>Order effects</h2><p>The position's F test in y ~ participant + condition + position "
+            "(a learning or fatigue effect across the session). Condition × position cannot be separated in a "
+            f"Latin square; the means per condition and position are in summary.json.</p><table><tr><th>measure</th>"
+            f"<th>F</th><th>df</th><th>p</th></tr>{text}</table>"
+        )
     checks = [(pid, c) for pid, p in summary["participants"].items() for c in p["checks"]]
     if checks:
-        text = "".join(f"<tr><td>{e(pid)}</td><td>{c['round']}</td><td>{_fmt(c['e_rms_before'], 1e3)}</td>"
-                       f"<td>{_fmt(c['e_rms'], 1e3)}</td><td>{_fmt(c['delta'], 1e3)}</td><td>{'met' if c['met'] else 'not met'}"
-                       f"{' (stopped)' if c['stop'] else ''}</td></tr>" for pid, c in checks)  # fmt: skip
-        parts.append("<h2>Iterative training: the stop criterion (eq. 4.13)</h2><table><tr><th>participant</th><th>round</th>"
-                     "<th>e_RMS before [mm]</th><th>e_RMS [mm]</th><th>|Δ| [mm]</th><th>criterion</th></tr>" + text + "</table>")
+        text = "".join(
+            f"<tr><td>{e(pid)}</td><td>{c['round']}</td><td>{_fmt(c['e_rms_before'], 1e3)}</td>"
+            f"<td>{_fmt(c['e_rms'], 1e3)}</td><td>{_fmt(c['delta'], 1e3)}</td><td>{'met' if c['met'] else 'not met'}"
+            f"{' (stopped)' if c['stop'] else ''}</td></tr>"
+            for pid, c in checks
+        )
+        parts.append(
+            "<h2>Iterative training: the stop criterion (eq. 4.13)</h2><table><tr><th>participant</th><th>round</th>"
+            "<th>e_RMS before [mm]</th><th>e_RMS [mm]</th><th>|Δ| [mm]</th><th>criterion</th></tr>" + text + "</table>"
+        )
     if any(summary["collections"].values()):
-        text = "".join(f"<tr><td>{e(pid)}</td><td>{e(b)}</td><td>{' '.join(_fmt(v, 1e3) for v in c['e_rms'])}</td>"
-                       f"<td>{e(', '.join(str(m) for m in c['models']))}</td></tr>"
-                       for pid, cs in summary["collections"].items() for b, c in cs.items())  # fmt: skip
-        parts.append("<h2>Collections</h2><table><tr><th>participant</th><th>block</th><th>e_RMS at 0.4 s per trial [mm]"
-                     "</th><th>model in the loop</th></tr>" + text + "</table>")  # fmt: skip
+        text = "".join(
+            f"<tr><td>{e(pid)}</td><td>{e(b)}</td><td>{' '.join(_fmt(v, 1e3) for v in c['e_rms'])}</td>"
+            f"<td>{e(', '.join(str(m) for m in c['models']))}</td></tr>"
+            for pid, cs in summary["collections"].items()
+            for b, c in cs.items()
+        )
+        parts.append(
+            "<h2>Collections</h2><table><tr><th>participant</th><th>block</th><th>e_RMS at 0.4 s per trial [mm]"
+            "</th><th>model in the loop</th></tr>" + text + "</table>"
+        )
     if summary["models"]:
-        text = "".join(f"<tr><td>{e(pid)}</td><td>{e(name)}</td><td>{e(str(m['init']))}</td><td>{m['trials']}</td>"
-                       f"<td>{_fmt(m['train_seconds'], 1, 1)}</td></tr>"
-                       for pid, ms in summary["models"].items() for name, m in ms.items())  # fmt: skip
-        parts.append("<h2>Models trained</h2><table><tr><th>participant</th><th>model</th><th>init</th><th>trials</th>"
-                     "<th>training [s]</th></tr>" + text + "</table>")  # fmt: skip
-    text = "".join(f"<tr><td>{e(pid)}</td><td>{p['number']}</td><td>{'simulated' if p['simulated'] else 'person'}</td>"
-                   f"<td>{e(' → '.join(summary['labels'].get(b, b) for b in p['order']))}</td>"
-                   f"<td>{p['steps_done']}/{p['steps']}</td></tr>" for pid, p in summary["participants"].items())  # fmt: skip
-    parts.append("<h2>Participants</h2><table><tr><th>id</th><th>#</th><th></th><th>order</th><th>steps done</th></tr>"
-                 + text + "</table>")  # fmt: skip
-    style = ("body{font-family:system-ui,sans-serif;margin:1.2em 2em;max-width:1250px;color:#222}"
-             "table{border-collapse:collapse;margin:.6em 0;font-size:13px}td,th{border:1px solid #ccc;padding:3px 7px;"
-             "text-align:left}caption{text-align:left;font-size:12px;color:#555}.n{color:#888;font-size:11px}"
-             ".lead{font-size:15px}.limits{background:#fff8e1;border:1px solid #e0c060;padding:.2em 1em;margin:.8em 0;"
-             "font-size:13px}.limits h2{font-size:15px}img{max-width:100%}h1{font-size:22px}h2{font-size:17px}")  # fmt: skip
-    page = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>coassist study {e(summary['study'])}</title>"
-            f"<style>{style}</style></head><body>{''.join(parts)}<p class=n>coassist study report · plan sha256 "
-            f"{summary['plan_sha256'][:12]}</p></body></html>")  # fmt: skip
+        text = "".join(
+            f"<tr><td>{e(pid)}</td><td>{e(name)}</td><td>{e(str(m['init']))}</td><td>{m['trials']}</td>"
+            f"<td>{_fmt(m['train_seconds'], 1, 1)}</td></tr>"
+            for pid, ms in summary["models"].items()
+            for name, m in ms.items()
+        )
+        parts.append(
+            "<h2>Models trained</h2><table><tr><th>participant</th><th>model</th><th>init</th><th>trials</th>"
+            "<th>training [s]</th></tr>" + text + "</table>"
+        )
+    text = "".join(
+        f"<tr><td>{e(pid)}</td><td>{p['number']}</td><td>{'simulated' if p['simulated'] else 'person'}</td>"
+        f"<td>{e(' → '.join(summary['labels'].get(b, b) for b in p['order']))}</td>"
+        f"<td>{p['steps_done']}/{p['steps']}</td></tr>"
+        for pid, p in summary["participants"].items()
+    )
+    parts.append(
+        "<h2>Participants</h2><table><tr><th>id</th><th>#</th><th></th><th>order</th><th>steps done</th></tr>"
+        + text
+        + "</table>"
+    )
+    style = (
+        "body{font-family:system-ui,sans-serif;margin:1.2em 2em;max-width:1250px;color:#222}"
+        "table{border-collapse:collapse;margin:.6em 0;font-size:13px}td,th{border:1px solid #ccc;padding:3px 7px;"
+        "text-align:left}caption{text-align:left;font-size:12px;color:#555}.n{color:#888;font-size:11px}"
+        ".lead{font-size:15px}.limits{background:#fff8e1;border:1px solid #e0c060;padding:.2em 1em;margin:.8em 0;"
+        "font-size:13px}.limits h2{font-size:15px}img{max-width:100%}h1{font-size:22px}h2{font-size:17px}"
+    )
+    page = (
+        f"<!doctype html><html lang=en><head><meta charset=utf-8><title>coassist study {e(summary['study'])}</title>"
+        f"<style>{style}</style></head><body>{''.join(parts)}<p class=n>coassist study report · plan sha256 "
+        f"{summary['plan_sha256'][:12]}</p></body></html>"
+    )
     out.mkdir(parents=True, exist_ok=True)
     html_path = atomic_write_text(out / "report.html", page)
     json_path = atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, allow_nan=False) + "\n")

@@ -59,9 +59,18 @@ class ParticipantRun:
     host : a real arm's address.  confirm : asked before a real arm moves.  say : progress lines.
     """
 
-    def __init__(self, study: StudyFolder, participant: str, *, simulate: bool = False,
-                 page: tuple[str, int, str | None] | None = None, realtime: bool = False, host: str | None = None,
-                 confirm: Any = None, say: Callable[[str], None] | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        study: StudyFolder,
+        participant: str,
+        *,
+        simulate: bool = False,
+        page: tuple[str, int, str | None] | None = None,
+        realtime: bool = False,
+        host: str | None = None,
+        confirm: Any = None,
+        say: Callable[[str], None] | None = None,
+    ) -> None:
         self.study = study
         self.plan = study.plan()
         if page is None and not simulate:
@@ -98,8 +107,13 @@ class ParticipantRun:
         order = self.folder.order()
         if order is None:
             steps = participant_steps(plan, self.study.labels, rec["number"], rec["row"])
-            order = {"participant": self.id, "number": rec["number"], "row": rec["row"],
-                     "operator": rec["number"] if self.simulate else None, "steps": steps}  # fmt: skip
+            order = {
+                "participant": self.id,
+                "number": rec["number"],
+                "row": rec["row"],
+                "operator": rec["number"] if self.simulate else None,
+                "steps": steps,
+            }
             self.folder.write_order(order)
         self.order = order
         self.steps: list[dict[str, Any]] = order["steps"]
@@ -108,22 +122,44 @@ class ParticipantRun:
         done = self.folder.progress()
         for i, rec_i in enumerate(done):
             if i >= len(self.steps) or rec_i.get("key") != step_key(self.steps[i]):
-                raise StudyFolderError(f"{self.folder.progress_file}: line {i + 1} is not step {i} of {self.folder.folder / 'order.json'}"
-                                       " (edited by hand?)")  # fmt: skip
+                raise StudyFolderError(
+                    f"{self.folder.progress_file}: line {i + 1} is not step {i} of {self.folder.folder / 'order.json'}"
+                    " (edited by hand?)"
+                )
         self.done = done
         tp = plan.trials
         kinds = sorted({s["controller"] for s in self.steps if s["kind"] == "trial"})
-        config = PlayConfig(user=self.id, out=self.folder.folder.parent, controllers=tuple(kinds), preset=tp.preset,
-                            tasks=tp.tasks, seed=0, motion_time=tp.motion_time, arrive_radius=tp.arrive_radius,
-                            dwell=tp.dwell, time_limit=tp.time_limit, paced=self.page is not None or self.realtime)  # fmt: skip
+        config = PlayConfig(
+            user=self.id,
+            out=self.folder.folder.parent,
+            controllers=tuple(kinds),
+            preset=tp.preset,
+            tasks=tp.tasks,
+            seed=0,
+            motion_time=tp.motion_time,
+            arrive_radius=tp.arrive_radius,
+            dwell=tp.dwell,
+            time_limit=tp.time_limit,
+            paced=self.page is not None or self.realtime,
+        )
         from coassist.control.presets import CONTROLLER_KINDS, FORMER_NAMES
         from coassist.study.session import StudySession
 
-        secrets = (*CONTROLLER_KINDS, *FORMER_NAMES, *(c.name for c in plan.conditions), *plan.model_paths(),
-                   "source", "transferred", "online", "offline", str(self.folder.folder / "models"))  # fmt: skip
+        secrets = (
+            *CONTROLLER_KINDS,
+            *FORMER_NAMES,
+            *(c.name for c in plan.conditions),
+            *plan.model_paths(),
+            "source",
+            "transferred",
+            "online",
+            "offline",
+            str(self.folder.folder / "models"),
+        )
         drive = {"object": tp.object, "obstacle": tp.obstacle, "preset": tp.preset, "time_limit": tp.time_limit}
-        self.session = StudySession(config, world=plan.world, secrets=secrets, drive=drive, host=self.host,
-                                    confirm=self.confirm)  # fmt: skip
+        self.session = StudySession(
+            config, world=plan.world, secrets=secrets, drive=drive, host=self.host, confirm=self.confirm
+        )
         if self.page is not None:
             from coassist.play.server import PlayServer
 
@@ -170,8 +206,14 @@ class ParticipantRun:
         return True
 
     def _view(self, k: int, step: dict[str, Any], **more: Any) -> dict[str, Any]:
-        return {"step": k, "of": len(self.steps), "kind": step["kind"], "label": step.get("label"),
-                "practice": bool(step.get("practice", False)), **more}  # fmt: skip
+        return {
+            "step": k,
+            "of": len(self.steps),
+            "kind": step["kind"],
+            "label": step.get("label"),
+            "practice": bool(step.get("practice", False)),
+            **more,
+        }
 
     def _show(self, view: dict[str, Any]) -> None:
         if self.session is not None:
@@ -188,35 +230,71 @@ class ParticipantRun:
         t0 = time.monotonic()
         intent, model_name = self._intent(step["intent"])  # a model still training is waited for here
         waited = time.monotonic() - t0
-        task = task_for_seed(step["task"], step["seed"], obstacle=tp.obstacle,
-                             motion_time=tp.motion_time if plan.world == "play" else None)  # fmt: skip
+        task = task_for_seed(
+            step["task"],
+            step["seed"],
+            obstacle=tp.obstacle,
+            motion_time=tp.motion_time if plan.world == "play" else None,
+        )
         hand = None
         operator = self.record["number"] if self.simulate else None
         if operator is not None and self.page is None and plan.world == "play":
             dt = float(self.session.preset.impedance.dt)
-            hand = OperatorHand(task, step["seed"], simulated_profile(operator, plan.seed), dt,
-                                episode_ticks(task, dt, tp.time_limit) + 1)  # fmt: skip
+            hand = OperatorHand(
+                task,
+                step["seed"],
+                simulated_profile(operator, plan.seed),
+                dt,
+                episode_ticks(task, dt, tp.time_limit) + 1,
+            )
         page_name = step["label"] or "go"
-        meta = {"study": plan.name, "study_participant": self.id, "study_step": k, "study_block": step["block"],
-                "study_condition": step["condition"], "study_label": step["label"], "study_position": step["position"],
-                "study_practice": step["practice"], "study_model": model_name,
-                "study_operator": None if operator is None else simulated_profile(operator, plan.seed).name}  # fmt: skip
-        setup = TrialSetup(step=k, page_name=page_name, controller=step["controller"], intent=intent, task=task,
-                           seed=step["seed"], meta=meta, operator=operator if self.page is None else None, hand=hand)  # fmt: skip
+        meta = {
+            "study": plan.name,
+            "study_participant": self.id,
+            "study_step": k,
+            "study_block": step["block"],
+            "study_condition": step["condition"],
+            "study_label": step["label"],
+            "study_position": step["position"],
+            "study_practice": step["practice"],
+            "study_model": model_name,
+            "study_operator": None if operator is None else simulated_profile(operator, plan.seed).name,
+        }
+        setup = TrialSetup(
+            step=k,
+            page_name=page_name,
+            controller=step["controller"],
+            intent=intent,
+            task=task,
+            seed=step["seed"],
+            meta=meta,
+            operator=operator if self.page is None else None,
+            hand=hand,
+        )
         what = "practice trial" if step["practice"] else "trial"
         label = f"condition {step['label']}" if step["label"] else step["block"].replace("-", " ")
-        self.session.view = self._view(k, step, text=f"{label}: {what} {step['index'] + 1} — press Start, then "
-                                                     "follow the plan, avoid the box and hold in the target")  # fmt: skip
+        self.session.view = self._view(
+            k,
+            step,
+            text=f"{label}: {what} {step['index'] + 1} — press Start, then "
+            "follow the plan, avoid the box and hold in the target",
+        )
         trial = self.session.run(setup, wait_for_page=self.page is not None)
         folder = self.folder.block(step["block"])
         if (folder / MANIFEST_NAME).is_file():
             append_to_dataset([trial], folder)
         else:
-            write_dataset([trial], folder, f"{self.id}/{step['block']}",
-                          f"study {plan.name}, participant {self.id}, {step['block']} (coassist study)")  # fmt: skip
+            write_dataset(
+                [trial],
+                folder,
+                f"{self.id}/{step['block']}",
+                f"study {plan.name}, participant {self.id}, {step['block']} (coassist study)",
+            )
         file = manifest_files(folder)[-1]
-        self.say(f"{self.id}: step {k + 1}/{len(self.steps)} {step['block']} trial {step['index'] + 1}: "
-                 f"{trial.meta.extra.get('ended')}")  # fmt: skip
+        self.say(
+            f"{self.id}: step {k + 1}/{len(self.steps)} {step['block']} trial {step['index'] + 1}: "
+            f"{trial.meta.extra.get('ended')}"
+        )
         rec = trial_record(k, step, file, trial.meta.to_dict(), model=model_name, waited_for_model_s=round(waited, 3))
         return {key: v for key, v in rec.items() if key not in ("step", "kind", "key")}
 
@@ -244,7 +322,9 @@ class ParticipantRun:
 
     def _train_jobs(self) -> list[str]:
         """The models of the train steps on record (started or done)."""
-        return [self.steps[i]["model"] for i, r in enumerate(self.done) if r["kind"] == "train" and not r.get("deferred")]
+        return [
+            self.steps[i]["model"] for i, r in enumerate(self.done) if r["kind"] == "train" and not r.get("deferred")
+        ]
 
     def _job(self, name: str) -> TrainJob:
         k = next(i for i, s in enumerate(self.steps) if s["kind"] == "train" and s["model"] == name)
@@ -306,16 +386,26 @@ class ParticipantRun:
         if step["init"] == "online" and self.training.busy(self._online_models()):
             return {"model": name, "deferred": True}  # the loop never waits: the next update takes these trials too
         assert self.plan.training is not None  # plans that train have [training]
-        job = TrainJob(data=self._data(step["data"]), out=str(self._model_dir(name)), init=self._init(step),
-                       training=self.plan.training)  # fmt: skip
+        job = TrainJob(
+            data=self._data(step["data"]),
+            out=str(self._model_dir(name)),
+            init=self._init(step),
+            training=self.plan.training,
+        )
         ready = model_ready(job.out)
         if not ready:
             self.training.submit(name, job)
             self.say(f"{self.id}: training {name} in the background ({job.init})")
         if step.get("wait"):
             self._ensure_model(name)
-        return {"model": name, "init": job.init, "data": list(job.data), "command": train_command(job),
-                "ready_when_recorded": model_ready(job.out) and not self.training.running(name), "was_ready": ready}  # fmt: skip
+        return {
+            "model": name,
+            "init": job.init,
+            "data": list(job.data),
+            "command": train_command(job),
+            "ready_when_recorded": model_ready(job.out) and not self.training.running(name),
+            "was_ready": ready,
+        }
 
     def _freeze(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
         for name in self._online_models():  # the last update, if one is still training
@@ -333,13 +423,19 @@ class ParticipantRun:
             from coassist.study.participants import simulated_answers, simulated_profile
 
             f, s = self._block_scores(step["block"])
-            values = simulated_answers(form, f, s, simulated_profile(self.record["number"], self.plan.seed),
-                                       np.random.default_rng([self.plan.seed, self.record["number"], k]))  # fmt: skip
+            values = simulated_answers(
+                form,
+                f,
+                s,
+                simulated_profile(self.record["number"], self.plan.seed),
+                np.random.default_rng([self.plan.seed, self.record["number"], k]),
+            )
             answers = form.check(values)
         else:
             what = f"condition {step['label']}" if step["label"] else step["block"].replace("-", " ")
-            answers = self.session.ask(self._view(k, step, form=form.to_page(), text=f"About {what}: how was it?"),
-                                       form.check)  # fmt: skip
+            answers = self.session.ask(
+                self._view(k, step, form=form.to_page(), text=f"About {what}: how was it?"), form.check
+            )
         return {"block": step["block"], "condition": step["condition"], "label": step["label"], "answers": answers}
 
     def _block_scores(self, block: str) -> tuple[float, float | None]:
@@ -347,16 +443,28 @@ class ParticipantRun:
 
         trials = read_dataset(self.folder.block(block)).trials
         f = float(np.mean([f_rms(t.wrench) for t in trials]))
-        sig = [precision_sigma(t.pose, np.asarray(t.meta.extra["target"], float), t.meta.dt,
-                               epsilon=float(t.meta.extra.get("arrive_radius", 0.025))) for t in trials]  # fmt: skip
+        sig = [
+            precision_sigma(
+                t.pose,
+                np.asarray(t.meta.extra["target"], float),
+                t.meta.dt,
+                epsilon=float(t.meta.extra.get("arrive_radius", 0.025)),
+            )
+            for t in trials
+        ]
         sig = [v for v in sig if math.isfinite(v)]
         return f, (float(np.mean(sig)) if sig else None)
 
     def _rest(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
         t0 = time.monotonic()
         seconds = float(step["seconds"]) if self.page is not None else 0.0
-        view = self._view(k, step, seconds=seconds, ready=False,
-                          text="Rest. The next part starts when you are ready (and the robot has learned).")  # fmt: skip
+        view = self._view(
+            k,
+            step,
+            seconds=seconds,
+            ready=False,
+            text="Rest. The next part starts when you are ready (and the robot has learned).",
+        )
         self.session.rest(view, lambda: not self.training.busy(), wait_for_page=self.page is not None, seconds=seconds)
         return {"rested_s": round(time.monotonic() - t0, 3)}
 
@@ -373,7 +481,16 @@ class ParticipantRun:
         e_prev, e_now = rounds[step["round"] - 1], rounds[step["round"]]
         delta = abs(e_now - e_prev)
         met = bool(delta < it.tolerance)
-        self.say(f"{self.id}: round {step['round']}: in-loop e_RMS {1e3 * e_now:.2f} mm (was {1e3 * e_prev:.2f}); "
-                 f"criterion {'met' if met else 'not met'}")  # fmt: skip
-        return {"round": step["round"], "e_rms": e_now, "e_rms_before": e_prev, "delta": delta, "tolerance": it.tolerance,
-                "met": met, "stop": met and it.stop_at_criterion and step["round"] < it.rounds - 1}  # fmt: skip
+        self.say(
+            f"{self.id}: round {step['round']}: in-loop e_RMS {1e3 * e_now:.2f} mm (was {1e3 * e_prev:.2f}); "
+            f"criterion {'met' if met else 'not met'}"
+        )
+        return {
+            "round": step["round"],
+            "e_rms": e_now,
+            "e_rms_before": e_prev,
+            "delta": delta,
+            "tolerance": it.tolerance,
+            "met": met,
+            "stop": met and it.stop_at_criterion and step["round"] < it.rounds - 1,
+        }

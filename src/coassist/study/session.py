@@ -73,8 +73,16 @@ class StudySession(PlaySession):
     confirm : asked before a real arm moves (as ``coassist drive``).
     """
 
-    def __init__(self, config: PlayConfig, *, world: str = "play", secrets: tuple[str, ...] = (),
-                 drive: dict[str, Any] | None = None, host: str | None = None, confirm: Any = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        config: PlayConfig,
+        *,
+        world: str = "play",
+        secrets: tuple[str, ...] = (),
+        drive: dict[str, Any] | None = None,
+        host: str | None = None,
+        confirm: Any = None,
+    ) -> None:
         super().__init__(config)
         self.world = world
         self.secrets = tuple(s for s in secrets if s)
@@ -106,7 +114,9 @@ class StudySession(PlaySession):
 
     def controller(self, name: str):
         if self.setup is None or name != self.setup.page_name:
-            raise ValueError(f"the page asked for {name!r}; the step shown is {self.setup.page_name if self.setup else None!r}")
+            raise ValueError(
+                f"the page asked for {name!r}; the step shown is {self.setup.page_name if self.setup else None!r}"
+            )
         return self._controllers[self.setup.controller]
 
     def for_page(self, message: dict[str, Any]) -> dict[str, Any]:
@@ -117,9 +127,16 @@ class StudySession(PlaySession):
             return dict(message, controller=name)
         out = dict(message)
         if kind == "init":
-            out.update(controllers=list(self.page_choices()), controller=name, model=None, preset=None, folder="",
-                       summary={}, results=[self._blind_result(r) for r in message.get("results", [])],
-                       study=self.view)  # fmt: skip
+            out.update(
+                controllers=list(self.page_choices()),
+                controller=name,
+                model=None,
+                preset=None,
+                folder="",
+                summary={},
+                results=[self._blind_result(r) for r in message.get("results", [])],
+                study=self.view,
+            )
         elif kind == "started":
             out["controller"] = name
         elif kind == "result":
@@ -148,8 +165,10 @@ class StudySession(PlaySession):
         assert setup is not None  # a trial runs only for a setup
         extra = dict(trial.meta.extra)
         extra.update(setup.meta, controller_name=setup.page_name, trial_index=setup.step)
-        trial = dataclasses.replace(trial, meta=TrialMeta(**{**trial.meta.to_dict(), "user": self.config.user,
-                                                             "seed": setup.seed, "extra": extra}))  # fmt: skip
+        trial = dataclasses.replace(
+            trial,
+            meta=TrialMeta(**{**trial.meta.to_dict(), "user": self.config.user, "seed": setup.seed, "extra": extra}),
+        )
         self._captured = trial
         result = _score(trial, "", len(self.results))
         self.results.append(result)
@@ -167,9 +186,16 @@ class StudySession(PlaySession):
         setup = self.setup
         assert setup is not None
         simulated = setup.operator is not None
-        config = DriveConfig(world=self.world, controller=setup.controller, task=setup.task.kind, seed=setup.seed,
-                             intent=setup.intent, user=setup.operator or 0, realtime_intent=False if simulated else None,
-                             **self.drive_options)  # fmt: skip
+        config = DriveConfig(
+            world=self.world,
+            controller=setup.controller,
+            task=setup.task.kind,
+            seed=setup.seed,
+            intent=setup.intent,
+            user=setup.operator or 0,
+            realtime_intent=False if simulated else None,
+            **self.drive_options,
+        )
         dt = config.dt
         every = max(1, int(round(config.rate_hz / 125.0)))
 
@@ -182,14 +208,26 @@ class StudySession(PlaySession):
                 return
             pred = out.prediction
             frame = {
-                "type": "frame", "index": setup.step, "k": k + 1, "t": (k + 1) * dt,
-                "x": float(out.pose[0]), "y": float(out.pose[1]), "vx": float(out.velocity[0]), "vy": float(out.velocity[1]),
-                "fh": [float(out.wrench[0]), float(out.wrench[1])], "ur": [float(v) for v in out.u_r[:2]],
+                "type": "frame",
+                "index": setup.step,
+                "k": k + 1,
+                "t": (k + 1) * dt,
+                "x": float(out.pose[0]),
+                "y": float(out.pose[1]),
+                "vx": float(out.velocity[0]),
+                "vy": float(out.velocity[1]),
+                "fh": [float(out.wrench[0]), float(out.wrench[1])],
+                "ur": [float(v) for v in out.u_r[:2]],
                 "ref": [float(v) for v in out.reference[:2]],
                 "prediction": [] if pred is None else np.vstack([pred[::PREDICTION_STRIDE], pred[-1:]]).tolist(),
-                "predicted": pred is not None, "faults": fault_names(int(out.fault)), "seq": self.hand.seq,
-                "held": bool(getattr(self.hand, "held", False)), "controller": name, "misses": 0, "world": self.world,
-            }  # fmt: skip
+                "predicted": pred is not None,
+                "faults": fault_names(int(out.fault)),
+                "seq": self.hand.seq,
+                "held": bool(getattr(self.hand, "held", False)),
+                "controller": name,
+                "misses": 0,
+                "world": self.world,
+            }
             self.frame = frame
             self.publish(frame)
 
@@ -198,12 +236,23 @@ class StudySession(PlaySession):
             from coassist.robot.mujoco_world import MujocoUR5World
 
             task = setup.task
-            world = MujocoUR5World(config.object, control_dt=dt, start=(float(task.start[0]), float(task.start[1]),
-                                                                       TASK_HEIGHT),
-                                   seed=config.seed, view=False, realtime=self.config.paced)  # fmt: skip
+            world = MujocoUR5World(
+                config.object,
+                control_dt=dt,
+                start=(float(task.start[0]), float(task.start[1]), TASK_HEIGHT),
+                seed=config.seed,
+                view=False,
+                realtime=self.config.paced,
+            )
         try:
-            trial = drive(config, world=world, host=self.robot_host, confirm=self.confirm, on_tick=on_tick,
-                          operator=None if simulated else self.hand)  # fmt: skip
+            trial = drive(
+                config,
+                world=world,
+                host=self.robot_host,
+                confirm=self.confirm,
+                on_tick=on_tick,
+                operator=None if simulated else self.hand,
+            )
         except _Aborted:
             self.publish({"type": "status", "level": "warn", "text": "trial aborted (nothing written)"})
             return None

@@ -34,8 +34,19 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PairedComparison", "bootstrap_interval", "cohen_dz", "cohen_dz_rows", "holm", "holm_family", "mean_rows",
-           "order_effect", "paired_comparison", "rank_biserial", "rank_biserial_rows"]
+__all__ = [
+    "PairedComparison",
+    "bootstrap_interval",
+    "cohen_dz",
+    "cohen_dz_rows",
+    "holm",
+    "holm_family",
+    "mean_rows",
+    "order_effect",
+    "paired_comparison",
+    "rank_biserial",
+    "rank_biserial_rows",
+]
 
 
 def holm(pvalues: Sequence[float]) -> list[float]:
@@ -92,8 +103,14 @@ def mean_rows(d: np.ndarray) -> np.ndarray:
     return np.atleast_2d(np.asarray(d, dtype=float)).mean(axis=1)
 
 
-def bootstrap_interval(d: Sequence[float], statistic: Callable[[np.ndarray], np.ndarray], *, seed: int,
-                       n_boot: int = 4000, confidence: float = 0.95) -> tuple[float, float, int]:  # fmt: skip
+def bootstrap_interval(
+    d: Sequence[float],
+    statistic: Callable[[np.ndarray], np.ndarray],
+    *,
+    seed: int,
+    n_boot: int = 4000,
+    confidence: float = 0.95,
+) -> tuple[float, float, int]:
     """Percentile bootstrap interval of ``statistic`` over resamples of ``d``.
 
     statistic : maps (B, n) resamples to (B,) values, one per row (:func:`mean_rows`,
@@ -148,8 +165,16 @@ class PairedComparison:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
 
 
-def paired_comparison(metric: str, a_name: str, b_name: str, a: Mapping[str, float], b: Mapping[str, float], *,
-                      seed: int = 0, n_boot: int = 4000) -> PairedComparison:  # fmt: skip
+def paired_comparison(
+    metric: str,
+    a_name: str,
+    b_name: str,
+    a: Mapping[str, float],
+    b: Mapping[str, float],
+    *,
+    seed: int = 0,
+    n_boot: int = 4000,
+) -> PairedComparison:
     """The tests and effect sizes of ``a`` against ``b`` (participant → value; pairs where both are finite)."""
     from scipy import stats
 
@@ -170,11 +195,24 @@ def paired_comparison(metric: str, a_name: str, b_name: str, a: Mapping[str, flo
     dz_ci = bootstrap_interval(d, cohen_dz_rows, seed=seed, n_boot=n_boot)[:2] if n >= 2 else nan2
     rb_ci = bootstrap_interval(d, rank_biserial_rows, seed=seed, n_boot=n_boot)[:2] if n >= 2 else nan2
     return PairedComparison(
-        metric=metric, a=a_name, b=b_name, n=n, mean_a=float(x.mean()) if n else math.nan,
-        mean_b=float(y.mean()) if n else math.nan, mean_diff=float(d.mean()) if n else math.nan,
-        mean_diff_ci=mean_ci, dz=cohen_dz(d), dz_ci=dz_ci, rank_biserial=rank_biserial(d), rank_biserial_ci=rb_ci,
-        wilcoxon_w=w, p_wilcoxon=p_w, t=t, p_t=p_t, smallest_p_wilcoxon=2.0 / 2**n if n else math.nan,
-    )  # fmt: skip
+        metric=metric,
+        a=a_name,
+        b=b_name,
+        n=n,
+        mean_a=float(x.mean()) if n else math.nan,
+        mean_b=float(y.mean()) if n else math.nan,
+        mean_diff=float(d.mean()) if n else math.nan,
+        mean_diff_ci=mean_ci,
+        dz=cohen_dz(d),
+        dz_ci=dz_ci,
+        rank_biserial=rank_biserial(d),
+        rank_biserial_ci=rb_ci,
+        wilcoxon_w=w,
+        p_wilcoxon=p_w,
+        t=t,
+        p_t=p_t,
+        smallest_p_wilcoxon=2.0 / 2**n if n else math.nan,
+    )
 
 
 def holm_family(comparisons: Sequence[PairedComparison]) -> list[PairedComparison]:

@@ -109,17 +109,23 @@ def init_study(plan_file: str | Path, out: str | Path) -> StudyFolder:
             if old.any_trial():
                 raise StudyFolderError(
                     f"{out}: trials have run under its plan (sha256 {old.record['plan_sha256'][:12]}); a changed plan "
-                    "needs a new study folder")  # fmt: skip
+                    "needs a new study folder"
+                )
         labels = blinding_labels(max(len(_condition_names(plan)), 1), plan.seed)
         record = {
-            "format": FORMAT, "name": plan.name, "protocol": plan.protocol, "world": plan.world,
-            "plan_sha256": _sha256(raw), "plan_dir": str(plan_file.parent.resolve()), "created": utc_now(),
+            "format": FORMAT,
+            "name": plan.name,
+            "protocol": plan.protocol,
+            "world": plan.world,
+            "plan_sha256": _sha256(raw),
+            "plan_dir": str(plan_file.parent.resolve()),
+            "created": utc_now(),
             "coassist_version": coassist.__version__,
             # the blinding key: condition -> label shown on the page (kept here only)
             "labels": dict(zip(_condition_names(plan), labels)),
             "models": {p: model_weights_hash(p) for p in plan.model_paths()},
             "latin_square": latin_square_rows(max(len(_condition_names(plan)), 1)),
-        }  # fmt: skip
+        }
         out.mkdir(parents=True, exist_ok=True)
         (out / "participants").mkdir(exist_ok=True)
         from coassist._io import atomic_write_bytes
@@ -148,7 +154,9 @@ class StudyFolder:
     def __init__(self, folder: str | Path) -> None:
         self.folder = Path(folder)
         if not (self.folder / STUDY_NAME).is_file():
-            raise StudyFolderError(f"{self.folder}: not a study folder (no {STUDY_NAME}); make one with coassist study init")
+            raise StudyFolderError(
+                f"{self.folder}: not a study folder (no {STUDY_NAME}); make one with coassist study init"
+            )
         try:
             self.record: dict[str, Any] = json.loads((self.folder / STUDY_NAME).read_text("utf-8"))
         except (OSError, ValueError) as exc:
@@ -170,11 +178,14 @@ class StudyFolder:
         if _sha256(raw) != self.record["plan_sha256"]:
             raise StudyFolderError(
                 f"{self.folder / PLAN_NAME} changed after study init (sha256 {self.record['plan_sha256'][:12]} recorded, "
-                f"{_sha256(raw)[:12]} now): {'trials have run under the old one; start a new study folder' if self.any_trial() else 'run coassist study init again'}")  # fmt: skip
+                f"{_sha256(raw)[:12]} now): {'trials have run under the old one; start a new study folder' if self.any_trial() else 'run coassist study init again'}"
+            )
         for path, digest in self.record["models"].items():
             if model_weights_hash(path) != digest:
-                raise StudyFolderError(f"{path}: the model's weights changed after study init (the study compares the "
-                                       "weights it recorded); start a new study folder")  # fmt: skip
+                raise StudyFolderError(
+                    f"{path}: the model's weights changed after study init (the study compares the "
+                    "weights it recorded); start a new study folder"
+                )
 
     @property
     def labels(self) -> dict[str, str]:
@@ -191,23 +202,28 @@ class StudyFolder:
     def any_trial(self) -> bool:
         """Whether any participant has a finished step on record."""
         root = self.folder / "participants"
-        return root.is_dir() and any((p / PROGRESS_NAME).is_file() and (p / PROGRESS_NAME).stat().st_size > 0
-                                     for p in root.iterdir())  # fmt: skip
+        return root.is_dir() and any(
+            (p / PROGRESS_NAME).is_file() and (p / PROGRESS_NAME).stat().st_size > 0 for p in root.iterdir()
+        )
 
     def register(self, participant: str, simulated: bool = False) -> dict[str, Any]:
         """The participant's record, made at their first run: number (1, 2, … in order of arrival),
         Latin-square row (number − 1), and whether a simulated operator stands in (``--simulate``)."""
         if not isinstance(participant, str) or not PARTICIPANT_ID.match(participant):
-            raise StudyFolderError(f"--participant must be 1-32 letters, digits, '-' or '_' (a pseudonymous id; it "
-                                   f"names a folder), got {participant!r}")  # fmt: skip
+            raise StudyFolderError(
+                f"--participant must be 1-32 letters, digits, '-' or '_' (a pseudonymous id; it "
+                f"names a folder), got {participant!r}"
+            )
         with OutputLock(self.folder / PARTICIPANTS_NAME):
             table = self.participants()
             if participant in table:
                 rec = table[participant]
                 if bool(rec.get("simulated")) != bool(simulated):
                     what = "a simulated participant" if rec.get("simulated") else "a person"
-                    raise StudyFolderError(f"--participant {participant} is {what} in this study; "
-                                           f"{'add' if rec.get('simulated') else 'leave out'} --simulate")  # fmt: skip
+                    raise StudyFolderError(
+                        f"--participant {participant} is {what} in this study; "
+                        f"{'add' if rec.get('simulated') else 'leave out'} --simulate"
+                    )
                 return rec
             number = len(table) + 1
             rec = {"number": number, "row": number - 1, "simulated": bool(simulated), "registered": utc_now()}
@@ -244,7 +260,9 @@ class ParticipantFolder:
     def write_order(self, order: Mapping[str, Any]) -> None:
         """Fix the participant's steps (once, at the first run)."""
         if (self.folder / ORDER_NAME).is_file():
-            raise StudyFolderError(f"{self.folder / ORDER_NAME} exists: a participant's order is fixed at their first run")
+            raise StudyFolderError(
+                f"{self.folder / ORDER_NAME} exists: a participant's order is fixed at their first run"
+            )
         atomic_write_text(self.folder / ORDER_NAME, _json(dict(order)))
 
     # ------------------------------------------------------------------ the manifest of what ran
@@ -321,8 +339,17 @@ class ParticipantFolder:
 def trial_record(k: int, step: Mapping[str, Any], file: str, meta: Mapping[str, Any], **more: Any) -> dict[str, Any]:
     """The progress line of trial step ``k`` written as ``file`` of its block."""
     extra = meta.get("extra", {})
-    return {"step": k, "kind": "trial", "key": step_key(step), "block": step["block"], "file": file,
-            "model_id": meta.get("model_id"), "ended": extra.get("ended"), "t": utc_now(), **more}  # fmt: skip
+    return {
+        "step": k,
+        "kind": "trial",
+        "key": step_key(step),
+        "block": step["block"],
+        "file": file,
+        "model_id": meta.get("model_id"),
+        "ended": extra.get("ended"),
+        "t": utc_now(),
+        **more,
+    }
 
 
 def step_key(step: Mapping[str, Any]) -> str:

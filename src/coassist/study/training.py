@@ -42,11 +42,24 @@ def _preset(job: TrainJob):
     from coassist.intent.training import MODEL_PRESETS, with_overrides
 
     t = job.training
-    p = with_overrides(MODEL_PRESETS.lookup(t.preset), epochs=t.epochs, lr=t.lr, batch_size=t.batch_size, seed=t.seed,
-                       threads=t.threads, test_fraction=t.test_fraction, init=job.init, optimizer=t.optimizer)  # fmt: skip
+    p = with_overrides(
+        MODEL_PRESETS.lookup(t.preset),
+        epochs=t.epochs,
+        lr=t.lr,
+        batch_size=t.batch_size,
+        seed=t.seed,
+        threads=t.threads,
+        test_fraction=t.test_fraction,
+        init=job.init,
+        optimizer=t.optimizer,
+    )
     if job.init == "scratch" and (t.layers, t.hidden, t.fc) != (None, None, None):
-        p = replace(p, lstm_layers=p.lstm_layers if t.layers is None else t.layers,
-                    hidden=p.hidden if t.hidden is None else t.hidden, fc=p.fc if t.fc is None else t.fc)  # fmt: skip
+        p = replace(
+            p,
+            lstm_layers=p.lstm_layers if t.layers is None else t.layers,
+            hidden=p.hidden if t.hidden is None else t.hidden,
+            fc=p.fc if t.fc is None else t.fc,
+        )
         p.network(2)  # validates the sizes
     return p
 
@@ -66,16 +79,29 @@ def train_job(job: TrainJob) -> dict[str, Any]:
         model = train_model(trials, p, p.train, checkpoint_to=job.out)
         write_model(model, job.out)
     last = model.info["training_history"][-1]
-    return {"model": job.out, "trials": [lt.id for lt in trials], "train_seconds": float(model.info["train_seconds"]),
-            "train_loss": last["train_loss"], "test_loss": last["test_loss"], "command": train_command(job)}  # fmt: skip
+    return {
+        "model": job.out,
+        "trials": [lt.id for lt in trials],
+        "train_seconds": float(model.info["train_seconds"]),
+        "train_loss": last["train_loss"],
+        "test_loss": last["test_loss"],
+        "command": train_command(job),
+    }
 
 
 def train_command(job: TrainJob) -> list[str]:
     """The ``coassist train`` command line that makes the same model from the same trials."""
     t = job.training
     cmd = ["coassist", "train", *job.data, "--out", job.out, "--preset", t.preset, "--init", job.init]
-    for option, value in (("--epochs", t.epochs), ("--lr", t.lr), ("--batch-size", t.batch_size), ("--seed", t.seed),
-                          ("--threads", t.threads), ("--test-fraction", t.test_fraction), ("--optimizer", t.optimizer)):  # fmt: skip
+    for option, value in (
+        ("--epochs", t.epochs),
+        ("--lr", t.lr),
+        ("--batch-size", t.batch_size),
+        ("--seed", t.seed),
+        ("--threads", t.threads),
+        ("--test-fraction", t.test_fraction),
+        ("--optimizer", t.optimizer),
+    ):
         if value is not None:
             cmd += [option, str(value)]
     if job.init == "scratch":
