@@ -455,7 +455,7 @@ def train_model(
     if config.freeze_skip and net.skip is not None:  # residual learning over the fixed (tuned) ridge
         if frozen and ckpt is None:
             # The residual is over the ridge of *this* data: the source's ridge, frozen, would
-            # extrapolate on a new user's windows (user-b: 78.9 mm at 0.4 s against 5.5 mm; README).
+            # extrapolate on a new user's windows (user-b: 78.9 mm at 0.4 s against 5.5 mm; docs/history.md).
             tuning = _fit_skip(net, trials, train_idx, WindowSet([trials[i].trial for i in train_idx], window, dt),
                                model.input_scaler, model.target_scaler, config)  # fmt: skip
         net.skip.requires_grad_(False)
@@ -690,7 +690,7 @@ def with_batch_size(train: TrainConfig, batch_size: int) -> TrainConfig:
     keeps its stochastic dynamics the same is the square root (Malladi et al. 2022, *On the
     SDEs and scaling rules for adaptive gradient algorithms*); the linear rule (Goyal et al.
     2017) is SGD's. The decay to ``lr_final_ratio`` still spans the whole run (fewer steps).
-    Checked on validation loss for the default preset: docs/intent-training-speed.md.
+    Checked on validation loss for the default preset: docs/history.md ("Bigger batches").
     A bigger batch is fewer, larger matrix products per window: more windows/s on a device
     with parallel width to fill, different (not worse, there) weights than the preset's.
     """
