@@ -26,7 +26,7 @@ same device and threads, the most this machine's arithmetic gives.
 wait policy unset (libgomp spins, then sleeps, at every barrier; today's) against
 ``OMP_WAIT_POLICY=PASSIVE`` (threads sleep at once). libgomp reads it once, when torch
 loads, so it takes a process each. On a 2-core machine shared with other work the policy,
-not the batch path, is what moves 2-thread CPU training (docs/intent-training-speed.md).
+not the batch path, is what moves 2-thread CPU training (docs/history.md, "OpenMP on a shared machine").
 
 ``--pairs N`` compares, N rounds, what the pipeline does with independent trainings (the
 application's intent sources, ``experiments.source_training.train_sources``): two child

@@ -795,7 +795,7 @@ def with_batch_size(train: TrainConfig, batch_size: int) -> TrainConfig:
     keeps its stochastic dynamics the same is the square root (Malladi et al. 2022, *On the
     SDEs and scaling rules for adaptive gradient algorithms*); the linear rule (Goyal et al.
     2017) is SGD's. The decay to ``lr_final_ratio`` still spans the whole run (fewer steps).
-    Checked on validation loss for the default preset: docs/intent-training-speed.md.
+    Checked on validation loss for the default preset: docs/history.md ("Bigger batches").
     A bigger batch is fewer, larger matrix products per window: more windows/s on a device
     with parallel width to fill, different (not worse, there) weights than the preset's.
     """
