@@ -168,14 +168,25 @@ def test_the_walk_sees_the_package():
     """The check is not vacuous: it reaches the documented API across the package."""
     assert "coassist.model.impedance" in MODULES and "coassist.scenario.objects" in MODULES
     checked = []
-    for name in ("coassist.model.impedance", "coassist.metrics", "coassist.scenario.objects", "coassist.sim.world",
-                 "coassist.runtime.wrench", "coassist.runtime.safety"):  # fmt: skip
+    for name in (
+        "coassist.model.impedance",
+        "coassist.metrics",
+        "coassist.scenario.objects",
+        "coassist.sim.world",
+        "coassist.runtime.wrench",
+        "coassist.runtime.safety",
+    ):
         module = importlib.import_module(name)
         checked += [qual for qual, obj in public_callables(module) if documented_parameters(obj.__doc__) is not None]
     # ImpedanceModel, the metrics' functions, CarriedObject, ForceSensor, run_trial, …
-    assert {"coassist.model.impedance.ImpedanceModel", "coassist.metrics.prediction_errors",
-            "coassist.scenario.objects.CarriedObject", "coassist.scenario.objects.ForceSensor",
-            "coassist.sim.world.run_trial", "coassist.runtime.wrench.payload_wrench"} <= set(checked)  # fmt: skip
+    assert {
+        "coassist.model.impedance.ImpedanceModel",
+        "coassist.metrics.prediction_errors",
+        "coassist.scenario.objects.CarriedObject",
+        "coassist.scenario.objects.ForceSensor",
+        "coassist.sim.world.run_trial",
+        "coassist.runtime.wrench.payload_wrench",
+    } <= set(checked)
     assert len(checked) >= 12
 
 
@@ -264,7 +275,11 @@ def test_parser_reads_both_styles():
 
 @pytest.mark.parametrize(
     "func, message",
-    [(_missing_one, r"undocumented \['b'\]"), (_out_of_order, "order"), (_unknown_name, r"not in the signature \['gone'\]")],
+    [
+        (_missing_one, r"undocumented \['b'\]"),
+        (_out_of_order, "order"),
+        (_unknown_name, r"not in the signature \['gone'\]"),
+    ],
 )
 def test_checker_reports_each_kind_of_mismatch(func, message):
     assert re.search(message, mismatch(func))
@@ -299,5 +314,7 @@ def test_the_citation_check_catches_a_missing_file_and_design(tmp_path):
     src.mkdir(parents=True)
     (tmp_path / "docs").mkdir()
     (tmp_path / "docs" / "here.md").write_text("")
-    (src / "mod.py").write_text('"""See docs/here.md, docs/intent-results.md and DESIGN §7; not a citation: my_docs/x.md."""\n')
+    (src / "mod.py").write_text(
+        '"""See docs/here.md, docs/intent-results.md and DESIGN §7; not a citation: my_docs/x.md."""\n'
+    )
     assert cited_files_missing(src, tmp_path) == ["coassist/mod.py: docs/intent-results.md", "coassist/mod.py: DESIGN"]

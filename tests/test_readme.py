@@ -88,8 +88,12 @@ def expected_output(blocks: list[Block], block: Block) -> str | None:
 
 
 def run_block(block: Block, cwd: Path, expected: str | None = None) -> None:
-    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
-           "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1"), "MPLBACKEND": "Agg"}  # fmt: skip
+    env = {
+        **os.environ,
+        "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
+        "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1"),
+        "MPLBACKEND": "Agg",
+    }
     if block.language in SHELL:
         argv = ["bash", "-e", "-o", "pipefail", "-c", block.code]
         run_in = ROOT if re.search(r"(^|\s)\./dev\b", block.code) else cwd
@@ -127,12 +131,29 @@ def test_every_block_is_accounted_for():
 
 def test_blocks_and_marks_are_read_as_meant():
     """The extractor on a hand-written README: marks, languages, nested fences, blank lines."""
-    text = "\n".join([
-        "intro", "```bash", "echo one", "```", "",
-        "<!-- readme-test: slow -->", "", "```python", "print(2)", "```",
-        "<!-- readme-test: output -->", "```text", "2", "```",
-        "````markdown", "```bash", "not a block", "```", "````",
-    ])  # fmt: skip
+    text = "\n".join(
+        [
+            "intro",
+            "```bash",
+            "echo one",
+            "```",
+            "",
+            "<!-- readme-test: slow -->",
+            "",
+            "```python",
+            "print(2)",
+            "```",
+            "<!-- readme-test: output -->",
+            "```text",
+            "2",
+            "```",
+            "````markdown",
+            "```bash",
+            "not a block",
+            "```",
+            "````",
+        ]
+    )
     blocks = readme_blocks(text)
     assert [(b.line, b.language, b.mark, b.code) for b in blocks] == [
         (2, "bash", None, "echo one\n"),
@@ -204,7 +225,13 @@ def _claim_counts(text: str) -> tuple[int, int, int]:
         cells = [c.strip() for c in row.split("|")]
         if len(cells) < 3 or cells[1] in ("verdict", "---") or set(cells[1]) <= {"-"}:
             continue
-        n = int(m.group(1)) if (m := re.search(r"\((\d+) claims\)", cells[0])) else 2 if "(board, heavy)" in cells[0] else 1
+        n = (
+            int(m.group(1))
+            if (m := re.search(r"\((\d+) claims\)", cells[0]))
+            else 2
+            if "(board, heavy)" in cells[0]
+            else 1
+        )
         total += n
         held += n if cells[1].strip("*") in ("holds", "hold") else 0
     assert total == int(stated.group(2)), f"the table has {total} claims, the sentence says {stated.group(2)}"

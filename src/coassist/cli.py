@@ -1256,7 +1256,9 @@ def reproduce(
         Path("runs/reproduce"), help="Output folder: report.html, summary.json, datasets, models."
     ),
     preset: str = typer.Option(
-        "default", help="default (≤ 15 min on 2 CPU cores), tiny (smoke run) or thesis (thesis sizes; GPU)."
+        "default",
+        help="default (about 6 min on 2 CPU cores), full (the pre-issue-35 default: more training data), "
+        "tiny (smoke run) or thesis (thesis sizes; GPU).",
     ),
     seed: int = typer.Option(0, help="Seed of every dataset and training."),
     seeds: str = typer.Option(

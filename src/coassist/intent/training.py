@@ -515,7 +515,7 @@ def train_model(
     if config.freeze_skip and net.skip is not None:  # residual learning over the fixed (tuned) ridge
         if frozen and ckpt is None:
             # The residual is over the ridge of *this* data: the source's ridge, frozen, would
-            # extrapolate on a new user's windows (user-b: 78.9 mm at 0.4 s against 5.5 mm; README).
+            # extrapolate on a new user's windows (user-b: 78.9 mm at 0.4 s against 5.5 mm; docs/history.md).
             tuning = _fit_skip(
                 net,
                 trials,
