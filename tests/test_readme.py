@@ -266,3 +266,11 @@ def test_dev_entry_points():
     for block in runnable(readme_blocks()):
         if re.search(r"(^|\s)\./dev\b", block.code):
             run_block(block, ROOT)
+
+
+def test_the_readme_is_a_manual_not_a_notebook():
+    """At most 25 KB: measurements live in docs/performance.md, their history in docs/history.md."""
+    size = README.stat().st_size
+    assert size <= 25 * 1024, f"README.md is {size} bytes; move measurements to docs/performance.md"
+    text = README.read_text(encoding="utf-8")
+    assert not re.search(r"\b20\d\d-\d\d-\d\d\b", text), "a dated entry: history goes to docs/history.md"
