@@ -182,7 +182,16 @@ def test_a_ros2_run_matches_the_in_process_mujoco_drive(controller):
     assert np.abs(trial.pose - trial.pose[0]).max() > 0.005
 
 
-@pytest.mark.parametrize("topic, lockstep", [("wrench", True), ("joints", True), ("joints", False)])
+@pytest.mark.parametrize(
+    "topic, lockstep",
+    [
+        ("wrench", True),
+        ("joints", True),
+        # Free-running: the robot's thread and the loop each keep their own time, so a loaded machine
+        # shifts the tick the silence falls on (78 ticks seen beside another test on 2 cores): it runs alone.
+        pytest.param("joints", False, marks=pytest.mark.realtime),
+    ],
+)
 def test_silent_topics_stop_the_arm(topic, lockstep):
     # Lockstep: the robot stops answering after its 40th command, read() waits stale_after
     # for it. Free-running (paced at 125 Hz): the last message ages past stale_after.

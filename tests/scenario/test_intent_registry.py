@@ -143,9 +143,26 @@ def _recipe(title: str) -> str:
     return text[start : min(ends, default=len(text))]
 
 
+def _same_entry(line: str, source: str) -> bool:
+    """Whether the registry entry ``line`` (``"name": Entry(...),`` as the recipe shows it) is in
+    ``source``'s registry dict, compared as syntax trees: the formatter may wrap it over lines."""
+    import ast
+
+    entry = ast.parse("{" + line + "}", mode="eval").body
+    assert isinstance(entry, ast.Dict) and len(entry.keys) == 1, line
+    want = (ast.dump(entry.keys[0]), ast.dump(entry.values[0]))
+    return any(
+        (ast.dump(k), ast.dump(v)) == want
+        for node in ast.walk(ast.parse(source))
+        if isinstance(node, ast.Dict)
+        for k, v in zip(node.keys, node.values)
+        if k is not None
+    )
+
+
 def test_the_intent_source_recipe_is_what_the_repository_does():
     """docs/architecture.md, *Add an intent source*: the file it names holds the source, and the
-    registry line it shows is in the registry, verbatim."""
+    registry line it shows is in the registry (the same syntax tree)."""
     recipe = _recipe("Add an intent source")
     files = re.findall(r"`(src/coassist/scenario/[\w/]+\.py)`", recipe)
     assert "src/coassist/scenario/constant_velocity.py" in files and "src/coassist/scenario/intent_registry.py" in files
@@ -153,7 +170,7 @@ def test_the_intent_source_recipe_is_what_the_repository_does():
         assert (ROOT / f).is_file(), f
     added = [ln[1:].strip() for ln in recipe.splitlines() if ln.startswith("+") and "IntentSourceEntry(" in ln]
     registry = (ROOT / "src/coassist/scenario/intent_registry.py").read_text(encoding="utf-8")
-    assert len(added) == 1 and added[0] in registry, added
+    assert len(added) == 1 and _same_entry(added[0], registry), added
     assert (
         '"constant-velocity": IntentSourceEntry("coassist.scenario.constant_velocity:ConstantVelocityIntent"'
         in added[0]

@@ -195,7 +195,7 @@ REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry(
     {
         "default": ReproduceConfig(),
         # The default preset until issue 35 (2026-11-29): every window stride, comparison model and ablation cell of
-        # the run at 1c264a8 plus issue 34's; 14.9 TFLOP of network arithmetic against the default's 8.6
+        # the run at 1c264a8 plus issue 34's; 14.9 TFLOP of network arithmetic against the default's 8.5
         # (docs/performance.md: the verdicts of both on seeds 0, 1 and 2).
         "full": ReproduceConfig(
             name="full",
