@@ -5,7 +5,6 @@ instead of probing attributes; and the recipe that adds a world."""
 from __future__ import annotations
 
 import importlib.util
-import re
 import sys
 from pathlib import Path
 
@@ -196,36 +195,3 @@ def test_a_world_registered_by_one_line_drives_as_the_built_in_one(tmp_path, mon
     assert mine.n_samples == builtin.n_samples > 50
     for column in ("pose", "wrench", "effort_r", "joints", "joint_velocity", "fault"):
         np.testing.assert_array_equal(getattr(mine, column), getattr(builtin, column), err_msg=column)
-
-
-def _same_entry(line: str, source: str) -> bool:
-    """Whether the registry entry ``line`` (``"name": Entry(...),`` as the recipe shows it) is in
-    ``source``'s registry dict, compared as syntax trees: the formatter may wrap it over lines."""
-    import ast
-
-    entry = ast.parse("{" + line + "}", mode="eval").body
-    assert isinstance(entry, ast.Dict) and len(entry.keys) == 1, line
-    want = (ast.dump(entry.keys[0]), ast.dump(entry.values[0]))
-    return any(
-        (ast.dump(k), ast.dump(v)) == want
-        for node in ast.walk(ast.parse(source))
-        if isinstance(node, ast.Dict)
-        for k, v in zip(node.keys, node.values)
-        if k is not None
-    )
-
-
-def test_the_world_recipe_is_what_the_repository_does():
-    """docs/architecture.md, *Add a world*: the files it names exist, and the registry line it shows
-    is in robot/worlds.py (the same syntax tree)."""
-    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
-    start = text.index("### Add a world")
-    ends = [i for i in (text.find("\n## ", start), text.find("\n### ", start + 1)) if i > 0]
-    recipe = text[start : min(ends, default=len(text))]
-    files = re.findall(r"`(src/coassist/robot/\w+\.py)`", recipe)
-    assert "src/coassist/robot/worlds.py" in files and "src/coassist/robot/ros2_world.py" in files
-    for f in files:
-        assert (ROOT / f).is_file(), f
-    added = [ln[1:].strip() for ln in recipe.splitlines() if ln.startswith("+") and "WorldEntry(" in ln]
-    source = (ROOT / "src/coassist/robot/worlds.py").read_text(encoding="utf-8")
-    assert len(added) == 1 and _same_entry(added[0], source), added

@@ -3,7 +3,6 @@ drive, play and the command line's help all read, and the recipe that adds a sou
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import numpy as np
@@ -134,44 +133,3 @@ def test_the_help_lists_every_source_and_only_what_a_person_can_run():
     for command, simulation in (("collect", True), ("drive", True), ("ros2", False), ("play", False)):
         text = " ".join(runner.invoke(app, [command, "--help"], terminal_width=400).output.split())
         assert intent_choices(simulation=simulation) in text, command
-
-
-def _recipe(title: str) -> str:
-    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
-    start = text.index(f"### {title}")
-    ends = [i for i in (text.find("\n## ", start), text.find("\n### ", start + 1)) if i > 0]
-    return text[start : min(ends, default=len(text))]
-
-
-def _same_entry(line: str, source: str) -> bool:
-    """Whether the registry entry ``line`` (``"name": Entry(...),`` as the recipe shows it) is in
-    ``source``'s registry dict, compared as syntax trees: the formatter may wrap it over lines."""
-    import ast
-
-    entry = ast.parse("{" + line + "}", mode="eval").body
-    assert isinstance(entry, ast.Dict) and len(entry.keys) == 1, line
-    want = (ast.dump(entry.keys[0]), ast.dump(entry.values[0]))
-    return any(
-        (ast.dump(k), ast.dump(v)) == want
-        for node in ast.walk(ast.parse(source))
-        if isinstance(node, ast.Dict)
-        for k, v in zip(node.keys, node.values)
-        if k is not None
-    )
-
-
-def test_the_intent_source_recipe_is_what_the_repository_does():
-    """docs/architecture.md, *Add an intent source*: the file it names holds the source, and the
-    registry line it shows is in the registry (the same syntax tree)."""
-    recipe = _recipe("Add an intent source")
-    files = re.findall(r"`(src/coassist/scenario/[\w/]+\.py)`", recipe)
-    assert "src/coassist/scenario/constant_velocity.py" in files and "src/coassist/scenario/intent_registry.py" in files
-    for f in files:
-        assert (ROOT / f).is_file(), f
-    added = [ln[1:].strip() for ln in recipe.splitlines() if ln.startswith("+") and "IntentSourceEntry(" in ln]
-    registry = (ROOT / "src/coassist/scenario/intent_registry.py").read_text(encoding="utf-8")
-    assert len(added) == 1 and _same_entry(added[0], registry), added
-    assert (
-        '"constant-velocity": IntentSourceEntry("coassist.scenario.constant_velocity:ConstantVelocityIntent"'
-        in added[0]
-    )
