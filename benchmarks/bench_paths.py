@@ -7,11 +7,11 @@ controller with the ``paths`` source in the loop), then replays them through fre
 times every ``predict`` call:
 
 - ``present``: the present estimate alone (no obstacle);
-- ``paths``, its default 5 × 5 shape grid per side (50 curves): each curve searched ±8 samples
-  around the tool's last nearest point (widened up to 2 cm while a nearest point is on the edge),
-  one curve standing for all where they coincide;
-- the naive baseline: the same filter searching the whole of every curve on every tick, all 50
-  curves every tick (``LOCAL`` and ``search_window`` past the path's length, no shared curve);
+- ``paths``, its default 5 × 5 shape grid per side (50 curves): each curve searched within
+  ±2 cm (``search_window``) of the arc length where the tool was last, one curve standing for
+  all where they coincide;
+- the naive baseline: the same filter searching the whole of every curve, all 50 curves, on
+  every tick (``search_window`` past the path's length, no shared curve);
 - ``paths`` with one shape per side (2 curves).
 
 Prints median and p99 [µs] per tick, the ratio to the naive search, and the share of the control
@@ -33,7 +33,6 @@ import numpy as np  # noqa: E402
 from bench_common import machine_line  # noqa: E402
 from coassist.control.presets import get_preset, make_controller  # noqa: E402
 from coassist.runtime.episode import run_episode  # noqa: E402
-from coassist.scenario import path_hypotheses  # noqa: E402
 from coassist.scenario.objects import get_object  # noqa: E402
 from coassist.scenario.operator import operator_profile  # noqa: E402
 from coassist.scenario.path_hypotheses import FilterSettings, PathHypothesesIntent, PersonShape  # noqa: E402
@@ -99,14 +98,9 @@ def main() -> None:
     ]
     results = {}
     for label, source in rows:
-        local = path_hypotheses.LOCAL
-        if source is naive:
-            path_hypotheses.LOCAL = 10**9  # the whole window at once: no local search
-        try:
-            runs = [_replay(source, recorder.context, recorder.windows) for _ in range(args.repeats)]
-        finally:
-            path_hypotheses.LOCAL = local
-        results[label] = np.concatenate(runs)
+        results[label] = np.concatenate(
+            [_replay(source, recorder.context, recorder.windows) for _ in range(args.repeats)]
+        )
     naive = np.median(results[rows[2][0]])
     print(f"{'per tick':50s} {'median µs':>10s} {'p99 µs':>8s} {'vs naive':>9s} {'of 8 ms':>8s} {'of 2 ms':>8s}")
     for label, t in results.items():
