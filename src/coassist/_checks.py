@@ -8,6 +8,8 @@ predicates for callers that word their own errors (manifests, wire messages).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -65,6 +67,21 @@ def check_positive_scalar(value: float, name: str) -> float:
     if not np.isfinite(out) or out <= 0.0:
         raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
     return out
+
+
+def check_real(value: object, name: str, lo: float, hi: float = math.inf, *, open_lo: bool = False) -> float:
+    """``value`` as a finite float in [lo, hi] ((lo, hi] with ``open_lo``); a ValueError naming ``name`` otherwise."""
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v < lo or v > hi or (open_lo and v == lo):
+        raise ValueError(
+            f"{name} must be finite and {'>' if open_lo else '>='} {lo}"
+            + (f" and <= {hi}" if hi < math.inf else "")
+            + f", got {value!r}"
+        )
+    return v
 
 
 def is_integer(value: object) -> bool:

@@ -64,11 +64,10 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from coassist._checks import check_int
+from coassist._checks import check_int, check_real
 from coassist._io import atomic_write_text
 from coassist.interfaces import TrialContext
 from coassist.scenario.objects import OBJECTS
@@ -100,20 +99,6 @@ CALIBRATION_FILE = "path-hypotheses.json"
 _FORMAT = "coassist-path-hypotheses-1"
 
 
-def _number(value: Any, name: str, lo: float, hi: float = math.inf, *, open_lo: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v < lo or v > hi or (open_lo and v == lo):
-        raise ValueError(
-            f"{name} must be finite and {'>' if open_lo else '>='} {lo}"
-            + (f" and <= {hi}" if hi < math.inf else "")
-            + f", got {value!r}"
-        )
-    return v
-
-
 @dataclass(frozen=True)
 class PersonShape:
     """How one person goes round an obstacle: clearance c [m] kept from it, anticipation a [m] of
@@ -127,11 +112,13 @@ class PersonShape:
     trials: int = 0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "clearance", _number(self.clearance, "PersonShape.clearance", 0.0, 0.5, open_lo=True))
         object.__setattr__(
-            self, "anticipation", _number(self.anticipation, "PersonShape.anticipation", 0.0, 2.0, open_lo=True)
+            self, "clearance", check_real(self.clearance, "PersonShape.clearance", 0.0, 0.5, open_lo=True)
         )
-        lp = _number(self.left_preference, "PersonShape.left_preference", 0.0, 1.0)
+        object.__setattr__(
+            self, "anticipation", check_real(self.anticipation, "PersonShape.anticipation", 0.0, 2.0, open_lo=True)
+        )
+        lp = check_real(self.left_preference, "PersonShape.left_preference", 0.0, 1.0)
         if not 0.0 < lp < 1.0:
             raise ValueError(f"PersonShape.left_preference must be strictly between 0 and 1, got {lp!r}")
         object.__setattr__(self, "left_preference", lp)
@@ -149,8 +136,8 @@ class ArmGuess:
     damping: float = 10.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "stiffness", _number(self.stiffness, "ArmGuess.stiffness", 0.0, open_lo=True))
-        object.__setattr__(self, "damping", _number(self.damping, "ArmGuess.damping", 0.0))
+        object.__setattr__(self, "stiffness", check_real(self.stiffness, "ArmGuess.stiffness", 0.0, open_lo=True))
+        object.__setattr__(self, "damping", check_real(self.damping, "ArmGuess.damping", 0.0))
 
 
 @dataclass(frozen=True)
@@ -192,26 +179,28 @@ class FilterSettings:
     shape_grid: tuple[float, ...] = (0.6, 0.8, 1.0, 1.25, 1.6)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "sigma", _number(self.sigma, "FilterSettings.sigma", 0.0, open_lo=True))
-        object.__setattr__(self, "kappa", _number(self.kappa, "FilterSettings.kappa", 0.0, 1.0, open_lo=True))
-        object.__setattr__(self, "decide", _number(self.decide, "FilterSettings.decide", 0.0))
-        object.__setattr__(self, "divergence", _number(self.divergence, "FilterSettings.divergence", 0.0, open_lo=True))
-        object.__setattr__(self, "bias_time", _number(self.bias_time, "FilterSettings.bias_time", 0.0, open_lo=True))
-        object.__setattr__(self, "bias_limit", _number(self.bias_limit, "FilterSettings.bias_limit", 0.0))
-        object.__setattr__(self, "accel_time", _number(self.accel_time, "FilterSettings.accel_time", 0.0))
-        object.__setattr__(self, "blend_time", _number(self.blend_time, "FilterSettings.blend_time", 0.0))
+        object.__setattr__(self, "sigma", check_real(self.sigma, "FilterSettings.sigma", 0.0, open_lo=True))
+        object.__setattr__(self, "kappa", check_real(self.kappa, "FilterSettings.kappa", 0.0, 1.0, open_lo=True))
+        object.__setattr__(self, "decide", check_real(self.decide, "FilterSettings.decide", 0.0))
         object.__setattr__(
-            self, "hedge_velocity", _number(self.hedge_velocity, "FilterSettings.hedge_velocity", 0.0, 1.0)
+            self, "divergence", check_real(self.divergence, "FilterSettings.divergence", 0.0, open_lo=True)
+        )
+        object.__setattr__(self, "bias_time", check_real(self.bias_time, "FilterSettings.bias_time", 0.0, open_lo=True))
+        object.__setattr__(self, "bias_limit", check_real(self.bias_limit, "FilterSettings.bias_limit", 0.0))
+        object.__setattr__(self, "accel_time", check_real(self.accel_time, "FilterSettings.accel_time", 0.0))
+        object.__setattr__(self, "blend_time", check_real(self.blend_time, "FilterSettings.blend_time", 0.0))
+        object.__setattr__(
+            self, "hedge_velocity", check_real(self.hedge_velocity, "FilterSettings.hedge_velocity", 0.0, 1.0)
         )
         object.__setattr__(
-            self, "search_window", _number(self.search_window, "FilterSettings.search_window", 0.0, open_lo=True)
+            self, "search_window", check_real(self.search_window, "FilterSettings.search_window", 0.0, open_lo=True)
         )
         object.__setattr__(
-            self, "evidence_rate", _number(self.evidence_rate, "FilterSettings.evidence_rate", 0.0, open_lo=True)
+            self, "evidence_rate", check_real(self.evidence_rate, "FilterSettings.evidence_rate", 0.0, open_lo=True)
         )
         if isinstance(self.shape_grid, (str, bytes)) or not hasattr(self.shape_grid, "__iter__"):
             raise ValueError(f"FilterSettings.shape_grid must be a list of factors > 0, got {self.shape_grid!r}")
-        grid = tuple(_number(g, "FilterSettings.shape_grid", 0.0, open_lo=True) for g in self.shape_grid)
+        grid = tuple(check_real(g, "FilterSettings.shape_grid", 0.0, open_lo=True) for g in self.shape_grid)
         if not grid or list(grid) != sorted(set(grid)):
             raise ValueError(
                 f"FilterSettings.shape_grid must be distinct factors in increasing order, got {self.shape_grid!r}"
@@ -332,7 +321,8 @@ class PathHypothesesIntent:
             # the obstacle the path passes nearest: one detour per trial (the scenarios have one box)
             near = min(obstacles, key=lambda o: float(np.min(np.linalg.norm(path - np.asarray(o[0]), axis=1))))
             shape = self.shapes.get(context.user, self.default)
-            self._hyp = _Hypotheses(_scene_task(path, near), shape, st.shape_grid)
+            task = _scene_task(path, near)
+            self._hyp = _Hypotheses(task, shape, st.shape_grid)
             n = len(self._hyp.sides)
             self._idx = np.zeros(n, dtype=int)
             self._loglik = np.zeros(n)
@@ -342,12 +332,7 @@ class PathHypothesesIntent:
             self._kappa = st.kappa * self.dt / REFERENCE_DT
             self._step_cap = st.evidence_rate * self.dt
             # the nominal sample where the obstacle sits: side evidence stops once the tool is past it
-            self._obstacle_index = int(
-                np.searchsorted(
-                    np.cumsum(np.r_[0.0, np.linalg.norm(np.diff(path, axis=0), axis=1)]),
-                    _scene_task(path, near).obstacle_arc,
-                )
-            )
+            self._obstacle_index = int(np.searchsorted(task.path.arc, task.obstacle_arc))
             self._bias = 0.0
             self._side = 0
             self._mix = 1.0
