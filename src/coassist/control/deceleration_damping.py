@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from coassist._checks import check_real
 from coassist.control.controllers import ControlStep, saturate
 from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault
 
@@ -43,16 +44,11 @@ class DampingParameters:
     accel_time: float = 0.02
 
     def __post_init__(self) -> None:
-        for name, lo, open_lo in (("gain", 0.0, False), ("decel_ref", 0.0, True), ("accel_time", 0.0, False)):
-            try:
-                v = float(getattr(self, name))
-            except (TypeError, ValueError):
-                raise ValueError(f"DampingParameters.{name} must be a number, got {getattr(self, name)!r}") from None
-            if not math.isfinite(v) or v < lo or (open_lo and v == lo):
-                raise ValueError(
-                    f"DampingParameters.{name} must be finite and {'>' if open_lo else '>='} {lo}, got {v!r}"
-                )
-            object.__setattr__(self, name, v)
+        object.__setattr__(self, "gain", check_real(self.gain, "DampingParameters.gain", 0.0))
+        object.__setattr__(
+            self, "decel_ref", check_real(self.decel_ref, "DampingParameters.decel_ref", 0.0, open_lo=True)
+        )
+        object.__setattr__(self, "accel_time", check_real(self.accel_time, "DampingParameters.accel_time", 0.0))
 
 
 def deceleration_damping(v: ArrayLike, a: ArrayLike, params: DampingParameters) -> np.ndarray:

@@ -67,19 +67,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from coassist._checks import check_int
+from coassist._checks import check_int, check_real
 from coassist.scenario.tasks import Task, _quintic
 
 
 def _num(value, name: str, lo: float = 0.0, hi: float = math.inf, *, lo_open: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"OperatorProfile.{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
-        bound = f"{'>' if lo_open else '>='} {lo}" + (f" and <= {hi}" if hi < math.inf else "")
-        raise ValueError(f"OperatorProfile.{name} must be finite and {bound}, got {value!r}")
-    return v
+    return check_real(value, f"OperatorProfile.{name}", lo, hi, open_lo=lo_open)
 
 
 @dataclass(frozen=True)
