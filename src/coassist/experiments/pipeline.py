@@ -78,7 +78,8 @@ class ReproduceConfig:
     # layer, reported but in no claim, only where a preset asks for it (the full and thesis presets).
     transfer_starts: tuple[str, ...] = ("transfer", "scratch")
     # The fixed-α controller's ablation cells with the learned sources (the arbitrated controller runs them
-    # all, every training seed): in no claim, 0.55 TFLOP in the loop; the full and thesis presets run them.
+    # all, every training seed): in no claim; the full and thesis presets run them (with the MuJoCo cells of
+    # every source, 0.55 of the full preset's 4.20 TFLOP in the loop: bench_floor.py, seed 0 of each preset).
     fixed_alpha_learned: bool = False
     # Shrinkage of the linear skip's ridge start in the simulated stages. M_k meets data collected
     # with M_k in the loop, i.e. inputs shifted from its training data; a weakly regularised linear
