@@ -616,7 +616,7 @@ def test_the_batch_effort_stage_passes_u_r_where_each_layer_does():
     """SafetyLayerBatch.limit_effort row for row against each SafetyLayer.limit_effort on a tick
     without an upstream fault: where the batch says clean the layer gives u_r back unchanged
     (bit for bit) with no flag; where the layer changes it or flags anything (tool speed,
-    contact force, a non-finite u_r) the batch is not clean. Rows near both limits and
+    contact force, a non-finite u_r, v or hand force) the batch is not clean. Rows near both limits and
     exactly at the contact force (where the layer's np.dot may round either way)."""
     from coassist.runtime.safety import SafetyLayerBatch
 
@@ -633,7 +633,10 @@ def test_the_batch_effort_stage_passes_u_r_where_each_layer_does():
     at_limit = np.arange(n)[5::41]  # a hand force exactly at the contact limit
     for i in at_limit:
         hand[i] = [layers[i].limits.contact_force, 0.0, 0.0]
+    v[3::53] = np.nan  # a velocity or a hand force that is not finite: the layer's to flag
+    hand[11::59, 1] = np.nan
     clean = batch.limit_effort(np.arange(n), u, v, hand)
+    assert not clean[3::53].any() and not clean[11::59].any()
     seen = Fault.NONE
     for i in range(n):
         w = np.array([*hand[i], 0.0, 0.0, 0.0])

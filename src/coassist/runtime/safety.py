@@ -1073,5 +1073,6 @@ class SafetyLayerBatch:
         speed = np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1])
         along = u_r[:, 0] * v[:, 0] + u_r[:, 1] * v[:, 1]
         clean &= ~((speed > self._tool_speed[rows]) & (along > 0.0))
-        clean &= np.isfinite(u_r).all(axis=1)
+        # as the docstring says: a non-finite effort, velocity or hand force is the layer's to flag
+        clean &= np.isfinite(u_r).all(axis=1) & np.isfinite(v).all(axis=1) & np.isfinite(hand).all(axis=1)
         return clean
