@@ -25,7 +25,9 @@ Each stage is the array twin of the per-trial stage, written beside it in the sa
 (with a test there that its rows equal the scalar code's, bit for bit): every formula the
 scalar code's own, elementwise in the same order of operations (numpy's elementwise
 + − × ÷ and sqrt are IEEE operations, as Python's), and where one formula serves both
-(the plant step, ref_h, the operator's force, the board, the sensor) written once. This
+(the plant step, ref_h, the operator's force, the board, the sensor) written once; the
+window's ring, the wrench checks, the safety checks and the dwell rule are written twice,
+the twin beside its original and tested row for row against it. This
 module only orchestrates them, so a trial here gives what the per-trial loop gives bit
 for bit. The controller is the same object's ``effort_batch`` (row for row its ``step``;
 the online-α ones :func:`~coassist.control.arbitration.arbitrated_effort_batch`, row for

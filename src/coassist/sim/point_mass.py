@@ -317,10 +317,11 @@ class PointMassWorldBatch:
         dt = self.dt
         x, v = self.position[rows], self.velocity[rows]
         th, thd = self._th[rows], self._thd[rows]
-        board = _Board(*(column[rows] for column in self._board))
         yaw = self._yaw[rows]
+        # the board's columns only where some run yaws (without yaw only its mass is read)
+        board = _Board(*(column[rows] for column in self._board)) if self._any_yaw else None
         # 1. the operator (the hand point moves with the board's yaw)
-        if self._any_yaw:
+        if board is not None:
             px, py, pvx, pvy = _hand_point(board, x[:, 0], x[:, 1], v[:, 0], v[:, 1], th, thd)
             p = np.where(yaw[:, None], np.stack([px, py], axis=1), x)
             pv = np.where(yaw[:, None], np.stack([pvx, pvy], axis=1), v)
@@ -328,11 +329,11 @@ class PointMassWorldBatch:
             p, pv = x, v
         fh = self.arms.force(k, rows, p, pv)
         # 2. the board
-        m = board.m
+        m = self._board.m[rows]
         noise = self._noise[rows, k + 1]
         bias = self._bres[rows]
         c = np.zeros_like(x)
-        if self._any_yaw and yaw.any():
+        if board is not None and yaw.any():
             a_prev = self._a_prev[rows]
             th_new, thd_new, thdd, cx, cy = _board_yaw(
                 board, th, thd, fh[:, 0], fh[:, 1], a_prev[:, 0], a_prev[:, 1], dt

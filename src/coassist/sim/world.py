@@ -91,7 +91,6 @@ from coassist.sim.lockstep import fast_path_eligible, run_point_mass_lockstep
 # The world and the processes live in their own modules; their names stay importable from here.
 from coassist.sim.point_mass import PointMassWorld
 from coassist.sim.pool import (
-    PARENT_POLL,
     SubmittedTrials,
     pool_for,
     run_on_ray,
@@ -101,7 +100,6 @@ from coassist.sim.pool import (
 
 __all__ = [
     "NAMED_GROUP",
-    "PARENT_POLL",
     "PointMassWorld",
     "SubmittedTrials",
     "TrialSpec",
