@@ -70,5 +70,10 @@ def test_an_entry_point_names_a_module_attribute_imported_when_asked():
         ValueError, match=r"^entry point 'coassist.registry:Nothing': coassist.registry has no 'Nothing'$"
     ):
         load_entry_point("coassist.registry:Nothing")
+    # the one form every registry checks its entries against
+    from coassist.registry import is_entry_point
+
+    assert is_entry_point("coassist.registry:Registry")
+    assert not any(is_entry_point(v) for v in ("a:b:c", ":x", "x:", "x", None, 3))
     with pytest.raises(ImportError):  # the caller names the extra to install
         load_entry_point("coassist_no_such_module:thing")

@@ -26,7 +26,7 @@ from typing import Any, Generic, TypeVar
 
 from coassist.errors import CoassistError
 
-__all__ = ["Registry", "UnknownNameError", "load_entry_point", "unknown_name_message"]
+__all__ = ["Registry", "UnknownNameError", "is_entry_point", "load_entry_point", "unknown_name_message"]
 
 T = TypeVar("T")
 
@@ -101,6 +101,15 @@ class Registry(Mapping[str, T], Generic[T]):
         return f"Registry({self.what!r}, names={tuple(self._entries)!r})"
 
 
+def is_entry_point(value: object) -> bool:
+    """Whether ``value`` is written as an entry point: ``"package.module:attribute"``, one colon, both
+    parts named (the registries' entries check it when built, :func:`load_entry_point` when used)."""
+    if not isinstance(value, str) or value.count(":") != 1:
+        return False
+    module_name, _, attribute = value.partition(":")
+    return bool(module_name and attribute)
+
+
 def load_entry_point(entry_point: str) -> Any:
     """The object an entry point ``"package.module:attribute"`` names, imported now.
 
@@ -108,9 +117,9 @@ def load_entry_point(entry_point: str) -> Any:
     an ImportError of the module (an optional extra not installed) goes to the caller, who
     knows which extra to name.
     """
-    module_name, sep, attribute = entry_point.partition(":") if isinstance(entry_point, str) else ("", "", "")
-    if not (sep and module_name and attribute):
+    if not is_entry_point(entry_point):
         raise ValueError(f"an entry point is 'package.module:attribute', got {entry_point!r}")
+    module_name, _, attribute = entry_point.partition(":")
     module = importlib.import_module(module_name)
     try:
         return getattr(module, attribute)

@@ -29,7 +29,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from coassist.registry import Registry, load_entry_point
+from coassist.registry import Registry, is_entry_point, load_entry_point
 from coassist.runtime.world import HandOperator, World
 
 __all__ = ["WORLDS", "ArmWorld", "HandWorld", "WorldEntry", "WorldRequest", "build_world", "missing_members"]
@@ -128,7 +128,7 @@ class WorldEntry:
     source: str
 
     def __post_init__(self) -> None:
-        if not isinstance(self.build, str) or self.build.count(":") != 1:
+        if not is_entry_point(self.build):
             raise ValueError(f"WorldEntry.build must be 'package.module:function', got {self.build!r}")
         if not self.arms or not all(isinstance(a, str) and a for a in self.arms):
             raise ValueError(f"WorldEntry.arms must be one or more arm names, got {self.arms!r}")

@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from coassist.interfaces import NETWORK_BACKENDS, IntentSource
-from coassist.registry import Registry, load_entry_point
+from coassist.registry import Registry, is_entry_point, load_entry_point
 
 __all__ = [
     "INTENT_FOLDERS",
@@ -77,7 +77,7 @@ class IntentSourceEntry:
     simulation_only: bool = False
 
     def __post_init__(self) -> None:
-        if not isinstance(self.source, str) or self.source.count(":") != 1:
+        if not is_entry_point(self.source):
             raise ValueError(f"IntentSourceEntry.source must be 'package.module:attribute', got {self.source!r}")
         if not isinstance(self.summary, str) or not self.summary:
             raise ValueError(f"IntentSourceEntry.summary must be a non-empty string, got {self.summary!r}")
