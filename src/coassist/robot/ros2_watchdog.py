@@ -183,16 +183,18 @@ class CommandWatchdog:
                 self._send([0.0] * self.config.n_joints)
 
     def close(self) -> None:
-        """Send zeros, stop the thread and shut the node down; never raises."""
-        try:
-            if getattr(self, "_pub", None) is not None and self.forwarded:
-                self._send([0.0] * self.config.n_joints)
-        except Exception:  # noqa: BLE001 - close must finish
-            pass
+        """Stop the thread, then send zeros and shut the node down; never raises. The spin thread
+        stops first: a command it forwarded after the zeros would be held by the robot's controller."""
         self._running = False
         thread = getattr(self, "_thread", None)
         if thread is not None:
             thread.join(timeout=2.0)
+        try:
+            if getattr(self, "_pub", None) is not None and self.forwarded:
+                with self._lock:
+                    self._send([0.0] * self.config.n_joints)
+        except Exception:  # noqa: BLE001 - close must finish
+            pass
         for step in (
             lambda: self._executor.shutdown(timeout_sec=1.0),
             lambda: self.node.destroy_node(),
