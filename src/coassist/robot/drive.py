@@ -164,15 +164,15 @@ class DriveConfig:
         return 1.0 / self.rate_hz
 
 
-#: [N] the largest contact force limit: the F/T sensor's range (FT300: 300 N per axis,
-#: runtime.wrench.WrenchConfig.force_range). Above it the protective stop could never trip.
-MAX_CONTACT_FORCE = 300.0
+#: [N] the largest contact force limit: the F/T sensor's range (FT300: 300 N per axis, the default
+#: of runtime.wrench.WrenchConfig.force_range). Above it the protective stop could never trip.
+MAX_CONTACT_FORCE = WrenchConfig.force_range
 
 
 def _check_limits_for_arm(limits: SafetyLimits, robot: str | None) -> None:
     """Refuse limits that would switch a protection off: speeds beyond the arm's own hard
     limits (they limit nothing) and a contact force beyond what the sensor can measure."""
-    from coassist.robot.arms import get_arm
+    from coassist.robot.arm_descriptions import get_arm
 
     arm = get_arm(robot or "ur5")
     if limits.tool_speed > arm.tool_speed_limit:

@@ -62,14 +62,14 @@ from typing import Any
 import numpy as np
 
 from coassist.robot.arms import NullSpacePosture, arm_kinematics, check_model_matches, get_arm
-from coassist.robot.worlds import WorldRequest
+from coassist.robot.worlds import WORLDS, WorldRequest
 from coassist.runtime.world import Command, RobotLinkError, RobotState
 from coassist.spatial import rotation_vector
 
 __all__ = ["FRANKA_ARMS", "FrankaLinkError", "FrankaWorld", "build_world", "pose_from_franka", "reported_arm"]
 
 #: The registered arms (coassist.robot.arms.ARMS) a FrankaWorld drives.
-FRANKA_ARMS = ("panda", "fr3")
+FRANKA_ARMS = WORLDS["franka"].arms  # the arms its registry entry names
 
 log = logging.getLogger(__name__)
 
