@@ -26,12 +26,19 @@ from .conftest import comparison_plan  # noqa: E402
 from .pagedriver import SECRETS, OperatorPath  # noqa: E402
 
 
-def play_page(url: str, path: OperatorPath, received: list[str], timeout: float = 120.0) -> dict:
-    """Be the page until the study says it is done; returns what was entered per step."""
+def play_page(
+    url: str, path: OperatorPath, received: list[str], timeout: float = 120.0, *, impatient: bool = False
+) -> dict:
+    """Be the page until the study says it is done; returns what was entered per step.
+
+    impatient : press Start twice per trial step, and once more as each trial's result arrives (an
+    impatient person, or a page that lags); the study must run each step's trial once."""
     entered: dict = {"answers": {}, "starts": []}
     ws_url = url.replace("http://", "ws://").rstrip("/").split("?")[0] + "/ws"
     with ws_client.connect(ws_url, open_timeout=10) as ws:
         bounds, view, running, seq, k = None, None, False, 0, -1
+        pressed = None  # the step whose Start was pressed: a page shows it again (init and step may
+        # both carry it when the page connects as it is shown) but a person presses once per showing
         t_end = time.monotonic() + timeout
         while time.monotonic() < t_end:
             try:
@@ -51,8 +58,12 @@ def play_page(url: str, path: OperatorPath, received: list[str], timeout: float 
             elif kind == "started":
                 running = True
             elif kind == "result":
-                running = False
+                running, pressed = False, None
                 view = None
+                if impatient:
+                    ws.send(json.dumps({"type": "start", "controller": entered["starts"][-1] or "go"}))
+            elif kind == "status" and m.get("level") in ("warn", "error"):
+                pressed = None  # aborted or failed: the step is shown again
             if kind == "frame" and running:
                 x, y = path.at(k, m["t"])
                 seq += 1
@@ -63,7 +74,12 @@ def play_page(url: str, path: OperatorPath, received: list[str], timeout: float 
             if view is None or running:
                 continue
             if view["kind"] == "trial":
-                ws.send(json.dumps({"type": "start", "controller": view["label"] or "go"}))
+                if view["step"] == pressed:
+                    view = None
+                    continue
+                pressed = view["step"]
+                for _ in range(2 if impatient else 1):
+                    ws.send(json.dumps({"type": "start", "controller": view["label"] or "go"}))
                 entered["starts"].append(view["label"])
                 k = view["step"]
                 view = None
@@ -103,6 +119,26 @@ def test_the_page_is_blinded_and_a_simulated_hand_drives_the_study(tmp_path):
     # the answers entered on the page are the ones stored, per condition
     stored = {r["step"]: list(r["answers"].values()) for r in pf.progress() if r["kind"] == "questionnaire"}
     assert stored == {int(k): v for k, v in entered["answers"].items()}
+
+
+def test_a_second_or_late_start_runs_no_second_trial(tmp_path):
+    """Start pressed twice, and again as the result arrives: each step's trial runs once, no trial
+    runs that no step waits for, and the study still ends."""
+    plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0, timing="motion_time = 1.5\ndwell = 0.5")
+    plan.write_text(plan.read_text().replace("between_conditions = 30.0", "between_conditions = 0.5"))
+    study = init_study(plan, tmp_path / "study")
+    received: list[str] = []
+    with ParticipantRun(study, "S01", simulate=True, page=("127.0.0.1", 0, None)) as run:
+        done = threading.Thread(target=run.run, daemon=True)
+        done.start()
+        entered = play_page(run.url, OperatorPath(study.folder, "S01"), received, impatient=True)
+        done.join(30)
+        assert not done.is_alive() and run.complete
+    assert len(entered["starts"]) == 3
+    assert sum('"type": "started"' in t for t in received) == 3
+    assert sum('"type": "result"' in t for t in received) == 3
+    pf = study.participant("S01")
+    assert [len(read_dataset(pf.block(n)).trials) for n in ("assistive", "impedance", "manual")] == [1, 1, 1]
 
 
 @pytest.mark.slow

@@ -95,6 +95,7 @@ class StudySession(PlaySession):
         self._page_hand = self.hand
         self._captured: Trial | None = None
         self._trial_over = threading.Event()
+        self._may_start = False  # one Start per shown trial step (start_trial)
         self._reply = threading.Event()
         self._answer_check: Callable[[list[float]], Any] | None = None
         self._answer: Any = None
@@ -111,6 +112,23 @@ class StudySession(PlaySession):
 
     def page_choices(self) -> tuple[str, ...]:
         return (self.setup.page_name,) if self.setup is not None else ()
+
+    def start_trial(self, controller: str) -> bool:
+        """Start the shown step's trial: once per showing. A second press, or a Start that arrives after
+        the trial ended and before the runner shows the next step, would run a trial no step waits for
+        (and write nothing); it is refused like a Start while running."""
+        with self._lock:
+            if not self._may_start or self.running:
+                return False
+            self._may_start = False
+        started = False
+        try:
+            started = super().start_trial(controller)
+        finally:
+            if not started:  # refused or raised (a name that is not the step's): the step still waits
+                with self._lock:
+                    self._may_start = True
+        return started
 
     def controller(self, name: str):
         if self.setup is None or name != self.setup.page_name:
@@ -302,6 +320,8 @@ class StudySession(PlaySession):
         while True:
             self._captured = None
             self._trial_over.clear()
+            with self._lock:
+                self._may_start = True
             if wait_for_page:
                 self.show({**self.view, "scene": self.scene()})
             elif not self.start_trial(setup.page_name):
