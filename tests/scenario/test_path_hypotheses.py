@@ -243,3 +243,27 @@ def test_one_curve_stands_for_all_where_they_coincide():
         np.testing.assert_allclose(fast.predict(row), full.predict(row), rtol=0, atol=1e-12)
         assert fast.side == full.side
     assert shortcut > 300  # the shortcut was taken on both shared stretches
+
+
+def test_each_curve_keeps_its_nearest_point_within_the_search_window():
+    # The filter's step 1 (its hot loop, written as flat gathers) against the direct search: on every curve,
+    # the point nearest the tool (Euclidean) among those within ±search_window of the curve's last phase.
+    shape = PersonShape(clearance=0.02, anticipation=0.1)
+    curve, _, _ = deformed_path(_task(), -1, 0.03, 0.12)
+    intent = curve[::2]
+    src = PathHypothesesIntent(default=shape)
+    src.shared_fast_path = False
+    src.reset(_context())
+    hyp = src._hyp
+    n_pts = hyp.points.shape[1]
+    widest = min(n_pts, max(2, int(np.ceil(src.settings.search_window / hyp.step))))
+    for k in range(0, len(intent), 3):
+        tool = intent[max(k - 6, 0)] + np.array([0.0, 0.004])  # beside every curve, never on one
+        vel = (intent[max(k - 6, 0)] - intent[max(k - 7, 0)]) / DT
+        w = 800.0 * (intent[k] - tool) - 10.0 * vel
+        before = src._idx.copy()
+        src.predict(np.array([[tool[0], tool[1], vel[0], vel[1], w[0], w[1], 0.0, 0.0]]))
+        for n in range(hyp.points.shape[0]):
+            ids = np.arange(max(before[n] - widest, 0), min(before[n] + widest, n_pts - 1) + 1)
+            dist = np.linalg.norm(hyp.points[n, ids] - tool, axis=1)
+            assert dist[ids == src._idx[n]][0] == dist.min()
