@@ -233,6 +233,38 @@ def test_skip_alpha_shrinks_the_skip_and_leaves_the_baseline_alone(trials, tiny)
     np.testing.assert_allclose(trained.ridge.W, baseline.W, rtol=1e-10, atol=1e-12)
 
 
+def test_fit_stride_fits_the_scalers_and_the_skip_on_every_nth_window(tmp_path, trials, tiny):
+    """fit_stride = 3: the scalers are the ranges of every 3rd training window and the skip is the ridge on
+    them (recomputed here), in a fresh model and in a transfer's refitted skip; 1 is every window."""
+    from dataclasses import replace
+
+    from coassist.intent import RidgeBaseline, WindowSet, split_trials
+    from coassist.intent.training import build_model
+
+    p = replace(tiny, skip=True, train=replace(tiny.train, skip_alpha=0.5, freeze_skip=True))
+    train_idx, _ = split_trials([lt.id for lt in trials], p.train.test_fraction, p.train.seed)
+    every = build_model(p, trials, p.train)
+    third = build_model(p, trials, replace(p.train, fit_stride=3))
+    ws = WindowSet([trials[i].trial for i in train_idx], p.window, every.dt, stride=3)
+    lo_hi = ws.fit_scalers()
+    for got, want in zip((third.input_scaler, third.target_scaler), lo_hi):
+        assert np.array_equal(got.lo, want.lo) and np.array_equal(got.hi, want.hi)
+    ridge = RidgeBaseline.fit(ws, *lo_hi, 0.5)
+    np.testing.assert_allclose(third.net.skip.weight.detach().numpy(), ridge.W.T, rtol=1e-5, atol=1e-6)
+    assert np.abs(third.net.skip.weight.detach().numpy() - every.net.skip.weight.detach().numpy()).max() > 1e-4
+    # a transfer's skip is refitted on the new trials' every 3rd window, in the source's scalers
+    save_model(every, tmp_path / "base")
+    new_user = labeled(4, prefix="U")
+    cfg = replace(p.train, init=f"transfer:{tmp_path / 'base'}", fit_stride=3, epochs=1)
+    tl = train_model(new_user, p, cfg)
+    idx, _ = split_trials([t.id for t in new_user], cfg.test_fraction, cfg.seed)
+    ws = WindowSet([new_user[i].trial for i in idx], every.window, every.dt, stride=3)
+    ridge = RidgeBaseline.fit(ws, every.input_scaler, every.target_scaler, 0.5)
+    np.testing.assert_allclose(tl.net.skip.weight.detach().numpy(), ridge.W.T, rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match="train.fit_stride must be an integer >= 1"):
+        TrainConfig(fit_stride=0)
+
+
 def test_the_ridge_alpha_search_runs_once_per_training(monkeypatch, trials, tiny):
     """The skip's α and the baselines' α come from the same search on the same trials: it runs
     once, and both use its answer."""

@@ -65,6 +65,10 @@ class ReproduceConfig:
     # stride 16 / 32 / 48 / 96. Every 96th window since issue 35 (48 in the full preset): each LSTM
     # source is trained source_seeds times for a third of the arithmetic three sources took once at 16.
     source_stride: int = 96
+    # The windows the learned sources' scalers and linear skip (a ridge, closed form) are fitted on: every
+    # 4th since issue 35 (1 in the full preset). Over the sources' 330 trials that is still more windows than
+    # M_0's skip sees at 1 (60 trials), and the fit takes a quarter of its 5 CPU-s per source.
+    source_fit_stride: int = 4
     # The learned sources of the in-loop ablation (experiments.source_training.LEARNED); the thesis preset
     # adds lstm-hand-alone, whose negative result docs/intent-labels.md records.
     learned_sources: tuple[str, ...] = ("ridge", "ridge-intent", "lstm-tool", "lstm-intent")
@@ -130,6 +134,7 @@ class ReproduceConfig:
             "transfer_epochs",
             "train_stride",
             "source_stride",
+            "source_fit_stride",
             "real_stride",
             "transfer_trials",
             "test_trials",
@@ -202,6 +207,7 @@ REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry(
             name="full",
             train_stride=4,
             source_stride=48,
+            source_fit_stride=1,
             transfer_starts=("transfer", "scratch", "finetune_all"),
             fixed_alpha_learned=True,
             mujoco_sources=(),
@@ -236,6 +242,7 @@ REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry(
             transfer_epochs=25,
             train_stride=1,
             source_stride=1,
+            source_fit_stride=1,
             real_epochs=25,
             device="cuda",
             learned_sources=("ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone", "lstm-intent"),
@@ -483,12 +490,14 @@ class Workspace:
         preset_name: str | None = None,
         label: str | None = None,
         stride: int | None = None,
+        fit_stride: int = 1,
         seed: int | None = None,
     ) -> Path:
         """Train and save a model. ``test_fraction=0`` when the model is scored on a separate
         test set anyway: then every trial collected for training is trained on. ``label``:
         what a fresh model learns to predict (``WindowConfig.label``; None: the preset's).
         ``stride``: every n-th window, for training and the per-epoch test loss (None: ``train_stride``).
+        ``fit_stride``: every n-th window for the scalers and the linear skip's ridge (``TrainConfig.fit_stride``).
         ``seed``: the training's seed (initial weights, split, batch order; None: the run's)."""
         from coassist.intent import MODEL_PRESETS, load_trials, train_model, write_model
 
@@ -504,6 +513,7 @@ class Workspace:
             threads=cfg.threads,
             train_stride=stride or cfg.train_stride,
             eval_stride=stride or cfg.train_stride,
+            fit_stride=fit_stride,
             device=cfg.device,
             test_fraction=test_fraction,
         )
@@ -528,6 +538,7 @@ def train_and_score(
     stride: int | None = None,
     evaluate_on: list[Path] | None = None,
     seed: int | None = None,
+    fit_stride: int = 1,
 ) -> tuple[str, float, Any]:
     """:meth:`Workspace.train`, timed, then the model scored (:func:`score_model`) on
     ``evaluate_on`` when given: (model folder, training seconds, evaluation or None)."""
@@ -543,6 +554,7 @@ def train_and_score(
         preset_name=preset_name,
         label=label,
         stride=stride,
+        fit_stride=fit_stride,
         seed=seed,
     )
     seconds = time.perf_counter() - t0
@@ -570,6 +582,7 @@ def train_in_worker(
     stride: int | None = None,
     evaluate_on: list[Path] | None = None,
     seed: int | None = None,
+    fit_stride: int = 1,
 ) -> tuple[str, float, Any]:
     """:func:`train_and_score` as a job for a worker process of the run's pool, on one torch
     thread (two 1-thread trainings at once do 1.34x the work of one 2-thread training on this
@@ -589,6 +602,7 @@ def train_in_worker(
         stride=stride,
         evaluate_on=evaluate_on,
         seed=seed,
+        fit_stride=fit_stride,
     )
 
 

@@ -155,6 +155,7 @@ def train_sources(
                     preset_name=preset_name,
                     label=label,
                     stride=ws.config.source_stride,
+                    fit_stride=ws.config.source_fit_stride,
                     seed=seed,
                 )
             )
@@ -179,6 +180,7 @@ def train_sources(
                 label=label,
                 stride=ws.config.source_stride,
                 seed=seed,
+                fit_stride=ws.config.source_fit_stride,
             ): name
             for name, epochs, preset_name, label, seed in jobs
         }

@@ -80,6 +80,8 @@ class TrainConfig:
     test_fraction : share of *trials* held out (thesis 0.2).
     train_stride, eval_stride : keep every n-th window (consecutive windows overlap almost
         entirely; 1 = all, the thesis).
+    fit_stride : every n-th training window for what is fitted in closed form before the
+        first epoch: the scalers' ranges and the linear skip's ridge (1 = all, the thesis).
     ridge_alpha : regularisation of the ridge baseline fitted on the same windows (the
         baseline the model is compared with). None (default): chosen on validation
         trials split from the training trials, like the model's own hyper-parameters
@@ -116,6 +118,7 @@ class TrainConfig:
     test_fraction: float = 0.2
     train_stride: int = 1
     eval_stride: int = 1
+    fit_stride: int = 1
     ridge_alpha: float | None = None
     skip_alpha: float | None = None
     grad_clip: float = 0.0
@@ -130,6 +133,7 @@ class TrainConfig:
             ("threads", 1),
             ("train_stride", 1),
             ("eval_stride", 1),
+            ("fit_stride", 1),
             ("seed", 0),
         ):
             v = getattr(self, name)
@@ -300,7 +304,7 @@ def _build_model(
         return load_model(path, features=feature_names(d), dt=dt), None
     ids = [lt.id for lt in trials]
     train_idx, _ = split_trials(ids, config.test_fraction, config.seed)
-    ws = WindowSet([trials[i].trial for i in train_idx], preset.window, dt)
+    ws = WindowSet([trials[i].trial for i in train_idx], preset.window, dt, stride=config.fit_stride)
     in_scaler, out_scaler = ws.fit_scalers()
     net = IntentNet(preset.network(d), generator=torch.Generator().manual_seed(config.seed))
     tuning = None
@@ -520,7 +524,7 @@ def train_model(
                 net,
                 trials,
                 train_idx,
-                WindowSet([trials[i].trial for i in train_idx], window, dt),
+                WindowSet([trials[i].trial for i in train_idx], window, dt, stride=config.fit_stride),
                 model.input_scaler,
                 model.target_scaler,
                 config,

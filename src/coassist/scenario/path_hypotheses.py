@@ -243,6 +243,11 @@ class _Hypotheses:
         tan = np.gradient(self.points, axis=1)
         self.tangents = tan / np.linalg.norm(tan, axis=2, keepdims=True)
         self.sides = np.asarray(sides)
+        n, p = self.points.shape[:2]
+        self.curves, self.row_start = np.arange(n), np.arange(n) * p
+        self.flat_points, self.flat_tangents = self.points.reshape(n * p, 2), self.tangents.reshape(n * p, 2)
+        self.flat_arc = self.arc.ravel()
+        self._offsets: dict[int, np.ndarray] = {}
         self.on_side = (np.flatnonzero(self.sides == 1), np.flatnonzero(self.sides == -1))  # curves per side
         self.n_o = task.path.normal(task.obstacle_arc)
         mid = grid.index(1.0) if 1.0 in grid else len(grid) // 2
@@ -255,6 +260,12 @@ class _Hypotheses:
         apart = np.flatnonzero(np.any(self.points != self.points[:1], axis=(0, 2)))
         self.first_apart: int = int(apart[0]) if apart.size else self.points.shape[1]
         self.last_apart: int = int(apart[-1]) if apart.size else -1
+
+    def offsets(self, widest: int) -> np.ndarray:
+        """−widest … widest, (1, 2·widest + 1): a search window around each curve's last phase."""
+        if widest not in self._offsets:
+            self._offsets[widest] = np.arange(-widest, widest + 1)[None, :]
+        return self._offsets[widest]
 
     def at(self, n: int, s: np.ndarray) -> np.ndarray:
         """Points of curve n at its arc lengths s (clipped to the curve)."""
@@ -419,18 +430,21 @@ class PathHypothesesIntent:
             if fast is not None:
                 return fast
         # 1. the tool's phase on every curve: its nearest point within search_window of the last one
-        curves = np.arange(n_curves)
-        ids = np.clip(self._idx[:, None] + np.arange(-widest, widest + 1)[None, :], 0, n_pts - 1)
-        flat = ids + (curves * n_pts)[:, None]
+        curves = hyp.curves
+        ids = self._idx[:, None] + hyp.offsets(widest)
+        np.maximum(ids, 0, out=ids)
+        np.minimum(ids, n_pts - 1, out=ids)
+        flat = ids + hyp.row_start[:, None]
         dx = np.take(hyp.flat_x, flat) - p[0]
         dy = np.take(hyp.flat_y, flat) - p[1]
         d2 = dx * dx + dy * dy  # = Σ over x, y of (point − p)², bit for bit
-        near = ids[curves, np.argmin(d2, axis=1)]
+        at = flat[curves, np.argmin(d2, axis=1)]  # flat index of each curve's nearest point
+        near = at - hyp.row_start
         self._idx = near
-        tan = hyp.tangents[curves, near]
+        tan = np.take(hyp.flat_tangents, at, axis=0)
         lead = (tan @ u_h + C * (tan @ v)) / K
-        q = hyp.points[curves, near] + lead[:, None] * tan  # each curve's present estimate
-        s_lead = hyp.arc[curves, near] + lead
+        q = np.take(hyp.flat_points, at, axis=0) + lead[:, None] * tan  # each curve's present estimate
+        s_lead = np.take(hyp.flat_arc, at) + lead
         # 2. side
         cl, cr = hyp.centre[1], hyp.centre[-1]
         sep = q[cl] - q[cr]

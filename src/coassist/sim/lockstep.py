@@ -200,7 +200,9 @@ class _Batch:
         self.wrench_log = np.empty((B, N, 2))
         self.ref_log = np.empty((B, N, 2))
         Hs_max = 0 if self.nominal.all() else int(self.Hs.max())  # the nominal runs log no prediction
-        self.pred_log = np.full((B, N, Hs_max, 2), np.nan)
+        # filled row by row as the runs tick (NaN, then the rows predicted): a (B, N, H, 2) np.full
+        # here wrote tens of MB per group at the time limit's N, most of it never read
+        self.pred_log = np.empty((B, N, Hs_max, 2))
         self.eff_h_log = np.empty((B, N, 2))
         self.eff_r_log = np.empty((B, N, 2))
         self.compute = np.zeros((B, N))
@@ -321,6 +323,8 @@ class _Batch:
         self.vel_log[act, k] = v
         self.wrench_log[act, k] = hand[:, :2]
         self.ref_log[act, k] = ref_pos
+        if self.pred_log.shape[2]:
+            self.pred_log[act, k] = np.nan
         for js, p in predicted:
             self.pred_log[act[js], k, : p.shape[1]] = p
         self.eff_r_log[act, k] = u_r
