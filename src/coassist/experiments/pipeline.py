@@ -66,8 +66,10 @@ class ReproduceConfig:
     # source is trained source_seeds times for a third of the arithmetic three sources took once at 16.
     source_stride: int = 96
     # The windows the learned sources' scalers and linear skip (a ridge, closed form) are fitted on: every
-    # 4th since issue 35 (1 in the full preset). Over the sources' 330 trials that is still more windows than
-    # M_0's skip sees at 1 (60 trials), and the fit takes a quarter of its 5 CPU-s per source.
+    # 4th since issue 35 (every window in the full and thesis presets). Over the sources' 330 trials that is
+    # still more windows than M_0's skip sees (60 trials, every window). It saves 90 CPU-s a seed (313 → 267 s,
+    # seed 0, one day) and moves the LSTM+FC sources' cells only: force share −0.4 to −0.7 points, overshoot
+    # share −4 to −11 points, inside their intervals, no verdict (docs/performance.md). 1 restores the bits.
     source_fit_stride: int = 4
     # The learned sources of the in-loop ablation (experiments.source_training.LEARNED); the thesis preset
     # adds lstm-hand-alone, whose negative result docs/intent-labels.md records.
