@@ -94,7 +94,9 @@ def play_page(
     raise AssertionError("the study did not end in time")
 
 
-def test_the_page_is_blinded_and_a_simulated_hand_drives_the_study(tmp_path):
+def _study_on_the_page(tmp_path, *, impatient: bool = False):
+    """A one-trial-per-condition comparison for participant S01, played to its end by :func:`play_page`:
+    (the study, every message the page received, what the page entered)."""
     plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0, timing="motion_time = 1.5\ndwell = 0.5")
     plan.write_text(plan.read_text().replace("between_conditions = 30.0", "between_conditions = 0.5"))
     study = init_study(plan, tmp_path / "study")
@@ -102,9 +104,14 @@ def test_the_page_is_blinded_and_a_simulated_hand_drives_the_study(tmp_path):
     with ParticipantRun(study, "S01", simulate=True, page=("127.0.0.1", 0, None)) as run:
         done = threading.Thread(target=run.run, daemon=True)
         done.start()
-        entered = play_page(run.url, OperatorPath(study.folder, "S01"), received)
+        entered = play_page(run.url, OperatorPath(study.folder, "S01"), received, impatient=impatient)
         done.join(30)
         assert not done.is_alive() and run.complete
+    return study, received, entered
+
+
+def test_the_page_is_blinded_and_a_simulated_hand_drives_the_study(tmp_path):
+    study, received, entered = _study_on_the_page(tmp_path)
     labels = study.labels
     # blinding: not one message names a controller kind or a condition
     assert received and not [s for s in SECRETS if any(s in text for text in received)]
@@ -124,16 +131,7 @@ def test_the_page_is_blinded_and_a_simulated_hand_drives_the_study(tmp_path):
 def test_a_second_or_late_start_runs_no_second_trial(tmp_path):
     """Start pressed twice, and again as the result arrives: each step's trial runs once, no trial
     runs that no step waits for, and the study still ends."""
-    plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0, timing="motion_time = 1.5\ndwell = 0.5")
-    plan.write_text(plan.read_text().replace("between_conditions = 30.0", "between_conditions = 0.5"))
-    study = init_study(plan, tmp_path / "study")
-    received: list[str] = []
-    with ParticipantRun(study, "S01", simulate=True, page=("127.0.0.1", 0, None)) as run:
-        done = threading.Thread(target=run.run, daemon=True)
-        done.start()
-        entered = play_page(run.url, OperatorPath(study.folder, "S01"), received, impatient=True)
-        done.join(30)
-        assert not done.is_alive() and run.complete
+    study, received, entered = _study_on_the_page(tmp_path, impatient=True)
     assert len(entered["starts"]) == 3
     assert sum('"type": "started"' in t for t in received) == 3
     assert sum('"type": "result"' in t for t in received) == 3
