@@ -66,7 +66,7 @@ def participant_steps(plan: StudyPlan, labels: dict[str, str], number: int, row:
     elif plan.protocol == "transfer":
         assert plan.transfer is not None  # parse_plan sets it for this protocol
         t = plan.transfer
-        _collect(steps, plan, "transfer-set", t.trials, t.controller, t.source_model, base + 2000)
+        _trials(steps, plan, "transfer-set", t.trials, t.controller, t.source_model, base + 2000)
         _add(
             steps,
             "train",
@@ -142,23 +142,38 @@ def _rest(steps: list[dict[str, Any]], plan: StudyPlan, why: str) -> None:
     _add(steps, "rest", block="rest", seconds=plan.rest.between_conditions, why=why)
 
 
-def _collect(steps, plan: StudyPlan, block: str, n: int, controller: str, intent: str, seed0: int) -> None:
+def _trials(
+    steps,
+    plan: StudyPlan,
+    block: str,
+    n: int,
+    controller: str,
+    intent: str,
+    seed0: int,
+    *,
+    condition: str | None = None,
+    label: str | None = None,
+    position: int = 0,
+    rests: bool = True,
+) -> None:
+    """``n`` trials of ``block`` (seeds seed0 … seed0 + n − 1, the plan's tasks in turn); ``condition``
+    None: the block's name. ``rests``: the plan's rest between consecutive trials."""
     for j in range(n):
         _add(
             steps,
             "trial",
             block=block,
             index=j,
-            condition=block,
-            label=None,
-            position=0,
+            condition=block if condition is None else condition,
+            label=label,
+            position=position,
             controller=controller,
             intent=intent,
             task=_task(plan, j),
             seed=seed0 + j,
             practice=False,
         )
-        if j < n - 1 and plan.rest.between_trials > 0:
+        if rests and j < n - 1 and plan.rest.between_trials > 0:
             _add(steps, "rest", block="rest", seconds=plan.rest.between_trials, why="between trials")
 
 
@@ -185,23 +200,7 @@ def _compare(steps, plan: StudyPlan, conditions: list[Condition], labels: dict[s
                 practice=True,
             )
             practice += 1
-        for j in range(tp.per_condition):
-            _add(
-                steps,
-                "trial",
-                block=c.name,
-                index=j,
-                condition=c.name,
-                label=label,
-                position=pos,
-                controller=c.controller,
-                intent=c.intent,
-                task=_task(plan, j),
-                seed=base + j,
-                practice=False,
-            )
-            if j < tp.per_condition - 1 and plan.rest.between_trials > 0:
-                _add(steps, "rest", block="rest", seconds=plan.rest.between_trials, why="between trials")
+        _trials(steps, plan, c.name, tp.per_condition, c.controller, c.intent, base, label=label, position=pos)
         if plan.questionnaire.asked:
             _add(steps, "questionnaire", block=c.name, index=pos, condition=c.name, label=label)
         if pos < len(order) - 1 and plan.rest.between_conditions > 0:
@@ -214,21 +213,8 @@ def _iterative(steps, plan: StudyPlan, base: int) -> None:
     for k in range(it.rounds):
         block = f"round-{k}"
         intent = "nominal" if k == 0 else f"model:M{k - 1}"
-        for j in range(it.trials_per_round):
-            _add(
-                steps,
-                "trial",
-                block=block,
-                index=j,
-                condition=block,
-                label=None,
-                position=k,
-                controller=it.controller,
-                intent=intent,
-                task=_task(plan, j),
-                seed=base + k * it.trials_per_round + j,
-                practice=False,
-            )
+        seed0 = base + k * it.trials_per_round
+        _trials(steps, plan, block, it.trials_per_round, it.controller, intent, seed0, position=k, rests=False)
         if k >= 1:
             _add(steps, "check", block=block, index=k, round=k)
         if plan.questionnaire.asked:
