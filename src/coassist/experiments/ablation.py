@@ -410,28 +410,10 @@ def _drive_batch(configs: list) -> list[tuple[dict, dict]]:
     import torch
 
     from coassist.robot.drive import drive_lockstep
+    from coassist.sim.pool import trial_payload
 
     torch.set_num_threads(1)
-    return [
-        (
-            t.meta.to_dict(),
-            {
-                n: getattr(t, n)
-                for n in (
-                    "time",
-                    "pose",
-                    "velocity",
-                    "wrench",
-                    "reference",
-                    "prediction",
-                    "intent",
-                    "effort_h",
-                    "effort_r",
-                )
-            },
-        )
-        for t in drive_lockstep(configs)
-    ]
+    return [trial_payload(t) for t in drive_lockstep(configs)]
 
 
 #: The MuJoCo job of MG's trials (its cells have no intent source).
@@ -469,7 +451,7 @@ def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict,
     """The arbitrated cells on the MuJoCo UR5 (fewer trials: ``ablation_mujoco_trials`` per operator)."""
     import contextlib
 
-    from coassist.data import Trial, TrialMeta
+    from coassist.sim.pool import trial_from_payload
     from coassist.sim.world import worker_pool
 
     cfg = ws.config
@@ -491,7 +473,7 @@ def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict,
             for key, configs in cells:
                 done.append((key, [next(runs) for _ in configs]))
         for (obj, controller, source), payloads in done:
-            trials = [Trial(meta=TrialMeta.from_dict(m), **a) for m, a in payloads]
+            trials = [trial_from_payload(p) for p in payloads]
             trials = sorted(trials, key=_pair_key)
             if controller == "manual":
                 mg[("mujoco", obj)] = application_metrics(trials)
