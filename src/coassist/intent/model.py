@@ -457,22 +457,7 @@ def load_model(
             f"its content does not match the hash recorded in {WEIGHTS} at save time "
             "(edited after saving?); restore it or retrain",
         )
-    skip = {
-        "format",
-        "features",
-        "n_dof",
-        "dt",
-        "history",
-        "horizon",
-        "window",
-        "network",
-        "input_scaler",
-        "target_scaler",
-        "weights_sha256",
-        "ridge_sha256",
-        _SIDECAR_HASH_KEY,
-        "predicts",
-    }
+    skip = {*_HASHED, "format", "weights_sha256", _SIDECAR_HASH_KEY, "predicts"}  # the fields read above
     info = {k: v for k, v in meta.items() if k not in skip}
     try:
         model = IntentModel(net, window, in_scaler, out_scaler, model_dt, info, ridge)
