@@ -21,14 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from coassist.play.session import (
-    PREDICTION_STRIDE,
-    PlayConfig,
-    PlaySession,
-    TrialResult,
-    fault_names,
-    points_bounds,
-)
+from coassist.play.session import PlayConfig, PlaySession, TrialResult, arm_frame, points_bounds
 from coassist.robot.drive import TASK_HEIGHT, DriveConfig, drive
 from coassist.robot.worlds import WORLDS, WorldRequest, build_world
 from coassist.scenario.tasks import task_for_seed
@@ -82,28 +75,9 @@ class DriveMonitor(PlaySession):
                     self.publish({"type": "started", "controller": name, "scene": scene, "bounds": self.bounds})
             if k % every:
                 return
-            pred = out.prediction
-            frame = {
-                "type": "frame",
-                "index": len(self.results),
-                "k": k + 1,
-                "t": (k + 1) * c.dt,
-                "x": float(out.pose[0]),
-                "y": float(out.pose[1]),
-                "vx": float(out.velocity[0]),
-                "vy": float(out.velocity[1]),
-                "fh": [float(out.wrench[0]), float(out.wrench[1])],
-                "ur": [float(v) for v in out.u_r[:2]],
-                "ref": [float(v) for v in out.reference[:2]],
-                "prediction": [] if pred is None else np.vstack([pred[::PREDICTION_STRIDE], pred[-1:]]).tolist(),
-                "predicted": pred is not None,
-                "faults": fault_names(int(out.fault)),
-                "seq": -1,
-                "held": False,
-                "controller": name,
-                "misses": 0,
-                "world": c.world,
-            }
+            frame = arm_frame(
+                out, index=len(self.results), k=k, dt=c.dt, controller=name, world=c.world, seq=-1, held=False
+            )
             self.frame = frame
             self.publish(frame)
 

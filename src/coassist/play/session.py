@@ -72,6 +72,33 @@ SIGMA_TAU = 3.0
 PREDICTION_STRIDE = 5
 
 
+def arm_frame(out, *, index: int, k: int, dt: float, controller: str, world: str, seq: int, held: bool) -> dict:
+    """The page's ``frame`` of an arm world's tick k (``coassist drive``'s tick output ``out``: pose,
+    velocity, wrench, u_r, reference, prediction, fault); the point-mass play world writes its own."""
+    pred = out.prediction
+    return {
+        "type": "frame",
+        "index": index,
+        "k": k + 1,
+        "t": (k + 1) * dt,
+        "x": float(out.pose[0]),
+        "y": float(out.pose[1]),
+        "vx": float(out.velocity[0]),
+        "vy": float(out.velocity[1]),
+        "fh": [float(out.wrench[0]), float(out.wrench[1])],
+        "ur": [float(v) for v in out.u_r[:2]],
+        "ref": [float(v) for v in out.reference[:2]],
+        "prediction": [] if pred is None else np.vstack([pred[::PREDICTION_STRIDE], pred[-1:]]).tolist(),
+        "predicted": pred is not None,
+        "faults": fault_names(int(out.fault)),
+        "seq": seq,
+        "held": held,
+        "controller": controller,
+        "misses": 0,
+        "world": world,
+    }
+
+
 @dataclass(frozen=True)
 class PlayConfig:
     """One person's session (every field validated; errors name ``PlayConfig.<field>``).

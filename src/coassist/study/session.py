@@ -26,12 +26,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from coassist.data import Trial, TrialMeta
 from coassist.errors import CoassistError
-from coassist.interfaces import fault_names
-from coassist.play.session import PREDICTION_STRIDE, PlayConfig, PlaySession, TrialResult, _score
+from coassist.play.session import PlayConfig, PlaySession, TrialResult, _score, arm_frame
 from coassist.scenario.tasks import Task, task_for_seed
 
 __all__ = ["StudySession", "TrialSetup"]
@@ -224,28 +221,16 @@ class StudySession(PlaySession):
                 raise _Aborted(self._abort)
             if k % every:
                 return
-            pred = out.prediction
-            frame = {
-                "type": "frame",
-                "index": setup.step,
-                "k": k + 1,
-                "t": (k + 1) * dt,
-                "x": float(out.pose[0]),
-                "y": float(out.pose[1]),
-                "vx": float(out.velocity[0]),
-                "vy": float(out.velocity[1]),
-                "fh": [float(out.wrench[0]), float(out.wrench[1])],
-                "ur": [float(v) for v in out.u_r[:2]],
-                "ref": [float(v) for v in out.reference[:2]],
-                "prediction": [] if pred is None else np.vstack([pred[::PREDICTION_STRIDE], pred[-1:]]).tolist(),
-                "predicted": pred is not None,
-                "faults": fault_names(int(out.fault)),
-                "seq": self.hand.seq,
-                "held": bool(getattr(self.hand, "held", False)),
-                "controller": name,
-                "misses": 0,
-                "world": self.world,
-            }
+            frame = arm_frame(
+                out,
+                index=setup.step,
+                k=k,
+                dt=dt,
+                controller=name,
+                world=self.world,
+                seq=self.hand.seq,
+                held=bool(getattr(self.hand, "held", False)),
+            )
             self.frame = frame
             self.publish(frame)
 
