@@ -10,7 +10,6 @@ Skips, saying why, only where no Chromium (or no Playwright) can be had.
 from __future__ import annotations
 
 import math
-import shutil
 import time
 from io import BytesIO
 from pathlib import Path
@@ -21,23 +20,10 @@ import pytest
 pytest.importorskip("starlette", reason="coassist play needs the web extra (pip install 'coassist[web]')")
 sync_api = pytest.importorskip("playwright.sync_api", reason="the browser test needs Playwright (the dev extra)")
 
-CHROMIUM = Path("/usr/bin/chromium")
-if not CHROMIUM.is_file():
-    CHROMIUM = Path(shutil.which("chromium") or "/nonexistent")
-pytestmark = pytest.mark.skipif(
-    not CHROMIUM.is_file(), reason="no Chromium at /usr/bin/chromium (apt-get install chromium)"
-)
+from ..chromium import CHROMIUM, CHROMIUM_ARGS, needs_chromium  # noqa: E402
 
-CHROMIUM_ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
+pytestmark = needs_chromium
+
 PATH_RGB = (31, 119, 180)  # the page's colours (play.js COLOR)
 PREDICTION_RGB = (255, 127, 14)
 

@@ -11,10 +11,8 @@ condition. Skips, saying why, only where no Chromium (or no Playwright) can be h
 from __future__ import annotations
 
 import json
-import shutil
 import threading
 import time
-from pathlib import Path
 
 import pytest
 
@@ -25,26 +23,11 @@ from coassist.study.report import write_report  # noqa: E402
 from coassist.study.runner import ParticipantRun  # noqa: E402
 from coassist.study.store import init_study  # noqa: E402
 
+from ..chromium import CHROMIUM, CHROMIUM_ARGS, needs_chromium  # noqa: E402
 from .conftest import comparison_plan  # noqa: E402
 from .pagedriver import SECRETS, OperatorPath  # noqa: E402
 
-CHROMIUM = Path("/usr/bin/chromium")
-if not CHROMIUM.is_file():
-    CHROMIUM = Path(shutil.which("chromium") or "/nonexistent")
-pytestmark = pytest.mark.skipif(
-    not CHROMIUM.is_file(), reason="no Chromium at /usr/bin/chromium (apt-get install chromium)"
-)
-
-CHROMIUM_ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
+pytestmark = needs_chromium
 
 
 def _participant(page, url: str, path: OperatorPath, received: list[str]) -> dict:
