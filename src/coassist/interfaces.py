@@ -122,7 +122,8 @@ class TrialContext:
     grid (the nominal plan is public: it is shown on the monitor).
     task : the task kind. user, object : names.
     true_intent : (n, 2) the operator's desired positions — simulation only, for the
-    oracle baseline; a real predictor must not read it.
+    oracle baseline: the episode fills it in only for a source whose ``reads_true_intent`` is
+    True (coassist.scenario.reference_intents.OracleIntent); every other source gets None.
     path : (P, 2) the nominal path's polyline [m] in the plan's frame (public, like the
         reference), or None when the world has none.
     obstacles : the boxes the robot is told of, each ((x, y) centre, (width, depth) size) [m] in

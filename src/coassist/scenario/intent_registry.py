@@ -138,6 +138,12 @@ def _load_calibration(folder: str, horizon: int, network: str) -> IntentSource:
     return read_calibration(folder, horizon)
 
 
+def _load_person_model(folder: str, horizon: int, network: str) -> IntentSource:
+    from coassist.scenario.person_model import read_person_model
+
+    return read_person_model(folder, horizon)
+
+
 def _load_model(folder: str, horizon: int, network: str) -> IntentSource:
     try:
         from coassist.intent import load_model_intent
@@ -158,6 +164,12 @@ INTENT_FOLDERS: Registry[IntentFolderKind] = Registry(
     {
         "path-hypotheses": IntentFolderKind(
             "path-hypotheses.json", "a path-hypotheses calibration folder", _load_calibration, network=False
+        ),
+        "person-model": IntentFolderKind(
+            "person-model.json",
+            "a person model folder (coassist calibrate)",
+            _load_person_model,
+            network=False,
         ),
         "model": IntentFolderKind(
             "model.json", "a model folder (coassist train)", _load_model, network=True
