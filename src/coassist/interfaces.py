@@ -128,6 +128,8 @@ class TrialContext:
         reference), or None when the world has none.
     obstacles : the boxes the robot is told of, each ((x, y) centre, (width, depth) size) [m] in
         the plan's frame; empty when it is told of none (the person may still see some).
+    seed : the trial's seed (TrialMeta.seed), the root of the robot's own random draws in the
+        trial (the calibration probe's phases: coassist.control.probe); None: none given.
     """
 
     dt: float
@@ -141,6 +143,7 @@ class TrialContext:
     true_intent: np.ndarray | None = None
     path: np.ndarray | None = None
     obstacles: tuple[tuple[tuple[float, float], tuple[float, float]], ...] = ()
+    seed: int | None = None
 
 
 @runtime_checkable

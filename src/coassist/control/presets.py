@@ -72,7 +72,7 @@ ARBITRATION = ArbitrationParameters(law="target", alpha_min=0.3, alpha_max=0.9, 
 #: The extra damping of "cooperative-damped": 40 N·s/m at full gate (40 % of the plant's 100), the gate
 #: fully open at 0.3 m/s² of deceleration (docs/precision.md: the lever's force and jerk cost).
 DECELERATION_DAMPING = DampingParameters(gain=40.0, decel_ref=0.3, accel_time=0.02)
-#: The probe of "manual-probe": 1.5 N RMS per axis at 1.3–5.6 Hz (coassist.control.probe), what
+#: The probe of "manual-probe": 2.5 N RMS per axis at 1.3–5.6 Hz (coassist.control.probe), what
 #: coassist.scenario.arm_identification reads the person's arm from.
 PROBE = ProbeParameters()
 #: Spring of the IMP baseline toward the nominal reference [N/m] (eq. 5.4). The thesis

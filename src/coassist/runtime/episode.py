@@ -358,6 +358,7 @@ def build_episode(
         true_intent=true_intent if getattr(intent, "reads_true_intent", False) is True else None,
         path=task.path.points + shift,
         obstacles=told,  # type: ignore[arg-type]
+        seed=labels.seed,
     )
     tick.reset(Plan(plan, start_pose), context)
     t_done = float(task.planner.end_time) if intent_end_time is None else max(task.planner.end_time, intent_end_time)
