@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
+from coassist.runtime.episode import run_episode
+from coassist.scenario.arm_identification import ASSUMED_ARM
 from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told, load_intent_source
 from coassist.scenario.path_hypotheses import PersonShape, write_calibration
 from coassist.scenario.path_model import fit_path_model
 from coassist.scenario.person_model import PersonFit, write_person_model
-from coassist.scenario.arm_identification import ASSUMED_ARM
 from coassist.sim.world import TrialSpec, spec_episode
-from coassist.runtime.episode import run_episode
 
 
 def _folders(tmp_path):
