@@ -87,6 +87,9 @@ class PersonFilterSettings:
     noise_scale: float = 2.0
     kernel: float = 0.005
     odds_limit: float = 10.0
+    shared_gap: float = 0.005
+    dead_zone: float = 0.002
+    side_rule: str = "offset"
 
     def __post_init__(self) -> None:
         for name, lo, hi, open_lo in (
@@ -105,10 +108,14 @@ class PersonFilterSettings:
             ("noise_scale", 0.1, 20.0, False),
             ("kernel", 0.0, 0.1, False),
             ("odds_limit", 1.0, 100.0, False),
+            ("shared_gap", 0.0, 0.05, False),
+            ("dead_zone", 0.0, 0.05, False),
         ):
             object.__setattr__(
                 self, name, check_real(getattr(self, name), f"PersonFilterSettings.{name}", lo, hi, open_lo=open_lo)
             )
+        if self.side_rule not in ("offset", "mixture"):
+            raise ValueError(f"PersonFilterSettings.side_rule must be 'offset' or 'mixture', got {self.side_rule!r}")
         if isinstance(self.shifts, (str, bytes)) or not hasattr(self.shifts, "__iter__"):
             raise ValueError(f"PersonFilterSettings.shifts must be a list of lengths [m], got {self.shifts!r}")
         shifts = tuple(check_real(x, "PersonFilterSettings.shifts", -0.2, 0.2) for x in self.shifts)
@@ -162,9 +169,10 @@ class _Curves:
             w: np.exp(self.log_prior[i] - np.logaddexp.reduce(self.log_prior[i])) @ self.offsets[i]
             for w, i in self.on_way.items()
         }
-        gap = np.abs(mean[1] - mean[-1]) if len(mean) == 2 else np.abs(next(iter(mean.values())))
+        # how far apart the ways' (prior-weighted) mean paths are at each point of the plan [m]
+        self.gap = np.abs(mean[1] - mean[-1]) if len(mean) == 2 else np.abs(next(iter(mean.values())))
         # the way taken is settled once the tool passes the place where the ways are furthest apart
-        self.peak = int(np.argmax(gap))
+        self.peak = int(np.argmax(self.gap))
 
     def at(self, n: int, s: np.ndarray) -> np.ndarray:
         """Points of curve n at its own arc lengths s (clipped)."""
@@ -304,9 +312,14 @@ class PersonPathsIntent:
         ):
             return present + self._steps[:, None] * v
         tan = np.take(hyp.flat_tangents, at, axis=0)
+        point = np.take(hyp.flat_points, at, axis=0)
+        # the tool's place along each curve, between its samples (a phase stuck to the samples would step the
+        # rows by their spacing), then the lead along the curve
+        along = (p[0] - point[:, 0]) * tan[:, 0] + (p[1] - point[:, 1]) * tan[:, 1]
+        np.clip(along, -hyp.step, hyp.step, out=along)
         lead = (tan @ u_h + C * (tan @ v)) / K
-        q = np.take(hyp.flat_points, at, axis=0) + lead[:, None] * tan
-        s_lead = np.take(hyp.flat_arc, at) + lead
+        q = point + (along + lead)[:, None] * tan
+        s_lead = np.take(hyp.flat_arc, at) + along + lead
         # 3. evidence. The way: the present estimate's offset from the plan (less the person's bias there),
         # toward one way or the other, in proportion to how far apart the ways are at this point of the plan
         # (a detour that comes later or earlier than before fakes no side)
@@ -316,17 +329,26 @@ class PersonPathsIntent:
         self._nominal_at = k = lo + int(np.argmin(rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]))
         normal = hyp.nominal_normals[k]
         z = float((present - hyp.nominal_points[k]) @ normal)
-        if float(hyp.spread[k]) < st.divergence:
-            if self._mix >= 1.0:  # the bias: learnt while every hypothesis is the same path here
+        D = float(hyp.gap[k])
+        if D < st.shared_gap:
+            if self._mix >= 1.0:  # the bias: learnt where the ways are still one path
                 self._bias += self._b_gain * (z - self._bias)
                 self._bias = min(max(self._bias, -st.bias_limit), st.bias_limit)
-        elif self._two and (self._side == 0 or k < hyp.peak):
-            # each way's likelihood of the offset: a mixture over its hypotheses' offsets here
-            e = hyp.offsets[:, k] - (z - self._bias)
-            ll = hyp.log_prior - 0.5 * e * e / self._kernel2
-            gain = self._kappa * float(
-                np.logaddexp.reduce(ll[hyp.on_way[1]]) - np.logaddexp.reduce(ll[hyp.on_way[-1]]) - self._way_prior
-            )
+        if self._two and D >= st.divergence and (self._side == 0 or k < hyp.peak):
+            if st.side_rule == "mixture":
+                # each way's likelihood of the offset: a mixture over its hypotheses' offsets here
+                e = hyp.offsets[:, k] - (z - self._bias)
+                ll = hyp.log_prior - 0.5 * e * e / self._kernel2
+                gain = self._kappa * float(
+                    np.logaddexp.reduce(ll[hyp.on_way[1]]) - np.logaddexp.reduce(ll[hyp.on_way[-1]]) - self._way_prior
+                )
+            else:
+                # the offset from the person's line, beyond a dead zone, toward the way it points to, in
+                # proportion to how far the ways are apart here: staying on the line is no evidence against
+                # a way that would have left it already (its detour may come later this time)
+                off = z - self._bias
+                off = math.copysign(max(abs(off) - st.dead_zone, 0.0), off)
+                gain = self._kappa * off * D / self._noise2
             self._log_odds += min(max(gain, -self._step_cap), self._step_cap)
             self._log_odds = min(max(self._log_odds, -st.odds_limit), st.odds_limit)
         # the shape: each hypothesis' likelihood relative to its way's best, while the way's curves are apart
