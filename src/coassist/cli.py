@@ -1393,15 +1393,16 @@ def study_init(
     )
     estimate = study.estimate()
     for line in estimate.lines() if estimate is not None else ():
-        console.print(line, highlight=False, markup=False)
-    rehearsal = out.with_name(out.name + "-rehearsal")
-    console.print(
-        f"rehearse it before anyone sits down (a simulated participant, in a folder of its own): coassist study "
-        f"init {plan} --out {rehearsal} && coassist study run {rehearsal} --simulate --participant S01",
-        highlight=False,
-        markup=False,
-        soft_wrap=True,
-    )
+        console.print(line, highlight=False, markup=False, soft_wrap=True)
+    if "rehearsal" in out.name:
+        advice = f"rehearse it: coassist study run {out} --simulate --participant S01"
+    else:
+        rehearsal = out.with_name(out.name + "-rehearsal")
+        advice = (
+            "rehearse it before anyone sits down (a simulated participant, in a folder of its own): coassist study "
+            f"init {plan} --out {rehearsal} && coassist study run {rehearsal} --simulate --participant S01"
+        )
+    console.print(advice, highlight=False, markup=False, soft_wrap=True)
     _wrote(str(out))
 
 
