@@ -53,6 +53,12 @@ def _model(folder: Path, *, label: str = "tool", horizon: int = 50) -> Path:
     return folder
 
 
+@pytest.fixture(scope="module")
+def tool_model(tmp_path_factory) -> Path:
+    """A tiny model of the tool label and the controller's horizon, shared (never edited)."""
+    return _model(tmp_path_factory.mktemp("tool") / "model")
+
+
 def _write(folder: Path, text: str) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "plan.toml").write_text(text)
@@ -91,11 +97,10 @@ def test_a_stop_criterion_beyond_the_logged_predictions_is_refused_at_init(tmp_p
     _refused(plan, tmp_path / "other", "training.preset")
 
 
-def test_a_model_is_checked_for_what_the_protocol_asks_of_it(tmp_path):
+def test_a_model_is_checked_for_what_the_protocol_asks_of_it(tmp_path, tool_model):
     """bdc84ed: a transfer whose source was trained on the intent label passed init and failed after the
     participant's transfer trials; a model of a horizon shorter than the controller's failed at its first trial."""
     intent_model = _model(tmp_path / "intent-model", label="intent")
-    tool_model = _model(tmp_path / "tool-model", label="tool")
     short_model = _model(tmp_path / "short-model", horizon=10)
     text = '[study]\nname = "tl"\nprotocol = "transfer"\n\n[transfer]\ntrials = 2\nsource_model = "{}"\n'
     plan = _write(tmp_path / "plans", text.format(intent_model) + TRIALS + TRAINING)
@@ -180,7 +185,7 @@ def test_init_shows_the_estimate_and_recommends_a_dry_run(tmp_path):
     assert said[0].startswith("S01: a participant's session: about")  # before the first trial
 
 
-def test_a_plan_takes_every_intent_source_a_person_can_run_and_the_dry_run_runs_them(tmp_path):
+def test_a_plan_takes_every_intent_source_a_person_can_run_and_the_dry_run_runs_them(tmp_path, tool_model):
     """The named sources (those of the registry that are not simulation-only) and the folder kinds (a
     calibration, a model), every one a condition; the oracle refused; each condition's trial runs it."""
     from coassist.scenario.path_hypotheses import write_calibration
@@ -189,7 +194,7 @@ def test_a_plan_takes_every_intent_source_a_person_can_run_and_the_dry_run_runs_
     assert names == [n for n, e in intent_registry.INTENT_SOURCES.items() if not e.simulation_only]
     assert {"nominal", "constant-velocity", "present", "paths"} <= set(names) and "oracle" not in names
     calibration = write_calibration(tmp_path / "calibration", {})
-    model = _model(tmp_path / "model")
+    model = tool_model
     intents = [*names, str(calibration), str(model)]
     plan = _write(tmp_path / "plans", _comparison(intents))
     parsed = plan_from_text(plan.read_text(), plan.parent)

@@ -86,9 +86,10 @@ PROGRESS_NAME = "progress.jsonl"
 PLANS_NAME = "plans"  # the plans an amendment replaced, as <sha256>.toml
 #: The plan's fields ``coassist study amend`` may change once trials have run: none changes a
 #: finished trial or the steps a participant has been given (their order is fixed at their
-#: first run). A rest takes its length from the plan when it starts; the stop criterion is
-#: checked with the plan's values when its step comes (and records them); the thread count
-#: of a training is part of the command line recorded with its model.
+#: first run). A rest takes its length from the plan the run loaded, not from the recorded
+#: steps; the stop criterion is checked with the plan's values when its step comes (and
+#: records them); the thread count of a training is part of the command line recorded with
+#: its model. An amendment applies from each participant's next run.
 SAFE_FIELDS = (
     "study.participants",
     "study.id_pattern",
