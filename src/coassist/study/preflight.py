@@ -8,7 +8,8 @@ only after a participant's trials:
 - every intent source a condition names is built as the session builds it
   (:func:`coassist.scenario.intent_registry.load_intent_source`, the controller's horizon
   H): a named source, a calibration folder, a model folder (its sidecar and weights
-  checked, its features and dt those of the loop, its horizon >= H);
+  checked, its features and dt those of the loop, its horizon >= H, at most
+  :data:`MAX_PARAMETERS` parameters);
 - a model the study trains further on a participant's trials (``[transfer]`` and
   ``[online]`` ``source_model``, ``[training] preset`` of an iterative study) must learn a
   label a person's trials have: not ``intent`` (the simulated operator's true intent);
@@ -184,6 +185,11 @@ def _check_sources(plan: StudyPlan, H: int, dt: float) -> dict[str, Any]:
                 model.check_compatible(FEATURES, dt, what="coassist study")
             except ValueError as exc:
                 raise PlanError(f"{where}: {exc}") from None
+            n_params = sum(p.numel() for p in model.net.parameters())
+            if n_params > MAX_PARAMETERS:
+                raise PlanError(
+                    f"{where}: the model has {n_params:,} parameters; a study runs at most {MAX_PARAMETERS:,} in the loop"
+                )
             models[c.intent] = model
         horizon = getattr(source, "horizon", H)
         if horizon < H:
