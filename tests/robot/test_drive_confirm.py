@@ -38,6 +38,7 @@ def test_no_terminal_no_yes_is_one_line_and_no_motion(tmp_path, monkeypatch):
     _check_one_line(result.stdout, [line for line in result.stderr.splitlines() if line.strip()])
 
 
+@pytest.mark.realtime  # franky-sim runs the arm's loop in threads: run alone (./dev test), as the Franka tests
 def test_the_same_against_franky_sim(tmp_path):
     """The issue's case end to end: franky-sim on loopback, stdin closed."""
     pytest.importorskip("franky", reason="the Franka world needs franky: pip install 'coassist[franka]'")
