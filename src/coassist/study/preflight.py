@@ -271,6 +271,42 @@ def _seconds_per_window(cfg, steps: int, training: TrainingPlan, batch_size: int
     return step_s / batch_size
 
 
+def _check_training(plan: StudyPlan, H: int, source) -> tuple[Any, Any, Any, int]:
+    """The study's own models: (their preset, window, network config, parameter count), checked."""
+    assert plan.training is not None
+    scratch = _study_preset(plan, "scratch")  # the plan's [training] options applied (sizes: scratch only)
+    if plan.iterative is not None:
+        if scratch.window.label == "intent":
+            raise PlanError(
+                f"training.preset: {plan.training.preset!r} trains on the 'intent' label (the simulated operator's "
+                "true intent), which a person's trials do not have; use a preset of the 'tool' label"
+            )
+        if scratch.window.horizon < H:
+            raise PlanError(
+                f"training.preset: {plan.training.preset!r} predicts {scratch.window.horizon} steps; the "
+                f"controller needs {H}"
+            )
+        logged = min(H, scratch.window.horizon)
+        if plan.iterative.criterion_horizon > logged:
+            raise PlanError(
+                f"iterative.criterion_horizon: {plan.iterative.criterion_horizon} samples, but the rounds log "
+                f"predictions of {logged} (the nominal plan: the controller's {H}; the models: "
+                f"training.preset {plan.training.preset!r}'s {scratch.window.horizon}): the stop criterion "
+                f"could not be computed; give at most {logged}"
+            )
+        window, cfg = scratch.window, scratch.network(STUDY_DOF)
+    else:  # transfer, online: the source model's network, trained further
+        assert source is not None
+        window, cfg = source.window, source.net.config
+    n_params = _n_parameters(cfg)
+    if n_params > MAX_PARAMETERS:
+        raise PlanError(
+            f"training: the network (layers {cfg.lstm_layers}, hidden {cfg.hidden}, fc {list(cfg.fc)}) has "
+            f"{n_params:,} parameters; a study trains at most {MAX_PARAMETERS:,} within a rest"
+        )
+    return scratch, window, cfg, n_params
+
+
 def preflight(plan: StudyPlan) -> SessionEstimate:
     """Check ``plan`` against what every step will need (module docstring); its :class:`SessionEstimate`."""
     H, dt = _controller_horizon(plan)
@@ -284,47 +320,17 @@ def preflight(plan: StudyPlan) -> SessionEstimate:
     trial_bytes = 2 * int(math.ceil(limit / dt)) * bytes_per_tick(H, n_joints=n_joints)
 
     train_s: dict[str, float] = {}
-    training_bytes = 0
+    training_bytes = n_params = 0
     s_per_window = None
     if plan.training is not None:
-        scratch = _study_preset(plan, "scratch")
-        if plan.iterative is not None:
-            if scratch.window.label == "intent":
-                raise PlanError(
-                    f"training.preset: {plan.training.preset!r} trains on the 'intent' label (the simulated operator's "
-                    "true intent), which a person's trials do not have; use a preset of the 'tool' label"
-                )
-            if scratch.window.horizon < H:
-                raise PlanError(
-                    f"training.preset: {plan.training.preset!r} predicts {scratch.window.horizon} steps; the "
-                    f"controller needs {H}"
-                )
-            logged = min(H, scratch.window.horizon)
-            if plan.iterative.criterion_horizon > logged:
-                raise PlanError(
-                    f"iterative.criterion_horizon: {plan.iterative.criterion_horizon} samples, but the rounds log "
-                    f"predictions of {logged} (the nominal plan: the controller's {H}; the models: "
-                    f"training.preset {plan.training.preset!r}'s {scratch.window.horizon}): the stop criterion "
-                    f"could not be computed; give at most {logged}"
-                )
-            window, cfg = scratch.window, scratch.network(STUDY_DOF)
-        else:
-            assert source is not None
-            window, cfg = source.window, source.net.config
-        n_params = _n_parameters(cfg)
-        if n_params > MAX_PARAMETERS:
-            raise PlanError(
-                f"training: the network (layers {cfg.lstm_layers}, hidden {cfg.hidden}, fc {list(cfg.fc)}) has "
-                f"{n_params:,} parameters; a study trains at most {MAX_PARAMETERS:,} within a rest"
-            )
+        preset, window, cfg, n_params = _check_training(plan, H, source)
         if ticks < window.history + window.horizon:
             raise PlanError(
                 f"trials.motion_time: a trial as planned lasts {trial_s:g} s ({ticks} ticks), shorter than the "
                 f"models' window ({window.history} samples of history + {window.horizon} of horizon): nothing "
                 "to train on; give a longer motion_time or dwell"
             )
-        batch = int(scratch.train.batch_size)
-        s_per_window = _seconds_per_window(cfg, window.steps, plan.training, min(batch, 4096))
+        s_per_window = _seconds_per_window(cfg, window.steps, plan.training, min(int(preset.train.batch_size), 4096))
         training_bytes = 16 * n_params
     names = condition_names(plan)
     labels = dict(zip(names, blinding_labels(max(len(names), 1), plan.seed)))
@@ -346,12 +352,11 @@ def preflight(plan: StudyPlan) -> SessionEstimate:
         elif kind == "rest":
             expected += float(step["seconds"])
             longest += float(step["seconds"])
-        elif kind == "train" and s_per_window is not None and plan.training is not None:
-            n = sum(trials_of.get(b, 0) for b in step["data"])
-            epochs = plan.training.epochs or scratch.train.epochs
-            tf = scratch.train.test_fraction if plan.training.test_fraction is None else plan.training.test_fraction
-            w = training_windows([ticks] * n, window.history, window.horizon, scratch.train.train_stride, tf)
-            seconds = w * epochs * s_per_window
+        elif kind == "train" and s_per_window is not None:
+            n = sum(trials_of.get(b, 0) for b in step["data"])  # the trials so far of the blocks it trains on
+            t = preset.train
+            w = training_windows([ticks] * n, window.history, window.horizon, t.train_stride, t.test_fraction)
+            seconds = w * t.epochs * s_per_window
             train_s[step["model"]] = seconds
             training_bytes = max(training_bytes, 16 * n_params + 8 * n * ticks * 4 * STUDY_DOF)
             if step["init"] != "online":  # online updates are never waited for

@@ -456,7 +456,7 @@ class ParticipantRun:
 
     def _rest(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
         t0 = time.monotonic()
-        rest = self.plan.rest  # the plan's length when the rest starts (coassist study amend may change it)
+        rest = self.plan.rest  # the plan's length, not the recorded step's (coassist study amend may change it)
         planned = rest.between_trials if step.get("why") == "between trials" else rest.between_conditions
         seconds = float(planned) if self.page is not None else 0.0
         view = self._view(

@@ -10,10 +10,10 @@ from the same trials; the tests check that tensor by tensor.
 
 :class:`BackgroundTraining` runs jobs in a ``spawn``-ed process each (torch in a process of
 its own: the study's control loop and page never wait for it) and tells when one is ready.
-The worker dies with the study's run: a thread of its own polls its parent
-(:func:`_exit_with_parent`) and ends it within :data:`PARENT_POLL_S` once the run is gone
-(a kill -9 included), so no orphan keeps training, holding memory, the model's lock and the
-pipe of a dead parent; the resumed run trains the model again (the same model).
+The worker dies with the study's run: a thread of its own, started before any job, polls its
+parent (:func:`_exit_with_parent`) and ends it within :data:`PARENT_POLL_S` once the run is
+gone (a kill -9 included), so no orphan keeps training, holding memory, the model's lock and
+the pipe of a dead parent; the resumed run trains the model again (the same model).
 """
 
 from __future__ import annotations
@@ -74,10 +74,6 @@ def study_preset(t: TrainingPlan, init: str):
     return p
 
 
-def _preset(job: TrainJob):
-    return study_preset(job.training, job.init)
-
-
 def train_job(job: TrainJob) -> dict[str, Any]:
     """Train and write one model (module docstring); returns what the study records of it."""
     import torch
@@ -87,7 +83,7 @@ def train_job(job: TrainJob) -> dict[str, Any]:
     from coassist.intent.training import train_model, write_model
 
     trials = load_trials(job.data)
-    p = _preset(job)
+    p = study_preset(job.training, job.init)
     torch.set_num_threads(p.train.threads)
     with OutputLock(job.out):
         model = train_model(trials, p, p.train, checkpoint_to=job.out)
