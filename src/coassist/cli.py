@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import NoReturn, TypeVar
 
+import click
 import typer
 from rich.console import Console
 from rich.markup import escape
@@ -766,7 +768,12 @@ def _run_alpha(preset: str, controller: str) -> float | None:
 
 
 def _confirm_move(yes: bool, stop_hint: str):
-    """The question drive and ros2 ask before an arm moves: the limits in force, then "Move the robot?"."""
+    """The question drive and ros2 ask before an arm moves: the limits in force, then "Move the robot?".
+
+    Only a person at a terminal answers it: with stdin closed or not a terminal (a script, a
+    service) and no ``--yes`` the arm does not move, and the reason is one line (a RuntimeError
+    the command prints as its error), not a prompt cut off by an empty error.
+    """
 
     def confirm(text: str) -> bool:
         console.print(
@@ -774,9 +781,27 @@ def _confirm_move(yes: bool, stop_hint: str):
         )
         console.print(text, markup=False)
         console.print(f"Keep {stop_hint} within reach.", markup=False)
-        return yes or typer.confirm("Move the robot?", default=False)
+        if yes:
+            return True
+        if not _stdin_is_terminal():
+            raise RuntimeError(
+                "the robot was not moved: 'Move the robot?' needs an answer from the person at it, and stdin is not "
+                "a terminal (closed or redirected); run the command at a terminal, or pass --yes to move it without asking"
+            )
+        try:
+            return typer.confirm("Move the robot?", default=False)
+        except click.exceptions.Abort:  # Ctrl+D or Ctrl+C at the prompt
+            console.print("", markup=False)
+            raise RuntimeError("the robot was not moved: no answer to 'Move the robot?'") from None
 
     return confirm
+
+
+def _stdin_is_terminal() -> bool:
+    try:
+        return sys.stdin is not None and not sys.stdin.closed and sys.stdin.isatty()
+    except (ValueError, OSError):
+        return False
 
 
 def _write_run(
@@ -1347,7 +1372,8 @@ def study_init(
     plan: Path = typer.Argument(..., help="The study plan (TOML; docs/study.md)."),
     out: Path = typer.Option(..., "--out", "-o", help="The study folder to make (e.g. studies/<name>)."),
 ) -> None:
-    """Validate a study plan and make its study folder (the plan, its hash, the blinding key, the Latin square)."""
+    """Check a study plan whole (every field, model and calibration; the session's time and memory) and make its
+    study folder (the plan, its hash, the blinding key, the Latin square)."""
     from coassist.study.plan import PlanError
     from coassist.study.store import StudyFolderError, init_study
 
@@ -1365,7 +1391,41 @@ def study_init(
         highlight=False,
         markup=False,
     )
+    estimate = study.estimate()
+    for line in estimate.lines() if estimate is not None else ():
+        console.print(line, highlight=False, markup=False, soft_wrap=True)
+    if "rehearsal" in out.name:
+        advice = f"rehearse it: coassist study run {out} --simulate --participant S01"
+    else:
+        rehearsal = out.with_name(out.name + "-rehearsal")
+        advice = (
+            "rehearse it before anyone sits down (a simulated participant, in a folder of its own): coassist study "
+            f"init {plan} --out {rehearsal} && coassist study run {rehearsal} --simulate --participant S01"
+        )
+    console.print(advice, highlight=False, markup=False, soft_wrap=True)
     _wrote(str(out))
+
+
+@study_app.command("amend")
+def study_amend(
+    folder: Path = typer.Argument(..., help="The study folder."),
+    plan: Path = typer.Argument(..., help="The amended plan (TOML): the study's plan with safe fields changed."),
+    reason: str = typer.Option(..., "--reason", help="Why (one line, recorded in study.json with the change)."),
+) -> None:
+    """Amend the plan's safe fields (rests, the stop criterion, planned participants, id pattern, training threads)
+    after trials have run; the change and its reason are recorded, the old plan kept in plans/."""
+    from coassist.study.plan import PlanError
+    from coassist.study.store import StudyFolderError, amend_study
+
+    try:
+        amendment = amend_study(folder, plan, reason)
+    except PlanError as exc:
+        _fail(f"{plan}: {exc}", 2)
+    except StudyFolderError as exc:
+        _fail(str(exc), 2)
+    for name, (old, new) in amendment["fields"].items():
+        console.print(f"{name}: {old!r} -> {new!r}", highlight=False, markup=False)
+    _wrote(f"{folder} (plan {amendment['to_sha256'][:12]}; the old plan in plans/{amendment['from_sha256']}.toml)")
 
 
 @study_app.command("run")
@@ -1442,8 +1502,14 @@ def study_run(
                 run.run()
         except KeyboardInterrupt:
             _fail(f"{pid}: stopped; what finished is kept, and the same command continues where it stopped", 130)
-        except (StudyFolderError, PlanError, OutputBusyError, ValueError, RuntimeError, OSError) as exc:
+        except (StudyFolderError, PlanError, OutputBusyError) as exc:
             _fail(f"{pid}: {exc}")
+        except Exception as exc:  # whatever failed, the participant is resumable: say so in one line
+            what = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            _fail(
+                f"{pid}: {what} ({type(exc).__name__}); what finished is kept: fix the cause (coassist study "
+                "amend changes the plan's safe fields) and the same command continues where it stopped"
+            )
         console.print(f"{pid}: complete", highlight=False)
     _wrote(str(folder))
 
@@ -1462,7 +1528,7 @@ def study_report(
         _folder_out(out, "--out")
     try:
         html_path, json_path = write_report(folder, out)
-    except (StudyFolderError, PlanError) as exc:
+    except (StudyFolderError, PlanError, OSError) as exc:
         _fail(str(exc), 2)
     _wrote(f"{html_path} and {json_path}")
 
