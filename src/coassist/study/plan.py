@@ -10,6 +10,7 @@ mean"), so ``coassist study init`` can print it as it is. The plan of a comparis
     world = "play"                 # play (the page) | mujoco (UR5 in MuJoCo) | ur | franka (a real arm)
     participants = 4               # planned: the balanced Latin square is filled in this many rows
     seed = 0
+    population = "thesis"          # who --simulate's participants are: thesis | varied | held-out
 
     [[condition]]                  # comparison: two or more; shown on the page as A, B, C…
     name = "assistive"
@@ -57,6 +58,7 @@ from coassist.control.presets import CONTROLLER_KINDS
 from coassist.errors import CoassistError
 from coassist.registry import unknown_name_message
 from coassist.scenario.objects import OBJECTS
+from coassist.scenario.populations import POPULATIONS
 from coassist.scenario.tasks import OBSTACLES, TASK_KINDS
 
 __all__ = [
@@ -307,6 +309,8 @@ class StudyPlan:
     iterative: IterativePlan | None = None
     transfer: TransferPlan | None = None
     online: OnlinePlan | None = None
+    #: who ``--simulate``'s participants are (:data:`coassist.scenario.populations.POPULATIONS`)
+    population: str = "thesis"
 
     def model_paths(self) -> tuple[str, ...]:
         """Every model folder the plan names (their weights are recorded at ``study init``)."""
@@ -326,7 +330,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     for k in data:
         if k not in _TOP:
             raise PlanError(f"{k}: {unknown_name_message(k, _TOP, 'table')}")
-    s = _table(data, "study", ("name", "protocol", "world", "participants", "seed"))
+    s = _table(data, "study", ("name", "protocol", "world", "participants", "seed", "population"))
     if "name" not in s:
         raise PlanError("study.name is missing (a short name: letters, digits, - and _)")
     name = s["name"]
@@ -336,6 +340,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     world = _choice(s.get("world", "play"), "study.world", WORLDS, "world")
     participants = _int(s.get("participants", 4), "study.participants", 1, 999)
     seed = _int(s.get("seed", 0), "study.seed", 0)
+    population = _choice(s.get("population", "thesis"), "study.population", POPULATIONS, "population")
 
     t = _table(data, "trials", tuple(TrialsPlan.__dataclass_fields__))
     tasks = t.get("tasks", list(TrialsPlan.tasks))
@@ -449,6 +454,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
         iterative=iterative,
         transfer=transfer,
         online=online,
+        population=population,
     )
 
 
