@@ -139,9 +139,9 @@ against user-a* above; users 0–5 of each, the three tasks, `thesis-evaluation-
   and `held-out` 8. Most of the closed loop's speed peaks come from the arm's motor noise (2
   trials per task: users with 0.98–1.0 N made a median of 11.5–12.5, users with 0.44–0.55 N
   2.5–3): the drawn populations' noise is 1.25 × the author's ×/÷ 1.3 (log-normal), where the
-  thesis population's is 1 × ×/÷ 1.5. The corrective family's dips show less in the tool than in the intent
-  (3–6 dips, yet a median of 7 against the shape families' 6–10): with the nominal intent the
-  robot keeps pulling along the plan through them.
+  thesis population's is the author's ×/÷ 1.5. The corrective family's dips show less in the
+  tool than in the intent (3–6 dips, yet a median of 7 against the shape families' 6–10):
+  with the nominal intent the robot keeps pulling along the plan through them.
 - *Return overshoot.* 2 mm for the bump, 12 mm for `varied` (its families swing through by
   0–40 % of the detour), 10 mm for the corrective family, 2 mm for the hesitant one (the
   bump's path), against user-a's 9 mm.
