@@ -60,13 +60,14 @@ slow-down to (1 − h_j) of the re-planned speed, a pause where h_j = 1; each co
 h_j τ_j (1 − r) of time (w is in closed form, :func:`progress_warp`). g and its first two
 derivatives vanish at the window's ends, so the progress stays twice differentiable.
 
-- :class:`Hesitant`: one window c ≥ 0 after the onset, depth 0.6–1 (1: a pause).
+- :class:`Hesitant`: one window ``delay`` ≥ 0 after the onset, of its ``depth`` (1: a pause)
+  and ``duration``.
 - :class:`Corrective`: m_p windows spread over the re-planned motion (window j centred at
   (j + 1)/(m_p + 1) of T_r): the progress in m_p + 1 sub-movements.
 
-Shapes and timing families apart, every family ends at rest at the target (f = 0 there and
-q ends at rest), clears the box by half the clearance, and draws the same numbers whatever
-the side (tests/scenario/test_detours.py measures each claim on generated paths).
+Shape or timing family, every one ends at rest at the target (f = 0 there and q ends at
+rest), clears the box by half the clearance, and draws the same numbers whatever the side
+(tests/scenario/test_detours.py measures each claim on generated paths).
 """
 
 from __future__ import annotations

@@ -76,7 +76,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from coassist._checks import check_int, check_real
-from coassist.scenario.detours import DetourFamily, detour_path, progress_warp
+from coassist.scenario.detours import DetourFamily, detour_path, progress_warp, smoothstep
 from coassist.scenario.tasks import Task, _quintic
 
 
@@ -219,11 +219,6 @@ def operator_profile(user_index: int, population_seed: int = 0) -> OperatorProfi
 DETOUR_TIME_EXPONENT = 0.5
 
 
-def _smoothstep(u: np.ndarray) -> np.ndarray:
-    u = np.clip(u, 0.0, 1.0)
-    return u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
-
-
 @dataclass(frozen=True, eq=False)
 class Intent:
     """The operator's desired trajectory on the tick grid.
@@ -270,7 +265,7 @@ def deformed_path(task: Task, side: int, clearance: float, anticipation: float) 
     for sgn in (side, -side):
         amp, plateau = h_n + clearance, h_t + clearance
         for _ in range(40):
-            bump = 1.0 - _smoothstep((dist - plateau) / anticipation)
+            bump = 1.0 - smoothstep((dist - plateau) / anticipation)
             A = offset + sgn * amp
             pts = path.points + (A * bump)[:, None] * n_o
             if box.signed_distance(pts).min() >= 0.5 * clearance:
