@@ -541,6 +541,11 @@ def collect(
         "small",
         help="The obstacle the operators go around: small (the evaluation's box) or large (the application's 12 cm box, no path shown).",
     ),
+    population: str = typer.Option(
+        "thesis",
+        help="Who the simulated operators are: thesis (the main job's: user 0 the thesis' author), varied (detour families to tune on), held-out (other kinds of detour, to report only); docs/realism.md.",
+    ),
+    population_seed: int = typer.Option(0, help="Seed of the population the users are drawn from."),
     dataset_id: str = typer.Option(None, help="Dataset id (default: the folder's name)."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
     ray_address: str = typer.Option(None, help="Run on a Ray cluster at this address (needs coassist[cluster])."),
@@ -565,14 +570,20 @@ def collect(
     from coassist._io import OutputBusyError
     from coassist.config import CONTROL_PRESETS
     from coassist.control.presets import CONTROLLER_KINDS
-    from coassist.scenario import OBJECTS, OBSTACLES, TASK_KINDS
+    from coassist.scenario import OBJECTS, OBSTACLES, POPULATIONS, TASK_KINDS
     from coassist.sim.collect import collect_dataset
 
     _choose(controller, CONTROLLER_KINDS, "--controller", "controller")
+    _choose(population, POPULATIONS, "--population", "population")
     _choose(obstacle, OBSTACLES, "--obstacle", "obstacle")
     _choose(network, NETWORK_BACKENDS, "--network", "network backend")
     _lookup(CONTROL_PRESETS, preset, "--preset")
-    for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
+    for value, option, minimum in (
+        (trials, "--trials", 1),
+        (seed, "--seed", 0),
+        (workers, "--workers", 1),
+        (population_seed, "--population-seed", 0),
+    ):
         if value is not None and value < minimum:
             _fail(f"{option} must be >= {minimum}, got {value}", 2)
     user_list = _int_list(users, "--users")
@@ -602,6 +613,8 @@ def collect(
             lockstep=lockstep,
             network=network,
             intent=intent,
+            population=population,
+            population_seed=population_seed,
             say=lambda line: console.print(line, highlight=False),
         )
     except (ValueError, FileExistsError, NotADirectoryError, RuntimeError, OutputBusyError) as exc:
@@ -629,6 +642,7 @@ DRIVE_OPTIONS = {
             "time_limit",
             "predictor_backend",
             "robot",
+            "population",
         )
     },
     "DriveConfig.object": "--object",
@@ -671,6 +685,9 @@ def drive(
         help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; the -dm presets ring with one).",
     ),
     user: int = typer.Option(0, help="Simulated operator (MuJoCo world)."),
+    population: str = typer.Option(
+        "thesis", help="The simulated operator's population: thesis, varied or held-out (docs/realism.md)."
+    ),
     seed: int = typer.Option(0, help="Seed of the task, the simulated operator and the sensor noise."),
     obstacle: str = typer.Option(
         "small", help="The obstacle the simulated operator goes around: small or large (the application's)."
@@ -724,6 +741,7 @@ def drive(
             realtime_intent=realtime_intent,
             predictor_backend=predictor_backend,
             robot=robot,
+            population=population,
         )
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
@@ -1195,23 +1213,51 @@ def realism(
     trials: int = typer.Option(10, help="Simulated trials per task and preset."),
     seed: int = typer.Option(0, help="Seed of the first simulated trial."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
+    population: list[str] = typer.Option(
+        [],
+        "--population",
+        help="Also a population's users against user-a (repeatable): thesis, varied or held-out.",
+    ),
+    population_users: str = typer.Option("0,1,2,3,4,5", help="The users of each --population."),
+    population_trials: int = typer.Option(3, help="Trials per --population user and task."),
 ) -> None:
     """Simulated trials (user 0, handle, cooperative, nominal intent) side by side with real user-a trials."""
     from coassist.data import default_real_data
     from coassist.experiments import realism as realism_exp
+    from coassist.scenario import POPULATIONS
 
-    for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
+    for value, option, minimum in (
+        (trials, "--trials", 1),
+        (seed, "--seed", 0),
+        (workers, "--workers", 1),
+        (population_trials, "--population-trials", 1),
+    ):
         if value is not None and value < minimum:
             _fail(f"{option} must be >= {minimum}, got {value}", 2)
+    for name in population:
+        _choose(name, POPULATIONS, "--population", "population")
+    users = _int_list(population_users, "--population-users")
     real = real or default_real_data() / "user-a"
     if not real.is_dir():
         _fail(f"--real {real}: no such folder (set COASSIST_REAL_DATA to the folder holding user-a/)", 2)
     out = _file_out(out, "--out", "realism.md")
     try:
-        result = realism_exp.run_realism(real, trials_per_task=trials, seed=seed, workers=workers, progress=True)
+        result = realism_exp.run_realism(
+            real,
+            trials_per_task=trials,
+            seed=seed,
+            workers=workers,
+            progress=True,
+            populations=population,
+            population_users=users,
+            population_trials=population_trials,
+        )
     except ValueError as exc:
         _fail(str(exc))
     console.print(realism_exp.summary_table(result))
+    if result.populations:
+        console.print(realism_exp.population_table(result))
+        console.print(realism_exp.family_table(result))
     _wrote(str(realism_exp.write_report(result, out, realism_exp.NOTES)))
 
 

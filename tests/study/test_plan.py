@@ -27,6 +27,18 @@ def test_a_valid_plan_reads_into_its_fields(comparison_file):
     )
     assert plan.questionnaire.tlx and len(plan.questionnaire.likert) == 4
     assert plan.training is None
+    assert plan.population == "thesis"
+
+
+def test_a_plans_population_is_who_the_simulated_participants_are(comparison_file):
+    from coassist.scenario.populations import population_profile
+    from coassist.study.participants import simulated_profile
+
+    text = comparison_file.read_text().replace("seed = 3", 'seed = 3\npopulation = "held-out"')
+    plan = plan_from_text(text, ".")
+    assert plan.population == "held-out"
+    assert simulated_profile(2, plan.seed, plan.population) == population_profile("held-out", 2, 3)
+    assert simulated_profile(2, plan.seed) == population_profile("thesis", 2, 3)
 
 
 @pytest.mark.parametrize(
@@ -46,6 +58,7 @@ def test_a_valid_plan_reads_into_its_fields(comparison_file):
         (lambda t: t + "\n[training]\nepochs = 1\n", "training"),
         (lambda t: t + '\n[[condition]]\nname = "again"\ncontroller = "cooperative"\n', "condition"),
         (lambda t: t.replace('name = "comparison"', 'name = "a b"'), "study.name"),
+        (lambda t: t.replace("seed = 3", 'seed = 3\npopulation = "everyone"'), "study.population"),
         (lambda t: t.replace("[study]", "[study]\nparticipants = 1\n"), None),  # duplicate key: TOML's own error
     ],
 )

@@ -10,6 +10,7 @@ mean"), so ``coassist study init`` can print it as it is. The plan of a comparis
     world = "play"                 # play (the page) | mujoco (UR5 in MuJoCo) | ur | franka (a real arm)
     participants = 4               # planned: the balanced Latin square is filled in this many rows
     seed = 0
+    population = "thesis"          # who --simulate's participants are: thesis | varied | held-out
 
     [[condition]]                  # comparison: two or more; shown on the page as A, B, C…
     name = "assistive"
@@ -68,6 +69,7 @@ from coassist.robot.drive import MAX_TIME_LIMIT
 from coassist.runtime.episode import DWELL
 from coassist.scenario import intent_registry
 from coassist.scenario.objects import OBJECTS
+from coassist.scenario.populations import POPULATIONS
 from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, task_for_seed
 from coassist.study.ids import DEFAULT_ID_PATTERN, IdError, compile_id_pattern
 
@@ -358,6 +360,8 @@ class StudyPlan:
     iterative: IterativePlan | None = None
     transfer: TransferPlan | None = None
     online: OnlinePlan | None = None
+    #: who ``--simulate``'s participants are (:data:`coassist.scenario.populations.POPULATIONS`)
+    population: str = "thesis"
 
     def intent_folders(self) -> tuple[str, ...]:
         """Every folder the plan names, models and calibrations (their hashes are recorded at ``study init``)."""
@@ -387,7 +391,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     for k in data:
         if k not in _TOP:
             raise PlanError(f"{k}: {unknown_name_message(k, _TOP, 'table')}")
-    s = _table(data, "study", ("name", "protocol", "world", "participants", "seed", "id_pattern"))
+    s = _table(data, "study", ("name", "protocol", "world", "participants", "seed", "id_pattern", "population"))
     if "name" not in s:
         raise PlanError("study.name is missing (a short name: letters, digits, - and _)")
     name = s["name"]
@@ -402,6 +406,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
         compile_id_pattern(id_pattern)
     except IdError as exc:
         raise PlanError(f"study.id_pattern: {exc}") from None
+    population = _choice(s.get("population", "thesis"), "study.population", POPULATIONS, "population")
 
     t = _table(data, "trials", tuple(TrialsPlan.__dataclass_fields__))
     tasks = t.get("tasks", list(TrialsPlan.tasks))
@@ -527,6 +532,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
         iterative=iterative,
         transfer=transfer,
         online=online,
+        population=population,
     )
     _check_trial_time(plan, "time_limit" in t)
     return plan

@@ -151,7 +151,15 @@ class ParticipantRun:
             "offline",
             str(self.folder.folder / "models"),
         )
-        drive = {"object": tp.object, "obstacle": tp.obstacle, "preset": tp.preset, "time_limit": tp.time_limit}
+        drive = {
+            "object": tp.object,
+            "obstacle": tp.obstacle,
+            "preset": tp.preset,
+            "time_limit": tp.time_limit,
+            # MuJoCo's simulated participant p is the page's: operator p of the plan's population and seed
+            "population": plan.population,
+            "population_seed": plan.seed,
+        }
         self.session = StudySession(
             config, world=plan.world, secrets=secrets, drive=drive, host=self.host, confirm=self.confirm
         )
@@ -242,7 +250,7 @@ class ParticipantRun:
             hand = OperatorHand(
                 task,
                 step["seed"],
-                simulated_profile(operator, plan.seed),
+                simulated_profile(operator, plan.seed, plan.population),
                 dt,
                 episode_ticks(task, dt, tp.time_limit) + 1,
             )
@@ -257,7 +265,9 @@ class ParticipantRun:
             "study_position": step["position"],
             "study_practice": step["practice"],
             "study_model": model_name,
-            "study_operator": None if operator is None else simulated_profile(operator, plan.seed).name,
+            "study_operator": None
+            if operator is None
+            else simulated_profile(operator, plan.seed, plan.population).name,
         }
         setup = TrialSetup(
             step=k,
@@ -426,7 +436,7 @@ class ParticipantRun:
                 form,
                 f,
                 s,
-                simulated_profile(self.record["number"], self.plan.seed),
+                simulated_profile(self.record["number"], self.plan.seed, self.plan.population),
                 np.random.default_rng([self.plan.seed, self.record["number"], k]),
             )
             answers = form.check(values)
