@@ -278,7 +278,7 @@ def test_registry_entry_points_respect_the_layers():
 
 #: The simulated person: what a source that may run on an arm and claims no model of people's paths
 #: (``Told.family`` empty) must not import, directly or through anything it imports.
-SIMULATED_PERSON = ("coassist.scenario.operator",)
+SIMULATED_PERSON = ("coassist.scenario.operator", "coassist.scenario.detours", "coassist.scenario.populations")
 
 
 def _arm_sources() -> dict[str, str]:
