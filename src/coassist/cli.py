@@ -1266,7 +1266,8 @@ def compare_intents(
     source: list[str] = typer.Option(
         ...,
         help="LABEL=INTENT, repeatable: a named source (present, paths, …), a model "
-        "folder or a calibration folder; paths alone is calibrated on each base's trials.",
+        "folder or a calibration folder; paths alone is calibrated on each base's trials, person alone is "
+        "each operator's person model fitted to their probe trials of each base.",
     ),
     out: Path = typer.Option(Path("runs/compare-intents"), help="Folder for the datasets, table.md and summary.json."),
     bases: str = typer.Option(

@@ -10,6 +10,7 @@ import pytest
 
 from coassist.experiments import pipeline
 from coassist.experiments.ablation import (
+    CALIBRATED,
     MG_JOB,
     OBJECTS,
     AblationAhead,
@@ -52,7 +53,17 @@ def _same_trials(a, b):
 
 def _named_cells(cfg):
     """The ablation's cells whose source needs no model or calibration, per object."""
-    return [(c, s) for c, s in ablation_cells(cfg) if base_source(s) not in LEARNED and s != "paths"]
+    return [(c, s) for c, s in ablation_cells(cfg) if base_source(s) not in LEARNED and s not in CALIBRATED]
+
+
+def _held_out(cfg):
+    """What the ablation's first call starts for the held-out population: its operators' calibration trials
+    and MG's cells (the calibrated sources' cells wait for their fit)."""
+    if not cfg.held_out_trials:
+        return set()
+    return {"dataset:calibration-held-out", "dataset:calibration-probe-held-out"} | {
+        f"dataset:held-out-{o}-manual" for o in OBJECTS
+    }
 
 
 def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
@@ -65,10 +76,11 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
     ahead = AblationAhead(ws, handed_to_ablation())
     models = {n: f"/models/{n}" for s in cfg.learned_sources for n in seed_names(s, cfg.source_seeds)}
     models["paths"] = "/models/paths"
+    models["person"] = "/models/person"
 
     ahead({})
-    named = [s for s in run_sources(cfg) if s not in LEARNED and s != "paths"]
-    expect = {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c, s in _named_cells(cfg)}
+    named = [s for s in run_sources(cfg) if s not in LEARNED and s not in CALIBRATED]
+    expect = {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c, s in _named_cells(cfg)} | _held_out(cfg)
     if ahead.mujoco:
         expect |= {f"job:mujoco:{s}" for s in (MG_JOB, *named)}
     assert set(ws._pending) == expect  # MG's point-mass cells come from the application: not started
@@ -181,10 +193,10 @@ def test_beside_training_starts_each_later_share_once_and_all_by_the_last_traini
         assert seen[0] == {"job:real recordings"}
         assert seen[1] == {
             f"dataset:app-{o}-{c}" for o in OBJECTS for c in APP_CONTROLLERS if not c.startswith("cooperative")
-        } | {"dataset:calibration"}
+        } | {"dataset:calibration", "dataset:calibration-probe"}
         assert all(seen[k] for k in range(4))
-    named = [s for s in run_sources(cfg) if s not in LEARNED and s != "paths"]
-    expect = {"job:real recordings", "dataset:calibration"}
+    named = [s for s in run_sources(cfg) if s not in LEARNED and s not in CALIBRATED]
+    expect = {"job:real recordings", "dataset:calibration", "dataset:calibration-probe"} | _held_out(cfg)
     expect |= {f"dataset:app-{o}-{c}" for o in OBJECTS for c in APP_CONTROLLERS if not c.startswith("cooperative")}
     expect |= {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c, s in _named_cells(cfg)}
     if ablation_ahead.mujoco:  # the default's MuJoCo sources: of the named ones, the oracle

@@ -32,7 +32,14 @@ from coassist.experiments.pipeline import (
     trial_seed_base,
 )
 from coassist.experiments.report import Claim, Section
-from coassist.experiments.source_training import APPLICATION_SOURCE, calibrate_paths, train_sources, training_datasets
+from coassist.experiments.source_training import (
+    APPLICATION_SOURCE,
+    calibrate_paths,
+    calibrate_person,
+    calibration_options,
+    train_sources,
+    training_datasets,
+)
 
 OBJECTS = ("board", "heavy")
 CONTROLLERS = ("cooperative", "cooperative-arbitrated", "impedance", "manual")
@@ -122,21 +129,8 @@ def prefetch_model_free(ws: Workspace) -> None:
     """Put the pairs' simulations that need no learned source (IMP's and MG's) and the operators'
     calibration trials on the run's pool now (:meth:`Workspace.prefetch`; :func:`run_application`
     then finds them there)."""
-    from coassist.experiments.pipeline import calibration_seed, trial_seed_base
-
-    cfg = ws.config
-    ws.prefetch(
-        "calibration",
-        tasks=(cfg.application_task,),
-        users=cfg.application_users,
-        objects=("handle",),
-        trials=cfg.calibration_trials,
-        seed=calibration_seed(trial_seed_base(cfg.seed)),
-        controller="manual",
-        preset=cfg.application_preset,
-        intent="nominal",
-        obstacle=OBSTACLE,
-    )
+    ws.prefetch("calibration", **calibration_options(ws, "manual"))
+    ws.prefetch("calibration-probe", **calibration_options(ws, "manual-probe"))
     for j, obj in enumerate(OBJECTS):
         for controller in CONTROLLERS:
             if not controller.startswith("cooperative"):
@@ -184,11 +178,11 @@ def run_application(
         if ahead is not None:
             ahead(models)
 
-    # the path hypotheses need no training: their calibration first, so that their pairs run beside the trainings
-    paths = calibrate_paths(ws)
-    on_models({"paths": paths})
-    models = train_sources(ws, training_datasets(ws), on_models=lambda learned: on_models({**learned, "paths": paths}))
-    models["paths"] = paths
+    # the calibrated sources need no training: their calibrations first, so that their pairs run beside the trainings
+    calibrated = {"paths": calibrate_paths(ws), "person": calibrate_person(ws)}
+    on_models(dict(calibrated))
+    models = train_sources(ws, training_datasets(ws), on_models=lambda learned: on_models({**learned, **calibrated}))
+    models.update(calibrated)
     metrics, trials = {}, {}
     for j, obj in enumerate(OBJECTS):
         for controller in CONTROLLERS:
@@ -267,7 +261,8 @@ def headline_table(result: ApplicationResult) -> tuple[str, list[str], list[list
     caption = (
         f"Application scenario, {result.trials_per_controller} paired trials per object and controller "
         f"(operators {', '.join(str(u) for u in result.users)}): force saved per trial (mean ± std), and the "
-        "assistive controller against MG with the paired difference and its 95 % interval"
+        "assistive controller against MG with the paired difference and its 95 % interval. The assistive "
+        f"controllers' intent source: '{result.source}' (told: {_told_text(result.source)})"
     )
     header = [
         "object",
@@ -279,6 +274,12 @@ def headline_table(result: ApplicationResult) -> tuple[str, list[str], list[list
         "jerk RMS [m/s³]",
     ]
     return caption, header, rows
+
+
+def _told_text(source: str) -> str:
+    from coassist.scenario.intent_registry import INTENT_SOURCES
+
+    return INTENT_SOURCES[source].told.text() if source in INTENT_SOURCES else "see the ablation"
 
 
 def application_metrics(trials) -> dict[str, Any]:

@@ -105,6 +105,9 @@ class ReproduceConfig:
     # The intent-source ablation on the MuJoCo UR5 (experiments.ablation): trials per operator, object, controller
     # and source (the point-mass world runs application_trials); 0 leaves the MuJoCo world out.
     ablation_mujoco_trials: int = 1
+    # The held-out population's cells of the ablation (experiments.ablation): trials per operator and
+    # object (application_users of the held-out population); 0 leaves them out.
+    held_out_trials: int = 8
     # The sources the MuJoCo UR5 runs (empty: every source of the point-mass cells). A MuJoCo trial costs
     # what ~20 point-mass trials do; the claims read the application's source against MG there, and the
     # LSTM and the oracle put it in context. The full and thesis presets run every source.
@@ -154,6 +157,8 @@ class ReproduceConfig:
             raise ValueError(
                 f"reproduce.ablation_mujoco_trials must be an integer >= 0, got {self.ablation_mujoco_trials!r}"
             )
+        if not is_integer(self.held_out_trials) or self.held_out_trials < 0:
+            raise ValueError(f"reproduce.held_out_trials must be an integer >= 0, got {self.held_out_trials!r}")
         if self.ablation_mujoco_trials > self.application_trials:
             raise ValueError(
                 f"reproduce.ablation_mujoco_trials ({self.ablation_mujoco_trials}) must be <= "
@@ -230,6 +235,7 @@ REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry(
             application_users=(0,),
             real_epochs=1,
             ablation_mujoco_trials=0,
+            held_out_trials=1,
             source_seeds=1,
             calibration_trials=1,
             real_stride=25,

@@ -32,7 +32,7 @@ from coassist.experiments.pipeline import (
     application_seed,
     calibration_seed,
 )
-from coassist.experiments.source_training import calibrate_paths
+from coassist.experiments.source_training import calibrate_paths, calibrate_person
 
 #: The offsets (base mod RUN_SEED_STRIDE) a validation base may have: its calibration trials
 #: (base + 880000 …) and application trials (base + 900000 … + 1000 + trials) then stay clear of every
@@ -55,7 +55,7 @@ def compare_intents(
     progress: bool = True,
 ) -> AblationResult:
     """Every source of ``sources`` (label → intent: a named source, a model folder, a calibration folder or
-    ``"paths"`` to use each base's fitted calibration) on the validation trials of ``bases``, with the
+    ``"paths"`` / ``"person"`` to use each base's fitted calibration / person models) on the validation trials of ``bases``, with the
     arbitrated controller or ``controllers[label]``; MG and the oracle (arbitrated) on the same trials.
     Datasets go under ``out``. The result is keyed like the ablation's (world "point-mass",
     controller, label), the bases' trials pooled in one cell."""
@@ -72,7 +72,7 @@ def compare_intents(
     from coassist.scenario.intent_registry import load_intent_source
 
     for label, spec in sources.items():  # refuse a bad source before anything runs
-        if spec != "paths":
+        if spec not in ("paths", "person"):
             try:
                 load_intent_source(spec, horizon=50)
             except ValueError as exc:
@@ -102,9 +102,15 @@ def compare_intents(
         ws = Workspace(replace(cfg, seed=int(base)), out / f"base-{base}", progress)
         paths = calibrate_paths(ws, seed=calibration_seed(int(base))) if calibrate else "paths"
         calibrations[str(base)] = paths
+        if "person" in sources.values():
+            calibrations[f"{base}/person"] = calibrate_person(ws, seed=calibration_seed(int(base)))
         plan = [("MG", "manual", "nominal"), ("oracle", ARBITRATED, "oracle")]
         plan += [
-            (label, controllers.get(label, ARBITRATED), paths if spec == "paths" else spec)
+            (
+                label,
+                controllers.get(label, ARBITRATED),
+                {"paths": paths, "person": calibrations.get(f"{base}/person", spec)}.get(spec, spec),
+            )
             for label, spec in sources.items()
         ]
         for j, obj in enumerate(OBJECTS):

@@ -274,6 +274,8 @@ def headline_section(application, transfer, real, sim_dt: float, ablation) -> Se
     s = Section("The answer: does the assistance help?")
     s.tables.append(headline_table(application))
     s.tables.append(headline_rows(ablation))
+    if ablation.mg.get(("held-out", "board")) is not None:
+        s.tables.append(headline_rows(ablation, "held-out"))
 
     def line(where: str, best: dict[int, dict], model: str, dt: float) -> str:
         h = max(best)

@@ -19,7 +19,13 @@ training seeds 1000·seed + k (no two runs' trainings share one).
 
 The path-hypotheses source ``paths`` (:mod:`coassist.scenario.path_hypotheses`) is not trained:
 :func:`calibrate_paths` fits each application operator's detour (clearance, anticipation, side
-preference) to ``calibration_trials`` trials of theirs with MG and writes its calibration.
+preference) to ``calibration_trials`` trials of theirs with MG and writes its calibration. It is
+told the obstacle and built on the simulated operator's own family of detours.
+
+The person model ``person`` (:mod:`coassist.scenario.person_model`) is what a lab can have:
+:func:`calibrate_person` records ``calibration_trials`` trials per operator under manual guidance
+with the probe (controller ``manual-probe``) and fits each one's arm and paths from what an arm
+measures (no obstacle, no intent label, no family), as ``coassist calibrate`` does on a lab's trials.
 
 :data:`APPLICATION_SOURCE` is the one the application scenario's assistive controllers use:
 the source that did best in the in-loop ablation on validation seeds the report never uses
@@ -34,7 +40,16 @@ from pathlib import Path
 
 from coassist.experiments.pipeline import Workspace, train_in_worker
 
-__all__ = ["APPLICATION_SOURCE", "LEARNED", "calibrate_paths", "seed_names", "train_sources", "training_datasets"]
+__all__ = [
+    "APPLICATION_SOURCE",
+    "LEARNED",
+    "calibrate_paths",
+    "calibrate_person",
+    "calibration_options",
+    "seed_names",
+    "train_sources",
+    "training_datasets",
+]
 
 #: The learned sources: (intent preset or None for the run's, window label).
 LEARNED = {
@@ -59,35 +74,70 @@ def seed_names(source: str, seeds: int) -> list[str]:
     return [source] + [f"{source}-s{k}" for k in range(1, seeds)]
 
 
-def calibrate_paths(ws: Workspace, seed: int | None = None) -> str:
-    """Collect ``calibration_trials`` MG trials per application operator (the handle, the application's
-    task and obstacle; first trial seed ``seed``, default the run's
-    :func:`~coassist.experiments.pipeline.calibration_seed`), fit each detour
-    (:func:`~coassist.scenario.path_hypotheses.fit_detour`) and write every operator's shape into
-    ``models/paths`` (:func:`~coassist.scenario.path_hypotheses.write_calibration`); the folder."""
+def calibration_options(ws: Workspace, controller: str, seed: int | None = None, population: str = "thesis") -> dict:
+    """The collection options of the operators' calibration trials (:meth:`Workspace.collect`): the
+    application's task, obstacle and operators, the handle, ``calibration_trials`` each, first trial seed
+    ``seed`` (default the run's :func:`~coassist.experiments.pipeline.calibration_seed`), ``controller``
+    ("manual" for ``paths``, "manual-probe" for ``person``), operators of ``population``."""
     from coassist.experiments.application import OBSTACLE
     from coassist.experiments.pipeline import calibration_seed, trial_seed_base
+
+    cfg = ws.config
+    return {
+        "tasks": (cfg.application_task,),
+        "users": cfg.application_users,
+        "objects": ("handle",),
+        "trials": cfg.calibration_trials,
+        "seed": calibration_seed(trial_seed_base(cfg.seed)) if seed is None else int(seed),
+        "controller": controller,
+        "preset": cfg.application_preset,
+        "intent": "nominal",
+        "obstacle": OBSTACLE,
+        "population": population,
+    }
+
+
+def _suffix(population: str) -> str:
+    return "" if population == "thesis" else f"-{population}"
+
+
+def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "thesis") -> str:
+    """Collect ``calibration_trials`` probe trials per application operator of ``population``
+    (:func:`calibration_options` with ``manual-probe``), fit each one's person model
+    (:func:`~coassist.scenario.person_model.fit_person`: arm and paths from what an arm measures) and
+    write them into ``models/person`` (``models/person-<population>`` for another population); the folder."""
+    from coassist.scenario.person_model import fit_person, write_person_model
+
+    suffix = _suffix(population)
+    _, ds = ws.collect(f"calibration-probe{suffix}", **calibration_options(ws, "manual-probe", seed, population))
+    by_user: dict[str, list] = {}
+    for trial in ds.trials:
+        by_user.setdefault(str(trial.meta.user), []).append(trial)
+    fits = {user: fit_person(trials) for user, trials in sorted(by_user.items())}
+    return str(write_person_model(ws.out / "models" / f"person{suffix}", fits))
+
+
+def calibrate_paths(ws: Workspace, seed: int | None = None, population: str = "thesis") -> str:
+    """Collect ``calibration_trials`` MG trials per application operator of ``population`` (the handle, the
+    application's task and obstacle, :func:`calibration_options`), fit each detour
+    (:func:`~coassist.scenario.path_hypotheses.fit_detour`) and write every operator's shape into
+    ``models/paths`` (``models/paths-<population>`` for another population,
+    :func:`~coassist.scenario.path_hypotheses.write_calibration`); the folder."""
+    from coassist.experiments.application import OBSTACLE
     from coassist.scenario.path_hypotheses import calibrate, fit_detour, write_calibration
     from coassist.scenario.tasks import task_for_seed
 
-    cfg = ws.config
-    _, ds = ws.collect(
-        "calibration",
-        tasks=(cfg.application_task,),
-        users=cfg.application_users,
-        objects=("handle",),
-        trials=cfg.calibration_trials,
-        seed=calibration_seed(trial_seed_base(cfg.seed)) if seed is None else int(seed),
-        controller="manual",
-        preset=cfg.application_preset,
-        intent="nominal",
-        obstacle=OBSTACLE,
-    )
+    suffix = _suffix(population)
+    _, ds = ws.collect(f"calibration{suffix}", **calibration_options(ws, "manual", seed, population))
     fits: dict[str, list[tuple[int, float, float]]] = {}
     for trial in ds.trials:
         task = task_for_seed(trial.meta.task, int(trial.meta.seed), obstacle=OBSTACLE)
         fits.setdefault(str(trial.meta.user), []).append(fit_detour(task, trial.pose))
-    return str(write_calibration(ws.out / "models" / "paths", {user: calibrate(f) for user, f in sorted(fits.items())}))
+    return str(
+        write_calibration(
+            ws.out / "models" / f"paths{suffix}", {user: calibrate(f) for user, f in sorted(fits.items())}
+        )
+    )
 
 
 def training_datasets(ws: Workspace) -> list[Path]:

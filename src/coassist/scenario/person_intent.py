@@ -69,6 +69,9 @@ class PersonFilterSettings:
     noise_scale : σ in the likelihoods is this times the present estimate's noise in the calibration.
     kernel : [m] the width each hypothesis' offset stands for in the side evidence (besides σ).
     odds_limit : the log-odds never exceed it (a mind may change).
+    reaction_lead : [s] the present estimate is put this far ahead along the tool's velocity. With a
+        measured arm, Ĉ holds the person's reaction delay (the force answers the intent of τ ago:
+        Ĉ = C − K̂τ), so q̂ is where the person wanted the tool τ ago; the lead brings it to now.
     """
 
     kappa: float = 0.2
@@ -90,6 +93,7 @@ class PersonFilterSettings:
     shared_gap: float = 0.005
     dead_zone: float = 0.002
     side_rule: str = "offset"
+    reaction_lead: float = 0.0
 
     def __post_init__(self) -> None:
         for name, lo, hi, open_lo in (
@@ -110,6 +114,7 @@ class PersonFilterSettings:
             ("odds_limit", 1.0, 100.0, False),
             ("shared_gap", 0.0, 0.05, False),
             ("dead_zone", 0.0, 0.05, False),
+            ("reaction_lead", 0.0, 0.3, False),
         ):
             object.__setattr__(
                 self, name, check_real(getattr(self, name), f"PersonFilterSettings.{name}", lo, hi, open_lo=open_lo)
@@ -239,6 +244,7 @@ class PersonPathsIntent:
         self._acc = np.zeros(2)
         arm = self.arms.get(context.user, self.default_arm)
         self._K, self._C = arm.stiffness, arm.damping
+        self._lead_time = st.reaction_lead
         model = self.paths.get(context.user, self.default_paths)
         self._hyp: _Curves | None = None
         if model is not None and context.path is not None:
@@ -287,7 +293,7 @@ class PersonPathsIntent:
             self._acc += self._a_gain * ((v - self._v_prev) / self.dt - self._acc)
         self._v_prev = v.copy()
         u_h = w + self._mass * self._acc
-        present = p + (u_h + self._C * v) / self._K
+        present = p + (u_h + self._C * v) / self._K + self._lead_time * v
         if self._hyp is None:
             return present + self._steps[:, None] * v
         return self._filter(self._hyp, p, v, u_h, present)
@@ -317,7 +323,7 @@ class PersonPathsIntent:
         # rows by their spacing), then the lead along the curve
         along = (p[0] - point[:, 0]) * tan[:, 0] + (p[1] - point[:, 1]) * tan[:, 1]
         np.clip(along, -hyp.step, hyp.step, out=along)
-        lead = (tan @ u_h + C * (tan @ v)) / K
+        lead = (tan @ u_h + C * (tan @ v)) / K + self._lead_time * (tan @ v)
         q = point + (along + lead)[:, None] * tan
         s_lead = np.take(hyp.flat_arc, at) + along + lead
         # 3. evidence. The way: the present estimate's offset from the plan (less the person's bias there),
