@@ -356,3 +356,29 @@ def test_report_is_complete_and_consistent_with_the_summary(tiny_run):
     saved = 1.0 - np.asarray(board) / np.asarray(mg)
     assert rows[0][2] == f"{100 * saved.mean():.0f} ± {100 * saved.std():.0f} %"
     assert rows[0][2] in answer
+
+
+def test_the_held_out_cells_meet_their_own_people(tiny_run):
+    """The held-out population's cells ran its MG trials (its operators, the same seeds), and its calibrated
+    sources were fitted to those operators' own calibration trials, not the thesis population's."""
+    import json
+
+    from coassist.data import read_dataset
+    from coassist.experiments.ablation import HELD_OUT_SOURCES
+
+    out, summary = tiny_run
+    cfg = rep.REPRODUCE_PRESETS["tiny"]
+    people = {f"held-out-user-{u}" for u in cfg.application_users}
+    for obj in ("board", "heavy"):
+        mg = sorted(
+            (t.meta.user, t.meta.seed) for t in read_dataset(out / "datasets" / f"held-out-{obj}-manual").trials
+        )
+        assert mg and {u for u, _ in mg} == people
+        for source in HELD_OUT_SOURCES:
+            ds = read_dataset(out / "datasets" / f"held-out-{obj}-{source}")
+            assert sorted((t.meta.user, t.meta.seed) for t in ds.trials) == mg, (obj, source)
+            assert f"held-out/{obj}/cooperative-arbitrated/{source}" in summary["ablation"]["cells"]
+    doc = json.loads((out / "models" / "person-held-out" / "person-model.json").read_text())
+    assert set(doc["people"]) == people
+    thesis = json.loads((out / "models" / "person" / "person-model.json").read_text())
+    assert set(thesis["people"]) == {f"user-{u}" for u in cfg.application_users}

@@ -196,9 +196,10 @@ class PersonPathsIntent:
     Parameters
     ----------
     horizon : rows predicted.
-    paths : person (TrialContext.user) → their :class:`PathModel`; ``default_paths`` for anyone else
-        (None: the present estimate alone for them).
-    arms : person → :class:`ArmEstimate`; ``default_arm`` for anyone else.
+    paths : person (TrialContext.user) → their :class:`PathModel`.
+    arms : person → :class:`ArmEstimate`.
+    default_paths : the path model for anyone not in ``paths`` (None: the present estimate alone for them).
+    default_arm : the arm for anyone not in ``arms`` (None: the assumed arm).
     settings : the filter's constants.
     model_id : what trials record as the source.
     """
@@ -375,7 +376,7 @@ class PersonPathsIntent:
             self._side = side
 
         # 4. rows
-        def along(n: int) -> np.ndarray:
+        def ahead_on(n: int) -> np.ndarray:
             speed = max(float(tan[n] @ v), 0.0)
             return hyp.at(n, s_lead[n] + self._steps * speed)
 
@@ -384,9 +385,9 @@ class PersonPathsIntent:
             best = np.argsort(weight)[::-1][:MIXTURE]
             best = best[weight[best] >= 0.01 * weight[best[0]]]
             w = weight[best] / weight[best].sum()
-            out = w[0] * along(int(on[best[0]]))
+            out = w[0] * ahead_on(int(on[best[0]]))
             for wt, n in zip(w[1:], on[best[1:]]):
-                out += wt * along(int(n))
+                out += wt * ahead_on(int(n))
             return out
 
         if self._side != 0 or not self._two:
