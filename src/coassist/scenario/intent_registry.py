@@ -107,6 +107,16 @@ INTENT_SOURCES: Registry[IntentSourceEntry] = Registry(
             "the present estimate from the hand force",
             options=(("use_obstacles", False),),
         ),
+        "present-held": IntentSourceEntry(
+            "coassist.scenario.path_hypotheses:PathHypothesesIntent",
+            "the present estimate from the hand force, held over the horizon (no extrapolation)",
+            options=(("use_obstacles", False), ("extrapolation", 0.0), ("model_id", "present-held")),
+        ),
+        "present-half": IntentSourceEntry(
+            "coassist.scenario.path_hypotheses:PathHypothesesIntent",
+            "the present estimate from the hand force at half the tool's velocity",
+            options=(("use_obstacles", False), ("extrapolation", 0.5), ("model_id", "present-half")),
+        ),
         "paths": IntentSourceEntry(
             "coassist.scenario.path_hypotheses:PathHypothesesIntent",
             "the path hypotheses round the obstacles the robot is told of",
