@@ -49,7 +49,7 @@ __all__ = ["ProbeParameters", "ProbedGuidance", "probe_phases", "probe_signal"]
 def _frequencies(values: object, name: str) -> tuple[float, ...]:
     if isinstance(values, (str, bytes)) or not hasattr(values, "__iter__"):
         raise ValueError(f"{name} must be a list of frequencies [Hz], got {values!r}")
-    freqs = tuple(check_real(f, name, 0.0, 20.0, open_lo=True) for f in values)  # type: ignore[union-attr]
+    freqs = tuple(check_real(f, name, 0.0, 20.0, open_lo=True) for f in values)
     if not freqs or list(freqs) != sorted(set(freqs)) or len(freqs) > 16:
         raise ValueError(f"{name} must be 1 to 16 distinct frequencies in increasing order, got {values!r}")
     return freqs

@@ -343,7 +343,7 @@ def build_episode(
     target = np.array(task.target if target is None else target, dtype=float)
     # What the robot is told of the scene, in the plan's frame (worlds move the task by a translation).
     shift = np.asarray(plan[0, :2], dtype=float) - np.asarray(task.start, dtype=float)
-    told = (
+    told: tuple[tuple[tuple[float, ...], tuple[float, ...]], ...] = (
         ((tuple(float(c) for c in np.asarray(task.obstacle.center) + shift), tuple(task.obstacle.size)),)
         if tell_obstacles
         else ()
