@@ -529,8 +529,8 @@ ARM_CONTROLLER_HELP = (
     "push that measures the arm; fit the trials with coassist calibrate)."
 )
 INTENT_DEFAULT_HELP = (
-    f"Intent source. Default {DEFAULT_INTENT}: {INTENT_SOURCES[DEFAULT_INTENT].summary}, the safest measured "
-    "without a calibration (docs/precision.md); with one, the person-model folder coassist calibrate wrote."
+    f"Default {DEFAULT_INTENT}: {INTENT_SOURCES[DEFAULT_INTENT].summary}, the safest measured without a "
+    "calibration (docs/precision.md); with one, the person-model folder coassist calibrate wrote."
 )
 PERSON_HELP = (
     "The person at the handle, a pseudonymous id (e.g. P07): the trial's user and whose calibration a person "
@@ -577,7 +577,7 @@ def collect(
     ),
     intent: str = typer.Option(
         DEFAULT_INTENT,
-        help=f"{INTENT_DEFAULT_HELP} The thesis' dataset D0 (Algorithm 4.1) is --intent nominal. Any of: {intent_choices()}.",
+        help=f"Intent source: {intent_choices()}. {INTENT_DEFAULT_HELP} The thesis' dataset D0 (Algorithm 4.1) is --intent nominal.",
     ),
     obstacle: str = typer.Option(
         "small",
@@ -695,9 +695,9 @@ def drive(
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
     intent: str = typer.Option(
         DEFAULT_INTENT,
-        help=f"{INTENT_DEFAULT_HELP} Any of: {intent_choices()} ("
+        help=f"Intent source: {intent_choices()} ("
         + ", ".join(n for n, e in INTENT_SOURCES.items() if e.simulation_only)
-        + " in a simulated world only).",
+        + f" in a simulated world only). {INTENT_DEFAULT_HELP}",
     ),
     person: str = typer.Option(None, help=PERSON_HELP),
     scene: Path = typer.Option(None, help=SCENE_HELP),
@@ -890,7 +890,7 @@ def ros2(
     ),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
     intent: str = typer.Option(
-        DEFAULT_INTENT, help=f"{INTENT_DEFAULT_HELP} Any of: {intent_choices(simulation=False)}."
+        DEFAULT_INTENT, help=f"Intent source: {intent_choices(simulation=False)}. {INTENT_DEFAULT_HELP}"
     ),
     person: str = typer.Option(None, help=PERSON_HELP),
     scene: Path = typer.Option(None, help=SCENE_HELP),
@@ -1156,7 +1156,7 @@ def play(
     ),
     intent: str = typer.Option(
         DEFAULT_INTENT,
-        help=f"{INTENT_DEFAULT_HELP} Its prediction is drawn live. Any of: {intent_choices(simulation=False)}.",
+        help=f"Intent source (its prediction is drawn live): {intent_choices(simulation=False)}. {INTENT_DEFAULT_HELP}",
     ),
     preset: str = typer.Option(
         APPLICATION_PRESET,

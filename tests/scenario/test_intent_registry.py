@@ -36,16 +36,25 @@ BEFORE = {
     "present": (PathHypothesesIntent, "present"),
     "paths": (PathHypothesesIntent, "paths"),
 }
+#: Registered since (issue 40): the present estimate held, or half extrapolated, over the horizon.
+SINCE = {
+    "present-held": (PathHypothesesIntent, "present-held"),
+    "present-half": (PathHypothesesIntent, "present-half"),
+}
 
 
 def test_the_names_are_the_ones_the_loop_knew():
-    assert NAMED_INTENTS == tuple(INTENT_SOURCES) == ("nominal", "constant-velocity", "oracle", "present", "paths")
+    assert (
+        NAMED_INTENTS
+        == tuple(INTENT_SOURCES)
+        == ("nominal", "constant-velocity", "oracle", "present", "present-held", "present-half", "paths")
+    )
     assert [name for name, e in INTENT_SOURCES.items() if e.simulation_only] == ["oracle"]
 
 
-@pytest.mark.parametrize("name", list(BEFORE))
+@pytest.mark.parametrize("name", [*BEFORE, *SINCE])
 def test_each_name_builds_its_source_for_the_horizon(name):
-    cls, model_id = BEFORE[name]
+    cls, model_id = {**BEFORE, **SINCE}[name]
     source = load_intent_source(name, horizon=17)
     assert type(source) is cls and source.horizon == 17 and source.model_id == model_id
     assert isinstance(source, IntentSource)
@@ -104,7 +113,10 @@ def test_anything_else_is_tried_as_a_model_and_refused_in_one_line(tmp_path):
     with pytest.raises(ValueError, match=r"could not be loaded as a model") as info:
         load_intent_source(str(tmp_path / "missing"))
     assert "\n" not in str(info.value)
-    with pytest.raises(ValueError, match=r"intent must be one of nominal, constant-velocity, oracle, present, paths"):
+    with pytest.raises(
+        ValueError,
+        match=r"intent must be one of nominal, constant-velocity, oracle, present, present-held, present-half, paths",
+    ):
         load_intent_source("")
     with pytest.raises(ValueError, match="network must be one of"):
         load_intent_source("nominal", network="gpu")
@@ -116,18 +128,20 @@ def test_check_intent_names_the_choices(tmp_path):
     with pytest.raises(ValueError) as info:
         check_intent(str(tmp_path / "nomodel"))
     assert str(info.value) == (
-        f"{str(tmp_path / 'nomodel')!r}: not one of nominal, constant-velocity, oracle, present, paths, "
+        f"{str(tmp_path / 'nomodel')!r}: not one of nominal, constant-velocity, oracle, present, present-held, present-half, paths, "
         "a path-hypotheses calibration folder (path-hypotheses.json) or a person model folder (coassist "
         "calibrate) (person-model.json) or a model folder (coassist train) (model.json)"
     )
     with pytest.raises(ValueError, match="a simulation alone knows it"):
         check_intent("oracle", simulation=False)
-    with pytest.raises(ValueError, match=r"not one of nominal, constant-velocity, present, paths, a path"):
+    with pytest.raises(
+        ValueError, match=r"not one of nominal, constant-velocity, present, present-held, present-half, paths, a path"
+    ):
         check_intent("oracle-ish", simulation=False)
 
 
 def test_the_help_lists_every_source_and_only_what_a_person_can_run():
-    assert intent_choices().split(" | ")[:5] == list(NAMED_INTENTS)
+    assert intent_choices().split(" | ")[: len(NAMED_INTENTS)] == list(NAMED_INTENTS)
     assert "oracle" not in intent_choices(simulation=False).split(" | ")
     runner = CliRunner()
     for command, simulation in (("collect", True), ("drive", True), ("ros2", False), ("play", False)):
