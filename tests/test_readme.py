@@ -37,6 +37,9 @@ import typer
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
+#: Doc pages whose blocks continue the README's (they read what its blocks wrote): run after it, in the same
+#: folder, by :func:`test_all_blocks_run`; their parse-only blocks parsed as the README's.
+CONTINUED = (ROOT / "docs" / "robots.md",)
 SHELL = ("bash", "sh", "shell")
 PYTHON = ("python", "py")
 MARKS = ("slow", "parse-only", "output")
@@ -190,7 +193,8 @@ def _parse_coassist(words: list[str], where: str) -> None:
 
 
 def test_parse_only_blocks_parse():
-    blocks = [b for b in readme_blocks() if b.mark == "parse-only"]
+    pages = [readme_blocks(), *(readme_blocks(page.read_text(encoding="utf-8")) for page in CONTINUED)]
+    blocks = [b for page in pages for b in page if b.mark == "parse-only"]
     for block in blocks:
         syntax = subprocess.run(["bash", "-n", "-c", block.code], capture_output=True, text=True)
         assert syntax.returncode == 0, f"{block.where}: {syntax.stderr}"
@@ -248,7 +252,8 @@ def test_claims_count_agrees_with_the_table():
 
 @pytest.mark.slow
 def test_all_blocks_run(tmp_path):
-    """Every block but parse-only ones, in order, in one folder: what a reader following the README runs.
+    """Every block but parse-only ones, in order, in one folder: what a reader following the README runs,
+    then the blocks of :data:`CONTINUED`.
 
     The ``./dev`` block (the main job, 10 minutes, and the whole test suite) is run by
     :func:`test_dev_entry_points`.
@@ -258,6 +263,12 @@ def test_all_blocks_run(tmp_path):
         if block.mark == "parse-only" or re.search(r"(^|\s)\./dev\b", block.code):
             continue
         run_block(block, tmp_path, expected_output(blocks, block))
+    for page in CONTINUED:
+        page_blocks = readme_blocks(page.read_text(encoding="utf-8"))
+        assert runnable(page_blocks), f"{page.name} holds no block to run"
+        for block in runnable(page_blocks):
+            if block.mark != "parse-only":
+                run_block(block, tmp_path, expected_output(page_blocks, block))
 
 
 @pytest.mark.slow

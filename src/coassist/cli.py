@@ -22,6 +22,7 @@ from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET
 from coassist.interfaces import NETWORK_BACKENDS
 from coassist.registry import Registry, UnknownNameError, unknown_name_message
 from coassist.robot.worlds import WORLDS, arm_choices, world_choices
+from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.intent_registry import INTENT_SOURCES, check_intent, intent_choices
 
 T = TypeVar("T")
@@ -523,10 +524,50 @@ def _print_forces(folder: Path) -> None:
     )
 
 
+ARM_CONTROLLER_HELP = (
+    "cooperative (the assistive controller: the cooperative game) | cooperative-arbitrated (α set every tick "
+    "by the target law) | cooperative-damped (arbitrated, damped while the tool slows) | impedance (IMP) | "
+    "manual (MG, manual guidance) | manual-probe (a calibration trial, no assistance: MG plus a small known "
+    "push that measures the arm; fit the trials with coassist calibrate)."
+)
+INTENT_DEFAULT_HELP = (
+    f"Default {DEFAULT_INTENT}: {INTENT_SOURCES[DEFAULT_INTENT].summary}, the safest measured without a "
+    "calibration (docs/precision.md); with one, the person-model folder coassist calibrate wrote."
+)
+PERSON_HELP = (
+    "The person at the handle, a pseudonymous id (e.g. P07): the trial's user and whose calibration a person "
+    "model (--intent FOLDER) uses (default: operator on a real arm, user-<user> in MuJoCo)."
+)
+SCENE_HELP = (
+    "A scene file (TOML or JSON: the obstacles as boxes in the robot's base frame, docs/robots.md). It tells "
+    "the robot the scene (the paths source goes round them); the trial records it, to be reported apart."
+)
+
+
+def _scene(path: Path | None):
+    """The scene of --scene, read and validated before anything moves (None: none given)."""
+    if path is None:
+        return None
+    from coassist.scenario.scene import SceneError, read_scene
+
+    try:
+        return read_scene(path)
+    except SceneError as exc:
+        _fail(f"--scene {exc}", 2)
+
+
+def _say(line: str) -> None:
+    """A run's one-line statement (what the person will get), as plain text."""
+    console.print(line, markup=False, highlight=False, soft_wrap=True)
+
+
 @app.command()
 def collect(
     out: Path = typer.Option(..., help="Dataset folder to write (trial Parquet files + manifest.json)."),
-    controller: str = typer.Option("cooperative", help="cooperative | cooperative-arbitrated | impedance | manual."),
+    controller: str = typer.Option(
+        "cooperative",
+        help="cooperative | cooperative-arbitrated | cooperative-damped | impedance | manual | manual-probe (calibration trials: MG plus the probe, for coassist calibrate).",
+    ),
     users: str = typer.Option("0", help="Simulated operators, comma-separated (0 = the thesis' author)."),
     tasks: str = typer.Option("linear,curved,sinusoidal", help="Nominal paths: linear, curved, sinusoidal, z."),
     objects: str = typer.Option("handle", help="Objects: handle, board, heavy."),
@@ -536,7 +577,10 @@ def collect(
         COLLECTION_PRESET,
         help=f"Control preset: {COLLECTION_PRESET} (the main job's for collection), {APPLICATION_PRESET} (the main job's with a learned model in the loop), thesis-application-dm, or one without -dm (SI units: the robot barely helps).",
     ),
-    intent: str = typer.Option("nominal", help=f"Intent source: {intent_choices()}."),
+    intent: str = typer.Option(
+        DEFAULT_INTENT,
+        help=f"Intent source: {intent_choices()}. {INTENT_DEFAULT_HELP} The thesis' dataset D0 (Algorithm 4.1) is --intent nominal.",
+    ),
     obstacle: str = typer.Option(
         "small",
         help="The obstacle the operators go around: small (the evaluation's box) or large (the application's 12 cm box, no path shown).",
@@ -562,7 +606,7 @@ def collect(
         help="What evaluates a model's network: onnx (ONNX Runtime, 1.6-1.9x faster at the loop's batch sizes; the onnx extra), torch, or auto (onnx where installed). The two agree to float32 rounding; each trial records which ran.",
     ),
 ) -> None:
-    """Simulate trials and write them as a dataset (thesis §5.2.2; default: D0, 60 trials).
+    """Simulate trials and write them as a dataset (thesis §5.2.2: 60 trials; D0 with --intent nominal).
 
     Each trial is written as it finishes; if the run is stopped, the same command
     continues where it stopped.
@@ -643,6 +687,8 @@ DRIVE_OPTIONS = {
             "predictor_backend",
             "robot",
             "population",
+            "person",
+            "scene",
         )
     },
     "DriveConfig.object": "--object",
@@ -660,18 +706,17 @@ def drive(
     ),
     world: str = typer.Option("mujoco", help=f"{world_choices()}."),
     robot: str = typer.Option(None, help=f"The arm: {arm_choices()}; default the world's first."),
-    controller: str = typer.Option(
-        "cooperative",
-        help="cooperative (the assistive controller: the cooperative game) | cooperative-arbitrated (α set every tick by the target law) | impedance (IMP) | manual (MG, manual guidance).",
-    ),
+    controller: str = typer.Option("cooperative", help=ARM_CONTROLLER_HELP),
     task: str = typer.Option("linear", help="Nominal path: linear, curved, sinusoidal, z."),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
     intent: str = typer.Option(
-        "nominal",
+        DEFAULT_INTENT,
         help=f"Intent source: {intent_choices()} ("
         + ", ".join(n for n, e in INTENT_SOURCES.items() if e.simulation_only)
-        + " in a simulated world only).",
+        + f" in a simulated world only). {INTENT_DEFAULT_HELP}",
     ),
+    person: str = typer.Option(None, help=PERSON_HELP),
+    scene: Path = typer.Option(None, help=SCENE_HELP),
     realtime_intent: bool = typer.Option(
         None,
         help="Run the model off the control thread, never waiting for it (default: on for a real arm, off in a simulated world, where runs are then deterministic).",
@@ -742,6 +787,8 @@ def drive(
             predictor_backend=predictor_backend,
             robot=robot,
             population=population,
+            person=person,
+            scene=_scene(scene),
         )
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
@@ -751,7 +798,7 @@ def drive(
 
     confirm = _confirm_move(yes, "the teach pendant's emergency stop")
     try:
-        trial = run_drive(config, host=host, view=view, confirm=None if WORLDS[world].simulated else confirm)
+        trial = run_drive(config, host=host, view=view, confirm=None if WORLDS[world].simulated else confirm, say=_say)
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
         _fail(str(exc))
     from coassist.robot.ros2_world import UR_JOINT_NAMES  # (no rclpy needed for the names)
@@ -880,15 +927,16 @@ def _floats(text: str | None, option: str) -> tuple[float, ...] | None:
 @app.command()
 def ros2(
     out: Path = typer.Option(Path("runs/ros2/trial.parquet"), help="Trial file to write (as coassist drive writes)."),
-    controller: str = typer.Option(
-        "cooperative",
-        help="cooperative (the assistive controller: the cooperative game) | impedance (IMP) | manual (MG, manual guidance).",
-    ),
+    controller: str = typer.Option("cooperative", help=ARM_CONTROLLER_HELP),
     task: str = typer.Option(
         "linear", help="Nominal path, laid out from where the tool is: linear, curved, sinusoidal, z."
     ),
     obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
-    intent: str = typer.Option("nominal", help=f"Intent source: {intent_choices(simulation=False)}."),
+    intent: str = typer.Option(
+        DEFAULT_INTENT, help=f"Intent source: {intent_choices(simulation=False)}. {INTENT_DEFAULT_HELP}"
+    ),
+    person: str = typer.Option(None, help=PERSON_HELP),
+    scene: Path = typer.Option(None, help=SCENE_HELP),
     predictor_backend: str = typer.Option(
         "process", help="Where a model runs: process (own worker process), onnx or torch (thread)."
     ),
@@ -961,6 +1009,8 @@ def ros2(
             time_limit=time_limit,
             limits=limits,
             predictor_backend=predictor_backend,
+            person=person,
+            scene=_scene(scene),
         )
         rcfg = Ros2Config(
             node_name=node_name,
@@ -989,7 +1039,7 @@ def ros2(
     try:
         world = Ros2World(rcfg, alpha=alpha)
         try:
-            trial = run_drive(config, world=world, confirm=confirm, on_tick=world.publish_monitor)
+            trial = run_drive(config, world=world, confirm=confirm, on_tick=world.publish_monitor, say=_say)
         finally:
             world.close()
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
@@ -1056,6 +1106,53 @@ def ros2_watchdog(
 
 
 @app.command()
+def calibrate(
+    data: list[Path] = typer.Argument(
+        ...,
+        help="Recorded trials: datasets (collect, play), trial files (drive, ros2), recording folders or bags.",
+    ),
+    out: Path = typer.Option(..., "--out", "-o", help="Person-model folder to write (person-model.json)."),
+    task: str = typer.Option(
+        None, help="Fit only the trials of this task (default: every person's trials must be of one task)."
+    ),
+    min_trials: int = typer.Option(3, help="The fewest trials a person is calibrated from."),
+    overwrite: bool = typer.Option(False, help="Replace the person model already in --out."),
+    skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
+    bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
+) -> None:
+    """Fit a person model per person from their calibration trials (record them with --controller manual-probe).
+
+    Prints one line per person: the arm (measured by the probe, or assumed), the
+    demonstrations per way round, the fit's time. Drive, ros2 and play take the folder as
+    --intent FOLDER.
+    """
+    from coassist.scenario.person_model import PERSON_MODEL_FILE
+
+    if min_trials < 1:
+        _fail(f"--min-trials must be >= 1, got {min_trials}", 2)
+    if out.exists() and not out.is_dir():
+        _fail(f"--out {out}: is a file; give a folder for the person model", 2)
+    if (out / PERSON_MODEL_FILE).exists() and not overwrite:
+        _fail(f"--out {out}: already holds a person model; pass --overwrite to replace it", 2)
+    _folder_out(out, "--out")
+    from coassist.experiments.person_calibration import CalibrationError, calibrate_people, summary_line
+    from coassist.scenario.person_model import write_person_model
+
+    trials = _intent_trials(data, skip_bad_trials, bag_topics=bag_topics)
+    try:
+        people = calibrate_people(trials, task=task, min_trials=min_trials)
+    except CalibrationError as exc:
+        _fail(str(exc), 2)
+    for c in people:
+        console.print(summary_line(c), markup=False, highlight=False, soft_wrap=True)
+    try:
+        write_person_model(out, {c.person: c.fit for c in people})
+    except OSError as exc:
+        _fail(f"--out {out}: cannot write ({exc.strerror})")
+    _wrote(f"{out / PERSON_MODEL_FILE}: {len(people)} person(s); drive with --intent {out}")
+
+
+@app.command()
 def show(
     path: Path = typer.Argument(
         ...,
@@ -1098,10 +1195,11 @@ def play(
     ),
     controller: str = typer.Option(
         "manual,impedance,cooperative",
-        help="Controllers the page offers, comma-separated: manual (MG), impedance (IMP), cooperative (assistive), cooperative-arbitrated.",
+        help="Controllers the page offers, comma-separated: manual (MG), impedance (IMP), cooperative (assistive), cooperative-arbitrated, cooperative-damped, manual-probe (calibration trials: MG plus the probe, no assistance).",
     ),
     intent: str = typer.Option(
-        "nominal", help=f"Intent source (its prediction is drawn live): {intent_choices(simulation=False)}."
+        DEFAULT_INTENT,
+        help=f"Intent source (its prediction is drawn live): {intent_choices(simulation=False)}. {INTENT_DEFAULT_HELP}",
     ),
     preset: str = typer.Option(
         APPLICATION_PRESET,
@@ -1129,6 +1227,7 @@ def play(
     mcap: bool = typer.Option(
         False, help="Also write each trial as <trial>.mcap beside its Parquet file (ROS 2 messages Foxglove opens)."
     ),
+    scene: Path = typer.Option(None, help=f"With --drive: {SCENE_HELP}"),
 ) -> None:
     """Be the operator: a live page where your mouse, touch screen or gamepad is the hand on the robot."""
     try:
@@ -1143,6 +1242,9 @@ def play(
         raise typer.BadParameter(f"must be 0..65535, got {port}", param_hint="--port")
     if mcap:
         _need_bags("--mcap")
+    if scene is not None and drive is None:
+        _fail("--scene: the page's own world tells the robot its obstacle; a scene file is for --drive (an arm)", 2)
+    told = _scene(scene)
     if token is None and not is_loopback(host):
         token = new_token()
     try:
@@ -1168,6 +1270,7 @@ def play(
         )
         if drive is None:
             session = PlaySession(config)
+            _say(_page_assistance(session))
         else:
             from coassist.play.monitor import DriveMonitor
             from coassist.robot.drive import DriveConfig
@@ -1184,10 +1287,14 @@ def play(
                     intent=intent,
                     preset=preset,
                     seed=seed,
+                    # at a real arm the page's user is the person at the handle (in MuJoCo, the simulated one)
+                    person=None if drive not in WORLDS or WORLDS[drive].simulated else user,
+                    scene=told,
                 ),
                 config,
                 host=robot_host,
                 confirm=confirm,
+                say=_say,
             )
         server = PlayServer(session, host=host, port=port, token=token)
     except (ValueError, OSError) as exc:
@@ -1202,6 +1309,26 @@ def play(
     if drive is not None:
         session.start()
     server.run()
+
+
+def _page_assistance(session) -> str:
+    """The one-line statement of a play page: what its assisting controller (the first offered) will give."""
+    from coassist.scenario.assistance import assistance_line
+
+    cfg = session.config
+    kinds = cfg.controllers
+    controller = next((c for c in kinds if c.startswith("cooperative")), kinds[0])
+    task = session.next_task()
+    line = assistance_line(
+        controller,
+        cfg.intent,
+        session.source,
+        user=cfg.user,
+        path=task.path.points,
+        obstacles=(task.obstacle.to_dict(),),
+    )
+    others = [c for c in kinds if c != controller]
+    return line + (f" (the page also offers {', '.join(others)})" if others else "")
 
 
 @app.command()
@@ -1276,6 +1403,9 @@ def compare_intents(
     damped: str = typer.Option(
         "", help="Labels to run with the cooperative-damped controller instead of the arbitrated one."
     ),
+    cooperative: str = typer.Option(
+        "", help="Labels to run with the plain cooperative controller (α fixed; drive's default) instead."
+    ),
     trials: int = typer.Option(4, help="Trials per operator, object and base."),
     workers: int = typer.Option(2, help="Simulation processes."),
 ) -> None:
@@ -1296,10 +1426,17 @@ def compare_intents(
             _fail(f"--source {label}: given twice", 2)
         pairs[label] = spec
     seeds = _int_list(bases, "--bases")
-    labels = [d for d in damped.split(",") if d]
-    for label in labels:
-        if label not in pairs:
-            _fail(f"--damped {label}: not a --source label", 2)
+    chosen: dict[str, str] = {}
+    for option, text, kind in (
+        ("--damped", damped, "cooperative-damped"),
+        ("--cooperative", cooperative, "cooperative"),
+    ):
+        for label in (d for d in text.split(",") if d):
+            if label not in pairs:
+                _fail(f"{option} {label}: not a --source label", 2)
+            if label in chosen:
+                _fail(f"{option} {label}: also given another controller", 2)
+            chosen[label] = kind
     for value, option in ((trials, "--trials"), (workers, "--workers")):
         if value < 1:
             _fail(f"{option} must be >= 1, got {value}", 2)
@@ -1309,7 +1446,7 @@ def compare_intents(
             pairs,
             out,
             bases=seeds,
-            controllers={label: "cooperative-damped" for label in labels},
+            controllers=chosen,
             trials=trials,
             workers=workers,
         )

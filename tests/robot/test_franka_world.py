@@ -250,7 +250,12 @@ def _assistive_run():
             seen = []
             # The preset this comparison's 1.5 mm was measured with (nominal intent: no learned predictor).
             config = DriveConfig(
-                world="franka", robot="fr3", controller="cooperative", preset="thesis-application-dm", time_limit=2.0
+                world="franka",
+                robot="fr3",
+                controller="cooperative",
+                preset="thesis-application-dm",
+                intent="nominal",
+                time_limit=2.0,
             )
             trial = drive(
                 config,
@@ -294,7 +299,9 @@ def test_the_assistive_controller_through_franky_sim():
     # the tool near the plan (which starts to move at 1.5 s), so both creep 17 mm. 1.5 mm: the push
     # here starts a tick late and franky-sim's joint velocity loop lags its command
     mj = drive(
-        DriveConfig(robot="panda", controller="cooperative", preset="thesis-application-dm", time_limit=2.0),
+        DriveConfig(
+            robot="panda", controller="cooperative", preset="thesis-application-dm", intent="nominal", time_limit=2.0
+        ),
         operator=ScriptedForce.constant((10.0, 0.0, 0.0, 0.0, 0.0, 0.0)),
     )
     np.testing.assert_allclose(trial.pose[:, 0] - trial.pose[0, 0], mj.pose[:, 0] - mj.pose[0, 0], atol=1.5e-3)

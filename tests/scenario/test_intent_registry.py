@@ -24,6 +24,7 @@ from coassist.scenario.intent_registry import (
     needs_network,
 )
 from coassist.scenario.path_hypotheses import PathHypothesesIntent, write_calibration
+from coassist.scenario.person_intent import PersonPathsIntent
 from coassist.scenario.reference_intents import NominalIntent, OracleIntent
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -33,24 +34,61 @@ BEFORE = {
     "nominal": (NominalIntent, None),
     "constant-velocity": (ConstantVelocityIntent, "constant-velocity"),
     "oracle": (OracleIntent, "oracle"),
-    "present": (PathHypothesesIntent, "present"),
+    "present": (PersonPathsIntent, "present"),
     "paths": (PathHypothesesIntent, "paths"),
+}
+#: Registered since (issue 40): the present estimate held, or half extrapolated, over the horizon.
+SINCE = {
+    "present-held": (PersonPathsIntent, "present-held"),
+    "present-half": (PersonPathsIntent, "present-half"),
 }
 
 
 def test_the_names_are_the_ones_the_loop_knew():
-    assert NAMED_INTENTS == tuple(INTENT_SOURCES) == ("nominal", "constant-velocity", "oracle", "present", "paths")
+    assert (
+        NAMED_INTENTS
+        == tuple(INTENT_SOURCES)
+        == ("nominal", "constant-velocity", "oracle", "present", "present-held", "present-half", "paths")
+    )
     assert [name for name, e in INTENT_SOURCES.items() if e.simulation_only] == ["oracle"]
 
 
-@pytest.mark.parametrize("name", list(BEFORE))
+@pytest.mark.parametrize("name", [*BEFORE, *SINCE])
 def test_each_name_builds_its_source_for_the_horizon(name):
-    cls, model_id = BEFORE[name]
+    cls, model_id = {**BEFORE, **SINCE}[name]
     source = load_intent_source(name, horizon=17)
     assert type(source) is cls and source.horizon == 17 and source.model_id == model_id
     assert isinstance(source, IntentSource)
     if cls is PathHypothesesIntent:
         assert source.use_obstacles == (name == "paths")
+
+
+@pytest.mark.parametrize(("name", "share"), [("present", 1.0), ("present-held", 0.0), ("present-half", 0.5)])
+def test_the_present_estimates_are_the_path_hypotheses_without_an_obstacle_bit_for_bit(name, share):
+    """The named present estimates are the person model's source knowing nobody; before, they were the path
+    hypotheses told no obstacle: the same rows, bit for bit, on a scripted hand (inertia included)."""
+    ctx = TrialContext(
+        dt=0.008,
+        horizon=12,
+        start=np.zeros(2),
+        target=np.array([0.3, 0.1]),
+        reference=np.zeros((10, 4)),
+        task="z",
+        user="user-0",
+        object="board",
+    )
+    old = PathHypothesesIntent(12, use_obstacles=False, extrapolation=share)
+    new = load_intent_source(name, horizon=12)
+    old.reset(ctx)
+    new.reset(ctx)
+    rng = np.random.default_rng(4)
+    t = 0.008 * np.arange(200)
+    p = np.stack([0.3 * np.sin(t), 0.1 * (1 - np.cos(2 * t))], axis=1)
+    v = np.gradient(p, 0.008, axis=0)
+    w = rng.normal(0.0, 2.0, (200, 2))
+    for k in range(200):
+        row = np.concatenate([p[k], v[k], w[k], p[k]])[None, :]
+        np.testing.assert_array_equal(new.predict(row), old.predict(row))
 
 
 def test_a_registered_source_predicts_what_its_class_does():
@@ -104,7 +142,10 @@ def test_anything_else_is_tried_as_a_model_and_refused_in_one_line(tmp_path):
     with pytest.raises(ValueError, match=r"could not be loaded as a model") as info:
         load_intent_source(str(tmp_path / "missing"))
     assert "\n" not in str(info.value)
-    with pytest.raises(ValueError, match=r"intent must be one of nominal, constant-velocity, oracle, present, paths"):
+    with pytest.raises(
+        ValueError,
+        match=r"intent must be one of nominal, constant-velocity, oracle, present, present-held, present-half, paths",
+    ):
         load_intent_source("")
     with pytest.raises(ValueError, match="network must be one of"):
         load_intent_source("nominal", network="gpu")
@@ -116,18 +157,20 @@ def test_check_intent_names_the_choices(tmp_path):
     with pytest.raises(ValueError) as info:
         check_intent(str(tmp_path / "nomodel"))
     assert str(info.value) == (
-        f"{str(tmp_path / 'nomodel')!r}: not one of nominal, constant-velocity, oracle, present, paths, "
+        f"{str(tmp_path / 'nomodel')!r}: not one of nominal, constant-velocity, oracle, present, present-held, present-half, paths, "
         "a path-hypotheses calibration folder (path-hypotheses.json) or a person model folder (coassist "
         "calibrate) (person-model.json) or a model folder (coassist train) (model.json)"
     )
     with pytest.raises(ValueError, match="a simulation alone knows it"):
         check_intent("oracle", simulation=False)
-    with pytest.raises(ValueError, match=r"not one of nominal, constant-velocity, present, paths, a path"):
+    with pytest.raises(
+        ValueError, match=r"not one of nominal, constant-velocity, present, present-held, present-half, paths, a path"
+    ):
         check_intent("oracle-ish", simulation=False)
 
 
 def test_the_help_lists_every_source_and_only_what_a_person_can_run():
-    assert intent_choices().split(" | ")[:5] == list(NAMED_INTENTS)
+    assert intent_choices().split(" | ")[: len(NAMED_INTENTS)] == list(NAMED_INTENTS)
     assert "oracle" not in intent_choices(simulation=False).split(" | ")
     runner = CliRunner()
     for command, simulation in (("collect", True), ("drive", True), ("ros2", False), ("play", False)):

@@ -38,6 +38,9 @@ from coassist.experiments.source_training import calibrate_paths, calibrate_pers
 #: (base + 880000 …) and application trials (base + 900000 … + 1000 + trials) then stay clear of every
 #: run's collections (offsets up to 902000) and of the next run's block.
 VALIDATION_BASES = (25_000, 95_000)
+#: The controllers a source may be compared with: the arbitrated one (the default), the damped one, and
+#: the plain cooperative game (α fixed: the default controller of drive, ros2, play and collect).
+COMPARED_CONTROLLERS = (ARBITRATED, DAMPED, "cooperative")
 
 __all__ = ["compare_intents", "comparison_table"]
 
@@ -55,8 +58,10 @@ def compare_intents(
     progress: bool = True,
 ) -> AblationResult:
     """Every source of ``sources`` (label → intent: a named source, a model folder, a calibration folder or
-    ``"paths"`` / ``"person"`` to use each base's fitted calibration / person models) on the validation trials of ``bases``, with the
-    arbitrated controller or ``controllers[label]``; MG and the oracle (arbitrated) on the same trials.
+    ``"paths"`` / ``"person"`` to use each base's fitted calibration / person models) on the validation trials
+    of ``bases``, with the arbitrated controller or ``controllers[label]`` (one of :data:`COMPARED_CONTROLLERS`);
+    MG and the oracle on the same trials (the arbitrated controller's; also the plain game's where a source runs
+    with it: a share is measured against the oracle of its own controller, the damped one's against the arbitrated).
     Datasets go under ``out``. The result is keyed like the ablation's (world "point-mass",
     controller, label), the bases' trials pooled in one cell."""
     if not sources:
@@ -81,12 +86,10 @@ def compare_intents(
     unknown = set(controllers) - set(sources)
     if unknown:
         raise ValueError(f"controllers names sources that are not compared: {sorted(unknown)}")
-    bad = {k: v for k, v in controllers.items() if v not in (ARBITRATED, DAMPED)}
+    bad = {k: v for k, v in controllers.items() if v not in COMPARED_CONTROLLERS}
     if bad:
-        raise ValueError(
-            f"controllers must be {ARBITRATED!r} or {DAMPED!r} (their oracle is the arbitrated one), got {bad}"
-        )
-    reserved = {"MG", "oracle"} & set(sources)
+        raise ValueError(f"controllers must be one of {', '.join(map(repr, COMPARED_CONTROLLERS))}, got {bad}")
+    reserved = {"MG", "oracle", "oracle-cooperative"} & set(sources)
     if reserved:
         raise ValueError(f"source labels {sorted(reserved)} are taken by the baselines every comparison runs")
     out = Path(out)
@@ -100,13 +103,20 @@ def compare_intents(
     calibrations: dict[str, str] = {}
     for base in bases:
         ws = Workspace(replace(cfg, seed=int(base)), out / f"base-{base}", progress)
-        paths = calibrate_paths(ws, seed=calibration_seed(int(base))) if calibrate else "paths"
-        calibrations[str(base)] = paths
-        if "person" in sources.values():
+        # the operators' calibration trials only where a source needs them
+        fit = calibrate and "paths" in sources.values()
+        paths = calibrate_paths(ws, seed=calibration_seed(int(base))) if fit else "paths"
+        if fit:
+            calibrations[str(base)] = paths
+        if calibrate and "person" in sources.values():
             calibrations[f"{base}/person"] = calibrate_person(ws, seed=calibration_seed(int(base)))
-        plan = [("MG", "manual", "nominal"), ("oracle", ARBITRATED, "oracle")]
+        # (dataset name, label, controller, intent): the plain game's oracle under its own name
+        plan = [("MG", "MG", "manual", "nominal"), ("oracle", "oracle", ARBITRATED, "oracle")]
+        if "cooperative" in controllers.values():
+            plan.append(("oracle-cooperative", "oracle", "cooperative", "oracle"))
         plan += [
             (
+                label,
                 label,
                 controllers.get(label, ARBITRATED),
                 {"paths": paths, "person": calibrations.get(f"{base}/person", spec)}.get(spec, spec),
@@ -114,9 +124,9 @@ def compare_intents(
             for label, spec in sources.items()
         ]
         for j, obj in enumerate(OBJECTS):
-            for label, controller, intent in plan:
+            for name, label, controller, intent in plan:
                 _, ds = ws.collect(
-                    f"{obj}-{label}",
+                    f"{obj}-{name}",
                     tasks=(cfg.application_task,),
                     users=cfg.application_users,
                     objects=(obj,),

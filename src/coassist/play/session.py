@@ -60,6 +60,7 @@ from coassist.runtime.intent import RealtimeIntent, WindowIntent
 from coassist.runtime.loop import run_loop
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.wrench import WrenchPipeline
+from coassist.scenario.assistance import DEFAULT_INTENT, check_person
 from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source
 from coassist.scenario.tasks import TASK_KINDS, Task, nominal_path, task_for_seed
 
@@ -107,7 +108,9 @@ class PlayConfig:
     out : the parent folder; the session lives in ``out/user``.
     controllers : the controllers the page offers (:data:`coassist.control.presets.CONTROLLER_KINDS`).
     intent : a source a person's run can use (:data:`~coassist.scenario.intent_registry.INTENT_SOURCES`
-        but the simulation-only oracle), or a model folder written by ``coassist train``.
+        but the simulation-only oracle), or a folder (a person model written by ``coassist calibrate``,
+        whose calibration of ``user`` it must hold; a model written by ``coassist train``); default
+        :data:`coassist.scenario.assistance.DEFAULT_INTENT`.
     preset : control preset (default :data:`coassist.config.APPLICATION_PRESET`, the main job's
         application preset, safe with a learned predictor in the loop).
     tasks : the protocol's paths, in order (repeated).
@@ -125,7 +128,7 @@ class PlayConfig:
     user: str
     out: Path
     controllers: tuple[str, ...] = ("manual", "impedance", "cooperative")
-    intent: str = "nominal"
+    intent: str = DEFAULT_INTENT
     preset: str = APPLICATION_PRESET
     tasks: tuple[str, ...] = TASK_KINDS
     seed: int = 0
@@ -156,7 +159,7 @@ class PlayConfig:
             or (self.intent in INTENT_SOURCES and INTENT_SOURCES[self.intent].simulation_only)
         ):
             raise ValueError(
-                f"PlayConfig.intent must be 'nominal' or a model folder (a person has no oracle), got {self.intent!r}"
+                f"PlayConfig.intent must be a named source or a folder (a person has no oracle), got {self.intent!r}"
             )
         try:
             get_preset(self.preset)
@@ -235,6 +238,8 @@ class PlaySession:
         self._controllers = {name: make_controller(name, self.preset) for name in config.controllers}
         H = int(self.preset.game.horizon)
         self.source = load_intent_source(config.intent, horizon=max(H, 2))
+        if not getattr(self, "watch_only", False):  # a monitored drive checks its own person (robot.drive)
+            check_person(self.source, config.user, config.intent)
         if int(self.source.horizon) < H:
             raise ValueError(f"the intent model predicts {self.source.horizon} steps; the controller needs {H}")
         model = getattr(self.source, "model", None)

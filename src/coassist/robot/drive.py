@@ -22,12 +22,19 @@ Worlds (:data:`coassist.robot.worlds.WORLDS`, one entry each; a world is an
   the TCP is when the run starts (coassist never moves a real arm to a start pose on its own).
 
 Controllers by kind (:data:`coassist.control.presets.CONTROLLER_KINDS`): ``cooperative`` (the
-assistive controller, the cooperative game), ``cooperative-arbitrated``, ``impedance`` (IMP, eq. 5.4),
-``manual`` (MG, eq. 5.5).
+assistive controller, the cooperative game), ``cooperative-arbitrated``, ``cooperative-damped``,
+``impedance`` (IMP, eq. 5.4), ``manual`` (MG, eq. 5.5) and ``manual-probe`` (MG plus the probe: the
+calibration trials ``coassist calibrate`` fits).
+
+What the robot is told: the nominal plan always; the task's obstacle in a simulated world; on any
+world, the boxes of a lab's scene file instead (``DriveConfig.scene``,
+:mod:`coassist.scenario.scene`), recorded in the trial (``meta.extra["scene"]``). Before the run,
+``say`` is told in one line what the person will get (:func:`coassist.scenario.assistance.assistance_line`).
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -45,11 +52,13 @@ from coassist.runtime.intent import RealtimeIntent, WindowIntent
 from coassist.runtime.safety import SafetyLayer, SafetyLimits
 from coassist.runtime.tick import TickConfig
 from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPipeline
+from coassist.scenario.assistance import DEFAULT_INTENT, assistance_line, check_person
 from coassist.scenario.hand import SimulatedHand
 from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source, needs_network, shared_intent_source
 from coassist.scenario.objects import get_object
-from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise
+from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
 from coassist.scenario.populations import POPULATIONS, population_profile
+from coassist.scenario.scene import Scene
 from coassist.scenario.seeds import trial_rngs
 from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, task_for_seed
 
@@ -75,18 +84,25 @@ class DriveConfig:
     """One run on a UR5 (every field validated, errors name it as ``DriveConfig.<field>``).
 
     world : a world of :data:`coassist.robot.worlds.WORLDS` ("mujoco", "ur", "franka", "ros2").
-    controller : "cooperative", "cooperative-arbitrated" (α set every tick by
-        coassist.control.presets.ARBITRATION), "impedance" or "manual".
+    controller : a kind of :data:`coassist.control.presets.CONTROLLER_KINDS`: "cooperative",
+        "cooperative-arbitrated" (α set every tick by coassist.control.presets.ARBITRATION),
+        "cooperative-damped", "impedance", "manual" or "manual-probe" (a calibration trial).
     robot : the arm, one of the world's ``arms`` ("ur5" or "panda" in MuJoCo, "ur5" on "ur"
         and "ros2", "panda" or "fr3" on "franka"); None: the world's first.
     task : a task kind (linear, curved, sinusoidal, z).  object : handle, board or heavy.
     preset : a control preset (default :data:`coassist.config.APPLICATION_PRESET`, the main
         job's application preset, safe with a learned predictor in the loop).
     intent : a name of :data:`coassist.scenario.intent_registry.INTENT_SOURCES` ("oracle" in a
-        simulated world only) or a folder (a model, a path-hypotheses calibration).
+        simulated world only) or a folder (a person model, a model, a path-hypotheses calibration);
+        default :data:`coassist.scenario.assistance.DEFAULT_INTENT`.
     user : simulated operator index (MuJoCo).  seed : task, operator and sensor seed.
     population, population_seed : who the simulated operator is
         (:func:`coassist.scenario.populations.population_profile`; "thesis": the main job's).
+    person : the person at the handle, a pseudonymous id (letters, digits, ``-``, ``_``): the trial's
+        user and whose calibration a person model uses; None: "operator" on a real arm, the simulated
+        operator's name (``user-<user>``) in a simulated world.
+    scene : the obstacles the robot is told of (a lab's scene file, :mod:`coassist.scenario.scene`), in
+        the robot's base frame; None: the task's in a simulated world, none on a real arm.
     obstacle : the obstacle the operator goes around (coassist.scenario.tasks.OBSTACLES; "small"
         is the evaluation's box, "large" the application's).
     rate_hz : 125 (UR CB3) or 500 (e-Series); the MuJoCo world runs either.
@@ -108,7 +124,7 @@ class DriveConfig:
     task: str = "linear"
     object: str = "handle"
     preset: str = APPLICATION_PRESET
-    intent: str = "nominal"
+    intent: str = DEFAULT_INTENT
     user: int = 0
     seed: int = 0
     obstacle: str = "small"
@@ -121,6 +137,8 @@ class DriveConfig:
     robot: str | None = None
     population: str = "thesis"
     population_seed: int = 0
+    person: str | None = None
+    scene: Scene | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, what: str) -> ValueError:
@@ -165,10 +183,25 @@ class DriveConfig:
         _check_limits_for_arm(self.limits, self.robot)
         if self.predictor_backend not in PREDICTOR_BACKENDS:
             raise bad("predictor_backend", f"one of {PREDICTOR_BACKENDS}")
+        if self.person is not None and (not isinstance(self.person, str) or not _PERSON.match(self.person)):
+            raise bad("person", "1-32 letters, digits, '-' or '_' (a pseudonymous id, e.g. P07)")
+        if self.scene is not None and not isinstance(self.scene, Scene):
+            raise bad("scene", "a Scene (coassist.scenario.scene.read_scene) or None")
 
     @property
     def dt(self) -> float:
         return 1.0 / self.rate_hz
+
+    @property
+    def who(self) -> str:
+        """The person at the handle as the trial names them (``person``, or the world's default)."""
+        if self.person is not None:
+            return self.person
+        return operator_profile(self.user).name if WORLDS[self.world].simulated else "operator"
+
+
+#: A person's id: what a folder may be named (as play's user).
+_PERSON = re.compile(r"^[A-Za-z0-9_-]{1,32}$")
 
 
 #: [N] the largest contact force limit: the F/T sensor's range (FT300: 300 N per axis, the default
@@ -254,6 +287,7 @@ def drive(
     confirm: Any = None,
     on_tick: Any = None,
     intent_source: Any = None,
+    say: Any = None,
 ) -> Trial:
     """Run one trial on a UR5 (module docstring) and return it.
 
@@ -263,9 +297,13 @@ def drive(
     confirm : called with the text of the limits in force before a real arm moves; it
         must return True to go on (the CLI asks the person at the robot).
     intent_source : an IntentSource or RealtimePredictor to use instead of ``config.intent``.
+    say : told in one line what the person will get (:func:`~coassist.scenario.assistance.assistance_line`),
+        once the world is read and before ``confirm``.
     """
     run = _prepare(config, operator=operator, world=world, host=host, view=view, intent_source=intent_source)
     try:
+        if say is not None:
+            say(run.assistance)
         if confirm is not None and not confirm(run.limits.describe()):
             raise RuntimeError("not confirmed: the robot was not moved")
         log = run.episode.run(deadline=config.dt if run.world.realtime else None, on_tick=on_tick)
@@ -309,6 +347,7 @@ class _PreparedDrive:
     wrench: WrenchPipeline
     built_here: bool
     intent_stage: Any
+    assistance: str = ""
 
     def close(self) -> None:
         _release(self.world, self.built_here, self.intent_stage)
@@ -355,8 +394,11 @@ def _prepare(
     n_max = episode_ticks(task, dt, config.time_limit)
     built_here = world is None
     intent_stage = None
+    user = config.who
     try:
         intent_stage, model_id = _intent_stage(config, H, intent_source, sources)
+        loaded = getattr(intent_stage, "source", None)
+        check_person(loaded, user, config.intent)
         ref_abs = plan_grid(task, dt, n_max, max(H, int(intent_stage.horizon)))
         rng_intent, rng_motor = trial_rngs(config.seed, 2)
         intent_traj = intent_trajectory(task, profile, rng_intent, ref_abs.shape[0], dt)
@@ -434,7 +476,7 @@ def _prepare(
             n_max=n_max,
             target=target,
             labels=EpisodeLabels(
-                user=profile.name if simulated else "operator",
+                user=user,
                 object=obj.name,
                 seed=config.seed,
                 source=entry.source,
@@ -449,6 +491,7 @@ def _prepare(
             # the robot is told of the obstacle only where the simulated operator goes round it: a person at a
             # real arm sees no such box (the path-hypotheses source then is the present estimate alone)
             tell_obstacles=simulated,
+            told_obstacles=None if config.scene is None else config.scene.told(),
             kinematics=kin,
             tick_config=TickConfig(dofs=dofs),
             extra={
@@ -464,14 +507,31 @@ def _prepare(
                 "start_pose": [float(v) for v in start_pose],
                 "limits": config.limits.describe(),
                 "dofs": list(dofs),
+                **({} if config.scene is None else {"scene": config.scene.to_extra()}),
             },
+        )
+        # what build_episode tells the source (TrialContext.path, .obstacles), for the one-line statement
+        shift = ref_abs[0, :2] - np.asarray(task.start, dtype=float)
+        told: tuple = ()
+        if config.scene is not None:
+            told = config.scene.told()
+        elif simulated:
+            told = ((tuple(np.asarray(task.obstacle.center) + shift), task.obstacle.size),)
+        assistance = assistance_line(
+            config.controller,
+            config.intent,
+            loaded,
+            user=user,
+            path=task.path.points + shift,
+            obstacles=told,
+            scene=None if config.scene is None else config.scene.source,
         )
         # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
         wrench.zero(np.asarray(state0.wrench, dtype=float)[None], np.asarray(state0.sensor_rotation, dtype=float)[None])
     except BaseException:
         _release(world, built_here, intent_stage)
         raise
-    return _PreparedDrive(episode, world, limits, wrench, built_here, intent_stage)
+    return _PreparedDrive(episode, world, limits, wrench, built_here, intent_stage, assistance)
 
 
 def move_tasks(robot: str, ref_abs: np.ndarray, intent: np.ndarray):

@@ -38,7 +38,7 @@ streams of one seed) is :mod:`coassist.scenario.seeds`.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -318,6 +318,7 @@ def build_episode(
     tick_config: TickConfig | None = None,
     extra: Mapping[str, Any] | None = None,
     tell_obstacles: bool = True,
+    told_obstacles: Sequence[tuple[tuple[float, float], tuple[float, float]]] | None = None,
 ) -> Episode:
     """The tick of ``world``'s stages reset for ``task`` and the termination rule (module docstring, step 2).
 
@@ -330,6 +331,9 @@ def build_episode(
     kinematics, tick_config : for joint-velocity worlds.  extra : the world's meta fields.
     tell_obstacles : whether the intent source is told where the task's obstacle is
     (:attr:`TrialContext.obstacles <coassist.interfaces.TrialContext>`); the operator sees it either way.
+    told_obstacles : the boxes the robot is told of instead (a lab's scene file,
+    :mod:`coassist.scenario.scene`), each ((x, y) centre, (width, depth) size) [m] already in the plan's
+    frame (an arm's base frame); None: as ``tell_obstacles`` says.
     """
     tick = ControlTick(
         controller, intent, wrench, safety, command_space=world.command_space, kinematics=kinematics, config=tick_config
@@ -339,11 +343,13 @@ def build_episode(
     target = np.array(task.target if target is None else target, dtype=float)
     # What the robot is told of the scene, in the plan's frame (worlds move the task by a translation).
     shift = np.asarray(plan[0, :2], dtype=float) - np.asarray(task.start, dtype=float)
-    told = (
+    told: tuple[tuple[tuple[float, ...], tuple[float, ...]], ...] = (
         ((tuple(float(c) for c in np.asarray(task.obstacle.center) + shift), tuple(task.obstacle.size)),)
         if tell_obstacles
         else ()
     )
+    if told_obstacles is not None:
+        told = tuple(((float(c[0]), float(c[1])), (float(z[0]), float(z[1]))) for c, z in told_obstacles)
     context = TrialContext(
         dt=dt,
         horizon=tick.H,

@@ -150,6 +150,18 @@ INTENT_SOURCES: Registry[IntentSourceEntry] = Registry(
             options=(("model_id", "present"),),
             told=Told(arm="assumed"),
         ),
+        "present-held": IntentSourceEntry(
+            "coassist.scenario.person_intent:PersonPathsIntent",
+            "the present estimate from the hand force, held over the horizon (no extrapolation)",
+            options=(("extrapolation", 0.0), ("model_id", "present-held")),
+            told=Told(arm="assumed"),
+        ),
+        "present-half": IntentSourceEntry(
+            "coassist.scenario.person_intent:PersonPathsIntent",
+            "the present estimate from the hand force at half the tool's velocity",
+            options=(("extrapolation", 0.5), ("model_id", "present-half")),
+            told=Told(arm="assumed"),
+        ),
         "paths": IntentSourceEntry(
             "coassist.scenario.path_hypotheses:PathHypothesesIntent",
             "the path hypotheses round the obstacles the robot is told of",

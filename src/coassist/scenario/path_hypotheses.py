@@ -288,6 +288,9 @@ class PathHypothesesIntent:
     arm : the arm of the present estimate.
     settings : the filter's constants.
     use_obstacles : False: ``present`` (never reads the obstacles).
+    extrapolation : the share e ∈ [0, 1] of the tool's velocity the present estimate's rows carry
+        where no obstacle is told: ŷ(k+i) = p̂(k) + e·i·dt·v (1: ``present``; 0: ``present-held``, the
+        estimate held over the horizon; 0.5: ``present-half``).
     model_id : what trials record as the source (default ``"paths"`` or ``"present"``).
     """
 
@@ -305,9 +308,11 @@ class PathHypothesesIntent:
         arm: ArmGuess | None = None,
         settings: FilterSettings | None = None,
         use_obstacles: bool = True,
+        extrapolation: float = 1.0,
         model_id: str | None = None,
     ) -> None:
         self.horizon = check_int(horizon, "PathHypothesesIntent.horizon", 1)
+        self.extrapolation = check_real(extrapolation, "PathHypothesesIntent.extrapolation", 0.0, 1.0)
         self.shapes = dict(shapes or {})
         for name, shape in self.shapes.items():
             if not isinstance(shape, PersonShape):
@@ -327,6 +332,7 @@ class PathHypothesesIntent:
         st = self.settings
         self.dt = float(context.dt)
         self._steps = self.dt * np.arange(1, self.horizon + 1)
+        self._present_steps = (self.extrapolation * self._steps)[:, None]
         obj = OBJECTS.get(context.object)
         self._mass = float(obj.mass) if obj is not None else 0.0
         self._a_gain = 1.0 - math.exp(-self.dt / st.accel_time) if st.accel_time > 0 else 1.0
@@ -382,7 +388,7 @@ class PathHypothesesIntent:
         K, C = self.arm.stiffness, self.arm.damping
         present = p + (u_h + C * v) / K
         if self._hyp is None:
-            return present + self._steps[:, None] * v
+            return present + self._present_steps * v
         return self._filter(self._hyp, p, v, u_h, present)
 
     def _shared(

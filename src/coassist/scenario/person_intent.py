@@ -200,6 +200,8 @@ class PersonPathsIntent:
     arms : person → :class:`ArmEstimate`.
     default_paths : the path model for anyone not in ``paths`` (None: the present estimate alone for them).
     default_arm : the arm for anyone not in ``arms`` (None: the assumed arm).
+    extrapolation : the share e ∈ [0, 1] of the tool's velocity the present estimate's rows carry where
+        there is no path model (or the tool is far from its paths): q + e·i·dt·v (0: held, 1: constant velocity).
     settings : the filter's constants.
     model_id : what trials record as the source.
     """
@@ -216,8 +218,10 @@ class PersonPathsIntent:
         default_arm: ArmEstimate | None = None,
         settings: PersonFilterSettings | None = None,
         model_id: str = "person",
+        extrapolation: float = 1.0,
     ) -> None:
         self.horizon = check_int(horizon, "PersonPathsIntent.horizon", 1)
+        self.extrapolation = check_real(extrapolation, "PersonPathsIntent.extrapolation", 0.0, 1.0)
         self.paths = dict(paths or {})
         self.arms = dict(arms or {})
         self.default_paths = default_paths
@@ -237,6 +241,7 @@ class PersonPathsIntent:
         st = self.settings
         self.dt = float(context.dt)
         self._steps = self.dt * np.arange(1, self.horizon + 1)
+        self._present_steps = (self.extrapolation * self._steps)[:, None]
         obj = OBJECTS.get(context.object)
         self._mass = float(obj.mass) if obj is not None else 0.0
         self._a_gain = 1.0 - math.exp(-self.dt / st.accel_time) if st.accel_time > 0 else 1.0
@@ -296,7 +301,7 @@ class PersonPathsIntent:
         u_h = w + self._mass * self._acc
         present = p + (u_h + self._C * v) / self._K + self._lead_time * v
         if self._hyp is None:
-            return present + self._steps[:, None] * v
+            return present + self._present_steps * v
         return self._filter(self._hyp, p, v, u_h, present)
 
     def _filter(self, hyp: _Curves, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray) -> np.ndarray:
@@ -317,7 +322,7 @@ class PersonPathsIntent:
         if float(np.min(np.take(d2.ravel(), np.argmin(d2, axis=1) + np.arange(len(near)) * d2.shape[1]))) > (
             st.max_offset**2
         ):
-            return present + self._steps[:, None] * v
+            return present + self._present_steps * v
         tan = np.take(hyp.flat_tangents, at, axis=0)
         point = np.take(hyp.flat_points, at, axis=0)
         # the tool's place along each curve, between its samples (a phase stuck to the samples would step the

@@ -8,9 +8,13 @@
     manual: "Manual guidance: the robot only renders its inertia and damping; all the work is yours (eq. 5.5).",
     impedance: "Impedance control: a spring pulls the tool back onto the plan, so it pushes against you around the obstacle (eq. 5.4).",
     cooperative: "Assistive: a cooperative game shares the effort toward where the robot expects you to go (eq. 3.27–3.31).",
+    "manual-probe": "Calibration, no assistance: manual guidance plus a small known push that measures your arm (coassist calibrate fits these trials).",
   };
+  // the probe is a calibration trial, never an assistive condition: its name says so
   const NAMES = { manual: "manual guidance (MG)", impedance: "impedance control (IMP)", cooperative: "assistive (cooperative game)",
-                  "cooperative-arbitrated": "assistive, α arbitrated online" };
+                  "cooperative-arbitrated": "assistive, α arbitrated online",
+                  "cooperative-damped": "assistive, α arbitrated, damped while slowing",
+                  "manual-probe": "calibration: MG + probe (no assistance)" };
   const FORCE_PX_PER_N = 3;   // arrow length
   const GAMEPAD_REACH = 0.08; // [m] hand offset at full stick deflection (≈ 32 N with the default spring)
   const HEARTBEAT_MS = 50;    // while held, the hand is re-sent: the server lets go after 0.25 s of silence

@@ -1,0 +1,225 @@
+"""A lab's calibration: recorded trials → one person model per person (``coassist calibrate``).
+
+A lab records a few trials of each person on a task (``coassist collect`` / ``drive`` / ``play``
+with the controller ``manual-probe``: manual guidance plus the probe that measures the arm),
+then fits them here. The trials are grouped by person (``TrialMeta.user``); each person's
+trials must be of one task (one nominal path, one control rate, the planar x-y motion); each
+group is fitted by :func:`~coassist.scenario.person_model.fit_person`:
+
+- the arm (K̂, Ĉ) from the person's probe trials alone (controller ``manual-probe``): the probe
+  is a push the person does not plan, which is what makes the arm measurable. A trial under
+  any other controller carries the robot's own effort, which follows the person's motion and
+  would bias the estimate; without a probe trial the arm is *assumed*
+  (:data:`~coassist.scenario.arm_identification.ASSUMED_ARM`), and the summary says so;
+- the person's paths from all of their trials (the intent each pursued, reconstructed with that arm).
+
+:func:`calibrate_people` checks and fits, :func:`summary_line` says in one line what was
+learnt of each person, and :func:`~coassist.scenario.person_model.write_person_model` writes
+the folder ``--intent`` takes. Every refusal is a :class:`CalibrationError` in one line that
+names the person and the trial.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from coassist.data import Trial
+from coassist.scenario.arm_identification import identify_arm
+from coassist.scenario.path_model import PathFrame
+from coassist.scenario.person_model import PersonFit, fit_person
+
+__all__ = [
+    "MIN_TRIALS",
+    "PROBE_CONTROLLER",
+    "CalibrationError",
+    "PersonCalibration",
+    "calibrate_people",
+    "summary_line",
+]
+
+#: The fewest trials a person is calibrated from: the arm's standard error is a jackknife over trials
+#: (it needs three), and one or two demonstrations say little of the ways round an obstacle.
+MIN_TRIALS = 3
+#: The controller kind whose trials carry the probe (coassist.control.presets).
+PROBE_CONTROLLER = "manual-probe"
+#: [m] two trials follow one nominal path when no point of one lies further than this from the other
+#: (the person model's own test: coassist.scenario.person_intent).
+SAME_PATH = 0.01
+#: A calibration trial moves the tool along at least this share of the plan's length.
+MIN_PROGRESS = 0.5
+
+
+class CalibrationError(ValueError):
+    """Trials a person model cannot be fitted from (the message names the person and the trial)."""
+
+
+class NamedTrial(Protocol):
+    """A trial and where it came from (``coassist.intent.LabeledTrial`` is one)."""
+
+    @property
+    def id(self) -> str: ...
+
+    @property
+    def trial(self) -> Trial: ...
+
+
+@dataclass(frozen=True, eq=False)
+class PersonCalibration:
+    """One person's calibration: their fit, the task, the trials it was fitted from (ids), how many of
+    them carried the probe, and the fit's wall-clock and CPU time [s]."""
+
+    person: str
+    task: str
+    fit: PersonFit
+    trials: tuple[str, ...]
+    probe_trials: int
+    seconds: float
+    cpu_seconds: float
+
+
+def _nominal(trial: Trial) -> np.ndarray:
+    ref = np.asarray(trial.reference[:, :2], dtype=float)
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(ref, axis=0), axis=1) > 1e-9])
+    return ref[keep]
+
+
+def _check_trial(person: str, tid: str, trial: Trial) -> None:
+    """Refuse a trial that is no calibration trial of a planar task (one line naming it)."""
+    d = trial.pose.shape[1]
+    if d < 2 or trial.reference.shape[1] < 2:
+        raise CalibrationError(
+            f"{person}: trial {tid} has {d} DOF; a person model needs the planar x-y motion (2 or more DOF)"
+        )
+    nominal = _nominal(trial)
+    if len(nominal) < 2:
+        raise CalibrationError(f"{person}: trial {tid} has no nominal path (its reference never moves)")
+    moved = float(np.max(np.linalg.norm(trial.pose[:, :2] - trial.pose[0, :2], axis=1)))
+    frame = PathFrame(nominal)
+    reached = float(np.max(frame.project(trial.pose[:, :2])[0])) / frame.length
+    if moved < 0.005 or reached < MIN_PROGRESS:
+        raise CalibrationError(
+            f"{person}: trial {tid}: the tool moved {1e3 * moved:.0f} mm and reached {100 * reached:.0f} % of the "
+            f"plan ({frame.length:.2f} m); a calibration trial follows the task to its end"
+        )
+
+
+def _group(trials: Sequence[NamedTrial], task: str | None) -> dict[str, list[NamedTrial]]:
+    groups: dict[str, list[NamedTrial]] = {}
+    for item in trials:
+        if task is not None and item.trial.meta.task != task:
+            continue
+        groups.setdefault(item.trial.meta.user, []).append(item)
+    return groups
+
+
+def _check_person(person: str, items: list[NamedTrial], min_trials: int) -> str:
+    """The person's task, once their trials are checked to be of one task, rate and nominal path."""
+    first = items[0]
+    meta0 = first.trial.meta
+    tasks = sorted({it.trial.meta.task for it in items})
+    if len(tasks) > 1:
+        odd = next(it for it in items if it.trial.meta.task != meta0.task)
+        raise CalibrationError(
+            f"{person}: trial {odd.id} is of task {odd.trial.meta.task!r}, trial {first.id} of {meta0.task!r} "
+            f"(tasks {', '.join(tasks)} mixed in); calibrate one task per person (--task)"
+        )
+    for it in items[1:]:
+        if abs(float(it.trial.meta.dt) - float(meta0.dt)) > 1e-6 * float(meta0.dt):
+            raise CalibrationError(
+                f"{person}: trial {it.id} was recorded at {1 / it.trial.meta.dt:.0f} Hz, trial {first.id} at "
+                f"{1 / meta0.dt:.0f} Hz; calibrate trials of one control rate"
+            )
+    if len(items) < min_trials:
+        raise CalibrationError(
+            f"{person}: {len(items)} trial(s) of task {meta0.task!r} ({', '.join(it.id for it in items)}); "
+            f"a person model needs at least {min_trials}"
+        )
+    for it in items:
+        _check_trial(person, it.id, it.trial)
+    nominal = _nominal(first.trial)
+    frame = PathFrame(nominal)
+    for it in items[1:]:
+        other = _nominal(it.trial)
+        # the offsets from the path, and its ends (a plan moved along itself has no offset)
+        ends = max(float(np.linalg.norm(other[0] - nominal[0])), float(np.linalg.norm(other[-1] - nominal[-1])))
+        apart = max(frame.distance_to(other), ends)
+        if apart > SAME_PATH:
+            raise CalibrationError(
+                f"{person}: trial {it.id} follows another nominal path than trial {first.id} ({100 * apart:.1f} cm "
+                f"apart; task {meta0.task!r}): on an arm, start every calibration trial from the same place"
+            )
+    return meta0.task
+
+
+def calibrate_people(
+    trials: Sequence[NamedTrial], *, task: str | None = None, min_trials: int = MIN_TRIALS
+) -> list[PersonCalibration]:
+    """Each person's :class:`PersonCalibration` from ``trials`` (module docstring), in the order people first
+    appear. ``task``: fit only the trials of this task (``TrialMeta.task``); None: every person's trials must
+    be of one task. Raises :class:`CalibrationError` (one line, naming the person and the trial)."""
+    if isinstance(min_trials, bool) or not isinstance(min_trials, int) or min_trials < 1:
+        raise ValueError(f"min_trials must be an int >= 1, got {min_trials!r}")
+    if not trials:
+        raise CalibrationError("no trials given")
+    groups = _group(trials, task)
+    if not groups:
+        have = sorted({it.trial.meta.task for it in trials})
+        raise CalibrationError(f"no trial of task {task!r} (the trials are of {', '.join(have)})")
+    out = []
+    for person, items in groups.items():
+        kind = _check_person(person, items, min_trials)
+        probed = [it.trial for it in items if it.trial.meta.controller == PROBE_CONTROLLER]
+        wall, cpu = time.perf_counter(), time.process_time()
+        try:
+            fit = fit_person([it.trial for it in items], arm=identify_arm(probed))
+        except ValueError as exc:
+            raise CalibrationError(f"{person}: {exc}") from None
+        out.append(
+            PersonCalibration(
+                person=person,
+                task=kind,
+                fit=fit,
+                trials=tuple(it.id for it in items),
+                probe_trials=len(probed),
+                seconds=time.perf_counter() - wall,
+                cpu_seconds=time.process_time() - cpu,
+            )
+        )
+    return out
+
+
+def _ways(sides: np.ndarray) -> str:
+    counts = {s: int(np.sum(sides == s)) for s in (1, -1, 0)}
+    parts = [f"{counts[1]} left", f"{counts[-1]} right"]
+    if counts[0]:
+        parts.append(f"{counts[0]} with no detour")
+    return ", ".join(parts)
+
+
+def summary_line(c: PersonCalibration) -> str:
+    """One line of what was learnt of a person: the arm (measured by the probe, or assumed and why), the
+    demonstrations per way round, the fit's time."""
+    arm = c.fit.arm
+    if arm.method == "probe-iv":
+        se = "" if arm.trials >= 3 else " (no standard error below 3 trials)"
+        measured = (
+            f"arm K̂ {arm.stiffness:.0f} ± {arm.stiffness_se:.0f} N/m, Ĉ {arm.damping:.1f} ± {arm.damping_se:.1f} "
+            f"N·s/m, measured by the probe in {arm.trials} trial(s){se}"
+        )
+    else:
+        why = (
+            f"the probe was not measurable in its {c.probe_trials} manual-probe trial(s) (shorter than 3 s, or "
+            "no push in the robot's effort)"
+            if c.probe_trials
+            else "the trials carry no probe (record them with --controller manual-probe)"
+        )
+        measured = f"arm ASSUMED, not measured (K̂ {arm.stiffness:.0f} N/m, Ĉ {arm.damping:.1f} N·s/m): {why}"
+    return (
+        f"{c.person} ({c.task}, {len(c.trials)} trials): {measured}; demonstrations: {_ways(c.fit.paths.sides)}; "
+        f"fit {c.seconds:.1f} s ({c.cpu_seconds:.1f} CPU-s)"
+    )

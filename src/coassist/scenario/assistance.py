@@ -1,0 +1,128 @@
+"""What the person at the handle will get, in one line: the controller, the intent source and what it was told.
+
+``coassist drive``, ``ros2`` and ``play`` print it before a run (``assistance: …``), so that
+the person running an arm knows whether the robot helps, toward what, and from which
+calibration — and, when it has none, how to get one. :func:`assistance_line` writes it from
+the controller kind, the ``--intent`` given and the loaded source (a person model says
+whose arm and paths it holds); :func:`check_person` refuses a person model that holds no
+calibration of the person at the handle (its rows would be the uncalibrated present
+estimate's, which overshoots more than manual guidance in the application scenario:
+docs/precision.md).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from coassist.scenario.intent_registry import INTENT_SOURCES, intent_folder_kind
+
+__all__ = ["DEFAULT_INTENT", "assistance_line", "check_person"]
+
+#: The intent source of every world and command when none is given: the safest measured on the
+#: validation seeds of the application scenario without a calibration (docs/precision.md, *The default
+#: without a calibration*).
+DEFAULT_INTENT = "present-held"
+
+_CALIBRATE = "no calibration: run coassist calibrate"
+_NAMED = {
+    "nominal": "the planned path (nominal): it pulls toward the plan, through any obstacle on it",
+    "present": f"the present estimate from the hand force, extrapolated ({_CALIBRATE})",
+    "present-held": f"the present estimate from the hand force ({_CALIBRATE})",
+    "present-half": f"the present estimate from the hand force, half extrapolated ({_CALIBRATE})",
+    "constant-velocity": f"the tool's constant-velocity extrapolation ({_CALIBRATE})",
+    "oracle": "the simulated operator's true intent (the oracle: simulation only)",
+}
+_CONTROLLERS = {
+    "manual": "none: manual guidance (MG), the robot renders its inertia and damping only",
+    "manual-probe": (
+        "none: a calibration trial, manual guidance plus the probe (a small known push that measures the arm); "
+        "fit the trials with coassist calibrate"
+    ),
+    "impedance": "impedance control (IMP): a spring pulls the tool back onto the planned path",
+}
+
+
+def _ways(sides: np.ndarray) -> str:
+    n = int(sides.size)
+    left, right = int(np.sum(sides == 1)), int(np.sum(sides == -1))
+    return f"{n} demonstration{'s' if n != 1 else ''} ({left} left, {right} right)"
+
+
+def _told(obstacles: Sequence[Any], scene: str | None) -> str:
+    n = len(obstacles)
+    where = f"the scene file {scene}" if scene else "the simulated task"
+    return f"{n} obstacle{'s' if n != 1 else ''} of {where}"
+
+
+def check_person(source: Any, user: str, intent: str) -> None:
+    """ValueError in one line when ``source`` is a person model (``coassist calibrate``) holding no calibration
+    of ``user`` (the person at the handle): it names who it holds."""
+    from coassist.scenario.person_intent import PersonPathsIntent
+
+    # the named present-estimate sources are the same class knowing nobody: no person model to check
+    fitted = isinstance(source, PersonPathsIntent) and bool(source.arms or source.paths)
+    if fitted and user not in source.arms and source.default_paths is None:
+        held = ", ".join(sorted(source.arms)) or "nobody"
+        raise ValueError(
+            f"intent {intent}: the person model holds no calibration of {user!r} (it holds {held}); "
+            "name the person at the handle (--person), or calibrate them (coassist calibrate)"
+        )
+
+
+def assistance_line(
+    controller: str,
+    intent: str,
+    source: Any = None,
+    *,
+    user: str = "",
+    path: np.ndarray | None = None,
+    obstacles: Sequence[Any] = (),
+    scene: str | None = None,
+) -> str:
+    """``"assistance: …"``: what the person at the handle gets (module docstring).
+
+    controller : the controller kind.  intent : the ``--intent`` given (a name or a folder).
+    source : the loaded intent source (a person model is described from it); None: from ``intent`` alone.
+    user : the person at the handle (whose calibration a person model uses).  path : (P, 2) the run's
+    nominal path, when known (a person model's paths serve only the plan they were recorded on).
+    obstacles : what the robot is told (TrialContext.obstacles).  scene : the scene file they came from
+    (None: the simulated task's).
+    """
+    if controller in _CONTROLLERS:
+        return f"assistance: {_CONTROLLERS[controller]}"
+    head = f"assistance: {controller}, toward "
+    if intent in _NAMED:
+        return head + _NAMED[intent]
+    if intent == "paths" or intent_folder_kind(intent) == "path-hypotheses":
+        what = "the path hypotheses" + ("" if intent == "paths" else f" calibrated in {intent}")
+        if obstacles:
+            return head + f"{what} round the {_told(obstacles, scene)} (the robot is told the scene)"
+        return head + f"{what}, but the robot is told no obstacle: the present estimate (give --scene FILE)"
+    if intent in INTENT_SOURCES:  # a source registered since (its summary says what it is)
+        return head + INTENT_SOURCES[intent].summary
+    if intent_folder_kind(intent) == "person-model":
+        return head + _person(intent, source, user, path)
+    return head + f"the trained model {intent} (coassist train)"
+
+
+def _person(intent: str, source: Any, user: str, path: np.ndarray | None) -> str:
+    from coassist.scenario.path_model import PathFrame
+    from coassist.scenario.person_intent import PersonPathsIntent
+
+    name = f"the person model {intent}"
+    if not isinstance(source, PersonPathsIntent) or not (source.arms or source.paths):
+        return name
+    arm = source.arms.get(user, source.default_arm)
+    how = "arm measured" if arm.method == "probe-iv" else "arm ASSUMED (their trials carried no probe)"
+    model = source.paths.get(user, source.default_paths)
+    if model is None:
+        return f"{name} ({user}: {how}, no demonstrations: the present estimate)"
+    known = f"{user}: {how}, {_ways(model.sides)}"
+    if path is not None:
+        # the person model's own test of the plan (coassist.scenario.person_intent.PersonPathsIntent.reset)
+        if PathFrame(model.nominal).distance_to(np.asarray(path, dtype=float)) > 0.01:
+            return f"{name} ({known}, recorded on another plan than this run's: the present estimate with their arm)"
+    return f"{name} ({known})"

@@ -1,0 +1,163 @@
+"""The lab's flow on an arm (issue 40): calibration trials recorded by drive with the probe fit a person model;
+drive says in one line what the person will get; a scene file reaches the intent source on an arm."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra: pip install 'coassist[robot]'")
+pytest.importorskip("pinocchio", reason="the UR5 kinematics need the robot extra: pip install 'coassist[robot]'")
+
+from coassist.data import Trial  # noqa: E402
+from coassist.experiments.person_calibration import calibrate_people  # noqa: E402
+from coassist.robot.drive import DriveConfig, drive  # noqa: E402
+from coassist.robot.mujoco_world import MujocoUR5World  # noqa: E402
+from coassist.runtime.operators import ScriptedForce  # noqa: E402
+from coassist.scenario.intent_registry import INTENT_SOURCES  # noqa: E402
+from coassist.scenario.person_model import write_person_model  # noqa: E402
+from coassist.scenario.scene import Scene, SceneBox  # noqa: E402
+
+PUSH = ScriptedForce.constant((5.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+
+
+class Named(NamedTuple):
+    id: str
+    trial: Trial
+
+
+@pytest.fixture(scope="module")
+def probe_trials():
+    """Three calibration trials of the simulated operator, recorded by drive in MuJoCo with the probe."""
+    said: list[str] = []
+    trials = [
+        Named(
+            f"mujoco/{s}",
+            drive(
+                DriveConfig(controller="manual-probe", task="linear", obstacle="large", seed=s, person="alice"),
+                say=said.append,
+            ),
+        )
+        for s in range(3)
+    ]
+    return trials, said
+
+
+def test_probe_trials_recorded_by_drive_fit_a_person_model(probe_trials, tmp_path):
+    trials, said = probe_trials
+    # the probe is a calibration trial, never assistance, and drive says so (one line per run)
+    assert said == [said[0]] * 3 and said[0].startswith("assistance: none: a calibration trial")
+    for t in trials:
+        assert t.trial.meta.controller == "manual-probe" and t.trial.meta.user == "alice"
+        # the probe's push is what the robot exerts: 2.5 N RMS per axis (coassist.control.presets.PROBE)
+        rms = np.sqrt(np.mean(t.trial.effort_r[:, :2] ** 2, axis=0))
+        np.testing.assert_allclose(rms, 2.5, rtol=0.1)
+    (c,) = calibrate_people(trials)
+    arm = c.fit.arm
+    assert arm.method == "probe-iv" and arm.trials == 3
+    # the simulated operator's arm stiffens from 550 to 1300 N/m with their effort: the estimate lies there
+    assert 550.0 - 3 * arm.stiffness_se < arm.stiffness < 1300.0 + 3 * arm.stiffness_se
+    folder = write_person_model(tmp_path / "cal", {"alice": c.fit})
+
+    # assisting with it: drive names the person model, whose arm and how many demonstrations
+    said = []
+    run = drive(
+        DriveConfig(task="linear", obstacle="large", intent=str(folder), person="alice", time_limit=0.4),
+        say=said.append,
+    )
+    sides = c.fit.paths.sides
+    assert said == [
+        f"assistance: cooperative, toward the person model {folder} (alice: arm measured, {sides.size} "
+        f"demonstrations ({int(np.sum(sides == 1))} left, {int(np.sum(sides == -1))} right))"
+    ]
+    assert run.meta.model_id == "person:cal" and run.meta.user == "alice"
+    # another task: the person model says it serves another plan
+    said.clear()
+    drive(
+        DriveConfig(task="curved", intent=str(folder), person="alice", time_limit=0.2),
+        say=said.append,
+    )
+    assert "recorded on another plan than this run's: the present estimate with their arm" in said[0]
+    # a person it holds no calibration of is refused before anything moves
+    with pytest.raises(ValueError, match=r"holds no calibration of 'bob' \(it holds alice\).*--person"):
+        drive(DriveConfig(task="linear", intent=str(folder), person="bob", time_limit=0.2))
+
+
+class _Told:
+    """The ``paths`` source, remembering what each trial told it."""
+
+    def __init__(self) -> None:
+        self.inner = INTENT_SOURCES["paths"].build(60)
+        self.history, self.horizon, self.model_id = 1, 60, "paths"
+        self.contexts: list = []
+
+    def reset(self, context) -> None:
+        self.contexts.append(context)
+        self.inner.reset(context)
+
+    def predict(self, history):
+        return self.inner.predict(history)
+
+
+def test_a_scene_file_reaches_the_source_on_an_arm():
+    # a real arm's world ("ur"), here MuJoCo behind it: the robot is told nothing of the task, only the scene
+    scene = Scene((SceneBox((0.52, 0.16), (0.12, 0.12), "box"),), "scene.toml")
+    base = {"world": "ur", "controller": "manual", "task": "linear", "time_limit": 0.3}
+    for given in (None, scene):
+        source = _Told()
+        world = MujocoUR5World("handle", seed=0)
+        try:
+            trial = drive(DriveConfig(**base, scene=given), world=world, intent_source=source, operator=PUSH)
+        finally:
+            world.close()
+        (context,) = source.contexts
+        if given is None:
+            assert context.obstacles == () and "scene" not in trial.meta.extra
+            assert source.inner.curves[0].size == 0  # no obstacle: paths is the present estimate
+        else:
+            assert context.obstacles == (((0.52, 0.16), (0.12, 0.12)),)
+            told = trial.meta.extra["scene"]  # recorded with the trial: reported apart
+            assert told["file"] == "scene.toml" and told["frame"] == "base"
+            assert [(tuple(o["center"]), tuple(o["size"]), o["name"]) for o in told["obstacles"]] == [
+                ((0.52, 0.16), (0.12, 0.12), "box")
+            ]
+            sides, points = source.inner.curves
+            assert set(sides.tolist()) == {1, -1} and points.shape[0] == sides.size  # hypotheses round the box
+
+
+def test_the_statement_names_the_scene_for_paths():
+    scene = Scene((SceneBox((0.52, 0.16), (0.12, 0.12)),), "lab/scene.toml")
+    said: list[str] = []
+    drive(DriveConfig(task="linear", intent="paths", scene=scene, time_limit=0.2), say=said.append)
+    assert said == [
+        "assistance: cooperative, toward the path hypotheses round the 1 obstacle of the scene file "
+        "lab/scene.toml (the robot is told the scene)"
+    ]
+
+
+def test_the_commands_say_what_the_person_gets_and_refuse_bad_lab_inputs(tmp_path):
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+
+    runner = CliRunner()
+    out = str(tmp_path / "t.parquet")
+    res = runner.invoke(app, ["drive", "--time-limit", "0.2", "--no-plot", "--out", out])
+    assert res.exit_code == 0, res.output
+    said = [line for line in res.output.splitlines() if line.startswith("assistance:")]
+    assert said == [
+        "assistance: cooperative, toward the present estimate from the hand force (no calibration: run coassist "
+        "calibrate)"
+    ]
+    bad = tmp_path / "scene.toml"
+    bad.write_text("[[obstacle]]\ncenter = [0.5, 0.1]\n")
+    res = runner.invoke(app, ["drive", "--scene", str(bad), "--out", str(tmp_path / "u.parquet")])
+    assert res.exit_code == 2 and f"error: --scene {bad}: obstacle[0].size is missing" in res.output
+    res = runner.invoke(app, ["drive", "--person", "a b", "--out", str(tmp_path / "u.parquet")])
+    assert res.exit_code == 2 and "--person must be 1-32 letters, digits" in res.output
+    assert not (tmp_path / "u.parquet").exists()
+    pytest.importorskip("starlette", reason="play needs the web extra")
+    res = runner.invoke(app, ["play", "--scene", str(bad), "--no-open"])
+    assert res.exit_code == 2 and "a scene file is for --drive (an arm)" in res.output
