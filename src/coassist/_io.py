@@ -18,18 +18,28 @@ Temporary names carry the writer's pid (``.<name>.<pid>.<token>.tmp``, ``….new
 :func:`remove_stale` can delete what a dead process left behind and nothing a live one
 is still writing. Files are created with mode 0666 and folders 0777, less the user's
 umask, as ``open``/``mkdir`` would (``tempfile`` would give 0600 / 0700).
+
+**Hashed JSON files** (:func:`write_hashed_json`, :func:`read_hashed_json`): a small JSON
+object that carries the SHA-256 of its own content, for the files a person could edit by
+hand and the robot would then obey (a path-hypotheses calibration, a learned person
+model). The hash is over the canonical JSON of the object without the hash key
+(:func:`json_sha256`: sorted keys, no spaces, ASCII, no NaN or infinity); an edit that
+does not recompute it is refused in one line naming the file. It guards against an edit
+by mistake (a typo, a value pasted from elsewhere), not against someone who recomputes it.
 """
 
 from __future__ import annotations
 
 import ctypes
 import errno
+import hashlib
 import io
+import json
 import os
 import re
 import secrets
 import shutil
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
@@ -37,17 +47,22 @@ from typing import IO, Any
 from coassist.errors import CoassistError
 
 __all__ = [
+    "HASH_KEY",
+    "HashedJsonError",
     "OutputBusyError",
     "OutputLock",
     "atomic_write",
     "atomic_write_bytes",
     "atomic_write_text",
     "fsync_dir",
+    "json_sha256",
     "partial_folder",
+    "read_hashed_json",
     "remove_stale",
     "save_figure",
     "staged_folder",
     "swap_in",
+    "write_hashed_json",
 ]
 
 # .<name>.<pid>.<token>.<kind>, kind = tmp (a file being written), new (a folder being
@@ -329,3 +344,108 @@ class OutputLock:
             # then close, which releases the flock. A killed run leaves the file unlocked.
             self.lock_file.unlink(missing_ok=True)
             os.close(fd)
+
+
+# --------------------------------------------------------------------------- hashed JSON
+
+#: The key of a hashed JSON file that holds the SHA-256 of the rest of it (module docstring).
+HASH_KEY = "sha256"
+#: The largest hashed JSON file read [bytes] unless the caller says otherwise (a calibration of
+#: a hundred people is tens of kB).
+MAX_HASHED_JSON_BYTES = 4 * 2**20
+
+
+class HashedJsonError(CoassistError, ValueError):
+    """A hashed JSON file that cannot be used (missing, malformed, another format, edited after it
+    was written); ``str()`` is one line that names the file."""
+
+
+def json_sha256(doc: Mapping[str, Any]) -> str:
+    """SHA-256 (hex) of ``doc``'s canonical JSON: keys sorted, no spaces, ASCII, NaN and ±inf refused
+    (ValueError). Equal for a document and its JSON round trip (a tuple hashes as the list it is read back as)."""
+    text = json.dumps(doc, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+    return hashlib.sha256(text.encode("ascii")).hexdigest()
+
+
+def write_hashed_json(path: str | os.PathLike[str], doc: Mapping[str, Any], *, format: str) -> Path:
+    """Write ``{"format": format, **doc, "sha256": …}`` to ``path`` atomically (:func:`atomic_write`); returns ``path``.
+
+    ``doc`` : a JSON-ready mapping with string keys, without ``"format"`` or :data:`HASH_KEY`;
+    its numbers finite (ValueError otherwise). The hash is that of the document as
+    :func:`read_hashed_json` will parse it back.
+    """
+    if not isinstance(format, str) or not format:
+        raise ValueError(f"format must be a non-empty string, got {format!r}")
+    if not isinstance(doc, Mapping) or not all(isinstance(k, str) for k in doc):
+        raise ValueError("a hashed JSON document must be a mapping with string keys")
+    clash = sorted({"format", HASH_KEY} & set(doc))
+    if clash:
+        raise ValueError(
+            f"a hashed JSON document may not hold {', '.join(map(repr, clash))}: write_hashed_json sets it"
+        )
+    content = json.loads(json.dumps({"format": format, **doc}, allow_nan=False))  # as it will be read back
+    content[HASH_KEY] = json_sha256(content)
+    return atomic_write_text(path, json.dumps(content, indent=1, allow_nan=False) + "\n")
+
+
+def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise ValueError(f"the key {key!r} appears twice")
+        out[key] = value
+    return out
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a number a file may hold")
+
+
+def read_hashed_json(
+    path: str | os.PathLike[str], *, format: str, max_bytes: int = MAX_HASHED_JSON_BYTES
+) -> dict[str, Any]:
+    """The document :func:`write_hashed_json` wrote at ``path``, without ``"format"`` and :data:`HASH_KEY`.
+
+    :class:`HashedJsonError` (one line naming the file) when the file is missing or unreadable,
+    larger than ``max_bytes``, not UTF-8 JSON (NaN, Infinity, a key given twice, nesting too deep
+    included), not an object, of another ``format``, without its hash, or when its content does
+    not match its hash (edited after it was written). What the fields mean is the caller's to check.
+    """
+    path = Path(path)
+
+    def fail(what: str) -> HashedJsonError:
+        return HashedJsonError(f"{path}: {what}")
+
+    try:
+        if path.stat().st_size > max_bytes:
+            raise fail(f"larger than {max_bytes} bytes: not a {format} file")
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise fail("not found") from None
+    except OSError as exc:
+        raise fail(f"cannot be read: {exc.strerror}") from None
+    try:
+        doc = json.loads(raw.decode("utf-8"), object_pairs_hook=_no_duplicates, parse_constant=_no_constant)
+    except RecursionError:
+        raise fail("JSON nested too deeply") from None
+    except UnicodeDecodeError as exc:
+        raise fail(f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except ValueError as exc:  # json.JSONDecodeError is one; so are the hooks' refusals
+        raise fail(f"malformed JSON: {exc}") from None
+    if not isinstance(doc, dict):
+        raise fail(f"must hold a JSON object, got {type(doc).__name__}")
+    if doc.get("format") != format:
+        raise fail(f"format {doc.get('format')!r}, expected {format!r}")
+    recorded = doc.pop(HASH_KEY, None)
+    if recorded is None:
+        raise fail(
+            f"carries no {HASH_KEY!r} (written before coassist hashed these files, or by hand): "
+            "it cannot be verified; write it again with coassist"
+        )
+    if recorded != json_sha256(doc):
+        raise fail(
+            f"its content does not match its {HASH_KEY!r} (edited after it was written?): "
+            "restore it or write it again with coassist"
+        )
+    del doc["format"]
+    return doc

@@ -3,6 +3,7 @@
 exactly what the later step would have run itself, and nothing may be left unused."""
 
 from concurrent.futures import Future
+from contextlib import nullcontext
 from dataclasses import replace
 
 import numpy as np
@@ -66,6 +67,15 @@ def _held_out(cfg):
     }
 
 
+@pytest.fixture(scope="module")
+def shared_pool():
+    """Two simulation processes for this module's tests: a pool costs ~8 CPU-s to start (each process
+    imports numpy, scipy and torch). A job carries all its inputs, so the same processes again give the same
+    trials (tests/sim/test_world.py); each test still compares against its own reference."""
+    with worker_pool(2) as pool:
+        yield pool
+
+
 def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
     """Named sources at the first call, each learned one (and each of its trainings) once written;
     never a cell the application hands over; never twice; the MuJoCo jobs are those ``_run_mujoco``
@@ -121,19 +131,20 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
 
 
 @pytest.mark.parametrize("with_model", [False, True])
-def test_prefetched_collection_is_the_collection(tmp_path, with_model):
+def test_prefetched_collection_is_the_collection(tmp_path, with_model, shared_pool):
     """prefetch + collect writes the same trials, bit for bit, as collect alone (named intent,
     and a model in the loop in lockstep groups); a prefetch under the same name with other
     options is dropped and the collection asked for runs."""
     pytest.importorskip("torch")
     cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=2, threads=1)
-    plain = pipeline.Workspace(cfg, tmp_path / "plain", progress=False)
+    plain = pipeline.Workspace(cfg, tmp_path / "plain", progress=False, pool=shared_pool)  # no pool of its own to start
     intent = "nominal"
     if with_model:
         folder, _ = plain.collect("D0", tasks=("curved",), trials=2, seed=1)
         intent = str(plain.train("m", [folder], init="scratch", epochs=1))
-    options = {"tasks": ("curved", "linear"), "users": (0, 1), "trials": 2, "seed": 7, "intent": intent}
-    with worker_pool(2) as pool:
+    # 2 tasks x 2 users x 1 trial: four trials, two to a lockstep group on each of the 2 workers
+    options = {"tasks": ("curved", "linear"), "users": (0, 1), "trials": 1, "seed": 7, "intent": intent}
+    with nullcontext(shared_pool) as pool:
         _, reference = pipeline.Workspace(cfg, tmp_path / "ref", progress=False, pool=pool).collect("x", **options)
         ws = pipeline.Workspace(cfg, tmp_path / "ahead", progress=False, pool=pool)
         ws.prefetch("x", **options)
@@ -143,7 +154,7 @@ def test_prefetched_collection_is_the_collection(tmp_path, with_model):
         assert ws._pending == {}
     _same_trials(reference, ahead)
     _same_trials(reference, other)
-    assert [t.meta.seed for t in ahead.trials] == list(range(7, 7 + 8))
+    assert [t.meta.seed for t in ahead.trials] == list(range(7, 7 + 4))
 
 
 def test_prefetch_without_a_pool_does_nothing(tmp_path):
@@ -208,7 +219,7 @@ def test_beside_training_starts_each_later_share_once_and_all_by_the_last_traini
     assert len(pool.calls) == n
 
 
-def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch):
+def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch, shared_pool):
     """run_transfer's jobs on the run's pool (one torch thread each, the longest first, each
     model scored in its worker) give the models and scores of the one-after-the-other path in
     this process on one thread, exactly; the train times are the jobs' own. The datasets are
@@ -237,7 +248,7 @@ def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch):
         return tmp_path / "here" / "datasets" / name, read_dataset(tmp_path / "here" / "datasets" / name)
 
     monkeypatch.setattr(pipeline.Workspace, "collect", collected_here)
-    with worker_pool(2) as pool:
+    with nullcontext(shared_pool) as pool:
         ws = pipeline.Workspace(cfg, tmp_path / "pool", progress=False, pool=pool)
         on_pool = run_transfer(ws, prev, 1.0)
     assert list(on_pool.targets) == list(here.targets)
@@ -252,11 +263,11 @@ def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch):
             assert a == b, (name, start)
 
 
-def test_prefetch_errors_reach_collect(tmp_path):
+def test_prefetch_errors_reach_collect(tmp_path, shared_pool):
     """A prefetched collection that fails raises in the collect that asks for it (not lost in
     its thread); the same name prefetched again is a no-op with the same options, refused with others."""
     cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=2)
-    with worker_pool(2) as pool:
+    with nullcontext(shared_pool) as pool:
         ws = pipeline.Workspace(cfg, tmp_path, progress=False, pool=pool)
         options = {"tasks": ("curved",), "trials": 1, "seed": 1}
         ws.prefetch("x", **options)

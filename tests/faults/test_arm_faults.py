@@ -174,9 +174,12 @@ def run_franky(case, franky_sim):
 
     server = franky_sim.SimServer()
     try:
-        inner = FrankaWorld(
-            server.host, arm="fr3", ft_sensor=ScriptedSensor(server, case.operator)
-        )  # franky-sim is an FR3
+        inner = FrankaWorld(  # franky-sim is an FR3; the cases are not about the link (its timeout: test_franka_world)
+            server.host,
+            arm="fr3",
+            ft_sensor=ScriptedSensor(server, case.operator),
+            link_timeout=franky_sim.LINK_TIMEOUT,
+        )
         limits = _limits(inner.read().tool_pose[:3])
         world = FaultyFranka(inner, case.inject, case.overrun)
         config = DriveConfig(

@@ -14,6 +14,10 @@ driver that does one thing wrong:
   newest (the hand force logged was 39.8 N for a 10 N push);
 - a joint state naming a joint twice, or without velocities: refused, and the error says
   what is wrong with the messages (not "no message");
+- a second node publishing another pose on ``/joint_states``, interleaved with the driver's
+  (issue 42: the restart after a stall took its speed, a 0.166 rad/s step against the
+  0.064 rad/s limit): the joint states jump, the run stops in one line naming the topic, and
+  no command before the stop stepped more than the acceleration limit;
 - the loop stalls between reading the state and sending its command: zeros go out, not
   a command computed from state older than ``stale_after``;
 - the commands stop (the loop hangs 0.5 s): with ``coassist ros2-watchdog`` between the
@@ -43,6 +47,7 @@ from coassist.interfaces import Fault  # noqa: E402
 from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
+from coassist.runtime.safety import SafetyLimits  # noqa: E402
 from coassist.runtime.world import Command  # noqa: E402
 
 TESTS = Path(__file__).resolve().parents[1]
@@ -263,6 +268,47 @@ def test_a_joint_state_without_velocities_says_what_is_wrong_not_no_message():
     msg = _connect({"velocities": False})
     assert "no message" not in msg and JOINTS in msg
     assert "one position and one velocity per name (6 names, 6 positions, 0 velocities)" in msg
+
+
+class TwoSources(Driver):
+    """The driver, and from command ``after`` on a second publisher on /joint_states: another pose
+    (0.2 rad off on every joint), moving, stamped 1 ms after each of the driver's messages."""
+
+    def _publish(self) -> None:
+        super()._publish()
+        if len(self.commands) >= self.after:
+            s = self.world.read()
+            js = JointState()
+            js.header.stamp = rclpy.time.Time(nanoseconds=EPOCH_NS + round(s.t * 1e9) + 1_000_000).to_msg()
+            js.name = list(UR_JOINT_NAMES)
+            js.position = [float(v) + 0.2 for v in s.q]
+            js.velocity = [-0.166] * len(UR_JOINT_NAMES)
+            self.js_pub.publish(js)
+
+
+def test_joint_states_from_two_sources_stop_the_arm_in_one_line():
+    config = DriveConfig(world="ur", controller="manual", task="linear", time_limit=1.2, seed=0)
+    sent = []
+    sim = ros.mujoco_world(config)
+    sim.operator = ros.PUSH
+    robot = TwoSources(sim, after=40)
+    world = Ros2World(_config(sim))
+    try:
+        trial = drive(config, world=world, on_tick=lambda k, st, out: sent.append(np.asarray(out.command.qd)))
+    finally:
+        world.close()
+        time.sleep(0.05)
+        robot.close()
+    extra = trial.meta.extra
+    assert extra["ended"] == "world_error" and 40 <= trial.n_samples <= 41, (extra["ended"], trial.n_samples)
+    msg = extra["stop_message"]
+    assert f"the joint states on {JOINTS} jump" in msg and "two sources publish" in msg and "\n" not in msg
+    assert "moved 0.2" in msg  # the other pose, 0.2 rad off (and no more: it was caught at once)
+    # every command the arm got before the stop: one acceleration step from the one before
+    a_dt = SafetyLimits().joint_acceleration * config.dt
+    steps = np.abs(np.diff(np.vstack([np.zeros(6), *robot.commands[: trial.n_samples]]), axis=0))
+    assert steps.max() <= a_dt + 1e-12
+    assert np.all(robot.commands[-1] == 0.0)  # then stand still
 
 
 # -------------------------------------------------------------------------- commands from stale state

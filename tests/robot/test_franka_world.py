@@ -36,6 +36,10 @@ from coassist.runtime.safety import SafetyLimits, within_limits  # noqa: E402
 
 SERVER = Path(__file__).with_name("franky_sim_server.py")
 D = 100.0  # the preset's damping [N·s/m]: MG renders M a + D v = F
+#: [s] the link timeout of the runs that are not about the link: beside two busy loops on 2 cores the
+#: server process (its 1 kHz clock) and this one are starved for longer than FrankaWorld's 0.1 s
+#: default now and then (the server also runs at a higher priority where it may: franky_sim_server.py)
+LINK_TIMEOUT = 1.0
 
 
 class SimServer:
@@ -102,7 +106,7 @@ def server():
 def mg_run():
     s = SimServer()
     try:
-        world = FrankaWorld(s.host, arm="fr3", ft_sensor=PushSensor(s, (10.0, 0.0, 0.0)))
+        world = FrankaWorld(s.host, arm="fr3", ft_sensor=PushSensor(s, (10.0, 0.0, 0.0)), link_timeout=LINK_TIMEOUT)
         sent = []
         trial = drive(
             DriveConfig(world="franka", robot="fr3", controller="manual", time_limit=1.4),
@@ -132,11 +136,17 @@ def test_mg_with_a_constant_push_settles_at_f_over_d(mg_run):
     v = trial.velocity
     # 10 N / 100 N·s/m = 0.1 m/s; time constant M/D = 0.1 s, so from 0.4 s on it has settled. 5 %:
     # franky-sim's joint velocity loop is a finite damper (kv = 200-450 N·m·s/rad), the push lags it.
-    settled = slice(50, 150)
+    # A busy machine makes the loop miss deadlines now and then (flagged: the layer decelerates a step, the
+    # admittance restarts from the command): the 25 ticks (2 time constants) from one on are left out.
+    settled = np.zeros(trial.n_samples, dtype=bool)
+    settled[50:150] = True
+    for k in np.flatnonzero(trial.fault & int(Fault.DEADLINE_MISS | Fault.DECELERATING)):
+        settled[k : k + 25] = False
+    assert settled.sum() >= 40, f"the machine left {settled.sum()} undisturbed ticks of 100"
     assert v[settled, 0].mean() == pytest.approx(10.0 / D, rel=0.05)
     assert np.abs(v[settled, 1]).max() < 5e-3
     # the 7th DOF: the null space holds the start posture, the tool's orientation held too
-    assert np.abs(trial.joints[settled, [0, 2, 4, 6]] - trial.joints[0, [0, 2, 4, 6]]).max() < 0.02
+    assert np.abs(trial.joints[settled][:, [0, 2, 4, 6]] - trial.joints[0, [0, 2, 4, 6]]).max() < 0.02
     # every command inside the joint speed limit, every step inside the acceleration limit
     lim = SafetyLimits()
     assert np.abs(sent).max() <= lim.joint_velocity + 1e-12
@@ -187,7 +197,9 @@ class ReflexAfter:
 def test_a_reflex_ends_the_run_safely_with_what_to_do(server):
     real = franky.Robot(server.host, realtime_config=franky.RealtimeConfig.Ignore)
     robot = ReflexAfter(real, 30)
-    world = FrankaWorld(server.host, robot=robot, arm="fr3", ft_sensor=PushSensor(server, (5.0, 0.0, 0.0)))
+    world = FrankaWorld(
+        server.host, robot=robot, arm="fr3", ft_sensor=PushSensor(server, (5.0, 0.0, 0.0)), link_timeout=LINK_TIMEOUT
+    )
     sent = []
     trial = drive(
         DriveConfig(world="franka", robot="fr3", controller="manual", time_limit=3.0),
@@ -246,7 +258,9 @@ def _assistive_run():
     for attempt in range(3):
         server = SimServer()
         try:
-            world = FrankaWorld(server.host, arm="fr3", ft_sensor=PushSensor(server, (10.0, 0.0, 0.0)))
+            world = FrankaWorld(
+                server.host, arm="fr3", ft_sensor=PushSensor(server, (10.0, 0.0, 0.0)), link_timeout=LINK_TIMEOUT
+            )
             seen = []
             # The preset this comparison's 1.5 mm was measured with (nominal intent: no learned predictor).
             config = DriveConfig(
@@ -282,11 +296,31 @@ def _assistive_run():
     raise AssertionError("unreachable")
 
 
-def test_the_assistive_controller_through_franky_sim():
+def _late_ticks(monkeypatch, flagged) -> None:
+    """Make the MuJoCo arm report its period ran over before each tick of ``flagged`` (the loop then
+    flags DEADLINE_MISS on it, as FrankaWorld's clock did), and on no other."""
+    from coassist.robot.mujoco_world import MujocoArmWorld
+
+    late = {int(k) - 1 for k in flagged}
+    apply = MujocoArmWorld.apply
+
+    def applying(self, command):
+        k = getattr(self, "_test_ticks", 0)
+        apply(self, command)
+        self.last_overrun = 0.004 if k in late else 0.0
+        self._test_ticks = k + 1
+
+    monkeypatch.setattr(MujocoArmWorld, "last_overrun", 0.0, raising=False)
+    monkeypatch.setattr(MujocoArmWorld, "apply", applying)
+
+
+def test_the_assistive_controller_through_franky_sim(monkeypatch):
     # A short assistive run (the cooperative game, nominal intent) with a 10 N push along +x.
     trial, seen, sent, rest, kin = _assistive_run()
-    # it ends cleanly: at the time limit, nothing flagged, every tick's command sent, the arm at rest after stop
-    assert trial.meta.extra["ended"] == "time_limit" and trial.fault.max() == 0, fault_names(int(trial.fault.max()))
+    # it ends cleanly: at the time limit, nothing flagged but the machine's own stalls (measured by the
+    # robot's clock; a loaded machine can stall every try), every tick's command sent, the arm at rest after stop
+    flags = int(np.bitwise_or.reduce(trial.fault))
+    assert trial.meta.extra["ended"] == "time_limit" and not flags & ~MACHINE_STALL, fault_names(flags)
     assert sent == len(seen) == trial.n_samples
     assert rest < 0.01  # rad/s
     # every command inside every limit, with the Jacobian and pose of the tick that sent it
@@ -297,7 +331,9 @@ def test_the_assistive_controller_through_franky_sim():
     assert bad == []
     # the same controller and push on the MuJoCo Panda move the tool the same way: the game holds
     # the tool near the plan (which starts to move at 1.5 s), so both creep 17 mm. 1.5 mm: the push
-    # here starts a tick late and franky-sim's joint velocity loop lags its command
+    # here starts a tick late and franky-sim's joint velocity loop lags its command. The machine's
+    # stalls above, if any, are replayed there: the same ticks late, the same ramp of the safety layer.
+    _late_ticks(monkeypatch, np.flatnonzero(trial.fault & int(Fault.DEADLINE_MISS)))
     mj = drive(
         DriveConfig(
             robot="panda", controller="cooperative", preset="thesis-application-dm", intent="nominal", time_limit=2.0

@@ -8,9 +8,14 @@ import pytest
 from coassist.interfaces import Fault, TrialContext
 from coassist.runtime.intent import WindowIntent, WindowIntentBatch
 
+DT = 0.008
+CONTEXT = TrialContext(
+    dt=DT, horizon=5, start=np.zeros(2), target=np.ones(2), reference=np.zeros((10, 4)), task="t", user="u", object="o"
+)
+
 
 class WindowSource:
-    """A model-like source: the window's last x-y plus its mean x-y times the row number."""
+    """A model-like source: the window's last x-y plus its mean x-y times the row number / 10."""
 
     model_id = "window-test"
 
@@ -22,25 +27,29 @@ class WindowSource:
 
     def predict(self, window: np.ndarray) -> np.ndarray:
         steps = np.arange(1, self.horizon + 1)[:, None]
-        return window[-1, :2] + steps * window[:, :2].mean(axis=0)
+        return window[-1, :2] + 0.1 * steps * window[:, :2].mean(axis=0)
 
 
 @pytest.mark.parametrize("history", [0, 1, 4])
 def test_the_batch_pushes_the_stages_windows_and_accepts_as_they_do(history):
     """Windows bit for bit those of each stage's push (the ring's padding at tick 0, its wrap),
     and ok where the stage's accept takes the row: a short answer, a NaN in the first horizon
-    rows (a NaN past them is no fallback), for rows leaving as their runs end."""
+    rows (a NaN past them is no fallback), a row farther from the tool than max_distance or
+    rows faster than max_speed (issue 42), for rows leaving as their runs end."""
     rng = np.random.default_rng(history)
     horizon, need, n = 5, 3, 6
     source = WindowSource(history, horizon)
     stages = [WindowIntent(source, need) for _ in range(n)]
     twins = [WindowIntent(source, need) for _ in range(n)]
+    for stage in stages + twins:
+        stage.reset(CONTEXT)
     batch = WindowIntentBatch(twins)
+    lim = stages[0].plausibility
     rows = np.arange(n)
     for k in range(3 * history + 4):
         if k == history + 2:
             rows = rows[1:]  # a run left
-        features = rng.normal(0.0, 1.0, (rows.size, 8))
+        features = rng.normal(0.0, 0.01, (rows.size, 8))
         windows = batch.push(k, rows, features)
         assert windows.shape == (rows.size, history, 8)
         for j, i in enumerate(rows.tolist()):
@@ -48,11 +57,15 @@ def test_the_batch_pushes_the_stages_windows_and_accepts_as_they_do(history):
         answer = (
             np.stack([source.predict(w) for w in windows])
             if history
-            else rng.normal(0.0, 1.0, (rows.size, horizon + 2, 2))
+            else features[:, None, :2] + rng.normal(0.0, 0.001, (rows.size, horizon + 2, 2))
         )
         answer[0, 1, 0] = np.nan  # row 0: a NaN in use (a fallback)
         if rows.size > 1:
             answer[1, horizon:, :] = np.nan  # row 1: NaNs only past the horizon (taken)
+        if rows.size > 3:
+            answer[2, 3, 1] = features[2, 1] + lim.max_distance * 1.01  # row 2: one point too far (a fallback)
+            answer[3, :, 0] = features[3, 0] + lim.max_speed * DT * 1.01 * np.arange(answer.shape[1])  # too fast
+            answer[3, :, 1] = features[3, 1]
         positions, ok = batch.accept(rows, answer)
         for j, i in enumerate(rows.tolist()):
             pred, flags = stages[i].accept(answer[j])
@@ -60,6 +73,8 @@ def test_the_batch_pushes_the_stages_windows_and_accepts_as_they_do(history):
             if ok[j]:
                 assert positions[j].tolist() == pred.tolist()
         assert not ok[0] and (rows.size < 2 or ok[1])
+        assert rows.size < 4 or not (ok[2] or ok[3])
+        assert ok[4:].all()  # the plain rows: near the tool, at a hand's speed
     short = np.zeros((rows.size, need - 1, 2))  # fewer rows than the controller needs: every row a fallback
     assert not batch.accept(rows, short)[1].any()
     with pytest.raises(ValueError, match="malformed"):
@@ -71,3 +86,36 @@ def test_the_batch_takes_stages_of_one_history_and_horizon_only():
         WindowIntentBatch([WindowIntent(WindowSource(2, 5), 3), WindowIntent(WindowSource(3, 5), 3)])
     with pytest.raises(ValueError, match="horizon"):
         WindowIntentBatch([WindowIntent(WindowSource(2, 5), 3), WindowIntent(WindowSource(2, 6), 3)])
+
+
+def test_a_row_far_from_the_tool_is_a_fallback_not_a_push():
+    """prediction_plausible's rule in the stage: a row max_distance from the tool (either axis) is
+    used, one beyond it is a fallback (flagged; PREDICTOR_STALLED once it persists); consecutive rows
+    max_speed · dt apart are used, more is a fallback."""
+    from coassist.interfaces import PlausibilityLimits, prediction_plausible
+
+    lim = PlausibilityLimits(max_distance=0.2, max_speed=1.0)
+    stage = WindowIntent(WindowSource(1, 5), 5, stall_ticks=2, plausibility=lim)
+    stage.reset(CONTEXT)
+    tool = (0.3, -0.6)
+    near = np.array(tool) + np.linspace(0.0, 0.004, 5)[:, None] * [1.0, 0.0]  # 0.5 m/s along x
+    for k, (rows, usable) in enumerate(
+        [
+            (near, True),
+            (near + [0.0, 0.2 - 1e-9], True),  # every row just within 0.2 m of the tool on y: used
+            (near + [0.0, 0.2 + 1e-9], False),  # just beyond it: a fallback
+            (np.array(tool) + np.arange(5)[:, None] * [DT * 0.99, 0.0], True),  # 0.99 m/s: used
+            (np.array(tool) + np.arange(5)[:, None] * [DT * 1.01, 0.0], False),  # 1 % faster: a fallback
+        ]
+    ):
+        stage.push(k, (*tool, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        assert prediction_plausible(rows, np.array(tool), DT, lim) == usable, k
+        pred, flags = stage.accept(rows)
+        assert (pred is not None, flags) == (usable, Fault.NONE if usable else Fault.PREDICTION_FALLBACK), k
+    far = near + [1.0, 0.0]
+    for k in range(5, 8):  # the third bad row in a row (stall_ticks = 2): stalled
+        stage.push(k, (*tool, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        pred, flags = stage.accept(far)
+    assert pred is None and flags == Fault.PREDICTION_FALLBACK | Fault.PREDICTOR_STALLED
+    with pytest.raises(ValueError, match="plausibility must be a PlausibilityLimits"):
+        WindowIntent(WindowSource(1, 5), 5, plausibility=0.5)

@@ -351,6 +351,65 @@ def test_reset_ramps_from_the_given_velocity():
         layer.reset(np.array([np.nan] * 6))
 
 
+# ---------------------------------------------------------------------- after a stall (step 2)
+def _stalled(prev, measured, history=()):
+    """The command of the tick after a stall: a layer whose commands were ``history`` then ``prev``,
+    told the arm measures ``measured``."""
+    lim = SafetyLimits(tool_speed=100.0, tool_angular_speed=100.0, min_manipulability=0.0)
+    layer = SafetyLayer(lim, DT, 6)
+    layer.reset(history[0] if history else prev)
+    for qd in [*history[1:], prev]:
+        step(layer, qd)
+    assert np.allclose(layer.previous, prev)
+    out, flags, _ = layer.limit_joint_velocity(
+        np.asarray(prev, dtype=float), I6, POSE, NO_HAND, Fault.DEADLINE_MISS, measured=np.asarray(measured)
+    )
+    return layer, out, flags
+
+
+def test_after_a_stall_a_braked_arm_is_ramped_from_what_it_measures():
+    # a Franka brakes to rest when its hold runs out: one acceleration step from the measured velocity
+    prev = np.array([0.5, -0.3, 0.2, 0.0, 0.1, -0.05])
+    measured = np.array([0.01, -0.02, 0.0, 0.0, 0.0, 0.0])
+    layer, out, flags = _stalled(prev, measured)
+    a_dt = 0.98 * 8.0 * DT
+    assert layer.resumed_from_measured == 1 and flags == Fault.DECELERATING
+    assert np.max(np.abs(out - measured)) <= a_dt + 1e-12
+    # an arm that kept its command (tracking lag ≤ 2 m a dt): ramped from the command, as on any bad tick
+    layer, out, _ = _stalled(prev, prev - 0.1 * np.sign(prev))
+    assert layer.resumed_from_measured == 0 and np.allclose(out, prev * (1 - a_dt / 0.5))
+
+
+def test_a_measured_velocity_the_arm_showed_a_few_ticks_late_is_no_brake():
+    # ramping up 0.0784 rad/s a tick, a joint state 3 ticks late reads 0.235 rad/s below the command:
+    # the arm kept its commands (issue 42: a stamp-0 flood delayed the joint states; a 0.071 rad/s step)
+    a_dt = 0.98 * 8.0 * DT
+    ramp = [np.full(6, a_dt * k) for k in range(1, 8)]
+    layer, out, _ = _stalled(ramp[-1], ramp[-4], history=ramp[:-1])
+    assert layer.resumed_from_measured == 0 and np.max(np.abs(out - ramp[-1])) <= a_dt + 1e-12
+
+
+def test_no_measured_velocity_makes_a_joint_speed_up_or_reverse():
+    """Whatever is measured after a stall (another publisher's joint states, a glitch), every joint's
+    command lies between rest and its last command: a step away from rest never follows from a
+    measured value (issue 42: 0.166 rad/s in one tick against the 0.064 rad/s limit)."""
+    rng = np.random.default_rng(7)
+    refused = resumed = 0
+    for _ in range(400):
+        prev = rng.uniform(-1.0, 1.0, 6) * rng.choice([0.05, 0.5, 1.5])
+        measured = rng.uniform(-1.5, 1.5, 6) * rng.choice([0.01, 0.2, 1.0])
+        layer, out, flags = _stalled(prev, measured)
+        lo, hi = np.minimum(prev, 0.0), np.maximum(prev, 0.0)
+        assert np.all(out >= lo - 1e-12) and np.all(out <= hi + 1e-12), (prev, measured, out)
+        assert flags == Fault.DECELERATING
+        refused += layer.refused_measured
+        resumed += layer.resumed_from_measured
+    assert refused > 100 and resumed > 20  # both branches taken
+    # the issue's case: the arm held 0.1 rad/s, the other publisher's velocity is -0.066: not used
+    layer, out, _ = _stalled(np.full(6, 0.1), np.full(6, -0.166))
+    assert layer.refused_measured == 1 and np.all(out >= 0.0) and np.all(out <= 0.1)
+
+
 # ---------------------------------------------------------------------- the residual case
 def test_jacobian_jump_brakes_at_the_acceleration_limit():
     """q̇⁻ was inside for the old J but J grew ×20: no command within the acceleration limit

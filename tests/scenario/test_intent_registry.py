@@ -137,10 +137,10 @@ def test_the_model_marker_is_the_sidecar_the_intent_package_writes():
     assert INTENT_FOLDERS["model"].marker == SIDECAR
 
 
-def test_anything_else_is_tried_as_a_model_and_refused_in_one_line(tmp_path):
+def test_any_other_folder_is_tried_as_a_model_and_refused_in_one_line(tmp_path):
     pytest.importorskip("torch", reason="coassist.intent needs the learn extra")
     with pytest.raises(ValueError, match=r"could not be loaded as a model") as info:
-        load_intent_source(str(tmp_path / "missing"))
+        load_intent_source(str(tmp_path))  # a folder, but no model in it
     assert "\n" not in str(info.value)
     with pytest.raises(
         ValueError,
@@ -149,6 +149,22 @@ def test_anything_else_is_tried_as_a_model_and_refused_in_one_line(tmp_path):
         load_intent_source("")
     with pytest.raises(ValueError, match="network must be one of"):
         load_intent_source("nominal", network="gpu")
+
+
+def test_a_string_that_is_neither_a_name_nor_a_folder_says_so_and_names_the_sources(tmp_path):
+    # issue 42: a typo of "paths" said "could not be loaded as a model: pahts/model.json: not found"
+    names = "nominal, constant-velocity, oracle, present, paths"
+    with pytest.raises(ValueError) as info:
+        load_intent_source("pahts")
+    assert str(info.value) == (
+        f"intent 'pahts' is neither a source name ({names}) nor an existing folder; did you mean 'paths'?"
+    )
+    missing = str(tmp_path / "models" / "m1")
+    with pytest.raises(ValueError) as info:
+        load_intent_source(missing)
+    assert str(info.value) == f"intent {missing!r} is neither a source name ({names}) nor an existing folder"
+    with pytest.raises(ValueError, match=r"not one of nominal, .*; did you mean 'constant-velocity'\?$"):
+        check_intent("constant-velocty")
 
 
 def test_check_intent_names_the_choices(tmp_path):

@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from coassist._io import write_hashed_json
 from coassist.interfaces import IntentSource, TrialContext
 from coassist.scenario.intent_registry import load_intent_source
 from coassist.scenario.objects import get_object
@@ -207,7 +208,14 @@ def test_calibration_file_round_trip_and_errors_name_the_field(tmp_path):
     doc = json.loads((folder / CALIBRATION_FILE).read_text())
     doc["shapes"]["user-1"]["left_preference"] = 1.0
     (folder / CALIBRATION_FILE).write_text(json.dumps(doc))
-    with pytest.raises(ValueError, match="left_preference"):
+    with pytest.raises(ValueError, match="does not match its 'sha256'"):  # edited: refused for its hash
+        read_calibration(folder)
+    write_calibration(folder, shapes, arm=ArmGuess(900.0, 12.0))
+    raw = json.loads((folder / CALIBRATION_FILE).read_text())
+    raw["shapes"]["user-1"]["left_preference"] = 1.0
+    del raw["sha256"]
+    write_hashed_json(folder / CALIBRATION_FILE, {k: v for k, v in raw.items() if k != "format"}, format=raw["format"])
+    with pytest.raises(ValueError, match="left_preference"):  # hashed again: refused for the value
         read_calibration(folder)
     (folder / CALIBRATION_FILE).write_text("{")
     with pytest.raises(ValueError, match=CALIBRATION_FILE):

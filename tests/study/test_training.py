@@ -3,6 +3,7 @@ process while the next trials wait, and each equals what ``coassist train`` make
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -109,9 +110,17 @@ def test_an_iterative_study_of_two_rounds_trains_what_coassist_train_trains(tmp_
     assert "the stop criterion (eq. 4.13)" in html.read_text() and "M1" in html.read_text()
 
 
-@pytest.fixture
-def source_model(tmp_path) -> Path:
-    """A small model of the default preset's window (1 x 8 LSTM) trained by coassist train on a simulated study's trials."""
+def _contents(folder: Path) -> dict[str, bytes]:
+    return {str(f.relative_to(folder)): f.read_bytes() for f in sorted(folder.rglob("*")) if f.is_file()}
+
+
+@pytest.fixture(scope="module")
+def _source_model(tmp_path_factory) -> Path:
+    """A small model of the default preset's window (1 x 8 LSTM) trained by coassist train on a simulated study's trials.
+
+    Made once for the module (a simulated study and a training): the tests that use it only read it, and
+    :func:`source_model` checks that they did."""
+    tmp_path = tmp_path_factory.mktemp("source-model")
     plan = tmp_path / "collect.toml"
     plan.write_text(
         '[study]\nname = "d0"\nprotocol = "comparison"\nworld = "play"\nparticipants = 1\n\n'
@@ -124,6 +133,14 @@ def source_model(tmp_path) -> Path:
     pf = study.participant("S09")
     _cli_train(str(pf.block("a")), str(pf.block("m")), "--out", str(tmp_path / "source"), *TRAIN_OPTIONS, *SIZES)
     return tmp_path / "source"
+
+
+@pytest.fixture
+def source_model(_source_model) -> Iterator[Path]:
+    """The module's source model (:func:`_source_model`); after the test, its folder must be as it was."""
+    before = _contents(_source_model)
+    yield _source_model
+    assert _contents(_source_model) == before, "a test changed the shared source model"
 
 
 def test_a_transfer_study_trains_the_frozen_lstm_transfer_as_coassist_train(tmp_path, source_model):
@@ -277,10 +294,19 @@ def test_the_training_worker_dies_with_its_run_and_a_resume_follows_at_once(tmp_
         while any(_alive(w) for w in workers) and time.monotonic() < t_end:
             time.sleep(0.05)
         assert not any(_alive(w) for w in workers), "the training worker outlived its run"
+        # nobody holds the model that was being trained. Polled: a process whose leader /proc shows as a zombie
+        # may still be closing its files while its other threads exit (the lock goes with the last of them).
+        from coassist._io import OutputBusyError
+
+        while True:
+            try:
+                with OutputLock(pf.folder / "models" / "M0"):
+                    break
+            except OutputBusyError:
+                assert time.monotonic() < t_end, "the dead worker's lock on M0 outlived it"
+                time.sleep(0.05)
         with ParticipantRun(study, "S01", simulate=True) as run:  # a resume right away: not refused
             assert [r["kind"] for r in run.done] == ["trial", "train"]
-            with OutputLock(pf.folder / "models" / "M0"):  # nobody holds the model being trained
-                pass
     finally:
         proc.kill()
         for w in workers:

@@ -41,7 +41,12 @@ stamp is newer: a late message (stamped before the newest) never does, the same 
 again is no news (a sign of life only), and a stamp of 0 — a driver that does not stamp
 — is refused. A joint state that names a joint twice, lacks one of ``joint_names``, or
 has not one position and one velocity per name is refused, as is any message with a
-non-finite value. Refused messages are counted (``rejected_messages``) and never reach
+non-finite value. Joint states that jump — a joint farther from the newest state than
+:data:`MAX_JOINT_SPEED` moves it between their stamps (at most ``stale_after`` more than
+between their arrivals), plus :data:`JOINT_JUMP_TOLERANCE` — come from two sources (a second
+node publishing another pose on the topic): the robot's state is unknown, so the run stops
+(or does not start) with one line naming the topic and the joint, as for a wrench in an
+unknown frame. Refused messages are counted (``rejected_messages``) and never reach
 the tick; if nothing valid follows, the topic goes stale and the arm stops, with the
 reason in the message (``"12 message(s) on /joint_states arrived but were refused: a
 joint state needs one position and one velocity per name …"``, not "no message").
@@ -101,6 +106,8 @@ from coassist.runtime.world import Command, RobotLinkError, RobotState
 from coassist.spatial import quaternion_from_rotation_vector, rotation_matrix, rotation_vector
 
 __all__ = [
+    "JOINT_JUMP_TOLERANCE",
+    "MAX_JOINT_SPEED",
     "MAX_STALE_AFTER",
     "MAX_TCP_OFFSET",
     "UR_JOINT_NAMES",
@@ -128,6 +135,12 @@ _INSTALL_HINT = "coassist ros2 needs the ros2 extra (rclpy and the message packa
 MAX_STALE_AFTER = 0.5
 #: [m] the farthest a TCP may lie from the flange: a hand-guided tool, not a typo of mm for m.
 MAX_TCP_OFFSET = 0.5
+#: [rad/s] the fastest a UR5 joint turns (180 °/s): joint states farther apart than this allows
+#: between their stamps come from two sources (module docstring).
+MAX_JOINT_SPEED = math.pi
+#: [rad] what two joint states of one arm may differ by beyond MAX_JOINT_SPEED · Δt: a driver's
+#: stamp a few ms off its sample at full speed (π rad/s × 3 ms); encoders resolve 1e-5 rad.
+JOINT_JUMP_TOLERANCE = 0.01
 _TOPIC = re.compile(r"^~?/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$|^~$")
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -486,12 +499,38 @@ class Ros2World:
             self._reject(topic, "a joint state with a non-finite value")
             return
         stamp = _stamp_ns(msg.header.stamp)
+        now = time.monotonic()
         with self._cond:
             if not self._fresh(topic, stamp, None if self._js is None else self._js[0]):
                 return
+            if self._js is not None and self._input_error is None:
+                jump = self._jump(self._js, stamp, q, now)
+                if jump:
+                    self._input_error = jump
+                    self._cond.notify_all()
+                    return
             self._refused.pop(topic, None)
-            self._js = (stamp, q, qd, time.monotonic())
+            self._js = (stamp, q, qd, now)
             self._cond.notify_all()
+
+    def _jump(self, last: tuple[int, np.ndarray, np.ndarray, float], stamp: int, q: np.ndarray, now: float) -> str:
+        """Why a joint state (stamp ns, q, arrival) cannot follow ``last`` (the newest) of the same arm, or "".
+
+        A joint may move MAX_JOINT_SPEED · Δt + JOINT_JUMP_TOLERANCE, Δt the time between the two
+        stamps, or between their arrivals plus stale_after where that is shorter (a publisher on
+        another clock)."""
+        last_stamp, last_q, _, last_rx = last
+        span = min((stamp - last_stamp) * 1e-9, max(now - last_rx, 0.0) + self.config.stale_after)
+        moved = np.abs(q - last_q)
+        i = int(np.argmax(moved))
+        if not moved[i] > MAX_JOINT_SPEED * span + JOINT_JUMP_TOLERANCE:
+            return ""
+        topic = self.config.joint_state_topic
+        return (
+            f"the joint states on {topic} jump: {self.config.joint_names[i]} moved {moved[i]:.3f} rad in "
+            f"{span:.3f} s, more than the arm can ({MAX_JOINT_SPEED:.2f} rad/s): two sources publish on {topic} "
+            "(another node, a second driver?); stop the other one, then rerun"
+        )
 
     def _fresh(self, topic: str, stamp: int, newest: int | None) -> bool:
         """Whether a message stamped ``stamp`` replaces the newest one (stamped ``newest``): a stamp of 0

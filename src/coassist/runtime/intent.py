@@ -16,17 +16,25 @@ PREDICTION_FALLBACK, PREDICTION_STALE, and PREDICTOR_STALLED once the predictor 
 given nothing usable for ``stall_ticks`` ticks in a row after its history filled (a
 dead worker, a hung network, NaN outputs). A stalled predictor is a bad tick for the
 safety layer: the robot decelerates, and stops if it persists.
+
+What a row may ask of the controller is bounded: a window source's rows are used only when
+they are finite *and* plausible for a hand (:func:`coassist.interfaces.prediction_plausible`
+against the tool's position of the row pushed: every row within
+``PlausibilityLimits.max_distance`` of the tool, consecutive rows no faster than
+``max_speed``), as the real-time predictor's are. A row far from the tool is a fault
+(PREDICTION_FALLBACK, and PREDICTOR_STALLED when it persists), never a push toward it.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any, Protocol
 
 import numpy as np
 
 from coassist._checks import check_int_at_least
-from coassist.interfaces import FEATURES, Fault, IntentSource, TrialContext
+from coassist.interfaces import FEATURES, Fault, IntentSource, PlausibilityLimits, TrialContext
 
 __all__ = ["RealtimeIntent", "TickIntent", "WindowIntent", "WindowIntentBatch"]
 
@@ -59,9 +67,20 @@ class WindowIntent:
     horizon : rows the controller needs (the source must give at least these).
     stall_ticks : consecutive unusable predictions (after the history has filled)
         that make the predictor stalled (≥ 1).
+    plausibility : what a prediction may look like (module docstring): rows farther from the
+        tool, or faster, are a fallback.
     """
 
-    def __init__(self, source: IntentSource, horizon: int, stall_ticks: int = 25) -> None:
+    def __init__(
+        self,
+        source: IntentSource,
+        horizon: int,
+        stall_ticks: int = 25,
+        plausibility: PlausibilityLimits | None = None,
+    ) -> None:
+        if plausibility is not None and not isinstance(plausibility, PlausibilityLimits):
+            raise ValueError(f"plausibility must be a PlausibilityLimits, got {type(plausibility).__name__}")
+        self.plausibility = PlausibilityLimits() if plausibility is None else plausibility
         if not isinstance(source, IntentSource):
             raise ValueError(f"intent source must implement IntentSource, got {type(source).__name__}")
         self.source = source
@@ -82,10 +101,13 @@ class WindowIntent:
         self._empty = self._hist[:0]
         self._empty.setflags(write=False)
         self._bad = 0
+        self._x = self._y = 0.0  # the tool's position in the row pushed last [m]
+        self.max_step = math.inf  # the most consecutive rows may move apart [m] (max_speed · dt, from reset)
 
     def reset(self, context: TrialContext) -> None:
         self.source.reset(context)
         self._bad = 0
+        self.max_step = self.plausibility.max_speed * float(context.dt)
 
     def update(self, k: int, row: tuple[float, ...], nominal: np.ndarray) -> tuple[np.ndarray | None, Fault]:
         window = self.push(k, row)
@@ -107,6 +129,7 @@ class WindowIntent:
     def push(self, k: int, row: tuple[float, ...]) -> np.ndarray:
         """Store tick k's feature row; the window the source predicts from, (history, 8), oldest
         first: a view of the ring buffer, valid until the next push."""
+        self._x, self._y = row[0], row[1]
         L = self.history
         if L <= 0:
             return self._empty
@@ -122,7 +145,7 @@ class WindowIntent:
         """The source's answer for the last pushed window (None: it raised) → (positions or None, flags)."""
         try:
             ok = isinstance(pred, np.ndarray) and pred.ndim == 2 and pred.shape[0] >= self.need and pred.shape[1] == 2
-            ok = ok and bool(np.isfinite(pred[: self.horizon]).all())
+            ok = ok and self._plausible(pred[: self.horizon])
         except Exception:  # a malformed answer is a fallback like any other
             ok = False
         if ok:
@@ -130,6 +153,19 @@ class WindowIntent:
             return pred[: self.horizon], Fault.NONE
         self._bad += 1
         return None, (_FALLBACK | Fault.PREDICTOR_STALLED) if self._bad > self.stall_ticks else _FALLBACK
+
+    def _plausible(self, p: np.ndarray) -> bool:
+        """:func:`~coassist.interfaces.prediction_plausible` of rows (m, 2) against the tool of the row
+        pushed last, written for the tick (a NaN fails every comparison, so finiteness comes with it)."""
+        lim = self.plausibility.max_distance
+        dx = p[:, 0] - self._x
+        dy = p[:, 1] - self._y
+        if not (float(np.max(np.abs(dx))) <= lim and float(np.max(np.abs(dy))) <= lim):
+            return False
+        if p.shape[0] > 1:
+            step = np.abs(p[1:] - p[:-1])
+            return float(np.max(step)) <= self.max_step
+        return True
 
 
 class WindowIntentBatch:
@@ -140,7 +176,7 @@ class WindowIntentBatch:
     ring twice as long, so every window is one contiguous slice); one ``predict_batch``
     call on them serves the B stages. :meth:`accept` checks the answers as each stage's
     :meth:`WindowIntent.accept` does (at least ``need`` rows of (x, y), the first
-    ``horizon`` finite) and says which rows pass; a row that does not is a fallback,
+    ``horizon`` finite and plausible) and says which rows pass; a row that does not is a fallback,
     which the caller leaves to the stage itself (it counts its stalls).
 
     Parameters
@@ -160,10 +196,15 @@ class WindowIntentBatch:
         self.history, self.horizon = first.history, first.horizon
         self._need = np.array([i.need for i in intents], dtype=np.intp)
         self._hist = np.zeros((len(intents), 2 * self.history, _N_FEATURES))
+        # each stage's plausibility (the stages are reset for their runs: max_step is theirs)
+        self._max_distance = np.array([i.plausibility.max_distance for i in intents])
+        self._max_step = np.array([i.max_step for i in intents])
+        self._tool = np.zeros((len(intents), 2))  # the tool's position in each stage's row pushed last
 
     def push(self, k: int, rows: np.ndarray, features: np.ndarray) -> np.ndarray:
         """Store tick k's feature rows (len(rows), 8) of the stages ``rows`` (indices); their
         windows (len(rows), history, 8), oldest first."""
+        self._tool[rows] = features[:, :2]
         L = self.history
         if L <= 0:
             return np.zeros((rows.size, 0, _N_FEATURES))
@@ -188,7 +229,11 @@ class WindowIntentBatch:
         ):
             raise ValueError("malformed predictions")
         positions = answer[:, : self.horizon]
-        ok = (answer.shape[1] >= self._need[rows]) & np.isfinite(positions).all(axis=(1, 2))
+        # WindowIntent._plausible row by row (the same comparisons: a NaN fails them)
+        far = np.abs(positions - self._tool[rows][:, None, :]).max(axis=(1, 2))
+        ok = (answer.shape[1] >= self._need[rows]) & (far <= self._max_distance[rows])
+        if positions.shape[1] > 1:
+            ok &= np.abs(positions[:, 1:] - positions[:, :-1]).max(axis=(1, 2)) <= self._max_step[rows]
         return positions, ok
 
 

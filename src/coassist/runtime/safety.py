@@ -27,13 +27,23 @@ limit even as J changes between ticks).
    hand wrench non-finite or of the wrong shape: the target becomes 0 (DECELERATING),
    reached along the acceleration ramp of step 5. ``max_bad_ticks`` bad ticks in a row
    latch STOPPED; a good tick resets the count.
-   *After a stall* (DEADLINE_MISS upstream, with the measured joint velocity q̇ₘ given):
-   if ‖q̇ₘ − q̇⁻‖∞ > 2 m a dt — more than tracking lag explains: the robot did not keep
-   the last command while the loop was away (a Franka brakes to rest when its 50 ms hold
-   runs out) — q̇⁻ becomes q̇ₘ (scaled into the joint speed limits), so every step from
-   here on is an acceleration step from what the arm really does. Otherwise q̇⁻ is kept
-   (the MuJoCo UR5 lags its command by at most 0.095 rad/s on the fault table's deadline
-   ticks, against 2 m a dt = 0.125 rad/s at 125 Hz); ``resumed_from_measured`` counts them.
+   *After a stall* (DEADLINE_MISS upstream, with the measured joint velocity q̇ₘ given),
+   with the tracking lag ℓ = 2 m a dt (the MuJoCo UR5 lags its command by at most
+   0.095 rad/s on the fault table's deadline ticks, against ℓ = 0.125 rad/s at 125 Hz):
+
+   - q̇ₘ within ℓ of the span of the commands of the last :data:`RESUME_LATENCY` (on every
+     joint, between the smallest and the largest of them ± ℓ): the robot kept its commands,
+     seen with the state's latency; q̇⁻ is kept;
+   - else, q̇ₘ between rest and q̇⁻ on every joint (± ℓ): the robot braked while the loop was
+     away (a Franka brakes to rest when its 50 ms hold runs out; a watchdog sends zeros):
+     q̇⁻ becomes q̇ₘ, each joint clipped to between 0 and its q̇⁻ (so no joint speeds up or
+     reverses), and every step from here on is an acceleration step from what the arm
+     really does (``resumed_from_measured``);
+   - else q̇ₘ is no velocity a stall leaves an arm at (faster than its last command, or
+     reversed: a joint state later than the latency allows, another publisher's, a
+     glitch): it is not used and q̇⁻ is kept (``refused_measured``; the tick is bad
+     already). So no measured value makes a joint speed up or reverse by more than one
+     acceleration step.
 3. *Manipulability* (Yoshikawa) w = ∏ σ_i(J) (= |det J| for n = 6, √det(J Jᵀ) for n > 6,
    √det(Jᵀ J) for n < 6). Below w_min the target is scaled by
    clip((w − w_min/2)/(w_min/2), 0, 1): zero at half the guard (SINGULARITY).
@@ -94,6 +104,7 @@ p(k+1) = p(k) + J_v q̇ dt.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -110,7 +121,12 @@ try:  # numpy's determinant kernel without np.linalg.det's Python checks (≈ 2 
 except Exception:  # pragma: no cover - another numpy
     _det = np.linalg.det
 
-__all__ = ["BAD_TICK_FAULTS", "SafetyLayer", "SafetyLayerBatch", "SafetyLimits", "within_limits"]
+__all__ = ["BAD_TICK_FAULTS", "RESUME_LATENCY", "SafetyLayer", "SafetyLayerBatch", "SafetyLimits", "within_limits"]
+
+#: [s] How late a measured joint velocity may show the commands the robot kept (step 2): the
+#: commands of this long before a stall still count as kept. A loaded machine's ROS 2 executor
+#: delivers joint states a few ticks late; 40 ms is 5 ticks at 125 Hz.
+RESUME_LATENCY = 0.04
 
 #: Upstream faults that make a tick "bad": the layer decelerates, and stops after
 #: ``SafetyLimits.max_bad_ticks`` of them in a row.
@@ -542,6 +558,8 @@ class SafetyLayer:
         the layer braked at the acceleration limit.
     resumed_from_measured : ticks after a stall on which q̇⁻ became the measured joint
         velocity (step 2).
+    refused_measured : ticks after a stall whose measured joint velocity no stall explains
+        (step 2: not used).
     """
 
     def __init__(self, limits: SafetyLimits, dt: float, n_joints: int) -> None:
@@ -564,6 +582,8 @@ class SafetyLayer:
         self._box = limits.workspace_lower is not None
         self._zeros = [0.0] * n
         self._effort_d = 2  # limit_effort's output length until it has seen a good u_r
+        # the commands of the last RESUME_LATENCY (step 2), newest last
+        self._recent: deque[list[float]] = deque(maxlen=max(1, math.ceil(RESUME_LATENCY / self.dt - 1e-9)))
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -583,11 +603,14 @@ class SafetyLayer:
             r = max(abs(v) * iv for v, iv in zip(xl, self._inv_vmax_m))
             prev = [v / r for v in xl] if r > 1.0 else xl
         self._prev = list(prev)
+        self._recent.clear()
+        self._recent.append(self._prev)
         self._stopped = False
         self._decelerating = False
         self.bad_ticks = 0
         self.limit_conflicts = 0
         self.resumed_from_measured = 0
+        self.refused_measured = 0
         self.interventions = {name: 0 for _, name in _COUNTED_BITS}
 
     @property
@@ -752,7 +775,9 @@ class SafetyLayer:
             with np.errstate(all="ignore"):
                 if measured is not None:
                     self._resume_from(measured, upstream)
-                return self._limit_joint_velocity(qd, J, pose, hand_wrench, upstream, robot_stop)
+                out = self._limit_joint_velocity(qd, J, pose, hand_wrench, upstream, robot_stop)
+                self._recent.append(self._prev)
+                return out
         except Exception:
             # Something unforeseen: treat it as a bad tick and ramp toward rest from the
             # last command (always finite: the layer only ever stores finite commands).
@@ -767,6 +792,7 @@ class SafetyLayer:
                     if not all(math.isfinite(v) for v in out):
                         out = list(self._zeros)
                 self._prev = out
+                self._recent.append(out)
                 self._decelerating = not stop
                 self._count(flags)
                 return np.array(out, dtype=float), _fault(flags), stop
@@ -774,7 +800,7 @@ class SafetyLayer:
                 return np.zeros(self._n), Fault.INTERNAL_ERROR | Fault.STOPPED, True
 
     def _resume_from(self, measured, upstream) -> None:
-        """After a stall, q̇⁻ := the measured q̇ when the robot did not keep the last command (step 2)."""
+        """After a stall, q̇⁻ := the measured q̇ when the robot braked instead of keeping its commands (step 2)."""
         up = _fault_word(upstream)
         if up is None or not up & _DM or self._stopped:
             return
@@ -782,10 +808,18 @@ class SafetyLayer:
         if m is None:
             return
         ml = m.tolist()
-        if max(abs(a - c) for a, c in zip(ml, self._prev)) <= 2.0 * self._acc_m:
+        lag = 2.0 * self._acc_m
+        recent = self._recent
+        if all(
+            min(c[i] for c in recent) - lag <= v <= max(c[i] for c in recent) + lag for i, v in enumerate(ml)
+        ):  # kept its commands (seen with the state's latency)
             return
-        r = max(abs(v) * iv for v, iv in zip(ml, self._inv_vmax_m))
-        self._prev = [v / r for v in ml] if r > 1.0 else ml
+        prev = self._prev
+        if not all(min(c, 0.0) - lag <= v <= max(c, 0.0) + lag for v, c in zip(ml, prev)):
+            self.refused_measured += 1  # faster than the last command, or reversed: no brake
+            return
+        # between rest and the last command, joint by joint (inside the joint speed limits as q̇⁻ is)
+        self._prev = [min(max(v, min(c, 0.0)), max(c, 0.0)) for v, c in zip(ml, prev)]
         self.resumed_from_measured += 1
 
     def _ramp_to_rest(self, prev: list) -> list:

@@ -20,8 +20,11 @@ may name, and the one place each is registered:
   imported when a run loads it;
 - a folder of a kind in :data:`INTENT_FOLDERS`, told apart by the file that marks it: a
   path-hypotheses calibration (``path-hypotheses.json``, :mod:`coassist.scenario.path_hypotheses`)
-  or an intent model written by ``coassist train`` (``model.json``; any other string is tried
-  as one, so that the model loader's error says what is wrong with it).
+  or an intent model written by ``coassist train`` (``model.json``; any other existing folder is
+  tried as one, so that the model loader's error says what is wrong with it).
+
+A string that is neither a name nor an existing folder (a typo of ``paths``) is refused in one
+line that says so, lists the names and suggests the closest.
 
 The loop (:func:`load_intent_source`, :func:`shared_intent_source`), ``coassist collect``,
 ``drive``, ``ros2``, ``play`` and their help texts (:func:`intent_choices`, :func:`check_intent`)
@@ -34,6 +37,7 @@ so that the simulator works without the learning stack.
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -289,7 +293,14 @@ def check_intent(spec: str, *, simulation: bool = True) -> None:
     if intent_folder_kind(spec) is None:
         names = [name for name, entry in INTENT_SOURCES.items() if simulation or not entry.simulation_only]
         folders = " or ".join(f"{kind.summary} ({kind.marker})" for kind in INTENT_FOLDERS.values())
-        raise ValueError(f"{spec!r}: not one of {', '.join(names)}, {folders}")
+        raise ValueError(f"{spec!r}: not one of {', '.join(names)}, {folders}{_close_name(spec, names)}")
+
+
+def _close_name(spec: object, names: list[str]) -> str:
+    """``"; did you mean 'paths'?"`` when ``spec`` is close to one of ``names`` (else ""), as
+    :func:`coassist.registry.unknown_name_message` words it (difflib, cutoff 0.5)."""
+    close = difflib.get_close_matches(str(spec), names, n=1, cutoff=0.5)
+    return f"; did you mean {close[0]!r}?" if close else ""
 
 
 def load_intent_source(spec: str, horizon: int = 50, network: str = "auto") -> IntentSource:
@@ -298,7 +309,7 @@ def load_intent_source(spec: str, horizon: int = 50, network: str = "auto") -> I
     A name of :data:`INTENT_SOURCES` → its entry's source (``"nominal"`` →
     :class:`~coassist.scenario.reference_intents.NominalIntent`, …); a path-hypotheses
     calibration folder → the calibrated
-    :class:`~coassist.scenario.path_hypotheses.PathHypothesesIntent`; any other string is a
+    :class:`~coassist.scenario.path_hypotheses.PathHypothesesIntent`; any other existing path is a
     model path handed to ``coassist.intent.load_model_intent`` (imported lazily, so the
     simulator works without the learning stack), its network evaluated by ``network``
     (:data:`~coassist.interfaces.NETWORK_BACKENDS`).
@@ -309,7 +320,14 @@ def load_intent_source(spec: str, horizon: int = 50, network: str = "auto") -> I
         raise ValueError(f"network must be one of {NETWORK_BACKENDS}, got {network!r}")
     if spec in INTENT_SOURCES:
         return INTENT_SOURCES[spec].build(horizon)
-    return INTENT_FOLDERS[intent_folder_kind(spec) or "model"].load(spec, horizon, network)
+    kind = intent_folder_kind(spec)
+    if kind is None and not Path(spec).exists():
+        names = list(INTENT_SOURCES)
+        raise ValueError(
+            f"intent {spec!r} is neither a source name ({', '.join(names)}) nor an existing folder"
+            f"{_close_name(spec, names)}"
+        )
+    return INTENT_FOLDERS[kind or "model"].load(spec, horizon, network)
 
 
 def shared_intent_source(

@@ -51,6 +51,16 @@ robot is told comes from :class:`~coassist.interfaces.TrialContext` (``path``, `
 ``object``); a person's shape from a calibration file (:func:`write_calibration`), whose
 folder is given as the intent (``intent="<folder>"``: ``path-hypotheses.json``).
 
+Ranges. Every field of :class:`PersonShape`, :class:`ArmGuess` and :class:`FilterSettings` lies
+in the range a person (and a filter for people) can have, :data:`CALIBRATION_RANGES`, checked
+when one is built, so a calibration file is checked where it is read: numbers only (the string
+``"0.03"`` and ``true`` are refused), each field's error naming it. Within them no calibration made
+the robot push more than 30 N harder than the worse of the robot with no prediction at all (the
+nominal plan, the fallback of every unusable row) and with the default calibration
+(tests/scenario/test_calibration_ranges.py fuzzes them; docs/precision.md, *A calibration is
+bounded like a limit*, gives each bound's reason). The file carries the SHA-256 of its content
+(:func:`coassist._io.write_hashed_json`): a hand edit is refused in one line.
+
 The detour model is the simulated operator's own (the hypotheses are its family of paths):
 in simulation the filter knows the form of every path an operator can take, not its shape
 in a trial (each trial draws its clearance and anticipation, ``OperatorProfile.shape_jitter``).
@@ -67,8 +77,8 @@ from pathlib import Path
 
 import numpy as np
 
-from coassist._checks import check_int, check_real
-from coassist._io import atomic_write_text
+from coassist._checks import check_int, check_real, is_real_number
+from coassist._io import read_hashed_json, write_hashed_json
 from coassist.interfaces import TrialContext
 from coassist.scenario.objects import OBJECTS
 from coassist.scenario.operator import deformed_path
@@ -76,6 +86,7 @@ from coassist.scenario.tasks import Box, MotionPlanner, NominalPath, Task
 
 __all__ = [
     "CALIBRATION_FILE",
+    "CALIBRATION_RANGES",
     "ArmGuess",
     "FilterSettings",
     "PathHypothesesIntent",
@@ -98,6 +109,61 @@ PRIOR_SHARE = 0.9
 CALIBRATION_FILE = "path-hypotheses.json"
 _FORMAT = "coassist-path-hypotheses-1"
 
+#: The closed range [lo, hi] of every calibration field (module docstring, *Ranges*; the reasons in
+#: docs/precision.md, section 5): ``"<Class>.<field>"`` → (lo, hi). ``PersonShape.left_preference`` is the open
+#: (0, 1); ``FilterSettings.shape_grid`` holds 1 … :data:`MAX_SHAPE_GRID` factors, each in its range,
+#: with 1 between the smallest and the largest.
+CALIBRATION_RANGES: dict[str, tuple[float, float]] = {
+    # --- the person (what people have)
+    # people keep 1–5 cm from a box (the simulated population), the fit's grid spans 5 mm–8 cm; closer
+    # than 2 mm is touching it, farther than 8 cm is another path, which the filter would push toward
+    "PersonShape.clearance": (0.002, 0.08),
+    # the path over which a person moves aside: 5–20 cm simulated, the fit's grid 3–30 cm
+    "PersonShape.anticipation": (0.02, 0.3),
+    "PersonShape.left_preference": (0.0, 1.0),
+    "PersonShape.trials": (0, 10_000),
+    # arm stiffness: the simulated users span 460–1300 N/m, the browser's hand is 400 N/m (the most
+    # compliant arm coassist models); a guess below it inflates the present estimate's lead
+    # (w + m a + Ĉ v)/K̂ (at 150 N/m the robot pushed 38 N more than with no prediction at all on the
+    # fuzz's Z); 2000 N/m is 1.5× the stiffest simulated arm
+    "ArmGuess.stiffness": (400.0, 2000.0),
+    # damping: simulated 5.9–10 N·s/m, the browser's hand 40 N·s/m; 0 leaves the velocity term out
+    "ArmGuess.damping": (0.0, 40.0),
+    # --- the filter's constants, chosen on validation seeds (docs/precision.md): a calibration may move
+    # each within about ¼× … 5× of its validated value (or its natural limits), not by orders of magnitude
+    "FilterSettings.sigma": (0.0005, 0.01),
+    "FilterSettings.kappa": (0.05, 1.0),
+    "FilterSettings.decide": (0.25, 5.0),
+    # "apart" must stay well under the smallest detour (half the 6 cm box plus a clearance)
+    "FilterSettings.divergence": (1e-4, 0.005),
+    "FilterSettings.bias_time": (0.1, 2.0),
+    # a larger offset beside the path is a detour starting early, not a bias
+    "FilterSettings.bias_limit": (0.0, 0.01),
+    # the acceleration estimate's lag: the carried object's m·a a tenth of a second late is a wrong force
+    "FilterSettings.accel_time": (0.0, 0.1),
+    # above 0: the cross-fade is what keeps the robot's effort from stepping when the rows change
+    "FilterSettings.blend_time": (0.02, 0.5),
+    "FilterSettings.hedge_velocity": (0.0, 1.0),
+    # at least what a tool at the point-mass world's 1 m/s limit moves in a 125 Hz tick (8 mm); at most
+    # 2.5× the default, so a tick's search stays within 2.5× its compute (a 1e300 window searched every
+    # whole curve every tick: 7× the compute per trial)
+    "FilterSettings.search_window": (0.01, 0.05),
+    "FilterSettings.evidence_rate": (5.0, 150.0),
+    # factors on the person's clearance and anticipation: half to twice their own
+    "FilterSettings.shape_grid": (0.5, 2.0),
+}
+#: The most factors in ``FilterSettings.shape_grid``: 9 × 9 shapes per side, 162 curves (3.2× the default's
+#: 50; 10 000 factors asked for 2·10⁸ curves and crashed).
+MAX_SHAPE_GRID = 9
+
+
+def _ranged(value: object, name: str) -> float:
+    """``value`` as a float if it is a number (not a string or a bool) in ``CALIBRATION_RANGES[name]``."""
+    if not is_real_number(value):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    lo, hi = CALIBRATION_RANGES[name]
+    return check_real(value, name, lo, hi)
+
 
 @dataclass(frozen=True)
 class PersonShape:
@@ -112,17 +178,14 @@ class PersonShape:
     trials: int = 0
 
     def __post_init__(self) -> None:
-        object.__setattr__(
-            self, "clearance", check_real(self.clearance, "PersonShape.clearance", 0.0, 0.5, open_lo=True)
-        )
-        object.__setattr__(
-            self, "anticipation", check_real(self.anticipation, "PersonShape.anticipation", 0.0, 2.0, open_lo=True)
-        )
-        lp = check_real(self.left_preference, "PersonShape.left_preference", 0.0, 1.0)
+        for name in ("clearance", "anticipation"):
+            object.__setattr__(self, name, _ranged(getattr(self, name), f"PersonShape.{name}"))
+        lp = _ranged(self.left_preference, "PersonShape.left_preference")
         if not 0.0 < lp < 1.0:
             raise ValueError(f"PersonShape.left_preference must be strictly between 0 and 1, got {lp!r}")
         object.__setattr__(self, "left_preference", lp)
-        object.__setattr__(self, "trials", check_int(self.trials, "PersonShape.trials", 0))
+        lo, hi = CALIBRATION_RANGES["PersonShape.trials"]
+        object.__setattr__(self, "trials", check_int(self.trials, "PersonShape.trials", int(lo), int(hi)))
 
 
 @dataclass(frozen=True)
@@ -130,14 +193,15 @@ class ArmGuess:
     """The arm the present estimate assumes (eq. 4.1): stiffness K̂ [N/m] and damping Ĉ [N·s/m].
 
     The defaults are the simulated author's relaxed-to-mid stiffness and damping
-    (coassist.scenario.operator.AUTHOR: 550–1300 N/m, 10 N·s/m)."""
+    (coassist.scenario.operator.AUTHOR: 550–1300 N/m, 10 N·s/m); the ranges a person's arm can
+    have are in :data:`CALIBRATION_RANGES`."""
 
     stiffness: float = 800.0
     damping: float = 10.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "stiffness", check_real(self.stiffness, "ArmGuess.stiffness", 0.0, open_lo=True))
-        object.__setattr__(self, "damping", check_real(self.damping, "ArmGuess.damping", 0.0))
+        for name in ("stiffness", "damping"):
+            object.__setattr__(self, name, _ranged(getattr(self, name), f"ArmGuess.{name}"))
 
 
 @dataclass(frozen=True)
@@ -158,8 +222,11 @@ class FilterSettings:
         one (a tool moves < 1 mm per tick; the whole curve is searched when it is longer than the path).
     evidence_rate : [1/s] the most the side's log-odds may move per second (per tick: evidence_rate·dt),
         so that no tick or two decide the side alone.
-    shape_grid : factors on the person's clearance and anticipation, one hypothesis per pair: distinct,
-        increasing.
+    shape_grid : factors on the person's clearance and anticipation, one hypothesis per pair: 1 …
+        :data:`MAX_SHAPE_GRID` distinct, increasing factors with 1 between the smallest and the largest
+        (the person's own shape among the hypotheses' span).
+
+    Each field lies in its :data:`CALIBRATION_RANGES` range.
 
     σ, κ, decide and the times were chosen at 125 Hz; κ is scaled by dt / 0.008 s at other rates
     (:data:`REFERENCE_DT`), so the evidence per second is the same.
@@ -179,31 +246,31 @@ class FilterSettings:
     shape_grid: tuple[float, ...] = (0.6, 0.8, 1.0, 1.25, 1.6)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "sigma", check_real(self.sigma, "FilterSettings.sigma", 0.0, open_lo=True))
-        object.__setattr__(self, "kappa", check_real(self.kappa, "FilterSettings.kappa", 0.0, 1.0, open_lo=True))
-        object.__setattr__(self, "decide", check_real(self.decide, "FilterSettings.decide", 0.0))
-        object.__setattr__(
-            self, "divergence", check_real(self.divergence, "FilterSettings.divergence", 0.0, open_lo=True)
-        )
-        object.__setattr__(self, "bias_time", check_real(self.bias_time, "FilterSettings.bias_time", 0.0, open_lo=True))
-        object.__setattr__(self, "bias_limit", check_real(self.bias_limit, "FilterSettings.bias_limit", 0.0))
-        object.__setattr__(self, "accel_time", check_real(self.accel_time, "FilterSettings.accel_time", 0.0))
-        object.__setattr__(self, "blend_time", check_real(self.blend_time, "FilterSettings.blend_time", 0.0))
-        object.__setattr__(
-            self, "hedge_velocity", check_real(self.hedge_velocity, "FilterSettings.hedge_velocity", 0.0, 1.0)
-        )
-        object.__setattr__(
-            self, "search_window", check_real(self.search_window, "FilterSettings.search_window", 0.0, open_lo=True)
-        )
-        object.__setattr__(
-            self, "evidence_rate", check_real(self.evidence_rate, "FilterSettings.evidence_rate", 0.0, open_lo=True)
-        )
-        if isinstance(self.shape_grid, (str, bytes)) or not hasattr(self.shape_grid, "__iter__"):
-            raise ValueError(f"FilterSettings.shape_grid must be a list of factors > 0, got {self.shape_grid!r}")
-        grid = tuple(check_real(g, "FilterSettings.shape_grid", 0.0, open_lo=True) for g in self.shape_grid)
-        if not grid or list(grid) != sorted(set(grid)):
+        for name in (
+            "sigma",
+            "kappa",
+            "decide",
+            "divergence",
+            "bias_time",
+            "bias_limit",
+            "accel_time",
+            "blend_time",
+            "hedge_velocity",
+            "search_window",
+            "evidence_rate",
+        ):
+            object.__setattr__(self, name, _ranged(getattr(self, name), f"FilterSettings.{name}"))
+        given = self.shape_grid
+        if not isinstance(given, (list, tuple, np.ndarray)) or np.ndim(given) != 1:
+            raise ValueError(f"FilterSettings.shape_grid must be a list of factors, got {given!r}")
+        if not 1 <= len(given) <= MAX_SHAPE_GRID:
+            raise ValueError(f"FilterSettings.shape_grid must hold 1 to {MAX_SHAPE_GRID} factors, got {len(given)}")
+        grid = tuple(_ranged(g, "FilterSettings.shape_grid") for g in given)
+        if list(grid) != sorted(set(grid)):
+            raise ValueError(f"FilterSettings.shape_grid must be distinct factors in increasing order, got {given!r}")
+        if not grid[0] <= 1.0 <= grid[-1]:
             raise ValueError(
-                f"FilterSettings.shape_grid must be distinct factors in increasing order, got {self.shape_grid!r}"
+                f"FilterSettings.shape_grid must span the person's own shape (smallest <= 1 <= largest), got {given!r}"
             )
         object.__setattr__(self, "shape_grid", grid)
 
@@ -391,6 +458,10 @@ class PathHypothesesIntent:
             return present + self._present_steps * v
         return self._filter(self._hyp, p, v, u_h, present)
 
+    def _widest(self, hyp: _Hypotheses) -> int:
+        """Samples searched either side of each curve's last phase: ``search_window`` of curve, at least 2."""
+        return min(hyp.points.shape[1], max(2, int(math.ceil(self.settings.search_window / hyp.step))))
+
     def _shared(
         self, hyp: _Hypotheses, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray, widest: int
     ) -> np.ndarray | None:
@@ -430,7 +501,7 @@ class PathHypothesesIntent:
         st = self.settings
         K, C = self.arm.stiffness, self.arm.damping
         n_curves, n_pts = hyp.points.shape[:2]
-        widest = min(n_pts, max(2, int(math.ceil(st.search_window / hyp.step))))
+        widest = self._widest(hyp)
         if self.shared_fast_path:
             fast = self._shared(hyp, p, v, u_h, present, widest)
             if fast is not None:
@@ -586,40 +657,58 @@ def write_calibration(
     settings: FilterSettings | None = None,
     default: PersonShape | None = None,
 ) -> Path:
-    """Write a ``paths`` source folder (``path-hypotheses.json``, atomically); returns the folder."""
+    """Write a ``paths`` source folder (``path-hypotheses.json``, atomically, with the hash of its content:
+    :func:`coassist._io.write_hashed_json`); returns the folder."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    for name, shape in shapes.items():
+        if not isinstance(name, str) or not isinstance(shape, PersonShape):
+            raise ValueError(f"shapes must map person names to PersonShape, got {name!r}: {type(shape).__name__}")
     doc = {
-        "format": _FORMAT,
         "shapes": {k: asdict(v) for k, v in shapes.items()},
         "default": asdict(default or PersonShape()),
         "arm": asdict(arm or ArmGuess()),
         "settings": asdict(settings or FilterSettings()),
     }
-    atomic_write_text(folder / CALIBRATION_FILE, json.dumps(doc, indent=1) + "\n")
+    write_hashed_json(folder / CALIBRATION_FILE, doc, format=_FORMAT)
     return folder
 
 
+def _fields(doc: Mapping[str, object], key: str, where: str) -> dict[str, object]:
+    """``doc[key]`` (an object of fields; {} when absent), or a ValueError naming it."""
+    value = doc.get(key, {})
+    if not isinstance(value, dict):
+        raise ValueError(f"{where} must be an object of fields, got {json.dumps(value)[:80]}")
+    return value
+
+
 def read_calibration(folder: str | Path, horizon: int = 50) -> PathHypothesesIntent:
-    """The ``paths`` source a folder written by :func:`write_calibration` holds (errors name the file and field)."""
+    """The ``paths`` source a folder written by :func:`write_calibration` holds.
+
+    Refused in one line naming the file (and the field): a file that is not there or not JSON, of
+    another format, edited after it was written (its hash, :func:`coassist._io.read_hashed_json`), or
+    with a field out of its :data:`CALIBRATION_RANGES` range or of the wrong type."""
     path = Path(folder) / CALIBRATION_FILE
+    doc = read_hashed_json(path, format=_FORMAT)
     try:
-        doc = json.loads(path.read_text("utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: not a path-hypotheses calibration ({exc})") from None
-    if not isinstance(doc, dict) or doc.get("format") != _FORMAT:
-        raise ValueError(f"{path}: format must be {_FORMAT!r}")
-    try:
-        shapes = {str(k): PersonShape(**v) for k, v in dict(doc.get("shapes", {})).items()}
-        settings = dict(doc.get("settings", {}))
-        if "shape_grid" in settings:
-            settings["shape_grid"] = tuple(settings["shape_grid"])
+        unknown = sorted(set(doc) - {"shapes", "default", "arm", "settings"})
+        if unknown:
+            raise ValueError(f"unknown field {unknown[0]!r}")
+        shapes = {}
+        for name, fields in _fields(doc, "shapes", "shapes").items():
+            if not isinstance(fields, dict):
+                raise ValueError(f"shapes[{name!r}] must be an object of fields, got {json.dumps(fields)[:80]}")
+            shapes[name] = PersonShape(**fields)
+        settings = _fields(doc, "settings", "settings")
+        grid = settings.get("shape_grid")
+        if isinstance(grid, list):
+            settings["shape_grid"] = tuple(grid)
         return PathHypothesesIntent(
             horizon,
             shapes=shapes,
-            default=PersonShape(**doc.get("default", {})),
-            arm=ArmGuess(**doc.get("arm", {})),
-            settings=FilterSettings(**settings),
+            default=PersonShape(**_fields(doc, "default", "default")),  # type: ignore[arg-type]
+            arm=ArmGuess(**_fields(doc, "arm", "arm")),  # type: ignore[arg-type]
+            settings=FilterSettings(**settings),  # type: ignore[arg-type]
             model_id=f"paths:{Path(folder).name}",
         )
     except (TypeError, ValueError) as exc:
