@@ -150,11 +150,9 @@ def _module_name(path: Path, src: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def import_circles(src: Path) -> list[list[str]]:
-    """The import circles between the modules under the package folder ``src``: each a sorted list
-    of the modules that reach one another through their imports (function-local ones included;
-    a package's own ``__init__`` being run first is not counted), found as the strongly
-    connected components of the module graph (Tarjan)."""
+def module_graph(src: Path) -> dict[str, set[str]]:
+    """Module → the modules it imports (function-local imports included; ``from pkg import module``
+    names the module), for every module under the package folder ``src``."""
     paths = {_module_name(p, src): p for p in src.rglob("*.py")}
     graph: dict[str, set[str]] = {}
     for name, path in paths.items():
@@ -173,6 +171,27 @@ def import_circles(src: Path) -> list[list[str]]:
             elif isinstance(node, ast.Import):
                 targets.update(alias.name for alias in node.names)
         graph[name] = {t for t in targets if t in paths and t != name}
+    return graph
+
+
+def import_closure(graph: dict[str, set[str]], module: str) -> set[str]:
+    """Every module ``module`` reaches through its imports (a package's own ``__init__`` being run first
+    is not counted: what the module's code depends on, not what Python happens to load)."""
+    seen, todo = {module}, [module]
+    while todo:
+        for nxt in graph.get(todo.pop(), ()):
+            if nxt not in seen:
+                seen.add(nxt)
+                todo.append(nxt)
+    return seen
+
+
+def import_circles(src: Path) -> list[list[str]]:
+    """The import circles between the modules under the package folder ``src``: each a sorted list
+    of the modules that reach one another through their imports (function-local ones included;
+    a package's own ``__init__`` being run first is not counted), found as the strongly
+    connected components of the module graph (Tarjan)."""
+    graph = module_graph(src)
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -255,3 +274,49 @@ def test_registry_entry_points_respect_the_layers():
                     f"{module_name}.{table}[{name!r}]: {here} (layer {RANK[here]}) names {target} (layer {RANK[there]})"
                 )
     assert not bad, "entry points against the layering:\n" + "\n".join(bad)
+
+
+#: The simulated person: what a source that may run on an arm and claims no model of people's paths
+#: (``Told.family`` empty) must not import, directly or through anything it imports.
+SIMULATED_PERSON = ("coassist.scenario.operator",)
+
+
+def _arm_sources() -> dict[str, str]:
+    """Name → module of every registered intent source a person or an arm may run that claims no model of
+    people's paths: named sources not simulation-only, and the folder kinds."""
+    import inspect
+
+    from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES
+
+    for name, kind in INTENT_FOLDERS.items():  # the module a kind declares is the one its loader reads with
+        assert kind.module and kind.module in inspect.getsource(kind.load), name
+    out = {
+        name: entry.source.partition(":")[0]
+        for name, entry in INTENT_SOURCES.items()
+        if not entry.simulation_only and not entry.told.family
+    }
+    out.update({f"folder:{name}": kind.module for name, kind in INTENT_FOLDERS.items() if not kind.told.family})
+    return out
+
+
+def test_no_source_an_arm_may_run_imports_the_simulated_person():
+    graph = module_graph(SRC)
+    sources = _arm_sources()
+    assert "folder:person-model" in sources and "present" in sources  # the person model, the safe default
+    bad = {
+        name: sorted(import_closure(graph, module) & set(SIMULATED_PERSON))
+        for name, module in sources.items()
+        if import_closure(graph, module) & set(SIMULATED_PERSON)
+    }
+    assert not bad, f"sources that claim no model of people's paths import the simulated person: {bad}"
+
+
+def test_the_closure_finds_a_simulated_person_behind_another_module(tmp_path):
+    # The test above must be able to fail: a source that reaches the operator through a helper, lazily.
+    src = tmp_path / "coassist"
+    (src / "scenario").mkdir(parents=True)
+    (src / "scenario" / "operator.py").write_text("X = 1\n")
+    (src / "scenario" / "helper.py").write_text("def f():\n    from coassist.scenario.operator import X\n")
+    (src / "scenario" / "source.py").write_text("from coassist.scenario import helper\n")
+    graph = module_graph(src)
+    assert "coassist.scenario.operator" in import_closure(graph, "coassist.scenario.source")

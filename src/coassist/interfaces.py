@@ -122,11 +122,14 @@ class TrialContext:
     grid (the nominal plan is public: it is shown on the monitor).
     task : the task kind. user, object : names.
     true_intent : (n, 2) the operator's desired positions — simulation only, for the
-    oracle baseline; a real predictor must not read it.
+    oracle baseline: the episode fills it in only for a source whose ``reads_true_intent`` is
+    True (coassist.scenario.reference_intents.OracleIntent); every other source gets None.
     path : (P, 2) the nominal path's polyline [m] in the plan's frame (public, like the
         reference), or None when the world has none.
     obstacles : the boxes the robot is told of, each ((x, y) centre, (width, depth) size) [m] in
         the plan's frame; empty when it is told of none (the person may still see some).
+    seed : the trial's seed (TrialMeta.seed), the root of the robot's own random draws in the
+        trial (the calibration probe's phases: coassist.control.probe); None: none given.
     """
 
     dt: float
@@ -140,6 +143,7 @@ class TrialContext:
     true_intent: np.ndarray | None = None
     path: np.ndarray | None = None
     obstacles: tuple[tuple[tuple[float, float], tuple[float, float]], ...] = ()
+    seed: int | None = None
 
 
 @runtime_checkable

@@ -117,8 +117,8 @@ def test_check_intent_names_the_choices(tmp_path):
         check_intent(str(tmp_path / "nomodel"))
     assert str(info.value) == (
         f"{str(tmp_path / 'nomodel')!r}: not one of nominal, constant-velocity, oracle, present, paths, "
-        "a path-hypotheses calibration folder (path-hypotheses.json) or a model folder (coassist "
-        "train) (model.json)"
+        "a path-hypotheses calibration folder (path-hypotheses.json) or a person model folder (coassist "
+        "calibrate) (person-model.json) or a model folder (coassist train) (model.json)"
     )
     with pytest.raises(ValueError, match="a simulation alone knows it"):
         check_intent("oracle", simulation=False)

@@ -13,6 +13,8 @@ kind                        controller (the thesis' name)
                             (:data:`DECELERATION_DAMPING`, :mod:`coassist.control.deceleration_damping`)
 ``impedance``               IMP, impedance control toward the plan (eq. 5.4)
 ``manual``                  MG, manual guidance, u_r = 0 (eq. 5.5)
+``manual-probe``            MG plus the calibration probe, a small known push that measures the
+                            person's arm (:data:`PROBE`, :mod:`coassist.control.probe`)
 ==========================  ==============================================================
 
 Every world and command names its controller by kind: a simulated batch
@@ -29,6 +31,7 @@ from coassist.control.arbitration import ArbitratedController, ArbitrationParame
 from coassist.control.controllers import AssistiveController, ImpedanceControl, ManualGuidance
 from coassist.control.deceleration_damping import DampingParameters, DecelerationDamping
 from coassist.control.game import cooperative_game
+from coassist.control.probe import ProbedGuidance, ProbeParameters
 from coassist.model.impedance import ImpedanceModel
 from coassist.registry import UnknownNameError
 
@@ -38,6 +41,7 @@ __all__ = [
     "DECELERATION_DAMPING",
     "FORMER_NAMES",
     "IMPEDANCE_STIFFNESS",
+    "PROBE",
     "get_preset",
     "make_controller",
     "plant_model",
@@ -45,7 +49,14 @@ __all__ = [
 
 #: Controller kinds. "cooperative-arbitrated": the cooperative game with α set every tick
 #: by the law :data:`ARBITRATION`.
-CONTROLLER_KINDS = ("cooperative", "impedance", "manual", "cooperative-arbitrated", "cooperative-damped")
+CONTROLLER_KINDS = (
+    "cooperative",
+    "impedance",
+    "manual",
+    "cooperative-arbitrated",
+    "cooperative-damped",
+    "manual-probe",
+)
 #: The names drive and play used before they took the kinds (old session files, muscle memory):
 #: read in play's recorded sessions, and named in the command line's error for an old name.
 FORMER_NAMES = {
@@ -61,6 +72,9 @@ ARBITRATION = ArbitrationParameters(law="target", alpha_min=0.3, alpha_max=0.9, 
 #: The extra damping of "cooperative-damped": 40 N·s/m at full gate (40 % of the plant's 100), the gate
 #: fully open at 0.3 m/s² of deceleration (docs/precision.md: the lever's force and jerk cost).
 DECELERATION_DAMPING = DampingParameters(gain=40.0, decel_ref=0.3, accel_time=0.02)
+#: The probe of "manual-probe": 2.5 N RMS per axis at 1.3–5.6 Hz (coassist.control.probe), what
+#: coassist.scenario.arm_identification reads the person's arm from.
+PROBE = ProbeParameters()
 #: Spring of the IMP baseline toward the nominal reference [N/m] (eq. 5.4). The thesis
 #: does not give it (its K_i = 0 would make IMP equal MG); 200 N/m pulls back with
 #: 10 N at a 5 cm deviation, about what the operators push with.
@@ -96,4 +110,6 @@ def make_controller(kind: str, preset: ControlPreset):
         return ImpedanceControl(model, IMPEDANCE_STIFFNESS * np.eye(model.n_dof), effort_limit=preset.effort_limit)
     if kind == "manual":
         return ManualGuidance(model)
+    if kind == "manual-probe":
+        return ProbedGuidance(model, PROBE)
     raise ValueError(f"controller must be one of {CONTROLLER_KINDS}, got {kind!r}")

@@ -353,9 +353,12 @@ def build_episode(
         task=task.kind,
         user=labels.user,
         object=labels.object,
-        true_intent=true_intent,
+        # only a source that says it reads the simulated operator's intent gets it (the oracle): no source
+        # that may run on an arm can come to depend on what an arm never measures
+        true_intent=true_intent if getattr(intent, "reads_true_intent", False) is True else None,
         path=task.path.points + shift,
         obstacles=told,  # type: ignore[arg-type]
+        seed=labels.seed,
     )
     tick.reset(Plan(plan, start_pose), context)
     t_done = float(task.planner.end_time) if intent_end_time is None else max(task.planner.end_time, intent_end_time)

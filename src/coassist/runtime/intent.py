@@ -41,6 +41,7 @@ class TickIntent(Protocol):
     horizon: int  # rows of positions returned
     model_id: str | None
     nominal: bool  # True: the source is the nominal plan itself (ref_h = ref_r exactly)
+    reads_true_intent: bool  # the source reads TrialContext.true_intent (the oracle: simulation only)
 
     def reset(self, context: TrialContext) -> None: ...
 
@@ -74,6 +75,8 @@ class WindowIntent:
         # model_id None means the nominal plan (IntentSource's contract): ref_h is then the
         # planner's own rows (analytic velocities), as eq. 4.7 means, and nothing is predicted.
         self.nominal = source.model_id is None
+        # the episode hands the simulated operator's intent to a source that declares it reads it, and no other
+        self.reads_true_intent = getattr(source, "reads_true_intent", False) is True
         L = self.history
         self._hist = np.zeros((2 * L, _N_FEATURES)) if L > 0 else np.zeros((0, _N_FEATURES))
         self._empty = self._hist[:0]
@@ -204,6 +207,7 @@ class RealtimeIntent:
     """
 
     nominal = False
+    reads_true_intent = False  # a network predictor: what an arm measures, nothing else
 
     def __init__(self, predictor: Any, stall_ticks: int = 25, model_id: str | None = None) -> None:
         for attr in ("tick", "horizon"):

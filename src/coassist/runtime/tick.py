@@ -287,8 +287,12 @@ class ControlTick:
         ref_ctrl = ref_abs.copy()
         ref_ctrl[:, :d] -= self._x0
         self._ref_ctrl = ref_ctrl
+        # a controller with draws of its own (the calibration probe) is reset with the trial's context
+        reset_for = getattr(self.controller, "reset_for", None)
         controller_reset = getattr(self.controller, "reset", None)
-        if callable(controller_reset):
+        if callable(reset_for):
+            reset_for(context)
+        elif callable(controller_reset):
             controller_reset()
         self.intent.reset(context)
         self.wrench.reset()

@@ -44,6 +44,8 @@ from coassist.registry import Registry, is_entry_point, load_entry_point
 
 __all__ = [
     "INTENT_FOLDERS",
+    "SIMULATED_FAMILY",
+    "Told",
     "INTENT_SOURCES",
     "NAMED_INTENTS",
     "IntentFolderKind",
@@ -59,6 +61,40 @@ __all__ = [
 
 
 @dataclass(frozen=True)
+class Told:
+    """What an intent source is told besides what an arm measures (the report says it beside its figures).
+
+    scene : it is told where the obstacles are (TrialContext.obstacles; a simulated world, or a lab's
+        scene file).
+    family : the model of people's paths it was built on ("": none; ``paths``: the simulated
+        operator's own detour family). A source with none may not import the simulated person
+        (tests/test_layers.py follows its imports).
+    arm : the person's arm it assumes: "none" (not used), "assumed" (a typical arm) or "measured"
+        (identified from the person's calibration trials).
+    label : what it learnt to predict from trials ("": it learnt nothing; "the simulated operator's
+        intent" needs a simulation to train).
+    person : what it learnt from the person's own trials ("": nothing).
+    """
+
+    scene: bool = False
+    family: str = ""
+    arm: str = "none"
+    label: str = ""
+    person: str = ""
+
+    def __post_init__(self) -> None:
+        if self.arm not in ("none", "assumed", "measured"):
+            raise ValueError(f"Told.arm must be 'none', 'assumed' or 'measured', got {self.arm!r}")
+
+    def text(self) -> str:
+        """One line: e.g. "scene; family: the simulated operator's detours; arm assumed"."""
+        parts = ["scene" if self.scene else "", f"family: {self.family}" if self.family else ""]
+        parts += [f"arm {self.arm}" if self.arm != "none" else "", f"label: {self.label}" if self.label else ""]
+        parts += [f"from the person's trials: {self.person}" if self.person else ""]
+        return "; ".join(p for p in parts if p) or "the plan only"
+
+
+@dataclass(frozen=True)
 class IntentSourceEntry:
     """One named intent source.
 
@@ -66,15 +102,18 @@ class IntentSourceEntry:
         ``attribute(horizon, **options)`` and returning an :class:`~coassist.interfaces.IntentSource`.
     summary : what it predicts, a phrase (the command line's help and docs/architecture.md).
     options : keyword arguments the name fixes besides the horizon, as (name, value) pairs
-        (``present`` is the path-hypotheses class without the obstacles).
+        (``present`` is the person model's source knowing no person: the present estimate of a
+        typical arm at constant velocity).
     simulation_only : it reads what only a simulation knows (``TrialContext.true_intent``):
         refused on a real arm and with a person at the handle.
+    told : what it is told besides what an arm measures (:class:`Told`).
     """
 
     source: str
     summary: str
     options: tuple[tuple[str, Any], ...] = ()
     simulation_only: bool = False
+    told: Told = Told()
 
     def __post_init__(self) -> None:
         if not is_entry_point(self.source):
@@ -87,6 +126,8 @@ class IntentSourceEntry:
         return load_entry_point(self.source)(horizon, **dict(self.options))
 
 
+#: The detour family ``paths`` (and ``present``, its class) is built on: the simulated operator's.
+SIMULATED_FAMILY = "the simulated operator's detours"
 #: The named intent sources (module docstring), in the order the help lists them.
 INTENT_SOURCES: Registry[IntentSourceEntry] = Registry(
     "intent source",
@@ -101,15 +142,18 @@ INTENT_SOURCES: Registry[IntentSourceEntry] = Registry(
             "coassist.scenario.reference_intents:OracleIntent",
             "the simulated operator's true intent",
             simulation_only=True,
+            told=Told(label="the simulated operator's intent, read directly"),
         ),
         "present": IntentSourceEntry(
-            "coassist.scenario.path_hypotheses:PathHypothesesIntent",
+            "coassist.scenario.person_intent:PersonPathsIntent",
             "the present estimate from the hand force",
-            options=(("use_obstacles", False),),
+            options=(("model_id", "present"),),
+            told=Told(arm="assumed"),
         ),
         "paths": IntentSourceEntry(
             "coassist.scenario.path_hypotheses:PathHypothesesIntent",
             "the path hypotheses round the obstacles the robot is told of",
+            told=Told(scene=True, family=SIMULATED_FAMILY, arm="assumed"),
         ),
     },
 )
@@ -124,18 +168,28 @@ class IntentFolderKind:
     marker : the file that marks a folder of this kind.  summary : what it is (the help).
     load : ``load(folder, horizon, network)`` → the source.  network : it evaluates a
     network (a model): the drive runs it off the control thread on a real arm.
+    module : the module ``load`` reads the folder with (tests/test_layers.py follows its imports).
+    told : what such a source is told besides what an arm measures (:class:`Told`).
     """
 
     marker: str
     summary: str
     load: Callable[[str, int, str], IntentSource]
     network: bool
+    module: str = ""
+    told: Told = Told()
 
 
 def _load_calibration(folder: str, horizon: int, network: str) -> IntentSource:
     from coassist.scenario.path_hypotheses import read_calibration
 
     return read_calibration(folder, horizon)
+
+
+def _load_person_model(folder: str, horizon: int, network: str) -> IntentSource:
+    from coassist.scenario.person_model import read_person_model
+
+    return read_person_model(folder, horizon)
 
 
 def _load_model(folder: str, horizon: int, network: str) -> IntentSource:
@@ -157,10 +211,28 @@ INTENT_FOLDERS: Registry[IntentFolderKind] = Registry(
     "intent folder kind",
     {
         "path-hypotheses": IntentFolderKind(
-            "path-hypotheses.json", "a path-hypotheses calibration folder", _load_calibration, network=False
+            "path-hypotheses.json",
+            "a path-hypotheses calibration folder",
+            _load_calibration,
+            network=False,
+            module="coassist.scenario.path_hypotheses",
+            told=Told(scene=True, family=SIMULATED_FAMILY, arm="assumed", person="detour shape and side"),
+        ),
+        "person-model": IntentFolderKind(
+            "person-model.json",
+            "a person model folder (coassist calibrate)",
+            _load_person_model,
+            network=False,
+            module="coassist.scenario.person_model",
+            told=Told(arm="measured", person="paths round obstacles and the arm"),
         ),
         "model": IntentFolderKind(
-            "model.json", "a model folder (coassist train)", _load_model, network=True
+            "model.json",
+            "a model folder (coassist train)",
+            _load_model,
+            network=True,
+            module="coassist.intent",
+            told=Told(label="what the model was trained on (its sidecar: the tool's future or the intent)"),
         ),  # intent.model.SIDECAR
     },
 )

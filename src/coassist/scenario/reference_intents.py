@@ -49,6 +49,8 @@ class OracleIntent:
 
     history = 0
     model_id = "oracle"
+    #: It reads the simulated operator's intent: the episode hands TrialContext.true_intent to it alone.
+    reads_true_intent = True
 
     def __init__(self, horizon: int = 50) -> None:
         self.horizon = check_int(horizon, "OracleIntent.horizon", 1)

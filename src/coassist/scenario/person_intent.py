@@ -1,0 +1,379 @@
+"""The person's intent from what an arm measures and what their own trials taught: the online half of the person model.
+
+An :class:`~coassist.interfaces.IntentSource` that reads only the last feature row (tool
+position p, velocity v, wrench w) and the nominal path (``TrialContext.path``, public like
+the plan), with a person's :class:`~coassist.scenario.path_model.PathModel` and
+:class:`~coassist.scenario.arm_identification.ArmEstimate` fitted to their calibration trials
+(coassist.scenario.person_model). It is told no obstacle: where the person goes round
+whatever is in the way, their own demonstrations say.
+
+Hypotheses. Every demonstrated path that took a way round, shifted along the plan by each of
+``shifts`` (the obstacle, unseen, is never exactly where it was), and mirrored for a way round
+nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each with its way round
+σₙ ∈ {+1, −1} and prior πₙ (:meth:`PathModel.curves`). Every tick:
+
+1. **present estimate** q = p + (w + m a + Ĉ v)/K̂ (eq. 4.1 solved for the intent; m a puts back
+   the carried object's inertia, a low-pass filtered over ``accel_time``);
+2. **phase**: the tool's nearest point on each curve within ``search_window`` of its last, and each
+   curve's present estimate qₙ = Cₙ(sₙ + ℓₙ) with the lead ℓₙ = tₙ·(w + m a + Ĉ v)/K̂ along it;
+3. **evidence**: each curve's log-likelihood grows by −κ‖q − b − qₙ‖²/(2σ²) (σ the present estimate's
+   noise measured in the calibration; κ discounts the correlation of successive ticks; b the
+   lateral bias learnt on the shared path, as in ``paths``). The ways' log-odds move with the
+   change of their marginal log-likelihoods log Σₙ πₙ exp(ℓₙ) per way, at most ``evidence_rate``·dt
+   per tick, from the ways' prior (bounded to ``prior_share`` of ``decide``: a habit never decides
+   alone), until the tool passes the place where the ways are furthest apart;
+4. **rows**: once |log-odds| > ``decide`` the rows run along the decided way's likeliest curves
+   (at most :data:`MIXTURE`, weighted) from their present estimates at the tool's speed along
+   them; while undecided and the ways' rows part by more than ``divergence`` over the horizon, the
+   rows are the present estimate's, q + ``hedge_velocity``·i·dt·v — neither way, and never the plan.
+   The two cross-fade over ``blend_time``.
+
+Where the tool is far from every curve (``max_offset``: another task, a person who left the plan
+for good) or the model knows no path for the trial's plan, the rows are the present estimate's
+at constant velocity.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from coassist._checks import check_int, check_real
+from coassist.interfaces import TrialContext
+from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate
+from coassist.scenario.objects import OBJECTS
+from coassist.scenario.path_model import PathFrame, PathModel
+
+__all__ = ["PersonFilterSettings", "PersonPathsIntent"]
+
+#: The control period [s] κ was chosen at; at another rate κ scales by dt / REFERENCE_DT.
+REFERENCE_DT = 0.008
+#: The spacing [m] of the grid of the plan the side evidence reads offsets on.
+NOMINAL_STEP = 0.002
+#: The most curves whose rows a decided way mixes.
+MIXTURE = 4
+
+
+@dataclass(frozen=True)
+class PersonFilterSettings:
+    """The online filter's constants (module docstring), chosen on validation seeds (docs/precision.md).
+
+    kappa : κ ∈ (0, 1]. decide : log-odds at which the rows follow a way round. prior_share : the share
+    of ``decide`` the prior may give. divergence : [m] at which curves (or rows) count as apart.
+    evidence_rate : [1/s]. accel_time, blend_time, bias_time : [s]. bias_limit : [m]. hedge_velocity :
+    ∈ [0, 1]. search_window : [m] of each curve searched for the phase. max_offset : [m] beyond it the
+    rows are the present estimate's. shifts : [m] along the plan each demonstration is tried at.
+    noise_scale : σ in the likelihoods is this times the present estimate's noise in the calibration.
+    kernel : [m] the width each hypothesis' offset stands for in the side evidence (besides σ).
+    odds_limit : the log-odds never exceed it (a mind may change).
+    """
+
+    kappa: float = 0.2
+    decide: float = 1.0
+    prior_share: float = 0.9
+    divergence: float = 0.0005
+    evidence_rate: float = 30.0
+    accel_time: float = 0.02
+    blend_time: float = 0.1
+    bias_time: float = 0.4
+    bias_limit: float = 0.005
+    hedge_velocity: float = 0.5
+    search_window: float = 0.02
+    max_offset: float = 0.1
+    shifts: tuple[float, ...] = (-0.015, 0.0, 0.015)
+    noise_scale: float = 2.0
+    kernel: float = 0.005
+    odds_limit: float = 10.0
+
+    def __post_init__(self) -> None:
+        for name, lo, hi, open_lo in (
+            ("kappa", 0.0, 1.0, True),
+            ("decide", 0.0, 20.0, False),
+            ("prior_share", 0.0, 1.0, False),
+            ("divergence", 0.0, 0.1, True),
+            ("evidence_rate", 0.0, 1000.0, True),
+            ("accel_time", 0.0, 1.0, False),
+            ("blend_time", 0.0, 2.0, False),
+            ("bias_time", 0.0, 10.0, True),
+            ("bias_limit", 0.0, 0.05, False),
+            ("hedge_velocity", 0.0, 1.0, False),
+            ("search_window", 0.004, 0.2, False),
+            ("max_offset", 0.01, 1.0, False),
+            ("noise_scale", 0.1, 20.0, False),
+            ("kernel", 0.0, 0.1, False),
+            ("odds_limit", 1.0, 100.0, False),
+        ):
+            object.__setattr__(
+                self, name, check_real(getattr(self, name), f"PersonFilterSettings.{name}", lo, hi, open_lo=open_lo)
+            )
+        if isinstance(self.shifts, (str, bytes)) or not hasattr(self.shifts, "__iter__"):
+            raise ValueError(f"PersonFilterSettings.shifts must be a list of lengths [m], got {self.shifts!r}")
+        shifts = tuple(check_real(x, "PersonFilterSettings.shifts", -0.2, 0.2) for x in self.shifts)
+        if not shifts or len(shifts) > 9 or list(shifts) != sorted(set(shifts)):
+            raise ValueError(
+                f"PersonFilterSettings.shifts must be 1 to 9 distinct lengths in increasing order, got {self.shifts!r}"
+            )
+        object.__setattr__(self, "shifts", shifts)
+
+
+class _Curves:
+    """One trial's hypotheses (module docstring): points (N, G, 2), their arc lengths (N, G) and unit
+    tangents (N, G, 2), flat copies for the per-tick gathers; ways (N,), log prior (N,). And the plan
+    on a grid of NOMINAL_STEP: its points and left normals (M, 2), each way's mean offset there (M,),
+    and the grid index where the ways are furthest apart."""
+
+    def __init__(self, model: PathModel, shifts: tuple[float, ...]) -> None:
+        self.points, self.ways, prior = model.curves(shifts)
+        self.log_prior = np.log(prior)
+        N, G = self.points.shape[:2]
+        seg = np.hypot(*np.moveaxis(np.diff(self.points, axis=1), 2, 0))
+        self.arc = np.concatenate([np.zeros((N, 1)), np.cumsum(seg, axis=1)], axis=1)
+        self.step = float(np.min(self.arc[:, -1])) / (G - 1)  # the finest spacing of any curve
+        tan = np.gradient(self.points, axis=1)
+        self.tangents = tan / np.maximum(np.linalg.norm(tan, axis=2, keepdims=True), 1e-12)
+        self.flat_x = np.ascontiguousarray(self.points[:, :, 0]).ravel()
+        self.flat_y = np.ascontiguousarray(self.points[:, :, 1]).ravel()
+        self.flat_points = self.points.reshape(N * G, 2)
+        self.flat_tangents = self.tangents.reshape(N * G, 2)
+        self.flat_arc = self.arc.ravel()
+        self.row_start = np.arange(N) * G
+        self.curves = np.arange(N)
+        self.on_way = {w: np.flatnonzero(self.ways == w) for w in np.unique(self.ways).tolist()}
+        frame = PathFrame(model.nominal)
+        M = max(2, int(math.ceil(frame.length / NOMINAL_STEP)) + 1)
+        s = np.linspace(0.0, frame.length, M)
+        self.nominal_step = float(s[1] - s[0])
+        self.nominal_points = frame.path.position(s)
+        self.nominal_normals = frame.path.normal(s)
+        # every hypothesis' offset from the plan at each grid point (where it first reaches it): the side
+        # evidence compares the present estimate's offset with them
+        offsets = []
+        for n in range(N):
+            sn, dn = frame.project(self.points[n])
+            sn = np.maximum.accumulate(sn)
+            first = np.concatenate([[True], np.diff(sn) > 0.0])
+            offsets.append(np.interp(s, sn[first], dn[first]))
+        self.offsets = np.asarray(offsets)  # (N, M)
+        self.spread = np.ptp(self.offsets, axis=0)  # (M,) how far the hypotheses disagree there
+        mean = {
+            w: np.exp(self.log_prior[i] - np.logaddexp.reduce(self.log_prior[i])) @ self.offsets[i]
+            for w, i in self.on_way.items()
+        }
+        gap = np.abs(mean[1] - mean[-1]) if len(mean) == 2 else np.abs(next(iter(mean.values())))
+        # the way taken is settled once the tool passes the place where the ways are furthest apart
+        self.peak = int(np.argmax(gap))
+
+    def at(self, n: int, s: np.ndarray) -> np.ndarray:
+        """Points of curve n at its own arc lengths s (clipped)."""
+        G = self.points.shape[1]
+        n0 = n * G
+        arc = self.arc[n]
+        out = np.empty(np.shape(s) + (2,))
+        out[..., 0] = np.interp(s, arc, self.flat_x[n0 : n0 + G])
+        out[..., 1] = np.interp(s, arc, self.flat_y[n0 : n0 + G])
+        return out
+
+
+class PersonPathsIntent:
+    """The intent source of a person model (module docstring), one trial at a time.
+
+    Parameters
+    ----------
+    horizon : rows predicted.
+    paths : person (TrialContext.user) → their :class:`PathModel`; ``default_paths`` for anyone else
+        (None: the present estimate alone for them).
+    arms : person → :class:`ArmEstimate`; ``default_arm`` for anyone else.
+    settings : the filter's constants.
+    model_id : what trials record as the source.
+    """
+
+    history = 1
+
+    def __init__(
+        self,
+        horizon: int = 50,
+        *,
+        paths: Mapping[str, PathModel] | None = None,
+        arms: Mapping[str, ArmEstimate] | None = None,
+        default_paths: PathModel | None = None,
+        default_arm: ArmEstimate | None = None,
+        settings: PersonFilterSettings | None = None,
+        model_id: str = "person",
+    ) -> None:
+        self.horizon = check_int(horizon, "PersonPathsIntent.horizon", 1)
+        self.paths = dict(paths or {})
+        self.arms = dict(arms or {})
+        self.default_paths = default_paths
+        self.default_arm = ASSUMED_ARM if default_arm is None else default_arm
+        self.settings = PersonFilterSettings() if settings is None else settings
+        self.model_id = model_id
+        self._ready = False
+        self._cache: dict[int, tuple[PathFrame, _Curves]] = {}
+
+    def _curves(self, model: PathModel) -> tuple[PathFrame, _Curves]:
+        key = id(model)
+        if key not in self._cache:
+            self._cache[key] = (PathFrame(model.nominal), _Curves(model, self.settings.shifts))
+        return self._cache[key]
+
+    def reset(self, context: TrialContext) -> None:
+        st = self.settings
+        self.dt = float(context.dt)
+        self._steps = self.dt * np.arange(1, self.horizon + 1)
+        obj = OBJECTS.get(context.object)
+        self._mass = float(obj.mass) if obj is not None else 0.0
+        self._a_gain = 1.0 - math.exp(-self.dt / st.accel_time) if st.accel_time > 0 else 1.0
+        self._b_gain = 1.0 - math.exp(-self.dt / st.bias_time)
+        self._v_prev: np.ndarray | None = None
+        self._acc = np.zeros(2)
+        arm = self.arms.get(context.user, self.default_arm)
+        self._K, self._C = arm.stiffness, arm.damping
+        model = self.paths.get(context.user, self.default_paths)
+        self._hyp: _Curves | None = None
+        if model is not None and context.path is not None:
+            frame, curves = self._curves(model)
+            # the model knows one plan: another plan gets the present estimate alone
+            if frame.distance_to(np.asarray(context.path, dtype=float)) <= 0.01:
+                self._hyp = curves
+        if self._hyp is not None and model is not None:
+            hyp = self._hyp
+            self._noise2 = (st.noise_scale * model.noise) ** 2
+            self._kernel2 = self._noise2 + st.kernel**2
+            n = len(hyp.ways)
+            self._idx = np.zeros(len(hyp.curves), dtype=int)
+            self._nominal_at = 0
+            self._nominal_window = max(2, int(math.ceil(st.search_window / hyp.nominal_step)))
+            self._loglik = np.zeros(n)
+            self._two = len(hyp.on_way) == 2
+            bound = st.prior_share * st.decide
+            if self._two:
+                lp = {w: float(np.logaddexp.reduce(hyp.log_prior[i])) for w, i in hyp.on_way.items()}
+                self._way_prior = lp[1] - lp[-1]  # the evidence per tick is the likelihood ratio alone
+                self._log_odds = min(max(self._way_prior, -bound), bound)
+            else:
+                self._log_odds = self._way_prior = 0.0
+            self._kappa = st.kappa * self.dt / REFERENCE_DT
+            self._step_cap = st.evidence_rate * self.dt
+            self._widest = max(2, int(math.ceil(st.search_window / hyp.step)))
+            self._offsets = np.arange(-self._widest, self._widest + 1)[None, :]
+            self._bias = 0.0
+            self._side = 0 if self._two else int(hyp.ways[0])
+            self._mix = 1.0
+            self._mix_step = self.dt / st.blend_time if st.blend_time > 0 else 1.0
+        self._ready = True
+
+    @property
+    def side(self) -> int:
+        """The way round the rows follow: +1 left, −1 right, 0 undecided (or no model)."""
+        return self._side if self._hyp is not None else 0
+
+    def predict(self, history: np.ndarray) -> np.ndarray:
+        if not self._ready:
+            raise RuntimeError("PersonPathsIntent.predict called before reset")
+        row = history[-1]
+        p, v, w = row[0:2], row[2:4], row[4:6]
+        if self._v_prev is not None:
+            self._acc += self._a_gain * ((v - self._v_prev) / self.dt - self._acc)
+        self._v_prev = v.copy()
+        u_h = w + self._mass * self._acc
+        present = p + (u_h + self._C * v) / self._K
+        if self._hyp is None:
+            return present + self._steps[:, None] * v
+        return self._filter(self._hyp, p, v, u_h, present)
+
+    def _filter(self, hyp: _Curves, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray) -> np.ndarray:
+        st = self.settings
+        K, C = self._K, self._C
+        G = hyp.points.shape[1]
+        # 2. the tool's phase on every curve: its nearest point within the search window of the last one
+        ids = self._idx[:, None] + self._offsets
+        np.clip(ids, 0, G - 1, out=ids)
+        flat = ids + hyp.row_start[:, None]
+        dx = np.take(hyp.flat_x, flat) - p[0]
+        dy = np.take(hyp.flat_y, flat) - p[1]
+        d2 = dx * dx + dy * dy
+        at = flat[hyp.curves, np.argmin(d2, axis=1)]
+        near = at - hyp.row_start
+        self._idx = near
+        hedge = present + (st.hedge_velocity * self._steps)[:, None] * v
+        if float(np.min(np.take(d2.ravel(), np.argmin(d2, axis=1) + np.arange(len(near)) * d2.shape[1]))) > (
+            st.max_offset**2
+        ):
+            return present + self._steps[:, None] * v
+        tan = np.take(hyp.flat_tangents, at, axis=0)
+        lead = (tan @ u_h + C * (tan @ v)) / K
+        q = np.take(hyp.flat_points, at, axis=0) + lead[:, None] * tan
+        s_lead = np.take(hyp.flat_arc, at) + lead
+        # 3. evidence. The way: the present estimate's offset from the plan (less the person's bias there),
+        # toward one way or the other, in proportion to how far apart the ways are at this point of the plan
+        # (a detour that comes later or earlier than before fakes no side)
+        g, M = self._nominal_at, len(hyp.nominal_points)
+        lo, hi = max(0, g - self._nominal_window), min(M, g + self._nominal_window + 1)
+        rel = p - hyp.nominal_points[lo:hi]
+        self._nominal_at = k = lo + int(np.argmin(rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]))
+        normal = hyp.nominal_normals[k]
+        z = float((present - hyp.nominal_points[k]) @ normal)
+        if float(hyp.spread[k]) < st.divergence:
+            if self._mix >= 1.0:  # the bias: learnt while every hypothesis is the same path here
+                self._bias += self._b_gain * (z - self._bias)
+                self._bias = min(max(self._bias, -st.bias_limit), st.bias_limit)
+        elif self._two and (self._side == 0 or k < hyp.peak):
+            # each way's likelihood of the offset: a mixture over its hypotheses' offsets here
+            e = hyp.offsets[:, k] - (z - self._bias)
+            ll = hyp.log_prior - 0.5 * e * e / self._kernel2
+            gain = self._kappa * float(
+                np.logaddexp.reduce(ll[hyp.on_way[1]]) - np.logaddexp.reduce(ll[hyp.on_way[-1]]) - self._way_prior
+            )
+            self._log_odds += min(max(gain, -self._step_cap), self._step_cap)
+            self._log_odds = min(max(self._log_odds, -st.odds_limit), st.odds_limit)
+        # the shape: each hypothesis' likelihood relative to its way's best, while the way's curves are apart
+        corrected = present - self._bias * normal
+        r = corrected - q
+        r2 = r[:, 0] * r[:, 0] + r[:, 1] * r[:, 1]
+        for on in hyp.on_way.values():
+            qs = q[on]
+            off = qs - qs.mean(axis=0)
+            if math.sqrt(float(np.max(off[:, 0] * off[:, 0] + off[:, 1] * off[:, 1]))) >= st.divergence:
+                self._loglik[on] -= self._kappa * (r2[on] - r2[on].min()) / (2.0 * self._noise2)
+                self._loglik[on] -= self._loglik[on].max()
+        np.maximum(self._loglik, -60.0, out=self._loglik)
+        if self._two and abs(self._log_odds) > st.decide:
+            side = 1 if self._log_odds > 0 else -1
+            if side != self._side and self._side != 0:
+                self._mix = 0.0  # a change of mind goes through the present estimate, not across the obstacle
+            self._side = side
+
+        # 4. rows
+        def along(n: int) -> np.ndarray:
+            speed = max(float(tan[n] @ v), 0.0)
+            return hyp.at(n, s_lead[n] + self._steps * speed)
+
+        def mixture(on: np.ndarray) -> np.ndarray:
+            weight = np.exp(self._loglik[on] + hyp.log_prior[on] - hyp.log_prior[on].max())
+            best = np.argsort(weight)[::-1][:MIXTURE]
+            best = best[weight[best] >= 0.01 * weight[best[0]]]
+            w = weight[best] / weight[best].sum()
+            out = w[0] * along(int(on[best[0]]))
+            for wt, n in zip(w[1:], on[best[1:]]):
+                out += wt * along(int(n))
+            return out
+
+        if self._side != 0 or not self._two:
+            ahead = mixture(hyp.on_way[self._side])
+            target = 1.0
+        else:
+            ahead = mixture(hyp.on_way[1])
+            other = mixture(hyp.on_way[-1])
+            target = 0.0 if float(np.max(np.linalg.norm(ahead - other, axis=1))) >= st.divergence else 1.0
+        if self._mix_step >= 1.0:
+            self._mix = target
+        elif target != self._mix:
+            self._mix = min(max(self._mix + math.copysign(self._mix_step, target - self._mix), 0.0), 1.0)
+        if self._mix >= 1.0:
+            return ahead
+        if self._mix <= 0.0:
+            return hedge
+        return self._mix * ahead + (1.0 - self._mix) * hedge

@@ -1,0 +1,162 @@
+"""A person model: what coassist learns of a person from their own calibration trials, and its folder.
+
+Fitted from what a lab records with an arm — the tool's positions and velocities, the wrench
+at the sensor, the robot's effort and the nominal plan — of a few trials per person under
+manual guidance with the probe (controller ``manual-probe``), with no intent label and no
+obstacle told:
+
+1. the arm, K̂ and Ĉ (:func:`~coassist.scenario.arm_identification.identify_arm`);
+2. each trial's intent path, reconstructed with that arm: q = p + (w + Ĉ v)/K̂, smoothed
+   (zero-phase, ``smoothing`` Hz) — the path the person pursued, not the one the tool took;
+3. the person's paths on the task (:func:`~coassist.scenario.path_model.fit_path_model`), with the
+   present estimate's noise σ (the RMS of q less its smoothed self, lateral to the plan).
+
+The folder (``person-model.json``) is one JSON document: per person their arm and, per task
+(nominal path), their path model; :func:`read_person_model` gives the intent source.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from coassist._io import atomic_write_text
+from coassist.scenario.arm_identification import ArmEstimate, identify_arm
+from coassist.scenario.path_model import PathFrame, PathModel, PathModelSettings, fit_path_model
+from coassist.scenario.person_intent import PersonFilterSettings, PersonPathsIntent
+
+__all__ = [
+    "PERSON_MODEL_FILE",
+    "PersonFit",
+    "fit_person",
+    "intent_paths",
+    "read_person_model",
+    "write_person_model",
+]
+
+PERSON_MODEL_FILE = "person-model.json"
+_FORMAT = "coassist-person-model-1"
+
+
+@dataclass(frozen=True, eq=False)
+class PersonFit:
+    """One person's fit: their arm and their path model on one task."""
+
+    arm: ArmEstimate
+    paths: PathModel
+
+
+def _nominal_of(trial) -> np.ndarray:
+    """The nominal path of a trial: its planner reference's distinct points, in order."""
+    ref = np.asarray(trial.reference[:, :2], dtype=float)
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(ref, axis=0), axis=1) > 1e-9])
+    return ref[keep]
+
+
+def intent_paths(trials: Sequence, arm: ArmEstimate, *, smoothing: float = 1.5) -> tuple[list[np.ndarray], float]:
+    """Each trial's reconstructed intent path (module docstring, step 2) and the present estimate's
+    noise σ [m] about it: (paths, σ). The handle's sensor reads the hand's force (no inertia put back)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    paths, resid = [], []
+    for trial in trials:
+        dt = float(trial.meta.dt)
+        q = trial.pose[:, :2] + (trial.wrench[:, :2] + arm.damping * trial.velocity[:, :2]) / arm.stiffness
+        sos = butter(2, smoothing, "lowpass", fs=1.0 / dt, output="sos")
+        smooth = sosfiltfilt(sos, q, axis=0)
+        # the part the person moved: from leaving the start to reaching the end of the plan
+        start, end = trial.reference[0, :2], trial.reference[-1, :2]
+        moved = np.flatnonzero(np.linalg.norm(trial.pose[:, :2] - start, axis=1) > 0.005)
+        first = int(moved[0]) if moved.size else 0
+        at_end = np.flatnonzero(np.linalg.norm(smooth - end, axis=1) < 0.01)
+        last = int(at_end[at_end > first][0]) if np.any(at_end > first) else len(smooth) - 1
+        paths.append(smooth[first : last + 1])
+        resid.append((q - smooth)[first : last + 1])
+    r = np.concatenate(resid)
+    return paths, float(math.sqrt(float(np.mean(np.sum(r * r, axis=1)) / 2.0)))
+
+
+def fit_person(
+    trials: Sequence,
+    *,
+    settings: PathModelSettings | None = None,
+    arm: ArmEstimate | None = None,
+    smoothing: float = 1.5,
+) -> PersonFit:
+    """One person's :class:`PersonFit` from their calibration trials on one task (module docstring).
+    ``arm``: use this arm instead of measuring it (e.g. to study what a wrong arm costs)."""
+    if not trials:
+        raise ValueError("fit_person needs at least one trial")
+    nominal = _nominal_of(trials[0])
+    frame = PathFrame(nominal)
+    for t in trials[1:]:
+        if frame.distance_to(_nominal_of(t)) > 0.01:
+            raise ValueError(
+                f"fit_person: the trials follow different nominal paths ({trials[0].meta.task!r}, {t.meta.task!r}); "
+                "fit each task apart"
+            )
+    arm = identify_arm(trials) if arm is None else arm
+    paths, noise = intent_paths(trials, arm, smoothing=smoothing)
+    return PersonFit(arm=arm, paths=fit_path_model(nominal, paths, noise=max(noise, 1e-4), settings=settings))
+
+
+def _model_doc(model: PathModel) -> dict:
+    return {
+        "nominal": model.nominal.tolist(),
+        "noise": model.noise,
+        "settings": asdict(model.settings),
+        "weights": model.weights.tolist(),
+        "sides": model.sides.tolist(),
+    }
+
+
+def _model_from(doc: Mapping) -> PathModel:
+    return PathModel(
+        nominal=np.asarray(doc["nominal"], dtype=float),
+        weights=np.asarray(doc["weights"], dtype=float),
+        sides=np.asarray(doc["sides"], dtype=int),
+        noise=float(doc["noise"]),
+        settings=PathModelSettings(**doc["settings"]),
+    )
+
+
+def write_person_model(
+    folder: str | Path, fits: Mapping[str, PersonFit], *, settings: PersonFilterSettings | None = None
+) -> Path:
+    """Write a person-model folder (``person-model.json``, atomically); returns the folder."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    doc = {
+        "format": _FORMAT,
+        "filter": asdict(settings or PersonFilterSettings()),
+        "people": {name: {"arm": asdict(f.arm), "paths": _model_doc(f.paths)} for name, f in fits.items()},
+    }
+    atomic_write_text(folder / PERSON_MODEL_FILE, json.dumps(doc) + "\n")
+    return folder
+
+
+def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsIntent:
+    """The intent source a person-model folder holds (errors name the file and field)."""
+    path = Path(folder) / PERSON_MODEL_FILE
+    try:
+        doc = json.loads(path.read_text("utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: not a person model ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != _FORMAT:
+        raise ValueError(f"{path}: format must be {_FORMAT!r}")
+    try:
+        people = dict(doc["people"])
+        return PersonPathsIntent(
+            horizon,
+            paths={name: _model_from(p["paths"]) for name, p in people.items()},
+            arms={name: ArmEstimate(**p["arm"]) for name, p in people.items()},
+            settings=PersonFilterSettings(**doc.get("filter", {})),
+            model_id=f"person:{Path(folder).name}",
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: {exc}") from None

@@ -1,0 +1,97 @@
+"""A person's paths learned from demonstrations (coassist.scenario.path_model), against hand-built paths."""
+
+import numpy as np
+import pytest
+
+from coassist.scenario.path_model import PathFrame, PathModel, PathModelSettings, fit_path_model
+
+# a straight plan along x, 1 m: a path's (s, d) is its (x, y)
+NOMINAL = np.stack([np.linspace(0.0, 1.0, 501), np.zeros(501)], axis=1)
+X = np.linspace(0.0, 1.0, 2001)
+
+
+def _bump(centre, amplitude, width=0.12):
+    """A smooth detour: y = A·exp(−((x − c)/w)⁴), on the straight plan (T, 2)."""
+    return np.stack([X, amplitude * np.exp(-(((X - centre) / width) ** 4))], axis=1)
+
+
+def test_the_frame_is_arc_length_and_offset():
+    frame = PathFrame(NOMINAL)
+    s, d = frame.project(np.array([[0.3, 0.05], [0.7, -0.02], [-0.1, 0.0]]))
+    np.testing.assert_allclose(s, [0.3, 0.7, 0.0], atol=1e-12)
+    np.testing.assert_allclose(d, [0.05, -0.02, 0.0], atol=1e-12)
+    # on an arc of radius R (counter-clockwise: its left normal points to the centre) the offset is the
+    # distance from the circle, positive inside (to the polyline's chord error)
+    R, phi = 0.5, np.linspace(0.0, np.pi / 2, 2001)
+    arc = PathFrame(np.stack([R * np.cos(phi), R * np.sin(phi)], axis=1))
+    q = np.array([[0.0, 0.55], [0.4 * np.cos(0.4), 0.4 * np.sin(0.4)]])
+    s, d = arc.project(q)
+    chord = R * (np.pi / 2 / 2000) ** 2  # the polyline's sagitta and its vertex spacing bound the error
+    np.testing.assert_allclose(d, [-0.05, 0.1], atol=10 * chord + 1e-6)
+    np.testing.assert_allclose(s, [R * np.pi / 2, R * 0.4], atol=R * np.pi / 2 / 2000)
+
+
+def test_demonstrations_are_kept_as_the_person_went():
+    demos = [_bump(0.5, 0.08), _bump(0.52, -0.07), _bump(0.48, 0.09)]
+    model = fit_path_model(NOMINAL, demos, noise=0.001)
+    assert model.sides.tolist() == [1, -1, 1]
+    got = model.demonstrations()
+    for demo, path in zip(demos, got):
+        # every point of the primitive's path lies on the demonstrated one: the bump spans ~10 basis
+        # widths, which the basis resolves to a small fraction of its amplitude
+        _, d = PathFrame(demo).project(path)
+        assert np.max(np.abs(d)) < 0.002
+        assert np.linalg.norm(path[0] - demo[0]) < 0.002 and np.linalg.norm(path[-1] - demo[-1]) < 0.002
+    # the same demonstrations fit again give the same model, bit for bit
+    again = fit_path_model(NOMINAL, demos, noise=0.001)
+    assert again.weights.tobytes() == model.weights.tobytes()
+
+
+def test_ways_have_laplaces_prior_and_a_plan_without_detours_has_one_way():
+    model = fit_path_model(NOMINAL, [_bump(0.5, 0.08)] * 3 + [_bump(0.5, -0.08)], noise=0.001)
+    assert model.ways() == pytest.approx({1: 4 / 6, -1: 2 / 6})
+    straight = fit_path_model(NOMINAL, [_bump(0.5, 0.005), _bump(0.5, -0.01)], noise=0.001)
+    assert straight.sides.tolist() == [0, 0] and straight.ways() == {0: 1.0}
+    points, ways, prior = straight.curves((0.0,))
+    assert ways.tolist() == [0, 0] and prior.sum() == pytest.approx(1.0)
+
+
+def test_a_way_nobody_took_is_the_mirror_of_the_other_and_shifts_move_along_the_plan():
+    model = fit_path_model(NOMINAL, [_bump(0.5, 0.08), _bump(0.45, 0.1)], noise=0.001)
+    points, ways, prior = model.curves((-0.02, 0.0, 0.02))
+    assert ways.tolist() == [1] * 6 + [-1] * 6
+    np.testing.assert_allclose(prior, np.r_[np.full(6, (3 / 4) / 6), np.full(6, (1 / 4) / 6)])
+    # on a straight plan the mirror is y → −y, and a shift is a translation along x
+    np.testing.assert_allclose(points[6:, :, 0], points[:6, :, 0], atol=1e-12)
+    np.testing.assert_allclose(points[6:, :, 1], -points[:6, :, 1], atol=1e-12)
+    demo = model.demonstrations()[0]
+    np.testing.assert_allclose(points[0, :, 1], demo[:, 1], atol=1e-12)
+    inner = (demo[:, 0] > 0.05) & (demo[:, 0] < 0.95)  # away from the ends, where the plan is clipped
+    np.testing.assert_allclose(points[0, inner, 0], demo[inner, 0] - 0.02, atol=1e-9)
+    np.testing.assert_allclose(points[2, inner, 0], demo[inner, 0] + 0.02, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("demos", "match"),
+    [
+        ([], "at least one"),
+        ([np.full((10, 2), np.nan)], "demonstration 0 must be a finite"),
+        ([np.zeros((10, 2))], "demonstration 0 does not move"),
+        ([np.zeros((10, 3))], "demonstration 0 must be a finite"),
+    ],
+)
+def test_bad_demonstrations_are_refused_in_one_line(demos, match):
+    with pytest.raises(ValueError, match=match):
+        fit_path_model(NOMINAL, demos, noise=0.001)
+
+
+def test_a_model_out_of_range_is_refused_naming_the_field():
+    good = fit_path_model(NOMINAL, [_bump(0.5, 0.08)], noise=0.001)
+    with pytest.raises(ValueError, match="PathModel.noise"):
+        PathModel(good.nominal, good.weights, good.sides, 1.0, good.settings)
+    with pytest.raises(ValueError, match="PathModel.sides"):
+        PathModel(good.nominal, good.weights, np.array([2]), 0.001, good.settings)
+    with pytest.raises(ValueError, match="PathModel.weights"):
+        PathModel(good.nominal, good.weights[:, :-1], good.sides, 0.001, good.settings)
+    with pytest.raises(ValueError, match="PathModelSettings.n_basis"):
+        PathModelSettings(n_basis=1)

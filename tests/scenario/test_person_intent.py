@@ -1,0 +1,134 @@
+"""The person model's online filter (coassist.scenario.person_intent) on scripted trials with known paths."""
+
+import numpy as np
+import pytest
+
+from coassist.interfaces import IntentSource, TrialContext
+from coassist.scenario.arm_identification import ArmEstimate
+from coassist.scenario.path_model import fit_path_model
+from coassist.scenario.person_intent import PersonFilterSettings, PersonPathsIntent
+
+DT = 0.008
+K = 800.0
+ARM = ArmEstimate(stiffness=K, damping=10.0, trials=5, method="probe-iv")
+NOMINAL = np.stack([np.linspace(0.0, 1.0, 501), np.zeros(501)], axis=1)
+X = np.linspace(0.0, 1.0, 4001)
+
+
+def _bump(centre, amplitude, width=0.12):
+    return np.stack([X, amplitude * np.exp(-(((X - centre) / width) ** 4))], axis=1)
+
+
+def _model(left=(0.49, 0.5, 0.51), right=(0.5, 0.52), amplitude=0.08):
+    demos = [_bump(c, amplitude) for c in left] + [_bump(c, -amplitude) for c in right]
+    return fit_path_model(NOMINAL, demos, noise=0.001)
+
+
+def _context(path=NOMINAL, user="u"):
+    return TrialContext(
+        dt=DT,
+        horizon=50,
+        start=path[0].copy(),
+        target=path[-1].copy(),
+        reference=np.zeros((10, 4)),
+        task="linear",
+        user=user,
+        object="handle",
+        path=path,
+    )
+
+
+def _walk(intent):
+    """The intent walked at 0.1 m/s: its points 1 mm apart (X is 0.25 mm apart)."""
+    seg = np.linalg.norm(np.diff(intent, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    s = np.arange(0.0, arc[-1], 0.1 * DT)
+    return np.stack([np.interp(s, arc, intent[:, 0]), np.interp(s, arc, intent[:, 1])], axis=1)
+
+
+def _tick(src, intent, k, lag=6):
+    """Tick k of a scripted trial: the tool trails the intent by ``lag`` ticks and the hand pulls with the
+    arm the model knows (so the present estimate is the intent itself); the rows."""
+    tool = intent[max(k - lag, 0)]
+    vel = (intent[max(k - lag, 0)] - intent[max(k - lag - 1, 0)]) / DT
+    w = K * (intent[k] - tool) - ARM.damping * vel
+    return src.predict(np.array([[tool[0], tool[1], vel[0], vel[1], w[0], w[1], 0.0, 0.0]]))
+
+
+def _scripted(src, intent):
+    """A whole scripted trial: the way decided and the first row, per tick."""
+    sides, first = [], []
+    for k in range(len(intent)):
+        first.append(_tick(src, intent, k)[0])
+        sides.append(src.side)
+    return np.asarray(sides), np.asarray(first)
+
+
+def test_it_is_an_intent_source_of_the_persons_arm():
+    src = PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM})
+    assert isinstance(src, IntentSource) and src.history == 1
+    # the model knows one plan: on another the rows are the present estimate at constant velocity
+    src.reset(_context(path=NOMINAL + [0.0, 0.2]))
+    row = np.array([[0.1, 0.2, 0.1, 0.0, 4.0, -2.0, 0.0, 0.0]])
+    present = np.array([0.1, 0.2]) + (np.array([4.0, -2.0]) + 10.0 * np.array([0.1, 0.0])) / K
+    np.testing.assert_allclose(src.predict(row), present + np.outer(DT * np.arange(1, 51), [0.1, 0.0]), atol=1e-15)
+    # a person nobody calibrated gets the assumed arm and no paths
+    src.reset(_context(user="stranger"))
+    assert src.side == 0
+
+
+@pytest.mark.parametrize(("amplitude", "centre"), [(0.08, 0.505), (-0.08, 0.515)], ids=["left", "right"])
+def test_the_way_is_found_soon_after_the_detour_starts_and_the_rows_follow_it(amplitude, centre):
+    src = PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM})
+    src.reset(_context())
+    intent = _walk(_bump(centre, amplitude))
+    sides, first = _scripted(src, intent)
+    way = int(np.sign(amplitude))
+    out = int(np.argmax(np.abs(intent[:, 1]) > 0.002))  # the person is 2 mm off the plan
+    assert (sides[:out] != -way).all()
+    decided = out + int(np.argmax(sides[out:] == way))
+    assert (sides[decided:] == way).all()  # and it stays decided
+    assert (decided - out) * DT < 0.3  # s
+    # once decided the first row is on the person's path: this trial's detour is one of the hypotheses
+    # (a demonstration shifted along the plan), and the rows mix it with its neighbours 5 mm along the
+    # plan, as much across on a ramp of slope one: within 5 mm of the intent, a millimetre or two mostly
+    late = slice(decided + 25, len(intent) - 60)
+    error = np.linalg.norm(first[late] - intent[late], axis=1)
+    assert np.max(error) < 5e-3 and np.median(error) < 2e-3
+
+
+def test_a_person_who_goes_straight_gets_no_detour_and_no_single_tick_decides():
+    src = PersonPathsIntent(paths={"u": _model(left=(0.5,) * 4, right=(0.5,))}, arms={"u": ARM})
+    src.reset(_context())
+    cap = src.settings.evidence_rate * DT
+    intent = _walk(NOMINAL)[:700]
+    odds, sides = [], []
+    for k in range(len(intent)):
+        _tick(src, intent, k)
+        odds.append(src._log_odds)
+        sides.append(src.side)
+    # a habit of 4 to 1 starts the odds at the prior but never decides alone; straight ahead adds nothing
+    assert (np.asarray(sides) == 0).all()
+    assert np.max(np.abs(np.diff(odds))) <= cap + 1e-12
+
+
+def test_each_curve_keeps_its_nearest_point_within_the_search_window():
+    src = PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM})
+    src.reset(_context())
+    hyp = src._hyp
+    intent = _walk(_bump(0.5, 0.08))
+    G = hyp.points.shape[1]
+    for k in range(len(intent)):
+        before = src._idx.copy()
+        _tick(src, intent, k)
+        tool = intent[max(k - 6, 0)]
+        for n in range(len(before)):
+            lo, hi = max(0, before[n] - src._widest), min(G, before[n] + src._widest + 1)
+            d2 = np.sum((hyp.points[n, lo:hi] - tool) ** 2, axis=1)
+            assert d2[src._idx[n] - lo] == d2.min()
+
+
+def test_bad_settings_name_the_field():
+    for field, value in (("kappa", 0.0), ("shifts", (0.01, -0.01)), ("shifts", ()), ("max_offset", 5.0)):
+        with pytest.raises(ValueError, match=f"PersonFilterSettings.{field}"):
+            PersonFilterSettings(**{field: value})

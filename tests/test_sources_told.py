@@ -1,0 +1,60 @@
+"""What each intent source is told: no source an arm may run is handed the simulated operator's intent."""
+
+import numpy as np
+import pytest
+
+from coassist.runtime.episode import run_episode
+from coassist.scenario.arm_identification import ASSUMED_ARM
+from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told, load_intent_source
+from coassist.scenario.path_hypotheses import PersonShape, write_calibration
+from coassist.scenario.path_model import fit_path_model
+from coassist.scenario.person_model import PersonFit, write_person_model
+from coassist.sim.world import TrialSpec, spec_episode
+
+
+def _folders(tmp_path):
+    """A folder of each kind a person or an arm may run without a network (a model folder needs a trained
+    network: tests/intent cover its loading; it never reads the context's intent)."""
+    nominal = np.stack([np.linspace(0.0, 1.0, 101), np.zeros(101)], axis=1)
+    x = np.linspace(0.0, 1.0, 400)
+    demo = np.stack([x, 0.08 * np.exp(-(((x - 0.5) / 0.12) ** 4))], axis=1)
+    paths = fit_path_model(nominal, [demo], noise=0.001)
+    return {
+        "person-model": str(write_person_model(tmp_path / "person", {"user-0": PersonFit(ASSUMED_ARM, paths)})),
+        "path-hypotheses": str(write_calibration(tmp_path / "paths", {"user-0": PersonShape()})),
+    }
+
+
+def test_only_the_oracle_is_handed_the_simulated_operators_intent(tmp_path):
+    specs = {name: name for name in INTENT_SOURCES}
+    specs.update({f"folder:{k}": v for k, v in _folders(tmp_path).items()})
+    assert set(specs) >= {"nominal", "present", "paths", "oracle", "folder:person-model"}
+    for name, intent in specs.items():
+        spec = TrialSpec("linear", user=0, controller="cooperative-arbitrated", seed=3, intent=intent, obstacle="large")
+        source = load_intent_source(intent, horizon=50)
+        seen = []
+        reset = source.reset
+        source.reset = lambda context, reset=reset, seen=seen: (seen.append(context), reset(context))[1]
+        episode = spec_episode(spec, None, {(intent, 50, "auto"): source})
+        episode.n_max = 30  # the context is handed over at the start: a few ticks show it
+        run_episode(episode)
+        simulation_only = INTENT_SOURCES[name].simulation_only if name in INTENT_SOURCES else False
+        assert len(seen) == 1
+        if simulation_only:
+            assert seen[0].true_intent is not None, name
+        else:
+            assert seen[0].true_intent is None, f"{name} was handed the simulated operator's intent"
+            assert getattr(source, "reads_true_intent", False) is False, name
+
+
+def test_every_source_says_what_it_is_told():
+    for name, entry in INTENT_SOURCES.items():
+        assert isinstance(entry.told, Told) and entry.told.text(), name
+    for name, kind in INTENT_FOLDERS.items():
+        assert isinstance(kind.told, Told) and kind.told.text(), name
+    assert INTENT_SOURCES["nominal"].told.text() == "the plan only"
+    assert INTENT_SOURCES["paths"].told.scene and INTENT_SOURCES["paths"].told.family
+    person = INTENT_FOLDERS["person-model"].told
+    assert person.arm == "measured" and not person.scene and not person.family and not person.label
+    with pytest.raises(ValueError, match="Told.arm"):
+        Told(arm="guessed")
