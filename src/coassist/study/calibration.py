@@ -21,8 +21,8 @@ model of how people detour):
    (:data:`~coassist.scenario.arm_identification.ASSUMED_ARM`), and the record says why, where
    the trials hold no probe, or where the measurement says too little to be used: K̂ or Ĉ at the
    bound of a person's range, or K̂'s jackknife error above :data:`ARM_SE_MAX` of it (a few short
-   trials: a K̂ of 100 ± 715 N/m measured on the page's 400 N/m hand from three 4-s trials would
-   turn the present estimate's hand force into 8 times the displacement it is);
+   trials: a K̂ of 100 ± 715 N/m, clipped at the bound, would turn the present estimate's hand
+   force into 8 times the displacement it is);
 2. per task, the person's paths (:func:`~coassist.scenario.person_model.fit_person` with that
    arm) from the trials of the task that ended in the target (a demonstration of the way there;
    the others still measure the arm).

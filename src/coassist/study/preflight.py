@@ -80,7 +80,7 @@ SECONDS_PER_ITEM = 10.0
 #: Batches timed for the training estimate (after one warm-up).
 TIMING_REPEATS = 3
 #: [s] a person model's fit as the participant waits for it: the worker's start, reading the trials,
-#: the arm and the paths (docs/study.md: 3–6 s measured on a busy 2-core machine, rounded up).
+#: the arm and the paths (docs/study.md: 3.7–5.5 s of the worker's CPU for six trials, plus its start).
 FIT_SECONDS = 8.0
 #: The degrees of freedom a study's trials log (the x-y plane) and an arm's joints.
 STUDY_DOF = 2

@@ -359,13 +359,17 @@ class ParticipantRun:
         if task not in rec["sha256"]:
             raise StudyFolderError(f"{self.id}: person model {model} knows no path of task {task!r}")
         folder = person_model_folder(self._model_dir(model), task)
-        digest = model_hashes(self._model_dir(model), [task])[task] if folder.is_dir() else None
+        try:
+            digest = model_hashes(self._model_dir(model), [task])[task]
+        except OSError:
+            digest = "missing"
         if digest != rec["sha256"][task]:
             raise StudyFolderError(
-                f"{folder}: changed after it was fitted (sha256 {rec['sha256'][task][:12]} recorded in "
-                f"{self.folder.progress_file}); restore it from your backup of the study folder"
+                f"{folder}: {'missing' if digest == 'missing' else 'changed'} after it was fitted (sha256 "
+                f"{rec['sha256'][task][:12]} recorded in {self.folder.progress_file}); restore it from your backup of "
+                "the study folder"
             )
-        return str(folder), model, digest
+        return str(folder), str(model), digest
 
     def _fit(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
         data = list(step["data"])
