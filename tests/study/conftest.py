@@ -77,3 +77,66 @@ def finished_study(_finished_study, tmp_path) -> Path:
     import shutil
 
     return Path(shutil.copytree(_finished_study, tmp_path / "study"))
+
+
+CALIBRATED = """
+[study]
+name = "calibrated"
+protocol = "comparison"
+world = "play"
+participants = 2
+seed = 3
+
+[calibration]
+trials = {trials}
+
+[[condition]]
+name = "mg"
+controller = "manual"
+
+[[condition]]
+name = "person"
+controller = "cooperative"
+intent = "calibrated"
+
+[trials]
+tasks = ["curved"]
+per_condition = 1
+practice = 0
+motion_time = 3.0
+dwell = {dwell}
+
+[rest]
+between_conditions = {rest}
+"""
+
+
+def calibrated_plan(folder: Path, *, trials: int = 3, dwell: float = 1.0, rest: float = 0.0) -> Path:
+    """MG against the participant's own person model after a calibration block of ``trials``, written into
+    ``folder``; returns the file."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "plan.toml"
+    path.write_text(CALIBRATED.format(trials=trials, dwell=dwell, rest=rest))
+    return path
+
+
+@pytest.fixture(scope="session")
+def _calibrated_study(tmp_path_factory) -> Path:
+    """The calibrated comparison run to its end by simulated participant S01 (seconds): tests copy it
+    (:func:`calibrated_study`) before they edit it."""
+    from coassist.study.runner import ParticipantRun
+    from coassist.study.store import init_study
+
+    root = tmp_path_factory.mktemp("calibrated")
+    study = init_study(calibrated_plan(root / "plans"), root / "study")
+    with ParticipantRun(study, "S01", simulate=True) as run:
+        run.run()
+    return study.folder
+
+
+@pytest.fixture
+def calibrated_study(_calibrated_study, tmp_path) -> Path:
+    """A copy of the finished calibrated study (:func:`_calibrated_study`) of this test's own."""
+    import shutil
+
+    return Path(shutil.copytree(_calibrated_study, tmp_path / "study"))

@@ -24,19 +24,20 @@ from coassist.study.runner import ParticipantRun  # noqa: E402
 from coassist.study.store import init_study  # noqa: E402
 
 from ..chromium import CHROMIUM, CHROMIUM_ARGS, needs_chromium  # noqa: E402
-from .conftest import comparison_plan  # noqa: E402
+from .conftest import calibrated_plan, comparison_plan  # noqa: E402
 from .pagedriver import SECRETS, OperatorPath  # noqa: E402
 
 pytestmark = needs_chromium
 
 
-def _participant(page, url: str, path: OperatorPath, received: list[str]) -> dict:
-    """Take part in the study on ``page`` until it says it is done; returns what was entered."""
+def _participant(page, url: str, path: OperatorPath, received: list[str], timeout: float = 120.0) -> dict:
+    """Take part in the study on ``page`` until it says it is done (within ``timeout`` s); returns what was
+    entered."""
     page.on("websocket", lambda ws: ws.on("framereceived", lambda payload: received.append(str(payload))))
     page.goto(url)
     page.wait_for_function("window.coassist && window.coassist.ready && window.coassist.study", timeout=15000)
     entered: dict = {"answers": {}, "starts": []}
-    t_end = time.monotonic() + 120
+    t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
         view = page.evaluate("window.coassist.study")
         if view["kind"] == "done":
@@ -69,7 +70,7 @@ def _participant(page, url: str, path: OperatorPath, received: list[str]) -> dic
             page.wait_for_function(f"window.coassist.study.step !== {view['step']}", timeout=10000)
         else:
             time.sleep(0.05)
-    raise AssertionError("the participant's session did not end in 120 s")
+    raise AssertionError(f"the participant's session did not end in {timeout:g} s")
 
 
 def test_four_simulated_participants_take_the_comparison_in_chromium(tmp_path):
@@ -112,3 +113,49 @@ def test_four_simulated_participants_take_the_comparison_in_chromium(tmp_path):
     # the drag carried the tool to the target in every trial
     ended = [r["ended"] for pid in entered for r in study.participant(pid).progress() if r["kind"] == "trial"]
     assert ended == ["target"] * 12
+
+
+def test_two_simulated_participants_take_mg_against_their_own_calibrated_model_in_chromium(tmp_path):
+    """Issue 40's lab flow on the page: a calibration block under the probe, each participant's person model
+    fitted from it, then MG against that model (blinded), then the report."""
+    study = init_study(calibrated_plan(tmp_path / "plans", trials=3, dwell=0.5), tmp_path / "study")
+    received: list[str] = []
+    entered = {}
+    with sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+        try:
+            for pid in ("S01", "S02"):
+                with ParticipantRun(study, pid, simulate=True, page=("127.0.0.1", 0, None)) as run:
+                    worker = threading.Thread(target=run.run, daemon=True)
+                    worker.start()
+                    page = browser.new_page(viewport={"width": 1300, "height": 900})
+                    try:
+                        path = OperatorPath(study.folder, pid)
+                        entered[pid] = _participant(page, run.url, path, received, timeout=300)
+                    finally:
+                        page.close()
+                    worker.join(30)
+                    assert not worker.is_alive() and run.complete
+        finally:
+            browser.close()
+    html_path, json_path = write_report(study.folder)
+    summary = json.loads(json_path.read_text())
+    labels = study.labels
+    assert summary["n_complete"] == 2 and summary["calibration"] == {"trials": 3, "calibrated": ["person"]}
+    # blinding: nothing the page received names a controller, a condition, the probe or the person model
+    assert received and not [s for s in (*SECRETS, "probe", "calibrat", "P0") if any(s in t for t in received)]
+    for pid, got in entered.items():
+        p = summary["participants"][pid]
+        assert got["starts"] == [None] * 3 + [labels[c] for c in p["order"]]  # the block first, unlabelled
+        (fit,) = p["person_models"]
+        assert fit["model"] == "P0" and fit["trials"] == {"curved": 3} and not fit["failed"]
+        arm = fit["arm"]
+        if arm["measured"]:  # the page's hand is a 400 N/m spring (coassist.play.hand.SpringDamper)
+            assert abs(arm["stiffness"] - 400.0) <= 3.0 * arm["stiffness_se"], arm
+        else:
+            assert arm["stiffness"] == 800.0 and "measured K" in arm["note"], arm
+        lines = [r for r in study.participant(pid).progress() if r["kind"] == "trial"]
+        assert [r["ended"] for r in lines[:3]] == ["target"] * 3
+        assert {r["block"]: r.get("model_sha256") for r in lines[3:]} == {"mg": None, "person": fit["sha256"]["curved"]}
+    html = html_path.read_text()
+    assert "<h2>Person models</h2>" in html and html.count("3 curved trials of calibration") == 2

@@ -394,6 +394,11 @@ class PlaySession:
                 {"type": "result", "result": result.to_json(), "summary": self.summary(), "next": self.scene()}
             )
 
+    def trial_seed(self, index: int) -> int:
+        """The seed of the session's trial ``index``: the root of the robot's own draws in it (the calibration
+        probe's phases)."""
+        return self.config.seed + index
+
     def _run_trial(self, task: Task, name: str, controller) -> TrialResult | None:
         cfg = self.config
         model = controller.model
@@ -423,7 +428,7 @@ class PlaySession:
             labels=EpisodeLabels(
                 user=cfg.user,
                 object="none",
-                seed=cfg.seed + index,
+                seed=self.trial_seed(index),
                 source="sim",
                 preset=cfg.preset,
                 model_id=self.source.model_id,

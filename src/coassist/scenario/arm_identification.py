@@ -49,7 +49,12 @@ import numpy as np
 
 from coassist._checks import check_int, check_real
 
-__all__ = ["ASSUMED_ARM", "ArmEstimate", "identify_arm"]
+__all__ = ["ASSUMED_ARM", "DAMPING_RANGE", "MIN_TRIAL_S", "STIFFNESS_RANGE", "ArmEstimate", "identify_arm"]
+
+
+#: What a person's arm can be: K̂ [N/m] from a limp to a fully braced arm, Ĉ [N·s/m] (may be negative).
+STIFFNESS_RANGE = (100.0, 5000.0)
+DAMPING_RANGE = (-100.0, 200.0)
 
 
 @dataclass(frozen=True)
@@ -70,8 +75,8 @@ class ArmEstimate:
     method: str = "assumed"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "stiffness", check_real(self.stiffness, "ArmEstimate.stiffness", 100.0, 5000.0))
-        object.__setattr__(self, "damping", check_real(self.damping, "ArmEstimate.damping", -100.0, 200.0))
+        object.__setattr__(self, "stiffness", check_real(self.stiffness, "ArmEstimate.stiffness", *STIFFNESS_RANGE))
+        object.__setattr__(self, "damping", check_real(self.damping, "ArmEstimate.damping", *DAMPING_RANGE))
         object.__setattr__(self, "stiffness_se", check_real(self.stiffness_se, "ArmEstimate.stiffness_se", 0.0, 5000.0))
         object.__setattr__(self, "damping_se", check_real(self.damping_se, "ArmEstimate.damping_se", 0.0, 300.0))
         object.__setattr__(self, "samples", check_int(self.samples, "ArmEstimate.samples", 0))
@@ -90,6 +95,8 @@ INSTRUMENT_LAGS = tuple(range(0, 60, 3))
 LAGS = tuple(range(0, 25, 2))
 #: The probe must reach this RMS [N] in the trials' high-passed robot effort to be measured.
 MIN_PROBE_RMS = 0.2
+#: [s] a shorter trial is not used (the filter's edges, 0.5 s at each end, would leave too little).
+MIN_TRIAL_S = 3.0
 
 
 def _lagged(x: np.ndarray, lags: Sequence[int]) -> np.ndarray:
@@ -140,7 +147,7 @@ def identify_arm(trials: Sequence, *, highpass: float = 0.8) -> ArmEstimate:
     rows = []
     dt = 0.0
     for trial in trials:
-        if trial.effort_r is None or trial.pose.shape[1] < 2 or len(trial.time) < int(3.0 / trial.meta.dt):
+        if trial.effort_r is None or trial.pose.shape[1] < 2 or len(trial.time) < int(MIN_TRIAL_S / trial.meta.dt):
             continue
         dt = float(trial.meta.dt)
         y, X, Z = _stage_rows(
@@ -164,8 +171,8 @@ def identify_arm(trials: Sequence, *, highpass: float = 0.8) -> ArmEstimate:
         n = len(rows)
         se = tuple(float(math.sqrt((n - 1) / n * np.sum((L[:, i] - L[:, i].mean()) ** 2))) for i in range(2))  # type: ignore[assignment]
     return ArmEstimate(
-        stiffness=min(max(stiffness, 100.0), 5000.0),
-        damping=min(max(damping, -100.0), 200.0),
+        stiffness=min(max(stiffness, STIFFNESS_RANGE[0]), STIFFNESS_RANGE[1]),
+        damping=min(max(damping, DAMPING_RANGE[0]), DAMPING_RANGE[1]),
         stiffness_se=min(se[0], 5000.0),
         damping_se=min(se[1], 300.0),
         samples=len(y),

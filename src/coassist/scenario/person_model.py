@@ -12,7 +12,9 @@ obstacle told:
    present estimate's noise σ (the RMS of q less its smoothed self, lateral to the plan).
 
 The folder (``person-model.json``) is one JSON document: per person their arm and, per task
-(nominal path), their path model; :func:`read_person_model` gives the intent source.
+(nominal path), their path model; :func:`read_person_model` gives the intent source. A folder
+may name one of its people ``default``: whoever else is at the handle gets that person's model
+(a study writes each participant's own folder so: whatever name the world gives them).
 """
 
 from __future__ import annotations
@@ -132,9 +134,16 @@ def _model_from(doc: Mapping) -> PathModel:
 
 
 def write_person_model(
-    folder: str | Path, fits: Mapping[str, PersonFit], *, settings: PersonFilterSettings | None = None
+    folder: str | Path,
+    fits: Mapping[str, PersonFit],
+    *,
+    settings: PersonFilterSettings | None = None,
+    default: str | None = None,
 ) -> Path:
-    """Write a person-model folder (``person-model.json``, atomically); returns the folder."""
+    """Write a person-model folder (``person-model.json``, atomically); returns the folder. ``default``: the
+    person (a key of ``fits``) whose model anyone else at the handle gets (module docstring)."""
+    if default is not None and default not in fits:
+        raise ValueError(f"default must be one of the people fitted ({', '.join(fits)}), got {default!r}")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     doc = {
@@ -142,6 +151,8 @@ def write_person_model(
         "filter": asdict(settings or PERSON_FILTER),
         "people": {name: {"arm": asdict(f.arm), "paths": _model_doc(f.paths)} for name, f in fits.items()},
     }
+    if default is not None:
+        doc["default"] = default
     atomic_write_text(folder / PERSON_MODEL_FILE, json.dumps(doc) + "\n")
     return folder
 
@@ -157,10 +168,17 @@ def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsInten
         raise ValueError(f"{path}: format must be {_FORMAT!r}")
     try:
         people = dict(doc["people"])
+        paths = {name: _model_from(p["paths"]) for name, p in people.items()}
+        arms = {name: ArmEstimate(**p["arm"]) for name, p in people.items()}
+        default = doc.get("default")
+        if default is not None and default not in people:
+            raise ValueError(f"default {default!r} is not one of its people ({', '.join(people)})")
         return PersonPathsIntent(
             horizon,
-            paths={name: _model_from(p["paths"]) for name, p in people.items()},
-            arms={name: ArmEstimate(**p["arm"]) for name, p in people.items()},
+            paths=paths,
+            arms=arms,
+            default_paths=None if default is None else paths[default],
+            default_arm=None if default is None else arms[default],
             settings=PersonFilterSettings(**doc.get("filter", {})),
             model_id=f"person:{Path(folder).name}",
         )

@@ -39,7 +39,15 @@ mean"), so ``coassist study init`` can print it as it is. The plan of a comparis
 
 The other protocols add one table each (``[iterative]``, ``[transfer]``, ``[online]``)
 and ``[training]``, the options of ``coassist train`` the study's models are trained with
-(docs/study.md). Nothing personal goes into a plan: participants are pseudonymous ids
+(docs/study.md). Any protocol may open with a calibration block::
+
+    [calibration]                  # manual guidance with small known pushes (controller manual-probe)
+    trials = 6                     # 1 … 10; then the participant's person model is fitted
+
+after which a condition's ``intent = "calibrated"`` is that participant's own person model
+(:mod:`coassist.study.calibration`); an iterative study may refit it between rounds
+(``[iterative] source = "calibrated"``), a transfer or online study compare it too
+(``compare_calibrated = true``). Nothing personal goes into a plan: participants are pseudonymous ids
 given at run time, of the form ``[study] id_pattern`` sets (:mod:`coassist.study.ids`).
 
 Every number has the range a study can use, upper bound included (a trial of 10⁷ s, a rest
@@ -74,8 +82,10 @@ from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, task_for_seed
 from coassist.study.ids import DEFAULT_ID_PATTERN, IdError, compile_id_pattern
 
 __all__ = [
+    "CALIBRATED",
     "PROTOCOLS",
     "WORLDS",
+    "CalibrationPlan",
     "Condition",
     "IterativePlan",
     "OnlinePlan",
@@ -98,8 +108,16 @@ PROTOCOLS = ("comparison", "iterative", "transfer", "online")
 WORLDS = ("play", "mujoco", "ur", "franka")
 #: The Likert items of the issue (thesis' journal version asked the participants these).
 DEFAULT_LIKERT = ("helped me", "I felt in control", "the motion was smooth", "I trusted it")
-#: Folder names the study keeps for itself inside a participant's folder.
-RESERVED_NAMES = frozenset({"practice", "models", "answers", "transfer-set", "adaptation"})
+#: Folder names the study keeps for itself inside a participant's folder (and ``calibration-*``, a
+#: calibration block run again).
+RESERVED_NAMES = frozenset({"practice", "models", "answers", "transfer-set", "adaptation", "calibration", "calibrated"})
+#: A condition's ``intent`` that names the participant's own person model, fitted after the plan's
+#: calibration block (not a source of the intent registry: each participant has their own).
+CALIBRATED = "calibrated"
+#: The most calibration trials a participant gives (issue 40: a lab calibrates in at most 10).
+CALIBRATION_TRIALS_MAX = 10
+#: What an iterative study's rounds assist with: the network of Algorithm 4.1, or the person model.
+ITERATIVE_SOURCES = ("network", CALIBRATED)
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_-]{0,31}$")
 _MAX_CONDITIONS = 26  # labelled A … Z
 #: The ranges of the plan's numbers a study can use (module docstring), [s] unless said.
@@ -195,7 +213,12 @@ def _intent(value: Any, name: str, base: Path) -> str:
     kind in :data:`~coassist.scenario.intent_registry.INTENT_FOLDERS` (a model, a calibration), by its marker."""
     sources, folders = intent_registry.INTENT_SOURCES, intent_registry.INTENT_FOLDERS
     markers = " or ".join(kind.marker for kind in folders.values())
-    choices = f"a source a person can run ({', '.join(person_intents())}) or a folder with {markers}"
+    choices = (
+        f"a source a person can run ({', '.join(person_intents())}), {CALIBRATED!r} (the participant's own "
+        f"person model) or a folder with {markers}"
+    )
+    if value == CALIBRATED:  # checked against [calibration] once the whole plan is read
+        return value
     if isinstance(value, str) and value in sources:
         if sources[value].simulation_only:
             raise PlanError(f"{name}: {value!r} is {sources[value].summary}, which a person has not; use {choices}")
@@ -224,6 +247,16 @@ class Condition:
     name: str
     controller: str
     intent: str = "nominal"
+
+
+@dataclass(frozen=True)
+class CalibrationPlan:
+    """The calibration block, before anything else in every protocol: ``trials`` trials (1 … 10) under
+    manual guidance with the calibration probe (controller ``manual-probe``: small known pushes that
+    measure the person's arm), following the plan's tasks in turn; then the participant's person model
+    is fitted from them (:mod:`coassist.study.calibration`). Every task needs one trial at least."""
+
+    trials: int = 6
 
 
 @dataclass(frozen=True)
@@ -305,7 +338,9 @@ class IterativePlan:
 
     rounds : the most rounds.  tolerance : [m] the stop criterion of eq. 4.13 on the in-loop
     e_RMS at ``criterion_horizon`` samples.  stop_at_criterion : end the study once it is met.
-    controller : the controller the models assist.
+    controller : the controller the models assist.  source : ``"network"`` (Algorithm 4.1's: round 0
+    with the nominal plan, M_k trained) or ``"calibrated"`` (round 0 with the person model of the
+    calibration block, P_{k+1} refitted after round k from the calibration's and the rounds' trials).
     """
 
     rounds: int = 3
@@ -314,17 +349,20 @@ class IterativePlan:
     criterion_horizon: int = 50
     stop_at_criterion: bool = True
     controller: str = "cooperative"
+    source: str = "network"
 
 
 @dataclass(frozen=True)
 class TransferPlan:
     """Algorithm 4.2 with a new participant: ``trials`` with the source model in the loop, the
     frozen-LSTM transfer trained on them in the background, then the transferred model against
-    the source model (blinded, counterbalanced, ``[trials]`` per condition)."""
+    the source model (blinded, counterbalanced, ``[trials]`` per condition); ``compare_calibrated``:
+    the participant's person model (the calibration block's) as a third condition."""
 
     source_model: str
     trials: int = 15
     controller: str = "cooperative"
+    compare_calibrated: bool = False
 
 
 @dataclass(frozen=True)
@@ -332,11 +370,13 @@ class OnlinePlan:
     """Online adaptation (thesis ch. 6): ``trials`` with the model in the loop while its FC head is
     updated (frozen-LSTM transfer from ``source_model`` on the participant's trials so far) in a
     background process after each trial; a trial takes the newest model ready when it starts,
-    never waiting. Then the last online model against the offline transfer on the same trials."""
+    never waiting. Then the last online model against the offline transfer on the same trials
+    (``compare_calibrated``: and the participant's person model)."""
 
     source_model: str
     trials: int = 15
     controller: str = "cooperative"
+    compare_calibrated: bool = False
 
 
 @dataclass(frozen=True)
@@ -362,14 +402,28 @@ class StudyPlan:
     online: OnlinePlan | None = None
     #: who ``--simulate``'s participants are (:data:`coassist.scenario.populations.POPULATIONS`)
     population: str = "thesis"
+    calibration: CalibrationPlan | None = None
 
     def intent_folders(self) -> tuple[str, ...]:
         """Every folder the plan names, models and calibrations (their hashes are recorded at ``study init``)."""
-        out = [c.intent for c in self.conditions if c.intent not in intent_registry.INTENT_SOURCES]
+        out = [
+            c.intent
+            for c in self.conditions
+            if c.intent not in intent_registry.INTENT_SOURCES and c.intent != CALIBRATED
+        ]
         for extra in (self.transfer, self.online):
             if extra is not None:
                 out.append(extra.source_model)
         return tuple(dict.fromkeys(out))
+
+    def uses_calibrated(self) -> bool:
+        """Whether a condition or the rounds assist with the participant's person model."""
+        extra = self.transfer or self.online
+        return (
+            any(c.intent == CALIBRATED for c in self.conditions)
+            or (self.iterative is not None and self.iterative.source == CALIBRATED)
+            or (extra is not None and extra.compare_calibrated)
+        )
 
     def task_end(self) -> float:
         """[s] the latest end of a task's planned motion among the plan's tasks (the play world's
@@ -382,7 +436,18 @@ class StudyPlan:
         return self.trials.dwell if self.world == "play" else DWELL
 
 
-_TOP = ("study", "condition", "trials", "rest", "questionnaire", "training", "iterative", "transfer", "online")
+_TOP = (
+    "study",
+    "condition",
+    "trials",
+    "rest",
+    "questionnaire",
+    "calibration",
+    "training",
+    "iterative",
+    "transfer",
+    "online",
+)
 
 
 def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
@@ -470,15 +535,35 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     )
 
     conditions = _conditions(data, protocol, base)
-    training = _training(data) if protocol != "comparison" else None
+    calibration = None
+    if "calibration" in data:
+        cal = _table(data, "calibration", tuple(CalibrationPlan.__dataclass_fields__))
+        n = _int(cal.get("trials", CalibrationPlan.trials), "calibration.trials", 1, CALIBRATION_TRIALS_MAX)
+        missing = [k for k in dict.fromkeys(tasks) if k not in tasks[:n]]
+        if missing:
+            need = max(tasks.index(k) for k in tasks) + 1
+            raise PlanError(
+                f"calibration.trials: {n} trials leave {', '.join(map(repr, missing))} of trials.tasks without a "
+                f"calibration trial (they follow the tasks in turn): the person model would know no path there; give "
+                f"at least {need}"
+            )
+        calibration = CalibrationPlan(n)
+    it = _table(data, "iterative", tuple(IterativePlan.__dataclass_fields__)) if protocol == "iterative" else {}
+    iterative_source = _choice(it.get("source", "network"), "iterative.source", ITERATIVE_SOURCES, "source")
+    trains = protocol in ("transfer", "online") or (protocol == "iterative" and iterative_source == "network")
+    training = _training(data) if trains else None
     if protocol == "comparison" and "training" in data:
         raise PlanError("training: a comparison trains no model; leave [training] out")
+    if not trains and "training" in data:
+        raise PlanError(
+            "training: an iterative study of the calibrated person model trains no network (it refits the person "
+            "model); leave [training] out"
+        )
     iterative = transfer = online = None
     for other in ("iterative", "transfer", "online"):
         if other in data and other != protocol:
             raise PlanError(f"{other}: the plan's protocol is {protocol!r}; leave [{other}] out")
     if protocol == "iterative":
-        it = _table(data, "iterative", tuple(IterativePlan.__dataclass_fields__))
         iterative = IterativePlan(
             rounds=_int(it.get("rounds", 3), "iterative.rounds", 1, 50),
             trials_per_round=_int(it.get("trials_per_round", 6), "iterative.trials_per_round", 1, 1000),
@@ -495,13 +580,14 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
             controller=_choice(
                 it.get("controller", "cooperative"), "iterative.controller", CONTROLLER_KINDS, "controller"
             ),
+            source=iterative_source,
         )
         if not iterative.controller.startswith("cooperative"):
             raise PlanError(
                 f"iterative.controller must use the model (cooperative or cooperative-arbitrated), got {iterative.controller!r}"
             )
     elif protocol in ("transfer", "online"):
-        tab = _table(data, protocol, ("source_model", "trials", "controller"))
+        tab = _table(data, protocol, ("source_model", "trials", "controller", "compare_calibrated"))
         if "source_model" not in tab:
             raise PlanError(f"{protocol}.source_model is missing (the model the participant starts from)")
         source = _model_path(tab["source_model"], f"{protocol}.source_model", base)
@@ -513,10 +599,11 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
             raise PlanError(
                 f"{protocol}.controller must use the model (cooperative or cooperative-arbitrated), got {controller!r}"
             )
+        compare = _bool(tab.get("compare_calibrated", False), f"{protocol}.compare_calibrated")
         if protocol == "transfer":
-            transfer = TransferPlan(source, n, controller)
+            transfer = TransferPlan(source, n, controller, compare)
         else:
-            online = OnlinePlan(source, n, controller)
+            online = OnlinePlan(source, n, controller, compare)
     plan = StudyPlan(
         name=name,
         protocol=protocol,
@@ -533,7 +620,17 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
         transfer=transfer,
         online=online,
         population=population,
+        calibration=calibration,
     )
+    if plan.uses_calibrated() and calibration is None:
+        where = next(
+            (f"condition[{i}].intent" for i, c in enumerate(conditions) if c.intent == CALIBRATED),
+            "iterative.source" if protocol == "iterative" else f"{protocol}.compare_calibrated",
+        )
+        raise PlanError(
+            f"{where}: {CALIBRATED!r} is the participant's own person model, fitted from their calibration trials; "
+            "add the block that records them: [calibration] trials = 1 … 10"
+        )
     _check_trial_time(plan, "time_limit" in t)
     return plan
 
@@ -571,10 +668,15 @@ def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Con
             if k not in ("name", "controller", "intent"):
                 raise PlanError(f"{where}.{k}: {unknown_name_message(k, ('name', 'controller', 'intent'), 'field')}")
         name = c.get("name")
-        if not isinstance(name, str) or not _NAME.match(name) or name in RESERVED_NAMES or name.startswith("round-"):
+        if (
+            not isinstance(name, str)
+            or not _NAME.match(name)
+            or name in RESERVED_NAMES
+            or name.startswith(("round-", "calibration-"))
+        ):
             raise PlanError(
                 f"{where}.name must be 1-32 lower-case letters, digits, '-' or '_' (not one of "
-                f"{sorted(RESERVED_NAMES)} or round-*), got {name!r}"
+                f"{sorted(RESERVED_NAMES)}, round-* or calibration-*), got {name!r}"
             )
         controller = _choice(c.get("controller"), f"{where}.controller", CONTROLLER_KINDS, "controller")
         out.append(Condition(name, controller, _intent(c.get("intent", "nominal"), f"{where}.intent", base)))

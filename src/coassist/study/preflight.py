@@ -19,6 +19,11 @@ only after a participant's trials:
 - the study's own networks have at most :data:`MAX_PARAMETERS` parameters (counted on
   torch's meta device: nothing allocated), and every trial is long enough to give a
   training window (ticks >= history + horizon);
+- a plan with ``[calibration]``: the participant's person model (``"calibrated"``) is built as
+  the session builds it, with the controller's horizon; a calibration trial as planned lasts at
+  least :data:`~coassist.scenario.arm_identification.MIN_TRIAL_S` (the arm is measured from
+  trials that long: shorter ones would leave it assumed); an iterative study of the person
+  model logs the controller's H predictions, which bounds ``criterion_horizon``;
 - a participant's session (:class:`SessionEstimate`) takes at most :data:`MAX_SESSION_HOURS`.
 
 The session estimate, shown before the first trial: participant 1's steps
@@ -28,6 +33,7 @@ The session estimate, shown before the first trial: participant 1's steps
   a trial that goes as planned), at most its time limit (2 t_end + 10 s by default);
 - questionnaire: :data:`SECONDS_PER_ITEM` per item (an assumption, not a measurement);
 - rest: its length;
+- fit (a person model): :data:`FIT_SECONDS`, waited for (measured: docs/study.md);
 - training: windows × epochs × s per window, the last measured here by timing the plan's
   network (forward, backward and an Adam step on random batches of the plan's size, the
   median of :data:`TIMING_REPEATS`); the participant waits for what a model's training
@@ -52,10 +58,11 @@ from typing import Any
 from coassist.config import CONTROL_PRESETS
 from coassist.scenario import intent_registry
 from coassist.study.design import blinding_labels
-from coassist.study.plan import PlanError, StudyPlan, TrainingPlan
+from coassist.study.plan import CALIBRATED, PlanError, StudyPlan, TrainingPlan
 from coassist.study.protocols import condition_names, participant_steps
 
 __all__ = [
+    "FIT_SECONDS",
     "MAX_PARAMETERS",
     "MAX_SESSION_HOURS",
     "SessionEstimate",
@@ -72,6 +79,9 @@ MAX_SESSION_HOURS = 8.0
 SECONDS_PER_ITEM = 10.0
 #: Batches timed for the training estimate (after one warm-up).
 TIMING_REPEATS = 3
+#: [s] a person model's fit as the participant waits for it: the worker's start, reading the trials,
+#: the arm and the paths (docs/study.md: 3.7–5.5 s of the worker's CPU for six trials, plus its start).
+FIT_SECONDS = 8.0
 #: The degrees of freedom a study's trials log (the x-y plane) and an arm's joints.
 STUDY_DOF = 2
 ARM_JOINTS = 6
@@ -176,7 +186,11 @@ def _check_sources(plan: StudyPlan, H: int, dt: float) -> dict[str, Any]:
     for i, c in enumerate(plan.conditions):
         where = f"condition[{i}].intent"
         try:
-            source = intent_registry.load_intent_source(c.intent, horizon=max(H, 2), network="torch")
+            source = (
+                _person_source(H)
+                if c.intent == CALIBRATED
+                else intent_registry.load_intent_source(c.intent, horizon=max(H, 2), network="torch")
+            )
         except (ValueError, OSError, ImportError) as exc:
             raise PlanError(f"{where}: {exc}") from None
         model = getattr(source, "model", None)
@@ -195,6 +209,36 @@ def _check_sources(plan: StudyPlan, H: int, dt: float) -> dict[str, Any]:
         if horizon < H:
             raise PlanError(f"{where}: {c.intent!r} predicts {horizon} steps; the controller needs {H}")
     return models
+
+
+def _person_source(H: int):
+    """The participant's person model as the session builds it (a person-model folder's source), knowing no
+    person yet: what every ``"calibrated"`` condition runs, with its horizon."""
+    from coassist.scenario.person_intent import PersonPathsIntent
+
+    return PersonPathsIntent(max(H, 2), model_id="calibrated")
+
+
+def _check_calibration(plan: StudyPlan, H: int, trial_s: float) -> None:
+    """The calibration block's checks (module docstring)."""
+    from coassist.scenario.arm_identification import MIN_TRIAL_S
+
+    if plan.calibration is None:
+        return
+    if trial_s < MIN_TRIAL_S:
+        field = "trials.motion_time" if plan.world == "play" else "trials"
+        raise PlanError(
+            f"{field}: a calibration trial as planned lasts {trial_s:g} s; the arm is measured from trials of at "
+            f"least {MIN_TRIAL_S:g} s (shorter ones would leave it assumed): give a longer motion_time or dwell"
+        )
+    if plan.iterative is not None and plan.iterative.source == CALIBRATED:
+        horizon = int(_person_source(H).horizon)
+        if plan.iterative.criterion_horizon > horizon:
+            raise PlanError(
+                f"iterative.criterion_horizon: {plan.iterative.criterion_horizon} samples, but the rounds log the "
+                f"person model's predictions of {horizon} (the controller's horizon): the stop criterion could not be "
+                f"computed; give at most {horizon}"
+            )
 
 
 def _source_model(plan: StudyPlan, H: int, dt: float):
@@ -318,6 +362,7 @@ def preflight(plan: StudyPlan) -> SessionEstimate:
     ticks = int(math.ceil(trial_s / dt))
     n_joints = ARM_JOINTS if plan.world != "play" else 0
     trial_bytes = 2 * int(math.ceil(limit / dt)) * bytes_per_tick(H, n_joints=n_joints)
+    _check_calibration(plan, H, trial_s)
 
     train_s: dict[str, float] = {}
     training_bytes = n_params = 0
@@ -352,6 +397,10 @@ def preflight(plan: StudyPlan) -> SessionEstimate:
         elif kind == "rest":
             expected += float(step["seconds"])
             longest += float(step["seconds"])
+        elif kind == "fit":
+            expected += FIT_SECONDS
+            longest += FIT_SECONDS
+            wait += FIT_SECONDS
         elif kind == "train" and s_per_window is not None:
             n = sum(trials_of.get(b, 0) for b in step["data"])  # the trials so far of the blocks it trains on
             t = preset.train

@@ -7,12 +7,22 @@ resumed run follows the record, not a recomputation)::
     questionnaire  {block, index, condition, label}      after a condition (or a round)
     rest           {block, index, seconds, why}           the participant rests (a model may train meanwhile)
     train          {block: "models", index, model, data, init, wait}   a model trained in a background process
+    fit            {block: "models", index, model, data, base, attempt}   a person model fitted (in the background)
     check          {block, index, round}                  Algorithm 4.1's stop criterion (eq. 4.13)
     freeze         {block: "models", index, model}        online: the last online model becomes a condition
 
 ``intent`` is ``"nominal"``, a model folder of the plan, ``"model:<name>"`` (a model this
-participant's study trained, in ``models/<name>``; a trial that needs it waits for it) or
-``"latest:online"`` (the newest online model ready when the trial starts; it never waits).
+participant's study trained, in ``models/<name>``; a trial that needs it waits for it),
+``"latest:online"`` (the newest online model ready when the trial starts; it never waits) or
+``"person:<name>"`` (a person model this participant's study fitted, in ``models/<name>``: P0
+from the calibration block, P1, P2, … an iterative study's refits).
+
+Calibration (any protocol with ``[calibration]``), before everything else: ``trials`` trials of
+block ``calibration`` under ``manual-probe`` (the plan's tasks in turn), then the fit of P0
+(``data`` the block, ``base`` None) and a rest. A condition whose ``intent`` is ``"calibrated"``
+runs with ``person:P0``. A calibration that fails (:mod:`coassist.study.calibration`) is run
+again: the runner inserts :func:`calibration_steps` of attempt a + 1 (block ``calibration-<a+1>``)
+after the failed fit.
 
 Protocols (thesis §5.2.3 and Algorithms 4.1 and 4.2):
 
@@ -33,10 +43,15 @@ Protocols (thesis §5.2.3 and Algorithms 4.1 and 4.2):
   (``transfer:`` previous, frozen LSTM); then the offline transfer from the source model on
   the same trials trains while they rest, and ``online`` (the last update) is compared with
   ``offline``.
+- ``iterative`` with ``source = "calibrated"``: round k runs with ``person:P<k>``; after it,
+  P_{k+1} is refitted from P0's calibration trials and rounds 0 … k (``base`` P0: its arm, the
+  rounds ran without the probe), no network trained. ``transfer`` and ``online`` with
+  ``compare_calibrated``: ``calibrated`` (``person:P0``) is a third condition of the comparison.
 
 Seeds: participant number p gets ``base = 10⁶·seed + 10⁴·p``; measured comparison trial j
 ``base + j``, practice trial i ``base + 5000 + i``, iterative round k trial j
-``base + k·trials_per_round + j``, collection trial j (transfer, online) ``base + 2000 + j``.
+``base + k·trials_per_round + j``, collection trial j (transfer, online) ``base + 2000 + j``,
+calibration trial j of attempt a ``base + 8000 + 100·(a − 1) + j``.
 """
 
 from __future__ import annotations
@@ -44,9 +59,28 @@ from __future__ import annotations
 from typing import Any
 
 from coassist.study.design import participant_order
-from coassist.study.plan import Condition, StudyPlan
+from coassist.study.plan import CALIBRATED, Condition, StudyPlan
 
-__all__ = ["condition_names", "participant_steps", "trial_seed_base"]
+__all__ = [
+    "CALIBRATION_BLOCK",
+    "PROBE_CONTROLLER",
+    "calibration_steps",
+    "condition_names",
+    "participant_steps",
+    "person_ref",
+    "trial_seed_base",
+]
+
+#: The block of the calibration trials (attempt a > 1: ``calibration-<a>``) and their controller.
+CALIBRATION_BLOCK = "calibration"
+PROBE_CONTROLLER = "manual-probe"
+#: The person model the calibration block fits.
+CALIBRATED_MODEL = "P0"
+
+
+def person_ref(model: str = CALIBRATED_MODEL) -> str:
+    """A step's ``intent`` for the person model ``model`` of this participant."""
+    return f"person:{model}"
 
 
 def condition_names(plan: StudyPlan) -> list[str]:
@@ -54,7 +88,11 @@ def condition_names(plan: StudyPlan) -> list[str]:
     (the iterative protocol has rounds, not conditions)."""
     if plan.protocol == "comparison":
         return [c.name for c in plan.conditions]
-    return {"transfer": ["source", "transferred"], "online": ["online", "offline"]}.get(plan.protocol, [])
+    extra = plan.transfer or plan.online
+    calibrated = [CALIBRATED] if extra is not None and extra.compare_calibrated else []
+    return {"transfer": ["source", "transferred"], "online": ["online", "offline"]}.get(plan.protocol, []) + (
+        calibrated
+    )
 
 
 def trial_seed_base(plan: StudyPlan, number: int) -> int:
@@ -66,9 +104,14 @@ def participant_steps(plan: StudyPlan, labels: dict[str, str], number: int, row:
     """The participant's steps (module docstring): ``labels`` the blinding key, ``number`` their number
     (1, 2, … in order of arrival), ``row`` their row of the Latin square."""
     base = trial_seed_base(plan, number)
-    steps: list[dict[str, Any]] = []
+    steps: list[dict[str, Any]] = calibration_steps(plan, number, 1) if plan.calibration is not None else []
+    if plan.calibration is not None and plan.rest.between_conditions > 0:
+        _rest(steps, plan, "after the calibration")
     if plan.protocol == "comparison":
-        _compare(steps, plan, list(plan.conditions), labels, row, base)
+        conditions = [
+            Condition(c.name, c.controller, person_ref()) if c.intent == CALIBRATED else c for c in plan.conditions
+        ]
+        _compare(steps, plan, conditions, labels, row, base)
     elif plan.protocol == "iterative":
         _iterative(steps, plan, base)
     elif plan.protocol == "transfer":
@@ -89,6 +132,8 @@ def participant_steps(plan: StudyPlan, labels: dict[str, str], number: int, row:
             Condition("source", t.controller, t.source_model),
             Condition("transferred", t.controller, "model:transferred"),
         ]
+        if t.compare_calibrated:
+            conditions.append(Condition(CALIBRATED, t.controller, person_ref()))
         _compare(steps, plan, conditions, labels, row, base)
     else:
         assert plan.online is not None
@@ -133,7 +178,24 @@ def participant_steps(plan: StudyPlan, labels: dict[str, str], number: int, row:
             Condition("online", o.controller, "model:online"),
             Condition("offline", o.controller, "model:offline"),
         ]
+        if o.compare_calibrated:
+            conditions.append(Condition(CALIBRATED, o.controller, person_ref()))
         _compare(steps, plan, conditions, labels, row, base)
+    return steps
+
+
+def calibration_steps(plan: StudyPlan, number: int, attempt: int) -> list[dict[str, Any]]:
+    """The calibration block's steps, attempt ``attempt`` (1, 2, …; module docstring): its trials under the
+    probe, then the fit of P0 from them."""
+    assert plan.calibration is not None  # a plan with [calibration]
+    block = CALIBRATION_BLOCK if attempt == 1 else f"{CALIBRATION_BLOCK}-{attempt}"
+    steps: list[dict[str, Any]] = []
+    seed0 = trial_seed_base(plan, number) + 8000 + 100 * (attempt - 1)
+    _trials(
+        steps, plan, block, plan.calibration.trials, PROBE_CONTROLLER, "nominal", seed0, condition=CALIBRATION_BLOCK
+    )
+    index = CALIBRATED_MODEL if attempt == 1 else f"{CALIBRATED_MODEL}-{attempt}"
+    _add(steps, "fit", block="models", index=index, model=CALIBRATED_MODEL, data=[block], base=None, attempt=attempt)
     return steps
 
 
@@ -218,6 +280,9 @@ def _compare(steps, plan: StudyPlan, conditions: list[Condition], labels: dict[s
 def _iterative(steps, plan: StudyPlan, base: int) -> None:
     it = plan.iterative
     assert it is not None
+    if it.source == CALIBRATED:
+        _iterative_person(steps, plan, base)
+        return
     for k in range(it.rounds):
         block = f"round-{k}"
         intent = "nominal" if k == 0 else f"model:M{k - 1}"
@@ -231,3 +296,24 @@ def _iterative(steps, plan: StudyPlan, base: int) -> None:
         _add(steps, "train", block="models", model=f"M{k}", data=[block], init=init, wait=k == it.rounds - 1)
         if k < it.rounds - 1:
             _rest(steps, plan, f"M{k} trains")
+
+
+def _iterative_person(steps, plan: StudyPlan, base: int) -> None:
+    """The iterative protocol with the person model (module docstring): round k with P_k, P_{k+1} refitted."""
+    it = plan.iterative
+    assert it is not None
+    for k in range(it.rounds):
+        block = f"round-{k}"
+        seed0 = base + k * it.trials_per_round
+        _trials(
+            steps, plan, block, it.trials_per_round, it.controller, person_ref(f"P{k}"), seed0, position=k, rests=False
+        )
+        if k >= 1:
+            _add(steps, "check", block=block, index=k, round=k)
+        if plan.questionnaire.asked:
+            _add(steps, "questionnaire", block=block, index=k, condition=block, label=None)
+        model = f"P{k + 1}"
+        data = [f"round-{r}" for r in range(k + 1)]
+        _add(steps, "fit", block="models", index=model, model=model, data=data, base=CALIBRATED_MODEL, attempt=1)
+        if k < it.rounds - 1:
+            _rest(steps, plan, f"{model} is fitted")

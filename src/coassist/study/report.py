@@ -14,6 +14,11 @@ with every figure embedded as a PNG):
   condition × position;
 - for the iterative protocol the in-loop e_RMS per round and the stop criterion (eq. 4.13);
   for transfer and online the collection's e_RMS per trial and the models trained;
+- with a calibration block: which conditions (or rounds) ran with the participant's own person
+  model, and per participant what each person model was fitted from (the trials per task, the
+  arm measured from the probe's trials or assumed, K̂ and Ĉ with their errors, the file's
+  SHA-256), what it was told (``Told``) and which blocks' trials ran with it (by that hash), the
+  failed attempts with their reasons;
 - figures: per-participant lines between conditions, force traces per condition, the
   questionnaire, the learning curves;
 - what a sample this size can and cannot show (:func:`sample_limits`), said plainly.
@@ -111,6 +116,7 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str], form: For
     for s in order["steps"]:
         if s["kind"] == "trial" and not s["practice"]:
             data["positions"][s["block"]] = s["position"]
+    data["fits"] = [_fit_summary(r, progress) for r in progress if r["kind"] == "fit"]
     for i, r in enumerate(progress):
         if r["kind"] == "questionnaire":
             data["answers"][r["block"]] = _answers(pf, i, r, form)
@@ -128,6 +134,60 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str], form: For
             "models": [t.meta.extra.get("study_model") for t in trials],
         }
     return data
+
+
+def _fit_summary(rec: dict[str, Any], progress: list[dict[str, Any]]) -> dict[str, Any]:
+    """What the report says of one person model's fit (a progress line of kind ``fit``): what it was fitted
+    from, what it was told (:class:`~coassist.scenario.intent_registry.Told`: the arm measured or assumed)
+    and ``used_in``, the blocks whose trials ran with its files (their lines' ``model_sha256``)."""
+    from dataclasses import replace
+
+    from coassist.scenario.intent_registry import INTENT_FOLDERS
+
+    out = {"model": rec.get("model"), "attempt": rec.get("attempt"), "failed": bool(rec.get("failed"))}
+    if out["failed"]:
+        return {**out, "reason": rec.get("reason"), "redo": rec.get("redo")}
+    arm = rec.get("arm") or {}
+    digests = set((rec.get("sha256") or {}).values())
+    used_in = [
+        r["block"]
+        for r in progress
+        if r["kind"] == "trial" and r.get("model") == rec.get("model") and r.get("model_sha256") in digests
+    ]
+    told = replace(INTENT_FOLDERS["person-model"].told, arm="measured" if rec.get("arm_measured") else "assumed")
+    return {
+        **out,
+        "told": told.text(),
+        "used_in": list(dict.fromkeys(used_in)),
+        "base": rec.get("base"),
+        "blocks": rec.get("blocks"),
+        "trials": {task: len(files) for task, files in (rec.get("demonstrations") or {}).items()},
+        "left_out": {task: len(v) for task, v in (rec.get("left_out") or {}).items()},
+        "arm": {
+            "measured": bool(rec.get("arm_measured")),
+            "note": rec.get("arm_note"),
+            "from": f"{rec.get('base')}'s" if rec.get("base") else None,
+            "trials": arm.get("trials"),
+            "stiffness": arm.get("stiffness"),
+            "stiffness_se": arm.get("stiffness_se"),
+            "damping": arm.get("damping"),
+            "damping_se": arm.get("damping_se"),
+        },
+        "sha256": rec.get("sha256"),
+        "fit_seconds": rec.get("fit_seconds"),
+    }
+
+
+def calibrated_blocks(plan) -> list[str]:
+    """The conditions (or rounds) that ran with the participant's own person model."""
+    from coassist.study.plan import CALIBRATED
+
+    if plan.protocol == "comparison":
+        return [c.name for c in plan.conditions if c.intent == CALIBRATED]
+    if plan.iterative is not None:
+        return [f"round-{k}" for k in range(plan.iterative.rounds)] if plan.iterative.source == CALIBRATED else []
+    extra = plan.transfer or plan.online
+    return [CALIBRATED] if extra is not None and extra.compare_calibrated else []
 
 
 def sample_limits(n: int, n_tests: int, simulated: bool) -> list[str]:
@@ -281,9 +341,13 @@ def study_summary(folder: str | Path) -> dict[str, Any]:
                 "means": per_participant.get(pid, {}),
                 "answers": d["answers"],
                 "checks": d["checks"],
+                "person_models": d["fits"],
             }
             for pid, d in participants.items()
         },
+        "calibration": None
+        if plan.calibration is None
+        else {"trials": plan.calibration.trials, "calibrated": calibrated_blocks(plan)},
         "n_participants": len(participants),
         "n_complete": n_complete,
         "pooled": pooled,
@@ -450,6 +514,31 @@ def _p(v: Any) -> str:
     return "—" if v is None else (f"{v:.3f}" if v >= 0.001 else "<0.001")
 
 
+def _fit_row(e, pid: str, f: dict[str, Any]) -> str:
+    if f["failed"]:
+        return (
+            f"<tr><td>{e(pid)}</td><td>{e(str(f['model']))}</td><td>{f['attempt']}</td>"
+            f"<td colspan=7>failed: {e(str(f['reason']))} (run again: {e(str(f['redo'] or '—'))})</td></tr>"
+        )
+    arm = f["arm"]
+    trials = ", ".join(f"{n} {e(task)}" for task, n in f["trials"].items())
+    left = sum(f["left_out"].values())
+    if arm["from"]:
+        source = f"{e(arm['from'])} (not measured again: no pushes in the rounds)"
+    elif arm["measured"]:
+        source = f"measured ({arm['trials']} trials with pushes)"
+    else:
+        source = f"assumed: {e(str(arm['note']))}"
+    return (
+        f"<tr><td>{e(pid)}</td><td>{e(str(f['model']))}</td><td>{f['attempt']}</td><td>{trials} trials"
+        f"{f' ({left} left out: not in the target)' if left else ''} of {e(', '.join(f['blocks'] or []))}</td>"
+        f"<td>{source}</td><td>{_fmt(arm['stiffness'], 1, 0)} ± {_fmt(arm['stiffness_se'], 1, 0)}</td>"
+        f"<td>{_fmt(arm['damping'], 1, 1)} ± {_fmt(arm['damping_se'], 1, 1)}</td>"
+        f"<td>{e(f['told'])}</td><td>{e(', '.join(f['used_in']) or '—')}</td>"
+        f"<td>{e(' '.join(str(v)[:12] for v in (f['sha256'] or {}).values()))}</td></tr>"
+    )
+
+
 def write_report(folder: str | Path, out: str | Path | None = None) -> tuple[Path, Path]:
     """Write ``report.html`` and ``summary.json`` (into ``out``, default the study folder's ``report/``)."""
     folder = Path(folder)
@@ -468,7 +557,14 @@ def write_report(folder: str | Path, out: str | Path | None = None) -> tuple[Pat
             if summary["labels"]
             else "Rounds: " + ", ".join(blocks)
         )
-        + ".</p>",
+        + "."
+        + (
+            f" With the participant's own person model (fitted from their {summary['calibration']['trials']} "
+            f"calibration trials): {', '.join(e(_name(summary, b)) for b in summary['calibration']['calibrated'])}."
+            if summary["calibration"] and summary["calibration"]["calibrated"]
+            else ""
+        )
+        + "</p>",
     ]
     # the first screen: pooled means, the limits, the lines
     head = "".join(f"<th>{e(_name(summary, b))}</th>" for b in blocks)
@@ -569,6 +665,17 @@ def write_report(folder: str | Path, out: str | Path | None = None) -> tuple[Pat
         parts.append(
             "<h2>Models trained</h2><table><tr><th>participant</th><th>model</th><th>init</th><th>trials</th>"
             "<th>training [s]</th></tr>" + text + "</table>"
+        )
+    fits = [(pid, f) for pid, p in summary["participants"].items() for f in p["person_models"]]
+    if fits:
+        parts.append(
+            "<h2>Person models</h2><p>Each participant's own, fitted from their calibration trials under manual "
+            "guidance with small known pushes (the probe), told no obstacle and no intent label: the arm (K̂, Ĉ) "
+            "from the pushes' response, the paths per task from the trials that ended in the target "
+            "(docs/study.md).</p><table><tr><th>participant</th><th>model</th><th>attempt</th><th>fitted from</th>"
+            "<th>arm</th><th>K̂ [N/m]</th><th>Ĉ [N·s/m]</th><th>told</th><th>used in</th><th>sha256</th></tr>"
+            + "".join(_fit_row(e, pid, f) for pid, f in fits)
+            + "</table>"
         )
     text = "".join(
         f"<tr><td>{e(pid)}</td><td>{p['number']}</td><td>{'simulated' if p['simulated'] else 'person'}</td>"

@@ -16,10 +16,18 @@ written to ``order.json``), and runs the steps not yet on record
   never does; an online update whose predecessor is still training is deferred (the next
   one trains on every trial so far);
 - ``check``: Algorithm 4.1's stop criterion on the in-loop e_RMS (eq. 4.12–4.13);
-- ``freeze``: the newest online model becomes the ``online`` condition.
+- ``freeze``: the newest online model becomes the ``online`` condition;
+- ``fit``: a person model fitted from the calibration block (or refitted from an iterative
+  round's trials) in the background worker (:mod:`coassist.study.calibration`; seconds) while
+  the page says to wait; its line records what it was fitted from, the arm and the SHA-256 of
+  each task's model, which every trial that uses it checks. A calibration that fails is
+  recorded with its reason, the block is put into the participant's order again after it, and
+  the run stops with one line (:class:`~coassist.study.calibration.CalibrationFailed`): the same
+  command runs the block again.
 
 A kill loses at most the step in progress; a background training that was cut off is
-started again when its model is next needed (training is deterministic: same model).
+started again when its model is next needed (training is deterministic: same model), a fit
+that was cut off is fitted again when the run resumes (the same model).
 """
 
 from __future__ import annotations
@@ -36,7 +44,8 @@ from coassist.data import append_to_dataset, read_dataset, write_dataset
 from coassist.data.store import MANIFEST_NAME, manifest_files
 from coassist.play.session import PlayConfig
 from coassist.scenario.tasks import task_for_seed
-from coassist.study.protocols import participant_steps
+from coassist.study.calibration import CalibrationFailed, FitJob, fit_job, model_hashes, person_model_folder
+from coassist.study.protocols import CALIBRATION_BLOCK, calibration_steps, participant_steps
 from coassist.study.questionnaires import form_for
 from coassist.study.store import ParticipantFolder, StudyFolder, StudyFolderError, step_key, trial_record, utc_now
 from coassist.study.training import BackgroundTraining, TrainJob, model_ready, train_command
@@ -149,6 +158,10 @@ class ParticipantRun:
             "transferred",
             "online",
             "offline",
+            "calibrated",
+            "calibration",
+            "person-model",
+            "person:",
             str(self.folder.folder / "models"),
         )
         drive = {
@@ -207,6 +220,12 @@ class ParticipantRun:
             record = {"step": k, "kind": step["kind"], "key": step_key(step), **record, "t": utc_now()}
             self.folder.append(record)
             self.done.append(record)
+            if step["kind"] == "fit" and record.get("redo"):
+                self._show({"kind": "wait", "text": "Thank you. We need to repeat the first part: a moment…"})
+                raise CalibrationFailed(
+                    f"the calibration failed: {record['reason']}; recorded, and the block is run again "
+                    f"({record['redo']}) when the same command continues"
+                )
         for name in self._train_jobs():  # every model this participant's study trains, finished
             self._ensure_model(name)
         self._show({"kind": "done", "text": "Thank you: the session is over."})
@@ -235,7 +254,7 @@ class ParticipantRun:
         plan = self.plan
         tp = plan.trials
         t0 = time.monotonic()
-        intent, model_name = self._intent(step["intent"])  # a model still training is waited for here
+        intent, model_name, model_sha = self._intent(step["intent"], step["task"])  # a model training: waited for
         waited = time.monotonic() - t0
         task = task_for_seed(
             step["task"],
@@ -282,12 +301,14 @@ class ParticipantRun:
         )
         what = "practice trial" if step["practice"] else "trial"
         label = f"condition {step['label']}" if step["label"] else step["block"].replace("-", " ")
-        self.session.view = self._view(
-            k,
-            step,
-            text=f"{label}: {what} {step['index'] + 1} — press Start, then "
-            "follow the plan, avoid the box and hold in the target",
-        )
+        text = f"{label}: {what} {step['index'] + 1} — press Start, then follow the plan, avoid the box and hold in the target"
+        if step["condition"] == CALIBRATION_BLOCK:  # the page never names the probe; the person is told of pushes
+            n = sum(1 for s in self.steps if s["kind"] == "trial" and s["block"] == step["block"])
+            text = (
+                f"warm-up trial {step['index'] + 1} of {n} — press Start, then follow the plan, avoid the box and hold "
+                "in the target; you will feel small pushes now and then: carry on as you would"
+            )
+        self.session.view = self._view(k, step, text=text)
         trial = self.session.run(setup, wait_for_page=self.page is not None)
         folder = self.folder.block(step["block"])
         if (folder / MANIFEST_NAME).is_file():
@@ -304,26 +325,99 @@ class ParticipantRun:
             f"{self.id}: step {k + 1}/{len(self.steps)} {step['block']} trial {step['index'] + 1}: "
             f"{trial.meta.extra.get('ended')}"
         )
-        rec = trial_record(k, step, file, trial.meta.to_dict(), model=model_name, waited_for_model_s=round(waited, 3))
+        more: dict[str, Any] = {"model": model_name, "waited_for_model_s": round(waited, 3)}
+        if model_sha is not None:
+            more["model_sha256"] = model_sha
+        rec = trial_record(k, step, file, trial.meta.to_dict(), **more)
         return {key: v for key, v in rec.items() if key not in ("step", "kind", "key")}
 
-    def _intent(self, ref: str) -> tuple[str, str | None]:
-        """(intent source for the session, the study model's name or None) of a step's ``intent``."""
+    def _intent(self, ref: str, task: str) -> tuple[str, str | None, str | None]:
+        """(intent source for the session, the study model's name or None, the SHA-256 of a person model's
+        file or None) of a step's ``intent`` on ``task``."""
         if ref == "nominal":
-            return "nominal", None
+            return "nominal", None, None
         if ref.startswith("model:"):
             name = ref.removeprefix("model:")
             if name == "online":
                 name = self._frozen_online()
             self._ensure_model(name)
-            return str(self._model_dir(name)), name
+            return str(self._model_dir(name)), name, None
         if ref == "latest:online":
             newest = self._newest_online()
             if newest is None:
                 assert self.plan.online is not None
-                return self.plan.online.source_model, None
-            return str(self._model_dir(newest)), newest
-        return ref, None
+                return self.plan.online.source_model, None, None
+            return str(self._model_dir(newest)), newest, None
+        if ref.startswith("person:"):
+            return self._person_model(ref.removeprefix("person:"), task)
+        return ref, None, None
+
+    # person models ------------------------------------------------------------------------------
+    def _person_fit(self, name: str) -> dict[str, Any]:
+        """The progress line of the person model ``name`` (P0, P1, …), or of the newest before it that was
+        fitted (an iterative refit that failed keeps its predecessor in the loop)."""
+        number = int(name.removeprefix("P"))
+        fits = {r["model"]: r for r in self.done if r["kind"] == "fit" and not r.get("failed")}
+        for n in range(number, -1, -1):
+            if f"P{n}" in fits:
+                return fits[f"P{n}"]
+        raise StudyFolderError(f"{self.id}: no person model was fitted before a trial that needs {name}")
+
+    def _person_model(self, name: str, task: str) -> tuple[str, str, str]:
+        rec = self._person_fit(name)
+        model = rec["model"]
+        if task not in rec["sha256"]:
+            raise StudyFolderError(f"{self.id}: person model {model} knows no path of task {task!r}")
+        folder = person_model_folder(self._model_dir(model), task)
+        try:
+            digest = model_hashes(self._model_dir(model), [task])[task]
+        except OSError:
+            digest = "missing"
+        if digest != rec["sha256"][task]:
+            raise StudyFolderError(
+                f"{folder}: {'missing' if digest == 'missing' else 'changed'} after it was fitted (sha256 "
+                f"{rec['sha256'][task][:12]} recorded in {self.folder.progress_file}); restore it from your backup of "
+                "the study folder"
+            )
+        return str(folder), str(model), digest
+
+    def _fit(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
+        data = list(step["data"])
+        job = FitJob(root=str(self.folder.folder), data=tuple(data), model=step["model"], person=self.id, base=None)
+        if step.get("base") is not None:
+            job = FitJob(
+                root=job.root,
+                data=job.data,
+                model=job.model,
+                person=job.person,
+                base=self._person_fit(step["base"])["model"],
+            )
+        key = f"fit:{step['index']}"
+        self._show({"kind": "wait", "text": "the robot is getting to know how you move: a moment…"})
+        self.training.submit(key, job, work=fit_job)
+        try:
+            record = self.training.wait(key)
+        except CalibrationFailed as exc:
+            return self._fit_failed(k, step, str(exc))
+        arm = record["arm"]
+        how = record["arm_note"] if record["arm_measured"] or record["base"] else f"assumed: {record['arm_note']}"
+        self.say(
+            f"{self.id}: person model {record['model']} fitted in {record['fit_seconds']:.1f} s from "
+            + ", ".join(f"{len(v)} {t} trials" for t, v in record["demonstrations"].items())
+            + f"; arm K = {arm['stiffness']:.0f} N/m, C = {arm['damping']:.1f} N·s/m ({how})"
+        )
+        return {"attempt": step["attempt"], **record}
+
+    def _fit_failed(self, k: int, step: dict[str, Any], reason: str) -> dict[str, Any]:
+        """Record a failed fit; a calibration's is run again (its block inserted after this step)."""
+        out: dict[str, Any] = {"model": step["model"], "attempt": step["attempt"], "failed": True, "reason": reason}
+        if step.get("base") is not None:  # an iterative refit: the rounds go on with its predecessor
+            self.say(f"{self.id}: person model {step['model']} not refitted ({reason}); the last one stays")
+            return out
+        redo = calibration_steps(self.plan, self.record["number"], int(step["attempt"]) + 1)
+        self.steps = self.folder.insert_steps(k, redo)
+        self.order["steps"] = self.steps
+        return {**out, "redo": redo[0]["block"]}
 
     # models -------------------------------------------------------------------------------------
     def _model_dir(self, name: str) -> Path:

@@ -102,6 +102,11 @@ class StudySession(PlaySession):
     def _resume(self) -> None:
         """The study folder keeps the trials (coassist.study.store), not a play folder."""
 
+    def trial_seed(self, index: int) -> int:
+        """The step's seed (the one its trial is recorded with), not the session's count: a resumed run draws
+        the calibration probe's phases of each trial as the first run did."""
+        return self.setup.seed if self.setup is not None else super().trial_seed(index)
+
     def next_task(self) -> Task:
         if self.setup is not None:
             return self.setup.task

@@ -451,6 +451,26 @@ class ParticipantFolder:
             )
         atomic_write_text(self.folder / ORDER_NAME, _json(dict(order)))
 
+    def insert_steps(self, after: int, steps: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        """Put ``steps`` into the recorded order right after step ``after`` (a calibration run again: the
+        only change an order takes, and only to steps not yet run); returns the new steps. Done already
+        (a kill between this and the step's line): the order as it is."""
+        order = self.order()
+        if order is None:
+            raise StudyFolderError(f"{self.folder / ORDER_NAME}: missing; {_RESTORE}")
+        old = order["steps"]
+        if len(self.progress()) > after:
+            raise StudyFolderError(f"{self.progress_file}: step {after} is recorded; its order cannot change now")
+        keys = [step_key(s) for s in steps]
+        if [step_key(s) for s in old[after + 1 : after + 1 + len(steps)]] == keys:
+            return old
+        new = [*old[: after + 1], *steps, *old[after + 1 :]]
+        atomic_write_text(
+            self.folder / ORDER_NAME,
+            _json({**order, "steps": new, "inserted": [*order.get("inserted", []), {"after": after, "keys": keys}]}),
+        )
+        return new
+
     # ------------------------------------------------------------------ the manifest of what ran
     def progress(self) -> list[dict[str, Any]]:
         """The finished steps, in order; a torn last line (a kill mid-write) is left out."""
@@ -582,6 +602,31 @@ class ParticipantFolder:
                     f"{self.block(str(rec.get('block'))) / MANIFEST_NAME}: does not list {rec.get('file')}, the trial "
                     f"of step {i} that {self.progress_file} records (lost?); {_RESTORE} (nothing is run again)"
                 )
+        self._audit_person_models(done)
+
+    def _audit_person_models(self, done: list[dict[str, Any]]) -> None:
+        """Every person model the log records as fitted is on disk as it was (its files' SHA-256)."""
+        from coassist.scenario.person_model import PERSON_MODEL_FILE
+
+        for i, rec in enumerate(done):
+            if rec["kind"] != "fit" or rec.get("failed"):
+                continue
+            digests = rec.get("sha256")
+            if not isinstance(digests, dict) or not isinstance(rec.get("model"), str):
+                raise StudyFolderError(
+                    f"{self.progress_file}: line {i + 1} is not a person model's record (edited by hand?); {_RESTORE}"
+                )
+            for task, digest in digests.items():
+                path = self.folder / "models" / rec["model"] / str(task) / PERSON_MODEL_FILE
+                try:
+                    now = _sha256(path.read_bytes())
+                except OSError:
+                    now = None
+                if now != digest:
+                    raise StudyFolderError(
+                        f"{path}: {'missing' if now is None else 'changed'} since it was fitted (step {i}, sha256 "
+                        f"{str(digest)[:12]} in {PROGRESS_NAME}); {_RESTORE} (nothing is fitted again)"
+                    )
 
     def reconcile(self, steps: list[dict[str, Any]]) -> int:
         """Write the line of a trial that was committed to its dataset but not to the progress file

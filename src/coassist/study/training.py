@@ -22,7 +22,7 @@ import multiprocessing
 import os
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -137,13 +137,15 @@ def _exit_with_parent(parent: int) -> None:
 
 class BackgroundTraining:
     """Jobs by name, each in a fresh ``spawn``-ed process (one at a time: the machine's cores
-    are the control loop's first). :meth:`ready` never blocks; :meth:`wait` does."""
+    are the control loop's first). :meth:`ready` never blocks; :meth:`wait` does. A job is a
+    :class:`TrainJob` (run by :func:`train_job`) or another job with the module-level function
+    ``work`` that runs it (the calibration's fit: :func:`coassist.study.calibration.fit_job`)."""
 
     def __init__(self) -> None:
         self._pool: ProcessPoolExecutor | None = None
         self._jobs: dict[str, Future] = {}
 
-    def submit(self, name: str, job: TrainJob) -> Future:
+    def submit(self, name: str, job: Any, work: Callable[[Any], dict[str, Any]] = train_job) -> Future:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(
                 1,
@@ -151,7 +153,7 @@ class BackgroundTraining:
                 initializer=_exit_with_parent,
                 initargs=(os.getpid(),),
             )
-        fut = self._pool.submit(train_job, job)
+        fut = self._pool.submit(work, job)
         self._jobs[name] = fut
         return fut
 

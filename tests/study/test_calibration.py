@@ -1,0 +1,371 @@
+"""The calibration block: its plan, its trials under the probe, the person model fitted from them, what
+uses it (a comparison's condition, an iterative study's rounds), a failed calibration run again, kill -9
+during the block and the fit, a model changed after its fit, and what the report says."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from html import escape
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from coassist.cli import app
+from coassist.control.presets import PROBE
+from coassist.control.probe import probe_phases, probe_signal
+from coassist.data import read_dataset
+from coassist.metrics import f_rms
+from coassist.scenario import intent_registry
+from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate, identify_arm
+from coassist.scenario.person_model import PERSON_MODEL_FILE, fit_person, read_person_model
+from coassist.scenario.tasks import task_for_seed
+from coassist.study.calibration import ARM_SE_MAX, FitJob, fit_job, measured_arm
+from coassist.study.plan import CALIBRATED, PlanError, plan_from_text
+from coassist.study.protocols import participant_steps, trial_seed_base
+from coassist.study.report import study_summary, write_report
+from coassist.study.runner import ParticipantRun
+from coassist.study.store import StudyFolder, StudyFolderError, init_study
+
+from .conftest import CALIBRATED as CALIBRATED_PLAN
+from .conftest import calibrated_plan
+
+SRC = Path(__file__).resolve().parents[2] / "src"
+
+
+def _sha(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _plan(**fmt) -> str:
+    return CALIBRATED_PLAN.format(**{"trials": 3, "dwell": 1.0, "rest": 0.0, **fmt})
+
+
+# ----------------------------------------------------------------------------- the plan
+
+
+def test_a_calibrated_plan_reads_and_its_steps_open_with_the_block():
+    plan = plan_from_text(_plan(), ".")
+    assert plan.calibration is not None and plan.calibration.trials == 3
+    assert [c.intent for c in plan.conditions] == ["nominal", CALIBRATED] and plan.intent_folders() == ()
+    assert CALIBRATED not in intent_registry.INTENT_SOURCES  # the token names no registered source
+    steps = participant_steps(plan, {"mg": "A", "person": "B"}, 1, 0)
+    base = trial_seed_base(plan, 1)
+    cal = steps[:3]
+    assert [(s["kind"], s["block"], s["controller"], s["intent"], s["seed"]) for s in cal] == [
+        ("trial", "calibration", "manual-probe", "nominal", base + 8000 + j) for j in range(3)
+    ]
+    assert {s["label"] for s in cal} == {None}  # nothing on the page to name
+    fit = steps[3]
+    assert (fit["kind"], fit["model"], fit["data"], fit["base"], fit["attempt"]) == (
+        "fit",
+        "P0",
+        ["calibration"],
+        None,
+        1,
+    )
+    measured = [s for s in steps[4:] if s["kind"] == "trial"]
+    assert {s["condition"]: s["intent"] for s in measured} == {"mg": "nominal", "person": "person:P0"}
+
+
+@pytest.mark.parametrize(
+    ("edit", "field"),
+    [
+        (lambda t: t.replace("trials = 3", "trials = 0"), "calibration.trials"),
+        (lambda t: t.replace("trials = 3", "trials = 11"), "calibration.trials"),
+        (lambda t: t.replace("trials = 3", 'trials = "3"'), "calibration.trials"),
+        (lambda t: t.replace("trials = 3", "trials = 2.5"), "calibration.trials"),
+        (lambda t: t.replace("trials = 3", "trails = 3"), "calibration.trails"),
+        (lambda t: t.replace("[calibration]\ntrials = 3\n", ""), "condition[1].intent"),
+        (
+            lambda t: t.replace("trials = 3", "trials = 1").replace('["curved"]', '["linear", "curved"]'),
+            "calibration.trials",
+        ),
+        (lambda t: t.replace('name = "mg"', 'name = "calibration"'), "condition[0].name"),
+        (lambda t: t.replace('name = "mg"', 'name = "calibrated"'), "condition[0].name"),
+        (lambda t: t.replace('name = "mg"', 'name = "calibration-2"'), "condition[0].name"),
+    ],
+)
+def test_a_bad_calibration_is_one_line_naming_the_field(edit, field):
+    with pytest.raises(PlanError) as err:
+        plan_from_text(edit(_plan()), ".")
+    assert "\n" not in str(err.value) and str(err.value).startswith(field), str(err.value)
+
+
+def test_the_other_protocols_take_the_person_model(tmp_path):
+    iterative = (
+        '[study]\nname = "it"\nprotocol = "iterative"\n\n[calibration]\ntrials = 2\n\n'
+        '[iterative]\nrounds = 2\ntrials_per_round = 1\nsource = "calibrated"\n\n'
+        '[trials]\ntasks = ["curved"]\nmotion_time = 3.0\ndwell = 1.0\n'
+    )
+    plan = plan_from_text(iterative, ".")
+    assert plan.training is None and plan.iterative.source == CALIBRATED
+    steps = participant_steps(plan, {}, 1, 0)
+    assert not [s for s in steps if s["kind"] == "train"]  # no network
+    fits = [(s["model"], s["data"], s["base"]) for s in steps if s["kind"] == "fit"]
+    assert fits == [("P0", ["calibration"], None), ("P1", ["round-0"], "P0"), ("P2", ["round-0", "round-1"], "P0")]
+    rounds = {s["block"]: s["intent"] for s in steps if s["kind"] == "trial" and s["block"].startswith("round-")}
+    assert rounds == {"round-0": "person:P0", "round-1": "person:P1"}
+    for edit, field in (
+        (lambda t: t.replace('source = "calibrated"', 'source = "person"'), "iterative.source"),
+        (lambda t: t.replace("[calibration]\ntrials = 2\n", ""), "iterative.source"),
+        (lambda t: t + "\n[training]\nepochs = 1\n", "training"),
+    ):
+        with pytest.raises(PlanError, match=rf"^{field}"):
+            plan_from_text(edit(iterative), ".")
+    # transfer (online alike): the person model as a third blinded condition, beside the networks
+    (tmp_path / "source").mkdir()
+    (tmp_path / "source" / "model.json").write_text("{}")  # parse_plan checks the folder's marker only
+    transfer = (
+        '[study]\nname = "tr"\nprotocol = "transfer"\n\n[calibration]\ntrials = 2\n\n'
+        '[transfer]\nsource_model = "source"\ntrials = 2\ncompare_calibrated = true\n\n'
+        '[trials]\ntasks = ["curved"]\nper_condition = 1\npractice = 0\nmotion_time = 3.0\ndwell = 1.0\n'
+    )
+    plan = plan_from_text(transfer, tmp_path)
+    steps = participant_steps(plan, {"source": "A", "transferred": "B", CALIBRATED: "C"}, 1, 0)
+    compared = {s["condition"]: s["intent"] for s in steps if s["kind"] == "trial" and s["label"]}
+    assert compared[CALIBRATED] == "person:P0" and compared["transferred"] == "model:transferred"
+    with pytest.raises(PlanError, match=r"^transfer\.compare_calibrated"):
+        plan_from_text(transfer.replace("[calibration]\ntrials = 2\n", ""), tmp_path)
+
+
+def test_init_refuses_a_calibration_that_could_not_measure_the_arm(tmp_path):
+    # a 1.5 s motion and 0.5 s dwell: the arm is measured from trials of 3 s at least
+    plan = calibrated_plan(tmp_path / "plans")
+    plan.write_text(
+        plan.read_text().replace("motion_time = 3.0", "motion_time = 1.5").replace("dwell = 1.0", "dwell = 0.5")
+    )
+    result = CliRunner().invoke(app, ["study", "init", str(plan), "--out", str(tmp_path / "study")])
+    assert result.exit_code != 0 and not (tmp_path / "study").exists()
+    line = " ".join(result.output.split())
+    end = task_for_seed("curved", 0, motion_time=1.5).planner.end_time
+    assert f"trials.motion_time: a calibration trial as planned lasts {end + 0.5:g} s; the arm is measured" in line
+
+
+def test_init_refuses_a_criterion_beyond_the_person_models_predictions(tmp_path):
+    text = (
+        '[study]\nname = "it"\nprotocol = "iterative"\n\n[calibration]\ntrials = 2\n\n'
+        '[iterative]\nrounds = 2\ntrials_per_round = 1\nsource = "calibrated"\ncriterion_horizon = 51\n\n'
+        '[trials]\ntasks = ["curved"]\nmotion_time = 3.0\ndwell = 1.0\n'
+    )
+    (tmp_path / "plan.toml").write_text(text)
+    with pytest.raises(PlanError, match=r"^iterative\.criterion_horizon: 51 samples, but the rounds log the person"):
+        init_study(tmp_path / "plan.toml", tmp_path / "study")
+    init_study_ok = text.replace("criterion_horizon = 51", "criterion_horizon = 50")
+    (tmp_path / "plan.toml").write_text(init_study_ok)
+    assert init_study(tmp_path / "plan.toml", tmp_path / "study").record["estimate"]["n_trials"] == 4
+
+
+# ----------------------------------------------------------------------------- the block and its fit
+
+
+def test_the_block_runs_under_the_probe_and_fits_the_participants_person_model(calibrated_study):
+    study = StudyFolder(calibrated_study)
+    pf = study.participant("S01")
+    progress = pf.progress()
+    cal = read_dataset(pf.block("calibration"))
+    assert len(cal.trials) == 3 and {t.meta.controller for t in cal.trials} == {"manual-probe"}
+    for t in cal.trials:  # the robot's effort is the probe of the step's seed, to the bit (coassist.control.probe)
+        push = probe_signal(t.time, PROBE, 2, probe_phases(PROBE, t.meta.seed))
+        assert (
+            np.array_equal(t.effort_r[:, :2], push)
+            and t.meta.seed == trial_seed_base(study.plan(), 1) + 8000 + (t.meta.extra["study_step"])
+        )
+    (fit,) = [r for r in progress if r["kind"] == "fit"]
+    assert fit["demonstrations"] == {"curved": [f"calibration/{f}" for f in cal.files]}
+    # the arm is identify_arm's on these trials, used where it says enough (else the typical arm, and why)
+    arm, note = measured_arm(identify_arm(cal.trials))
+    assert ArmEstimate(**fit["arm"]) == arm
+    assert fit["arm_measured"] == (not note) and fit["arm"]["trials"] == (3 if not note else 0)
+    folder = pf.folder / "models" / "P0" / "curved"
+    assert fit["sha256"] == {"curved": _sha(folder / PERSON_MODEL_FILE)}
+    # the folder is this participant's, whatever name the world gives the person at the handle
+    source = read_person_model(folder)
+    assert set(source.paths) == {"S01"} and source.default_arm == arm and source.default_paths is source.paths["S01"]
+    by_hand = fit_person(list(cal.trials), arm=arm).paths
+    assert np.allclose(source.paths["S01"].weights, by_hand.weights, rtol=0, atol=1e-12)
+    # the calibrated condition ran with it, each trial recording its file's hash; MG with nothing
+    person = read_dataset(pf.block("person")).trials
+    assert {t.meta.model_id for t in person} == {"person:curved"} and {t.meta.extra["study_model"] for t in person} == {
+        "P0"
+    }
+    lines = {r["block"]: r for r in progress if r["kind"] == "trial"}
+    assert lines["person"]["model_sha256"] == fit["sha256"]["curved"] and "model_sha256" not in lines["mg"]
+    mg = read_dataset(pf.block("mg")).trials
+    assert {t.meta.model_id for t in mg} == {None}
+    # the same path and obstacle in both conditions (paired): the person model takes less hand force than MG
+    assert person[0].meta.seed == mg[0].meta.seed
+    assert f_rms(person[0].wrench[:, :2]) < f_rms(mg[0].wrench[:, :2])
+
+
+def test_the_report_says_what_used_the_person_model_and_what_it_was_fitted_from(calibrated_study):
+    html_path, json_path = write_report(calibrated_study)
+    summary = json.loads(json_path.read_text())
+    assert summary["calibration"] == {"trials": 3, "calibrated": ["person"]}
+    (p0,) = summary["participants"]["S01"]["person_models"]
+    assert p0["model"] == "P0" and p0["trials"] == {"curved": 3} and p0["blocks"] == ["calibration"]
+    html = html_path.read_text()
+    assert "With the participant's own person model (fitted from their 3 calibration trials): person (" in html
+    assert "<h2>Person models</h2>" in html and "3 curved trials of calibration" in html
+    assert ("measured (3 trials with pushes)" if p0["arm"]["measured"] else "assumed: ") in html
+    # what the model was told, and the blocks whose trials ran with its file (by the hash on their lines)
+    arm = "measured" if p0["arm"]["measured"] else "assumed"
+    assert p0["told"] == f"arm {arm}; from the person's trials: paths round obstacles and the arm"
+    assert p0["used_in"] == ["person"] and f"<td>{escape(p0['told'])}</td><td>person</td>" in html
+
+
+def test_the_arm_is_assumed_where_the_measurement_says_too_little():
+    good = ArmEstimate(stiffness=600.0, damping=5.0, stiffness_se=0.4 * 600.0, trials=3, method="probe-iv")
+    assert measured_arm(good) == (good, "")
+    vague = ArmEstimate(
+        stiffness=600.0, damping=5.0, stiffness_se=(ARM_SE_MAX + 0.01) * 600.0, trials=3, method="probe-iv"
+    )
+    arm, why = measured_arm(vague)
+    assert arm is ASSUMED_ARM and "too uncertain" in why
+    clipped = ArmEstimate(stiffness=100.0, damping=95.0, stiffness_se=715.0, trials=3, method="probe-iv")
+    assert measured_arm(clipped)[0] is ASSUMED_ARM and "bound" in measured_arm(clipped)[1]
+    assert measured_arm(ASSUMED_ARM) == (ASSUMED_ARM, "no pushes measured in the trials")
+
+
+def test_a_person_model_changed_after_its_fit_is_refused_in_one_line(calibrated_study):
+    study = StudyFolder(calibrated_study)
+    path = study.participant("S01").folder / "models" / "P0" / "curved" / PERSON_MODEL_FILE
+    path.write_text(path.read_text().replace('"stiffness": ', '"stiffness": 1'))
+    for attempt in (
+        lambda: ParticipantRun(study, "S01", simulate=True).__enter__(),
+        lambda: study_summary(study.folder),
+    ):
+        with pytest.raises(StudyFolderError, match="changed since it was fitted") as err:
+            attempt()
+        assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_calibration_without_motion_fails_in_one_line_and_the_same_command_runs_it_again(tmp_path, monkeypatch):
+    from coassist.study.participants import OperatorHand
+
+    plan = calibrated_plan(tmp_path / "plans", trials=2)
+    study = init_study(plan, tmp_path / "study")
+    monkeypatch.setattr(OperatorHand, "force_xy", lambda self, x, y, vx, vy: (0.0, 0.0))  # a hand that never pushes
+    result = CliRunner().invoke(app, ["study", "run", str(study.folder), "--participant", "S01", "--simulate"])
+    line = " ".join(result.output.split())
+    assert result.exit_code == 1, result.output
+    assert (
+        "error: S01: the calibration failed: no calibration trial of task 'curved' ended in the target (2 ended: "
+        "time_limit; the tool moved" in line
+    )
+    assert ": no motion): the person model cannot learn the way there; recorded, and the block is run again" in line
+    pf = study.participant("S01")
+    failed = pf.progress()[-1]
+    assert failed["kind"] == "fit" and failed["failed"] and failed["redo"] == "calibration-2"
+    assert not (pf.folder / "models" / "P0").exists()
+    order = json.loads((pf.folder / "order.json").read_text())
+    assert [s["block"] for s in order["steps"][3:6]] == ["calibration-2", "calibration-2", "models"]
+    assert order["inserted"] == [
+        {"after": 2, "keys": ["trial:calibration-2:0", "trial:calibration-2:1", "fit:models:P0-2"]}
+    ]
+    monkeypatch.undo()
+    result = CliRunner().invoke(app, ["study", "run", str(study.folder), "--participant", "S01", "--simulate"])
+    assert result.exit_code == 0, result.output
+    fits = [r for r in pf.progress() if r["kind"] == "fit"]
+    assert [(r["attempt"], bool(r.get("failed"))) for r in fits] == [(1, True), (2, False)]
+    assert fits[1]["demonstrations"]["curved"] == [
+        f"calibration-2/{f}" for f in read_dataset(pf.block("calibration-2")).files
+    ]
+    assert len(read_dataset(pf.block("calibration")).trials) == 2  # the failed attempt's trials are kept
+    summary = study_summary(study.folder)
+    attempts = summary["participants"]["S01"]["person_models"]
+    assert attempts[0]["failed"] and "no motion" in attempts[0]["reason"] and attempts[1]["trials"] == {"curved": 2}
+
+
+def _lines(pf, kind: str) -> list[dict]:
+    return [r for r in pf.progress() if r["kind"] == kind]
+
+
+def test_kill_9_during_the_block_and_during_the_fit_then_resume(tmp_path):
+    study = init_study(calibrated_plan(tmp_path / "plans"), tmp_path / "study")
+    pf = study.participant("S01")
+    env = {**os.environ, "PYTHONPATH": f"{SRC}{os.pathsep}{os.environ.get('PYTHONPATH', '')}", "OMP_NUM_THREADS": "1"}
+    cmd = [
+        sys.executable,
+        "-m",
+        "coassist.cli",
+        "study",
+        "run",
+        str(study.folder),
+        "-p",
+        "S01",
+        "--simulate",
+        "--realtime",
+    ]
+
+    def run_until(done, what: str, then: float) -> None:
+        """Run the participant paced, and kill -9 the run ``then`` seconds after ``done()``."""
+        proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        try:
+            t_end = time.monotonic() + 180  # generous: a busy machine starts processes slowly
+            while not done():
+                assert proc.poll() is None, proc.stdout.read().decode()
+                assert time.monotonic() < t_end, f"{what} did not come in 180 s"
+                time.sleep(0.05)
+            time.sleep(then)
+            os.kill(proc.pid, signal.SIGKILL)
+        finally:
+            proc.kill()
+            proc.wait()
+
+    # 1. inside the second calibration trial (each lasts about 4 s, paced)
+    run_until(lambda: len(_lines(pf, "trial")) >= 1, "the first calibration trial", then=1.0)
+    assert len(_lines(pf, "trial")) == 1
+    first = _sha(pf.block("calibration") / _lines(pf, "trial")[0]["file"])
+    # 2. inside the fit: its trials are recorded, its line is not (the fit takes seconds: a worker starts, fits)
+    run_until(lambda: len(_lines(pf, "trial")) == 3, "the fit", then=0.5)
+    assert not _lines(pf, "fit") and len(_lines(pf, "trial")) == 3
+    with ParticipantRun(study, "S01", simulate=True) as run:  # the resume fits again, then runs the rest
+        assert [r["kind"] for r in run.done] == ["trial"] * 3
+        run.run()
+        assert run.complete
+    cal = read_dataset(pf.block("calibration"))
+    assert [t.meta.extra["study_step"] for t in cal.trials] == [0, 1, 2]  # each once; the killed one run again
+    assert _sha(pf.block("calibration") / cal.files[0]) == first
+    (fit,) = _lines(pf, "fit")
+    assert sorted(p.name for p in (pf.folder / "models").iterdir()) == ["P0"]  # nothing half-written left
+    # the fit is what fitting those trials again makes, byte for byte
+    again = fit_job(FitJob(root=str(pf.folder), data=("calibration",), model="P0-again", person="S01"))
+    assert again["sha256"] == fit["sha256"] and again["arm"] == fit["arm"]
+
+
+def test_an_iterative_study_refits_the_person_model_between_rounds(tmp_path):
+    text = (
+        '[study]\nname = "it"\nprotocol = "iterative"\nseed = 3\n\n[calibration]\ntrials = 3\n\n'
+        '[iterative]\nrounds = 2\ntrials_per_round = 1\nsource = "calibrated"\n\n'
+        "[questionnaire]\ntlx = false\nlikert = []\n\n"
+        '[trials]\ntasks = ["curved"]\nmotion_time = 3.0\ndwell = 1.0\n\n[rest]\nbetween_conditions = 0.0\n'
+    )
+    (tmp_path / "plan.toml").write_text(text)
+    study = init_study(tmp_path / "plan.toml", tmp_path / "study")
+    with ParticipantRun(study, "S01", simulate=True) as run:
+        run.run()
+        assert run.complete
+    pf = study.participant("S01")
+    fits = {r["model"]: r for r in _lines(pf, "fit")}
+    assert list(fits) == ["P0", "P1", "P2"] and not any(r.get("failed") for r in fits.values())
+    # the arm stays the calibration's (the rounds ran without pushes); the paths take each round's trials too
+    assert fits["P1"]["arm"] == fits["P2"]["arm"] == fits["P0"]["arm"] and fits["P1"]["base"] == "P0"
+    demos = {m: r["demonstrations"]["curved"] for m, r in fits.items()}
+    assert demos["P1"][:3] == demos["P0"] and demos["P2"][: len(demos["P1"])] == demos["P1"]
+    assert len(demos["P0"]) == 3 and len(demos["P2"]) == 5  # every round's trial ended in the target
+    for k in (0, 1):
+        (trial,) = read_dataset(pf.block(f"round-{k}")).trials
+        line = next(r for r in _lines(pf, "trial") if r["block"] == f"round-{k}")
+        assert trial.meta.extra["study_model"] == f"P{k}" and line["model_sha256"] == fits[f"P{k}"]["sha256"]["curved"]
+    used = {f["model"]: f["used_in"] for f in study_summary(study.folder)["participants"]["S01"]["person_models"]}
+    assert used == {"P0": ["round-0"], "P1": ["round-1"], "P2": []}  # P2 is fitted after the last round
+    (check,) = _lines(pf, "check")
+    assert np.isfinite(check["e_rms"]) and np.isfinite(check["e_rms_before"])  # the person model's predictions logged
