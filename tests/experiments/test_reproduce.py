@@ -361,8 +361,7 @@ def test_report_is_complete_and_consistent_with_the_summary(tiny_run):
 def test_the_held_out_cells_meet_their_own_people(tiny_run):
     """The held-out population's cells ran its MG trials (its operators, the same seeds), and its calibrated
     sources were fitted to those operators' own calibration trials, not the thesis population's."""
-    import json
-
+    from coassist._io import read_hashed_json
     from coassist.data import read_dataset
     from coassist.experiments.ablation import HELD_OUT_SOURCES
 
@@ -378,7 +377,7 @@ def test_the_held_out_cells_meet_their_own_people(tiny_run):
             ds = read_dataset(out / "datasets" / f"held-out-{obj}-{source}")
             assert sorted((t.meta.user, t.meta.seed) for t in ds.trials) == mg, (obj, source)
             assert f"held-out/{obj}/cooperative-arbitrated/{source}" in summary["ablation"]["cells"]
-    doc = json.loads((out / "models" / "person-held-out" / "person-model.json").read_text())
+    doc = read_hashed_json(out / "models" / "person-held-out" / "person-model.json", format="coassist-person-model-1")
     assert set(doc["people"]) == people
-    thesis = json.loads((out / "models" / "person" / "person-model.json").read_text())
+    thesis = read_hashed_json(out / "models" / "person" / "person-model.json", format="coassist-person-model-1")
     assert set(thesis["people"]) == {f"user-{u}" for u in cfg.application_users}

@@ -11,7 +11,8 @@ obstacle told:
 3. the person's paths on the task (:func:`~coassist.scenario.path_model.fit_path_model`), with the
    present estimate's noise σ (the RMS of q less its smoothed self, lateral to the plan).
 
-The folder (``person-model.json``) is one JSON document: per person their arm and, per task
+The folder (``person-model.json``) is one JSON document carrying its own SHA-256
+(:func:`coassist._io.write_hashed_json`: a hand edit is refused in one line): per person their arm and, per task
 (nominal path), their path model; :func:`read_person_model` gives the intent source. A folder
 may name one of its people ``default``: whoever else is at the handle gets that person's model
 (a study writes each participant's own folder so: whatever name the world gives them).
@@ -19,15 +20,15 @@ may name one of its people ``default``: whoever else is at the handle gets that 
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from coassist._io import atomic_write_text
+from coassist._io import read_hashed_json, write_hashed_json
 from coassist.scenario.arm_identification import ArmEstimate, identify_arm
 from coassist.scenario.path_model import PathFrame, PathModel, PathModelSettings, fit_path_model
 from coassist.scenario.person_intent import PersonFilterSettings, PersonPathsIntent
@@ -146,26 +147,21 @@ def write_person_model(
         raise ValueError(f"default must be one of the people fitted ({', '.join(fits)}), got {default!r}")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    doc = {
-        "format": _FORMAT,
+    doc: dict[str, Any] = {
         "filter": asdict(settings or PERSON_FILTER),
         "people": {name: {"arm": asdict(f.arm), "paths": _model_doc(f.paths)} for name, f in fits.items()},
     }
     if default is not None:
         doc["default"] = default
-    atomic_write_text(folder / PERSON_MODEL_FILE, json.dumps(doc) + "\n")
+    # the file carries its own SHA-256: a person model is something the robot obeys, an edit by hand is refused
+    write_hashed_json(folder / PERSON_MODEL_FILE, doc, format=_FORMAT)
     return folder
 
 
 def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsIntent:
     """The intent source a person-model folder holds (errors name the file and field)."""
     path = Path(folder) / PERSON_MODEL_FILE
-    try:
-        doc = json.loads(path.read_text("utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: not a person model ({exc})") from None
-    if not isinstance(doc, dict) or doc.get("format") != _FORMAT:
-        raise ValueError(f"{path}: format must be {_FORMAT!r}")
+    doc = read_hashed_json(path, format=_FORMAT)  # one line naming the file: missing, edited, another format
     try:
         people = dict(doc["people"])
         paths = {name: _model_from(p["paths"]) for name, p in people.items()}

@@ -1,0 +1,81 @@
+"""A person-model folder: written, read back the same, and refused in one line when edited by hand."""
+
+import json
+
+import numpy as np
+import pytest
+
+from coassist.interfaces import TrialContext
+from coassist.scenario.arm_identification import ArmEstimate
+from coassist.scenario.path_model import fit_path_model
+from coassist.scenario.person_intent import PersonPathsIntent
+from coassist.scenario.person_model import (
+    PERSON_FILTER,
+    PERSON_MODEL_FILE,
+    PersonFit,
+    read_person_model,
+    write_person_model,
+)
+
+LINE = np.stack([np.linspace(0.0, 0.4, 81), np.zeros(81)], axis=1)
+
+
+def _detour(side: int, width: float = 0.05) -> np.ndarray:
+    x = np.linspace(0.0, 0.4, 200)
+    return np.stack([x, side * 0.05 * np.exp(-(((x - 0.2) / width) ** 2))], axis=1)
+
+
+@pytest.fixture()
+def written(tmp_path):
+    paths = fit_path_model(LINE, [_detour(1), _detour(1, 0.06), _detour(-1)], noise=0.001)
+    arm = ArmEstimate(stiffness=650.0, damping=-5.0, stiffness_se=40.0, damping_se=3.0, trials=3, method="probe-iv")
+    folder = write_person_model(tmp_path / "cal", {"alice": PersonFit(arm, paths)})
+    return folder, paths, arm
+
+
+def _rows(source: PersonPathsIntent) -> np.ndarray:
+    ctx = TrialContext(
+        dt=0.008,
+        horizon=10,
+        start=LINE[0],
+        target=LINE[-1],
+        reference=np.zeros((10, 4)),
+        task="z",
+        object="handle",
+        user="alice",
+        path=LINE,
+    )
+    source.reset(ctx)
+    out = []
+    for k in range(150):  # along the line, then up the left detour, pushing
+        p = np.array([0.002 * k, 0.03 * np.exp(-(((0.002 * k - 0.2) / 0.05) ** 2))])
+        row = np.concatenate([p, [0.25, 0.0], [2.0, 1.0], p])[None, :]
+        out.append(source.predict(row))
+    return np.asarray(out)
+
+
+def test_a_written_model_is_read_back_the_same(written):
+    folder, paths, arm = written
+    direct = PersonPathsIntent(10, paths={"alice": paths}, arms={"alice": arm}, settings=PERSON_FILTER)
+    loaded = read_person_model(folder, horizon=10)
+    assert loaded.arms["alice"] == arm and loaded.settings == PERSON_FILTER
+    np.testing.assert_array_equal(_rows(loaded), _rows(direct))  # the JSON round trip keeps every bit
+
+
+def test_a_hand_edited_or_unhashed_model_is_refused_in_one_line(written):
+    folder, _, _ = written
+    path = folder / PERSON_MODEL_FILE
+    text = path.read_text()
+    path.write_text(text.replace('"stiffness": 650.0', '"stiffness": 6500.0'))
+    with pytest.raises(ValueError, match="sha256|hash|changed|edited") as err:
+        read_person_model(folder)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+    doc = json.loads(text)
+    del doc["sha256"]
+    path.write_text(json.dumps(doc))  # a file of before the hash
+    with pytest.raises(ValueError) as err:
+        read_person_model(folder)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+    path.unlink()
+    with pytest.raises(ValueError, match=PERSON_MODEL_FILE):
+        read_person_model(folder)
