@@ -129,7 +129,11 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
 
     ab = summary["ablation"]
     tiny = rep.REPRODUCE_PRESETS["tiny"]
-    assert set(ab["cells"]) == {f"point-mass/{o}/{c}/{s}" for o in ("board", "heavy") for c, s in ablation_cells(tiny)}
+    from coassist.experiments.ablation import ARBITRATED, HELD_OUT_SOURCES
+
+    assert set(ab["cells"]) == {
+        f"point-mass/{o}/{c}/{s}" for o in ("board", "heavy") for c, s in ablation_cells(tiny)
+    } | {f"held-out/{o}/{ARBITRATED}/{s}" for o in ("board", "heavy") for s in HELD_OUT_SOURCES}
     assert "mujoco" in ab["skipped"]
     labels = {"ridge": "tool", "ridge-intent": "intent", "lstm-tool": "tool", "lstm-intent": "intent"}
     assert set(labels) == set(tiny.learned_sources)
