@@ -1,0 +1,7 @@
+"""``python -m coassist.robot.ur_sim '<config JSON>'``: the simulator for :class:`~coassist.robot.ur_sim.process.URSimProcess`."""
+
+import sys
+
+from coassist.robot.ur_sim.process import config_from_json, serve
+
+serve(config_from_json(sys.argv[1]) if len(sys.argv) > 1 else config_from_json("{}"))
