@@ -86,12 +86,20 @@ Link loss, late data, stops
 A reading that raises, an interface that reports it is disconnected, a robot timestamp
 that has not advanced for ``link_timeout`` seconds (ur-rtde's receive thread keeps serving
 its last sample after the link drops), or a sample that arrives more than ``link_timeout``
-later than the stream's usual delay makes ``read()`` raise
+later than the stream's usual delay, or a quarter of the last second's samples more than two
+periods late (a jittery link), makes ``read()`` raise
 :class:`~coassist.runtime.world.RobotLinkError` (a ``ConnectionError``); the loop turns it into
 a stop. A sample more than two periods late is counted (:attr:`URRTDEWorld.late_samples`) and
 reported as an overrun, which the loop flags ``DEADLINE_MISS``. Protective and emergency
 stops are not errors: ``read()`` reports them in :class:`~coassist.runtime.world.RobotState`,
 and :attr:`URRTDEWorld.stop_detail` / :func:`stop_message` say what to do.
+
+On a dead link ur-rtde's waiting commands would wait for an answer for up to 300 s (its
+``UR_EXECUTION_TIMEOUT``, from its last cached state), so :meth:`URRTDEWorld.stop` and
+:meth:`URRTDEWorld.close` send them only while the link is alive (the controller's watchdog
+stops the arm otherwise), and ``disconnect`` is given 2 s: against a controller that accepts
+connections but sends nothing, ur-rtde's receive thread reconnects for ever and its
+disconnect never returns; the interface is then left running.
 """
 
 from __future__ import annotations
@@ -99,6 +107,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -119,6 +128,10 @@ _MIN_AUTO_FREQUENCY = 100.0
 _STEP_PROBE_TIME = 0.25
 #: [s/s] how fast the stream's usual delay may drift upward (the robot's clock against ours).
 _CLOCK_DRIFT = 1e-3
+_LATE = "the robot's state arrived late"
+#: [s], fraction: over the last _JITTER_WINDOW of samples, this share more than two periods late is a failing link.
+_JITTER_WINDOW = 1.0
+_JITTER_SHARE = 0.25
 #: The RTDE interface runs at most at the e-Series controller rate.
 _MAX_FREQUENCY = 500.0
 _INSTALL_HINT = "the real robot needs ur-rtde: pip install 'coassist[robot]'"
@@ -371,6 +384,8 @@ class URRTDEWorld:
         self.step_time: float | None = None
         self.tcp_offset = np.zeros(6)
         self.stop_detail: str | None = None
+        self._late_streak = 0
+        self._late_window: deque[bool] = deque(maxlen=8)
 
         self._rtde_c: Any = None
         self._rtde_r: Any = None
@@ -547,8 +562,8 @@ class URRTDEWorld:
             protective_stop=state_stop[0],
             emergency_stop=state_stop[1],
         )
-        if any(state_stop) and self.stop_detail is None:
-            self.stop_detail = stop_message(state, bits)
+        if any(state_stop):
+            self.stop_detail = stop_message(state, bits)  # the robot's own stop says most
         return state
 
     def _check_delay(self, now: float, ts: float) -> None:
@@ -565,16 +580,31 @@ class URRTDEWorld:
                 f"(link_timeout {self.link_timeout * 1e3:.0f} ms): the link is overloaded or failing. "
                 "Check the cable (direct, no switch or Wi-Fi in between) and the controller's load, then rerun."
             )
+        window = self._late_window
+        if window.maxlen != max(8, round(_JITTER_WINDOW / self.dt)):
+            window = self._late_window = deque(maxlen=max(8, round(_JITTER_WINDOW / self.dt)))
+        window.append(late > 2.0 * self.dt)
+        if len(window) == window.maxlen and sum(window) >= _JITTER_SHARE * len(window):
+            raise RobotLinkError(
+                f"the robot's data from {self.host} arrive irregularly ({sum(window)} of the last {len(window)} "
+                f"samples more than two periods late, the worst {self.worst_delay * 1e3:.0f} ms): the link or "
+                "this computer cannot keep the rate. Check the cable (direct, no switch or Wi-Fi) and this "
+                "computer's load, or lower --rate, then rerun."
+            )
         if late > 2.0 * self.dt:
             self.late_samples += 1
+            self._late_streak += 1
             self.last_overrun = max(self.last_overrun, late - self.dt)
-            if self.stop_detail is None or self.stop_detail.startswith("the robot's state arrived late"):
+            if self.stop_detail is None or self.stop_detail.startswith(_LATE):
                 self.stop_detail = (
-                    f"the robot's state arrived late ({self.late_samples} samples more than two periods "
-                    f"behind, the worst {self.worst_delay * 1e3:.0f} ms): the safety layer slowed and stopped "
-                    "the arm. Check the cable (direct, no switch or Wi-Fi) and the load of this computer "
-                    "and the controller, then rerun."
+                    f"{_LATE} ({self._late_streak} samples in a row more than two periods behind, the worst "
+                    f"{self.worst_delay * 1e3:.0f} ms): the safety layer slowed and stopped the arm. Check the "
+                    "cable (direct, no switch or Wi-Fi) and the load of this computer and the controller, then rerun."
                 )
+        else:
+            self._late_streak = 0
+            if self.stop_detail is not None and self.stop_detail.startswith(_LATE):
+                self.stop_detail = None  # the stream is on time again: a later stop is not about it
 
     def _vector(self, name: str, n: int) -> np.ndarray:
         value = self._call_r(name)
@@ -636,7 +666,14 @@ class URRTDEWorld:
         return [float(v) for v in arr]
 
     def _on_rejected_speedj(self) -> None:
-        bits = int(self._call_r("getSafetyStatusBits"))
+        # The control interface's stream may be a package ahead of the receive interface's: give the
+        # receive side two controller steps to show a safety stop before calling it a stopped program.
+        end = time.monotonic() + 2.0 * self.dt + 0.004
+        while True:
+            bits = int(self._call_r("getSafetyStatusBits"))
+            if bits & (SafetyStatus.PROTECTIVE | SafetyStatus.EMERGENCY) or time.monotonic() > end:
+                break
+            time.sleep(0.0005)
         self.safety_status_bits = bits
         if bits & (SafetyStatus.PROTECTIVE | SafetyStatus.EMERGENCY):
             return  # the next read() reports the stop
@@ -657,35 +694,55 @@ class URRTDEWorld:
         self.stop_detail = what
         raise URProgramStopped(what)
 
+    def _link_ok(self) -> bool:
+        """Both interfaces connected and the stream alive: a command that waits for the script's
+        answer (``speedStop``, ``stopScript``) would get one. On a dead link ur-rtde waits for it
+        for up to 300 s (its UR_EXECUTION_TIMEOUT), answering from its last cached state."""
+        try:
+            connected = bool(self._rtde_c.isConnected()) and bool(self._rtde_r.isConnected())
+        except Exception:  # noqa: BLE001 - a broken interface is a dead link
+            return False
+        return connected and time.monotonic() - self._last_advance_wall <= self.link_timeout
+
     def stop(self) -> None:
         """``speedStop(deceleration)`` (it returns once the arm is at rest); safe to call twice;
-        a no-op after :meth:`close`.
+        a no-op after :meth:`close`. On a dead link (:meth:`_link_ok`) only a real-time
+        ``speedJ(zeros, deceleration)`` is tried: the controller's watchdog stops the arm.
 
         Raises :class:`RobotLinkError` when the command cannot be sent (the watchdog then
         stops the arm within ``1/watchdog_hz``).
         """
         if self._closed or self._rtde_c is None:
             return
-        self._call_c("speedStop", self.deceleration)
+        if self._link_ok():
+            self._call_c("speedStop", self.deceleration)
+        else:
+            self._call_c("speedJ", [0.0] * self.n_joints, self.deceleration, self.dt)
 
     def close(self) -> None:
-        """``speedStop``, ``stopScript``, then disconnect both interfaces; never raises."""
+        """``speedStop``, ``stopScript`` (on a live link only: :meth:`_link_ok`), then disconnect
+        both interfaces; never raises."""
         if self._closed:
             return
         self._closed = True
         self._t0 = None
         steps: list[tuple[Any, str, tuple]] = []
         if self._rtde_c is not None:
-            steps += [
-                (self._rtde_c, "speedStop", (self.deceleration,)),
-                (self._rtde_c, "stopScript", ()),
-                (self._rtde_c, "disconnect", ()),
-            ]
+            if self._rtde_r is not None and self._link_ok():
+                steps += [(self._rtde_c, "speedStop", (self.deceleration,)), (self._rtde_c, "stopScript", ())]
+            else:
+                log.warning(
+                    "URRTDEWorld.close: the link to %s is down; the controller's watchdog stops the arm", self.host
+                )
+            steps.append((self._rtde_c, "disconnect", ()))
         if self._rtde_r is not None:
             steps.append((self._rtde_r, "disconnect", ()))
         for iface, name, args in steps:
             try:
-                getattr(iface, name)(*args)
+                if name == "disconnect":
+                    _disconnect(iface, self.host)
+                else:
+                    getattr(iface, name)(*args)
             except Exception as exc:  # noqa: BLE001 - close must finish
                 log.warning("URRTDEWorld.close: %s failed: %s", name, exc)
 
@@ -737,6 +794,43 @@ class URRTDEWorld:
             "payload_cog": ask(self._rtde_r, "getPayloadCog"),
             "controller_version": None if self._closed else controller_version(self.host),
         }
+
+
+#: Interfaces whose disconnect did not return (module docstring, *Link loss*): kept alive, not destroyed.
+_ABANDONED: list[Any] = []
+#: [s] how long close() waits for an interface's disconnect.
+_DISCONNECT_TIMEOUT = 2.0
+
+
+def _disconnect(iface: Any, host: str) -> None:
+    """``iface.disconnect()``, given up after :data:`_DISCONNECT_TIMEOUT`.
+
+    ur-rtde's disconnect joins its receive thread, and against a controller that accepts
+    connections but sends nothing that thread reconnects for ever: the interface is then kept
+    (never destroyed, which would wait again) and the thread ends when the controller answers
+    or goes away.
+    """
+    import threading
+
+    done = threading.Event()
+
+    def run() -> None:
+        try:
+            iface.disconnect()
+        except Exception as exc:  # noqa: BLE001 - reported below, close goes on
+            log.warning("URRTDEWorld.close: disconnect failed: %s", exc)
+        finally:
+            done.set()
+
+    threading.Thread(target=run, name="ur-rtde-disconnect", daemon=True).start()
+    if not done.wait(_DISCONNECT_TIMEOUT):
+        _ABANDONED.append(iface)
+        log.warning(
+            "URRTDEWorld.close: ur-rtde's interface to %s did not disconnect within %g s (its receive thread "
+            "keeps reconnecting to a controller that sends nothing); left running",
+            host,
+            _DISCONNECT_TIMEOUT,
+        )
 
 
 def build_world(request: WorldRequest) -> URRTDEWorld:

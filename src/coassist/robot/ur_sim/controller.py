@@ -140,6 +140,9 @@ class Controller:
         self.last_program_stop: str | None = None
         self.unsupported_programs = 0
         self._cache: dict[str, object] = {}
+        #: packages held back by a late or jittery stream: (due wall time, stream, bytes), in order
+        self.outbox: deque[tuple[float, OutputStream, bytes]] = deque()
+        self.outbox_ready = threading.Condition()
 
     # ------------------------------------------------------------------ inputs
     def receive(self, values: dict[str, object]) -> None:
@@ -313,11 +316,17 @@ class Controller:
         sent = None
         if packages and not self.faults.stalled:
             delay = self.faults.late + (self._rng.uniform(0.0, self.faults.jitter) if self.faults.jitter else 0.0)
-            if delay > 0.0:
-                time.sleep(delay)
-            sent = time.perf_counter()
-            for stream, data in packages:
-                stream.send(data)
+            with self.outbox_ready:
+                if delay > 0.0 or self.outbox:
+                    # a late package leaves later, never before the one ahead of it (TCP keeps order)
+                    due = max(now + delay, self.outbox[-1][0] if self.outbox else now)
+                    self.outbox.extend((due, stream, data) for stream, data in packages)
+                    self.outbox_ready.notify()
+                    packages = []
+            if packages:
+                sent = time.perf_counter()
+                for stream, data in packages:
+                    stream.send(data)
         with self.lock:
             self.arm.step()
             self.k += 1

@@ -275,7 +275,11 @@ class URSim:
             self._close_listeners()
             raise
         self._stop.clear()
-        for target, name in ((self._network, "ur-sim-net"), (self._clock, "ur-sim-clock")):
+        for target, name in (
+            (self._network, "ur-sim-net"),
+            (self._clock, "ur-sim-clock"),
+            (self._late_sender, "ur-sim-late"),
+        ):
             t = threading.Thread(target=target, name=name, daemon=True)
             t.start()
             self._threads.append(t)
@@ -316,6 +320,8 @@ class URSim:
         self._stop.set()
         with contextlib.suppress(OSError):
             self._wake_w.send(b"x")
+        with self.controller.outbox_ready:
+            self.controller.outbox_ready.notify_all()
         for t in self._threads:
             t.join(5.0)
         self._threads.clear()
@@ -441,6 +447,30 @@ class URSim:
             if sent is not None:
                 self.send_times.append(sent)
             t_next += dt
+
+    def _late_sender(self) -> None:
+        """Sends the packages a late or jittery stream holds back, each at its due time."""
+        self._set_priority()
+        ctrl = self.controller
+        while not self._stop.is_set():
+            with ctrl.outbox_ready:
+                if not ctrl.outbox:
+                    ctrl.outbox_ready.wait(0.05)
+                    continue
+                due = ctrl.outbox[0][0]
+            wait = due - time.perf_counter()
+            if wait > 0.0:
+                time.sleep(min(wait, 0.05))
+                continue
+            with ctrl.outbox_ready:
+                if not ctrl.outbox or ctrl.outbox[0][0] != due:
+                    continue
+                batch = []
+                while ctrl.outbox and ctrl.outbox[0][0] == due:
+                    batch.append(ctrl.outbox.popleft())
+            for _, stream, data in batch:
+                stream.send(data)
+            self.send_times.append(time.perf_counter())
 
     def _set_priority(self) -> None:
         """SCHED_FIFO at ``URSimConfig.rt_priority`` for the calling thread, when asked and allowed."""
