@@ -17,8 +17,8 @@ this fake keeps what that showed, so the fast tests cannot pass on what the prot
   ``getTCPOffset`` wait for the script's answer: each costs at least one cycle, and
   ``speedStop`` runs the arm to rest before it returns (:attr:`FakeRobot.blocking_cycles`);
 - the controller's TCP is ``tcp_offset`` (default the handle's, not the flange);
-- with ``stream = True`` the receive timestamp advances one period per ``getTimestamp`` call
-  (the RTDE stream running on its own, for the rate detection of ``frequency=-1``).
+- with ``stream = True`` the receive timestamp advances one controller step (``step_time``) per
+  ``getTimestamp`` call (the RTDE stream running on its own: URRTDEWorld measures its step).
 
 The arm: the joint velocity moves toward the speedJ target by at most a·period per cycle, q
 integrates it, the timestamp advances. The TCP pose is ``tcp_pose`` or ``pose_fn(q)``; the TCP
@@ -283,7 +283,7 @@ class FakeRTDEReceive:
         self._rec("getTimestamp")
         r = self.robot
         if r.stream and not r.frozen:
-            r.timestamp += r.period
+            r.timestamp += r.step_time  # the receive interface runs at the controller's own step
         return r.timestamp
 
     def getActualQ(self) -> list[float]:

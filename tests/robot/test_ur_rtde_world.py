@@ -33,7 +33,13 @@ TCP = [0.0, 0.0, 0.06, 0.0, 0.0, 0.0]  # the fake controller's installation TCP
 def make(robot: FakeRobot | None = None, **kwargs) -> tuple[URRTDEWorld, FakeRobot]:
     robot = robot or FakeRobot()
     kwargs.setdefault("frequency", 500.0)
-    world = URRTDEWorld(HOST, control_factory=robot.control_factory, receive_factory=robot.receive_factory, **kwargs)
+    stream, robot.stream = robot.stream, True  # connect measures the stream's step (the receive interface runs at -1)
+    try:
+        world = URRTDEWorld(
+            HOST, control_factory=robot.control_factory, receive_factory=robot.receive_factory, **kwargs
+        )
+    finally:
+        robot.stream = stream
     return world, robot
 
 
@@ -361,7 +367,7 @@ def test_dt_from_the_stream_timestamps_not_get_step_time():
         assert world.dt == step and world.step_time == step and robot.calls[0].args == (HOST, -1.0)
         # getStepTime answers before the script has run it (0.0 here): never asked
         assert "getStepTime" not in robot.names()
-    world, _ = make(FakeRobot(step_time=0.008), frequency=250)
+    world, _ = make(FakeRobot(step_time=0.002), frequency=250)
     assert world.dt == 1 / 250
 
 
@@ -376,7 +382,8 @@ def test_get_step_time_answers_from_the_register_before_the_script_ran():
 
 
 def test_a_stream_that_shows_no_step_asks_for_the_frequency():
-    robot = FakeRobot(step_time=0.002)  # stream False: the timestamps do not advance
+    robot = FakeRobot(step_time=0.002)
+    robot.frozen = True  # the timestamps do not advance
     with pytest.raises(RobotLinkError, match="frequency="):
         make(robot, frequency=-1)
     assert robot.names()[-2:] == ["disconnect", "disconnect"]  # cleaned up
@@ -459,3 +466,13 @@ def test_fake_matches_the_real_ur_rtde_api():
         for name in vars(fake):
             if not name.startswith("_"):
                 assert hasattr(real, name), f"{real.__name__} has no {name}"
+
+
+def test_the_state_streams_at_the_controllers_rate_and_a_cb3_refuses_a_500_hz_loop():
+    robot = FakeRobot(step_time=0.002)
+    world, _ = make(robot, frequency=125.0)
+    receive, control = robot.calls[0], robot.calls[1]
+    assert receive.args == (HOST, -1.0) and control.args == (HOST, 125.0)  # freshest sample; the loop's period
+    assert world.dt == 1 / 125
+    with pytest.raises(RobotLinkError, match="every 8 ms: a 500 Hz loop"):
+        make(FakeRobot(step_time=0.008), frequency=500.0)

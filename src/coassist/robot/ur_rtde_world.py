@@ -106,6 +106,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -255,6 +256,28 @@ def controller_version(host: str, timeout: float = 1.0) -> str | None:
     return line or None
 
 
+#: The oldest software ur-rtde 1.6.5 runs on: the general-purpose output registers its control script
+#: answers through came with PolyScope 3.4 (older, its client reads registers the controller never
+#: sends and the process crashes).
+MIN_SOFTWARE = {3: (3, 4), 5: (5, 0)}
+
+
+def _check_version(host: str) -> None:
+    """RobotLinkError before ur-rtde connects when the dashboard reports software it cannot drive."""
+    text = controller_version(host)
+    m = re.search(r"(\d+)\.(\d+)\.(\d+)", text or "")
+    if m is None:
+        return  # no dashboard answer: ur-rtde's own connect says what is wrong
+    major, minor = int(m.group(1)), int(m.group(2))
+    need = MIN_SOFTWARE.get(major)
+    if need is None or (major, minor) < need:
+        wanted = " or ".join(f"{a}.{b}" for a, b in MIN_SOFTWARE.values())
+        raise RobotLinkError(
+            f"the controller at {host} runs {text}; ur-rtde 1.6.5 needs PolyScope {wanted} or later: "
+            "update PolyScope (CB3 3.15, e-Series 5.11 or later), then rerun"
+        )
+
+
 def _connect_hint(host: str, exc: BaseException) -> str:
     """What to do about a failed connect, from ur-rtde's words (the common causes first)."""
     text = str(exc)
@@ -382,6 +405,7 @@ class URRTDEWorld:
         self.late_samples = 0
         self.worst_delay = 0.0
         self.step_time: float | None = None
+        self._stream_dt: float | None = None
         self.tcp_offset = np.zeros(6)
         self.stop_detail: str | None = None
         self._late_streak = 0
@@ -413,8 +437,12 @@ class URRTDEWorld:
 
     def _connect(self, control_factory: Callable, receive_factory: Callable) -> None:
         host, freq = self.host, self.requested_frequency
+        if control_factory is _default_control_factory:
+            _check_version(host)
         try:
-            self._rtde_r = receive_factory(host, freq)
+            # the state at the controller's own rate (500 Hz e-Series, 125 Hz CB3): each read() gets a
+            # sample at most one controller step old, whatever the loop's rate
+            self._rtde_r = receive_factory(host, -1.0)
             self._rtde_c = control_factory(host, freq)
         except ImportError:
             raise
@@ -437,11 +465,23 @@ class URRTDEWorld:
         else:
             # ur-rtde's -1 picks 500 Hz on an e-Series and 125 Hz on a CB3. getStepTime cannot
             # tell which (module docstring): the stream's timestamps advance one step per package.
-            self.step_time = self.dt = self._measure_step()
+            self.step_time = self.dt = self._stream_step()
+        # every controller streams at least 125 Hz: a faster loop needs an e-Series (500 Hz)
+        if freq > 125.0 and 1.0 / freq < self._stream_step() - 1e-9:
+            raise RobotLinkError(
+                f"the UR at {host} streams its state every {self._stream_step() * 1e3:g} ms: a {freq:g} Hz loop "
+                "would run ahead of it; pass frequency=125 (a CB3) or -1"
+            )
         if self.zero_sensor:
             # Zero with the tool still and nobody touching it (module docstring).
             self._require(self._call_c("zeroFtSensor"), "zeroFtSensor")
         log.info("URRTDEWorld: connected to %s, dt = %.4f s, TCP %s", host, self.dt, self.tcp_offset.tolist())
+
+    def _stream_step(self) -> float:
+        """The receive stream's step [s] (the controller's period), measured once."""
+        if self._stream_dt is None:
+            self._stream_dt = self._measure_step()
+        return self._stream_dt
 
     def _measure_step(self) -> float:
         """The RTDE stream's period [s]: the smallest step between the timestamps of consecutive packages."""

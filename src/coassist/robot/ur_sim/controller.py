@@ -137,6 +137,8 @@ class Controller:
         #: what happened, for tests and the status line: name → count or time
         self.events: dict[str, float] = {}
         self.watchdog_fired_at: float | None = None  # wall time
+        self.watchdog_silence: float | None = None
+        self.watchdog_rest_after: float | None = None
         self.last_program_stop: str | None = None
         self.unsupported_programs = 0
         self._cache: dict[str, object] = {}
@@ -299,11 +301,15 @@ class Controller:
             self._apply_inputs(now)
             self._start_pending(now)
             for variable, f in list(self.watchdogs.items()):
-                if now - self._updated.get(variable, now) > 1.0 / f:
+                silent = now - self._updated.get(variable, now)
+                if silent > 1.0 / f:
                     self.watchdog_fired_at = now
+                    self.watchdog_silence = silent  # [s] from the input's last update to the stop
                     self.events["watchdog"] = self.events.get("watchdog", 0) + 1
                     self._end_program(f"watchdog: no update of {variable} for {1.0 / f:g} s")
                     break
+            if self.watchdog_fired_at is not None and self.watchdog_rest_after is None and self.arm.at_rest:
+                self.watchdog_rest_after = now - self.watchdog_fired_at
             script = self.script
             if script is not None:
                 script.cycle()
@@ -430,6 +436,9 @@ class Controller:
                 "events": dict(self.events),
                 "last_program_stop": self.last_program_stop,
                 "watchdogs": dict(self.watchdogs),
+                # the last watchdog stop: input silent for [s] when it fired, arm at rest [s] after
+                "watchdog_silence": self.watchdog_silence,
+                "watchdog_rest_after": self.watchdog_rest_after,
                 "unsupported_commands": dict(script.unsupported) if script is not None else {},
                 "commands": list(script.processed[-50:]) if script is not None else [],
                 "q": self.arm.q.tolist(),
