@@ -55,7 +55,7 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
-from coassist.robot.mujoco_world import FTSensorModel, MujocoArmWorld
+from coassist.robot.mujoco_world import FTSensorModel, MujocoArmWorld, tool_down_ik
 from coassist.runtime.world import Command, HandOperator
 from coassist.spatial import joint_velocity, rotation_matrix, rotation_vector
 
@@ -351,6 +351,19 @@ class SimArm:
     def zero_ftsensor(self) -> None:
         """Take the present (payload-compensated) reading as zero from now on (in the sensor's frame)."""
         self.zero_offset = self._compensated_sensor_frame()
+
+    def teleport(self, position) -> None:
+        """Put the TCP at ``position`` (3,) [m], the tool pointing down, at rest (a simulator's reset, no motion).
+
+        Raises ValueError when it is out of reach.
+        """
+        q = tool_down_ik(self._model, np.asarray(position, dtype=float), self.q)
+        self.world.reset(q)
+        self.mode, self._move, self._force = "idle", None, None
+        self.v_ref = np.zeros(6)
+        self.a_ref = np.zeros(6)
+        self.q_ref = q.copy()
+        self._sample()
 
     @property
     def moving(self) -> bool:

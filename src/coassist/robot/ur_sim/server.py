@@ -2,7 +2,9 @@
 
 Ports, on ``URSimConfig.host``, as on a UR controller:
 
-- 29999 the dashboard server (:mod:`coassist.robot.ur_sim.dashboard`);
+- 29999 the dashboard server (:mod:`coassist.robot.ur_sim.dashboard`; and coassist's own
+  ``coassist …`` commands, :mod:`coassist.robot.ur_sim.hand`: the simulated operator at the
+  handle, a start pose);
 - 30001, 30002, 30003 the script ports: a program sent there replaces the running one
   (ur_rtde's control script is run: :mod:`coassist.robot.ur_sim.registers`; another program
   is accepted and ends at once). The state packages a controller streams on these ports are
@@ -44,7 +46,7 @@ import numpy as np
 
 from coassist._checks import check_real
 from coassist.robot.mujoco_world import DEFAULT_START, FTSensorModel
-from coassist.robot.ur_sim import dashboard, rtde
+from coassist.robot.ur_sim import dashboard, hand, rtde
 from coassist.robot.ur_sim.arm import SimArm
 from coassist.robot.ur_sim.controller import Controller, OutputStream
 from coassist.robot.ur_sim.registers import parse_program
@@ -574,7 +576,11 @@ class URSim:
         while b"\n" in conn.inbuf:
             line, _, rest = bytes(conn.inbuf).partition(b"\n")
             conn.inbuf = bytearray(rest)
-            text, close = dashboard.reply(self.controller, line.decode("utf-8", errors="replace"))
+            text_in = line.decode("utf-8", errors="replace")
+            if text_in.lower().startswith("coassist "):  # coassist's own commands (ur_sim.hand)
+                text, close = hand.reply(self.controller, self.config.series, text_in), False
+            else:
+                text, close = dashboard.reply(self.controller, text_in)
             conn.send((text + "\n").encode())
             if close:
                 conn.flush()
