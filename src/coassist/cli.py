@@ -1012,6 +1012,55 @@ def ros2_watchdog(
         )
 
 
+@app.command("ur-sim")
+def ur_sim(
+    host: str = typer.Option("127.0.0.1", help="Address to listen on (another 127.x.y.z for a second simulator)."),
+    series: str = typer.Option("e-series", help="e-series (500 Hz, PolyScope 5) or cb3 (125 Hz, PolyScope 3)."),
+    software: str = typer.Option(
+        None, help="The software version it reports, e.g. 5.11.1.108318 (default: the series')."
+    ),
+    obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
+    start: str = typer.Option(None, help="x,y,z [m] of the TCP at the start, tool down (default: the tasks' start)."),
+    seed: int = typer.Option(0, help="Seed of the sensor noise and of the jitter fault."),
+    unlock_delay: float = typer.Option(5.0, help="Seconds after a protective stop before it can be unlocked."),
+    rt_priority: int = typer.Option(
+        None, help="SCHED_FIFO priority 1-99 for its threads (needs root or CAP_SYS_NICE)."
+    ),
+) -> None:
+    """A UR controller (dashboard, script and RTDE ports) with the MuJoCo UR5 behind it: drive it with --world ur.
+
+    Reads faults on stdin, one a line: protective-stop, emergency-stop, release-emergency-stop,
+    pendant-stop, stall, unstall, delay LATE [JITTER], remote on|off, drop [REFUSE_FOR],
+    push FX FY FZ, release, status, quit (docs/robots.md).
+    """
+    from coassist.robot.ur_sim import URSimConfig
+    from coassist.robot.ur_sim.process import serve
+
+    names = ("host", "series", "seed", "start", "unlock_delay")
+    options = {f"URSimConfig.{n}": f"--{n.replace('_', '-')}" for n in names}
+    options.update(
+        {
+            "URSimConfig.version": "--software",
+            "URSimConfig.tool": "--object",
+            "URSimConfig.rt_priority": "--rt-priority",
+        }
+    )
+    fields: dict = {"host": host, "series": series, "tool": obj, "seed": seed, "unlock_delay": unlock_delay}
+    fields["rt_priority"] = rt_priority
+    if software is not None:
+        try:
+            fields["version"] = tuple(int(v) for v in software.split("."))
+        except ValueError:
+            _fail(f"--software {software!r}: give four numbers, e.g. 5.11.1.108318", 2)
+    if start is not None:
+        fields["start"] = _floats(start, "--start")
+    try:
+        config = URSimConfig(**fields)
+        serve(config)
+    except (ValueError, OSError) as exc:
+        _fail(_typed(str(exc), options), 2 if isinstance(exc, ValueError) else 1)
+
+
 @app.command()
 def show(
     path: Path = typer.Argument(

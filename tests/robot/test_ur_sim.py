@@ -425,3 +425,37 @@ def test_a_config_names_its_bad_field():
     with pytest.raises(ValueError, match="URSimConfig.start"):
         URSimConfig(start=(0.0, math.nan, 0.2))
     assert URSimConfig(series="cb3").rate == 125.0 and URSimConfig(series="cb3").controller_version[0] == 3
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (["--series", "cb2"], "--series must be one of ('e-series', 'cb3'), got 'cb2'"),
+        (["--software", "5.x"], "--software '5.x': give four numbers"),
+        (["--object", "box"], "--object must be one of ('handle', 'board', 'heavy'), got 'box'"),
+        (["--start", "0,nan,0.2"], "--start must be 3 finite numbers"),
+        (["--rt-priority", "120"], "--rt-priority must be an int in [1, 99]"),
+    ],
+)
+def test_ur_sim_names_the_option_it_refuses(args, words):
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+
+    result = CliRunner().invoke(app, ["ur-sim", *args])
+    assert result.exit_code == 2 and words in result.output, result.output
+
+
+def test_the_simulator_process_answers_its_stdin_commands():
+    from coassist.robot.ur_sim.process import URSim, _command
+
+    sim = URSim(URSimConfig(host="127.0.0.1"))  # not started: the commands act on its state only
+    assert _command(sim, "protective-stop") == ("ok", False) and sim.controller.safety_mode == 3
+    assert _command(sim, "delay 0.01 0.002") == ("ok", False) and sim.controller.faults.jitter == 0.002
+    assert _command(sim, "delay -1")[0].startswith("error: late must be")
+    assert _command(sim, "push 1 2")[0].startswith("error: unknown command")
+    assert _command(sim, "push 10 0 0") == ("ok", False) and sim.arm.operator is not None
+    assert _command(sim, "remote off") == ("ok", False) and not sim.controller.faults.remote_control
+    reply, _ = _command(sim, "status")
+    assert reply.startswith("status {") and '"safety_mode": 3' in reply
+    assert _command(sim, "quit") == ("ok", True)

@@ -24,7 +24,8 @@ or ``status {json}``):
 ``push FX FY FZ [TX TY TZ]``   a constant hand wrench on the handle [N, N·m], base frame; ``release``
 ``status``                     the controller's state and counters, as JSON
 ``periods``                    the output stream's periods [s] so far, as JSON
-``quit``                       stop the simulator (as end of input and Ctrl-C do)
+``quit``                       stop the simulator (as Ctrl-C and SIGTERM do; at the end of
+                               its input it goes on serving)
 =============================  =============================================================
 """
 
@@ -140,7 +141,9 @@ def serve(config: URSimConfig, stdin: IO[str] | None = None, stdout: IO[str] | N
                 if reply:
                     print(reply, file=stdout, flush=True)
                 if stop:
-                    break
+                    return
+            # no more input (started in the background, stdin closed): serve until Ctrl-C or SIGTERM
+            threading.Event().wait()
         except KeyboardInterrupt:
             pass
 

@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from coassist._checks import check_real
+from coassist.robot.arm_mjcf import TOOLS
 from coassist.robot.mujoco_world import DEFAULT_START, FTSensorModel
 from coassist.robot.ur_sim import dashboard, hand, rtde
 from coassist.robot.ur_sim.arm import SimArm
@@ -114,6 +115,8 @@ class URSimConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.host, str) or not self.host:
             raise ValueError(f"URSimConfig.host must be an address, got {self.host!r}")
+        if self.tool not in TOOLS:
+            raise ValueError(f"URSimConfig.tool must be one of {TOOLS}, got {self.tool!r}")
         if self.series not in SERIES:
             raise ValueError(f"URSimConfig.series must be one of {tuple(SERIES)}, got {self.series!r}")
         if self.version is not None:
