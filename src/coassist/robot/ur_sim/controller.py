@@ -52,6 +52,22 @@ __all__ = ["Controller", "Faults", "OutputStream"]
 
 log = logging.getLogger(__name__)
 
+#: Output fields the cycle itself changes (program, safety, time): never taken from the cache.
+_DYNAMIC = frozenset(
+    {
+        "timestamp",
+        "control_step",
+        "runtime_state",
+        "robot_mode",
+        "safety_mode",
+        "safety_status",
+        "safety_status_bits",
+        "robot_status_bits",
+        "joint_mode",
+    }
+)
+_REGISTER_SUFFIXES = tuple(f"_{i}" for i in range(48))
+
 STOPPED, PLAYING = 1, 2
 POWER_OFF, IDLE, RUNNING = 3, 5, 7
 NORMAL, PROTECTIVE_STOP, ROBOT_EMERGENCY_STOP = 1, 3, 7
@@ -297,7 +313,6 @@ class Controller:
         """
         now = time.perf_counter()
         with self.lock:
-            self._cache.clear()
             self._apply_inputs(now)
             self._start_pending(now)
             for variable, f in list(self.watchdogs.items()):
@@ -336,6 +351,13 @@ class Controller:
         with self.lock:
             self.arm.step()
             self.k += 1
+            # the next period's state fields now, so its packages leave right at its start
+            self._cache.clear()
+            for stream in self.streams:
+                if stream.started:
+                    for name in stream.recipe.names:
+                        if name not in _DYNAMIC and not name.endswith(_REGISTER_SUFFIXES):
+                            self.value(name)
         return sent
 
     def _due(self, stream: OutputStream) -> bool:
@@ -351,7 +373,13 @@ class Controller:
 
     # ------------------------------------------------------------------ outputs
     def value(self, name: str) -> object:
-        """The present value of the output field ``name`` (module docstring of :mod:`.arm` for the conventions)."""
+        """The present value of the output field ``name`` (module docstring of :mod:`.arm` for the conventions).
+
+        The arm's fields are those at the period's start (computed once, right after the physics
+        step); the program's and safety state's and the registers as the script left them this cycle.
+        """
+        if name in _DYNAMIC or "_register" in name:
+            return self._value(name)
         cached = self._cache.get(name)
         if cached is not None:
             return cached

@@ -24,6 +24,7 @@ or ``status {json}``):
 ``push FX FY FZ [TX TY TZ]``   a constant hand wrench on the handle [N, N·m], base frame; ``release``
 ``status``                     the controller's state and counters, as JSON
 ``periods``                    the output stream's periods [s] so far, as JSON
+``clock``                      the clock's periods [s] so far (its wake-ups), as JSON
 ``quit``                       stop the simulator (as Ctrl-C and SIGTERM do; at the end of
                                its input it goes on serving)
 =============================  =============================================================
@@ -31,6 +32,7 @@ or ``status {json}``):
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import subprocess
@@ -119,6 +121,8 @@ def _command(sim: URSim, line: str) -> tuple[str, bool]:
         return "status " + json.dumps(sim.status()), False
     elif name == "periods":
         return "periods " + json.dumps(sim.stream_periods().tolist()), False
+    elif name == "clock":
+        return "clock " + json.dumps(sim.clock_periods().tolist()), False
     else:
         return f"error: unknown command {line.strip()!r} (see coassist ur-sim --help)", False
     return "ok", False
@@ -134,6 +138,10 @@ def serve(config: URSimConfig, stdin: IO[str] | None = None, stdout: IO[str] | N
     # the clock and the network threads share the GIL: hand it over within 1 ms, not Python's 5 ms
     sys.setswitchinterval(0.001)
     with URSim(config) as sim:
+        # what was built stays: the collector need not walk it, and runs rarely (its pauses are the clock's)
+        gc.collect()
+        gc.freeze()
+        gc.set_threshold(50_000, 50, 100)
         print(ready_line(sim), file=stdout, flush=True)
         try:
             for line in stdin:
@@ -209,7 +217,7 @@ class URSimProcess:
                 if not reply:
                     raise RuntimeError(f"ur-sim ended while answering {line!r}")
                 reply = reply.rstrip("\n")
-                if reply.startswith(("ok", "error", "status", "periods")):
+                if reply.startswith(("ok", "error", "status", "periods", "clock")):
                     break  # anything else is the simulator's log
         if reply.startswith("error"):
             raise ValueError(reply)
@@ -251,6 +259,9 @@ class URSimProcess:
 
     def stream_periods(self) -> np.ndarray:
         return np.asarray(json.loads(self._ask("periods")[len("periods ") :]), dtype=float)
+
+    def clock_periods(self) -> np.ndarray:
+        return np.asarray(json.loads(self._ask("clock")[len("clock ") :]), dtype=float)
 
     def stop(self) -> None:
         """Ask it to quit; kill it if it does not within 10 s (idempotent)."""

@@ -256,6 +256,8 @@ class URSim:
         self._wake_r, self._wake_w = socket.socketpair()
         #: wall times [s, perf_counter] of the cycles that sent output packages (the stream's period)
         self.send_times: deque[float] = deque(maxlen=1_000_000)
+        #: wall times the clock woke for a period's start (its own period, whether anyone listens)
+        self.wake_times: deque[float] = deque(maxlen=1_000_000)
         #: times the clock fell more than _MAX_CATCH_UP periods behind and re-anchored (simulated time lost)
         self.overruns = 0
         #: periods whose output packages were skipped because the process ran late
@@ -425,6 +427,10 @@ class URSim:
         t = np.asarray(self.send_times, dtype=float)
         return np.diff(t)
 
+    def clock_periods(self) -> np.ndarray:
+        """The intervals [s] between the clock's wake-ups for its periods, oldest first."""
+        return np.diff(np.asarray(self.wake_times, dtype=float))
+
     # ------------------------------------------------------------------ the clock
     def _clock(self) -> None:
         self._set_priority()
@@ -437,6 +443,7 @@ class URSim:
                 time.sleep(rem - spin)
             while clock() < t_next:
                 pass
+            self.wake_times.append(clock())
             # Periods this process missed (the machine ran something else): their physics runs now,
             # their packages are skipped, as a controller short of time sends only the newest.
             behind = int((clock() - t_next) / dt)
