@@ -208,8 +208,8 @@ def _run(config: DriveConfig, push_at: int | None = None, wrench=(10.0, 0.0, 0.0
                     (np.asarray(out.command.qd, dtype=float).copy(), state.q.copy(), np.asarray(state.tool_pose).copy())
                 )
 
-            world = URRTDEWorld(sim.host, frequency=float(config.rate_hz))
-            with realtime_priority() as granted:
+            with realtime_priority() as granted:  # ur-rtde's receive threads, started here, inherit it
+                world = URRTDEWorld(sim.host, frequency=float(config.rate_hz))
                 trial = drive(config, world=world, on_tick=on_tick)
             kin = world.kinematics()
             world.close()
@@ -327,14 +327,14 @@ FAULTS = {
 def test_each_fault_ends_in_a_controlled_stop_with_the_trial_kept_and_what_to_do(name):
     inject, ended, words, within = FAULTS[name]
     with simulator() as sim:
-        world = URRTDEWorld(sim.host, frequency=125.0)
 
         def on_tick(k, state, out):
             if k == 60:
                 inject(sim)
 
         sim.push([10.0, 0.0, 0.0])
-        with realtime_priority():
+        with realtime_priority():  # ur-rtde's receive threads, started here, inherit it
+            world = URRTDEWorld(sim.host, frequency=125.0)
             trial = drive(DriveConfig(world="ur", controller="manual", time_limit=4.0), world=world, on_tick=on_tick)
         t = time.monotonic()
         world.close()  # on any link, dead or alive: never raises, never hangs
@@ -350,7 +350,7 @@ def test_each_fault_ends_in_a_controlled_stop_with_the_trial_kept_and_what_to_do
 
 
 def test_the_watchdog_stops_the_arm_within_its_timeout_when_coassist_hangs():
-    with simulator() as sim:
+    with simulator() as sim, realtime_priority():
         world = URRTDEWorld(sim.host, frequency=125.0, watchdog_hz=10.0)
         world.read()
         for _ in range(50):  # moving at 0.3 rad/s
