@@ -459,3 +459,44 @@ def test_the_simulator_process_answers_its_stdin_commands():
     reply, _ = _command(sim, "status")
     assert reply.startswith("status {") and '"safety_mode": 3' in reply
     assert _command(sim, "quit") == ("ok", True)
+
+
+def test_the_simulators_hand_is_asked_once_per_its_own_tick():
+    from coassist.robot.ur_sim.hand import TickedHand
+
+    class Counting:
+        dt = 0.008
+
+        def __init__(self):
+            self.calls = []
+
+        def force(self, t, pose, twist):
+            self.calls.append(t)
+            return np.full(6, float(len(self.calls)))
+
+    inner = Counting()
+    hand = TickedHand(inner)
+    assert not hand.force(0.0, np.zeros(6), np.zeros(6)).any() and inner.calls == []  # still until go
+    hand.go()
+    seen = [hand.force(1.0 + 0.002 * i, np.zeros(6), np.zeros(6))[0] for i in range(20)]  # 500 Hz for 40 ms
+    # asked at its tick 0 (the first cycle after go), then every 8 ms: 4 controller cycles each
+    assert (
+        inner.calls == pytest.approx([1.0, 1.008, 1.016, 1.024, 1.032])
+        and seen == [1] * 4 + [2] * 4 + [3] * 4 + [4] * 4 + [5] * 4
+    )
+
+
+def test_the_simulators_coassist_commands_and_a_reset_to_the_start():
+    from coassist.robot.ur_sim.hand import reply
+
+    ctrl, arm = make_controller()
+    assert reply(ctrl, "e-series", "coassist hello") == "coassist ur-sim e-series 500 Hz"
+    assert reply(ctrl, "e-series", "coassist start 0.05 -0.5 0.3") == "ok"
+    np.testing.assert_allclose(arm.tcp_position, [0.05, -0.5, 0.3], atol=1e-6)
+    assert arm.at_rest and np.abs(arm.qd).max() == 0.0
+    assert reply(ctrl, "e-series", "coassist start 5 0 0").startswith("error: start [5.0, 0.0, 0.0] is not reachable")
+    values = [float(v) for v in reply(ctrl, "e-series", "coassist handle").split()]
+    np.testing.assert_allclose(values[:3], [0.05, -0.5, 0.3], atol=1e-6)  # the handle is the TCP (the handle tool)
+    assert reply(ctrl, "e-series", "coassist hand {").startswith("error:")
+    assert reply(ctrl, "e-series", "coassist hand go").startswith("error: no hand")
+    assert reply(ctrl, "e-series", "coassist fly").startswith("could not understand")
