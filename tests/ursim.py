@@ -17,8 +17,6 @@ from collections.abc import Iterator
 
 import pytest
 
-from coassist.robot.ur_sim import URSimConfig
-
 _counter = itertools.count(1)
 
 
@@ -32,6 +30,7 @@ def free_host() -> str:
 @contextlib.contextmanager
 def simulator(**config) -> Iterator:
     """A started :class:`~coassist.robot.ur_sim.process.URSimProcess` (another address when one is taken)."""
+    from coassist.robot.ur_sim import URSimConfig
     from coassist.robot.ur_sim.process import URSimProcess
 
     config.setdefault("rt_priority", 20)

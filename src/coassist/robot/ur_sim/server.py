@@ -220,7 +220,9 @@ class URSim:
 
     ``with URSim(URSimConfig(host="127.0.0.2")) as sim:`` starts it (every port bound, the
     clock running) and stops it at the end; :meth:`start` / :meth:`stop` do the same by hand.
-    The faults are methods; :meth:`status` is a snapshot.
+    The faults are methods; :meth:`status` is a snapshot. Its threads share this process's
+    GIL: for the ur-rtde client, which holds the GIL while it waits for the controller, run it
+    in its own (:class:`~coassist.robot.ur_sim.process.URSimProcess`, ``coassist ur-sim``).
     """
 
     def __init__(self, config: URSimConfig | None = None) -> None:
