@@ -44,7 +44,7 @@ def priority(prio: int):
     granted = False
     if prio:
         try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+            os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(prio))
             granted = True
         except (AttributeError, OSError):
             pass

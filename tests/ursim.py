@@ -52,9 +52,11 @@ def simulator(**config) -> Iterator:
 
 @contextlib.contextmanager
 def realtime_priority(priority: int = 10) -> Iterator[bool]:
-    """SCHED_FIFO for the calling thread (and the threads it starts) while inside; yields whether granted."""
+    """SCHED_FIFO for the calling thread (and the threads it starts, not the processes) while inside;
+    yields whether granted."""
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        # not for the processes it forks (a predictor's or a training's worker would take a core for ever)
+        os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(priority))
         granted = True
     except (AttributeError, OSError):
         granted = False

@@ -128,8 +128,12 @@ def _command(sim: URSim, line: str) -> tuple[str, bool]:
     return "ok", False
 
 
-def serve(config: URSimConfig, stdin: IO[str] | None = None, stdout: IO[str] | None = None) -> None:
-    """Run the simulator until ``quit``, the end of ``stdin`` or Ctrl-C (module docstring).
+def serve(
+    config: URSimConfig, stdin: IO[str] | None = None, stdout: IO[str] | None = None, *, quit_at_eof: bool = False
+) -> None:
+    """Run the simulator until ``quit`` or Ctrl-C (module docstring); at the end of ``stdin`` it goes
+    on serving (a simulator started in the background), or with ``quit_at_eof`` it stops (its parent,
+    :class:`URSimProcess`, has gone).
 
     Raises OSError (naming the port) when a port is taken.
     """
@@ -150,8 +154,8 @@ def serve(config: URSimConfig, stdin: IO[str] | None = None, stdout: IO[str] | N
                     print(reply, file=stdout, flush=True)
                 if stop:
                     return
-            # no more input (started in the background, stdin closed): serve until Ctrl-C or SIGTERM
-            threading.Event().wait()
+            if not quit_at_eof:  # no more input (started in the background): serve until Ctrl-C or SIGTERM
+                threading.Event().wait()
         except KeyboardInterrupt:
             pass
 

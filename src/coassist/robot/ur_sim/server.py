@@ -93,7 +93,8 @@ class URSimConfig:
     spin : [s] how long before each period's start the clock stops sleeping and spins.
     rt_priority : SCHED_FIFO priority (1-99) for the simulator's threads, where the system allows
         it (root, or CAP_SYS_NICE); None: normal priority. It keeps the stream's period on a busy
-        machine; the threads sleep most of each period, so other programs keep the processor.
+        machine; the threads sleep most of each period, so other programs keep the processor (a
+        clock that finds no time to sleep for a second drops it; processes it starts never get it).
     """
 
     host: str = "127.0.0.1"
@@ -439,8 +440,16 @@ class URSim:
         ctrl, dt, spin = self.controller, self.controller.dt, self.config.spin
         clock = time.perf_counter
         t_next = clock() + dt
+        busy = 0  # periods in a row the clock found no time to sleep
         while not self._stop.is_set():
             rem = t_next - clock()
+            busy = 0 if rem > 0.0 else busy + 1
+            if busy > round(1.0 / dt) and self.config.rt_priority is not None:
+                # a second without a pause: at real-time priority it would take a core from everything else
+                with contextlib.suppress(OSError):
+                    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+                log.warning("ur-sim: the cycle does not fit its period on this machine; real-time priority dropped")
+                busy = -(1 << 30)
             if rem > spin:
                 time.sleep(rem - spin)
             while clock() < t_next:
@@ -492,7 +501,7 @@ class URSim:
         if prio is None:
             return
         try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+            os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(prio))
         except (AttributeError, OSError) as exc:
             if not self._priority_warned:
                 self._priority_warned = True
