@@ -249,6 +249,8 @@ def drive(
     confirm: Any = None,
     on_tick: Any = None,
     intent_source: Any = None,
+    live: Any = None,
+    joint_names: Sequence[str] | None = None,
 ) -> Trial:
     """Run one trial on a UR5 (module docstring) and return it.
 
@@ -258,11 +260,19 @@ def drive(
     confirm : called with the text of the limits in force before a real arm moves; it
         must return True to go on (the CLI asks the person at the robot).
     intent_source : an IntentSource or RealtimePredictor to use instead of ``config.intent``.
+    live : a :class:`~coassist.runtime.live.LiveFeed` (the live view, e.g. Foxglove) that watches the
+        run; ``joint_names`` name its joint states (default: the UR's for a UR5, else joint_1 …).
     """
     run = _prepare(config, operator=operator, world=world, host=host, view=view, intent_source=intent_source)
     try:
         if confirm is not None and not confirm(run.limits.describe()):
             raise RuntimeError("not confirmed: the robot was not moved")
+        if live is not None:
+            if joint_names is None and config.robot == "ur5":
+                from coassist.robot.ros2_world import UR_JOINT_NAMES  # (the names only: no rclpy)
+
+                joint_names = UR_JOINT_NAMES
+            on_tick = live.watch(run.episode, on_tick, joint_names=joint_names)
         log = run.episode.run(deadline=config.dt if run.world.realtime else None, on_tick=on_tick)
     finally:
         run.close()

@@ -66,6 +66,7 @@ class ParticipantRun:
     or a browser automation moving the pointer along the simulated operator's path.
     realtime : pace a simulated participant's trials to the wall clock (a person's pace).
     host : a real arm's address.  confirm : asked before a real arm moves.  say : progress lines.
+    live : a :class:`~coassist.runtime.live.LiveFeed` that watches every trial (``--foxglove``).
     """
 
     def __init__(
@@ -79,8 +80,10 @@ class ParticipantRun:
         host: str | None = None,
         confirm: Any = None,
         say: Callable[[str], None] | None = None,
+        live: Any = None,
     ) -> None:
         self.study = study
+        self.live = live
         self.plan = study.plan()
         if page is None and not simulate:
             raise StudyFolderError("a person takes part through the page: run without --no-page (or --simulate)")
@@ -170,7 +173,7 @@ class ParticipantRun:
         )
         drive = {"object": tp.object, "obstacle": tp.obstacle, "preset": tp.preset, "time_limit": tp.time_limit}
         self.session = StudySession(
-            config, world=plan.world, secrets=secrets, drive=drive, host=self.host, confirm=self.confirm
+            config, world=plan.world, secrets=secrets, drive=drive, host=self.host, confirm=self.confirm, live=self.live
         )
         if self.page is not None:
             from coassist.play.server import PlayServer
