@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import NoReturn, TypeVar
 
+import click
 import typer
 from rich.console import Console
 from rich.markup import escape
@@ -605,6 +607,11 @@ def collect(
         "small",
         help="The obstacle the operators go around: small (the evaluation's box) or large (the application's 12 cm box, no path shown).",
     ),
+    population: str = typer.Option(
+        "thesis",
+        help="Who the simulated operators are: thesis (the main job's: user 0 the thesis' author), varied (detour families to tune on), held-out (other kinds of detour, to report only); docs/realism.md.",
+    ),
+    population_seed: int = typer.Option(0, help="Seed of the population the users are drawn from."),
     dataset_id: str = typer.Option(None, help="Dataset id (default: the folder's name)."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
     ray_address: str = typer.Option(None, help="Run on a Ray cluster at this address (needs coassist[cluster])."),
@@ -635,14 +642,20 @@ def collect(
     from coassist._io import OutputBusyError
     from coassist.config import CONTROL_PRESETS
     from coassist.control.presets import CONTROLLER_KINDS
-    from coassist.scenario import OBJECTS, OBSTACLES, TASK_KINDS
+    from coassist.scenario import OBJECTS, OBSTACLES, POPULATIONS, TASK_KINDS
     from coassist.sim.collect import collect_dataset
 
     _choose(controller, CONTROLLER_KINDS, "--controller", "controller")
+    _choose(population, POPULATIONS, "--population", "population")
     _choose(obstacle, OBSTACLES, "--obstacle", "obstacle")
     _choose(network, NETWORK_BACKENDS, "--network", "network backend")
     _lookup(CONTROL_PRESETS, preset, "--preset")
-    for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
+    for value, option, minimum in (
+        (trials, "--trials", 1),
+        (seed, "--seed", 0),
+        (workers, "--workers", 1),
+        (population_seed, "--population-seed", 0),
+    ):
         if value is not None and value < minimum:
             _fail(f"{option} must be >= {minimum}, got {value}", 2)
     user_list = _int_list(users, "--users")
@@ -673,6 +686,8 @@ def collect(
             lockstep=lockstep,
             network=network,
             intent=intent,
+            population=population,
+            population_seed=population_seed,
             say=lambda line: console.print(line, highlight=False),
             live=live,
         )
@@ -703,6 +718,7 @@ DRIVE_OPTIONS = {
             "time_limit",
             "predictor_backend",
             "robot",
+            "population",
         )
     },
     "DriveConfig.object": "--object",
@@ -745,6 +761,9 @@ def drive(
         help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; the -dm presets ring with one).",
     ),
     user: int = typer.Option(0, help="Simulated operator (MuJoCo world)."),
+    population: str = typer.Option(
+        "thesis", help="The simulated operator's population: thesis, varied or held-out (docs/realism.md)."
+    ),
     seed: int = typer.Option(0, help="Seed of the task, the simulated operator and the sensor noise."),
     obstacle: str = typer.Option(
         "small", help="The obstacle the simulated operator goes around: small or large (the application's)."
@@ -799,6 +818,7 @@ def drive(
             realtime_intent=realtime_intent,
             predictor_backend=predictor_backend,
             robot=robot,
+            population=population,
         )
     except ValueError as exc:
         _fail(_typed(str(exc), DRIVE_OPTIONS), 2)
@@ -846,7 +866,12 @@ def _run_alpha(preset: str, controller: str) -> float | None:
 
 
 def _confirm_move(yes: bool, stop_hint: str):
-    """The question drive and ros2 ask before an arm moves: the limits in force, then "Move the robot?"."""
+    """The question drive and ros2 ask before an arm moves: the limits in force, then "Move the robot?".
+
+    Only a person at a terminal answers it: with stdin closed or not a terminal (a script, a
+    service) and no ``--yes`` the arm does not move, and the reason is one line (a RuntimeError
+    the command prints as its error), not a prompt cut off by an empty error.
+    """
 
     def confirm(text: str) -> bool:
         console.print(
@@ -854,9 +879,27 @@ def _confirm_move(yes: bool, stop_hint: str):
         )
         console.print(text, markup=False)
         console.print(f"Keep {stop_hint} within reach.", markup=False)
-        return yes or typer.confirm("Move the robot?", default=False)
+        if yes:
+            return True
+        if not _stdin_is_terminal():
+            raise RuntimeError(
+                "the robot was not moved: 'Move the robot?' needs an answer from the person at it, and stdin is not "
+                "a terminal (closed or redirected); run the command at a terminal, or pass --yes to move it without asking"
+            )
+        try:
+            return typer.confirm("Move the robot?", default=False)
+        except click.exceptions.Abort:  # Ctrl+D or Ctrl+C at the prompt
+            console.print("", markup=False)
+            raise RuntimeError("the robot was not moved: no answer to 'Move the robot?'") from None
 
     return confirm
+
+
+def _stdin_is_terminal() -> bool:
+    try:
+        return sys.stdin is not None and not sys.stdin.closed and sys.stdin.isatty()
+    except (ValueError, OSError):
+        return False
 
 
 def _write_run(
@@ -1314,23 +1357,51 @@ def realism(
     trials: int = typer.Option(10, help="Simulated trials per task and preset."),
     seed: int = typer.Option(0, help="Seed of the first simulated trial."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
+    population: list[str] = typer.Option(
+        [],
+        "--population",
+        help="Also a population's users against user-a (repeatable): thesis, varied or held-out.",
+    ),
+    population_users: str = typer.Option("0,1,2,3,4,5", help="The users of each --population."),
+    population_trials: int = typer.Option(3, help="Trials per --population user and task."),
 ) -> None:
     """Simulated trials (user 0, handle, cooperative, nominal intent) side by side with real user-a trials."""
     from coassist.data import default_real_data
     from coassist.experiments import realism as realism_exp
+    from coassist.scenario import POPULATIONS
 
-    for value, option, minimum in ((trials, "--trials", 1), (seed, "--seed", 0), (workers, "--workers", 1)):
+    for value, option, minimum in (
+        (trials, "--trials", 1),
+        (seed, "--seed", 0),
+        (workers, "--workers", 1),
+        (population_trials, "--population-trials", 1),
+    ):
         if value is not None and value < minimum:
             _fail(f"{option} must be >= {minimum}, got {value}", 2)
+    for name in population:
+        _choose(name, POPULATIONS, "--population", "population")
+    users = _int_list(population_users, "--population-users")
     real = real or default_real_data() / "user-a"
     if not real.is_dir():
         _fail(f"--real {real}: no such folder (set COASSIST_REAL_DATA to the folder holding user-a/)", 2)
     out = _file_out(out, "--out", "realism.md")
     try:
-        result = realism_exp.run_realism(real, trials_per_task=trials, seed=seed, workers=workers, progress=True)
+        result = realism_exp.run_realism(
+            real,
+            trials_per_task=trials,
+            seed=seed,
+            workers=workers,
+            progress=True,
+            populations=population,
+            population_users=users,
+            population_trials=population_trials,
+        )
     except ValueError as exc:
         _fail(str(exc))
     console.print(realism_exp.summary_table(result))
+    if result.populations:
+        console.print(realism_exp.population_table(result))
+        console.print(realism_exp.family_table(result))
     _wrote(str(realism_exp.write_report(result, out, realism_exp.NOTES)))
 
 
@@ -1491,7 +1562,8 @@ def study_init(
     plan: Path = typer.Argument(..., help="The study plan (TOML; docs/study.md)."),
     out: Path = typer.Option(..., "--out", "-o", help="The study folder to make (e.g. studies/<name>)."),
 ) -> None:
-    """Validate a study plan and make its study folder (the plan, its hash, the blinding key, the Latin square)."""
+    """Check a study plan whole (every field, model and calibration; the session's time and memory) and make its
+    study folder (the plan, its hash, the blinding key, the Latin square)."""
     from coassist.study.plan import PlanError
     from coassist.study.store import StudyFolderError, init_study
 
@@ -1509,7 +1581,41 @@ def study_init(
         highlight=False,
         markup=False,
     )
+    estimate = study.estimate()
+    for line in estimate.lines() if estimate is not None else ():
+        console.print(line, highlight=False, markup=False, soft_wrap=True)
+    if "rehearsal" in out.name:
+        advice = f"rehearse it: coassist study run {out} --simulate --participant S01"
+    else:
+        rehearsal = out.with_name(out.name + "-rehearsal")
+        advice = (
+            "rehearse it before anyone sits down (a simulated participant, in a folder of its own): coassist study "
+            f"init {plan} --out {rehearsal} && coassist study run {rehearsal} --simulate --participant S01"
+        )
+    console.print(advice, highlight=False, markup=False, soft_wrap=True)
     _wrote(str(out))
+
+
+@study_app.command("amend")
+def study_amend(
+    folder: Path = typer.Argument(..., help="The study folder."),
+    plan: Path = typer.Argument(..., help="The amended plan (TOML): the study's plan with safe fields changed."),
+    reason: str = typer.Option(..., "--reason", help="Why (one line, recorded in study.json with the change)."),
+) -> None:
+    """Amend the plan's safe fields (rests, the stop criterion, planned participants, id pattern, training threads)
+    after trials have run; the change and its reason are recorded, the old plan kept in plans/."""
+    from coassist.study.plan import PlanError
+    from coassist.study.store import StudyFolderError, amend_study
+
+    try:
+        amendment = amend_study(folder, plan, reason)
+    except PlanError as exc:
+        _fail(f"{plan}: {exc}", 2)
+    except StudyFolderError as exc:
+        _fail(str(exc), 2)
+    for name, (old, new) in amendment["fields"].items():
+        console.print(f"{name}: {old!r} -> {new!r}", highlight=False, markup=False)
+    _wrote(f"{folder} (plan {amendment['to_sha256'][:12]}; the old plan in plans/{amendment['from_sha256']}.toml)")
 
 
 @study_app.command("run", cls=_live_command(FOXGLOVE_PAGE_PORT))
@@ -1594,8 +1700,14 @@ def study_run(
                 run.run()
         except KeyboardInterrupt:
             _fail(f"{pid}: stopped; what finished is kept, and the same command continues where it stopped", 130)
-        except (StudyFolderError, PlanError, OutputBusyError, ValueError, RuntimeError, OSError) as exc:
+        except (StudyFolderError, PlanError, OutputBusyError) as exc:
             _fail(f"{pid}: {exc}")
+        except Exception as exc:  # whatever failed, the participant is resumable: say so in one line
+            what = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            _fail(
+                f"{pid}: {what} ({type(exc).__name__}); what finished is kept: fix the cause (coassist study "
+                "amend changes the plan's safe fields) and the same command continues where it stopped"
+            )
         console.print(f"{pid}: complete", highlight=False)
     _close_live(live)
     _wrote(str(folder))
@@ -1615,7 +1727,7 @@ def study_report(
         _folder_out(out, "--out")
     try:
         html_path, json_path = write_report(folder, out)
-    except (StudyFolderError, PlanError) as exc:
+    except (StudyFolderError, PlanError, OSError) as exc:
         _fail(str(exc), 2)
     _wrote(f"{html_path} and {json_path}")
 

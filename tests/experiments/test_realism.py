@@ -4,7 +4,15 @@ import numpy as np
 import pytest
 
 from coassist.data import Trial, TrialMeta, default_real_data
-from coassist.experiments.realism import run_realism, summary_table, trial_stats, turn_stats, write_report
+from coassist.experiments.realism import (
+    family_table,
+    population_table,
+    run_realism,
+    summary_table,
+    trial_stats,
+    turn_stats,
+    write_report,
+)
 
 REAL = default_real_data() / "user-a"
 
@@ -69,3 +77,29 @@ def test_realism_report(tmp_path):
     out = write_report(result, tmp_path / "realism.md", notes="## Notes\n\nhello")
     text = out.read_text()
     assert text.startswith("# Realism check") and "hello" in text
+
+
+@pytest.mark.real_data
+@pytest.mark.skipif(not REAL.exists(), reason="real recordings not available")
+def test_realism_of_the_populations(tmp_path):
+    result = run_realism(
+        REAL,
+        presets=(),
+        tasks=("linear",),
+        trials_per_task=1,
+        workers=1,
+        progress=False,
+        populations=("varied", "held-out"),
+        population_users=(0, 1),
+        population_trials=1,
+    )
+    assert [f for f, _ in result.populations["varied"]] == ["asymmetric", "skewed"]
+    assert [f for f, _ in result.populations["held-out"]] == ["corrective", "hesitant"]
+    table = population_table(result)
+    assert "varied (n = 2)" in table and "held-out (n = 2)" in table and "sub-movements" in table
+    families = family_table(result)
+    assert "| held-out | hesitant | 1 |" in families and "| real user-a | — | 15 |" in families
+    text = write_report(result, tmp_path / "realism.md").read_text()
+    assert "--population varied --population held-out --population-users 0,1" in text
+    with pytest.raises(ValueError, match="population must be one of"):
+        run_realism(REAL, presets=(), tasks=("linear",), progress=False, populations=("all",))

@@ -146,6 +146,18 @@ def test_config_validation_names_the_field():
         ({"controller": "pid"}, "controller"),
         ({"rate_hz": 100}, "rate_hz"),
         ({"task": "spiral"}, "task"),
+        ({"population": "crowd"}, "population"),
+        ({"population_seed": -1}, "population_seed"),
     ):
         with pytest.raises(ValueError, match=f"DriveConfig.{field}"):
             DriveConfig(**kwargs)
+
+
+def test_the_simulated_operator_comes_from_the_population_asked_for():
+    # the same seed, a held-out operator: its name on the trial and a different hand from the thesis' user 1
+    thesis = drive(DriveConfig(controller="manual", task="linear", time_limit=2.0, seed=2, user=1))
+    held_out = drive(
+        DriveConfig(controller="manual", task="linear", time_limit=2.0, seed=2, user=1, population="held-out")
+    )
+    assert (thesis.meta.user, held_out.meta.user) == ("user-1", "held-out-user-1")
+    assert not np.array_equal(thesis.effort_h, held_out.effort_h)

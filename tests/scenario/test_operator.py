@@ -18,6 +18,7 @@ from coassist.scenario.operator import (
     operator_profile,
     trial_shape,
 )
+from coassist.scenario.populations import population_profile
 from coassist.scenario.seeds import trial_rngs
 from coassist.scenario.tasks import make_task, task_for_seed
 
@@ -97,7 +98,9 @@ def test_the_batch_arm_gives_each_arms_force_bit_for_bit():
     profiles = [operator_profile(u, 3) for u in range(4)] + [
         OperatorProfile("fast", reaction_delay=0.0, force_limit=5.0, stiffness_gain=40000.0)
     ]
-    lengths = [120, 120, 60, 120, 120]  # arm 2's intent ends before the run does
+    # the drawn populations' arms too (stiffness 0.5-2x, damping 0.5-3x the author's, delays to 0.16 s)
+    profiles += [population_profile(name, u) for name in ("varied", "held-out") for u in range(3)]
+    lengths = [120, 120, 60, 120, 120] + [120] * 6  # arm 2's intent ends before the run does
     arms, twins = [], []
     for p, n in zip(profiles, lengths):
         intent = np.cumsum(rng.normal(0.0, 0.002, (n, 2)), axis=0)
@@ -106,11 +109,11 @@ def test_the_batch_arm_gives_each_arms_force_bit_for_bit():
         twins.append(OperatorArm(p, intent, DT, noise))  # the batch's copy, untouched by the scalar calls
     batch = OperatorArmBatch(twins)
     assert sorted(set(batch.delay.tolist())) == sorted({a.delay_ticks for a in arms}) and max(batch.delay) > 5
-    rows = np.arange(5)
+    rows = np.arange(len(profiles))
     limited = 0
     for k in range(100):
         if k == 70:
-            rows = rows[[0, 2, 4]]  # two runs ended
+            rows = rows[[0, 2, 4, 5, 8, 10]]  # five runs ended
         p = rng.normal(0.0, 0.03, (rows.size, 2)) + batch.intent[rows, np.minimum(k, batch.n[rows] - 1)]
         v = rng.normal(0.0, 0.1, (rows.size, 2))
         got = batch.force(k, rows, p, v)
@@ -193,10 +196,16 @@ def test_detour_is_replanned_at_its_onset_with_the_documented_duration():
     assert np.max(np.linalg.norm(fd - mid, axis=1)) < 5e-3  # m/s: second-order accurate on the 1 mm polyline
 
 
-@pytest.mark.parametrize("user", [0, 1, 2])
-def test_the_intent_before_the_detour_does_not_depend_on_the_side(user):
-    # The same draws with the side forced each way: bit for bit the same intent until the paths part.
-    profile = operator_profile(user)
+@pytest.mark.parametrize(
+    ("population", "user"),
+    [("thesis", 0), ("thesis", 1), ("thesis", 2)]
+    + [("varied", u) for u in range(3)]
+    + [("held-out", u) for u in range(2)],
+)
+def test_the_intent_before_the_detour_does_not_depend_on_the_side(population, user):
+    # The same draws with the side forced each way: bit for bit the same intent until the paths part (every
+    # detour family: tests/scenario/test_detours.py checks them on every path).
+    profile = population_profile(population, user)
     task = task_for_seed("curved", 900_000 + user, obstacle="large")
     n = 2500
     left = intent_trajectory(task, dataclasses.replace(profile, left_preference=1.0), np.random.default_rng(7), n, DT)

@@ -41,6 +41,21 @@ def test_collect_then_show(tmp_path):
     assert png.stat().st_size > 10_000
 
 
+def test_collect_a_population(tmp_path):
+    # --population: the drawn operators, named so, each trial recording its family and the trial's parameters
+    out = tmp_path / "varied"
+    args = ["collect", "--out", str(out), "--tasks", "linear", "--trials", "1", "--users", "0,1", "--workers", "1"]
+    res = runner.invoke(app, [*args, "--population", "varied", "--population-seed", "2"])
+    assert res.exit_code == 0, res.output
+    ds = read_dataset(out)
+    assert [t.meta.user for t in ds.trials] == ["varied-user-0", "varied-user-1"]
+    families = [t.meta.extra["operator"]["detour"]["family"] for t in ds.trials]
+    assert families == ["asymmetric", "skewed"]
+    assert [t.meta.extra["intent_detour"]["family"] for t in ds.trials] == families
+    res = runner.invoke(app, [*args, "--population", "tesis", "--out", str(tmp_path / "y")])
+    assert res.exit_code != 0 and "--population" in res.output
+
+
 def test_collect_rejects_bad_options(tmp_path):
     res = runner.invoke(app, ["collect", "--out", str(tmp_path / "x"), "--tasks", "circle"])
     assert res.exit_code != 0 and "tasks" in res.output

@@ -285,6 +285,25 @@ def test_spec_validation_names_the_field():
         TrialSpec(task="linear", seed=-1)
     with pytest.raises(ValueError, match="intent"):
         run_spec(TrialSpec(task="linear", intent="/nonexistent/model.safetensors"))
+    with pytest.raises(ValueError, match="TrialSpec.population"):
+        TrialSpec(task="linear", population="everyone")
+
+
+def test_a_thesis_collection_keeps_its_key_and_a_population_trial_its_record(trial):
+    # the thesis population's specs are keyed as before populations had names (a collection on disk stays
+    # recognised); its trials record no family (their metadata unchanged)
+    from dataclasses import asdict
+
+    from coassist.sim.collect import spec_key
+
+    spec = TrialSpec(task="curved", seed=11)
+    assert spec_key(spec) == {k: v for k, v in asdict(spec).items() if k != "population"}
+    assert spec_key(replace(spec, population="held-out"))["population"] == "held-out"
+    assert "detour" not in trial.meta.extra["operator"] and "intent_detour" not in trial.meta.extra
+    held_out = run_spec(replace(spec, population="held-out", user=1))
+    assert held_out.meta.user == "held-out-user-1"
+    assert held_out.meta.extra["operator"]["detour"]["family"] == "hesitant"
+    assert held_out.meta.extra["intent_detour"]["family"] == "hesitant"
 
 
 def test_the_applications_large_obstacle_makes_a_wide_detour_that_still_ends_at_the_target():

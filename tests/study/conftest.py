@@ -55,3 +55,25 @@ def comparison_plan(
 @pytest.fixture
 def comparison_file(tmp_path: Path) -> Path:
     return comparison_plan(tmp_path / "plans")
+
+
+@pytest.fixture(scope="session")
+def _finished_study(tmp_path_factory) -> Path:
+    """A comparison of three conditions, one measured trial each, no practice, run to the end by simulated
+    participant S01 (about a second): tests copy it (:func:`finished_study`) before they edit it."""
+    from coassist.study.runner import ParticipantRun
+    from coassist.study.store import init_study
+
+    root = tmp_path_factory.mktemp("finished")
+    study = init_study(comparison_plan(root / "plans", per_condition=1, practice=0), root / "study")
+    with ParticipantRun(study, "S01", simulate=True) as run:
+        run.run()
+    return study.folder
+
+
+@pytest.fixture
+def finished_study(_finished_study, tmp_path) -> Path:
+    """A copy of the finished study (:func:`_finished_study`) of this test's own."""
+    import shutil
+
+    return Path(shutil.copytree(_finished_study, tmp_path / "study"))

@@ -27,6 +27,18 @@ def test_a_valid_plan_reads_into_its_fields(comparison_file):
     )
     assert plan.questionnaire.tlx and len(plan.questionnaire.likert) == 4
     assert plan.training is None
+    assert plan.population == "thesis"
+
+
+def test_a_plans_population_is_who_the_simulated_participants_are(comparison_file):
+    from coassist.scenario.populations import population_profile
+    from coassist.study.participants import simulated_profile
+
+    text = comparison_file.read_text().replace("seed = 3", 'seed = 3\npopulation = "held-out"')
+    plan = plan_from_text(text, ".")
+    assert plan.population == "held-out"
+    assert simulated_profile(2, plan.seed, plan.population) == population_profile("held-out", 2, 3)
+    assert simulated_profile(2, plan.seed) == population_profile("thesis", 2, 3)
 
 
 @pytest.mark.parametrize(
@@ -46,6 +58,7 @@ def test_a_valid_plan_reads_into_its_fields(comparison_file):
         (lambda t: t + "\n[training]\nepochs = 1\n", "training"),
         (lambda t: t + '\n[[condition]]\nname = "again"\ncontroller = "cooperative"\n', "condition"),
         (lambda t: t.replace('name = "comparison"', 'name = "a b"'), "study.name"),
+        (lambda t: t.replace("seed = 3", 'seed = 3\npopulation = "everyone"'), "study.population"),
         (lambda t: t.replace("[study]", "[study]\nparticipants = 1\n"), None),  # duplicate key: TOML's own error
     ],
 )
@@ -63,8 +76,89 @@ def test_a_bad_plan_is_one_line_naming_the_field(edit, field):
 
 def test_a_model_the_plan_names_must_exist(tmp_path):
     text = _plan().replace('controller = "cooperative"', 'controller = "cooperative"\nintent = "models/M9"')
-    with pytest.raises(PlanError, match=r"^condition\[0\]\.intent: 'models/M9' is not a model folder"):
+    with pytest.raises(PlanError, match=r"^condition\[0\]\.intent: 'models/M9' is not a source a person can run"):
         plan_from_text(text, tmp_path)
+
+
+ITERATIVE = """
+[study]
+name = "iter"
+protocol = "iterative"
+
+[iterative]
+rounds = 2
+trials_per_round = 2
+
+[trials]
+tasks = ["linear"]
+practice = 0
+motion_time = 3.0
+dwell = 1.0
+
+[rest]
+between_conditions = 30.0
+
+[training]
+epochs = 1
+"""
+
+
+def _set(text: str, table: str, line: str) -> str:
+    """``text`` with ``line`` added at the top of ``[table]`` (a key set twice would be TOML's own error)."""
+    key = line.split("=")[0].strip()
+    lines = text.splitlines()
+    start = lines.index(f"[{table}]")
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("[")), len(lines))
+    kept = [x for x in lines[start + 1 : end] if x.split("=")[0].strip() != key]
+    return "\n".join([*lines[: start + 1], line, *kept, *lines[end:]]) + "\n"
+
+
+@pytest.mark.parametrize(
+    ("table", "line", "field"),
+    [
+        # each of these passed study init on bdc84ed and failed, or blocked, only after a participant's trials
+        ("trials", "time_limit = 1e300", "trials.time_limit"),  # "Maximum allowed size exceeded" at run time
+        ("trials", "time_limit = 1e-9", "trials.time_limit"),  # refused only by the first trial
+        ("trials", "time_limit = 4.0", "trials.time_limit"),  # 3.9 s of planned motion + 1 s dwell: never in time
+        ("trials", "motion_time = 1e7", "trials.motion_time"),  # MemoryError (18.6 GiB) in the first trial
+        ("trials", "dwell = 1e300", "trials.dwell"),
+        ("trials", "dwell = 20.0", "trials.dwell"),  # longer than the default time limit leaves after the motion
+        ("trials", 'arrive_radius = "0.03"', "trials.arrive_radius"),  # a string is not a number
+        ("trials", "motion_time = nan", "trials.motion_time"),
+        ("rest", "between_conditions = 1e300", "rest.between_conditions"),
+        ("rest", "between_trials = inf", "rest.between_trials"),
+        ("study", "seed = 1_000_000_000_000", "study.seed"),
+        ("iterative", "tolerance = 1e300", "iterative.tolerance"),
+        ("iterative", "criterion_horizon = 1_000_000", "iterative.criterion_horizon"),
+        ("training", "epochs = 1_000_000_000", "training.epochs"),
+        ("training", "hidden = 100_000_000", "training.hidden"),
+        ("training", "layers = 1000", "training.layers"),
+        ("training", "fc = [100_000_000]", "training.fc"),
+        ("training", "batch_size = 1e9", "training.batch_size"),
+        ("training", "lr = 1e300", "training.lr"),
+        ("study", 'id_pattern = "P[0-9"', "study.id_pattern"),
+    ],
+)
+def test_every_number_has_a_range_a_study_can_use_named_in_one_line(table, line, field):
+    pytest.importorskip("torch", reason="a plan with [training] needs the learn extra")
+    with pytest.raises(PlanError) as err:
+        plan_from_text(_set(ITERATIVE, table, line), ".")
+    assert "\n" not in str(err.value) and str(err.value).startswith(field), str(err.value)
+
+
+def test_the_edges_of_the_ranges_are_accepted():
+    pytest.importorskip("torch", reason="a plan with [training] needs the learn extra")
+    text = ITERATIVE
+    for table, line in [
+        ("trials", "time_limit = 4.9"),  # exactly the planned motion (3.9 s) and the dwell (1 s)
+        ("rest", "between_conditions = 3600.0"),
+        ("training", "epochs = 1000"),
+        ("training", "hidden = 4096"),
+        ("iterative", "tolerance = 1.0"),
+    ]:
+        text = _set(text, table, line)
+    plan = plan_from_text(text, ".")
+    assert plan.trials.time_limit == 4.9 and plan.training.hidden == 4096 and plan.rest.between_conditions == 3600.0
 
 
 def test_the_cli_prints_the_plan_error_on_one_line(tmp_path):

@@ -88,6 +88,16 @@ def test_an_iterative_study_of_two_rounds_trains_what_coassist_train_trains(tmp_
     assert abs(check["e_rms"] - check["e_rms_before"]) == pytest.approx(check["delta"])
     # the models equal coassist train's from the same trials
     m0, m1 = pf.folder / "models" / "M0", pf.folder / "models" / "M1"
+    # the session estimate's count of training windows is the one M0 trained on (its kept trials' ticks)
+    import json
+
+    from coassist.study.preflight import training_windows
+
+    meta = json.loads((m0 / "model.json").read_text())
+    ds = read_dataset(pf.block("round-0"))
+    kept = [t.n_samples for f, t in zip(ds.files, ds.trials) if f"S01/round-0/{Path(f).stem}" in meta["train_trials"]]
+    assert 1 <= len(kept) < 3
+    assert training_windows(kept, 125, 50, 4, 0.0) == meta["n_train_windows"]
     _cli_train(str(pf.block("round-0")), "--out", str(tmp_path / "cli-M0"), *TRAIN_OPTIONS, *SIZES)
     _same_weights(m0, tmp_path / "cli-M0")
     _cli_train(str(pf.block("round-1")), "--out", str(tmp_path / "cli-M1"), "--init", f"resume:{m0}", *TRAIN_OPTIONS)
@@ -202,3 +212,86 @@ def test_online_adaptation_never_delays_the_loop_and_meets_the_offline_transfer(
 
     _, summary = write_report(study.folder)
     assert '"blocks": [\n  "online",\n  "offline"\n ]' in summary.read_text()
+
+
+def _children(pid: int) -> dict[int, str]:
+    """The processes whose parent is ``pid``: pid → command line (Linux /proc)."""
+    out = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            if int(fields[1]) == pid:
+                out[int(stat.parent.name)] = (stat.parent / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except (OSError, ValueError, IndexError):
+            continue
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="finds the worker through Linux's /proc")
+def test_the_training_worker_dies_with_its_run_and_a_resume_follows_at_once(tmp_path):
+    """bdc84ed: after a kill -9 of the study run alone, its training worker trained on, then blocked for good
+    holding the memory, the model's lock and the pipe; a resume right away was refused ("being written by
+    another coassist run")."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from coassist._io import OutputLock
+
+    plan = tmp_path / "iterative.toml"
+    plan.write_text(
+        '[study]\nname = "iter"\nprotocol = "iterative"\nworld = "play"\nparticipants = 1\n\n'
+        "[iterative]\nrounds = 2\ntrials_per_round = 1\n\n[questionnaire]\ntlx = false\nlikert = []\n"
+        + TRIALS
+        + TRAINING.replace("epochs = 1", "epochs = 1000")  # trains for many seconds
+    )
+    study = init_study(plan, tmp_path / "study")
+    src = Path(__file__).resolve().parents[2] / "src"
+    env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}", "OMP_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-m", "coassist.cli", "study", "run", str(study.folder), "-p", "S01", "--simulate"]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    pf = study.participant("S01")
+    workers: list[int] = []
+    try:
+        t_end = time.monotonic() + 300  # generous: a busy machine starts processes slowly
+        lock = pf.folder / "models" / ".M0.lock"  # taken by the job, once the worker (and its watch) started
+        while not (workers and lock.exists()):
+            assert proc.poll() is None and time.monotonic() < t_end, "the run did not start M0's training"
+            if any(r["kind"] == "train" for r in pf.progress()):
+                workers = [p for p, cmd in _children(proc.pid).items() if "spawn_main" in cmd]
+            time.sleep(0.05)
+        assert not (pf.folder / "models" / "M0" / "model.json").exists()  # M0 is training
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+        # the worker checks its parent every 0.2 s; unfixed, it trains on for many seconds, then blocks for good
+        t_end = time.monotonic() + 10.0
+        while any(_alive(w) for w in workers) and time.monotonic() < t_end:
+            time.sleep(0.05)
+        assert not any(_alive(w) for w in workers), "the training worker outlived its run"
+        # nobody holds the model that was being trained. Polled: a process whose leader /proc shows as a zombie
+        # may still be closing its files while its other threads exit (the lock goes with the last of them).
+        from coassist._io import OutputBusyError
+
+        while True:
+            try:
+                with OutputLock(pf.folder / "models" / "M0"):
+                    break
+            except OutputBusyError:
+                assert time.monotonic() < t_end, "the dead worker's lock on M0 outlived it"
+                time.sleep(0.05)
+        with ParticipantRun(study, "S01", simulate=True) as run:  # a resume right away: not refused
+            assert [r["kind"] for r in run.done] == ["trial", "train"]
+    finally:
+        proc.kill()
+        for w in workers:
+            if _alive(w):
+                os.kill(w, signal.SIGKILL)

@@ -354,18 +354,22 @@ class Workspace:
         intent: str = "nominal",
         obstacle: str = "small",
         groups: int | None = None,
+        population: str = "thesis",
     ):
         """Simulate a dataset into ``out/datasets/<name>``; return its folder and the dataset read back.
 
         ``groups``: how many lockstep groups the trials are split into on the pool
         (:func:`~coassist.sim.world.submit_trials`; None: its rule), an option like the others.
+        ``population``: who the simulated operators are (:mod:`coassist.scenario.populations`).
         A collection :meth:`prefetch` started with the same options is waited for, not run
         again (the same trials bit for bit: the same jobs); one started under this name with
         other options is let finish, then replaced by the one asked for."""
         from coassist.data import read_dataset
         from coassist.sim.collect import collect_dataset
 
-        options = self._spec_options(tasks, users, objects, trials, seed, controller, preset, intent, obstacle)
+        options = self._spec_options(
+            tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population
+        )
         written = self._pending.pop(f"dataset:{name}", None)
         if written is not None:
             if written[0] == (options, groups):
@@ -399,6 +403,7 @@ class Workspace:
         intent: str = "nominal",
         obstacle: str = "small",
         groups: int | None = None,
+        population: str = "thesis",
     ) -> None:
         """Start :meth:`collect`'s simulations for these options on the run's pool now and
         return at once; a thread of this process writes the dataset as the jobs end, and the
@@ -412,7 +417,9 @@ class Workspace:
 
         if self.pool is None:
             return
-        options = self._spec_options(tasks, users, objects, trials, seed, controller, preset, intent, obstacle)
+        options = self._spec_options(
+            tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population
+        )
         pending = self._pending.get(f"dataset:{name}")
         if pending is not None:
             if pending[0] == (options, groups):
@@ -465,7 +472,7 @@ class Workspace:
         return fn(*args) if future is None else future.result()
 
     def _spec_options(
-        self, tasks, users, objects, trials, seed, controller, preset, intent, obstacle
+        self, tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population
     ) -> dict[str, Any]:
         # coassist.sim.collect.dataset_specs' keyword arguments
         return {
@@ -478,6 +485,7 @@ class Workspace:
             "preset": preset or self.config.control_preset,
             "intent": intent,
             "obstacle": obstacle,
+            "population": population,
         }
 
     def train(

@@ -50,7 +50,8 @@ from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPi
 from coassist.scenario.hand import SimulatedHand
 from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source, needs_network, shared_intent_source
 from coassist.scenario.objects import get_object
-from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
+from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise
+from coassist.scenario.populations import POPULATIONS, population_profile
 from coassist.scenario.seeds import trial_rngs
 from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, task_for_seed
 
@@ -86,6 +87,8 @@ class DriveConfig:
     intent : a name of :data:`coassist.scenario.intent_registry.INTENT_SOURCES` ("oracle" in a
         simulated world only) or a folder (a model, a path-hypotheses calibration).
     user : simulated operator index (MuJoCo).  seed : task, operator and sensor seed.
+    population, population_seed : who the simulated operator is
+        (:func:`coassist.scenario.populations.population_profile`; "thesis": the main job's).
     obstacle : the obstacle the operator goes around (coassist.scenario.tasks.OBSTACLES; "small"
         is the evaluation's box, "large" the application's).
     rate_hz : 125 (UR CB3) or 500 (e-Series); the MuJoCo world runs either.
@@ -118,6 +121,8 @@ class DriveConfig:
     realtime_intent: bool | None = None
     predictor_backend: str = "process"
     robot: str | None = None
+    population: str = "thesis"
+    population_seed: int = 0
 
     def __post_init__(self) -> None:
         def bad(name: str, what: str) -> ValueError:
@@ -145,7 +150,9 @@ class DriveConfig:
         source = INTENT_SOURCES.get(self.intent)
         if source is not None and source.simulation_only and not world.simulated:
             raise bad("intent", f"a source a real arm can run, not {source.summary} (a simulation alone knows it)")
-        for name in ("user", "seed"):
+        if self.population not in POPULATIONS:
+            raise bad("population", f"one of {POPULATIONS}")
+        for name in ("user", "seed", "population_seed"):
             v = getattr(self, name)
             if not is_integer(v) or v < 0:
                 raise bad(name, "an int >= 0")
@@ -353,7 +360,7 @@ def _prepare(
     controller = _controller(config)
     H = int(controller.horizon)
     task = task_for_seed(config.task, config.seed, obstacle=config.obstacle)  # the same draw in every world
-    profile = operator_profile(config.user)
+    profile = population_profile(config.population, config.user, config.population_seed)
     obj = get_object(config.object)
     entry = WORLDS[config.world]
     simulated = entry.simulated

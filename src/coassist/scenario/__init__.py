@@ -16,6 +16,7 @@ from coassist.scenario.operator import (
     intent_trajectory,
     operator_profile,
 )
+from coassist.scenario.populations import POPULATIONS, population_profile
 from coassist.scenario.reference_intents import NominalIntent, OracleIntent
 from coassist.scenario.seeds import task_rng, trial_rngs
 from coassist.scenario.tasks import (
@@ -35,6 +36,7 @@ __all__ = [
     "INTENT_SOURCES",
     "OBJECTS",
     "OBSTACLES",
+    "POPULATIONS",
     "TASK_KINDS",
     "Box",
     "CarriedObject",
@@ -54,6 +56,7 @@ __all__ = [
     "make_task",
     "nominal_path",
     "operator_profile",
+    "population_profile",
     "task_for_seed",
     "task_rng",
     "trial_rngs",

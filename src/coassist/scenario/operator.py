@@ -3,8 +3,13 @@
 Intent (docs/architecture.md, *The simulated world*)
 ----------------------------------------------------
 The operator wants the nominal path deformed smoothly around the obstacle, which
-only they can see. Along the arc length s the path is shifted sideways, along the path's
-left normal n_o at the obstacle, by::
+only they can see. A profile with a detour family (``OperatorProfile.detour``,
+:mod:`coassist.scenario.detours`: asymmetric, skewed, swinging through, corrective
+sub-movements, hesitation; the populations of :mod:`coassist.scenario.populations`) goes round
+in the family's shape and may slow its progress after the onset; the timing below, and
+everything before the onset, is the same for every family. Without one (the thesis
+population, :func:`operator_profile`), along the arc length s the path is shifted sideways,
+along the path's left normal n_o at the obstacle, by::
 
     d(s) = A · b(s),   b = 1 within ±(h_t + clearance) of the obstacle's arc length s_o,
                        rising and falling over the anticipation distance with the
@@ -56,7 +61,10 @@ Population
 ----------
 :func:`operator_profile` (user_index, population_seed): user 0 plays the thesis' author
 (fixed parameters tuned against the real user-a recordings, see docs/realism.md);
-users ≥ 1 are drawn from a seeded population around it.
+users ≥ 1 are drawn from a seeded population around it. This is the ``thesis`` population,
+the main job's; :func:`coassist.scenario.populations.population_profile` names the others
+(``varied``: detour families to tune on, arms 0.5–2 × the author's; ``held-out``: families of
+another kind, to report only).
 """
 
 from __future__ import annotations
@@ -68,6 +76,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from coassist._checks import check_int, check_real
+from coassist.scenario.detours import DetourFamily, detour_path, progress_warp, smoothstep
 from coassist.scenario.tasks import Task, _quintic
 
 
@@ -95,6 +104,8 @@ class OperatorProfile:
         clearance and the anticipation: nobody walks round an obstacle the same way twice.
     start_delay : [s] from the planner's start to the operator's.
     left_preference : probability of passing the obstacle on the left of the path.
+    detour : the person's detour family (:mod:`coassist.scenario.detours`); None: the thesis'
+        symmetric bump (:func:`deformed_path`), as every profile of :func:`operator_profile`.
     """
 
     name: str
@@ -115,8 +126,11 @@ class OperatorProfile:
     shape_jitter: float = 0.2
     start_delay: float = 0.4
     left_preference: float = 0.5
+    detour: DetourFamily | None = None
 
     def __post_init__(self) -> None:
+        if self.detour is not None and not isinstance(self.detour, DetourFamily):
+            raise ValueError(f"OperatorProfile.detour must be a DetourFamily or None, got {type(self.detour).__name__}")
         if not isinstance(self.name, str) or not self.name:
             raise ValueError(f"OperatorProfile.name must be a non-empty string, got {self.name!r}")
         for name, lo, hi, lo_open in (
@@ -145,7 +159,13 @@ class OperatorProfile:
             )
 
     def to_extra(self) -> dict:
-        return asdict(self)
+        """JSON-able (trial metadata); ``detour`` (the family and its parameters) only where there is one,
+        so a thesis profile's record is what it was before families existed."""
+        out = asdict(self)
+        del out["detour"]
+        if self.detour is not None:
+            out["detour"] = self.detour.to_extra()
+        return out
 
 
 #: User 0: "the author" of the iterative experiments (tuned on user-a, docs/realism.md).
@@ -199,11 +219,6 @@ def operator_profile(user_index: int, population_seed: int = 0) -> OperatorProfi
 DETOUR_TIME_EXPONENT = 0.5
 
 
-def _smoothstep(u: np.ndarray) -> np.ndarray:
-    u = np.clip(u, 0.0, 1.0)
-    return u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
-
-
 @dataclass(frozen=True, eq=False)
 class Intent:
     """The operator's desired trajectory on the tick grid.
@@ -212,6 +227,8 @@ class Intent:
     side : +1 passing on the left of the path, −1 on the right.
     amplitude : |A| [m], the largest lateral shift.
     pace : the trial's pace; end_time : [s] when the operator's motion ends.
+    detour : the trial's detour family and parameters (:meth:`DetourFamily.trial
+        <coassist.scenario.detours.DetourFamily.trial>`); None: the thesis' bump.
     """
 
     positions: np.ndarray
@@ -220,6 +237,7 @@ class Intent:
     amplitude: float
     pace: float
     end_time: float
+    detour: DetourFamily | None = None
 
 
 def deformed_path(task: Task, side: int, clearance: float, anticipation: float) -> tuple[np.ndarray, float, int]:
@@ -247,7 +265,7 @@ def deformed_path(task: Task, side: int, clearance: float, anticipation: float) 
     for sgn in (side, -side):
         amp, plateau = h_n + clearance, h_t + clearance
         for _ in range(40):
-            bump = 1.0 - _smoothstep((dist - plateau) / anticipation)
+            bump = 1.0 - smoothstep((dist - plateau) / anticipation)
             A = offset + sgn * amp
             pts = path.points + (A * bump)[:, None] * n_o
             if box.signed_distance(pts).min() >= 0.5 * clearance:
@@ -292,13 +310,20 @@ def intent_trajectory(task: Task, profile: OperatorProfile, rng: np.random.Gener
     """The operator's intent for this trial on n ticks of dt [s] (module docstring).
 
     ``rng`` draws the trial's side, pace jitter and shape jitter (clearance, anticipation), in
-    that order. Up to the detour's onset the intent is the same, bit for bit, whichever side is
-    drawn.
+    that order, then, for a profile with a detour family, the family's own jitter
+    (:meth:`~coassist.scenario.detours.DetourFamily.trial`); the family shapes the path
+    (:func:`~coassist.scenario.detours.detour_path`) and may slow the re-planned progress
+    (s(t) = q(w(t − t_on)), :func:`~coassist.scenario.detours.progress_warp`). Up to the detour's
+    onset the intent is the same, bit for bit, whichever side is drawn.
     """
     side = 1 if rng.random() < profile.left_preference else -1
     pace = profile.pace * float(np.exp(rng.normal(0.0, profile.pace_jitter)))
     clearance, anticipation = trial_shape(profile, rng)
-    pts, amp, side = deformed_path(task, side, clearance, anticipation)
+    family = None if profile.detour is None else profile.detour.trial(rng)
+    if family is None:
+        pts, amp, side = deformed_path(task, side, clearance, anticipation)
+    else:
+        pts, amp, side, family = detour_path(task, side, clearance, anticipation, family)
     path = task.path
     seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
     arc = np.concatenate([[0.0], np.cumsum(seg)])
@@ -327,11 +352,17 @@ def intent_trajectory(task: Task, profile: OperatorProfile, rng: np.random.Gener
         remaining, remaining_nominal = Ld - s_on, L - s_on
         T_r = (1.0 - tau_on) * T * (remaining / remaining_nominal) ** DETOUR_TIME_EXPONENT
         after = t >= t_on
-        q, qd = _quintic_to_rest(s_on, v_on, a_on, Ld, T_r, t[after] - t_on)
+        windows = () if family is None else family.windows(T_r)
+        if windows:  # the family slows the re-planned motion down: q at the warped time, q̇ · w'
+            warped, rate = progress_warp(t[after] - t_on, windows)
+            q, qd = _quintic_to_rest(s_on, v_on, a_on, Ld, T_r, warped)
+            qd = qd * rate
+        else:
+            q, qd = _quintic_to_rest(s_on, v_on, a_on, Ld, T_r, t[after] - t_on)
         s = np.where(after, 0.0, s)
         sdot = np.where(after, 0.0, sdot)
         s[after], sdot[after] = np.clip(q, s_on, Ld), np.maximum(qd, 0.0)
-        end_time = t_on + T_r
+        end_time = t_on + (_unwarp(T_r, windows) if windows else T_r)
     else:
         end_time = t0 + T
     pos = np.stack([np.interp(s, arc, pts[:, 0]), np.interp(s, arc, pts[:, 1])], axis=1)
@@ -340,7 +371,20 @@ def intent_trajectory(task: Task, profile: OperatorProfile, rng: np.random.Gener
     # before the onset the nominal path's own tangents: the shared part's velocities do not see the detour
     tan[: i_on + 1] = path.tangents[: i_on + 1]
     vel = np.stack([np.interp(s, arc, tan[:, 0]), np.interp(s, arc, tan[:, 1])], axis=1) * sdot[:, None]
-    return Intent(positions=pos, velocities=vel, side=side, amplitude=amp, pace=pace, end_time=end_time)
+    return Intent(positions=pos, velocities=vel, side=side, amplitude=amp, pace=pace, end_time=end_time, detour=family)
+
+
+def _unwarp(duration: float, windows) -> float:
+    """The first time u [s] after the onset with w(u) = ``duration`` (w non-decreasing, w(u) ≥ u − Σ lost):
+    duration + Σ lost where every window has ended by then, else bisection to the last bit."""
+    lost = sum(w.time_lost for w in windows)
+    if all(w.start + w.width <= duration + lost for w in windows):
+        return float(duration) + lost
+    lo, hi = float(duration), float(duration) + lost + 1e-9
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if float(progress_warp(np.array([mid]), windows)[0][0]) < duration else (lo, mid)
+    return hi
 
 
 class OperatorArm:

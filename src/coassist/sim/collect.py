@@ -29,9 +29,11 @@ def dataset_specs(
     population_seed: int = 0,
     obstacle: str = "small",
     network: str = "auto",
+    population: str = "thesis",
 ) -> list[TrialSpec]:
     """One spec per (user, object, task, repetition); trial i of the list gets seed ``seed + i``.
     ``network``: what evaluates a model's network (:attr:`TrialSpec.network <coassist.sim.world.TrialSpec>`).
+    ``population``, ``population_seed``: who the users are (:mod:`coassist.scenario.populations`).
 
     Every trial has its own seed, so two datasets with different ``seed`` share no
     trial as long as the seed ranges do not overlap (a 60-trial dataset uses seed … seed+59).
@@ -58,6 +60,7 @@ def dataset_specs(
                             population_seed=population_seed,
                             obstacle=obstacle,
                             network=network,
+                            population=population,
                         )
                     )
     return specs
@@ -109,6 +112,7 @@ def collect_dataset(
         f"simulated: controller={s0.controller} preset={s0.preset} intent={s0.intent} "
         f"users={sorted({s.user for s in specs})} tasks={sorted({s.task for s in specs})} "
         f"objects={sorted({s.object for s in specs})} seeds {specs[0].seed}..{specs[-1].seed}"
+        + ("" if s0.population == "thesis" else f" population={s0.population} (seed {s0.population_seed})")
     )
     dataset_id = dataset_id or out.name
     # What is collected, so that a re-run continues only the same collection.
@@ -119,7 +123,12 @@ def collect_dataset(
         digest(model_file.read_bytes().hex()) if s0.intent not in NAMED_INTENTS and model_file.is_file() else None
     )
     key = digest(
-        {"specs": [asdict(s) for s in specs], "dataset_id": dataset_id, "format": FORMAT_VERSION, "model": model_hash}
+        {
+            "specs": [spec_key(s) for s in specs],
+            "dataset_id": dataset_id,
+            "format": FORMAT_VERSION,
+            "model": model_hash,
+        }
     )
     if not overwrite and _holds_collection(out, key, len(specs)):
         if say:
@@ -154,6 +163,15 @@ def collect_dataset(
             on_result=lambda j, trial: writer.add(todo[j], trial),
         )
         return writer.finish()
+
+
+def spec_key(spec: TrialSpec) -> dict:
+    """A spec as the collection's key sees it: the thesis population's specs are keyed as they were
+    before populations had names (a finished or half-written collection of it stays recognised)."""
+    out = asdict(spec)
+    if out["population"] == "thesis":
+        del out["population"]
+    return out
 
 
 def _holds_collection(out: Path, key: str, n_trials: int) -> bool:

@@ -83,7 +83,8 @@ from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.wrench import WrenchPipeline
 from coassist.scenario.intent_registry import NAMED_INTENTS, shared_intent_source
 from coassist.scenario.objects import CarriedObject, ForceSensor, get_object
-from coassist.scenario.operator import OperatorProfile, operator_profile
+from coassist.scenario.operator import OperatorProfile
+from coassist.scenario.populations import POPULATIONS, population_profile
 from coassist.scenario.reference_intents import NominalIntent
 from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, Task, task_for_seed
 from coassist.sim.lockstep import fast_path_eligible, run_point_mass_lockstep
@@ -236,6 +237,8 @@ def build_trial(
             "intent_amplitude": intent.amplitude,
             "intent_pace": intent.pace,
             "intent_end_time": intent.end_time,
+            # the trial's detour family and its jittered parameters (none for the thesis' bump: its record unchanged)
+            **({} if intent.detour is None else {"intent_detour": intent.detour.to_extra()}),
             "sensor_raw_bias": [float(v) for v in world.raw_bias],
             "sensor_residual_bias": [float(v) for v in world.residual],
             # What the effort drives: (M + m) a + D v = u (the label 'hand_alone' removes u_r through it).
@@ -263,6 +266,8 @@ class TrialSpec:
     :data:`~coassist.control.presets.CONTROLLER_KINDS`. preset : a name of :data:`coassist.config.CONTROL_PRESETS`. seed : int ≥ 0.
     intent : one of :data:`~coassist.interfaces.NAMED_INTENTS` or a model path (loaded in the worker).
     population_seed : which population the user is drawn from.
+    population : who the operators are, one of :data:`~coassist.scenario.populations.POPULATIONS`
+    ("thesis": :func:`~coassist.scenario.operator.operator_profile`, the main job's).
     obstacle : a name of :data:`coassist.scenario.tasks.OBSTACLES` ("small": the evaluation's box).
     network : what evaluates a model path's network, one of :data:`~coassist.interfaces.NETWORK_BACKENDS`
     ("auto": ONNX Runtime where installed, else torch; they agree to float32 rounding).
@@ -278,8 +283,11 @@ class TrialSpec:
     population_seed: int = 0
     obstacle: str = "small"
     network: str = "auto"
+    population: str = "thesis"
 
     def __post_init__(self) -> None:
+        if self.population not in POPULATIONS:
+            raise ValueError(f"TrialSpec.population must be one of {POPULATIONS}, got {self.population!r}")
         if self.network not in NETWORK_BACKENDS:
             raise ValueError(f"TrialSpec.network must be one of {NETWORK_BACKENDS}, got {self.network!r}")
         if self.obstacle not in OBSTACLES:
@@ -329,7 +337,7 @@ def spec_episode(spec: TrialSpec, _controllers: dict | None = None, _sources: di
     source = shared_intent_source(spec.intent, horizon, _sources, spec.network)
     return build_trial(
         task,
-        operator_profile(spec.user, spec.population_seed),
+        population_profile(spec.population, spec.user, spec.population_seed),
         get_object(spec.object),
         controller,
         source,

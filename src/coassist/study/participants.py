@@ -1,8 +1,9 @@
 """Simulated participants: the simulated operator population standing in for people (``--simulate``).
 
-Participant number p is simulated by operator p of the population (operator 0 is the
-thesis' author, so a study's participants are the new users 1, 2, …;
-:func:`coassist.scenario.operator.operator_profile`, population seed = the plan's seed).
+Participant number p is simulated by operator p of the plan's population (``study.population``,
+default "thesis", where operator 0 is the thesis' author, so a study's participants are the new
+users 1, 2, …; :func:`coassist.scenario.populations.population_profile`, population seed = the
+plan's seed).
 In a trial of seed s the operator wants what it wants in every world: its intent
 (:func:`~coassist.scenario.operator.intent_trajectory`) and motor noise come from
 :func:`coassist.scenario.seeds.trial_rngs` of s, the task from s as everywhere.
@@ -30,7 +31,8 @@ import math
 
 import numpy as np
 
-from coassist.scenario.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise, operator_profile
+from coassist.scenario.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise
+from coassist.scenario.populations import population_profile
 from coassist.scenario.seeds import trial_rngs
 from coassist.scenario.tasks import Task
 from coassist.study.questionnaires import Form
@@ -38,9 +40,10 @@ from coassist.study.questionnaires import Form
 __all__ = ["OperatorHand", "hand_path", "simulated_answers", "simulated_profile"]
 
 
-def simulated_profile(number: int, population_seed: int) -> OperatorProfile:
-    """The simulated operator standing in for participant ``number`` (1, 2, …)."""
-    return operator_profile(int(number), int(population_seed))
+def simulated_profile(number: int, population_seed: int, population: str = "thesis") -> OperatorProfile:
+    """The simulated operator standing in for participant ``number`` (1, 2, …): user ``number`` of
+    ``population`` (:func:`~coassist.scenario.populations.population_profile`)."""
+    return population_profile(population, int(number), int(population_seed))
 
 
 class OperatorHand:

@@ -10,11 +10,13 @@ mean"), so ``coassist study init`` can print it as it is. The plan of a comparis
     world = "play"                 # play (the page) | mujoco (UR5 in MuJoCo) | ur | franka (a real arm)
     participants = 4               # planned: the balanced Latin square is filled in this many rows
     seed = 0
+    population = "thesis"          # who --simulate's participants are: thesis | varied | held-out
 
     [[condition]]                  # comparison: two or more; shown on the page as A, B, C…
     name = "assistive"
     controller = "cooperative"     # coassist.control.presets.CONTROLLER_KINDS
-    intent = "nominal"             # nominal | a model folder (relative to the plan's folder)
+    intent = "nominal"             # a named source a person can run (nominal, constant-velocity,
+                                   # present, paths, …) or a folder: a model, a path-hypotheses calibration
     [[condition]]
     name = "impedance"
     controller = "impedance"
@@ -38,7 +40,14 @@ mean"), so ``coassist study init`` can print it as it is. The plan of a comparis
 The other protocols add one table each (``[iterative]``, ``[transfer]``, ``[online]``)
 and ``[training]``, the options of ``coassist train`` the study's models are trained with
 (docs/study.md). Nothing personal goes into a plan: participants are pseudonymous ids
-given at run time.
+given at run time, of the form ``[study] id_pattern`` sets (:mod:`coassist.study.ids`).
+
+Every number has the range a study can use, upper bound included (a trial of 10⁷ s, a rest
+of 10³⁰⁰ s or 10⁹ epochs are typos that would block a participant hours in, not plans), and
+the fields that depend on each other are checked together (a time limit that leaves no time
+to dwell in the target). What needs the models and the machine (a model's horizon against
+the stop criterion, its label, the session's time and memory) is
+:mod:`coassist.study.preflight`'s, run by ``coassist study init``.
 """
 
 from __future__ import annotations
@@ -56,8 +65,13 @@ from coassist.config import APPLICATION_PRESET, CONTROL_PRESETS
 from coassist.control.presets import CONTROLLER_KINDS
 from coassist.errors import CoassistError
 from coassist.registry import unknown_name_message
+from coassist.robot.drive import MAX_TIME_LIMIT
+from coassist.runtime.episode import DWELL
+from coassist.scenario import intent_registry
 from coassist.scenario.objects import OBJECTS
-from coassist.scenario.tasks import OBSTACLES, TASK_KINDS
+from coassist.scenario.populations import POPULATIONS
+from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, task_for_seed
+from coassist.study.ids import DEFAULT_ID_PATTERN, IdError, compile_id_pattern
 
 __all__ = [
     "PROTOCOLS",
@@ -74,6 +88,8 @@ __all__ = [
     "TrialsPlan",
     "load_plan",
     "parse_plan",
+    "person_intents",
+    "plan_from_text",
 ]
 
 PROTOCOLS = ("comparison", "iterative", "transfer", "online")
@@ -86,6 +102,22 @@ DEFAULT_LIKERT = ("helped me", "I felt in control", "the motion was smooth", "I 
 RESERVED_NAMES = frozenset({"practice", "models", "answers", "transfer-set", "adaptation"})
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_-]{0,31}$")
 _MAX_CONDITIONS = 26  # labelled A … Z
+#: The ranges of the plan's numbers a study can use (module docstring), [s] unless said.
+MOTION_TIME_RANGE = (0.5, 120.0)  # a reach of the thesis takes 10-20 s
+DWELL_RANGE = (0.0, 30.0)  # (open below) the thesis' arm trials dwell 5 s
+REST_BETWEEN_CONDITIONS_MAX = 3600.0  # an hour's break is the most a session holds
+REST_BETWEEN_TRIALS_MAX = 600.0
+TOLERANCE_MAX = 1.0  # [m] the stop criterion's: a metre is no criterion at all
+CRITERION_HORIZON_MAX = 1000  # samples (the models' horizon bounds it further: study.preflight)
+MAX_SEED = 2**31 - 1  # seeds of trials are 10⁶·seed + …: they stay within int64
+#: [training]'s: a network a study's background process trains within a rest (study.preflight
+#: estimates the time and memory of what these allow).
+EPOCHS_MAX = 1000
+BATCH_SIZE_MAX = 65536
+LAYERS_MAX = 8
+WIDTH_MAX = 4096  # an LSTM's hidden size, an FC layer's width
+FC_LAYERS_MAX = 8
+LR_MAX = 10.0
 
 
 class PlanError(CoassistError, ValueError):
@@ -95,20 +127,18 @@ class PlanError(CoassistError, ValueError):
 # ----------------------------------------------------------------------------- field checks
 
 
-def _int(value: Any, name: str, lo: int, hi: int | None = None) -> int:
-    if not is_integer(value) or value < lo or (hi is not None and value > hi):
-        rng = f">= {lo}" if hi is None else f"in {lo} … {hi}"
-        raise PlanError(f"{name} must be an integer {rng}, got {value!r}")
+def _int(value: Any, name: str, lo: int, hi: int) -> int:
+    if not is_integer(value) or value < lo or value > hi:
+        raise PlanError(f"{name} must be an integer in {lo} … {hi}, got {value!r}")
     return int(value)
 
 
-def _opt_seconds(value: Any, name: str) -> float | None:
-    return None if value is None else _seconds(value, name, positive=True)
-
-
-def _seconds(value: Any, name: str, *, positive: bool = False) -> float:
-    if not is_real_number(value) or not math.isfinite(value) or value < 0 or (positive and value == 0):
-        raise PlanError(f"{name} must be a finite number of seconds {'> 0' if positive else '>= 0'}, got {value!r}")
+def _seconds(value: Any, name: str, lo: float, hi: float, *, open_lo: bool = False) -> float:
+    """A number of seconds in [lo, hi] (``open_lo``: (lo, hi]); a string, bool, NaN or inf is refused."""
+    if not is_real_number(value) or not math.isfinite(value) or value > hi or value < lo or (open_lo and value == lo):
+        raise PlanError(
+            f"{name} must be a number of seconds in {'(' if open_lo else '['}{lo:g}, {hi:g}], got {value!r}"
+        )
     return float(value)
 
 
@@ -144,20 +174,38 @@ def _table(data: Mapping[str, Any], key: str, fields: tuple[str, ...], where: st
 
 def _model_path(value: Any, name: str, base: Path) -> str:
     """A model folder named in the plan, relative to the plan's folder: its absolute path, checked now."""
+    marker = intent_registry.INTENT_FOLDERS["model"].marker
     if not isinstance(value, str) or not value:
         raise PlanError(f"{name} must be a model folder written by coassist train, got {value!r}")
     path = Path(value) if Path(value).is_absolute() else base / value
-    if not (path / "model.json").is_file():
-        raise PlanError(f"{name}: {value!r} is not a model folder (no model.json in {path})")
+    if not (path / marker).is_file():
+        raise PlanError(f"{name}: {value!r} is not a model folder (no {marker} in {path})")
     return str(path.resolve())
 
 
+def person_intents() -> tuple[str, ...]:
+    """The named intent sources a person's trial can use: every entry of
+    :data:`coassist.scenario.intent_registry.INTENT_SOURCES` that is not simulation-only, read
+    when called (a source registered there is one, with nothing to change here)."""
+    return tuple(n for n, e in intent_registry.INTENT_SOURCES.items() if not e.simulation_only)
+
+
 def _intent(value: Any, name: str, base: Path) -> str:
-    if value == "nominal":
-        return "nominal"
-    if value == "oracle":
-        raise PlanError(f"{name}: a person has no oracle; use 'nominal' or a model folder")
-    return _model_path(value, name, base)
+    """A condition's intent source: a name of :func:`person_intents`, or the absolute path of a folder of a
+    kind in :data:`~coassist.scenario.intent_registry.INTENT_FOLDERS` (a model, a calibration), by its marker."""
+    sources, folders = intent_registry.INTENT_SOURCES, intent_registry.INTENT_FOLDERS
+    markers = " or ".join(kind.marker for kind in folders.values())
+    choices = f"a source a person can run ({', '.join(person_intents())}) or a folder with {markers}"
+    if isinstance(value, str) and value in sources:
+        if sources[value].simulation_only:
+            raise PlanError(f"{name}: {value!r} is {sources[value].summary}, which a person has not; use {choices}")
+        return value
+    if not isinstance(value, str) or not value:
+        raise PlanError(f"{name} must be {choices}, got {value!r}")
+    path = Path(value) if Path(value).is_absolute() else base / value
+    if intent_registry.intent_folder_kind(str(path)) is None:
+        raise PlanError(f"{name}: {value!r} is not {choices} (none in {path})")
+    return str(path.resolve())
 
 
 # ----------------------------------------------------------------------------- the tables
@@ -169,7 +217,8 @@ class Condition:
 
     name : letters, digits, ``-``, ``_`` (it names the condition's folder; the page never sees it).
     controller : one of :data:`coassist.control.presets.CONTROLLER_KINDS`.
-    intent : ``"nominal"`` or the absolute path of a model folder.
+    intent : a name of :func:`person_intents` (``"nominal"``, ``"paths"``, …) or the absolute path of a
+        folder of a kind in :data:`~coassist.scenario.intent_registry.INTENT_FOLDERS` (a model, a calibration).
     """
 
     name: str
@@ -292,7 +341,10 @@ class OnlinePlan:
 
 @dataclass(frozen=True)
 class StudyPlan:
-    """The whole plan (module docstring). ``base`` is the plan file's folder (model paths are relative to it)."""
+    """The whole plan (module docstring); folder paths in it are absolute (relative in the file: to its folder).
+
+    id_pattern : the regular expression a person's id must match whole (:mod:`coassist.study.ids`).
+    """
 
     name: str
     protocol: str
@@ -300,6 +352,7 @@ class StudyPlan:
     participants: int
     seed: int
     conditions: tuple[Condition, ...]
+    id_pattern: str = DEFAULT_ID_PATTERN
     trials: TrialsPlan = field(default_factory=TrialsPlan)
     rest: RestPlan = field(default_factory=RestPlan)
     questionnaire: QuestionnairePlan = field(default_factory=QuestionnairePlan)
@@ -307,14 +360,26 @@ class StudyPlan:
     iterative: IterativePlan | None = None
     transfer: TransferPlan | None = None
     online: OnlinePlan | None = None
+    #: who ``--simulate``'s participants are (:data:`coassist.scenario.populations.POPULATIONS`)
+    population: str = "thesis"
 
-    def model_paths(self) -> tuple[str, ...]:
-        """Every model folder the plan names (their weights are recorded at ``study init``)."""
-        out = [c.intent for c in self.conditions if c.intent != "nominal"]
+    def intent_folders(self) -> tuple[str, ...]:
+        """Every folder the plan names, models and calibrations (their hashes are recorded at ``study init``)."""
+        out = [c.intent for c in self.conditions if c.intent not in intent_registry.INTENT_SOURCES]
         for extra in (self.transfer, self.online):
             if extra is not None:
                 out.append(extra.source_model)
         return tuple(dict.fromkeys(out))
+
+    def task_end(self) -> float:
+        """[s] the latest end of a task's planned motion among the plan's tasks (the play world's
+        ``motion_time``, or the thesis' per path on an arm)."""
+        mt = self.trials.motion_time if self.world == "play" else None
+        return max(float(task_for_seed(kind, 0, motion_time=mt).planner.end_time) for kind in self.trials.tasks)
+
+    def dwell(self) -> float:
+        """[s] in the target ball that ends a trial (the arm worlds: ``coassist drive``'s)."""
+        return self.trials.dwell if self.world == "play" else DWELL
 
 
 _TOP = ("study", "condition", "trials", "rest", "questionnaire", "training", "iterative", "transfer", "online")
@@ -326,7 +391,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     for k in data:
         if k not in _TOP:
             raise PlanError(f"{k}: {unknown_name_message(k, _TOP, 'table')}")
-    s = _table(data, "study", ("name", "protocol", "world", "participants", "seed"))
+    s = _table(data, "study", ("name", "protocol", "world", "participants", "seed", "id_pattern", "population"))
     if "name" not in s:
         raise PlanError("study.name is missing (a short name: letters, digits, - and _)")
     name = s["name"]
@@ -335,7 +400,13 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     protocol = _choice(s.get("protocol", "comparison"), "study.protocol", PROTOCOLS, "protocol")
     world = _choice(s.get("world", "play"), "study.world", WORLDS, "world")
     participants = _int(s.get("participants", 4), "study.participants", 1, 999)
-    seed = _int(s.get("seed", 0), "study.seed", 0)
+    seed = _int(s.get("seed", 0), "study.seed", 0, MAX_SEED)
+    id_pattern = s.get("id_pattern", DEFAULT_ID_PATTERN)
+    try:
+        compile_id_pattern(id_pattern)
+    except IdError as exc:
+        raise PlanError(f"study.id_pattern: {exc}") from None
+    population = _choice(s.get("population", "thesis"), "study.population", POPULATIONS, "population")
 
     t = _table(data, "trials", tuple(TrialsPlan.__dataclass_fields__))
     tasks = t.get("tasks", list(TrialsPlan.tasks))
@@ -350,7 +421,9 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
         raise PlanError(
             f"trials.object must be 'handle' in the play world (the page's robot carries nothing), got {obj!r}"
         )
-    motion_time = _opt_seconds(t.get("motion_time"), "trials.motion_time")
+    motion_time = (
+        None if t.get("motion_time") is None else _seconds(t["motion_time"], "trials.motion_time", *MOTION_TIME_RANGE)
+    )
     if world != "play":  # coassist drive plans the thesis' motion times and ends a trial after 5 s in the 2.5 cm ball
         for key in ("motion_time", "dwell", "arrive_radius"):
             if key in t:
@@ -365,18 +438,20 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
         object=obj,
         obstacle=_choice(t.get("obstacle", "small"), "trials.obstacle", tuple(OBSTACLES), "obstacle"),
         motion_time=motion_time,
-        dwell=_seconds(t.get("dwell", 3.0), "trials.dwell", positive=True),
+        dwell=_seconds(t.get("dwell", 3.0), "trials.dwell", *DWELL_RANGE, open_lo=True),
         arrive_radius=_number(
             t.get("arrive_radius", 0.025), "trials.arrive_radius", "in (0, 0.5] m", lambda v: 0 < v <= 0.5
         ),
-        time_limit=_opt_seconds(t.get("time_limit"), "trials.time_limit"),
+        time_limit=None
+        if t.get("time_limit") is None
+        else _seconds(t["time_limit"], "trials.time_limit", 0.0, MAX_TIME_LIMIT, open_lo=True),
         preset=preset,
     )
 
     r = _table(data, "rest", ("between_conditions", "between_trials"))
     rest = RestPlan(
-        _seconds(r.get("between_conditions", 60.0), "rest.between_conditions"),
-        _seconds(r.get("between_trials", 0.0), "rest.between_trials"),
+        _seconds(r.get("between_conditions", 60.0), "rest.between_conditions", 0.0, REST_BETWEEN_CONDITIONS_MAX),
+        _seconds(r.get("between_trials", 0.0), "rest.between_trials", 0.0, REST_BETWEEN_TRIALS_MAX),
     )
 
     q = _table(data, "questionnaire", ("tlx", "likert", "likert_points"))
@@ -407,8 +482,15 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
         iterative = IterativePlan(
             rounds=_int(it.get("rounds", 3), "iterative.rounds", 1, 50),
             trials_per_round=_int(it.get("trials_per_round", 6), "iterative.trials_per_round", 1, 1000),
-            tolerance=_number(it.get("tolerance", 1e-3), "iterative.tolerance", "> 0 [m]", lambda v: v > 0),
-            criterion_horizon=_int(it.get("criterion_horizon", 50), "iterative.criterion_horizon", 1),
+            tolerance=_number(
+                it.get("tolerance", 1e-3),
+                "iterative.tolerance",
+                f"in (0, {TOLERANCE_MAX:g}] m",
+                lambda v: 0 < v <= TOLERANCE_MAX,
+            ),
+            criterion_horizon=_int(
+                it.get("criterion_horizon", 50), "iterative.criterion_horizon", 1, CRITERION_HORIZON_MAX
+            ),
             stop_at_criterion=_bool(it.get("stop_at_criterion", True), "iterative.stop_at_criterion"),
             controller=_choice(
                 it.get("controller", "cooperative"), "iterative.controller", CONTROLLER_KINDS, "controller"
@@ -435,13 +517,14 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
             transfer = TransferPlan(source, n, controller)
         else:
             online = OnlinePlan(source, n, controller)
-    return StudyPlan(
+    plan = StudyPlan(
         name=name,
         protocol=protocol,
         world=world,
         participants=participants,
         seed=seed,
         conditions=conditions,
+        id_pattern=id_pattern,
         trials=trials,
         rest=rest,
         questionnaire=questionnaire,
@@ -449,7 +532,24 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
         iterative=iterative,
         transfer=transfer,
         online=online,
+        population=population,
     )
+    _check_trial_time(plan, "time_limit" in t)
+    return plan
+
+
+def _check_trial_time(plan: StudyPlan, limit_given: bool) -> None:
+    """A trial must be able to end in the target: its time limit covers the longest task's planned motion
+    and the dwell after it (else every trial runs to its limit, or, for a limit under a tick, fails)."""
+    end, dwell = plan.task_end(), plan.dwell()
+    limit = plan.trials.time_limit if plan.trials.time_limit is not None else 2.0 * end + 10.0
+    if limit < end + dwell:
+        field = "trials.time_limit" if limit_given else "trials.dwell"
+        raise PlanError(
+            f"{field}: a time limit of {limit:g} s leaves no time to dwell {dwell:g} s in the target after the "
+            f"longest task's planned motion ({end:g} s): no trial could end in the target; give time_limit >= "
+            f"{end + dwell:g} s or a shorter dwell"
+        )
 
 
 def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Condition, ...]:
@@ -496,13 +596,19 @@ def _training(data: Mapping[str, Any]) -> TrainingPlan:
     if not isinstance(preset, str) or preset not in MODEL_PRESETS:
         raise PlanError(f"training.preset: {unknown_name_message(str(preset), MODEL_PRESETS, 'intent-model preset')}")
 
-    def opt_int(key: str, lo: int) -> int | None:
-        return None if tr.get(key) is None else _int(tr[key], f"training.{key}", lo)
+    def opt_int(key: str, lo: int, hi: int) -> int | None:
+        return None if tr.get(key) is None else _int(tr[key], f"training.{key}", lo, hi)
 
     fc = tr.get("fc")
     if fc is not None:
-        if not isinstance(fc, list) or not all(is_integer(v) and v >= 1 for v in fc):
-            raise PlanError(f"training.fc must be a list of layer widths >= 1, got {fc!r}")
+        if (
+            not isinstance(fc, list)
+            or len(fc) > FC_LAYERS_MAX
+            or not all(is_integer(v) and 1 <= v <= WIDTH_MAX for v in fc)
+        ):
+            raise PlanError(
+                f"training.fc must be a list of at most {FC_LAYERS_MAX} layer widths in 1 … {WIDTH_MAX}, got {fc!r}"
+            )
         fc = tuple(int(v) for v in fc)
     optimizer = tr.get("optimizer")
     if optimizer is not None:
@@ -511,15 +617,15 @@ def _training(data: Mapping[str, Any]) -> TrainingPlan:
     tf = tr.get("test_fraction")
     return TrainingPlan(
         preset=preset,
-        epochs=opt_int("epochs", 1),
-        batch_size=opt_int("batch_size", 1),
-        seed=opt_int("seed", 0),
+        epochs=opt_int("epochs", 1, EPOCHS_MAX),
+        batch_size=opt_int("batch_size", 1, BATCH_SIZE_MAX),
+        seed=opt_int("seed", 0, 2**32 - 1),
         threads=_int(tr.get("threads", 1), "training.threads", 1, 256),
-        layers=opt_int("layers", 0),
-        hidden=opt_int("hidden", 1),
+        layers=opt_int("layers", 0, LAYERS_MAX),
+        hidden=opt_int("hidden", 1, WIDTH_MAX),
         fc=fc,
         optimizer=optimizer,
-        lr=None if lr is None else _number(lr, "training.lr", "> 0", lambda v: v > 0),
+        lr=None if lr is None else _number(lr, "training.lr", f"in (0, {LR_MAX:g}]", lambda v: 0 < v <= LR_MAX),
         test_fraction=None if tf is None else _number(tf, "training.test_fraction", "in [0, 1)", lambda v: 0 <= v < 1),
     )
 

@@ -46,7 +46,15 @@ from typing import Any
 from coassist.study.design import participant_order
 from coassist.study.plan import Condition, StudyPlan
 
-__all__ = ["participant_steps", "trial_seed_base"]
+__all__ = ["condition_names", "participant_steps", "trial_seed_base"]
+
+
+def condition_names(plan: StudyPlan) -> list[str]:
+    """The blinded conditions of the plan's protocol (those shown as A, B, C…), in the plan's order
+    (the iterative protocol has rounds, not conditions)."""
+    if plan.protocol == "comparison":
+        return [c.name for c in plan.conditions]
+    return {"transfer": ["source", "transferred"], "online": ["online", "offline"]}.get(plan.protocol, [])
 
 
 def trial_seed_base(plan: StudyPlan, number: int) -> int:

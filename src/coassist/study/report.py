@@ -20,6 +20,14 @@ with every figure embedded as a PNG):
 
 The blinding key is used here (the report is the researcher's): conditions are shown by
 name with their label.
+
+The folder is read as evidence: the participant table and every participant's log are
+cross-checked first (:meth:`~coassist.study.store.StudyFolder.check_table`,
+:meth:`~coassist.study.store.ParticipantFolder.audit`), the answers checked against the
+plan's questionnaire as they are read, and a trial file that cannot be read is one
+:class:`~coassist.study.store.StudyFolderError` line naming it: a report never averages a
+trial twice, drops a condition or a participant without saying so, or takes an answer off
+its scale.
 """
 
 from __future__ import annotations
@@ -38,9 +46,9 @@ from coassist._io import atomic_write_text
 from coassist.data import read_dataset
 from coassist.data.store import MANIFEST_NAME
 from coassist.study.measures import MEASURES, trial_measures
-from coassist.study.questionnaires import TLX_ITEMS, raw_tlx
+from coassist.study.questionnaires import TLX_ITEMS, Form, form_for, raw_tlx
 from coassist.study.stats import holm_family, order_effect, paired_comparison
-from coassist.study.store import StudyFolder
+from coassist.study.store import StudyFolder, StudyFolderError, finite_json
 
 __all__ = ["sample_limits", "study_summary", "write_report"]
 
@@ -61,10 +69,35 @@ def _blocks(study: StudyFolder, plan) -> list[str]:
     return list(study.labels)
 
 
-def _participant_data(study: StudyFolder, pid: str, blocks: list[str]) -> dict[str, Any]:
+def _read_block(folder: Path):
+    """The block's trials; a file that cannot be read is one line naming it (never a traceback)."""
+    try:
+        return read_dataset(folder).trials
+    except (ValueError, OSError) as exc:  # TrialFileError, ManifestError, FileNotFoundError name the file
+        what = " ".join(str(exc).split())  # one line: a parquet reader's message may span several
+        raise StudyFolderError(f"{what}; restore it from your backup of the study folder") from None
+
+
+def _answers(pf, i: int, rec: dict[str, Any], form: Form) -> dict[str, int]:
+    """A questionnaire line's answers, checked against the plan's form as they are read."""
+    answers = rec.get("answers")
+    keys = [item.key for item in form.items]
+    try:
+        if not isinstance(answers, dict) or sorted(answers) != sorted(keys):
+            raise ValueError(f"expected the items {keys}, got {answers!r}")
+        return form.check([answers[k] for k in keys])
+    except ValueError as exc:
+        raise StudyFolderError(
+            f"{pf.progress_file}: line {i + 1}: answers off the questionnaire ({exc}; edited by hand?); restore it "
+            "from your backup of the study folder"
+        ) from None
+
+
+def _participant_data(study: StudyFolder, pid: str, blocks: list[str], form: Form) -> dict[str, Any]:
     pf = study.participant(pid)
     order = pf.order() or {"steps": []}
     progress = pf.progress()
+    pf.audit(order["steps"], progress)
     data: dict[str, Any] = {
         "complete": bool(order["steps"])
         and (len(progress) == len(order["steps"]) or bool(progress and progress[-1].get("stop"))),
@@ -78,14 +111,14 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str]) -> dict[s
     for s in order["steps"]:
         if s["kind"] == "trial" and not s["practice"]:
             data["positions"][s["block"]] = s["position"]
-    for r in progress:
+    for i, r in enumerate(progress):
         if r["kind"] == "questionnaire":
-            data["answers"][r["block"]] = r["answers"]
+            data["answers"][r["block"]] = _answers(pf, i, r, form)
     for b in [*blocks, "transfer-set", "adaptation"]:
         folder = pf.block(b)
         if not (folder / MANIFEST_NAME).is_file():
             continue
-        trials = read_dataset(folder).trials
+        trials = _read_block(folder)
         per_trial = [trial_measures(t) for t in trials]
         forces = [(t.time - t.time[0], np.linalg.norm(t.wrench[:, :2], axis=1)) for t in trials]
         data["blocks"][b] = {
@@ -163,8 +196,9 @@ def study_summary(folder: str | Path) -> dict[str, Any]:
     study = StudyFolder(folder)
     plan = study.plan()
     blocks = _blocks(study, plan)
-    table = study.participants()
-    participants = {pid: _participant_data(study, pid, blocks) for pid in sorted(table)}
+    table = study.check_table()
+    form = form_for(plan.questionnaire)
+    participants = {pid: _participant_data(study, pid, blocks, form) for pid in sorted(table)}
     labels = study.labels
     measured = {pid: d for pid, d in participants.items() if any(b in d["blocks"] for b in blocks)}
     # per participant (mean over their measured trials) and pooled (mean and sd over participants)
@@ -268,7 +302,7 @@ def study_summary(folder: str | Path) -> dict[str, Any]:
         },
         "models": _models(study, participants),
     }
-    return _finite(summary)
+    return finite_json(summary)
 
 
 def _answer(ans: dict[str, int] | None, key: str) -> float:
@@ -286,7 +320,14 @@ def _models(study: StudyFolder, participants: dict[str, Any]) -> dict[str, Any]:
         if not folder.is_dir():
             continue
         for m in sorted(p for p in folder.iterdir() if (p / "model.json").is_file()):
-            meta = json.loads((m / "model.json").read_text("utf-8"))
+            try:
+                meta = json.loads((m / "model.json").read_bytes().decode("utf-8"))
+                if not isinstance(meta, dict):
+                    raise ValueError("not a JSON object")
+            except (ValueError, OSError) as exc:
+                raise StudyFolderError(
+                    f"{m / 'model.json'}: unreadable ({exc}); restore it from your backup of the study folder"
+                ) from None
             info = meta.get("info", meta)
             hist = info.get("training_history") or [{}]
             out.setdefault(pid, {})[m.name] = {
@@ -296,19 +337,6 @@ def _models(study: StudyFolder, participants: dict[str, Any]) -> dict[str, Any]:
                 "test_loss": hist[-1].get("test_loss"),
             }
     return out
-
-
-def _finite(obj: Any) -> Any:
-    """NaN and inf as null (strict JSON)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {str(k): _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return _finite(obj.item())
-    return obj
 
 
 # ----------------------------------------------------------------------------- the HTML
@@ -372,7 +400,7 @@ def _force_figure(folder: Path, summary: dict[str, Any]) -> str:
             f = study.participant(pid).block(b)
             if not (f / MANIFEST_NAME).is_file():
                 continue
-            for t in read_dataset(f).trials:
+            for t in _read_block(f):
                 ax.plot(t.time - t.time[0], np.linalg.norm(t.wrench[:, :2], axis=1), lw=0.6, alpha=0.5)
         ax.set_title(_name(summary, b), fontsize=9)
         ax.set_xlabel("t [s]")

@@ -96,7 +96,7 @@ class ParticipantRun:
         self.simulate, self.page, self.realtime = simulate, page, realtime
         self.host, self.confirm = host, confirm
         self.say = say or (lambda line: None)
-        self.record = study.register(participant, simulated=simulate)
+        self.record = study.register(participant, simulated=simulate)  # the table cross-checked first
         self.folder: ParticipantFolder = study.participant(participant)
         self.session: Any = None
         self.server: Any = None
@@ -132,16 +132,10 @@ class ParticipantRun:
             self.folder.write_order(order)
         self.order = order
         self.steps: list[dict[str, Any]] = order["steps"]
+        self.folder.audit(self.steps)  # the log, the order and the manifests agree (else one line, nothing run)
         if self.folder.reconcile(self.steps):
             self.say(f"{self.id}: recovered the last trial's record (the run stopped while writing it)")
-        done = self.folder.progress()
-        for i, rec_i in enumerate(done):
-            if i >= len(self.steps) or rec_i.get("key") != step_key(self.steps[i]):
-                raise StudyFolderError(
-                    f"{self.folder.progress_file}: line {i + 1} is not step {i} of {self.folder.folder / 'order.json'}"
-                    " (edited by hand?)"
-                )
-        self.done = done
+        self.done = self.folder.progress()
         tp = plan.trials
         kinds = sorted({s["controller"] for s in self.steps if s["kind"] == "trial"})
         config = PlayConfig(
@@ -164,14 +158,23 @@ class ParticipantRun:
             *CONTROLLER_KINDS,
             *FORMER_NAMES,
             *(c.name for c in plan.conditions),
-            *plan.model_paths(),
+            *(c.intent for c in plan.conditions if c.intent != "nominal"),  # a named source names the condition
+            *plan.intent_folders(),
             "source",
             "transferred",
             "online",
             "offline",
             str(self.folder.folder / "models"),
         )
-        drive = {"object": tp.object, "obstacle": tp.obstacle, "preset": tp.preset, "time_limit": tp.time_limit}
+        drive = {
+            "object": tp.object,
+            "obstacle": tp.obstacle,
+            "preset": tp.preset,
+            "time_limit": tp.time_limit,
+            # MuJoCo's simulated participant p is the page's: operator p of the plan's population and seed
+            "population": plan.population,
+            "population_seed": plan.seed,
+        }
         self.session = StudySession(
             config, world=plan.world, secrets=secrets, drive=drive, host=self.host, confirm=self.confirm, live=self.live
         )
@@ -208,6 +211,10 @@ class ParticipantRun:
         """Run the steps not yet on record; True once the participant has done all of them."""
         if self.done:
             self.say(f"{self.id}: resuming at step {len(self.done) + 1} of {len(self.steps)}")
+        else:
+            estimate = self.study.estimate()
+            for line in estimate.lines() if estimate is not None else ():
+                self.say(f"{self.id}: {line}")
         while not self.complete:
             k = len(self.done)
             step = self.steps[k]
@@ -258,7 +265,7 @@ class ParticipantRun:
             hand = OperatorHand(
                 task,
                 step["seed"],
-                simulated_profile(operator, plan.seed),
+                simulated_profile(operator, plan.seed, plan.population),
                 dt,
                 episode_ticks(task, dt, tp.time_limit) + 1,
             )
@@ -273,7 +280,9 @@ class ParticipantRun:
             "study_position": step["position"],
             "study_practice": step["practice"],
             "study_model": model_name,
-            "study_operator": None if operator is None else simulated_profile(operator, plan.seed).name,
+            "study_operator": None
+            if operator is None
+            else simulated_profile(operator, plan.seed, plan.population).name,
         }
         setup = TrialSetup(
             step=k,
@@ -442,7 +451,7 @@ class ParticipantRun:
                 form,
                 f,
                 s,
-                simulated_profile(self.record["number"], self.plan.seed),
+                simulated_profile(self.record["number"], self.plan.seed, self.plan.population),
                 np.random.default_rng([self.plan.seed, self.record["number"], k]),
             )
             answers = form.check(values)
@@ -472,7 +481,9 @@ class ParticipantRun:
 
     def _rest(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
         t0 = time.monotonic()
-        seconds = float(step["seconds"]) if self.page is not None else 0.0
+        rest = self.plan.rest  # the plan's length, not the recorded step's (coassist study amend may change it)
+        planned = rest.between_trials if step.get("why") == "between trials" else rest.between_conditions
+        seconds = float(planned) if self.page is not None else 0.0
         view = self._view(
             k,
             step,
@@ -495,10 +506,11 @@ class ParticipantRun:
             rounds[r] = err[h]["e_rms"] if h in err else math.nan
         e_prev, e_now = rounds[step["round"] - 1], rounds[step["round"]]
         delta = abs(e_now - e_prev)
-        met = bool(delta < it.tolerance)
+        computable = math.isfinite(delta)  # a round whose trials logged no prediction h long: not met, go on
+        met = computable and bool(delta < it.tolerance)
         self.say(
             f"{self.id}: round {step['round']}: in-loop e_RMS {1e3 * e_now:.2f} mm (was {1e3 * e_prev:.2f}); "
-            f"criterion {'met' if met else 'not met'}"
+            + (f"criterion {'met' if met else 'not met'}" if computable else f"criterion not computable at {h} samples")
         )
         return {
             "round": step["round"],
@@ -506,6 +518,7 @@ class ParticipantRun:
             "e_rms_before": e_prev,
             "delta": delta,
             "tolerance": it.tolerance,
+            "criterion_horizon": h,
             "met": met,
             "stop": met and it.stop_at_criterion and step["round"] < it.rounds - 1,
         }

@@ -15,8 +15,9 @@
         practice/                the practice trials (a dataset too; not analysed)
         models/<name>/           the models the study trained for this participant
 
-Nothing personal is stored: an id is 1–32 letters, digits, ``-`` or ``_`` chosen by the
-researcher (``P07``), and trials carry it as their user.
+Nothing personal is stored: an id is a pseudonym of the form the plan sets (``P07``;
+:mod:`coassist.study.ids` refuses names, dates, ids that differ from another in case only),
+and trials carry it as their user.
 
 Lossless: every file is written atomically (:mod:`coassist._io`); a trial is committed in
 two steps, its dataset's manifest (:func:`coassist.data.append_to_dataset`) and then its
@@ -29,7 +30,17 @@ written then (:meth:`ParticipantFolder.reconcile`), so it is neither lost nor ru
 A participant's folder is locked while a run uses it (:class:`coassist._io.OutputLock`):
 two runs never write the same participant. The plan may be replaced (``study init``
 again) until the first trial of anyone has run; after that a changed ``plan.toml`` (or a
-changed model it names) is refused with one line.
+changed model it names) is refused with one line, but for its safe fields
+(:data:`SAFE_FIELDS`: those that change no finished trial), which :func:`amend_study`
+changes with a reason, recorded in ``study.json`` (the plan it replaced kept in ``plans/``).
+
+The folder is evidence, cross-checked on every run and report: the participant table
+against the participants' folders (:meth:`StudyFolder.check_table`), each participant's
+progress log against their order and their blocks' manifests
+(:meth:`ParticipantFolder.audit`). A trial on disk the log does not know, a trial the log
+records that its block's manifest or folder lost, a participant's folder the table does not
+list: one :class:`StudyFolderError` line naming the file and what to do, never a silent
+re-run. No JSON file gets a NaN or an infinity (:func:`finite_json`: null).
 """
 
 from __future__ import annotations
@@ -37,20 +48,34 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import json
+import math
 import os
-import re
 from collections.abc import Mapping
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import coassist
-from coassist._io import OutputLock, atomic_write_text, fsync_dir
+from coassist._io import OutputLock, atomic_write_bytes, atomic_write_text, fsync_dir
 from coassist.data.store import MANIFEST_NAME
 from coassist.errors import CoassistError
+from coassist.scenario import intent_registry
 from coassist.study.design import blinding_labels, latin_square_rows
+from coassist.study.ids import IdError, check_id
 from coassist.study.plan import StudyPlan, load_plan
+from coassist.study.preflight import SessionEstimate, preflight
+from coassist.study.protocols import condition_names
 
-__all__ = ["PARTICIPANT_ID", "ParticipantFolder", "StudyFolder", "StudyFolderError", "init_study"]
+__all__ = [
+    "SAFE_FIELDS",
+    "ParticipantFolder",
+    "StudyFolder",
+    "StudyFolderError",
+    "amend_study",
+    "finite_json",
+    "init_study",
+    "plan_differences",
+]
 
 FORMAT = "coassist-study/1"
 PLAN_NAME = "plan.toml"
@@ -58,8 +83,24 @@ STUDY_NAME = "study.json"
 PARTICIPANTS_NAME = "participants.json"
 ORDER_NAME = "order.json"
 PROGRESS_NAME = "progress.jsonl"
-#: A pseudonymous participant id: it names a folder, and nothing else about the person.
-PARTICIPANT_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,31}$")
+PLANS_NAME = "plans"  # the plans an amendment replaced, as <sha256>.toml
+#: The plan's fields ``coassist study amend`` may change once trials have run: none changes a
+#: finished trial or the steps a participant has been given (their order is fixed at their
+#: first run). A rest takes its length from the plan the run loaded, not from the recorded
+#: steps; the stop criterion is checked with the plan's values when its step comes (and
+#: records them); the thread count of a training is part of the command line recorded with
+#: its model. An amendment applies from each participant's next run.
+SAFE_FIELDS = (
+    "study.participants",
+    "study.id_pattern",
+    "rest.between_conditions",
+    "rest.between_trials",
+    "iterative.criterion_horizon",
+    "iterative.tolerance",
+    "iterative.stop_at_criterion",
+    "training.threads",
+)
+_RESTORE = "restore it from your backup of the study folder"
 
 
 class StudyFolderError(CoassistError, ValueError):
@@ -74,27 +115,50 @@ def utc_now() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
+def finite_json(obj: Any) -> Any:
+    """``obj`` with every NaN and infinity as None (strict JSON; a float a JSON file cannot hold is null)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): finite_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite_json(v) for v in obj]
+    if hasattr(obj, "dtype") and hasattr(obj, "item"):  # a numpy scalar
+        return finite_json(obj.item())
+    return obj
+
+
 def _json(obj: Any) -> str:
-    return json.dumps(obj, indent=1, allow_nan=False, sort_keys=False) + "\n"
+    return json.dumps(finite_json(obj), indent=1, allow_nan=False, sort_keys=False) + "\n"
 
 
-def model_weights_hash(path: str | Path) -> str:
-    """The ``weights_sha256`` a model's sidecar records (what identifies its weights)."""
+def intent_folder_hash(path: str | Path) -> str:
+    """What identifies a folder the plan names: a model's ``weights_sha256`` (its sidecar's), else the
+    SHA-256 of the file that marks its kind (a calibration's ``path-hypotheses.json``)."""
+    kind = intent_registry.intent_folder_kind(str(path))
+    if kind is None or kind == "model":
+        try:
+            meta = json.loads((Path(path) / "model.json").read_text("utf-8"))
+            return str(meta["weights_sha256"])
+        except (OSError, ValueError, KeyError, TypeError):
+            raise StudyFolderError(f"{path}: not a readable model folder (model.json with weights_sha256)") from None
+    marker = Path(path) / intent_registry.INTENT_FOLDERS[kind].marker
     try:
-        meta = json.loads((Path(path) / "model.json").read_text("utf-8"))
-        return str(meta["weights_sha256"])
-    except (OSError, ValueError, KeyError, TypeError):
-        raise StudyFolderError(f"{path}: not a readable model folder (model.json with weights_sha256)") from None
+        return _sha256(marker.read_bytes())
+    except OSError as exc:
+        raise StudyFolderError(f"{marker}: unreadable ({exc.strerror})") from None
 
 
 def init_study(plan_file: str | Path, out: str | Path) -> StudyFolder:
-    """Validate ``plan_file`` and make ``out`` its study folder (module docstring).
+    """Validate ``plan_file`` whole (:func:`coassist.study.preflight.preflight`) and make ``out`` its
+    study folder (module docstring); the session's estimate is recorded in ``study.json``.
 
     An existing study folder with the same plan is left as it is; with another plan it is
     updated only while no trial has run (else :class:`StudyFolderError`, one line).
     """
     plan_file = Path(plan_file)
     plan = load_plan(plan_file)
+    estimate = preflight(plan)
     raw = plan_file.read_bytes()
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -109,9 +173,10 @@ def init_study(plan_file: str | Path, out: str | Path) -> StudyFolder:
             if old.any_trial():
                 raise StudyFolderError(
                     f"{out}: trials have run under its plan (sha256 {old.record['plan_sha256'][:12]}); a changed plan "
-                    "needs a new study folder"
+                    f"needs a new study folder (its safe fields, {', '.join(SAFE_FIELDS)}: coassist study amend)"
                 )
-        labels = blinding_labels(max(len(_condition_names(plan)), 1), plan.seed)
+        names = condition_names(plan)
+        labels = blinding_labels(max(len(names), 1), plan.seed)
         record = {
             "format": FORMAT,
             "name": plan.name,
@@ -122,14 +187,13 @@ def init_study(plan_file: str | Path, out: str | Path) -> StudyFolder:
             "created": utc_now(),
             "coassist_version": coassist.__version__,
             # the blinding key: condition -> label shown on the page (kept here only)
-            "labels": dict(zip(_condition_names(plan), labels)),
-            "models": {p: model_weights_hash(p) for p in plan.model_paths()},
-            "latin_square": latin_square_rows(max(len(_condition_names(plan)), 1)),
+            "labels": dict(zip(names, labels)),
+            "models": {p: intent_folder_hash(p) for p in plan.intent_folders()},
+            "latin_square": latin_square_rows(max(len(names), 1)),
+            "estimate": estimate.to_json(),
         }
         out.mkdir(parents=True, exist_ok=True)
         (out / "participants").mkdir(exist_ok=True)
-        from coassist._io import atomic_write_bytes
-
         atomic_write_bytes(out / PLAN_NAME, raw)
         atomic_write_text(out / STUDY_NAME, _json(record))
         if not (out / PARTICIPANTS_NAME).is_file():
@@ -137,15 +201,68 @@ def init_study(plan_file: str | Path, out: str | Path) -> StudyFolder:
     return StudyFolder(out)
 
 
-def _condition_names(plan: StudyPlan) -> list[str]:
-    """The blinded conditions of the plan's protocol (those shown as A, B, C…), in the plan's order."""
-    if plan.protocol == "comparison":
-        return [c.name for c in plan.conditions]
-    if plan.protocol == "transfer":
-        return ["source", "transferred"]
-    if plan.protocol == "online":
-        return ["online", "offline"]
-    return []  # iterative: rounds, not conditions
+def plan_differences(old: StudyPlan, new: StudyPlan) -> dict[str, tuple[Any, Any]]:
+    """The plan's fields that differ, as written in the plan (``rest.between_trials``, ``condition``): (old, new)."""
+    a, b = asdict(old), asdict(new)
+    out: dict[str, tuple[Any, Any]] = {}
+    for key in a:
+        if key == "conditions":
+            if a[key] != b[key]:
+                out["condition"] = (a[key], b[key])
+        elif isinstance(a[key], dict) or isinstance(b[key], dict):
+            sub_a, sub_b = a[key] or {}, b[key] or {}
+            for k in dict.fromkeys([*sub_a, *sub_b]):
+                if sub_a.get(k) != sub_b.get(k) or (a[key] is None) != (b[key] is None):
+                    out[f"{key}.{k}"] = (sub_a.get(k), sub_b.get(k))
+        elif a[key] != b[key]:
+            out[f"study.{key}"] = (a[key], b[key])
+    return out
+
+
+def amend_study(folder: str | Path, plan_file: str | Path, reason: str) -> dict[str, Any]:
+    """Replace the study's plan by ``plan_file``, which may differ in :data:`SAFE_FIELDS` only, for ``reason``
+    (one line, recorded). The new plan is checked whole as at init; the one it replaces is kept in
+    ``plans/<sha256>.toml``. Returns the amendment's record (:class:`StudyFolderError` naming a field
+    that may not change)."""
+    if not isinstance(reason, str) or not reason.strip() or "\n" in reason or len(reason) > 500:
+        raise StudyFolderError("--reason must say why, on one line of at most 500 characters")
+    study = StudyFolder(folder)
+    old = study.plan()
+    plan_file = Path(plan_file)
+    new = load_plan(plan_file)
+    raw = plan_file.read_bytes()
+    changed = plan_differences(old, new)
+    if not changed:
+        raise StudyFolderError(f"{plan_file}: nothing to amend (the same plan as {study.folder / PLAN_NAME})")
+    for name in changed:
+        if name not in SAFE_FIELDS:
+            raise StudyFolderError(
+                f"{plan_file}: {name} cannot be amended: it would change what participants do or what a finished "
+                f"trial means; a study amends only {', '.join(SAFE_FIELDS)} (anything else: a new study folder)"
+            )
+    estimate = preflight(new)
+    with OutputLock(study.folder / STUDY_NAME):
+        record = dict(study.record)
+        old_raw = (study.folder / PLAN_NAME).read_bytes()
+        (study.folder / PLANS_NAME).mkdir(exist_ok=True)
+        atomic_write_bytes(study.folder / PLANS_NAME / f"{record['plan_sha256']}.toml", old_raw)
+        amendment = {
+            "t": utc_now(),
+            "from_sha256": record["plan_sha256"],
+            "to_sha256": _sha256(raw),
+            "fields": {k: list(v) for k, v in changed.items()},
+            "reason": reason.strip(),
+            "trials_before": study.any_trial(),
+        }
+        record.update(
+            plan_sha256=_sha256(raw),
+            plan_dir=str(plan_file.parent.resolve()),
+            estimate=estimate.to_json(),
+            amendments=[*record.get("amendments", []), amendment],
+        )
+        atomic_write_bytes(study.folder / PLAN_NAME, raw)
+        atomic_write_text(study.folder / STUDY_NAME, _json(record))
+    return amendment
 
 
 class StudyFolder:
@@ -178,13 +295,13 @@ class StudyFolder:
         if _sha256(raw) != self.record["plan_sha256"]:
             raise StudyFolderError(
                 f"{self.folder / PLAN_NAME} changed after study init (sha256 {self.record['plan_sha256'][:12]} recorded, "
-                f"{_sha256(raw)[:12]} now): {'trials have run under the old one; start a new study folder' if self.any_trial() else 'run coassist study init again'}"
+                f"{_sha256(raw)[:12]} now): {'trials have run under the old one: put it back, or start a new study folder (coassist study amend changes its safe fields)' if self.any_trial() else 'run coassist study init again'}"
             )
         for path, digest in self.record["models"].items():
-            if model_weights_hash(path) != digest:
+            if intent_folder_hash(path) != digest:
                 raise StudyFolderError(
-                    f"{path}: the model's weights changed after study init (the study compares the "
-                    "weights it recorded); start a new study folder"
+                    f"{path}: changed after study init (a model's weights, a calibration: the study compares "
+                    "what it recorded); put it back, or start a new study folder"
                 )
 
     @property
@@ -192,12 +309,73 @@ class StudyFolder:
         """The blinding key: condition → label (never sent to the page)."""
         return dict(self.record["labels"])
 
+    def estimate(self) -> SessionEstimate | None:
+        """The session's estimate recorded at init (or at the last amendment); None in an older folder."""
+        e = self.record.get("estimate")
+        return None if not isinstance(e, dict) else SessionEstimate(**e)
+
     # ------------------------------------------------------------------ participants
     def participants(self) -> dict[str, dict[str, Any]]:
+        """The participant table (id → number, row, simulated); one line naming the file if it is not one."""
+        path = self.folder / PARTICIPANTS_NAME
         try:
-            return json.loads((self.folder / PARTICIPANTS_NAME).read_text("utf-8"))
+            table = json.loads(path.read_bytes().decode("utf-8"))
         except FileNotFoundError:
             return {}
+        except (UnicodeDecodeError, ValueError):
+            raise StudyFolderError(f"{path}: not JSON (edited by hand?); {_RESTORE}") from None
+        except OSError as exc:
+            raise StudyFolderError(f"{path}: unreadable ({exc.strerror})") from None
+        ok = isinstance(table, dict) and all(
+            isinstance(rec, dict)
+            and isinstance(rec.get("number"), int)
+            and isinstance(rec.get("row"), int)
+            and isinstance(rec.get("simulated"), bool)
+            for rec in table.values()
+        )
+        if not ok:
+            raise StudyFolderError(
+                f"{path}: not a participant table (id → number, row, simulated; edited by hand?); {_RESTORE}"
+            )
+        return table
+
+    def started(self) -> dict[str, dict[str, Any]]:
+        """The participants whose folder holds an order (they have started): id → their ``order.json``."""
+        root = self.folder / "participants"
+        out = {}
+        for p in sorted(root.iterdir()) if root.is_dir() else ():
+            if p.is_dir() and not p.name.startswith(".") and (p / ORDER_NAME).is_file():
+                out[p.name] = ParticipantFolder(p, p.name).order() or {}
+        return out
+
+    def check_table(self) -> dict[str, dict[str, Any]]:
+        """The participant table, cross-checked against the participants' folders (module docstring):
+        every participant who started is listed, with the number and row of their order; numbers unique."""
+        path = self.folder / PARTICIPANTS_NAME
+        table = self.participants()
+        started = self.started()
+        if started and not path.is_file():
+            raise StudyFolderError(
+                f"{path}: missing, but {len(started)} participants have started ({', '.join(started)}): {_RESTORE} "
+                "(a new participant would take an occupied number and row)"
+            )
+        for pid, order in started.items():
+            rec = table.get(pid)
+            where = self.folder / "participants" / pid / ORDER_NAME
+            if rec is None:
+                raise StudyFolderError(
+                    f"{path} does not list {pid} ({where}: participant {order.get('number')}): {_RESTORE} "
+                    "(a new participant would take an occupied number and row)"
+                )
+            if (rec["number"], rec["row"]) != (order.get("number"), order.get("row")):
+                raise StudyFolderError(
+                    f"{path}: {pid} is number {rec['number']}, row {rec['row']}, but {where} says number "
+                    f"{order.get('number')}, row {order.get('row')} (edited by hand?); {_RESTORE}"
+                )
+        numbers = [rec["number"] for rec in table.values()]
+        if len(set(numbers)) != len(numbers):
+            raise StudyFolderError(f"{path}: two participants have the same number (edited by hand?); {_RESTORE}")
+        return table
 
     def any_trial(self) -> bool:
         """Whether any participant has a finished step on record."""
@@ -208,14 +386,16 @@ class StudyFolder:
 
     def register(self, participant: str, simulated: bool = False) -> dict[str, Any]:
         """The participant's record, made at their first run: number (1, 2, … in order of arrival),
-        Latin-square row (number − 1), and whether a simulated operator stands in (``--simulate``)."""
-        if not isinstance(participant, str) or not PARTICIPANT_ID.match(participant):
-            raise StudyFolderError(
-                f"--participant must be 1-32 letters, digits, '-' or '_' (a pseudonymous id; it "
-                f"names a folder), got {participant!r}"
-            )
+        Latin-square row (number − 1), and whether a simulated operator stands in (``--simulate``).
+        A new id must be a pseudonym of the plan's form (:func:`coassist.study.ids.check_id`)."""
+        pattern = self.plan().id_pattern
         with OutputLock(self.folder / PARTICIPANTS_NAME):
-            table = self.participants()
+            table = self.check_table()
+            if participant not in table:
+                try:
+                    check_id(participant, pattern, table, simulated=simulated)
+                except IdError as exc:
+                    raise StudyFolderError(str(exc)) from None
             if participant in table:
                 rec = table[participant]
                 if bool(rec.get("simulated")) != bool(simulated):
@@ -225,7 +405,7 @@ class StudyFolder:
                         f"{'add' if rec.get('simulated') else 'leave out'} --simulate"
                     )
                 return rec
-            number = len(table) + 1
+            number = max((r["number"] for r in table.values()), default=0) + 1
             rec = {"number": number, "row": number - 1, "simulated": bool(simulated), "registered": utc_now()}
             table[participant] = rec
             atomic_write_text(self.folder / PARTICIPANTS_NAME, _json(table))
@@ -255,7 +435,13 @@ class ParticipantFolder:
         path = self.folder / ORDER_NAME
         if not path.is_file():
             return None
-        return json.loads(path.read_text("utf-8"))
+        try:
+            order = json.loads(path.read_bytes().decode("utf-8"))
+        except (UnicodeDecodeError, ValueError):
+            raise StudyFolderError(f"{path}: not JSON (edited by hand?); {_RESTORE}") from None
+        if not isinstance(order, dict) or not isinstance(order.get("steps"), list):
+            raise StudyFolderError(f"{path}: not a participant's order (no steps; edited by hand?); {_RESTORE}")
+        return order
 
     def write_order(self, order: Mapping[str, Any]) -> None:
         """Fix the participant's steps (once, at the first run)."""
@@ -272,7 +458,7 @@ class ParticipantFolder:
             data = self.progress_file.read_bytes()
         except FileNotFoundError:
             return []
-        out = []
+        out: list[dict[str, Any]] = []
         for i, line in enumerate(data.split(b"\n")):
             if not line:
                 continue
@@ -281,7 +467,14 @@ class ParticipantFolder:
             except ValueError:
                 if not data.endswith(b"\n") and line == data.rsplit(b"\n", 1)[-1]:
                     break  # the torn last line
-                raise StudyFolderError(f"{self.progress_file}: line {i + 1} is not JSON (edited by hand?)") from None
+                raise StudyFolderError(
+                    f"{self.progress_file}: line {i + 1} is not JSON (edited by hand?); {_RESTORE}"
+                ) from None
+            if not isinstance(rec, dict) or rec.get("step") != len(out) or not isinstance(rec.get("kind"), str):
+                raise StudyFolderError(
+                    f"{self.progress_file}: line {i + 1} is not the record of step {len(out)} (edited by hand?); "
+                    f"{_RESTORE}"
+                )
             out.append(rec)
         return out
 
@@ -302,7 +495,7 @@ class ParticipantFolder:
         """Commit one finished step: one whole line, appended and fsync'ed."""
         self.folder.mkdir(parents=True, exist_ok=True)
         self._cut_torn_tail()
-        line = (json.dumps(dict(record), allow_nan=False, sort_keys=False) + "\n").encode("utf-8")
+        line = (json.dumps(finite_json(dict(record)), allow_nan=False, sort_keys=False) + "\n").encode("utf-8")
         new = not self.progress_file.exists()
         fd = os.open(self.progress_file, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
         try:
@@ -316,6 +509,80 @@ class ParticipantFolder:
     def block(self, name: str) -> Path:
         return self.folder / name
 
+    def _manifest(self, block: str) -> dict[str, Any] | None:
+        path = self.block(block) / MANIFEST_NAME
+        if not path.is_file():
+            return None
+        try:
+            manifest = json.loads(path.read_bytes().decode("utf-8"))
+        except (UnicodeDecodeError, ValueError):
+            raise StudyFolderError(f"{path}: not JSON (edited by hand?); {_RESTORE}") from None
+        if not isinstance(manifest, dict) or not isinstance(manifest.get("trials"), list):
+            raise StudyFolderError(f"{path}: not a dataset manifest (edited by hand?); {_RESTORE}")
+        return manifest
+
+    def audit(self, steps: list[dict[str, Any]], done: list[dict[str, Any]] | None = None) -> None:
+        """Cross-check the progress log against the order and the blocks' manifests (module docstring);
+        one :class:`StudyFolderError` line naming the file and what to do. The one trial on disk the log
+        may not know is the next step's (a kill between its two commits; :meth:`reconcile` records it)."""
+        done = self.progress() if done is None else done
+        where = self.folder / ORDER_NAME
+        if len(done) > len(steps):
+            raise StudyFolderError(
+                f"{self.progress_file}: {len(done)} steps recorded, {where} has {len(steps)}; {_RESTORE}"
+            )
+        for i, rec in enumerate(done):
+            if rec.get("key") != step_key(steps[i]):
+                raise StudyFolderError(
+                    f"{self.progress_file}: line {i + 1} is not step {i} of {where} (edited by hand?); {_RESTORE}"
+                )
+        on_disk: dict[int, tuple[str, str]] = {}  # step -> (block, file) of every study trial in the blocks
+        for block in dict.fromkeys(s["block"] for s in steps if s["kind"] == "trial"):
+            manifest = self._manifest(block)
+            recorded = [r for r in done if r["kind"] == "trial" and r.get("block") == block]
+            path = self.block(block) / MANIFEST_NAME
+            if manifest is None:
+                if recorded:
+                    raise StudyFolderError(
+                        f"{path}: missing, but {self.progress_file} records {len(recorded)} trials of block {block!r} "
+                        f"(deleted?); {_RESTORE} (nothing is run again)"
+                    )
+                continue
+            for entry in manifest["trials"]:
+                meta = entry.get("meta") if isinstance(entry, dict) else None
+                k = ((meta or {}).get("extra") or {}).get("study_step")
+                if not isinstance(k, int) or k in on_disk or not isinstance(entry.get("file"), str):
+                    raise StudyFolderError(
+                        f"{path}: an entry that is not one of this participant's trials, or one listed twice "
+                        f"(edited by hand?); {_RESTORE}"
+                    )
+                on_disk[k] = (block, entry["file"])
+        for k, (block, file) in sorted(on_disk.items()):
+            if (
+                k < len(done)
+                and done[k]["kind"] == "trial"
+                and (done[k].get("block"), done[k].get("file")) == (block, file)
+            ):
+                if not (self.block(block) / file).is_file():
+                    raise StudyFolderError(
+                        f"{self.block(block) / file}: missing (step {k}, listed in {MANIFEST_NAME} and "
+                        f"{PROGRESS_NAME}); {_RESTORE} (nothing is run again)"
+                    )
+                continue
+            if k == len(done) and k == max(on_disk) and k < len(steps) and steps[k]["kind"] == "trial":
+                continue  # the next step's trial, committed without its line: reconcile records it
+            raise StudyFolderError(
+                f"{self.progress_file}: records {len(done)} steps, but {self.block(block) / MANIFEST_NAME} holds "
+                f"{file}, the trial of step {k}, which it does not record (the log was truncated or emptied?); "
+                f"{_RESTORE} (nothing is run again)"
+            )
+        for i, rec in enumerate(done):
+            if rec["kind"] == "trial" and on_disk.get(i) != (rec.get("block"), rec.get("file")):
+                raise StudyFolderError(
+                    f"{self.block(str(rec.get('block'))) / MANIFEST_NAME}: does not list {rec.get('file')}, the trial "
+                    f"of step {i} that {self.progress_file} records (lost?); {_RESTORE} (nothing is run again)"
+                )
+
     def reconcile(self, steps: list[dict[str, Any]]) -> int:
         """Write the line of a trial that was committed to its dataset but not to the progress file
         (a kill between the two); returns how many lines were recovered (0 or 1)."""
@@ -325,10 +592,9 @@ class ParticipantFolder:
         if k >= len(steps) or steps[k]["kind"] != "trial":
             return 0
         step = steps[k]
-        folder = self.block(step["block"])
-        if not (folder / MANIFEST_NAME).is_file():
+        manifest = self._manifest(step["block"])
+        if manifest is None:
             return 0
-        manifest = json.loads((folder / MANIFEST_NAME).read_text("utf-8"))
         for entry in manifest["trials"]:
             if entry.get("meta", {}).get("extra", {}).get("study_step") == k:
                 self.append(trial_record(k, step, entry["file"], entry["meta"], recovered=True))

@@ -10,11 +10,18 @@ from the same trials; the tests check that tensor by tensor.
 
 :class:`BackgroundTraining` runs jobs in a ``spawn``-ed process each (torch in a process of
 its own: the study's control loop and page never wait for it) and tells when one is ready.
+The worker dies with the study's run: a thread of its own, started before any job, polls its
+parent (:func:`_exit_with_parent`) and ends it within :data:`PARENT_POLL_S` once the run is
+gone (a kill -9 included), so no orphan keeps training, holding memory, the model's lock and
+the pipe of a dead parent; the resumed run trains the model again (the same model).
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
+import threading
+import time
 from collections.abc import Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, replace
@@ -23,7 +30,10 @@ from typing import Any
 
 from coassist.study.plan import TrainingPlan
 
-__all__ = ["BackgroundTraining", "TrainJob", "train_command", "train_job"]
+__all__ = ["BackgroundTraining", "TrainJob", "study_preset", "train_command", "train_job"]
+
+#: [s] how often a training worker checks that the run that started it is alive.
+PARENT_POLL_S = 0.2
 
 
 @dataclass(frozen=True)
@@ -37,11 +47,11 @@ class TrainJob:
     training: TrainingPlan
 
 
-def _preset(job: TrainJob):
-    """The intent preset as ``coassist train --preset … --epochs …`` builds it (cli._intent_preset)."""
+def study_preset(t: TrainingPlan, init: str):
+    """The intent preset as ``coassist train --preset … --epochs … --init init`` builds it (cli._intent_preset)
+    from the plan's ``[training]`` ``t``; the sizes (layers, hidden, fc) apply to ``init="scratch"`` only."""
     from coassist.intent.training import MODEL_PRESETS, with_overrides
 
-    t = job.training
     p = with_overrides(
         MODEL_PRESETS.lookup(t.preset),
         epochs=t.epochs,
@@ -50,10 +60,10 @@ def _preset(job: TrainJob):
         seed=t.seed,
         threads=t.threads,
         test_fraction=t.test_fraction,
-        init=job.init,
+        init=init,
         optimizer=t.optimizer,
     )
-    if job.init == "scratch" and (t.layers, t.hidden, t.fc) != (None, None, None):
+    if init == "scratch" and (t.layers, t.hidden, t.fc) != (None, None, None):
         p = replace(
             p,
             lstm_layers=p.lstm_layers if t.layers is None else t.layers,
@@ -73,7 +83,7 @@ def train_job(job: TrainJob) -> dict[str, Any]:
     from coassist.intent.training import train_model, write_model
 
     trials = load_trials(job.data)
-    p = _preset(job)
+    p = study_preset(job.training, job.init)
     torch.set_num_threads(p.train.threads)
     with OutputLock(job.out):
         model = train_model(trials, p, p.train, checkpoint_to=job.out)
@@ -113,6 +123,18 @@ def train_command(job: TrainJob) -> list[str]:
     return cmd
 
 
+def _exit_with_parent(parent: int) -> None:
+    """A training worker's initializer: a daemon thread ends the process (``os._exit``, as a kill would)
+    once its parent ``parent`` is gone, i.e. once the worker has been handed to another parent."""
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(PARENT_POLL_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="coassist-exit-with-parent", daemon=True).start()
+
+
 class BackgroundTraining:
     """Jobs by name, each in a fresh ``spawn``-ed process (one at a time: the machine's cores
     are the control loop's first). :meth:`ready` never blocks; :meth:`wait` does."""
@@ -123,7 +145,12 @@ class BackgroundTraining:
 
     def submit(self, name: str, job: TrainJob) -> Future:
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+            self._pool = ProcessPoolExecutor(
+                1,
+                mp_context=multiprocessing.get_context("spawn"),
+                initializer=_exit_with_parent,
+                initargs=(os.getpid(),),
+            )
         fut = self._pool.submit(train_job, job)
         self._jobs[name] = fut
         return fut

@@ -1,0 +1,148 @@
+"""The study folder is evidence: a log, a manifest, a trial file or the participant table that was lost,
+emptied or edited is one line naming the file and what to do, on every run and report; nothing is run
+again, no trial counted twice, no condition or participant dropped without a word."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from coassist.cli import app
+from coassist.data import read_dataset
+from coassist.study.runner import ParticipantRun
+from coassist.study.store import StudyFolder, StudyFolderError
+
+BLOCKS = ("assistive", "impedance", "manual")
+
+
+def _digests(folder: Path) -> dict[str, str]:
+    """SHA-256 of every file under the participant folders (what a re-run would change)."""
+    return {
+        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted((folder / "participants").rglob("*"))
+        if p.is_file() and not p.name.startswith(".")
+    }
+
+
+def _one_line_error(args: list[str], *names: str) -> str:
+    """Run the CLI; it must fail with one ``error:`` line naming each of ``names``."""
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code in (1, 2) and not isinstance(result.exception, (KeyError, TypeError)), result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    errors = [line for line in lines if line.startswith("error: ")]
+    assert len(errors) == 1 and errors == lines[-1:], result.output
+    assert "Traceback" not in result.output
+    for name in names:
+        assert name in errors[0], errors[0]
+    return errors[0]
+
+
+def _refused_everywhere(folder: Path, *names: str) -> None:
+    """A run of S01 and the report both refuse in one line naming ``names``; nothing in the folder changed."""
+    before = _digests(folder)
+    with pytest.raises(StudyFolderError) as err:
+        with ParticipantRun(StudyFolder(folder), "S01", simulate=True) as run:
+            run.run()
+    assert "\n" not in str(err.value) and all(n in str(err.value) for n in names), str(err.value)
+    _one_line_error(["study", "run", str(folder), "--participant", "S01", "--simulate"], *names)
+    _one_line_error(["study", "report", str(folder)], *names)
+    assert _digests(folder) == before  # nothing run again, nothing rewritten
+    assert not (folder / "report").exists()
+
+
+@pytest.mark.parametrize("keep", [0, 2, 4])
+def test_an_emptied_or_truncated_log_is_one_line_never_a_second_run(finished_study, keep):
+    """bdc84ed: the run repeated the finished trials and appended them; the report averaged both."""
+    log = finished_study / "participants" / "S01" / "progress.jsonl"
+    lines = log.read_bytes().splitlines(keepends=True)
+    log.write_bytes(b"".join(lines[:keep]))
+    _refused_everywhere(finished_study, "progress.jsonl", "restore it from your backup")
+
+
+def test_a_block_whose_manifest_or_trial_was_lost_is_one_line_never_a_dropped_condition(finished_study):
+    """bdc84ed: "already complete", and the report left the condition out for the participant."""
+    manifest = finished_study / "participants" / "S01" / "impedance" / "manifest.json"
+    kept = manifest.read_bytes()
+    manifest.unlink()
+    _refused_everywhere(finished_study, "impedance/manifest.json", "missing")
+    manifest.write_bytes(kept)
+    (finished_study / "participants" / "S01" / "manual" / "trial_00000.parquet").unlink()
+    _refused_everywhere(finished_study, "manual/trial_00000.parquet", "missing")
+
+
+def test_a_lost_or_edited_participant_table_is_one_line_never_a_second_number_1(finished_study):
+    """bdc84ed: with participants.json deleted the next participant was number 1, row 0, again, and the report
+    listed only them; a table that is not JSON stopped the run without naming the file and the report with a
+    traceback."""
+    table = finished_study / "participants.json"
+    kept = table.read_bytes()
+    for damage in (None, b"{}\n", b'{"S01": {"number": 1, "row": 0, "simulated": tr'):
+        if damage is None:
+            table.unlink()
+        else:
+            table.write_bytes(damage)
+        before = _digests(finished_study)
+        with pytest.raises(StudyFolderError, match="participants.json"):
+            ParticipantRun(StudyFolder(finished_study), "S02", simulate=True)
+        _one_line_error(
+            ["study", "run", str(finished_study), "--participant", "S02", "--simulate"], "participants.json"
+        )
+        _one_line_error(["study", "report", str(finished_study)], "participants.json")
+        assert _digests(finished_study) == before and not (finished_study / "participants" / "S02").exists()
+    table.write_bytes(kept)
+    with ParticipantRun(StudyFolder(finished_study), "S02", simulate=True) as run:
+        assert run.record["number"] == 2 and run.record["row"] == 1
+
+
+@pytest.mark.parametrize("value", [999, "lots", 2.5, None])
+def test_answers_are_checked_when_read(finished_study, value):
+    """bdc84ed: an answer edited to 999 was averaged (a raw TLX of 279); a word made the report trace back."""
+    log = finished_study / "participants" / "S01" / "progress.jsonl"
+    records = [json.loads(line) for line in log.read_text().splitlines()]
+    i = next(i for i, r in enumerate(records) if r["kind"] == "questionnaire")
+    records[i]["answers"]["tlx_mental"] = value
+    log.write_text("".join(json.dumps(r) + "\n" for r in records))
+    error = _one_line_error(["study", "report", str(finished_study)], "progress.jsonl", f"line {i + 1}", "tlx_mental")
+    assert "answers off the questionnaire" in error
+
+
+@pytest.mark.parametrize("damage", ["truncated", "flipped", "emptied"])
+def test_a_damaged_trial_file_is_one_line_in_the_report(finished_study, damage):
+    """bdc84ed: the report traced back on a truncated or flipped trial parquet."""
+    path = finished_study / "participants" / "S01" / "assistive" / "trial_00000.parquet"
+    data = bytearray(path.read_bytes())
+    if damage == "truncated":
+        data = data[: len(data) // 2]
+    elif damage == "flipped":
+        data[len(data) // 3] ^= 0xFF
+    else:
+        data = bytearray()
+    path.write_bytes(bytes(data))
+    _one_line_error(["study", "report", str(finished_study)], "assistive/trial_00000.parquet")
+
+
+def test_the_intact_folder_still_reports_and_resumes(finished_study):
+    """The checks above take nothing from a sound folder: the report counts each trial once."""
+    with ParticipantRun(StudyFolder(finished_study), "S01", simulate=True) as run:
+        assert run.complete
+    result = CliRunner().invoke(app, ["study", "report", str(finished_study)])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((finished_study / "report" / "summary.json").read_text())
+    assert summary["n_complete"] == 1 and set(summary["participants"]["S01"]["means"]) == set(BLOCKS)
+    for b in BLOCKS:
+        assert len(read_dataset(finished_study / "participants" / "S01" / b).trials) == 1
+
+
+def test_a_non_finite_value_never_reaches_a_json_file(finished_study):
+    """bdc84ed: a NaN in a step's record raised "Out of range float values are not JSON compliant" at every
+    re-run; it is written as null."""
+    pf = StudyFolder(finished_study).participant("S01")
+    n = len(pf.progress())
+    pf.append({"step": n, "kind": "check", "key": "x", "e_rms": math.nan, "delta": [math.inf, 1.0]})
+    last = json.loads(pf.progress_file.read_text().splitlines()[-1])
+    assert last["e_rms"] is None and last["delta"] == [None, 1.0]
