@@ -246,6 +246,35 @@ def _track_gap(a, b) -> float:
     return float(np.linalg.norm((a.pose[:n, :2] - a.pose[0, :2]) - (b.pose[:n, :2] - b.pose[0, :2]), axis=1).max())
 
 
+def _onset(trial, threshold: float = 5.0) -> int:
+    """The first tick the hand force along x exceeds ``threshold`` [N] (the push of 10 N)."""
+    pushed = trial.wrench[:, 0] > threshold
+    assert pushed.any(), "the run was never pushed"
+    return int(np.argmax(pushed))
+
+
+#: What the push's timing inside a tick may add to the track [m]: the simulator applies it at its next
+#: 2 ms cycle, anywhere in the loop's period before the tick MuJoCo applies it at, so up to a period's
+#: more impulse: F·dt/D = 10 N · 8 ms / 100 N·s/m (MG's damping) = 0.8 mm. Measured: MG 0.92-0.97 mm,
+#: the assistive controller 0.38-0.54 mm (the defaults' trial, pushed by the simulated operator in the
+#: simulator's own time, keeps the 1 mm without it).
+PUSH_TIMING = 10.0 * 0.008 / 100.0
+
+
+def _mujoco_same_push(trial, config: DriveConfig, push_at: int):
+    """The MuJoCo run of the push ``trial`` felt, at the tick it felt it. The test hands the push to the
+    simulator's process through its stdin (read by a thread at normal priority): on a busy machine it
+    lands a tick or more late, and each tick is 0.8 mm of MG's 0.1 m/s on the track; what is compared
+    is the loop through the protocol, not when the test's message arrived."""
+    mj = _mujoco(config, push_at=push_at)
+    shift = _onset(trial) - _onset(mj)
+    assert abs(shift) <= 25, shift  # the push reached the simulator within 0.2 s
+    if shift:
+        mj = _mujoco(config, push_at=push_at + shift)
+        assert _onset(mj) == _onset(trial)
+    return mj
+
+
 def test_drives_defaults_complete_a_trial_on_the_track_of_the_mujoco_world(tmp_path):
     from typer.testing import CliRunner
 
@@ -275,7 +304,7 @@ def test_drives_defaults_complete_a_trial_on_the_track_of_the_mujoco_world(tmp_p
 def test_mg_with_a_push_settles_at_f_over_d_on_the_mujoco_track():
     config = DriveConfig(world="ur", controller="manual", time_limit=3.0)
     trial, seen, kin, status = _run(config, push_at=40, sensor=QUIET)
-    mj = _mujoco(DriveConfig(controller="manual", time_limit=3.0), push_at=40)
+    mj = _mujoco_same_push(trial, DriveConfig(controller="manual", time_limit=3.0), push_at=40)
     assert trial.meta.extra["ended"] == "time_limit", trial.meta.extra["stop_message"]
     assert status["out_of_limits"] == 0
     # initPeriod / waitPeriod keep the period (the first one: the watchdog's round trip before it)
@@ -287,20 +316,20 @@ def test_mg_with_a_push_settles_at_f_over_d_on_the_mujoco_track():
     assert trial.velocity[settled, 0].mean() == pytest.approx((10.0 - 0.2) / 100.0, rel=0.02)  # the 0.2 N deadband
     _every_command_inside_the_limits(seen, kin, config.dt)
     if not _flags(trial):
-        assert _track_gap(trial, mj) < 1e-3
+        assert _track_gap(trial, mj) < 1e-3 + PUSH_TIMING
 
 
 def test_the_assistive_controller_through_the_simulator_on_the_mujoco_track():
     config = DriveConfig(world="ur", controller="cooperative", time_limit=3.0)
     trial, seen, kin, status = _run(config, push_at=40, sensor=QUIET)
-    mj = _mujoco(DriveConfig(controller="cooperative", time_limit=3.0), push_at=40)
+    mj = _mujoco_same_push(trial, DriveConfig(controller="cooperative", time_limit=3.0), push_at=40)
     assert trial.meta.extra["ended"] == "time_limit", trial.meta.extra["stop_message"]
     assert status["out_of_limits"] == 0
     flags = _flags(trial)
     assert not flags & ~MACHINE_STALL, fault_names(flags)
     _every_command_inside_the_limits(seen, kin, config.dt)
     if not flags:
-        assert _track_gap(trial, mj) < 1e-3
+        assert _track_gap(trial, mj) < 1e-3 + PUSH_TIMING
 
 
 def _every_command_inside_the_limits(seen, kin, dt) -> None:
