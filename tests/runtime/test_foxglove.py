@@ -274,3 +274,35 @@ def test_a_port_in_use_and_a_bad_port_are_one_line():
     for bad in (-1, 65536, 3.5, True, "8765"):
         with pytest.raises(ValueError, match="port must be a port number in 0 … 65535"):
             open_foxglove(bad)
+
+
+@pytest.mark.realtime
+def test_the_ur_simulator_stream_through_the_real_client_is_the_runs_log(tmp_path):
+    """The UR world on ``coassist ur-sim`` (the real ur-rtde client, the simulated operator at the
+    simulator's handle), watched live: the messages are the run's MCAP file's, with the UR's joints."""
+    from ..ursim import needs_ur_rtde, realtime_priority, simulator
+
+    needs_ur_rtde()
+    pytest.importorskip("mujoco", reason="the simulator's arm is the MuJoCo UR5: pip install 'coassist[robot]'")
+    from coassist.control.presets import get_preset
+    from coassist.robot.drive import DriveConfig, drive
+    from coassist.robot.ros2_world import UR_JOINT_NAMES
+
+    with simulator() as sim:
+
+        def run(feed):
+            config = DriveConfig(world="ur", controller="cooperative", time_limit=1.5)
+            with realtime_priority():  # the loop at the simulator's priority, as a lab runs it (chrt -f)
+                return drive(config, host=sim.host, live=feed), 0.0
+
+        trial, _, live, client = _watch(run)
+    assert trial.meta.extra["ended"] == "time_limit", trial.meta.extra.get("stop_message")
+    alpha = get_preset(trial.meta.extra["preset"]).game.alpha
+    mcap, schemas = _mcap_messages(trial, alpha, live, tmp_path, joint_names=UR_JOINT_NAMES)
+    ticks = _check_against_log(client, trial, alpha, live, mcap, schemas)
+    assert len(ticks) >= 20  # 1.5 s at 50 frames a second, most of them received
+    names = TS.deserialize_cdr(client.of("/joint_states")[0][1], MCAP_TOPICS["/joint_states"]).name
+    assert list(names) == list(UR_JOINT_NAMES)
+    # the arm moved: the joints the viewer received are the simulator's, not a constant
+    q = np.array([TS.deserialize_cdr(p, MCAP_TOPICS["/joint_states"]).position for _, p in client.of("/joint_states")])
+    assert np.ptp(q, axis=0).max() > 1e-4
