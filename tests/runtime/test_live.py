@@ -153,3 +153,55 @@ def test_trials_in_a_row_never_run_a_viewers_clock_backwards():
 def test_a_bad_rate_names_the_field(rate):
     with pytest.raises(ValueError, match="LiveFeed.rate_hz"):
         LiveFeed(Recorder(), rate_hz=rate)
+
+
+class PolicyRecorder(Recorder):
+    """A sink that notes the scheduling policy of the thread that publishes."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.policies: list[int] = []
+
+    def publish(self, snapshot: TickSnapshot) -> None:
+        import os
+
+        self.policies.append(os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK)
+        super().publish(snapshot)
+
+
+def test_the_publisher_runs_at_the_watching_threads_policy():
+    """A real-time loop's publisher runs at its priority (else, preempted with the interpreter lock held,
+    it would make the loop wait behind the machine's other processes), and back at normal priority
+    for a loop at normal priority."""
+    import os
+
+    if not hasattr(os, "sched_setscheduler"):
+        pytest.skip("no scheduling policies on this OS")
+    seen: dict[str, object] = {}
+
+    def fifo_run(feed: LiveFeed) -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(5))
+        except OSError:
+            seen["refused"] = True
+            return
+        try:
+            _run(SPEC, feed)
+            assert feed.flush(10)
+        finally:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+    recorder = PolicyRecorder()
+    with LiveFeed(recorder, rate_hz=100.0) as feed:
+        thread = threading.Thread(target=fifo_run, args=(feed,))  # this thread's policy stays as it is
+        thread.start()
+        thread.join()
+        if seen.get("refused"):
+            pytest.skip("SCHED_FIFO is not allowed here")
+        assert feed.policy == (os.SCHED_FIFO, 5)
+        n = len(recorder.policies)
+        assert n >= 2 and set(recorder.policies[1:]) == {os.SCHED_FIFO}  # the first may precede the change
+        _run(SPEC, feed)  # a loop at normal priority: the publisher follows it back
+        assert feed.flush(10)
+        assert feed.policy == (os.SCHED_OTHER, 0) and recorder.policies[-1] == os.SCHED_OTHER
+        assert os.sched_getscheduler(0) == os.SCHED_OTHER  # the test's own thread untouched

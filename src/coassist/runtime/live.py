@@ -13,6 +13,14 @@ is :mod:`coassist.runtime.foxglove`). The ticks in between are not published: th
 shows the run as it goes, the trial file (and its MCAP) keeps every tick. A sink that raises
 is counted (:attr:`LiveFeed.failures`, :attr:`LiveFeed.last_error`) and the run goes on.
 
+The publishing thread runs at the scheduling policy of the thread that called :meth:`LiveFeed.watch`
+(the control thread, at SCHED_FIFO when the lab gives the loop real-time priority, ``chrt -f``): a
+thread at normal priority that the OS preempts while it holds the interpreter lock makes the
+real-time control thread wait for it behind every other process of a busy machine (a priority
+inversion: with ``coassist ur-sim`` at 500 Hz and the loop at SCHED_FIFO on the loaded 2-core
+machine it doubled the loop's deadline misses, docs/foxglove.md). At the loop's own priority it is
+never preempted by them, and it holds the lock for microseconds a frame.
+
 Every trial the feed watches gets a :class:`LiveTrial`: its scene (the obstacle, the path
 shown to the operator, the target ball, in the plan's frame), its period, the axes a 2-D
 world does not control (held at the start pose, as the MCAP file fills them) and the start
@@ -24,6 +32,7 @@ than real time).
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -119,6 +128,28 @@ class LiveSink(Protocol):
         ...
 
 
+#: (policy, priority) of a thread: os.sched_getscheduler's policy, SCHED_RESET_ON_FORK removed.
+Policy = tuple[int, int]
+
+
+def _thread_policy() -> Policy | None:
+    """The calling thread's scheduling policy and priority (Linux), or None where the OS has none."""
+    try:
+        policy = os.sched_getscheduler(0) & ~getattr(os, "SCHED_RESET_ON_FORK", 0)
+        return policy, int(os.sched_getparam(0).sched_priority)
+    except (AttributeError, OSError):
+        return None
+
+
+def _set_thread_policy(want: Policy) -> bool:
+    """Give the calling thread ``want`` (not to processes it forks); whether the OS allowed it."""
+    try:
+        os.sched_setscheduler(0, want[0] | getattr(os, "SCHED_RESET_ON_FORK", 0), os.sched_param(want[1]))
+        return True
+    except (AttributeError, OSError):
+        return False
+
+
 def _alpha_reader(controller: Any) -> Callable[[], float | None] | None:
     """A reader of the controller's α now (the cooperative game's, an arbitration's online one),
     or None for a controller without one (IMP, MG)."""
@@ -149,6 +180,10 @@ class LiveFeed:
         self._done: TickSnapshot | None = None  # the last one the sink returned from
         self._trials = 0
         self._last_end_ns = 0
+        #: The publishing thread's scheduling (policy, priority) once it followed a watching thread's.
+        self.policy: Policy | None = None
+        self._want_policy: Policy | None = None  # the watching thread's
+        self._tried_policy: Policy | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="coassist-live", daemon=True)
         self._thread.start()
@@ -160,6 +195,7 @@ class LiveFeed:
         caller's own monitor, if any). ``joint_names``: the arm's (default ``joint_1 …``).
         Called before the run, on the thread that runs it."""
         trial = self._trial(episode, joint_names)
+        self._want_policy = _thread_policy()  # the publisher follows it (module docstring)
         tick = episode.tick
         alpha_of = _alpha_reader(tick.controller)
         nj = int(episode.world.n_joints)
@@ -247,6 +283,11 @@ class LiveFeed:
                 return
 
     def _publish_latest(self) -> None:
+        want = self._want_policy
+        if want is not None and want != self._tried_policy:  # once per change (a refusal is not retried)
+            self._tried_policy = want
+            _set_thread_policy(want)
+            self.policy = _thread_policy()
         snap = self._latest
         if snap is None or snap is self._done:
             return
