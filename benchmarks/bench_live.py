@@ -1,12 +1,16 @@
 """What the live Foxglove view costs a real-time control loop: its deadline misses with the view on and off.
 
-    .venv/bin/python benchmarks/bench_live.py [--world mujoco|franka] [--rate 500] [--seconds 8]
+    .venv/bin/python benchmarks/bench_live.py [--world mujoco|franka|ur] [--rate 500] [--seconds 8]
         [--rounds 2] [--controller cooperative] [--intent oracle] [--modes off,live,naive,encode]
+        [--rt-priority 0]
 
 ``coassist drive``'s loop on a real-time world: the MuJoCo UR5 paced to the wall clock
 (``--world mujoco``), or an FR3 in franky-sim (``--world franka``: the real franky client over
 libfranka's protocol, the loop paced by the robot's 1 kHz clock; franky-sim in its own process,
-tests/robot/franky_sim_server.py), at ``--rate`` (the e-Series' 500 Hz by default: 2 ms). A
+tests/robot/franky_sim_server.py), or a UR5 behind ``coassist ur-sim`` (``--world ur``: the real
+ur-rtde client over UR's RTDE protocol, the loop paced by ``initPeriod`` / ``waitPeriod``, the
+simulator in its own process at SCHED_FIFO where allowed, its simulated operator at the
+handle), at ``--rate`` (the e-Series' 500 Hz by default: 2 ms). A
 Foxglove viewer (a WebSocket client speaking ``foxglove.sdk.v1`` in its own process, as the
 Foxglove app is) subscribes to every topic. The modes run in rounds (off, live, naive, off, …)
 so that a busy machine's drift hits them alike:
@@ -36,6 +40,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
+import contextlib  # noqa: E402
 import json  # noqa: E402
 import multiprocessing  # noqa: E402
 import subprocess  # noqa: E402
@@ -58,6 +63,23 @@ from coassist.runtime.loop import run_loop  # noqa: E402
 from coassist.scenario.tasks import task_for_seed  # noqa: E402
 
 RATE_HZ = 30.0
+
+
+@contextlib.contextmanager
+def priority(prio: int):  # type: ignore[no-untyped-def]
+    """SCHED_FIFO ``prio`` for the calling thread while inside (not for processes it forks); yields whether granted."""
+    granted = False
+    if prio:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(prio))
+            granted = True
+        except (AttributeError, OSError):
+            pass
+    try:
+        yield granted
+    finally:
+        if granted:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
 def _view(url: str, frames, ready) -> None:
@@ -164,13 +186,34 @@ class StillHand:
         return np.zeros(6), np.eye(3), self.seq
 
 
-def make_world(args, config: DriveConfig, sim: FrankySim | None):
+class URSim:
+    """``coassist ur-sim`` (e-Series, 500 Hz; CB3 for ``--rate 125``) in its own process, on a loopback address of its own."""
+
+    def __init__(self, rate: int) -> None:
+        from coassist.robot.ur_sim import URSimConfig
+        from coassist.robot.ur_sim.process import URSimProcess
+
+        pid = os.getpid()
+        self.host = f"127.{100 + pid % 100}.{(pid // 100) % 250 + 1}.7"
+        series = "cb3" if rate == 125 else "e-series"
+        self.proc = URSimProcess(URSimConfig(host=self.host, series=series, rt_priority=20))
+        self.proc.start()
+
+    def close(self) -> None:
+        self.proc.stop()
+
+
+def make_world(args, config: DriveConfig, sim):  # type: ignore[no-untyped-def]
+    task = task_for_seed(config.task, config.seed)
+    start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
+    if args.world == "ur":  # as drive builds it on the simulator: at the task's start, its operator at the handle
+        from coassist.robot.ur_sim_world import URSimWorld
+
+        return URSimWorld(sim.host, start=start, frequency=float(config.rate_hz))
     if args.world == "franka":
         from coassist.robot.franka_world import FrankaWorld
 
         return FrankaWorld(sim.host, frequency=float(config.rate_hz), arm="fr3", ft_sensor=StillHand())
-    task = task_for_seed(config.task, config.seed)
-    start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
     return build_world("mujoco", WorldRequest("ur5", config.object, config.rate_hz, config.seed, start, realtime=True))
 
 
@@ -195,7 +238,7 @@ class EncodeOnly:
         return
 
 
-def one_run(mode: str, args, feeds: dict, viewer: Viewer, sim: FrankySim | None) -> dict:
+def one_run(mode: str, args, feeds: dict, viewer: Viewer, sim) -> dict:  # type: ignore[no-untyped-def]
     config = DriveConfig(
         world=args.world,
         robot="fr3" if args.world == "franka" else "ur5",
@@ -206,6 +249,8 @@ def one_run(mode: str, args, feeds: dict, viewer: Viewer, sim: FrankySim | None)
         rate_hz=args.rate,
         time_limit=args.seconds,
     )
+    rt = priority(args.rt_priority)  # from the world's start: ur-rtde's receive threads inherit it
+    granted = rt.__enter__()
     world = make_world(args, config, sim)
     starts: list[float] = []
     costs: list[float] = []
@@ -233,12 +278,14 @@ def one_run(mode: str, args, feeds: dict, viewer: Viewer, sim: FrankySim | None)
     finally:
         episode_module.run_loop = run_loop
         world.close()
+        rt.__exit__(None, None, None)
     if feed is not None:
         feed.flush(2.0)
     time.sleep(0.2)
     dt = 1.0 / args.rate
     return {
         "ticks": trial.n_samples,
+        "fifo": granted,
         "ended": f"{trial.meta.extra['ended']} {trial.meta.extra.get('stop_message', '')}",
         "misses": int(np.count_nonzero(trial.fault & int(Fault.DEADLINE_MISS))),
         "late": int(np.count_nonzero(np.diff(np.asarray(starts)) > 1.5 * dt)),
@@ -252,23 +299,30 @@ def one_run(mode: str, args, feeds: dict, viewer: Viewer, sim: FrankySim | None)
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--world", choices=("mujoco", "franka"), default="mujoco")
+    parser.add_argument("--world", choices=("mujoco", "franka", "ur"), default="mujoco")
     parser.add_argument("--rate", type=int, default=500)
     parser.add_argument("--seconds", type=float, default=8.0)
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--controller", default="cooperative")
     parser.add_argument("--intent", default="oracle")
     parser.add_argument(
+        "--rt-priority", type=int, default=0, help="SCHED_FIFO priority of the control loop (0: normal), as chrt -f"
+    )
+    parser.add_argument(
         "--modes", default="off,live,thread,naive", help="of off, live, thread, naive (in rounds, in this order)"
     )
     args = parser.parse_args()
     print(machine_line())
-    where = "franky-sim FR3 (the robot's clock)" if args.world == "franka" else "MuJoCo UR5 paced"
+    where = {
+        "franka": "franky-sim FR3 (the robot's clock)",
+        "ur": "coassist ur-sim UR5 (the real ur-rtde client)",
+        "mujoco": "MuJoCo UR5 paced",
+    }[args.world]
     print(
         f"{where} at {args.rate} Hz ({1e3 / args.rate:g} ms), {args.controller}, intent {args.intent}, "
         f"{args.seconds:g} s x {args.rounds} rounds per mode"
     )
-    sim = FrankySim() if args.world == "franka" else None
+    sim = FrankySim() if args.world == "franka" else URSim(args.rate) if args.world == "ur" else None
     feed, sink = open_foxglove(0, rate_hz=RATE_HZ)
     feeds = {"live": feed, "thread": LiveFeed(EncodeOnly(), RATE_HZ), "naive": NaiveLive(EncodeOnly(), RATE_HZ)}
     viewer = Viewer(sink.url)
@@ -284,7 +338,8 @@ def main() -> None:
                 print(
                     f"  round {r + 1} {mode:5s}: {res['ticks']} ticks, {res['misses']} deadline misses, "
                     f"{res['late']} late periods, tick p99 {np.percentile(res['compute'], 99):.3f} ms, "
-                    f"{res['frames']} frames received, ended {res['ended']}",
+                    f"{res['frames']} frames received, loop {'SCHED_FIFO' if res['fifo'] else 'normal'}, "
+                    f"ended {res['ended']}",
                     flush=True,
                 )
     finally:
