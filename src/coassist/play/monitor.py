@@ -38,19 +38,26 @@ class DriveMonitor(PlaySession):
     drive_config : the run.  config : the session (user, out folder; its controllers and
     intent are taken from ``drive_config``).  host : the real arm's address (the worlds that need one).
     confirm : as :func:`~coassist.robot.drive.drive`'s, asked before a real arm moves.
+    live : a :class:`~coassist.runtime.live.LiveFeed` that watches the run too (e.g. Foxglove).
     """
 
     watch_only = True
 
     def __init__(
-        self, drive_config: DriveConfig, config: PlayConfig, *, host: str | None = None, confirm: Any = None
+        self,
+        drive_config: DriveConfig,
+        config: PlayConfig,
+        *,
+        host: str | None = None,
+        confirm: Any = None,
+        live: Any = None,
     ) -> None:
         if not isinstance(drive_config, DriveConfig):
             raise ValueError(f"drive_config must be a DriveConfig, got {type(drive_config).__name__}")
         self.drive_config, self.robot_host, self.confirm = drive_config, host, confirm
         # The drive builds its own controller and predictor: the session's paced predictor
         # process would start and never be used.
-        super().__init__(dataclasses.replace(config, paced=False))
+        super().__init__(dataclasses.replace(config, paced=False), live=live)
 
     def next_task(self):
         c = self.drive_config
@@ -89,7 +96,7 @@ class DriveMonitor(PlaySession):
                 WorldRequest(c.robot or WORLDS[c.world].arms[0], c.object, c.rate_hz, c.seed, start, realtime=True),
             )
         try:
-            trial = drive(c, world=world, host=self.robot_host, confirm=self.confirm, on_tick=on_tick)
+            trial = drive(c, world=world, host=self.robot_host, confirm=self.confirm, on_tick=on_tick, live=self.live)
         finally:
             if world is not None:
                 world.close()

@@ -20,6 +20,8 @@ Worlds (:data:`coassist.robot.worlds.WORLDS`, one entry each; a world is an
 - a real arm (``"ur"``: :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`; ``"franka"``,
   ``"ros2"``); the person at the handle is the operator. The task is laid out from wherever
   the TCP is when the run starts (coassist never moves a real arm to a start pose on its own).
+  The ``"ur"`` world on ``coassist ur-sim`` (:class:`~coassist.robot.ur_sim_world.URSimWorld`)
+  has a simulated handle: the simulated operator holds it, as in MuJoCo.
 
 Controllers by kind (:data:`coassist.control.presets.CONTROLLER_KINDS`): ``cooperative`` (the
 assistive controller, the cooperative game), ``cooperative-arbitrated``, ``impedance`` (IMP, eq. 5.4),
@@ -254,6 +256,8 @@ def drive(
     confirm: Any = None,
     on_tick: Any = None,
     intent_source: Any = None,
+    live: Any = None,
+    joint_names: Sequence[str] | None = None,
 ) -> Trial:
     """Run one trial on a UR5 (module docstring) and return it.
 
@@ -263,11 +267,19 @@ def drive(
     confirm : called with the text of the limits in force before a real arm moves; it
         must return True to go on (the CLI asks the person at the robot).
     intent_source : an IntentSource or RealtimePredictor to use instead of ``config.intent``.
+    live : a :class:`~coassist.runtime.live.LiveFeed` (the live view, e.g. Foxglove) that watches the
+        run; ``joint_names`` name its joint states (default: the UR's for a UR5, else joint_1 …).
     """
     run = _prepare(config, operator=operator, world=world, host=host, view=view, intent_source=intent_source)
     try:
         if confirm is not None and not confirm(run.limits.describe()):
             raise RuntimeError("not confirmed: the robot was not moved")
+        if live is not None:
+            if joint_names is None and config.robot == "ur5":
+                from coassist.robot.ros2_world import UR_JOINT_NAMES  # (the names only: no rclpy)
+
+                joint_names = UR_JOINT_NAMES
+            on_tick = live.watch(run.episode, on_tick, joint_names=joint_names)
         log = run.episode.run(deadline=config.dt if run.world.realtime else None, on_tick=on_tick)
     finally:
         run.close()
@@ -389,14 +401,16 @@ def _prepare(
             )
         state0 = world.read()
         start_pose = np.asarray(state0.tool_pose, dtype=float).copy()
-        if not simulated:
+        hand: HandWorld | None = world if isinstance(world, HandWorld) else None  # a handle to hold
+        # the simulated operator at a simulated handle: MuJoCo's, or coassist ur-sim's behind the ur world
+        held = simulated or hand is not None
+        if not held:
             # lay the task out from where the TCP is: shift the plan
             shift = start_pose[:2] - ref_abs[0, :2]
             ref_abs = ref_abs.copy()
             ref_abs[:, :2] += shift
             target = target + shift
-        hand: HandWorld | None = world if isinstance(world, HandWorld) else None  # a handle to hold
-        if operator is None and simulated and hand is not None:
+        if operator is None and hand is not None:
             noise = motor_noise(profile, rng_motor, ref_abs.shape[0], dt)  # as long as the intent: stop() may step on
             arm = OperatorArm(profile, intent_pos, dt, noise)
             hand_pose, _ = hand.hand_pose()
@@ -434,7 +448,7 @@ def _prepare(
             n_max=n_max,
             target=target,
             labels=EpisodeLabels(
-                user=profile.name if simulated else "operator",
+                user=profile.name if held else "operator",
                 object=obj.name,
                 seed=config.seed,
                 source=entry.source,
@@ -445,10 +459,10 @@ def _prepare(
             # real-arm link), the Trial's intent column only where that operator held the handle
             true_intent=intent_pos,
             intent_end_time=intent_traj.end_time,
-            log_intent=simulated,
+            log_intent=held,
             # the robot is told of the obstacle only where the simulated operator goes round it: a person at a
             # real arm sees no such box (the path-hypotheses source then is the present estimate alone)
-            tell_obstacles=simulated,
+            tell_obstacles=held,
             kinematics=kin,
             tick_config=TickConfig(dofs=dofs),
             extra={
