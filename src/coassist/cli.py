@@ -157,6 +157,72 @@ def _wrote(text: str) -> None:
     console.print(f"[green]wrote[/] {escape(text)}", highlight=False, soft_wrap=True)  # paths stay whole
 
 
+# --------------------------------------------------------------------------- the live view (--foxglove)
+#: The bare ``--foxglove`` port of the commands without a page (the Foxglove app's default), and of
+#: play and study run, whose page listens on 8765.
+FOXGLOVE_PORT, FOXGLOVE_PAGE_PORT = 8765, 8766
+_LIVE_HELP = (
+    "Serve the run live to the Foxglove app on this port (bare --foxglove: {port}; the viz extra): "
+    "ws://127.0.0.1:PORT, the MCAP file's topics and the scene at 30 Hz (docs/foxglove.md)."
+)
+
+
+def _live_command(port: int) -> type:
+    """A command class whose ``--foxglove`` takes an optional port: bare (followed by nothing, another
+    option or an argument that is not a number) it means ``port`` (typer has no optional values)."""
+    from typer.core import TyperCommand
+
+    class LiveCommand(TyperCommand):
+        def parse_args(self, ctx, args):
+            out = list(args)
+            for i, arg in enumerate(out):
+                if arg == "--":
+                    break
+                if arg == "--foxglove" and not (i + 1 < len(out) and re.fullmatch(r"[+-]?\d+", out[i + 1])):
+                    out[i] = f"--foxglove={port}"
+            return super().parse_args(ctx, out)
+
+    return LiveCommand
+
+
+def _open_live(port: int | None, page_port: int | None = None):
+    """The live view's feed on ``port`` (None: no --foxglove), or one line saying why not: a port out
+    of range, the page's own, one in use, the viz extra missing. Started before anything moves."""
+    if port is None:
+        return None
+    if not 0 <= port <= 65535:
+        _fail(f"--foxglove must be a port in 1 … 65535 (0: any free one), got {port}", 2)
+    if page_port is not None and port == page_port and port != 0:
+        _fail(
+            f"--foxglove {port}: the page listens on it (--port); give the live view another, e.g. --foxglove {port + 1}",
+            2,
+        )
+    from coassist.runtime.foxglove import LiveServerError, open_foxglove
+
+    try:
+        feed, sink = open_foxglove(port)
+    except ImportError as exc:
+        _fail(f"--foxglove: {exc}", 2)
+    except (LiveServerError, ValueError) as exc:
+        _fail(f"--foxglove {port}: {exc}", 2)
+    console.print(
+        f"live view: open {sink.url} in Foxglove (Open connection, Foxglove WebSocket)",
+        highlight=False,
+        markup=False,
+        soft_wrap=True,
+    )
+    return feed
+
+
+def _close_live(feed) -> None:
+    """Publish the last tick and stop the live view; say so if publishing failed on the way."""
+    if feed is None:
+        return
+    feed.close()
+    if feed.failures:
+        err_console.print(f"live view: {feed.failures} tick(s) not published ({feed.last_error})", markup=False)
+
+
 @app.command()
 def sweep(
     out: Path = typer.Option(Path("runs/sweep"), help="Output folder for the figure grid and summary.json."),
@@ -561,7 +627,7 @@ def _say(line: str) -> None:
     console.print(line, markup=False, highlight=False, soft_wrap=True)
 
 
-@app.command()
+@app.command(cls=_live_command(FOXGLOVE_PORT))
 def collect(
     out: Path = typer.Option(..., help="Dataset folder to write (trial Parquet files + manifest.json)."),
     controller: str = typer.Option(
@@ -605,6 +671,12 @@ def collect(
         "auto",
         help="What evaluates a model's network: onnx (ONNX Runtime, 1.6-1.9x faster at the loop's batch sizes; the onnx extra), torch, or auto (onnx where installed). The two agree to float32 rounding; each trial records which ran.",
     ),
+    foxglove: int = typer.Option(
+        None,
+        metavar="[PORT]",
+        help=_LIVE_HELP.format(port=FOXGLOVE_PORT)
+        + " Shows the first trial still to run, which then runs first, in this process.",
+    ),
 ) -> None:
     """Simulate trials and write them as a dataset (thesis §5.2.2: 60 trials; D0 with --intent nominal).
 
@@ -638,6 +710,7 @@ def collect(
     except ValueError as exc:
         _fail(f"--intent {exc}", 2)
     _folder_out(out, "--out")
+    live = _open_live(foxglove)
     try:
         folder = collect_dataset(
             out,
@@ -660,11 +733,14 @@ def collect(
             population=population,
             population_seed=population_seed,
             say=lambda line: console.print(line, highlight=False),
+            live=live,
         )
     except (ValueError, FileExistsError, NotADirectoryError, RuntimeError, OutputBusyError) as exc:
         _fail(f"{exc}")
     except OSError as exc:
         _fail(f"cannot write {exc.filename or out}: {exc.strerror}")
+    finally:
+        _close_live(live)
     _wrote(str(folder))
     _print_forces(Path(folder))
 
@@ -698,7 +774,7 @@ DRIVE_OPTIONS = {
 }
 
 
-@app.command()
+@app.command(cls=_live_command(FOXGLOVE_PORT))
 def drive(
     out: Path = typer.Option(
         Path("runs/drive/trial.parquet"),
@@ -756,6 +832,7 @@ def drive(
         help="Also write the run as <out>.mcap: ROS 2 messages (poses, wrench, prediction, alpha, faults) that Foxglove opens and train reads.",
     ),
     overwrite: bool = typer.Option(False, help="Replace an existing trial file at --out."),
+    foxglove: int = typer.Option(None, metavar="[PORT]", help=_LIVE_HELP.format(port=FOXGLOVE_PORT)),
 ) -> None:
     """Run the assistive controller, IMP or MG on an arm (UR5, Panda): in MuJoCo, or on a real one."""
     from coassist.config import CONTROL_PRESETS
@@ -797,10 +874,15 @@ def drive(
         _set_torch_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
 
     confirm = _confirm_move(yes, "the teach pendant's emergency stop")
+    live = _open_live(foxglove)
     try:
-        trial = run_drive(config, host=host, view=view, confirm=None if WORLDS[world].simulated else confirm, say=_say)
+        trial = run_drive(
+            config, host=host, view=view, confirm=None if WORLDS[world].simulated else confirm, live=live, say=_say
+        )
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
         _fail(str(exc))
+    finally:
+        _close_live(live)
     from coassist.robot.ros2_world import UR_JOINT_NAMES  # (no rclpy needed for the names)
 
     # The UR's joint names; another arm's joints are named joint_1 … joint_n in the MCAP.
@@ -924,7 +1006,7 @@ def _floats(text: str | None, option: str) -> tuple[float, ...] | None:
         _fail(f"{option}: expected comma-separated numbers, got {text!r}", 2)
 
 
-@app.command()
+@app.command(cls=_live_command(FOXGLOVE_PORT))
 def ros2(
     out: Path = typer.Option(Path("runs/ros2/trial.parquet"), help="Trial file to write (as coassist drive writes)."),
     controller: str = typer.Option("cooperative", help=ARM_CONTROLLER_HELP),
@@ -984,6 +1066,7 @@ def ros2(
     mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap (ROS 2 messages Foxglove opens)."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
     overwrite: bool = typer.Option(False, help="Replace an existing run at --out (its trial and its .mcap)."),
+    foxglove: int = typer.Option(None, metavar="[PORT]", help=_LIVE_HELP.format(port=FOXGLOVE_PORT)),
 ) -> None:
     """Run the assistive controller, IMP or MG as a ROS 2 node: ros2_control's forward velocity controller."""
     try:
@@ -1036,14 +1119,25 @@ def ros2(
 
     confirm = _confirm_move(yes, "the emergency stop")
     alpha = _run_alpha(preset, controller)
+    live = _open_live(foxglove)
     try:
         world = Ros2World(rcfg, alpha=alpha)
         try:
-            trial = run_drive(config, world=world, confirm=confirm, on_tick=world.publish_monitor, say=_say)
+            trial = run_drive(
+                config,
+                world=world,
+                confirm=confirm,
+                on_tick=world.publish_monitor,
+                live=live,
+                joint_names=rcfg.joint_names,
+                say=_say,
+            )
         finally:
             world.close()
     except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
         _fail(str(exc))
+    finally:
+        _close_live(live)
     _write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=rcfg.joint_names)
 
 
@@ -1103,6 +1197,55 @@ def ros2_watchdog(
         console.print(
             f"forwarded {dog.forwarded} commands, {dog.timeouts} silences, {dog.malformed} malformed", markup=False
         )
+
+
+@app.command("ur-sim")
+def ur_sim(
+    host: str = typer.Option("127.0.0.1", help="Address to listen on (another 127.x.y.z for a second simulator)."),
+    series: str = typer.Option("e-series", help="e-series (500 Hz, PolyScope 5) or cb3 (125 Hz, PolyScope 3)."),
+    software: str = typer.Option(
+        None, help="The software version it reports, e.g. 5.11.1.108318 (default: the series')."
+    ),
+    obj: str = typer.Option("handle", "--object", help="Carried object: handle, board, heavy."),
+    start: str = typer.Option(None, help="x,y,z [m] of the TCP at the start, tool down (default: the tasks' start)."),
+    seed: int = typer.Option(0, help="Seed of the sensor noise and of the jitter fault."),
+    unlock_delay: float = typer.Option(5.0, help="Seconds after a protective stop before it can be unlocked."),
+    rt_priority: int = typer.Option(
+        None, help="SCHED_FIFO priority 1-99 for its threads (needs root or CAP_SYS_NICE)."
+    ),
+) -> None:
+    """A UR controller (dashboard, script and RTDE ports) with the MuJoCo UR5 behind it: drive it with --world ur.
+
+    Reads faults on stdin, one a line: protective-stop, emergency-stop, release-emergency-stop,
+    pendant-stop, stall, unstall, delay LATE [JITTER], remote on|off, drop [REFUSE_FOR],
+    push FX FY FZ, release, status, quit (docs/robots.md).
+    """
+    from coassist.robot.ur_sim import URSimConfig
+    from coassist.robot.ur_sim.process import serve
+
+    names = ("host", "series", "seed", "start", "unlock_delay")
+    options = {f"URSimConfig.{n}": f"--{n.replace('_', '-')}" for n in names}
+    options.update(
+        {
+            "URSimConfig.version": "--software",
+            "URSimConfig.tool": "--object",
+            "URSimConfig.rt_priority": "--rt-priority",
+        }
+    )
+    fields: dict = {"host": host, "series": series, "tool": obj, "seed": seed, "unlock_delay": unlock_delay}
+    fields["rt_priority"] = rt_priority
+    if software is not None:
+        try:
+            fields["version"] = tuple(int(v) for v in software.split("."))
+        except ValueError:
+            _fail(f"--software {software!r}: give four numbers, e.g. 5.11.1.108318", 2)
+    if start is not None:
+        fields["start"] = _floats(start, "--start")
+    try:
+        config = URSimConfig(**fields)
+        serve(config)
+    except (ValueError, OSError) as exc:
+        _fail(_typed(str(exc), options), 2 if isinstance(exc, ValueError) else 1)
 
 
 @app.command()
@@ -1185,7 +1328,7 @@ def _simulation_only(intent: str) -> bool:
     return intent in INTENT_SOURCES and INTENT_SOURCES[intent].simulation_only
 
 
-@app.command()
+@app.command(cls=_live_command(FOXGLOVE_PAGE_PORT))
 def play(
     user: str = typer.Option(
         "me", help="Your id (letters, digits, - and _): it names your session folder <out>/<user>."
@@ -1228,6 +1371,7 @@ def play(
         False, help="Also write each trial as <trial>.mcap beside its Parquet file (ROS 2 messages Foxglove opens)."
     ),
     scene: Path = typer.Option(None, help=f"With --drive: {SCENE_HELP}"),
+    foxglove: int = typer.Option(None, metavar="[PORT]", help=_LIVE_HELP.format(port=FOXGLOVE_PAGE_PORT)),
 ) -> None:
     """Be the operator: a live page where your mouse, touch screen or gamepad is the hand on the robot."""
     try:
@@ -1251,6 +1395,7 @@ def play(
         check_token(token, host)
     except ValueError as exc:
         _fail(f"{exc}", 2)
+    live = _open_live(foxglove, page_port=port)  # stopped with the process when a line below fails
     try:
         from coassist.config import CONTROL_PRESETS
         from coassist.control.presets import CONTROLLER_KINDS
@@ -1269,7 +1414,7 @@ def play(
             mcap=mcap,
         )
         if drive is None:
-            session = PlaySession(config)
+            session = PlaySession(config, live=live)
             _say(_page_assistance(session))
         else:
             from coassist.play.monitor import DriveMonitor
@@ -1295,6 +1440,7 @@ def play(
                 host=robot_host,
                 confirm=confirm,
                 say=_say,
+                live=live,
             )
         server = PlayServer(session, host=host, port=port, token=token)
     except (ValueError, OSError) as exc:
@@ -1309,6 +1455,7 @@ def play(
     if drive is not None:
         session.start()
     server.run()
+    _close_live(live)
 
 
 def _page_assistance(session) -> str:
@@ -1612,7 +1759,7 @@ def study_amend(
     _wrote(f"{folder} (plan {amendment['to_sha256'][:12]}; the old plan in plans/{amendment['from_sha256']}.toml)")
 
 
-@study_app.command("run")
+@study_app.command("run", cls=_live_command(FOXGLOVE_PAGE_PORT))
 def study_run(
     folder: Path = typer.Argument(..., help="The study folder (coassist study init)."),
     participant: str = typer.Option(
@@ -1634,6 +1781,12 @@ def study_run(
     robot_host: str = typer.Option(None, help="The real arm's address (world ur or franka)."),
     open_browser: bool = typer.Option(True, "--open/--no-open", help="Open the page in your web browser."),
     yes: bool = typer.Option(False, "--yes", help="Do not ask before a real arm moves (scripts)."),
+    foxglove: int = typer.Option(
+        None,
+        metavar="[PORT]",
+        help=_LIVE_HELP.format(port=FOXGLOVE_PAGE_PORT)
+        + " For the experimenter: alpha and the prediction tell the conditions apart.",
+    ),
 ) -> None:
     """Run a participant's steps in their recorded order (continuing where they stopped)."""
     from coassist._io import OutputBusyError
@@ -1662,6 +1815,7 @@ def study_run(
         if token is None and not is_loopback(host):
             token = new_token()
     confirm = _confirm_move(yes, "the emergency stop") if plan.world in ("ur", "franka") else None
+    live = _open_live(foxglove, page_port=port if use_page else None)  # stopped with the process on a failure
     for pid in ids:
         try:
             with ParticipantRun(
@@ -1673,6 +1827,7 @@ def study_run(
                 host=robot_host,
                 confirm=confirm,
                 say=lambda line: console.print(line, highlight=False, markup=False),
+                live=live,
             ) as run:
                 if run.complete:
                     console.print(f"{pid}: already complete", highlight=False)
@@ -1695,6 +1850,7 @@ def study_run(
                 "amend changes the plan's safe fields) and the same command continues where it stopped"
             )
         console.print(f"{pid}: complete", highlight=False)
+    _close_live(live)
     _wrote(str(folder))
 
 

@@ -1,15 +1,28 @@
-"""A fake of ur-rtde's RTDEControlInterface / RTDEReceiveInterface for tests.
+"""A fake of ur-rtde's RTDEControlInterface / RTDEReceiveInterface for fast tests of URRTDEWorld.
 
 One :class:`FakeRobot` holds a trivial arm shared by the two interfaces and records
 every call of either, in order, as ``Call(source, name, args, t)`` (``source`` is
 "control" or "receive", ``t`` the monotonic time). Pass ``robot.control_factory`` and
-``robot.receive_factory`` to ``URRTDEWorld``.
+``robot.receive_factory`` to ``URRTDEWorld``. The timed and protocol-level behaviour is
+tested against the real client and ``coassist ur-sim`` (tests/robot/test_ur_sim_world.py);
+this fake keeps what that showed, so the fast tests cannot pass on what the protocol forbids:
 
-The arm: ``speedJ(qd, a, time)`` sets the target joint velocity; each ``waitPeriod``
-advances one period (1/frequency, or the step time when frequency is -1): the joint
-velocity moves toward the target by at most a·period, q integrates it, the timestamp
-advances. The TCP pose is ``tcp_pose`` or ``pose_fn(q)``; the TCP force is
-``tcp_force`` (base frame) minus what ``zeroFtSensor`` captured.
+- one controller cycle per ``waitPeriod`` (:meth:`FakeRobot.step`); the control script sees
+  only the *last* command code sent in a cycle: ``kickWatchdog`` (code 0) after ``speedJ``
+  in the same cycle drops the speedJ (:attr:`FakeRobot.dropped_speedj` counts them);
+- ``getStepTime`` is real-time: it returns ``output_double_register_0`` as it is *before* the
+  script runs it (0.0 at first, or the x of the last ``getTCPOffset``), the step time appears
+  there one cycle later;
+- ``speedStop``, ``setWatchdog``, ``zeroFtSensor``, ``setTcp``, ``setPayload`` and
+  ``getTCPOffset`` wait for the script's answer: each costs at least one cycle, and
+  ``speedStop`` runs the arm to rest before it returns (:attr:`FakeRobot.blocking_cycles`);
+- the controller's TCP is ``tcp_offset`` (default the handle's, not the flange);
+- with ``stream = True`` the receive timestamp advances one controller step (``step_time``) per
+  ``getTimestamp`` call (the RTDE stream running on its own: URRTDEWorld measures its step).
+
+The arm: the joint velocity moves toward the speedJ target by at most a·period per cycle, q
+integrates it, the timestamp advances. The TCP pose is ``tcp_pose`` or ``pose_fn(q)``; the TCP
+force is ``tcp_force`` (base frame) minus what ``zeroFtSensor`` captured.
 
 Faults to inject (plain attributes):
 - ``protective_stop_at = N``: the N-th speedJ (1-based) triggers a protective stop: the
@@ -21,7 +34,7 @@ Faults to inject (plain attributes):
 - ``late_by = X``: waitPeriod returns X s after the end of the period (a late tick).
 - ``script_running = False``: speedJ returns False (the control script has stopped,
   e.g. the watchdog fired) without any safety stop.
-- ``step_time``: what getStepTime returns.
+- ``step_time``: the controller's period (what getStepTime answers a cycle late).
 
 Method names and signatures follow ur-rtde 1.6.5 (tests check each exists there).
 """
@@ -70,7 +83,7 @@ class FakeRobot:
         self.tcp_speed = [0.0] * 6
         self.tcp_force = list(tcp_force) if tcp_force is not None else [0.0] * 6
         self.force_offset = [0.0] * 6
-        self.tcp_offset = [0.0] * 6
+        self.tcp_offset = [0.0, 0.0, 0.06, 0.0, 0.0, 0.0]  # the installation's TCP (the handle), not the flange
         self.payload = (0.0, [0.0, 0.0, 0.0])
         self.safety_bits = NORMAL_MODE_BIT
         self.n_speedj = 0
@@ -82,6 +95,13 @@ class FakeRobot:
         self.frozen = False
         self.late_by = 0.0
         self.script_running = True
+        self.stream = False
+        # the register protocol (module docstring)
+        self.out_double_0 = 0.0  # output_double_register_0 as the client last received it
+        self._pending_code: tuple[int, list[float], float] | None = None  # last command code sent this cycle
+        self._answer_next_cycle: float | None = None  # what the script writes into register 0 at the next cycle
+        self.dropped_speedj = 0
+        self.blocking_cycles = 0
 
     # -- factories (URRTDEWorld's control_factory / receive_factory) -----------------
 
@@ -113,13 +133,32 @@ class FakeRobot:
         return bool(self.safety_bits & PROTECTIVE_STOPPED_BIT)
 
     def step(self) -> None:
-        """Advance the arm one period."""
+        """One controller cycle: the script runs the cycle's last command code, the arm moves one period."""
+        pending, self._pending_code = self._pending_code, None
+        if pending is not None:
+            code, qd, a = pending
+            if code == 9:
+                self.target_qd, self.acceleration = np.asarray(qd, dtype=float), a
+        if self._answer_next_cycle is not None:
+            self.out_double_0, self._answer_next_cycle = self._answer_next_cycle, None
         dt = self.period
         dv = np.clip(self.target_qd - self.qd, -self.acceleration * dt, self.acceleration * dt)
         self.qd = self.qd + dv
         self.q = self.q + self.qd * dt
         if not self.frozen:
             self.timestamp += dt
+
+    def send_code(self, code: int, qd: list[float] | None = None, a: float = 0.0) -> None:
+        """A command package: the command register holds its code until the cycle runs."""
+        if self._pending_code is not None and self._pending_code[0] == 9 and code != 9:
+            self.dropped_speedj += 1
+        self._pending_code = (code, list(qd) if qd is not None else [], a)
+
+    def wait_for_script(self, cycles: int = 1) -> None:
+        """A command that waits for the script's answer: the cycles pass before it returns."""
+        for _ in range(cycles):
+            self.step()
+            self.blocking_cycles += 1
 
     def pose(self) -> list[float]:
         return list(self.pose_fn(self.q)) if self.pose_fn is not None else list(self.tcp_pose)
@@ -138,33 +177,49 @@ class FakeRTDEControl:
 
     def getStepTime(self) -> float:
         self._rec("getStepTime")
-        return self.robot.step_time
+        r = self.robot
+        r.send_code(26)
+        r._answer_next_cycle = r.step_time
+        return r.out_double_0  # read before the script ran the command
 
     def setTcp(self, tcp_offset: list[float]) -> bool:
         self._rec("setTcp", list(tcp_offset))
+        self.robot.send_code(29)
+        self.robot.wait_for_script()
         self.robot.tcp_offset = list(tcp_offset)
         return True
 
     def getTCPOffset(self) -> list[float]:
         self._rec("getTCPOffset")
-        return list(self.robot.tcp_offset)
+        r = self.robot
+        r.send_code(40)
+        r.wait_for_script()
+        r.out_double_0 = r.tcp_offset[0]  # the answer lands in output_double_register_0-5
+        return list(r.tcp_offset)
 
     def setPayload(self, mass: float, cog: list[float]) -> bool:
         self._rec("setPayload", mass, list(cog))
+        self.robot.send_code(17)
+        self.robot.wait_for_script()
         self.robot.payload = (mass, list(cog))
         return True
 
     def zeroFtSensor(self) -> bool:
         self._rec("zeroFtSensor")
+        self.robot.send_code(8)
+        self.robot.wait_for_script()
         self.robot.force_offset = list(self.robot.tcp_force)
         return True
 
     def setWatchdog(self, min_frequency: float = 10.0) -> bool:
         self._rec("setWatchdog", min_frequency)
+        self.robot.send_code(35)
+        self.robot.wait_for_script()
         return True
 
     def kickWatchdog(self) -> bool:
         self._rec("kickWatchdog")
+        self.robot.send_code(0)
         return True
 
     def initPeriod(self) -> datetime.timedelta:
@@ -188,15 +243,23 @@ class FakeRTDEControl:
             r.target_qd = np.zeros(6)
             r.qd = np.zeros(6)
             return False
-        r.target_qd = np.asarray(qd, dtype=float)
-        r.acceleration = acceleration
+        r.send_code(9, list(qd), acceleration)  # real-time: the script takes it at the next cycle
         return True
 
     def speedStop(self, a: float = 10.0) -> bool:
         self._rec("speedStop", a)
-        self.robot.target_qd = np.zeros(6)
-        self.robot.acceleration = a
-        return not self.robot.protective_stopped
+        r = self.robot
+        if r.protective_stopped or not r.script_running:
+            return False
+        r.send_code(15)
+        r.target_qd = np.zeros(6)
+        r.acceleration = a
+        r.wait_for_script()
+        for _ in range(100_000):  # stopj blocks until the arm is at rest
+            if not np.any(r.qd):
+                break
+            r.wait_for_script()
+        return True
 
     def stopScript(self) -> None:
         self._rec("stopScript")
@@ -218,7 +281,10 @@ class FakeRTDEReceive:
 
     def getTimestamp(self) -> float:
         self._rec("getTimestamp")
-        return self.robot.timestamp
+        r = self.robot
+        if r.stream and not r.frozen:
+            r.timestamp += r.step_time  # the receive interface runs at the controller's own step
+        return r.timestamp
 
     def getActualQ(self) -> list[float]:
         self._rec("getActualQ")

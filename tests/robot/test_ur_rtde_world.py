@@ -1,4 +1,7 @@
-"""URRTDEWorld against the fake RTDE interfaces (tests/robot/fake_rtde.py); no robot needed."""
+"""URRTDEWorld against the fake RTDE interfaces (tests/robot/fake_rtde.py): fast, no clock.
+
+The fake keeps what the real client against ``coassist ur-sim`` showed (its docstring);
+tests/robot/test_ur_sim_world.py runs the same world against the simulator."""
 
 from __future__ import annotations
 
@@ -11,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from coassist.robot.ur_rtde_world import SafetyStatus, URRTDEWorld, stop_message
+from coassist.robot.ur_rtde_world import SafetyStatus, URProgramStopped, URRTDEWorld, stop_message
 from coassist.runtime.world import Command, RobotLinkError, RobotState, World
 
 # Loaded by path under a unique name: works with --import-mode=importlib and without
@@ -24,12 +27,19 @@ FakeRobot = fake_rtde.FakeRobot
 
 HOST = "192.0.2.10"
 PERIOD_CALLS = ("initPeriod", "speedJ", "speedStop", "kickWatchdog", "waitPeriod")
+TCP = [0.0, 0.0, 0.06, 0.0, 0.0, 0.0]  # the fake controller's installation TCP
 
 
 def make(robot: FakeRobot | None = None, **kwargs) -> tuple[URRTDEWorld, FakeRobot]:
     robot = robot or FakeRobot()
     kwargs.setdefault("frequency", 500.0)
-    world = URRTDEWorld(HOST, control_factory=robot.control_factory, receive_factory=robot.receive_factory, **kwargs)
+    stream, robot.stream = robot.stream, True  # connect measures the stream's step (the receive interface runs at -1)
+    try:
+        world = URRTDEWorld(
+            HOST, control_factory=robot.control_factory, receive_factory=robot.receive_factory, **kwargs
+        )
+    finally:
+        robot.stream = stream
     return world, robot
 
 
@@ -53,26 +63,39 @@ def test_connect_order_zero_before_motion_and_one_watchdog():
     names = robot.names()
     assert names[:2] == ["__init__", "__init__"]
     assert [c.source for c in robot.calls[:2]] == ["receive", "control"]
-    assert names.index("setTcp") < names.index("zeroFtSensor")
+    assert names.index("setTcp") < names.index("getTCPOffset") < names.index("zeroFtSensor")
     assert names.index("setPayload") < names.index("zeroFtSensor")
     assert "setWatchdog" not in names  # armed at the first apply, not while the caller sets up
+    world.read()  # a drive reads the start state long before its loop: no watchdog, no period yet
+    assert "setWatchdog" not in robot.names() and "initPeriod" not in robot.names()
     run_ticks(world, 3)
     names = robot.names()
     assert names.index("zeroFtSensor") < names.index("speedJ")
-    assert names.index("setWatchdog") < names.index("speedJ")
+    # the watchdog (a round trip) before the first period opens: it is not charged to tick 0
+    assert names.index("setWatchdog") < names.index("initPeriod") < names.index("speedJ")
     watchdog = [c for c in robot.calls if c.name == "setWatchdog"]
     assert len(watchdog) == 1 and watchdog[0].args == (20.0,)
     assert next(c for c in robot.calls if c.name == "setPayload").args == (0.8, [0.0, 0.0, 0.05])
 
 
-def test_every_apply_is_init_speedj_kick_wait_with_the_exact_qd():
+def test_the_kinematics_use_the_controllers_tcp():
+    world, robot = make()  # no tcp_offset: the controller keeps its own, read back
+    assert world.tcp_offset.tolist() == TCP
+    assert world.kinematics().tcp_offset.tolist() == TCP
+    world, robot = make(tcp_offset=[0, 0, 0.1, 0, 0, 0])
+    assert world.tcp_offset.tolist() == [0, 0, 0.1, 0, 0, 0] and robot.tcp_offset == [0, 0, 0.1, 0, 0, 0]
+
+
+def test_every_apply_is_init_speedj_wait_with_the_exact_qd_and_no_kick():
     world, robot = make()
     commanded = [np.array([0.1, -0.2, 0.3, -0.4, 0.5, -0.6]) * (k + 1) / 7 for k in range(5)]
     for qd in commanded:
         world.read()
         world.apply(Command(qd=qd))
     period = [c for c in robot.calls if c.source == "control" and c.name in PERIOD_CALLS]
-    assert [c.name for c in period] == ["initPeriod", "speedJ", "kickWatchdog", "waitPeriod"] * 5 + ["initPeriod"]
+    # no kickWatchdog: its code 0 would overwrite the speedJ's in the same controller cycle
+    assert [c.name for c in period] == ["initPeriod", "speedJ", "waitPeriod"] * 5 + ["initPeriod"]
+    assert robot.dropped_speedj == 0 and robot.blocking_cycles == 1 + 1 + 1  # getTCPOffset, zeroFtSensor, setWatchdog
     sent = [c for c in period if c.name == "speedJ"]
     for call, qd in zip(sent, commanded, strict=True):
         assert call.args[0] == [float(v) for v in qd]  # bit for bit
@@ -82,26 +105,39 @@ def test_every_apply_is_init_speedj_kick_wait_with_the_exact_qd():
     assert np.all(np.abs(world.read().q) > 0)
 
 
+def test_a_kick_right_after_speedj_drops_it():
+    """Why there is no kickWatchdog: the script sees the cycle's last command code (the fake as the simulator)."""
+    robot = FakeRobot()
+    c = robot.control_factory(HOST, 500.0)
+    for _ in range(5):
+        c.speedJ([0.1] * 6, 1.4, 0.002)
+        c.kickWatchdog()
+        c.waitPeriod(c.initPeriod())
+    assert robot.dropped_speedj == 5 and not np.any(robot.qd)
+
+
 @pytest.mark.parametrize(
     "qd",
     [None, [0.1, 0.2, math.nan, 0, 0, 0], [0, 0, 0, 0, 0, math.inf], [0.1, 0.2], "fast", [[0.1] * 6]],
     ids=["none", "nan", "inf", "short", "string", "2d"],
 )
-def test_bad_qd_sends_speed_stop_never_speedj(qd):
+def test_bad_qd_sends_a_zero_speedj_never_nan_nor_speed_stop(qd):
     world, robot = make(deceleration=3.0)
     world.read()
     world.apply(Command(qd=qd))
     control = [c for c in robot.calls if c.source == "control" and c.name in PERIOD_CALLS]
-    assert [c.name for c in control] == ["initPeriod", "speedStop", "kickWatchdog", "waitPeriod", "initPeriod"]
-    assert next(c for c in control if c.name == "speedStop").args == (3.0,)
-    assert "speedJ" not in robot.names()
+    assert [c.name for c in control] == ["initPeriod", "speedJ", "waitPeriod", "initPeriod"]
+    # speedStop would hold the period until the arm is at rest: a real-time zero speedJ decelerates instead
+    assert next(c for c in control if c.name == "speedJ").args == ([0.0] * 6, 3.0, world.dt)
+    assert "speedStop" not in robot.names()
     assert world.rejected_commands == (0 if qd is None else 1)
 
 
-def test_stop_command_sends_speed_stop():
-    world, robot = make()
+def test_stop_command_sends_a_zero_speedj_at_the_deceleration():
+    world, robot = make(deceleration=2.0)
     world.apply(Command(qd=np.ones(6), stop=True))
-    assert "speedJ" not in robot.names() and "speedStop" in robot.names()
+    speedj = [c for c in robot.calls if c.name == "speedJ"]
+    assert [c.args for c in speedj] == [([0.0] * 6, 2.0, world.dt)] and "speedStop" not in robot.names()
 
 
 def test_stop_is_idempotent_and_a_no_op_after_close():
@@ -113,6 +149,18 @@ def test_stop_is_idempotent_and_a_no_op_after_close():
     n = len(robot.calls)
     world.stop()
     assert len(robot.calls) == n
+
+
+def test_stop_on_a_dead_link_sends_no_waiting_command():
+    world, robot = make(link_timeout=0.02)
+    world.read()
+    robot.frozen = True
+    time.sleep(0.03)  # the stream has said nothing for longer than link_timeout
+    world.stop()
+    assert "speedStop" not in robot.names()  # ur-rtde would wait up to 300 s for its answer
+    assert robot.calls[-1].name == "speedJ" and robot.calls[-1].args[0] == [0.0] * 6
+    world.close()
+    assert "stopScript" not in robot.names() and robot.names()[-2:] == ["disconnect", "disconnect"]
 
 
 def test_close_stops_then_stops_script_and_disconnects_even_if_speed_stop_raises(caplog):
@@ -142,7 +190,8 @@ def test_close_with_the_link_gone_never_raises():
     robot.link_down = True
     with world:
         pass
-    assert robot.names()[-4:] == ["speedStop", "stopScript", "disconnect", "disconnect"]
+    # the dead link: no speedStop / stopScript (they would wait for an answer), only the disconnects
+    assert robot.names()[-2:] == ["disconnect", "disconnect"] and "speedStop" not in robot.names()
 
 
 def test_protective_stop_is_reported_and_explained():
@@ -208,11 +257,24 @@ def test_apply_and_stop_raise_when_the_link_is_lost():
         world.stop()
 
 
-def test_rejected_speedj_without_a_safety_stop_is_a_link_error():
+def test_rejected_speedj_without_a_safety_stop_says_the_program_stopped():
     world, robot = make()
     world.read()
+    world.apply(Command(qd=np.zeros(6)))
     robot.script_running = False
-    with pytest.raises(RobotLinkError, match="control script is not running"):
+    with pytest.raises(URProgramStopped, match="control script stopped running.*teach pendant") as info:
+        world.apply(Command(qd=np.zeros(6)))
+    assert not isinstance(info.value, ConnectionError)  # not a lost link: the loop says what stopped it
+    assert world.stop_detail == str(info.value)
+
+
+def test_rejected_speedj_after_a_long_period_names_the_watchdog():
+    world, robot = make(frequency=100.0, watchdog_hz=20.0)
+    world.read()
+    world.apply(Command(qd=np.zeros(6)))
+    time.sleep(0.08)  # the loop hung longer than the watchdog's 0.05 s
+    robot.script_running = False
+    with pytest.raises(URProgramStopped, match="watchdog stopped .* over the watchdog's 0.05 s"):
         world.apply(Command(qd=np.zeros(6)))
 
 
@@ -275,6 +337,7 @@ def test_general_rotation_round_trip():
 
 def test_wrench_seq_and_strictly_increasing_time():
     world, robot = make()
+    world.apply(Command(qd=np.zeros(6)))  # the first apply arms the watchdog (a round trip)
     s0 = world.read()
     s1 = world.read()  # nothing new from the robot
     assert s1.wrench_seq == s0.wrench_seq and s1.t > s0.t
@@ -296,15 +359,31 @@ def test_state_layout():
     assert s.t == robot.timestamp
 
 
-def test_dt_from_the_controller_step_time():
-    world, robot = make(FakeRobot(step_time=0.008), frequency=-1)
-    assert world.dt == 0.008 and robot.calls[0].args == (HOST, -1.0)
-    world, _ = make(FakeRobot(step_time=0.008), frequency=250)
+def test_dt_from_the_stream_timestamps_not_get_step_time():
+    for step in (0.008, 0.002):  # CB3, e-Series
+        robot = FakeRobot(step_time=step)
+        robot.stream = True
+        world, _ = make(robot, frequency=-1)
+        assert world.dt == step and world.step_time == step and robot.calls[0].args == (HOST, -1.0)
+        # getStepTime answers before the script has run it (0.0 here): never asked
+        assert "getStepTime" not in robot.names()
+    world, _ = make(FakeRobot(step_time=0.002), frequency=250)
     assert world.dt == 1 / 250
 
 
-def test_unknown_step_time_asks_for_the_frequency():
-    robot = FakeRobot(step_time=0.0)
+def test_get_step_time_answers_from_the_register_before_the_script_ran():
+    robot = FakeRobot(step_time=0.008)
+    c = robot.control_factory(HOST, -1.0)
+    assert c.getStepTime() == 0.0  # nothing written yet
+    c.getTCPOffset()
+    assert c.getStepTime() == TCP[0]  # the last answer in output_double_register_0
+    c.waitPeriod(c.initPeriod())
+    assert c.getStepTime() == 0.008  # a cycle later
+
+
+def test_a_stream_that_shows_no_step_asks_for_the_frequency():
+    robot = FakeRobot(step_time=0.002)
+    robot.frozen = True  # the timestamps do not advance
     with pytest.raises(RobotLinkError, match="frequency="):
         make(robot, frequency=-1)
     assert robot.names()[-2:] == ["disconnect", "disconnect"]  # cleaned up
@@ -363,13 +442,16 @@ def test_missing_ur_rtde_names_the_extra(monkeypatch):
     assert robot.names() == ["__init__", "disconnect"]
 
 
-def test_robot_info():
+def test_robot_info(monkeypatch):
+    from coassist.robot import ur_rtde_world
+
+    monkeypatch.setattr(ur_rtde_world, "controller_version", lambda host: f"URSoftware 5.11.1.108318 at {host}")
     world, _ = make(FakeRobot(step_time=0.002), tcp_offset=[0, 0, 0.12, 0, 0, 0], payload=(1.5, [0, 0, 0.04]))
     info = world.robot_info()
     assert info["host"] == HOST and info["frequency"] == pytest.approx(500.0) and info["dt"] == world.dt
-    assert info["step_time"] == 0.002 and info["tcp_offset"] == [0, 0, 0.12, 0, 0, 0]
+    assert info["step_time"] is None and info["tcp_offset"] == [0, 0, 0.12, 0, 0, 0]  # a given rate: not measured
     assert info["payload_mass"] == 1.5 and info["payload_cog"] == [0, 0, 0.04]
-    assert info["controller_version"] is None
+    assert info["controller_version"] == f"URSoftware 5.11.1.108318 at {HOST}"  # the dashboard's answer
 
 
 def test_fake_matches_the_real_ur_rtde_api():
@@ -384,3 +466,13 @@ def test_fake_matches_the_real_ur_rtde_api():
         for name in vars(fake):
             if not name.startswith("_"):
                 assert hasattr(real, name), f"{real.__name__} has no {name}"
+
+
+def test_the_state_streams_at_the_controllers_rate_and_a_cb3_refuses_a_500_hz_loop():
+    robot = FakeRobot(step_time=0.002)
+    world, _ = make(robot, frequency=125.0)
+    receive, control = robot.calls[0], robot.calls[1]
+    assert receive.args == (HOST, -1.0) and control.args == (HOST, 125.0)  # freshest sample; the loop's period
+    assert world.dt == 1 / 125
+    with pytest.raises(RobotLinkError, match="every 8 ms: a 500 Hz loop"):
+        make(FakeRobot(step_time=0.008), frequency=500.0)

@@ -100,7 +100,8 @@ def test_the_real_ur_world_is_an_arm_world_without_a_handle():
         assert not world.noise_free_sensor
         mass, com = world.tool_mass_and_com()
         assert mass == 0.0 and np.array_equal(com, np.zeros(3))
-        np.testing.assert_array_equal(world.kinematics().tcp_offset, np.zeros(6))  # as the drive always had it
+        # the controller's own TCP, read back at connect (the fake's installation TCP, not the flange)
+        np.testing.assert_array_equal(world.kinematics().tcp_offset, robot.tcp_offset)
     finally:
         world.close()
 

@@ -266,3 +266,36 @@ def test_trial_shape_draws_come_after_side_and_pace():
     assert (c, ant) == (AUTHOR.clearance * np.exp(expect[0]), AUTHOR.anticipation * np.exp(expect[1]))
     fixed = dataclasses.replace(AUTHOR, shape_jitter=0.0)
     assert trial_shape(fixed, np.random.default_rng(0)) == (AUTHOR.clearance, AUTHOR.anticipation)
+
+
+def test_a_simulated_hand_travels_as_json_and_pushes_the_same_bit_for_bit():
+    import json
+
+    from coassist.scenario.hand import SimulatedHand
+    from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
+    from coassist.scenario.tasks import task_for_seed
+
+    profile = operator_profile(3)
+    rng = np.random.default_rng(7)
+    task = task_for_seed("curved", 2)
+    n, dt = 300, 1 / 125
+    intent = intent_trajectory(task, profile, rng, n, dt).positions
+    noise = motor_noise(profile, rng, n, dt)
+
+    def build():
+        return SimulatedHand(
+            OperatorArm(profile, intent, dt, noise), dt, np.r_[intent[0], 0.2, np.pi, 0, 0], full_pose=True
+        )
+
+    original = build()
+    copy = SimulatedHand.from_dict(json.loads(json.dumps(original.to_dict())))
+    states = np.random.default_rng(1).normal(0, 0.05, size=(n, 12))
+    for k in range(n):
+        pose, twist = np.r_[intent[k] + states[k, :2], 0.2 + states[k, 2], np.pi, 0, 0], states[k, 6:]
+        np.testing.assert_array_equal(original.force(k * dt, pose, twist), copy.force(k * dt, pose, twist))
+    with pytest.raises(ValueError, match="already run 300 ticks"):
+        original.to_dict()
+    bad = build().to_dict()
+    del bad["noise"]
+    with pytest.raises(ValueError, match="no 'noise'"):
+        SimulatedHand.from_dict(bad)

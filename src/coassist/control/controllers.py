@@ -356,6 +356,11 @@ class AssistiveController(_GuardedController):
         self.name = "cooperative" if isinstance(game, CooperativeGame) else "nash"
         super().__init__(game.model, game.horizon, effort_limit, bounds)
 
+    @property
+    def alpha(self) -> float | None:
+        """The cooperative game's α now (what a live view and the MCAP's ``/alpha`` show); None for a Nash game."""
+        return getattr(self.game, "alpha", None)
+
     def _law(self, z, ref_h, ref_r):
         return self.game.solve(z, ref_h, ref_r)
 

@@ -48,9 +48,11 @@ from coassist.spatial import quaternion_from_rotation_vector
 __all__ = [
     "FAULT_STATUS_NAME",
     "MCAP_TOPICS",
+    "TickMessages",
     "fault_array",
     "fault_level",
     "float64_multi_array",
+    "ros2_schema",
     "write_chunk_crcs",
     "write_trial_mcap",
 ]
@@ -88,11 +90,20 @@ def _full(rows: np.ndarray, fill: np.ndarray) -> np.ndarray:
     return out
 
 
-class _Messages:
-    """Builds the messages from a rosbags typestore (``ts.types[...]``)."""
+class TickMessages:
+    """The messages of one tick (module docstring's table), as :func:`write_trial_mcap` writes them.
 
-    def __init__(self, ts: Any, frame_id: str) -> None:
+    One builder for the file and for the live view (:mod:`coassist.runtime.foxglove`), so the
+    two carry the same topics, types and values. ``ts``: a rosbags typestore (ROS 2 Humble);
+    ``frame_id``: the frame of every pose and wrench; ``joint_names``: the names of
+    ``/joint_states``; ``dt_ns``: the period [ns] (pose i of a prediction is stamped
+    ``ns + (i + 1)·dt_ns``).
+    """
+
+    def __init__(self, ts: Any, frame_id: str, joint_names: Sequence[str] = (), dt_ns: int = 0) -> None:
         self.ts, self.frame_id = ts, frame_id
+        self.joint_names = list(joint_names)
+        self.dt_ns = int(dt_ns)
         t = ts.types
         self.Time, self.Header = t["builtin_interfaces/msg/Time"], t["std_msgs/msg/Header"]
         self.Point, self.Quat, self.Pose = (
@@ -114,6 +125,86 @@ class _Messages:
 
     def v3(self, v: np.ndarray) -> Any:
         return self.V3(*map(float, v))
+
+    def tick(
+        self,
+        ns: int,
+        pose6: np.ndarray,
+        velocity6: np.ndarray,
+        wrench6: np.ndarray,
+        reference6: np.ndarray,
+        prediction: np.ndarray | None = None,
+        alpha: float | None = None,
+        flags: int = 0,
+        joints: np.ndarray | None = None,
+        joint_velocity: np.ndarray | None = None,
+    ) -> list[tuple[str, Any]]:
+        """(topic, message) of one tick stamped ``ns``, in the file's order.
+
+        pose6, velocity6, wrench6, reference6 : (6,) [m, rad; m/s, rad/s; N, N·m].
+        prediction : (H, ≤ 6) poses at t + (i+1)·dt, the missing axes taken from ``pose6``;
+        None or not finite: no ``/prediction``.  alpha : None or NaN: no ``/alpha``.
+        flags : the tick's :class:`~coassist.interfaces.Fault` bits.  joints : (J,) measured
+        q [rad] and joint_velocity (J,) the commanded q̇ [rad/s] (zeros when None); None: no joint topics.
+        """
+        T = self.ts.types
+        m = self
+        out: list[tuple[str, Any]] = [
+            ("/current_pose", m.pose_stamped(ns, pose6)),
+            (
+                "/current_velocity",
+                T["geometry_msgs/msg/TwistStamped"](
+                    header=m.header(ns),
+                    twist=T["geometry_msgs/msg/Twist"](linear=m.v3(velocity6[:3]), angular=m.v3(velocity6[3:])),
+                ),
+            ),
+            (
+                "/human_wrench",
+                T["geometry_msgs/msg/WrenchStamped"](
+                    header=m.header(ns),
+                    wrench=T["geometry_msgs/msg/Wrench"](force=m.v3(wrench6[:3]), torque=m.v3(wrench6[3:])),
+                ),
+            ),
+            ("/robot_ref_pos", m.pose_stamped(ns, reference6)),
+        ]
+        if prediction is not None and np.all(np.isfinite(prediction)):
+            rows = _full(prediction, pose6)
+            dt_ns = self.dt_ns
+            out.append(
+                (
+                    "/prediction",
+                    T["nav_msgs/msg/Path"](
+                        header=m.header(ns),
+                        poses=[m.pose_stamped(ns + (i + 1) * dt_ns, rows[i]) for i in range(rows.shape[0])],
+                    ),
+                )
+            )
+        if alpha is not None and math.isfinite(alpha):
+            out.append(("/alpha", T["std_msgs/msg/Float64"](data=float(alpha))))
+        out.append(("/faults", fault_array(self.ts, m.header(ns), int(flags))))
+        if joints is not None:
+            out.append(
+                (
+                    "/joint_states",
+                    T["sensor_msgs/msg/JointState"](
+                        header=m.header(ns),
+                        name=self.joint_names,
+                        position=np.asarray(joints, dtype=np.float64),
+                        velocity=np.zeros(0),
+                        effort=np.zeros(0),
+                    ),
+                )
+            )
+            qd = np.zeros(len(joints)) if joint_velocity is None else joint_velocity
+            out.append(("/forward_velocity_controller/commands", float64_multi_array(self.ts, qd)))
+        return out
+
+
+def ros2_schema(ts: Any, msgtype: str) -> str:
+    """The ``ros2msg`` text of ``msgtype`` (its fields, then every type it uses): the schema an MCAP
+    file written here embeds for it, and the one the live view advertises."""
+    text, _ = ts.generate_msgdef(msgtype, ros_version=2)
+    return text
 
 
 def write_trial_mcap(
@@ -170,8 +261,6 @@ def write_trial_mcap(
             raise ValueError(f"joint_names must be {joints.shape[1]} strings, got {joint_names!r}")
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
-    m = _Messages(ts, frame_id)
-    T = ts.types
     start = np.zeros(6)
     sp = trial.meta.extra.get("start_pose")
     if sp is not None and len(sp) == 6:
@@ -180,7 +269,7 @@ def write_trial_mcap(
     vel6 = _full(trial.velocity, np.zeros(6))
     wr6 = _full(trial.wrench, np.zeros(6))
     stamps = [int(start_ns) + round(float(t) * 1e9) for t in trial.time]
-    dt_ns = round(trial.meta.dt * 1e9)
+    m = TickMessages(ts, frame_id, names if joints is not None else (), round(trial.meta.dt * 1e9))
 
     # rosbags writes a bag folder: a pid-named one beside the file (not in /tmp), so what a killed
     # writer leaves is removed by the next write there (coassist._io.remove_stale)
@@ -198,54 +287,25 @@ def write_trial_mcap(
                 and (topic not in ("/joint_states", "/forward_velocity_controller/commands") or joints is not None)
                 and (topic != "/prediction" or trial.prediction is not None)
             }
-
-            def put(topic: str, ns: int, msg: Any) -> None:
-                w.write(conn[topic], ns, ts.serialize_cdr(msg, MCAP_TOPICS[topic]))
-
             for k in range(n):
                 ns = stamps[k]
-                put("/current_pose", ns, m.pose_stamped(ns, pose6[k]))
-                put(
-                    "/current_velocity",
+                qd = None
+                if joints is not None and trial.joint_velocity is not None:
+                    qd = trial.joint_velocity[k]
+                messages = m.tick(
                     ns,
-                    T["geometry_msgs/msg/TwistStamped"](
-                        header=m.header(ns),
-                        twist=T["geometry_msgs/msg/Twist"](linear=m.v3(vel6[k, :3]), angular=m.v3(vel6[k, 3:])),
-                    ),
+                    pose6[k],
+                    vel6[k],
+                    wr6[k],
+                    ref6[k],
+                    prediction=None if trial.prediction is None else trial.prediction[k],
+                    alpha=None if alphas is None else float(alphas[k]),
+                    flags=0 if trial.fault is None else int(trial.fault[k]),
+                    joints=None if joints is None else joints[k],
+                    joint_velocity=qd,
                 )
-                put(
-                    "/human_wrench",
-                    ns,
-                    T["geometry_msgs/msg/WrenchStamped"](
-                        header=m.header(ns),
-                        wrench=T["geometry_msgs/msg/Wrench"](force=m.v3(wr6[k, :3]), torque=m.v3(wr6[k, 3:])),
-                    ),
-                )
-                put("/robot_ref_pos", ns, m.pose_stamped(ns, ref6[k]))
-                if trial.prediction is not None and np.all(np.isfinite(trial.prediction[k])):
-                    rows = _full(trial.prediction[k], pose6[k])
-                    path_msg = T["nav_msgs/msg/Path"](
-                        header=m.header(ns),
-                        poses=[m.pose_stamped(ns + (i + 1) * dt_ns, rows[i]) for i in range(rows.shape[0])],
-                    )
-                    put("/prediction", ns, path_msg)
-                if alphas is not None and math.isfinite(alphas[k]):
-                    put("/alpha", ns, T["std_msgs/msg/Float64"](data=float(alphas[k])))
-                put("/faults", ns, fault_array(ts, m.header(ns), 0 if trial.fault is None else int(trial.fault[k])))
-                if joints is not None:
-                    put(
-                        "/joint_states",
-                        ns,
-                        T["sensor_msgs/msg/JointState"](
-                            header=m.header(ns),
-                            name=names,
-                            position=np.asarray(joints[k], dtype=np.float64),
-                            velocity=np.zeros(0),
-                            effort=np.zeros(0),
-                        ),
-                    )
-                    qd = trial.joint_velocity[k] if trial.joint_velocity is not None else np.zeros(joints.shape[1])
-                    put("/forward_velocity_controller/commands", ns, float64_multi_array(ts, qd))
+                for topic, msg in messages:
+                    w.write(conn[topic], ns, ts.serialize_cdr(msg, MCAP_TOPICS[topic]))
         inner = bag / "bag.mcap"
         write_chunk_crcs(inner)
 

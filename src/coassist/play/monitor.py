@@ -39,6 +39,7 @@ class DriveMonitor(PlaySession):
     intent are taken from ``drive_config``).  host : the real arm's address (the worlds that need one).
     confirm : as :func:`~coassist.robot.drive.drive`'s, asked before a real arm moves.
     say : as :func:`~coassist.robot.drive.drive`'s, told what the person will get before the run.
+    live : a :class:`~coassist.runtime.live.LiveFeed` that watches the run too (e.g. Foxglove).
     """
 
     watch_only = True
@@ -51,13 +52,14 @@ class DriveMonitor(PlaySession):
         host: str | None = None,
         confirm: Any = None,
         say: Any = None,
+        live: Any = None,
     ) -> None:
         if not isinstance(drive_config, DriveConfig):
             raise ValueError(f"drive_config must be a DriveConfig, got {type(drive_config).__name__}")
         self.drive_config, self.robot_host, self.confirm, self.say = drive_config, host, confirm, say
         # The drive builds its own controller and predictor: the session's paced predictor
         # process would start and never be used.
-        super().__init__(dataclasses.replace(config, paced=False))
+        super().__init__(dataclasses.replace(config, paced=False), live=live)
 
     def next_task(self):
         c = self.drive_config
@@ -96,7 +98,15 @@ class DriveMonitor(PlaySession):
                 WorldRequest(c.robot or WORLDS[c.world].arms[0], c.object, c.rate_hz, c.seed, start, realtime=True),
             )
         try:
-            trial = drive(c, world=world, host=self.robot_host, confirm=self.confirm, on_tick=on_tick, say=self.say)
+            trial = drive(
+                c,
+                world=world,
+                host=self.robot_host,
+                confirm=self.confirm,
+                on_tick=on_tick,
+                say=self.say,
+                live=self.live,
+            )
         finally:
             if world is not None:
                 world.close()

@@ -225,10 +225,11 @@ class PlaySession:
     each result (set :attr:`publish` before the first trial; it must not block).
     """
 
-    def __init__(self, config: PlayConfig, hand: BrowserHand | None = None) -> None:
+    def __init__(self, config: PlayConfig, hand: BrowserHand | None = None, *, live: Any = None) -> None:
         if not isinstance(config, PlayConfig):
             raise ValueError(f"config must be a PlayConfig, got {type(config).__name__}")
         self.config = config
+        self.live = live  # a LiveFeed (coassist.runtime.live) that watches every trial, or None
         self.results: list[TrialResult] = []
         self._resume()  # a folder that is not a session fails here, before anything is built
         self.hand = hand or BrowserHand(config.arm)
@@ -478,6 +479,8 @@ class PlaySession:
             self.frame = frame
             self.publish(frame)
 
+        if self.live is not None:
+            on_tick = self.live.watch(episode, on_tick)
         log = run_loop(episode.world, episode.tick, episode.n_max, termination, on_tick=on_tick)
         if self._abort is not None:
             self.publish(

@@ -20,6 +20,8 @@ Worlds (:data:`coassist.robot.worlds.WORLDS`, one entry each; a world is an
 - a real arm (``"ur"``: :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`; ``"franka"``,
   ``"ros2"``); the person at the handle is the operator. The task is laid out from wherever
   the TCP is when the run starts (coassist never moves a real arm to a start pose on its own).
+  The ``"ur"`` world on ``coassist ur-sim`` (:class:`~coassist.robot.ur_sim_world.URSimWorld`)
+  has a simulated handle: the simulated operator holds it, as in MuJoCo.
 
 Controllers by kind (:data:`coassist.control.presets.CONTROLLER_KINDS`): ``cooperative`` (the
 assistive controller, the cooperative game), ``cooperative-arbitrated``, ``cooperative-damped``,
@@ -56,7 +58,7 @@ from coassist.scenario.assistance import DEFAULT_INTENT, assistance_line, check_
 from coassist.scenario.hand import SimulatedHand
 from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source, needs_network, shared_intent_source
 from coassist.scenario.objects import get_object
-from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
+from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise
 from coassist.scenario.populations import POPULATIONS, population_profile
 from coassist.scenario.scene import Scene
 from coassist.scenario.seeds import trial_rngs
@@ -197,7 +199,9 @@ class DriveConfig:
         """The person at the handle as the trial names them (``person``, or the world's default)."""
         if self.person is not None:
             return self.person
-        return operator_profile(self.user).name if WORLDS[self.world].simulated else "operator"
+        if WORLDS[self.world].simulated:
+            return population_profile(self.population, self.user, self.population_seed).name
+        return "operator"
 
 
 #: A person's id: what a folder may be named (as play's user).
@@ -288,6 +292,8 @@ def drive(
     on_tick: Any = None,
     intent_source: Any = None,
     say: Any = None,
+    live: Any = None,
+    joint_names: Sequence[str] | None = None,
 ) -> Trial:
     """Run one trial on a UR5 (module docstring) and return it.
 
@@ -299,6 +305,8 @@ def drive(
     intent_source : an IntentSource or RealtimePredictor to use instead of ``config.intent``.
     say : told in one line what the person will get (:func:`~coassist.scenario.assistance.assistance_line`),
         once the world is read and before ``confirm``.
+    live : a :class:`~coassist.runtime.live.LiveFeed` (the live view, e.g. Foxglove) that watches the
+        run; ``joint_names`` name its joint states (default: the UR's for a UR5, else joint_1 …).
     """
     run = _prepare(config, operator=operator, world=world, host=host, view=view, intent_source=intent_source)
     try:
@@ -306,6 +314,12 @@ def drive(
             say(run.assistance)
         if confirm is not None and not confirm(run.limits.describe()):
             raise RuntimeError("not confirmed: the robot was not moved")
+        if live is not None:
+            if joint_names is None and config.robot == "ur5":
+                from coassist.robot.ros2_world import UR_JOINT_NAMES  # (the names only: no rclpy)
+
+                joint_names = UR_JOINT_NAMES
+            on_tick = live.watch(run.episode, on_tick, joint_names=joint_names)
         log = run.episode.run(deadline=config.dt if run.world.realtime else None, on_tick=on_tick)
     finally:
         run.close()
@@ -431,14 +445,16 @@ def _prepare(
             )
         state0 = world.read()
         start_pose = np.asarray(state0.tool_pose, dtype=float).copy()
-        if not simulated:
+        hand: HandWorld | None = world if isinstance(world, HandWorld) else None  # a handle to hold
+        # the simulated operator at a simulated handle: MuJoCo's, or coassist ur-sim's behind the ur world
+        held = simulated or hand is not None
+        if not held:
             # lay the task out from where the TCP is: shift the plan
             shift = start_pose[:2] - ref_abs[0, :2]
             ref_abs = ref_abs.copy()
             ref_abs[:, :2] += shift
             target = target + shift
-        hand: HandWorld | None = world if isinstance(world, HandWorld) else None  # a handle to hold
-        if operator is None and simulated and hand is not None:
+        if operator is None and hand is not None:
             noise = motor_noise(profile, rng_motor, ref_abs.shape[0], dt)  # as long as the intent: stop() may step on
             arm = OperatorArm(profile, intent_pos, dt, noise)
             hand_pose, _ = hand.hand_pose()
@@ -476,7 +492,7 @@ def _prepare(
             n_max=n_max,
             target=target,
             labels=EpisodeLabels(
-                user=user,
+                user=user if config.person is not None else (profile.name if held else "operator"),
                 object=obj.name,
                 seed=config.seed,
                 source=entry.source,
@@ -487,10 +503,10 @@ def _prepare(
             # real-arm link), the Trial's intent column only where that operator held the handle
             true_intent=intent_pos,
             intent_end_time=intent_traj.end_time,
-            log_intent=simulated,
+            log_intent=held,
             # the robot is told of the obstacle only where the simulated operator goes round it: a person at a
             # real arm sees no such box (the path-hypotheses source then is the present estimate alone)
-            tell_obstacles=simulated,
+            tell_obstacles=held,
             told_obstacles=None if config.scene is None else config.scene.told(),
             kinematics=kin,
             tick_config=TickConfig(dofs=dofs),

@@ -362,6 +362,29 @@ class MujocoArmWorld:
 
             self._viewer = mj_viewer.launch_passive(m, d)
 
+    def reset(self, q) -> None:
+        """Put the arm at rest at the joints ``q`` (n,) [rad]: the servo holds there, the sensor samples anew.
+
+        The simulated time, the sensor's noise stream and its sample count go on. Raises
+        ValueError unless ``q`` is n finite joint angles inside the joint ranges.
+        """
+        q = np.asarray(q, dtype=float)
+        lo, hi = self.model.jnt_range[:, 0], self.model.jnt_range[:, 1]
+        if q.shape != (self.n_joints,) or not np.isfinite(q).all() or np.any(q < lo) or np.any(q > hi):
+            raise ValueError(f"q must be {self.n_joints} finite joint angles inside the joint ranges, got {q!r}")
+        m, d = self.model, self.data
+        self._v_ref = [0.0] * self.n_joints
+        self._q_ref = q.tolist()
+        self._target = [0.0] * self.n_joints
+        d.qpos[:] = q
+        d.qvel[:] = 0.0
+        d.qacc[:] = 0.0
+        mujoco.mj_forward(m, d)
+        self._set_servo(hold=True)
+        mujoco.mj_forward(m, d)
+        self._wrench = self._sample()
+        self.wrench_seq += 1
+
     # ------------------------------------------------------------------ physics
     def _set_servo(self, hold: bool = False) -> None:
         """The joint torques for the next physics step (needs mj_step1's M and c at the current state).

@@ -1,31 +1,52 @@
 """A real UR arm as a :class:`~coassist.runtime.world.World`, through ur-rtde (``speedJ``).
 
-**Nothing in this module has been run against a robot or URSim.** It is written from
-the ur-rtde 1.6.5 Python bindings' signatures and docstrings and tested against a fake
-(``tests/robot/fake_rtde.py``). Untried on hardware: the call order on a live
-controller, the timing of ``initPeriod``/``waitPeriod`` under load, what the watchdog
-does when it fires, the sign and frame of ``getActualTCPForce`` (below), the
-``getStepTime`` rate detection (``frequency=-1``), and ``close()`` after a protective stop. Try it first in
-URSim, then on the arm at low speed with a hand on the emergency stop.
+Tested with the real ur-rtde 1.6.5 client against ``coassist ur-sim``
+(:mod:`coassist.robot.ur_sim`: a UR controller at the protocol level, its dashboard, script
+and RTDE ports, ur_rtde's control script run register by register, the MuJoCo UR5 behind it;
+``tests/robot/test_ur_sim_world.py``). Not yet run on a real controller or URSim: docs/robots.md
+lists what the simulator leaves out. Try it first at low speed with a hand on the emergency stop.
 
 The loop pattern
 ----------------
-ur-rtde's real-time pattern is one period per control tick::
+One period per control tick::
 
     t0 = rtde_c.initPeriod()          # start of the period (steady clock)
     ... read, compute ...
     rtde_c.speedJ(qd, acceleration, dt)
-    rtde_c.kickWatchdog()
     rtde_c.waitPeriod(t0)             # sleep until t0 + dt
 
-The World protocol splits a tick into ``read()`` then ``apply()``, so the period is
-opened by the first ``read()`` and then at the end of every ``apply()`` (right after
-``waitPeriod``): the loop's computation between ``read`` and ``apply`` falls inside the
-period, as in the pattern above, and the tick rate is 1/dt, not 1/(dt + compute). The
-control interface therefore sees ``initPeriod, speedJ, kickWatchdog, waitPeriod``
-repeating. ``apply`` measures the whole period with the wall clock; when it lasted
-longer than ``dt·(1 + overrun_tolerance)``, :attr:`URRTDEWorld.last_overrun` holds the
-excess [s] (else 0.0) and the loop flags ``Fault.DEADLINE_MISS``.
+The World protocol splits a tick into ``read()`` then ``apply()``, so the first period
+opens in the first ``apply()`` (a drive reads the start state long before its loop starts)
+and every later one at the end of ``apply()`` (right after ``waitPeriod``): the loop's
+computation between ``read`` and ``apply`` falls inside the period, and the tick rate is
+1/dt, not 1/(dt + compute). ``apply`` measures the whole
+period with the wall clock; when it lasted longer than ``dt·(1 + overrun_tolerance)``,
+:attr:`URRTDEWorld.last_overrun` holds the excess [s] (else 0.0) and the loop flags
+``Fault.DEADLINE_MISS``.
+
+What the protocol decides (ur_rtde's control script reads one command code a controller
+cycle from ``input_int_register_0`` and answers through ``output_int_register_0``;
+:mod:`coassist.robot.ur_sim.registers`):
+
+- Only real-time commands go inside a period: ``speedJ`` returns at once. ``speedStop``
+  waits until the arm is at rest and every other command for at least one controller
+  round trip, so a stop inside the loop is ``speedJ(zeros, deceleration, dt)``, and
+  ``speedStop`` is left to :meth:`URRTDEWorld.stop` and :meth:`URRTDEWorld.close`.
+- No ``kickWatchdog`` after ``speedJ``: it writes command code 0 into the same register
+  microseconds later, and when both packages land in one controller cycle the script sees
+  the 0 and drops the speedJ. The watchdog watches ``input_int_register_0``, which every
+  speedJ package updates, so each speedJ is the kick.
+- ``setWatchdog`` costs a round trip: it is armed in the first ``apply()``, before the first
+  period opens (not at connect: a pause between building the world and starting the loop
+  would trip it).
+- ``getStepTime`` is real-time: it returns what ``output_double_register_0`` held *before*
+  the script ran it (0.0 at first, or the answer of an earlier command such as
+  ``getTCPOffset``), and a CB3's script has no ``get_steptime`` at all. With
+  ``frequency=-1`` the period is therefore measured from the RTDE stream's timestamps, which
+  advance one controller step per package (0.002 s e-Series, 0.008 s CB3).
+- The TCP is the controller's (the installation's TCP, or ``tcp_offset`` sent with
+  ``setTcp``), read back with ``getTCPOffset`` at connect: :meth:`URRTDEWorld.kinematics`
+  uses it, so the pose RTDE reports and the Jacobian of eq. 3.6 are of the same point.
 
 Why ``speedJ`` and not ``servoJ``
 ---------------------------------
@@ -39,61 +60,79 @@ change of command; the safety layer limits it too.
 
 Watchdog
 --------
-``setWatchdog(watchdog_hz)`` is armed once, at the first ``apply()`` (not at connect:
-any pause between building the world and starting the loop would trip it), and every
-``apply()`` kicks it. If the loop hangs for longer than ``1/watchdog_hz`` (0.1 s at the
-default 10 Hz), ur-rtde's control script stops the robot ("shutdown the control", per
-its docstring); later commands then fail and ``apply`` raises :class:`RobotLinkError`.
-Between runs, close the world, or keep applying ``Command(stop=True)`` (which holds the
-arm and kicks the watchdog).
+``setWatchdog(watchdog_hz)`` makes the controller stop the program when no input package
+updates ``input_int_register_0`` for ``1/watchdog_hz`` (0.1 s at the default 10 Hz): a hung
+loop brakes the arm (tested: the simulated arm stops within the timeout). Later commands
+then fail and ``apply`` raises :class:`URProgramStopped`, saying the watchdog stopped it when
+the last period outlasted the timeout.
 
 Force zeroing and the wrench
 ----------------------------
 At connect (``zero_sensor=True``) the world calls ``zeroFtSensor()``, which subtracts
 the current reading from every later one. Do it with **the tool still and nobody
 touching it or the object**: whatever force is there at that moment is taken as zero
-for the whole run. The reading is ``getActualTCPForce()``: the external wrench at the
-TCP — force in the base frame's axes, torque about the TCP — measured by the tool
-flange's sensor on an e-Series and estimated from the joint currents on a CB3 (noisier,
-a few N). The controller compensates it for the payload set with ``setPayload``. UR's
-script manual describes it as the external wrench on the tool, so a hand pushing the
-tool along +x_base reads +f_x: the sign of coassist's convention (runtime.world).
-``read()`` rotates it into the TCP frame (the "sensor" frame here):
-``f_tcp = Rᵀ f_base``, ``τ_tcp = Rᵀ τ_base`` with ``R`` the TCP orientation, and reports
-``R`` as ``sensor_rotation``. This sign reading of UR's docs is unchecked on an arm:
-push the tool by hand along +x_base once and check that ``Rᵀ``-rotated back the reading
-is positive.
+for the whole run. The reading is ``getActualTCPForce()``: the external wrench on the
+tool, force in the base frame's axes and torque about the TCP (UR's script manual);
+measured by the flange's sensor on an e-Series, estimated from the joint currents on a
+CB3 (noisier, a few N). The controller removes the payload set with ``setPayload``. A hand
+pushing the tool along +x_base reads +f_x, coassist's sign (runtime.world). ``read()``
+rotates it into the TCP frame (the "sensor" frame here): ``f_tcp = Rᵀ f_base``,
+``τ_tcp = Rᵀ τ_base`` with ``R`` the TCP orientation, and reports ``R`` as
+``sensor_rotation``. The simulator follows that reading of UR's documentation (tested);
+on an arm, push the tool by hand along +x_base once and check the sign.
 
-Link loss
----------
-A reading that raises, an interface that reports it is disconnected, or a robot
-timestamp that has not advanced for ``link_timeout`` seconds (ur-rtde's receive thread
-keeps serving its last sample after the link drops) makes ``read()`` raise
-:class:`~coassist.runtime.world.RobotLinkError` (a ``ConnectionError``); the loop turns it into a stop.
-Protective and emergency stops are not errors: ``read()`` reports them in
-:class:`~coassist.runtime.world.RobotState` and :func:`stop_message` says what to do.
+Link loss, late data, stops
+---------------------------
+A reading that raises, an interface that reports it is disconnected, a robot timestamp
+that has not advanced for ``link_timeout`` seconds (ur-rtde's receive thread keeps serving
+its last sample after the link drops), or a sample that arrives more than ``link_timeout``
+later than the stream's usual delay, or a quarter of the last second's samples more than two
+periods late (a jittery link), makes ``read()`` raise
+:class:`~coassist.runtime.world.RobotLinkError` (a ``ConnectionError``); the loop turns it into
+a stop. A sample more than two periods late is counted (:attr:`URRTDEWorld.late_samples`) and
+reported as an overrun, which the loop flags ``DEADLINE_MISS``. Protective and emergency
+stops are not errors: ``read()`` reports them in :class:`~coassist.runtime.world.RobotState`,
+and :attr:`URRTDEWorld.stop_detail` / :func:`stop_message` say what to do.
+
+On a dead link ur-rtde's waiting commands would wait for an answer for up to 300 s (its
+``UR_EXECUTION_TIMEOUT``, from its last cached state), so :meth:`URRTDEWorld.stop` and
+:meth:`URRTDEWorld.close` send them only while the link is alive (the controller's watchdog
+stops the arm otherwise), and ``disconnect`` is given 2 s: against a controller that accepts
+connections but sends nothing, ur-rtde's receive thread reconnects for ever and its
+disconnect never returns; the interface is then left running.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import re
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
+from coassist.errors import CoassistError
 from coassist.robot.worlds import WorldRequest
 from coassist.runtime.world import Command, RobotLinkError, RobotState
 from coassist.spatial import rotation_matrix
 
-__all__ = ["SafetyStatus", "URRTDEWorld", "build_world", "stop_message"]
+__all__ = ["SafetyStatus", "URProgramStopped", "URRTDEWorld", "build_world", "controller_version", "stop_message"]
 
 log = logging.getLogger(__name__)
 
 #: With ``frequency=-1``, a controller step time slower than this rate is not believed.
 _MIN_AUTO_FREQUENCY = 100.0
+#: [s] how long connect watches the RTDE stream to measure its period (``frequency=-1``).
+_STEP_PROBE_TIME = 0.25
+#: [s/s] how fast the stream's usual delay may drift upward (the robot's clock against ours).
+_CLOCK_DRIFT = 1e-3
+_LATE = "the robot's state arrived late"
+#: [s], fraction: over the last _JITTER_WINDOW of samples, this share more than two periods late is a failing link.
+_JITTER_WINDOW = 1.0
+_JITTER_SHARE = 0.25
 #: The RTDE interface runs at most at the e-Series controller rate.
 _MAX_FREQUENCY = 500.0
 _INSTALL_HINT = "the real robot needs ur-rtde: pip install 'coassist[robot]'"
@@ -192,6 +231,86 @@ def _default_receive_factory(host: str, frequency: float) -> Any:
     return rtde_receive.RTDEReceiveInterface(host, frequency)
 
 
+class URProgramStopped(CoassistError, RuntimeError):
+    """ur_rtde's control script is no longer running (the watchdog fired, the program was stopped
+    on the pendant or through the dashboard) while the robot is not in a safety stop: the arm
+    is at rest, the run is over; the message says which and what to do."""
+
+
+def controller_version(host: str, timeout: float = 1.0) -> str | None:
+    """The controller's software version from its dashboard server (``PolyscopeVersion``), or None.
+
+    ur-rtde 1.6.5's Python interfaces do not expose it; one line over port 29999 does.
+    """
+    import socket
+
+    try:
+        with socket.create_connection((host, 29999), timeout=timeout) as s:
+            f = s.makefile("rwb")
+            f.readline()  # the greeting
+            f.write(b"PolyscopeVersion\n")
+            f.flush()
+            line = f.readline().decode("utf-8", errors="replace").strip()
+    except OSError:
+        return None
+    return line or None
+
+
+#: The oldest software ur-rtde 1.6.5 runs on: the general-purpose output registers its control script
+#: answers through came with PolyScope 3.4 (older, its client reads registers the controller never
+#: sends and the process crashes).
+MIN_SOFTWARE = {3: (3, 4), 5: (5, 0)}
+
+
+def _check_version(host: str) -> None:
+    """RobotLinkError before ur-rtde connects when the dashboard reports software it cannot drive."""
+    text = controller_version(host)
+    m = re.search(r"(\d+)\.(\d+)\.(\d+)", text or "")
+    if m is None:
+        return  # no dashboard answer: ur-rtde's own connect says what is wrong
+    major, minor = int(m.group(1)), int(m.group(2))
+    need = MIN_SOFTWARE.get(major)
+    if need is None or (major, minor) < need:
+        wanted = " or ".join(f"{a}.{b}" for a, b in MIN_SOFTWARE.values())
+        raise RobotLinkError(
+            f"the controller at {host} runs {text}; ur-rtde 1.6.5 needs PolyScope {wanted} or later: "
+            "update PolyScope (CB3 3.15, e-Series 5.11 or later), then rerun"
+        )
+
+
+def _connect_hint(host: str, exc: BaseException) -> str:
+    """What to do about a failed connect, from ur-rtde's words (the common causes first)."""
+    text = str(exc)
+    if "remote control" in text:
+        return (
+            f"the UR at {host} is not in remote control: switch it to Remote Control on the teach "
+            "pendant (the icon top right), then rerun"
+        )
+    if "already in use" in text:
+        return (
+            f"another client writes the RTDE input registers of the UR at {host} (an EtherNet/IP, "
+            "PROFINET or MODBUS unit, or another ur-rtde program): disable it or close the other "
+            "client, then rerun"
+        )
+    if "control script" in text or "program is not running" in text:
+        return (
+            f"the UR at {host} did not start ur-rtde's control script: check on the teach pendant "
+            "that the arm is powered on with its brakes released, not in a protective or emergency "
+            "stop, and in remote control, then rerun"
+        )
+    if "not found by the controller" in text or "register" in text:
+        version = controller_version(host)
+        return (
+            f"the controller at {host} (software {version or 'unknown'}) lacks RTDE fields ur-rtde "
+            "1.6.5 needs: update PolyScope to 3.15 (CB3) or 5.11 (e-Series) or later, then rerun"
+        )
+    return (
+        "check the IP address, that the robot is powered on and its brakes released, that "
+        "an e-Series is in remote control mode, and that no other program holds the RTDE "
+        "interface"
+    )
+
+
 class URRTDEWorld:
     """A UR arm driven by joint velocity through ur-rtde (module docstring).
 
@@ -199,19 +318,20 @@ class URRTDEWorld:
     ----------
     host : the robot's IP address or host name.
     frequency : RTDE rate [Hz], at most 500; -1 lets ur-rtde pick (125 Hz on a CB3,
-        500 Hz on an e-Series), and ``dt`` is then the controller's ``getStepTime()``
-        (RobotLinkError if that cannot be read: pass the rate then).
+        500 Hz on an e-Series), and ``dt`` is then the step of the RTDE stream's timestamps
+        (RobotLinkError if the stream does not show one: pass the rate then).
     acceleration : ``speedJ`` acceleration of the leading joint [rad/s²].
-    deceleration : ``speedStop`` deceleration [rad/s²] for ``stop()``, ``Command(stop=True)``
-        and rejected commands.
-    watchdog_hz : minimum kick rate [Hz] of the controller-side watchdog; None disables
+    deceleration : [rad/s²] how fast ``Command(stop=True)``, a rejected command,
+        :meth:`stop` and :meth:`close` bring the joints to rest.
+    watchdog_hz : minimum update rate [Hz] of the controller-side watchdog; None disables
         it (not recommended).
     tcp_offset : TCP pose in the flange frame ``[x, y, z, rx, ry, rz]`` sent with
-        ``setTcp``; None keeps the controller's.
+        ``setTcp``; None keeps the controller's (read back with ``getTCPOffset``).
     payload : ``(mass [kg], cog [m, 3])`` sent with ``setPayload``; None keeps the
         controller's.
     zero_sensor : call ``zeroFtSensor()`` at connect (tool still, nobody touching it).
-    link_timeout : [s] a robot timestamp that does not advance for this long is a lost link.
+    link_timeout : [s] a robot timestamp that does not advance for this long, or a sample
+        this much later than the stream's usual delay, is a lost link.
     overrun_tolerance : fraction of ``dt`` a period may run over before ``last_overrun``
         reports it (absorbs scheduler jitter).
     control_factory, receive_factory : ``(host, frequency) -> interface``; default the
@@ -220,10 +340,13 @@ class URRTDEWorld:
     Attributes
     ----------
     dt, command_space, n_joints, realtime : the World protocol.
-    last_overrun : [s] how far the last period ran over ``dt`` (0.0 when on time).
+    tcp_offset : (6,) the TCP in the flange frame the controller reports the pose of.
+    last_overrun : [s] how far the last period (or the last sample's delay) ran over (0.0 when on time).
     last_period : [s] the last period's measured length.
     safety_status_bits : the last ``getSafetyStatusBits()`` (see :class:`SafetyStatus`).
-    rejected_commands : commands replaced by ``speedStop`` (non-finite or wrong shape).
+    rejected_commands : commands replaced by a stop (non-finite or wrong shape).
+    late_samples : samples that arrived more than two periods behind the stream's usual delay.
+    stop_detail : what stopped the robot and what to do (None while it runs).
     """
 
     dt: float  # set at connect
@@ -258,7 +381,7 @@ class URRTDEWorld:
         self.acceleration = _check_number(acceleration, "acceleration")
         self.deceleration = _check_number(deceleration, "deceleration")
         self.watchdog_hz = None if watchdog_hz is None else _check_number(watchdog_hz, "watchdog_hz")
-        self.tcp_offset = None if tcp_offset is None else _check_vector(tcp_offset, "tcp_offset", 6)
+        self.requested_tcp_offset = None if tcp_offset is None else _check_vector(tcp_offset, "tcp_offset", 6)
         if payload is None:
             self.payload = None
         else:
@@ -279,7 +402,14 @@ class URRTDEWorld:
         self.last_period = 0.0
         self.safety_status_bits = 0
         self.rejected_commands = 0
+        self.late_samples = 0
+        self.worst_delay = 0.0
         self.step_time: float | None = None
+        self._stream_dt: float | None = None
+        self.tcp_offset = np.zeros(6)
+        self.stop_detail: str | None = None
+        self._late_streak = 0
+        self._late_window: deque[bool] = deque(maxlen=8)
 
         self._rtde_c: Any = None
         self._rtde_r: Any = None
@@ -292,6 +422,8 @@ class URRTDEWorld:
         self._last_force: np.ndarray | None = None
         self._last_advance_wall = time.monotonic()
         self._wrench_seq = 0
+        self._usual_delay = math.inf  # the smallest (local clock − robot timestamp) seen, drifting up slowly
+        self._delay_seen_at = time.monotonic()
 
         control_factory = control_factory or _default_control_factory
         receive_factory = receive_factory or _default_receive_factory
@@ -305,42 +437,70 @@ class URRTDEWorld:
 
     def _connect(self, control_factory: Callable, receive_factory: Callable) -> None:
         host, freq = self.host, self.requested_frequency
-        hint = (
-            "check the IP address, that the robot is powered on and its brakes released, that "
-            "an e-Series is in remote control mode, and that no other program holds the RTDE "
-            "interface"
-        )
+        if control_factory is _default_control_factory:
+            _check_version(host)
         try:
-            self._rtde_r = receive_factory(host, freq)
+            # the state at the controller's own rate (500 Hz e-Series, 125 Hz CB3): each read() gets a
+            # sample at most one controller step old, whatever the loop's rate
+            self._rtde_r = receive_factory(host, -1.0)
             self._rtde_c = control_factory(host, freq)
         except ImportError:
             raise
         except Exception as exc:
-            raise RobotLinkError(f"could not connect to the UR at {host}: {exc}; {hint}") from exc
+            raise RobotLinkError(f"could not connect to the UR at {host}: {exc}; {_connect_hint(host, exc)}") from exc
         if not (self._call_r("isConnected") and self._call_c("isConnected")):
-            raise RobotLinkError(f"the RTDE interfaces to {host} are not connected; {hint}")
-        if self.tcp_offset is not None:
-            self._require(self._call_c("setTcp", self.tcp_offset), "setTcp", self.tcp_offset)
+            raise RobotLinkError(f"the RTDE interfaces to {host} are not connected; {_connect_hint(host, Exception())}")
+        if self.requested_tcp_offset is not None:
+            self._require(self._call_c("setTcp", self.requested_tcp_offset), "setTcp", self.requested_tcp_offset)
         if self.payload is not None:
             self._require(self._call_c("setPayload", *self.payload), "setPayload", self.payload)
+        # The TCP the controller reports the pose of: the installation's, or the one just set.
+        # getTCPOffset waits for the script's answer (not real-time), so it is today's value.
+        offset = np.asarray(self._call_c("getTCPOffset"), dtype=float)
+        if offset.shape != (6,) or not np.all(np.isfinite(offset)):
+            raise RobotLinkError(f"the UR at {host} returned an unusable TCP offset {offset.tolist()!r}")
+        self.tcp_offset = offset
         if freq > 0:
             self.dt = 1.0 / freq
         else:
-            # ur-rtde's -1 picks 500 Hz on an e-Series and 125 Hz on a CB3: the controller's
-            # own step (get_steptime: 0.002 s / 0.008 s). Guessing wrong would make every
-            # dt-based gain wrong by 4x, so a step time that cannot be read is an error.
-            step = float(self._call_c("getStepTime"))
-            if not (math.isfinite(step) and 0.0 < step <= 1.0 / _MIN_AUTO_FREQUENCY):
-                raise RobotLinkError(
-                    f"could not read the control period from {host} (getStepTime() = {step!r}); "
-                    "pass frequency= explicitly (125 for a CB3, 500 for an e-Series)"
-                )
-            self.step_time = step
-            self.dt = step
+            # ur-rtde's -1 picks 500 Hz on an e-Series and 125 Hz on a CB3. getStepTime cannot
+            # tell which (module docstring): the stream's timestamps advance one step per package.
+            self.step_time = self.dt = self._stream_step()
+        # every controller streams at least 125 Hz: a faster loop needs an e-Series (500 Hz)
+        if freq > 125.0 and 1.0 / freq < self._stream_step() - 1e-9:
+            raise RobotLinkError(
+                f"the UR at {host} streams its state every {self._stream_step() * 1e3:g} ms: a {freq:g} Hz loop "
+                "would run ahead of it; pass frequency=125 (a CB3) or -1"
+            )
         if self.zero_sensor:
             # Zero with the tool still and nobody touching it (module docstring).
             self._require(self._call_c("zeroFtSensor"), "zeroFtSensor")
-        log.info("URRTDEWorld: connected to %s, dt = %.4f s", host, self.dt)
+        log.info("URRTDEWorld: connected to %s, dt = %.4f s, TCP %s", host, self.dt, self.tcp_offset.tolist())
+
+    def _stream_step(self) -> float:
+        """The receive stream's step [s] (the controller's period), measured once."""
+        if self._stream_dt is None:
+            self._stream_dt = self._measure_step()
+        return self._stream_dt
+
+    def _measure_step(self) -> float:
+        """The RTDE stream's period [s]: the smallest step between the timestamps of consecutive packages."""
+        seen: list[float] = []
+        end = time.monotonic() + _STEP_PROBE_TIME
+        while time.monotonic() < end and len(seen) < 8:
+            ts = float(self._call_r("getTimestamp"))
+            if not seen or ts != seen[-1]:
+                seen.append(ts)
+            time.sleep(0.0005)
+        steps = np.diff(seen)
+        steps = steps[steps > 0]
+        step = float(np.round(steps.min(), 6)) if steps.size >= 3 else math.nan
+        if not (math.isfinite(step) and 0.0 < step <= 1.0 / _MIN_AUTO_FREQUENCY):
+            raise RobotLinkError(
+                f"could not tell the control period of the UR at {self.host} from its RTDE stream "
+                f"(timestamps {seen!r}); pass frequency= explicitly (125 for a CB3, 500 for an e-Series)"
+            )
+        return step
 
     def _call_c(self, name: str, *args: Any) -> Any:
         """Call the control interface; RobotLinkError when it raises."""
@@ -377,6 +537,13 @@ class URRTDEWorld:
         self._t0 = self._call_c("initPeriod")
         self._t0_wall = time.perf_counter()
 
+    def _arm_watchdog(self) -> None:
+        """setWatchdog once, before the first period opens (it waits for the script's answer)."""
+        if not self._watchdog_armed:
+            if self.watchdog_hz is not None:
+                self._require(self._call_c("setWatchdog", self.watchdog_hz), "setWatchdog", self.watchdog_hz)
+            self._watchdog_armed = True
+
     def read(self) -> RobotState:
         """The robot's latest sample (ur-rtde's receive thread keeps it; no waiting).
 
@@ -388,8 +555,6 @@ class URRTDEWorld:
         Raises :class:`RobotLinkError` when the link is lost (module docstring).
         """
         self._check_open("read()")
-        if self._t0 is None:
-            self._open_period()
         if not self._call_r("isConnected"):
             raise RobotLinkError(
                 f"the RTDE receive interface to {self.host} reports it is disconnected; the "
@@ -407,6 +572,7 @@ class URRTDEWorld:
         advanced = self._last_ts is None or ts > self._last_ts
         if advanced:
             self._last_advance_wall = now
+            self._check_delay(now, ts)
         elif now - self._last_advance_wall > self.link_timeout:
             raise RobotLinkError(
                 f"no new data from the robot at {self.host} for {now - self._last_advance_wall:.3f} s "
@@ -421,9 +587,10 @@ class URRTDEWorld:
         self._last_t = t
         self.safety_status_bits = bits
 
+        state_stop = bool(bits & SafetyStatus.PROTECTIVE), bool(bits & SafetyStatus.EMERGENCY)
         R = rotation_matrix(pose[3:])
         wrench = np.concatenate((R.T @ force[:3], R.T @ force[3:]))
-        return RobotState(
+        state = RobotState(
             t=t,
             q=q,
             qd=qd,
@@ -432,9 +599,52 @@ class URRTDEWorld:
             wrench=wrench,
             sensor_rotation=R,
             wrench_seq=self._wrench_seq,
-            protective_stop=bool(bits & SafetyStatus.PROTECTIVE),
-            emergency_stop=bool(bits & SafetyStatus.EMERGENCY),
+            protective_stop=state_stop[0],
+            emergency_stop=state_stop[1],
         )
+        if any(state_stop):
+            self.stop_detail = stop_message(state, bits)  # the robot's own stop says most
+        return state
+
+    def _check_delay(self, now: float, ts: float) -> None:
+        """How late this sample is against the stream's usual delay (module docstring, *Link loss*)."""
+        delay = now - ts
+        # the usual delay: the smallest seen, allowed to creep up as the two clocks drift apart
+        self._usual_delay = min(self._usual_delay + _CLOCK_DRIFT * (now - self._delay_seen_at), delay)
+        self._delay_seen_at = now
+        late = delay - self._usual_delay
+        self.worst_delay = max(self.worst_delay, late)
+        if late > self.link_timeout:
+            raise RobotLinkError(
+                f"the robot's data from {self.host} arrive {late * 1e3:.0f} ms later than usual "
+                f"(link_timeout {self.link_timeout * 1e3:.0f} ms): the link is overloaded or failing. "
+                "Check the cable (direct, no switch or Wi-Fi in between) and the controller's load, then rerun."
+            )
+        window = self._late_window
+        if window.maxlen != max(8, round(_JITTER_WINDOW / self.dt)):
+            window = self._late_window = deque(maxlen=max(8, round(_JITTER_WINDOW / self.dt)))
+        window.append(late > 2.0 * self.dt)
+        if len(window) == window.maxlen and sum(window) >= _JITTER_SHARE * len(window):
+            raise RobotLinkError(
+                f"the robot's data from {self.host} arrive irregularly ({sum(window)} of the last {len(window)} "
+                f"samples more than two periods late, the worst {self.worst_delay * 1e3:.0f} ms): the link or "
+                "this computer cannot keep the rate. Check the cable (direct, no switch or Wi-Fi) and this "
+                "computer's load, or lower --rate, then rerun."
+            )
+        if late > 2.0 * self.dt:
+            self.late_samples += 1
+            self._late_streak += 1
+            self.last_overrun = max(self.last_overrun, late - self.dt)
+            if self.stop_detail is None or self.stop_detail.startswith(_LATE):
+                self.stop_detail = (
+                    f"{_LATE} ({self._late_streak} samples in a row more than two periods behind, the worst "
+                    f"{self.worst_delay * 1e3:.0f} ms): the safety layer slowed and stopped the arm. Check the "
+                    "cable (direct, no switch or Wi-Fi) and the load of this computer and the controller, then rerun."
+                )
+        else:
+            self._late_streak = 0
+            if self.stop_detail is not None and self.stop_detail.startswith(_LATE):
+                self.stop_detail = None  # the stream is on time again: a later stop is not about it
 
     def _vector(self, name: str, n: int) -> np.ndarray:
         value = self._call_r(name)
@@ -450,28 +660,25 @@ class URRTDEWorld:
 
         ``command.qd`` (6 finite values) goes to ``speedJ(qd, acceleration, dt)``;
         ``command.stop``, a missing ``qd``, a wrong shape or any non-finite value send
-        ``speedStop(deceleration)`` instead (a non-finite value is never sent). Then
-        ``kickWatchdog`` and ``waitPeriod``; :attr:`last_overrun` is updated and the next
-        period opens. Raises :class:`RobotLinkError` when a call fails, or when the
+        ``speedJ(zeros, deceleration, dt)`` instead (a non-finite value is never sent;
+        ``speedStop`` would hold the period until the arm is at rest). Then ``waitPeriod``;
+        :attr:`last_overrun` is updated and the next period opens. Raises
+        :class:`RobotLinkError` when a call fails, :class:`URProgramStopped` when the
         controller rejects ``speedJ`` while not in a protective or emergency stop (its
         control script is no longer running: watchdog, a stop from the pendant).
         """
         self._check_open("apply()")
         if self._t0 is None:
+            self._arm_watchdog()
             self._open_period()
-        if not self._watchdog_armed:
-            if self.watchdog_hz is not None:
-                self._require(self._call_c("setWatchdog", self.watchdog_hz), "setWatchdog", self.watchdog_hz)
-            self._watchdog_armed = True
-
         qd = self._checked_qd(command)
         if qd is None:
-            self._call_c("speedStop", self.deceleration)
+            ok = self._call_c("speedJ", [0.0] * self.n_joints, self.deceleration, self.dt)
         else:
             ok = self._call_c("speedJ", qd, self.acceleration, self.dt)
-            if ok is False:
-                self._on_rejected_speedj()
-        self._call_c("kickWatchdog")
+        if ok is False:
+            self._on_rejected_speedj()
+        # No kickWatchdog: the speedJ package updated input_int_register_0 (module docstring).
         self._call_c("waitPeriod", self._t0)
         period = time.perf_counter() - self._t0_wall
         self.last_period = period
@@ -490,8 +697,7 @@ class URRTDEWorld:
             self.rejected_commands += 1
             if self.rejected_commands == 1 or self.rejected_commands % 1000 == 0:
                 log.warning(
-                    "URRTDEWorld: joint velocity command %r is not %d finite values; sent speedStop "
-                    "instead (%d so far)",
+                    "URRTDEWorld: joint velocity command %r is not %d finite values; sent a stop instead (%d so far)",
                     command.qd,
                     self.n_joints,
                     self.rejected_commands,
@@ -500,53 +706,91 @@ class URRTDEWorld:
         return [float(v) for v in arr]
 
     def _on_rejected_speedj(self) -> None:
-        bits = int(self._call_r("getSafetyStatusBits"))
+        # The control interface's stream may be a package ahead of the receive interface's: give the
+        # receive side two controller steps to show a safety stop before calling it a stopped program.
+        end = time.monotonic() + 2.0 * self.dt + 0.004
+        while True:
+            bits = int(self._call_r("getSafetyStatusBits"))
+            if bits & (SafetyStatus.PROTECTIVE | SafetyStatus.EMERGENCY) or time.monotonic() > end:
+                break
+            time.sleep(0.0005)
         self.safety_status_bits = bits
         if bits & (SafetyStatus.PROTECTIVE | SafetyStatus.EMERGENCY):
             return  # the next read() reports the stop
-        raise RobotLinkError(
-            f"the controller at {self.host} rejected speedJ: ur-rtde's control script is not "
-            "running (the watchdog fired, the program was stopped on the pendant, or remote "
-            "control was lost). Check the teach pendant, then rerun."
-        )
+        timeout = None if self.watchdog_hz is None else 1.0 / self.watchdog_hz
+        gap = time.perf_counter() - self._t0_wall
+        if timeout is not None and max(self.last_period, gap) > timeout:
+            what = (
+                f"the controller's watchdog stopped ur-rtde's control script: this loop's period lasted "
+                f"{max(self.last_period, gap):.3f} s, over the watchdog's {timeout:g} s, and the arm "
+                "braked. Find what held this computer (load, a debugger, swapping), then rerun."
+            )
+        else:
+            what = (
+                f"ur-rtde's control script stopped running on the UR at {self.host} (the program was "
+                "stopped on the teach pendant or through the dashboard, or remote control was lost); the "
+                "arm is at rest. Check the teach pendant, then rerun."
+            )
+        self.stop_detail = what
+        raise URProgramStopped(what)
+
+    def _link_ok(self) -> bool:
+        """Both interfaces connected and the stream alive: a command that waits for the script's
+        answer (``speedStop``, ``stopScript``) would get one. On a dead link ur-rtde waits for it
+        for up to 300 s (its UR_EXECUTION_TIMEOUT), answering from its last cached state."""
+        try:
+            connected = bool(self._rtde_c.isConnected()) and bool(self._rtde_r.isConnected())
+        except Exception:  # noqa: BLE001 - a broken interface is a dead link
+            return False
+        return connected and time.monotonic() - self._last_advance_wall <= self.link_timeout
 
     def stop(self) -> None:
-        """``speedStop(deceleration)``; safe to call twice; a no-op after :meth:`close`.
+        """``speedStop(deceleration)`` (it returns once the arm is at rest); safe to call twice;
+        a no-op after :meth:`close`. On a dead link (:meth:`_link_ok`) only a real-time
+        ``speedJ(zeros, deceleration)`` is tried: the controller's watchdog stops the arm.
 
         Raises :class:`RobotLinkError` when the command cannot be sent (the watchdog then
         stops the arm within ``1/watchdog_hz``).
         """
         if self._closed or self._rtde_c is None:
             return
-        self._call_c("speedStop", self.deceleration)
+        if self._link_ok():
+            self._call_c("speedStop", self.deceleration)
+        else:
+            self._call_c("speedJ", [0.0] * self.n_joints, self.deceleration, self.dt)
 
     def close(self) -> None:
-        """``speedStop``, ``stopScript``, then disconnect both interfaces; never raises."""
+        """``speedStop``, ``stopScript`` (on a live link only: :meth:`_link_ok`), then disconnect
+        both interfaces; never raises."""
         if self._closed:
             return
         self._closed = True
         self._t0 = None
         steps: list[tuple[Any, str, tuple]] = []
         if self._rtde_c is not None:
-            steps += [
-                (self._rtde_c, "speedStop", (self.deceleration,)),
-                (self._rtde_c, "stopScript", ()),
-                (self._rtde_c, "disconnect", ()),
-            ]
+            if self._rtde_r is not None and self._link_ok():
+                steps += [(self._rtde_c, "speedStop", (self.deceleration,)), (self._rtde_c, "stopScript", ())]
+            else:
+                log.warning(
+                    "URRTDEWorld.close: the link to %s is down; the controller's watchdog stops the arm", self.host
+                )
+            steps.append((self._rtde_c, "disconnect", ()))
         if self._rtde_r is not None:
             steps.append((self._rtde_r, "disconnect", ()))
         for iface, name, args in steps:
             try:
-                getattr(iface, name)(*args)
+                if name == "disconnect":
+                    _disconnect(iface, self.host)
+                else:
+                    getattr(iface, name)(*args)
             except Exception as exc:  # noqa: BLE001 - close must finish
                 log.warning("URRTDEWorld.close: %s failed: %s", name, exc)
 
     def kinematics(self):
-        """The UR5's kinematics with a zero TCP offset: the drive builds this world without a
-        ``tcp_offset``, so the controller keeps its own (the flange, as shipped)."""
+        """The UR5's kinematics with the controller's TCP (:attr:`tcp_offset`, read at connect)."""
         from coassist.robot.kinematics import UR5Kinematics
 
-        return UR5Kinematics(tcp_offset=np.zeros(6))
+        return UR5Kinematics(tcp_offset=self.tcp_offset)
 
     def tool_mass_and_com(self) -> tuple[float, np.ndarray]:
         """(0.0, zeros): the controller removes the payload from ``getActualTCPForce`` itself (``setPayload``)."""
@@ -563,9 +807,8 @@ class URRTDEWorld:
     def robot_info(self) -> dict[str, Any]:
         """Connection facts for the trial metadata; None where the robot did not answer.
 
-        Some of these go through the control script: call it before or after the loop,
-        not inside it. ``controller_version`` is None: ur-rtde 1.6.5's RTDE interfaces do
-        not expose it (``dashboard_client.DashboardClient.polyscopeVersion()`` does).
+        ``controller_version`` comes from the dashboard server (:func:`controller_version`).
+        Call it before or after the loop, not inside it (it waits for answers).
         """
 
         def ask(iface: Any, name: str) -> Any:
@@ -582,15 +825,52 @@ class URRTDEWorld:
             "frequency": 1.0 / self.dt,
             "dt": self.dt,
             "requested_frequency": self.requested_frequency,
-            "step_time": self.step_time if self.step_time is not None else ask(self._rtde_c, "getStepTime"),
+            "step_time": self.step_time,
             "acceleration": self.acceleration,
             "deceleration": self.deceleration,
             "watchdog_hz": self.watchdog_hz,
-            "tcp_offset": ask(self._rtde_c, "getTCPOffset"),
+            "tcp_offset": [float(v) for v in self.tcp_offset],
             "payload_mass": ask(self._rtde_r, "getPayload"),
             "payload_cog": ask(self._rtde_r, "getPayloadCog"),
-            "controller_version": None,
+            "controller_version": None if self._closed else controller_version(self.host),
         }
+
+
+#: Interfaces whose disconnect did not return (module docstring, *Link loss*): kept alive, not destroyed.
+_ABANDONED: list[Any] = []
+#: [s] how long close() waits for an interface's disconnect.
+_DISCONNECT_TIMEOUT = 2.0
+
+
+def _disconnect(iface: Any, host: str) -> None:
+    """``iface.disconnect()``, given up after :data:`_DISCONNECT_TIMEOUT`.
+
+    ur-rtde's disconnect joins its receive thread, and against a controller that accepts
+    connections but sends nothing that thread reconnects for ever: the interface is then kept
+    (never destroyed, which would wait again) and the thread ends when the controller answers
+    or goes away.
+    """
+    import threading
+
+    done = threading.Event()
+
+    def run() -> None:
+        try:
+            iface.disconnect()
+        except Exception as exc:  # noqa: BLE001 - reported below, close goes on
+            log.warning("URRTDEWorld.close: disconnect failed: %s", exc)
+        finally:
+            done.set()
+
+    threading.Thread(target=run, name="ur-rtde-disconnect", daemon=True).start()
+    if not done.wait(_DISCONNECT_TIMEOUT):
+        _ABANDONED.append(iface)
+        log.warning(
+            "URRTDEWorld.close: ur-rtde's interface to %s did not disconnect within %g s (its receive thread "
+            "keeps reconnecting to a controller that sends nothing); left running",
+            host,
+            _DISCONNECT_TIMEOUT,
+        )
 
 
 def build_world(request: WorldRequest) -> URRTDEWorld:

@@ -7,7 +7,7 @@ extra is not installed is still listed), the arms it drives, and what it needs::
 
     world    builds                        arms          needs
     mujoco   MujocoUR5World/MujocoArmWorld  ur5, panda    the robot extra (MuJoCo physics, the simulated operator)
-    ur       URRTDEWorld                    ur5           --host (the robot's IP address), the robot extra (ur-rtde)
+    ur       URRTDEWorld (URSimWorld)       ur5           --host (the robot's IP address, or coassist ur-sim's), the robot extra (ur-rtde)
     franka   FrankaWorld                    panda, fr3    --host (the FCI address), the franka extra (franky)
     ros2     Ros2World                      ur5           the ros2 extra (rclpy): ros2_control's topics
 
@@ -148,9 +148,9 @@ WORLDS: Registry[WorldEntry] = Registry(
             source="mujoco",
         ),
         "ur": WorldEntry(
-            "coassist.robot.ur_rtde_world:build_world",
+            "coassist.robot.ur_sim_world:build_world",
             ("ur5",),
-            "a real UR5 through ur-rtde",
+            "a real UR5 through ur-rtde (or coassist ur-sim)",
             simulated=False,
             host="the robot's IP address",
             extras=("robot",),

@@ -13,13 +13,18 @@ other DOFs:
       f_z = k_z (z0 − z) − c_z ż,      τ = k_r log(R0 Rᵀ) − c_r ω
 
 The world calls :meth:`SimulatedHand.force` once per control period, in order.
+:meth:`SimulatedHand.to_dict` / :meth:`SimulatedHand.from_dict` carry a hand not yet used to
+another process as JSON (``coassist ur-sim`` holds it on its simulated handle).
 """
 
 from __future__ import annotations
 
+from dataclasses import asdict
+from typing import Any
+
 import numpy as np
 
-from coassist.scenario.operator import OperatorArm
+from coassist.scenario.operator import OperatorArm, OperatorProfile
 from coassist.spatial import orientation_error, rotation_matrix
 
 __all__ = ["SimulatedHand"]
@@ -64,6 +69,58 @@ class SimulatedHand:
         self.ox, self.oy = float(offset[0]), float(offset[1])
         self.k = 0
         self.last = np.zeros(6)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Everything that builds this hand, JSON-ready (plain lists and numbers); a hand already used refuses."""
+        if self.k:
+            raise ValueError(f"SimulatedHand.to_dict: the hand has already run {self.k} ticks")
+        arm = self.arm
+        return {
+            "profile": asdict(arm.profile),
+            "intent": np.asarray(arm.intent, dtype=float).tolist(),
+            "noise": np.asarray(arm.noise, dtype=float).tolist(),
+            "dt": self.dt,
+            "start_pose": self.start.tolist(),
+            "full_pose": self.full_pose,
+            "offset": [self.ox, self.oy],
+            "z_stiffness": self.kz,
+            "z_damping": self.cz,
+            "rotation_stiffness": self.kr,
+            "rotation_damping": self.cr,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> SimulatedHand:
+        """The hand of :meth:`to_dict`: the same forces for the same states, bit for bit.
+
+        Raises ValueError naming the field that is missing or malformed.
+        """
+        try:
+            profile = OperatorProfile(**data["profile"])
+            intent = np.asarray(data["intent"], dtype=float)
+            noise = np.asarray(data["noise"], dtype=float)
+            dt = float(data["dt"])
+            start = np.asarray(data["start_pose"], dtype=float)
+        except KeyError as exc:
+            raise ValueError(f"SimulatedHand.from_dict: no {exc.args[0]!r}") from None
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"SimulatedHand.from_dict: {exc}") from None
+        if intent.ndim != 2 or intent.shape[1] != 2 or noise.shape != intent.shape or start.shape != (6,):
+            raise ValueError(
+                f"SimulatedHand.from_dict: intent and noise must be (n, 2) alike and start_pose 6 numbers, got "
+                f"{intent.shape}, {noise.shape}, {start.shape}"
+            )
+        return cls(
+            OperatorArm(profile, intent, dt, noise),
+            dt,
+            start,
+            full_pose=bool(data.get("full_pose", False)),
+            offset=tuple(data.get("offset", (0.0, 0.0))),
+            z_stiffness=float(data.get("z_stiffness", 300.0)),
+            z_damping=float(data.get("z_damping", 30.0)),
+            rotation_stiffness=float(data.get("rotation_stiffness", 3.0)),
+            rotation_damping=float(data.get("rotation_damping", 0.3)),
+        )
 
     def force(self, t: float, hand_pose: np.ndarray, hand_twist: np.ndarray) -> np.ndarray:
         k = self.k

@@ -401,6 +401,7 @@ class OperatorArm:
 
     def __init__(self, profile: OperatorProfile, intent: np.ndarray, dt: float, noise: np.ndarray) -> None:
         self.profile = profile
+        self.intent, self.noise, self.dt = intent, noise, float(dt)  # what built it (SimulatedHand.to_dict)
         self._ix = intent[:, 0].tolist()  # plain floats: the tick is scalar arithmetic
         self._iy = intent[:, 1].tolist()
         self._nx = noise[:, 0].tolist()

@@ -7,12 +7,13 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import Executor
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 from coassist._checks import check_int
 from coassist.data import DatasetWriter
 from coassist.data.store import FORMAT_VERSION, MANIFEST_NAME, digest
 from coassist.scenario.intent_registry import NAMED_INTENTS
-from coassist.sim.world import SubmittedTrials, TrialSpec, run_trials
+from coassist.sim.world import SubmittedTrials, TrialSpec, run_trials, spec_episode
 
 
 def dataset_specs(
@@ -78,6 +79,7 @@ def collect_dataset(
     pool: Executor | None = None,
     submitted: SubmittedTrials | None = None,
     groups: int | None = None,
+    live: Any = None,
     **spec_options,
 ) -> Path:
     """Simulate the trials of :func:`dataset_specs` (``spec_options``) and write them as a dataset.
@@ -88,6 +90,10 @@ def collect_dataset(
     already put on a pool by :func:`~coassist.sim.world.submit_trials` (its specs must be
     :func:`dataset_specs` of ``spec_options``): they are waited for instead of run again.
     ``groups``: :func:`~coassist.sim.world.run_trials`' (lockstep groups on the processes).
+    ``live``: a :class:`~coassist.runtime.live.LiveFeed` (``--foxglove``) that watches one trial, the
+    first still to run: it runs first, in this process, alone (:func:`~coassist.sim.world.run_spec`'s
+    path: the same trial bit for bit with a named intent, to the network's float32 rounding with a
+    model, as ``lockstep``), then the others as before.
 
     The output is checked and locked before anything is simulated. Each trial is
     written as soon as it finishes (:class:`coassist.data.DatasetWriter`), so memory
@@ -136,6 +142,13 @@ def collect_dataset(
         if say and writer.resumed:
             say(f"continuing: {len(writer.resumed)} of {len(specs)} trials were already written in {writer.partial}")
         todo = [i for i in range(len(specs)) if not writer.has(i)]
+        if live is not None and todo and submitted is None:
+            watched = todo.pop(0)
+            spec = specs[watched]
+            if say:
+                say(f"live: trial {watched} (task {spec.task}, user {spec.user}, seed {spec.seed}) runs first, watched")
+            episode = spec_episode(spec)
+            writer.add(watched, episode.finish(episode.run(on_tick=live.watch(episode))))
         if submitted is not None:
             submitted.gather(lambda i, trial: writer.add(i, trial) if not writer.has(i) else None, progress)
             return writer.finish()

@@ -53,6 +53,15 @@ from coassist.study.training import BackgroundTraining, TrainJob, model_ready, t
 __all__ = ["ParticipantRun", "simulated_ids"]
 
 
+def _simulated_arm(world: str, host: str | None) -> bool:
+    """Whether the arm at ``host`` is a simulator a simulated participant can hold (``coassist ur-sim``)."""
+    if world != "ur" or not host:
+        return False
+    from coassist.robot.ur_sim_world import is_simulator
+
+    return is_simulator(host)
+
+
 def simulated_ids(n: int) -> list[str]:
     """The ids of ``n`` simulated participants: S01, S02, …"""
     return [f"S{i:02d}" for i in range(1, n + 1)]
@@ -66,6 +75,7 @@ class ParticipantRun:
     or a browser automation moving the pointer along the simulated operator's path.
     realtime : pace a simulated participant's trials to the wall clock (a person's pace).
     host : a real arm's address.  confirm : asked before a real arm moves.  say : progress lines.
+    live : a :class:`~coassist.runtime.live.LiveFeed` that watches every trial (``--foxglove``).
     """
 
     def __init__(
@@ -79,13 +89,18 @@ class ParticipantRun:
         host: str | None = None,
         confirm: Any = None,
         say: Callable[[str], None] | None = None,
+        live: Any = None,
     ) -> None:
         self.study = study
+        self.live = live
         self.plan = study.plan()
         if page is None and not simulate:
             raise StudyFolderError("a person takes part through the page: run without --no-page (or --simulate)")
-        if self.plan.world in ("ur", "franka") and simulate:
-            raise StudyFolderError(f"--simulate: the {self.plan.world} world is a real arm; rehearse on mujoco or play")
+        if self.plan.world in ("ur", "franka") and simulate and not _simulated_arm(self.plan.world, host):
+            raise StudyFolderError(
+                f"--simulate: the {self.plan.world} world is a real arm; rehearse on mujoco or play"
+                + (", or against coassist ur-sim (--robot-host its address)" if self.plan.world == "ur" else "")
+            )
         self.id = participant
         self.simulate, self.page, self.realtime = simulate, page, realtime
         self.host, self.confirm = host, confirm
@@ -174,7 +189,7 @@ class ParticipantRun:
             "population_seed": plan.seed,
         }
         self.session = StudySession(
-            config, world=plan.world, secrets=secrets, drive=drive, host=self.host, confirm=self.confirm
+            config, world=plan.world, secrets=secrets, drive=drive, host=self.host, confirm=self.confirm, live=self.live
         )
         if self.page is not None:
             from coassist.play.server import PlayServer

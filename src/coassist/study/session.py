@@ -67,7 +67,9 @@ class StudySession(PlaySession):
     world : "play", "mujoco", "ur" or "franka".  secrets : every string a page must never receive
     (condition names, controller kinds, model paths and ids).  drive : DriveConfig options of the
     arm worlds (object, obstacle, preset, time_limit).  host : a real arm's address.
-    confirm : asked before a real arm moves (as ``coassist drive``).
+    confirm : asked before a real arm moves (as ``coassist drive``).  live : a
+    :class:`~coassist.runtime.live.LiveFeed` that watches every trial (e.g. Foxglove; for the
+    experimenter's screen: α and the prediction name the condition).
     """
 
     def __init__(
@@ -79,8 +81,9 @@ class StudySession(PlaySession):
         drive: dict[str, Any] | None = None,
         host: str | None = None,
         confirm: Any = None,
+        live: Any = None,
     ) -> None:
-        super().__init__(config)
+        super().__init__(config, live=live)
         self.world = world
         self.secrets = tuple(s for s in secrets if s)
         self.drive_options = dict(drive or {})
@@ -260,6 +263,7 @@ class StudySession(PlaySession):
                 confirm=self.confirm,
                 on_tick=on_tick,
                 operator=None if simulated else self.hand,
+                live=self.live,
             )
         except _Aborted:
             self.publish({"type": "status", "level": "warn", "text": "trial aborted (nothing written)"})
