@@ -153,7 +153,7 @@ def test_any_other_folder_is_tried_as_a_model_and_refused_in_one_line(tmp_path):
 
 def test_a_string_that_is_neither_a_name_nor_a_folder_says_so_and_names_the_sources(tmp_path):
     # issue 42: a typo of "paths" said "could not be loaded as a model: pahts/model.json: not found"
-    names = "nominal, constant-velocity, oracle, present, paths"
+    names = "nominal, constant-velocity, oracle, present, present-held, present-half, paths"
     with pytest.raises(ValueError) as info:
         load_intent_source("pahts")
     assert str(info.value) == (

@@ -200,10 +200,10 @@ class PersonPathsIntent:
     arms : person → :class:`ArmEstimate`.
     default_paths : the path model for anyone not in ``paths`` (None: the present estimate alone for them).
     default_arm : the arm for anyone not in ``arms`` (None: the assumed arm).
-    extrapolation : the share e ∈ [0, 1] of the tool's velocity the present estimate's rows carry where
-        there is no path model (or the tool is far from its paths): q + e·i·dt·v (0: held, 1: constant velocity).
     settings : the filter's constants.
     model_id : what trials record as the source.
+    extrapolation : the share e ∈ [0, 1] of the tool's velocity the present estimate's rows carry where
+        there is no path model (or the tool is far from its paths): q + e·i·dt·v (0: held, 1: constant velocity).
     """
 
     history = 1
