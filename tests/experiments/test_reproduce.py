@@ -267,6 +267,20 @@ def _expected_claims(summary):
             bool(jerk <= 1.2 * jerk_mg),
             [f"{jerk:.2f} vs MG {jerk_mg:.2f}"],
         )
+    # issue 40's goals for the person model, in the thesis population and the held-out one
+    for world, (fb, ob, lb, jb) in {"point-mass": (0.85, 0.7, 0.4, 1.1), "held-out": (0.8, 0.6, 0.3, None)}.items():
+        for obj in ("board", "heavy"):
+            cell = cells[f"{world}/{obj}/cooperative-arbitrated/person"]
+            f, (o, o_lo) = cell["oracle_share_force"][0], cell["oracle_share_overshoot"][:2]
+            ok = all(v is not None and np.isfinite(v) for v in (f, o, o_lo)) and f >= fb and o >= ob and o_lo >= lb
+            jerk = cell["jerk_rms"] / mg_cells[f"{world}/{obj}"]["jerk_rms"]
+            if jb is not None:
+                ok = ok and jerk <= jb
+            else:
+                sides = [cell["by_side"][s]["overshoot"] for s in ("left", "right")]
+                ok = ok and all(sd["trials"] >= 1 and sd["vs_mg"] is not None and sd["vs_mg"] <= 0.0 for sd in sides)
+            where = "held-out population" if world == "held-out" else "point-mass world"
+            out[f"{obj}, {where}: the person model"] = (bool(ok), [f"{jerk:.2f}× MG"])
     if "user_a" in summary["real"]:
         ev = summary["real"]["user_a"]
         best = ev["best_baseline"]
