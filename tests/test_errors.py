@@ -15,6 +15,8 @@ from coassist.errors import CoassistError
 def _coassist_exceptions() -> list[type[BaseException]]:
     found = []
     for info in pkgutil.walk_packages(coassist.__path__, "coassist."):
+        if info.name.endswith(".__main__"):  # a script (python -m …): importing it runs it
+            continue
         try:
             module = importlib.import_module(info.name)
         except ImportError:  # an optional extra that is absent (its own tests skip)

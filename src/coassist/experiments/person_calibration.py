@@ -29,6 +29,7 @@ from typing import Protocol
 import numpy as np
 
 from coassist.data import Trial
+from coassist.errors import CoassistError
 from coassist.scenario.arm_identification import identify_arm
 from coassist.scenario.path_model import PathFrame
 from coassist.scenario.person_model import PersonFit, fit_person
@@ -54,7 +55,7 @@ SAME_PATH = 0.01
 MIN_PROGRESS = 0.5
 
 
-class CalibrationError(ValueError):
+class CalibrationError(CoassistError, ValueError):
     """Trials a person model cannot be fitted from (the message names the person and the trial)."""
 
 

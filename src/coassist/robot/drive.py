@@ -448,6 +448,9 @@ def _prepare(
         hand: HandWorld | None = world if isinstance(world, HandWorld) else None  # a handle to hold
         # the simulated operator at a simulated handle: MuJoCo's, or coassist ur-sim's behind the ur world
         held = simulated or hand is not None
+        # the robot is told the task's obstacle where the simulated operator, who goes round it, is at the
+        # handle (a simulated world, or a simulated handle with no other hand given); a lab's scene otherwise
+        told_task = simulated or (hand is not None and operator is None)
         if not held:
             # lay the task out from where the TCP is: shift the plan
             shift = start_pose[:2] - ref_abs[0, :2]
@@ -506,7 +509,7 @@ def _prepare(
             log_intent=held,
             # the robot is told of the obstacle only where the simulated operator goes round it: a person at a
             # real arm sees no such box (the path-hypotheses source then is the present estimate alone)
-            tell_obstacles=held,
+            tell_obstacles=told_task,
             told_obstacles=None if config.scene is None else config.scene.told(),
             kinematics=kin,
             tick_config=TickConfig(dofs=dofs),

@@ -29,6 +29,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from coassist.errors import CoassistError
+
 __all__ = ["MAX_BOXES", "Scene", "SceneBox", "SceneError", "read_scene"]
 
 #: The most boxes a scene holds (the path-hypotheses source uses the one the path passes nearest).
@@ -39,7 +41,7 @@ _BOX_KEYS = ("center", "size", "name")
 _TOP_KEYS = ("frame", "obstacle")
 
 
-class SceneError(ValueError):
+class SceneError(CoassistError, ValueError):
     """A scene file that cannot be used (the message names the file and the field)."""
 
 

@@ -34,6 +34,8 @@ import struct
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
+from coassist.errors import CoassistError
+
 __all__ = [
     "INPUT_FIELDS",
     "OUTPUT_FIELDS",
@@ -211,7 +213,7 @@ def field_available(name: str, version: Sequence[int]) -> bool:
     return first is not None and here >= first
 
 
-class FieldError(ValueError):
+class FieldError(CoassistError, ValueError):
     """A recipe names a field the controller refuses (``NOT_FOUND`` / ``IN_USE``)."""
 
 
