@@ -35,7 +35,9 @@ def _participant(page, url: str, path: OperatorPath, received: list[str], timeou
     entered."""
     page.on("websocket", lambda ws: ws.on("framereceived", lambda payload: received.append(str(payload))))
     page.goto(url)
-    page.wait_for_function("window.coassist && window.coassist.ready && window.coassist.study", timeout=15000)
+    page.wait_for_function(
+        "window.coassist && window.coassist.ready && window.coassist.study", timeout=60000
+    )  # a busy machine: the worker fitting the last participant shares the cores
     entered: dict = {"answers": {}, "starts": []}
     t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
