@@ -18,7 +18,9 @@ from ..ursim import needs_ur_rtde, realtime_priority, simulator
 
 needs_ur_rtde()
 pytest.importorskip("mujoco", reason="the simulator's arm is the MuJoCo UR5: pip install 'coassist[robot]'")
-pytestmark = pytest.mark.realtime
+# slow too: four 16 s trials in real time (82 s of the realtime run's 297 s); `./dev test -m slow` runs it.
+# The default run drives the ur world through the simulator end to end in tests/robot/test_ur_sim_world.py.
+pytestmark = [pytest.mark.realtime, pytest.mark.slow]
 
 PLAN = """
 [study]
