@@ -190,7 +190,9 @@ def test_a_gamepad_is_a_hand_too(tmp_path):
         finally:
             context.close()
         session.wait(5.0)
-    # full stick = the hand 8 cm ahead of the tool: K_s · 0.08 = 32 N minus damping, pushing +x
-    assert held["held"] and held["fh"][0] > 15.0 and abs(held["fh"][1]) < 2.0
+    # full stick = the hand 8 cm ahead of the tool: K_s · 0.08 = 32 N minus damping, pushing +x. The bound
+    # leaves room for a busy machine (two CPU hogs beside the suite: 14.2 N, the frame read late in the
+    # push); a pad that does not push reads 0
+    assert held["held"] and held["fh"][0] > 10.0 and abs(held["fh"][1]) < 2.0
     assert held["x"] - x0 > 0.05
     assert not released["held"] and released["fh"] == [0.0, 0.0]
