@@ -26,11 +26,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
-import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from bench_common import machine_line  # noqa: E402
+from bench_common import RecordsWindows, machine_line, replay  # noqa: E402
 from coassist.control.presets import get_preset, make_controller  # noqa: E402
 from coassist.runtime.episode import run_episode  # noqa: E402
 from coassist.scenario.objects import get_object  # noqa: E402
@@ -40,16 +39,8 @@ from coassist.scenario.tasks import task_for_seed  # noqa: E402
 from coassist.sim.world import build_trial  # noqa: E402
 
 
-class _Recording(PathHypothesesIntent):
+class _Recording(RecordsWindows, PathHypothesesIntent):
     """The source in the loop, keeping the windows it was given (to replay them)."""
-
-    def reset(self, context):
-        super().reset(context)
-        self.context, self.windows = context, []
-
-    def predict(self, history):
-        self.windows.append(np.array(history))
-        return super().predict(history)
 
 
 class _WholeCurves(PathHypothesesIntent):
@@ -60,16 +51,6 @@ class _WholeCurves(PathHypothesesIntent):
 
     def _widest(self, hyp):
         return hyp.points.shape[1]
-
-
-def _replay(source: PathHypothesesIntent, context, windows) -> np.ndarray:
-    source.reset(context)
-    times = np.empty(len(windows))
-    for k, window in enumerate(windows):
-        t0 = time.perf_counter_ns()
-        source.predict(window)
-        times[k] = time.perf_counter_ns() - t0
-    return times / 1e3  # µs
 
 
 def main() -> None:
@@ -108,7 +89,7 @@ def main() -> None:
     results = {}
     for label, source in rows:
         results[label] = np.concatenate(
-            [_replay(source, recorder.context, recorder.windows) for _ in range(args.repeats)]
+            [replay(source, recorder.context, recorder.windows) for _ in range(args.repeats)]
         )
     naive = np.median(results[rows[2][0]])
     print(f"{'per tick':50s} {'median µs':>10s} {'p99 µs':>8s} {'vs naive':>9s} {'of 8 ms':>8s} {'of 2 ms':>8s}")

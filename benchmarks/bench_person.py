@@ -31,7 +31,7 @@ from dataclasses import replace  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from bench_common import machine_line  # noqa: E402
+from bench_common import RecordsWindows, machine_line, replay  # noqa: E402
 from coassist.control.presets import get_preset, make_controller  # noqa: E402
 from coassist.runtime.episode import run_episode  # noqa: E402
 from coassist.scenario.objects import get_object  # noqa: E402
@@ -45,26 +45,8 @@ from coassist.scenario.tasks import task_for_seed  # noqa: E402
 from coassist.sim.world import build_trial  # noqa: E402
 
 
-class _Recording(PersonPathsIntent):
+class _Recording(RecordsWindows, PersonPathsIntent):
     """The source in the loop, keeping the windows it was given (to replay them)."""
-
-    def reset(self, context):
-        super().reset(context)
-        self.context, self.windows = context, []
-
-    def predict(self, history):
-        self.windows.append(np.array(history))
-        return super().predict(history)
-
-
-def _replay(source: PersonPathsIntent, context, windows) -> np.ndarray:
-    source.reset(context)
-    times = np.empty(len(windows))
-    for k, window in enumerate(windows):
-        t0 = time.thread_time_ns()
-        source.predict(window)
-        times[k] = time.thread_time_ns() - t0
-    return times / 1e3  # µs
 
 
 def main() -> None:
@@ -124,7 +106,9 @@ def main() -> None:
         ("person model, ±20 cm of every curve (naive)", person(replace(settings, search_window=0.2))),
     ]
     results = {
-        label: np.concatenate([_replay(src, recorder.context, recorder.windows) for _ in range(args.repeats)])
+        label: np.concatenate(
+            [replay(src, recorder.context, recorder.windows, time.thread_time_ns) for _ in range(args.repeats)]
+        )
         for label, src in rows
     }
     if args.profile:
@@ -132,7 +116,7 @@ def main() -> None:
         import pstats
 
         profiler = cProfile.Profile()
-        profiler.runcall(_replay, rows[1][1], recorder.context, recorder.windows)
+        profiler.runcall(replay, rows[1][1], recorder.context, recorder.windows, time.thread_time_ns)
         pstats.Stats(profiler).sort_stats("tottime").print_stats(12)
     naive = np.median(results[rows[2][0]])
     print(
