@@ -80,7 +80,7 @@ import numpy as np
 from coassist._checks import check_int, check_real, is_real_number
 from coassist._io import read_hashed_json, write_hashed_json
 from coassist.interfaces import TrialContext
-from coassist.scenario.objects import OBJECTS
+from coassist.scenario.hand_force import HandForce
 from coassist.scenario.operator import deformed_path
 from coassist.scenario.tasks import Box, MotionPlanner, NominalPath, Task
 
@@ -400,12 +400,8 @@ class PathHypothesesIntent:
         self.dt = float(context.dt)
         self._steps = self.dt * np.arange(1, self.horizon + 1)
         self._present_steps = (self.extrapolation * self._steps)[:, None]
-        obj = OBJECTS.get(context.object)
-        self._mass = float(obj.mass) if obj is not None else 0.0
-        self._a_gain = 1.0 - math.exp(-self.dt / st.accel_time) if st.accel_time > 0 else 1.0
+        self._hand = HandForce(self.dt, st.accel_time, context.object)
         self._b_gain = 1.0 - math.exp(-self.dt / st.bias_time)
-        self._v_prev: np.ndarray | None = None
-        self._acc = np.zeros(2)
         self._hyp = None
         obstacles = tuple(context.obstacles) if self.use_obstacles else ()
         if obstacles and context.path is not None:
@@ -448,10 +444,7 @@ class PathHypothesesIntent:
             raise RuntimeError("PathHypothesesIntent.predict called before reset")
         row = history[-1]
         p, v, w = row[0:2], row[2:4], row[4:6]
-        if self._v_prev is not None:
-            self._acc += self._a_gain * ((v - self._v_prev) / self.dt - self._acc)
-        self._v_prev = v.copy()
-        u_h = w + self._mass * self._acc  # the hand's force, the object's inertia put back
+        u_h = self._hand(v, w)  # the hand's force, the object's inertia put back
         K, C = self.arm.stiffness, self.arm.damping
         present = p + (u_h + C * v) / K
         if self._hyp is None:

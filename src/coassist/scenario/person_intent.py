@@ -44,7 +44,7 @@ import numpy as np
 from coassist._checks import check_int, check_real
 from coassist.interfaces import TrialContext
 from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate
-from coassist.scenario.objects import OBJECTS
+from coassist.scenario.hand_force import HandForce
 from coassist.scenario.path_model import PathFrame, PathModel
 
 __all__ = ["PersonFilterSettings", "PersonPathsIntent"]
@@ -242,12 +242,8 @@ class PersonPathsIntent:
         self.dt = float(context.dt)
         self._steps = self.dt * np.arange(1, self.horizon + 1)
         self._present_steps = (self.extrapolation * self._steps)[:, None]
-        obj = OBJECTS.get(context.object)
-        self._mass = float(obj.mass) if obj is not None else 0.0
-        self._a_gain = 1.0 - math.exp(-self.dt / st.accel_time) if st.accel_time > 0 else 1.0
+        self._hand = HandForce(self.dt, st.accel_time, context.object)
         self._b_gain = 1.0 - math.exp(-self.dt / st.bias_time)
-        self._v_prev: np.ndarray | None = None
-        self._acc = np.zeros(2)
         arm = self.arms.get(context.user, self.default_arm)
         self._K, self._C = arm.stiffness, arm.damping
         self._lead_time = st.reaction_lead
@@ -295,10 +291,7 @@ class PersonPathsIntent:
             raise RuntimeError("PersonPathsIntent.predict called before reset")
         row = history[-1]
         p, v, w = row[0:2], row[2:4], row[4:6]
-        if self._v_prev is not None:
-            self._acc += self._a_gain * ((v - self._v_prev) / self.dt - self._acc)
-        self._v_prev = v.copy()
-        u_h = w + self._mass * self._acc
+        u_h = self._hand(v, w)  # the hand's force, the object's inertia put back
         present = p + (u_h + self._C * v) / self._K + self._lead_time * v
         if self._hyp is None:
             return present + self._present_steps * v
