@@ -65,6 +65,11 @@ def _participant(page, url: str, path: OperatorPath, received: list[str], timeou
                 else:
                     page.locator(f"input[name='{item['key']}'][value='{v}']").check()
             entered["answers"][view["step"]] = values
+            # the same questionnaire shown again (a reconnect's init) keeps what was entered
+            page.evaluate("window.coassist.extend({...window.coassist.study, type: 'step'})")
+            for item, v in zip(view["form"]["items"], values):
+                sel = f"input[name='{item['key']}']" + ("" if item["scale"] == "tlx" else ":checked")
+                assert float(page.locator(sel).input_value()) == float(v), item["key"]
             page.click("#study-submit")
             page.wait_for_function(f"window.coassist.study.step !== {view['step']}", timeout=10000)
         elif view["kind"] == "rest" and page.is_visible("#study-next") and page.is_enabled("#study-next"):

@@ -25,7 +25,16 @@
   }
 
   function renderForm(view) {
-    const form = $("study-form"); form.innerHTML = "";
+    const form = $("study-form");
+    // The same questionnaire shown again (a reconnect's init, a repeated step) keeps what was already
+    // entered: a participant's answers are never wiped under their cursor.
+    const kept = new Map();
+    if (form.dataset.step === String(view.step)) {
+      for (const el of form.querySelectorAll("input")) {
+        if (el.type === "range" || el.checked) kept.set(el.name, el.value);
+      }
+    }
+    form.innerHTML = ""; form.dataset.step = String(view.step);
     view.form.items.forEach((it, i) => {
       const div = document.createElement("div"); div.className = "item";
       const label = document.createElement("label"); label.textContent = it.text; div.appendChild(label);
@@ -34,12 +43,14 @@
         Object.assign(input, { type: "range", min: it.lo, max: it.hi, step: it.step, value: Math.round((it.lo + it.hi) / 2 / it.step) * it.step, name: it.key, id: `q-${i}` });
         const ends = document.createElement("div"); ends.className = "ends";
         ends.innerHTML = it.key === "tlx_performance" ? "<span>perfect</span><span>failure</span>" : "<span>very low</span><span>very high</span>";
+        if (kept.has(it.key)) input.value = kept.get(it.key);
         div.appendChild(input); div.appendChild(ends);
       } else {
         const scale = document.createElement("div"); scale.className = "scale";
         scale.appendChild(document.createTextNode("disagree"));
         for (let v = it.lo; v <= it.hi; v += it.step) {
           const r = document.createElement("input"); Object.assign(r, { type: "radio", name: it.key, value: v, id: `q-${i}-${v}` });
+          r.checked = kept.get(it.key) === String(v);
           scale.appendChild(r);
         }
         scale.appendChild(document.createTextNode("agree"));
