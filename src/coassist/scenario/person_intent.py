@@ -13,7 +13,9 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
 σₙ ∈ {+1, −1} and prior πₙ (:meth:`PathModel.curves`). Every tick:
 
 1. **present estimate** q = p + (w + m a + Ĉ v)/K̂ (eq. 4.1 solved for the intent; m a puts back
-   the carried object's inertia, a low-pass filtered over ``accel_time``);
+   the carried object's inertia, a low-pass filtered over ``accel_time``); with ``object_yaw`` p and
+   v are the hand point's, not the tip's, on an object that yaws on its mount (the board's grasp is
+   0.61 m from the cup: :class:`~coassist.scenario.hand_force.HandPoint`);
 2. **phase**: the tool's nearest point on each curve within ``search_window`` of its last, and each
    curve's present estimate qₙ = Cₙ(sₙ + ℓₙ) with the lead ℓₙ = tₙ·(w + m a + Ĉ v)/K̂ along it;
 3. **evidence**: each curve's log-likelihood grows by −κ‖q − b − qₙ‖²/(2σ²) (σ the present estimate's
@@ -44,7 +46,7 @@ import numpy as np
 from coassist._checks import check_int, check_real
 from coassist.interfaces import TrialContext
 from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate
-from coassist.scenario.hand_force import HandForce
+from coassist.scenario.hand_force import HandForce, HandPoint
 from coassist.scenario.path_model import PathFrame, PathModel
 
 __all__ = ["PersonFilterSettings", "PersonPathsIntent"]
@@ -72,6 +74,8 @@ class PersonFilterSettings:
     reaction_lead : [s] the present estimate is put this far ahead along the tool's velocity. With a
         measured arm, Ĉ holds the person's reaction delay (the force answers the intent of τ ago:
         Ĉ = C − K̂τ), so q̂ is where the person wanted the tool τ ago; the lead brings it to now.
+    object_yaw : estimate the hand point on an object that yaws on its mount (the board:
+        :class:`~coassist.scenario.hand_force.HandPoint`) instead of taking the tip for it.
     """
 
     kappa: float = 0.2
@@ -94,6 +98,7 @@ class PersonFilterSettings:
     dead_zone: float = 0.002
     side_rule: str = "offset"
     reaction_lead: float = 0.0
+    object_yaw: bool = False
 
     def __post_init__(self) -> None:
         for name, lo, hi, open_lo in (
@@ -119,6 +124,8 @@ class PersonFilterSettings:
             object.__setattr__(
                 self, name, check_real(getattr(self, name), f"PersonFilterSettings.{name}", lo, hi, open_lo=open_lo)
             )
+        if not isinstance(self.object_yaw, bool):
+            raise ValueError(f"PersonFilterSettings.object_yaw must be true or false, got {self.object_yaw!r}")
         if self.side_rule not in ("offset", "mixture"):
             raise ValueError(f"PersonFilterSettings.side_rule must be 'offset' or 'mixture', got {self.side_rule!r}")
         if isinstance(self.shifts, (str, bytes)) or not hasattr(self.shifts, "__iter__"):
@@ -151,6 +158,8 @@ class _Curves:
         self.flat_points = self.points.reshape(N * G, 2)
         self.flat_tangents = self.tangents.reshape(N * G, 2)
         self.flat_arc = self.arc.ravel()
+        self.key_stride = float(np.max(self.arc[:, -1])) + 1.0
+        self.flat_key = (self.arc + (np.arange(N) * self.key_stride)[:, None]).ravel()
         self.row_start = np.arange(N) * G
         self.curves = np.arange(N)
         self.on_way = {w: np.flatnonzero(self.ways == w) for w in np.unique(self.ways).tolist()}
@@ -178,6 +187,21 @@ class _Curves:
         self.gap = np.abs(mean[1] - mean[-1]) if len(mean) == 2 else np.abs(next(iter(mean.values())))
         # the way taken is settled once the tool passes the place where the ways are furthest apart
         self.peak = int(np.argmax(self.gap))
+
+    def along(self, n: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Points of curves n (k,) at their own arc lengths s (k, H), clipped to each curve: (k, H, 2). One
+        search over every curve at once: each curve's arc lengths are offset by its index times a stride
+        longer than any curve, so the flat array is increasing and one ``searchsorted`` finds every segment."""
+        G = self.points.shape[1]
+        s = np.minimum(np.maximum(s, 0.0), self.arc[n, -1][:, None])
+        key = s + (n * self.key_stride)[:, None]
+        j = np.searchsorted(self.flat_key, key, side="right") - 1
+        lo = (n * G)[:, None]
+        np.clip(j, lo, lo + G - 2, out=j)
+        k0, k1 = self.flat_key[j], self.flat_key[j + 1]
+        den = k1 - k0
+        t = np.divide(key - k0, den, out=np.zeros_like(key), where=den > 0.0)[..., None]
+        return self.flat_points[j] * (1.0 - t) + self.flat_points[j + 1] * t
 
     def at(self, n: int, s: np.ndarray) -> np.ndarray:
         """Points of curve n at its own arc lengths s (clipped)."""
@@ -243,6 +267,7 @@ class PersonPathsIntent:
         self._steps = self.dt * np.arange(1, self.horizon + 1)
         self._present_steps = (self.extrapolation * self._steps)[:, None]
         self._hand = HandForce(self.dt, st.accel_time, context.object)
+        self._yaw = HandPoint(self.dt, context.object) if st.object_yaw else None
         self._b_gain = 1.0 - math.exp(-self.dt / st.bias_time)
         arm = self.arms.get(context.user, self.default_arm)
         self._K, self._C = arm.stiffness, arm.damping
@@ -292,6 +317,9 @@ class PersonPathsIntent:
         row = history[-1]
         p, v, w = row[0:2], row[2:4], row[4:6]
         u_h = self._hand(v, w)  # the hand's force, the object's inertia put back
+        if self._yaw is not None:  # the hand point, not the tip: the object's yaw on its mount
+            dp, dv = self._yaw(u_h, self._hand.acc)
+            p, v = p + dp, v + dv
         present = p + (u_h + self._C * v) / self._K + self._lead_time * v
         if self._hyp is None:
             return present + self._present_steps * v
@@ -374,19 +402,16 @@ class PersonPathsIntent:
             self._side = side
 
         # 4. rows
-        def ahead_on(n: int) -> np.ndarray:
-            speed = max(float(tan[n] @ v), 0.0)
-            return hyp.at(n, s_lead[n] + self._steps * speed)
-
         def mixture(on: np.ndarray) -> np.ndarray:
             weight = np.exp(self._loglik[on] + hyp.log_prior[on] - hyp.log_prior[on].max())
             best = np.argsort(weight)[::-1][:MIXTURE]
             best = best[weight[best] >= 0.01 * weight[best[0]]]
             w = weight[best] / weight[best].sum()
-            out = w[0] * ahead_on(int(on[best[0]]))
-            for wt, n in zip(w[1:], on[best[1:]]):
-                out += wt * ahead_on(int(n))
-            return out
+            n = on[best]
+            # every chosen curve's rows at once, from its present estimate at the tool's speed along it
+            speed = np.maximum(tan[n] @ v, 0.0)
+            rows = hyp.along(n, s_lead[n][:, None] + speed[:, None] * self._steps[None, :])
+            return np.tensordot(w, rows, axes=1)
 
         if self._side != 0 or not self._two:
             ahead = mixture(hyp.on_way[self._side])

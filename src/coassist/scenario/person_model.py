@@ -45,10 +45,12 @@ __all__ = [
 
 PERSON_MODEL_FILE = "person-model.json"
 #: The filter a fitted person model runs with unless told otherwise: the defaults, with the present estimate
-#: put 0.06 s ahead (a measured arm's Ĉ holds the person's reaction delay). On the validation trials
-#: (application_seed(50000), the board, 24 trials, the arbitrated controller) the lead took the force share
-#: from 77 to 83 (0.03 s) and 87 % (0.06 s), the overshoot share 46 → 46 / 43 %, the jerk 1.33 → 1.38 / 1.42 × MG.
-PERSON_FILTER = PersonFilterSettings(reaction_lead=0.06)
+#: put 0.06 s ahead (a measured arm's Ĉ holds the person's reaction delay) and taken at the hand point of an
+#: object that yaws on its mount. On the validation trials (application_seed(50000), the board, 24 trials, the
+#: arbitrated controller) the lead took the force share from 77 to 83 (0.03 s) and 87 % (0.06 s), the overshoot
+#: share 46 → 46 / 43 %, the jerk 1.33 → 1.38 / 1.42 × MG; the hand point then took them from 87 % / 54 % / 1.34 ×
+#: to 93 % / 91 % [81, 103] / 1.17 × (docs/person-model.md).
+PERSON_FILTER = PersonFilterSettings(reaction_lead=0.06, object_yaw=True)
 _FORMAT = "coassist-person-model-1"
 
 
