@@ -158,9 +158,16 @@ class _Curves:
         self.flat_points = self.points.reshape(N * G, 2)
         self.flat_tangents = self.tangents.reshape(N * G, 2)
         self.flat_arc = self.arc.ravel()
-        self.key_stride = float(np.max(self.arc[:, -1])) + 1.0
-        self.flat_key = (self.arc + (np.arange(N) * self.key_stride)[:, None]).ravel()
+        # for :meth:`along`: the arc lengths of curve n offset by n times a stride longer than any curve (one
+        # increasing array), each segment's point step and inverse length (0 for a repeated point)
+        self.arc_end = self.arc[:, -1].copy()
+        self.key_start = np.arange(N) * (float(np.max(self.arc_end)) + 1.0)
+        self.flat_key = (self.arc + self.key_start[:, None]).ravel()
+        seg_len = np.diff(self.flat_key, append=self.flat_key[-1])
+        self.flat_inv = np.divide(1.0, seg_len, out=np.zeros_like(seg_len), where=seg_len > 0.0)
+        self.flat_step = np.diff(self.flat_points, axis=0, append=self.flat_points[-1:])
         self.row_start = np.arange(N) * G
+        self.row_last = self.row_start + G - 2
         self.curves = np.arange(N)
         self.on_way = {w: np.flatnonzero(self.ways == w) for w in np.unique(self.ways).tolist()}
         frame = PathFrame(model.nominal)
@@ -192,16 +199,14 @@ class _Curves:
         """Points of curves n (k,) at their own arc lengths s (k, H), clipped to each curve: (k, H, 2). One
         search over every curve at once: each curve's arc lengths are offset by its index times a stride
         longer than any curve, so the flat array is increasing and one ``searchsorted`` finds every segment."""
-        G = self.points.shape[1]
-        s = np.minimum(np.maximum(s, 0.0), self.arc[n, -1][:, None])
-        key = s + (n * self.key_stride)[:, None]
-        j = np.searchsorted(self.flat_key, key, side="right") - 1
-        lo = (n * G)[:, None]
-        np.clip(j, lo, lo + G - 2, out=j)
-        k0, k1 = self.flat_key[j], self.flat_key[j + 1]
-        den = k1 - k0
-        t = np.divide(key - k0, den, out=np.zeros_like(key), where=den > 0.0)[..., None]
-        return self.flat_points[j] * (1.0 - t) + self.flat_points[j + 1] * t
+        s = np.minimum(np.maximum(s, 0.0), self.arc_end[n][:, None])
+        key = s + self.key_start[n][:, None]
+        j = np.minimum(
+            np.maximum(self.flat_key.searchsorted(key, side="right") - 1, self.row_start[n][:, None]),
+            self.row_last[n][:, None],
+        )
+        t = ((key - self.flat_key[j]) * self.flat_inv[j])[..., None]
+        return self.flat_points[j] + t * self.flat_step[j]
 
     def at(self, n: int, s: np.ndarray) -> np.ndarray:
         """Points of curve n at its own arc lengths s (clipped)."""
@@ -266,6 +271,7 @@ class PersonPathsIntent:
         self.dt = float(context.dt)
         self._steps = self.dt * np.arange(1, self.horizon + 1)
         self._present_steps = (self.extrapolation * self._steps)[:, None]
+        self._hedge_steps = (st.hedge_velocity * self._steps)[:, None]
         self._hand = HandForce(self.dt, st.accel_time, context.object)
         self._yaw = HandPoint(self.dt, context.object) if st.object_yaw else None
         self._b_gain = 1.0 - math.exp(-self.dt / st.bias_time)
@@ -330,29 +336,25 @@ class PersonPathsIntent:
         K, C = self._K, self._C
         G = hyp.points.shape[1]
         # 2. the tool's phase on every curve: its nearest point within the search window of the last one
-        ids = self._idx[:, None] + self._offsets
-        np.clip(ids, 0, G - 1, out=ids)
-        flat = ids + hyp.row_start[:, None]
-        dx = np.take(hyp.flat_x, flat) - p[0]
-        dy = np.take(hyp.flat_y, flat) - p[1]
+        # (every step below is a handful of whole-array operations: the tick's cost is their count, not their size)
+        flat = np.minimum(np.maximum(self._idx[:, None] + self._offsets, 0), G - 1) + hyp.row_start[:, None]
+        dx = hyp.flat_x[flat] - p[0]
+        dy = hyp.flat_y[flat] - p[1]
         d2 = dx * dx + dy * dy
-        at = flat[hyp.curves, np.argmin(d2, axis=1)]
-        near = at - hyp.row_start
-        self._idx = near
-        hedge = present + (st.hedge_velocity * self._steps)[:, None] * v
-        if float(np.min(np.take(d2.ravel(), np.argmin(d2, axis=1) + np.arange(len(near)) * d2.shape[1]))) > (
-            st.max_offset**2
-        ):
+        best = d2.argmin(axis=1)
+        at = flat[hyp.curves, best]
+        self._idx = at - hyp.row_start
+        if float(d2[hyp.curves, best].min()) > st.max_offset**2:
             return present + self._present_steps * v
-        tan = np.take(hyp.flat_tangents, at, axis=0)
-        point = np.take(hyp.flat_points, at, axis=0)
+        tan = hyp.flat_tangents[at]
+        point = hyp.flat_points[at]
         # the tool's place along each curve, between its samples (a phase stuck to the samples would step the
         # rows by their spacing), then the lead along the curve
-        along = (p[0] - point[:, 0]) * tan[:, 0] + (p[1] - point[:, 1]) * tan[:, 1]
-        np.clip(along, -hyp.step, hyp.step, out=along)
-        lead = (tan @ u_h + C * (tan @ v)) / K + self._lead_time * (tan @ v)
+        along = np.minimum(np.maximum(((p - point) * tan).sum(axis=1), -hyp.step), hyp.step)
+        tv = tan @ v
+        lead = (tan @ u_h + C * tv) / K + self._lead_time * tv
         q = point + (along + lead)[:, None] * tan
-        s_lead = np.take(hyp.flat_arc, at) + along + lead
+        s_lead = hyp.flat_arc[at] + along + lead
         # 3. evidence. The way: the present estimate's offset from the plan (less the person's bias there),
         # toward one way or the other, in proportion to how far apart the ways are at this point of the plan
         # (a detour that comes later or earlier than before fakes no side)
@@ -390,10 +392,11 @@ class PersonPathsIntent:
         r2 = r[:, 0] * r[:, 0] + r[:, 1] * r[:, 1]
         for on in hyp.on_way.values():
             qs = q[on]
-            off = qs - qs.mean(axis=0)
-            if math.sqrt(float(np.max(off[:, 0] * off[:, 0] + off[:, 1] * off[:, 1]))) >= st.divergence:
-                self._loglik[on] -= self._kappa * (r2[on] - r2[on].min()) / (2.0 * self._noise2)
-                self._loglik[on] -= self._loglik[on].max()
+            off = qs - qs.sum(axis=0) / len(on)
+            if float((off * off).sum(axis=1).max()) >= st.divergence**2:
+                r2_on = r2[on]
+                ll = self._loglik[on] - self._kappa * (r2_on - r2_on.min()) / (2.0 * self._noise2)
+                self._loglik[on] = ll - ll.max()
         np.maximum(self._loglik, -60.0, out=self._loglik)
         if self._two and abs(self._log_odds) > st.decide:
             side = 1 if self._log_odds > 0 else -1
@@ -409,9 +412,9 @@ class PersonPathsIntent:
             w = weight[best] / weight[best].sum()
             n = on[best]
             # every chosen curve's rows at once, from its present estimate at the tool's speed along it
-            speed = np.maximum(tan[n] @ v, 0.0)
+            speed = np.maximum(tv[n], 0.0)
             rows = hyp.along(n, s_lead[n][:, None] + speed[:, None] * self._steps[None, :])
-            return np.tensordot(w, rows, axes=1)
+            return (w @ rows.reshape(len(w), -1)).reshape(-1, 2)
 
         if self._side != 0 or not self._two:
             ahead = mixture(hyp.on_way[self._side])
@@ -419,13 +422,15 @@ class PersonPathsIntent:
         else:
             ahead = mixture(hyp.on_way[1])
             other = mixture(hyp.on_way[-1])
-            target = 0.0 if float(np.max(np.linalg.norm(ahead - other, axis=1))) >= st.divergence else 1.0
+            apart = ahead - other
+            target = 0.0 if float((apart * apart).sum(axis=1).max()) >= st.divergence**2 else 1.0
         if self._mix_step >= 1.0:
             self._mix = target
         elif target != self._mix:
             self._mix = min(max(self._mix + math.copysign(self._mix_step, target - self._mix), 0.0), 1.0)
         if self._mix >= 1.0:
             return ahead
+        hedge = present + self._hedge_steps * v
         if self._mix <= 0.0:
             return hedge
         return self._mix * ahead + (1.0 - self._mix) * hedge
