@@ -42,7 +42,7 @@ and the **share of the oracle's benefit** for force and for overshoot::
     share = mean_i(MG_i − X_i) / mean_i(MG_i − oracle_i)
 
 over the paired trials i, with a 95 % percentile bootstrap interval over trials
-(:func:`oracle_share`); the oracle of the same controller (the arbitrated one's for the damped
+(:func:`~coassist.analysis.paired.gain_share`); the oracle of the same controller (the arbitrated one's for the damped
 controller). 1 is everything the oracle gains over MG; 0 nothing; below 0 worse than MG.
 Overshoot and clearance deficit are also given per side of the detour (the inside of the arc,
 where the tool turns hardest, and the outside), each as a paired difference from MG.
@@ -58,13 +58,13 @@ from typing import Any
 
 import numpy as np
 
+from coassist.analysis.paired import gain_share, paired_difference
 from coassist.experiments.application import (
     OBJECTS,
     OBSTACLE,
     _pair_key,
     application_metrics,
     cell_options,
-    paired_difference,
 )
 from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_seed, in_loop_errors, trial_seed_base
 from coassist.experiments.report import Claim, Section
@@ -150,35 +150,6 @@ def _oracle_of(controller: str) -> str:
     return ARBITRATED if controller == DAMPED else controller
 
 
-def oracle_share(mg, x, oracle, *, seed: int = 0, confidence: float = 0.95) -> tuple[float, float, float]:
-    """(share, low, high): mean(MG − X) / mean(MG − oracle) over paired trials, with a percentile
-    bootstrap interval (trials resampled with replacement, ``BOOTSTRAP`` times, seeded).
-
-    ``mg``, ``x``, ``oracle``: per-trial values of one metric on the same trials, same order.
-    Trials where any of the three is non-finite are left out. NaN when the oracle gains
-    nothing on average (the share is undefined) or no trial is left.
-    """
-    mg, x, oracle = (np.asarray(v, dtype=float) for v in (mg, x, oracle))
-    if not mg.shape == x.shape == oracle.shape or mg.ndim != 1:
-        raise ValueError(f"paired values need one shape (n,), got {mg.shape}, {x.shape}, {oracle.shape}")
-    ok = np.isfinite(mg) & np.isfinite(x) & np.isfinite(oracle)
-    gain_x, gain_o = (mg - x)[ok], (mg - oracle)[ok]
-    nan = float("nan")
-    if gain_x.size == 0 or gain_o.mean() == 0.0:
-        return nan, nan, nan
-    share = float(gain_x.mean() / gain_o.mean())
-    rng = np.random.default_rng(seed)
-    idx = rng.integers(0, gain_x.size, (BOOTSTRAP, gain_x.size))
-    denom = gain_o[idx].mean(axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        boot = gain_x[idx].mean(axis=1) / denom
-    boot = boot[np.isfinite(boot)]
-    if boot.size < BOOTSTRAP // 2:  # the oracle's gain is too often zero in a resample: no interval
-        return share, nan, nan
-    lo, hi = np.quantile(boot, [(1 - confidence) / 2, (1 + confidence) / 2])
-    return share, float(lo), float(hi)
-
-
 @dataclass(frozen=True)
 class AblationResult:
     """metrics[(world, object, controller, source)] and mg[(world, object)]: :func:`application_metrics`;
@@ -197,7 +168,8 @@ class AblationResult:
     errors: dict[tuple[str, str, str, str], dict[int, dict[str, float]]]
 
     def shares(self, world: str, obj: str, controller: str, source: str) -> dict[str, tuple[float, float, float]]:
-        """The share of the oracle's benefit for force and for overshoot (:func:`oracle_share`); each
+        """The share of the oracle's benefit for force and for overshoot (:func:`~coassist.analysis.paired.gain_share`
+        of MG, the source and the oracle, :data:`BOOTSTRAP` resamples); each
         cell's bootstrap runs once (the summary, the section and the first screen all ask)."""
         key = (world, obj, controller, source)
         cache = self.__dict__.setdefault("_shares", {})  # frozen: the cache is not a field
@@ -209,7 +181,10 @@ class AblationResult:
         mg = self.mg[(world, obj)]
         x = self.metrics[(world, obj, controller, source)]
         o = self.metrics[(world, obj, _oracle_of(controller), "oracle")]
-        return {m: oracle_share(mg[f"{m}_trials"], x[f"{m}_trials"], o[f"{m}_trials"]) for m in ("f_rms", "overshoot")}
+        return {
+            m: gain_share(mg[f"{m}_trials"], x[f"{m}_trials"], o[f"{m}_trials"], n_boot=BOOTSTRAP)
+            for m in ("f_rms", "overshoot")
+        }
 
     def by_side(
         self,
