@@ -188,7 +188,7 @@ def run_application(
     for j, obj in enumerate(OBJECTS):
         for controller in CONTROLLERS:
             _, ds = ws.collect(f"app-{obj}-{controller}", **cell(j, obj, controller, models))
-            ordered = sorted(ds.trials, key=_pair_key)  # the same order for every controller: trial i meets trial i
+            ordered = sorted(ds.trials, key=pair_key)  # the same order for every controller: trial i meets trial i
             metrics[(obj, controller)] = application_metrics(ordered)
             trials[(obj, controller)] = ordered
     return ApplicationResult(
@@ -202,7 +202,7 @@ def run_application(
     )
 
 
-def _pair_key(trial) -> tuple[str, int]:
+def pair_key(trial) -> tuple[str, int]:
     """(operator, seed): what makes two controllers' trials the same trial."""
     return (str(trial.meta.user), -1 if trial.meta.seed is None else int(trial.meta.seed))
 
