@@ -77,8 +77,8 @@ def headline_figures(run: Path) -> dict[str, tuple[float, float, float]]:
     saving and overshoot reduction (their bootstrap intervals)."""
     import json
 
+    from coassist.analysis.paired import paired_difference
     from coassist.experiments.ablation import HEADLINE
-    from coassist.experiments.application import paired_difference
 
     summary = json.loads((run / "summary.json").read_text("utf-8"))
     app, cells = summary["application"], summary["ablation"]["cells"]

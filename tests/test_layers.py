@@ -26,7 +26,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "spatial",
         "registry",
     ),  # shared vocabulary and rigid-body math
-    ("model", "data", "metrics"),  # the impedance model; trials on disk; metrics
+    ("model", "data", "metrics", "analysis"),  # the impedance model; trials on disk; metrics; paired statistics
     ("control",),  # games, baselines, guarded controllers (pure control laws)
     ("intent",),  # the predictor
     ("scenario",),  # what every world runs: tasks, objects, simulated operators and hand, intent sources, seeds

@@ -14,11 +14,15 @@ An HTML comment on the line before a block's fence says how it is tested:
 - ``<!-- readme-test: parse-only (why) -->``: needs what a test machine lacks (a robot
   arm, a person at a browser): each ``coassist`` line is parsed by the command's own
   option parser (unknown options, bad values and missing arguments fail) and the
-  block is checked by ``bash -n``; it is not run;
+  block is checked by ``bash -n`` (a Python block: compiled); it is not run;
 - ``<!-- readme-test: output -->`` on a ``text`` block: the exact output of the Python
   block before it (checked wherever that block runs).
 
 The claims count of "What the main job measured" is checked against its table.
+
+Blocks that moved from the README to a doc page (:data:`CONTINUED`) are checked there the same
+way, after the README's; a doc page's synopsis with placeholders (``PLAN.toml``, ``<name>``) is a
+``text`` block, not a command.
 """
 
 from __future__ import annotations
@@ -39,7 +43,9 @@ ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 #: Doc pages whose blocks continue the README's (they read what its blocks wrote): run after it, in the same
 #: folder, by :func:`test_all_blocks_run`; their parse-only blocks parsed as the README's.
-CONTINUED = (ROOT / "docs" / "robots.md",)
+CONTINUED = (ROOT / "docs" / "robots.md", ROOT / "docs" / "study.md")
+#: The README's size limit in bytes (22 KB): what grows beyond it moves to docs/.
+README_LIMIT = 22 * 1024
 SHELL = ("bash", "sh", "shell")
 PYTHON = ("python", "py")
 MARKS = ("slow", "parse-only", "output")
@@ -52,14 +58,15 @@ class Block:
     language: str
     mark: str | None
     code: str
+    page: str = "README.md"
 
     @property
     def where(self) -> str:
-        return f"README.md:{self.line} ({self.language} block{'' if self.mark is None else ', ' + self.mark})"
+        return f"{self.page}:{self.line} ({self.language} block{'' if self.mark is None else ', ' + self.mark})"
 
 
-def readme_blocks(text: str | None = None) -> list[Block]:
-    """Every fenced block of the README with its language and its readme-test mark."""
+def readme_blocks(text: str | None = None, page: str = "README.md") -> list[Block]:
+    """Every fenced block of the README (or of ``text``, named ``page``) with its language and mark."""
     lines = (README.read_text(encoding="utf-8") if text is None else text).splitlines()
     blocks, i = [], 0
     while i < len(lines):
@@ -72,8 +79,9 @@ def readme_blocks(text: str | None = None) -> list[Block]:
         mark = re.match(r"^<!--\s*readme-test:\s*([\w-]+)", prev.strip())
         end = next((j for j in range(i + 1, len(lines)) if lines[j].strip() == ticks), None)
         if end is None:
-            raise AssertionError(f"README.md:{i + 1}: the code block is never closed")
-        blocks.append(Block(i + 1, language, mark.group(1) if mark else None, "\n".join(lines[i + 1 : end]) + "\n"))
+            raise AssertionError(f"{page}:{i + 1}: the code block is never closed")
+        code = "\n".join(lines[i + 1 : end]) + "\n"
+        blocks.append(Block(i + 1, language, mark.group(1) if mark else None, code, page))
         i = end + 1
     return blocks
 
@@ -118,10 +126,14 @@ def run_block(block: Block, cwd: Path, expected: str | None = None) -> None:
 # --------------------------------------------------------------------------- every run
 
 
+def page_blocks(page: Path) -> list[Block]:
+    return readme_blocks(page.read_text(encoding="utf-8"), f"{page.parent.name}/{page.name}")
+
+
 def test_every_block_is_accounted_for():
     blocks = readme_blocks()
     assert len(runnable(blocks)) >= 4
-    for b in blocks:
+    for b in [*blocks, *(b for page in CONTINUED for b in page_blocks(page))]:
         assert b.mark in (None, *MARKS), f"{b.where}: unknown readme-test mark {b.mark!r} (known: {MARKS})"
         if b.mark == "output":
             before = blocks[blocks.index(b) - 1]
@@ -129,7 +141,7 @@ def test_every_block_is_accounted_for():
         if re.search(r"(^|\s)\./dev\b", b.code):
             assert b.mark == "slow", f"{b.where}: ./dev runs for minutes; mark the block slow"
         if b.mark == "parse-only":
-            assert b.language in SHELL, f"{b.where}: only shell blocks can be parse-only"
+            assert b.language in SHELL + PYTHON, f"{b.where}: only shell and Python blocks can be parse-only"
 
 
 def test_blocks_and_marks_are_read_as_meant():
@@ -193,9 +205,13 @@ def _parse_coassist(words: list[str], where: str) -> None:
 
 
 def test_parse_only_blocks_parse():
-    pages = [readme_blocks(), *(readme_blocks(page.read_text(encoding="utf-8")) for page in CONTINUED)]
+    pages = [readme_blocks(), *(page_blocks(page) for page in CONTINUED)]
     blocks = [b for page in pages for b in page if b.mark == "parse-only"]
+    assert any(b.language in PYTHON for b in blocks), "no parse-only Python block: the compile check is idle"
     for block in blocks:
+        if block.language in PYTHON:
+            compile(block.code, block.where, "exec")  # a SyntaxError names the block
+            continue
         syntax = subprocess.run(["bash", "-n", "-c", block.code], capture_output=True, text=True)
         assert syntax.returncode == 0, f"{block.where}: {syntax.stderr}"
         commands = 0
@@ -264,11 +280,11 @@ def test_all_blocks_run(tmp_path):
             continue
         run_block(block, tmp_path, expected_output(blocks, block))
     for page in CONTINUED:
-        page_blocks = readme_blocks(page.read_text(encoding="utf-8"))
-        assert runnable(page_blocks), f"{page.name} holds no block to run"
-        for block in runnable(page_blocks):
+        blocks = page_blocks(page)
+        assert runnable(blocks), f"{page.name} holds no block to run"
+        for block in runnable(blocks):
             if block.mark != "parse-only":
-                run_block(block, tmp_path, expected_output(page_blocks, block))
+                run_block(block, tmp_path, expected_output(blocks, block))
 
 
 @pytest.mark.slow
@@ -280,8 +296,12 @@ def test_dev_entry_points():
 
 
 def test_the_readme_is_a_manual_not_a_notebook():
-    """At most 25 KB: measurements live in docs/performance.md, their history in docs/history.md."""
+    """At most 22 KB: measurements live in docs/performance.md, their history in docs/history.md, the
+    reference behind a command in its docs/ page."""
     size = README.stat().st_size
-    assert size <= 25 * 1024, f"README.md is {size} bytes; move measurements to docs/performance.md"
+    assert size <= README_LIMIT, (
+        f"README.md is {size} bytes (limit {README_LIMIT}); move measurements to docs/performance.md, "
+        "details to the docs/ page the README links"
+    )
     text = README.read_text(encoding="utf-8")
     assert not re.search(r"\b20\d\d-\d\d-\d\d\b", text), "a dated entry: history goes to docs/history.md"

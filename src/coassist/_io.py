@@ -74,7 +74,8 @@ class OutputBusyError(CoassistError, RuntimeError):
     """Another run is writing the same output; the message names it and the lock file."""
 
 
-def _temp_name(name: str, kind: str) -> str:
+def temp_name(name: str, kind: str) -> str:
+    """A hidden sibling name for a file or folder being written (``.name.<pid>.<random>.kind``), unique per process."""
     return f".{name}.{os.getpid()}.{secrets.token_hex(4)}.{kind}"
 
 
@@ -159,7 +160,7 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], Any]
     folder = path.parent
     folder.mkdir(parents=True, exist_ok=True)
     remove_stale(folder, path.name)
-    tmp = folder / _temp_name(path.name, "tmp")
+    tmp = folder / temp_name(path.name, "tmp")
     # os.open with 0o666 lets the kernel apply the umask (mkstemp would force 0600).
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
     try:
@@ -241,12 +242,12 @@ def swap_in(staging: str | os.PathLike[str], dest: str | os.PathLike[str]) -> Pa
         raise NotADirectoryError(f"{dest} exists and is not a folder")
     elif _exchange(staging, dest):
         # ``staging`` now holds the old folder: give it a dead-writer-safe name first.
-        old = dest.parent / _temp_name(dest.name, "tmp")
+        old = dest.parent / temp_name(dest.name, "tmp")
         os.rename(staging, old)
         fsync_dir(dest.parent)
         shutil.rmtree(old, ignore_errors=True)
     else:
-        old = dest.parent / _temp_name(dest.name, "old")
+        old = dest.parent / temp_name(dest.name, "old")
         os.rename(dest, old)
         os.rename(staging, dest)
         fsync_dir(dest.parent)
@@ -265,7 +266,7 @@ def staged_folder(dest: str | os.PathLike[str]) -> Iterator[Path]:
     dest = Path(dest)
     dest.parent.mkdir(parents=True, exist_ok=True)
     remove_stale(dest.parent, dest.name)
-    staging = dest.parent / _temp_name(dest.name, "new")
+    staging = dest.parent / temp_name(dest.name, "new")
     os.mkdir(staging)
     try:
         yield staging

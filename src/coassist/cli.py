@@ -1562,7 +1562,7 @@ def compare_intents(
     from coassist._io import atomic_write_text
     from coassist.experiments.precision import compare_intents as run
     from coassist.experiments.precision import comparison_table
-    from coassist.experiments.reproduce import _jsonable
+    from coassist.experiments.reproduce import jsonable
 
     pairs = {}
     for item in source:
@@ -1602,7 +1602,7 @@ def compare_intents(
     table = comparison_table(result)
     console.print(table, markup=False, highlight=False)
     atomic_write_text(out / "table.md", table + "\n")
-    atomic_write_text(out / "summary.json", json.dumps(_jsonable(result.summary()), indent=1, allow_nan=True))
+    atomic_write_text(out / "summary.json", json.dumps(jsonable(result.summary()), indent=1, allow_nan=True))
     _wrote(str(out / "table.md"))
 
 

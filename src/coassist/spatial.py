@@ -29,7 +29,8 @@ __all__ = [
 ]
 
 
-def _as_rotation(R: ArrayLike, name: str) -> np.ndarray:
+def checked_rotation(R: ArrayLike, name: str) -> np.ndarray:
+    """``R`` as a finite (3, 3) float array; ValueError naming ``name`` otherwise."""
     arr = np.asarray(R, dtype=float)
     if arr.shape != (3, 3):
         raise ValueError(f"{name} must be a 3x3 rotation matrix, got shape {arr.shape}")
@@ -38,7 +39,8 @@ def _as_rotation(R: ArrayLike, name: str) -> np.ndarray:
     return arr
 
 
-def _as_vector(v: ArrayLike, name: str, n: int) -> np.ndarray:
+def checked_vector(v: ArrayLike, name: str, n: int) -> np.ndarray:
+    """``v`` as a finite (n,) float array; ValueError naming ``name`` otherwise."""
     arr = np.asarray(v, dtype=float)
     if arr.shape != (n,):
         raise ValueError(f"{name} must have shape ({n},), got {arr.shape}")
@@ -63,10 +65,10 @@ def rotation_vector(R: ArrayLike) -> np.ndarray:
     rv : ndarray, shape (3,)
         Rotation vector in rad, with angle ``|rv|`` in [0, π].
     """
-    return _rotation_vector(_as_rotation(R, "R"))
+    return rotation_vector_unchecked(checked_rotation(R, "R"))
 
 
-def _rotation_vector(R: np.ndarray) -> np.ndarray:
+def rotation_vector_unchecked(R: np.ndarray) -> np.ndarray:
     """:func:`rotation_vector` without input checks, for the control tick (R a (3, 3) float array)."""
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
     tr = r00 + r11 + r22
@@ -122,7 +124,7 @@ def rotation_matrix(rv: ArrayLike) -> np.ndarray:
     R : ndarray, shape (3, 3)
         Rotation matrix.
     """
-    x, y, z = _as_vector(rv, "rv", 3).tolist()
+    x, y, z = checked_vector(rv, "rv", 3).tolist()
     t2 = x * x + y * y + z * z
     if t2 < 1e-8:
         a = 1.0 - t2 / 6.0 + t2 * t2 / 120.0
@@ -161,8 +163,8 @@ def orientation_error(R_desired: ArrayLike, R_actual: ArrayLike) -> np.ndarray:
     e : ndarray, shape (3,)
         Rotation vector in rad, ``|e|`` in [0, π].
     """
-    Rd = _as_rotation(R_desired, "R_desired")
-    Ra = _as_rotation(R_actual, "R_actual")
+    Rd = checked_rotation(R_desired, "R_desired")
+    Ra = checked_rotation(R_actual, "R_actual")
     return rotation_vector(Rd @ Ra.T)
 
 
@@ -291,11 +293,11 @@ def damped_pseudo_inverse(
     damping : float
         The ``λ`` used (0 when undamped).
     """
-    U, inv_s, Vt, lam = _damped_svd(_as_jacobian(J), sigma_threshold, max_damping)
+    U, inv_s, Vt, lam = damped_svd(_as_jacobian(J), sigma_threshold, max_damping)
     return (Vt.T * inv_s) @ U.T, lam
 
 
-def _damped_svd(
+def damped_svd(
     J: np.ndarray, sigma_threshold: float, max_damping: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """``J⁺ = Vt.T diag(inv_s) U.T``: the factors of the damped inverse, and λ."""
@@ -354,8 +356,8 @@ def joint_velocity(
         Joint velocities, rad/s for the UR5.
     """
     J = _as_jacobian(J)
-    twist = _as_vector(twist, "twist", J.shape[0])
-    U, inv_s, Vt, _ = _damped_svd(J, sigma_threshold, max_damping)
+    twist = checked_vector(twist, "twist", J.shape[0])
+    U, inv_s, Vt, _ = damped_svd(J, sigma_threshold, max_damping)
     return Vt.T @ (inv_s * (U.T @ twist))
 
 
@@ -370,7 +372,7 @@ def quaternion_from_rotation_vector(rv: ArrayLike) -> np.ndarray:
     ``q = [sin(θ/2) r/θ, cos(θ/2)]`` with ``θ = |r|``; ``sin(θ/2)/θ`` from its Taylor
     series ``1/2 − θ²/48`` for small θ. Inverse: :func:`rotation_vector_from_quaternion`.
     """
-    x, y, z = _as_vector(rv, "rv", 3).tolist()
+    x, y, z = checked_vector(rv, "rv", 3).tolist()
     t2 = x * x + y * y + z * z
     if t2 < 1e-8:
         s, w = 0.5 - t2 / 48.0, 1.0 - t2 / 8.0
@@ -382,7 +384,7 @@ def quaternion_from_rotation_vector(rv: ArrayLike) -> np.ndarray:
 
 def rotation_vector_from_quaternion(q: ArrayLike) -> np.ndarray:
     """Rotation vector of a quaternion ``[x, y, z, w]`` (normalised here), angle in [0, π]."""
-    x, y, z, w = _as_vector(q, "q", 4).tolist()
+    x, y, z, w = checked_vector(q, "q", 4).tolist()
     n = math.sqrt(x * x + y * y + z * z + w * w)
     if n == 0.0:
         raise ValueError("q must not be zero")

@@ -1,41 +1,8 @@
-"""The ablation's share of the oracle's benefit, by hand and against a naive bootstrap."""
+"""The ablation's cells, what each source was told and the person model's claims (the share of the
+oracle's benefit itself: tests/analysis/test_paired.py, gain_share)."""
 
 import numpy as np
 import pytest
-
-from coassist.experiments.ablation import BOOTSTRAP, oracle_share
-
-
-def test_share_by_hand():
-    # MG − X = (1, 1, 2), mean 4/3; MG − oracle = (2, 3, 3), mean 8/3: half the oracle's benefit.
-    mg, x, oracle = [4.0, 5.0, 6.0], [3.0, 4.0, 4.0], [2.0, 2.0, 3.0]
-    share, lo, hi = oracle_share(mg, x, oracle)
-    assert share == pytest.approx(0.5, rel=1e-15)
-    assert lo <= share <= hi
-    # Per-trial ratios lie in [1/3, 2/3]; a ratio of resampled means cannot leave their range.
-    assert 1 / 3 - 1e-12 <= lo and hi <= 2 / 3 + 1e-12
-    assert (share, lo, hi) == oracle_share(mg, x, oracle)  # seeded: the same interval every time
-
-
-def test_interval_is_the_naive_percentile_bootstrap():
-    rng = np.random.default_rng(5)
-    mg = rng.normal(5.0, 0.5, 18)
-    oracle = mg - rng.normal(2.0, 0.4, 18)
-    x = mg - rng.normal(1.5, 0.6, 18)
-    share, lo, hi = oracle_share(mg, x, oracle, seed=3)
-    # The same resamples drawn one by one, in a loop.
-    draw = np.random.default_rng(3).integers(0, 18, (BOOTSTRAP, 18))
-    ratios = [np.mean(mg[i] - x[i]) / np.mean(mg[i] - oracle[i]) for i in draw]
-    assert (lo, hi) == pytest.approx(tuple(np.quantile(ratios, [0.025, 0.975])), rel=1e-12)
-    assert share == pytest.approx(np.mean(mg - x) / np.mean(mg - oracle), rel=1e-14)
-
-
-def test_undefined_share_and_bad_input():
-    assert all(np.isnan(v) for v in oracle_share([1.0, 2.0], [0.5, 1.0], [1.0, 2.0]))  # the oracle gains nothing
-    share, _, _ = oracle_share([4.0, np.nan, 6.0], [3.0, 1.0, 4.0], [2.0, 2.0, 4.0])  # the NaN trial is left out
-    assert share == pytest.approx((1.0 + 2.0) / (2.0 + 2.0))
-    with pytest.raises(ValueError, match="one shape"):
-        oracle_share([1.0, 2.0], [1.0], [1.0, 2.0])
 
 
 @pytest.mark.slow

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from coassist.experiments.ablation import ARBITRATED, oracle_share
+from coassist.analysis.paired import gain_share
+from coassist.experiments.ablation import ARBITRATED
 from coassist.experiments.precision import compare_intents, comparison_table
 
 
@@ -26,7 +27,7 @@ def test_comparison_pairs_every_source_with_mg_and_the_oracle(tmp_path):
         )
         assert len(mg["f_rms_trials"]) == len(cv["f_rms_trials"]) == 1
         assert result.pairs[("point-mass", obj)] == [("user-0", 950000 + 1000 * ("board", "heavy").index(obj))]
-        share = oracle_share(mg["f_rms_trials"], cv["f_rms_trials"], oracle["f_rms_trials"])
+        share = gain_share(mg["f_rms_trials"], cv["f_rms_trials"], oracle["f_rms_trials"])
         assert result.shares("point-mass", obj, ARBITRATED, "cv")["f_rms"][0] == share[0]
         assert np.isfinite(cv["clearance_deficit"])
     table = comparison_table(result)
@@ -72,7 +73,7 @@ def test_the_default_source_needs_less_force_and_overshoots_less_than_mg(tmp_pat
             assert got["overshoot"] <= mg["overshoot"], (obj, label, got["overshoot"], mg["overshoot"])
         # the plain game's share is measured against its own oracle, run on the same trials
         plain, oracle = (result.metrics[("point-mass", obj, "cooperative", k)] for k in ("default-plain", "oracle"))
-        share = oracle_share(mg["f_rms_trials"], plain["f_rms_trials"], oracle["f_rms_trials"])
+        share = gain_share(mg["f_rms_trials"], plain["f_rms_trials"], oracle["f_rms_trials"])
         assert result.shares("point-mass", obj, "cooperative", "default-plain")["f_rms"][0] == share[0]
     table = comparison_table(result)
     assert table.count("| oracle | cooperative |") == 2 and table.count("| default-plain | cooperative |") == 2

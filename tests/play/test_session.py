@@ -75,7 +75,7 @@ def test_a_session_recorded_under_the_former_controller_names_scores_by_kind():
     import numpy as np
 
     from coassist.data import Trial, TrialMeta
-    from coassist.play.session import _score
+    from coassist.play.session import score_trial
 
     n = 400
     t = np.arange(n) * 0.008
@@ -93,4 +93,4 @@ def test_a_session_recorded_under_the_former_controller_names_scores_by_kind():
             extra={"target": [0.5, 0.0], "controller_name": former, "ended": "target"},
         )
         trial = Trial(meta=meta, time=t, pose=pose, velocity=np.zeros((n, 2)), wrench=np.ones((n, 2)), reference=pose)
-        assert _score(trial, "trial_00000.parquet", 0).controller == kind
+        assert score_trial(trial, "trial_00000.parquet", 0).controller == kind

@@ -56,16 +56,16 @@ import numpy as np
 import pandas as pd
 
 from coassist.data.rosbag_csv import (
-    _NSECS,
-    _RECEIVE,
-    _SECS,
-    _SEQ,
+    NSECS_COLUMN,
+    RECEIVE_COLUMN,
+    SECS_COLUMN,
+    SEQ_COLUMN,
     TOPIC_FILES,
     RecordingError,
-    _check_dofs,
-    _natural_key,
     assemble_recording,
+    check_dofs,
     check_plausible,
+    natural_key,
 )
 from coassist.data.trial import Trial
 
@@ -88,7 +88,7 @@ BAG_TYPES: Mapping[str, str] = {
 #: File suffixes read as bags: ROS 1, ROS 2 MCAP, ROS 2 sqlite3.
 BAG_SUFFIXES = (".bag", ".mcap", ".db3")
 _INSTALL_HINT = "reading bags needs rosbags: pip install 'coassist[bags]'"
-_STAMP = "stamp_ns"  # the CSV export's column names (_SEQ … _RECEIVE) are the CSV loader's: one assembly reads both
+_STAMP = "stamp_ns"  # the CSV export's column names (SEQ_COLUMN … RECEIVE_COLUMN) are the CSV loader's: one assembly reads both
 
 
 def is_bag(path: str | os.PathLike[str]) -> bool:
@@ -108,7 +108,7 @@ def bag_paths(folder: str | os.PathLike[str]) -> list[Path]:
     folder = Path(folder)
     if not folder.is_dir() or is_bag(folder):
         return []
-    return sorted((p for p in folder.iterdir() if is_bag(p)), key=_natural_key)
+    return sorted((p for p in folder.iterdir() if is_bag(p)), key=natural_key)
 
 
 def resolve_topics(topics: Mapping[str, str] | None) -> dict[str, str]:
@@ -175,14 +175,14 @@ def _read_topic(
     values = np.asarray(rows, dtype=np.float64)
     check_plausible(field_name, values, columns, f"{where}: topic {topic}", lambda r: f"message {r}")
     df = pd.DataFrame(values, columns=columns)
-    df[_SECS] = np.asarray(secs, dtype=np.int64)
-    df[_NSECS] = np.asarray(nsecs, dtype=np.int64)
-    df[_STAMP] = df[_SECS] * 1_000_000_000 + df[_NSECS]
-    df[_RECEIVE] = _receive_seconds(log_ns)
+    df[SECS_COLUMN] = np.asarray(secs, dtype=np.int64)
+    df[NSECS_COLUMN] = np.asarray(nsecs, dtype=np.int64)
+    df[_STAMP] = df[SECS_COLUMN] * 1_000_000_000 + df[NSECS_COLUMN]
+    df[RECEIVE_COLUMN] = _receive_seconds(log_ns)
     # In the order received: header stamps (and a ROS 1 seq) must strictly increase.
-    checks = [(_STAMP, "header stamp")] + ([(_SEQ, "header.seq")] if ros1 else [])
+    checks = [(_STAMP, "header stamp")] + ([(SEQ_COLUMN, "header.seq")] if ros1 else [])
     if ros1:
-        df[_SEQ] = np.asarray(seqs, dtype=np.int64)
+        df[SEQ_COLUMN] = np.asarray(seqs, dtype=np.int64)
     for col, what in checks:
         step = np.diff(df[col].to_numpy())
         if np.any(step <= 0):
@@ -255,7 +255,7 @@ def load_bag_trial(
         rosbags is not installed.
     """
     path = Path(path)
-    dofs = _check_dofs(dofs)
+    dofs = check_dofs(dofs)
     names = resolve_topics(topics)
     try:
         from rosbags.highlevel import AnyReader, AnyReaderError
@@ -298,7 +298,7 @@ def load_bag_trial(
         raise RecordingError(
             f"{where}: cannot read the bag, it is damaged ({type(exc).__name__}: {_one_line(exc)})"
         ) from None
-    key = _SEQ if ros1 else _STAMP
+    key = SEQ_COLUMN if ros1 else _STAMP
     sources = {name: f"{where}: topic {topic}" for name, topic in names.items()}
     lengths = {names[name]: len(df) for name, df in frames.items()}
     return assemble_recording(

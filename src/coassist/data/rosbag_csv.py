@@ -107,10 +107,11 @@ PLAUSIBLE_BOUNDS: dict[str, tuple[float, str]] = {
     "reference": (PLAUSIBLE_POSITION, "m"),
 }
 
-_SEQ = "header.seq"
-_SECS = "header.stamp.secs"
-_NSECS = "header.stamp.nsecs"
-_RECEIVE = "Time"
+#: The header columns of the thesis' CSV export (the bag reader, data/bags.py, builds its tables with them).
+SEQ_COLUMN = "header.seq"
+SECS_COLUMN = "header.stamp.secs"
+NSECS_COLUMN = "header.stamp.nsecs"
+RECEIVE_COLUMN = "Time"
 
 
 class RecordingError(CoassistError, ValueError):
@@ -153,7 +154,8 @@ def _warn_gaps(where: str, time: np.ndarray, dt: float) -> None:
         )
 
 
-def _check_dofs(dofs: Sequence[str]) -> tuple[str, ...]:
+def check_dofs(dofs: Sequence[str]) -> tuple[str, ...]:
+    """``dofs`` as a tuple, refused unless a prefix of (x, y, z) (ValueError naming them)."""
     dofs = tuple(dofs)
     # Only prefixes of (x, y, z): a Trial's axis j is stored as AXES[j], so ("x", "z")
     # would be written as pose_x, pose_y and mislabel z as y.
@@ -184,12 +186,12 @@ def _read_topic(path: Path, field_name: str, value_cols: list[str]) -> pd.DataFr
         df = pd.read_csv(io.BytesIO(raw))
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise RecordingError(f"{path}: cannot parse CSV: {' '.join(str(exc).split())}") from None
-    for col in [_SEQ, _SECS, _NSECS, *value_cols]:
+    for col in [SEQ_COLUMN, SECS_COLUMN, NSECS_COLUMN, *value_cols]:
         if col not in df.columns:
             raise RecordingError(f"{path}: missing column {col!r}")
     if len(df) == 0:
         raise RecordingError(f"{path}: no rows")
-    for col in [_SEQ, _SECS, _NSECS, *value_cols]:
+    for col in [SEQ_COLUMN, SECS_COLUMN, NSECS_COLUMN, *value_cols]:
         values = pd.to_numeric(df[col], errors="coerce")
         bad = values.isna() | ~np.isfinite(values.to_numpy(dtype=float, na_value=np.nan))
         if bad.any():
@@ -198,14 +200,14 @@ def _read_topic(path: Path, field_name: str, value_cols: list[str]) -> pd.DataFr
                 f"{path}: column {col!r} has {int(bad.sum())} missing or non-numeric values (first at data row {row})"
             )
         df[col] = values
-    for col in (_SEQ, _SECS, _NSECS):
+    for col in (SEQ_COLUMN, SECS_COLUMN, NSECS_COLUMN):
         if np.any(df[col].to_numpy() != np.round(df[col].to_numpy())):
             raise RecordingError(f"{path}: column {col!r} must hold integers")
         df[col] = df[col].astype(np.int64)
-    dup = df[_SEQ].duplicated()
+    dup = df[SEQ_COLUMN].duplicated()
     if dup.any():
-        raise RecordingError(f"{path}: column {_SEQ!r} repeats value {int(df[_SEQ][dup].iloc[0])}")
-    seq = df[_SEQ].to_numpy()
+        raise RecordingError(f"{path}: column {SEQ_COLUMN!r} repeats value {int(df[SEQ_COLUMN][dup].iloc[0])}")
+    seq = df[SEQ_COLUMN].to_numpy()
     check_plausible(
         field_name,
         df[value_cols].to_numpy(np.float64),
@@ -213,7 +215,7 @@ def _read_topic(path: Path, field_name: str, value_cols: list[str]) -> pd.DataFr
         str(path),
         lambda r: f"data row {r} (seq {int(seq[r])})",
     )
-    return df.sort_values(_SEQ, kind="stable").reset_index(drop=True)
+    return df.sort_values(SEQ_COLUMN, kind="stable").reset_index(drop=True)
 
 
 def load_ros_trial(
@@ -255,7 +257,7 @@ def load_ros_trial(
         an implausible value (:func:`check_plausible`) or a file cut off mid-line.
     """
     folder = Path(folder)
-    dofs = _check_dofs(dofs)
+    dofs = check_dofs(dofs)
     if not folder.is_dir():
         raise RecordingError(f"{folder}: recording folder not found")
     if user is None:
@@ -280,7 +282,7 @@ def assemble_recording(
     user: str,
     dofs: tuple[str, ...],
     recording: str,
-    key: str = _SEQ,
+    key: str = SEQ_COLUMN,
 ) -> Trial:
     """Join the four topics of one recording on ``key`` and build its :class:`Trial`.
 
@@ -295,7 +297,7 @@ def assemble_recording(
     With ``key`` other than ``header.seq``, ``seq_gaps``/``seq_first``/``seq_last``
     in ``meta.extra`` are None.
     """
-    what = "header.seq value" if key == _SEQ else "header stamp"
+    what = "header.seq value" if key == SEQ_COLUMN else "header stamp"
     seqs = np.asarray(frames["pose"][key].to_numpy())
     joined = ["pose"]
     for field_name, df in frames.items():
@@ -319,7 +321,7 @@ def assemble_recording(
 
     # Integer nanoseconds: a float of 1.67e9 s keeps only ~0.2 µs, so subtract first.
     stamps = {
-        name: df[_SECS].to_numpy(np.int64) * 1_000_000_000 + df[_NSECS].to_numpy(np.int64)
+        name: df[SECS_COLUMN].to_numpy(np.int64) * 1_000_000_000 + df[NSECS_COLUMN].to_numpy(np.int64)
         for name, df in aligned.items()
     }
     ns = stamps["pose"]
@@ -328,10 +330,10 @@ def assemble_recording(
     if np.any(steps <= 0.0):
         k = int(np.argmax(steps <= 0.0))
         raise RecordingError(
-            f"{sources['pose']}: header stamps do not increase at {'seq' if key == _SEQ else key} {int(seqs[k + 1])}"
+            f"{sources['pose']}: header stamps do not increase at {'seq' if key == SEQ_COLUMN else key} {int(seqs[k + 1])}"
         )
     mismatch = max(int(np.max(np.abs(s - ns))) for s in stamps.values()) * 1e-9
-    receive = aligned["pose"][_RECEIVE].to_numpy(float) if _RECEIVE in aligned["pose"] else None
+    receive = aligned["pose"][RECEIVE_COLUMN].to_numpy(float) if RECEIVE_COLUMN in aligned["pose"] else None
 
     arrays: dict[str, np.ndarray] = {}
     n_denormals = 0
@@ -341,7 +343,7 @@ def assemble_recording(
         n_denormals += int(tiny.sum())
         arrays[field_name] = np.where(tiny, 0.0, values)
 
-    by_seq = key == _SEQ
+    by_seq = key == SEQ_COLUMN
     extra = {
         "recording": recording,
         "dofs": list(dofs),
@@ -378,7 +380,8 @@ def _name(source: str, where: str) -> str:
     return source
 
 
-def _natural_key(path: Path) -> tuple:
+def natural_key(path: Path) -> tuple:
+    """Sort key of a file name with its digit runs as numbers (``trial_2`` before ``trial_10``)."""
     return tuple(int(p) if p.isdigit() else p for p in re.split(r"(\d+)", path.name))
 
 
@@ -396,7 +399,7 @@ def recording_folders(folder: str | os.PathLike[str]) -> list[Path]:
     folder = Path(folder)
     if not folder.is_dir():
         raise RecordingError(f"{folder}: user folder not found")
-    trial_dirs = sorted((p for p in folder.iterdir() if p.is_dir() and p.name.startswith("trial_")), key=_natural_key)
+    trial_dirs = sorted((p for p in folder.iterdir() if p.is_dir() and p.name.startswith("trial_")), key=natural_key)
     if not trial_dirs:
         raise RecordingError(f"{folder}: no trial_* subfolders")
     return trial_dirs

@@ -28,7 +28,7 @@ import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
-from coassist._io import _temp_name, fsync_dir, remove_stale
+from coassist._io import fsync_dir, remove_stale, temp_name
 from coassist.data.store import write_trial
 from coassist.data.trial import Trial
 
@@ -58,7 +58,7 @@ def write_run_pair(
     folder.mkdir(parents=True, exist_ok=True)
     for name in (path.name, mcap_path.name):
         remove_stale(folder, name)
-    staging = folder / _temp_name(path.name, "new")
+    staging = folder / temp_name(path.name, "new")
     os.mkdir(staging)
     aside: Path | None = None
     replaced = False
@@ -73,7 +73,7 @@ def write_run_pair(
         fsync_dir(staging)
         # 2. the old MCAP aside: the old trial is alone from here
         if mcap_path.exists() or mcap_path.is_symlink():
-            aside = folder / _temp_name(mcap_path.name, "tmp")
+            aside = folder / temp_name(mcap_path.name, "tmp")
             os.rename(mcap_path, aside)
         # 3., 4. the new trial, then its MCAP
         os.replace(staged_trial, path)

@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from coassist._io import _temp_name, atomic_write, remove_stale
+from coassist._io import atomic_write, remove_stale, temp_name
 from coassist.data.trial import Trial
 from coassist.interfaces import Fault, fault_names
 from coassist.spatial import quaternion_from_rotation_vector
@@ -275,7 +275,7 @@ def write_trial_mcap(
     # writer leaves is removed by the next write there (coassist._io.remove_stale)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale(path.parent, path.name)
-    tmp = path.parent / _temp_name(path.name, "new")
+    tmp = path.parent / temp_name(path.name, "new")
     os.mkdir(tmp)
     try:
         bag = tmp / "bag"

@@ -42,7 +42,7 @@ and the **share of the oracle's benefit** for force and for overshoot::
     share = mean_i(MG_i − X_i) / mean_i(MG_i − oracle_i)
 
 over the paired trials i, with a 95 % percentile bootstrap interval over trials
-(:func:`oracle_share`); the oracle of the same controller (the arbitrated one's for the damped
+(:func:`~coassist.analysis.paired.gain_share`); the oracle of the same controller (the arbitrated one's for the damped
 controller). 1 is everything the oracle gains over MG; 0 nothing; below 0 worse than MG.
 Overshoot and clearance deficit are also given per side of the detour (the inside of the arc,
 where the tool turns hardest, and the outside), each as a paired difference from MG.
@@ -58,13 +58,13 @@ from typing import Any
 
 import numpy as np
 
+from coassist.analysis.paired import gain_share, paired_difference
 from coassist.experiments.application import (
     OBJECTS,
     OBSTACLE,
-    _pair_key,
     application_metrics,
     cell_options,
-    paired_difference,
+    pair_key,
 )
 from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_seed, in_loop_errors, trial_seed_base
 from coassist.experiments.report import Claim, Section
@@ -150,35 +150,6 @@ def _oracle_of(controller: str) -> str:
     return ARBITRATED if controller == DAMPED else controller
 
 
-def oracle_share(mg, x, oracle, *, seed: int = 0, confidence: float = 0.95) -> tuple[float, float, float]:
-    """(share, low, high): mean(MG − X) / mean(MG − oracle) over paired trials, with a percentile
-    bootstrap interval (trials resampled with replacement, ``BOOTSTRAP`` times, seeded).
-
-    ``mg``, ``x``, ``oracle``: per-trial values of one metric on the same trials, same order.
-    Trials where any of the three is non-finite are left out. NaN when the oracle gains
-    nothing on average (the share is undefined) or no trial is left.
-    """
-    mg, x, oracle = (np.asarray(v, dtype=float) for v in (mg, x, oracle))
-    if not mg.shape == x.shape == oracle.shape or mg.ndim != 1:
-        raise ValueError(f"paired values need one shape (n,), got {mg.shape}, {x.shape}, {oracle.shape}")
-    ok = np.isfinite(mg) & np.isfinite(x) & np.isfinite(oracle)
-    gain_x, gain_o = (mg - x)[ok], (mg - oracle)[ok]
-    nan = float("nan")
-    if gain_x.size == 0 or gain_o.mean() == 0.0:
-        return nan, nan, nan
-    share = float(gain_x.mean() / gain_o.mean())
-    rng = np.random.default_rng(seed)
-    idx = rng.integers(0, gain_x.size, (BOOTSTRAP, gain_x.size))
-    denom = gain_o[idx].mean(axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        boot = gain_x[idx].mean(axis=1) / denom
-    boot = boot[np.isfinite(boot)]
-    if boot.size < BOOTSTRAP // 2:  # the oracle's gain is too often zero in a resample: no interval
-        return share, nan, nan
-    lo, hi = np.quantile(boot, [(1 - confidence) / 2, (1 + confidence) / 2])
-    return share, float(lo), float(hi)
-
-
 @dataclass(frozen=True)
 class AblationResult:
     """metrics[(world, object, controller, source)] and mg[(world, object)]: :func:`application_metrics`;
@@ -197,7 +168,8 @@ class AblationResult:
     errors: dict[tuple[str, str, str, str], dict[int, dict[str, float]]]
 
     def shares(self, world: str, obj: str, controller: str, source: str) -> dict[str, tuple[float, float, float]]:
-        """The share of the oracle's benefit for force and for overshoot (:func:`oracle_share`); each
+        """The share of the oracle's benefit for force and for overshoot (:func:`~coassist.analysis.paired.gain_share`
+        of MG, the source and the oracle, :data:`BOOTSTRAP` resamples); each
         cell's bootstrap runs once (the summary, the section and the first screen all ask)."""
         key = (world, obj, controller, source)
         cache = self.__dict__.setdefault("_shares", {})  # frozen: the cache is not a field
@@ -209,7 +181,10 @@ class AblationResult:
         mg = self.mg[(world, obj)]
         x = self.metrics[(world, obj, controller, source)]
         o = self.metrics[(world, obj, _oracle_of(controller), "oracle")]
-        return {m: oracle_share(mg[f"{m}_trials"], x[f"{m}_trials"], o[f"{m}_trials"]) for m in ("f_rms", "overshoot")}
+        return {
+            m: gain_share(mg[f"{m}_trials"], x[f"{m}_trials"], o[f"{m}_trials"], n_boot=BOOTSTRAP)
+            for m in ("f_rms", "overshoot")
+        }
 
     def by_side(
         self,
@@ -318,18 +293,18 @@ def run_ablation(
 
         def collect(name: str, controller: str, intent: str, j: int = j, obj: str = obj):
             _, ds = ws.collect(name, **cell_options(cfg, j, obj, controller, intent))
-            return sorted(ds.trials, key=_pair_key)
+            return sorted(ds.trials, key=pair_key)
 
         base = known.get((obj, "manual", "nominal"))
-        base = collect(f"ablation-{obj}-manual", "manual", "nominal") if base is None else sorted(base, key=_pair_key)
+        base = collect(f"ablation-{obj}-manual", "manual", "nominal") if base is None else sorted(base, key=pair_key)
         mg[("point-mass", obj)] = application_metrics(base)
-        pairs[("point-mass", obj)] = [_pair_key(t) for t in base]
+        pairs[("point-mass", obj)] = [pair_key(t) for t in base]
         for controller, source in cells:
             trials = known.get((obj, controller, source))
             if trials is None:
                 trials = collect(f"ablation-{obj}-{controller}-{source}", controller, intents[source])
-            trials = sorted(trials, key=_pair_key)
-            if [_pair_key(t) for t in trials] != pairs[("point-mass", obj)]:
+            trials = sorted(trials, key=pair_key)
+            if [pair_key(t) for t in trials] != pairs[("point-mass", obj)]:
                 raise RuntimeError(f"ablation cell {obj}/{controller}/{source} did not meet MG's trials")
             metrics[("point-mass", obj, controller, source)] = application_metrics(trials)
             errors[("point-mass", obj, controller, source)] = prediction_errors_against_intent(trials)
@@ -362,13 +337,13 @@ def _run_held_out(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dic
     sources = held_out_models(ws, intents)
     for j, obj in enumerate(OBJECTS):
         _, ds = ws.collect(f"held-out-{obj}-manual", **_held_out_options(cfg, j, obj, "manual", "nominal"))
-        base = sorted(ds.trials, key=_pair_key)
+        base = sorted(ds.trials, key=pair_key)
         mg[(HELD_OUT, obj)] = application_metrics(base)
-        pairs[(HELD_OUT, obj)] = [_pair_key(t) for t in base]
+        pairs[(HELD_OUT, obj)] = [pair_key(t) for t in base]
         for source, intent in sources.items():
             _, ds = ws.collect(f"held-out-{obj}-{source}", **_held_out_options(cfg, j, obj, ARBITRATED, intent))
-            trials = sorted(ds.trials, key=_pair_key)
-            if [_pair_key(t) for t in trials] != pairs[(HELD_OUT, obj)]:
+            trials = sorted(ds.trials, key=pair_key)
+            if [pair_key(t) for t in trials] != pairs[(HELD_OUT, obj)]:
                 raise RuntimeError(f"held-out cell {obj}/{source} did not meet MG's trials")
             metrics[(HELD_OUT, obj, ARBITRATED, source)] = application_metrics(trials)
             errors[(HELD_OUT, obj, ARBITRATED, source)] = prediction_errors_against_intent(trials)
@@ -553,18 +528,19 @@ def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict,
                 done.append((key, [next(runs) for _ in configs]))
         for (obj, controller, source), payloads in done:
             trials = [trial_from_payload(p) for p in payloads]
-            trials = sorted(trials, key=_pair_key)
+            trials = sorted(trials, key=pair_key)
             if controller == "manual":
                 mg[("mujoco", obj)] = application_metrics(trials)
-                pairs[("mujoco", obj)] = [_pair_key(t) for t in trials]
+                pairs[("mujoco", obj)] = [pair_key(t) for t in trials]
                 continue
-            if [_pair_key(t) for t in trials] != pairs[("mujoco", obj)]:
+            if [pair_key(t) for t in trials] != pairs[("mujoco", obj)]:
                 raise RuntimeError(f"ablation cell mujoco/{obj}/{controller}/{source} did not meet MG's trials")
             metrics[("mujoco", obj, controller, source)] = application_metrics(trials)
             errors[("mujoco", obj, controller, source)] = prediction_errors_against_intent(trials)
 
 
-def _share_text(s: tuple[float, float, float]) -> str:
+def share_text(s: tuple[float, float, float]) -> str:
+    """A (share, low, high) as the report writes it: percent with its interval, or n/a."""
     share, lo, hi = s
     if not np.isfinite(share):
         return "n/a"
@@ -572,10 +548,10 @@ def _share_text(s: tuple[float, float, float]) -> str:
     return f"{100 * share:.0f} %{bracket}"
 
 
-def _seeds_text(result: AblationResult, world: str, obj: str, controller: str, source: str, metric: str) -> str:
+def seeds_text(result: AblationResult, world: str, obj: str, controller: str, source: str, metric: str) -> str:
     """The share over a source's trainings: the first one's with its interval, and each other seed's."""
     names = result.seeds_of(world, obj, controller, source)
-    first = _share_text(result.shares(world, obj, controller, names[0])[metric])
+    first = share_text(result.shares(world, obj, controller, names[0])[metric])
     if len(names) == 1:
         return first
     others = [result.shares(world, obj, controller, n)[metric][0] for n in names]
@@ -646,9 +622,9 @@ def headline_rows(result: AblationResult, world: str = "point-mass") -> tuple[st
                     obj,
                     label + default,
                     f"{r['f_rms']:.2f}",
-                    _seeds_text(result, world, obj, controller, source, "f_rms"),
+                    seeds_text(result, world, obj, controller, source, "f_rms"),
                     sided(r["overshoot_trials"]),
-                    _seeds_text(result, world, obj, controller, source, "overshoot"),
+                    seeds_text(result, world, obj, controller, source, "overshoot"),
                     sided(r["clearance_deficit_trials"]),
                     f"{r['jerk_rms']:.2f} ({r['jerk_rms'] / m['jerk_rms']:.2f}× MG)",
                     f"{1e3 * r['sigma']:.2f}",
@@ -743,8 +719,8 @@ def ablation_section(result: AblationResult) -> Section:
                         _side_text(cd_side[-1]),
                         f"{r['jerk_rms']:.2f}",
                         f"{r['peak_effort_ratio']:.2f}",
-                        _share_text(sh["f_rms"]),
-                        _share_text(sh["overshoot"]),
+                        share_text(sh["f_rms"]),
+                        share_text(sh["overshoot"]),
                     ]
                 )
         if rows:
@@ -800,7 +776,7 @@ def ablation_section(result: AblationResult) -> Section:
                     f"{obj}: the arbitrated controller with {source} in the loop gets ≥ {100 * ORACLE_SHARE_BAR:.0f} % of the "
                     "oracle's force saving and of its overshoot reduction over MG (issue 18's bar; point-mass world)",
                     bool(np.isfinite(f) and np.isfinite(o) and f >= ORACLE_SHARE_BAR and o >= ORACLE_SHARE_BAR),
-                    f"force {_share_text(sh['f_rms'])}, overshoot {_share_text(sh['overshoot'])} of the oracle's benefit",
+                    f"force {share_text(sh['f_rms'])}, overshoot {share_text(sh['overshoot'])} of the oracle's benefit",
                     reason="a network on the hand force learns where the tool goes, not where the person wants it now: at a "
                     "turn it runs past it (docs/precision.md)",
                 )
@@ -831,7 +807,7 @@ def person_claims(result: AblationResult, source: str = "person") -> list[Claim]
             where = "held-out population" if world == HELD_OUT else f"{world} world"
             ok = all(np.isfinite(v) for v in (f, o, o_lo)) and f >= force_bar and o >= over_bar and o_lo >= lower_bar
             jerk = r["jerk_rms"] / m["jerk_rms"]
-            text = f"force {_share_text(sh['f_rms'])}, overshoot {_share_text(sh['overshoot'])}; jerk {jerk:.2f}× MG"
+            text = f"force {share_text(sh['f_rms'])}, overshoot {share_text(sh['overshoot'])}; jerk {jerk:.2f}× MG"
             goal = (
                 f"{obj}, {where}: the person model (learnt from each operator's probe trials, told no scene, family or "
                 f"label) gets ≥ {100 * force_bar:.0f} % of the oracle's force saving and ≥ {100 * over_bar:.0f} % of its "
@@ -880,7 +856,7 @@ def precision_claims(result: AblationResult, source: str = APPLICATION_SOURCE) -
                     and o >= OVERSHOOT_SHARE_BAR
                     and o_lo >= SHARE_LOWER_BAR
                 ),
-                f"force {_share_text(sh['f_rms'])}, overshoot {_share_text(sh['overshoot'])} of the oracle's benefit",
+                f"force {share_text(sh['f_rms'])}, overshoot {share_text(sh['overshoot'])} of the oracle's benefit",
                 reason="the side of the detour is known only some 0.1 s after it starts, and the person's shape varies from "
                 "trial to trial: the robot follows the present estimate meanwhile",
             )

@@ -10,7 +10,7 @@ in-loop ablation on validation seeds; the thesis used each object's transferred 
 on the tool's future). Every controller meets
 the same trials (same operators and seeds), so each assistive trial is compared with MG's on
 the same seed
-(:func:`paired_difference`). :func:`run_application` returns an
+(:func:`~coassist.analysis.paired.paired_difference`). :func:`run_application` returns an
 :class:`ApplicationResult`; :func:`application_section` turns it into the report's section.
 """
 
@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from coassist.analysis.paired import paired_difference
 from coassist.experiments.pipeline import (
     ITERATION_TASKS,
     Workspace,
@@ -187,7 +188,7 @@ def run_application(
     for j, obj in enumerate(OBJECTS):
         for controller in CONTROLLERS:
             _, ds = ws.collect(f"app-{obj}-{controller}", **cell(j, obj, controller, models))
-            ordered = sorted(ds.trials, key=_pair_key)  # the same order for every controller: trial i meets trial i
+            ordered = sorted(ds.trials, key=pair_key)  # the same order for every controller: trial i meets trial i
             metrics[(obj, controller)] = application_metrics(ordered)
             trials[(obj, controller)] = ordered
     return ApplicationResult(
@@ -201,31 +202,9 @@ def run_application(
     )
 
 
-def _pair_key(trial) -> tuple[str, int]:
+def pair_key(trial) -> tuple[str, int]:
     """(operator, seed): what makes two controllers' trials the same trial."""
     return (str(trial.meta.user), -1 if trial.meta.seed is None else int(trial.meta.seed))
-
-
-def paired_difference(a, b, confidence: float = 0.95) -> tuple[float, float, float, int]:
-    """Mean of a_i − b_i over the pairs where both are finite, and its Student-t interval.
-
-    ``a`` and ``b`` are per-trial values of two controllers on the same trials (same
-    order). Returns (mean, low, high, n); the interval is NaN with fewer than 2 pairs.
-    """
-    from scipy import stats
-
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    if a.shape != b.shape:
-        raise ValueError(f"paired values need the same shape, got {a.shape} and {b.shape}")
-    d = (a - b)[np.isfinite(a) & np.isfinite(b)]
-    n = int(d.size)
-    if n == 0:
-        return float("nan"), float("nan"), float("nan"), 0
-    mean = float(d.mean())
-    if n < 2:
-        return mean, float("nan"), float("nan"), n
-    half = float(stats.t.ppf(0.5 + confidence / 2, n - 1) * d.std(ddof=1) / np.sqrt(n))
-    return mean, mean - half, mean + half, n
 
 
 def force_saving(assistive, baseline) -> tuple[float, float]:

@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from coassist.experiments.ablation import ARBITRATED, DAMPED, SIDES, AblationResult, _seeds_text, _share_text
-from coassist.experiments.application import OBJECTS, OBSTACLE, _pair_key, application_metrics
+from coassist.experiments.ablation import ARBITRATED, DAMPED, SIDES, AblationResult, seeds_text, share_text
+from coassist.experiments.application import OBJECTS, OBSTACLE, application_metrics, pair_key
 from coassist.experiments.pipeline import (
     REPRODUCE_PRESETS,
     RUN_SEED_STRIDE,
@@ -137,14 +137,14 @@ def compare_intents(
                     intent=intent,
                     obstacle=OBSTACLE,
                 )
-                cells.setdefault((obj, label, controller), []).extend(sorted(ds.trials, key=_pair_key))
+                cells.setdefault((obj, label, controller), []).extend(sorted(ds.trials, key=pair_key))
     metrics, mg, pairs = {}, {}, {}
     for (obj, label, controller), trials_ in cells.items():
         if label == "MG":
             mg[("point-mass", obj)] = application_metrics(trials_)
-            pairs[("point-mass", obj)] = [_pair_key(t) for t in trials_]
+            pairs[("point-mass", obj)] = [pair_key(t) for t in trials_]
             continue
-        if [_pair_key(t) for t in trials_] != pairs[("point-mass", obj)]:
+        if [pair_key(t) for t in trials_] != pairs[("point-mass", obj)]:
             raise RuntimeError(f"{obj}/{label} did not meet MG's trials")
         metrics[("point-mass", obj, controller, label)] = application_metrics(trials_)
     errors: dict[tuple[str, str, str, str], dict[int, dict[str, float]]] = {key: {} for key in metrics}
@@ -188,8 +188,8 @@ def comparison_table(result: AblationResult) -> str:
             )
             lines.append(
                 f"| {label} | {controller} | {r['f_rms']:.2f} | "
-                f"{_seeds_text(result, world, obj, controller, label, 'f_rms')} | {sided(r['overshoot_trials'])} | "
-                f"{_share_text(result.shares(world, obj, controller, label)['overshoot'])} | {clear} | "
+                f"{seeds_text(result, world, obj, controller, label, 'f_rms')} | {sided(r['overshoot_trials'])} | "
+                f"{share_text(result.shares(world, obj, controller, label)['overshoot'])} | {clear} | "
                 f"{r['jerk_rms']:.2f} ({r['jerk_rms'] / m['jerk_rms']:.2f}×) | {1e3 * r['sigma']:.2f} |"
             )
         lines.append("")

@@ -142,7 +142,7 @@ class _Context:
         return self.ws.out
 
 
-def _simulation_pool(config: ReproduceConfig):
+def simulation_pool(config: ReproduceConfig):
     """One pool of simulation processes for the whole run (coassist.sim.world.worker_pool):
     started once, not once per collection; none where the run simulates in this process."""
     from coassist.sim.world import worker_pool
@@ -164,7 +164,7 @@ def run_reproduce(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     say = say or (lambda message: None)
-    with contextlib.nullcontext(pool) if pool is not None else _simulation_pool(config) as pool:
+    with contextlib.nullcontext(pool) if pool is not None else simulation_pool(config) as pool:
         ctx = _Context(Workspace(config, out, progress, pool), _Stage(say))
         t0, c0 = time.perf_counter(), run_cpu_seconds()
         ctx.summary["config"] = asdict(config)
@@ -228,7 +228,7 @@ def run_reproduce(
         write_report(
             out / "report.html", "coassist — the thesis' experiments, reproduced", intro, ctx.sections, headline
         )
-        atomic_write_text(out / "summary.json", json.dumps(_jsonable(ctx.summary), indent=1, allow_nan=False))
+        atomic_write_text(out / "summary.json", json.dumps(jsonable(ctx.summary), indent=1, allow_nan=False))
         return ctx.summary
 
 
@@ -302,11 +302,12 @@ def headline_section(application, transfer, real, sim_dt: float, ablation) -> Se
     return s
 
 
-def _jsonable(obj):
+def jsonable(obj):
+    """``obj`` as JSON holds it: dict keys as strings, tuples as lists, numpy numbers and paths as Python's, NaN as null."""
     if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
+        return [jsonable(v) for v in obj]
     if isinstance(obj, (np.floating, float)):
         return None if not np.isfinite(obj) else float(obj)
     if isinstance(obj, np.integer):

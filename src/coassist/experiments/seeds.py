@@ -168,7 +168,7 @@ def run_seeds(
 ) -> dict[str, Any]:
     """Run the pipeline on each seed (``out/seed-<k>``, one pool for all) and write ``out/report.html`` and
     ``out/summary.json`` (module docstring); returns the summary."""
-    from coassist.experiments.reproduce import _simulation_pool, run_reproduce
+    from coassist.experiments.reproduce import run_reproduce, simulation_pool
 
     seeds = tuple(int(k) for k in seeds)
     if not seeds or len(set(seeds)) != len(seeds) or any(k < 0 for k in seeds):
@@ -178,7 +178,7 @@ def run_seeds(
     say = say or (lambda line: None)
     t0 = time.perf_counter()
     summaries: dict[int, dict[str, Any]] = {}
-    with _simulation_pool(config) as pool:
+    with simulation_pool(config) as pool:
         for k in seeds:
             say(f"[bold]seed {k}[/] ({len(summaries) + 1} of {len(seeds)})")
             summaries[k] = run_reproduce(

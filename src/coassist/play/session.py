@@ -270,7 +270,7 @@ class PlaySession:
         if (folder / MANIFEST_NAME).is_file():
             ds = read_dataset(folder)
             for file, trial in zip(ds.files, ds.trials):
-                self.results.append(_score(trial, file, len(self.results)))
+                self.results.append(score_trial(trial, file, len(self.results)))
         elif folder.is_dir() and any(folder.iterdir()):
             raise ValueError(
                 f"{folder} is not empty and holds no {MANIFEST_NAME}: not a play session; pick another --out or --user"
@@ -511,12 +511,12 @@ class PlaySession:
 
             alpha = self.preset.game.alpha if trial.meta.controller == "cooperative" else None
             write_trial_mcap(trial, (folder / manifest_files(folder)[-1]).with_suffix(".mcap"), alpha=alpha)
-        result = _score(trial, manifest_files(folder)[-1], len(self.results))
+        result = score_trial(trial, manifest_files(folder)[-1], len(self.results))
         self.results.append(result)
         return result
 
 
-def _score(trial: Trial, file: str, index: int) -> TrialResult:
+def score_trial(trial: Trial, file: str, index: int) -> TrialResult:
     """f_RMS (eq. 5.9) and σ (eq. 5.10–5.11) of a trial, with how it ended."""
     extra = trial.meta.extra
     target = np.asarray(extra["target"], dtype=float)

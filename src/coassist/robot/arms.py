@@ -32,7 +32,7 @@ from numpy.typing import ArrayLike
 from coassist._checks import check_positive_scalar
 from coassist.robot.arm_descriptions import ARMS, ArmDescription, get_arm  # the registry's data, re-exported
 from coassist.robot.kinematics import ArmKinematics, robot_data_path
-from coassist.spatial import _damped_svd
+from coassist.spatial import damped_svd
 
 __all__ = ["ARMS", "ArmDescription", "NullSpacePosture", "arm_kinematics", "check_model_matches", "get_arm"]
 
@@ -134,7 +134,7 @@ class NullSpacePosture:
         # the null-space projector from the exact row space of J (its right singular vectors),
         # not I − J⁺J with the damped J⁺: near a singularity that one is no projector and leaks
         # the posture pull into the tool's motion (J (I − J⁺J) ≠ 0 once λ > 0).
-        U, inv_s, row, _ = _damped_svd(J, self.sigma_threshold, self.max_damping)
+        U, inv_s, row, _ = damped_svd(J, self.sigma_threshold, self.max_damping)
         qd = row.T @ (inv_s * (U.T @ twist))
         pull = self.gain * (self.posture - q)
         qd += pull - row.T @ (row @ pull)

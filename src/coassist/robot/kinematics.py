@@ -53,8 +53,8 @@ from coassist._checks import check_int, check_positive_scalar
 from coassist.errors import CoassistError
 from coassist.robot.arm_descriptions import ARMS
 from coassist.spatial import (
-    _as_rotation,
-    _as_vector,
+    checked_rotation,
+    checked_vector,
     damped_pseudo_inverse,
     joint_velocity,
     manipulability,
@@ -434,8 +434,8 @@ def solve_ik(
         If the tolerances are not met within ``max_iterations`` (unreachable pose,
         singular target or a poor ``q0``); the message gives the residuals.
     """
-    p_d = _as_vector(position, "position", 3)
-    R_d = None if rotation is None else _as_rotation(rotation, "rotation")
+    p_d = checked_vector(position, "position", 3)
+    R_d = None if rotation is None else checked_rotation(rotation, "rotation")
     q = kin._as_q(q0).copy()
     tol_position = check_positive_scalar(tol_position, "tol_position")
     tol_rotation = check_positive_scalar(tol_rotation, "tol_rotation")

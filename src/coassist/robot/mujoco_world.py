@@ -54,7 +54,7 @@ from coassist.robot.arms import NullSpacePosture, arm_kinematics, get_arm
 from coassist.robot.ur5_mjcf import Q_SEED
 from coassist.robot.worlds import WorldRequest
 from coassist.runtime.world import Command, HandOperator, RobotState
-from coassist.spatial import _rotation_vector, rotation_vector  # rotation_vector: re-exported
+from coassist.spatial import rotation_vector, rotation_vector_unchecked  # rotation_vector: re-exported
 
 __all__ = [
     "DEFAULT_START",
@@ -560,7 +560,7 @@ class MujocoArmWorld:
         return w
 
     def _site_pose(self, site: int) -> np.ndarray:
-        return np.concatenate((self._site_xpos[site], _rotation_vector(self._site_xmat[site].reshape(3, 3))))
+        return np.concatenate((self._site_xpos[site], rotation_vector_unchecked(self._site_xmat[site].reshape(3, 3))))
 
     def _site_twist(self, site: int) -> np.ndarray:
         mujoco.mj_objectVelocity(self.model, self.data, mujoco.mjtObj.mjOBJ_SITE, site, self._vel6, 0)

@@ -64,16 +64,16 @@ class WatchdogConfig:
     domain_id: int | None = None
 
     def __post_init__(self) -> None:
-        from coassist.robot.ros2_world import _NAME, _TOPIC
+        from coassist.robot.ros2_world import ROS_NAME, ROS_TOPIC
 
         def bad(name: str, what: str) -> ValueError:
             return ValueError(f"WatchdogConfig.{name} must be {what}, got {getattr(self, name)!r}")
 
         for name in ("input_topic", "output_topic"):
             v = getattr(self, name)
-            if not isinstance(v, str) or not _TOPIC.match(v):
+            if not isinstance(v, str) or not ROS_TOPIC.match(v):
                 raise bad(name, "a ROS topic name such as /forward_velocity_controller/commands")
-        if not isinstance(self.node_name, str) or not _NAME.match(self.node_name):
+        if not isinstance(self.node_name, str) or not ROS_NAME.match(self.node_name):
             raise bad("node_name", "a ROS name (letters, digits, _; a letter first)")
         if resolve_topic(self.input_topic, self.node_name) == resolve_topic(self.output_topic, self.node_name):
             raise bad("output_topic", f"another topic than the input ({self.input_topic})")

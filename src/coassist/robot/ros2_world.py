@@ -141,8 +141,8 @@ MAX_JOINT_SPEED = math.pi
 #: [rad] what two joint states of one arm may differ by beyond MAX_JOINT_SPEED · Δt: a driver's
 #: stamp a few ms off its sample at full speed (π rad/s × 3 ms); encoders resolve 1e-5 rad.
 JOINT_JUMP_TOLERANCE = 0.01
-_TOPIC = re.compile(r"^~?/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$|^~$")
-_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+ROS_TOPIC = re.compile(r"^~?/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$|^~$")
+ROS_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
 
 @dataclass(frozen=True)
@@ -208,17 +208,17 @@ class Ros2Config:
         def bad(name: str, what: str) -> ValueError:
             return ValueError(f"Ros2Config.{name} must be {what}, got {getattr(self, name)!r}")
 
-        if not isinstance(self.node_name, str) or not _NAME.match(self.node_name):
+        if not isinstance(self.node_name, str) or not ROS_NAME.match(self.node_name):
             raise bad("node_name", "a ROS name (letters, digits, _; a letter first)")
-        if not isinstance(self.namespace, str) or (self.namespace and not _TOPIC.match(self.namespace)):
+        if not isinstance(self.namespace, str) or (self.namespace and not ROS_TOPIC.match(self.namespace)):
             raise bad("namespace", "'' or a ROS namespace such as /cell_1")
         for name in ("wrench_topic", "joint_state_topic", "command_topic"):
             v = getattr(self, name)
-            if not isinstance(v, str) or not _TOPIC.match(v):
+            if not isinstance(v, str) or not ROS_TOPIC.match(v):
                 raise bad(name, "a ROS topic name such as /joint_states")
         for name in ("tool_pose_topic", "prediction_topic", "alpha_topic", "hand_force_topic", "diagnostics_topic"):
             v = getattr(self, name)
-            if not isinstance(v, str) or (v and not _TOPIC.match(v)):
+            if not isinstance(v, str) or (v and not ROS_TOPIC.match(v)):
                 raise bad(name, "'' (off) or a ROS topic name such as ~/tool_pose")
         for name in ("base_frame", "wrench_frame"):
             v = getattr(self, name)

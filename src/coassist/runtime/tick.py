@@ -473,7 +473,7 @@ class ControlTick:
                 R_des = _spatial.rotation_matrix(dr) @ self._R_start
             else:
                 R_des = self._R_start
-            tw[3:6] = self._rot_gain * _spatial._rotation_vector(R_des @ R_meas.T)
+            tw[3:6] = self._rot_gain * _spatial.rotation_vector_unchecked(R_des @ R_meas.T)
             for j in self._ctrl_rot:
                 tw[dofs[j]] += za[d + j]
             tw, sf = self.safety.limit_twist(tw, pose)
@@ -496,7 +496,7 @@ class ControlTick:
             self._za[:d] = x_meas - self._x0
             self._za[d:] = twist_cmd[self._dofs]
             if self._rot and R_meas is not None:  # rotations: the measured orientation's Δ from the start
-                dr = _spatial._rotation_vector(R_meas @ self._R_start.T)
+                dr = _spatial.rotation_vector_unchecked(R_meas @ self._R_start.T)
                 for j in self._ctrl_rot:
                     self._za[j] = dr[dofs[j] - 3]
         return Command(qd=qd, twist=twist_cmd, stop=stop), sf

@@ -77,7 +77,7 @@ import numpy as np
 
 from coassist._checks import check_int, check_real
 from coassist.scenario.detours import DetourFamily, detour_path, progress_warp, smoothstep
-from coassist.scenario.tasks import Task, _quintic
+from coassist.scenario.tasks import Task, quintic
 
 
 def _num(value, name: str, lo: float = 0.0, hi: float = math.inf, *, lo_open: bool = False) -> float:
@@ -332,7 +332,7 @@ def intent_trajectory(task: Task, profile: OperatorProfile, rng: np.random.Gener
     T = task.planner.duration / pace
     t = np.arange(int(n)) * float(dt)
     # the nominal plan: progress along the (shared) path before the onset
-    sigma, dsigma, ddsigma = _quintic((t - t0) / T)
+    sigma, dsigma, ddsigma = quintic((t - t0) / T)
     inside = ((t - t0) > 0.0) & ((t - t0) < T)
     s = L * sigma
     sdot = np.where(inside, dsigma * L / T, 0.0)
@@ -344,9 +344,9 @@ def intent_trajectory(task: Task, profile: OperatorProfile, rng: np.random.Gener
         target = s_on / L
         for _ in range(60):
             mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if _quintic(np.array(mid))[0] < target else (lo, mid)
+            lo, hi = (mid, hi) if quintic(np.array(mid))[0] < target else (lo, mid)
         tau_on = lo
-        sig_on, dsig_on, ddsig_on = (float(v) for v in _quintic(np.array(tau_on)))
+        sig_on, dsig_on, ddsig_on = (float(v) for v in quintic(np.array(tau_on)))
         t_on = t0 + tau_on * T
         v_on, a_on = (dsig_on * L / T, ddsig_on * L / T**2) if 0.0 < tau_on < 1.0 else (0.0, 0.0)
         remaining, remaining_nominal = Ld - s_on, L - s_on

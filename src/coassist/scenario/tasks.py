@@ -50,7 +50,7 @@ START_DELAY = 0.9
 _N_POINTS = 2001  # dense polyline samples: < 1 mm between points on every path
 
 
-def _quintic(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def quintic(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Minimum-jerk profile σ(τ), σ'(τ), σ''(τ) on τ clipped to [0, 1]."""
     tau = np.clip(tau, 0.0, 1.0)
     t2 = tau * tau
@@ -220,7 +220,7 @@ class MotionPlanner:
     def arc_length(self, t: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """s(t) [m] and ṡ(t) [m/s]."""
         tau = (np.asarray(t, dtype=float) - self.start_delay) / self.duration
-        sigma, dsigma, _ = _quintic(tau)
+        sigma, dsigma, _ = quintic(tau)
         inside = (tau > 0.0) & (tau < 1.0)
         return self.path.length * sigma, np.where(inside, dsigma * (self.path.length / self.duration), 0.0)
 

@@ -11,6 +11,6 @@
 - :mod:`coassist.study.questionnaires`: raw NASA-TLX and Likert items.
 - :mod:`coassist.study.participants`: simulated participants from the operator population.
 - :mod:`coassist.study.runner`: one participant's steps, resumed where they stopped.
-- :mod:`coassist.study.stats`: paired tests for small samples, Holm, effect sizes, order effects.
+- :mod:`coassist.study.stats`: order effects (the paired tests, Holm and effect sizes: :mod:`coassist.analysis.paired`).
 - :mod:`coassist.study.report`: the HTML report and the JSON summary.
 """

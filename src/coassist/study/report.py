@@ -6,7 +6,7 @@ with every figure embedded as a PNG):
 - per participant and pooled: the measures of :mod:`coassist.study.measures` per condition
   (or round), each participant's value the mean over their measured trials (practice trials
   left out);
-- paired comparisons between every two conditions (:mod:`coassist.study.stats`: Wilcoxon
+- paired comparisons between every two conditions (:mod:`coassist.analysis.paired`: Wilcoxon
   signed-rank and paired t, Holm-corrected over the measures × pairs family, effect sizes
   with seeded bootstrap intervals), and the same for the raw TLX and each Likert item (their
   own family);
@@ -48,11 +48,12 @@ from typing import Any
 import numpy as np
 
 from coassist._io import atomic_write_text
+from coassist.analysis.paired import holm_family, paired_comparison
 from coassist.data import read_dataset
 from coassist.data.store import MANIFEST_NAME
 from coassist.study.measures import MEASURES, trial_measures
 from coassist.study.questionnaires import TLX_ITEMS, Form, form_for, raw_tlx
-from coassist.study.stats import holm_family, order_effect, paired_comparison
+from coassist.study.stats import order_effect
 from coassist.study.store import StudyFolder, StudyFolderError, finite_json
 
 __all__ = ["sample_limits", "study_summary", "write_report"]

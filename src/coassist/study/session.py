@@ -28,7 +28,7 @@ from typing import Any
 
 from coassist.data import Trial, TrialMeta
 from coassist.errors import CoassistError
-from coassist.play.session import PlayConfig, PlaySession, TrialResult, _score, arm_frame
+from coassist.play.session import PlayConfig, PlaySession, TrialResult, arm_frame, score_trial
 from coassist.scenario.tasks import Task, task_for_seed
 
 __all__ = ["StudySession", "TrialSetup"]
@@ -193,7 +193,7 @@ class StudySession(PlaySession):
             meta=TrialMeta(**{**trial.meta.to_dict(), "user": self.config.user, "seed": setup.seed, "extra": extra}),
         )
         self._captured = trial
-        result = _score(trial, "", len(self.results))
+        result = score_trial(trial, "", len(self.results))
         self.results.append(result)
         return result
 

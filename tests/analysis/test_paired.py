@@ -1,0 +1,185 @@
+"""coassist.analysis.paired against independent references: hand-computed t intervals and tests,
+exact Wilcoxon by enumeration, scipy on known cases and the naive bootstrap loop."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from coassist.analysis.paired import (
+    bootstrap_interval,
+    cohen_dz,
+    cohen_dz_rows,
+    gain_share,
+    holm,
+    mean_rows,
+    paired_comparison,
+    paired_difference,
+    rank_biserial,
+    rank_biserial_rows,
+)
+
+#: The ablation's resamples per share (experiments/ablation.py's BOOTSTRAP).
+BOOTSTRAP = 2000
+
+A = {"P1": 12.0, "P2": 9.5, "P3": 14.0, "P4": 11.0, "P5": 10.2, "P6": 13.1}
+B = {"P1": 10.0, "P2": 9.9, "P3": 11.0, "P4": 8.5, "P5": 9.0, "P6": 10.0}
+
+
+# --------------------------------------------------------------------------- the t interval of a paired difference
+
+
+def test_paired_difference_equals_scipys_paired_t_interval():
+    rng = np.random.default_rng(4)
+    a = rng.normal(4.5, 0.5, 18)
+    b = a + rng.normal(0.1, 0.2, 18)
+    mean, lo, hi, n = paired_difference(a, b)
+    ci = stats.ttest_rel(a, b).confidence_interval(0.95)
+    assert n == 18
+    assert mean == pytest.approx(np.mean(a - b), abs=1e-12)
+    assert (lo, hi) == pytest.approx((ci.low, ci.high), abs=1e-12)
+
+
+def test_paired_difference_by_hand_and_drops_unfinished_pairs():
+    # differences 1, 2, 3 (the NaN pair dropped): mean 2, s = 1, t(0.975, 2) = 4.302653
+    mean, lo, hi, n = paired_difference([2.0, 4.0, 6.0, np.nan], [1.0, 2.0, 3.0, 0.0])
+    half = 4.302652729911275 / np.sqrt(3)
+    assert (mean, n) == (2.0, 3)
+    assert (lo, hi) == pytest.approx((2.0 - half, 2.0 + half), abs=1e-9)
+    m1, lo1, _, n1 = paired_difference([1.0], [0.5])
+    assert (m1, n1) == (0.5, 1) and np.isnan(lo1)
+    with pytest.raises(ValueError, match="same shape"):
+        paired_difference([1.0, 2.0], [1.0])
+
+
+def test_paired_difference_of_equal_differences_has_no_width():
+    # d = 1, 1, 1: s_d = 0, so the interval is the mean itself (scipy's would be NaN: 0/0)
+    assert paired_difference([2.0, 3.0, 4.0], [1.0, 2.0, 3.0]) == (1.0, 1.0, 1.0, 3)
+    assert all(math.isnan(v) for v in paired_difference([np.nan], [1.0])[:3])
+
+
+def test_bootstrap_interval_is_scipys_percentile_interval_when_every_resample_is_defined():
+    d = np.random.default_rng(7).normal(0.5, 1.0, 12)
+    lo, hi, undefined = bootstrap_interval(d, mean_rows, seed=11, n_boot=3000)
+    ref = stats.bootstrap(
+        (d,), np.mean, n_resamples=3000, method="percentile", rng=np.random.default_rng(11), vectorized=True
+    ).confidence_interval
+    assert undefined == 0
+    assert (lo, hi) == pytest.approx((ref.low, ref.high), rel=1e-12)
+
+
+def test_bootstrap_interval_leaves_out_and_counts_undefined_resamples():
+    # A resample that draws one value three times (1, 1, 1 or 2, 2, 2) has s_d = 0: d_z is undefined
+    # there, left out and counted; the naive loop below counts the same resamples.
+    d = np.array([1.0, 1.0, 2.0])
+    lo, hi, undefined = bootstrap_interval(d, cohen_dz_rows, seed=4, n_boot=500)
+    idx = np.random.default_rng(4).integers(0, 3, (500, 3))
+    dz = np.array([np.nan if d[r].std(ddof=1) == 0 else d[r].mean() / d[r].std(ddof=1) for r in idx])
+    ok = dz[np.isfinite(dz)]
+    assert undefined == int(np.isnan(dz).sum()) > 0
+    assert (lo, hi) == pytest.approx(tuple(np.quantile(ok, [0.025, 0.975])), rel=1e-12)
+    assert all(math.isnan(v) for v in bootstrap_interval([1.0], mean_rows, seed=0)[:2])
+
+
+# --------------------------------------------------------------------------- the share of a reference's gain (the ablation)
+
+
+def test_share_by_hand():
+    # MG − X = (1, 1, 2), mean 4/3; MG − oracle = (2, 3, 3), mean 8/3: half the oracle's benefit.
+    mg, x, oracle = [4.0, 5.0, 6.0], [3.0, 4.0, 4.0], [2.0, 2.0, 3.0]
+    share, lo, hi = gain_share(mg, x, oracle)
+    assert share == pytest.approx(0.5, rel=1e-15)
+    assert lo <= share <= hi
+    # Per-trial ratios lie in [1/3, 2/3]; a ratio of resampled means cannot leave their range.
+    assert 1 / 3 - 1e-12 <= lo and hi <= 2 / 3 + 1e-12
+    assert (share, lo, hi) == gain_share(mg, x, oracle)  # seeded: the same interval every time
+
+
+def test_interval_is_the_naive_percentile_bootstrap():
+    rng = np.random.default_rng(5)
+    mg = rng.normal(5.0, 0.5, 18)
+    oracle = mg - rng.normal(2.0, 0.4, 18)
+    x = mg - rng.normal(1.5, 0.6, 18)
+    share, lo, hi = gain_share(mg, x, oracle, seed=3)
+    # The same resamples drawn one by one, in a loop.
+    draw = np.random.default_rng(3).integers(0, 18, (BOOTSTRAP, 18))
+    ratios = [np.mean(mg[i] - x[i]) / np.mean(mg[i] - oracle[i]) for i in draw]
+    assert (lo, hi) == pytest.approx(tuple(np.quantile(ratios, [0.025, 0.975])), rel=1e-12)
+    assert share == pytest.approx(np.mean(mg - x) / np.mean(mg - oracle), rel=1e-14)
+
+
+def test_undefined_share_and_bad_input():
+    assert all(np.isnan(v) for v in gain_share([1.0, 2.0], [0.5, 1.0], [1.0, 2.0]))  # the oracle gains nothing
+    share, _, _ = gain_share([4.0, np.nan, 6.0], [3.0, 1.0, 4.0], [2.0, 2.0, 4.0])  # the NaN trial is left out
+    assert share == pytest.approx((1.0 + 2.0) / (2.0 + 2.0))
+    with pytest.raises(ValueError, match="one shape"):
+        gain_share([1.0, 2.0], [1.0], [1.0, 2.0])
+
+
+def test_share_of_one_pair_has_no_width():
+    assert gain_share([4.0], [3.0], [2.0]) == (0.5, 0.5, 0.5)
+
+
+# --------------------------------------------------------------------------- the study's tests and effect sizes
+
+
+def _exact_wilcoxon(d: np.ndarray) -> tuple[float, float]:
+    """W = min(W+, W−) and the exact two-sided p by enumerating the 2^n sign patterns (no ties, no zeros)."""
+    ranks = stats.rankdata(np.abs(d))
+    w_plus = ranks[d > 0].sum()
+    w = min(w_plus, ranks.sum() - w_plus)
+    null = [sum(r for r, s in zip(ranks, signs) if s) for signs in itertools.product((0, 1), repeat=len(d))]
+    p = sum(1 for v in null if min(v, ranks.sum() - v) <= w) / len(null)
+    return float(w), float(p)
+
+
+def test_wilcoxon_and_paired_t_equal_a_hand_computation():
+    c = paired_comparison("f_rms", "a", "b", A, B, seed=0, n_boot=200)
+    x, y = np.array([A[k] for k in sorted(A)]), np.array([B[k] for k in sorted(B)])
+    d = x - y  # 2.0 −0.4 3.0 2.5 1.2 3.1: no ties, no zeros
+    w, p = _exact_wilcoxon(d)
+    assert (c.wilcoxon_w, c.p_wilcoxon) == (w, pytest.approx(p, abs=1e-12))
+    assert p == pytest.approx(4 / 64)  # W = W− = 1 (the rank of |−0.4|): W+ ∈ {0, 1, 20, 21} are 4 of 64 patterns
+    t = d.mean() / (d.std(ddof=1) / math.sqrt(d.size))
+    assert c.t == pytest.approx(t, rel=1e-12)
+    assert c.p_t == pytest.approx(2 * stats.t.sf(abs(t), d.size - 1), rel=1e-10)
+    assert c.mean_diff == pytest.approx(d.mean()) and c.dz == pytest.approx(d.mean() / d.std(ddof=1))
+    assert c.rank_biserial == pytest.approx((20 - 1) / 21)  # W+ = 21 − 1 = 20, W− = 1
+    assert c.smallest_p_wilcoxon == pytest.approx(2 / 2**6)
+
+
+def test_holm_equals_the_step_down_by_hand():
+    p = [0.01, 0.04, 0.03, 0.005, math.nan]
+    # sorted: 0.005 (×4 = 0.02), 0.01 (×3 = 0.03), 0.03 (×2 = 0.06), 0.04 (×1 = 0.04 → max with 0.06 = 0.06)
+    assert holm(p)[:4] == pytest.approx([0.03, 0.06, 0.06, 0.02])
+    assert math.isnan(holm(p)[4])
+    assert holm([0.5, 0.6]) == pytest.approx([1.0, 1.0])  # capped at 1
+
+
+def test_rank_biserial_drops_zeros_and_averages_ties():
+    d = np.array([0.0, 1.0, -1.0, 2.0, 0.0, 3.0])
+    # non-zero |d|: 1, 1, 2, 3 → ranks 1.5, 1.5, 3, 4; W+ = 1.5 + 3 + 4 = 8.5, W− = 1.5
+    assert rank_biserial(d) == pytest.approx((8.5 - 1.5) / 10.0)
+    rows = np.array([[0.0, 1.0, -1.0, 2.0, 0.0, 3.0], [1.0, 2.0, 3.0, 4.0, 5.0, 6.0], [0.0] * 6])
+    out = rank_biserial_rows(rows)
+    assert out[0] == pytest.approx(0.7) and out[1] == 1.0 and math.isnan(out[2])
+    assert math.isnan(cohen_dz([1.0, 1.0, 1.0]))
+
+
+def test_bootstrap_is_the_percentile_of_the_seeded_resamples():
+    d = np.array([2.0, -0.4, 3.0, 2.5, 1.2, 3.1])
+    lo, hi, undefined = bootstrap_interval(d, mean_rows, seed=5, n_boot=1000)
+    idx = np.random.default_rng(5).integers(0, d.size, (1000, d.size))
+    means = np.array([d[row].mean() for row in idx])
+    assert (lo, hi) == tuple(pytest.approx(v, rel=1e-12) for v in np.percentile(means, [2.5, 97.5]))
+    assert undefined == 0
+    assert bootstrap_interval(d, mean_rows, seed=5, n_boot=1000) == (lo, hi, 0)
+    # the mean of a normal sample: the percentile interval close to the t interval for a large n
+    big = np.random.default_rng(1).normal(1.0, 2.0, 400)
+    lo, hi, _ = bootstrap_interval(big, mean_rows, seed=2, n_boot=4000)
+    half = stats.t.ppf(0.975, big.size - 1) * big.std(ddof=1) / math.sqrt(big.size)
+    assert lo == pytest.approx(big.mean() - half, abs=0.05) and hi == pytest.approx(big.mean() + half, abs=0.05)
