@@ -276,7 +276,7 @@ def _mujoco_same_push(trial, config: DriveConfig, push_at: int):
 
 
 #: The defaults' trial through the simulator against the same trial in MuJoCo: the largest distance of
-#: the two tool tracks [m]. Measured 0.39-0.83 mm (5 runs alone, none flagged, this machine's load 8-12),
+#: the two tool tracks [m]. Measured 0.39, 0.46, 0.83 mm (3 runs alone, none flagged, this machine's load 8-12),
 #: 1.30 mm once among the other realtime tests at load 10 (unflagged): the issue's 1 mm is reached
 #: alone, the bound keeps 1.5 mm for a shared machine. What remains is the protocol's, a real UR's too:
 #: the state read is up to one controller cycle (2 ms) old, a speedJ takes effect at the next cycle and

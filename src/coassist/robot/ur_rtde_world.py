@@ -31,7 +31,7 @@ fresh one each period, every period carries the previous one's late wake-up
 8.022 ms a period at 125 Hz, 55 ms behind the controller's clock after a 17 s trial. The
 controller, and the person at the handle, move in real time, so tick k would no longer be
 the time k·dt the log, the controller and the intent model take it for (the trial's tool
-track 2.6 mm off the same trial in MuJoCo, where a tick is exactly dt). A period that
+track 2.7-5.5 mm off the same trial in MuJoCo, where a tick is exactly dt). A period that
 overran is caught up by the next ones (``waitPeriod`` returns at once while behind; each
 such period is late and reported in ``last_overrun``), so one late tick does not shift every
 later one; a stall of more than 50 ms restarts the schedule from now (``initPeriod``)
