@@ -314,7 +314,10 @@ def test_drives_defaults_complete_a_trial_on_the_track_of_the_mujoco_world(tmp_p
             status = sim.status()
         assert result.exit_code == 0, result.output
         trial = read_trial(out)
-        if not _machine_stall(trial):
+        # again after a stall, or a track off by more than the bound: measured once 2.63 mm unflagged in
+        # ./dev test's realtime phase at this shared machine's heaviest load; the old schedule is 2.5 mm
+        # and more in every run, so it still fails all three
+        if not _machine_stall(trial) and (_flags(trial) or _track_gap(trial, mj) < TRACK_GAP):
             break
     assert trial.meta.extra["ended"] == mj.meta.extra["ended"] == "target", result.output
     assert status["out_of_limits"] == 0 and status["events"] == {"stopScript": 1}
