@@ -14,8 +14,14 @@ ur-rtde client (``coassist drive --world ur``'s loop at 500 Hz, MG, a 10 N push)
 
 The driving loop runs at ``--client-rt-priority`` where allowed (0: normal priority). Prints the
 median and p99 of the period [ms], its largest, the share of periods within 10 % of 2 ms, the
-packages skipped, and the ratio naive/ur-sim of the p99's excess over 2 ms. The machine's load
-is printed first: on a shared machine the naive clock's tail is the load's.
+packages skipped, the loop's overruns (ticks flagged DEADLINE_MISS), and the ratio naive/ur-sim of
+the p99's excess over 2 ms. The machine's load is printed first: on a shared machine the naive
+clock's tail is the load's.
+
+``--foxglove`` adds a third run, **ur-sim + foxglove**: the same as ur-sim with the live view on
+(``--foxglove``'s server in its worker process, 30 Hz, a viewer in its own process subscribed to
+every topic: the test suite's client, tests/runtime/foxglove_client.py); its overruns against ur-sim's are the
+issue's "live Foxglove adds no tick over its period".
 """
 
 from __future__ import annotations
@@ -27,10 +33,14 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import contextlib  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from coassist.interfaces import Fault  # noqa: E402
 from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.ur_rtde_world import URRTDEWorld  # noqa: E402
 from coassist.robot.ur_sim import URSimConfig  # noqa: E402
@@ -55,7 +65,55 @@ def priority(prio: int):
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
-def run(name: str, config: URSimConfig, seconds: float, client_prio: int) -> tuple[float, float] | None:
+#: The viewer, in a process of its own (in this one its reading thread, at normal priority, would hold the
+#: interpreter lock the real-time loop needs: a priority inversion of the benchmark's, not of the live view):
+#: the test suite's client (tests/runtime/foxglove_client.py) subscribed to every topic until stdin closes.
+_VIEWER = """
+import importlib.util, sys
+spec = importlib.util.spec_from_file_location("client", sys.argv[1])
+m = importlib.util.module_from_spec(spec); spec.loader.exec_module(m)
+c = m.FoxgloveClient(sys.argv[2])
+c.subscribe([t for t in sys.argv[3:] if t in c.channels])
+print("subscribed", flush=True)
+sys.stdin.read()
+print(len(c.messages), flush=True)
+c.close()
+"""
+
+
+def _viewer(url: str, topics: list[str]) -> subprocess.Popen:
+    client = Path(__file__).parents[1] / "tests" / "runtime" / "foxglove_client.py"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _VIEWER, str(client), url, *topics],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout is not None and proc.stdout.readline().strip() == "subscribed"
+    return proc
+
+
+def run(
+    name: str, config: URSimConfig, seconds: float, client_prio: int, foxglove: bool = False
+) -> tuple[float, float] | None:
+    live = client = None
+    if foxglove:
+        from coassist.data.trial_mcap import MCAP_TOPICS
+        from coassist.runtime.foxglove import SCENE_TOPIC, open_foxglove
+
+        live, sink = open_foxglove(0, rate_hz=30.0)
+        client = _viewer(sink.url, [*MCAP_TOPICS, SCENE_TOPIC])
+    try:
+        return _run(name, config, seconds, client_prio, live)
+    finally:
+        if client is not None:
+            received, _ = client.communicate(timeout=30)
+            print(f"{'':8s}  the viewer (its own process) received {received.strip()} messages")
+        if live is not None:
+            live.close()
+
+
+def _run(name: str, config: URSimConfig, seconds: float, client_prio: int, live) -> tuple[float, float] | None:
     with URSimProcess(config) as sim:
         try:
             world = URRTDEWorld(config.host, frequency=500.0)
@@ -76,10 +134,13 @@ def run(name: str, config: URSimConfig, seconds: float, client_prio: int) -> tup
                     DriveConfig(world="ur", controller="manual", rate_hz=500, time_limit=seconds),
                     world=world,
                     on_tick=on_tick,
+                    live=live,
                 )
                 ended = trial.meta.extra["ended"]
                 if ended != "time_limit":
                     ended += f" at tick {trial.n_samples}: {trial.meta.extra['stop_message'][:90]}…"
+                overruns = int(np.count_nonzero(trial.fault[3:] & int(Fault.DEADLINE_MISS)))
+                ended += f"; {overruns} of {trial.n_samples} ticks flagged DEADLINE_MISS"
             except RuntimeError as exc:  # the run ended before its first tick (a starved simulator)
                 ended = f"before its first tick ({str(exc)[:60]}…)"
         world.close()
@@ -96,7 +157,7 @@ def _report(name: str, periods: np.ndarray, status: dict, ended: str, granted: b
     within = float(np.mean(np.abs(periods - PERIOD) <= 0.1 * PERIOD))
     med, p99 = float(np.median(ms)), float(np.percentile(ms, 99))
     print(
-        f"{name:8s}: period median {med:.3f} ms  p99 {p99:.3f} ms  max {ms.max():.3f} ms  "
+        f"{name}: period median {med:.3f} ms  p99 {p99:.3f} ms  max {ms.max():.3f} ms  "
         f"within 10 % {within:.1%}  skipped {status['skipped']}  ({periods.size} periods; "
         f"loop ended {ended}, client priority {'SCHED_FIFO' if granted else 'normal'})"
     )
@@ -108,6 +169,7 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--rt-priority", type=int, default=20)
     ap.add_argument("--client-rt-priority", type=int, default=10)
+    ap.add_argument("--foxglove", action="store_true", help="a third run with the live Foxglove view on")
     args = ap.parse_args()
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     pid = os.getpid()
@@ -118,6 +180,15 @@ def main() -> None:
         args.seconds,
         args.client_rt_priority,
     )
+    if args.foxglove:
+        time.sleep(1.0)
+        run(
+            "ur-sim + foxglove",
+            URSimConfig(host=f"{host}.3", rt_priority=args.rt_priority or None),
+            args.seconds,
+            args.client_rt_priority,
+            foxglove=True,
+        )
     time.sleep(1.0)
     naive = run("naive", URSimConfig(host=f"{host}.2", spin=0.0), args.seconds, args.client_rt_priority)
     if ours and naive:

@@ -484,6 +484,14 @@ def test_the_simulators_hand_is_asked_once_per_its_own_tick():
         inner.calls == pytest.approx([1.0, 1.008, 1.016, 1.024, 1.032])
         and seen == [1] * 4 + [2] * 4 + [3] * 4 + [4] * 4 + [5] * 4
     )
+    # with the lead the simulator gives it (one 2 ms cycle): its ticks fall on the cycle go arrived in
+    # (0.998 s, whose state the client's first tick reads) + 8 ms each; tick 0 asked at the first call
+    inner = Counting()
+    hand = TickedHand(inner, lead=0.002)
+    hand.go()
+    seen = [hand.force(1.0 + 0.002 * i, np.zeros(6), np.zeros(6))[0] for i in range(20)]
+    assert inner.calls == pytest.approx([1.0, 1.006, 1.014, 1.022, 1.030, 1.038])
+    assert seen == [1] * 3 + [2] * 4 + [3] * 4 + [4] * 4 + [5] * 4 + [6]
 
 
 def test_the_simulators_coassist_commands_and_a_reset_to_the_start():

@@ -306,3 +306,99 @@ def test_the_ur_simulator_stream_through_the_real_client_is_the_runs_log(tmp_pat
     # the arm moved: the joints the viewer received are the simulator's, not a constant
     q = np.array([TS.deserialize_cdr(p, MCAP_TOPICS["/joint_states"]).position for _, p in client.of("/joint_states")])
     assert np.ptp(q, axis=0).max() > 1e-4
+
+
+@pytest.mark.realtime
+def test_the_franky_sim_stream_through_the_real_client_is_the_runs_log(tmp_path):
+    """The Franka world on franky-sim (the real franky client, libfranka's protocol, a 10 N push read by
+    an F/T sensor at the hand), watched live: the messages are the run's MCAP file's, with the FR3's
+    seven joints."""
+    pytest.importorskip("franky", reason="the Franka world needs franky: pip install 'coassist[franka]'")
+    pytest.importorskip("franky_sim", reason="franky-sim: pip install 'coassist[franka]'")
+    pytest.importorskip("pinocchio", reason="the FR3 kinematics need the robot extra: pip install 'coassist[robot]'")
+    from coassist.control.presets import get_preset
+    from coassist.robot.drive import DriveConfig, drive
+    from coassist.robot.franka_world import FrankaWorld
+
+    from ..robot.test_franka_world import LINK_TIMEOUT, PushSensor, SimServer
+
+    server = SimServer()
+    try:
+
+        def run(feed):
+            world = FrankaWorld(
+                server.host, arm="fr3", ft_sensor=PushSensor(server, (10.0, 0.0, 0.0)), link_timeout=LINK_TIMEOUT
+            )
+            try:
+                config = DriveConfig(world="franka", robot="fr3", controller="cooperative", time_limit=0.6)
+                return drive(config, world=world, live=feed), 0.0
+            finally:
+                world.close()
+
+        trial, _, live, client = _watch(run)
+    finally:
+        server.close()
+    assert trial.meta.extra["ended"] == "time_limit", trial.meta.extra.get("stop_message")
+    alpha = get_preset(trial.meta.extra["preset"]).game.alpha
+    mcap, schemas = _mcap_messages(trial, alpha, live, tmp_path)
+    ticks = _check_against_log(client, trial, alpha, live, mcap, schemas)
+    assert len(ticks) >= 10  # 0.6 s at 50 frames a second, most of them received
+    names = TS.deserialize_cdr(client.of("/joint_states")[0][1], MCAP_TOPICS["/joint_states"]).name
+    assert list(names) == [f"joint_{i}" for i in range(1, 8)]
+    # the push moved the tool: the poses the viewer received are franky-sim's, not a constant
+    x = [TS.deserialize_cdr(p, MCAP_TOPICS["/current_pose"]).pose.position.x for _, p in client.of("/current_pose")]
+    assert np.ptp(x) > 1e-3
+
+
+def test_the_ros2_stream_is_the_runs_log(tmp_path, monkeypatch):
+    """The ROS 2 world over real DDS on loopback (a node plays the MuJoCo UR5 behind ros2_control's
+    topics, lockstep: no clock), watched live: the messages are the run's MCAP file's, with the UR's
+    joints as the driver names them."""
+    pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra: pip install 'coassist[robot]'")
+    pytest.importorskip("pinocchio", reason="the UR5 kinematics need the robot extra: pip install 'coassist[robot]'")
+    pytest.importorskip("rclpy", reason="the ros2 extra (ros-rclpy and the message packages) is not installed")
+    from coassist.control.presets import get_preset
+    from coassist.robot.drive import DriveConfig, drive
+    from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World
+
+    from ..robot.test_ros2_world import DOMAIN, SimRobot, mujoco_world
+
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")  # as tests/robot/test_ros2_world.py
+    monkeypatch.setenv("ROS_LOCALHOST_ONLY", "1")
+    monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
+    config = DriveConfig(world="ros2", controller="cooperative", time_limit=0.6)
+    sim = mujoco_world(config)  # pushed: 8 N along +x, then 6 N along -y
+    robot = SimRobot(sim)
+    mass, com = sim.tool_mass_and_com()
+    cfg = Ros2Config(
+        domain_id=DOMAIN,
+        lockstep=True,
+        pace=False,
+        rate_hz=config.rate_hz,
+        tcp_offset=tuple(sim.kinematics().tcp_offset),
+        payload=(mass, tuple(com)),
+        connect_timeout=10.0,
+    )
+    try:
+
+        def run(feed):
+            world = Ros2World(cfg, alpha=0.8)
+            try:
+                return drive(config, world=world, on_tick=world.publish_monitor, live=feed), 0.0
+            finally:
+                world.close()
+
+        trial, _, live, client = _watch(run)
+    finally:
+        time.sleep(0.05)  # the final zero command reaches the robot
+        robot.close()
+    assert trial.meta.extra["ended"] == "time_limit", trial.meta.extra.get("stop_message")
+    alpha = get_preset(trial.meta.extra["preset"]).game.alpha
+    mcap, schemas = _mcap_messages(trial, alpha, live, tmp_path, joint_names=UR_JOINT_NAMES)
+    ticks = _check_against_log(client, trial, alpha, live, mcap, schemas)
+    assert len(ticks) >= 10
+    names = TS.deserialize_cdr(client.of("/joint_states")[0][1], MCAP_TOPICS["/joint_states"]).name
+    assert list(names) == list(UR_JOINT_NAMES)
+    # the push moved the tool: the poses received are the ROS 2 robot's, not a constant
+    x = [TS.deserialize_cdr(p, MCAP_TOPICS["/current_pose"]).pose.position.x for _, p in client.of("/current_pose")]
+    assert np.ptp(x) > 1e-3

@@ -24,6 +24,19 @@ period with the wall clock; when it lasted longer than ``dt·(1 + overrun_tolera
 :attr:`URRTDEWorld.last_overrun` holds the excess [s] (else 0.0) and the loop flags
 ``Fault.DEADLINE_MISS``.
 
+The periods keep an absolute schedule: period k starts at ``t_first + k·dt``
+(``t_first`` what the first ``initPeriod`` returned), not at a fresh ``initPeriod``. With a
+fresh one each period, every period carries the previous one's late wake-up
+(``waitPeriod``'s sleep, the return into Python): measured against ``coassist ur-sim``,
+8.022 ms a period at 125 Hz, 55 ms behind the controller's clock after a 17 s trial. The
+controller, and the person at the handle, move in real time, so tick k would no longer be
+the time k·dt the log, the controller and the intent model take it for (the trial's tool
+track 2.7-5.5 mm off the same trial in MuJoCo, where a tick is exactly dt). A period that
+overran is caught up by the next ones (``waitPeriod`` returns at once while behind; each
+such period is late and reported in ``last_overrun``), so one late tick does not shift every
+later one; a stall of more than 50 ms restarts the schedule from now (``initPeriod``)
+rather than run a burst of back-to-back ticks.
+
 What the protocol decides (ur_rtde's control script reads one command code a controller
 cycle from ``input_int_register_0`` and answers through ``output_int_register_0``;
 :mod:`coassist.robot.ur_sim.registers`):
@@ -104,6 +117,7 @@ disconnect never returns; the interface is then left running.
 
 from __future__ import annotations
 
+import datetime
 import logging
 import math
 import re
@@ -135,6 +149,9 @@ _JITTER_WINDOW = 1.0
 _JITTER_SHARE = 0.25
 #: The RTDE interface runs at most at the e-Series controller rate.
 _MAX_FREQUENCY = 500.0
+#: [s] how far behind its schedule the loop may fall and still catch up (module docstring, the schedule);
+#: beyond it (a long stall) the schedule restarts from now rather than run a burst of back-to-back ticks
+_MAX_CATCH_UP = 0.05
 _INSTALL_HINT = "the real robot needs ur-rtde: pip install 'coassist[robot]'"
 
 
@@ -342,7 +359,7 @@ class URRTDEWorld:
     dt, command_space, n_joints, realtime : the World protocol.
     tcp_offset : (6,) the TCP in the flange frame the controller reports the pose of.
     last_overrun : [s] how far the last period (or the last sample's delay) ran over (0.0 when on time).
-    last_period : [s] the last period's measured length.
+    last_period : [s] the last period's measured length (from its scheduled start to waitPeriod's return).
     safety_status_bits : the last ``getSafetyStatusBits()`` (see :class:`SafetyStatus`).
     rejected_commands : commands replaced by a stop (non-finite or wrong shape).
     late_samples : samples that arrived more than two periods behind the stream's usual delay.
@@ -415,8 +432,11 @@ class URRTDEWorld:
         self._rtde_r: Any = None
         self._closed = False
         self._watchdog_armed = False
-        self._t0: Any = None  # what initPeriod returned for the open period
-        self._t0_wall = 0.0
+        self._t0: Any = None  # the open period's start, as initPeriod returns it (module docstring, the schedule)
+        self._t0_wall = 0.0  # the same on perf_counter's clock
+        self._anchor: Any = None  # the schedule's start (initPeriod's) and its wall clock; k periods since
+        self._anchor_wall = 0.0
+        self._k = 0
         self._last_ts: float | None = None
         self._last_t = -math.inf
         self._last_force: np.ndarray | None = None
@@ -533,9 +553,24 @@ class URRTDEWorld:
 
     # -- World -----------------------------------------------------------------------
 
+    def _before_first_period(self) -> None:
+        """Called once, after the watchdog's round trip and right before the first period opens: a subclass
+        starts here what must start with the loop's first period (the simulator's hand)."""
+
     def _open_period(self) -> None:
-        self._t0 = self._call_c("initPeriod")
-        self._t0_wall = time.perf_counter()
+        """Start the schedule: this period begins now (``initPeriod``)."""
+        self._t0 = self._anchor = self._call_c("initPeriod")
+        self._t0_wall = self._anchor_wall = time.perf_counter()
+        self._k = 0
+
+    def _next_period(self) -> None:
+        """The next period of the schedule: ``t_first + k·dt`` (module docstring), no drift from late wake-ups."""
+        self._k += 1
+        offset = self._k * self.dt
+        # ur-rtde's time point is a datetime.timedelta (pybind11's steady_clock); a number in a fake's place
+        step = datetime.timedelta(seconds=offset) if isinstance(self._anchor, datetime.timedelta) else offset
+        self._t0 = self._anchor + step
+        self._t0_wall = self._anchor_wall + offset
 
     def _arm_watchdog(self) -> None:
         """setWatchdog once, before the first period opens (it waits for the script's answer)."""
@@ -670,6 +705,7 @@ class URRTDEWorld:
         self._check_open("apply()")
         if self._t0 is None:
             self._arm_watchdog()
+            self._before_first_period()
             self._open_period()
         qd = self._checked_qd(command)
         if qd is None:
@@ -684,7 +720,10 @@ class URRTDEWorld:
         self.last_period = period
         excess = period - self.dt
         self.last_overrun = excess if excess > self.overrun_tolerance * self.dt else 0.0
-        self._open_period()
+        if excess > _MAX_CATCH_UP:
+            self._open_period()  # a long stall: the schedule restarts from now, no burst of ticks to catch up
+        else:
+            self._next_period()  # a late period is caught up by the next (module docstring, the schedule)
 
     def _checked_qd(self, command: Command) -> list[float] | None:
         if command.stop or command.qd is None:

@@ -126,10 +126,17 @@ class URSimWorld(URRTDEWorld):
             raise RobotLinkError(f"the simulator at {self.host} sent a handle pose of {values.size} numbers, not 12")
         return values[:6], values[6:]
 
-    def apply(self, command: Command) -> None:
-        if self._go:  # the hand's first tick is the loop's first
+    def _before_first_period(self) -> None:
+        # The hand's first tick is the loop's first period: sent after the watchdog's round trip (12-18 ms
+        # measured), not before it, else the hand ran that much (two ticks) ahead of the loop for the whole
+        # run, 1 mm of the track at the trial's 0.1 m/s against the same trial in MuJoCo.
+        if self._go:
             self._go = False
             self._ask("coassist hand go")
+
+    def apply(self, command: Command) -> None:
+        if self._go and self._t0 is not None:  # a hand given while the loop runs: from this period on
+            self._before_first_period()
         super().apply(command)
 
     def close(self) -> None:

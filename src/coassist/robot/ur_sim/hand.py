@@ -16,7 +16,13 @@ A UR controller answers every one of these ``could not understand: …``, so a c
 
 The hand is asked once per its own tick (its ``dt``, the client's control period) at the
 simulated time the tick falls on, its wrench held in between, as the MuJoCo world asks it
-once per control period.
+once per control period. Its ticks fall on the controller cycles whose state the client's
+ticks read: ``go`` arrives just before the client's first period opens (coassist's UR world
+sends it there), so the client's tick k reads the state of the cycle ``go`` arrived in plus
+k periods, and the hand's tick k is that cycle's (its tick 0, already past, is asked at the
+next cycle). So at each tick the hand and the loop see the same state and the loop reads the
+hand's wrench one tick later, as in the MuJoCo world (measured, 500 Hz: with the hand's ticks
+a cycle after the loop's state, the defaults' trial ran 2 ms behind MuJoCo's, 0.3 mm of its track).
 """
 
 from __future__ import annotations
@@ -37,10 +43,15 @@ class TickedHand:
     """A :class:`~coassist.scenario.hand.SimulatedHand` asked once per its own tick of simulated time.
 
     hand : the hand.  Until :meth:`go` it applies nothing.
+    lead : [s] how long before its first call (the cycle after ``go``) the hand's ticks start: the
+        controller's period, so they fall on the cycle ``go`` arrived in and every hand period after it
+        (module docstring). Tick 0 is then asked late, at the first call; at a lead of one hand period
+        or more (a CB3, 8 ms, at 125 Hz) ticks 0 and 1 are both asked at the first call.
     """
 
-    def __init__(self, hand: SimulatedHand) -> None:
+    def __init__(self, hand: SimulatedHand, lead: float = 0.0) -> None:
         self.hand = hand
+        self.lead = float(lead)
         self.t0: float | None = None
         self._start = False
         self.ticks = 0
@@ -53,7 +64,7 @@ class TickedHand:
         if self.t0 is None:
             if not self._start:
                 return np.zeros(6)
-            self.t0 = t
+            self.t0 = t - self.lead
         due = math.floor((t - self.t0) / self.hand.dt + 1e-9)
         while self.ticks <= due:
             self._w = self.hand.force(t, hand_pose, hand_twist)
@@ -105,6 +116,6 @@ def reply(controller: Controller, series: str, line: str) -> str:
         except (ValueError, TypeError) as exc:
             return f"error: {exc}"
         with controller.lock:
-            arm.operator = TickedHand(hand)
+            arm.operator = TickedHand(hand, lead=controller.dt)
         return "ok"
     return f"could not understand: '{line.strip()}'"
