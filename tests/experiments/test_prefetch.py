@@ -213,6 +213,27 @@ def test_collections_deferred_without_a_pool_run_together_and_are_the_collection
     assert ws.collect("e", **options["d"])[1].trials[0].meta.seed == 30 and ws._deferred == {}
 
 
+def test_a_deferred_collection_that_fails_raises_in_its_own_collect(tmp_path, monkeypatch):
+    """Without a pool, a broken model in one deferred collection does not take the others with it: the one
+    asked for is collected (alone), and the broken one raises when it is asked for, as it would alone."""
+    import coassist.intent.onnx_network as onnx_network
+
+    monkeypatch.setattr(onnx_network, "onnx_runtime_available", lambda: True)  # deferred, whatever is installed
+    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
+    ws = pipeline.Workspace(cfg, tmp_path, progress=False)
+    broken = tmp_path / "broken-model"
+    broken.mkdir()
+    (broken / "model.json").write_text("{not json")
+    options = {"tasks": ("curved",), "trials": 1, "seed": 1}
+    ws.prefetch("y", **options, intent=str(broken))
+    ws.prefetch("x", **options)
+    assert list(ws._deferred) == ["y", "x"]
+    _, x = ws.collect("x", **options)
+    assert [t.meta.seed for t in x.trials] == [1] and ws._deferred == {}
+    with pytest.raises(Exception, match="model.json|JSON|json"):
+        ws.collect("y", **options, intent=str(broken))
+
+
 def test_result_of_waits_for_the_job_or_runs_it_here(tmp_path):
     """``result_of`` gives the submitted job's result without running ``fn`` again; without a
     pool (nothing submitted) it runs ``fn`` in this process."""

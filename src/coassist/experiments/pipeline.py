@@ -511,7 +511,10 @@ class Workspace:
             else:
                 batches.append([item])
         for batch in batches:
-            trials = run_spec_lockstep([spec for *_, specs in batch for spec in specs])
+            try:
+                trials = run_spec_lockstep([spec for *_, specs in batch for spec in specs])
+            except Exception:  # noqa: BLE001 -- e.g. a broken model: each collect runs alone, the error raised by its own
+                continue
             start = 0
             for name, options, groups, specs in batch:
                 done: Future = Future()
