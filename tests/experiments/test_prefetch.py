@@ -165,19 +165,17 @@ def test_prefetch_without_a_pool_does_nothing(tmp_path):
     assert not (tmp_path / "datasets").exists() and list(ws._deferred) == ["x"]
 
 
-@pytest.mark.parametrize("onnx", [True, False])
-def test_collections_deferred_without_a_pool_run_together_and_are_the_collections(tmp_path, monkeypatch, onnx):
-    """Without a pool, the first collect of a prefetched collection runs every deferred one in one lockstep
-    group in this process (the same trials, bit for bit, as each collected alone: named intents, MG, a model
-    on ONNX Runtime); a model that would run on torch is not deferred (its rounding depends on the batch);
-    a group holds at most NAMED_GROUP trials."""
+def test_collections_deferred_without_a_pool_run_together_and_are_the_collections(tmp_path, monkeypatch):
+    """Without a pool, the first collect of a prefetched collection runs every deferred one in lockstep groups
+    in this process (the same trials, bit for bit, as each collected alone: named intents, MG, a model on
+    ONNX Runtime); a group holds at most NAMED_GROUP trials; a model that would run on torch is not deferred
+    (its rounding depends on the batch)."""
     pytest.importorskip("torch")
     import coassist.intent.onnx_network as onnx_network
     import coassist.sim.world as world
 
-    if onnx and not onnx_network.onnx_runtime_available():
+    if not onnx_network.onnx_runtime_available():
         pytest.skip("needs ONNX Runtime (the onnx extra)")
-    monkeypatch.setattr(onnx_network, "onnx_runtime_available", lambda: onnx)
     cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
     plain = pipeline.Workspace(cfg, tmp_path / "ref", progress=False)
     folder, _ = plain.collect("D0", tasks=("curved",), trials=1, seed=1)
@@ -199,18 +197,23 @@ def test_collections_deferred_without_a_pool_run_together_and_are_the_collection
     ws = pipeline.Workspace(cfg, tmp_path / "ahead", progress=False)
     for name, o in options.items():
         ws.prefetch(name, **o)
-    deferred = ["a", "b", "c", "d"] if onnx else ["a", "b", "d"]
-    assert list(ws._deferred) == deferred and groups == [] and not (tmp_path / "ahead" / "datasets").exists()
+    assert list(ws._deferred) == ["a", "b", "c", "d"] and groups == []
+    assert not (tmp_path / "ahead" / "datasets").exists()
     got = {"b": ws.collect("b", **options["b"])[1]}  # runs every deferred one: 2 + 2 + 2 trials, then 1
-    assert groups == ([6, 1] if onnx else [5]) and ws._deferred == {}
-    assert sorted(p.name for p in (tmp_path / "ahead" / "datasets").iterdir()) == deferred
+    assert groups == [6, 1] and ws._deferred == {}
+    assert sorted(p.name for p in (tmp_path / "ahead" / "datasets").iterdir()) == ["a", "b", "c", "d"]
     got |= {name: ws.collect(name, **options[name])[1] for name in ("a", "c", "d")}
-    assert ws._pending == {} and groups[-1:] == ([1] if onnx else [2])  # c alone where not deferred
+    assert ws._pending == {} and groups == [6, 1]
     for name in options:
         _same_trials(reference[name], got[name])
     # deferred under a name, then asked for with other options: the one asked for runs, alone
     ws.prefetch("e", **options["a"])
     assert ws.collect("e", **options["d"])[1].trials[0].meta.seed == 30 and ws._deferred == {}
+    # where the model would run on torch, its collection is not deferred; the named ones still are
+    monkeypatch.setattr(onnx_network, "onnx_runtime_available", lambda: False)
+    for name, o in options.items():
+        ws.prefetch(name, **o)
+    assert list(ws._deferred) == ["a", "b", "d"]
 
 
 def test_a_deferred_collection_that_fails_raises_in_its_own_collect(tmp_path, monkeypatch):
