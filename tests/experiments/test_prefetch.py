@@ -158,9 +158,83 @@ def test_prefetched_collection_is_the_collection(tmp_path, with_model, shared_po
 
 
 def test_prefetch_without_a_pool_does_nothing(tmp_path):
+    """Nothing is simulated or submitted: the collection is only deferred (below)."""
     ws = pipeline.Workspace(pipeline.REPRODUCE_PRESETS["tiny"], tmp_path, progress=False)
     ws.prefetch("x", tasks=("curved",), trials=1, seed=1)
     assert ws._pending == {} and ws.submit("k", int, "1") is None and ws.take("k") is None
+    assert not (tmp_path / "datasets").exists() and list(ws._deferred) == ["x"]
+
+
+def test_collections_deferred_without_a_pool_run_together_and_are_the_collections(tmp_path, monkeypatch):
+    """Without a pool, the first collect of a prefetched collection runs every deferred one in lockstep groups
+    in this process (the same trials, bit for bit, as each collected alone: named intents, MG, a model on
+    ONNX Runtime); a group holds at most NAMED_GROUP trials; a model that would run on torch is not deferred
+    (its rounding depends on the batch)."""
+    pytest.importorskip("torch")
+    import coassist.intent.onnx_network as onnx_network
+    import coassist.sim.world as world
+
+    if not onnx_network.onnx_runtime_available():
+        pytest.skip("needs ONNX Runtime (the onnx extra)")
+    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
+    plain = pipeline.Workspace(cfg, tmp_path / "ref", progress=False)
+    folder, _ = plain.collect("D0", tasks=("curved",), trials=1, seed=1)
+    model = str(plain.train("m", [folder], init="scratch", epochs=1))
+    base = {"tasks": ("curved",), "users": (0, 1), "trials": 1, "obstacle": "large"}
+    options = {
+        "a": {**base, "seed": 7, "controller": "cooperative-arbitrated", "intent": "constant-velocity"},
+        "b": {**base, "seed": 7, "controller": "manual"},
+        "c": {**base, "seed": 7, "controller": "cooperative-arbitrated", "intent": model},
+        "d": {**base, "seed": 30, "users": (0,), "intent": "oracle"},
+    }
+    reference = {name: plain.collect(name, **o)[1] for name, o in options.items()}
+    groups = []
+    run = world.run_spec_lockstep
+    monkeypatch.setattr(
+        world, "run_spec_lockstep", lambda specs, *a, **k: groups.append(len(specs)) or run(specs, *a, **k)
+    )
+    monkeypatch.setattr(world, "NAMED_GROUP", 6)
+    ws = pipeline.Workspace(cfg, tmp_path / "ahead", progress=False)
+    for name, o in options.items():
+        ws.prefetch(name, **o)
+    assert list(ws._deferred) == ["a", "b", "c", "d"] and groups == []
+    assert not (tmp_path / "ahead" / "datasets").exists()
+    got = {"b": ws.collect("b", **options["b"])[1]}  # runs every deferred one: 2 + 2 + 2 trials, then 1
+    assert groups == [6, 1] and ws._deferred == {}
+    assert sorted(p.name for p in (tmp_path / "ahead" / "datasets").iterdir()) == ["a", "b", "c", "d"]
+    got |= {name: ws.collect(name, **options[name])[1] for name in ("a", "c", "d")}
+    assert ws._pending == {} and groups == [6, 1]
+    for name in options:
+        _same_trials(reference[name], got[name])
+    # deferred under a name, then asked for with other options: the one asked for runs, alone
+    ws.prefetch("e", **options["a"])
+    assert ws.collect("e", **options["d"])[1].trials[0].meta.seed == 30 and ws._deferred == {}
+    # where the model would run on torch, its collection is not deferred; the named ones still are
+    monkeypatch.setattr(onnx_network, "onnx_runtime_available", lambda: False)
+    for name, o in options.items():
+        ws.prefetch(name, **o)
+    assert list(ws._deferred) == ["a", "b", "d"]
+
+
+def test_a_deferred_collection_that_fails_raises_in_its_own_collect(tmp_path, monkeypatch):
+    """Without a pool, a broken model in one deferred collection does not take the others with it: the one
+    asked for is collected (alone), and the broken one raises when it is asked for, as it would alone."""
+    import coassist.intent.onnx_network as onnx_network
+
+    monkeypatch.setattr(onnx_network, "onnx_runtime_available", lambda: True)  # deferred, whatever is installed
+    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
+    ws = pipeline.Workspace(cfg, tmp_path, progress=False)
+    broken = tmp_path / "broken-model"
+    broken.mkdir()
+    (broken / "model.json").write_text("{not json")
+    options = {"tasks": ("curved",), "trials": 1, "seed": 1}
+    ws.prefetch("y", **options, intent=str(broken))
+    ws.prefetch("x", **options)
+    assert list(ws._deferred) == ["y", "x"]
+    _, x = ws.collect("x", **options)
+    assert [t.meta.seed for t in x.trials] == [1] and ws._deferred == {}
+    with pytest.raises(Exception, match="model.json|JSON|json"):
+        ws.collect("y", **options, intent=str(broken))
 
 
 def test_result_of_waits_for_the_job_or_runs_it_here(tmp_path):

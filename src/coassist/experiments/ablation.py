@@ -335,6 +335,11 @@ def _run_held_out(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dic
     """The held-out population's cells (module docstring), paired against its own MG trials."""
     cfg = ws.config
     sources = held_out_models(ws, intents)
+    # Every cell put on the pool at once (without one: deferred and run together), the same jobs as each
+    # collect's: one cell, one lockstep group, would otherwise keep one process busy while the others wait.
+    for j, obj in enumerate(OBJECTS):
+        for source, intent in sources.items():
+            ws.prefetch(f"held-out-{obj}-{source}", **_held_out_options(cfg, j, obj, ARBITRATED, intent))
     for j, obj in enumerate(OBJECTS):
         _, ds = ws.collect(f"held-out-{obj}-manual", **_held_out_options(cfg, j, obj, "manual", "nominal"))
         base = sorted(ds.trials, key=pair_key)
