@@ -35,9 +35,9 @@ def _participant(page, url: str, path: OperatorPath, received: list[str], timeou
     entered."""
     page.on("websocket", lambda ws: ws.on("framereceived", lambda payload: received.append(str(payload))))
     page.goto(url)
-    page.wait_for_function(
-        "window.coassist && window.coassist.ready && window.coassist.study", timeout=60000
-    )  # a busy machine: the worker fitting the last participant shares the cores
+    # a busy machine: the worker fitting the last participant shares the cores, and ./dev test starts these tests
+    # first, beside the other worker's heaviest (once 60 s were not enough there; alone it takes a few seconds)
+    page.wait_for_function("window.coassist && window.coassist.ready && window.coassist.study", timeout=180000)
     entered: dict = {"answers": {}, "starts": []}
     t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
