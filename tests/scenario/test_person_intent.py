@@ -132,3 +132,19 @@ def test_bad_settings_name_the_field():
     for field, value in (("kappa", 0.0), ("shifts", (0.01, -0.01)), ("shifts", ()), ("max_offset", 5.0)):
         with pytest.raises(ValueError, match=f"PersonFilterSettings.{field}"):
             PersonFilterSettings(**{field: value})
+
+
+def test_the_rows_of_every_curve_at_once_are_each_curves_own_interpolation():
+    """_Curves.along (one search over all curves) against np.interp on each curve alone, ends clipped."""
+    from coassist.scenario.person_intent import _Curves
+
+    curves = _Curves(_model(), (-0.015, 0.0, 0.015))
+    rng = np.random.default_rng(3)
+    n = rng.integers(0, len(curves.ways), 6)
+    s = rng.uniform(-0.1, 1.3, (6, 50))  # beyond both ends too: the curves are about 1.05 m long
+    got = curves.along(n, s)
+    for i, k in enumerate(n):
+        arc, pts = curves.arc[k], curves.points[k]
+        want = np.stack([np.interp(s[i], arc, pts[:, 0]), np.interp(s[i], arc, pts[:, 1])], axis=1)
+        # the stride added to the arc lengths (under 30 m here) costs at most a few ulps of it
+        np.testing.assert_allclose(got[i], want, rtol=0.0, atol=1e-12)

@@ -208,16 +208,6 @@ class _Curves:
         t = ((key - self.flat_key[j]) * self.flat_inv[j])[..., None]
         return self.flat_points[j] + t * self.flat_step[j]
 
-    def at(self, n: int, s: np.ndarray) -> np.ndarray:
-        """Points of curve n at its own arc lengths s (clipped)."""
-        G = self.points.shape[1]
-        n0 = n * G
-        arc = self.arc[n]
-        out = np.empty(np.shape(s) + (2,))
-        out[..., 0] = np.interp(s, arc, self.flat_x[n0 : n0 + G])
-        out[..., 1] = np.interp(s, arc, self.flat_y[n0 : n0 + G])
-        return out
-
 
 class PersonPathsIntent:
     """The intent source of a person model (module docstring), one trial at a time.
