@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from coassist.scenario.objects import OBJECTS
+from coassist.scenario.objects import OBJECTS, yaw_step
 
 __all__ = ["HandForce", "HandPoint"]
 
@@ -56,21 +56,18 @@ class HandPoint:
         known = OBJECTS.get(obj)
         self.dt = float(dt)
         self.active = known is not None and known.has_yaw
-        if known is not None and self.active:
-            self.rh = np.asarray(known.grasp_offset, dtype=float)
-            self.rc = np.asarray(known.center_offset, dtype=float)
-            self.m, self.k, self.c, self.inertia = known.mass, known.yaw_stiffness, known.yaw_damping, known.yaw_inertia
+        self.board = known.yaw_constants() if known is not None else None
         self.theta = 0.0
         self.rate = 0.0
 
     def __call__(self, u_h: np.ndarray, acc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(Δp, Δṗ): the hand point less the tip's, position [m] and velocity [m/s], after this tick's update."""
-        if not self.active:
+        board = self.board
+        if not self.active or board is None:
             return np.zeros(2), np.zeros(2)
-        rh, rc = self.rh, self.rc
-        tau = rh[0] * u_h[1] - rh[1] * u_h[0] - self.m * (rc[0] * acc[1] - rc[1] * acc[0])
-        acc_th = (tau - self.k * self.theta - self.c * self.rate) / self.inertia
-        self.rate += acc_th * self.dt
-        self.theta += self.rate * self.dt
-        turn = np.array([-rh[1], rh[0]])
+        # the plant's own step (coassist.sim.point_mass steps the simulated board with it)
+        self.theta, self.rate, _, _, _ = yaw_step(
+            board, self.theta, self.rate, float(u_h[0]), float(u_h[1]), float(acc[0]), float(acc[1]), self.dt
+        )
+        turn = np.array([-board.rhy, board.rhx])
         return self.theta * turn, self.rate * turn

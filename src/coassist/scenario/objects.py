@@ -46,6 +46,7 @@ saturate at ±327.67 N.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -109,6 +110,12 @@ class CarriedObject:
     @property
     def has_yaw(self) -> bool:
         return self.yaw_stiffness > 0.0
+
+    def yaw_constants(self) -> YawConstants:
+        """Its :class:`YawConstants` (I_c = 1 without a yaw mode, where nothing divides by it)."""
+        rh, rc = self.grasp_offset, self.center_offset
+        inertia = self.yaw_inertia if self.has_yaw else 1.0
+        return YawConstants(rh[0], rh[1], rc[0], rc[1], self.mass, self.yaw_stiffness, self.yaw_damping, inertia)
 
     @property
     def yaw_inertia(self) -> float:
@@ -219,3 +226,36 @@ class ForceSensor:
         fresh = np.ones(n, dtype=bool)
         fresh[1:] = idx[1:] != idx[:-1]
         return fresh
+
+
+class YawConstants(NamedTuple):
+    """A carried object's yaw constants (:meth:`CarriedObject.yaw_constants`), for :func:`yaw_step` and
+    :func:`hand_point`: floats for one object, (B,) arrays for a batch of worlds (coassist.sim.point_mass).
+
+    rhx, rhy : r_h, the hand from the cup [m]; rcx, rcy : r_c, the centre from the cup [m];
+    m : [kg]; k_th : [N·m/rad]; c_th : [N·m·s/rad]; I_c : [kg·m²] (1 without yaw, unused)."""
+
+    rhx: Any
+    rhy: Any
+    rcx: Any
+    rcy: Any
+    m: Any
+    k_th: Any
+    c_th: Any
+    I_c: Any
+
+
+def hand_point(board: YawConstants, x, y, vx, vy, th, thd):
+    """The hand point's position and velocity on a board turned by θ: (p_x, p_y, ṗ_x, ṗ_y)."""
+    return x - th * board.rhy, y + th * board.rhx, vx - thd * board.rhy, vy + thd * board.rhx
+
+
+def yaw_step(board: YawConstants, th, thd, fhx, fhy, ax_prev, ay_prev, dt: float):
+    """One period of the yaw (module docstring: I_c θ̈ + c_θ θ̇ + k_θ θ = r_h × F_h − m r_c × a, semi-implicit
+    Euler; F_h = (fhx, fhy), a the previous period's): (θ(k+1), θ̇(k+1), θ̈(k), c_x, c_y), c = −m θ̈ J r_c."""
+    m = board.m
+    tau = board.rhx * fhy - board.rhy * fhx - m * (board.rcx * ay_prev - board.rcy * ax_prev)
+    thdd = (tau - board.k_th * th - board.c_th * thd) / board.I_c
+    thd = thd + thdd * dt
+    th = th + thd * dt
+    return th, thd, thdd, m * thdd * board.rcy, -m * thdd * board.rcx

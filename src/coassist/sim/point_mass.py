@@ -30,50 +30,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any, NamedTuple
 
 import numpy as np
 
 from coassist.model.impedance import ImpedanceModel
 from coassist.model.plant import PointMassPlant, plant_step
 from coassist.runtime.world import Command, RobotState
-from coassist.scenario.objects import CarriedObject, ForceSensor
+from coassist.scenario.objects import CarriedObject, ForceSensor, YawConstants, hand_point, yaw_step
 from coassist.scenario.operator import OperatorArm, OperatorArmBatch, OperatorProfile, intent_trajectory, motor_noise
 from coassist.scenario.seeds import trial_rngs
 from coassist.scenario.tasks import Task
 
 __all__ = ["PointMassWorld", "PointMassWorldBatch"]
-
-
-class _Board(NamedTuple):
-    """The carried object's constants (module docstring, step 2): floats for one world, (B,) arrays for a batch.
-
-    rhx, rhy : r_h, the hand from the cup [m]; rcx, rcy : r_c, the centre from the cup [m];
-    m : [kg]; k_th : [N·m/rad]; c_th : [N·m·s/rad]; I_c : [kg·m²] (1 without yaw, unused)."""
-
-    rhx: Any
-    rhy: Any
-    rcx: Any
-    rcy: Any
-    m: Any
-    k_th: Any
-    c_th: Any
-    I_c: Any
-
-
-def _hand_point(board: _Board, x, y, vx, vy, th, thd):
-    """The hand point's position and velocity on a board turned by θ: (p_x, p_y, ṗ_x, ṗ_y)."""
-    return x - th * board.rhy, y + th * board.rhx, vx - thd * board.rhy, vy + thd * board.rhx
-
-
-def _board_yaw(board: _Board, th, thd, fhx, fhy, ax_prev, ay_prev, dt: float):
-    """Step 2 of the module docstring: (θ(k+1), θ̇(k+1), θ̈(k), c_x, c_y), c = −m θ̈ J r_c."""
-    m = board.m
-    tau = board.rhx * fhy - board.rhy * fhx - m * (board.rcx * ay_prev - board.rcy * ax_prev)
-    thdd = (tau - board.k_th * th - board.c_th * thd) / board.I_c
-    thd = thd + thdd * dt
-    th = th + thd * dt
-    return th, thd, thdd, m * thdd * board.rcy, -m * thdd * board.rcx
 
 
 def _net_force(fh, u, noise, bias, c):
@@ -134,17 +102,7 @@ class PointMassWorld:
         #: The plant (M + m) a + D v = f, per axis (coassist.model.plant).
         self.plant = PointMassPlant.free(model, obj.mass)
         self._yaw = obj.has_yaw
-        rh, rc = obj.grasp_offset, obj.center_offset
-        self._board = _Board(
-            rh[0],
-            rh[1],
-            rc[0],
-            rc[1],
-            obj.mass,
-            obj.yaw_stiffness,
-            obj.yaw_damping,
-            obj.yaw_inertia if obj.has_yaw else 1.0,
-        )
+        self._board = obj.yaw_constants()
         #: The operator's arm (called once per period by :meth:`apply`).
         self.arm = OperatorArm(operator, self.intent.positions, dt, noise_h)
         sat = self._sat
@@ -199,7 +157,7 @@ class PointMassWorld:
         board = self._board
         # 1. the operator (the hand point moves with the board's yaw)
         if self._yaw:
-            px, py, pvx, pvy = _hand_point(board, x, y, vx, vy, th, thd)
+            px, py, pvx, pvy = hand_point(board, x, y, vx, vy, th, thd)
         else:
             px, py, pvx, pvy = x, y, vx, vy
         fhx, fhy = self.arm.force(k, px, py, pvx, pvy)
@@ -210,7 +168,7 @@ class PointMassWorld:
         bres_x, bres_y = self._bres
         cx = cy = 0.0
         if self._yaw:
-            th, thd, thdd, cx, cy = _board_yaw(board, th, thd, fhx, fhy, self._ax_prev, self._ay_prev, dt)
+            th, thd, thdd, cx, cy = yaw_step(board, th, thd, fhx, fhy, self._ax_prev, self._ay_prev, dt)
             self._thdd, self._thd, self._th = thdd, thd, th
         # 3. the plant
         fx = _net_force(fhx, urx, nsx, bres_x, cx)
@@ -294,7 +252,7 @@ class PointMassWorldBatch:
         plants = [w.plant for w in worlds]
         self._a_xv, self._a_vv = f([p.a_xv for p in plants]), f([p.a_vv for p in plants])
         self._b_x, self._b_v = f([p.b_x for p in plants]), f([p.b_v for p in plants])
-        self._board = _Board(*(f(column) for column in zip(*(w._board for w in worlds))))
+        self._board = YawConstants(*(f(column) for column in zip(*(w._board for w in worlds))))
         self._yaw = np.array([bool(w._yaw) for w in worlds])
         self._any_yaw = bool(self._yaw.any())
         self._th = f([w._th for w in worlds])
@@ -319,10 +277,10 @@ class PointMassWorldBatch:
         th, thd = self._th[rows], self._thd[rows]
         yaw = self._yaw[rows]
         # the board's columns only where some run yaws (without yaw only its mass is read)
-        board = _Board(*(column[rows] for column in self._board)) if self._any_yaw else None
+        board = YawConstants(*(column[rows] for column in self._board)) if self._any_yaw else None
         # 1. the operator (the hand point moves with the board's yaw)
         if board is not None:
-            px, py, pvx, pvy = _hand_point(board, x[:, 0], x[:, 1], v[:, 0], v[:, 1], th, thd)
+            px, py, pvx, pvy = hand_point(board, x[:, 0], x[:, 1], v[:, 0], v[:, 1], th, thd)
             p = np.where(yaw[:, None], np.stack([px, py], axis=1), x)
             pv = np.where(yaw[:, None], np.stack([pvx, pvy], axis=1), v)
         else:
@@ -335,9 +293,7 @@ class PointMassWorldBatch:
         c = np.zeros_like(x)
         if board is not None and yaw.any():
             a_prev = self._a_prev[rows]
-            th_new, thd_new, thdd, cx, cy = _board_yaw(
-                board, th, thd, fh[:, 0], fh[:, 1], a_prev[:, 0], a_prev[:, 1], dt
-            )
+            th_new, thd_new, thdd, cx, cy = yaw_step(board, th, thd, fh[:, 0], fh[:, 1], a_prev[:, 0], a_prev[:, 1], dt)
             self._thd[rows] = np.where(yaw, thd_new, thd)
             self._th[rows] = np.where(yaw, th_new, th)
             c = np.where(yaw[:, None], np.stack([cx, cy], axis=1), 0.0)
