@@ -47,7 +47,15 @@ from coassist.scenario.tasks import task_for_seed
 from coassist.study.calibration import CalibrationFailed, FitJob, fit_job, model_hashes, person_model_folder
 from coassist.study.protocols import CALIBRATION_BLOCK, calibration_steps, participant_steps
 from coassist.study.questionnaires import form_for
-from coassist.study.store import ParticipantFolder, StudyFolder, StudyFolderError, step_key, trial_record, utc_now
+from coassist.study.store import (
+    ParticipantFolder,
+    StudyFolder,
+    StudyFolderError,
+    file_sha256,
+    step_key,
+    trial_record,
+    utc_now,
+)
 from coassist.study.training import BackgroundTraining, TrainJob, model_ready, train_command
 
 __all__ = ["ParticipantRun", "simulated_ids"]
@@ -343,7 +351,7 @@ class ParticipantRun:
         more: dict[str, Any] = {"model": model_name, "waited_for_model_s": round(waited, 3)}
         if model_sha is not None:
             more["model_sha256"] = model_sha
-        rec = trial_record(k, step, file, trial.meta.to_dict(), **more)
+        rec = trial_record(k, step, file, trial.meta.to_dict(), sha256=file_sha256(folder / file), **more)
         return {key: v for key, v in rec.items() if key not in ("step", "kind", "key")}
 
     def _intent(self, ref: str, task: str) -> tuple[str, str | None, str | None]:

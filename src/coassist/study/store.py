@@ -38,9 +38,10 @@ The folder is evidence, cross-checked on every run and report: the participant t
 against the participants' folders (:meth:`StudyFolder.check_table`), each participant's
 progress log against their order and their blocks' manifests
 (:meth:`ParticipantFolder.audit`). A trial on disk the log does not know, a trial the log
-records that its block's manifest or folder lost, a participant's folder the table does not
-list: one :class:`StudyFolderError` line naming the file and what to do, never a silent
-re-run. No JSON file gets a NaN or an infinity (:func:`finite_json`: null).
+records that its block's manifest or folder lost, a trial file whose bytes are not those its
+line recorded (its SHA-256: a flipped byte in a parquet column can still read as numbers), a
+participant's folder the table does not list: one :class:`StudyFolderError` line naming the
+file and what to do, never a silent re-run or a report on changed data. No JSON file gets a NaN or an infinity (:func:`finite_json`: null).
 """
 
 from __future__ import annotations
@@ -583,10 +584,17 @@ class ParticipantFolder:
                 and done[k]["kind"] == "trial"
                 and (done[k].get("block"), done[k].get("file")) == (block, file)
             ):
-                if not (self.block(block) / file).is_file():
+                path = self.block(block) / file
+                if not path.is_file():
                     raise StudyFolderError(
-                        f"{self.block(block) / file}: missing (step {k}, listed in {MANIFEST_NAME} and "
+                        f"{path}: missing (step {k}, listed in {MANIFEST_NAME} and "
                         f"{PROGRESS_NAME}); {_RESTORE} (nothing is run again)"
+                    )
+                recorded_sha = done[k].get("sha256")  # absent in lines written before the digest was kept
+                if recorded_sha is not None and file_sha256(path) != recorded_sha:
+                    raise StudyFolderError(
+                        f"{path}: changed after it was recorded (step {k}: sha256 {str(recorded_sha)[:12]} in "
+                        f"{PROGRESS_NAME}, {file_sha256(path)[:12]} on disk); {_RESTORE} (nothing is run again)"
                     )
                 continue
             if k == len(done) and k == max(on_disk) and k < len(steps) and steps[k]["kind"] == "trial":
@@ -642,13 +650,23 @@ class ParticipantFolder:
             return 0
         for entry in manifest["trials"]:
             if entry.get("meta", {}).get("extra", {}).get("study_step") == k:
-                self.append(trial_record(k, step, entry["file"], entry["meta"], recovered=True))
+                file = entry["file"]
+                sha = file_sha256(self.block(step["block"]) / file)
+                self.append(trial_record(k, step, file, entry["meta"], sha256=sha, recovered=True))
                 return 1
         return 0
 
 
-def trial_record(k: int, step: Mapping[str, Any], file: str, meta: Mapping[str, Any], **more: Any) -> dict[str, Any]:
-    """The progress line of trial step ``k`` written as ``file`` of its block."""
+def file_sha256(path: Path) -> str:
+    """SHA-256 of a file's bytes (hex): what a trial's progress line records of its parquet file."""
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def trial_record(
+    k: int, step: Mapping[str, Any], file: str, meta: Mapping[str, Any], *, sha256: str, **more: Any
+) -> dict[str, Any]:
+    """The progress line of trial step ``k`` written as ``file`` of its block, whose bytes hash to ``sha256``
+    (checked by :meth:`ParticipantFolder.audit` on every run and report)."""
     extra = meta.get("extra", {})
     return {
         "step": k,
@@ -656,6 +674,7 @@ def trial_record(k: int, step: Mapping[str, Any], file: str, meta: Mapping[str, 
         "key": step_key(step),
         "block": step["block"],
         "file": file,
+        "sha256": sha256,
         "model_id": meta.get("model_id"),
         "ended": extra.get("ended"),
         "t": utc_now(),
