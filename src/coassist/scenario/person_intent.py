@@ -29,6 +29,10 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    them; while undecided and the ways' rows part by more than ``divergence`` over the horizon, the
    rows are the present estimate's, q + ``hedge_velocity``·i·dt·v — neither way, and never the plan.
    The two cross-fade over ``blend_time``.
+5. **smoothing**: the rows are low-passed over time with a time constant ``row_smoothing`` and
+   advanced by the filter's lag (:class:`~coassist.scenario.row_smoothing.RowSmoothing`): the
+   tick-to-tick noise of the phase, the lead and the mixture leaves the robot's effort, and with it
+   the tool's jerk.
 
 Where the tool is far from every curve (``max_offset``: another task, a person who left the plan
 for good) or the model knows no path for the trial's plan, the rows are the present estimate's
@@ -48,6 +52,7 @@ from coassist.interfaces import TrialContext
 from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate
 from coassist.scenario.hand_force import HandForce, HandPoint
 from coassist.scenario.path_model import PathFrame, PathModel
+from coassist.scenario.row_smoothing import RowSmoothing
 
 __all__ = ["PersonFilterSettings", "PersonPathsIntent"]
 
@@ -76,6 +81,8 @@ class PersonFilterSettings:
         Ĉ = C − K̂τ), so q̂ is where the person wanted the tool τ ago; the lead brings it to now.
     object_yaw : estimate the hand point on an object that yaws on its mount (the board:
         :class:`~coassist.scenario.hand_force.HandPoint`) instead of taking the tip for it.
+    row_smoothing : [s] the time constant of the rows' low-pass over time, its lag advanced away
+        (:class:`~coassist.scenario.row_smoothing.RowSmoothing`; 0: the rows as computed).
     """
 
     kappa: float = 0.2
@@ -99,6 +106,7 @@ class PersonFilterSettings:
     side_rule: str = "offset"
     reaction_lead: float = 0.0
     object_yaw: bool = False
+    row_smoothing: float = 0.0
 
     def __post_init__(self) -> None:
         for name, lo, hi, open_lo in (
@@ -120,6 +128,7 @@ class PersonFilterSettings:
             ("shared_gap", 0.0, 0.05, False),
             ("dead_zone", 0.0, 0.05, False),
             ("reaction_lead", 0.0, 0.3, False),
+            ("row_smoothing", 0.0, 1.0, False),
         ):
             object.__setattr__(
                 self, name, check_real(getattr(self, name), f"PersonFilterSettings.{name}", lo, hi, open_lo=open_lo)
@@ -268,6 +277,7 @@ class PersonPathsIntent:
         arm = self.arms.get(context.user, self.default_arm)
         self._K, self._C = arm.stiffness, arm.damping
         self._lead_time = st.reaction_lead
+        self._smoothing = RowSmoothing(self.dt, st.row_smoothing, self.horizon)
         model = self.paths.get(context.user, self.default_paths)
         self._hyp: _Curves | None = None
         if model is not None and context.path is not None:
@@ -319,7 +329,7 @@ class PersonPathsIntent:
         present = p + (u_h + self._C * v) / self._K + self._lead_time * v
         if self._hyp is None:
             return present + self._present_steps * v
-        return self._filter(self._hyp, p, v, u_h, present)
+        return self._smoothing(self._filter(self._hyp, p, v, u_h, present))
 
     def _filter(self, hyp: _Curves, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray) -> np.ndarray:
         st = self.settings
