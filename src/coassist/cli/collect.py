@@ -101,11 +101,12 @@ def collect(
     """
     from coassist._io import OutputBusyError
     from coassist.config import CONTROL_PRESETS
-    from coassist.control.presets import CONTROLLER_KINDS
-    from coassist.scenario import OBJECTS, OBSTACLES, POPULATIONS, TASK_KINDS
+    from coassist.control.presets import CONTROLLERS
+    from coassist.scenario import OBJECTS, OBSTACLES, POPULATIONS
+    from coassist.scenario.tasks import TASKS
     from coassist.sim.collect import collect_dataset
 
-    choose(controller, CONTROLLER_KINDS, "--controller", "controller")
+    choose(controller, CONTROLLERS, "--controller", "controller")
     choose(population, POPULATIONS, "--population", "population")
     choose(obstacle, OBSTACLES, "--obstacle", "obstacle")
     choose(network, NETWORK_BACKENDS, "--network", "network backend")
@@ -119,7 +120,7 @@ def collect(
         if value is not None and value < minimum:
             fail(f"{option} must be >= {minimum}, got {value}", 2)
     user_list = int_list(users, "--users")
-    task_list = name_list(tasks, "--tasks", TASK_KINDS, "task")
+    task_list = name_list(tasks, "--tasks", tuple(TASKS), "task")
     object_list = name_list(objects, "--objects", tuple(OBJECTS), "object")
     try:
         check_intent(intent)

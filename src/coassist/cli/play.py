@@ -97,17 +97,17 @@ def play(
     live = open_live(foxglove, page_port=port)  # stopped with the process when a line below fails
     try:
         from coassist.config import CONTROL_PRESETS
-        from coassist.control.presets import CONTROLLER_KINDS
-        from coassist.scenario import TASK_KINDS
+        from coassist.control.presets import CONTROLLERS
+        from coassist.scenario.tasks import TASKS
 
         lookup(CONTROL_PRESETS, preset, "--preset")
         config = PlayConfig(
             user=user,
             out=out,
-            controllers=tuple(name_list(controller, "--controller", tuple(CONTROLLER_KINDS), "controller")),
+            controllers=tuple(name_list(controller, "--controller", tuple(CONTROLLERS), "controller")),
             intent="nominal" if drive and _simulation_only(intent) else intent,
             preset=preset,
-            tasks=tuple(name_list(tasks, "--tasks", TASK_KINDS, "task")),
+            tasks=tuple(name_list(tasks, "--tasks", tuple(TASKS), "task")),
             seed=seed,
             motion_time=motion_time,
             mcap=mcap,

@@ -89,13 +89,13 @@ def drive(
 ) -> None:
     """Run the assistive controller, IMP or MG on an arm (UR5, Panda): in MuJoCo, or on a real one."""
     from coassist.config import CONTROL_PRESETS
-    from coassist.control.presets import CONTROLLER_KINDS
+    from coassist.control.presets import CONTROLLERS
     from coassist.robot.drive import DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.runtime.safety import SafetyLimits
 
     choose(world, WORLDS, "--world", "world")
-    choose(controller, CONTROLLER_KINDS, "--controller", "controller")
+    choose(controller, CONTROLLERS, "--controller", "controller")
     lookup(CONTROL_PRESETS, preset, "--preset")
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)

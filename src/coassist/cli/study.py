@@ -114,7 +114,7 @@ def study_run(
 ) -> None:
     """Run a participant's steps in their recorded order (continuing where they stopped)."""
     from coassist._io import OutputBusyError
-    from coassist.study.plan import PlanError
+    from coassist.study.plan import PlanError, is_real_arm
     from coassist.study.runner import ParticipantRun, simulated_ids
     from coassist.study.store import StudyFolder, StudyFolderError
 
@@ -138,7 +138,7 @@ def study_run(
             fail(f"the page needs the web extra ({exc.name} missing): pip install 'coassist[web]'")
         if token is None and not is_loopback(host):
             token = new_token()
-    confirm = confirm_move(yes, "the emergency stop") if plan.world in ("ur", "franka") else None
+    confirm = confirm_move(yes, "the emergency stop") if is_real_arm(plan.world) else None
     live = open_live(foxglove, page_port=port if use_page else None)  # stopped with the process on a failure
     for pid in ids:
         try:
