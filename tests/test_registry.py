@@ -36,6 +36,29 @@ def test_registry_is_read_only_and_validated():
         Registry("widget", {"": 1})
 
 
+def test_register_adds_after_the_declared_and_unregister_removes_only_what_was_added():
+    r = Registry("widget", {"alpha": 1, "beta": 2}, entry_type=int)
+    r.register("gamma", 3)
+    assert list(r) == ["alpha", "beta", "gamma"] and r["gamma"] == 3 and len(r) == 3
+    with pytest.raises(ValueError, match=r"^widget 'gamma' is already registered$"):
+        r.register("gamma", 4)  # never replaced
+    assert r["gamma"] == 3
+    with pytest.raises(ValueError, match=r"^widget 'beta' is already registered$"):
+        r.register("beta", 5)
+    with pytest.raises(ValueError, match=r"^widget 'delta' must be a int, got str$"):
+        r.register("delta", "4")
+    with pytest.raises(ValueError, match="widget names must be non-empty strings"):
+        r.register("", 4)
+    with pytest.raises(ValueError, match="'alpha' is declared with the registry"):
+        r.unregister("alpha")
+    r.unregister("gamma")
+    assert list(r) == ["alpha", "beta"] and "gamma" not in r
+    with pytest.raises(UnknownNameError, match="no such widget"):
+        r.unregister("gamma")
+    with pytest.raises(ValueError, match=r"^widget 'x' must be a int, got float$"):
+        Registry("widget", {"x": 1.0}, entry_type=int)  # the declared entries are checked too
+
+
 def test_the_three_preset_kinds_are_registries_with_their_own_names():
     from coassist.config import CONTROL_PRESETS, DECIMETRE_SCALE, THESIS_EVALUATION
     from coassist.control.presets import get_preset

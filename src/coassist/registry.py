@@ -21,7 +21,6 @@ from __future__ import annotations
 import difflib
 import importlib
 from collections.abc import Iterable, Iterator, Mapping
-from types import MappingProxyType
 from typing import Any, Generic, TypeVar
 
 from coassist.errors import CoassistError
@@ -59,20 +58,51 @@ class UnknownNameError(CoassistError, KeyError, ValueError):
 
 
 class Registry(Mapping[str, T], Generic[T]):
-    """A read-only mapping from names to entries of one kind (``what``, e.g. "control preset").
+    """A mapping from names to entries of one kind (``what``, e.g. "control preset"), read-only
+    but for :meth:`register`.
 
     Entries keep their declaration order. ``registry[name]`` and :meth:`lookup` raise
-    :class:`UnknownNameError` for an unknown name.
+    :class:`UnknownNameError` for an unknown name. ``entry_type``: the class every entry is
+    (checked for the declared entries and for each one registered later; None: not checked).
     """
 
-    def __init__(self, what: str, entries: Mapping[str, T]) -> None:
+    def __init__(self, what: str, entries: Mapping[str, T], *, entry_type: type | None = None) -> None:
         if not isinstance(what, str) or not what:
             raise ValueError(f"registry kind must be a non-empty string, got {what!r}")
-        for name in entries:
-            if not isinstance(name, str) or not name:
-                raise ValueError(f"{what} names must be non-empty strings, got {name!r}")
         self.what = what
-        self._entries: Mapping[str, T] = MappingProxyType(dict(entries))
+        self.entry_type = entry_type
+        for name, entry in entries.items():
+            self._check(name, entry)
+        self._entries: dict[str, T] = dict(entries)
+        self._declared = frozenset(self._entries)
+
+    def _check(self, name: object, entry: object) -> None:
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"{self.what} names must be non-empty strings, got {name!r}")
+        if self.entry_type is not None and not isinstance(entry, self.entry_type):
+            raise ValueError(f"{self.what} {name!r} must be a {self.entry_type.__name__}, got {type(entry).__name__}")
+
+    def register(self, name: str, entry: T) -> None:
+        """Add ``entry`` as ``name`` (after the declared ones) from any module: a plug-in's, a test's.
+
+        Every consumer that reads the registry sees it from then on, in this process; a worker
+        process sees it only if it imports the module that registers it (the simulator's
+        workers are spawned: run such trials with ``workers=1``, or register in an imported
+        module). ValueError for a name already taken (an entry is never replaced) and for an
+        entry not of ``entry_type``.
+        """
+        self._check(name, entry)
+        if name in self._entries:
+            raise ValueError(f"{self.what} {name!r} is already registered")
+        self._entries[name] = entry
+
+    def unregister(self, name: str) -> None:
+        """Remove an entry :meth:`register` added; the declared entries stay (ValueError)."""
+        if name in self._declared:
+            raise ValueError(f"{self.what} {name!r} is declared with the registry; only registered ones are removed")
+        if name not in self._entries:
+            raise UnknownNameError(unknown_name_message(str(name), self._entries, self.what), str(name))
+        del self._entries[name]
 
     def lookup(self, name: str) -> T:
         """The entry called ``name``; :class:`UnknownNameError` naming the closest one if there is none."""

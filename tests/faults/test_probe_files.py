@@ -308,13 +308,13 @@ def test_killing_collect_leaves_no_worker_running(tmp_path, sig):
 def test_the_collect_summary_reads_one_trial_at_a_time(tmp_path):
     """The closing f_RMS line re-read the whole dataset (606 MB for 60 trials): its peak
     memory must not grow with the number of trials."""
-    from coassist.cli import _print_forces
+    from coassist.cli.collect import print_forces
 
     def peak(n: int) -> int:
         folder = write_dataset([_trial(n=20_000, seed=i) for i in range(n)], tmp_path / f"D{n}", dataset_id=f"D{n}")
         tracemalloc.start()
         try:
-            _print_forces(folder)
+            print_forces(folder)
             return tracemalloc.get_traced_memory()[1]
         finally:
             tracemalloc.stop()

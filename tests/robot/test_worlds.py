@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from coassist.cli import app
-from coassist.registry import Registry, load_entry_point
+from coassist.registry import load_entry_point
 from coassist.robot.arms import ARMS
 from coassist.robot.worlds import (
     WORLDS,
@@ -164,7 +164,6 @@ def test_a_world_registered_by_one_line_drives_as_the_built_in_one(tmp_path, mon
     drive runs it, records it by name, and (built like the mujoco world) it gives the mujoco trial."""
     pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra")
     from coassist.robot import drive as drive_module
-    from coassist.robot import worlds as worlds_module
 
     (tmp_path / "coassist_test_my_world.py").write_text(
         "from coassist.robot.mujoco_world import MujocoUR5World\n\n"
@@ -184,11 +183,12 @@ def test_a_world_registered_by_one_line_drives_as_the_built_in_one(tmp_path, mon
             source="mujoco",
         )
     }
-    extended = Registry("world", {**WORLDS, **line})
-    monkeypatch.setattr(worlds_module, "WORLDS", extended)
-    monkeypatch.setattr(drive_module, "WORLDS", extended)  # drive's own name for the same table
-    config = drive_module.DriveConfig(world="my-arm", controller="cooperative", intent="oracle", time_limit=0.6)
-    mine = drive_module.drive(config)
+    WORLDS.register(*line.popitem())  # the one line, from this module: the drive reads the same table
+    try:
+        config = drive_module.DriveConfig(world="my-arm", controller="cooperative", intent="oracle", time_limit=0.6)
+        mine = drive_module.drive(config)
+    finally:
+        WORLDS.unregister("my-arm")
     builtin = drive_module.drive(
         drive_module.DriveConfig(world="mujoco", controller="cooperative", intent="oracle", time_limit=0.6)
     )

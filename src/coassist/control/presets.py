@@ -17,12 +17,20 @@ kind                        controller (the thesis' name)
                             person's arm (:data:`PROBE`, :mod:`coassist.control.probe`)
 ==========================  ==============================================================
 
+Each kind is one entry of :data:`CONTROLLERS` (the function that builds it from the plant and
+the preset, and a summary); a new kind is one function and one line there, and
+:func:`make_controller` and every consumer of the kinds read the registry.
+
 Every world and command names its controller by kind: a simulated batch
 (``TrialSpec.controller``, ``coassist collect``), ``coassist drive`` / ``ros2``
 (``DriveConfig.controller``) and ``coassist play`` and its page (``PlayConfig.controllers``).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -33,11 +41,13 @@ from coassist.control.deceleration_damping import DampingParameters, Deceleratio
 from coassist.control.game import cooperative_game
 from coassist.control.probe import ProbedGuidance, ProbeParameters
 from coassist.model.impedance import ImpedanceModel
-from coassist.registry import UnknownNameError
+from coassist.registry import Registry, UnknownNameError
 
 __all__ = [
     "ARBITRATION",
+    "CONTROLLERS",
     "CONTROLLER_KINDS",
+    "ControllerEntry",
     "DECELERATION_DAMPING",
     "FORMER_NAMES",
     "IMPEDANCE_STIFFNESS",
@@ -47,16 +57,6 @@ __all__ = [
     "plant_model",
 ]
 
-#: Controller kinds. "cooperative-arbitrated": the cooperative game with α set every tick
-#: by the law :data:`ARBITRATION`.
-CONTROLLER_KINDS = (
-    "cooperative",
-    "impedance",
-    "manual",
-    "cooperative-arbitrated",
-    "cooperative-damped",
-    "manual-probe",
-)
 #: The names drive and play used before they took the kinds (old session files, muscle memory):
 #: read in play's recorded sessions, and named in the command line's error for an old name.
 FORMER_NAMES = {
@@ -95,21 +95,77 @@ def plant_model(preset: ControlPreset) -> ImpedanceModel:
     return ImpedanceModel(np.diag(imp.M), np.diag(imp.D), np.zeros((imp.n_dof, imp.n_dof)), imp.dt)
 
 
+@dataclass(frozen=True)
+class ControllerEntry:
+    """One controller kind of :data:`CONTROLLERS`.
+
+    build : ``build(model, preset)`` → the controller, on the preset's free plant ``model``
+        (:func:`plant_model`: M a + D v = u) with the preset's game, effort limit and rate.
+    summary : what it is, a phrase (the thesis' name where it has one).
+    """
+
+    build: Callable[[ImpedanceModel, ControlPreset], Any]
+    summary: str
+
+    def __post_init__(self) -> None:
+        if not callable(self.build):
+            raise ValueError(
+                f"ControllerEntry.build must be callable (model, preset) -> controller, got {self.build!r}"
+            )
+        if not isinstance(self.summary, str) or not self.summary:
+            raise ValueError(f"ControllerEntry.summary must be a non-empty string, got {self.summary!r}")
+
+
+def _cooperative(model: ImpedanceModel, preset: ControlPreset) -> AssistiveController:
+    return AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
+
+
+def _cooperative_arbitrated(model: ImpedanceModel, preset: ControlPreset) -> ArbitratedController:
+    return ArbitratedController(_cooperative(model, preset), ARBITRATION)
+
+
+def _cooperative_damped(model: ImpedanceModel, preset: ControlPreset) -> DecelerationDamping:
+    return DecelerationDamping(_cooperative_arbitrated(model, preset), DECELERATION_DAMPING)
+
+
+def _impedance(model: ImpedanceModel, preset: ControlPreset) -> ImpedanceControl:
+    return ImpedanceControl(model, IMPEDANCE_STIFFNESS * np.eye(model.n_dof), effort_limit=preset.effort_limit)
+
+
+def _manual(model: ImpedanceModel, preset: ControlPreset) -> ManualGuidance:
+    return ManualGuidance(model)
+
+
+def _manual_probe(model: ImpedanceModel, preset: ControlPreset) -> ProbedGuidance:
+    return ProbedGuidance(model, PROBE)
+
+
+#: The controller kinds (module docstring), in the order the help lists them; what
+#: :func:`make_controller` builds and every world's controller option accepts.
+CONTROLLERS: Registry[ControllerEntry] = Registry(
+    "controller",
+    {
+        "cooperative": ControllerEntry(_cooperative, "the assistive controller: the cooperative game"),
+        "impedance": ControllerEntry(_impedance, "IMP, impedance control toward the plan"),
+        "manual": ControllerEntry(_manual, "MG, manual guidance"),
+        "cooperative-arbitrated": ControllerEntry(
+            _cooperative_arbitrated, "the cooperative game with α set every tick by the target law"
+        ),
+        "cooperative-damped": ControllerEntry(
+            _cooperative_damped, "the arbitrated cooperative game, damped while the tool slows"
+        ),
+        "manual-probe": ControllerEntry(_manual_probe, "MG plus the calibration probe"),
+    },
+    entry_type=ControllerEntry,
+)
+#: Their names. "cooperative-arbitrated": the cooperative game with α set every tick by the law
+#: :data:`ARBITRATION`.
+CONTROLLER_KINDS: tuple[str, ...] = tuple(CONTROLLERS)
+
+
 def make_controller(kind: str, preset: ControlPreset):
-    """A controller of ``kind`` (one of :data:`CONTROLLER_KINDS`) built from ``preset``."""
+    """A controller of ``kind`` (one of :data:`CONTROLLERS`) built from ``preset``."""
     model = plant_model(preset)
-    if kind == "cooperative":
-        return AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
-    if kind == "cooperative-arbitrated":
-        assistive = AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
-        return ArbitratedController(assistive, ARBITRATION)
-    if kind == "cooperative-damped":
-        assistive = AssistiveController(cooperative_game(model, preset.game), effort_limit=preset.effort_limit)
-        return DecelerationDamping(ArbitratedController(assistive, ARBITRATION), DECELERATION_DAMPING)
-    if kind == "impedance":
-        return ImpedanceControl(model, IMPEDANCE_STIFFNESS * np.eye(model.n_dof), effort_limit=preset.effort_limit)
-    if kind == "manual":
-        return ManualGuidance(model)
-    if kind == "manual-probe":
-        return ProbedGuidance(model, PROBE)
-    raise ValueError(f"controller must be one of {CONTROLLER_KINDS}, got {kind!r}")
+    if kind not in CONTROLLERS:
+        raise ValueError(f"controller must be one of {tuple(CONTROLLERS)}, got {kind!r}")
+    return CONTROLLERS[kind].build(model, preset)

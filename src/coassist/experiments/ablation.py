@@ -21,7 +21,9 @@ and the MuJoCo UR5 (``coassist drive``'s world, the arbitrated controller, the s
 - ``person``: the person model learnt from each operator's own probe trials, told no obstacle,
   no family and no label, the arm measured
   (:func:`~coassist.experiments.source_training.calibrate_person`);
-- ``oracle``: the operator's true intent itself, the best any predictor could do.
+- ``oracle``: the operator's true intent itself, the best any predictor could do;
+- then every source registered with ``ablation=True`` in
+  :data:`~coassist.scenario.intent_registry.INTENT_SOURCES` (:func:`registered_sources`; none by default).
 
 Every learned source is trained from scratch on the same datasets by the same protocol; only
 the label differs, and the ridge's model class. Each LSTM source is trained ``source_seeds``
@@ -113,9 +115,16 @@ BOOTSTRAP = 2000
 SIDES = {1: "left", -1: "right"}
 
 
+def registered_sources() -> tuple[str, ...]:
+    """The sources of :data:`~coassist.scenario.intent_registry.INTENT_SOURCES` whose entry asks for the
+    ablation (``ablation=True``) besides :data:`SOURCES`, in the registry's order (read when called)."""
+    return tuple(n for n, e in INTENT_SOURCES.items() if e.ablation and n not in SOURCES)
+
+
 def run_sources(cfg) -> tuple[str, ...]:
-    """This run's sources, in the tables' order: the named ones, ``paths`` and its learned ones."""
-    return tuple(s for s in SOURCES if s not in LEARNED or s in cfg.learned_sources)
+    """This run's sources, in the tables' order: the named ones, ``paths`` and its learned ones, then
+    the :func:`registered_sources`."""
+    return tuple(s for s in SOURCES if s not in LEARNED or s in cfg.learned_sources) + registered_sources()
 
 
 def mujoco_sources(cfg) -> tuple[str, ...]:

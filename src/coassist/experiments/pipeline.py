@@ -328,9 +328,9 @@ def _may_defer(specs) -> bool:
     """Whether a collection's trials are the same bit for bit in any lockstep grouping: named intents
     and calibrated sources (no network), or a model whose network runs on ONNX Runtime (batch-invariant);
     not one on torch (:meth:`Workspace.prefetch`)."""
-    from coassist.scenario.intent_registry import NAMED_INTENTS
+    from coassist.scenario.intent_registry import INTENT_SOURCES
 
-    models = [s for s in specs if s.intent not in NAMED_INTENTS and (Path(s.intent) / "model.json").is_file()]
+    models = [s for s in specs if s.intent not in INTENT_SOURCES and (Path(s.intent) / "model.json").is_file()]
     if not models:
         return True
     from coassist.intent.onnx_network import onnx_runtime_available

@@ -41,7 +41,7 @@ import numpy as np
 
 from coassist._checks import check_int, check_positive_scalar
 from coassist.config import APPLICATION_PRESET
-from coassist.control.presets import CONTROLLER_KINDS, FORMER_NAMES, get_preset, make_controller
+from coassist.control.presets import CONTROLLERS, FORMER_NAMES, get_preset, make_controller
 from coassist.data import Trial, append_to_dataset, write_dataset
 from coassist.data.store import MANIFEST_NAME, manifest_files, read_dataset
 from coassist.interfaces import FEATURES, fault_names
@@ -62,7 +62,7 @@ from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.wrench import WrenchPipeline
 from coassist.scenario.assistance import DEFAULT_INTENT, check_person
 from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source
-from coassist.scenario.tasks import TASK_KINDS, Task, nominal_path, task_for_seed
+from coassist.scenario.tasks import TASK_KINDS, TASKS, Task, nominal_path, task_for_seed
 
 __all__ = ["PlayConfig", "PlaySession", "TrialResult", "view_bounds"]
 
@@ -106,7 +106,7 @@ class PlayConfig:
 
     user : the person's id: letters, digits, ``-`` and ``_``, at most 32 (it names the folder).
     out : the parent folder; the session lives in ``out/user``.
-    controllers : the controllers the page offers (:data:`coassist.control.presets.CONTROLLER_KINDS`).
+    controllers : the controllers the page offers (:data:`coassist.control.presets.CONTROLLERS`).
     intent : a source a person's run can use (:data:`~coassist.scenario.intent_registry.INTENT_SOURCES`
         but the simulation-only oracle), or a folder (a person model written by ``coassist calibrate``,
         whose calibration of ``user`` it must hold; a model written by ``coassist train``); default
@@ -148,9 +148,9 @@ class PlayConfig:
             )
         object.__setattr__(self, "out", Path(self.out))
         ctrl = tuple(self.controllers)
-        if not ctrl or len(set(ctrl)) != len(ctrl) or any(c not in CONTROLLER_KINDS for c in ctrl):
+        if not ctrl or len(set(ctrl)) != len(ctrl) or any(c not in CONTROLLERS for c in ctrl):
             raise ValueError(
-                f"PlayConfig.controllers must be distinct names from {tuple(CONTROLLER_KINDS)}, got {self.controllers!r}"
+                f"PlayConfig.controllers must be distinct names from {tuple(CONTROLLERS)}, got {self.controllers!r}"
             )
         object.__setattr__(self, "controllers", ctrl)
         if (
@@ -166,8 +166,8 @@ class PlayConfig:
         except ValueError as exc:
             raise ValueError(f"PlayConfig.{exc}") from None
         tasks = tuple(self.tasks)
-        if not tasks or any(t not in TASK_KINDS for t in tasks):
-            raise ValueError(f"PlayConfig.tasks must be names from {TASK_KINDS}, got {self.tasks!r}")
+        if not tasks or any(t not in TASKS for t in tasks):
+            raise ValueError(f"PlayConfig.tasks must be names from {tuple(TASKS)}, got {self.tasks!r}")
         object.__setattr__(self, "tasks", tasks)
         object.__setattr__(self, "seed", check_int(self.seed, "PlayConfig.seed", 0))
         for name in ("motion_time", "time_limit"):
@@ -304,7 +304,7 @@ class PlaySession:
     def summary(self) -> dict[str, Any]:
         """The running means per controller over this user's trials (f_RMS [N], σ [m])."""
         out: dict[str, Any] = {}
-        for name in CONTROLLER_KINDS:
+        for name in CONTROLLERS:
             rows = [r for r in self.results if r.controller == name]
             if not rows:
                 continue

@@ -23,7 +23,7 @@ Worlds (:data:`coassist.robot.worlds.WORLDS`, one entry each; a world is an
   The ``"ur"`` world on ``coassist ur-sim`` (:class:`~coassist.robot.ur_sim_world.URSimWorld`)
   has a simulated handle: the simulated operator holds it, as in MuJoCo.
 
-Controllers by kind (:data:`coassist.control.presets.CONTROLLER_KINDS`): ``cooperative`` (the
+Controllers by kind (:data:`coassist.control.presets.CONTROLLERS`): ``cooperative`` (the
 assistive controller, the cooperative game), ``cooperative-arbitrated``, ``cooperative-damped``,
 ``impedance`` (IMP, eq. 5.4), ``manual`` (MG, eq. 5.5) and ``manual-probe`` (MG plus the probe: the
 calibration trials ``coassist calibrate`` fits).
@@ -45,7 +45,7 @@ import numpy as np
 
 from coassist._checks import is_integer
 from coassist.config import APPLICATION_PRESET, ImpedanceParameters
-from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
+from coassist.control.presets import CONTROLLERS, get_preset, make_controller
 from coassist.data import Trial
 from coassist.interfaces import FEATURES
 from coassist.robot.worlds import WORLDS, ArmWorld, HandWorld, WorldRequest, build_world, missing_members
@@ -62,7 +62,7 @@ from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noi
 from coassist.scenario.populations import POPULATIONS, population_profile
 from coassist.scenario.scene import Scene
 from coassist.scenario.seeds import trial_rngs
-from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, task_for_seed
+from coassist.scenario.tasks import OBSTACLES, TASKS, task_for_seed
 
 __all__ = ["DriveConfig", "drive", "drive_lockstep", "move_tasks", "workspace_for"]
 
@@ -86,7 +86,7 @@ class DriveConfig:
     """One run on a UR5 (every field validated, errors name it as ``DriveConfig.<field>``).
 
     world : a world of :data:`coassist.robot.worlds.WORLDS` ("mujoco", "ur", "franka", "ros2").
-    controller : a kind of :data:`coassist.control.presets.CONTROLLER_KINDS`: "cooperative",
+    controller : a kind of :data:`coassist.control.presets.CONTROLLERS`: "cooperative",
         "cooperative-arbitrated" (α set every tick by coassist.control.presets.ARBITRATION),
         "cooperative-damped", "impedance", "manual" or "manual-probe" (a calibration trial).
     robot : the arm, one of the world's ``arms`` ("ur5" or "panda" in MuJoCo, "ur5" on "ur"
@@ -153,10 +153,10 @@ class DriveConfig:
             object.__setattr__(self, "robot", world.arms[0])
         elif self.robot not in world.arms:
             raise bad("robot", f"one of {world.arms} with world {self.world!r}")
-        if self.controller not in CONTROLLER_KINDS:
-            raise bad("controller", f"one of {tuple(CONTROLLER_KINDS)}")
-        if self.task not in TASK_KINDS:
-            raise bad("task", f"one of {TASK_KINDS}")
+        if self.controller not in CONTROLLERS:
+            raise bad("controller", f"one of {tuple(CONTROLLERS)}")
+        if self.task not in TASKS:
+            raise bad("task", f"one of {tuple(TASKS)}")
         get_object(self.object)
         get_preset(self.preset)
         if self.obstacle not in OBSTACLES:

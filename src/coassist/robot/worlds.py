@@ -117,6 +117,9 @@ class WorldEntry:
     host : what ``--host`` is for this world ("the robot's IP address"), None when it takes none.
     extras : the optional dependency groups it needs (``pip install 'coassist[<extra>]'``).
     source : the trials' ``TrialMeta.source`` (where the data came from).
+    studies : a study plan may name it (``[study] world``): the drive builds it from the run's
+        request alone. ros2: False, its node and topics are ``coassist ros2``'s options, which a
+        plan does not carry.
     """
 
     build: str
@@ -126,6 +129,7 @@ class WorldEntry:
     host: str | None
     extras: tuple[str, ...]
     source: str
+    studies: bool = True
 
     def __post_init__(self) -> None:
         if not is_entry_point(self.build):
@@ -173,8 +177,10 @@ WORLDS: Registry[WorldEntry] = Registry(
             host=None,
             extras=("ros2", "robot"),
             source="ur5",
+            studies=False,
         ),
     },
+    entry_type=WorldEntry,
 )
 
 

@@ -111,6 +111,8 @@ class IntentSourceEntry:
     simulation_only : it reads what only a simulation knows (``TrialContext.true_intent``):
         refused on a real arm and with a person at the handle.
     told : what it is told besides what an arm measures (:class:`Told`).
+    ablation : the main job's ablation runs it too, after the sources of its tables
+        (:data:`coassist.experiments.ablation.SOURCES`, which name the project's own).
     """
 
     source: str
@@ -118,12 +120,15 @@ class IntentSourceEntry:
     options: tuple[tuple[str, Any], ...] = ()
     simulation_only: bool = False
     told: Told = Told()
+    ablation: bool = False
 
     def __post_init__(self) -> None:
         if not is_entry_point(self.source):
             raise ValueError(f"IntentSourceEntry.source must be 'package.module:attribute', got {self.source!r}")
         if not isinstance(self.summary, str) or not self.summary:
             raise ValueError(f"IntentSourceEntry.summary must be a non-empty string, got {self.summary!r}")
+        if not isinstance(self.ablation, bool):
+            raise ValueError(f"IntentSourceEntry.ablation must be True or False, got {self.ablation!r}")
 
     def build(self, horizon: int) -> IntentSource:
         """A new source of this kind predicting ``horizon`` rows."""
@@ -172,8 +177,11 @@ INTENT_SOURCES: Registry[IntentSourceEntry] = Registry(
             told=Told(scene=True, family=SIMULATED_FAMILY, arm="assumed"),
         ),
     },
+    entry_type=IntentSourceEntry,
 )
-#: Their names: the sources computed in the tick, with no network to evaluate.
+#: Their names as declared here: the sources computed in the tick, with no network to evaluate. A
+#: consumer that must see sources registered later (:meth:`~coassist.registry.Registry.register`)
+#: reads :data:`INTENT_SOURCES` itself.
 NAMED_INTENTS: tuple[str, ...] = tuple(INTENT_SOURCES)
 
 

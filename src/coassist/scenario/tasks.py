@@ -26,24 +26,20 @@ y_ref,r = [x, y, ẋ, ẏ] with velocity = ṡ · unit tangent.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from coassist._checks import check_positive_scalar
+from coassist.registry import Registry
 from coassist.scenario.seeds import task_rng
-
-#: Path kinds: the three of the iterative experiments and the transfer one.
-TASK_KINDS = ("linear", "curved", "sinusoidal", "z")
 
 #: Start and end of the real recordings (user-a), m, UR5 base frame.
 START = (-0.10, -0.615)
 END = (0.40, -0.615)
 
-#: Planned motion time per path [s], from the real references (linear and curved
-#: 10 s, the S path 14 s); the Z keeps the same mean speed (≈0.06 m/s).
-MOTION_TIME = {"linear": 10.0, "curved": 10.0, "sinusoidal": 14.0, "z": 20.0}
 #: The real references start moving about 0.9 s after the recording starts.
 START_DELAY = 0.9
 
@@ -151,36 +147,89 @@ def _smooth_corners(corners: np.ndarray, radius: float, n: int) -> np.ndarray:
     return out
 
 
+def _sideways(offset: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """A path that runs along the chord start → end, ``offset(u)`` [m] to its left at the chord's
+    fraction u ∈ [0, 1]: p(u) = p0 + u (p1 − p0) + offset(u) n, n the chord's left normal."""
+
+    def points(p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
+        u = np.linspace(0.0, 1.0, _N_POINTS)
+        chord = p1 - p0
+        along = chord / float(np.linalg.norm(chord))
+        left = np.array([-along[1], along[0]])
+        return p0 + u[:, None] * chord + offset(u)[:, None] * left
+
+    return points
+
+
+def _z_points(p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
+    """The Z: top stroke left→right, diagonal back, bottom stroke left→right, corners rounded (4 cm)."""
+    chord = p1 - p0
+    along = chord / float(np.linalg.norm(chord))
+    left = np.array([-along[1], along[0]])
+    a = p0 + 0.05 * along
+    b = p1 - 0.05 * along
+    corners = np.array([a + 0.15 * left, b + 0.15 * left, a - 0.15 * left, b - 0.15 * left])
+    return _smooth_corners(corners, 0.04, _N_POINTS)
+
+
+@dataclass(frozen=True)
+class TaskEntry:
+    """One path kind of :data:`TASKS`.
+
+    points : ``points(start, end)`` → (P, 2) polyline [m] from ``start`` to ``end`` (each (2,) [m],
+        distinct), consecutive points distinct: the :class:`NominalPath`'s points.
+    motion_time : planned motion time T [s] of the minimum-jerk timing (:class:`MotionPlanner`), > 0.
+    summary : what the path is, a phrase.
+    """
+
+    points: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    motion_time: float
+    summary: str
+
+    def __post_init__(self) -> None:
+        if not callable(self.points):
+            raise ValueError(f"TaskEntry.points must be callable (start, end) -> (P, 2) points, got {self.points!r}")
+        object.__setattr__(self, "motion_time", check_positive_scalar(self.motion_time, "TaskEntry.motion_time"))
+        if not isinstance(self.summary, str) or not self.summary:
+            raise ValueError(f"TaskEntry.summary must be a non-empty string, got {self.summary!r}")
+
+
+#: Path kinds (module docstring): the three of the iterative experiments and the transfer one.
+#: Motion times from the real references (linear and curved 10 s, the S path 14 s); the Z keeps
+#: the same mean speed (≈0.06 m/s).
+TASKS: Registry[TaskEntry] = Registry(
+    "task",
+    {
+        "linear": TaskEntry(_sideways(np.zeros_like), 10.0, "a straight segment, 0.50 m"),
+        "curved": TaskEntry(
+            _sideways(lambda u: 0.15 * np.sin(np.pi * u)), 10.0, "a half-sine arc bulging 0.15 m to the left"
+        ),
+        "sinusoidal": TaskEntry(
+            _sideways(lambda u: -0.15 * np.sin(2.0 * np.pi * u)), 14.0, "one sine period of amplitude 0.15 m"
+        ),
+        "z": TaskEntry(_z_points, 20.0, "a Z with rounded corners, 0.40 m wide and 0.30 m tall"),
+    },
+    entry_type=TaskEntry,
+)
+#: Their names.
+TASK_KINDS: tuple[str, ...] = tuple(TASKS)
+#: Planned motion time per path [s] (:attr:`TaskEntry.motion_time`).
+MOTION_TIME: dict[str, float] = {name: entry.motion_time for name, entry in TASKS.items()}
+
+
 def nominal_path(kind: str, start: tuple[float, float] = START, end: tuple[float, float] = END) -> NominalPath:
-    """The nominal path of ``kind`` (one of :data:`TASK_KINDS`) from ``start`` to ``end`` [m].
+    """The nominal path of ``kind`` (one of :data:`TASKS`) from ``start`` to ``end`` [m].
 
     linear, curved and sinusoidal run from start to end; the Z spans the same x range
     (shrunk by 0.05 m each side), its top stroke at y_start + 0.15 m and its bottom
     stroke at y_start − 0.15 m.
     """
-    if kind not in TASK_KINDS:
-        raise ValueError(f"task kind must be one of {TASK_KINDS}, got {kind!r}")
+    if kind not in TASKS:
+        raise ValueError(f"task kind must be one of {tuple(TASKS)}, got {kind!r}")
     p0, p1 = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
-    u = np.linspace(0.0, 1.0, _N_POINTS)
-    chord = p1 - p0
-    length = float(np.linalg.norm(chord))
-    if length <= 0.0:
+    if float(np.linalg.norm(p1 - p0)) <= 0.0:
         raise ValueError("start and end must differ")
-    along = chord / length
-    left = np.array([-along[1], along[0]])
-    if kind == "linear":
-        offset = np.zeros_like(u)
-    elif kind == "curved":
-        offset = 0.15 * np.sin(np.pi * u)
-    elif kind == "sinusoidal":
-        offset = -0.15 * np.sin(2.0 * np.pi * u)
-    else:  # z: top stroke left→right, diagonal back, bottom stroke left→right
-        a = p0 + 0.05 * along
-        b = p1 - 0.05 * along
-        corners = np.array([a + 0.15 * left, b + 0.15 * left, a - 0.15 * left, b - 0.15 * left])
-        return NominalPath("z", _smooth_corners(corners, 0.04, _N_POINTS))
-    pts = p0 + u[:, None] * chord + offset[:, None] * left
-    return NominalPath(kind, pts)
+    return NominalPath(kind, TASKS[kind].points(p0, p1))
 
 
 @dataclass(frozen=True, eq=False)
@@ -344,7 +393,7 @@ def make_task(
     if not 0.0 <= lo <= hi <= 1.0:
         raise ValueError(f"obstacle_range must satisfy 0 <= lo <= hi <= 1, got {obstacle_range!r}")
     path = nominal_path(kind)
-    planner = MotionPlanner(path, MOTION_TIME[kind] if motion_time is None else motion_time)
+    planner = MotionPlanner(path, TASKS[kind].motion_time if motion_time is None else motion_time)
     # Redraw (up to 100 times, from the same generator) where the path turns by more
     # than 60° within ±6 cm: an operator cannot dodge a box sitting on a sharp corner
     # (the Z's) with a smooth sideways detour.

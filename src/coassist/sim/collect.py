@@ -12,7 +12,7 @@ from typing import Any
 from coassist._checks import check_int
 from coassist.data import DatasetWriter
 from coassist.data.store import FORMAT_VERSION, MANIFEST_NAME, digest
-from coassist.scenario.intent_registry import NAMED_INTENTS
+from coassist.scenario.intent_registry import INTENT_SOURCES
 from coassist.sim.world import SubmittedTrials, TrialSpec, run_trials, spec_episode
 
 
@@ -120,7 +120,7 @@ def collect_dataset(
     if not model_file.is_file():  # a calibrated path-hypotheses source: its calibration is what runs
         model_file = Path(s0.intent) / "path-hypotheses.json"
     model_hash = (
-        digest(model_file.read_bytes().hex()) if s0.intent not in NAMED_INTENTS and model_file.is_file() else None
+        digest(model_file.read_bytes().hex()) if s0.intent not in INTENT_SOURCES and model_file.is_file() else None
     )
     key = digest(
         {

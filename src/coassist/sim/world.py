@@ -60,7 +60,7 @@ import numpy as np
 from coassist._checks import check_int
 from coassist._progress import progress_bar
 from coassist.config import THESIS_EVALUATION
-from coassist.control.presets import CONTROLLER_KINDS, get_preset, make_controller
+from coassist.control.presets import CONTROLLERS, get_preset, make_controller
 from coassist.data import Trial
 from coassist.interfaces import NETWORK_BACKENDS, IntentSource
 from coassist.model.impedance import ImpedanceModel
@@ -81,12 +81,12 @@ from coassist.runtime.lockstep import run_loops
 from coassist.runtime.loop import LoopLog
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.wrench import WrenchPipeline
-from coassist.scenario.intent_registry import NAMED_INTENTS, shared_intent_source
+from coassist.scenario.intent_registry import INTENT_SOURCES, shared_intent_source
 from coassist.scenario.objects import CarriedObject, ForceSensor, get_object
 from coassist.scenario.operator import OperatorProfile
 from coassist.scenario.populations import POPULATIONS, population_profile
 from coassist.scenario.reference_intents import NominalIntent
-from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, Task, task_for_seed
+from coassist.scenario.tasks import OBSTACLES, TASKS, Task, task_for_seed
 from coassist.sim.lockstep import fast_path_eligible, run_point_mass_lockstep
 
 # The world and the processes live in their own modules; their names stay importable from here.
@@ -261,10 +261,10 @@ def build_trial(
 class TrialSpec:
     """One trial to run, small enough to send to a worker process.
 
-    task : one of :data:`~coassist.scenario.tasks.TASK_KINDS`. user : operator index (0 = the
+    task : one of :data:`~coassist.scenario.tasks.TASKS`. user : operator index (0 = the
     author). object : "handle" | "board" | "heavy". controller : one of
-    :data:`~coassist.control.presets.CONTROLLER_KINDS`. preset : a name of :data:`coassist.config.CONTROL_PRESETS`. seed : int ≥ 0.
-    intent : one of :data:`~coassist.interfaces.NAMED_INTENTS` or a model path (loaded in the worker).
+    :data:`~coassist.control.presets.CONTROLLERS`. preset : a name of :data:`coassist.config.CONTROL_PRESETS`. seed : int ≥ 0.
+    intent : a name of :data:`~coassist.scenario.intent_registry.INTENT_SOURCES` or a model path (loaded in the worker).
     population_seed : which population the user is drawn from.
     population : who the operators are, one of :data:`~coassist.scenario.populations.POPULATIONS`
     ("thesis": :func:`~coassist.scenario.operator.operator_profile`, the main job's).
@@ -292,12 +292,12 @@ class TrialSpec:
             raise ValueError(f"TrialSpec.network must be one of {NETWORK_BACKENDS}, got {self.network!r}")
         if self.obstacle not in OBSTACLES:
             raise ValueError(f"TrialSpec.obstacle must be one of {tuple(OBSTACLES)}, got {self.obstacle!r}")
-        if self.task not in TASK_KINDS:
-            raise ValueError(f"TrialSpec.task must be one of {TASK_KINDS}, got {self.task!r}")
+        if self.task not in TASKS:
+            raise ValueError(f"TrialSpec.task must be one of {tuple(TASKS)}, got {self.task!r}")
         object.__setattr__(self, "user", check_int(self.user, "TrialSpec.user", 0))
         get_object(self.object)
-        if self.controller not in CONTROLLER_KINDS:
-            raise ValueError(f"TrialSpec.controller must be one of {CONTROLLER_KINDS}, got {self.controller!r}")
+        if self.controller not in CONTROLLERS:
+            raise ValueError(f"TrialSpec.controller must be one of {tuple(CONTROLLERS)}, got {self.controller!r}")
         get_preset(self.preset)
         for name in ("seed", "population_seed"):
             object.__setattr__(self, name, check_int(getattr(self, name), f"TrialSpec.{name}", 0))
@@ -407,7 +407,7 @@ def run_spec_lockstep(
 def _run_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
     """A worker process's batch. A model in the loop gets one torch thread: this process is
     one of one-per-core, and more threads would oversubscribe them."""
-    if any(spec.intent not in NAMED_INTENTS for spec in specs):
+    if any(spec.intent not in INTENT_SOURCES for spec in specs):
         import torch
 
         torch.set_num_threads(1)
@@ -417,7 +417,7 @@ def _run_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
 
 def _run_lockstep_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
     """A worker process's lockstep group (:func:`run_spec_lockstep`), one torch thread as above."""
-    if any(spec.intent not in NAMED_INTENTS for spec in specs):
+    if any(spec.intent not in INTENT_SOURCES for spec in specs):
         import torch
 
         torch.set_num_threads(1)
@@ -515,7 +515,7 @@ def _shifted(deliver: Callable[[int, Trial], None], start: int, j: int, trial: T
 
 
 def _has_model(specs: Sequence[TrialSpec]) -> bool:
-    return any(spec.intent not in NAMED_INTENTS for spec in specs)
+    return any(spec.intent not in INTENT_SOURCES for spec in specs)
 
 
 #: The most trials in one lockstep job with named intents only (:func:`submit_trials`).

@@ -14,7 +14,7 @@ mean"), so ``coassist study init`` can print it as it is. The plan of a comparis
 
     [[condition]]                  # comparison: two or more; shown on the page as A, B, C…
     name = "assistive"
-    controller = "cooperative"     # coassist.control.presets.CONTROLLER_KINDS
+    controller = "cooperative"     # coassist.control.presets.CONTROLLERS
     intent = "nominal"             # a named source a person can run (nominal, constant-velocity,
                                    # present, paths, …) or a folder: a model, a path-hypotheses calibration
     [[condition]]
@@ -70,21 +70,24 @@ from typing import Any
 
 from coassist._checks import is_integer, is_real_number
 from coassist.config import APPLICATION_PRESET, CONTROL_PRESETS
-from coassist.control.presets import CONTROLLER_KINDS
+from coassist.control.presets import CONTROLLERS
 from coassist.errors import CoassistError
 from coassist.registry import unknown_name_message
+from coassist.robot import worlds as arm_worlds
 from coassist.robot.drive import MAX_TIME_LIMIT
 from coassist.runtime.episode import DWELL
 from coassist.scenario import intent_registry
 from coassist.scenario.objects import OBJECTS
 from coassist.scenario.populations import POPULATIONS
-from coassist.scenario.tasks import OBSTACLES, TASK_KINDS, task_for_seed
+from coassist.scenario.tasks import OBSTACLES, TASKS, task_for_seed
 from coassist.study.ids import DEFAULT_ID_PATTERN, IdError, compile_id_pattern
 
 __all__ = [
     "CALIBRATED",
     "PROTOCOLS",
     "WORLDS",
+    "is_real_arm",
+    "study_worlds",
     "CalibrationPlan",
     "Condition",
     "IterativePlan",
@@ -103,9 +106,28 @@ __all__ = [
 ]
 
 PROTOCOLS = ("comparison", "iterative", "transfer", "online")
-#: play: the page's point-mass robot (the browser is the hand); mujoco: the UR5 in MuJoCo (the
-#: page as the hand, or a simulated participant); ur, franka: a real arm through ``coassist drive``.
-WORLDS = ("play", "mujoco", "ur", "franka")
+#: The page's point-mass world (the browser is the hand); a study may also run in the arm worlds.
+PLAY = "play"
+
+
+def study_worlds() -> tuple[str, ...]:
+    """The worlds a plan may name, read when called: :data:`PLAY`, then every world of
+    :data:`coassist.robot.worlds.WORLDS` a study can run (``studies``): mujoco (the UR5 in MuJoCo: the
+    page as the hand, or a simulated participant), ur and franka (a real arm through ``coassist drive``),
+    and any world registered there since."""
+    return (PLAY, *(name for name, entry in arm_worlds.WORLDS.items() if entry.studies))
+
+
+#: :func:`study_worlds` as declared (play, mujoco, ur, franka).
+WORLDS = study_worlds()
+
+
+def is_real_arm(world: str) -> bool:
+    """Whether the plan's ``world`` is a real arm (a person, or a simulator behind its address, holds
+    it): an arm world of :data:`coassist.robot.worlds.WORLDS` that is not simulated (ur, franka)."""
+    return world != PLAY and not arm_worlds.WORLDS[world].simulated
+
+
 #: The Likert items of the issue (thesis' journal version asked the participants these).
 DEFAULT_LIKERT = ("helped me", "I felt in control", "the motion was smooth", "I trusted it")
 #: Folder names the study keeps for itself inside a participant's folder (and ``calibration-*``, a
@@ -239,7 +261,7 @@ class Condition:
     """One condition under test: its name (researcher-side only), the controller kind and its intent source.
 
     name : letters, digits, ``-``, ``_`` (it names the condition's folder; the page never sees it).
-    controller : one of :data:`coassist.control.presets.CONTROLLER_KINDS`.
+    controller : one of :data:`coassist.control.presets.CONTROLLERS`.
     intent : a name of :func:`person_intents` (``"nominal"``, ``"paths"``, …) or the absolute path of a
         folder of a kind in :data:`~coassist.scenario.intent_registry.INTENT_FOLDERS` (a model, a calibration).
     """
@@ -463,7 +485,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     if not isinstance(name, str) or not re.match(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$", name):
         raise PlanError(f"study.name must be 1-64 letters, digits, '-' or '_', got {name!r}")
     protocol = _choice(s.get("protocol", "comparison"), "study.protocol", PROTOCOLS, "protocol")
-    world = _choice(s.get("world", "play"), "study.world", WORLDS, "world")
+    world = _choice(s.get("world", "play"), "study.world", study_worlds(), "world")
     participants = _int(s.get("participants", 4), "study.participants", 1, 999)
     seed = _int(s.get("seed", 0), "study.seed", 0, MAX_SEED)
     id_pattern = s.get("id_pattern", DEFAULT_ID_PATTERN)
@@ -476,8 +498,8 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     t = _table(data, "trials", tuple(TrialsPlan.__dataclass_fields__))
     tasks = t.get("tasks", list(TrialsPlan.tasks))
     if not isinstance(tasks, list) or not tasks:
-        raise PlanError(f"trials.tasks must be a list of paths from {TASK_KINDS}, got {tasks!r}")
-    tasks = tuple(_choice(v, f"trials.tasks[{i}]", TASK_KINDS, "task") for i, v in enumerate(tasks))
+        raise PlanError(f"trials.tasks must be a list of paths from {tuple(TASKS)}, got {tasks!r}")
+    tasks = tuple(_choice(v, f"trials.tasks[{i}]", tuple(TASKS), "task") for i, v in enumerate(tasks))
     preset = t.get("preset", APPLICATION_PRESET)
     if not isinstance(preset, str) or preset not in CONTROL_PRESETS:
         raise PlanError(f"trials.preset: {unknown_name_message(str(preset), CONTROL_PRESETS, 'control preset')}")
@@ -578,7 +600,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
             ),
             stop_at_criterion=_bool(it.get("stop_at_criterion", True), "iterative.stop_at_criterion"),
             controller=_choice(
-                it.get("controller", "cooperative"), "iterative.controller", CONTROLLER_KINDS, "controller"
+                it.get("controller", "cooperative"), "iterative.controller", tuple(CONTROLLERS), "controller"
             ),
             source=iterative_source,
         )
@@ -593,7 +615,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
         source = _model_path(tab["source_model"], f"{protocol}.source_model", base)
         n = _int(tab.get("trials", 15), f"{protocol}.trials", 2, 1000)
         controller = _choice(
-            tab.get("controller", "cooperative"), f"{protocol}.controller", CONTROLLER_KINDS, "controller"
+            tab.get("controller", "cooperative"), f"{protocol}.controller", tuple(CONTROLLERS), "controller"
         )
         if not controller.startswith("cooperative"):
             raise PlanError(
@@ -678,7 +700,7 @@ def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Con
                 f"{where}.name must be 1-32 lower-case letters, digits, '-' or '_' (not one of "
                 f"{sorted(RESERVED_NAMES)}, round-* or calibration-*), got {name!r}"
             )
-        controller = _choice(c.get("controller"), f"{where}.controller", CONTROLLER_KINDS, "controller")
+        controller = _choice(c.get("controller"), f"{where}.controller", tuple(CONTROLLERS), "controller")
         out.append(Condition(name, controller, _intent(c.get("intent", "nominal"), f"{where}.intent", base)))
     names = [c.name for c in out]
     if len(set(names)) != len(names):

@@ -45,6 +45,7 @@ from coassist.data.store import MANIFEST_NAME, manifest_files
 from coassist.play.session import PlayConfig
 from coassist.scenario.tasks import task_for_seed
 from coassist.study.calibration import CalibrationFailed, FitJob, fit_job, model_hashes, person_model_folder
+from coassist.study.plan import is_real_arm
 from coassist.study.protocols import CALIBRATION_BLOCK, calibration_steps, participant_steps
 from coassist.study.questionnaires import form_for
 from coassist.study.store import (
@@ -104,7 +105,7 @@ class ParticipantRun:
         self.plan = study.plan()
         if page is None and not simulate:
             raise StudyFolderError("a person takes part through the page: run without --no-page (or --simulate)")
-        if self.plan.world in ("ur", "franka") and simulate and not _simulated_arm(self.plan.world, host):
+        if is_real_arm(self.plan.world) and simulate and not _simulated_arm(self.plan.world, host):
             raise StudyFolderError(
                 f"--simulate: the {self.plan.world} world is a real arm; rehearse on mujoco or play"
                 + (", or against coassist ur-sim (--robot-host its address)" if self.plan.world == "ur" else "")
@@ -168,11 +169,11 @@ class ParticipantRun:
             time_limit=tp.time_limit,
             paced=self.page is not None or self.realtime,
         )
-        from coassist.control.presets import CONTROLLER_KINDS, FORMER_NAMES
+        from coassist.control.presets import CONTROLLERS, FORMER_NAMES
         from coassist.study.session import StudySession
 
         secrets = (
-            *CONTROLLER_KINDS,
+            *CONTROLLERS,
             *FORMER_NAMES,
             *(c.name for c in plan.conditions),
             *(c.intent for c in plan.conditions if c.intent != "nominal"),  # a named source names the condition

@@ -48,7 +48,7 @@ class TrainJob:
 
 
 def study_preset(t: TrainingPlan, init: str):
-    """The intent preset as ``coassist train --preset … --epochs … --init init`` builds it (cli._intent_preset)
+    """The intent preset as ``coassist train --preset … --epochs … --init init`` builds it (coassist.cli.intent)
     from the plan's ``[training]`` ``t``; the sizes (layers, hidden, fc) apply to ``init="scratch"`` only."""
     from coassist.intent.training import MODEL_PRESETS, with_overrides
 

@@ -1,0 +1,5 @@
+"""``python -m coassist.cli``: the ``coassist`` command."""
+
+from coassist.cli import app
+
+app()

@@ -1,0 +1,130 @@
+"""What ``drive``, ``ros2`` (and ``study run`` on an arm) share: the trial file a run writes, the
+question asked before an arm moves, and the run's files once it ended."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import click
+import typer
+from rich.markup import escape
+
+from coassist.cli._common import (
+    console,
+    fail,
+    file_out,
+    need_bags,
+    wrote,
+)
+
+#: drive's options as typed, for the DriveConfig / SafetyLimits fields they set.
+DRIVE_OPTIONS = {
+    **{
+        f"DriveConfig.{name}": f"--{name.replace('_', '-')}"
+        for name in (
+            "world",
+            "controller",
+            "task",
+            "preset",
+            "intent",
+            "user",
+            "seed",
+            "obstacle",
+            "full_pose",
+            "time_limit",
+            "predictor_backend",
+            "robot",
+            "population",
+            "person",
+            "scene",
+        )
+    },
+    "DriveConfig.object": "--object",
+    "DriveConfig.rate_hz": "--rate",
+    "SafetyLimits.tool_speed": "--tool-speed",
+    "SafetyLimits.contact_force": "--contact-force",
+}
+
+
+def run_out(out: Path, overwrite: bool, mcap: bool) -> Path:
+    """The trial file of a drive/ros2 run: a recorded run (its trial, or the MCAP beside it) is not
+    replaced without --overwrite, checked before the robot moves."""
+    out = file_out(out, "--out", "trial.parquet")
+    if out.suffix == ".mcap":
+        fail(f"--out {out}: give the trial file (e.g. trial.parquet); --mcap writes the .mcap beside it", 2)
+    if not overwrite:
+        for path in (out, out.with_suffix(".mcap")):
+            if path.exists() or path.is_symlink():  # a recorded run is not replaced silently
+                fail(f"--out {out}: {path} exists; pass --overwrite to replace the run", 2)
+    if mcap:
+        need_bags("--mcap")
+    return out
+
+
+def run_alpha(preset: str, controller: str) -> float | None:
+    """The game's α of a drive/ros2 run (the assistive controller's preset), None for IMP and MG."""
+    from coassist.config import CONTROL_PRESETS
+
+    return CONTROL_PRESETS.lookup(preset).game.alpha if controller == "cooperative" else None
+
+
+def confirm_move(yes: bool, stop_hint: str):
+    """The question drive and ros2 ask before an arm moves: the limits in force, then "Move the robot?".
+
+    Only a person at a terminal answers it: with stdin closed or not a terminal (a script, a
+    service) and no ``--yes`` the arm does not move, and the reason is one line (a RuntimeError
+    the command prints as its error), not a prompt cut off by an empty error.
+    """
+
+    def confirm(text: str) -> bool:
+        console.print(
+            "[bold]Limits in force[/] (coassist's safety layer, on top of the robot's own safety system):", markup=True
+        )
+        console.print(text, markup=False)
+        console.print(f"Keep {stop_hint} within reach.", markup=False)
+        if yes:
+            return True
+        if not _stdin_is_terminal():
+            raise RuntimeError(
+                "the robot was not moved: 'Move the robot?' needs an answer from the person at it, and stdin is not "
+                "a terminal (closed or redirected); run the command at a terminal, or pass --yes to move it without asking"
+            )
+        try:
+            return typer.confirm("Move the robot?", default=False)
+        except click.exceptions.Abort:  # Ctrl+D or Ctrl+C at the prompt
+            console.print("", markup=False)
+            raise RuntimeError("the robot was not moved: no answer to 'Move the robot?'") from None
+
+    return confirm
+
+
+def _stdin_is_terminal() -> bool:
+    try:
+        return sys.stdin is not None and not sys.stdin.closed and sys.stdin.isatty()
+    except (ValueError, OSError):
+        return False
+
+
+def write_run(
+    trial, out: Path, *, alpha: float | None, mcap: bool, plot: bool, joint_names: Sequence[str] | None
+) -> None:
+    """Write a drive/ros2 run: the trial file, how it ended, and <out>.mcap / <out>.png on request.
+    ``joint_names``: the arm's, in the trial's joint order (None: joint_1 … joint_n in the MCAP)."""
+    from coassist.data.run_pair import write_run_pair
+
+    # the trial and its MCAP as one pair: no crash leaves a trial beside another run's MCAP
+    path, mcap_path = write_run_pair(trial, out, mcap=mcap, alpha=alpha, joint_names=joint_names)
+    extra = trial.meta.extra
+    wrote(f"{path}: {trial.n_samples} ticks, ended: {extra['ended']}")
+    if extra.get("stop_message"):
+        console.print(f"[yellow]{escape(extra['stop_message'])}[/]", highlight=False)
+    if extra.get("log_note"):
+        console.print(f"[yellow]{escape(extra['log_note'])}[/]", highlight=False)
+    if mcap_path is not None:
+        wrote(str(mcap_path))
+    if plot:
+        from coassist.sim.monitor import plot_trial
+
+        wrote(str(plot_trial(trial, path.with_suffix(".png"))))

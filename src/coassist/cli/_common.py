@@ -1,0 +1,269 @@
+"""What the commands share: the console, the checks that run before any work (each ends in one
+line naming the option as typed), the readers of list options and trial folders, and the help
+texts several commands show."""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import NoReturn, TypeVar
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+
+from coassist.registry import Registry, UnknownNameError, unknown_name_message
+from coassist.robot.worlds import WORLDS
+from coassist.scenario.assistance import DEFAULT_INTENT
+from coassist.scenario.intent_registry import INTENT_SOURCES
+
+T = TypeVar("T")
+
+console = Console()
+err_console = Console(stderr=True, highlight=False)
+
+
+# --------------------------------------------------------------------------- shared checks
+# Each runs before any work starts and ends in one line that names the option as typed.
+
+
+def fail(message: str, code: int = 1) -> NoReturn:
+    """Print ``error: <message>`` on stderr (as plain text: brackets stay) and exit with ``code``."""
+    err_console.print(f"error: {message}", markup=False, soft_wrap=True)
+    raise typer.Exit(code)
+
+
+def typed(message: str, options: Mapping[str, str]) -> str:
+    """``message`` with config field names (``train.epochs``) replaced by the options typed (``--epochs``)."""
+    for name in sorted(options, key=len, reverse=True):
+        message = re.sub(rf"(?<![\w.-]){re.escape(name)}(?![\w])", options[name], message)
+    return message
+
+
+def choose(value: str, choices: Iterable[str], option: str, what: str) -> str:
+    """``value`` if it is one of ``choices``, else fail naming the option, with a "did you mean"
+    (for a controller's former name, its kind: ``coassist.control.presets.FORMER_NAMES``)."""
+    choices = list(choices)
+    if value in choices:
+        return value
+    if what == "controller":
+        from coassist.control.presets import FORMER_NAMES
+
+        if FORMER_NAMES.get(value) in choices:
+            fail(f"{option} {value!r} is now called {FORMER_NAMES[value]!r} (choose from: {', '.join(choices)})", 2)
+    fail(f"{option} {unknown_name_message(value, choices, what)}", 2)
+
+
+def lookup(registry: Registry[T], name: str, option: str) -> T:
+    """The preset ``name`` of ``registry`` (any kind), else fail naming the option, with a "did you mean"."""
+    try:
+        return registry.lookup(name)
+    except UnknownNameError as exc:
+        fail(f"{option} {exc}", 2)
+
+
+def _existing_ancestor(path: Path) -> Path:
+    """The nearest of ``path`` and its parents that exists (``.`` at worst)."""
+    path = Path(os.path.abspath(path))
+    while not path.exists() and path.parent != path:
+        path = path.parent
+    return path
+
+
+def folder_out(path: Path, option: str, typed: Path | None = None) -> Path:
+    """Fail now unless ``path`` is, or can be made, a folder this user can write in.
+
+    ``typed``: what the user gave, when ``path`` is derived from it (a file's folder).
+    """
+    shown = f"{option} {path if typed is None else typed}"
+    if path.exists() and not path.is_dir():
+        fail(f"{shown}: {path} is a file, not a folder")
+    base = _existing_ancestor(path)
+    if not base.is_dir():
+        fail(f"{shown}: {base} is a file, not a folder")
+    if not os.access(base, os.W_OK | os.X_OK):
+        fail(f"{shown}: {base} is not writable (permission denied)")
+    return path
+
+
+def file_out(path: Path, option: str, default_name: str) -> Path:
+    """The file to write for ``--out path``: ``path`` itself, or ``path/default_name`` if it is a folder.
+
+    Fails now (not after the work) if the file's folder cannot be created or written.
+    """
+    if path.is_dir():
+        path = path / default_name
+    if path.is_dir():
+        fail(f"{option} {path}: is a folder; give a file name")
+    folder_out(path.parent, option, typed=path)
+    if path.exists() and not os.access(path, os.W_OK):
+        fail(f"{option} {path}: is not writable (permission denied)")
+    return path
+
+
+def check_device(device: str | None, option: str = "--device") -> None:
+    """Fail now if the torch device cannot be used here (not after loading the data)."""
+    if device is None:
+        return
+    import torch
+
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError):
+        fail(f"{option} {device!r}: not a torch device (use cpu, cuda or cuda:<n>)", 2)
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            built = "built with CUDA, but no GPU is visible" if torch.backends.cuda.is_built() else "built without CUDA"
+            fail(f"{option} {device}: CUDA is not available here (torch {torch.__version__} {built}); use --device cpu")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            fail(f"{option} {device}: this machine has {torch.cuda.device_count()} CUDA device(s)")
+    elif dev.type == "mps" and not torch.backends.mps.is_available():
+        fail(f"{option} {device}: Apple MPS is not available here; use --device cpu")
+    elif dev.type not in ("cpu", "cuda", "mps"):
+        fail(f"{option} {device}: use cpu, cuda or cuda:<n>", 2)
+
+
+def set_torch_threads(threads: int) -> None:
+    """Torch's intra-op thread count for this process: the command's choice (the library never sets it)."""
+    import torch
+
+    torch.set_num_threads(threads)
+
+
+def wrote(text: str) -> None:
+    console.print(f"[green]wrote[/] {escape(text)}", highlight=False, soft_wrap=True)  # paths stay whole
+
+
+SKIP_BAD_HELP = "Leave out trials that cannot be read, saying which and why (default: stop at the first)."
+
+
+def need_bags(option: str) -> None:
+    """Refuse ``option`` before any work when rosbags (the bags extra) is missing."""
+    try:
+        import rosbags  # noqa: F401
+    except ImportError:
+        fail(f"{option} needs the bags extra (rosbags): pip install 'coassist[bags]'", 2)
+
+
+BAG_TOPICS_HELP = (
+    "Topics of bags, where they differ from the thesis' (/current_pose, /current_velocity, /human_wrench, "
+    "/robot_ref_pos): e.g. wrench=/ft/wrench,pose=/tcp_pose."
+)
+
+
+def _bag_topics(text: str | None) -> dict[str, str] | None:
+    """``--bag-topics field=/topic,…`` checked before any work."""
+    if text is None:
+        return None
+    from coassist.data.bags import resolve_topics
+
+    pairs = [item.partition("=") for item in text.split(",") if item.strip()]
+    if not pairs or any(not sep for _, sep, _ in pairs):
+        fail(f"--bag-topics: expected field=/topic pairs separated by commas, got {text!r}", 2)
+    topics = {k.strip(): v.strip() for k, _, v in pairs}
+    try:
+        resolve_topics(topics)
+    except ValueError as exc:
+        fail(f"--bag-topics: {exc}", 2)
+    return topics
+
+
+def intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA", bag_topics: str | None = None):
+    import warnings
+
+    from coassist.data import RecordingError, TrialFileError
+    from coassist.data.store import ManifestError
+    from coassist.intent import load_trials
+
+    def skipped(where: str, reason: str) -> None:
+        reason = reason.removeprefix(f"{where}: ")  # the reason usually names the file already
+        console.print(f"[yellow]skipped[/] {where}: {reason}", highlight=False)
+
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            trials = load_trials(paths, on_bad=skipped if skip_bad else None, bag_topics=_bag_topics(bag_topics))
+    except ImportError as exc:  # a bag without the bags extra
+        fail(f"{option}: {exc}", 2)
+    except (FileNotFoundError, ValueError) as exc:
+        one_trial = isinstance(exc, (TrialFileError, RecordingError)) and not isinstance(exc, ManifestError)
+        hint = " (--skip-bad-trials leaves unreadable trials out)" if one_trial and not skip_bad else ""
+        fail(f"{option}: {exc}{hint}", 2)
+    for w in caught:
+        console.print(f"[yellow]warning:[/] {w.message}", highlight=False)
+    return trials
+
+
+def int_list(text: str, option: str) -> list[int]:
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        fail(f"{option} must be comma-separated integers, got {text!r}", 2)
+    if not values or any(v < 0 for v in values):
+        fail(f"{option} must list integers >= 0, got {text!r}", 2)
+    return values
+
+
+def name_list(text: str, option: str, allowed: tuple[str, ...], what: str) -> list[str]:
+    values = [v.strip() for v in text.split(",") if v.strip()]
+    if not values:
+        fail(f"{option} must list one or more of {', '.join(allowed)}; got {text!r}", 2)
+    return [choose(v, allowed, option, what) for v in values]
+
+
+ARM_CONTROLLER_HELP = (
+    "cooperative (the assistive controller: the cooperative game) | cooperative-arbitrated (α set every tick "
+    "by the target law) | cooperative-damped (arbitrated, damped while the tool slows) | impedance (IMP) | "
+    "manual (MG, manual guidance) | manual-probe (a calibration trial, no assistance: MG plus a small known "
+    "push that measures the arm; fit the trials with coassist calibrate)."
+)
+INTENT_DEFAULT_HELP = (
+    f"Default {DEFAULT_INTENT}: {INTENT_SOURCES[DEFAULT_INTENT].summary}, the safest measured without a "
+    "calibration (docs/precision.md); with one, the person-model folder coassist calibrate wrote."
+)
+PERSON_HELP = (
+    "The person at the handle, a pseudonymous id (e.g. P07): the trial's user and whose calibration a person "
+    "model (--intent FOLDER) uses (default: operator on a real arm, user-<user> in MuJoCo)."
+)
+SCENE_HELP = (
+    "A scene file (TOML or JSON: the obstacles as boxes in the robot's base frame, docs/robots.md). It tells "
+    "the robot the scene (the paths source goes round them); the trial records it, to be reported apart."
+)
+
+
+def simulation_only_sources() -> str:
+    """The intent sources only a simulated world runs (the oracle), comma-separated, for the help."""
+    return ", ".join(n for n, e in INTENT_SOURCES.items() if e.simulation_only)
+
+
+def real_arm_hosts(option: str) -> str:
+    """Each real arm's default address and the ``option`` value that names its world, for the help."""
+    return ", ".join(f"{e.host} ({option} {n})" for n, e in WORLDS.items() if e.host)
+
+
+def scene_option(path: Path | None):
+    """The scene of --scene, read and validated before anything moves (None: none given)."""
+    if path is None:
+        return None
+    from coassist.scenario.scene import SceneError, read_scene
+
+    try:
+        return read_scene(path)
+    except SceneError as exc:
+        fail(f"--scene {exc}", 2)
+
+
+def say(line: str) -> None:
+    """A run's one-line statement (what the person will get), as plain text."""
+    console.print(line, markup=False, highlight=False, soft_wrap=True)
+
+
+def floats(text: str | None, option: str) -> tuple[float, ...] | None:
+    if text is None:
+        return None
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        fail(f"{option}: expected comma-separated numbers, got {text!r}", 2)

@@ -1,0 +1,269 @@
+"""The intent model's commands: ``train``, ``evaluate`` and ``tune``."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import typer
+from rich.markup import escape
+
+from coassist.cli._common import (
+    BAG_TOPICS_HELP,
+    SKIP_BAD_HELP,
+    check_device,
+    choose,
+    console,
+    fail,
+    file_out,
+    folder_out,
+    int_list,
+    intent_trials,
+    lookup,
+    set_torch_threads,
+    typed,
+    wrote,
+)
+
+# --------------------------------------------------------------------------- intent model
+
+
+#: The training options as typed, for the fields of TrainConfig / NetworkConfig they set.
+TRAIN_OPTIONS = {
+    **{
+        f"train.{name}": f"--{name.replace('_', '-')}"
+        for name in ("epochs", "lr", "batch_size", "seed", "threads", "test_fraction", "init", "device", "optimizer")
+    },
+    "network.lstm_layers": "--layers",
+    "network.hidden": "--hidden",
+    "network.fc": "--fc",
+}
+
+
+def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, **overrides):
+    """The intent preset named by --preset, with the training (and network-size) options applied."""
+    from dataclasses import replace
+
+    from coassist.intent.training import MODEL_PRESETS, with_overrides
+
+    chosen = lookup(MODEL_PRESETS, preset, "--preset")
+    try:
+        p = with_overrides(chosen, **overrides)
+        sizes = {k: v for k, v in (network or {}).items() if v is not None}
+        if sizes:
+            p = replace(p, **sizes)
+            p.network(2)  # validates the sizes (NetworkConfig)
+        return p
+    except ValueError as exc:
+        fail(typed(str(exc), TRAIN_OPTIONS), 2)
+
+
+def _check_model_out(out: Path, overwrite: bool, init: str) -> None:
+    """Refuse before any work an --out that is a file, or an existing model without --overwrite."""
+    bad_parent = next((p for p in reversed(out.parents) if p.exists() and not p.is_dir()), None)
+    if bad_parent is not None:
+        fail(f"--out {out}: {bad_parent} is a file, not a folder", 2)
+    if out.exists() and not out.is_dir():
+        fail(f"--out {out}: is a file; give a folder for the model", 2)
+    continuing = init.startswith("resume:") and Path(init.partition(":")[2]).absolute() == out.absolute()
+    if out.is_dir() and any(out.iterdir()) and not (overwrite or continuing):
+        fail(
+            f"--out {out}: already holds files; pass --overwrite to replace it (the old model stays until the new "
+            "one is complete)",
+            2,
+        )
+
+
+def train(
+    data: list[Path] = typer.Argument(
+        ..., help="Dataset folders, real-recording folders (e.g. .../ur5-thesis/user-a) or single recordings."
+    ),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Model folder to write (weights, model.json, history.json, loss.png)."
+    ),
+    preset: str = typer.Option(
+        "default",
+        help="Starting configuration: 'default' (LSTM 2×64 learning the residual over the validation-tuned ridge), 'lstm' (the same, skip trained too), 'intent' (lstm learning the simulated operator's true intent: simulated data only), 'linear' (the tuned ridge alone, closed form) or 'thesis' (exact §5.2.2).",
+    ),
+    init: str = typer.Option(
+        "scratch", help="scratch | resume:<model> | finetune:<model> | transfer:<model> (LSTM frozen)."
+    ),
+    epochs: int = typer.Option(None, help="Override the preset's epochs."),
+    lr: float = typer.Option(None, help="Override the initial learning rate."),
+    batch_size: int = typer.Option(None, help="Override the batch size."),
+    seed: int = typer.Option(None, help="Seed of split, init and batch order (default 0)."),
+    threads: int = typer.Option(None, help="Torch threads (default 2; at most the cores you may use)."),
+    test_fraction: float = typer.Option(None, help="Share of trials held out (default 0.2)."),
+    device: str = typer.Option(None, help="Torch device to train on: cpu (default) or cuda."),
+    optimizer: str = typer.Option(None, help="Override the optimiser: adam, adamw, rmsprop or sgd."),
+    layers: int = typer.Option(None, help="LSTM layers (--init scratch; default: the preset's)."),
+    hidden: int = typer.Option(None, help="LSTM hidden size (--init scratch)."),
+    fc: str = typer.Option(None, help="Widths of the FC layers after the LSTM, comma-separated (--init scratch)."),
+    label: str = typer.Option(
+        None,
+        help="What the model predicts (--init scratch; default: the preset's): tool (the measured future pose, the thesis), hand_alone (the robot's own effort removed: needs trials that log u_r) or intent (the simulated operator's true intent).",
+    ),
+    overwrite: bool = typer.Option(
+        False, help="Replace the model already in --out (only once the new one is complete)."
+    ),
+    skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
+    bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
+) -> None:
+    """Train the intent predictor (thesis §5.2.2; Algorithm 4.1 with resume:, 4.2 with transfer:).
+
+    After each epoch a checkpoint is kept beside --out (.<name>.partial); if the run is
+    stopped, --init resume:<out> continues it where it stopped, with the same result.
+    """
+    _check_model_out(out, overwrite, init)
+    folder_out(out, "--out")  # before the slow imports: a bad --out is told at once
+    from coassist._io import OutputBusyError, OutputLock
+    from coassist.intent.training import OPTIMIZERS, train_model, write_model
+
+    if optimizer is not None:
+        choose(optimizer, OPTIMIZERS, "--optimizer", "optimiser")
+    sizes = {"lstm_layers": layers, "hidden": hidden, "fc": None if fc is None else tuple(int_list(fc, "--fc"))}
+    given = [TRAIN_OPTIONS[f"network.{k}"] for k, v in sizes.items() if v is not None]
+    if label is not None:
+        from coassist.intent.features import LABELS
+
+        choose(label, LABELS, "--label", "label")
+        given.append("--label")
+    if given and init != "scratch":
+        fail(
+            f"{', '.join(given)}: network sizes and the label apply to --init scratch only; {init.partition(':')[0]}: "
+            "keeps the starting model's",
+            2,
+        )
+    p = _intent_preset(
+        preset,
+        network=sizes,
+        epochs=epochs,
+        lr=lr,
+        batch_size=batch_size,
+        seed=seed,
+        threads=threads,
+        test_fraction=test_fraction,
+        init=init,
+        device=device,
+        optimizer=optimizer,
+    )
+    if label is not None:
+        from dataclasses import replace
+
+        p = replace(p, window=replace(p.window, label=label))
+    check_device(device)
+    trials = intent_trials(data, skip_bad_trials, bag_topics=bag_topics)
+    set_torch_threads(p.train.threads)
+    try:
+        with OutputLock(out):
+            model = train_model(trials, p, p.train, progress=True, checkpoint_to=out)
+            write_model(model, out)
+    except ValueError as exc:  # mismatched model, unknown init, too-short trials
+        fail(typed(str(exc), TRAIN_OPTIONS), 2)
+    except OutputBusyError as exc:
+        fail(f"{exc}")
+    except OSError as exc:
+        fail(f"cannot write {exc.filename or out}: {exc.strerror}")
+    last = model.info["training_history"][-1]
+    console.print(
+        f"[green]wrote[/] {escape(str(out))}  train {len(model.info['train_trials'])} / test {len(model.info['test_trials'])} trials, "
+        f"final loss (MSE of the scaled targets) train {last['train_loss']:.3e}, test {last['test_loss'] if last['test_loss'] is None else format(last['test_loss'], '.3e')}, "
+        f"{model.info['train_seconds']:.0f} s"
+    )
+
+
+def evaluate(
+    model: Path = typer.Option(..., "--model", "-m", help="Model folder written by `coassist train`."),
+    data: list[Path] = typer.Option(..., "--data", "-d", help="Dataset or recording folders to score on (repeatable)."),
+    out: Path = typer.Option(
+        None, help="JSON file for the results, or a folder for evaluation.json (default: <model>/evaluation.json)."
+    ),
+    include_training: bool = typer.Option(False, help="Also score trials the model was trained on."),
+    skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
+    bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
+) -> None:
+    """e_RMS and e_MAX per horizon [mm] for the model and the baselines (nominal, constant velocity, tuned constant
+    acceleration and ridge), and the best baseline per horizon with the model's gain over it."""
+    if not model.exists():
+        fail(f"--model {model}: no such folder", 2)
+    dest = file_out(out or model / "evaluation.json", "--out", "evaluation.json")
+    import json
+
+    from coassist._io import atomic_write_text
+    from coassist.intent import ModelFileError, ModelMismatchError, evaluate_model, load_model, results_table
+    from coassist.intent.evaluation import comparison_lines
+
+    try:
+        m = load_model(model)
+    except (ModelFileError, OSError) as exc:
+        fail(f"--model {model}: {exc}", 2)
+    trials = intent_trials(data, skip_bad_trials, "--data", bag_topics=bag_topics)
+    try:
+        result = evaluate_model(m, trials, held_out_only=not include_training)
+    except (ModelMismatchError, ValueError) as exc:
+        fail(str(exc), 2)
+    console.print(results_table(result, f"{model}: {len(result.trials)} trials, {result.n_ticks} ticks"))
+    for line in comparison_lines(result):
+        console.print(line, highlight=False, soft_wrap=True)
+    if result.skipped:
+        console.print(f"skipped {len(result.skipped)} training trials (use --include-training to score them)")
+    try:
+        atomic_write_text(dest, json.dumps({**result.to_dict(), "model": str(model)}, indent=1) + "\n")
+    except OSError as exc:
+        fail(f"--out {dest}: cannot write ({exc.strerror})")
+    wrote(str(dest))
+
+
+def tune(
+    data: list[Path] = typer.Argument(..., help="Dataset or recording folders."),
+    preset: str = typer.Option("default", help="Preset whose window and training defaults are searched around."),
+    n_trials: int = typer.Option(20, "--trials", help="Optuna trials to run."),
+    storage: str = typer.Option("sqlite:///study.db", help="Optuna storage URL (any database URL Optuna accepts)."),
+    study_name: str = typer.Option("intent", help="Study name (resumed if it exists and was run on the same trials)."),
+    epochs: int = typer.Option(None, help="Epochs per trial (default: the preset's)."),
+    seed: int = typer.Option(0, help="Sampler seed."),
+) -> None:
+    """Optuna search over optimiser, learning rate and sizes; objective: validation e_RMS at the full horizon.
+
+    Prints the best parameters as the `coassist train` options that use them.
+    """
+    from coassist.intent.tuning import StudyMismatchError, check_storage, run_study, train_options
+
+    for value, option in ((n_trials, "--trials"), (epochs, "--epochs")):
+        if value is not None and value < 1:
+            fail(f"{option} must be >= 1, got {value}", 2)
+    if seed < 0:
+        fail(f"--seed must be >= 0, got {seed}", 2)
+    try:
+        sqlite_file = check_storage(storage)
+    except ValueError as exc:
+        fail(f"--storage {storage}: {exc}", 2)
+    if sqlite_file is not None:
+        file_out(sqlite_file, "--storage", "study.db")
+    p = _intent_preset(preset)
+    trials = intent_trials(data)
+    set_torch_threads(p.train.threads)
+    try:
+        result = run_study(
+            trials,
+            p,
+            n_trials=n_trials,
+            storage=storage,
+            study_name=study_name,
+            epochs=epochs,
+            seed=seed,
+            progress=True,
+        )
+    except StudyMismatchError as exc:
+        fail(f"--study-name {study_name}: {exc}", 2)
+    except ValueError as exc:
+        fail(str(exc), 2)
+    console.print(f"best validation e_RMS {1e3 * result['best_value']:.2f} mm", highlight=False)
+    console.print(
+        f"train with them: coassist train {' '.join(map(str, data))} --out <model> "
+        f"{' '.join(train_options(result['best_params']))}",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
+    console.print(f"study {result['study_name']!r} in {result['storage']} ({result['n_trials']} trials)", markup=False)

@@ -1,0 +1,177 @@
+"""``coassist play``: a live page where a person is the hand on the robot."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from coassist.cli._common import (
+    INTENT_DEFAULT_HELP,
+    SCENE_HELP,
+    console,
+    fail,
+    lookup,
+    name_list,
+    need_bags,
+    real_arm_hosts,
+    say,
+    scene_option,
+)
+from coassist.cli._live import FOXGLOVE_PAGE_PORT, LIVE_HELP, close_live, open_live
+from coassist.config import APPLICATION_PRESET
+from coassist.robot.worlds import WORLDS
+from coassist.scenario.assistance import DEFAULT_INTENT
+from coassist.scenario.intent_registry import INTENT_SOURCES, intent_choices
+
+
+def _simulation_only(intent: str) -> bool:
+    """Whether ``intent`` names a source only a simulation can run (the oracle)."""
+    return intent in INTENT_SOURCES and INTENT_SOURCES[intent].simulation_only
+
+
+def play(
+    user: str = typer.Option(
+        "me", help="Your id (letters, digits, - and _): it names your session folder <out>/<user>."
+    ),
+    out: Path = typer.Option(
+        Path("runs/play"), help="Parent folder of the session folders (each a dataset coassist train reads)."
+    ),
+    controller: str = typer.Option(
+        "manual,impedance,cooperative",
+        help="Controllers the page offers, comma-separated: manual (MG), impedance (IMP), cooperative (assistive), cooperative-arbitrated, cooperative-damped, manual-probe (calibration trials: MG plus the probe, no assistance).",
+    ),
+    intent: str = typer.Option(
+        DEFAULT_INTENT,
+        help=f"Intent source (its prediction is drawn live): {intent_choices(simulation=False)}. {INTENT_DEFAULT_HELP}",
+    ),
+    preset: str = typer.Option(
+        APPLICATION_PRESET,
+        help=f"Control preset (default: the main job's application preset, {APPLICATION_PRESET}, safe with a learned model in the loop; also thesis-evaluation[-dm], thesis-application[-dm]).",
+    ),
+    tasks: str = typer.Option("linear,curved,sinusoidal,z", help="The protocol's paths, in order (repeated)."),
+    seed: int = typer.Option(0, help="Trial i's obstacle is drawn from seed + i."),
+    motion_time: float = typer.Option(
+        None, help="Planned motion time of every path in seconds (default: the thesis' per path)."
+    ),
+    host: str = typer.Option("127.0.0.1", help="Address to listen on; anything but this machine needs --token."),
+    port: int = typer.Option(8765, help="Port to listen on (0: any free port)."),
+    token: str = typer.Option(None, help="Token the page must present (made for you on a non-local --host)."),
+    open_browser: bool = typer.Option(True, "--open/--no-open", help="Open the page in your web browser."),
+    drive: str = typer.Option(
+        None,
+        help=f"Watch a coassist drive run instead (read-only): {' | '.join(WORLDS)}; uses the first --controller and --tasks.",
+    ),
+    robot_host: str = typer.Option(
+        None,
+        help=f"The real arm's address: {real_arm_hosts('--drive')}.",
+    ),
+    mcap: bool = typer.Option(
+        False, help="Also write each trial as <trial>.mcap beside its Parquet file (ROS 2 messages Foxglove opens)."
+    ),
+    scene: Path = typer.Option(None, help=f"With --drive: {SCENE_HELP}"),
+    foxglove: int = typer.Option(None, metavar="[PORT]", help=LIVE_HELP.format(port=FOXGLOVE_PAGE_PORT)),
+) -> None:
+    """Be the operator: a live page where your mouse, touch screen or gamepad is the hand on the robot."""
+    try:
+        import starlette  # noqa: F401  (the web extra, checked before anything starts)
+        import uvicorn  # noqa: F401
+
+        from coassist.play.server import PlayServer, check_token, is_loopback, new_token
+        from coassist.play.session import PlayConfig, PlaySession
+    except ImportError as exc:
+        fail(f"coassist play needs the web extra ({exc.name} missing): pip install 'coassist[web]'")
+    if not 0 <= port <= 65535:
+        raise typer.BadParameter(f"must be 0..65535, got {port}", param_hint="--port")
+    if mcap:
+        need_bags("--mcap")
+    if scene is not None and drive is None:
+        fail("--scene: the page's own world tells the robot its obstacle; a scene file is for --drive (an arm)", 2)
+    told = scene_option(scene)
+    if token is None and not is_loopback(host):
+        token = new_token()
+    try:
+        check_token(token, host)
+    except ValueError as exc:
+        fail(f"{exc}", 2)
+    live = open_live(foxglove, page_port=port)  # stopped with the process when a line below fails
+    try:
+        from coassist.config import CONTROL_PRESETS
+        from coassist.control.presets import CONTROLLERS
+        from coassist.scenario.tasks import TASKS
+
+        lookup(CONTROL_PRESETS, preset, "--preset")
+        config = PlayConfig(
+            user=user,
+            out=out,
+            controllers=tuple(name_list(controller, "--controller", tuple(CONTROLLERS), "controller")),
+            intent="nominal" if drive and _simulation_only(intent) else intent,
+            preset=preset,
+            tasks=tuple(name_list(tasks, "--tasks", tuple(TASKS), "task")),
+            seed=seed,
+            motion_time=motion_time,
+            mcap=mcap,
+        )
+        if drive is None:
+            session = PlaySession(config, live=live)
+            say(_page_assistance(session))
+        else:
+            from coassist.play.monitor import DriveMonitor
+            from coassist.robot.drive import DriveConfig
+
+            def confirm(text: str) -> bool:
+                console.print(text, markup=False)
+                return typer.confirm("Keep the emergency stop within reach. Move the robot?", default=False)
+
+            session = DriveMonitor(
+                DriveConfig(
+                    world=drive,
+                    controller=config.controllers[0],
+                    task=config.tasks[0],
+                    intent=intent,
+                    preset=preset,
+                    seed=seed,
+                    # at a real arm the page's user is the person at the handle (in MuJoCo, the simulated one)
+                    person=None if drive not in WORLDS or WORLDS[drive].simulated else user,
+                    scene=told,
+                ),
+                config,
+                host=robot_host,
+                confirm=confirm,
+                say=say,
+                live=live,
+            )
+        server = PlayServer(session, host=host, port=port, token=token)
+    except (ValueError, OSError) as exc:
+        fail(f"{exc}")
+    console.print(
+        f"coassist play: open [bold]{server.url}[/] (Ctrl+C to stop); trials go to {config.folder}", highlight=False
+    )
+    if open_browser:
+        import webbrowser
+
+        webbrowser.open(server.url)
+    if drive is not None:
+        session.start()
+    server.run()
+    close_live(live)
+
+
+def _page_assistance(session) -> str:
+    """The one-line statement of a play page: what its assisting controller (the first offered) will give."""
+    from coassist.scenario.assistance import assistance_line
+
+    cfg = session.config
+    kinds = cfg.controllers
+    controller = next((c for c in kinds if c.startswith("cooperative")), kinds[0])
+    task = session.next_task()
+    line = assistance_line(
+        controller,
+        cfg.intent,
+        session.source,
+        user=cfg.user,
+        path=task.path.points,
+        obstacles=(task.obstacle.to_dict(),),
+    )
+    others = [c for c in kinds if c != controller]
+    return line + (f" (the page also offers {', '.join(others)})" if others else "")

@@ -1,0 +1,91 @@
+"""Commands on recorded trials: ``calibrate`` (a person model per person) and ``show`` (one trial's figure)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from coassist.cli._common import (
+    BAG_TOPICS_HELP,
+    SKIP_BAD_HELP,
+    console,
+    fail,
+    file_out,
+    folder_out,
+    intent_trials,
+    wrote,
+)
+
+
+def calibrate(
+    data: list[Path] = typer.Argument(
+        ...,
+        help="Recorded trials: datasets (collect, play), trial files (drive, ros2), recording folders or bags.",
+    ),
+    out: Path = typer.Option(..., "--out", "-o", help="Person-model folder to write (person-model.json)."),
+    task: str = typer.Option(
+        None, help="Fit only the trials of this task (default: every person's trials must be of one task)."
+    ),
+    min_trials: int = typer.Option(3, help="The fewest trials a person is calibrated from."),
+    overwrite: bool = typer.Option(False, help="Replace the person model already in --out."),
+    skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
+    bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
+) -> None:
+    """Fit a person model per person from their calibration trials (record them with --controller manual-probe).
+
+    Prints one line per person: the arm (measured by the probe, or assumed), the
+    demonstrations per way round, the fit's time. Drive, ros2 and play take the folder as
+    --intent FOLDER.
+    """
+    from coassist.scenario.person_model import PERSON_MODEL_FILE
+
+    if min_trials < 1:
+        fail(f"--min-trials must be >= 1, got {min_trials}", 2)
+    if out.exists() and not out.is_dir():
+        fail(f"--out {out}: is a file; give a folder for the person model", 2)
+    if (out / PERSON_MODEL_FILE).exists() and not overwrite:
+        fail(f"--out {out}: already holds a person model; pass --overwrite to replace it", 2)
+    folder_out(out, "--out")
+    from coassist.experiments.person_calibration import CalibrationError, calibrate_people, summary_line
+    from coassist.scenario.person_model import write_person_model
+
+    trials = intent_trials(data, skip_bad_trials, bag_topics=bag_topics)
+    try:
+        people = calibrate_people(trials, task=task, min_trials=min_trials)
+    except CalibrationError as exc:
+        fail(str(exc), 2)
+    for c in people:
+        console.print(summary_line(c), markup=False, highlight=False, soft_wrap=True)
+    try:
+        write_person_model(out, {c.person: c.fit for c in people})
+    except OSError as exc:
+        fail(f"--out {out}: cannot write ({exc.strerror})")
+    wrote(f"{out / PERSON_MODEL_FILE}: {len(people)} person(s); drive with --intent {out}")
+
+
+def show(
+    path: Path = typer.Argument(
+        ...,
+        help="What train and evaluate read: a dataset folder, a folder of trial_* recordings, one recording folder or one trial file.",
+    ),
+    out: Path = typer.Option(
+        None, help="PNG to write, or a folder for it (default: <name>.png in the current folder)."
+    ),
+    index: int = typer.Option(0, help="Which trial of a dataset or folder of recordings (0 = the first)."),
+    skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP + " --index then counts the readable ones."),
+    bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
+) -> None:
+    """The monitor view of a trial (thesis Fig. 5.7–5.8) and its force over time."""
+    from coassist.sim.monitor import plot_trial
+
+    name = f"{path.resolve().name}{'' if index == 0 else f'_{index}'}.png"
+    out = file_out(Path(name) if out is None else out, "--out", name)
+    trials = intent_trials([path], skip_bad_trials, option="PATH", bag_topics=bag_topics)
+    if not 0 <= index < len(trials):
+        fail(f"--index {index}: {path} holds {len(trials)} trial(s), so it must be in 0 … {len(trials) - 1}", 2)
+    try:
+        written = plot_trial(trials[index].trial, out)
+    except OSError as exc:
+        fail(f"--out {out}: cannot write ({exc.strerror})")
+    wrote(str(written))
