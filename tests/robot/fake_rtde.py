@@ -91,6 +91,8 @@ class FakeRobot:
         self.protective_stop_at: int | None = None
         self.link_down = False
         self.raise_on: set[str] = set()
+        #: [s] how long each interface's disconnect takes (ur-rtde's own: 0.5 s), by source
+        self.disconnect_seconds: dict[str, float] = {}
         self.connected = True
         self.frozen = False
         self.late_by = 0.0
@@ -266,6 +268,7 @@ class FakeRTDEControl:
 
     def disconnect(self) -> None:
         self._rec("disconnect")
+        time.sleep(self.robot.disconnect_seconds.get("control", 0.0))
 
 
 class FakeRTDEReceive:
@@ -328,3 +331,4 @@ class FakeRTDEReceive:
 
     def disconnect(self) -> None:
         self._rec("disconnect")
+        time.sleep(self.robot.disconnect_seconds.get("receive", 0.0))

@@ -800,7 +800,7 @@ class URRTDEWorld:
 
     def close(self) -> None:
         """``speedStop``, ``stopScript`` (on a live link only: :meth:`_link_ok`), then disconnect
-        both interfaces; never raises."""
+        both interfaces, side by side (ur-rtde's disconnect takes 0.5 s each); never raises."""
         if self._closed:
             return
         self._closed = True
@@ -813,17 +813,13 @@ class URRTDEWorld:
                 log.warning(
                     "URRTDEWorld.close: the link to %s is down; the controller's watchdog stops the arm", self.host
                 )
-            steps.append((self._rtde_c, "disconnect", ()))
-        if self._rtde_r is not None:
-            steps.append((self._rtde_r, "disconnect", ()))
         for iface, name, args in steps:
             try:
-                if name == "disconnect":
-                    _disconnect(iface, self.host)
-                else:
-                    getattr(iface, name)(*args)
+                getattr(iface, name)(*args)
             except Exception as exc:  # noqa: BLE001 - close must finish
                 log.warning("URRTDEWorld.close: %s failed: %s", name, exc)
+        # after the stop: the two interfaces are two sockets, and each disconnect waits 0.5 s inside ur-rtde
+        _disconnect([i for i in (self._rtde_c, self._rtde_r) if i is not None], self.host)
 
     def kinematics(self):
         """The UR5's kinematics with the controller's TCP (:attr:`tcp_offset`, read at connect)."""
@@ -881,8 +877,8 @@ _ABANDONED: list[Any] = []
 _DISCONNECT_TIMEOUT = 2.0
 
 
-def _disconnect(iface: Any, host: str) -> None:
-    """``iface.disconnect()``, given up after :data:`_DISCONNECT_TIMEOUT`.
+def _disconnect(ifaces: list[Any], host: str) -> None:
+    """``disconnect()`` of each interface, all at once, each given up after :data:`_DISCONNECT_TIMEOUT`.
 
     ur-rtde's disconnect joins its receive thread, and against a controller that accepts
     connections but sends nothing that thread reconnects for ever: the interface is then kept
@@ -891,9 +887,7 @@ def _disconnect(iface: Any, host: str) -> None:
     """
     import threading
 
-    done = threading.Event()
-
-    def run() -> None:
+    def run(iface: Any, done: threading.Event) -> None:
         try:
             iface.disconnect()
         except Exception as exc:  # noqa: BLE001 - reported below, close goes on
@@ -901,15 +895,21 @@ def _disconnect(iface: Any, host: str) -> None:
         finally:
             done.set()
 
-    threading.Thread(target=run, name="ur-rtde-disconnect", daemon=True).start()
-    if not done.wait(_DISCONNECT_TIMEOUT):
-        _ABANDONED.append(iface)
-        log.warning(
-            "URRTDEWorld.close: ur-rtde's interface to %s did not disconnect within %g s (its receive thread "
-            "keeps reconnecting to a controller that sends nothing); left running",
-            host,
-            _DISCONNECT_TIMEOUT,
-        )
+    waits = []
+    for iface in ifaces:
+        done = threading.Event()
+        threading.Thread(target=run, args=(iface, done), name="ur-rtde-disconnect", daemon=True).start()
+        waits.append((iface, done))
+    deadline = time.monotonic() + _DISCONNECT_TIMEOUT
+    for iface, done in waits:
+        if not done.wait(max(0.0, deadline - time.monotonic())):
+            _ABANDONED.append(iface)
+            log.warning(
+                "URRTDEWorld.close: ur-rtde's interface to %s did not disconnect within %g s (its receive thread "
+                "keeps reconnecting to a controller that sends nothing); left running",
+                host,
+                _DISCONNECT_TIMEOUT,
+            )
 
 
 def build_world(request: WorldRequest) -> URRTDEWorld:

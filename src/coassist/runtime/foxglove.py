@@ -22,8 +22,8 @@ thread encoding the messages itself held it for ~0.1 ms a frame, 0.5 ms on a loa
 and when the OS preempted that thread mid-frame the control thread waited for the lock: it
 more than doubled a 500 Hz loop's deadline misses on a 2-core machine at load 15, docs/foxglove.md.)
 In the worker, nothing is encoded for a topic no viewer subscribes to, and the server (Rust)
-sends on its own threads; a slow viewer loses the oldest messages (1024 per viewer are kept),
-it never slows the worker, and a worker that falls behind only makes the publishing thread
+sends on its own threads; a slow viewer loses the oldest messages (``backlog`` per viewer are
+kept, 1024 by default), it never slows the worker, and a worker that falls behind only makes the publishing thread
 wait on the pipe, never the control thread.
 """
 
@@ -41,11 +41,13 @@ from typing import Any
 
 import numpy as np
 
+from coassist._checks import check_int
 from coassist.data.trial_mcap import MCAP_TOPICS
 from coassist.errors import CoassistError
 from coassist.runtime.live import LiveFeed, LiveTrial, TickSnapshot
 
 __all__ = [
+    "BACKLOG",
     "FOXGLOVE_PORT",
     "INSTALL_HINT",
     "SCENE_TOPIC",
@@ -65,6 +67,9 @@ SCENE_TOPIC = "/scene"
 TOPICS: tuple[str, ...] = (*MCAP_TOPICS, SCENE_TOPIC)
 #: What to install for the live view.
 INSTALL_HINT = "pip install 'coassist[viz]'"
+#: Messages the server keeps per viewer by default (the SDK's own default): a viewer that falls
+#: further behind loses the oldest ones (about 110 frames of the MCAP file's nine topics).
+BACKLOG = 1024
 
 
 class LiveServerError(CoassistError, OSError):
@@ -95,12 +100,19 @@ class FoxgloveServer:
     port : 0 … 65535 (0: any free one; :attr:`port` says which).  host : the address to listen on
     (default this machine only).  name : the server's name in the app.  watched : an integer array
     (len(:data:`TOPICS`)) the server keeps each topic's subscription count in (None: none kept).
+    backlog : messages kept per viewer, ≥ 1 (:data:`BACKLOG`); a viewer further behind loses the oldest.
     """
 
     def __init__(
-        self, port: int = FOXGLOVE_PORT, host: str = "127.0.0.1", name: str = "coassist", watched: Any = None
+        self,
+        port: int = FOXGLOVE_PORT,
+        host: str = "127.0.0.1",
+        name: str = "coassist",
+        watched: Any = None,
+        backlog: int = BACKLOG,
     ) -> None:
         port = check_port(port)
+        backlog = check_int(backlog, "backlog", 1)
         foxglove, ts = _import_viz()
         from foxglove.channels import SceneUpdateChannel
         from foxglove.websocket import ServerListener
@@ -124,7 +136,12 @@ class FoxgloveServer:
         self._ctx = foxglove.Context()
         try:
             self._server = foxglove.start_server(
-                name=name, host=host, port=port, context=self._ctx, server_listener=_Listener()
+                name=name,
+                host=host,
+                port=port,
+                context=self._ctx,
+                server_listener=_Listener(),
+                message_backlog_size=backlog,
             )
         except (RuntimeError, OSError, ValueError) as exc:
             text = " ".join(str(exc).split())
@@ -375,10 +392,10 @@ def _unpack_tick(data: bytes, trial: LiveTrial) -> TickSnapshot:
     )
 
 
-def _serve(conn: Any, host: str, port: int, name: str, watched: Any) -> None:
+def _serve(conn: Any, host: str, port: int, name: str, watched: Any, backlog: int) -> None:
     """The worker process: the server, fed by the parent's pipe until it closes."""
     try:
-        server = FoxgloveServer(port, host=host, name=name, watched=watched)
+        server = FoxgloveServer(port, host=host, name=name, watched=watched, backlog=backlog)
     except ImportError as exc:
         conn.send_bytes(b"I" + str(exc).encode())
         return
@@ -414,14 +431,20 @@ class FoxgloveProcess:
     """A :class:`~coassist.runtime.live.LiveSink` that runs a :class:`FoxgloveServer` in a worker
     process (module docstring): snapshots go there as raw bytes over a pipe.
 
-    port, host, name : the server's (:class:`FoxgloveServer`).  start_timeout : [s] to wait for the
-    worker to listen. Raises as :func:`open_foxglove`.
+    port, host, name, backlog : the server's (:class:`FoxgloveServer`).  start_timeout : [s] to wait for
+    the worker to listen. Raises as :func:`open_foxglove`.
     """
 
     def __init__(
-        self, port: int = FOXGLOVE_PORT, host: str = "127.0.0.1", name: str = "coassist", start_timeout: float = 60.0
+        self,
+        port: int = FOXGLOVE_PORT,
+        host: str = "127.0.0.1",
+        name: str = "coassist",
+        start_timeout: float = 60.0,
+        backlog: int = BACKLOG,
     ) -> None:
         port = check_port(port)
+        backlog = check_int(backlog, "backlog", 1)
         for module in ("foxglove", "rosbags"):  # said here in one line, before a process starts
             if importlib.util.find_spec(module) is None:
                 raise ImportError(f"the live view needs the viz extra ({module} missing): {INSTALL_HINT}")
@@ -430,7 +453,7 @@ class FoxgloveProcess:
         self._watched = ctx.Array("i", len(TOPICS), lock=False)  # written by the worker's server only
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(
-            target=_serve, args=(child, host, port, name, self._watched), name="coassist-foxglove", daemon=True
+            target=_serve, args=(child, host, port, name, self._watched, backlog), name="coassist-foxglove", daemon=True
         )
         self._proc.start()
         child.close()
@@ -492,15 +515,21 @@ class FoxgloveProcess:
 
 
 def open_foxglove(
-    port: int = FOXGLOVE_PORT, *, host: str = "127.0.0.1", rate_hz: float = 30.0, name: str = "coassist"
+    port: int = FOXGLOVE_PORT,
+    *,
+    host: str = "127.0.0.1",
+    rate_hz: float = 30.0,
+    name: str = "coassist",
+    backlog: int = BACKLOG,
 ) -> tuple[LiveFeed, FoxgloveProcess]:
     """Start the Foxglove server on ``host:port`` in its worker process and a :class:`LiveFeed`
-    publishing to it at ``rate_hz``; returns both (the sink says the port and the URL).
+    publishing to it at ``rate_hz``; returns both (the sink says the port and the URL). ``backlog``:
+    the messages the server keeps per viewer (a viewer further behind loses the oldest ones).
 
     Raises ImportError (one line: what to install) without the viz extra, ValueError for a port
-    outside 0 … 65535, :class:`LiveServerError` when the server cannot listen (the port in use).
-    Close the feed when done (it stops the server)."""
-    sink = FoxgloveProcess(port, host=host, name=name)
+    outside 0 … 65535 or a backlog < 1, :class:`LiveServerError` when the server cannot listen (the
+    port in use). Close the feed when done (it stops the server)."""
+    sink = FoxgloveProcess(port, host=host, name=name, backlog=backlog)
     try:
         return LiveFeed(sink, rate_hz), sink
     except BaseException:
