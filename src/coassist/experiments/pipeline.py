@@ -30,6 +30,8 @@ EVAL_HORIZONS = (5, 10, 20, 50)
 
 #: The learned intent sources a run may train (coassist.experiments.source_training.LEARNED's names).
 LEARNED_SOURCES = ("ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone", "lstm-intent")
+#: Where the MuJoCo UR5's person model may be calibrated (ReproduceConfig.mujoco_person_calibration).
+MUJOCO_PERSON_CALIBRATIONS = ("mujoco", "point-mass")
 
 
 @dataclass(frozen=True)
@@ -111,7 +113,11 @@ class ReproduceConfig:
     # The sources the MuJoCo UR5 runs (empty: every source of the point-mass cells). A MuJoCo trial costs
     # what ~20 point-mass trials do; the claims read the application's source against MG there, and the
     # LSTM and the oracle put it in context. The full and thesis presets run every source.
-    mujoco_sources: tuple[str, ...] = ("lstm-intent", "paths", "oracle")
+    mujoco_sources: tuple[str, ...] = ("lstm-intent", "paths", "person", "oracle")
+    # Where the person model of the MuJoCo UR5's cells is calibrated: "mujoco", on the arm it assists (the
+    # point-mass cells' probe trials driven there: calibration_trials per operator, ~0.7 CPU-s a trial), as a
+    # lab would; "point-mass", the point-mass cells' model (docs/person-model.md compares them).
+    mujoco_person_calibration: str = "mujoco"
     real_data: str | None = None  # folder holding user-a/ and user-b/ recordings
     real_epochs: int = 15
     workers: int = 2
@@ -188,6 +194,11 @@ class ReproduceConfig:
             )
         if not isinstance(self.mujoco_sources, tuple) or not all(isinstance(x, str) and x for x in self.mujoco_sources):
             raise ValueError(f"reproduce.mujoco_sources must be a tuple of source names, got {self.mujoco_sources!r}")
+        if self.mujoco_person_calibration not in MUJOCO_PERSON_CALIBRATIONS:
+            raise ValueError(
+                f"reproduce.mujoco_person_calibration must be one of {MUJOCO_PERSON_CALIBRATIONS}, "
+                f"got {self.mujoco_person_calibration!r}"
+            )
         if not isinstance(self.fixed_alpha_learned, bool):
             raise ValueError(f"reproduce.fixed_alpha_learned must be true or false, got {self.fixed_alpha_learned!r}")
         if (
