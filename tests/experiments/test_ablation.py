@@ -33,6 +33,7 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     assert "person" in mujoco_sources(cfg)
     calibrated = read_person_model(result.models["person-mujoco"])
     assert set(calibrated.arms) == {"user-0"} and np.isfinite(calibrated.arms["user-0"].stiffness)
+    assert not calibrated.settings.object_yaw  # the MuJoCo UR5's board is rigid: the hand moves with the tip
     for obj in ("board", "heavy"):
         assert len(result.pairs[("mujoco", obj)]) == len(cfg.application_users)
         for source in mujoco_sources(cfg):
@@ -77,6 +78,12 @@ def test_the_mujoco_cells_run_the_person_model_calibrated_on_the_arm(tmp_path):
     assert [(c.object, c.user, c.seed) for c in configs] == [(c.object, c.user, c.seed) for c in mg]
     assert {(c.world, c.controller, c.intent) for c in configs} == {("mujoco", ARBITRATED, folder)}
     assert {(c.controller, c.intent) for c in mg} == {("manual", "nominal")}
+
+    # the filter it is written with: the point-mass world's, told the MuJoCo UR5's rigid board (no yaw mode)
+    from coassist.experiments.ablation import mujoco_person_filter
+    from coassist.scenario.person_model import PERSON_FILTER
+
+    assert PERSON_FILTER.object_yaw and mujoco_person_filter() == replace(PERSON_FILTER, object_yaw=False)
 
     ws = pipeline.Workspace(replace(cfg, mujoco_person_calibration="point-mass"), tmp_path, progress=False)
     fn, (configs,) = mujoco_task(ws, "person", {"person": "/point-mass/person"})

@@ -531,12 +531,24 @@ def probe_configs(cfg) -> list:
     ]
 
 
+def mujoco_person_filter():
+    """The online filter of the person model calibrated on the MuJoCo UR5: the point-mass world's
+    (:data:`~coassist.scenario.person_model.PERSON_FILTER`) told no yaw mode (``object_yaw`` off). The MuJoCo
+    UR5 holds every object rigidly (:mod:`coassist.robot.ur5_mjcf`: the cup's torsion is not modelled), so
+    there the hand moves with the tip; a lab tells the source its own object's mount the same way."""
+    from dataclasses import replace
+
+    from coassist.scenario.person_model import PERSON_FILTER
+
+    return replace(PERSON_FILTER, object_yaw=False)
+
+
 def calibrate_then_drive(probes: list, folder: str, configs: list) -> list[tuple[dict, dict]]:
     """A worker's MuJoCo person-model job: drive the calibration trials ``probes`` (:func:`probe_configs`), fit
     each operator's person model (:func:`~coassist.scenario.person_model.fit_person`, as
     :func:`~coassist.experiments.source_training.calibrate_person` does on the point-mass world's), write them
-    into ``folder`` (the intent of ``configs``), then drive ``configs`` as :func:`_drive_batch` does. One job:
-    the cells wait for their own calibration and for nothing else."""
+    into ``folder`` (the intent of ``configs``) with :func:`mujoco_person_filter`, then drive ``configs`` as
+    :func:`_drive_batch` does. One job: the cells wait for their own calibration and for nothing else."""
     import torch
 
     from coassist.robot.drive import drive_lockstep
@@ -546,7 +558,8 @@ def calibrate_then_drive(probes: list, folder: str, configs: list) -> list[tuple
     by_user: dict[str, list] = {}
     for trial in drive_lockstep(probes):
         by_user.setdefault(str(trial.meta.user), []).append(trial)
-    write_person_model(folder, {user: fit_person(trials) for user, trials in sorted(by_user.items())})
+    fits = {user: fit_person(trials) for user, trials in sorted(by_user.items())}
+    write_person_model(folder, fits, settings=mujoco_person_filter())
     return _drive_batch(configs)
 
 

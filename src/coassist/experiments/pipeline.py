@@ -105,18 +105,22 @@ class ReproduceConfig:
     application_users: tuple[int, ...] = (0, 1, 2)
     application_task: str = "curved"
     # The intent-source ablation on the MuJoCo UR5 (experiments.ablation): trials per operator, object, controller
-    # and source (the point-mass world runs application_trials); 0 leaves the MuJoCo world out.
-    ablation_mujoco_trials: int = 1
+    # and source (each operator's first application trials; the point-mass world runs application_trials); 0 leaves
+    # the MuJoCo world out. Four (12 paired trials per object, 1 until issue 40) resolve the direction of the person
+    # model, `paths` and the oracle against MG on both objects on seed 0 (every paired difference's 95 % interval
+    # below zero; docs/person-model.md), for about 100 CPU-s more than 1 (a MuJoCo trial is 0.8–0.9 CPU-s).
+    ablation_mujoco_trials: int = 4
     # The held-out population's cells of the ablation (experiments.ablation): trials per operator and
     # object (application_users of the held-out population); 0 leaves them out.
     held_out_trials: int = 8
-    # The sources the MuJoCo UR5 runs (empty: every source of the point-mass cells). A MuJoCo trial costs
-    # what ~20 point-mass trials do; the claims read the application's source against MG there, and the
-    # LSTM and the oracle put it in context. The full and thesis presets run every source.
+    # The sources the MuJoCo UR5 runs (empty: every source of the point-mass cells). The claims read the
+    # application's source and the person model against MG there, and the LSTM and the oracle put them in
+    # context. The full and thesis presets run every source.
     mujoco_sources: tuple[str, ...] = ("lstm-intent", "paths", "person", "oracle")
-    # Where the person model of the MuJoCo UR5's cells is calibrated: "mujoco", on the arm it assists (the
-    # point-mass cells' probe trials driven there: calibration_trials per operator, ~0.7 CPU-s a trial), as a
-    # lab would; "point-mass", the point-mass cells' model (docs/person-model.md compares them).
+    # Where the person model of the MuJoCo UR5's cells is calibrated: "mujoco", on the arm it assists, as a lab
+    # would (the point-mass cells' probe trials driven there: calibration_trials per operator, 12 trials for
+    # ~8 CPU-s; told the arm's rigid board, experiments.ablation.mujoco_person_filter); "point-mass", the
+    # point-mass cells' model as it is (docs/person-model.md compares them).
     mujoco_person_calibration: str = "mujoco"
     real_data: str | None = None  # folder holding user-a/ and user-b/ recordings
     real_epochs: int = 15
