@@ -14,8 +14,9 @@ and are not run here. One simulation process (``workers`` 1): on this shared mac
 Prints, per object and source: f_RMS and the share of the oracle's force saving, overshoot and the share of its
 overshoot reduction (95 % bootstrap intervals, :data:`~coassist.experiments.ablation.BOOTSTRAP` resamples), the
 paired differences from MG (Student-t 95 %) and jerk against MG's; with ``--first k`` the same on each
-operator's first k trials too (the cells of ``ablation_mujoco_trials`` = k: the same trials). The CPU seconds
-of the run (this process and its workers) last. Writes ``DIR/mujoco-cells.json``.
+operator's first k trials too (the cells of ``ablation_mujoco_trials`` = k: the same trials). Then the report's
+MuJoCo verdicts on these cells (``paths``' direction, the person model's direction with its intervals) and the
+CPU seconds of the run (this process and its workers). Writes ``DIR/mujoco-cells.json``.
 """
 
 from __future__ import annotations
@@ -37,7 +38,14 @@ from coassist._cpu import run_cpu_seconds  # noqa: E402
 from coassist._io import atomic_write_text  # noqa: E402
 from coassist.analysis.paired import gain_share, paired_difference  # noqa: E402
 from coassist.experiments import pipeline  # noqa: E402
-from coassist.experiments.ablation import ARBITRATED, BOOTSTRAP, OBJECTS, run_mujoco_ablation  # noqa: E402
+from coassist.experiments.ablation import (  # noqa: E402
+    ARBITRATED,
+    BOOTSTRAP,
+    OBJECTS,
+    mujoco_person_claims,
+    precision_claims,
+    run_mujoco_ablation,
+)
 from coassist.experiments.source_training import calibrate_paths, calibrate_person  # noqa: E402
 
 
@@ -111,6 +119,13 @@ def main() -> None:
                     f" ({df:+.2f} [{dlo:+.2f}, {dhi:+.2f}] N), overshoot {pct(f['overshoot_share'])}"
                     f" ({1e3 * do:+.2f} [{1e3 * olo:+.2f}, {1e3 * ohi:+.2f}] mm), jerk {f['jerk_vs_mg']:.2f}× MG"
                 )
+    # the report's MuJoCo verdicts on these cells (section 6), with the evidence it prints
+    claims = [c for c in precision_claims(result) if "MuJoCo" in c.text]
+    if "person" in sources:
+        claims += mujoco_person_claims(result)
+    doc["claims"] = [c.to_dict() for c in claims]
+    for c in claims:
+        print(f"\n{'HOLDS' if c.holds else 'FAILS'}: {c.text}\n  {c.evidence}")
     doc["cpu_seconds"] = {"calibrations_point_mass": calibrated.total, "total": cpu.total}
     print(f"\nCPU seconds: point-mass calibrations {calibrated.total:.1f}, total {cpu.total:.1f}")
     atomic_write_text(args.out / "mujoco-cells.json", json.dumps(doc, indent=1, default=float))

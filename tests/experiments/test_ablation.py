@@ -15,7 +15,7 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
 
     from coassist.experiments import pipeline
     from coassist.experiments.ablation import ARBITRATED, ablation_cells, mujoco_sources, run_ablation
-    from coassist.experiments.source_training import seed_names
+    from coassist.experiments.source_training import calibrate_person, seed_names
     from coassist.scenario.path_hypotheses import write_calibration
 
     cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1, threads=1)
@@ -25,6 +25,7 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     model = ws.train("m", [folder], init="scratch", epochs=1)
     models = {n: str(model) for s in cfg.learned_sources for n in seed_names(s, cfg.source_seeds)}
     models["paths"] = str(write_calibration(tmp_path / "paths", {}))
+    models["person"] = calibrate_person(ws)  # the point-mass cells' (one probe trial per operator in tiny)
     result = run_ablation(ws, models)
     assert not result.skipped
     # the person model of the MuJoCo cells: fitted on the arm to the operator's probe trials, in its own folder
@@ -40,6 +41,14 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
             assert ("mujoco", obj, ARBITRATED, source) in result.metrics
         for controller, source in ablation_cells(cfg):
             assert ("point-mass", obj, controller, source) in result.metrics
+    # the report shows them: the MuJoCo headline's person row, the verdict per object, how it was calibrated
+    from coassist.experiments.ablation import ablation_section, headline_rows
+
+    _, _, rows = headline_rows(result, "mujoco")
+    assert {r[0] for r in rows if r[1].startswith("person model")} == {"board", "heavy"}
+    section = ablation_section(result)
+    assert sum("MuJoCo UR5: the person model" in c.text for c in section.claims) == 2
+    assert any("calibrated on the arm it assists" in p for p in section.paragraphs)
 
 
 def test_the_mujoco_cells_run_the_person_model_calibrated_on_the_arm(tmp_path):
