@@ -20,7 +20,8 @@ and the MuJoCo UR5 (``coassist drive``'s world, the arbitrated controller, the s
   operator (:func:`~coassist.experiments.source_training.calibrate_paths`);
 - ``person``: the person model learnt from each operator's own probe trials, told no obstacle,
   no family and no label, the arm measured
-  (:func:`~coassist.experiments.source_training.calibrate_person`);
+  (:func:`~coassist.experiments.source_training.calibrate_person`); on the MuJoCo UR5 the same probe
+  trials driven on the arm, fitted there (:func:`calibrate_then_drive`, ``reproduce.mujoco_person_calibration``);
 - ``oracle``: the operator's true intent itself, the best any predictor could do.
 
 Every learned source is trained from scratch on the same datasets by the same protocol; only
