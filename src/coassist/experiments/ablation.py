@@ -55,7 +55,7 @@ import os
 import re
 from collections.abc import Collection
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -78,6 +78,9 @@ from coassist.experiments.source_training import (
     seed_names,
 )
 from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told
+
+if TYPE_CHECKING:
+    from coassist.scenario.person_intent import PersonFilterSettings
 
 SOURCES = (
     "nominal",
@@ -532,7 +535,7 @@ def probe_configs(cfg) -> list:
     ]
 
 
-def mujoco_person_filter():
+def mujoco_person_filter() -> PersonFilterSettings:
     """The online filter of the person model calibrated on the MuJoCo UR5: the point-mass world's
     (:data:`~coassist.scenario.person_model.PERSON_FILTER`) told no yaw mode (``object_yaw`` off). The MuJoCo
     UR5 holds every object rigidly (:mod:`coassist.robot.ur5_mjcf`: the cup's torsion is not modelled), so

@@ -108,7 +108,7 @@ class ReproduceConfig:
     # and source (each operator's first application trials; the point-mass world runs application_trials); 0 leaves
     # the MuJoCo world out. Four (12 paired trials per object, 1 until issue 40) resolve the direction of the person
     # model, `paths` and the oracle against MG on both objects on seed 0 (every paired difference's 95 % interval
-    # below zero; docs/person-model.md), for about 100 CPU-s more than 1 (a MuJoCo trial is 0.8–0.9 CPU-s).
+    # below zero; docs/person-model.md), for about 96 CPU-s more than 1 (a MuJoCo trial is 0.6–1.4 CPU-s).
     ablation_mujoco_trials: int = 4
     # The held-out population's cells of the ablation (experiments.ablation): trials per operator and
     # object (application_users of the held-out population); 0 leaves them out.
