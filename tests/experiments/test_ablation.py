@@ -198,3 +198,9 @@ def test_the_person_models_mujoco_claim_needs_the_direction_with_an_interval():
     assert not mujoco_person_claims(_result(-0.1, 1.0, world="mujoco"))[0].holds  # worse than MG
     assert not mujoco_person_claims(_result(0.0, 1.0, world="mujoco"))[0].holds  # the same as MG: bound 0
     assert mujoco_person_claims(_result(0.9, 1.0)) == []  # no MuJoCo cells: no claim
+    one = _result(0.5, 1.0, world="mujoco")  # one paired trial: no interval, so no verdict for the direction
+    for cell in (*one.metrics.values(), *one.mg.values()):
+        for k in ("f_rms_trials", "overshoot_trials"):
+            cell[k] = cell[k][:1]
+    (single,) = mujoco_person_claims(one)
+    assert not single.holds and "no interval" in single.evidence and "nan" not in single.evidence

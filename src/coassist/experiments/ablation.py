@@ -993,9 +993,11 @@ def mujoco_person_claims(result: AblationResult, source: str = "person") -> list
             d, lo, hi, n = paired_difference(r[f"{metric}_trials"], m[f"{metric}_trials"])
             ok = ok and bool(np.isfinite(hi) and hi < 0.0)
             what = "force" if metric == "f_rms" else "overshoot"
+            # below two pairs there is no interval: the difference alone, and the claim does not hold
+            interval = f" [{scale * lo:+.2f}, {scale * hi:+.2f}]" if np.isfinite(lo) else ", no interval"
             parts.append(
                 f"{what} {share_text(sh[metric])} of the oracle's benefit, {scale * r[metric]:.2f} vs MG "
-                f"{scale * m[metric]:.2f} {unit} ({scale * d:+.2f} [{scale * lo:+.2f}, {scale * hi:+.2f}])"
+                f"{scale * m[metric]:.2f} {unit} ({scale * d:+.2f}{interval})"
             )
         parts.append(f"jerk {r['jerk_rms'] / m['jerk_rms']:.2f}× MG; {len(r['f_rms_trials'])} paired trials")
         claims.append(
