@@ -15,7 +15,7 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
 
     from coassist.experiments import pipeline
     from coassist.experiments.ablation import ARBITRATED, ablation_cells, mujoco_sources, run_ablation
-    from coassist.experiments.source_training import seed_names
+    from coassist.experiments.source_training import calibrate_person, seed_names
     from coassist.scenario.path_hypotheses import write_calibration
 
     cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1, threads=1)
@@ -25,14 +25,108 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     model = ws.train("m", [folder], init="scratch", epochs=1)
     models = {n: str(model) for s in cfg.learned_sources for n in seed_names(s, cfg.source_seeds)}
     models["paths"] = str(write_calibration(tmp_path / "paths", {}))
+    models["person"] = calibrate_person(ws)  # the point-mass cells' (one probe trial per operator in tiny)
     result = run_ablation(ws, models)
     assert not result.skipped
+    # the person model of the MuJoCo cells: fitted on the arm to the operator's probe trials, in its own folder
+    from coassist.scenario.person_model import read_person_model
+
+    assert "person" in mujoco_sources(cfg)
+    calibrated = read_person_model(result.models["person-mujoco"])
+    assert set(calibrated.arms) == {"user-0"} and np.isfinite(calibrated.arms["user-0"].stiffness)
+    assert not calibrated.settings.object_yaw  # the MuJoCo UR5's board is rigid: the hand moves with the tip
     for obj in ("board", "heavy"):
         assert len(result.pairs[("mujoco", obj)]) == len(cfg.application_users)
         for source in mujoco_sources(cfg):
             assert ("mujoco", obj, ARBITRATED, source) in result.metrics
         for controller, source in ablation_cells(cfg):
             assert ("point-mass", obj, controller, source) in result.metrics
+    # the report shows them: the MuJoCo headline's person row, the verdict per object, how it was calibrated
+    from coassist.experiments.ablation import ablation_section, headline_rows
+
+    _, _, rows = headline_rows(result, "mujoco")
+    assert {r[0] for r in rows if r[1].startswith("person model")} == {"board", "heavy"}
+    section = ablation_section(result)
+    assert sum("MuJoCo UR5: the person model" in c.text for c in section.claims) == 2
+    assert any("calibrated on the arm it assists" in p for p in section.paragraphs)
+
+
+def test_the_mujoco_cells_run_the_person_model_calibrated_on_the_arm(tmp_path):
+    """The default's MuJoCo cells include the person model. Its job drives the point-mass cells' calibration
+    trials on the arm first (the same operators, seeds, task and handle, with the probe) and hands MG's trials
+    the folder it writes; calibrated in the point-mass world, the cells get the point-mass model, and no
+    calibration runs on the arm."""
+    from dataclasses import replace
+
+    from coassist.experiments import pipeline
+    from coassist.experiments.ablation import (
+        ARBITRATED,
+        MG_JOB,
+        _drive_batch,
+        calibrate_then_drive,
+        mujoco_sources,
+        mujoco_task,
+    )
+    from coassist.experiments.source_training import calibration_options
+    from coassist.sim.collect import dataset_specs
+
+    cfg = pipeline.REPRODUCE_PRESETS["default"]
+    assert {"person", "paths", "oracle"} <= set(mujoco_sources(cfg))
+    assert cfg.mujoco_person_calibration == "mujoco"
+    ws = pipeline.Workspace(cfg, tmp_path, progress=False)
+    fn, (probes, folder, configs) = mujoco_task(ws, "person", {"person": "/point-mass/person"})
+    assert fn is calibrate_then_drive
+    assert folder == str(tmp_path / "models" / "person-mujoco")
+    point_mass = dataset_specs(**calibration_options(ws, "manual-probe"))
+    assert len(probes) == len(cfg.application_users) * cfg.calibration_trials
+    assert [(c.world, c.controller, c.object, c.task, c.user, c.seed, c.obstacle, c.intent) for c in probes] == [
+        ("mujoco", "manual-probe", "handle", s.task, s.user, s.seed, s.obstacle, "nominal") for s in point_mass
+    ]
+    _, (mg,) = mujoco_task(ws, MG_JOB, {})
+    assert len(configs) == len(mg) == 2 * len(cfg.application_users) * cfg.ablation_mujoco_trials
+    assert [(c.object, c.user, c.seed) for c in configs] == [(c.object, c.user, c.seed) for c in mg]
+    assert {(c.world, c.controller, c.intent) for c in configs} == {("mujoco", ARBITRATED, folder)}
+    assert {(c.controller, c.intent) for c in mg} == {("manual", "nominal")}
+
+    # the filter it is written with: the point-mass world's, told the MuJoCo UR5's rigid board (no yaw mode)
+    from coassist.experiments.ablation import mujoco_person_filter
+    from coassist.scenario.person_model import PERSON_FILTER
+
+    assert PERSON_FILTER.object_yaw and mujoco_person_filter() == replace(PERSON_FILTER, object_yaw=False)
+
+    ws = pipeline.Workspace(replace(cfg, mujoco_person_calibration="point-mass"), tmp_path, progress=False)
+    fn, (configs,) = mujoco_task(ws, "person", {"person": "/point-mass/person"})
+    assert fn is _drive_batch and {c.intent for c in configs} == {"/point-mass/person"}
+
+
+def test_the_mujoco_cells_alone_need_every_model_they_run(tmp_path):
+    """run_mujoco_ablation refuses, before any run, sources it has no model or calibration of (the person
+    model calibrated on the arm needs none)."""
+    pytest.importorskip("mujoco")
+    pytest.importorskip("pinocchio")
+    from dataclasses import replace
+
+    from coassist.experiments import pipeline
+    from coassist.experiments.ablation import run_mujoco_ablation
+
+    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1)
+    ws = pipeline.Workspace(cfg, tmp_path, progress=False)
+    with pytest.raises(ValueError, match="no model or calibration of lstm-intent, paths$"):
+        run_mujoco_ablation(ws, {})
+    with pytest.raises(ValueError, match="ablation_mujoco_trials is 0"):
+        run_mujoco_ablation(pipeline.Workspace(replace(cfg, ablation_mujoco_trials=0), tmp_path, False), {})
+
+
+def test_mujoco_person_calibration_is_validated():
+    from dataclasses import replace
+
+    from coassist.experiments import pipeline
+
+    cfg = pipeline.REPRODUCE_PRESETS["default"]
+    assert replace(cfg, mujoco_person_calibration="point-mass").mujoco_person_calibration == "point-mass"
+    for bad in ("pointmass", "", None, 1):
+        with pytest.raises(ValueError, match="reproduce.mujoco_person_calibration"):
+            replace(cfg, mujoco_person_calibration=bad)
 
 
 def test_each_cell_says_what_its_source_was_told():
@@ -87,3 +181,26 @@ def test_the_person_models_claims_follow_issue_40s_bars():
     assert held_out.holds and "held-out population" in held_out.text
     assert not person_claims(_result(0.7, 1.0, world="held-out"))[0].holds  # force 70 % < 80 %
     assert not person_claims(_result(-0.1, 1.0, world="held-out"))[0].holds  # worse than MG on both sides
+
+
+def test_the_person_models_mujoco_claim_needs_the_direction_with_an_interval():
+    """On the MuJoCo UR5 the claim is the direction: less force and overshoot than MG, each paired difference's
+    95 % upper bound below zero; its evidence gives the shares with their intervals."""
+    from coassist.analysis.paired import paired_difference
+    from coassist.experiments.ablation import mujoco_person_claims, person_claims
+
+    (good,) = person_claims(_result(0.5, 1.3, world="mujoco"))  # no share or jerk bar there: the direction
+    assert good.holds and "MuJoCo UR5" in good.text and "force 50 % [" in good.evidence and "1.30× MG" in good.evidence
+    assert "4 paired trials" in good.evidence
+    # the interval the evidence states is the Student-t one of the paired differences (gains 0.5 × 2, 3, 3, 2 N)
+    d, lo, hi, _ = paired_difference(np.array([-1.0, -1.5, -1.5, -1.0]), np.zeros(4))
+    assert f"({d:+.2f} [{lo:+.2f}, {hi:+.2f}])" in good.evidence
+    assert not mujoco_person_claims(_result(-0.1, 1.0, world="mujoco"))[0].holds  # worse than MG
+    assert not mujoco_person_claims(_result(0.0, 1.0, world="mujoco"))[0].holds  # the same as MG: bound 0
+    assert mujoco_person_claims(_result(0.9, 1.0)) == []  # no MuJoCo cells: no claim
+    one = _result(0.5, 1.0, world="mujoco")  # one paired trial: no interval, so no verdict for the direction
+    for cell in (*one.metrics.values(), *one.mg.values()):
+        for k in ("f_rms_trials", "overshoot_trials"):
+            cell[k] = cell[k][:1]
+    (single,) = mujoco_person_claims(one)
+    assert not single.holds and "no interval" in single.evidence and "nan" not in single.evidence

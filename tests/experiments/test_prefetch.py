@@ -19,6 +19,7 @@ from coassist.experiments.ablation import (
     ablation_cells,
     base_source,
     mujoco_sources,
+    mujoco_task,
     run_sources,
 )
 from coassist.experiments.application import handed_to_ablation
@@ -124,10 +125,14 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
     assert "dataset:ablation-board-cooperative-ridge" not in ws._pending  # the default leaves fixed-α learned cells out
     assert groups == 1  # a cell is one lockstep group: the pool holds many at once
     if ahead.mujoco:
-        jobs = _mujoco_jobs(cfg, {s: models.get(s, s) for s in run_sources(cfg)})
-        drives = [args[0] for name, args in pool.calls if name == "_drive_batch"]
+        intents = {s: models.get(s, s) for s in run_sources(cfg)}
+        jobs = _mujoco_jobs(ws, intents)
+        drives = [(name, args) for name, args in pool.calls if name in ("_drive_batch", "calibrate_then_drive")]
         order = (MG_JOB, *named, "lstm-tool", *[s for s in run_sources(cfg) if s not in (*named, "lstm-tool")])
-        assert drives == [[c for _, configs in jobs[s] for c in configs] for s in order]
+        assert [args[-1] for _, args in drives] == [[c for _, configs in jobs[s] for c in configs] for s in order]
+        # the person model's job calibrates on the arm first (its own folder); every other job drives its cells
+        assert drives == [(fn.__name__, args) for fn, args in (mujoco_task(ws, s, intents) for s in order)]
+        assert [name for name, _ in drives].count("calibrate_then_drive") == 1
 
 
 @pytest.mark.parametrize("with_model", [False, True])

@@ -20,7 +20,8 @@ and the MuJoCo UR5 (``coassist drive``'s world, the arbitrated controller, the s
   operator (:func:`~coassist.experiments.source_training.calibrate_paths`);
 - ``person``: the person model learnt from each operator's own probe trials, told no obstacle,
   no family and no label, the arm measured
-  (:func:`~coassist.experiments.source_training.calibrate_person`);
+  (:func:`~coassist.experiments.source_training.calibrate_person`); on the MuJoCo UR5 the same probe
+  trials driven on the arm, fitted there (:func:`calibrate_then_drive`, ``reproduce.mujoco_person_calibration``);
 - ``oracle``: the operator's true intent itself, the best any predictor could do;
 - then every source registered with ``ablation=True`` in
   :data:`~coassist.scenario.intent_registry.INTENT_SOURCES` (:func:`registered_sources`; none by default).
@@ -56,7 +57,7 @@ import os
 import re
 from collections.abc import Collection
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -79,6 +80,9 @@ from coassist.experiments.source_training import (
     seed_names,
 )
 from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told
+
+if TYPE_CHECKING:
+    from coassist.scenario.person_intent import PersonFilterSettings
 
 SOURCES = (
     "nominal",
@@ -322,9 +326,40 @@ def run_ablation(
     why = _mujoco_unavailable()
     if why is None and cfg.ablation_mujoco_trials > 0:
         _run_mujoco(ws, intents, metrics, mg, pairs, errors)
+        models = {**models, **_mujoco_models(ws)}
     else:
         skipped["mujoco"] = why or "reproduce.ablation_mujoco_trials is 0"
     return AblationResult(metrics, mg, pairs, models, skipped, cfg.application_preset, errors)
+
+
+def _mujoco_models(ws: Workspace) -> dict[str, str]:
+    """The models the MuJoCo cells fitted themselves: the person model calibrated on the arm, where it ran."""
+    cfg = ws.config
+    if "person" in mujoco_sources(cfg) and cfg.mujoco_person_calibration == "mujoco":
+        return {MUJOCO_PERSON: mujoco_intent(ws, "person", {})}
+    return {}
+
+
+def run_mujoco_ablation(ws: Workspace, models: dict[str, str]) -> AblationResult:
+    """The MuJoCo UR5's cells alone (those :func:`run_ablation` runs there, with ``models`` as it is given
+    them): to measure them without the main job (``benchmarks/bench_mujoco_cells.py``). Every source of
+    ``reproduce.mujoco_sources`` that needs a model or a point-mass calibration must be in ``models``."""
+    cfg = ws.config
+    why = _mujoco_unavailable()
+    if why is not None:
+        raise RuntimeError(why)
+    if cfg.ablation_mujoco_trials < 1:
+        raise ValueError("run_mujoco_ablation: reproduce.ablation_mujoco_trials is 0, so there are no MuJoCo cells")
+    intents = _intents(models, mujoco_sources(cfg))
+    needed = [s for s in mujoco_sources(cfg) if not _runnable(s, models) and mujoco_intent(ws, s, intents) == s]
+    if needed:
+        raise ValueError(f"run_mujoco_ablation: models holds no model or calibration of {', '.join(needed)}")
+    metrics: dict = {}
+    mg: dict = {}
+    pairs: dict = {}
+    errors: dict = {}
+    _run_mujoco(ws, intents, metrics, mg, pairs, errors)
+    return AblationResult(metrics, mg, pairs, {**models, **_mujoco_models(ws)}, {}, cfg.application_preset, errors)
 
 
 def held_out_models(ws: Workspace, intents: dict[str, str]) -> dict[str, str]:
@@ -395,7 +430,8 @@ class AblationAhead:
                 if (obj, "manual", "nominal") not in self.reused:
                     self.ws.prefetch(f"ablation-{obj}-manual", **cell_options(cfg, j, obj, "manual", "nominal"))
             if self.mujoco:
-                self.ws.submit(f"mujoco:{MG_JOB}", _drive_batch, _mujoco_job(cfg, MG_JOB, "nominal"))
+                fn, args = mujoco_task(self.ws, MG_JOB, {})
+                self.ws.submit(f"mujoco:{MG_JOB}", fn, *args)
             if cfg.held_out_trials > 0:  # the held-out operators' calibration trials and MG's cells
                 for name, controller in (("calibration", "manual"), ("calibration-probe", "manual-probe")):
                     self.ws.prefetch(
@@ -418,7 +454,8 @@ class AblationAhead:
                 key = f"mujoco:{source}"
                 if key not in self.started and _runnable(source, models) and wanted(source):
                     self.started.add(key)
-                    self.ws.submit(key, _drive_batch, _mujoco_job(cfg, source, intents[source]))
+                    fn, args = mujoco_task(self.ws, source, intents)
+                    self.ws.submit(key, fn, *args)
 
 
 def prediction_errors_against_intent(trials, horizons=EVAL_HORIZONS) -> dict[int, dict[str, float]]:
@@ -472,6 +509,73 @@ def _mujoco_configs(cfg, obj: str, seed0: int, controller: str, intent: str) -> 
     ]
 
 
+def probe_configs(cfg) -> list:
+    """The person model's calibration trials on the MuJoCo UR5 (``reproduce.mujoco_person_calibration`` =
+    "mujoco"): what :func:`~coassist.experiments.source_training.calibration_options` collects in the
+    point-mass world (MG with the probe, the handle, the application's task and obstacle, ``calibration_trials``
+    per application operator, the same trial seeds: the same task and intent draws), driven on the arm."""
+    from coassist.experiments.pipeline import calibration_seed
+    from coassist.robot.drive import DriveConfig
+    from coassist.sim.collect import dataset_specs
+
+    specs = dataset_specs(
+        controller="manual-probe",
+        users=cfg.application_users,
+        tasks=(cfg.application_task,),
+        objects=("handle",),
+        trials=cfg.calibration_trials,
+        seed=calibration_seed(trial_seed_base(cfg.seed)),
+        preset=cfg.application_preset,
+        obstacle=OBSTACLE,
+    )
+    return [
+        DriveConfig(
+            world="mujoco",
+            controller="manual-probe",
+            task=s.task,
+            object="handle",
+            preset=s.preset,
+            intent="nominal",
+            user=s.user,
+            seed=s.seed,
+            obstacle=s.obstacle,
+        )
+        for s in specs
+    ]
+
+
+def mujoco_person_filter() -> PersonFilterSettings:
+    """The online filter of the person model calibrated on the MuJoCo UR5: the point-mass world's
+    (:data:`~coassist.scenario.person_model.PERSON_FILTER`) told no yaw mode (``object_yaw`` off). The MuJoCo
+    UR5 holds every object rigidly (:mod:`coassist.robot.ur5_mjcf`: the cup's torsion is not modelled), so
+    there the hand moves with the tip; a lab tells the source its own object's mount the same way."""
+    from dataclasses import replace
+
+    from coassist.scenario.person_model import PERSON_FILTER
+
+    return replace(PERSON_FILTER, object_yaw=False)
+
+
+def calibrate_then_drive(probes: list, folder: str, configs: list) -> list[tuple[dict, dict]]:
+    """A worker's MuJoCo person-model job: drive the calibration trials ``probes`` (:func:`probe_configs`), fit
+    each operator's person model (:func:`~coassist.scenario.person_model.fit_person`, as
+    :func:`~coassist.experiments.source_training.calibrate_person` does on the point-mass world's), write them
+    into ``folder`` (the intent of ``configs``) with :func:`mujoco_person_filter`, then drive ``configs`` as
+    :func:`_drive_batch` does. One job: the cells wait for their own calibration and for nothing else."""
+    import torch
+
+    from coassist.robot.drive import drive_lockstep
+    from coassist.scenario.person_model import fit_person, write_person_model
+
+    torch.set_num_threads(1)
+    by_user: dict[str, list] = {}
+    for trial in drive_lockstep(probes):
+        by_user.setdefault(str(trial.meta.user), []).append(trial)
+    fits = {user: fit_person(trials) for user, trials in sorted(by_user.items())}
+    write_person_model(folder, fits, settings=mujoco_person_filter())
+    return _drive_batch(configs)
+
+
 def _drive_batch(configs: list) -> list[tuple[dict, dict]]:
     """A worker's MuJoCo runs, in lockstep (one network call per tick for those sharing a model;
     spawned process, one torch thread like the simulator's workers)."""
@@ -506,12 +610,38 @@ def _mujoco_job(cfg, source: str, intent: str) -> list:
     return [c for _, configs in _mujoco_cells(cfg, source, intent) for c in configs]
 
 
-def _mujoco_jobs(cfg, intents: dict[str, str]) -> dict[str, list[tuple[tuple[str, str, str], list]]]:
+#: The MuJoCo UR5's person model when it is calibrated there (``reproduce.mujoco_person_calibration``): its folder
+#: under the run's ``models``.
+MUJOCO_PERSON = "person-mujoco"
+
+
+def mujoco_intent(ws: Workspace, source: str, intents: dict[str, str]) -> str:
+    """What a MuJoCo job's loop is given: MG's plan, the person model calibrated on the MuJoCo UR5
+    (``models/person-mujoco``, written by its own job) unless ``reproduce.mujoco_person_calibration`` says
+    "point-mass" (the point-mass cells' model), else what the point-mass cells are given."""
+    if source == MG_JOB:
+        return "nominal"
+    if source == "person" and ws.config.mujoco_person_calibration == "mujoco":
+        return str(ws.out / "models" / MUJOCO_PERSON)
+    return intents[source]
+
+
+def mujoco_task(ws: Workspace, source: str, intents: dict[str, str]) -> tuple[Any, tuple]:
+    """A MuJoCo job as (function, arguments) for a pool: :func:`_drive_batch` of its cells, or for the person
+    model calibrated on the arm :func:`calibrate_then_drive` (its calibration trials first, in the same job)."""
+    intent = mujoco_intent(ws, source, intents)
+    configs = _mujoco_job(ws.config, source, intent)
+    if source == "person" and ws.config.mujoco_person_calibration == "mujoco":
+        return calibrate_then_drive, (probe_configs(ws.config), intent, configs)
+    return _drive_batch, (configs,)
+
+
+def _mujoco_jobs(ws: Workspace, intents: dict[str, str]) -> dict[str, list[tuple[tuple[str, str, str], list]]]:
     """One job per intent source of the run (and MG's, :data:`MG_JOB`): its cells, which run in lockstep
     in one worker, so a model in the loop is called once per tick for all of them."""
     return {
-        source: _mujoco_cells(cfg, source, "nominal" if source == MG_JOB else intents[source])
-        for source in (MG_JOB, *mujoco_sources(cfg))
+        source: _mujoco_cells(ws.config, source, mujoco_intent(ws, source, intents))
+        for source in (MG_JOB, *mujoco_sources(ws.config))
     }
 
 
@@ -523,18 +653,18 @@ def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict,
     from coassist.sim.world import worker_pool
 
     cfg = ws.config
-    jobs = _mujoco_jobs(cfg, intents)
+    jobs = _mujoco_jobs(ws, intents)
     workers = max(1, min(cfg.workers, os.cpu_count() or 1))
     # the run's simulation processes where it has them (started once), else a pool for these runs
     with contextlib.nullcontext(ws.pool) if ws.pool is not None else worker_pool(workers) as pool:
         # a job AblationAhead started is taken, not run again
-        futures = [
-            (
-                cells,
-                ws.take(f"mujoco:{source}") or pool.submit(_drive_batch, [c for _, configs in cells for c in configs]),
-            )
-            for source, cells in jobs.items()
-        ]
+        futures = []
+        for source, cells in jobs.items():
+            future = ws.take(f"mujoco:{source}")
+            if future is None:
+                fn, args = mujoco_task(ws, source, intents)
+                future = pool.submit(fn, *args)
+            futures.append((cells, future))
         done = []
         for cells, fut in futures:
             runs = iter(fut.result())
@@ -649,6 +779,8 @@ def headline_rows(result: AblationResult, world: str = "point-mass") -> tuple[st
     who = (
         "the held-out population: operators whose detour families and arms nothing was tuned to, point-mass world"
         if world == HELD_OUT
+        else "the MuJoCo UR5: each operator's first trials of the point-mass world, driven on the arm"
+        if world == "mujoco"
         else f"{world} world"
     )
     caption = (
@@ -688,6 +820,12 @@ def ablation_section(result: AblationResult) -> Section:
     )
     for world, why in result.skipped.items():
         s.paragraphs.append(f"The {world} world did not run: {why}.")
+    if MUJOCO_PERSON in result.models:
+        s.paragraphs.append(
+            "On the MuJoCo UR5 the person model is calibrated on the arm it assists: each operator's probe trials "
+            "(the point-mass cells' calibration trials, the same seeds) are driven there and fitted as in the "
+            "point-mass world (reproduce.mujoco_person_calibration)."
+        )
     for world in WORLDS:
         rows = []
         for obj in OBJECTS:
@@ -808,7 +946,7 @@ PERSON_BARS = {"point-mass": (0.85, 0.70, 0.40, 1.1), HELD_OUT: (0.80, 0.60, 0.3
 def person_claims(result: AblationResult, source: str = "person") -> list[Claim]:
     """Issue 40's goals for the person model, per object, in the point-mass world and on the held-out
     population (where its cells ran): shares of the oracle's benefit, jerk, and per side no more
-    overshoot than MG on the held-out population."""
+    overshoot than MG on the held-out population; then the MuJoCo UR5's direction (:func:`mujoco_person_claims`)."""
     claims = []
     for world, (force_bar, over_bar, lower_bar, jerk_bar) in PERSON_BARS.items():
         for obj in OBJECTS:
@@ -844,6 +982,44 @@ def person_claims(result: AblationResult, source: str = "person") -> list[Claim]
                     "dead zone, and the rows follow the person's own scatter of shapes (docs/precision.md)",
                 )
             )
+    return claims + mujoco_person_claims(result, source)
+
+
+def mujoco_person_claims(result: AblationResult, source: str = "person") -> list[Claim]:
+    """Issue 40's goal on the MuJoCo UR5, per object where its cells ran: the point-mass world's direction
+    with an interval. The person model needs less hand force and overshoots less than MG on the same trials,
+    each paired difference's 95 % upper bound below zero (:func:`~coassist.analysis.paired.paired_difference`);
+    the evidence gives the shares of the oracle's benefit with their bootstrap intervals and the jerk."""
+    claims = []
+    for obj in OBJECTS:
+        key = ("mujoco", obj, ARBITRATED, source)
+        if key not in result.metrics:
+            continue
+        r, m = result.metrics[key], result.mg[("mujoco", obj)]
+        sh = result.shares(*key)
+        ok, parts = True, []
+        for metric, unit, scale in (("f_rms", "N", 1.0), ("overshoot", "mm", 1e3)):
+            d, lo, hi, n = paired_difference(r[f"{metric}_trials"], m[f"{metric}_trials"])
+            ok = ok and bool(np.isfinite(hi) and hi < 0.0)
+            what = "force" if metric == "f_rms" else "overshoot"
+            # below two pairs there is no interval: the difference alone, and the claim does not hold
+            interval = f" [{scale * lo:+.2f}, {scale * hi:+.2f}]" if np.isfinite(lo) else ", no interval"
+            parts.append(
+                f"{what} {share_text(sh[metric])} of the oracle's benefit, {scale * r[metric]:.2f} vs MG "
+                f"{scale * m[metric]:.2f} {unit} ({scale * d:+.2f}{interval})"
+            )
+        parts.append(f"jerk {r['jerk_rms'] / m['jerk_rms']:.2f}× MG; {len(r['f_rms_trials'])} paired trials")
+        claims.append(
+            Claim(
+                f"{obj}, MuJoCo UR5: the person model (calibrated from each operator's probe trials) needs less hand "
+                "force and overshoots less than MG on the same trials, each paired difference's 95 % upper bound "
+                "below zero (the point-mass world's direction, with an interval; issue 40)",
+                ok,
+                "; ".join(parts),
+                reason="the arm's joint limits and the safety layer's filters delay the robot's effort, and fewer "
+                "trials run on the arm than in the point-mass world",
+            )
+        )
     return claims
 
 

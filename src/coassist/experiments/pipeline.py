@@ -30,6 +30,8 @@ EVAL_HORIZONS = (5, 10, 20, 50)
 
 #: The learned intent sources a run may train (coassist.experiments.source_training.LEARNED's names).
 LEARNED_SOURCES = ("ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone", "lstm-intent")
+#: Where the MuJoCo UR5's person model may be calibrated (ReproduceConfig.mujoco_person_calibration).
+MUJOCO_PERSON_CALIBRATIONS = ("mujoco", "point-mass")
 
 
 @dataclass(frozen=True)
@@ -103,15 +105,24 @@ class ReproduceConfig:
     application_users: tuple[int, ...] = (0, 1, 2)
     application_task: str = "curved"
     # The intent-source ablation on the MuJoCo UR5 (experiments.ablation): trials per operator, object, controller
-    # and source (the point-mass world runs application_trials); 0 leaves the MuJoCo world out.
-    ablation_mujoco_trials: int = 1
+    # and source (each operator's first application trials; the point-mass world runs application_trials); 0 leaves
+    # the MuJoCo world out. Eight (all 24 paired trials per object; 1 until issue 40) resolve the direction of the
+    # person model against MG on both objects of seeds 0, 1 and 2 (every paired difference's 95 % interval below
+    # zero); four did on five of the six (docs/person-model.md). A MuJoCo trial is 0.5–1.4 CPU-s: eight add about
+    # 170 CPU-s to a run against one, four about 96.
+    ablation_mujoco_trials: int = 8
     # The held-out population's cells of the ablation (experiments.ablation): trials per operator and
     # object (application_users of the held-out population); 0 leaves them out.
     held_out_trials: int = 8
-    # The sources the MuJoCo UR5 runs (empty: every source of the point-mass cells). A MuJoCo trial costs
-    # what ~20 point-mass trials do; the claims read the application's source against MG there, and the
-    # LSTM and the oracle put it in context. The full and thesis presets run every source.
-    mujoco_sources: tuple[str, ...] = ("lstm-intent", "paths", "oracle")
+    # The sources the MuJoCo UR5 runs (empty: every source of the point-mass cells). The claims read the
+    # application's source and the person model against MG there, and the LSTM and the oracle put them in
+    # context. The full and thesis presets run every source.
+    mujoco_sources: tuple[str, ...] = ("lstm-intent", "paths", "person", "oracle")
+    # Where the person model of the MuJoCo UR5's cells is calibrated: "mujoco", on the arm it assists, as a lab
+    # would (the point-mass cells' probe trials driven there: calibration_trials per operator, 12 trials for
+    # ~8 CPU-s; told the arm's rigid board, experiments.ablation.mujoco_person_filter); "point-mass", the
+    # point-mass cells' model as it is (docs/person-model.md compares them).
+    mujoco_person_calibration: str = "mujoco"
     real_data: str | None = None  # folder holding user-a/ and user-b/ recordings
     real_epochs: int = 15
     workers: int = 2
@@ -188,6 +199,11 @@ class ReproduceConfig:
             )
         if not isinstance(self.mujoco_sources, tuple) or not all(isinstance(x, str) and x for x in self.mujoco_sources):
             raise ValueError(f"reproduce.mujoco_sources must be a tuple of source names, got {self.mujoco_sources!r}")
+        if self.mujoco_person_calibration not in MUJOCO_PERSON_CALIBRATIONS:
+            raise ValueError(
+                f"reproduce.mujoco_person_calibration must be one of {MUJOCO_PERSON_CALIBRATIONS}, "
+                f"got {self.mujoco_person_calibration!r}"
+            )
         if not isinstance(self.fixed_alpha_learned, bool):
             raise ValueError(f"reproduce.fixed_alpha_learned must be true or false, got {self.fixed_alpha_learned!r}")
         if (

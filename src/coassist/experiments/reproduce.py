@@ -276,6 +276,8 @@ def headline_section(application, transfer, real, sim_dt: float, ablation) -> Se
     s.tables.append(headline_rows(ablation))
     if ablation.mg.get(("held-out", "board")) is not None:
         s.tables.append(headline_rows(ablation, "held-out"))
+    if ablation.mg.get(("mujoco", "board")) is not None:  # the same rows on the MuJoCo UR5 (its sources only)
+        s.tables.append(headline_rows(ablation, "mujoco"))
 
     def line(where: str, best: dict[int, dict], model: str, dt: float) -> str:
         h = max(best)
