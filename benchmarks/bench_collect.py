@@ -65,7 +65,8 @@ from bench_common import machine_line
 
 def train_small_model(folder: Path) -> str:
     from coassist.intent import LabeledTrial
-    from coassist.intent.training import MODEL_PRESETS, train_model, write_model
+    from coassist.intent.presets import MODEL_PRESETS
+    from coassist.intent.training import train_model, write_model
     from coassist.sim.world import TrialSpec, run_spec
 
     specs = [

@@ -66,7 +66,7 @@ def test_the_three_preset_kinds_are_registries_with_their_own_names():
 
     kinds = {CONTROL_PRESETS.what, REPRODUCE_PRESETS.what}
     try:
-        from coassist.intent.training import MODEL_PRESETS
+        from coassist.intent.presets import MODEL_PRESETS
 
         kinds.add(MODEL_PRESETS.what)
         assert isinstance(MODEL_PRESETS, Registry)

@@ -2,7 +2,7 @@
 
 Three kinds of presets live on three layers: control presets (:mod:`coassist.config`,
 layer 0, used by ``sim`` and ``robot``), intent-model presets
-(:mod:`coassist.intent.training`, layer 3) and reproduce presets
+(:mod:`coassist.intent.presets`, layer 3) and reproduce presets
 (:mod:`coassist.experiments.pipeline`, layer 6). A single table holding all three would
 have to sit above ``experiments`` and so could not be read by ``sim``; instead each kind
 is a :class:`Registry` declared next to the type it holds, and this layer-0 module gives

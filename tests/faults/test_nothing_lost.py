@@ -587,12 +587,12 @@ def test_cli_train_resumes_a_killed_run(tmp_path):
     run_child(f"""
         import os, signal
         from coassist.intent import training
-        real = training._checkpoint_files
+        real = training.checkpoint_files
         def files(*a, epoch, **kw):
             if epoch == 2:
                 {KILL}
             return real(*a, epoch=epoch, **kw)
-        training._checkpoint_files = files
+        training.checkpoint_files = files
         from coassist.cli import app
         app({args!r}, standalone_mode=False)
     """)

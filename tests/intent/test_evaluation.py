@@ -121,7 +121,7 @@ def test_tuned_ridge_beats_the_fixed_alpha_on_held_out_user_a():
     """On held-out user-a trials the validation-tuned α is no worse at 0.4 s than the former fixed α = 1."""
     from coassist.intent import RidgeBaseline, WindowSet
     from coassist.intent.baselines import fit_tuned_baselines
-    from coassist.intent.training import MODEL_PRESETS
+    from coassist.intent.presets import MODEL_PRESETS
 
     w = MODEL_PRESETS["default"].window
     trials = load_trials([USER_A])
@@ -153,7 +153,7 @@ def test_linear_preset_is_the_tuned_ridge_in_the_model_format(trials, tmp_path):
     from dataclasses import replace
 
     from coassist.intent import load_model, save_model
-    from coassist.intent.training import MODEL_PRESETS
+    from coassist.intent.presets import MODEL_PRESETS
 
     lin = MODEL_PRESETS["linear"]
     p = replace(
@@ -189,7 +189,7 @@ def test_default_predictor_is_no_worse_than_the_best_tuned_baseline_on_held_out_
 
     import torch
 
-    from coassist.intent.training import MODEL_PRESETS
+    from coassist.intent.presets import MODEL_PRESETS
 
     torch.set_num_threads(1)
     p = MODEL_PRESETS["default"]

@@ -289,7 +289,7 @@ def test_the_ridge_alpha_search_runs_once_per_training(monkeypatch, trials, tiny
 
 
 def test_a_bigger_batch_scales_the_learning_rate_by_the_square_root_rule():
-    from coassist.intent.training import with_batch_size
+    from coassist.intent.presets import with_batch_size
 
     base = TrainConfig(batch_size=64, lr=3e-3)
     big = with_batch_size(base, 256)

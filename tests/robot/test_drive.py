@@ -90,7 +90,7 @@ def test_a_trained_model_in_the_loop_needs_less_force_than_mg(tmp_path):
     preset, which gives up some assistance so that the loop does not ring). Measured: 2.82 N
     against MG's 4.02 N (seed 1); 2.04 / 1.93 / 2.00 N (seeds 1–3) on thesis-application-dm."""
     from coassist.intent import LabeledTrial, save_model, train_model
-    from coassist.intent.training import MODEL_PRESETS, with_overrides
+    from coassist.intent.presets import MODEL_PRESETS, with_overrides
     from coassist.sim import TrialSpec, run_spec
 
     d0 = [run_spec(TrialSpec(task=("curved", "linear", "sinusoidal")[s % 3], seed=s)) for s in range(6)]

@@ -44,7 +44,7 @@ def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, 
     """The intent preset named by --preset, with the training (and network-size) options applied."""
     from dataclasses import replace
 
-    from coassist.intent.training import MODEL_PRESETS, with_overrides
+    from coassist.intent.presets import MODEL_PRESETS, with_overrides
 
     chosen = lookup(MODEL_PRESETS, preset, "--preset")
     try:
@@ -117,7 +117,8 @@ def train(
     _check_model_out(out, overwrite, init)
     folder_out(out, "--out")  # before the slow imports: a bad --out is told at once
     from coassist._io import OutputBusyError, OutputLock
-    from coassist.intent.training import OPTIMIZERS, train_model, write_model
+    from coassist.intent.presets import OPTIMIZERS
+    from coassist.intent.training import train_model, write_model
 
     if optimizer is not None:
         choose(optimizer, OPTIMIZERS, "--optimizer", "optimiser")

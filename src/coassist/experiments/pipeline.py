@@ -43,7 +43,7 @@ class ReproduceConfig:
     """
 
     name: str = "default"
-    intent_preset: str = "lstm"  # coassist.intent.training.MODEL_PRESETS, for the simulated stages (as measured there)
+    intent_preset: str = "lstm"  # coassist.intent.presets.MODEL_PRESETS, for the simulated stages (as measured there)
     real_intent_preset: str = "default"  # the shipped default predictor, on the real recordings
     control_preset: str = COLLECTION_PRESET
     # Positions ×3.5, not ×10: in decimetres the robot's gain on the learned prediction (an extrapolation of its

@@ -9,7 +9,7 @@ Protocols (split by trial, never tuned on a test trial):
 - ``user-b``: user-a's recordings plus two of user-b's for training, the third user-b
   recording held out; seed s holds out user-b trial s (mod 3).
 
-Each variant (a preset from :data:`coassist.intent.training.MODEL_PRESETS`, optionally with
+Each variant (a preset from :data:`coassist.intent.presets.MODEL_PRESETS`, optionally with
 TrainConfig overrides ``field=value``) is trained from scratch per seed; its baselines
 (ridge α, Kalman noise) are tuned on validation trials split from the training trials
 (``baselines.fit_tuned_baselines``), and everything is scored on the same ticks
@@ -35,7 +35,7 @@ PROTOCOLS = ("user-a", "user-b")
 
 def parse_variant(text: str) -> tuple[str, dict[str, Any]]:
     """``preset[:field=value,...]`` -> (preset name, TrainConfig overrides); values parsed as JSON."""
-    from coassist.intent.training import MODEL_PRESETS, TrainConfig
+    from coassist.intent.presets import MODEL_PRESETS, TrainConfig
 
     name, _, rest = text.partition(":")
     if name not in MODEL_PRESETS:
@@ -60,7 +60,7 @@ def run(
     import torch
 
     from coassist.intent import evaluate_model, load_trials, train_model
-    from coassist.intent.training import MODEL_PRESETS
+    from coassist.intent.presets import MODEL_PRESETS
 
     torch.set_num_threads(threads)
     a = load_trials([data / "user-a"])

@@ -6,8 +6,9 @@ from coassist.intent.evaluation import PREDICTORS, ModelEvaluation, evaluate_mod
 from coassist.intent.features import Scaler, WindowConfig, WindowSet, feature_names, split_trials, trial_features
 from coassist.intent.model import IntentModel, ModelFileError, ModelMismatchError, load_model, save_model
 from coassist.intent.network import IntentNet, NetworkConfig
+from coassist.intent.presets import MODEL_PRESETS, Preset, TrainConfig
 from coassist.intent.realtime import ModelIntent, RealtimeConfig, RealtimePredictor, load_model_intent
-from coassist.intent.training import MODEL_PRESETS, Preset, TrainConfig, plot_losses, train_model, write_model
+from coassist.intent.training import plot_losses, train_model, write_model
 from coassist.intent.trials import LabeledTrial, load_trials
 
 __all__ = [

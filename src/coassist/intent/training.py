@@ -19,6 +19,12 @@ geometrically from ``lr`` to ``lr · lr_final_ratio`` over the whole run. Given 
 seed and the thread count, a run is deterministic. The library leaves torch's global
 state alone: the initial weights come from a ``torch.Generator`` seeded with ``seed``,
 the batch order from a NumPy generator, and the caller (the CLI) sets the thread count.
+
+What to train with (:class:`~coassist.intent.presets.TrainConfig`, the named presets
+:data:`~coassist.intent.presets.MODEL_PRESETS`) lives in :mod:`coassist.intent.presets`; the
+checkpoint an interrupted run leaves, in :mod:`coassist.intent.checkpoint`. This module holds
+the training itself, the starting model (:func:`build_model`) and the finished model's folder
+(:func:`write_model`, :func:`plot_losses`).
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ import os
 import shutil
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import IO, Any
 
@@ -38,223 +44,23 @@ import numpy as np
 import torch
 from torch import nn
 
-from coassist._checks import is_integer, is_real_number
 from coassist._io import partial_folder, save_figure
 from coassist._progress import progress_bar
 from coassist.intent.baselines import UNTUNED_RIDGE_ALPHA, RidgeBaseline, fit_tuned_baselines, tune_ridge_alpha
 from coassist.intent.batches import DeviceWindows
+from coassist.intent.checkpoint import CHECKPOINT_JSON, checkpoint_files, read_checkpoint, restore_checkpoint
 from coassist.intent.features import WindowConfig, WindowSet, feature_names, scale_targets, split_trials
 from coassist.intent.model import IntentModel, load_model, save_model
-from coassist.intent.network import IntentNet, NetworkConfig
+from coassist.intent.network import IntentNet
+from coassist.intent.presets import Preset, TrainConfig
 from coassist.intent.trials import LabeledTrial
-from coassist.registry import Registry
 
 __all__ = [
-    "OPTIMIZERS",
-    "MODEL_PRESETS",
-    "Preset",
-    "TrainConfig",
     "build_model",
     "plot_losses",
     "train_model",
     "write_model",
 ]
-
-OPTIMIZERS = ("adam", "adamw", "rmsprop", "sgd")
-INIT_MODES = ("scratch", "resume", "finetune", "transfer")
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """How to train. Every field is validated on construction; errors name the field.
-
-    epochs, batch_size : thesis 25 and 64.
-    lr, lr_final_ratio : initial learning rate (thesis 1e-3) and the fraction it decays to
-        geometrically by the end (0.05).
-    optimizer : one of :data:`OPTIMIZERS` (thesis: Adam, chosen with Optuna).
-    weight_decay : L2 / decoupled decay (0 = none).
-    seed : seeds the split, initialisation and batch order.
-    init : ``"scratch"`` or ``"resume:<model>"``, ``"finetune:<model>"``, ``"transfer:<model>"``.
-    threads : torch intra-op threads (1 or 2 on the project machines); the CLI sets them,
-        ``train_model`` does not (it leaves torch's global state alone).
-    test_fraction : share of *trials* held out (thesis 0.2).
-    train_stride, eval_stride : keep every n-th window (consecutive windows overlap almost
-        entirely; 1 = all, the thesis).
-    fit_stride : every n-th training window for what is fitted in closed form before the
-        first epoch: the scalers' ranges and the linear skip's ridge (1 = all, the thesis).
-    ridge_alpha : regularisation of the ridge baseline fitted on the same windows (the
-        baseline the model is compared with). None (default): chosen on validation
-        trials split from the training trials, like the model's own hyper-parameters
-        (``baselines.fit_tuned_baselines``); a number fixes it.
-    skip_alpha : regularisation of the ridge solution the network's linear skip starts
-        from (``Preset.skip``); None: the baseline's α (tuned unless ``ridge_alpha`` is set). Larger shrinks that linear map, which makes the model
-        degrade more gracefully on inputs outside the training range (a new user, data
-        collected with another model in the loop).
-    grad_clip : max gradient norm (0 = off).
-    freeze_skip : keep the linear skip at the ridge solution it starts from, so the LSTM+FC
-        learns only the residual over that linear predictor. In transfer the skip is first
-        re-fitted: the ridge (α as ``skip_alpha``) on the new training trials, in the
-        source model's scalers; the frozen LSTM and the retrained FC layers then learn the
-        residual over the new data's own linear predictor.
-    device : torch device to train on (``"cpu"``, ``"cuda"``); the model returned is on the CPU.
-        The trials' features go there once and every batch is cut there
-        (``intent.batches.DeviceWindows``, bit-identical to cutting it with NumPy).
-    mirror : data augmentation: each training window is mirrored along each axis with
-        probability 1/2 (all positions, velocities, forces and the target of that axis
-        negated). The planar admittance M a + D v = f is symmetric under it; it needs the
-        relative input frame and a relative or residual target. Not applied in transfer
-        (the frozen LSTM's features are computed once per window).
-    """
-
-    epochs: int = 25
-    batch_size: int = 64
-    lr: float = 1e-3
-    lr_final_ratio: float = 0.05
-    optimizer: str = "adam"
-    weight_decay: float = 0.0
-    seed: int = 0
-    init: str = "scratch"
-    threads: int = 2
-    test_fraction: float = 0.2
-    train_stride: int = 1
-    eval_stride: int = 1
-    fit_stride: int = 1
-    ridge_alpha: float | None = None
-    skip_alpha: float | None = None
-    grad_clip: float = 0.0
-    device: str = "cpu"
-    mirror: bool = False
-    freeze_skip: bool = False
-
-    def __post_init__(self) -> None:
-        for name, minimum in (
-            ("epochs", 1),
-            ("batch_size", 1),
-            ("threads", 1),
-            ("train_stride", 1),
-            ("eval_stride", 1),
-            ("fit_stride", 1),
-            ("seed", 0),
-        ):
-            v = getattr(self, name)
-            if not is_integer(v) or v < minimum:
-                raise ValueError(f"train.{name} must be an integer >= {minimum}, got {v!r}")
-            object.__setattr__(self, name, int(v))
-        for name, ok, what in (
-            ("lr", lambda v: v > 0, "> 0"),
-            ("lr_final_ratio", lambda v: 0 < v <= 1, "in (0, 1]"),
-            ("weight_decay", lambda v: v >= 0, ">= 0"),
-            ("test_fraction", lambda v: 0 <= v < 1, "in [0, 1)"),
-            ("ridge_alpha", lambda v: v >= 0, ">= 0"),
-            ("skip_alpha", lambda v: v >= 0, ">= 0"),
-            ("grad_clip", lambda v: v >= 0, ">= 0"),
-        ):
-            v = getattr(self, name)
-            if v is None and name in ("ridge_alpha", "skip_alpha"):  # None: tuned on validation trials
-                continue
-            if not is_real_number(v) or not math.isfinite(v) or not ok(v):
-                raise ValueError(f"train.{name} must be a finite number {what}, got {v!r}")
-            object.__setattr__(self, name, float(v))
-        if self.optimizer not in OPTIMIZERS:
-            raise ValueError(f"train.optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
-        if not isinstance(self.device, str) or self.device.split(":")[0] not in ("cpu", "cuda", "mps"):
-            raise ValueError(f"train.device must be 'cpu', 'cuda[:n]' or 'mps', got {self.device!r}")
-        if not isinstance(self.freeze_skip, bool):
-            raise ValueError(f"train.freeze_skip must be a bool, got {self.freeze_skip!r}")
-        if not isinstance(self.mirror, bool):
-            raise ValueError(f"train.mirror must be a bool, got {self.mirror!r}")
-        mode, _ = self.start
-        if mode not in INIT_MODES:
-            raise ValueError(
-                f"train.init must be 'scratch' or one of resume:/finetune:/transfer:<model>, got {self.init!r}"
-            )
-
-    @property
-    def start(self) -> tuple[str, str | None]:
-        """(mode, model path or None) parsed from ``init``."""
-        if self.init == "scratch":
-            return "scratch", None
-        mode, sep, path = self.init.partition(":")
-        if not sep or not path or mode == "scratch":
-            return "invalid", None
-        return mode, path
-
-
-@dataclass(frozen=True)
-class Preset:
-    """A named starting configuration: window, network sizes, training."""
-
-    name: str
-    window: WindowConfig
-    lstm_layers: int
-    hidden: int
-    fc: tuple[int, ...]
-    train: TrainConfig = field(default_factory=TrainConfig)
-    activation: str = "silu"
-    skip: bool = False  # linear skip initialised with the ridge solution
-
-    def network(self, n_dof: int) -> NetworkConfig:
-        skip = self.window.steps * 4 * n_dof if self.skip else 0
-        return NetworkConfig(
-            4 * n_dof, self.window.horizon * n_dof, self.lstm_layers, self.hidden, self.fc, self.activation, skip
-        )
-
-
-#: ``thesis``: exactly §5.2.2 — 125 samples of absolute features, LSTM 3 × 250,
-#: FC 250 → 200 → 2·50 (SiLU), Adam 1e-3 → 5e-5, batch 64, 25 epochs, MSE.
-#: ``lstm``: small and fast on a 2-core CPU; input frame, target, per-step target
-#: scaling, the ridge-initialised linear skip and mirror augmentation chosen by
-#: measurement on real user-a data (docs/intent-parameterisation.md).
-#: ``default``: ``lstm`` with its skip frozen at the validation-tuned ridge, so the LSTM+FC
-#: learns only the residual over that linear predictor (``train.freeze_skip``).
-#: ``linear``: the same window with no LSTM — the validation-tuned ridge in the model
-#: format, fitted in closed form.
-#: ``intent``: ``lstm`` learning the simulated operator's true intent instead of the tool's
-#: future (issue 18; needs simulated trials).
-#: Held-out real recordings, 3 seeds/folds (docs/intent-baselines.md, issue 11): ``default``
-#: beats the tuned ridge at every horizon in every run, but by 2–5 %, not the 15 % asked:
-#: e_RMS at 0.4 s (median) user-a 1.658 mm against 1.744, user-b 5.277 against 5.379 mm.
-#: ``lstm`` trails the ridge at 0.04 s (user-b −3.4 %).
-_LSTM = Preset(
-    "lstm",
-    WindowConfig(
-        history=125, decimation=5, horizon=50, input_frame="relative", target="residual", target_scaling="step"
-    ),
-    lstm_layers=2,
-    hidden=64,
-    fc=(64,),
-    skip=True,
-    train=TrainConfig(
-        epochs=15, batch_size=64, lr=3e-3, lr_final_ratio=0.05, optimizer="adam", mirror=True, train_stride=4
-    ),
-)
-MODEL_PRESETS: Registry[Preset] = Registry(
-    "intent-model preset",
-    {
-        "thesis": Preset(
-            "thesis",
-            WindowConfig(history=125, decimation=1, horizon=50, input_frame="absolute", target="absolute"),
-            lstm_layers=3,
-            hidden=250,
-            fc=(200,),
-            train=TrainConfig(epochs=25, batch_size=64, lr=1e-3, lr_final_ratio=0.05, optimizer="adam"),
-        ),
-        "lstm": _LSTM,
-        "default": replace(_LSTM, name="default", train=replace(_LSTM.train, freeze_skip=True)),
-        "linear": Preset(
-            "linear",
-            _LSTM.window,
-            lstm_layers=0,
-            hidden=1,
-            fc=(),
-            skip=True,
-            train=TrainConfig(epochs=1, train_stride=4),
-        ),
-        # ``intent``: ``lstm`` trained on the simulated operator's true intent (window.label "intent"),
-        # the intent source that wins the in-loop ablation (docs/intent-labels.md); simulated data only.
-        "intent": replace(_LSTM, name="intent", window=replace(_LSTM.window, label="intent")),
-    },
-)
 
 
 def _optimizer(name: str, params: list[nn.Parameter], lr: float, weight_decay: float) -> torch.optim.Optimizer:
@@ -485,7 +291,7 @@ def train_model(
         fit_linear_skip=False,
     )
     ids = [lt.id for lt in trials]
-    ckpt = _read_checkpoint(Path(base_path)) if mode == "resume" and not base.info.get("finished", True) else None
+    ckpt = read_checkpoint(Path(base_path)) if mode == "resume" and not base.info.get("finished", True) else None
     if ckpt is not None:
         if ckpt["trials"] != ids:
             raise ValueError(
@@ -547,7 +353,7 @@ def train_model(
     done = 0
     if ckpt is not None:
         epoch0, done = ckpt["epoch0"], ckpt["epoch"]
-        _restore(ckpt, opt, sched, rng)
+        restore_checkpoint(ckpt, opt, sched, rng)
 
     def info(finished: bool) -> dict[str, Any]:
         out = {
@@ -621,7 +427,7 @@ def train_model(
             history.append(record)
             if checkpoint_to is not None:
                 snapshot = IntentModel(net, window, model.input_scaler, model.target_scaler, dt, info(False))
-                files = _checkpoint_files(opt, sched, rng, epoch0=epoch0, epoch=epoch, trials=ids, config=config)
+                files = checkpoint_files(opt, sched, rng, epoch0=epoch0, epoch=epoch, trials=ids, config=config)
                 save_model(
                     snapshot,
                     partial_folder(checkpoint_to),
@@ -669,83 +475,6 @@ def train_model(
     return model
 
 
-CHECKPOINT = "checkpoint.safetensors"
-CHECKPOINT_JSON = "checkpoint.json"
-CHECKPOINT_FORMAT = "coassist-checkpoint/1"
-
-
-def _checkpoint_files(
-    opt: torch.optim.Optimizer,
-    sched: Any,
-    rng: np.random.Generator,
-    *,
-    epoch0: int,
-    epoch: int,
-    trials: list[str],
-    config: TrainConfig,
-) -> dict[str, bytes]:
-    """What a resume needs beyond the weights: optimizer tensors (safetensors) and the rest (JSON)."""
-    from safetensors.torch import save as st_save
-
-    state = opt.state_dict()
-    tensors, scalars = {}, {}
-    for idx, per_param in state["state"].items():
-        for name, value in per_param.items():
-            if torch.is_tensor(value):
-                tensors[f"state.{idx}.{name}"] = value.detach().cpu().contiguous()
-            else:
-                scalars[f"{idx}.{name}"] = value
-    sched_state = {k: v for k, v in sched.state_dict().items() if k != "lr_lambdas"}
-    record = {
-        "format": CHECKPOINT_FORMAT,
-        "epoch": epoch,
-        "epoch0": epoch0,
-        "trials": trials,
-        "train_config": asdict(config),
-        "optimizer": {"param_groups": state["param_groups"], "scalars": scalars},
-        "scheduler": sched_state,
-        "numpy_rng": rng.bit_generator.state,
-    }
-    return {CHECKPOINT: st_save(tensors), CHECKPOINT_JSON: _json(record).encode()}
-
-
-def _read_checkpoint(folder: Path) -> dict[str, Any] | None:
-    """The checkpoint record of a model folder (tensors under ``"tensors"``), or None without one."""
-    import json
-
-    from safetensors import SafetensorError
-    from safetensors.torch import load as st_load
-
-    path = folder / CHECKPOINT_JSON
-    if not path.is_file():
-        return None
-    try:
-        record = json.loads(path.read_bytes().decode("utf-8"))
-        if not isinstance(record, dict) or record.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"format is not {CHECKPOINT_FORMAT!r}")
-        for key in ("epoch", "epoch0", "trials", "train_config", "optimizer", "scheduler", "numpy_rng"):
-            if key not in record:
-                raise ValueError(f"missing {key!r}")
-        record["tensors"] = st_load((folder / CHECKPOINT).read_bytes())
-    except (OSError, ValueError, SafetensorError) as exc:
-        raise ValueError(f"{path}: unusable checkpoint ({exc}); start a new stage with finetune:{folder}") from None
-    return record
-
-
-def _restore(ckpt: dict[str, Any], opt: torch.optim.Optimizer, sched: Any, rng: np.random.Generator) -> None:
-    """Put the optimizer, schedule and batch-order generator back where the checkpoint left them."""
-    per_param: dict[int, dict[str, Any]] = {}
-    for key, value in ckpt["tensors"].items():
-        _, idx, name = key.split(".", 2)
-        per_param.setdefault(int(idx), {})[name] = value
-    for key, value in ckpt["optimizer"]["scalars"].items():
-        idx, name = key.split(".", 1)
-        per_param.setdefault(int(idx), {})[name] = value
-    opt.load_state_dict({"state": per_param, "param_groups": ckpt["optimizer"]["param_groups"]})
-    sched.load_state_dict({**ckpt["scheduler"], "lr_lambdas": [None] * len(opt.param_groups)})
-    rng.bit_generator.state = ckpt["numpy_rng"]
-
-
 def plot_losses(history: Sequence[dict[str, Any]], path: Path | IO[bytes], title: str = "") -> None:
     """Train and test loss per epoch on a log scale (thesis Fig. 5.12), PNG to a path or a binary file."""
     import matplotlib
@@ -789,26 +518,3 @@ def _json(obj: Any) -> str:
     import json
 
     return json.dumps(obj, indent=1, allow_nan=False) + "\n"
-
-
-def with_batch_size(train: TrainConfig, batch_size: int) -> TrainConfig:
-    """``train`` with another batch size and its learning rate scaled by the square-root rule,
-    lr' = lr · √(batch_size / train.batch_size) (opt-in; the presets keep their batches).
-
-    Why √ and not linear: for Adam the update's noise scales with 1/√B, and the rule that
-    keeps its stochastic dynamics the same is the square root (Malladi et al. 2022, *On the
-    SDEs and scaling rules for adaptive gradient algorithms*); the linear rule (Goyal et al.
-    2017) is SGD's. The decay to ``lr_final_ratio`` still spans the whole run (fewer steps).
-    Checked on validation loss for the default preset: docs/history.md ("Bigger batches").
-    A bigger batch is fewer, larger matrix products per window: more windows/s on a device
-    with parallel width to fill, different (not worse, there) weights than the preset's.
-    """
-    if not is_integer(batch_size) or batch_size < 1:
-        raise ValueError(f"train.batch_size must be an integer >= 1, got {batch_size!r}")
-    return replace(train, batch_size=int(batch_size), lr=train.lr * math.sqrt(batch_size / train.batch_size))
-
-
-def with_overrides(preset: Preset, **train_overrides: Any) -> Preset:
-    """A preset with some TrainConfig fields replaced (None values ignored)."""
-    kw = {k: v for k, v in train_overrides.items() if v is not None}
-    return replace(preset, train=replace(preset.train, **kw)) if kw else preset

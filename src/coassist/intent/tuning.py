@@ -18,7 +18,8 @@ from typing import Any
 from coassist.errors import CoassistError
 from coassist.intent.evaluation import evaluate_model
 from coassist.intent.features import split_trials, validation_split
-from coassist.intent.training import Preset, train_model
+from coassist.intent.presets import Preset
+from coassist.intent.training import train_model
 from coassist.intent.trials import LabeledTrial
 
 __all__ = ["StudyMismatchError", "check_storage", "run_study", "train_options"]

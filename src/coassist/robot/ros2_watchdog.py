@@ -33,15 +33,11 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from coassist.robot.ros2_world import resolve_topic
+from coassist.robot.ros2_node import ROS_NAME, ROS_TOPIC, Ros2Node, install_hint, resolve_topic
 
 __all__ = ["CommandWatchdog", "WatchdogConfig"]
 
 log = logging.getLogger(__name__)
-
-_INSTALL_HINT = (
-    "coassist ros2-watchdog needs the ros2 extra (rclpy and the message packages): pip install 'coassist[ros2]'"
-)
 
 
 @dataclass(frozen=True)
@@ -64,8 +60,6 @@ class WatchdogConfig:
     domain_id: int | None = None
 
     def __post_init__(self) -> None:
-        from coassist.robot.ros2_world import ROS_NAME, ROS_TOPIC
-
         def bad(name: str, what: str) -> ValueError:
             return ValueError(f"WatchdogConfig.{name} must be {what}, got {getattr(self, name)!r}")
 
@@ -103,47 +97,32 @@ class CommandWatchdog:
         if not isinstance(config, WatchdogConfig):
             raise ValueError(f"config must be a WatchdogConfig, got {type(config).__name__}")
         try:
-            import rclpy
-            from rclpy.executors import SingleThreadedExecutor
             from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
             from std_msgs.msg import Float64MultiArray
         except ImportError as exc:
-            raise ImportError(f"{_INSTALL_HINT} ({exc})") from exc
+            raise ImportError(f"{install_hint('ros2-watchdog')} ({exc})") from exc
         self.forwarded = self.zeros_sent = self.malformed = self.timeouts = 0
         self._msg = Float64MultiArray
         self._lock = threading.Lock()
         self._last = -math.inf  # monotonic time of the last good command
         self._quiet = True  # zeros are what the controller holds
-        self._rclpy = rclpy
-        self._context = rclpy.Context()
-        init_args: dict[str, Any] = {"context": self._context}
-        if config.domain_id is not None:
-            init_args["domain_id"] = config.domain_id
-        rclpy.init(**init_args)
-        self._running = False
+        self._ros = Ros2Node(
+            config.node_name,
+            domain_id=config.domain_id,
+            owner="CommandWatchdog",
+            command="ros2-watchdog",
+            thread_name="coassist-ros2-watchdog",
+        )
+        self.node = self._ros.node
         try:
-            self.node = rclpy.create_node(config.node_name, context=self._context)
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE)
             self._pub = self.node.create_publisher(Float64MultiArray, config.output_topic, qos)
             self.node.create_subscription(Float64MultiArray, config.input_topic, self._on_command, qos)
             self.node.create_timer(config.period, self._check)
-            self._executor = SingleThreadedExecutor(context=self._context)
-            self._executor.add_node(self.node)
-            self._running = True
-            self._thread = threading.Thread(target=self._spin, name="coassist-ros2-watchdog", daemon=True)
-            self._thread.start()
+            self._ros.spin()
         except BaseException:
             self.close()
             raise
-
-    def _spin(self) -> None:
-        while self._running:
-            try:
-                self._executor.spin_once(timeout_sec=0.02)
-            except Exception as exc:  # noqa: BLE001 - a shutdown race ends the thread
-                if self._running:
-                    log.warning("CommandWatchdog: executor stopped: %s", exc)
-                return
 
     def _send(self, values: list[float]) -> None:
         msg = self._msg()
@@ -185,25 +164,14 @@ class CommandWatchdog:
     def close(self) -> None:
         """Stop the thread, then send zeros and shut the node down; never raises. The spin thread
         stops first: a command it forwarded after the zeros would be held by the robot's controller."""
-        self._running = False
-        thread = getattr(self, "_thread", None)
-        if thread is not None:
-            thread.join(timeout=2.0)
+        self._ros.stop_spinning()
         try:
             if getattr(self, "_pub", None) is not None and self.forwarded:
                 with self._lock:
                     self._send([0.0] * self.config.n_joints)
         except Exception:  # noqa: BLE001 - close must finish
             pass
-        for step in (
-            lambda: self._executor.shutdown(timeout_sec=1.0),
-            lambda: self.node.destroy_node(),
-            lambda: self._rclpy.shutdown(context=self._context),
-        ):
-            try:
-                step()
-            except Exception:  # noqa: BLE001 - partly built, or already shut down
-                pass
+        self._ros.shutdown()
 
     def __enter__(self) -> CommandWatchdog:
         return self

@@ -90,7 +90,6 @@ from __future__ import annotations
 
 import logging
 import math
-import re
 import threading
 import time
 from collections.abc import Sequence
@@ -101,6 +100,7 @@ import numpy as np
 
 from coassist.errors import CoassistError
 from coassist.interfaces import fault_names
+from coassist.robot.ros2_node import ROS_NAME, ROS_TOPIC, Ros2Node, install_hint, resolve_topic
 from coassist.robot.worlds import WorldRequest
 from coassist.runtime.world import Command, RobotLinkError, RobotState
 from coassist.spatial import quaternion_from_rotation_vector, rotation_matrix, rotation_vector
@@ -115,7 +115,6 @@ __all__ = [
     "Ros2InputError",
     "Ros2World",
     "build_world",
-    "resolve_topic",
 ]
 
 log = logging.getLogger(__name__)
@@ -129,7 +128,6 @@ UR_JOINT_NAMES = (
     "wrist_2_joint",
     "wrist_3_joint",
 )
-_INSTALL_HINT = "coassist ros2 needs the ros2 extra (rclpy and the message packages): pip install 'coassist[ros2]'"
 #: [s] the longest ``stale_after``: the stop on a lost link. At the 0.25 m/s tool speed a silent
 #: driver lets the tool go at most 125 mm before the arm stops; beyond it the stop is no stop.
 MAX_STALE_AFTER = 0.5
@@ -141,8 +139,6 @@ MAX_JOINT_SPEED = math.pi
 #: [rad] what two joint states of one arm may differ by beyond MAX_JOINT_SPEED · Δt: a driver's
 #: stamp a few ms off its sample at full speed (π rad/s × 3 ms); encoders resolve 1e-5 rad.
 JOINT_JUMP_TOLERANCE = 0.01
-ROS_TOPIC = re.compile(r"^~?/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$|^~$")
-ROS_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
 
 @dataclass(frozen=True)
@@ -300,19 +296,6 @@ _TOPIC_FIELDS = (
 )
 
 
-def resolve_topic(name: str, node_name: str, namespace: str = "") -> str:
-    """The fully qualified name ROS 2 gives ``name`` on node ``node_name`` in ``namespace``:
-    ``/x`` stays, ``~/x`` is ``<ns>/<node>/x``, a relative ``x`` is ``<ns>/x``."""
-    ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
-    if name.startswith("/"):
-        full = name
-    elif name == "~" or name.startswith("~/"):
-        full = f"{ns}/{node_name}{name[1:]}"
-    else:
-        full = f"{ns}/{name}"
-    return "/" + "/".join(part for part in full.split("/") if part)
-
-
 def _numbers(value: Any) -> bool:
     try:
         np.asarray(value, dtype=float)
@@ -357,16 +340,14 @@ class Ros2World:
         if not isinstance(config, Ros2Config):
             raise ValueError(f"config must be a Ros2Config, got {type(config).__name__}")
         try:
-            import rclpy
             from diagnostic_msgs.msg import DiagnosticArray
             from geometry_msgs.msg import PoseStamped, WrenchStamped
             from nav_msgs.msg import Path
-            from rclpy.executors import SingleThreadedExecutor
             from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
             from sensor_msgs.msg import JointState
             from std_msgs.msg import Float64, Float64MultiArray
         except ImportError as exc:
-            raise ImportError(f"{_INSTALL_HINT} ({exc})") from exc
+            raise ImportError(f"{install_hint('ros2')} ({exc})") from exc
         from coassist.robot.kinematics import UR5Kinematics
 
         self.dt = config.dt
@@ -405,14 +386,16 @@ class Ros2World:
         self._closed = False
         self._stopped_sent = False
 
-        self._rclpy = rclpy
-        self._context = rclpy.Context()
-        init_args: dict[str, Any] = {"context": self._context}
-        if config.domain_id is not None:
-            init_args["domain_id"] = config.domain_id
-        rclpy.init(**init_args)
+        self._ros = Ros2Node(
+            config.node_name,
+            namespace=config.namespace or None,
+            domain_id=config.domain_id,
+            owner="Ros2World",
+            command="ros2",
+            thread_name="coassist-ros2",
+        )
+        self.node = self._ros.node
         try:
-            self.node = rclpy.create_node(config.node_name, namespace=config.namespace or None, context=self._context)
             sensor_qos = (
                 QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5, reliability=ReliabilityPolicy.RELIABLE)
                 if config.sensor_reliable
@@ -436,26 +419,13 @@ class Ros2World:
                 )
                 if getattr(config, f"{name}_topic")
             }
-            self._executor = SingleThreadedExecutor(context=self._context)
-            self._executor.add_node(self.node)
-            self._spinning = True
-            self._thread = threading.Thread(target=self._spin, name="coassist-ros2", daemon=True)
-            self._thread.start()
+            self._ros.spin()
             self._wait_first()
         except BaseException:
             self.close()
             raise
 
     # -- ROS side -----------------------------------------------------------------
-
-    def _spin(self) -> None:
-        while self._spinning:
-            try:
-                self._executor.spin_once(timeout_sec=0.02)
-            except Exception as exc:  # noqa: BLE001 - a shutdown race ends the thread
-                if self._spinning:
-                    log.warning("Ros2World: executor stopped: %s", exc)
-                return
 
     def _reject(self, topic: str, why: str) -> None:
         """Drop a message on ``topic``, remembering why: a topic that goes silent for it says so."""
@@ -731,19 +701,7 @@ class Ros2World:
         except Exception as exc:  # noqa: BLE001 - close must finish
             log.warning("Ros2World.close: stop failed: %s", exc)
         self._closed = True
-        self._spinning = False
-        thread = getattr(self, "_thread", None)
-        if thread is not None:
-            thread.join(timeout=2.0)
-        for step in (
-            lambda: self._executor.shutdown(timeout_sec=1.0),
-            lambda: self.node.destroy_node(),
-            lambda: self._rclpy.shutdown(context=self._context),
-        ):
-            try:
-                step()
-            except Exception:  # noqa: BLE001 - partly built, or already shut down
-                pass
+        self._ros.close()
 
     def __enter__(self) -> Ros2World:
         return self

@@ -713,7 +713,7 @@ def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Con
 
 
 def _training(data: Mapping[str, Any]) -> TrainingPlan:
-    from coassist.intent.training import MODEL_PRESETS, OPTIMIZERS  # the learn extra, only for a plan that trains
+    from coassist.intent.presets import MODEL_PRESETS, OPTIMIZERS  # the learn extra, only for a plan that trains
 
     tr = _table(data, "training", tuple(TrainingPlan.__dataclass_fields__))
     preset = tr.get("preset", "default")

@@ -50,7 +50,7 @@ class TrainJob:
 def study_preset(t: TrainingPlan, init: str):
     """The intent preset as ``coassist train --preset … --epochs … --init init`` builds it (coassist.cli.intent)
     from the plan's ``[training]`` ``t``; the sizes (layers, hidden, fc) apply to ``init="scratch"`` only."""
-    from coassist.intent.training import MODEL_PRESETS, with_overrides
+    from coassist.intent.presets import MODEL_PRESETS, with_overrides
 
     p = with_overrides(
         MODEL_PRESETS.lookup(t.preset),

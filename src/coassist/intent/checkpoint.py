@@ -1,0 +1,109 @@
+"""The checkpoint of an interrupted training run: what a resume needs beyond the weights.
+
+:func:`coassist.intent.training.train_model` (``checkpoint_to=``) writes, beside the model
+files of each epoch's snapshot, :data:`CHECKPOINT` (the optimizer's tensors, safetensors)
+and :data:`CHECKPOINT_JSON` (format :data:`CHECKPOINT_FORMAT`: epoch, first epoch, trial
+ids, training configuration, the optimizer's other state, the learning-rate schedule's
+position and the batch-order generator's state). :func:`checkpoint_files` builds those
+files, :func:`read_checkpoint` reads them back from a model folder and
+:func:`restore_checkpoint` puts the optimizer, schedule and generator where they were.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from coassist.intent.presets import TrainConfig
+
+__all__ = [
+    "CHECKPOINT",
+    "CHECKPOINT_FORMAT",
+    "CHECKPOINT_JSON",
+    "checkpoint_files",
+    "read_checkpoint",
+    "restore_checkpoint",
+]
+
+CHECKPOINT = "checkpoint.safetensors"
+CHECKPOINT_JSON = "checkpoint.json"
+CHECKPOINT_FORMAT = "coassist-checkpoint/1"
+
+
+def checkpoint_files(
+    opt: torch.optim.Optimizer,
+    sched: Any,
+    rng: np.random.Generator,
+    *,
+    epoch0: int,
+    epoch: int,
+    trials: list[str],
+    config: TrainConfig,
+) -> dict[str, bytes]:
+    """What a resume needs beyond the weights: optimizer tensors (safetensors) and the rest (JSON)."""
+    from safetensors.torch import save as st_save
+
+    state = opt.state_dict()
+    tensors, scalars = {}, {}
+    for idx, per_param in state["state"].items():
+        for name, value in per_param.items():
+            if torch.is_tensor(value):
+                tensors[f"state.{idx}.{name}"] = value.detach().cpu().contiguous()
+            else:
+                scalars[f"{idx}.{name}"] = value
+    sched_state = {k: v for k, v in sched.state_dict().items() if k != "lr_lambdas"}
+    record = {
+        "format": CHECKPOINT_FORMAT,
+        "epoch": epoch,
+        "epoch0": epoch0,
+        "trials": trials,
+        "train_config": asdict(config),
+        "optimizer": {"param_groups": state["param_groups"], "scalars": scalars},
+        "scheduler": sched_state,
+        "numpy_rng": rng.bit_generator.state,
+    }
+    return {
+        CHECKPOINT: st_save(tensors),
+        CHECKPOINT_JSON: (json.dumps(record, indent=1, allow_nan=False) + "\n").encode(),
+    }
+
+
+def read_checkpoint(folder: Path) -> dict[str, Any] | None:
+    """The checkpoint record of a model folder (tensors under ``"tensors"``), or None without one."""
+
+    from safetensors import SafetensorError
+    from safetensors.torch import load as st_load
+
+    path = folder / CHECKPOINT_JSON
+    if not path.is_file():
+        return None
+    try:
+        record = json.loads(path.read_bytes().decode("utf-8"))
+        if not isinstance(record, dict) or record.get("format") != CHECKPOINT_FORMAT:
+            raise ValueError(f"format is not {CHECKPOINT_FORMAT!r}")
+        for key in ("epoch", "epoch0", "trials", "train_config", "optimizer", "scheduler", "numpy_rng"):
+            if key not in record:
+                raise ValueError(f"missing {key!r}")
+        record["tensors"] = st_load((folder / CHECKPOINT).read_bytes())
+    except (OSError, ValueError, SafetensorError) as exc:
+        raise ValueError(f"{path}: unusable checkpoint ({exc}); start a new stage with finetune:{folder}") from None
+    return record
+
+
+def restore_checkpoint(ckpt: dict[str, Any], opt: torch.optim.Optimizer, sched: Any, rng: np.random.Generator) -> None:
+    """Put the optimizer, schedule and batch-order generator back where the checkpoint left them."""
+    per_param: dict[int, dict[str, Any]] = {}
+    for key, value in ckpt["tensors"].items():
+        _, idx, name = key.split(".", 2)
+        per_param.setdefault(int(idx), {})[name] = value
+    for key, value in ckpt["optimizer"]["scalars"].items():
+        idx, name = key.split(".", 1)
+        per_param.setdefault(int(idx), {})[name] = value
+    opt.load_state_dict({"state": per_param, "param_groups": ckpt["optimizer"]["param_groups"]})
+    sched.load_state_dict({**ckpt["scheduler"], "lr_lambdas": [None] * len(opt.param_groups)})
+    rng.bit_generator.state = ckpt["numpy_rng"]
