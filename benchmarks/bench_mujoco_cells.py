@@ -42,10 +42,9 @@ from coassist.experiments.ablation import (  # noqa: E402
     ARBITRATED,
     BOOTSTRAP,
     OBJECTS,
-    mujoco_person_claims,
-    precision_claims,
     run_mujoco_ablation,
 )
+from coassist.experiments.ablation_report import mujoco_person_claims, precision_claims  # noqa: E402
 from coassist.experiments.source_training import calibrate_paths, calibrate_person  # noqa: E402
 
 

@@ -78,7 +78,7 @@ def headline_figures(run: Path) -> dict[str, tuple[float, float, float]]:
     import json
 
     from coassist.analysis.paired import paired_difference
-    from coassist.experiments.ablation import HEADLINE
+    from coassist.experiments.ablation_report import HEADLINE
 
     summary = json.loads((run / "summary.json").read_text("utf-8"))
     app, cells = summary["application"], summary["ablation"]["cells"]

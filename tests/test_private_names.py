@@ -1,7 +1,7 @@
 """No module uses another module's private (underscore) names.
 
 A name with a leading underscore is its module's own: another module that imports it
-(``from coassist.experiments.ablation import _seeds_text``) or reaches for it through the module
+(``from coassist.experiments.ablation_report import _side_text``) or reaches for it through the module
 (``spatial._rotation_vector(...)``) depends on what the owner may change at will. A name two
 modules share is public in its owner, or lives where both can import it. Private *modules*
 (``coassist._io``, ``coassist._checks``: internals shared by the package) are imported freely;

@@ -42,7 +42,7 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
         for controller, source in ablation_cells(cfg):
             assert ("point-mass", obj, controller, source) in result.metrics
     # the report shows them: the MuJoCo headline's person row, the verdict per object, how it was calibrated
-    from coassist.experiments.ablation import ablation_section, headline_rows
+    from coassist.experiments.ablation_report import ablation_section, headline_rows
 
     _, _, rows = headline_rows(result, "mujoco")
     assert {r[0] for r in rows if r[1].startswith("person model")} == {"board", "heavy"}
@@ -171,7 +171,7 @@ def _result(person_gain: float, jerk: float, world: str = "point-mass"):
 
 
 def test_the_person_models_claims_follow_issue_40s_bars():
-    from coassist.experiments.ablation import person_claims
+    from coassist.experiments.ablation_report import person_claims
 
     (good,) = person_claims(_result(0.9, 1.05))
     assert good.holds and "force 90 %" in good.evidence and "1.05× MG" in good.evidence
@@ -187,7 +187,7 @@ def test_the_person_models_mujoco_claim_needs_the_direction_with_an_interval():
     """On the MuJoCo UR5 the claim is the direction: less force and overshoot than MG, each paired difference's
     95 % upper bound below zero; its evidence gives the shares with their intervals."""
     from coassist.analysis.paired import paired_difference
-    from coassist.experiments.ablation import mujoco_person_claims, person_claims
+    from coassist.experiments.ablation_report import mujoco_person_claims, person_claims
 
     (good,) = person_claims(_result(0.5, 1.3, world="mujoco"))  # no share or jerk bar there: the direction
     assert good.holds and "MuJoCo UR5" in good.text and "force 50 % [" in good.evidence and "1.30× MG" in good.evidence

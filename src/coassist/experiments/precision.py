@@ -23,7 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from coassist.experiments.ablation import ARBITRATED, DAMPED, SIDES, AblationResult, seeds_text, share_text
+from coassist.experiments.ablation import ARBITRATED, DAMPED, SIDES, AblationResult
+from coassist.experiments.ablation_report import seeds_text, share_text
 from coassist.experiments.application import OBJECTS, OBSTACLE, application_metrics, pair_key
 from coassist.experiments.pipeline import (
     REPRODUCE_PRESETS,

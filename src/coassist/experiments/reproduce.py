@@ -57,7 +57,8 @@ import numpy as np
 
 from coassist._cpu import CpuSeconds, run_cpu_seconds
 from coassist._io import atomic_write_text
-from coassist.experiments.ablation import MG_JOB, AblationAhead, ablation_section, run_ablation
+from coassist.experiments.ablation import MG_JOB, AblationAhead, run_ablation
+from coassist.experiments.ablation_report import ablation_section
 from coassist.experiments.application import (
     application_section,
     handed_to_ablation,
@@ -268,7 +269,7 @@ def headline_section(application, transfer, real, sim_dt: float, ablation) -> Se
     precision and smoothness against MG; the share of the oracle's benefit each intent source
     gets in the loop (the ablation); then whether the prediction beats its best simple
     baseline (the simulated transfer targets and the real recordings), in mm."""
-    from coassist.experiments.ablation import headline_rows
+    from coassist.experiments.ablation_report import headline_rows
     from coassist.experiments.application import headline_table
 
     s = Section("The answer: does the assistance help?")

@@ -50,7 +50,7 @@ from coassist.runtime.lockstep import Loop
 from coassist.runtime.loop import LoopLog, TargetDwell, Termination, run_loop
 from coassist.runtime.safety import SafetyLimits
 from coassist.runtime.tick import ControlTick, Plan, TickConfig
-from coassist.runtime.world import RobotState, World
+from coassist.runtime.world import RobotState, World, optional_member
 from coassist.runtime.wrench import WrenchConfig
 from coassist.scenario.tasks import Task
 from coassist.spatial import unwrap_rotation_vectors
@@ -173,7 +173,7 @@ class Episode:
         if n == 0:
             raise RuntimeError(f"the run ended before its first tick: {log.message or log.ended}")
         message = log.message
-        detail = getattr(self.world, "stop_detail", None)  # a world that knows why the robot stopped says so
+        detail = optional_member(self.world, "stop_detail")  # a world that knows why the robot stopped says so
         if detail and log.ended in ("robot_stop", "safety_stop"):
             message = log.message = detail
         tick = self.tick

@@ -42,7 +42,7 @@ import numpy as np
 from coassist.errors import CoassistError
 from coassist.interfaces import Fault
 from coassist.runtime.tick import ControlTick
-from coassist.runtime.world import RobotState, World, finite_vector
+from coassist.runtime.world import RobotState, World, finite_vector, optional_member
 
 __all__ = ["LINK_LOST", "LoopLog", "LoopRun", "TargetDwell", "TargetDwellBatch", "run_loop"]
 
@@ -228,7 +228,7 @@ class LoopRun:
         self.jvel = np.empty((n_max, nj)) if nj else None
         self.compute = np.zeros(n_max)
         self.hand_of = _hand_reader(world)
-        self.overrun_of = getattr(world, "last_overrun", None) is not None
+        self.overrun_of = optional_member(world, "last_overrun") is not None
         self.upstream = Fault.NONE
         self.ended, self.message, self.n = "time_limit", "", n_max
         self.held_q = np.zeros(nj)  # the joints logged for a glitch at tick 0 (nothing good seen yet)
@@ -244,7 +244,7 @@ class LoopRun:
             self._world_failed(k, exc, "read")
             return LINK_LOST
         upstream = self.upstream
-        if self.overrun_of and float(getattr(self.world, "last_overrun", 0.0) or 0.0) > 0.0:
+        if self.overrun_of and float(optional_member(self.world, "last_overrun") or 0.0) > 0.0:
             # a world that measures the gap at read (the robot's own clock): this tick is late too
             upstream |= Fault.DEADLINE_MISS
         try:
@@ -288,7 +288,7 @@ class LoopRun:
         upstream = Fault.NONE
         if self.deadline is not None and spent > self.deadline:
             upstream |= Fault.DEADLINE_MISS
-        if self.overrun_of and float(getattr(world, "last_overrun", 0.0) or 0.0) > 0.0:
+        if self.overrun_of and float(optional_member(world, "last_overrun") or 0.0) > 0.0:
             upstream |= Fault.DEADLINE_MISS
         self.upstream = upstream
         d = self.tick.d
@@ -385,10 +385,10 @@ def _hand_reader(world: World) -> Callable[[], object] | None:
     """What the hand applied in the last period, where the world knows it (simulation).
 
     A real robot does not: there the log's effort_h is the measured hand wrench."""
-    fn = getattr(world, "hand_force", None)
+    fn = optional_member(world, "hand_force")
     if callable(fn):
         return fn
-    if hasattr(type(world), "hand_wrench"):
+    if optional_member(type(world), "hand_wrench") is not None:
         return lambda: world.hand_wrench
     return None
 

@@ -23,14 +23,25 @@ model physically and take the robot's Cartesian effort u_r instead.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from coassist._checks import as_real_array
 from coassist.errors import CoassistError
 
-__all__ = ["COMMAND_SPACES", "Command", "HandOperator", "RobotLinkError", "RobotState", "World", "finite_vector"]
+__all__ = [
+    "COMMAND_SPACES",
+    "OPTIONAL_WORLD_MEMBERS",
+    "Command",
+    "HandOperator",
+    "OptionalWorldMembers",
+    "RobotLinkError",
+    "RobotState",
+    "World",
+    "finite_vector",
+    "optional_member",
+]
 
 COMMAND_SPACES: tuple[str, ...] = ("joint_velocity", "effort")
 
@@ -138,6 +149,61 @@ class World(Protocol):
     def close(self) -> None:
         """Release the robot or the physics; calls :meth:`stop` first where it moves."""
         ...
+
+
+class OptionalWorldMembers(Protocol):
+    """What the runtime reads of a world when the world has it, besides :class:`World`'s members.
+
+    None is required: a world without one gets the default of :data:`OPTIONAL_WORLD_MEMBERS`,
+    and the runtime reads each through :func:`optional_member` (``hand_wrench`` is looked up on
+    the world's class, being a property a world computes on demand).
+
+    Attributes
+    ----------
+    last_overrun : [s] how far the last period ran over ``dt`` (0.0 on time), for a world that
+        measures its own period (a real arm's clock, a world paced for a viewer); > 0 after a
+        read or an apply makes the loop flag ``Fault.DEADLINE_MISS``. Absent (None): the loop
+        does not ask.
+    stop_detail : what stopped the robot and what to do (None while it runs); replaces the
+        log's message when the run ended with ``"robot_stop"`` or ``"safety_stop"``.
+    hand_wrench : (6,) the hand's wrench at the handle in the last period [N, N·m], base frame,
+        for a world that simulates the hand; the log's effort_h (its first ``d`` entries).
+    """
+
+    last_overrun: float | None
+    stop_detail: str | None
+
+    @property
+    def hand_wrench(self) -> np.ndarray:
+        """(6,) the hand's wrench in the last period [N, N·m], base frame (class docstring)."""
+        ...
+
+    def hand_force(self) -> tuple[float, float]:
+        """(d,) the hand force u_h the world applied in the last period [N] (a simulated hand; the
+        point-mass world's (2,)); preferred to ``hand_wrench`` where a world has both."""
+        ...
+
+
+#: Every member of :class:`OptionalWorldMembers` → what the runtime reads when a world lacks it.
+OPTIONAL_WORLD_MEMBERS: dict[str, None] = {
+    "last_overrun": None,
+    "stop_detail": None,
+    "hand_force": None,
+    "hand_wrench": None,
+}
+
+
+def optional_member(world: object, name: str) -> Any:
+    """``world``'s member ``name`` of :class:`OptionalWorldMembers`, or its default (None) when the
+    world lacks it. ``world`` may be a world's class (a property is then found without being
+    computed). Raises ``ValueError`` for a name the protocol does not declare: a new probe of a
+    world is declared there first (tests/runtime/test_world_members.py checks both)."""
+    if name not in OPTIONAL_WORLD_MEMBERS:
+        raise ValueError(
+            f"optional_member: name must be one of {sorted(OPTIONAL_WORLD_MEMBERS)} (declare it in "
+            f"OptionalWorldMembers), got {name!r}"
+        )
+    return getattr(world, name, OPTIONAL_WORLD_MEMBERS[name])
 
 
 @runtime_checkable

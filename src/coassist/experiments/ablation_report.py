@@ -1,0 +1,450 @@
+"""The in-loop ablation's report (issues 18, 34, 40): its tables, first-screen rows and claims.
+
+Rendering only: everything here reads an :class:`~coassist.experiments.ablation.AblationResult`
+(the cells' metrics, the shares of the oracle's benefit and the per-side paired differences it
+computes) and writes text for :mod:`coassist.experiments.report`'s sections; the cells are run
+and their statistics computed in :mod:`coassist.experiments.ablation`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from coassist.analysis.paired import paired_difference
+from coassist.experiments.ablation import (
+    ARBITRATED,
+    DAMPED,
+    FORCE_SHARE_BAR,
+    HELD_OUT,
+    JERK_BAR,
+    MUJOCO_PERSON,
+    ORACLE_SHARE_BAR,
+    OVERSHOOT_SHARE_BAR,
+    SHARE_LOWER_BAR,
+    SIDES,
+    WORLDS,
+    AblationResult,
+    told_of,
+)
+from coassist.experiments.application import OBJECTS
+from coassist.experiments.pipeline import EVAL_HORIZONS
+from coassist.experiments.report import Claim, Section
+from coassist.experiments.source_training import APPLICATION_SOURCE
+
+
+def share_text(s: tuple[float, float, float]) -> str:
+    """A (share, low, high) as the report writes it: percent with its interval, or n/a."""
+    share, lo, hi = s
+    if not np.isfinite(share):
+        return "n/a"
+    bracket = f" [{100 * lo:.0f}, {100 * hi:.0f}]" if np.isfinite(lo) else ""
+    return f"{100 * share:.0f} %{bracket}"
+
+
+def seeds_text(result: AblationResult, world: str, obj: str, controller: str, source: str, metric: str) -> str:
+    """The share over a source's trainings: the first one's with its interval, and each other seed's."""
+    names = result.seeds_of(world, obj, controller, source)
+    first = share_text(result.shares(world, obj, controller, names[0])[metric])
+    if len(names) == 1:
+        return first
+    others = [result.shares(world, obj, controller, n)[metric][0] for n in names]
+    return f"{first}; seeds {', '.join(f'{100 * v:.0f}' for v in others)} %"
+
+
+def _side_text(v: tuple[float, float, float, float, int]) -> str:
+    mean, d, lo, hi, n = v
+    if not n:
+        return "—"
+    return (
+        f"{1e3 * mean:.1f} ({1e3 * d:+.1f} [{1e3 * lo:+.1f}, {1e3 * hi:+.1f}])"
+        if np.isfinite(lo)
+        else f"{1e3 * mean:.1f}"
+    )
+
+
+#: The first screen's rows: (label, controller, source); the LSTM's and the ridge's as the previous
+#: application source and its simplest rival, the application's, and the oracle.
+HEADLINE = (
+    ("nominal plan", ARBITRATED, "nominal"),
+    ("LSTM+FC, intent label", ARBITRATED, "lstm-intent"),
+    ("ridge, intent label", ARBITRATED, "ridge-intent"),
+    ("present estimate", ARBITRATED, "present"),
+    ("path hypotheses", ARBITRATED, "paths"),
+    ("path hypotheses + deceleration damping", DAMPED, "paths"),
+    ("person model (learnt from probe trials)", ARBITRATED, "person"),
+    ("oracle (true intent)", ARBITRATED, "oracle"),
+)
+
+
+def headline_rows(result: AblationResult, world: str = "point-mass") -> tuple[str, list[str], list[list[Any]]]:
+    """The report's first-screen table (issue 34): per object, MG and each headline source with the
+    arbitrated controller: f_RMS and its share of the oracle's saving, overshoot past the intent per side
+    of the detour and its share, the clearance deficit per side, jerk and σ."""
+    rows = []
+    for obj in OBJECTS:
+        if (world, obj) not in result.mg:
+            continue
+        m = result.mg[(world, obj)]
+        side = np.asarray(m["side"])
+
+        def sided(values, side: np.ndarray = side) -> str:
+            v = np.asarray(values, float)
+            return " / ".join(f"{1e3 * np.nanmean(v[side == s]):.1f}" if (side == s).any() else "—" for s in SIDES)
+
+        rows.append(
+            [
+                obj,
+                "MG",
+                f"{m['f_rms']:.2f}",
+                "",
+                sided(m["overshoot_trials"]),
+                "",
+                sided(m["clearance_deficit_trials"]),
+                f"{m['jerk_rms']:.2f}",
+                f"{1e3 * m['sigma']:.2f}",
+                "",
+            ]
+        )
+        for label, controller, source in HEADLINE:
+            if (world, obj, controller, source) not in result.metrics:
+                continue
+            r = result.metrics[(world, obj, controller, source)]
+            default = " (the application's)" if source == APPLICATION_SOURCE and controller == ARBITRATED else ""
+            rows.append(
+                [
+                    obj,
+                    label + default,
+                    f"{r['f_rms']:.2f}",
+                    seeds_text(result, world, obj, controller, source, "f_rms"),
+                    sided(r["overshoot_trials"]),
+                    seeds_text(result, world, obj, controller, source, "overshoot"),
+                    sided(r["clearance_deficit_trials"]),
+                    f"{r['jerk_rms']:.2f} ({r['jerk_rms'] / m['jerk_rms']:.2f}× MG)",
+                    f"{1e3 * r['sigma']:.2f}",
+                    told_of(source).text(),
+                ]
+            )
+    n = len(result.pairs.get((world, OBJECTS[0]), ()))
+    who = (
+        "the held-out population: operators whose detour families and arms nothing was tuned to, point-mass world"
+        if world == HELD_OUT
+        else "the MuJoCo UR5: each operator's first trials of the point-mass world, driven on the arm"
+        if world == "mujoco"
+        else f"{world} world"
+    )
+    caption = (
+        f"Precision at the person's turns ({who}, arbitrated controller, {n} paired trials per object; "
+        "shares of the oracle's benefit over MG with their 95 % bootstrap interval, and each training seed's for "
+        "a learned source; left / right: the detour's side, right being the inside of the arc)"
+    )
+    header = [
+        "object",
+        "intent source",
+        "f_RMS [N]",
+        "force: share of oracle's saving",
+        "overshoot left / right [mm]",
+        "overshoot: share of oracle's reduction",
+        "clearance deficit left / right [mm]",
+        "jerk RMS [m/s³]",
+        "σ [mm]",
+        "told (besides what an arm measures)",
+    ]
+    return caption, header, rows
+
+
+def ablation_section(result: AblationResult) -> Section:
+    """The report's ablation section: every cell of both worlds, and the claims of issues 18 and 34."""
+    s = Section("6. Which intent makes assistance better? The in-loop ablation (issues 18, 34)")
+    s.paragraphs.append(
+        "Each intent source drives the fixed-α and the arbitrated assistive controller (preset "
+        f"'{result.preset}') on the application's trials, paired against MG on the same trials. The learned sources are "
+        "trained from scratch on the same datasets by the same protocol; only what they learn to predict differs: the "
+        "tool's future pose (the thesis) or the simulated operator's true intent; each LSTM is trained with several seeds "
+        "(the arbitrated controller runs every one). 'present' estimates where the operator wants the tool now from the "
+        "hand force; 'paths' adds path hypotheses round the obstacle the robot is told of, fitted to each operator's "
+        "calibration trials. 'cooperative-damped' is the arbitrated controller with damping while the tool slows down. "
+        "Share of the oracle's benefit = mean(MG − X) / mean(MG − oracle) over paired trials, with a 95 % bootstrap "
+        "interval. Overshoot and clearance deficit (how much closer to the obstacle the tool passed than the operator "
+        "meant) per side of the detour, as paired differences from MG with their 95 % intervals."
+    )
+    for world, why in result.skipped.items():
+        s.paragraphs.append(f"The {world} world did not run: {why}.")
+    if MUJOCO_PERSON in result.models:
+        s.paragraphs.append(
+            "On the MuJoCo UR5 the person model is calibrated on the arm it assists: each operator's probe trials "
+            "(the point-mass cells' calibration trials, the same seeds) are driven there and fitted as in the "
+            "point-mass world (reproduce.mujoco_person_calibration)."
+        )
+    for world in WORLDS:
+        rows = []
+        for obj in OBJECTS:
+            if (world, obj) not in result.mg:
+                continue
+            m = result.mg[(world, obj)]
+            rows.append(
+                [
+                    obj,
+                    "—",
+                    "MG",
+                    f"{m['f_rms']:.2f}",
+                    f"{m['sigma'] * 1e3:.2f}",
+                    f"{m['overshoot'] * 1e3:.1f}",
+                    "",
+                    "",
+                    "",
+                    "",
+                    f"{m['jerk_rms']:.2f}",
+                    f"{m['peak_effort_ratio']:.2f}",
+                    "",
+                    "",
+                ]
+            )
+            for (w, ob, controller, source), r in result.metrics.items():
+                if (w, ob) != (world, obj):
+                    continue
+                sh = result.shares(world, obj, controller, source)
+                d, lo, hi, _ = paired_difference(r["overshoot_trials"], m["overshoot_trials"])
+                os_side = result.by_side(world, obj, controller, source, "overshoot")
+                cd_side = result.by_side(world, obj, controller, source, "clearance_deficit")
+                rows.append(
+                    [
+                        obj,
+                        controller,
+                        source,
+                        f"{r['f_rms']:.2f}",
+                        f"{r['sigma'] * 1e3:.2f}",
+                        f"{r['overshoot'] * 1e3:.1f} ({d * 1e3:+.1f} [{lo * 1e3:+.1f}, {hi * 1e3:+.1f}])",
+                        _side_text(os_side[1]),
+                        _side_text(os_side[-1]),
+                        _side_text(cd_side[1]),
+                        _side_text(cd_side[-1]),
+                        f"{r['jerk_rms']:.2f}",
+                        f"{r['peak_effort_ratio']:.2f}",
+                        share_text(sh["f_rms"]),
+                        share_text(sh["overshoot"]),
+                    ]
+                )
+        if rows:
+            n = len(result.pairs[(world, OBJECTS[0])])
+            s.tables.append(
+                (
+                    f"{world} world, {n} paired trials per cell: f_RMS [N], σ [mm], overshoot past the intent [mm] (paired "
+                    "difference from MG, 95 % interval), the same per side of the detour, the clearance deficit per side [mm], "
+                    "jerk RMS [m/s³], peak robot/hand effort, share of the oracle's benefit",
+                    [
+                        "object",
+                        "controller",
+                        "intent source",
+                        "f_RMS",
+                        "σ",
+                        "overshoot",
+                        "overshoot, left",
+                        "overshoot, right",
+                        "clearance deficit, left",
+                        "clearance deficit, right",
+                        "jerk RMS",
+                        "peak |u_r|/|u_h|",
+                        "oracle share: force",
+                        "oracle share: overshoot",
+                    ],
+                    rows,
+                )
+            )
+    rows = []
+    for (world, obj, controller, source), e in result.errors.items():
+        if world == "point-mass" and controller == ARBITRATED:
+            rows.append(
+                [source, obj]
+                + [f"{1e3 * e[h]['tool']:.2f} / {1e3 * e[h]['intent']:.2f}" if h in e else "—" for h in EVAL_HORIZONS]
+            )
+    s.tables.append(
+        (
+            "What each source predicted in the loop (point-mass world, arbitrated controller): e_RMS [mm] against the tool's "
+            "measured future pose / against the operator's true intent, per horizon",
+            ["intent source", "object"] + [f"{h} samples" for h in EVAL_HORIZONS],
+            rows,
+        )
+    )
+    for obj in OBJECTS:
+        for source in ("lstm-tool", "lstm-hand-alone", "lstm-intent"):
+            key = ("point-mass", obj, ARBITRATED, source)
+            if key not in result.metrics:
+                continue
+            sh = result.shares(*key)
+            f, o = sh["f_rms"][0], sh["overshoot"][0]
+            s.claims.append(
+                Claim(
+                    f"{obj}: the arbitrated controller with {source} in the loop gets ≥ {100 * ORACLE_SHARE_BAR:.0f} % of the "
+                    "oracle's force saving and of its overshoot reduction over MG (issue 18's bar; point-mass world)",
+                    bool(np.isfinite(f) and np.isfinite(o) and f >= ORACLE_SHARE_BAR and o >= ORACLE_SHARE_BAR),
+                    f"force {share_text(sh['f_rms'])}, overshoot {share_text(sh['overshoot'])} of the oracle's benefit",
+                    reason="a network on the hand force learns where the tool goes, not where the person wants it now: at a "
+                    "turn it runs past it (docs/precision.md)",
+                )
+            )
+    s.claims.extend(precision_claims(result))
+    s.claims.extend(person_claims(result))
+    return s
+
+
+#: Issue 40's bars for the person model (arbitrated controller): (force share, overshoot share, its lower
+#: bound, jerk against MG's) in the population it was developed on, and on the held-out population.
+PERSON_BARS = {"point-mass": (0.85, 0.70, 0.40, 1.1), HELD_OUT: (0.80, 0.60, 0.30, None)}
+
+
+def person_claims(result: AblationResult, source: str = "person") -> list[Claim]:
+    """Issue 40's goals for the person model, per object, in the point-mass world and on the held-out
+    population (where its cells ran): shares of the oracle's benefit, jerk, and per side no more
+    overshoot than MG on the held-out population; then the MuJoCo UR5's direction (:func:`mujoco_person_claims`)."""
+    claims = []
+    for world, (force_bar, over_bar, lower_bar, jerk_bar) in PERSON_BARS.items():
+        for obj in OBJECTS:
+            key = (world, obj, ARBITRATED, source)
+            if key not in result.metrics:
+                continue
+            sh = result.shares(*key)
+            (f, _, _), (o, o_lo, _) = sh["f_rms"], sh["overshoot"]
+            r, m = result.metrics[key], result.mg[(world, obj)]
+            where = "held-out population" if world == HELD_OUT else f"{world} world"
+            ok = all(np.isfinite(v) for v in (f, o, o_lo)) and f >= force_bar and o >= over_bar and o_lo >= lower_bar
+            jerk = r["jerk_rms"] / m["jerk_rms"]
+            text = f"force {share_text(sh['f_rms'])}, overshoot {share_text(sh['overshoot'])}; jerk {jerk:.2f}× MG"
+            goal = (
+                f"{obj}, {where}: the person model (learnt from each operator's probe trials, told no scene, family or "
+                f"label) gets ≥ {100 * force_bar:.0f} % of the oracle's force saving and ≥ {100 * over_bar:.0f} % of its "
+                f"overshoot reduction (lower bound ≥ {100 * lower_bar:.0f} %)"
+            )
+            if jerk_bar is not None:
+                goal += f", jerk ≤ {jerk_bar:g} × MG's"
+                ok = ok and jerk <= jerk_bar
+            else:
+                sides = result.by_side(*key, "overshoot")
+                goal += ", and overshoots no more than MG on either side"
+                ok = ok and all(n >= 1 and np.isfinite(d) and d <= 0.0 for _, d, _, _, n in sides.values())
+                text += "; " + "; ".join(f"{SIDES[sd]} {_side_text(v)} mm vs MG" for sd, v in sides.items())
+            claims.append(
+                Claim(
+                    goal + " (issue 40)",
+                    bool(ok),
+                    text,
+                    reason="the way round is known only once the person has left the plan by more than the filter's "
+                    "dead zone, and the rows follow the person's own scatter of shapes (docs/precision.md)",
+                )
+            )
+    return claims + mujoco_person_claims(result, source)
+
+
+def mujoco_person_claims(result: AblationResult, source: str = "person") -> list[Claim]:
+    """Issue 40's goal on the MuJoCo UR5, per object where its cells ran: the point-mass world's direction
+    with an interval. The person model needs less hand force and overshoots less than MG on the same trials,
+    each paired difference's 95 % upper bound below zero (:func:`~coassist.analysis.paired.paired_difference`);
+    the evidence gives the shares of the oracle's benefit with their bootstrap intervals and the jerk."""
+    claims = []
+    for obj in OBJECTS:
+        key = ("mujoco", obj, ARBITRATED, source)
+        if key not in result.metrics:
+            continue
+        r, m = result.metrics[key], result.mg[("mujoco", obj)]
+        sh = result.shares(*key)
+        ok, parts = True, []
+        for metric, unit, scale in (("f_rms", "N", 1.0), ("overshoot", "mm", 1e3)):
+            d, lo, hi, n = paired_difference(r[f"{metric}_trials"], m[f"{metric}_trials"])
+            ok = ok and bool(np.isfinite(hi) and hi < 0.0)
+            what = "force" if metric == "f_rms" else "overshoot"
+            # below two pairs there is no interval: the difference alone, and the claim does not hold
+            interval = f" [{scale * lo:+.2f}, {scale * hi:+.2f}]" if np.isfinite(lo) else ", no interval"
+            parts.append(
+                f"{what} {share_text(sh[metric])} of the oracle's benefit, {scale * r[metric]:.2f} vs MG "
+                f"{scale * m[metric]:.2f} {unit} ({scale * d:+.2f}{interval})"
+            )
+        parts.append(f"jerk {r['jerk_rms'] / m['jerk_rms']:.2f}× MG; {len(r['f_rms_trials'])} paired trials")
+        claims.append(
+            Claim(
+                f"{obj}, MuJoCo UR5: the person model (calibrated from each operator's probe trials) needs less hand "
+                "force and overshoots less than MG on the same trials, each paired difference's 95 % upper bound "
+                "below zero (the point-mass world's direction, with an interval; issue 40)",
+                ok,
+                "; ".join(parts),
+                reason="the arm's joint limits and the safety layer's filters delay the robot's effort, and fewer "
+                "trials run on the arm than in the point-mass world",
+            )
+        )
+    return claims
+
+
+def precision_claims(result: AblationResult, source: str = APPLICATION_SOURCE) -> list[Claim]:
+    """Issue 34's goals for ``source`` with the arbitrated controller in the point-mass world, per object
+    (and the direction in the MuJoCo UR5's cells when they ran)."""
+    claims = []
+    for obj in OBJECTS:
+        key = ("point-mass", obj, ARBITRATED, source)
+        if key not in result.metrics:
+            continue
+        sh = result.shares(*key)
+        (f, _, _), (o, o_lo, _) = sh["f_rms"], sh["overshoot"]
+        claims.append(
+            Claim(
+                f"{obj}: with '{source}' the arbitrated controller gets ≥ {100 * FORCE_SHARE_BAR:.0f} % of the oracle's force "
+                f"saving and ≥ {100 * OVERSHOOT_SHARE_BAR:.0f} % of its overshoot reduction over MG, the latter's bootstrap "
+                f"lower bound ≥ {100 * SHARE_LOWER_BAR:.0f} % (issue 34)",
+                bool(
+                    np.isfinite(f)
+                    and np.isfinite(o)
+                    and np.isfinite(o_lo)
+                    and f >= FORCE_SHARE_BAR
+                    and o >= OVERSHOOT_SHARE_BAR
+                    and o_lo >= SHARE_LOWER_BAR
+                ),
+                f"force {share_text(sh['f_rms'])}, overshoot {share_text(sh['overshoot'])} of the oracle's benefit",
+                reason="the side of the detour is known only some 0.1 s after it starts, and the person's shape varies from "
+                "trial to trial: the robot follows the present estimate meanwhile",
+            )
+        )
+        for metric, what in (
+            ("overshoot", "overshoots the intent"),
+            ("clearance_deficit", "passes closer to the obstacle"),
+        ):
+            sides = result.by_side(*key, metric)
+            ok = all(n >= 2 and np.isfinite(hi) and hi <= 0.0 for _, _, _, hi, n in sides.values())
+            claims.append(
+                Claim(
+                    f"{obj}: with '{source}' the arbitrated controller {what} no more than MG on either side of the detour "
+                    "(paired difference's 95 % upper bound ≤ 0; issue 34)",
+                    bool(ok),
+                    "; ".join(f"{SIDES[sd]} {_side_text(v)} mm vs MG" for sd, v in sides.items()),
+                    reason="MG's heavy tool swings wide of the obstacle at the outside turn; a controller that follows the "
+                    "intent closely passes nearer to it than MG does (the oracle too)"
+                    if metric == "clearance_deficit"
+                    else "where the side is decided late, the tool follows the old direction for a moment",
+                )
+            )
+        r, m = result.metrics[key], result.mg[("point-mass", obj)]
+        claims.append(
+            Claim(
+                f"{obj}: with '{source}' the arbitrated controller's jerk RMS is ≤ {JERK_BAR:g} × MG's (issue 34)",
+                bool(r["jerk_rms"] <= JERK_BAR * m["jerk_rms"]),
+                f"jerk RMS {r['jerk_rms']:.2f} vs MG {m['jerk_rms']:.2f} m/s³ ({r['jerk_rms'] / m['jerk_rms']:.2f}×)",
+                reason="the rows change when the filter decides the side or the shape: the robot's effort changes with them",
+            )
+        )
+    if all(("mujoco", obj, ARBITRATED, source) in result.metrics for obj in OBJECTS):
+        parts, ok = [], True
+        for obj in OBJECTS:
+            r, m = result.metrics[("mujoco", obj, ARBITRATED, source)], result.mg[("mujoco", obj)]
+            ok &= bool(r["f_rms"] < m["f_rms"] and r["overshoot"] <= m["overshoot"])
+            parts.append(
+                f"{obj}: f_RMS {r['f_rms']:.2f} vs MG {m['f_rms']:.2f} N, overshoot {1e3 * r['overshoot']:.1f} vs "
+                f"MG {1e3 * m['overshoot']:.1f} mm"
+            )
+        claims.append(
+            Claim(
+                f"on the MuJoCo UR5, '{source}' with the arbitrated controller needs less force than MG and overshoots no more, "
+                "on both objects (the point-mass result's direction; issue 34)",
+                ok,
+                "; ".join(parts),
+                reason="the arm's joint limits and the safety layer's filters delay the robot's effort, and few trials run there",
+            )
+        )
+    return claims
