@@ -148,3 +148,29 @@ def test_the_rows_of_every_curve_at_once_are_each_curves_own_interpolation():
         want = np.stack([np.interp(s[i], arc, pts[:, 0]), np.interp(s[i], arc, pts[:, 1])], axis=1)
         # the stride added to the arc lengths (under 30 m here) costs at most a few ulps of it
         np.testing.assert_allclose(got[i], want, rtol=0.0, atol=1e-12)
+
+
+def test_a_curve_held_far_from_the_tool_gives_no_rows():
+    """Seed 1's held-out operator 2 (2026-12-02): round a detour wider than any of their demonstrations, the way's
+    curves kept their phase in a local minimum 0.24 m behind the tool (each curve is searched within
+    ``search_window`` of its last phase); one curve of the other way stayed near, so the rows went on from the
+    far ones, 0.18 m behind the tool, and the robot held the tool there against 35 N until the time limit.
+    Here: the way decided, its curves' phases put 0.25 m behind the tool; the rows must be the present
+    estimate's, not the far curves'."""
+    src = PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM})
+    src.reset(_context())
+    intent = _walk(NOMINAL)
+    k = int(np.argmax(intent[:, 0] > 0.3))
+    for i in range(k):
+        _tick(src, intent, i)
+    hyp = src._hyp
+    left = hyp.on_way[1]
+    behind = np.argmin(np.abs(hyp.points[left, :, 0] - 0.05), axis=1)  # each left curve's point at x = 0.05
+    src._idx[left] = behind
+    src._side, src._log_odds, src._mix = 1, 5.0, 1.0
+    rows = _tick(src, intent, k)
+    tool = intent[k - 6]
+    # the present estimate is the intent itself here (_tick), the rows start there: far from x = 0.05
+    assert np.linalg.norm(rows[0] - intent[k]) < 0.01, rows[0]
+    assert np.all(rows[:, 0] > tool[0] - 0.01)
+    assert src._mix == 0.0  # through the present estimate, as on a change of mind

@@ -344,8 +344,13 @@ class PersonPathsIntent:
         best = d2.argmin(axis=1)
         at = flat[hyp.curves, best]
         self._idx = at - hyp.row_start
-        if float(d2[hyp.curves, best].min()) > st.max_offset**2:
+        d2_at = d2[hyp.curves, best]
+        if float(d2_at.min()) > st.max_offset**2:
             return present + self._present_steps * v
+        # a curve whose phase is held in a local minimum far from the tool (the person left it, round a detour wider
+        # than any demonstrated, and came back elsewhere) gives no rows: followed, its rows pulled the tool back
+        # to where it was left (held-out operator, seed 1: 35 N against the person until the time limit)
+        near = d2_at <= st.max_offset**2
         tan = hyp.flat_tangents[at]
         point = hyp.flat_points[at]
         # the tool's place along each curve, between its samples (a phase stuck to the samples would step the
@@ -406,6 +411,7 @@ class PersonPathsIntent:
 
         # 4. rows
         def mixture(on: np.ndarray) -> np.ndarray:
+            on = on[near[on]]
             weight = np.exp(self._loglik[on] + hyp.log_prior[on] - hyp.log_prior[on].max())
             best = np.argsort(weight)[::-1][:MIXTURE]
             best = best[weight[best] >= 0.01 * weight[best[0]]]
@@ -416,6 +422,10 @@ class PersonPathsIntent:
             rows = hyp.along(n, s_lead[n][:, None] + speed[:, None] * self._steps[None, :])
             return (w @ rows.reshape(len(w), -1)).reshape(-1, 2)
 
+        ways = (self._side,) if self._side != 0 or not self._two else (1, -1)
+        if not all(near[hyp.on_way[w]].any() for w in ways):
+            self._mix = 0.0  # no near curve of a way the rows need: the present estimate's rows, as on a change of mind
+            return present + self._hedge_steps * v
         if self._side != 0 or not self._two:
             ahead = mixture(hyp.on_way[self._side])
             target = 1.0
