@@ -171,7 +171,15 @@ def test_the_point_mass_stream_is_the_runs_log_and_its_mcap_file(tmp_path):
     episode = _point_mass_episode()
 
     def run(feed):
-        trial = episode.finish(episode.run(on_tick=feed.watch(episode)))
+        watch = feed.watch(episode)
+
+        def paced(*args):
+            # a lockstep run of 625 ticks can end before the publisher's first frame on a loaded machine (CI-like
+            # run, 2026-12-02: only the final flush, one tick); 1 ms a tick spans some 30 frame periods at 50 Hz
+            watch(*args)
+            time.sleep(0.001)
+
+        trial = episode.finish(episode.run(on_tick=paced))
         return trial, episode.tick.controller.game.alpha
 
     w = _watch(run, tmp_path)
