@@ -36,7 +36,9 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
 
 Where the tool is far from every curve (``max_offset``: another task, a person who left the plan
 for good) or the model knows no path for the trial's plan, the rows are the present estimate's
-at constant velocity.
+at constant velocity. A curve whose phase is held more than ``max_offset`` from the tool (left in a
+local minimum round a detour wider than any demonstrated) gives no rows, and a way with none near
+gives the present estimate's rows, as on a change of mind.
 """
 
 from __future__ import annotations
