@@ -158,8 +158,8 @@ CONTROLLERS: Registry[ControllerEntry] = Registry(
     },
     entry_type=ControllerEntry,
 )
-#: Their names. "cooperative-arbitrated": the cooperative game with α set every tick by the law
-#: :data:`ARBITRATION`.
+#: The built-in kinds' names (a kind registered later is in :data:`CONTROLLERS`, not here).
+#: "cooperative-arbitrated": the cooperative game with α set every tick by the law :data:`ARBITRATION`.
 CONTROLLER_KINDS: tuple[str, ...] = tuple(CONTROLLERS)
 
 

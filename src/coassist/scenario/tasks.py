@@ -211,10 +211,8 @@ TASKS: Registry[TaskEntry] = Registry(
     },
     entry_type=TaskEntry,
 )
-#: Their names.
+#: The built-in kinds' names (a kind registered later is in :data:`TASKS`, not here).
 TASK_KINDS: tuple[str, ...] = tuple(TASKS)
-#: Planned motion time per path [s] (:attr:`TaskEntry.motion_time`).
-MOTION_TIME: dict[str, float] = {name: entry.motion_time for name, entry in TASKS.items()}
 
 
 def nominal_path(kind: str, start: tuple[float, float] = START, end: tuple[float, float] = END) -> NominalPath:
@@ -385,7 +383,7 @@ def make_task(
     rng : the generator that places the obstacle (pass one derived from the trial seed).
     obstacle_size : box size [m].
     obstacle_range : (lo, hi) fractions of the path length, 0 ≤ lo ≤ hi ≤ 1.
-    motion_time : T [s]; default :data:`MOTION_TIME` of the kind.
+    motion_time : T [s]; default the kind's :attr:`TaskEntry.motion_time`.
     """
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy Generator, got {type(rng).__name__}")
