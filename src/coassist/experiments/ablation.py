@@ -559,21 +559,17 @@ def mujoco_person_filter() -> PersonFilterSettings:
 
 def calibrate_then_drive(probes: list, folder: str, configs: list) -> list[tuple[dict, dict]]:
     """A worker's MuJoCo person-model job: drive the calibration trials ``probes`` (:func:`probe_configs`), fit
-    each operator's person model (:func:`~coassist.scenario.person_model.fit_person`, as
+    each operator's person model (:func:`~coassist.scenario.person_model.fit_people`, as
     :func:`~coassist.experiments.source_training.calibrate_person` does on the point-mass world's), write them
     into ``folder`` (the intent of ``configs``) with :func:`mujoco_person_filter`, then drive ``configs`` as
     :func:`_drive_batch` does. One job: the cells wait for their own calibration and for nothing else."""
     import torch
 
     from coassist.robot.drive import drive_lockstep
-    from coassist.scenario.person_model import fit_person, write_person_model
+    from coassist.scenario.person_model import fit_people, write_person_model
 
     torch.set_num_threads(1)
-    by_user: dict[str, list] = {}
-    for trial in drive_lockstep(probes):
-        by_user.setdefault(str(trial.meta.user), []).append(trial)
-    fits = {user: fit_person(trials) for user, trials in sorted(by_user.items())}
-    write_person_model(folder, fits, settings=mujoco_person_filter())
+    write_person_model(folder, fit_people(drive_lockstep(probes)), settings=mujoco_person_filter())
     return _drive_batch(configs)
 
 

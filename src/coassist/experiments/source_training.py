@@ -106,15 +106,11 @@ def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "
     (:func:`calibration_options` with ``manual-probe``), fit each one's person model
     (:func:`~coassist.scenario.person_model.fit_person`: arm and paths from what an arm measures) and
     write them into ``models/person`` (``models/person-<population>`` for another population); the folder."""
-    from coassist.scenario.person_model import fit_person, write_person_model
+    from coassist.scenario.person_model import fit_people, write_person_model
 
     suffix = _suffix(population)
     _, ds = ws.collect(f"calibration-probe{suffix}", **calibration_options(ws, "manual-probe", seed, population))
-    by_user: dict[str, list] = {}
-    for trial in ds.trials:
-        by_user.setdefault(str(trial.meta.user), []).append(trial)
-    fits = {user: fit_person(trials) for user, trials in sorted(by_user.items())}
-    return str(write_person_model(ws.out / "models" / f"person{suffix}", fits))
+    return str(write_person_model(ws.out / "models" / f"person{suffix}", fit_people(ds.trials)))
 
 
 def calibrate_paths(ws: Workspace, seed: int | None = None, population: str = "thesis") -> str:

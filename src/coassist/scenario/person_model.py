@@ -37,6 +37,7 @@ __all__ = [
     "PERSON_FILTER",
     "PERSON_MODEL_FILE",
     "PersonFit",
+    "fit_people",
     "fit_person",
     "intent_paths",
     "read_person_model",
@@ -116,6 +117,15 @@ def fit_person(
     arm = identify_arm(trials) if arm is None else arm
     paths, noise = intent_paths(trials, arm, smoothing=smoothing)
     return PersonFit(arm=arm, paths=fit_path_model(nominal, paths, noise=max(noise, 1e-4), settings=settings))
+
+
+def fit_people(trials: Sequence) -> dict[str, PersonFit]:
+    """Each person's fit (:func:`fit_person`) from their own trials among ``trials`` (grouped by
+    ``meta.user``), keyed by that name, in name order: what a person-model folder holds."""
+    by_user: dict[str, list] = {}
+    for trial in trials:
+        by_user.setdefault(str(trial.meta.user), []).append(trial)
+    return {user: fit_person(own) for user, own in sorted(by_user.items())}
 
 
 def _model_doc(model: PathModel) -> dict:
