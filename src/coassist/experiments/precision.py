@@ -98,8 +98,7 @@ def compare_intents(
         REPRODUCE_PRESETS["default"],
         application_users=tuple(users),
         application_trials=int(trials),
-        # the comparison runs the point-mass world only; the MuJoCo cells' share of the trials must fit in them
-        ablation_mujoco_trials=min(REPRODUCE_PRESETS["default"].ablation_mujoco_trials, int(trials)),
+        ablation_mujoco_trials=0,  # the comparison runs the point-mass world only
         workers=int(workers),
     )
     cells: dict[tuple[str, str, str], list] = {}

@@ -591,10 +591,11 @@ class ParticipantFolder:
                         f"{PROGRESS_NAME}); {_RESTORE} (nothing is run again)"
                     )
                 recorded_sha = done[k].get("sha256")  # absent in lines written before the digest was kept
-                if recorded_sha is not None and file_sha256(path) != recorded_sha:
+                on_disk_sha = None if recorded_sha is None else file_sha256(path)
+                if on_disk_sha != recorded_sha:
                     raise StudyFolderError(
                         f"{path}: changed after it was recorded (step {k}: sha256 {str(recorded_sha)[:12]} in "
-                        f"{PROGRESS_NAME}, {file_sha256(path)[:12]} on disk); {_RESTORE} (nothing is run again)"
+                        f"{PROGRESS_NAME}, {str(on_disk_sha)[:12]} on disk); {_RESTORE} (nothing is run again)"
                     )
                 continue
             if k == len(done) and k == max(on_disk) and k < len(steps) and steps[k]["kind"] == "trial":
@@ -659,7 +660,7 @@ class ParticipantFolder:
 
 def file_sha256(path: Path) -> str:
     """SHA-256 of a file's bytes (hex): what a trial's progress line records of its parquet file."""
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+    return _sha256(path.read_bytes())
 
 
 def trial_record(
