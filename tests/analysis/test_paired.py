@@ -183,3 +183,43 @@ def test_bootstrap_is_the_percentile_of_the_seeded_resamples():
     lo, hi, _ = bootstrap_interval(big, mean_rows, seed=2, n_boot=4000)
     half = stats.t.ppf(0.975, big.size - 1) * big.std(ddof=1) / math.sqrt(big.size)
     assert lo == pytest.approx(big.mean() - half, abs=0.05) and hi == pytest.approx(big.mean() + half, abs=0.05)
+
+
+# --------------------------------------------------------------------------- clustered pairs (calibration draws)
+
+
+def test_clusters_of_one_pair_are_the_pairs_bootstrap():
+    # Σ gain_x / Σ gain_ref over n drawn pairs is their means' ratio: the same resamples give the same interval.
+    rng = np.random.default_rng(11)
+    mg = rng.normal(5.0, 0.5, 20)
+    oracle = mg - rng.normal(2.0, 0.4, 20)
+    x = mg - rng.normal(1.2, 0.7, 20)
+    plain = gain_share(mg, x, oracle, seed=4)
+    single = gain_share(mg, x, oracle, seed=4, clusters=[("p", i) for i in range(20)])
+    assert single == pytest.approx(plain, rel=1e-12)
+
+
+def test_clusters_are_resampled_whole():
+    # Six clusters of four pairs: the interval is the naive loop over clusters drawn with replacement, each
+    # contributing its four pairs' summed gains.
+    rng = np.random.default_rng(2)
+    labels = [(f"p{c // 2}", c % 2) for c in range(6) for _ in range(4)]
+    shift = np.repeat(rng.normal(0.0, 0.8, 6), 4)  # what a cluster's pairs share: its calibration
+    mg = rng.normal(5.0, 0.3, 24)
+    oracle = mg - rng.normal(2.0, 0.2, 24)
+    x = mg - (1.0 + shift + rng.normal(0.0, 0.1, 24))
+    share, lo, hi = gain_share(mg, x, oracle, seed=7, clusters=labels)
+    assert share == pytest.approx(np.mean(mg - x) / np.mean(mg - oracle), rel=1e-14)
+    gx = (mg - x).reshape(6, 4).sum(axis=1)  # clusters in the order they first appear
+    gr = (mg - oracle).reshape(6, 4).sum(axis=1)
+    draw = np.random.default_rng(7).integers(0, 6, (BOOTSTRAP, 6))
+    ratios = [gx[i].sum() / gr[i].sum() for i in draw]
+    assert (lo, hi) == pytest.approx(tuple(np.quantile(ratios, [0.025, 0.975])), rel=1e-12)
+    # what the clusters share widens the interval against the pairs' bootstrap, which takes them as independent
+    _, plo, phi = gain_share(mg, x, oracle, seed=7)
+    assert hi - lo > 1.5 * (phi - plo)
+
+
+def test_clusters_need_one_label_per_pair():
+    with pytest.raises(ValueError, match="one label per pair"):
+        gain_share([4.0, 5.0, 6.0], [3.0, 4.0, 4.0], [2.0, 2.0, 3.0], clusters=["a", "b"])

@@ -49,6 +49,14 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     section = ablation_section(result)
     assert sum("MuJoCo UR5: the person model" in c.text for c in section.claims) == 2
     assert any("calibrated on the arm it assists" in p for p in section.paragraphs)
+    # the held-out person cells met the tiny preset's two calibration draws: their intervals resample
+    # (operator, draw) clusters; the point-mass cells were given one calibration, so their pairs are independent
+    assert cfg.calibration_draws == 2
+    for obj in ("board", "heavy"):
+        (user, seed), *_ = result.pairs[("held-out", obj)]
+        assert result.clusters[("held-out", obj, ARBITRATED, "person")] == [(user, seed % 2)]
+        assert ("point-mass", obj, ARBITRATED, "person") not in result.clusters
+        assert result.summary()["cells"][f"held-out/{obj}/{ARBITRATED}/person"]["interval_clusters"] == 1
 
 
 def test_the_mujoco_cells_run_the_person_model_calibrated_on_the_arm(tmp_path):

@@ -45,6 +45,10 @@ def test_bad_requests_name_what_is_wrong(tmp_path):
         compare_intents({"oracle-cooperative": "present"}, tmp_path)
     with pytest.raises(ValueError, match="'cooperative-damped', 'cooperative', got"):
         compare_intents({"a": "present"}, tmp_path, controllers={"a": "manual"})
+    with pytest.raises(ValueError, match="kept out of everything tuned"):  # the held-out population only reports
+        compare_intents({"a": "present"}, tmp_path, population="held-out")
+    with pytest.raises(ValueError, match="population must be one of thesis, varied"):
+        compare_intents({"a": "present"}, tmp_path, population="nobody")
 
 
 def test_the_default_source_needs_less_force_and_overshoots_less_than_mg(tmp_path):

@@ -58,12 +58,20 @@ def _named_cells(cfg):
     return [(c, s) for c, s in ablation_cells(cfg) if base_source(s) not in LEARNED and s not in CALIBRATED]
 
 
+def _probes(cfg, suffix=""):
+    """The person model's probe datasets: one per calibration draw (draw 0 under the plain name)."""
+    return {f"dataset:calibration-probe{suffix}"} | {
+        f"dataset:calibration-probe{suffix}-draw{k}" for k in range(1, cfg.calibration_draws)
+    }
+
+
 def _held_out(cfg):
     """What the ablation's first call starts for the held-out population: its operators' calibration trials
-    and MG's cells (the calibrated sources' cells wait for their fit)."""
+    (the person model's, one set per calibration draw) and MG's cells (the calibrated sources' cells wait for
+    their fit)."""
     if not cfg.held_out_trials:
         return set()
-    return {"dataset:calibration-held-out", "dataset:calibration-probe-held-out"} | {
+    return {"dataset:calibration-held-out", *_probes(cfg, "-held-out")} | {
         f"dataset:held-out-{o}-manual" for o in OBJECTS
     }
 
@@ -283,10 +291,10 @@ def test_beside_training_starts_each_later_share_once_and_all_by_the_last_traini
         assert seen[0] == {"job:real recordings"}
         assert seen[1] == {
             f"dataset:app-{o}-{c}" for o in OBJECTS for c in APP_CONTROLLERS if not c.startswith("cooperative")
-        } | {"dataset:calibration", "dataset:calibration-probe"}
+        } | {"dataset:calibration", *_probes(cfg)}
         assert all(seen[k] for k in range(4))
     named = [s for s in run_sources(cfg) if s not in LEARNED and s not in CALIBRATED]
-    expect = {"job:real recordings", "dataset:calibration", "dataset:calibration-probe"} | _held_out(cfg)
+    expect = {"job:real recordings", "dataset:calibration", *_probes(cfg)} | _held_out(cfg)
     expect |= {f"dataset:app-{o}-{c}" for o in OBJECTS for c in APP_CONTROLLERS if not c.startswith("cooperative")}
     expect |= {f"dataset:ablation-{o}-{c}-{s}" for o in OBJECTS for c, s in _named_cells(cfg)}
     if ablation_ahead.mujoco:  # the default's MuJoCo sources: of the named ones, the oracle

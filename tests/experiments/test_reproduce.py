@@ -15,6 +15,7 @@ import pytest
 
 from coassist.experiments import pipeline
 from coassist.experiments import reproduce as rep
+from coassist.experiments.source_training import DRAW_SEED_STEP
 from coassist.experiments.transfer import transfer_targets
 
 
@@ -31,6 +32,14 @@ def _collections(cfg):
         out += [(f"TL {name}", train, per * t.trials), (f"TL {name} test", test, per * t.test_trials)]
     out.append(("TL heavy", pipeline.heavy_transfer_seed(base), n_tasks * max(1, cfg.transfer_trials // 3)))
     out.append(("calibration", pipeline.calibration_seed(base), cfg.calibration_trials * len(cfg.application_users)))
+    for k in range(1, cfg.calibration_draws):  # the person model's further calibrations (draw 0 is the above)
+        out.append(
+            (
+                f"calibration draw {k}",
+                pipeline.calibration_seed(base) + k * DRAW_SEED_STEP,
+                cfg.calibration_trials * len(cfg.application_users),
+            )
+        )
     for j in range(2):  # every controller of object j reuses the same seeds on purpose
         out.append(
             (
@@ -395,7 +404,16 @@ def test_the_held_out_cells_meet_their_own_people(tiny_run):
             ds = read_dataset(out / "datasets" / f"held-out-{obj}-{source}")
             assert sorted((t.meta.user, t.meta.seed) for t in ds.trials) == mg, (obj, source)
             assert f"held-out/{obj}/cooperative-arbitrated/{source}" in summary["ablation"]["cells"]
-    doc = read_hashed_json(out / "models" / "person-held-out" / "person-model.json", format="coassist-person-model-1")
-    assert set(doc["people"]) == people
-    thesis = read_hashed_json(out / "models" / "person" / "person-model.json", format="coassist-person-model-1")
-    assert set(thesis["people"]) == {f"user-{u}" for u in cfg.application_users}
+    # the person model: calibration_draws calibrations per population, each of that population's operators
+    assert cfg.calibration_draws == 2
+    for folder, names in (
+        ("person-held-out-draws", people),
+        ("person-draws", {f"user-{u}" for u in cfg.application_users}),
+    ):
+        for k in range(cfg.calibration_draws):
+            doc = read_hashed_json(
+                out / "models" / folder / f"draw-{k}" / "person-model.json", format="coassist-person-model-1"
+            )
+            assert set(doc["people"]) == names, (folder, k)
+    # and the held-out person cells' intervals resampled (operator, draw) clusters
+    assert summary["ablation"]["cells"]["held-out/board/cooperative-arbitrated/person"]["interval_clusters"] >= 1

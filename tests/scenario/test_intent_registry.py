@@ -175,7 +175,8 @@ def test_check_intent_names_the_choices(tmp_path):
     assert str(info.value) == (
         f"{str(tmp_path / 'nomodel')!r}: not one of nominal, constant-velocity, oracle, present, present-held, present-half, paths, "
         "a path-hypotheses calibration folder (path-hypotheses.json) or a person model folder (coassist "
-        "calibrate) (person-model.json) or a model folder (coassist train) (model.json)"
+        "calibrate) (person-model.json) or a calibration-draws folder (person models of several calibrations) "
+        "(calibration-draws.json) or a model folder (coassist train) (model.json)"
     )
     with pytest.raises(ValueError, match="a simulation alone knows it"):
         check_intent("oracle", simulation=False)

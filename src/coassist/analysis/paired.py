@@ -135,7 +135,7 @@ def bootstrap_interval(
 
 
 def gain_share(
-    base, x, ref, *, seed: int = 0, n_boot: int = 2000, confidence: float = 0.95
+    base, x, ref, *, seed: int = 0, n_boot: int = 2000, confidence: float = 0.95, clusters=None
 ) -> tuple[float, float, float]:
     """(share, low, high): mean(base − x) / mean(base − ref) over the pairs, with its percentile
     bootstrap interval (:func:`bootstrap_interval`, the pairs resampled ``n_boot`` times).
@@ -144,6 +144,11 @@ def gain_share(
     MG, an intent source and the oracle on the same trials). Pairs where any of the three is
     non-finite are left out. All NaN when ``ref`` gains nothing on average (the share is undefined)
     or no pair is left; the interval NaN when the reference's gain is zero in half the resamples or more.
+
+    ``clusters``: a label per pair (shape (n,), any hashable values) for pairs that are not independent
+    (trials that share one calibration of the person): the bootstrap then resamples whole clusters (each
+    one's summed gains, Σ gain_x / Σ gain_ref over the drawn clusters), so what the pairs of a cluster share
+    is in the interval. With one pair per cluster it is the pairs' bootstrap, draw for draw.
     """
     base, x, ref = (np.asarray(v, dtype=float) for v in (base, x, ref))
     if not base.shape == x.shape == ref.shape or base.ndim != 1:
@@ -153,11 +158,22 @@ def gain_share(
     if gain_x.size == 0 or gain_ref.mean() == 0.0:
         return math.nan, math.nan, math.nan
     share = float(gain_x.mean() / gain_ref.mean())
-    if gain_x.size == 1:  # every resample is the one pair: the interval has no width
+    if clusters is not None:
+        labels = [str(c) for c in clusters]  # tuples too: (person, calibration draw)
+        if len(labels) != base.size:
+            raise ValueError(f"clusters needs one label per pair ({base.size}), got {len(labels)}")
+        _, first, which = np.unique(np.asarray(labels)[ok], return_index=True, return_inverse=True)
+        which = np.argsort(np.argsort(first))[which]  # clusters in the order they first appear
+        # each cluster's summed gains: resampling them resamples the clusters whole
+        gain_x, gain_ref = np.bincount(which, weights=gain_x), np.bincount(which, weights=gain_ref)
+        statistic = lambda gx, gr: gx.sum(axis=1) / gr.sum(axis=1)  # noqa: E731
+    else:
+        statistic = lambda gx, gr: gx.mean(axis=1) / gr.mean(axis=1)  # noqa: E731
+    if gain_x.size == 1:  # every resample is the one pair (or cluster): the interval has no width
         return share, share, share
     lo, hi, undefined = bootstrap_interval(
         (gain_x, gain_ref),
-        lambda gx, gr: gx.mean(axis=1) / gr.mean(axis=1),
+        statistic,
         seed=seed,
         n_boot=n_boot,
         confidence=confidence,

@@ -119,6 +119,10 @@ def compare_intents(
     ),
     trials: int = typer.Option(4, help="Trials per operator, object and base."),
     workers: int = typer.Option(2, help="Simulation processes."),
+    population: str = typer.Option(
+        "thesis", help="The simulated operators: thesis or varied (the in-family population to tune on)."
+    ),
+    users: str = typer.Option("0,1,2", help="The operators (user indices of the population), comma-separated."),
 ) -> None:
     """Intent sources in the loop on validation seeds, paired against MG and the oracle (docs/precision.md)."""
     import json
@@ -137,6 +141,7 @@ def compare_intents(
             fail(f"--source {label}: given twice", 2)
         pairs[label] = spec
     seeds = int_list(bases, "--bases")
+    operators = int_list(users, "--users")
     chosen: dict[str, str] = {}
     for option, text, kind in (
         ("--damped", damped, "cooperative-damped"),
@@ -160,6 +165,8 @@ def compare_intents(
             controllers=chosen,
             trials=trials,
             workers=workers,
+            population=population,
+            users=operators,
         )
     except ValueError as exc:
         fail(str(exc), 2)

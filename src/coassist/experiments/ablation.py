@@ -59,7 +59,7 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Collection
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -77,9 +77,11 @@ from coassist.experiments.source_training import (
     LEARNED,
     calibrate_paths,
     calibrate_person,
+    calibration_draw_options,
     calibration_options,
     seed_names,
 )
+from coassist.scenario.calibration_draws import draw_clusters, draw_count
 from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told
 
 if TYPE_CHECKING:
@@ -180,6 +182,10 @@ class AblationResult:
     #: errors[(world, object, controller, source)][h] = {"tool": e_RMS against the measured future pose,
     #: "intent": against the operator's true intent} [m] of the predictions the loop used, h in samples.
     errors: dict[tuple[str, str, str, str], dict[int, dict[str, float]]]
+    #: clusters[(world, object, controller, source)]: a label per pair (in ``pairs``' order) for a cell whose
+    #: trials are not independent: the person model's calibration draws (scenario.calibration_draws). Its
+    #: shares' intervals resample the clusters whole (:func:`~coassist.analysis.paired.gain_share`).
+    clusters: dict[tuple[str, str, str, str], list] = field(default_factory=dict)
 
     def shares(self, world: str, obj: str, controller: str, source: str) -> dict[str, tuple[float, float, float]]:
         """The share of the oracle's benefit for force and for overshoot (:func:`~coassist.analysis.paired.gain_share`
@@ -196,7 +202,13 @@ class AblationResult:
         x = self.metrics[(world, obj, controller, source)]
         o = self.metrics[(world, obj, _oracle_of(controller), "oracle")]
         return {
-            m: gain_share(mg[f"{m}_trials"], x[f"{m}_trials"], o[f"{m}_trials"], n_boot=BOOTSTRAP)
+            m: gain_share(
+                mg[f"{m}_trials"],
+                x[f"{m}_trials"],
+                o[f"{m}_trials"],
+                n_boot=BOOTSTRAP,
+                clusters=self.clusters.get((world, obj, controller, source)),
+            )
             for m in ("f_rms", "overshoot")
         }
 
@@ -257,6 +269,9 @@ class AblationResult:
                 },
                 "prediction_errors": self.errors[(world, obj, controller, source)],
             }
+            labels = self.clusters.get((world, obj, controller, source))
+            if labels is not None:  # the intervals resampled these clusters whole
+                out["cells"][f"{world}/{obj}/{controller}/{source}"]["interval_clusters"] = len(set(map(str, labels)))
         return out
 
 
@@ -322,15 +337,32 @@ def run_ablation(
                 raise RuntimeError(f"ablation cell {obj}/{controller}/{source} did not meet MG's trials")
             metrics[("point-mass", obj, controller, source)] = application_metrics(trials)
             errors[("point-mass", obj, controller, source)] = prediction_errors_against_intent(trials)
+    world_intents = {"point-mass": intents}
     if cfg.held_out_trials > 0:
-        _run_held_out(ws, intents, metrics, mg, pairs, errors)
+        world_intents[HELD_OUT] = _run_held_out(ws, intents, metrics, mg, pairs, errors)
     why = _mujoco_unavailable()
     if why is None and cfg.ablation_mujoco_trials > 0:
         _run_mujoco(ws, intents, metrics, mg, pairs, errors)
         models = {**models, **_mujoco_models(ws)}
     else:
         skipped["mujoco"] = why or "reproduce.ablation_mujoco_trials is 0"
-    return AblationResult(metrics, mg, pairs, models, skipped, cfg.application_preset, errors)
+    clusters = draw_clusters_of(world_intents, metrics, pairs)
+    return AblationResult(metrics, mg, pairs, models, skipped, cfg.application_preset, errors, clusters)
+
+
+def draw_clusters_of(
+    world_intents: dict[str, dict[str, str]], metrics: Collection[tuple[str, str, str, str]], pairs: dict
+) -> dict[tuple[str, str, str, str], list]:
+    """The cells whose source is a calibration-draws folder (``world_intents[world][source]``), each with its
+    pairs' (operator, draw) clusters (:func:`~coassist.scenario.calibration_draws.draw_clusters`)."""
+    out = {}
+    for key in metrics:
+        world, obj, _, source = key
+        intent = world_intents.get(world, {}).get(source)
+        draws = draw_count(intent) if intent else 1
+        if draws > 1:
+            out[key] = draw_clusters(pairs[(world, obj)], draws)
+    return out
 
 
 def _mujoco_models(ws: Workspace) -> dict[str, str]:
@@ -368,7 +400,7 @@ def held_out_models(ws: Workspace, intents: dict[str, str]) -> dict[str, str]:
     population's operators (their own calibration trials), the others as the run has them."""
     out = {s: intents.get(s, s) for s in HELD_OUT_SOURCES if _runnable(s, intents) or s in CALIBRATED}
     out["paths"] = calibrate_paths(ws, population=HELD_OUT)
-    out["person"] = calibrate_person(ws, population=HELD_OUT)
+    out["person"] = calibrate_person(ws, population=HELD_OUT, draws=ws.config.calibration_draws)
     return out
 
 
@@ -376,8 +408,10 @@ def _held_out_options(cfg, j: int, obj: str, controller: str, intent: str) -> di
     return {**cell_options(cfg, j, obj, controller, intent), "trials": cfg.held_out_trials, "population": HELD_OUT}
 
 
-def _run_held_out(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict, pairs: dict, errors: dict) -> None:
-    """The held-out population's cells (module docstring), paired against its own MG trials."""
+def _run_held_out(
+    ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict, pairs: dict, errors: dict
+) -> dict[str, str]:
+    """The held-out population's cells (module docstring), paired against its own MG trials; their sources."""
     cfg = ws.config
     sources = held_out_models(ws, intents)
     # Every cell put on the pool at once (without one: deferred and run together), the same jobs as each
@@ -397,6 +431,7 @@ def _run_held_out(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dic
                 raise RuntimeError(f"held-out cell {obj}/{source} did not meet MG's trials")
             metrics[(HELD_OUT, obj, ARBITRATED, source)] = application_metrics(trials)
             errors[(HELD_OUT, obj, ARBITRATED, source)] = prediction_errors_against_intent(trials)
+    return sources
 
 
 class AblationAhead:
@@ -434,10 +469,11 @@ class AblationAhead:
                 fn, args = mujoco_task(self.ws, MG_JOB, {})
                 self.ws.submit(f"mujoco:{MG_JOB}", fn, *args)
             if cfg.held_out_trials > 0:  # the held-out operators' calibration trials and MG's cells
-                for name, controller in (("calibration", "manual"), ("calibration-probe", "manual-probe")):
-                    self.ws.prefetch(
-                        f"{name}-{HELD_OUT}", **calibration_options(self.ws, controller, population=HELD_OUT)
-                    )
+                self.ws.prefetch(
+                    f"calibration-{HELD_OUT}", **calibration_options(self.ws, "manual", population=HELD_OUT)
+                )
+                for name, options in calibration_draw_options(self.ws, HELD_OUT, cfg.calibration_draws).items():
+                    self.ws.prefetch(name, **options)
                 for j, obj in enumerate(OBJECTS):
                     self.ws.prefetch(f"held-out-{obj}-manual", **_held_out_options(cfg, j, obj, "manual", "nominal"))
         for controller, name in cells:

@@ -171,6 +171,15 @@ def ablation_section(result: AblationResult) -> Section:
     )
     for world, why in result.skipped.items():
         s.paragraphs.append(f"The {world} world did not run: {why}.")
+    drawn = sorted({(w, len({c[1] for c in labels})) for (w, _, _, _), labels in result.clusters.items()})
+    if drawn:
+        where = ", ".join(f"{w} ({k} calibrations per operator)" for w, k in drawn)
+        s.paragraphs.append(
+            f"The person model's cells of {where}: each operator was calibrated that many times, each on their own "
+            "probe trials, and their trials go round the calibrations; the intervals of those cells resample the "
+            "(operator, calibration) clusters whole, so they carry the calibration's own variance as well as the "
+            "trials'. The per-side differences from MG are over the trials alone."
+        )
     if MUJOCO_PERSON in result.models:
         s.paragraphs.append(
             "On the MuJoCo UR5 the person model is calibrated on the arm it assists: each operator's probe trials "

@@ -37,6 +37,7 @@ from coassist.experiments.source_training import (
     APPLICATION_SOURCE,
     calibrate_paths,
     calibrate_person,
+    calibration_draw_options,
     calibration_options,
     train_sources,
     training_datasets,
@@ -131,7 +132,8 @@ def prefetch_model_free(ws: Workspace) -> None:
     calibration trials on the run's pool now (:meth:`Workspace.prefetch`; :func:`run_application`
     then finds them there)."""
     ws.prefetch("calibration", **calibration_options(ws, "manual"))
-    ws.prefetch("calibration-probe", **calibration_options(ws, "manual-probe"))
+    for name, options in calibration_draw_options(ws, draws=ws.config.calibration_draws).items():
+        ws.prefetch(name, **options)
     for j, obj in enumerate(OBJECTS):
         for controller in CONTROLLERS:
             if not controller.startswith("cooperative"):
@@ -180,7 +182,7 @@ def run_application(
             ahead(models)
 
     # the calibrated sources need no training: their calibrations first, so that their pairs run beside the trainings
-    calibrated = {"paths": calibrate_paths(ws), "person": calibrate_person(ws)}
+    calibrated = {"paths": calibrate_paths(ws), "person": calibrate_person(ws, draws=cfg.calibration_draws)}
     on_models(dict(calibrated))
     models = train_sources(ws, training_datasets(ws), on_models=lambda learned: on_models({**learned, **calibrated}))
     models.update(calibrated)

@@ -81,6 +81,12 @@ class ReproduceConfig:
     # Calibration trials per application operator for the path-hypotheses source (MG, the handle, the
     # application's task and obstacle): their detours give the person's shape (scenario.path_hypotheses).
     calibration_trials: int = 4
+    # Calibrations of each operator's person model in the point-mass and held-out cells (issue 40): each on its
+    # own calibration_trials probe trials, the trial of seed s meeting draw s mod calibration_draws, and the
+    # person model's intervals resample the (operator, draw) clusters whole, so that they carry the calibration's
+    # own variance (scenario.calibration_draws). Four: each draw meets two of an operator's eight trials per
+    # object. 1: one calibration, the intervals over the trials alone (before issue 40's fourth round).
+    calibration_draws: int = 4
     # The models each transfer target trains (experiments.iterative.TRANSFER_STARTS): M_TL ("transfer", the
     # thesis' frozen LSTM) and the from-scratch model its claim compares it with; the fine-tuning of every
     # layer, reported but in no claim, only where a preset asks for it (the full and thesis presets).
@@ -160,10 +166,13 @@ class ReproduceConfig:
             "threads",
             "source_seeds",
             "calibration_trials",
+            "calibration_draws",
         ):
             v = getattr(self, name)
             if not is_integer(v) or v < 1:
                 raise ValueError(f"reproduce.{name} must be an integer >= 1, got {v!r}")
+        if self.calibration_draws > 8:
+            raise ValueError(f"reproduce.calibration_draws must be 1 to 8, got {self.calibration_draws}")
         if not is_integer(self.ablation_mujoco_trials) or self.ablation_mujoco_trials < 0:
             raise ValueError(
                 f"reproduce.ablation_mujoco_trials must be an integer >= 0, got {self.ablation_mujoco_trials!r}"
@@ -254,6 +263,7 @@ REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry(
             held_out_trials=1,
             source_seeds=1,
             calibration_trials=1,
+            calibration_draws=2,
             real_stride=25,
             sweep_duration=1.0,
         ),

@@ -34,6 +34,8 @@ from coassist.experiments.pipeline import (
     calibration_seed,
 )
 from coassist.experiments.source_training import calibrate_paths, calibrate_person
+from coassist.scenario.calibration_draws import draw_clusters, draw_count
+from coassist.scenario.populations import POPULATIONS
 
 #: The offsets (base mod RUN_SEED_STRIDE) a validation base may have: its calibration trials
 #: (base + 880000 …) and application trials (base + 900000 … + 1000 + trials) then stay clear of every
@@ -43,7 +45,10 @@ VALIDATION_BASES = (25_000, 95_000)
 #: the plain cooperative game (α fixed: the default controller of drive, ros2, play and collect).
 COMPARED_CONTROLLERS = (ARBITRATED, DAMPED, "cooperative")
 
-__all__ = ["compare_intents", "comparison_table"]
+#: The populations a comparison may run (the sources are tuned on these): never the held-out one.
+TUNING_POPULATIONS = ("thesis", "varied")
+
+__all__ = ["TUNING_POPULATIONS", "compare_intents", "comparison_table"]
 
 
 def compare_intents(
@@ -57,16 +62,22 @@ def compare_intents(
     calibrate: bool = True,
     workers: int = 2,
     progress: bool = True,
+    population: str = "thesis",
 ) -> AblationResult:
     """Every source of ``sources`` (label → intent: a named source, a model folder, a calibration folder or
     ``"paths"`` / ``"person"`` to use each base's fitted calibration / person models) on the validation trials
     of ``bases``, with the arbitrated controller or ``controllers[label]`` (one of :data:`COMPARED_CONTROLLERS`);
     MG and the oracle on the same trials (the arbitrated controller's; also the plain game's where a source runs
     with it: a share is measured against the oracle of its own controller, the damped one's against the arbitrated).
-    Datasets go under ``out``. The result is keyed like the ablation's (world "point-mass",
-    controller, label), the bases' trials pooled in one cell."""
+    ``population``: the simulated operators (:data:`TUNING_POPULATIONS`: the thesis population or ``varied``, the
+    in-family one to tune on; never ``held-out``, which only the report runs). Datasets go under ``out``. The
+    result is keyed like the ablation's (world "point-mass", controller, label), the bases' trials pooled in one
+    cell."""
     if not sources:
         raise ValueError("compare_intents needs at least one source")
+    if population not in TUNING_POPULATIONS:
+        kept = " (it is kept out of everything tuned and used only to report)" if population in POPULATIONS else ""
+        raise ValueError(f"population must be one of {', '.join(TUNING_POPULATIONS)}, got {population!r}{kept}")
     if not bases or len(set(bases)) != len(bases) or any(int(b) < 0 for b in bases):
         raise ValueError(f"bases must be distinct seeds >= 0, got {bases!r}")
     off = [b for b in bases if not VALIDATION_BASES[0] <= int(b) % RUN_SEED_STRIDE <= VALIDATION_BASES[1]]
@@ -102,16 +113,20 @@ def compare_intents(
         workers=int(workers),
     )
     cells: dict[tuple[str, str, str], list] = {}
+    groups: dict[tuple[str, str, str], list] = {}  # each trial's (base, operator, calibration draw)
+    drawn: dict[tuple[str, str, str], set[int]] = {}  # the draws each cell's sources held
     calibrations: dict[str, str] = {}
     for base in bases:
         ws = Workspace(replace(cfg, seed=int(base)), out / f"base-{base}", progress)
         # the operators' calibration trials only where a source needs them
         fit = calibrate and "paths" in sources.values()
-        paths = calibrate_paths(ws, seed=calibration_seed(int(base))) if fit else "paths"
+        paths = calibrate_paths(ws, seed=calibration_seed(int(base)), population=population) if fit else "paths"
         if fit:
             calibrations[str(base)] = paths
         if calibrate and "person" in sources.values():
-            calibrations[f"{base}/person"] = calibrate_person(ws, seed=calibration_seed(int(base)))
+            calibrations[f"{base}/person"] = calibrate_person(
+                ws, seed=calibration_seed(int(base)), population=population, draws=cfg.calibration_draws
+            )
         # (dataset name, label, controller, intent): the plain game's oracle under its own name
         plan = [("MG", "MG", "manual", "nominal"), ("oracle", "oracle", ARBITRATED, "oracle")]
         if "cooperative" in controllers.values():
@@ -128,7 +143,7 @@ def compare_intents(
         for j, obj in enumerate(OBJECTS):
             for name, label, controller, intent in plan:
                 _, ds = ws.collect(
-                    f"{obj}-{name}",
+                    f"{obj}-{name}{'' if population == 'thesis' else '-' + population}",
                     tasks=(cfg.application_task,),
                     users=cfg.application_users,
                     objects=(obj,),
@@ -138,9 +153,17 @@ def compare_intents(
                     preset=cfg.application_preset,
                     intent=intent,
                     obstacle=OBSTACLE,
+                    population=population,
                 )
-                cells.setdefault((obj, label, controller), []).extend(sorted(ds.trials, key=pair_key))
-    metrics, mg, pairs = {}, {}, {}
+                ordered = sorted(ds.trials, key=pair_key)
+                cells.setdefault((obj, label, controller), []).extend(ordered)
+                draws = draw_count(intent) if label not in ("MG", "oracle") else 1
+                # a calibration's draws are this base's: the clusters are (base, operator, draw)
+                groups.setdefault((obj, label, controller), []).extend(
+                    (base, *c) for c in draw_clusters([pair_key(t) for t in ordered], draws)
+                )
+                drawn.setdefault((obj, label, controller), set()).add(draws)
+    metrics, mg, pairs, clusters = {}, {}, {}, {}
     for (obj, label, controller), trials_ in cells.items():
         if label == "MG":
             mg[("point-mass", obj)] = application_metrics(trials_)
@@ -149,9 +172,11 @@ def compare_intents(
         if [pair_key(t) for t in trials_] != pairs[("point-mass", obj)]:
             raise RuntimeError(f"{obj}/{label} did not meet MG's trials")
         metrics[("point-mass", obj, controller, label)] = application_metrics(trials_)
+        if drawn[(obj, label, controller)] != {1}:  # the labels were gathered in the trials' order
+            clusters[("point-mass", obj, controller, label)] = groups[(obj, label, controller)]
     errors: dict[tuple[str, str, str, str], dict[int, dict[str, float]]] = {key: {} for key in metrics}
     models = {f"paths@{base}": folder for base, folder in calibrations.items()}
-    return AblationResult(metrics, mg, pairs, models, {}, cfg.application_preset, errors)
+    return AblationResult(metrics, mg, pairs, models, {}, cfg.application_preset, errors, clusters)
 
 
 def comparison_table(result: AblationResult) -> str:

@@ -42,14 +42,21 @@ from coassist.experiments.pipeline import Workspace, train_in_worker
 
 __all__ = [
     "APPLICATION_SOURCE",
+    "DRAW_SEED_STEP",
     "LEARNED",
     "calibrate_paths",
     "calibrate_person",
+    "calibration_draw_options",
     "calibration_options",
     "seed_names",
     "train_sources",
     "training_datasets",
 ]
+
+#: The seeds between two calibration draws' first trials (:func:`calibrate_person`): a draw's trials (operators ×
+#: calibration_trials) stay under it, and eight draws stay inside the run's calibration block (its application
+#: trials start 20 000 seeds on; a validation base's, :mod:`coassist.experiments.precision`, 10 000 on another base's).
+DRAW_SEED_STEP = 1000
 
 #: The learned sources: (intent preset or None for the run's, window label).
 LEARNED = {
@@ -101,16 +108,53 @@ def _suffix(population: str) -> str:
     return "" if population == "thesis" else f"-{population}"
 
 
-def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "thesis") -> str:
+def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "thesis", draws: int = 1) -> str:
     """Collect ``calibration_trials`` probe trials per application operator of ``population``
     (:func:`calibration_options` with ``manual-probe``), fit each one's person model
     (:func:`~coassist.scenario.person_model.fit_person`: arm and paths from what an arm measures) and
-    write them into ``models/person`` (``models/person-<population>`` for another population); the folder."""
+    write them into ``models/person`` (``models/person-<population>`` for another population); the folder.
+
+    ``draws`` > 1: that many calibrations, each on its own probe trials (draw k's first seed is draw 0's plus
+    k·:data:`DRAW_SEED_STEP`; draw 0 is the one calibration of ``draws`` = 1, bit for bit), written as a
+    calibration-draws folder ``models/person[-<population>]-draws`` (:mod:`coassist.scenario.calibration_draws`:
+    the trial of seed s meets draw s mod ``draws``), so that an evaluation's intervals carry the calibration's
+    own variance."""
+    from coassist.scenario.calibration_draws import MAX_DRAWS, write_draws
     from coassist.scenario.person_model import fit_people, write_person_model
 
+    if not 1 <= int(draws) <= MAX_DRAWS:
+        raise ValueError(f"draws must be 1 to {MAX_DRAWS}, got {draws!r}")
     suffix = _suffix(population)
-    _, ds = ws.collect(f"calibration-probe{suffix}", **calibration_options(ws, "manual-probe", seed, population))
-    return str(write_person_model(ws.out / "models" / f"person{suffix}", fit_people(ds.trials)))
+    options = calibration_options(ws, "manual-probe", seed, population)
+    if draws > 1 and len(options["users"]) * options["trials"] > DRAW_SEED_STEP:
+        raise ValueError(
+            f"{len(options['users'])} operators × {options['trials']} calibration trials do not fit in a draw's "
+            f"{DRAW_SEED_STEP} seeds"
+        )
+    _, ds = ws.collect(f"calibration-probe{suffix}", **options)
+    if draws == 1:
+        return str(write_person_model(ws.out / "models" / f"person{suffix}", fit_people(ds.trials)))
+    folder = ws.out / "models" / f"person{suffix}-draws"
+    names = []
+    for k in range(int(draws)):
+        if k:
+            _, ds = ws.collect(
+                f"calibration-probe{suffix}-draw{k}", **{**options, "seed": options["seed"] + k * DRAW_SEED_STEP}
+            )
+        names.append(f"draw-{k}")
+        write_person_model(folder / names[-1], fit_people(ds.trials))
+    return str(write_draws(folder, names))
+
+
+def calibration_draw_options(ws: Workspace, population: str = "thesis", draws: int = 1) -> dict[str, dict]:
+    """The probe datasets :func:`calibrate_person` collects with ``draws`` (name → :meth:`Workspace.collect`
+    options): to put them on the pool before it asks."""
+    suffix = _suffix(population)
+    options = calibration_options(ws, "manual-probe", None, population)
+    out = {f"calibration-probe{suffix}": options}
+    for k in range(1, int(draws)):
+        out[f"calibration-probe{suffix}-draw{k}"] = {**options, "seed": options["seed"] + k * DRAW_SEED_STEP}
+    return out
 
 
 def calibrate_paths(ws: Workspace, seed: int | None = None, population: str = "thesis") -> str:

@@ -216,6 +216,12 @@ def _load_person_model(folder: str, horizon: int, network: str) -> IntentSource:
     return read_person_model(folder, horizon)
 
 
+def _load_draws(folder: str, horizon: int, network: str) -> IntentSource:
+    from coassist.scenario.calibration_draws import read_draws
+
+    return read_draws(folder, horizon)
+
+
 def _load_model(folder: str, horizon: int, network: str) -> IntentSource:
     try:
         from coassist.intent import load_model_intent
@@ -248,6 +254,14 @@ INTENT_FOLDERS: Registry[IntentFolderKind] = Registry(
             _load_person_model,
             network=False,
             module="coassist.scenario.person_model",
+            told=Told(arm="measured", person="paths round obstacles and the arm"),
+        ),
+        "calibration-draws": IntentFolderKind(
+            "calibration-draws.json",
+            "a calibration-draws folder (person models of several calibrations)",
+            _load_draws,
+            network=False,
+            module="coassist.scenario.calibration_draws",
             told=Told(arm="measured", person="paths round obstacles and the arm"),
         ),
         "model": IntentFolderKind(
