@@ -221,3 +221,13 @@ def test_every_table_holds_the_summary_formatted_as_the_f_string_report_did(writ
     assert lead in page
     assert "".join(f"<li>{line}</li>" for line in j["limits"]).replace("'", "&#x27;") in page
     assert page.count("<img src='data:image/png;base64,") == 3  # the lines, the force traces, the questionnaire
+
+
+def test_a_summary_missing_a_key_is_refused_naming_it(written):
+    _, on_disk = written
+    broken = {k: v for k, v in on_disk.items() if k != "order_effects"}
+    with pytest.raises(ValueError, match=r"\['order_effects'\]"):
+        StudySummary.from_json(broken)
+    comparison = {k: v for k, v in on_disk["comparisons"][0].items() if k != "p_t_holm"}
+    with pytest.raises(ValueError, match=r"\['p_t_holm'\]"):
+        StudySummary.from_json({**on_disk, "comparisons": [comparison]})

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -465,7 +465,11 @@ class StudySummary:
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> StudySummary:
-        """The summary back from :meth:`to_json`'s data (``summary.json`` as read)."""
+        """The summary back from :meth:`to_json`'s data (``summary.json`` as read); a key missing at the top
+        is a ValueError naming it."""
+        missing = [f.name for f in fields(cls) if f.name not in d]
+        if missing:
+            raise ValueError(f"a study summary without {missing}: not a summary.json of coassist study report")
         return cls(
             study=d["study"],
             protocol=d["protocol"],
@@ -491,7 +495,8 @@ class StudySummary:
 
 
 def _comparison_from_json(d: Mapping[str, Any]) -> PairedComparison:
-    """A :class:`PairedComparison` back from its JSON: null is NaN again, a list its interval's tuple."""
+    """A :class:`PairedComparison` back from its JSON, field by field: null is NaN again, a list its
+    interval's tuple; a field missing is a ValueError naming it."""
 
     def value(v: Any) -> Any:
         if v is None:
@@ -500,7 +505,11 @@ def _comparison_from_json(d: Mapping[str, Any]) -> PairedComparison:
             return tuple(math.nan if x is None else float(x) for x in v)
         return v
 
-    return PairedComparison(**{k: value(v) for k, v in d.items()})
+    names = [f.name for f in fields(PairedComparison)]
+    missing = [n for n in names if n not in d]
+    if missing:
+        raise ValueError(f"a paired comparison without {missing}: not a study summary's")
+    return PairedComparison(**{n: value(d[n]) for n in names})
 
 
 @dataclass(frozen=True)
