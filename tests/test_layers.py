@@ -21,11 +21,12 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "_io",
         "_progress",
         "_cpu",
+        "_render",
         "interfaces",
         "config",
         "spatial",
         "registry",
-    ),  # shared vocabulary and rigid-body math
+    ),  # shared vocabulary and rigid-body math; the reports' HTML templates (_render)
     ("model", "data", "metrics", "analysis"),  # the impedance model; trials on disk; metrics; paired statistics
     ("control",),  # games, baselines, guarded controllers (pure control laws)
     ("intent",),  # the predictor

@@ -27,7 +27,7 @@ import re
 import threading
 from typing import Any
 
-__all__ = ["ROS_NAME", "ROS_TOPIC", "Ros2Node", "install_hint", "resolve_topic"]
+__all__ = ["ROS_NAME", "ROS_TOPIC", "Ros2Node", "install_hint", "resolve_topic", "stamp_ns"]
 
 log = logging.getLogger(__name__)
 
@@ -35,6 +35,11 @@ log = logging.getLogger(__name__)
 ROS_TOPIC = re.compile(r"^~?/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$|^~$")
 #: A node name or a namespace component.
 ROS_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+
+
+def stamp_ns(stamp: Any) -> int:
+    """A ROS ``builtin_interfaces/Time`` (``sec``, ``nanosec``) as integer nanoseconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 def install_hint(command: str) -> str:

@@ -84,6 +84,10 @@ the simulator.
 ROS isolation: ``domain_id`` (default ``$ROS_DOMAIN_ID``, else 0) and, where the
 environment sets ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, loopback only. The node
 lives in its own rclpy context, spun by one executor thread. Needs the ``ros2`` extra.
+
+The configuration is :mod:`coassist.robot.ros2_config`'s (no rclpy needed to import it), the
+monitor topics :mod:`coassist.robot.ros2_monitor`'s; :class:`Ros2Config`, :data:`UR_JOINT_NAMES`,
+:data:`MAX_STALE_AFTER` and :data:`MAX_TCP_OFFSET` are importable from here as before.
 """
 
 from __future__ import annotations
@@ -93,17 +97,17 @@ import math
 import threading
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from coassist.errors import CoassistError
-from coassist.interfaces import fault_names
-from coassist.robot.ros2_node import ROS_NAME, ROS_TOPIC, Ros2Node, install_hint, resolve_topic
+from coassist.robot.ros2_config import MAX_STALE_AFTER, MAX_TCP_OFFSET, UR_JOINT_NAMES, Ros2Config
+from coassist.robot.ros2_monitor import Ros2Monitor
+from coassist.robot.ros2_node import Ros2Node, install_hint, stamp_ns
 from coassist.robot.worlds import WorldRequest
 from coassist.runtime.world import Command, RobotLinkError, RobotState
-from coassist.spatial import quaternion_from_rotation_vector, rotation_matrix, rotation_vector
+from coassist.spatial import rotation_matrix, rotation_vector
 
 __all__ = [
     "JOINT_JUMP_TOLERANCE",
@@ -119,193 +123,12 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: The UR arms' joint names (ur_description), in kinematic order.
-UR_JOINT_NAMES = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-)
-#: [s] the longest ``stale_after``: the stop on a lost link. At the 0.25 m/s tool speed a silent
-#: driver lets the tool go at most 125 mm before the arm stops; beyond it the stop is no stop.
-MAX_STALE_AFTER = 0.5
-#: [m] the farthest a TCP may lie from the flange: a hand-guided tool, not a typo of mm for m.
-MAX_TCP_OFFSET = 0.5
 #: [rad/s] the fastest a UR5 joint turns (180 °/s): joint states farther apart than this allows
 #: between their stamps come from two sources (module docstring).
 MAX_JOINT_SPEED = math.pi
 #: [rad] what two joint states of one arm may differ by beyond MAX_JOINT_SPEED · Δt: a driver's
 #: stamp a few ms off its sample at full speed (π rad/s × 3 ms); encoders resolve 1e-5 rad.
 JOINT_JUMP_TOLERANCE = 0.01
-
-
-@dataclass(frozen=True)
-class Ros2Config:
-    """The node's names, frames, QoS and link rules (every field validated; errors name ``Ros2Config.<field>``).
-
-    node_name, namespace : the node (``coassist`` in ``/``).
-    wrench_topic, joint_state_topic, command_topic : the robot side (module docstring).
-    tool_pose_topic, prediction_topic, alpha_topic, hand_force_topic, diagnostics_topic :
-        the monitor topics ("" leaves one out).
-    base_frame : ``frame_id`` of the published poses (the UR driver's ``base``).
-    wrench_frame : ``frame_id`` of a wrench in the sensor frame, whose axes are the
-        flange's (the UR driver's ``tool0``). A wrench stamped in ``base_frame`` is
-        rotated from there instead; any other frame is refused and stops the run.
-    joint_names : the order of ``q`` and of the command: the UR5's 6 joints.
-    wrench_in_base : kept for scripts that set it: each wrench message's ``frame_id`` now
-        says whether it is in the base frame or the sensor's (module docstring).
-    sensor_reliable : subscribe to the sensor topics reliable (default best effort).
-    command_depth : history depth of the command publisher.
-    rate_hz : control rate [Hz].  stale_after : [s] input age that stops the arm, at most
-        :data:`MAX_STALE_AFTER`; a command computed from state older than it is not sent
-        (zeros go out instead).
-    connect_timeout : [s] wait for the first messages.  monitor_rate_hz : monitor topics' rate.
-    prediction_seconds : [s] how much of the prediction ``~/prediction`` carries.
-    prediction_stride : ``~/prediction`` carries every stride-th row of it, and the last.
-    lockstep : wait for fresh state each tick (simulated robots).  pace : wait for the period's end.
-    domain_id : ROS_DOMAIN_ID (None: the environment's).
-    tcp_offset : TCP pose in the flange frame ``[x, y, z, rx, ry, rz]``, at most
-        :data:`MAX_TCP_OFFSET` from the flange.
-    payload : ``(mass [kg], (cx, cy, cz) [m])`` of the tool below the sensor, for the
-        wrench pipeline's gravity compensation (0: the driver compensates already).
-    """
-
-    node_name: str = "coassist"
-    namespace: str = ""
-    wrench_topic: str = "/force_torque_sensor_broadcaster/wrench"
-    joint_state_topic: str = "/joint_states"
-    command_topic: str = "/forward_velocity_controller/commands"
-    tool_pose_topic: str = "~/tool_pose"
-    prediction_topic: str = "~/prediction"
-    alpha_topic: str = "~/alpha"
-    hand_force_topic: str = "~/hand_force"
-    diagnostics_topic: str = "/diagnostics"
-    base_frame: str = "base"
-    wrench_frame: str = "tool0"
-    joint_names: tuple[str, ...] = UR_JOINT_NAMES
-    wrench_in_base: bool = False
-    sensor_reliable: bool = False
-    command_depth: int = 1
-    rate_hz: float = 125.0
-    stale_after: float = 0.1
-    connect_timeout: float = 5.0
-    monitor_rate_hz: float = 25.0
-    prediction_seconds: float = 0.4
-    prediction_stride: int = 5
-    lockstep: bool = False
-    pace: bool = True
-    domain_id: int | None = None
-    tcp_offset: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    payload: tuple[float, tuple[float, float, float]] = (0.0, (0.0, 0.0, 0.0))
-
-    def __post_init__(self) -> None:
-        def bad(name: str, what: str) -> ValueError:
-            return ValueError(f"Ros2Config.{name} must be {what}, got {getattr(self, name)!r}")
-
-        if not isinstance(self.node_name, str) or not ROS_NAME.match(self.node_name):
-            raise bad("node_name", "a ROS name (letters, digits, _; a letter first)")
-        if not isinstance(self.namespace, str) or (self.namespace and not ROS_TOPIC.match(self.namespace)):
-            raise bad("namespace", "'' or a ROS namespace such as /cell_1")
-        for name in ("wrench_topic", "joint_state_topic", "command_topic"):
-            v = getattr(self, name)
-            if not isinstance(v, str) or not ROS_TOPIC.match(v):
-                raise bad(name, "a ROS topic name such as /joint_states")
-        for name in ("tool_pose_topic", "prediction_topic", "alpha_topic", "hand_force_topic", "diagnostics_topic"):
-            v = getattr(self, name)
-            if not isinstance(v, str) or (v and not ROS_TOPIC.match(v)):
-                raise bad(name, "'' (off) or a ROS topic name such as ~/tool_pose")
-        for name in ("base_frame", "wrench_frame"):
-            v = getattr(self, name)
-            if not isinstance(v, str) or not v.strip():
-                raise bad(name, "a frame id")
-        if self.base_frame == self.wrench_frame:
-            raise bad("wrench_frame", f"the sensor's frame, not the base frame {self.base_frame!r}")
-        names = tuple(self.joint_names) if isinstance(self.joint_names, (list, tuple)) else None
-        if not names or len(set(names)) != len(names) or not all(isinstance(n, str) and n for n in names):
-            raise bad("joint_names", "distinct joint names")
-        if len(names) != len(UR_JOINT_NAMES):
-            raise bad("joint_names", f"{len(UR_JOINT_NAMES)} names, one per joint of the UR5 (got {len(names)})")
-        object.__setattr__(self, "joint_names", names)
-        for name in ("wrench_in_base", "sensor_reliable", "lockstep", "pace"):
-            if not isinstance(getattr(self, name), bool):
-                raise bad(name, "True or False")
-        for name in ("command_depth", "prediction_stride"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise bad(name, "an int >= 1")
-        for name in ("rate_hz", "stale_after", "connect_timeout", "monitor_rate_hz", "prediction_seconds"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-                raise bad(name, "a finite number > 0")
-        if self.stale_after > MAX_STALE_AFTER:
-            raise bad(
-                "stale_after", f"at most {MAX_STALE_AFTER:g} s (the stop on a lost link; longer is no stop at all)"
-            )
-        if self.domain_id is not None and (
-            isinstance(self.domain_id, bool) or not isinstance(self.domain_id, int) or not 0 <= self.domain_id <= 232
-        ):
-            raise bad("domain_id", "None or an int in 0 … 232")
-        off = np.asarray(self.tcp_offset, dtype=float) if _numbers(self.tcp_offset) else None
-        if off is None or off.shape != (6,) or not np.isfinite(off).all():
-            raise bad("tcp_offset", "6 finite numbers [x, y, z, rx, ry, rz]")
-        if float(np.linalg.norm(off[:3])) > MAX_TCP_OFFSET:
-            raise bad("tcp_offset", f"a TCP within {MAX_TCP_OFFSET:g} m of the flange (x, y, z in metres)")
-        object.__setattr__(self, "tcp_offset", tuple(float(v) for v in off))
-        try:
-            mass, com = self.payload
-            mass = float(mass)
-            com = tuple(float(c) for c in com)
-        except (TypeError, ValueError):
-            raise bad("payload", "(mass, (cx, cy, cz))") from None
-        if not math.isfinite(mass) or mass < 0 or len(com) != 3 or not all(math.isfinite(c) for c in com):
-            raise bad("payload", "(mass >= 0 [kg], 3 finite numbers [m])")
-        object.__setattr__(self, "payload", (mass, com))
-        self._check_topics()
-
-    def _check_topics(self) -> None:
-        """No two roles on one topic (as the middleware resolves the names): an input on the node's
-        own command or monitor topic, or two inputs on one topic, is refused before anything starts."""
-        roles = [name for name in _TOPIC_FIELDS if getattr(self, name)]
-        seen: dict[str, str] = {}
-        for name in roles:
-            full = resolve_topic(getattr(self, name), self.node_name, self.namespace)
-            if full in seen:
-                raise ValueError(
-                    f"Ros2Config.{name} {getattr(self, name)!r} is {full}, the topic of "
-                    f"Ros2Config.{seen[full]} too: give each its own topic"
-                )
-            seen[full] = name
-
-    @property
-    def dt(self) -> float:
-        return 1.0 / self.rate_hz
-
-
-#: The topic fields, inputs first (an error names the later of two that clash).
-_TOPIC_FIELDS = (
-    "wrench_topic",
-    "joint_state_topic",
-    "command_topic",
-    "tool_pose_topic",
-    "prediction_topic",
-    "alpha_topic",
-    "hand_force_topic",
-    "diagnostics_topic",
-)
-
-
-def _numbers(value: Any) -> bool:
-    try:
-        np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        return False
-    return True
-
-
-def _stamp_ns(stamp: Any) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 class Ros2InputError(CoassistError, ValueError):
@@ -340,12 +163,10 @@ class Ros2World:
         if not isinstance(config, Ros2Config):
             raise ValueError(f"config must be a Ros2Config, got {type(config).__name__}")
         try:
-            from diagnostic_msgs.msg import DiagnosticArray
-            from geometry_msgs.msg import PoseStamped, WrenchStamped
-            from nav_msgs.msg import Path
+            from geometry_msgs.msg import WrenchStamped
             from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
             from sensor_msgs.msg import JointState
-            from std_msgs.msg import Float64, Float64MultiArray
+            from std_msgs.msg import Float64MultiArray
         except ImportError as exc:
             raise ImportError(f"{install_hint('ros2')} ({exc})") from exc
         from coassist.robot.kinematics import UR5Kinematics
@@ -360,14 +181,7 @@ class Ros2World:
         self.rejected_commands = 0
         self._kin = UR5Kinematics(tcp_offset=self.tcp_offset_pose)
         self._R_offset = rotation_matrix(self.tcp_offset_pose[3:])
-        self._msg = {
-            "PoseStamped": PoseStamped,
-            "WrenchStamped": WrenchStamped,
-            "Path": Path,
-            "Float64": Float64,
-            "Float64MultiArray": Float64MultiArray,
-            "DiagnosticArray": DiagnosticArray,
-        }
+        self._msg = {"Float64MultiArray": Float64MultiArray}
         self._cond = threading.Condition()
         self._js: tuple[int, np.ndarray, np.ndarray, float] | None = None  # stamp ns, q, qd, receive time
         self._wr: tuple[int, np.ndarray, float, bool] | None = None  # stamp ns, wrench, receive time, in base
@@ -382,7 +196,6 @@ class Ros2World:
         self._t0_ns: int | None = None
         self._last_t = -math.inf
         self._period_start: float | None = None
-        self._monitor_every = max(1, round(config.rate_hz / config.monitor_rate_hz))
         self._closed = False
         self._stopped_sent = False
 
@@ -407,18 +220,8 @@ class Ros2World:
                 history=HistoryPolicy.KEEP_LAST, depth=config.command_depth, reliability=ReliabilityPolicy.RELIABLE
             )
             self._cmd_pub = self.node.create_publisher(Float64MultiArray, config.command_topic, cmd_qos)
-            mon_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE)
-            self._pubs = {
-                name: self.node.create_publisher(kind, getattr(config, f"{name}_topic"), mon_qos)
-                for name, kind in (
-                    ("tool_pose", PoseStamped),
-                    ("prediction", Path),
-                    ("alpha", Float64),
-                    ("hand_force", WrenchStamped),
-                    ("diagnostics", DiagnosticArray),
-                )
-                if getattr(config, f"{name}_topic")
-            }
+            self._monitor = Ros2Monitor(self.node, config)
+            self._pubs = self._monitor.publishers  # topic name → publisher (the tests wait on their subscribers)
             self._ros.spin()
             self._wait_first()
         except BaseException:
@@ -468,7 +271,7 @@ class Ros2World:
         if not (np.isfinite(q).all() and np.isfinite(qd).all()):
             self._reject(topic, "a joint state with a non-finite value")
             return
-        stamp = _stamp_ns(msg.header.stamp)
+        stamp = stamp_ns(msg.header.stamp)
         now = time.monotonic()
         with self._cond:
             if not self._fresh(topic, stamp, None if self._js is None else self._js[0]):
@@ -537,7 +340,7 @@ class Ros2World:
         if not np.isfinite(w).all():
             self._reject(topic, "a wrench with a non-finite value")
             return
-        stamp = _stamp_ns(msg.header.stamp)
+        stamp = stamp_ns(msg.header.stamp)
         with self._cond:
             newest = None if self._wr is None else self._wr[0]
             if not self._fresh(topic, stamp, newest):
@@ -723,89 +526,10 @@ class Ros2World:
     # -- monitor ---------------------------------------------------------------------
 
     def publish_monitor(self, k: int, state: RobotState, out: Any) -> None:
-        """The loop's ``on_tick``: tool pose, prediction, α, hand force and fault flags at ``monitor_rate_hz``
-        (every ``round(rate_hz / monitor_rate_hz)``-th tick, from tick 0).
-
-        ``out`` is the tick's :class:`~coassist.runtime.tick.TickOutput`. Faults go out on
-        every tick that has one (and at the monitor rate otherwise), so none is missed.
-        """
+        """The loop's ``on_tick``: the monitor topics (:meth:`~coassist.robot.ros2_monitor.Ros2Monitor.publish`)."""
         if self._closed:
             return
-        due = k % self._monitor_every == 0
-        flags = int(out.fault)
-        if not due and not flags:
-            return
-        stamp = self.node.get_clock().now().to_msg()
-        if "diagnostics" in self._pubs:
-            self._pubs["diagnostics"].publish(self._diagnostics(stamp, flags))
-        if not due:
-            return
-        frame = self.config.base_frame
-        pose = np.asarray(state.tool_pose, dtype=float)
-        if "tool_pose" in self._pubs:
-            self._pubs["tool_pose"].publish(self._pose_stamped(stamp, frame, pose))
-        if "hand_force" in self._pubs:
-            m = self._msg["WrenchStamped"]()
-            m.header.stamp, m.header.frame_id = stamp, frame
-            w = np.zeros(6)
-            w[: len(out.wrench)] = out.wrench
-            m.wrench.force.x, m.wrench.force.y, m.wrench.force.z = (float(v) for v in w[:3])
-            m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z = (float(v) for v in w[3:])
-            self._pubs["hand_force"].publish(m)
-        if "alpha" in self._pubs and self.alpha is not None:
-            self._pubs["alpha"].publish(self._msg["Float64"](data=self.alpha))
-        if "prediction" in self._pubs and out.prediction is not None:
-            # Every stride-th row of the first prediction_seconds, and the last: a path to draw,
-            # built in well under a millisecond (all 50 rows cost ~1 ms of the tick).
-            n = max(1, min(len(out.prediction), round(self.config.prediction_seconds / self.dt)))
-            rows = sorted(set(range(self.config.prediction_stride - 1, n, self.config.prediction_stride)) | {n - 1})
-            path = self._msg["Path"]()
-            path.header.stamp, path.header.frame_id = stamp, frame
-            qx, qy, qz, qw = quaternion_from_rotation_vector(pose[3:6])  # the tool's orientation, held
-            t0 = _stamp_ns(stamp)
-            d = out.prediction.shape[1]
-            poses = []
-            for i in rows:
-                ps = self._msg["PoseStamped"]()
-                ns = t0 + round((i + 1) * self.dt * 1e9)
-                ps.header.stamp.sec, ps.header.stamp.nanosec, ps.header.frame_id = (
-                    ns // 1_000_000_000,
-                    ns % 1_000_000_000,
-                    frame,
-                )
-                xyz = pose[:3].copy()
-                xyz[: min(d, 3)] = out.prediction[i, : min(d, 3)]
-                pp = ps.pose
-                pp.position.x, pp.position.y, pp.position.z = float(xyz[0]), float(xyz[1]), float(xyz[2])
-                pp.orientation.x, pp.orientation.y, pp.orientation.z, pp.orientation.w = qx, qy, qz, qw
-                poses.append(ps)
-            path.poses = poses
-            self._pubs["prediction"].publish(path)
-
-    def _pose_stamped(self, stamp: Any, frame: str, pose: np.ndarray) -> Any:
-        m = self._msg["PoseStamped"]()
-        m.header.stamp, m.header.frame_id = stamp, frame
-        m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in pose[:3])
-        qx, qy, qz, qw = quaternion_from_rotation_vector(pose[3:6])
-        m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w = qx, qy, qz, qw
-        return m
-
-    def _diagnostics(self, stamp: Any, flags: int) -> Any:
-        from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-
-        from coassist.data.trial_mcap import FAULT_STATUS_NAME, fault_level
-
-        names = fault_names(flags)
-        status = DiagnosticStatus(
-            level=bytes([fault_level(flags)]),
-            name=FAULT_STATUS_NAME,
-            message=", ".join(names) or "ok",
-            hardware_id=self.config.node_name,
-        )
-        status.values = [KeyValue(key="flags", value=str(flags))] + [KeyValue(key=n, value="1") for n in names]
-        arr = self._msg["DiagnosticArray"]()
-        arr.header.stamp, arr.status = stamp, [status]
-        return arr
+        self._monitor.publish(k, state, out, self.alpha)
 
 
 def build_world(request: WorldRequest) -> Ros2World:

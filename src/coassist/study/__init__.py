@@ -12,5 +12,7 @@
 - :mod:`coassist.study.participants`: simulated participants from the operator population.
 - :mod:`coassist.study.runner`: one participant's steps, resumed where they stopped.
 - :mod:`coassist.study.stats`: order effects (the paired tests, Holm and effect sizes: :mod:`coassist.analysis.paired`).
-- :mod:`coassist.study.report`: the HTML report and the JSON summary.
+- :mod:`coassist.study.summary`: the study's summary as a typed result (:class:`~coassist.study.summary.StudySummary`).
+- :mod:`coassist.study.summarise`: the summary computed from a study folder.
+- :mod:`coassist.study.report`: the HTML report (rendered through the Jinja2 templates) and the JSON summary.
 """

@@ -1,0 +1,461 @@
+"""What ``coassist study report`` shows, computed: a study folder read into one typed
+:class:`~coassist.study.summary.StudySummary`.
+
+:func:`summarise_study` reads the folder as evidence and computes everything the report shows
+(:mod:`coassist.study.report` renders it, and writes its JSON as ``summary.json``):
+
+- per participant and pooled: the measures of :mod:`coassist.study.measures` per condition
+  (or round), each participant's value the mean over their measured trials (practice trials
+  left out); pooled, the mean and sample sd (ddof = 1) of those means over participants;
+- paired comparisons between every two conditions (:mod:`coassist.analysis.paired`: Wilcoxon
+  signed-rank and paired t, Holm-corrected over the measures × pairs family, effect sizes
+  with seeded bootstrap intervals), and the same for the raw TLX and each Likert item (their
+  own family);
+- order effects: the position's F test beside condition and participant, and the means per
+  condition × position (:func:`coassist.study.stats.order_effect`);
+- for the iterative protocol the in-loop e_RMS per round and the stop criterion (eq. 4.13);
+  for transfer and online the collection's e_RMS per trial and the models trained;
+- with a calibration block: which conditions (or rounds) ran with the participant's own person
+  model, and per participant what each person model was fitted from (the trials per task, the
+  arm measured from the probe's trials or assumed, K̂ and Ĉ with their standard errors, the
+  file's SHA-256), what it was told (``Told``) and which blocks' trials ran with it (by that
+  hash), the failed attempts with their reasons;
+- what a sample this size can and cannot show (:func:`sample_limits`), said plainly.
+
+The folder is read as evidence: the participant table and every participant's log are
+cross-checked first (:meth:`~coassist.study.store.StudyFolder.check_table`,
+:meth:`~coassist.study.store.ParticipantFolder.audit`), the answers checked against the
+plan's questionnaire as they are read, and a trial file that cannot be read is one
+:class:`~coassist.study.store.StudyFolderError` line naming it: a summary never averages a
+trial twice, drops a condition or a participant without saying so, or takes an answer off
+its scale.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from coassist.analysis.paired import holm_family, paired_comparison
+from coassist.data import read_dataset
+from coassist.data.store import MANIFEST_NAME
+from coassist.study.measures import MEASURES, trial_measures
+from coassist.study.questionnaires import TLX_ITEMS, Form, form_for, raw_tlx
+from coassist.study.stats import order_effect
+from coassist.study.store import StudyFolder, StudyFolderError, finite_json
+from coassist.study.summary import (
+    AnswerStat,
+    ArmFit,
+    Calibration,
+    Collection,
+    CriterionCheck,
+    ForceTrace,
+    OrderEffect,
+    ParticipantRow,
+    PersonModelFit,
+    PooledMeasure,
+    QuestionnaireSummary,
+    StudySummary,
+    TrainedModel,
+    finite_number,
+)
+
+__all__ = [
+    "ALPHA",
+    "POWER",
+    "answer_value",
+    "calibrated_blocks",
+    "force_traces",
+    "read_block",
+    "sample_limits",
+    "study_summary",
+    "summarise_study",
+]
+
+#: Power and α of the detectable-effect sentence (a paired t test, two-sided).
+POWER, ALPHA = 0.8, 0.05
+
+
+def _nanmean(values) -> float:
+    arr = np.asarray([v for v in values if v is not None], dtype=float)
+    arr = arr[np.isfinite(arr)]
+    return float(arr.mean()) if arr.size else math.nan
+
+
+def _blocks(study: StudyFolder, plan) -> list[str]:
+    """The blocks compared (conditions in the plan's order), or the rounds for the iterative protocol."""
+    if plan.protocol == "iterative":
+        return [f"round-{k}" for k in range(plan.iterative.rounds)]
+    return list(study.labels)
+
+
+def read_block(folder: Path):
+    """The block's trials; a file that cannot be read is one line naming it (never a traceback)."""
+    try:
+        return read_dataset(folder).trials
+    except (ValueError, OSError) as exc:  # TrialFileError, ManifestError, FileNotFoundError name the file
+        what = " ".join(str(exc).split())  # one line: a parquet reader's message may span several
+        raise StudyFolderError(f"{what}; restore it from your backup of the study folder") from None
+
+
+def _answers(pf, i: int, rec: dict[str, Any], form: Form) -> dict[str, int]:
+    """A questionnaire line's answers, checked against the plan's form as they are read."""
+    answers = rec.get("answers")
+    keys = [item.key for item in form.items]
+    try:
+        if not isinstance(answers, dict) or sorted(answers) != sorted(keys):
+            raise ValueError(f"expected the items {keys}, got {answers!r}")
+        return form.check([answers[k] for k in keys])
+    except ValueError as exc:
+        raise StudyFolderError(
+            f"{pf.progress_file}: line {i + 1}: answers off the questionnaire ({exc}; edited by hand?); restore it "
+            "from your backup of the study folder"
+        ) from None
+
+
+def _participant_data(study: StudyFolder, pid: str, blocks: list[str], form: Form) -> dict[str, Any]:
+    """One participant's log and trials read (audited first): the working data :func:`summarise_study` pools."""
+    pf = study.participant(pid)
+    order = pf.order() or {"steps": []}
+    progress = pf.progress()
+    pf.audit(order["steps"], progress)
+    data: dict[str, Any] = {
+        "complete": bool(order["steps"])
+        and (len(progress) == len(order["steps"]) or bool(progress and progress[-1].get("stop"))),
+        "steps_done": len(progress),
+        "steps": len(order["steps"]),
+        "blocks": {},
+        "answers": {},
+        "positions": {},
+        "checks": [CriterionCheck.from_json(finite_json(r)) for r in progress if r["kind"] == "check"],
+    }
+    for s in order["steps"]:
+        if s["kind"] == "trial" and not s["practice"]:
+            data["positions"][s["block"]] = s["position"]
+    data["fits"] = [_fit_summary(r, progress) for r in progress if r["kind"] == "fit"]
+    for i, r in enumerate(progress):
+        if r["kind"] == "questionnaire":
+            data["answers"][r["block"]] = _answers(pf, i, r, form)
+    for b in [*blocks, "transfer-set", "adaptation"]:
+        folder = pf.block(b)
+        if not (folder / MANIFEST_NAME).is_file():
+            continue
+        trials = read_block(folder)
+        per_trial = [trial_measures(t) for t in trials]
+        data["blocks"][b] = {
+            "trials": per_trial,
+            "means": {k: _nanmean(m[k] for m in per_trial) for k, *_ in MEASURES},
+            "models": [t.meta.extra.get("study_model") for t in trials],
+        }
+    return data
+
+
+def _fit_summary(rec: dict[str, Any], progress: list[dict[str, Any]]) -> PersonModelFit:
+    """What the report says of one person model's fit (a progress line of kind ``fit``): what it was fitted
+    from, what it was told (:class:`~coassist.scenario.intent_registry.Told`: the arm measured or assumed)
+    and ``used_in``, the blocks whose trials ran with its files (their lines' ``model_sha256``)."""
+    from dataclasses import replace
+
+    from coassist.scenario.intent_registry import INTENT_FOLDERS
+
+    model, attempt = rec.get("model"), rec.get("attempt")
+    if rec.get("failed"):
+        return PersonModelFit(model=model, attempt=attempt, failed=True, reason=rec.get("reason"), redo=rec.get("redo"))
+    arm = rec.get("arm") or {}
+    digests = set((rec.get("sha256") or {}).values())
+    used_in = [
+        r["block"]
+        for r in progress
+        if r["kind"] == "trial" and r.get("model") == model and r.get("model_sha256") in digests
+    ]
+    told = replace(INTENT_FOLDERS["person-model"].told, arm="measured" if rec.get("arm_measured") else "assumed")
+    blocks = rec.get("blocks")
+    sha256 = rec.get("sha256")
+    return PersonModelFit(
+        model=model,
+        attempt=attempt,
+        failed=False,
+        told=told.text(),
+        used_in=tuple(dict.fromkeys(used_in)),
+        base=rec.get("base"),
+        blocks=None if blocks is None else tuple(blocks),
+        trials={task: len(files) for task, files in (rec.get("demonstrations") or {}).items()},
+        left_out={task: len(v) for task, v in (rec.get("left_out") or {}).items()},
+        arm=ArmFit(
+            measured=bool(rec.get("arm_measured")),
+            note=rec.get("arm_note"),
+            from_=f"{rec.get('base')}'s" if rec.get("base") else None,
+            trials=arm.get("trials"),
+            stiffness=finite_number(arm.get("stiffness")),
+            stiffness_se=finite_number(arm.get("stiffness_se")),
+            damping=finite_number(arm.get("damping")),
+            damping_se=finite_number(arm.get("damping_se")),
+        ),
+        sha256=None if sha256 is None else dict(sha256),
+        fit_seconds=finite_number(rec.get("fit_seconds")),
+    )
+
+
+def calibrated_blocks(plan) -> list[str]:
+    """The conditions (or rounds) that ran with the participant's own person model."""
+    from coassist.study.plan import CALIBRATED
+
+    if plan.protocol == "comparison":
+        return [c.name for c in plan.conditions if c.intent == CALIBRATED]
+    if plan.iterative is not None:
+        return [f"round-{k}" for k in range(plan.iterative.rounds)] if plan.iterative.source == CALIBRATED else []
+    extra = plan.transfer or plan.online
+    return [CALIBRATED] if extra is not None and extra.compare_calibrated else []
+
+
+def sample_limits(n: int, n_tests: int, simulated: bool) -> list[str]:
+    """Plain sentences on what ``n`` participants can and cannot show.
+
+    The smallest two-sided p of the exact Wilcoxon signed-rank test on n pairs is 2/2^n; the smallest
+    Cohen's d_z a two-sided paired t test detects with :data:`POWER` at :data:`ALPHA` (and at α/n_tests,
+    Holm's smallest threshold) solves 1 − β = P(|T| > t_{1−α/2, n−1}), T noncentral t with n − 1 degrees of
+    freedom and noncentrality d_z √n.
+    """
+    from scipy import optimize, stats
+
+    lines = []
+    if n == 0:
+        return ["No participant has finished a condition yet: nothing to compare."]
+    smallest = 2.0 / 2**n
+    lines.append(
+        f"{n} participant{'s' if n != 1 else ''}: the smallest two-sided p a Wilcoxon signed-rank test can "
+        f"give is 2/2^{n} = {smallest:.3g}"
+        + (
+            " — it cannot reach 0.05 whatever the data; its p values show direction and consistency, not significance."
+            if smallest > 0.05
+            else "."
+        )
+    )
+    if n >= 3:
+
+        def power(d: float, alpha: float) -> float:
+            df, nc = n - 1, d * math.sqrt(n)
+            tc = stats.t.ppf(1 - alpha / 2, df)
+            p = float(stats.nct.sf(tc, df, nc) + stats.nct.cdf(-tc, df, nc))
+            return p if math.isfinite(p) else 1.0  # the noncentral t's tail fails only far past any power asked
+
+        def detectable(alpha: float) -> float:
+            hi = 1.0
+            while power(hi, alpha) < POWER:
+                hi *= 2.0
+            return float(optimize.brentq(lambda d: power(d, alpha) - POWER, 1e-3, hi))
+
+        d80, d80h = detectable(ALPHA), detectable(ALPHA / max(n_tests, 1))
+        lines.append(
+            f"A paired t test on {n} participants detects, with {POWER:.0%} power at α = {ALPHA}, only effects "
+            f"of Cohen's d_z ≥ {d80:.2f} (≥ {d80h:.2f} for the smallest p after Holm's correction over "
+            f"{n_tests} tests): a smaller difference may be real and go unseen. It also assumes the differences "
+            "are roughly normal, which so few cannot check."
+        )
+    else:
+        lines.append(
+            "Fewer than three participants: no test has a meaningful null distribution; read the individual lines."
+        )
+    lines.append(
+        "What it can show: whether the differences point the same way for every participant (the lines), "
+        "and how large they are, with bootstrap intervals that are wide at this size (and rest on so few "
+        "distinct resamples that their ends are coarse)."
+    )
+    lines.append(
+        "What it cannot show: that a result holds for other people (the sample is small and not drawn at "
+        "random), interactions between condition and order (a Latin square confounds them), or differences "
+        "in rare events (safety stops, missed targets)."
+    )
+    if simulated:
+        lines.append(
+            "These participants are simulated operators (coassist study run --simulate): the numbers rehearse "
+            "the plan and its analysis; they are not evidence about people, and the questionnaire answers "
+            "are a function of the measured force, not opinions."
+        )
+    return lines
+
+
+def summarise_study(folder: str | Path) -> StudySummary:
+    """Everything the report shows, computed from the study folder ``folder`` (module docstring)."""
+    study = StudyFolder(folder)
+    plan = study.plan()
+    blocks = _blocks(study, plan)
+    table = study.check_table()
+    form = form_for(plan.questionnaire)
+    participants = {pid: _participant_data(study, pid, blocks, form) for pid in sorted(table)}
+    measured = {pid: d for pid, d in participants.items() if any(b in d["blocks"] for b in blocks)}
+    # per participant (mean over their measured trials) and pooled (mean and sd over participants)
+    per_participant: dict[str, dict[str, dict[str, float]]] = {
+        pid: {b: d["blocks"][b]["means"] for b in blocks if b in d["blocks"]} for pid, d in measured.items()
+    }
+    pooled: dict[str, dict[str, PooledMeasure]] = {}
+    for b in blocks:
+        pooled[b] = {}
+        for key, *_ in MEASURES:
+            vals = np.array([per_participant[p][b][key] for p in per_participant if b in per_participant[p]], float)
+            vals = vals[np.isfinite(vals)]
+            pooled[b][key] = PooledMeasure(
+                mean=float(vals.mean()) if vals.size else None,
+                sd=float(vals.std(ddof=1)) if vals.size > 1 else None,
+                n=int(vals.size),
+            )
+    comparisons = []
+    pairs = [(a, b) for i, a in enumerate(blocks) for b in blocks[i + 1 :]]
+    for key, *_ in MEASURES:
+        for a, b in pairs:
+            va = {p: v[a][key] for p, v in per_participant.items() if a in v}
+            vb = {p: v[b][key] for p, v in per_participant.items() if b in v}
+            if len(set(va) & set(vb)) >= 1:
+                comparisons.append(paired_comparison(key, a, b, va, vb, seed=plan.seed))
+    comparisons = holm_family(comparisons)
+    # questionnaires: raw TLX and each Likert item, their own family
+    q_comparisons = []
+    answers = {pid: d["answers"] for pid, d in measured.items()}
+    q_keys = ["raw_tlx"] + [f"likert_{i}" for i in range(len(plan.questionnaire.likert))]
+    q_pooled: dict[str, dict[str, AnswerStat]] = {}
+    for b in blocks:
+        q_pooled[b] = {}
+        for qk in q_keys + [f"tlx_{k}" for k, *_ in TLX_ITEMS]:
+            qv = [v for v in (answer_value(answers[p].get(b), qk) for p in answers) if math.isfinite(v)]
+            q_pooled[b][qk] = AnswerStat(
+                mean=float(np.mean(qv)) if qv else None,
+                n=len(qv),
+                median=float(np.median(qv)) if qv else None,
+            )
+    for qk in q_keys:
+        for a, b in pairs:
+            va = {p: answer_value(ans.get(a), qk) for p, ans in answers.items()}
+            vb = {p: answer_value(ans.get(b), qk) for p, ans in answers.items()}
+            if any(math.isfinite(v) for v in va.values()) and any(math.isfinite(v) for v in vb.values()):
+                q_comparisons.append(paired_comparison(qk, a, b, va, vb, seed=plan.seed))
+    q_comparisons = holm_family(q_comparisons)
+    order = (
+        {
+            key: OrderEffect.from_json(
+                finite_json(
+                    order_effect(
+                        [
+                            (p, b, measured[p]["positions"].get(b, 0), per_participant[p][b][key])
+                            for p in per_participant
+                            for b in per_participant[p]
+                        ]
+                    )
+                )
+            )
+            for key, *_ in MEASURES
+        }
+        if plan.protocol != "iterative"
+        else {}
+    )
+    simulated = bool(table) and all(r.get("simulated") for r in table.values())
+    return StudySummary(
+        study=plan.name,
+        protocol=plan.protocol,
+        world=plan.world,
+        plan_sha256=study.record["plan_sha256"],
+        labels=study.labels,
+        blocks=tuple(blocks),
+        participants={
+            pid: ParticipantRow(
+                number=table[pid]["number"],
+                row=table[pid]["row"],
+                simulated=table[pid]["simulated"],
+                complete=d["complete"],
+                steps_done=d["steps_done"],
+                steps=d["steps"],
+                order=tuple(b for b, _ in sorted(d["positions"].items(), key=lambda kv: kv[1]) if b in blocks),
+                means={b: {k: finite_number(v) for k, v in m.items()} for b, m in per_participant.get(pid, {}).items()},
+                answers=d["answers"],
+                checks=tuple(d["checks"]),
+                person_models=tuple(d["fits"]),
+            )
+            for pid, d in participants.items()
+        },
+        calibration=None
+        if plan.calibration is None
+        else Calibration(trials=plan.calibration.trials, calibrated=tuple(calibrated_blocks(plan))),
+        n_participants=len(participants),
+        n_complete=sum(1 for d in participants.values() if d["complete"]),
+        pooled=pooled,
+        comparisons=tuple(comparisons),
+        questionnaire=QuestionnaireSummary(pooled=q_pooled, comparisons=tuple(q_comparisons)),
+        order_effects=order,
+        simulated=simulated,
+        limits=tuple(sample_limits(len(per_participant), len(comparisons), simulated)),
+        collections={
+            pid: {
+                b: Collection(
+                    e_rms=tuple(finite_number(m["e_rms"]) for m in d["blocks"][b]["trials"]),
+                    models=tuple(d["blocks"][b]["models"]),
+                )
+                for b in ("transfer-set", "adaptation")
+                if b in d["blocks"]
+            }
+            for pid, d in participants.items()
+        },
+        models=_models(study, participants),
+    )
+
+
+def study_summary(folder: str | Path) -> dict[str, Any]:
+    """:func:`summarise_study` as JSON-ready data (``summary.json``)."""
+    return summarise_study(folder).to_json()
+
+
+def answer_value(ans: Mapping[str, int] | None, key: str) -> float:
+    """A score from one block's answers: ``raw_tlx`` (the mean of the six TLX items, 0–100), or one item
+    (``tlx_<item>``, ``likert_<i>``); NaN where the block was not answered or the item not asked."""
+    if not ans:
+        return math.nan
+    if key == "raw_tlx":
+        return raw_tlx(dict(ans))
+    return float(ans[key]) if key in ans else math.nan
+
+
+def _models(study: StudyFolder, participants: Mapping[str, Any]) -> dict[str, dict[str, TrainedModel]]:
+    out: dict[str, dict[str, TrainedModel]] = {}
+    for pid in participants:
+        folder = study.participant(pid).folder / "models"
+        if not folder.is_dir():
+            continue
+        for m in sorted(p for p in folder.iterdir() if (p / "model.json").is_file()):
+            try:
+                meta = json.loads((m / "model.json").read_bytes().decode("utf-8"))
+                if not isinstance(meta, dict):
+                    raise ValueError("not a JSON object")
+            except (ValueError, OSError) as exc:
+                raise StudyFolderError(
+                    f"{m / 'model.json'}: unreadable ({exc}); restore it from your backup of the study folder"
+                ) from None
+            info = meta.get("info", meta)
+            hist = info.get("training_history") or [{}]
+            out.setdefault(pid, {})[m.name] = TrainedModel(
+                init=info.get("init"),
+                train_seconds=finite_number(info.get("train_seconds")),
+                trials=len(info.get("train_trials", [])) + len(info.get("test_trials", [])),
+                test_loss=finite_number(hist[-1].get("test_loss")),
+            )
+    return out
+
+
+def force_traces(folder: str | Path, summary: StudySummary) -> dict[str, list[ForceTrace]]:
+    """Block → every measured trial's planar hand force, of every participant in ``summary`` (the report's
+    force figure); the trials read from the study folder ``folder`` as :func:`summarise_study` reads them."""
+    study = StudyFolder(folder)
+    out: dict[str, list[ForceTrace]] = {}
+    for b in summary.blocks:
+        out[b] = []
+        for pid in summary.participants:
+            f = study.participant(pid).block(b)
+            if not (f / MANIFEST_NAME).is_file():
+                continue
+            out[b].extend(
+                ForceTrace(time=t.time - t.time[0], force=np.linalg.norm(t.wrench[:, :2], axis=1))
+                for t in read_block(f)
+            )
+    return out

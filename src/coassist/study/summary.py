@@ -1,0 +1,521 @@
+"""The study's summary as a typed result: :class:`StudySummary`, what ``coassist study report`` shows.
+
+:func:`coassist.study.summarise.summarise_study` computes it from a study folder (what each field
+means and how it is computed is said there); :mod:`coassist.study.report` renders it, and writes
+:meth:`StudySummary.to_json` as ``summary.json`` (its keys and their order are the file's since
+the first study report; :meth:`StudySummary.from_json` reads the file back).
+
+A number that cannot be computed (a measure with no finite value, a test with too few pairs) is
+None here and null in the JSON, except in :class:`~coassist.analysis.paired.PairedComparison`,
+which keeps its NaN (null in the JSON too: :meth:`StudySummary.from_json` reads it back as NaN).
+Units are SI (m, N, s) as :data:`~coassist.study.measures.MEASURES` states them; the report scales
+them to its display units.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from coassist.analysis.paired import PairedComparison
+from coassist.study.store import finite_json
+
+__all__ = [
+    "AnswerStat",
+    "ArmFit",
+    "Calibration",
+    "Collection",
+    "CriterionCheck",
+    "ForceTrace",
+    "OrderEffect",
+    "ParticipantRow",
+    "PersonModelFit",
+    "PooledMeasure",
+    "QuestionnaireSummary",
+    "StudySummary",
+    "TrainedModel",
+    "finite_number",
+]
+
+
+def finite_number(v: Any) -> float | None:
+    """``v``, None where it is missing or not a finite number (what the JSON holds as null); an int stays
+    an int (as :func:`~coassist.study.store.finite_json` leaves it: the JSON writes ``3``, not ``3.0``)."""
+    v = finite_json(v)
+    if v is None or isinstance(v, int):
+        return v
+    return float(v)
+
+
+@dataclass(frozen=True)
+class PooledMeasure:
+    """One measure in one block over participants: the mean and sample sd (ddof = 1) of the participants'
+    means, in the measure's SI unit (:data:`coassist.study.measures.MEASURES`); ``n`` participants with a
+    finite value. None where ``n`` is 0 (the mean) or below 2 (the sd)."""
+
+    mean: float | None
+    sd: float | None
+    n: int
+
+    def to_json(self) -> dict[str, Any]:
+        return {"mean": self.mean, "sd": self.sd, "n": self.n}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> PooledMeasure:
+        return cls(mean=finite_number(d["mean"]), sd=finite_number(d["sd"]), n=int(d["n"]))
+
+
+@dataclass(frozen=True)
+class AnswerStat:
+    """One questionnaire score (raw TLX 0–100, a TLX item, a Likert item) in one block over the participants
+    who answered: mean, median, ``n``; None where no one did."""
+
+    mean: float | None
+    n: int
+    median: float | None
+
+    def to_json(self) -> dict[str, Any]:
+        return {"mean": self.mean, "n": self.n, "median": self.median}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> AnswerStat:
+        return cls(mean=finite_number(d["mean"]), n=int(d["n"]), median=finite_number(d["median"]))
+
+
+@dataclass(frozen=True)
+class CriterionCheck:
+    """The iterative protocol's stop criterion at one round (eq. 4.13), as the participant's log records it:
+    the in-loop e_RMS [m] at ``criterion_horizon`` samples of this round and the one before, ``delta`` =
+    |e_RMS − e_RMS_before| [m] against ``tolerance`` [m]; ``stop``: the study stopped here."""
+
+    step: int
+    key: str
+    round: int
+    e_rms: float | None
+    e_rms_before: float | None
+    delta: float | None
+    tolerance: float
+    criterion_horizon: int
+    met: bool
+    stop: bool
+    t: str
+    kind: str = "check"
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "step": self.step,
+            "kind": self.kind,
+            "key": self.key,
+            "round": self.round,
+            "e_rms": self.e_rms,
+            "e_rms_before": self.e_rms_before,
+            "delta": self.delta,
+            "tolerance": self.tolerance,
+            "criterion_horizon": self.criterion_horizon,
+            "met": self.met,
+            "stop": self.stop,
+            "t": self.t,
+        }
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> CriterionCheck:
+        return cls(
+            step=int(d["step"]),
+            kind=str(d["kind"]),
+            key=str(d["key"]),
+            round=int(d["round"]),
+            e_rms=finite_number(d["e_rms"]),
+            e_rms_before=finite_number(d["e_rms_before"]),
+            delta=finite_number(d["delta"]),
+            tolerance=float(d["tolerance"]),
+            criterion_horizon=int(d["criterion_horizon"]),
+            met=bool(d["met"]),
+            stop=bool(d["stop"]),
+            t=str(d["t"]),
+        )
+
+
+@dataclass(frozen=True)
+class ArmFit:
+    """The arm of a person model: measured from the probe's ``trials`` (pushes), taken ``from`` its base
+    model, or assumed (``note`` says why); K̂ [N/m] and Ĉ [N·s/m] with their standard errors."""
+
+    measured: bool
+    note: str | None
+    from_: str | None  # "from" in the JSON: the base model's, when the arm was not measured again
+    trials: int | None
+    stiffness: float | None
+    stiffness_se: float | None
+    damping: float | None
+    damping_se: float | None
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "measured": self.measured,
+            "note": self.note,
+            "from": self.from_,
+            "trials": self.trials,
+            "stiffness": self.stiffness,
+            "stiffness_se": self.stiffness_se,
+            "damping": self.damping,
+            "damping_se": self.damping_se,
+        }
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> ArmFit:
+        return cls(
+            measured=bool(d["measured"]),
+            note=d["note"],
+            from_=d["from"],
+            trials=d["trials"],
+            stiffness=finite_number(d["stiffness"]),
+            stiffness_se=finite_number(d["stiffness_se"]),
+            damping=finite_number(d["damping"]),
+            damping_se=finite_number(d["damping_se"]),
+        )
+
+
+@dataclass(frozen=True)
+class PersonModelFit:
+    """One attempt at fitting a participant's person model (a progress line of kind ``fit``).
+
+    Failed: ``reason`` and ``redo`` (the block run again). Otherwise what it was fitted from (``trials``
+    per task, ``left_out`` per task: not in the target, of the ``blocks``), its ``arm``, what it was
+    ``told`` (:class:`~coassist.scenario.intent_registry.Told`), ``used_in``: the blocks whose trials ran
+    with its files (their lines' ``model_sha256`` among its ``sha256``), the fit's wall time [s]."""
+
+    model: str | None
+    attempt: int | None
+    failed: bool
+    reason: str | None = None
+    redo: str | None = None
+    told: str | None = None
+    used_in: tuple[str, ...] = ()
+    base: str | None = None
+    blocks: tuple[str, ...] | None = None
+    trials: Mapping[str, int] = field(default_factory=dict)
+    left_out: Mapping[str, int] = field(default_factory=dict)
+    arm: ArmFit | None = None
+    sha256: Mapping[str, str] | None = None
+    fit_seconds: float | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"model": self.model, "attempt": self.attempt, "failed": self.failed}
+        if self.failed:
+            return {**out, "reason": self.reason, "redo": self.redo}
+        return {
+            **out,
+            "told": self.told,
+            "used_in": list(self.used_in),
+            "base": self.base,
+            "blocks": None if self.blocks is None else list(self.blocks),
+            "trials": dict(self.trials),
+            "left_out": dict(self.left_out),
+            "arm": None if self.arm is None else self.arm.to_json(),
+            "sha256": None if self.sha256 is None else dict(self.sha256),
+            "fit_seconds": self.fit_seconds,
+        }
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> PersonModelFit:
+        if d["failed"]:
+            return cls(model=d["model"], attempt=d["attempt"], failed=True, reason=d["reason"], redo=d["redo"])
+        return cls(
+            model=d["model"],
+            attempt=d["attempt"],
+            failed=False,
+            told=d["told"],
+            used_in=tuple(d["used_in"]),
+            base=d["base"],
+            blocks=None if d["blocks"] is None else tuple(d["blocks"]),
+            trials=dict(d["trials"]),
+            left_out=dict(d["left_out"]),
+            arm=None if d["arm"] is None else ArmFit.from_json(d["arm"]),
+            sha256=None if d["sha256"] is None else dict(d["sha256"]),
+            fit_seconds=finite_number(d["fit_seconds"]),
+        )
+
+
+@dataclass(frozen=True)
+class ParticipantRow:
+    """One participant: their number and Latin-square row, how far they got, the block ``order`` they met,
+    their ``means`` (block → measure → mean over their measured trials, SI units; None where no trial
+    gave a finite value), their questionnaire ``answers`` (block → item → answer), the criterion checks
+    and the person models fitted."""
+
+    number: int
+    row: int
+    simulated: bool
+    complete: bool
+    steps_done: int
+    steps: int
+    order: tuple[str, ...]
+    means: Mapping[str, Mapping[str, float | None]]
+    answers: Mapping[str, Mapping[str, int]]
+    checks: tuple[CriterionCheck, ...]
+    person_models: tuple[PersonModelFit, ...]
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "number": self.number,
+            "row": self.row,
+            "simulated": self.simulated,
+            "complete": self.complete,
+            "steps_done": self.steps_done,
+            "steps": self.steps,
+            "order": list(self.order),
+            "means": {b: dict(m) for b, m in self.means.items()},
+            "answers": {b: dict(a) for b, a in self.answers.items()},
+            "checks": [c.to_json() for c in self.checks],
+            "person_models": [f.to_json() for f in self.person_models],
+        }
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> ParticipantRow:
+        return cls(
+            number=d["number"],
+            row=d["row"],
+            simulated=bool(d["simulated"]),
+            complete=bool(d["complete"]),
+            steps_done=int(d["steps_done"]),
+            steps=int(d["steps"]),
+            order=tuple(d["order"]),
+            means={b: {k: finite_number(v) for k, v in m.items()} for b, m in d["means"].items()},
+            answers={b: dict(a) for b, a in d["answers"].items()},
+            checks=tuple(CriterionCheck.from_json(c) for c in d["checks"]),
+            person_models=tuple(PersonModelFit.from_json(f) for f in d["person_models"]),
+        )
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The plan's calibration block: its ``trials`` per participant and the blocks that ran with the
+    participant's own person model (:func:`calibrated_blocks`)."""
+
+    trials: int
+    calibrated: tuple[str, ...]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"trials": self.trials, "calibrated": list(self.calibrated)}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> Calibration:
+        return cls(trials=int(d["trials"]), calibrated=tuple(d["calibrated"]))
+
+
+@dataclass(frozen=True)
+class QuestionnaireSummary:
+    """The questionnaire pooled (block → score → :class:`AnswerStat`) and its own family of paired
+    comparisons (raw TLX and each Likert item, Holm-corrected together)."""
+
+    pooled: Mapping[str, Mapping[str, AnswerStat]]
+    comparisons: tuple[PairedComparison, ...]
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "pooled": {b: {k: s.to_json() for k, s in q.items()} for b, q in self.pooled.items()},
+            "comparisons": [finite_json(c.to_json()) for c in self.comparisons],
+        }
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> QuestionnaireSummary:
+        return cls(
+            pooled={b: {k: AnswerStat.from_json(s) for k, s in q.items()} for b, q in d["pooled"].items()},
+            comparisons=tuple(_comparison_from_json(c) for c in d["comparisons"]),
+        )
+
+
+@dataclass(frozen=True)
+class OrderEffect:
+    """The position's F test on one measure (:func:`~coassist.study.stats.order_effect`): F with (df1, df2)
+    degrees of freedom and its p (None where the design leaves no degrees of freedom), the means per
+    condition and position (position as a string, as in the JSON), ``n`` rows."""
+
+    F: float | None
+    df1: int
+    df2: int
+    p: float | None
+    means: Mapping[str, Mapping[str, float | None]]
+    n: int
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "F": self.F,
+            "df1": self.df1,
+            "df2": self.df2,
+            "p": self.p,
+            "means": {c: dict(m) for c, m in self.means.items()},
+            "n": self.n,
+        }
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> OrderEffect:
+        return cls(
+            F=finite_number(d["F"]),
+            df1=int(d["df1"]),
+            df2=int(d["df2"]),
+            p=finite_number(d["p"]),
+            means={str(c): {str(pos): finite_number(v) for pos, v in m.items()} for c, m in d["means"].items()},
+            n=int(d["n"]),
+        )
+
+
+@dataclass(frozen=True)
+class Collection:
+    """A transfer or online collection block: its trials' e_RMS [m] at 0.4 s and the model in the loop of each."""
+
+    e_rms: tuple[float | None, ...]
+    models: tuple[str | None, ...]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"e_rms": list(self.e_rms), "models": list(self.models)}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> Collection:
+        return cls(e_rms=tuple(finite_number(v) for v in d["e_rms"]), models=tuple(d["models"]))
+
+
+@dataclass(frozen=True)
+class TrainedModel:
+    """A model the study trained for a participant (its ``model.json``): how it was initialised, its
+    training wall time [s], the trials it saw (train + test) and its last test loss."""
+
+    init: str | None
+    train_seconds: float | None
+    trials: int
+    test_loss: float | None
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "init": self.init,
+            "train_seconds": self.train_seconds,
+            "trials": self.trials,
+            "test_loss": self.test_loss,
+        }
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> TrainedModel:
+        return cls(
+            init=d["init"],
+            train_seconds=finite_number(d["train_seconds"]),
+            trials=int(d["trials"]),
+            test_loss=finite_number(d["test_loss"]),
+        )
+
+
+@dataclass(frozen=True)
+class StudySummary:
+    """Everything ``coassist study report`` shows (module docstring); :meth:`to_json` is ``summary.json``.
+
+    ``blocks``: the conditions in the plan's order, or the rounds (``round-k``) of the iterative
+    protocol; ``labels``: the blinding key (condition → label on the page). Mappings are keyed by
+    participant id, block and measure (:data:`~coassist.study.measures.MEASURES`' keys) in the
+    order the report lists them."""
+
+    study: str
+    protocol: str
+    world: str
+    plan_sha256: str
+    labels: Mapping[str, str]
+    blocks: tuple[str, ...]
+    participants: Mapping[str, ParticipantRow]
+    calibration: Calibration | None
+    n_participants: int
+    n_complete: int
+    pooled: Mapping[str, Mapping[str, PooledMeasure]]
+    comparisons: tuple[PairedComparison, ...]
+    questionnaire: QuestionnaireSummary
+    order_effects: Mapping[str, OrderEffect]
+    simulated: bool
+    limits: tuple[str, ...]
+    collections: Mapping[str, Mapping[str, Collection]]
+    models: Mapping[str, Mapping[str, TrainedModel]]
+
+    def name(self, block: str) -> str:
+        """A block as the report names it: ``block (label)``, or the block alone where it has no label."""
+        label = self.labels.get(block)
+        return f"{block} ({label})" if label else block
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON-ready summary (strict JSON: no NaN), its keys in ``summary.json``'s order."""
+        return {
+            "study": self.study,
+            "protocol": self.protocol,
+            "world": self.world,
+            "plan_sha256": self.plan_sha256,
+            "labels": dict(self.labels),
+            "blocks": list(self.blocks),
+            "participants": {pid: p.to_json() for pid, p in self.participants.items()},
+            "calibration": None if self.calibration is None else self.calibration.to_json(),
+            "n_participants": self.n_participants,
+            "n_complete": self.n_complete,
+            "pooled": {b: {k: s.to_json() for k, s in m.items()} for b, m in self.pooled.items()},
+            "comparisons": [finite_json(c.to_json()) for c in self.comparisons],
+            "questionnaire": self.questionnaire.to_json(),
+            "order_effects": {k: o.to_json() for k, o in self.order_effects.items()},
+            "simulated": self.simulated,
+            "limits": list(self.limits),
+            "collections": {pid: {b: c.to_json() for b, c in cs.items()} for pid, cs in self.collections.items()},
+            "models": {pid: {n: m.to_json() for n, m in ms.items()} for pid, ms in self.models.items()},
+        }
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> StudySummary:
+        """The summary back from :meth:`to_json`'s data (``summary.json`` as read); a key missing at the top
+        is a ValueError naming it."""
+        missing = [f.name for f in fields(cls) if f.name not in d]
+        if missing:
+            raise ValueError(f"a study summary without {missing}: not a summary.json of coassist study report")
+        return cls(
+            study=d["study"],
+            protocol=d["protocol"],
+            world=d["world"],
+            plan_sha256=d["plan_sha256"],
+            labels=dict(d["labels"]),
+            blocks=tuple(d["blocks"]),
+            participants={pid: ParticipantRow.from_json(p) for pid, p in d["participants"].items()},
+            calibration=None if d["calibration"] is None else Calibration.from_json(d["calibration"]),
+            n_participants=int(d["n_participants"]),
+            n_complete=int(d["n_complete"]),
+            pooled={b: {k: PooledMeasure.from_json(s) for k, s in m.items()} for b, m in d["pooled"].items()},
+            comparisons=tuple(_comparison_from_json(c) for c in d["comparisons"]),
+            questionnaire=QuestionnaireSummary.from_json(d["questionnaire"]),
+            order_effects={k: OrderEffect.from_json(o) for k, o in d["order_effects"].items()},
+            simulated=bool(d["simulated"]),
+            limits=tuple(d["limits"]),
+            collections={
+                pid: {b: Collection.from_json(c) for b, c in cs.items()} for pid, cs in d["collections"].items()
+            },
+            models={pid: {n: TrainedModel.from_json(m) for n, m in ms.items()} for pid, ms in d["models"].items()},
+        )
+
+
+def _comparison_from_json(d: Mapping[str, Any]) -> PairedComparison:
+    """A :class:`PairedComparison` back from its JSON, field by field: null is NaN again, a list its
+    interval's tuple; a field missing is a ValueError naming it."""
+
+    def value(v: Any) -> Any:
+        if v is None:
+            return math.nan
+        if isinstance(v, list):
+            return tuple(math.nan if x is None else float(x) for x in v)
+        return v
+
+    names = [f.name for f in fields(PairedComparison)]
+    missing = [n for n in names if n not in d]
+    if missing:
+        raise ValueError(f"a paired comparison without {missing}: not a study summary's")
+    return PairedComparison(**{n: value(d[n]) for n in names})
+
+
+@dataclass(frozen=True)
+class ForceTrace:
+    """One measured trial's hand force in the plane: ``force`` [N] = ‖wrench[:, :2]‖ at ``time`` [s] from
+    the trial's start; both (T,)."""
+
+    time: np.ndarray
+    force: np.ndarray

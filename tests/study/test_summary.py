@@ -1,0 +1,233 @@
+"""The study's summary as a typed result (coassist.study.summary) and the report rendered from it through the
+templates (coassist.study.report), computed by coassist.study.summarise: the JSON keeps its keys and round-trips, and every table of the page holds
+the summary's numbers formatted as the f-string report (before issue 43) formatted them, recomputed here from
+summary.json with those rules."""
+
+from __future__ import annotations
+
+import json
+import math
+from html.parser import HTMLParser
+from pathlib import Path
+
+import pytest
+
+from coassist.analysis.paired import PairedComparison
+from coassist.study.measures import MEASURES
+from coassist.study.report import write_report
+from coassist.study.summarise import study_summary, summarise_study
+from coassist.study.summary import AnswerStat, OrderEffect, ParticipantRow, PooledMeasure, StudySummary
+
+from .conftest import comparison_plan
+
+#: summary.json's keys as the report has written them since the study's first report (issue 26 on).
+KEYS = [
+    "study",
+    "protocol",
+    "world",
+    "plan_sha256",
+    "labels",
+    "blocks",
+    "participants",
+    "calibration",
+    "n_participants",
+    "n_complete",
+    "pooled",
+    "comparisons",
+    "questionnaire",
+    "order_effects",
+    "simulated",
+    "limits",
+    "collections",
+    "models",
+]
+PARTICIPANT_KEYS = [
+    "number",
+    "row",
+    "simulated",
+    "complete",
+    "steps_done",
+    "steps",
+    "order",
+    "means",
+    "answers",
+    "checks",
+    "person_models",
+]
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory) -> Path:
+    """Four simulated participants through the three conditions, one measured trial each (a few seconds)."""
+    from coassist.study.runner import ParticipantRun
+    from coassist.study.store import init_study
+
+    root = tmp_path_factory.mktemp("summary")
+    s = init_study(comparison_plan(root / "plans", per_condition=1, practice=0), root / "study")
+    for pid in ("S01", "S02", "S03", "S04"):
+        with ParticipantRun(s, pid, simulate=True) as run:
+            assert run.run()
+    return s.folder
+
+
+@pytest.fixture(scope="module")
+def written(study) -> tuple[str, dict]:
+    html_path, json_path = write_report(study)
+    return html_path.read_text("utf-8"), json.loads(json_path.read_text("utf-8"))
+
+
+def test_the_summary_is_typed_and_its_json_keeps_its_keys_and_round_trips(study, written):
+    _, on_disk = written
+    s = summarise_study(study)
+    assert isinstance(s, StudySummary) and list(s.participants) == ["S01", "S02", "S03", "S04"]
+    p = s.participants["S02"]
+    assert isinstance(p, ParticipantRow) and p.complete and len(p.order) == 3
+    assert isinstance(s.pooled["manual"]["f_rms"], PooledMeasure) and s.pooled["manual"]["f_rms"].n == 4
+    assert all(isinstance(c, PairedComparison) for c in s.comparisons)
+    assert isinstance(s.questionnaire.pooled["manual"]["raw_tlx"], AnswerStat)
+    assert isinstance(s.order_effects["f_rms"], OrderEffect)
+    data = s.to_json()
+    assert list(data) == KEYS and list(data["participants"]["S01"]) == PARTICIPANT_KEYS
+    assert data == on_disk == study_summary(study)  # what write_report wrote, and the dict the callers read
+    assert StudySummary.from_json(on_disk).to_json() == on_disk  # summary.json back into the typed result
+    again = StudySummary.from_json(json.loads(json.dumps(data, allow_nan=False)))
+    assert again.participants == s.participants and again.pooled == s.pooled and again.limits == s.limits
+    # a test with no result is null in the JSON and NaN again in the typed comparison
+    nan_fields = [(i, k) for i, c in enumerate(on_disk["comparisons"]) for k, v in c.items() if v is None]
+    for i, k in nan_fields:
+        assert math.isnan(getattr(again.comparisons[i], k))
+    # the pooled mean is the mean of the participants' means, their sd the sample sd (ddof = 1)
+    vals = [data["participants"][q]["means"]["manual"]["f_rms"] for q in data["participants"]]
+    m = sum(vals) / 4
+    assert data["pooled"]["manual"]["f_rms"]["mean"] == pytest.approx(m, rel=1e-12)
+    assert data["pooled"]["manual"]["f_rms"]["sd"] == pytest.approx(
+        math.sqrt(sum((v - m) ** 2 for v in vals) / 3), rel=1e-12
+    )
+
+
+class _Tables(HTMLParser):
+    """The page's tables as lists of rows of cell texts (th and td alike; a span's text is its cell's)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.tables: list[list[list[str]]] = []
+        self._cell: list[str] | None = None
+
+    def handle_starttag(self, tag, attrs):
+        if tag == "table":
+            self.tables.append([])
+        elif tag == "tr":
+            self.tables[-1].append([])
+        elif tag in ("td", "th"):
+            self._cell = []
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th") and self._cell is not None:
+            self.tables[-1][-1].append("".join(self._cell))
+            self._cell = None
+
+    def handle_data(self, data):
+        if self._cell is not None:
+            self._cell.append(data)
+
+
+def _fmt(v, scale=1.0, digits=2):  # the f-string report's _fmt
+    return "—" if v is None else f"{v * scale:.{digits}f}"
+
+
+def _p(v):  # the f-string report's _p
+    return "—" if v is None else (f"{v:.3f}" if v >= 0.001 else "<0.001")
+
+
+def test_every_table_holds_the_summary_formatted_as_the_f_string_report_did(written):
+    page, j = written
+    parser = _Tables()
+    parser.feed(page)
+    tables = parser.tables
+    blocks, labels = j["blocks"], j["labels"]
+
+    def name(b):
+        return f"{b} ({labels[b]})" if labels.get(b) else b
+
+    pooled = [["", *[name(b) for b in blocks]]] + [
+        [f"{label} [{unit}]"]
+        + [
+            f"{_fmt(j['pooled'][b][key]['mean'], scale)} ± {_fmt(j['pooled'][b][key]['sd'], scale)} "
+            f"(n={j['pooled'][b][key]['n']})"
+            for b in blocks
+        ]
+        for key, label, unit, scale in MEASURES
+    ]
+    units = {key: (unit, scale) for key, _, unit, scale in MEASURES}
+    comparisons = [
+        [
+            "measure",
+            "a − b",
+            "n",
+            "mean difference [95 % bootstrap]",
+            "d_z [95 % bootstrap]",
+            "rank-biserial r",
+            "Wilcoxon p / Holm",
+            "paired t p / Holm",
+        ]
+    ] + [
+        [
+            c["metric"],
+            f"{name(c['a'])} − {name(c['b'])}",
+            str(c["n"]),
+            f"{_fmt(c['mean_diff'], units[c['metric']][1])} [{_fmt(c['mean_diff_ci'][0], units[c['metric']][1])}, "
+            f"{_fmt(c['mean_diff_ci'][1], units[c['metric']][1])}] {units[c['metric']][0]}",
+            f"{_fmt(c['dz'])} [{_fmt(c['dz_ci'][0])}, {_fmt(c['dz_ci'][1])}]",
+            _fmt(c["rank_biserial"]),
+            f"{_p(c['p_wilcoxon'])} / {_p(c['p_wilcoxon_holm'])}",
+            f"{_p(c['p_t'])} / {_p(c['p_t_holm'])}",
+        ]
+        for c in j["comparisons"]
+    ]
+    questionnaire = [["item", "a − b", "n", "mean difference", "rank-biserial r", "Wilcoxon p / Holm"]] + [
+        [
+            c["metric"],
+            f"{name(c['a'])} − {name(c['b'])}",
+            str(c["n"]),
+            _fmt(c["mean_diff"]),
+            _fmt(c["rank_biserial"]),
+            f"{_p(c['p_wilcoxon'])} / {_p(c['p_wilcoxon_holm'])}",
+        ]
+        for c in j["questionnaire"]["comparisons"]
+    ]
+    order = [["measure", "F", "df", "p"]] + [
+        [k, _fmt(v["F"]), f"{v['df1']}, {v['df2']}", _p(v["p"])] for k, v in j["order_effects"].items()
+    ]
+    participants = [["id", "#", "", "order", "steps done"]] + [
+        [
+            pid,
+            str(p["number"]),
+            "simulated" if p["simulated"] else "person",
+            " → ".join(labels.get(b, b) for b in p["order"]),
+            f"{p['steps_done']}/{p['steps']}",
+        ]
+        for pid, p in j["participants"].items()
+    ]
+    # a comparison study with the questionnaire: these five tables, in this order, and no other
+    assert tables == [pooled, comparisons, questionnaire, order, participants]
+    # not vacuous: 3 pairs × every measure, 3 pairs × (raw TLX + the Likert items), 4 participants
+    assert len(comparisons) == 1 + 3 * len(MEASURES) and len(participants) == 5 and len(questionnaire) > 1
+    assert any(row[-1] != "— / —" for row in comparisons[1:])  # the paired t ran on some measure
+    # the lead paragraph and the limits, as the f-string report wrote them
+    lead = (
+        f"<p class=lead>4 of 4 participants complete (4 planned) — simulated participants. Conditions (label on "
+        f"the page): {', '.join(name(b) for b in blocks)}.</p>"
+    )
+    assert lead in page
+    assert "".join(f"<li>{line}</li>" for line in j["limits"]).replace("'", "&#x27;") in page
+    assert page.count("<img src='data:image/png;base64,") == 3  # the lines, the force traces, the questionnaire
+
+
+def test_a_summary_missing_a_key_is_refused_naming_it(written):
+    _, on_disk = written
+    broken = {k: v for k, v in on_disk.items() if k != "order_effects"}
+    with pytest.raises(ValueError, match=r"\['order_effects'\]"):
+        StudySummary.from_json(broken)
+    comparison = {k: v for k, v in on_disk["comparisons"][0].items() if k != "p_t_holm"}
+    with pytest.raises(ValueError, match=r"\['p_t_holm'\]"):
+        StudySummary.from_json({**on_disk, "comparisons": [comparison]})
