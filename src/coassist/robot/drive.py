@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from coassist._checks import is_integer
-from coassist.config import APPLICATION_PRESET, ImpedanceParameters
+from coassist.config import APPLICATION_PRESET, GameWeights, ImpedanceParameters
 from coassist.control.presets import CONTROLLERS, get_preset, make_controller
 from coassist.data import Trial
 from coassist.interfaces import FEATURES
@@ -256,18 +256,23 @@ def _controller(config: DriveConfig):
         M = M + (M[0], ROTATIONAL_INERTIA, ROTATIONAL_INERTIA, ROTATIONAL_INERTIA)
         D = D + (D[0], ROTATIONAL_DAMPING, ROTATIONAL_DAMPING, ROTATIONAL_DAMPING)
 
+        w = gp.weights
+
+        def diagonal(name: str) -> tuple[float, ...]:
+            matrix = getattr(w, name)
+            d = np.diag(matrix)
+            if not np.array_equal(matrix, np.diag(d)):  # the rotations copy x's weight: a diagonal's
+                raise ValueError(f"full_pose needs the preset's game.weights.{name} diagonal, got {matrix.tolist()}")
+            return tuple(float(v) for v in d)
+
         def six(q: tuple[float, ...]) -> tuple[float, ...]:
             return q[:2] + (q[0],) * 4 + q[2:] + (q[2],) * 4
 
-        gp = replace(
-            gp,
-            Q_hh=six(gp.Q_hh),
-            Q_hr=six(gp.Q_hr),
-            Q_rh=six(gp.Q_rh),
-            Q_rr=six(gp.Q_rr),
-            R_h=gp.R_h + (gp.R_h[0],) * 4,
-            R_r=gp.R_r + (gp.R_r[0],) * 4,
+        weights = GameWeights(
+            *(np.array(six(diagonal(q))) for q in ("Q_hh", "Q_hr", "Q_rh", "Q_rr")),
+            *(np.array(diagonal(r) + (diagonal(r)[0],) * 4) for r in ("R_h", "R_r")),
         )
+        gp = replace(gp, weights=weights)
     impedance = ImpedanceParameters(M=M, D=D, K=(0.0,) * len(M), dt=dt)
     return make_controller(config.controller, replace(preset, impedance=impedance, game=gp))
 
