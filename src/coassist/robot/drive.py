@@ -48,7 +48,7 @@ from coassist.config import APPLICATION_PRESET, GameWeights, ImpedanceParameters
 from coassist.control.presets import CONTROLLERS, get_preset, make_controller
 from coassist.data import Trial
 from coassist.interfaces import FEATURES
-from coassist.robot.worlds import WORLDS, ArmWorld, HandWorld, WorldRequest, build_world, missing_members
+from coassist.robot.worlds import WORLDS, ArmWorld, HandWorld, WorldRequest, arm_worlds, build_world, missing_members
 from coassist.runtime.episode import EpisodeLabels, build_episode, episode_ticks, plan_grid
 from coassist.runtime.intent import RealtimeIntent, WindowIntent
 from coassist.runtime.safety import SafetyLayer, SafetyLimits
@@ -85,7 +85,8 @@ MAX_TIME_LIMIT = 600.0
 class DriveConfig:
     """One run on a UR5 (every field validated, errors name it as ``DriveConfig.<field>``).
 
-    world : a world of :data:`coassist.robot.worlds.WORLDS` ("mujoco", "ur", "franka", "ros2").
+    world : an arm world of :data:`coassist.robot.worlds.WORLDS` ("mujoco", "ur", "franka", "ros2":
+        :func:`~coassist.robot.worlds.arm_worlds`).
     controller : a kind of :data:`coassist.control.presets.CONTROLLERS`: "cooperative",
         "cooperative-arbitrated" (α set every tick by coassist.control.presets.ARBITRATION),
         "cooperative-damped", "impedance", "manual" or "manual-probe" (a calibration trial).
@@ -146,9 +147,10 @@ class DriveConfig:
         def bad(name: str, what: str) -> ValueError:
             return ValueError(f"DriveConfig.{name} must be {what}, got {getattr(self, name)!r}")
 
-        if self.world not in WORLDS:
-            raise bad("world", f"one of {tuple(WORLDS)}")
-        world = WORLDS[self.world]
+        arms = arm_worlds()
+        if self.world not in arms:
+            raise bad("world", f"one of {tuple(arms)}")
+        world = arms[self.world]
         if self.robot is None:
             object.__setattr__(self, "robot", world.arms[0])
         elif self.robot not in world.arms:
@@ -340,7 +342,7 @@ def drive_lockstep(configs: Sequence[DriveConfig]) -> list[Trial]:
 
     for i, c in enumerate(configs):
         if not isinstance(c, DriveConfig) or not WORLDS[c.world].simulated or c.realtime_intent:
-            simulated = ", ".join(name for name, entry in WORLDS.items() if entry.simulated)
+            simulated = ", ".join(name for name, entry in arm_worlds().items() if entry.simulated)
             raise ValueError(
                 f"configs[{i}] must be a DriveConfig of a simulated world ({simulated}) without a real-time predictor"
             )
