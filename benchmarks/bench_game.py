@@ -39,24 +39,15 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from coassist.control import CooperativeGame, prediction_matrices  # noqa: E402
+from coassist.control import CooperativeGame, GameWeights, prediction_matrices  # noqa: E402
 from coassist.model import ImpedanceModel  # noqa: E402
 
 
 def build_game(n: int, horizon: int, alpha: float = 0.8) -> CooperativeGame:
     model = ImpedanceModel(np.full(n, 10.0), np.full(n, 100.0), 0.0, 0.008)
     Q = np.diag([1.0] * n + [1e-4] * n)
-    return CooperativeGame(
-        model,
-        Q_hh=Q,
-        Q_hr=0.0,
-        Q_rh=0.0,
-        Q_rr=Q,
-        R_h=np.full(n, 5e-4),
-        R_r=np.full(n, 5e-4),
-        alpha=alpha,
-        horizon=horizon,
-    )
+    weights = GameWeights(Q_hh=Q, Q_hr=0.0, Q_rh=0.0, Q_rr=Q, R_h=np.full(n, 5e-4), R_r=np.full(n, 5e-4))
+    return CooperativeGame(model, weights, alpha=alpha, horizon=horizon)
 
 
 def naive_tick(game: CooperativeGame, z, ref_h, ref_r) -> tuple[np.ndarray, np.ndarray]:
@@ -360,7 +351,8 @@ def random_weights_game(n: int, horizon: int, alpha: float) -> CooperativeGame:
         return scale * a @ a.T / (2 * n)
 
     Q = {k: psd(s) for k, s in (("Q_hh", 1.0), ("Q_hr", 0.2), ("Q_rh", 0.2), ("Q_rr", 0.5))}
-    return CooperativeGame(model, **Q, R_h=np.full(n, 5e-4), R_r=np.full(n, 1e-4), alpha=alpha, horizon=horizon)
+    weights = GameWeights(**Q, R_h=np.full(n, 5e-4), R_r=np.full(n, 1e-4))
+    return CooperativeGame(model, weights, alpha=alpha, horizon=horizon)
 
 
 def bench_alpha(n: int, horizon: int, weights: str, changes: int, fresh_changes: int) -> dict:

@@ -1,5 +1,6 @@
 """coassist.registry: one lookup and one "did you mean" error for every kind of preset."""
 
+import numpy as np
 import pytest
 
 from coassist.registry import Registry, UnknownNameError, load_entry_point, unknown_name_message
@@ -75,7 +76,10 @@ def test_the_three_preset_kinds_are_registries_with_their_own_names():
     assert {"control preset", "reproduce preset"} <= kinds
     # the decimetre preset is the SI one with every Q scaled by 10² (positions in dm)
     dm = CONTROL_PRESETS["thesis-evaluation-dm"]
-    assert dm.game.Q_hh == tuple(DECIMETRE_SCALE**2 * q for q in THESIS_EVALUATION.game.Q_hh)
+    for name in ("Q_hh", "Q_rr"):
+        expected = np.diag([DECIMETRE_SCALE**2 * q for q in (1.0, 1.0, 1e-4, 1e-4)])
+        np.testing.assert_array_equal(getattr(dm.game.weights, name), expected)
+    np.testing.assert_array_equal(dm.game.weights.R_r, THESIS_EVALUATION.game.weights.R_r)  # efforts unscaled
     with pytest.raises(
         ValueError, match=r"^preset 'thesis-eval': no such control preset; did you mean 'thesis-evaluation'\?"
     ):

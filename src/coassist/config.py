@@ -10,7 +10,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from coassist._checks import check_int_at_least, check_positive_scalar
+from coassist._checks import (
+    as_square_matrix,
+    check_int_at_least,
+    check_positive_definite,
+    check_positive_scalar,
+    check_positive_semidefinite,
+)
 from coassist.registry import Registry
 
 
@@ -55,34 +61,116 @@ class ImpedanceParameters:
         return len(self.M)
 
 
-@dataclass(frozen=True)
-class GameParameters:
-    """Cost weights of the cooperative game (eq. 3.15–3.17), as diagonals.
+_Q_NAMES = ("Q_hh", "Q_hr", "Q_rh", "Q_rr")
+_WEIGHT_NAMES = (*_Q_NAMES, "R_h", "R_r")
 
-    Q_* have 2n entries (positions then velocities), R_* have n. ``alpha`` is the share
-    of the human's cost; ``horizon`` and ``control_horizon`` are in samples.
+
+@dataclass(frozen=True, eq=False)
+class GameWeights:
+    """Both players' cost weights (eq. 3.15–3.17), validated once, read-only: the one home
+    of the six weights, for a game built directly (:class:`coassist.control.CooperativeGame`,
+    :class:`~coassist.control.NashGame`) and for a preset's (:attr:`GameParameters.weights`).
+
+    Q_hh, Q_hr : (2n, 2n) the human's weights on tracking its own and the robot's
+        reference (position then velocity). PSD.
+    Q_rh, Q_rr : (2n, 2n) the robot's weights on the human's and its own reference. PSD.
+    R_h, R_r : (n, n) effort weights [1/N²]; SPD. A lower R_r lets the robot assist harder.
+    n_dof : n, needed only when every weight is given as a scalar; None: read from the
+        first weight given as a vector or matrix (an R's size, or half a Q's).
+
+    Each weight may be given as a matrix, a vector (its diagonal, as the thesis writes
+    them) or a scalar (that multiple of the identity); every one is stored as a read-only
+    float64 matrix. An error names the weight (``Q_hh must be 4x4 …``, ``R_r must be
+    positive definite …``). Two weight sets are equal when their matrices are, entry by
+    entry (so a preset's :class:`GameParameters` can key a memo of built games).
     """
 
-    Q_hh: tuple[float, ...] = (1.0, 1.0, 1e-4, 1e-4)
-    Q_hr: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)
-    Q_rh: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)
-    Q_rr: tuple[float, ...] = (1.0, 1.0, 1e-4, 1e-4)
-    R_h: tuple[float, ...] = (5e-4, 5e-4)
-    R_r: tuple[float, ...] = (5e-4, 5e-4)
+    # stored as read-only float64 matrices, whatever array-like they were given as (__post_init__)
+    Q_hh: np.ndarray
+    Q_hr: np.ndarray
+    Q_rh: np.ndarray
+    Q_rr: np.ndarray
+    R_h: np.ndarray
+    R_r: np.ndarray
+    n_dof: int | None = field(default=None, kw_only=True)
+
+    def __post_init__(self) -> None:
+        n = self.n_dof
+        if n is None:
+            n = _size_of(self, ("R_h", "R_r"), 1) or _size_of(self, _Q_NAMES, 2)
+            if n is None:
+                raise ValueError("GameWeights.n_dof is needed when every weight is a scalar")
+        elif not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 1:
+            raise ValueError(f"GameWeights.n_dof must be an int >= 1, got {n!r}")
+        n = int(n)
+        for name in _Q_NAMES:  # the order the errors are checked in: the Q's, then the R's
+            Q = as_square_matrix(getattr(self, name), name, 2 * n)
+            check_positive_semidefinite(Q, name)
+            object.__setattr__(self, name, Q)
+        for name in ("R_h", "R_r"):
+            object.__setattr__(self, name, as_square_matrix(getattr(self, name), name, n))
+        check_positive_definite(self.R_h, "R_h")
+        check_positive_definite(self.R_r, "R_r")
+        object.__setattr__(self, "n_dof", n)
+
+    @property
+    def Q(self) -> dict[str, np.ndarray]:
+        """The four state weights by name (``"Q_hh"``, ``"Q_hr"``, ``"Q_rh"``, ``"Q_rr"``)."""
+        return {name: getattr(self, name) for name in _Q_NAMES}
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, GameWeights):
+            return NotImplemented
+        return self.n_dof == other.n_dof and all(
+            np.array_equal(getattr(self, name), getattr(other, name)) for name in _WEIGHT_NAMES
+        )
+
+    def __hash__(self) -> int:
+        # + 0.0 turns −0.0 into 0.0: equal weights (array_equal) must hash alike
+        return hash((self.n_dof, *((getattr(self, name) + 0.0).tobytes() for name in _WEIGHT_NAMES)))
+
+
+def _size_of(weights: GameWeights, names: tuple[str, ...], per_dof: int) -> int | None:
+    """n from the first of ``names`` given as a vector or a matrix (its length / ``per_dof``), None if all are scalars."""
+    for name in names:
+        shape = np.shape(getattr(weights, name))
+        if shape:
+            return max(1, shape[0] // per_dof)
+    return None
+
+
+#: Thesis §5.2: Q_hh = Q_rr = diag(1, 1, 1e-4, 1e-4) (x-y positions [m], then velocities
+#: [m/s]), Q_hr = Q_rh = 0, R_h = R_r = diag(5e-4, 5e-4) [1/N²].
+THESIS_WEIGHTS = GameWeights(
+    Q_hh=(1.0, 1.0, 1e-4, 1e-4),
+    Q_hr=(0.0, 0.0, 0.0, 0.0),
+    Q_rh=(0.0, 0.0, 0.0, 0.0),
+    Q_rr=(1.0, 1.0, 1e-4, 1e-4),
+    R_h=(5e-4, 5e-4),
+    R_r=(5e-4, 5e-4),
+)
+
+
+@dataclass(frozen=True)
+class GameParameters:
+    """A preset's cooperative game (eq. 3.15–3.17): its weights and how it is played.
+
+    weights : both players' cost weights (:class:`GameWeights`), on 1 to 6 DOFs.
+    alpha : the share of the human's cost. horizon, control_horizon : Np, Nc [samples]
+    (None: Nc = Np). input_weighting : "shared" (R_h, R_r) or "alpha_scaled" (α R_h, (1 − α) R_r).
+    """
+
+    weights: GameWeights = THESIS_WEIGHTS
     alpha: float = 0.8
     horizon: int = 50
     control_horizon: int | None = None
     input_weighting: str = "shared"
 
     def __post_init__(self) -> None:
-        R_h = _diag(self.R_h, "game.R_h", positive=True)
-        n = len(R_h)
-        if not 1 <= n <= 6:
-            raise ValueError(f"game.R_h must have 1 to 6 entries (one per DOF), got {n}")
-        object.__setattr__(self, "R_h", R_h)
-        object.__setattr__(self, "R_r", _diag(self.R_r, "game.R_r", n, positive=True))
-        for name in ("Q_hh", "Q_hr", "Q_rh", "Q_rr"):
-            object.__setattr__(self, name, _diag(getattr(self, name), f"game.{name}", 2 * n))
+        if not isinstance(self.weights, GameWeights):
+            raise ValueError(f"game.weights must be a GameWeights, got {type(self.weights).__name__}")
+        if not 1 <= self.weights.n_dof <= 6:  # type: ignore[operator]
+            raise ValueError(f"game.weights must be on 1 to 6 DOFs, got {self.weights.n_dof}")
         try:
             alpha = float(self.alpha)
         except (TypeError, ValueError):
@@ -104,7 +192,7 @@ class GameParameters:
 
     @property
     def n_dof(self) -> int:
-        return len(self.R_h)
+        return int(self.weights.n_dof)
 
 
 @dataclass(frozen=True)
@@ -118,14 +206,16 @@ class ControlPreset:
 
     def __post_init__(self) -> None:
         if self.impedance.n_dof != self.game.n_dof:
-            raise ValueError(f"impedance has {self.impedance.n_dof} DOFs but game.R_h has {self.game.n_dof} entries")
+            raise ValueError(f"impedance has {self.impedance.n_dof} DOFs but game.weights has {self.game.n_dof}")
         object.__setattr__(self, "effort_limit", check_positive_scalar(self.effort_limit, "effort_limit"))
 
 
 #: Thesis §5.2: x-y impedance, evaluation of the prediction model (α = 0.8, R_r = 5e-4).
 THESIS_EVALUATION = ControlPreset(name="thesis-evaluation")
 #: Thesis §5.2.3: application scenario, more assistance (α = 0.9, R_r = 1e-4).
-THESIS_APPLICATION = ControlPreset(name="thesis-application", game=GameParameters(alpha=0.9, R_r=(1e-4, 1e-4)))
+THESIS_APPLICATION = ControlPreset(
+    name="thesis-application", game=GameParameters(replace(THESIS_WEIGHTS, R_r=(1e-4, 1e-4)), alpha=0.9)
+)
 
 
 def scale_positions(preset: ControlPreset, scale: float, name: str) -> ControlPreset:
@@ -135,10 +225,10 @@ def scale_positions(preset: ControlPreset, scale: float, name: str) -> ControlPr
     error, see coassist.experiments.dmpc_study); in decimetres (scale 10) the robot
     assists with a few N per cm, like the thesis' figures.
     """
-    g = preset.game
+    w = preset.game.weights
     s2 = float(scale) ** 2
-    game = replace(g, **{q: tuple(s2 * v for v in getattr(g, q)) for q in ("Q_hh", "Q_hr", "Q_rh", "Q_rr")})
-    return replace(preset, name=name, game=game)
+    weights = replace(w, **{q: s2 * Q for q, Q in w.Q.items()})
+    return replace(preset, name=name, game=replace(preset.game, weights=weights))
 
 
 #: Position scale of the "-dm" presets: positions in decimetres.

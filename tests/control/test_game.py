@@ -493,30 +493,34 @@ def test_application_presets_damping_left_by_a_pose_extrapolating_prediction():
 def test_games_of_one_preset_share_the_work_not_the_alpha():
     """cooperative_game builds once per (model, parameters): the copies it hands out have the
     gains of a game built alone, bit for bit, and each its own α."""
+    from dataclasses import replace
+
     from threadpoolctl import threadpool_limits
 
-    from coassist.config import GameParameters
+    from coassist.config import THESIS_WEIGHTS, GameParameters
     from coassist.control import game as game_module
     from coassist.control.game import CooperativeGame, cooperative_game
 
     model = ImpedanceModel(np.diag([8.0, 8.0]), np.diag([30.0, 30.0]), np.zeros((2, 2)), 0.008)
-    params = GameParameters(Q_hr=(0.2, 0.2, 0.0, 0.0), horizon=12, control_horizon=6)
+    params = GameParameters(replace(THESIS_WEIGHTS, Q_hr=(0.2, 0.2, 0.0, 0.0)), horizon=12, control_horizon=6)
+    twin = GameParameters(replace(THESIS_WEIGHTS, Q_hr=np.diag([0.2, 0.2, 0.0, 0.0])), horizon=12, control_horizon=6)
     game_module._GAME_MEMO.clear()
-    a, b = cooperative_game(model, params), cooperative_game(model, params)
+    a, b = cooperative_game(model, params), cooperative_game(model, twin)  # equal parameters: one build
     # built as cooperative_game builds, on one BLAS thread: bit for bit on any BLAS build
     with threadpool_limits(1, user_api="blas"):
         alone = CooperativeGame(
             model,
-            Q_hh=params.Q_hh,
-            Q_hr=params.Q_hr,
-            Q_rh=params.Q_rh,
-            Q_rr=params.Q_rr,
-            R_h=params.R_h,
-            R_r=params.R_r,
-            alpha=params.alpha,
+            Q_hh=np.diag([1.0, 1.0, 1e-4, 1e-4]),
+            Q_hr=np.diag([0.2, 0.2, 0.0, 0.0]),
+            Q_rh=0.0,
+            Q_rr=np.diag([1.0, 1.0, 1e-4, 1e-4]),
+            R_h=[5e-4, 5e-4],
+            R_r=[5e-4, 5e-4],
+            alpha=0.8,
             horizon=12,
             control_horizon=6,
         )
+    assert params.weights is not twin.weights and params.alpha == 0.8
     assert a is not b and len(game_module._GAME_MEMO) == 1
     for g in (a, b):
         for name in ("G_z", "G_h", "G_r"):
@@ -561,8 +565,7 @@ def test_solve_with_gains_is_each_games_solve_bit_for_bit():
 
 def test_game_weights_object_is_the_keywords_bit_for_bit():
     """One GameWeights, validated once, builds the same game as the six keywords (cooperative
-    and Nash), and a preset's diagonals (GameWeights.from_parameters) the same as the keywords."""
-    from coassist.config import GameParameters
+    and Nash); weights given as diagonals are those diagonal matrices."""
     from coassist.control import GameWeights
 
     rng = np.random.default_rng(11)
@@ -581,14 +584,46 @@ def test_game_weights_object_is_the_keywords_bit_for_bit():
     ):
         for name in ("G_z", "G_h", "G_r"):
             np.testing.assert_array_equal(getattr(by_object.gains, name), getattr(by_keywords.gains, name))
-    params = GameParameters(Q_hr=(0.2, 0.2, 0.0, 0.0), R_r=(1e-4, 2e-4))
-    from_preset = GameWeights.from_parameters(params)
-    np.testing.assert_array_equal(from_preset.Q_hr, np.diag([0.2, 0.2, 0.0, 0.0]))
-    np.testing.assert_array_equal(from_preset.R_r, np.diag([1e-4, 2e-4]))
+    diagonals = GameWeights((1, 1, 1e-4, 1e-4), (0.2, 0.2, 0.0, 0.0), 0, (1, 1, 1e-4, 1e-4), 5e-4, (1e-4, 2e-4))
+    np.testing.assert_array_equal(diagonals.Q_hr, np.diag([0.2, 0.2, 0.0, 0.0]))
+    np.testing.assert_array_equal(diagonals.R_r, np.diag([1e-4, 2e-4]))
+    np.testing.assert_array_equal(diagonals.R_h, np.diag([5e-4, 5e-4]))
     # a scalar is that multiple of the identity; the size comes from the first non-scalar weight
     scalar = GameWeights(1.0, 0, 0, 1.0, [5e-4, 5e-4], 5e-4)
     np.testing.assert_array_equal(scalar.Q_hh, np.eye(4))
     np.testing.assert_array_equal(scalar.R_r, 5e-4 * np.eye(2))
+
+
+@pytest.mark.parametrize("seed", [21, 22, 23])
+def test_every_way_to_hand_the_weights_gives_the_same_solution(seed):
+    """The three ways a game meets its weights: the GameWeights object, the six keywords
+    (the README's sugar, which builds that object) and a preset's GameParameters through
+    cooperative_game, on random full (not diagonal) weights: the same gains and the same
+    efforts, bit for bit (all built on one BLAS thread, as cooperative_game builds)."""
+    from threadpoolctl import threadpool_limits
+
+    from coassist.config import GameParameters
+    from coassist.control import GameWeights, cooperative_game
+
+    rng = np.random.default_rng(seed)
+    n = 1 + seed % 3
+    model, Q, R_h, R_r, z, ref_h, ref_r = random_instance(rng, n, 9, 4)
+    alpha = float(rng.uniform(0.1, 0.9))
+    weights = GameWeights(**Q, R_h=R_h, R_r=R_r)
+    with threadpool_limits(1, user_api="blas"):
+        games = [
+            CooperativeGame(model, weights, alpha=alpha, horizon=9, control_horizon=4),
+            CooperativeGame(model, **Q, R_h=R_h, R_r=R_r, alpha=alpha, horizon=9, control_horizon=4),
+        ]
+    games.append(cooperative_game(model, GameParameters(weights, alpha=alpha, horizon=9, control_horizon=4)))
+    u_h, u_r = games[0].solve(z, ref_h, ref_r)
+    assert np.abs(u_r).max() > 1e-6  # a solution that could differ
+    for game in games[1:]:
+        for name in ("G_z", "G_h", "G_r"):
+            np.testing.assert_array_equal(getattr(game.gains, name), getattr(games[0].gains, name))
+        e_h, e_r = game.solve(z, ref_h, ref_r)
+        np.testing.assert_array_equal(e_h, u_h)
+        np.testing.assert_array_equal(e_r, u_r)
 
 
 def test_game_weights_are_frozen_and_read_only():

@@ -140,6 +140,30 @@ def test_full_pose_rotation_columns_stay_continuous_through_pi():
     assert np.abs(np.diff(tr.pose[:, 3:6], axis=0)).max() < 0.01  # no 2π jump
 
 
+def test_full_pose_game_weighs_z_and_rotations_like_x(monkeypatch):
+    """The 6-DOF game copies the preset's x weights (position, velocity, effort) onto z and the
+    three rotations; a preset whose x-y weights are not diagonal has no x weight to copy."""
+    from dataclasses import replace
+
+    from coassist.control.presets import get_preset
+    from coassist.robot import drive as drive_module
+
+    preset = get_preset("thesis-application-damped")
+    game = drive_module._controller(DriveConfig(controller="cooperative", preset=preset.name, full_pose=True)).game
+    q = 3.5**2  # APPLICATION_DAMPED_SCALE²: every Q of the thesis' weights times it
+    Q = np.diag([q * 1.0] * 6 + [q * 1e-4] * 6)
+    for name, expected in (("Q_hh", Q), ("Q_hr", 0 * Q), ("Q_rh", 0 * Q), ("Q_rr", Q)):
+        np.testing.assert_allclose(game.weights.Q[name], expected, rtol=1e-15, atol=0)
+    np.testing.assert_array_equal(game.weights.R_h, 5e-4 * np.eye(6))
+    np.testing.assert_array_equal(game.weights.R_r, 1e-4 * np.eye(6))
+    coupled = preset.game.weights.Q_hh.copy()
+    coupled[0, 1] = coupled[1, 0] = 0.1
+    odd = replace(preset, game=replace(preset.game, weights=replace(preset.game.weights, Q_hh=coupled)))
+    monkeypatch.setattr(drive_module, "get_preset", lambda name: odd)
+    with pytest.raises(ValueError, match="full_pose needs the preset's game.weights.Q_hh diagonal"):
+        drive_module._controller(DriveConfig(controller="cooperative", full_pose=True))
+
+
 def test_config_validation_names_the_field():
     for kwargs, field in (
         ({"world": "moon"}, "world"),

@@ -1,6 +1,7 @@
-"""The arm worlds as a registry (coassist.robot.worlds): one entry per world that DriveConfig,
-drive, play --drive and the command line's help read; the ArmWorld protocol drive asks for
-instead of probing attributes; and the recipe that adds a world."""
+"""The worlds as a registry (coassist.robot.worlds): one entry per world, the point mass's and
+the page's too, that DriveConfig, drive, play --drive, a study plan and the command line's help
+read; the ArmWorld protocol drive asks for instead of probing attributes; and the recipe that
+adds a world."""
 
 from __future__ import annotations
 
@@ -16,13 +17,17 @@ from coassist.cli import app
 from coassist.registry import load_entry_point
 from coassist.robot.arms import ARMS
 from coassist.robot.worlds import (
+    PLAY,
+    POINT_MASS,
     WORLDS,
     ArmWorld,
     HandWorld,
     WorldEntry,
     WorldRequest,
     arm_choices,
+    arm_worlds,
     build_world,
+    study_worlds,
     world_choices,
 )
 
@@ -31,21 +36,50 @@ REQUEST = WorldRequest(robot="ur5", object="handle", rate_hz=125, seed=0, start=
 
 
 def test_one_entry_per_world_with_its_arms_and_needs():
-    assert tuple(WORLDS) == ("mujoco", "ur", "franka", "ros2")
+    assert tuple(WORLDS) == ("point-mass", "play", "mujoco", "ur", "franka", "ros2")
     assert {name: e.arms for name, e in WORLDS.items()} == {
+        "point-mass": (),
+        "play": (),
         "mujoco": ("ur5", "panda"),
         "ur": ("ur5",),
         "franka": ("panda", "fr3"),
         "ros2": ("ur5",),
     }
-    assert [name for name, e in WORLDS.items() if e.simulated] == ["mujoco"]
+    assert tuple(arm_worlds()) == ("mujoco", "ur", "franka", "ros2")
+    assert [name for name, e in WORLDS.items() if e.simulated] == ["point-mass", "mujoco"]
     assert [name for name, e in WORLDS.items() if e.host] == ["ur", "franka"]
-    for name, entry in WORLDS.items():
+    assert study_worlds() == ("play", "mujoco", "ur", "franka")
+    for name, entry in arm_worlds().items():
         assert set(entry.arms) <= set(ARMS), name
         assert entry.extras, name
 
 
-@pytest.mark.parametrize("name", list(WORLDS))
+def test_the_point_mass_has_one_name_and_its_trials_source():
+    """The point mass is the world "point-mass" (the simulator) and "play" (the page on it); the trials
+    of both record source "sim" (TrialMeta.SOURCES), as the simulator and the page write it."""
+    import inspect
+
+    from coassist.data.trial import SOURCES
+    from coassist.experiments.ablation import ABLATION_CELLS
+    from coassist.experiments.pipeline import MUJOCO_PERSON_CALIBRATIONS
+    from coassist.play import session as play_session
+    from coassist.sim import world as sim_world
+
+    assert (POINT_MASS, PLAY) == ("point-mass", "play")
+    assert WORLDS[POINT_MASS].source == WORLDS[PLAY].source == "sim" and "sim" in SOURCES
+    for module in (sim_world, play_session):  # where the point mass's trials get their source
+        assert 'source="sim"' in inspect.getsource(module), module.__name__
+    assert not WORLDS[POINT_MASS].is_arm and not WORLDS[PLAY].is_arm
+    # the names other tables use for worlds are the table's (the ablation's third cell is a population)
+    assert set(MUJOCO_PERSON_CALIBRATIONS) <= set(WORLDS)
+    assert ABLATION_CELLS[:2] == (POINT_MASS, "mujoco") and ABLATION_CELLS[2] not in WORLDS
+    with pytest.raises(ValueError, match=r"^the play world is not an arm world: the drive builds mujoco, ur, franka"):
+        build_world(PLAY, REQUEST)
+    with pytest.raises(ValueError, match="WorldEntry without a builder .* takes no arms"):
+        WorldEntry(None, ("ur5",), "x", simulated=True, host=None, extras=(), source="sim")
+
+
+@pytest.mark.parametrize("name", list(arm_worlds()))
 def test_each_builder_is_importable(name):
     entry = WORLDS[name]
     try:
@@ -143,6 +177,9 @@ def test_drive_config_reads_the_registry():
     assert DriveConfig(world="ros2").robot == "ur5"  # coassist ros2's runs are recorded as world "ros2"
     with pytest.raises(ValueError, match=r"DriveConfig.world must be one of \('mujoco', 'ur', 'franka', 'ros2'\)"):
         DriveConfig(world="gazebo")
+    for world in (POINT_MASS, PLAY):  # in the table, not an arm: the drive names the arm worlds
+        with pytest.raises(ValueError, match=r"DriveConfig.world must be one of \('mujoco', 'ur', 'franka', 'ros2'\)"):
+            DriveConfig(world=world)
     for world in ("ur", "franka", "ros2"):
         with pytest.raises(
             ValueError, match="DriveConfig.intent must be a source a real arm can run, not the simulated"
@@ -156,7 +193,11 @@ def test_the_help_lists_every_world_and_its_arms():
     assert world_choices() in drive_help and arm_choices() in drive_help
     assert all(f"{e.host} (--world {n})" in drive_help for n, e in WORLDS.items() if e.host)
     play_help = " ".join(runner.invoke(app, ["play", "--help"], terminal_width=400).output.split())
-    assert " | ".join(WORLDS) in play_help
+    assert " | ".join(arm_worlds()) in play_help
+    assert POINT_MASS not in world_choices() and "play (" not in world_choices()
+    refused = runner.invoke(app, ["drive", "--world", POINT_MASS], terminal_width=400)
+    assert refused.exit_code == 2
+    assert "--world 'point-mass': no such arm world (choose from: mujoco, ur, franka, ros2)" in refused.output
 
 
 def test_a_world_registered_by_one_line_drives_as_the_built_in_one(tmp_path, monkeypatch):

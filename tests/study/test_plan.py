@@ -42,6 +42,30 @@ def test_a_plans_population_is_who_the_simulated_participants_are(comparison_fil
 
 
 @pytest.mark.parametrize(
+    ("world", "real_arm"), [("play", False), ("mujoco", False), ("ur", True), ("franka", True), (None, False)]
+)
+def test_every_world_a_plan_names_today_still_reads(world, real_arm):
+    """The plan's [study] world keeps its names (coassist.robot.worlds.study_worlds, the one table's
+    entries a study runs); none given: play. The page's motion times are the play world's only."""
+    from coassist.study.plan import is_real_arm
+
+    timing = "motion_time = 3.0\ndwell = 1.0" if world in ("play", None) else ""
+    text = _plan(world=world or "play", timing=timing)
+    if world is None:
+        text = text.replace('world = "play"\n', "")
+    plan = plan_from_text(text, ".")
+    assert plan.world == (world or "play") and is_real_arm(plan.world) is real_arm
+
+
+@pytest.mark.parametrize("world", ["point-mass", "sim", "ros2", "gazebo"])
+def test_a_world_no_study_runs_is_refused_naming_those_it_runs(world):
+    with pytest.raises(
+        PlanError, match=rf"^study.world: '{world}': no such study world.*\(choose from: play, mujoco, ur, franka\)$"
+    ):
+        plan_from_text(_plan(world=world, timing=""), ".")
+
+
+@pytest.mark.parametrize(
     ("edit", "field"),
     [
         (lambda t: t.replace("per_condition = 2", "per_condition = 0"), "trials.per_condition"),

@@ -20,7 +20,7 @@ from coassist.cli._common import (
 )
 from coassist.cli._live import FOXGLOVE_PAGE_PORT, LIVE_HELP, close_live, open_live
 from coassist.config import APPLICATION_PRESET
-from coassist.robot.worlds import WORLDS
+from coassist.robot.worlds import WORLDS, arm_worlds
 from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.intent_registry import INTENT_SOURCES, intent_choices
 
@@ -60,7 +60,7 @@ def play(
     open_browser: bool = typer.Option(True, "--open/--no-open", help="Open the page in your web browser."),
     drive: str = typer.Option(
         None,
-        help=f"Watch a coassist drive run instead (read-only): {' | '.join(WORLDS)}; uses the first --controller and --tasks.",
+        help=f"Watch a coassist drive run instead (read-only): {' | '.join(arm_worlds())}; uses the first --controller and --tasks.",
     ),
     robot_host: str = typer.Option(
         None,
@@ -132,7 +132,7 @@ def play(
                     preset=preset,
                     seed=seed,
                     # at a real arm the page's user is the person at the handle (in MuJoCo, the simulated one)
-                    person=None if drive not in WORLDS or WORLDS[drive].simulated else user,
+                    person=None if drive not in arm_worlds() or WORLDS[drive].simulated else user,
                     scene=told,
                 ),
                 config,

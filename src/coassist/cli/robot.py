@@ -25,7 +25,7 @@ from coassist.cli._common import (
 )
 from coassist.cli._live import FOXGLOVE_PORT, LIVE_HELP, close_live, open_live
 from coassist.config import APPLICATION_PRESET
-from coassist.robot.worlds import WORLDS, arm_choices, world_choices
+from coassist.robot.worlds import WORLDS, arm_choices, arm_worlds, world_choices
 from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.intent_registry import INTENT_SOURCES, intent_choices
 
@@ -94,7 +94,7 @@ def drive(
     from coassist.robot.drive import drive as run_drive
     from coassist.runtime.safety import SafetyLimits
 
-    choose(world, WORLDS, "--world", "world")
+    choose(world, arm_worlds(), "--world", "arm world")
     choose(controller, CONTROLLERS, "--controller", "controller")
     lookup(CONTROL_PRESETS, preset, "--preset")
     try:

@@ -1,5 +1,6 @@
 """Control: prediction matrices, the human-robot games, baselines and the guarded controllers."""
 
+from coassist.config import GameWeights
 from coassist.control.controllers import (
     AssistiveController,
     Controller,
@@ -9,7 +10,7 @@ from coassist.control.controllers import (
     ManualGuidance,
     saturate,
 )
-from coassist.control.game import CooperativeGame, EquilibriumGains, GameWeights, NashGame, cooperative_game
+from coassist.control.game import CooperativeGame, EquilibriumGains, NashGame, cooperative_game
 from coassist.control.prediction import prediction_matrices
 from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault  # the flags live below control; re-exported
 

@@ -78,7 +78,7 @@ every α uses the exact sum.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -86,86 +86,19 @@ import scipy.linalg
 from numpy.typing import ArrayLike
 from threadpoolctl import threadpool_limits
 
-from coassist._checks import (
-    as_square_matrix,
-    check_positive_definite,
-    check_positive_semidefinite,
-)
-from coassist.config import GameParameters
+from coassist.config import GameParameters, GameWeights
 from coassist.control.prediction import prediction_matrices
 from coassist.model.impedance import ImpedanceModel
 
 InputWeighting = Literal["shared", "alpha_scaled"]
-_Q_NAMES = ("Q_hh", "Q_hr", "Q_rh", "Q_rr")
-
-
-@dataclass(frozen=True, eq=False)
-class GameWeights:
-    """Both players' cost weights (eq. 3.15–3.17), validated once, read-only.
-
-    Q_hh, Q_hr : (2n, 2n) the human's weights on tracking its own and the robot's
-        reference (position then velocity). PSD.
-    Q_rh, Q_rr : (2n, 2n) the robot's weights on the human's and its own reference. PSD.
-    R_h, R_r : (n, n) effort weights [1/N²]; SPD. A lower R_r lets the robot assist harder.
-    n_dof : n, needed only when every weight is given as a scalar; None: read from the
-        first weight given as a vector or matrix (an R's size, or half a Q's).
-
-    Each weight may be given as a matrix, a vector (its diagonal) or a scalar (that
-    multiple of the identity); every one is stored as a read-only float64 matrix. An
-    error names the weight (``Q_hh must be 4x4 …``, ``R_r must be positive definite …``).
-    """
-
-    # stored as read-only float64 matrices, whatever array-like they were given as (__post_init__)
-    Q_hh: np.ndarray
-    Q_hr: np.ndarray
-    Q_rh: np.ndarray
-    Q_rr: np.ndarray
-    R_h: np.ndarray
-    R_r: np.ndarray
-    n_dof: int | None = field(default=None, kw_only=True)
-
-    def __post_init__(self) -> None:
-        n = self.n_dof
-        if n is None:
-            n = _size_of(self, ("R_h", "R_r"), 1) or _size_of(self, _Q_NAMES, 2)
-            if n is None:
-                raise ValueError("GameWeights.n_dof is needed when every weight is a scalar")
-        elif not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 1:
-            raise ValueError(f"GameWeights.n_dof must be an int >= 1, got {n!r}")
-        n = int(n)
-        for name in _Q_NAMES:  # the order the errors are checked in: the Q's, then the R's
-            Q = as_square_matrix(getattr(self, name), name, 2 * n)
-            check_positive_semidefinite(Q, name)
-            object.__setattr__(self, name, Q)
-        for name in ("R_h", "R_r"):
-            object.__setattr__(self, name, as_square_matrix(getattr(self, name), name, n))
-        check_positive_definite(self.R_h, "R_h")
-        check_positive_definite(self.R_r, "R_r")
-        object.__setattr__(self, "n_dof", n)
-
-    @classmethod
-    def from_parameters(cls, params: GameParameters) -> GameWeights:
-        """The diagonal weights of a :class:`~coassist.config.GameParameters` (a preset's game)."""
-        diagonals = [np.asarray(getattr(params, name), dtype=float) for name in (*_Q_NAMES, "R_h", "R_r")]
-        return cls(*diagonals, n_dof=params.n_dof)
-
-    @property
-    def Q(self) -> dict[str, np.ndarray]:
-        """The four state weights by name (``"Q_hh"``, ``"Q_hr"``, ``"Q_rh"``, ``"Q_rr"``)."""
-        return {name: getattr(self, name) for name in _Q_NAMES}
-
-
-def _size_of(weights: GameWeights, names: tuple[str, ...], per_dof: int) -> int | None:
-    """n from the first of ``names`` given as a vector or a matrix (its length / ``per_dof``), None if all are scalars."""
-    for name in names:
-        shape = np.shape(getattr(weights, name))
-        if shape:
-            return max(1, shape[0] // per_dof)
-    return None
 
 
 def _weights(weights: GameWeights | None, n_dof: int, given: dict[str, ArrayLike | None]) -> GameWeights:
-    """The game's weights: ``weights``, or a :class:`GameWeights` of the six keywords (``given``), not both."""
+    """The game's weights: ``weights``, or a :class:`GameWeights` of the six keywords (``given``), not both.
+
+    The keywords are sugar (the README's example writes them): they build the one
+    :class:`GameWeights` the game then reads, as ``GameWeights(**given, n_dof=n_dof)``.
+    """
     passed = [name for name, value in given.items() if value is not None]
     if weights is not None:
         if not isinstance(weights, GameWeights):
@@ -791,7 +724,7 @@ def cooperative_game(model: ImpedanceModel, params: GameParameters) -> Cooperati
         with threadpool_limits(1, user_api="blas"):
             template = CooperativeGame(
                 model,
-                GameWeights.from_parameters(params),
+                params.weights,
                 alpha=params.alpha,
                 horizon=params.horizon,
                 control_horizon=params.control_horizon,

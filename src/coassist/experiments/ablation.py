@@ -81,6 +81,7 @@ from coassist.experiments.source_training import (
     calibration_options,
     seed_names,
 )
+from coassist.robot.worlds import POINT_MASS
 from coassist.scenario.calibration_draws import draw_clusters, draw_count
 from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told
 
@@ -105,10 +106,15 @@ DAMPED = "cooperative-damped"
 CONTROLLERS = ("cooperative", ARBITRATED)
 #: The damped controller's cells: the lever on the application's source and on the oracle.
 DAMPED_SOURCES = ("paths", "oracle")
-WORLDS = ("point-mass", "mujoco", "held-out")
 #: The held-out population's cells (module docstring): the arbitrated controller with these sources.
 HELD_OUT = "held-out"
 HELD_OUT_SOURCES = ("nominal", "present", "lstm-intent", "paths", "person", "oracle")
+#: The report's world cells, the first item of every cell key (world, object, controller, source) and
+#: the order the report's tables run in: not a list of worlds to choose from. "point-mass" and
+#: "mujoco" are worlds of coassist.robot.worlds.WORLDS by name; "held-out" is the point-mass world
+#: again with the held-out population's operators (module docstring). The report's text and tables
+#: and experiments.precision and reproduce read the cells by these names.
+ABLATION_CELLS = (POINT_MASS, "mujoco", HELD_OUT)
 #: The sources calibrated per operator (not trained): their folder is written per population.
 CALIBRATED = ("paths", "person")
 #: Issue 18's bar: a learned predictor in the loop gets this share of the oracle's benefit over MG.
@@ -326,18 +332,18 @@ def run_ablation(
 
         base = known.get((obj, "manual", "nominal"))
         base = collect(f"ablation-{obj}-manual", "manual", "nominal") if base is None else sorted(base, key=pair_key)
-        mg[("point-mass", obj)] = application_metrics(base)
-        pairs[("point-mass", obj)] = [pair_key(t) for t in base]
+        mg[(POINT_MASS, obj)] = application_metrics(base)
+        pairs[(POINT_MASS, obj)] = [pair_key(t) for t in base]
         for controller, source in cells:
             trials = known.get((obj, controller, source))
             if trials is None:
                 trials = collect(f"ablation-{obj}-{controller}-{source}", controller, intents[source])
             trials = sorted(trials, key=pair_key)
-            if [pair_key(t) for t in trials] != pairs[("point-mass", obj)]:
+            if [pair_key(t) for t in trials] != pairs[(POINT_MASS, obj)]:
                 raise RuntimeError(f"ablation cell {obj}/{controller}/{source} did not meet MG's trials")
-            metrics[("point-mass", obj, controller, source)] = application_metrics(trials)
-            errors[("point-mass", obj, controller, source)] = prediction_errors_against_intent(trials)
-    world_intents = {"point-mass": intents}
+            metrics[(POINT_MASS, obj, controller, source)] = application_metrics(trials)
+            errors[(POINT_MASS, obj, controller, source)] = prediction_errors_against_intent(trials)
+    world_intents = {POINT_MASS: intents}
     if cfg.held_out_trials > 0:
         world_intents[HELD_OUT] = _run_held_out(ws, intents, metrics, mg, pairs, errors)
     why = _mujoco_unavailable()

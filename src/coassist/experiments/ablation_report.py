@@ -14,6 +14,7 @@ import numpy as np
 
 from coassist.analysis.paired import paired_difference
 from coassist.experiments.ablation import (
+    ABLATION_CELLS,
     ARBITRATED,
     DAMPED,
     FORCE_SHARE_BAR,
@@ -24,7 +25,6 @@ from coassist.experiments.ablation import (
     OVERSHOOT_SHARE_BAR,
     SHARE_LOWER_BAR,
     SIDES,
-    WORLDS,
     AblationResult,
     told_of,
 )
@@ -32,6 +32,7 @@ from coassist.experiments.application import OBJECTS
 from coassist.experiments.pipeline import EVAL_HORIZONS
 from coassist.experiments.report import Claim, Section
 from coassist.experiments.source_training import APPLICATION_SOURCE
+from coassist.robot.worlds import POINT_MASS
 
 
 def share_text(s: tuple[float, float, float]) -> str:
@@ -78,7 +79,7 @@ HEADLINE = (
 )
 
 
-def headline_rows(result: AblationResult, world: str = "point-mass") -> tuple[str, list[str], list[list[Any]]]:
+def headline_rows(result: AblationResult, world: str = POINT_MASS) -> tuple[str, list[str], list[list[Any]]]:
     """The report's first-screen table (issue 34): per object, MG and each headline source with the
     arbitrated controller: f_RMS and its share of the oracle's saving, overshoot past the intent per side
     of the detour and its share, the clearance deficit per side, jerk and σ."""
@@ -186,7 +187,7 @@ def ablation_section(result: AblationResult) -> Section:
             "(the point-mass cells' calibration trials, the same seeds) are driven there and fitted as in the "
             "point-mass world (reproduce.mujoco_person_calibration)."
         )
-    for world in WORLDS:
+    for world in ABLATION_CELLS:
         rows = []
         for obj in OBJECTS:
             if (world, obj) not in result.mg:
@@ -263,7 +264,7 @@ def ablation_section(result: AblationResult) -> Section:
             )
     rows = []
     for (world, obj, controller, source), e in result.errors.items():
-        if world == "point-mass" and controller == ARBITRATED:
+        if world == POINT_MASS and controller == ARBITRATED:
             rows.append(
                 [source, obj]
                 + [f"{1e3 * e[h]['tool']:.2f} / {1e3 * e[h]['intent']:.2f}" if h in e else "—" for h in EVAL_HORIZONS]
@@ -278,7 +279,7 @@ def ablation_section(result: AblationResult) -> Section:
     )
     for obj in OBJECTS:
         for source in ("lstm-tool", "lstm-hand-alone", "lstm-intent"):
-            key = ("point-mass", obj, ARBITRATED, source)
+            key = (POINT_MASS, obj, ARBITRATED, source)
             if key not in result.metrics:
                 continue
             sh = result.shares(*key)
@@ -300,7 +301,7 @@ def ablation_section(result: AblationResult) -> Section:
 
 #: Issue 40's bars for the person model (arbitrated controller): (force share, overshoot share, its lower
 #: bound, jerk against MG's) in the population it was developed on, and on the held-out population.
-PERSON_BARS = {"point-mass": (0.85, 0.70, 0.40, 1.1), HELD_OUT: (0.80, 0.60, 0.30, None)}
+PERSON_BARS = {POINT_MASS: (0.85, 0.70, 0.40, 1.1), HELD_OUT: (0.80, 0.60, 0.30, None)}
 
 
 def person_claims(result: AblationResult, source: str = "person") -> list[Claim]:
@@ -388,7 +389,7 @@ def precision_claims(result: AblationResult, source: str = APPLICATION_SOURCE) -
     (and the direction in the MuJoCo UR5's cells when they ran)."""
     claims = []
     for obj in OBJECTS:
-        key = ("point-mass", obj, ARBITRATED, source)
+        key = (POINT_MASS, obj, ARBITRATED, source)
         if key not in result.metrics:
             continue
         sh = result.shares(*key)
@@ -429,7 +430,7 @@ def precision_claims(result: AblationResult, source: str = APPLICATION_SOURCE) -
                     else "where the side is decided late, the tool follows the old direction for a moment",
                 )
             )
-        r, m = result.metrics[key], result.mg[("point-mass", obj)]
+        r, m = result.metrics[key], result.mg[(POINT_MASS, obj)]
         claims.append(
             Claim(
                 f"{obj}: with '{source}' the arbitrated controller's jerk RMS is ≤ {JERK_BAR:g} × MG's (issue 34)",

@@ -341,7 +341,7 @@ def application_section(result: ApplicationResult) -> Section:
         f"Simulated operators {', '.join(str(u) for u in result.users)} carry each object along the '{result.task}' path "
         f"around a {size[0] * 100:g} × {size[1] * 100:g} cm obstacle midway (no path shown: they detour widely) to the "
         f"target, {result.trials_per_controller} trials per object and controller: the assistive controller "
-        f"(preset '{result.control_preset}': α = {preset.game.alpha:g}, R_r = {preset.game.R_r[0]:g}; its prediction: "
+        f"(preset '{result.control_preset}': α = {preset.game.alpha:g}, R_r = {preset.game.weights.R_r[0, 0]:g}; its prediction: "
         f"'{result.source}', {_SOURCE_TEXT.get(result.source, 'a learned source')}), the same with α set every tick by "
         f"the '{ARBITRATION.law}' law (α {ARBITRATION.alpha_min:g}–"
         f"{ARBITRATION.alpha_max:g}, falling within {ARBITRATION.target_scale * 100:g} cm of where the robot's plan ends: the "

@@ -32,6 +32,7 @@ import numpy as np
 
 from coassist._checks import check_positive_scalar, is_real_number
 from coassist._io import atomic_write_text, save_figure
+from coassist.config import GameWeights
 from coassist.control.game import CooperativeGame
 from coassist.model.impedance import ImpedanceModel
 
@@ -137,17 +138,9 @@ def simulate_case(
     """
     model = ImpedanceModel(config.mass, config.damping, 0.0, config.dt)
     Q = np.diag([config.position_weight, config.velocity_weight]) * position_scale**2
-    game = CooperativeGame(
-        model,
-        Q_hh=Q,
-        Q_hr=0.0,
-        Q_rh=0.0,
-        Q_rr=Q,
-        R_h=config.human_effort_weight,
-        R_r=R_r,
-        alpha=alpha,
-        horizon=horizon,
-    )
+    zero = np.zeros_like(Q)
+    weights = GameWeights(Q, zero, zero, Q, np.array([[config.human_effort_weight]]), np.array([[R_r]]))
+    game = CooperativeGame(model, weights, alpha=alpha, horizon=horizon)
     T = int(round(config.duration / config.dt))
     ref_h, ref_r = references(config, T + horizon + 1)
     z = np.zeros(2)

@@ -23,6 +23,7 @@ import numpy as np
 from coassist._checks import is_integer
 from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET
 from coassist.registry import Registry
+from coassist.robot.worlds import POINT_MASS
 
 ITERATION_TASKS = ("linear", "curved", "sinusoidal")
 EVAL_HORIZONS = (5, 10, 20, 50)
@@ -31,7 +32,7 @@ EVAL_HORIZONS = (5, 10, 20, 50)
 #: The learned intent sources a run may train (coassist.experiments.source_training.LEARNED's names).
 LEARNED_SOURCES = ("ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone", "lstm-intent")
 #: Where the MuJoCo UR5's person model may be calibrated (ReproduceConfig.mujoco_person_calibration).
-MUJOCO_PERSON_CALIBRATIONS = ("mujoco", "point-mass")
+MUJOCO_PERSON_CALIBRATIONS = ("mujoco", POINT_MASS)
 
 
 @dataclass(frozen=True)

@@ -44,11 +44,11 @@ from typing import Any
 import numpy as np
 
 from coassist._checks import is_integer
-from coassist.config import APPLICATION_PRESET, ImpedanceParameters
+from coassist.config import APPLICATION_PRESET, GameWeights, ImpedanceParameters
 from coassist.control.presets import CONTROLLERS, get_preset, make_controller
 from coassist.data import Trial
 from coassist.interfaces import FEATURES
-from coassist.robot.worlds import WORLDS, ArmWorld, HandWorld, WorldRequest, build_world, missing_members
+from coassist.robot.worlds import WORLDS, ArmWorld, HandWorld, WorldRequest, arm_worlds, build_world, missing_members
 from coassist.runtime.episode import EpisodeLabels, build_episode, episode_ticks, plan_grid
 from coassist.runtime.intent import RealtimeIntent, WindowIntent
 from coassist.runtime.safety import SafetyLayer, SafetyLimits
@@ -85,7 +85,8 @@ MAX_TIME_LIMIT = 600.0
 class DriveConfig:
     """One run on a UR5 (every field validated, errors name it as ``DriveConfig.<field>``).
 
-    world : a world of :data:`coassist.robot.worlds.WORLDS` ("mujoco", "ur", "franka", "ros2").
+    world : an arm world of :data:`coassist.robot.worlds.WORLDS` ("mujoco", "ur", "franka", "ros2":
+        :func:`~coassist.robot.worlds.arm_worlds`).
     controller : a kind of :data:`coassist.control.presets.CONTROLLERS`: "cooperative",
         "cooperative-arbitrated" (α set every tick by coassist.control.presets.ARBITRATION),
         "cooperative-damped", "impedance", "manual" or "manual-probe" (a calibration trial).
@@ -146,9 +147,10 @@ class DriveConfig:
         def bad(name: str, what: str) -> ValueError:
             return ValueError(f"DriveConfig.{name} must be {what}, got {getattr(self, name)!r}")
 
-        if self.world not in WORLDS:
-            raise bad("world", f"one of {tuple(WORLDS)}")
-        world = WORLDS[self.world]
+        arms = arm_worlds()
+        if self.world not in arms:
+            raise bad("world", f"one of {tuple(arms)}")
+        world = arms[self.world]
         if self.robot is None:
             object.__setattr__(self, "robot", world.arms[0])
         elif self.robot not in world.arms:
@@ -256,18 +258,23 @@ def _controller(config: DriveConfig):
         M = M + (M[0], ROTATIONAL_INERTIA, ROTATIONAL_INERTIA, ROTATIONAL_INERTIA)
         D = D + (D[0], ROTATIONAL_DAMPING, ROTATIONAL_DAMPING, ROTATIONAL_DAMPING)
 
+        w = gp.weights
+
+        def diagonal(name: str) -> tuple[float, ...]:
+            matrix = getattr(w, name)
+            d = np.diag(matrix)
+            if not np.array_equal(matrix, np.diag(d)):  # the rotations copy x's weight: a diagonal's
+                raise ValueError(f"full_pose needs the preset's game.weights.{name} diagonal, got {matrix.tolist()}")
+            return tuple(float(v) for v in d)
+
         def six(q: tuple[float, ...]) -> tuple[float, ...]:
             return q[:2] + (q[0],) * 4 + q[2:] + (q[2],) * 4
 
-        gp = replace(
-            gp,
-            Q_hh=six(gp.Q_hh),
-            Q_hr=six(gp.Q_hr),
-            Q_rh=six(gp.Q_rh),
-            Q_rr=six(gp.Q_rr),
-            R_h=gp.R_h + (gp.R_h[0],) * 4,
-            R_r=gp.R_r + (gp.R_r[0],) * 4,
+        weights = GameWeights(
+            *(np.array(six(diagonal(q))) for q in ("Q_hh", "Q_hr", "Q_rh", "Q_rr")),
+            *(np.array(diagonal(r) + (diagonal(r)[0],) * 4) for r in ("R_h", "R_r")),
         )
+        gp = replace(gp, weights=weights)
     impedance = ImpedanceParameters(M=M, D=D, K=(0.0,) * len(M), dt=dt)
     return make_controller(config.controller, replace(preset, impedance=impedance, game=gp))
 
@@ -335,7 +342,7 @@ def drive_lockstep(configs: Sequence[DriveConfig]) -> list[Trial]:
 
     for i, c in enumerate(configs):
         if not isinstance(c, DriveConfig) or not WORLDS[c.world].simulated or c.realtime_intent:
-            simulated = ", ".join(name for name, entry in WORLDS.items() if entry.simulated)
+            simulated = ", ".join(name for name, entry in arm_worlds().items() if entry.simulated)
             raise ValueError(
                 f"configs[{i}] must be a DriveConfig of a simulated world ({simulated}) without a real-time predictor"
             )

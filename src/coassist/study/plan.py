@@ -73,8 +73,8 @@ from coassist.config import APPLICATION_PRESET, CONTROL_PRESETS
 from coassist.control.presets import CONTROLLERS
 from coassist.errors import CoassistError
 from coassist.registry import unknown_name_message
-from coassist.robot import worlds as arm_worlds
 from coassist.robot.drive import MAX_TIME_LIMIT
+from coassist.robot.worlds import PLAY, WORLDS, study_worlds
 from coassist.runtime.episode import DWELL
 from coassist.scenario import intent_registry
 from coassist.scenario.objects import OBJECTS
@@ -85,7 +85,6 @@ from coassist.study.ids import DEFAULT_ID_PATTERN, IdError, compile_id_pattern
 __all__ = [
     "CALIBRATED",
     "PROTOCOLS",
-    "WORLDS",
     "is_real_arm",
     "study_worlds",
     "CalibrationPlan",
@@ -106,26 +105,17 @@ __all__ = [
 ]
 
 PROTOCOLS = ("comparison", "iterative", "transfer", "online")
-#: The page's point-mass world (the browser is the hand); a study may also run in the arm worlds.
-PLAY = "play"
-
-
-def study_worlds() -> tuple[str, ...]:
-    """The worlds a plan may name, read when called: :data:`PLAY`, then every world of
-    :data:`coassist.robot.worlds.WORLDS` a study can run (``studies``): mujoco (the UR5 in MuJoCo: the
-    page as the hand, or a simulated participant), ur and franka (a real arm through ``coassist drive``),
-    and any world registered there since."""
-    return (PLAY, *(name for name, entry in arm_worlds.WORLDS.items() if entry.studies))
-
-
-#: :func:`study_worlds` as declared (play, mujoco, ur, franka).
-WORLDS = study_worlds()
+# The worlds a plan may name are coassist.robot.worlds.study_worlds() (re-exported here), read
+# when a plan is parsed: PLAY (the page's point mass, the browser as the hand), mujoco (the UR5 in
+# MuJoCo: the page as the hand, or a simulated participant), ur and franka (a real arm through
+# ``coassist drive``), and any world registered in coassist.robot.worlds.WORLDS since.
 
 
 def is_real_arm(world: str) -> bool:
     """Whether the plan's ``world`` is a real arm (a person, or a simulator behind its address, holds
     it): an arm world of :data:`coassist.robot.worlds.WORLDS` that is not simulated (ur, franka)."""
-    return world != PLAY and not arm_worlds.WORLDS[world].simulated
+    entry = WORLDS[world]
+    return entry.is_arm and not entry.simulated
 
 
 #: The Likert items of the issue (thesis' journal version asked the participants these).
@@ -450,12 +440,12 @@ class StudyPlan:
     def task_end(self) -> float:
         """[s] the latest end of a task's planned motion among the plan's tasks (the play world's
         ``motion_time``, or the thesis' per path on an arm)."""
-        mt = self.trials.motion_time if self.world == "play" else None
+        mt = self.trials.motion_time if self.world == PLAY else None
         return max(float(task_for_seed(kind, 0, motion_time=mt).planner.end_time) for kind in self.trials.tasks)
 
     def dwell(self) -> float:
         """[s] in the target ball that ends a trial (the arm worlds: ``coassist drive``'s)."""
-        return self.trials.dwell if self.world == "play" else DWELL
+        return self.trials.dwell if self.world == PLAY else DWELL
 
 
 _TOP = (
@@ -485,7 +475,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     if not isinstance(name, str) or not re.match(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$", name):
         raise PlanError(f"study.name must be 1-64 letters, digits, '-' or '_', got {name!r}")
     protocol = _choice(s.get("protocol", "comparison"), "study.protocol", PROTOCOLS, "protocol")
-    world = _choice(s.get("world", "play"), "study.world", study_worlds(), "world")
+    world = _choice(s.get("world", PLAY), "study.world", study_worlds(), "study world")
     participants = _int(s.get("participants", 4), "study.participants", 1, 999)
     seed = _int(s.get("seed", 0), "study.seed", 0, MAX_SEED)
     id_pattern = s.get("id_pattern", DEFAULT_ID_PATTERN)
@@ -504,14 +494,14 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     if not isinstance(preset, str) or preset not in CONTROL_PRESETS:
         raise PlanError(f"trials.preset: {unknown_name_message(str(preset), CONTROL_PRESETS, 'control preset')}")
     obj = _choice(t.get("object", "handle"), "trials.object", tuple(OBJECTS), "object")
-    if world == "play" and obj != "handle":
+    if world == PLAY and obj != "handle":
         raise PlanError(
             f"trials.object must be 'handle' in the play world (the page's robot carries nothing), got {obj!r}"
         )
     motion_time = (
         None if t.get("motion_time") is None else _seconds(t["motion_time"], "trials.motion_time", *MOTION_TIME_RANGE)
     )
-    if world != "play":  # coassist drive plans the thesis' motion times and ends a trial after 5 s in the 2.5 cm ball
+    if world != PLAY:  # coassist drive plans the thesis' motion times and ends a trial after 5 s in the 2.5 cm ball
         for key in ("motion_time", "dwell", "arrive_radius"):
             if key in t:
                 raise PlanError(

@@ -29,7 +29,7 @@ from typing import Any
 from coassist.data import Trial, TrialMeta
 from coassist.errors import CoassistError
 from coassist.play.session import PlayConfig, PlaySession, TrialResult, arm_frame, score_trial
-from coassist.robot import worlds as arm_worlds
+from coassist.robot.worlds import WORLDS
 from coassist.scenario.tasks import Task, task_for_seed
 
 __all__ = ["StudySession", "TrialSetup"]
@@ -224,7 +224,7 @@ class StudySession(PlaySession):
         every = max(1, int(round(config.rate_hz / 125.0)))
 
         def on_tick(k: int, state, out) -> None:
-            if self._abort is not None and arm_worlds.WORLDS[self.world].simulated:
+            if self._abort is not None and WORLDS[self.world].simulated:
                 # a simulated arm stops where it is; a real arm's run is never cut from the page (its own
                 # stop and coassist drive's safety layer end it)
                 raise _Aborted(self._abort)
