@@ -2,9 +2,11 @@
 
 import numpy as np
 import pytest
+import scipy.linalg
 import scipy.signal
 
-from coassist.model import ImpedanceModel, continuous_matrices
+from coassist.model import ImpedanceModel, continuous_matrices, discretize
+from coassist.model.impedance import DISCRETE_CACHE_SIZE
 
 
 def random_impedance(rng, n):
@@ -83,3 +85,51 @@ def test_model_is_immutable():
     model = ImpedanceModel(1, 1, 0, 0.01)
     with pytest.raises(ValueError):
         model.Ad[0, 0] = 2.0
+
+
+@pytest.mark.parametrize("method", ["zoh", "tustin"])
+def test_discretize_gives_the_same_bits_when_it_remembers_and_new_arrays_each_time(method):
+    # The formulas of eq. 3.5 written out here (Van Loan's block exponential; Tustin's solves): the
+    # same floating-point operations, so the same bits, whether discretize computes or remembers.
+    rng = np.random.default_rng(7)
+    M, D, K = random_impedance(rng, 2)
+    A, B = continuous_matrices(M, D, K)
+    dt = 0.008
+    if method == "zoh":
+        block = np.zeros((6, 6))
+        block[:4, :4] = A * dt
+        block[:4, 4:] = B * dt
+        e = scipy.linalg.expm(block)
+        want = (e[:4, :4], e[:4, 4:])
+    else:
+        lhs = np.eye(4) - A * (dt / 2.0)
+        want = (np.linalg.solve(lhs, np.eye(4) + A * (dt / 2.0)), np.linalg.solve(lhs, B * dt))
+    first = discretize(A, B, dt, method)
+    first[0][:] = np.nan  # the caller's own arrays: changing them changes nothing remembered
+    first[1][:] = np.nan
+    for got in (discretize(A, B, dt, method), discretize(A.copy(), B.copy(), dt, method)):
+        np.testing.assert_array_equal(got[0], want[0], strict=True)
+        np.testing.assert_array_equal(got[1], want[1], strict=True)
+    # another dt or another matrix is another discretisation, not the one remembered
+    other = discretize(A, B, dt / 2, method)[0]
+    assert not np.array_equal(other, want[0])
+    A2 = A.copy()
+    A2[2, 2] *= 2.0
+    assert not np.array_equal(discretize(A2, B, dt, method)[0], want[0])
+
+
+def test_discretize_answers_right_past_the_number_it_remembers():
+    A, B = continuous_matrices(np.array([[2.0]]), np.array([[6.0]]), np.array([[0.0]]))
+    dts = [0.001 * (k + 1) for k in range(DISCRETE_CACHE_SIZE + 5)]
+    for dt in dts:
+        Ad, Bd = discretize(A, B, dt)
+        # the 1-DOF mass-damper's closed form: v decays by exp(-dt D/M)
+        np.testing.assert_allclose(Ad[1, 1], np.exp(-dt * 3.0), rtol=1e-13)
+    # the first dt was let go (the oldest of more than DISCRETE_CACHE_SIZE): computed again, right
+    np.testing.assert_allclose(discretize(A, B, dts[0])[0][1, 1], np.exp(-dts[0] * 3.0), rtol=1e-13)
+
+
+def test_discretize_names_a_bad_method_before_remembering_anything():
+    A, B = continuous_matrices(np.array([[1.0]]), np.array([[1.0]]), np.array([[0.0]]))
+    with pytest.raises(ValueError, match="discretization must be 'zoh' or 'tustin'"):
+        discretize(A, B, 0.01, "euler")  # type: ignore[arg-type]

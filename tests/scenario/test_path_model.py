@@ -3,7 +3,13 @@
 import numpy as np
 import pytest
 
-from coassist.scenario.path_model import PathFrame, PathModel, PathModelSettings, fit_path_model
+from coassist.scenario.path_model import (
+    NEAREST_CANDIDATES,
+    PathFrame,
+    PathModel,
+    PathModelSettings,
+    fit_path_model,
+)
 
 # a straight plan along x, 1 m: a path's (s, d) is its (x, y)
 NOMINAL = np.stack([np.linspace(0.0, 1.0, 501), np.zeros(501)], axis=1)
@@ -95,3 +101,58 @@ def test_a_model_out_of_range_is_refused_naming_the_field():
         PathModel(good.nominal, good.weights[:, :-1], good.sides, 0.001, good.settings)
     with pytest.raises(ValueError, match="PathModelSettings.n_basis"):
         PathModelSettings(n_basis=1)
+
+
+def _brute_projection(frame: PathFrame, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every vertex against every point (the search PathFrame.project made before issue 44), then its formulas."""
+    q = np.asarray(q, dtype=float).reshape(-1, 2)
+    x, y = frame.points[:, 0], frame.points[:, 1]
+    i = np.argmin((q[:, None, 0] - x[None, :]) ** 2 + (q[:, None, 1] - y[None, :]) ** 2, axis=1)
+    rel = q - frame.points[i]
+    s = np.clip(frame.arc[i] + np.sum(rel * frame.tangents[i], axis=1), 0.0, frame.length)
+    return i, s, np.sum(rel * frame.normals[i], axis=1)
+
+
+def _plan(n: int) -> np.ndarray:
+    """A wavy plan of n vertices, 0.6 m long, unevenly spaced (as a task's polyline is)."""
+    u = np.sort(np.random.default_rng(n).uniform(0.0, 1.0, n))
+    u[0], u[-1] = 0.0, 1.0
+    return np.stack([0.6 * u, 0.05 * np.sin(9.0 * u) + 0.02 * np.sin(31.0 * u)], axis=1)
+
+
+@pytest.mark.parametrize("n_vertices", [2, NEAREST_CANDIDATES, NEAREST_CANDIDATES + 1, 1250])
+def test_projection_is_every_vertex_searched_bit_for_bit(n_vertices):
+    frame = PathFrame(_plan(n_vertices))
+    rng = np.random.default_rng(3)
+    q = np.concatenate(
+        [
+            rng.uniform([-0.1, -0.2], [0.7, 0.2], size=(3000, 2)),  # anywhere round the plan
+            frame.points + rng.normal(scale=1e-7, size=frame.points.shape),  # next to a vertex
+            frame.points,  # on a vertex: distance 0
+            0.5 * (frame.points[1:] + frame.points[:-1]),  # halfway between two: (near) ties
+            [[np.nan, 0.1], [0.2, np.inf], [1e200, 1e200]],  # what every vertex is compared with
+        ]
+    )
+    with np.errstate(over="ignore", invalid="ignore"):  # the 1e200 point's squares overflow, as before
+        i, s, d = _brute_projection(frame, q)
+        np.testing.assert_array_equal(frame.nearest_vertex(q), i)
+        got_s, got_d = frame.project(q)
+    np.testing.assert_array_equal(got_s, s, strict=True)
+    np.testing.assert_array_equal(got_d, d, strict=True)
+    assert frame.project(np.empty((0, 2)))[0].shape == (0,)
+
+
+def test_exact_ties_go_to_the_first_vertex_as_argmin_does():
+    # a plan that comes back through its own vertices: the same point twice, far apart in arc length,
+    # and points equidistant from two vertices; argmin takes the first
+    pts = np.array(
+        [[0.0, 0.0], [0.1, 0.0], [0.2, 0.0], [0.2, 0.1], [0.1, 0.0], [0.0, 0.1]] + [[0.3, 0.01 * k] for k in range(12)]
+    )
+    frame = PathFrame(pts)
+    q = np.array([[0.1, 0.0], [0.15, 0.0], [0.1, 0.05], [0.05, 0.05], [0.3, 0.005], [0.3, 0.055]])
+    i, s, d = _brute_projection(frame, q)
+    assert i[0] == 1  # the first of the two vertices at (0.1, 0)
+    np.testing.assert_array_equal(frame.nearest_vertex(q), i)
+    got_s, got_d = frame.project(q)
+    np.testing.assert_array_equal(got_s, s, strict=True)
+    np.testing.assert_array_equal(got_d, d, strict=True)

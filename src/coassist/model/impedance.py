@@ -49,6 +49,12 @@ def continuous_matrices(M: np.ndarray, D: np.ndarray, K: np.ndarray) -> tuple[np
     return A, B
 
 
+#: The discretisations computed in this process, by their inputs' bytes (:func:`discretize`).
+_DISCRETE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+#: At most this many are kept (the oldest goes first); a run uses a handful of (M, D, dt).
+DISCRETE_CACHE_SIZE = 64
+
+
 def discretize(
     A: np.ndarray, B: np.ndarray, dt: float, method: Discretization = "zoh"
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -60,7 +66,29 @@ def discretize(
     state-space form scipy.signal.cont2discrete uses with method="bilinear". That form
     also maps the output (C_d = C (I − A dt/2)⁻¹, D_d ≠ 0); like the thesis group's code
     we keep y = z, an approximation that only zero-order hold avoids.
+
+    A (2n, 2n) and B (2n, n) float arrays; returns new arrays of the same shapes (the caller's
+    to change). The result is remembered per process by the inputs' exact bytes, shapes,
+    ``dt`` and ``method`` (at most :data:`DISCRETE_CACHE_SIZE`): every simulated trial builds
+    its plant and controller models afresh, and the matrix exponential was 1.5 % of the main
+    job's worker time (issue 44, docs/performance.md). The same inputs give the same bits
+    either way: the function is deterministic in one process.
     """
+    if method not in ("zoh", "tustin"):
+        raise ValueError(f"discretization must be 'zoh' or 'tustin', got {method!r}")
+    A, B = np.asarray(A), np.asarray(B)
+    key = (method, float(dt), A.dtype.str, A.shape, B.dtype.str, B.shape, A.tobytes(), B.tobytes())
+    known = _DISCRETE.get(key)
+    if known is None:
+        known = _discretize(A, B, dt, method)
+        if len(_DISCRETE) >= DISCRETE_CACHE_SIZE:
+            _DISCRETE.pop(next(iter(_DISCRETE)))
+        _DISCRETE[key] = known
+    return known[0].copy(), known[1].copy()
+
+
+def _discretize(A: np.ndarray, B: np.ndarray, dt: float, method: Discretization) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`discretize` computed."""
     nx, nu = B.shape
     if method == "zoh":
         block = np.zeros((nx + nu, nx + nu))
