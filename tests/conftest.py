@@ -65,11 +65,14 @@ LONGEST_FIRST: tuple[tuple[str, float], ...] = (
 
 def workers_of(config: pytest.Config) -> int:
     """How many workers share the collection the way :func:`longest_first` plans for: xdist's under
-    ``--dist worksteal`` (read in each worker), else 1."""
+    ``--dist worksteal`` (in each worker, whose own ``dist`` option xdist sets to ``no``: read from the
+    command line it was started with), else 1."""
     workerinput = getattr(config, "workerinput", None)
-    if workerinput is None or config.getoption("dist", "no") != "worksteal":
+    if workerinput is None:
         return 1
-    return int(workerinput["workercount"])
+    args = [str(a) for a in config.invocation_params.args]
+    dist = [b for a, b in zip(args, args[1:]) if a == "--dist"] + [a[7:] for a in args if a.startswith("--dist=")]
+    return int(workerinput["workercount"]) if dist[-1:] == ["worksteal"] else 1
 
 
 def longest_first(items: list[pytest.Item], workers: int = 1) -> None:

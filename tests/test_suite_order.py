@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import LONGEST_FIRST, longest_first
+from .conftest import LONGEST_FIRST, longest_first, workers_of
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -98,3 +98,19 @@ def test_each_worker_is_handed_its_longest_first_at_the_head_of_its_share(worker
     # greedy (LPT): no worker has more than the least loaded one plus the longest entry
     assert max(seconds) - min(seconds) <= LONGEST_FIRST[0][1]
     assert sum(seconds) == pytest.approx(sum(s for _, s in LONGEST_FIRST))
+
+
+def test_the_plan_is_for_xdists_workers_under_worksteal_alone():
+    """In a worker xdist sets the ``dist`` option to ``no``: the mode is read from the command line it ran."""
+
+    class Config:
+        def __init__(self, args, workers=None):
+            self.invocation_params = type("Params", (), {"args": tuple(args)})()
+            if workers is not None:
+                self.workerinput = {"workercount": workers}
+
+    assert workers_of(Config(["-n", "3", "--dist", "worksteal"], 3)) == 3  # type: ignore[arg-type]
+    assert workers_of(Config(["-n", "2", "--dist=worksteal", "-q"], 2)) == 2  # type: ignore[arg-type]
+    assert workers_of(Config(["-n", "3", "--dist", "load"], 3)) == 1  # type: ignore[arg-type]
+    assert workers_of(Config(["-n", "3"], 3)) == 1  # type: ignore[arg-type]
+    assert workers_of(Config(["--dist", "worksteal"])) == 1  # type: ignore[arg-type]  # not a worker
