@@ -37,11 +37,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 # the last tests of the longest queue, never the head of one. A long test late in the order is then run last,
 # alone, while the others idle; the tests of a module-scoped fixture split between workers pay for it twice; and
 # long tests all at the head of the first share run one after another on one worker (~255 s of them in CI's
-# durations at d85d523: with three workers that chain, not the cores, would bound the main part). So each entry
+# durations at 9959460: with three workers that chain, not the cores, would bound the main part). So each entry
 # here (CI's --durations, 2 cores; a whole file where a module fixture serves several tests, or where two
 # Chromium studies must not run at once) goes, in this order, to the head of the share of the worker with the
 # fewest of these seconds so far (longest first: LPT); each share is then filled with the rest in their order.
-# Entries: (node id prefix, seconds): CI's --durations at d85d523 (fresh clone, 2 cores, two workers), a file's
+# Entries: (node id prefix, seconds): CI's --durations at 9959460 (fresh clone, 2 cores, two workers), a file's
 # tests summed; test_registered_entries.py's scaled by its CPU-s since (issue 44).
 LONGEST_FIRST: tuple[tuple[str, float], ...] = (
     ("tests/study/test_browser.py::", 113.1),  # two studies in Chromium, paced trials (58 s and 55 s)
