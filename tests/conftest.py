@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Generator
 from pathlib import Path
 
 import pytest
@@ -13,8 +14,8 @@ import pytest
 REALTIME_TEXT = "mark.realtime"
 
 
-@pytest.hookimpl(tryfirst=True)  # before ``-m`` deselects them: every collected test is seen
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+@pytest.hookimpl(wrapper=True)  # before ``-m`` deselects them every collected test is seen; after it, ordered
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> Generator[None, None, None]:
     seen: dict[Path, bool] = {}
     for item in items:
         if item.get_closest_marker("realtime") is None:
@@ -27,30 +28,79 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
                 f"{item.nodeid} is marked realtime but its file does not contain {REALTIME_TEXT!r}: "
                 "./dev test would not run it (write the marker as pytest.mark.realtime in that file)"
             )
-    longest_first(items)
+    yield  # the other plugins' hooks: ``-m`` deselects
+    longest_first(items, workers_of(config))  # the tests xdist shares out: those that run
 
 
-# ``./dev test`` runs the suite on two workers with ``--dist worksteal``: each worker is handed one half of
-# the collection, in order, and one that runs out takes the last tests of the other's queue. A long test
-# late in the order is then run last, alone, while the other worker idles; and the tests of a module-scoped
-# fixture split between the workers pay for it twice. So the longest tests (CI's --durations, 2 cores, on
-# 4e41a44) go first, whole files where a module fixture serves several, in this order; the rest keep theirs.
-LONGEST_FIRST = (
-    "tests/experiments/test_reproduce.py::",  # the tiny preset's whole pipeline: the module fixture tiny_run
-    "tests/study/test_browser.py::",  # two studies in Chromium, paced trials (62 s and 47 s)
-    "tests/test_readme.py::test_fast_blocks_run",  # 27 s
-    "tests/study/test_calibration.py::test_kill_9_during_the_block_and_during_the_fit_then_resume",  # 26 s
-    "tests/experiments/test_source_training.py::",  # 24 s, a module fixture
-    "tests/experiments/test_prefetch.py::",  # 23 s, a module's shared pool
-    "tests/sim/test_world.py::test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone",  # 21 s
-    "tests/study/test_comparison.py::test_the_same_plan_runs_on_the_mujoco_ur5",  # 19 s
+# ``./dev test`` runs the suite on xdist workers with ``--dist worksteal``: at the start worker i is handed the next
+# ``len(pending) // (n - i)`` tests of the collection, in order (a contiguous share), and one that runs out takes
+# the last tests of the longest queue, never the head of one. A long test late in the order is then run last,
+# alone, while the others idle; the tests of a module-scoped fixture split between workers pay for it twice; and
+# long tests all at the head of the first share run one after another on one worker (~255 s of them in CI's
+# durations at 9959460: with three workers that chain, not the cores, would bound the main part). So each entry
+# here (CI's --durations, 2 cores; a whole file where a module fixture serves several tests, or where two
+# Chromium studies must not run at once) goes, in this order, to the head of the share of the worker with the
+# fewest of these seconds so far (longest first: LPT); each share is then filled with the rest in their order.
+# Entries: (node id prefix, seconds): CI's --durations at 9959460 (fresh clone, 2 cores, two workers), a file's
+# tests summed; test_registered_entries.py's scaled by its CPU-s since (issue 44).
+LONGEST_FIRST: tuple[tuple[str, float], ...] = (
+    ("tests/study/test_browser.py::", 113.1),  # two studies in Chromium, paced trials (58 s and 55 s)
+    ("tests/experiments/test_reproduce.py::", 45.0),  # the tiny preset's whole pipeline: the module fixture tiny_run
+    ("tests/experiments/test_prefetch.py::", 40.0),  # a module's shared pool
+    ("tests/study/test_page.py::", 21.6),  # two studies on the page's websocket, paced trials
+    ("tests/study/test_calibration.py::test_kill_9_during_the_block_and_during_the_fit_then_resume", 20.0),
+    ("tests/test_registered_entries.py::", 14.0),
+    (
+        "tests/faults/test_run_record_faults.py::test_a_kill_during_drive_mcap_never_leaves_a_trial_beside_another_runs_mcap",
+        14.0,
+    ),
+    ("tests/experiments/test_source_training.py::", 12.4),  # a module fixture
+    ("tests/sim/test_ray_backend.py::", 9.9),
+    ("tests/test_readme.py::test_fast_blocks_run", 9.3),
+    ("tests/sim/test_world.py::test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone", 9.2),
+    ("tests/study/test_store.py::test_kill_9_mid_trial_then_resume_keeps_every_finished_trial_and_the_order", 8.5),
+    ("tests/play/test_browser.py::", 8.0),  # Chromium
 )
 
 
-def longest_first(items: list[pytest.Item]) -> None:
-    """Put the tests LONGEST_FIRST names first, in its order (./dev test schedules them first)."""
+def workers_of(config: pytest.Config) -> int:
+    """How many workers share the collection the way :func:`longest_first` plans for: xdist's under
+    ``--dist worksteal`` (in each worker, whose own ``dist`` option xdist sets to ``no``: read from the
+    command line it was started with), else 1."""
+    workerinput = getattr(config, "workerinput", None)
+    if workerinput is None:
+        return 1
+    args = [str(a) for a in config.invocation_params.args]
+    dist = [b for a, b in zip(args, args[1:]) if a == "--dist"] + [a[7:] for a in args if a.startswith("--dist=")]
+    return int(workerinput["workercount"]) if dist[-1:] == ["worksteal"] else 1
+
+
+def longest_first(items: list[pytest.Item], workers: int = 1) -> None:
+    """Reorder ``items`` for ``workers`` workers under ``--dist worksteal``: each LONGEST_FIRST entry's
+    tests (in their order) at the head of the share of the worker with the fewest of their seconds so far
+    (entries in LONGEST_FIRST's order, longest first), the other tests after them in their order, each
+    share as long as xdist's first hand-out makes it. One worker: the entries first, in their order."""
 
     def rank(item: pytest.Item) -> int:
-        return next((k for k, p in enumerate(LONGEST_FIRST) if item.nodeid.startswith(p)), len(LONGEST_FIRST))
+        return next((k for k, (p, _) in enumerate(LONGEST_FIRST) if item.nodeid.startswith(p)), len(LONGEST_FIRST))
 
-    items[:] = sorted(items, key=rank)  # stable: each file's tests keep their order
+    groups: list[list[pytest.Item]] = [[] for _ in range(len(LONGEST_FIRST) + 1)]
+    for item in items:
+        groups[rank(item)].append(item)
+    rest = groups.pop()
+    heads: list[list[pytest.Item]] = [[] for _ in range(workers)]
+    seconds = [0.0] * workers
+    for k, group in enumerate(groups):
+        if group:
+            w = min(range(workers), key=lambda i: (seconds[i], i))
+            heads[w] += group
+            seconds[w] += LONGEST_FIRST[k][1]
+    ordered: list[pytest.Item] = []
+    left, taken = len(items), 0
+    for w in range(workers):
+        share = left // (workers - w)  # xdist's worksteal: the next len(pending) // (idle workers left)
+        left -= share
+        fill = max(0, share - len(heads[w])) if w < workers - 1 else len(rest)
+        ordered += heads[w] + rest[taken : taken + fill]
+        taken += fill
+    items[:] = ordered

@@ -232,7 +232,14 @@ def test_the_study_runs_a_registered_world(echo_cv, my_arm, tmp_path):
 
 def test_the_ablation_runs_a_registered_intent_source(echo_cv, tmp_path):
     from coassist.experiments import pipeline
-    from coassist.experiments.ablation import ARBITRATED, ablation_cells, registered_sources, run_ablation
+    from coassist.experiments.ablation import (
+        ARBITRATED,
+        OBJECTS,
+        AblationAhead,
+        ablation_cells,
+        registered_sources,
+        run_ablation,
+    )
     from coassist.scenario.path_hypotheses import write_calibration
     from coassist.scenario.person_model import write_person_model
 
@@ -253,6 +260,14 @@ def test_the_ablation_runs_a_registered_intent_source(echo_cv, tmp_path):
     models = {
         "paths": str(write_calibration(tmp_path / "paths", {})),
         "person": str(write_person_model(tmp_path / "person", {})),
+    }
+    # As the main job does: AblationAhead starts every cell ahead (the registered source's too, from the
+    # same ablation_cells), and with one worker Workspace.prefetch defers them; the first collect runs them
+    # all in lockstep groups, the same trials bit for bit as each alone (tests/experiments/test_prefetch.py).
+    # The 34 one-trial cells then cost 6.5 CPU-s in all instead of 18.1 one by one (issue 44).
+    AblationAhead(ws, set())(models)
+    assert {n for n in ws._deferred if n.endswith("echo-cv")} == {
+        f"ablation-{o}-{c}-echo-cv" for o in OBJECTS for c in ("cooperative", ARBITRATED)
     }
     result = run_ablation(ws, models)
     assert echo_cv[0] > 100
