@@ -174,3 +174,33 @@ def test_a_curve_held_far_from_the_tool_gives_no_rows():
     assert np.linalg.norm(rows[0] - intent[k]) < 0.01, rows[0]
     assert np.all(rows[:, 0] > tool[0] - 0.01)
     assert src._mix == 0.0  # through the present estimate, as on a change of mind
+
+
+def test_on_a_way_nobody_took_the_rows_are_the_present_estimates_without_the_mirror():
+    # the calibration went left three times; this trial goes right. With follow_mirror the rows run along the
+    # mirror of the left paths; without, once the right way is decided, they are the present estimate's rows
+    # q + hedge_velocity·i·dt·v (q: the intent itself here, the arm known), never a curve.
+    model = _model(left=(0.49, 0.5, 0.51), right=())
+    intent = _walk(_bump(0.505, -0.08))
+    rows = {}
+    for follow in (True, False):
+        src = PersonPathsIntent(
+            paths={"u": model}, arms={"u": ARM}, settings=PersonFilterSettings(follow_mirror=follow)
+        )
+        src.reset(_context())
+        rows[follow], sides = [], []
+        for k in range(len(intent)):
+            rows[follow].append(_tick(src, intent, k))
+            sides.append(src.side)
+        sides = np.asarray(sides)
+        assert sides[-1] == -1  # the way is found either way
+    decided = int(np.argmax(sides == -1))
+    late = range(decided + 1, len(intent) - 60)
+    st = PersonFilterSettings()
+    for k in late:
+        tool, prev = intent[max(k - 6, 0)], intent[max(k - 7, 0)]
+        vel = (tool - prev) / DT
+        hedge = intent[k] + st.hedge_velocity * np.outer(DT * np.arange(1, 51), vel)
+        np.testing.assert_allclose(rows[False][k], hedge, atol=1e-9)
+    # and the mirror's rows differ from them: the test can fail
+    assert max(np.abs(rows[True][k] - rows[False][k]).max() for k in late) > 1e-3

@@ -26,7 +26,7 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    alone), until the tool passes the place where the ways are furthest apart;
 4. **rows**: once |log-odds| > ``decide`` the rows run along the decided way's likeliest curves
    (at most :data:`MIXTURE`, weighted) from their present estimates at the tool's speed along
-   them; while undecided and the ways' rows part by more than ``divergence`` over the horizon, the
+   them (on a way nobody took, with ``follow_mirror`` off, the present estimate's rows instead); while undecided and the ways' rows part by more than ``divergence`` over the horizon, the
    rows are the present estimate's, q + ``hedge_velocity``·i·dt·v — neither way, and never the plan.
    The two cross-fade over ``blend_time``.
 5. **smoothing**: the rows are low-passed over time with a time constant ``row_smoothing`` and
@@ -85,6 +85,9 @@ class PersonFilterSettings:
         :class:`~coassist.scenario.hand_force.HandPoint`) instead of taking the tip for it.
     row_smoothing : [s] the time constant of the rows' low-pass over time, its lag advanced away
         (:class:`~coassist.scenario.row_smoothing.RowSmoothing`; 0: the rows as computed).
+    follow_mirror : on a way round the person never took in their calibration, follow the mirror images of
+        the other way's paths (True), or give the present estimate's rows there (False): the mirror knows
+        nothing of how this person goes round that side.
     """
 
     kappa: float = 0.2
@@ -109,6 +112,7 @@ class PersonFilterSettings:
     reaction_lead: float = 0.0
     object_yaw: bool = False
     row_smoothing: float = 0.0
+    follow_mirror: bool = True
 
     def __post_init__(self) -> None:
         for name, lo, hi, open_lo in (
@@ -135,8 +139,9 @@ class PersonFilterSettings:
             object.__setattr__(
                 self, name, check_real(getattr(self, name), f"PersonFilterSettings.{name}", lo, hi, open_lo=open_lo)
             )
-        if not isinstance(self.object_yaw, bool):
-            raise ValueError(f"PersonFilterSettings.object_yaw must be true or false, got {self.object_yaw!r}")
+        for flag in ("object_yaw", "follow_mirror"):
+            if not isinstance(getattr(self, flag), bool):
+                raise ValueError(f"PersonFilterSettings.{flag} must be true or false, got {getattr(self, flag)!r}")
         if self.side_rule not in ("offset", "mixture"):
             raise ValueError(f"PersonFilterSettings.side_rule must be 'offset' or 'mixture', got {self.side_rule!r}")
         if isinstance(self.shifts, (str, bytes)) or not hasattr(self.shifts, "__iter__"):
@@ -157,6 +162,8 @@ class _Curves:
 
     def __init__(self, model: PathModel, shifts: tuple[float, ...]) -> None:
         self.points, self.ways, prior = model.curves(shifts)
+        # the ways round whose curves are mirror images: nobody took them in the calibration
+        self.unseen = {int(w) for w in np.unique(self.ways)} - {int(w) for w in model.sides}
         self.log_prior = np.log(prior)
         N, G = self.points.shape[:2]
         seg = np.hypot(*np.moveaxis(np.diff(self.points, axis=1), 2, 0))
@@ -424,6 +431,9 @@ class PersonPathsIntent:
             rows = hyp.along(n, s_lead[n][:, None] + speed[:, None] * self._steps[None, :])
             return (w @ rows.reshape(len(w), -1)).reshape(-1, 2)
 
+        if not st.follow_mirror and self._side in hyp.unseen:
+            self._mix = 0.0  # a way this person never showed: no curves of theirs to follow there
+            return present + self._hedge_steps * v
         ways = (self._side,) if self._side != 0 or not self._two else (1, -1)
         if not all(near[hyp.on_way[w]].any() for w in ways):
             self._mix = 0.0  # no near curve of a way the rows need: the present estimate's rows, as on a change of mind
