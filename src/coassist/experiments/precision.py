@@ -157,7 +157,7 @@ def compare_intents(
                 )
                 ordered = sorted(ds.trials, key=pair_key)
                 cells.setdefault((obj, label, controller), []).extend(ordered)
-                draws = draw_count(intent) if label not in ("MG", "oracle") else 1
+                draws = draw_count(intent)
                 # a calibration's draws are this base's: the clusters are (base, operator, draw)
                 groups.setdefault((obj, label, controller), []).extend(
                     (base, *c) for c in draw_clusters([pair_key(t) for t in ordered], draws)

@@ -55,7 +55,8 @@ __all__ = [
 
 #: The seeds between two calibration draws' first trials (:func:`calibrate_person`): a draw's trials (operators ×
 #: calibration_trials) stay under it, and eight draws stay inside the run's calibration block (its application
-#: trials start 20 000 seeds on; a validation base's, :mod:`coassist.experiments.precision`, 10 000 on another base's).
+#: trials start 20 000 seeds on); validation bases 10 000 apart (docs/precision.md's 50000 and 60000) keep their
+#: draws apart too.
 DRAW_SEED_STEP = 1000
 
 #: The learned sources: (intent preset or None for the run's, window label).
@@ -124,33 +125,33 @@ def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "
 
     if not 1 <= int(draws) <= MAX_DRAWS:
         raise ValueError(f"draws must be 1 to {MAX_DRAWS}, got {draws!r}")
-    suffix = _suffix(population)
-    options = calibration_options(ws, "manual-probe", seed, population)
+    collections = calibration_draw_options(ws, population, int(draws), seed)
+    (first, options), *_ = collections.items()
     if draws > 1 and len(options["users"]) * options["trials"] > DRAW_SEED_STEP:
         raise ValueError(
             f"{len(options['users'])} operators × {options['trials']} calibration trials do not fit in a draw's "
             f"{DRAW_SEED_STEP} seeds"
         )
-    _, ds = ws.collect(f"calibration-probe{suffix}", **options)
     if draws == 1:
-        return str(write_person_model(ws.out / "models" / f"person{suffix}", fit_people(ds.trials)))
-    folder = ws.out / "models" / f"person{suffix}-draws"
+        _, ds = ws.collect(first, **options)
+        return str(write_person_model(ws.out / "models" / f"person{_suffix(population)}", fit_people(ds.trials)))
+    folder = ws.out / "models" / f"person{_suffix(population)}-draws"
     names = []
-    for k in range(int(draws)):
-        if k:
-            _, ds = ws.collect(
-                f"calibration-probe{suffix}-draw{k}", **{**options, "seed": options["seed"] + k * DRAW_SEED_STEP}
-            )
+    for k, (name, options) in enumerate(collections.items()):
+        _, ds = ws.collect(name, **options)
         names.append(f"draw-{k}")
         write_person_model(folder / names[-1], fit_people(ds.trials))
     return str(write_draws(folder, names))
 
 
-def calibration_draw_options(ws: Workspace, population: str = "thesis", draws: int = 1) -> dict[str, dict]:
-    """The probe datasets :func:`calibrate_person` collects with ``draws`` (name → :meth:`Workspace.collect`
-    options): to put them on the pool before it asks."""
+def calibration_draw_options(
+    ws: Workspace, population: str = "thesis", draws: int = 1, seed: int | None = None
+) -> dict[str, dict]:
+    """The probe datasets :func:`calibrate_person` collects with ``draws``, in draw order (name →
+    :meth:`Workspace.collect` options; draw 0's first seed ``seed``, as :func:`calibration_options`'s): what it
+    collects, and what a stage puts on the pool before it asks."""
     suffix = _suffix(population)
-    options = calibration_options(ws, "manual-probe", None, population)
+    options = calibration_options(ws, "manual-probe", seed, population)
     out = {f"calibration-probe{suffix}": options}
     for k in range(1, int(draws)):
         out[f"calibration-probe{suffix}-draw{k}"] = {**options, "seed": options["seed"] + k * DRAW_SEED_STEP}

@@ -26,7 +26,8 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    alone), until the tool passes the place where the ways are furthest apart;
 4. **rows**: once |log-odds| > ``decide`` the rows run along the decided way's likeliest curves
    (at most :data:`MIXTURE`, weighted) from their present estimates at the tool's speed along
-   them (on a way nobody took, with ``follow_mirror`` off, the present estimate's rows instead); while undecided and the ways' rows part by more than ``divergence`` over the horizon, the
+   them (on a way nobody took, with ``follow_mirror`` off, the present estimate's rows instead); while
+   undecided and the ways' rows part by more than ``divergence`` over the horizon, the
    rows are the present estimate's, q + ``hedge_velocity``·i·dt·v — neither way, and never the plan.
    The two cross-fade over ``blend_time``.
 5. **smoothing**: the rows are low-passed over time with a time constant ``row_smoothing`` and
