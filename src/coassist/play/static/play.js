@@ -263,6 +263,9 @@
       if (l.length) $("s-lat").textContent = `${l[Math.floor(l.length / 2)].toFixed(0)} ms`;
     }
   }
-  connect();
+  // Connect once every script of the page has run: a message that arrives while the parser still waits for a
+  // later script (study.js on a loaded server) would reach no handler of it, and a study's view is sent once.
+  if (document.readyState === "loading") document.addEventListener("DOMContentLoaded", connect);
+  else connect();
   requestAnimationFrame(loop);
 })();
