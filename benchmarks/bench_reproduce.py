@@ -4,7 +4,7 @@ Runs the whole pipeline (:func:`coassist.experiments.reproduce.run_reproduce`) o
 preset ``--repeats`` times with the reference path — every simulated trial alone, one
 batch-1 network call per trial and tick (``ReproduceConfig.lockstep=False``) — and as
 many times with the default lockstep path (one batched call per tick for every trial of
-a worker's group, :mod:`coassist.runtime.lockstep`), alternating the two so that a
+a worker's group, :mod:`coassist.runtime.batched_loops`), alternating the two so that a
 change in the machine's load falls on both. Prints, per stage and in total, the median
 and p99 wall time of each path and the ratio of their medians. The training, the
 dMPC study and the real-recordings stage do the same work on both paths; the ratio

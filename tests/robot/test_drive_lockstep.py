@@ -2,7 +2,7 @@
 
 The reference is :func:`drive` itself on the same configs: named intents must give the same
 Trial bit for bit (nothing is batched); a float32 model in the loop agrees to its batched
-kernels' rounding (tests/runtime/test_lockstep.py explains the bound), and is loaded once
+kernels' rounding (tests/runtime/test_batched_loops.py explains the bound), and is loaded once
 and called once per tick for every run.
 """
 
@@ -76,7 +76,7 @@ def test_a_model_drives_in_lockstep_to_its_rounding_with_one_call_per_tick(tiny_
     for a, b in zip(alone, together):
         assert a.n_samples == b.n_samples and a.meta.extra["ended"] == b.meta.extra["ended"]
         np.testing.assert_array_equal(a.fault, b.fault)
-        # float32 rounding of batched kernels (tests/runtime/test_lockstep.py), through the arm's loop
+        # float32 rounding of batched kernels (tests/runtime/test_batched_loops.py), through the arm's loop
         np.testing.assert_allclose(b.prediction, a.prediction, rtol=0, atol=1e-6)
         np.testing.assert_allclose(b.pose, a.pose, rtol=0, atol=1e-7)
 

@@ -16,7 +16,7 @@ import pytest
 
 from coassist.control.presets import CONTROLLER_KINDS
 from coassist.interfaces import Fault
-from coassist.runtime.lockstep import Loop
+from coassist.runtime.batched_loops import Loop
 from coassist.runtime.loop import run_loop
 from coassist.runtime.safety import SafetyLimits
 from coassist.runtime.world import Command

@@ -98,7 +98,7 @@ def cell_options(cfg, j: int, obj: str, controller: str, intent: str) -> dict[st
     the CPU time of two groups of 9 with MG or the nominal intent, 0.78× with the LSTM in the
     loop, 0.82× arbitrated). With a named intent,
     or a model on ONNX Runtime where its kernels are batch-invariant
-    (:mod:`coassist.runtime.lockstep`), the trials are the same bit for bit in any grouping."""
+    (:mod:`coassist.runtime.batched_loops`), the trials are the same bit for bit in any grouping."""
     from coassist.sim.world import NAMED_GROUP
 
     n_trials = len(cfg.application_users) * cfg.application_trials

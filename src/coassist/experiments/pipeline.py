@@ -143,7 +143,7 @@ class ReproduceConfig:
     seed: int = 0
     sweep_duration: float = 10.0
     # Trials with a model in the loop advance in lockstep, one network call per tick for all of them
-    # (coassist.runtime.lockstep); False: each trial alone, the reference path (benchmarks/bench_reproduce.py).
+    # (coassist.runtime.batched_loops); False: each trial alone, the reference path (benchmarks/bench_reproduce.py).
     lockstep: bool = True
 
     def __post_init__(self) -> None:

@@ -28,7 +28,7 @@ Exactness. Both evaluate the float32 network; their kernels sum in other orders,
 outputs differ by float32 rounding (≤ 1e-7 measured on outputs scaled to [−1, 1]; the
 tests allow 2.4e-5, the worst-case n·ε of the widest float32 dot product, the skip's 200
 terms), as torch's own
-kernels do between batch sizes (:mod:`coassist.runtime.lockstep`). For the same inputs
+kernels do between batch sizes (:mod:`coassist.runtime.batched_loops`). For the same inputs
 and batch size a session's output is deterministic. A float64 network (converted for an
 exactness check) is refused: ONNX Runtime's LSTM kernel is float32 only.
 

@@ -514,7 +514,7 @@ class ModelIntent:
     @property
     def batcher(self) -> Any:
         """``predict_batch(histories (B, history, 8))``, the model's on the chosen backend: serves
-        many trials' ticks in one network call (coassist.runtime.lockstep); row b is
+        many trials' ticks in one network call (coassist.runtime.batched_loops); row b is
         ``predict(histories[b])`` up to the float32 rounding of batched kernels. Stateless,
         so trials may share it."""
         return self._batcher

@@ -335,10 +335,10 @@ def drive(
 
 def drive_lockstep(configs: Sequence[DriveConfig]) -> list[Trial]:
     """Simulated drives (a simulated world such as ``"mujoco"``, each its own) run in lockstep
-    (:func:`coassist.runtime.lockstep.run_loops`): one network call per tick for the runs
+    (:func:`coassist.runtime.batched_loops.run_loops`): one network call per tick for the runs
     with the same model in the loop. Each trial is its :func:`drive` to the float32 rounding
     of batched network calls (bit for bit with a named intent); in ``configs``' order."""
-    from coassist.runtime.lockstep import run_loops
+    from coassist.runtime.batched_loops import run_loops
 
     for i, c in enumerate(configs):
         if not isinstance(c, DriveConfig) or not WORLDS[c.world].simulated or c.realtime_intent:

@@ -46,7 +46,7 @@ import numpy as np
 
 from coassist.data import Trial, TrialMeta
 from coassist.interfaces import FEATURES, Fault, TrialContext
-from coassist.runtime.lockstep import Loop
+from coassist.runtime.batched_loops import Loop
 from coassist.runtime.loop import LoopLog, TargetDwell, Termination, run_loop
 from coassist.runtime.safety import SafetyLimits
 from coassist.runtime.tick import ControlTick, Plan, TickConfig
@@ -155,7 +155,7 @@ class Episode:
 
     @property
     def loop(self) -> Loop:
-        """run_loop's arguments, for :func:`~coassist.runtime.lockstep.run_loops` (many episodes in lockstep)."""
+        """run_loop's arguments, for :func:`~coassist.runtime.batched_loops.run_loops` (many episodes in lockstep)."""
         return Loop(self.world, self.tick, self.n_max, self.termination)
 
     def run(

@@ -118,7 +118,7 @@ class WindowIntent:
         return self.accept(pred)
 
     # The two halves of :meth:`update`, for a runner that batches the network call over
-    # trials (coassist.runtime.lockstep): push the row, predict elsewhere, accept the result.
+    # trials (coassist.runtime.batched_loops): push the row, predict elsewhere, accept the result.
     @property
     def batcher(self) -> Any:
         """The object whose ``predict_batch(windows (B, history, 8)) -> (B, horizon, 2)`` serves

@@ -195,7 +195,7 @@ class LoopRun:
     feature row, None for the nominal intent, or :data:`LINK_LOST`), then
     ``over = act(k, intent)`` with ``intent = tick.predict(k, row)`` (or an answer
     computed elsewhere for that row, e.g. in one network call for many runs:
-    :mod:`coassist.runtime.lockstep`), which commands the world, logs row k and says
+    :mod:`coassist.runtime.batched_loops`), which commands the world, logs row k and says
     whether the run has ended. :meth:`log` gives the :class:`LoopLog`.
     """
 

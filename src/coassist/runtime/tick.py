@@ -323,7 +323,7 @@ class ControlTick:
         return self.decide(None if row is None else self.predict(k, row))
 
     # step() in three parts, so a runner can batch the intent's network call over many
-    # trials between sense() and decide() (coassist.runtime.lockstep); step() is their
+    # trials between sense() and decide() (coassist.runtime.batched_loops); step() is their
     # composition, so the per-trial and the batched loops run the same code.
     def sense(self, k: int, state: RobotState, upstream: Fault = Fault.NONE) -> tuple[float, ...] | None:
         """Stage 1 and the intent's feature row of tick k (8 floats, FEATURES order), or None
@@ -370,7 +370,7 @@ class ControlTick:
         return self.finish(self.controller.step(*self.control_inputs(intent)))
 
     # decide() in two parts around the controller, so a runner can serve many trials that
-    # share one controller in one call (controller.step_batch, coassist.runtime.lockstep).
+    # share one controller in one call (controller.step_batch, coassist.runtime.batched_loops).
     def control_inputs(self, intent: tuple[np.ndarray | None, Fault] | None) -> tuple[np.ndarray, ...]:
         """Stage 2 of the tick :meth:`sense` began: the controller's arguments (z (2d,), ref_h
         and ref_r (H, 2d), w (d,)) for the intent's answer; views of the tick's buffers, valid

@@ -1,6 +1,6 @@
 """Point-mass trials in lockstep as arrays: every stage of the tick for B trials at once.
 
-:func:`~coassist.runtime.lockstep.run_loops` runs B trials tick by tick, but each trial's
+:func:`~coassist.runtime.batched_loops.run_loops` runs B trials tick by tick, but each trial's
 world, operator, wrench pipeline, tick and safety layer still do their own scalar Python
 every tick (a few hundred microseconds per trial-tick); only the network and the shared
 controller are called once for all. Here the simulated :class:`~coassist.sim.point_mass.PointMassWorld`
@@ -43,7 +43,7 @@ it again from its spec on the reference path (:func:`coassist.sim.world.run_spec
 does), which handles every branch. The result is the reference path's trial either way.
 
 With a model in the loop the network's float32 rows depend on the batch (see
-:mod:`coassist.runtime.lockstep`): here the batch holds the same trials in the same order as
+:mod:`coassist.runtime.batched_loops`): here the batch holds the same trials in the same order as
 ``run_loops``' for as long as none leaves early, so the trials equal ``run_loops``' bit for
 bit; after a trial leaves, the others' rows may round differently on torch (ONNX Runtime's
 rows do not depend on the batch on the project's machines: there they stay bit for bit).
@@ -58,8 +58,8 @@ from typing import Any
 import numpy as np
 
 from coassist.control.arbitration import ArbitratedController, arbitrated_effort_batch, guard_key
+from coassist.runtime.batched_loops import Loop, intent_batcher, shared_controller
 from coassist.runtime.intent import WindowIntentBatch
-from coassist.runtime.lockstep import Loop, intent_batcher, shared_controller
 from coassist.runtime.loop import LoopLog, TargetDwellBatch
 from coassist.runtime.safety import SafetyLayerBatch
 from coassist.runtime.tick import human_reference

@@ -64,6 +64,7 @@ from coassist.control.presets import CONTROLLERS, get_preset, make_controller
 from coassist.data import Trial
 from coassist.interfaces import NETWORK_BACKENDS, IntentSource
 from coassist.model.impedance import ImpedanceModel
+from coassist.runtime.batched_loops import run_loops
 from coassist.runtime.episode import (
     ARRIVE_RADIUS,
     DWELL,
@@ -77,7 +78,6 @@ from coassist.runtime.episode import (
     run_episode,
 )
 from coassist.runtime.intent import WindowIntent
-from coassist.runtime.lockstep import run_loops
 from coassist.runtime.loop import LoopLog
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.wrench import WrenchPipeline
@@ -188,7 +188,7 @@ def build_trial(
 ) -> Episode:
     """:func:`run_trial`'s trial built, not run (same parameters): the
     :class:`~coassist.runtime.episode.Episode` of the point-mass world, for
-    :meth:`~coassist.runtime.episode.Episode.run` or :func:`~coassist.runtime.lockstep.run_loops`."""
+    :meth:`~coassist.runtime.episode.Episode.run` or :func:`~coassist.runtime.batched_loops.run_loops`."""
     if not isinstance(task, Task):
         raise ValueError(f"task must be a Task, got {type(task).__name__}")
     if not isinstance(operator, OperatorProfile):
@@ -349,12 +349,12 @@ def spec_episode(spec: TrialSpec, _controllers: dict | None = None, _sources: di
 def run_spec_lockstep(
     specs: Sequence[TrialSpec], on_result: Callable[[int, Trial], None] | None = None, *, arrays: bool = True
 ) -> list[Trial]:
-    """The trials of ``specs``, run in lockstep (:func:`coassist.runtime.lockstep.run_loops`):
+    """The trials of ``specs``, run in lockstep (:func:`coassist.runtime.batched_loops.run_loops`):
     one network call per tick for all the trials with the same model in the loop.
 
     Each trial equals its :func:`run_spec` bit for bit with a named intent (nominal,
     oracle, constant-velocity) and to the network's float32 rounding with a model
-    (batched kernels round differently; see :mod:`coassist.runtime.lockstep`).
+    (batched kernels round differently; see :mod:`coassist.runtime.batched_loops`).
     Controllers that keep state between ticks (``reset``: the online-α arbitration) are
     built per trial; the others are shared, like :func:`run_spec`'s cache.
 
@@ -364,7 +364,7 @@ def run_spec_lockstep(
     ``arrays``: run the trials that can as arrays (:mod:`coassist.sim.lockstep`: every stage
     of the tick for all of them at once, the same trials bit for bit); a trial in which
     something unusual happens (any fault flag) leaves that path and runs again here on
-    :func:`~coassist.runtime.lockstep.run_loops`. False: every trial on ``run_loops``.
+    :func:`~coassist.runtime.batched_loops.run_loops`. False: every trial on ``run_loops``.
     """
     controllers: dict = {}
     sources: dict = {}

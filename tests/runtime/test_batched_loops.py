@@ -1,4 +1,4 @@
-"""Lockstep runs (coassist.runtime.lockstep) against the per-trial loop, on the simulator's trials.
+"""Lockstep runs (coassist.runtime.batched_loops) against the per-trial loop, on the simulator's trials.
 
 The reference is the per-trial path itself (``run_loop`` on the same episode): nominal,
 oracle and any row-invariant batched source must give the same Trial bit for bit; a
@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from coassist.runtime.lockstep import Loop, run_loops
+from coassist.runtime.batched_loops import Loop, run_loops
 from coassist.runtime.loop import run_loop
 from coassist.scenario.constant_velocity import ConstantVelocityIntent
 from coassist.sim.world import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
@@ -300,7 +300,7 @@ def test_collect_per_trial_and_lockstep_options(tiny_model, tmp_path):
 
 
 def test_stacks_reuse_their_arrays_and_never_cast():
-    from coassist.runtime.lockstep import _Stacks
+    from coassist.runtime.batched_loops import _Stacks
 
     stacks = _Stacks()
     rng = np.random.default_rng(0)

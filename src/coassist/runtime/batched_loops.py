@@ -33,7 +33,7 @@ depend on it: torch's CPU kernels (MKL) take other code paths for other batch si
 ~3e-8, a 200-input linear layer's by ~1e-6 between batches 1, 2–3 and ≥ 4), so a run's
 predictions equal its per-trial ones to float32 rounding, and the trajectory follows
 them to that rounding times the loop's gain from prediction to pose (tests/runtime/
-test_lockstep.py measures both; in float64 the runs agree to 1e-12). ONNX Runtime's
+test_batched_loops.py measures both; in float64 the runs agree to 1e-12). ONNX Runtime's
 kernels (the simulated loop's default where the ``onnx`` extra is installed,
 :mod:`coassist.intent.onnx_network`) give a row the same bits at every batch size on the
 project's machines, so there a lockstep run is its per-trial run bit for bit (tested where
