@@ -23,7 +23,7 @@ Measures:
 4. per tick: one worker's lockstep group (every ``--workers``-th trial of the dataset),
    with the model and with the nominal intent, run in this process (one torch thread, as
    a worker), ``--repeats`` times: ``run_loops`` over the per-trial objects and as arrays
-   (:mod:`coassist.sim.lockstep`, the default; the same trials bit for bit), with the
+   (:mod:`coassist.sim.array_runner`, the default; the same trials bit for bit), with the
    model's network on torch and on ONNX Runtime (``TrialSpec.network``):
    wall and CPU seconds (CPU time is less inflated by other processes on a shared
    machine), the number of lockstep ticks and trial-ticks, µs per trial-tick and ms per
@@ -195,7 +195,7 @@ def cell_cpu_seconds(specs, repeats: int) -> tuple[float, float]:
 
 def group_seconds(specs, repeats: int, arrays: bool = True) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Wall and CPU seconds of running ``specs`` in lockstep in this process (``arrays``: as
-    arrays, coassist.sim.lockstep; else run_loops over the per-trial objects); lockstep ticks, trial-ticks."""
+    arrays, coassist.sim.array_runner; else run_loops over the per-trial objects); lockstep ticks, trial-ticks."""
     import torch
 
     from coassist.sim.world import run_spec_lockstep
@@ -324,7 +324,7 @@ def groups_section(with_model, nominal, workers: int, repeats: int) -> None:
                 [replace(s, network=network) for s in group], repeats, arrays
             )
             cpu_of[arrays, network] = np.median(g_cpu)
-            name = "as arrays (coassist.sim.lockstep)" if arrays else "run_loops over per-trial objects"
+            name = "as arrays (coassist.sim.array_runner)" if arrays else "run_loops over per-trial objects"
             if label == "model in the loop":
                 name += f", network on {network}"
             print(f"  {name}: {g_ticks} ticks, {g_trial_ticks} trial-ticks")

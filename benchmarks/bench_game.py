@@ -286,7 +286,7 @@ def bench_controllers(fresh_builds: int) -> list[dict]:
 
 
 def bench_group_steps(calls: int, B: int = 18) -> list[dict]:
-    """A lockstep group's guarded controller steps, as :mod:`coassist.sim.lockstep` takes them
+    """A lockstep group's guarded controller steps, as :mod:`coassist.sim.array_runner` takes them
     (B = 18, an application cell; the application preset): the shared game's ``step`` per
     row in a Python loop (the naive baseline) against ``effort_batch``; the online-α
     arbitration's ``step`` per run against ``arbitrated_effort_batch`` (each run its own α).

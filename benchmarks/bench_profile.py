@@ -135,7 +135,7 @@ _NETWORK = ("coassist/intent/network.py", "coassist/intent/onnx_network.py")
 _FEATURES = ("coassist/intent/features.py", "coassist/intent/batches.py", "coassist/runtime/intent.py")
 _POINT_MASS = (
     "coassist/sim/point_mass.py",
-    "coassist/sim/lockstep.py",
+    "coassist/sim/array_runner.py",
     "coassist/runtime/",
     "coassist/model/",
     "coassist/control/",

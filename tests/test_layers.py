@@ -227,7 +227,7 @@ def import_circles(src: Path) -> list[list[str]]:
 
 
 def test_no_modules_import_each_other_in_a_circle():
-    """Old code: sim.world <-> sim.lockstep (a lazy import of PointMassWorld) and robot.arms <->
+    """Old code: sim.world <-> sim.array_runner (a lazy import of PointMassWorld) and robot.arms <->
     robot.kinematics (a lazy import of ARMS) besides the known one; now only the known one."""
     circles = {frozenset(c) for c in import_circles(SRC)}
     new = [sorted(c) for c in circles - set(KNOWN_CIRCLES)]

@@ -93,17 +93,17 @@ def test_collect_in_one_process_runs_bounded_groups(monkeypatch):
     """Old code: one lockstep group of every trial, its arrays twice as large for 20 trials as for 10.
 
     Measured on the groups' own arrays (inputs and logs, (B, N, ·)), the memory that grew."""
-    from coassist.sim import lockstep as sim_lockstep
+    from coassist.sim import array_runner
 
     monkeypatch.setattr(sim_world, "NAMED_GROUP", JOB)
     batch_bytes: list[int] = []
-    init = sim_lockstep._Batch.__init__
+    init = array_runner._Batch.__init__
 
     def spy(self, loops) -> None:
         init(self, loops)
         batch_bytes.append(sum(v.nbytes for v in vars(self).values() if isinstance(v, np.ndarray)))
 
-    monkeypatch.setattr(sim_lockstep._Batch, "__init__", spy)
+    monkeypatch.setattr(array_runner._Batch, "__init__", spy)
     largest: dict[int, int] = {}
     later = JOB + 1  # a trial of the second group
     got: dict[int, Trial] = {}

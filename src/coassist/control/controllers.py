@@ -248,7 +248,7 @@ class _GuardedController:
         self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """The robot efforts of :meth:`step_batch`'s clean rows, as arrays, for a runner that
-        only goes on with ticks that carry no flag (:mod:`coassist.sim.lockstep`).
+        only goes on with ticks that carry no flag (:mod:`coassist.sim.array_runner`).
 
         Returns (u_r (B, n), clean (B,) bool): where ``clean[b]``, ``u_r[b]`` is
         ``step(z[b], ref_h[b], ref_r[b], wrench[b]).u_r`` bit for bit and that step carries

@@ -19,7 +19,7 @@ the zero-order-hold :class:`~coassist.model.impedance.ImpedanceModel` (M + m I, 
 entries are those of the identity and zeros). :func:`plant_step` is that step, written
 once for Python floats and numpy arrays alike (elementwise + and ×, the same IEEE
 operations in the same order), so the per-trial worlds (floats) and the point-mass
-array path (:mod:`coassist.sim.lockstep`, arrays of many trials) integrate the same
+array path (:mod:`coassist.sim.array_runner`, arrays of many trials) integrate the same
 plant bit for bit.
 """
 

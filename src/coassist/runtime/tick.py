@@ -98,7 +98,7 @@ def human_reference(positions: np.ndarray, x0: np.ndarray, inv_dt: float, out: n
     One tick or a batch of them alike: positions (..., m, 2) [m], x0 (..., 2) the start [m],
     inv_dt = 1/dt [1/s], out (..., ≥ m, 2d) [m, m/s] with d = out.shape[-1] // 2 (x-y first).
     The tick (:meth:`ControlTick.control_inputs`) and the point-mass array path
-    (:mod:`coassist.sim.lockstep`) both build ref_h here, so their rows are equal bit for bit.
+    (:mod:`coassist.sim.array_runner`) both build ref_h here, so their rows are equal bit for bit.
     """
     m = positions.shape[-2]
     d = out.shape[-1] // 2
@@ -308,7 +308,7 @@ class ControlTick:
 
     def references(self) -> TickReferences:
         """This run's grids (:class:`TickReferences`), for a runner that does the tick's
-        arithmetic for many runs at once (:mod:`coassist.sim.lockstep`)."""
+        arithmetic for many runs at once (:mod:`coassist.sim.array_runner`)."""
         views = []
         for a in (self._ref_ctrl, self._ref_pos, self._ref_xy, self._x0):
             view = a.view()

@@ -623,7 +623,7 @@ class WrenchPipelineBatch:
     non-finite reading, an implausible, jumping or saturated sample, or a new sample equal
     to the last accepted one while the frozen check is on (the pipeline may or may not call
     that stale yet). A caller runs such a row on the pipeline itself (the point-mass array
-    path, :mod:`coassist.sim.lockstep`, runs the whole trial again on the reference path); the
+    path, :mod:`coassist.sim.array_runner`, runs the whole trial again on the reference path); the
     batch's state for it is then no longer meaningful.
 
     Parameters

@@ -455,7 +455,7 @@ def _axis_force(K, b, e, e_delayed, damping, v, noise):
 class OperatorArmBatch:
     """:meth:`OperatorArm.force` for B arms at once, row for row the same floats: its array twin.
 
-    The point-mass array path (:mod:`coassist.sim.lockstep`) calls :meth:`force` once per
+    The point-mass array path (:mod:`coassist.sim.array_runner`) calls :meth:`force` once per
     tick for the rows still going; each row keeps its arm's ring of errors, filtered error
     ē and stiffness exactly as the arm would (the same formulas: :func:`_axis_force`, and
     the others written elementwise in the arm's order of operations).

@@ -19,7 +19,7 @@ One period k → k+1 of :meth:`PointMassWorld.apply`, given the robot's effort u
 
 :class:`PointMassWorldBatch` is its array twin: the same period for B worlds at once, row
 for row the same floats (the same helpers below for every formula both write, elementwise
-on floats or arrays), for the point-mass array path (:mod:`coassist.sim.lockstep`).
+on floats or arrays), for the point-mass array path (:mod:`coassist.sim.array_runner`).
 
 Determinism: every random draw comes from Generators of the trial seed
 (:mod:`coassist.scenario.seeds`: the trial's streams), drawn in the constructor in a fixed

@@ -30,7 +30,7 @@ The trial is assembled, run and logged by :mod:`coassist.runtime.episode`, as in
 other world. This module holds the trials by name (:class:`TrialSpec`), their assembly
 (:func:`build_trial`, :func:`spec_episode`) and their runs: one (:func:`run_trial`,
 :func:`run_spec`), a lockstep group (:func:`run_spec_lockstep`, on the point-mass array
-path of :mod:`coassist.sim.lockstep` where it can), many (:func:`run_trials`,
+path of :mod:`coassist.sim.array_runner` where it can), many (:func:`run_trials`,
 :func:`submit_trials`). The world itself (steps 4–5) is :mod:`coassist.sim.point_mass`; the
 worker processes and Ray are :mod:`coassist.sim.pool`; both modules' public names are
 importable from here too.
@@ -87,7 +87,7 @@ from coassist.scenario.operator import OperatorProfile
 from coassist.scenario.populations import POPULATIONS, population_profile
 from coassist.scenario.reference_intents import NominalIntent
 from coassist.scenario.tasks import OBSTACLES, TASKS, Task, task_for_seed
-from coassist.sim.lockstep import fast_path_eligible, run_point_mass_lockstep
+from coassist.sim.array_runner import fast_path_eligible, run_point_mass_lockstep
 
 # The world and the processes live in their own modules; their names stay importable from here.
 from coassist.sim.point_mass import PointMassWorld
@@ -361,7 +361,7 @@ def run_spec_lockstep(
     ``on_result(i, trial)`` is called as trial i ends, while the others go on; the trials
     are then not kept and the list returned is empty.
 
-    ``arrays``: run the trials that can as arrays (:mod:`coassist.sim.lockstep`: every stage
+    ``arrays``: run the trials that can as arrays (:mod:`coassist.sim.array_runner`: every stage
     of the tick for all of them at once, the same trials bit for bit); a trial in which
     something unusual happens (any fault flag) leaves that path and runs again here on
     :func:`~coassist.runtime.batched_loops.run_loops`. False: every trial on ``run_loops``.

@@ -1,4 +1,4 @@
-"""Point-mass trials as arrays (coassist.sim.lockstep) against the reference paths.
+"""Point-mass trials as arrays (coassist.sim.array_runner) against the reference paths.
 
 The references: every trial alone (``run_loop`` on its episode, :func:`run_spec`) and the
 lockstep runner of per-trial objects (``run_loops``, ``run_spec_lockstep(arrays=False)``).
@@ -21,7 +21,7 @@ from coassist.runtime.loop import run_loop
 from coassist.runtime.safety import SafetyLimits
 from coassist.runtime.world import Command
 from coassist.scenario.constant_velocity import ConstantVelocityIntent
-from coassist.sim.lockstep import fast_path_eligible, run_point_mass_lockstep
+from coassist.sim.array_runner import fast_path_eligible, run_point_mass_lockstep
 from coassist.sim.world import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
 
 from ..intent.conftest import write_loop_model
