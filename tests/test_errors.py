@@ -36,7 +36,7 @@ def test_every_coassist_exception_derives_from_the_base():
 
 
 def test_the_old_built_in_bases_still_catch():
-    from coassist.data.store import ManifestError
+    from coassist.data.datasets import ManifestError
     from coassist.registry import UnknownNameError
 
     with pytest.raises(ValueError):

@@ -34,8 +34,7 @@ from typer.testing import CliRunner
 from coassist import _io
 from coassist._io import OutputBusyError, OutputLock, atomic_write, atomic_write_bytes, partial_folder, remove_stale
 from coassist.cli import app
-from coassist.data import read_dataset, write_dataset
-from coassist.data import store as store_mod
+from coassist.data import datasets, read_dataset, write_dataset
 
 from ..intent.conftest import TINY, labeled, make_trial
 
@@ -141,7 +140,7 @@ def assert_old(folder: Path) -> None:
 @pytest.mark.parametrize("at", [f"trial {i}" for i in range(5)] + ["manifest", "swap"])
 def test_overwrite_interrupted_at_each_step_keeps_the_old_dataset(old_dataset, monkeypatch, at):
     calls = {"n": 0}
-    real_write_trial, real_manifest, real_swap = store_mod.write_trial, store_mod._write_manifest, _io.swap_in
+    real_write_trial, real_manifest, real_swap = datasets.write_trial, datasets._write_manifest, _io.swap_in
 
     def write_trial(trial, path):
         if at == f"trial {calls['n']}":
@@ -159,8 +158,8 @@ def test_overwrite_interrupted_at_each_step_keeps_the_old_dataset(old_dataset, m
             raise RuntimeError("injected")
         return real_swap(staging, dest)
 
-    monkeypatch.setattr(store_mod, "write_trial", write_trial)
-    monkeypatch.setattr(store_mod, "_write_manifest", manifest)
+    monkeypatch.setattr(datasets, "write_trial", write_trial)
+    monkeypatch.setattr(datasets, "_write_manifest", manifest)
     monkeypatch.setattr(_io, "swap_in", swap)
     with pytest.raises(RuntimeError, match="injected"):
         write_dataset(trials(5, seed0=100), old_dataset, "NEW", overwrite=True)
@@ -175,16 +174,16 @@ def test_overwrite_killed_mid_way_keeps_the_old_dataset(old_dataset, new_source,
     new files go to a folder beside, so any kill leaves the old dataset whole."""
     run_child(f"""
         import os, signal
-        from coassist.data import store
-        new = store.read_dataset({str(new_source)!r}).trials
-        real, n = store.write_trial, [0]
+        from coassist.data import datasets
+        new = datasets.read_dataset({str(new_source)!r}).trials
+        real, n = datasets.write_trial, [0]
         def write_trial(trial, path):
             if n[0] == {after_files}:
                 {KILL}
             n[0] += 1
             return real(trial, path)
-        store.write_trial = write_trial
-        store.write_dataset(new, {str(old_dataset)!r}, "NEW", overwrite=True)
+        datasets.write_trial = write_trial
+        datasets.write_dataset(new, {str(old_dataset)!r}, "NEW", overwrite=True)
     """)
     assert_old(old_dataset)
     assert len(leftovers(old_dataset.parent)) == 1  # the dead writer's .new folder ...
@@ -441,16 +440,16 @@ def test_collect_killed_after_two_trials_continues_and_matches_an_unbroken_run(t
     out = tmp_path / "D"
     run_child(f"""
         import os, signal
-        from coassist.data import store
+        from coassist.data import datasets
         from coassist.sim.collect import collect_dataset
-        real, n = store.DatasetWriter.add, [0]
+        real, n = datasets.DatasetWriter.add, [0]
         def add(self, index, trial):
             path = real(self, index, trial)
             n[0] += 1
             if n[0] == 2:
                 {KILL}
             return path
-        store.DatasetWriter.add = add
+        datasets.DatasetWriter.add = add
         collect_dataset({str(out)!r}, workers=1, progress=False, **{COLLECT!r})
     """)
     assert not out.exists()

@@ -174,7 +174,7 @@ def intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA
     import warnings
 
     from coassist.data import RecordingError, TrialFileError
-    from coassist.data.store import ManifestError
+    from coassist.data.datasets import ManifestError
     from coassist.intent import load_trials
 
     def skipped(where: str, reason: str) -> None:

@@ -28,7 +28,7 @@ def print_forces(folder: Path) -> None:
     """The hand's and the robot's f_RMS (eq. 5.9) over a dataset: how much the robot helped."""
     import numpy as np
 
-    from coassist.data.store import manifest_files, read_dataset_trial
+    from coassist.data.datasets import manifest_files, read_dataset_trial
     from coassist.metrics import f_rms
 
     # one trial in memory at a time: the summary's memory does not grow with the dataset

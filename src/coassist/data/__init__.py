@@ -1,13 +1,6 @@
 """Trial logs, datasets on disk, and the loader for real UR5 recordings."""
 
-from coassist.data.rosbag_csv import (
-    RecordingError,
-    RecordingWarning,
-    default_real_data,
-    load_ros_trial,
-    load_ros_user,
-)
-from coassist.data.store import (
+from coassist.data.datasets import (
     Dataset,
     DatasetWriter,
     TrialFileError,
@@ -16,6 +9,13 @@ from coassist.data.store import (
     read_trial,
     write_dataset,
     write_trial,
+)
+from coassist.data.rosbag_csv import (
+    RecordingError,
+    RecordingWarning,
+    default_real_data,
+    load_ros_trial,
+    load_ros_user,
 )
 from coassist.data.trial import Trial, TrialMeta
 

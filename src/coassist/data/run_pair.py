@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from coassist._io import fsync_dir, remove_stale, temp_name
-from coassist.data.store import write_trial
+from coassist.data.datasets import write_trial
 from coassist.data.trial import Trial
 
 __all__ = ["write_run_pair"]

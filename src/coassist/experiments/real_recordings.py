@@ -49,7 +49,7 @@ def run_real_recordings(ws: Workspace, real: str | None) -> RealRecordingsResult
     if real is None:
         return RealRecordingsResult(cfg.real_intent_preset, skipped="no recordings found")
     from coassist.data import load_ros_user
-    from coassist.data.store import write_dataset
+    from coassist.data.datasets import write_dataset
     from coassist.intent import evaluate_model, load_model, load_trials
 
     a = ws.train(

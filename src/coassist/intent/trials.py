@@ -22,8 +22,8 @@ from typing import NamedTuple
 
 from coassist.data import RecordingError, Trial, load_ros_trial, read_dataset
 from coassist.data.bags import bag_paths, is_bag, load_bag_trial
+from coassist.data.datasets import MANIFEST_NAME
 from coassist.data.rosbag_csv import recording_folders
-from coassist.data.store import MANIFEST_NAME
 
 __all__ = ["LabeledTrial", "load_trials"]
 

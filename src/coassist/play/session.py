@@ -1,7 +1,7 @@
 """A person's session: the thesis' protocol of trials, each run through the control tick and saved.
 
 One session belongs to one user id and one folder, ``<out>/<user>/``, which is a
-dataset (:mod:`coassist.data.store`: ``trial_*.parquet`` + ``manifest.json``, id
+dataset (:mod:`coassist.data.datasets`: ``trial_*.parquet`` + ``manifest.json``, id
 ``play-<user>``) that ``coassist train`` reads as it is. Restarting ``coassist play``
 with the same folder and user resumes the session: trials are appended.
 
@@ -43,7 +43,7 @@ from coassist._checks import check_int, check_positive_scalar
 from coassist.config import APPLICATION_PRESET
 from coassist.control.presets import CONTROLLERS, FORMER_NAMES, get_preset, make_controller
 from coassist.data import Trial, append_to_dataset, write_dataset
-from coassist.data.store import MANIFEST_NAME, manifest_files, read_dataset
+from coassist.data.datasets import MANIFEST_NAME, manifest_files, read_dataset
 from coassist.interfaces import FEATURES, fault_names
 from coassist.metrics import f_rms, precision_sigma
 from coassist.play.hand import BrowserHand, SpringDamper

@@ -11,7 +11,7 @@ from typing import Any
 
 from coassist._checks import check_int
 from coassist.data import DatasetWriter
-from coassist.data.store import FORMAT_VERSION, MANIFEST_NAME, digest
+from coassist.data.datasets import FORMAT_VERSION, MANIFEST_NAME, digest
 from coassist.scenario.intent_registry import INTENT_SOURCES
 from coassist.sim.world import SubmittedTrials, TrialSpec, run_trials, spec_episode
 

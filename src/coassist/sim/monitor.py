@@ -108,7 +108,7 @@ def plot_trial(trial: Trial, out: str | Path, *, n_predictions: int = 6, title: 
 def load_for_show(path: str | Path, index: int = 0) -> Trial:
     """A trial from a trial file, a dataset folder (its ``index``-th trial) or a ROS CSV recording folder."""
     from coassist.data import load_ros_trial, read_trial
-    from coassist.data.store import read_dataset_trial
+    from coassist.data.datasets import read_dataset_trial
 
     path = Path(path)
     if path.is_dir():

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from coassist.data import append_to_dataset, read_dataset, write_dataset
-from coassist.data.store import MANIFEST_NAME, manifest_files
+from coassist.data.datasets import MANIFEST_NAME, manifest_files
 from coassist.play.session import PlayConfig
 from coassist.scenario.tasks import task_for_seed
 from coassist.study.calibration import CalibrationFailed, FitJob, fit_job, model_hashes, person_model_folder

@@ -58,7 +58,7 @@ from typing import Any
 
 import coassist
 from coassist._io import OutputLock, atomic_write_bytes, atomic_write_text, fsync_dir
-from coassist.data.store import MANIFEST_NAME
+from coassist.data.datasets import MANIFEST_NAME
 from coassist.errors import CoassistError
 from coassist.scenario import intent_registry
 from coassist.study.design import blinding_labels, latin_square_rows

@@ -43,7 +43,7 @@ import numpy as np
 
 from coassist.analysis.paired import holm_family, paired_comparison
 from coassist.data import read_dataset
-from coassist.data.store import MANIFEST_NAME
+from coassist.data.datasets import MANIFEST_NAME
 from coassist.study.measures import MEASURES, trial_measures
 from coassist.study.questionnaires import TLX_ITEMS, Form, form_for, raw_tlx
 from coassist.study.stats import order_effect
