@@ -194,8 +194,8 @@ between_conditions = 0.0
 def _run_study(root: Path, world: str, timing: str) -> dict[str, list]:
     """The plan's simulated participant S01, run to the end; the trials of each condition."""
     from coassist.data import read_dataset
+    from coassist.study.folder import init_study
     from coassist.study.runner import ParticipantRun
-    from coassist.study.store import init_study
 
     root.mkdir(parents=True)
     (root / "plan.toml").write_text(STUDY.format(world=world, timing=timing))

@@ -61,8 +61,8 @@ def comparison_file(tmp_path: Path) -> Path:
 def _finished_study(tmp_path_factory) -> Path:
     """A comparison of three conditions, one measured trial each, no practice, run to the end by simulated
     participant S01 (about a second): tests copy it (:func:`finished_study`) before they edit it."""
+    from coassist.study.folder import init_study
     from coassist.study.runner import ParticipantRun
-    from coassist.study.store import init_study
 
     root = tmp_path_factory.mktemp("finished")
     study = init_study(comparison_plan(root / "plans", per_condition=1, practice=0), root / "study")
@@ -124,8 +124,8 @@ def calibrated_plan(folder: Path, *, trials: int = 3, dwell: float = 1.0, rest: 
 def _calibrated_study(tmp_path_factory) -> Path:
     """The calibrated comparison run to its end by simulated participant S01 (seconds): tests copy it
     (:func:`calibrated_study`) before they edit it."""
+    from coassist.study.folder import init_study
     from coassist.study.runner import ParticipantRun
-    from coassist.study.store import init_study
 
     root = tmp_path_factory.mktemp("calibrated")
     study = init_study(calibrated_plan(root / "plans"), root / "study")

@@ -12,8 +12,8 @@ from typer.testing import CliRunner
 
 from coassist.cli import app
 from coassist.data import read_dataset
+from coassist.study.folder import StudyFolder, StudyFolderError, init_study
 from coassist.study.runner import ParticipantRun
-from coassist.study.store import StudyFolder, StudyFolderError, init_study
 
 from .conftest import comparison_plan
 
@@ -57,7 +57,7 @@ def test_a_field_that_changes_what_participants_do_is_not_amended(finished_study
     ]:
         amended = _amended(finished_study, old, new)
         with pytest.raises(StudyFolderError) as err:
-            from coassist.study.store import amend_study
+            from coassist.study.folder import amend_study
 
             amend_study(finished_study, amended, "why not")
         assert str(err.value).startswith(f"{amended}: {field} cannot be amended") and "\n" not in str(err.value)
@@ -70,7 +70,7 @@ def test_a_field_that_changes_what_participants_do_is_not_amended(finished_study
 def test_the_stop_criterion_of_an_iterative_study_can_be_amended(tmp_path):
     """The issue's case: the criterion's horizon is a safe field (it changes no finished trial)."""
     pytest.importorskip("torch", reason="an iterative study needs the learn extra")
-    from coassist.study.store import amend_study
+    from coassist.study.folder import amend_study
 
     plan = tmp_path / "plans" / "iter.toml"
     plan.parent.mkdir()

@@ -19,9 +19,9 @@ import pytest
 pytest.importorskip("starlette", reason="the study's page needs the web extra (pip install 'coassist[web]')")
 sync_api = pytest.importorskip("playwright.sync_api", reason="the browser test needs Playwright (the dev extra)")
 
+from coassist.study.folder import init_study  # noqa: E402
 from coassist.study.report import write_report  # noqa: E402
 from coassist.study.runner import ParticipantRun  # noqa: E402
-from coassist.study.store import init_study  # noqa: E402
 
 from ..chromium import CHROMIUM, CHROMIUM_ARGS, needs_chromium  # noqa: E402
 from .conftest import calibrated_plan, comparison_plan  # noqa: E402

@@ -28,11 +28,11 @@ from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate, ident
 from coassist.scenario.person_model import PERSON_MODEL_FILE, fit_person, read_person_model
 from coassist.scenario.tasks import task_for_seed
 from coassist.study.calibration import ARM_SE_MAX, FitJob, fit_job, measured_arm
+from coassist.study.folder import StudyFolder, StudyFolderError, init_study
 from coassist.study.plan import CALIBRATED, PlanError, plan_from_text
 from coassist.study.protocols import participant_steps, trial_seed_base
 from coassist.study.report import study_summary, write_report
 from coassist.study.runner import ParticipantRun
-from coassist.study.store import StudyFolder, StudyFolderError, init_study
 
 from .conftest import CALIBRATED as CALIBRATED_PLAN
 from .conftest import calibrated_plan

@@ -14,8 +14,8 @@ from typer.testing import CliRunner
 
 from coassist.cli import app
 from coassist.data import read_dataset
+from coassist.study.folder import StudyFolder, StudyFolderError
 from coassist.study.runner import ParticipantRun
-from coassist.study.store import StudyFolder, StudyFolderError
 
 BLOCKS = ("assistive", "impedance", "manual")
 

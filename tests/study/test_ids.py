@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
+from coassist.study.folder import StudyFolderError, init_study
 from coassist.study.ids import DEFAULT_ID_PATTERN, IdError, check_id, looks_like_date, looks_like_name
-from coassist.study.store import StudyFolderError, init_study
 
 from .conftest import comparison_plan
 

@@ -19,8 +19,8 @@ pytest.importorskip("starlette", reason="the study's page needs the web extra")
 ws_client = pytest.importorskip("websockets.sync.client", reason="the test client needs websockets (the web extra)")
 
 from coassist.data import read_dataset  # noqa: E402
+from coassist.study.folder import init_study  # noqa: E402
 from coassist.study.runner import ParticipantRun  # noqa: E402
-from coassist.study.store import init_study  # noqa: E402
 
 from .conftest import comparison_plan  # noqa: E402
 from .pagedriver import SECRETS, OperatorPath  # noqa: E402

@@ -15,10 +15,10 @@ from coassist.cli import app
 from coassist.data import read_dataset
 from coassist.registry import Registry
 from coassist.scenario import intent_registry
+from coassist.study.folder import StudyFolder, init_study
 from coassist.study.plan import PlanError, person_intents, plan_from_text
 from coassist.study.preflight import bytes_per_tick, training_windows
 from coassist.study.runner import ParticipantRun
-from coassist.study.store import StudyFolder, init_study
 
 from .conftest import comparison_plan
 

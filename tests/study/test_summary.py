@@ -59,8 +59,8 @@ PARTICIPANT_KEYS = [
 @pytest.fixture(scope="module")
 def study(tmp_path_factory) -> Path:
     """Four simulated participants through the three conditions, one measured trial each (a few seconds)."""
+    from coassist.study.folder import init_study
     from coassist.study.runner import ParticipantRun
-    from coassist.study.store import init_study
 
     root = tmp_path_factory.mktemp("summary")
     s = init_study(comparison_plan(root / "plans", per_condition=1, practice=0), root / "study")

@@ -16,8 +16,8 @@ from safetensors.numpy import load_file  # noqa: E402
 
 from coassist.cli import app  # noqa: E402
 from coassist.data import read_dataset  # noqa: E402
+from coassist.study.folder import init_study  # noqa: E402
 from coassist.study.runner import ParticipantRun  # noqa: E402
-from coassist.study.store import init_study  # noqa: E402
 
 TRAINING = """
 [training]

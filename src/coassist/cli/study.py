@@ -29,8 +29,8 @@ def study_init(
 ) -> None:
     """Check a study plan whole (every field, model and calibration; the session's time and memory) and make its
     study folder (the plan, its hash, the blinding key, the Latin square)."""
+    from coassist.study.folder import StudyFolderError, init_study
     from coassist.study.plan import PlanError
-    from coassist.study.store import StudyFolderError, init_study
 
     folder_out(out, "--out")
     try:
@@ -69,8 +69,8 @@ def study_amend(
 ) -> None:
     """Amend the plan's safe fields (rests, the stop criterion, planned participants, id pattern, training threads)
     after trials have run; the change and its reason are recorded, the old plan kept in plans/."""
+    from coassist.study.folder import StudyFolderError, amend_study
     from coassist.study.plan import PlanError
-    from coassist.study.store import StudyFolderError, amend_study
 
     try:
         amendment = amend_study(folder, plan, reason)
@@ -114,9 +114,9 @@ def study_run(
 ) -> None:
     """Run a participant's steps in their recorded order (continuing where they stopped)."""
     from coassist._io import OutputBusyError
+    from coassist.study.folder import StudyFolder, StudyFolderError
     from coassist.study.plan import PlanError, is_real_arm
     from coassist.study.runner import ParticipantRun, simulated_ids
-    from coassist.study.store import StudyFolder, StudyFolderError
 
     if not 0 <= port <= 65535:
         fail(f"--port must be 0..65535, got {port}", 2)
@@ -184,9 +184,9 @@ def study_report(
     out: Path = typer.Option(None, help="Folder for report.html and summary.json (default: <folder>/report)."),
 ) -> None:
     """The study's report: per participant and pooled measures, paired tests, questionnaires, order effects."""
+    from coassist.study.folder import StudyFolderError
     from coassist.study.plan import PlanError
     from coassist.study.report import write_report
-    from coassist.study.store import StudyFolderError
 
     if out is not None:
         folder_out(out, "--out")

@@ -5,7 +5,7 @@
 - :mod:`coassist.study.ids`: pseudonymous participant ids by construction.
 - :mod:`coassist.study.design`: the balanced Latin square and the blinding labels.
 - :mod:`coassist.study.protocols`: comparison, iterative (Alg. 4.1), transfer (Alg. 4.2), online, as step lists.
-- :mod:`coassist.study.store`: the study folder; resumable, lossless, cross-checked as evidence; amendments.
+- :mod:`coassist.study.folder`: the study folder; resumable, lossless, cross-checked as evidence; amendments.
 - :mod:`coassist.study.session`: the trials on ``coassist play``'s page (blinded) or with a simulated hand.
 - :mod:`coassist.study.training`: the study's models, trained in the background as ``coassist train`` does.
 - :mod:`coassist.study.questionnaires`: raw NASA-TLX and Likert items.

@@ -41,7 +41,7 @@ with that arm: eq. 4.1 holds under any controller).
 Each task's folder names the participant as its ``default`` person, so it applies whatever name
 the world gives the person at the handle. The study records the SHA-256 of each task's
 ``person-model.json`` in the fit's progress line and checks it before every trial that uses it
-and on every run (:meth:`coassist.study.store.ParticipantFolder.audit`). The fit is
+and on every run (:meth:`coassist.study.folder.ParticipantFolder.audit`). The fit is
 deterministic: a fit cut off by a kill is fitted again, the same.
 """
 

@@ -14,7 +14,7 @@ every position twice and every ordered pair next to each other exactly twice.
 
 Participants take the rows in the order they first run (participant p: row p mod rows),
 so a study of a whole number of squares is balanced; the order each one got is recorded
-in the study folder (:mod:`coassist.study.store`), never recomputed.
+in the study folder (:mod:`coassist.study.folder`), never recomputed.
 
 Blinding: the page shows a condition by its label only, A, B, C… in a seeded random
 assignment of labels to conditions (not the plan's order), kept in the study folder.

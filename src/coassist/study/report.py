@@ -20,8 +20,8 @@ import numpy as np
 
 from coassist._io import atomic_write_text
 from coassist._render import png_data, render
+from coassist.study.folder import StudyFolder
 from coassist.study.measures import MEASURES
-from coassist.study.store import StudyFolder
 from coassist.study.summarise import (
     answer_value,
     calibrated_blocks,

@@ -3,7 +3,7 @@
 :class:`ParticipantRun` registers the participant (number and Latin-square row, in order
 of arrival), fixes their steps at the first run (:func:`coassist.study.protocols.participant_steps`,
 written to ``order.json``), and runs the steps not yet on record
-(:class:`~coassist.study.store.ParticipantFolder`), each committed as it finishes:
+(:class:`~coassist.study.folder.ParticipantFolder`), each committed as it finishes:
 
 - ``trial``: through :class:`~coassist.study.session.StudySession`, on the page (the person
   presses Start; an aborted trial, or one whose hand left, is shown again) or with the
@@ -45,10 +45,7 @@ from coassist.data.datasets import MANIFEST_NAME, manifest_files
 from coassist.play.session import PlayConfig
 from coassist.scenario.tasks import task_for_seed
 from coassist.study.calibration import CalibrationFailed, FitJob, fit_job, model_hashes, person_model_folder
-from coassist.study.plan import is_real_arm
-from coassist.study.protocols import CALIBRATION_BLOCK, calibration_steps, participant_steps
-from coassist.study.questionnaires import form_for
-from coassist.study.store import (
+from coassist.study.folder import (
     ParticipantFolder,
     StudyFolder,
     StudyFolderError,
@@ -57,6 +54,9 @@ from coassist.study.store import (
     trial_record,
     utc_now,
 )
+from coassist.study.plan import is_real_arm
+from coassist.study.protocols import CALIBRATION_BLOCK, calibration_steps, participant_steps
+from coassist.study.questionnaires import form_for
 from coassist.study.training import BackgroundTraining, TrainJob, model_ready, train_command
 
 __all__ = ["ParticipantRun", "simulated_ids"]

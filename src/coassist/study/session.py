@@ -104,7 +104,7 @@ class StudySession(PlaySession):
 
     # ------------------------------------------------------------------ PlaySession's hooks
     def _resume(self) -> None:
-        """The study folder keeps the trials (coassist.study.store), not a play folder."""
+        """The study folder keeps the trials (coassist.study.folder), not a play folder."""
 
     def trial_seed(self, index: int) -> int:
         """The step's seed (the one its trial is recorded with), not the session's count: a resumed run draws

@@ -23,10 +23,10 @@
 - what a sample this size can and cannot show (:func:`sample_limits`), said plainly.
 
 The folder is read as evidence: the participant table and every participant's log are
-cross-checked first (:meth:`~coassist.study.store.StudyFolder.check_table`,
-:meth:`~coassist.study.store.ParticipantFolder.audit`), the answers checked against the
+cross-checked first (:meth:`~coassist.study.folder.StudyFolder.check_table`,
+:meth:`~coassist.study.folder.ParticipantFolder.audit`), the answers checked against the
 plan's questionnaire as they are read, and a trial file that cannot be read is one
-:class:`~coassist.study.store.StudyFolderError` line naming it: a summary never averages a
+:class:`~coassist.study.folder.StudyFolderError` line naming it: a summary never averages a
 trial twice, drops a condition or a participant without saying so, or takes an answer off
 its scale.
 """
@@ -44,10 +44,10 @@ import numpy as np
 from coassist.analysis.paired import holm_family, paired_comparison
 from coassist.data import read_dataset
 from coassist.data.datasets import MANIFEST_NAME
+from coassist.study.folder import StudyFolder, StudyFolderError, finite_json
 from coassist.study.measures import MEASURES, trial_measures
 from coassist.study.questionnaires import TLX_ITEMS, Form, form_for, raw_tlx
 from coassist.study.stats import order_effect
-from coassist.study.store import StudyFolder, StudyFolderError, finite_json
 from coassist.study.summary import (
     AnswerStat,
     ArmFit,

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from coassist.analysis.paired import PairedComparison
-from coassist.study.store import finite_json
+from coassist.study.folder import finite_json
 
 __all__ = [
     "AnswerStat",
@@ -44,7 +44,7 @@ __all__ = [
 
 def finite_number(v: Any) -> float | None:
     """``v``, None where it is missing or not a finite number (what the JSON holds as null); an int stays
-    an int (as :func:`~coassist.study.store.finite_json` leaves it: the JSON writes ``3``, not ``3.0``)."""
+    an int (as :func:`~coassist.study.folder.finite_json` leaves it: the JSON writes ``3``, not ``3.0``)."""
     v = finite_json(v)
     if v is None or isinstance(v, int):
         return v

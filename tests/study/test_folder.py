@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from coassist.data import read_dataset
+from coassist.study.folder import StudyFolder, StudyFolderError, init_study
 from coassist.study.runner import ParticipantRun
-from coassist.study.store import StudyFolder, StudyFolderError, init_study
 
 from .conftest import comparison_plan
 
