@@ -67,7 +67,7 @@ def train_small_model(folder: Path) -> str:
     from coassist.intent import LabeledTrial
     from coassist.intent.presets import MODEL_PRESETS
     from coassist.intent.training import train_model, write_model
-    from coassist.sim.world import TrialSpec, run_spec
+    from coassist.sim.trial_runner import TrialSpec, run_spec
 
     specs = [
         TrialSpec(task=t, seed=s, user=s % 3, preset="thesis-evaluation-dm")
@@ -86,7 +86,7 @@ def network_ticks(model_path: str, batch: int, ticks: int) -> tuple[np.ndarray, 
     import torch
 
     from coassist.intent import load_model_intent
-    from coassist.sim.world import TrialSpec, run_spec
+    from coassist.sim.trial_runner import TrialSpec, run_spec
 
     torch.set_num_threads(1)
     source = load_model_intent(model_path, backend="torch")
@@ -117,7 +117,7 @@ def dataset_seconds(specs, workers: int, lockstep: bool, repeats: int, kept_pool
     call, or (``kept_pool``) on one pool started and warmed (a small run) before the timing."""
     import contextlib
 
-    from coassist.sim.world import run_trials, worker_pool
+    from coassist.sim.trial_runner import run_trials, worker_pool
 
     out = []
     with worker_pool(workers) if kept_pool else contextlib.nullcontext() as pool:
@@ -176,7 +176,7 @@ def cell_cpu_seconds(specs, repeats: int) -> tuple[float, float]:
     workers) and as one group."""
     import torch
 
-    from coassist.sim.world import run_spec_lockstep
+    from coassist.sim.trial_runner import run_spec_lockstep
 
     torch.set_num_threads(1)
     run_spec_lockstep(specs[:1])  # warm: imports, the game's gains, the model's first call
@@ -198,7 +198,7 @@ def group_seconds(specs, repeats: int, arrays: bool = True) -> tuple[np.ndarray,
     arrays, coassist.sim.array_runner; else run_loops over the per-trial objects); lockstep ticks, trial-ticks."""
     import torch
 
-    from coassist.sim.world import run_spec_lockstep
+    from coassist.sim.trial_runner import run_spec_lockstep
 
     torch.set_num_threads(1)
     run_spec_lockstep(specs[:2], arrays=arrays)  # warm: imports, the game's gains, the model's first call

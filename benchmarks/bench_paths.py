@@ -36,7 +36,7 @@ from coassist.scenario.objects import get_object  # noqa: E402
 from coassist.scenario.operator import operator_profile  # noqa: E402
 from coassist.scenario.path_hypotheses import FilterSettings, PathHypothesesIntent, PersonShape  # noqa: E402
 from coassist.scenario.tasks import task_for_seed  # noqa: E402
-from coassist.sim.world import build_trial  # noqa: E402
+from coassist.sim.trial_runner import build_trial  # noqa: E402
 
 
 class _Recording(RecordsWindows, PathHypothesesIntent):

@@ -42,7 +42,7 @@ from coassist.scenario.person_model import (
     fit_person,  # noqa: E402
 )
 from coassist.scenario.tasks import task_for_seed  # noqa: E402
-from coassist.sim.world import build_trial  # noqa: E402
+from coassist.sim.trial_runner import build_trial  # noqa: E402
 
 
 class _Recording(RecordsWindows, PersonPathsIntent):

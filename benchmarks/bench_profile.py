@@ -12,7 +12,7 @@ payloads a worker sends back): run it before and after a change that must keep t
 - ``pm-mg``: MG (manual guidance, nominal intent), the application's board cell: 24 trials;
 - ``pm-lstm`` / ``pm-paths`` / ``pm-person``: the arbitrated controller with ``lstm-intent``,
   the path hypotheses or the person model, the same 24 trials, one lockstep group
-  (:func:`coassist.sim.world.run_spec_lockstep`, as a worker's job);
+  (:func:`coassist.sim.trial_runner.run_spec_lockstep`, as a worker's job);
 - ``mj-lstm`` / ``mj-person``: the MuJoCo UR5's job of that source
   (:func:`coassist.experiments.ablation.mujoco_task`) for the board's cell, 24 trials; the
   person model's job first drives its 12 probe trials on the arm and fits the model there.
@@ -62,7 +62,7 @@ def run_job(kind: str, run: Path) -> dict:
     from coassist.experiments.pipeline import REPRODUCE_PRESETS, Workspace
     from coassist.sim.collect import dataset_specs
     from coassist.sim.pool import trial_payload
-    from coassist.sim.world import run_spec_lockstep
+    from coassist.sim.trial_runner import run_spec_lockstep
 
     torch.set_num_threads(1)
     cfg = REPRODUCE_PRESETS.lookup("default")

@@ -57,7 +57,7 @@ LONGEST_FIRST: tuple[tuple[str, float], ...] = (
     ("tests/experiments/test_source_training.py::", 12.4),  # a module fixture
     ("tests/sim/test_ray_backend.py::", 9.9),
     ("tests/test_readme.py::test_fast_blocks_run", 9.3),
-    ("tests/sim/test_world.py::test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone", 9.2),
+    ("tests/sim/test_trial_runner.py::test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone", 9.2),
     ("tests/study/test_folder.py::test_kill_9_mid_trial_then_resume_keeps_every_finished_trial_and_the_order", 8.5),
     ("tests/play/test_browser.py::", 8.0),  # Chromium
 )

@@ -172,7 +172,7 @@ def test_the_walk_sees_the_package():
         "coassist.model.impedance",
         "coassist.metrics",
         "coassist.scenario.objects",
-        "coassist.sim.world",
+        "coassist.sim.trial_runner",
         "coassist.runtime.wrench",
         "coassist.runtime.safety",
     ):
@@ -184,7 +184,7 @@ def test_the_walk_sees_the_package():
         "coassist.metrics.prediction_errors",
         "coassist.scenario.objects.CarriedObject",
         "coassist.scenario.objects.ForceSensor",
-        "coassist.sim.world.run_trial",
+        "coassist.sim.trial_runner.run_trial",
         "coassist.runtime.wrench.payload_wrench",
     } <= set(checked)
     assert len(checked) >= 12

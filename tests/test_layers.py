@@ -122,7 +122,7 @@ def test_the_checker_catches_upward_lazy_and_sideways_imports(tmp_path):
     src = tmp_path / "coassist"
     (src / "control").mkdir(parents=True)
     (src / "intent").mkdir()
-    (src / "control" / "law.py").write_text("def f():\n    from coassist.sim import world\n")
+    (src / "control" / "law.py").write_text("def f():\n    from coassist.sim import trial_runner\n")
     (src / "intent" / "net.py").write_text("from coassist.runtime import tick\nfrom coassist.model import impedance\n")
     bad = layering_violations(src)
     assert len(bad) == 2
@@ -136,14 +136,14 @@ def test_the_checker_forbids_the_arm_worlds_and_the_page_from_importing_the_simu
     src = tmp_path / "coassist"
     (src / "robot").mkdir(parents=True)
     (src / "play").mkdir()
-    (src / "robot" / "drive.py").write_text("from coassist.sim.world import run_trial\n")
+    (src / "robot" / "drive.py").write_text("from coassist.sim.trial_runner import run_trial\n")
     (src / "play" / "session.py").write_text(
-        "def f():\n    from coassist.sim import world\nfrom coassist.scenario import tasks\n"
+        "def f():\n    from coassist.sim import trial_runner\nfrom coassist.scenario import tasks\n"
     )
     bad = layering_violations(src)
     assert len(bad) == 2
     assert "play/session.py:2: play imports coassist.sim (forbidden" in bad[0]
-    assert "robot/drive.py:1: robot (layer 6) imports coassist.sim.world (layer 6)" in bad[1]
+    assert "robot/drive.py:1: robot (layer 6) imports coassist.sim.trial_runner (layer 6)" in bad[1]
 
 
 def _module_name(path: Path, src: Path) -> str:
@@ -227,7 +227,7 @@ def import_circles(src: Path) -> list[list[str]]:
 
 
 def test_no_modules_import_each_other_in_a_circle():
-    """Old code: sim.world <-> sim.array_runner (a lazy import of PointMassWorld) and robot.arms <->
+    """Old code: sim.trial_runner <-> sim.array_runner (a lazy import of PointMassWorld) and robot.arms <->
     robot.kinematics (a lazy import of ARMS) besides the known one; now only the known one."""
     circles = {frozenset(c) for c in import_circles(SRC)}
     new = [sorted(c) for c in circles - set(KNOWN_CIRCLES)]

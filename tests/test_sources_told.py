@@ -9,7 +9,7 @@ from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, To
 from coassist.scenario.path_hypotheses import PersonShape, write_calibration
 from coassist.scenario.path_model import fit_path_model
 from coassist.scenario.person_model import PersonFit, write_person_model
-from coassist.sim.world import TrialSpec, spec_episode
+from coassist.sim.trial_runner import TrialSpec, spec_episode
 
 
 def _folders(tmp_path):

@@ -23,7 +23,7 @@ from coassist.scenario.objects import get_object
 from coassist.scenario.operator import AUTHOR
 from coassist.scenario.person_model import read_person_model
 from coassist.scenario.tasks import task_for_seed
-from coassist.sim.world import run_trial
+from coassist.sim.trial_runner import run_trial
 
 PRESET = get_preset("thesis-application-damped")
 #: a person of known, fixed arm (no co-contraction): what the probe must recover

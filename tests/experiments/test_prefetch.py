@@ -24,7 +24,7 @@ from coassist.experiments.ablation import (
 )
 from coassist.experiments.application import handed_to_ablation
 from coassist.experiments.source_training import LEARNED, seed_names
-from coassist.sim.world import worker_pool
+from coassist.sim.trial_runner import worker_pool
 
 ARRAYS = ("time", "pose", "velocity", "wrench", "reference", "prediction", "intent", "effort_h", "effort_r", "fault")
 
@@ -80,7 +80,7 @@ def _held_out(cfg):
 def shared_pool():
     """Two simulation processes for this module's tests: a pool costs ~8 CPU-s to start (each process
     imports numpy, scipy and torch). A job carries all its inputs, so the same processes again give the same
-    trials (tests/sim/test_world.py); each test still compares against its own reference."""
+    trials (tests/sim/test_trial_runner.py); each test still compares against its own reference."""
     with worker_pool(2) as pool:
         yield pool
 
@@ -185,7 +185,7 @@ def test_collections_deferred_without_a_pool_run_together_and_are_the_collection
     (its rounding depends on the batch)."""
     pytest.importorskip("torch")
     import coassist.intent.onnx_network as onnx_network
-    import coassist.sim.world as world
+    from coassist.sim import trial_runner
 
     if not onnx_network.onnx_runtime_available():
         pytest.skip("needs ONNX Runtime (the onnx extra)")
@@ -202,11 +202,11 @@ def test_collections_deferred_without_a_pool_run_together_and_are_the_collection
     }
     reference = {name: plain.collect(name, **o)[1] for name, o in options.items()}
     groups = []
-    run = world.run_spec_lockstep
+    run = trial_runner.run_spec_lockstep
     monkeypatch.setattr(
-        world, "run_spec_lockstep", lambda specs, *a, **k: groups.append(len(specs)) or run(specs, *a, **k)
+        trial_runner, "run_spec_lockstep", lambda specs, *a, **k: groups.append(len(specs)) or run(specs, *a, **k)
     )
-    monkeypatch.setattr(world, "NAMED_GROUP", 6)
+    monkeypatch.setattr(trial_runner, "NAMED_GROUP", 6)
     ws = pipeline.Workspace(cfg, tmp_path / "ahead", progress=False)
     for name, o in options.items():
         ws.prefetch(name, **o)
@@ -312,7 +312,7 @@ def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch, 
     this process on one thread, exactly; the train times are the jobs' own. The datasets are
     collected once, in this process, and the pool's run is handed the same folders (what this
     test compares is the trainings and scorings; prefetched and pooled collections equal
-    in-process ones in the tests above and in tests/sim/test_world.py)."""
+    in-process ones in the tests above and in tests/sim/test_trial_runner.py)."""
     pytest.importorskip("torch")
     import torch
 

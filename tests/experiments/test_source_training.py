@@ -17,7 +17,7 @@ def datasets(tmp_path_factory):
     cfg = REPRODUCE_PRESETS["tiny"]
     out = tmp_path_factory.mktemp("sources")
     # collected in this process (workers=1): the same trials bit for bit as on the preset's pool of two
-    # (tests/sim/test_world.py), without starting the pool's two processes (1.6 CPU-s against 4.5)
+    # (tests/sim/test_trial_runner.py), without starting the pool's two processes (1.6 CPU-s against 4.5)
     ws = Workspace(replace(cfg, workers=1), out, progress=False)
     folder, _ = ws.collect("D0", tasks=ITERATION_TASKS, trials=cfg.trials_per_task, seed=1)
     return cfg, out, [folder]

@@ -25,9 +25,9 @@ from collections.abc import Callable
 import numpy as np
 
 from coassist.data import Trial
-from coassist.sim import world as sim_world
+from coassist.sim import trial_runner
 from coassist.sim.collect import dataset_specs
-from coassist.sim.world import run_spec, run_trials, worker_pool
+from coassist.sim.trial_runner import run_spec, run_trials, worker_pool
 
 FEW, MANY, JOB = 10, 40, 5
 SPECS = dataset_specs(
@@ -95,7 +95,7 @@ def test_collect_in_one_process_runs_bounded_groups(monkeypatch):
     Measured on the groups' own arrays (inputs and logs, (B, N, ·)), the memory that grew."""
     from coassist.sim import array_runner
 
-    monkeypatch.setattr(sim_world, "NAMED_GROUP", JOB)
+    monkeypatch.setattr(trial_runner, "NAMED_GROUP", JOB)
     batch_bytes: list[int] = []
     init = array_runner._Batch.__init__
 

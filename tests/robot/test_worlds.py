@@ -63,11 +63,11 @@ def test_the_point_mass_has_one_name_and_its_trials_source():
     from coassist.experiments.ablation import ABLATION_CELLS
     from coassist.experiments.pipeline import MUJOCO_PERSON_CALIBRATIONS
     from coassist.play import session as play_session
-    from coassist.sim import world as sim_world
+    from coassist.sim import trial_runner
 
     assert (POINT_MASS, PLAY) == ("point-mass", "play")
     assert WORLDS[POINT_MASS].source == WORLDS[PLAY].source == "sim" and "sim" in SOURCES
-    for module in (sim_world, play_session):  # where the point mass's trials get their source
+    for module in (trial_runner, play_session):  # where the point mass's trials get their source
         assert 'source="sim"' in inspect.getsource(module), module.__name__
     assert not WORLDS[POINT_MASS].is_arm and not WORLDS[PLAY].is_arm
     # the names other tables use for worlds are the table's (the ablation's third cell is a population)

@@ -16,7 +16,7 @@ import pytest
 from coassist.runtime.batched_loops import Loop, run_loops
 from coassist.runtime.loop import run_loop
 from coassist.scenario.constant_velocity import ConstantVelocityIntent
-from coassist.sim.world import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
+from coassist.sim.trial_runner import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
 
 from ..intent.conftest import write_loop_model
 

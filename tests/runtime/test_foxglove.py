@@ -31,7 +31,7 @@ from coassist.scenario.intent_registry import load_intent_source  # noqa: E402
 from coassist.scenario.objects import get_object  # noqa: E402
 from coassist.scenario.operator import operator_profile  # noqa: E402
 from coassist.scenario.tasks import task_for_seed  # noqa: E402
-from coassist.sim.world import TrialSpec, build_trial  # noqa: E402
+from coassist.sim.trial_runner import TrialSpec, build_trial  # noqa: E402
 
 from .foxglove_client import FoxgloveClient  # noqa: E402
 from .test_live import Recorder  # noqa: E402

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from coassist.runtime.live import LiveFeed, TickSnapshot
-from coassist.sim.world import TrialSpec, spec_episode
+from coassist.sim.trial_runner import TrialSpec, spec_episode
 
 
 class Recorder:

@@ -10,7 +10,7 @@ from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate, ident
 from coassist.scenario.objects import get_object
 from coassist.scenario.operator import AUTHOR
 from coassist.scenario.tasks import task_for_seed
-from coassist.sim.world import run_trial
+from coassist.sim.trial_runner import run_trial
 
 PRESET = get_preset("thesis-application-damped")
 DT = 0.008

@@ -34,7 +34,7 @@ from coassist.scenario.path_hypotheses import (
     write_calibration,
 )
 from coassist.scenario.tasks import task_for_seed
-from coassist.sim.world import build_trial
+from coassist.sim.trial_runner import build_trial
 
 CLASSES = (PersonShape, ArmGuess, FilterSettings)
 

@@ -73,7 +73,7 @@ def test_on_the_board_the_present_estimate_finds_the_hand_not_the_tip():
     from coassist.scenario.path_model import PathFrame
     from coassist.scenario.person_intent import PersonFilterSettings, PersonPathsIntent
     from coassist.scenario.tasks import task_for_seed
-    from coassist.sim.world import build_trial
+    from coassist.sim.trial_runner import build_trial
 
     preset = get_preset("thesis-application-damped")
     task = task_for_seed("curved", 7, obstacle="large")

@@ -22,7 +22,7 @@ from coassist.runtime.safety import SafetyLimits
 from coassist.runtime.world import Command
 from coassist.scenario.constant_velocity import ConstantVelocityIntent
 from coassist.sim.array_runner import fast_path_eligible, run_point_mass_lockstep
-from coassist.sim.world import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
+from coassist.sim.trial_runner import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
 
 from ..intent.conftest import write_loop_model
 
@@ -126,9 +126,9 @@ def test_a_trial_with_a_fault_leaves_the_array_path_and_is_the_reference_paths(m
     """A tool-speed limit low enough that some trials hit it (TOOL_SPEED_LIMIT, the effort
     braked): those leave the array path at that tick and are run again on run_loops; the
     result is the reference path's, trial for trial."""
-    import coassist.sim.world as sim_world
+    from coassist.sim import trial_runner
 
-    monkeypatch.setattr(sim_world, "POINT_MASS_LIMITS", SafetyLimits(tool_speed=0.12))
+    monkeypatch.setattr(trial_runner, "POINT_MASS_LIMITS", SafetyLimits(tool_speed=0.12))
     specs = _specs("oracle", n=8, objects=("handle",))
     reference = run_spec_lockstep(specs, arrays=False)
     flagged = [bool(np.any(t.fault & int(Fault.TOOL_SPEED_LIMIT))) for t in reference]

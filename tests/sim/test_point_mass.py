@@ -7,7 +7,7 @@ import pytest
 
 from coassist.runtime.world import Command
 from coassist.sim.point_mass import PointMassWorld, PointMassWorldBatch
-from coassist.sim.world import TrialSpec, spec_episode
+from coassist.sim.trial_runner import TrialSpec, spec_episode
 
 
 def _worlds(specs: list[TrialSpec]) -> list[PointMassWorld]:

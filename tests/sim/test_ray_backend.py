@@ -1,4 +1,4 @@
-"""The Ray backend of :func:`coassist.sim.world.run_trials` on a local, in-process Ray instance.
+"""The Ray backend of :func:`coassist.sim.trial_runner.run_trials` on a local, in-process Ray instance.
 
 Ray 2.60 has no ``local_mode``: ``ray_address="local"`` makes ``run_trials`` start a
 local instance (a raylet and worker processes on this machine), which is what a cluster
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import pytest
 
-from coassist.sim.world import TrialSpec, run_trials
+from coassist.sim.trial_runner import TrialSpec, run_trials
 
 ray = pytest.importorskip("ray", reason="Ray is the optional 'cluster' extra: pip install -e '.[cluster]'")
 

@@ -689,7 +689,7 @@ def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict,
     import contextlib
 
     from coassist.sim.pool import trial_from_payload
-    from coassist.sim.world import worker_pool
+    from coassist.sim.trial_runner import worker_pool
 
     cfg = ws.config
     jobs = _mujoco_jobs(ws, intents)

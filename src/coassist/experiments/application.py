@@ -91,7 +91,7 @@ def cell_options(cfg, j: int, obj: str, controller: str, intent: str) -> dict[st
     application's trials, object ``j`` of :data:`OBJECTS`: every cell of an object meets the
     same operators and seeds (the ablation's point-mass cells too).
 
-    A cell runs as one lockstep group (two or more past :data:`~coassist.sim.world.NAMED_GROUP`
+    A cell runs as one lockstep group (two or more past :data:`~coassist.sim.trial_runner.NAMED_GROUP`
     trials): the run prefetches the cells, ~30 of them, so the pool's processes are kept busy
     by other cells, and a group shares each tick's fixed cost over all of its trials (an
     18-trial board cell, one process, ``benchmarks/bench_collect.py --only cells``: 0.58–0.59×
@@ -99,7 +99,7 @@ def cell_options(cfg, j: int, obj: str, controller: str, intent: str) -> dict[st
     loop, 0.82× arbitrated). With a named intent,
     or a model on ONNX Runtime where its kernels are batch-invariant
     (:mod:`coassist.runtime.batched_loops`), the trials are the same bit for bit in any grouping."""
-    from coassist.sim.world import NAMED_GROUP
+    from coassist.sim.trial_runner import NAMED_GROUP
 
     n_trials = len(cfg.application_users) * cfg.application_trials
     return {

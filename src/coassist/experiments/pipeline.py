@@ -379,7 +379,7 @@ class Workspace:
     config: ReproduceConfig
     out: Path
     progress: bool
-    #: The simulation processes every collection runs on (coassist.sim.world.worker_pool), started
+    #: The simulation processes every collection runs on (coassist.sim.trial_runner.worker_pool), started
     #: once for the run; None: each collection starts its own.
     pool: Executor | None = None
 
@@ -408,7 +408,7 @@ class Workspace:
         """Simulate a dataset into ``out/datasets/<name>``; return its folder and the dataset read back.
 
         ``groups``: how many lockstep groups the trials are split into on the pool
-        (:func:`~coassist.sim.world.submit_trials`; None: its rule), an option like the others.
+        (:func:`~coassist.sim.trial_runner.submit_trials`; None: its rule), an option like the others.
         ``population``: who the simulated operators are (:mod:`coassist.scenario.populations`).
         A collection :meth:`prefetch` started with the same options is waited for, not run
         again (the same trials bit for bit: the same jobs); one started under this name with
@@ -471,11 +471,11 @@ class Workspace:
         preset's ablation cells, one trial each: 18 of its named cells, run_spec_lockstep, one process,
         took 6.3 CPU-s together against 26.8 one by one). The same
         trials bit for bit: named intents are exact in any grouping and ONNX Runtime's kernels
-        are batch-invariant (:func:`~coassist.sim.world.run_spec_lockstep`); a collection whose
+        are batch-invariant (:func:`~coassist.sim.trial_runner.run_spec_lockstep`); a collection whose
         model would run on torch, whose rounding depends on the batch, is not deferred."""
         from coassist.data import read_dataset
         from coassist.sim.collect import collect_dataset, dataset_specs
-        from coassist.sim.world import submit_trials
+        from coassist.sim.trial_runner import submit_trials
 
         options = self._spec_options(
             tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population
@@ -519,12 +519,12 @@ class Workspace:
 
     def _run_deferred(self) -> None:
         """Run every deferred collection here, in lockstep groups of whole collections of at most
-        :data:`~coassist.sim.world.NAMED_GROUP` trials together (a bigger one alone), and write
+        :data:`~coassist.sim.trial_runner.NAMED_GROUP` trials together (a bigger one alone), and write
         each dataset (so :meth:`collect` finds it as a prefetched one). The cap keeps memory where a
-        one-worker :func:`~coassist.sim.world.run_trials` keeps it: a group holds its trials until it ends."""
+        one-worker :func:`~coassist.sim.trial_runner.run_trials` keeps it: a group holds its trials until it ends."""
         from coassist.data import read_dataset
         from coassist.sim.collect import collect_dataset, dataset_specs
-        from coassist.sim.world import NAMED_GROUP, SubmittedTrials, run_spec_lockstep, trial_payload
+        from coassist.sim.trial_runner import NAMED_GROUP, SubmittedTrials, run_spec_lockstep, trial_payload
 
         deferred = [
             (name, options, groups, tuple(dataset_specs(**options)))

@@ -46,7 +46,7 @@ from coassist._io import atomic_write_text
 from coassist.data import Trial, load_ros_user
 from coassist.metrics import f_rms
 from coassist.scenario.populations import POPULATIONS
-from coassist.sim.world import TrialSpec, run_trials
+from coassist.sim.trial_runner import TrialSpec, run_trials
 
 STATS = (
     "duration",
@@ -91,7 +91,7 @@ BUMP = "bump"
 NOTES = """## How the simulated operator was tuned, and where it differs
 
 **Model** (details in the docstrings of `coassist.scenario.operator`, `coassist.scenario.objects`,
-`coassist.sim.world`). User 0 ("the author"): arm stiffness 550 N/m relaxed, up to
+`coassist.sim.trial_runner`). User 0 ("the author"): arm stiffness 550 N/m relaxed, up to
 1300 N/m when co-contracting (κ = 12 000 N/m per m of filtered error, τ_a = 0.4 s),
 damping 10 N·s/m, half of the stiffness acting through an 80 ms reaction delay, force
 limit 40 N, motor noise 0.6 N (correlation time 0.15 s), clearance 2.5 cm, anticipation
@@ -193,7 +193,7 @@ intent than the nominal path; 12 paired trials, 3 tasks × 4 seeds, user 0, hand
 With the thesis' weights in SI units the claim does not hold: the robot's effort is too
 small to matter, and the nominal reference, which runs slightly ahead of the operator,
 pulls them forward a little more than their own intent does. With position weights in
-decimetres it holds strongly (tested in `tests/sim/test_world.py`). Iterative training
+decimetres it holds strongly (tested in `tests/sim/test_trial_runner.py`). Iterative training
 (Algorithm 4.1) can only change the data when the robot assists measurably, so the
 iterative experiments should run with a `-dm` preset.
 """

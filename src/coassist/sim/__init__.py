@@ -1,4 +1,4 @@
-"""The point-mass world: the thesis' robot as an ideal admittance, the closed loop, batches.
+"""The point-mass world: the thesis' robot as an ideal admittance, its trials' runner, batches.
 
 See docs/architecture.md, *The simulated world*. Entry points: :func:`run_trial` (one trial from built parts),
 :class:`TrialSpec` + :func:`run_spec` / :func:`run_trials` (by name, in parallel). The scenario it runs
@@ -7,6 +7,6 @@ See docs/architecture.md, *The simulated world*. Entry points: :func:`run_trial`
 """
 
 from coassist.sim.point_mass import PointMassWorld
-from coassist.sim.world import TrialSpec, run_spec, run_trial, run_trials
+from coassist.sim.trial_runner import TrialSpec, run_spec, run_trial, run_trials
 
 __all__ = ["PointMassWorld", "TrialSpec", "run_spec", "run_trial", "run_trials"]

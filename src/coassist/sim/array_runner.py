@@ -39,7 +39,7 @@ A trial in which anything unusual happens — any fault flag (a stale, frozen, s
 saturated sensor, a prediction fallback, a saturated or refusing controller, the tool
 speed or contact limit), a non-finite state, a batched call that raises — leaves the fast
 path at that tick: :func:`run_point_mass_lockstep` returns None for it, and the caller runs
-it again from its spec on the reference path (:func:`coassist.sim.world.run_spec_lockstep`
+it again from its spec on the reference path (:func:`coassist.sim.trial_runner.run_spec_lockstep`
 does), which handles every branch. The result is the reference path's trial either way.
 
 With a model in the loop the network's float32 rows depend on the batch (see

@@ -13,7 +13,7 @@ from coassist._checks import check_int
 from coassist.data import DatasetWriter
 from coassist.data.datasets import FORMAT_VERSION, MANIFEST_NAME, digest
 from coassist.scenario.intent_registry import INTENT_SOURCES
-from coassist.sim.world import SubmittedTrials, TrialSpec, run_trials, spec_episode
+from coassist.sim.trial_runner import SubmittedTrials, TrialSpec, run_trials, spec_episode
 
 
 def dataset_specs(
@@ -32,7 +32,7 @@ def dataset_specs(
     population: str = "thesis",
 ) -> list[TrialSpec]:
     """One spec per (user, object, task, repetition); trial i of the list gets seed ``seed + i``.
-    ``network``: what evaluates a model's network (:attr:`TrialSpec.network <coassist.sim.world.TrialSpec>`).
+    ``network``: what evaluates a model's network (:attr:`TrialSpec.network <coassist.sim.trial_runner.TrialSpec>`).
     ``population``, ``population_seed``: who the users are (:mod:`coassist.scenario.populations`).
 
     Every trial has its own seed, so two datasets with different ``seed`` share no
@@ -85,13 +85,13 @@ def collect_dataset(
     """Simulate the trials of :func:`dataset_specs` (``spec_options``) and write them as a dataset.
 
     ``dataset_id`` defaults to the folder's name. Returns the dataset folder. ``lockstep``,
-    ``pool``: :func:`~coassist.sim.world.run_trials`' (trials advance together in lockstep
+    ``pool``: :func:`~coassist.sim.trial_runner.run_trials`' (trials advance together in lockstep
     groups; processes kept across collections). ``submitted``: this collection's trials,
-    already put on a pool by :func:`~coassist.sim.world.submit_trials` (its specs must be
+    already put on a pool by :func:`~coassist.sim.trial_runner.submit_trials` (its specs must be
     :func:`dataset_specs` of ``spec_options``): they are waited for instead of run again.
-    ``groups``: :func:`~coassist.sim.world.run_trials`' (lockstep groups on the processes).
+    ``groups``: :func:`~coassist.sim.trial_runner.run_trials`' (lockstep groups on the processes).
     ``live``: a :class:`~coassist.runtime.live.LiveFeed` (``--foxglove``) that watches one trial, the
-    first still to run: it runs first, in this process, alone (:func:`~coassist.sim.world.run_spec`'s
+    first still to run: it runs first, in this process, alone (:func:`~coassist.sim.trial_runner.run_spec`'s
     path: the same trial bit for bit with a named intent, to the network's float32 rounding with a
     model, as ``lockstep``), then the others as before.
 

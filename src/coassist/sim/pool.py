@@ -1,10 +1,10 @@
 """The simulation's processes: a pool of worker processes kept across calls, and Ray.
 
-:func:`~coassist.sim.world.run_trials` and :func:`~coassist.sim.world.submit_trials` send
+:func:`~coassist.sim.trial_runner.run_trials` and :func:`~coassist.sim.trial_runner.submit_trials` send
 trial specs here to run; a job runs in a worker and sends its trials back as plain data
 (:func:`trial_payload`), and :class:`SubmittedTrials` delivers them as each job finishes.
 This module knows processes and payloads, not what a trial is made of
-(:mod:`coassist.sim.world` assembles and runs them).
+(:mod:`coassist.sim.trial_runner` assembles and runs them).
 """
 
 from __future__ import annotations
@@ -85,9 +85,9 @@ def _watch_parent(parent: int) -> None:
 
 
 def worker_pool(workers: int) -> Executor:
-    """``workers`` simulation processes to pass to :func:`~coassist.sim.world.run_trials` (``pool``) call after call.
+    """``workers`` simulation processes to pass to :func:`~coassist.sim.trial_runner.run_trials` (``pool``) call after call.
 
-    Each :func:`~coassist.sim.world.run_trials` without a pool starts its own processes, and a fresh
+    Each :func:`~coassist.sim.trial_runner.run_trials` without a pool starts its own processes, and a fresh
     interpreter importing numpy, scipy and torch costs seconds: a pipeline of many small
     collections (``coassist reproduce``: ~40) spends more time starting workers than
     simulating. One pool for the whole run pays it once. spawn: a clean interpreter per
@@ -111,7 +111,7 @@ def pool_for(pool: Executor | None, workers: int):
 
 @dataclass(eq=False)
 class SubmittedTrials:
-    """Trials running on a pool (:func:`coassist.sim.world.submit_trials`): their specs, and per
+    """Trials running on a pool (:func:`coassist.sim.trial_runner.submit_trials`): their specs, and per
     job the future of its payloads (:func:`trial_payload`) and the indices (into ``specs``) of
     the trials it runs.
 
@@ -154,7 +154,7 @@ def run_on_ray(
     on_result: Callable[[int, Trial], None] | None = None,
 ) -> list[Trial]:
     """Each spec as its own Ray task ``job([spec])`` (payloads, :func:`trial_payload`) on the
-    cluster at ``address``; the trials in the order of ``specs`` (as :func:`~coassist.sim.world.run_trials`
+    cluster at ``address``; the trials in the order of ``specs`` (as :func:`~coassist.sim.trial_runner.run_trials`
     says), or ``on_result(i, trial)`` for each as it finishes and an empty list.
 
     Needs the optional extra ``pip install coassist[cluster]`` (RuntimeError saying so otherwise).

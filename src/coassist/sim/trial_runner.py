@@ -1,6 +1,7 @@
-"""The closed loop: robot (impedance plant), controller, intent source, operator, sensor.
+"""The simulated trials' runner: point-mass trials by name, built and run one, a group or many at once.
 
-Every tick k (t = k·dt, dt = the controller model's, 0.008 s in the presets):
+A trial closes the loop of robot (impedance plant), controller, intent source, operator and
+sensor. Every tick k (t = k·dt, dt = the controller model's, 0.008 s in the presets):
 
 1. the robot reads its tip pose x(k), velocity v(k) and the force sensor's latest
    reading w(k) (the force transmitted through the object, see
