@@ -117,7 +117,8 @@ def dataset_seconds(specs, workers: int, lockstep: bool, repeats: int, kept_pool
     call, or (``kept_pool``) on one pool started and warmed (a small run) before the timing."""
     import contextlib
 
-    from coassist.sim.trial_runner import run_trials, worker_pool
+    from coassist.sim.pool import worker_pool
+    from coassist.sim.trial_runner import run_trials
 
     out = []
     with worker_pool(workers) if kept_pool else contextlib.nullcontext() as pool:

@@ -2,7 +2,7 @@
 
 On a shared machine wall time moves with other processes' load; CPU seconds move much
 less (they still grow somewhat when cores are contended: caches, frequency), so runs are
-compared by both. A run's worker processes (``sim.trial_runner.worker_pool``) live as long as
+compared by both. A run's worker processes (``sim.pool.worker_pool``) live as long as
 the run, so their time is read while they run: from ``/proc/<pid>/stat`` (Linux), the
 user and system time of every child process still alive, plus what the children that
 have ended and been waited for used (``resource.getrusage(RUSAGE_CHILDREN)``).

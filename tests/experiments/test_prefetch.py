@@ -24,7 +24,7 @@ from coassist.experiments.ablation import (
 )
 from coassist.experiments.application import handed_to_ablation
 from coassist.experiments.source_training import LEARNED, seed_names
-from coassist.sim.trial_runner import worker_pool
+from coassist.sim.pool import worker_pool
 
 ARRAYS = ("time", "pose", "velocity", "wrench", "reference", "prediction", "intent", "effort_h", "effort_r", "fault")
 

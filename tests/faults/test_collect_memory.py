@@ -27,7 +27,8 @@ import numpy as np
 from coassist.data import Trial
 from coassist.sim import trial_runner
 from coassist.sim.collect import dataset_specs
-from coassist.sim.trial_runner import run_spec, run_trials, worker_pool
+from coassist.sim.pool import worker_pool
+from coassist.sim.trial_runner import run_spec, run_trials
 
 FEW, MANY, JOB = 10, 40, 5
 SPECS = dataset_specs(

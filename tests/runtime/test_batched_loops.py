@@ -13,10 +13,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from coassist.control.presets import get_preset
 from coassist.runtime.batched_loops import Loop, run_loops
 from coassist.runtime.loop import run_loop
 from coassist.scenario.constant_velocity import ConstantVelocityIntent
-from coassist.sim.trial_runner import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
+from coassist.sim.trial_runner import TrialSpec, run_spec, run_spec_lockstep, spec_episode
 
 from ..intent.conftest import write_loop_model
 

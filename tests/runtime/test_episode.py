@@ -36,7 +36,7 @@ from coassist.runtime.tick import ControlTick, Plan, TickConfig
 from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
 from coassist.scenario import ForceSensor, get_object, load_intent_source, operator_profile, task_for_seed
 from coassist.sim import TrialSpec, run_spec, run_trial
-from coassist.sim.trial_runner import PointMassWorld
+from coassist.sim.point_mass import PointMassWorld
 
 from .fakes import DT, NominalStage, ScriptedEffortWorld
 

@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from coassist.control.presets import CONTROLLER_KINDS
+from coassist.control.presets import CONTROLLER_KINDS, get_preset
 from coassist.interfaces import Fault
 from coassist.runtime.batched_loops import Loop
 from coassist.runtime.loop import run_loop
@@ -22,7 +22,7 @@ from coassist.runtime.safety import SafetyLimits
 from coassist.runtime.world import Command
 from coassist.scenario.constant_velocity import ConstantVelocityIntent
 from coassist.sim.array_runner import fast_path_eligible, run_point_mass_lockstep
-from coassist.sim.trial_runner import TrialSpec, get_preset, run_spec, run_spec_lockstep, spec_episode
+from coassist.sim.trial_runner import TrialSpec, run_spec, run_spec_lockstep, spec_episode
 
 from ..intent.conftest import write_loop_model
 

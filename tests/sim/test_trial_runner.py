@@ -235,7 +235,7 @@ def test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone()
 def test_a_kept_pool_serves_call_after_call_and_stays_up():
     """run_trials(pool=...) runs on the caller's processes, gives what a fresh pool gives, and leaves
     them running for the next call (coassist reproduce keeps one pool for its ~40 collections)."""
-    from coassist.sim.trial_runner import worker_pool
+    from coassist.sim.pool import worker_pool
 
     specs = [TrialSpec(task=t, seed=s) for t, s in (("linear", 11), ("curved", 12), ("z", 13))]
     serial = run_trials(specs, workers=1, progress=False)

@@ -688,8 +688,7 @@ def _run_mujoco(ws: Workspace, intents: dict[str, str], metrics: dict, mg: dict,
     """The arbitrated cells on the MuJoCo UR5 (fewer trials: ``ablation_mujoco_trials`` per operator)."""
     import contextlib
 
-    from coassist.sim.pool import trial_from_payload
-    from coassist.sim.trial_runner import worker_pool
+    from coassist.sim.pool import trial_from_payload, worker_pool
 
     cfg = ws.config
     jobs = _mujoco_jobs(ws, intents)

@@ -379,7 +379,7 @@ class Workspace:
     config: ReproduceConfig
     out: Path
     progress: bool
-    #: The simulation processes every collection runs on (coassist.sim.trial_runner.worker_pool), started
+    #: The simulation processes every collection runs on (coassist.sim.pool.worker_pool), started
     #: once for the run; None: each collection starts its own.
     pool: Executor | None = None
 
@@ -524,7 +524,8 @@ class Workspace:
         one-worker :func:`~coassist.sim.trial_runner.run_trials` keeps it: a group holds its trials until it ends."""
         from coassist.data import read_dataset
         from coassist.sim.collect import collect_dataset, dataset_specs
-        from coassist.sim.trial_runner import NAMED_GROUP, SubmittedTrials, run_spec_lockstep, trial_payload
+        from coassist.sim.pool import SubmittedTrials, trial_payload
+        from coassist.sim.trial_runner import NAMED_GROUP, run_spec_lockstep
 
         deferred = [
             (name, options, groups, tuple(dataset_specs(**options)))

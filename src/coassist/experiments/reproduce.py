@@ -144,9 +144,9 @@ class _Context:
 
 
 def simulation_pool(config: ReproduceConfig):
-    """One pool of simulation processes for the whole run (coassist.sim.trial_runner.worker_pool):
+    """One pool of simulation processes for the whole run (coassist.sim.pool.worker_pool):
     started once, not once per collection; none where the run simulates in this process."""
-    from coassist.sim.trial_runner import worker_pool
+    from coassist.sim.pool import worker_pool
 
     return worker_pool(config.workers) if config.workers > 1 else contextlib.nullcontext(None)
 
@@ -160,7 +160,7 @@ def run_reproduce(
     pool: Any = None,
 ) -> dict:
     """Run every stage; write ``report.html`` and ``summary.json`` in ``out``; return the summary.
-    ``pool``: the simulation processes to run on (:func:`coassist.sim.trial_runner.worker_pool`, kept by the caller
+    ``pool``: the simulation processes to run on (:func:`coassist.sim.pool.worker_pool`, kept by the caller
     across runs, e.g. :func:`coassist.experiments.seeds.run_seeds`); None: started for this run."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -223,7 +223,7 @@ def train_sources(
 
     from coassist._progress import progress_bar
     from coassist.intent import MODEL_PRESETS
-    from coassist.sim.trial_runner import worker_pool
+    from coassist.sim.pool import worker_pool
 
     jobs = []
     for source in ws.config.learned_sources:

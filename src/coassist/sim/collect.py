@@ -13,7 +13,8 @@ from coassist._checks import check_int
 from coassist.data import DatasetWriter
 from coassist.data.datasets import FORMAT_VERSION, MANIFEST_NAME, digest
 from coassist.scenario.intent_registry import INTENT_SOURCES
-from coassist.sim.trial_runner import SubmittedTrials, TrialSpec, run_trials, spec_episode
+from coassist.sim.pool import SubmittedTrials
+from coassist.sim.trial_runner import TrialSpec, run_trials, spec_episode
 
 
 def dataset_specs(

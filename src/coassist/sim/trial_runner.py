@@ -33,8 +33,8 @@ other world. This module holds the trials by name (:class:`TrialSpec`), their as
 :func:`run_spec`), a lockstep group (:func:`run_spec_lockstep`, on the point-mass array
 path of :mod:`coassist.sim.array_runner` where it can), many (:func:`run_trials`,
 :func:`submit_trials`). The world itself (steps 4–5) is :mod:`coassist.sim.point_mass`; the
-worker processes and Ray are :mod:`coassist.sim.pool`; both modules' public names are
-importable from here too.
+worker processes and Ray are :mod:`coassist.sim.pool` (:func:`~coassist.sim.pool.worker_pool`,
+:class:`~coassist.sim.pool.SubmittedTrials`), each name imported from its own module.
 
 Determinism: every random draw comes from Generators of the trial seed
 (:mod:`coassist.scenario.seeds`: the trial's stream here, the task's in :func:`run_spec`), and the loop has no other source of variation: the same seed gives
@@ -89,21 +89,11 @@ from coassist.scenario.populations import POPULATIONS, population_profile
 from coassist.scenario.reference_intents import NominalIntent
 from coassist.scenario.tasks import OBSTACLES, TASKS, Task, task_for_seed
 from coassist.sim.array_runner import fast_path_eligible, run_point_mass_lockstep
-
-# The world and the processes live in their own modules; their names stay importable from here.
 from coassist.sim.point_mass import PointMassWorld
-from coassist.sim.pool import (
-    SubmittedTrials,
-    pool_for,
-    run_on_ray,
-    trial_payload,
-    worker_pool,
-)
+from coassist.sim.pool import SubmittedTrials, pool_for, run_on_ray, trial_payload
 
 __all__ = [
     "NAMED_GROUP",
-    "PointMassWorld",
-    "SubmittedTrials",
     "TrialSpec",
     "build_trial",
     "run_spec",
@@ -112,7 +102,6 @@ __all__ = [
     "run_trials",
     "spec_episode",
     "submit_trials",
-    "worker_pool",
 ]
 
 
@@ -137,7 +126,7 @@ def run_trial(
 ) -> Trial:
     """Simulate one trial and return its log (module docstring for the loop).
 
-    The :class:`PointMassWorld` runs under the same control tick as every other world
+    The :class:`~coassist.sim.point_mass.PointMassWorld` runs under the same control tick as every other world
     (:mod:`coassist.runtime.tick`, :func:`coassist.runtime.loop.run_loop`).
 
     Parameters
@@ -459,7 +448,7 @@ def run_trials(
         whose kernels are batch-invariant on the project's machines, and with named intents
         only, bit for bit the same either way.
         False: every trial alone (the reference path). Ray runs trials alone.
-    pool : the processes to run on (:func:`worker_pool`, kept by the caller across calls);
+    pool : the processes to run on (:func:`~coassist.sim.pool.worker_pool`, kept by the caller across calls);
         None: ``workers`` processes started for this call.
     groups : how many lockstep groups (jobs) the trials are split into on the processes
         (:func:`submit_trials`); None: its rule. Ignored with ``workers`` = 1 (here, one group
