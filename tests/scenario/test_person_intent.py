@@ -6,7 +6,12 @@ import pytest
 from coassist.interfaces import IntentSource, TrialContext
 from coassist.scenario.arm_identification import ArmEstimate
 from coassist.scenario.path_model import fit_path_model
-from coassist.scenario.person_intent import PersonFilterSettings, PersonPathsIntent
+from coassist.scenario.person_intent import (
+    PersonFilterSettings,
+    PersonPathsIntent,
+    normal_cdf_between,
+    onset_log_ratio,
+)
 
 DT = 0.008
 K = 800.0
@@ -204,3 +209,97 @@ def test_on_a_way_nobody_took_the_rows_are_the_present_estimates_without_the_mir
         np.testing.assert_allclose(rows[False][k], hedge, atol=1e-9)
     # and the mirror's rows differ from them: the test can fail
     assert max(np.abs(rows[True][k] - rows[False][k]).max() for k in late) > 1e-3
+
+
+@pytest.mark.parametrize(
+    ("z", "h", "sigma"), [(0.001, 0.002, 0.002), (-0.003, 0.05, 0.0025), (0.004, 0.0005, 0.001), (0.02, 0.1, 0.002)]
+)
+def test_the_onset_rule_is_the_likelihood_ratio_of_an_offset_anywhere_into_either_way(z, h, sigma):
+    from scipy import integrate, stats
+
+    # p±(z) = (1/h) ∫ φ((z ∓ u)/σ)/σ du over u ∈ [0, h], integrated numerically
+    def density(sign):
+        value, _ = integrate.quad(lambda u: stats.norm.pdf(z - sign * u, scale=sigma), 0.0, h, epsabs=0.0, epsrel=1e-12)
+        return value / h
+
+    expected = np.log(density(1.0)) - np.log(density(-1.0))
+    assert onset_log_ratio(z, h, sigma) == pytest.approx(expected, rel=1e-8)
+    assert onset_log_ratio(-z, h, sigma) == pytest.approx(-expected, rel=1e-12)  # odd in z
+
+
+def test_the_onset_rule_is_the_offset_rule_where_the_ways_are_close_and_stops_growing_where_they_part():
+    sigma, z = 0.002, 0.001
+    # h ≪ σ: z·h/σ² (two Gaussians at ±h/2), to first order (the next term is O(h²/σ²) relative)
+    h = 1e-5
+    assert onset_log_ratio(z, h, sigma) == pytest.approx(z * h / sigma**2, rel=1e-4)
+    # h ≫ σ: log Φ(z/σ) − log Φ(−z/σ), whatever h
+    from scipy import stats
+
+    limit = stats.norm.logcdf(z / sigma) - stats.norm.logcdf(-z / sigma)
+    for h in (0.05, 0.5):
+        assert onset_log_ratio(z, h, sigma) == pytest.approx(limit, rel=1e-12)
+    assert onset_log_ratio(0.0, 0.05, sigma) == 0.0 and onset_log_ratio(z, 0.0, sigma) == 0.0
+
+
+def test_the_normal_cdf_difference_keeps_its_digits_in_either_tail():
+    from scipy import stats
+
+    for a, b in ((0.3, -1.2), (9.0, 8.5), (-8.5, -9.0), (30.0, 29.0)):
+        expected = stats.norm.sf(b) - stats.norm.sf(a) if b > 0 else stats.norm.cdf(a) - stats.norm.cdf(b)
+        assert normal_cdf_between(a, b) == pytest.approx(expected, rel=1e-10)
+    assert normal_cdf_between(30.0, 29.0) > 0.0  # Φ(30) − Φ(29) computed as 1 − 1 would be 0
+
+
+def test_no_way_evidence_where_the_ways_are_closer_than_the_evidence_gap():
+    # a person who walks 1 cm left of the plan (beyond what the lateral bias may take, 5 mm): the offset is evidence
+    # for the left way only where the ways' mean paths are at least evidence_gap apart
+    model = _model(left=(0.5,), right=(0.5,))
+    intent = _walk(NOMINAL + [0.0, 0.01])[:600]
+    for gap in (0.0, 0.02):
+        src = PersonPathsIntent(
+            paths={"u": model}, arms={"u": ARM}, settings=PersonFilterSettings(evidence_gap=gap, side_rule="onset")
+        )
+        src.reset(_context())
+        hyp, prior = src._hyp, src._log_odds
+        moved = []
+        for k in range(len(intent)):
+            before = src._log_odds
+            _tick(src, intent, k)
+            moved.append((float(hyp.gap[src._nominal_at]), src._log_odds - before))
+        closer = [d for g, d in moved if g < 0.02]
+        if gap > 0.0:
+            assert closer and all(d == 0.0 for d in closer)  # no evidence until the ways are 2 cm apart
+            assert src._log_odds > prior  # and then the offset tells the way
+        else:
+            assert max(closer) > 0.0  # the test can fail: without the gap the same ticks move the odds
+
+
+def test_the_hedge_without_its_lateral_part_carries_only_the_progress_along_the_plan():
+    # undecided, the rows are the present estimate's with half the tool's velocity; with hedge_lateral off only
+    # its component along the plan (here x): a sideways drift of the tool is not extrapolated into a push
+    model = _model()
+    intent = _walk(NOMINAL)[:400]
+    intent[:, 1] = 0.0015 * np.sin(np.arange(len(intent)) * 0.05)  # swaying, within the dead zone
+    rows = {}
+    for lateral in (True, False):
+        src = PersonPathsIntent(
+            paths={"u": model}, arms={"u": ARM}, settings=PersonFilterSettings(hedge_lateral=lateral)
+        )
+        src.reset(_context())
+        rows[lateral] = []
+        for k in range(len(intent)):
+            rows[lateral].append((_tick(src, intent, k), src._mix, src.side))
+    st = PersonFilterSettings()
+    steps = st.hedge_velocity * DT * np.arange(1, 51)
+    checked, sideways = 0, 0.0
+    for k, (row, mix, side) in enumerate(rows[False]):
+        if mix != 0.0 or side != 0 or k < 7:
+            continue
+        tool, prev = intent[k - 6], intent[k - 7]
+        vel = (tool - prev) / DT
+        np.testing.assert_allclose(row, intent[k] + np.outer(steps, [vel[0], 0.0]), atol=1e-9)
+        lat_row = rows[True][k][0]
+        np.testing.assert_allclose(lat_row, intent[k] + np.outer(steps, vel), atol=1e-9)
+        checked += 1
+        sideways = max(sideways, abs(vel[1]))
+    assert checked > 30 and sideways * steps[-1] > 1e-4  # the two differ by more than 0.1 mm: the test can fail

@@ -23,12 +23,19 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    lateral bias learnt on the shared path, as in ``paths``). The ways' log-odds move with the
    change of their marginal log-likelihoods log Σₙ πₙ exp(ℓₙ) per way, at most ``evidence_rate``·dt
    per tick, from the ways' prior (bounded to ``prior_share`` of ``decide``: a habit never decides
-   alone), until the tool passes the place where the ways are furthest apart;
+   alone), until the tool passes the place where the ways are furthest apart. With ``side_rule``
+   "onset" the way's evidence is the log-likelihood ratio of the present estimate's offset z from the
+   plan when each way's offset there is anywhere between the plan and its mean path (how far into the
+   detour the person is, unknown: :func:`onset_log_ratio`), counted only where the ways' mean paths are
+   ``evidence_gap`` apart: a person still on the plan where their demonstrations had already left it
+   says nothing about the way;
 4. **rows**: once |log-odds| > ``decide`` the rows run along the decided way's likeliest curves
    (at most :data:`MIXTURE`, weighted) from their present estimates at the tool's speed along
    them (on a way nobody took, with ``follow_mirror`` off, the present estimate's rows instead); while
    undecided and the ways' rows part by more than ``divergence`` over the horizon, the
-   rows are the present estimate's, q + ``hedge_velocity``·i·dt·v — neither way, and never the plan.
+   rows are the present estimate's, q + ``hedge_velocity``·i·dt·v — neither way, and never the plan
+   (with ``hedge_lateral`` off, v's component across the plan is left out: extrapolated, the tool's own
+   sideways drift became the robot's push and then evidence for a way).
    The two cross-fade over ``blend_time``.
 5. **smoothing**: the rows are low-passed over time with a time constant ``row_smoothing`` and
    advanced by the filter's lag (:class:`~coassist.scenario.row_smoothing.RowSmoothing`): the
@@ -57,7 +64,7 @@ from coassist.scenario.hand_force import HandForce, HandPoint
 from coassist.scenario.path_model import PathFrame, PathModel
 from coassist.scenario.row_smoothing import RowSmoothing
 
-__all__ = ["PersonFilterSettings", "PersonPathsIntent"]
+__all__ = ["PersonFilterSettings", "PersonPathsIntent", "normal_cdf_between", "onset_log_ratio"]
 
 #: The control period [s] κ was chosen at; at another rate κ scales by dt / REFERENCE_DT.
 REFERENCE_DT = 0.008
@@ -65,6 +72,8 @@ REFERENCE_DT = 0.008
 NOMINAL_STEP = 0.002
 #: The most curves whose rows a decided way mixes.
 MIXTURE = 4
+_SQRT2 = math.sqrt(2.0)
+_TINY = 1e-300
 
 
 @dataclass(frozen=True)
@@ -86,6 +95,11 @@ class PersonFilterSettings:
         :class:`~coassist.scenario.hand_force.HandPoint`) instead of taking the tip for it.
     row_smoothing : [s] the time constant of the rows' low-pass over time, its lag advanced away
         (:class:`~coassist.scenario.row_smoothing.RowSmoothing`; 0: the rows as computed).
+    side_rule : the way's evidence per tick: "offset" (z·D/σ², the linear log-likelihood ratio of two ways whose
+        offsets are ±D/2), "mixture" (each way's hypotheses' offsets as a mixture) or "onset" (each way's offset
+        anywhere between the plan and ±D/2: :func:`onset_log_ratio`).
+    evidence_gap : [m] the side evidence counts only where the ways' mean paths are at least this far apart.
+    hedge_lateral : the hedge rows carry the tool's whole velocity (True) or only its component along the plan.
     follow_mirror : on a way round the person never took in their calibration, follow the mirror images of
         the other way's paths (True), or give the present estimate's rows there (False): the mirror knows
         nothing of how this person goes round that side.
@@ -114,6 +128,8 @@ class PersonFilterSettings:
     object_yaw: bool = False
     row_smoothing: float = 0.0
     follow_mirror: bool = True
+    evidence_gap: float = 0.0
+    hedge_lateral: bool = True
 
     def __post_init__(self) -> None:
         for name, lo, hi, open_lo in (
@@ -136,15 +152,18 @@ class PersonFilterSettings:
             ("dead_zone", 0.0, 0.05, False),
             ("reaction_lead", 0.0, 0.3, False),
             ("row_smoothing", 0.0, 1.0, False),
+            ("evidence_gap", 0.0, 0.1, False),
         ):
             object.__setattr__(
                 self, name, check_real(getattr(self, name), f"PersonFilterSettings.{name}", lo, hi, open_lo=open_lo)
             )
-        for flag in ("object_yaw", "follow_mirror"):
+        for flag in ("object_yaw", "follow_mirror", "hedge_lateral"):
             if not isinstance(getattr(self, flag), bool):
                 raise ValueError(f"PersonFilterSettings.{flag} must be true or false, got {getattr(self, flag)!r}")
-        if self.side_rule not in ("offset", "mixture"):
-            raise ValueError(f"PersonFilterSettings.side_rule must be 'offset' or 'mixture', got {self.side_rule!r}")
+        if self.side_rule not in ("offset", "mixture", "onset"):
+            raise ValueError(
+                f"PersonFilterSettings.side_rule must be 'offset', 'mixture' or 'onset', got {self.side_rule!r}"
+            )
         if isinstance(self.shifts, (str, bytes)) or not hasattr(self.shifts, "__iter__"):
             raise ValueError(f"PersonFilterSettings.shifts must be a list of lengths [m], got {self.shifts!r}")
         shifts = tuple(check_real(x, "PersonFilterSettings.shifts", -0.2, 0.2) for x in self.shifts)
@@ -153,6 +172,30 @@ class PersonFilterSettings:
                 f"PersonFilterSettings.shifts must be 1 to 9 distinct lengths in increasing order, got {self.shifts!r}"
             )
         object.__setattr__(self, "shifts", shifts)
+
+
+def normal_cdf_between(a: float, b: float) -> float:
+    """Φ(a) − Φ(b) for a ≥ b (Φ the standard normal CDF), from the tail nearer to both: no cancellation where
+    both are far in the upper tail."""
+    if b > 0.0:
+        return 0.5 * (math.erfc(b / _SQRT2) - math.erfc(a / _SQRT2))
+    return 0.5 * (math.erfc(-a / _SQRT2) - math.erfc(-b / _SQRT2))
+
+
+def onset_log_ratio(z: float, h: float, sigma: float) -> float:
+    """log p₊(z) / p₋(z) of an offset z [m] from the plan when under way + the person's offset there is uniform on
+    [0, h] and under way − on [−h, 0] (how far into its detour the person is, unknown), each seen through Gaussian
+    noise σ [m]: p₊(z) ∝ Φ(z/σ) − Φ((z − h)/σ), p₋(z) ∝ Φ((z + h)/σ) − Φ(z/σ).
+
+    For h ≪ σ it is z·h/σ² (two Gaussians at the ways' mean offsets ±h/2: the "offset" rule with D = h); for
+    h ≫ σ it no longer grows with h, only with z/σ: where the ways are far apart an offset of a millimetre is not
+    the evidence of a whole way round. Odd in
+    z, 0 at z = 0 or h = 0. Densities below 1e-300 are taken as 1e-300 (|z| beyond some 37 σ)."""
+    if h <= 0.0:
+        return 0.0
+    up = normal_cdf_between(z / sigma, (z - h) / sigma)
+    down = normal_cdf_between((z + h) / sigma, z / sigma)
+    return math.log(max(up, _TINY)) - math.log(max(down, _TINY))
 
 
 class _Curves:
@@ -297,7 +340,8 @@ class PersonPathsIntent:
                 self._hyp = curves
         if self._hyp is not None and model is not None:
             hyp = self._hyp
-            self._noise2 = (st.noise_scale * model.noise) ** 2
+            self._noise = st.noise_scale * model.noise
+            self._noise2 = self._noise**2
             self._kernel2 = self._noise2 + st.kernel**2
             n = len(hyp.ways)
             self._idx = np.zeros(len(hyp.curves), dtype=int)
@@ -379,12 +423,14 @@ class PersonPathsIntent:
         self._nominal_at = k = lo + int(np.argmin(rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]))
         normal = hyp.nominal_normals[k]
         z = float((present - hyp.nominal_points[k]) @ normal)
+        # the hedge's velocity: the tool's, or only its progress along the plan (module docstring, step 4)
+        hv = v if st.hedge_lateral else v - float(v @ normal) * normal
         D = float(hyp.gap[k])
         if D < st.shared_gap:
             if self._mix >= 1.0:  # the bias: learnt where the ways are still one path
                 self._bias += self._b_gain * (z - self._bias)
                 self._bias = min(max(self._bias, -st.bias_limit), st.bias_limit)
-        if self._two and D >= st.divergence and (self._side == 0 or k < hyp.peak):
+        if self._two and D >= st.divergence and D >= st.evidence_gap and (self._side == 0 or k < hyp.peak):
             if st.side_rule == "mixture":
                 # each way's likelihood of the offset: a mixture over its hypotheses' offsets here
                 e = hyp.offsets[:, k] - (z - self._bias)
@@ -398,7 +444,10 @@ class PersonPathsIntent:
                 # a way that would have left it already (its detour may come later this time)
                 off = z - self._bias
                 off = math.copysign(max(abs(off) - st.dead_zone, 0.0), off)
-                gain = self._kappa * off * D / self._noise2
+                if st.side_rule == "onset":
+                    gain = self._kappa * onset_log_ratio(off, 0.5 * D, self._noise)
+                else:
+                    gain = self._kappa * off * D / self._noise2
             self._log_odds += min(max(gain, -self._step_cap), self._step_cap)
             self._log_odds = min(max(self._log_odds, -st.odds_limit), st.odds_limit)
         # the shape: each hypothesis' likelihood relative to its way's best, while the way's curves are apart
@@ -434,11 +483,11 @@ class PersonPathsIntent:
 
         if not st.follow_mirror and self._side in hyp.unseen:
             self._mix = 0.0  # a way this person never showed: no curves of theirs to follow there
-            return present + self._hedge_steps * v
+            return present + self._hedge_steps * hv
         ways = (self._side,) if self._side != 0 or not self._two else (1, -1)
         if not all(near[hyp.on_way[w]].any() for w in ways):
             self._mix = 0.0  # no near curve of a way the rows need: the present estimate's rows, as on a change of mind
-            return present + self._hedge_steps * v
+            return present + self._hedge_steps * hv
         if self._side != 0 or not self._two:
             ahead = mixture(hyp.on_way[self._side])
             target = 1.0
@@ -453,7 +502,7 @@ class PersonPathsIntent:
             self._mix = min(max(self._mix + math.copysign(self._mix_step, target - self._mix), 0.0), 1.0)
         if self._mix >= 1.0:
             return ahead
-        hedge = present + self._hedge_steps * v
+        hedge = present + self._hedge_steps * hv
         if self._mix <= 0.0:
             return hedge
         return self._mix * ahead + (1.0 - self._mix) * hedge
