@@ -37,7 +37,7 @@ from bench_common import machine_line  # noqa: E402
 from coassist._cpu import run_cpu_seconds  # noqa: E402
 from coassist._io import atomic_write_text  # noqa: E402
 from coassist.analysis.paired import gain_share, paired_difference  # noqa: E402
-from coassist.experiments import pipeline  # noqa: E402
+from coassist.experiments import pipeline, reproduce_config  # noqa: E402
 from coassist.experiments.ablation import (  # noqa: E402
     ARBITRATED,
     BOOTSTRAP,
@@ -73,11 +73,11 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--trials", type=int, default=None, help="per operator and object (default: the preset's)")
     parser.add_argument("--sources", default="paths,person,oracle")
-    parser.add_argument("--calibration", choices=pipeline.MUJOCO_PERSON_CALIBRATIONS, default=None)
+    parser.add_argument("--calibration", choices=reproduce_config.MUJOCO_PERSON_CALIBRATIONS, default=None)
     parser.add_argument("--first", type=int, default=0, help="also the figures on each operator's first k trials")
     args = parser.parse_args()
     print(machine_line())
-    base = pipeline.REPRODUCE_PRESETS["default"]
+    base = reproduce_config.REPRODUCE_PRESETS["default"]
     sources = tuple(s for s in args.sources.split(",") if s)
     if "oracle" not in sources:
         raise SystemExit("--sources must hold the oracle: the shares are of its benefit")

@@ -59,7 +59,8 @@ def run_job(kind: str, run: Path) -> dict:
 
     from coassist.experiments.ablation import ARBITRATED, mujoco_task
     from coassist.experiments.application import cell_options
-    from coassist.experiments.pipeline import REPRODUCE_PRESETS, Workspace
+    from coassist.experiments.pipeline import Workspace
+    from coassist.experiments.reproduce_config import REPRODUCE_PRESETS
     from coassist.sim.collect import dataset_specs
     from coassist.sim.pool import trial_payload
     from coassist.sim.trial_runner import run_spec_lockstep

@@ -231,7 +231,7 @@ def test_the_study_runs_a_registered_world(echo_cv, my_arm, tmp_path):
 
 
 def test_the_ablation_runs_a_registered_intent_source(echo_cv, tmp_path):
-    from coassist.experiments import pipeline
+    from coassist.experiments import pipeline, reproduce_config
     from coassist.experiments.ablation import (
         ARBITRATED,
         OBJECTS,
@@ -245,7 +245,7 @@ def test_the_ablation_runs_a_registered_intent_source(echo_cv, tmp_path):
 
     assert registered_sources() == ("echo-cv",)
     cfg = replace(
-        pipeline.REPRODUCE_PRESETS["tiny"],
+        reproduce_config.REPRODUCE_PRESETS["tiny"],
         workers=1,
         threads=1,
         learned_sources=(),

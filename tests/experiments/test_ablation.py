@@ -13,12 +13,12 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     pytest.importorskip("torch")
     from dataclasses import replace
 
-    from coassist.experiments import pipeline
+    from coassist.experiments import pipeline, reproduce_config
     from coassist.experiments.ablation import ARBITRATED, ablation_cells, mujoco_sources, run_ablation
     from coassist.experiments.source_training import calibrate_person, seed_names
     from coassist.scenario.path_hypotheses import write_calibration
 
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1, threads=1)
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1, threads=1)
     ws = pipeline.Workspace(cfg, tmp_path, progress=False)
     # One tool-labelled model stands in for every learned source: the cells' plumbing is what is tested.
     folder, _ = ws.collect("D0", tasks=("curved",), trials=2, seed=1, preset=cfg.application_preset, obstacle="large")
@@ -66,7 +66,7 @@ def test_the_mujoco_cells_run_the_person_model_calibrated_on_the_arm(tmp_path):
     calibration runs on the arm."""
     from dataclasses import replace
 
-    from coassist.experiments import pipeline
+    from coassist.experiments import pipeline, reproduce_config
     from coassist.experiments.ablation import (
         ARBITRATED,
         MG_JOB,
@@ -78,7 +78,7 @@ def test_the_mujoco_cells_run_the_person_model_calibrated_on_the_arm(tmp_path):
     from coassist.experiments.source_training import calibration_options
     from coassist.sim.collect import dataset_specs
 
-    cfg = pipeline.REPRODUCE_PRESETS["default"]
+    cfg = reproduce_config.REPRODUCE_PRESETS["default"]
     assert {"person", "paths", "oracle"} <= set(mujoco_sources(cfg))
     assert cfg.mujoco_person_calibration == "mujoco"
     ws = pipeline.Workspace(cfg, tmp_path, progress=False)
@@ -114,10 +114,10 @@ def test_the_mujoco_cells_alone_need_every_model_they_run(tmp_path):
     pytest.importorskip("pinocchio")
     from dataclasses import replace
 
-    from coassist.experiments import pipeline
+    from coassist.experiments import pipeline, reproduce_config
     from coassist.experiments.ablation import run_mujoco_ablation
 
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1)
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1)
     ws = pipeline.Workspace(cfg, tmp_path, progress=False)
     with pytest.raises(ValueError, match="no model or calibration of lstm-intent, paths$"):
         run_mujoco_ablation(ws, {})
@@ -128,9 +128,9 @@ def test_the_mujoco_cells_alone_need_every_model_they_run(tmp_path):
 def test_mujoco_person_calibration_is_validated():
     from dataclasses import replace
 
-    from coassist.experiments import pipeline
+    from coassist.experiments import reproduce_config
 
-    cfg = pipeline.REPRODUCE_PRESETS["default"]
+    cfg = reproduce_config.REPRODUCE_PRESETS["default"]
     assert replace(cfg, mujoco_person_calibration="point-mass").mujoco_person_calibration == "point-mass"
     for bad in ("pointmass", "", None, 1):
         with pytest.raises(ValueError, match="reproduce.mujoco_person_calibration"):

@@ -61,7 +61,7 @@ def test_the_point_mass_has_one_name_and_its_trials_source():
 
     from coassist.data.trial import SOURCES
     from coassist.experiments.ablation import ABLATION_CELLS
-    from coassist.experiments.pipeline import MUJOCO_PERSON_CALIBRATIONS
+    from coassist.experiments.reproduce_config import MUJOCO_PERSON_CALIBRATIONS
     from coassist.play import session as play_session
     from coassist.sim import trial_runner
 

@@ -1,7 +1,7 @@
 """The in-loop ablation of intent sources (issues 18, 34): which prediction makes assistance better?
 
 Every intent source drives the same assistive controllers on the same trials of the
-application scenario (the report's seeds, :func:`~coassist.experiments.pipeline.application_seed`),
+application scenario (the report's seeds, :func:`~coassist.experiments.seed_plan.application_seed`),
 paired against manual guidance (MG) on those trials, in two worlds: the point-mass world
 and the MuJoCo UR5 (``coassist drive``'s world, the arbitrated controller, the sources of
 ``reproduce.mujoco_sources``; fewer trials, the intervals say what they resolve). The sources:
@@ -72,7 +72,8 @@ from coassist.experiments.application import (
     cell_options,
     pair_key,
 )
-from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_seed, in_loop_errors, trial_seed_base
+from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, in_loop_errors
+from coassist.experiments.seed_plan import application_seed, trial_seed_base
 from coassist.experiments.source_training import (
     LEARNED,
     calibrate_paths,
@@ -557,7 +558,7 @@ def probe_configs(cfg) -> list:
     "mujoco"): what :func:`~coassist.experiments.source_training.calibration_options` collects in the
     point-mass world (MG with the probe, the handle, the application's task and obstacle, ``calibration_trials``
     per application operator, the same trial seeds: the same task and intent draws), driven on the arm."""
-    from coassist.experiments.pipeline import calibration_seed
+    from coassist.experiments.seed_plan import calibration_seed
     from coassist.robot.drive import DriveConfig
     from coassist.sim.collect import dataset_specs
 

@@ -26,13 +26,9 @@ import numpy as np
 from coassist.experiments.ablation import ARBITRATED, DAMPED, SIDES, AblationResult
 from coassist.experiments.ablation_report import seeds_text, share_text
 from coassist.experiments.application import OBJECTS, OBSTACLE, application_metrics, pair_key
-from coassist.experiments.pipeline import (
-    REPRODUCE_PRESETS,
-    RUN_SEED_STRIDE,
-    Workspace,
-    application_seed,
-    calibration_seed,
-)
+from coassist.experiments.pipeline import Workspace
+from coassist.experiments.reproduce_config import REPRODUCE_PRESETS
+from coassist.experiments.seed_plan import RUN_SEED_STRIDE, application_seed, calibration_seed
 from coassist.experiments.source_training import calibrate_paths, calibrate_person
 from coassist.scenario.calibration_draws import draw_clusters, draw_count
 from coassist.scenario.populations import POPULATIONS
