@@ -12,7 +12,7 @@ is calibrated on the MuJoCo UR5 itself, in its own job. The learned sources need
 and are not run here. One simulation process (``workers`` 1): on this shared machine one heavy process.
 
 Prints, per object and source: f_RMS and the share of the oracle's force saving, overshoot and the share of its
-overshoot reduction (95 % bootstrap intervals, :data:`~coassist.experiments.ablation.BOOTSTRAP` resamples), the
+overshoot reduction (95 % bootstrap intervals, :data:`~coassist.experiments.ablation_cells.BOOTSTRAP` resamples), the
 paired differences from MG (Student-t 95 %) and jerk against MG's; with ``--first k`` the same on each
 operator's first k trials too (the cells of ``ablation_mujoco_trials`` = k: the same trials). Then the report's
 MuJoCo verdicts on these cells (``paths``' direction, the person model's direction with its intervals) and the
@@ -38,12 +38,8 @@ from coassist._cpu import run_cpu_seconds  # noqa: E402
 from coassist._io import atomic_write_text  # noqa: E402
 from coassist.analysis.paired import gain_share, paired_difference  # noqa: E402
 from coassist.experiments import pipeline, reproduce_config  # noqa: E402
-from coassist.experiments.ablation import (  # noqa: E402
-    ARBITRATED,
-    BOOTSTRAP,
-    OBJECTS,
-    run_mujoco_ablation,
-)
+from coassist.experiments.ablation import OBJECTS, run_mujoco_ablation
+from coassist.experiments.ablation_cells import ARBITRATED, BOOTSTRAP
 from coassist.experiments.ablation_report import mujoco_person_claims, precision_claims  # noqa: E402
 from coassist.experiments.source_training import calibrate_paths, calibrate_person  # noqa: E402
 

@@ -57,7 +57,8 @@ def run_job(kind: str, run: Path) -> dict:
     """One worker job of ``kind`` (module docstring) with ``run``'s models: CPU seconds, trials, ticks, digest."""
     import torch
 
-    from coassist.experiments.ablation import ARBITRATED, mujoco_task
+    from coassist.experiments.ablation import mujoco_task
+    from coassist.experiments.ablation_cells import ARBITRATED
     from coassist.experiments.application import cell_options
     from coassist.experiments.pipeline import Workspace
     from coassist.experiments.reproduce_config import REPRODUCE_PRESETS

@@ -10,18 +10,8 @@ import numpy as np
 import pytest
 
 from coassist.experiments import pipeline, reproduce_config
-from coassist.experiments.ablation import (
-    CALIBRATED,
-    MG_JOB,
-    OBJECTS,
-    AblationAhead,
-    _mujoco_jobs,
-    ablation_cells,
-    base_source,
-    mujoco_sources,
-    mujoco_task,
-    run_sources,
-)
+from coassist.experiments.ablation import MG_JOB, OBJECTS, AblationAhead, _mujoco_jobs, mujoco_task
+from coassist.experiments.ablation_cells import CALIBRATED, ablation_cells, base_source, mujoco_sources, run_sources
 from coassist.experiments.application import handed_to_ablation
 from coassist.experiments.source_training import LEARNED, seed_names
 from coassist.sim.pool import worker_pool

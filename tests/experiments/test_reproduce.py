@@ -134,11 +134,11 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
         assert (out / "models" / key / "history.json").is_file()
     # The ablation: every (object, controller, source) cell in the point-mass world (the tiny preset leaves MuJoCo out),
     # each model saying what it predicts.
-    from coassist.experiments.ablation import ablation_cells
+    from coassist.experiments.ablation_cells import ablation_cells
 
     ab = summary["ablation"]
     tiny = rep.REPRODUCE_PRESETS["tiny"]
-    from coassist.experiments.ablation import ARBITRATED, HELD_OUT_SOURCES
+    from coassist.experiments.ablation_cells import ARBITRATED, HELD_OUT_SOURCES
 
     assert set(ab["cells"]) == {
         f"point-mass/{o}/{c}/{s}" for o in ("board", "heavy") for c, s in ablation_cells(tiny)
@@ -312,7 +312,7 @@ def test_ablation_cells_meet_the_same_trials(tiny_run):
     """Every (object, controller, source) cell of the ablation ran MG's trials: same operators, same seeds.
     The cells of the application's own source are the application's assistive trials, reused."""
     from coassist.data import read_dataset
-    from coassist.experiments.ablation import CONTROLLERS, ablation_cells
+    from coassist.experiments.ablation_cells import CONTROLLERS, ablation_cells
     from coassist.experiments.source_training import APPLICATION_SOURCE
 
     out, summary = tiny_run
@@ -390,7 +390,7 @@ def test_the_held_out_cells_meet_their_own_people(tiny_run):
     sources were fitted to those operators' own calibration trials, not the thesis population's."""
     from coassist._io import read_hashed_json
     from coassist.data import read_dataset
-    from coassist.experiments.ablation import HELD_OUT_SOURCES
+    from coassist.experiments.ablation_cells import HELD_OUT_SOURCES
 
     out, summary = tiny_run
     cfg = rep.REPRODUCE_PRESETS["tiny"]
