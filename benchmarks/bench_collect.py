@@ -255,7 +255,7 @@ def main() -> None:
                 )
         if "cells" in only:
             from coassist.experiments.application import cell_options
-            from coassist.experiments.pipeline import ReproduceConfig
+            from coassist.experiments.reproduce_config import ReproduceConfig
 
             cfg = ReproduceConfig()
             cell_model = args.cell_model or model

@@ -12,7 +12,7 @@ is calibrated on the MuJoCo UR5 itself, in its own job. The learned sources need
 and are not run here. One simulation process (``workers`` 1): on this shared machine one heavy process.
 
 Prints, per object and source: f_RMS and the share of the oracle's force saving, overshoot and the share of its
-overshoot reduction (95 % bootstrap intervals, :data:`~coassist.experiments.ablation.BOOTSTRAP` resamples), the
+overshoot reduction (95 % bootstrap intervals, :data:`~coassist.experiments.ablation_cells.BOOTSTRAP` resamples), the
 paired differences from MG (Student-t 95 %) and jerk against MG's; with ``--first k`` the same on each
 operator's first k trials too (the cells of ``ablation_mujoco_trials`` = k: the same trials). Then the report's
 MuJoCo verdicts on these cells (``paths``' direction, the person model's direction with its intervals) and the
@@ -37,13 +37,9 @@ from bench_common import machine_line  # noqa: E402
 from coassist._cpu import run_cpu_seconds  # noqa: E402
 from coassist._io import atomic_write_text  # noqa: E402
 from coassist.analysis.paired import gain_share, paired_difference  # noqa: E402
-from coassist.experiments import pipeline  # noqa: E402
-from coassist.experiments.ablation import (  # noqa: E402
-    ARBITRATED,
-    BOOTSTRAP,
-    OBJECTS,
-    run_mujoco_ablation,
-)
+from coassist.experiments import pipeline, reproduce_config  # noqa: E402
+from coassist.experiments.ablation import OBJECTS, run_mujoco_ablation
+from coassist.experiments.ablation_cells import ARBITRATED, BOOTSTRAP
 from coassist.experiments.ablation_report import mujoco_person_claims, precision_claims  # noqa: E402
 from coassist.experiments.source_training import calibrate_paths, calibrate_person  # noqa: E402
 
@@ -73,11 +69,11 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--trials", type=int, default=None, help="per operator and object (default: the preset's)")
     parser.add_argument("--sources", default="paths,person,oracle")
-    parser.add_argument("--calibration", choices=pipeline.MUJOCO_PERSON_CALIBRATIONS, default=None)
+    parser.add_argument("--calibration", choices=reproduce_config.MUJOCO_PERSON_CALIBRATIONS, default=None)
     parser.add_argument("--first", type=int, default=0, help="also the figures on each operator's first k trials")
     args = parser.parse_args()
     print(machine_line())
-    base = pipeline.REPRODUCE_PRESETS["default"]
+    base = reproduce_config.REPRODUCE_PRESETS["default"]
     sources = tuple(s for s in args.sources.split(",") if s)
     if "oracle" not in sources:
         raise SystemExit("--sources must hold the oracle: the shares are of its benefit")

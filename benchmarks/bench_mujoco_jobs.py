@@ -26,7 +26,7 @@ from pathlib import Path  # noqa: E402
 import torch  # noqa: E402
 
 from bench_common import machine_line  # noqa: E402
-from coassist.experiments import pipeline  # noqa: E402
+from coassist.experiments import pipeline, reproduce_config  # noqa: E402
 from coassist.experiments.ablation import MG_JOB, mujoco_task, probe_configs  # noqa: E402
 from coassist.experiments.source_training import calibrate_paths  # noqa: E402
 
@@ -34,12 +34,16 @@ from coassist.experiments.source_training import calibrate_paths  # noqa: E402
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, required=True)
-    parser.add_argument("--trials", type=int, default=pipeline.REPRODUCE_PRESETS["default"].ablation_mujoco_trials)
+    parser.add_argument(
+        "--trials", type=int, default=reproduce_config.REPRODUCE_PRESETS["default"].ablation_mujoco_trials
+    )
     parser.add_argument("--paths", default=None, help="a path-hypotheses calibration folder")
     args = parser.parse_args()
     print(machine_line())
     torch.set_num_threads(1)
-    cfg = replace(pipeline.REPRODUCE_PRESETS["default"], workers=1, threads=1, ablation_mujoco_trials=args.trials)
+    cfg = replace(
+        reproduce_config.REPRODUCE_PRESETS["default"], workers=1, threads=1, ablation_mujoco_trials=args.trials
+    )
     ws = pipeline.Workspace(cfg, args.out, progress=False)
     folder, _ = ws.collect("D0", tasks=("curved",), trials=2, seed=1, preset=cfg.application_preset, obstacle="large")
     model = ws.train("m", [folder], init="scratch", epochs=1)

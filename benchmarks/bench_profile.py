@@ -19,7 +19,7 @@ payloads a worker sends back): run it before and after a change that must keep t
 
 ``io`` reads every dataset of a finished run (:func:`coassist.data.read_dataset`, as the main
 process reads each collection back) and writes every trial again to a temporary folder
-(:func:`coassist.data.datasets.write_trial`, as the collections write them), and prints the CPU
+(:func:`coassist.data.trial_file.write_trial`, as the collections write them), and prints the CPU
 seconds of each: what a run spends on its dataset files.
 
 ``classify`` reads a py-spy ``--format raw`` file (``py-spy record -s -f raw``, or ``--pid``
@@ -57,9 +57,11 @@ def run_job(kind: str, run: Path) -> dict:
     """One worker job of ``kind`` (module docstring) with ``run``'s models: CPU seconds, trials, ticks, digest."""
     import torch
 
-    from coassist.experiments.ablation import ARBITRATED, mujoco_task
+    from coassist.experiments.ablation import mujoco_task
+    from coassist.experiments.ablation_cells import ARBITRATED
     from coassist.experiments.application import cell_options
-    from coassist.experiments.pipeline import REPRODUCE_PRESETS, Workspace
+    from coassist.experiments.pipeline import Workspace
+    from coassist.experiments.reproduce_config import REPRODUCE_PRESETS
     from coassist.sim.collect import dataset_specs
     from coassist.sim.pool import trial_payload
     from coassist.sim.trial_runner import run_spec_lockstep
@@ -104,7 +106,7 @@ def run_job(kind: str, run: Path) -> dict:
 def data_files(run: Path) -> str:
     """CPU seconds to read every dataset of ``run`` and to write its trials again (module docstring)."""
     from coassist.data import read_dataset
-    from coassist.data.datasets import write_trial
+    from coassist.data.trial_file import write_trial
 
     read = write = 0.0
     trials = ticks = 0

@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from bench_common import machine_line
-from coassist.experiments.pipeline import REPRODUCE_PRESETS
 from coassist.experiments.reproduce import run_reproduce
+from coassist.experiments.reproduce_config import REPRODUCE_PRESETS
 
 
 def _stats(values: list[float]) -> tuple[float, float]:

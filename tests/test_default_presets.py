@@ -9,7 +9,7 @@ import typer
 
 from coassist.cli import app
 from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET, CONTROL_PRESETS
-from coassist.experiments.pipeline import ReproduceConfig
+from coassist.experiments.reproduce_config import ReproduceConfig
 from coassist.play.session import PlayConfig
 from coassist.robot.drive import DriveConfig
 

@@ -124,7 +124,7 @@ def _same_trials(mine, builtin) -> None:
 
 def test_registered_entries_leave_with_the_test():
     assert "echo-cv" not in INTENT_SOURCES and "my-arm" not in WORLDS
-    from coassist.experiments.ablation import registered_sources
+    from coassist.experiments.ablation_cells import registered_sources
     from coassist.study.plan import study_worlds
 
     assert registered_sources() == ()  # the main job's ablation runs the sources of its tables alone
@@ -231,21 +231,15 @@ def test_the_study_runs_a_registered_world(echo_cv, my_arm, tmp_path):
 
 
 def test_the_ablation_runs_a_registered_intent_source(echo_cv, tmp_path):
-    from coassist.experiments import pipeline
-    from coassist.experiments.ablation import (
-        ARBITRATED,
-        OBJECTS,
-        AblationAhead,
-        ablation_cells,
-        registered_sources,
-        run_ablation,
-    )
+    from coassist.experiments import pipeline, reproduce_config
+    from coassist.experiments.ablation import OBJECTS, AblationAhead, run_ablation
+    from coassist.experiments.ablation_cells import ARBITRATED, ablation_cells, registered_sources
     from coassist.scenario.path_hypotheses import write_calibration
     from coassist.scenario.person_model import write_person_model
 
     assert registered_sources() == ("echo-cv",)
     cfg = replace(
-        pipeline.REPRODUCE_PRESETS["tiny"],
+        reproduce_config.REPRODUCE_PRESETS["tiny"],
         workers=1,
         threads=1,
         learned_sources=(),

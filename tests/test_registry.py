@@ -63,7 +63,7 @@ def test_register_adds_after_the_declared_and_unregister_removes_only_what_was_a
 def test_the_three_preset_kinds_are_registries_with_their_own_names():
     from coassist.config import CONTROL_PRESETS, DECIMETRE_SCALE, THESIS_EVALUATION
     from coassist.control.presets import get_preset
-    from coassist.experiments.pipeline import REPRODUCE_PRESETS
+    from coassist.experiments.reproduce_config import REPRODUCE_PRESETS
 
     kinds = {CONTROL_PRESETS.what, REPRODUCE_PRESETS.what}
     try:

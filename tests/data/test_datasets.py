@@ -20,7 +20,7 @@ from coassist.data import (
     write_dataset,
     write_trial,
 )
-from coassist.data.datasets import META_KEY, VERSION_KEY
+from coassist.data.trial_file import META_KEY, VERSION_KEY
 
 
 def full_trial(n: int = 50, d: int = 2, h: int = 5, seed: int = 0, **meta_changes) -> Trial:

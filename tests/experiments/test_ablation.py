@@ -13,12 +13,13 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     pytest.importorskip("torch")
     from dataclasses import replace
 
-    from coassist.experiments import pipeline
-    from coassist.experiments.ablation import ARBITRATED, ablation_cells, mujoco_sources, run_ablation
+    from coassist.experiments import pipeline, reproduce_config
+    from coassist.experiments.ablation import run_ablation
+    from coassist.experiments.ablation_cells import ARBITRATED, ablation_cells, mujoco_sources
     from coassist.experiments.source_training import calibrate_person, seed_names
     from coassist.scenario.path_hypotheses import write_calibration
 
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1, threads=1)
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1, threads=1)
     ws = pipeline.Workspace(cfg, tmp_path, progress=False)
     # One tool-labelled model stands in for every learned source: the cells' plumbing is what is tested.
     folder, _ = ws.collect("D0", tasks=("curved",), trials=2, seed=1, preset=cfg.application_preset, obstacle="large")
@@ -66,19 +67,13 @@ def test_the_mujoco_cells_run_the_person_model_calibrated_on_the_arm(tmp_path):
     calibration runs on the arm."""
     from dataclasses import replace
 
-    from coassist.experiments import pipeline
-    from coassist.experiments.ablation import (
-        ARBITRATED,
-        MG_JOB,
-        _drive_batch,
-        calibrate_then_drive,
-        mujoco_sources,
-        mujoco_task,
-    )
+    from coassist.experiments import pipeline, reproduce_config
+    from coassist.experiments.ablation import MG_JOB, _drive_batch, calibrate_then_drive, mujoco_task
+    from coassist.experiments.ablation_cells import ARBITRATED, mujoco_sources
     from coassist.experiments.source_training import calibration_options
     from coassist.sim.collect import dataset_specs
 
-    cfg = pipeline.REPRODUCE_PRESETS["default"]
+    cfg = reproduce_config.REPRODUCE_PRESETS["default"]
     assert {"person", "paths", "oracle"} <= set(mujoco_sources(cfg))
     assert cfg.mujoco_person_calibration == "mujoco"
     ws = pipeline.Workspace(cfg, tmp_path, progress=False)
@@ -114,10 +109,10 @@ def test_the_mujoco_cells_alone_need_every_model_they_run(tmp_path):
     pytest.importorskip("pinocchio")
     from dataclasses import replace
 
-    from coassist.experiments import pipeline
+    from coassist.experiments import pipeline, reproduce_config
     from coassist.experiments.ablation import run_mujoco_ablation
 
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1)
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, workers=1)
     ws = pipeline.Workspace(cfg, tmp_path, progress=False)
     with pytest.raises(ValueError, match="no model or calibration of lstm-intent, paths$"):
         run_mujoco_ablation(ws, {})
@@ -128,9 +123,9 @@ def test_the_mujoco_cells_alone_need_every_model_they_run(tmp_path):
 def test_mujoco_person_calibration_is_validated():
     from dataclasses import replace
 
-    from coassist.experiments import pipeline
+    from coassist.experiments import reproduce_config
 
-    cfg = pipeline.REPRODUCE_PRESETS["default"]
+    cfg = reproduce_config.REPRODUCE_PRESETS["default"]
     assert replace(cfg, mujoco_person_calibration="point-mass").mujoco_person_calibration == "point-mass"
     for bad in ("pointmass", "", None, 1):
         with pytest.raises(ValueError, match="reproduce.mujoco_person_calibration"):
@@ -138,7 +133,7 @@ def test_mujoco_person_calibration_is_validated():
 
 
 def test_each_cell_says_what_its_source_was_told():
-    from coassist.experiments.ablation import SOURCES, told_of
+    from coassist.experiments.ablation_cells import SOURCES, told_of
 
     person, paths = told_of("person"), told_of("paths")
     assert (person.scene, person.family, person.arm, person.label) == (False, "", "measured", "")
@@ -152,7 +147,7 @@ def test_each_cell_says_what_its_source_was_told():
 def _result(person_gain: float, jerk: float, world: str = "point-mass"):
     """One object's cells: MG, the oracle (gains 2, 3, 3 N / mm) and the person model (gains ``person_gain`` × the
     oracle's per trial), so its shares are ``person_gain`` exactly."""
-    from coassist.experiments.ablation import ARBITRATED, AblationResult
+    from coassist.experiments.ablation_cells import ARBITRATED, AblationResult
 
     mg_f, gain = np.array([4.0, 5.0, 6.0, 5.0]), np.array([2.0, 3.0, 3.0, 2.0])
     side = [1, -1, 1, -1]

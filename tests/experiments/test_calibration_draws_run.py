@@ -5,7 +5,7 @@ from dataclasses import replace
 
 import pytest
 
-from coassist.experiments import pipeline
+from coassist.experiments import pipeline, reproduce_config
 from coassist.experiments.source_training import (
     DRAW_SEED_STEP,
     calibrate_person,
@@ -16,7 +16,7 @@ from coassist.scenario.person_model import PERSON_MODEL_FILE
 
 
 def test_draws_are_calibrations_of_their_own_trials(tmp_path):
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
     ws = pipeline.Workspace(cfg, tmp_path, progress=False)
     one = calibrate_person(ws)
     drawn = calibrate_person(ws, draws=2)
@@ -37,4 +37,4 @@ def test_draws_are_calibrations_of_their_own_trials(tmp_path):
 @pytest.mark.parametrize("draws", [0, 9, 1.5])
 def test_the_config_refuses_draws_it_cannot_seed(draws):
     with pytest.raises(ValueError, match="calibration_draws"):
-        replace(pipeline.REPRODUCE_PRESETS["default"], calibration_draws=draws)
+        replace(reproduce_config.REPRODUCE_PRESETS["default"], calibration_draws=draws)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from coassist.analysis.paired import gain_share
-from coassist.experiments.ablation import ARBITRATED
+from coassist.experiments.ablation_cells import ARBITRATED
 from coassist.experiments.precision import compare_intents, comparison_table
 
 

@@ -9,19 +9,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from coassist.experiments import pipeline
-from coassist.experiments.ablation import (
-    CALIBRATED,
-    MG_JOB,
-    OBJECTS,
-    AblationAhead,
-    _mujoco_jobs,
-    ablation_cells,
-    base_source,
-    mujoco_sources,
-    mujoco_task,
-    run_sources,
-)
+from coassist.experiments import pipeline, reproduce_config
+from coassist.experiments.ablation import MG_JOB, OBJECTS, AblationAhead, _mujoco_jobs, mujoco_task
+from coassist.experiments.ablation_cells import CALIBRATED, ablation_cells, base_source, mujoco_sources, run_sources
 from coassist.experiments.application import handed_to_ablation
 from coassist.experiments.source_training import LEARNED, seed_names
 from coassist.sim.pool import worker_pool
@@ -89,7 +79,9 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
     """Named sources at the first call, each learned one (and each of its trainings) once written;
     never a cell the application hands over; never twice; the MuJoCo jobs are those ``_run_mujoco``
     takes."""
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, source_seeds=2, mujoco_sources=())
+    cfg = replace(
+        reproduce_config.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=1, source_seeds=2, mujoco_sources=()
+    )
     pool = _RecordingPool()
     ws = pipeline.Workspace(cfg, tmp_path, progress=False, pool=pool)
     ahead = AblationAhead(ws, handed_to_ablation())
@@ -149,7 +141,7 @@ def test_prefetched_collection_is_the_collection(tmp_path, with_model, shared_po
     and a model in the loop in lockstep groups); a prefetch under the same name with other
     options is dropped and the collection asked for runs."""
     pytest.importorskip("torch")
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=2, threads=1)
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], workers=2, threads=1)
     plain = pipeline.Workspace(cfg, tmp_path / "plain", progress=False, pool=shared_pool)  # no pool of its own to start
     intent = "nominal"
     if with_model:
@@ -172,7 +164,7 @@ def test_prefetched_collection_is_the_collection(tmp_path, with_model, shared_po
 
 def test_prefetch_without_a_pool_does_nothing(tmp_path):
     """Nothing is simulated or submitted: the collection is only deferred (below)."""
-    ws = pipeline.Workspace(pipeline.REPRODUCE_PRESETS["tiny"], tmp_path, progress=False)
+    ws = pipeline.Workspace(reproduce_config.REPRODUCE_PRESETS["tiny"], tmp_path, progress=False)
     ws.prefetch("x", tasks=("curved",), trials=1, seed=1)
     assert ws._pending == {} and ws.submit("k", int, "1") is None and ws.take("k") is None
     assert not (tmp_path / "datasets").exists() and list(ws._deferred) == ["x"]
@@ -189,7 +181,7 @@ def test_collections_deferred_without_a_pool_run_together_and_are_the_collection
 
     if not onnx_network.onnx_runtime_available():
         pytest.skip("needs ONNX Runtime (the onnx extra)")
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
     plain = pipeline.Workspace(cfg, tmp_path / "ref", progress=False)
     folder, _ = plain.collect("D0", tasks=("curved",), trials=1, seed=1)
     model = str(plain.train("m", [folder], init="scratch", epochs=1))
@@ -235,7 +227,7 @@ def test_a_deferred_collection_that_fails_raises_in_its_own_collect(tmp_path, mo
     import coassist.intent.onnx_network as onnx_network
 
     monkeypatch.setattr(onnx_network, "onnx_runtime_available", lambda: True)  # deferred, whatever is installed
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
     ws = pipeline.Workspace(cfg, tmp_path, progress=False)
     broken = tmp_path / "broken-model"
     broken.mkdir()
@@ -259,11 +251,11 @@ def test_result_of_waits_for_the_job_or_runs_it_here(tmp_path):
         calls.append(x)
         return x + 1
 
-    alone = pipeline.Workspace(pipeline.REPRODUCE_PRESETS["tiny"], tmp_path, progress=False)
+    alone = pipeline.Workspace(reproduce_config.REPRODUCE_PRESETS["tiny"], tmp_path, progress=False)
     alone.submit("k", fn, 1)
     assert alone.result_of("k", fn, 1) == 2 and calls == [1]
     pool = _RecordingPool()  # its futures hold []
-    ws = pipeline.Workspace(pipeline.REPRODUCE_PRESETS["tiny"], tmp_path, progress=False, pool=pool)
+    ws = pipeline.Workspace(reproduce_config.REPRODUCE_PRESETS["tiny"], tmp_path, progress=False, pool=pool)
     ws.submit("k", fn, 1)
     assert ws.result_of("k", fn, 1) == [] and calls == [1] and ws._pending == {}
 
@@ -276,7 +268,7 @@ def test_beside_training_starts_each_later_share_once_and_all_by_the_last_traini
     from coassist.experiments.application import CONTROLLERS as APP_CONTROLLERS
     from coassist.experiments.reproduce import _beside_training
 
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], iterations=iterations, ablation_mujoco_trials=1)
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], iterations=iterations, ablation_mujoco_trials=1)
     pool = _RecordingPool()
     ws = pipeline.Workspace(cfg, tmp_path, progress=False, pool=pool)
     ablation_ahead = AblationAhead(ws, handed_to_ablation())
@@ -319,7 +311,7 @@ def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch, 
     from coassist.data import read_dataset
     from coassist.experiments.transfer import run_transfer
 
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=2, threads=1)
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], workers=2, threads=1)
     alone = replace(cfg, workers=1)  # collections in this process: no worker processes to start
     base = pipeline.Workspace(alone, tmp_path / "base", progress=False)
     folder, _ = base.collect("D0", tasks=("curved",), trials=2, seed=1)
@@ -353,7 +345,7 @@ def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch, 
 def test_prefetch_errors_reach_collect(tmp_path, shared_pool):
     """A prefetched collection that fails raises in the collect that asks for it (not lost in
     its thread); the same name prefetched again is a no-op with the same options, refused with others."""
-    cfg = replace(pipeline.REPRODUCE_PRESETS["tiny"], workers=2)
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], workers=2)
     with nullcontext(shared_pool) as pool:
         ws = pipeline.Workspace(cfg, tmp_path, progress=False, pool=pool)
         options = {"tasks": ("curved",), "trials": 1, "seed": 1}

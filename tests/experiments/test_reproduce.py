@@ -13,7 +13,7 @@ from itertools import pairwise
 import numpy as np
 import pytest
 
-from coassist.experiments import pipeline
+from coassist.experiments import pipeline, reproduce_config, seed_plan
 from coassist.experiments import reproduce as rep
 from coassist.experiments.source_training import DRAW_SEED_STEP
 from coassist.experiments.transfer import transfer_targets
@@ -22,21 +22,21 @@ from coassist.experiments.transfer import transfer_targets
 def _collections(cfg):
     """(name, first seed, trial count) of every simulated collection of a run, from the seed plan."""
     n_tasks = len(pipeline.ITERATION_TASKS)
-    base = pipeline.trial_seed_base(cfg.seed)
+    base = seed_plan.trial_seed_base(cfg.seed)
     out = [
-        (f"D{k}", pipeline.iteration_seed(base, k), n_tasks * cfg.trials_per_task) for k in range(cfg.iterations + 1)
+        (f"D{k}", seed_plan.iteration_seed(base, k), n_tasks * cfg.trials_per_task) for k in range(cfg.iterations + 1)
     ]
     for i, (name, t) in enumerate(transfer_targets(cfg).items()):
-        train, test = pipeline.transfer_seeds(base, i)
+        train, test = seed_plan.transfer_seeds(base, i)
         per = len(t.tasks) * len(t.users) * len(t.objects)
         out += [(f"TL {name}", train, per * t.trials), (f"TL {name} test", test, per * t.test_trials)]
-    out.append(("TL heavy", pipeline.heavy_transfer_seed(base), n_tasks * max(1, cfg.transfer_trials // 3)))
-    out.append(("calibration", pipeline.calibration_seed(base), cfg.calibration_trials * len(cfg.application_users)))
+    out.append(("TL heavy", seed_plan.heavy_transfer_seed(base), n_tasks * max(1, cfg.transfer_trials // 3)))
+    out.append(("calibration", seed_plan.calibration_seed(base), cfg.calibration_trials * len(cfg.application_users)))
     for k in range(1, cfg.calibration_draws):  # the person model's further calibrations (draw 0 is the above)
         out.append(
             (
                 f"calibration draw {k}",
-                pipeline.calibration_seed(base) + k * DRAW_SEED_STEP,
+                seed_plan.calibration_seed(base) + k * DRAW_SEED_STEP,
                 cfg.calibration_trials * len(cfg.application_users),
             )
         )
@@ -44,7 +44,7 @@ def _collections(cfg):
         out.append(
             (
                 f"application {j}",
-                pipeline.application_seed(base, j),
+                seed_plan.application_seed(base, j),
                 cfg.application_trials * len(cfg.application_users),
             )
         )
@@ -56,26 +56,26 @@ def test_no_two_collections_share_a_trial_seed(name):
     # one run, and the three runs of `reproduce --seeds 3` (seeds 0, 1, 2) together
     for seeds in ((0,), (0, 1, 2)):
         spans = sorted(
-            (c for s in seeds for c in _collections(replace(pipeline.REPRODUCE_PRESETS[name], seed=s))),
+            (c for s in seeds for c in _collections(replace(reproduce_config.REPRODUCE_PRESETS[name], seed=s))),
             key=lambda c: c[1],
         )
         for (a, sa, na), (b, sb, _) in pairwise(spans):
             assert sa + na <= sb, f"{a} (seeds {sa}..{sa + na - 1}) overlaps {b} (from {sb}), run seeds {seeds}"
     # and every run's collections stay inside its own block of trial seeds
     for s in (0, 1, 2):
-        for a, sa, na in _collections(replace(pipeline.REPRODUCE_PRESETS[name], seed=s)):
-            assert s * pipeline.RUN_SEED_STRIDE <= sa and sa + na <= (s + 1) * pipeline.RUN_SEED_STRIDE, a
+        for a, sa, na in _collections(replace(reproduce_config.REPRODUCE_PRESETS[name], seed=s)):
+            assert s * seed_plan.RUN_SEED_STRIDE <= sa and sa + na <= (s + 1) * seed_plan.RUN_SEED_STRIDE, a
 
 
 def test_seed_plan_offsets():
     # The offsets as named; a change here changes every dataset of a run.
-    assert pipeline.trial_seed_base(0) == 0 and pipeline.trial_seed_base(2) == 2_000_000
-    assert pipeline.iteration_seed(7, 2) == 7 + 300_000
+    assert seed_plan.trial_seed_base(0) == 0 and seed_plan.trial_seed_base(2) == 2_000_000
+    assert seed_plan.iteration_seed(7, 2) == 7 + 300_000
     # The transfer targets moved from +500_000 to +600_000: D_4 of a 4-iteration run starts at +500_000.
-    assert pipeline.transfer_seeds(7, 2) == (7 + 640_000, 7 + 650_000)
-    assert pipeline.heavy_transfer_seed(7) == 7 + 800_000
-    assert pipeline.application_seed(7, 1) == 7 + 901_000
-    assert pipeline.calibration_seed(7) == 7 + 880_000
+    assert seed_plan.transfer_seeds(7, 2) == (7 + 640_000, 7 + 650_000)
+    assert seed_plan.heavy_transfer_seed(7) == 7 + 800_000
+    assert seed_plan.application_seed(7, 1) == 7 + 901_000
+    assert seed_plan.calibration_seed(7) == 7 + 880_000
 
 
 @pytest.fixture(scope="module")
@@ -134,11 +134,11 @@ def test_every_stage_ran_and_wrote_its_numbers(tiny_run):
         assert (out / "models" / key / "history.json").is_file()
     # The ablation: every (object, controller, source) cell in the point-mass world (the tiny preset leaves MuJoCo out),
     # each model saying what it predicts.
-    from coassist.experiments.ablation import ablation_cells
+    from coassist.experiments.ablation_cells import ablation_cells
 
     ab = summary["ablation"]
     tiny = rep.REPRODUCE_PRESETS["tiny"]
-    from coassist.experiments.ablation import ARBITRATED, HELD_OUT_SOURCES
+    from coassist.experiments.ablation_cells import ARBITRATED, HELD_OUT_SOURCES
 
     assert set(ab["cells"]) == {
         f"point-mass/{o}/{c}/{s}" for o in ("board", "heavy") for c, s in ablation_cells(tiny)
@@ -312,7 +312,7 @@ def test_ablation_cells_meet_the_same_trials(tiny_run):
     """Every (object, controller, source) cell of the ablation ran MG's trials: same operators, same seeds.
     The cells of the application's own source are the application's assistive trials, reused."""
     from coassist.data import read_dataset
-    from coassist.experiments.ablation import CONTROLLERS, ablation_cells
+    from coassist.experiments.ablation_cells import CONTROLLERS, ablation_cells
     from coassist.experiments.source_training import APPLICATION_SOURCE
 
     out, summary = tiny_run
@@ -390,7 +390,7 @@ def test_the_held_out_cells_meet_their_own_people(tiny_run):
     sources were fitted to those operators' own calibration trials, not the thesis population's."""
     from coassist._io import read_hashed_json
     from coassist.data import read_dataset
-    from coassist.experiments.ablation import HELD_OUT_SOURCES
+    from coassist.experiments.ablation_cells import HELD_OUT_SOURCES
 
     out, summary = tiny_run
     cfg = rep.REPRODUCE_PRESETS["tiny"]

@@ -8,7 +8,8 @@ from dataclasses import replace
 import pytest
 from safetensors.numpy import load_file
 
-from coassist.experiments.pipeline import ITERATION_TASKS, REPRODUCE_PRESETS, Workspace
+from coassist.experiments.pipeline import ITERATION_TASKS, Workspace
+from coassist.experiments.reproduce_config import REPRODUCE_PRESETS
 from coassist.experiments.source_training import seed_names, train_sources
 
 

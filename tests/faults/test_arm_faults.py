@@ -9,7 +9,7 @@ case pushes for 5 s of wall time — both stay on MuJoCo to keep the suite fast;
 runs are cut to 1.6 s). The
 check is the UR's: the loop does not crash, the fault is flagged, the run stops where the
 case says, and no joint velocity command sent is outside a limit
-(:func:`coassist.runtime.safety.within_limits` with the Jacobian and pose the layer saw).
+(:func:`coassist.runtime.safety_limits.within_limits` with the Jacobian and pose the layer saw).
 
 Run as a script for the table of cases: ``python tests/faults/test_arm_faults.py``.
 """
@@ -30,7 +30,7 @@ pytest.importorskip("pinocchio", reason="the Panda kinematics need the robot ext
 from coassist.interfaces import Fault  # noqa: E402
 from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.mujoco_world import MujocoArmWorld  # noqa: E402
-from coassist.runtime.safety import SafetyLimits, within_limits  # noqa: E402
+from coassist.runtime.safety_limits import SafetyLimits, within_limits  # noqa: E402
 
 TESTS = Path(__file__).resolve().parents[1]
 

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from coassist.cli import app
 from coassist.robot.drive import DriveConfig
-from coassist.runtime.safety import SafetyLimits
+from coassist.runtime.safety_limits import SafetyLimits
 
 runner = CliRunner()
 

@@ -40,7 +40,7 @@ from coassist.data import read_trial, write_trial  # noqa: E402
 from coassist.interfaces import Fault  # noqa: E402
 from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.franka_world import FrankaWorld  # noqa: E402
-from coassist.runtime.safety import SafetyLimits  # noqa: E402
+from coassist.runtime.safety_limits import SafetyLimits  # noqa: E402
 
 TESTS = Path(__file__).resolve().parents[1]
 DT = 0.008

@@ -13,7 +13,8 @@ import pytest
 
 from coassist.control.controllers import saturate
 from coassist.interfaces import Fault
-from coassist.runtime.safety import SafetyLayer, SafetyLimits
+from coassist.runtime.safety import SafetyLayer
+from coassist.runtime.safety_limits import SafetyLimits
 from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPipeline
 
 DT = 0.008

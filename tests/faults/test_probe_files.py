@@ -159,7 +159,7 @@ def test_an_implausible_value_without_a_checksum_is_refused(tmp_path):
     """Files written before the checksum: a finite 6e307 N wrench is still no recording."""
     import pyarrow.parquet as pq
 
-    from coassist.data.datasets import CHECKSUM_KEY
+    from coassist.data.trial_file import CHECKSUM_KEY
 
     path = write_trial(_trial(), tmp_path / "t.parquet")
     table = pq.read_table(path)

@@ -47,7 +47,7 @@ from coassist.interfaces import Fault  # noqa: E402
 from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
-from coassist.runtime.safety import SafetyLimits  # noqa: E402
+from coassist.runtime.safety_limits import SafetyLimits  # noqa: E402
 from coassist.runtime.world import Command  # noqa: E402
 
 TESTS = Path(__file__).resolve().parents[1]

@@ -2,7 +2,7 @@
 
 Each case runs the whole loop (``coassist.robot.drive``) with a fault injected between
 the world and the tick, and checks: the loop does not crash, every joint velocity
-command sent is inside every limit (:func:`coassist.runtime.safety.within_limits`,
+command sent is inside every limit (:func:`coassist.runtime.safety_limits.within_limits`,
 with the Jacobian and pose the layer saw), and the fault is flagged in the log.
 
 Run as a script for the table of cases: ``python tests/faults/test_runtime_faults.py``.
@@ -23,7 +23,7 @@ from coassist.interfaces import Fault  # noqa: E402
 from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.mujoco_world import MujocoUR5World  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
-from coassist.runtime.safety import SafetyLimits, within_limits  # noqa: E402
+from coassist.runtime.safety_limits import SafetyLimits, within_limits  # noqa: E402
 
 DT = 0.008
 LIMITS = SafetyLimits(workspace_lower=(-0.6, -1.1, 0.0), workspace_upper=(0.7, -0.1, 0.5))

@@ -32,7 +32,7 @@ from coassist.robot.arms import arm_kinematics  # noqa: E402
 from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.franka_world import FrankaLinkError, FrankaWorld  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
-from coassist.runtime.safety import SafetyLimits, within_limits  # noqa: E402
+from coassist.runtime.safety_limits import SafetyLimits, within_limits  # noqa: E402
 
 SERVER = Path(__file__).with_name("franky_sim_server.py")
 D = 100.0  # the preset's damping [N·s/m]: MG renders M a + D v = F

@@ -24,7 +24,7 @@ from coassist.robot.arms import NullSpacePosture, arm_kinematics, get_arm  # noq
 from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.mujoco_world import FTSensorModel, MujocoArmWorld  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
-from coassist.runtime.safety import SafetyLimits  # noqa: E402
+from coassist.runtime.safety_limits import SafetyLimits  # noqa: E402
 
 D = 100.0  # the preset's damping [N·s/m]
 DEADBAND = 0.2  # the wrench pipeline's force deadband [N] (WrenchConfig default)

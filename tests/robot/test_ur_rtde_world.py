@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from coassist.robot.ur_rtde_world import SafetyStatus, URProgramStopped, URRTDEWorld, stop_message
+from coassist.robot.ur_rtde_world import URProgramStopped, URRTDEWorld
+from coassist.robot.ur_status import SafetyStatus, stop_message
 from coassist.runtime.world import Command, RobotLinkError, RobotState, World
 
 # Loaded by path under a unique name: works with --import-mode=importlib and without

@@ -29,7 +29,7 @@ from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.mujoco_world import FTSensorModel, MujocoUR5World  # noqa: E402
 from coassist.robot.ur_rtde_world import URProgramStopped, URRTDEWorld  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
-from coassist.runtime.safety import SafetyLimits, within_limits  # noqa: E402
+from coassist.runtime.safety_limits import SafetyLimits, within_limits  # noqa: E402
 from coassist.runtime.world import Command, RobotLinkError  # noqa: E402
 
 #: Flags a stall of this machine raises (a late tick: the safety layer ramps), not the robot's doing.

@@ -60,8 +60,8 @@ def test_the_point_mass_has_one_name_and_its_trials_source():
     import inspect
 
     from coassist.data.trial import SOURCES
-    from coassist.experiments.ablation import ABLATION_CELLS
-    from coassist.experiments.pipeline import MUJOCO_PERSON_CALIBRATIONS
+    from coassist.experiments.ablation_cells import ABLATION_CELLS
+    from coassist.experiments.reproduce_config import MUJOCO_PERSON_CALIBRATIONS
     from coassist.play import session as play_session
     from coassist.sim import trial_runner
 

@@ -31,7 +31,8 @@ from coassist.runtime.episode import (
 )
 from coassist.runtime.intent import WindowIntent
 from coassist.runtime.loop import LoopLog, TargetDwell, run_loop
-from coassist.runtime.safety import SafetyLayer, SafetyLimits
+from coassist.runtime.safety import SafetyLayer
+from coassist.runtime.safety_limits import SafetyLimits
 from coassist.runtime.tick import ControlTick, Plan, TickConfig
 from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
 from coassist.scenario import ForceSensor, get_object, load_intent_source, operator_profile, task_for_seed

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from coassist.interfaces import Fault
-from coassist.runtime.safety import BAD_TICK_FAULTS, SafetyLayer, SafetyLimits, within_limits
+from coassist.runtime.safety import BAD_TICK_FAULTS, SafetyLayer
+from coassist.runtime.safety_limits import SafetyLimits, within_limits
 
 DT = 0.008
 I6 = np.eye(6)

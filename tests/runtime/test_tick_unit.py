@@ -18,7 +18,8 @@ from coassist.errors import CoassistError
 from coassist.interfaces import Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
 from coassist.runtime.loop import TargetDwell, TargetDwellBatch, run_loop
-from coassist.runtime.safety import SafetyLayer, SafetyLimits
+from coassist.runtime.safety import SafetyLayer
+from coassist.runtime.safety_limits import SafetyLimits
 from coassist.runtime.tick import ControlTick, Plan, TickConfig, human_reference
 from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
 

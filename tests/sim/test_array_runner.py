@@ -18,7 +18,7 @@ from coassist.control.presets import CONTROLLER_KINDS, get_preset
 from coassist.interfaces import Fault
 from coassist.runtime.batched_loops import Loop
 from coassist.runtime.loop import run_loop
-from coassist.runtime.safety import SafetyLimits
+from coassist.runtime.safety_limits import SafetyLimits
 from coassist.runtime.world import Command
 from coassist.scenario.constant_velocity import ConstantVelocityIntent
 from coassist.sim.array_runner import fast_path_eligible, run_point_mass_lockstep

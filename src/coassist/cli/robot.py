@@ -92,7 +92,7 @@ def drive(
     from coassist.control.presets import CONTROLLERS
     from coassist.robot.drive import DriveConfig
     from coassist.robot.drive import drive as run_drive
-    from coassist.runtime.safety import SafetyLimits
+    from coassist.runtime.safety_limits import SafetyLimits
 
     choose(world, arm_worlds(), "--world", "arm world")
     choose(controller, CONTROLLERS, "--controller", "controller")

@@ -116,7 +116,7 @@ def ros2(
     from coassist.robot.drive import DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World
-    from coassist.runtime.safety import SafetyLimits
+    from coassist.runtime.safety_limits import SafetyLimits
 
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)

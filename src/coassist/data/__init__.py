@@ -1,15 +1,6 @@
 """Trial logs, datasets on disk, and the loader for real UR5 recordings."""
 
-from coassist.data.datasets import (
-    Dataset,
-    DatasetWriter,
-    TrialFileError,
-    append_to_dataset,
-    read_dataset,
-    read_trial,
-    write_dataset,
-    write_trial,
-)
+from coassist.data.datasets import Dataset, DatasetWriter, append_to_dataset, read_dataset, write_dataset
 from coassist.data.rosbag_csv import (
     RecordingError,
     RecordingWarning,
@@ -18,6 +9,7 @@ from coassist.data.rosbag_csv import (
     load_ros_user,
 )
 from coassist.data.trial import Trial, TrialMeta
+from coassist.data.trial_file import TrialFileError, read_trial, write_trial
 
 __all__ = [
     "Dataset",

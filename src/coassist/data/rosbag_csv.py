@@ -81,7 +81,7 @@ TOPIC_FILES: dict[str, tuple[str, str]] = {
     "wrench": ("human_wrench.csv", "wrench.force.{ax}"),
     "reference": ("robot_ref_pos.csv", "pose.position.{ax}"),
 }
-#: The linear DOFs a recording provides, in the order the files name them (coassist.data.datasets).
+#: The linear DOFs a recording provides, in the order the files name them (coassist.data.trial_file).
 LINEAR_DOFS = ("x", "y", "z")
 #: Magnitudes below this are export noise and read as 0.
 DENORMAL_THRESHOLD = 1e-100

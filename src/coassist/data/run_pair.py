@@ -29,8 +29,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from coassist._io import fsync_dir, remove_stale, temp_name
-from coassist.data.datasets import write_trial
 from coassist.data.trial import Trial
+from coassist.data.trial_file import write_trial
 
 __all__ = ["write_run_pair"]
 

@@ -9,7 +9,7 @@ Conventions (docs/architecture.md, *Conventions for the math*):
 
 - SI units: s, m, m/s, N.
 - ``d`` is the number of controlled Cartesian DOFs (1 to 6). Axis ``j`` of every
-  ``(T, d)`` array is the same DOF; a trial file (:mod:`coassist.data.datasets`) names them x, y, z, rx, ry, rz in order.
+  ``(T, d)`` array is the same DOF; a trial file (:mod:`coassist.data.trial_file`) names them x, y, z, rx, ry, rz in order.
 - ``prediction[k, i - 1]`` is the position predicted at tick ``k`` for tick ``k + i``,
   ``i = 1 … H``; a row of NaN means "no prediction in use at that tick".
 
@@ -208,7 +208,7 @@ def _check_finite(arr: np.ndarray, name: str) -> None:
         raise ValueError(f"Trial.{name} has non-finite values (first at tick {bad})")
 
 
-# Fields shaped like the pose, in the order a trial file (data.datasets) writes them.
+# Fields shaped like the pose, in the order a trial file (data.trial_file) writes them.
 _TD_REQUIRED = ("velocity", "wrench", "reference")
 _TD_OPTIONAL = ("intent", "effort_h", "effort_r")
 

@@ -1,7 +1,7 @@
 """The in-loop ablation of intent sources (issues 18, 34): which prediction makes assistance better?
 
 Every intent source drives the same assistive controllers on the same trials of the
-application scenario (the report's seeds, :func:`~coassist.experiments.pipeline.application_seed`),
+application scenario (the report's seeds, :func:`~coassist.experiments.seed_plan.application_seed`),
 paired against manual guidance (MG) on those trials, in two worlds: the point-mass world
 and the MuJoCo UR5 (``coassist drive``'s world, the arbitrated controller, the sources of
 ``reproduce.mujoco_sources``; fewer trials, the intervals say what they resolve). The sources:
@@ -24,7 +24,8 @@ and the MuJoCo UR5 (``coassist drive``'s world, the arbitrated controller, the s
   trials driven on the arm, fitted there (:func:`calibrate_then_drive`, ``reproduce.mujoco_person_calibration``);
 - ``oracle``: the operator's true intent itself, the best any predictor could do;
 - then every source registered with ``ablation=True`` in
-  :data:`~coassist.scenario.intent_registry.INTENT_SOURCES` (:func:`registered_sources`; none by default).
+  :data:`~coassist.scenario.intent_registry.INTENT_SOURCES`
+  (:func:`~coassist.experiments.ablation_cells.registered_sources`; none by default).
 
 Every learned source is trained from scratch on the same datasets by the same protocol; only
 the label differs, and the ridge's model class. Each LSTM source is trained ``source_seeds``
@@ -36,8 +37,9 @@ lever's force, overshoot and jerk against the same sources without it.
 
 A third set of cells, world ``held-out``, runs the point-mass world with operators of the
 ``held-out`` population (:mod:`coassist.scenario.populations`: detour families and arms nothing was
-tuned to): MG and the arbitrated controller with :data:`HELD_OUT_SOURCES`, ``paths`` and ``person``
-calibrated to those operators' own trials, the learned sources as trained (on the thesis population).
+tuned to): MG and the arbitrated controller with
+:data:`~coassist.experiments.ablation_cells.HELD_OUT_SOURCES`, ``paths`` and ``person`` calibrated to
+those operators' own trials, the learned sources as trained (on the thesis population).
 
 Per cell (world, object, controller, source): :func:`~coassist.experiments.application.application_metrics`,
 and the **share of the oracle's benefit** for force and for overshoot::
@@ -50,21 +52,28 @@ controller). 1 is everything the oracle gains over MG; 0 nothing; below 0 worse 
 Overshoot and clearance deficit are also given per side of the detour (the inside of the arc,
 where the tool turns hardest, and the outside), each as a paired difference from MG.
 
-This module runs the cells and computes their statistics; the report's tables, first-screen
-rows and claims are written from an :class:`AblationResult` by :mod:`coassist.experiments.ablation_report`.
+This module runs the cells; what the cells are (sources, controllers, worlds, the issues' bars) and
+the :class:`~coassist.experiments.ablation_cells.AblationResult` that computes their statistics are
+:mod:`coassist.experiments.ablation_cells`; the report's tables, first-screen rows and claims are
+written from an ``AblationResult`` by :mod:`coassist.experiments.ablation_report`.
 """
 
 from __future__ import annotations
 
 import os
-import re
 from collections.abc import Collection
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from coassist.analysis.paired import gain_share, paired_difference
+from coassist.experiments.ablation_cells import (
+    ARBITRATED,
+    CALIBRATED,
+    HELD_OUT,
+    HELD_OUT_SOURCES,
+    AblationResult,
+    ablation_cells,
+    base_source,
+    mujoco_sources,
+)
 from coassist.experiments.application import (
     OBJECTS,
     OBSTACLE,
@@ -72,213 +81,20 @@ from coassist.experiments.application import (
     cell_options,
     pair_key,
 )
-from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, application_seed, in_loop_errors, trial_seed_base
+from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace, in_loop_errors
+from coassist.experiments.seed_plan import application_seed, trial_seed_base
 from coassist.experiments.source_training import (
     LEARNED,
     calibrate_paths,
     calibrate_person,
     calibration_draw_options,
     calibration_options,
-    seed_names,
 )
 from coassist.robot.worlds import POINT_MASS
 from coassist.scenario.calibration_draws import draw_clusters, draw_count
-from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told
 
 if TYPE_CHECKING:
     from coassist.scenario.person_intent import PersonFilterSettings
-
-SOURCES = (
-    "nominal",
-    "constant-velocity",
-    "present",
-    "ridge",
-    "ridge-intent",
-    "lstm-tool",
-    "lstm-hand-alone",
-    "lstm-intent",
-    "paths",
-    "person",
-    "oracle",
-)
-ARBITRATED = "cooperative-arbitrated"
-DAMPED = "cooperative-damped"
-CONTROLLERS = ("cooperative", ARBITRATED)
-#: The damped controller's cells: the lever on the application's source and on the oracle.
-DAMPED_SOURCES = ("paths", "oracle")
-#: The held-out population's cells (module docstring): the arbitrated controller with these sources.
-HELD_OUT = "held-out"
-HELD_OUT_SOURCES = ("nominal", "present", "lstm-intent", "paths", "person", "oracle")
-#: The report's world cells, the first item of every cell key (world, object, controller, source) and
-#: the order the report's tables run in: not a list of worlds to choose from. "point-mass" and
-#: "mujoco" are worlds of coassist.robot.worlds.WORLDS by name; "held-out" is the point-mass world
-#: again with the held-out population's operators (module docstring). The report's text and tables
-#: and experiments.precision and reproduce read the cells by these names.
-ABLATION_CELLS = (POINT_MASS, "mujoco", HELD_OUT)
-#: The sources calibrated per operator (not trained): their folder is written per population.
-CALIBRATED = ("paths", "person")
-#: Issue 18's bar: a learned predictor in the loop gets this share of the oracle's benefit over MG.
-ORACLE_SHARE_BAR = 0.8
-#: Issue 34's bars for the application's source (arbitrated controller): shares of the oracle's force
-#: saving and overshoot reduction, the bootstrap lower bound of the latter, and jerk against MG's.
-FORCE_SHARE_BAR, OVERSHOOT_SHARE_BAR, SHARE_LOWER_BAR, JERK_BAR = 0.85, 0.60, 0.30, 1.2
-#: Bootstrap resamples of the share's interval (seeded: the same run gives the same interval).
-BOOTSTRAP = 2000
-#: The sides of the detour (TrialMeta.extra["intent_side"]): +1 passes on the left of the path.
-SIDES = {1: "left", -1: "right"}
-
-
-def registered_sources() -> tuple[str, ...]:
-    """The sources of :data:`~coassist.scenario.intent_registry.INTENT_SOURCES` whose entry asks for the
-    ablation (``ablation=True``) besides :data:`SOURCES`, in the registry's order (read when called)."""
-    return tuple(n for n, e in INTENT_SOURCES.items() if e.ablation and n not in SOURCES)
-
-
-def run_sources(cfg) -> tuple[str, ...]:
-    """This run's sources, in the tables' order: the named ones, ``paths`` and its learned ones, then
-    the :func:`registered_sources`."""
-    return tuple(s for s in SOURCES if s not in LEARNED or s in cfg.learned_sources) + registered_sources()
-
-
-def mujoco_sources(cfg) -> tuple[str, ...]:
-    """The sources of the MuJoCo UR5's cells (``reproduce.mujoco_sources``; empty: every source of the run)."""
-    chosen = tuple(cfg.mujoco_sources)
-    return tuple(s for s in run_sources(cfg) if not chosen or s in chosen)
-
-
-def base_source(name: str) -> str:
-    """The source of a cell's name: ``lstm-intent-s2`` → ``lstm-intent``."""
-    return re.sub(r"-s\d+$", "", name)
-
-
-def ablation_cells(cfg) -> list[tuple[str, str]]:
-    """The (controller, source) cells of one object in the point-mass world (module docstring); the fixed-α
-    controller runs the learned sources only where ``reproduce.fixed_alpha_learned`` says so."""
-    cells = [
-        (c, s)
-        for c in CONTROLLERS
-        for s in run_sources(cfg)
-        if c == ARBITRATED or s not in LEARNED or cfg.fixed_alpha_learned
-    ]
-    cells += [
-        (ARBITRATED, name) for s in run_sources(cfg) if s in LEARNED for name in seed_names(s, cfg.source_seeds)[1:]
-    ]
-    cells += [(DAMPED, s) for s in DAMPED_SOURCES]
-    return cells
-
-
-def _oracle_of(controller: str) -> str:
-    """The controller whose oracle cell is a cell's reference (the damped one is measured against the arbitrated)."""
-    return ARBITRATED if controller == DAMPED else controller
-
-
-@dataclass(frozen=True)
-class AblationResult:
-    """metrics[(world, object, controller, source)] and mg[(world, object)]: :func:`application_metrics`;
-    pairs[(world, object)]: the (operator, seed) of every trial, in the order all cells share;
-    models: the learned sources' model folders (and ``paths``' calibration); skipped: world → why it
-    did not run."""
-
-    metrics: dict[tuple[str, str, str, str], dict[str, Any]]
-    mg: dict[tuple[str, str], dict[str, Any]]
-    pairs: dict[tuple[str, str], list[tuple[str, int]]]
-    models: dict[str, str]
-    skipped: dict[str, str]
-    preset: str
-    #: errors[(world, object, controller, source)][h] = {"tool": e_RMS against the measured future pose,
-    #: "intent": against the operator's true intent} [m] of the predictions the loop used, h in samples.
-    errors: dict[tuple[str, str, str, str], dict[int, dict[str, float]]]
-    #: clusters[(world, object, controller, source)]: a label per pair (in ``pairs``' order) for a cell whose
-    #: trials are not independent: the person model's calibration draws (scenario.calibration_draws). Its
-    #: shares' intervals resample the clusters whole (:func:`~coassist.analysis.paired.gain_share`).
-    clusters: dict[tuple[str, str, str, str], list] = field(default_factory=dict)
-
-    def shares(self, world: str, obj: str, controller: str, source: str) -> dict[str, tuple[float, float, float]]:
-        """The share of the oracle's benefit for force and for overshoot (:func:`~coassist.analysis.paired.gain_share`
-        of MG, the source and the oracle, :data:`BOOTSTRAP` resamples); each
-        cell's bootstrap runs once (the summary, the section and the first screen all ask)."""
-        key = (world, obj, controller, source)
-        cache = self.__dict__.setdefault("_shares", {})  # frozen: the cache is not a field
-        if key not in cache:
-            cache[key] = self._shares_of(*key)
-        return cache[key]
-
-    def _shares_of(self, world: str, obj: str, controller: str, source: str) -> dict[str, tuple[float, float, float]]:
-        mg = self.mg[(world, obj)]
-        x = self.metrics[(world, obj, controller, source)]
-        o = self.metrics[(world, obj, _oracle_of(controller), "oracle")]
-        return {
-            m: gain_share(
-                mg[f"{m}_trials"],
-                x[f"{m}_trials"],
-                o[f"{m}_trials"],
-                n_boot=BOOTSTRAP,
-                clusters=self.clusters.get((world, obj, controller, source)),
-            )
-            for m in ("f_rms", "overshoot")
-        }
-
-    def by_side(
-        self,
-        world: str,
-        obj: str,
-        controller: str,
-        source: str,
-        metric: str,
-    ) -> dict[int, tuple[float, float, float, float, int]]:
-        """Per side of the detour (:data:`SIDES`): (mean, paired difference from MG, its 95 % low and high,
-        trials) of ``metric`` ("overshoot" or "clearance_deficit") [m]."""
-        x = self.metrics[(world, obj, controller, source)]
-        mg = self.mg[(world, obj)]
-        side = np.asarray(mg["side"])
-        out = {}
-        for s in SIDES:
-            on = side == s
-            a, b = np.asarray(x[f"{metric}_trials"], float)[on], np.asarray(mg[f"{metric}_trials"], float)[on]
-            d, lo, hi, n = paired_difference(a, b)
-            out[s] = (float(np.nanmean(a)) if n else float("nan"), d, lo, hi, n)
-        return out
-
-    def seeds_of(self, world: str, obj: str, controller: str, source: str) -> list[str]:
-        """The cells of ``source``'s trainings that ran with ``controller`` (one unless the arbitrated LSTM)."""
-        return sorted(
-            (s for (w, o, c, s) in self.metrics if (w, o, c) == (world, obj, controller) and base_source(s) == source),
-            key=lambda s: (s != source, s),
-        )
-
-    def summary(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "preset": self.preset,
-            "models": self.models,
-            "skipped": self.skipped,
-            "cells": {},
-            "pairs": {f"{w}/{o}": p for (w, o), p in self.pairs.items()},
-            "mg": {
-                f"{w}/{o}": {k: v for k, v in m.items() if not k.endswith("_trials")} for (w, o), m in self.mg.items()
-            },
-        }
-        for (world, obj, controller, source), r in self.metrics.items():
-            sh = self.shares(world, obj, controller, source)
-            out["cells"][f"{world}/{obj}/{controller}/{source}"] = {
-                **{k: v for k, v in r.items() if not k.endswith("_trials")},
-                "oracle_share_force": sh["f_rms"],
-                "oracle_share_overshoot": sh["overshoot"],
-                "by_side": {
-                    SIDES[s]: {
-                        m: dict(zip(("mean", "vs_mg", "low", "high", "trials"), v[s]))
-                        for m, v in (
-                            (m, self.by_side(world, obj, controller, source, m))
-                            for m in ("overshoot", "clearance_deficit")
-                        )
-                    }
-                    for s in SIDES
-                },
-                "prediction_errors": self.errors[(world, obj, controller, source)],
-            }
-            labels = self.clusters.get((world, obj, controller, source))
-            if labels is not None:  # the intervals resampled these clusters whole
-                out["cells"][f"{world}/{obj}/{controller}/{source}"]["interval_clusters"] = len(set(map(str, labels)))
-        return out
 
 
 def _intents(models: dict[str, str], names) -> dict[str, str]:
@@ -288,23 +104,6 @@ def _intents(models: dict[str, str], names) -> dict[str, str]:
 
 def _runnable(name: str, models: dict[str, str]) -> bool:
     return name in models or (base_source(name) not in LEARNED and name not in CALIBRATED)
-
-
-def told_of(source: str) -> Told:
-    """What a cell's source was told besides what an arm measures (:class:`~coassist.scenario.intent_registry.Told`)."""
-    base = base_source(source)
-    if base in INTENT_SOURCES:
-        return INTENT_SOURCES[base].told
-    if base == "person":
-        return INTENT_FOLDERS["person-model"].told
-    label = LEARNED[base][1] if base in LEARNED else ""
-    return Told(
-        label={
-            "tool": "the tool's future pose",
-            "intent": "the simulated operator's intent",
-            "hand_alone": "the simulated hand-alone path",
-        }.get(label, label)
-    )
 
 
 def run_ablation(
@@ -402,8 +201,9 @@ def run_mujoco_ablation(ws: Workspace, models: dict[str, str]) -> AblationResult
 
 
 def held_out_models(ws: Workspace, intents: dict[str, str]) -> dict[str, str]:
-    """The held-out cells' sources (:data:`HELD_OUT_SOURCES`): the calibrated ones fitted to the held-out
-    population's operators (their own calibration trials), the others as the run has them."""
+    """The held-out cells' sources (:data:`~coassist.experiments.ablation_cells.HELD_OUT_SOURCES`): the
+    calibrated ones fitted to the held-out population's operators (their own calibration trials), the
+    others as the run has them."""
     out = {s: intents.get(s, s) for s in HELD_OUT_SOURCES if _runnable(s, intents) or s in CALIBRATED}
     out["paths"] = calibrate_paths(ws, population=HELD_OUT)
     out["person"] = calibrate_person(ws, population=HELD_OUT, draws=ws.config.calibration_draws)
@@ -557,7 +357,7 @@ def probe_configs(cfg) -> list:
     "mujoco"): what :func:`~coassist.experiments.source_training.calibration_options` collects in the
     point-mass world (MG with the probe, the handle, the application's task and obstacle, ``calibration_trials``
     per application operator, the same trial seeds: the same task and intent draws), driven on the arm."""
-    from coassist.experiments.pipeline import calibration_seed
+    from coassist.experiments.seed_plan import calibration_seed
     from coassist.robot.drive import DriveConfig
     from coassist.sim.collect import dataset_specs
 

@@ -1,9 +1,10 @@
 """The in-loop ablation's report (issues 18, 34, 40): its tables, first-screen rows and claims.
 
-Rendering only: everything here reads an :class:`~coassist.experiments.ablation.AblationResult`
+Rendering only: everything here reads an :class:`~coassist.experiments.ablation_cells.AblationResult`
 (the cells' metrics, the shares of the oracle's benefit and the per-side paired differences it
 computes) and writes text for :mod:`coassist.experiments.report`'s sections; the cells are run
-and their statistics computed in :mod:`coassist.experiments.ablation`.
+in :mod:`coassist.experiments.ablation`, and what they are and their statistics are
+:mod:`coassist.experiments.ablation_cells`'.
 """
 
 from __future__ import annotations
@@ -13,14 +14,14 @@ from typing import Any
 import numpy as np
 
 from coassist.analysis.paired import paired_difference
-from coassist.experiments.ablation import (
+from coassist.experiments.ablation import MUJOCO_PERSON
+from coassist.experiments.ablation_cells import (
     ABLATION_CELLS,
     ARBITRATED,
     DAMPED,
     FORCE_SHARE_BAR,
     HELD_OUT,
     JERK_BAR,
-    MUJOCO_PERSON,
     ORACLE_SHARE_BAR,
     OVERSHOOT_SHARE_BAR,
     SHARE_LOWER_BAR,

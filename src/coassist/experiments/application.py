@@ -24,15 +24,9 @@ from typing import Any
 import numpy as np
 
 from coassist.analysis.paired import paired_difference
-from coassist.experiments.pipeline import (
-    ITERATION_TASKS,
-    Workspace,
-    application_seed,
-    heavy_transfer_seed,
-    pyplot,
-    trial_seed_base,
-)
+from coassist.experiments.pipeline import ITERATION_TASKS, Workspace, pyplot
 from coassist.experiments.report import Claim, Section
+from coassist.experiments.seed_plan import application_seed, heavy_transfer_seed, trial_seed_base
 from coassist.experiments.source_training import (
     APPLICATION_SOURCE,
     calibrate_paths,

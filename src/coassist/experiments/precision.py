@@ -5,7 +5,7 @@ the board and the heavy load) on seeds the report never uses:
 ``application_seed(base, j)`` for each ``base`` given (50000 and 60000 in docs/precision.md:
 disjoint trial seeds), every source with the same controller, paired against MG and the oracle on
 the same trials, as the report's ablation pairs them
-(:class:`~coassist.experiments.ablation.AblationResult`: shares of the oracle's benefit, overshoot
+(:class:`~coassist.experiments.ablation_cells.AblationResult`: shares of the oracle's benefit, overshoot
 and clearance deficit per side of the detour). ``paths`` needs a calibration: with
 ``calibrate=True`` the operators' calibration trials of each base
 (``calibration_seed(base)``) are collected and fitted first
@@ -23,16 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from coassist.experiments.ablation import ARBITRATED, DAMPED, SIDES, AblationResult
+from coassist.experiments.ablation_cells import ARBITRATED, DAMPED, SIDES, AblationResult
 from coassist.experiments.ablation_report import seeds_text, share_text
 from coassist.experiments.application import OBJECTS, OBSTACLE, application_metrics, pair_key
-from coassist.experiments.pipeline import (
-    REPRODUCE_PRESETS,
-    RUN_SEED_STRIDE,
-    Workspace,
-    application_seed,
-    calibration_seed,
-)
+from coassist.experiments.pipeline import Workspace
+from coassist.experiments.reproduce_config import REPRODUCE_PRESETS
+from coassist.experiments.seed_plan import RUN_SEED_STRIDE, application_seed, calibration_seed
 from coassist.experiments.source_training import calibrate_paths, calibrate_person
 from coassist.scenario.calibration_draws import draw_clusters, draw_count
 from coassist.scenario.populations import POPULATIONS

@@ -12,8 +12,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from coassist.experiments.pipeline import EVAL_HORIZONS, ReproduceConfig, Workspace
+from coassist.experiments.pipeline import EVAL_HORIZONS, Workspace
 from coassist.experiments.report import Claim, Section
+from coassist.experiments.reproduce_config import ReproduceConfig
 
 if TYPE_CHECKING:  # the learning stack is imported only when the stage runs
     from coassist.intent.evaluation import ModelEvaluation

@@ -69,16 +69,12 @@ from coassist.experiments.iterative import IterativeResult
 from coassist.experiments.pipeline import (
     EVAL_HORIZONS,
     ITERATION_TASKS,
-    REPRODUCE_PRESETS,
-    ReproduceConfig,
     Workspace,
     default_real_data,
     evaluate_in_worker,
     in_loop_errors,
-    iteration_seed,
     pyplot,
     score_model,
-    trial_seed_base,
     windows_trained,
 )
 from coassist.experiments.real_recordings import (
@@ -87,6 +83,8 @@ from coassist.experiments.real_recordings import (
     run_real_recordings,
 )
 from coassist.experiments.report import Claim, Section, write_report
+from coassist.experiments.reproduce_config import REPRODUCE_PRESETS, ReproduceConfig
+from coassist.experiments.seed_plan import iteration_seed, trial_seed_base
 from coassist.experiments.transfer import run_transfer, transfer_section
 
 __all__ = [

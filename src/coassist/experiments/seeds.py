@@ -3,7 +3,7 @@
 Every verdict of one run comes from one seed: 18–24 paired trials per cell, one training of
 each model. :func:`run_seeds` runs the whole pipeline once per seed, in ``out/seed-<k>/``, all
 on one pool of simulation processes (run seed k owns the trial seeds k·10⁶ … (k+1)·10⁶ − 1 and
-its own training seeds, :func:`~coassist.experiments.pipeline.trial_seed_base`, so the runs share
+its own training seeds, :func:`~coassist.experiments.seed_plan.trial_seed_base`, so the runs share
 no trial), then writes one report and one summary: per claim, on how many seeds it holds, with
 each seed's verdict and evidence (:func:`claims_across_seeds`). A claim is
 
@@ -23,8 +23,8 @@ from pathlib import Path
 from typing import Any
 
 from coassist._io import atomic_write_text
-from coassist.experiments.pipeline import ReproduceConfig
 from coassist.experiments.report import Section, write_report
+from coassist.experiments.reproduce_config import ReproduceConfig
 
 __all__ = ["SeedClaim", "claims_across_seeds", "parse_seeds", "run_seeds", "seeds_section"]
 

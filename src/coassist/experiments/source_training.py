@@ -85,10 +85,10 @@ def seed_names(source: str, seeds: int) -> list[str]:
 def calibration_options(ws: Workspace, controller: str, seed: int | None = None, population: str = "thesis") -> dict:
     """The collection options of the operators' calibration trials (:meth:`Workspace.collect`): the
     application's task, obstacle and operators, the handle, ``calibration_trials`` each, first trial seed
-    ``seed`` (default the run's :func:`~coassist.experiments.pipeline.calibration_seed`), ``controller``
+    ``seed`` (default the run's :func:`~coassist.experiments.seed_plan.calibration_seed`), ``controller``
     ("manual" for ``paths``, "manual-probe" for ``person``), operators of ``population``."""
     from coassist.experiments.application import OBSTACLE
-    from coassist.experiments.pipeline import calibration_seed, trial_seed_base
+    from coassist.experiments.seed_plan import calibration_seed, trial_seed_base
 
     cfg = ws.config
     return {

@@ -16,17 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from coassist.experiments.pipeline import (
-    EVAL_HORIZONS,
-    ITERATION_TASKS,
-    ReproduceConfig,
-    Workspace,
-    pyplot,
-    transfer_seeds,
-    trial_seed_base,
-    windows_trained,
-)
+from coassist.experiments.pipeline import EVAL_HORIZONS, ITERATION_TASKS, Workspace, pyplot, windows_trained
 from coassist.experiments.report import Claim, Section
+from coassist.experiments.reproduce_config import ReproduceConfig
+from coassist.experiments.seed_plan import transfer_seeds, trial_seed_base
 
 #: Predictors in the e_RMS table of each target: the models, then the baselines.
 MODELS = ("M_prev", "transfer", "finetune_all", "scratch")

@@ -51,7 +51,8 @@ from coassist.interfaces import FEATURES
 from coassist.robot.worlds import WORLDS, ArmWorld, HandWorld, WorldRequest, arm_worlds, build_world, missing_members
 from coassist.runtime.episode import EpisodeLabels, build_episode, episode_ticks, plan_grid
 from coassist.runtime.intent import RealtimeIntent, WindowIntent
-from coassist.runtime.safety import SafetyLayer, SafetyLimits
+from coassist.runtime.safety import SafetyLayer
+from coassist.runtime.safety_limits import SafetyLimits
 from coassist.runtime.tick import TickConfig
 from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPipeline
 from coassist.scenario.assistance import DEFAULT_INTENT, assistance_line, check_person

@@ -105,7 +105,7 @@ periods late (a jittery link), makes ``read()`` raise
 a stop. A sample more than two periods late is counted (:attr:`URRTDEWorld.late_samples`) and
 reported as an overrun, which the loop flags ``DEADLINE_MISS``. Protective and emergency
 stops are not errors: ``read()`` reports them in :class:`~coassist.runtime.world.RobotState`,
-and :attr:`URRTDEWorld.stop_detail` / :func:`stop_message` say what to do.
+and :attr:`URRTDEWorld.stop_detail` / :func:`~coassist.robot.ur_status.stop_message` say what to do.
 
 On a dead link ur-rtde's waiting commands would wait for an answer for up to 300 s (its
 ``UR_EXECUTION_TIMEOUT``, from its last cached state), so :meth:`URRTDEWorld.stop` and
@@ -120,7 +120,6 @@ from __future__ import annotations
 import datetime
 import logging
 import math
-import re
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -129,11 +128,12 @@ from typing import Any
 import numpy as np
 
 from coassist.errors import CoassistError
+from coassist.robot.ur_status import SafetyStatus, check_software, connect_hint, controller_version, stop_message
 from coassist.robot.worlds import WorldRequest
 from coassist.runtime.world import Command, RobotLinkError, RobotState
 from coassist.spatial import rotation_matrix
 
-__all__ = ["SafetyStatus", "URProgramStopped", "URRTDEWorld", "build_world", "controller_version", "stop_message"]
+__all__ = ["URProgramStopped", "URRTDEWorld", "build_world"]
 
 log = logging.getLogger(__name__)
 
@@ -153,62 +153,6 @@ _MAX_FREQUENCY = 500.0
 #: beyond it (a long stall) the schedule restarts from now rather than run a burst of back-to-back ticks
 _MAX_CATCH_UP = 0.05
 _INSTALL_HINT = "the real robot needs ur-rtde: pip install 'coassist[robot]'"
-
-
-class SafetyStatus:
-    """Bits of ``getSafetyStatusBits()`` (ur-rtde docstring order, bits 0–10)."""
-
-    NORMAL = 1 << 0
-    REDUCED = 1 << 1
-    PROTECTIVE_STOPPED = 1 << 2
-    RECOVERY = 1 << 3
-    SAFEGUARD_STOPPED = 1 << 4
-    SYSTEM_EMERGENCY_STOPPED = 1 << 5
-    ROBOT_EMERGENCY_STOPPED = 1 << 6
-    EMERGENCY_STOPPED = 1 << 7
-    VIOLATION = 1 << 8
-    FAULT = 1 << 9
-    STOPPED_DUE_TO_SAFETY = 1 << 10
-
-    #: Reported as ``RobotState.protective_stop``: the safety system halted the arm and a
-    #: person must clear it (a protective or safeguard stop, a violation or a fault).
-    PROTECTIVE = PROTECTIVE_STOPPED | SAFEGUARD_STOPPED | VIOLATION | FAULT | STOPPED_DUE_TO_SAFETY
-    #: Reported as ``RobotState.emergency_stop``.
-    EMERGENCY = SYSTEM_EMERGENCY_STOPPED | ROBOT_EMERGENCY_STOPPED | EMERGENCY_STOPPED
-
-
-def stop_message(state: RobotState, safety_status_bits: int | None = None) -> str | None:
-    """What stopped the robot and what to do next, or None when it is not stopped.
-
-    ``safety_status_bits`` (:attr:`URRTDEWorld.safety_status_bits`) refines the message
-    (safeguard stop, violation, fault); without it the two flags of ``state`` decide.
-    """
-    bits = int(safety_status_bits or 0)
-    if state.emergency_stop or bits & SafetyStatus.EMERGENCY:
-        return (
-            "Emergency stop: the robot's emergency stop circuit is open (a pressed button or "
-            "the external e-stop input). Make the workspace safe, release the button, reset "
-            "the robot on the teach pendant (power on, release the brakes), then rerun."
-        )
-    if bits & (SafetyStatus.VIOLATION | SafetyStatus.FAULT):
-        return (
-            "Safety fault: the robot's safety system reports a violation or a fault and has "
-            "stopped the arm. Read the error on the teach pendant, restart the safety system "
-            "there (or with the dashboard's restartSafety), power on, then rerun."
-        )
-    if bits & SafetyStatus.SAFEGUARD_STOPPED:
-        return (
-            "Safeguard stop: the safeguard stop input is active (a light curtain, a door or a "
-            "safety mat). Clear the safeguarded area, reset the safeguard, then rerun."
-        )
-    if state.protective_stop or bits & SafetyStatus.PROTECTIVE:
-        return (
-            "Protective stop: the robot's safety system stopped the arm (a force or speed "
-            "limit, or a collision). Check the workspace and the person, clear the stop on "
-            "the teach pendant (or with the dashboard's unlockProtectiveStop, at least 5 s "
-            "after it happened), then rerun."
-        )
-    return None
 
 
 def _check_number(value: Any, name: str, *, positive: bool = True, allow_zero: bool = False) -> float:
@@ -254,80 +198,6 @@ class URProgramStopped(CoassistError, RuntimeError):
     is at rest, the run is over; the message says which and what to do."""
 
 
-def controller_version(host: str, timeout: float = 1.0) -> str | None:
-    """The controller's software version from its dashboard server (``PolyscopeVersion``), or None.
-
-    ur-rtde 1.6.5's Python interfaces do not expose it; one line over port 29999 does.
-    """
-    import socket
-
-    try:
-        with socket.create_connection((host, 29999), timeout=timeout) as s:
-            f = s.makefile("rwb")
-            f.readline()  # the greeting
-            f.write(b"PolyscopeVersion\n")
-            f.flush()
-            line = f.readline().decode("utf-8", errors="replace").strip()
-    except OSError:
-        return None
-    return line or None
-
-
-#: The oldest software ur-rtde 1.6.5 runs on: the general-purpose output registers its control script
-#: answers through came with PolyScope 3.4 (older, its client reads registers the controller never
-#: sends and the process crashes).
-MIN_SOFTWARE = {3: (3, 4), 5: (5, 0)}
-
-
-def _check_version(host: str) -> None:
-    """RobotLinkError before ur-rtde connects when the dashboard reports software it cannot drive."""
-    text = controller_version(host)
-    m = re.search(r"(\d+)\.(\d+)\.(\d+)", text or "")
-    if m is None:
-        return  # no dashboard answer: ur-rtde's own connect says what is wrong
-    major, minor = int(m.group(1)), int(m.group(2))
-    need = MIN_SOFTWARE.get(major)
-    if need is None or (major, minor) < need:
-        wanted = " or ".join(f"{a}.{b}" for a, b in MIN_SOFTWARE.values())
-        raise RobotLinkError(
-            f"the controller at {host} runs {text}; ur-rtde 1.6.5 needs PolyScope {wanted} or later: "
-            "update PolyScope (CB3 3.15, e-Series 5.11 or later), then rerun"
-        )
-
-
-def _connect_hint(host: str, exc: BaseException) -> str:
-    """What to do about a failed connect, from ur-rtde's words (the common causes first)."""
-    text = str(exc)
-    if "remote control" in text:
-        return (
-            f"the UR at {host} is not in remote control: switch it to Remote Control on the teach "
-            "pendant (the icon top right), then rerun"
-        )
-    if "already in use" in text:
-        return (
-            f"another client writes the RTDE input registers of the UR at {host} (an EtherNet/IP, "
-            "PROFINET or MODBUS unit, or another ur-rtde program): disable it or close the other "
-            "client, then rerun"
-        )
-    if "control script" in text or "program is not running" in text:
-        return (
-            f"the UR at {host} did not start ur-rtde's control script: check on the teach pendant "
-            "that the arm is powered on with its brakes released, not in a protective or emergency "
-            "stop, and in remote control, then rerun"
-        )
-    if "not found by the controller" in text or "register" in text:
-        version = controller_version(host)
-        return (
-            f"the controller at {host} (software {version or 'unknown'}) lacks RTDE fields ur-rtde "
-            "1.6.5 needs: update PolyScope to 3.15 (CB3) or 5.11 (e-Series) or later, then rerun"
-        )
-    return (
-        "check the IP address, that the robot is powered on and its brakes released, that "
-        "an e-Series is in remote control mode, and that no other program holds the RTDE "
-        "interface"
-    )
-
-
 class URRTDEWorld:
     """A UR arm driven by joint velocity through ur-rtde (module docstring).
 
@@ -360,7 +230,7 @@ class URRTDEWorld:
     tcp_offset : (6,) the TCP in the flange frame the controller reports the pose of.
     last_overrun : [s] how far the last period (or the last sample's delay) ran over (0.0 when on time).
     last_period : [s] the last period's measured length (from its scheduled start to waitPeriod's return).
-    safety_status_bits : the last ``getSafetyStatusBits()`` (see :class:`SafetyStatus`).
+    safety_status_bits : the last ``getSafetyStatusBits()`` (see :class:`~coassist.robot.ur_status.SafetyStatus`).
     rejected_commands : commands replaced by a stop (non-finite or wrong shape).
     late_samples : samples that arrived more than two periods behind the stream's usual delay.
     stop_detail : what stopped the robot and what to do (None while it runs).
@@ -458,7 +328,7 @@ class URRTDEWorld:
     def _connect(self, control_factory: Callable, receive_factory: Callable) -> None:
         host, freq = self.host, self.requested_frequency
         if control_factory is _default_control_factory:
-            _check_version(host)
+            check_software(host)
         try:
             # the state at the controller's own rate (500 Hz e-Series, 125 Hz CB3): each read() gets a
             # sample at most one controller step old, whatever the loop's rate
@@ -467,9 +337,9 @@ class URRTDEWorld:
         except ImportError:
             raise
         except Exception as exc:
-            raise RobotLinkError(f"could not connect to the UR at {host}: {exc}; {_connect_hint(host, exc)}") from exc
+            raise RobotLinkError(f"could not connect to the UR at {host}: {exc}; {connect_hint(host, exc)}") from exc
         if not (self._call_r("isConnected") and self._call_c("isConnected")):
-            raise RobotLinkError(f"the RTDE interfaces to {host} are not connected; {_connect_hint(host, Exception())}")
+            raise RobotLinkError(f"the RTDE interfaces to {host} are not connected; {connect_hint(host, Exception())}")
         if self.requested_tcp_offset is not None:
             self._require(self._call_c("setTcp", self.requested_tcp_offset), "setTcp", self.requested_tcp_offset)
         if self.payload is not None:
@@ -842,7 +712,7 @@ class URRTDEWorld:
     def robot_info(self) -> dict[str, Any]:
         """Connection facts for the trial metadata; None where the robot did not answer.
 
-        ``controller_version`` comes from the dashboard server (:func:`controller_version`).
+        ``controller_version`` comes from the dashboard server (:func:`~coassist.robot.ur_status.controller_version`).
         Call it before or after the loop, not inside it (it waits for answers).
         """
 

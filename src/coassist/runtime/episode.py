@@ -48,7 +48,7 @@ from coassist.data import Trial, TrialMeta
 from coassist.interfaces import FEATURES, Fault, TrialContext
 from coassist.runtime.batched_loops import Loop
 from coassist.runtime.loop import LoopLog, TargetDwell, Termination, run_loop
-from coassist.runtime.safety import SafetyLimits
+from coassist.runtime.safety_limits import SafetyLimits
 from coassist.runtime.tick import ControlTick, Plan, TickConfig
 from coassist.runtime.world import RobotState, World, optional_member
 from coassist.runtime.wrench import WrenchConfig

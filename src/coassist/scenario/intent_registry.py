@@ -112,7 +112,7 @@ class IntentSourceEntry:
         refused on a real arm and with a person at the handle.
     told : what it is told besides what an arm measures (:class:`Told`).
     ablation : the main job's ablation runs it too, after the sources of its tables
-        (:data:`coassist.experiments.ablation.SOURCES`, which name the project's own).
+        (:data:`coassist.experiments.ablation_cells.SOURCES`, which name the project's own).
     """
 
     source: str

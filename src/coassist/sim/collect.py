@@ -11,7 +11,8 @@ from typing import Any
 
 from coassist._checks import check_int
 from coassist.data import DatasetWriter
-from coassist.data.datasets import FORMAT_VERSION, MANIFEST_NAME, digest
+from coassist.data.datasets import MANIFEST_NAME, digest
+from coassist.data.trial_file import FORMAT_VERSION
 from coassist.scenario.intent_registry import INTENT_SOURCES
 from coassist.sim.pool import SubmittedTrials
 from coassist.sim.trial_runner import TrialSpec, run_trials, spec_episode
