@@ -48,6 +48,9 @@ from collections import Counter  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 POINT_MASS = {"pm-mg": "nominal", "pm-lstm": "lstm-intent", "pm-paths": "paths", "pm-person": "person"}
+#: The folder under ``RUN_FOLDER/models`` that a point-mass source's cells are given: the person model's
+#: cells get its calibration draws (one person model per calibration, :mod:`coassist.scenario.calibration_draws`).
+MODEL_FOLDERS = {"person": "person-draws"}
 MUJOCO = {"mj-lstm": "lstm-intent", "mj-person": "person"}
 #: Frames of a worker's job (``classify --job`` keeps the samples under one of them).
 JOB_FRAMES = ("run_spec_lockstep (", "_run_lockstep_batch (", "_drive_batch (", "calibrate_then_drive (")
@@ -72,7 +75,7 @@ def run_job(kind: str, run: Path) -> dict:
     t0, c0 = time.perf_counter(), time.process_time()
     if kind in POINT_MASS:
         source = POINT_MASS[kind]
-        intent = "nominal" if source == "nominal" else str(models / source)
+        intent = "nominal" if source == "nominal" else str(models / MODEL_FOLDERS.get(source, source))
         options = cell_options(cfg, 0, "board", "manual" if kind == "pm-mg" else ARBITRATED, intent)
         options.pop("groups")
         payloads = [trial_payload(t) for t in run_spec_lockstep(dataset_specs(**options))]
