@@ -105,7 +105,7 @@ def my_arm(tmp_path, monkeypatch):
         simulated=True,
         host=None,
         extras=("robot",),
-        source="mujoco",
+        origin="mujoco",
     )
     try:
         with registered(WORLDS, "my-arm", entry):

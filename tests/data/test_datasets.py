@@ -39,7 +39,7 @@ def full_trial(n: int = 50, d: int = 2, h: int = 5, seed: int = 0, **meta_change
         controller="cooperative",
         model_id="M2",
         seed=seed,
-        source="sim",
+        origin="sim",
         dt=0.008,
         extra={"target": [0.4, 0.1], "obstacle": {"lo": [0.1, 0.0], "hi": [0.2, 0.05]}},
     )
@@ -69,7 +69,7 @@ def minimal_trial(n: int = 20, d: int = 2) -> Trial:
             controller="unknown",
             model_id=None,
             seed=None,
-            source="real",
+            origin="real",
             dt=0.007999973999999632,
         ),
         time=np.cumsum(rng.uniform(0.007, 0.013, size=n)) - 0.01,

@@ -119,7 +119,7 @@ def test_alignment_time_and_diagnostics(tmp_path):
     }
     assert (extra["seq_first"], extra["seq_last"], extra["seq_gaps"]) == (101, 108, 0)
     assert extra["stamp_mismatch_max_s"] == 0.0
-    assert trial.meta.user == "user-q" and trial.meta.source == "real" and trial.meta.task == "real"
+    assert trial.meta.user == "user-q" and trial.meta.origin == "real" and trial.meta.task == "real"
     assert (trial.meta.object, trial.meta.controller, trial.meta.model_id, trial.meta.seed) == (
         "unknown",
         "unknown",

@@ -19,7 +19,7 @@ def make_meta(**changes) -> TrialMeta:
         controller="cooperative",
         model_id="M1",
         seed=7,
-        source="sim",
+        origin="sim",
         dt=0.008,
         extra={"target": (0.4, 0.1), "obstacle": {"center": [0.2, 0.05], "size": [0.05, 0.05]}},
     )
@@ -69,7 +69,7 @@ def test_meta_extra_is_a_copy():
         ({"model_id": ""}, "model_id"),
         ({"seed": 1.5}, "seed"),
         ({"seed": True}, "seed"),
-        ({"source": "lab"}, "source"),
+        ({"origin": "lab"}, "origin"),
         ({"dt": 0.0}, "dt"),
         ({"dt": float("nan")}, "dt"),
         ({"extra": {"x": float("nan")}}, "extra"),

@@ -35,7 +35,7 @@ def six_dof_trial(seed: int = 0) -> Trial:
         controller="cooperative",
         model_id=None,
         seed=0,
-        source="mujoco",
+        origin="mujoco",
         dt=DT,
         extra={"start_pose": [0.4, -0.1, 0.2, 3.0, 0.1, -0.2]},
     )

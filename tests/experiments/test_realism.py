@@ -26,7 +26,7 @@ def _trial():
     wrench[:, 0] = 3.0
     wrench[50, 1] = 4.0  # one tick of |f| = 5 N
     meta = TrialMeta(
-        user="u", task="linear", object="handle", controller="c", model_id=None, seed=None, source="real", dt=0.01
+        user="u", task="linear", object="handle", controller="c", model_id=None, seed=None, origin="real", dt=0.01
     )
     return Trial(meta=meta, time=t, pose=pose, velocity=np.zeros_like(pose), wrench=wrench, reference=ref)
 

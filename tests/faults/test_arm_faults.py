@@ -201,7 +201,7 @@ def test_franka_through_franky_sim(case, franky_sim):
     # 1.6 s: every one of these faults starts by tick 150 (1.2 s) and is flagged within a tick
     case = replace(case, time_limit=min(case.time_limit, 1.6))
     trial, violations = run_franky(case, franky_sim)
-    assert trial.meta.source == "franka" and trial.joint_velocity.shape[1] == 7
+    assert trial.meta.origin == "franka" and trial.joint_velocity.shape[1] == 7
     _check(case, trial, violations)
 
 

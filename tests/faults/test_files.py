@@ -51,7 +51,7 @@ def _trial(n: int = 40, d: int = 2, seed: int = 0) -> Trial:
         controller="impedance",
         model_id=None,
         seed=seed,
-        source="sim",
+        origin="sim",
         dt=0.008,
     )
     arr = lambda: rng.normal(size=(n, d))  # noqa: E731

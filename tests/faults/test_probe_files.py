@@ -112,7 +112,7 @@ def _trial(n: int = 400, seed: int = 0, horizon: int = 0) -> Trial:
         controller="impedance",
         model_id=None,
         seed=seed,
-        source="sim",
+        origin="sim",
         dt=0.008,
     )
     arr = lambda: rng.normal(size=(n, 2))  # noqa: E731

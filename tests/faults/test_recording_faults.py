@@ -286,7 +286,7 @@ def _trial(n: int = 1992) -> Trial:
     t = np.arange(n) * 0.008
     pose = np.stack([0.1 * np.sin(t), -0.6 + 0.1 * np.cos(t)], axis=1)
     meta = TrialMeta(
-        user="u", task="real", object="unknown", controller="unknown", model_id=None, seed=None, source="real", dt=0.008
+        user="u", task="real", object="unknown", controller="unknown", model_id=None, seed=None, origin="real", dt=0.008
     )
     return Trial(
         meta=meta,

@@ -21,7 +21,7 @@ def make_trial(seed: int, n: int = 260, d: int = 2, dt: float = 0.008, user: str
     vel = np.gradient(pose, dt, axis=0)
     wrench = 100.0 * vel + rng.normal(0, 0.1, size=pose.shape)
     meta = TrialMeta(
-        user=user, task="linear", object="handle", controller="impedance", model_id=None, seed=seed, source="sim", dt=dt
+        user=user, task="linear", object="handle", controller="impedance", model_id=None, seed=seed, origin="sim", dt=dt
     )
     return Trial(meta=meta, time=t, pose=pose, velocity=vel, wrench=wrench, reference=ref)
 

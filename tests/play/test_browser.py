@@ -48,7 +48,7 @@ def tiny_model(folder: Path) -> Path:
         pose = ref + 0.02 * np.sin(rng.uniform(1, 3) * t + rng.uniform(0, 6))[:, None]
         vel = np.gradient(pose, 0.008, axis=0)
         meta = TrialMeta(
-            user="t", task="linear", object="none", controller="manual", model_id=None, seed=i, source="sim", dt=0.008
+            user="t", task="linear", object="none", controller="manual", model_id=None, seed=i, origin="sim", dt=0.008
         )
         trials.append(
             LabeledTrial(

@@ -49,7 +49,7 @@ def test_a_watcher_sees_the_drive_run_live_and_cannot_steer_it(tmp_path):
     assert init["mode"] == "monitor" and init["role"] == "watcher"
     assert result["result"]["ended"] == "time_limit" and result["result"]["controller"] == "manual"
     trial = read_dataset(tmp_path / "lab").trials[0]
-    assert trial.meta.source == "mujoco" and trial.joints is not None and trial.joints.shape[1] == 6
+    assert trial.meta.origin == "mujoco" and trial.joints is not None and trial.joints.shape[1] == 6
     # the frames are the drive's own rows: frame k shows tick k − 1's measured pose and hand wrench
     assert len(frames) > 0.8 * trial.n_samples
     for f in frames[:: max(1, len(frames) // 25)]:

@@ -88,7 +88,7 @@ def test_a_session_recorded_under_the_former_controller_names_scores_by_kind():
             controller="x",
             model_id=None,
             seed=0,
-            source="sim",
+            origin="sim",
             dt=0.008,
             extra={"target": [0.5, 0.0], "controller_name": former, "ended": "target"},
         )

@@ -25,7 +25,7 @@ def test_saved_trials_are_written_as_mcap_too(tmp_path):
         controller="cooperative",
         model_id=None,
         seed=0,
-        source="sim",
+        origin="sim",
         dt=0.008,
         extra={"target": [0.5, 0.0], "arrive_radius": 0.025, "ended": "target"},
     )

@@ -70,7 +70,7 @@ def test_the_model_is_the_panda_with_its_limits():
 def test_mg_with_a_constant_push_settles_at_f_over_d(mg_push):
     # M a + D v = F − deadband: 9.8 N / 100 N·s/m = 0.098 m/s (time constant M/D = 0.1 s, so
     # settled long before the last 0.5 s); 1 %: the sensor's 0.05 N noise averages out over 60 ticks
-    assert mg_push.meta.extra["ended"] == "time_limit" and mg_push.meta.source == "mujoco"
+    assert mg_push.meta.extra["ended"] == "time_limit" and mg_push.meta.origin == "mujoco"
     assert mg_push.meta.extra["robot"] == "panda"
     assert mg_push.velocity[-60:, 0].mean() == pytest.approx((10.0 - DEADBAND) / D, rel=0.01)
     assert np.abs(mg_push.velocity[-60:, 1]).max() < 2e-3

@@ -54,21 +54,21 @@ def test_one_entry_per_world_with_its_arms_and_needs():
         assert entry.extras, name
 
 
-def test_the_point_mass_has_one_name_and_its_trials_source():
+def test_the_point_mass_has_one_name_and_its_trials_origin():
     """The point mass is the world "point-mass" (the simulator) and "play" (the page on it); the trials
-    of both record source "sim" (TrialMeta.SOURCES), as the simulator and the page write it."""
+    of both record origin "sim" (TrialMeta.origin, one of ORIGINS), as the simulator and the page write it."""
     import inspect
 
-    from coassist.data.trial import SOURCES
+    from coassist.data.trial import ORIGINS
     from coassist.experiments.ablation_cells import ABLATION_CELLS
     from coassist.experiments.reproduce_config import MUJOCO_PERSON_CALIBRATIONS
     from coassist.play import session as play_session
     from coassist.sim import trial_runner
 
     assert (POINT_MASS, PLAY) == ("point-mass", "play")
-    assert WORLDS[POINT_MASS].source == WORLDS[PLAY].source == "sim" and "sim" in SOURCES
-    for module in (trial_runner, play_session):  # where the point mass's trials get their source
-        assert 'source="sim"' in inspect.getsource(module), module.__name__
+    assert WORLDS[POINT_MASS].origin == WORLDS[PLAY].origin == "sim" and "sim" in ORIGINS
+    for module in (trial_runner, play_session):  # where the point mass's trials get their origin
+        assert 'origin="sim"' in inspect.getsource(module), module.__name__
     assert not WORLDS[POINT_MASS].is_arm and not WORLDS[PLAY].is_arm
     # the names other tables use for worlds are the table's (the ablation's third cell is a population)
     assert set(MUJOCO_PERSON_CALIBRATIONS) <= set(WORLDS)
@@ -76,7 +76,7 @@ def test_the_point_mass_has_one_name_and_its_trials_source():
     with pytest.raises(ValueError, match=r"^the play world is not an arm world: the drive builds mujoco, ur, franka"):
         build_world(PLAY, REQUEST)
     with pytest.raises(ValueError, match="WorldEntry without a builder .* takes no arms"):
-        WorldEntry(None, ("ur5",), "x", simulated=True, host=None, extras=(), source="sim")
+        WorldEntry(None, ("ur5",), "x", simulated=True, host=None, extras=(), origin="sim")
 
 
 @pytest.mark.parametrize("name", list(arm_worlds()))
@@ -221,7 +221,7 @@ def test_a_world_registered_by_one_line_drives_as_the_built_in_one(tmp_path, mon
             simulated=True,
             host=None,
             extras=("robot",),
-            source="mujoco",
+            origin="mujoco",
         )
     }
     WORLDS.register(*line.popitem())  # the one line, from this module: the drive reads the same table

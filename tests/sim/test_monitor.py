@@ -53,7 +53,7 @@ def _trial(*, simulated: bool = True, n: int = 300, horizon: int = 8, seed: int 
         controller="cooperative",
         model_id=None,
         seed=seed,
-        source="sim" if simulated else "real",
+        origin="sim" if simulated else "real",
         dt=dt,
         extra=extra,
     )

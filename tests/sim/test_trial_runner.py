@@ -38,7 +38,7 @@ def test_trial_ends_at_the_target(trial):
 
 def test_trial_logs_every_signal(trial):
     T = trial.n_samples
-    assert trial.meta.source == "sim" and trial.meta.user == "user-0" and trial.meta.model_id is None
+    assert trial.meta.origin == "sim" and trial.meta.user == "user-0" and trial.meta.model_id is None
     assert trial.prediction.shape == (T, 50, 2) and trial.intent.shape == (T, 2)
     assert trial.fault.shape == (T,) and np.all(trial.fault & ~int(Fault.SATURATED) == 0)
     # nominal intent: the prediction in use is the planner's next 50 positions

@@ -76,5 +76,5 @@ def test_the_same_plan_runs_on_the_mujoco_ur5(tmp_path):
     folder, summary = _run_study(tmp_path, plan)
     _check_comparison(folder, summary, per_condition=1)
     trial = read_dataset(folder / "participants" / "S02" / "manual").trials[0]
-    assert trial.meta.source == "mujoco" and trial.meta.extra["world"] == "mujoco" and trial.joints is not None
+    assert trial.meta.origin == "mujoco" and trial.meta.extra["world"] == "mujoco" and trial.joints is not None
     assert trial.meta.user == "S02" and trial.meta.extra["study_operator"] == "user-2"  # operator 2 stood in

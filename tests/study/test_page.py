@@ -160,5 +160,5 @@ def test_the_page_is_the_hand_on_the_mujoco_ur5(tmp_path):
     assert not [s for s in SECRETS if any(s in text for text in received)]
     for name in ("assistive", "impedance", "manual"):
         trial = read_dataset(study.participant("S01").block(name)).trials[0]
-        assert trial.meta.source == "mujoco" and trial.meta.extra["ended"] == "target"
+        assert trial.meta.origin == "mujoco" and trial.meta.extra["ended"] == "target"
         assert float(np.abs(trial.wrench[:, 0]).max()) > 1.0  # the page's hand pushed the arm

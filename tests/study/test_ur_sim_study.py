@@ -88,7 +88,7 @@ def test_a_comparison_of_two_simulated_participants_on_the_ur_world_through_the_
             (trial,) = read_dataset(folder / "participants" / pid / c).trials
             extra = trial.meta.extra
             # the ur world, through the real client, with the simulated operator at the simulator's handle
-            assert trial.meta.source == "ur5" and extra["world"] == "ur" and trial.joints is not None
+            assert trial.meta.origin == "ur5" and extra["world"] == "ur" and trial.joints is not None
             assert trial.meta.user == pid and extra["study_operator"] == operator, extra
             assert p["means"][c]["f_rms"] == pytest.approx(f_rms(trial.wrench[:, :2]), rel=1e-12)
             if _machine_stall(extra):  # kept and analysed as a study keeps it; its run not judged

@@ -239,7 +239,7 @@ def load_ros_trial(
     Returns
     -------
     Trial
-        ``source="real"``, ``task="real"``, ``object="unknown"``,
+        ``origin="real"``, ``task="real"``, ``object="unknown"``,
         ``controller="unknown"``, ``model_id=None``, ``seed=None``; ``time`` from the
         header stamps of ``current_pose.csv`` minus the first, ``dt`` the median
         period. ``meta.extra`` holds the diagnostics: ``rows_dropped`` (ticks of the
@@ -366,7 +366,7 @@ def assemble_recording(
         controller="unknown",
         model_id=None,
         seed=None,
-        source="real",
+        origin="real",
         dt=dt,
         extra=extra,
     )

@@ -32,15 +32,20 @@ from numpy.typing import ArrayLike
 
 from coassist._checks import check_optional_int
 
-__all__ = ["GAP_FACTOR", "MAX_DOF", "SOURCES", "Trial", "TrialMeta", "time_gaps"]
+__all__ = ["FORMER_KEYS", "GAP_FACTOR", "MAX_DOF", "ORIGINS", "Trial", "TrialMeta", "time_gaps"]
 
 #: Most Cartesian DOFs a trial may carry (3 linear + 3 angular).
 MAX_DOF = 6
 #: A time step longer than this many nominal periods is a gap in the recording, not a
 #: late tick: the UR5 recordings' late ticks reach 2.3 periods (18.6 ms at 8 ms).
 GAP_FACTOR = 5.0
-#: Where a trial comes from.
-SOURCES = ("sim", "real", "mujoco", "ur5", "franka")
+#: Where a trial comes from (:attr:`TrialMeta.origin`): the point-mass simulator, a recording
+#: (rosbag export), MuJoCo, a UR5 (real or coassist ur-sim), a Franka arm.
+ORIGINS = ("sim", "real", "mujoco", "ur5", "franka")
+#: A key of files written before its field was renamed -> the field (issue 43: "source" also
+#: named the intent sources). Trial files and manifests holding it still read, to the same
+#: TrialMeta; one holding both the former key and the field with different values is refused.
+FORMER_KEYS = {"source": "origin"}
 
 
 def _require_str(value: Any, name: str, *, allow_empty: bool = False) -> str:
@@ -88,8 +93,10 @@ class TrialMeta:
         predicted intent (dataset D0 of Algorithm 4.1).
     seed : int or None
         Seed of the simulated trial; ``None`` for recordings.
-    source : str
-        ``"sim"`` or ``"real"``.
+    origin : str
+        Where the trial comes from, one of :data:`ORIGINS`: ``"sim"`` (the point mass),
+        ``"real"`` (a recording), ``"mujoco"``, ``"ur5"``, ``"franka"``. Files written before
+        issue 43 store it under the key ``"source"`` (:data:`FORMER_KEYS`); they read the same.
     dt : float
         Nominal control period in s (> 0). For recordings, the median period.
     extra : Mapping
@@ -104,7 +111,7 @@ class TrialMeta:
     controller: str
     model_id: str | None
     seed: int | None
-    source: str
+    origin: str
     dt: float
     extra: Mapping[str, Any] = field(default_factory=dict)
 
@@ -116,8 +123,8 @@ class TrialMeta:
         if self.model_id is not None:
             _require_str(self.model_id, "model_id")
         object.__setattr__(self, "seed", check_optional_int(self.seed, "TrialMeta.seed"))
-        if self.source not in SOURCES:
-            raise ValueError(f"TrialMeta.source must be one of {SOURCES}, got {self.source!r}")
+        if self.origin not in ORIGINS:
+            raise ValueError(f"TrialMeta.origin must be one of {ORIGINS}, got {self.origin!r}")
         if isinstance(self.dt, bool):
             raise ValueError(f"TrialMeta.dt must be a number, got {self.dt!r}")
         try:
@@ -145,9 +152,14 @@ class TrialMeta:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> TrialMeta:
-        """Inverse of :meth:`to_dict`; unknown or missing keys raise ``ValueError``."""
+        """Inverse of :meth:`to_dict`; unknown or missing keys raise ``ValueError``.
+
+        A former key (:data:`FORMER_KEYS`: ``"source"``, written before issue 43) reads as its
+        field (``origin``); both present with different values raise ``ValueError`` naming both.
+        """
         if not isinstance(data, Mapping):
             raise ValueError(f"TrialMeta must be read from a mapping, got {type(data).__name__}")
+        data, former = _renamed(data)
         names = [f.name for f in fields(cls)]
         unknown = sorted(set(data) - set(names))
         if unknown:
@@ -155,7 +167,14 @@ class TrialMeta:
         missing = [n for n in names if n not in data and n != "extra"]
         if missing:
             raise ValueError(f"TrialMeta is missing field(s) {missing}")
-        return cls(**{n: data[n] for n in names if n in data})
+        try:
+            return cls(**{n: data[n] for n in names if n in data})
+        except ValueError as exc:
+            if not former:
+                raise
+            # the file holds the former key: say so, or the field named would not be found in it
+            was = ", ".join(f"{FORMER_KEYS[k]} under its former key {k!r}" for k in former)
+            raise ValueError(f"{exc} (read {was})") from None
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), allow_nan=False, sort_keys=True)
@@ -167,6 +186,23 @@ class TrialMeta:
         except json.JSONDecodeError as exc:
             raise ValueError(f"TrialMeta JSON is malformed: {exc}") from None
         return cls.from_dict(data)
+
+
+def _renamed(data: Mapping[str, Any]) -> tuple[dict[str, Any], list[str]]:
+    """``data`` with each former key (:data:`FORMER_KEYS`) under its field's name, and the former
+    keys it held."""
+    out = dict(data)
+    former = [k for k in FORMER_KEYS if k in out]
+    for key in former:
+        name = FORMER_KEYS[key]
+        value = out.pop(key)
+        if name in out and out[name] != value:
+            raise ValueError(
+                f"TrialMeta.{name} is stored twice, as {name!r} ({out[name]!r}) and under its former key {key!r} "
+                f"({value!r}), with different values"
+            )
+        out[name] = value
+    return out, former
 
 
 def time_gaps(time: ArrayLike, dt: float, factor: float = GAP_FACTOR) -> np.ndarray:

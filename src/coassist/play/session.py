@@ -430,7 +430,7 @@ class PlaySession:
                 user=cfg.user,
                 object="none",
                 seed=self.trial_seed(index),
-                source="sim",
+                origin="sim",
                 preset=cfg.preset,
                 model_id=self.source.model_id,
             ),

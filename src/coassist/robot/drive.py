@@ -506,7 +506,7 @@ def _prepare(
                 user=user if config.person is not None else (profile.name if held else "operator"),
                 object=obj.name,
                 seed=config.seed,
-                source=entry.source,
+                origin=entry.origin,
                 preset=config.preset,
                 model_id=model_id,
             ),

@@ -19,7 +19,7 @@ arms it drives, and what it needs::
 The point mass's names, mapped here once: the world is ``point-mass`` (the main job's
 ablation cells and ``reproduce.mujoco_person_calibration`` say so too); ``play`` is the same
 point mass with the browser as the hand (a study plan's default world); the trials of both
-record ``TrialMeta.source`` ``"sim"`` (the entries' ``source``, as the ``ur`` world's trials
+record ``TrialMeta.origin`` ``"sim"`` (the entries' ``origin``, as the ``ur`` world's trials
 record ``"ur5"``). The point-mass worlds have no builder here: :mod:`coassist.sim` and
 :mod:`coassist.play` run them (the layers keep the arm worlds and the simulator apart).
 
@@ -143,7 +143,7 @@ class WorldEntry:
         run is deterministic for a seed. Otherwise a person does: on a real arm, or at the page.
     host : what ``--host`` is for this world ("the robot's IP address"), None when it takes none.
     extras : the optional dependency groups it needs (``pip install 'coassist[<extra>]'``).
-    source : the trials' ``TrialMeta.source`` (where the data came from).
+    origin : the trials' ``TrialMeta.origin`` (where the data came from).
     studies : a study plan may name it (``[study] world``): the study builds it from the run's
         request alone. ros2: False, its node and topics are ``coassist ros2``'s options, which a
         plan does not carry; point-mass: False, a study's page world is ``play``.
@@ -155,7 +155,7 @@ class WorldEntry:
     simulated: bool
     host: str | None
     extras: tuple[str, ...]
-    source: str
+    origin: str
     studies: bool = True
 
     def __post_init__(self) -> None:
@@ -193,7 +193,7 @@ WORLDS: Registry[WorldEntry] = Registry(
             simulated=True,
             host=None,
             extras=(),
-            source="sim",
+            origin="sim",
             studies=False,
         ),
         PLAY: WorldEntry(
@@ -203,7 +203,7 @@ WORLDS: Registry[WorldEntry] = Registry(
             simulated=False,
             host=None,
             extras=("web",),
-            source="sim",
+            origin="sim",
         ),
         "mujoco": WorldEntry(
             "coassist.robot.mujoco_world:build_world",
@@ -212,7 +212,7 @@ WORLDS: Registry[WorldEntry] = Registry(
             simulated=True,
             host=None,
             extras=("robot",),
-            source="mujoco",
+            origin="mujoco",
         ),
         "ur": WorldEntry(
             "coassist.robot.ur_sim_world:build_world",
@@ -221,7 +221,7 @@ WORLDS: Registry[WorldEntry] = Registry(
             simulated=False,
             host="the robot's IP address",
             extras=("robot",),
-            source="ur5",
+            origin="ur5",
         ),
         "franka": WorldEntry(
             "coassist.robot.franka_world:build_world",
@@ -230,7 +230,7 @@ WORLDS: Registry[WorldEntry] = Registry(
             simulated=False,
             host="the robot's FCI address",
             extras=("franka",),
-            source="franka",
+            origin="franka",
         ),
         "ros2": WorldEntry(
             "coassist.robot.ros2_world:build_world",
@@ -239,7 +239,7 @@ WORLDS: Registry[WorldEntry] = Registry(
             simulated=False,
             host=None,
             extras=("ros2", "robot"),
-            source="ur5",
+            origin="ur5",
             studies=False,
         ),
     },

@@ -114,14 +114,14 @@ def plan_grid(task: Task, dt: float, n_max: int, horizon: int) -> np.ndarray:
 class EpisodeLabels:
     """What a trial's meta says about who and what ran it (:class:`~coassist.data.TrialMeta`).
 
-    user, object : names.  seed : the trial's seed.  source : "sim", "mujoco", "ur5", … .
+    user, object : names.  seed : the trial's seed.  origin : "sim", "mujoco", "ur5", … (TrialMeta.origin).
     preset : the control preset's name.  model_id : the intent source's (None: the nominal plan).
     """
 
     user: str
     object: str
     seed: int
-    source: str
+    origin: str
     preset: str | None
     model_id: str | None
 
@@ -227,7 +227,7 @@ class Episode:
             controller=tick.controller.name,
             model_id=labels.model_id,
             seed=labels.seed,
-            source=labels.source,
+            origin=labels.origin,
             dt=dt,
             extra=meta_extra,
         )

@@ -74,7 +74,7 @@ def plot_trial(trial: Trial, out: str | Path, *, n_predictions: int = 6, title: 
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     meta = trial.meta
-    label = title or f"{meta.source}: {meta.user} · {meta.task} · {meta.object} · {meta.controller}" + (
+    label = title or f"{meta.origin}: {meta.user} · {meta.task} · {meta.object} · {meta.controller}" + (
         f" · model {meta.model_id}" if meta.model_id else ""
     )
     ax.set_title(label, fontsize=10)

@@ -214,7 +214,7 @@ def build_trial(
         start_pose=np.array((x0[0], x0[1], 0.0, 0.0, 0.0, 0.0)),
         n_max=n_max,
         labels=EpisodeLabels(
-            user=operator.name, object=obj.name, seed=seed, source="sim", preset=preset_name, model_id=source.model_id
+            user=operator.name, object=obj.name, seed=seed, origin="sim", preset=preset_name, model_id=source.model_id
         ),
         true_intent=intent.positions,
         intent_end_time=intent.end_time,
