@@ -6,18 +6,54 @@ worktree's suite) never meet. The simulator asks for SCHED_FIFO (it sleeps most 
 2 ms period), and :func:`realtime_priority` gives the test's own control loop the same where
 the system allows it, as a lab runs its controller (``chrt -f``): on this shared 2-core
 machine a loop at normal priority misses deadlines that are the machine's, not the code's.
+
+Each simulator runs in a process started ahead (:func:`~coassist.robot.ur_sim.process.spawn`:
+its imports done, waiting for its config): the next test's is started as this one's simulator
+stops, and imports while the test's world is destroyed (ur-rtde's destructors, ~1 s) and the
+next test sets up, not while a real-time loop runs. A process that has only imported carries no
+state from one test to the next; each test still gets a simulator of its own.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import itertools
 import os
+import subprocess
 from collections.abc import Iterator
 
 import pytest
 
 _counter = itertools.count(1)
+#: the process the next :func:`simulator` starts in (at most one)
+_spare: list[subprocess.Popen[str]] = []
+
+
+def _take_spare() -> subprocess.Popen[str]:
+    from coassist.robot.ur_sim.process import spawn
+
+    while _spare:
+        proc = _spare.pop()
+        if proc.poll() is None:
+            return proc
+    return spawn()
+
+
+def _start_spare() -> None:
+    from coassist.robot.ur_sim.process import spawn
+
+    if not _spare:
+        _spare.append(spawn())
+
+
+@atexit.register
+def _end_spare() -> None:
+    # it would end on its own when its stdin closes with this process; ended here, none outlives pytest
+    while _spare:
+        proc = _spare.pop()
+        proc.kill()
+        proc.wait(10)
 
 
 def free_host() -> str:
@@ -38,7 +74,7 @@ def simulator(**config) -> Iterator:
     for _ in range(5):
         sim = URSimProcess(URSimConfig(host=free_host(), **config))
         try:
-            sim.start()
+            sim.start(_take_spare())
         except RuntimeError as exc:  # the address was taken: the next one
             last = exc
             continue
@@ -46,6 +82,7 @@ def simulator(**config) -> Iterator:
             yield sim
         finally:
             sim.stop()
+            _start_spare()  # the next test's, importing while this one's world is destroyed
         return
     raise RuntimeError(f"no simulator started: {last}")
 

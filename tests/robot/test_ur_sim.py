@@ -461,6 +461,15 @@ def test_the_simulator_process_answers_its_stdin_commands():
     assert _command(sim, "quit") == ("ok", True)
 
 
+def test_a_process_started_ahead_builds_nothing_until_its_config_and_ends_without_one():
+    from coassist.robot.ur_sim.process import spawn
+
+    proc = spawn()  # ``python -m coassist.robot.ur_sim -``: waits for its config on stdin
+    assert proc.stdin is not None and proc.stdout is not None
+    proc.stdin.close()  # its parent gone before it was needed
+    assert proc.wait(60) == 0 and proc.stdout.read() == ""  # no simulator built, no port bound, no error
+
+
 def test_the_simulators_hand_is_asked_once_per_its_own_tick():
     from coassist.robot.ur_sim.hand import TickedHand
 

@@ -38,6 +38,11 @@ MACHINE_STALL = int(Fault.DEADLINE_MISS | Fault.DECELERATING)
 QUIET = FTSensorModel(noise_force=0.005, noise_torque=0.0002, rate_hz=None)
 
 
+# ur-rtde 1.6.5's ``disconnect()`` sleeps 0.5 s after closing, and its destructor calls it again: an
+# interface disconnected, then destroyed, costs 1.0 s; destroyed alone (``del``, while the simulator still
+# answers: against a dead one its receive thread would retry for ever), 0.5 s, closing the same connections.
+
+
 def stamps(receive, seconds: float = 0.3) -> np.ndarray:
     """The distinct RTDE timestamps the client saw over ``seconds``."""
     out: list[float] = []
@@ -60,7 +65,7 @@ def test_the_stream_runs_at_the_rate_the_client_asked(series, frequency, step):
     with simulator(series=series) as sim, realtime_priority():
         r = rtde_receive.RTDEReceiveInterface(sim.host, frequency)
         steps = np.diff(stamps(r))
-        r.disconnect()
+        del r  # disconnects (above)
     # the controller's clock: each package one step of k·dt later (a skipped one: a whole number of steps)
     assert steps.min() == pytest.approx(step, abs=1e-9) and np.median(steps) == pytest.approx(step, abs=1e-9)
     np.testing.assert_allclose(steps / step, np.round(steps / step), atol=1e-6)
@@ -74,7 +79,7 @@ def test_rate_detection_uses_the_stream_not_get_step_time():
             time.sleep(0.05)
             later = c.getStepTime()
             c.stopScript()
-            c.disconnect()
+            del c  # disconnects (above)
             world = URRTDEWorld(sim.host)  # frequency=-1
             info = world.robot_info()
             world.close()
@@ -91,7 +96,7 @@ def test_a_field_the_controller_lacks_and_registers_in_use_are_refused():
         with pytest.raises(RuntimeError, match="already in use"):
             rtde_control.RTDEControlInterface(sim.host)  # the first holds the input registers
         c.stopScript()
-        c.disconnect()
+        del c  # disconnects (above)
 
 
 # ------------------------------------------------------------------ every command coassist or a user's script uses
@@ -170,8 +175,7 @@ def test_each_command_through_the_real_client():
             assert not c.isProgramRunning() and r.getRuntimeState() == 1
             status = sim.status()
         finally:
-            c.disconnect()
-            r.disconnect()
+            c = r = None  # destroyed here, which disconnects (above; the lambdas share c, so no del)
     assert status["out_of_limits"] == 0 and status["unsupported_commands"] == {}
 
 

@@ -47,9 +47,11 @@ import numpy as np
 from coassist.robot.mujoco_world import FTSensorModel
 from coassist.robot.ur_sim.server import PORTS, URSim, URSimConfig
 
-__all__ = ["URSimProcess", "config_from_json", "config_to_json", "serve"]
+__all__ = ["URSimProcess", "config_from_json", "config_to_json", "serve", "spawn"]
 
 READY = "ur-sim: ready on"
+#: ``python -m coassist.robot.ur_sim -``: the config is the first line of stdin (:func:`spawn`)
+CONFIG_ON_STDIN = "-"
 
 
 def config_to_json(config: URSimConfig) -> str:
@@ -160,6 +162,26 @@ def serve(
             pass
 
 
+def spawn() -> subprocess.Popen[str]:
+    """A simulator process that imports what it needs, then waits for its config: the first line of
+    its stdin (``python -m coassist.robot.ur_sim -``); :meth:`URSimProcess.start` sends it.
+
+    Started ahead (while a test's world closes), the ~0.5 s of imports are paid before the
+    simulator is needed; until its config comes it builds nothing and listens on no port, and it
+    ends when its stdin does (its parent gone) or on ``kill``.
+    """
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    return subprocess.Popen(
+        [sys.executable, "-m", "coassist.robot.ur_sim", CONFIG_ON_STDIN],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        bufsize=1,
+        env=env,
+    )
+
+
 class URSimProcess:
     """The simulator in a child process (``python -m coassist.robot.ur_sim``), with :class:`URSim`'s fault methods.
 
@@ -178,19 +200,23 @@ class URSimProcess:
     def host(self) -> str:
         return self.config.host
 
-    def start(self) -> URSimProcess:
+    def start(self, process: subprocess.Popen[str] | None = None) -> URSimProcess:
+        """Start the simulator with :attr:`config`: in ``process`` (one :func:`spawn` returned, not used
+        before: its imports already done) or in a new one; return once it listens.
+
+        Raises RuntimeError with its last lines of output when it does not (an address taken: the
+        process has then ended).
+        """
         if self._proc is not None:
             return self
-        env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
-        self._proc = subprocess.Popen(
-            [sys.executable, "-m", "coassist.robot.ur_sim", config_to_json(self.config)],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            bufsize=1,
-            env=env,
-        )
+        self._proc = process if process is not None else spawn()
+        assert self._proc.stdin is not None
+        try:
+            self._proc.stdin.write(config_to_json(self.config) + "\n")
+            self._proc.stdin.flush()
+        except OSError as exc:  # it ended before its config (killed)
+            self.kill()
+            raise RuntimeError(f"ur-sim did not start: {exc}") from exc
         seen: list[str] = []
         done = threading.Event()
 
