@@ -1,5 +1,7 @@
 """The person model's online filter (coassist.scenario.person_intent) on scripted trials with known paths."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -303,3 +305,31 @@ def test_the_hedge_without_its_lateral_part_carries_only_the_progress_along_the_
         checked += 1
         sideways = max(sideways, abs(vel[1]))
     assert checked > 30 and sideways * steps[-1] > 1e-4  # the two differ by more than 0.1 mm: the test can fail
+
+
+@pytest.mark.parametrize("noise", [0.0005, 0.001])
+def test_the_dead_zone_grows_with_the_persons_calibration_noise(noise):
+    # a person who walks a lasting offset left of the plan (no lateral bias learnt): the offset counts for the left
+    # way only beyond the dead zone, the larger of dead_zone (2 mm) and dead_zone_noise × the calibration's noise σ₀:
+    # 2 mm for σ₀ = 0.5 mm, 3 mm for σ₀ = 1 mm
+    model = replace(_model(left=(0.5,), right=(0.5,)), noise=noise)
+    for offset in (0.0025, 0.0035):
+        intent = _walk(NOMINAL + [0.0, offset])[:600]
+        for multiple in (0.0, 3.0):
+            zone = max(0.002, multiple * noise)
+            settings = PersonFilterSettings(dead_zone_noise=multiple, bias_limit=0.0, side_rule="onset")
+            src = PersonPathsIntent(paths={"u": model}, arms={"u": ARM}, settings=settings)
+            src.reset(_context())
+            prior = src._log_odds
+            for k in range(len(intent)):
+                _tick(src, intent, k)
+            if offset > zone:
+                assert src._log_odds > prior + 0.5, (offset, multiple)  # evidence for the left way
+            else:
+                # within the dead zone: none (the onset rule's log ratio of a zero offset is 0 to an ulp per tick)
+                assert abs(src._log_odds - prior) < 1e-12, (offset, multiple)
+
+
+def test_the_dead_zone_multiple_is_validated():
+    with pytest.raises(ValueError, match="dead_zone_noise"):
+        PersonFilterSettings(dead_zone_noise=-1.0)

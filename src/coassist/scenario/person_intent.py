@@ -88,6 +88,11 @@ class PersonFilterSettings:
     noise_scale : σ in the likelihoods is this times the present estimate's noise in the calibration.
     kernel : [m] the width each hypothesis' offset stands for in the side evidence (besides σ).
     odds_limit : the log-odds never exceed it (a mind may change).
+    dead_zone : [m] the present estimate's offset from the person's line counts as evidence for a way only beyond it.
+    dead_zone_noise : the dead zone is at least this many times the present estimate's noise σ₀ measured in the
+        person's calibration (:attr:`PathModel.noise`, before ``noise_scale``): the estimate's error is smooth (its
+        correlation time ~0.18 s, some 22 ticks), so an error of 2–3 σ₀ lasts long enough for the per-tick evidence
+        to decide a way the person is not taking (docs/person-model.md). 0: the fixed ``dead_zone`` alone.
     reaction_lead : [s] the present estimate is put this far ahead along the tool's velocity. With a
         measured arm, Ĉ holds the person's reaction delay (the force answers the intent of τ ago:
         Ĉ = C − K̂τ), so q̂ is where the person wanted the tool τ ago; the lead brings it to now.
@@ -123,6 +128,7 @@ class PersonFilterSettings:
     odds_limit: float = 10.0
     shared_gap: float = 0.005
     dead_zone: float = 0.002
+    dead_zone_noise: float = 0.0
     side_rule: str = "offset"
     reaction_lead: float = 0.0
     object_yaw: bool = False
@@ -150,6 +156,7 @@ class PersonFilterSettings:
             ("odds_limit", 1.0, 100.0, False),
             ("shared_gap", 0.0, 0.05, False),
             ("dead_zone", 0.0, 0.05, False),
+            ("dead_zone_noise", 0.0, 10.0, False),
             ("reaction_lead", 0.0, 0.3, False),
             ("row_smoothing", 0.0, 1.0, False),
             ("evidence_gap", 0.0, 0.1, False),
@@ -342,6 +349,7 @@ class PersonPathsIntent:
             hyp = self._hyp
             self._noise = st.noise_scale * model.noise
             self._noise2 = self._noise**2
+            self._dead_zone = max(st.dead_zone, st.dead_zone_noise * model.noise)
             self._kernel2 = self._noise2 + st.kernel**2
             n = len(hyp.ways)
             self._idx = np.zeros(len(hyp.curves), dtype=int)
@@ -443,7 +451,7 @@ class PersonPathsIntent:
                 # proportion to how far the ways are apart here: staying on the line is no evidence against
                 # a way that would have left it already (its detour may come later this time)
                 off = z - self._bias
-                off = math.copysign(max(abs(off) - st.dead_zone, 0.0), off)
+                off = math.copysign(max(abs(off) - self._dead_zone, 0.0), off)
                 if st.side_rule == "onset":
                     gain = self._kappa * onset_log_ratio(off, 0.5 * D, self._noise)
                 else:
