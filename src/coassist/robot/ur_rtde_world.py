@@ -109,23 +109,24 @@ and :attr:`URRTDEWorld.stop_detail` / :func:`~coassist.robot.ur_status.stop_mess
 
 A connection that has ended is not called into. ur-rtde 1.6.5 tears a control connection down
 from two threads and without a lock: the thread whose command fails on it (``sendCommand``
-catches the error, disconnects, reconnects) and its own receive thread (when a read fails).
-Each guards the socket only with ``isConnected()``, and ``RTDE::disconnect`` drops the socket
-before that flag turns false, so a command that meets the receive thread's teardown, or a
-teardown that a command started and the receive thread meets, dereferences the dropped socket:
-the process dies (SIGSEGV, in ``speedJ`` or in ur-rtde's receive thread; seen with the
-simulator's dropped connection, docs/robots.md). Before each ``speedJ`` the world therefore asks
-the kernel whether the robot reset or closed the control connection
+catches the error, disconnects, reconnects) and its own receive thread (when a read fails). Each
+guards the socket only with ``isConnected()``, and ``RTDE::disconnect`` drops the socket before
+that flag turns false, so a command that meets the receive thread's teardown, or a teardown that
+a command started and the receive thread meets, dereferences the dropped socket: the process
+dies (SIGSEGV, in ``speedJ`` or in ur-rtde's receive thread; seen with the simulator's dropped
+connection, docs/robots.md). Before each ``speedJ`` the world therefore asks the kernel whether
+the robot reset or closed the control connection
 (:class:`~coassist.robot.socket_watch.SocketWatch`: ``poll(2)`` on the socket the control
-interface opened to port 30004, found at connect through ``/proc``, Linux only), then
-ur-rtde's ``isConnected()`` (together about 1.3 µs a tick): an ended connection raises
-:class:`~coassist.runtime.world.RobotLinkError` with no command sent, so no teardown starts from
-this thread and none is met in progress. From the first sign of a lost link (a call that
-raised, an interface or the kernel saying the connection is gone) the link stays lost: ``read``,
-``apply`` and ``stop`` raise without calling ur-rtde and ``close`` only disconnects (ur-rtde's
-``disconnect`` joins its receive thread first). Left open: a connection that ends in the
-microseconds between that check and ``speedJ``'s write, and a receive thread that tears down and
-reconnects entirely between two ticks (the controller accepting again at once).
+interface opened to port 30004, found at connect through ``/proc``, Linux only), then ur-rtde's
+``isConnected()`` (together 1.2-1.6 µs a tick: benchmarks/bench_ur_link_check.py). An ended
+connection raises :class:`~coassist.runtime.world.RobotLinkError` with no command sent, so no
+teardown starts from this thread and none is met in progress. From the first sign of a lost link
+(a call that raised, an interface or the kernel saying the connection is gone) the link stays
+lost: ``read``, ``apply`` and ``stop`` raise without calling ur-rtde and ``close`` only
+disconnects (ur-rtde's ``disconnect`` joins its receive thread first). Left open: a connection
+that ends in the microseconds between that check and ``speedJ``'s write, and a receive thread
+that tears down and reconnects entirely between two ticks (the controller accepting again at
+once).
 
 On a dead link ur-rtde's waiting commands would wait for an answer for up to 300 s (its
 ``UR_EXECUTION_TIMEOUT``, from its last cached state), so :meth:`URRTDEWorld.stop` and
