@@ -29,7 +29,11 @@ Faults to inject (plain attributes):
   arm halts, the safety bits say so, and speedJ/speedStop return False from then on.
 - ``link_down = True`` or a method name in ``raise_on``: calls raise RuntimeError, as
   ur-rtde does when the connection is gone (the call is still recorded).
-- ``connected = False``: isConnected() returns False.
+- ``connected = False``: isConnected() returns False; ``control_connected = False``: only the
+  control interface's does (ur-rtde's receive thread tore that connection down).
+- ``rtde_address = (host, port)``: the control interface opens a real TCP connection there when
+  it is built, as ur-rtde's does to the RTDE port (``rtde_socket``; closed by its disconnect), so
+  what the kernel says of that connection can be tested.
 - ``frozen = True``: the timestamp stops advancing (a dead receive thread).
 - ``late_by = X``: waitPeriod returns X s after the end of the period (a late tick).
 - ``script_running = False``: speedJ returns False (the control script has stopped,
@@ -42,6 +46,7 @@ Method names and signatures follow ur-rtde 1.6.5 (tests check each exists there)
 from __future__ import annotations
 
 import datetime
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -94,6 +99,9 @@ class FakeRobot:
         #: [s] how long each interface's disconnect takes (ur-rtde's own: 0.5 s), by source
         self.disconnect_seconds: dict[str, float] = {}
         self.connected = True
+        self.control_connected = True
+        self.rtde_address: tuple[str, int] | None = None
+        self.rtde_socket: socket.socket | None = None
         self.frozen = False
         self.late_by = 0.0
         self.script_running = True
@@ -110,6 +118,8 @@ class FakeRobot:
     def control_factory(self, host: str, frequency: float) -> FakeRTDEControl:
         self.frequency = frequency
         self.record("control", "__init__", host, frequency)
+        if self.rtde_address is not None:
+            self.rtde_socket = socket.create_connection(self.rtde_address, timeout=2.0)
         return FakeRTDEControl(self)
 
     def receive_factory(self, host: str, frequency: float) -> FakeRTDEReceive:
@@ -175,7 +185,7 @@ class FakeRTDEControl:
 
     def isConnected(self) -> bool:
         self._rec("isConnected")
-        return self.robot.connected
+        return self.robot.connected and self.robot.control_connected
 
     def getStepTime(self) -> float:
         self._rec("getStepTime")
@@ -268,6 +278,8 @@ class FakeRTDEControl:
 
     def disconnect(self) -> None:
         self._rec("disconnect")
+        if self.robot.rtde_socket is not None:
+            self.robot.rtde_socket.close()
         time.sleep(self.robot.disconnect_seconds.get("control", 0.0))
 
 

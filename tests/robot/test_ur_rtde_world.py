@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import socket
+import struct
 import sys
 import time
 from pathlib import Path
@@ -17,6 +19,8 @@ import pytest
 from coassist.robot.ur_rtde_world import URProgramStopped, URRTDEWorld
 from coassist.robot.ur_status import SafetyStatus, stop_message
 from coassist.runtime.world import Command, RobotLinkError, RobotState, World
+
+from ..ursim import free_host
 
 # Loaded by path under a unique name: works with --import-mode=importlib and without
 # an __init__.py, and cannot clash with another test directory's helper module.
@@ -273,11 +277,77 @@ def test_a_stuck_timestamp_is_a_lost_link():
 def test_apply_and_stop_raise_when_the_link_is_lost():
     world, robot = make()
     world.read()
-    robot.raise_on = {"speedJ", "speedStop"}
-    with pytest.raises(RobotLinkError, match="speedJ"):
-        world.apply(Command(qd=np.zeros(6)))
+    robot.raise_on = {"speedStop"}
     with pytest.raises(RobotLinkError, match="speedStop"):
         world.stop()
+    world, robot = make()
+    world.read()
+    robot.raise_on = {"speedJ"}
+    with pytest.raises(RobotLinkError, match="speedJ"):
+        world.apply(Command(qd=np.zeros(6)))
+    n = len(robot.calls)
+    # ur-rtde may be tearing that connection down now, and a call into it then can crash the process:
+    # nothing more reaches it but the disconnects
+    with pytest.raises(RobotLinkError, match=r"stop\(\): the link to .* was lost \(speedJ: .*nothing more is sent"):
+        world.stop()
+    with pytest.raises(RobotLinkError, match="was lost"):
+        world.read()
+    with pytest.raises(RobotLinkError, match="was lost"):
+        world.apply(Command(qd=np.zeros(6)))
+    assert world.robot_info()["payload_mass"] is None
+    assert len(robot.calls) == n
+    world.close()
+    assert sorted((c.source, c.name) for c in robot.calls[n:]) == [("control", "disconnect"), ("receive", "disconnect")]
+
+
+def test_a_control_link_reported_down_ends_the_run_link_lost_without_another_command():
+    pytest.importorskip("pinocchio", reason="the drive needs the robot extra")
+    from coassist.robot.drive import DriveConfig, drive
+
+    world, robot = make(frequency=125.0)
+    at = {}
+
+    def on_tick(k, state, out):
+        if k == 30:  # after tick 30's speedJ: ur-rtde's receive thread saw the connection end and tore it down
+            robot.control_connected = False
+            at["calls"] = len(robot.calls)
+
+    try:
+        trial = drive(DriveConfig(world="ur", controller="manual", time_limit=1.0), world=world, on_tick=on_tick)
+    finally:
+        world.close()
+    extra = trial.meta.extra
+    assert extra["ended"] == "link_lost" and "reports it is disconnected" in extra["stop_message"]
+    assert "no command was sent" in extra["stop_message"]
+    # tick 31 read the state (the receive link is up) and asked before its speedJ: rows 0-30 kept
+    assert trial.n_samples == 31 and np.all(np.isfinite(trial.pose))
+    after = [(c.source, c.name) for c in robot.calls[at["calls"] :]]
+    assert [name for source, name in after if source == "control"] == ["isConnected", "disconnect"]
+    assert robot.n_speedj == 31
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="the control socket is found through /proc")
+@pytest.mark.parametrize("how", ["reset", "closed"])
+def test_a_control_connection_the_robot_ended_gets_no_command_and_stop_sends_nothing(how):
+    """The kernel says first: no call reaches ur-rtde, whose own threads would tear the connection down."""
+    with socket.create_server((free_host(), 30004)) as server:  # the RTDE port, as the control interface's
+        robot = FakeRobot()
+        robot.rtde_address = server.getsockname()[:2]
+        world, robot = make(robot)
+        peer, _ = server.accept()
+        run_ticks(world, 3)
+        if how == "reset":  # RST: a controller restart, the simulator's dropped connection
+            peer.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        peer.close()  # else FIN: the controller closed it
+        n = len(robot.calls)
+        world.read()  # the receive interface's connection is another one
+        with pytest.raises(RobotLinkError, match=r"the robot closed the control connection\); no command was sent"):
+            world.apply(Command(qd=np.full(6, 0.01)))
+        with pytest.raises(RobotLinkError, match="was lost"):
+            world.stop()
+        world.close()
+    assert [c.name for c in robot.calls[n:] if c.source == "control"] == ["disconnect"]
+    assert robot.n_speedj == 3
 
 
 def test_rejected_speedj_without_a_safety_stop_says_the_program_stopped():

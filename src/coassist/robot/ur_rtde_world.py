@@ -107,6 +107,27 @@ reported as an overrun, which the loop flags ``DEADLINE_MISS``. Protective and e
 stops are not errors: ``read()`` reports them in :class:`~coassist.runtime.world.RobotState`,
 and :attr:`URRTDEWorld.stop_detail` / :func:`~coassist.robot.ur_status.stop_message` say what to do.
 
+A connection that has ended is not called into. ur-rtde 1.6.5 tears a control connection down
+from two threads and without a lock: the thread whose command fails on it (``sendCommand``
+catches the error, disconnects, reconnects) and its own receive thread (when a read fails). Each
+guards the socket only with ``isConnected()``, and ``RTDE::disconnect`` drops the socket before
+that flag turns false, so a command that meets the receive thread's teardown, or a teardown that
+a command started and the receive thread meets, dereferences the dropped socket: the process
+dies (SIGSEGV, in ``speedJ`` or in ur-rtde's receive thread; seen with the simulator's dropped
+connection, docs/robots.md). Before each ``speedJ`` the world therefore asks the kernel whether
+the robot reset or closed the control connection
+(:class:`~coassist.robot.socket_watch.SocketWatch`: ``poll(2)`` on the socket the control
+interface opened to port 30004, found at connect through ``/proc``, Linux only), then ur-rtde's
+``isConnected()`` (together 1.2-1.6 µs a tick: benchmarks/bench_ur_link_check.py). An ended
+connection raises :class:`~coassist.runtime.world.RobotLinkError` with no command sent, so no
+teardown starts from this thread and none is met in progress. From the first sign of a lost link
+(a call that raised, an interface or the kernel saying the connection is gone) the link stays
+lost: ``read``, ``apply`` and ``stop`` raise without calling ur-rtde and ``close`` only
+disconnects (ur-rtde's ``disconnect`` joins its receive thread first). Left open: a connection
+that ends in the microseconds between that check and ``speedJ``'s write, and a receive thread
+that tears down and reconnects entirely between two ticks (the controller accepting again at
+once).
+
 On a dead link ur-rtde's waiting commands would wait for an answer for up to 300 s (its
 ``UR_EXECUTION_TIMEOUT``, from its last cached state), so :meth:`URRTDEWorld.stop` and
 :meth:`URRTDEWorld.close` send them only while the link is alive (the controller's watchdog
@@ -128,6 +149,7 @@ from typing import Any
 import numpy as np
 
 from coassist.errors import CoassistError
+from coassist.robot.socket_watch import SocketWatch, socket_fds, sockets_to
 from coassist.robot.ur_status import SafetyStatus, check_software, connect_hint, controller_version, stop_message
 from coassist.robot.worlds import WorldRequest
 from coassist.runtime.world import Command, RobotLinkError, RobotState
@@ -153,6 +175,8 @@ _MAX_FREQUENCY = 500.0
 #: beyond it (a long stall) the schedule restarts from now rather than run a burst of back-to-back ticks
 _MAX_CATCH_UP = 0.05
 _INSTALL_HINT = "the real robot needs ur-rtde: pip install 'coassist[robot]'"
+#: The controller's RTDE port: the control interface's connection there carries every speedJ.
+_RTDE_PORT = 30004
 
 
 def _check_number(value: Any, name: str, *, positive: bool = True, allow_zero: bool = False) -> float:
@@ -301,6 +325,9 @@ class URRTDEWorld:
         self._rtde_c: Any = None
         self._rtde_r: Any = None
         self._closed = False
+        # why a connection was found gone; from then on only disconnect reaches ur-rtde (module docstring, *Link loss*)
+        self._lost: str | None = None
+        self._watch: SocketWatch | None = None  # the control interface's RTDE socket (module docstring, *Link loss*)
         self._watchdog_armed = False
         self._t0: Any = None  # the open period's start, as initPeriod returns it (module docstring, the schedule)
         self._t0_wall = 0.0  # the same on perf_counter's clock
@@ -333,7 +360,9 @@ class URRTDEWorld:
             # the state at the controller's own rate (500 Hz e-Series, 125 Hz CB3): each read() gets a
             # sample at most one controller step old, whatever the loop's rate
             self._rtde_r = receive_factory(host, -1.0)
+            before = socket_fds()
             self._rtde_c = control_factory(host, freq)
+            self._watch = self._watch_control_socket(before)
         except ImportError:
             raise
         except Exception as exc:
@@ -367,6 +396,27 @@ class URRTDEWorld:
             self._require(self._call_c("zeroFtSensor"), "zeroFtSensor")
         log.info("URRTDEWorld: connected to %s, dt = %.4f s, TCP %s", host, self.dt, self.tcp_offset.tolist())
 
+    def _watch_control_socket(self, before: set[int]) -> SocketWatch | None:
+        """A watch on the socket the control interface opened to the RTDE port (module docstring,
+        *Link loss*); None where it cannot be told (no ``/proc``, a fake interface, two candidates)."""
+        found = sockets_to(_RTDE_PORT, before)
+        if len(found) != 1:
+            log.debug("URRTDEWorld: %d new sockets to port %d: the control link is not watched", len(found), _RTDE_PORT)
+            return None
+        return SocketWatch(found[0])
+
+    def _control_ended(self) -> str | None:
+        """Why the control connection is over (and the link lost for good), or None while it is up.
+
+        Asked before each command: first the kernel (an RST or FIN from the robot, seen before ur-rtde
+        acts on it), then ur-rtde's own flag (its receive thread has torn the connection down)."""
+        if self._lost is None:
+            if self._watch is not None and self._watch.ended():
+                self._lose("the robot closed the control connection")
+            elif not self._call_c("isConnected"):
+                self._lose("the control interface reports it is disconnected")
+        return self._lost
+
     def _stream_step(self) -> float:
         """The receive stream's step [s] (the controller's period), measured once."""
         if self._stream_dt is None:
@@ -393,20 +443,22 @@ class URRTDEWorld:
         return step
 
     def _call_c(self, name: str, *args: Any) -> Any:
-        """Call the control interface; RobotLinkError when it raises."""
+        """Call the control interface; RobotLinkError when it raises (the link is then lost for good)."""
         try:
             return getattr(self._rtde_c, name)(*args)
         except Exception as exc:
+            self._lose(f"{name}: {exc}")
             raise RobotLinkError(
                 f"lost the RTDE control link to {self.host} ({name}: {exc}). The watchdog (when "
                 "armed) stops the arm; check the network and the teach pendant, then rerun."
             ) from exc
 
     def _call_r(self, name: str) -> Any:
-        """Call the receive interface; RobotLinkError when it raises."""
+        """Call the receive interface; RobotLinkError when it raises (the link is then lost for good)."""
         try:
             return getattr(self._rtde_r, name)()
         except Exception as exc:
+            self._lose(f"{name}: {exc}")
             raise RobotLinkError(
                 f"lost the RTDE receive link to {self.host} ({name}: {exc}). The watchdog (when "
                 "armed) stops the arm; check the network and the teach pendant, then rerun."
@@ -420,6 +472,18 @@ class URRTDEWorld:
     def _check_open(self, what: str) -> None:
         if self._closed:
             raise RobotLinkError(f"{what} on a closed URRTDEWorld ({self.host}); build a new one")
+        if self._lost is not None:
+            raise RobotLinkError(
+                f"{what}: the link to {self.host} was lost ({self._lost}); nothing more is sent to ur-rtde, "
+                "the controller's watchdog (when armed) stops the arm. Check the network and the robot, then rerun."
+            )
+
+    def _lose(self, why: str) -> None:
+        """Latch a lost connection: from now on no call but ``disconnect`` reaches ur-rtde (module docstring,
+        *Link loss*): its receive thread may be tearing the connection down, and a command sent then can
+        crash the process."""
+        if self._lost is None:
+            self._lost = why
 
     # -- World -----------------------------------------------------------------------
 
@@ -461,6 +525,7 @@ class URRTDEWorld:
         """
         self._check_open("read()")
         if not self._call_r("isConnected"):
+            self._lose("the receive interface reports it is disconnected")
             raise RobotLinkError(
                 f"the RTDE receive interface to {self.host} reports it is disconnected; the "
                 "watchdog (when armed) stops the arm. Check the network cable and the robot, then rerun."
@@ -578,6 +643,14 @@ class URRTDEWorld:
             self._before_first_period()
             self._open_period()
         qd = self._checked_qd(command)
+        # never a speedJ on a connection that has ended: ur-rtde would tear it down in this thread while
+        # its receive thread does too, and either can crash the process (module docstring, *Link loss*)
+        ended = self._control_ended()
+        if ended is not None:
+            raise RobotLinkError(
+                f"lost the RTDE control link to {self.host} ({ended}); no command was sent. The watchdog (when "
+                "armed) stops the arm; check the network cable and the robot, then rerun."
+            )
         if qd is None:
             ok = self._call_c("speedJ", [0.0] * self.n_joints, self.deceleration, self.dt)
         else:
@@ -647,6 +720,11 @@ class URRTDEWorld:
         """Both interfaces connected and the stream alive: a command that waits for the script's
         answer (``speedStop``, ``stopScript``) would get one. On a dead link ur-rtde waits for it
         for up to 300 s (its UR_EXECUTION_TIMEOUT), answering from its last cached state."""
+        if self._lost is not None:
+            return False
+        if self._watch is not None and self._watch.ended():
+            self._lose("the robot closed the control connection")
+            return False
         try:
             connected = bool(self._rtde_c.isConnected()) and bool(self._rtde_r.isConnected())
         except Exception:  # noqa: BLE001 - a broken interface is a dead link
@@ -656,13 +734,17 @@ class URRTDEWorld:
     def stop(self) -> None:
         """``speedStop(deceleration)`` (it returns once the arm is at rest); safe to call twice;
         a no-op after :meth:`close`. On a dead link (:meth:`_link_ok`) only a real-time
-        ``speedJ(zeros, deceleration)`` is tried: the controller's watchdog stops the arm.
+        ``speedJ(zeros, deceleration)`` is tried: the controller's watchdog stops the arm; on a
+        lost one (a call raised, an interface reported itself disconnected) nothing is sent.
 
-        Raises :class:`RobotLinkError` when the command cannot be sent (the watchdog then
-        stops the arm within ``1/watchdog_hz``).
+        Raises :class:`RobotLinkError` when the command cannot be sent or the link was lost (the
+        watchdog then stops the arm within ``1/watchdog_hz``).
         """
         if self._closed or self._rtde_c is None:
             return
+        self._check_open("stop()")
+        self._control_ended()
+        self._check_open("stop()")  # a lost link: nothing is sent into a connection ur-rtde may be tearing down
         if self._link_ok():
             self._call_c("speedStop", self.deceleration)
         else:
@@ -717,7 +799,7 @@ class URRTDEWorld:
         """
 
         def ask(iface: Any, name: str) -> Any:
-            if iface is None or self._closed:
+            if iface is None or self._closed or self._lost is not None:
                 return None
             try:
                 value = getattr(iface, name)()
