@@ -333,3 +333,30 @@ def test_the_dead_zone_grows_with_the_persons_calibration_noise(noise):
 def test_the_dead_zone_multiple_is_validated():
     with pytest.raises(ValueError, match="dead_zone_noise"):
         PersonFilterSettings(dead_zone_noise=-1.0)
+
+
+def test_the_rows_keep_the_persons_offset_from_their_curves_fading_over_the_residual_time():
+    # a person 3 mm left of their own detour: on its flat top (the curves parallel to the plan) the decided way's
+    # rows with residual_time τ are the rows without it plus 3 mm across the plan, fading as e^{−i·dt/τ} along the
+    # horizon. Scripted tool positions: the evidence, and so every other part of the rows, is the same in both runs
+    tau, shift = 0.2, 0.003
+    intent = _walk(_bump(0.5, 0.08) + [0.0, shift])
+    rows = {}
+    for residual in (0.0, tau):
+        src = PersonPathsIntent(
+            paths={"u": _model()},
+            arms={"u": ARM},
+            settings=PersonFilterSettings(residual_time=residual, bias_limit=0.0),
+        )
+        src.reset(_context())
+        rows[residual] = [(_tick(src, intent, k), src.side) for k in range(len(intent))]
+    fade = np.exp(-DT * np.arange(1, 51) / tau)
+    top = [k for k in range(len(intent)) if abs(intent[k, 0] - 0.5) < 0.03]  # the bump's flat top, ±3 cm
+    assert len(top) > 20
+    for k in top:
+        (plain, side), (kept, side_kept) = rows[0.0][k], rows[tau][k]
+        assert side == side_kept == 1
+        diff = kept - plain
+        np.testing.assert_allclose(diff[:, 0], 0.0, atol=1e-12)  # across the plan only (its normal is y)
+        np.testing.assert_allclose(diff[:, 1] / fade, diff[0, 1] / fade[0], rtol=1e-9)  # one offset, fading
+        assert abs(diff[0, 1] / fade[0] - shift) < 0.3e-3  # the person's 3 mm off their curves

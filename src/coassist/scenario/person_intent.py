@@ -36,7 +36,10 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    rows are the present estimate's, q + ``hedge_velocity``·i·dt·v — neither way, and never the plan
    (with ``hedge_lateral`` off, v's component across the plan is left out: extrapolated, the tool's own
    sideways drift became the robot's push and then evidence for a way).
-   The two cross-fade over ``blend_time``.
+   The two cross-fade over ``blend_time``. With ``residual_time`` τ_r > 0 the curves' rows carry the present
+   estimate's offset across the plan from the chosen curves' own present estimates, fading along the horizon:
+   row_i += ((q − b − Σₙ wₙ qₙ)·n̂) e^{−i·dt/τ_r} n̂ (n̂ the plan's left normal where the tool is): a person
+   off their curves (a turn earlier than any demonstrated) is not pulled back onto them at once.
 5. **smoothing**: the rows are low-passed over time with a time constant ``row_smoothing`` and
    advanced by the filter's lag (:class:`~coassist.scenario.row_smoothing.RowSmoothing`): the
    tick-to-tick noise of the phase, the lead and the mixture leaves the robot's effort, and with it
@@ -100,6 +103,8 @@ class PersonFilterSettings:
         :class:`~coassist.scenario.hand_force.HandPoint`) instead of taking the tip for it.
     row_smoothing : [s] the time constant of the rows' low-pass over time, its lag advanced away
         (:class:`~coassist.scenario.row_smoothing.RowSmoothing`; 0: the rows as computed).
+    residual_time : [s] τ_r, how long along the horizon the rows of a way's curves keep the present estimate's
+        offset across the plan from those curves (step 4; 0: the curves' rows as they are).
     side_rule : the way's evidence per tick: "offset" (z·D/σ², the linear log-likelihood ratio of two ways whose
         offsets are ±D/2), "mixture" (each way's hypotheses' offsets as a mixture) or "onset" (each way's offset
         anywhere between the plan and ±D/2: :func:`onset_log_ratio`).
@@ -129,6 +134,7 @@ class PersonFilterSettings:
     shared_gap: float = 0.005
     dead_zone: float = 0.002
     dead_zone_noise: float = 0.0
+    residual_time: float = 0.0
     side_rule: str = "offset"
     reaction_lead: float = 0.0
     object_yaw: bool = False
@@ -157,6 +163,7 @@ class PersonFilterSettings:
             ("shared_gap", 0.0, 0.05, False),
             ("dead_zone", 0.0, 0.05, False),
             ("dead_zone_noise", 0.0, 10.0, False),
+            ("residual_time", 0.0, 2.0, False),
             ("reaction_lead", 0.0, 0.3, False),
             ("row_smoothing", 0.0, 1.0, False),
             ("evidence_gap", 0.0, 0.1, False),
@@ -350,6 +357,7 @@ class PersonPathsIntent:
             self._noise = st.noise_scale * model.noise
             self._noise2 = self._noise**2
             self._dead_zone = max(st.dead_zone, st.dead_zone_noise * model.noise)
+            self._residual = np.exp(-self._steps / st.residual_time) if st.residual_time > 0.0 else None
             self._kernel2 = self._noise2 + st.kernel**2
             n = len(hyp.ways)
             self._idx = np.zeros(len(hyp.curves), dtype=int)
@@ -487,7 +495,13 @@ class PersonPathsIntent:
             # every chosen curve's rows at once, from its present estimate at the tool's speed along it
             speed = np.maximum(tv[n], 0.0)
             rows = hyp.along(n, s_lead[n][:, None] + speed[:, None] * self._steps[None, :])
-            return (w @ rows.reshape(len(w), -1)).reshape(-1, 2)
+            out = (w @ rows.reshape(len(w), -1)).reshape(-1, 2)
+            if self._residual is not None:
+                # the present estimate's offset across the plan from these curves' own present estimates, carried
+                # into the rows and fading: a person off their curves is not pulled back onto them at once
+                lateral = float((corrected - w @ q[n]) @ normal)
+                out = out + (lateral * self._residual)[:, None] * normal
+            return out
 
         if not st.follow_mirror and self._side in hyp.unseen:
             self._mix = 0.0  # a way this person never showed: no curves of theirs to follow there

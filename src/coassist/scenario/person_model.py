@@ -68,6 +68,10 @@ PERSON_MODEL_FILE = "person-model.json"
 #: −0.005 [−0.013, +0.002] m/s³; trials whose rows ever followed the way the person did not take 15 → 4 of 144
 #: (replayed; 2 σ₀ 9, 4 σ₀ 1), the right way decided a median 4 → 6 ticks after the intent is 5 mm off the plan
 #: (docs/person-model.md, "A dead zone in the person's own noise").
+#: The decided way's rows keep the present estimate's offset across the plan from their curves, fading over
+#: residual_time = 0.2 s (the estimate's own error stays correlated about that long): on the same cells against the
+#: filter with the dead zone, hand force −0.019 [−0.026, −0.012] N, overshoot +0.03 [−0.04, +0.11] mm, jerk +0.002
+#: [−0.000, +0.003] m/s³; 0.4 s: −0.029 [−0.040, −0.018] N, +0.07 [−0.04, +0.17] mm, jerk +0.003 [+0.000, +0.006].
 PERSON_FILTER = PersonFilterSettings(
     reaction_lead=0.06,
     object_yaw=True,
@@ -77,6 +81,7 @@ PERSON_FILTER = PersonFilterSettings(
     evidence_gap=0.005,
     hedge_lateral=False,
     dead_zone_noise=3.0,
+    residual_time=0.2,
 )
 _FORMAT = "coassist-person-model-1"
 
