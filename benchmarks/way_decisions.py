@@ -9,7 +9,7 @@ runs draw s mod n); the replayed rows must equal the recorded prediction (checke
 Per tick it reads the way the rows follow (``PersonPathsIntent.side``: +1 left, −1 right, 0 undecided) and
 compares it with the way the person took (the trial's detour side, as the application's metrics read it).
 
-Prints per RUN: the trials, those whose rows ever followed the way the person did not take and the ticks
+Prints per RUN, and pooled over all RUNs when there are several: the trials, those whose rows ever followed the way the person did not take and the ticks
 they did, and how many ticks after the intent first left the plan by 5 mm the right way was followed
 (median, 10th and 90th percentile; negative: before, from the prior or an early offset). This reads the
 simulated intent: a measure of the filter in simulation, not something an arm can compute.
@@ -70,13 +70,45 @@ def replay_ways(source, trial) -> tuple[np.ndarray, np.ndarray]:
     return sides, np.asarray(offsets)
 
 
+class _Tally:
+    """Trials, those whose rows ever followed the way not taken, those ticks, and each trial's latency [ticks]."""
+
+    def __init__(self) -> None:
+        self.trials = self.wrong = self.wrong_ticks = 0
+        self.latency: list[int] = []
+
+    def add(self, sides: np.ndarray, offsets: np.ndarray, side: int) -> None:
+        self.trials += 1
+        astray = (sides != 0) & (sides != side)
+        self.wrong += int(astray.any())
+        self.wrong_ticks += int(astray.sum())
+        right, left_plan = np.flatnonzero(sides == side), np.flatnonzero(np.abs(offsets) > LEFT_PLAN)
+        if len(right) and len(left_plan):
+            self.latency.append(int(right[0] - left_plan[0]))
+
+    def merge(self, other: _Tally) -> None:
+        self.trials += other.trials
+        self.wrong += other.wrong
+        self.wrong_ticks += other.wrong_ticks
+        self.latency += other.latency
+
+    def __str__(self) -> str:
+        lat = np.asarray(self.latency)
+        return (
+            f"{self.trials} trials; the rows followed the way not taken in {self.wrong} ({self.wrong_ticks} ticks); "
+            f"the right way followed {np.median(lat):.0f} ticks after the intent left the plan by "
+            f"{1e3 * LEFT_PLAN:.0f} mm (p10 {np.percentile(lat, 10):.0f}, p90 {np.percentile(lat, 90):.0f}; "
+            f"{len(lat)} trials)"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("runs", nargs="+", type=Path)
     args = parser.parse_args()
+    pooled = _Tally()
     for run in args.runs:
-        trials = wrong = wrong_ticks = 0
-        latency = []
+        tally = _Tally()
         for folder in sorted(run.glob("base-*/datasets/*-person*")):
             if "draw" in folder.name or "probe" in folder.name:
                 continue
@@ -89,23 +121,13 @@ def main() -> None:
             recorded = sorted(read_dataset(folder).trials, key=pair_key)
             took = np.sign(np.asarray(application_metrics(recorded)["side"], dtype=float)).astype(int)
             for trial, side in zip(recorded, took, strict=True):
-                sides, offsets = replay_ways(sources[trial.meta.seed % len(sources)], trial)
-                trials += 1
-                astray = (sides != 0) & (sides != side)
-                wrong += int(astray.any())
-                wrong_ticks += int(astray.sum())
-                right, left_plan = np.flatnonzero(sides == side), np.flatnonzero(np.abs(offsets) > LEFT_PLAN)
-                if len(right) and len(left_plan):
-                    latency.append(int(right[0] - left_plan[0]))
-        if not trials:
+                tally.add(*replay_ways(sources[trial.meta.seed % len(sources)], trial), side)
+        if not tally.trials:
             raise SystemExit(f"{run}: no person-model trials (a compare-intents folder with --source person=person?)")
-        lat = np.asarray(latency)
-        print(
-            f"{run}: {trials} trials; the rows followed the way not taken in {wrong} ({wrong_ticks} ticks); "
-            f"the right way followed {np.median(lat):.0f} ticks after the intent left the plan by "
-            f"{1e3 * LEFT_PLAN:.0f} mm (p10 {np.percentile(lat, 10):.0f}, p90 {np.percentile(lat, 90):.0f}; "
-            f"{len(lat)} trials)"
-        )
+        print(f"{run}: {tally}")
+        pooled.merge(tally)
+    if len(args.runs) > 1:
+        print(f"all {len(args.runs)}: {pooled}")
 
 
 if __name__ == "__main__":

@@ -36,10 +36,11 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    rows are the present estimate's, q + ``hedge_velocity``·i·dt·v — neither way, and never the plan
    (with ``hedge_lateral`` off, v's component across the plan is left out: extrapolated, the tool's own
    sideways drift became the robot's push and then evidence for a way).
-   The two cross-fade over ``blend_time``. With ``residual_time`` τ_r > 0 the curves' rows carry the present
-   estimate's offset across the plan from the chosen curves' own present estimates, fading along the horizon:
-   row_i += ((q − b − Σₙ wₙ qₙ)·n̂) e^{−i·dt/τ_r} n̂ (n̂ the plan's left normal where the tool is): a person
-   off their curves (a turn earlier than any demonstrated) is not pulled back onto them at once.
+   The two cross-fade over ``blend_time``. With ``residual_time`` τ_r > 0 each way's rows from its curves carry
+   the present estimate's offset across the plan from the chosen curves' own present estimates, fading along the
+   horizon: row_i += ((q − b − Σₙ wₙ qₙ)·n̂) e^{−i·dt/τ_r} n̂ (n̂ the plan's left normal where the tool is): a
+   person off their curves (a turn earlier than any demonstrated) is not pulled back onto them at once. While
+   undecided, the two ways' rows compared against ``divergence`` are these rows too.
 5. **smoothing**: the rows are low-passed over time with a time constant ``row_smoothing`` and
    advanced by the filter's lag (:class:`~coassist.scenario.row_smoothing.RowSmoothing`): the
    tick-to-tick noise of the phase, the lead and the mixture leaves the robot's effort, and with it
