@@ -15,6 +15,7 @@ import threading
 import time
 
 import pytest
+from scipy import stats
 
 pytest.importorskip("starlette", reason="the study's page needs the web extra (pip install 'coassist[web]')")
 sync_api = pytest.importorskip("playwright.sync_api", reason="the browser test needs Playwright (the dev extra)")
@@ -184,7 +185,12 @@ def test_two_simulated_participants_take_mg_against_their_own_calibrated_model_i
         assert fit["model"] == "P0" and fit["trials"] == {"curved": 3} and not fit["failed"]
         arm = fit["arm"]
         if arm["measured"]:  # the page's hand is a 400 N/m spring (coassist.play.hand.SpringDamper)
-            assert abs(arm["stiffness"] - 400.0) <= 3.0 * arm["stiffness_se"], arm
+            # a jackknife SE over n trials is itself an estimate with n − 1 degrees of freedom: the 99 % two-sided
+            # bound is Student's t (9.92 SE for the 3 trials here), not the normal's 3 SE, which a 3-trial fit
+            # misses one time in ten (CI at 85d39b7: 586 ± 57 N/m). Identification accuracy is tested on its own
+            # (tests/scenario/test_arm_identification.py); here the lab's flow
+            bound = float(stats.t.ppf(0.995, arm["trials"] - 1)) * arm["stiffness_se"]
+            assert abs(arm["stiffness"] - 400.0) <= bound, arm
         else:
             assert arm["stiffness"] == 800.0 and "measured K" in arm["note"], arm
         lines = [r for r in study.participant(pid).progress() if r["kind"] == "trial"]
