@@ -244,10 +244,12 @@ class _Curves:
         self.flat_inv = np.divide(1.0, seg_len, out=np.zeros_like(seg_len), where=seg_len > 0.0)
         self.flat_step = np.diff(self.flat_points, axis=0, append=self.flat_points[-1:])
         self.row_start = np.arange(N) * G
-        self.row_last = self.row_start + G - 2
+        self.row_last = self.row_start + G - 2  # each curve's last segment
         self.curves = np.arange(N)
-        # the keys after the first: a search in them finds the segment itself (the first key is 0, at or before any)
+        # the keys after the first: a search in them finds the segment itself (the first key is 0, at or before any);
+        # each curve's last key nudged up by one ulp, so its end (where s is clipped) is in its last segment
         self.key_tail = self.flat_key[1:].copy()
+        self.key_tail[self.row_last] = np.nextafter(self.key_tail[self.row_last], np.inf)
         self.on_way = {w: np.flatnonzero(self.ways == w) for w in np.unique(self.ways).tolist()}
         # each way's log prior, and its highest: a way's weights are relative to it (while all its curves are near)
         self.way_log_prior = {w: self.log_prior[i] for w, i in self.on_way.items()}
@@ -321,12 +323,12 @@ class _Curves:
         """Points of curves n (k,) at their own arc lengths s (k, H), clipped to each curve: (k, H, 2). One
         search over every curve at once: each curve's arc lengths are offset by its index times a stride
         longer than any curve, so the flat array is increasing and one ``searchsorted`` finds every segment
-        (at or after the curve's first, whose key is where the clipped s puts it; before its last, clipped)."""
+        (at or after the curve's first, whose key is where the clipped s puts it; before its last: the key of
+        its end, nudged up, is above any clipped s)."""
         key = np.maximum(s, 0.0)
         np.minimum(key, self.arc_end.take(n)[:, None], out=key)
         key += self.key_start.take(n)[:, None]
         j = self.key_tail.searchsorted(key, side="right")
-        np.minimum(j, self.row_last.take(n)[:, None], out=j)
         t = key - self.flat_key.take(j)
         t *= self.flat_inv.take(j)
         out = t[..., None] * self.flat_step.take(j, axis=0)
