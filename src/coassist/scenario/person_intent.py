@@ -449,7 +449,8 @@ class PersonPathsIntent:
         if not self._ready:
             raise RuntimeError("PersonPathsIntent.predict called before reset")
         # the tick's two-vectors as Python floats: a numpy call on two elements costs more than the arithmetic
-        # (each component's operations are those of the vectors', in the same order: the same bits)
+        # (each component's operations are those of the vectors', in the same order: the same bits; a dot product
+        # of two is x0·y0 + x1·y1, which is what OpenBLAS's ddot gave for it, benchmarks/check_person_rows.py)
         px, py, vx, vy, wx, wy = history[-1, :6].tolist()
         ux, uy = self._hand.step(vx, vy, wx, wy)  # the hand's force, the object's inertia put back
         if self._yaw is not None:  # the hand point, not the tip: the object's yaw on its mount
@@ -499,6 +500,8 @@ class PersonPathsIntent:
         along = np.add.reduce(along, axis=1)
         np.maximum(along, -hyp.step, out=along)
         np.minimum(along, hyp.step, out=along)
+        # t·v and t·u_h stay numpy's (N, 2) @ (2,) products on the tangents in curve order: OpenBLAS's gemv fuses
+        # multiply-adds, and how depends on the row's place. The lead (t·u_h + Ĉ t·v)/K̂ + τ t·v, in place
         tv = tan @ v
         lead = tan @ np.array((ux, uy))
         lead += C * tv
