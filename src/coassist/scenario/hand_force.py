@@ -20,21 +20,41 @@ __all__ = ["HandForce", "HandPoint"]
 
 
 class HandForce:
-    """u_h = w + m·â of one trial (module docstring); :meth:`__call__` once per tick, in order."""
+    """u_h = w + m·â of one trial (module docstring): :meth:`__call__` (arrays) or :meth:`step` (components) once
+    per tick, in order."""
 
     def __init__(self, dt: float, accel_time: float, obj: str) -> None:
         known = OBJECTS.get(obj)
         self.dt = float(dt)
         self.mass = float(known.mass) if known is not None else 0.0
         self.gain = 1.0 - math.exp(-self.dt / accel_time) if accel_time > 0 else 1.0
-        self.acc = np.zeros(2)
-        self._v_prev: np.ndarray | None = None
+        # the state as Python floats: a tick's arithmetic on two components is cheaper without numpy
+        self._ax = self._ay = 0.0
+        self._v_prev: tuple[float, float] | None = None
+
+    @property
+    def acc(self) -> np.ndarray:
+        """â (2,) [m/s²] after the last tick."""
+        return np.array((self._ax, self._ay))
+
+    @property
+    def acceleration(self) -> tuple[float, float]:
+        """â's components [m/s²] after the last tick."""
+        return self._ax, self._ay
+
+    def step(self, vx: float, vy: float, wx: float, wy: float) -> tuple[float, float]:
+        """u_h's components [N] from the tool's velocity [m/s] and the sensor's force [N], as :meth:`__call__`."""
+        if self._v_prev is not None:
+            g, dt = self.gain, self.dt
+            self._ax += g * ((vx - self._v_prev[0]) / dt - self._ax)
+            self._ay += g * ((vy - self._v_prev[1]) / dt - self._ay)
+        self._v_prev = (vx, vy)
+        return wx + self.mass * self._ax, wy + self.mass * self._ay
 
     def __call__(self, v: np.ndarray, w: np.ndarray) -> np.ndarray:
-        if self._v_prev is not None:
-            self.acc += self.gain * ((v - self._v_prev) / self.dt - self.acc)
-        self._v_prev = v.copy()
-        return w + self.mass * self.acc
+        vx, vy = v.tolist()
+        wx, wy = w.tolist()
+        return np.array(self.step(vx, vy, wx, wy))
 
 
 class HandPoint:
@@ -60,14 +80,16 @@ class HandPoint:
         self.theta = 0.0
         self.rate = 0.0
 
-    def __call__(self, u_h: np.ndarray, acc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(Δp, Δṗ): the hand point less the tip's, position [m] and velocity [m/s], after this tick's update."""
+    def step(self, ux: float, uy: float, ax: float, ay: float) -> tuple[float, float, float, float]:
+        """(Δx, Δy, Δẋ, Δẏ): :meth:`__call__` on components, the hand force u_h [N] and the tip's acceleration [m/s²]."""
         board = self.board
         if not self.active or board is None:
-            return np.zeros(2), np.zeros(2)
+            return 0.0, 0.0, 0.0, 0.0
         # the plant's own step (coassist.sim.point_mass steps the simulated board with it)
-        self.theta, self.rate, _, _, _ = yaw_step(
-            board, self.theta, self.rate, float(u_h[0]), float(u_h[1]), float(acc[0]), float(acc[1]), self.dt
-        )
-        turn = np.array([-board.rhy, board.rhx])
-        return self.theta * turn, self.rate * turn
+        self.theta, self.rate, _, _, _ = yaw_step(board, self.theta, self.rate, ux, uy, ax, ay, self.dt)
+        return self.theta * -board.rhy, self.theta * board.rhx, self.rate * -board.rhy, self.rate * board.rhx
+
+    def __call__(self, u_h: np.ndarray, acc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(Δp, Δṗ): the hand point less the tip's, position [m] and velocity [m/s], after this tick's update."""
+        dx, dy, dvx, dvy = self.step(float(u_h[0]), float(u_h[1]), float(acc[0]), float(acc[1]))
+        return np.array((dx, dy)), np.array((dvx, dvy))

@@ -244,9 +244,32 @@ class _Curves:
         self.flat_inv = np.divide(1.0, seg_len, out=np.zeros_like(seg_len), where=seg_len > 0.0)
         self.flat_step = np.diff(self.flat_points, axis=0, append=self.flat_points[-1:])
         self.row_start = np.arange(N) * G
-        self.row_last = self.row_start + G - 2
+        self.row_last = self.row_start + G - 2  # each curve's last segment
         self.curves = np.arange(N)
+        # the keys after the first: a search in them finds the segment itself (the first key is 0, at or before any);
+        # each curve's last key nudged up by one ulp, so its end (where s is clipped) is in its last segment
+        self.key_tail = self.flat_key[1:].copy()
+        self.key_tail[self.row_last] = np.nextafter(self.key_tail[self.row_last], np.inf)
         self.on_way = {w: np.flatnonzero(self.ways == w) for w in np.unique(self.ways).tolist()}
+        # each way's log prior, and its highest: a way's weights are relative to it (while all its curves are near)
+        self.way_log_prior = {w: self.log_prior[i] for w, i in self.on_way.items()}
+        self.log_prior_max = {w: float(np.max(self.log_prior[i])) for w, i in self.on_way.items()}
+        # the curves way by way (each in on_way's order), for the tick's per-way sums and extremes in one call each:
+        # by_way (N,) the curves in that order, way_rank (N,) the rank of each one's way there, way_starts
+        # (ways,) where each way's run begins, way_slice its run; way_padded (ways, most curves of a way) each
+        # way's curves padded with N (a row of zeros the tick appends to its points: a sum in the order of
+        # on_way, plus zeros), way_count (ways, 1) their numbers
+        counts = [len(i) for i in self.on_way.values()]
+        starts = np.cumsum([0, *counts[:-1]])
+        self.by_way = np.concatenate(list(self.on_way.values()))
+        self.way_rank = np.repeat(np.arange(len(counts)), counts)
+        self.way_starts = starts
+        self.way_slice = {w: slice(int(a), int(a) + c) for w, a, c in zip(self.on_way, starts, counts)}
+        self.way_padded = np.full((len(counts), max(counts)), N)
+        for row, i in zip(self.way_padded, self.on_way.values()):
+            row[: len(i)] = i
+        self.way_count = np.asarray(counts, dtype=float)[:, None]
+        self._windows: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
         frame = PathFrame(model.nominal)
         M = max(2, int(math.ceil(frame.length / NOMINAL_STEP)) + 1)
         s = np.linspace(0.0, frame.length, M)
@@ -271,19 +294,46 @@ class _Curves:
         self.gap = np.abs(mean[1] - mean[-1]) if len(mean) == 2 else np.abs(next(iter(mean.values())))
         # the way taken is settled once the tool passes the place where the ways are furthest apart
         self.peak = int(np.argmax(self.gap))
+        # the plan's grid as Python floats, for the tick's scalar arithmetic on one point of it
+        self.nominal_list = self.nominal_points.tolist()
+        self.normal_list = self.nominal_normals.tolist()
+        self.gap_list = self.gap.tolist()
+
+    def window(self, widest: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The phase search's tables for a window of ±``widest`` samples: each curve's x and y padded with
+        ``widest`` copies of its end points at either end (N·(G + 2·widest),), so the window of sample i of curve
+        n is the run of 2·widest + 1 padded samples from n·(G + 2·widest) + i and needs no clipping (the copies
+        are what a clipped index reads); each curve's first padded index (N,); the window's offsets (2·widest + 1,);
+        and the sample (within its curve) each padded index stands for (N·(G + 2·widest),)."""
+        if widest not in self._windows:
+            N, G = self.points.shape[:2]
+            width = G + 2 * widest
+            local = np.minimum(np.maximum(np.arange(width) - widest, 0), G - 1)  # (G + 2·widest,)
+            flat = (self.row_start[:, None] + local[None, :]).ravel()
+            self._windows[widest] = (
+                self.flat_x[flat],
+                self.flat_y[flat],
+                np.arange(N) * width,
+                np.arange(2 * widest + 1),
+                np.tile(local, N),
+            )
+        return self._windows[widest]
 
     def along(self, n: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Points of curves n (k,) at their own arc lengths s (k, H), clipped to each curve: (k, H, 2). One
         search over every curve at once: each curve's arc lengths are offset by its index times a stride
-        longer than any curve, so the flat array is increasing and one ``searchsorted`` finds every segment."""
-        s = np.minimum(np.maximum(s, 0.0), self.arc_end[n][:, None])
-        key = s + self.key_start[n][:, None]
-        j = np.minimum(
-            np.maximum(self.flat_key.searchsorted(key, side="right") - 1, self.row_start[n][:, None]),
-            self.row_last[n][:, None],
-        )
-        t = ((key - self.flat_key[j]) * self.flat_inv[j])[..., None]
-        return self.flat_points[j] + t * self.flat_step[j]
+        longer than any curve, so the flat array is increasing and one ``searchsorted`` finds every segment
+        (at or after the curve's first, whose key is where the clipped s puts it; before its last: the key of
+        its end, nudged up, is above any clipped s)."""
+        key = np.maximum(s, 0.0)
+        np.minimum(key, self.arc_end.take(n)[:, None], out=key)
+        key += self.key_start.take(n)[:, None]
+        j = self.key_tail.searchsorted(key, side="right")
+        t = key - self.flat_key.take(j)
+        t *= self.flat_inv.take(j)
+        out = t[..., None] * self.flat_step.take(j, axis=0)
+        out += self.flat_points.take(j, axis=0)
+        return out
 
 
 class PersonPathsIntent:
@@ -364,7 +414,8 @@ class PersonPathsIntent:
             self._idx = np.zeros(len(hyp.curves), dtype=int)
             self._nominal_at = 0
             self._nominal_window = max(2, int(math.ceil(st.search_window / hyp.nominal_step)))
-            self._loglik = np.zeros(n)
+            self._loglik = np.zeros(n)  # in the order of hyp.by_way
+            self._q = np.zeros((n + 1, 2))  # the curves' present estimates, and a row of zeros (hyp.way_padded)
             self._two = len(hyp.on_way) == 2
             bound = st.prior_share * st.decide
             if self._two:
@@ -376,7 +427,13 @@ class PersonPathsIntent:
             self._kappa = st.kappa * self.dt / REFERENCE_DT
             self._step_cap = st.evidence_rate * self.dt
             self._widest = max(2, int(math.ceil(st.search_window / hyp.step)))
-            self._offsets = np.arange(-self._widest, self._widest + 1)[None, :]
+            self._pad_x, self._pad_y, self._pad_first, self._window, self._pad_local = hyp.window(self._widest)
+            self._window_rows = np.arange(n) * len(self._window)  # each curve's first in the window's (N·(2W + 1),)
+            self._max_offset2 = st.max_offset**2
+            self._divergence2 = st.divergence**2
+            self._two_noise2 = 2.0 * self._noise2
+            self._steps_row = self._steps[None, :]
+            self._residual_column = None if self._residual is None else self._residual[:, None]
             self._bias = 0.0
             self._side = 0 if self._two else int(hyp.ways[0])
             self._mix = 1.0
@@ -391,58 +448,89 @@ class PersonPathsIntent:
     def predict(self, history: np.ndarray) -> np.ndarray:
         if not self._ready:
             raise RuntimeError("PersonPathsIntent.predict called before reset")
-        row = history[-1]
-        p, v, w = row[0:2], row[2:4], row[4:6]
-        u_h = self._hand(v, w)  # the hand's force, the object's inertia put back
+        # the tick's two-vectors as Python floats: a numpy call on two elements costs more than the arithmetic
+        # (each component's operations are those of the vectors', in the same order: the same bits; a dot product
+        # of two is x0·y0 + x1·y1, which is what OpenBLAS's ddot gave for it, benchmarks/check_person_rows.py)
+        px, py, vx, vy, wx, wy = history[-1, :6].tolist()
+        ux, uy = self._hand.step(vx, vy, wx, wy)  # the hand's force, the object's inertia put back
         if self._yaw is not None:  # the hand point, not the tip: the object's yaw on its mount
-            dp, dv = self._yaw(u_h, self._hand.acc)
-            p, v = p + dp, v + dv
-        present = p + (u_h + self._C * v) / self._K + self._lead_time * v
+            ax, ay = self._hand.acceleration
+            dpx, dpy, dvx, dvy = self._yaw.step(ux, uy, ax, ay)
+            px, py, vx, vy = px + dpx, py + dpy, vx + dvx, vy + dvy
+        K, C, lead = self._K, self._C, self._lead_time
+        qx = px + (ux + C * vx) / K + lead * vx
+        qy = py + (uy + C * vy) / K + lead * vy
         if self._hyp is None:
-            return present + self._present_steps * v
-        return self._smoothing(self._filter(self._hyp, p, v, u_h, present))
+            return np.array((qx, qy)) + self._present_steps * np.array((vx, vy))
+        return self._smoothing(self._filter(self._hyp, px, py, vx, vy, ux, uy, qx, qy))
 
-    def _filter(self, hyp: _Curves, p: np.ndarray, v: np.ndarray, u_h: np.ndarray, present: np.ndarray) -> np.ndarray:
+    def _filter(
+        self, hyp: _Curves, px: float, py: float, vx: float, vy: float, ux: float, uy: float, qx: float, qy: float
+    ) -> np.ndarray:
         st = self.settings
         K, C = self._K, self._C
-        G = hyp.points.shape[1]
-        # 2. the tool's phase on every curve: its nearest point within the search window of the last one
+        v = np.array((vx, vy))
+        # 2. the tool's phase on every curve: its nearest point within the search window of the last one, on the
+        # curves padded with copies of their ends (:meth:`_Curves.window`: what a clipped index reads)
         # (every step below is a handful of whole-array operations: the tick's cost is their count, not their size)
-        flat = np.minimum(np.maximum(self._idx[:, None] + self._offsets, 0), G - 1) + hyp.row_start[:, None]
-        dx = hyp.flat_x[flat] - p[0]
-        dy = hyp.flat_y[flat] - p[1]
+        flat = (self._pad_first + self._idx)[:, None] + self._window
+        dx = self._pad_x[flat] - px
+        dy = self._pad_y[flat] - py
         d2 = dx * dx + dy * dy
         best = d2.argmin(axis=1)
-        at = flat[hyp.curves, best]
-        self._idx = at - hyp.row_start
-        d2_at = d2[hyp.curves, best]
-        if float(d2_at.min()) > st.max_offset**2:
-            return present + self._present_steps * v
+        pad_at = flat[:, 0] + best
+        self._idx = self._pad_local.take(pad_at)
+        at = self._idx + hyp.row_start
+        d2_at = d2.reshape(-1).take(self._window_rows + best)  # d2[n, best[n]]
         # a curve whose phase is held in a local minimum far from the tool (the person left it, round a detour wider
         # than any demonstrated, and came back elsewhere) gives no rows: followed, its rows pulled the tool back
         # to where it was left (held-out operator, seed 1: 35 N against the person until the time limit)
-        near = d2_at <= st.max_offset**2
-        tan = hyp.flat_tangents[at]
-        point = hyp.flat_points[at]
+        near = None  # every curve near
+        if np.maximum.reduce(d2_at) > self._max_offset2:
+            if np.minimum.reduce(d2_at) > self._max_offset2:
+                return np.array((qx, qy)) + self._present_steps * v
+            near = d2_at <= self._max_offset2
+        tan = hyp.flat_tangents.take(at, axis=0)
+        point = hyp.flat_points.take(at, axis=0)
         # the tool's place along each curve, between its samples (a phase stuck to the samples would step the
         # rows by their spacing), then the lead along the curve
-        along = np.minimum(np.maximum(((p - point) * tan).sum(axis=1), -hyp.step), hyp.step)
+        p = np.array((px, py))
+        along = p - point
+        along *= tan
+        along = np.add.reduce(along, axis=1)
+        np.maximum(along, -hyp.step, out=along)
+        np.minimum(along, hyp.step, out=along)
+        # t·v and t·u_h stay numpy's (N, 2) @ (2,) products on the tangents in curve order: OpenBLAS's gemv fuses
+        # multiply-adds, and how depends on the row's place. The lead (t·u_h + Ĉ t·v)/K̂ + τ t·v, in place
         tv = tan @ v
-        lead = (tan @ u_h + C * tv) / K + self._lead_time * tv
-        q = point + (along + lead)[:, None] * tan
-        s_lead = hyp.flat_arc[at] + along + lead
+        lead = tan @ np.array((ux, uy))
+        lead += C * tv
+        lead /= K
+        lead += self._lead_time * tv
+        q = self._q[:-1]
+        np.multiply((along + lead)[:, None], tan, out=q)
+        q += point
+        s_lead = hyp.flat_arc.take(at)
+        s_lead += along
+        s_lead += lead
         # 3. evidence. The way: the present estimate's offset from the plan (less the person's bias there),
         # toward one way or the other, in proportion to how far apart the ways are at this point of the plan
         # (a detour that comes later or earlier than before fakes no side)
-        g, M = self._nominal_at, len(hyp.nominal_points)
+        g, M = self._nominal_at, len(hyp.nominal_list)
         lo, hi = max(0, g - self._nominal_window), min(M, g + self._nominal_window + 1)
         rel = p - hyp.nominal_points[lo:hi]
-        self._nominal_at = k = lo + int(np.argmin(rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]))
-        normal = hyp.nominal_normals[k]
-        z = float((present - hyp.nominal_points[k]) @ normal)
+        rel *= rel
+        self._nominal_at = k = lo + int(np.add.reduce(rel, axis=1).argmin())
+        nx, ny = hyp.normal_list[k]
+        ox, oy = hyp.nominal_list[k]
+        z = (qx - ox) * nx + (qy - oy) * ny
         # the hedge's velocity: the tool's, or only its progress along the plan (module docstring, step 4)
-        hv = v if st.hedge_lateral else v - float(v @ normal) * normal
-        D = float(hyp.gap[k])
+        if st.hedge_lateral:
+            hvx, hvy = vx, vy
+        else:
+            vn = vx * nx + vy * ny
+            hvx, hvy = vx - vn * nx, vy - vn * ny
+        D = hyp.gap_list[k]
         if D < st.shared_gap:
             if self._mix >= 1.0:  # the bias: learnt where the ways are still one path
                 self._bias += self._b_gain * (z - self._bias)
@@ -468,17 +556,32 @@ class PersonPathsIntent:
             self._log_odds += min(max(gain, -self._step_cap), self._step_cap)
             self._log_odds = min(max(self._log_odds, -st.odds_limit), st.odds_limit)
         # the shape: each hypothesis' likelihood relative to its way's best, while the way's curves are apart
-        corrected = present - self._bias * normal
-        r = corrected - q
-        r2 = r[:, 0] * r[:, 0] + r[:, 1] * r[:, 1]
-        for on in hyp.on_way.values():
-            qs = q[on]
-            off = qs - qs.sum(axis=0) / len(on)
-            if float((off * off).sum(axis=1).max()) >= st.divergence**2:
-                r2_on = r2[on]
-                ll = self._loglik[on] - self._kappa * (r2_on - r2_on.min()) / (2.0 * self._noise2)
-                self._loglik[on] = ll - ll.max()
-        np.maximum(self._loglik, -60.0, out=self._loglik)
+        cx, cy = qx - self._bias * nx, qy - self._bias * ny
+        # way by way (hyp.by_way): each way's mean present estimate, and how far its curves' are from it
+        ranks, starts = hyp.way_rank, hyp.way_starts
+        mean = np.add.reduce(self._q.take(hyp.way_padded, axis=0), axis=1)
+        mean /= hyp.way_count
+        qs = self._q.take(hyp.by_way, axis=0)
+        off = qs - mean.take(ranks, axis=0)
+        off *= off
+        apart = (np.maximum.reduceat(np.add.reduce(off, axis=1), starts) >= self._divergence2).tolist()
+        loglik = self._loglik
+        if any(apart):
+            r = np.array((cx, cy)) - qs
+            r *= r
+            ll = np.add.reduce(r, axis=1)
+            ll -= np.minimum.reduceat(ll, starts).take(ranks)
+            ll *= self._kappa
+            ll /= self._two_noise2
+            np.subtract(loglik, ll, out=ll)
+            ll -= np.maximum.reduceat(ll, starts).take(ranks)
+            if all(apart):
+                self._loglik = loglik = ll
+            else:
+                for way, moves in zip(hyp.on_way, apart):
+                    if moves:
+                        loglik[hyp.way_slice[way]] = ll[hyp.way_slice[way]]
+        np.maximum(loglik, -60.0, out=loglik)
         if self._two and abs(self._log_odds) > st.decide:
             side = 1 if self._log_odds > 0 else -1
             if side != self._side and self._side != 0:
@@ -486,46 +589,61 @@ class PersonPathsIntent:
             self._side = side
 
         # 4. rows
-        def mixture(on: np.ndarray) -> np.ndarray:
-            on = on[near[on]]
-            weight = np.exp(self._loglik[on] + hyp.log_prior[on] - hyp.log_prior[on].max())
-            best = np.argsort(weight)[::-1][:MIXTURE]
-            best = best[weight[best] >= 0.01 * weight[best[0]]]
-            w = weight[best] / weight[best].sum()
-            n = on[best]
+        def mixture(way: int) -> np.ndarray:
+            on, mine = hyp.on_way[way], loglik[hyp.way_slice[way]]
+            if near is None:  # every curve near: the way's prior and its highest are known
+                prior, top = hyp.way_log_prior[way], hyp.log_prior_max[way]
+            else:
+                keep = near.take(on)
+                on, mine = on[keep], mine[keep]
+                prior = hyp.log_prior.take(on)
+                top = np.maximum.reduce(prior)
+            weight = mine + prior
+            weight -= top
+            np.exp(weight, out=weight)
+            best = weight.argsort()[::-1][:MIXTURE]
+            w = weight.take(best)
+            # the weights are in decreasing order: those above a hundredth of the first are the first few
+            first = w.tolist()
+            if not first[-1] >= 0.01 * first[0]:
+                kept = sum(x >= 0.01 * first[0] for x in first)
+                best, w = best[:kept], w[:kept]
+            w /= np.add.reduce(w)
+            n = on.take(best)
             # every chosen curve's rows at once, from its present estimate at the tool's speed along it
-            speed = np.maximum(tv[n], 0.0)
-            rows = hyp.along(n, s_lead[n][:, None] + speed[:, None] * self._steps[None, :])
+            speed = np.maximum(tv.take(n), 0.0)
+            rows = hyp.along(n, s_lead.take(n)[:, None] + speed[:, None] * self._steps_row)
             out = (w @ rows.reshape(len(w), -1)).reshape(-1, 2)
             if self._residual is not None:
                 # the present estimate's offset across the plan from these curves' own present estimates, carried
                 # into the rows and fading: a person off their curves is not pulled back onto them at once
-                lateral = float((corrected - w @ q[n]) @ normal)
-                out = out + (lateral * self._residual)[:, None] * normal
+                mx, my = (w @ q.take(n, axis=0)).tolist()
+                lateral = (cx - mx) * nx + (cy - my) * ny
+                out += lateral * self._residual_column * hyp.nominal_normals[k]
             return out
 
         if not st.follow_mirror and self._side in hyp.unseen:
             self._mix = 0.0  # a way this person never showed: no curves of theirs to follow there
-            return present + self._hedge_steps * hv
+            return np.array((qx, qy)) + self._hedge_steps * np.array((hvx, hvy))
         ways = (self._side,) if self._side != 0 or not self._two else (1, -1)
-        if not all(near[hyp.on_way[w]].any() for w in ways):
+        if near is not None and not all(near[hyp.on_way[w]].any() for w in ways):
             self._mix = 0.0  # no near curve of a way the rows need: the present estimate's rows, as on a change of mind
-            return present + self._hedge_steps * hv
+            return np.array((qx, qy)) + self._hedge_steps * np.array((hvx, hvy))
         if self._side != 0 or not self._two:
-            ahead = mixture(hyp.on_way[self._side])
+            ahead = mixture(self._side)
             target = 1.0
         else:
-            ahead = mixture(hyp.on_way[1])
-            other = mixture(hyp.on_way[-1])
-            apart = ahead - other
-            target = 0.0 if float((apart * apart).sum(axis=1).max()) >= st.divergence**2 else 1.0
+            ahead = mixture(1)
+            apart = ahead - mixture(-1)
+            apart *= apart
+            target = 0.0 if np.maximum.reduce(np.add.reduce(apart, axis=1)) >= self._divergence2 else 1.0
         if self._mix_step >= 1.0:
             self._mix = target
         elif target != self._mix:
             self._mix = min(max(self._mix + math.copysign(self._mix_step, target - self._mix), 0.0), 1.0)
         if self._mix >= 1.0:
             return ahead
-        hedge = present + self._hedge_steps * hv
+        hedge = np.array((qx, qy)) + self._hedge_steps * np.array((hvx, hvy))
         if self._mix <= 0.0:
             return hedge
         return self._mix * ahead + (1.0 - self._mix) * hedge

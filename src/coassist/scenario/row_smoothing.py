@@ -57,14 +57,19 @@ class RowSmoothing:
         """The rows (H, d) of this tick, low-passed and advanced: (H, d)."""
         if self.gain >= 1.0:
             return rows
-        if self._state is None:
-            self._state = np.array(rows, dtype=float)
+        state = self._state
+        if state is None:
+            self._state = state = np.array(rows, dtype=float)
         else:
-            self._state += self.gain * (rows - self._state)
+            step = rows - state
+            step *= self.gain
+            state += step
         m = self.advance
         if m == 0:
-            return self._state.copy()
-        out = np.empty_like(self._state)
-        out[:-m] = self._state[m:]
-        out[-m:] = self._state[-1] + (self._state[-1] - self._state[-2]) * self._ahead
+            return state.copy()
+        out = np.empty_like(state)
+        out[:-m] = state[m:]
+        last = state[-1]
+        np.multiply(last - state[-2], self._ahead, out=out[-m:])
+        out[-m:] += last
         return out
