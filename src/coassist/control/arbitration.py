@@ -280,4 +280,4 @@ def arbitrated_effort_batch(
 
     inner = controllers[0].controller
     core = inner._batch_core(z, ref_h, ref_r, wrench, law=law)
-    return inner._clean_efforts(core, z, ref_h, ref_r, wrench, [c.controller.step for c in controllers])
+    return inner._clean_efforts(core, z, ref_h, ref_r, wrench, lambda b: controllers[b].controller.step)
