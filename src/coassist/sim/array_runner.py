@@ -320,10 +320,16 @@ class _Batch:
         self.vel_log[act, k] = v
         self.wrench_log[act, k] = hand[:, :2]
         self.ref_log[act, k] = ref_pos
-        if self.pred_log.shape[2]:
-            self.pred_log[act, k] = np.nan
-        for js, p in predicted:
-            self.pred_log[act[js], k, : p.shape[1]] = p
+        Hs_max = self.pred_log.shape[2]
+        if len(predicted) == 1 and predicted[0][0].size == B and predicted[0][1].shape[1] >= Hs_max:
+            # one group predicted every row's whole width (a shared model): nothing of row k stays NaN
+            # (positions in act ascending and distinct: the same rows as act)
+            self.pred_log[act, k] = predicted[0][1][:, :Hs_max]
+        else:
+            if Hs_max:
+                self.pred_log[act, k] = np.nan
+            for js, p in predicted:
+                self.pred_log[act[js], k, : p.shape[1]] = p
         self.eff_r_log[act, k] = u_r
         self.eff_h_log[act, k] = fh
         done_target = self.dwell(k, act, x)
