@@ -262,7 +262,15 @@ class _Batch:
         w2 = np.ascontiguousarray(hand[:, :2])
         u_r = np.zeros((B, 2))
         inv_dt = 1.0 / self.dt
-        for js, p in predicted:  # ref_h from the positions (the tick's own human_reference)
+        if len(predicted) == 1 and predicted[0][0].size == B and predicted[0][1].shape[1] == Hmax:
+            # one group predicted every row over the whole horizon (a shared model): human_reference
+            # writes every entry of every row, so straight into ref_h (the same values as through a buffer)
+            ref_h_all = np.empty_like(ref_r_all)
+            human_reference(predicted[0][1], x0, inv_dt, ref_h_all)
+            predicted_rows = []
+        else:
+            predicted_rows = predicted
+        for js, p in predicted_rows:  # ref_h from the positions (the tick's own human_reference)
             if ref_h_all is ref_r_all:
                 ref_h_all = ref_r_all.copy()
             m = p.shape[1]
