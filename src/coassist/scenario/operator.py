@@ -498,15 +498,15 @@ class OperatorArmBatch:
         # the per-arm constants, gathered once per set of rows still going
         self._constants = RowConstants(
             (
-                self.n,
+                self.n - 1,  # the last tick of each arm's intent and noise
                 self._size,
                 self.delay,
                 self._alpha,
                 self._k_min,
                 self._k_gain,
                 self._k_max,
-                self._reflex,
-                self._damping,
+                self._reflex[:, None],  # β and C_h as columns: _axis_force on both axes at once
+                self._damping[:, None],
                 self._force_limit,
             )
         )
@@ -514,8 +514,8 @@ class OperatorArmBatch:
     def force(self, k: int, rows: np.ndarray, p: np.ndarray, v: np.ndarray) -> np.ndarray:
         """u_h(k) [N], (len(rows), 2), of the arms ``rows`` (indices) for their hand points p and
         velocities v, (len(rows), 2) [m, m/s]: each row what its arm's ``force(k, …)`` gives."""
-        n, size, delay, alpha, k_min, k_gain, k_max, b, damping, limit = self._constants.take(rows)
-        i = np.minimum(k, n - 1)
+        last, size, delay, alpha, k_min, k_gain, k_max, b, damping, limit = self._constants.take(rows)
+        i = np.minimum(k, last)
         e = self.intent[rows, i] - p
         self._err[rows, k % size] = e
         # the oldest slot of the ring is e(k − d) (e(0) before d ticks have passed: at rest)
@@ -528,9 +528,9 @@ class OperatorArmBatch:
         K = np.where(K > k_max, k_max, K)
         self.stiffness[rows] = K
         noise = self.noise[rows, i]
-        f = np.empty_like(e)
-        f[:, 0] = _axis_force(K, b, e[:, 0], de[:, 0], damping, v[:, 0], noise[:, 0])
-        f[:, 1] = _axis_force(K, b, e[:, 1], de[:, 1], damping, v[:, 1], noise[:, 1])
+        # both axes in one pass, each row's K, β and C_h broadcast along its axes (the same
+        # operations on each element as one axis at a time)
+        f = _axis_force(K[:, None], b, e, de, damping, v, noise)
         norm = np.sqrt(f[:, 0] * f[:, 0] + f[:, 1] * f[:, 1])
         over = norm > limit
         if over.any():
