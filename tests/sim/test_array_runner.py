@@ -178,3 +178,16 @@ def test_only_fresh_point_mass_runs_take_the_array_path():
         run_point_mass_lockstep([ep.loop, Loop(Wrapped(ep.world), ep.tick, ep.n_max, ep.termination)])
     ep.world.apply(Command(effort=np.zeros(2)))
     assert not fast_path_eligible(ep.loop)  # a world that has already run a period
+
+
+def test_every_run_on_the_board_as_arrays_equals_every_trial_alone_bit_for_bit():
+    """Only board trials: every row yaws and every sensor samples at once (the twins then take the
+    rows as they are, no masked copies), runs leaving at different ticks."""
+    specs = _specs("nominal", n=4, objects=("board",))
+    eps = _episodes(specs)
+    logs = run_point_mass_lockstep([ep.loop for ep in eps])
+    assert all(log is not None for log in logs)
+    alone = [run_spec(spec) for spec in specs]
+    assert len({t.n_samples for t in alone}) > 1
+    for spec, a, ep, log in zip(specs, alone, eps, logs):
+        assert a.equals(ep.finish(log)), spec

@@ -172,11 +172,16 @@ class AlphaArbiter:
                 self._pred[slot] = row
                 self._k += 1
                 signal = self.error
-            if not math.isfinite(signal):
-                return self.alpha
-            self.alpha += self._gain * (target_alpha(p, signal) - self.alpha)
+            return self.advance(signal)
         except Exception:  # unusable input (e.g. an object array): α stays where it was, the tick goes on
             pass
+        return self.alpha
+
+    def advance(self, signal: float) -> float:
+        """α for this tick from the law's signal (a float: ``target_alpha``'s), as :meth:`update`
+        ends: the α filter moves toward α*; a non-finite signal leaves α where it was."""
+        if math.isfinite(signal):
+            self.alpha += self._gain * (target_alpha(self.params, signal) - self.alpha)
         return self.alpha
 
 
@@ -266,8 +271,7 @@ def arbitrated_effort_batch(
     """
     if not controllers:
         return np.zeros((0, z.shape[1] // 2 if np.ndim(z) == 2 else 0)), np.zeros(0, dtype=bool)
-    for b, c in enumerate(controllers):
-        alpha = c.arbiter.update(z[b], ref_h[b], wrench[b], ref_r[b])
+    for c, alpha in zip(controllers, _arbitrate(controllers, z, ref_h, ref_r, wrench)):
         if alpha != c.game.alpha:
             try:
                 c.game.set_alpha(alpha)
@@ -280,4 +284,32 @@ def arbitrated_effort_batch(
 
     inner = controllers[0].controller
     core = inner._batch_core(z, ref_h, ref_r, wrench, law=law)
-    return inner._clean_efforts(core, z, ref_h, ref_r, wrench, [c.controller.step for c in controllers])
+    return inner._clean_efforts(core, z, ref_h, ref_r, wrench, lambda b: controllers[b].controller.step)
+
+
+def _arbitrate(
+    controllers: list[ArbitratedController], z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray
+) -> list[float]:
+    """Each row's arbiter updated as ``controllers[b].arbiter.update(z[b], ref_h[b], wrench[b], ref_r[b])``
+    does it: its α for this tick, in row order.
+
+    Where every arbiter has the ``target`` law on the same n DOFs and the inputs are float64
+    arrays, the distances d = x − y_ref,r(k+H) of all rows are one subtraction (elementwise: each
+    row's own), and each row's signal is √(d·d) with ``np.dot`` on its row as ``update`` takes it;
+    anything else goes through ``update`` row by row."""
+    arbiters = [c.arbiter for c in controllers]
+    n = arbiters[0].n
+    if (
+        all(a.params.law == "target" and a.n == n for a in arbiters)
+        and all(type(a) is np.ndarray and a.dtype == np.float64 for a in (z, ref_r))
+        and z.ndim == 2
+        and z.shape[1] >= n
+        and ref_r.ndim == 3
+        and ref_r.shape[1] >= 1
+        and ref_r.shape[2] >= n
+        and z.shape[0] == ref_r.shape[0] == len(arbiters)
+    ):
+        d = z[:, :n] - ref_r[:, -1, :n]
+        dot, sqrt = np.dot, math.sqrt
+        return [a.advance(float(sqrt(float(dot(db, db))))) for a, db in zip(arbiters, d)]
+    return [a.update(z[b], ref_h[b], wrench[b], ref_r[b]) for b, a in enumerate(arbiters)]

@@ -36,6 +36,7 @@ The effort is then saturated to ``effort_limit`` keeping its direction (``SATURA
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
@@ -259,18 +260,21 @@ class _GuardedController:
         warns as it always does. Never raises.
         """
         return self._clean_efforts(
-            self._batch_core(z, ref_h, ref_r, wrench), z, ref_h, ref_r, wrench, [self.step] * z.shape[0]
+            self._batch_core(z, ref_h, ref_r, wrench), z, ref_h, ref_r, wrench, lambda b: self.step
         )
 
-    def _clean_efforts(self, core, z, ref_h, ref_r, wrench, steps: list) -> tuple[np.ndarray, np.ndarray]:
+    def _clean_efforts(
+        self, core, z, ref_h, ref_r, wrench, step_of: Callable[[int], Callable[..., ControlStep]]
+    ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`effort_batch`'s answer from :meth:`_batch_core`'s; where that is None, row b
-        goes through ``steps[b]`` (a guarded step) and is clean where it carries no flag."""
+        goes through ``step_of(b)`` (a guarded step) and is clean where it carries no flag
+        (a function of b, not a list: the batched path, nearly every tick, builds none)."""
         B, n = z.shape[0], self._zero.shape[0]
         u = np.zeros((B, n))
         clean = np.zeros(B, dtype=bool)
         if core is None:  # odd inputs: step() per row decides (and warns, as it always does)
-            for b, step in enumerate(steps):
-                s = step(z[b], ref_h[b], ref_r[b], wrench[b])
+            for b in range(B):
+                s = step_of(b)(z[b], ref_h[b], ref_r[b], wrench[b])
                 if s.fault == Fault.NONE:
                     u[b], clean[b] = s.u_r, True
             return u, clean
@@ -299,11 +303,17 @@ class _GuardedController:
             ok &= (np.abs(ref_r) <= bound).all(axis=(1, 2))
             ok &= (np.abs(wrench) <= self.bounds.wrench).all(axis=1)
             good = np.flatnonzero(ok)
-            rh, rr = (ref_h[good, :1], ref_r[good, :1]) if self._reads_first_row_only else (ref_h[good], ref_r[good])
-            u_h, u_r = self._law_batch(z[good], rh, rr) if law is None else law(good, z[good], rh, rr)
+            # every row good (nearly every tick): the rows as they are, not copies of them (the laws only read them)
+            zg, rh, rr = (z, ref_h, ref_r) if good.size == ok.size else (z[good], ref_h[good], ref_r[good])
+            if self._reads_first_row_only:
+                rh, rr = rh[:, :1], rr[:, :1]
+            u_h, u_r = self._law_batch(zg, rh, rr) if law is None else law(good, zg, rh, rr)
             fine = np.isfinite(u_r).all(axis=1) & np.isfinite(u_h).all(axis=1)
-            with np.errstate(invalid="ignore"):  # rows with a non-finite effort are redone by step()
+            if fine.all():  # finite efforts: no inf / inf to silence (entering np.errstate costs a tick microseconds)
                 ratio = np.max(np.abs(u_r) / self.effort_limit, axis=1)
+            else:
+                with np.errstate(invalid="ignore"):  # rows with a non-finite effort are redone by step()
+                    ratio = np.max(np.abs(u_r) / self.effort_limit, axis=1)
         except Exception:  # noqa: BLE001 -- step() per row reports the fault as it always does
             return None
         return good, u_h, u_r, fine, ratio
@@ -413,3 +423,8 @@ class ManualGuidance(_GuardedController):
 
     def _law(self, z, ref_h, ref_r):
         return self._zero.copy(), self._zero.copy()
+
+    def _law_batch(self, z, ref_h, ref_r):
+        # the law's zeros for every row at once (a Python call per row cost most of an MG tick's law)
+        shape = (z.shape[0], self._zero.shape[0])
+        return np.zeros(shape), np.zeros(shape)

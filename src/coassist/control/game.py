@@ -349,10 +349,10 @@ def solve_with_gains(
     rh, rr = ref_h.reshape(B, -1), ref_r.reshape(B, -1)
     u = np.empty((B, 2 * n))
     dot = np.dot
-    for b, g in enumerate(gains):
-        ub = dot(g.G_z, z[b])
-        ub += dot(g.G_h, rh[b])
-        ub += dot(g.G_r, rr[b])
+    for b, (g, zb, rhb, rrb) in enumerate(zip(gains, z, rh, rr)):  # the rows as views, as z[b] gives them
+        ub = dot(g.G_z, zb)
+        ub += dot(g.G_h, rhb)
+        ub += dot(g.G_r, rrb)
         u[b] = ub
     return u[:, :n], u[:, n:]
 

@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from coassist._rows import RowConstants
 from coassist.errors import CoassistError
 from coassist.interfaces import Fault
 from coassist.runtime.tick import ControlTick
@@ -102,17 +103,20 @@ class TargetDwellBatch:
         self._after_tick = np.array([r.after_tick if r is not None else 0 for r in rules], dtype=np.intp)
         #: (B,) ticks inside the ball in a row so far, as each rule's ``inside``.
         self.inside = np.zeros(len(rules), dtype=np.intp)
+        # the rules' constants, gathered once per set of rows
+        self._constants = RowConstants((self._has_rule, self._after_tick, self._target, self._r2, self._dwell_ticks))
 
     def __call__(self, k: int, rows: np.ndarray, pose: np.ndarray) -> np.ndarray:
         """Tick k of the runs ``rows`` (indices) at their poses (len(rows), ≥ 2) [m]: (len(rows),) bool,
         each what its rule's ``rule(k, pose)`` says (False without a rule)."""
-        counted = self._has_rule[rows] & (k >= self._after_tick[rows])
-        d = pose[:, :2] - self._target[rows]
-        inside = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) < self._r2[rows]
+        has_rule, after_tick, target, r2, dwell_ticks = self._constants.take(rows)
+        counted = has_rule & (k >= after_tick)
+        d = pose[:, :2] - target
+        inside = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) < r2
         before = self.inside[rows]
         count = np.where(counted, np.where(inside, before + 1, 0), before)
         self.inside[rows] = count
-        return counted & inside & (count >= self._dwell_ticks[rows])
+        return counted & inside & (count >= dwell_ticks)
 
 
 @dataclass

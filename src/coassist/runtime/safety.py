@@ -114,6 +114,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from coassist._checks import check_int_at_least, check_positive_scalar, is_integer
+from coassist._rows import RowConstants
 from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault
 from coassist.runtime.safety_limits import (
     LIMIT_TOLERANCE,
@@ -786,15 +787,17 @@ class SafetyLayerBatch:
                 raise ValueError(f"layers[{i}] cannot join a SafetyLayerBatch (SafetyLayerBatch.accepts is False)")
         self._contact2 = np.array([layer._f2 for layer in layers], dtype=float)  # contact_force², as the layer's
         self._tool_speed = np.array([layer.limits.tool_speed for layer in layers], dtype=float)
+        self._constants = RowConstants((self._contact2, self._tool_speed))  # gathered once per set of rows
 
     def limit_effort(self, rows: np.ndarray, u_r: np.ndarray, v: np.ndarray, hand: np.ndarray) -> np.ndarray:
         """clean (len(rows),) bool for the layers ``rows`` (indices), their efforts u_r (len(rows), 2)
         [N], tool velocities v (len(rows), 2) [m/s] and hand forces (len(rows), 3) [N] (class docstring)."""
+        contact2, tool_speed = self._constants.take(rows)
         f2 = hand[:, 0] * hand[:, 0] + hand[:, 1] * hand[:, 1] + hand[:, 2] * hand[:, 2]
-        clean = ~(f2 > self._contact2[rows] * (1.0 - 1e-12))
+        clean = ~(f2 > contact2 * (1.0 - 1e-12))
         speed = np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1])
         along = u_r[:, 0] * v[:, 0] + u_r[:, 1] * v[:, 1]
-        clean &= ~((speed > self._tool_speed[rows]) & (along > 0.0))
+        clean &= ~((speed > tool_speed) & (along > 0.0))
         # as the docstring says: a non-finite effort, velocity or hand force is the layer's to flag
         clean &= np.isfinite(u_r).all(axis=1) & np.isfinite(v).all(axis=1) & np.isfinite(hand).all(axis=1)
         return clean

@@ -75,6 +75,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from coassist._checks import check_int, is_real_number
+from coassist._rows import RowConstants
 from coassist.interfaces import Fault
 
 __all__ = [
@@ -660,6 +661,7 @@ class WrenchPipelineBatch:
             return np.array(seq, dtype=float)
 
         self._R = [[float(R[r, c]) for c in range(3)] for r in range(3)]
+        self._R_columns = tuple(np.array([self._R[r][c] for r in range(3)]) for c in range(3))  # (3,) each: R[:, c]
         self._max_age = f([p._max_age for p in pipes])
         self._frozen_checked = np.array([p._max_frozen is not None for p in pipes], dtype=bool)
         self._max_f, self._sat_f, self._jump_f = (
@@ -674,6 +676,9 @@ class WrenchPipelineBatch:
         self._has_ref = np.zeros(B, dtype=bool)
         #: (B, 3) the hand force held by each pipeline [N], base frame.
         self.hand = np.zeros((B, 3))
+        # the pipelines' constants, gathered once per set of rows (those with a new sample: another set)
+        self._ages = RowConstants((self._max_age,))
+        self._checks = RowConstants((self._frozen_checked, self._jump_f, self._max_f, self._sat_f, self._bias))
 
     def update(self, rows: np.ndarray, raw: np.ndarray, seq: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
         """One tick of the pipelines ``rows`` (indices): raw readings (len(rows), 2) [N] (f_x, f_y;
@@ -683,29 +688,31 @@ class WrenchPipelineBatch:
         clean, each pipeline's ``update`` gives that force and no fault flag (class docstring).
         """
         new = seq != self._seq[rows]
-        clean = new | ~(t - self._seq_t[rows] > self._max_age[rows])  # no new sample for too long: stale
+        (max_age,) = self._ages.take(rows)
+        clean = new | ~(t - self._seq_t[rows] > max_age)  # no new sample for too long: stale
         clean &= np.isfinite(raw).all(axis=1)
-        at = rows[new]
+        if new.all():  # every row has a new sample (the sensors share their sample ticks): no row to pick
+            at, w, fresh = rows, raw, seq
+        else:
+            at, w, fresh = rows[new], raw[new], seq[new]
         if at.size:
-            self._seq[at] = seq[new]
+            self._seq[at] = fresh
             self._seq_t[at] = t
-            w = raw[new]
             ref = self._ref[at]
             has_ref = self._has_ref[at]
-            repeat = (w[:, 0] == ref[:, 0]) & (w[:, 1] == ref[:, 1]) & has_ref & self._frozen_checked[at]
+            frozen_checked, jf, max_f, sat_f, b = self._checks.take(at)
+            repeat = (w[:, 0] == ref[:, 0]) & (w[:, 1] == ref[:, 1]) & has_ref & frozen_checked
             # the reading's f_z and torques are 0 (below every range and jump, which are > 0)
             mf = np.maximum(np.abs(w[:, 0]), np.abs(w[:, 1]))
-            jf = self._jump_f[at]
             jump = has_ref & ((np.abs(w[:, 0] - ref[:, 0]) > jf) | (np.abs(w[:, 1] - ref[:, 1]) > jf))
-            bad = repeat | jump | (mf > self._max_f[at]) | (mf >= self._sat_f[at])
-            clean[np.flatnonzero(new)[bad]] = False
+            bad = repeat | jump | (mf > max_f) | (mf >= sat_f)
+            clean[np.flatnonzero(new)[bad] if at is not rows else bad] = False
             self._ref[at] = w
             self._has_ref[at] = True
             # bias (sensor frame), then into the base frame (WrenchPipeline._update's stages 5 and 7)
-            b = self._bias[at]
             c0, c1, c2 = w[:, 0] - b[:, 0], w[:, 1] - b[:, 1], 0.0 - b[:, 2]
-            R = self._R
-            self.hand[at, 0] = R[0][0] * c0 + R[0][1] * c1 + R[0][2] * c2
-            self.hand[at, 1] = R[1][0] * c0 + R[1][1] * c1 + R[1][2] * c2
-            self.hand[at, 2] = R[2][0] * c0 + R[2][1] * c1 + R[2][2] * c2
+            # hand[:, r] = R[r][0] c0 + R[r][1] c1 + R[r][2] c2 for r = 0, 1, 2 in one (len(at), 3) pass:
+            # the same products (x·y = y·x in IEEE arithmetic) summed in the same order
+            R0, R1, R2 = self._R_columns
+            self.hand[at] = c0[:, None] * R0 + c1[:, None] * R1 + c2[:, None] * R2
         return self.hand[rows], clean

@@ -76,6 +76,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from coassist._checks import check_int, check_real
+from coassist._rows import RowConstants
 from coassist.scenario.detours import DetourFamily, detour_path, progress_warp, smoothstep
 from coassist.scenario.tasks import Task, quintic
 
@@ -494,31 +495,43 @@ class OperatorArmBatch:
             column("force_limit"),
         )
         self.stiffness = np.array([a.stiffness for a in arms], dtype=float)
+        # the per-arm constants, gathered once per set of rows still going
+        self._constants = RowConstants(
+            (
+                self.n - 1,  # the last tick of each arm's intent and noise
+                self._size,
+                self.delay,
+                self._alpha,
+                self._k_min,
+                self._k_gain,
+                self._k_max,
+                self._reflex[:, None],  # β and C_h as columns: _axis_force on both axes at once
+                self._damping[:, None],
+                self._force_limit,
+            )
+        )
 
     def force(self, k: int, rows: np.ndarray, p: np.ndarray, v: np.ndarray) -> np.ndarray:
         """u_h(k) [N], (len(rows), 2), of the arms ``rows`` (indices) for their hand points p and
         velocities v, (len(rows), 2) [m, m/s]: each row what its arm's ``force(k, …)`` gives."""
-        n = self.n[rows]
-        i = np.minimum(k, n - 1)
+        last, size, delay, alpha, k_min, k_gain, k_max, b, damping, limit = self._constants.take(rows)
+        i = np.minimum(k, last)
         e = self.intent[rows, i] - p
-        size = self._size[rows]
         self._err[rows, k % size] = e
         # the oldest slot of the ring is e(k − d) (e(0) before d ticks have passed: at rest)
-        old = np.where(k >= self.delay[rows], (k + 1) % size, 0)
+        old = np.where(k >= delay, (k + 1) % size, 0)
         de = self._err[rows, old]
         ebar = self.filtered_error[rows]
-        ebar = ebar + self._alpha[rows] * (np.sqrt(e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1]) - ebar)
+        ebar = ebar + alpha * (np.sqrt(e[:, 0] * e[:, 0] + e[:, 1] * e[:, 1]) - ebar)
         self.filtered_error[rows] = ebar
-        K = self._k_min[rows] + self._k_gain[rows] * ebar
-        k_max = self._k_max[rows]
+        K = k_min + k_gain * ebar
         K = np.where(K > k_max, k_max, K)
         self.stiffness[rows] = K
-        b, damping, noise = self._reflex[rows], self._damping[rows], self.noise[rows, i]
-        f = np.empty_like(e)
-        f[:, 0] = _axis_force(K, b, e[:, 0], de[:, 0], damping, v[:, 0], noise[:, 0])
-        f[:, 1] = _axis_force(K, b, e[:, 1], de[:, 1], damping, v[:, 1], noise[:, 1])
+        noise = self.noise[rows, i]
+        # both axes in one pass, each row's K, β and C_h broadcast along its axes (the same
+        # operations on each element as one axis at a time)
+        f = _axis_force(K[:, None], b, e, de, damping, v, noise)
         norm = np.sqrt(f[:, 0] * f[:, 0] + f[:, 1] * f[:, 1])
-        limit = self._force_limit[rows]
         over = norm > limit
         if over.any():
             f[over] *= (limit[over] / norm[over])[:, None]

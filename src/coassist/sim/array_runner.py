@@ -206,12 +206,17 @@ class _Batch:
         self.eff_h_log = np.empty((B, N, 2))
         self.eff_r_log = np.empty((B, N, 2))
         self.compute = np.zeros((B, N))
+        # what a tick reads of the runs still going that only changes when one ends (_Rows)
+        self._rows: _Rows | None = None
 
     # ------------------------------------------------------------------ one tick
     def tick(self, k: int, act: np.ndarray) -> tuple[np.ndarray, list[tuple[int, str]]]:
         """Tick k for the runs ``act`` (indices, ascending): which go on, and (i, why) for those
         that ended; a run that leaves the fast path is neither (its log stays None)."""
         world = self.world
+        rows = self._rows
+        if rows is None or not rows.holds(act):
+            rows = self._rows = _Rows(self, act)
         x, v = world.position[act], world.velocity[act]
         # 1. the wrench pipeline on the world's reading (a row it cannot answer for leaves)
         hand, clean = self.wrench.update(act, world.wrench[act], world.wrench_seq[act], k * self.dt)
@@ -221,24 +226,20 @@ class _Batch:
         ref_pos = self.ref_pos[act, k]
         # 2. intent: the controllers' ref_h (B, Hmax, 4), the plan's rows where nothing is predicted
         B = act.size
-        H = self.H[act]
-        Hmax = int(H.max())
+        H = rows.H
+        Hmax = rows.Hmax
         ref_r_all = self.ref_ctrl[act, k + 1 : k + 1 + Hmax]
         ref_h_all = ref_r_all
         predicted: list[tuple[np.ndarray, np.ndarray]] = []  # (positions in act, positions (n, m, 2) in use)
         if self.model_list:
-            gid = self.model_gid[act]
             features = np.concatenate([x, v, hand[:, :2], ref_pos], axis=1)
-            for g, batcher in enumerate(self.model_list):
-                js = np.flatnonzero(gid == g)
-                if not js.size:
-                    continue
+            for g, js, slots, needed in rows.models:
+                batcher = self.model_list[g]
                 windows = self.windows[g]
-                slots = self.model_slot[act[js]]
                 try:
                     p, ok = windows.accept(slots, batcher.predict_batch(windows.push(k, slots, features[js])))
                     # fewer rows than the controller's horizon: the reference path decides
-                    ok &= p.shape[1] >= self.rows_needed[act[js]]
+                    ok &= p.shape[1] >= needed
                 except Exception:  # the reference path predicts these rows one by one (and flags the failures)
                     left[js] = True
                     continue
@@ -246,12 +247,7 @@ class _Batch:
                 if ok.any():
                     predicted.append((js[ok], p[ok]))
         if self.alone:
-            at = np.full(self.H.size, -1, dtype=np.intp)
-            at[act] = np.arange(B)
-            for i in self.alone:
-                j = int(at[i])
-                if j < 0:
-                    continue
+            for i, j in rows.alone:
                 row = (x[j, 0], x[j, 1], v[j, 0], v[j, 1], hand[j, 0], hand[j, 1], ref_pos[j, 0], ref_pos[j, 1])
                 answer, pf = self.ticks[i].predict(k, row)
                 if pf or answer is None or answer.shape[0] < self.rows_needed[i]:
@@ -260,26 +256,35 @@ class _Batch:
                     predicted.append((np.array([j]), answer[None]))
         # 3. the controllers' arguments (ControlTick.control_inputs) and steps
         z = np.empty((B, 4))
-        np.subtract(x, self.x0[act], out=z[:, :2])
+        x0 = rows.x0
+        np.subtract(x, x0, out=z[:, :2])
         z[:, 2:] = v
         w2 = np.ascontiguousarray(hand[:, :2])
         u_r = np.zeros((B, 2))
         inv_dt = 1.0 / self.dt
-        for js, p in predicted:  # ref_h from the positions (the tick's own human_reference)
+        if len(predicted) == 1 and predicted[0][0].size == B and predicted[0][1].shape[1] == Hmax:
+            # one group predicted every row over the whole horizon (a shared model): human_reference
+            # writes every entry of every row, so straight into ref_h (the same values as through a buffer)
+            ref_h_all = np.empty_like(ref_r_all)
+            human_reference(predicted[0][1], x0, inv_dt, ref_h_all)
+            predicted_rows = []
+        else:
+            predicted_rows = predicted
+        for js, p in predicted_rows:  # ref_h from the positions (the tick's own human_reference)
             if ref_h_all is ref_r_all:
                 ref_h_all = ref_r_all.copy()
             m = p.shape[1]
             buf = np.zeros((js.size, m, 4))
-            human_reference(p, self.x0[act[js]], inv_dt, buf)
+            human_reference(p, x0[js], inv_dt, buf)
             h = min(m, Hmax)
             ref_h_all[js, :h] = buf[:, :h]
-        cg = self.ctrl_gid[act]
-        for g, controller in enumerate(self.ctrl_list):
-            js = np.flatnonzero((cg == g) & ~left)
+        for g, members in rows.controllers:
+            controller = self.ctrl_list[g]
+            js = members[~left[members]]
             if not js.size:
                 continue
             if controller is None:  # each run's own controller (state between ticks)
-                ag = self.arb_gid[act[js]]
+                ag = rows.arb_gid[js]
                 for a in range(self.n_arb):  # the arbitrated runs sharing a guard: one batched step, each its own α
                     sel = js[ag == a]
                     if sel.size:
@@ -323,14 +328,20 @@ class _Batch:
         self.vel_log[act, k] = v
         self.wrench_log[act, k] = hand[:, :2]
         self.ref_log[act, k] = ref_pos
-        if self.pred_log.shape[2]:
-            self.pred_log[act, k] = np.nan
-        for js, p in predicted:
-            self.pred_log[act[js], k, : p.shape[1]] = p
+        Hs_max = self.pred_log.shape[2]
+        if len(predicted) == 1 and predicted[0][0].size == B and predicted[0][1].shape[1] >= Hs_max:
+            # one group predicted every row's whole width (a shared model): nothing of row k stays NaN
+            # (positions in act ascending and distinct: the same rows as act)
+            self.pred_log[act, k] = predicted[0][1][:, :Hs_max]
+        else:
+            if Hs_max:
+                self.pred_log[act, k] = np.nan
+            for js, p in predicted:
+                self.pred_log[act[js], k, : p.shape[1]] = p
         self.eff_r_log[act, k] = u_r
         self.eff_h_log[act, k] = fh
         done_target = self.dwell(k, act, x)
-        done_time = k + 1 >= self.n_max[act]
+        done_time = k + 1 >= rows.n_max
         go = ~left
         stop = go & (done_target | done_time)
         ended = [(int(act[j]), "target" if done_target[j] else "time_limit") for j in np.flatnonzero(stop).tolist()]
@@ -353,6 +364,36 @@ class _Batch:
             compute=self.compute[i, :n].copy(),
             ended=ended,
         )
+
+
+class _Rows:
+    """What a tick reads of the runs ``act`` still going that changes only when one of them ends:
+    their constants (x0, H, n_max, the arbitration groups), the largest horizon, and per
+    model or controller group the positions in ``act`` of its runs (ascending), their window
+    slots and the prediction rows they need, and the runs whose intent stage is called alone."""
+
+    def __init__(self, batch: _Batch, act: np.ndarray) -> None:
+        self.act = act.copy()
+        self.x0 = batch.x0[act]
+        self.H = batch.H[act]
+        self.Hmax = int(self.H.max())
+        self.n_max = batch.n_max[act]
+        self.arb_gid = batch.arb_gid[act]
+        gid = batch.model_gid[act]
+        self.models = []
+        for g in range(len(batch.model_list)):
+            js = np.flatnonzero(gid == g)
+            if js.size:
+                self.models.append((g, js, batch.model_slot[act[js]], batch.rows_needed[act[js]]))
+        cg = batch.ctrl_gid[act]
+        self.controllers = [(g, np.flatnonzero(cg == g)) for g in range(len(batch.ctrl_list))]
+        at = np.full(batch.H.size, -1, dtype=np.intp)
+        at[act] = np.arange(act.size)
+        self.alone = [(i, int(at[i])) for i in batch.alone if at[i] >= 0]
+
+    def holds(self, act: np.ndarray) -> bool:
+        """Whether these are the runs ``act`` (the same indices in the same order)."""
+        return act.shape == self.act.shape and bool((act == self.act).all())
 
 
 def _ragged_rows(arrays: Sequence[np.ndarray], n: int) -> np.ndarray:

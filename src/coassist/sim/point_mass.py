@@ -33,6 +33,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from coassist._rows import RowConstants
 from coassist.model.impedance import ImpedanceModel
 from coassist.model.plant import PointMassPlant, plant_step
 from coassist.runtime.world import Command, RobotState
@@ -268,6 +269,14 @@ class PointMassWorldBatch:
             self._noise[b, : len(w._nsx), 0] = w._nsx
             self._noise[b, : len(w._nsy), 1] = w._nsy
         self.arms = OperatorArmBatch([w.arm for w in worlds])
+        # the per-world constants, gathered once per set of rows still going (the board's
+        # columns last: read only where some world yaws)
+        self._constants = RowConstants(
+            (self._yaw, self._bres, self._a_xv, self._a_vv, self._b_x, self._b_v, self._sat, *self._board)
+        )
+        self._taken: tuple[np.ndarray, ...] = ()
+        self._columns = self._board
+        self._all_yaw = False
 
     def apply(self, k: int, rows: np.ndarray, effort: np.ndarray) -> np.ndarray:
         """Period k of the worlds ``rows`` (indices) under the efforts u_r (len(rows), 2) [N]; their
@@ -275,39 +284,55 @@ class PointMassWorldBatch:
         dt = self.dt
         x, v = self.position[rows], self.velocity[rows]
         th, thd = self._th[rows], self._thd[rows]
-        yaw = self._yaw[rows]
+        taken = self._constants.take(rows)
+        yaw, bias, a_xv, a_vv, b_x, b_v, sat_rows = taken[:7]
+        if taken is not self._taken:  # a new set of rows: its board columns as one YawConstants
+            self._taken, self._columns, self._all_yaw = taken, YawConstants(*taken[7:]), bool(yaw.all())
+        columns = self._columns
+        all_yaw = self._all_yaw  # every row yaws (a board cell): np.where would pick the yawing values
         # the board's columns only where some run yaws (without yaw only its mass is read)
-        board = YawConstants(*(column[rows] for column in self._board)) if self._any_yaw else None
+        board = columns if self._any_yaw else None
         # 1. the operator (the hand point moves with the board's yaw)
         if board is not None:
             px, py, pvx, pvy = hand_point(board, x[:, 0], x[:, 1], v[:, 0], v[:, 1], th, thd)
-            p = np.where(yaw[:, None], np.stack([px, py], axis=1), x)
-            pv = np.where(yaw[:, None], np.stack([pvx, pvy], axis=1), v)
+            p, pv = np.stack([px, py], axis=1), np.stack([pvx, pvy], axis=1)
+            if not all_yaw:
+                p, pv = np.where(yaw[:, None], p, x), np.where(yaw[:, None], pv, v)
         else:
             p, pv = x, v
         fh = self.arms.force(k, rows, p, pv)
         # 2. the board
-        m = self._board.m[rows]
+        m = columns.m
         noise = self._noise[rows, k + 1]
-        bias = self._bres[rows]
         c = np.zeros_like(x)
         if board is not None and yaw.any():
             a_prev = self._a_prev[rows]
             th_new, thd_new, thdd, cx, cy = yaw_step(board, th, thd, fh[:, 0], fh[:, 1], a_prev[:, 0], a_prev[:, 1], dt)
-            self._thd[rows] = np.where(yaw, thd_new, thd)
-            self._th[rows] = np.where(yaw, th_new, th)
-            c = np.where(yaw[:, None], np.stack([cx, cy], axis=1), 0.0)
+            c = np.stack([cx, cy], axis=1)
+            if not all_yaw:
+                thd_new, th_new, c = (
+                    np.where(yaw, thd_new, thd),
+                    np.where(yaw, th_new, th),
+                    np.where(yaw[:, None], c, 0.0),
+                )
+            self._thd[rows] = thd_new
+            self._th[rows] = th_new
         # 3. the plant
         f = _net_force(fh, effort, noise, bias, c)
-        x_new, v_new = plant_step(x, v, f, self._a_xv[rows], self._a_vv[rows], self._b_x[rows], self._b_v[rows])
+        x_new, v_new = plant_step(x, v, f, a_xv, a_vv, b_x, b_v)
         a = (v_new - v) * self._inv_dt
         self._a_prev[rows] = a
         # 4. the sensor, for the rows with a new sample
         fresh = self._fresh[rows, k + 1]
-        if fresh.any():
+        if fresh.all():  # every row samples (the sensors share their sample ticks): no row to pick
+            s = _sensed_force(fh, m[:, None], a, c, noise, bias)
+            sat = sat_rows[:, None]
+            self.wrench[rows] = np.where(s > sat, sat, np.where(s < -sat, -sat, s))
+            self.wrench_seq[rows] += 1
+        elif fresh.any():
             at = rows[fresh]
             s = _sensed_force(fh[fresh], m[fresh, None], a[fresh], c[fresh], noise[fresh], bias[fresh])
-            sat = self._sat[at][:, None]
+            sat = sat_rows[fresh][:, None]
             self.wrench[at] = np.where(s > sat, sat, np.where(s < -sat, -sat, s))
             self.wrench_seq[at] += 1
         self.position[rows], self.velocity[rows] = x_new, v_new
