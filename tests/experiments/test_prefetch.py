@@ -75,6 +75,19 @@ def shared_pool():
         yield pool
 
 
+@pytest.fixture(scope="module")
+def loop_model(tmp_path_factory):
+    """The tiny preset's network (``Workspace.train``, one epoch from scratch on two curved trials, in this process):
+    the model in the loop of this module's collections and the M_prev of its transfer run. Which model it is
+    matters to none of them (each compares two paths with the same model); trained once here instead of once in
+    each of three tests, each with its own collection (issue 44)."""
+    pytest.importorskip("torch")
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
+    ws = pipeline.Workspace(cfg, tmp_path_factory.mktemp("loop-model"), progress=False)
+    folder, _ = ws.collect("D0", tasks=("curved",), trials=2, seed=1)
+    return ws.train("m", [folder], init="scratch", epochs=1)
+
+
 def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
     """Named sources at the first call, each learned one (and each of its trainings) once written;
     never a cell the application hands over; never twice; the MuJoCo jobs are those ``_run_mujoco``
@@ -136,17 +149,13 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
 
 
 @pytest.mark.parametrize("with_model", [False, True])
-def test_prefetched_collection_is_the_collection(tmp_path, with_model, shared_pool):
+def test_prefetched_collection_is_the_collection(tmp_path, with_model, shared_pool, request):
     """prefetch + collect writes the same trials, bit for bit, as collect alone (named intent,
     and a model in the loop in lockstep groups); a prefetch under the same name with other
     options is dropped and the collection asked for runs."""
     pytest.importorskip("torch")
     cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], workers=2, threads=1)
-    plain = pipeline.Workspace(cfg, tmp_path / "plain", progress=False, pool=shared_pool)  # no pool of its own to start
-    intent = "nominal"
-    if with_model:
-        folder, _ = plain.collect("D0", tasks=("curved",), trials=2, seed=1)
-        intent = str(plain.train("m", [folder], init="scratch", epochs=1))
+    intent = str(request.getfixturevalue("loop_model")) if with_model else "nominal"
     # 2 tasks x 2 users x 1 trial: four trials, two to a lockstep group on each of the 2 workers
     options = {"tasks": ("curved", "linear"), "users": (0, 1), "trials": 1, "seed": 7, "intent": intent}
     with nullcontext(shared_pool) as pool:
@@ -170,7 +179,7 @@ def test_prefetch_without_a_pool_does_nothing(tmp_path):
     assert not (tmp_path / "datasets").exists() and list(ws._deferred) == ["x"]
 
 
-def test_collections_deferred_without_a_pool_run_together_and_are_the_collections(tmp_path, monkeypatch):
+def test_collections_deferred_without_a_pool_run_together_and_are_the_collections(tmp_path, monkeypatch, loop_model):
     """Without a pool, the first collect of a prefetched collection runs every deferred one in lockstep groups
     in this process (the same trials, bit for bit, as each collected alone: named intents, MG, a model on
     ONNX Runtime); a group holds at most NAMED_GROUP trials; a model that would run on torch is not deferred
@@ -183,8 +192,7 @@ def test_collections_deferred_without_a_pool_run_together_and_are_the_collection
         pytest.skip("needs ONNX Runtime (the onnx extra)")
     cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], workers=1, threads=1)
     plain = pipeline.Workspace(cfg, tmp_path / "ref", progress=False)
-    folder, _ = plain.collect("D0", tasks=("curved",), trials=1, seed=1)
-    model = str(plain.train("m", [folder], init="scratch", epochs=1))
+    model = str(loop_model)
     base = {"tasks": ("curved",), "users": (0, 1), "trials": 1, "obstacle": "large"}
     options = {
         "a": {**base, "seed": 7, "controller": "cooperative-arbitrated", "intent": "constant-velocity"},
@@ -298,7 +306,7 @@ def test_beside_training_starts_each_later_share_once_and_all_by_the_last_traini
     assert len(pool.calls) == n
 
 
-def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch, shared_pool):
+def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch, shared_pool, loop_model):
     """run_transfer's jobs on the run's pool (one torch thread each, the longest first, each
     model scored in its worker) give the models and scores of the one-after-the-other path in
     this process on one thread, exactly; the train times are the jobs' own. The datasets are
@@ -313,9 +321,7 @@ def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch, 
 
     cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], workers=2, threads=1)
     alone = replace(cfg, workers=1)  # collections in this process: no worker processes to start
-    base = pipeline.Workspace(alone, tmp_path / "base", progress=False)
-    folder, _ = base.collect("D0", tasks=("curved",), trials=2, seed=1)
-    prev = base.train("M0", [folder], init="scratch", epochs=1)
+    prev = loop_model
     threads = torch.get_num_threads()
     try:
         torch.set_num_threads(1)

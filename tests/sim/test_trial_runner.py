@@ -190,6 +190,7 @@ def test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone()
     trials bit for bit what the per-trial path gives, on a pool and in this process; in this
     process each trial is delivered as it ends (shortest first), not when the group ends."""
     from coassist.control.presets import CONTROLLER_KINDS
+    from coassist.sim.pool import worker_pool
     from coassist.sim.trial_runner import NAMED_GROUP, submit_trials
 
     specs = [
@@ -203,7 +204,13 @@ def test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone()
         )
     ]
     alone = run_trials(specs, workers=1, progress=False, lockstep=False)
-    pooled = run_trials(specs, workers=2, progress=False)
+    # One pool of two for both runs on a pool below (``pool=``: the same jobs on the same number of processes as
+    # the pool run_trials would start itself, pool_for; a job carries all its inputs, so the processes give the
+    # same trials call after call: test_a_kept_pool_serves_call_after_call_and_stays_up). A second fresh pool
+    # cost ~3 CPU-s of interpreters importing numpy, scipy and torch (issue 44).
+    with worker_pool(2) as shared:
+        pooled = run_trials(specs, workers=2, progress=False, pool=shared)
+        one_group = run_trials(specs, workers=2, progress=False, groups=1, pool=shared)
     order: list[int] = []
     here = run_trials(specs, workers=1, progress=False, on_result=lambda i, t: order.append(i)) or None
     assert here is None and sorted(order) == list(range(len(specs)))
@@ -227,7 +234,6 @@ def test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone()
     assert len(submit_trials(specs[:2], Pool(), workers=2, groups=5).jobs) == 2
     with pytest.raises(ValueError, match="groups must be >= 1"):
         submit_trials(specs, Pool(), workers=2, groups=0)
-    one_group = run_trials(specs, workers=2, progress=False, groups=1)
     for a, b in zip(alone, one_group, strict=True):
         assert a.equals(b)
 
