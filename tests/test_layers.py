@@ -22,11 +22,12 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "_progress",
         "_cpu",
         "_render",
+        "_rows",
         "interfaces",
         "config",
         "spatial",
         "registry",
-    ),  # shared vocabulary and rigid-body math; the reports' HTML templates (_render)
+    ),  # shared vocabulary and rigid-body math; the reports' HTML templates (_render); the array twins' per-set constants (_rows)
     ("model", "data", "metrics", "analysis"),  # the impedance model; trials on disk; metrics; paired statistics
     ("control",),  # games, baselines, guarded controllers (pure control laws)
     ("intent",),  # the predictor

@@ -193,12 +193,16 @@ class _Peer(ros._SpunNode):
 
 
 def _connect(peer_kw: dict, **cfg_kw) -> str:
-    """The error Ros2World gives at connect against ``_Peer(**peer_kw)`` (it must give one)."""
+    """The error Ros2World gives at connect against ``_Peer(**peer_kw)`` (it must give one).
+
+    Every error asked for here needs a message from the peer, which the world answers at once;
+    the timeout only bounds discovery, which took over 1.5 s once on CI's loaded two cores
+    ("no message on /joint_states … within 1.5 s"), so it is as long as the runs' (``_config``)."""
     peer = _Peer(**peer_kw)
     try:
         with pytest.raises(ValueError) as info:
             Ros2World(
-                Ros2Config(domain_id=DOMAIN, connect_timeout=cfg_kw.pop("connect_timeout", 1.5), **cfg_kw)
+                Ros2Config(domain_id=DOMAIN, connect_timeout=cfg_kw.pop("connect_timeout", 10.0), **cfg_kw)
             ).close()
     finally:
         peer.close()
@@ -300,7 +304,10 @@ def test_joint_states_from_two_sources_stop_the_arm_in_one_line():
         time.sleep(0.05)
         robot.close()
     extra = trial.meta.extra
-    assert extra["ended"] == "world_error" and 40 <= trial.n_samples <= 41, (extra["ended"], trial.n_samples)
+    # The second source's first message goes out 1 ms after the driver's 40th and reaches the world on
+    # that tick or a later one: the runs ended at 40-41 samples until one ended at 42 (a fresh-clone CI on two
+    # cores at load 3-4, DDS delivering it a tick late); the check stops at the first message that jumps.
+    assert extra["ended"] == "world_error" and 40 <= trial.n_samples <= 43, (extra["ended"], trial.n_samples)
     msg = extra["stop_message"]
     assert f"the joint states on {JOINTS} jump" in msg and "two sources publish" in msg and "\n" not in msg
     assert "moved 0.2" in msg  # the other pose, 0.2 rad off (and no more: it was caught at once)
