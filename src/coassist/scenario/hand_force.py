@@ -33,11 +33,6 @@ class HandForce:
         self._v_prev: tuple[float, float] | None = None
 
     @property
-    def acc(self) -> np.ndarray:
-        """â (2,) [m/s²] after the last tick."""
-        return np.array((self._ax, self._ay))
-
-    @property
     def acceleration(self) -> tuple[float, float]:
         """â's components [m/s²] after the last tick."""
         return self._ax, self._ay
@@ -81,7 +76,8 @@ class HandPoint:
         self.rate = 0.0
 
     def step(self, ux: float, uy: float, ax: float, ay: float) -> tuple[float, float, float, float]:
-        """(Δx, Δy, Δẋ, Δẏ): :meth:`__call__` on components, the hand force u_h [N] and the tip's acceleration [m/s²]."""
+        """(Δx, Δy, Δẋ, Δẏ): the hand point less the tip's, position [m] and velocity [m/s], after this tick's update
+        from the hand force u_h [N] and the tip's acceleration â [m/s²] (components; once per tick, in order)."""
         board = self.board
         if not self.active or board is None:
             return 0.0, 0.0, 0.0, 0.0
@@ -90,6 +86,6 @@ class HandPoint:
         return self.theta * -board.rhy, self.theta * board.rhx, self.rate * -board.rhy, self.rate * board.rhx
 
     def __call__(self, u_h: np.ndarray, acc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(Δp, Δṗ): the hand point less the tip's, position [m] and velocity [m/s], after this tick's update."""
+        """(Δp, Δṗ): :meth:`step` on arrays, (2,) each."""
         dx, dy, dvx, dvy = self.step(float(u_h[0]), float(u_h[1]), float(acc[0]), float(acc[1]))
         return np.array((dx, dy)), np.array((dvx, dvy))

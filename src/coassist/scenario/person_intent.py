@@ -245,7 +245,6 @@ class _Curves:
         self.flat_step = np.diff(self.flat_points, axis=0, append=self.flat_points[-1:])
         self.row_start = np.arange(N) * G
         self.row_last = self.row_start + G - 2  # each curve's last segment
-        self.curves = np.arange(N)
         # the keys after the first: a search in them finds the segment itself (the first key is 0, at or before any);
         # each curve's last key nudged up by one ulp, so its end (where s is clipped) is in its last segment
         self.key_tail = self.flat_key[1:].copy()
@@ -411,7 +410,7 @@ class PersonPathsIntent:
             self._residual = np.exp(-self._steps / st.residual_time) if st.residual_time > 0.0 else None
             self._kernel2 = self._noise2 + st.kernel**2
             n = len(hyp.ways)
-            self._idx = np.zeros(len(hyp.curves), dtype=int)
+            self._idx = np.zeros(n, dtype=int)
             self._nominal_at = 0
             self._nominal_window = max(2, int(math.ceil(st.search_window / hyp.nominal_step)))
             self._loglik = np.zeros(n)  # in the order of hyp.by_way
