@@ -1,0 +1,225 @@
+"""The person filter's settings compared on the eight validation cells, paired trial by trial (issue 40).
+
+    .venv/bin/python benchmarks/person_filter_cells.py OUT --variant NAME='{"field": value, ...}' [...]
+
+The cells every filter change of docs/person-model.md was chosen on: the application scenario's trials on the
+validation bases 50000 and 60000 (never a report's seeds), the thesis population's operators 0–2 and the varied
+population's 0, 3, 4, 5, 7 and 8 (the two that limit-cycle with the board left out), four trials per operator,
+object and base, both objects, the arbitrated controller: 144 paired trials.
+
+The reference is ``coassist compare-intents --source person=person`` on each cell (MG, the oracle, the four
+calibration draws and the person model with :data:`~coassist.scenario.person_model.PERSON_FILTER`), written once
+under ``OUT/ref/<population>-<base>`` and reused by later calls. Each variant is the reference's calibration
+draws with the ``filter`` fields of its JSON replaced (``PersonFilterSettings`` fields: a setting of the code in
+this tree), run on the same trials into ``OUT/<NAME>/<population>-<base>``. A cell already done is not run
+again (delete its folder to redo it).
+
+Prints, per cell and object, each source's force share / overshoot share [95 %, (operator, calibration)
+clusters] / jerk × MG, and per variant the paired differences from the reference over the 144 trials
+(overshoot [mm], f_RMS [N], jerk RMS [m/s³]; Student-t 95 % intervals). Reads the simulated intent (the
+overshoot): a measure of the filter in simulation.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import shutil  # noqa: E402
+import time  # noqa: E402
+from dataclasses import fields, replace  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from coassist._io import read_hashed_json, write_hashed_json  # noqa: E402
+from coassist.analysis.paired import gain_share, paired_difference  # noqa: E402
+from coassist.data import read_dataset  # noqa: E402
+from coassist.experiments.ablation_cells import ARBITRATED  # noqa: E402
+from coassist.experiments.application import OBJECTS, OBSTACLE, application_metrics, pair_key  # noqa: E402
+from coassist.experiments.pipeline import Workspace  # noqa: E402
+from coassist.experiments.precision import compare_intents  # noqa: E402
+from coassist.experiments.reproduce_config import REPRODUCE_PRESETS  # noqa: E402
+from coassist.experiments.seed_plan import application_seed  # noqa: E402
+from coassist.scenario.calibration_draws import draw_clusters, draw_count  # noqa: E402
+from coassist.scenario.person_intent import PersonFilterSettings  # noqa: E402
+
+#: (population, operators, base) of the eight cells (each with both objects).
+CELLS = (
+    ("thesis", (0, 1, 2), 50000),
+    ("thesis", (0, 1, 2), 60000),
+    ("varied", (0, 3, 4, 5, 7, 8), 50000),
+    ("varied", (0, 3, 4, 5, 7, 8), 60000),
+)
+TRIALS = 4
+PERSON_MODEL_FORMAT = "coassist-person-model-1"
+
+
+def _suffix(population: str) -> str:
+    return "" if population == "thesis" else "-" + population
+
+
+def _config(users, base: int, workers: int):
+    return replace(
+        REPRODUCE_PRESETS["default"],
+        application_users=tuple(users),
+        application_trials=TRIALS,
+        ablation_mujoco_trials=0,
+        workers=workers,
+        seed=base,
+    )
+
+
+def _trials(folder: Path) -> list:
+    return sorted(read_dataset(folder).trials, key=pair_key)
+
+
+def run_reference(out: Path, population: str, users, base: int, workers: int) -> Path:
+    """The reference cell (compare_intents with the person model); its folder."""
+    folder = out / "ref" / f"{population}-{base}"
+    if not (folder / "done").exists():
+        start = time.time()
+        compare_intents(
+            {"person": "person"},
+            folder,
+            bases=(base,),
+            users=users,
+            population=population,
+            workers=workers,
+            progress=False,
+        )
+        (folder / "done").write_text(f"{time.time() - start:.0f} s wall\n")
+    return folder
+
+
+def run_variant(out: Path, name: str, override: dict, population: str, users, base: int, workers: int) -> Path:
+    """A variant's person-model trials on the reference cell's trials and calibration draws; its folder."""
+    ref = out / "ref" / f"{population}-{base}"
+    folder = out / name / f"{population}-{base}"
+    if (folder / "done").exists():
+        return folder
+    start = time.time()
+    draws = folder / "draws"
+    if draws.exists():
+        shutil.rmtree(draws)
+    shutil.copytree(ref / f"base-{base}" / "models" / f"person{_suffix(population)}-draws", draws)
+    for path in sorted(draws.glob("draw-*/person-model.json")):
+        doc = read_hashed_json(path, format=PERSON_MODEL_FORMAT)
+        doc["filter"].update(override)
+        PersonFilterSettings(**doc["filter"])  # refuse a bad setting before anything runs
+        write_hashed_json(path, doc, format=PERSON_MODEL_FORMAT)
+    cfg = _config(users, base, workers)
+    ws = Workspace(cfg, folder, False)
+    for j, obj in enumerate(OBJECTS):
+        ws.collect(
+            f"{obj}-person{_suffix(population)}",
+            tasks=(cfg.application_task,),
+            users=cfg.application_users,
+            objects=(obj,),
+            trials=cfg.application_trials,
+            seed=application_seed(base, j),
+            controller=ARBITRATED,
+            preset=cfg.application_preset,
+            intent=str(draws),
+            obstacle=OBSTACLE,
+            population=population,
+        )
+    (folder / "done").write_text(f"{time.time() - start:.0f} s wall\n")
+    return folder
+
+
+def _share(values, name, mg, oracle, clusters) -> str:
+    share, lo, hi = gain_share(
+        mg[f"{name}_trials"], values[f"{name}_trials"], oracle[f"{name}_trials"], clusters=clusters
+    )
+    return f"{100 * share:.0f} [{100 * lo:.0f}, {100 * hi:.0f}]"
+
+
+def report(out: Path, names: list[str]) -> None:
+    pooled: dict[str, dict[str, list[float]]] = {n: {"overshoot": [], "f_rms": [], "jerk_rms": []} for n in names}
+    for population, _, base in CELLS:
+        cell = f"{population}-{base}"
+        ref = out / "ref" / cell
+        if not (ref / "done").exists():
+            continue
+        data = ref / f"base-{base}" / "datasets"
+        draws = draw_count(ref / f"base-{base}" / "models" / f"person{_suffix(population)}-draws")
+        for obj in OBJECTS:
+            name_of = {k: data / f"{obj}-{k}{_suffix(population)}" for k in ("MG", "oracle", "person")}
+            base_trials = {k: _trials(v) for k, v in name_of.items()}
+            keys = [pair_key(t) for t in base_trials["person"]]
+            clusters = draw_clusters(keys, draws)
+            m = {k: application_metrics(v) for k, v in base_trials.items()}
+            line = [f"{cell} {obj}:"]
+            for n in ["ref", *names]:
+                if n == "ref":
+                    v = m["person"]
+                else:
+                    folder = out / n / cell
+                    if not (folder / "done").exists():
+                        continue
+                    trials = _trials(folder / "datasets" / f"{obj}-person{_suffix(population)}")
+                    if [pair_key(t) for t in trials] != keys:
+                        raise SystemExit(f"{folder}: its trials are not the reference's")
+                    v = application_metrics(trials)
+                    for metric in pooled[n]:
+                        pooled[n][metric] += list(np.subtract(v[f"{metric}_trials"], m["person"][f"{metric}_trials"]))
+                jerk = v["jerk_rms"] / m["MG"]["jerk_rms"]
+                line.append(
+                    f"{n} {_share(v, 'f_rms', m['MG'], m['oracle'], clusters)} / "
+                    f"{_share(v, 'overshoot', m['MG'], m['oracle'], clusters)} / {jerk:.2f}"
+                )
+            print("  ".join(line))
+    for n in names:
+        d = pooled[n]
+        if not d["overshoot"]:
+            continue
+        parts = []
+        for metric, scale, unit in (("overshoot", 1e3, "mm"), ("f_rms", 1.0, "N"), ("jerk_rms", 1.0, "m/s³")):
+            mean, lo, hi, count = paired_difference(scale * np.asarray(d[metric]), np.zeros(len(d[metric])))
+            parts.append(f"{metric} {mean:+.3f} [{lo:+.3f}, {hi:+.3f}] {unit}")
+        print(f"{n} − ref over {count} paired trials: " + ", ".join(parts))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("out", type=Path)
+    parser.add_argument("--variant", action="append", default=[], help="NAME='{\"field\": value}' (repeatable)")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--report-only", action="store_true", help="print the table of what is already run")
+    args = parser.parse_args()
+    known = {f.name for f in fields(PersonFilterSettings)}
+    variants: dict[str, dict] = {}
+    for spec in args.variant:
+        name, sep, text = spec.partition("=")
+        if not sep or not name or name == "ref" or "/" in name:
+            raise SystemExit(f"--variant must be NAME=JSON with a NAME other than ref, got {spec!r}")
+        try:
+            override = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise SystemExit(f"--variant {name}: not JSON ({exc})") from None
+        if not isinstance(override, dict) or not set(override) <= known:
+            raise SystemExit(
+                f"--variant {name}: fields must be among PersonFilterSettings' ({', '.join(sorted(known))})"
+            )
+        PersonFilterSettings(**override)  # a bad value is refused here, naming the field
+        variants[name] = override
+    if not args.report_only:
+        for population, users, base in CELLS:
+            run_reference(args.out, population, users, base, args.workers)
+            for name, override in variants.items():
+                run_variant(args.out, name, override, population, users, base, args.workers)
+            print(f"{population}-{base} done", flush=True)
+    names = (
+        list(variants) or sorted(p.name for p in args.out.iterdir() if p.is_dir() and p.name != "ref")
+        if args.out.exists()
+        else []
+    )
+    report(args.out, names)
+
+
+if __name__ == "__main__":
+    main()
