@@ -1,6 +1,7 @@
 """A person-model folder: written, read back the same, and refused in one line when edited by hand."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -79,3 +80,21 @@ def test_a_hand_edited_or_unhashed_model_is_refused_in_one_line(written):
     path.unlink()
     with pytest.raises(ValueError, match=PERSON_MODEL_FILE):
         read_person_model(folder)
+
+
+def test_a_folder_read_again_shares_its_models_and_an_edit_or_a_rewrite_is_read_anew(written):
+    # a run builds a source per trial from the same folder: the file's version is read once per process (issue 44),
+    # the sources' states are their own and their rows the same; a file edited after it was read is still refused,
+    # and one written again is what the next read gives
+    folder, paths, arm = written
+    first, second = read_person_model(folder, horizon=10), read_person_model(folder, horizon=10)
+    assert first is not second and first.paths["alice"] is second.paths["alice"]
+    np.testing.assert_array_equal(_rows(first), _rows(second))
+    path = folder / PERSON_MODEL_FILE
+    text = path.read_text()
+    path.write_text(text.replace('"stiffness": 650.0', '"stiffness": 6500.0'))
+    with pytest.raises(ValueError, match="sha256|hash|changed|edited"):
+        read_person_model(folder)
+    other = replace(PERSON_FILTER, row_smoothing=0.08)
+    write_person_model(folder, {"alice": PersonFit(arm, paths)}, settings=other)
+    assert read_person_model(folder).settings == other

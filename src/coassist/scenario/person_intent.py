@@ -335,6 +335,13 @@ class _Curves:
         return out
 
 
+#: The hypotheses built in this process, per (path model, shifts): a trial's source is built afresh (its state is
+#: the trial's), the person's curves need not be (building them was about 78 ms of CPU a trial; issue 44). What a
+#: trial does with them reads them only. Each entry holds its model, so its id is no other model's while held.
+_CURVES_MEMO: dict[tuple[int, tuple[float, ...]], tuple[PathModel, PathFrame, _Curves]] = {}
+_CURVES_MEMO_SIZE = 64
+
+
 class PersonPathsIntent:
     """The intent source of a person model (module docstring), one trial at a time.
 
@@ -374,13 +381,17 @@ class PersonPathsIntent:
         self.settings = PersonFilterSettings() if settings is None else settings
         self.model_id = model_id
         self._ready = False
-        self._cache: dict[int, tuple[PathFrame, _Curves]] = {}
 
     def _curves(self, model: PathModel) -> tuple[PathFrame, _Curves]:
-        key = id(model)
-        if key not in self._cache:
-            self._cache[key] = (PathFrame(model.nominal), _Curves(model, self.settings.shifts))
-        return self._cache[key]
+        """The plan's frame and the hypotheses of ``model`` at this filter's shifts, built once per process
+        (:data:`_CURVES_MEMO`)."""
+        key = (id(model), self.settings.shifts)
+        held = _CURVES_MEMO.get(key)
+        if held is None or held[0] is not model:
+            if len(_CURVES_MEMO) >= _CURVES_MEMO_SIZE:
+                _CURVES_MEMO.pop(next(iter(_CURVES_MEMO)))
+            held = _CURVES_MEMO[key] = (model, PathFrame(model.nominal), _Curves(model, self.settings.shifts))
+        return held[1], held[2]
 
     def reset(self, context: TrialContext) -> None:
         st = self.settings

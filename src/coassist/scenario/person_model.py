@@ -201,9 +201,44 @@ def write_person_model(
     return folder
 
 
+#: What :func:`read_person_model` read, per version of a file (its resolved path, inode, size and modification
+#: time): a run's simulation processes build a fresh source for every trial (its state is the trial's) from the
+#: same few folders, and reading, hashing and rebuilding the path models was about 80 ms of CPU a trial (issue 44).
+#: A file written again (atomically: another inode) or edited is read again, its hash checked. Bounded.
+_READ_MEMO: dict[tuple[str, int, int, int], tuple[dict, dict, str | None, PersonFilterSettings]] = {}
+_READ_MEMO_SIZE = 32
+
+
 def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsIntent:
     """The intent source a person-model folder holds (errors name the file and field)."""
     path = Path(folder) / PERSON_MODEL_FILE
+    try:
+        st = path.stat()
+        key: tuple[str, int, int, int] | None = (str(path.resolve()), st.st_ino, st.st_size, st.st_mtime_ns)
+    except OSError:
+        key = None  # read_hashed_json says what is wrong with it
+    read = None if key is None else _READ_MEMO.get(key)
+    if read is None:
+        read = _read_people(path)
+        if key is not None:
+            if len(_READ_MEMO) >= _READ_MEMO_SIZE:
+                _READ_MEMO.pop(next(iter(_READ_MEMO)))
+            _READ_MEMO[key] = read
+    paths, arms, default, settings = read
+    return PersonPathsIntent(
+        horizon,
+        paths=paths,
+        arms=arms,
+        default_paths=None if default is None else paths[default],
+        default_arm=None if default is None else arms[default],
+        settings=settings,
+        model_id=f"person:{Path(folder).name}",
+    )
+
+
+def _read_people(path: Path) -> tuple[dict, dict, str | None, PersonFilterSettings]:
+    """A person-model file's people's path models and arms, its default person and its filter (errors name the
+    file and field)."""
     doc = read_hashed_json(path, format=_FORMAT)  # one line naming the file: missing, edited, another format
     try:
         people = dict(doc["people"])
@@ -212,14 +247,6 @@ def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsInten
         default = doc.get("default")
         if default is not None and default not in people:
             raise ValueError(f"default {default!r} is not one of its people ({', '.join(people)})")
-        return PersonPathsIntent(
-            horizon,
-            paths=paths,
-            arms=arms,
-            default_paths=None if default is None else paths[default],
-            default_arm=None if default is None else arms[default],
-            settings=PersonFilterSettings(**doc.get("filter", {})),
-            model_id=f"person:{Path(folder).name}",
-        )
+        return paths, arms, default, PersonFilterSettings(**doc.get("filter", {}))
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"{path}: {exc}") from None
