@@ -360,3 +360,30 @@ def test_the_rows_keep_the_persons_offset_from_their_curves_fading_over_the_resi
         np.testing.assert_allclose(diff[:, 0], 0.0, atol=1e-12)  # across the plan only (its normal is y)
         np.testing.assert_allclose(diff[:, 1] / fade, diff[0, 1] / fade[0], rtol=1e-9)  # one offset, fading
         assert abs(diff[0, 1] / fade[0] - shift) < 0.3e-3  # the person's 3 mm off their curves
+
+
+def test_the_hedge_carries_a_share_of_the_progress_while_the_person_leaves_their_line():
+    # undecided (decide out of reach), the hedge rows are the present estimate's plus hedge_velocity·i·dt of the
+    # tool's progress along the plan; with hedge_leaving h, while the estimate is further than the dead zone from the
+    # person's line (here the plan: no bias), only h of it: the plan's way on is no longer where the person goes
+    intent = _walk(NOMINAL)[:400]
+    intent[:, 1] = 0.004 * np.sin(np.arange(len(intent)) * 0.05)  # swaying 4 mm: in and out of the 2 mm dead zone
+    rows = {}
+    for leaving in (1.0, 0.5):
+        st = PersonFilterSettings(hedge_lateral=False, hedge_leaving=leaving, bias_limit=0.0, decide=20.0)
+        src = PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM}, settings=st)
+        src.reset(_context())
+        rows[leaving] = [(_tick(src, intent, k), src._mix) for k in range(len(intent))]
+    steps = 0.5 * DT * np.arange(1, 51)
+    inside = outside = 0
+    for k in range(7, len(intent)):
+        (full, mix_full), (part, mix_part) = rows[1.0][k], rows[0.5][k]
+        if mix_full != 0.0 or mix_part != 0.0:
+            continue
+        vel = (intent[k - 6] - intent[k - 7]) / DT
+        np.testing.assert_allclose(full, intent[k] + np.outer(steps, [vel[0], 0.0]), atol=1e-9)
+        share = 0.5 if abs(intent[k, 1]) > 0.002 else 1.0
+        np.testing.assert_allclose(part, intent[k] + np.outer(share * steps, [vel[0], 0.0]), atol=1e-9)
+        inside += share == 1.0
+        outside += share == 0.5
+    assert inside > 20 and outside > 20

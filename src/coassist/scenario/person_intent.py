@@ -35,7 +35,9 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    undecided and the ways' rows part by more than ``divergence`` over the horizon, the
    rows are the present estimate's, q + ``hedge_velocity``·i·dt·v — neither way, and never the plan
    (with ``hedge_lateral`` off, v's component across the plan is left out: extrapolated, the tool's own
-   sideways drift became the robot's push and then evidence for a way).
+   sideways drift became the robot's push and then evidence for a way; with ``hedge_leaving`` h < 1, while the
+   present estimate is beyond the dead zone from the person's line, h·v: the person is leaving the plan, and the
+   plan's way on is no longer where they go).
    The two cross-fade over ``blend_time``. With ``residual_time`` τ_r > 0 each way's rows from its curves carry
    the present estimate's offset across the plan from the chosen curves' own present estimates, fading along the
    horizon: row_i += ((q − b − Σₙ wₙ qₙ)·n̂) e^{−i·dt/τ_r} n̂ (n̂ the plan's left normal where the tool is): a
@@ -111,6 +113,9 @@ class PersonFilterSettings:
         anywhere between the plan and ±D/2: :func:`onset_log_ratio`).
     evidence_gap : [m] the side evidence counts only where the ways' mean paths are at least this far apart.
     hedge_lateral : the hedge rows carry the tool's whole velocity (True) or only its component along the plan.
+    hedge_leaving : the share of that velocity the hedge rows carry while the present estimate is off the person's
+        line by more than the dead zone (the person leaving the plan, the way not yet decided): the plan's way on
+        is then no longer where the person goes (1: the same as elsewhere).
     follow_mirror : on a way round the person never took in their calibration, follow the mirror images of
         the other way's paths (True), or give the present estimate's rows there (False): the mirror knows
         nothing of how this person goes round that side.
@@ -143,6 +148,7 @@ class PersonFilterSettings:
     follow_mirror: bool = True
     evidence_gap: float = 0.0
     hedge_lateral: bool = True
+    hedge_leaving: float = 1.0
 
     def __post_init__(self) -> None:
         for name, lo, hi, open_lo in (
@@ -168,6 +174,7 @@ class PersonFilterSettings:
             ("reaction_lead", 0.0, 0.3, False),
             ("row_smoothing", 0.0, 1.0, False),
             ("evidence_gap", 0.0, 0.1, False),
+            ("hedge_leaving", 0.0, 1.0, False),
         ):
             object.__setattr__(
                 self, name, check_real(getattr(self, name), f"PersonFilterSettings.{name}", lo, hi, open_lo=open_lo)
@@ -540,6 +547,8 @@ class PersonPathsIntent:
         else:
             vn = vx * nx + vy * ny
             hvx, hvy = vx - vn * nx, vy - vn * ny
+        if st.hedge_leaving < 1.0 and abs(z - self._bias) > self._dead_zone:
+            hvx, hvy = st.hedge_leaving * hvx, st.hedge_leaving * hvy
         D = hyp.gap_list[k]
         if D < st.shared_gap:
             if self._mix >= 1.0:  # the bias: learnt where the ways are still one path

@@ -76,8 +76,15 @@ PERSON_MODEL_FILE = "person-model.json"
 #: taken as the person turns (the detour's onset, inside the arc) reaches the robot a few ticks sooner. On the same
 #: cells (benchmarks/person_filter_cells.py), against the filter before: overshoot −0.034 [−0.053, −0.015] mm, hand
 #: force −0.005 [−0.006, −0.003] N, jerk −0.001 [−0.003, +0.001] m/s³ (0.02 s: −0.037 [−0.081, +0.006] mm, −0.007 N).
+#: While undecided and the person leaves their line (the present estimate beyond the dead zone), the hedge rows carry
+#: half their progress along the plan (hedge_leaving = 0.5): in-family the largest overshoot left against the oracle's
+#: was at the detour's onset, the hedge's progress along the plan carrying the tool on as the person turned (0.57 of
+#: the 0.95 mm a trial between the two). On the same cells against the filter with the 0.05 s cross-fade: overshoot
+#: −0.047 [−0.076, −0.018] mm, hand force +0.011 [+0.005, +0.017] N, jerk −0.002 [−0.004, −0.001] m/s³ (0: −0.076
+#: [−0.121, −0.031] mm, +0.023 [+0.011, +0.035] N; half the progress everywhere: −0.064 mm for +0.065 N).
 PERSON_FILTER = PersonFilterSettings(
     blend_time=0.05,
+    hedge_leaving=0.5,
     reaction_lead=0.06,
     object_yaw=True,
     row_smoothing=0.04,
