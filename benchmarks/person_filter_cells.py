@@ -138,7 +138,9 @@ def _share(values, name, mg, oracle, clusters) -> str:
     return f"{100 * share:.0f} [{100 * lo:.0f}, {100 * hi:.0f}]"
 
 
-def report(out: Path, names: list[str]) -> None:
+def report(out: Path, names: list[str], against: str = "ref") -> None:
+    """The table (module docstring); each variant's paired differences are from ``against`` (the default or a
+    variant)."""
     pooled: dict[str, dict[str, list[float]]] = {n: {"overshoot": [], "f_rms": [], "jerk_rms": []} for n in names}
     for population, _, base in CELLS:
         cell = f"{population}-{base}"
@@ -153,25 +155,26 @@ def report(out: Path, names: list[str]) -> None:
             keys = [pair_key(t) for t in base_trials["person"]]
             clusters = draw_clusters(keys, draws)
             m = {k: application_metrics(v) for k, v in base_trials.items()}
-            line = [f"{cell} {obj}:"]
-            for n in ["ref", *names]:
-                if n == "ref":
-                    v = m["person"]
-                else:
-                    folder = out / n / cell
-                    if not (folder / "done").exists():
-                        continue
+            values = {"ref": m["person"]}
+            for n in names:
+                folder = out / n / cell
+                if (folder / "done").exists():
                     trials = _trials(folder / "datasets" / f"{obj}-person{_suffix(population)}")
                     if [pair_key(t) for t in trials] != keys:
                         raise SystemExit(f"{folder}: its trials are not the reference's")
-                    v = application_metrics(trials)
-                    for metric in pooled[n]:
-                        pooled[n][metric] += list(np.subtract(v[f"{metric}_trials"], m["person"][f"{metric}_trials"]))
+                    values[n] = application_metrics(trials)
+            line = [f"{cell} {obj}:"]
+            for n, v in values.items():
                 jerk = v["jerk_rms"] / m["MG"]["jerk_rms"]
                 line.append(
                     f"{n} {_share(v, 'f_rms', m['MG'], m['oracle'], clusters)} / "
                     f"{_share(v, 'overshoot', m['MG'], m['oracle'], clusters)} / {jerk:.2f}"
                 )
+                if n != against and n != "ref" and against in values:
+                    for metric in pooled[n]:
+                        pooled[n][metric] += list(
+                            np.subtract(v[f"{metric}_trials"], values[against][f"{metric}_trials"])
+                        )
             print("  ".join(line))
     for n in names:
         d = pooled[n]
@@ -181,7 +184,7 @@ def report(out: Path, names: list[str]) -> None:
         for metric, scale, unit in (("overshoot", 1e3, "mm"), ("f_rms", 1.0, "N"), ("jerk_rms", 1.0, "m/s³")):
             mean, lo, hi, count = paired_difference(scale * np.asarray(d[metric]), np.zeros(len(d[metric])))
             parts.append(f"{metric} {mean:+.3f} [{lo:+.3f}, {hi:+.3f}] {unit}")
-        print(f"{n} − ref over {count} paired trials: " + ", ".join(parts))
+        print(f"{n} − {against} over {count} paired trials: " + ", ".join(parts))
 
 
 def main() -> None:
@@ -190,6 +193,7 @@ def main() -> None:
     parser.add_argument("--variant", action="append", default=[], help="NAME='{\"field\": value}' (repeatable)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--report-only", action="store_true", help="print the table of what is already run")
+    parser.add_argument("--against", default="ref", help="the paired differences from this: ref or a variant's NAME")
     args = parser.parse_args()
     known = {f.name for f in fields(PersonFilterSettings)}
     variants: dict[str, dict] = {}
@@ -218,7 +222,9 @@ def main() -> None:
         if args.out.exists()
         else []
     )
-    report(args.out, names)
+    if args.against != "ref" and args.against not in names:
+        names.insert(0, args.against)
+    report(args.out, names, args.against)
 
 
 if __name__ == "__main__":
