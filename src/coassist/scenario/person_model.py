@@ -20,6 +20,7 @@ may name one of its people ``default``: whoever else is at the handle gets that 
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
@@ -213,11 +214,11 @@ def write_person_model(
     return folder
 
 
-#: What :func:`read_person_model` read, per version of a file (its resolved path, inode, size and modification
-#: time): a run's simulation processes build a fresh source for every trial (its state is the trial's) from the
-#: same few folders, and reading, hashing and rebuilding the path models was about 80 ms of CPU a trial (issue 44).
-#: A file written again (atomically: another inode) or edited is read again, its hash checked. Bounded.
-_READ_MEMO: dict[tuple[str, int, int, int], tuple[dict, dict, str | None, PersonFilterSettings]] = {}
+#: What :func:`read_person_model` read, per file content (its bytes' SHA-256): a run's simulation processes build a
+#: fresh source for every trial (its state is the trial's) from the same few folders, and parsing the file and
+#: rebuilding the path models was about 80 ms of CPU a trial (issue 44). Content that was not read before (an edit,
+#: a rewrite) is read and its own hash checked. Bounded.
+_READ_MEMO: dict[bytes, tuple[dict, dict, str | None, PersonFilterSettings]] = {}
 _READ_MEMO_SIZE = 32
 
 
@@ -225,8 +226,7 @@ def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsInten
     """The intent source a person-model folder holds (errors name the file and field)."""
     path = Path(folder) / PERSON_MODEL_FILE
     try:
-        st = path.stat()
-        key: tuple[str, int, int, int] | None = (str(path.resolve()), st.st_ino, st.st_size, st.st_mtime_ns)
+        key: bytes | None = hashlib.sha256(path.read_bytes()).digest()
     except OSError:
         key = None  # read_hashed_json says what is wrong with it
     read = None if key is None else _READ_MEMO.get(key)
