@@ -9,7 +9,8 @@ object and base, both objects, the arbitrated controller: 144 paired trials.
 
 The reference is ``coassist compare-intents --source person=person`` on each cell (MG, the oracle, the four
 calibration draws and the person model with :data:`~coassist.scenario.person_model.PERSON_FILTER`), written once
-under ``OUT/ref/<population>-<base>`` and reused by later calls. Each variant is the reference's calibration
+under ``OUT/ref/<population>-<base>`` and reused by later calls (with a line saying so where this tree's default
+filter is not the one it ran). Each variant is the reference's calibration
 draws with the ``filter`` fields of its JSON replaced (``PersonFilterSettings`` fields: a setting of the code in
 this tree), run on the same trials into ``OUT/<NAME>/<population>-<base>``. A cell already done is not run
 again (delete its folder to redo it).
@@ -30,7 +31,7 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import shutil  # noqa: E402
 import time  # noqa: E402
-from dataclasses import fields, replace  # noqa: E402
+from dataclasses import asdict, fields, replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -46,6 +47,7 @@ from coassist.experiments.reproduce_config import REPRODUCE_PRESETS  # noqa: E40
 from coassist.experiments.seed_plan import application_seed  # noqa: E402
 from coassist.scenario.calibration_draws import draw_clusters, draw_count  # noqa: E402
 from coassist.scenario.person_intent import PersonFilterSettings  # noqa: E402
+from coassist.scenario.person_model import PERSON_FILTER  # noqa: E402
 
 #: (population, operators, base) of the eight cells (each with both objects).
 CELLS = (
@@ -80,7 +82,13 @@ def _trials(folder: Path) -> list:
 def run_reference(out: Path, population: str, users, base: int, workers: int) -> Path:
     """The reference cell (compare_intents with the person model); its folder."""
     folder = out / "ref" / f"{population}-{base}"
-    if not (folder / "done").exists():
+    current = json.dumps(asdict(PERSON_FILTER), sort_keys=True)
+    if (folder / "done").exists():
+        # a reference run before the default changed is another filter's: the differences would be from that one
+        ran = (folder / "filter.json").read_text() if (folder / "filter.json").exists() else None
+        if ran != current:
+            print(f"{folder}: run with another default filter than this tree's PERSON_FILTER; delete it to redo it")
+    else:
         start = time.time()
         compare_intents(
             {"person": "person"},
@@ -91,6 +99,7 @@ def run_reference(out: Path, population: str, users, base: int, workers: int) ->
             workers=workers,
             progress=False,
         )
+        (folder / "filter.json").write_text(current)
         (folder / "done").write_text(f"{time.time() - start:.0f} s wall\n")
     return folder
 
