@@ -192,6 +192,42 @@ def training_datasets(ws: Workspace) -> list[Path]:
     return [root / n for n in names]
 
 
+def _train_here(
+    ws: Workspace, datasets: list[Path], jobs: list[tuple], told: Callable[[dict[str, str]], None]
+) -> dict[str, str]:
+    """:func:`train_sources`' jobs in this process, in their order, each as :func:`train_in_worker` trains it (one
+    torch thread; this process's thread count put back after)."""
+    import torch
+
+    from coassist._progress import progress_bar
+
+    models: dict[str, str] = {}
+    threads = torch.get_num_threads()
+    told({})
+    try:
+        with progress_bar(ws.progress) as bar:
+            task = bar.add_task(f"training {len(jobs)} intent sources, one at a time", total=len(jobs))
+            for name, epochs, preset_name, label, seed in jobs:
+                models[name] = train_in_worker(
+                    ws.config,
+                    ws.out,
+                    name,
+                    datasets,
+                    init="scratch",
+                    epochs=epochs,
+                    preset_name=preset_name,
+                    label=label,
+                    stride=ws.config.source_stride,
+                    seed=seed,
+                    fit_stride=ws.config.source_fit_stride,
+                )[0]
+                bar.advance(task)
+                told(dict(models))
+    finally:
+        torch.set_num_threads(threads)
+    return {name: models[name] for name, *_ in sorted(jobs, key=lambda job: job[0])}
+
+
 def train_sources(
     ws: Workspace,
     datasets: list[Path],
@@ -203,7 +239,8 @@ def train_sources(
     LSTM+FC once per training seed, into ``models/<name>``; model folders by name (:func:`seed_names`).
 
     On a CPU they train in worker processes, ``processes`` at a time (None: in the run's
-    pool, ``reproduce.workers`` at a time), each on one torch thread. Small LSTM kernels
+    pool, ``reproduce.workers`` at a time; one at a time without the run's pool: in this
+    process, the same trainings), each on one torch thread. Small LSTM kernels
     split badly over threads: on this 2-core machine two 1-thread trainings do 1.34x the
     work of one 2-thread training (``benchmarks/bench_training.py --pairs``), and four at
     once took 125.9 s against 124.4 s two at a time (the main job's datasets, one run
@@ -257,6 +294,10 @@ def train_sources(
     n = max(1, min(ws.config.workers if processes is None else int(processes), len(jobs)))
     # the run's pool (workers processes) unless another count is asked for: then n started here
     shared = ws.pool if processes is None else None
+    if shared is None and n == 1:
+        # one at a time and no pool: here, one after the other, as a one-process pool would have run them while
+        # this process waited (its start, ~8 CPU-s importing numpy, scipy and torch, was all it added)
+        return _train_here(ws, datasets, jobs, told)
     with contextlib.nullcontext(shared) if shared is not None else worker_pool(n) as pool:
         futures = {
             pool.submit(
