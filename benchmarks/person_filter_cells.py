@@ -79,6 +79,16 @@ def _trials(folder: Path) -> list:
     return sorted(read_dataset(folder).trials, key=pair_key)
 
 
+def _filter_of(recorded: str) -> PersonFilterSettings | None:
+    """The filter a reference recorded, a setting added to the code since at its default (the same filter: a
+    variant's new field must not make every cached reference look stale); None where it names a field the code
+    no longer has or a value it refuses."""
+    try:
+        return PersonFilterSettings(**json.loads(recorded))
+    except (TypeError, ValueError):
+        return None
+
+
 def run_reference(out: Path, population: str, users, base: int, workers: int) -> Path:
     """The reference cell (compare_intents with the person model); its folder."""
     folder = out / "ref" / f"{population}-{base}"
@@ -86,7 +96,7 @@ def run_reference(out: Path, population: str, users, base: int, workers: int) ->
     if (folder / "done").exists():
         # a reference run before the default changed is another filter's: the differences would be from that one
         ran = (folder / "filter.json").read_text() if (folder / "filter.json").exists() else None
-        if ran != current:
+        if ran is None or _filter_of(ran) != PERSON_FILTER:
             print(f"{folder}: run with another default filter than this tree's PERSON_FILTER; delete it to redo it")
     else:
         start = time.time()
