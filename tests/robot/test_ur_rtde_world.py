@@ -304,18 +304,30 @@ def test_a_control_link_reported_down_ends_the_run_link_lost_without_another_com
     pytest.importorskip("pinocchio", reason="the drive needs the robot extra")
     from coassist.robot.drive import DriveConfig, drive
 
-    world, robot = make(frequency=125.0)
-    at = {}
+    trial = None
+    for _attempt in range(3):
+        world, robot = make(frequency=125.0)
+        at: dict = {}
 
-    def on_tick(k, state, out):
-        if k == 30:  # after tick 30's speedJ: ur-rtde's receive thread saw the connection end and tore it down
-            robot.control_connected = False
-            at["calls"] = len(robot.calls)
+        def on_tick(k, state, out, robot=robot, at=at):
+            if k == 30:  # after tick 30's speedJ: ur-rtde's receive thread saw the connection end and tore it down
+                robot.control_connected = False
+                at["calls"] = len(robot.calls)
 
-    try:
-        trial = drive(DriveConfig(world="ur", controller="manual", time_limit=1.0), world=world, on_tick=on_tick)
-    finally:
-        world.close()
+        try:
+            trial = drive(DriveConfig(world="ur", controller="manual", time_limit=1.0), world=world, on_tick=on_tick)
+        except RuntimeError as exc:  # a stall before the first tick: the fake's stream starved (link_timeout)
+            if "before its first tick" not in str(exc):
+                raise
+            continue
+        finally:
+            world.close()
+        # Again only where the machine stalled before tick 30 (CI, 3 workers on 2 cores: a safety stop after
+        # repeated stale or late ticks): the link was never taken down, so nothing of what is tested ran. A run
+        # that reached tick 30 is judged below, whatever it did.
+        if "calls" in at:
+            break
+    assert trial is not None, "three runs of three stalled before their first tick"
     extra = trial.meta.extra
     assert extra["ended"] == "link_lost" and "reports it is disconnected" in extra["stop_message"]
     assert "no command was sent" in extra["stop_message"]
