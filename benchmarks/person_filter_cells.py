@@ -92,7 +92,6 @@ def _filter_of(recorded: str) -> PersonFilterSettings | None:
 def run_reference(out: Path, population: str, users, base: int, workers: int) -> Path:
     """The reference cell (compare_intents with the person model); its folder."""
     folder = out / "ref" / f"{population}-{base}"
-    current = json.dumps(asdict(PERSON_FILTER), sort_keys=True)
     if (folder / "done").exists():
         # a reference run before the default changed is another filter's: the differences would be from that one
         ran = (folder / "filter.json").read_text() if (folder / "filter.json").exists() else None
@@ -109,7 +108,7 @@ def run_reference(out: Path, population: str, users, base: int, workers: int) ->
             workers=workers,
             progress=False,
         )
-        (folder / "filter.json").write_text(current)
+        (folder / "filter.json").write_text(json.dumps(asdict(PERSON_FILTER), sort_keys=True))
         (folder / "done").write_text(f"{time.time() - start:.0f} s wall\n")
     return folder
 

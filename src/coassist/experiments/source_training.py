@@ -35,8 +35,10 @@ all of them again on the report's trials).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from functools import partial
 from pathlib import Path
+from typing import Any
 
 from coassist.experiments.pipeline import Workspace, train_in_worker
 
@@ -193,10 +195,12 @@ def training_datasets(ws: Workspace) -> list[Path]:
 
 
 def _train_here(
-    ws: Workspace, datasets: list[Path], jobs: list[tuple], told: Callable[[dict[str, str]], None]
+    trainings: Mapping[str, Callable[[], tuple[str, float, Any]]],
+    told: Callable[[dict[str, str]], None],
+    progress: bool,
 ) -> dict[str, str]:
-    """:func:`train_sources`' jobs in this process, in their order, each as :func:`train_in_worker` trains it (one
-    torch thread; this process's thread count put back after)."""
+    """:func:`train_sources`' trainings (name → :func:`train_in_worker` with its arguments) in this process, in their
+    order, each on one torch thread as in a worker; this process's thread count put back after."""
     import torch
 
     from coassist._progress import progress_bar
@@ -205,27 +209,15 @@ def _train_here(
     threads = torch.get_num_threads()
     told({})
     try:
-        with progress_bar(ws.progress) as bar:
-            task = bar.add_task(f"training {len(jobs)} intent sources, one at a time", total=len(jobs))
-            for name, epochs, preset_name, label, seed in jobs:
-                models[name] = train_in_worker(
-                    ws.config,
-                    ws.out,
-                    name,
-                    datasets,
-                    init="scratch",
-                    epochs=epochs,
-                    preset_name=preset_name,
-                    label=label,
-                    stride=ws.config.source_stride,
-                    seed=seed,
-                    fit_stride=ws.config.source_fit_stride,
-                )[0]
+        with progress_bar(progress) as bar:
+            task = bar.add_task(f"training {len(trainings)} intent sources, one at a time", total=len(trainings))
+            for name, train in trainings.items():
+                models[name] = train()[0]
                 bar.advance(task)
                 told(dict(models))
     finally:
         torch.set_num_threads(threads)
-    return {name: models[name] for name, *_ in sorted(jobs, key=lambda job: job[0])}
+    return models
 
 
 def train_sources(
@@ -294,33 +286,35 @@ def train_sources(
     n = max(1, min(ws.config.workers if processes is None else int(processes), len(jobs)))
     # the run's pool (workers processes) unless another count is asked for: then n started here
     shared = ws.pool if processes is None else None
+    trainings = {
+        name: partial(
+            train_in_worker,
+            ws.config,
+            ws.out,
+            name,
+            datasets,
+            init="scratch",
+            epochs=epochs,
+            preset_name=preset_name,
+            label=label,
+            stride=ws.config.source_stride,
+            seed=seed,
+            fit_stride=ws.config.source_fit_stride,
+        )
+        for name, epochs, preset_name, label, seed in jobs
+    }
     if shared is None and n == 1:
         # one at a time and no pool: here, one after the other, as a one-process pool would have run them while
-        # this process waited (its start, ~8 CPU-s importing numpy, scipy and torch, was all it added)
-        return _train_here(ws, datasets, jobs, told)
-    with contextlib.nullcontext(shared) if shared is not None else worker_pool(n) as pool:
-        futures = {
-            pool.submit(
-                train_in_worker,
-                ws.config,
-                ws.out,
-                name,
-                datasets,
-                init="scratch",
-                epochs=epochs,
-                preset_name=preset_name,
-                label=label,
-                stride=ws.config.source_stride,
-                seed=seed,
-                fit_stride=ws.config.source_fit_stride,
-            ): name
-            for name, epochs, preset_name, label, seed in jobs
-        }
-        told({})
-        with progress_bar(ws.progress) as bar:
-            task = bar.add_task(f"training {len(jobs)} intent sources, {n} at a time", total=len(jobs))
-            for future in as_completed(futures):
-                models[futures[future]] = future.result()[0]
-                bar.advance(task)
-                told(dict(models))
-    return {name: models[name] for name, *_ in sorted(jobs, key=lambda job: job[0])}
+        # this process waited (its start, ~5 CPU-s importing numpy, scipy and torch, was all it added)
+        models = _train_here(trainings, told, ws.progress)
+    else:
+        with contextlib.nullcontext(shared) if shared is not None else worker_pool(n) as pool:
+            futures = {pool.submit(train): name for name, train in trainings.items()}
+            told({})
+            with progress_bar(ws.progress) as bar:
+                task = bar.add_task(f"training {len(jobs)} intent sources, {n} at a time", total=len(jobs))
+                for future in as_completed(futures):
+                    models[futures[future]] = future.result()[0]
+                    bar.advance(task)
+                    told(dict(models))
+    return {name: models[name] for name in sorted(trainings)}
