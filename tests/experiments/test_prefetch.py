@@ -179,6 +179,27 @@ def test_prefetch_without_a_pool_does_nothing(tmp_path):
     assert not (tmp_path / "datasets").exists() and list(ws._deferred) == ["x"]
 
 
+def test_run_deferred_runs_only_the_collections_named(tmp_path, monkeypatch):
+    """A stage that times its own collections (the transfer's) runs only those; what other stages deferred stays
+    deferred for their own collect; a name not deferred is left to its collect."""
+    from coassist.sim import trial_runner
+
+    groups = []
+    run = trial_runner.run_spec_lockstep
+    monkeypatch.setattr(
+        trial_runner, "run_spec_lockstep", lambda specs, *a, **k: groups.append(len(specs)) or run(specs, *a, **k)
+    )
+    ws = pipeline.Workspace(reproduce_config.REPRODUCE_PRESETS["tiny"], tmp_path, progress=False)
+    options = {"tasks": ("curved",), "trials": 1, "controller": "manual"}
+    for name, seed in (("x", 1), ("y", 2), ("z", 3)):
+        ws.prefetch(name, seed=seed, **options)
+    ws.run_deferred(["z", "x", "not-deferred"])
+    assert groups == [2] and list(ws._deferred) == ["y"]
+    assert sorted(p.name for p in (tmp_path / "datasets").iterdir()) == ["x", "z"]
+    assert ws.collect("x", seed=1, **options)[1].trials[0].meta.seed == 1 and groups == [2]  # already written
+    assert ws.collect("y", seed=2, **options)[1].trials[0].meta.seed == 2 and groups == [2, 1] and not ws._deferred
+
+
 def test_collections_deferred_without_a_pool_run_together_and_are_the_collections(tmp_path, monkeypatch, loop_model):
     """Without a pool, the first collect of a prefetched collection runs every deferred one in lockstep groups
     in this process (the same trials, bit for bit, as each collected alone: named intents, MG, a model on
@@ -322,17 +343,32 @@ def test_transfer_on_the_pool_equals_transfer_in_process(tmp_path, monkeypatch, 
     cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], workers=2, threads=1)
     alone = replace(cfg, workers=1)  # collections in this process: no worker processes to start
     prev = loop_model
+    from coassist.experiments.transfer import transfer_targets
+    from coassist.sim import trial_runner
+
+    groups = []
+    run = trial_runner.run_spec_lockstep
+    monkeypatch.setattr(
+        trial_runner, "run_spec_lockstep", lambda specs, *a, **k: groups.append(len(specs)) or run(specs, *a, **k)
+    )
     threads = torch.get_num_threads()
     try:
         torch.set_num_threads(1)
         here = run_transfer(pipeline.Workspace(alone, tmp_path / "here", progress=False), prev, 1.0)
     finally:
         torch.set_num_threads(threads)
+    # without a pool the targets' six collections ran together, in one lockstep group (the tiny preset's
+    # trials are fewer than NAMED_GROUP), and each is the dataset collected alone (tests above)
+    targets = transfer_targets(alone)
+    n_trials = sum(len(t.users) * len(t.objects) * len(t.tasks) * (t.trials + t.test_trials) for t in targets.values())
+    assert groups == [n_trials] and n_trials <= trial_runner.NAMED_GROUP
+    monkeypatch.setattr(trial_runner, "run_spec_lockstep", run)
 
     def collected_here(self, name, **options):
         return tmp_path / "here" / "datasets" / name, read_dataset(tmp_path / "here" / "datasets" / name)
 
     monkeypatch.setattr(pipeline.Workspace, "collect", collected_here)
+    monkeypatch.setattr(pipeline.Workspace, "prefetch", lambda self, name, **options: None)  # nothing to start
     with nullcontext(shared_pool) as pool:
         ws = pipeline.Workspace(cfg, tmp_path / "pool", progress=False, pool=pool)
         on_pool = run_transfer(ws, prev, 1.0)
@@ -369,3 +405,20 @@ def test_prefetch_errors_reach_collect(tmp_path, shared_pool):
         with pytest.raises(Exception, match="model.json|JSON|json"):
             ws.collect("y", **options, intent=str(broken))
         assert ws._pending == {}
+
+
+def test_transfer_collection_shares_are_each_targets_training_ticks_over_all_ticks():
+    """Table 5.2's "collect" column: the targets' collections run together, so each target gets the share of
+    their time its training trials' ticks are of every tick collected (training and test trials of all)."""
+    from types import SimpleNamespace
+
+    from coassist.experiments.transfer import collection_shares
+
+    def dataset(*ticks):
+        return SimpleNamespace(trials=[SimpleNamespace(n_samples=n) for n in ticks])
+
+    shares = collection_shares(
+        [(dataset(100, 300), dataset(100)), (dataset(200), dataset(50, 50)), (dataset(), dataset(200))]
+    )
+    assert shares == pytest.approx([400 / 1000, 200 / 1000, 0.0], rel=1e-15)
+    assert collection_shares([(dataset(), dataset())]) == [0.0]

@@ -14,7 +14,7 @@ from __future__ import annotations
 import contextlib
 import json
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -99,7 +99,7 @@ class Workspace:
             tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population
         )
         if (options, groups) == self._deferred.get(name):
-            self._run_deferred()  # this one and every other collection deferred so far, in lockstep
+            self.run_deferred()  # this one and every other collection deferred so far, in lockstep
         self._deferred.pop(name, None)  # deferred with other options: collected as asked, below
         written = self._pending.pop(f"dataset:{name}", None)
         if written is not None:
@@ -145,7 +145,7 @@ class Workspace:
 
         Without a pool (one worker) the collection is deferred: the first :meth:`collect` of any
         deferred collection runs all of them in this process in lockstep, a few collections to
-        a group (:meth:`_run_deferred`), instead of each alone as its :meth:`collect` comes. A
+        a group (:meth:`run_deferred`), instead of each alone as its :meth:`collect` comes. A
         tick's fixed cost is then shared by the trials of many small collections (the tiny
         preset's ablation cells, one trial each: 18 of its named cells, run_spec_lockstep, one process,
         took 6.3 CPU-s together against 26.8 one by one). The same
@@ -196,21 +196,23 @@ class Workspace:
         threading.Thread(target=write, name=f"coassist-write-{name}", daemon=True).start()
         self._pending[f"dataset:{name}"] = ((options, groups), written)
 
-    def _run_deferred(self) -> None:
-        """Run every deferred collection here, in lockstep groups of whole collections of at most
-        :data:`~coassist.sim.trial_runner.NAMED_GROUP` trials together (a bigger one alone), and write
+    def run_deferred(self, names: Collection[str] | None = None) -> None:
+        """Run the deferred collections named (None: every one) here, in lockstep groups of whole collections
+        of at most :data:`~coassist.sim.trial_runner.NAMED_GROUP` trials together (a bigger one alone), and write
         each dataset (so :meth:`collect` finds it as a prefetched one). The cap keeps memory where a
-        one-worker :func:`~coassist.sim.trial_runner.run_trials` keeps it: a group holds its trials until it ends."""
+        one-worker :func:`~coassist.sim.trial_runner.run_trials` keeps it: a group holds its trials until it ends.
+        Names not deferred (there is a pool, or a model on torch) are left to their :meth:`collect`; the other
+        deferred collections stay deferred: a stage that times its own collections runs only those."""
         from coassist.data import read_dataset
         from coassist.sim.collect import collect_dataset, dataset_specs
         from coassist.sim.pool import SubmittedTrials, trial_payload
         from coassist.sim.trial_runner import NAMED_GROUP, run_spec_lockstep
 
+        chosen = [name for name in self._deferred if names is None or name in names]
         deferred = [
             (name, options, groups, tuple(dataset_specs(**options)))
-            for name, (options, groups) in self._deferred.items()
+            for name, (options, groups) in ((name, self._deferred.pop(name)) for name in chosen)
         ]
-        self._deferred.clear()
         batches: list[list[tuple[str, dict, Any, tuple]]] = []
         for item in deferred:
             if batches and sum(len(b[3]) for b in batches[-1]) + len(item[3]) <= NAMED_GROUP:

@@ -314,8 +314,13 @@ class _Hypotheses:
         self.curves, self.row_start = np.arange(n), np.arange(n) * p
         self.flat_points, self.flat_tangents = self.points.reshape(n * p, 2), self.tangents.reshape(n * p, 2)
         self.flat_arc = self.arc.ravel()
-        self._offsets: dict[int, np.ndarray] = {}
+        self._windows: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
         self.on_side = (np.flatnonzero(self.sides == 1), np.flatnonzero(self.sides == -1))  # curves per side
+        # each side's curves as a slice where they are one run (always but at a sharp corner): a view, not a copy
+        self.side_runs: tuple[slice | np.ndarray, ...] = tuple(
+            slice(int(on[0]), int(on[-1]) + 1) if on.size and on[-1] - on[0] + 1 == on.size else on
+            for on in self.on_side
+        )
         self.n_o = task.path.normal(task.obstacle_arc)
         mid = grid.index(1.0) if 1.0 in grid else len(grid) // 2
         centre = mid * len(grid) + mid
@@ -328,11 +333,26 @@ class _Hypotheses:
         self.first_apart: int = int(apart[0]) if apart.size else self.points.shape[1]
         self.last_apart: int = int(apart[-1]) if apart.size else -1
 
-    def offsets(self, widest: int) -> np.ndarray:
-        """−widest … widest, (1, 2·widest + 1): a search window around each curve's last phase."""
-        if widest not in self._offsets:
-            self._offsets[widest] = np.arange(-widest, widest + 1)[None, :]
-        return self._offsets[widest]
+    def window(self, widest: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The phase search's tables for a window of ±``widest`` samples: each curve's x and y padded with
+        ``widest`` copies of its end points at either end (N·(P + 2·widest),), so the window of sample i of curve
+        n is the run of 2·widest + 1 padded samples from n·(P + 2·widest) + i and needs no clipping (the copies
+        are what a clipped index reads: the same distances, the first least of them at the same sample); each
+        curve's first padded index (N,); the window's offsets (2·widest + 1,); and the sample (within its curve)
+        each padded index stands for (N·(P + 2·widest),)."""
+        if widest not in self._windows:
+            n, p = self.points.shape[:2]
+            width = p + 2 * widest
+            local = np.minimum(np.maximum(np.arange(width) - widest, 0), p - 1)
+            flat = (self.row_start[:, None] + local[None, :]).ravel()
+            self._windows[widest] = (
+                self.flat_x[flat],
+                self.flat_y[flat],
+                np.arange(n) * width,
+                np.arange(2 * widest + 1),
+                np.tile(local, n),
+            )
+        return self._windows[widest]
 
     def at(self, n: int, s: np.ndarray) -> np.ndarray:
         """Points of curve n at its arc lengths s (clipped to the curve)."""
@@ -425,6 +445,9 @@ class PathHypothesesIntent:
             self._side = 0
             self._mix = 1.0
             self._mix_step = self.dt / st.blend_time if st.blend_time > 0.0 else 1.0
+            self._hedge_steps = (st.hedge_velocity * self._steps)[:, None]
+            self._search_widest = widest = self._widest(self._hyp)
+            self._pad_x, self._pad_y, self._pad_first, self._window, self._pad_local = self._hyp.window(widest)
         self._ready = True
 
     @property
@@ -485,7 +508,7 @@ class PathHypothesesIntent:
         self._mix = 1.0 if self._mix_step >= 1.0 else min(self._mix + self._mix_step, 1.0)
         if self._mix >= 1.0:
             return ahead
-        hedge = present + (st.hedge_velocity * self._steps)[:, None] * v
+        hedge = present + self._hedge_steps * v
         return self._mix * ahead + (1.0 - self._mix) * hedge
 
     def _filter(
@@ -493,23 +516,20 @@ class PathHypothesesIntent:
     ) -> np.ndarray:
         st = self.settings
         K, C = self.arm.stiffness, self.arm.damping
-        n_curves, n_pts = hyp.points.shape[:2]
-        widest = self._widest(hyp)
+        widest = self._search_widest
         if self.shared_fast_path:
             fast = self._shared(hyp, p, v, u_h, present, widest)
             if fast is not None:
                 return fast
-        # 1. the tool's phase on every curve: its nearest point within search_window of the last one
-        curves = hyp.curves
-        ids = self._idx[:, None] + hyp.offsets(widest)
-        np.maximum(ids, 0, out=ids)
-        np.minimum(ids, n_pts - 1, out=ids)
-        flat = ids + hyp.row_start[:, None]
-        dx = np.take(hyp.flat_x, flat) - p[0]
-        dy = np.take(hyp.flat_y, flat) - p[1]
+        # 1. the tool's phase on every curve: its nearest point within search_window of the last one, on the
+        # curves padded with copies of their ends (:meth:`_Hypotheses.window`: what a clipped index reads)
+        px, py = p.tolist()
+        flat = (self._pad_first + self._idx)[:, None] + self._window
+        dx = self._pad_x[flat] - px
+        dy = self._pad_y[flat] - py
         d2 = dx * dx + dy * dy  # = Σ over x, y of (point − p)², bit for bit
-        at = flat[curves, np.argmin(d2, axis=1)]  # flat index of each curve's nearest point
-        near = at - hyp.row_start
+        near = self._pad_local.take(flat[:, 0] + d2.argmin(axis=1))  # each curve's nearest sample
+        at = near + hyp.row_start  # its flat index
         self._idx = near
         tan = np.take(hyp.flat_tangents, at, axis=0)
         lead = (tan @ u_h + C * (tan @ v)) / K
@@ -537,14 +557,16 @@ class PathHypothesesIntent:
         corrected = present - self._bias * hyp.n_o
         r = corrected - q
         r2 = r[:, 0] * r[:, 0] + r[:, 1] * r[:, 1]
-        for on in hyp.on_side:
+        for on in hyp.side_runs:  # slices (views) where a side's curves are one run
             qs = q[on]
-            off = qs - qs.mean(axis=0)
+            off = qs - np.add.reduce(qs, axis=0) / qs.shape[0]  # the mean's own sum and division
             # the largest distance from the side's mean point (sqrt of the largest square: the same number)
-            spread = math.sqrt(float(np.max(off[:, 0] * off[:, 0] + off[:, 1] * off[:, 1])))
+            spread = math.sqrt(float(np.maximum.reduce(off[:, 0] * off[:, 0] + off[:, 1] * off[:, 1])))
             if spread >= st.divergence:
-                self._loglik[on] -= self._kappa * (r2[on] - r2[on].min()) / (2 * st.sigma**2)
-                self._loglik[on] -= self._loglik[on].max()
+                r2_on = r2[on]
+                ll = self._loglik[on] - self._kappa * (r2_on - np.minimum.reduce(r2_on)) / (2 * st.sigma**2)
+                ll -= np.maximum.reduce(ll)
+                self._loglik[on] = ll
         np.maximum(self._loglik, -60.0, out=self._loglik)
         if abs(self._log_odds) > st.decide:
             side = 1 if self._log_odds > 0 else -1
@@ -557,9 +579,8 @@ class PathHypothesesIntent:
             speed = max(float(tan[n] @ v), 0.0)
             return hyp.at(n, s_lead[n] + self._steps * speed)
 
-        hedge = present + (st.hedge_velocity * self._steps)[:, None] * v
         if self._side != 0:
-            on = np.flatnonzero(hyp.sides == self._side)
+            on = hyp.on_side[0 if self._side == 1 else 1]
             weight = np.exp(self._loglik[on])
             # the shapes that still matter (at most MIXTURE, each ≥ 1 % of the best): their rows, weighted,
             # so the rows slide from one shape to the next instead of jumping
@@ -573,15 +594,18 @@ class PathHypothesesIntent:
         else:
             ahead = along(cl)
             # the sides disagree over the horizon: the present estimate alone
-            target = 0.0 if float(np.max(np.linalg.norm(ahead - along(cr), axis=1))) >= st.divergence else 1.0
+            # the largest row distance (the largest norm is the root of the largest square, as norm sums them)
+            apart = ahead - along(cr)
+            apart *= apart
+            target = 0.0 if math.sqrt(float(np.maximum.reduce(np.add.reduce(apart, axis=1)))) >= st.divergence else 1.0
         # cross-fade between the curve's rows and the present estimate's (no step in the robot's effort)
-        self._mix = (
-            target
-            if self._mix_step >= 1.0
-            else min(max(self._mix + np.sign(target - self._mix) * self._mix_step, 0.0), 1.0)
-        )
+        if self._mix_step >= 1.0:
+            self._mix = target
+        elif target != self._mix:
+            self._mix = min(max(self._mix + math.copysign(self._mix_step, target - self._mix), 0.0), 1.0)
         if self._mix >= 1.0:
             return ahead
+        hedge = present + self._hedge_steps * v  # built only where it is used
         if self._mix <= 0.0:
             return hedge
         return self._mix * ahead + (1.0 - self._mix) * hedge
