@@ -199,3 +199,30 @@ def test_default_predictor_is_no_worse_than_the_best_tuned_baseline_on_held_out_
     assert set(res.trials).isdisjoint(model.info["baselines"]["validation_trials"])
     for h, best in res.best_baseline.items():
         assert best["name"] == "ridge" and best["gain"] > 0, (h, best)
+
+
+def test_a_scoring_stride_scores_every_predictor_on_every_nth_window(trials, tiny):
+    """``stride`` n: the model predicts at the ticks of every n-th window only (the first full history's, then
+    every n-th tick after), the same rows there as predicting every tick (the network's batches differ: float32
+    rounding), and evaluate_model scores every predictor on those ticks alone."""
+    model = train_model(trials, tiny, tiny.train)
+    t = trials[-1].trial
+    full, thin = model.predict_trial(t), model.predict_trial(t, stride=7)
+    done = np.isfinite(full).all(axis=(1, 2))
+    first = int(np.flatnonzero(done)[0])
+    scored = np.flatnonzero(np.isfinite(thin).all(axis=(1, 2)))
+    assert done[first:].all() and scored.tolist() == list(range(first, t.n_samples, 7))
+    np.testing.assert_allclose(thin[scored], full[scored], rtol=0, atol=1e-6)  # m; positions of order 1 m
+    assert np.isnan(thin[np.setdiff1d(np.arange(t.n_samples), scored)]).all()
+    every = evaluate_model(model, trials, held_out_only=False)
+    assert evaluate_model(model, trials, held_out_only=False, stride=1).to_dict() == every.to_dict()
+    res = evaluate_model(model, trials, held_out_only=False, stride=7)
+    horizon = max(res.horizons)
+    expect = 0
+    for lt in trials:
+        n = lt.trial.n_samples
+        start = int(np.flatnonzero(np.isfinite(model.predict_trial(lt.trial)).all(axis=(1, 2)))[0])
+        expect += len(range(start, max(0, n - horizon), 7))
+    assert res.n_ticks == expect < every.n_ticks
+    with pytest.raises(ValueError, match="stride"):
+        model.predict_trial(t, stride=0)

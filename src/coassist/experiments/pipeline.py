@@ -356,14 +356,15 @@ def train_and_score(
         seed=seed,
     )
     seconds = time.perf_counter() - t0
-    return str(path), seconds, None if evaluate_on is None else score_model(path, evaluate_on)
+    return str(path), seconds, None if evaluate_on is None else score_model(path, evaluate_on, ws.config.score_stride)
 
 
-def score_model(model: str | Path, datasets: list[Path]) -> Any:
-    """:func:`~coassist.intent.evaluate_model` of the saved ``model`` on every trial of ``datasets``."""
+def score_model(model: str | Path, datasets: list[Path], stride: int = 1) -> Any:
+    """:func:`~coassist.intent.evaluate_model` of the saved ``model`` on every trial of ``datasets`` (on every
+    ``stride``-th tick: ``ReproduceConfig.score_stride``)."""
     from coassist.intent import evaluate_model, load_model, load_trials
 
-    return evaluate_model(load_model(model), load_trials(datasets), held_out_only=False)
+    return evaluate_model(load_model(model), load_trials(datasets), held_out_only=False, stride=stride)
 
 
 def train_in_worker(
@@ -404,12 +405,12 @@ def train_in_worker(
     )
 
 
-def evaluate_in_worker(model: str | Path, datasets: list[Path]) -> Any:
+def evaluate_in_worker(model: str | Path, datasets: list[Path], stride: int = 1) -> Any:
     """:func:`score_model` as a job for a worker process of the run's pool, on one torch thread."""
     import torch
 
     torch.set_num_threads(1)
-    return score_model(model, datasets)
+    return score_model(model, datasets, stride)
 
 
 # ----------------------------------------------------------------------------- measures

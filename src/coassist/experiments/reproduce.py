@@ -453,7 +453,7 @@ def run_iterative_stage(
         if k == 1:
             # The skip's shrinkage is chosen for the input shift between D_k and D_{k+1}: how
             # M_0, trained on D_0, predicts on D_1 (collected with M_0 in the loop).
-            ws.submit("iterative: M0 on D1", evaluate_in_worker, model_path, [folder])
+            ws.submit("iterative: M0 on D1", evaluate_in_worker, model_path, [folder], cfg.score_stride)
         return ds
 
     def train(k, dataset, start):
@@ -477,7 +477,13 @@ def run_iterative_stage(
         criterion_horizon=50,
         progress=lambda m: say("  " + m),
     )
-    ws.submit("iterative: final model offline", evaluate_in_worker, result.models[-1], [folders[cfg.iterations]])
+    ws.submit(
+        "iterative: final model offline",
+        evaluate_in_worker,
+        result.models[-1],
+        [folders[cfg.iterations]],
+        cfg.score_stride,
+    )
     labels = ("nominal", *(f"M{k}" for k in range(cfg.iterations)))
     datasets = [it.dataset for it in result.iterations] + [result.final_dataset]
     errors = {label: measured[id(ds)] for label, ds in zip(labels, datasets)}
@@ -488,9 +494,9 @@ def run_iterative_stage(
         for it in result.iterations
     )
     final_eval = ws.result_of(
-        "iterative: final model offline", score_model, result.models[-1], [folders[cfg.iterations]]
+        "iterative: final model offline", score_model, result.models[-1], [folders[cfg.iterations]], cfg.score_stride
     )
-    shifted = ws.result_of("iterative: M0 on D1", score_model, result.models[0], [folders[1]])
+    shifted = ws.result_of("iterative: M0 on D1", score_model, result.models[0], [folders[1]], cfg.score_stride)
     return IterativeStageResult(
         run=result,
         labels=labels,

@@ -62,6 +62,10 @@ class ReproduceConfig:
     # seed 0, one day) and moves the LSTM+FC sources' cells only: force share −0.4 to −0.7 points, overshoot
     # share −4 to −11 points, inside their intervals, no verdict (docs/performance.md). 1 restores the bits.
     source_fit_stride: int = 4
+    # The ticks the simulated stages' models are scored on (e_RMS, iterative and transfer): every n-th of each test
+    # trial, model and baselines on the same ticks. 1 (every tick) in every preset but ``tiny``, the suite's, whose
+    # models see every 25th window in training too: there scoring every tick was a fifth of the run's CPU.
+    score_stride: int = 1
     # The learned sources of the in-loop ablation (experiments.source_training.LEARNED); the thesis preset
     # adds lstm-hand-alone, whose negative result docs/intent-labels.md records.
     learned_sources: tuple[str, ...] = ("ridge", "ridge-intent", "lstm-tool", "lstm-intent")
@@ -146,6 +150,7 @@ class ReproduceConfig:
             "train_stride",
             "source_stride",
             "source_fit_stride",
+            "score_stride",
             "real_stride",
             "transfer_trials",
             "test_trials",
@@ -242,6 +247,7 @@ REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry(
             transfer_epochs=1,
             train_stride=25,
             source_stride=25,
+            score_stride=25,
             transfer_trials=3,
             test_trials=2,
             new_users=(1,),

@@ -120,7 +120,9 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
         return future
 
     def evaluate(model, test: Path) -> Future:
-        return pool.submit(evaluate_in_worker, model, [test]) if pool is not None else done(score_model(model, [test]))
+        if pool is not None:
+            return pool.submit(evaluate_in_worker, model, [test], cfg.score_stride)
+        return done(score_model(model, [test], cfg.score_stride))
 
     def train(name: str, folder: Path, test: Path, init: str, epochs: int) -> Future:
         if pool is not None:

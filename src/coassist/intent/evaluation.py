@@ -109,6 +109,7 @@ def evaluate_model(
     *,
     horizons: Sequence[int] = HORIZONS,
     held_out_only: bool = True,
+    stride: int = 1,
 ) -> ModelEvaluation:
     """e_RMS and e_MAX per horizon for the model and the baselines, in m.
 
@@ -120,6 +121,8 @@ def evaluate_model(
     held_out_only : bool
         Skip trials the model was trained on (its sidecar's ``train_trials``); the
         skipped ids are listed in the result.
+    stride : score every n-th of the model's ticks (:meth:`IntentModel.predict_trial`), every predictor on the
+        same ticks (1: every tick).
 
     Returns
     -------
@@ -145,7 +148,7 @@ def evaluate_model(
     for lt in used:
         t = lt.trial
         model.check_compatible(feature_names(t.n_dof), t.meta.dt, what=f"trial {lt.id}")
-        pm = model.predict_trial(t)
+        pm = model.predict_trial(t, stride=stride)
         mask = ~np.all(np.isfinite(pm), axis=(1, 2))
         preds = {
             "model": pm,

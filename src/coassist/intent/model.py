@@ -46,7 +46,7 @@ from safetensors import SafetensorError
 from safetensors.torch import load as st_load
 from safetensors.torch import save as st_save
 
-from coassist._checks import is_real_number
+from coassist._checks import check_int, is_real_number
 from coassist._io import OutputLock, atomic_write_bytes, staged_folder
 from coassist.data import Trial
 from coassist.errors import CoassistError
@@ -198,13 +198,16 @@ class IntentModel:
         """Nothing to reset: the windowed model keeps no state between calls."""
 
     @torch.inference_mode()
-    def predict_trial(self, trial: Trial, batch_size: int = 1024) -> np.ndarray:
-        """Predictions at every tick of a trial, (T, H, d); NaN before the history is full."""
+    def predict_trial(self, trial: Trial, batch_size: int = 1024, stride: int = 1) -> np.ndarray:
+        """Predictions at every tick of a trial, (T, H, d); NaN before the history is full, and with ``stride``
+        n > 1 at every tick but those of every n-th window (the first full history's, then every n-th after)."""
         self.check_compatible(trial_features_names(trial), trial.meta.dt, what=f"trial of user {trial.meta.user!r}")
+        stride = check_int(stride, "predict_trial stride", 1)
         ws = WindowSet([trial], self.window, self.dt, need_future=False)
         self.net.eval()
         pred = np.full((trial.n_samples, self.horizon, self.n_dof), np.nan)
-        for sel in np.array_split(np.arange(len(ws)), max(1, math.ceil(len(ws) / batch_size))):
+        chosen = np.arange(0, len(ws), stride)
+        for sel in np.array_split(chosen, max(1, math.ceil(len(chosen) / batch_size))):
             out = self.net(self.scale_inputs(ws.raw_inputs(sel))).numpy()
             pose, vel = ws.anchors(sel)
             pred[ws.ends[sel]] = self.outputs_to_positions(out, pose, vel)
