@@ -80,6 +80,7 @@ import numpy as np
 from coassist._checks import check_int, check_real, is_real_number
 from coassist._io import read_hashed_json, write_hashed_json
 from coassist.interfaces import TrialContext
+from coassist.scenario.curve_search import SearchTables, search_tables
 from coassist.scenario.hand_force import HandForce
 from coassist.scenario.operator import deformed_path
 from coassist.scenario.tasks import Box, MotionPlanner, NominalPath, Task
@@ -314,7 +315,7 @@ class _Hypotheses:
         self.curves, self.row_start = np.arange(n), np.arange(n) * p
         self.flat_points, self.flat_tangents = self.points.reshape(n * p, 2), self.tangents.reshape(n * p, 2)
         self.flat_arc = self.arc.ravel()
-        self._windows: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._windows: dict[int, SearchTables] = {}
         self.on_side = (np.flatnonzero(self.sides == 1), np.flatnonzero(self.sides == -1))  # curves per side
         # each side's curves as a slice where they are one run (always but at a sharp corner): a view, not a copy
         self.side_runs: tuple[slice | np.ndarray, ...] = tuple(
@@ -333,25 +334,12 @@ class _Hypotheses:
         self.first_apart: int = int(apart[0]) if apart.size else self.points.shape[1]
         self.last_apart: int = int(apart[-1]) if apart.size else -1
 
-    def window(self, widest: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The phase search's tables for a window of ±``widest`` samples: each curve's x and y padded with
-        ``widest`` copies of its end points at either end (N·(P + 2·widest),), so the window of sample i of curve
-        n is the run of 2·widest + 1 padded samples from n·(P + 2·widest) + i and needs no clipping (the copies
-        are what a clipped index reads: the same distances, the first least of them at the same sample); each
-        curve's first padded index (N,); the window's offsets (2·widest + 1,); and the sample (within its curve)
-        each padded index stands for (N·(P + 2·widest),)."""
+    def window(self, widest: int) -> SearchTables:
+        """The phase search's tables for a window of ±``widest`` samples (:mod:`coassist.scenario.curve_search`),
+        built once per width."""
         if widest not in self._windows:
             n, p = self.points.shape[:2]
-            width = p + 2 * widest
-            local = np.minimum(np.maximum(np.arange(width) - widest, 0), p - 1)
-            flat = (self.row_start[:, None] + local[None, :]).ravel()
-            self._windows[widest] = (
-                self.flat_x[flat],
-                self.flat_y[flat],
-                np.arange(n) * width,
-                np.arange(2 * widest + 1),
-                np.tile(local, n),
-            )
+            self._windows[widest] = search_tables(self.flat_x, self.flat_y, n, p, widest)
         return self._windows[widest]
 
     def at(self, n: int, s: np.ndarray) -> np.ndarray:

@@ -66,6 +66,7 @@ import numpy as np
 from coassist._checks import check_int, check_real
 from coassist.interfaces import TrialContext
 from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate
+from coassist.scenario.curve_search import SearchTables, search_tables
 from coassist.scenario.hand_force import HandForce, HandPoint
 from coassist.scenario.path_model import PathFrame, PathModel
 from coassist.scenario.row_smoothing import RowSmoothing
@@ -275,7 +276,7 @@ class _Curves:
         for row, i in zip(self.way_padded, self.on_way.values()):
             row[: len(i)] = i
         self.way_count = np.asarray(counts, dtype=float)[:, None]
-        self._windows: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._windows: dict[int, SearchTables] = {}
         frame = PathFrame(model.nominal)
         M = max(2, int(math.ceil(frame.length / NOMINAL_STEP)) + 1)
         s = np.linspace(0.0, frame.length, M)
@@ -305,24 +306,12 @@ class _Curves:
         self.normal_list = self.nominal_normals.tolist()
         self.gap_list = self.gap.tolist()
 
-    def window(self, widest: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The phase search's tables for a window of ±``widest`` samples: each curve's x and y padded with
-        ``widest`` copies of its end points at either end (N·(G + 2·widest),), so the window of sample i of curve
-        n is the run of 2·widest + 1 padded samples from n·(G + 2·widest) + i and needs no clipping (the copies
-        are what a clipped index reads); each curve's first padded index (N,); the window's offsets (2·widest + 1,);
-        and the sample (within its curve) each padded index stands for (N·(G + 2·widest),)."""
+    def window(self, widest: int) -> SearchTables:
+        """The phase search's tables for a window of ±``widest`` samples (:mod:`coassist.scenario.curve_search`),
+        built once per width."""
         if widest not in self._windows:
             N, G = self.points.shape[:2]
-            width = G + 2 * widest
-            local = np.minimum(np.maximum(np.arange(width) - widest, 0), G - 1)  # (G + 2·widest,)
-            flat = (self.row_start[:, None] + local[None, :]).ravel()
-            self._windows[widest] = (
-                self.flat_x[flat],
-                self.flat_y[flat],
-                np.arange(N) * width,
-                np.arange(2 * widest + 1),
-                np.tile(local, N),
-            )
+            self._windows[widest] = search_tables(self.flat_x, self.flat_y, N, G, widest)
         return self._windows[widest]
 
     def along(self, n: np.ndarray, s: np.ndarray) -> np.ndarray:
