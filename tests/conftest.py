@@ -41,24 +41,28 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 # here (CI's --durations, 2 cores; a whole file where a module fixture serves several tests, or where two
 # Chromium studies must not run at once) goes, in this order, to the head of the share of the worker with the
 # fewest of these seconds so far (longest first: LPT); each share is then filled with the rest in their order.
-# Entries: (node id prefix, seconds): CI's --durations at 9959460 (fresh clone, 2 cores, two workers), a file's
-# tests summed; test_registered_entries.py's scaled by its CPU-s since (issue 44).
+# Entries: (node id prefix, seconds): --durations=0 of ./dev test's main part on a fresh clone of 2434987 (2 cores,
+# three workers, 2026-12-03), a file's tests summed. Before, the table held 9959460's two-worker figures, which put
+# the tiny run's module at 45 s and test_prefetch.py at 40 s where they now take 85 s and 72 s (issue 44).
 LONGEST_FIRST: tuple[tuple[str, float], ...] = (
-    ("tests/study/test_browser.py::", 113.1),  # two studies in Chromium, paced trials (58 s and 55 s)
-    ("tests/experiments/test_reproduce.py::", 45.0),  # the tiny preset's whole pipeline: the module fixture tiny_run
-    ("tests/experiments/test_prefetch.py::", 40.0),  # a module's shared pool
-    ("tests/study/test_page.py::", 21.6),  # two studies on the page's websocket, paced trials
-    ("tests/study/test_calibration.py::test_kill_9_during_the_block_and_during_the_fit_then_resume", 20.0),
-    ("tests/test_registered_entries.py::", 14.0),
-    ("tests/experiments/test_source_training.py::", 12.4),  # a module fixture
-    ("tests/sim/test_ray_backend.py::", 9.9),
-    ("tests/test_readme.py::test_fast_blocks_run", 9.3),
-    ("tests/sim/test_trial_runner.py::test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone", 9.2),
-    ("tests/study/test_folder.py::test_kill_9_mid_trial_then_resume_keeps_every_finished_trial_and_the_order", 8.5),
-    ("tests/play/test_browser.py::", 8.0),  # Chromium
+    ("tests/study/test_browser.py::", 122.6),  # two studies in Chromium, paced trials (~60 s each)
+    ("tests/experiments/test_reproduce.py::", 84.8),  # the tiny preset's whole pipeline: the module fixture tiny_run
+    ("tests/experiments/test_prefetch.py::", 72.3),  # a module's shared pool
+    ("tests/sim/test_ray_backend.py::", 27.5),
+    ("tests/study/test_calibration.py::test_kill_9_during_the_block_and_during_the_fit_then_resume", 23.4),
+    ("tests/study/test_page.py::", 21.9),  # two studies on the page's websocket, paced trials
+    ("tests/test_registered_entries.py::", 19.1),
+    ("tests/experiments/test_source_training.py::", 17.3),  # a module fixture
+    ("tests/play/test_browser.py::", 12.7),  # Chromium
+    ("tests/test_readme.py::test_fast_blocks_run", 10.6),
+    (
+        "tests/sim/test_trial_runner.py::test_named_intents_on_the_pool_run_in_lockstep_groups_bit_for_bit_as_alone",
+        10.5,
+    ),
+    ("tests/study/test_folder.py::test_kill_9_mid_trial_then_resume_keeps_every_finished_trial_and_the_order", 8.6),
     (
         "tests/faults/test_run_record_faults.py::test_a_kill_during_drive_mcap_never_leaves_a_trial_beside_another_runs_mcap",
-        6.0,  # its writers forked from one warm parent since (20.8 → 6.3 CPU-s)
+        4.7,
     ),
 )
 
