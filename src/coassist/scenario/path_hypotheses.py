@@ -312,7 +312,7 @@ class _Hypotheses:
         self.tangents = tan / np.linalg.norm(tan, axis=2, keepdims=True)
         self.sides = np.asarray(sides)
         n, p = self.points.shape[:2]
-        self.curves, self.row_start = np.arange(n), np.arange(n) * p
+        self.row_start = np.arange(n) * p
         self.flat_points, self.flat_tangents = self.points.reshape(n * p, 2), self.tangents.reshape(n * p, 2)
         self.flat_arc = self.arc.ravel()
         self._windows: dict[int, SearchTables] = {}
