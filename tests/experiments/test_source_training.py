@@ -41,3 +41,28 @@ def test_sources_train_alike_one_or_two_at_a_time(datasets, tmp_path):
         assert one.keys() == two.keys()
         for name in one:
             assert (one[name] == two[name]).all(), (source, name)  # bit for bit: one thread each either way
+
+
+def test_on_an_accelerator_each_source_trains_here_with_the_arguments_a_worker_gets(tmp_path, monkeypatch):
+    """Off the CPU the sources train one after the other in this process (Workspace.train), each with the
+    arguments a CPU run hands train_in_worker, and each written model is told as it comes."""
+    from coassist.experiments import pipeline
+
+    calls, told = [], []
+
+    def train(self, name, datasets, **options):
+        calls.append((name, tuple(datasets), options))
+        return tmp_path / "models" / name
+
+    monkeypatch.setattr(pipeline.Workspace, "train", train)
+    cfg = replace(REPRODUCE_PRESETS["tiny"], device="cuda", source_seeds=2)
+    ws = Workspace(cfg, tmp_path, progress=False)
+    models = train_sources(ws, [tmp_path / "D0"], on_models=lambda m: told.append(dict(m)))
+    names = [n for source in cfg.learned_sources for n in seed_names(source, cfg.source_seeds)]
+    assert [name for name, _, _ in calls] == names and sorted(models) == sorted(names)
+    assert told[0] == {} and told[-1] == models and len(told) == len(names) + 1
+    for _, datasets, options in calls:
+        assert datasets == (tmp_path / "D0",)
+        assert options["init"] == "scratch" and options["stride"] == cfg.source_stride
+        assert options["fit_stride"] == cfg.source_fit_stride and options["seed"] // 1000 == cfg.seed
+    assert len({o["seed"] for _, _, o in calls}) == cfg.source_seeds  # seed·1000 + k, k per training seed

@@ -254,55 +254,36 @@ def train_sources(
     from coassist.intent import MODEL_PRESETS
     from coassist.sim.pool import worker_pool
 
-    jobs = []
+    # each training's arguments, once: the same for ws.train (on an accelerator) and train_in_worker (on a CPU)
+    jobs: list[tuple[str, dict[str, Any]]] = []
     for source in ws.config.learned_sources:
         preset_name, label = LEARNED[source]
         epochs = ws.config.epochs if preset_name is None else MODEL_PRESETS[preset_name].train.epochs
         for k, name in enumerate(seed_names(source, ws.config.source_seeds)):
-            # training seeds seed·1000 + k: no two runs' trainings share one
-            jobs.append((name, epochs, preset_name, label, ws.config.seed * 1000 + k))
+            options: dict[str, Any] = {
+                "init": "scratch",
+                "epochs": epochs,
+                "preset_name": preset_name,
+                "label": label,
+                "stride": ws.config.source_stride,
+                "fit_stride": ws.config.source_fit_stride,
+                "seed": ws.config.seed * 1000 + k,  # training seeds seed·1000 + k: no two runs' trainings share one
+            }
+            jobs.append((name, options))
     told = on_models or (lambda models: None)
     models: dict[str, str] = {}
     if ws.config.device != "cpu":
         told({})
-        for name, epochs, preset_name, label, seed in jobs:
-            models[name] = str(
-                ws.train(
-                    name,
-                    datasets,
-                    init="scratch",
-                    epochs=epochs,
-                    preset_name=preset_name,
-                    label=label,
-                    stride=ws.config.source_stride,
-                    fit_stride=ws.config.source_fit_stride,
-                    seed=seed,
-                )
-            )
+        for name, options in jobs:
+            models[name] = str(ws.train(name, datasets, **options))
             told(dict(models))
         return models
     # the first seed of each LSTM+FC first (their cells wait for them), then the other seeds; the ridges last
-    jobs.sort(key=lambda job: (job[2] == "linear", job[4]))
+    jobs.sort(key=lambda job: (job[1]["preset_name"] == "linear", job[1]["seed"]))
     n = max(1, min(ws.config.workers if processes is None else int(processes), len(jobs)))
     # the run's pool (workers processes) unless another count is asked for: then n started here
     shared = ws.pool if processes is None else None
-    trainings = {
-        name: partial(
-            train_in_worker,
-            ws.config,
-            ws.out,
-            name,
-            datasets,
-            init="scratch",
-            epochs=epochs,
-            preset_name=preset_name,
-            label=label,
-            stride=ws.config.source_stride,
-            seed=seed,
-            fit_stride=ws.config.source_fit_stride,
-        )
-        for name, epochs, preset_name, label, seed in jobs
-    }
+    trainings = {name: partial(train_in_worker, ws.config, ws.out, name, datasets, **options) for name, options in jobs}
     if shared is None and n == 1:
         # one at a time and no pool: here, one after the other, as a one-process pool would have run them while
         # this process waited (its start, ~5 CPU-s importing numpy, scipy and torch, was all it added)
