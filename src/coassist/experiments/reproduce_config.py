@@ -64,7 +64,8 @@ class ReproduceConfig:
     source_fit_stride: int = 4
     # The ticks the simulated stages' models are scored on (e_RMS, iterative and transfer): every n-th of each test
     # trial, model and baselines on the same ticks. 1 (every tick) in every preset but ``tiny``, the suite's, whose
-    # models see every 25th window in training too: there scoring every tick was a fifth of the run's CPU.
+    # models see every 25th window in training too: there scoring every tick took 14.9 of the run's 127 profiled
+    # CPU-s (docs/performance.md).
     score_stride: int = 1
     # The learned sources of the in-loop ablation (experiments.source_training.LEARNED); the thesis preset
     # adds lstm-hand-alone, whose negative result docs/intent-labels.md records.

@@ -10,9 +10,10 @@ target against M_prev and the baselines: :func:`run_transfer` returns a
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,6 +21,9 @@ from coassist.experiments.pipeline import EVAL_HORIZONS, ITERATION_TASKS, Worksp
 from coassist.experiments.report import Claim, Section
 from coassist.experiments.reproduce_config import ReproduceConfig
 from coassist.experiments.seed_plan import transfer_seeds, trial_seed_base
+
+if TYPE_CHECKING:
+    from coassist.data import Dataset
 
 #: Predictors in the e_RMS table of each target: the models, then the baselines.
 MODELS = ("M_prev", "transfer", "finetune_all", "scratch")
@@ -208,7 +212,7 @@ def run_transfer(ws: Workspace, final_model: Path, iteration_seconds: float) -> 
     return TransferResult(Path(final_model), targets, float(iteration_seconds), cfg.transfer_trials)
 
 
-def collection_shares(datasets) -> list[float]:
+def collection_shares(datasets: Sequence[tuple[Dataset, Dataset]]) -> list[float]:
     """Each target's share of the time its collections took together: its training trials' simulated ticks over
     every tick collected (training and test trials of all targets), for Table 5.2's "collect" column.
 
