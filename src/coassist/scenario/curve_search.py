@@ -11,16 +11,34 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SearchTables", "search_tables"]
+__all__ = ["CurveSearch", "SearchTables"]
 
 #: (padded x (N·(P + 2·widest),), padded y (same), each curve's first padded index (N,), the window's offsets
 #: (2·widest + 1,), the sample within its curve each padded index stands for (N·(P + 2·widest),)).
 SearchTables = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
-def search_tables(flat_x: np.ndarray, flat_y: np.ndarray, n_curves: int, n_points: int, widest: int) -> SearchTables:
-    """The padded tables (module docstring) of N = ``n_curves`` curves of P = ``n_points`` samples each."""
-    width = n_points + 2 * widest
-    local = np.minimum(np.maximum(np.arange(width) - widest, 0), n_points - 1)  # (P + 2·widest,)
-    flat = ((np.arange(n_curves) * n_points)[:, None] + local[None, :]).ravel()
-    return flat_x[flat], flat_y[flat], np.arange(n_curves) * width, np.arange(2 * widest + 1), np.tile(local, n_curves)
+class CurveSearch:
+    """The padded tables (module docstring) of N = ``n_curves`` curves of P = ``n_points`` samples each, x and y
+    flat (``flat_x``, ``flat_y``): built once per window width and kept with the curves (the person model's are
+    shared by every trial of a person; the path hypotheses' are a trial's)."""
+
+    def __init__(self, flat_x: np.ndarray, flat_y: np.ndarray, n_curves: int, n_points: int) -> None:
+        self.flat_x, self.flat_y, self.n_curves, self.n_points = flat_x, flat_y, n_curves, n_points
+        self._tables: dict[int, SearchTables] = {}
+
+    def tables(self, widest: int) -> SearchTables:
+        """The tables of a window of ±``widest`` samples."""
+        if widest not in self._tables:
+            n, p = self.n_curves, self.n_points
+            width = p + 2 * widest
+            local = np.minimum(np.maximum(np.arange(width) - widest, 0), p - 1)  # (P + 2·widest,)
+            flat = ((np.arange(n) * p)[:, None] + local[None, :]).ravel()
+            self._tables[widest] = (
+                self.flat_x[flat],
+                self.flat_y[flat],
+                np.arange(n) * width,
+                np.arange(2 * widest + 1),
+                np.tile(local, n),
+            )
+        return self._tables[widest]

@@ -80,7 +80,7 @@ import numpy as np
 from coassist._checks import check_int, check_real, is_real_number
 from coassist._io import read_hashed_json, write_hashed_json
 from coassist.interfaces import TrialContext
-from coassist.scenario.curve_search import SearchTables, search_tables
+from coassist.scenario.curve_search import CurveSearch
 from coassist.scenario.hand_force import HandForce
 from coassist.scenario.operator import deformed_path
 from coassist.scenario.tasks import Box, MotionPlanner, NominalPath, Task
@@ -315,7 +315,7 @@ class _Hypotheses:
         self.row_start = np.arange(n) * p
         self.flat_points, self.flat_tangents = self.points.reshape(n * p, 2), self.tangents.reshape(n * p, 2)
         self.flat_arc = self.arc.ravel()
-        self._windows: dict[int, SearchTables] = {}
+        self.search = CurveSearch(self.flat_x, self.flat_y, n, p)  # the phase search's tables, per window width
         self.on_side = (np.flatnonzero(self.sides == 1), np.flatnonzero(self.sides == -1))  # curves per side
         # each side's curves as a slice where they are one run (always but at a sharp corner): a view, not a copy
         self.side_runs: tuple[slice | np.ndarray, ...] = tuple(
@@ -333,14 +333,6 @@ class _Hypotheses:
         apart = np.flatnonzero(np.any(self.points != self.points[:1], axis=(0, 2)))
         self.first_apart: int = int(apart[0]) if apart.size else self.points.shape[1]
         self.last_apart: int = int(apart[-1]) if apart.size else -1
-
-    def window(self, widest: int) -> SearchTables:
-        """The phase search's tables for a window of ±``widest`` samples (:mod:`coassist.scenario.curve_search`),
-        built once per width."""
-        if widest not in self._windows:
-            n, p = self.points.shape[:2]
-            self._windows[widest] = search_tables(self.flat_x, self.flat_y, n, p, widest)
-        return self._windows[widest]
 
     def at(self, n: int, s: np.ndarray) -> np.ndarray:
         """Points of curve n at its arc lengths s (clipped to the curve)."""
@@ -435,7 +427,7 @@ class PathHypothesesIntent:
             self._mix_step = self.dt / st.blend_time if st.blend_time > 0.0 else 1.0
             self._hedge_steps = (st.hedge_velocity * self._steps)[:, None]
             self._search_widest = widest = self._widest(self._hyp)
-            self._pad_x, self._pad_y, self._pad_first, self._window, self._pad_local = self._hyp.window(widest)
+            self._pad_x, self._pad_y, self._pad_first, self._window, self._pad_local = self._hyp.search.tables(widest)
         self._ready = True
 
     @property
@@ -510,7 +502,7 @@ class PathHypothesesIntent:
             if fast is not None:
                 return fast
         # 1. the tool's phase on every curve: its nearest point within search_window of the last one, on the
-        # curves padded with copies of their ends (:meth:`_Hypotheses.window`: what a clipped index reads)
+        # curves padded with copies of their ends (:class:`~coassist.scenario.curve_search.CurveSearch`: what a clipped index reads)
         px, py = p.tolist()
         flat = (self._pad_first + self._idx)[:, None] + self._window
         dx = self._pad_x[flat] - px

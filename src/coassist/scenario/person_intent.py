@@ -66,7 +66,7 @@ import numpy as np
 from coassist._checks import check_int, check_real
 from coassist.interfaces import TrialContext
 from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate
-from coassist.scenario.curve_search import SearchTables, search_tables
+from coassist.scenario.curve_search import CurveSearch
 from coassist.scenario.hand_force import HandForce, HandPoint
 from coassist.scenario.path_model import PathFrame, PathModel
 from coassist.scenario.row_smoothing import RowSmoothing
@@ -276,7 +276,7 @@ class _Curves:
         for row, i in zip(self.way_padded, self.on_way.values()):
             row[: len(i)] = i
         self.way_count = np.asarray(counts, dtype=float)[:, None]
-        self._windows: dict[int, SearchTables] = {}
+        self.search = CurveSearch(self.flat_x, self.flat_y, N, G)  # the phase search's tables, per window width
         frame = PathFrame(model.nominal)
         M = max(2, int(math.ceil(frame.length / NOMINAL_STEP)) + 1)
         s = np.linspace(0.0, frame.length, M)
@@ -305,14 +305,6 @@ class _Curves:
         self.nominal_list = self.nominal_points.tolist()
         self.normal_list = self.nominal_normals.tolist()
         self.gap_list = self.gap.tolist()
-
-    def window(self, widest: int) -> SearchTables:
-        """The phase search's tables for a window of ±``widest`` samples (:mod:`coassist.scenario.curve_search`),
-        built once per width."""
-        if widest not in self._windows:
-            N, G = self.points.shape[:2]
-            self._windows[widest] = search_tables(self.flat_x, self.flat_y, N, G, widest)
-        return self._windows[widest]
 
     def along(self, n: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Points of curves n (k,) at their own arc lengths s (k, H), clipped to each curve: (k, H, 2). One
@@ -433,7 +425,7 @@ class PersonPathsIntent:
             self._kappa = st.kappa * self.dt / REFERENCE_DT
             self._step_cap = st.evidence_rate * self.dt
             self._widest = max(2, int(math.ceil(st.search_window / hyp.step)))
-            self._pad_x, self._pad_y, self._pad_first, self._window, self._pad_local = hyp.window(self._widest)
+            self._pad_x, self._pad_y, self._pad_first, self._window, self._pad_local = hyp.search.tables(self._widest)
             self._window_rows = np.arange(n) * len(self._window)  # each curve's first in the window's (N·(2W + 1),)
             self._max_offset2 = st.max_offset**2
             self._divergence2 = st.divergence**2
@@ -477,7 +469,7 @@ class PersonPathsIntent:
         K, C = self._K, self._C
         v = np.array((vx, vy))
         # 2. the tool's phase on every curve: its nearest point within the search window of the last one, on the
-        # curves padded with copies of their ends (:meth:`_Curves.window`: what a clipped index reads)
+        # curves padded with copies of their ends (:class:`~coassist.scenario.curve_search.CurveSearch`: what a clipped index reads)
         # (every step below is a handful of whole-array operations: the tick's cost is their count, not their size)
         flat = (self._pad_first + self._idx)[:, None] + self._window
         dx = self._pad_x[flat] - px
