@@ -170,10 +170,11 @@ def compare_intents(
         )
     except ValueError as exc:
         fail(str(exc), 2)
+    # the numbers first: what took the simulations is kept whatever the table's formatting meets
+    atomic_write_text(out / "summary.json", json.dumps(jsonable(result.summary()), indent=1, allow_nan=True))
     table = comparison_table(result)
     console.print(table, markup=False, highlight=False)
     atomic_write_text(out / "table.md", table + "\n")
-    atomic_write_text(out / "summary.json", json.dumps(jsonable(result.summary()), indent=1, allow_nan=True))
     wrote(str(out / "table.md"))
 
 

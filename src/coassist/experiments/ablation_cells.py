@@ -182,9 +182,14 @@ class AblationResult:
         return out
 
     def seeds_of(self, world: str, obj: str, controller: str, source: str) -> list[str]:
-        """The cells of ``source``'s trainings that ran with ``controller`` (one unless the arbitrated LSTM)."""
+        """The cells of ``source``'s trainings that ran with ``controller`` (one unless the arbitrated LSTM);
+        ``source`` itself first, also where its name ends like a training's (a compare-intents label ``k2-s1``)."""
         return sorted(
-            (s for (w, o, c, s) in self.metrics if (w, o, c) == (world, obj, controller) and base_source(s) == source),
+            (
+                s
+                for (w, o, c, s) in self.metrics
+                if (w, o, c) == (world, obj, controller) and source in (s, base_source(s))
+            ),
             key=lambda s: (s != source, s),
         )
 
