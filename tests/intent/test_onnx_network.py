@@ -34,8 +34,13 @@ def windows(rng, batch: int, steps: int, features: int) -> np.ndarray:
         ),  # the lstm preset
         NetworkConfig(n_features=8, n_outputs=20, lstm_layers=1, hidden=8, fc=(8,)),
         NetworkConfig(n_features=8, n_outputs=20, lstm_layers=0, skip_inputs=10 * 8),  # the ridge as a network
+        # two hypotheses: their weights softmax(ℓ/T) move by at most |Δℓ|/(4T) = |Δℓ| at T = 0.25 for two, the
+        # logits' rounding that of a 64-term sum, times hypotheses O(1) apart: the same bound
+        NetworkConfig(
+            n_features=8, n_outputs=100, lstm_layers=2, hidden=64, fc=(64,), skip_inputs=25 * 8, hypotheses=2
+        ),
     ],
-    ids=["lstm-2x64-skip", "lstm-1x8", "linear"],
+    ids=["lstm-2x64-skip", "lstm-1x8", "linear", "lstm-2x64-skip-2-hypotheses"],
 )
 def test_outputs_equal_torch_to_float32_rounding_at_every_batch_size(config):
     steps = config.skip_inputs // config.n_features if config.skip_inputs else 25

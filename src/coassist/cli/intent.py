@@ -37,6 +37,7 @@ TRAIN_OPTIONS = {
     "network.lstm_layers": "--layers",
     "network.hidden": "--hidden",
     "network.fc": "--fc",
+    "network.hypotheses": "--hypotheses",
 }
 
 
@@ -99,6 +100,10 @@ def train(
     layers: int = typer.Option(None, help="LSTM layers (--init scratch; default: the preset's)."),
     hidden: int = typer.Option(None, help="LSTM hidden size (--init scratch)."),
     fc: str = typer.Option(None, help="Widths of the FC layers after the LSTM, comma-separated (--init scratch)."),
+    hypotheses: int = typer.Option(
+        None,
+        help="Trajectories the network predicts, with a chooser between them (--init scratch; default 1, the thesis): 2 keeps a detour's two ways apart (docs/intent-hypotheses.md).",
+    ),
     label: str = typer.Option(
         None,
         help="What the model predicts (--init scratch; default: the preset's): tool (the measured future pose, the thesis), hand_alone (the robot's own effort removed: needs trials that log u_r) or intent (the simulated operator's true intent).",
@@ -122,7 +127,12 @@ def train(
 
     if optimizer is not None:
         choose(optimizer, OPTIMIZERS, "--optimizer", "optimiser")
-    sizes = {"lstm_layers": layers, "hidden": hidden, "fc": None if fc is None else tuple(int_list(fc, "--fc"))}
+    sizes = {
+        "lstm_layers": layers,
+        "hidden": hidden,
+        "fc": None if fc is None else tuple(int_list(fc, "--fc")),
+        "hypotheses": hypotheses,
+    }
     given = [TRAIN_OPTIONS[f"network.{k}"] for k, v in sizes.items() if v is not None]
     if label is not None:
         from coassist.intent.features import LABELS

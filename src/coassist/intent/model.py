@@ -364,14 +364,17 @@ def _n_parameters(cfg: NetworkConfig) -> int:
     """Parameters of ``IntentNet(cfg)``, from its sizes alone (nothing allocated).
 
     LSTM layer l: 4h (in_l + h) weights + 8h biases (in_0 = n_features, else h); each
-    linear layer a → b: a b + b; the skip: skip_inputs · n_outputs + n_outputs.
+    linear layer a → b: a b + b (the last one's b is hypotheses · n_outputs, and with hypotheses the
+    chooser is one more, from the last one's input to hypotheses); the skip: skip_inputs · n_outputs + n_outputs.
     """
     n, h = 0, cfg.hidden
     if cfg.lstm_layers:
         for layer in range(cfg.lstm_layers):
             n += 4 * h * ((cfg.n_features if layer == 0 else h) + h) + 8 * h
-        widths = (h, *cfg.fc, cfg.n_outputs)
+        widths = (h, *cfg.fc, cfg.hypotheses * cfg.n_outputs)
         n += sum(a * b + b for a, b in zip(widths[:-1], widths[1:]))
+        if cfg.hypotheses > 1:  # the chooser
+            n += widths[-2] * cfg.hypotheses + cfg.hypotheses
     if cfg.skip_inputs:
         n += cfg.skip_inputs * cfg.n_outputs + cfg.n_outputs
     return n

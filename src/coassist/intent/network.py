@@ -8,17 +8,30 @@ LSTM 3 × 250 → FC 250 → 200 → 2·50 with SiLU between FC layers, Xavier i
 With ``lstm_layers = 0`` the network is its linear skip alone, y = W x + b on the
 flattened window: the ridge predictor in the same model format (training fits it in
 closed form, ``training.train_model``).
+
+With ``hypotheses = K > 1`` the last FC layer gives K trajectories y_k (each plus the
+skip) and a chooser (one linear layer on the last FC layer's input, which it does not
+train) their logits ℓ_k. Where the person may go round an obstacle either way, one
+trajectory fitted by MSE is the mean of the two ways, near the plan; K hypotheses keep
+the ways apart (multiple-choice learning: the loss is the best hypothesis' MSE,
+``training``). The network's output is
+
+    y = Σ_k softmax(ℓ / T)_k y_k,    T = ``choice_temperature``,
+
+the likeliest hypothesis as T → 0, the mixture's mean at T = 1; continuous in the inputs
+for every T > 0, so the rows do not jump when the likeliest way changes.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
 import torch
 from torch import nn
 
-from coassist._checks import check_int
+from coassist._checks import check_int, is_real_number
 
 __all__ = ["ACTIVATIONS", "IntentNet", "NetworkConfig"]
 
@@ -35,6 +48,8 @@ class NetworkConfig:
     skip_inputs : 0 (the thesis) or steps·n_features: adds a linear map from the flattened
     window straight to the outputs, so the LSTM+FC learns a correction on top of a linear
     predictor (initialised with the ridge solution; see ``training.build_model``).
+    hypotheses : K trajectories and a chooser (module docstring); 1 (the thesis): one.
+    choice_temperature : T of the module docstring (K > 1 only), > 0.
     """
 
     n_features: int
@@ -44,6 +59,8 @@ class NetworkConfig:
     fc: tuple[int, ...] = (200,)
     activation: str = "silu"
     skip_inputs: int = 0
+    hypotheses: int = 1
+    choice_temperature: float = 0.25
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "n_features", check_int(self.n_features, "network.n_features", 1))
@@ -62,6 +79,13 @@ class NetworkConfig:
             raise ValueError(
                 "network.lstm_layers = 0 (a linear predictor) needs the linear skip (network.skip_inputs > 0)"
             )
+        object.__setattr__(self, "hypotheses", check_int(self.hypotheses, "network.hypotheses", 1))
+        if self.hypotheses > 1 and not self.lstm_layers:
+            raise ValueError("network.hypotheses > 1 needs the LSTM (network.lstm_layers >= 1)")
+        t = self.choice_temperature
+        if not is_real_number(t) or not math.isfinite(t) or t <= 0:
+            raise ValueError(f"network.choice_temperature must be a number > 0, got {t!r}")
+        object.__setattr__(self, "choice_temperature", float(t))
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"network.activation must be one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
 
@@ -83,18 +107,21 @@ class IntentNet(nn.Module):
         self.config = config
         self.lstm: nn.LSTM | None = None
         self.head: nn.Sequential | None = None
+        self.chooser: nn.Linear | None = None
         # The layers' own default initialisation draws from torch's global generator and is
         # overwritten below: restore that generator so building a network leaves it alone.
         with torch.random.fork_rng(devices=[]):
             if config.lstm_layers:
                 self.lstm = nn.LSTM(config.n_features, config.hidden, config.lstm_layers, batch_first=True)
-                widths = (config.hidden, *config.fc, config.n_outputs)
+                widths = (config.hidden, *config.fc, config.hypotheses * config.n_outputs)
                 layers: list[nn.Module] = []
                 for i, (a, b) in enumerate(zip(widths[:-1], widths[1:])):
                     if i:
                         layers.append(ACTIVATIONS[config.activation]())
                     layers.append(nn.Linear(a, b))
                 self.head = nn.Sequential(*layers)
+                if config.hypotheses > 1:
+                    self.chooser = nn.Linear(widths[-2], config.hypotheses)
             self.skip = nn.Linear(config.skip_inputs, config.n_outputs) if config.skip_inputs else None
         self.reset_parameters(generator)
 
@@ -124,13 +151,31 @@ class IntentNet(nn.Module):
         return out[:, -1]
 
     def forward_head(self, h: torch.Tensor, x_flat: torch.Tensor | None) -> torch.Tensor:
-        """FC layers on the LSTM features (B, hidden), plus the skip on the flat window (B, steps·features)."""
+        """FC layers on the LSTM features (B, hidden), plus the skip on the flat window (B, steps·features);
+        with hypotheses, their mixture at ``choice_temperature`` (module docstring)."""
         if self.head is None:
             return self.skip(x_flat)
+        if self.chooser is not None:
+            ys, logits = self.forward_hypotheses(h, x_flat)
+            weights = torch.softmax(logits / self.config.choice_temperature, dim=1)
+            return torch.einsum("bk,bko->bo", weights, ys)
         y = self.head(h)
         if self.skip is not None:
             y = y + self.skip(x_flat)
         return y
+
+    def forward_hypotheses(self, h: torch.Tensor, x_flat: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+        """The K hypotheses (B, K, n_outputs), each plus the skip, and the chooser's logits (B, K).
+
+        The chooser reads the last FC layer's input detached: its cross-entropy trains it alone,
+        and the hypotheses' shared layers learn only from their regression."""
+        if self.head is None or self.chooser is None:
+            raise ValueError("forward_hypotheses needs network.hypotheses > 1")
+        z = self.head[:-1](h)
+        ys = self.head[-1](z).unflatten(1, (self.config.hypotheses, self.config.n_outputs))
+        if self.skip is not None:
+            ys = ys + self.skip(x_flat).unsqueeze(1)
+        return ys, self.chooser(z.detach())
 
     def lstm_parameters(self) -> list[nn.Parameter]:
         return [] if self.lstm is None else list(self.lstm.parameters())
@@ -138,12 +183,16 @@ class IntentNet(nn.Module):
     @torch.no_grad()
     def init_skip(self, weight: torch.Tensor, bias: torch.Tensor) -> None:
         """Set the linear skip to a given map (e.g. the ridge solution) and zero the last FC
-        layer, so the network starts as that linear predictor."""
+        layer, so the network starts as that linear predictor.
+
+        With hypotheses the last layer keeps its initial weights (its biases zeroed): K equal
+        hypotheses would stay equal, the best of them taking every gradient."""
         if self.skip is None:
             raise ValueError("network has no linear skip (network.skip_inputs = 0)")
         self.skip.weight.copy_(weight)
         self.skip.bias.copy_(bias)
         if self.head is not None:
             last = self.head[-1]
-            last.weight.zero_()
+            if self.chooser is None:
+                last.weight.zero_()
             last.bias.zero_()

@@ -162,11 +162,19 @@ class Preset:
     train: TrainConfig = field(default_factory=TrainConfig)
     activation: str = "silu"
     skip: bool = False  # linear skip initialised with the ridge solution
+    hypotheses: int = 1  # trajectories and a chooser (network.hypotheses); 1: the thesis' one
 
     def network(self, n_dof: int) -> NetworkConfig:
         skip = self.window.steps * 4 * n_dof if self.skip else 0
         return NetworkConfig(
-            4 * n_dof, self.window.horizon * n_dof, self.lstm_layers, self.hidden, self.fc, self.activation, skip
+            4 * n_dof,
+            self.window.horizon * n_dof,
+            self.lstm_layers,
+            self.hidden,
+            self.fc,
+            self.activation,
+            skip,
+            hypotheses=self.hypotheses,
         )
 
 

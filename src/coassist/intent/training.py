@@ -56,7 +56,9 @@ from coassist.intent.presets import Preset, TrainConfig
 from coassist.intent.trials import LabeledTrial
 
 __all__ = [
+    "CHOICE_RELAX",
     "build_model",
+    "choice_loss",
     "plot_losses",
     "train_model",
     "write_model",
@@ -211,16 +213,39 @@ class _Windows:
         return list(idx.tensor_split(max(1, math.ceil(len(self) / size))))
 
     def loss(self, sel: torch.Tensor, reduction: str = "mean", signs: torch.Tensor | None = None) -> torch.Tensor:
-        """The MSE of the windows ``sel`` (int64 on the device); ``signs`` (B, d) mirror them."""
+        """The MSE of the windows ``sel`` (int64 on the device); ``signs`` (B, d) mirror them.
+
+        A network with hypotheses in training mode: :func:`choice_loss` instead (in eval mode, the
+        MSE of its output, the mixture it predicts, comparable with a one-hypothesis network's)."""
         net = self.model.net
         if self.cached:
             sel = sel.to(self.y.device)  # no-op but on MPS, where the windows are cut on the CPU
-            pred = net.forward_head(self.h[sel], None if self.x is None else self.x[sel])
-            y = self.y[sel]
+            h, x_flat, y = self.h[sel], None if self.x is None else self.x[sel], self.y[sel]
         else:
             x, y = self.windows.batch(sel, signs)
-            pred = net(x)
-        return nn.functional.mse_loss(pred, y, reduction=reduction)
+            h, x_flat = net.lstm_features(x), x.flatten(1)
+        if net.chooser is not None and net.training:
+            return choice_loss(*net.forward_hypotheses(h, x_flat), y)
+        return nn.functional.mse_loss(net.forward_head(h, x_flat), y, reduction=reduction)
+
+
+#: The share of a batch's gradient the hypotheses that did not win get, together (relaxed winner-takes-all,
+#: Rupprecht et al. 2017, *Learning in an uncertain world*): without it a hypothesis that never wins never moves.
+CHOICE_RELAX = 0.05
+
+
+def choice_loss(ys: torch.Tensor, logits: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """Multiple-choice learning's loss: each window's best hypothesis' MSE (the others get
+    :data:`CHOICE_RELAX` of the weight), plus the chooser's cross-entropy on which one was best.
+
+    ys (B, K, O), logits (B, K), y (B, O). The chooser reads detached features
+    (:meth:`IntentNet.forward_hypotheses`), so the two terms train disjoint parameters."""
+    err = ((ys - y.unsqueeze(1)) ** 2).mean(dim=2)  # (B, K)
+    best = err.detach().argmin(dim=1)
+    k = ys.shape[1]
+    weight = torch.full_like(err, CHOICE_RELAX / (k - 1))
+    weight.scatter_(1, best.unsqueeze(1), 1.0 - CHOICE_RELAX)
+    return (weight * err).sum(dim=1).mean() + nn.functional.cross_entropy(logits, best)
 
 
 @torch.no_grad()
