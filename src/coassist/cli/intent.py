@@ -102,7 +102,7 @@ def train(
     fc: str = typer.Option(None, help="Widths of the FC layers after the LSTM, comma-separated (--init scratch)."),
     hypotheses: int = typer.Option(
         None,
-        help="Trajectories the network predicts, with a chooser between them (--init scratch; default 1, the thesis): 2 keeps a detour's two ways apart (docs/intent-hypotheses.md).",
+        help="Trajectories the network predicts, with a chooser between them (--init scratch; default 1, the thesis); 2 measured no better in the loop (docs/intent-hypotheses.md).",
     ),
     label: str = typer.Option(
         None,

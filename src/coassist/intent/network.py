@@ -10,11 +10,13 @@ flattened window: the ridge predictor in the same model format (training fits it
 closed form, ``training.train_model``).
 
 With ``hypotheses = K > 1`` the last FC layer gives K trajectories y_k (each plus the
-skip) and a chooser (one linear layer on the last FC layer's input, which it does not
-train) their logits ℓ_k. Where the person may go round an obstacle either way, one
-trajectory fitted by MSE is the mean of the two ways, near the plan; K hypotheses keep
-the ways apart (multiple-choice learning: the loss is the best hypothesis' MSE,
-``training``). The network's output is
+skip) and a chooser (one linear layer on the last FC layer's input, which its loss does
+not train) their logits ℓ_k. Where the person may go round an obstacle either way, one
+trajectory fitted by MSE is the mean of the two ways, near the plan; K hypotheses are
+meant to keep the ways apart (multiple-choice learning: the loss is the best hypothesis'
+MSE, ``training.choice_loss``). On the project's simulated data they did not: the two
+split the futures' spread, not the way round, and in the loop did no better than one
+(docs/intent-hypotheses.md). The network's output is
 
     y = Σ_k softmax(ℓ / T)_k y_k,    T = ``choice_temperature``,
 

@@ -14,7 +14,8 @@ is configuration (``TrainConfig.init``):
 A model started from another keeps its window, features, dt and scaling ranges: its
 weights only mean something on inputs scaled the same way.
 
-The loss is the MSE (eq. 5.3) on scaled targets; the learning rate decays
+The loss is the MSE (eq. 5.3) on scaled targets (a network with several hypotheses:
+:func:`choice_loss`, the best hypothesis' MSE plus its chooser's cross-entropy); the learning rate decays
 geometrically from ``lr`` to ``lr · lr_final_ratio`` over the whole run. Given the
 seed and the thread count, a run is deterministic. The library leaves torch's global
 state alone: the initial weights come from a ``torch.Generator`` seeded with ``seed``,
