@@ -18,6 +18,7 @@ from coassist.metrics import (
     peak_effort_ratio,
     precision_sigma,
     prediction_errors,
+    prediction_errors_by_horizon,
     time_to_target,
     tracking_error_rms,
 )
@@ -289,3 +290,32 @@ def test_clearance_against_hand_computation():
     assert clearance_deficit(above, closer, center, size) == pytest.approx(-0.01, abs=1e-15)
     with pytest.raises(ValueError, match="size"):
         clearance(above, center, (0.1, 0.0))
+
+
+@pytest.mark.parametrize(("t", "h", "d"), [(200, 50, 2), (70, 50, 1), (61, 50, 3), (30, 8, 2)])
+def test_prediction_errors_by_horizon_are_prediction_errors_bit_for_bit(t, h, d):
+    """Every horizon's ticks, RMS and max equal the one-horizon function's exactly (the same float operations on
+    the same elements), float32 predictions with NaN rows (unscored ticks) and a NaN inside one row included."""
+    rng = np.random.default_rng(t + h + d)
+    pose = np.cumsum(rng.normal(0, 1e-3, (t, d)), axis=0)
+    pred = (pose[:, None, :] + rng.normal(0, 2e-3, (t, h, d))).astype(np.float32)
+    pred[:5] = np.nan  # the history not yet full
+    pred[t // 2, h // 2] = np.nan  # one step of one tick: scored at the shorter horizons only
+    horizons = [k for k in (5, 10, 20, 50, h) if k <= h and k < t]
+    got = prediction_errors_by_horizon(pred, pose, horizons)
+    assert sorted(got) == sorted(set(horizons))
+    for k in horizons:
+        want = prediction_errors(pred, pose, k)
+        for field in ("tick", "rms", "max"):
+            assert np.array_equal(getattr(got[k], field), getattr(want, field)), (k, field)
+
+
+def test_prediction_errors_by_horizon_refuse_what_prediction_errors_refuses():
+    pose = np.zeros((20, 2))
+    with pytest.raises(ValueError, match="too short for a horizon of 20"):
+        prediction_errors_by_horizon(np.zeros((20, 30, 2)), pose, [5, 20])
+    with pytest.raises(ValueError, match="between 1 and the prediction's H = 10"):
+        prediction_errors_by_horizon(np.zeros((20, 10, 2)), pose, [5, 11])
+    with pytest.raises(ValueError, match="no tick has a finite prediction over the first 5 steps"):
+        prediction_errors_by_horizon(np.full((20, 10, 2), np.nan), pose, [5])
+    assert prediction_errors_by_horizon(np.zeros((20, 10, 2)), pose, []) == {}

@@ -51,6 +51,7 @@ __all__ = [
     "precision_sigma",
     "tracking_error_rms",
     "prediction_errors",
+    "prediction_errors_by_horizon",
     "time_to_target",
 ]
 
@@ -170,6 +171,43 @@ def prediction_errors(prediction: ArrayLike, pose: ArrayLike, horizon: int) -> P
     tick = np.flatnonzero(ok)
     sq = sq[ok]
     return PredictionErrors(tick=tick, rms=np.sqrt(np.mean(sq, axis=1)), max=np.sqrt(np.max(sq, axis=1)))
+
+
+def prediction_errors_by_horizon(
+    prediction: ArrayLike, pose: ArrayLike, horizons: Sequence[int]
+) -> dict[int, PredictionErrors]:
+    """:func:`prediction_errors` for several horizons of one trajectory, bit for bit, converting and checking
+    the prediction once and computing each step's squared error once (for the longest horizon).
+
+    Returns horizon → :class:`PredictionErrors`; raises what :func:`prediction_errors` raises for the first
+    horizon that cannot be scored (in the order given)."""
+    pose_arr = _as_positions(pose, "pose")
+    pred = _as_prediction(prediction, pose_arr)
+    hs = [_check_horizon(h, pred.shape[1]) for h in horizons]
+    if not hs:
+        return {}
+    t, d = pose_arr.shape
+    for n in hs:
+        if t <= n:
+            raise ValueError(f"trajectory of {t} samples is too short for a horizon of {n} samples (needs T > N)")
+    longest = max(hs)
+    # future[k, i-1] = pose[k+i] for k = 0 … T-2, NaN past the end: each horizon N reads rows k < T-N of its
+    # first N columns, which never reach the padding, so each element is prediction_errors' own.
+    padded = np.concatenate((pose_arr[1:], np.full((longest - 1, d), np.nan)))
+    future = np.moveaxis(sliding_window_view(padded, longest, axis=0), -1, 1)  # (T-1, longest, d)
+    err = pred[: t - 1, :longest, :] - future
+    sq_all = np.sum(err * err, axis=2)  # (T-1, longest)
+    out: dict[int, PredictionErrors] = {}
+    for n in hs:
+        sq = sq_all[: t - n, :n]
+        ok = np.all(np.isfinite(sq), axis=1)
+        if not np.any(ok):
+            raise ValueError(f"no tick has a finite prediction over the first {n} steps")
+        sq = sq[ok]
+        out[n] = PredictionErrors(
+            tick=np.flatnonzero(ok), rms=np.sqrt(np.mean(sq, axis=1)), max=np.sqrt(np.max(sq, axis=1))
+        )
+    return out
 
 
 def e_rms(prediction: ArrayLike, pose: ArrayLike, horizon: int) -> float:

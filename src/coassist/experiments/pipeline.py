@@ -425,20 +425,23 @@ def in_loop_errors(trials, horizons=EVAL_HORIZONS, against: str = "pose") -> dic
     simulated operator's true intent (eq. 5.6 with x_ref,h(k+i) in place of x(k+i); trials
     without one are left out).
     """
-    from coassist.metrics import prediction_errors
+    from coassist.metrics import prediction_errors_by_horizon
 
     if against not in ("pose", "intent"):
         raise ValueError(f"against must be 'pose' or 'intent', got {against!r}")
+    # each trial's errors at every horizon at once (the prediction converted and checked once), bit for bit
+    # prediction_errors' per horizon
+    per_trial = []
+    for t in trials:
+        reference = getattr(t, against)
+        if t.prediction is None or reference is None:
+            continue
+        hs = [h for h in horizons if t.prediction.shape[1] >= h]
+        per_trial.append(prediction_errors_by_horizon(t.prediction, reference, hs))
     out = {}
     for h in horizons:
-        rms, mx = [], []
-        for t in trials:
-            reference = getattr(t, against)
-            if t.prediction is None or t.prediction.shape[1] < h or reference is None:
-                continue
-            e = prediction_errors(t.prediction, reference, h)
-            rms.append(e.rms)
-            mx.append(e.max)
+        rms = [e[h].rms for e in per_trial if h in e]
+        mx = [e[h].max for e in per_trial if h in e]
         if rms:
             rms_all, max_all = np.concatenate(rms), np.concatenate(mx)
             out[h] = {

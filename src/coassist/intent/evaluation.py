@@ -36,7 +36,7 @@ from coassist.intent.features import feature_names
 from coassist.intent.kalman import KalmanCA
 from coassist.intent.model import IntentModel
 from coassist.intent.trials import LabeledTrial
-from coassist.metrics import HORIZONS, prediction_errors
+from coassist.metrics import HORIZONS, prediction_errors_by_horizon
 
 __all__ = [
     "BASELINES",
@@ -158,13 +158,13 @@ def evaluate_model(
         }
         if model.ridge is not None:
             preds["ridge"] = model.ridge.predict_trial(t)
+        scored = [h for h in horizons if not (t.n_samples <= h or np.all(mask[: t.n_samples - h]))]
         for p, pred in preds.items():
             pred = pred.copy()
             pred[mask] = np.nan  # score every predictor on the model's ticks only
-            for h in horizons:
-                if t.n_samples <= h or np.all(mask[: t.n_samples - h]):
-                    continue
-                e = prediction_errors(pred, t.pose, h)
+            errors = prediction_errors_by_horizon(pred, t.pose, scored)  # prediction_errors' per h, bit for bit
+            for h in scored:
+                e = errors[h]
                 per[p][h]["rms"].append(e.rms)
                 per[p][h]["max"].append(e.max)
                 per_trial[p][h][lt.id] = float(e.rms.mean())
