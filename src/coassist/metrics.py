@@ -155,29 +155,15 @@ def prediction_errors(prediction: ArrayLike, pose: ArrayLike, horizon: int) -> P
         On bad shapes, non-finite poses, or when no tick can be scored (T ≤ N, or
         every prediction is NaN).
     """
-    pose_arr = _as_positions(pose, "pose")
-    pred = _as_prediction(prediction, pose_arr)
-    n = _check_horizon(horizon, pred.shape[1])
-    t = pose_arr.shape[0]
-    if t <= n:
-        raise ValueError(f"trajectory of {t} samples is too short for a horizon of {n} samples (needs T > N)")
-    # future[k, i-1] = pose[k+i] for k = 0 … T-N-1: windows of N rows starting at k+1.
-    future = np.moveaxis(sliding_window_view(pose_arr[1:], n, axis=0), -1, 1)  # (T-N, N, d)
-    err = pred[: t - n, :n, :] - future
-    sq = np.sum(err * err, axis=2)  # (T-N, N): ||·||² per step
-    ok = np.all(np.isfinite(sq), axis=1)
-    if not np.any(ok):
-        raise ValueError(f"no tick has a finite prediction over the first {n} steps")
-    tick = np.flatnonzero(ok)
-    sq = sq[ok]
-    return PredictionErrors(tick=tick, rms=np.sqrt(np.mean(sq, axis=1)), max=np.sqrt(np.max(sq, axis=1)))
+    return prediction_errors_by_horizon(prediction, pose, (horizon,))[int(horizon)]
 
 
 def prediction_errors_by_horizon(
     prediction: ArrayLike, pose: ArrayLike, horizons: Sequence[int]
 ) -> dict[int, PredictionErrors]:
-    """:func:`prediction_errors` for several horizons of one trajectory, bit for bit, converting and checking
-    the prediction once and computing each step's squared error once (for the longest horizon).
+    """:func:`prediction_errors` for several horizons of one trajectory: the prediction converted and checked
+    once, each step's squared error computed once (for the longest horizon); each horizon's result is the one
+    it gets alone, bit for bit (its rows and columns of the same squared errors).
 
     Returns horizon → :class:`PredictionErrors`; raises what :func:`prediction_errors` raises for the first
     horizon that cannot be scored (in the order given)."""
