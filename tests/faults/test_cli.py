@@ -202,12 +202,18 @@ def test_train_names_options_as_typed(work):
     assert "train." not in line
     line = assert_one_line_error(run("train", work / "D", "--out", work / "m0", "--hidden", "0"), "--hidden", code=2)
     assert "network." not in line
+    line = assert_one_line_error(
+        run("train", work / "D", "--out", work / "m0", "--hypotheses", "0"), "--hypotheses", code=2
+    )
+    assert "network." not in line
     assert_one_line_error(run("train", work / "D", "--out", work / "m0", "--optimizer", "adamm"), "--optimizer")
 
 
 def test_network_sizes_only_from_scratch(work):
     res = run("train", work / "D", "--out", work / "m0", "--hidden", "8", "--init", f"resume:{work / 'm'}")
     assert_one_line_error(res, "--hidden", "--init scratch only", code=2)
+    res = run("train", work / "D", "--out", work / "m0", "--hypotheses", "2", "--init", f"transfer:{work / 'm'}")
+    assert_one_line_error(res, "--hypotheses", "--init scratch only", code=2)
 
 
 def test_sweep_names_its_option(work):
