@@ -13,7 +13,7 @@ payloads a worker sends back): run it before and after a change that must keep t
 - ``pm-lstm`` / ``pm-paths`` / ``pm-person``: the arbitrated controller with ``lstm-intent``,
   the path hypotheses or the person model, the same 24 trials, one lockstep group
   (:func:`coassist.sim.trial_runner.run_spec_lockstep`, as a worker's job);
-- ``mj-lstm`` / ``mj-person``: the MuJoCo UR5's job of that source
+- ``mj-mg`` / ``mj-lstm`` / ``mj-person``: the MuJoCo UR5's job of that source (``mj-mg``: MG's, no model)
   (:func:`coassist.experiments.ablation.mujoco_task`) for the board's cell, 24 trials; the
   person model's job first drives its 12 probe trials on the arm and fits the model there.
 
@@ -51,7 +51,7 @@ POINT_MASS = {"pm-mg": "nominal", "pm-lstm": "lstm-intent", "pm-paths": "paths",
 #: The folder under ``RUN_FOLDER/models`` that a point-mass source's cells are given: the person model's
 #: cells get its calibration draws (one person model per calibration, :mod:`coassist.scenario.calibration_draws`).
 MODEL_FOLDERS = {"person": "person-draws"}
-MUJOCO = {"mj-lstm": "lstm-intent", "mj-person": "person"}
+MUJOCO = {"mj-mg": "nominal-mg", "mj-lstm": "lstm-intent", "mj-person": "person"}
 #: Frames of a worker's job (``classify --job`` keeps the samples under one of them).
 JOB_FRAMES = ("run_spec_lockstep (", "_run_lockstep_batch (", "_drive_batch (", "calibrate_then_drive (")
 
