@@ -207,3 +207,55 @@ def test_the_person_models_mujoco_claim_needs_the_direction_with_an_interval():
             cell[k] = cell[k][:1]
     (single,) = mujoco_person_claims(one)
     assert not single.holds and "no interval" in single.evidence and "nan" not in single.evidence
+
+
+def _default_result(gain_share: float, worlds=(("point-mass", "cooperative-arbitrated"),), side_worse: float = 0.0):
+    """Both objects' cells of the default (present-held) beside MG and the oracle for each (world, controller), its
+    gains ``gain_share`` × the oracle's per trial (so both shares are ``gain_share`` exactly, and so are their
+    bootstrap bounds); ``side_worse`` [m] adds overshoot to its left-side trials only."""
+    from coassist.experiments.ablation_cells import AblationResult
+    from coassist.scenario.assistance import DEFAULT_INTENT
+
+    # eight trials (the pattern of _result twice): the bootstrap's bounds close enough to the share to test a side
+    mg_f, gain = np.tile([4.0, 5.0, 6.0, 5.0], 2), np.tile([2.0, 3.0, 3.0, 2.0], 2)
+    side = np.tile([1, -1, 1, -1], 2)
+
+    def cell(f, over):
+        return {
+            "f_rms_trials": list(f),
+            "overshoot_trials": list(over),
+            "clearance_deficit_trials": [0.0] * 8,
+            "jerk_rms": 1.0,
+            "f_rms": float(np.mean(f)),
+            "overshoot": float(np.mean(over)),
+            "side": list(side),
+        }
+
+    metrics, mg = {}, {}
+    for world, controller in worlds:
+        for obj in ("board", "heavy"):
+            mg[(world, obj)] = cell(mg_f, mg_f / 1e3)
+            metrics[(world, obj, controller, "oracle")] = cell(mg_f - gain, (mg_f - gain) / 1e3)
+            f = mg_f - gain_share * gain
+            metrics[(world, obj, controller, DEFAULT_INTENT)] = cell(f, f / 1e3 + side_worse * (side == 1))
+    return AblationResult(metrics, mg, {}, {}, {}, "x", {})
+
+
+def test_the_defaults_claims_need_less_force_and_overshoot_than_mg_with_an_interval_and_on_each_side():
+    """Issue 40's goal for every world's default: per cell where it ran, on both objects, both shares' bootstrap
+    lower bounds above zero and no side with more overshoot than MG."""
+    from coassist.experiments.ablation_report import DEFAULT_CELLS, default_claims
+
+    cells = [(w, c) for w, c, _ in DEFAULT_CELLS]
+    claims = default_claims(_default_result(0.4, cells))
+    assert [c.holds for c in claims] == [True] * len(DEFAULT_CELLS)
+    assert all("force 40 % [40, 40]" in c.evidence and "right" in c.evidence for c in claims)
+    assert "drive's default" in claims[0].text and "MuJoCo UR5" in claims[-1].text
+    assert not default_claims(_default_result(0.0))[0].holds  # the same as MG: a lower bound of 0
+    assert not default_claims(_default_result(-0.1))[0].holds  # worse than MG
+    # less overshoot than MG in all (share and its lower bound > 0), but 0.1 mm more than MG on the left (+0.4 and
+    # −0.2 mm there, −1.8 and −1.2 on the right): each side must be no worse
+    worse = _default_result(0.6, side_worse=0.0016)
+    assert worse.shares("point-mass", "board", "cooperative-arbitrated", "present-held")["overshoot"][1] > 0.0
+    assert not default_claims(worse)[0].holds
+    assert default_claims(_result(0.9, 1.0)) == []  # no cells of the default: no claim

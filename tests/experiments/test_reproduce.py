@@ -290,6 +290,24 @@ def _expected_claims(summary):
                 ok = ok and all(sd["trials"] >= 1 and sd["vs_mg"] is not None and sd["vs_mg"] <= 0.0 for sd in sides)
             where = "held-out population" if world == "held-out" else "point-mass world"
             out[f"{obj}, {where}: the person model"] = (bool(ok), [f"{jerk:.2f}× MG"])
+    # issue 40's goal for every world's default without a calibration: less force and overshoot than MG
+    # (shares' lower bounds > 0) on both objects, and no more overshoot on either side
+    for world, controller, where in (
+        ("point-mass", "cooperative", "point-mass world, the plain cooperative game"),
+        ("point-mass", "cooperative-arbitrated", "point-mass world, the arbitrated game"),
+        ("held-out", "cooperative-arbitrated", "held-out population, the arbitrated game"),
+        ("mujoco", "cooperative-arbitrated", "MuJoCo UR5, the arbitrated game"),
+    ):
+        if f"{world}/board/{controller}/present-held" not in cells:  # the tiny preset leaves MuJoCo out
+            continue
+        ok = True
+        for obj in ("board", "heavy"):
+            cell = cells[f"{world}/{obj}/{controller}/present-held"]
+            f_lo, o_lo = cell["oracle_share_force"][1], cell["oracle_share_overshoot"][1]
+            ok = ok and all(v is not None and np.isfinite(v) and v > 0.0 for v in (f_lo, o_lo))
+            sides = [cell["by_side"][s]["overshoot"] for s in ("left", "right")]
+            ok = ok and all(sd["trials"] >= 1 and sd["vs_mg"] is not None and sd["vs_mg"] <= 0.0 for sd in sides)
+        out[where] = (bool(ok), [])
     if "user_a" in summary["real"]:
         ev = summary["real"]["user_a"]
         best = ev["best_baseline"]

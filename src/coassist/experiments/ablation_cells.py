@@ -26,12 +26,14 @@ import numpy as np
 from coassist.analysis.paired import gain_share, paired_difference
 from coassist.experiments.source_training import LEARNED, seed_names
 from coassist.robot.worlds import POINT_MASS
+from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told
 
 SOURCES = (
     "nominal",
     "constant-velocity",
     "present",
+    DEFAULT_INTENT,
     "ridge",
     "ridge-intent",
     "lstm-tool",
@@ -49,7 +51,7 @@ DAMPED_SOURCES = ("paths", "oracle")
 #: The held-out population's cells (:mod:`coassist.experiments.ablation`'s docstring): the arbitrated
 #: controller with these sources.
 HELD_OUT = "held-out"
-HELD_OUT_SOURCES = ("nominal", "present", "lstm-intent", "paths", "person", "oracle")
+HELD_OUT_SOURCES = ("nominal", "present", DEFAULT_INTENT, "lstm-intent", "paths", "person", "oracle")
 #: The report's world cells, the first item of every cell key (world, object, controller, source) and
 #: the order the report's tables run in: not a list of worlds to choose from. "point-mass" and
 #: "mujoco" are worlds of coassist.robot.worlds.WORLDS by name; "held-out" is the point-mass world

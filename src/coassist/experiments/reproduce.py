@@ -86,6 +86,7 @@ from coassist.experiments.report import Claim, Section, write_report
 from coassist.experiments.reproduce_config import REPRODUCE_PRESETS, ReproduceConfig
 from coassist.experiments.seed_plan import iteration_seed, trial_seed_base
 from coassist.experiments.transfer import run_transfer, transfer_section
+from coassist.scenario.assistance import DEFAULT_INTENT
 
 __all__ = [
     "EVAL_HORIZONS",
@@ -239,13 +240,13 @@ def _beside_training(ws: Workspace, real_data: str | None, ablation_ahead: Ablat
     M_{k+1}'s training unless some is left for then. In order: the real recordings (beside
     M_0, the longest training), the application's IMP and MG pairs and the operators' calibration
     trials, then the ablation's named sources (MG's MuJoCo trials and the nominal intent, then constant
-    velocity, the present estimate and the oracle).
+    velocity, the present estimate, every world's default and the oracle).
     Whatever a short run's last training has not started is started there."""
     shares: list[Callable[[], object]] = [
         lambda: ws.submit("real recordings", real_recordings_in_worker, ws.config, ws.out, real_data),
         lambda: prefetch_model_free(ws),
         lambda: ablation_ahead({}, only=(MG_JOB, "nominal")),
-        lambda: ablation_ahead({}, only=("constant-velocity", "present", "oracle")),
+        lambda: ablation_ahead({}, only=("constant-velocity", "present", DEFAULT_INTENT, "oracle")),
     ]
     last = ws.config.iterations - 1
 

@@ -115,9 +115,10 @@ class ReproduceConfig:
     # object (application_users of the held-out population); 0 leaves them out.
     held_out_trials: int = 8
     # The sources the MuJoCo UR5 runs (empty: every source of the point-mass cells). The claims read the
-    # application's source and the person model against MG there, and the LSTM and the oracle put them in
-    # context. The full and thesis presets run every source.
-    mujoco_sources: tuple[str, ...] = ("lstm-intent", "paths", "person", "oracle")
+    # application's source, the person model and every world's default without a calibration (present-held)
+    # against MG there, and the LSTM and the oracle put them in context. The full and thesis presets run
+    # every source.
+    mujoco_sources: tuple[str, ...] = ("lstm-intent", "present-held", "paths", "person", "oracle")
     # Where the person model of the MuJoCo UR5's cells is calibrated: "mujoco", on the arm it assists, as a lab
     # would (the point-mass cells' probe trials driven there: calibration_trials per operator, 12 trials for
     # ~8 CPU-s; told the arm's rigid board, experiments.ablation.mujoco_person_filter); "point-mass", the

@@ -535,6 +535,8 @@ def _prepare(
                 "limits": config.limits.describe(),
                 "dofs": list(dofs),
                 **({} if config.scene is None else {"scene": config.scene.to_extra()}),
+                # the simulated operator's way round the obstacle (+1 left): the report's per-side figures
+                **({"intent_side": int(intent_traj.side)} if held else {}),
             },
         )
         # what build_episode tells the source (TrialContext.path, .obstacles), for the one-line statement
