@@ -343,8 +343,8 @@ def default_claims(result: AblationResult, source: str = DEFAULT_INTENT) -> list
                 "bootstrap lower bound above 0) and no more than MG on either side of the detour (issue 40)",
                 ok,
                 "; ".join(parts),
-                reason="the present estimate holds the person's position: it follows the hand rather than leading it, "
-                "and where the person turns late it helps little (docs/precision.md)",
+                reason="it follows the hand rather than leading it, so what it saves varies from person to person "
+                "and 24 trials leave a wide interval (docs/precision.md)",
             )
         )
     return claims

@@ -16,6 +16,7 @@ from coassist._checks import is_integer
 from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET
 from coassist.registry import Registry
 from coassist.robot.worlds import POINT_MASS
+from coassist.scenario.assistance import DEFAULT_INTENT
 
 #: The learned intent sources a run may train (coassist.experiments.source_training.LEARNED's names).
 LEARNED_SOURCES = ("ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone", "lstm-intent")
@@ -118,7 +119,7 @@ class ReproduceConfig:
     # application's source, the person model and every world's default without a calibration (present-held)
     # against MG there, and the LSTM and the oracle put them in context. The full and thesis presets run
     # every source.
-    mujoco_sources: tuple[str, ...] = ("lstm-intent", "present-held", "paths", "person", "oracle")
+    mujoco_sources: tuple[str, ...] = ("lstm-intent", DEFAULT_INTENT, "paths", "person", "oracle")
     # Where the person model of the MuJoCo UR5's cells is calibrated: "mujoco", on the arm it assists, as a lab
     # would (the point-mass cells' probe trials driven there: calibration_trials per operator, 12 trials for
     # ~8 CPU-s; told the arm's rigid board, experiments.ablation.mujoco_person_filter); "point-mass", the
