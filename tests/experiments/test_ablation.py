@@ -38,6 +38,9 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     assert not calibrated.settings.object_yaw  # the MuJoCo UR5's board is rigid: the hand moves with the tip
     for obj in ("board", "heavy"):
         assert len(result.pairs[("mujoco", obj)]) == len(cfg.application_users)
+        # each MuJoCo trial records the simulated operator's way round, the point-mass trial's of the same draws
+        sides = {w: dict(zip(result.pairs[(w, obj)], result.mg[(w, obj)]["side"])) for w in ("point-mass", "mujoco")}
+        assert all(sides["mujoco"][k] == sides["point-mass"][k] in (1, -1) for k in sides["mujoco"])
         for source in mujoco_sources(cfg):
             assert ("mujoco", obj, ARBITRATED, source) in result.metrics
         for controller, source in ablation_cells(cfg):
@@ -144,6 +147,20 @@ def test_each_cell_says_what_its_source_was_told():
     assert all(told_of(s).text() for s in SOURCES)  # every source of the tables has its line
 
 
+def _cell(f, over, jerk: float, side) -> dict:
+    """A cell's metrics as application_metrics gives them: per-trial f_RMS [N] and overshoot [m], their means, the
+    jerk, each trial's side of the detour."""
+    return {
+        "f_rms_trials": list(f),
+        "overshoot_trials": list(over),
+        "clearance_deficit_trials": [0.0] * len(f),
+        "jerk_rms": jerk,
+        "f_rms": float(np.mean(f)),
+        "overshoot": float(np.mean(over)),
+        "side": list(side),
+    }
+
+
 def _result(person_gain: float, jerk: float, world: str = "point-mass"):
     """One object's cells: MG, the oracle (gains 2, 3, 3 N / mm) and the person model (gains ``person_gain`` × the
     oracle's per trial), so its shares are ``person_gain`` exactly."""
@@ -151,23 +168,11 @@ def _result(person_gain: float, jerk: float, world: str = "point-mass"):
 
     mg_f, gain = np.array([4.0, 5.0, 6.0, 5.0]), np.array([2.0, 3.0, 3.0, 2.0])
     side = [1, -1, 1, -1]
-
-    def cell(f, over, j):
-        return {
-            "f_rms_trials": list(f),
-            "overshoot_trials": list(over),
-            "clearance_deficit_trials": [0.0] * 4,
-            "jerk_rms": j,
-            "f_rms": float(np.mean(f)),
-            "overshoot": float(np.mean(over)),
-            "side": side,
-        }
-
-    mg = cell(mg_f, mg_f / 1e3, 1.0)
+    mg = _cell(mg_f, mg_f / 1e3, 1.0, side)
     metrics = {
-        (world, "board", ARBITRATED, "oracle"): cell(mg_f - gain, (mg_f - gain) / 1e3, 0.9),
-        (world, "board", ARBITRATED, "person"): cell(
-            mg_f - person_gain * gain, (mg_f - person_gain * gain) / 1e3, jerk
+        (world, "board", ARBITRATED, "oracle"): _cell(mg_f - gain, (mg_f - gain) / 1e3, 0.9, side),
+        (world, "board", ARBITRATED, "person"): _cell(
+            mg_f - person_gain * gain, (mg_f - person_gain * gain) / 1e3, jerk, side
         ),
     }
     return AblationResult(metrics, {(world, "board"): mg}, {}, {}, {}, "x", {})
@@ -212,7 +217,7 @@ def test_the_person_models_mujoco_claim_needs_the_direction_with_an_interval():
 def _default_result(gain_share: float, worlds=(("point-mass", "cooperative-arbitrated"),), side_worse: float = 0.0):
     """Both objects' cells of the default (present-held) beside MG and the oracle for each (world, controller), its
     gains ``gain_share`` × the oracle's per trial (so both shares are ``gain_share`` exactly, and so are their
-    bootstrap bounds); ``side_worse`` [m] adds overshoot to its left-side trials only."""
+    bootstrap bounds, where ``side_worse`` is 0); ``side_worse`` [m] adds overshoot to its left-side trials only."""
     from coassist.experiments.ablation_cells import AblationResult
     from coassist.scenario.assistance import DEFAULT_INTENT
 
@@ -220,24 +225,13 @@ def _default_result(gain_share: float, worlds=(("point-mass", "cooperative-arbit
     mg_f, gain = np.tile([4.0, 5.0, 6.0, 5.0], 2), np.tile([2.0, 3.0, 3.0, 2.0], 2)
     side = np.tile([1, -1, 1, -1], 2)
 
-    def cell(f, over):
-        return {
-            "f_rms_trials": list(f),
-            "overshoot_trials": list(over),
-            "clearance_deficit_trials": [0.0] * 8,
-            "jerk_rms": 1.0,
-            "f_rms": float(np.mean(f)),
-            "overshoot": float(np.mean(over)),
-            "side": list(side),
-        }
-
     metrics, mg = {}, {}
     for world, controller in worlds:
         for obj in ("board", "heavy"):
-            mg[(world, obj)] = cell(mg_f, mg_f / 1e3)
-            metrics[(world, obj, controller, "oracle")] = cell(mg_f - gain, (mg_f - gain) / 1e3)
+            mg[(world, obj)] = _cell(mg_f, mg_f / 1e3, 1.0, side)
+            metrics[(world, obj, controller, "oracle")] = _cell(mg_f - gain, (mg_f - gain) / 1e3, 1.0, side)
             f = mg_f - gain_share * gain
-            metrics[(world, obj, controller, DEFAULT_INTENT)] = cell(f, f / 1e3 + side_worse * (side == 1))
+            metrics[(world, obj, controller, DEFAULT_INTENT)] = _cell(f, f / 1e3 + side_worse * (side == 1), 1.0, side)
     return AblationResult(metrics, mg, {}, {}, {}, "x", {})
 
 
