@@ -5,7 +5,9 @@
 The cells every filter change of docs/person-model.md was chosen on: the application scenario's trials on the
 validation bases 50000 and 60000 (never a report's seeds), the thesis population's operators 0–2 and the varied
 population's 0, 3, 4, 5, 7 and 8 (the two that limit-cycle with the board left out), four trials per operator,
-object and base, both objects, the arbitrated controller: 144 paired trials.
+object and base, both objects, the arbitrated controller: 144 paired trials. Each operator's person model is fitted
+to the default preset's ``person_calibration_trials`` probe trials per calibration draw (``--probe-trials N``:
+another count, into another OUT: docs/person-model.md's "Eight probe trials a person").
 
 The reference is ``coassist compare-intents --source person=person`` on each cell (MG, the oracle, the four
 calibration draws and the person model with :data:`~coassist.scenario.person_model.PERSON_FILTER`), written once
@@ -89,14 +91,21 @@ def _filter_of(recorded: str) -> PersonFilterSettings | None:
         return None
 
 
-def run_reference(out: Path, population: str, users, base: int, workers: int) -> Path:
-    """The reference cell (compare_intents with the person model); its folder."""
+def run_reference(out: Path, population: str, users, base: int, workers: int, probes: int) -> Path:
+    """The reference cell (compare_intents with the person model fitted to ``probes`` probe trials per operator and
+    draw); its folder."""
     folder = out / "ref" / f"{population}-{base}"
     if (folder / "done").exists():
         # a reference run before the default changed is another filter's: the differences would be from that one
         ran = (folder / "filter.json").read_text() if (folder / "filter.json").exists() else None
         if ran is None or _filter_of(ran) != PERSON_FILTER:
             print(f"{folder}: run with another default filter than this tree's PERSON_FILTER; delete it to redo it")
+        # (a reference from before the count was recorded had four)
+        had = int((folder / "probe_trials").read_text()) if (folder / "probe_trials").exists() else 4
+        if had != probes:
+            print(
+                f"{folder}: fitted to {had} probe trials per operator, not the {probes} asked for; delete it to redo it"
+            )
     else:
         start = time.time()
         compare_intents(
@@ -107,8 +116,10 @@ def run_reference(out: Path, population: str, users, base: int, workers: int) ->
             population=population,
             workers=workers,
             progress=False,
+            probe_trials=probes,
         )
         (folder / "filter.json").write_text(json.dumps(asdict(PERSON_FILTER), sort_keys=True))
+        (folder / "probe_trials").write_text(f"{probes}\n")
         (folder / "done").write_text(f"{time.time() - start:.0f} s wall\n")
     return folder
 
@@ -210,9 +221,18 @@ def main() -> None:
     parser.add_argument("out", type=Path)
     parser.add_argument("--variant", action="append", default=[], help="NAME='{\"field\": value}' (repeatable)")
     parser.add_argument("--workers", type=int, default=2)
+    default_probes = REPRODUCE_PRESETS["default"].person_calibration_trials
+    parser.add_argument(
+        "--probe-trials",
+        type=int,
+        default=default_probes,
+        help=f"the reference's probe trials per operator and calibration draw (default {default_probes}, the main job's)",
+    )
     parser.add_argument("--report-only", action="store_true", help="print the table of what is already run")
     parser.add_argument("--against", default="ref", help="the paired differences from this: ref or a variant's NAME")
     args = parser.parse_args()
+    if args.probe_trials < 1:
+        raise SystemExit(f"--probe-trials must be >= 1, got {args.probe_trials}")
     known = {f.name for f in fields(PersonFilterSettings)}
     variants: dict[str, dict] = {}
     for spec in args.variant:
@@ -231,7 +251,7 @@ def main() -> None:
         variants[name] = override
     if not args.report_only:
         for population, users, base in CELLS:
-            run_reference(args.out, population, users, base, args.workers)
+            run_reference(args.out, population, users, base, args.workers, args.probe_trials)
             for name, override in variants.items():
                 run_variant(args.out, name, override, population, users, base, args.workers)
             print(f"{population}-{base} done", flush=True)

@@ -84,7 +84,7 @@ def test_the_mujoco_cells_run_the_person_model_calibrated_on_the_arm(tmp_path):
     assert fn is calibrate_then_drive
     assert folder == str(tmp_path / "models" / "person-mujoco")
     point_mass = dataset_specs(**calibration_options(ws, "manual-probe"))
-    assert len(probes) == len(cfg.application_users) * cfg.calibration_trials
+    assert len(probes) == len(cfg.application_users) * cfg.person_calibration_trials
     assert [(c.world, c.controller, c.object, c.task, c.user, c.seed, c.obstacle, c.intent) for c in probes] == [
         ("mujoco", "manual-probe", "handle", s.task, s.user, s.seed, s.obstacle, "nominal") for s in point_mass
     ]

@@ -38,3 +38,22 @@ def test_draws_are_calibrations_of_their_own_trials(tmp_path):
 def test_the_config_refuses_draws_it_cannot_seed(draws):
     with pytest.raises(ValueError, match="calibration_draws"):
         replace(reproduce_config.REPRODUCE_PRESETS["default"], calibration_draws=draws)
+
+
+def test_the_probe_trials_are_counted_apart_from_the_path_hypotheses(tmp_path):
+    """The person model's probe trials per operator are ``person_calibration_trials``, the path hypotheses' MG trials
+    ``calibration_trials``; both from the same first seed, so the one that gives fewer gives the other's first."""
+    from coassist.experiments.source_training import calibration_options
+
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["default"], calibration_trials=3, person_calibration_trials=5)
+    ws = pipeline.Workspace(cfg, tmp_path, progress=False)
+    mg, probe = calibration_options(ws, "manual"), calibration_options(ws, "manual-probe")
+    assert (mg["trials"], probe["trials"]) == (3, 5) and mg["seed"] == probe["seed"]
+    assert all(o["trials"] == 5 for o in calibration_draw_options(ws, draws=3).values())
+    assert not (tmp_path / "datasets").exists()  # options only: nothing collected
+
+
+@pytest.mark.parametrize("trials", [0, 2.5])
+def test_the_config_refuses_a_probe_count_that_is_no_count(trials):
+    with pytest.raises(ValueError, match="person_calibration_trials"):
+        replace(reproduce_config.REPRODUCE_PRESETS["default"], person_calibration_trials=trials)

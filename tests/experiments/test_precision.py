@@ -51,6 +51,10 @@ def test_bad_requests_name_what_is_wrong(tmp_path):
         compare_intents({"a": "present"}, tmp_path, population="held-out")
     with pytest.raises(ValueError, match="population must be one of thesis, varied"):
         compare_intents({"a": "present"}, tmp_path, population="nobody")
+    for bad in (0, 2.5):
+        with pytest.raises(ValueError, match="probe_trials must be an integer >= 1"):
+            compare_intents({"p": "person"}, tmp_path, probe_trials=bad)
+    assert not any(tmp_path.iterdir())  # refused before anything ran
 
 
 def test_the_default_source_needs_less_force_and_overshoots_less_than_mg(tmp_path):

@@ -31,13 +31,15 @@ def _collections(cfg):
         per = len(t.tasks) * len(t.users) * len(t.objects)
         out += [(f"TL {name}", train, per * t.trials), (f"TL {name} test", test, per * t.test_trials)]
     out.append(("TL heavy", seed_plan.heavy_transfer_seed(base), n_tasks * max(1, cfg.transfer_trials // 3)))
-    out.append(("calibration", seed_plan.calibration_seed(base), cfg.calibration_trials * len(cfg.application_users)))
+    # the path hypotheses' MG trials and the person model's probe trials (draw 0) start at the same seed on purpose
+    per_user = max(cfg.calibration_trials, cfg.person_calibration_trials)
+    out.append(("calibration", seed_plan.calibration_seed(base), per_user * len(cfg.application_users)))
     for k in range(1, cfg.calibration_draws):  # the person model's further calibrations (draw 0 is the above)
         out.append(
             (
                 f"calibration draw {k}",
                 seed_plan.calibration_seed(base) + k * DRAW_SEED_STEP,
-                cfg.calibration_trials * len(cfg.application_users),
+                cfg.person_calibration_trials * len(cfg.application_users),
             )
         )
     for j in range(2):  # every controller of object j reuses the same seeds on purpose

@@ -123,6 +123,9 @@ def compare_intents(
         "thesis", help="The simulated operators: thesis or varied (the in-family population to tune on)."
     ),
     users: str = typer.Option("0,1,2", help="The operators (user indices of the population), comma-separated."),
+    probe_trials: int | None = typer.Option(
+        None, help="Probe trials per operator and calibration draw for person (default: the main job's)."
+    ),
 ) -> None:
     """Intent sources in the loop on validation seeds, paired against MG and the oracle (docs/precision.md)."""
     import json
@@ -153,8 +156,8 @@ def compare_intents(
             if label in chosen:
                 fail(f"{option} {label}: also given another controller", 2)
             chosen[label] = kind
-    for value, option in ((trials, "--trials"), (workers, "--workers")):
-        if value < 1:
+    for value, option in ((trials, "--trials"), (workers, "--workers"), (probe_trials, "--probe-trials")):
+        if value is not None and value < 1:
             fail(f"{option} must be >= 1, got {value}", 2)
     out = folder_out(out, "--out")
     try:
@@ -167,6 +170,7 @@ def compare_intents(
             workers=workers,
             population=population,
             users=operators,
+            probe_trials=probe_trials,
         )
     except ValueError as exc:
         fail(str(exc), 2)

@@ -355,8 +355,9 @@ def _mujoco_configs(cfg, obj: str, seed0: int, controller: str, intent: str) -> 
 def probe_configs(cfg) -> list:
     """The person model's calibration trials on the MuJoCo UR5 (``reproduce.mujoco_person_calibration`` =
     "mujoco"): what :func:`~coassist.experiments.source_training.calibration_options` collects in the
-    point-mass world (MG with the probe, the handle, the application's task and obstacle, ``calibration_trials``
-    per application operator, the same trial seeds: the same task and intent draws), driven on the arm."""
+    point-mass world (MG with the probe, the handle, the application's task and obstacle,
+    ``person_calibration_trials`` per application operator, the same trial seeds: the same task and intent draws),
+    driven on the arm."""
     from coassist.experiments.seed_plan import calibration_seed
     from coassist.robot.drive import DriveConfig
     from coassist.sim.collect import dataset_specs
@@ -366,7 +367,7 @@ def probe_configs(cfg) -> list:
         users=cfg.application_users,
         tasks=(cfg.application_task,),
         objects=("handle",),
-        trials=cfg.calibration_trials,
+        trials=cfg.person_calibration_trials,
         seed=calibration_seed(trial_seed_base(cfg.seed)),
         preset=cfg.application_preset,
         obstacle=OBSTACLE,

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from coassist._checks import is_integer
 from coassist.experiments.ablation_cells import ARBITRATED, DAMPED, SIDES, AblationResult
 from coassist.experiments.ablation_report import seeds_text, share_text
 from coassist.experiments.application import OBJECTS, OBSTACLE, application_metrics, pair_key
@@ -59,6 +60,7 @@ def compare_intents(
     workers: int = 2,
     progress: bool = True,
     population: str = "thesis",
+    probe_trials: int | None = None,
 ) -> AblationResult:
     """Every source of ``sources`` (label → intent: a named source, a model folder, a calibration folder or
     ``"paths"`` / ``"person"`` to use each base's fitted calibration / person models) on the validation trials
@@ -66,7 +68,9 @@ def compare_intents(
     MG and the oracle on the same trials (the arbitrated controller's; also the plain game's where a source runs
     with it: a share is measured against the oracle of its own controller, the damped one's against the arbitrated).
     ``population``: the simulated operators (:data:`TUNING_POPULATIONS`: the thesis population or ``varied``, the
-    in-family one to tune on; never ``held-out``, which only the report runs). Datasets go under ``out``. The
+    in-family one to tune on; never ``held-out``, which only the report runs). ``probe_trials``: each operator's
+    probe trials per calibration draw for ``person`` (default the main job's ``person_calibration_trials``). Datasets
+    go under ``out``. The
     result is keyed like the ablation's (world "point-mass", controller, label), the bases' trials pooled in one
     cell."""
     if not sources:
@@ -74,6 +78,8 @@ def compare_intents(
     if population not in TUNING_POPULATIONS:
         kept = " (it is kept out of everything tuned and used only to report)" if population in POPULATIONS else ""
         raise ValueError(f"population must be one of {', '.join(TUNING_POPULATIONS)}, got {population!r}{kept}")
+    if probe_trials is not None and (not is_integer(probe_trials) or probe_trials < 1):
+        raise ValueError(f"probe_trials must be an integer >= 1, got {probe_trials!r}")
     if not bases or len(set(bases)) != len(bases) or any(int(b) < 0 for b in bases):
         raise ValueError(f"bases must be distinct seeds >= 0, got {bases!r}")
     off = [b for b in bases if not VALIDATION_BASES[0] <= int(b) % RUN_SEED_STRIDE <= VALIDATION_BASES[1]]
@@ -108,6 +114,8 @@ def compare_intents(
         ablation_mujoco_trials=0,  # the comparison runs the point-mass world only
         workers=int(workers),
     )
+    if probe_trials is not None:
+        cfg = replace(cfg, person_calibration_trials=int(probe_trials))
     cells: dict[tuple[str, str, str], list] = {}
     groups: dict[tuple[str, str, str], list] = {}  # each trial's (base, operator, calibration draw)
     drawn: dict[tuple[str, str, str], set[int]] = {}  # the draws each cell's sources held

@@ -23,7 +23,7 @@ preference) to ``calibration_trials`` trials of theirs with MG and writes its ca
 told the obstacle and built on the simulated operator's own family of detours.
 
 The person model ``person`` (:mod:`coassist.scenario.person_model`) is what a lab can have:
-:func:`calibrate_person` records ``calibration_trials`` trials per operator under manual guidance
+:func:`calibrate_person` records ``person_calibration_trials`` trials per operator under manual guidance
 with the probe (controller ``manual-probe``) and fits each one's arm and paths from what an arm
 measures (no obstacle, no intent label, no family), as ``coassist calibrate`` does on a lab's trials.
 
@@ -56,7 +56,7 @@ __all__ = [
 ]
 
 #: The seeds between two calibration draws' first trials (:func:`calibrate_person`): a draw's trials (operators ×
-#: calibration_trials) stay under it, and eight draws stay inside the run's calibration block (its application
+#: person_calibration_trials) stay under it, and eight draws stay inside the run's calibration block (its application
 #: trials start 20 000 seeds on); validation bases 10 000 apart (docs/precision.md's 50000 and 60000) keep their
 #: draws apart too.
 DRAW_SEED_STEP = 1000
@@ -86,18 +86,22 @@ def seed_names(source: str, seeds: int) -> list[str]:
 
 def calibration_options(ws: Workspace, controller: str, seed: int | None = None, population: str = "thesis") -> dict:
     """The collection options of the operators' calibration trials (:meth:`Workspace.collect`): the
-    application's task, obstacle and operators, the handle, ``calibration_trials`` each, first trial seed
-    ``seed`` (default the run's :func:`~coassist.experiments.seed_plan.calibration_seed`), ``controller``
-    ("manual" for ``paths``, "manual-probe" for ``person``), operators of ``population``."""
+    application's task, obstacle and operators, the handle, first trial seed ``seed`` (default the run's
+    :func:`~coassist.experiments.seed_plan.calibration_seed`), ``controller`` ("manual" for ``paths``,
+    ``calibration_trials`` each; "manual-probe" for ``person``, ``person_calibration_trials`` each), operators of
+    ``population``."""
     from coassist.experiments.application import OBSTACLE
+    from coassist.experiments.person_calibration import PROBE_CONTROLLER
     from coassist.experiments.seed_plan import calibration_seed, trial_seed_base
 
     cfg = ws.config
+    # the probe's trials are the person model's (coassist calibrate fits its arm from them): their own count
+    trials = cfg.person_calibration_trials if controller == PROBE_CONTROLLER else cfg.calibration_trials
     return {
         "tasks": (cfg.application_task,),
         "users": cfg.application_users,
         "objects": ("handle",),
-        "trials": cfg.calibration_trials,
+        "trials": trials,
         "seed": calibration_seed(trial_seed_base(cfg.seed)) if seed is None else int(seed),
         "controller": controller,
         "preset": cfg.application_preset,
@@ -112,7 +116,7 @@ def _suffix(population: str) -> str:
 
 
 def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "thesis", draws: int = 1) -> str:
-    """Collect ``calibration_trials`` probe trials per application operator of ``population``
+    """Collect ``person_calibration_trials`` probe trials per application operator of ``population``
     (:func:`calibration_options` with ``manual-probe``), fit each one's person model
     (:func:`~coassist.scenario.person_model.fit_person`: arm and paths from what an arm measures) and
     write them into ``models/person`` (``models/person-<population>`` for another population); the folder.
