@@ -83,12 +83,16 @@ PERSON_MODEL_FILE = "person-model.json"
 #: the 0.95 mm a trial between the two). On the same cells against the filter with the 0.05 s cross-fade: overshoot
 #: −0.047 [−0.076, −0.018] mm, hand force +0.011 [+0.005, +0.017] N, jerk −0.002 [−0.004, −0.001] m/s³ (0: −0.076
 #: [−0.121, −0.031] mm, +0.023 [+0.011, +0.035] N; half the progress everywhere: −0.064 mm for +0.065 N).
+#: The rows low-passed over 0.06 s instead of 0.04 once each person gives eight probe trials (the force shares rose
+#: enough to pay for it): on the same cells, against 0.04 s, overshoot −0.019 [−0.040, +0.002] mm, hand force +0.040
+#: [+0.037, +0.043] N, jerk −0.040 [−0.045, −0.035] m/s³, every cell's force share ≥ 85 % (0.08 s: −0.085 mm, +0.054 N,
+#: −0.068 m/s³, but one cell's force share 84 %; docs/person-model.md, "Eight probe trials a person").
 PERSON_FILTER = PersonFilterSettings(
     blend_time=0.05,
     hedge_leaving=0.5,
     reaction_lead=0.06,
     object_yaw=True,
-    row_smoothing=0.04,
+    row_smoothing=0.06,
     follow_mirror=False,
     side_rule="onset",
     evidence_gap=0.005,
