@@ -116,7 +116,7 @@ def test_a_scripted_drag_in_chromium_plays_a_trial(tmp_path):
             page.mouse.move(x, y)
             page.mouse.down()
             draws0, t0 = page.evaluate("window.coassist.draws"), time.perf_counter()
-            xs, shot = [], None
+            xs, shot, prediction_pixels, shots = [], None, 0, 0
             while True:
                 f = page.evaluate("window.coassist.frame")
                 if f is None:  # the trial ended: the result replaced the frame
@@ -125,13 +125,18 @@ def test_a_scripted_drag_in_chromium_plays_a_trial(tmp_path):
                 aim = target if f["t"] > 2.9 else f["ref"]
                 x, y = page.evaluate(f"window.coassist.toPixels({aim[0]}, {aim[1]})")
                 page.mouse.move(x, y)
-                if shot is None and f["t"] > 1.6 and f["predicted"]:
+                if prediction_pixels <= 20 and shots < 5 and f["t"] > 1.6 and f["predicted"]:
                     # a prediction long enough on screen to count its pixels: on a loaded machine
-                    # the drag can pause, and the tool's prediction 0.4 s ahead then shrinks to a dot
+                    # the drag can pause, and the tool's prediction 0.4 s ahead then shrinks to a dot.
+                    # The canvas may be redrawn from a later frame between reading this one and the
+                    # screenshot (on 2026-12-04, under the suite's load, one shot had no prediction
+                    # drawn), so up to five shots are taken until one shows it.
                     tip = page.evaluate(f"window.coassist.toPixels({f['prediction'][-1][0]}, {f['prediction'][-1][1]})")
                     tool = page.evaluate(f"window.coassist.toPixels({f['x']}, {f['y']})")
                     if math.dist(tip, tool) >= 30:
                         shot = page.locator("canvas").screenshot()
+                        shots += 1
+                        prediction_pixels = colour_pixels(shot, PREDICTION_RGB)
                 if time.perf_counter() - t0 > 20:
                     raise AssertionError("the trial did not end within 20 s")
                 time.sleep(0.02)
@@ -146,7 +151,7 @@ def test_a_scripted_drag_in_chromium_plays_a_trial(tmp_path):
     assert max(xs) - start[0] > 0.4  # the drag carried the tool most of the 0.5 m path
     assert shot is not None, "the model's prediction never arrived in a frame"
     assert colour_pixels(shot, PATH_RGB) > 200
-    assert colour_pixels(shot, PREDICTION_RGB) > 20
+    assert prediction_pixels > 20, f"none of {shots} screenshots showed the prediction"
     assert fps >= 30.0, f"the page drew {fps:.1f} frames/s"
     # every pointer move the drag made was timed by the frame that answered it (the last one or two may come after
     # the trial's end): how many moves there were depends on how fast this machine runs the loop above (19 on
