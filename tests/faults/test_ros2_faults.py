@@ -195,17 +195,21 @@ class _Peer(ros._SpunNode):
 def _connect(peer_kw: dict, **cfg_kw) -> str:
     """The error Ros2World gives at connect against ``_Peer(**peer_kw)`` (it must give one).
 
-    Every error asked for here needs a message from the peer, which the world answers at once;
-    the timeout only bounds discovery, which took over 1.5 s once on CI's loaded two cores
-    ("no message on /joint_states … within 1.5 s"), so it is as long as the runs' (``_config``)."""
+    Every error asked for here needs a message from the peer, which the world answers at once (an unknown
+    frame) or once the topic's messages were all refused for ``REFUSED_AT_CONNECT`` (1 s); the timeout only
+    bounds discovery, which took over 1.5 s once on CI's loaded two cores ("no message on /joint_states …
+    within 1.5 s"), so it is as long as the runs' (``_config``), and the answer must come well before it
+    (it came at the timeout, 10.1 s, before ``REFUSED_AT_CONNECT``)."""
+    timeout = cfg_kw.pop("connect_timeout", 10.0)
     peer = _Peer(**peer_kw)
     try:
+        t0 = time.monotonic()
         with pytest.raises(ValueError) as info:
-            Ros2World(
-                Ros2Config(domain_id=DOMAIN, connect_timeout=cfg_kw.pop("connect_timeout", 10.0), **cfg_kw)
-            ).close()
+            Ros2World(Ros2Config(domain_id=DOMAIN, connect_timeout=timeout, **cfg_kw)).close()
+        waited = time.monotonic() - t0
     finally:
         peer.close()
+    assert waited < 0.5 * timeout, f"the error came after {waited:.1f} s: {info.value}"
     return str(info.value)
 
 

@@ -49,7 +49,9 @@ node publishing another pose on the topic): the robot's state is unknown, so the
 unknown frame. Refused messages are counted (``rejected_messages``) and never reach
 the tick; if nothing valid follows, the topic goes stale and the arm stops, with the
 reason in the message (``"12 message(s) on /joint_states arrived but were refused: a
-joint state needs one position and one velocity per name …"``, not "no message").
+joint state needs one position and one velocity per name …"``, not "no message"). At connect, a
+topic whose every message was refused for :data:`REFUSED_AT_CONNECT` (1 s) says so then, not at
+``connect_timeout``.
 
 Link rules, those of :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`: a wrench or a
 joint state older than ``stale_after`` [s] (wall clock since the last accepted message;
@@ -129,6 +131,11 @@ MAX_JOINT_SPEED = math.pi
 #: [rad] what two joint states of one arm may differ by beyond MAX_JOINT_SPEED · Δt: a driver's
 #: stamp a few ms off its sample at full speed (π rad/s × 3 ms); encoders resolve 1e-5 rad.
 JOINT_JUMP_TOLERANCE = 0.01
+#: [s] at connect, a topic whose every message was refused for this long (none accepted) ends the wait at
+#: once, saying why, instead of after ``connect_timeout``: a driver that sends malformed messages sends
+#: nothing else (a wrong name list, no velocities, no stamps), so waiting longer tells the user nothing more.
+#: A second leaves room for a driver whose first messages are unstamped while it starts.
+REFUSED_AT_CONNECT = 1.0
 
 
 class Ros2InputError(CoassistError, ValueError):
@@ -185,7 +192,8 @@ class Ros2World:
         self._cond = threading.Condition()
         self._js: tuple[int, np.ndarray, np.ndarray, float] | None = None  # stamp ns, q, qd, receive time
         self._wr: tuple[int, np.ndarray, float, bool] | None = None  # stamp ns, wrench, receive time, in base
-        self._refused: dict[str, tuple[int, str]] = {}  # topic -> (refused since its last good message, why)
+        # topic -> (messages refused since its last good one, why, when the first of them came [monotonic s])
+        self._refused: dict[str, tuple[int, str, float]] = {}
         self._input_error: str | None = None  # an input that cannot be used at all (a wrench's unknown frame)
         self._state_rx = math.inf  # receive time of the older input read() used (the command's state)
         self.stale_commands = 0
@@ -233,8 +241,8 @@ class Ros2World:
     def _reject(self, topic: str, why: str) -> None:
         """Drop a message on ``topic``, remembering why: a topic that goes silent for it says so."""
         self.rejected_messages += 1
-        n = self._refused.get(topic, (0, ""))[0] + 1
-        self._refused[topic] = (n, why)
+        n, _, since = self._refused.get(topic, (0, "", time.monotonic()))
+        self._refused[topic] = (n + 1, why, since)
         if self.rejected_messages == 1 or self.rejected_messages % 1000 == 0:
             log.warning(
                 "Ros2World: dropped a message on %s: %s (%d dropped so far)", topic, why, self.rejected_messages
@@ -242,7 +250,7 @@ class Ros2World:
 
     def _why_silent(self, topic: str) -> str:
         """What was wrong with the messages of ``topic`` since its last good one ("" if none came)."""
-        n, why = self._refused.get(topic, (0, ""))
+        n, why, _ = self._refused.get(topic, (0, "", 0.0))
         return f"{n} message(s) on {topic} arrived but were refused: {why}" if n else ""
 
     def _on_joint_state(self, msg: Any) -> None:
@@ -360,7 +368,15 @@ class Ros2World:
             while self._js is None or self._wr is None:
                 if self._input_error is not None:
                     raise Ros2InputError(self._input_error)
-                left = deadline - time.monotonic()
+                now = time.monotonic()
+                hopeless = [
+                    self._why_silent(t)
+                    for t, v in ((c.joint_state_topic, self._js), (c.wrench_topic, self._wr))
+                    if v is None and t in self._refused and now - self._refused[t][2] >= REFUSED_AT_CONNECT
+                ]
+                if hopeless:  # only refused messages for a second: say what is wrong now
+                    raise Ros2InputError("; ".join(hopeless) + " (nothing was moved)")
+                left = deadline - now
                 if left <= 0:
                     missing = [t for t, v in ((c.joint_state_topic, self._js), (c.wrench_topic, self._wr)) if v is None]
                     refused = [self._why_silent(t) for t in missing if self._why_silent(t)]
