@@ -12,6 +12,7 @@ from scipy import stats
 
 from coassist.analysis.paired import (
     bootstrap_interval,
+    clustered_difference,
     cohen_dz,
     cohen_dz_rows,
     gain_share,
@@ -60,6 +61,61 @@ def test_paired_difference_of_equal_differences_has_no_width():
     # d = 1, 1, 1: s_d = 0, so the interval is the mean itself (scipy's would be NaN: 0/0)
     assert paired_difference([2.0, 3.0, 4.0], [1.0, 2.0, 3.0]) == (1.0, 1.0, 1.0, 3)
     assert all(math.isnan(v) for v in paired_difference([np.nan], [1.0])[:3])
+
+
+# --------------------------------------------------------------------------- the clusters' t interval
+
+
+def test_clustered_difference_by_hand():
+    # d = 1, 3 | 2 | 6, 6, 6 (the NaN pair dropped): n = 6, d̄ = 24/6 = 4; the clusters' summed deviations
+    # −3 − 1 = −4, −2 and 2 + 2 + 2 = 6, squares 56; se² = 3/2 · 56/36 = 7/3; t(0.975, 2) = 4.302652729911275
+    a = [1.0, 3.0, 2.0, 6.0, 6.0, 6.0, np.nan]
+    b = [0.0] * 7
+    mean, lo, hi, n = clustered_difference(a, b, ["x", "x", "y", "z", "z", "z", "y"])
+    half = 4.302652729911275 * math.sqrt(7.0 / 3.0)
+    assert (mean, n) == (4.0, 6)
+    assert (lo, hi) == pytest.approx((4.0 - half, 4.0 + half), abs=1e-9)
+
+
+def test_clustered_difference_of_one_pair_per_cluster_is_the_paired_t_interval():
+    rng = np.random.default_rng(7)
+    a = rng.normal(4.5, 0.5, 18)
+    b = a + rng.normal(0.1, 0.2, 18)
+    labels = [(f"user-{k % 6}", k // 6) for k in range(18)]  # tuples, as the ablation's (person, draw)
+    assert clustered_difference(a, b, labels) == pytest.approx(paired_difference(a, b), abs=1e-12)
+
+
+def test_a_cluster_repeated_counts_once():
+    # each cluster's pair repeated 1-4 times: the clusters' interval is that of the five pairs once (the
+    # pairs' own t interval, treating the copies as independent, narrows)
+    a, b = np.array([3.0, 1.5, 2.2, 4.1, 0.7]), np.array([2.0, 1.9, 1.0, 2.5, 0.9])
+    reps = [1, 4, 2, 3, 2]
+    ar, br = np.repeat(a, reps), np.repeat(b, reps)
+    labels = np.repeat(np.arange(5), reps)
+    once = paired_difference(a, b)
+    mean, lo, hi, n = clustered_difference(ar, br, labels)
+    assert n == 12
+    # the mean is the pairs' weighted by their copies; the width is the five clusters', t with 4 df
+    assert mean == pytest.approx(float(np.mean(ar - br)), abs=1e-12)
+    d = a - b
+    w = np.array(reps, float)
+    se = math.sqrt(5 / 4 * float(np.sum((w * (d - mean)) ** 2))) / 12
+    assert (hi - lo) / 2 == pytest.approx(stats.t.ppf(0.975, 4) * se, rel=1e-12)
+    assert hi - lo > paired_difference(ar, br)[2] - paired_difference(ar, br)[1]
+    # equal copies: exactly the five pairs' paired t interval
+    eq = clustered_difference(np.repeat(a, 3), np.repeat(b, 3), np.repeat(np.arange(5), 3))
+    assert eq == pytest.approx((once[0], once[1], once[2], 15), abs=1e-12)
+
+
+def test_clustered_difference_needs_two_clusters_and_one_label_per_pair():
+    m, lo, hi, n = clustered_difference([1.0, 2.0, 4.0], [0.0, 0.0, 0.0], ["a", "a", "a"])
+    assert (m, n) == (pytest.approx(7.0 / 3.0), 3) and math.isnan(lo) and math.isnan(hi)
+    assert clustered_difference([2.0, 3.0], [1.0, 2.0], ["a", "b"]) == (1.0, 1.0, 1.0, 2)
+    assert all(math.isnan(v) for v in clustered_difference([np.nan], [1.0], ["a"])[:3])
+    with pytest.raises(ValueError, match="one label per pair"):
+        clustered_difference([1.0, 2.0], [0.0, 0.0], ["a"])
+    with pytest.raises(ValueError, match="one shape"):
+        clustered_difference([1.0, 2.0], [0.0], ["a", "b"])
 
 
 def test_bootstrap_interval_is_scipys_percentile_interval_when_every_resample_is_defined():

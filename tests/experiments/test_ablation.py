@@ -178,6 +178,38 @@ def _result(person_gain: float, jerk: float, world: str = "point-mass"):
     return AblationResult(metrics, {(world, "board"): mg}, {}, {}, {}, "x", {})
 
 
+def test_the_per_side_differences_of_a_cell_with_clusters_are_the_clusters_interval():
+    """A cell whose trials share calibrations (clusters) gives each side's difference from MG the clusters' t interval,
+    as its shares resample them whole; a cell without clusters the trials' paired t interval."""
+    from dataclasses import replace
+
+    from coassist.analysis.paired import clustered_difference, paired_difference
+    from coassist.experiments.ablation_cells import ARBITRATED
+
+    side = np.array([1, -1] * 6)
+    mg_f = np.linspace(4.0, 6.2, 12)
+    # the overshoot saved per trial: mostly its calibration's (0.6, 0.1, 0.35 mm), what its trials share
+    saved = np.repeat([0.6, 0.1, 0.35], 4) + 0.02 * np.array([1, 1, -1, -1] * 3)
+    over = (mg_f - saved) / 1e3
+    plain = _result(0.9, 1.05, world="held-out")
+    key = ("held-out", "board", ARBITRATED, "person")
+    mg = _cell(mg_f, mg_f / 1e3, 1.0, side)
+    metrics = {**plain.metrics, key: _cell(mg_f - 1.0, over, 1.0, side)}
+    labels = [("held-out-user-0", k // 4) for k in range(12)]  # three calibrations of four trials each
+    result = replace(plain, metrics=metrics, mg={("held-out", "board"): mg}, clusters={key: labels})
+    unclustered = replace(result, clusters={})
+    for s in (1, -1):
+        on = side == s
+        want = clustered_difference(over[on], (mg_f / 1e3)[on], [str(c) for c, k in zip(labels, on) if k])
+        assert result.by_side(*key, "overshoot")[s][1:] == pytest.approx(want, abs=1e-15)
+        assert unclustered.by_side(*key, "overshoot")[s][1:] == pytest.approx(
+            paired_difference(over[on], (mg_f / 1e3)[on]), abs=1e-15
+        )
+        # what a calibration's trials share counts once: three clusters (t with 2 df), not six trials (5 df)
+        width = lambda v: v[3] - v[2]  # noqa: E731
+        assert width(result.by_side(*key, "overshoot")[s]) > width(unclustered.by_side(*key, "overshoot")[s])
+
+
 def test_the_person_models_claims_follow_issue_40s_bars():
     from coassist.experiments.ablation_report import person_claims
 

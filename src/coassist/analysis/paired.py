@@ -6,6 +6,11 @@ either value is non-finite are left out.
 
 - Paired mean difference d̄ with its Student-t interval (:func:`paired_difference`):
   d̄ ± t_{n−1, (1+c)/2} · s_d / √n, from :func:`scipy.stats.ttest_rel`'s ``confidence_interval``.
+- Where pairs come in clusters that are not independent (trials sharing one calibration of the
+  person), the mean difference's cluster-robust t interval (:func:`clustered_difference`): over G
+  clusters, se² = G/(G − 1) · Σ_g (Σ_{i∈g} (d_i − d̄))² / n² (the CR1 sandwich; Cameron & Miller,
+  J. Human Resources 2015) and t with G − 1 degrees of freedom. With one pair per cluster it is the
+  paired t interval above.
 - Percentile bootstrap interval of any statistic of paired samples (:func:`bootstrap_interval`):
   :func:`scipy.stats.bootstrap` (``method="percentile"``, ``paired=True``) with the Generator
   ``np.random.default_rng(seed)``, which draws the B × n row indices as
@@ -40,6 +45,7 @@ import numpy as np
 __all__ = [
     "PairedComparison",
     "bootstrap_interval",
+    "clustered_difference",
     "cohen_dz",
     "cohen_dz_rows",
     "gain_share",
@@ -78,6 +84,42 @@ def paired_difference(a, b, confidence: float = 0.95) -> tuple[float, float, flo
     with np.errstate(divide="ignore", invalid="ignore"):
         ci = stats.ttest_rel(a[ok], b[ok]).confidence_interval(confidence)
     return mean, float(ci.low), float(ci.high), n
+
+
+def clustered_difference(a, b, clusters, confidence: float = 0.95) -> tuple[float, float, float, int]:
+    """Mean of a_i − b_i over the pairs where both are finite, and its cluster-robust Student-t interval.
+
+    ``clusters``: a label per pair (any values; compared as text, so tuples too), pairs of one label not
+    independent of each other. With G labels among the n finite pairs:
+    d̄ ± t_{G−1,(1+c)/2} · se, se² = G/(G − 1) · Σ_g (Σ_{i∈g} (d_i − d̄))² / n² (module docstring). Returns
+    (mean, low, high, n); the interval NaN with fewer than two clusters, and (d̄, d̄) when se is 0. One pair
+    per cluster gives :func:`paired_difference`'s interval (se² = s_d²/n); a cluster's pairs repeated k times
+    give the same interval as the cluster once, where the pairs' own t interval would narrow by √k.
+    """
+    from scipy import stats
+
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.shape != b.shape or a.ndim != 1:
+        raise ValueError(f"paired values need one shape (n,), got {a.shape} and {b.shape}")
+    labels = [str(c) for c in clusters]
+    if len(labels) != a.size:
+        raise ValueError(f"clusters needs one label per pair ({a.size}), got {len(labels)}")
+    ok = np.isfinite(a) & np.isfinite(b)
+    d = (a - b)[ok]
+    n = int(d.size)
+    if n == 0:
+        return math.nan, math.nan, math.nan, 0
+    mean = float(d.mean())
+    _, which = np.unique(np.asarray(labels)[ok], return_inverse=True)
+    sums = np.bincount(which, weights=d - mean)  # each cluster's summed deviation from the mean
+    G = int(sums.size)
+    if G < 2:
+        return mean, math.nan, math.nan, n
+    se = math.sqrt(G / (G - 1) * float(sums @ sums)) / n
+    if se == 0.0:
+        return mean, mean, mean, n
+    half = float(stats.t.ppf((1.0 + confidence) / 2.0, G - 1)) * se
+    return mean, mean - half, mean + half, n
 
 
 def bootstrap_interval(

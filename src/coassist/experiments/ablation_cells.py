@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from coassist.analysis.paired import gain_share, paired_difference
+from coassist.analysis.paired import clustered_difference, gain_share, paired_difference
 from coassist.experiments.source_training import LEARNED, seed_names
 from coassist.robot.worlds import POINT_MASS
 from coassist.scenario.assistance import DEFAULT_INTENT
@@ -171,15 +171,21 @@ class AblationResult:
         metric: str,
     ) -> dict[int, tuple[float, float, float, float, int]]:
         """Per side of the detour (:data:`SIDES`): (mean, paired difference from MG, its 95 % low and high,
-        trials) of ``metric`` ("overshoot" or "clearance_deficit") [m]."""
+        trials) of ``metric`` ("overshoot" or "clearance_deficit") [m]. In a cell with ``clusters`` (trials
+        sharing a calibration of the person) the interval is the clusters' (:func:`clustered_difference`), as
+        the shares' intervals resample them whole; elsewhere the trials' paired t interval."""
         x = self.metrics[(world, obj, controller, source)]
         mg = self.mg[(world, obj)]
         side = np.asarray(mg["side"])
+        labels = self.clusters.get((world, obj, controller, source))
         out = {}
         for s in SIDES:
             on = side == s
             a, b = np.asarray(x[f"{metric}_trials"], float)[on], np.asarray(mg[f"{metric}_trials"], float)[on]
-            d, lo, hi, n = paired_difference(a, b)
+            if labels is None:
+                d, lo, hi, n = paired_difference(a, b)
+            else:
+                d, lo, hi, n = clustered_difference(a, b, [str(c) for c, keep in zip(labels, on) if keep])
             out[s] = (float(np.nanmean(a)) if n else float("nan"), d, lo, hi, n)
         return out
 

@@ -182,7 +182,8 @@ def ablation_section(result: AblationResult) -> Section:
             f"The person model's cells of {where}: each operator was calibrated that many times, each on their own "
             "probe trials, and their trials go round the calibrations; the intervals of those cells resample the "
             "(operator, calibration) clusters whole, so they carry the calibration's own variance as well as the "
-            "trials'. The per-side differences from MG are over the trials alone."
+            "trials'. Their per-side differences from MG too: a t interval over those clusters (cluster-robust, "
+            "G − 1 degrees of freedom), not over the trials."
         )
     if MUJOCO_PERSON in result.models:
         s.paragraphs.append(
