@@ -55,7 +55,8 @@ def main() -> None:
         out = fn(*job)
         dt = time.process_time() - t
         total += dt
-        probes = f" (+{len(probe_configs(cfg))} probe trials)" if source == "person" else ""
+        n_probes = sum(len(probe_configs(cfg, k)) for k in range(cfg.calibration_draws))
+        probes = f" (+{n_probes} probe trials)" if source == "person" else ""
         print(
             f"{source:12s} {len(out)} trials{probes}: {dt:6.1f} CPU-s, {dt / len(out):.2f} per cell trial", flush=True
         )

@@ -29,13 +29,19 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     models["person"] = calibrate_person(ws)  # the point-mass cells' (one probe trial per operator in tiny)
     result = run_ablation(ws, models)
     assert not result.skipped
-    # the person model of the MuJoCo cells: fitted on the arm to the operator's probe trials, in its own folder
-    from coassist.scenario.person_model import read_person_model
+    # the person model of the MuJoCo cells: fitted on the arm to the operator's probe trials, in its own folder,
+    # once per calibration draw (the tiny preset's two), each trial meeting the draw of its seed
+    from coassist.scenario.calibration_draws import draw_clusters, read_draws
 
     assert "person" in mujoco_sources(cfg)
-    calibrated = read_person_model(result.models["person-mujoco"])
-    assert set(calibrated.arms) == {"user-0"} and np.isfinite(calibrated.arms["user-0"].stiffness)
-    assert not calibrated.settings.object_yaw  # the MuJoCo UR5's board is rigid: the hand moves with the tip
+    calibrated = read_draws(result.models["person-mujoco"])
+    assert len(calibrated.draws) == cfg.calibration_draws == 2
+    for draw in calibrated.draws:
+        assert set(draw.arms) == {"user-0"} and np.isfinite(draw.arms["user-0"].stiffness)
+        assert not draw.settings.object_yaw  # the MuJoCo UR5's board is rigid: the hand moves with the tip
+    assert calibrated.draws[0].arms["user-0"].stiffness != calibrated.draws[1].arms["user-0"].stiffness
+    for obj in ("board", "heavy"):
+        assert result.clusters[("mujoco", obj, ARBITRATED, "person")] == draw_clusters(result.pairs[("mujoco", obj)], 2)
     for obj in ("board", "heavy"):
         assert len(result.pairs[("mujoco", obj)]) == len(cfg.application_users)
         # each MuJoCo trial records the simulated operator's way round, the point-mass trial's of the same draws
@@ -83,11 +89,19 @@ def test_the_mujoco_cells_run_the_person_model_calibrated_on_the_arm(tmp_path):
     fn, (probes, folder, configs) = mujoco_task(ws, "person", {"person": "/point-mass/person"})
     assert fn is calibrate_then_drive
     assert folder == str(tmp_path / "models" / "person-mujoco")
-    point_mass = dataset_specs(**calibration_options(ws, "manual-probe"))
-    assert len(probes) == len(cfg.application_users) * cfg.person_calibration_trials
-    assert [(c.world, c.controller, c.object, c.task, c.user, c.seed, c.obstacle, c.intent) for c in probes] == [
-        ("mujoco", "manual-probe", "handle", s.task, s.user, s.seed, s.obstacle, "nominal") for s in point_mass
-    ]
+    # one list of probe trials per calibration draw: the point-mass cells' draws (calibration_draw_options), driven
+    # on the arm
+    from coassist.experiments.source_training import calibration_draw_options
+
+    assert cfg.calibration_draws == 4 and len(probes) == cfg.calibration_draws
+    for draw, options in zip(probes, calibration_draw_options(ws, draws=cfg.calibration_draws).values()):
+        point_mass = dataset_specs(**options)
+        assert len(draw) == len(cfg.application_users) * cfg.person_calibration_trials
+        assert [(c.world, c.controller, c.object, c.task, c.user, c.seed, c.obstacle, c.intent) for c in draw] == [
+            ("mujoco", "manual-probe", "handle", s.task, s.user, s.seed, s.obstacle, "nominal") for s in point_mass
+        ]
+    assert len({c.seed for draw in probes for c in draw}) == sum(map(len, probes))  # no trial twice
+    assert [c.seed for c in probes[0]] == [s.seed for s in dataset_specs(**calibration_options(ws, "manual-probe"))]
     _, (mg,) = mujoco_task(ws, MG_JOB, {})
     assert len(configs) == len(mg) == 2 * len(cfg.application_users) * cfg.ablation_mujoco_trials
     assert [(c.object, c.user, c.seed) for c in configs] == [(c.object, c.user, c.seed) for c in mg]

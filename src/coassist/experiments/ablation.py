@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Collection
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from coassist.experiments.ablation_cells import (
@@ -149,6 +150,8 @@ def run_ablation(
     if why is None and cfg.ablation_mujoco_trials > 0:
         _run_mujoco(ws, intents, metrics, mg, pairs, errors)
         models = {**models, **_mujoco_models(ws)}
+        if "person" in mujoco_sources(cfg):  # its calibration draws, on the arm or the point-mass world's
+            world_intents["mujoco"] = {"person": mujoco_intent(ws, "person", intents)}
     else:
         skipped["mujoco"] = why or "reproduce.ablation_mujoco_trials is 0"
     clusters = draw_clusters_of(world_intents, metrics, pairs)
@@ -352,13 +355,15 @@ def _mujoco_configs(cfg, obj: str, seed0: int, controller: str, intent: str) -> 
     ]
 
 
-def probe_configs(cfg) -> list:
+def probe_configs(cfg, draw: int = 0) -> list:
     """The person model's calibration trials on the MuJoCo UR5 (``reproduce.mujoco_person_calibration`` =
     "mujoco"): what :func:`~coassist.experiments.source_training.calibration_options` collects in the
     point-mass world (MG with the probe, the handle, the application's task and obstacle,
     ``person_calibration_trials`` per application operator, the same trial seeds: the same task and intent draws),
-    driven on the arm."""
+    driven on the arm. ``draw`` k: the point-mass world's calibration draw k, its seeds k ·
+    :data:`~coassist.experiments.source_training.DRAW_SEED_STEP` on (``reproduce.calibration_draws``)."""
     from coassist.experiments.seed_plan import calibration_seed
+    from coassist.experiments.source_training import DRAW_SEED_STEP
     from coassist.robot.drive import DriveConfig
     from coassist.sim.collect import dataset_specs
 
@@ -368,7 +373,7 @@ def probe_configs(cfg) -> list:
         tasks=(cfg.application_task,),
         objects=("handle",),
         trials=cfg.person_calibration_trials,
-        seed=calibration_seed(trial_seed_base(cfg.seed)),
+        seed=calibration_seed(trial_seed_base(cfg.seed)) + int(draw) * DRAW_SEED_STEP,
         preset=cfg.application_preset,
         obstacle=OBSTACLE,
     )
@@ -400,19 +405,36 @@ def mujoco_person_filter() -> PersonFilterSettings:
     return replace(PERSON_FILTER, object_yaw=False)
 
 
-def calibrate_then_drive(probes: list, folder: str, configs: list) -> list[tuple[dict, dict]]:
-    """A worker's MuJoCo person-model job: drive the calibration trials ``probes`` (:func:`probe_configs`), fit
-    each operator's person model (:func:`~coassist.scenario.person_model.fit_people`, as
-    :func:`~coassist.experiments.source_training.calibrate_person` does on the point-mass world's), write them
-    into ``folder`` (the intent of ``configs``) with :func:`mujoco_person_filter`, then drive ``configs`` as
-    :func:`_drive_batch` does. One job: the cells wait for their own calibration and for nothing else."""
+def calibrate_then_drive(probes: list[list], folder: str, configs: list) -> list[tuple[dict, dict]]:
+    """A worker's MuJoCo person-model job: drive the calibration trials of every draw in ``probes`` (one list
+    per calibration draw, :func:`probe_configs`; all in one lockstep batch), fit each operator's person model
+    per draw (:func:`~coassist.scenario.person_model.fit_people`, as
+    :func:`~coassist.experiments.source_training.calibrate_person` does on the point-mass world's) with
+    :func:`mujoco_person_filter`, and write them into ``folder`` (the intent of ``configs``): one draw, a
+    person-model folder; several, a calibration-draws folder (``draw-0`` …, :mod:`coassist.scenario.calibration_draws`:
+    the trial of seed s meets draw s mod K). Then drive ``configs`` as :func:`_drive_batch` does. One job: the
+    cells wait for their own calibration and for nothing else."""
     import torch
 
     from coassist.robot.drive import drive_lockstep
+    from coassist.scenario.calibration_draws import write_draws
     from coassist.scenario.person_model import fit_people, write_person_model
 
     torch.set_num_threads(1)
-    write_person_model(folder, fit_people(drive_lockstep(probes)), settings=mujoco_person_filter())
+    if not probes or not all(probes):
+        raise ValueError("calibrate_then_drive needs at least one calibration trial in every draw")
+    trials = drive_lockstep([c for draw in probes for c in draw])
+    fits, at = [], 0
+    for draw in probes:
+        fits.append(fit_people(trials[at : at + len(draw)]))
+        at += len(draw)
+    if len(fits) == 1:
+        write_person_model(folder, fits[0], settings=mujoco_person_filter())
+    else:
+        names = [f"draw-{k}" for k in range(len(fits))]
+        for name, fit in zip(names, fits):
+            write_person_model(Path(folder) / name, fit, settings=mujoco_person_filter())
+        write_draws(folder, names)
     return _drive_batch(configs)
 
 
@@ -472,7 +494,8 @@ def mujoco_task(ws: Workspace, source: str, intents: dict[str, str]) -> tuple[An
     intent = mujoco_intent(ws, source, intents)
     configs = _mujoco_job(ws.config, source, intent)
     if source == "person" and ws.config.mujoco_person_calibration == "mujoco":
-        return calibrate_then_drive, (probe_configs(ws.config), intent, configs)
+        probes = [probe_configs(ws.config, k) for k in range(ws.config.calibration_draws)]
+        return calibrate_then_drive, (probes, intent, configs)
     return _drive_batch, (configs,)
 
 

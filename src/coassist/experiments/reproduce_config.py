@@ -83,7 +83,8 @@ class ReproduceConfig:
     # person"): the person model met force >= 85 % and overshoot >= 70 % with its lower bound >= 40 % in 3 of the
     # 8 cells with 4 trials, 5 with 6, 7 with 8 and 6 with 10 (issue 40 allows a lab 10).
     person_calibration_trials: int = 8
-    # Calibrations of each operator's person model in the point-mass and held-out cells (issue 40): each on its
+    # Calibrations of each operator's person model in the point-mass, held-out and MuJoCo cells (issue 40; on the
+    # MuJoCo UR5 draw k's probe trials are the point-mass draw k's, driven on the arm): each on its
     # own person_calibration_trials probe trials, the trial of seed s meeting draw s mod calibration_draws, and the
     # person model's intervals resample the (operator, draw) clusters whole, so that they carry the calibration's
     # own variance (scenario.calibration_draws). Four: each draw meets two of an operator's eight trials per
@@ -128,8 +129,9 @@ class ReproduceConfig:
     # every source.
     mujoco_sources: tuple[str, ...] = ("lstm-intent", DEFAULT_INTENT, "paths", "person", "oracle")
     # Where the person model of the MuJoCo UR5's cells is calibrated: "mujoco", on the arm it assists, as a lab
-    # would (the point-mass cells' probe trials driven there: person_calibration_trials per operator, 24 trials in
-    # the default preset; 12 took ~8 CPU-s; told the arm's rigid board, experiments.ablation.mujoco_person_filter); "point-mass", the
+    # would (the point-mass cells' probe trials driven there: person_calibration_trials per operator and
+    # calibration draw, 24 × 4 trials in the default preset; 12 took ~8 CPU-s; told the arm's rigid board,
+    # experiments.ablation.mujoco_person_filter); "point-mass", the
     # point-mass cells' model as it is (docs/person-model.md compares them).
     mujoco_person_calibration: str = "mujoco"
     real_data: str | None = None  # folder holding user-a/ and user-b/ recordings
