@@ -59,6 +59,12 @@ __all__ = [
 ]
 
 
+def _finite_differences(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(a − b over the pairs where both are finite, which pairs those are)."""
+    ok = np.isfinite(a) & np.isfinite(b)
+    return (a - b)[ok], ok
+
+
 def paired_difference(a, b, confidence: float = 0.95) -> tuple[float, float, float, int]:
     """Mean of a_i − b_i over the pairs where both are finite, and its Student-t interval.
 
@@ -71,8 +77,7 @@ def paired_difference(a, b, confidence: float = 0.95) -> tuple[float, float, flo
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     if a.shape != b.shape:
         raise ValueError(f"paired values need the same shape, got {a.shape} and {b.shape}")
-    ok = np.isfinite(a) & np.isfinite(b)
-    d = (a - b)[ok]
+    d, ok = _finite_differences(a, b)
     n = int(d.size)
     if n == 0:
         return math.nan, math.nan, math.nan, 0
@@ -104,8 +109,7 @@ def clustered_difference(a, b, clusters, confidence: float = 0.95) -> tuple[floa
     labels = [str(c) for c in clusters]
     if len(labels) != a.size:
         raise ValueError(f"clusters needs one label per pair ({a.size}), got {len(labels)}")
-    ok = np.isfinite(a) & np.isfinite(b)
-    d = (a - b)[ok]
+    d, ok = _finite_differences(a, b)
     n = int(d.size)
     if n == 0:
         return math.nan, math.nan, math.nan, 0
