@@ -224,7 +224,7 @@ def _run(config: DriveConfig, push_at: int | None = None, wrench=(10.0, 0.0, 0.0
         flags = _flags(trial)
         # the loop held longer than the watchdog's 0.1 s (this machine, not the code): as a stall
         held = "this loop's period lasted" in (trial.meta.extra.get("stop_message") or "")
-        if not (flags & MACHINE_STALL or held) or flags & ~MACHINE_STALL or attempt == retries - 1:
+        if not (flags & MACHINE_STALL or held) or _unexplained(trial) or attempt == retries - 1:
             return trial, seen, kin, status
     raise AssertionError("unreachable")
 
@@ -233,6 +233,26 @@ def _flags(trial) -> int:
     """The trial's fault flags after its first 3 ticks (the controller's first call takes longer than a
     period: a deadline miss while the arm is still at rest, in every real-time world)."""
     return int(np.bitwise_or.reduce(trial.fault[3:]))
+
+
+#: [ticks] after a deadline miss this machine made, the loop's next command may ask for more than the arm's
+#: acceleration allows (the admittance ran on while the loop stood); the safety layer limits it and flags
+#: JOINT_ACCELERATION_LIMIT, part of the stall (./dev test's realtime part, 2026-12-04: the assistive run's only
+#: other flag with DEADLINE_MISS and DECELERATING). 25 ticks: 0.2 s, as the Franka settling test leaves out.
+STALL_AFTERMATH = 25
+
+
+def _unexplained(trial) -> int:
+    """The flags of ticks 3 on that no stall of this machine explains: any but :data:`MACHINE_STALL`'s, and
+    JOINT_ACCELERATION_LIMIT only where no deadline miss came in the :data:`STALL_AFTERMATH` ticks before.
+    Every command stays checked against the limits (``_every_command_inside_the_limits``)."""
+    f = np.asarray(trial.fault[3:], dtype=np.int64)
+    after = np.zeros(f.size, dtype=bool)
+    for k in np.flatnonzero(f & int(Fault.DEADLINE_MISS)):
+        after[k : k + STALL_AFTERMATH + 1] = True
+    out = f & ~MACHINE_STALL
+    out[after] &= ~int(Fault.JOINT_ACCELERATION_LIMIT)
+    return int(np.bitwise_or.reduce(out)) if out.size else 0
 
 
 def _mujoco(config: DriveConfig, push_at: int | None, wrench=(10.0, 0.0, 0.0)):
@@ -293,6 +313,18 @@ def _mujoco_same_push(trial, config: DriveConfig, push_at: int):
 TRACK_GAP = 1.5e-3
 
 
+def test_only_a_deadline_miss_just_before_explains_an_acceleration_limit():
+    from types import SimpleNamespace
+
+    D, A, C = int(Fault.DEADLINE_MISS), int(Fault.JOINT_ACCELERATION_LIMIT), int(Fault.DECELERATING)
+    ticks = lambda *f: SimpleNamespace(fault=np.array([0, 0, 0, *f]))  # noqa: E731 (the first 3 are left out)
+    assert _unexplained(ticks(0, D | C, 0, A, C)) == 0  # the stall, the layer slowing, the next command limited
+    assert _unexplained(ticks(A, 0, D, 0)) == A  # limited before any stall
+    assert _unexplained(ticks(D, *[0] * STALL_AFTERMATH, A)) == A  # 26 ticks after it
+    assert _unexplained(ticks(D, *[0] * (STALL_AFTERMATH - 1), A)) == 0
+    assert _unexplained(ticks(D, int(Fault.NONFINITE_STATE))) == int(Fault.NONFINITE_STATE)
+
+
 def _machine_stall(trial) -> bool:
     """A run this machine disturbed: a late tick flagged, or the stream held up past the link timeout."""
     message = trial.meta.extra.get("stop_message") or ""
@@ -328,7 +360,7 @@ def test_drives_defaults_complete_a_trial_on_the_track_of_the_mujoco_world(tmp_p
     # the simulator's hand pushed the tool round the obstacle (the thesis' bump), as MuJoCo's did
     assert np.abs(trial.wrench[:, :2]).max() > 5.0 and trial.pose[:, 1].min() < trial.pose[0, 1] - 0.03
     flags = _flags(trial)
-    assert not flags & ~MACHINE_STALL, fault_names(flags)
+    assert not _unexplained(trial), fault_names(flags)
     if not flags:
         assert abs(trial.n_samples - mj.n_samples) <= 2
         # against nobody at the handle the gap is the bump, 54 mm; a force read in the wrong frame or sign,
@@ -367,7 +399,7 @@ def test_the_assistive_controller_through_the_simulator_on_the_mujoco_track():
     assert trial.meta.extra["ended"] == "time_limit", trial.meta.extra["stop_message"]
     assert status["out_of_limits"] == 0
     flags = _flags(trial)
-    assert not flags & ~MACHINE_STALL, fault_names(flags)
+    assert not _unexplained(trial), fault_names(flags)
     _every_command_inside_the_limits(seen, kin, config.dt)
     if not flags:
         assert _track_gap(trial, mj) < 1e-3 + PUSH_TIMING
