@@ -15,7 +15,7 @@ payloads a worker sends back): run it before and after a change that must keep t
   (:func:`coassist.sim.trial_runner.run_spec_lockstep`, as a worker's job);
 - ``mj-mg`` / ``mj-lstm`` / ``mj-person``: the MuJoCo UR5's job of that source (``mj-mg``: MG's, no model)
   (:func:`coassist.experiments.ablation.mujoco_task`) for the board's cell, 24 trials; the
-  person model's job first drives its 12 probe trials on the arm and fits the model there.
+  person model's job first drives its probe trials on the arm (every calibration draw's) and fits the model there.
 
 ``io`` reads every dataset of a finished run (:func:`coassist.data.read_dataset`, as the main
 process reads each collection back) and writes every trial again to a temporary folder

@@ -473,7 +473,7 @@ def _mujoco_job(cfg, source: str, intent: str) -> list:
 
 
 #: The MuJoCo UR5's person model when it is calibrated there (``reproduce.mujoco_person_calibration``): its folder
-#: under the run's ``models``.
+#: under the run's ``models`` (a calibration-draws folder where ``reproduce.calibration_draws`` > 1).
 MUJOCO_PERSON = "person-mujoco"
 
 
