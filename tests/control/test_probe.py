@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from coassist.control.presets import PROBE, get_preset, make_controller
-from coassist.control.probe import ProbedGuidance, ProbeParameters, probe_phases, probe_signal
+from coassist.control.probe import PROBE_BLOCK, ProbedGuidance, ProbeParameters, probe_phases, probe_signal
 from coassist.interfaces import Fault, TrialContext
 from coassist.scenario.seeds import robot_rng
 
@@ -64,12 +64,18 @@ def test_the_controller_is_manual_guidance_plus_the_trials_probe():
     assert isinstance(ctrl, ProbedGuidance) and ctrl.params == PROBE
     z, ref, w = np.zeros(4), np.zeros((1, 4)), np.array([1.0, -2.0])
     ctrl.reset_for(_context(7))
-    got = np.array([ctrl.step(z, ref, ref, w).u_r for _ in range(300)])
-    t = np.arange(300) * DT
+    # past two of the blocks the controller computes the probe in (PROBE_BLOCK ticks each)
+    n = 2 * PROBE_BLOCK + 50
+    got = np.array([ctrl.step(z, ref, ref, w).u_r for _ in range(n)])
+    t = np.arange(n) * DT
     np.testing.assert_array_equal(got, probe_signal(t, PROBE, 2, probe_phases(PROBE, 7)))
-    # the same seed again: the same push; a bad input: no push at all, flagged as MG flags it
+    # the same seed again: the same push; another trial mid-block: its own push from its tick 0
     ctrl.reset_for(_context(7))
     assert np.array_equal(ctrl.step(z, ref, ref, w).u_r, got[0])
+    ctrl.reset_for(_context(8))
+    assert np.array_equal(ctrl.step(z, ref, ref, w).u_r, probe_signal(np.zeros(1), PROBE, 2, probe_phases(PROBE, 8))[0])
+    assert np.array_equal(ctrl.step(z, ref, ref, w).u_r, probe_signal(np.array([DT]), PROBE, 2, probe_phases(PROBE, 8))[0])
+    # a bad input: no push at all, flagged as MG flags it
     bad = ctrl.step(np.full(4, np.nan), ref, ref, w)
     assert np.all(bad.u_r == 0.0) and bad.fault & Fault.NONFINITE_STATE
 

@@ -158,13 +158,24 @@ class WindowIntent:
         """:func:`~coassist.interfaces.prediction_plausible` of rows (m, 2) against the tool of the row
         pushed last, written for the tick (a NaN fails every comparison, so finiteness comes with it)."""
         lim = self.plausibility.max_distance
-        dx = p[:, 0] - self._x
-        dy = p[:, 1] - self._y
-        if not (float(np.max(np.abs(dx))) <= lim and float(np.max(np.abs(dy))) <= lim):
+        if p.dtype != np.float64:  # another dtype: its own promotion against the tool's floats, column by column
+            dx = p[:, 0] - self._x
+            dy = p[:, 1] - self._y
+            if not (float(np.max(np.abs(dx))) <= lim and float(np.max(np.abs(dy))) <= lim):
+                return False
+            if p.shape[0] > 1:
+                return float(np.max(np.abs(p[1:] - p[:-1]))) <= self.max_step
+            return True
+        # the same differences and comparisons in fewer calls (this runs every tick of every run with a source
+        # of its own: issue 44): both columns' distances at once, and the ufuncs' reduce without np.max's wrapper
+        off = p - np.array((self._x, self._y))
+        np.abs(off, out=off)
+        if not np.maximum.reduce(off, axis=None) <= lim:
             return False
         if p.shape[0] > 1:
-            step = np.abs(p[1:] - p[:-1])
-            return float(np.max(step)) <= self.max_step
+            step = p[1:] - p[:-1]
+            np.abs(step, out=step)
+            return bool(np.maximum.reduce(step, axis=None) <= self.max_step)
         return True
 
 

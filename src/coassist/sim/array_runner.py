@@ -247,13 +247,20 @@ class _Batch:
                 if ok.any():
                     predicted.append((js[ok], p[ok]))
         if self.alone:
+            # each run's own source (a filter with a trial's state), one at a time; their rows then go to
+            # human_reference together, grouped by how many rows they give (elementwise: the same values)
+            answered: dict[int, tuple[list[int], list[np.ndarray]]] = {}
             for i, j in rows.alone:
                 row = (x[j, 0], x[j, 1], v[j, 0], v[j, 1], hand[j, 0], hand[j, 1], ref_pos[j, 0], ref_pos[j, 1])
                 answer, pf = self.ticks[i].predict(k, row)
                 if pf or answer is None or answer.shape[0] < self.rows_needed[i]:
                     left[j] = True
                 else:
-                    predicted.append((np.array([j]), answer[None]))
+                    js_m, ps_m = answered.setdefault(answer.shape[0], ([], []))
+                    js_m.append(j)
+                    ps_m.append(answer)
+            for js_m, ps_m in answered.values():
+                predicted.append((np.array(js_m), np.stack(ps_m)))
         # 3. the controllers' arguments (ControlTick.control_inputs) and steps
         z = np.empty((B, 4))
         x0 = rows.x0
