@@ -74,7 +74,9 @@ def test_the_controller_is_manual_guidance_plus_the_trials_probe():
     assert np.array_equal(ctrl.step(z, ref, ref, w).u_r, got[0])
     ctrl.reset_for(_context(8))
     assert np.array_equal(ctrl.step(z, ref, ref, w).u_r, probe_signal(np.zeros(1), PROBE, 2, probe_phases(PROBE, 8))[0])
-    assert np.array_equal(ctrl.step(z, ref, ref, w).u_r, probe_signal(np.array([DT]), PROBE, 2, probe_phases(PROBE, 8))[0])
+    assert np.array_equal(
+        ctrl.step(z, ref, ref, w).u_r, probe_signal(np.array([DT]), PROBE, 2, probe_phases(PROBE, 8))[0]
+    )
     # a bad input: no push at all, flagged as MG flags it
     bad = ctrl.step(np.full(4, np.nan), ref, ref, w)
     assert np.all(bad.u_r == 0.0) and bad.fault & Fault.NONFINITE_STATE

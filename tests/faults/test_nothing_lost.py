@@ -492,6 +492,43 @@ def test_collect_with_other_options_does_not_reuse_a_partial_folder(tmp_path):
     assert read_dataset(out).trials[0].meta.task == "linear"
 
 
+def test_a_collection_loaded_as_written_is_the_dataset_read_back(tmp_path):
+    """``collect_dataset(read=True)`` hands over the trials it wrote instead of reading them back (issue 44): the
+    same dataset as ``read_dataset`` of its folder, bit for bit, whether it simulated every trial, continued an
+    interrupted run (those trials come from their files) or found the collection complete."""
+    from coassist.data import DatasetWriter
+    from coassist.sim.collect import collect_dataset
+
+    def same(a, b) -> bool:
+        return (
+            (a.id, a.files, a.skipped) == (b.id, b.files, b.skipped)
+            and a.manifest == b.manifest
+            and len(a.trials) == len(b.trials)
+            and all(x.equals(y) for x, y in zip(a.trials, b.trials))
+        )
+
+    out = tmp_path / "D"
+    loaded = collect_dataset(out, workers=1, progress=False, read=True, **COLLECT)
+    assert same(loaded, read_dataset(out)) and len(loaded) == 4
+    assert same(collect_dataset(out, workers=1, progress=False, read=True, **COLLECT), loaded)  # complete: read
+    # an interrupted writer's two trials, then a writer of the same collection adds the rest: two from their
+    # files, two as written
+    again = tmp_path / "E"
+    with DatasetWriter(again, "E", n_trials=4, key="k") as w:
+        w.add(1, loaded.trials[1])
+        w.add(3, loaded.trials[3])
+    with DatasetWriter(again, "E", n_trials=4, key="k", keep=True) as w:
+        assert w.resumed == [1, 3]
+        w.add(0, loaded.trials[0])
+        w.add(2, loaded.trials[2])
+        with pytest.raises(RuntimeError, match="before finish"):
+            w.dataset()
+        w.finish()
+        resumed = w.dataset()
+    assert same(resumed, read_dataset(again))
+    assert resumed.trials[0] is loaded.trials[0] and resumed.trials[1] is not loaded.trials[1]
+
+
 def test_collect_checks_the_output_before_simulating(tmp_path):
     (tmp_path / "afile").write_text("x")
     res = CliRunner().invoke(app, ["collect", "--out", str(tmp_path / "afile" / "sub"), "--trials", "1"])

@@ -92,7 +92,6 @@ class Workspace:
         A collection :meth:`prefetch` started with the same options is waited for, not run
         again (the same trials bit for bit: the same jobs); one started under this name with
         other options is let finish, then replaced by the one asked for."""
-        from coassist.data import read_dataset
         from coassist.sim.collect import collect_dataset
 
         options = self._spec_options(
@@ -107,8 +106,9 @@ class Workspace:
                 return written[1].result()
             with contextlib.suppress(Exception):  # another collection under this name: let it end, then replace it
                 written[1].result()
-        folder = collect_dataset(
-            self.out / "datasets" / name,
+        folder = self.out / "datasets" / name
+        return folder, collect_dataset(
+            folder,
             dataset_id=name,
             workers=self.config.workers,
             progress=self.progress,
@@ -116,9 +116,9 @@ class Workspace:
             lockstep=self.config.lockstep,
             pool=self.pool,
             groups=groups,
+            read=True,
             **options,
         )
-        return folder, read_dataset(folder)
 
     def prefetch(
         self,
@@ -152,7 +152,6 @@ class Workspace:
         trials bit for bit: named intents are exact in any grouping and ONNX Runtime's kernels
         are batch-invariant (:func:`~coassist.sim.trial_runner.run_spec_lockstep`); a collection whose
         model would run on torch, whose rounding depends on the batch, is not deferred."""
-        from coassist.data import read_dataset
         from coassist.sim.collect import collect_dataset, dataset_specs
         from coassist.sim.trial_runner import submit_trials
 
@@ -179,17 +178,13 @@ class Workspace:
 
         def write() -> None:
             # Written as the jobs end, in this thread: the stage that asks for it later finds it
-            # on disk and read back, instead of writing ~20 datasets in a row while the pool idles.
+            # written and loaded, instead of writing ~20 datasets in a row while the pool idles.
             try:
-                folder = collect_dataset(
-                    self.out / "datasets" / name,
-                    dataset_id=name,
-                    progress=False,
-                    overwrite=True,
-                    submitted=submitted,
-                    **options,
+                folder = self.out / "datasets" / name
+                dataset = collect_dataset(
+                    folder, dataset_id=name, progress=False, overwrite=True, submitted=submitted, read=True, **options
                 )
-                written.set_result((folder, read_dataset(folder)))
+                written.set_result((folder, dataset))
             except BaseException as exc:  # handed to collect(), which raises it
                 written.set_exception(exc)
 
@@ -203,7 +198,6 @@ class Workspace:
         one-worker :func:`~coassist.sim.trial_runner.run_trials` keeps it: a group holds its trials until it ends.
         Names not deferred (there is a pool, or a model on torch) are left to their :meth:`collect`; the other
         deferred collections stay deferred: a stage that times its own collections runs only those."""
-        from coassist.data import read_dataset
         from coassist.sim.collect import collect_dataset, dataset_specs
         from coassist.sim.pool import SubmittedTrials, trial_payload
         from coassist.sim.trial_runner import NAMED_GROUP, run_spec_lockstep
@@ -229,16 +223,18 @@ class Workspace:
                 done: Future = Future()
                 done.set_result([trial_payload(t) for t in trials[start : start + len(specs)]])
                 start += len(specs)
-                folder = collect_dataset(
-                    self.out / "datasets" / name,
+                folder = self.out / "datasets" / name
+                dataset = collect_dataset(
+                    folder,
                     dataset_id=name,
                     progress=False,
                     overwrite=True,
                     submitted=SubmittedTrials(specs, [(done, tuple(range(len(specs))))]),
+                    read=True,
                     **options,
                 )
                 written: Future = Future()
-                written.set_result((folder, read_dataset(folder)))
+                written.set_result((folder, dataset))
                 self._pending[f"dataset:{name}"] = ((options, groups), written)
 
     def submit(self, key: str, fn: Callable[..., Any], *args: Any) -> Future | None:

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from coassist._checks import check_int
-from coassist.data import DatasetWriter
+from coassist.data import Dataset, DatasetWriter, read_dataset
 from coassist.data.datasets import MANIFEST_NAME, digest
 from coassist.data.trial_file import FORMAT_VERSION
 from coassist.scenario.intent_registry import INTENT_SOURCES
@@ -82,8 +82,9 @@ def collect_dataset(
     submitted: SubmittedTrials | None = None,
     groups: int | None = None,
     live: Any = None,
+    read: bool = False,
     **spec_options,
-) -> Path:
+) -> Path | Dataset:
     """Simulate the trials of :func:`dataset_specs` (``spec_options``) and write them as a dataset.
 
     ``dataset_id`` defaults to the folder's name. Returns the dataset folder. ``lockstep``,
@@ -96,6 +97,10 @@ def collect_dataset(
     first still to run: it runs first, in this process, alone (:func:`~coassist.sim.trial_runner.run_spec`'s
     path: the same trial bit for bit with a named intent, to the network's float32 rounding with a
     model, as ``lockstep``), then the others as before.
+
+    ``read``: return the dataset as :func:`~coassist.data.read_dataset` reads it from ``out``
+    instead of the folder, the trials simulated here as they were written rather than read back
+    (:meth:`DatasetWriter.dataset <coassist.data.DatasetWriter.dataset>`).
 
     The output is checked and locked before anything is simulated. Each trial is
     written as soon as it finishes (:class:`coassist.data.DatasetWriter`), so memory
@@ -135,10 +140,15 @@ def collect_dataset(
     if not overwrite and _holds_collection(out, key, len(specs)):
         if say:
             say(f"{out} already holds this collection, complete ({len(specs)} trials): nothing to do")
-        return out
+        return read_dataset(out) if read else out
     with DatasetWriter(
-        out, dataset_id, n_trials=len(specs), key=key, description=description, overwrite=overwrite
+        out, dataset_id, n_trials=len(specs), key=key, description=description, overwrite=overwrite, keep=read
     ) as writer:
+
+        def finish() -> Path | Dataset:
+            folder = writer.finish()
+            return writer.dataset() if read else folder
+
         if say and writer.discarded:
             say(f"removed the unfinished trials of a different collection in {writer.partial}")
         if say and writer.resumed:
@@ -153,7 +163,7 @@ def collect_dataset(
             writer.add(watched, episode.finish(episode.run(on_tick=live.watch(episode))))
         if submitted is not None:
             submitted.gather(lambda i, trial: writer.add(i, trial) if not writer.has(i) else None, progress)
-            return writer.finish()
+            return finish()
         run_trials(
             [specs[i] for i in todo],
             workers=workers,
@@ -164,7 +174,7 @@ def collect_dataset(
             groups=groups,
             on_result=lambda j, trial: writer.add(todo[j], trial),
         )
-        return writer.finish()
+        return finish()
 
 
 def spec_key(spec: TrialSpec) -> dict:
