@@ -84,7 +84,8 @@ class Workspace:
         groups: int | None = None,
         population: str = "thesis",
     ):
-        """Simulate a dataset into ``out/datasets/<name>``; return its folder and the dataset read back.
+        """Simulate a dataset into ``out/datasets/<name>``; return its folder and the dataset (as
+        :func:`~coassist.data.read_dataset` reads it; the trials simulated here as written, not read back).
 
         ``groups``: how many lockstep groups the trials are split into on the pool
         (:func:`~coassist.sim.trial_runner.submit_trials`; None: its rule), an option like the others.

@@ -248,7 +248,8 @@ class _Batch:
                     predicted.append((js[ok], p[ok]))
         if self.alone:
             # each run's own source (a filter with a trial's state), one at a time; their rows then go to
-            # human_reference together, grouped by how many rows they give (elementwise: the same values)
+            # human_reference together, grouped by how many rows they give (elementwise: the same values; rows.alone
+            # is in ascending positions, so a group of every run is act's order, as the paths below assume)
             answered: dict[int, tuple[list[int], list[np.ndarray]]] = {}
             for i, j in rows.alone:
                 row = (x[j, 0], x[j, 1], v[j, 0], v[j, 1], hand[j, 0], hand[j, 1], ref_pos[j, 0], ref_pos[j, 1])
