@@ -88,6 +88,31 @@ def test_the_batch_takes_stages_of_one_history_and_horizon_only():
         WindowIntentBatch([WindowIntent(WindowSource(2, 5), 3), WindowIntent(WindowSource(2, 6), 3)])
 
 
+def test_the_stages_answer_check_is_prediction_plausible():
+    """The stage's per-tick check (written in fewer numpy calls, issue 44) accepts exactly the answers
+    prediction_plausible accepts: 3000 random float64 answers around both bounds, with NaN and inf, 1 to 60
+    rows. Exact: both take the same differences of the same floats and compare them with the same bounds."""
+    from coassist.interfaces import PlausibilityLimits, prediction_plausible
+
+    lim = PlausibilityLimits(max_distance=0.2, max_speed=1.0)
+    stage = WindowIntent(WindowSource(1, 60), 1, plausibility=lim)
+    stage.reset(CONTEXT)
+    rng = np.random.default_rng(7)
+    used = 0
+    for k in range(3000):
+        tool = rng.uniform(-0.5, 0.5, 2)
+        n = int(rng.integers(1, 61))
+        step = rng.choice([0.5, 0.99, 1.01, 2.0]) * DT * rng.uniform(-1.0, 1.0, (n, 2))
+        rows = tool + rng.choice([0.0, 0.15, 0.199]) * rng.uniform(-1.0, 1.0, 2) + np.cumsum(step, axis=0)
+        if rng.random() < 0.05:
+            rows[rng.integers(n), rng.integers(2)] = rng.choice([np.nan, np.inf, -np.inf])
+        stage.push(k, (*tool.tolist(), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        want = prediction_plausible(rows, tool, DT, lim)
+        assert (stage.accept(rows)[0] is not None) == want, k
+        used += want
+    assert 300 < used < 2700  # both outcomes well represented
+
+
 def test_a_row_far_from_the_tool_is_a_fallback_not_a_push():
     """prediction_plausible's rule in the stage: a row max_distance from the tool (either axis) is
     used, one beyond it is a fallback (flagged; PREDICTOR_STALLED once it persists); consecutive rows
