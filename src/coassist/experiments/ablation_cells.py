@@ -185,7 +185,7 @@ class AblationResult:
             if labels is None:
                 d, lo, hi, n = paired_difference(a, b)
             else:
-                d, lo, hi, n = clustered_difference(a, b, [str(c) for c, keep in zip(labels, on) if keep])
+                d, lo, hi, n = clustered_difference(a, b, [c for c, keep in zip(labels, on) if keep])
             out[s] = (float(np.nanmean(a)) if n else float("nan"), d, lo, hi, n)
         return out
 
