@@ -387,3 +387,39 @@ def test_the_hedge_carries_a_share_of_the_progress_while_the_person_leaves_their
         inside += share == 1.0
         outside += share == 0.5
     assert inside > 20 and outside > 20
+
+
+def test_the_rows_advance_at_the_persons_pace_when_told_to():
+    # pace_time τ_p: the decided way's rows run at the tool's speed along each curve plus the rate of the present
+    # estimate's lead along it, (ℓ − ℓ̄)/τ_p, ℓ̄ the lead low-passed over τ_p. On the plan's straight part (the curves
+    # flat there to 4e-5 m) the lead is how far the intent is ahead of the tool: a person who slows (0.1 → 0.03 m/s
+    # over 0.3 s) pulls the rows back by that rate, computed here from the script alone
+    speed = np.concatenate([np.full(120, 0.1), np.linspace(0.1, 0.03, 40), np.full(90, 0.03)])
+    intent = np.stack([np.concatenate([[0.0], np.cumsum(speed[:-1] * DT)]), np.zeros(len(speed))], axis=1)
+    tau, lag = 0.1, 6
+    rows = {}
+    for pace in (0.0, tau):
+        src = PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM}, settings=PersonFilterSettings(pace_time=pace))
+        src.reset(_context())
+        rows[pace] = [_tick(src, intent, k, lag) for k in range(len(intent))]
+    gain, low, steps = 1.0 - np.exp(-DT / tau), None, DT * np.arange(1, 51)
+    slowed = 0
+    for k in range(len(intent)):
+        lead = intent[k, 0] - intent[max(k - lag, 0), 0]
+        low = lead if low is None else low
+        rate = lead - low
+        low += gain * rate
+        rate /= tau
+        tool_speed = (intent[max(k - lag, 0), 0] - intent[max(k - lag - 1, 0), 0]) / DT
+        if k < 120 or tool_speed + rate <= 0.0:
+            # before the person slows the filter's lead differs from the script's at the start (the tool starting
+            # from rest, its inertia put back: 2 % of the start's washout, 4e-6 m/s of rate left at tick 120); where
+            # the rows would run backwards they stand still (speed ≥ 0), not this closed form
+            continue
+        diff = rows[tau][k] - rows[0.0][k]
+        np.testing.assert_allclose(diff[:, 0], rate * steps, rtol=0, atol=1e-7)
+        np.testing.assert_allclose(diff[:, 1], 0.0, atol=1e-4)
+        slowed += rate < -0.005  # at least 5 mm/s slower than the tool
+    assert slowed > 20
+    with pytest.raises(ValueError, match="pace_time"):
+        PersonFilterSettings(pace_time=-0.1)

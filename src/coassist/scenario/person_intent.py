@@ -117,6 +117,11 @@ class PersonFilterSettings:
     hedge_leaving : the share of that velocity the hedge rows carry while the present estimate is off the person's
         line by more than the dead zone (the person leaving the plan, the way not yet decided): the plan's way on
         is then no longer where the person goes (1: the same as elsewhere).
+    pace_time : [s] τ_p. 0: the decided way's rows run along its curves at the tool's speed along each. > 0: at the
+        person's pace, the tool's speed plus the rate of the present estimate's lead along the curve (its force and
+        damping term, what the person wants beyond where the tool is), that rate the lead's washout over τ_p,
+        (ℓ − ℓ̄)/τ_p with ℓ̄ ← ℓ̄ + (1 − e^(−dt/τ_p))(ℓ − ℓ̄): a person who slows pulls back on the tool, and rows
+        at the tool's speed carried it on past them.
     follow_mirror : on a way round the person never took in their calibration, follow the mirror images of
         the other way's paths (True), or give the present estimate's rows there (False): the mirror knows
         nothing of how this person goes round that side.
@@ -150,6 +155,7 @@ class PersonFilterSettings:
     evidence_gap: float = 0.0
     hedge_lateral: bool = True
     hedge_leaving: float = 1.0
+    pace_time: float = 0.0
 
     def __post_init__(self) -> None:
         for name, lo, hi, open_lo in (
@@ -176,6 +182,7 @@ class PersonFilterSettings:
             ("row_smoothing", 0.0, 1.0, False),
             ("evidence_gap", 0.0, 0.1, False),
             ("hedge_leaving", 0.0, 1.0, False),
+            ("pace_time", 0.0, 5.0, False),
         ):
             object.__setattr__(
                 self, name, check_real(getattr(self, name), f"PersonFilterSettings.{name}", lo, hi, open_lo=open_lo)
@@ -436,6 +443,8 @@ class PersonPathsIntent:
             self._side = 0 if self._two else int(hyp.ways[0])
             self._mix = 1.0
             self._mix_step = self.dt / st.blend_time if st.blend_time > 0 else 1.0
+            self._pace_gain = 1.0 - math.exp(-self.dt / st.pace_time) if st.pace_time > 0.0 else 0.0
+            self._lead_low: np.ndarray | None = None  # each curve's lead, low-passed over pace_time
         self._ready = True
 
     @property
@@ -505,6 +514,15 @@ class PersonPathsIntent:
         lead += C * tv
         lead /= K
         lead += self._lead_time * tv
+        pace = tv
+        if self._pace_gain > 0.0:
+            # the lead's rate: its washout over τ_p (the lead's first value is its own low-pass: no rate at the start)
+            if self._lead_low is None:
+                self._lead_low = lead.copy()
+            rate = lead - self._lead_low
+            self._lead_low += self._pace_gain * rate
+            rate /= st.pace_time
+            pace = tv + rate
         q = self._q[:-1]
         np.multiply((along + lead)[:, None], tan, out=q)
         q += point
@@ -611,7 +629,7 @@ class PersonPathsIntent:
             w /= np.add.reduce(w)
             n = on.take(best)
             # every chosen curve's rows at once, from its present estimate at the tool's speed along it
-            speed = np.maximum(tv.take(n), 0.0)
+            speed = np.maximum(pace.take(n), 0.0)
             rows = hyp.along(n, s_lead.take(n)[:, None] + speed[:, None] * self._steps_row)
             out = (w @ rows.reshape(len(w), -1)).reshape(-1, 2)
             if self._residual is not None:
