@@ -2,10 +2,20 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Generator
 from pathlib import Path
 
 import pytest
+
+# One BLAS and torch thread per xdist worker, as ``./dev test`` sets them for its whole run: several workers on a
+# few cores, each with a thread team of its own, spin while another worker holds the core. The main part under a
+# plain ``pytest -n 3`` took 364 s and 638 CPU-s against 285 s and 495 CPU-s with one thread each (docs/performance.md,
+# "The suite, once more"). A worker imports this before numpy or torch, which read these when they load; a value
+# already set (./dev's, or the caller's) is kept.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_name, "1")
 
 # ``./dev test`` runs the real-time tests alone, after the rest, and collects only the files that hold
 # them: those whose text names the marker (``grep -l 'mark.realtime'``), so that second run does not pay the

@@ -341,7 +341,7 @@ def _first_stall(trial) -> int | None:
 
 def _detour_passed(trial) -> int:
     """The tick the tool is back on its line after the bump: within 3 mm across of where it started, after its
-    farthest point (the defaults' MuJoCo run: the bump's low at tick 819, back at ~1090 of 2115)."""
+    farthest point (the defaults' MuJoCo run: the bump's low at tick 819, back at 1067 of 2115)."""
     y = trial.pose[:, 1] - trial.pose[0, 1]
     low = int(np.argmin(y))
     back = np.flatnonzero(np.abs(y[low:]) < 3e-3)
