@@ -7,7 +7,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import Executor
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, overload
 
 from coassist._checks import check_int
 from coassist.data import Dataset, DatasetWriter, read_dataset
@@ -66,6 +66,47 @@ def dataset_specs(
                         )
                     )
     return specs
+
+
+# The return follows ``read``: the folder, or the dataset (its overloads say which to a type checker).
+@overload
+def collect_dataset(
+    out: str | Path,
+    *,
+    dataset_id: str | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+    ray_address: str | None = None,
+    overwrite: bool = False,
+    say: Callable[[str], None] | None = None,
+    lockstep: bool = True,
+    pool: Executor | None = None,
+    submitted: SubmittedTrials | None = None,
+    groups: int | None = None,
+    live: Any = None,
+    read: Literal[False] = False,
+    **spec_options: Any,
+) -> Path: ...
+
+
+@overload
+def collect_dataset(
+    out: str | Path,
+    *,
+    dataset_id: str | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+    ray_address: str | None = None,
+    overwrite: bool = False,
+    say: Callable[[str], None] | None = None,
+    lockstep: bool = True,
+    pool: Executor | None = None,
+    submitted: SubmittedTrials | None = None,
+    groups: int | None = None,
+    live: Any = None,
+    read: Literal[True],
+    **spec_options: Any,
+) -> Dataset: ...
 
 
 def collect_dataset(
