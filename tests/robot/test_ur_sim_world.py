@@ -362,6 +362,7 @@ def test_drives_defaults_complete_a_trial_on_the_track_of_the_mujoco_world(tmp_p
     compared = None  # the ticks whose track was compared: all (an unflagged run) or those before a late stall
     best = None  # (stall, trial, result, status) of the stalled run that ended at the target latest-stalled
     reached = None  # (trial, result, status) of the last stalled run that ended at the target
+    off_track = None  # (trial, result, status) of the last run no stall disturbed whose track left MuJoCo's
     for attempt in range(4):  # a stall of this machine decelerates the loop: from it on the track is not the same
         with simulator() as sim:
             out = tmp_path / f"trial-{attempt}.parquet"
@@ -378,9 +379,11 @@ def test_drives_defaults_complete_a_trial_on_the_track_of_the_mujoco_world(tmp_p
         # after it (2 of 3 runs of ./dev test on 2026-12-04: ticks 1246-1839) leaves the whole detour to compare
         # up to it: one run instead of three (~20 s each)
         stall = _first_stall(trial)
-        if not _machine_stall(trial) and (_flags(trial) or _track_gap(trial, mj) < TRACK_GAP):
-            compared = None if _flags(trial) else trial.n_samples
-            break
+        if not _machine_stall(trial):
+            if _flags(trial) or _track_gap(trial, mj) < TRACK_GAP:
+                compared = None if _flags(trial) else trial.n_samples
+                break
+            off_track = (trial, result, status)
         if stall is not None and trial.meta.extra["ended"] == "target":
             reached = (trial, result, status)
             if _track_gap(_ticks(trial, stall), mj) < TRACK_GAP:
@@ -394,12 +397,14 @@ def test_drives_defaults_complete_a_trial_on_the_track_of_the_mujoco_world(tmp_p
         # 57, 689 and 113, the last run then stopped by the watchdog at 1927): the run that reached the target with
         # the latest stall, its track compared up to it, if that is past the push's first ticks (the tool 10 cm
         # along by tick 600, the push from tick ~300), where a force of the wrong sign or frame leaves the track;
-        # else the last run that reached the target, uncompared; else the last run (which fails below: a run of
-        # the wrong sign or frame ends off the target). Runs no stall disturbed and off the track fail it here
-        if not _machine_stall(trial):
-            compared = trial.n_samples
-        elif best is not None and best[0] >= EARLY_STALL:
+        # else a run no stall disturbed whose track left MuJoCo's, compared whole (it fails below: before, such runs
+        # passed uncompared); else the last run that reached the target, uncompared; else the last run (which fails
+        # below: a run of the wrong sign or frame ends off the target)
+        if best is not None and best[0] >= EARLY_STALL:
             compared, trial, result, status = best
+        elif off_track is not None:
+            trial, result, status = off_track
+            compared = trial.n_samples
         elif reached is not None:
             trial, result, status = reached
     assert trial.meta.extra["ended"] == mj.meta.extra["ended"] == "target", result.output
