@@ -393,18 +393,18 @@ def test_drives_defaults_complete_a_trial_on_the_track_of_the_mujoco_world(tmp_p
                 if best is None or stall > best[0]:
                     best = (stall, trial, result, status)
     else:
-        # every run stalled before the bump's return (two busy loops beside the test on 2026-12-04: stalls at ticks
-        # 57, 689 and 113, the last run then stopped by the watchdog at 1927): the run that reached the target with
-        # the latest stall, its track compared up to it, if that is past the push's first ticks (the tool 10 cm
-        # along by tick 600, the push from tick ~300), where a force of the wrong sign or frame leaves the track;
-        # else a run no stall disturbed whose track left MuJoCo's, compared whole (it fails below: before, such runs
-        # passed uncompared); else the last run that reached the target, uncompared; else the last run (which fails
-        # below: a run of the wrong sign or frame ends off the target)
-        if best is not None and best[0] >= EARLY_STALL:
-            compared, trial, result, status = best
-        elif off_track is not None:
+        # no run was kept. A run no stall disturbed whose track left MuJoCo's is compared whole, and fails below
+        # (before, such runs passed uncompared). Else every run stalled before the bump's return (two busy loops
+        # beside the test on 2026-12-04: stalls at ticks 57, 689 and 113, the last run then stopped by the watchdog
+        # at 1927): the run that reached the target with the latest stall, its track compared up to it, if that is
+        # past the push's first ticks (the tool 10 cm along by tick 600, the push from tick ~300), where a force of
+        # the wrong sign or frame leaves the track; else the last run that reached the target, uncompared; else
+        # the last run (which fails below: a run of the wrong sign or frame ends off the target)
+        if off_track is not None:
             trial, result, status = off_track
             compared = trial.n_samples
+        elif best is not None and best[0] >= EARLY_STALL:
+            compared, trial, result, status = best
         elif reached is not None:
             trial, result, status = reached
     assert trial.meta.extra["ended"] == mj.meta.extra["ended"] == "target", result.output
