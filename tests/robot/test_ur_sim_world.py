@@ -199,8 +199,8 @@ def test_the_tcp_force_is_signed_and_framed_as_coassist_reads_it():
 
 def _run(config: DriveConfig, push_at: int | None = None, wrench=(10.0, 0.0, 0.0), retries: int = 3, **sim_config):
     """A drive through a fresh simulator (commands and states recorded, the simulator's status after);
-    run again while a stall of this machine flagged it (at most ``retries``); any other flag ends the
-    retries at once."""
+    run again while this machine disturbed it (:func:`_machine_stall`: a late tick flagged, the robot's data or the
+    loop's own period 0.1 s late; at most ``retries``); any other flag ends the retries at once."""
     for attempt in range(retries):
         seen, periods = [], []
         with simulator(**sim_config) as sim:
