@@ -414,7 +414,10 @@ def test_the_periods_keep_an_absolute_schedule():
 def test_a_late_period_is_caught_up_and_a_stall_restarts_the_schedule():
     """One late period (15 ms at 100 Hz) does not shift the later ones: the next waits until its slot of the
     schedule (here at once: it is late too, and says so); a stall beyond 50 ms restarts it from now."""
-    world, robot = make(frequency=100.0, overrun_tolerance=0.1)
+    # the fake's timestamps keep to the schedule, so the 80 ms stall reads as data 80 ms late, and a busy machine's
+    # own delays on top reached the default 0.1 s link timeout (173 ms in CI's main part, 2026-12-04): the link
+    # check is not what this test is about, so it allows 1 s
+    world, robot = make(frequency=100.0, overrun_tolerance=0.1, link_timeout=1.0)
     run_ticks(world, 2)
     robot.late_by = 0.015  # waitPeriod returns 15 ms after the end of this period
     run_ticks(world, 1)
