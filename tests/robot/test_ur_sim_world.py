@@ -377,7 +377,7 @@ def test_drives_defaults_complete_a_trial_on_the_track_of_the_mujoco_world(tmp_p
         # the bound: measured once 2.63 mm unflagged in ./dev test's realtime phase at this shared machine's
         # heaviest load; the old schedule is 2.5 mm and more in every run: it fails all four, and the test. A stall
         # after it (2 of 3 runs of ./dev test on 2026-12-04: ticks 1246-1839) leaves the whole detour to compare
-        # up to it: one run instead of three (~20 s each)
+        # up to it: one run instead of up to four (~20 s each)
         stall = _first_stall(trial)
         if not _machine_stall(trial):
             if _flags(trial) or _track_gap(trial, mj) < TRACK_GAP:
