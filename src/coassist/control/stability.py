@@ -1,0 +1,139 @@
+"""When the person and the assistance fall into an oscillation: the robot becomes a damper (issue 40).
+
+A person whose own arm loop is near its margin — a stiff arm behind a long reflex delay — moving a tool of
+damping D through that delay is stable only while K τ / D < π/2 (a first-order plant under delayed proportional
+feedback). The simulated people stiffen with their tracking error (K up to K_max), so such a person can cross it
+mid-trial. Assistance that follows the hand's force adds to the loop: a held-out person (K 905–2584 N/m, τ = 0.149 s)
+fell into a limit cycle round the target with the default source, the tool orbiting 6 cm out at about 1 Hz against
+39–42 N of steady hand force, every trial at the time limit (docs/person-model.md, "People the assistance
+destabilises"). Taking the robot's effort away (manual guidance from then on) did not end the cycle once it had
+begun; damping does: D + c > K τ / (π/2) is 245 N·s/m for K = 2.6 kN/m and τ = 0.149 s, against the application
+preset's D = 100 N·s/m.
+
+:class:`StabilityGuard` wraps a controller. Each tick it low-passes the hand force's magnitude,
+
+    f̄ ← f̄ + (1 − e^(−dt/τ_f)) (‖w‖ − f̄),
+
+and the first time f̄ passes f_s it engages for the rest of the run: over ``fade_time`` the robot's effort moves
+from the controller's u_c to a damper's,
+
+    u_r = g u_c − (1 − g) c v,   g = max(0, 1 − m dt / t_fade) on the m-th tick engaged (m = 1, 2, …),
+
+v the measured velocity of the controlled DOFs, saturated to the controller's ``effort_limit`` keeping its
+direction (:func:`~coassist.control.controllers.saturate`, ``SATURATED``), and every tick engaged carries ``Fault.STABILITY_DAMPING``. Until then ``step`` returns
+the controller's own answer, the same object. A non-finite ‖w‖ leaves f̄ as it was (the controller's guard has
+already zeroed and flagged that tick).
+
+f_s = 20 N: under assistance the report's operators need 2–3 N RMS of hand force, under manual guidance 4–5 N, and
+steady 20 N for half a second is a person fighting the tool or the loop.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from coassist._checks import check_positive_scalar
+from coassist.control.controllers import ControlStep, saturate
+from coassist.interfaces import Fault
+
+__all__ = ["StabilityGuard", "StabilityGuardParameters"]
+
+
+@dataclass(frozen=True)
+class StabilityGuardParameters:
+    """When the guard engages and what the robot then is (module docstring). SI units.
+
+    force_threshold : f_s [N], the low-passed hand force above which the guard engages.
+    time_constant : τ_f [s], of that low-pass: a push of 2 f_s engages it after about 0.7 τ_f.
+    fade_time : [s] from the controller's effort to the damper's, once engaged.
+    damping : c [N·s/m], the damper the robot becomes (added to the plant's own D).
+    """
+
+    force_threshold: float = 20.0
+    time_constant: float = 0.5
+    fade_time: float = 0.5
+    damping: float = 150.0
+
+    def __post_init__(self) -> None:
+        for name in ("force_threshold", "time_constant", "fade_time", "damping"):
+            object.__setattr__(
+                self, name, check_positive_scalar(getattr(self, name), f"StabilityGuardParameters.{name}")
+            )
+
+
+class StabilityGuard:
+    """A controller that becomes a damper once the hand force stays high (module docstring).
+
+    Parameters
+    ----------
+    controller : the controller to guard (``name``, ``model``, ``horizon``, ``step``; an assistive one: manual
+        guidance and impedance control are the baselines and stay as they are).
+    params : :class:`StabilityGuardParameters`.
+
+    ``engaged_at`` is the tick (counted from the last ``reset``) at which it engaged, None before.
+    """
+
+    def __init__(self, controller: Any, params: StabilityGuardParameters | None = None) -> None:
+        for attr in ("step", "model", "horizon"):
+            if not hasattr(controller, attr):
+                raise ValueError(
+                    f"controller must have {attr!r} (a controller of coassist.control), got {controller!r}"
+                )
+        params = StabilityGuardParameters() if params is None else params
+        if not isinstance(params, StabilityGuardParameters):
+            raise ValueError(f"params must be StabilityGuardParameters, got {type(params).__name__}")
+        self.controller, self.params = controller, params
+        self.name = f"{getattr(controller, 'name', type(controller).__name__)}+stability"
+        self.model, self.horizon = controller.model, controller.horizon
+        self.effort_limit = getattr(controller, "effort_limit", None)
+        self.n = int(controller.model.n_dof)
+        dt = float(controller.model.dt)
+        self._gain = 1.0 - math.exp(-dt / params.time_constant)
+        self._fade = dt / params.fade_time
+        self.reset()
+
+    def reset(self) -> None:
+        """A new run: f̄ = 0, not engaged (and the controller's own state, where it keeps one)."""
+        inner_reset = getattr(self.controller, "reset", None)
+        if callable(inner_reset):
+            inner_reset()
+        self.force = 0.0
+        self.share = 1.0  # g
+        self.engaged_at: int | None = None
+        self._k = 0
+
+    def step(self, z: ArrayLike, ref_h: ArrayLike, ref_r: ArrayLike, wrench: ArrayLike) -> ControlStep:
+        """The controller's step, or once engaged the fade to the damper (module docstring). Never raises."""
+        out = self.controller.step(z, ref_h, ref_r, wrench)
+        k = self._k
+        self._k += 1
+        try:
+            w = np.asarray(wrench, dtype=float).reshape(-1)
+            f = math.sqrt(float(w @ w))
+        except (TypeError, ValueError):
+            f = math.nan
+        if math.isfinite(f):
+            self.force += self._gain * (f - self.force)
+        if self.engaged_at is None:
+            if not self.force > self.params.force_threshold:
+                return out
+            self.engaged_at = k
+        self.share = max(0.0, self.share - self._fade)
+        try:
+            v = np.asarray(z, dtype=float).reshape(-1)[self.n : 2 * self.n]
+        except (TypeError, ValueError):
+            v = np.zeros(self.n)
+        if v.shape != (self.n,) or not np.isfinite(v).all():
+            v = np.zeros(self.n)  # a bad state: no damper on it (the controller's guard flagged the tick)
+        u = self.share * np.asarray(out.u_r, dtype=float) - (1.0 - self.share) * self.params.damping * v
+        fault = out.fault | Fault.STABILITY_DAMPING
+        if self.effort_limit is not None:
+            u, clipped = saturate(u, np.broadcast_to(np.asarray(self.effort_limit, dtype=float), (self.n,)))
+            if clipped:
+                fault |= Fault.SATURATED
+        return ControlStep(u, out.u_h_model, fault)
