@@ -46,7 +46,7 @@ def _tick(guard, w, v=(0.0, 0.0)):
 def test_below_the_threshold_the_answer_is_the_controllers_own():
     inner = _Scripted([3.0, -4.0])
     guard = StabilityGuard(inner)
-    assert inner.resets == 1 and guard.name == "scripted+stability"
+    assert inner.resets == 1 and guard.name == "scripted"  # the controller's name: trials and studies say which
     for _ in range(2000):  # 19 N steady: f̄ tends to 19 N, never past 20
         out = _tick(guard, [19.0 / math.sqrt(2), 19.0 / math.sqrt(2)])
         assert out.fault == Fault.NONE and np.array_equal(out.u_r, [3.0, -4.0])
@@ -129,3 +129,11 @@ def test_a_limit_cycle_of_a_stiff_slow_person_ends_at_the_target_with_the_guard(
     assert ended == {False: "time_limit", True: "target"}, (ended, f_rms)
     if less_force:
         assert f_rms[True] < 0.5 * f_rms[False], f_rms
+
+
+def test_the_controllers_alpha_shows_through():
+    arbitrated = make_controller("cooperative-arbitrated", PRESET)
+    assert StabilityGuard(arbitrated).alpha == arbitrated.alpha
+    cooperative = make_controller("cooperative", PRESET)
+    assert StabilityGuard(cooperative).alpha == cooperative.alpha == 0.9
+    assert StabilityGuard(make_controller("manual", PRESET)).alpha is None

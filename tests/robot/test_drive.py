@@ -185,3 +185,34 @@ def test_the_simulated_operator_comes_from_the_population_asked_for():
     )
     assert (thesis.meta.user, held_out.meta.user) == ("user-1", "held-out-user-1")
     assert not np.array_equal(thesis.effort_h, held_out.effort_h)
+
+
+def test_the_stability_guard_wraps_the_assistive_controllers_and_ends_a_limit_cycle():
+    # a stiff arm behind a 0.149 s delay (held-out population seed 5, user 1) on the heavy load with the default
+    # source: without the guard the tool circles the target until the time limit (point-mass world and MuJoCo
+    # alike, docs/person-model.md); with it (the default) the robot becomes a damper and the trial ends at the target
+    base = dict(
+        world="mujoco",
+        controller="cooperative-arbitrated",
+        task="curved",
+        object="heavy",
+        user=1,
+        seed=711004,
+        obstacle="large",
+        population="held-out",
+        population_seed=5,
+    )
+    guarded, off = drive(DriveConfig(**base)), drive(DriveConfig(**base, stability=None))
+    assert guarded.meta.controller == off.meta.controller == "cooperative+target"  # the controller's own name
+    assert (off.meta.extra["ended"], guarded.meta.extra["ended"]) == ("time_limit", "target")
+    assert np.any(guarded.fault & int(Fault.STABILITY_DAMPING)) and not np.any(off.fault & int(Fault.STABILITY_DAMPING))
+    # the baselines are not guarded: a steady 30 N push under manual guidance (the guard would engage after
+    # 0.35 s) or the assistive controller (it does) for 1 s
+    push = ScriptedForce.steps([(0.0, (30.0, 0.0, 0.0, 0.0, 0.0, 0.0))])
+    flags = {}
+    for controller in ("manual", "cooperative"):
+        trial = drive(DriveConfig(controller=controller, task="linear", time_limit=1.0), operator=push)
+        flags[controller] = bool(np.any(trial.fault & int(Fault.STABILITY_DAMPING)))
+    assert flags == {"manual": False, "cooperative": True}
+    with pytest.raises(ValueError, match="DriveConfig.stability"):
+        DriveConfig(stability="on")

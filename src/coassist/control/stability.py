@@ -88,7 +88,9 @@ class StabilityGuard:
         if not isinstance(params, StabilityGuardParameters):
             raise ValueError(f"params must be StabilityGuardParameters, got {type(params).__name__}")
         self.controller, self.params = controller, params
-        self.name = f"{getattr(controller, 'name', type(controller).__name__)}+stability"
+        # the controller's own name: the guard is a safety behaviour of the loop (a study's conditions, a trial's
+        # controller, are the controller's); the ticks it acts on carry STABILITY_DAMPING
+        self.name = getattr(controller, "name", type(controller).__name__)
         self.model, self.horizon = controller.model, controller.horizon
         self.effort_limit = getattr(controller, "effort_limit", None)
         self.n = int(controller.model.n_dof)
@@ -96,6 +98,11 @@ class StabilityGuard:
         self._gain = 1.0 - math.exp(-dt / params.time_constant)
         self._fade = dt / params.fade_time
         self.reset()
+
+    @property
+    def alpha(self) -> float | None:
+        """The controller's α where it has one (an arbitrated game's, what a live view shows), else None."""
+        return getattr(self.controller, "alpha", None)
 
     def reset(self) -> None:
         """A new run: f̄ = 0, not engaged (and the controller's own state, where it keeps one)."""

@@ -46,6 +46,7 @@ import numpy as np
 from coassist._checks import is_integer
 from coassist.config import APPLICATION_PRESET, GameWeights, ImpedanceParameters
 from coassist.control.presets import CONTROLLERS, get_preset, make_controller
+from coassist.control.stability import StabilityGuard, StabilityGuardParameters
 from coassist.data import Trial
 from coassist.interfaces import FEATURES
 from coassist.robot.worlds import WORLDS, ArmWorld, HandWorld, WorldRequest, arm_worlds, build_world, missing_members
@@ -65,7 +66,7 @@ from coassist.scenario.scene import Scene
 from coassist.scenario.seeds import trial_rngs
 from coassist.scenario.tasks import OBSTACLES, TASKS, task_for_seed
 
-__all__ = ["DriveConfig", "drive", "drive_lockstep", "move_tasks", "workspace_for"]
+__all__ = ["GUARDED_CONTROLLERS", "DriveConfig", "drive", "drive_lockstep", "move_tasks", "workspace_for"]
 
 #: Where the real-time predictor runs (coassist.intent.realtime.BACKENDS).
 PREDICTOR_BACKENDS = ("process", "onnx", "torch")
@@ -121,6 +122,10 @@ class DriveConfig:
     predictor_backend : where the real-time predictor runs: "process" (a worker process:
         the tick never waits for the GIL; the default, see benchmarks/bench_tick.py),
         "onnx" (ONNX Runtime in a worker thread) or "torch" (eager, worker thread).
+    stability : the stability guard on an assistive controller (:data:`GUARDED_CONTROLLERS`, x-y only:
+        not with ``full_pose``): once the hand force low-passed over 0.5 s passes 20 N the robot becomes a
+        damper for the rest of the run (:mod:`coassist.control.stability`; a stiff person behind a long reflex
+        delay can fall into a limit cycle with assistance that follows their force). None: off.
     """
 
     world: str = "mujoco"
@@ -143,6 +148,7 @@ class DriveConfig:
     population_seed: int = 0
     person: str | None = None
     scene: Scene | None = None
+    stability: StabilityGuardParameters | None = StabilityGuardParameters()
 
     def __post_init__(self) -> None:
         def bad(name: str, what: str) -> ValueError:
@@ -192,6 +198,8 @@ class DriveConfig:
             raise bad("person", "1-32 letters, digits, '-' or '_' (a pseudonymous id, e.g. P07)")
         if self.scene is not None and not isinstance(self.scene, Scene):
             raise bad("scene", "a Scene (coassist.scenario.scene.read_scene) or None")
+        if self.stability is not None and not isinstance(self.stability, StabilityGuardParameters):
+            raise bad("stability", "StabilityGuardParameters (coassist.control.stability) or None (off)")
 
     @property
     def dt(self) -> float:
@@ -242,6 +250,11 @@ def _check_limits_for_arm(limits: SafetyLimits, robot: str | None) -> None:
         )
 
 
+#: The controller kinds the stability guard wraps (:attr:`DriveConfig.stability`): the assistive ones. Manual
+#: guidance, impedance control and the calibration probe are the baselines and the lab's measurement.
+GUARDED_CONTROLLERS = ("cooperative", "cooperative-arbitrated", "cooperative-damped")
+
+
 def _controller(config: DriveConfig):
     """The preset's controller at the run's rate, on 2 (x-y) or 6 DOFs (coassist.control.presets.make_controller)."""
     preset = get_preset(config.preset)
@@ -277,7 +290,12 @@ def _controller(config: DriveConfig):
         )
         gp = replace(gp, weights=weights)
     impedance = ImpedanceParameters(M=M, D=D, K=(0.0,) * len(M), dt=dt)
-    return make_controller(config.controller, replace(preset, impedance=impedance, game=gp))
+    controller = make_controller(config.controller, replace(preset, impedance=impedance, game=gp))
+    if config.stability is not None and config.controller in GUARDED_CONTROLLERS and not config.full_pose:
+        # a damper once the hand force stays high: the damper's c acts on the x-y velocity (N·s/m), so not on
+        # the rotations of a full pose
+        controller = StabilityGuard(controller, config.stability)
+    return controller
 
 
 def workspace_for(
