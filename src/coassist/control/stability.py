@@ -19,9 +19,10 @@ from the controller's u_c to a damper's,
 
     u_r = g u_c − (1 − g) c v,   g = max(0, 1 − m dt / t_fade) on the m-th tick engaged (m = 1, 2, …),
 
-v the measured velocity of the controlled DOFs, saturated to the controller's ``effort_limit`` keeping its
-direction (:func:`~coassist.control.controllers.saturate`, ``SATURATED``), and every tick engaged carries ``Fault.STABILITY_DAMPING``. Until then ``step`` returns
-the controller's own answer, the same object. A non-finite ‖w‖ leaves f̄ as it was (the controller's guard has
+v the velocity in the controller's state z = [Δx; v] (the measured one in an effort world, the admittance's, which
+the arm tracks, in an arm world), saturated to the controller's ``effort_limit`` keeping its direction
+(:func:`~coassist.control.controllers.saturate`, ``SATURATED``); every tick engaged carries
+``Fault.STABILITY_DAMPING``. Until then ``step`` returns the controller's own answer, the same object. A non-finite ‖w‖ leaves f̄ as it was (the controller's guard has
 already zeroed and flagged that tick).
 
 f_s = 20 N: under assistance the report's operators need 2–3 N RMS of hand force, under manual guidance 4–5 N, and
