@@ -22,8 +22,9 @@ from the controller's u_c to a damper's,
 v the velocity in the controller's state z = [Δx; v] (the measured one in an effort world, the admittance's, which
 the arm tracks, in an arm world), saturated to the controller's ``effort_limit`` keeping its direction
 (:func:`~coassist.control.controllers.saturate`, ``SATURATED``); every tick engaged carries
-``Fault.STABILITY_DAMPING``. Until then ``step`` returns the controller's own answer, the same object. A non-finite ‖w‖ leaves f̄ as it was (the controller's guard has
-already zeroed and flagged that tick).
+``Fault.STABILITY_DAMPING``. Until then ``step`` returns the controller's own answer, the same object. A tick the
+controller's guard refused (:data:`~coassist.interfaces.ZERO_EFFORT_FAULTS`: a non-finite or invalid state, reference
+or wrench) stays its answer, zero effort and flagged, engaged or not; a non-finite ‖w‖ leaves f̄ as it was.
 
 f_s = 20 N: under assistance the report's operators need 2–3 N RMS of hand force, under manual guidance 4–5 N, and
 steady 20 N for half a second is a person fighting the tool or the loop.
@@ -40,7 +41,7 @@ from numpy.typing import ArrayLike
 
 from coassist._checks import check_positive_scalar
 from coassist.control.controllers import ControlStep, saturate
-from coassist.interfaces import Fault
+from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault
 
 __all__ = ["StabilityGuard", "StabilityGuardParameters"]
 
@@ -132,12 +133,11 @@ class StabilityGuard:
                 return out
             self.engaged_at = k
         self.share = max(0.0, self.share - self._fade)
-        try:
-            v = np.asarray(z, dtype=float).reshape(-1)[self.n : 2 * self.n]
-        except (TypeError, ValueError):
+        if out.fault & ZERO_EFFORT_FAULTS:
+            return out  # a bad tick gives zero effort, as the controller's guard says (no damper on a bad state)
+        v = np.asarray(z, dtype=float).reshape(-1)[self.n : 2 * self.n]
+        if not np.isfinite(v).all():  # a controller without the guard's checks: no damper on a bad state
             v = np.zeros(self.n)
-        if v.shape != (self.n,) or not np.isfinite(v).all():
-            v = np.zeros(self.n)  # a bad state: no damper on it (the controller's guard flagged the tick)
         u = self.share * np.asarray(out.u_r, dtype=float) - (1.0 - self.share) * self.params.damping * v
         fault = out.fault | Fault.STABILITY_DAMPING
         if self.effort_limit is not None:
