@@ -245,9 +245,8 @@ def _claim_counts(text: str) -> tuple[int, int, int]:
         cells = [c.strip() for c in row.split("|")]
         if len(cells) < 3 or cells[1] in ("verdict", "---") or set(cells[1]) <= {"-"}:
             continue
-        # "(board; heavy)": two claims, each with its own verdict ("holds; **2 of 3**")
-        verdicts = [v.strip().strip("*") for v in cells[1].split(";")]
-        if "(board; heavy)" in cells[0]:
+        if "(board; heavy)" in cells[0]:  # two claims, each with its own verdict ("holds; **2 of 3**")
+            verdicts = [v.strip().strip("*") for v in cells[1].split(";")]
             assert len(verdicts) == 2, f"a (board; heavy) row needs a verdict for each: {row}"
             total += 2
             held += sum(v in ("holds", "hold") for v in verdicts)

@@ -206,8 +206,8 @@ def test_the_stability_guard_wraps_the_assistive_controllers_and_ends_a_limit_cy
     assert guarded.meta.controller == off.meta.controller == "cooperative+target"  # the controller's own name
     assert (off.meta.extra["ended"], guarded.meta.extra["ended"]) == ("time_limit", "target")
     assert np.any(guarded.fault & int(Fault.STABILITY_DAMPING)) and not np.any(off.fault & int(Fault.STABILITY_DAMPING))
-    # the baselines are not guarded: a steady 30 N push under manual guidance (the guard would engage after
-    # 0.35 s) or the assistive controller (it does) for 1 s
+    # the baselines are not guarded: a steady 30 N push for 1 s under manual guidance (the guard would engage after
+    # ln 3 · 0.5 s = 0.55 s) or under the assistive controller (it does)
     push = ScriptedForce.steps([(0.0, (30.0, 0.0, 0.0, 0.0, 0.0, 0.0))])
     flags = {}
     for controller in ("manual", "cooperative"):
