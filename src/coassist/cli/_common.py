@@ -232,6 +232,19 @@ SCENE_HELP = (
     "the robot the scene (the paths source goes round them); the trial records it, to be reported apart."
 )
 
+STABILITY_HELP = (
+    "The stability guard on the assistive controllers (x-y): once the hand force, low-passed over 0.5 s, passes "
+    "20 N the robot becomes a damper for the rest of the run (a stiff person behind a long reflex delay can fall "
+    "into a limit cycle with assistance that follows their force; docs/robots.md). Off: the controller as it is."
+)
+
+
+def stability_option(on: bool):
+    """DriveConfig.stability for --stability-guard / --no-stability-guard: the guard's defaults, or None (off)."""
+    from coassist.control.stability import StabilityGuardParameters
+
+    return StabilityGuardParameters() if on else None
+
 
 def simulation_only_sources() -> str:
     """The intent sources only a simulated world runs (the oracle), comma-separated, for the help."""

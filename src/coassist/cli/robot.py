@@ -12,6 +12,7 @@ from coassist.cli._common import (
     INTENT_DEFAULT_HELP,
     PERSON_HELP,
     SCENE_HELP,
+    STABILITY_HELP,
     choose,
     fail,
     floats,
@@ -21,6 +22,7 @@ from coassist.cli._common import (
     scene_option,
     set_torch_threads,
     simulation_only_sources,
+    stability_option,
     typed,
 )
 from coassist.cli._live import FOXGLOVE_PORT, LIVE_HELP, close_live, open_live
@@ -85,6 +87,7 @@ def drive(
         help="Also write the run as <out>.mcap: ROS 2 messages (poses, wrench, prediction, alpha, faults) that Foxglove opens and train reads.",
     ),
     overwrite: bool = typer.Option(False, help="Replace an existing trial file at --out."),
+    stability_guard: bool = typer.Option(True, "--stability-guard/--no-stability-guard", help=STABILITY_HELP),
     foxglove: int = typer.Option(None, metavar="[PORT]", help=LIVE_HELP.format(port=FOXGLOVE_PORT)),
 ) -> None:
     """Run the assistive controller, IMP or MG on an arm (UR5, Panda): in MuJoCo, or on a real one."""
@@ -119,6 +122,7 @@ def drive(
             population=population,
             person=person,
             scene=scene_option(scene),
+            stability=stability_option(stability_guard),
         )
     except ValueError as exc:
         fail(typed(str(exc), DRIVE_OPTIONS), 2)

@@ -12,11 +12,13 @@ from coassist.cli._common import (
     INTENT_DEFAULT_HELP,
     PERSON_HELP,
     SCENE_HELP,
+    STABILITY_HELP,
     console,
     fail,
     floats,
     say,
     scene_option,
+    stability_option,
     typed,
 )
 from coassist.cli._live import FOXGLOVE_PORT, LIVE_HELP, close_live, open_live
@@ -106,6 +108,7 @@ def ros2(
     mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap (ROS 2 messages Foxglove opens)."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
     overwrite: bool = typer.Option(False, help="Replace an existing run at --out (its trial and its .mcap)."),
+    stability_guard: bool = typer.Option(True, "--stability-guard/--no-stability-guard", help=STABILITY_HELP),
     foxglove: int = typer.Option(None, metavar="[PORT]", help=LIVE_HELP.format(port=FOXGLOVE_PORT)),
 ) -> None:
     """Run the assistive controller, IMP or MG as a ROS 2 node: ros2_control's forward velocity controller."""
@@ -134,6 +137,7 @@ def ros2(
             predictor_backend=predictor_backend,
             person=person,
             scene=scene_option(scene),
+            stability=stability_option(stability_guard),
         )
         rcfg = Ros2Config(
             node_name=node_name,
