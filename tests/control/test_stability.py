@@ -1,5 +1,6 @@
 """The stability guard (coassist.control.stability): the controller's own answer until the low-passed hand force
-passes its threshold (closed form), then the fade to a damper, and a limit cycle of a simulated person ended."""
+passes its threshold while it turns (closed forms), then the fade to a damper; a limit cycle of a simulated person
+ended, and the real recorded people's hard pushes left alone."""
 
 import math
 
@@ -9,6 +10,7 @@ import pytest
 from coassist.control.controllers import ControlStep
 from coassist.control.presets import get_preset, make_controller
 from coassist.control.stability import StabilityGuard, StabilityGuardParameters
+from coassist.data import default_real_data, load_ros_user
 from coassist.interfaces import Fault
 from coassist.scenario.intent_registry import load_intent_source
 from coassist.scenario.objects import get_object
@@ -56,7 +58,7 @@ def test_below_the_threshold_the_answer_is_the_controllers_own():
 
 @pytest.mark.parametrize("push", [25.0, 60.0])
 def test_it_engages_when_the_low_passed_force_passes_the_threshold_then_fades_to_a_damper(push):
-    p = StabilityGuardParameters()
+    p = StabilityGuardParameters(direction_ratio=1.0)  # any force held above f_s (a steady push's ρ is 1)
     guard = StabilityGuard(_Scripted([10.0, 0.0]), p)
     # from rest under a steady push F: f̄ after k ticks is F (1 − (1 − a)^k), a = 1 − e^(−dt/τ): it first passes f_s
     # at k* = ⌈ln(1 − f_s/F) / ln(1 − a)⌉, tick k* − 1 counting from 0
@@ -78,8 +80,70 @@ def test_it_engages_when_the_low_passed_force_passes_the_threshold_then_fades_to
     assert guard.engaged_at is None and guard.force == 0.0 and np.array_equal(_tick(guard, [0.0, 0.0]).u_r, [10.0, 0.0])
 
 
+@pytest.mark.parametrize("push", [25.0, 60.0, 200.0])
+def test_a_push_held_in_one_direction_never_engages_it(push):
+    # a person pushing hard (real people do: the recordings below) is not an oscillation: ρ = ‖w̄‖ / f̄ = 1
+    guard = StabilityGuard(_Scripted([10.0, 0.0]))
+    for k in range(1000):
+        turn = 0.3 * k / 1000  # and slowly turning (0.3 rad over 8 s): ρ stays within 1e-3 of 1
+        out = _tick(guard, [push * math.cos(turn), push * math.sin(turn)], (0.2, -0.1))
+        assert out.fault == Fault.NONE and np.array_equal(out.u_r, [10.0, 0.0])
+    assert guard.engaged_at is None and guard.force > 0.99 * push
+
+
+@pytest.mark.parametrize(("push", "hz"), [(25.0, 1.0), (60.0, 1.0), (40.0, 3.0), (25.0, 0.25), (60.0, 0.25)])
+def test_a_force_that_turns_engages_it_at_the_closed_forms_tick(push, hz):
+    # F of constant magnitude turning at ω from rest: f̄_k = F (1 − q^(k+1)), q = 1 − a, and
+    # w̄_k = a F e^(iωk dt) (1 − (q e^(−iω dt))^(k+1)) / (1 − q e^(−iω dt)) (a geometric sum); it engages at the
+    # first k with f̄_k > f_s and ‖w̄_k‖ ≤ ρ_s f̄_k. ρ tends to 1/√(1 + (ω τ_f)²): a turn slower than 0.28 Hz
+    # (ρ > 0.75 for good) never engages it; a strong push turning at 1 Hz only once it has turned for a while
+    p = StabilityGuardParameters()
+    a = 1.0 - math.exp(-DT / p.time_constant)
+    q, w = 1.0 - a, 2.0 * math.pi * hz
+    r = q * complex(math.cos(w * DT), -math.sin(w * DT))
+    n = 2500  # 20 s
+    expected = next(
+        (
+            k
+            for k in range(n)
+            if (fbar := push * (1.0 - q ** (k + 1))) > p.force_threshold
+            and abs(a * push * (1.0 - r ** (k + 1)) / (1.0 - r)) <= p.direction_ratio * fbar
+        ),
+        None,
+    )
+    f_only = math.ceil(math.log(1.0 - p.force_threshold / push) / math.log(q)) - 1  # the tick f̄ alone passes f_s
+    assert {(25.0, 1.0): f_only, (60.0, 1.0): 51, (40.0, 3.0): f_only}.get((push, hz)) == expected  # the sums'
+    guard = StabilityGuard(_Scripted([10.0, 0.0]), p)
+    for k in range(n if expected is None else expected + 3):
+        _tick(guard, [push * math.cos(w * k * DT), push * math.sin(w * k * DT)])
+    assert guard.engaged_at == expected, (guard.engaged_at, expected)
+
+
+@pytest.mark.real_data
+def test_the_recorded_people_of_the_thesis_lab_push_hard_but_never_engage_it():
+    # the real UR5 trials (user-a, user-b: 18 people's trials at 125 Hz): in 7 of them the low-passed hand force
+    # passes 20 N (to 32 N), held in one direction; a guard on the force alone would have engaged there
+    folder = default_real_data()
+    if not (folder / "user-a").is_dir():
+        pytest.skip(f"real UR5 recordings (shared/data/ur5-thesis) not found: {folder.resolve()}")
+    engaged = {}
+    for user in ("user-a", "user-b"):
+        for trial in load_ros_user(folder / user):
+            name = f"{user}/{trial.meta.extra['recording']}"
+            for ratio in (0.75, 1.0):
+                guard = StabilityGuard(_Scripted([0.0, 0.0]), StabilityGuardParameters(direction_ratio=ratio))
+                for v, w in zip(trial.velocity, trial.wrench, strict=True):
+                    _tick(guard, w, v)
+                engaged[name, ratio] = guard.engaged_at is not None
+    assert len(engaged) == 2 * 18
+    assert not any(on for (_, ratio), on in engaged.items() if ratio == 0.75)
+    assert sorted(name for (name, ratio), on in engaged.items() if ratio == 1.0 and on) == [
+        f"user-a/trial_{k}" for k in (10, 11, 14, 4, 5, 6, 7)
+    ]
+
+
 def test_the_damper_is_saturated_to_the_effort_limit_and_bad_input_is_no_damper():
-    p = StabilityGuardParameters(time_constant=0.008, fade_time=0.008)
+    p = StabilityGuardParameters(time_constant=0.008, fade_time=0.008, direction_ratio=1.0)
     guard = StabilityGuard(_Scripted([0.0, 0.0], effort_limit=30.0), p)
     out = _tick(guard, [500.0, 0.0], (1.0, 0.0))  # engaged at once (f̄ = 500 (1 − 1/e) > 20), g = 0: −150 N, to 30
     np.testing.assert_allclose(out.u_r, [-30.0, 0.0])
@@ -90,7 +154,8 @@ def test_the_damper_is_saturated_to_the_effort_limit_and_bad_input_is_no_damper(
 
 def test_a_tick_the_controllers_guard_refuses_stays_zero_effort_when_engaged():
     # the controllers' contract: a bad tick gives zero robot effort and a flag; engaged, the guard keeps it
-    guard = StabilityGuard(make_controller("cooperative", PRESET), StabilityGuardParameters(time_constant=0.008))
+    p = StabilityGuardParameters(time_constant=0.008, direction_ratio=1.0)
+    guard = StabilityGuard(make_controller("cooperative", PRESET), p)
     z, ref = np.array([0.0, 0.0, 0.1, 0.0]), np.zeros((50, 4))
     assert guard.step(z, ref, ref, np.array([500.0, 0.0])).fault & Fault.STABILITY_DAMPING  # engaged at once
     out = guard.step(z, ref, ref, np.array([math.nan, 0.0]))

@@ -11,6 +11,7 @@ import pytest
 pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra: pip install 'coassist[robot]'")
 pytest.importorskip("pinocchio", reason="the UR5 kinematics need the robot extra: pip install 'coassist[robot]'")
 
+from coassist.control.stability import StabilityGuardParameters
 from coassist.data import read_trial, write_trial  # noqa: E402
 from coassist.interfaces import Fault  # noqa: E402
 from coassist.metrics import f_rms  # noqa: E402
@@ -206,13 +207,20 @@ def test_the_stability_guard_wraps_the_assistive_controllers_and_ends_a_limit_cy
     assert guarded.meta.controller == off.meta.controller == "cooperative+target"  # the controller's own name
     assert (off.meta.extra["ended"], guarded.meta.extra["ended"]) == ("time_limit", "target")
     assert np.any(guarded.fault & int(Fault.STABILITY_DAMPING)) and not np.any(off.fault & int(Fault.STABILITY_DAMPING))
-    # the baselines are not guarded: a steady 30 N push for 1 s under manual guidance (the guard would engage after
-    # ln 3 · 0.5 s = 0.55 s) or under the assistive controller (it does)
+    # the baselines are not guarded: a steady 30 N push for 1 s under manual guidance or under the assistive
+    # controller, with a guard that engages on any force held above 20 N (direction_ratio 1: after ln 3 · 0.5 s =
+    # 0.55 s); the default guard leaves a push held in one direction alone (a person pushing hard, not a cycle)
     push = ScriptedForce.steps([(0.0, (30.0, 0.0, 0.0, 0.0, 0.0, 0.0))])
     flags = {}
-    for controller in ("manual", "cooperative"):
-        trial = drive(DriveConfig(controller=controller, task="linear", time_limit=1.0), operator=push)
-        flags[controller] = bool(np.any(trial.fault & int(Fault.STABILITY_DAMPING)))
-    assert flags == {"manual": False, "cooperative": True}
+    for controller, ratio in (("manual", 1.0), ("cooperative", 1.0), ("cooperative", 0.75)):
+        config = DriveConfig(
+            controller=controller,
+            task="linear",
+            time_limit=1.0,
+            stability=StabilityGuardParameters(direction_ratio=ratio),
+        )
+        trial = drive(config, operator=push)
+        flags[controller, ratio] = bool(np.any(trial.fault & int(Fault.STABILITY_DAMPING)))
+    assert flags == {("manual", 1.0): False, ("cooperative", 1.0): True, ("cooperative", 0.75): False}
     with pytest.raises(ValueError, match="DriveConfig.stability"):
         DriveConfig(stability="on")

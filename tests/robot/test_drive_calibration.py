@@ -71,7 +71,7 @@ def test_probe_trials_recorded_by_drive_fit_a_person_model(probe_trials, tmp_pat
     assert said == [
         f"assistance: cooperative, toward the person model {folder} (alice: arm measured, {sides.size} "
         f"demonstrations ({int(np.sum(sides == 1))} left, {int(np.sum(sides == -1))} right))"
-        "; a damper if the hand force stays above 20 N (the stability guard)"
+        "; a damper if the hand force oscillates above 20 N (the stability guard)"
     ]
     assert run.meta.model_id == "person:cal" and run.meta.user == "alice"
     # another task: the person model says it serves another plan
@@ -135,7 +135,7 @@ def test_the_statement_names_the_scene_for_paths():
     assert said == [
         "assistance: cooperative, toward the path hypotheses round the 1 obstacle of the scene file "
         "lab/scene.toml (the robot is told the scene)"
-        "; a damper if the hand force stays above 20 N (the stability guard)"
+        "; a damper if the hand force oscillates above 20 N (the stability guard)"
     ]
 
 
@@ -151,7 +151,7 @@ def test_the_commands_say_what_the_person_gets_and_refuse_bad_lab_inputs(tmp_pat
     said = [line for line in res.output.splitlines() if line.startswith("assistance:")]
     assert said == [
         "assistance: cooperative, toward the present estimate from the hand force (no calibration: run coassist "
-        "calibrate); a damper if the hand force stays above 20 N (the stability guard)"
+        "calibrate); a damper if the hand force oscillates above 20 N (the stability guard)"
     ]
     # the guard off (a lab's choice, docs/robots.md): the statement says the controller alone, as on MG, which is
     # never guarded (which runs the guard wraps: tests/robot/test_drive.py)

@@ -234,8 +234,9 @@ SCENE_HELP = (
 
 STABILITY_HELP = (
     "The stability guard on the assistive controllers (x-y): once the hand force, low-passed over 0.5 s, passes "
-    "20 N the robot becomes a damper for the rest of the run (a stiff person behind a long reflex delay can fall "
-    "into a limit cycle with assistance that follows their force; docs/robots.md). Off: the controller as it is."
+    "20 N while it turns (an oscillation, not a push held one way) the robot becomes a damper for the rest of the "
+    "run (a stiff person behind a long reflex delay can fall into a limit cycle with assistance that follows their "
+    "force; docs/robots.md). Off: the controller as it is."
 )
 
 

@@ -123,8 +123,8 @@ class DriveConfig:
         the tick never waits for the GIL; the default, see benchmarks/bench_tick.py),
         "onnx" (ONNX Runtime in a worker thread) or "torch" (eager, worker thread).
     stability : the stability guard on an assistive controller (:data:`GUARDED_CONTROLLERS`, x-y only:
-        not with ``full_pose``): once the hand force low-passed over 0.5 s passes 20 N the robot becomes a
-        damper for the rest of the run (:mod:`coassist.control.stability`; a stiff person behind a long reflex
+        not with ``full_pose``): once the hand force low-passed over 0.5 s passes 20 N while it turns (an
+        oscillation, not a push held in one direction) the robot becomes a damper for the rest of the run (:mod:`coassist.control.stability`; a stiff person behind a long reflex
         delay can fall into a limit cycle with assistance that follows their force). None: off.
     """
 
@@ -579,9 +579,7 @@ def _prepare(
             scene=None if config.scene is None else config.scene.source,
         )
         if guarded(config) and config.stability is not None:
-            assistance += (
-                f"; a damper if the hand force stays above {config.stability.force_threshold:g} N (the stability guard)"
-            )
+            assistance += f"; a damper if the hand force oscillates above {config.stability.force_threshold:g} N (the stability guard)"
         # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
         wrench.zero(np.asarray(state0.wrench, dtype=float)[None], np.asarray(state0.sensor_rotation, dtype=float)[None])
     except BaseException:
