@@ -121,7 +121,7 @@ def test_a_force_that_turns_engages_it_at_the_closed_forms_tick(push, hz):
 
 @pytest.mark.real_data
 def test_the_recorded_people_of_the_thesis_lab_push_hard_but_never_engage_it():
-    # the real UR5 trials (user-a, user-b: 18 people's trials at 125 Hz): in 7 of them the low-passed hand force
+    # the real UR5 trials (user-a's 15, user-b's 3: two people, 125 Hz): in 7 of them the low-passed hand force
     # passes 20 N (to 32 N), held in one direction; a guard on the force alone would have engaged there
     folder = default_real_data()
     if not (folder / "user-a").is_dir():
