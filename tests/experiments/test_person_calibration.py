@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from coassist.cli import app
 from coassist.control.presets import get_preset, make_controller
-from coassist.data import Trial, TrialMeta, write_dataset
+from coassist.data import Trial, TrialMeta, default_real_data, load_ros_user, write_dataset
 from coassist.experiments.person_calibration import (
     CalibrationError,
     PersonCalibration,
@@ -21,7 +21,8 @@ from coassist.experiments.person_calibration import (
 from coassist.scenario.arm_identification import ASSUMED_ARM, identify_arm
 from coassist.scenario.objects import get_object
 from coassist.scenario.operator import AUTHOR
-from coassist.scenario.person_model import read_person_model
+from coassist.scenario.path_model import REPEAT_LIMIT, fit_path_model
+from coassist.scenario.person_model import PersonFit, fit_person, read_person_model
 from coassist.scenario.tasks import task_for_seed
 from coassist.sim.trial_runner import run_trial
 
@@ -80,6 +81,43 @@ def test_each_person_gets_their_own_fit_and_a_line(alice, bob):
         sides = c.fit.paths.sides
         assert f"{int(np.sum(sides == 1))} left, {int(np.sum(sides == -1))} right" in line
         assert "\n" not in line
+
+
+def test_the_line_says_how_far_the_paths_repeat(alice):
+    (a,) = calibrate_people(alice)
+    r = a.fit.paths.repeatability()
+    assert r is not None and r < REPEAT_LIMIT  # a simulated person goes round the obstacle alike each time
+    assert f"; the paths repeat ({r:.2f} of each one's offset" in summary_line(a)
+    # two detours with nothing in common (r = √2, tests/scenario/test_path_model.py): the line warns
+    nominal = a.fit.paths.nominal
+    x = np.linspace(nominal[0, 0], nominal[-1, 0], 800)
+    span = nominal[-1, 0] - nominal[0, 0]
+
+    def bump(at: float) -> np.ndarray:
+        return np.stack([x, nominal[0, 1] + 0.08 * np.exp(-(((x - nominal[0, 0] - at * span) / 0.05) ** 4))], axis=1)
+
+    apart = fit_path_model(nominal, [bump(0.3), bump(0.7)], noise=0.001)
+    line = summary_line(replace(a, fit=PersonFit(arm=a.fit.arm, paths=apart)))
+    assert (
+        f"the paths do NOT repeat ({apart.repeatability():.2f}" in line and "record trials round the same scene" in line
+    )
+    one = fit_path_model(nominal, [bump(0.5)], noise=0.001)
+    assert "no way taken twice" in summary_line(replace(a, fit=PersonFit(arm=a.fit.arm, paths=one)))
+
+
+@pytest.mark.real_data
+def test_the_recorded_free_deviations_do_not_repeat():
+    # user-a of the thesis lab deviated as they wished, with nothing to go round (docs/person-model.md, "On the
+    # real recordings"): on each plan they followed more than once their paths repeat less than the limit allows
+    folder = default_real_data()
+    if not (folder / "user-a").is_dir():
+        pytest.skip(f"real UR5 recordings (shared/data/ur5-thesis) not found: {folder.resolve()}")
+    plans: dict[tuple, list] = {}
+    for t in load_ros_user(folder / "user-a"):
+        ref = np.asarray(t.reference[:, :2])
+        plans.setdefault(tuple(np.round(np.concatenate([ref[0], ref.min(axis=0), ref.max(axis=0)]), 3)), []).append(t)
+    fitted = [fit_person(trials).paths.repeatability() for trials in plans.values() if len(trials) > 1]
+    assert len(fitted) == 3 and all(r is not None and r > REPEAT_LIMIT for r in fitted), fitted
 
 
 def test_the_arm_comes_from_the_probe_trials_alone(alice):

@@ -5,6 +5,7 @@ import pytest
 
 from coassist.scenario.path_model import (
     NEAREST_CANDIDATES,
+    REPEAT_LIMIT,
     PathFrame,
     PathModel,
     PathModelSettings,
@@ -60,6 +61,25 @@ def test_ways_have_laplaces_prior_and_a_plan_without_detours_has_one_way():
     assert straight.sides.tolist() == [0, 0] and straight.ways() == {0: 1.0}
     points, ways, prior = straight.curves((0.0,))
     assert ways.tolist() == [0, 0] and prior.sum() == pytest.approx(1.0)
+
+
+def test_repeatability_is_what_the_others_mean_leaves_of_each_path():
+    # r_j = ‖d_j − mean of the others of its way‖ / ‖d_j‖ (RMS over 5–95 % of the plan), median over j.
+    # The same detour three times: 0. One detour and the same at c times its height: r = |1 − c| and |1 − c| / c,
+    # the median of two their mean (0.5 and 1 at c = 0.5: 0.75). Two detours with nothing in common (apart
+    # along the plan): ‖d_1 − d_2‖ = √2 ‖d_1‖, r = √2. A way taken once gives no figure. Tolerance: the
+    # primitive's fit of a demonstration, < 2 mm against RMS offsets of 20–40 mm (above)
+    same = fit_path_model(NOMINAL, [_bump(0.5, 0.08)] * 3, noise=0.001)
+    assert same.repeatability() == pytest.approx(0.0, abs=0.03)
+    scaled = fit_path_model(NOMINAL, [_bump(0.5, 0.08), _bump(0.5, 0.04)], noise=0.001)
+    assert scaled.repeatability() == pytest.approx(0.75, abs=0.03)
+    apart = fit_path_model(NOMINAL, [_bump(0.3, 0.08), _bump(0.7, 0.08)], noise=0.001)
+    assert apart.repeatability() == pytest.approx(np.sqrt(2.0), abs=0.03)
+    # the others are of the same way: a left and a right detour say nothing of each other
+    assert fit_path_model(NOMINAL, [_bump(0.5, 0.08), _bump(0.5, -0.08)], noise=0.001).repeatability() is None
+    mixed = fit_path_model(NOMINAL, [_bump(0.5, 0.08)] * 2 + [_bump(0.5, -0.08)] * 2, noise=0.001)
+    assert mixed.repeatability() == pytest.approx(0.0, abs=0.03)
+    assert same.repeatability() < REPEAT_LIMIT < scaled.repeatability()
 
 
 def test_a_way_nobody_took_is_the_mirror_of_the_other_and_shifts_move_along_the_plan():
