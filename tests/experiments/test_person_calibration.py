@@ -164,6 +164,15 @@ def test_refusals_name_the_person_and_the_trial(alice):
     moved = _trial(first.trial, reference=first.trial.reference + [0.05, 0.0], pose=first.trial.pose + [0.05, 0.0])
     with pytest.raises(CalibrationError, match=r"alice: trial lab/moved follows another nominal path.*5\.0 cm"):
         calibrate_people([*alice, Named("lab/moved", moved)])
+    # a loop: a plan round a circle, ending where it started
+    n = first.trial.n_samples
+    theta = np.linspace(0.0, 2.0 * np.pi, n)
+    circle = first.trial.reference[0, :2] + 0.2 * np.stack([np.cos(theta) - 1.0, np.sin(theta)], axis=1)
+    ref = first.trial.reference.copy()
+    ref[:, :2] = circle
+    loop = _trial(first.trial, reference=ref, pose=ref.copy())
+    with pytest.raises(CalibrationError, match=r"alice: trial lab/loop: its plan ends 0\.0 cm from where it starts"):
+        calibrate_people([*alice, Named("lab/loop", loop)])
     # a trial where the tool never moved
     still = _trial(first.trial, pose=np.repeat(first.trial.pose[:1], first.trial.n_samples, axis=0))
     with pytest.raises(CalibrationError, match=r"alice: trial lab/still: the tool moved 0 mm and reached 0 %"):

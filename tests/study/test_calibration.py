@@ -191,6 +191,9 @@ def test_the_block_runs_under_the_probe_and_fits_the_participants_person_model(c
     assert set(source.paths) == {"S01"} and source.default_arm == arm and source.default_paths is source.paths["S01"]
     by_hand = fit_person(list(cal.trials), arm=arm).paths
     assert np.allclose(source.paths["S01"].weights, by_hand.weights, rtol=0, atol=1e-12)
+    # how far the demonstrations repeat, recorded with the fit (None where no way was taken twice)
+    r = by_hand.repeatability()
+    assert fit["paths"]["curved"]["repeatability"] == (None if r is None else pytest.approx(r, abs=1e-9))
     # the calibrated condition ran with it, each trial recording its file's hash; MG with nothing
     person = read_dataset(pf.block("person")).trials
     assert {t.meta.model_id for t in person} == {"person:curved"} and {t.meta.extra["study_model"] for t in person} == {

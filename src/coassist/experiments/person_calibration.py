@@ -53,6 +53,9 @@ PROBE_CONTROLLER = "manual-probe"
 SAME_PATH = 0.01
 #: A calibration trial moves the tool along at least this share of the plan's length.
 MIN_PROGRESS = 0.5
+#: A plan whose end is nearer its start than this share of its length is a loop: refused (the real recordings'
+#: user-b followed one, 1.5 m long, ending where it started).
+LOOP_GAP = 0.1
 
 
 class CalibrationError(CoassistError, ValueError):
@@ -101,6 +104,13 @@ def _check_trial(person: str, tid: str, trial: Trial) -> None:
         raise CalibrationError(f"{person}: trial {tid} has no nominal path (its reference never moves)")
     moved = float(np.max(np.linalg.norm(trial.pose[:, :2] - trial.pose[0, :2], axis=1)))
     frame = PathFrame(nominal)
+    gap = float(np.linalg.norm(nominal[-1] - nominal[0]))
+    if gap < LOOP_GAP * frame.length:
+        # a path's offset from a loop is not defined along it (the nearest point may be on the way out or back)
+        raise CalibrationError(
+            f"{person}: trial {tid}: its plan ends {100 * gap:.1f} cm from where it starts ({frame.length:.2f} m "
+            "long, a loop); a person model learns paths from a start to a target"
+        )
     reached = float(np.max(frame.project(trial.pose[:, :2])[0])) / frame.length
     if moved < 0.005 or reached < MIN_PROGRESS:
         raise CalibrationError(

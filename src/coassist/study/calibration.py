@@ -210,6 +210,8 @@ def fit_job(job: FitJob) -> dict[str, Any]:
                 "demonstrations": len(demos[task]),
                 "sides": [int(s) for s in fit.paths.sides],
                 "noise_m": float(fit.paths.noise),
+                # how far the demonstrations repeat (PathModel.repeatability; None: no way taken twice)
+                "repeatability": fit.paths.repeatability(),
             }
             for task, fit in fits.items()
         },
