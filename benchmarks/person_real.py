@@ -118,8 +118,8 @@ def main() -> None:
     args = ap.parse_args()
     folder = default_real_data() if args.data is None else args.data
     horizons = [int(h) for h in args.horizons.split(",")]
-    if any(not 1 <= h <= HORIZON for h in horizons):
-        ap.error(f"--horizons must be in 1..{HORIZON}")
+    if any(not 2 <= h <= HORIZON for h in horizons):
+        ap.error(f"--horizons must be in 2..{HORIZON} (a displacement along the rows needs two of them)")
     names = ("person model",) + BASELINES
     metrics = ("position", "displacement")
     total = {(m, n, h): [] for m in metrics for n in names for h in horizons}

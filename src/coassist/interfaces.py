@@ -80,7 +80,9 @@ class Fault(enum.IntFlag):
     STOPPED = 1 << 21  # the safety layer has stopped the robot (zero command until the run ends)
     ROBOT_PROTECTIVE_STOP = 1 << 22  # the robot controller reports a protective stop
     ROBOT_EMERGENCY_STOP = 1 << 23  # the robot controller reports an emergency stop
-    STABILITY_DAMPING = 1 << 24  # the hand force stayed high: the robot is a damper (coassist.control.stability)
+    STABILITY_DAMPING = (
+        1 << 24
+    )  # a large hand force turned, an oscillation: the robot is a damper (coassist.control.stability)
 
 
 #: (bit, name) of every single fault flag, built once: fault_names runs every tick.

@@ -77,7 +77,8 @@ def test_it_engages_when_the_low_passed_force_passes_the_threshold_then_fades_to
     # it stays engaged when the push goes away, and a reset starts a new run
     assert _tick(guard, [0.0, 0.0], v).fault & Fault.STABILITY_DAMPING
     guard.reset()
-    assert guard.engaged_at is None and guard.force == 0.0 and np.array_equal(_tick(guard, [0.0, 0.0]).u_r, [10.0, 0.0])
+    assert guard.engaged_at is None and guard.force == 0.0 and np.array_equal(guard.mean_force, [0.0, 0.0])
+    assert np.array_equal(_tick(guard, [0.0, 0.0]).u_r, [10.0, 0.0])
 
 
 @pytest.mark.parametrize("push", [25.0, 60.0, 200.0])
@@ -148,8 +149,12 @@ def test_the_damper_is_saturated_to_the_effort_limit_and_bad_input_is_no_damper(
     out = _tick(guard, [500.0, 0.0], (1.0, 0.0))  # engaged at once (f̄ = 500 (1 − 1/e) > 20), g = 0: −150 N, to 30
     np.testing.assert_allclose(out.u_r, [-30.0, 0.0])
     assert out.fault & Fault.SATURATED and out.fault & Fault.STABILITY_DAMPING
+    force, mean = guard.force, guard.mean_force.copy()
     out = _tick(guard, [math.nan, 0.0], (math.inf, 0.0))  # a non-finite state: no damper on it, f̄ unchanged
     assert np.array_equal(out.u_r, [0.0, 0.0])
+    assert guard.force == force and np.array_equal(guard.mean_force, mean)
+    _tick(guard, [30.0, 0.0, 0.0])  # a wrench of another size than the controller's 2 DOFs: not counted either
+    assert guard.force == force and np.array_equal(guard.mean_force, mean)
 
 
 def test_a_tick_the_controllers_guard_refuses_stays_zero_effort_when_engaged():
@@ -167,6 +172,10 @@ def test_a_tick_the_controllers_guard_refuses_stays_zero_effort_when_engaged():
 def test_bad_parameters_name_the_field():
     with pytest.raises(ValueError, match="StabilityGuardParameters.damping"):
         StabilityGuardParameters(damping=-1.0)
+    for ratio in (0.0, 1.5, math.nan):  # ‖w̄‖ / f̄ is in [0, 1]: 0 would never engage, above 1 is any force
+        with pytest.raises(ValueError, match="StabilityGuardParameters.direction_ratio"):
+            StabilityGuardParameters(direction_ratio=ratio)
+    assert StabilityGuardParameters(direction_ratio=1.0).direction_ratio == 1.0
     with pytest.raises(ValueError, match="'step'"):
         StabilityGuard(object())
 

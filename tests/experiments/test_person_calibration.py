@@ -102,7 +102,7 @@ def test_the_line_says_how_far_the_paths_repeat(alice):
         f"the paths do NOT repeat ({apart.repeatability():.2f}" in line and "record trials round the same scene" in line
     )
     one = fit_path_model(nominal, [bump(0.5)], noise=0.001)
-    assert "no way taken twice" in summary_line(replace(a, fit=PersonFit(arm=a.fit.arm, paths=one)))
+    assert "no detour taken twice" in summary_line(replace(a, fit=PersonFit(arm=a.fit.arm, paths=one)))
 
 
 @pytest.mark.real_data

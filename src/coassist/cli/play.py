@@ -9,6 +9,7 @@ import typer
 from coassist.cli._common import (
     INTENT_DEFAULT_HELP,
     SCENE_HELP,
+    STABILITY_HELP,
     console,
     fail,
     lookup,
@@ -17,6 +18,7 @@ from coassist.cli._common import (
     real_arm_hosts,
     say,
     scene_option,
+    stability_option,
 )
 from coassist.cli._live import FOXGLOVE_PAGE_PORT, LIVE_HELP, close_live, open_live
 from coassist.config import APPLICATION_PRESET
@@ -70,6 +72,9 @@ def play(
         False, help="Also write each trial as <trial>.mcap beside its Parquet file (ROS 2 messages Foxglove opens)."
     ),
     scene: Path = typer.Option(None, help=f"With --drive: {SCENE_HELP}"),
+    stability_guard: bool = typer.Option(
+        True, "--stability-guard/--no-stability-guard", help=f"With --drive: {STABILITY_HELP}"
+    ),
     foxglove: int = typer.Option(None, metavar="[PORT]", help=LIVE_HELP.format(port=FOXGLOVE_PAGE_PORT)),
 ) -> None:
     """Be the operator: a live page where your mouse, touch screen or gamepad is the hand on the robot."""
@@ -134,6 +139,7 @@ def play(
                     # at a real arm the page's user is the person at the handle (in MuJoCo, the simulated one)
                     person=None if drive not in arm_worlds() or WORLDS[drive].simulated else user,
                     scene=told,
+                    stability=stability_option(stability_guard),
                 ),
                 config,
                 host=robot_host,

@@ -28,7 +28,9 @@ the arm tracks, in an arm world), saturated to the controller's ``effort_limit``
 (:func:`~coassist.control.controllers.saturate`, ``SATURATED``); every tick engaged carries
 ``Fault.STABILITY_DAMPING``. Until then ``step`` returns the controller's own answer, the same object. A tick the
 controller's guard refused (:data:`~coassist.interfaces.ZERO_EFFORT_FAULTS`: a non-finite or invalid state, reference
-or wrench) stays its answer, zero effort and flagged, engaged or not; a non-finite ‖w‖ leaves f̄ as it was.
+or wrench) stays its answer, zero effort and flagged, engaged or not; a wrench that is not finite, or not of the
+controller's n DOFs (the control tick never passes one: it checks the controller's DOFs against its own), leaves f̄
+and w̄ as they were.
 
 f_s = 20 N: under assistance the report's operators need 2–3 N RMS of hand force, under manual guidance 4–5 N, and
 20 N for half a second is a person fighting the tool or the loop. ρ_s = 0.75: between the cycles' ≤ 0.57 and the
@@ -44,7 +46,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from coassist._checks import check_positive_scalar
+from coassist._checks import check_positive_scalar, check_real
 from coassist.control.controllers import ControlStep, saturate
 from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault
 
@@ -70,19 +72,20 @@ class StabilityGuardParameters:
     direction_ratio: float = 0.75
 
     def __post_init__(self) -> None:
-        for name in ("force_threshold", "time_constant", "fade_time", "damping", "direction_ratio"):
+        for name in ("force_threshold", "time_constant", "fade_time", "damping"):
             object.__setattr__(
                 self, name, check_positive_scalar(getattr(self, name), f"StabilityGuardParameters.{name}")
             )
-        if self.direction_ratio > 1.0:
-            raise ValueError(
-                "StabilityGuardParameters.direction_ratio must be in (0, 1] (‖w̄‖ / f̄ is at most 1), "
-                f"got {self.direction_ratio!r}"
-            )
+        # ‖w̄‖ / f̄ is at most 1 (the mean of vectors is no longer than the mean of their lengths)
+        object.__setattr__(
+            self,
+            "direction_ratio",
+            check_real(self.direction_ratio, "StabilityGuardParameters.direction_ratio", 0.0, 1.0, open_lo=True),
+        )
 
 
 class StabilityGuard:
-    """A controller that becomes a damper once the hand force stays high (module docstring).
+    """A controller that becomes a damper once a large hand force turns, an oscillation (module docstring).
 
     Parameters
     ----------

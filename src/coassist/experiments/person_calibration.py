@@ -236,7 +236,7 @@ def summary_line(c: PersonCalibration) -> str:
         measured = f"arm ASSUMED, not measured (K̂ {arm.stiffness:.0f} N/m, Ĉ {arm.damping:.1f} N·s/m): {why}"
     r = c.fit.paths.repeatability()
     if r is None:
-        repeat = "; no way taken twice: how far the paths repeat is unknown"
+        repeat = "; no detour taken twice: how far the paths repeat is not measured"
     elif r > REPEAT_LIMIT:
         repeat = (
             f"; the paths do NOT repeat ({r:.2f} of each one's offset from the plan is left by the others' mean; "

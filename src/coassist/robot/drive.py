@@ -124,8 +124,9 @@ class DriveConfig:
         "onnx" (ONNX Runtime in a worker thread) or "torch" (eager, worker thread).
     stability : the stability guard on an assistive controller (:data:`GUARDED_CONTROLLERS`, x-y only:
         not with ``full_pose``): once the hand force low-passed over 0.5 s passes 20 N while it turns (an
-        oscillation, not a push held in one direction) the robot becomes a damper for the rest of the run (:mod:`coassist.control.stability`; a stiff person behind a long reflex
-        delay can fall into a limit cycle with assistance that follows their force). None: off.
+        oscillation, not a push held in one direction) the robot becomes a damper for the rest of the run
+        (:mod:`coassist.control.stability`; a stiff person behind a long reflex delay can fall into a limit cycle
+        with assistance that follows their force). None: off.
     """
 
     world: str = "mujoco"
@@ -292,8 +293,8 @@ def _controller(config: DriveConfig):
     impedance = ImpedanceParameters(M=M, D=D, K=(0.0,) * len(M), dt=dt)
     controller = make_controller(config.controller, replace(preset, impedance=impedance, game=gp))
     if guarded(config):
-        # a damper once the hand force stays high: the damper's c acts on the x-y velocity (N·s/m), so not on
-        # the rotations of a full pose
+        # a damper once a large hand force turns (an oscillation): the damper's c acts on the x-y velocity
+        # (N·s/m), so not on the rotations of a full pose
         controller = StabilityGuard(controller, config.stability)
     return controller
 

@@ -259,14 +259,16 @@ class PathModel:
         return np.asarray(per_demo)
 
     def repeatability(self) -> float | None:
-        """How far the person's paths repeat: the median over demonstrations of ‖d_j − d̄_{−j}‖ / ‖d_j‖, d_j a
-        demonstration's offset from the plan over 5–95 % of its length, d̄_{−j} the mean of the others of its way
-        (RMS over the arc length). Near 0: the others say where this one went; near 1 or above: no better than the
-        plan (free deviations, not a scene gone round the same way). None: no way with two demonstrations."""
+        """How far the person's detours repeat: the median over the demonstrations that went round (way ±1) of
+        ‖d_j − d̄_{−j}‖ / ‖d_j‖, d_j a demonstration's offset from the plan over 5–95 % of its length, d̄_{−j} the
+        mean of the others of its way (RMS over the arc length). Near 0: the others say where this one went; near 1
+        or above: no better than the plan (free deviations, not a scene gone round the same way). None: no way
+        round taken twice. Paths that took no detour (way 0) are left out: their offset is the person's noise
+        about the plan, which the ratio would read as paths that do not repeat."""
         L = PathFrame(self.nominal).length
         D = self.demonstration_offsets(np.linspace(0.05 * L, 0.95 * L, 91))
         ratios = []
-        for j in range(len(D)):
+        for j in np.flatnonzero(self.sides != 0):
             others = np.flatnonzero(self.sides == self.sides[j])
             others = others[others != j]
             own = float(np.sqrt(np.mean(D[j] ** 2)))
