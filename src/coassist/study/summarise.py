@@ -198,9 +198,6 @@ def _fit_summary(rec: dict[str, Any], progress: list[dict[str, Any]]) -> PersonM
         ),
         sha256=None if sha256 is None else dict(sha256),
         fit_seconds=finite_number(rec.get("fit_seconds")),
-        repeatability={
-            task: finite_number(paths.get("repeatability")) for task, paths in (rec.get("paths") or {}).items()
-        },
     )
 
 

@@ -186,9 +186,7 @@ class PersonModelFit:
     Failed: ``reason`` and ``redo`` (the block run again). Otherwise what it was fitted from (``trials``
     per task, ``left_out`` per task: not in the target, of the ``blocks``), its ``arm``, what it was
     ``told`` (:class:`~coassist.scenario.intent_registry.Told`), ``used_in``: the blocks whose trials ran
-    with its files (their lines' ``model_sha256`` among its ``sha256``), the fit's wall time [s], and per task how
-    far the participant's paths repeat (``repeatability``: :meth:`~coassist.scenario.path_model.PathModel.
-    repeatability`, None where no detour was taken twice; absent from a summary written before it was recorded)."""
+    with its files (their lines' ``model_sha256`` among its ``sha256``), the fit's wall time [s]."""
 
     model: str | None
     attempt: int | None
@@ -204,21 +202,6 @@ class PersonModelFit:
     arm: ArmFit | None = None
     sha256: Mapping[str, str] | None = None
     fit_seconds: float | None = None
-    repeatability: Mapping[str, float | None] = field(default_factory=dict)
-
-    @property
-    def repeat_notes(self) -> tuple[str, ...]:
-        """Per task with a figure, one phrase: whether the participant's paths repeat (against
-        :data:`~coassist.scenario.path_model.REPEAT_LIMIT`)."""
-        from coassist.scenario.path_model import REPEAT_LIMIT
-
-        return tuple(
-            f"{task} paths repeat ({r:.2f})"
-            if r <= REPEAT_LIMIT
-            else f"{task} paths do NOT repeat ({r:.2f} > {REPEAT_LIMIT:g})"
-            for task, r in self.repeatability.items()
-            if r is not None
-        )
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"model": self.model, "attempt": self.attempt, "failed": self.failed}
@@ -235,7 +218,6 @@ class PersonModelFit:
             "arm": None if self.arm is None else self.arm.to_json(),
             "sha256": None if self.sha256 is None else dict(self.sha256),
             "fit_seconds": self.fit_seconds,
-            "repeatability": dict(self.repeatability),
         }
 
     @classmethod
@@ -255,7 +237,6 @@ class PersonModelFit:
             arm=None if d["arm"] is None else ArmFit.from_json(d["arm"]),
             sha256=None if d["sha256"] is None else dict(d["sha256"]),
             fit_seconds=finite_number(d["fit_seconds"]),
-            repeatability={task: finite_number(r) for task, r in (d.get("repeatability") or {}).items()},
         )
 
 
