@@ -21,8 +21,7 @@ from coassist.experiments.person_calibration import (
 from coassist.scenario.arm_identification import ASSUMED_ARM, identify_arm
 from coassist.scenario.objects import get_object
 from coassist.scenario.operator import AUTHOR
-from coassist.scenario.path_model import REPEAT_LIMIT, fit_path_model
-from coassist.scenario.person_model import PersonFit, read_person_model
+from coassist.scenario.person_model import read_person_model
 from coassist.scenario.tasks import task_for_seed
 from coassist.sim.trial_runner import run_trial
 
@@ -83,32 +82,11 @@ def test_each_person_gets_their_own_fit_and_a_line(alice, bob):
         assert "\n" not in line
 
 
-def test_the_line_says_how_far_the_paths_repeat(alice):
-    (a,) = calibrate_people(alice)
-    r = a.fit.paths.repeatability()
-    assert r is not None and r < REPEAT_LIMIT  # a simulated person goes round the obstacle alike each time
-    assert f"; the paths repeat ({r:.2f} of each one's offset" in summary_line(a)
-    # two detours with nothing in common (r = √2, tests/scenario/test_path_model.py): the line warns
-    nominal = a.fit.paths.nominal
-    x = np.linspace(nominal[0, 0], nominal[-1, 0], 800)
-    span = nominal[-1, 0] - nominal[0, 0]
-
-    def bump(at: float) -> np.ndarray:
-        return np.stack([x, nominal[0, 1] + 0.08 * np.exp(-(((x - nominal[0, 0] - at * span) / 0.05) ** 4))], axis=1)
-
-    apart = fit_path_model(nominal, [bump(0.3), bump(0.7)], noise=0.001)
-    line = summary_line(replace(a, fit=PersonFit(arm=a.fit.arm, paths=apart)))
-    assert (
-        f"the paths do NOT repeat ({apart.repeatability():.2f}" in line and "record trials round the same scene" in line
-    )
-    one = fit_path_model(nominal, [bump(0.5)], noise=0.001)
-    assert "no detour taken twice" in summary_line(replace(a, fit=PersonFit(arm=a.fit.arm, paths=one)))
-
-
 @pytest.mark.real_data
-def test_the_recorded_free_deviations_do_not_repeat():
+def test_the_recorded_people_calibrate_and_their_free_deviations_do_not_repeat():
     # user-a of the thesis lab deviated as they wished, with nothing to go round (docs/person-model.md, "On the
-    # real recordings"): on each plan they followed more than once their paths repeat less than the limit allows
+    # real recordings"). Each plan they followed more than once calibrates (the trials' periods, measured from their
+    # timestamps, differ by up to 0.6 %), and its paths repeat less than any simulated person's (0.12–0.32)
     folder = default_real_data()
     if not (folder / "user-a").is_dir():
         pytest.skip(f"real UR5 recordings (shared/data/ur5-thesis) not found: {folder.resolve()}")
@@ -116,15 +94,13 @@ def test_the_recorded_free_deviations_do_not_repeat():
     for t in load_ros_user(folder / "user-a"):
         ref = np.asarray(t.reference[:, :2])
         plans.setdefault(tuple(np.round(np.concatenate([ref[0], ref.min(axis=0), ref.max(axis=0)]), 3)), []).append(t)
-    # each plan's trials calibrate together (their periods, measured from the timestamps, differ by up to 0.6 %)
     fitted = []
     for trials in plans.values():
         if len(trials) > 1:
             (c,) = calibrate_people([Named(t.meta.extra["recording"], t) for t in trials])
-            r = c.fit.paths.repeatability()
-            assert r is not None and "the paths do NOT repeat" in summary_line(c)
-            fitted.append(r)
-    assert len(fitted) == 3 and all(r > REPEAT_LIMIT for r in fitted), fitted
+            assert "arm ASSUMED" in summary_line(c) and c.fit.paths.repeatability() is not None
+            fitted.append(c.fit.paths.repeatability())
+    assert len(fitted) == 3 and all(r > 0.4 for r in fitted), fitted
 
 
 def test_the_arm_comes_from_the_probe_trials_alone(alice):

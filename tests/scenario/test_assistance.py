@@ -8,7 +8,6 @@ from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate
 from coassist.scenario.assistance import DEFAULT_INTENT, assistance_line, check_person
 from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source
 from coassist.scenario.path_model import fit_path_model
-from coassist.scenario.person_intent import PersonPathsIntent
 from coassist.scenario.person_model import PersonFit, write_person_model
 
 LINE = np.stack([np.linspace(0.0, 0.4, 81), np.zeros(81)], axis=1)
@@ -74,14 +73,6 @@ def test_a_person_model_says_whose_arm_and_paths(person_model):
     moved = LINE + [0.0, 0.05]
     assert "recorded on another plan than this run's: the present estimate with their arm" in assistance_line(
         "cooperative", person_model, source, user="alice", path=moved
-    )
-    # paths that do not repeat (two left detours with nothing in common, r = √2): the line says it may mislead
-    x = np.linspace(0.0, 0.4, 200)
-    apart = [np.stack([x, 0.05 * np.exp(-(((x - c) / 0.03) ** 4))], axis=1) for c in (0.1, 0.3)]
-    loose = PersonPathsIntent(50, paths={"dan": fit_path_model(LINE, apart, noise=0.001)}, arms={"dan": ASSUMED_ARM})
-    said = assistance_line("cooperative", person_model, loose, user="dan", path=LINE)
-    assert said.endswith(
-        "2 demonstrations (2 left, 0 right) that do not repeat (1.41: it may lead where they do not go))"
     )
     check_person(source, "alice", person_model)
     with pytest.raises(ValueError, match=r"holds no calibration of 'carol' \(it holds alice, bob\)"):

@@ -31,7 +31,7 @@ import numpy as np
 from coassist.data import Trial
 from coassist.errors import CoassistError
 from coassist.scenario.arm_identification import identify_arm
-from coassist.scenario.path_model import REPEAT_LIMIT, PathFrame
+from coassist.scenario.path_model import PathFrame
 from coassist.scenario.person_model import PersonFit, fit_person
 
 __all__ = [
@@ -217,8 +217,7 @@ def _ways(sides: np.ndarray) -> str:
 
 def summary_line(c: PersonCalibration) -> str:
     """One line of what was learnt of a person: the arm (measured by the probe, or assumed and why), the
-    demonstrations per way round, how far their paths repeat (:meth:`~coassist.scenario.path_model.PathModel.
-    repeatability`, against :data:`~coassist.scenario.path_model.REPEAT_LIMIT`), the fit's time."""
+    demonstrations per way round, the fit's time."""
     arm = c.fit.arm
     if arm.method == "probe-iv":
         se = "" if arm.trials >= 3 else " (no standard error below 3 trials)"
@@ -234,17 +233,7 @@ def summary_line(c: PersonCalibration) -> str:
             else "the trials carry no probe (record them with --controller manual-probe)"
         )
         measured = f"arm ASSUMED, not measured (K̂ {arm.stiffness:.0f} N/m, Ĉ {arm.damping:.1f} N·s/m): {why}"
-    r = c.fit.paths.repeatability()
-    if r is None:
-        repeat = "; no detour taken twice: how far the paths repeat is not measured"
-    elif r > REPEAT_LIMIT:
-        repeat = (
-            f"; the paths do NOT repeat ({r:.2f} of each one's offset from the plan is left by the others' mean; "
-            f"above {REPEAT_LIMIT:g} the model leads where the person may not go: record trials round the same scene)"
-        )
-    else:
-        repeat = f"; the paths repeat ({r:.2f} of each one's offset from the plan is left by the others' mean)"
     return (
-        f"{c.person} ({c.task}, {len(c.trials)} trials): {measured}; demonstrations: {_ways(c.fit.paths.sides)}"
-        f"{repeat}; fit {c.seconds:.1f} s ({c.cpu_seconds:.1f} CPU-s)"
+        f"{c.person} ({c.task}, {len(c.trials)} trials): {measured}; demonstrations: {_ways(c.fit.paths.sides)}; "
+        f"fit {c.seconds:.1f} s ({c.cpu_seconds:.1f} CPU-s)"
     )

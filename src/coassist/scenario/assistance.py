@@ -45,17 +45,10 @@ _CONTROLLERS = {
 }
 
 
-def _ways(model: Any) -> str:
-    from coassist.scenario.path_model import REPEAT_LIMIT
-
-    sides = model.sides
+def _ways(sides: np.ndarray) -> str:
     n = int(sides.size)
     left, right = int(np.sum(sides == 1)), int(np.sum(sides == -1))
-    out = f"{n} demonstration{'s' if n != 1 else ''} ({left} left, {right} right)"
-    r = model.repeatability()
-    if r is not None and r > REPEAT_LIMIT:
-        out += f" that do not repeat ({r:.2f}: it may lead where they do not go)"
-    return out
+    return f"{n} demonstration{'s' if n != 1 else ''} ({left} left, {right} right)"
 
 
 def _told(obstacles: Sequence[Any], scene: str | None) -> str:
@@ -127,7 +120,7 @@ def _person(intent: str, source: Any, user: str, path: np.ndarray | None) -> str
     model = source.paths.get(user, source.default_paths)
     if model is None:
         return f"{name} ({user}: {how}, no demonstrations: the present estimate)"
-    known = f"{user}: {how}, {_ways(model)}"
+    known = f"{user}: {how}, {_ways(model.sides)}"
     if path is not None:
         # the person model's own test of the plan (coassist.scenario.person_intent.PersonPathsIntent.reset)
         if PathFrame(model.nominal).distance_to(np.asarray(path, dtype=float)) > 0.01:

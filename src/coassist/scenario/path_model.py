@@ -51,11 +51,6 @@ __all__ = ["NEAREST_CANDIDATES", "PathFrame", "PathModel", "PathModelSettings", 
 
 #: The vertices :meth:`PathFrame.nearest_vertex` compares each point with before it is sure of the nearest.
 NEAREST_CANDIDATES = 8
-#: Above this :meth:`PathModel.repeatability` the person's paths do not repeat enough to lead them: the simulated
-#: people's (every population, eight probe trials each) are 0.12–0.32; the real UR5 recordings' user-a, who deviated
-#: as they wished with nothing to go round, 0.42–0.89, where the person model's rows predicted the path's shape worse
-#: than the plan's (docs/person-model.md, "On the real recordings").
-REPEAT_LIMIT = 0.4
 
 
 class PathFrame:

@@ -43,7 +43,6 @@ import numpy as np
 from coassist.data import append_to_dataset, read_dataset, write_dataset
 from coassist.data.datasets import MANIFEST_NAME, manifest_files
 from coassist.play.session import PlayConfig
-from coassist.scenario.path_model import REPEAT_LIMIT
 from coassist.scenario.tasks import task_for_seed
 from coassist.study.calibration import CalibrationFailed, FitJob, fit_job, model_hashes, person_model_folder
 from coassist.study.folder import (
@@ -430,12 +429,6 @@ class ParticipantRun:
             f"{self.id}: person model {record['model']} fitted in {record['fit_seconds']:.1f} s from "
             + ", ".join(f"{len(v)} {t} trials" for t, v in record["demonstrations"].items())
             + f"; arm K = {arm['stiffness']:.0f} N/m, C = {arm['damping']:.1f} N·s/m ({how})"
-            + "".join(
-                f"; the {task} paths do NOT repeat ({paths['repeatability']:.2f} > {REPEAT_LIMIT:g}: the model may "
-                "lead where they do not go)"
-                for task, paths in record["paths"].items()
-                if paths.get("repeatability") is not None and paths["repeatability"] > REPEAT_LIMIT
-            )
         )
         return {"attempt": step["attempt"], **record}
 
