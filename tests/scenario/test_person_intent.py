@@ -213,6 +213,40 @@ def test_on_a_way_nobody_took_the_rows_are_the_present_estimates_without_the_mir
     assert max(np.abs(rows[True][k] - rows[False][k]).max() for k in late) > 1e-3
 
 
+def test_a_way_shown_fewer_times_than_min_way_paths_gives_the_present_estimates_rows():
+    # the calibration went left three times and right once; this trial goes right. With min_way_paths 1 (the
+    # default) the rows follow the one right path; with 2, once the right way is decided, they are the present
+    # estimate's rows (as on a way nobody took), and on the left way (three paths) nothing changes
+    model = _model(left=(0.49, 0.5, 0.51), right=(0.5,))
+    st = PersonFilterSettings()
+    for side, bump in ((-1, _bump(0.505, -0.08)), (1, _bump(0.505, 0.08))):
+        intent = _walk(bump)
+        rows = {}
+        for least in (1, 2):
+            src = PersonPathsIntent(
+                paths={"u": model}, arms={"u": ARM}, settings=PersonFilterSettings(min_way_paths=least)
+            )
+            src.reset(_context())
+            rows[least], sides = [], []
+            for k in range(len(intent)):
+                rows[least].append(_tick(src, intent, k))
+                sides.append(src.side)
+            sides = np.asarray(sides)
+            assert sides[-1] == side
+        decided = int(np.argmax(sides == side))
+        late = range(decided + 1, len(intent) - 60)
+        if side == 1:  # the left way: three paths, followed alike
+            assert all(np.array_equal(rows[1][k], rows[2][k]) for k in range(len(intent)))
+            continue
+        for k in late:
+            tool, prev = intent[max(k - 6, 0)], intent[max(k - 7, 0)]
+            hedge = intent[k] + st.hedge_velocity * np.outer(DT * np.arange(1, 51), (tool - prev) / DT)
+            np.testing.assert_allclose(rows[2][k], hedge, atol=1e-9)
+        assert max(np.abs(rows[1][k] - rows[2][k]).max() for k in late) > 1e-3  # the test can fail
+    with pytest.raises(ValueError, match="PersonFilterSettings.min_way_paths"):
+        PersonFilterSettings(min_way_paths=0)
+
+
 @pytest.mark.parametrize(
     ("z", "h", "sigma"), [(0.001, 0.002, 0.002), (-0.003, 0.05, 0.0025), (0.004, 0.0005, 0.001), (0.02, 0.1, 0.002)]
 )

@@ -125,6 +125,8 @@ class PersonFilterSettings:
     follow_mirror : on a way round the person never took in their calibration, follow the mirror images of
         the other way's paths (True), or give the present estimate's rows there (False): the mirror knows
         nothing of how this person goes round that side.
+    min_way_paths : a way round shown in fewer of the calibration's paths than this gives the present estimate's
+        rows, as a way nobody took does with ``follow_mirror`` off (1: every way shown at least once is followed).
     """
 
     kappa: float = 0.2
@@ -156,6 +158,7 @@ class PersonFilterSettings:
     hedge_lateral: bool = True
     hedge_leaving: float = 1.0
     pace_time: float = 0.0
+    min_way_paths: int = 1
 
     def __post_init__(self) -> None:
         for name, lo, hi, open_lo in (
@@ -187,6 +190,9 @@ class PersonFilterSettings:
             object.__setattr__(
                 self, name, check_real(getattr(self, name), f"PersonFilterSettings.{name}", lo, hi, open_lo=open_lo)
             )
+        object.__setattr__(
+            self, "min_way_paths", check_int(self.min_way_paths, "PersonFilterSettings.min_way_paths", 1, 100)
+        )
         for flag in ("object_yaw", "follow_mirror", "hedge_lateral"):
             if not isinstance(getattr(self, flag), bool):
                 raise ValueError(f"PersonFilterSettings.{flag} must be true or false, got {getattr(self, flag)!r}")
@@ -238,6 +244,7 @@ class _Curves:
         self.points, self.ways, prior = model.curves(shifts)
         # the ways round whose curves are mirror images: nobody took them in the calibration
         self.unseen = {int(w) for w in np.unique(self.ways)} - {int(w) for w in model.sides}
+        self.paths_of = {int(w): int(np.sum(model.sides == w)) for w in np.unique(self.ways)}  # demonstrations a way
         self.log_prior = np.log(prior)
         N, G = self.points.shape[:2]
         seg = np.hypot(*np.moveaxis(np.diff(self.points, axis=1), 2, 0))
@@ -640,8 +647,10 @@ class PersonPathsIntent:
                 out += lateral * self._residual_column * hyp.nominal_normals[k]
             return out
 
-        if not st.follow_mirror and self._side in hyp.unseen:
-            self._mix = 0.0  # a way this person never showed: no curves of theirs to follow there
+        if (not st.follow_mirror and self._side in hyp.unseen) or 0 < hyp.paths_of.get(
+            self._side, 0
+        ) < st.min_way_paths:
+            self._mix = 0.0  # a way this person never showed (or too few times): no curves of theirs to follow there
             return np.array((qx, qy)) + self._hedge_steps * np.array((hvx, hvy))
         ways = (self._side,) if self._side != 0 or not self._two else (1, -1)
         if near is not None and not all(near[hyp.on_way[w]].any() for w in ways):
