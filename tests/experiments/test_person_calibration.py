@@ -86,7 +86,8 @@ def test_each_person_gets_their_own_fit_and_a_line(alice, bob):
 def test_the_recorded_people_calibrate_and_their_free_deviations_do_not_repeat():
     # user-a of the thesis lab deviated as they wished, with nothing to go round (docs/person-model.md, "On the
     # real recordings"). Each plan they followed more than once calibrates (the trials' periods, measured from their
-    # timestamps, differ by up to 0.6 %), and its paths repeat less than any simulated person's (0.12–0.32)
+    # timestamps, differ by up to 0.6 %), and its paths repeat less than any simulated person's with the
+    # application's obstacle (0.12–0.32, eight probe trials each; user-a's 0.42–0.89)
     folder = default_real_data()
     if not (folder / "user-a").is_dir():
         pytest.skip(f"real UR5 recordings (shared/data/ur5-thesis) not found: {folder.resolve()}")
@@ -100,7 +101,8 @@ def test_the_recorded_people_calibrate_and_their_free_deviations_do_not_repeat()
             (c,) = calibrate_people([Named(t.meta.extra["recording"], t) for t in trials])
             assert "arm ASSUMED" in summary_line(c) and c.fit.paths.repeatability() is not None
             fitted.append(c.fit.paths.repeatability())
-    assert len(fitted) == 3 and all(r > 0.4 for r in fitted), fitted
+    simulated_most = 0.32
+    assert len(fitted) == 3 and all(r > simulated_most for r in fitted), fitted
 
 
 def test_the_arm_comes_from_the_probe_trials_alone(alice):

@@ -243,6 +243,20 @@ def test_a_way_shown_fewer_times_than_min_way_paths_gives_the_present_estimates_
             hedge = intent[k] + st.hedge_velocity * np.outer(DT * np.arange(1, 51), (tool - prev) / DT)
             np.testing.assert_allclose(rows[2][k], hedge, atol=1e-9)
         assert max(np.abs(rows[1][k] - rows[2][k]).max() for k in late) > 1e-3  # the test can fail
+    # a way nobody took is left to follow_mirror: with the mirror followed, min_way_paths changes nothing there
+    unseen = _model(left=(0.49, 0.5, 0.51), right=())
+    intent = _walk(_bump(0.505, -0.08))
+    mirrored = {}
+    for least in (1, 2):
+        src = PersonPathsIntent(
+            paths={"u": unseen},
+            arms={"u": ARM},
+            settings=PersonFilterSettings(follow_mirror=True, min_way_paths=least),
+        )
+        src.reset(_context())
+        mirrored[least] = np.asarray([_tick(src, intent, k) for k in range(len(intent))])
+        assert src.side == -1
+    np.testing.assert_array_equal(mirrored[1], mirrored[2])
     with pytest.raises(ValueError, match="PersonFilterSettings.min_way_paths"):
         PersonFilterSettings(min_way_paths=0)
 

@@ -63,6 +63,23 @@ def test_a_written_model_is_read_back_the_same(written):
     np.testing.assert_array_equal(_rows(loaded), _rows(direct))  # the JSON round trip keeps every bit
 
 
+def test_a_file_written_before_a_filter_setting_existed_reads_with_its_default(written):
+    # a person model written before min_way_paths (its filter without the field, hashed as it was): the setting's
+    # default, the rows of the filter it was written with
+    from coassist._io import read_hashed_json, write_hashed_json
+
+    folder, paths, arm = written
+    path = folder / PERSON_MODEL_FILE
+    fmt = json.loads(path.read_text())["format"]  # the file's own format name
+    doc = read_hashed_json(path, format=fmt)
+    del doc["filter"]["min_way_paths"]
+    write_hashed_json(path, doc, format=fmt)
+    loaded = read_person_model(folder, horizon=10)
+    assert loaded.settings == PERSON_FILTER and loaded.settings.min_way_paths == 1
+    direct = PersonPathsIntent(10, paths={"alice": paths}, arms={"alice": arm}, settings=PERSON_FILTER)
+    np.testing.assert_array_equal(_rows(loaded), _rows(direct))
+
+
 def test_a_hand_edited_or_unhashed_model_is_refused_in_one_line(written):
     folder, _, _ = written
     path = folder / PERSON_MODEL_FILE

@@ -125,8 +125,9 @@ class PersonFilterSettings:
     follow_mirror : on a way round the person never took in their calibration, follow the mirror images of
         the other way's paths (True), or give the present estimate's rows there (False): the mirror knows
         nothing of how this person goes round that side.
-    min_way_paths : a way round shown in fewer of the calibration's paths than this gives the present estimate's
-        rows, as a way nobody took does with ``follow_mirror`` off (1: every way shown at least once is followed).
+    min_way_paths : a way round shown at least once but in fewer of the calibration's paths than this gives the
+        present estimate's rows, as a way nobody took does with ``follow_mirror`` off (a way nobody took is left to
+        ``follow_mirror``; 1: every way shown at least once is followed).
     """
 
     kappa: float = 0.2
