@@ -29,7 +29,7 @@ from coassist.scenario.person_model import PERSON_MODEL_FILE, fit_person, read_p
 from coassist.scenario.tasks import task_for_seed
 from coassist.study.calibration import ARM_SE_MAX, FitJob, fit_job, measured_arm
 from coassist.study.folder import StudyFolder, StudyFolderError, init_study
-from coassist.study.plan import CALIBRATED, PlanError, plan_from_text
+from coassist.study.plan import CALIBRATED, PlanError, default_calibration_trials, plan_from_text
 from coassist.study.protocols import participant_steps, trial_seed_base
 from coassist.study.report import study_summary, write_report
 from coassist.study.runner import ParticipantRun
@@ -73,6 +73,18 @@ def test_a_calibrated_plan_reads_and_its_steps_open_with_the_block():
     )
     measured = [s for s in steps[4:] if s["kind"] == "trial"]
     assert {s["condition"]: s["intent"] for s in measured} == {"mg": "nominal", "person": "person:P0"}
+
+
+@pytest.mark.parametrize(
+    ("tasks", "trials"),
+    [('["curved"]', 3), ('["linear", "curved", "sinusoidal"]', 9), ('["linear", "curved", "sinusoidal", "z"]', 10)],
+)
+def test_a_plan_that_does_not_say_calibrates_three_paths_a_task_at_most_ten_trials(tasks, trials):
+    # two paths a task were few (docs/person-model.md): three a task, in the block's ten at most
+    text = _plan().replace("[calibration]\ntrials = 3\n", "[calibration]\n").replace('["curved"]', tasks)
+    plan = plan_from_text(text, ".")
+    assert plan.calibration is not None and plan.calibration.trials == trials
+    assert default_calibration_trials(tuple(plan.trials.tasks)) == trials
 
 
 @pytest.mark.parametrize(

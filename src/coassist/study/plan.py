@@ -42,7 +42,7 @@ and ``[training]``, the options of ``coassist train`` the study's models are tra
 (docs/study.md). Any protocol may open with a calibration block::
 
     [calibration]                  # manual guidance with small known pushes (controller manual-probe)
-    trials = 6                     # 1 … 10; then the participant's person model is fitted
+    trials = 9                     # 1 … 10 (default 3 a task); then the participant's person model is fitted
 
 after which a condition's ``intent = "calibrated"`` is that participant's own person model
 (:mod:`coassist.study.calibration`); an iterative study may refit it between rounds
@@ -266,9 +266,22 @@ class CalibrationPlan:
     """The calibration block, before anything else in every protocol: ``trials`` trials (1 … 10) under
     manual guidance with the calibration probe (controller ``manual-probe``: small known pushes that
     measure the person's arm), following the plan's tasks in turn; then the participant's person model
-    is fitted from them (:mod:`coassist.study.calibration`). Every task needs one trial at least."""
+    is fitted from them (:mod:`coassist.study.calibration`). Every task needs one trial at least; a plan
+    that does not say gets :func:`default_calibration_trials`."""
 
-    trials: int = 6
+    trials: int
+
+
+#: Calibration paths a task when the plan does not say: with two (the small obstacle moving between trials) the
+#: person model overshot up to 1.4 × MG's where the two went round on either side; with three 0.60–0.86 ×, four
+#: 0.60–1.05 × (thesis users 0–2, six trials each; docs/person-model.md, "On the real recordings").
+CALIBRATION_PATHS_PER_TASK = 3
+
+
+def default_calibration_trials(tasks: tuple[str, ...]) -> int:
+    """The calibration trials of a plan that does not say: :data:`CALIBRATION_PATHS_PER_TASK` for each distinct task,
+    at most :data:`CALIBRATION_TRIALS_MAX` (the plan's three default tasks: 9)."""
+    return min(CALIBRATION_TRIALS_MAX, CALIBRATION_PATHS_PER_TASK * len(dict.fromkeys(tasks)))
 
 
 @dataclass(frozen=True)
@@ -550,7 +563,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     calibration = None
     if "calibration" in data:
         cal = _table(data, "calibration", tuple(CalibrationPlan.__dataclass_fields__))
-        n = _int(cal.get("trials", CalibrationPlan.trials), "calibration.trials", 1, CALIBRATION_TRIALS_MAX)
+        n = _int(cal.get("trials", default_calibration_trials(tasks)), "calibration.trials", 1, CALIBRATION_TRIALS_MAX)
         missing = [k for k in dict.fromkeys(tasks) if k not in tasks[:n]]
         if missing:
             need = max(tasks.index(k) for k in tasks) + 1
