@@ -21,6 +21,10 @@ of the trials' e_RMS). A plan the person followed once is left out (nothing to f
 
 Nothing here is told the scene (the recordings carry none): the person model learns the ways round from the other
 trials. What it is scored on: the person's own trials, other than the ones it was fitted to.
+
+``--simulated``: the same scoring on simulated thesis operators 0–2 instead (the control: where the person model is
+known to help in the loop): each fitted to eight probe trials (curved task, the large obstacle, seeds 951000 + k),
+scored on four MG trials (seeds 950000 + k), 50 ticks ahead.
 """
 
 from __future__ import annotations
@@ -115,7 +119,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=None, help="the recordings' folder (default: coassist's)")
     ap.add_argument("--horizons", default="10,25,50", help="ticks ahead to score (125 Hz)")
+    ap.add_argument("--simulated", action="store_true", help="score simulated thesis operators instead (the control)")
     args = ap.parse_args()
+    if args.simulated:
+        simulated_control()
+        return
     folder = default_real_data() if args.data is None else args.data
     horizons = [int(h) for h in args.horizons.split(",")]
     if any(not 2 <= h <= HORIZON for h in horizons):
@@ -171,6 +179,48 @@ def main() -> None:
         for n in names:
             cells = [f"{1e3 * math.sqrt(float(np.mean(np.concatenate(total[m, n, h]) ** 2))):6.2f}" for h in horizons]
             print(f"  {n:18s} " + "  ".join(cells))
+
+
+def simulated_control() -> None:
+    """The same scoring on simulated thesis operators under MG (module docstring, ``--simulated``)."""
+    from coassist.control.presets import get_preset, make_controller
+    from coassist.scenario.objects import get_object
+    from coassist.scenario.populations import population_profile
+    from coassist.scenario.tasks import task_for_seed
+    from coassist.sim.trial_runner import run_trial
+
+    preset = get_preset("thesis-application-damped")
+
+    def trial(profile, seed: int, controller: str):
+        task = task_for_seed("curved", seed, obstacle="large")
+        return run_trial(task, profile, get_object("handle"), make_controller(controller, preset), None, seed)
+
+    h = HORIZON
+    print(f"simulated thesis operators under MG, e_RMS mm at {h} ticks: position / displacement")
+    for user in (0, 1, 2):
+        profile = population_profile("thesis", user, 0)
+        fit = fit_person([trial(profile, 951000 + k, "manual-probe") for k in range(8)])
+        tests = [trial(profile, 950000 + k, "manual") for k in range(4)]
+        out = {}
+        for t in tests:
+            name = str(t.meta.user)
+            sources = {
+                "person model": PersonPathsIntent(
+                    HORIZON, paths={name: fit.paths}, arms={name: fit.arm}, settings=PERSON_FILTER
+                )
+            }
+            sources.update({n: load_intent_source(n, HORIZON) for n in BASELINES})
+            rows, context = feature_rows(t), context_of(t, name)
+            for n, src in sources.items():
+                pred = replay(src, context, rows)
+                for moved in (False, True):
+                    out.setdefault((n, moved), []).append(errors(pred, t.pose[:, :2], h, moved))
+        cells = [
+            f"{n} {1e3 * math.sqrt(float(np.mean(np.concatenate(out[n, False]) ** 2))):.1f} / "
+            f"{1e3 * math.sqrt(float(np.mean(np.concatenate(out[n, True]) ** 2))):.1f}"
+            for n in ("person model",) + BASELINES
+        ]
+        print(f"  user {user}: " + "; ".join(cells))
 
 
 if __name__ == "__main__":

@@ -274,7 +274,7 @@ class CalibrationPlan:
 
 #: Calibration paths a task when the plan does not say: with two (the small obstacle moving between trials) the
 #: person model overshot up to 1.4 × MG's where the two went round on either side; with three 0.60–0.86 ×, four
-#: 0.60–1.05 × (thesis users 0–2, six trials each; docs/person-model.md, "On the real recordings").
+#: 0.60–1.05 × (thesis users 0–2, six trials each: benchmarks/calibration_paths.py, docs/person-model.md).
 CALIBRATION_PATHS_PER_TASK = 3
 
 
