@@ -160,7 +160,17 @@ def ros_run(config: DriveConfig, *, stale_after=0.5, silent_after=None, silent_t
 def test_a_ros2_run_matches_the_in_process_mujoco_drive(controller):
     base = dict(controller=controller, task="linear", time_limit=1.2, seed=2)
     ref = drive(DriveConfig(world="mujoco", **base), operator=PUSH)
-    trial, robot, world = ros_run(DriveConfig(world="ur", **base))
+    # the simulated robot announces its state every 20 ms until the first command; beside two other test workers on
+    # two cores its threads were once starved for 0.76 s before drive's first read (stale_after 0.5 s, a lost link
+    # before any tick): that run is run again once, as the realtime tests run a stalled run again. What this test
+    # compares is the runs; the link's watchdog is test_silent_topics_stop_the_arm below
+    for attempt in range(2):
+        try:
+            trial, robot, world = ros_run(DriveConfig(world="ur", **base))
+            break
+        except RobotLinkError as exc:
+            if attempt or "no new message" not in str(exc):
+                raise
     assert trial.n_samples == ref.n_samples == 150
     assert world.rejected_messages == 0 and world.rejected_commands == 0
     # Every command the tick sent arrived, in order (reliable, lockstep), then the stop's zeros.
