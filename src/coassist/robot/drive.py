@@ -292,16 +292,20 @@ def _controller(config: DriveConfig):
         gp = replace(gp, weights=weights)
     impedance = ImpedanceParameters(M=M, D=D, K=(0.0,) * len(M), dt=dt)
     controller = make_controller(config.controller, replace(preset, impedance=impedance, game=gp))
-    if guarded(config):
+    guard = stability_guard(config)
+    if guard is not None:
         # a damper once a large hand force turns (an oscillation): the damper's c acts on the x-y velocity
         # (N·s/m), so not on the rotations of a full pose
-        controller = StabilityGuard(controller, config.stability)
+        controller = StabilityGuard(controller, guard)
     return controller
 
 
-def guarded(config: DriveConfig) -> bool:
-    """Whether the run's controller is wrapped in the stability guard (:attr:`DriveConfig.stability`)."""
-    return config.stability is not None and config.controller in GUARDED_CONTROLLERS and not config.full_pose
+def stability_guard(config: DriveConfig) -> StabilityGuardParameters | None:
+    """The stability guard's parameters where the run's controller is wrapped in it (:attr:`DriveConfig.stability`:
+    an assistive controller on x-y), else None."""
+    if config.controller in GUARDED_CONTROLLERS and not config.full_pose:
+        return config.stability
+    return None
 
 
 def workspace_for(
@@ -579,8 +583,11 @@ def _prepare(
             obstacles=told,
             scene=None if config.scene is None else config.scene.source,
         )
-        if guarded(config) and config.stability is not None:
-            assistance += f"; a damper if the hand force oscillates above {config.stability.force_threshold:g} N (the stability guard)"
+        guard = stability_guard(config)
+        if guard is not None:
+            assistance += (
+                f"; a damper if the hand force oscillates above {guard.force_threshold:g} N (the stability guard)"
+            )
         # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
         wrench.zero(np.asarray(state0.wrench, dtype=float)[None], np.asarray(state0.sensor_rotation, dtype=float)[None])
     except BaseException:
