@@ -156,21 +156,35 @@ def ros_run(config: DriveConfig, *, stale_after=0.5, silent_after=None, silent_t
     return trial, robot, world
 
 
+def starved_once(run):
+    """``run()`` (a lockstep run: (trial, robot, world)), run again once if this machine starved it.
+
+    Beside two other test workers on two cores the simulated robot's threads were once starved for 0.76 s before
+    drive's first read (stale_after 0.5 s: a lost link before any tick). Starved mid-run, the world rightly sends
+    zeros for a command whose state aged past stale_after (``stale_commands``), a tick's motion off the in-process
+    run's track (a CI run at bad086e had test_ros2_faults' base-frame run 0.1-0.4 mm off from tick 75; its cause was
+    not seen again: 45 runs, three at once beside a main job, all within 1.3e-8 m). Both are the world's watchdog
+    doing its job on a starved machine, tested on purpose
+    by test_silent_topics_stop_the_arm and test_ros2_faults' stale-command test; what a comparison test compares is
+    the runs, so such a run is run again once, as the realtime tests run a stalled run again. A second starved run
+    is returned as it is (and fails the comparison)."""
+    for attempt in range(2):
+        try:
+            trial, robot, world = run()
+        except RobotLinkError as exc:
+            if attempt or "no new message" not in str(exc):
+                raise
+            continue
+        if attempt or world.stale_commands == 0:
+            return trial, robot, world
+    raise AssertionError("unreachable")  # the loop returns or raises on its second attempt
+
+
 @pytest.mark.parametrize("controller", ["manual", "cooperative"])
 def test_a_ros2_run_matches_the_in_process_mujoco_drive(controller):
     base = dict(controller=controller, task="linear", time_limit=1.2, seed=2)
     ref = drive(DriveConfig(world="mujoco", **base), operator=PUSH)
-    # the simulated robot announces its state every 20 ms until the first command; beside two other test workers on
-    # two cores its threads were once starved for 0.76 s before drive's first read (stale_after 0.5 s, a lost link
-    # before any tick): that run is run again once, as the realtime tests run a stalled run again. What this test
-    # compares is the runs; the link's watchdog is test_silent_topics_stop_the_arm below
-    for attempt in range(2):
-        try:
-            trial, robot, world = ros_run(DriveConfig(world="ur", **base))
-            break
-        except RobotLinkError as exc:
-            if attempt or "no new message" not in str(exc):
-                raise
+    trial, robot, world = starved_once(lambda: ros_run(DriveConfig(world="ur", **base)))
     assert trial.n_samples == ref.n_samples == 150
     assert world.rejected_messages == 0 and world.rejected_commands == 0
     # Every command the tick sent arrived, in order (reliable, lockstep), then the stop's zeros.
