@@ -3,9 +3,9 @@
     .venv/bin/python benchmarks/bench_tick.py [--ticks 3000] [--model MODEL [--backends process,onnx,torch]]
                                               [--realtime-seconds 60]
 
-Measures ``tick.step()`` (wrench pipeline, predictor dispatch, game,
-impedance, J⁺, safety; the loop's log write is a row copy, included in the loop but not
-here) for the assistive controller with the simulated operator, and a naive tick that
+Measures the tick's own work as the loop times it for its deadline (``LoopRun.compute``:
+the world's read, the wrench pipeline, predictor dispatch, game, impedance, J⁺, safety, up to
+the command; not the world's apply) for the assistive controller with the simulated operator, and a naive tick that
 does the same work but recomputes the game's gains (prediction matrices and the
 equilibrium solve) and an SVD pseudo-inverse (np.linalg.pinv) every tick. With
 ``--model`` the intent stage is the RealtimePredictor on that model (the deployed
@@ -40,9 +40,10 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from coassist.control.game import cooperative_game  # noqa: E402
+from coassist.control.game import CooperativeGame  # noqa: E402
 from coassist.robot import drive as drive_mod  # noqa: E402
 from coassist.robot.drive import DriveConfig  # noqa: E402
+from coassist.runtime import loop as loop_mod  # noqa: E402
 from coassist.runtime import tick as tick_mod  # noqa: E402
 
 
@@ -58,7 +59,16 @@ class NaiveController:
         self.name, self.model, self.horizon = controller.name, controller.model, controller.horizon
 
     def step(self, z, ref_h, ref_r, wrench):
-        game = cooperative_game(self.model, self.params)
+        # the game built anew, not cooperative_game's per-process copy of one built once
+        p = self.params
+        game = CooperativeGame(
+            self.model,
+            p.weights,
+            alpha=p.alpha,
+            horizon=p.horizon,
+            control_horizon=p.control_horizon,
+            input_weighting=p.input_weighting,
+        )
         self.inner.game = game
         return self.inner.step(z, ref_h, ref_r, wrench)
 
@@ -146,18 +156,18 @@ def measure(
         realtime_intent=True if model else None,
         predictor_backend=backend,
     )
-    # time read + step by wrapping the tick's step (the loop's own clock does the same)
-    orig_step = tick_mod.ControlTick.step
+    # the tick's own work as the loop times it (LoopRun.compute, read → command): the loop runs the tick in
+    # parts (sense, decide/finish), so wrapping ControlTick.step times nothing
+    orig_log = loop_mod.LoopRun.log
     orig_dls = tick_mod._spatial.dls_joint_velocity
     orig_ctrl = drive_mod._controller
 
-    def timed_step(self, k, state, upstream=tick_mod.Fault.NONE):
-        t0 = time.perf_counter()
-        out = orig_step(self, k, state, upstream)
-        times.append(time.perf_counter() - t0)
-        return out
+    def logged(self):
+        log = orig_log(self)
+        times[:] = log.compute.tolist()
+        return log
 
-    tick_mod.ControlTick.step = timed_step
+    loop_mod.LoopRun.log = logged
     if naive:
         from coassist.control.presets import get_preset
 
@@ -190,7 +200,7 @@ def measure(
         if world is not None:
             world.close()
     finally:
-        tick_mod.ControlTick.step = orig_step
+        loop_mod.LoopRun.log = orig_log
         tick_mod._spatial.dls_joint_velocity = orig_dls
         drive_mod._controller = orig_ctrl
     arr = np.array(times)
@@ -215,7 +225,7 @@ def main() -> None:
     rpm, rpp = _stats(ref["paced"])
     print(f"intent: {'RealtimePredictor on ' + a.model if a.model else 'nominal plan'}; 125 Hz; assistive; z task")
     print(
-        "| tick.step (no physics) | back to back: median ms | p99 ms | paced: median ms | p99 ms | "
+        "| the tick's own work (no physics) | back to back: median ms | p99 ms | paced: median ms | p99 ms | "
         "paced/back-to-back p99 | ticks > 8 ms | ratio naive/this (median, p99) |"
     )
     print("|---|---|---|---|---|---|---|---|")
