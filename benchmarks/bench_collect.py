@@ -32,11 +32,12 @@ Measures:
    torch eager against ONNX Runtime, median and p99 of ``--calls`` calls, and each
    backend's largest difference between a batch's rows and the same windows one at a time
    (0: batch-invariant, what makes lockstep bit for bit);
-6. ``cells``: one of the main job's application cells (the board, 18 trials, the
-   application preset; MG, the nominal intent, and with ``--cell-model`` the model in the
-   loop, plain and arbitrated) in this process, as two lockstep groups of 9 (one per
-   worker, the rule for a lone collection) against one group of 18 (``cell_options``'
-   ``groups``), CPU seconds, the lower of ``--repeats`` runs each.
+6. ``cells``: one of the main job's application cells (the board, its trials: 24 with the
+   default's three users and eight trials each; the application preset; MG, the nominal intent,
+   and with ``--cell-model`` the model in the loop, plain and arbitrated) in this process, as
+   two lockstep groups of half the trials each (one per worker, the rule for a lone
+   collection) against one group of all of them (``cell_options``' ``groups``), CPU seconds,
+   the lower of ``--repeats`` runs each.
 
 ``--only network,groups,datasets,sweep,cells`` runs some of them (default: all; the
 numbers above are the sections' order: network = 1, datasets = 2 and 3, groups = 4).
@@ -265,9 +266,10 @@ def main() -> None:
                 ("cooperative", cell_model),
                 ("cooperative-arbitrated", cell_model),
             ]
+            n_cell = len(cfg.application_users) * cfg.application_trials
             print(
-                f"\none application cell (board, {len(cfg.application_users) * cfg.application_trials} trials), this "
-                f"process, CPU s, the lower of {args.repeats} runs: two groups of 9 against one of 18"
+                f"\none application cell (board, {n_cell} trials), this process, CPU s, the lower of {args.repeats} "
+                f"runs: two groups of {(n_cell + 1) // 2} and {n_cell // 2} against one of {n_cell}"
             )
             for controller, intent in cells:
                 options = cell_options(cfg, 0, "board", controller, intent)

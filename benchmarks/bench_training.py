@@ -22,13 +22,13 @@ network's matrix-product FLOPs per window (``training_flops_per_window``, a lowe
 the GFLOP/s the device path reaches, and a large float32 matrix product's GFLOP/s on the
 same device and threads, the most this machine's arithmetic gives.
 
-``--rounds N`` also compares whole processes, N rounds of two child runs each: OpenMP's
+``--rounds N`` compares whole processes instead (the in-process comparison above is not run), N rounds of two child runs each: OpenMP's
 wait policy unset (libgomp spins, then sleeps, at every barrier; today's) against
 ``OMP_WAIT_POLICY=PASSIVE`` (threads sleep at once). libgomp reads it once, when torch
 loads, so it takes a process each. On a 2-core machine shared with other work the policy,
 not the batch path, is what moves 2-thread CPU training (docs/history.md, "OpenMP on a shared machine").
 
-``--pairs N`` compares, N rounds, what the pipeline does with independent trainings (the
+``--pairs N`` compares instead (neither the in-process comparison nor ``--rounds`` is run), N rounds, what the pipeline does with independent trainings (the
 application's intent sources, ``experiments.source_training.train_sources``): two child
 processes of one thread each training at the same time, against one child of two threads
 (the naive baseline: the trainings one after the other, each on both cores); windows/s
@@ -273,11 +273,13 @@ def main() -> None:
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--batch-size", type=int, default=None, help="override the presets' batch size")
     ap.add_argument("--json", default=None)
-    ap.add_argument("--rounds", type=int, default=0, help="also compare whole processes (see above), N rounds")
+    ap.add_argument("--rounds", type=int, default=0, help="compare whole processes instead (see above), N rounds")
     ap.add_argument(
         "--pairs", type=int, default=0, help="compare two 1-thread trainings at once with one 2-thread (see above)"
     )
     args = ap.parse_args()
+    if args.rounds and args.pairs:
+        ap.error("--rounds and --pairs are two different comparisons: give one")
     if args.rounds:
         compare_processes(args)
         return
