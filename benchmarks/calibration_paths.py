@@ -1,7 +1,7 @@
 """How many calibration paths a task the person model needs, and what their repeatability says (issue 40).
 
     .venv/bin/python benchmarks/calibration_paths.py [--configs small:2,small:3,small:4,small:8,large:2,large:8]
-        [--users 0,1,2] [--trials 6] [--controller cooperative]
+        [--users 0,1,2] [--trials 6] [--controller cooperative] [--filter '{"min_way_paths": 2}']
 
 For each configuration (obstacle, probe trials): each simulated thesis operator records that many calibration trials
 on the curved task under manual guidance with the probe (seeds 960000 + k), their person model is fitted
@@ -12,7 +12,9 @@ on the curved task under manual guidance with the probe (seeds 960000 + k), thei
 
 Prints per operator the paths' repeatability (:meth:`coassist.scenario.path_model.PathModel.repeatability`, None
 where no way round was taken twice), and each source's mean hand force f_RMS [N], overshoot [mm] and jerk RMS
-[m/s³] over the trials, and the person model's and ``present-held``'s as ratios to MG's. docs/person-model.md
+[m/s³] over the trials, and the person model's and ``present-held``'s as ratios to MG's. ``--filter``: the person
+model's filter settings changed from the default's (``PERSON_FILTER``; a JSON object of
+:class:`~coassist.scenario.person_intent.PersonFilterSettings` fields). docs/person-model.md
 ("How far a person's paths repeat") has its table.
 """
 
@@ -24,6 +26,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
+import json  # noqa: E402
+from dataclasses import replace  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -55,7 +59,9 @@ def _measures(trial) -> tuple[float, float, float]:
     )
 
 
-def run_config(obstacle: str, probes: int, users: list[int], trials: int, controller: str) -> None:
+def run_config(
+    obstacle: str, probes: int, users: list[int], trials: int, controller: str, settings=PERSON_FILTER
+) -> None:
     print(
         f"{obstacle} obstacle, {probes} probe trials (f_RMS N / overshoot mm / jerk m/s³; person and present-held × MG)"
     )
@@ -72,7 +78,7 @@ def run_config(obstacle: str, probes: int, users: list[int], trials: int, contro
             got["present-held"].append(
                 _measures(_trial(profile, seed, controller, load_intent_source("present-held"), obstacle))
             )
-            person = PersonPathsIntent(50, paths={name: fit.paths}, arms={name: fit.arm}, settings=PERSON_FILTER)
+            person = PersonPathsIntent(50, paths={name: fit.paths}, arms={name: fit.arm}, settings=settings)
             got["person model"].append(_measures(_trial(profile, seed, controller, person, obstacle)))
         means = {k: np.mean(v, axis=0) for k, v in got.items()}
         line = f"  user {user}: sides {fit.paths.sides.tolist()}, repeatability " + (
@@ -92,7 +98,15 @@ def main() -> None:
     ap.add_argument("--users", default="0,1,2", help="thesis operators")
     ap.add_argument("--trials", type=int, default=6, help="trials per source and operator")
     ap.add_argument("--controller", default="cooperative", help="the assisting controller")
+    ap.add_argument("--filter", default="{}", help="filter settings changed from the default's, a JSON object")
     args = ap.parse_args()
+    try:
+        changes = json.loads(args.filter)
+        if not isinstance(changes, dict):
+            raise ValueError("not a JSON object")
+        settings = replace(PERSON_FILTER, **changes)
+    except (ValueError, TypeError) as exc:
+        ap.error(f"--filter: {exc}")
     configs = []
     for item in args.configs.split(","):
         obstacle, _, n = item.partition(":")
@@ -105,7 +119,7 @@ def main() -> None:
         ap.error("--trials must be >= 1")
     users = [int(u) for u in args.users.split(",")]
     for obstacle, n in configs:
-        run_config(obstacle, n, users, args.trials, args.controller)
+        run_config(obstacle, n, users, args.trials, args.controller, settings)
 
 
 if __name__ == "__main__":
