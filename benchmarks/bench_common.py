@@ -51,3 +51,17 @@ def replay(source, context, windows, clock=time.perf_counter_ns) -> np.ndarray:
         source.predict(window)
         times[k] = clock() - t0
     return times / 1e3
+
+
+def curved_trial(profile, seed: int, controller: str, source=None, obstacle: str = "large"):
+    """One simulated trial of the curved task with ``profile``'s operator at the handle, under ``controller`` of the
+    ``thesis-application-damped`` preset with the intent ``source`` (None: the controller's own), the task's obstacle
+    drawn from ``seed`` (the person-model scripts' trials: calibration_paths.py, person_real.py --simulated)."""
+    from coassist.control.presets import get_preset, make_controller
+    from coassist.scenario.objects import get_object
+    from coassist.scenario.tasks import task_for_seed
+    from coassist.sim.trial_runner import run_trial
+
+    task = task_for_seed("curved", seed, obstacle=obstacle)
+    preset = get_preset("thesis-application-damped")
+    return run_trial(task, profile, get_object("handle"), make_controller(controller, preset), source, seed)

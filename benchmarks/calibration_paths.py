@@ -31,23 +31,16 @@ from dataclasses import replace  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from coassist.control.presets import CONTROLLERS, get_preset, make_controller  # noqa: E402
+from bench_common import curved_trial  # noqa: E402
+from coassist.control.presets import CONTROLLERS  # noqa: E402
 from coassist.metrics import f_rms, jerk_rms, overshoot  # noqa: E402
 from coassist.scenario.intent_registry import load_intent_source  # noqa: E402
-from coassist.scenario.objects import get_object  # noqa: E402
 from coassist.scenario.person_intent import PersonPathsIntent  # noqa: E402
 from coassist.scenario.person_model import PERSON_FILTER, fit_person  # noqa: E402
 from coassist.scenario.populations import population_profile  # noqa: E402
-from coassist.scenario.tasks import OBSTACLES, task_for_seed  # noqa: E402
-from coassist.sim.trial_runner import run_trial  # noqa: E402
+from coassist.scenario.tasks import OBSTACLES  # noqa: E402
 
-PRESET = get_preset("thesis-application-damped")
 PROBE_SEED, TRIAL_SEED = 960000, 970000
-
-
-def _trial(profile, seed: int, controller: str, source, obstacle: str):
-    task = task_for_seed("curved", seed, obstacle=obstacle)
-    return run_trial(task, profile, get_object("handle"), make_controller(controller, PRESET), source, seed)
 
 
 def _measures(trial) -> tuple[float, float, float]:
@@ -67,19 +60,19 @@ def run_config(
     )
     for user in users:
         profile = population_profile("thesis", user, 0)
-        cal = [_trial(profile, PROBE_SEED + k, "manual-probe", None, obstacle) for k in range(probes)]
+        cal = [curved_trial(profile, PROBE_SEED + k, "manual-probe", None, obstacle) for k in range(probes)]
         fit = fit_person(cal)
         r = fit.paths.repeatability()
         name = profile.name
         got: dict[str, list] = {"MG": [], "present-held": [], "person model": []}
         for k in range(trials):
             seed = TRIAL_SEED + k
-            got["MG"].append(_measures(_trial(profile, seed, "manual", None, obstacle)))
+            got["MG"].append(_measures(curved_trial(profile, seed, "manual", None, obstacle)))
             got["present-held"].append(
-                _measures(_trial(profile, seed, controller, load_intent_source("present-held"), obstacle))
+                _measures(curved_trial(profile, seed, controller, load_intent_source("present-held"), obstacle))
             )
             person = PersonPathsIntent(50, paths={name: fit.paths}, arms={name: fit.arm}, settings=settings)
-            got["person model"].append(_measures(_trial(profile, seed, controller, person, obstacle)))
+            got["person model"].append(_measures(curved_trial(profile, seed, controller, person, obstacle)))
         means = {k: np.mean(v, axis=0) for k, v in got.items()}
         line = f"  user {user}: sides {fit.paths.sides.tolist()}, repeatability " + (
             "none" if r is None else f"{r:.2f}"

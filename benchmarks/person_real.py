@@ -183,24 +183,15 @@ def main() -> None:
 
 def simulated_control() -> None:
     """The same scoring on simulated thesis operators under MG (module docstring, ``--simulated``)."""
-    from coassist.control.presets import get_preset, make_controller
-    from coassist.scenario.objects import get_object
+    from bench_common import curved_trial
     from coassist.scenario.populations import population_profile
-    from coassist.scenario.tasks import task_for_seed
-    from coassist.sim.trial_runner import run_trial
-
-    preset = get_preset("thesis-application-damped")
-
-    def trial(profile, seed: int, controller: str):
-        task = task_for_seed("curved", seed, obstacle="large")
-        return run_trial(task, profile, get_object("handle"), make_controller(controller, preset), None, seed)
 
     h = HORIZON
     print(f"simulated thesis operators under MG, e_RMS mm at {h} ticks: position / displacement")
     for user in (0, 1, 2):
         profile = population_profile("thesis", user, 0)
-        fit = fit_person([trial(profile, 951000 + k, "manual-probe") for k in range(8)])
-        tests = [trial(profile, 950000 + k, "manual") for k in range(4)]
+        fit = fit_person([curved_trial(profile, 951000 + k, "manual-probe") for k in range(8)])
+        tests = [curved_trial(profile, 950000 + k, "manual") for k in range(4)]
         out = {}
         for t in tests:
             name = str(t.meta.user)
