@@ -296,7 +296,15 @@ def test_the_monitor_topics_carry_the_run():
         while world._pubs["tool_pose"].get_subscription_count() == 0 and time.monotonic() < deadline:
             time.sleep(0.01)
         try:
-            trial = drive(config, world=world, on_tick=world.publish_monitor, intent_source=OracleIntent(60))
+            # Unpaced, the lockstep run publishes its 15 messages a topic within ~0.1 s, faster than the monitor's
+            # rate; its publishers keep the last 10 (KEEP_LAST 10, as an operator's monitor would), so a listener
+            # stalled by a busy machine lost 3 of 15 once in CI. A few ms a tick spaces them as a run's own pace
+            # would (20 ms between messages here, 40 at 125 Hz), and the run stays unpaced (no deadline).
+            def on_tick(k, state, out):
+                world.publish_monitor(k, state, out)
+                time.sleep(0.004)
+
+            trial = drive(config, world=world, on_tick=on_tick, intent_source=OracleIntent(60))
         finally:
             world.close()
             robot.close()
