@@ -15,11 +15,11 @@ together. This measures that lever's first stage, the world, before anything is 
   all; each arm's sensor noise from its own generator, as in its world.
 
 Both get the same commands (each arm its own joint-velocity sines). The check: every arm's joint positions,
-velocities, sensor readings and sampled wrench in the one model equal its world's, bit for bit, at every tick
-(``--no-check`` leaves it out of the timed loop; it is checked then at the end only). Printed per tick of all B
-arms: median and p99 [µs] of both, the ratio, and the saving per trial-tick. It measures the world stage alone:
-the control tick's arm stage (kinematics, the DLS step, the safety layer) and the simulated hand stay per arm
-here, as they are in the loop today.
+velocities, controls and sampled wrench in the one model equal its world's, bit for bit, at every tick, outside the
+timed work (``--no-check``: at the end only); exit status 1 where they differ. Printed per tick of all B arms: median
+and p99 [µs] of both (CPU time, the two alternated tick by tick), the ratio, and the cost per trial-tick. It measures
+the world stage alone: the control tick's arm stage (kinematics, the DLS step, the safety layer) and the simulated
+hand stay per arm here, as they are in the loop today.
 """
 
 from __future__ import annotations

@@ -4,11 +4,13 @@
 tick in parts): it timed no tick and failed on an empty array; and its naive controller got ``cooperative_game``'s
 per-process copy of a game built once, so the naive tick rebuilt nothing and was as fast as coassist's (0.119 against
 0.103 ms). Run small, it must time every tick the loop ran and find the naive tick, which builds the game anew every
-tick (2.0 ms against 0.1 ms measured: 13-21x), several times slower.
+tick (2.0 ms against 0.1 ms measured: 13-21x), several times slower. ``benchmarks/bench_mujoco_arms.py`` measures a
+saving only where its arms stepped together are its worlds, bit for bit.
 """
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -59,8 +61,6 @@ def test_arms_in_one_mujoco_model_step_as_their_worlds_bit_for_bit_and_faster(tm
         cwd=ROOT,
     )
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
-    import json
-
     result = json.loads((tmp_path / "out.json").read_text())
     assert result["bit_for_bit"] and result["first_tick_differing"] is None
     # measured 2.2-2.3x for 8 arms (2.9x for 24) on this 2-core machine, alternated tick by tick in CPU time: 1.3x
