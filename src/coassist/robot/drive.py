@@ -36,6 +36,7 @@ world, the boxes of a lab's scene file instead (``DriveConfig.scene``,
 
 from __future__ import annotations
 
+import logging
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -65,6 +66,8 @@ from coassist.scenario.populations import POPULATIONS, population_profile
 from coassist.scenario.scene import Scene
 from coassist.scenario.seeds import trial_rngs
 from coassist.scenario.tasks import OBSTACLES, TASKS, task_for_seed
+
+logger = logging.getLogger(__name__)
 
 __all__ = ["GUARDED_CONTROLLERS", "DriveConfig", "drive", "drive_lockstep", "move_tasks", "workspace_for"]
 
@@ -362,12 +365,20 @@ def drive(
     return run.finish(log)
 
 
-def drive_lockstep(configs: Sequence[DriveConfig]) -> list[Trial]:
+def drive_lockstep(configs: Sequence[DriveConfig], *, together: bool = True) -> list[Trial]:
     """Simulated drives (a simulated world such as ``"mujoco"``, each its own) run in lockstep
     (:func:`coassist.runtime.batched_loops.run_loops`): one network call per tick for the runs
     with the same model in the loop. Each trial is its :func:`drive` to the float32 rounding
-    of batched network calls (bit for bit with a named intent); in ``configs``' order."""
+    of batched network calls (bit for bit with a named intent); in ``configs``' order.
+
+    ``together``: the MuJoCo worlds built alike step in one model
+    (:class:`~coassist.robot.mujoco_world.MujocoArmGroup`, the same states bit for bit); where a
+    joint limit makes that impossible (:class:`~coassist.robot.mujoco_world.ConstraintInGroup`) the
+    drives run again, each world its own."""
     from coassist.runtime.batched_loops import run_loops
+
+    if together:
+        from coassist.robot.mujoco_world import ConstraintInGroup, MujocoArmGroup
 
     for i, c in enumerate(configs):
         if not isinstance(c, DriveConfig) or not WORLDS[c.world].simulated or c.realtime_intent:
@@ -380,7 +391,22 @@ def drive_lockstep(configs: Sequence[DriveConfig]) -> list[Trial]:
     try:
         for c in configs:
             runs.append(_prepare(c, sources=sources))
-        logs = run_loops([r.episode.loop for r in runs])
+        groups = MujocoArmGroup.form([r.world for r in runs if r.built_here]) if together else []
+
+        def step_groups() -> None:
+            for g in groups:
+                g.step()
+
+        try:
+            logs = run_loops([r.episode.loop for r in runs], after_tick=step_groups if groups else None)
+        except Exception as exc:
+            if not (groups and isinstance(exc, ConstraintInGroup)):
+                raise
+            logger.warning("drive_lockstep: %s; the %d drives run again, each world its own", exc, len(configs))
+            for r in runs:
+                r.close()
+            runs = []
+            return drive_lockstep(configs, together=False)
     finally:
         for r in runs:
             r.close()

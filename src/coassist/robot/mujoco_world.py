@@ -36,6 +36,9 @@ g = (0, 0, −9.81)), in the sensor frame (the flange frame, ``tool0`` on the UR
 
 Determinism: the physics is deterministic and the only randomness is the sensor noise,
 so the same seed and the same commands give bit-identical states.
+
+:class:`MujocoArmGroup` steps the worlds of a lockstep group (:func:`coassist.robot.drive.drive_lockstep`)
+in one MuJoCo model: the same states, bit for bit, for a fraction of the physics' Python.
 """
 
 from __future__ import annotations
@@ -43,13 +46,15 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import mujoco
 import numpy as np
 
 from coassist._checks import check_optional_int
-from coassist.robot.arm_mjcf import TOOLS, build_arm_model, urdf_joint_limits
+from coassist.robot.arm_mjcf import TOOLS, build_arm_model, build_arm_spec, urdf_joint_limits
 from coassist.robot.arms import NullSpacePosture, arm_kinematics, get_arm
 from coassist.robot.ur5_mjcf import Q_SEED
 from coassist.robot.worlds import WorldRequest
@@ -58,7 +63,9 @@ from coassist.spatial import rotation_vector, rotation_vector_unchecked  # rotat
 
 __all__ = [
     "DEFAULT_START",
+    "ConstraintInGroup",
     "FTSensorModel",
+    "MujocoArmGroup",
     "MujocoArmWorld",
     "MujocoUR5World",
     "TOOL_DOWN",
@@ -289,6 +296,18 @@ class MujocoArmWorld:
             tcp_offset=tcp_offset,
             gravity=gravity,
         )
+        # what the model was built from: worlds built alike can share one model (MujocoArmGroup)
+        self._spec_args = (
+            arm.name,
+            tool,
+            physics_dt,
+            tau,
+            None if tcp_offset is None else tuple(np.asarray(tcp_offset, dtype=float).tolist()),
+            bool(gravity),
+        )
+        self._group: MujocoArmGroup | None = None
+        self._applied = False
+        self._dofs = slice(0, n)  # this arm's joints among its model's (a group's model holds several arms)
         self.data = mujoco.MjData(self.model)
         m = self.model
         self._tcp = m.site("tcp").id
@@ -368,6 +387,8 @@ class MujocoArmWorld:
         The simulated time, the sensor's noise stream and its sample count go on. Raises
         ValueError unless ``q`` is n finite joint angles inside the joint ranges.
         """
+        if self._group is not None:
+            raise RuntimeError("MujocoArmWorld.reset on a world stepped in a MujocoArmGroup")
         q = np.asarray(q, dtype=float)
         lo, hi = self.model.jnt_range[:, 0], self.model.jnt_range[:, 1]
         if q.shape != (self.n_joints,) or not np.isfinite(q).all() or np.any(q < lo) or np.any(q > hi):
@@ -487,6 +508,9 @@ class MujocoArmWorld:
         self._hand_active = any(self._hand_list)
         if not self._hand_active:
             self._xfrc_tool[:] = 0.0
+        if self._group is not None:  # the group steps the physics once every member has applied
+            self._applied = True
+            return
         for _ in range(self.n_substeps):
             self._substep()
         if self.sensor.rate_hz is None:
@@ -505,8 +529,9 @@ class MujocoArmWorld:
                 self._wall0 = now - self.t
 
     def stop(self, max_time: float = 2.0) -> None:
-        """Command zero joint velocity until |q̇| < 1e-3 rad/s (at most ``max_time`` s)."""
-        if self._closed:
+        """Command zero joint velocity until |q̇| < 1e-3 rad/s (at most ``max_time`` s). In a
+        :class:`MujocoArmGroup` nothing: the group holds an arm whose run ended (its run is over)."""
+        if self._closed or self._group is not None:
             return
         for _ in range(max(1, math.ceil(max_time / self.dt))):
             self.apply(Command(stop=True))
@@ -607,13 +632,179 @@ class MujocoArmWorld:
     def tcp_jacobian(self) -> np.ndarray:
         """(6, n) TCP Jacobian [linear; angular] in the base frame at the current joints."""
         mujoco.mj_jacSite(self.model, self.data, self._jacp, self._jacr, self._tcp)
-        return np.vstack([self._jacp, self._jacr])
+        if self._group is None:
+            return np.vstack([self._jacp, self._jacr])
+        cols = self._dofs  # this arm's columns of the group's model
+        return np.vstack([self._jacp[:, cols], self._jacr[:, cols]])
 
     def __enter__(self) -> MujocoArmWorld:
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class ConstraintInGroup(RuntimeError):
+    """A constraint (a joint at its limit) became active in a :class:`MujocoArmGroup`'s model: MuJoCo's
+    solver then runs over every arm, and the arms' states are no longer their own worlds' bit for bit."""
+
+
+class MujocoArmGroup:
+    """The worlds of a lockstep group stepped in one MuJoCo model (issue 44).
+
+    Each world keeps its own servo state, hand, sensor noise and counters; its model and data become its
+    arm's slot of one model holding every member's arm (the spec it was built from, attached once per
+    member, all at the base's place: the arm models have no contacts, so the arms never touch). A member's
+    :meth:`MujocoArmWorld.apply` asks its hand and sets its servo's target as before, and the physics waits
+    for :meth:`step`, called once per control period after every member has applied (``run_loops``'
+    ``after_tick``): each physics step is the world's servo on (B, n) arrays (its formula, elementwise in its
+    order), one ``mj_mulM`` and one mj_step2/mj_step1 for every arm, then each member's sensor samples.
+
+    Every arm's joints, velocities, controls and samples are its own world's bit for bit
+    (``benchmarks/bench_mujoco_arms.py``, ``tests/robot/test_drive_lockstep.py``) while no constraint is
+    active: MuJoCo runs its constraint solver over the whole model once any joint of any arm is at its limit
+    (none was in the main job's MuJoCo cells). A step with one raises :class:`ConstraintInGroup` (the caller
+    runs its worlds again apart). A member that does not apply in a period (its run ended) is held: its target
+    zero, its hand let go. Members are built alike (:meth:`key`), none stepped yet.
+    """
+
+    def __init__(self, worlds: Sequence[MujocoArmWorld]) -> None:
+        worlds = list(worlds)
+        if (
+            len(worlds) < 2
+            or len({MujocoArmGroup.key(w) for w in worlds}) != 1
+            or None in map(MujocoArmGroup.key, worlds)
+        ):
+            raise ValueError("a MujocoArmGroup takes two or more fresh worlds built alike (MujocoArmGroup.key)")
+        w0 = worlds[0]
+        parent = mujoco.MjSpec()
+        parent.option.timestep = w0.model.opt.timestep
+        parent.option.gravity = w0.model.opt.gravity.copy()
+        parent.option.integrator = w0.model.opt.integrator
+        robot, tool, physics_dt, tau, tcp_offset, gravity = w0._spec_args
+        for i in range(len(worlds)):
+            child = build_arm_spec(
+                robot, tool, physics_dt=physics_dt, servo_time_constant=tau, tcp_offset=tcp_offset, gravity=gravity
+            )
+            parent.attach(child, prefix=f"a{i}/", frame=parent.worldbody.add_frame())
+        self.model = m = parent.compile()
+        self.data = d = mujoco.MjData(m)
+        B, n = len(worlds), w0.n_joints
+        if m.nq != B * n or m.nv != B * n or m.nu != B * n:
+            raise RuntimeError(f"the group's model has {m.nv} joints, expected {B} × {n}")
+        for i, w in enumerate(worlds):
+            if m.opt.timestep != w.model.opt.timestep:
+                raise RuntimeError("the group's model steps otherwise than its worlds'")
+            cols = slice(i * n, (i + 1) * n)
+            d.qpos[cols] = w.data.qpos
+            d.qvel[cols] = w.data.qvel
+            d.ctrl[cols] = w.data.ctrl
+        mujoco.mj_forward(m, d)
+        tip = get_arm(robot).tip_frame
+        for i, w in enumerate(worlds):
+            cols = slice(i * n, (i + 1) * n)
+            w.model, w.data = m, d
+            w._tcp, w._handle, w._ft = (m.site(f"a{i}/{name}").id for name in ("tcp", "handle", "ft_sensor"))
+            w._tool_body, w._tool0 = m.body(f"a{i}/tool").id, m.body(f"a{i}/{tip}").id
+            w._force_adr = int(m.sensor(f"a{i}/ft_force").adr[0])
+            w._torque_adr = int(m.sensor(f"a{i}/ft_torque").adr[0])
+            w._ctrl, w._bias_force = d.ctrl[cols], d.qfrc_bias[cols]
+            w._qpos, w._qvel = d.qpos[cols], d.qvel[cols]
+            w._site_xpos, w._site_xmat, w._xipos = d.site_xpos, d.site_xmat, d.xipos
+            w._xfrc_tool = d.xfrc_applied[w._tool_body]
+            w._sensordata = d.sensordata
+            w._jacp, w._jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+            w._dofs = cols
+            w._group = self
+        self.worlds = worlds
+        self.n_substeps, self.h, self.rate = w0.n_substeps, w0.physics_dt, w0.sensor.rate_hz
+        self.alpha, self.kd, self.kp = w0._alpha, w0._kd, w0._kp
+        self._qpos, self._qvel = d.qpos.reshape(B, n), d.qvel.reshape(B, n)
+        self._u = np.zeros(B * n)
+        self._steps, self._sample_index = w0._steps, w0._sample_index
+
+    @staticmethod
+    def key(world: Any) -> tuple | None:
+        """What worlds must share to step in one model (their model's spec, their servo, their sensor's rate
+        and time), or None for a world that cannot join (another kind, paced to the wall clock, viewed, closed,
+        already in a group)."""
+        if not isinstance(world, MujocoArmWorld) or world.realtime or world._viewer is not None:
+            return None
+        if world._closed or world._group is not None:
+            return None
+        return (
+            world._spec_args,
+            world.n_substeps,
+            world._alpha,
+            world._kd,
+            world._kp,
+            world.sensor.rate_hz,
+            world._steps,
+            world._sample_index,
+        )
+
+    @classmethod
+    def form(cls, worlds: Sequence[Any]) -> list[MujocoArmGroup]:
+        """The groups of ``worlds`` built alike, two or more each (the others are left as they are)."""
+        alike: dict[tuple, list[MujocoArmWorld]] = {}
+        for w in worlds:
+            k = cls.key(w)
+            if k is not None:
+                alike.setdefault(k, []).append(w)
+        return [cls(members) for members in alike.values() if len(members) > 1]
+
+    def step(self) -> None:
+        """One control period of physics for every member (the class docstring)."""
+        worlds, n = self.worlds, self.worlds[0].n_joints
+        for w in worlds:
+            if not w._applied:  # its run ended: hold it where it is
+                w._target = [0.0] * n
+                w._hand_active = False
+                w._xfrc_tool[:] = 0.0
+            w._applied = False
+        v_ref = np.array([w._v_ref for w in worlds])
+        q_ref = np.array([w._q_ref for w in worlds])
+        target = np.array([w._target for w in worlds])
+        m, d = self.model, self.data
+        u = self._u.reshape(v_ref.shape)
+        for _ in range(self.n_substeps):
+            for w in worlds:
+                if w._hand_active:
+                    w._set_hand()
+            # MujocoArmWorld._set_servo on every arm: u = dv/h + kd (v − q̇) + kp (q_ref − q), in its order
+            dv = self.alpha * (target - v_ref)
+            np.divide(dv, self.h, out=u)
+            u += self.kd * (v_ref - self._qvel)
+            u += self.kp * (q_ref - self._qpos)
+            v_ref += dv
+            q_ref += self.h * v_ref
+            mujoco.mj_mulM(m, d, d.ctrl, self._u)
+            d.ctrl += d.qfrc_bias
+            mujoco.mj_step2(m, d)
+            mujoco.mj_step1(m, d)
+            if d.nefc:
+                raise ConstraintInGroup(
+                    f"{d.nefc} constraint rows active in a group of {len(worlds)} MuJoCo arms (a joint at its limit)"
+                )
+            self._steps += 1
+            sample = False
+            if self.rate is not None:
+                idx = math.floor(self._steps * self.h * self.rate + 1e-9)
+                if idx != self._sample_index:
+                    self._sample_index = idx
+                    sample = True
+            for w in worlds:
+                w._steps = self._steps
+                if sample:
+                    w._sample_index = self._sample_index
+                    w._wrench = w._sample()
+                    w.wrench_seq += 1
+        if self.rate is None:
+            for w in worlds:
+                w._wrench = w._sample()
+                w.wrench_seq += 1
+        for w, v, q in zip(worlds, v_ref.tolist(), q_ref.tolist()):
+            w._v_ref, w._q_ref = v, q
 
 
 class MujocoUR5World(MujocoArmWorld):

@@ -72,6 +72,7 @@ def run_loops(
     episodes: Sequence[Loop],
     clock: Callable[[], float] = time.perf_counter,
     on_end: Callable[[int, LoopLog], None] | None = None,
+    after_tick: Callable[[], None] | None = None,
 ) -> list[LoopLog]:
     """Run every episode's loop in lockstep (module docstring); their logs, in order.
 
@@ -79,6 +80,8 @@ def run_loops(
     worlds), up to the float rounding of batched network calls. ``compute`` is each
     tick's own work plus its share of the batched call. ``on_end(i, log)`` is called as
     run i ends, while the others go on (so a caller can write each trial at once).
+    ``after_tick()`` is called after every period in which a run commanded its world, once
+    all have (worlds stepped together: :class:`coassist.robot.mujoco_world.MujocoArmGroup`).
     """
     runs = []
     for i, ep in enumerate(episodes):
@@ -132,6 +135,8 @@ def run_loops(
                 active.append(i)
             elif on_end is not None:
                 on_end(i, runs[i].log())
+        if after_tick is not None and going:
+            after_tick()
         k += 1
     return [run.log() for run in runs]
 
