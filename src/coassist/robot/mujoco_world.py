@@ -765,12 +765,22 @@ class MujocoArmGroup:
         v_ref = np.array([w._v_ref for w in worlds])
         q_ref = np.array([w._q_ref for w in worlds])
         target = np.array([w._target for w in worlds])
+        pushed = [w for w in worlds if w._hand_active]
+        if pushed:  # MujocoArmWorld._set_hand on every pushed arm: the hand's wrench moved to the tool's COM
+            handles = np.array([w._handle for w in pushed])
+            tools = np.array([w._tool_body for w in pushed])
+            fx, fy, fz, tx, ty, tz = np.array([w._hand_list for w in pushed]).T
+            at_com = np.empty((len(pushed), 6))
+            at_com[:, 0], at_com[:, 1], at_com[:, 2] = fx, fy, fz
         m, d = self.model, self.data
         u = self._u.reshape(v_ref.shape)
         for _ in range(self.n_substeps):
-            for w in worlds:
-                if w._hand_active:
-                    w._set_hand()
+            if pushed:
+                rx, ry, rz = (d.site_xpos[handles] - d.xipos[tools]).T
+                at_com[:, 3] = tx + ry * fz - rz * fy  # r × f, in the world's order of operations
+                at_com[:, 4] = ty + rz * fx - rx * fz
+                at_com[:, 5] = tz + rx * fy - ry * fx
+                d.xfrc_applied[tools] = at_com
             # MujocoArmWorld._set_servo on every arm: u = dv/h + kd (v − q̇) + kp (q_ref − q), in its order
             dv = self.alpha * (target - v_ref)
             np.divide(dv, self.h, out=u)
