@@ -54,6 +54,7 @@ import mujoco
 import numpy as np
 
 from coassist._checks import check_optional_int
+from coassist.errors import CoassistError
 from coassist.robot.arm_mjcf import TOOLS, build_arm_model, build_arm_spec, urdf_joint_limits
 from coassist.robot.arms import NullSpacePosture, arm_kinematics, get_arm
 from coassist.robot.ur5_mjcf import Q_SEED
@@ -644,7 +645,7 @@ class MujocoArmWorld:
         self.close()
 
 
-class ConstraintInGroup(RuntimeError):
+class ConstraintInGroup(CoassistError, RuntimeError):
     """A constraint (a joint at its limit) became active in a :class:`MujocoArmGroup`'s model: MuJoCo's
     solver then runs over every arm, and the arms' states are no longer their own worlds' bit for bit."""
 
