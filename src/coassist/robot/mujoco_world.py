@@ -90,6 +90,11 @@ MAX_TRACKING_ERROR = 0.05
 _MUJOCO_TO_COASSIST = -1.0
 
 
+def _sample_number(steps: int, physics_dt: float, rate_hz: float) -> int:
+    """The sensor's sample in which physics step ``steps`` falls: a new one is taken where it changes."""
+    return math.floor(steps * physics_dt * rate_hz + 1e-9)
+
+
 @dataclass(frozen=True)
 class FTSensorModel:
     """The force/torque sensor (module docstring).
@@ -470,7 +475,7 @@ class MujocoArmWorld:
         mujoco.mj_step1(m, d)
         self._steps += 1
         if self.sensor.rate_hz is not None:
-            idx = math.floor(self._steps * self.physics_dt * self.sensor.rate_hz + 1e-9)
+            idx = _sample_number(self._steps, self.physics_dt, self.sensor.rate_hz)
             if idx != self._sample_index:
                 self._sample_index = idx
                 self._wrench = self._sample()
@@ -734,11 +739,9 @@ class MujocoArmGroup:
         if world._closed or world._group is not None:
             return None
         return (
-            world._spec_args,
+            world._spec_args,  # the model, the servo's lag (its α follows from it and the step)
             world.n_substeps,
-            world._alpha,
-            world._kd,
-            world._kp,
+            world.servo_bandwidth,  # the servo's gains
             world.sensor.rate_hz,
             world._steps,
             world._sample_index,
@@ -800,7 +803,7 @@ class MujocoArmGroup:
             self._steps += 1
             sample = False
             if self.rate is not None:
-                idx = math.floor(self._steps * self.h * self.rate + 1e-9)
+                idx = _sample_number(self._steps, self.h, self.rate)
                 if idx != self._sample_index:
                     self._sample_index = idx
                     sample = True
