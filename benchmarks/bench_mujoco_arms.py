@@ -113,13 +113,11 @@ def main() -> None:
     parser.add_argument("--no-check", action="store_true", help="compare the two at the end only")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
-    if args.arms < 1 or args.ticks < 10:
-        parser.error("--arms must be ≥ 1 and --ticks ≥ 10")
+    if args.arms < 2 or args.ticks < 10:
+        parser.error("--arms must be ≥ 2 (a group) and --ticks ≥ 10")
     worlds = [MujocoArmWorld(args.tool, seed=i) for i in range(args.arms)]
     grouped = [MujocoArmWorld(args.tool, seed=i) for i in range(args.arms)]
-    group = MujocoArmGroup(grouped) if args.arms > 1 else None
-    if group is None:
-        parser.error("--arms must be ≥ 2 (a group)")
+    group = MujocoArmGroup(grouped)
     if not same(worlds, grouped):
         raise SystemExit("the grouped worlds differ from their twins before the first tick")
     qd = commands(args.arms, worlds[0].n_joints, args.ticks, worlds[0].dt)

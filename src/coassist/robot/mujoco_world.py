@@ -669,7 +669,8 @@ class MujocoArmGroup:
     Every arm's joints, velocities, controls and samples are its own world's bit for bit
     (``benchmarks/bench_mujoco_arms.py``, ``tests/robot/test_drive_lockstep.py``) while no constraint is
     active: MuJoCo runs its constraint solver over the whole model once any joint of any arm is at its limit
-    (none was in the main job's MuJoCo cells). A step with one raises :class:`ConstraintInGroup` (the caller
+    (none in 1.46 million physics steps of three of the main job's MuJoCo jobs, board cells and the arm's probe
+    trials; docs/performance.md). A step with one raises :class:`ConstraintInGroup` (the caller
     runs its worlds again apart). A member that does not apply in a period (its run ended) is held: its target
     zero, its hand let go. Members are built alike (:meth:`key`), none stepped yet.
     """
