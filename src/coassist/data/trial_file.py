@@ -110,7 +110,8 @@ def _table_checksum(table: pa.Table) -> str:
         if pa.types.is_fixed_size_list(col.type):
             col = col.flatten()
         h.update(name.encode())
-        h.update(np.ascontiguousarray(col.to_numpy(zero_copy_only=False)).tobytes())
+        # the array's own buffer (no bytes copy: 4.6 GB of the main job's trials are hashed as they are written)
+        h.update(np.ascontiguousarray(col.to_numpy(zero_copy_only=False)).data)
     return h.hexdigest()
 
 

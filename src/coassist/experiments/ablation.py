@@ -447,10 +447,10 @@ def _drive_batch(configs: list) -> list[tuple[dict, dict]]:
     import torch
 
     from coassist.robot.drive import drive_lockstep
-    from coassist.sim.pool import trial_payload
+    from coassist.sim.pool import payloads
 
     torch.set_num_threads(1)
-    return [trial_payload(t) for t in drive_lockstep(configs)]
+    return payloads(drive_lockstep(configs))
 
 
 #: The MuJoCo job of MG's trials (its cells have no intent source).

@@ -5,17 +5,36 @@ trial specs here to run; a job runs in a worker and sends its trials back as pla
 (:func:`trial_payload`), and :class:`SubmittedTrials` delivers them as each job finishes.
 This module knows processes and payloads, not what a trial is made of
 (:mod:`coassist.sim.trial_runner` assembles and runs them).
+
+**How the payloads travel.** A job's trials are its :class:`Payloads`. Pickled in one of
+:func:`worker_pool`'s workers, their arrays go through a file of the pool's own in shared memory
+(``/dev/shm``: a tmpfs, so memory, not a disk) and only the file's name, the arrays' shapes and
+the trials' metadata through the pool's pipe; the parent reads each array straight into its own
+buffer and removes the file as it unpickles the job's result. Through the pipe, the main job's
+4.6 GB of trials (86 % of it the predictions the loops used) were pickled by the workers, sent
+64 KiB at a time and read back by the pool's result thread, which spent 16 CPU-s in the kernel
+alone (issue 44). Where the folder is missing or a write fails (no ``/dev/shm``, a full tmpfs,
+Ray's workers, a pool of another kind), the arrays are pickled inline as before: the same
+payloads either way. The folder is the pool's (created with it, removed at its shutdown, and a
+folder whose process is gone is removed by the next pool), so a crashed job leaves nothing behind
+its run.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
+import shutil
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from coassist._checks import check_int
 from coassist._progress import progress_bar
@@ -23,9 +42,11 @@ from coassist.data import Trial, TrialMeta
 
 __all__ = [
     "PARENT_POLL",
+    "Payloads",
     "SubmittedTrials",
     "pool_for",
     "run_on_ray",
+    "payloads",
     "trial_from_payload",
     "trial_payload",
     "worker_pool",
@@ -60,8 +81,140 @@ def trial_from_payload(payload: tuple[dict, dict]) -> Trial:
     return Trial(meta=TrialMeta.from_dict(meta), **arrays)
 
 
+#: Where a pool's folders of payload files go: shared memory where the system has it.
+SHARED_MEMORY = Path("/dev/shm")
+#: A pool's folder is ``SHARED_MEMORY / f"{FOLDER_PREFIX}{pid}-{n}"`` (pid: the process that started the pool).
+FOLDER_PREFIX = "coassist-pool-"
+
+# The payload folder of the pool this process works for: set once by the pool's initializer in
+# each worker (:func:`_start_worker`) and read when a job's result is pickled; None elsewhere
+# (the parent, Ray's workers, a process of no pool), where payloads are pickled inline.
+_worker_folder: Path | None = None
+
+
+class Payloads(list):
+    """A job's trials as :func:`trial_payload`'s (meta, arrays) pairs: a list, pickled through a file in a
+    worker of :func:`worker_pool` (module docstring), inline elsewhere; unpickled, the same list."""
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        shipped = _ship(self, _worker_folder)
+        if shipped is None:
+            return (Payloads, (list(self),))
+        return (_receive, shipped)
+
+
+def payloads(trials: Sequence[Trial]) -> Payloads:
+    """``trials`` as a job's result: :class:`Payloads` of their :func:`trial_payload`."""
+    return Payloads(trial_payload(t) for t in trials)
+
+
+def _ship(items: list, folder: Path | None) -> tuple[str, list, list] | None:
+    """Write every array of ``items`` into a new file in ``folder``, in order: (its path, each trial's meta,
+    each array's (trial, name, dtype, shape) or (trial, name, None, None) for a None); None where it cannot
+    (no folder, anything not a plain payload, a failed write: the file is removed), to pickle inline."""
+    if folder is None or not folder.is_dir():
+        return None
+    metas, layout, arrays = [], [], []
+    for t, item in enumerate(items):
+        if not (isinstance(item, tuple) and len(item) == 2 and isinstance(item[1], dict)):
+            return None
+        meta, named = item
+        metas.append(meta)
+        for name, a in named.items():
+            if a is None:
+                layout.append((t, name, None, None))
+            elif type(a) is np.ndarray and a.dtype.kind in "biuf" and not a.dtype.hasobject:
+                layout.append((t, name, a.dtype.str, a.shape))
+                arrays.append(np.ascontiguousarray(a))
+            else:
+                return None
+    try:
+        fd, path = tempfile.mkstemp(dir=folder, suffix=".payload")
+    except OSError:
+        return None
+    try:
+        with os.fdopen(fd, "wb", buffering=0) as fh:
+            for a in arrays:
+                if not a.nbytes:  # nothing to write (and no byte view of an empty shape)
+                    continue
+                view = a.data.cast("B")
+                written = 0
+                while written < len(view):  # a write to a pipe-like file may be short
+                    written += fh.write(view[written:])
+    except OSError:  # e.g. ENOSPC: a full tmpfs
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+        return None
+    return path, metas, layout
+
+
+def _receive(path: str, metas: list, layout: list) -> Payloads:
+    """The :class:`Payloads` that :func:`_ship` wrote to ``path``, each array read into a buffer of its own;
+    the file is removed."""
+    try:
+        fh = open(path, "rb", buffering=0)  # noqa: SIM115 -- closed below, and the file removed
+    except FileNotFoundError:
+        raise RuntimeError(
+            f"a worker's trials were sent in {path}, which is gone (was the pool's folder in {SHARED_MEMORY} removed?)"
+        ) from None
+    out: list[tuple[dict, dict]] = [(meta, {}) for meta in metas]
+    try:
+        with fh:
+            for t, name, dtype, shape in layout:
+                if dtype is None:
+                    out[t][1][name] = None
+                    continue
+                a = np.empty(shape, dtype=np.dtype(dtype))
+                out[t][1][name] = a
+                if not a.nbytes:
+                    continue
+                view = a.data.cast("B")
+                got = 0
+                while got < len(view):
+                    n = fh.readinto(view[got:])
+                    if not n:
+                        raise RuntimeError(
+                            f"a worker's trials in {path} end early: {got} of {len(view)} bytes of {name}"
+                        )
+                    got += n
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+    return Payloads(out)
+
+
+def _pool_folder() -> Path | None:
+    """A new, empty payload folder for a pool started by this process (module docstring), or None where
+    there is no shared memory to put it in. Folders of processes that are gone are removed first."""
+    if not SHARED_MEMORY.is_dir():
+        return None
+    for old in SHARED_MEMORY.glob(f"{FOLDER_PREFIX}*"):
+        pid = old.name[len(FOLDER_PREFIX) :].split("-")[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(old, ignore_errors=True)
+    try:
+        return Path(tempfile.mkdtemp(prefix=f"{FOLDER_PREFIX}{os.getpid()}-", dir=SHARED_MEMORY))
+    except OSError:
+        return None
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except OSError as exc:
+        return exc.errno == errno.EPERM  # someone else's process of that pid
+    return True
+
+
 #: How often a worker process checks that its parent is alive [s].
 PARENT_POLL = 0.2
+
+
+def _start_worker(parent: int, folder: str | None) -> None:
+    """Worker initializer: watch the parent (:func:`_watch_parent`) and send payloads through ``folder``."""
+    global _worker_folder
+    _worker_folder = None if folder is None else Path(folder)
+    _watch_parent(parent)
 
 
 def _watch_parent(parent: int) -> None:
@@ -101,7 +254,24 @@ def worker_pool(workers: int) -> Executor:
 
     workers = check_int(workers, "workers", 1)
     ctx = multiprocessing.get_context("spawn")
-    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_watch_parent, initargs=(os.getpid(),))
+    folder = _pool_folder()
+
+    class _WorkerPool(ProcessPoolExecutor):
+        """The pool, and its payload folder removed at shutdown (its jobs' files read or no longer wanted)."""
+
+        def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+            try:
+                super().shutdown(wait=wait, cancel_futures=cancel_futures)
+            finally:
+                if folder is not None:
+                    shutil.rmtree(folder, ignore_errors=True)
+
+    return _WorkerPool(
+        max_workers=workers,
+        mp_context=ctx,
+        initializer=_start_worker,
+        initargs=(os.getpid(), None if folder is None else str(folder)),
+    )
 
 
 def pool_for(pool: Executor | None, workers: int):

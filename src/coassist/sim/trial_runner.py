@@ -90,7 +90,7 @@ from coassist.scenario.reference_intents import NominalIntent
 from coassist.scenario.tasks import OBSTACLES, TASKS, Task, task_for_seed
 from coassist.sim.array_runner import fast_path_eligible, run_point_mass_lockstep
 from coassist.sim.point_mass import PointMassWorld
-from coassist.sim.pool import SubmittedTrials, pool_for, run_on_ray, trial_payload
+from coassist.sim.pool import SubmittedTrials, payloads, pool_for, run_on_ray
 
 __all__ = [
     "NAMED_GROUP",
@@ -402,7 +402,7 @@ def _run_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
 
         torch.set_num_threads(1)
     controllers: dict = {}  # one game per (kind, preset) per batch
-    return [trial_payload(run_spec(spec, controllers)) for spec in specs]
+    return payloads([run_spec(spec, controllers) for spec in specs])
 
 
 def _run_lockstep_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
@@ -411,7 +411,7 @@ def _run_lockstep_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
         import torch
 
         torch.set_num_threads(1)
-    return [trial_payload(trial) for trial in run_spec_lockstep(specs)]
+    return payloads(run_spec_lockstep(specs))
 
 
 def run_trials(
