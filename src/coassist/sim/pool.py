@@ -12,8 +12,8 @@ This module knows processes and payloads, not what a trial is made of
 the trials' metadata through the pool's pipe; the parent reads each array straight into its own
 buffer and removes the file as it unpickles the job's result. Through the pipe, the main job's
 4.6 GB of trials (86 % of it the predictions the loops used) were pickled by the workers, sent
-64 KiB at a time and read back by the pool's result thread, which spent 16 CPU-s in the kernel
-alone (issue 44). Where the folder is missing or a write fails (no ``/dev/shm``, a full tmpfs,
+64 KiB at a time and read back by the pool's result thread, which spent 16–21 CPU-s of a run, nearly
+all of it in the kernel (issue 44). Where the folder is missing or a write fails (no ``/dev/shm``, a full tmpfs,
 Ray's workers, a pool of another kind), the arrays are pickled inline as before: the same
 payloads either way. The folder is the pool's (created with it, removed at its shutdown, and a
 folder whose process is gone is removed by the next pool), so a crashed job leaves nothing behind
@@ -29,7 +29,7 @@ import shutil
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import Executor, Future
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -44,6 +44,7 @@ __all__ = [
     "PARENT_POLL",
     "Payloads",
     "SubmittedTrials",
+    "WorkerPool",
     "pool_for",
     "run_on_ray",
     "payloads",
@@ -237,6 +238,28 @@ def _watch_parent(parent: int) -> None:
     threading.Thread(target=watch, name="coassist-parent-watch", daemon=True).start()
 
 
+class WorkerPool(ProcessPoolExecutor):
+    """:func:`worker_pool`'s processes: ``workers`` of context ``context``, each started by :func:`_start_worker`,
+    and the pool's payload folder ``folder`` (module docstring; None: payloads pickled inline), removed when the
+    pool shuts down: by then its jobs' files have been read, or are no longer wanted."""
+
+    def __init__(self, workers: int, context: Any, folder: Path | None) -> None:
+        super().__init__(
+            max_workers=workers,
+            mp_context=context,
+            initializer=_start_worker,
+            initargs=(os.getpid(), None if folder is None else str(folder)),
+        )
+        self.payload_folder = folder
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        try:
+            super().shutdown(wait=wait, cancel_futures=cancel_futures)
+        finally:
+            if self.payload_folder is not None:
+                shutil.rmtree(self.payload_folder, ignore_errors=True)
+
+
 def worker_pool(workers: int) -> Executor:
     """``workers`` simulation processes to pass to :func:`~coassist.sim.trial_runner.run_trials` (``pool``) call after call.
 
@@ -250,28 +273,10 @@ def worker_pool(workers: int) -> Executor:
     only for the same BLAS thread count. Use it as a context manager (it shuts down).
     """
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
 
     workers = check_int(workers, "workers", 1)
     ctx = multiprocessing.get_context("spawn")
-    folder = _pool_folder()
-
-    class _WorkerPool(ProcessPoolExecutor):
-        """The pool, and its payload folder removed at shutdown (its jobs' files read or no longer wanted)."""
-
-        def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
-            try:
-                super().shutdown(wait=wait, cancel_futures=cancel_futures)
-            finally:
-                if folder is not None:
-                    shutil.rmtree(folder, ignore_errors=True)
-
-    return _WorkerPool(
-        max_workers=workers,
-        mp_context=ctx,
-        initializer=_start_worker,
-        initargs=(os.getpid(), None if folder is None else str(folder)),
-    )
+    return WorkerPool(workers, ctx, _pool_folder())
 
 
 def pool_for(pool: Executor | None, workers: int):
