@@ -12,6 +12,7 @@ section is built.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import threading
 from collections.abc import Callable, Collection
@@ -61,6 +62,9 @@ class Workspace:
     #: The simulation processes every collection runs on (coassist.sim.pool.worker_pool), started
     #: once for the run; None: each collection starts its own.
     pool: Executor | None = None
+    #: A pool worker's (:func:`train_in_worker`): the trials of the dataset folders it last trained on are kept
+    #: for its next training on the same folders (:class:`KeptTrials`), instead of read again.
+    keep_trials: bool = False
 
     #: Collections put on the pool ahead of time (:meth:`prefetch`), by dataset name; and other
     #: jobs a later stage will ask for (:meth:`submit`, by key). Not part of the value.
@@ -314,7 +318,8 @@ class Workspace:
         )
         if simulated:
             train_cfg = replace(train_cfg, skip_alpha=cfg.skip_alpha)
-        model = train_model(load_trials(datasets), preset, train_cfg, progress=self.progress)
+        trials = KEPT_TRIALS.load(datasets) if self.keep_trials else load_trials(datasets)
+        model = train_model(trials, preset, train_cfg, progress=self.progress)
         path = self.out / "models" / name
         write_model(model, path)
         return path
@@ -364,6 +369,54 @@ def score_model(model: str | Path, datasets: list[Path], stride: int = 1) -> Any
     return evaluate_model(load_model(model), load_trials(datasets), held_out_only=False, stride=stride)
 
 
+class KeptTrials:
+    """The trials of the dataset folders loaded last, kept for the next load of the same folders.
+
+    A pool worker trains the application's learned sources one after another, eight trainings on the same seven
+    datasets (~330 trials, 5–7 CPU-s to read, checksums checked, each time): kept, each worker reads them once
+    (issue 44). A folder is known by its resolved path, its manifest's SHA-256 and every file's size and
+    modification time, so a dataset written anew is read anew; a path that is not a dataset folder (a trial file,
+    recordings, bags) is read every time and not kept. One entry: other folders' trials replace the kept ones
+    (let go before they are read). The trials are immutable (read-only arrays); each load returns a list of its own.
+    """
+
+    def __init__(self) -> None:
+        self._key: tuple | None = None
+        self._trials: list | None = None
+
+    def load(self, paths: Collection[str | Path]) -> list:
+        """:func:`~coassist.intent.load_trials` of ``paths``, or the kept trials when they are those folders'."""
+        from coassist.intent import load_trials
+
+        key = _folders_key(paths)
+        if key is None:
+            return load_trials(paths)
+        if key != self._key:
+            self._key = self._trials = None  # the kept trials go before the next are read
+            self._trials = load_trials(paths)
+            self._key = key
+        return list(self._trials or ())
+
+
+def _folders_key(paths: Collection[str | Path]) -> tuple | None:
+    """What identifies these dataset folders' trials (:class:`KeptTrials`), or None if one is not a dataset folder."""
+    from coassist.data.datasets import MANIFEST_NAME
+
+    key = []
+    for p in paths:
+        folder = Path(p).resolve()
+        manifest = folder / MANIFEST_NAME
+        if not manifest.is_file():
+            return None
+        files = tuple(sorted((f.name, f.stat().st_size, f.stat().st_mtime_ns) for f in folder.iterdir() if f.is_file()))
+        key.append((str(folder), hashlib.sha256(manifest.read_bytes()).hexdigest(), files))
+    return tuple(key)
+
+
+#: This process's kept trials (a pool worker's; :attr:`Workspace.keep_trials`).
+KEPT_TRIALS = KeptTrials()
+
+
 def train_in_worker(
     config: ReproduceConfig,
     out: Path,
@@ -387,7 +440,7 @@ def train_in_worker(
 
     torch.set_num_threads(1)
     return train_and_score(
-        Workspace(replace(config, threads=1), out, progress=False),
+        Workspace(replace(config, threads=1), out, progress=False, keep_trials=True),
         name,
         datasets,
         init=init,
