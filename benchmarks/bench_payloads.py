@@ -47,6 +47,19 @@ def inline(seed: int, trials: int, ticks: int) -> list:
     return build(seed, trials, ticks)
 
 
+def _pid_after(seconds: float) -> int:
+    time.sleep(seconds)  # held long enough that the other worker takes the next job
+    return os.getpid()
+
+
+def _worker_pids(pool, n: int) -> list[int]:
+    """The pool's ``n`` worker processes' pids: ``n`` jobs that wait side by side, one on each."""
+    pids = sorted({f.result() for f in [pool.submit(_pid_after, 0.5) for _ in range(n)]})
+    if len(pids) != n:
+        raise RuntimeError(f"expected {n} workers to answer, {len(pids)} did")
+    return pids
+
+
 def _cpu(pid: int) -> float:
     """CPU-seconds (user + system) of process ``pid`` so far."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
@@ -77,8 +90,7 @@ def main() -> None:
     workers = {w: 0.0 for w in ways}
     equal = True
     with worker_pool(2) as pool:
-        pool.submit(int, "0").result()
-        pids = [p.pid for p in pool._processes.values()]  # noqa: SLF001 -- the benchmark reads the workers' CPU
+        pids = _worker_pids(pool, 2)
         for job in range(args.jobs):
             for way, fn in ways.items() if job % 2 == 0 else reversed(list(ways.items())):
                 want = build(job, args.trials, args.ticks)

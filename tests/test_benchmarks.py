@@ -16,7 +16,22 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def _json_of(script: str, tmp_path: Path, *args: str) -> dict:
+    """Run ``benchmarks/<script> ARGS --json OUT`` and return what it wrote (its output in the failure's message)."""
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / script), *args, "--json", str(tmp_path / "out.json")],
+        capture_output=True,
+        text=True,
+        timeout=240,
+        cwd=ROOT,
+    )
+    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
+    return json.loads((tmp_path / "out.json").read_text())
 
 
 def test_bench_tick_times_the_loops_ticks_and_its_naive_tick_is_slower():
@@ -44,24 +59,7 @@ def test_arms_in_one_mujoco_model_step_as_their_worlds_bit_for_bit_and_faster(tm
     """``benchmarks/bench_mujoco_arms.py``: worlds stepped in a ``MujocoArmGroup`` (one MuJoCo model, the servo on
     (B, 6) arrays) give every arm's joints, controls and sampled wrench of its twin alone at every tick, bit for bit,
     in less CPU time per tick (issue 44); and so does the tick's DLS step stacked over the arms."""
-    out = subprocess.run(
-        [
-            sys.executable,
-            str(ROOT / "benchmarks" / "bench_mujoco_arms.py"),
-            "--arms",
-            "8",
-            "--ticks",
-            "150",
-            "--json",
-            str(tmp_path / "out.json"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=240,
-        cwd=ROOT,
-    )
-    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
-    result = json.loads((tmp_path / "out.json").read_text())
+    result = _json_of("bench_mujoco_arms.py", tmp_path, "--arms", "8", "--ticks", "150")
     assert result["bit_for_bit"] and result["first_tick_differing"] is None
     # measured 1.7x for 8 arms (each world's own apply included) on this 2-core machine, alternated tick by tick in CPU
     # time: 1.3x leaves room for load, and fails where the group costs what the worlds alone do
@@ -79,27 +77,8 @@ def test_trials_come_back_from_a_worker_through_shared_memory_bit_for_bit_and_ch
     from coassist.sim.pool import SHARED_MEMORY
 
     if not SHARED_MEMORY.is_dir():
-        import pytest
-
         pytest.skip(f"no {SHARED_MEMORY} here: payloads are pickled inline (tests/sim/test_pool_payloads.py)")
-    out = subprocess.run(
-        [
-            sys.executable,
-            str(ROOT / "benchmarks" / "bench_payloads.py"),
-            "--jobs",
-            "24",
-            "--trials",
-            "6",
-            "--json",
-            str(tmp_path / "out.json"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=240,
-        cwd=ROOT,
-    )
-    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
-    result = json.loads((tmp_path / "out.json").read_text())
+    result = _json_of("bench_payloads.py", tmp_path, "--jobs", "24", "--trials", "6")
     assert result["equal"], result
     # the parent's CPU (its pool thread reading and unpickling the results), these sizes: measured 1.9-2.5x less
     # through the folder, and 0.92-1.01x with the folder's path switched off (both ways inline: what the bar must
