@@ -4,36 +4,16 @@ from __future__ import annotations
 
 import os
 
-import numpy as np
+import pytest
 
-from coassist.data import Trial, TrialMeta, write_dataset
+from coassist.data import write_dataset
 from coassist.experiments import pipeline
+
+from ..data.test_datasets import full_trial
 
 
 def _dataset(folder, seed: int):
-    rng = np.random.default_rng(seed)
-    trials = []
-    for k in range(2):
-        n = 20
-        trials.append(
-            Trial(
-                meta=TrialMeta(
-                    user="user-0",
-                    task="linear",
-                    object="handle",
-                    controller="manual",
-                    model_id=None,
-                    seed=seed + k,
-                    origin="sim",
-                    dt=0.008,
-                ),
-                time=np.arange(n) * 0.008,
-                pose=rng.standard_normal((n, 2)),
-                velocity=rng.standard_normal((n, 2)),
-                wrench=rng.standard_normal((n, 2)),
-                reference=rng.standard_normal((n, 2)),
-            )
-        )
+    trials = [full_trial(n=20, seed=seed + k) for k in range(2)]
     write_dataset(trials, folder, dataset_id=folder.name, overwrite=True)
     return trials
 
@@ -82,9 +62,44 @@ def test_the_same_folders_are_read_once_and_anything_new_is_read_again(tmp_path,
     assert len(reads) == 6
 
 
-def test_only_a_pool_workers_workspace_keeps_trials(tmp_path):
+class _Stop(Exception):
+    pass
+
+
+def test_a_pool_workers_trainings_load_through_the_kept_trials_and_the_runs_own_do_not(tmp_path, monkeypatch):
+    import torch
+
+    import coassist.intent as intent
     from coassist.experiments.reproduce_config import REPRODUCE_PRESETS
 
     cfg = REPRODUCE_PRESETS.lookup("tiny")
-    assert not pipeline.Workspace(cfg, tmp_path, progress=False).keep_trials  # the run's own process
-    assert pipeline.Workspace(cfg, tmp_path, progress=False, keep_trials=True).keep_trials
+    folder = tmp_path / "A"
+    _dataset(folder, 1)
+    workspaces = []
+    monkeypatch.setattr(pipeline, "train_and_score", lambda ws, *args, **kwargs: workspaces.append(ws))
+    threads = torch.get_num_threads()
+    try:
+        pipeline.train_in_worker(cfg, tmp_path, "m", [folder], init="scratch", epochs=1)
+    finally:
+        torch.set_num_threads(threads)  # train_in_worker sets one thread, as a pool worker has
+    (worker,) = workspaces
+    own = pipeline.Workspace(cfg, tmp_path, progress=False)
+    assert worker.keep_trials and not own.keep_trials
+
+    kept, read = [], []
+
+    class Kept:
+        def load(self, paths):
+            kept.append(list(paths))
+            raise _Stop
+
+    def load_trials(paths, **kwargs):
+        read.append(list(paths))
+        raise _Stop
+
+    monkeypatch.setattr(pipeline, "KEPT_TRIALS", Kept())
+    monkeypatch.setattr(intent, "load_trials", load_trials)
+    for ws in (worker, own):
+        with pytest.raises(_Stop):
+            ws.train("m", [folder], init="scratch", epochs=1)
+    assert kept == [[folder]] and read == [[folder]]

@@ -94,14 +94,17 @@ def test_a_payload_file_that_is_gone_is_named_in_the_error(tmp_path, monkeypatch
 def test_a_pools_workers_send_through_its_folder_which_goes_with_the_pool(tmp_path):
     if not P.SHARED_MEMORY.is_dir():
         pytest.skip(f"no {P.SHARED_MEMORY} on this system: payloads are pickled inline (tested above)")
-    stale = P.SHARED_MEMORY / f"{P.FOLDER_PREFIX}{2**22 + 1}-x"  # above Linux's largest pid: its process is gone
+    # as a run that died leaves it: its pid above Linux's largest, so its process is gone
+    stale = P.SHARED_MEMORY / f".{P.FOLDER_NAME}.{2**22 + 1}.0123abcd.new"
     stale.mkdir(exist_ok=True)
     (stale / "left.payload").write_bytes(b"0" * 10)
     items = _payloads()
-    before = set(P.SHARED_MEMORY.glob(f"{P.FOLDER_PREFIX}{os.getpid()}-*"))
+    mine = f".{P.FOLDER_NAME}.{os.getpid()}.*.new"
+    before = set(P.SHARED_MEMORY.glob(mine))
     with P.worker_pool(1) as pool:
         assert not stale.exists()  # a folder of a run that died is removed by the next pool
-        (folder,) = set(P.SHARED_MEMORY.glob(f"{P.FOLDER_PREFIX}{os.getpid()}-*")) - before
+        (folder,) = set(P.SHARED_MEMORY.glob(mine)) - before
+        assert pool.payload_folder == folder
         # the worker pickles the payloads it was given: through the pool's folder, as a job's result is
         sent = pool.submit(pickle.dumps, items).result()
         assert len(sent) < 2_000 and len(list(folder.iterdir())) == 1

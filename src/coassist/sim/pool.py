@@ -23,7 +23,6 @@ its run.
 from __future__ import annotations
 
 import contextlib
-import errno
 import os
 import shutil
 import tempfile
@@ -37,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from coassist._checks import check_int
+from coassist._io import remove_stale, temp_name
 from coassist._progress import progress_bar
 from coassist.data import Trial, TrialMeta
 
@@ -84,8 +84,9 @@ def trial_from_payload(payload: tuple[dict, dict]) -> Trial:
 
 #: Where a pool's folders of payload files go: shared memory where the system has it.
 SHARED_MEMORY = Path("/dev/shm")
-#: A pool's folder is ``SHARED_MEMORY / f"{FOLDER_PREFIX}{pid}-{n}"`` (pid: the process that started the pool).
-FOLDER_PREFIX = "coassist-pool-"
+#: A pool's folder is ``SHARED_MEMORY / temp_name(FOLDER_NAME, "new")``: ``.coassist-pool.<pid>.<random>.new``,
+#: pid the process that started the pool.
+FOLDER_NAME = "coassist-pool"
 
 # The payload folder of the pool this process works for: set once by the pool's initializer in
 # each worker (:func:`_start_worker`) and read when a job's result is pickled; None elsewhere
@@ -186,25 +187,18 @@ def _receive(path: str, metas: list, layout: list) -> Payloads:
 
 def _pool_folder() -> Path | None:
     """A new, empty payload folder for a pool started by this process (module docstring), or None where
-    there is no shared memory to put it in. Folders of processes that are gone are removed first."""
+    there is no shared memory to put it in. The folders of processes that are gone are removed first: the
+    folder is named as the project's other temporaries (:func:`coassist._io.temp_name`), which
+    :func:`coassist._io.remove_stale` sweeps."""
     if not SHARED_MEMORY.is_dir():
         return None
-    for old in SHARED_MEMORY.glob(f"{FOLDER_PREFIX}*"):
-        pid = old.name[len(FOLDER_PREFIX) :].split("-")[0]
-        if pid.isdigit() and not _alive(int(pid)):
-            shutil.rmtree(old, ignore_errors=True)
+    remove_stale(SHARED_MEMORY, FOLDER_NAME)
+    folder = SHARED_MEMORY / temp_name(FOLDER_NAME, "new")
     try:
-        return Path(tempfile.mkdtemp(prefix=f"{FOLDER_PREFIX}{os.getpid()}-", dir=SHARED_MEMORY))
+        folder.mkdir()
     except OSError:
         return None
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except OSError as exc:
-        return exc.errno == errno.EPERM  # someone else's process of that pid
-    return True
+    return folder
 
 
 #: How often a worker process checks that its parent is alive [s].
