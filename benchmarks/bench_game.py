@@ -290,9 +290,11 @@ def bench_group_steps(calls: int, B: int = 18) -> list[dict]:
     (B = 18, an application cell; the application preset): the shared game's ``step`` per
     row in a Python loop (the naive baseline) against ``effort_batch``; the online-α
     arbitration's ``step`` per run against ``arbitrated_effort_batch`` (each run its own α).
+    And as :func:`coassist.runtime.batched_loops.run_loops` takes them (MuJoCo drives in lockstep):
+    MG's ``step`` per row against ``step_batch``, the arbitration's against ``arbitrated_step_batch``.
     Efforts checked bit for bit against the loop first (twin controllers)."""
     from coassist.config import APPLICATION_PRESET
-    from coassist.control.arbitration import arbitrated_effort_batch
+    from coassist.control.arbitration import arbitrated_effort_batch, arbitrated_step_batch
     from coassist.control.presets import get_preset, make_controller
 
     preset = get_preset(APPLICATION_PRESET)
@@ -316,6 +318,21 @@ def bench_group_steps(calls: int, B: int = 18) -> list[dict]:
     for got, ok, expected in ((u, clean, want), (u2, clean2, want2)):
         if not ok.all() or not all(np.array_equal(got[b], e.u_r) for b, e in enumerate(expected)):
             raise SystemExit("a batched controller step differs from the per-row step")
+    stepped = [make_controller("cooperative-arbitrated", preset) for _ in range(B)]
+    twins = [make_controller("cooperative-arbitrated", preset) for _ in range(B)]
+    manual = make_controller("manual", preset)
+    for got, expected in (
+        (
+            arbitrated_step_batch(stepped, z, ref_h, ref_r, w),
+            [c.step(*row) for c, row in zip(twins, zip(z, ref_h, ref_r, w))],
+        ),
+        (manual.step_batch(z, ref_h, ref_r, w), [manual.step(*row) for row in zip(z, ref_h, ref_r, w)]),
+    ):
+        if not all(
+            np.array_equal(g.u_r, e.u_r) and np.array_equal(g.u_h_model, e.u_h_model) and g.fault == e.fault
+            for g, e in zip(got, expected)
+        ):
+            raise SystemExit("a batched controller step differs from the per-row step")
 
     def loop(controllers):
         for c, row in zip(controllers, zip(z, ref_h, ref_r, w)):
@@ -324,6 +341,8 @@ def bench_group_steps(calls: int, B: int = 18) -> list[dict]:
     cases = (
         ("cooperative (shared game)", shared.effort_batch, (z, ref_h, ref_r, w), loop, ([shared] * B,)),
         ("cooperative-arbitrated", arbitrated_effort_batch, (arbitrated, z, ref_h, ref_r, w), loop, (arbitrated,)),
+        ("manual (shared), steps", manual.step_batch, (z, ref_h, ref_r, w), loop, ([manual] * B,)),
+        ("cooperative-arbitrated, steps", arbitrated_step_batch, (stepped, z, ref_h, ref_r, w), loop, (stepped,)),
     )
     for name, batched, b_args, naive, n_args in cases:
         (b_med, b_p99), (l_med, l_p99) = time_calls(batched, b_args, calls), time_calls(naive, n_args, calls)

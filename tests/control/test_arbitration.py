@@ -190,3 +190,52 @@ def test_arbitrated_effort_batch_is_each_controllers_step_bit_for_bit(law):
         [], np.zeros((0, 4)), np.zeros((0, 20, 4)), np.zeros((0, 20, 4)), np.zeros((0, 2))
     )
     assert u0.shape == (0, 2) and clean0.shape == (0,)
+
+
+@pytest.mark.parametrize("law", ["target", "hand_force", "confidence"])
+def test_arbitrated_step_batch_gives_each_controllers_step_bit_for_bit(law):
+    """As above, the whole step: every row's u_r, u_h model and flags are its twin's ``step`` bit for bit
+    (a refused row, a saturated one, inputs the batch cannot take at all), and the α after every tick."""
+    from coassist.control.arbitration import arbitrated_step_batch
+
+    params = ArbitrationParameters(
+        law=law, alpha_min=0.3, alpha_max=0.9, target_scale=0.05, force_scale=4.0, error_scale=0.01, error_lag=3
+    )
+    base = thesis_game(alpha=0.7)
+    B = 5
+
+    def controllers():
+        return [
+            ArbitratedController(AssistiveController(base.copy(), effort_limit=[10.0, 12.0]), params) for _ in range(B)
+        ]
+
+    batch, alone = controllers(), controllers()
+    rng = np.random.default_rng(7)
+    offsets = rng.normal(size=(B, 4)) * 0.05
+    seen = set()
+    for k in range(30):
+        z = offsets + 0.001 * k
+        ref_h = rng.normal(size=(B, 20, 4)) * 0.01
+        ref_r = rng.normal(size=(B, 20, 4)) * 0.01 + offsets[:, None, :]
+        wrench = rng.normal(size=(B, 2)) * 3.0
+        if k == 10:
+            z[1, 0] = np.nan  # refused (NONFINITE_STATE)
+            ref_r[2] += 2.0  # 2 m away: saturated
+            ref_h[2] += 2.0
+            wrench[3, 1] = 1e9  # out of the guard's bounds: refused
+        if k == 20:  # float32 inputs: the batch does not take them, every row is its own guarded step
+            z, ref_h, ref_r, wrench = (a.astype(np.float32) for a in (z, ref_h, ref_r, wrench))
+        expected = [c.step(*row) for c, row in zip(alone, zip(z, ref_h, ref_r, wrench))]
+        got = arbitrated_step_batch(batch, z, ref_h, ref_r, wrench)
+        assert len(got) == B
+        for b, (g, e) in enumerate(zip(got, expected)):
+            np.testing.assert_array_equal(g.u_r, e.u_r, err_msg=f"tick {k} row {b}")
+            np.testing.assert_array_equal(g.u_h_model, e.u_h_model, err_msg=f"tick {k} row {b}")
+            assert g.fault == e.fault, (k, b)
+            seen.add(e.fault)
+        assert [c.alpha for c in batch] == [c.alpha for c in alone]
+    assert {Fault.NONE, Fault.SATURATED, Fault.NONFINITE_STATE} <= seen and len(seen) >= 4
+    assert len({c.alpha for c in batch}) == B
+    assert (
+        arbitrated_step_batch([], np.zeros((0, 4)), np.zeros((0, 20, 4)), np.zeros((0, 20, 4)), np.zeros((0, 2))) == []
+    )

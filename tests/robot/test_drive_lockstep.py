@@ -44,6 +44,42 @@ def test_named_intents_drive_in_lockstep_exactly_as_alone():
         assert a.n_samples > 100 and a.equals(b), config
 
 
+def test_drives_of_one_controller_kind_step_it_in_one_call_a_tick_exactly_as_alone(monkeypatch):
+    """MG's drives share one controller (it keeps no state: one step_batch a tick); the online-α drives
+    keep their own, stepped by one arbitrated_step_batch a tick (without the stability guard, as the
+    ablation's cells drive); every trial is its drive() bit for bit."""
+    from coassist.control.controllers import _GuardedController
+    from coassist.runtime import batched_loops
+
+    configs = [
+        DriveConfig(
+            world="mujoco", controller=c, task=t, seed=s, user=u, intent="oracle", time_limit=tl, stability=None
+        )
+        for c in ("manual", "cooperative-arbitrated")
+        for t, s, u, tl in (("linear", 4, 0, 0.8), ("curved", 5, 1, 1.0))
+    ]
+    alone = [drive(c) for c in configs]
+    calls: dict[str, list[int]] = {"step_batch": [], "arbitrated": []}
+    step_batch, arbitrated = _GuardedController.step_batch, batched_loops.arbitrated_step_batch
+
+    def counting_step_batch(self, z, *args):
+        calls["step_batch"].append(z.shape[0])
+        return step_batch(self, z, *args)
+
+    def counting_arbitrated(controllers, *args):
+        calls["arbitrated"].append(len(controllers))
+        return arbitrated(controllers, *args)
+
+    monkeypatch.setattr(_GuardedController, "step_batch", counting_step_batch)
+    monkeypatch.setattr(batched_loops, "arbitrated_step_batch", counting_arbitrated)
+    together = drive_lockstep(configs)
+    for config, a, b in zip(configs, alone, together):
+        assert a.n_samples > 90 and a.equals(b), config
+    both = min(alone[0].n_samples, alone[1].n_samples)  # ticks both runs of a kind are going
+    assert calls["step_batch"][:both] == [2] * both and calls["arbitrated"][:both] == [2] * both
+    assert len(calls["step_batch"]) == len(calls["arbitrated"]) == both  # then each run left alone steps its own
+
+
 @pytest.fixture(scope="module")
 def tiny_model(tmp_path_factory) -> str:
     from coassist.intent.training import train_model, write_model

@@ -158,6 +158,44 @@ def test_every_controller_kind_runs_in_lockstep_exactly_as_alone(controller, ste
     assert step_batch_rows == ([] if controller == "cooperative-arbitrated" else _one_call_per_tick(together))
 
 
+def test_online_alpha_runs_step_their_controllers_in_one_call_a_tick_exactly_as_alone(monkeypatch):
+    """run_loops (the reference path, MuJoCo drives in lockstep): the online-α runs, each its own
+    controller and arbiter, are stepped by one arbitrated_step_batch a tick (row for row each run's
+    step), and give the trials they give alone, bit for bit."""
+    from coassist.runtime import batched_loops
+
+    specs = [replace(s, controller="cooperative-arbitrated") for s in _specs("oracle")]
+    alone = [run_spec(spec) for spec in specs]
+    rows: list[int] = []
+    batched = batched_loops.arbitrated_step_batch
+
+    def counting(controllers, *args):
+        rows.append(len(controllers))
+        return batched(controllers, *args)
+
+    monkeypatch.setattr(batched_loops, "arbitrated_step_batch", counting)
+    together = run_spec_lockstep(specs, arrays=False)  # each run its own controller (it keeps state)
+    for a, b in zip(alone, together):
+        assert a.equals(b)
+    assert rows == _one_call_per_tick(together)
+
+
+def test_arbitrated_groups_take_own_controllers_on_own_games_with_one_guard():
+    from coassist.control.arbitration import ArbitratedController
+    from coassist.runtime.batched_loops import arbitrated_groups
+
+    eps = [spec_episode(replace(s, controller="cooperative-arbitrated"), None) for s in _specs("nominal")]
+    ticks = [ep.loop.tick for ep in eps]
+    assert all(type(t.controller) is ArbitratedController for t in ticks)
+    assert len({id(t.controller.game) for t in ticks}) == 3
+    assert arbitrated_groups(ticks) == [0, 0, 0]
+    assert arbitrated_groups(ticks[:1]) == [None]  # alone: its own step
+    shared = spec_episode(replace(_specs("nominal")[0], controller="manual"), None).loop.tick
+    assert arbitrated_groups([ticks[0], shared, ticks[1]]) == [0, None, 0]
+    # the same controller twice (or two on one game) cannot be advanced twice in one call
+    assert arbitrated_groups([ticks[0], ticks[0]]) == [None, None]
+
+
 @pytest.mark.parametrize("network", ["torch", "onnx"])
 def test_a_float32_model_agrees_to_its_rounding(tiny_model, network):
     # torch's CPU kernels round a row differently at batch 1 and in a batch (MKL takes other

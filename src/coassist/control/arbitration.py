@@ -38,6 +38,7 @@ input leaves α where it was (the guard then refuses the tick as before).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,6 +54,7 @@ __all__ = [
     "ArbitratedController",
     "ArbitrationParameters",
     "arbitrated_effort_batch",
+    "arbitrated_step_batch",
     "guard_key",
     "target_alpha",
 ]
@@ -271,6 +273,36 @@ def arbitrated_effort_batch(
     """
     if not controllers:
         return np.zeros((0, z.shape[1] // 2 if np.ndim(z) == 2 else 0)), np.zeros(0, dtype=bool)
+    inner = controllers[0].controller
+    core = inner._batch_core(z, ref_h, ref_r, wrench, law=_advanced_law(controllers, z, ref_h, ref_r, wrench))
+    return inner._clean_efforts(core, z, ref_h, ref_r, wrench, lambda b: controllers[b].controller.step)
+
+
+def arbitrated_step_batch(
+    controllers: list[ArbitratedController], z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray
+) -> list[ControlStep]:
+    """:meth:`ArbitratedController.step` for B runs at once, run b with its own controller, answered as
+    :meth:`~coassist.control.controllers._GuardedController.step_batch` answers: row b's
+    :class:`~coassist.control.controllers.ControlStep` is ``controllers[b].step(z[b], ref_h[b], ref_r[b],
+    wrench[b])`` bit for bit (u_r, u_h and the flags; saturated rows included), and every arbiter has
+    advanced once, as that step advances it. The arbiters and the α as :func:`arbitrated_effort_batch`; a
+    row the batched guard does not take (out of bounds, not finite, a non-finite effort, or every row
+    where the batch cannot run) is the guarded step of its own assistive controller on the α just set
+    (what ``controllers[b].step`` runs after its arbiter). The same requirements: one
+    :func:`guard_key`, B distinct objects on B distinct games. Never raises."""
+    if not controllers:
+        return []
+    inner = controllers[0].controller
+    core = inner._batch_core(z, ref_h, ref_r, wrench, law=_advanced_law(controllers, z, ref_h, ref_r, wrench))
+    return inner._steps(core, z, ref_h, ref_r, wrench, lambda b: controllers[b].controller.step)
+
+
+def _advanced_law(
+    controllers: list[ArbitratedController], z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray
+) -> Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """Every row's arbiter advanced and its game's α set, as each ``step`` does before its guarded
+    step (whatever the guard then finds); the law of the batch's good rows on their own gains
+    (:func:`~coassist.control.game.solve_with_gains`)."""
     for c, alpha in zip(controllers, _arbitrate(controllers, z, ref_h, ref_r, wrench)):
         if alpha != c.game.alpha:
             try:
@@ -282,9 +314,7 @@ def arbitrated_effort_batch(
     def law(good: np.ndarray, zg: np.ndarray, rh: np.ndarray, rr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return solve_with_gains([gains[i] for i in good.tolist()], zg, rh, rr)
 
-    inner = controllers[0].controller
-    core = inner._batch_core(z, ref_h, ref_r, wrench, law=law)
-    return inner._clean_efforts(core, z, ref_h, ref_r, wrench, lambda b: controllers[b].controller.step)
+    return law
 
 
 def _arbitrate(

@@ -229,9 +229,16 @@ class _GuardedController:
         else (other shapes or dtypes, a law that raises) falls back to :meth:`step` per row.
         Never raises.
         """
-        core = self._batch_core(z, ref_h, ref_r, wrench)
+        return self._steps(self._batch_core(z, ref_h, ref_r, wrench), z, ref_h, ref_r, wrench, lambda b: self.step)
+
+    def _steps(
+        self, core, z, ref_h, ref_r, wrench, step_of: Callable[[int], Callable[..., ControlStep]]
+    ) -> list[ControlStep]:
+        """:meth:`step_batch`'s answer from :meth:`_batch_core`'s: row b's :class:`ControlStep`, where
+        the batch found it good and its effort finite (saturated as :func:`saturate` does), else
+        ``step_of(b)``'s guarded step of the row (every row where ``core`` is None)."""
         if core is None:
-            return [self.step(*row) for row in zip(z, ref_h, ref_r, wrench)]
+            return [step_of(b)(*row) for b, row in enumerate(zip(z, ref_h, ref_r, wrench))]
         good, u_h, u_r, fine, ratio = core
         limit = self.effort_limit
         out: list[ControlStep | None] = [None] * z.shape[0]
@@ -243,7 +250,7 @@ class _GuardedController:
                 out[b] = ControlStep(u_r[j], u_h[j], Fault.NONE)
             else:  # as saturate()
                 out[b] = ControlStep(np.clip(u_r[j] / r, -limit, limit), u_h[j], Fault.SATURATED)
-        return [s if s is not None else self.step(z[b], ref_h[b], ref_r[b], wrench[b]) for b, s in enumerate(out)]
+        return [s if s is not None else step_of(b)(z[b], ref_h[b], ref_r[b], wrench[b]) for b, s in enumerate(out)]
 
     def effort_batch(
         self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray

@@ -303,6 +303,22 @@ def _controller(config: DriveConfig):
     return controller
 
 
+def _lockstep_controller(config: DriveConfig, held: dict[tuple, Any]):
+    """:func:`_controller` for a drive in lockstep: one object for the runs that would build equal ones
+    (their preset, kind, rate, DOFs and guard) where it keeps no state between ticks (no ``reset``:
+    MG, IMP, a fixed-α game), so :func:`~coassist.runtime.batched_loops.run_loops` steps them in one
+    ``step_batch`` (row for row its ``step``, bit for bit); one of its own where it keeps state (the
+    online-α arbitration, the stability guard)."""
+    key = (config.preset, config.controller, config.dt, config.full_pose, stability_guard(config))
+    controller = held.get(key)
+    if controller is None:
+        controller = _controller(config)
+        if callable(getattr(controller, "reset", None)):
+            return controller
+        held[key] = controller
+    return controller
+
+
 def stability_guard(config: DriveConfig) -> StabilityGuardParameters | None:
     """The stability guard's parameters where the run's controller is wrapped in it (:attr:`DriveConfig.stability`:
     an assistive controller on x-y), else None."""
@@ -368,7 +384,8 @@ def drive(
 def drive_lockstep(configs: Sequence[DriveConfig], *, together: bool = True) -> list[Trial]:
     """Simulated drives (a simulated world such as ``"mujoco"``, each its own) run in lockstep
     (:func:`coassist.runtime.batched_loops.run_loops`): one network call per tick for the runs
-    with the same model in the loop. Each trial is its :func:`drive` to the float32 rounding
+    with the same model in the loop, one controller call per tick for the runs of one controller
+    kind (:func:`_lockstep_controller`). Each trial is its :func:`drive` to the float32 rounding
     of batched network calls (bit for bit with a named intent); in ``configs``' order.
 
     ``together``: the MuJoCo worlds built alike step in one model
@@ -387,10 +404,11 @@ def drive_lockstep(configs: Sequence[DriveConfig], *, together: bool = True) -> 
                 f"configs[{i}] must be a DriveConfig of a simulated world ({simulated}) without a real-time predictor"
             )
     sources: dict[tuple[str, int], Any] = {}
+    controllers: dict[tuple, Any] = {}
     runs: list[_PreparedDrive] = []
     try:
         for c in configs:
-            runs.append(_prepare(c, sources=sources))
+            runs.append(_prepare(c, sources=sources, controllers=controllers))
         groups = MujocoArmGroup.form([r.world for r in runs if r.built_here]) if together else []
 
         def step_groups() -> None:
@@ -453,14 +471,16 @@ def _prepare(
     view: bool = False,
     intent_source: Any = None,
     sources: dict | None = None,
+    controllers: dict | None = None,
 ) -> _PreparedDrive:
     """Build :func:`drive`'s episode (world, hand, kinematics, wrench, safety, tick) with the
     sensor zeroed; on failure, close what was built. ``sources``: a cache (intent, horizon) →
-    loaded source that runs in lockstep share (those with a ``batcher``: stateless)."""
+    loaded source that runs in lockstep share (those with a ``batcher``: stateless);
+    ``controllers``: a cache of the controllers they share (:func:`_lockstep_controller`)."""
     if not isinstance(config, DriveConfig):
         raise ValueError(f"config must be a DriveConfig, got {type(config).__name__}")
     dt = config.dt
-    controller = _controller(config)
+    controller = _controller(config) if controllers is None else _lockstep_controller(config, controllers)
     H = int(controller.horizon)
     task = task_for_seed(config.task, config.seed, obstacle=config.obstacle)  # the same draw in every world
     profile = population_profile(config.population, config.user, config.population_seed)

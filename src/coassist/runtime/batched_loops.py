@@ -9,6 +9,7 @@ would, one period at a time for all of them together::
         the other runs' intent stages alone                 (nominal, oracle, a real-time predictor)
         args_i = run_i.tick.control_inputs(intent_i)        z, ref_h, ref_r, w
         runs sharing a controller → one step_batch(B rows)  (the game's gains are shared)
+        online-α runs of one guard → one arbitrated_step_batch (each run its own α)
         over_i = run_i.act(k, intent_i, control_i)          safety, command, log, end?
 
 A run that ends (its termination rule, ``n_max``, a safety or robot stop, a lost link)
@@ -20,11 +21,13 @@ batchers get one call each. Every other part of a tick is the per-trial code its
 / ``decide``), so the two runners cannot drift.
 
 Runs whose controller is one object without state between ticks (no ``reset``: the
-game controller, IMP and MG of a batch; ``run_spec_lockstep`` shares them) are stepped by
+game controller, IMP and MG of a batch; ``run_spec_lockstep`` and ``drive_lockstep`` share them) are stepped by
 one ``step_batch`` call per tick, which gives row for row what ``step`` gives, bit for bit
 (the guard's checks once over the batch, the game's three matrix-vector products per row:
-a matrix-matrix product over the batch would round differently). A controller that keeps
-state (the online-α arbitration) is stepped by its own tick.
+a matrix-matrix product over the batch would round differently). The online-α runs, each with
+a controller and arbiter of its own, are stepped by one ``arbitrated_step_batch`` per group
+(:func:`arbitrated_groups`: one guard), row for row each run's ``step``, bit for bit. Any other
+controller that keeps state is stepped by its own tick.
 
 Exactness. Nominal and oracle intents, and any batcher whose rows do not depend on the
 batch, give the per-trial logs bit for bit. A float32 network evaluated by BLAS does
@@ -51,11 +54,12 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from coassist.control.arbitration import ArbitratedController, arbitrated_step_batch, guard_key
 from coassist.runtime.loop import LINK_LOST, LoopLog, LoopRun, Termination
 from coassist.runtime.tick import ControlTick
 from coassist.runtime.world import World
 
-__all__ = ["Loop", "intent_batcher", "run_loops", "shared_controller"]
+__all__ = ["Loop", "arbitrated_groups", "intent_batcher", "run_loops", "shared_controller"]
 
 
 class Loop(NamedTuple):
@@ -90,6 +94,7 @@ def run_loops(
         runs.append(LoopRun(ep.world, ep.tick, ep.n_max, ep.termination, clock=clock, split=True))
     batchers = [intent_batcher(run.tick) for run in runs]
     steppers = [shared_controller(run.tick) for run in runs]
+    arbitrated = arbitrated_groups([run.tick for run in runs])
     active = [i for i, run in enumerate(runs) if run.n_max > 0]
     if on_end is not None:
         for i, run in enumerate(runs):
@@ -128,7 +133,7 @@ def run_loops(
             for i, pred in zip(members, preds):
                 runs[i].charge(share)
                 answers[i] = runs[i].tick.intent.accept(pred)
-        controls = _step_controllers(runs, going, answers, steppers, clock, stacks)
+        controls = _step_controllers(runs, going, answers, steppers, arbitrated, clock, stacks)
         active = []
         for i in going:
             if not runs[i].act(k, answers[i], controls.get(i)) and k + 1 < runs[i].n_max:
@@ -182,33 +187,65 @@ def shared_controller(tick: ControlTick) -> Any:
     return controller
 
 
+def arbitrated_groups(ticks: Sequence[ControlTick]) -> list[int | None]:
+    """Per tick, the group of online-α runs whose controllers one :func:`~coassist.control.arbitration.arbitrated_step_batch`
+    may step together (an index; None: the tick steps its controller itself): an
+    :class:`~coassist.control.arbitration.ArbitratedController` of its own, on a game of its own, with
+    the :func:`~coassist.control.arbitration.guard_key` of at least one other run's."""
+    keys: dict[tuple, list[int]] = {}
+    controllers, games = set(), set()
+    for i, tick in enumerate(ticks):
+        c = tick.controller
+        if type(c) is ArbitratedController and id(c) not in controllers and id(c.game) not in games:
+            controllers.add(id(c))
+            games.add(id(c.game))
+            keys.setdefault(guard_key(c), []).append(i)
+    out: list[int | None] = [None] * len(ticks)
+    for g, members in enumerate(keys.values()):
+        if len(members) > 1:
+            for i in members:
+                out[i] = g
+    return out
+
+
 def _step_controllers(
     runs: list[LoopRun],
     going: list[int],
     answers: dict[int, Any],
     steppers: list[Any],
+    arbitrated: list[int | None],
     clock: Callable[[], float],
     stacks: _Stacks,
 ) -> dict[int, Any]:
     """Run i's controller step for this tick, for the runs whose controller is shared: one
-    ``step_batch`` per controller (row for row its ``step``, bit for bit), each run charged
-    its inputs' time and its share of the call."""
-    groups: dict[int, tuple[Any, list[int], list[tuple[np.ndarray, ...]]]] = {}
+    ``step_batch`` per controller (row for row its ``step``, bit for bit); and for the online-α
+    runs of one :func:`arbitrated_groups` group: one ``arbitrated_step_batch`` (row for row each
+    run's ``step``, bit for bit). Each run is charged its inputs' time and its share of the call."""
+    groups: dict[Any, tuple[Any, list[int], list[tuple[np.ndarray, ...]]]] = {}
     for i in going:
         controller = steppers[i]
-        if controller is None:
+        if controller is not None:
+            key: Any = id(controller)
+        elif arbitrated[i] is not None:
+            key = ("arbitrated", arbitrated[i])
+        else:
             continue
         t0 = clock()
         inputs = runs[i].tick.control_inputs(answers[i])
         runs[i].charge(clock() - t0)
-        _, members, rows = groups.setdefault(id(controller), (controller, [], []))
+        _, members, rows = groups.setdefault(key, (controller, [], []))
         members.append(i)
         rows.append(inputs)
     controls: dict[int, Any] = {}
-    for controller, members, rows in groups.values():
+    for key, (controller, members, rows) in groups.items():
         t0 = clock()
         if len(members) == 1:  # a controller of its own (a drive builds one per run): its step, the same rows
-            steps = [controller.step(*rows[0])]
+            steps = [runs[members[0]].tick.controller.step(*rows[0])]
+        elif controller is None:  # the online-α runs of one group, each its own controller
+            steps = arbitrated_step_batch(
+                [runs[i].tick.controller for i in members],
+                *(stacks.stack((key, j), column) for j, column in enumerate(zip(*rows))),
+            )
         else:
             steps = controller.step_batch(
                 *(stacks.stack((id(controller), j), column) for j, column in enumerate(zip(*rows)))
