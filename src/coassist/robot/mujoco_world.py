@@ -729,6 +729,14 @@ class MujocoArmGroup:
         self._qpos, self._qvel = d.qpos.reshape(B, n), d.qvel.reshape(B, n)
         self._u = np.zeros(B * n)
         self._steps, self._sample_index = w0._steps, w0._sample_index
+        # every member's sensor (MujocoArmWorld._sample) as (B, 6) arrays: where its six readings sit in the
+        # group's sensordata, its bias, noise and range
+        self._ft_at = np.array(
+            [[*range(w._force_adr, w._force_adr + 3), *range(w._torque_adr, w._torque_adr + 3)] for w in worlds]
+        )
+        self._ft_bias = np.array([w._bias for w in worlds], dtype=float)
+        self._ft_sigma = np.array([w._sigma for w in worlds], dtype=float)
+        self._ft_range = np.array([w._range for w in worlds], dtype=float)
 
     @staticmethod
     def key(world: Any) -> tuple | None:
@@ -802,24 +810,36 @@ class MujocoArmGroup:
                     f"{d.nefc} constraint rows active in a group of {len(worlds)} MuJoCo arms (a joint at its limit)"
                 )
             self._steps += 1
-            sample = False
             if self.rate is not None:
                 idx = _sample_number(self._steps, self.h, self.rate)
                 if idx != self._sample_index:
                     self._sample_index = idx
-                    sample = True
-            for w in worlds:
-                w._steps = self._steps
-                if sample:
-                    w._sample_index = self._sample_index
-                    w._wrench = w._sample()
-                    w.wrench_seq += 1
+                    self._sample()
         if self.rate is None:
-            for w in worlds:
-                w._wrench = w._sample()
-                w.wrench_seq += 1
+            self._sample()
+        # (nothing in the substeps reads a member's clock or sample count: they are set once, here)
         for w, v, q in zip(worlds, v_ref.tolist(), q_ref.tolist()):
             w._v_ref, w._q_ref = v, q
+            w._steps = self._steps
+            if self.rate is not None:
+                w._sample_index = self._sample_index
+
+    def _sample(self) -> None:
+        """A new sensor sample for every member: :meth:`MujocoArmWorld._sample` on (B, 6) arrays, elementwise
+        in its order, each member's noise from its own generator (its six draws, as its own sample draws them)."""
+        raw = self.data.sensordata[self._ft_at]
+        raw *= _MUJOCO_TO_COASSIST
+        raw += self._ft_bias
+        noise = np.empty_like(raw)
+        for w, row in zip(self.worlds, noise):
+            w._rng.standard_normal(out=row)
+        noise *= self._ft_sigma
+        raw += noise
+        np.minimum(raw, self._ft_range, out=raw)
+        np.maximum(raw, -self._ft_range, out=raw)
+        for w, row in zip(self.worlds, raw):
+            w._wrench = row
+            w.wrench_seq += 1
 
 
 class MujocoUR5World(MujocoArmWorld):
