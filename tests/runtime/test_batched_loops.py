@@ -289,6 +289,48 @@ def test_a_lost_link_ends_only_its_run_as_alone():
         np.testing.assert_array_equal(a.fault, b.fault)
 
 
+class FailingInputs:
+    """A tick whose controller inputs fail (a stage's bug) from tick ``at`` on; everything else the wrapped tick's."""
+
+    def __init__(self, tick, at: int) -> None:
+        self._t, self._at, self._k = tick, at, -1
+
+    def __getattr__(self, name):
+        return getattr(self._t, name)
+
+    def sense(self, k, *args):
+        self._k = k
+        return self._t.sense(k, *args)
+
+    def control_inputs(self, intent):
+        if self._k >= self._at:
+            raise RuntimeError("a bug in a stage")
+        return self._t.control_inputs(intent)
+
+    def decide(self, intent):
+        return self._t.finish(self._t.controller.step(*self.control_inputs(intent)))
+
+
+@pytest.mark.parametrize("controller", ["manual", "cooperative-arbitrated"])
+def test_a_stage_that_fails_in_a_batched_tick_stops_only_its_run(controller):
+    """A run whose controller inputs raise leaves the tick's batched controller call (shared MG, online-α
+    group) and is stopped by its own act(), as alone; the others go on as they would alone."""
+    specs = [replace(s, controller=controller) for s in _specs("oracle")]
+    alone = [run_spec(spec) for spec in specs]
+    controllers: dict = {}
+    eps = []
+    for spec in specs:
+        eps.append(spec_episode(spec, controllers))
+        if callable(getattr(eps[-1].tick.controller, "reset", None)):
+            controllers.clear()  # state between ticks: each run its own, as run_spec_lockstep builds them
+    episodes = [ep.loop for ep in eps]
+    episodes[1] = Loop(episodes[1].world, FailingInputs(episodes[1].tick, 30), *episodes[1][2:])
+    logs = run_loops(episodes)
+    assert logs[1].ended == "internal_error" and logs[1].n == 30 and "a bug in a stage" in logs[1].message
+    for i in (0, 2):
+        assert eps[i].finish(logs[i]).equals(alone[i])
+
+
 def test_run_loops_refuses_what_is_not_a_loop():
     with pytest.raises(ValueError, match=r"episodes\[0\] must be a Loop"):
         run_loops([(1, 2, 3, None)])
