@@ -146,6 +146,39 @@ def test_a_cached_arbitrated_controller_gives_the_same_trial_every_time():
     assert alone.meta.controller == "cooperative+target"
 
 
+def _online_alpha_twins(law: str, B: int) -> tuple[list[ArbitratedController], list[ArbitratedController]]:
+    """Two sets of B online-α controllers alike (each its own game): one stepped in a batch, its twins one by one."""
+    params = ArbitrationParameters(
+        law=law, alpha_min=0.3, alpha_max=0.9, target_scale=0.05, force_scale=4.0, error_scale=0.01, error_lag=3
+    )
+    base = thesis_game(alpha=0.7)
+
+    def controllers():
+        return [
+            ArbitratedController(AssistiveController(base.copy(), effort_limit=[10.0, 12.0]), params) for _ in range(B)
+        ]
+
+    return controllers(), controllers()
+
+
+def _online_alpha_ticks(B: int, seed: int):
+    """30 ticks of B runs' controller inputs, each run its own distance to the plan (its own α); at tick 10 row 1's
+    state is NaN (refused), row 2 is 2 m from its plan (saturated) and row 3's hand force 1e9 N (out of bounds)."""
+    rng = np.random.default_rng(seed)
+    offsets = rng.normal(size=(B, 4)) * 0.05
+    for k in range(30):
+        z = offsets + 0.001 * k
+        ref_h = rng.normal(size=(B, 20, 4)) * 0.01
+        ref_r = rng.normal(size=(B, 20, 4)) * 0.01 + offsets[:, None, :]
+        wrench = rng.normal(size=(B, 2)) * 3.0
+        if k == 10:
+            z[1, 0] = np.nan
+            ref_r[2] += 2.0
+            ref_h[2] += 2.0
+            wrench[3, 1] = 1e9
+        yield k, z, ref_h, ref_r, wrench
+
+
 @pytest.mark.parametrize("law", ["target", "hand_force", "confidence"])
 def test_arbitrated_effort_batch_is_each_controllers_step_bit_for_bit(law):
     """B runs, each with its own controller and α history, stepped together for 30 ticks against
@@ -153,30 +186,10 @@ def test_arbitrated_effort_batch_is_each_controllers_step_bit_for_bit(law):
     tick, and the rows the guard refuses or saturates are not clean (their α moved as step's)."""
     from coassist.control.arbitration import arbitrated_effort_batch, guard_key
 
-    params = ArbitrationParameters(
-        law=law, alpha_min=0.3, alpha_max=0.9, target_scale=0.05, force_scale=4.0, error_scale=0.01, error_lag=3
-    )
-    base = thesis_game(alpha=0.7)
     B = 6
-
-    def controllers():
-        return [
-            ArbitratedController(AssistiveController(base.copy(), effort_limit=[10.0, 12.0]), params) for _ in range(B)
-        ]
-
-    batch, alone = controllers(), controllers()
+    batch, alone = _online_alpha_twins(law, B)
     assert len({guard_key(c) for c in batch}) == 1
-    rng = np.random.default_rng(5)
-    offsets = rng.normal(size=(B, 4)) * 0.05  # each run its own distance to the plan: its own α
-    for k in range(30):
-        z = offsets + 0.001 * k
-        ref_h = rng.normal(size=(B, 20, 4)) * 0.01
-        ref_r = rng.normal(size=(B, 20, 4)) * 0.01 + offsets[:, None, :]
-        wrench = rng.normal(size=(B, 2)) * 3.0
-        if k == 10:
-            z[1, 0] = np.nan  # refused (NONFINITE_STATE)
-            ref_r[2] += 2.0  # 2 m away: saturated
-            ref_h[2] += 2.0
+    for k, z, ref_h, ref_r, wrench in _online_alpha_ticks(B, seed=5):
         expected = [c.step(*row) for c, row in zip(alone, zip(z, ref_h, ref_r, wrench))]
         u, clean = arbitrated_effort_batch(batch, z, ref_h, ref_r, wrench)
         np.testing.assert_array_equal(clean, [e.fault == Fault.NONE for e in expected])
@@ -184,7 +197,7 @@ def test_arbitrated_effort_batch_is_each_controllers_step_bit_for_bit(law):
             np.testing.assert_array_equal(u[b], expected[b].u_r, err_msg=f"tick {k} row {b}")
         assert [c.alpha for c in batch] == [c.alpha for c in alone]
         if k == 10:
-            assert not clean[1] and not clean[2]
+            assert not clean[1] and not clean[2] and not clean[3]
     assert len({c.alpha for c in batch}) == B  # the runs' α differ: each row had its own gains
     u0, clean0 = arbitrated_effort_batch(
         [], np.zeros((0, 4)), np.zeros((0, 20, 4)), np.zeros((0, 20, 4)), np.zeros((0, 2))
@@ -198,31 +211,10 @@ def test_arbitrated_step_batch_gives_each_controllers_step_bit_for_bit(law):
     (a refused row, a saturated one, inputs the batch cannot take at all), and the α after every tick."""
     from coassist.control.arbitration import arbitrated_step_batch
 
-    params = ArbitrationParameters(
-        law=law, alpha_min=0.3, alpha_max=0.9, target_scale=0.05, force_scale=4.0, error_scale=0.01, error_lag=3
-    )
-    base = thesis_game(alpha=0.7)
     B = 5
-
-    def controllers():
-        return [
-            ArbitratedController(AssistiveController(base.copy(), effort_limit=[10.0, 12.0]), params) for _ in range(B)
-        ]
-
-    batch, alone = controllers(), controllers()
-    rng = np.random.default_rng(7)
-    offsets = rng.normal(size=(B, 4)) * 0.05
+    batch, alone = _online_alpha_twins(law, B)
     seen = set()
-    for k in range(30):
-        z = offsets + 0.001 * k
-        ref_h = rng.normal(size=(B, 20, 4)) * 0.01
-        ref_r = rng.normal(size=(B, 20, 4)) * 0.01 + offsets[:, None, :]
-        wrench = rng.normal(size=(B, 2)) * 3.0
-        if k == 10:
-            z[1, 0] = np.nan  # refused (NONFINITE_STATE)
-            ref_r[2] += 2.0  # 2 m away: saturated
-            ref_h[2] += 2.0
-            wrench[3, 1] = 1e9  # out of the guard's bounds: refused
+    for k, z, ref_h, ref_r, wrench in _online_alpha_ticks(B, seed=7):
         if k == 20:  # float32 inputs: the batch does not take them, every row is its own guarded step
             z, ref_h, ref_r, wrench = (a.astype(np.float32) for a in (z, ref_h, ref_r, wrench))
         expected = [c.step(*row) for c, row in zip(alone, zip(z, ref_h, ref_r, wrench))]
