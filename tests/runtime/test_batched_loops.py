@@ -316,19 +316,22 @@ def test_a_stage_that_fails_in_a_batched_tick_stops_only_its_run(controller):
     """A run whose controller inputs raise leaves the tick's batched controller call (shared MG, online-α
     group) and is stopped by its own act(), as alone; the others go on as they would alone."""
     specs = [replace(s, controller=controller) for s in _specs("oracle")]
-    alone = [run_spec(spec) for spec in specs]
+    n = 60  # ticks: the failure at 30, then the others on their own
+    alone = [run_loop(*spec_episode(spec).loop._replace(n_max=n)) for spec in specs]
     controllers: dict = {}
-    eps = []
+    episodes = []
     for spec in specs:
-        eps.append(spec_episode(spec, controllers))
-        if callable(getattr(eps[-1].tick.controller, "reset", None)):
+        episodes.append(spec_episode(spec, controllers).loop._replace(n_max=n))
+        if callable(getattr(episodes[-1].tick.controller, "reset", None)):
             controllers.clear()  # state between ticks: each run its own, as run_spec_lockstep builds them
-    episodes = [ep.loop for ep in eps]
-    episodes[1] = Loop(episodes[1].world, FailingInputs(episodes[1].tick, 30), *episodes[1][2:])
+    episodes[1] = episodes[1]._replace(tick=FailingInputs(episodes[1].tick, 30))
     logs = run_loops(episodes)
     assert logs[1].ended == "internal_error" and logs[1].n == 30 and "a bug in a stage" in logs[1].message
     for i in (0, 2):
-        assert eps[i].finish(logs[i]).equals(alone[i])
+        assert logs[i].n == n and logs[i].ended == alone[i].ended == "time_limit"
+        np.testing.assert_array_equal(logs[i].pose, alone[i].pose)
+        np.testing.assert_array_equal(logs[i].effort_r, alone[i].effort_r)
+        np.testing.assert_array_equal(logs[i].fault, alone[i].fault)
 
 
 def test_run_loops_refuses_what_is_not_a_loop():
