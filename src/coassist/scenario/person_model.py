@@ -87,12 +87,16 @@ PERSON_MODEL_FILE = "person-model.json"
 #: enough to pay for it): on the same cells, against 0.04 s, overshoot −0.019 [−0.040, +0.002] mm, hand force +0.040
 #: [+0.037, +0.043] N, jerk −0.040 [−0.045, −0.035] m/s³, every cell's force share ≥ 85 % (0.08 s: −0.085 mm, +0.054 N,
 #: −0.068 m/s³, but one cell's force share 84 %; docs/person-model.md, "Eight probe trials a person").
+#: The lead and the rows' low-pass moved together, 0.06 → 0.09 s each (2026-12-05): alone, a longer lead saves hand
+#: force for jerk and a longer low-pass jerk and overshoot for force; together, on the same eight cells against 0.06 /
+#: 0.06 s, overshoot −0.139 [−0.283, +0.006] mm, hand force −0.051 [−0.065, −0.037] N, jerk −0.029 [−0.036, −0.021]
+#: m/s³, every cell's force share 87–96 % (docs/person-model.md, "The lead and the rows' low-pass together").
 PERSON_FILTER = PersonFilterSettings(
     blend_time=0.05,
     hedge_leaving=0.5,
-    reaction_lead=0.06,
+    reaction_lead=0.09,
     object_yaw=True,
-    row_smoothing=0.06,
+    row_smoothing=0.09,
     follow_mirror=False,
     side_rule="onset",
     evidence_gap=0.005,
