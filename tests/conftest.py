@@ -17,7 +17,8 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
     for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(_name, "1")
 
-# ``./dev test`` runs the real-time tests alone, after the rest, and collects only the files that hold
+# ``./dev test`` runs the real-time tests after the rest (two at a time, then those also marked ``alone`` one at a
+# time: pyproject.toml's markers), and collects only the files that hold
 # them: those whose text names the marker (``grep -l 'mark.realtime'``), so that second run does not pay the
 # whole suite's imports again (~25 CPU-s of collection for 24 tests). The marker must therefore be spelt
 # out in the test's own file; this refuses a realtime test the grep would miss, before any test runs.
@@ -29,6 +30,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     seen: dict[Path, bool] = {}
     for item in items:
         if item.get_closest_marker("realtime") is None:
+            if item.get_closest_marker("alone") is not None:
+                raise pytest.UsageError(
+                    f"{item.nodeid} is marked alone but not realtime: ./dev test runs only realtime tests alone "
+                    "(mark it pytest.mark.realtime too)"
+                )
             continue
         path = Path(item.path)
         if path not in seen:

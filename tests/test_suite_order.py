@@ -1,5 +1,6 @@
 """tests/conftest.py's LONGEST_FIRST names tests that exist, and the collection puts them first: in its order on
-one worker, at the heads of the workers' first shares under xdist's ``--dist worksteal``."""
+one worker, at the heads of the workers' first shares under xdist's ``--dist worksteal``; its checks of the realtime
+and alone markers (what ./dev test's realtime runs would miss is refused)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import LONGEST_FIRST, longest_first, workers_of
+from .conftest import LONGEST_FIRST, longest_first, pytest_collection_modifyitems, workers_of
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -114,3 +115,25 @@ def test_the_plan_is_for_xdists_workers_under_worksteal_alone():
     assert workers_of(Config(["-n", "3", "--dist", "load"], 3)) == 1  # type: ignore[arg-type]
     assert workers_of(Config(["-n", "3"], 3)) == 1  # type: ignore[arg-type]
     assert workers_of(Config(["--dist", "worksteal"])) == 1  # type: ignore[arg-type]  # not a worker
+
+
+class _Marked:
+    def __init__(self, path: Path, markers: set[str]):
+        self.path, self.nodeid, self.markers = path, f"{path.name}::test_a", markers
+
+    def get_closest_marker(self, name: str) -> object | None:
+        return object() if name in self.markers else None
+
+
+def test_a_realtime_test_must_say_so_in_its_file_and_alone_needs_realtime(tmp_path):
+    # ./dev test's realtime runs collect the files that spell the marker out (grep), and run only realtime tests
+    # alone: a test either would miss is refused before any test runs
+    spelt, bare = tmp_path / "test_spelt.py", tmp_path / "test_bare.py"
+    spelt.write_text("import pytest\n\n\n@pytest.mark.realtime\n@pytest.mark.alone\ndef test_a():\n    pass\n")
+    bare.write_text("import pytest\n\nMARKS = (pytest.mark.slow,)\n")
+    for item in (_Marked(spelt, {"realtime", "alone"}), _Marked(spelt, {"realtime"}), _Marked(bare, set())):
+        next(pytest_collection_modifyitems(None, [item]))  # the checks pass: the hook goes on to the others' hooks
+    with pytest.raises(pytest.UsageError, match="does not contain 'mark.realtime'"):
+        next(pytest_collection_modifyitems(None, [_Marked(bare, {"realtime"})]))
+    with pytest.raises(pytest.UsageError, match="marked alone but not realtime"):
+        next(pytest_collection_modifyitems(None, [_Marked(spelt, {"alone"})]))

@@ -58,6 +58,7 @@ def stamps(receive, seconds: float = 0.3) -> np.ndarray:
 # ------------------------------------------------------------------ connection, recipes, rate
 
 
+@pytest.mark.alone  # measures the stream's timing: no other test beside it (pyproject.toml's markers)
 @pytest.mark.parametrize(
     ("series", "frequency", "step"), [("e-series", -1.0, 0.002), ("cb3", -1.0, 0.008), ("e-series", 125.0, 0.008)]
 )
@@ -71,6 +72,7 @@ def test_the_stream_runs_at_the_rate_the_client_asked(series, frequency, step):
     np.testing.assert_allclose(steps / step, np.round(steps / step), atol=1e-6)
 
 
+@pytest.mark.alone
 def test_rate_detection_uses_the_stream_not_get_step_time():
     for series, step, version in (("e-series", 0.002, "URSoftware 5.11"), ("cb3", 0.008, "URSoftware 3.15")):
         with simulator(series=series) as sim:
@@ -357,6 +359,7 @@ def _detour_passed(trial) -> int:
     return low + int(back[0]) if back.size else trial.n_samples
 
 
+@pytest.mark.alone
 def test_drives_defaults_complete_a_trial_on_the_track_of_the_mujoco_world(tmp_path):
     from typer.testing import CliRunner
 
@@ -458,6 +461,7 @@ def test_the_track_before_a_late_stall_is_what_the_defaults_test_compares():
     assert _track_gap(off, run) == pytest.approx(0.01) and _track_gap(_ticks(off, 55), run) == 0.0
 
 
+@pytest.mark.alone
 def test_mg_with_a_push_settles_at_f_over_d_on_the_mujoco_track():
     config = DriveConfig(world="ur", controller="manual", time_limit=3.0)
     trial, seen, kin, status = _run(config, push_at=40, sensor=QUIET)
@@ -482,6 +486,7 @@ def test_mg_with_a_push_settles_at_f_over_d_on_the_mujoco_track():
         assert _track_gap(trial, mj) < 1e-3 + PUSH_TIMING
 
 
+@pytest.mark.alone
 def test_the_assistive_controller_through_the_simulator_on_the_mujoco_track():
     config = DriveConfig(world="ur", controller="cooperative", time_limit=3.0)
     trial, seen, kin, status = _run(config, push_at=40, sensor=QUIET)
@@ -552,6 +557,7 @@ def test_each_fault_ends_in_a_controlled_stop_with_the_trial_kept_and_what_to_do
     assert closed_in < 5.0 and status["out_of_limits"] == 0
 
 
+@pytest.mark.alone
 def test_the_watchdog_stops_the_arm_within_its_timeout_when_coassist_hangs():
     with simulator() as sim, realtime_priority():
         world = URRTDEWorld(sim.host, frequency=125.0, watchdog_hz=10.0)

@@ -319,6 +319,7 @@ def test_a_port_in_use_a_bad_port_and_a_bad_backlog_are_one_line():
 
 
 @pytest.mark.realtime
+@pytest.mark.alone  # the stream against the run's log while the loop runs: no other test beside it
 def test_the_ur_simulator_stream_through_the_real_client_is_the_runs_log(tmp_path):
     """The UR world on ``coassist ur-sim`` (the real ur-rtde client, the simulated operator at the
     simulator's handle), watched live: the messages are the run's MCAP file's, with the UR's joints."""
@@ -349,6 +350,7 @@ def test_the_ur_simulator_stream_through_the_real_client_is_the_runs_log(tmp_pat
 
 
 @pytest.mark.realtime
+@pytest.mark.alone  # the stream against the run's log while the loop runs: no other test beside it
 def test_the_franky_sim_stream_through_the_real_client_is_the_runs_log(tmp_path):
     """The Franka world on franky-sim (the real franky client, libfranka's protocol, a 10 N push read by
     an F/T sensor at the hand), watched live: the messages are the run's MCAP file's, with the FR3's
