@@ -194,6 +194,9 @@ def test_the_command_writes_a_person_model_drive_can_load(alice, bob, tmp_path):
     assert lines[0].startswith("alice (linear, 4 trials): arm K̂ ") and "measured by the probe" in lines[0]
     assert lines[1].startswith("bob (linear, 3 trials): arm ASSUMED")
     assert f"--intent {out}" in res.output
+    # and the figure of what was learnt, beside the model
+    figure = out / "person-model.png"
+    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f"{figure}: each person's paths and arm" in res.output
     source = read_person_model(out)
     direct = calibrate_people(alice)[0].fit
     assert source.arms["alice"] == direct.arm and source.arms["bob"] == ASSUMED_ARM
@@ -209,3 +212,39 @@ def test_the_command_writes_a_person_model_drive_can_load(alice, bob, tmp_path):
     assert not (tmp_path / "m3").exists()
     res = runner.invoke(app, ["calibrate", str(tmp_path / "nothing"), "--out", str(tmp_path / "m4")])
     assert res.exit_code == 2 and "nothing: no such file or folder" in res.output
+
+
+def test_the_figure_draws_each_persons_demonstrations_by_way_round_and_says_their_arm(alice, bob):
+    import matplotlib.pyplot as plt
+    from movement_primitives.promp import ProMP
+
+    from coassist.experiments.person_figure import WAY_COLOURS, person_figure
+
+    people = calibrate_people([*alice, *bob])
+    fig = person_figure(people)
+    try:
+        axes = [ax for ax in fig.axes if ax.get_visible()]
+        assert len(axes) == 2
+        for ax, c in zip(axes, people):
+            model = c.fit.paths
+            lines = {line.get_gid(): line for line in ax.get_lines() if line.get_gid()}
+            np.testing.assert_array_equal(lines["plan"].get_xydata(), model.nominal)
+            for j, (demo, side) in enumerate(zip(model.demonstrations(), model.sides.tolist())):
+                np.testing.assert_array_equal(lines[f"demo-{j}"].get_xydata(), demo)
+                assert lines[f"demo-{j}"].get_color() == WAY_COLOURS[side]
+            # each way taken: its mean path is the primitive of its demonstrations' mean weights (the ProMP's mean),
+            # rendered here by movement_primitives itself on the model's phases (0 … 1, settings.samples of them)
+            promp = ProMP(n_dims=2, n_weights_per_dim=model.settings.n_basis)
+            phases = np.linspace(0.0, 1.0, model.settings.samples)
+            for way in set(model.sides.tolist()):
+                mean = promp.trajectory_from_weights(phases, model.weights[model.sides == way].mean(axis=0))
+                np.testing.assert_allclose(lines[f"way{way}"].get_xydata(), mean, rtol=0, atol=1e-12)
+                assert lines[f"way{way}"].get_color() == WAY_COLOURS[way]
+        a, b = (ax.get_title() for ax in axes)
+        arm = people[0].fit.arm
+        assert a.startswith("alice (linear, 4 trials)") and f"K̂ {arm.stiffness:.0f} ± {arm.stiffness_se:.0f} N/m" in a
+        assert b.startswith("bob (linear, 3 trials)") and "arm assumed: K̂ 800 N/m" in b
+    finally:
+        plt.close(fig)
+    with pytest.raises(ValueError, match="at least one"):
+        person_figure([])

@@ -35,9 +35,10 @@ def calibrate(
     """Fit a person model per person from their calibration trials (record them with --controller manual-probe).
 
     Prints one line per person: the arm (measured by the probe, or assumed), the
-    demonstrations per way round, the fit's time. Drive, ros2 and play take the folder as
-    --intent FOLDER.
+    demonstrations per way round, the fit's time; draws their paths and arm (person-model.png).
+    Drive, ros2 and play take the folder as --intent FOLDER.
     """
+    from coassist.experiments.person_figure import PERSON_FIGURE_FILE
     from coassist.scenario.person_model import PERSON_MODEL_FILE
 
     if min_trials < 1:
@@ -57,11 +58,15 @@ def calibrate(
         fail(str(exc), 2)
     for c in people:
         console.print(summary_line(c), markup=False, highlight=False, soft_wrap=True)
+    from coassist.experiments.person_figure import write_person_figure
+
     try:
         write_person_model(out, {c.person: c.fit for c in people})
+        figure = write_person_figure(people, out / PERSON_FIGURE_FILE)
     except OSError as exc:
         fail(f"--out {out}: cannot write ({exc.strerror})")
     wrote(f"{out / PERSON_MODEL_FILE}: {len(people)} person(s); drive with --intent {out}")
+    wrote(f"{figure}: each person's paths and arm, to look at before they assist")
 
 
 def show(
