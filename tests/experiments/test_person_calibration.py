@@ -218,10 +218,10 @@ def test_the_figure_draws_each_persons_demonstrations_by_way_round_and_says_thei
     import matplotlib.pyplot as plt
     from movement_primitives.promp import ProMP
 
-    from coassist.experiments.person_figure import WAY_COLOURS, person_figure
+    from coassist.experiments.person_figure import WAY_COLOURS, calibration_panels, person_figure
 
     people = calibrate_people([*alice, *bob])
-    fig = person_figure(people)
+    fig = person_figure(calibration_panels(people))
     try:
         axes = [ax for ax in fig.axes if ax.get_visible()]
         assert len(axes) == 2

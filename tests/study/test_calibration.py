@@ -198,6 +198,7 @@ def test_the_block_runs_under_the_probe_and_fits_the_participants_person_model(c
     assert fit["arm_measured"] == (not note) and fit["arm"]["trials"] == (3 if not note else 0)
     folder = pf.folder / "models" / "P0" / "curved"
     assert fit["sha256"] == {"curved": _sha(folder / PERSON_MODEL_FILE)}
+    assert (folder / "person-model.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # its paths and arm, drawn
     # the folder is this participant's, whatever name the world gives the person at the handle
     source = read_person_model(folder)
     assert set(source.paths) == {"S01"} and source.default_arm == arm and source.default_paths is source.paths["S01"]

@@ -58,11 +58,11 @@ def calibrate(
         fail(str(exc), 2)
     for c in people:
         console.print(summary_line(c), markup=False, highlight=False, soft_wrap=True)
-    from coassist.experiments.person_figure import write_person_figure
+    from coassist.experiments.person_figure import calibration_panels, write_person_figure
 
     try:
         write_person_model(out, {c.person: c.fit for c in people})
-        figure = write_person_figure(people, out / PERSON_FIGURE_FILE)
+        figure = write_person_figure(calibration_panels(people), out / PERSON_FIGURE_FILE)
     except OSError as exc:
         fail(f"--out {out}: cannot write ({exc.strerror})")
     wrote(f"{out / PERSON_MODEL_FILE}: {len(people)} person(s); drive with --intent {out}")

@@ -19,8 +19,9 @@ from typing import Any
 
 from coassist._io import save_figure
 from coassist.experiments.person_calibration import PersonCalibration
+from coassist.scenario.person_model import PersonFit
 
-__all__ = ["PERSON_FIGURE_FILE", "WAY_COLOURS", "person_figure", "write_person_figure"]
+__all__ = ["PERSON_FIGURE_FILE", "WAY_COLOURS", "calibration_panels", "person_figure", "write_person_figure"]
 
 #: The figure's name in a person-model folder (beside person-model.json).
 PERSON_FIGURE_FILE = "person-model.png"
@@ -30,8 +31,13 @@ WAY_COLOURS = {1: "tab:blue", -1: "tab:orange", 0: "0.55"}
 _WAY_NAMES = {1: "left", -1: "right", 0: "no detour"}
 
 
-def _title(c: PersonCalibration) -> str:
-    arm, paths = c.fit.arm, c.fit.paths
+def calibration_panels(people: Sequence[PersonCalibration]) -> list[tuple[str, PersonFit]]:
+    """One panel per calibrated person: "person (task, n trials)" and their fit."""
+    return [(f"{c.person} ({c.task}, {len(c.trials)} trials)", c.fit) for c in people]
+
+
+def _title(heading: str, fit: PersonFit) -> str:
+    arm, paths = fit.arm, fit.paths
     if arm.method == "probe-iv":
         arm_text = (
             f"K̂ {arm.stiffness:.0f} ± {arm.stiffness_se:.0f} N/m, Ĉ {arm.damping:.1f} ± {arm.damping_se:.1f} N·s/m "
@@ -41,25 +47,26 @@ def _title(c: PersonCalibration) -> str:
         arm_text = f"arm assumed: K̂ {arm.stiffness:.0f} N/m, Ĉ {arm.damping:.1f} N·s/m"
     repeat = paths.repeatability()
     repeat_text = "no way taken twice" if repeat is None else f"detours repeat to {repeat:.2f}"
-    return f"{c.person} ({c.task}, {len(c.trials)} trials)\n{arm_text}\nσ₀ {1e3 * paths.noise:.1f} mm, {repeat_text}"
+    return f"{heading}\n{arm_text}\nσ₀ {1e3 * paths.noise:.1f} mm, {repeat_text}"
 
 
-def person_figure(people: Sequence[PersonCalibration]) -> Any:
-    """The figure (a matplotlib Figure, Agg): one panel per person of ``people``, in their order (module docstring)."""
+def person_figure(panels: Sequence[tuple[str, PersonFit]]) -> Any:
+    """The figure (a matplotlib Figure, Agg): one panel per (heading, fit) of ``panels``, in their order (module
+    docstring); :func:`calibration_panels` makes them of ``coassist calibrate``'s people."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    if not people:
+    if not panels:
         raise ValueError("person_figure needs at least one calibrated person")
-    cols = min(3, len(people))
-    rows = math.ceil(len(people) / cols)
+    cols = min(3, len(panels))
+    rows = math.ceil(len(panels) / cols)
     fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.6 * rows), squeeze=False)
-    for ax in axes.ravel()[len(people) :]:
+    for ax in axes.ravel()[len(panels) :]:
         ax.set_visible(False)
-    for ax, c in zip(axes.ravel(), people):
-        model = c.fit.paths
+    for ax, (heading, fit) in zip(axes.ravel(), panels):
+        model = fit.paths
         plan = model.nominal
         ax.plot(plan[:, 0], plan[:, 1], "k--", lw=1.2, label="plan", gid="plan")
         demos = model.demonstrations()
@@ -81,7 +88,7 @@ def person_figure(people: Sequence[PersonCalibration]) -> Any:
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
-        ax.set_title(_title(c), fontsize=9)
+        ax.set_title(_title(heading, fit), fontsize=9)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best")
     fig.suptitle("The person model: each person's intent paths from their calibration trials, and their arm")
@@ -89,11 +96,11 @@ def person_figure(people: Sequence[PersonCalibration]) -> Any:
     return fig
 
 
-def write_person_figure(people: Sequence[PersonCalibration], path: str | Path) -> Path:
+def write_person_figure(panels: Sequence[tuple[str, PersonFit]], path: str | Path) -> Path:
     """:func:`person_figure` to the PNG ``path`` (written whole or not at all); returns the path."""
     import matplotlib.pyplot as plt
 
-    fig = person_figure(people)
+    fig = person_figure(panels)
     try:
         return save_figure(fig, path)
     finally:

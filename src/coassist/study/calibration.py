@@ -10,6 +10,7 @@ plan's tasks in turn. Then :func:`fit_job` fits the participant's person model
     participants/<id>/models/P0/
       fit.json                      what it was fitted from (below), written with it
       <task>/person-model.json      the intent source of one task (``intent = "calibrated"``)
+      <task>/person-model.png       its paths and arm, drawn (:mod:`coassist.experiments.person_figure`)
 
 What is fitted, told only what the trials recorded (the tool's pose and velocity, the wrench
 at the handle, the robot's effort, the nominal plan shown; no obstacle, no intent label, no
@@ -154,6 +155,7 @@ def fit_job(job: FitJob) -> dict[str, Any]:
     """Fit and write one person model (module docstring); returns what the study records of it.
     :class:`CalibrationFailed` (one line) where a task has no demonstration or cannot be fitted."""
     from coassist._io import OutputLock, atomic_write_text, staged_folder
+    from coassist.experiments.person_figure import PERSON_FIGURE_FILE, write_person_figure
     from coassist.scenario.arm_identification import ArmEstimate, identify_arm
     from coassist.scenario.person_model import fit_person, write_person_model
 
@@ -218,7 +220,10 @@ def fit_job(job: FitJob) -> dict[str, Any]:
     }
     with OutputLock(job.out), staged_folder(job.out) as stage:
         for task, fit in fits.items():
-            write_person_model(person_model_folder(stage, task), {job.person: fit}, default=job.person)
+            folder = person_model_folder(stage, task)
+            write_person_model(folder, {job.person: fit}, default=job.person)
+            heading = f"{job.person}, {job.model} ({task}, {len(demos[task])} demonstrations)"
+            write_person_figure([(heading, fit)], folder / PERSON_FIGURE_FILE)
         atomic_write_text(stage / FIT_FILE, json.dumps(record, indent=1, allow_nan=False) + "\n")
     record["sha256"] = model_hashes(job.out, tasks)
     record["fit_seconds"] = round(time.perf_counter() - t0, 3)
