@@ -17,6 +17,7 @@ from coassist.experiments.person_calibration import (
     PersonCalibration,
     calibrate_people,
     summary_line,
+    thin_ways,
 )
 from coassist.scenario.arm_identification import ASSUMED_ARM, identify_arm
 from coassist.scenario.objects import get_object
@@ -248,3 +249,25 @@ def test_the_figure_draws_each_persons_demonstrations_by_way_round_and_says_thei
         plt.close(fig)
     with pytest.raises(ValueError, match="at least one"):
         person_figure([])
+
+
+def test_a_way_shown_in_fewer_than_three_trials_is_named_with_what_to_record():
+    assert thin_ways(np.array([1, 1, 1, -1, 1, 1, 1, 1])) == (
+        "the right way shown in 1 trial only: the model follows that path alone there; record more going right"
+    )
+    assert thin_ways(np.array([1, -1, 1, -1, 0])) == (
+        "the left way shown in 2 trials only: the model follows those 2 paths alone there; record more going left; "
+        "the right way shown in 2 trials only: the model follows those 2 paths alone there; record more going right"
+    )
+    # every way shown three times or more, or never (the present estimate's rows there, not a path of one trial)
+    assert thin_ways(np.array([1, 1, 1, -1, -1, -1])) == thin_ways(np.array([1, 1, 1, 0])) == ""
+
+
+def test_the_summary_names_a_thin_way(alice):
+    (c,) = calibrate_people(alice)
+    sides = c.fit.paths.sides
+    thin = replace(c, fit=replace(c.fit, paths=replace(c.fit.paths, sides=np.where(np.arange(len(sides)) == 0, -1, 1))))
+    assert summary_line(thin).endswith(
+        "; the right way shown in 1 trial only: the model follows that path alone there; record more going right"
+    )
+    assert ("record more" in summary_line(c)) == bool(thin_ways(sides))

@@ -35,7 +35,8 @@ def calibrate(
     """Fit a person model per person from their calibration trials (record them with --controller manual-probe).
 
     Prints one line per person: the arm (measured by the probe, or assumed), the
-    demonstrations per way round, the fit's time; draws their paths and arm (person-model.png).
+    demonstrations per way round, the fit's time, a way shown too few times; draws their paths and arm
+    (person-model.png).
     Drive, ros2 and play take the folder as --intent FOLDER.
     """
     from coassist.experiments.person_figure import PERSON_FIGURE_FILE
