@@ -22,6 +22,7 @@ from coassist.cli import app
 from coassist.control.presets import PROBE
 from coassist.control.probe import probe_phases, probe_signal
 from coassist.data import read_dataset
+from coassist.experiments.person_calibration import thin_ways
 from coassist.metrics import f_rms
 from coassist.scenario import intent_registry
 from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate, identify_arm
@@ -235,6 +236,28 @@ def test_the_report_says_what_used_the_person_model_and_what_it_was_fitted_from(
     arm = "measured" if p0["arm"]["measured"] else "assumed"
     assert p0["told"] == f"arm {arm}; from the person's trials: paths round obstacles and the arm"
     assert p0["used_in"] == ["person"] and f"<td>{escape(p0['told'])}</td><td>person</td>" in html
+    # a way round shown in too few of the calibration's trials is named, with what to record (here: three trials)
+    (fit,) = [r for r in StudyFolder(calibrated_study).participant("S01").progress() if r["kind"] == "fit"]
+    note = thin_ways(np.asarray(fit["paths"]["curved"]["sides"]))
+    assert p0["thin_ways"] == ({"curved": note} if note else {})
+    assert (f"curved: {escape(note)}" in html) if note else ("record more going" not in html)
+
+
+def test_the_report_names_a_way_shown_in_too_few_calibration_trials(calibrated_study):
+    # the fit's record, as if one of the three paths had gone left: both ways thin, each named with what to record
+    progress = calibrated_study / "participants" / "S01" / "progress.jsonl"
+    lines = [json.loads(line) for line in progress.read_text().splitlines()]
+    for r in lines:
+        if r["kind"] == "fit":
+            r["paths"]["curved"]["sides"] = [1, -1, -1]
+    progress.write_text("".join(json.dumps(r) + "\n" for r in lines))
+    html_path, json_path = write_report(calibrated_study)
+    (p0,) = json.loads(json_path.read_text())["participants"]["S01"]["person_models"]
+    note = (
+        "the left way shown in 1 trial only: the model follows that path alone there; record more going left; "
+        "the right way shown in 2 trials only: the model follows those 2 paths alone there; record more going right"
+    )
+    assert p0["thin_ways"] == {"curved": note} and f"<br>curved: {escape(note)}</td>" in html_path.read_text()
 
 
 def test_the_arm_is_assumed_where_the_measurement_says_too_little():

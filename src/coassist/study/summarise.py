@@ -161,6 +161,7 @@ def _fit_summary(rec: dict[str, Any], progress: list[dict[str, Any]]) -> PersonM
     and ``used_in``, the blocks whose trials ran with its files (their lines' ``model_sha256``)."""
     from dataclasses import replace
 
+    from coassist.experiments.person_calibration import thin_ways
     from coassist.scenario.intent_registry import INTENT_FOLDERS
 
     model, attempt = rec.get("model"), rec.get("attempt")
@@ -198,6 +199,11 @@ def _fit_summary(rec: dict[str, Any], progress: list[dict[str, Any]]) -> PersonM
         ),
         sha256=None if sha256 is None else dict(sha256),
         fit_seconds=finite_number(rec.get("fit_seconds")),
+        thin_ways={
+            task: note
+            for task, paths in (rec.get("paths") or {}).items()
+            if (note := thin_ways(np.asarray(paths.get("sides", []), dtype=int)))
+        },
     )
 
 

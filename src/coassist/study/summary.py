@@ -186,7 +186,9 @@ class PersonModelFit:
     Failed: ``reason`` and ``redo`` (the block run again). Otherwise what it was fitted from (``trials``
     per task, ``left_out`` per task: not in the target, of the ``blocks``), its ``arm``, what it was
     ``told`` (:class:`~coassist.scenario.intent_registry.Told`), ``used_in``: the blocks whose trials ran
-    with its files (their lines' ``model_sha256`` among its ``sha256``), the fit's wall time [s]."""
+    with its files (their lines' ``model_sha256`` among its ``sha256``), the fit's wall time [s], and per task a way
+    round shown in too few of its trials to follow (``thin_ways``:
+    :func:`~coassist.experiments.person_calibration.thin_ways`; tasks with none left out)."""
 
     model: str | None
     attempt: int | None
@@ -202,6 +204,7 @@ class PersonModelFit:
     arm: ArmFit | None = None
     sha256: Mapping[str, str] | None = None
     fit_seconds: float | None = None
+    thin_ways: Mapping[str, str] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"model": self.model, "attempt": self.attempt, "failed": self.failed}
@@ -218,6 +221,7 @@ class PersonModelFit:
             "arm": None if self.arm is None else self.arm.to_json(),
             "sha256": None if self.sha256 is None else dict(self.sha256),
             "fit_seconds": self.fit_seconds,
+            "thin_ways": dict(self.thin_ways),
         }
 
     @classmethod
@@ -237,6 +241,7 @@ class PersonModelFit:
             arm=None if d["arm"] is None else ArmFit.from_json(d["arm"]),
             sha256=None if d["sha256"] is None else dict(d["sha256"]),
             fit_seconds=finite_number(d["fit_seconds"]),
+            thin_ways=dict(d.get("thin_ways", {})),  # summaries written before it: none said
         )
 
 
