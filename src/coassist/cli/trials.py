@@ -35,11 +35,10 @@ def calibrate(
     """Fit a person model per person from their calibration trials (record them with --controller manual-probe).
 
     Prints one line per person: the arm (measured by the probe, or assumed), the
-    demonstrations per way round, the fit's time, a way shown too few times; draws their paths and arm
-    (person-model.png).
-    Drive, ros2 and play take the folder as --intent FOLDER.
+    demonstrations per way round, a way shown in too few trials, the fit's time; draws their
+    paths and arm beside the model (person-model.png). Drive, ros2 and play take the folder
+    as --intent FOLDER.
     """
-    from coassist.experiments.person_figure import PERSON_FIGURE_FILE
     from coassist.scenario.person_model import PERSON_MODEL_FILE
 
     if min_trials < 1:
@@ -50,6 +49,7 @@ def calibrate(
         fail(f"--out {out}: already holds a person model; pass --overwrite to replace it", 2)
     folder_out(out, "--out")
     from coassist.experiments.person_calibration import CalibrationError, calibrate_people, summary_line
+    from coassist.experiments.person_figure import PERSON_FIGURE_FILE, calibration_panels, write_person_figure
     from coassist.scenario.person_model import write_person_model
 
     trials = intent_trials(data, skip_bad_trials, bag_topics=bag_topics)
@@ -59,8 +59,6 @@ def calibrate(
         fail(str(exc), 2)
     for c in people:
         console.print(summary_line(c), markup=False, highlight=False, soft_wrap=True)
-    from coassist.experiments.person_figure import calibration_panels, write_person_figure
-
     try:
         write_person_model(out, {c.person: c.fit for c in people})
         figure = write_person_figure(calibration_panels(people), out / PERSON_FIGURE_FILE)
