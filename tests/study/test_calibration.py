@@ -4,6 +4,7 @@ during the block and the fit, a model changed after its fit, and what the report
 
 from __future__ import annotations
 
+import base64
 import hashlib
 import json
 import os
@@ -236,6 +237,10 @@ def test_the_report_says_what_used_the_person_model_and_what_it_was_fitted_from(
     arm = "measured" if p0["arm"]["measured"] else "assumed"
     assert p0["told"] == f"arm {arm}; from the person's trials: paths round obstacles and the arm"
     assert p0["used_in"] == ["person"] and f"<td>{escape(p0['told'])}</td><td>person</td>" in html
+    # and the person model as the calibration drew it, the figure's own bytes
+    png = (calibrated_study / "participants" / "S01" / "models" / "P0" / "curved" / "person-model.png").read_bytes()
+    uri = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
+    assert f'<img src="{uri}" alt="person model: S01, P0, curved">' in html
     # a way round shown in too few of the calibration's trials is named, with what to record (here: three trials)
     (fit,) = [r for r in StudyFolder(calibrated_study).participant("S01").progress() if r["kind"] == "fit"]
     note = thin_ways(np.asarray(fit["paths"]["curved"]["sides"]))

@@ -32,7 +32,15 @@ from coassist.study.summarise import (
 )
 from coassist.study.summary import ForceTrace, StudySummary
 
-__all__ = ["calibrated_blocks", "render_report", "sample_limits", "study_summary", "summarise_study", "write_report"]
+__all__ = [
+    "calibrated_blocks",
+    "person_figures",
+    "render_report",
+    "sample_limits",
+    "study_summary",
+    "summarise_study",
+    "write_report",
+]
 
 #: The measures of the first screen's figure (keys of :data:`~coassist.study.measures.MEASURES`).
 LINE_MEASURES = ("f_rms", "sigma", "time_to_target", "e_rms")
@@ -120,9 +128,34 @@ def _questionnaire_figure(s: StudySummary, plan) -> str | None:
     return _png(fig)
 
 
-def render_report(s: StudySummary, plan, traces: dict[str, list[ForceTrace]]) -> str:
+def person_figures(folder: str | Path, s: StudySummary) -> list[tuple[str, str]]:
+    """Each participant's person model as its calibration drew it (``models/<model>/<task>/person-model.png``, written
+    with the fit: :mod:`coassist.study.calibration`), for the report: (caption, ``data:`` URI), in the participants'
+    order, each model once (its folder holds the last fit's)."""
+    from coassist.experiments.person_figure import PERSON_FIGURE_FILE
+    from coassist.study.calibration import person_model_folder
+
+    study = StudyFolder(folder)
+    out = []
+    for pid, p in s.participants.items():
+        for model in dict.fromkeys(f.model for f in p.person_models if not f.failed and f.model):
+            tasks = dict.fromkeys(t for f in p.person_models if f.model == model and not f.failed for t in f.trials)
+            for task in tasks:
+                png = person_model_folder(study.participant(pid).folder / "models" / model, task) / PERSON_FIGURE_FILE
+                if png.is_file():
+                    out.append((f"{pid}, {model}, {task}", "data:image/png;base64," + png_data(png.read_bytes())))
+    return out
+
+
+def render_report(
+    s: StudySummary,
+    plan,
+    traces: dict[str, list[ForceTrace]],
+    calibrations: list[tuple[str, str]] | None = None,
+) -> str:
     """The report page of the summary ``s`` of a study run under ``plan`` (its questionnaire, the participants
-    planned), its force figure drawn from ``traces`` (:func:`~coassist.study.summarise.force_traces`)."""
+    planned), its force figure drawn from ``traces`` (:func:`~coassist.study.summarise.force_traces`) and the
+    person models' figures ``calibrations`` (:func:`person_figures`)."""
     measured = bool(s.pooled) and any(p.means for p in s.participants.values())
     lines = _lines_figure(s, [m for m in MEASURES if m[0] in LINE_MEASURES]) if measured else None
     return render(
@@ -135,6 +168,7 @@ def render_report(s: StudySummary, plan, traces: dict[str, list[ForceTrace]]) ->
             "lines": lines,
             "forces": _force_figure(s, traces),
             "questionnaire": _questionnaire_figure(s, plan),
+            "calibrations": calibrations or [],
         },
     )
 
@@ -144,7 +178,7 @@ def write_report(folder: str | Path, out: str | Path | None = None) -> tuple[Pat
     folder = Path(folder)
     plan = StudyFolder(folder).plan()
     s = summarise_study(folder)
-    page = render_report(s, plan, force_traces(folder, s))
+    page = render_report(s, plan, force_traces(folder, s), person_figures(folder, s))
     out = Path(out) if out is not None else folder / "report"
     out.mkdir(parents=True, exist_ok=True)
     html_path = atomic_write_text(out / "report.html", page)
