@@ -68,9 +68,14 @@ def test_probe_trials_recorded_by_drive_fit_a_person_model(probe_trials, tmp_pat
         say=said.append,
     )
     sides = c.fit.paths.sides
+    left, right = int(np.sum(sides == 1)), int(np.sum(sides == -1))
+    # a way shown once or twice: said, as it is followed from those paths alone
+    thin = ", ".join(
+        f"{w} from {k} path{'s' * (k > 1)} only" for w, k in (("left", left), ("right", right)) if 0 < k < 3
+    )
     assert said == [
         f"assistance: cooperative, toward the person model {folder} (alice: arm measured, {sides.size} "
-        f"demonstrations ({int(np.sum(sides == 1))} left, {int(np.sum(sides == -1))} right))"
+        f"demonstrations ({left} left, {right} right{'; ' + thin if thin else ''}))"
         "; a damper if the hand force oscillates above 20 N (the stability guard)"
     ]
     assert run.meta.model_id == "person:cal" and run.meta.user == "alice"

@@ -65,7 +65,7 @@ def test_a_person_model_says_whose_arm_and_paths(person_model):
     alice = assistance_line("cooperative", person_model, source, user="alice", path=LINE)
     assert alice == (
         f"assistance: cooperative, toward the person model {person_model} "
-        "(alice: arm measured, 3 demonstrations (2 left, 1 right))"
+        "(alice: arm measured, 3 demonstrations (2 left, 1 right; left from 2 paths only, right from 1 path only))"
     )
     bob = assistance_line("cooperative", person_model, source, user="bob", path=LINE)
     assert "bob: arm ASSUMED (their trials carried no probe), 3 demonstrations" in bob

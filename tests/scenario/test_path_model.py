@@ -177,3 +177,15 @@ def test_exact_ties_go_to_the_first_vertex_as_argmin_does():
     got_s, got_d = frame.project(q)
     np.testing.assert_array_equal(got_s, s, strict=True)
     np.testing.assert_array_equal(got_d, d, strict=True)
+
+
+def test_a_way_shown_once_or_twice_is_thin_and_counted_in_order():
+    from coassist.scenario.path_model import FEW_PATHS, few_paths
+
+    assert FEW_PATHS == 3
+    assert few_paths(np.array([1, 1, 1, -1, 1, 1, 1, 1])) == {"right": 1}
+    assert few_paths(np.array([-1, 1, 0, -1])) == {"left": 1, "right": 2}  # left first; no detour is no way
+    assert list(few_paths(np.array([-1, 1, -1]))) == ["left", "right"]
+    assert (
+        few_paths(np.array([1, 1, 1, -1, -1, -1])) == few_paths(np.array([1, 1, 1])) == few_paths(np.array([0])) == {}
+    )

@@ -31,11 +31,10 @@ import numpy as np
 from coassist.data import Trial
 from coassist.errors import CoassistError
 from coassist.scenario.arm_identification import identify_arm
-from coassist.scenario.path_model import PathFrame
+from coassist.scenario.path_model import PathFrame, few_paths
 from coassist.scenario.person_model import PersonFit, fit_person
 
 __all__ = [
-    "FEW_PATHS",
     "MIN_TRIALS",
     "PROBE_CONTROLLER",
     "CalibrationError",
@@ -58,11 +57,6 @@ MIN_PROGRESS = 0.5
 #: Trials whose periods differ by less than this share are of one control rate: a recording's period is measured
 #: from its timestamps (the thesis lab's 125 Hz recordings: 7.963–8.007 ms, 0.6 % apart), another rate is 4 × away.
 RATE_TOLERANCE = 0.02
-#: A way round shown in fewer of a person's trials than this (but at least once) is named in the summary: the model
-#: follows those few paths there as if they were the person's habit. Both of the report's in-family misses (seed 0's
-#: board, seed 2's heavy load) are one operator's way shown once or twice in eight (docs/person-model.md), and with
-#: two paths a task the overshoot was 1.25–1.39 × MG's against 0.57–1.06 × with three or more.
-FEW_PATHS = 3
 #: A plan whose end is nearer its start than this share of its length is a loop: refused (the real recordings'
 #: user-b followed one, 1.5 m long, ending where it started).
 LOOP_GAP = 0.1
@@ -223,18 +217,17 @@ def _ways(sides: np.ndarray) -> str:
 
 
 def thin_ways(sides: np.ndarray) -> str:
-    """What to record more of: each way round shown in fewer than :data:`FEW_PATHS` of the person's trials (but at
-    least once), e.g. "the right way shown in 1 trial only: the model follows that path alone there; record more
-    going right"; "" where every way shown was shown often enough."""
+    """What to record more of: each way round shown in fewer than
+    :data:`~coassist.scenario.path_model.FEW_PATHS` of the person's trials but at least once
+    (:func:`~coassist.scenario.path_model.few_paths`), e.g. "the right way shown in 1 trial only: the model follows
+    that path alone there; record more going right"; "" where every way shown was shown often enough."""
     notes = []
-    for side, name in ((1, "left"), (-1, "right")):
-        n = int(np.sum(np.asarray(sides) == side))
-        if 0 < n < FEW_PATHS:
-            paths = "that path" if n == 1 else f"those {n} paths"
-            notes.append(
-                f"the {name} way shown in {n} trial{'s' if n > 1 else ''} only: the model follows {paths} alone there; "
-                f"record more going {name}"
-            )
+    for name, n in few_paths(sides).items():
+        paths = "that path" if n == 1 else f"those {n} paths"
+        notes.append(
+            f"the {name} way shown in {n} trial{'s' if n > 1 else ''} only: the model follows {paths} alone there; "
+            f"record more going {name}"
+        )
     return "; ".join(notes)
 
 

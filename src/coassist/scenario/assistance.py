@@ -46,9 +46,13 @@ _CONTROLLERS = {
 
 
 def _ways(sides: np.ndarray) -> str:
+    from coassist.scenario.path_model import few_paths
+
     n = int(sides.size)
     left, right = int(np.sum(sides == 1)), int(np.sum(sides == -1))
-    return f"{n} demonstration{'s' if n != 1 else ''} ({left} left, {right} right)"
+    # a way shown once or twice is followed from those few paths alone (coassist.scenario.path_model.FEW_PATHS)
+    thin = ", ".join(f"{name} from {k} path{'s' if k != 1 else ''} only" for name, k in few_paths(sides).items())
+    return f"{n} demonstration{'s' if n != 1 else ''} ({left} left, {right} right{'; ' + thin if thin else ''})"
 
 
 def _told(obstacles: Sequence[Any], scene: str | None) -> str:
