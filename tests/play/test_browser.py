@@ -146,6 +146,7 @@ def test_a_scripted_drag_in_chromium_plays_a_trial(tmp_path):
             result = page.evaluate("window.coassist.results[0]")
             rows = page.locator("#results tbody tr").count()
             latencies = page.evaluate("window.coassist.latencies")
+            untimed, last_drawn = page.evaluate("[window.coassist.untimed(), window.coassist.lastDrawSeq]")
         finally:
             context.close()
     assert max(xs) - start[0] > 0.4  # the drag carried the tool most of the 0.5 m path
@@ -153,10 +154,10 @@ def test_a_scripted_drag_in_chromium_plays_a_trial(tmp_path):
     assert colour_pixels(shot, PATH_RGB) > 200
     assert prediction_pixels > 20, f"none of {shots} screenshots showed the prediction"
     assert fps >= 30.0, f"the page drew {fps:.1f} frames/s"
-    # every pointer move the drag made was timed by the frame that answered it (the last one or two may come after
-    # the trial's end): how many moves there were depends on how fast this machine runs the loop above (19 on
-    # 2026-12-03, quiet, 18 timed), so the count is checked against the moves, not against a fixed number
-    assert len(latencies) >= max(10, len(xs) - 2), (len(latencies), len(xs))
+    # every pointer move the drag made was timed by the first frame drawn that answered it: those still untimed came
+    # after the last frame drawn (the trial's end). How many those are depends on this machine's load (one or two
+    # quiet; three in a CI run of 2026-12-05, 72 of 75 timed), so the property is checked, not a count
+    assert len(latencies) >= 10 and all(s > last_drawn for s in untimed), (len(latencies), untimed, last_drawn)
     assert result["ended"] == "target" and result["file"] == "trial_00000.parquet" and rows == 1
     from coassist.data import read_dataset
 

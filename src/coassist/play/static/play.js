@@ -55,6 +55,7 @@
     send({ type: "pointer", x: hand.x, y: hand.y, down: hand.down, seq });
   }
   api.ping = (n) => { seq += 1; pings.set(seq, performance.now()); send({ type: "ping", seq }); return seq; };
+  api.untimed = () => Array.from(pending.keys());  // pointer events no drawn frame has answered yet (their seqs)
   setInterval(() => { if (hand.down) sendHand(null); }, HEARTBEAT_MS);
 
   function onMessage(m) {
