@@ -91,7 +91,8 @@ def person_figure(panels: Sequence[tuple[str, PersonFit]]) -> Any:
         ax.set_title(_title(heading, fit), fontsize=9)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best")
-    fig.suptitle("The person model: each person's intent paths from their calibration trials, and their arm")
+    if cols > 1:  # a lone panel's own title says it (the line is wider than one panel)
+        fig.suptitle("The person model: each person's intent paths from their calibration trials, and their arm")
     fig.tight_layout()
     return fig
 
