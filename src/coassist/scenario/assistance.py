@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from coassist.scenario.intent_registry import INTENT_SOURCES, intent_folder_kind
+from coassist.scenario.path_model import few_paths
 
 __all__ = ["DEFAULT_INTENT", "assistance_line", "check_person"]
 
@@ -46,8 +47,6 @@ _CONTROLLERS = {
 
 
 def _ways(sides: np.ndarray) -> str:
-    from coassist.scenario.path_model import few_paths
-
     n = int(sides.size)
     left, right = int(np.sum(sides == 1)), int(np.sum(sides == -1))
     # a way shown once or twice is followed from those few paths alone (coassist.scenario.path_model.FEW_PATHS)
