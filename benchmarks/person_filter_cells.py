@@ -91,7 +91,7 @@ def _filter_of(recorded: str) -> PersonFilterSettings | None:
         return None
 
 
-def run_reference(out: Path, population: str, users, base: int, workers: int, probes: int) -> Path:
+def run_reference(out: Path, population: str, users, base: int, workers: int, probes: int, asked: int = 0) -> Path:
     """The reference cell (compare_intents with the person model fitted to ``probes`` probe trials per operator and
     draw); its folder."""
     folder = out / "ref" / f"{population}-{base}"
@@ -106,6 +106,12 @@ def run_reference(out: Path, population: str, users, base: int, workers: int, pr
             print(
                 f"{folder}: fitted to {had} probe trials per operator, not the {probes} asked for; delete it to redo it"
             )
+        # (a reference from before ways could be asked for asked for none)
+        was = int((folder / "asked_trials").read_text()) if (folder / "asked_trials").exists() else 0
+        if was != asked:
+            print(
+                f"{folder}: its calibrations asked for up to {was} trials of a thin way, not {asked}; delete it to redo it"
+            )
     else:
         start = time.time()
         compare_intents(
@@ -117,9 +123,11 @@ def run_reference(out: Path, population: str, users, base: int, workers: int, pr
             workers=workers,
             progress=False,
             probe_trials=probes,
+            asked_trials=asked,
         )
         (folder / "filter.json").write_text(json.dumps(asdict(PERSON_FILTER), sort_keys=True))
         (folder / "probe_trials").write_text(f"{probes}\n")
+        (folder / "asked_trials").write_text(f"{asked}\n")
         (folder / "done").write_text(f"{time.time() - start:.0f} s wall\n")
     return folder
 
@@ -216,6 +224,53 @@ def report(out: Path, names: list[str], against: str = "ref") -> None:
         print(f"{n} − {against} over {count} paired trials: " + ", ".join(parts))
 
 
+def compare_references(out: Path, other: Path) -> None:
+    """Two references on the same trials with other calibrations (``--paired-with``): per cell and object each one's
+    force share / overshoot share / jerk × MG, then the paired differences of ``out``'s person-model trials from
+    ``other``'s over every cell both ran (overshoot [mm], f_RMS [N], jerk RMS [m/s³]; Student-t 95 %)."""
+    pooled: dict[str, list[float]] = {"overshoot": [], "f_rms": [], "jerk_rms": []}
+    for population, _, base in CELLS:
+        cell = f"{population}-{base}"
+        folders = [o / "ref" / cell for o in (out, other)]
+        if not all((f / "done").exists() for f in folders):
+            continue
+        line = [f"{cell}"]
+        for obj in OBJECTS:
+            got = []
+            for f in folders:
+                data = f / f"base-{base}" / "datasets"
+                t = {k: _trials(data / f"{obj}-{k}{_suffix(population)}") for k in ("MG", "oracle", "person")}
+                if [pair_key(x) for x in t["MG"]] != [pair_key(x) for x in t["person"]]:
+                    raise SystemExit(f"{f}: its person trials are not its MG trials")
+                got.append(t)
+            if [pair_key(x) for x in got[0]["person"]] != [pair_key(x) for x in got[1]["person"]]:
+                raise SystemExit(f"{cell} {obj}: the two references ran different trials")
+            for t in got[1:]:
+                for k in ("MG", "oracle"):  # the baselines do not depend on the calibration: the same trials
+                    if application_metrics(t[k])["f_rms_trials"] != application_metrics(got[0][k])["f_rms_trials"]:
+                        raise SystemExit(f"{cell} {obj}: the two references' {k} trials differ")
+            draws = draw_count(folders[0] / f"base-{base}" / "models" / f"person{_suffix(population)}-draws")
+            clusters = draw_clusters([pair_key(x) for x in got[0]["person"]], draws)
+            m = [{k: application_metrics(v) for k, v in t.items()} for t in got]
+            for name, mm in zip((out.name, other.name), m):
+                line.append(
+                    f"{obj} {name} {_share(mm['person'], 'f_rms', mm['MG'], mm['oracle'], clusters)} / "
+                    f"{_share(mm['person'], 'overshoot', mm['MG'], mm['oracle'], clusters)} / "
+                    f"{mm['person']['jerk_rms'] / mm['MG']['jerk_rms']:.2f}"
+                )
+            for metric in pooled:
+                pooled[metric] += list(
+                    np.subtract(m[0]["person"][f"{metric}_trials"], m[1]["person"][f"{metric}_trials"])
+                )
+        print("  ".join(line))
+    if pooled["overshoot"]:
+        parts = []
+        for metric, scale, unit in (("overshoot", 1e3, "mm"), ("f_rms", 1.0, "N"), ("jerk_rms", 1.0, "m/s³")):
+            mean, lo, hi, count = paired_difference(scale * np.asarray(pooled[metric]), np.zeros(len(pooled[metric])))
+            parts.append(f"{metric} {mean:+.3f} [{lo:+.3f}, {hi:+.3f}] {unit}")
+        print(f"{out.name} − {other.name} over {count} paired trials: " + ", ".join(parts))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path)
@@ -227,6 +282,20 @@ def main() -> None:
         type=int,
         default=default_probes,
         help=f"the reference's probe trials per operator and calibration draw (default {default_probes}, the main job's)",
+    )
+    default_asked = REPRODUCE_PRESETS["default"].person_calibration_asked
+    parser.add_argument(
+        "--asked-trials",
+        type=int,
+        default=default_asked,
+        help=f"the most trials the reference's calibrations ask of an operator for a way shown too seldom (default "
+        f"{default_asked}, the main job's)",
+    )
+    parser.add_argument(
+        "--paired-with",
+        type=Path,
+        help="another OUT whose reference ran on the same trials with other calibrations (--probe-trials, "
+        "--asked-trials): print both references' shares and the paired differences of this one from that one",
     )
     parser.add_argument("--report-only", action="store_true", help="print the table of what is already run")
     parser.add_argument("--against", default="ref", help="the paired differences from this: ref or a variant's NAME")
@@ -251,7 +320,7 @@ def main() -> None:
         variants[name] = override
     if not args.report_only:
         for population, users, base in CELLS:
-            run_reference(args.out, population, users, base, args.workers, args.probe_trials)
+            run_reference(args.out, population, users, base, args.workers, args.probe_trials, args.asked_trials)
             for name, override in variants.items():
                 run_variant(args.out, name, override, population, users, base, args.workers)
             print(f"{population}-{base} done", flush=True)
@@ -263,6 +332,8 @@ def main() -> None:
     if args.against != "ref" and args.against not in names:
         names.insert(0, args.against)
     report(args.out, names, args.against)
+    if args.paired_with is not None:
+        compare_references(args.out, args.paired_with)
 
 
 if __name__ == "__main__":

@@ -86,8 +86,8 @@ def test_the_mujoco_cells_run_the_person_model_calibrated_on_the_arm(tmp_path):
     assert {"person", "paths", "oracle"} <= set(mujoco_sources(cfg))
     assert cfg.mujoco_person_calibration == "mujoco"
     ws = pipeline.Workspace(cfg, tmp_path, progress=False)
-    fn, (probes, folder, configs) = mujoco_task(ws, "person", {"person": "/point-mass/person"})
-    assert fn is calibrate_then_drive
+    fn, (probes, folder, configs, asked) = mujoco_task(ws, "person", {"person": "/point-mass/person"})
+    assert fn is calibrate_then_drive and asked == cfg.person_calibration_asked
     assert folder == str(tmp_path / "models" / "person-mujoco")
     # one list of probe trials per calibration draw: the point-mass cells' draws (calibration_draw_options), driven
     # on the arm

@@ -57,3 +57,63 @@ def test_the_probe_trials_are_counted_apart_from_the_path_hypotheses(tmp_path):
 def test_the_config_refuses_a_probe_count_that_is_no_count(trials):
     with pytest.raises(ValueError, match="person_calibration_trials"):
         replace(reproduce_config.REPRODUCE_PRESETS["default"], person_calibration_trials=trials)
+
+
+def test_a_calibration_asks_for_a_way_shown_too_seldom_and_leaves_it_out_of_the_prior(tmp_path):
+    """reproduce.person_calibration_asked: after the chosen-way probe trials (one per operator in tiny: every way shown
+    once, too seldom), each operator is asked for that way until FEW_PATHS paths show it, within the budget; the asked
+    trials go that way and say so, their paths join the model, the ways' prior counts only the chosen trial."""
+    from coassist.data import read_dataset
+    from coassist.experiments.source_training import asked_way_seed
+    from coassist.scenario.path_model import ASKED_WAY, FEW_PATHS
+    from coassist.scenario.person_model import read_person_model
+
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["tiny"], workers=1, threads=1, person_calibration_asked=2)
+    assert cfg.person_calibration_trials == 1 and FEW_PATHS == 3
+    ws = pipeline.Workspace(cfg, tmp_path, progress=False)
+    source = read_person_model(calibrate_person(ws))
+    options = calibration_draw_options(ws)["calibration-probe"]
+    users = list(options["users"])
+    chosen = {t.meta.user: t for t in read_dataset(tmp_path / "datasets" / "calibration-probe").trials}
+    for position, user in enumerate(users):
+        model = source.paths[f"user-{user}"]
+        (side,) = {int(s) for s in model.sides[:1]}
+        assert side in (1, -1) and ASKED_WAY not in chosen[f"user-{user}"].meta.extra
+        name = "left" if side > 0 else "right"
+        asked = read_dataset(tmp_path / "datasets" / f"calibration-probe-ask-{user}-{name}").trials
+        seed = asked_way_seed(options["seed"], len(users), 1, position, side, 2)
+        assert [t.meta.seed for t in asked] == [seed, seed + 1]
+        assert all(t.meta.extra[ASKED_WAY] == side == t.meta.extra["intent_side"] for t in asked)
+        assert model.sides.tolist() == [side] * 3 and model.asked.tolist() == [False, True, True]
+        # Laplace's rule over the one chosen trial: 2/3 its way, 1/3 the other, as with that trial alone
+        assert model.ways() == pytest.approx({side: 2 / 3, -side: 1 / 3})
+
+
+def test_the_arm_asks_for_the_same_trials_as_the_point_mass_world(tmp_path):
+    # the MuJoCo UR5's calibration (ablation.asked_trials) asks a draw's operators for a thin way on the seeds the
+    # point-mass world's calibration gives them: each operator's probe trial, asked that way
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from coassist.experiments.ablation import asked_trials, probe_configs
+    from coassist.experiments.source_training import asked_way_seed
+
+    cfg = replace(reproduce_config.REPRODUCE_PRESETS["default"], person_calibration_asked=2)
+    for draw in (0, 1):
+        probes = probe_configs(cfg, draw)
+        users = list(dict.fromkeys(c.user for c in probes))
+        assert users == [0, 1, 2] and len(probes) == 3 * cfg.person_calibration_trials
+        first = calibration_draw_options(pipeline.Workspace(cfg, tmp_path, progress=False), draws=2)
+        seed0 = list(first.values())[draw]["seed"]
+        assert min(c.seed for c in probes) == seed0
+        fits = {c.who: SimpleNamespace(paths=SimpleNamespace(sides=np.array([-1] + [1] * 7))) for c in probes}
+        fits["user-0"] = SimpleNamespace(paths=SimpleNamespace(sides=np.array([1] * 8)))  # nothing thin
+        got = asked_trials(probes, fits, 2)
+        firsts = {c.user: c for c in reversed(probes)}  # each operator's first probe trial
+        want = [
+            replace(firsts[u], seed=asked_way_seed(seed0, 3, cfg.person_calibration_trials, u, -1, 2) + i, way=-1)
+            for u in (1, 2)
+            for i in range(2)
+        ]
+        assert got == want and len({c.seed for c in got} | {c.seed for c in probes}) == len(got) + len(probes)

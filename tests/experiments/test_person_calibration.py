@@ -18,6 +18,7 @@ from coassist.experiments.person_calibration import (
     calibrate_people,
     summary_line,
     thin_ways,
+    ways_to_ask,
 )
 from coassist.scenario.arm_identification import ASSUMED_ARM, identify_arm
 from coassist.scenario.objects import get_object
@@ -253,14 +254,34 @@ def test_the_figure_draws_each_persons_demonstrations_by_way_round_and_says_thei
 
 def test_a_way_shown_in_fewer_than_three_trials_is_named_with_what_to_record():
     assert thin_ways(np.array([1, 1, 1, -1, 1, 1, 1, 1])) == (
-        "the right way shown in 1 trial only: the model follows that path alone there; record more going right"
+        "the right way shown in 1 trial only: the model follows that path alone there; record more going right (asked: --ask-way right)"
     )
     assert thin_ways(np.array([1, -1, 1, -1, 0])) == (
-        "the left way shown in 2 trials only: the model follows those 2 paths alone there; record more going left; "
-        "the right way shown in 2 trials only: the model follows those 2 paths alone there; record more going right"
+        "the left way shown in 2 trials only: the model follows those 2 paths alone there; record more going left (asked: --ask-way left); "
+        "the right way shown in 2 trials only: the model follows those 2 paths alone there; record more going right (asked: --ask-way right)"
     )
     # every way shown three times or more, or never (the present estimate's rows there, not a path of one trial)
     assert thin_ways(np.array([1, 1, 1, -1, -1, -1])) == thin_ways(np.array([1, 1, 1, 0])) == ""
+
+
+def test_a_calibration_asks_for_each_thin_way_within_its_budget():
+    # a way shown once or twice is asked for until FEW_PATHS (3) paths show it, left first, within the budget; a way
+    # never shown is not asked for (the person did not choose it)
+    assert ways_to_ask(np.array([1, 1, 1, -1, 1, 1, 1, 1]), 2) == [(-1, 2)]
+    assert ways_to_ask(np.array([1, -1, 1, -1, 0]), 2) == [(1, 1), (-1, 1)]
+    assert ways_to_ask(np.array([1, -1, 1, -1, 0]), 1) == [(1, 1)]
+    assert ways_to_ask(np.array([-1, 1, 1, 1]), 8) == [(-1, 2)]
+    assert ways_to_ask(np.array([1, 1, 1, 1]), 8) == ways_to_ask(np.array([-1, 1, 1, 1]), 0) == []
+    with pytest.raises(ValueError, match="room"):
+        ways_to_ask(np.array([1]), -1)
+
+
+def test_the_summary_says_how_many_paths_were_asked_for(alice):
+    (c,) = calibrate_people(alice)
+    paths = c.fit.paths
+    asked = replace(c, fit=replace(c.fit, paths=replace(paths, asked=np.arange(len(paths.sides)) < 2)))
+    assert f"right ({2} asked for, not in the prior); fit" in summary_line(asked)
+    assert "asked for" not in summary_line(c)
 
 
 def test_the_summary_names_a_thin_way(alice):
@@ -268,6 +289,6 @@ def test_the_summary_names_a_thin_way(alice):
     sides = c.fit.paths.sides
     thin = replace(c, fit=replace(c.fit, paths=replace(c.fit.paths, sides=np.where(np.arange(len(sides)) == 0, -1, 1))))
     assert summary_line(thin).endswith(
-        "; the right way shown in 1 trial only: the model follows that path alone there; record more going right"
+        "; the right way shown in 1 trial only: the model follows that path alone there; record more going right (asked: --ask-way right)"
     )
     assert ("record more" in summary_line(c)) == bool(thin_ways(sides))

@@ -142,7 +142,9 @@ def test_ahead_starts_exactly_the_cells_the_ablation_collects(tmp_path):
         jobs = _mujoco_jobs(ws, intents)
         drives = [(name, args) for name, args in pool.calls if name in ("_drive_batch", "calibrate_then_drive")]
         order = (MG_JOB, *named, "lstm-tool", *[s for s in run_sources(cfg) if s not in (*named, "lstm-tool")])
-        assert [args[-1] for _, args in drives] == [[c for _, configs in jobs[s] for c in configs] for s in order]
+        # the cells' configs: _drive_batch's one argument, calibrate_then_drive's third (probes, folder, configs, asked)
+        cells = [args[0] if name == "_drive_batch" else args[2] for name, args in drives]
+        assert cells == [[c for _, configs in jobs[s] for c in configs] for s in order]
         # the person model's job calibrates on the arm first (its own folder); every other job drives its cells
         assert drives == [(fn.__name__, args) for fn, args in (mujoco_task(ws, s, intents) for s in order)]
         assert [name for name, _ in drives].count("calibrate_then_drive") == 1

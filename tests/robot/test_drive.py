@@ -173,6 +173,8 @@ def test_config_validation_names_the_field():
         ({"task": "spiral"}, "task"),
         ({"population": "crowd"}, "population"),
         ({"population_seed": -1}, "population_seed"),
+        ({"way": 2}, "way"),
+        ({"way": True}, "way"),
     ):
         with pytest.raises(ValueError, match=f"DriveConfig.{field}"):
             DriveConfig(**kwargs)
@@ -186,6 +188,17 @@ def test_the_simulated_operator_comes_from_the_population_asked_for():
     )
     assert (thesis.meta.user, held_out.meta.user) == ("user-1", "held-out-user-1")
     assert not np.array_equal(thesis.effort_h, held_out.effort_h)
+
+
+def test_a_simulated_operator_asked_for_a_way_takes_it_and_the_trial_records_the_asking():
+    from coassist.scenario.path_model import ASKED_WAY
+
+    common = {"controller": "manual", "task": "curved", "obstacle": "large", "time_limit": 1.0, "seed": 4, "user": 1}
+    chosen = drive(DriveConfig(**common))
+    side = chosen.meta.extra["intent_side"]
+    asked = drive(DriveConfig(**common, way=-side))
+    assert ASKED_WAY not in chosen.meta.extra
+    assert (asked.meta.extra[ASKED_WAY], asked.meta.extra["intent_side"]) == (-side, -side)
 
 
 def test_the_stability_guard_wraps_the_assistive_controllers_and_ends_a_limit_cycle():

@@ -100,3 +100,37 @@ def test_bad_draws_are_refused_naming_them(folder, tmp_path):
         read_draws(folder)
     with pytest.raises(RuntimeError, match="before reset"):
         CalibrationDraws([read_person_model(folder / "draw-0")]).predict(np.zeros((1, 8)))
+
+
+def test_the_paths_asked_for_are_counted_per_fit(folder, tmp_path):
+    # none asked in the fixture's two draws; a draw with one fit that asked for two paths, one that asked for none
+    from coassist.scenario.calibration_draws import asked_paths
+    from coassist.scenario.path_model import fit_path_model
+
+    assert asked_paths(folder) == (0, 0, 2)
+    root = tmp_path / "asked"
+    arm = ArmEstimate(stiffness=650.0, damping=-5.0, stiffness_se=40.0, damping_se=3.0, trials=3)
+    demos = [_detour(1, 0.05), _detour(-1, 0.05), _detour(-1, 0.06), _detour(-1, 0.07)]
+    people = {
+        "alice": PersonFit(arm, fit_path_model(LINE, demos, noise=0.001, asked=[False, False, True, True])),
+        "bob": PersonFit(arm, fit_path_model(LINE, demos, noise=0.001)),
+    }
+    write_person_model(root / "draw-0", people)
+    write_person_model(root / "draw-1", {"alice": people["bob"], "bob": people["bob"]})
+    assert asked_paths(write_draws(root, ["draw-0", "draw-1"])) == (1, 2, 4)
+    assert asked_paths(root / "draw-0") == (1, 2, 2)  # a person-model folder: its fits alone
+
+
+def test_the_report_says_where_the_calibrations_asked(tmp_path):
+    from coassist.experiments.ablation import MUJOCO_PERSON
+    from coassist.experiments.ablation_report import asked_in_calibrations
+
+    arm = ArmEstimate(stiffness=650.0, damping=-5.0, stiffness_se=40.0, damping_se=3.0, trials=3)
+    demos = [_detour(1, 0.05), _detour(-1, 0.05), _detour(-1, 0.06)]
+    asked = write_person_model(
+        tmp_path / "a", {"alice": PersonFit(arm, fit_path_model(LINE, demos, noise=0.001, asked=[False, True, True]))}
+    )
+    chosen = write_person_model(tmp_path / "c", {"alice": PersonFit(arm, fit_path_model(LINE, demos, noise=0.001))})
+    models = {"person": str(asked), MUJOCO_PERSON: str(chosen), "ridge": str(tmp_path / "ridge")}
+    assert asked_in_calibrations(models) == {"point-mass world": (1, 2, 1)}
+    assert asked_in_calibrations({"person": str(tmp_path / "gone")}) == {}

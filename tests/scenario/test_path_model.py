@@ -189,3 +189,28 @@ def test_a_way_shown_once_or_twice_is_thin_and_counted_in_order():
     assert (
         few_paths(np.array([1, 1, 1, -1, -1, -1])) == few_paths(np.array([1, 1, 1])) == few_paths(np.array([0])) == {}
     )
+
+
+def test_asked_ways_add_their_paths_but_not_to_the_prior():
+    # three chosen left, one chosen right, two right asked for: the prior is the chosen trials' alone (Laplace over
+    # four), the right way's hypotheses are its three paths, each a third of the way's prior
+    demos = [_bump(0.5, 0.08)] * 3 + [_bump(0.5, -0.08), _bump(0.45, -0.07), _bump(0.55, -0.09)]
+    asked = [False, False, False, False, True, True]
+    model = fit_path_model(NOMINAL, demos, noise=0.001, asked=asked)
+    assert model.asked.tolist() == asked
+    assert model.ways() == pytest.approx({1: 4 / 6, -1: 2 / 6})
+    chosen = fit_path_model(NOMINAL, demos, noise=0.001)
+    assert chosen.asked.tolist() == [False] * 6 and chosen.ways() == pytest.approx({1: 4 / 8, -1: 4 / 8})
+    shifts = (-0.01, 0.0, 0.01)
+    _, ways, prior = model.curves(shifts)
+    assert np.sum(ways == -1) == 3 * len(shifts)
+    np.testing.assert_allclose(prior[ways == -1], 2 / 6 / (3 * len(shifts)), rtol=1e-12)
+    assert prior.sum() == pytest.approx(1.0, abs=1e-12)
+    # every path asked for: no preference known, even odds
+    only_asked = fit_path_model(NOMINAL, demos[3:], noise=0.001, asked=[True] * 3)
+    assert only_asked.ways() == pytest.approx({1: 0.5, -1: 0.5})
+    for bad in ([True] * 5, [1, 0, 0, 0, 0, 0]):
+        with pytest.raises(ValueError, match="asked"):
+            fit_path_model(NOMINAL, demos, noise=0.001, asked=bad)
+    with pytest.raises(ValueError, match="PathModel.asked"):
+        PathModel(model.nominal, model.weights, model.sides, 0.001, model.settings, asked=np.array([1, 0, 0, 0, 0, 0]))

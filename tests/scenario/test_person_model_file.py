@@ -115,3 +115,32 @@ def test_a_folder_read_again_shares_its_models_and_an_edit_or_a_rewrite_is_read_
     other = replace(PERSON_FILTER, row_smoothing=0.08)
     write_person_model(folder, {"alice": PersonFit(arm, paths)}, settings=other)
     assert read_person_model(folder).settings == other
+
+
+def test_the_asked_ways_are_written_and_read_back_and_a_model_without_them_is_written_as_before(written, tmp_path):
+    folder, paths, arm = written
+    assert "asked" not in (folder / PERSON_MODEL_FILE).read_text()  # none asked: the file as before
+    asked = fit_path_model(LINE, [_detour(1), _detour(1, 0.06), _detour(-1)], noise=0.001, asked=[False, False, True])
+    other = write_person_model(tmp_path / "asked", {"alice": PersonFit(arm, asked)})
+    loaded = read_person_model(other, horizon=10)
+    assert loaded.paths["alice"].asked.tolist() == [False, False, True]
+    assert loaded.paths["alice"].ways() == asked.ways() == pytest.approx({1: 3 / 4, -1: 1 / 4})
+    direct = PersonPathsIntent(10, paths={"alice": asked}, arms={"alice": arm}, settings=PERSON_FILTER)
+    np.testing.assert_array_equal(_rows(loaded), _rows(direct))
+
+
+def test_a_trials_asked_way_is_read_from_its_meta():
+    # the trials' meta says which way was asked for; a value that is no way is refused naming the trial
+    from types import SimpleNamespace
+
+    from coassist.scenario import person_model
+    from coassist.scenario.path_model import ASKED_WAY
+
+    def trial(extra):
+        return SimpleNamespace(meta=SimpleNamespace(extra=extra, user="alice", seed=7))
+
+    assert person_model.asked_way(trial({})) == 0
+    assert person_model.asked_way(trial({ASKED_WAY: -1})) == -1
+    for bad in (2, True, "left"):
+        with pytest.raises(ValueError, match="alice seed 7: meta.extra\\['asked_way'\\]"):
+            person_model.asked_way(trial({ASKED_WAY: bad}))

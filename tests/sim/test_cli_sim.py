@@ -70,3 +70,31 @@ def test_show_a_real_recording(tmp_path):
     res = runner.invoke(app, ["show", str(REAL), "--out", str(png)])
     assert res.exit_code == 0, res.output
     assert png.stat().st_size > 10_000
+
+
+def test_a_way_asked_for_is_recorded_and_calibrate_counts_its_paths_but_not_as_the_persons_choice(tmp_path):
+    # the lab's flow for a way shown too seldom: more trials with --ask-way, then calibrate all of them
+    from coassist.scenario.path_model import ASKED_WAY
+    from coassist.scenario.person_model import read_person_model
+
+    args = ["collect", "--controller", "manual-probe", "--tasks", "curved", "--obstacle", "large", "--users", "1"]
+    args += ["--workers", "1"]
+    res = runner.invoke(app, [*args, "--trials", "3", "--out", str(tmp_path / "chosen")])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(
+        app, [*args, "--trials", "2", "--seed", "50", "--ask-way", "right", "--out", str(tmp_path / "a")]
+    )
+    assert res.exit_code == 0, res.output
+    chosen, asked = read_dataset(tmp_path / "chosen").trials, read_dataset(tmp_path / "a").trials
+    assert all(ASKED_WAY not in t.meta.extra for t in chosen)
+    assert [(t.meta.extra[ASKED_WAY], t.meta.extra["intent_side"]) for t in asked] == [(-1, -1), (-1, -1)]
+    out = tmp_path / "model"
+    res = runner.invoke(app, ["calibrate", str(tmp_path / "chosen"), str(tmp_path / "a"), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "(2 asked for, not in the prior)" in res.output
+    paths = read_person_model(out).paths["user-1"]
+    assert paths.asked.tolist() == [False, False, False, True, True]
+    left = int(sum(paths.sides[:3] == 1))
+    assert paths.ways() == pytest.approx({1: (left + 1) / 5, -1: (3 - left + 1) / 5})
+    res = runner.invoke(app, [*args, "--trials", "1", "--ask-way", "up", "--out", str(tmp_path / "b")])
+    assert res.exit_code == 2 and "--ask-way" in res.output and "left" in res.output

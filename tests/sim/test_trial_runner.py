@@ -303,7 +303,20 @@ def test_a_thesis_collection_keeps_its_key_and_a_population_trial_its_record(tri
     from coassist.sim.collect import spec_key
 
     spec = TrialSpec(task="curved", seed=11)
-    assert spec_key(spec) == {k: v for k, v in asdict(spec).items() if k != "population"}
+    before = (
+        "task",
+        "user",
+        "object",
+        "controller",
+        "preset",
+        "seed",
+        "intent",
+        "population_seed",
+        "obstacle",
+        "network",
+    )
+    assert spec_key(spec) == {k: v for k, v in asdict(spec).items() if k in before}
+    assert spec_key(replace(spec, way=-1))["way"] == -1
     assert spec_key(replace(spec, population="held-out"))["population"] == "held-out"
     assert "detour" not in trial.meta.extra["operator"] and "intent_detour" not in trial.meta.extra
     held_out = run_spec(replace(spec, population="held-out", user=1))
@@ -338,3 +351,27 @@ def test_the_applications_large_obstacle_makes_a_wide_detour_that_still_ends_at_
     assert dev["large"] > dev["small"] + 0.02 and dev["large"] > 0.07
     with pytest.raises(ValueError, match="TrialSpec.obstacle"):
         TrialSpec(task="curved", obstacle="huge")
+
+
+def test_an_operator_asked_for_a_way_goes_that_way_and_the_trial_says_it_was_asked():
+    """TrialSpec.way forces the operator's side draw and nothing else: the intent up to the detour's onset is the
+    chosen trial's bit for bit, the way taken is the one asked for, and the meta records the asking (ASKED_WAY)
+    beside the operator's own profile (their preference, not the forced one)."""
+    from coassist.scenario.path_model import ASKED_WAY
+
+    chosen = run_spec(TrialSpec(task="curved", controller="manual", seed=5, user=1, obstacle="large"))
+    side = chosen.meta.extra["intent_side"]
+    asked = run_spec(TrialSpec(task="curved", controller="manual", seed=5, user=1, obstacle="large", way=-side))
+    assert ASKED_WAY not in chosen.meta.extra
+    assert asked.meta.extra[ASKED_WAY] == -side and asked.meta.extra["intent_side"] == -side
+    assert asked.meta.extra["operator"] == chosen.meta.extra["operator"]
+    same = run_spec(TrialSpec(task="curved", controller="manual", seed=5, user=1, obstacle="large", way=side))
+    assert same.meta.extra[ASKED_WAY] == side
+    np.testing.assert_array_equal(same.pose, chosen.pose)  # asked the way they would have taken: the same trial
+    # the two sides' trials share their first ticks exactly (the intent is the same up to the onset)
+    n = min(len(asked.pose), len(chosen.pose))
+    differs = np.flatnonzero(np.any(asked.pose[:n] != chosen.pose[:n], axis=1))
+    assert differs.size and differs[0] > 50
+    for bad in (2, True, 0.5):
+        with pytest.raises(ValueError, match="TrialSpec.way"):
+            TrialSpec(task="curved", way=bad)

@@ -259,8 +259,8 @@ def test_the_report_names_a_way_shown_in_too_few_calibration_trials(calibrated_s
     html_path, json_path = write_report(calibrated_study)
     (p0,) = json.loads(json_path.read_text())["participants"]["S01"]["person_models"]
     note = (
-        "the left way shown in 1 trial only: the model follows that path alone there; record more going left; "
-        "the right way shown in 2 trials only: the model follows those 2 paths alone there; record more going right"
+        "the left way shown in 1 trial only: the model follows that path alone there; record more going left (asked: --ask-way left); "
+        "the right way shown in 2 trials only: the model follows those 2 paths alone there; record more going right (asked: --ask-way right)"
     )
     assert p0["thin_ways"] == {"curved": note} and f"<br>curved: {escape(note)}</td>" in html_path.read_text()
 

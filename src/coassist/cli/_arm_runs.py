@@ -43,6 +43,7 @@ DRIVE_OPTIONS = {
     },
     "DriveConfig.object": "--object",
     "DriveConfig.rate_hz": "--rate",
+    "DriveConfig.way": "--ask-way",
     "SafetyLimits.tool_speed": "--tool-speed",
     "SafetyLimits.contact_force": "--contact-force",
 }

@@ -240,6 +240,22 @@ STABILITY_HELP = (
 )
 
 
+ASK_WAY_HELP = (
+    "left | right: the person is asked to go round the obstacle that way in this run (a calibration trial for a way "
+    "coassist calibrate says was shown too seldom). The trial records it, and the person model counts its path but "
+    "not as their preference; a simulated operator goes that way. Default: the person chooses."
+)
+
+
+def way_option(name: str | None) -> int:
+    """DriveConfig.way for --ask-way: +1 left, −1 right, 0 (not given) the person chooses."""
+    from coassist.scenario.path_model import WAY_SIGNS
+
+    if name is None:
+        return 0
+    return WAY_SIGNS[choose(name, tuple(WAY_SIGNS), "--ask-way", "way round")]
+
+
 def stability_option(on: bool):
     """DriveConfig.stability for --stability-guard / --no-stability-guard: the guard's defaults, or None (off)."""
     from coassist.control.stability import StabilityGuardParameters

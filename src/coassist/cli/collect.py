@@ -72,6 +72,10 @@ def collect(
         help="Who the simulated operators are: thesis (the main job's: user 0 the thesis' author), varied (detour families to tune on), held-out (other kinds of detour, to report only); docs/realism.md.",
     ),
     population_seed: int = typer.Option(0, help="Seed of the population the users are drawn from."),
+    ask_way: str = typer.Option(
+        None,
+        help="left | right: the operators are asked to go round the obstacle that way in every trial (calibration trials for a way coassist calibrate says was shown too seldom; each trial records it, and the person model counts its path but not as their preference). Default: they choose.",
+    ),
     dataset_id: str = typer.Option(None, help="Dataset id (default: the folder's name)."),
     workers: int = typer.Option(None, help="Local worker processes (default: one per CPU)."),
     ray_address: str = typer.Option(None, help="Run on a Ray cluster at this address (needs coassist[cluster])."),
@@ -103,6 +107,7 @@ def collect(
     from coassist.config import CONTROL_PRESETS
     from coassist.control.presets import CONTROLLERS
     from coassist.scenario import OBJECTS, OBSTACLES, POPULATIONS
+    from coassist.scenario.path_model import WAY_SIGNS
     from coassist.scenario.tasks import TASKS
     from coassist.sim.collect import collect_dataset
 
@@ -110,6 +115,8 @@ def collect(
     choose(population, POPULATIONS, "--population", "population")
     choose(obstacle, OBSTACLES, "--obstacle", "obstacle")
     choose(network, NETWORK_BACKENDS, "--network", "network backend")
+    if ask_way is not None:
+        choose(ask_way, tuple(WAY_SIGNS), "--ask-way", "way round")
     lookup(CONTROL_PRESETS, preset, "--preset")
     for value, option, minimum in (
         (trials, "--trials", 1),
@@ -149,6 +156,7 @@ def collect(
             intent=intent,
             population=population,
             population_seed=population_seed,
+            way=0 if ask_way is None else WAY_SIGNS[ask_way],
             say=lambda line: console.print(line, highlight=False),
             live=live,
         )

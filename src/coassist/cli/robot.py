@@ -9,6 +9,7 @@ import typer
 from coassist.cli._arm_runs import DRIVE_OPTIONS, confirm_move, run_alpha, run_out, write_run
 from coassist.cli._common import (
     ARM_CONTROLLER_HELP,
+    ASK_WAY_HELP,
     INTENT_DEFAULT_HELP,
     PERSON_HELP,
     SCENE_HELP,
@@ -24,6 +25,7 @@ from coassist.cli._common import (
     simulation_only_sources,
     stability_option,
     typed,
+    way_option,
 )
 from coassist.cli._live import FOXGLOVE_PORT, LIVE_HELP, close_live, open_live
 from coassist.config import APPLICATION_PRESET
@@ -88,6 +90,7 @@ def drive(
     ),
     overwrite: bool = typer.Option(False, help="Replace an existing trial file at --out."),
     stability_guard: bool = typer.Option(True, "--stability-guard/--no-stability-guard", help=STABILITY_HELP),
+    ask_way: str = typer.Option(None, help=ASK_WAY_HELP),
     foxglove: int = typer.Option(None, metavar="[PORT]", help=LIVE_HELP.format(port=FOXGLOVE_PORT)),
 ) -> None:
     """Run the assistive controller, IMP or MG on an arm (UR5, Panda): in MuJoCo, or on a real one."""
@@ -123,6 +126,7 @@ def drive(
             person=person,
             scene=scene_option(scene),
             stability=stability_option(stability_guard),
+            way=way_option(ask_way),
         )
     except ValueError as exc:
         fail(typed(str(exc), DRIVE_OPTIONS), 2)

@@ -9,6 +9,7 @@ import typer
 from coassist.cli._arm_runs import DRIVE_OPTIONS, confirm_move, run_alpha, run_out, write_run
 from coassist.cli._common import (
     ARM_CONTROLLER_HELP,
+    ASK_WAY_HELP,
     INTENT_DEFAULT_HELP,
     PERSON_HELP,
     SCENE_HELP,
@@ -20,6 +21,7 @@ from coassist.cli._common import (
     scene_option,
     stability_option,
     typed,
+    way_option,
 )
 from coassist.cli._live import FOXGLOVE_PORT, LIVE_HELP, close_live, open_live
 from coassist.config import APPLICATION_PRESET
@@ -109,6 +111,7 @@ def ros2(
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
     overwrite: bool = typer.Option(False, help="Replace an existing run at --out (its trial and its .mcap)."),
     stability_guard: bool = typer.Option(True, "--stability-guard/--no-stability-guard", help=STABILITY_HELP),
+    ask_way: str = typer.Option(None, help=ASK_WAY_HELP),
     foxglove: int = typer.Option(None, metavar="[PORT]", help=LIVE_HELP.format(port=FOXGLOVE_PORT)),
 ) -> None:
     """Run the assistive controller, IMP or MG as a ROS 2 node: ros2_control's forward velocity controller."""
@@ -138,6 +141,7 @@ def ros2(
             person=person,
             scene=scene_option(scene),
             stability=stability_option(stability_guard),
+            way=way_option(ask_way),
         )
         rcfg = Ros2Config(
             node_name=node_name,

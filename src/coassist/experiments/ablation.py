@@ -408,15 +408,18 @@ def mujoco_person_filter() -> PersonFilterSettings:
     return replace(PERSON_FILTER, object_yaw=False)
 
 
-def calibrate_then_drive(probes: list[list], folder: str, configs: list) -> list[tuple[dict, dict]]:
+def calibrate_then_drive(probes: list[list], folder: str, configs: list, asked: int = 0) -> list[tuple[dict, dict]]:
     """A worker's MuJoCo person-model job: drive the calibration trials of every draw in ``probes`` (one list
     per calibration draw, :func:`probe_configs`; all in one lockstep batch), fit each operator's person model
     per draw (:func:`~coassist.scenario.person_model.fit_people`, as
     :func:`~coassist.experiments.source_training.calibrate_person` does on the point-mass world's) with
     :func:`mujoco_person_filter`, and write them into ``folder`` (the intent of ``configs``): one draw, a
     person-model folder; several, a calibration-draws folder (``draw-0`` …, :mod:`coassist.scenario.calibration_draws`:
-    the trial of seed s meets draw s mod K). Then drive ``configs`` as :func:`_drive_batch` does. One job: the
-    cells wait for their own calibration and for nothing else."""
+    the trial of seed s meets draw s mod K). ``asked`` > 0: each draw then asks each operator for up to that many
+    trials going a way round its fit shows too seldom, as the point-mass world's calibration does
+    (``reproduce.person_calibration_asked``; :func:`asked_trials`), driven together, and refits with them. Then
+    drive ``configs`` as :func:`_drive_batch` does. One job: the cells wait for their own calibration and for
+    nothing else."""
     import torch
 
     from coassist.robot.drive import drive_lockstep
@@ -427,10 +430,19 @@ def calibrate_then_drive(probes: list[list], folder: str, configs: list) -> list
     if not probes or not all(probes):
         raise ValueError("calibrate_then_drive needs at least one calibration trial in every draw")
     trials = drive_lockstep([c for draw in probes for c in draw])
-    fits, at = [], 0
+    fits, own, at = [], [], 0
     for draw in probes:
-        fits.append(fit_people(trials[at : at + len(draw)]))
+        own.append(list(trials[at : at + len(draw)]))
+        fits.append(fit_people(own[-1]))
         at += len(draw)
+    if asked:
+        more = [asked_trials(draw, fit, asked) for draw, fit in zip(probes, fits)]
+        driven = drive_lockstep([c for draw in more for c in draw])
+        at = 0
+        for k, draw in enumerate(more):
+            if draw:
+                fits[k] = fit_people(own[k] + list(driven[at : at + len(draw)]))
+            at += len(draw)
     if len(fits) == 1:
         write_person_model(folder, fits[0], settings=mujoco_person_filter())
     else:
@@ -439,6 +451,29 @@ def calibrate_then_drive(probes: list[list], folder: str, configs: list) -> list
             write_person_model(Path(folder) / name, fit, settings=mujoco_person_filter())
         write_draws(folder, names)
     return _drive_batch(configs)
+
+
+def asked_trials(probes: list, fits: dict, most: int) -> list:
+    """The drive configs of the trials one calibration draw asks for (:func:`calibrate_then_drive`): for each
+    operator of ``probes`` (its chosen-way trials, in :func:`probe_configs`' order) whose fit in ``fits`` shows a way
+    round too seldom (:func:`~coassist.experiments.person_calibration.ways_to_ask`, at most ``most``), their probe
+    trial asked that way, on the seeds the point-mass world's calibration gives them
+    (:func:`~coassist.experiments.source_training.asked_way_seed`)."""
+    from dataclasses import replace
+
+    from coassist.experiments.person_calibration import ways_to_ask
+    from coassist.experiments.source_training import asked_way_seed
+
+    users = list(dict.fromkeys(c.user for c in probes))
+    per_user = len(probes) // len(users)
+    first = min(c.seed for c in probes)
+    out = []
+    for position, user in enumerate(users):
+        mine = [c for c in probes if c.user == user]
+        for way, count in ways_to_ask(fits[mine[0].who].paths.sides, most):
+            seed = asked_way_seed(first, len(users), per_user, position, way, most)
+            out += [replace(mine[0], seed=seed + i, way=way) for i in range(count)]
+    return out
 
 
 def _drive_batch(configs: list) -> list[tuple[dict, dict]]:
@@ -498,7 +533,7 @@ def mujoco_task(ws: Workspace, source: str, intents: dict[str, str]) -> tuple[An
     configs = _mujoco_job(ws.config, source, intent)
     if source == "person" and ws.config.mujoco_person_calibration == "mujoco":
         probes = [probe_configs(ws.config, k) for k in range(ws.config.calibration_draws)]
-        return calibrate_then_drive, (probes, intent, configs)
+        return calibrate_then_drive, (probes, intent, configs, ws.config.person_calibration_asked)
     return _drive_batch, (configs,)
 
 

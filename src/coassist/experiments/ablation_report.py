@@ -35,6 +35,7 @@ from coassist.experiments.report import Claim, Section
 from coassist.experiments.source_training import APPLICATION_SOURCE
 from coassist.robot.worlds import POINT_MASS
 from coassist.scenario.assistance import DEFAULT_INTENT
+from coassist.scenario.path_model import FEW_PATHS
 
 
 def share_text(s: tuple[float, float, float]) -> str:
@@ -185,6 +186,15 @@ def ablation_section(result: AblationResult) -> Section:
             "trials'. Their per-side differences from MG too: a t interval over those clusters (cluster-robust, "
             "G − 1 degrees of freedom), not over the trials."
         )
+    asked = asked_in_calibrations(result.models)
+    if asked:
+        s.paragraphs.append(
+            "Each calibration then asked an operator for a few more trials going a way round their probe trials "
+            f"showed in fewer than {FEW_PATHS} (reproduce.person_calibration_asked; their paths join that way's, the "
+            "ways' prior stays the operator's own choices): "
+            + "; ".join(f"{where}: {n} of {fits} fits, {paths} trials" for where, (n, paths, fits) in asked.items())
+            + "."
+        )
     if MUJOCO_PERSON in result.models:
         s.paragraphs.append(
             "On the MuJoCo UR5 the person model is calibrated on the arm it assists: each operator's probe trials "
@@ -313,6 +323,24 @@ DEFAULT_CELLS = (
     (HELD_OUT, ARBITRATED, "held-out population, the arbitrated game"),
     ("mujoco", ARBITRATED, "MuJoCo UR5, the arbitrated game"),
 )
+
+
+def asked_in_calibrations(models: dict[str, str]) -> dict[str, tuple[int, int, int]]:
+    """Per person-model folder of ``models`` whose calibrations asked for a way (point-mass world, MuJoCo UR5):
+    :func:`~coassist.scenario.calibration_draws.asked_paths`; a folder no longer there is left out."""
+    from pathlib import Path
+
+    from coassist.scenario.calibration_draws import DRAWS_FILE, asked_paths
+    from coassist.scenario.person_model import PERSON_MODEL_FILE
+
+    out = {}
+    for label, where in (("person", "point-mass world"), (MUJOCO_PERSON, "MuJoCo UR5")):
+        folder = Path(models.get(label, ""))
+        if label in models and ((folder / DRAWS_FILE).is_file() or (folder / PERSON_MODEL_FILE).is_file()):
+            counts = asked_paths(folder)
+            if counts[1]:
+                out[where] = counts
+    return out
 
 
 def default_claims(result: AblationResult, source: str = DEFAULT_INTENT) -> list[Claim]:

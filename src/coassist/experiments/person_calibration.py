@@ -28,10 +28,11 @@ from typing import Protocol
 
 import numpy as np
 
+from coassist._checks import check_int
 from coassist.data import Trial
 from coassist.errors import CoassistError
 from coassist.scenario.arm_identification import identify_arm
-from coassist.scenario.path_model import PathFrame, few_paths
+from coassist.scenario.path_model import FEW_PATHS, WAY_SIGNS, PathFrame, PathModel, few_paths
 from coassist.scenario.person_model import PersonFit, fit_person
 
 __all__ = [
@@ -42,6 +43,7 @@ __all__ = [
     "calibrate_people",
     "summary_line",
     "thin_ways",
+    "ways_to_ask",
 ]
 
 #: The fewest trials a person is calibrated from: the arm's standard error is a jackknife over trials
@@ -208,12 +210,29 @@ def calibrate_people(
     return out
 
 
-def _ways(sides: np.ndarray) -> str:
+def _ways(paths: PathModel) -> str:
+    sides = paths.sides
     counts = {s: int(np.sum(sides == s)) for s in (1, -1, 0)}
     parts = [f"{counts[1]} left", f"{counts[-1]} right"]
     if counts[0]:
         parts.append(f"{counts[0]} with no detour")
-    return ", ".join(parts)
+    asked = int(np.sum(np.asarray(paths.asked, dtype=bool)))
+    return ", ".join(parts) + (f" ({asked} asked for, not in the prior)" if asked else "")
+
+
+def ways_to_ask(sides: np.ndarray, room: int) -> list[tuple[int, int]]:
+    """The trials a calibration asks for next (:func:`thin_ways`' advice): for each way round shown in fewer than
+    :data:`~coassist.scenario.path_model.FEW_PATHS` of the paths ``sides`` but at least once, (way, trials) to
+    show it that often, left first, at most ``room`` trials in all (the lab's budget of trials left). A way never
+    shown is not asked for: the person did not choose it, and the model mirrors the other way there."""
+    room = check_int(room, "room", 0)
+    out = []
+    for name, n in few_paths(sides).items():
+        ask = min(FEW_PATHS - n, room)
+        if ask > 0:
+            out.append((WAY_SIGNS[name], ask))
+            room -= ask
+    return out
 
 
 def thin_ways(sides: np.ndarray) -> str:
@@ -226,7 +245,7 @@ def thin_ways(sides: np.ndarray) -> str:
         paths = "that path" if n == 1 else f"those {n} paths"
         notes.append(
             f"the {name} way shown in {n} trial{'s' if n > 1 else ''} only: the model follows {paths} alone there; "
-            f"record more going {name}"
+            f"record more going {name} (asked: --ask-way {name})"
         )
     return "; ".join(notes)
 
@@ -251,6 +270,6 @@ def summary_line(c: PersonCalibration) -> str:
         measured = f"arm ASSUMED, not measured (K̂ {arm.stiffness:.0f} N/m, Ĉ {arm.damping:.1f} N·s/m): {why}"
     thin = thin_ways(c.fit.paths.sides)
     return (
-        f"{c.person} ({c.task}, {len(c.trials)} trials): {measured}; demonstrations: {_ways(c.fit.paths.sides)}; "
+        f"{c.person} ({c.task}, {len(c.trials)} trials): {measured}; demonstrations: {_ways(c.fit.paths)}; "
         f"fit {c.seconds:.1f} s ({c.cpu_seconds:.1f} CPU-s){'; ' + thin if thin else ''}"
     )

@@ -87,6 +87,7 @@ class Workspace:
         obstacle: str = "small",
         groups: int | None = None,
         population: str = "thesis",
+        way: int = 0,
     ):
         """Simulate a dataset into ``out/datasets/<name>``; return its folder and the dataset (as
         :func:`~coassist.data.read_dataset` reads it; the trials simulated here as written, not read back).
@@ -94,13 +95,14 @@ class Workspace:
         ``groups``: how many lockstep groups the trials are split into on the pool
         (:func:`~coassist.sim.trial_runner.submit_trials`; None: its rule), an option like the others.
         ``population``: who the simulated operators are (:mod:`coassist.scenario.populations`).
+        ``way``: the way round the operators are asked to take (+1 left, −1 right; 0 their own choice).
         A collection :meth:`prefetch` started with the same options is waited for, not run
         again (the same trials bit for bit: the same jobs); one started under this name with
         other options is let finish, then replaced by the one asked for."""
         from coassist.sim.collect import collect_dataset
 
         options = self._spec_options(
-            tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population
+            tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population, way
         )
         if (options, groups) == self._deferred.get(name):
             self.run_deferred()  # this one and every other collection deferred so far, in lockstep
@@ -140,6 +142,7 @@ class Workspace:
         obstacle: str = "small",
         groups: int | None = None,
         population: str = "thesis",
+        way: int = 0,
     ) -> None:
         """Start :meth:`collect`'s simulations for these options on the run's pool now and
         return at once; a thread of this process writes the dataset as the jobs end, and the
@@ -161,7 +164,7 @@ class Workspace:
         from coassist.sim.trial_runner import submit_trials
 
         options = self._spec_options(
-            tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population
+            tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population, way
         )
         if self.pool is None:
             if _may_defer(dataset_specs(**options)) and name not in self._deferred:
@@ -261,10 +264,10 @@ class Workspace:
         return fn(*args) if future is None else future.result()
 
     def _spec_options(
-        self, tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population
+        self, tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population, way=0
     ) -> dict[str, Any]:
-        # coassist.sim.collect.dataset_specs' keyword arguments
-        return {
+        # coassist.sim.collect.dataset_specs' keyword arguments (way only where asked: the options as before)
+        return ({"way": way} if way else {}) | {
             "controller": controller,
             "users": list(users),
             "tasks": list(tasks),

@@ -61,6 +61,7 @@ def compare_intents(
     progress: bool = True,
     population: str = "thesis",
     probe_trials: int | None = None,
+    asked_trials: int | None = None,
 ) -> AblationResult:
     """Every source of ``sources`` (label → intent: a named source, a model folder, a calibration folder or
     ``"paths"`` / ``"person"`` to use each base's fitted calibration / person models) on the validation trials
@@ -69,7 +70,9 @@ def compare_intents(
     with it: a share is measured against the oracle of its own controller, the damped one's against the arbitrated).
     ``population``: the simulated operators (:data:`TUNING_POPULATIONS`: the thesis population or ``varied``, the
     in-family one to tune on; never ``held-out``, which only the report runs). ``probe_trials``: each operator's
-    probe trials per calibration draw for ``person`` (default the main job's ``person_calibration_trials``). Datasets
+    probe trials per calibration draw for ``person`` (default the main job's ``person_calibration_trials``);
+    ``asked_trials``: the most trials each calibration then asks of an operator for a way round shown too seldom
+    (default the main job's ``person_calibration_asked``). Datasets
     go under ``out``. The
     result is keyed like the ablation's (world "point-mass", controller, label), the bases' trials pooled in one
     cell."""
@@ -116,6 +119,8 @@ def compare_intents(
     )
     if probe_trials is not None:
         cfg = replace(cfg, person_calibration_trials=int(probe_trials))
+    if asked_trials is not None:
+        cfg = replace(cfg, person_calibration_asked=asked_trials)  # the config refuses a bad count, naming it
     cells: dict[tuple[str, str, str], list] = {}
     groups: dict[tuple[str, str, str], list] = {}  # each trial's (base, operator, calibration draw)
     drawn: dict[tuple[str, str, str], set[int]] = {}  # the draws each cell's sources held

@@ -83,6 +83,15 @@ class ReproduceConfig:
     # person"): the person model met force >= 85 % and overshoot >= 70 % with its lower bound >= 40 % in 3 of the
     # 8 cells with 4 trials, 5 with 6, 7 with 8 and 6 with 10 (issue 40 allows a lab 10).
     person_calibration_trials: int = 8
+    # The most trials a person's calibration then adds, asking for a way round shown in fewer than FEW_PATHS
+    # (scenario.path_model) of its person_calibration_trials but at least once (what coassist calibrate advises a
+    # lab: experiments.person_calibration.ways_to_ask); the asked trials' paths join that way's, the ways' prior
+    # counts only the chosen ones. 0: none asked (the calibration as before). Two: with eight probe trials a person
+    # stays within the 10 issue 40 allows a lab. On the eight validation cells (benchmarks/person_filter_cells.py
+    # --asked-trials 2 --paired-with, 144 paired trials; 53 trials asked in 37 of the 72 calibrations) against none:
+    # overshoot -0.000 [-0.030, +0.029] mm, hand force -0.013 [-0.024, -0.002] N, jerk -0.001 [-0.004, +0.002] m/s³
+    # (docs/person-model.md, "Asking for a way shown too seldom").
+    person_calibration_asked: int = 2
     # Calibrations of each operator's person model in the point-mass, held-out and MuJoCo cells (issue 40; on the
     # MuJoCo UR5 draw k's probe trials are the point-mass draw k's, driven on the arm): each on its
     # own person_calibration_trials probe trials, the trial of seed s meeting draw s mod calibration_draws, and the
@@ -178,6 +187,10 @@ class ReproduceConfig:
             v = getattr(self, name)
             if not is_integer(v) or v < 1:
                 raise ValueError(f"reproduce.{name} must be an integer >= 1, got {v!r}")
+        if not is_integer(self.person_calibration_asked) or not 0 <= self.person_calibration_asked <= 8:
+            raise ValueError(
+                f"reproduce.person_calibration_asked must be an integer 0 to 8, got {self.person_calibration_asked!r}"
+            )
         if self.calibration_draws > 8:
             raise ValueError(f"reproduce.calibration_draws must be 1 to 8, got {self.calibration_draws}")
         if not is_integer(self.ablation_mujoco_trials) or self.ablation_mujoco_trials < 0:
@@ -272,6 +285,8 @@ REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry(
             source_seeds=1,
             calibration_trials=1,
             person_calibration_trials=1,
+            # one probe trial a person shows every way it takes once: too seldom; the tiny run asks for none
+            person_calibration_asked=0,
             calibration_draws=2,
             real_stride=25,
             sweep_duration=1.0,

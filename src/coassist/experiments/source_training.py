@@ -46,6 +46,7 @@ __all__ = [
     "APPLICATION_SOURCE",
     "DRAW_SEED_STEP",
     "LEARNED",
+    "asked_way_seed",
     "calibrate_paths",
     "calibrate_person",
     "calibration_draw_options",
@@ -127,7 +128,7 @@ def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "
     the trial of seed s meets draw s mod ``draws``), so that an evaluation's intervals carry the calibration's
     own variance."""
     from coassist.scenario.calibration_draws import MAX_DRAWS, write_draws
-    from coassist.scenario.person_model import fit_people, write_person_model
+    from coassist.scenario.person_model import write_person_model
 
     if not 1 <= int(draws) <= MAX_DRAWS:
         raise ValueError(f"draws must be 1 to {MAX_DRAWS}, got {draws!r}")
@@ -140,14 +141,54 @@ def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "
         )
     if draws == 1:
         _, ds = ws.collect(first, **options)
-        return str(write_person_model(ws.out / "models" / f"person{_suffix(population)}", fit_people(ds.trials)))
+        fits = _asked_ways_added(ws, first, options, ds.trials)
+        return str(write_person_model(ws.out / "models" / f"person{_suffix(population)}", fits))
     folder = ws.out / "models" / f"person{_suffix(population)}-draws"
     names = []
     for k, (name, options) in enumerate(collections.items()):
         _, ds = ws.collect(name, **options)
         names.append(f"draw-{k}")
-        write_person_model(folder / names[-1], fit_people(ds.trials))
+        write_person_model(folder / names[-1], _asked_ways_added(ws, name, options, ds.trials))
     return str(write_draws(folder, names))
+
+
+def asked_way_seed(first: int, users: int, trials: int, position: int, way: int, most: int) -> int:
+    """The first seed of the trials a calibration asks of its ``position``-th operator for ``way`` (+1 / −1), at most
+    ``most`` of them: after the draw's ``users`` × ``trials`` chosen-way trials from ``first``, each operator's two
+    ways ``most`` seeds apart (so the asked trials of a calibration never share a seed with another trial of it)."""
+    return first + users * trials + (2 * position + (0 if way > 0 else 1)) * most
+
+
+def _asked_ways_added(ws: Workspace, name: str, options: Mapping[str, Any], trials: list) -> dict:
+    """The people's fits (:func:`~coassist.scenario.person_model.fit_people`) of a calibration's probe trials, after
+    it has asked each operator for up to ``reproduce.person_calibration_asked`` more trials going a way round shown too
+    seldom (:func:`~coassist.experiments.person_calibration.ways_to_ask`; collections ``<name>-ask-<user>-<way>``)."""
+    from coassist.experiments.person_calibration import ways_to_ask
+    from coassist.scenario.path_model import WAY_SIGNS
+    from coassist.scenario.person_model import fit_people
+    from coassist.scenario.populations import population_profile
+
+    fits = fit_people(trials)
+    most = ws.config.person_calibration_asked
+    if not most:
+        return fits
+    users = list(options["users"])
+    last = asked_way_seed(options["seed"], len(users), options["trials"], len(users), 1, most)
+    if last - options["seed"] > DRAW_SEED_STEP:
+        raise ValueError(
+            f"{len(users)} operators × ({options['trials']} + 2 × {most} asked) calibration trials do not fit in a "
+            f"draw's {DRAW_SEED_STEP} seeds"
+        )
+    way_names = {sign: way for way, sign in WAY_SIGNS.items()}
+    added = []
+    for position, user in enumerate(users):
+        who = population_profile(options["population"], user, 0).name
+        for way, count in ways_to_ask(fits[who].paths.sides, most):
+            seed = asked_way_seed(options["seed"], len(users), options["trials"], position, way, most)
+            asked = {**options, "users": (user,), "trials": count, "seed": seed, "way": way}
+            _, ds = ws.collect(f"{name}-ask-{user}-{way_names[way]}", **asked)
+            added += ds.trials
+    return fit_people(list(trials) + added) if added else fits
 
 
 def calibration_draw_options(

@@ -61,7 +61,8 @@ from coassist.scenario.assistance import DEFAULT_INTENT, assistance_line, check_
 from coassist.scenario.hand import SimulatedHand
 from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source, needs_network, shared_intent_source
 from coassist.scenario.objects import get_object
-from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise
+from coassist.scenario.operator import OperatorArm, asked_to_go, intent_trajectory, motor_noise
+from coassist.scenario.path_model import ASKED_WAY, check_way
 from coassist.scenario.populations import POPULATIONS, population_profile
 from coassist.scenario.scene import Scene
 from coassist.scenario.seeds import trial_rngs
@@ -125,6 +126,10 @@ class DriveConfig:
     predictor_backend : where the real-time predictor runs: "process" (a worker process:
         the tick never waits for the GIL; the default, see benchmarks/bench_tick.py),
         "onnx" (ONNX Runtime in a worker thread) or "torch" (eager, worker thread).
+    way : the way round the obstacle the person is asked to take in this run, +1 on the left of the plan, −1 on the
+        right (a calibration that asks for a way shown too seldom, ``coassist calibrate``'s advice): recorded in the
+        trial (``meta.extra["asked_way"]``) so that the person model counts its path but not as their preference; a
+        simulated operator is made to go that way. 0: the person chooses.
     stability : the stability guard on an assistive controller (:data:`GUARDED_CONTROLLERS`, x-y only:
         not with ``full_pose``): once the hand force low-passed over 0.5 s passes 20 N while it turns (an
         oscillation, not a push held in one direction) the robot becomes a damper for the rest of the run
@@ -153,6 +158,7 @@ class DriveConfig:
     person: str | None = None
     scene: Scene | None = None
     stability: StabilityGuardParameters | None = StabilityGuardParameters()
+    way: int = 0
 
     def __post_init__(self) -> None:
         def bad(name: str, what: str) -> ValueError:
@@ -204,6 +210,7 @@ class DriveConfig:
             raise bad("scene", "a Scene (coassist.scenario.scene.read_scene) or None")
         if self.stability is not None and not isinstance(self.stability, StabilityGuardParameters):
             raise bad("stability", "StabilityGuardParameters (coassist.control.stability) or None (off)")
+        check_way(self.way, "DriveConfig.way")
 
     @property
     def dt(self) -> float:
@@ -484,6 +491,7 @@ def _prepare(
     H = int(controller.horizon)
     task = task_for_seed(config.task, config.seed, obstacle=config.obstacle)  # the same draw in every world
     profile = population_profile(config.population, config.user, config.population_seed)
+    profile = asked_to_go(profile, config.way)  # a simulated operator asked for a way goes that way
     obj = get_object(config.object)
     entry = WORLDS[config.world]
     simulated = entry.simulated
@@ -611,6 +619,7 @@ def _prepare(
                 **({} if config.scene is None else {"scene": config.scene.to_extra()}),
                 # the simulated operator's way round the obstacle (+1 left): the report's per-side figures
                 **({"intent_side": int(intent_traj.side)} if held else {}),
+                **({ASKED_WAY: config.way} if config.way else {}),
             },
         )
         # what build_episode tells the source (TrialContext.path, .obstacles), for the one-line statement

@@ -33,6 +33,7 @@ __all__ = [
     "DRAWS_FILE",
     "MAX_DRAWS",
     "CalibrationDraws",
+    "asked_paths",
     "draw_clusters",
     "draw_count",
     "draw_of",
@@ -129,6 +130,15 @@ def write_draws(folder: str | Path, names: Sequence[str]) -> Path:
         raise ValueError(f"draws {names}: a draw is named twice")
     write_hashed_json(folder / DRAWS_FILE, {"draws": names}, format=_FORMAT)
     return folder
+
+
+def asked_paths(intent: str | Path) -> tuple[int, int, int]:
+    """Of a person-model or calibration-draws folder's fits (person × draw): (how many hold paths the lab asked for,
+    how many paths were asked for in all, how many fits) (:attr:`~coassist.scenario.path_model.PathModel.asked`)."""
+    folder = Path(intent)
+    sources = read_draws(folder).draws if (folder / DRAWS_FILE).is_file() else (read_person_model(folder),)
+    counts = [int(np.sum(np.asarray(m.asked, dtype=bool))) for source in sources for m in source.paths.values()]
+    return sum(n > 0 for n in counts), sum(counts), len(counts)
 
 
 def read_draws(folder: str | Path, horizon: int = 50) -> CalibrationDraws:

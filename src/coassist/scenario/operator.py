@@ -71,7 +71,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -305,6 +305,13 @@ def detour_onset(task: Task, points: np.ndarray) -> int:
     same samples) still shares: the detour's onset (0 when it departs from the start)."""
     differs = np.any(points != task.path.points, axis=1)
     return max(int(np.argmax(differs)) - 1, 0) if differs.any() else len(points) - 1
+
+
+def asked_to_go(profile: OperatorProfile, way: int) -> OperatorProfile:
+    """The operator of ``profile`` asked to go round the obstacle one way in a trial (+1 left of the plan, −1 right;
+    0: ``profile`` itself, their own choice): the side draw of :func:`intent_trajectory` forced (a uniform draw is
+    always < 1 and never < 0), every other draw of the trial as without the asking."""
+    return profile if not way else replace(profile, left_preference=1.0 if way > 0 else 0.0)
 
 
 def intent_trajectory(task: Task, profile: OperatorProfile, rng: np.random.Generator, n: int, dt: float) -> Intent:

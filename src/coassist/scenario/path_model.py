@@ -17,7 +17,10 @@ the nominal path (+1 left, −1 right; 0 when it never leaves the plan by ``deto
 The distribution of the person's paths is the mixture over their demonstrations (a kernel
 density over paths: each demonstration one component), one mode per way round, with prior
 probability (n_way + 1)/(n + 2) for each way (Laplace's rule: a person who went left ten
-times may still go right once). :meth:`PathModel.curves` draws its hypotheses for a trial:
+times may still go right once). The prior counts only the trials where the person chose their way: a trial in
+which the lab asked for a way round (:data:`ASKED_WAY` in its meta, what ``calibrate`` asks for when a way is
+shown in fewer than :data:`FEW_PATHS` paths) adds that way's path, not the person's preference for it.
+:meth:`PathModel.curves` draws its hypotheses for a trial:
 
 - every demonstration that took a way round, shifted along the plan by each of ``shifts``
   (the obstacle, unseen, is never exactly where it was): x'(u) = x(u) + P(s(u) + δ) − P(s(u)),
@@ -48,11 +51,14 @@ from coassist._checks import check_int, check_real
 from coassist.scenario.tasks import NominalPath
 
 __all__ = [
+    "ASKED_WAY",
     "FEW_PATHS",
     "NEAREST_CANDIDATES",
     "PathFrame",
     "PathModel",
     "PathModelSettings",
+    "WAY_SIGNS",
+    "check_way",
     "few_paths",
     "fit_path_model",
 ]
@@ -64,12 +70,27 @@ NEAREST_CANDIDATES = 8
 #: load) are one operator's way shown once or twice in eight (docs/person-model.md), and with two paths a task the
 #: person model's overshoot was 1.25–1.39 × MG's against 0.57–1.06 × with three or more. What calibrate and drive say.
 FEW_PATHS = 3
+#: The key of a trial's ``meta.extra`` that says the lab asked the person to go round one way in that trial: +1 on the
+#: left of the plan, −1 on the right (absent: the person chose). ``collect`` and ``drive`` write it (``--ask-way``).
+ASKED_WAY = "asked_way"
+#: The ways round by name: +1 on the left of the plan (seen along it), −1 on the right.
+WAY_SIGNS = {"left": 1, "right": -1}
+
+
+def check_way(way: Any, name: str) -> int:
+    """``way`` as a way round asked for (:data:`ASKED_WAY`): +1 left, −1 right, 0 none; else a ValueError naming
+    ``name``."""
+    if isinstance(way, bool) or way not in (-1, 0, 1):
+        raise ValueError(
+            f"{name} must be +1 (asked to go round on the left), -1 (on the right) or 0 (none asked), got {way!r}"
+        )
+    return int(way)
 
 
 def few_paths(sides: np.ndarray) -> dict[str, int]:
     """Each way round ("left", "right") shown in fewer than :data:`FEW_PATHS` of the paths ``sides`` (+1 left, −1
     right, 0 no detour) but at least once: how many times, in that order."""
-    counts = {name: int(np.sum(np.asarray(sides) == side)) for side, name in ((1, "left"), (-1, "right"))}
+    counts = {name: int(np.sum(np.asarray(sides) == side)) for name, side in WAY_SIGNS.items()}
     return {name: n for name, n in counts.items() if 0 < n < FEW_PATHS}
 
 
@@ -202,6 +223,8 @@ class PathModel:
     sides : (J,) the way round each took: +1 left, −1 right, 0 no detour.
     noise : σ [m] of the present estimate about the person's intent (its RMS per axis in the calibration).
     settings : how it was fitted.
+    asked : (J,) bool, whether the lab asked for the way in that demonstration's trial (:data:`ASKED_WAY`): its
+        path is one of the way's, but the ways' prior leaves it out. None: none was asked.
     """
 
     nominal: np.ndarray
@@ -209,6 +232,7 @@ class PathModel:
     sides: np.ndarray
     noise: float
     settings: PathModelSettings
+    asked: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.settings, PathModelSettings):
@@ -222,9 +246,13 @@ class PathModel:
             raise ValueError(f"PathModel.weights must be finite, shape (J >= 1, {2 * B}), got {weights.shape}")
         if sides.shape != (weights.shape[0],) or not np.isin(sides, (-1, 0, 1)).all():
             raise ValueError(f"PathModel.sides must be one of -1, 0, 1 per demonstration, got {sides.tolist()}")
+        asked = np.zeros(sides.shape, dtype=bool) if self.asked is None else np.asarray(self.asked)
+        if asked.shape != sides.shape or asked.dtype != bool:
+            raise ValueError(f"PathModel.asked must be one bool per demonstration, got {asked.tolist()}")
         object.__setattr__(self, "nominal", nominal)
         object.__setattr__(self, "weights", weights)
         object.__setattr__(self, "sides", sides.astype(int))
+        object.__setattr__(self, "asked", asked)
         object.__setattr__(self, "noise", check_real(self.noise, "PathModel.noise", 0.0, 0.05, open_lo=True))
 
     def demonstrations(self) -> np.ndarray:
@@ -234,12 +262,12 @@ class PathModel:
 
     def ways(self) -> dict[int, float]:
         """The ways round the model knows and their prior probabilities (module docstring): {+1, −1}
-        whenever a demonstration took one, else {0}."""
-        detoured = self.sides[self.sides != 0]
-        if detoured.size == 0:
+        whenever a demonstration took one, else {0}. The prior counts the ways the person chose (not those asked)."""
+        if not np.any(self.sides != 0):
             return {0: 1.0}
-        n = detoured.size
-        return {side: (int(np.sum(detoured == side)) + 1) / (n + 2) for side in (1, -1)}
+        chosen = self.sides[(self.sides != 0) & ~np.asarray(self.asked, dtype=bool)]
+        n = chosen.size
+        return {side: (int(np.sum(chosen == side)) + 1) / (n + 2) for side in (1, -1)}
 
     def curves(self, shifts: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The hypotheses of a trial (module docstring): (points (N, G, 2) [m], ways (N,), prior (N,),
@@ -308,13 +336,17 @@ def fit_path_model(
     *,
     noise: float,
     settings: PathModelSettings | None = None,
+    asked: Sequence[bool] | None = None,
 ) -> PathModel:
     """The :class:`PathModel` of a person's demonstrated paths (each (T_j, 2) [m], the intent they pursued,
     in the order they moved) against the nominal path (P, 2) (module docstring). ``noise``: σ [m] of the
-    present estimate about the intent."""
+    present estimate about the intent. ``asked``: per demonstration, whether the lab asked for its way round
+    (:attr:`PathModel.asked`); None: none was."""
     settings = PathModelSettings() if settings is None else settings
     if not demonstrations:
         raise ValueError("fit_path_model needs at least one demonstrated path")
+    if asked is not None and (len(asked) != len(demonstrations) or not all(isinstance(a, bool) for a in asked)):
+        raise ValueError(f"asked must be one bool per demonstration ({len(demonstrations)}), got {list(asked)!r}")
     frame = PathFrame(nominal)
     promp = _primitive(settings.n_basis)
     weights, sides = [], []
@@ -339,4 +371,5 @@ def fit_path_model(
         sides=np.asarray(sides),
         noise=noise,
         settings=settings,
+        asked=None if asked is None else np.asarray(asked, dtype=bool),
     )

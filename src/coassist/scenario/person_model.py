@@ -31,13 +31,21 @@ import numpy as np
 
 from coassist._io import read_hashed_json, write_hashed_json
 from coassist.scenario.arm_identification import ArmEstimate, identify_arm
-from coassist.scenario.path_model import PathFrame, PathModel, PathModelSettings, fit_path_model
+from coassist.scenario.path_model import (
+    ASKED_WAY,
+    PathFrame,
+    PathModel,
+    PathModelSettings,
+    check_way,
+    fit_path_model,
+)
 from coassist.scenario.person_intent import PersonFilterSettings, PersonPathsIntent
 
 __all__ = [
     "PERSON_FILTER",
     "PERSON_MODEL_FILE",
     "PersonFit",
+    "asked_way",
     "fit_people",
     "fit_person",
     "intent_paths",
@@ -166,7 +174,21 @@ def fit_person(
             )
     arm = identify_arm(trials) if arm is None else arm
     paths, noise = intent_paths(trials, arm, smoothing=smoothing)
-    return PersonFit(arm=arm, paths=fit_path_model(nominal, paths, noise=max(noise, 1e-4), settings=settings))
+    asked = [asked_way(t) != 0 for t in trials]
+    return PersonFit(
+        arm=arm,
+        paths=fit_path_model(
+            nominal, paths, noise=max(noise, 1e-4), settings=settings, asked=asked if any(asked) else None
+        ),
+    )
+
+
+def asked_way(trial) -> int:
+    """The way round the lab asked for in ``trial`` (its ``meta.extra`` :data:`ASKED_WAY`): +1 left, −1 right, 0 none
+    asked (the person chose)."""
+    return check_way(
+        trial.meta.extra.get(ASKED_WAY, 0), f"trial {trial.meta.user} seed {trial.meta.seed}: meta.extra[{ASKED_WAY!r}]"
+    )
 
 
 def fit_people(trials: Sequence) -> dict[str, PersonFit]:
@@ -185,6 +207,8 @@ def _model_doc(model: PathModel) -> dict:
         "settings": asdict(model.settings),
         "weights": model.weights.tolist(),
         "sides": model.sides.tolist(),
+        # written only where a way was asked for: a model fitted to chosen ways alone is written as before
+        **({"asked": np.asarray(model.asked).tolist()} if np.any(model.asked) else {}),
     }
 
 
@@ -195,6 +219,7 @@ def _model_from(doc: Mapping) -> PathModel:
         sides=np.asarray(doc["sides"], dtype=int),
         noise=float(doc["noise"]),
         settings=PathModelSettings(**doc["settings"]),
+        asked=np.asarray(doc["asked"]) if "asked" in doc else None,
     )
 
 

@@ -32,10 +32,13 @@ def dataset_specs(
     obstacle: str = "small",
     network: str = "auto",
     population: str = "thesis",
+    way: int = 0,
 ) -> list[TrialSpec]:
     """One spec per (user, object, task, repetition); trial i of the list gets seed ``seed + i``.
     ``network``: what evaluates a model's network (:attr:`TrialSpec.network <coassist.sim.trial_runner.TrialSpec>`).
     ``population``, ``population_seed``: who the users are (:mod:`coassist.scenario.populations`).
+    ``way``: the way round every trial's operator is asked to take (:class:`~coassist.sim.trial_runner.TrialSpec`'s;
+    0: their own choice).
 
     Every trial has its own seed, so two datasets with different ``seed`` share no
     trial as long as the seed ranges do not overlap (a 60-trial dataset uses seed … seed+59).
@@ -63,6 +66,7 @@ def dataset_specs(
                             obstacle=obstacle,
                             network=network,
                             population=population,
+                            way=way,
                         )
                     )
     return specs
@@ -161,6 +165,7 @@ def collect_dataset(
         f"users={sorted({s.user for s in specs})} tasks={sorted({s.task for s in specs})} "
         f"objects={sorted({s.object for s in specs})} seeds {specs[0].seed}..{specs[-1].seed}"
         + ("" if s0.population == "thesis" else f" population={s0.population} (seed {s0.population_seed})")
+        + ("" if not s0.way else f" asked to go round on the {'left' if s0.way > 0 else 'right'}")
     )
     dataset_id = dataset_id or out.name
     # What is collected, so that a re-run continues only the same collection.
@@ -224,6 +229,8 @@ def spec_key(spec: TrialSpec) -> dict:
     out = asdict(spec)
     if out["population"] == "thesis":
         del out["population"]
+    if not out["way"]:  # the operator's own choice: keyed as before ways could be asked for
+        del out["way"]
     return out
 
 

@@ -84,7 +84,8 @@ from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.wrench import WrenchPipeline
 from coassist.scenario.intent_registry import INTENT_SOURCES, shared_intent_source
 from coassist.scenario.objects import CarriedObject, ForceSensor, get_object
-from coassist.scenario.operator import OperatorProfile
+from coassist.scenario.operator import OperatorProfile, asked_to_go
+from coassist.scenario.path_model import ASKED_WAY, check_way
 from coassist.scenario.populations import POPULATIONS, population_profile
 from coassist.scenario.reference_intents import NominalIntent
 from coassist.scenario.tasks import OBSTACLES, TASKS, Task, task_for_seed
@@ -175,10 +176,16 @@ def build_trial(
     dwell: float = DWELL,
     time_limit: float | None = None,
     preset_name: str | None = None,
+    asked_way: int = 0,
 ) -> Episode:
     """:func:`run_trial`'s trial built, not run (same parameters): the
     :class:`~coassist.runtime.episode.Episode` of the point-mass world, for
-    :meth:`~coassist.runtime.episode.Episode.run` or :func:`~coassist.runtime.batched_loops.run_loops`."""
+    :meth:`~coassist.runtime.episode.Episode.run` or :func:`~coassist.runtime.batched_loops.run_loops`.
+
+    ``asked_way``: +1 / −1, the operator is asked to go round the obstacle on the left / right of the plan in this
+    trial (a calibration that asks for a way shown too seldom; the operator's side draw is forced, everything else
+    drawn as without it, and the trial's meta records it under :data:`~coassist.scenario.path_model.ASKED_WAY`);
+    0: the operator chooses (their ``left_preference``)."""
     if not isinstance(task, Task):
         raise ValueError(f"task must be a Task, got {type(task).__name__}")
     if not isinstance(operator, OperatorProfile):
@@ -186,6 +193,7 @@ def build_trial(
     if not isinstance(obj, CarriedObject):
         raise ValueError(f"obj must be a CarriedObject, got {type(obj).__name__}")
     seed = check_int(seed, "seed", 0)
+    asked_way = check_way(asked_way, "asked_way")
     sensor = ForceSensor() if sensor is None else sensor
     model: ImpedanceModel = controller.model
     _diag2(model.M, "M")
@@ -200,7 +208,7 @@ def build_trial(
         raise ValueError(f"intent source horizon ({Hs}) must be >= the controller's ({H})")
     n_max = episode_ticks(task, dt, time_limit)
     ref_abs = plan_grid(task, dt, n_max, Hs)
-    world = PointMassWorld(task, operator, obj, model, seed, n_max, ref_abs.shape[0], sensor)
+    world = PointMassWorld(task, asked_to_go(operator, asked_way), obj, model, seed, n_max, ref_abs.shape[0], sensor)
     intent = world.intent
     x0 = np.array(task.start, dtype=float)
     return build_episode(
@@ -224,6 +232,7 @@ def build_trial(
             "object": obj.to_extra(),
             "operator": operator.to_extra(),
             "intent_side": intent.side,
+            **({ASKED_WAY: asked_way} if asked_way else {}),
             "intent_amplitude": intent.amplitude,
             "intent_pace": intent.pace,
             "intent_end_time": intent.end_time,
@@ -258,6 +267,8 @@ class TrialSpec:
     population_seed : which population the user is drawn from.
     population : who the operators are, one of :data:`~coassist.scenario.populations.POPULATIONS`
     ("thesis": :func:`~coassist.scenario.operator.operator_profile`, the main job's).
+    way : the way round the operator is asked to take (:func:`build_trial`'s ``asked_way``): +1 left, −1 right,
+    0 their own choice.
     obstacle : a name of :data:`coassist.scenario.tasks.OBSTACLES` ("small": the evaluation's box).
     network : what evaluates a model path's network, one of :data:`~coassist.interfaces.NETWORK_BACKENDS`
     ("auto": ONNX Runtime where installed, else torch; they agree to float32 rounding).
@@ -274,8 +285,10 @@ class TrialSpec:
     obstacle: str = "small"
     network: str = "auto"
     population: str = "thesis"
+    way: int = 0
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "way", check_way(self.way, "TrialSpec.way"))
         if self.population not in POPULATIONS:
             raise ValueError(f"TrialSpec.population must be one of {POPULATIONS}, got {self.population!r}")
         if self.network not in NETWORK_BACKENDS:
@@ -333,6 +346,7 @@ def spec_episode(spec: TrialSpec, _controllers: dict | None = None, _sources: di
         source,
         spec.seed,
         preset_name=preset.name,
+        asked_way=spec.way,
     )
 
 
