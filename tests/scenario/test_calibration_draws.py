@@ -134,3 +134,12 @@ def test_the_report_says_where_the_calibrations_asked(tmp_path):
     models = {"person": str(asked), MUJOCO_PERSON: str(chosen), "ridge": str(tmp_path / "ridge")}
     assert asked_in_calibrations(models) == {"point-mass world": (1, 2, 1)}
     assert asked_in_calibrations({"person": str(tmp_path / "gone")}) == {}
+    # and the ablation's section says it, for the world whose calibrations asked
+    from coassist.experiments.ablation_cells import AblationResult
+    from coassist.experiments.ablation_report import ablation_section
+
+    section = ablation_section(AblationResult({}, {}, {}, models, {}, "default", {}))
+    (said,) = [p for p in section.paragraphs if "asked" in p]
+    assert said.endswith("point-mass world, 1 of 1 (operator, calibration) fits, 2 trials asked.")
+    quiet = ablation_section(AblationResult({}, {}, {}, {"person": str(chosen)}, {}, "default", {}))
+    assert not [p for p in quiet.paragraphs if "asked" in p]

@@ -89,6 +89,7 @@ seed = 3
 
 [calibration]
 trials = {trials}
+asked = {asked}
 
 [[condition]]
 name = "mg"
@@ -111,12 +112,12 @@ between_conditions = {rest}
 """
 
 
-def calibrated_plan(folder: Path, *, trials: int = 3, dwell: float = 1.0, rest: float = 0.0) -> Path:
-    """MG against the participant's own person model after a calibration block of ``trials``, written into
-    ``folder``; returns the file."""
+def calibrated_plan(folder: Path, *, trials: int = 3, dwell: float = 1.0, rest: float = 0.0, asked: int = 0) -> Path:
+    """MG against the participant's own person model after a calibration block of ``trials`` (then up to ``asked``
+    trials asking for a way shown too seldom), written into ``folder``; returns the file."""
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "plan.toml"
-    path.write_text(CALIBRATED.format(trials=trials, dwell=dwell, rest=rest))
+    path.write_text(CALIBRATED.format(trials=trials, dwell=dwell, rest=rest, asked=asked))
     return path
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from coassist.config import CONTROL_PRESETS
+from coassist.scenario.operator import asked_to_go
 from coassist.scenario.tasks import task_for_seed
 from coassist.study.participants import hand_path, simulated_answers, simulated_profile
 from coassist.study.plan import plan_from_text
@@ -42,9 +43,9 @@ class OperatorPath:
             dt = float(CONTROL_PRESETS.lookup(tp.preset).impedance.dt)
             task = task_for_seed(step["task"], step["seed"], obstacle=tp.obstacle, motion_time=tp.motion_time)
             self.dt = dt
-            self._paths[k] = hand_path(
-                task, step["seed"], simulated_profile(order["number"], self.plan.seed), dt, 20000
-            )
+            # a calibration trial that asks for a way round: the page says which; the simulated participant takes it
+            profile = asked_to_go(simulated_profile(order["number"], self.plan.seed), int(step.get("way", 0)))
+            self._paths[k] = hand_path(task, step["seed"], profile, dt, 20000)
         path = self._paths[k]
         i = min(len(path) - 1, max(0, int(round(t / self.dt))))
         return float(path[i, 0]), float(path[i, 1])

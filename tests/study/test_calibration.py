@@ -47,7 +47,7 @@ def _sha(path: Path) -> str:
 
 
 def _plan(**fmt) -> str:
-    return CALIBRATED_PLAN.format(**{"trials": 3, "dwell": 1.0, "rest": 0.0, **fmt})
+    return CALIBRATED_PLAN.format(**{"trials": 3, "dwell": 1.0, "rest": 0.0, "asked": 0, **fmt})
 
 
 # ----------------------------------------------------------------------------- the plan
@@ -413,3 +413,58 @@ def test_an_iterative_study_refits_the_person_model_between_rounds(tmp_path):
     assert used == {"P0": ["round-0"], "P1": ["round-1"], "P2": []}  # P2 is fitted after the last round
     (check,) = _lines(pf, "check")
     assert np.isfinite(check["e_rms"]) and np.isfinite(check["e_rms_before"])  # the person model's predictions logged
+
+
+def test_a_calibration_asks_for_a_way_shown_too_seldom_then_fits_again(tmp_path):
+    """[calibration] asked: after P0's fit, a way round shown in one or two of a task's paths is asked for (the page
+    says which way; the simulated participant goes that way), within the budget, then P0 is fitted again from both
+    blocks: the asked paths join that way's, the prior stays the chosen trials'. A participant whose ways were all
+    shown often enough is asked nothing; the finished folders pass the audit of a resumed run."""
+    from coassist.experiments.person_calibration import ways_to_ask
+    from coassist.scenario.path_model import ASKED_WAY
+
+    study = init_study(calibrated_plan(tmp_path / "plans", asked=2), tmp_path / "study")
+    asked_by = {}
+    for pid in ("S01", "S02"):
+        with ParticipantRun(study, pid, simulate=True) as run:
+            run.run()
+        pf = study.participant(pid)
+        fits = [r for r in pf.progress() if r["kind"] == "fit"]
+        sides = fits[0]["paths"]["curved"]["sides"]
+        asks = [("curved", way, n) for way, n in ways_to_ask(np.asarray(sides), 2)]
+        assert [tuple(a) for a in fits[0].get("asks", [])] == asks
+        steps = json.loads((pf.folder / "order.json").read_text())["steps"]
+        more = [s for s in steps if s["kind"] == "trial" and s["block"] == "calibration-asked"]
+        want = [(way, "manual-probe", "nominal") for _, way, n in asks for _ in range(n)]
+        assert [(s["way"], s["controller"], s["intent"]) for s in more] == want
+        base = trial_seed_base(study.plan(), pf.order()["number"])
+        assert [s["seed"] for s in more] == [base + 8000 + 50 + j for j in range(len(more))]
+        if not asks:
+            assert len(fits) == 1 and not (pf.folder / "calibration-asked").exists()
+            continue
+        asked_by[pid] = asks
+        trials = read_dataset(pf.block("calibration-asked")).trials
+        assert [t.meta.extra[ASKED_WAY] for t in trials] == [w for w, _, _ in want]
+        again = fits[1]
+        assert again["model"] == "P0" and again["blocks"] == ["calibration", "calibration-asked"]
+        assert again["paths"]["curved"]["sides"][: len(sides)] == sides
+        # the simulated participant went the way asked: the fit reads it off their paths, told nothing
+        assert again["paths"]["curved"]["sides"][len(sides) :] == [w for w, _, _ in want]
+        model = read_person_model(pf.folder / "models" / "P0" / "curved").paths[pid]
+        assert model.asked.tolist() == [False] * len(sides) + [True] * len(more)
+        chosen = np.asarray(sides)
+        assert model.ways() == pytest.approx({w: (int(np.sum(chosen == w)) + 1) / (len(chosen) + 2) for w in (1, -1)})
+        # the calibrated condition ran with the refitted model (its hash)
+        lines = {r["block"]: r for r in pf.progress() if r["kind"] == "trial"}
+        assert lines["person"]["model_sha256"] == again["sha256"]["curved"]
+        with ParticipantRun(study, pid, simulate=True) as run:  # the audit passes; nothing runs again
+            run.run()
+        assert len(pf.progress()) == len(steps)
+    assert asked_by  # at least one of the two was asked for a way (seed 3: S02, the left way twice)
+
+
+def test_a_calibration_cannot_ask_beyond_ten_trials():
+    plan = plan_from_text(_plan(trials=8, asked=2), ".")
+    assert (plan.calibration.trials, plan.calibration.asked) == (8, 2)
+    with pytest.raises(PlanError, match=r"calibration.asked must be an integer in 0 … 2"):
+        plan_from_text(_plan(trials=8, asked=3), ".")

@@ -189,10 +189,14 @@ def ablation_section(result: AblationResult) -> Section:
     asked = asked_in_calibrations(result.models)
     if asked:
         s.paragraphs.append(
-            "Each calibration then asked an operator for a few more trials going a way round their probe trials "
-            f"showed in fewer than {FEW_PATHS} (reproduce.person_calibration_asked; their paths join that way's, the "
-            "ways' prior stays the operator's own choices): "
-            + "; ".join(f"{where}: {n} of {fits} fits, {paths} trials" for where, (n, paths, fits) in asked.items())
+            "Where an operator's probe trials showed a way round in fewer than "
+            f"{FEW_PATHS} of them, their calibration asked them for a few more trials going that way "
+            "(reproduce.person_calibration_asked; the paths join that way's, the ways' prior stays the operator's own "
+            "choices): "
+            + "; ".join(
+                f"{where}, {n} of {fits} (operator, calibration) fits, {paths} trials asked"
+                for where, (n, paths, fits) in asked.items()
+            )
             + "."
         )
     if MUJOCO_PERSON in result.models:

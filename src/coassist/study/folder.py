@@ -614,9 +614,11 @@ class ParticipantFolder:
         self._audit_person_models(done)
 
     def _audit_person_models(self, done: list[dict[str, Any]]) -> None:
-        """Every person model the log records as fitted is on disk as it was (its files' SHA-256)."""
+        """Every person model the log records as fitted is on disk as it was (its files' SHA-256): each model's last
+        fit (a calibration that asked for more trials fits P0 again, over the first fit's files)."""
         from coassist.scenario.person_model import PERSON_MODEL_FILE
 
+        last = {rec.get("model"): i for i, rec in enumerate(done) if rec["kind"] == "fit" and not rec.get("failed")}
         for i, rec in enumerate(done):
             if rec["kind"] != "fit" or rec.get("failed"):
                 continue
@@ -625,6 +627,8 @@ class ParticipantFolder:
                 raise StudyFolderError(
                     f"{self.progress_file}: line {i + 1} is not a person model's record (edited by hand?); {_RESTORE}"
                 )
+            if last[rec["model"]] != i:  # fitted again later: its files are the later fit's
+                continue
             for task, digest in digests.items():
                 path = self.folder / "models" / rec["model"] / str(task) / PERSON_MODEL_FILE
                 try:

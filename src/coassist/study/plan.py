@@ -43,6 +43,7 @@ and ``[training]``, the options of ``coassist train`` the study's models are tra
 
     [calibration]                  # manual guidance with small known pushes (controller manual-probe)
     trials = 9                     # 1 … 10 (default 3 a task); then the participant's person model is fitted
+    asked = 1                      # then up to this many trials asking for a way shown too seldom (default 0)
 
 after which a condition's ``intent = "calibrated"`` is that participant's own person model
 (:mod:`coassist.study.calibration`); an iterative study may refit it between rounds
@@ -267,9 +268,16 @@ class CalibrationPlan:
     manual guidance with the calibration probe (controller ``manual-probe``: small known pushes that
     measure the person's arm), following the plan's tasks in turn; then the participant's person model
     is fitted from them (:mod:`coassist.study.calibration`). Every task needs one trial at least; a plan
-    that does not say gets :func:`default_calibration_trials`."""
+    that does not say gets :func:`default_calibration_trials`.
+
+    ``asked``: then, where the fit shows a way round the obstacle in fewer than
+    :data:`~coassist.scenario.path_model.FEW_PATHS` of a task's paths (but once at least), up to this many more
+    trials in which the page asks the participant to go round that way, and the person model is fitted again from
+    all of them (the asked trials' paths join that way's, its prior stays the participant's own choices;
+    :func:`~coassist.experiments.person_calibration.ways_to_ask`). At most ``10 − trials``; 0 (the default): none."""
 
     trials: int
+    asked: int = 0
 
 
 #: Calibration paths a task when the plan does not say: with two (the small obstacle moving between trials) the
@@ -572,7 +580,8 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
                 f"calibration trial (they follow the tasks in turn): the person model would know no path there; give "
                 f"at least {need}"
             )
-        calibration = CalibrationPlan(n)
+        asked = _int(cal.get("asked", 0), "calibration.asked", 0, CALIBRATION_TRIALS_MAX - n)
+        calibration = CalibrationPlan(n, asked)
     it = _table(data, "iterative", tuple(IterativePlan.__dataclass_fields__)) if protocol == "iterative" else {}
     iterative_source = _choice(it.get("source", "network"), "iterative.source", ITERATIVE_SOURCES, "source")
     trains = protocol in ("transfer", "online") or (protocol == "iterative" and iterative_source == "network")

@@ -415,6 +415,9 @@ def preflight(plan: StudyPlan) -> SessionEstimate:
                 wait += waited
                 expected += waited
                 longest += waited
+    if plan.calibration is not None and plan.calibration.asked:
+        # the trials a calibration may ask for after its fit, and the second fit: not in the steps until then
+        longest += plan.calibration.asked * limit + FIT_SECONDS
     estimate = SessionEstimate(
         expected_s=expected,
         max_s=longest,

@@ -3,11 +3,11 @@
 A step is a small JSON object (so the order is recorded in the study folder as it is, and a
 resumed run follows the record, not a recomputation)::
 
-    trial          {block, index, condition, label, position, controller, intent, task, seed, practice}
+    trial          {block, index, condition, label, position, controller, intent, task, seed, practice[, way]}
     questionnaire  {block, index, condition, label}      after a condition (or a round)
     rest           {block, index, seconds, why}           the participant rests (a model may train meanwhile)
     train          {block: "models", index, model, data, init, wait}   a model trained in a background process
-    fit            {block: "models", index, model, data, base, attempt}   a person model fitted (in the background)
+    fit            {block: "models", index, model, data, base, attempt[, asked]}   a person model fitted (in the background)
     check          {block, index, round}                  Algorithm 4.1's stop criterion (eq. 4.13)
     freeze         {block: "models", index, model}        online: the last online model becomes a condition
 
@@ -22,7 +22,10 @@ block ``calibration`` under ``manual-probe`` (the plan's tasks in turn), then th
 (``data`` the block, ``base`` None) and a rest. A condition whose ``intent`` is ``"calibrated"``
 runs with ``person:P0``. A calibration that fails (:mod:`coassist.study.calibration`) is run
 again: the runner inserts :func:`calibration_steps` of attempt a + 1 (block ``calibration-<a+1>``)
-after the failed fit.
+after the failed fit. With ``[calibration] asked`` > 0, a fit that shows a way round the obstacle in
+fewer than three of a task's paths (but once at least) is followed by :func:`asked_steps`: trials of
+block ``<block>-asked`` whose ``way`` (+1 left, −1 right) the page asks the participant to take, then
+P0 fitted again from both blocks (the asked trials' paths join that way's, not its prior).
 
 Protocols (thesis §5.2.3 and Algorithms 4.1 and 4.2):
 
@@ -51,7 +54,7 @@ Protocols (thesis §5.2.3 and Algorithms 4.1 and 4.2):
 Seeds: participant number p gets ``base = 10⁶·seed + 10⁴·p``; measured comparison trial j
 ``base + j``, practice trial i ``base + 5000 + i``, iterative round k trial j
 ``base + k·trials_per_round + j``, collection trial j (transfer, online) ``base + 2000 + j``,
-calibration trial j of attempt a ``base + 8000 + 100·(a − 1) + j``.
+calibration trial j of attempt a ``base + 8000 + 100·(a − 1) + j``, its asked trial j ``… + 50 + j``.
 """
 
 from __future__ import annotations
@@ -62,8 +65,10 @@ from coassist.study.design import participant_order
 from coassist.study.plan import CALIBRATED, Condition, StudyPlan
 
 __all__ = [
+    "ASKED_SEED_OFFSET",
     "CALIBRATION_BLOCK",
     "PROBE_CONTROLLER",
+    "asked_steps",
     "calibration_steps",
     "condition_names",
     "participant_steps",
@@ -76,6 +81,8 @@ CALIBRATION_BLOCK = "calibration"
 PROBE_CONTROLLER = "manual-probe"
 #: The person model the calibration block fits.
 CALIBRATED_MODEL = "P0"
+#: The seeds of an attempt's asked trials start this far past its calibration trials' (at most 10 of those).
+ASKED_SEED_OFFSET = 50
 
 
 def person_ref(model: str = CALIBRATED_MODEL) -> str:
@@ -196,6 +203,49 @@ def calibration_steps(plan: StudyPlan, number: int, attempt: int) -> list[dict[s
     )
     index = CALIBRATED_MODEL if attempt == 1 else f"{CALIBRATED_MODEL}-{attempt}"
     _add(steps, "fit", block="models", index=index, model=CALIBRATED_MODEL, data=[block], base=None, attempt=attempt)
+    return steps
+
+
+def asked_steps(
+    plan: StudyPlan, number: int, attempt: int, block: str, asks: list[tuple[str, int, int]]
+) -> list[dict[str, Any]]:
+    """The trials a calibration asks for once its fit shows a way round too seldom (module docstring): for each
+    (task, way, count) of ``asks``, ``count`` trials of block ``<block>-asked`` under the probe, the participant asked
+    to go round the obstacle ``way`` (+1 left, −1 right: the step's ``way``); then P0 fitted again from ``block`` and
+    them (``asked``: no second asking)."""
+    seed0 = trial_seed_base(plan, number) + 8000 + 100 * (attempt - 1) + ASKED_SEED_OFFSET
+    steps: list[dict[str, Any]] = []
+    more = f"{block}-asked"
+    for task, way, count in asks:
+        for _ in range(count):
+            j = sum(1 for s in steps if s["kind"] == "trial")
+            _add(
+                steps,
+                "trial",
+                block=more,
+                index=j,
+                condition=CALIBRATION_BLOCK,
+                label=None,
+                position=0,
+                controller=PROBE_CONTROLLER,
+                intent="nominal",
+                task=task,
+                seed=seed0 + j,
+                practice=False,
+                way=way,
+            )
+    index = f"{CALIBRATED_MODEL}-asked" if attempt == 1 else f"{CALIBRATED_MODEL}-{attempt}-asked"
+    _add(
+        steps,
+        "fit",
+        block="models",
+        index=index,
+        model=CALIBRATED_MODEL,
+        data=[block, more],
+        base=None,
+        attempt=attempt,
+        asked=True,
+    )
     return steps
 
 

@@ -43,6 +43,7 @@ import numpy as np
 from coassist.data import append_to_dataset, read_dataset, write_dataset
 from coassist.data.datasets import MANIFEST_NAME, manifest_files
 from coassist.play.session import PlayConfig
+from coassist.scenario.path_model import ASKED_WAY
 from coassist.scenario.tasks import task_for_seed
 from coassist.study.calibration import CalibrationFailed, FitJob, fit_job, model_hashes, person_model_folder
 from coassist.study.folder import (
@@ -55,7 +56,7 @@ from coassist.study.folder import (
     utc_now,
 )
 from coassist.study.plan import is_real_arm
-from coassist.study.protocols import CALIBRATION_BLOCK, calibration_steps, participant_steps
+from coassist.study.protocols import CALIBRATION_BLOCK, asked_steps, calibration_steps, participant_steps
 from coassist.study.questionnaires import form_for
 from coassist.study.training import BackgroundTraining, TrainJob, model_ready, train_command
 
@@ -272,6 +273,7 @@ class ParticipantRun:
     # trial ------------------------------------------------------------------------------------
     def _trial(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
         from coassist.runtime.episode import episode_ticks
+        from coassist.scenario.operator import asked_to_go
         from coassist.study.participants import OperatorHand, simulated_profile
         from coassist.study.session import TrialSetup
 
@@ -288,12 +290,13 @@ class ParticipantRun:
         )
         hand = None
         operator = self.record["number"] if self.simulate else None
+        way = int(step.get("way", 0))  # a calibration trial that asks for a way round
         if operator is not None and self.page is None and plan.world == "play":
             dt = float(self.session.preset.impedance.dt)
             hand = OperatorHand(
                 task,
                 step["seed"],
-                simulated_profile(operator, plan.seed, plan.population),
+                asked_to_go(simulated_profile(operator, plan.seed, plan.population), way),
                 dt,
                 episode_ticks(task, dt, tp.time_limit) + 1,
             )
@@ -311,6 +314,7 @@ class ParticipantRun:
             "study_operator": None
             if operator is None
             else simulated_profile(operator, plan.seed, plan.population).name,
+            **({ASKED_WAY: way} if way else {}),
         }
         setup = TrialSetup(
             step=k,
@@ -322,6 +326,7 @@ class ParticipantRun:
             meta=meta,
             operator=operator if self.page is None else None,
             hand=hand,
+            way=way,
         )
         what = "practice trial" if step["practice"] else "trial"
         label = f"condition {step['label']}" if step["label"] else step["block"].replace("-", " ")
@@ -332,6 +337,12 @@ class ParticipantRun:
                 f"warm-up trial {step['index'] + 1} of {n} — press Start, then follow the plan, avoid the box and hold "
                 "in the target; you will feel small pushes now and then: carry on as you would"
             )
+            if way:
+                text = (
+                    f"warm-up trial {step['index'] + 1} of {n} — this time go round the box on its "
+                    f"{'left' if way > 0 else 'right'} (seen along the path); press Start, then follow the plan and "
+                    "hold in the target; you will feel small pushes now and then"
+                )
         self.session.view = self._view(k, step, text=text)
         trial = self.session.run(setup, wait_for_page=self.page is not None)
         folder = self.folder.block(step["block"])
@@ -430,7 +441,36 @@ class ParticipantRun:
             + ", ".join(f"{len(v)} {t} trials" for t, v in record["demonstrations"].items())
             + f"; arm K = {arm['stiffness']:.0f} N/m, C = {arm['damping']:.1f} N·s/m ({how})"
         )
-        return {"attempt": step["attempt"], **record}
+        out = {"attempt": step["attempt"], **record}
+        asks = self._asks(step, record)
+        if asks:
+            more = asked_steps(self.plan, self.record["number"], int(step["attempt"]), step["data"][0], asks)
+            self.steps = self.folder.insert_steps(k, more)
+            self.order["steps"] = self.steps
+            names = {1: "left", -1: "right"}
+            self.say(
+                f"{self.id}: asking for "
+                + ", ".join(f"{n} more {task} trial(s) going {names[way]}" for task, way, n in asks)
+                + " (a way shown too seldom), then fitting again"
+            )
+            out["asks"] = [list(a) for a in asks]
+        return out
+
+    def _asks(self, step: dict[str, Any], record: dict[str, Any]) -> list[tuple[str, int, int]]:
+        """What the calibration asks for after the fit ``record`` of ``step`` (``[calibration] asked``): per task, the
+        way(s) its paths show too seldom (:func:`~coassist.experiments.person_calibration.ways_to_ask`) within the
+        plan's budget; none after an iterative refit or a fit that already followed an asking."""
+        from coassist.experiments.person_calibration import ways_to_ask
+
+        cal = self.plan.calibration
+        if cal is None or not cal.asked or step.get("base") is not None or step.get("asked"):
+            return []
+        room, asks = cal.asked, []
+        for task in record["tasks"]:
+            for way, n in ways_to_ask(np.asarray(record["paths"][task]["sides"]), room):
+                asks.append((task, way, n))
+                room -= n
+        return asks
 
     def _fit_failed(self, k: int, step: dict[str, Any], reason: str) -> dict[str, Any]:
         """Record a failed fit; a calibration's is run again (its block inserted after this step)."""

@@ -44,6 +44,8 @@ class TrialSetup:
     intent : "nominal" or a model folder.  task : the trial's task (seed ``seed``).
     meta : study fields added to the trial's ``meta.extra`` (condition, label, block, …).
     operator : the simulated operator's index (None: a person, or the page's pointer).
+    way : the way round the obstacle the participant is asked to take (+1 left, −1 right; 0 their own choice): an
+    arm world's simulated operator takes it (``DriveConfig.way``), and the trial records it.
     """
 
     step: int
@@ -55,6 +57,7 @@ class TrialSetup:
     meta: dict[str, Any] = field(default_factory=dict)
     operator: int | None = None
     hand: Any = None  # the page world's simulated hand (OperatorHand); None: the page's pointer
+    way: int = 0
 
 
 class _Aborted(CoassistError, RuntimeError):
@@ -217,6 +220,7 @@ class StudySession(PlaySession):
             seed=setup.seed,
             intent=setup.intent,
             user=setup.operator or 0,
+            way=setup.way,
             realtime_intent=False if simulated else None,
             **self.drive_options,
         )
