@@ -468,3 +468,11 @@ def test_a_calibration_cannot_ask_beyond_ten_trials():
     assert (plan.calibration.trials, plan.calibration.asked) == (8, 2)
     with pytest.raises(PlanError, match=r"calibration.asked must be an integer in 0 … 2"):
         plan_from_text(_plan(trials=8, asked=3), ".")
+    # the session's longest estimate counts the trials it may ask for and the fit after them; the expected one not
+    from coassist.study.preflight import FIT_SECONDS, preflight
+
+    none, one, two = (preflight(plan_from_text(_plan(trials=8, asked=n), ".")) for n in (0, 1, 2))
+    assert two.expected_s == none.expected_s and two.n_trials == none.n_trials
+    limit = one.max_s - none.max_s - FIT_SECONDS  # one trial run to its time limit
+    assert limit >= plan.trials.motion_time + plan.trials.dwell
+    assert two.max_s - none.max_s == pytest.approx(2 * limit + FIT_SECONDS)
