@@ -97,7 +97,10 @@ def test_a_plan_that_does_not_say_calibrates_three_paths_a_task_at_most_ten_tria
         (lambda t: t.replace("trials = 3", 'trials = "3"'), "calibration.trials"),
         (lambda t: t.replace("trials = 3", "trials = 2.5"), "calibration.trials"),
         (lambda t: t.replace("trials = 3", "trails = 3"), "calibration.trails"),
-        (lambda t: t.replace("[calibration]\ntrials = 3\n", ""), "condition[1].intent"),
+        (lambda t: t.replace("[calibration]\ntrials = 3\nasked = 0\n", ""), "condition[1].intent"),
+        (lambda t: t.replace("asked = 0", "asked = -1"), "calibration.asked"),
+        (lambda t: t.replace("asked = 0", "asked = 8"), "calibration.asked"),
+        (lambda t: t.replace("asked = 0", "asked = true"), "calibration.asked"),
         (
             lambda t: t.replace("trials = 3", "trials = 1").replace('["curved"]', '["linear", "curved"]'),
             "calibration.trials",
