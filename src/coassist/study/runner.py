@@ -339,9 +339,9 @@ class ParticipantRun:
             )
             if way:
                 text = (
-                    f"warm-up trial {step['index'] + 1} of {n} — this time go round the box on its "
-                    f"{'left' if way > 0 else 'right'} (seen along the path); press Start, then follow the plan and "
-                    "hold in the target; you will feel small pushes now and then"
+                    f"warm-up trial {step['index'] + 1} of {n} — this time go round the box on the "
+                    f"{'left' if way > 0 else 'right'} side of the path (seen along it); press Start, then follow the "
+                    "plan and hold in the target; you will feel small pushes now and then"
                 )
         self.session.view = self._view(k, step, text=text)
         trial = self.session.run(setup, wait_for_page=self.page is not None)
