@@ -37,7 +37,8 @@ def calibrate(
     Prints one line per person: the arm (measured by the probe, or assumed), the
     demonstrations per way round, a way shown in too few trials, the fit's time; draws their
     paths and arm beside the model (person-model.png). Drive, ros2 and play take the folder
-    as --intent FOLDER.
+    as --intent FOLDER. Trials recorded with --ask-way add their path to that way, not to the
+    person's preference between the ways.
     """
     from coassist.scenario.person_model import PERSON_MODEL_FILE
 

@@ -128,7 +128,7 @@ def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "
     the trial of seed s meets draw s mod ``draws``), so that an evaluation's intervals carry the calibration's
     own variance."""
     from coassist.scenario.calibration_draws import MAX_DRAWS, write_draws
-    from coassist.scenario.person_model import write_person_model
+    from coassist.scenario.person_model import fit_people, write_person_model
 
     if not 1 <= int(draws) <= MAX_DRAWS:
         raise ValueError(f"draws must be 1 to {MAX_DRAWS}, got {draws!r}")
@@ -139,16 +139,26 @@ def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "
             f"{len(options['users'])} operators × {options['trials']} calibration trials do not fit in a draw's "
             f"{DRAW_SEED_STEP} seeds"
         )
-    if draws == 1:
-        _, ds = ws.collect(first, **options)
-        fits = _asked_ways_added(ws, first, options, ds.trials)
-        return str(write_person_model(ws.out / "models" / f"person{_suffix(population)}", fits))
-    folder = ws.out / "models" / f"person{_suffix(population)}-draws"
-    names = []
-    for k, (name, options) in enumerate(collections.items()):
+    # each draw's probe trials fitted, and the trials it asks for put on the pool at once (they run while the next
+    # draws are fitted); then each draw fitted again with its asked trials
+    drawn = []
+    for name, options in collections.items():
         _, ds = ws.collect(name, **options)
-        names.append(f"draw-{k}")
-        write_person_model(folder / names[-1], _asked_ways_added(ws, name, options, ds.trials))
+        fits = fit_people(ds.trials)
+        asked = _asked_collections(ws, name, options, fits)
+        for more, more_options in asked.items():
+            ws.prefetch(more, **more_options)
+        drawn.append((ds.trials, fits, asked))
+    fitted = []
+    for trials, fits, asked in drawn:
+        added = [t for more, more_options in asked.items() for t in ws.collect(more, **more_options)[1].trials]
+        fitted.append(fit_people(list(trials) + added) if added else fits)
+    if draws == 1:
+        return str(write_person_model(ws.out / "models" / f"person{_suffix(population)}", fitted[0]))
+    folder = ws.out / "models" / f"person{_suffix(population)}-draws"
+    names = [f"draw-{k}" for k in range(len(fitted))]
+    for name, fits in zip(names, fitted):
+        write_person_model(folder / name, fits)
     return str(write_draws(folder, names))
 
 
@@ -159,19 +169,20 @@ def asked_way_seed(first: int, users: int, trials: int, position: int, way: int,
     return first + users * trials + (2 * position + (0 if way > 0 else 1)) * most
 
 
-def _asked_ways_added(ws: Workspace, name: str, options: Mapping[str, Any], trials: list) -> dict:
-    """The people's fits (:func:`~coassist.scenario.person_model.fit_people`) of a calibration's probe trials, after
-    it has asked each operator for up to ``reproduce.person_calibration_asked`` more trials going a way round shown too
-    seldom (:func:`~coassist.experiments.person_calibration.ways_to_ask`; collections ``<name>-ask-<user>-<way>``)."""
+def _asked_collections(
+    ws: Workspace, name: str, options: Mapping[str, Any], fits: Mapping[str, Any]
+) -> dict[str, dict[str, Any]]:
+    """The collections (name → :meth:`Workspace.collect` options) of the trials the calibration ``name`` (collected
+    with ``options``, its people's fits ``fits``) asks of each operator: up to ``reproduce.person_calibration_asked``
+    trials going a way round shown too seldom (:func:`~coassist.experiments.person_calibration.ways_to_ask`),
+    ``<name>-ask-<user>-<way>``; none where it asks for none."""
     from coassist.experiments.person_calibration import ways_to_ask
     from coassist.scenario.path_model import WAY_SIGNS
-    from coassist.scenario.person_model import fit_people
     from coassist.scenario.populations import population_profile
 
-    fits = fit_people(trials)
     most = ws.config.person_calibration_asked
     if not most:
-        return fits
+        return {}
     users = list(options["users"])
     last = asked_way_seed(options["seed"], len(users), options["trials"], len(users), 1, most)
     if last - options["seed"] > DRAW_SEED_STEP:
@@ -180,15 +191,19 @@ def _asked_ways_added(ws: Workspace, name: str, options: Mapping[str, Any], tria
             f"draw's {DRAW_SEED_STEP} seeds"
         )
     way_names = {sign: way for way, sign in WAY_SIGNS.items()}
-    added = []
+    out = {}
     for position, user in enumerate(users):
         who = population_profile(options["population"], user, 0).name
         for way, count in ways_to_ask(fits[who].paths.sides, most):
             seed = asked_way_seed(options["seed"], len(users), options["trials"], position, way, most)
-            asked = {**options, "users": (user,), "trials": count, "seed": seed, "way": way}
-            _, ds = ws.collect(f"{name}-ask-{user}-{way_names[way]}", **asked)
-            added += ds.trials
-    return fit_people(list(trials) + added) if added else fits
+            out[f"{name}-ask-{user}-{way_names[way]}"] = {
+                **options,
+                "users": (user,),
+                "trials": count,
+                "seed": seed,
+                "way": way,
+            }
+    return out
 
 
 def calibration_draw_options(
