@@ -117,3 +117,18 @@ def test_the_arm_asks_for_the_same_trials_as_the_point_mass_world(tmp_path):
             for i in range(2)
         ]
         assert got == want and len({c.seed for c in got} | {c.seed for c in probes}) == len(got) + len(probes)
+
+
+def test_the_asked_trials_seeds_follow_the_draws_own_trials_and_never_meet():
+    # hand-computed: three operators × eight trials from 1000 take 1000 … 1023; then each operator's left and right
+    # asks, two seeds each, in operator order
+    from coassist.experiments.source_training import asked_way_seed
+
+    assert [asked_way_seed(1000, 3, 8, p, w, 2) for p in range(3) for w in (1, -1)] == [
+        1024,
+        1026,
+        1028,
+        1030,
+        1032,
+        1034,
+    ]
