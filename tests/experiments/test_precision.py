@@ -54,7 +54,18 @@ def test_bad_requests_name_what_is_wrong(tmp_path):
     for bad in (0, 2.5):
         with pytest.raises(ValueError, match="probe_trials must be an integer >= 1"):
             compare_intents({"p": "person"}, tmp_path, probe_trials=bad)
+    for bad in (-1, 9, 1.5):
+        with pytest.raises(ValueError, match="person_calibration_asked must be an integer 0 to 8"):
+            compare_intents({"p": "person"}, tmp_path, asked_trials=bad)
     assert not any(tmp_path.iterdir())  # refused before anything ran
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+
+    res = CliRunner().invoke(
+        app, ["compare-intents", "--source", "p=person", "--out", str(tmp_path / "x"), "--asked-trials", "9"]
+    )
+    assert res.exit_code == 2 and "--asked-trials must be 0 to 8, got 9" in res.output
 
 
 def test_the_default_source_needs_less_force_and_overshoots_less_than_mg(tmp_path):

@@ -126,6 +126,10 @@ def compare_intents(
     probe_trials: int | None = typer.Option(
         None, help="Probe trials per operator and calibration draw for person (default: the main job's)."
     ),
+    asked_trials: int | None = typer.Option(
+        None,
+        help="Then the most trials each calibration asks of an operator for a way round its probe trials showed too seldom (0: none; default: the main job's).",
+    ),
 ) -> None:
     """Intent sources in the loop on validation seeds, paired against MG and the oracle (docs/precision.md)."""
     import json
@@ -159,6 +163,8 @@ def compare_intents(
     for value, option in ((trials, "--trials"), (workers, "--workers"), (probe_trials, "--probe-trials")):
         if value is not None and value < 1:
             fail(f"{option} must be >= 1, got {value}", 2)
+    if asked_trials is not None and not 0 <= asked_trials <= 8:
+        fail(f"--asked-trials must be 0 to 8, got {asked_trials}", 2)
     out = folder_out(out, "--out")
     try:
         result = run(
@@ -171,6 +177,7 @@ def compare_intents(
             population=population,
             users=operators,
             probe_trials=probe_trials,
+            asked_trials=asked_trials,
         )
     except ValueError as exc:
         fail(str(exc), 2)
