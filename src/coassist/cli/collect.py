@@ -15,6 +15,7 @@ from coassist.cli._common import (
     int_list,
     lookup,
     name_list,
+    way_option,
     wrote,
 )
 from coassist.cli._live import FOXGLOVE_PORT, LIVE_HELP, close_live, open_live
@@ -107,7 +108,6 @@ def collect(
     from coassist.config import CONTROL_PRESETS
     from coassist.control.presets import CONTROLLERS
     from coassist.scenario import OBJECTS, OBSTACLES, POPULATIONS
-    from coassist.scenario.path_model import WAY_SIGNS
     from coassist.scenario.tasks import TASKS
     from coassist.sim.collect import collect_dataset
 
@@ -115,8 +115,7 @@ def collect(
     choose(population, POPULATIONS, "--population", "population")
     choose(obstacle, OBSTACLES, "--obstacle", "obstacle")
     choose(network, NETWORK_BACKENDS, "--network", "network backend")
-    if ask_way is not None:
-        choose(ask_way, tuple(WAY_SIGNS), "--ask-way", "way round")
+    way = way_option(ask_way)
     lookup(CONTROL_PRESETS, preset, "--preset")
     for value, option, minimum in (
         (trials, "--trials", 1),
@@ -156,7 +155,7 @@ def collect(
             intent=intent,
             population=population,
             population_seed=population_seed,
-            way=0 if ask_way is None else WAY_SIGNS[ask_way],
+            way=way,
             say=lambda line: console.print(line, highlight=False),
             live=live,
         )

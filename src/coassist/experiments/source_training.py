@@ -177,7 +177,7 @@ def _asked_collections(
     trials going a way round shown too seldom (:func:`~coassist.experiments.person_calibration.ways_to_ask`),
     ``<name>-ask-<user>-<way>``; none where it asks for none."""
     from coassist.experiments.person_calibration import ways_to_ask
-    from coassist.scenario.path_model import WAY_SIGNS
+    from coassist.scenario.path_model import WAY_NAMES
     from coassist.scenario.populations import population_profile
 
     most = ws.config.person_calibration_asked
@@ -190,13 +190,12 @@ def _asked_collections(
             f"{len(users)} operators × ({options['trials']} + 2 × {most} asked) calibration trials do not fit in a "
             f"draw's {DRAW_SEED_STEP} seeds"
         )
-    way_names = {sign: way for way, sign in WAY_SIGNS.items()}
     out = {}
     for position, user in enumerate(users):
         who = population_profile(options["population"], user, 0).name
         for way, count in ways_to_ask(fits[who].paths.sides, most):
             seed = asked_way_seed(options["seed"], len(users), options["trials"], position, way, most)
-            out[f"{name}-ask-{user}-{way_names[way]}"] = {
+            out[f"{name}-ask-{user}-{WAY_NAMES[way]}"] = {
                 **options,
                 "users": (user,),
                 "trials": count,

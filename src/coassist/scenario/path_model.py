@@ -57,6 +57,7 @@ __all__ = [
     "PathFrame",
     "PathModel",
     "PathModelSettings",
+    "WAY_NAMES",
     "WAY_SIGNS",
     "check_way",
     "few_paths",
@@ -73,8 +74,9 @@ FEW_PATHS = 3
 #: The key of a trial's ``meta.extra`` that says the lab asked the person to go round one way in that trial: +1 on the
 #: left of the plan, −1 on the right (absent: the person chose). ``collect`` and ``drive`` write it (``--ask-way``).
 ASKED_WAY = "asked_way"
-#: The ways round by name: +1 on the left of the plan (seen along it), −1 on the right.
+#: The ways round by name: +1 on the left of the plan (seen along it), −1 on the right; and by sign.
 WAY_SIGNS = {"left": 1, "right": -1}
+WAY_NAMES = {sign: name for name, sign in WAY_SIGNS.items()}
 
 
 def check_way(way: Any, name: str) -> int:

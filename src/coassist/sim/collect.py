@@ -14,6 +14,7 @@ from coassist.data import Dataset, DatasetWriter, read_dataset
 from coassist.data.datasets import MANIFEST_NAME, digest
 from coassist.data.trial_file import FORMAT_VERSION
 from coassist.scenario.intent_registry import INTENT_SOURCES
+from coassist.scenario.path_model import WAY_NAMES
 from coassist.sim.pool import SubmittedTrials
 from coassist.sim.trial_runner import TrialSpec, run_trials, spec_episode
 
@@ -165,7 +166,7 @@ def collect_dataset(
         f"users={sorted({s.user for s in specs})} tasks={sorted({s.task for s in specs})} "
         f"objects={sorted({s.object for s in specs})} seeds {specs[0].seed}..{specs[-1].seed}"
         + ("" if s0.population == "thesis" else f" population={s0.population} (seed {s0.population_seed})")
-        + ("" if not s0.way else f" asked to go round on the {'left' if s0.way > 0 else 'right'}")
+        + ("" if not s0.way else f" asked to go round on the {WAY_NAMES[s0.way]}")
     )
     dataset_id = dataset_id or out.name
     # What is collected, so that a re-run continues only the same collection.

@@ -218,7 +218,7 @@ def asked_steps(
     more = f"{block}-asked"
     for task, way, count in asks:
         for _ in range(count):
-            j = sum(1 for s in steps if s["kind"] == "trial")
+            j = len(steps)  # the trials so far: the fit comes after them
             _add(
                 steps,
                 "trial",

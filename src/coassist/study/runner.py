@@ -43,7 +43,7 @@ import numpy as np
 from coassist.data import append_to_dataset, read_dataset, write_dataset
 from coassist.data.datasets import MANIFEST_NAME, manifest_files
 from coassist.play.session import PlayConfig
-from coassist.scenario.path_model import ASKED_WAY
+from coassist.scenario.path_model import ASKED_WAY, WAY_NAMES
 from coassist.scenario.tasks import task_for_seed
 from coassist.study.calibration import CalibrationFailed, FitJob, fit_job, model_hashes, person_model_folder
 from coassist.study.folder import (
@@ -340,7 +340,7 @@ class ParticipantRun:
             if way:
                 text = (
                     f"warm-up trial {step['index'] + 1} of {n} — this time go round the box on the "
-                    f"{'left' if way > 0 else 'right'} side of the path (seen along it); press Start, then follow the "
+                    f"{WAY_NAMES[way]} side of the path (seen along it); press Start, then follow the "
                     "plan and hold in the target; you will feel small pushes now and then"
                 )
         self.session.view = self._view(k, step, text=text)
@@ -447,10 +447,9 @@ class ParticipantRun:
             more = asked_steps(self.plan, self.record["number"], int(step["attempt"]), step["data"][0], asks)
             self.steps = self.folder.insert_steps(k, more)
             self.order["steps"] = self.steps
-            names = {1: "left", -1: "right"}
             self.say(
                 f"{self.id}: asking for "
-                + ", ".join(f"{n} more {task} trial(s) going {names[way]}" for task, way, n in asks)
+                + ", ".join(f"{n} more {task} trial(s) going {WAY_NAMES[way]}" for task, way, n in asks)
                 + " (a way shown too seldom), then fitting again"
             )
             out["asks"] = [list(a) for a in asks]
