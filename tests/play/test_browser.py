@@ -177,7 +177,8 @@ def test_a_gamepad_is_a_hand_too(tmp_path):
     from coassist.play.server import PlayServer
     from coassist.play.session import PlayConfig, PlaySession
 
-    config = PlayConfig(user="dave", out=tmp_path / "runs", controllers=("manual",), motion_time=2.0, dwell=1.0)
+    # asked for a way round (--ask-way left): the page says it before the trial
+    config = PlayConfig(user="dave", out=tmp_path / "runs", controllers=("manual",), motion_time=2.0, dwell=1.0, way=1)
     session = PlaySession(config)
     with PlayServer(session, port=0) as server, sync_api.sync_playwright() as pw:
         context = launch(pw, tmp_path / "profile")
@@ -186,6 +187,8 @@ def test_a_gamepad_is_a_hand_too(tmp_path):
             page = context.new_page()
             page.goto(server.url)
             page.wait_for_function("window.coassist && window.coassist.ready", timeout=15000)
+            page.wait_for_function("document.getElementById('hud-controller').textContent.length > 0", timeout=5000)
+            hud = page.text_content("#hud-controller")
             page.click("#start")
             page.wait_for_function("window.coassist.frame !== null", timeout=10000)
             x0 = page.evaluate("window.coassist.frame.x")
@@ -202,6 +205,7 @@ def test_a_gamepad_is_a_hand_too(tmp_path):
     # full stick = the hand 8 cm ahead of the tool: K_s · 0.08 = 32 N minus damping, pushing +x. The bound
     # leaves room for a busy machine (two CPU hogs beside the suite: 14.2 N, the frame read late in the
     # push); a pad that does not push reads 0
+    assert hud.startswith("next: linear path") and "go round the box on the left" in hud, hud
     assert held["held"] and held["fh"][0] > 10.0 and abs(held["fh"][1]) < 2.0
     assert held["x"] - x0 > 0.05
     assert not released["held"] and released["fh"] == [0.0, 0.0]

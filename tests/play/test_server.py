@@ -21,6 +21,7 @@ from coassist.control.presets import get_preset  # noqa: E402
 from coassist.data import read_dataset  # noqa: E402
 from coassist.play.server import PlayServer  # noqa: E402
 from coassist.play.session import PlayConfig, PlaySession  # noqa: E402
+from coassist.scenario import person_model  # noqa: E402
 
 
 def short_config(tmp_path, **kw) -> PlayConfig:
@@ -75,7 +76,8 @@ def zoh(M: float, D: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_a_websocket_client_plays_a_whole_trial_and_it_is_saved_as_a_dataset(tmp_path):
-    session = PlaySession(short_config(tmp_path))
+    # asked to go round on the right (--ask-way right): the page is told, the trial records it
+    session = PlaySession(short_config(tmp_path, way=-1))
     with PlayServer(session, port=0) as server:
         t0 = time.perf_counter()
         seen = asyncio.run(play_trial(server.port, "cooperative", junk=True))
@@ -91,6 +93,7 @@ def test_a_websocket_client_plays_a_whole_trial_and_it_is_saved_as_a_dataset(tmp
     )
     trial = ds.trials[0]
     dt = trial.meta.dt
+    assert seen["init"]["scene"]["way"] == "right" and person_model.asked_way(trial) == -1
     assert trial.meta.user == "alice" and trial.meta.task == "linear" and trial.meta.controller == "cooperative"
     assert trial.n_samples == r["n_ticks"] == seen["frames"][-1]["k"] >= len(seen["frames"]) > 0.9 * trial.n_samples
     assert np.array_equal(trial.time, np.arange(trial.n_samples) * dt)

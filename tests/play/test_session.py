@@ -25,6 +25,8 @@ from coassist.scenario.tasks import TASK_KINDS, nominal_path
         ("motion_time", 0.0),
         ("dwell", -1.0),
         ("grace", float("nan")),
+        ("way", 2),
+        ("way", True),
     ],
 )
 def test_bad_configuration_names_the_field(tmp_path, field, value):
@@ -47,6 +49,7 @@ def test_the_protocol_cycles_the_paths_with_a_seeded_obstacle(tmp_path):
     again = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("manual",), seed=3)).next_task()
     assert t0.kind == "linear" and t0.obstacle == again.obstacle  # the same seed, the same box
     scene = session.scene()
+    assert "way" not in scene  # the person chooses their way round: the page asks nothing
     assert scene["path"][0] == pytest.approx(list(t0.start)) and scene["path"][-1] == pytest.approx(list(t0.target))
 
 
@@ -69,6 +72,8 @@ def test_the_cli_says_what_is_wrong_in_one_line(tmp_path):
     # the controllers' former names (before drive and play took the kinds) are named, not guessed at
     result = CliRunner().invoke(app, ["play", "--controller", "mg,imp", "--out", str(tmp_path), "--no-open"])
     assert result.exit_code == 2 and "'mg' is now called 'manual'" in result.output
+    result = CliRunner().invoke(app, ["play", "--ask-way", "up", "--out", str(tmp_path), "--no-open"])
+    assert result.exit_code == 2 and "--ask-way" in result.output and "Traceback" not in result.output
 
 
 def test_a_session_recorded_under_the_former_controller_names_scores_by_kind():

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from coassist.cli._common import (
+    ASK_WAY_HELP,
     INTENT_DEFAULT_HELP,
     SCENE_HELP,
     STABILITY_HELP,
@@ -19,12 +20,14 @@ from coassist.cli._common import (
     say,
     scene_option,
     stability_option,
+    way_option,
 )
 from coassist.cli._live import FOXGLOVE_PAGE_PORT, LIVE_HELP, close_live, open_live
 from coassist.config import APPLICATION_PRESET
 from coassist.robot.worlds import WORLDS, arm_worlds
 from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.intent_registry import INTENT_SOURCES, intent_choices
+from coassist.scenario.path_model import WAY_NAMES
 
 
 def _simulation_only(intent: str) -> bool:
@@ -76,6 +79,7 @@ def play(
         True, "--stability-guard/--no-stability-guard", help=f"With --drive: {STABILITY_HELP}"
     ),
     foxglove: int = typer.Option(None, metavar="[PORT]", help=LIVE_HELP.format(port=FOXGLOVE_PAGE_PORT)),
+    ask_way: str = typer.Option(None, help=f"{ASK_WAY_HELP} The page says it before every trial."),
 ) -> None:
     """Be the operator: a live page where your mouse, touch screen or gamepad is the hand on the robot."""
     try:
@@ -93,6 +97,7 @@ def play(
     if scene is not None and drive is None:
         fail("--scene: the page's own world tells the robot its obstacle; a scene file is for --drive (an arm)", 2)
     told = scene_option(scene)
+    way = way_option(ask_way)
     if token is None and not is_loopback(host):
         token = new_token()
     try:
@@ -116,10 +121,16 @@ def play(
             seed=seed,
             motion_time=motion_time,
             mcap=mcap,
+            way=way,
         )
         if drive is None:
             session = PlaySession(config, live=live)
             say(_page_assistance(session))
+            if way:
+                say(
+                    f"every trial asks you to go round the obstacle on the {WAY_NAMES[way]} of the plan (the page says "
+                    "so); the trials record it, and coassist calibrate counts their paths but not as your preference"
+                )
         else:
             from coassist.play.monitor import DriveMonitor
             from coassist.robot.drive import DriveConfig
@@ -140,6 +151,7 @@ def play(
                     person=None if drive not in arm_worlds() or WORLDS[drive].simulated else user,
                     scene=told,
                     stability=stability_option(stability_guard),
+                    way=way,
                 ),
                 config,
                 host=robot_host,

@@ -62,6 +62,7 @@ from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.wrench import WrenchPipeline
 from coassist.scenario.assistance import DEFAULT_INTENT, check_person
 from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source
+from coassist.scenario.path_model import ASKED_WAY, WAY_NAMES, check_way
 from coassist.scenario.tasks import TASK_KINDS, TASKS, Task, nominal_path, task_for_seed
 
 __all__ = ["PlayConfig", "PlaySession", "TrialResult", "view_bounds"]
@@ -123,6 +124,10 @@ class PlayConfig:
     paced : run the loop in real time (False only for tests of the bookkeeping).
     mcap : also write each trial as ``<trial>.mcap`` beside its Parquet file (ROS 2
         messages Foxglove opens, :mod:`coassist.data.trial_mcap`; the bags extra).
+    way : the way round the obstacle the person is asked to take in every trial of the session, +1 on the left
+        of the plan, −1 on the right (calibration trials for a way ``coassist calibrate`` says was shown too
+        seldom): the page says so before each trial, and each trial records it (``meta.extra["asked_way"]``) so
+        that the person model counts its path but not as their preference. 0: the person chooses.
     """
 
     user: str
@@ -140,6 +145,7 @@ class PlayConfig:
     arm: SpringDamper = field(default_factory=SpringDamper)
     paced: bool = True
     mcap: bool = False
+    way: int = 0
 
     def __post_init__(self) -> None:
         if not isinstance(self.user, str) or not _USER.match(self.user):
@@ -177,6 +183,7 @@ class PlayConfig:
             object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"PlayConfig.{name}"))
         if not isinstance(self.arm, SpringDamper):
             raise ValueError(f"PlayConfig.arm must be a SpringDamper, got {type(self.arm).__name__}")
+        object.__setattr__(self, "way", check_way(self.way, "PlayConfig.way"))
 
     @property
     def folder(self) -> Path:
@@ -299,6 +306,8 @@ class PlaySession:
             "dwell": self.config.dwell,
             "motion_start": task.planner.start_delay,
             "motion_end": task.planner.end_time,
+            # the way the person is asked to go round (the page says it); absent where they choose
+            **({"way": WAY_NAMES[self.config.way]} if self.config.way else {}),
         }
 
     def summary(self) -> dict[str, Any]:
@@ -443,6 +452,7 @@ class PlaySession:
                 "arm": {"stiffness": arm.stiffness, "damping": arm.damping, "force_limit": arm.force_limit},
                 "controller_name": name,
                 "trial_index": index,
+                **({ASKED_WAY: cfg.way} if cfg.way else {}),
             },
         )
         dwell = episode.termination

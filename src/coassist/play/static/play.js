@@ -236,7 +236,7 @@
     if (hand.down) disc(hand.x, hand.y, 6, null, COLOR.hand, 2);
     disc(tool[0], tool[1], 9, COLOR.tool, null);
     if (f) arrow(tool[0], tool[1], f.fh[0], f.fh[1]);
-    $("hud-controller").textContent = f ? (NAMES[f.controller] || f.controller) : (api.running ? "starting…" : `next: ${sc.task} path`);
+    $("hud-controller").textContent = f ? (NAMES[f.controller] || f.controller) : (api.running ? "starting…" : `next: ${sc.task} path` + (sc.way ? ` — go round the box on the ${sc.way} (seen along the path)` : ""));
     $("hud-faults").textContent = f && f.faults.length ? "faults: " + f.faults.join(", ") : "";
   }
 
