@@ -284,6 +284,47 @@ def test_the_summary_says_how_many_paths_were_asked_for(alice):
     assert "asked for" not in summary_line(c)
 
 
+def _asked(named: Named, way) -> Named:
+    meta = TrialMeta(
+        **{
+            **{k: getattr(named.trial.meta, k) for k in named.trial.meta.__dataclass_fields__},
+            "extra": {**named.trial.meta.extra, "asked_way": way},
+        }
+    )
+    return Named(named.id, _trial(named.trial, meta=meta))
+
+
+def test_a_trial_that_went_the_other_way_than_asked_counts_as_chosen(alice):
+    """A path asked for one way joins that way but not the prior; one that went the other way is what the person
+    chose against the asking: in the prior, and the summary says so. Against the hand count of the fit's own
+    sides (Laplace's rule over the chosen paths)."""
+    (plain,) = calibrate_people(alice)
+    sides = plain.fit.paths.sides.tolist()
+    assert all(s != 0 for s in sides)
+    # trials 0 and 1 asked for the way they took, trial 2 asked for the other
+    trials = [_asked(alice[0], sides[0]), _asked(alice[1], sides[1]), _asked(alice[2], -sides[2]), alice[3]]
+    (c,) = calibrate_people(trials)
+    paths = c.fit.paths
+    assert paths.sides.tolist() == sides and paths.asked.tolist() == [True, True, False, False]
+    assert c.asked_other_way == 1
+    chosen = [sides[2], sides[3]]
+    left = chosen.count(1)
+    assert paths.ways() == pytest.approx({1: (left + 1) / 4, -1: (2 - left + 1) / 4}, abs=1e-12)
+    assert "(2 asked for, not in the prior; 1 asked for a way but went the other: counted as chosen)" in (
+        summary_line(c)
+    )
+    # every asked trial went the other way: no path is asked for, the model is the plain one's
+    (d,) = calibrate_people([_asked(t, -s) for t, s in zip(alice, sides)])
+    assert not d.fit.paths.asked.any() and d.asked_other_way == 4
+    assert d.fit.paths.ways() == plain.fit.paths.ways()
+
+
+@pytest.mark.parametrize("way", [1.0, "left", True, 2, None])
+def test_a_bad_asked_way_is_refused_naming_the_trial(alice, way):
+    with pytest.raises(CalibrationError, match=r"alice: trial lab/alice-linear-1: meta.extra\['asked_way'\] must be"):
+        calibrate_people([alice[0], _asked(alice[1], way), *alice[2:]])
+
+
 def test_the_summary_names_a_thin_way(alice):
     (c,) = calibrate_people(alice)
     sides = c.fit.paths.sides

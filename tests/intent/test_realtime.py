@@ -288,6 +288,25 @@ def test_the_fallback_always_has_the_prediction_shape(model):
     assert junk.fault & Fault.INVALID_INPUT and long.fault == Fault.PREDICTION_FALLBACK
 
 
+@pytest.mark.parametrize("answer", [[[0.0, 0.0], [0.0], [0.0, 0.0]], [["a", "b"]] * 3, np.zeros((3, 3))])
+def test_an_answer_that_is_no_positions_array_is_a_fallback_not_an_exception(answer):
+    """RealtimeIntent turns a predictor's answer into an array: one that is ragged, of strings or of another shape
+    falls back to the plan's rows, flagged (it once raised out of the loop's intent stage)."""
+    from coassist.runtime.intent import RealtimeIntent
+
+    class Predictor:  # a duck-typed predictor, as a lab's own may be
+        horizon, history, errors = 3, 0, 0
+
+        def reset(self, context):
+            pass
+
+        def tick(self, sample, nominal):
+            return answer, 0, 0
+
+    pred, flags = RealtimeIntent(Predictor()).update(0, (0.0,) * 8, np.zeros((3, 2)))
+    assert pred is None and flags & Fault.PREDICTION_FALLBACK
+
+
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
 def test_a_dead_worker_thread_is_reported_and_stalls_the_loop_intent(model):
     from coassist.runtime.intent import RealtimeIntent

@@ -244,6 +244,19 @@ def test_contact_force_and_robot_stops_latch(hand, robot):
     assert not stop and not layer.stopped and np.allclose(out, 0.05)
 
 
+def test_a_saturated_sensor_stops_as_a_contact_force():
+    """The wrench pipeline holds its last good reading on a saturated channel (SENSOR_SATURATED): the
+    wrench the layer sees is small, but the hand pushes at least the sensor's range, over the contact limit."""
+    layer = SafetyLayer(SafetyLimits(), DT, 6)
+    run_to_steady(layer, np.full(6, 0.05), ticks=20)
+    held = np.array([9.8, 0, 0, 0, 0, 0])  # the last reading before the channel reached its 300 N
+    out, flags, stop = step(layer, np.full(6, 0.05), hand=held, upstream=Fault.SENSOR_SATURATED)
+    assert stop and flags == Fault.CONTACT_FORCE_LIMIT | Fault.STOPPED and not out.any() and layer.stopped
+    effort = SafetyLayer(SafetyLimits(), DT, 6)
+    u, f, stop = effort.limit_effort(np.array([3.0, 4.0]), np.array([0.1, 0.0]), held, Fault.SENSOR_SATURATED)
+    assert stop and f == Fault.CONTACT_FORCE_LIMIT | Fault.STOPPED and not u.any() and effort.stopped
+
+
 def test_hand_force_at_the_threshold_does_not_stop():
     layer = SafetyLayer(SafetyLimits(), DT, 6)
     _, flags, stop = step(layer, np.zeros(6), hand=np.array([120.0, 0, 0, 0, 0, 15.0]))
@@ -670,6 +683,18 @@ def test_effort_stage_brakes_above_the_tool_speed_and_latches_on_contact_force()
     np.testing.assert_array_equal(u, [0.0, 0.0])
     u, f, stop = layer.limit_effort(np.array([3.0, 4.0]), np.array([0.1, 0.0]), calm, Fault.NONE)
     assert stop and f & Fault.STOPPED and not u.any()
+
+
+@pytest.mark.parametrize("upstream", [Fault.NONFINITE_WRENCH, Fault.INVALID_INPUT, Fault.INTERNAL_ERROR])
+def test_the_effort_stage_limits_the_tool_speed_after_a_wrench_fault_too(upstream):
+    """A wrench fault zeroes the hand's force (the pipeline), not the controller's effort: above the tool speed the
+    forward component along v is still removed (hand-computed as above), and a zero effort passes unflagged."""
+    layer = SafetyLayer(SafetyLimits(tool_speed=0.25), 0.008, 6)
+    u, f, stop = layer.limit_effort(np.array([3.0, 4.0]), np.array([0.3, 0.0]), np.zeros(6), upstream)
+    np.testing.assert_allclose(u, [0.0, 4.0], atol=1e-15)
+    assert f == Fault.TOOL_SPEED_LIMIT and not stop
+    u, f, stop = layer.limit_effort(np.zeros(2), np.array([0.3, 0.0]), np.zeros(6), upstream)
+    assert not u.any() and f == Fault.NONE and not stop
 
 
 def test_the_batch_effort_stage_passes_u_r_where_each_layer_does():

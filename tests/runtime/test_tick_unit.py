@@ -232,6 +232,55 @@ def test_the_run_ends_at_the_time_limit_when_the_target_is_never_held():
     assert log.compute.shape == (17,) and np.all(log.compute >= 0.0)
 
 
+class _FailingStage:
+    """An intent stage that raises where it should answer (a predictor's answer of the wrong type, a bug)."""
+
+    nominal = False
+    horizon = H
+    batcher = None
+
+    def reset(self, context: object) -> None:
+        pass
+
+    def update(self, k: int, row: tuple[float, ...], nominal: np.ndarray):
+        raise ValueError("setting an array element with a sequence")
+
+
+def _impedance_tick(ref: np.ndarray, stage) -> ControlTick:
+    tick = ControlTick(
+        ImpedanceControl(ImpedanceModel(M, D, 0.0, DT), 200.0 * np.eye(2), effort_limit=50.0),
+        stage,
+        WrenchPipeline(CLEAN, DT),
+        SafetyLayer(SafetyLimits(), DT, 6),
+        command_space="effort",
+    )
+    tick.reset(Plan(ref, np.array([*ref[0, :2], 0.0, 0.0, 0.0, 0.0])), _context(ref))
+    return tick
+
+
+def test_an_intent_stage_that_raises_falls_back_to_the_plan_and_the_run_goes_on():
+    """The loop's intent stage raising is a failing predictor: the plan's rows, PREDICTION_FALLBACK on every tick,
+    the run to its end (before, the exception left run_loop with the world never stopped). The commands are those of
+    the nominal stage's run, bit for bit (the fallback is the plan's rows), in run_loop and in lockstep."""
+    from coassist.runtime.batched_loops import Loop, run_loops
+
+    ref = _reference((0.1, 0.2), velocity=(0.05, 0.0))
+    poses = ref[:40, :2] + 0.01
+    world, nominal = ScriptedEffortWorld(poses), ScriptedEffortWorld(poses)
+    log = run_loop(world, _impedance_tick(ref, _FailingStage()), 30)
+    want = run_loop(nominal, _impedance_tick(ref, NominalStage(H)), 30)
+    assert log.ended == "time_limit" and log.n == 30 == len(world.efforts)
+    assert all(int(f) & Fault.PREDICTION_FALLBACK for f in log.fault)
+    np.testing.assert_array_equal(np.array(world.efforts), np.array(nominal.efforts))
+    assert np.abs(np.array(world.efforts)).max() > 0.1  # the spring pulled: a real effort was compared
+    worlds = [ScriptedEffortWorld(poses), ScriptedEffortWorld(poses)]
+    logs = run_loops([Loop(w, _impedance_tick(ref, _FailingStage()), 30) for w in worlds])
+    for w, lg in zip(worlds, logs):
+        assert lg.ended == "time_limit" and all(int(f) & Fault.PREDICTION_FALLBACK for f in lg.fault)
+        np.testing.assert_array_equal(np.array(w.efforts), np.array(nominal.efforts))
+    np.testing.assert_array_equal(want.effort_r, log.effort_r)
+
+
 def test_the_batch_dwell_rule_decides_as_each_rule():
     """TargetDwellBatch row for row against each TargetDwell: targets, radii, dwell and start ticks
     of their own, tools wandering in and out of the ball, a run without a rule, runs leaving."""

@@ -1,5 +1,6 @@
 """The thin CLI commands over the simulator: collect and show."""
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -98,3 +99,20 @@ def test_a_way_asked_for_is_recorded_and_calibrate_counts_its_paths_but_not_as_t
     assert paths.ways() == pytest.approx({1: (left + 1) / 5, -1: (3 - left + 1) / 5})
     res = runner.invoke(app, [*args, "--trials", "1", "--ask-way", "up", "--out", str(tmp_path / "b")])
     assert res.exit_code == 2 and "--ask-way" in res.output and "left" in res.output
+    # assisted by the model; the same command again continues (here: finds complete) only the same model's
+    # collection: after calibrating again (other trials, another model) it refuses the folder, and collects anew
+    # with --overwrite (it once found the old model's trials complete: nothing to do)
+    helped = [*args[:2], "cooperative-arbitrated", *args[3:], "--trials", "1", "--seed", "90", "--intent", str(out)]
+    helped += ["--out", str(tmp_path / "helped")]
+    first = runner.invoke(app, helped)
+    again = runner.invoke(app, helped)
+    assert first.exit_code == again.exit_code == 0 and "nothing to do" in again.output, again.output
+    before = read_dataset(tmp_path / "helped").trials[0]
+    res = runner.invoke(app, ["calibrate", str(tmp_path / "chosen"), "--out", str(out), "--overwrite"])
+    assert res.exit_code == 0, res.output
+    refused = runner.invoke(app, helped)
+    assert refused.exit_code == 1 and "--overwrite" in refused.output, refused.output
+    anew = runner.invoke(app, [*helped, "--overwrite"])
+    assert anew.exit_code == 0 and "nothing to do" not in anew.output, anew.output
+    after = read_dataset(tmp_path / "helped").trials[0]
+    assert not np.array_equal(after.reference, before.reference) or not np.array_equal(after.pose, before.pose)

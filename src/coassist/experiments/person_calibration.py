@@ -32,7 +32,15 @@ from coassist._checks import check_int
 from coassist.data import Trial
 from coassist.errors import CoassistError
 from coassist.scenario.arm_identification import identify_arm
-from coassist.scenario.path_model import FEW_PATHS, WAY_SIGNS, PathFrame, PathModel, few_paths
+from coassist.scenario.path_model import (
+    ASKED_WAY,
+    FEW_PATHS,
+    WAY_SIGNS,
+    PathFrame,
+    PathModel,
+    check_way,
+    few_paths,
+)
 from coassist.scenario.person_model import PersonFit, fit_person
 
 __all__ = [
@@ -90,6 +98,9 @@ class PersonCalibration:
     probe_trials: int
     seconds: float
     cpu_seconds: float
+    #: trials in which the lab asked for a way round and the person went the other way (or round neither): their
+    #: paths count as the person's own choice
+    asked_other_way: int = 0
 
 
 def _nominal(trial: Trial) -> np.ndarray:
@@ -108,6 +119,10 @@ def _check_trial(person: str, tid: str, trial: Trial) -> None:
     nominal = _nominal(trial)
     if len(nominal) < 2:
         raise CalibrationError(f"{person}: trial {tid} has no nominal path (its reference never moves)")
+    try:  # a value written by hand is refused naming this trial, before anything is fitted
+        check_way(trial.meta.extra.get(ASKED_WAY, 0), f"{person}: trial {tid}: meta.extra[{ASKED_WAY!r}]")
+    except ValueError as exc:
+        raise CalibrationError(str(exc)) from None
     moved = float(np.max(np.linalg.norm(trial.pose[:, :2] - trial.pose[0, :2], axis=1)))
     frame = PathFrame(nominal)
     gap = float(np.linalg.norm(nominal[-1] - nominal[0]))
@@ -205,19 +220,29 @@ def calibrate_people(
                 probe_trials=len(probed),
                 seconds=time.perf_counter() - wall,
                 cpu_seconds=time.process_time() - cpu,
+                asked_other_way=_asked_other_way(items, np.asarray(fit.paths.asked, dtype=bool)),
             )
         )
     return out
 
 
-def _ways(paths: PathModel) -> str:
+def _asked_other_way(items: Sequence[NamedTrial], asked: np.ndarray) -> int:
+    """How many of ``items`` asked for a way round whose path the fit does not count as asked (it went the other
+    way, or round neither)."""
+    return int(sum(bool(it.trial.meta.extra.get(ASKED_WAY, 0)) and not a for it, a in zip(items, asked.tolist())))
+
+
+def _ways(paths: PathModel, other_way: int = 0) -> str:
     sides = paths.sides
     counts = {s: int(np.sum(sides == s)) for s in (1, -1, 0)}
     parts = [f"{counts[1]} left", f"{counts[-1]} right"]
     if counts[0]:
         parts.append(f"{counts[0]} with no detour")
     asked = int(np.sum(np.asarray(paths.asked, dtype=bool)))
-    return ", ".join(parts) + (f" ({asked} asked for, not in the prior)" if asked else "")
+    notes = [f"{asked} asked for, not in the prior"] if asked else []
+    if other_way:
+        notes.append(f"{other_way} asked for a way but went the other: counted as chosen")
+    return ", ".join(parts) + (f" ({'; '.join(notes)})" if notes else "")
 
 
 def ways_to_ask(sides: np.ndarray, room: int) -> list[tuple[int, int]]:
@@ -270,6 +295,6 @@ def summary_line(c: PersonCalibration) -> str:
         measured = f"arm ASSUMED, not measured (K̂ {arm.stiffness:.0f} N/m, Ĉ {arm.damping:.1f} N·s/m): {why}"
     thin = thin_ways(c.fit.paths.sides)
     return (
-        f"{c.person} ({c.task}, {len(c.trials)} trials): {measured}; demonstrations: {_ways(c.fit.paths)}; "
+        f"{c.person} ({c.task}, {len(c.trials)} trials): {measured}; demonstrations: {_ways(c.fit.paths, c.asked_other_way)}; "
         f"fit {c.seconds:.1f} s ({c.cpu_seconds:.1f} CPU-s){'; ' + thin if thin else ''}"
     )

@@ -210,7 +210,7 @@ class DriveConfig:
             raise bad("scene", "a Scene (coassist.scenario.scene.read_scene) or None")
         if self.stability is not None and not isinstance(self.stability, StabilityGuardParameters):
             raise bad("stability", "StabilityGuardParameters (coassist.control.stability) or None (off)")
-        check_way(self.way, "DriveConfig.way")
+        object.__setattr__(self, "way", check_way(self.way, "DriveConfig.way"))
 
     @property
     def dt(self) -> float:

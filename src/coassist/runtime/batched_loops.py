@@ -120,7 +120,7 @@ def run_loops(
             batcher = batchers[i]
             if batcher is None:
                 t0 = clock()
-                answers[i] = run.tick.predict(k, row)
+                answers[i] = run.predict(k, row)
                 run.charge(clock() - t0)
                 continue
             _, members, windows = groups.setdefault(id(batcher), (batcher, [], []))
@@ -132,7 +132,7 @@ def run_loops(
             share = (clock() - t0) / len(members)
             for i, pred in zip(members, preds):
                 runs[i].charge(share)
-                answers[i] = runs[i].tick.intent.accept(pred)
+                answers[i] = runs[i].accept(pred)
         controls = _step_controllers(runs, going, answers, steppers, arbitrated, clock, stacks)
         active = []
         for i in going:

@@ -299,8 +299,11 @@ class RealtimeIntent:
         arr = None
         usable = not (fault & _FALLBACK_I) and pos is not None
         if usable:
-            arr = np.asarray(pos, dtype=float)
-            usable = arr.shape == (self.horizon, 2) and bool(np.isfinite(arr).all())
+            try:  # an answer that is no array of numbers (ragged, strings) is a failing predictor's
+                arr = np.asarray(pos, dtype=float)
+                usable = arr.shape == (self.horizon, 2) and bool(np.isfinite(arr).all())
+            except (TypeError, ValueError):
+                usable = False
         warm = k >= self.history  # before the window fills the fallback is expected
         self._bad = 0 if usable else self._bad + (1 if warm else 0)
         flags = (0 if usable else _FALLBACK_I) | (fault & _STALE_I)

@@ -179,9 +179,14 @@ def run_loop(
         row = run.sense(k)
         if row is LINK_LOST:
             break
-        if run.act(k, None if row is None else run.tick.predict(k, row)):
+        if run.act(k, None if row is None else run.predict(k, row)):
             break
     return run.log()
+
+
+#: The intent stage's answer where the stage itself raised: no prediction (the plan's rows), flagged as a failing
+#: predictor's is (:class:`~coassist.runtime.intent.WindowIntent`), and the loop goes on.
+INTENT_FAILED = (None, Fault.PREDICTION_FALLBACK)
 
 
 #: What :meth:`LoopRun.sense` returns when the link to the robot dropped (the run is over).
@@ -261,6 +266,23 @@ class LoopRun:
         if self.split:  # other runs' work follows: time this part alone
             self._spent = self.clock() - self._t0
         return row
+
+    def predict(self, k: int, row: Any) -> tuple[np.ndarray | None, Fault]:
+        """The intent stage's answer for tick k's feature ``row`` (``tick.predict``); a stage that raises (a
+        predictor's answer of the wrong type, a bug) gives :data:`INTENT_FAILED`: the plan's rows, flagged, and the
+        tick goes on to the controller and the safety layer as with any failing predictor."""
+        try:
+            return self.tick.predict(k, row)
+        except Exception:  # noqa: BLE001 - a failing intent stage must not stop the loop
+            return INTENT_FAILED
+
+    def accept(self, prediction: Any) -> tuple[np.ndarray | None, Fault]:
+        """The intent stage's answer for a ``prediction`` made elsewhere (one batched call for many runs:
+        ``tick.intent.accept``); a stage that raises gives :data:`INTENT_FAILED`, as :meth:`predict`."""
+        try:
+            return self.tick.intent.accept(prediction)
+        except Exception:  # noqa: BLE001 - as predict
+            return INTENT_FAILED
 
     def act(self, k: int, intent: Any, control: Any = None) -> bool:
         """Finish tick k with the intent's answer, command the world, log; True when the run is over.

@@ -23,6 +23,9 @@ limit even as J changes between ticks).
 1. *Stop.* A robot stop (protective or emergency) or a hand wrench ‖f‖ > f̄ or ‖τ‖ > τ̄
    (a protective stop, CONTACT_FORCE_LIMIT) latches STOPPED: from then on the command
    is zero and ``stop`` is True (the world brakes with its own stop), until ``reset()``.
+   SENSOR_SATURATED upstream counts as such a wrench (CONTACT_FORCE_LIMIT): the wrench pipeline
+   holds its last good reading, but a channel at the sensor's range (an FT300's 300 N, 30 N·m)
+   says the hand pushes at least that hard, past f̄ and τ̄.
 2. *Bad tick.* An upstream fault of :data:`BAD_TICK_FAULTS`, or q̇, J, the pose or the
    hand wrench non-finite or of the wrong shape: the target becomes 0 (DECELERATING),
    reached along the acceleration ramp of step 5. ``max_bad_ticks`` bad ticks in a row
@@ -115,7 +118,7 @@ import numpy as np
 
 from coassist._checks import check_int_at_least, check_positive_scalar, is_integer
 from coassist._rows import RowConstants
-from coassist.interfaces import ZERO_EFFORT_FAULTS, Fault
+from coassist.interfaces import Fault
 from coassist.runtime.safety_limits import (
     LIMIT_TOLERANCE,
     SafetyLimits,
@@ -152,10 +155,10 @@ BAD_TICK_FAULTS = (
     | Fault.WRENCH_SPIKE
     | Fault.INTERNAL_ERROR
     | Fault.INVALID_INPUT
-    | Fault.SENSOR_SATURATED
-)
+)  # SENSOR_SATURATED is not here: it stops the robot (step 1), it does not merely decelerate it
 
 _ROBOT_STOPS = int(Fault.ROBOT_PROTECTIVE_STOP | Fault.ROBOT_EMERGENCY_STOP)
+_SAT = int(Fault.SENSOR_SATURATED)
 _BAD = int(BAD_TICK_FAULTS)
 _JV = int(Fault.JOINT_VELOCITY_LIMIT)
 _JA = int(Fault.JOINT_ACCELERATION_LIMIT)
@@ -336,13 +339,14 @@ class SafetyLayer:
         hand : the hand wrench [N, N·m], (6,) or its first (≥ 2,) force entries. Returns
         (effort, flags, stop), effort a new finite (d,) array:
 
-        - a robot stop, or a hand force over ``contact_force``, latches STOPPED: zero
-          effort and ``stop`` from now on (the world brakes);
+        - a robot stop, a hand force over ``contact_force``, or SENSOR_SATURATED upstream (a channel at
+          the sensor's range: the force is at least that, above ``contact_force``) latches STOPPED
+          (CONTACT_FORCE_LIMIT for the last two): zero effort and ``stop`` from now on (the world brakes);
         - u_r not a finite vector: zero effort, NONFINITE_EFFORT (INVALID_INPUT when it
           is not a vector at all); v or hand missing, short or non-finite: zero effort,
           INVALID_INPUT (the contact and speed checks cannot be made);
-        - with an upstream fault that zeroed the effort, the effort passes as it is;
-        - above ``tool_speed`` the effort may only brake: its component along v, if it
+        - above ``tool_speed``, with or without an upstream fault (a wrench fault zeroes the hand's
+          force, not the controller's effort), the effort may only brake: its component along v, if it
           pushes forward, is removed (TOOL_SPEED_LIMIT).
 
         Never raises (as the joint stage); d is u_r's length, or the last good call's.
@@ -362,7 +366,7 @@ class SafetyLayer:
             self._effort_d = u.shape[0]
         f = (rs or 0) & _ROBOT_STOPS
         w = _finite_vector(hand, 2)
-        if w is not None and float(np.dot(w[:3], w[:3])) > self._f2:
+        if (w is not None and float(np.dot(w[:3], w[:3])) > self._f2) or (up or 0) & _SAT:
             f |= _CF
         if f or self._stopped:
             self.latch_stop()
@@ -378,8 +382,8 @@ class SafetyLayer:
             self._count(bad & _II)
             return np.zeros(self._effort_d), _fault(bad), False
         u = u.copy()
-        if up & int(ZERO_EFFORT_FAULTS):
-            return u, Fault.NONE, False
+        # The tool-speed check runs after an upstream fault too: a wrench fault zeroes the hand's force, not the
+        # controller's effort (a zero effort passes it unchanged: nothing along v).
         speed = math.sqrt(float(vel[0] * vel[0] + vel[1] * vel[1]))
         flags = 0
         if speed > lim.tool_speed and u.shape[0] >= 2:
@@ -533,6 +537,8 @@ class SafetyLayer:
         rs = _fault_word(robot_stop)
         w = as_vector(hand_wrench, 6)
         flags = ((up or 0) | (rs or 0)) & _ROBOT_STOPS
+        if (up or 0) & _SAT:  # a channel at the sensor's range: the hand wrench is at least that, over f̄ or τ̄
+            flags |= _CF
         if w is not None:
             wl = w.tolist()
             if (

@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from coassist._checks import check_int, check_real
+from coassist._checks import check_int, check_real, is_integer
 from coassist.scenario.tasks import NominalPath
 
 __all__ = [
@@ -82,7 +82,7 @@ WAY_NAMES = {sign: name for name, sign in WAY_SIGNS.items()}
 def check_way(way: Any, name: str) -> int:
     """``way`` as a way round asked for (:data:`ASKED_WAY`): +1 left, −1 right, 0 none; else a ValueError naming
     ``name``."""
-    if isinstance(way, bool) or way not in (-1, 0, 1):
+    if not is_integer(way) or way not in (-1, 0, 1):  # 1.0 is no way round: a file written by hand says so
         raise ValueError(
             f"{name} must be +1 (asked to go round on the left), -1 (on the right) or 0 (none asked), got {way!r}"
         )

@@ -23,7 +23,7 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -173,14 +173,13 @@ def fit_person(
                 "fit each task apart"
             )
     arm = identify_arm(trials) if arm is None else arm
+    ways = [asked_way(t) for t in trials]
     paths, noise = intent_paths(trials, arm, smoothing=smoothing)
-    asked = [asked_way(t) != 0 for t in trials]
-    return PersonFit(
-        arm=arm,
-        paths=fit_path_model(
-            nominal, paths, noise=max(noise, 1e-4), settings=settings, asked=asked if any(asked) else None
-        ),
-    )
+    model = fit_path_model(nominal, paths, noise=max(noise, 1e-4), settings=settings)
+    # A path asked for one way counts for that way but not in the prior; one that went the other way (or round
+    # neither) is what the person chose against the lab's asking: in the prior, as every chosen path
+    asked = [way != 0 and way == side for way, side in zip(ways, model.sides.tolist())]
+    return PersonFit(arm=arm, paths=replace(model, asked=np.asarray(asked)) if any(asked) else model)
 
 
 def asked_way(trial) -> int:

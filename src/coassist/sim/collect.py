@@ -170,12 +170,7 @@ def collect_dataset(
     )
     dataset_id = dataset_id or out.name
     # What is collected, so that a re-run continues only the same collection.
-    model_file = Path(s0.intent) / "model.json"
-    if not model_file.is_file():  # a calibrated path-hypotheses source: its calibration is what runs
-        model_file = Path(s0.intent) / "path-hypotheses.json"
-    model_hash = (
-        digest(model_file.read_bytes().hex()) if s0.intent not in INTENT_SOURCES and model_file.is_file() else None
-    )
+    model_hash = None if s0.intent in INTENT_SOURCES else _model_hash(Path(s0.intent))
     key = digest(
         {
             "specs": [spec_key(s) for s in specs],
@@ -233,6 +228,22 @@ def spec_key(spec: TrialSpec) -> dict:
     if not out["way"]:  # the operator's own choice: keyed as before ways could be asked for
         del out["way"]
     return out
+
+
+def _model_hash(folder: Path) -> str | None:
+    """A digest of what an ``--intent`` folder runs, so that a re-run continues only the same model's collection:
+    a trained model's ``model.json``, a calibration's ``path-hypotheses.json``, a person model's
+    ``person-model.json`` (a person calibrated again is another model), a calibration-draws folder's list and each
+    draw's person model; None where the folder holds none of them."""
+    for name in ("model.json", "path-hypotheses.json"):
+        if (folder / name).is_file():
+            return digest((folder / name).read_bytes().hex())
+    files = sorted(folder.glob("person-model.json")) + sorted(folder.glob("calibration-draws.json"))
+    if (folder / "calibration-draws.json").is_file():
+        files += sorted(folder.glob("*/person-model.json"))
+    if not files:
+        return None
+    return digest({str(f.relative_to(folder)): f.read_bytes().hex() for f in files})
 
 
 def _holds_collection(out: Path, key: str, n_trials: int) -> bool:
