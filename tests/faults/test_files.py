@@ -120,6 +120,10 @@ MANIFEST_CASES = {
     "dataset_id empty": (lambda m: {**m, "dataset_id": ""}, r"'dataset_id' must be a non-empty string"),
     "not an object": (lambda m: [], r"must hold a JSON object, got list"),
     "wrong format": (lambda m: {**m, "format": "x"}, r"'format' is 'x'"),
+    "NUL in a file name": (
+        lambda m: {**m, "trials": [{**m["trials"][0], "file": "a\x00b"}], "n_trials": 1},
+        r"trials\[0\] 'file' must be a file name",
+    ),
 }
 
 
@@ -128,6 +132,21 @@ def test_manifest_defects_are_one_clear_error(dataset, case):
     change, message = MANIFEST_CASES[case]
     _edit_manifest(dataset, change)
     with pytest.raises(TrialFileError, match=r"D/manifest\.json: .*" + message):
+        read_dataset(dataset)
+
+
+def test_a_manifest_nested_too_deep_or_listing_other_sample_counts_is_one_clear_error(dataset):
+    """Once a RecursionError traceback without the file's name, and an n_samples no reader compared."""
+    manifest = (dataset / "manifest.json").read_text()
+    (dataset / "manifest.json").write_text("[" * 100_000)
+    with pytest.raises(TrialFileError, match=r"D/manifest\.json: malformed JSON: nested too deep"):
+        read_dataset(dataset)
+    (dataset / "manifest.json").write_text(manifest)
+    n = read_dataset(dataset).trials[1].n_samples
+    _edit_manifest(
+        dataset, lambda m: {**m, "trials": [m["trials"][0], {**m["trials"][1], "n_samples": 5}, m["trials"][2]]}
+    )
+    with pytest.raises(TrialFileError, match=rf"trial_00001\.parquet: holds {n} samples, .*manifest\.json lists 5"):
         read_dataset(dataset)
 
 

@@ -76,3 +76,15 @@ def test_every_model_coassist_writes_carries_the_record_and_loads(model_dir, tmp
         load_model(folder)
     x = np.random.default_rng(0).normal(size=(4, trained.history, trained.net.config.n_features)).astype(np.float32)
     np.testing.assert_array_equal(load_model(resaved).predict_batch(x), trained.predict_batch(x))
+
+
+@pytest.mark.parametrize("key", ["ridge_sha256", "weights_sha256"])
+def test_a_sidecar_without_a_digest_key_is_refused_in_one_line(model_dir, tmp_path, key):
+    """A model.json edited by hand to drop a digest key: once a KeyError traceback for the ridge's."""
+    folder = Path(shutil.copytree(model_dir, tmp_path / "m"))
+    side = json.loads((folder / "model.json").read_text())
+    del side[key]
+    (folder / "model.json").write_text(json.dumps(side))
+    with pytest.raises(ModelFileError) as err:
+        load_model(folder)
+    assert "\n" not in str(err.value) and f"{key!r} must be a hex digest" in str(err.value)

@@ -597,6 +597,44 @@ def test_resume_of_an_interrupted_run_with_other_data_is_refused(tmp_path):
         train_model(labeled(4), TINY, cfg, checkpoint_to=tmp_path / "m", on_epoch=stop)
     with pytest.raises(ValueError, match="interrupted run on 4 other trials"):
         train_model(labeled(4, prefix="X"), TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
+    # the same ids holding other data (a dataset collected again under the same id): refused too, where it once
+    # continued on the new trials with the old ones' scalers
+    again = labeled(4)
+    again[2] = again[2]._replace(trial=replace(again[2].trial, pose=again[2].trial.pose + 1e-3))
+    with pytest.raises(ValueError, match="other data under the same trial ids"):
+        train_model(again, TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
+
+
+@pytest.mark.parametrize(
+    "field, value, says",
+    [("epoch", "x", "'epoch' must be an integer"), ("epoch", 1_000_000, "epoch 1000000 done of a run of 3")],
+)
+def test_a_checkpoint_edited_by_hand_is_refused_naming_it(tmp_path, field, value, says):
+    """checkpoint.json carries no hash: its values are checked (once a string epoch was a traceback, and a huge
+    one wrote a run stopped at epoch 1 of 3 out as finished)."""
+    import json
+
+    from coassist._io import partial_folder
+    from coassist.intent.checkpoint import CHECKPOINT_JSON
+    from coassist.intent.training import train_model
+
+    class Stop(Exception):
+        pass
+
+    def stop(record):
+        if record["epoch"] == 1:
+            raise Stop
+
+    cfg = replace(TINY.train, epochs=3)
+    with pytest.raises(Stop):
+        train_model(labeled(4), TINY, cfg, checkpoint_to=tmp_path / "m", on_epoch=stop)
+    path = partial_folder(tmp_path / "m") / CHECKPOINT_JSON
+    record = json.loads(path.read_text())
+    record[field] = value
+    path.write_text(json.dumps(record))
+    with pytest.raises(ValueError, match="unusable checkpoint") as err:
+        train_model(labeled(4), TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
+    assert says in str(err.value) and "\n" not in str(err.value)
 
 
 @pytest.mark.slow  # ~11 s: two trainings and a child process; the library test above covers the resume itself

@@ -115,6 +115,21 @@ def test_a_trial_written_but_not_recorded_is_recovered_not_run_twice(tmp_path):
     assert all(line.endswith(b"\n") for line in pf.progress_file.read_bytes().splitlines(keepends=True))
 
 
+def test_a_plan_changed_after_a_participant_started_but_logged_no_step_is_refused(tmp_path):
+    """A run stopped during its first trial has written the participant's order (and maybe the trial's file) but no
+    step: the plan it ordered from is in use. Before, init took the changed plan and the old order ran under it
+    (two controllers pooled under one condition name)."""
+    plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0)
+    study = init_study(plan, tmp_path / "study")
+    with ParticipantRun(study, "S01", simulate=True):
+        pass  # registered, ordered; killed before its first trial's line
+    assert (study.participant("S01").folder / "order.json").is_file() and not study.participant("S01").progress()
+    plan.write_text(plan.read_text().replace("per_condition = 1", "per_condition = 2"))
+    with pytest.raises(StudyFolderError) as err:
+        init_study(plan, tmp_path / "study")
+    assert "\n" not in str(err.value) and "participants have started" in str(err.value)
+
+
 def test_a_plan_changed_after_the_first_trial_is_refused_in_one_line(tmp_path):
     plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0)
     study = init_study(plan, tmp_path / "study")

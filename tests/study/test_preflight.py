@@ -135,6 +135,19 @@ def test_a_network_too_large_to_train_in_a_rest_is_refused_without_building_it(t
     assert preflight._n_parameters(cfg) == real == hand
 
 
+def test_a_plan_whose_trials_would_share_seeds_is_refused(tmp_path):
+    """Each participant's trials draw from the 10 000 seeds past their base: 11 rounds of 1 000 trials gave
+    participant 1's round 10 the seeds of participant 2's round 0 (the same paths and obstacles), and init took it."""
+    pytest.importorskip("torch", reason="an iterative study needs the learn extra")
+    text = '[study]\nname = "iter"\nprotocol = "iterative"\nparticipants = 2\n\n[iterative]\n'
+    plan = _write(tmp_path / "plans", text + "rounds = 11\ntrials_per_round = 1000\n" + TRIALS + TRAINING)
+    message = _refused(plan, tmp_path / "study", "iterative.rounds × iterative.trials_per_round")
+    assert "round-10 trial 1 would take seed base + 10000, past the participant's 10 000 seeds" in message
+    # 10 rounds of 1 000 fill the band to its last seed: past the seeds, the session is what is refused
+    plan.write_text(text + "rounds = 10\ntrials_per_round = 1000\n" + TRIALS + TRAINING)
+    _refused(plan, tmp_path / "study", "a participant's session would take about")
+
+
 def test_a_session_longer_than_a_person_can_sit_is_refused(tmp_path):
     plan = comparison_plan(tmp_path / "plans", per_condition=1000, timing="motion_time = 10.0")
     message = _refused(plan, tmp_path / "study", "a participant's session would take about")

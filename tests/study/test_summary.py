@@ -231,3 +231,30 @@ def test_a_summary_missing_a_key_is_refused_naming_it(written):
     comparison = {k: v for k, v in on_disk["comparisons"][0].items() if k != "p_t_holm"}
     with pytest.raises(ValueError, match=r"\['p_t_holm'\]"):
         StudySummary.from_json({**on_disk, "comparisons": [comparison]})
+
+
+def test_a_block_stopped_before_its_last_trial_stays_out_of_the_pooled_numbers(tmp_path):
+    """A participant stopped mid-condition has a block of fewer trials, of other tasks than the other blocks': its
+    mean is not paired with theirs. The pooled mean is the other participant's alone, the comparisons do not count
+    it, and a line names the block (before, "4.29 ± 1.49 (n=2)" pooled a half block as a whole one)."""
+    from coassist.study.folder import init_study
+    from coassist.study.runner import ParticipantRun
+
+    s = init_study(comparison_plan(tmp_path / "plans", per_condition=2, practice=0), tmp_path / "study")
+    with ParticipantRun(s, "S01", simulate=True) as run:
+        assert run.run()
+    with ParticipantRun(s, "S02", simulate=True) as run:
+        trials = [k for k, step in enumerate(run.steps) if step["kind"] == "trial"]
+        block = run.steps[trials[0]]["block"]
+        assert run.steps[trials[1]]["block"] == block  # two trials a block
+        run.steps = run.steps[: trials[1]]  # stopped before the block's second trial
+        assert run.run()
+    summary = summarise_study(s.folder)
+    assert not summary.participants["S02"].complete
+    assert block not in summary.participants["S02"].means
+    s01 = summary.participants["S01"].means[block]["f_rms"]
+    pooled = summary.pooled[block]["f_rms"]
+    assert pooled.n == 1 and pooled.mean == s01
+    assert all(c.n == 1 for c in summary.comparisons if block in (c.a, c.b))  # S01's pair alone
+    assert any(f"S02: {block}" in line for line in summary.limits)
+    assert summary.n_participants == 2 and summary.to_json()["limits"] == list(summary.limits)

@@ -105,7 +105,7 @@ def _write_manifest(folder: Path, manifest: Mapping[str, Any]) -> None:
 
 def _confined(folder: Path, name: Any, where: str, path: Path) -> str:
     """A manifest's trial file name, refused unless it stays inside the dataset folder."""
-    if not isinstance(name, str) or not name.strip():
+    if not isinstance(name, str) or not name.strip() or "\0" in name:  # a NUL: no file name (os refuses it)
         raise ManifestError(f"{path}: {where} 'file' must be a file name, got {name!r}")
     root = folder.resolve()
     target = (folder / name).resolve()
@@ -130,6 +130,8 @@ def _read_manifest(folder: Path) -> dict[str, Any]:
         raise ManifestError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except json.JSONDecodeError as exc:
         raise ManifestError(f"{path}: malformed JSON: {exc}") from None
+    except RecursionError:  # nested deeper than the parser goes: no manifest coassist writes
+        raise ManifestError(f"{path}: malformed JSON: nested too deep") from None
     if not isinstance(manifest, dict):
         raise ManifestError(f"{path}: must hold a JSON object, got {type(manifest).__name__}")
     for key in ("dataset_id", "trials", "format_version"):
@@ -347,6 +349,9 @@ def _read_entry(folder: Path, entry: Mapping[str, Any]) -> Trial:
         raise TrialFileError(f"{folder / MANIFEST_NAME}: bad meta for {entry['file']!r}: {exc}") from None
     if listed != trial.meta:
         raise TrialFileError(f"{path}: meta differs from the one listed in {folder / MANIFEST_NAME}")
+    n = entry.get("n_samples")
+    if n is not None and n != trial.n_samples:
+        raise TrialFileError(f"{path}: holds {trial.n_samples} samples, {folder / MANIFEST_NAME} lists {n}")
     return trial
 
 

@@ -11,7 +11,9 @@ files, :func:`read_checkpoint` reads them back from a model folder and
 
 from __future__ import annotations
 
+import hashlib
 import json
+from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -28,6 +30,7 @@ __all__ = [
     "checkpoint_files",
     "read_checkpoint",
     "restore_checkpoint",
+    "trials_digest",
 ]
 
 CHECKPOINT = "checkpoint.safetensors"
@@ -43,6 +46,7 @@ def checkpoint_files(
     epoch0: int,
     epoch: int,
     trials: list[str],
+    contents: str,
     config: TrainConfig,
 ) -> dict[str, bytes]:
     """What a resume needs beyond the weights: optimizer tensors (safetensors) and the rest (JSON)."""
@@ -62,6 +66,7 @@ def checkpoint_files(
         "epoch": epoch,
         "epoch0": epoch0,
         "trials": trials,
+        "trials_sha256": contents,  # what the trials hold (trials_digest): a resume on other data is refused
         "train_config": asdict(config),
         "optimizer": {"param_groups": state["param_groups"], "scalars": scalars},
         "scheduler": sched_state,
@@ -71,6 +76,22 @@ def checkpoint_files(
         CHECKPOINT: st_save(tensors),
         CHECKPOINT_JSON: (json.dumps(record, indent=1, allow_nan=False) + "\n").encode(),
     }
+
+
+def trials_digest(trials: Sequence[Any]) -> str:
+    """SHA-256 of what labeled ``trials`` hold (each one's id and the arrays a training reads, in order): the
+    same ids collected again are other data."""
+    h = hashlib.sha256()
+    for lt in trials:
+        h.update(str(lt.id).encode() + b"\0")
+        t = lt.trial
+        for name in ("time", "pose", "velocity", "wrench", "reference", "intent"):
+            value = getattr(t, name, None)
+            if value is not None:
+                arr = np.ascontiguousarray(value, dtype=np.float64)
+                h.update(name.encode() + str(arr.shape).encode())
+                h.update(arr.tobytes())
+    return h.hexdigest()
 
 
 def read_checkpoint(folder: Path) -> dict[str, Any] | None:
@@ -89,8 +110,16 @@ def read_checkpoint(folder: Path) -> dict[str, Any] | None:
         for key in ("epoch", "epoch0", "trials", "train_config", "optimizer", "scheduler", "numpy_rng"):
             if key not in record:
                 raise ValueError(f"missing {key!r}")
+        for key in ("epoch", "epoch0"):  # epochs done: a count (the run's own total is checked where it is known)
+            value = record[key]
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"{key!r} must be an integer >= 0, got {json.dumps(value)}")
+        if not isinstance(record["trials"], list) or not all(isinstance(t, str) for t in record["trials"]):
+            raise ValueError("'trials' must be a list of trial ids")
+        if not isinstance(record["train_config"], dict):
+            raise ValueError("'train_config' must be an object")
         record["tensors"] = st_load((folder / CHECKPOINT).read_bytes())
-    except (OSError, ValueError, SafetensorError) as exc:
+    except (OSError, ValueError, RecursionError, SafetensorError) as exc:
         raise ValueError(f"{path}: unusable checkpoint ({exc}); start a new stage with finetune:{folder}") from None
     return record
 

@@ -335,7 +335,8 @@ def read_sidecar(folder: str | os.PathLike[str]) -> dict[str, Any]:
         raise _fail(path, f"'features' must be a list of names, got {json.dumps(features)}")
     for key in ("weights_sha256", "ridge_sha256"):
         value = meta.get(key)
-        if not (isinstance(value, str) or (key == "ridge_sha256" and value is None)):
+        # a model without a ridge writes null: the key itself is always there
+        if key not in meta or not (isinstance(value, str) or (key == "ridge_sha256" and value is None)):
             raise _fail(path, f"{key!r} must be a hex digest, got {json.dumps(value)}")
     return meta
 

@@ -49,7 +49,13 @@ from coassist._io import partial_folder, save_figure
 from coassist._progress import progress_bar
 from coassist.intent.baselines import UNTUNED_RIDGE_ALPHA, RidgeBaseline, fit_tuned_baselines, tune_ridge_alpha
 from coassist.intent.batches import DeviceWindows
-from coassist.intent.checkpoint import CHECKPOINT_JSON, checkpoint_files, read_checkpoint, restore_checkpoint
+from coassist.intent.checkpoint import (
+    CHECKPOINT_JSON,
+    checkpoint_files,
+    read_checkpoint,
+    restore_checkpoint,
+    trials_digest,
+)
 from coassist.intent.features import WindowConfig, WindowSet, feature_names, scale_targets, split_trials
 from coassist.intent.model import IntentModel, load_model, save_model
 from coassist.intent.network import IntentNet
@@ -317,6 +323,7 @@ def train_model(
         fit_linear_skip=False,
     )
     ids = [lt.id for lt in trials]
+    contents = trials_digest(trials)
     ckpt = read_checkpoint(Path(base_path)) if mode == "resume" and not base.info.get("finished", True) else None
     if ckpt is not None:
         if ckpt["trials"] != ids:
@@ -324,12 +331,24 @@ def train_model(
                 f"{base_path} is an interrupted run on {len(ckpt['trials'])} other trials; continue it with the same "
                 "data, or start a new stage from it with finetune:"
             )
+        if ckpt.get("trials_sha256", contents) != contents:  # (a checkpoint written before it: ids alone)
+            raise ValueError(
+                f"{base_path} is an interrupted run on other data under the same trial ids (a dataset collected "
+                "again?); continue it with the data it began on, or start a new stage from it with finetune:"
+            )
         try:
             config = replace(TrainConfig(**ckpt["train_config"]), threads=config.threads, device=config.device)
         except TypeError as exc:  # a checkpoint of another coassist version
             raise ValueError(
                 f"{base_path}: checkpoint's training configuration is not this version's ({exc})"
             ) from None
+        except ValueError as exc:  # its values refused (TrainConfig names the field, not an option given here)
+            raise ValueError(f"{base_path}: unusable checkpoint (its train_config: {exc})") from None
+        if ckpt["epoch"] > config.epochs:  # epochs done of this run: at most its own
+            raise ValueError(
+                f"{base_path}: unusable checkpoint (epoch {ckpt['epoch']} done of a run of {config.epochs}); start a "
+                "new stage from it with finetune:"
+            )
         mode = config.start[0]  # the interrupted run's own mode (a transfer stays frozen)
     model = IntentModel(copy.deepcopy(base.net), base.window, base.input_scaler, base.target_scaler, base.dt, {})
     net, window, dt = model.net, model.window, model.dt
@@ -379,7 +398,10 @@ def train_model(
     done = 0
     if ckpt is not None:
         epoch0, done = ckpt["epoch0"], ckpt["epoch"]
-        restore_checkpoint(ckpt, opt, sched, rng)
+        try:
+            restore_checkpoint(ckpt, opt, sched, rng)
+        except (KeyError, TypeError, ValueError, RuntimeError) as exc:  # the optimizer's or generator's state
+            raise ValueError(f"{base_path}: unusable checkpoint ({type(exc).__name__}: {exc})") from None
 
     def info(finished: bool) -> dict[str, Any]:
         out = {
@@ -453,7 +475,9 @@ def train_model(
             history.append(record)
             if checkpoint_to is not None:
                 snapshot = IntentModel(net, window, model.input_scaler, model.target_scaler, dt, info(False))
-                files = checkpoint_files(opt, sched, rng, epoch0=epoch0, epoch=epoch, trials=ids, config=config)
+                files = checkpoint_files(
+                    opt, sched, rng, epoch0=epoch0, epoch=epoch, trials=ids, contents=contents, config=config
+                )
                 save_model(
                     snapshot,
                     partial_folder(checkpoint_to),

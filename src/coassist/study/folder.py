@@ -155,7 +155,7 @@ def init_study(plan_file: str | Path, out: str | Path) -> StudyFolder:
     study folder (module docstring); the session's estimate is recorded in ``study.json``.
 
     An existing study folder with the same plan is left as it is; with another plan it is
-    updated only while no trial has run (else :class:`StudyFolderError`, one line).
+    updated only while no participant has started (an order written: else :class:`StudyFolderError`, one line).
     """
     plan_file = Path(plan_file)
     plan = load_plan(plan_file)
@@ -171,9 +171,9 @@ def init_study(plan_file: str | Path, out: str | Path) -> StudyFolder:
             old = StudyFolder(out)
             if old.record["plan_sha256"] == _sha256(raw) and old.record["plan_dir"] == str(plan_file.parent.resolve()):
                 return old
-            if old.any_trial():
+            if old.any_started():
                 raise StudyFolderError(
-                    f"{out}: trials have run under its plan (sha256 {old.record['plan_sha256'][:12]}); a changed plan "
+                    f"{out}: participants have started under its plan (sha256 {old.record['plan_sha256'][:12]}); a changed plan "
                     f"needs a new study folder (its safe fields, {', '.join(SAFE_FIELDS)}: coassist study amend)"
                 )
         names = condition_names(plan)
@@ -253,7 +253,7 @@ def amend_study(folder: str | Path, plan_file: str | Path, reason: str) -> dict[
             "to_sha256": _sha256(raw),
             "fields": {k: list(v) for k, v in changed.items()},
             "reason": reason.strip(),
-            "trials_before": study.any_trial(),
+            "trials_before": study.any_started(),
         }
         record.update(
             plan_sha256=_sha256(raw),
@@ -296,7 +296,7 @@ class StudyFolder:
         if _sha256(raw) != self.record["plan_sha256"]:
             raise StudyFolderError(
                 f"{self.folder / PLAN_NAME} changed after study init (sha256 {self.record['plan_sha256'][:12]} recorded, "
-                f"{_sha256(raw)[:12]} now): {'trials have run under the old one: put it back, or start a new study folder (coassist study amend changes its safe fields)' if self.any_trial() else 'run coassist study init again'}"
+                f"{_sha256(raw)[:12]} now): {'trials have run under the old one: put it back, or start a new study folder (coassist study amend changes its safe fields)' if self.any_started() else 'run coassist study init again'}"
             )
         for path, digest in self.record["models"].items():
             if intent_folder_hash(path) != digest:
@@ -378,11 +378,13 @@ class StudyFolder:
             raise StudyFolderError(f"{path}: two participants have the same number (edited by hand?); {_RESTORE}")
         return table
 
-    def any_trial(self) -> bool:
-        """Whether any participant has a finished step on record."""
+    def any_started(self) -> bool:
+        """Whether any participant has started: a finished step on record, or their order written (a run stopped
+        during its first trial has an order, and maybe a trial file, but no step on record yet)."""
         root = self.folder / "participants"
         return root.is_dir() and any(
-            (p / PROGRESS_NAME).is_file() and (p / PROGRESS_NAME).stat().st_size > 0 for p in root.iterdir()
+            (p / ORDER_NAME).is_file() or ((p / PROGRESS_NAME).is_file() and (p / PROGRESS_NAME).stat().st_size > 0)
+            for p in root.iterdir()
         )
 
     def register(self, participant: str, simulated: bool = False) -> dict[str, Any]:

@@ -59,7 +59,7 @@ from coassist.config import CONTROL_PRESETS
 from coassist.scenario import intent_registry
 from coassist.study.design import blinding_labels
 from coassist.study.plan import CALIBRATED, PlanError, StudyPlan, TrainingPlan
-from coassist.study.protocols import condition_names, participant_steps
+from coassist.study.protocols import SEED_BAND, condition_names, participant_steps, trial_seed_base
 
 __all__ = [
     "FIT_SECONDS",
@@ -241,6 +241,27 @@ def _check_calibration(plan: StudyPlan, H: int, trial_s: float) -> None:
             )
 
 
+def _check_seeds(plan: StudyPlan) -> None:
+    """Refuse a plan whose trials would share a seed (the same path and obstacle): each participant's trials draw
+    from the 10 000 seeds past their base (:func:`~coassist.study.protocols.trial_seed_base`; practice from 5 000
+    on, collections from 2 000, calibration from 8 000), the same offsets for every participant."""
+    names = condition_names(plan)
+    base = trial_seed_base(plan, 1)
+    seen: dict[int, str] = {}
+    for step in participant_steps(plan, dict(zip(names, names)), 1, 0):
+        if step["kind"] != "trial":
+            continue
+        offset, what = step["seed"] - base, f"{step['block']} trial {step['index'] + 1}"
+        if not 0 <= offset < SEED_BAND or offset in seen:
+            clash = "past the participant's 10 000 seeds" if offset >= SEED_BAND else f"as {seen.get(offset)}"
+            fields = "iterative.rounds × iterative.trials_per_round" if plan.iterative is not None else "trials"
+            raise PlanError(
+                f"{fields}: a participant's {what} would take seed base + {offset}, {clash} (the next participant's "
+                "trials, or another block's: the same path and obstacle twice); plan fewer trials"
+            )
+        seen[offset] = what
+
+
 def _source_model(plan: StudyPlan, H: int, dt: float):
     """The transfer/online source model, loaded and checked for its use: in the loop, and trained further."""
     from coassist.intent.model import load_model
@@ -363,6 +384,7 @@ def preflight(plan: StudyPlan) -> SessionEstimate:
     n_joints = ARM_JOINTS if plan.world != "play" else 0
     trial_bytes = 2 * int(math.ceil(limit / dt)) * bytes_per_tick(H, n_joints=n_joints)
     _check_calibration(plan, H, trial_s)
+    _check_seeds(plan)
 
     train_s: dict[str, float] = {}
     training_bytes = n_params = 0

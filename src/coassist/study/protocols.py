@@ -68,6 +68,7 @@ __all__ = [
     "ASKED_SEED_OFFSET",
     "CALIBRATION_BLOCK",
     "PROBE_CONTROLLER",
+    "SEED_BAND",
     "asked_steps",
     "calibration_steps",
     "condition_names",
@@ -102,9 +103,13 @@ def condition_names(plan: StudyPlan) -> list[str]:
     )
 
 
+#: How many seeds each participant's trials draw from, past their base (module docstring).
+SEED_BAND = 10_000
+
+
 def trial_seed_base(plan: StudyPlan, number: int) -> int:
     """``base`` of participant ``number`` (module docstring)."""
-    return 1_000_000 * plan.seed + 10_000 * int(number)
+    return 1_000_000 * plan.seed + SEED_BAND * int(number)
 
 
 def participant_steps(plan: StudyPlan, labels: dict[str, str], number: int, row: int) -> list[dict[str, Any]]:

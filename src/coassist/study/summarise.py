@@ -134,9 +134,11 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str], form: For
         "positions": {},
         "checks": [CriterionCheck.from_json(finite_json(r)) for r in progress if r["kind"] == "check"],
     }
+    planned: dict[str, int] = {}  # measured trials per block, as ordered (asked calibration trials included)
     for s in order["steps"]:
         if s["kind"] == "trial" and not s["practice"]:
             data["positions"][s["block"]] = s["position"]
+            planned[s["block"]] = planned.get(s["block"], 0) + 1
     data["fits"] = [_fit_summary(r, progress) for r in progress if r["kind"] == "fit"]
     for i, r in enumerate(progress):
         if r["kind"] == "questionnaire":
@@ -151,6 +153,9 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str], form: For
             "trials": per_trial,
             "means": {k: _nanmean(m[k] for m in per_trial) for k, *_ in MEASURES},
             "models": [t.meta.extra.get("study_model") for t in trials],
+            # a block cut short (the participant stopped mid-condition) has fewer trials, of other tasks: its
+            # mean is not paired with the other blocks' and stays out of the pooled numbers
+            "partial": len(trials) < planned.get(b, 0),
         }
     return data
 
@@ -294,10 +299,15 @@ def summarise_study(folder: str | Path) -> StudySummary:
     table = study.check_table()
     form = form_for(plan.questionnaire)
     participants = {pid: _participant_data(study, pid, blocks, form) for pid in sorted(table)}
-    measured = {pid: d for pid, d in participants.items() if any(b in d["blocks"] for b in blocks)}
-    # per participant (mean over their measured trials) and pooled (mean and sd over participants)
+    # per participant (mean over their measured trials of each whole block) and pooled (mean and sd over
+    # participants); a block cut short is left out of both, of the comparisons and of the order effects
+    partial = {pid: [b for b in blocks if d["blocks"].get(b, {}).get("partial")] for pid, d in participants.items()}
+    measured = {
+        pid: d for pid, d in participants.items() if any(b in d["blocks"] and b not in partial[pid] for b in blocks)
+    }
     per_participant: dict[str, dict[str, dict[str, float]]] = {
-        pid: {b: d["blocks"][b]["means"] for b in blocks if b in d["blocks"]} for pid, d in measured.items()
+        pid: {b: d["blocks"][b]["means"] for b in blocks if b in d["blocks"] and b not in partial[pid]}
+        for pid, d in measured.items()
     }
     pooled: dict[str, dict[str, PooledMeasure]] = {}
     for b in blocks:
@@ -392,7 +402,8 @@ def summarise_study(folder: str | Path) -> StudySummary:
         questionnaire=QuestionnaireSummary(pooled=q_pooled, comparisons=tuple(q_comparisons)),
         order_effects=order,
         simulated=simulated,
-        limits=tuple(sample_limits(len(per_participant), len(comparisons), simulated)),
+        limits=tuple(sample_limits(len(per_participant), len(comparisons), simulated))
+        + _partial_note({pid: bs for pid, bs in partial.items() if bs}),
         collections={
             pid: {
                 b: Collection(
@@ -405,6 +416,18 @@ def summarise_study(folder: str | Path) -> StudySummary:
             for pid, d in participants.items()
         },
         models=_models(study, participants),
+    )
+
+
+def _partial_note(partial: Mapping[str, list[str]]) -> tuple[str, ...]:
+    """The line that names the blocks cut short and left out of the pooled numbers (none: no line)."""
+    if not partial:
+        return ()
+    cut = "; ".join(f"{pid}: {', '.join(bs)}" for pid, bs in sorted(partial.items()))
+    return (
+        f"Left out of the pooled numbers, the comparisons and the order effects: blocks stopped before their last "
+        f"trial ({cut}). Their trials are in the study folder; a block's mean over some of its trials is of "
+        "other tasks than the other blocks' and would not pair with them.",
     )
 
 
