@@ -142,7 +142,10 @@ def test_a_plan_whose_trials_would_share_seeds_is_refused(tmp_path):
     text = '[study]\nname = "iter"\nprotocol = "iterative"\nparticipants = 2\n\n[iterative]\n'
     plan = _write(tmp_path / "plans", text + "rounds = 11\ntrials_per_round = 1000\n" + TRIALS + TRAINING)
     message = _refused(plan, tmp_path / "study", "iterative.rounds × iterative.trials_per_round")
-    assert "round-10 trial 1 would take seed base + 10000, past the participant's 10 000 seeds" in message
+    assert "round-10 trial 1 would take seed base + 10000, outside the participant's 10 000 seeds" in message
+    # a comparison's conditions share measured trial j's seed on purpose (paired), and pass (once refused)
+    comparison = comparison_plan(tmp_path / "pairs", per_condition=2, practice=1)
+    assert init_study(comparison, tmp_path / "paired").plan().trials.per_condition == 2
     # 10 rounds of 1 000 fill the band to its last seed: past the seeds, the session is what is refused
     plan.write_text(text + "rounds = 10\ntrials_per_round = 1000\n" + TRIALS + TRAINING)
     _refused(plan, tmp_path / "study", "a participant's session would take about")

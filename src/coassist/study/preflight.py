@@ -247,19 +247,26 @@ def _check_seeds(plan: StudyPlan) -> None:
     on, collections from 2 000, calibration from 8 000), the same offsets for every participant."""
     names = condition_names(plan)
     base = trial_seed_base(plan, 1)
-    seen: dict[int, str] = {}
+    seen: dict[int, tuple[str, tuple[Any, ...]]] = {}
     for step in participant_steps(plan, dict(zip(names, names)), 1, 0):
         if step["kind"] != "trial":
             continue
         offset, what = step["seed"] - base, f"{step['block']} trial {step['index'] + 1}"
-        if not 0 <= offset < SEED_BAND or offset in seen:
-            clash = "past the participant's 10 000 seeds" if offset >= SEED_BAND else f"as {seen.get(offset)}"
-            fields = "iterative.rounds × iterative.trials_per_round" if plan.iterative is not None else "trials"
-            raise PlanError(
-                f"{fields}: a participant's {what} would take seed base + {offset}, {clash} (the next participant's "
-                "trials, or another block's: the same path and obstacle twice); plan fewer trials"
-            )
-        seen[offset] = what
+        # measured trial j of every condition shares its seed on purpose (the conditions are paired)
+        role = (
+            ("paired", step["index"])
+            if step["block"] in names and not step["practice"]
+            else (step["block"], step["index"])
+        )
+        if 0 <= offset < SEED_BAND and seen.get(offset, (what, role))[1] == role:
+            seen.setdefault(offset, (what, role))
+            continue
+        clash = f"as {seen[offset][0]}" if offset in seen else "outside the participant's 10 000 seeds"
+        fields = "iterative.rounds × iterative.trials_per_round" if plan.iterative is not None else "trials"
+        raise PlanError(
+            f"{fields}: a participant's {what} would take seed base + {offset}, {clash} (the next participant's "
+            "trials, or another block's: the same path and obstacle twice); plan fewer trials"
+        )
 
 
 def _source_model(plan: StudyPlan, H: int, dt: float):
