@@ -376,3 +376,51 @@ def test_help_is_plain_and_fits_80_columns():
     assert "Simulated time per case [s]." in " ".join(sweep_help.split())
     collect_help = RUNNER.invoke(app, ["collect", "--help"], terminal_width=80).output
     assert "coassist[cluster]" in " ".join(collect_help.split())
+
+
+# --------------------------------------------------------------------------- a review's fuzzing (2026-12-05)
+REFUSED = {
+    # repeated or empty list items: once accepted (--users 0,0 collected user 0 twice under users=[0])
+    "collect --users 0,0": (["collect", "--users", "0,0", "--trials", "1"], ["--users lists 0 twice"]),
+    "collect --tasks linear,linear": (["collect", "--tasks", "linear,linear"], ["--tasks lists 'linear' twice"]),
+    "collect --users 0,,1": (["collect", "--users", "0,,1"], ["--users has an empty item"]),
+    "collect --users full-width": (["collect", "--users", "１"], ["--users must be comma-separated integers"]),
+    "compare-intents --users 0,0": (
+        ["compare-intents", "--source", "p=present", "--users", "0,0"],
+        ["--users lists 0 twice"],
+    ),
+    "reproduce --seeds full-width": (["reproduce", "--seeds", "１,２"], ["--seeds must be a count or"]),
+    "train --fc 64,,32": (["train", "{D}", "--fc", "64,,32"], ["--fc has an empty item"]),
+    # sizes a model cannot have: once a traceback (allocation) or a build that never ended
+    "train --hidden 1e8": (["train", "{D}", "--hidden", "100000000"], ["more than the 100,000,000"]),
+    "train --layers 1e5": (["train", "{D}", "--layers", "100000"], ["more than the 100,000,000"]),
+    "train --hypotheses 1e5": (["train", "{D}", "--hypotheses", "100000"], ["more than the 100,000,000"]),
+    "train --layers 0": (["train", "{D}", "--layers", "0"], ["--layers must be >= 1", "--preset linear"]),
+    "train --threads 100000": (["train", "{D}", "--threads", "100000"], ["--threads must be at most"]),
+    "show --out x.txt": (["show", "{D}", "--out", "{OUT}/x.txt"], ["--out", "give a file ending in .png"]),
+    "sweep --duration 1e308": (["sweep", "--duration", "1e308"], ["--duration must be at most 3600"]),
+    "evaluate -m a file": (["evaluate", "-m", "{work}/afile", "-d", "{D}"], ["--model", "is a file"]),
+    "ur-sim --seed -1": (["ur-sim", "--seed", "-1"], ["--seed must be >= 0"]),
+    "drive --object bogus": (["drive", "--world", "mujoco", "--object", "bogus"], ["--object"]),
+}
+
+
+@pytest.mark.parametrize("case", list(REFUSED))
+def test_a_fuzzed_option_is_refused_in_one_line_naming_it(work, tmp_path, case):
+    args, says = REFUSED[case]
+    args = [a.format(D=work / "D", OUT=tmp_path, work=work) for a in args]
+    if args[0] in ("collect", "train") and "--out" not in args:
+        args += ["--out", str(tmp_path / "out")]
+    res = run(*args)
+    assert_one_line_error(res, *says, code=2)
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())  # nothing half-written
+
+
+def test_collect_into_the_current_folder_names_the_dataset_after_it(tmp_path):
+    """``--out .`` once gave the dataset the empty name and was refused for it (and "." cannot be swapped into
+    place: the folder is written by its absolute path)."""
+    here = tmp_path / "here"
+    here.mkdir()
+    res = run("collect", "--out", ".", "--trials", "1", "--tasks", "linear", "--workers", "1", cwd=here)
+    assert res.exit_code == 0, res.output
+    assert json.loads((here / "manifest.json").read_text())["dataset_id"] == "here"

@@ -64,7 +64,20 @@ def test_the_cli_says_what_is_wrong_in_one_line(tmp_path):
     from coassist.cli import app
 
     result = CliRunner().invoke(app, ["play", "--user", "../x", "--out", str(tmp_path), "--no-open"])
-    assert result.exit_code == 1 and "PlayConfig.user" in result.output and "Traceback" not in result.output
+    assert result.exit_code == 2 and "--user must be" in result.output and "Traceback" not in result.output
+    # each refused option named as typed, exit 2 (once PlayConfig's field names, exit 1)
+    for args, says in (
+        (["--seed", "-1"], "--seed must be"),
+        (["--motion-time", "nan"], "--motion-time"),
+        (["--controller", "manual,manual"], "--controller"),
+        (["--drive", "bogus"], "--drive"),
+        (["--tasks", "linear,,z"], "--tasks has an empty item"),
+    ):
+        result = CliRunner().invoke(app, ["play", *args, "--out", str(tmp_path), "--no-open"])
+        assert result.exit_code == 2 and says in result.output and "Traceback" not in result.output, (
+            args,
+            result.output,
+        )
     result = CliRunner().invoke(
         app, ["play", "--intent", str(tmp_path / "missing"), "--out", str(tmp_path), "--no-open"]
     )

@@ -186,3 +186,19 @@ def test_one_run_per_participant_and_each_their_own_folder(tmp_path):
         ParticipantRun(study, "S01", page=("127.0.0.1", 0, None))
     with pytest.raises(StudyFolderError, match="--participant must be"):
         ParticipantRun(study, "../etc", simulate=True)
+
+
+@pytest.mark.parametrize("host, token", [("0.0.0.0", "short"), ("no such host.invalid", None)])
+def test_a_refused_page_option_registers_nobody(tmp_path, host, token):
+    """`study run` with a --host/--token the page cannot use once registered the participant (and wrote their
+    order, which locks the plan) before the page refused to start."""
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+
+    study = init_study(comparison_plan(tmp_path / "plans", per_condition=1, practice=0), tmp_path / "study")
+    args = ["study", "run", str(study.folder), "--participant", "P01", "--host", host, "--no-open"]
+    res = CliRunner().invoke(app, args + (["--token", token] if token else []))
+    assert res.exit_code == 2 and ("--token" in res.output or "--host" in res.output), res.output
+    assert "Traceback" not in res.output
+    assert not (study.folder / "participants" / "P01").exists() and not study.any_started()

@@ -125,6 +125,20 @@ def check_device(device: str | None, option: str = "--device") -> None:
         fail(f"{option} {device}: use cpu, cuda or cuda:<n>", 2)
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity, else the machine's)."""
+    import os
+
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def check_threads(threads: int | None, option: str = "--threads") -> None:
+    """Refuse a thread count given on the command line above :func:`usable_cores` (``--threads 100000`` once ran
+    out of memory in a traceback)."""
+    if threads is not None and threads > (cores := usable_cores()):
+        fail(f"{option} must be at most the {cores} cores this process may use, got {threads}", 2)
+
+
 def set_torch_threads(threads: int) -> None:
     """Torch's intra-op thread count for this process: the command's choice (the library never sets it)."""
     import torch
@@ -163,6 +177,9 @@ def _bag_topics(text: str | None) -> dict[str, str] | None:
     if not pairs or any(not sep for _, sep, _ in pairs):
         fail(f"--bag-topics: expected field=/topic pairs separated by commas, got {text!r}", 2)
     topics = {k.strip(): v.strip() for k, _, v in pairs}
+    if len(topics) != len(pairs):  # the last would win, silently
+        twice = next(k.strip() for k, _, _ in pairs if sum(1 for j, _, _ in pairs if j.strip() == k.strip()) > 1)
+        fail(f"--bag-topics names {twice!r} twice: {text!r}", 2)
     try:
         resolve_topics(topics)
     except ValueError as exc:
@@ -196,18 +213,38 @@ def intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA
     return trials
 
 
-def int_list(text: str, option: str) -> list[int]:
-    try:
-        values = [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
+def _items(text: str, option: str, distinct: bool) -> list[str]:
+    """The comma-separated items of ``text``: an empty item (``a,,b``, a trailing comma) is refused, and with
+    ``distinct`` a repeated one (``--users 0,0`` once collected user 0 twice under ``users=[0]``)."""
+    items = [v.strip() for v in text.split(",")]
+    if not any(items):
+        return []
+    if not all(items):
+        fail(f"{option} has an empty item (two commas, or one at an end): {text!r}", 2)
+    if distinct and len(set(items)) != len(items):
+        twice = next(v for v in items if items.count(v) > 1)
+        fail(f"{option} lists {twice!r} twice: {text!r}", 2)
+    return items
+
+
+def int_list(text: str, option: str, *, distinct: bool = True) -> list[int]:
+    """``text``'s comma-separated integers >= 0 (``distinct``: each once), or a one-line refusal naming ``option``."""
+    items = _items(text, option, False)
+    # ASCII digits only: int() takes "１" (full-width) as 1, a seed nobody typed
+    if not all(v.isascii() and v.removeprefix("-").isdigit() for v in items):
         fail(f"{option} must be comma-separated integers, got {text!r}", 2)
+    values = [int(v) for v in items]
     if not values or any(v < 0 for v in values):
         fail(f"{option} must list integers >= 0, got {text!r}", 2)
+    if distinct and len(set(values)) != len(values):
+        twice = next(v for v in values if values.count(v) > 1)
+        fail(f"{option} lists {twice} twice: {text!r}", 2)
     return values
 
 
-def name_list(text: str, option: str, allowed: tuple[str, ...], what: str) -> list[str]:
-    values = [v.strip() for v in text.split(",") if v.strip()]
+def name_list(text: str, option: str, allowed: tuple[str, ...], what: str, *, distinct: bool = True) -> list[str]:
+    """``text``'s comma-separated names, each one of ``allowed`` (``distinct``: each once), or a one-line refusal."""
+    values = _items(text, option, distinct)
     if not values:
         fail(f"{option} must list one or more of {', '.join(allowed)}; got {text!r}", 2)
     return [choose(v, allowed, option, what) for v in values]

@@ -132,6 +132,7 @@ def collect(
         check_intent(intent)
     except ValueError as exc:
         fail(f"--intent {exc}", 2)
+    out = out.absolute()  # "--out ." is a folder with a name (the dataset's id), swapped into place by its path
     folder_out(out, "--out")
     live = open_live(foxglove)
     try:

@@ -12,6 +12,7 @@ from coassist.cli._common import (
     BAG_TOPICS_HELP,
     SKIP_BAD_HELP,
     check_device,
+    check_threads,
     choose,
     console,
     fail,
@@ -127,10 +128,13 @@ def train(
 
     if optimizer is not None:
         choose(optimizer, OPTIMIZERS, "--optimizer", "optimiser")
+    check_threads(threads)
+    if layers == 0:
+        fail("--layers must be >= 1 (a network without its LSTM is the linear predictor: --preset linear)", 2)
     sizes = {
         "lstm_layers": layers,
         "hidden": hidden,
-        "fc": None if fc is None else tuple(int_list(fc, "--fc")),
+        "fc": None if fc is None else tuple(int_list(fc, "--fc", distinct=False)),
         "hypotheses": hypotheses,
     }
     given = [TRAIN_OPTIONS[f"network.{k}"] for k, v in sizes.items() if v is not None]
@@ -197,6 +201,8 @@ def evaluate(
     acceleration and ridge), and the best baseline per horizon with the model's gain over it."""
     if not model.exists():
         fail(f"--model {model}: no such folder", 2)
+    if not model.is_dir():
+        fail(f"--model {model}: is a file; give the model's folder (coassist train writes one)", 2)
     dest = file_out(out or model / "evaluation.json", "--out", "evaluation.json")
     import json
 

@@ -11,6 +11,7 @@ from coassist.cli._common import (
     INTENT_DEFAULT_HELP,
     SCENE_HELP,
     STABILITY_HELP,
+    choose,
     console,
     fail,
     lookup,
@@ -20,6 +21,7 @@ from coassist.cli._common import (
     say,
     scene_option,
     stability_option,
+    typed,
     way_option,
 )
 from coassist.cli._live import FOXGLOVE_PAGE_PORT, LIVE_HELP, close_live, open_live
@@ -28,6 +30,19 @@ from coassist.robot.worlds import WORLDS, arm_worlds
 from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.intent_registry import INTENT_SOURCES, intent_choices
 from coassist.scenario.path_model import WAY_NAMES
+
+#: PlayConfig's fields as the options that set them, for its refusals.
+PLAY_OPTIONS = {
+    "PlayConfig.user": "--user",
+    "PlayConfig.out": "--out",
+    "PlayConfig.controllers": "--controller",
+    "PlayConfig.intent": "--intent",
+    "PlayConfig.preset": "--preset",
+    "PlayConfig.tasks": "--tasks",
+    "PlayConfig.seed": "--seed",
+    "PlayConfig.motion_time": "--motion-time",
+    "PlayConfig.way": "--ask-way",
+}
 
 
 def _simulation_only(intent: str) -> bool:
@@ -111,18 +126,23 @@ def play(
         from coassist.scenario.tasks import TASKS
 
         lookup(CONTROL_PRESETS, preset, "--preset")
-        config = PlayConfig(
-            user=user,
-            out=out,
-            controllers=tuple(name_list(controller, "--controller", tuple(CONTROLLERS), "controller")),
-            intent="nominal" if drive and _simulation_only(intent) else intent,
-            preset=preset,
-            tasks=tuple(name_list(tasks, "--tasks", tuple(TASKS), "task")),
-            seed=seed,
-            motion_time=motion_time,
-            mcap=mcap,
-            way=way,
-        )
+        if drive is not None:
+            choose(drive, arm_worlds(), "--drive", "world")
+        try:
+            config = PlayConfig(
+                user=user,
+                out=out,
+                controllers=tuple(name_list(controller, "--controller", tuple(CONTROLLERS), "controller")),
+                intent="nominal" if drive and _simulation_only(intent) else intent,
+                preset=preset,
+                tasks=tuple(name_list(tasks, "--tasks", tuple(TASKS), "task", distinct=False)),
+                seed=seed,
+                motion_time=motion_time,
+                mcap=mcap,
+                way=way,
+            )
+        except ValueError as exc:  # the options refused: named as typed, exit 2
+            fail(typed(str(exc), PLAY_OPTIONS), 2)
         if drive is None:
             session = PlaySession(config, live=live)
             say(_page_assistance(session))

@@ -99,9 +99,11 @@ def drive(
     from coassist.robot.drive import DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.runtime.safety_limits import SafetyLimits
+    from coassist.scenario.objects import OBJECTS
 
     choose(world, arm_worlds(), "--world", "arm world")
     choose(controller, CONTROLLERS, "--controller", "controller")
+    choose(obj, OBJECTS, "--object", "object")
     lookup(CONTROL_PRESETS, preset, "--preset")
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
@@ -194,6 +196,8 @@ def ur_sim(
             fail(f"--software {software!r}: give four numbers, e.g. 5.11.1.108318", 2)
     if start is not None:
         fields["start"] = floats(start, "--start")
+    if seed < 0:  # numpy's own refusal names no option
+        fail(f"--seed must be >= 0, got {seed}", 2)
     try:
         config = URSimConfig(**fields)
         serve(config)

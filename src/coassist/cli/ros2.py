@@ -14,6 +14,7 @@ from coassist.cli._common import (
     PERSON_HELP,
     SCENE_HELP,
     STABILITY_HELP,
+    choose,
     console,
     fail,
     floats,
@@ -123,7 +124,9 @@ def ros2(
     from coassist.robot.drive import drive as run_drive
     from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World
     from coassist.runtime.safety_limits import SafetyLimits
+    from coassist.scenario.objects import OBJECTS
 
+    choose(obj, OBJECTS, "--object", "object")
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
         config = DriveConfig(

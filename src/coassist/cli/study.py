@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import socket
 from pathlib import Path
 
 import typer
@@ -133,11 +134,19 @@ def study_run(
         try:
             import starlette  # noqa: F401  (the web extra)
 
-            from coassist.play.server import is_loopback, new_token
+            from coassist.play.server import check_token, is_loopback, new_token
         except ImportError as exc:
             fail(f"the page needs the web extra ({exc.name} missing): pip install 'coassist[web]'")
         if token is None and not is_loopback(host):
             token = new_token()
+        # before anyone is registered: a refused option must not start a participant (it would lock the plan)
+        try:
+            check_token(token, host)
+            socket.getaddrinfo(host, None)
+        except ValueError as exc:
+            fail(str(exc), 2)
+        except OSError as exc:
+            fail(f"--host {host!r}: not an address this machine can listen on ({exc.strerror or exc})", 2)
     confirm = confirm_move(yes, "the emergency stop") if is_real_arm(plan.world) else None
     live = open_live(foxglove, page_port=port if use_page else None)  # stopped with the process on a failure
     for pid in ids:

@@ -41,6 +41,10 @@ ROBOT_EFFORT_WEIGHTS = (0.01, 5e-4, 1e-4)
 HORIZONS = (5, 20, 50)
 
 
+#: [s] The longest case a sweep simulates (an hour: 450 000 ticks at the thesis' 8 ms).
+MAX_DURATION = 3600.0
+
+
 @dataclass(frozen=True)
 class SweepConfig:
     """Parameters of the study; the defaults are the thesis' (§5.2, §5.2.1)."""
@@ -74,6 +78,8 @@ class SweepConfig:
             object.__setattr__(self, name, check_positive_scalar(getattr(self, name), name))
         if self.duration < self.dt:
             raise ValueError(f"duration must be at least one sample (dt = {self.dt}), got {self.duration}")
+        if self.duration > MAX_DURATION:  # a case is simulated tick by tick: 1e308 s never ends (or overflows)
+            raise ValueError(f"duration must be at most {MAX_DURATION:g} s, got {self.duration:g}")
         if not (np.isfinite(self.velocity_weight) and self.velocity_weight >= 0):
             raise ValueError(f"velocity_weight must be a finite number >= 0, got {self.velocity_weight}")
         object.__setattr__(self, "alphas", _values(self.alphas, "alphas", lambda a: 0.0 <= a <= 1.0, "in [0, 1]"))

@@ -69,10 +69,10 @@ class SeedClaim:
 def parse_seeds(text: str) -> tuple[int, ...]:
     """``--seeds``: a count N (the seeds 0 … N−1) or a comma-separated list of distinct seeds ≥ 0."""
     parts = [p.strip() for p in str(text).split(",") if p.strip()]
-    try:
-        values = [int(p) for p in parts]
-    except ValueError:
-        raise ValueError(f"--seeds must be a count or a comma-separated list of integers, got {text!r}") from None
+    # ASCII digits only: int() would take "１" (full-width) as 1, a seed nobody typed
+    if not all(p.isascii() and p.removeprefix("-").isdigit() for p in parts):
+        raise ValueError(f"--seeds must be a count or a comma-separated list of integers, got {text!r}")
+    values = [int(p) for p in parts]
     if not values:
         raise ValueError("--seeds must name at least one seed")
     if len(values) == 1 and "," not in str(text):

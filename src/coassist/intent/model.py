@@ -361,26 +361,6 @@ def _safetensors_metadata(raw: bytes) -> dict[str, Any]:
     return meta if isinstance(meta, dict) else {}
 
 
-def _n_parameters(cfg: NetworkConfig) -> int:
-    """Parameters of ``IntentNet(cfg)``, from its sizes alone (nothing allocated).
-
-    LSTM layer l: 4h (in_l + h) weights + 8h biases (in_0 = n_features, else h); each
-    linear layer a → b: a b + b (the last one's b is hypotheses · n_outputs, and with hypotheses the
-    chooser is one more, from the last one's input to hypotheses); the skip: skip_inputs · n_outputs + n_outputs.
-    """
-    n, h = 0, cfg.hidden
-    if cfg.lstm_layers:
-        for layer in range(cfg.lstm_layers):
-            n += 4 * h * ((cfg.n_features if layer == 0 else h) + h) + 8 * h
-        widths = (h, *cfg.fc, cfg.hypotheses * cfg.n_outputs)
-        n += sum(a * b + b for a, b in zip(widths[:-1], widths[1:]))
-        if cfg.hypotheses > 1:  # the chooser
-            n += widths[-2] * cfg.hypotheses + cfg.hypotheses
-    if cfg.skip_inputs:
-        n += cfg.skip_inputs * cfg.n_outputs + cfg.n_outputs
-    return n
-
-
 def _tensors(path: Path, raw: bytes) -> dict[str, torch.Tensor]:
     try:
         return st_load(raw)
@@ -424,7 +404,7 @@ def load_model(
     weights_path = folder / WEIGHTS
     if not weights_path.is_file():
         raise _fail(weights_path, "not found")
-    n_params = _n_parameters(net_cfg)
+    n_params = net_cfg.n_parameters
     size = weights_path.stat().st_size
     if 4 * n_params > size:  # before any allocation: the network must fit its float32 weights
         raise _fail(

@@ -35,9 +35,12 @@ from torch import nn
 
 from coassist._checks import check_int, is_real_number
 
-__all__ = ["ACTIVATIONS", "IntentNet", "NetworkConfig"]
+__all__ = ["ACTIVATIONS", "MAX_PARAMETERS", "IntentNet", "NetworkConfig"]
 
 ACTIVATIONS = {"silu": nn.SiLU, "relu": nn.ReLU, "tanh": nn.Tanh}
+#: The most parameters a network may have (400 MB of float32 weights, three times that to train with Adam): a size
+#: typed by mistake (--hidden 100000000, --layers 100000) is refused in one line, not allocated or built for hours.
+MAX_PARAMETERS = 100_000_000
 
 
 @dataclass(frozen=True)
@@ -90,6 +93,32 @@ class NetworkConfig:
         object.__setattr__(self, "choice_temperature", float(t))
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"network.activation must be one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
+        if self.n_parameters > MAX_PARAMETERS:  # counted from the sizes: refused before anything is allocated
+            raise ValueError(
+                f"network: {self.n_parameters:,} parameters (lstm_layers {self.lstm_layers}, hidden {self.hidden}, "
+                f"fc {list(self.fc)}, hypotheses {self.hypotheses}) is more than the {MAX_PARAMETERS:,} a model may "
+                "have (the thesis' network has 1.3 million)"
+            )
+
+    @property
+    def n_parameters(self) -> int:
+        """Parameters of ``IntentNet(self)``, from its sizes alone (nothing allocated).
+
+        LSTM layer l: 4h (in_l + h) weights + 8h biases (in_0 = n_features, else h); each
+        linear layer a → b: a b + b (the last one's b is hypotheses · n_outputs, and with hypotheses the
+        chooser is one more, from the last one's input to hypotheses); the skip: skip_inputs · n_outputs + n_outputs.
+        """
+        n, h = 0, self.hidden
+        if self.lstm_layers:
+            for layer in range(self.lstm_layers):
+                n += 4 * h * ((self.n_features if layer == 0 else h) + h) + 8 * h
+            widths = (h, *self.fc, self.hypotheses * self.n_outputs)
+            n += sum(a * b + b for a, b in zip(widths[:-1], widths[1:]))
+            if self.hypotheses > 1:  # the chooser
+                n += widths[-2] * self.hypotheses + self.hypotheses
+        if self.skip_inputs:
+            n += self.skip_inputs * self.n_outputs + self.n_outputs
+        return n
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
