@@ -71,15 +71,25 @@ def test_a_deeply_nested_sidecar_is_one_clear_error(model_dir, tmp_path):
         load_model(folder)
 
 
-def test_a_huge_network_is_refused_before_any_allocation(model_dir, tmp_path):
+@pytest.mark.parametrize(
+    "hidden, says",
+    [
+        (
+            100_000,
+            r"model\.json: .*network: 40,004,800,188 parameters .* more than the 100,000,000",
+        ),  # any model's bound
+        (2_000, r"model\.json: the network .* has \d+ parameters .* holds \d+ bytes"),  # under it, over its weights
+    ],
+)
+def test_a_huge_network_is_refused_before_any_allocation(model_dir, tmp_path, hidden, says):
     """hidden = 100 000 would be a 160 GB allocation: refused from the sizes alone, at once."""
     from coassist.intent import ModelFileError, load_model
 
     folder = _copy(model_dir, tmp_path)
-    _edit(folder, lambda m: {**m, "network": {**m["network"], "hidden": 100_000}})
+    _edit(folder, lambda m: {**m, "network": {**m["network"], "hidden": hidden}})
     tracemalloc.start()
     try:
-        with pytest.raises(ModelFileError, match=r"model\.json: the network .* has \d+ parameters .* holds \d+ bytes"):
+        with pytest.raises(ModelFileError, match=says):
             load_model(folder)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
@@ -88,15 +98,15 @@ def test_a_huge_network_is_refused_before_any_allocation(model_dir, tmp_path):
 
 
 def test_the_parameter_count_from_sizes_matches_the_network():
-    from coassist.intent.model import _n_parameters
     from coassist.intent.network import IntentNet, NetworkConfig
 
     for cfg in (
         NetworkConfig(8, 20, lstm_layers=2, hidden=7, fc=(5, 3)),
         NetworkConfig(8, 20, lstm_layers=0, skip_inputs=16),
         NetworkConfig(8, 20, lstm_layers=1, hidden=4, fc=(), skip_inputs=24),
+        NetworkConfig(8, 20, lstm_layers=2, hidden=6, fc=(5,), hypotheses=3),
     ):
-        assert _n_parameters(cfg) == sum(p.numel() for p in IntentNet(cfg).parameters())
+        assert cfg.n_parameters == sum(p.numel() for p in IntentNet(cfg).parameters())
 
 
 # --------------------------------------------------------------------------- trial files

@@ -125,6 +125,10 @@ def test_a_network_too_large_to_train_in_a_rest_is_refused_without_building_it(t
     big = TRAINING.replace("layers = 1", "layers = 8").replace("hidden = 8", "hidden = 4096")
     text = '[study]\nname = "iter"\nprotocol = "iterative"\n\n[iterative]\nrounds = 2\ntrials_per_round = 2\n'
     message = _refused(_write(tmp_path / "plans", text + TRIALS + big), tmp_path / "study", "training")
+    assert "more than the 100,000,000 a model may have" in message  # any model's bound (NetworkConfig)
+    # 2 × 2048: 50 million, under any model's bound and over a study's
+    big = TRAINING.replace("layers = 1", "layers = 2").replace("hidden = 8", "hidden = 2048")
+    message = _refused(_write(tmp_path / "plans2", text + TRIALS + big), tmp_path / "study2", "training")
     assert f"{MAX_PARAMETERS:,}" in message
     # the count on the meta device is the parameters of a network built for real (an independent count)
     from coassist.study import preflight

@@ -132,8 +132,8 @@ def collect(
         check_intent(intent)
     except ValueError as exc:
         fail(f"--intent {exc}", 2)
+    folder_out(out, "--out")  # told as typed
     out = out.absolute()  # "--out ." is a folder with a name (the dataset's id), swapped into place by its path
-    folder_out(out, "--out")
     live = open_live(foxglove)
     try:
         folder = collect_dataset(
