@@ -323,8 +323,9 @@ def train_model(
         fit_linear_skip=False,
     )
     ids = [lt.id for lt in trials]
-    contents = trials_digest(trials)
     ckpt = read_checkpoint(Path(base_path)) if mode == "resume" and not base.info.get("finished", True) else None
+    # what the trials hold, for a checkpoint to be continued only on them (hashed only where one is read or kept)
+    contents = trials_digest(trials) if ckpt is not None or checkpoint_to is not None else ""
     if ckpt is not None:
         if ckpt["trials"] != ids:
             raise ValueError(

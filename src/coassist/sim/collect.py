@@ -168,7 +168,7 @@ def collect_dataset(
         + ("" if s0.population == "thesis" else f" population={s0.population} (seed {s0.population_seed})")
         + ("" if not s0.way else f" asked to go round on the {WAY_NAMES[s0.way]}")
     )
-    dataset_id = dataset_id or out.resolve().name  # "--out ." names its folder, not ""
+    dataset_id = dataset_id or out.absolute().name  # "--out ." names its folder, not ""
     # What is collected, so that a re-run continues only the same collection.
     model_hash = None if s0.intent in INTENT_SOURCES else _model_hash(Path(s0.intent))
     key = digest(
