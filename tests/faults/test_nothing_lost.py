@@ -582,7 +582,9 @@ def test_train_two_epochs_then_resume_two_equals_four(tmp_path, optimizer):
     assert max(float((unbroken[k] - naive[k]).abs().max()) for k in unbroken) > 1e-4
 
 
-def test_resume_of_an_interrupted_run_with_other_data_is_refused(tmp_path):
+def _stopped_after_epoch_1(out):
+    """A 3-epoch training of four labeled trials, stopped after its first epoch (its checkpoint beside ``out``);
+    returns its training configuration."""
     from coassist.intent.training import train_model
 
     class Stop(Exception):
@@ -594,7 +596,14 @@ def test_resume_of_an_interrupted_run_with_other_data_is_refused(tmp_path):
 
     cfg = replace(TINY.train, epochs=3)
     with pytest.raises(Stop):
-        train_model(labeled(4), TINY, cfg, checkpoint_to=tmp_path / "m", on_epoch=stop)
+        train_model(labeled(4), TINY, cfg, checkpoint_to=out, on_epoch=stop)
+    return cfg
+
+
+def test_resume_of_an_interrupted_run_with_other_data_is_refused(tmp_path):
+    from coassist.intent.training import train_model
+
+    cfg = _stopped_after_epoch_1(tmp_path / "m")
     with pytest.raises(ValueError, match="interrupted run on 4 other trials"):
         train_model(labeled(4, prefix="X"), TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
     # the same ids holding other data (a dataset collected again under the same id): refused too, where it once
@@ -618,16 +627,7 @@ def test_a_checkpoint_edited_by_hand_is_refused_naming_it(tmp_path, field, value
     from coassist.intent.checkpoint import CHECKPOINT_JSON
     from coassist.intent.training import train_model
 
-    class Stop(Exception):
-        pass
-
-    def stop(record):
-        if record["epoch"] == 1:
-            raise Stop
-
-    cfg = replace(TINY.train, epochs=3)
-    with pytest.raises(Stop):
-        train_model(labeled(4), TINY, cfg, checkpoint_to=tmp_path / "m", on_epoch=stop)
+    cfg = _stopped_after_epoch_1(tmp_path / "m")
     path = partial_folder(tmp_path / "m") / CHECKPOINT_JSON
     record = json.loads(path.read_text())
     record[field] = value
