@@ -93,6 +93,8 @@ def test_a_way_asked_for_is_recorded_and_calibrate_counts_its_paths_but_not_as_t
     res = runner.invoke(app, ["calibrate", str(tmp_path / "chosen"), str(tmp_path / "a"), "--out", str(out)])
     assert res.exit_code == 0, res.output
     assert "(2 asked for, not in the prior)" in res.output
+    other = runner.invoke(app, ["calibrate", str(tmp_path / "chosen"), "--task", "z", "--out", str(tmp_path / "m2")])
+    assert other.exit_code == 2 and "--task z: no trial of task 'z'" in other.output, other.output
     paths = read_person_model(out).paths["user-1"]
     assert paths.asked.tolist() == [False, False, False, True, True]
     left = int(sum(paths.sides[:3] == 1))

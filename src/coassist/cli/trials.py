@@ -57,7 +57,10 @@ def calibrate(
     try:
         people = calibrate_people(trials, task=task, min_trials=min_trials)
     except CalibrationError as exc:
-        fail(str(exc), 2)
+        message = str(exc)
+        if task is not None and message.startswith("no trial of task"):  # the option that asked for it, named
+            message = f"--task {task}: {message}"
+        fail(message, 2)
     for c in people:
         console.print(summary_line(c), markup=False, highlight=False, soft_wrap=True)
     try:
