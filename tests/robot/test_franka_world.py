@@ -223,6 +223,49 @@ def test_bad_arguments_name_the_option(server):
         FrankaWorld("127.0.0.254")
 
 
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("link_timeout", float("inf")),  # once accepted: a stuck robot clock was waited on without end
+        ("link_timeout", 1e9),
+        ("frequency", True),
+        ("hold_ms", True),
+        ("posture_gain", float("nan")),  # once refused only later, as NullSpacePosture.gain
+    ],
+)
+def test_bad_values_are_refused_naming_them_before_connecting(field, value):
+    with pytest.raises(ValueError, match=field):
+        FrankaWorld("127.0.0.254", **{field: value})
+
+
+def test_a_repeated_robot_clock_reads_forward_and_as_no_new_wrench_sample(server):
+    """A state whose clock did not advance (or went back) once reached the tick as it was, and counted as a new
+    wrench sample, so a stuck Franka's wrench never read as stale: the time goes on by a microsecond, the sample
+    number stays."""
+    real = franky.Robot(server.host, realtime_config=franky.RealtimeConfig.Ignore)
+
+    class Stuck:  # the real robot, but for the state it reports once frozen
+        frozen = None
+
+        def __getattr__(self, name):
+            return getattr(real, name)
+
+        @property
+        def state(self):
+            return real.state if self.frozen is None else self.frozen
+
+    robot = Stuck()
+    world = FrankaWorld(server.host, arm="fr3", robot=robot, link_timeout=1.0)
+    try:
+        first = world.read()
+        robot.frozen = real.state
+        new, again, more = world.read(), world.read(), world.read()
+        assert first.t < new.t < again.t < more.t and again.t - new.t == pytest.approx(1e-6, abs=1e-9)
+        assert new.wrench_seq == first.wrench_seq + 1 and more.wrench_seq == again.wrench_seq == new.wrench_seq
+    finally:
+        world.close()
+
+
 def test_the_world_takes_the_limits_of_the_arm_it_is_told(server, monkeypatch):
     # franky-sim simulates an FR3: told "fr3", the world holds the FR3's joint range and speeds
     world = FrankaWorld(server.host, arm="fr3")

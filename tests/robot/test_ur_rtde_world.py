@@ -623,3 +623,20 @@ def test_the_state_streams_at_the_controllers_rate_and_a_cb3_refuses_a_500_hz_lo
     assert world.dt == 1 / 125
     with pytest.raises(RobotLinkError, match="every 8 ms: a 500 Hz loop"):
         make(FakeRobot(step_time=0.008), frequency=500.0)
+
+
+@pytest.mark.parametrize(
+    "options, says",
+    [
+        ({"tcp_offset": (0, 0, 150, 0, 0, 0)}, "tcp_offset must be a TCP within 0.5 m of the flange"),  # mm for m
+        ({"payload": (1500.0, (0, 0, 0.05))}, "payload must be at most 30 kg"),
+        ({"payload": (2.0, (0, 0, 50))}, "payload must be at most 30 kg"),
+        ({"link_timeout": 1e9}, "link_timeout must be at most 1 s"),
+        ({"frequency": 2.0, "watchdog_hz": 10.0}, "watchdog_hz must be at most the loop's frequency"),
+    ],
+)
+def test_values_no_arm_takes_are_refused_naming_them_before_anything_is_sent(options, says):
+    """Once accepted and sent (setTcp with z = 150 m, setPayload 1500 kg), or waited on without end."""
+    robot = FakeRobot()
+    with pytest.raises(ValueError, match=says):
+        make(robot, **options)

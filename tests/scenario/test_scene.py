@@ -60,6 +60,7 @@ def test_toml_and_json_give_the_same_scene(tmp_path):
         ("boxes = []\n", "unknown field 'boxes'"),
         ("", "obstacle must list 1 to 16 boxes"),
         ("[[obstacle]\n", "not valid TOML"),
+        ("[[obstacle]]\ncenter = [1" + "0" * 400 + ", 0.1]\nsize = [0.1, 0.1]\n", "obstacle[0].center must be"),
     ],
 )
 def test_a_bad_scene_is_refused_naming_the_file_and_the_field(tmp_path, text, words):

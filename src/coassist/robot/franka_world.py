@@ -61,9 +61,10 @@ from typing import Any
 
 import numpy as np
 
+from coassist._checks import is_integer, is_real_number
 from coassist.robot.arms import NullSpacePosture, arm_kinematics, check_model_matches, get_arm
 from coassist.robot.worlds import WORLDS, WorldRequest
-from coassist.runtime.world import Command, RobotLinkError, RobotState
+from coassist.runtime.world import MAX_LINK_TIMEOUT, Command, RobotLinkError, RobotState
 from coassist.spatial import rotation_vector
 
 __all__ = ["FRANKA_ARMS", "FrankaLinkError", "FrankaWorld", "build_world", "pose_from_franka", "reported_arm"]
@@ -169,12 +170,17 @@ class FrankaWorld:
     ) -> None:
         if not isinstance(host, str) or not host:
             raise ValueError(f"host must be the robot's FCI address, got {host!r}")
-        if not isinstance(frequency, (int, float)) or not 0.0 < frequency <= 1000.0:
+        if not is_real_number(frequency) or not 0.0 < frequency <= 1000.0:
             raise ValueError(f"frequency must be in (0, 1000] Hz, got {frequency!r}")
-        if not isinstance(hold_ms, int) or not 1 <= hold_ms <= 1000:
+        if not is_integer(hold_ms) or not 1 <= hold_ms <= 1000:
             raise ValueError(f"hold_ms must be an int in [1, 1000] ms, got {hold_ms!r}")
-        if not isinstance(link_timeout, (int, float)) or not link_timeout > 0:
-            raise ValueError(f"link_timeout must be a number of seconds > 0, got {link_timeout!r}")
+        if not is_real_number(link_timeout) or not 0 < link_timeout <= MAX_LINK_TIMEOUT:
+            raise ValueError(
+                f"link_timeout must be a number of seconds in (0, {MAX_LINK_TIMEOUT:g}] (a stopped robot clock "
+                f"is a lost link), got {link_timeout!r}"
+            )
+        if not is_real_number(posture_gain) or not math.isfinite(posture_gain) or posture_gain < 0:
+            raise ValueError(f"posture_gain must be a finite number >= 0 (1/s), got {posture_gain!r}")
         if arm not in FRANKA_ARMS:
             raise ValueError(f"arm must be one of {FRANKA_ARMS}, got {arm!r}")
         if ft_sensor is not None and not callable(getattr(ft_sensor, "read", None)):
@@ -276,10 +282,14 @@ class FrankaWorld:
         s = self._state()
         t = float(s.time.to_sec())
         now = time.monotonic()
-        if t > self._last_t:
+        advanced = t > self._last_t
+        if advanced:
             self._last_t, self._last_new = t, now
         elif now - self._last_new > self.link_timeout:
             raise FrankaLinkError(f"no new state from the Franka at {self.host} for {now - self._last_new:.3f} s")
+        else:  # a repeated or earlier robot clock: the state's time still only goes forward (the loop's protocol)
+            t = self._last_t + 1e-6 if math.isfinite(self._last_t) else t
+            self._last_t = t
         if self._applied:  # the robot's clock since the last read: a stalled loop shows here, wherever it stalled
             excess = t - self._read_t - self.dt
             self.last_overrun = excess if excess > self._overrun_tolerance else 0.0
@@ -295,7 +305,8 @@ class FrankaWorld:
             twist = np.full(6, np.nan)
         if self.ft_sensor is None:
             wrench, R = np.asarray(s.O_F_ext_hat_K, dtype=float), np.eye(3)
-            self._seq += 1
+            if advanced:  # a new sample only with a new state: a stuck robot's wrench reads as stale
+                self._seq += 1
             seq = self._seq
         else:
             wrench, R, seq = self._read_sensor()

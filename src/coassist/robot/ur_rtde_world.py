@@ -149,10 +149,11 @@ from typing import Any
 import numpy as np
 
 from coassist.errors import CoassistError
+from coassist.robot.ros2_config import MAX_TCP_OFFSET
 from coassist.robot.socket_watch import SocketWatch, socket_fds, sockets_to
 from coassist.robot.ur_status import SafetyStatus, check_software, connect_hint, controller_version, stop_message
 from coassist.robot.worlds import WorldRequest
-from coassist.runtime.world import Command, RobotLinkError, RobotState
+from coassist.runtime.world import MAX_LINK_TIMEOUT, Command, RobotLinkError, RobotState
 from coassist.spatial import rotation_matrix
 
 __all__ = ["URProgramStopped", "URRTDEWorld", "build_world"]
@@ -171,6 +172,8 @@ _JITTER_WINDOW = 1.0
 _JITTER_SHARE = 0.25
 #: The RTDE interface runs at most at the e-Series controller rate.
 _MAX_FREQUENCY = 500.0
+#: [kg] The heaviest payload a UR-class arm carries (the UR30's 30 kg): more is a typo, not a tool.
+MAX_PAYLOAD = 30.0
 #: [s] how far behind its schedule the loop may fall and still catch up (module docstring, the schedule);
 #: beyond it (a long stall) the schedule restarts from now rather than run a burst of back-to-back ticks
 _MAX_CATCH_UP = 0.05
@@ -292,7 +295,17 @@ class URRTDEWorld:
         self.acceleration = _check_number(acceleration, "acceleration")
         self.deceleration = _check_number(deceleration, "deceleration")
         self.watchdog_hz = None if watchdog_hz is None else _check_number(watchdog_hz, "watchdog_hz")
+        if self.watchdog_hz is not None and frequency > 0 and self.watchdog_hz > frequency:
+            raise ValueError(
+                f"watchdog_hz must be at most the loop's frequency ({frequency:g} Hz): a loop slower than its watchdog "
+                f"stops the program every period, got {watchdog_hz!r}"
+            )
         self.requested_tcp_offset = None if tcp_offset is None else _check_vector(tcp_offset, "tcp_offset", 6)
+        if self.requested_tcp_offset is not None and np.linalg.norm(self.requested_tcp_offset[:3]) > MAX_TCP_OFFSET:
+            raise ValueError(
+                f"tcp_offset must be a TCP within {MAX_TCP_OFFSET:g} m of the flange (metres, not mm), got "
+                f"{list(self.requested_tcp_offset)}"
+            )
         if payload is None:
             self.payload = None
         else:
@@ -301,7 +314,17 @@ class URRTDEWorld:
             except (TypeError, ValueError):
                 raise ValueError(f"payload must be (mass, cog), got {payload!r}") from None
             self.payload = (_check_number(mass, "payload mass", allow_zero=True), _check_vector(cog, "payload cog", 3))
+            if self.payload[0] > MAX_PAYLOAD or np.linalg.norm(self.payload[1]) > MAX_TCP_OFFSET:
+                raise ValueError(
+                    f"payload must be at most {MAX_PAYLOAD:g} kg with its centre of gravity within {MAX_TCP_OFFSET:g} m "
+                    f"of the flange (kg and metres), got {payload!r}"
+                )
         self.link_timeout = _check_number(link_timeout, "link_timeout")
+        if self.link_timeout > MAX_LINK_TIMEOUT:
+            raise ValueError(
+                f"link_timeout must be at most {MAX_LINK_TIMEOUT:g} s (a stopped robot clock is a lost link), got "
+                f"{link_timeout!r}"
+            )
         self.overrun_tolerance = _check_number(overrun_tolerance, "overrun_tolerance", allow_zero=True)
         self.zero_sensor = bool(zero_sensor)
         if self.watchdog_hz is None:

@@ -32,6 +32,7 @@ from coassist.errors import CoassistError
 
 __all__ = [
     "COMMAND_SPACES",
+    "MAX_LINK_TIMEOUT",
     "OPTIONAL_WORLD_MEMBERS",
     "Command",
     "HandOperator",
@@ -42,6 +43,10 @@ __all__ = [
     "finite_vector",
     "optional_member",
 ]
+
+#: [s] The longest an arm world waits for a new state before it calls the link lost: a stopped robot clock is a lost
+#: link, never a wait without end (the tests of a busy machine allow 1 s; ROS 2's stale_after is at most 0.5 s).
+MAX_LINK_TIMEOUT = 1.0
 
 COMMAND_SPACES: tuple[str, ...] = ("joint_velocity", "effort")
 

@@ -84,9 +84,14 @@ def _numbers(value: Any, where: str, *, positive: bool) -> tuple[float, float]:
         raise SceneError(f"{where} must be {what}, got {value!r}")
     out = []
     for v in value:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise SceneError(f"{where} must be {what}, got {value!r}")
-        v = float(v)
+        try:  # a 400-digit integer overflows a float: no length in metres either
+            v = float(v)
+        except OverflowError:
+            v = math.inf
+        if not math.isfinite(v):
+            raise SceneError(f"{where} must be {what}, got {value!r}")
         if (positive and not 0.0 < v <= REACH) or abs(v) > REACH:
             raise SceneError(f"{where} must be {what} within ±{REACH:g} m (an arm's reach), got {value!r}")
         out.append(v)
