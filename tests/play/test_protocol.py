@@ -44,6 +44,7 @@ HOSTILE = [
     '{"type": "pointer", "x": NaN, "y": -0.6, "down": true, "seq": 1}',
     '{"type": "pointer", "x": Infinity, "y": -0.6, "down": true, "seq": 1}',
     '{"type": "pointer", "x": 1e999, "y": -0.6, "down": true, "seq": 1}',
+    '{"type": "pointer", "x": 1' + "0" * 400 + ', "y": -0.6, "down": true, "seq": 1}',  # once an OverflowError
     {"type": "pointer", "x": 0.6, "y": -0.6, "down": True, "seq": 1},  # outside the view
     {"type": "pointer", "x": 0.1, "y": 5.0, "down": True, "seq": 1},
     {"type": "pointer", "x": True, "y": -0.6, "down": True, "seq": 1},  # a bool is not a number

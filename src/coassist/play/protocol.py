@@ -99,7 +99,10 @@ _FIELDS = {
 def _number(value, name: str, lo: float, hi: float) -> float:
     if not is_real_number(value):
         raise InvalidMessage(f"{name} is not a number")
-    v = float(value)
+    try:  # JSON reads a 400-digit integer exactly: no float holds it
+        v = float(value)
+    except OverflowError:
+        raise InvalidMessage(f"{name} out of range") from None
     if not math.isfinite(v) or not lo <= v <= hi:
         raise InvalidMessage(f"{name} out of range")
     return v

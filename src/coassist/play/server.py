@@ -77,6 +77,8 @@ _TOKEN_CHARS = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz01
 
 #: Messages a second one page may send before the rest of that second is dropped.
 MAX_RATE = 1000
+#: Messages kept for one page that has not read them: a page that pings and never reads gets no more pongs.
+MAX_QUEUED = 1000
 #: Largest websocket frame the server reads at all [bytes]; larger ones close the link.
 WS_MAX_SIZE = 65536
 
@@ -301,7 +303,13 @@ def create_app(
         except InvalidMessage as exc:
             hub.drop(str(exc))
             return
+        except Exception:  # noqa: BLE001 - whatever a message makes the parser raise, the link stays up
+            hub.drop("unparseable")
+            return
         if isinstance(msg, Ping):
+            if len(client.queue) >= MAX_QUEUED:  # a page that pings and never reads: its pongs are not kept
+                hub.drop("pong queue full")
+                return
             client.queue.append({"type": "pong", "seq": msg.seq})
             client.wake.set()
             return
