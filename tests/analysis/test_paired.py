@@ -170,6 +170,8 @@ def test_interval_is_the_naive_percentile_bootstrap():
 
 def test_undefined_share_and_bad_input():
     assert all(np.isnan(v) for v in gain_share([1.0, 2.0], [0.5, 1.0], [1.0, 2.0]))  # the oracle gains nothing
+    # the oracle worse than MG by 1, the source by 2: once a share of 2.0, a bar met by losing more
+    assert all(np.isnan(v) for v in gain_share([1.0, 2.0], [3.0, 4.0], [2.0, 3.0]))
     share, _, _ = gain_share([4.0, np.nan, 6.0], [3.0, 1.0, 4.0], [2.0, 2.0, 4.0])  # the NaN trial is left out
     assert share == pytest.approx((1.0 + 2.0) / (2.0 + 2.0))
     with pytest.raises(ValueError, match="one shape"):

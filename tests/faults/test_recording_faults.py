@@ -78,6 +78,35 @@ def test_an_implausible_value_is_refused_naming_file_column_and_row(tmp_path, fi
     _one_line(err, folder / file)
 
 
+@pytest.mark.parametrize(
+    "file, column, value, pattern",
+    [
+        ("current_pose.csv", 0, "abc", r"column 'Time' has 1 missing or non-numeric values \(first at data row 17\)"),
+        ("current_pose.csv", 0, "", r"column 'Time' has 1 missing or non-numeric values"),
+        ("human_wrench.csv", 1, "1e30", r"column 'header.seq' must hold integers in 0 … 4294967295 \(data row 17"),
+        ("human_wrench.csv", 3, "1500000000", r"column 'header.stamp.nsecs' must hold integers in 0 … 999999999"),
+    ],
+)
+def test_a_bad_receive_time_or_header_field_is_refused_naming_file_and_column(tmp_path, file, column, value, pattern):
+    """Once a float() error naming nothing, a NaN in the trial's meta, or a seq wrapped in int64 and its row dropped."""
+    folder = make_recording(tmp_path / "user-x" / "trial_1", n=50)
+    _set_value(folder, file, 17, column, value)
+    with pytest.raises(RecordingError, match=pattern) as err:
+        load_ros_trial(folder)
+    _one_line(err, folder / file)
+
+
+def test_rows_of_one_seq_whose_stamps_are_not_one_moment_are_refused(tmp_path):
+    """A wrench row stamped 1 s off the pose's at the same seq loaded silently (only a diagnostic said so)."""
+    folder = make_recording(tmp_path / "user-x" / "trial_1", n=50)
+    path = folder / "human_wrench.csv"
+    cells = path.read_text().splitlines()[1 + 17].split(",")
+    _set_value(folder, "human_wrench.csv", 17, 2, str(int(cells[2]) - 1))  # secs one less
+    with pytest.raises(RecordingError, match=r"header stamp at seq 17 is 1000\.0 ms from the pose's") as err:
+        load_ros_trial(folder)
+    _one_line(err, folder / "human_wrench.csv")
+
+
 def test_the_bounds_are_the_sensor_range_the_reach_and_the_top_speed():
     # FT300 / CB3 force estimate: ±327.67 N; UR20 reach 1.75 m; UR5 at its joint limits ~3 m/s
     assert 327.67 < PLAUSIBLE_FORCE < 2 * 327.67

@@ -188,7 +188,7 @@ def gain_share(
 
     ``base``, ``x``, ``ref``: per-pair values of one metric, same order, shape (n,) (the ablation:
     MG, an intent source and the oracle on the same trials). Pairs where any of the three is
-    non-finite are left out. All NaN when ``ref`` gains nothing on average (the share is undefined)
+    non-finite are left out. All NaN when ``ref`` gains nothing or loses on average (the share is undefined)
     or no pair is left; the interval NaN when the reference's gain is zero in half the resamples or more.
 
     ``clusters``: a label per pair (shape (n,), any hashable values) for pairs that are not independent
@@ -201,7 +201,9 @@ def gain_share(
         raise ValueError(f"paired values need one shape (n,), got {base.shape}, {x.shape}, {ref.shape}")
     ok = np.isfinite(base) & np.isfinite(x) & np.isfinite(ref)
     gain_x, gain_ref = (base - x)[ok], (base - ref)[ok]
-    if gain_x.size == 0 or gain_ref.mean() == 0.0:
+    # a reference that gains nothing, or loses, on average: no share of it (a source losing more would read as a
+    # share above 1, a claim met by being worse)
+    if gain_x.size == 0 or not gain_ref.mean() > 0.0:
         return math.nan, math.nan, math.nan
     share = float(gain_x.mean() / gain_ref.mean())
     if clusters is not None:

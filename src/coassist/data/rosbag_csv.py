@@ -191,7 +191,9 @@ def _read_topic(path: Path, field_name: str, value_cols: list[str]) -> pd.DataFr
             raise RecordingError(f"{path}: missing column {col!r}")
     if len(df) == 0:
         raise RecordingError(f"{path}: no rows")
-    for col in [SEQ_COLUMN, SECS_COLUMN, NSECS_COLUMN, *value_cols]:
+    # the receive time too where the export has it: a bad cell is named here, not a float() error or a NaN later
+    checked = [SEQ_COLUMN, SECS_COLUMN, NSECS_COLUMN, *value_cols] + ([RECEIVE_COLUMN] if RECEIVE_COLUMN in df else [])
+    for col in checked:
         values = pd.to_numeric(df[col], errors="coerce")
         bad = values.isna() | ~np.isfinite(values.to_numpy(dtype=float, na_value=np.nan))
         if bad.any():
@@ -200,9 +202,14 @@ def _read_topic(path: Path, field_name: str, value_cols: list[str]) -> pd.DataFr
                 f"{path}: column {col!r} has {int(bad.sum())} missing or non-numeric values (first at data row {row})"
             )
         df[col] = values
-    for col in (SEQ_COLUMN, SECS_COLUMN, NSECS_COLUMN):
-        if np.any(df[col].to_numpy() != np.round(df[col].to_numpy())):
+    for col, hi in ((SEQ_COLUMN, 2**32 - 1), (SECS_COLUMN, 2**32 - 1), (NSECS_COLUMN, 10**9 - 1)):
+        v = df[col].to_numpy()
+        if np.any(v != np.round(v)):
             raise RecordingError(f"{path}: column {col!r} must hold integers")
+        out = (v < 0) | (v > hi)  # ROS's uint32 fields (nsecs below a second): 1e30 would wrap in int64 silently
+        if out.any():
+            row = int(np.flatnonzero(out)[0])
+            raise RecordingError(f"{path}: column {col!r} must hold integers in 0 … {hi} (data row {row}: {v[row]!r})")
         df[col] = df[col].astype(np.int64)
     dup = df[SEQ_COLUMN].duplicated()
     if dup.any():
@@ -333,6 +340,13 @@ def assemble_recording(
             f"{sources['pose']}: header stamps do not increase at {'seq' if key == SEQ_COLUMN else key} {int(seqs[k + 1])}"
         )
     mismatch = max(int(np.max(np.abs(s - ns))) for s in stamps.values()) * 1e-9
+    if steps.size and mismatch > 0.5 * float(np.median(steps)):  # rows of one seq that are not one moment
+        worst = max(stamps, key=lambda f: int(np.max(np.abs(stamps[f] - ns))))
+        k = int(np.argmax(np.abs(stamps[worst] - ns)))
+        raise RecordingError(
+            f"{sources[worst]}: its header stamp at {'seq' if key == SEQ_COLUMN else key} {int(seqs[k])} is "
+            f"{mismatch * 1e3:.1f} ms from the pose's, more than half a period: the topics' rows are not one moment"
+        )
     receive = aligned["pose"][RECEIVE_COLUMN].to_numpy(float) if RECEIVE_COLUMN in aligned["pose"] else None
 
     arrays: dict[str, np.ndarray] = {}
