@@ -60,38 +60,47 @@ def _set_value(folder: Path, file: str, data_row: int, column: int, text: str) -
     path.write_text("".join(lines))
 
 
-@pytest.mark.parametrize(
-    "file, column, value, pattern",
-    [
-        ("human_wrench.csv", 4, "5000.0", r"wrench\.force\.x = 5000 N is beyond the plausible ±330 N"),
-        ("current_pose.csv", 5, "1e300", r"pose\.position\.y = 1e\+300 m is beyond the plausible ±5 m"),
-        ("robot_ref_pos.csv", 4, "-7.5", r"pose\.position\.x = -7\.5 m is beyond the plausible ±5 m"),
-        ("current_velocity.csv", 5, "12.0", r"twist\.linear\.y = 12 m/s is beyond the plausible ±5 m/s"),
-    ],
-)
-def test_an_implausible_value_is_refused_naming_file_column_and_row(tmp_path, file, column, value, pattern):
-    """Old code: the 5 kN force loaded with a warning, the others silently."""
-    folder = make_recording(tmp_path / "user-x" / "trial_1", n=50)
-    _set_value(folder, file, 17, column, value)
-    with pytest.raises(RecordingError, match=rf"{file}: data row 17 \(seq 17\): {pattern} \(1 such row\(s\)\)") as err:
-        load_ros_trial(folder)
-    _one_line(err, folder / file)
+#: one cell of a 50-row recording (data row 17) set to a value no recording holds, and what the loader says of it
+BAD_CELLS = [
+    # implausible values (old code: the 5 kN force loaded with a warning, the others silently)
+    (
+        "human_wrench.csv",
+        4,
+        "5000.0",
+        r"data row 17 \(seq 17\): wrench\.force\.x = 5000 N is beyond the plausible ±330 N \(1 such row\(s\)\)",
+    ),
+    (
+        "current_pose.csv",
+        5,
+        "1e300",
+        r"data row 17 \(seq 17\): pose\.position\.y = 1e\+300 m is beyond the plausible ±5 m \(1 such row\(s\)\)",
+    ),
+    (
+        "robot_ref_pos.csv",
+        4,
+        "-7.5",
+        r"data row 17 \(seq 17\): pose\.position\.x = -7\.5 m is beyond the plausible ±5 m \(1 such row\(s\)\)",
+    ),
+    (
+        "current_velocity.csv",
+        5,
+        "12.0",
+        r"data row 17 \(seq 17\): twist\.linear\.y = 12 m/s is beyond the plausible ±5 m/s \(1 such row\(s\)\)",
+    ),
+    # a bad receive time or header field (once a float() error naming nothing, a NaN in the trial's meta, or a seq
+    # wrapped in int64 and its row dropped)
+    ("current_pose.csv", 0, "abc", r"column 'Time' has 1 missing or non-numeric values \(first at data row 17\)"),
+    ("current_pose.csv", 0, "", r"column 'Time' has 1 missing or non-numeric values"),
+    ("human_wrench.csv", 1, "1e30", r"column 'header.seq' must hold integers in 0 … 4294967295 \(data row 17"),
+    ("human_wrench.csv", 3, "1500000000", r"column 'header.stamp.nsecs' must hold integers in 0 … 999999999"),
+]
 
 
-@pytest.mark.parametrize(
-    "file, column, value, pattern",
-    [
-        ("current_pose.csv", 0, "abc", r"column 'Time' has 1 missing or non-numeric values \(first at data row 17\)"),
-        ("current_pose.csv", 0, "", r"column 'Time' has 1 missing or non-numeric values"),
-        ("human_wrench.csv", 1, "1e30", r"column 'header.seq' must hold integers in 0 … 4294967295 \(data row 17"),
-        ("human_wrench.csv", 3, "1500000000", r"column 'header.stamp.nsecs' must hold integers in 0 … 999999999"),
-    ],
-)
-def test_a_bad_receive_time_or_header_field_is_refused_naming_file_and_column(tmp_path, file, column, value, pattern):
-    """Once a float() error naming nothing, a NaN in the trial's meta, or a seq wrapped in int64 and its row dropped."""
+@pytest.mark.parametrize("file, column, value, pattern", BAD_CELLS)
+def test_a_bad_cell_is_refused_naming_file_column_and_row(tmp_path, file, column, value, pattern):
     folder = make_recording(tmp_path / "user-x" / "trial_1", n=50)
     _set_value(folder, file, 17, column, value)
-    with pytest.raises(RecordingError, match=pattern) as err:
+    with pytest.raises(RecordingError, match=rf"{file}: {pattern}") as err:
         load_ros_trial(folder)
     _one_line(err, folder / file)
 
@@ -245,7 +254,11 @@ def write_bag(path: Path, kind: str, n: int = 400, *, value=None, offsets=None) 
 @pytest.mark.parametrize(
     "field, x, pattern",
     [
-        ("wrench", 5000.0, r"topic /human_wrench: message 7: wrench\.force\.x = 5000 N is beyond the plausible ±330 N"),
+        (
+            "wrench",
+            5000.0,
+            r"topic /human_wrench: message 7: wrench\.force\.x = 5000 N is beyond the plausible ±330 N",
+        ),
         ("pose", 1e300, r"topic /current_pose: message 7: pose\.position\.x = 1e\+300 m is beyond the plausible ±5 m"),
     ],
 )
