@@ -89,6 +89,12 @@ def is_integer(value: object) -> bool:
     return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
 
 
+def is_ascii_integer(text: str) -> bool:
+    """Whether ``text`` is an integer typed in ASCII digits (a leading minus allowed): ``int()`` also takes
+    full-width digits ("１" is 1), a number nobody typed."""
+    return text.isascii() and text.removeprefix("-").isdigit()
+
+
 def is_real_number(value: object) -> bool:
     """True for a Python or NumPy integer or float (not ``bool``); finiteness is not checked."""
     return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)

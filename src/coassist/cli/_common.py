@@ -14,6 +14,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
+from coassist._checks import is_ascii_integer
 from coassist.registry import Registry, UnknownNameError, unknown_name_message
 from coassist.robot.worlds import WORLDS
 from coassist.scenario.assistance import DEFAULT_INTENT
@@ -230,8 +231,7 @@ def _items(text: str, option: str, distinct: bool) -> list[str]:
 def int_list(text: str, option: str, *, distinct: bool = True) -> list[int]:
     """``text``'s comma-separated integers >= 0 (``distinct``: each once), or a one-line refusal naming ``option``."""
     items = _items(text, option, False)
-    # ASCII digits only: int() takes "１" (full-width) as 1, a seed nobody typed
-    if not all(v.isascii() and v.removeprefix("-").isdigit() for v in items):
+    if not all(is_ascii_integer(v) for v in items):
         fail(f"{option} must be comma-separated integers, got {text!r}", 2)
     values = [int(v) for v in items]
     if not values or any(v < 0 for v in values):

@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from coassist._checks import is_ascii_integer
 from coassist._io import atomic_write_text
 from coassist.experiments.report import Section, write_report
 from coassist.experiments.reproduce_config import ReproduceConfig
@@ -69,8 +70,7 @@ class SeedClaim:
 def parse_seeds(text: str) -> tuple[int, ...]:
     """``--seeds``: a count N (the seeds 0 … N−1) or a comma-separated list of distinct seeds ≥ 0."""
     parts = [p.strip() for p in str(text).split(",") if p.strip()]
-    # ASCII digits only: int() would take "１" (full-width) as 1, a seed nobody typed
-    if not all(p.isascii() and p.removeprefix("-").isdigit() for p in parts):
+    if not all(is_ascii_integer(p) for p in parts):
         raise ValueError(f"--seeds must be a count or a comma-separated list of integers, got {text!r}")
     values = [int(p) for p in parts]
     if not values:

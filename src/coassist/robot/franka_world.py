@@ -288,7 +288,8 @@ class FrankaWorld:
         elif now - self._last_new > self.link_timeout:
             raise FrankaLinkError(f"no new state from the Franka at {self.host} for {now - self._last_new:.3f} s")
         else:  # a repeated or earlier robot clock: the state's time still only goes forward (the loop's protocol)
-            t = self._last_t + 1e-6 if math.isfinite(self._last_t) else t
+            # 1 µs on, or one ulp where the clock is so large that 1 µs rounds away
+            t = max(self._last_t + 1e-6, math.nextafter(self._last_t, math.inf)) if math.isfinite(self._last_t) else t
             self._last_t = t
         if self._applied:  # the robot's clock since the last read: a stalled loop shows here, wherever it stalled
             excess = t - self._read_t - self.dt

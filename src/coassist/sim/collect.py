@@ -13,7 +13,7 @@ from coassist._checks import check_int
 from coassist.data import Dataset, DatasetWriter, read_dataset
 from coassist.data.datasets import MANIFEST_NAME, digest
 from coassist.data.trial_file import FORMAT_VERSION
-from coassist.scenario.intent_registry import INTENT_SOURCES
+from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, intent_folder_kind
 from coassist.scenario.path_model import WAY_NAMES
 from coassist.sim.pool import SubmittedTrials
 from coassist.sim.trial_runner import TrialSpec, run_trials, spec_episode
@@ -231,18 +231,17 @@ def spec_key(spec: TrialSpec) -> dict:
 
 
 def _model_hash(folder: Path) -> str | None:
-    """A digest of what an ``--intent`` folder runs, so that a re-run continues only the same model's collection:
-    a trained model's ``model.json``, a calibration's ``path-hypotheses.json``, a person model's
-    ``person-model.json`` (a person calibrated again is another model), a calibration-draws folder's list and each
-    draw's person model; None where the folder holds none of them."""
-    for name in ("model.json", "path-hypotheses.json"):
-        if (folder / name).is_file():
-            return digest((folder / name).read_bytes().hex())
-    files = sorted(folder.glob("person-model.json")) + sorted(folder.glob("calibration-draws.json"))
-    if (folder / "calibration-draws.json").is_file():
-        files += sorted(folder.glob("*/person-model.json"))
-    if not files:
+    """A digest of what an ``--intent`` folder runs, so that a re-run continues only the same model's collection: the
+    file that marks its kind (:data:`~coassist.scenario.intent_registry.INTENT_FOLDERS`: a trained model's sidecar,
+    a calibration, a person model — calibrated again, another model), for a calibration-draws folder with each draw's
+    person model; None where the folder is of no kind."""
+    kind = intent_folder_kind(str(folder))
+    if kind is None:
         return None
+    marker = folder / INTENT_FOLDERS[kind].marker
+    if kind != "calibration-draws":
+        return digest(marker.read_bytes().hex())
+    files = [marker, *sorted(folder.glob(f"*/{INTENT_FOLDERS['person-model'].marker}"))]
     return digest({str(f.relative_to(folder)): f.read_bytes().hex() for f in files})
 
 

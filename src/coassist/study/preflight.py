@@ -258,8 +258,7 @@ def _check_seeds(plan: StudyPlan) -> None:
             if step["block"] in names and not step["practice"]
             else (step["block"], step["index"])
         )
-        if 0 <= offset < SEED_BAND and seen.get(offset, (what, role))[1] == role:
-            seen.setdefault(offset, (what, role))
+        if 0 <= offset < SEED_BAND and seen.setdefault(offset, (what, role))[1] == role:
             continue
         clash = f"as {seen[offset][0]}" if offset in seen else "outside the participant's 10 000 seeds"
         fields = "iterative.rounds × iterative.trials_per_round" if plan.iterative is not None else "trials"
