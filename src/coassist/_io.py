@@ -56,6 +56,7 @@ __all__ = [
     "atomic_write_text",
     "fsync_dir",
     "json_sha256",
+    "no_duplicate_keys",
     "partial_folder",
     "read_hashed_json",
     "remove_stale",
@@ -389,7 +390,9 @@ def write_hashed_json(path: str | os.PathLike[str], doc: Mapping[str, Any], *, f
     return atomic_write_text(path, json.dumps(content, indent=1, allow_nan=False) + "\n")
 
 
-def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+def no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A ``json.loads`` ``object_pairs_hook`` refusing a key given twice in one object (ValueError naming it):
+    plain JSON keeps the last silently (a second ``"obstacle"`` list would replace the first)."""
     out: dict[str, Any] = {}
     for key, value in pairs:
         if key in out:
@@ -426,7 +429,7 @@ def read_hashed_json(
     except OSError as exc:
         raise fail(f"cannot be read: {exc.strerror}") from None
     try:
-        doc = json.loads(raw.decode("utf-8"), object_pairs_hook=_no_duplicates, parse_constant=_no_constant)
+        doc = json.loads(raw.decode("utf-8"), object_pairs_hook=no_duplicate_keys, parse_constant=_no_constant)
     except RecursionError:
         raise fail("JSON nested too deeply") from None
     except UnicodeDecodeError as exc:

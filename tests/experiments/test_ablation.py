@@ -237,6 +237,37 @@ def test_the_person_models_claims_follow_issue_40s_bars():
     assert not person_claims(_result(-0.1, 1.0, world="held-out"))[0].holds  # worse than MG on both sides
 
 
+def test_a_claims_figures_are_printed_on_their_side_of_its_bar():
+    """Rounded to whole points, a force share of 84.96 % read "85 %" beside a claim of ≥ 85 % that failed: a figure a
+    claim is judged on keeps as many decimals as it takes to stay on its side of the bar (hand-checked cases)."""
+    from coassist.experiments.ablation_report import person_claims, shown
+
+    assert shown(84.96, 0, 85.0) == "84.96" and shown(85.0, 0, 85.0) == "85" and shown(84.4, 0, 85.0) == "84"
+    assert shown(85.4, 0, 85.0) == "85" and shown(84.96, 0) == "85"  # no bar: plain rounding
+    assert shown(0.3, 0, 0.0, strict=True) == "0.3" and shown(-0.3, 0, 0.0, strict=True) == "-0"  # "> 0" bars
+    assert shown(0.04, 1, 0.0, strict=True, signed=True) == "+0.04" and shown(1.1004, 2, 1.1, strict=True) == "1.1004"
+    (claim,) = person_claims(_result(0.8496, 1.05))  # both shares 84.96 % exactly (_result)
+    assert not claim.holds and "force 84.96 %" in claim.evidence and "overshoot 85 %" in claim.evidence
+
+
+def test_a_side_no_trial_went_round_says_so():
+    """A side of the detour no trial of the cell went round cannot be compared with MG: the held-out claim fails saying
+    that (not a behavioural reason), and a side with one trial shows its difference from MG without an interval."""
+    from coassist.experiments.ablation_report import person_claims
+
+    result = _result(0.85, 1.5, world="held-out")
+    for cell in (*result.metrics.values(), *result.mg.values()):
+        cell["side"] = np.array([-1, -1, -1, -1])  # everyone went right
+    (claim,) = person_claims(result)
+    assert not claim.holds and "left — (no trial)" in claim.evidence
+    assert claim.reason.startswith("too few of the cell's trials went round the detour on the left (0)")
+    for cell in (*result.metrics.values(), *result.mg.values()):
+        cell["side"] = np.array([1, -1, -1, -1])
+    (claim,) = person_claims(result)
+    # trial 0 went left: MG 4 mm, the person model 4 − 0.85 × 2 = 2.3 mm, so −1.7 mm, no interval from one pair
+    assert claim.holds and "left 2.3 (-1.7, one trial: no interval) mm vs MG" in claim.evidence
+
+
 def test_the_person_models_mujoco_claim_needs_the_direction_with_an_interval():
     """On the MuJoCo UR5 the claim is the direction: less force and overshoot than MG, each paired difference's
     95 % upper bound below zero; its evidence gives the shares with their intervals."""

@@ -40,12 +40,12 @@ class Named(NamedTuple):
     trial: Trial
 
 
-def _run(profile, controller, seeds, task="linear"):
+def _run(profile, controller, seeds, task="linear", obj="handle"):
     ctrl = make_controller(controller, PRESET)
     return [
         Named(
-            f"lab/{profile.name}-{task}-{s}",
-            run_trial(task_for_seed(task, s, obstacle="large"), profile, get_object("handle"), ctrl, None, s),
+            f"lab/{profile.name}-{task}-{s}{'' if obj == 'handle' else '-' + obj}",
+            run_trial(task_for_seed(task, s, obstacle="large"), profile, get_object(obj), ctrl, None, s),
         )
         for s in seeds
     ]
@@ -185,6 +185,98 @@ def test_refusals_name_the_person_and_the_trial(alice):
         calibrate_people([])
     with pytest.raises(ValueError, match="min_trials"):
         calibrate_people(alice, min_trials=0)
+
+
+def test_a_trial_stopped_halfway_is_refused_though_its_tool_passed_near_the_plans_end(alice):
+    """On the Z plan the tool out on its detour passes near the plan's last leg: the nearest point of the plan jumped
+    from 46 % to 92 % of its length in one sample, so a person who stopped there read as having reached 92 %. The
+    progress is followed sample by sample (each within 2 cm of arc of the last), and the trial is refused."""
+    from coassist.experiments.person_calibration import MIN_PROGRESS
+    from coassist.scenario.path_model import PathFrame
+
+    (z,) = _run(ALICE, "manual-probe", [31], task="z")
+    t = z.trial
+    frame = PathFrame(t.reference[np.r_[True, np.any(np.diff(t.reference[:, :2], axis=0) != 0.0, axis=1)], :2])
+    s, _ = frame.project(t.pose[:, :2])
+    k = int(np.argmax(s >= 0.55 * frame.length))  # the sample the nearest vertex jumps past 55 %
+    assert s[k] / frame.length > 0.9 and s[k - 1] / frame.length < MIN_PROGRESS  # the jump itself
+    pose = t.pose.copy()
+    pose[k:] = pose[k]  # the person holds still from there
+    stopped = Named(
+        "lab/stopped", _trial(t, pose=pose, velocity=np.where(np.arange(len(pose))[:, None] >= k, 0.0, t.velocity))
+    )
+    rest = _run(ALICE, "manual-probe", [32, 33, 34], task="z")
+    calibrate_people(rest + [z])  # the whole trial: accepted
+    with pytest.raises(CalibrationError, match=r"alice: trial lab/stopped: the tool moved \d+ mm and reached 4\d % of"):
+        calibrate_people(rest + [stopped])
+
+
+def test_a_sensor_spike_a_copy_and_a_recording_cut_short_are_refused_naming_them(alice):
+    first = alice[0].trial
+    w = first.wrench.copy()
+    w[500, 0] += 300.0  # one sample: a sensor spike (the thesis lab's recordings: isolated samples of 2 N at most)
+    with pytest.raises(CalibrationError, match=r"alice: trial lab/spike: at sample 500 the hand force is 300 N out of"):
+        calibrate_people([*alice, Named("lab/spike", _trial(first, wrench=w))])
+    w[500, 0] -= 285.0  # 15 N: a person may, at most, jerk the handle so
+    calibrate_people([*alice, Named("lab/jerk", _trial(first, wrench=w))])
+    with pytest.raises(
+        CalibrationError, match=r"alice: trials lab/alice-linear-0 and lab/copy hold the same recording"
+    ):
+        calibrate_people([*alice, Named("lab/copy", first)])
+    # the same start and line, the plan 45 % shorter: the recording was stopped early, and the line says so
+    n = int(0.55 * first.n_samples)
+    cut = Trial(
+        meta=first.meta, time=first.time[:n], pose=first.pose[:n], velocity=first.velocity[:n],
+        wrench=first.wrench[:n], reference=first.reference[:n], effort_r=first.effort_r[:n],
+    )  # fmt: skip
+    with pytest.raises(
+        CalibrationError, match=r"trial lab/cut's stops short; was its recording stopped before the end"
+    ):
+        calibrate_people([*alice, Named("lab/cut", cut)])
+
+
+def test_the_arm_is_measured_on_a_rigid_object_and_used_only_where_it_says_enough(alice, monkeypatch):
+    """Probe trials on the board (its mount twists in series with the arm) are left out of the arm's fit, and said;
+    a measurement at the bound of a person's range (identify_arm clips to it) gives the typical arm, and says why, as
+    the study's calibration block does (measured_arm)."""
+    from coassist.experiments import person_calibration
+    from coassist.scenario.arm_identification import ArmEstimate
+
+    board = _run(ALICE, "manual-probe", range(40, 43), obj="board")
+    (c,) = calibrate_people([*alice, *board])
+    assert c.fit.arm == identify_arm([t.trial for t in alice]) and c.probe_trials == 7  # the handle's four alone
+    line = summary_line(c)
+    assert "measured by the probe in 4 trial(s) (3 probe trial(s) on the board left out of the arm's fit" in line
+    (c,) = calibrate_people(board)
+    assert c.fit.arm == ASSUMED_ARM
+    assert (
+        "arm ASSUMED, not measured (K̂ 800 N/m, Ĉ 10.0 N·s/m): 3 probe trial(s) on the board left out" in summary_line(c)
+    )
+    clipped = ArmEstimate(
+        stiffness=5000.0, damping=20.0, stiffness_se=800.0, damping_se=3.0, trials=4, method="probe-iv"
+    )
+    monkeypatch.setattr(person_calibration, "identify_arm", lambda trials: clipped)
+    (c,) = calibrate_people(alice)
+    assert c.fit.arm == ASSUMED_ARM
+    assert summary_line(c).startswith(
+        "alice (linear, 4 trials): arm ASSUMED (K̂ 800 N/m, Ĉ 10.0 N·s/m): the probe measured K = 5000 ± 800 N/m, "
+        "C = 20.0 ± 3.0 N·s/m from 4 trials: at the bound of a person's range;"
+    )
+
+
+def test_a_figure_that_cannot_be_written_leaves_the_model_there_was(alice, tmp_path):
+    data = write_dataset([t.trial for t in alice], tmp_path / "cal", "cal")
+    out = tmp_path / "my model"
+    res = runner.invoke(app, ["calibrate", str(data), "--out", str(out)])
+    assert res.exit_code == 0 and f"--intent '{out}'" in res.output  # quoted: a path with a space copies whole
+    before = (out / "person-model.json").read_bytes()
+    (out / "person-model.png").unlink()
+    (out / "person-model.png").mkdir()
+    res = runner.invoke(app, ["calibrate", str(data), "--out", str(out), "--overwrite"])
+    assert res.exit_code == 2 and "person-model.png is a folder" in res.output
+    assert (out / "person-model.json").read_bytes() == before and [
+        p.name for p in out.iterdir() if p.name.startswith(".")
+    ] == []
 
 
 def test_the_command_writes_a_person_model_drive_can_load(alice, bob, tmp_path):

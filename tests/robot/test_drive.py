@@ -4,6 +4,7 @@ the assistive controller saves force, the sensor reads the hand, and a run is a 
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
 
 import numpy as np
 import pytest
@@ -220,6 +221,11 @@ def test_the_stability_guard_wraps_the_assistive_controllers_and_ends_a_limit_cy
     assert guarded.meta.controller == off.meta.controller == "cooperative+target"  # the controller's own name
     assert (off.meta.extra["ended"], guarded.meta.extra["ended"]) == ("time_limit", "target")
     assert np.any(guarded.fault & int(Fault.STABILITY_DAMPING)) and not np.any(off.fault & int(Fault.STABILITY_DAMPING))
+    # each trial records whether its controller was guarded, and with what
+    assert (
+        guarded.meta.extra["stability_guard"] == asdict(StabilityGuardParameters())
+        and off.meta.extra["stability_guard"] is None
+    )
     # the baselines are not guarded: a steady 30 N push for 1 s under manual guidance or under the assistive
     # controller, with a guard that engages on any force held above 20 N (direction_ratio 1: after ln 3 · 0.5 s =
     # 0.55 s); the default guard leaves a push held in one direction alone (a person pushing hard, not a cycle)
@@ -237,3 +243,43 @@ def test_the_stability_guard_wraps_the_assistive_controllers_and_ends_a_limit_cy
     assert flags == {("manual", 1.0): False, ("cooperative", 1.0): True, ("cooperative", 0.75): False}
     with pytest.raises(ValueError, match="DriveConfig.stability"):
         DriveConfig(stability="on")
+
+
+def test_the_trial_records_the_limits_in_force_with_their_workspace_box():
+    """The safety layer runs with a workspace box round the plan where none is given (workspace_for): the trial
+    records that box, not the config's "no box"."""
+    from dataclasses import replace
+
+    from coassist.robot.drive import workspace_for
+    from coassist.runtime.safety_limits import SafetyLimits
+
+    trial = drive(DriveConfig(controller="manual", task="linear", time_limit=0.2))
+    # in 0.2 s (+ the 64-tick look-ahead: 0.72 s of plan) the plan holds at the start (-0.1, -0.615) (it moves at
+    # 0.9 s): the box is that ± 0.25 m in x-y and the start height 0.2 m ± 0.15 m
+    lines = trial.meta.extra["limits"].splitlines()
+    assert (
+        "workspace: the tool stays in the box x ∈ [-0.350, 0.150] m, y ∈ [-0.865, -0.365] m, z ∈ [0.050, 0.350] m "
+        "(robot base frame)"
+    ) in lines
+    lo, hi = workspace_for(np.array([[-0.1, -0.615]]), np.array(trial.meta.extra["start_pose"]))
+    in_force = replace(SafetyLimits(), workspace_lower=tuple(lo), workspace_upper=tuple(hi))
+    assert trial.meta.extra["limits"] == in_force.describe()
+    # a box given is the one in force, recorded as given
+    box = SafetyLimits(workspace_lower=(-0.3, -0.8, 0.1), workspace_upper=(0.2, -0.4, 0.3))
+    given = drive(DriveConfig(controller="manual", task="linear", time_limit=0.2, limits=box))
+    assert given.meta.extra["limits"] == box.describe()
+    assert "workspace: the tool stays in the box x ∈ [-0.300, 0.200] m" in given.meta.extra["limits"]
+
+
+def test_realtime_intent_without_a_network_says_it_only_paces_the_world():
+    """With a named source (computed in the tick) realtime_intent runs no predictor: the one-line statement says
+    that it only paces the simulated world, and without it the line says nothing of it."""
+    said: list[str] = []
+    for realtime in (True, None):
+        drive(DriveConfig(intent="paths", realtime_intent=realtime, time_limit=0.1), say=said.append)
+    note = (
+        "; realtime_intent runs no predictor (paths has no network, it is computed in the tick): it only paces the "
+        "simulated world to the wall clock"
+    )
+    assert said[0].endswith(note) and said[0].startswith("assistance: cooperative, toward the path hypotheses")
+    assert said[1] == said[0][: -len(note)]

@@ -3,6 +3,7 @@ drive says in one line what the person will get; a scene file reaches the intent
 
 from __future__ import annotations
 
+import hashlib
 from typing import NamedTuple
 
 import numpy as np
@@ -17,7 +18,7 @@ from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.mujoco_world import MujocoUR5World  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
 from coassist.scenario.intent_registry import INTENT_SOURCES  # noqa: E402
-from coassist.scenario.person_model import write_person_model  # noqa: E402
+from coassist.scenario.person_model import PERSON_MODEL_FILE, write_person_model  # noqa: E402
 from coassist.scenario.scene import Scene, SceneBox  # noqa: E402
 
 PUSH = ScriptedForce.constant((5.0, 0.0, 0.0, 0.0, 0.0, 0.0))
@@ -78,7 +79,9 @@ def test_probe_trials_recorded_by_drive_fit_a_person_model(probe_trials, tmp_pat
         f"demonstrations ({left} left, {right} right{'; ' + thin if thin else ''}))"
         "; a damper if the hand force oscillates above 20 N (the stability guard)"
     ]
-    assert run.meta.model_id == "person:cal" and run.meta.user == "alice"
+    # the folder's name and the first 12 hex digits of the file's SHA-256: another calibration, another id
+    digest = hashlib.sha256((folder / PERSON_MODEL_FILE).read_bytes()).hexdigest()[:12]
+    assert run.meta.model_id == f"person:cal@{digest}" and run.meta.user == "alice"
     # another task: the person model says it serves another plan
     said.clear()
     drive(
@@ -108,8 +111,9 @@ class _Told:
 
 
 def test_a_scene_file_reaches_the_source_on_an_arm():
-    # a real arm's world ("ur"), here MuJoCo behind it: the robot is told nothing of the task, only the scene
-    scene = Scene((SceneBox((0.52, 0.16), (0.12, 0.12), "box"),), "scene.toml")
+    # a real arm's world ("ur"), here MuJoCo behind it: the robot is told nothing of the task, only the scene (a box
+    # on the plan, y = −0.615 m from x = −0.1 to 0.4 m in the base frame: one a person goes round)
+    scene = Scene((SceneBox((0.15, -0.6), (0.12, 0.12), "box"),), "scene.toml")
     base = {"world": "ur", "controller": "manual", "task": "linear", "time_limit": 0.3}
     for given in (None, scene):
         source = _Told()
@@ -123,24 +127,28 @@ def test_a_scene_file_reaches_the_source_on_an_arm():
             assert context.obstacles == () and "scene" not in trial.meta.extra
             assert source.inner.curves[0].size == 0  # no obstacle: paths is the present estimate
         else:
-            assert context.obstacles == (((0.52, 0.16), (0.12, 0.12)),)
+            assert context.obstacles == (((0.15, -0.6), (0.12, 0.12)),)
             told = trial.meta.extra["scene"]  # recorded with the trial: reported apart
             assert told["file"] == "scene.toml" and told["frame"] == "base"
             assert [(tuple(o["center"]), tuple(o["size"]), o["name"]) for o in told["obstacles"]] == [
-                ((0.52, 0.16), (0.12, 0.12), "box")
+                ((0.15, -0.6), (0.12, 0.12), "box")
             ]
             sides, points = source.inner.curves
             assert set(sides.tolist()) == {1, -1} and points.shape[0] == sides.size  # hypotheses round the box
 
 
 def test_the_statement_names_the_scene_for_paths():
-    scene = Scene((SceneBox((0.52, 0.16), (0.12, 0.12)),), "lab/scene.toml")
+    # a box on the plan (y = −0.615 m, x from −0.1 to 0.4 m), and one 0.7 m off it (a fixture on the table)
+    guard = "; a damper if the hand force oscillates above 20 N (the stability guard)"
     said: list[str] = []
-    drive(DriveConfig(task="linear", intent="paths", scene=scene, time_limit=0.2), say=said.append)
+    for box in ((0.15, -0.6), (0.52, 0.16)):
+        scene = Scene((SceneBox(box, (0.12, 0.12)),), "lab/scene.toml")
+        drive(DriveConfig(task="linear", intent="paths", scene=scene, time_limit=0.2), say=said.append)
     assert said == [
         "assistance: cooperative, toward the path hypotheses round the 1 obstacle of the scene file "
-        "lab/scene.toml (the robot is told the scene)"
-        "; a damper if the hand force oscillates above 20 N (the stability guard)"
+        "lab/scene.toml (the robot is told the scene)" + guard,
+        "assistance: cooperative, toward the path hypotheses, but the 1 obstacle of the scene file lab/scene.toml lies "
+        "clear of this run's plan: nothing to go round, the present estimate" + guard,
     ]
 
 

@@ -1,5 +1,6 @@
 """The present estimate and the path-hypotheses filter (issue 34), against hand computations."""
 
+import hashlib
 import json
 
 import numpy as np
@@ -69,6 +70,29 @@ def test_hypotheses_are_the_hand_built_detours():
     assert sides.tolist() == [1] * 4 + [-1] * 4
     amplitudes = np.abs(pts[:, :, 1]).max(axis=1)
     np.testing.assert_allclose(amplitudes, 0.05 + 0.02 * np.array([0.5, 0.5, 1, 1, 0.5, 0.5, 1, 1]), atol=1e-12)
+
+
+def test_a_box_the_plan_already_clears_is_no_obstacle_of_its_path():
+    """A scene may name every fixture on the table: a box the plan passes by more than half the person's largest
+    clearance (here 2 × 2 cm, so 2 cm) gets no detour round it (the rows are the present estimate's), one nearer
+    does, and beside the box on the path a far box changes nothing (the same curves, bit for bit)."""
+    shape = PersonShape(clearance=0.02, anticipation=0.1)
+    settings = FilterSettings(shape_grid=(0.5, 1.0, 2.0))
+
+    def curves(obstacles):
+        src = PathHypothesesIntent(default=shape, settings=settings)
+        src.reset(_context(obstacles=obstacles))
+        return src.curves
+
+    beside = ((0.5, 0.05 + 0.0201), (0.1, 0.1))  # its near face 2.01 cm from the path: cleared
+    grazing = ((0.5, 0.05 + 0.0199), (0.1, 0.1))  # 1.99 cm: in the way
+    far = ((1.5, 1.5), (0.1, 0.1))
+    assert curves((beside,))[0].size == 0 and curves((far,))[0].size == 0
+    sides, pts = curves((grazing,))
+    assert sorted(set(sides.tolist())) == [-1, 1] and np.abs(pts[:, :, 1]).max() > 0.05
+    alone, with_far = curves((BOX,)), curves((far, BOX, beside))
+    np.testing.assert_array_equal(alone[0], with_far[0])
+    np.testing.assert_array_equal(alone[1], with_far[1])
 
 
 def test_present_estimate_is_the_arm_solved_for_the_intent():
@@ -201,7 +225,8 @@ def test_calibration_file_round_trip_and_errors_name_the_field(tmp_path):
     folder = write_calibration(tmp_path / "paths", shapes, arm=ArmGuess(900.0, 12.0))
     src = read_calibration(folder, horizon=20)
     assert src.shapes == shapes and src.arm == ArmGuess(900.0, 12.0) and src.horizon == 20
-    assert src.model_id == "paths:paths"
+    digest = hashlib.sha256((folder / CALIBRATION_FILE).read_bytes()).hexdigest()[:12]
+    assert src.model_id == f"paths:paths@{digest}"  # the folder's name and the file's digest
     loaded = load_intent_source(str(folder), horizon=20)
     assert isinstance(loaded, PathHypothesesIntent) and loaded.shapes == shapes
     assert isinstance(load_intent_source("paths"), PathHypothesesIntent)

@@ -81,3 +81,63 @@ def test_too_many_boxes_a_wrong_suffix_and_a_missing_file(tmp_path):
         read_scene(tmp_path / "scene.yaml")
     with pytest.raises(SceneError, match=r"absent.toml: cannot read"):
         read_scene(tmp_path / "absent.toml")
+
+
+@pytest.mark.parametrize(
+    "text, field",
+    [
+        # plain json.loads kept the last: the robot was told the second list only
+        (
+            '{"obstacle": [{"center": [0.1, 0.1], "size": [0.1, 0.1]}],'
+            ' "obstacle": [{"center": [1.0, 0.1], "size": [0.1, 0.1]}]}',
+            "obstacle",
+        ),
+        ('{"obstacle": [{"center": [0.1, 0.1], "size": [0.1, 0.1], "center": [0.9, 0.9]}]}', "center"),
+        ('{"frame": "base", "frame": "base", "obstacle": [{"center": [0.1, 0.1], "size": [0.1, 0.1]}]}', "frame"),
+    ],
+)
+def test_a_field_given_twice_in_json_is_refused_naming_it(tmp_path, text, field):
+    path = tmp_path / "scene.json"
+    path.write_text(text)
+    with pytest.raises(SceneError) as info:
+        read_scene(path)
+    assert str(info.value) == f"{path}: not valid JSON (the key {field!r} appears twice)"
+
+
+def test_a_field_given_twice_in_toml_is_refused_by_toml_itself(tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_text("[[obstacle]]\ncenter = [0.1, 0.1]\ncenter = [0.9, 0.9]\nsize = [0.1, 0.1]\n")
+    with pytest.raises(SceneError, match=r"scene.toml: not valid TOML \(Cannot overwrite a value"):
+        read_scene(path)
+
+
+@pytest.mark.parametrize(
+    "name, text",
+    [
+        ("scene.json", '{"obstacle": ' + "[" * 3000 + "]" * 3000 + "}"),
+        ("scene.toml", "obstacle = " + "[" * 3000 + "]" * 3000 + "\n"),
+    ],
+)
+def test_a_file_nested_too_deeply_is_one_line_naming_it(tmp_path, name, text):
+    # the parsers recurse once a level: RecursionError's traceback, not a scene error
+    path = tmp_path / name
+    path.write_text(text)
+    with pytest.raises(SceneError) as info:
+        read_scene(path)
+    kind = path.suffix[1:].upper()
+    assert str(info.value) == f"{path}: not valid {kind} (nested too deeply for a scene)"
+
+
+def test_anything_else_a_parser_raises_is_one_line_naming_the_file(tmp_path, monkeypatch):
+    # (no input known to make json raise other than ValueError / RecursionError: one is made to)
+    import coassist.scenario.scene as scene_module
+
+    def broken(text, object_pairs_hook=None):
+        raise MemoryError("out of\nmemory")
+
+    monkeypatch.setattr(scene_module.json, "loads", broken)
+    path = tmp_path / "scene.json"
+    path.write_text("{}")
+    with pytest.raises(SceneError) as info:
+        read_scene(path)
+    assert str(info.value) == f"{path}: not valid JSON (MemoryError: out of memory)"

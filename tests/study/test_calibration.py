@@ -26,10 +26,10 @@ from coassist.data import read_dataset
 from coassist.experiments.person_calibration import thin_ways
 from coassist.metrics import f_rms
 from coassist.scenario import intent_registry
-from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate, identify_arm
+from coassist.scenario.arm_identification import ARM_SE_MAX, ASSUMED_ARM, ArmEstimate, identify_arm, measured_arm
 from coassist.scenario.person_model import PERSON_MODEL_FILE, fit_person, read_person_model
 from coassist.scenario.tasks import task_for_seed
-from coassist.study.calibration import ARM_SE_MAX, FitJob, fit_job, measured_arm
+from coassist.study.calibration import FitJob, fit_job
 from coassist.study.folder import StudyFolder, StudyFolderError, init_study
 from coassist.study.plan import CALIBRATED, PlanError, default_calibration_trials, plan_from_text
 from coassist.study.protocols import participant_steps, trial_seed_base
@@ -214,9 +214,9 @@ def test_the_block_runs_under_the_probe_and_fits_the_participants_person_model(c
     assert fit["paths"]["curved"]["repeatability"] == (None if r is None else pytest.approx(r, abs=1e-9))
     # the calibrated condition ran with it, each trial recording its file's hash; MG with nothing
     person = read_dataset(pf.block("person")).trials
-    assert {t.meta.model_id for t in person} == {"person:curved"} and {t.meta.extra["study_model"] for t in person} == {
-        "P0"
-    }
+    # the model's id: the folder's name and the first 12 hex digits of the file's SHA-256
+    assert {t.meta.model_id for t in person} == {f"person:curved@{fit['sha256']['curved'][:12]}"}
+    assert {t.meta.extra["study_model"] for t in person} == {"P0"}
     lines = {r["block"]: r for r in progress if r["kind"] == "trial"}
     assert lines["person"]["model_sha256"] == fit["sha256"]["curved"] and "model_sha256" not in lines["mg"]
     mg = read_dataset(pf.block("mg")).trials

@@ -54,11 +54,11 @@ def drive(
     scene: Path = typer.Option(None, help=SCENE_HELP),
     realtime_intent: bool = typer.Option(
         None,
-        help="Run the model off the control thread, never waiting for it (default: on for a real arm, off in a simulated world, where runs are then deterministic).",
+        help="Run a model folder (coassist train) off the control thread, never waiting for it (default: on for a real arm, off in a simulated world, where runs are then deterministic); it also paces a simulated world to the wall clock. A named source or a person model is computed in the tick: with one, only the pace changes.",
     ),
     predictor_backend: str = typer.Option(
         "process",
-        help="Where a real-time model runs: process (own worker process), onnx (ONNX Runtime thread) or torch (thread).",
+        help="Where a real-time model runs: process (own worker process), onnx (ONNX Runtime thread) or torch (thread); onnx and torch only with a model folder run off the control thread (--realtime-intent, a real arm's default).",
     ),
     preset: str = typer.Option(
         APPLICATION_PRESET,

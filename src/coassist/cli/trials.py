@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import shlex
 from pathlib import Path
 
 import typer
@@ -63,12 +65,19 @@ def calibrate(
         fail(message, 2)
     for c in people:
         console.print(summary_line(c), markup=False, highlight=False, soft_wrap=True)
+    figure = out / PERSON_FIGURE_FILE
+    if figure.is_dir():
+        fail(f"--out {out}: {figure} is a folder; the person model's figure is written there", 2)
+    # the figure drawn first, beside its place: a figure that cannot be drawn leaves the model there was
+    drawing = out / f".{PERSON_FIGURE_FILE}.{os.getpid()}.png"
     try:
+        write_person_figure(calibration_panels(people), drawing)
         write_person_model(out, {c.person: c.fit for c in people})
-        figure = write_person_figure(calibration_panels(people), out / PERSON_FIGURE_FILE)
+        os.replace(drawing, figure)
     except OSError as exc:
+        drawing.unlink(missing_ok=True)
         fail(f"--out {out}: cannot write ({exc.strerror})")
-    wrote(f"{out / PERSON_MODEL_FILE}: {len(people)} person(s); drive with --intent {out}")
+    wrote(f"{out / PERSON_MODEL_FILE}: {len(people)} person(s); drive with --intent {shlex.quote(str(out))}")
     wrote(f"{figure}: each person's paths and arm, to look at before they assist")
 
 

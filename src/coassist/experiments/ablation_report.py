@@ -38,13 +38,36 @@ from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.path_model import FEW_PATHS
 
 
-def share_text(s: tuple[float, float, float]) -> str:
-    """A (share, low, high) as the report writes it: percent with its interval, or n/a."""
+def shown(value: float, digits: int, bar: float | None = None, strict: bool = False, signed: bool = False) -> str:
+    """``value`` with ``digits`` decimals, or more (at most three more) where that rounding would put it on the
+    other side of a claim's ``bar`` than it is (``value`` > ``bar`` where ``strict``, else ≥; both in the units
+    shown): 84.96 against a bar of 85 is "84.96", not "85". ``signed``: with its sign (a difference)."""
+    sign = "+" if signed else ""
+    text = f"{value:{sign}.{digits}f}"
+    if bar is None or not np.isfinite(value):
+        return text
+    holds = value > bar if strict else value >= bar
+    for more in range(1, 4):
+        rounded = float(text)
+        if (rounded > bar if strict else rounded >= bar) == holds:
+            break
+        text = f"{value:{sign}.{digits + more}f}"
+    return text
+
+
+def share_text(
+    s: tuple[float, float, float], bar: float | None = None, lower_bar: float | None = None, lower_strict: bool = False
+) -> str:
+    """A (share, low, high) as the report writes it: percent with its interval, or n/a. A claim's ``bar`` on
+    the share (share ≥ bar) and ``lower_bar`` on its low bound (≥, or > where ``lower_strict``), as fractions,
+    keep the printed figures on their side of it (:func:`shown`)."""
     share, lo, hi = s
     if not np.isfinite(share):
         return "n/a"
-    bracket = f" [{100 * lo:.0f}, {100 * hi:.0f}]" if np.isfinite(lo) else ""
-    return f"{100 * share:.0f} %{bracket}"
+    pct = None if bar is None else 100 * bar
+    low = None if lower_bar is None else 100 * lower_bar
+    bracket = f" [{shown(100 * lo, 0, low, lower_strict)}, {100 * hi:.0f}]" if np.isfinite(lo) else ""
+    return f"{shown(100 * share, 0, pct)} %{bracket}"
 
 
 def seeds_text(result: AblationResult, world: str, obj: str, controller: str, source: str, metric: str) -> str:
@@ -57,14 +80,30 @@ def seeds_text(result: AblationResult, world: str, obj: str, controller: str, so
     return f"{first}; seeds {', '.join(f'{100 * v:.0f}' for v in others)} %"
 
 
-def _side_text(v: tuple[float, float, float, float, int]) -> str:
+def _side_text(v: tuple[float, float, float, float, int], judged: str = "") -> str:
+    """One side's (mean, paired difference from MG, its 95 % low and high, trials) [m] in mm: "—" without a
+    trial; the difference without an interval where one trial went that way. ``judged`` ("d" or "hi"): the
+    figure a claim holds to ≤ 0, kept on its side of 0 (:func:`shown`)."""
     mean, d, lo, hi, n = v
     if not n:
-        return "—"
+        return "— (no trial)"
+    # the claims hold a side to d ≤ 0 or hi ≤ 0: printed on the right side of "> 0"
+    diff = shown(1e3 * d, 1, 0.0 if judged == "d" else None, strict=True, signed=True)
+    if not np.isfinite(lo):
+        return f"{1e3 * mean:.1f} ({diff}, one trial: no interval)"
+    high = shown(1e3 * hi, 1, 0.0 if judged == "hi" else None, strict=True, signed=True)
+    return f"{1e3 * mean:.1f} ({diff} [{1e3 * lo:+.1f}, {high}])"
+
+
+def _thin_sides(sides: dict[int, tuple[float, float, float, float, int]], need: int) -> str:
+    """Why a per-side claim cannot hold where a side had fewer than ``need`` trials ("" where none did)."""
+    thin = [f"{SIDES[sd]} ({v[4]})" for sd, v in sides.items() if v[4] < need]
+    if not thin:
+        return ""
+    least = "a trial" if need == 1 else f"{need} trials (an interval)"
     return (
-        f"{1e3 * mean:.1f} ({1e3 * d:+.1f} [{1e3 * lo:+.1f}, {1e3 * hi:+.1f}])"
-        if np.isfinite(lo)
-        else f"{1e3 * mean:.1f}"
+        f"too few of the cell's trials went round the detour on the {' and '.join(thin)} to compare that side with "
+        f"MG: it needs {least}; the trials' sides are the operators' own choices"
     )
 
 
@@ -307,7 +346,8 @@ def ablation_section(result: AblationResult) -> Section:
                     f"{obj}: the arbitrated controller with {source} in the loop gets ≥ {100 * ORACLE_SHARE_BAR:.0f} % of the "
                     "oracle's force saving and of its overshoot reduction over MG (issue 18's bar; point-mass world)",
                     bool(np.isfinite(f) and np.isfinite(o) and f >= ORACLE_SHARE_BAR and o >= ORACLE_SHARE_BAR),
-                    f"force {share_text(sh['f_rms'])}, overshoot {share_text(sh['overshoot'])} of the oracle's benefit",
+                    f"force {share_text(sh['f_rms'], ORACLE_SHARE_BAR)}, overshoot "
+                    f"{share_text(sh['overshoot'], ORACLE_SHARE_BAR)} of the oracle's benefit",
                     reason="a network on the hand force learns where the tool goes, not where the person wants it now: at a "
                     "turn it runs past it (docs/precision.md)",
                 )
@@ -358,16 +398,19 @@ def default_claims(result: AblationResult, source: str = DEFAULT_INTENT) -> list
         keys = [(world, obj, controller, source) for obj in OBJECTS]
         if not all(k in result.metrics for k in keys):
             continue
-        ok, parts = True, []
+        ok, parts, thin = True, [], []
         for key in keys:
             sh = result.shares(*key)
             f_lo, o_lo = sh["f_rms"][1], sh["overshoot"][1]
             sides = result.by_side(*key, "overshoot")
             ok = ok and bool(np.isfinite(f_lo) and np.isfinite(o_lo) and f_lo > 0.0 and o_lo > 0.0)
             ok = ok and all(n >= 1 and np.isfinite(d) and d <= 0.0 for _, d, _, _, n in sides.values())
+            if _thin_sides(sides, 1):
+                thin.append(f"{key[1]}: {_thin_sides(sides, 1)}")
             parts.append(
-                f"{key[1]}: force {share_text(sh['f_rms'])}, overshoot {share_text(sh['overshoot'])} of the oracle's "
-                "benefit; " + "; ".join(f"{SIDES[sd]} {_side_text(v)} mm vs MG" for sd, v in sides.items())
+                f"{key[1]}: force {share_text(sh['f_rms'], lower_bar=0.0, lower_strict=True)}, overshoot "
+                f"{share_text(sh['overshoot'], lower_bar=0.0, lower_strict=True)} of the oracle's benefit; "
+                + "; ".join(f"{SIDES[sd]} {_side_text(v, 'd')} mm vs MG" for sd, v in sides.items())
             )
         claims.append(
             Claim(
@@ -376,7 +419,8 @@ def default_claims(result: AblationResult, source: str = DEFAULT_INTENT) -> list
                 "bootstrap lower bound above 0) and no more than MG on either side of the detour (issue 40)",
                 ok,
                 "; ".join(parts),
-                reason="it follows the hand rather than leading it, so what it saves varies from person to person "
+                reason="; ".join(thin)
+                or "it follows the hand rather than leading it, so what it saves varies from person to person "
                 "and 24 trials leave a wide interval (docs/precision.md)",
             )
         )
@@ -404,7 +448,14 @@ def person_claims(result: AblationResult, source: str = "person") -> list[Claim]
             where = "held-out population" if world == HELD_OUT else f"{world} world"
             ok = all(np.isfinite(v) for v in (f, o, o_lo)) and f >= force_bar and o >= over_bar and o_lo >= lower_bar
             jerk = r["jerk_rms"] / m["jerk_rms"]
-            text = f"force {share_text(sh['f_rms'])}, overshoot {share_text(sh['overshoot'])}; jerk {jerk:.2f}× MG"
+            text = (
+                f"force {share_text(sh['f_rms'], force_bar)}, overshoot {share_text(sh['overshoot'], over_bar, lower_bar)}; "
+                f"jerk {shown(jerk, 2, jerk_bar, strict=True)}× MG"
+            )
+            reason = (
+                "the way round is known only once the person has left the plan by more than the filter's dead zone, "
+                "and the rows follow the person's own scatter of shapes (docs/precision.md)"
+            )
             goal = (
                 f"{obj}, {where}: the person model (learnt from each operator's probe trials, told no scene, family or "
                 f"label) gets ≥ {100 * force_bar:.0f} % of the oracle's force saving and ≥ {100 * over_bar:.0f} % of its "
@@ -417,16 +468,9 @@ def person_claims(result: AblationResult, source: str = "person") -> list[Claim]
                 sides = result.by_side(*key, "overshoot")
                 goal += ", and overshoots no more than MG on either side"
                 ok = ok and all(n >= 1 and np.isfinite(d) and d <= 0.0 for _, d, _, _, n in sides.values())
-                text += "; " + "; ".join(f"{SIDES[sd]} {_side_text(v)} mm vs MG" for sd, v in sides.items())
-            claims.append(
-                Claim(
-                    goal + " (issue 40)",
-                    bool(ok),
-                    text,
-                    reason="the way round is known only once the person has left the plan by more than the filter's "
-                    "dead zone, and the rows follow the person's own scatter of shapes (docs/precision.md)",
-                )
-            )
+                text += "; " + "; ".join(f"{SIDES[sd]} {_side_text(v, 'd')} mm vs MG" for sd, v in sides.items())
+                reason = _thin_sides(sides, 1) or reason
+            claims.append(Claim(goal + " (issue 40)", bool(ok), text, reason=reason))
     return claims + mujoco_person_claims(result, source)
 
 
@@ -448,7 +492,11 @@ def mujoco_person_claims(result: AblationResult, source: str = "person") -> list
             ok = ok and bool(np.isfinite(hi) and hi < 0.0)
             what = "force" if metric == "f_rms" else "overshoot"
             # below two pairs there is no interval: the difference alone, and the claim does not hold
-            interval = f" [{scale * lo:+.2f}, {scale * hi:+.2f}]" if np.isfinite(lo) else ", no interval"
+            interval = (
+                f" [{scale * lo:+.2f}, {shown(scale * hi, 2, 0.0, signed=True)}]"
+                if np.isfinite(lo)
+                else ", no interval"
+            )
             parts.append(
                 f"{what} {share_text(sh[metric])} of the oracle's benefit, {scale * r[metric]:.2f} vs MG "
                 f"{scale * m[metric]:.2f} {unit} ({scale * d:+.2f}{interval})"
@@ -491,7 +539,8 @@ def precision_claims(result: AblationResult, source: str = APPLICATION_SOURCE) -
                     and o >= OVERSHOOT_SHARE_BAR
                     and o_lo >= SHARE_LOWER_BAR
                 ),
-                f"force {share_text(sh['f_rms'])}, overshoot {share_text(sh['overshoot'])} of the oracle's benefit",
+                f"force {share_text(sh['f_rms'], FORCE_SHARE_BAR)}, overshoot "
+                f"{share_text(sh['overshoot'], OVERSHOOT_SHARE_BAR, SHARE_LOWER_BAR)} of the oracle's benefit",
                 reason="the side of the detour is known only some 0.1 s after it starts, and the person's shape varies from "
                 "trial to trial: the robot follows the present estimate meanwhile",
             )
@@ -507,11 +556,14 @@ def precision_claims(result: AblationResult, source: str = APPLICATION_SOURCE) -
                     f"{obj}: with '{source}' the arbitrated controller {what} no more than MG on either side of the detour "
                     "(paired difference's 95 % upper bound ≤ 0; issue 34)",
                     bool(ok),
-                    "; ".join(f"{SIDES[sd]} {_side_text(v)} mm vs MG" for sd, v in sides.items()),
-                    reason="MG's heavy tool swings wide of the obstacle at the outside turn; a controller that follows the "
-                    "intent closely passes nearer to it than MG does (the oracle too)"
-                    if metric == "clearance_deficit"
-                    else "where the side is decided late, the tool follows the old direction for a moment",
+                    "; ".join(f"{SIDES[sd]} {_side_text(v, 'hi')} mm vs MG" for sd, v in sides.items()),
+                    reason=_thin_sides(sides, 2)
+                    or (
+                        "MG's heavy tool swings wide of the obstacle at the outside turn; a controller that follows the "
+                        "intent closely passes nearer to it than MG does (the oracle too)"
+                        if metric == "clearance_deficit"
+                        else "where the side is decided late, the tool follows the old direction for a moment"
+                    ),
                 )
             )
         r, m = result.metrics[key], result.mg[(POINT_MASS, obj)]
@@ -519,7 +571,7 @@ def precision_claims(result: AblationResult, source: str = APPLICATION_SOURCE) -
             Claim(
                 f"{obj}: with '{source}' the arbitrated controller's jerk RMS is ≤ {JERK_BAR:g} × MG's (issue 34)",
                 bool(r["jerk_rms"] <= JERK_BAR * m["jerk_rms"]),
-                f"jerk RMS {r['jerk_rms']:.2f} vs MG {m['jerk_rms']:.2f} m/s³ ({r['jerk_rms'] / m['jerk_rms']:.2f}×)",
+                f"jerk RMS {r['jerk_rms']:.2f} vs MG {m['jerk_rms']:.2f} m/s³ ({shown(r['jerk_rms'] / m['jerk_rms'], 2, JERK_BAR, strict=True)}×)",
                 reason="the rows change when the filter decides the side or the shape: the robot's effort changes with them",
             )
         )

@@ -10,7 +10,11 @@ group is fitted by :func:`~coassist.scenario.person_model.fit_person`:
   is a push the person does not plan, which is what makes the arm measurable. A trial under
   any other controller carries the robot's own effort, which follows the person's motion and
   would bias the estimate; without a probe trial the arm is *assumed*
-  (:data:`~coassist.scenario.arm_identification.ASSUMED_ARM`), and the summary says so;
+  (:data:`~coassist.scenario.arm_identification.ASSUMED_ARM`), and the summary says so. So it is where
+  the measurement says too little to be used (:func:`~coassist.scenario.arm_identification.measured_arm`:
+  at the bound of a person's range, or too uncertain), as in a study's calibration block. Probe trials on an
+  object whose mount twists (the board) are left out of the arm's fit: the twist is a spring in series
+  with the arm (docs/person-model.md, "The hand, not the tip"), which the online filter puts back itself;
 - the person's paths from all of their trials (the intent each pursued, reconstructed with that arm).
 
 :func:`calibrate_people` checks and fits, :func:`summary_line` says in one line what was
@@ -21,6 +25,7 @@ names the person and the trial.
 
 from __future__ import annotations
 
+import hashlib
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -31,7 +36,8 @@ import numpy as np
 from coassist._checks import check_int
 from coassist.data import Trial
 from coassist.errors import CoassistError
-from coassist.scenario.arm_identification import identify_arm
+from coassist.scenario.arm_identification import identify_arm, measured_arm
+from coassist.scenario.objects import get_object
 from coassist.scenario.path_model import (
     ASKED_WAY,
     FEW_PATHS,
@@ -64,6 +70,14 @@ PROBE_CONTROLLER = "manual-probe"
 SAME_PATH = 0.01
 #: A calibration trial moves the tool along at least this share of the plan's length.
 MIN_PROGRESS = 0.5
+#: [m] how far along the plan the tool's nearest point may move from one sample to the next when its progress is
+#: followed (a tool out on a detour near another stretch of the plan, the Z's legs, is not taken to be there); the
+#: tool moves about 2 mm a sample at 125 Hz.
+PROGRESS_STEP = 0.02
+#: [N] a sample of the hand force out of line with both its neighbours, the same way, by more than this is a
+#: sensor spike, not a hand: refused (one 300 N sample made the person's noise 3 mm for 0.7 and their dead zone
+#: 9 mm). The thesis lab's recordings have at most 2 N, simulated trials 0.4 N.
+WRENCH_SPIKE = 20.0
 #: Trials whose periods differ by less than this share are of one control rate: a recording's period is measured
 #: from its timestamps (the thesis lab's 125 Hz recordings: 7.963–8.007 ms, 0.6 % apart), another rate is 4 × away.
 RATE_TOLERANCE = 0.02
@@ -101,6 +115,8 @@ class PersonCalibration:
     #: trials in which the lab asked for a way round and the person went the other way (or round neither): their
     #: paths count as the person's own choice
     asked_other_way: int = 0
+    #: why the arm is assumed though the probe measured one, or what was left out of its fit ("" where neither)
+    arm_note: str = ""
 
 
 def _nominal(trial: Trial) -> np.ndarray:
@@ -132,12 +148,50 @@ def _check_trial(person: str, tid: str, trial: Trial) -> None:
             f"{person}: trial {tid}: its plan ends {100 * gap:.1f} cm from where it starts ({frame.length:.2f} m "
             "long, a loop); a person model learns paths from a start to a target"
         )
-    reached = float(np.max(frame.project(trial.pose[:, :2])[0])) / frame.length
+    reached = _progress(frame, trial.pose[:, :2]) / frame.length
     if moved < 0.005 or reached < MIN_PROGRESS:
         raise CalibrationError(
             f"{person}: trial {tid}: the tool moved {1e3 * moved:.0f} mm and reached {100 * reached:.0f} % of the "
             f"plan ({frame.length:.2f} m); a calibration trial follows the task to its end"
         )
+    spike = _wrench_spike(trial.wrench[:, :2])
+    if spike is not None:
+        k, size = spike
+        raise CalibrationError(
+            f"{person}: trial {tid}: at sample {k} the hand force is {size:.0f} N out of line with the samples either "
+            f"side of it (more than {WRENCH_SPIKE:.0f} N: a sensor spike, not a hand); it would widen the person's "
+            "noise and bend their path: leave the trial out, or record it again"
+        )
+
+
+def _progress(frame: PathFrame, xy: np.ndarray) -> float:
+    """[m] how far along the plan the tool got, followed sample by sample: each sample's nearest vertex of the plan
+    within :data:`PROGRESS_STEP` of arc length of the last one's, so a tool out on a detour that passes near a later
+    stretch of the plan (the Z's legs) is not counted there. The first sample's nearest vertex over the whole plan."""
+    arc, pts = frame.arc, frame.points
+    j = int(frame.nearest_vertex(xy[:1])[0])
+    best = s = float(arc[j])
+    lo_side = np.searchsorted(arc, arc - PROGRESS_STEP, side="left")
+    hi_side = np.searchsorted(arc, arc + PROGRESS_STEP, side="right")
+    for x, y in xy[1:].tolist():
+        lo, hi = int(lo_side[j]), int(hi_side[j])
+        near = pts[lo:hi]
+        j = lo + int(np.argmin((near[:, 0] - x) ** 2 + (near[:, 1] - y) ** 2))
+        s = float(arc[j])
+        if s > best:
+            best = s
+    return best
+
+
+def _wrench_spike(w: np.ndarray) -> tuple[int, float] | None:
+    """(sample, N) of the largest sample of the hand force ``w`` (T, 2) out of line with both its neighbours the same
+    way by more than :data:`WRENCH_SPIKE` on a channel, or None."""
+    if len(w) < 3:
+        return None
+    up, down = w[1:-1] - w[:-2], w[1:-1] - w[2:]
+    out = np.where(np.sign(up) == np.sign(down), np.minimum(np.abs(up), np.abs(down)), 0.0).max(axis=1)
+    k = int(np.argmax(out))
+    return (k + 1, float(out[k])) if out[k] > WRENCH_SPIKE else None
 
 
 def _group(trials: Sequence[NamedTrial], task: str | None) -> dict[str, list[NamedTrial]]:
@@ -178,14 +232,39 @@ def _check_person(person: str, items: list[NamedTrial], min_trials: int) -> str:
     for it in items[1:]:
         other = _nominal(it.trial)
         # the offsets from the path, and its ends (a plan moved along itself has no offset)
-        ends = max(float(np.linalg.norm(other[0] - nominal[0])), float(np.linalg.norm(other[-1] - nominal[-1])))
-        apart = max(frame.distance_to(other), ends)
-        if apart > SAME_PATH:
+        start, end = float(np.linalg.norm(other[0] - nominal[0])), float(np.linalg.norm(other[-1] - nominal[-1]))
+        apart = frame.distance_to(other)
+        if max(apart, start) > SAME_PATH:
             raise CalibrationError(
-                f"{person}: trial {it.id} follows another nominal path than trial {first.id} ({100 * apart:.1f} cm "
-                f"apart; task {meta0.task!r}): on an arm, start every calibration trial from the same place"
+                f"{person}: trial {it.id} follows another nominal path than trial {first.id} "
+                f"({100 * max(apart, start):.1f} cm apart; task {meta0.task!r}): on an arm, start every calibration "
+                "trial from the same place"
             )
+        if end > SAME_PATH:  # the same start and line: the plan of one of them stops short (a recording cut early)
+            shorter = it.id if PathFrame(other).length < frame.length else first.id
+            raise CalibrationError(
+                f"{person}: the plans of trials {it.id} and {first.id} end {100 * end:.1f} cm apart (task "
+                f"{meta0.task!r}): trial {shorter}'s stops short; was its recording stopped before the end of the task?"
+            )
+    _check_copies(person, items)
     return meta0.task
+
+
+def _check_copies(person: str, items: list[NamedTrial]) -> None:
+    """Refuse one recording given twice under two names (its arrays equal): it would count its way round twice."""
+    seen: dict[bytes, str] = {}
+    for it in items:
+        t = it.trial
+        digest = hashlib.sha256()
+        for column in (t.time, t.pose, t.velocity, t.wrench):
+            digest.update(np.ascontiguousarray(column, dtype=np.float64).data)
+        key = digest.digest()
+        if key in seen:
+            raise CalibrationError(
+                f"{person}: trials {seen[key]} and {it.id} hold the same recording (their time, pose, velocity and "
+                "wrench are equal): give each trial once"
+            )
+        seen[key] = it.id
 
 
 def calibrate_people(
@@ -206,9 +285,21 @@ def calibrate_people(
     for person, items in groups.items():
         kind = _check_person(person, items, min_trials)
         probed = [it.trial for it in items if it.trial.meta.controller == PROBE_CONTROLLER]
+        rigid = [t for t in probed if not _twists(t.meta.object)]
         wall, cpu = time.perf_counter(), time.process_time()
+        estimate = identify_arm(rigid)
+        arm, note = measured_arm(estimate)
+        if estimate.method == "assumed":  # nothing measured: summary_line says why from the trials
+            note = ""
+        if len(rigid) < len(probed):
+            twisting = ", ".join(sorted({t.meta.object for t in probed} - {t.meta.object for t in rigid}))
+            left_out = (
+                f"{len(probed) - len(rigid)} probe trial(s) on the {twisting} left out of the arm's fit (its mount "
+                "twists in series with the arm: record the probe trials with the handle)"
+            )
+            note = left_out if not rigid else f"{note}; {left_out}" if note else left_out
         try:
-            fit = fit_person([it.trial for it in items], arm=identify_arm(probed))
+            fit = fit_person([it.trial for it in items], arm=arm)
         except ValueError as exc:
             raise CalibrationError(f"{person}: {exc}") from None
         out.append(
@@ -221,9 +312,19 @@ def calibrate_people(
                 seconds=time.perf_counter() - wall,
                 cpu_seconds=time.process_time() - cpu,
                 asked_other_way=_asked_other_way(items, np.asarray(fit.paths.asked, dtype=bool)),
+                arm_note=note,
             )
         )
     return out
+
+
+def _twists(name: str) -> bool:
+    """Whether the object ``name`` is held through a mount that twists (a yaw mode); an object the project does not
+    know (a lab's own) is taken to be rigid."""
+    try:
+        return get_object(name).has_yaw
+    except ValueError:
+        return False
 
 
 def _asked_other_way(items: Sequence[NamedTrial], asked: np.ndarray) -> int:
@@ -283,16 +384,23 @@ def summary_line(c: PersonCalibration) -> str:
         se = "" if arm.trials >= 3 else " (no standard error below 3 trials)"
         measured = (
             f"arm K̂ {arm.stiffness:.0f} ± {arm.stiffness_se:.0f} N/m, Ĉ {arm.damping:.1f} ± {arm.damping_se:.1f} "
-            f"N·s/m, measured by the probe in {arm.trials} trial(s){se}"
+            f"N·s/m, measured by the probe in {arm.trials} trial(s){se}{' (' + c.arm_note + ')' if c.arm_note else ''}"
         )
     else:
-        why = (
-            f"the probe was not measurable in its {c.probe_trials} manual-probe trial(s) (shorter than 3 s, or "
-            "no push in the robot's effort)"
-            if c.probe_trials
-            else "the trials carry no probe (record them with --controller manual-probe)"
+        if c.arm_note:  # measured but not usable, or every probe trial left out of the fit
+            why = c.arm_note
+        elif c.probe_trials:
+            why = (
+                f"the probe was not measurable in its {c.probe_trials} manual-probe trial(s) (shorter than 3 s, or "
+                "no push in the robot's effort)"
+            )
+        else:
+            why = "the trials carry no probe (record them with --controller manual-probe)"
+        unused = c.arm_note.startswith("measured")  # measured_arm's words for a measurement it does not use
+        measured = (
+            f"arm ASSUMED{'' if unused else ', not measured'} (K̂ {arm.stiffness:.0f} N/m, Ĉ {arm.damping:.1f} N·s/m): "
+            f"{'the probe ' + why if unused else why}"
         )
-        measured = f"arm ASSUMED, not measured (K̂ {arm.stiffness:.0f} N/m, Ĉ {arm.damping:.1f} N·s/m): {why}"
     thin = thin_ways(c.fit.paths.sides)
     return (
         f"{c.person} ({c.task}, {len(c.trials)} trials): {measured}; demonstrations: {_ways(c.fit.paths, c.asked_other_way)}; "

@@ -39,12 +39,12 @@ from __future__ import annotations
 import logging
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
-from coassist._checks import is_integer
+from coassist._checks import is_integer, is_real_number
 from coassist.config import APPLICATION_PRESET, GameWeights, ImpedanceParameters
 from coassist.control.presets import CONTROLLERS, get_preset, make_controller
 from coassist.control.stability import StabilityGuard, StabilityGuardParameters
@@ -60,7 +60,7 @@ from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPi
 from coassist.scenario.assistance import DEFAULT_INTENT, assistance_line, check_person
 from coassist.scenario.hand import SimulatedHand
 from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source, needs_network, shared_intent_source
-from coassist.scenario.objects import get_object
+from coassist.scenario.objects import OBJECTS, get_object
 from coassist.scenario.operator import OperatorArm, asked_to_go, intent_trajectory, motor_noise
 from coassist.scenario.path_model import ASKED_WAY, check_way
 from coassist.scenario.populations import POPULATIONS, population_profile
@@ -122,10 +122,13 @@ class DriveConfig:
         contact force beyond :data:`MAX_CONTACT_FORCE` are refused.
     realtime_intent : run the predictor off the control thread (RealtimePredictor); the
         default is on for the real arm and off in MuJoCo, where a deterministic run is
-        worth more than wall-clock realism.
+        worth more than wall-clock realism. A simulated world then runs against the wall clock;
+        an intent with no network (a named source, a person model) is computed in the tick all
+        the same, so there it changes only that pace (the run's one-line statement says so).
     predictor_backend : where the real-time predictor runs: "process" (a worker process:
         the tick never waits for the GIL; the default, see benchmarks/bench_tick.py),
-        "onnx" (ONNX Runtime in a worker thread) or "torch" (eager, worker thread).
+        "onnx" (ONNX Runtime in a worker thread) or "torch" (eager, worker thread); these two
+        only with a model run off the control thread (else refused: they would change nothing).
     way : the way round the obstacle the person is asked to take in this run, +1 on the left of the plan, −1 on the
         right (a calibration that asks for a way shown too seldom, ``coassist calibrate``'s advice): recorded in the
         trial (``meta.extra["asked_way"]``) so that the person model counts its path but not as their preference; a
@@ -164,47 +167,71 @@ class DriveConfig:
         def bad(name: str, what: str) -> ValueError:
             return ValueError(f"DriveConfig.{name} must be {what}, got {getattr(self, name)!r}")
 
+        def one_of(name: str, choices: Any) -> None:
+            # a list (unhashable) would make `in` on a dict raise TypeError instead of naming the field
+            value = getattr(self, name)
+            if not isinstance(value, str) or value not in choices:
+                raise bad(name, f"one of {tuple(choices)}")
+
         arms = arm_worlds()
-        if self.world not in arms:
-            raise bad("world", f"one of {tuple(arms)}")
+        one_of("world", arms)
         world = arms[self.world]
         if self.robot is None:
             object.__setattr__(self, "robot", world.arms[0])
-        elif self.robot not in world.arms:
+        elif not isinstance(self.robot, str) or self.robot not in world.arms:
             raise bad("robot", f"one of {world.arms} with world {self.world!r}")
-        if self.controller not in CONTROLLERS:
-            raise bad("controller", f"one of {tuple(CONTROLLERS)}")
-        if self.task not in TASKS:
-            raise bad("task", f"one of {tuple(TASKS)}")
-        get_object(self.object)
-        get_preset(self.preset)
-        if self.obstacle not in OBSTACLES:
-            raise bad("obstacle", f"one of {tuple(OBSTACLES)}")
-        if not isinstance(self.intent, str) or not self.intent:
+        one_of("controller", CONTROLLERS)
+        one_of("task", TASKS)
+        one_of("object", OBJECTS)
+        if not isinstance(self.preset, str):
+            raise bad("preset", "a control preset's name")
+        try:
+            get_preset(self.preset)
+        except ValueError as exc:  # "preset 'x': no such control preset (choose from …; did you mean …)"
+            raise ValueError(f"DriveConfig.{exc}") from None
+        one_of("obstacle", OBSTACLES)
+        if not isinstance(self.intent, str) or not self.intent.strip():
             raise bad(
                 "intent", f"one of {', '.join(INTENT_SOURCES)} or a folder (a model, a path-hypotheses calibration)"
             )
         source = INTENT_SOURCES.get(self.intent)
         if source is not None and source.simulation_only and not world.simulated:
             raise bad("intent", f"a source a real arm can run, not {source.summary} (a simulation alone knows it)")
-        if self.population not in POPULATIONS:
-            raise bad("population", f"one of {POPULATIONS}")
+        one_of("population", POPULATIONS)
         for name in ("user", "seed", "population_seed"):
             v = getattr(self, name)
             if not is_integer(v) or v < 0:
                 raise bad(name, "an int >= 0")
-        if self.rate_hz not in (125, 500):
-            raise bad("rate_hz", "125 or 500")
+        if not is_integer(self.rate_hz) or self.rate_hz not in (125, 500):  # 125.0 would give dt and a rate of floats
+            raise bad("rate_hz", "125 or 500 (an int)")
+        # a string such as "no" is truthy: it would switch the field on
+        if not isinstance(self.full_pose, bool):
+            raise bad("full_pose", "True or False")
+        if self.realtime_intent is not None and not isinstance(self.realtime_intent, bool):
+            raise bad("realtime_intent", "True, False or None (the world's default)")
         if self.time_limit is not None and not (
-            isinstance(self.time_limit, (int, float)) and 0 < self.time_limit <= MAX_TIME_LIMIT
+            is_real_number(self.time_limit) and 0 < self.time_limit <= MAX_TIME_LIMIT
         ):
             raise bad("time_limit", f"a number of seconds in (0, {MAX_TIME_LIMIT:g}] or None")
         if not isinstance(self.limits, SafetyLimits):
             raise bad("limits", "a SafetyLimits")
         _check_limits_for_arm(self.limits, self.robot)
-        if self.predictor_backend not in PREDICTOR_BACKENDS:
-            raise bad("predictor_backend", f"one of {PREDICTOR_BACKENDS}")
-        if self.person is not None and (not isinstance(self.person, str) or not _PERSON.match(self.person)):
+        one_of("predictor_backend", PREDICTOR_BACKENDS)
+        # The backend is where a trained network runs off the control thread (_intent_stage): a named source, a
+        # person model or a calibration is computed in the tick, and so is a model with realtime_intent off, so
+        # another backend would change nothing. A string that is no such folder is tried as a model
+        # (needs_network): its loader says what is wrong with it. (realtime_intent itself is not refused without
+        # a network: it still paces a simulated world to the wall clock, the live view's use, docs/foxglove.md;
+        # the run's one-line statement says so.)
+        if self.predictor_backend != "process":
+            realtime = self.realtime_intent if self.realtime_intent is not None else not world.simulated
+            network = needs_network(self.intent)
+            if not (network and realtime):
+                why = (
+                    "it has no network to run" if not network else "realtime_intent is off: the model runs in the tick"
+                )
+                raise bad("predictor_backend", f"'process' (the default) with intent {self.intent!r} ({why})")
+        if self.person is not None and (not isinstance(self.person, str) or not _PERSON.fullmatch(self.person)):
             raise bad("person", "1-32 letters, digits, '-' or '_' (a pseudonymous id, e.g. P07)")
         if self.scene is not None and not isinstance(self.scene, Scene):
             raise bad("scene", "a Scene (coassist.scenario.scene.read_scene) or None")
@@ -226,8 +253,9 @@ class DriveConfig:
         return "operator"
 
 
-#: A person's id: what a folder may be named (as play's user).
-_PERSON = re.compile(r"^[A-Za-z0-9_-]{1,32}$")
+#: A person's id: what a folder may be named (as play's user). Matched with fullmatch: ``$`` would also
+#: match before a trailing newline ("P07\n").
+_PERSON = re.compile(r"[A-Za-z0-9_-]{1,32}")
 
 
 #: [N] the largest contact force limit: the F/T sensor's range (FT300: 300 N per axis, the default
@@ -573,6 +601,7 @@ def _prepare(
             lo, hi = workspace_for(ref_abs, start_pose)
             limits = replace(limits, workspace_lower=tuple(lo), workspace_upper=tuple(hi))
         dofs = (0, 1, 2, 3, 4, 5) if config.full_pose else (0, 1)
+        guarded = stability_guard(config)
         episode = build_episode(
             world=world,
             controller=controller,
@@ -614,12 +643,15 @@ def _prepare(
                 "rate_hz": config.rate_hz,
                 "full_pose": config.full_pose,
                 "start_pose": [float(v) for v in start_pose],
-                "limits": config.limits.describe(),
+                # the limits in force: the safety layer's, with the workspace box drawn round the plan
+                "limits": limits.describe(),
                 "dofs": list(dofs),
                 **({} if config.scene is None else {"scene": config.scene.to_extra()}),
                 # the simulated operator's way round the obstacle (+1 left): the report's per-side figures
                 **({"intent_side": int(intent_traj.side)} if held else {}),
                 **({ASKED_WAY: config.way} if config.way else {}),
+                # whether the run's controller was wrapped in the stability guard, and with what (None: not)
+                "stability_guard": None if guarded is None else asdict(guarded),
             },
         )
         # what build_episode tells the source (TrialContext.path, .obstacles), for the one-line statement
@@ -638,10 +670,15 @@ def _prepare(
             obstacles=told,
             scene=None if config.scene is None else config.scene.source,
         )
-        guard = stability_guard(config)
-        if guard is not None:
+        if guarded is not None:
             assistance += (
-                f"; a damper if the hand force oscillates above {guard.force_threshold:g} N (the stability guard)"
+                f"; a damper if the hand force oscillates above {guarded.force_threshold:g} N (the stability guard)"
+            )
+        if config.realtime_intent and intent_source is None and not needs_network(config.intent):
+            # asked for a real-time predictor where there is none to run: say what it does instead
+            assistance += (
+                f"; realtime_intent runs no predictor ({config.intent} has no network, it is computed in the tick)"
+                + (": it only paces the simulated world to the wall clock" if simulated else "")
             )
         # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
         wrench.zero(np.asarray(state0.wrench, dtype=float)[None], np.asarray(state0.sensor_rotation, dtype=float)[None])

@@ -49,12 +49,23 @@ import numpy as np
 
 from coassist._checks import check_int, check_real
 
-__all__ = ["ASSUMED_ARM", "DAMPING_RANGE", "MIN_TRIAL_S", "STIFFNESS_RANGE", "ArmEstimate", "identify_arm"]
+__all__ = [
+    "ARM_SE_MAX",
+    "ASSUMED_ARM",
+    "DAMPING_RANGE",
+    "MIN_TRIAL_S",
+    "STIFFNESS_RANGE",
+    "ArmEstimate",
+    "identify_arm",
+    "measured_arm",
+]
 
 
 #: What a person's arm can be: K̂ [N/m] from a limp to a fully braced arm, Ĉ [N·s/m] (may be negative).
 STIFFNESS_RANGE = (100.0, 5000.0)
 DAMPING_RANGE = (-100.0, 200.0)
+#: The largest relative jackknife error of K̂ a measured arm may have to be used (:func:`measured_arm`).
+ARM_SE_MAX = 0.5
 
 
 @dataclass(frozen=True)
@@ -179,3 +190,24 @@ def identify_arm(trials: Sequence, *, highpass: float = 0.8) -> ArmEstimate:
         trials=len(rows),
         method="probe-iv",
     )
+
+
+def measured_arm(arm: ArmEstimate) -> tuple[ArmEstimate, str]:
+    """(the arm to use, why the typical one is assumed: "" when the measured one is used) of :func:`identify_arm`'s
+    estimate ``arm``. The typical arm (:data:`ASSUMED_ARM`) is used where nothing was measured, and where the
+    measurement says too little to be used: K̂ or Ĉ at the bound of a person's range (:func:`identify_arm` clips
+    to it: the clipped value is no measurement), or K̂'s jackknife error above :data:`ARM_SE_MAX` of it (a few short
+    trials: a K̂ of 100 ± 715 N/m, clipped at the bound, would turn the present estimate's hand force into 8 times
+    the displacement it is). ``coassist calibrate`` and the study's calibration block both decide so."""
+    if arm.method == "assumed":
+        return ASSUMED_ARM, "no pushes measured in the trials"
+    measured = (
+        f"K = {arm.stiffness:.0f} ± {arm.stiffness_se:.0f} N/m, C = {arm.damping:.1f} ± {arm.damping_se:.1f} N·s/m"
+    )
+    if arm.stiffness in STIFFNESS_RANGE or arm.damping in DAMPING_RANGE:  # identify_arm clips to the range
+        return ASSUMED_ARM, f"measured {measured} from {arm.trials} trials: at the bound of a person's range"
+    if arm.trials >= 3 and arm.stiffness_se > ARM_SE_MAX * arm.stiffness:
+        return ASSUMED_ARM, (
+            f"measured {measured} from {arm.trials} trials: too uncertain (error above {100 * ARM_SE_MAX:.0f} % of K)"
+        )
+    return arm, ""

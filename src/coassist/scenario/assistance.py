@@ -101,6 +101,13 @@ def assistance_line(
         return head + _NAMED[intent]
     if intent == "paths" or intent_folder_kind(intent) == "path-hypotheses":
         what = "the path hypotheses" + ("" if intent == "paths" else f" calibrated in {intent}")
+        if obstacles and path is not None and callable(getattr(source, "in_the_way", None)):
+            if not source.in_the_way(path, tuple(obstacles), user):  # what the source's reset will find
+                return head + (
+                    f"{what}, but the {_told(obstacles, scene)} {'lies' if len(obstacles) == 1 else 'lie'} clear of "
+                    "this run's plan: nothing to go round, "
+                    "the present estimate"
+                )
         if obstacles:
             return head + f"{what} round the {_told(obstacles, scene)} (the robot is told the scene)"
         return head + f"{what}, but the robot is told no obstacle: the present estimate (give --scene FILE)"

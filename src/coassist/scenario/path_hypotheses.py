@@ -46,7 +46,8 @@ person's own shape (:class:`PersonShape`, fitted to a few calibration trials by
    curve's. The rows cross-fade between the two over ``blend_time``, so the robot's effort
    never steps.
 
-Without an obstacle (or with ``use_obstacles=False``) ``paths`` is ``present``. What the
+Without an obstacle in the way (none told, none the plan passes within half the person's largest
+clearance of, or ``use_obstacles=False``) ``paths`` is ``present``. What the
 robot is told comes from :class:`~coassist.interfaces.TrialContext` (``path``, ``obstacles``,
 ``object``); a person's shape from a calibration file (:func:`write_calibration`), whose
 folder is given as the intent (``intent="<folder>"``: ``path-hypotheses.json``).
@@ -69,6 +70,7 @@ How far real detours follow that family is unknown (docs/realism.md).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
@@ -276,6 +278,21 @@ class FilterSettings:
         object.__setattr__(self, "shape_grid", grid)
 
 
+def _in_the_way(
+    path: np.ndarray, obstacles: tuple[tuple[tuple[float, float], tuple[float, float]], ...], clearance: float
+) -> tuple[tuple[tuple[float, float], tuple[float, float]], ...]:
+    """The boxes (centre, size) the nominal path ``path`` (P, 2) does not clear by half of ``clearance`` [m]: those a
+    person must go round (:func:`deformed_path`'s own test of a cleared box). A box beside the path, or across the
+    room, a scene file may name with every other fixture is not an obstacle of this path: a detour round it would
+    lead the tool away from a plan that already passes it."""
+    out = []
+    for obstacle in obstacles:
+        box = Box(obstacle[0], obstacle[1])
+        if float(box.signed_distance(path).min()) < 0.5 * clearance:
+            out.append(obstacle)
+    return tuple(out)
+
+
 def _scene_task(path: np.ndarray, obstacle: tuple[Sequence[float], Sequence[float]]) -> Task:
     """A :class:`Task` for :func:`deformed_path` from what the robot is told: the nominal path's
     polyline and one box (centre, size); the obstacle's arc length is where the path passes
@@ -404,11 +421,13 @@ class PathHypothesesIntent:
         self._b_gain = 1.0 - math.exp(-self.dt / st.bias_time)
         self._hyp = None
         obstacles = tuple(context.obstacles) if self.use_obstacles else ()
+        shape = self.shapes.get(context.user, self.default)
         if obstacles and context.path is not None:
             path = np.asarray(context.path, dtype=float)
+            obstacles = self.in_the_way(path, obstacles, context.user)
+        if obstacles and context.path is not None:
             # the obstacle the path passes nearest: one detour per trial (the scenarios have one box)
             near = min(obstacles, key=lambda o: float(np.min(np.linalg.norm(path - np.asarray(o[0]), axis=1))))
-            shape = self.shapes.get(context.user, self.default)
             task = _scene_task(path, near)
             self._hyp = _Hypotheses(task, shape, st.shape_grid)
             n = len(self._hyp.sides)
@@ -429,6 +448,17 @@ class PathHypothesesIntent:
             self._search_widest = widest = self._widest(self._hyp)
             self._pad_x, self._pad_y, self._pad_first, self._window, self._pad_local = self._hyp.search.tables(widest)
         self._ready = True
+
+    def in_the_way(
+        self, path: np.ndarray, obstacles: tuple[tuple[tuple[float, float], tuple[float, float]], ...], user: str
+    ) -> tuple[tuple[tuple[float, float], tuple[float, float]], ...]:
+        """The boxes of ``obstacles`` (centre, size) [m] the nominal ``path`` (P, 2) does not clear by half of
+        ``user``'s largest clearance (their shape's times the largest factor of ``shape_grid``): those a trial's
+        hypotheses go round (:meth:`reset`); the others lie clear of the plan."""
+        shape = self.shapes.get(user, self.default)
+        return _in_the_way(
+            np.asarray(path, dtype=float), tuple(obstacles), shape.clearance * max(self.settings.shape_grid)
+        )
 
     @property
     def curves(self) -> tuple[np.ndarray, np.ndarray]:
@@ -710,7 +740,8 @@ def read_calibration(folder: str | Path, horizon: int = 50) -> PathHypothesesInt
             default=PersonShape(**_fields(doc, "default", "default")),  # type: ignore[arg-type]
             arm=ArmGuess(**_fields(doc, "arm", "arm")),  # type: ignore[arg-type]
             settings=FilterSettings(**settings),  # type: ignore[arg-type]
-            model_id=f"paths:{Path(folder).name}",
+            # as a person model's: the folder's name and the file's digest (person_model.read_person_model)
+            model_id=f"paths:{Path(folder).name}@{hashlib.sha256(path.read_bytes()).hexdigest()[:12]}",
         )
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{path}: {exc}") from None

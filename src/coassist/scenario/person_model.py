@@ -276,7 +276,9 @@ def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsInten
         default_paths=None if default is None else paths[default],
         default_arm=None if default is None else arms[default],
         settings=settings,
-        model_id=f"person:{Path(folder).name}",
+        # the folder's name and the file's digest: two calibrations written to folders of one name (or one
+        # folder rewritten with --overwrite) give their trials different ids, as a trained model's do
+        model_id=f"person:{Path(folder).name}@{'' if key is None else key.hex()[:12]}",
     )
 
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from coassist._io import no_duplicate_keys
 from coassist.errors import CoassistError
 
 __all__ = ["MAX_BOXES", "Scene", "SceneBox", "SceneError", "read_scene"]
@@ -144,8 +145,13 @@ def read_scene(path: str | Path) -> Scene:
         text = path.read_text("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise SceneError(f"{path}: cannot read ({getattr(exc, 'strerror', None) or exc})") from None
+    kind = path.suffix[1:].upper()
     try:
-        doc = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
+        doc = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text, object_pairs_hook=no_duplicate_keys)
     except (tomllib.TOMLDecodeError, ValueError) as exc:
-        raise SceneError(f"{path}: not valid {path.suffix[1:].upper()} ({exc})") from None
+        raise SceneError(f"{path}: not valid {kind} ({exc})") from None
+    except RecursionError:  # thousands of nested brackets: both parsers recurse once a level
+        raise SceneError(f"{path}: not valid {kind} (nested too deeply for a scene)") from None
+    except Exception as exc:  # whatever else a parser raises: one line naming the file, not a traceback
+        raise SceneError(f"{path}: not valid {kind} ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
     return _scene_from(doc, str(path))

@@ -21,7 +21,7 @@ model of how people detour):
    instruments). The typical arm is assumed instead
    (:data:`~coassist.scenario.arm_identification.ASSUMED_ARM`), and the record says why, where
    the trials hold no probe, or where the measurement says too little to be used: K̂ or Ĉ at the
-   bound of a person's range, or K̂'s jackknife error above :data:`ARM_SE_MAX` of it (a few short
+   bound of a person's range, or K̂'s jackknife error above :data:`~coassist.scenario.arm_identification.ARM_SE_MAX` of it (a few short
    trials: a K̂ of 100 ± 715 N/m, clipped at the bound, would turn the present estimate's hand
    force into 8 times the displacement it is);
 2. per task, the person's paths (:func:`~coassist.scenario.person_model.fit_person` with that
@@ -58,13 +58,13 @@ from typing import Any
 import numpy as np
 
 from coassist.errors import CoassistError
+from coassist.scenario.arm_identification import measured_arm
 
 __all__ = [
     "FIT_FILE",
     "CalibrationFailed",
     "FitJob",
     "fit_job",
-    "measured_arm",
     "model_hashes",
     "person_model_folder",
 ]
@@ -73,8 +73,6 @@ __all__ = [
 FIT_FILE = "fit.json"
 #: [m] the tool counts as having moved once it left the start by this much (the failure's line).
 MOVED = 0.005
-#: The largest relative jackknife error of K̂ a measured arm may have to be used (module docstring).
-ARM_SE_MAX = 0.5
 
 
 class CalibrationFailed(CoassistError, ValueError):
@@ -119,25 +117,6 @@ def _moved(trial) -> float:
     """[m] how far the tool got from where it started."""
     p = np.asarray(trial.pose[:, :2], dtype=float)
     return float(np.max(np.linalg.norm(p - p[0], axis=1))) if len(p) else 0.0
-
-
-def measured_arm(arm) -> tuple[Any, str]:
-    """(the arm to use, why the typical one is assumed: "" when the measured one is used) of
-    :func:`~coassist.scenario.arm_identification.identify_arm`'s estimate ``arm`` (module docstring)."""
-    from coassist.scenario.arm_identification import ASSUMED_ARM, DAMPING_RANGE, STIFFNESS_RANGE
-
-    if arm.method == "assumed":
-        return ASSUMED_ARM, "no pushes measured in the trials"
-    measured = (
-        f"K = {arm.stiffness:.0f} ± {arm.stiffness_se:.0f} N/m, C = {arm.damping:.1f} ± {arm.damping_se:.1f} N·s/m"
-    )
-    if arm.stiffness in STIFFNESS_RANGE or arm.damping in DAMPING_RANGE:  # identify_arm clips to the range
-        return ASSUMED_ARM, f"measured {measured} from {arm.trials} trials: at the bound of a person's range"
-    if arm.trials >= 3 and arm.stiffness_se > ARM_SE_MAX * arm.stiffness:
-        return ASSUMED_ARM, (
-            f"measured {measured} from {arm.trials} trials: too uncertain (error above {100 * ARM_SE_MAX:.0f} % of K)"
-        )
-    return arm, ""
 
 
 def _read(root: str, blocks: tuple[str, ...] | list[str]) -> list[tuple[str, Any]]:
