@@ -471,3 +471,82 @@ def test_the_rows_advance_at_the_persons_pace_when_told_to():
     assert slowed > 20
     with pytest.raises(ValueError, match="pace_time"):
         PersonFilterSettings(pace_time=-0.1)
+
+
+def test_a_bad_row_costs_one_tick_and_leaves_the_filter_as_it_was():
+    """A NaN or an infinity in one feature row is kept out of every state (the hand's filter, the smoothing, the
+    bias, the odds): that tick's rows are NaN (the loop's check falls back to the plan for it) and every later row
+    is what the filter gives the same trial without that row, bit for bit. Before, one NaN velocity made every later
+    row NaN: the loop fell back for the rest of the trial and stopped the arm."""
+    intent = _walk(_bump(0.49, 0.08))
+    rows = [
+        np.array([[*intent[max(k - 6, 0)], *(intent[max(k - 6, 0)] - intent[max(k - 7, 0)]) / DT, 0.0, 0.0, 0.0, 0.0]])
+        for k in range(400)
+    ]
+    for k, row in enumerate(rows):
+        row[0, 4:6] = K * (intent[k] - row[0, :2]) - ARM.damping * row[0, 2:4]
+    for field, value in ((2, np.nan), (4, np.inf), (0, -np.inf)):
+        sources = []
+        for src in (
+            PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM}),
+            PersonPathsIntent(arms={"u": ARM}, extrapolation=0.0),  # the present estimate held
+        ):
+            twin = PersonPathsIntent(paths=src.paths, arms=src.arms, extrapolation=src.extrapolation)
+            src.reset(_context())
+            twin.reset(_context())
+            sources.append((src, twin))
+        bad = rows[150].copy()
+        bad[0, field] = value
+        for src, twin in sources:
+            for k, row in enumerate(rows):
+                if k == 150:
+                    assert np.isnan(src.predict(bad)).all()  # the bad row: no rows, nothing kept
+                got, want = src.predict(row), twin.predict(row)
+                np.testing.assert_array_equal(got, want)  # the trial with the row left out, bit for bit
+            assert np.isfinite(got).all()
+
+
+def test_the_phase_catches_up_with_a_person_who_cut_across():
+    """On a hairpin plan (two legs 15 cm apart) a person who crosses from the first leg to the second leaves every
+    curve's phase where they left it: the phase search looks 2 cm either side, and along the curve the way to the
+    person first leads away from them (round the hairpin), so the phase was held there and the rows stayed the
+    present estimate's for the rest of the trial. Now a phase every curve left behind moves on to the curve's
+    nearest point ahead, and the filter reads the person on their curves again the tick after they rejoin."""
+    t = np.linspace(-np.pi / 2, np.pi / 2, 200)
+    leg1 = np.stack([np.linspace(0.0, 0.5, 500), np.zeros(500)], axis=1)
+    turn = np.stack([0.5 + 0.075 * np.cos(t), 0.075 + 0.075 * np.sin(t)], axis=1)
+    leg2 = np.stack([np.linspace(0.5, 0.0, 500), np.full(500, 0.15)], axis=1)
+    plan = np.concatenate([leg1, turn[1:], leg2[1:]])
+
+    def detour(a):  # a 3 cm detour on the first leg
+        p = plan.copy()
+        first = np.arange(len(p)) < 500
+        p[first, 1] += a * np.exp(-(((p[first, 0] - 0.25) / 0.08) ** 4))
+        return p
+
+    model = fit_path_model(plan, [detour(0.03), detour(0.032), detour(-0.03)], noise=0.001)
+    walked = _walk(detour(0.03))
+    cut = int(np.argmax(walked[:, 0] >= 0.42))
+    back = len(walked) - int(np.argmax(walked[::-1, 0] >= 0.42))  # the same x on the second leg
+    intent = np.concatenate([walked[:cut], walked[back:]])
+    src = PersonPathsIntent(paths={"u": model}, arms={"u": ARM})
+    src.reset(_context(path=plan))
+    on = []
+    for k in range(len(intent)):
+        _tick(src, intent, k, lag=0)
+        on.append(src.on_curves)
+    assert all(on[:cut]) and not on[cut]  # on the first leg, then 15 cm from every curve's phase
+    assert all(on[cut + 1 :])  # the next tick on: on the second leg's curves
+
+
+def test_another_plan_whose_points_lie_on_the_models_gets_the_present_estimate():
+    """The model knows one plan: a run's plan is the model's only where each lies within 1 cm of the other, both ways,
+    and their ends meet. A straight plan from the start of an L to its end (its two points on the L), and the L's
+    first half, passed the one-sided test and were given the L's curves."""
+    leg = np.linspace(0.0, 0.5, 251)
+    ell = np.concatenate([np.stack([leg, np.zeros(251)], axis=1), np.stack([np.full(250, 0.5), leg[1:]], axis=1)])
+    model = fit_path_model(ell, [ell + [0.0, 0.0]] * 3, noise=0.001)
+    for plan, used in ((ell, True), (ell[[0, -1]], False), (ell[:251], False), (ell + [0.0, 0.02], False)):
+        src = PersonPathsIntent(paths={"u": model}, arms={"u": ARM})
+        src.reset(_context(path=plan))
+        assert src.on_curves is used

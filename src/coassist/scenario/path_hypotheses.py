@@ -476,6 +476,9 @@ class PathHypothesesIntent:
         if not self._ready:
             raise RuntimeError("PathHypothesesIntent.predict called before reset")
         row = history[-1]
+        total = float(np.add.reduce(row[:6]))
+        if total - total != 0.0:  # a NaN or an infinity in the row: kept out of every state (the hand's filter)
+            return np.full((self.horizon, 2), np.nan)  # the loop's check falls back to the plan for this tick alone
         p, v, w = row[0:2], row[2:4], row[4:6]
         u_h = self._hand(v, w)  # the hand's force, the object's inertia put back
         K, C = self.arm.stiffness, self.arm.damping

@@ -343,6 +343,22 @@ class _Curves:
 #: trial does with them reads them only. Each entry holds its model, so its id is no other model's while held.
 _CURVES_MEMO: dict[tuple[int, tuple[float, ...]], tuple[PathModel, PathFrame, _Curves]] = {}
 _CURVES_MEMO_SIZE = 64
+#: [m] a run's plan is the model's where each lies within this of the other (both ways: one-sided, a plan whose
+#: vertices lie on the other's passed); the calibration's own test of one plan (person_calibration.SAME_PATH)
+SAME_PLAN = 0.01
+#: The run's plans as frames, per content: a run resets a source for every trial, on a few plans.
+_FRAME_MEMO: dict[bytes, PathFrame] = {}
+_FRAME_MEMO_SIZE = 16
+
+
+def _frame_of(path: np.ndarray) -> PathFrame:
+    key = np.ascontiguousarray(path, dtype=np.float64).tobytes()
+    frame = _FRAME_MEMO.get(key)
+    if frame is None:
+        if len(_FRAME_MEMO) >= _FRAME_MEMO_SIZE:
+            _FRAME_MEMO.pop(next(iter(_FRAME_MEMO)))
+        frame = _FRAME_MEMO[key] = PathFrame(path)
+    return frame
 
 
 class PersonPathsIntent:
@@ -413,8 +429,18 @@ class PersonPathsIntent:
         self._hyp: _Curves | None = None
         if model is not None and context.path is not None:
             frame, curves = self._curves(model)
-            # the model knows one plan: another plan gets the present estimate alone
-            if frame.distance_to(np.asarray(context.path, dtype=float)) <= 0.01:
+            # the model knows one plan: another plan gets the present estimate alone. Both ways: a plan whose
+            # vertices lie on the model's (a straight line from the Z's start to its end, the Z's first third) is
+            # another plan too
+            path = np.asarray(context.path, dtype=float)
+            ends = max(
+                float(np.linalg.norm(path[0] - model.nominal[0])), float(np.linalg.norm(path[-1] - model.nominal[-1]))
+            )
+            if (
+                ends <= SAME_PLAN
+                and frame.distance_to(path) <= SAME_PLAN
+                and _frame_of(path).distance_to(model.nominal) <= SAME_PLAN
+            ):
                 self._hyp = curves
         if self._hyp is not None and model is not None:
             hyp = self._hyp
@@ -453,12 +479,20 @@ class PersonPathsIntent:
             self._mix_step = self.dt / st.blend_time if st.blend_time > 0 else 1.0
             self._pace_gain = 1.0 - math.exp(-self.dt / st.pace_time) if st.pace_time > 0.0 else 0.0
             self._lead_low: np.ndarray | None = None  # each curve's lead, low-passed over pace_time
+        self._on_curves = self._hyp is not None
         self._ready = True
 
     @property
     def side(self) -> int:
         """The way round the rows follow: +1 left, −1 right, 0 undecided (or no model)."""
         return self._side if self._hyp is not None else 0
+
+    @property
+    def on_curves(self) -> bool:
+        """Whether the last tick found the tool near the person's curves (within ``max_offset`` of one), so the
+        rows came from reading its phase along them; False where they are the present estimate's alone (no model
+        of this plan, or every curve far from the tool)."""
+        return self._hyp is not None and self._on_curves
 
     def predict(self, history: np.ndarray) -> np.ndarray:
         if not self._ready:
@@ -467,6 +501,9 @@ class PersonPathsIntent:
         # (each component's operations are those of the vectors', in the same order: the same bits; a dot product
         # of two is x0·y0 + x1·y1, which is what OpenBLAS's ddot gave for it, benchmarks/check_person_rows.py)
         px, py, vx, vy, wx, wy = history[-1, :6].tolist()
+        total = px + py + vx + vy + wx + wy
+        if total - total != 0.0:  # a NaN or an infinity in the row: kept out of every state (the filters, the odds)
+            return np.full((self.horizon, 2), np.nan)  # the loop's check falls back to the plan for this tick alone
         ux, uy = self._hand.step(vx, vy, wx, wy)  # the hand's force, the object's inertia put back
         if self._yaw is not None:  # the hand point, not the tip: the object's yaw on its mount
             ax, ay = self._hand.acceleration
@@ -479,10 +516,22 @@ class PersonPathsIntent:
             return np.array((qx, qy)) + self._present_steps * np.array((vx, vy))
         return self._smoothing(self._filter(self._hyp, px, py, vx, vy, ux, uy, qx, qy))
 
+    def _catch_up(self, hyp: _Curves, px: float, py: float) -> None:
+        """Every curve's phase held far from the tool (the person left them all: a corner cut wider than the phase
+        search's window, a detour wider than any demonstrated): each curve's phase moves on to its sample nearest
+        the tool from where it is to its end, so the search finds the person again where they rejoin the curve.
+        Held where it was, a phase the person had left behind never caught up: the rows stayed the present
+        estimate's for the rest of the trial (a corner cut by 45 mm at 20 % of the plan, rejoined at 45 %)."""
+        pts = hyp.points
+        d2 = (pts[:, :, 0] - px) ** 2 + (pts[:, :, 1] - py) ** 2
+        d2[np.arange(pts.shape[1])[None, :] < self._idx[:, None]] = np.inf  # behind the phase: not searched
+        self._idx = d2.argmin(axis=1)
+
     def _filter(
         self, hyp: _Curves, px: float, py: float, vx: float, vy: float, ux: float, uy: float, qx: float, qy: float
     ) -> np.ndarray:
         st = self.settings
+        self._on_curves = True
         K, C = self._K, self._C
         v = np.array((vx, vy))
         # 2. the tool's phase on every curve: its nearest point within the search window of the last one, on the
@@ -503,6 +552,8 @@ class PersonPathsIntent:
         near = None  # every curve near
         if np.maximum.reduce(d2_at) > self._max_offset2:
             if np.minimum.reduce(d2_at) > self._max_offset2:
+                self._catch_up(hyp, px, py)
+                self._on_curves = False
                 return np.array((qx, qy)) + self._present_steps * v
             near = d2_at <= self._max_offset2
         tan = hyp.flat_tangents.take(at, axis=0)
