@@ -93,6 +93,41 @@ def make_recording(folder: Path, *, drop=None, overrides=None, seqs=None) -> Pat
 WRENCH_DENORMALS = {"human_wrench.csv": {(102, 0): 5e-324, (103, 1): -1e-182, (104, 0): 1e-99}}
 
 
+def _set_frames(folder: Path, frames: dict[str, list[str] | str]) -> None:
+    """Write the header.frame_id column of each named file: one frame for every row, or one per row."""
+    import pandas as pd
+
+    for name, frame in frames.items():
+        df = pd.read_csv(folder / name, dtype={"header.frame_id": str})
+        df["header.frame_id"] = frame
+        df.to_csv(folder / name, index=False)
+
+
+def test_topics_in_different_frames_are_refused_naming_them(tmp_path):
+    """The import reads every topic as it is, with no transform: a wrench in the sensor's frame beside a pose in the
+    base frame (a push along the tool's x read as the base's x) is refused naming both, and so is a topic whose frame
+    changes within the recording; one frame everywhere, or unset (the lab's exports), loads."""
+    everywhere = {name: "base" for name in COLUMNS}
+    folder = make_recording(tmp_path / "same")
+    _set_frames(folder, everywhere)
+    load_ros_trial(folder)
+    folder = make_recording(tmp_path / "mixed")
+    _set_frames(folder, {**everywhere, "human_wrench.csv": "ft_sensor"})
+    with pytest.raises(RecordingError) as info:
+        load_ros_trial(folder)
+    assert str(info.value) == (
+        f"{folder}: its topics are in different frames (current_pose.csv in 'base', current_velocity.csv in 'base', "
+        "human_wrench.csv in 'ft_sensor', robot_ref_pos.csv in 'base'); the import reads them as they are, with no "
+        "transform: record or export them in the robot's base frame"
+    )
+    folder = make_recording(tmp_path / "switch")
+    _set_frames(folder, {"human_wrench.csv": ["base"] * 4 + ["tool0"] * 5})
+    with pytest.raises(
+        RecordingError, match=r"human_wrench\.csv: header\.frame_id changes within the recording \('base', 'tool0'\)"
+    ):
+        load_ros_trial(folder)
+
+
 def test_alignment_time_and_diagnostics(tmp_path):
     trial = load_ros_trial(make_recording(tmp_path / "user-q" / "trial_1", overrides=WRENCH_DENORMALS))
     seq = np.arange(101, 109)

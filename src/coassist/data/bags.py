@@ -56,6 +56,7 @@ import numpy as np
 import pandas as pd
 
 from coassist.data.rosbag_csv import (
+    FRAME_COLUMN,
     NSECS_COLUMN,
     RECEIVE_COLUMN,
     SECS_COLUMN,
@@ -145,6 +146,7 @@ def _read_topic(
     nsecs: list[int] = []
     seqs: list[int] = []
     log_ns: list[int] = []
+    frame_ids: list[str] = []
     for connection, timestamp, raw in reader.messages(connections=connections):
         try:
             msg = reader.deserialize(raw, connection.msgtype)
@@ -163,6 +165,7 @@ def _read_topic(
         secs.append(int(msg.header.stamp.sec))
         nsecs.append(int(msg.header.stamp.nanosec))
         seqs.append(int(getattr(msg.header, "seq", 0)))
+        frame_ids.append(str(getattr(msg.header, "frame_id", "")))
         log_ns.append(int(timestamp))
     if not rows:
         raise RecordingError(f"{where}: topic {topic} has no messages")
@@ -179,6 +182,7 @@ def _read_topic(
     df[NSECS_COLUMN] = np.asarray(nsecs, dtype=np.int64)
     df[_STAMP] = df[SECS_COLUMN] * 1_000_000_000 + df[NSECS_COLUMN]
     df[RECEIVE_COLUMN] = _receive_seconds(log_ns)
+    df[FRAME_COLUMN] = frame_ids  # one frame for every topic: checked with the others (assemble_recording)
     # In the order received: header stamps (and a ROS 1 seq) must strictly increase.
     checks = [(_STAMP, "header stamp")] + ([(SEQ_COLUMN, "header.seq")] if ros1 else [])
     if ros1:

@@ -58,6 +58,7 @@ from coassist.errors import CoassistError
 
 __all__ = [
     "DENORMAL_THRESHOLD",
+    "FRAME_COLUMN",
     "LINEAR_DOFS",
     "MIN_TICKS",
     "PLAUSIBLE_FORCE",
@@ -112,6 +113,8 @@ SEQ_COLUMN = "header.seq"
 SECS_COLUMN = "header.stamp.secs"
 NSECS_COLUMN = "header.stamp.nsecs"
 RECEIVE_COLUMN = "Time"
+#: The frame a topic's message is expressed in (empty in the thesis lab's exports: unset).
+FRAME_COLUMN = "header.frame_id"
 
 
 class RecordingError(CoassistError, ValueError):
@@ -304,6 +307,7 @@ def assemble_recording(
     With ``key`` other than ``header.seq``, ``seq_gaps``/``seq_first``/``seq_last``
     in ``meta.extra`` are None.
     """
+    _check_frames(frames, sources, where)
     what = "header.seq value" if key == SEQ_COLUMN else "header stamp"
     seqs = np.asarray(frames["pose"][key].to_numpy())
     joined = ["pose"]
@@ -385,6 +389,31 @@ def assemble_recording(
         extra=extra,
     )
     return Trial(meta=meta, time=time, **arrays)
+
+
+def _check_frames(frames: Mapping[str, pd.DataFrame], sources: Mapping[str, str], where: str) -> None:
+    """Every topic in one frame: the import reads the pose, velocity, wrench and reference as they are, with no
+    transform, so a wrench recorded in the sensor's frame would be read as the base frame's (a hand pushing along
+    the tool's x taken as a push along the base's). An unset frame (empty, as in the thesis lab's exports) is
+    taken to be the others'; a topic whose frame changes within the recording is refused too."""
+    named: dict[str, str] = {}
+    for field_name, df in frames.items():
+        if FRAME_COLUMN not in df:
+            continue
+        ids = sorted({str(v) for v in df[FRAME_COLUMN].tolist() if not pd.isna(v)} - {""})  # empty reads as NaN
+        if len(ids) > 1:
+            raise RecordingError(
+                f"{sources[field_name]}: {FRAME_COLUMN} changes within the recording ({', '.join(map(repr, ids))}); "
+                "a topic's messages must be in one frame"
+            )
+        if ids:
+            named[field_name] = ids[0]
+    if len(set(named.values())) > 1:
+        said = ", ".join(f"{_name(sources[f], where)} in {frame!r}" for f, frame in named.items())
+        raise RecordingError(
+            f"{where}: its topics are in different frames ({said}); the import reads them as they are, with no "
+            "transform: record or export them in the robot's base frame"
+        )
 
 
 def _name(source: str, where: str) -> str:
