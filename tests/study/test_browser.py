@@ -175,7 +175,7 @@ def test_two_simulated_participants_take_mg_against_their_own_calibrated_model_i
     html_path, json_path = write_report(study.folder)
     summary = json.loads(json_path.read_text())
     labels = study.labels
-    assert summary["n_complete"] == 2 and summary["calibration"] == {"trials": 3, "calibrated": ["person"]}
+    assert summary["n_complete"] == 2 and summary["calibration"] == {"trials": 3, "calibrated": ["person"], "asked": 0}
     # blinding: nothing the page received names a controller, a condition, the probe or the person model
     assert received and not [s for s in (*SECRETS, "probe", "calibrat", "P0") if any(s in t for t in received)]
     for pid, got in entered.items():

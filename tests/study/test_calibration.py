@@ -229,7 +229,7 @@ def test_the_block_runs_under_the_probe_and_fits_the_participants_person_model(c
 def test_the_report_says_what_used_the_person_model_and_what_it_was_fitted_from(calibrated_study):
     html_path, json_path = write_report(calibrated_study)
     summary = json.loads(json_path.read_text())
-    assert summary["calibration"] == {"trials": 3, "calibrated": ["person"]}
+    assert summary["calibration"] == {"trials": 3, "calibrated": ["person"], "asked": 0}
     (p0,) = summary["participants"]["S01"]["person_models"]
     assert p0["model"] == "P0" and p0["trials"] == {"curved": 3} and p0["blocks"] == ["calibration"]
     html = html_path.read_text()
@@ -464,6 +464,118 @@ def test_a_calibration_asks_for_a_way_shown_too_seldom_then_fits_again(tmp_path)
             run.run()
         assert len(pf.progress()) == len(steps)
     assert asked_by  # at least one of the two was asked for a way (seed 3: S02, the left way twice)
+
+
+def test_a_kill_after_the_asked_refit_wrote_p0_but_not_its_line_resumes(tmp_path, monkeypatch):
+    """The asked refit fits P0 again into the first fit's folder: a kill after its files were swapped in and before
+    its line was written left P0's files the refit's while the log recorded the first fit's hash, and the audit
+    refused the participant (and the study's report) for good. The model the next step fits again is left out of
+    the audit: the resumed run fits it again (the same trials: the same bytes) and records it."""
+    from coassist.study.folder import ParticipantFolder
+
+    study = init_study(calibrated_plan(tmp_path / "plans", asked=2), tmp_path / "study")
+    with ParticipantRun(study, "S01", simulate=True) as run:  # S02 is participant 2: seed 3 asks them for a way
+        run.run()
+
+    class Killed(Exception):
+        pass
+
+    append = ParticipantFolder.append
+
+    def killed_at_the_refits_line(self, record):
+        if record.get("kind") == "fit" and str(record.get("key", "")).endswith("P0-asked"):
+            raise Killed  # the refit's files are in models/P0; its line is never written
+        return append(self, record)
+
+    monkeypatch.setattr(ParticipantFolder, "append", killed_at_the_refits_line)
+    with pytest.raises(Killed), ParticipantRun(study, "S02", simulate=True) as run:
+        run.run()
+    monkeypatch.setattr(ParticipantFolder, "append", append)
+    pf = study.participant("S02")
+    swapped = _sha(pf.folder / "models" / "P0" / "curved" / PERSON_MODEL_FILE)
+    first = next(r for r in pf.progress() if r["kind"] == "fit")
+    assert first["sha256"]["curved"] != swapped  # the state that was refused
+    with ParticipantRun(study, "S02", simulate=True) as run:
+        run.run()
+        assert run.complete
+    again = [r for r in pf.progress() if r["kind"] == "fit"][-1]
+    assert again["blocks"] == ["calibration", "calibration-asked"] and again["sha256"]["curved"] == swapped
+    assert study_summary(study.folder)["participants"]["S02"]["complete"]
+
+
+def test_an_iterative_refit_builds_on_its_base_as_recorded_not_on_a_file_nothing_checks(tmp_path, monkeypatch):
+    """P1 and P2 take P0's arm and demonstrations from P0's progress line (which the audit holds the folder to), not
+    from models/P0/fit.json: an edited fit.json refitted them with an arm P0 never had, and a deleted one failed a
+    round later with a traceback's words."""
+    text = (
+        '[study]\nname = "it"\nprotocol = "iterative"\nseed = 3\n\n[calibration]\ntrials = 3\n\n'
+        '[iterative]\nrounds = 2\ntrials_per_round = 1\nsource = "calibrated"\n\n'
+        "[questionnaire]\ntlx = false\nlikert = []\n\n"
+        '[trials]\ntasks = ["curved"]\nmotion_time = 3.0\ndwell = 1.0\n\n[rest]\nbetween_conditions = 0.0\n'
+    )
+    (tmp_path / "plan.toml").write_text(text)
+    study = init_study(tmp_path / "plan.toml", tmp_path / "study")
+    pf = study.participant("S01")
+    from coassist.study.folder import ParticipantFolder
+
+    class Stopped(Exception):
+        pass
+
+    append = ParticipantFolder.append
+
+    def stop_after_p0(self, record):
+        append(self, record)
+        if record.get("kind") == "fit":
+            raise Stopped  # the session ends with P0 fitted and recorded
+
+    monkeypatch.setattr(ParticipantFolder, "append", stop_after_p0)
+    with pytest.raises(Stopped), ParticipantRun(study, "S01", simulate=True) as run:
+        run.run()
+    monkeypatch.setattr(ParticipantFolder, "append", append)
+    (pf.folder / "models" / "P0" / "fit.json").unlink()  # gone: nothing reads it
+    with ParticipantRun(study, "S01", simulate=True) as run:
+        run.run()
+        assert run.complete
+    fits = {r["model"]: r for r in pf.progress() if r["kind"] == "fit"}
+    assert fits["P1"]["arm"] == fits["P2"]["arm"] == fits["P0"]["arm"] and not fits["P1"].get("failed")
+    assert fits["P1"]["demonstrations"]["curved"][:3] == fits["P0"]["demonstrations"]["curved"]
+
+
+def test_a_participant_whose_calibration_fails_every_attempt_stops_before_the_next_ones_seeds(monkeypatch):
+    """Attempt a's seeds start 8000 + 100 (a − 1) past the participant's base: a 21st attempt would draw the next
+    participant's. After the 20th failure the session ends in one line (recorded; nothing run), and no step asks
+    for a 21st."""
+    from coassist.study.protocols import MAX_CALIBRATION_ATTEMPTS, SEED_BAND, calibration_steps
+
+    plan = plan_from_text(_plan(trials=3, asked=2), ".")
+    last = calibration_steps(plan, 1, MAX_CALIBRATION_ATTEMPTS)
+    base = trial_seed_base(plan, 1)
+    assert max(s["seed"] for s in last if s["kind"] == "trial") + plan.calibration.asked + 50 < base + SEED_BAND
+    with pytest.raises(ValueError, match="calibration attempt 21 is outside 1 … 20"):
+        calibration_steps(plan, 1, MAX_CALIBRATION_ATTEMPTS + 1)
+
+
+def test_the_last_attempt_failing_ends_the_session_in_one_line(tmp_path, monkeypatch):
+    """The runner's side of the limit, with the limit at 2: the second failure is recorded, asks for no third, and the
+    session ends in one line, the same line on every later run, nothing run."""
+    from coassist.study import runner
+    from coassist.study.participants import OperatorHand
+
+    monkeypatch.setattr(runner, "MAX_CALIBRATION_ATTEMPTS", 2)
+    monkeypatch.setattr(OperatorHand, "force_xy", lambda self, x, y, vx, vy: (0.0, 0.0))  # a hand that never pushes
+    study = init_study(calibrated_plan(tmp_path / "plans", trials=2), tmp_path / "study")
+    command = ["study", "run", str(study.folder), "--participant", "S01", "--simulate"]
+    assert CliRunner().invoke(app, command).exit_code == 1  # attempt 1 failed: run again
+    pf = study.participant("S01")
+    for _ in range(2):  # attempt 2 fails; then the same line, nothing run
+        result = CliRunner().invoke(app, command)
+        line = " ".join(result.output.split())
+        assert result.exit_code == 1 and "error: S01: the calibration failed in all 2 attempts (the last: no" in line
+        assert "no seeds are left for another: this participant's session ends here" in line
+        fits = [r for r in pf.progress() if r["kind"] == "fit"]
+        assert [(r["attempt"], bool(r.get("exhausted"))) for r in fits] == [(1, False), (2, True)]
+        assert len(pf.progress()) == 6 and not (pf.folder / "models" / "P0").exists()
+    assert not study_summary(study.folder)["participants"]["S01"]["complete"]
 
 
 def test_a_calibration_cannot_ask_beyond_ten_trials():

@@ -51,6 +51,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -84,13 +85,16 @@ class FitJob:
     """One person model to fit for the participant ``person`` whose folder is ``root``: from the trials
     of its blocks ``data``, into ``root/models/<model>``; ``base`` the name of a person model of theirs
     whose arm is kept and whose demonstrations are added (an iterative refit), or None (a calibration:
-    the arm measured)."""
+    the arm measured); ``base_fit`` that model's fit as the progress log records it (its ``arm``,
+    ``arm_measured``, ``blocks`` and ``demonstrations``): what the refit builds on is the record the folder's
+    audit checks, not a ``fit.json`` on disk, which nothing checks."""
 
     root: str
     data: tuple[str, ...]
     model: str
     person: str
     base: str | None = None
+    base_fit: Mapping[str, Any] | None = None
 
     @property
     def out(self) -> Path:
@@ -143,7 +147,9 @@ def fit_job(job: FitJob) -> dict[str, Any]:
     if not trials:
         raise CalibrationFailed("no calibration trial to fit the person model from")
     if job.base is not None:
-        base = json.loads((Path(job.root) / "models" / job.base / FIT_FILE).read_text("utf-8"))
+        base = job.base_fit
+        if base is None:
+            raise CalibrationFailed(f"refitting from {job.base} needs its fit's record (FitJob.base_fit)")
         arm = ArmEstimate(**base["arm"])
         demos_of_base = {f for files in base["demonstrations"].values() for f in files}
         trials = [(f, t) for f, t in _read(job.root, base["blocks"]) if f in demos_of_base] + trials

@@ -613,13 +613,17 @@ class ParticipantFolder:
                     f"{self.block(str(rec.get('block'))) / MANIFEST_NAME}: does not list {rec.get('file')}, the trial "
                     f"of step {i} that {self.progress_file} records (lost?); {_RESTORE} (nothing is run again)"
                 )
-        self._audit_person_models(done)
+        self._audit_person_models(done, steps)
 
-    def _audit_person_models(self, done: list[dict[str, Any]]) -> None:
+    def _audit_person_models(self, done: list[dict[str, Any]], steps: list[dict[str, Any]]) -> None:
         """Every person model the log records as fitted is on disk as it was (its files' SHA-256): each model's last
-        fit (a calibration that asked for more trials fits P0 again, over the first fit's files)."""
+        fit (a calibration that asked for more trials fits P0 again, over the first fit's files). A model the next
+        step fits again is left out: a kill after that fit's files were swapped in and before its line was written
+        leaves them the next fit's, which the resumed run fits again (the same trials, the same model) and records."""
         from coassist.scenario.person_model import PERSON_MODEL_FILE
 
+        pending = steps[len(done)] if len(done) < len(steps) else {}
+        refitting = pending.get("model") if pending.get("kind") == "fit" else None
         last = {rec.get("model"): i for i, rec in enumerate(done) if rec["kind"] == "fit" and not rec.get("failed")}
         for i, rec in enumerate(done):
             if rec["kind"] != "fit" or rec.get("failed"):
@@ -629,7 +633,7 @@ class ParticipantFolder:
                 raise StudyFolderError(
                     f"{self.progress_file}: line {i + 1} is not a person model's record (edited by hand?); {_RESTORE}"
                 )
-            if last[rec["model"]] != i:  # fitted again later: its files are the later fit's
+            if last[rec["model"]] != i or rec["model"] == refitting:  # fitted again later, or being fitted again
                 continue
             for task, digest in digests.items():
                 path = self.folder / "models" / rec["model"] / str(task) / PERSON_MODEL_FILE

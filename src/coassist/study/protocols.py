@@ -66,6 +66,7 @@ from coassist.study.plan import CALIBRATED, Condition, StudyPlan
 
 __all__ = [
     "ASKED_SEED_OFFSET",
+    "MAX_CALIBRATION_ATTEMPTS",
     "CALIBRATION_BLOCK",
     "PROBE_CONTROLLER",
     "SEED_BAND",
@@ -84,6 +85,10 @@ PROBE_CONTROLLER = "manual-probe"
 CALIBRATED_MODEL = "P0"
 #: The seeds of an attempt's asked trials start this far past its calibration trials' (at most 10 of those).
 ASKED_SEED_OFFSET = 50
+#: The most calibration attempts a participant may make: attempt a's seeds start 8000 + 100 (a − 1) past their
+#: base, its asked trials' 50 further and at most 10 of them, so attempt 20's end at 9969, inside the participant's
+#: SEED_BAND; a 21st would take the next participant's seeds.
+MAX_CALIBRATION_ATTEMPTS = 20
 
 
 def person_ref(model: str = CALIBRATED_MODEL) -> str:
@@ -200,6 +205,8 @@ def calibration_steps(plan: StudyPlan, number: int, attempt: int) -> list[dict[s
     """The calibration block's steps, attempt ``attempt`` (1, 2, …; module docstring): its trials under the
     probe, then the fit of P0 from them."""
     assert plan.calibration is not None  # a plan with [calibration]
+    if not 1 <= attempt <= MAX_CALIBRATION_ATTEMPTS:  # the runner stops before (its own line): a programming error
+        raise ValueError(f"calibration attempt {attempt} is outside 1 … {MAX_CALIBRATION_ATTEMPTS}")
     block = CALIBRATION_BLOCK if attempt == 1 else f"{CALIBRATION_BLOCK}-{attempt}"
     steps: list[dict[str, Any]] = []
     seed0 = trial_seed_base(plan, number) + 8000 + 100 * (attempt - 1)

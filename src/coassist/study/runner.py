@@ -56,7 +56,13 @@ from coassist.study.folder import (
     utc_now,
 )
 from coassist.study.plan import is_real_arm
-from coassist.study.protocols import CALIBRATION_BLOCK, asked_steps, calibration_steps, participant_steps
+from coassist.study.protocols import (
+    CALIBRATION_BLOCK,
+    MAX_CALIBRATION_ATTEMPTS,
+    asked_steps,
+    calibration_steps,
+    participant_steps,
+)
 from coassist.study.questionnaires import form_for
 from coassist.study.training import BackgroundTraining, TrainJob, model_ready, train_command
 
@@ -232,6 +238,7 @@ class ParticipantRun:
 
     def run(self) -> bool:
         """Run the steps not yet on record; True once the participant has done all of them."""
+        self._refuse_exhausted()
         if self.done:
             self.say(f"{self.id}: resuming at step {len(self.done) + 1} of {len(self.steps)}")
         else:
@@ -245,6 +252,7 @@ class ParticipantRun:
             record = {"step": k, "kind": step["kind"], "key": step_key(step), **record, "t": utc_now()}
             self.folder.append(record)
             self.done.append(record)
+            self._refuse_exhausted()
             if step["kind"] == "fit" and record.get("redo"):
                 self._show({"kind": "wait", "text": "Thank you. We need to repeat the first part: a moment…"})
                 raise CalibrationFailed(
@@ -255,6 +263,17 @@ class ParticipantRun:
             self._ensure_model(name)
         self._show({"kind": "done", "text": "Thank you: the session is over."})
         return True
+
+    def _refuse_exhausted(self) -> None:
+        """One line, nothing run, once the participant's calibration has failed in every attempt there are seeds
+        for (:data:`~coassist.study.protocols.MAX_CALIBRATION_ATTEMPTS`): another would draw the next participant's."""
+        last = self.done[-1] if self.done else {}
+        if last.get("kind") == "fit" and last.get("exhausted"):
+            raise CalibrationFailed(
+                f"the calibration failed in all {MAX_CALIBRATION_ATTEMPTS} attempts (the last: {last.get('reason')}); "
+                "no seeds are left for another: this participant's session ends here (the report counts them "
+                "incomplete)"
+            )
 
     def _view(self, k: int, step: dict[str, Any], **more: Any) -> dict[str, Any]:
         return {
@@ -420,12 +439,9 @@ class ParticipantRun:
         data = list(step["data"])
         job = FitJob(root=str(self.folder.folder), data=tuple(data), model=step["model"], person=self.id, base=None)
         if step.get("base") is not None:
+            base = self._person_fit(step["base"])  # the recorded line: the audit holds the folder to it
             job = FitJob(
-                root=job.root,
-                data=job.data,
-                model=job.model,
-                person=job.person,
-                base=self._person_fit(step["base"])["model"],
+                root=job.root, data=job.data, model=job.model, person=job.person, base=base["model"], base_fit=base
             )
         key = f"fit:{step['index']}"
         self._show({"kind": "wait", "text": "the robot is getting to know how you move: a moment…"})
@@ -477,6 +493,8 @@ class ParticipantRun:
         if step.get("base") is not None:  # an iterative refit: the rounds go on with its predecessor
             self.say(f"{self.id}: person model {step['model']} not refitted ({reason}); the last one stays")
             return out
+        if int(step["attempt"]) >= MAX_CALIBRATION_ATTEMPTS:  # no seeds left for another (protocols)
+            return {**out, "exhausted": True}
         redo = calibration_steps(self.plan, self.record["number"], int(step["attempt"]) + 1)
         self.steps = self.folder.insert_steps(k, redo)
         self.order["steps"] = self.steps

@@ -394,7 +394,9 @@ def summarise_study(folder: str | Path) -> StudySummary:
         },
         calibration=None
         if plan.calibration is None
-        else Calibration(trials=plan.calibration.trials, calibrated=tuple(calibrated_blocks(plan))),
+        else Calibration(
+            trials=plan.calibration.trials, calibrated=tuple(calibrated_blocks(plan)), asked=plan.calibration.asked
+        ),
         n_participants=len(participants),
         n_complete=sum(1 for d in participants.values() if d["complete"]),
         pooled=pooled,

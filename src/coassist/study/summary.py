@@ -298,18 +298,21 @@ class ParticipantRow:
 
 @dataclass(frozen=True)
 class Calibration:
-    """The plan's calibration block: its ``trials`` per participant and the blocks that ran with the
-    participant's own person model (:func:`calibrated_blocks`)."""
+    """The plan's calibration block: its ``trials`` per participant, the blocks that ran with the
+    participant's own person model (:func:`calibrated_blocks`) and the most trials it may ask for more
+    (``[calibration] asked``: a way shown too seldom; each participant's count is in their fit)."""
 
     trials: int
     calibrated: tuple[str, ...]
+    asked: int = 0
 
     def to_json(self) -> dict[str, Any]:
-        return {"trials": self.trials, "calibrated": list(self.calibrated)}
+        return {"trials": self.trials, "calibrated": list(self.calibrated), "asked": self.asked}
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> Calibration:
-        return cls(trials=int(d["trials"]), calibrated=tuple(d["calibrated"]))
+        # a summary written before the asked trials were counted has none
+        return cls(trials=int(d["trials"]), calibrated=tuple(d["calibrated"]), asked=int(d.get("asked", 0)))
 
 
 @dataclass(frozen=True)
