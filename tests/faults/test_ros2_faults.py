@@ -84,17 +84,24 @@ class Driver(ros.SimRobot):
     stamps (from command ``after`` on, 0: always), or a late copy of an older wrench."""
 
     def __init__(
-        self, world, *, frame: str = "tool0", zero_stamps: bool = False, late: bool = False, after: int = 0
+        self,
+        world,
+        *,
+        frame: str = "tool0",
+        zero_stamps: bool = False,
+        late: bool = False,
+        after: int = 0,
+        free_running: bool = False,
     ) -> None:
         self.frame, self.zero_stamps, self.late, self.after = frame, zero_stamps, late, after
         self.history: list[tuple[int, np.ndarray]] = []  # (stamp, raw wrench) of every step
-        super().__init__(world)
+        super().__init__(world, free_running=free_running)
 
     def _publish(self) -> None:
         s = self.world.read()
         n = len(self.commands)
         on = n >= self.after
-        ns = 0 if (self.zero_stamps and on) else EPOCH_NS + round(s.t * 1e9)
+        ns = 0 if (self.zero_stamps and on) else self._stamp_ns(s)
         stamp = rclpy.time.Time(nanoseconds=ns).to_msg()
         w = np.asarray(s.wrench, dtype=float)
         frame = self.frame if on else "tool0"
@@ -141,7 +148,7 @@ def run_against(driver_kw: dict, config: DriveConfig, *, world_cls=Ros2World, op
     """A drive through Ros2World against ``Driver(**driver_kw)``; returns (trial, driver, world)."""
     sim = ros.mujoco_world(config)
     sim.operator = operator
-    robot = Driver(sim, **driver_kw)
+    robot = Driver(sim, free_running=not cfg_kw.get("lockstep", True), **driver_kw)
     world = world_cls(_config(sim, **cfg_kw))
     try:
         trial = drive(config, world=world)
@@ -311,7 +318,7 @@ class TwoSources(Driver):
         if len(self.commands) >= self.after:
             s = self.world.read()
             js = JointState()
-            js.header.stamp = rclpy.time.Time(nanoseconds=EPOCH_NS + round(s.t * 1e9) + 1_000_000).to_msg()
+            js.header.stamp = rclpy.time.Time(nanoseconds=self._stamp_ns(s) + 1_000_000).to_msg()
             js.name = list(UR_JOINT_NAMES)
             js.position = [float(v) + 0.2 for v in s.q]
             js.velocity = [-0.166] * len(UR_JOINT_NAMES)
@@ -385,6 +392,7 @@ class HoldingRobot(ros._SpunNode):
 
     def __init__(self, world, command_topic: str) -> None:
         self.world, self.qd, self.path = world, np.zeros(6), []
+        self.steps = 0  # its clock: the timer's steps, at rest too (a repeated stamp is a hung driver)
         self.got: list[tuple[float, np.ndarray]] = []
         self._lock = threading.Lock()
         self._open("holding_robot")
@@ -406,7 +414,8 @@ class HoldingRobot(ros._SpunNode):
             self.world.apply(Command(qd=qd))
         s = self.world.read()
         self.path.append((time.monotonic(), np.array(s.tool_pose[:2])))
-        stamp = rclpy.time.Time(nanoseconds=EPOCH_NS + round(s.t * 1e9)).to_msg()
+        self.steps += 1
+        stamp = rclpy.time.Time(nanoseconds=EPOCH_NS + self.steps * round(self.world.dt * 1e9)).to_msg()
         self.w_pub.publish(Driver._wrench(stamp, "tool0", np.asarray(s.wrench, dtype=float)))
         js = JointState()
         js.header.stamp, js.name = stamp, list(UR_JOINT_NAMES)

@@ -79,11 +79,22 @@ class _SpunNode:
 class SimRobot(_SpunNode):
     """The robot's side: a MuJoCo UR5 behind ros2_control's topics, stepped once per command."""
 
-    def __init__(self, world: MujocoUR5World, *, silent_after: int | None = None, silent_topic: str = "both") -> None:
+    def __init__(
+        self,
+        world: MujocoUR5World,
+        *,
+        silent_after: int | None = None,
+        silent_topic: str = "both",
+        free_running: bool = False,
+    ) -> None:
         self.world = world
         self.silent_after, self.silent_topic = silent_after, silent_topic
         self.commands: list[np.ndarray] = []
         self.started = False
+        # Free-running, a driver's stamps advance while it waits for the first command (a repeated stamp is a
+        # hung driver to a free-running world); in lockstep the simulator's clock stands still until then.
+        self.free_running = free_running
+        self.idle_ns = 0
         self._open("ur5_sim")
         self.js_pub = self.node.create_publisher(JointState, "/joint_states", 10)
         self.w_pub = self.node.create_publisher(WrenchStamped, "/force_torque_sensor_broadcaster/wrench", 10)
@@ -93,7 +104,13 @@ class SimRobot(_SpunNode):
 
     def _announce(self) -> None:
         if not self.started:
+            if self.free_running:
+                self.idle_ns += 20_000_000  # the timer's period
             self._publish()
+
+    def _stamp_ns(self, state) -> int:
+        """A message's stamp [ns] for the simulator's ``state``, as a driver stamps with the ROS clock (never 0)."""
+        return EPOCH_NS + self.idle_ns + round(state.t * 1e9)
 
     def _on_command(self, msg) -> None:
         self.started = True
@@ -105,7 +122,7 @@ class SimRobot(_SpunNode):
     def _publish(self) -> None:
         s = self.world.read()
         n = len(self.commands)
-        ns = EPOCH_NS + round(s.t * 1e9)  # stamped as a driver does, on the ROS clock (never 0)
+        ns = self._stamp_ns(s)
         stamp = rclpy.time.Time(nanoseconds=ns).to_msg()
         silent = self.silent_after is not None and n > self.silent_after
         if not (silent and self.silent_topic in ("both", "wrench")):
@@ -133,7 +150,7 @@ def mujoco_world(config: DriveConfig) -> MujocoUR5World:
 
 def ros_run(config: DriveConfig, *, stale_after=0.5, silent_after=None, silent_topic="both", lockstep=True):
     sim = mujoco_world(config)
-    robot = SimRobot(sim, silent_after=silent_after, silent_topic=silent_topic)
+    robot = SimRobot(sim, silent_after=silent_after, silent_topic=silent_topic, free_running=not lockstep)
     offset = sim.kinematics().tcp_offset
     mass, com = sim.tool_mass_and_com()
     cfg = Ros2Config(
@@ -382,3 +399,74 @@ def test_coassist_ros2_drives_the_simulated_robot_and_writes_the_run(tmp_path):
     assert load_bag_trial(tmp_path / "run.mcap").pose.tobytes() == trial.pose.tobytes()
     bad = CliRunner().invoke(app, ["ros2", "--wrench-topic", "no spaces", "--yes"])
     assert bad.exit_code == 2 and "--wrench-topic must be a ROS topic name" in bad.output
+
+
+def test_coassist_ros2_with_a_live_view_writes_the_run_first_and_shows_what_the_robot_is_told(tmp_path, monkeypatch):
+    """``--foxglove`` with ``--scene``, ``--base-frame world`` and ``--mcap``: the run is written before the
+    live view closes (a live view that hangs on closing once cost the trial); the view draws the scene
+    file's box, the one the robot is told of, in the robot's base frame; the MCAP file is in that frame and
+    stamped as the live view was."""
+    from types import SimpleNamespace
+
+    from rosbags.highlevel import AnyReader
+    from typer.testing import CliRunner
+
+    import coassist.cli.ros2 as ros2_cli
+    import coassist.runtime.foxglove as foxglove_module
+    from coassist.cli import app
+    from coassist.data import read_trial
+    from coassist.runtime.live import LiveFeed
+
+    from ..runtime.test_live import Recorder
+
+    sink = Recorder()
+    monkeypatch.setattr(
+        foxglove_module,
+        "open_foxglove",
+        lambda port, **kw: (LiveFeed(sink, rate_hz=100.0), SimpleNamespace(url=f"ws://127.0.0.1:{port}")),
+    )
+    out = tmp_path / "run.parquet"
+    at_close: list[bool] = []
+    real_close = ros2_cli.close_live
+
+    def close_live(feed):
+        at_close.append(out.exists())
+        real_close(feed)
+
+    monkeypatch.setattr(ros2_cli, "close_live", close_live)
+    scene = tmp_path / "scene.toml"
+    scene.write_text('[[obstacle]]\ncenter = [0.30, 0.35]\nsize = [0.10, 0.12]\nname = "fixture"\n')
+    config = DriveConfig(world="ur", controller="manual", task="linear", time_limit=0.4, seed=0)
+    sim = mujoco_world(config)
+    robot = SimRobot(sim)
+    offset = ",".join(repr(float(v)) for v in sim.kinematics().tcp_offset)
+    args = ["ros2", "--controller", "manual", "--time-limit", "0.4", "--domain-id", str(DOMAIN), "--lockstep"]
+    args += ["--yes", "--tcp-offset", offset, "--stale-after", "0.5", "--out", str(out), "--mcap", "--no-plot"]
+    args += ["--scene", str(scene), "--base-frame", "world", "--foxglove", "0"]
+    try:
+        result = CliRunner().invoke(app, args)
+    finally:
+        time.sleep(0.05)
+        robot.close()
+    assert result.exit_code == 0, result.output
+    assert at_close == [True]  # the trial was on disk when the live view closed
+    assert sink.closed
+    trial = read_trial(out)
+    live = sink.snapshots[-1].trial
+    assert trial.n_samples == 50 and sink.snapshots[-1].k == 49
+    # what the view draws: the scene file's box (the robot is told of it), in the robot's base frame
+    assert live.frame_id == "world" and len(live.obstacles) == 1
+    np.testing.assert_array_equal(live.obstacles[0][0], [0.30, 0.35])
+    np.testing.assert_array_equal(live.obstacles[0][1], [0.10, 0.12])
+    # the MCAP: the base frame, and tick k stamped live.start_ns + k·8 ms, as the view stamped it
+    assert trial.meta.extra["live_start_ns"] == live.start_ns > 1_600_000_000 * 10**9
+    frames, stamps = set(), []
+    with AnyReader([tmp_path / "run.mcap"]) as reader:
+        for conn, stamp, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            if hasattr(msg, "header"):
+                frames.add(msg.header.frame_id)
+            if conn.topic == "/current_pose":
+                stamps.append(stamp)
+    assert frames == {"world"}
+    assert stamps == [live.start_ns + k * 8_000_000 for k in range(50)] == [live.stamp(k) for k in range(50)]

@@ -298,6 +298,82 @@ def test_a_stalled_viewer_blocks_neither_the_publisher_nor_another_viewer():
         feed.close()
 
 
+def _ticks_of_a_run(seconds: float = 1.0) -> list:
+    """The snapshots of a short point-mass run (what a feed hands its sink)."""
+    recorder = Recorder()
+    with LiveFeed(recorder, rate_hz=100.0) as snapshots:
+        episode = _point_mass_episode(seconds)
+        watch = snapshots.watch(episode)
+
+        def paced(*args):
+            watch(*args)
+            time.sleep(0.001)  # a few frames of the 100 Hz publisher, however fast the run
+
+        episode.run(on_tick=paced)
+        snapshots.flush(10)
+    return recorder.snapshots
+
+
+def test_closing_the_live_view_when_its_worker_hangs_returns_and_kills_the_worker():
+    # The worker stops (SIGSTOP: a hung or starved process) while a viewer subscribes, and the publisher
+    # fills the pipe until its send blocks. Closing used to write its stop request into that full pipe
+    # and wait for ever, and `coassist ros2 --foxglove` never wrote its trial.
+    import signal
+
+    snaps = _ticks_of_a_run()
+    feed, sink = open_foxglove(0, rate_hz=30.0)
+    client = FoxgloveClient(sink.url)
+    client.subscribe(TOPICS)
+    sent = [0]
+    try:
+        _wait(lambda: all(sink.watched(t) for t in TOPICS), what="the subscriptions")
+        os.kill(sink.pid, signal.SIGSTOP)
+
+        def publish_for_ever() -> None:
+            try:
+                while True:
+                    sink.publish(snaps[sent[0] % len(snaps)])
+                    sent[0] += 1
+            except OSError:  # the worker is gone: its end of the pipe closed
+                pass
+
+        publisher = threading.Thread(target=publish_for_ever, daemon=True)
+        publisher.start()
+        stuck_since, last = time.monotonic(), -1
+        while time.monotonic() - stuck_since < 0.5:  # until no send returned for 0.5 s: the pipe is full
+            if sent[0] != last:
+                stuck_since, last = time.monotonic(), sent[0]
+            assert publisher.is_alive()
+            time.sleep(0.02)
+        assert sent[0] > 10  # a few hundred kB went in before the pipe filled
+        closer = threading.Thread(target=feed.close, daemon=True)
+        t0 = time.monotonic()
+        closer.start()
+        # the feed's own thread is idle (1 frame), then the sink: the stuck send holds the pipe for the
+        # lock's 1 s, the kill, then 2 s at most for the worker to go: ~8 s even on a loaded machine
+        closer.join(60)
+        took = time.monotonic() - t0
+        assert not closer.is_alive(), "closing the live view blocked on the hung worker"
+        assert took < 30, f"closing took {took:.1f} s"
+        _wait(lambda: not publisher.is_alive(), 10, "the stuck send to fail")  # its worker's end is gone
+        with pytest.raises(ProcessLookupError):
+            os.kill(sink.pid, 0)  # killed and reaped
+    finally:
+        try:
+            os.kill(sink.pid, signal.SIGKILL)  # never leave a stopped worker behind a failed test
+        except ProcessLookupError:
+            pass
+        client.close()
+
+
+def test_closing_the_live_view_asks_a_healthy_worker_to_stop():
+    feed, sink = open_foxglove(0)
+    t0 = time.monotonic()
+    feed.close()
+    assert time.monotonic() - t0 < 5.0  # asked, it stops at once: not killed after CLOSE_TIMEOUT
+    assert sink._proc.exitcode == 0  # it returned (a kill is -9)
+
+
 def test_a_port_in_use_a_bad_port_and_a_bad_backlog_are_one_line():
     from coassist.runtime.foxglove import LiveServerError
 
@@ -443,3 +519,6 @@ def test_the_ros2_stream_is_the_runs_log(tmp_path, monkeypatch):
     # the push moved the tool: the poses received are the ROS 2 robot's, not a constant
     x = [TS.deserialize_cdr(p, MCAP_TOPICS["/current_pose"]).pose.position.x for _, p in client.of("/current_pose")]
     assert np.ptp(x) > 1e-3
+    # a person at the arm, no scene file: the robot is told of no obstacle, and the view draws none (it drew
+    # the task generator's box); its poses are in the world's base frame
+    assert w.live.obstacles == () and w.live.frame_id == cfg.base_frame == "base"

@@ -109,14 +109,22 @@ def _stdin_is_terminal() -> bool:
 
 
 def write_run(
-    trial, out: Path, *, alpha: float | None, mcap: bool, plot: bool, joint_names: Sequence[str] | None
+    trial,
+    out: Path,
+    *,
+    alpha: float | None,
+    mcap: bool,
+    plot: bool,
+    joint_names: Sequence[str] | None,
+    frame_id: str = "base",
 ) -> None:
     """Write a drive/ros2 run: the trial file, how it ended, and <out>.mcap / <out>.png on request.
-    ``joint_names``: the arm's, in the trial's joint order (None: joint_1 … joint_n in the MCAP)."""
+    ``joint_names``: the arm's, in the trial's joint order (None: joint_1 … joint_n in the MCAP);
+    ``frame_id``: the robot's base frame, the MCAP's poses' frame (``coassist ros2 --base-frame``)."""
     from coassist.data.run_pair import write_run_pair
 
     # the trial and its MCAP as one pair: no crash leaves a trial beside another run's MCAP
-    path, mcap_path = write_run_pair(trial, out, mcap=mcap, alpha=alpha, joint_names=joint_names)
+    path, mcap_path = write_run_pair(trial, out, mcap=mcap, alpha=alpha, joint_names=joint_names, frame_id=frame_id)
     extra = trial.meta.extra
     wrote(f"{path}: {trial.n_samples} ticks, ended: {extra['ended']}")
     if extra.get("stop_message"):

@@ -172,24 +172,34 @@ def ros2(
     alpha = run_alpha(preset, controller)
     live = open_live(foxglove)
     try:
-        world = Ros2World(rcfg, alpha=alpha)
         try:
-            trial = run_drive(
-                config,
-                world=world,
-                confirm=confirm,
-                on_tick=world.publish_monitor,
-                live=live,
-                joint_names=rcfg.joint_names,
-                say=say,
-            )
-        finally:
-            world.close()
-    except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
-        fail(str(exc))
+            world = Ros2World(rcfg, alpha=alpha)
+            try:
+                trial = run_drive(
+                    config,
+                    world=world,
+                    confirm=confirm,
+                    on_tick=world.publish_monitor,
+                    live=live,
+                    joint_names=rcfg.joint_names,
+                    say=say,
+                )
+            finally:
+                world.close()
+        except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
+            fail(str(exc))
+        # the run is written before the live view closes: whatever became of the view, the trial is kept
+        write_run(
+            trial,
+            out,
+            alpha=alpha,
+            mcap=mcap,
+            plot=plot,
+            joint_names=rcfg.joint_names,
+            frame_id=rcfg.base_frame,
+        )
     finally:
         close_live(live)
-    write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=rcfg.joint_names)
 
 
 def ros2_watchdog(

@@ -15,6 +15,11 @@ beside a trial must be that trial's. Two files cannot be renamed in one step, so
 4. the new MCAP is renamed into place (with ``mcap``);
 5. the folder is fsync'ed, the old MCAP and the staging folder deleted.
 
+The MCAP's stamps are the live view's where one watched the run (``--foxglove``): tick k at
+``start + round(k·dt·1e9)`` ns, ``start`` the wall clock the view stamped tick 0 with, which
+:meth:`~coassist.runtime.live.LiveFeed.watch` records in the trial (``meta.extra["live_start_ns"]``);
+without one, from 0 (the trial's own clock).
+
 After a kill the folder holds the old pair, the old trial alone, the new trial alone, or
 the new pair, plus the dead writer's pid-named temporaries, which the next write beside
 them removes (:func:`coassist._io.remove_stale`). Without ``mcap``, an old ``<out>.mcap``
@@ -32,7 +37,11 @@ from coassist._io import fsync_dir, remove_stale, temp_name
 from coassist.data.trial import Trial
 from coassist.data.trial_file import write_trial
 
-__all__ = ["write_run_pair"]
+__all__ = ["LIVE_START", "write_run_pair"]
+
+#: The trial meta field (``meta.extra``) holding the live view's start [ns since the epoch]: the stamp
+#: of tick 0 on the live view, written by :meth:`coassist.runtime.live.LiveFeed.watch`.
+LIVE_START = "live_start_ns"
 
 
 def write_run_pair(
@@ -42,10 +51,12 @@ def write_run_pair(
     mcap: bool = False,
     alpha: float | None = None,
     joint_names: Sequence[str] | None = None,
+    frame_id: str = "base",
 ) -> tuple[Path, Path | None]:
     """Write ``trial`` to ``path`` and, with ``mcap``, to ``path`` with suffix ``.mcap`` (module docstring).
 
-    alpha, joint_names : :func:`~coassist.data.trial_mcap.write_trial_mcap`'s. Returns (trial
+    alpha, joint_names, frame_id : :func:`~coassist.data.trial_mcap.write_trial_mcap`'s (frame_id: the
+    robot's base frame). The MCAP's start is the live view's (module docstring). Returns (trial
     path, MCAP path or None). On an exception before step 2 nothing on disk has changed.
     """
     if not isinstance(trial, Trial):
@@ -69,7 +80,15 @@ def write_run_pair(
         if mcap:
             from coassist.data.trial_mcap import write_trial_mcap
 
-            staged_mcap = write_trial_mcap(trial, staging / "trial.mcap", alpha=alpha, joint_names=joint_names)
+            staged_mcap = write_trial_mcap(
+                trial,
+                staging / "trial.mcap",
+                alpha=alpha,
+                joint_names=joint_names,
+                frame_id=frame_id,
+                # stamped as the live view stamped it, where one watched: its messages are the file's
+                start_ns=trial.meta.extra.get(LIVE_START, 0),
+            )
         fsync_dir(staging)
         # 2. the old MCAP aside: the old trial is alone from here
         if mcap_path.exists() or mcap_path.is_symlink():

@@ -37,9 +37,14 @@ topic and the frame, and the run stops (at connect: it does not start). ``wrench
 counts wrench messages with a newer header stamp.
 
 Trust in the inputs. A message replaces the newest one of its topic only when its header
-stamp is newer: a late message (stamped before the newest) never does, the same stamp
-again is no news (a sign of life only), and a stamp of 0 — a driver that does not stamp
-— is refused. A joint state that names a joint twice, lacks one of ``joint_names``, or
+stamp is newer: a late message (stamped before the newest) never does, and a stamp of 0 — a
+driver that does not stamp — is refused, as is a stamp more than :data:`MAX_STAMP_LEAD` ahead
+of this node's clock (a wrong stamp, or a driver's computer whose clock is ahead: accepted,
+it would make every correct message after it a late one). The same stamp again with the same
+values is a repeat (a driver republishing its last sample): no news, and not a sign of life
+either (below); with other values (two publishers, or a driver that does not advance its
+stamp) it is refused, on either topic, and the message first stamped so is kept. A joint
+state that names a joint twice, lacks one of ``joint_names``, or
 has not one position and one velocity per name is refused, as is any message with a
 non-finite value. Joint states that jump — a joint farther from the newest state than
 :data:`MAX_JOINT_SPEED` moves it between their stamps (at most ``stale_after`` more than
@@ -54,8 +59,9 @@ topic whose every message was refused for :data:`REFUSED_AT_CONNECT` (1 s) says 
 ``connect_timeout``.
 
 Link rules, those of :class:`~coassist.robot.ur_rtde_world.URRTDEWorld`: a wrench or a
-joint state older than ``stale_after`` [s] (wall clock since the last accepted message;
-at most :data:`MAX_STALE_AFTER`), nothing at all within ``connect_timeout`` of start (or
+joint state older than ``stale_after`` [s] (at most :data:`MAX_STALE_AFTER`) — wall clock since
+its stamp last advanced: a driver that hangs and republishes its last sample is a lost link,
+as a silent one is —, nothing at all within ``connect_timeout`` of start (or
 no subscriber to the commands), makes :meth:`Ros2World.read` raise
 :class:`~coassist.runtime.world.RobotLinkError`; the loop stops the run and
 :meth:`Ros2World.stop` sends zero velocities. A command that is not ``n_joints`` finite
@@ -81,7 +87,8 @@ topic), 0.3 µs on the others; ``read`` (UR5 kinematics) 16 µs. Lower
 Lockstep (``lockstep=True``) is for simulated robots that step once per command:
 :meth:`read` after an :meth:`apply` then waits (at most ``stale_after``) for a joint state
 and a wrench stamped later than the last ones it used, so a run is as deterministic as
-the simulator.
+the simulator. Such a robot repeats its state while it waits for a command, so in lockstep a
+repeat is a sign of life (the read after a command waits for a newer stamp all the same).
 
 ROS isolation: ``domain_id`` (default ``$ROS_DOMAIN_ID``, else 0) and, where the
 environment sets ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, loopback only. The node
@@ -114,6 +121,7 @@ from coassist.spatial import rotation_matrix, rotation_vector
 __all__ = [
     "JOINT_JUMP_TOLERANCE",
     "MAX_JOINT_SPEED",
+    "MAX_STAMP_LEAD",
     "MAX_STALE_AFTER",
     "MAX_TCP_OFFSET",
     "UR_JOINT_NAMES",
@@ -136,6 +144,12 @@ JOINT_JUMP_TOLERANCE = 0.01
 #: nothing else (a wrong name list, no velocities, no stamps), so waiting longer tells the user nothing more.
 #: A second leaves room for a driver whose first messages are unstamped while it starts.
 REFUSED_AT_CONNECT = 1.0
+#: [s] how far a header stamp may be ahead of this node's clock. A driver stamps a sample before
+#: it is sent, so on one computer a stamp is never ahead; between two, NTP or chrony keep the clocks
+#: within milliseconds. Further ahead, the stamp is wrong (or the clocks are not synchronised), and
+#: accepted it would make every correct message after it late, for as long as it is ahead: below
+#: ``stale_after``'s default (0.1 s), one such message cannot stop the run.
+MAX_STAMP_LEAD = 0.05
 
 
 class Ros2InputError(CoassistError, ValueError):
@@ -156,7 +170,10 @@ class Ros2World:
     dt, command_space, n_joints, realtime : the World protocol (``realtime`` = ``config.pace``).
     tcp_offset_pose : the TCP in the flange frame (the drive builds its kinematics from it).
     last_overrun : [s] how far the last period ran over ``dt`` (0.0 on time).
-    rejected_messages : dropped inputs (non-finite, missing joints).
+    rejected_messages : dropped inputs (non-finite, missing joints, late or unstamped, stamped ahead of
+        this node's clock, the newest stamp again with other values; a repeat is not counted).
+    repeated_messages : messages that repeated the newest one (same stamp, same values).
+    base_frame : the robot's base frame (``config.base_frame``): the frame of every pose it reports.
     rejected_commands : commands replaced by zeros (not n_joints finite numbers).
     stale_commands : commands replaced by zeros because their state was older than
         ``stale_after`` when they were sent.
@@ -182,6 +199,7 @@ class Ros2World:
         self.n_joints = len(config.joint_names)
         self.realtime = config.pace
         self.tcp_offset_pose = np.asarray(config.tcp_offset, dtype=float)
+        self.base_frame = config.base_frame
         self.alpha = None if alpha is None else float(alpha)
         self.last_overrun = 0.0
         self.rejected_messages = 0
@@ -190,8 +208,12 @@ class Ros2World:
         self._R_offset = rotation_matrix(self.tcp_offset_pose[3:])
         self._msg = {"Float64MultiArray": Float64MultiArray}
         self._cond = threading.Condition()
+        # receive time: when the stamp last advanced (what a message's age is counted from, module docstring)
         self._js: tuple[int, np.ndarray, np.ndarray, float] | None = None  # stamp ns, q, qd, receive time
         self._wr: tuple[int, np.ndarray, float, bool] | None = None  # stamp ns, wrench, receive time, in base
+        # topic -> (repeats of its newest message since its stamp last advanced, when the last came [monotonic s])
+        self._repeats: dict[str, tuple[int, float]] = {}
+        self.repeated_messages = 0
         # topic -> (messages refused since its last good one, why, when the first of them came [monotonic s])
         self._refused: dict[str, tuple[int, str, float]] = {}
         self._input_error: str | None = None  # an input that cannot be used at all (a wrench's unknown frame)
@@ -282,15 +304,21 @@ class Ros2World:
         stamp = stamp_ns(msg.header.stamp)
         now = time.monotonic()
         with self._cond:
-            if not self._fresh(topic, stamp, None if self._js is None else self._js[0]):
+            last = self._js
+            fresh = self._fresh(topic, stamp, None if last is None else last[0])
+            if fresh is None:
                 return
-            if self._js is not None and self._input_error is None:
-                jump = self._jump(self._js, stamp, q, now)
+            if last is not None and self._input_error is None:
+                jump = self._jump(last, stamp, q, now)
                 if jump:
                     self._input_error = jump
                     self._cond.notify_all()
                     return
+            if last is not None and not fresh:  # the newest stamp again
+                self._same_stamp(topic, np.array_equal(q, last[1]) and np.array_equal(qd, last[2]), now)
+                return
             self._refused.pop(topic, None)
+            self._repeats.pop(topic, None)
             self._js = (stamp, q, qd, now)
             self._cond.notify_all()
 
@@ -313,21 +341,56 @@ class Ros2World:
             "(another node, a second driver?); stop the other one, then rerun"
         )
 
-    def _fresh(self, topic: str, stamp: int, newest: int | None) -> bool:
-        """Whether a message stamped ``stamp`` replaces the newest one (stamped ``newest``): a stamp of 0
-        (a driver that does not stamp) or older than the newest (a late message) is refused; the same
-        stamp again (a driver repeating its last sample) is no news, but counts as a sign of life."""
+    def _fresh(self, topic: str, stamp: int, newest: int | None) -> bool | None:
+        """Whether a message stamped ``stamp`` is newer than the newest one (stamped ``newest``): True,
+        False for the same stamp (the caller compares the values), None when it is refused (module
+        docstring): a stamp of 0 (a driver that does not stamp), one older than the newest (a late
+        message), or one more than MAX_STAMP_LEAD ahead of this node's clock."""
         if stamp <= 0:
             self._reject(
                 topic,
                 "header stamp 0: the driver does not stamp its messages, and coassist orders and "
                 "ages them by their stamp",
             )
-            return False
+            return None
         if newest is not None and stamp < newest:
             self._reject(topic, f"a late message, stamped {(newest - stamp) * 1e-9:.3f} s before the newest")
-            return False
-        return True
+            return None
+        lead = (stamp - self.node.get_clock().now().nanoseconds) * 1e-9
+        if lead > MAX_STAMP_LEAD:
+            self._reject(
+                topic,
+                f"stamped {lead:.3f} s ahead of this node's clock (at most {MAX_STAMP_LEAD:g} s): a wrong stamp, or "
+                "the driver's computer's clock is ahead of this one's (synchronise them: chrony, NTP)",
+            )
+            return None
+        return newest is None or stamp > newest
+
+    def _same_stamp(self, topic: str, same_values: bool, now: float) -> None:
+        """A message stamped as the newest one of ``topic``: a repeat when its values are the same (no
+        news; in lockstep a sign of life), refused when they differ (module docstring)."""
+        if not same_values:
+            self._reject(
+                topic,
+                "a message with the newest message's stamp and other values (two publishers on the topic, or a "
+                "driver that does not advance its stamps); the first one is kept",
+            )
+            return
+        self.repeated_messages += 1
+        n, _ = self._repeats.get(topic, (0, now))
+        self._repeats[topic] = (n + 1, now)
+        self._cond.notify_all()
+
+    def _why_stale(self, topic: str) -> str:
+        """Why ``topic`` brought nothing newer: its refused messages, its repeats ("" if neither)."""
+        why = [self._why_silent(topic)]
+        n, _ = self._repeats.get(topic, (0, 0.0))
+        if n:
+            why.append(
+                f"{n} message(s) on {topic} repeated the newest one, stamp unchanged (a driver that hangs and "
+                "republishes its last sample)"
+            )
+        return "; ".join(w for w in why if w)
 
     def _on_wrench(self, msg: Any) -> None:
         c = self.config
@@ -349,16 +412,20 @@ class Ros2World:
             self._reject(topic, "a wrench with a non-finite value")
             return
         stamp = stamp_ns(msg.header.stamp)
+        in_base = frame == c.base_frame
+        now = time.monotonic()
         with self._cond:
-            newest = None if self._wr is None else self._wr[0]
-            if not self._fresh(topic, stamp, newest):
+            last = self._wr
+            fresh = self._fresh(topic, stamp, None if last is None else last[0])
+            if fresh is None:
+                return
+            if last is not None and not fresh:  # the newest stamp again
+                self._same_stamp(topic, in_base == last[3] and np.array_equal(w, last[1]), now)
                 return
             self._refused.pop(topic, None)
-            if newest is None or stamp > newest:
-                self._wrench_seq += 1
-                self._wr = (stamp, w, time.monotonic(), frame == c.base_frame)
-            else:  # the same sample again: alive, no news
-                self._wr = (*self._wr[:2], time.monotonic(), self._wr[3])
+            self._repeats.pop(topic, None)
+            self._wrench_seq += 1
+            self._wr = (stamp, w, now, in_base)
             self._cond.notify_all()
 
     def _wait_first(self) -> None:
@@ -414,7 +481,7 @@ class Ros2World:
                     left = deadline - time.monotonic()
                     if left <= 0:
                         stale = c.joint_state_topic if self._js[0] <= self._used_js else c.wrench_topic
-                        why = self._why_silent(stale)
+                        why = self._why_stale(stale)
                         raise RobotLinkError(
                             f"no new message on {stale} for {c.stale_after:g} s (lockstep): the robot stopped "
                             "answering; the arm is stopped" + (f" ({why})" if why else "")
@@ -423,10 +490,13 @@ class Ros2World:
             js_stamp, q, qd, js_rx = self._js
             wr_stamp, w, wr_rx, wr_in_base = self._wr
             seq = self._wrench_seq
+            if c.lockstep:  # a robot waiting for its command repeats its state: a sign of life there
+                js_rx = max(js_rx, self._repeats.get(c.joint_state_topic, (0, js_rx))[1])
+                wr_rx = max(wr_rx, self._repeats.get(c.wrench_topic, (0, wr_rx))[1])
         now = time.monotonic()
         for topic, rx in ((c.joint_state_topic, js_rx), (c.wrench_topic, wr_rx)):
             if now - rx > c.stale_after:
-                why = self._why_silent(topic)
+                why = self._why_stale(topic)
                 raise RobotLinkError(
                     f"no new message on {topic} for {now - rx:.3f} s (stale_after {c.stale_after:g} s)"
                     + (f": {why}" if why else "")

@@ -9,8 +9,10 @@ The topics are the MCAP file's (:data:`coassist.data.trial_mcap.MCAP_TOPICS`: to
 twist, hand wrench, reference, prediction, α, fault flags, joint states and commands), with
 the same names, types, ``ros2msg`` schemas (the very text the MCAP file embeds,
 :func:`~coassist.data.trial_mcap.ros2_schema`) and values in CDR (:mod:`coassist.data.tick_cdr`,
-rosbags' bytes); and one more, ``/scene`` (``foxglove.SceneUpdate``): the obstacle as a box,
-the path the operator is shown as a line and the target ball, all in the ``base`` frame at the
+rosbags' bytes); and one more, ``/scene`` (``foxglove.SceneUpdate``): the obstacles the run's
+intent source is told of as boxes (:func:`~coassist.runtime.live.told_obstacles`: a scene file's,
+the simulated task's, or none), the path the operator is shown as a line and the target ball, all
+in the trial's frame (the robot's base frame, ``base`` unless the world names another) at the
 tool's start height, sent when a trial begins and whenever a viewer subscribes to it.
 
 What it costs the control loop: nothing on its thread but the snapshot
@@ -24,7 +26,9 @@ more than doubled a 500 Hz loop's deadline misses on a 2-core machine at load 15
 In the worker, nothing is encoded for a topic no viewer subscribes to, and the server (Rust)
 sends on its own threads; a slow viewer loses the oldest messages (``backlog`` per viewer are
 kept, 1024 by default), it never slows the worker, and a worker that falls behind only makes the publishing thread
-wait on the pipe, never the control thread.
+wait on the pipe, never the control thread. Closing never waits on the worker for long: a worker that
+hangs (stopped, starved) with the pipe full is killed, not written to (:meth:`FoxgloveProcess.close`),
+so a command writes its trial whatever became of its live view.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ import importlib.util
 import json
 import math
 import multiprocessing
+import select
 import struct
 import sys
 import threading
@@ -48,6 +53,7 @@ from coassist.runtime.live import LiveFeed, LiveTrial, TickSnapshot
 
 __all__ = [
     "BACKLOG",
+    "CLOSE_TIMEOUT",
     "FOXGLOVE_PORT",
     "INSTALL_HINT",
     "SCENE_TOPIC",
@@ -67,6 +73,8 @@ SCENE_TOPIC = "/scene"
 TOPICS: tuple[str, ...] = (*MCAP_TOPICS, SCENE_TOPIC)
 #: What to install for the live view.
 INSTALL_HINT = "pip install 'coassist[viz]'"
+#: [s] how long :meth:`FoxgloveProcess.close` waits for the worker to stop when asked, before it kills it.
+CLOSE_TIMEOUT = 5.0
 #: Messages the server keeps per viewer by default (the SDK's own default): a viewer that falls
 #: further behind loses the oldest ones (about 110 frames of the MCAP file's nine topics).
 BACKLOG = 1024
@@ -245,7 +253,8 @@ def tick_rows(snapshot: TickSnapshot) -> tuple[Any, ...]:
 
 
 def scene_update(trial: LiveTrial) -> Any:
-    """The trial's ``foxglove.SceneUpdate``: entity ``obstacle`` (a red box per obstacle, 5 cm tall),
+    """The trial's ``foxglove.SceneUpdate``: entity ``obstacle`` (a red box per obstacle the intent source
+    is told of, 5 cm tall; none where it is told none, which clears the previous trial's),
     ``path`` (the operator's path, a line strip) and ``target`` (a sphere of the arrive radius), in
     ``trial.frame_id`` at the start pose's height [m]."""
     from foxglove.messages import (
@@ -432,7 +441,7 @@ class FoxgloveProcess:
     process (module docstring): snapshots go there as raw bytes over a pipe.
 
     port, host, name, backlog : the server's (:class:`FoxgloveServer`).  start_timeout : [s] to wait for
-    the worker to listen. Raises as :func:`open_foxglove`.
+    the worker to listen. Raises as :func:`open_foxglove`.  pid : the worker's process id.
     """
 
     def __init__(
@@ -452,10 +461,13 @@ class FoxgloveProcess:
         ctx = multiprocessing.get_context("spawn")  # no fork of a process running the control loop's threads
         self._watched = ctx.Array("i", len(TOPICS), lock=False)  # written by the worker's server only
         self._conn, child = ctx.Pipe()
+        # held by whoever writes to the pipe: the publishing thread (blocked while the pipe is full) or close()
+        self._send_lock = threading.Lock()
         self._proc = ctx.Process(
             target=_serve, args=(child, host, port, name, self._watched, backlog), name="coassist-foxglove", daemon=True
         )
         self._proc.start()
+        self.pid = self._proc.pid
         child.close()
         reply = b""
         deadline = time.monotonic() + start_timeout
@@ -495,23 +507,41 @@ class FoxgloveProcess:
     def publish(self, snapshot: TickSnapshot) -> None:
         """Send the snapshot to the worker (its trial first, once): on the feed's publishing thread.
         Nothing but a new trial is sent while no viewer subscribes to anything."""
-        if snapshot.trial is not self._trial:
-            self._trial = snapshot.trial
-            self._conn.send_bytes(_pack_trial(snapshot.trial))
-        if any(self._watched):
-            self._conn.send_bytes(_pack_tick(snapshot))
+        with self._send_lock:
+            if snapshot.trial is not self._trial:
+                self._trial = snapshot.trial
+                self._conn.send_bytes(_pack_trial(snapshot.trial))
+            if any(self._watched):
+                self._conn.send_bytes(_pack_tick(snapshot))
 
-    def close(self) -> None:
-        """Stop the worker (it stops the server): asked, then killed after 5 s."""
-        try:
-            self._conn.send_bytes(b"C")
-        except (OSError, ValueError):
-            pass
-        self._proc.join(timeout=5.0)
+    def close(self, timeout: float = CLOSE_TIMEOUT) -> None:
+        """Stop the worker (it stops the server) without ever blocking for long: it is asked to stop where
+        the pipe takes the request at once, and killed when it has not stopped within ``timeout`` s. A
+        worker that hangs with the pipe full (a publish stuck in its send holds the pipe, or the pipe has
+        no room) is killed at once: writing to it would wait for ever."""
+        deadline = time.monotonic() + float(timeout)
+        asked = False
+        if self._send_lock.acquire(timeout=min(1.0, float(timeout))):
+            try:
+                _, room, _ = select.select([], [self._conn], [], 0.0)
+                if room:  # a Unix socket that selects writable has room for this 5-byte message: no wait
+                    self._conn.send_bytes(b"C")
+                    asked = True
+            except (OSError, ValueError):  # closed already, or the worker is gone
+                pass
+            finally:
+                self._send_lock.release()
+        if asked:
+            self._proc.join(timeout=max(0.0, deadline - time.monotonic()))
         if self._proc.is_alive():
-            self._proc.kill()
+            self._proc.kill()  # SIGKILL: it ends a stopped process too; a publish stuck in its send then fails
             self._proc.join(timeout=2.0)
-        self._conn.close()
+        # a publish that was stuck returns (the worker's end is closed) before the connection is closed under it
+        if self._send_lock.acquire(timeout=1.0):
+            try:
+                self._conn.close()
+            finally:
+                self._send_lock.release()
 
 
 def open_foxglove(

@@ -21,13 +21,17 @@ inversion: with ``coassist ur-sim`` at 500 Hz and the loop at SCHED_FIFO on the 
 machine it doubled the loop's deadline misses, docs/foxglove.md). At the loop's own priority it is
 never preempted by them, and it holds the lock for microseconds a frame.
 
-Every trial the feed watches gets a :class:`LiveTrial`: its scene (the obstacle, the path
-shown to the operator, the target ball, in the plan's frame), its period, the axes a 2-D
+Every trial the feed watches gets a :class:`LiveTrial`: its scene (the path shown to the
+operator, the target ball and the obstacles the run's intent source is told of, in the plan's
+frame: :func:`told_obstacles`), the frame its poses are in (the world's ``base_frame`` where it
+has one, e.g. ``coassist ros2 --base-frame``; else ``base``), its period, the axes a 2-D
 world does not control (held at the start pose, as the MCAP file fills them) and the start
 of its clock. Tick k is stamped ``start_ns + round(k·dt·1e9)``, the MCAP file's stamps with
 ``start_ns`` the wall clock when the trial began (never before the previous trial's last
 possible stamp, so a viewer's clock never runs backwards when a simulated trial ran faster
-than real time).
+than real time). :meth:`LiveFeed.watch` records ``start_ns`` in the episode's meta fields
+(:data:`~coassist.data.run_pair.LIVE_START`), so the trial file keeps it and the run's MCAP file
+(:func:`~coassist.data.run_pair.write_run_pair`) is stamped as the live view was.
 """
 
 from __future__ import annotations
@@ -42,9 +46,10 @@ from typing import Any, NamedTuple, Protocol
 import numpy as np
 
 from coassist._checks import check_real
+from coassist.data.run_pair import LIVE_START
 from coassist.runtime.world import RobotState, finite_vector
 
-__all__ = ["LiveFeed", "LiveSink", "LiveTrial", "TickSnapshot"]
+__all__ = ["LiveFeed", "LiveSink", "LiveTrial", "TickSnapshot", "told_obstacles"]
 
 OnTick = Callable[[int, RobotState, Any], None]
 
@@ -59,7 +64,8 @@ class LiveTrial:
     horizon : H_s, the rows of the prediction a tick logs.  plan : (n, 4) the plan grid when the
     intent source is the nominal plan (its next H_s rows are the prediction, as in the trial
     file), else None.  joint_names : ``/joint_states``' names (empty: no joints).
-    obstacles : ((center (2,), size (2,)), …) [m].  path : (m, 2) the path the operator is shown [m].
+    obstacles : ((center (2,), size (2,)), …) [m], those the intent source is told of (:func:`told_obstacles`).
+    path : (m, 2) the path the operator is shown [m].
     target : (2,) [m] and arrive_radius [m]: the ball that ends the trial.  frame_id : every pose's frame.
     """
 
@@ -150,6 +156,31 @@ def _set_thread_policy(want: Policy) -> bool:
         return False
 
 
+def told_obstacles(episode: Any) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """The boxes ``episode``'s intent source is told of, ((centre (2,), size (2,)), …) [m] in the plan's
+    frame, as :func:`~coassist.runtime.episode.build_episode` told them (what the live view draws):
+
+    - a lab's scene file's boxes, where the run has one (recorded as ``extra["scene"]``, already in the
+      plan's frame: the robot's base frame);
+    - else the task's obstacle where the simulated operator, who goes round it, holds the handle
+      (``episode.log_intent``: a simulated world, the point mass, the page's; the task moved with the plan);
+    - else none: a person at a real arm is told of no obstacle (the assistance line says so).
+
+    The episode keeps its context's obstacles nowhere else; this follows the rule the drive and the
+    simulators tell them by (:mod:`coassist.robot.drive`'s *What the robot is told*)."""
+    scene = episode.extra.get("scene")
+    if scene is not None:
+        return tuple(
+            (np.array(box["center"][:2], dtype=float), np.array(box["size"][:2], dtype=float))
+            for box in scene["obstacles"]
+        )
+    if not episode.log_intent:
+        return ()
+    task = episode.task
+    shift = np.asarray(episode.plan, dtype=float)[0, :2] - np.asarray(task.start, dtype=float)
+    return ((np.asarray(task.obstacle.center, dtype=float) + shift, np.asarray(task.obstacle.size, dtype=float)),)
+
+
 def _alpha_reader(controller: Any) -> Callable[[], float | None] | None:
     """A reader of the controller's α now (the cooperative game's, an arbitration's online one),
     or None for a controller without one (IMP, MG)."""
@@ -193,8 +224,10 @@ class LiveFeed:
         """Begin a trial of ``episode`` (a built :class:`~coassist.runtime.episode.Episode`) and return
         the ``on_tick`` to run it with: it stores the tick's snapshot, then calls ``on_tick`` (the
         caller's own monitor, if any). ``joint_names``: the arm's (default ``joint_1 …``).
+        Records the trial's live start in the episode's meta fields (module docstring).
         Called before the run, on the thread that runs it."""
         trial = self._trial(episode, joint_names)
+        episode.extra[LIVE_START] = trial.start_ns  # the trial file keeps it: its MCAP is stamped alike
         self._want_policy = _thread_policy()  # the publisher follows it (module docstring)
         tick = episode.tick
         alpha_of = _alpha_reader(tick.controller)
@@ -240,6 +273,9 @@ class LiveFeed:
         from coassist.runtime.loop import TargetDwell  # here: the Foxglove worker imports this module without the loop
 
         tick, task, plan = episode.tick, episode.task, np.asarray(episode.plan, dtype=float)
+        frame = getattr(episode.world, "base_frame", "base")  # coassist ros2 --base-frame; the others' "base"
+        if not isinstance(frame, str) or not frame:
+            raise ValueError(f"the world's base_frame must be a frame name, got {frame!r}")
         dt = float(tick.dt)
         nj = int(episode.world.n_joints)
         names = tuple(joint_names) if joint_names is not None else tuple(f"joint_{i + 1}" for i in range(nj))
@@ -259,12 +295,11 @@ class LiveFeed:
             horizon=int(tick.Hs),
             plan=plan if tick.intent.nominal else None,
             joint_names=names if nj else (),
-            obstacles=(
-                (np.asarray(task.obstacle.center, dtype=float) + shift, np.asarray(task.obstacle.size, dtype=float)),
-            ),
+            obstacles=told_obstacles(episode),
             path=np.asarray(task.path.points, dtype=float) + shift,
             target=target,
             arrive_radius=float(episode.arrive_radius),
+            frame_id=frame,
         )
         self._trials += 1
         self._last_end_ns = trial.end_ns
