@@ -137,6 +137,10 @@ class IntentModel:
         self.features = feature_names(self.n_dof)
         self.info = dict(info or {})
         self.ridge = ridge
+        #: the SHA-256 of the weights file this model was loaded from, as :func:`load_model` verified it (None: built
+        #: in memory); what a run records as the model's id, taken here, not from the folder read again (a folder
+        #: swapped between the two reads named weights that never ran)
+        self.weights_sha256: str | None = None
 
     @property
     def horizon(self) -> int:
@@ -451,4 +455,5 @@ def load_model(
     except ValueError as exc:
         raise _fail(sidecar, f"inconsistent model: {exc}") from None
     model.check_compatible(features, dt)
+    model.weights_sha256 = str(meta["weights_sha256"])
     return model

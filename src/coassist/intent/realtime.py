@@ -34,8 +34,11 @@ Backends (``benchmarks/bench_intent.py`` and ``benchmarks/bench_tick.py`` measur
 
 - ``"torch"``: eager PyTorch in the worker thread. Its Python-level work holds the GIL,
   which the control thread then waits for (a tick's p99 grows by the network's time).
-  It uses torch's process-wide thread count: the application sets it
-  (``torch.set_num_threads``); the library leaves global state alone.
+  It uses torch's thread count as the application set it (``torch.set_num_threads``) when the
+  predictor was built; the worker thread applies it to itself, as a new thread's OpenMP team
+  does not follow the setting of the thread that made it (measured: a thesis-size network's call
+  8–12 ms on the main thread, a median of 29–43 ms and single calls of 3 s in a thread that did not
+  apply it; 75 % of a 125 Hz run's ticks fell back).
 - ``"onnx"``: ONNX Runtime with ``threads`` intra-op threads; ``session.run`` releases the
   GIL, so the control thread runs while the network does.
 - ``"process"``: the model in a worker process of its own (``threads`` torch threads
@@ -200,12 +203,14 @@ class ProcessRunner:
                 break
             if not self._proc.is_alive():
                 break
+        if ready:  # the worker has loaded its copy: nothing left behind should this process be killed
+            self._tmp.cleanup()
         if not ready:
+            self._proc.join(1.0)  # a child that closed its pipe and exited: reaped, so its exit code is known
             code = self._proc.exitcode
+            waited = time.monotonic() - (deadline - start_timeout)
             self.close()
-            why = (
-                f"it exited with code {code}" if code is not None else f"it did not answer within {start_timeout:.0f} s"
-            )
+            why = f"it exited with code {code}" if code is not None else f"it did not answer within {waited:.0f} s"
             raise RuntimeError(f"the predictor's worker process did not start: {why} (its error is printed above)")
 
     def __call__(self, window: np.ndarray) -> np.ndarray:
@@ -320,6 +325,8 @@ class RealtimePredictor:
         self.held_samples = 0
         self._last_run = float("nan")
         self.reset()
+        # the thread count the worker thread applies to itself (torch backend, module docstring)
+        self._torch_threads = torch.get_num_threads() if self.config.backend == "torch" and runner is None else None
         if self.config.threaded:
             self._worker = threading.Thread(target=self._work, name="intent-predictor", daemon=True)
             self._worker.start()
@@ -434,6 +441,8 @@ class RealtimePredictor:
                 self.predictions += 1
 
     def _work(self) -> None:
+        if self._torch_threads is not None:
+            torch.set_num_threads(self._torch_threads)  # this thread's OpenMP team (module docstring)
         while True:
             with self._lock:
                 while self._pending is None and not self._stop:
@@ -533,7 +542,7 @@ def load_model_intent(path: str, backend: str = "auto") -> ModelIntent:
     Leaves torch's thread count alone: the simulator's worker processes set one thread
     each (one process per core); a single-process caller chooses its own.
     """
-    from coassist.intent.model import load_model, read_sidecar
+    from coassist.intent.model import load_model
 
     if backend not in NETWORK_BACKENDS:
         raise ValueError(f"network backend must be one of {NETWORK_BACKENDS}, got {backend!r}")
@@ -542,5 +551,5 @@ def load_model_intent(path: str, backend: str = "auto") -> ModelIntent:
 
         backend = "onnx" if onnx_runtime_available() else "torch"
     model = load_model(path, features=FEATURES)
-    digest = str(read_sidecar(path).get("weights_sha256", ""))[:12]
+    digest = str(model.weights_sha256)[:12]  # the weights that were loaded and verified
     return ModelIntent(model, f"{Path(path).name}@{digest}", backend)

@@ -719,11 +719,11 @@ def _intent_stage(config: DriveConfig, H: int, source: Any, sources: dict | None
         return WindowIntent(src, H), src.model_id
     if realtime:
         from coassist.intent import RealtimeConfig, RealtimePredictor
-        from coassist.intent.model import load_model, read_sidecar
+        from coassist.intent.model import load_model
 
         model = load_model(config.intent, features=FEATURES)
         model.check_compatible(None, config.dt, what="the drive loop")
-        digest = str(read_sidecar(config.intent).get("weights_sha256", ""))[:12]
+        digest = str(model.weights_sha256)[:12]  # the weights that were loaded and verified
         mid = f"{config.intent.rstrip('/').split('/')[-1]}@{digest}"
         predictor = RealtimePredictor(model, RealtimeConfig(threaded=True, backend=config.predictor_backend))
         return RealtimeIntent(predictor, model_id=mid), mid

@@ -14,8 +14,10 @@ Both return the (H, 2) predicted positions in use at tick k for ticks k+1 … k+
 None (fallback: the loop uses the nominal reference, eq. 4.7), and the tick's flags:
 PREDICTION_FALLBACK, PREDICTION_STALE, and PREDICTOR_STALLED once the predictor has
 given nothing usable for ``stall_ticks`` ticks in a row after its history filled (a
-dead worker, a hung network, NaN outputs). A stalled predictor is a bad tick for the
-safety layer: the robot decelerates, and stops if it persists.
+hung network, implausible rows), and at once on a tick whose worker is dead or whose
+real-time prediction failed (raised, non-finite or misshapen: a network that gave NaN once is
+not trusted with the next, though a prediction still in use may be fresh enough). A stalled
+predictor is a bad tick for the safety layer: the robot decelerates, and stops if it persists.
 
 What a row may ask of the controller is bounded: a window source's rows are used only when
 they are finite *and* plausible for a hand (:func:`coassist.interfaces.prediction_plausible`
