@@ -350,9 +350,9 @@ def test_health_shows_a_hung_network_while_it_hangs(model):
 def test_process_backend_equals_the_model_and_reports_its_death(model):
     """The model in a worker process answers exactly what it answers in-process (same
     float64 bytes back); a killed process is reported dead and its calls fail."""
-    from coassist.intent.realtime import ProcessRunner
-
     from pathlib import Path
+
+    from coassist.intent.realtime import ProcessRunner
 
     runner = ProcessRunner(model, threads=1)
     try:
