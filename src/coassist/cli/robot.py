@@ -139,20 +139,22 @@ def drive(
     confirm = confirm_move(yes, "the teach pendant's emergency stop")
     live = open_live(foxglove)
     try:
-        trial = run_drive(
-            config, host=host, view=view, confirm=None if WORLDS[world].simulated else confirm, live=live, say=say
+        try:
+            trial = run_drive(
+                config, host=host, view=view, confirm=None if WORLDS[world].simulated else confirm, live=live, say=say
+            )
+        except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
+            fail(str(exc))
+        from coassist.robot.ros2_world import UR_JOINT_NAMES  # (no rclpy needed for the names)
+
+        # The UR's joint names; another arm's joints are named joint_1 … joint_n in the MCAP.
+        names = UR_JOINT_NAMES if config.robot == "ur5" else None
+        # the run is written before the live view closes, as ros2 does: whatever became of the view, the trial is kept
+        write_run(
+            trial, out, alpha=run_alpha(preset, controller) if mcap else None, mcap=mcap, plot=plot, joint_names=names
         )
-    except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
-        fail(str(exc))
     finally:
         close_live(live)
-    from coassist.robot.ros2_world import UR_JOINT_NAMES  # (no rclpy needed for the names)
-
-    # The UR's joint names; another arm's joints are named joint_1 … joint_n in the MCAP.
-    names = UR_JOINT_NAMES if config.robot == "ur5" else None
-    write_run(
-        trial, out, alpha=run_alpha(preset, controller) if mcap else None, mcap=mcap, plot=plot, joint_names=names
-    )
 
 
 def ur_sim(
