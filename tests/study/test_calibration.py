@@ -388,14 +388,17 @@ def test_kill_9_during_the_block_and_during_the_fit_then_resume(tmp_path):
     assert again["sha256"] == fit["sha256"] and again["arm"] == fit["arm"]
 
 
+#: An iterative study of two rounds of one trial after a calibration of three (seconds, simulated).
+ITERATIVE_PLAN = (
+    '[study]\nname = "it"\nprotocol = "iterative"\nseed = 3\n\n[calibration]\ntrials = 3\n\n'
+    '[iterative]\nrounds = 2\ntrials_per_round = 1\nsource = "calibrated"\n\n'
+    "[questionnaire]\ntlx = false\nlikert = []\n\n"
+    '[trials]\ntasks = ["curved"]\nmotion_time = 3.0\ndwell = 1.0\n\n[rest]\nbetween_conditions = 0.0\n'
+)
+
+
 def test_an_iterative_study_refits_the_person_model_between_rounds(tmp_path):
-    text = (
-        '[study]\nname = "it"\nprotocol = "iterative"\nseed = 3\n\n[calibration]\ntrials = 3\n\n'
-        '[iterative]\nrounds = 2\ntrials_per_round = 1\nsource = "calibrated"\n\n'
-        "[questionnaire]\ntlx = false\nlikert = []\n\n"
-        '[trials]\ntasks = ["curved"]\nmotion_time = 3.0\ndwell = 1.0\n\n[rest]\nbetween_conditions = 0.0\n'
-    )
-    (tmp_path / "plan.toml").write_text(text)
+    (tmp_path / "plan.toml").write_text(ITERATIVE_PLAN)
     study = init_study(tmp_path / "plan.toml", tmp_path / "study")
     with ParticipantRun(study, "S01", simulate=True) as run:
         run.run()
@@ -507,13 +510,7 @@ def test_an_iterative_refit_builds_on_its_base_as_recorded_not_on_a_file_nothing
     """P1 and P2 take P0's arm and demonstrations from P0's progress line (which the audit holds the folder to), not
     from models/P0/fit.json: an edited fit.json refitted them with an arm P0 never had, and a deleted one failed a
     round later with a traceback's words."""
-    text = (
-        '[study]\nname = "it"\nprotocol = "iterative"\nseed = 3\n\n[calibration]\ntrials = 3\n\n'
-        '[iterative]\nrounds = 2\ntrials_per_round = 1\nsource = "calibrated"\n\n'
-        "[questionnaire]\ntlx = false\nlikert = []\n\n"
-        '[trials]\ntasks = ["curved"]\nmotion_time = 3.0\ndwell = 1.0\n\n[rest]\nbetween_conditions = 0.0\n'
-    )
-    (tmp_path / "plan.toml").write_text(text)
+    (tmp_path / "plan.toml").write_text(ITERATIVE_PLAN)
     study = init_study(tmp_path / "plan.toml", tmp_path / "study")
     pf = study.participant("S01")
     from coassist.study.folder import ParticipantFolder
