@@ -207,6 +207,15 @@ def test_a_trial_stopped_halfway_is_refused_though_its_tool_passed_near_the_plan
     )
     rest = _run(ALICE, "manual-probe", [32, 33, 34], task="z")
     calibrate_people(rest + [z])  # the whole trial: accepted
+    # a plan recorded at 1 Hz (its vertices up to 9 cm apart, farther than the 2 cm followed a sample): accepted too
+    sparse = [
+        Named(
+            f"{n.id}-1hz",
+            _trial(n.trial, reference=n.trial.reference[(np.arange(len(n.trial.reference)) // 125) * 125]),
+        )
+        for n in rest + [z]
+    ]
+    calibrate_people(sparse)
     with pytest.raises(CalibrationError, match=r"alice: trial lab/stopped: the tool moved \d+ mm and reached 4\d % of"):
         calibrate_people(rest + [stopped])
 

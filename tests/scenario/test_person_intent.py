@@ -506,12 +506,11 @@ def test_a_bad_row_costs_one_tick_and_leaves_the_filter_as_it_was():
             assert np.isfinite(got).all()
 
 
-def test_the_phase_catches_up_with_a_person_who_cut_across():
-    """On a hairpin plan (two legs 15 cm apart) a person who crosses from the first leg to the second leaves every
-    curve's phase where they left it: the phase search looks 2 cm either side, and along the curve the way to the
-    person first leads away from them (round the hairpin), so the phase was held there and the rows stayed the
-    present estimate's for the rest of the trial. Now a phase every curve left behind moves on to the curve's
-    nearest point ahead, and the filter reads the person on their curves again the tick after they rejoin."""
+def test_a_person_who_steps_off_every_curve_is_read_on_them_again_where_they_come_back():
+    """On a hairpin plan (two legs 15 cm apart) a person who steps 11 cm aside on the first leg (beyond max_offset,
+    toward the second leg) and comes back: while off, the rows are the present estimate's; back, the held phases find
+    them again. (A search for the phases further along, tried, threw them onto the second leg, nearer the person
+    stepped aside, and the rows never read the first leg's curves again, its detour included.)"""
     t = np.linspace(-np.pi / 2, np.pi / 2, 200)
     leg1 = np.stack([np.linspace(0.0, 0.5, 500), np.zeros(500)], axis=1)
     turn = np.stack([0.5 + 0.075 * np.cos(t), 0.075 + 0.075 * np.sin(t)], axis=1)
@@ -526,17 +525,19 @@ def test_the_phase_catches_up_with_a_person_who_cut_across():
 
     model = fit_path_model(plan, [detour(0.03), detour(0.032), detour(-0.03)], noise=0.001)
     walked = _walk(detour(0.03))
-    cut = int(np.argmax(walked[:, 0] >= 0.42))
-    back = len(walked) - int(np.argmax(walked[::-1, 0] >= 0.42))  # the same x on the second leg
-    intent = np.concatenate([walked[:cut], walked[back:]])
+    k0 = int(np.argmax(walked[:, 0] >= 0.12))
+    aside = np.stack([np.full(120, walked[k0, 0]), np.linspace(0.0, 0.11, 120)], axis=1)
+    intent = np.concatenate([walked[:k0], aside, aside[::-1], walked[k0:]])
     src = PersonPathsIntent(paths={"u": model}, arms={"u": ARM})
     src.reset(_context(path=plan))
     on = []
     for k in range(len(intent)):
         _tick(src, intent, k, lag=0)
         on.append(src.on_curves)
-    assert all(on[:cut]) and not on[cut]  # on the first leg, then 15 cm from every curve's phase
-    assert all(on[cut + 1 :])  # the next tick on: on the second leg's curves
+    off = [k for k in range(k0, k0 + 240) if not on[k]]
+    # off every curve only while aside, at its farthest (the held phases over 10 cm away)
+    assert all(on[:k0]) and off and all(np.abs(intent[off, 1]) > 0.1)
+    assert all(on[k0 + 240 :])  # back on the first leg, and on along the rest of the plan
 
 
 def test_another_plan_whose_points_lie_on_the_models_gets_the_present_estimate():

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import shlex
 from pathlib import Path
 
@@ -68,15 +67,16 @@ def calibrate(
     figure = out / PERSON_FIGURE_FILE
     if figure.is_dir():
         fail(f"--out {out}: {figure} is a folder; the person model's figure is written there", 2)
-    # the figure drawn first, beside its place: a figure that cannot be drawn leaves the model there was
-    drawing = out / f".{PERSON_FIGURE_FILE}.{os.getpid()}.png"
+    # the figure first (each file is written whole or not at all): a figure that cannot be written leaves the model
+    # there was; a model that cannot be written after it is said, and the figure beside the old model is the new fit's
     try:
-        write_person_figure(calibration_panels(people), drawing)
-        write_person_model(out, {c.person: c.fit for c in people})
-        os.replace(drawing, figure)
+        write_person_figure(calibration_panels(people), figure)
     except OSError as exc:
-        drawing.unlink(missing_ok=True)
-        fail(f"--out {out}: cannot write ({exc.strerror})")
+        fail(f"--out {out}: cannot write {figure.name} ({exc.strerror}); the person model there is unchanged")
+    try:
+        write_person_model(out, {c.person: c.fit for c in people})
+    except OSError as exc:
+        fail(f"--out {out}: cannot write {PERSON_MODEL_FILE} ({exc.strerror})")
     wrote(f"{out / PERSON_MODEL_FILE}: {len(people)} person(s); drive with --intent {shlex.quote(str(out))}")
     wrote(f"{figure}: each person's paths and arm, to look at before they assist")
 

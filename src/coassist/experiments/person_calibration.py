@@ -171,8 +171,11 @@ def _progress(frame: PathFrame, xy: np.ndarray) -> float:
     arc, pts = frame.arc, frame.points
     j = int(frame.nearest_vertex(xy[:1])[0])
     best = s = float(arc[j])
-    lo_side = np.searchsorted(arc, arc - PROGRESS_STEP, side="left")
-    hi_side = np.searchsorted(arc, arc + PROGRESS_STEP, side="right")
+    # the vertices within PROGRESS_STEP of arc either side, and always the next and the one before: a plan given
+    # as a few waypoints, or a reference topic recorded at a few hertz, has vertices farther apart than the step
+    n = len(arc)
+    lo_side = np.minimum(np.searchsorted(arc, arc - PROGRESS_STEP, side="left"), np.maximum(np.arange(n) - 1, 0))
+    hi_side = np.maximum(np.searchsorted(arc, arc + PROGRESS_STEP, side="right"), np.minimum(np.arange(n) + 2, n))
     for x, y in xy[1:].tolist():
         lo, hi = int(lo_side[j]), int(hi_side[j])
         near = pts[lo:hi]

@@ -308,15 +308,15 @@ class Ros2World:
             fresh = self._fresh(topic, stamp, None if last is None else last[0])
             if fresh is None:
                 return
+            if last is not None and not fresh:  # the newest stamp again: a repeat, or refused (not a jump of 0 s)
+                self._same_stamp(topic, np.array_equal(q, last[1]) and np.array_equal(qd, last[2]), now)
+                return
             if last is not None and self._input_error is None:
                 jump = self._jump(last, stamp, q, now)
                 if jump:
                     self._input_error = jump
                     self._cond.notify_all()
                     return
-            if last is not None and not fresh:  # the newest stamp again
-                self._same_stamp(topic, np.array_equal(q, last[1]) and np.array_equal(qd, last[2]), now)
-                return
             self._refused.pop(topic, None)
             self._repeats.pop(topic, None)
             self._js = (stamp, q, qd, now)

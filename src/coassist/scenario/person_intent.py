@@ -516,17 +516,6 @@ class PersonPathsIntent:
             return np.array((qx, qy)) + self._present_steps * np.array((vx, vy))
         return self._smoothing(self._filter(self._hyp, px, py, vx, vy, ux, uy, qx, qy))
 
-    def _catch_up(self, hyp: _Curves, px: float, py: float) -> None:
-        """Every curve's phase held far from the tool (the person left them all: a corner cut wider than the phase
-        search's window, a detour wider than any demonstrated): each curve's phase moves on to its sample nearest
-        the tool from where it is to its end, so the search finds the person again where they rejoin the curve.
-        Held where it was, a phase the person had left behind never caught up: the rows stayed the present
-        estimate's for the rest of the trial (a corner cut by 45 mm at 20 % of the plan, rejoined at 45 %)."""
-        pts = hyp.points
-        d2 = (pts[:, :, 0] - px) ** 2 + (pts[:, :, 1] - py) ** 2
-        d2[np.arange(pts.shape[1])[None, :] < self._idx[:, None]] = np.inf  # behind the phase: not searched
-        self._idx = d2.argmin(axis=1)
-
     def _filter(
         self, hyp: _Curves, px: float, py: float, vx: float, vy: float, ux: float, uy: float, qx: float, qy: float
     ) -> np.ndarray:
@@ -552,7 +541,10 @@ class PersonPathsIntent:
         near = None  # every curve near
         if np.maximum.reduce(d2_at) > self._max_offset2:
             if np.minimum.reduce(d2_at) > self._max_offset2:
-                self._catch_up(hyp, px, py)
+                # the phases are held where the person left: a search for them further along (a corner cut wider
+                # than the search's ±2 cm reach) would find, on a path that passes near itself (a hairpin, a Z's
+                # legs), a later leg as often as the person: rows leading along it are worse than the present
+                # estimate's, which serve until the person is back near a held phase
                 self._on_curves = False
                 return np.array((qx, qy)) + self._present_steps * v
             near = d2_at <= self._max_offset2
