@@ -47,7 +47,7 @@ import numpy as np
 
 from coassist._checks import check_real
 from coassist.data.run_pair import LIVE_START
-from coassist.runtime.world import RobotState, finite_vector
+from coassist.runtime.world import RobotState, finite_vector, optional_member
 
 __all__ = ["LiveFeed", "LiveSink", "LiveTrial", "TickSnapshot", "told_obstacles"]
 
@@ -273,7 +273,7 @@ class LiveFeed:
         from coassist.runtime.loop import TargetDwell  # here: the Foxglove worker imports this module without the loop
 
         tick, task, plan = episode.tick, episode.task, np.asarray(episode.plan, dtype=float)
-        frame = getattr(episode.world, "base_frame", "base")  # coassist ros2 --base-frame; the others' "base"
+        frame = optional_member(episode.world, "base_frame") or "base"  # coassist ros2 --base-frame; the others' "base"
         if not isinstance(frame, str) or not frame:
             raise ValueError(f"the world's base_frame must be a frame name, got {frame!r}")
         dt = float(tick.dt)

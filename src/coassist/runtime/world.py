@@ -173,10 +173,13 @@ class OptionalWorldMembers(Protocol):
         log's message when the run ended with ``"robot_stop"`` or ``"safety_stop"``.
     hand_wrench : (6,) the hand's wrench at the handle in the last period [N, N·m], base frame,
         for a world that simulates the hand; the log's effort_h (its first ``d`` entries).
+    base_frame : the name of the frame the world's poses are in (``coassist ros2 --base-frame``), for the
+        live view and the MCAP file; absent (None): ``"base"``.
     """
 
     last_overrun: float | None
     stop_detail: str | None
+    base_frame: str | None
 
     @property
     def hand_wrench(self) -> np.ndarray:
@@ -195,6 +198,7 @@ OPTIONAL_WORLD_MEMBERS: dict[str, None] = {
     "stop_detail": None,
     "hand_force": None,
     "hand_wrench": None,
+    "base_frame": None,
 }
 
 
