@@ -166,8 +166,9 @@ def _check_trial(person: str, tid: str, trial: Trial) -> None:
 
 def _progress(frame: PathFrame, xy: np.ndarray) -> float:
     """[m] how far along the plan the tool got, followed sample by sample: each sample's nearest vertex of the plan
-    within :data:`PROGRESS_STEP` of arc length of the last one's, so a tool out on a detour that passes near a later
-    stretch of the plan (the Z's legs) is not counted there. The first sample's nearest vertex over the whole plan."""
+    within :data:`PROGRESS_STEP` of arc length of the last one's (and always the next and the one before), so a tool
+    out on a detour that passes near a later stretch of the plan (the Z's legs) is not counted there. The first
+    sample's nearest vertex over the whole plan."""
     arc, pts = frame.arc, frame.points
     j = int(frame.nearest_vertex(xy[:1])[0])
     best = s = float(arc[j])
