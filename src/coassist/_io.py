@@ -54,6 +54,7 @@ __all__ = [
     "atomic_write",
     "atomic_write_bytes",
     "atomic_write_text",
+    "figure_bytes",
     "fsync_dir",
     "json_sha256",
     "no_duplicate_keys",
@@ -189,9 +190,14 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
 
 def save_figure(fig: Any, path: str | os.PathLike[str], dpi: int = 110) -> Path:
     """Save a matplotlib figure atomically (format from the suffix, PNG by default)."""
+    return atomic_write_bytes(path, figure_bytes(fig, Path(path).suffix.lstrip(".") or "png", dpi))
+
+
+def figure_bytes(fig: Any, format: str = "png", dpi: int = 110) -> bytes:
+    """A matplotlib figure drawn in memory (what :func:`save_figure` writes)."""
     buf = io.BytesIO()
-    fig.savefig(buf, format=Path(path).suffix.lstrip(".") or "png", dpi=dpi)
-    return atomic_write_bytes(path, buf.getvalue())
+    fig.savefig(buf, format=format, dpi=dpi)
+    return buf.getvalue()
 
 
 # --------------------------------------------------------------------------- folders

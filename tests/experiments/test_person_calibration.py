@@ -220,6 +220,47 @@ def test_a_trial_stopped_halfway_is_refused_though_its_tool_passed_near_the_plan
         calibrate_people(rest + [stopped])
 
 
+def _along(waypoints, n: int, until: float = 1.0) -> np.ndarray:
+    """(n, 2) points walked along the polyline ``waypoints`` at an even pace up to the share ``until`` of its length
+    (then held there)."""
+    w = np.asarray(waypoints, dtype=float)
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(w, axis=0), axis=1))])
+    s = np.minimum(np.linspace(0.0, cum[-1], n), until * cum[-1])
+    return np.stack([np.interp(s, cum, w[:, 0]), np.interp(s, cum, w[:, 1])], axis=1)
+
+
+def test_the_progress_is_read_along_the_plans_segments_whatever_its_vertices(alice):
+    """Hand-built plans and tools (alice's recordings otherwise): a plan of three waypoints, stopped at 26 % of it, is
+    refused as 26 % (its nearest vertex, half-way, had read 50 %); a plan that doubles back on itself, followed to its
+    end, is accepted (on a tie the later vertex: the return leg; it had read 38 %); a tool that moves 4 cm between two
+    samples (a trial recorded at a few hertz) is followed (it had read about half)."""
+
+    def trial(base, waypoints, *, held=False, until=1.0, every=1):
+        """``base`` with the plan ``waypoints`` (walked densely, or each waypoint held a share of the trial) and the
+        tool walked along it up to ``until`` (a new position every ``every`` samples)."""
+        n = base.n_samples
+        w = np.asarray(waypoints, dtype=float)
+        ref = base.reference.copy()
+        ref[:, :2] = w[np.minimum(np.arange(n) * len(w) // n, len(w) - 1)] if held else _along(w, n)
+        pose = base.pose.copy()
+        pose[:, :2] = np.repeat(_along(w, -(-n // every), until), every, axis=0)[:n]
+        return _trial(base, reference=ref, pose=pose)
+
+    bases = [t.trial for t in alice]
+    three = [(0.0, 0.0), (0.25, 0.0), (0.25, 0.25)]
+    plans = [Named(f"lab/three-{i}", trial(b, three, held=True)) for i, b in enumerate(bases[:3])]
+    calibrate_people(plans)
+    stopped = Named("lab/three-stopped", trial(bases[3], three, held=True, until=0.26))
+    with pytest.raises(
+        CalibrationError, match=r"lab/three-stopped: the tool moved \d+ mm and reached 26 % of the plan"
+    ):
+        calibrate_people([*plans, stopped])
+    back = [(0.0, 0.0), (0.3, 0.0), (0.1, 0.0), (0.1, 0.3)]
+    calibrate_people([Named(f"lab/back-{i}", trial(b, back)) for i, b in enumerate(bases[:3])])
+    line = [(0.0, 0.0), (0.5, 0.0)]  # the tool on by about 4 cm every 170th sample
+    calibrate_people([Named(f"lab/coarse-{i}", trial(b, line, every=170)) for i, b in enumerate(bases[:3])])
+
+
 def test_a_sensor_spike_a_copy_and_a_recording_cut_short_are_refused_naming_them(alice):
     first = alice[0].trial
     w = first.wrench.copy()
@@ -286,6 +327,16 @@ def test_a_figure_that_cannot_be_written_leaves_the_model_there_was(alice, tmp_p
     assert (out / "person-model.json").read_bytes() == before and [
         p.name for p in out.iterdir() if p.name.startswith(".")
     ] == []
+    # a model that cannot be written: the folder as it was, the figure too
+    (out / "person-model.png").rmdir()
+    res = runner.invoke(app, ["calibrate", str(data), "--out", str(out), "--overwrite"])
+    assert res.exit_code == 0, res.output
+    figure = (out / "person-model.png").read_bytes()
+    (out / "person-model.json").unlink()
+    (out / "person-model.json").mkdir()  # in the way of the model's write
+    res = runner.invoke(app, ["calibrate", str(data), "--out", str(out), "--overwrite"])
+    assert res.exit_code == 1 and "cannot write person-model.json" in res.output and "nothing changed" in res.output
+    assert (out / "person-model.png").read_bytes() == figure
 
 
 def test_the_command_writes_a_person_model_drive_can_load(alice, bob, tmp_path):

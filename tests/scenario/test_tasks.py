@@ -103,3 +103,17 @@ def test_box_signed_distance():
         box.signed_distance(np.array([[0.0, 0.0], [0.3, 0.0], [0.1, 0.05], [0.2, 0.15]])),
         [-0.05, 0.2, 0.0, np.hypot(0.1, 0.1)],
     )
+
+
+def test_a_plan_that_turns_straight_back_has_the_incoming_direction_at_the_turn():
+    """np.gradient's central difference is zero where a plan turns straight back on itself (its two neighbours the
+    same point): the tangent there was 0/0 = NaN, and every projection onto that vertex NaN. It is the incoming
+    segment's direction; elsewhere the central one, as before."""
+    from coassist.scenario.tasks import NominalPath
+
+    path = NominalPath("back", np.array([[0.0, 0.0], [0.3, 0.0], [0.0, 0.0], [0.0, 0.2]]))
+    assert np.isfinite(path.tangents).all()
+    np.testing.assert_array_equal(path.tangents[1], [1.0, 0.0])
+    # where the gradient is not zero, the central difference, normalised, as np.gradient gives it
+    g = np.gradient(path.points, path.arc, axis=0)[2]
+    np.testing.assert_allclose(path.tangents[2], g / np.linalg.norm(g), rtol=0, atol=1e-15)

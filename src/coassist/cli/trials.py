@@ -50,8 +50,9 @@ def calibrate(
     if (out / PERSON_MODEL_FILE).exists() and not overwrite:
         fail(f"--out {out}: already holds a person model; pass --overwrite to replace it", 2)
     folder_out(out, "--out")
+    from coassist._io import atomic_write_bytes
     from coassist.experiments.person_calibration import CalibrationError, calibrate_people, summary_line
-    from coassist.experiments.person_figure import PERSON_FIGURE_FILE, calibration_panels, write_person_figure
+    from coassist.experiments.person_figure import PERSON_FIGURE_FILE, calibration_panels, person_figure_png
     from coassist.scenario.person_model import write_person_model
 
     trials = intent_trials(data, skip_bad_trials, bag_topics=bag_topics)
@@ -67,16 +68,19 @@ def calibrate(
     figure = out / PERSON_FIGURE_FILE
     if figure.is_dir():
         fail(f"--out {out}: {figure} is a folder; the person model's figure is written there", 2)
-    # the figure first (each file is written whole or not at all): a figure that cannot be written leaves the model
-    # there was; a model that cannot be written after it is said, and the figure beside the old model is the new fit's
-    try:
-        write_person_figure(calibration_panels(people), figure)
-    except OSError as exc:
-        fail(f"--out {out}: cannot write {figure.name} ({exc.strerror}); the person model there is unchanged")
+    # the figure drawn in memory, the model written, then the figure (each file whole or not at all): a model that
+    # cannot be written leaves the folder as it was; a figure that cannot be written after it is said
+    png = person_figure_png(calibration_panels(people))
     try:
         write_person_model(out, {c.person: c.fit for c in people})
+    except (OSError, ValueError) as exc:
+        fail(
+            f"--out {out}: cannot write {PERSON_MODEL_FILE} ({getattr(exc, 'strerror', None) or exc}); nothing changed"
+        )
+    try:
+        atomic_write_bytes(figure, png)
     except OSError as exc:
-        fail(f"--out {out}: cannot write {PERSON_MODEL_FILE} ({exc.strerror})")
+        fail(f"--out {out}: the person model is written, but not its figure {figure.name} ({exc.strerror})")
     wrote(f"{out / PERSON_MODEL_FILE}: {len(people)} person(s); drive with --intent {shlex.quote(str(out))}")
     wrote(f"{figure}: each person's paths and arm, to look at before they assist")
 

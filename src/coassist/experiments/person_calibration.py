@@ -25,7 +25,9 @@ names the person and the trial.
 
 from __future__ import annotations
 
+import bisect
 import hashlib
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -166,24 +168,36 @@ def _check_trial(person: str, tid: str, trial: Trial) -> None:
 
 def _progress(frame: PathFrame, xy: np.ndarray) -> float:
     """[m] how far along the plan the tool got, followed sample by sample: each sample's nearest vertex of the plan
-    within :data:`PROGRESS_STEP` of arc length of the last one's (and always the next and the one before), so a tool
-    out on a detour that passes near a later stretch of the plan (the Z's legs) is not counted there. The first
+    within :data:`PROGRESS_STEP` of arc length of the last one's, plus as far as the tool moved since the last sample
+    (and always the next and the one before; on a tie
+    the later: a plan that doubles back on itself goes on along its return), so a tool out on a detour that passes
+    near a later stretch of the plan (the Z's legs) is not counted there; the sample's place is its projection on the
+    nearer of that vertex's two segments (a plan of a few waypoints is not read half a segment ahead). The first
     sample's nearest vertex over the whole plan."""
     arc, pts = frame.arc, frame.points
-    j = int(frame.nearest_vertex(xy[:1])[0])
-    best = s = float(arc[j])
-    # the vertices within PROGRESS_STEP of arc either side, and always the next and the one before: a plan given
-    # as a few waypoints, or a reference topic recorded at a few hertz, has vertices farther apart than the step
     n = len(arc)
-    lo_side = np.minimum(np.searchsorted(arc, arc - PROGRESS_STEP, side="left"), np.maximum(np.arange(n) - 1, 0))
-    hi_side = np.maximum(np.searchsorted(arc, arc + PROGRESS_STEP, side="right"), np.minimum(np.arange(n) + 2, n))
-    for x, y in xy[1:].tolist():
-        lo, hi = int(lo_side[j]), int(hi_side[j])
-        near = pts[lo:hi]
-        j = lo + int(np.argmin((near[:, 0] - x) ** 2 + (near[:, 1] - y) ** 2))
-        s = float(arc[j])
-        if s > best:
-            best = s
+    j = int(frame.nearest_vertex(xy[:1])[0])
+    plist, alist = pts.tolist(), arc.tolist()
+    best = 0.0
+    px, py = xy[0].tolist()
+    for x, y in xy.tolist():
+        # the step, and as far as the tool moved since the last sample (a trial recorded at a few hertz)
+        reach = PROGRESS_STEP + math.hypot(x - px, y - py)
+        px, py = x, y
+        lo = min(bisect.bisect_left(alist, alist[j] - reach), max(j - 1, 0))
+        hi = max(bisect.bisect_right(alist, alist[j] + reach), min(j + 2, n))
+        d2 = (pts[lo:hi, 0] - x) ** 2 + (pts[lo:hi, 1] - y) ** 2
+        j = hi - 1 - int(np.argmin(d2[::-1]))  # the last of the nearest
+        s, gap = alist[j], math.inf
+        for a in (j - 1, j):  # the segments before and after vertex j
+            if 0 <= a < n - 1:
+                (ax, ay), (bx, by) = plist[a], plist[a + 1]
+                ux, uy = bx - ax, by - ay
+                t = min(max(((x - ax) * ux + (y - ay) * uy) / (ux * ux + uy * uy), 0.0), 1.0)
+                g = (ax + t * ux - x) ** 2 + (ay + t * uy - y) ** 2
+                if g < gap:
+                    s, gap = alist[a] + t * (alist[a + 1] - alist[a]), g
+        best = max(best, s)
     return best
 
 

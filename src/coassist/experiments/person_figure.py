@@ -17,11 +17,18 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from coassist._io import save_figure
+from coassist._io import atomic_write_bytes, figure_bytes
 from coassist.experiments.person_calibration import PersonCalibration
 from coassist.scenario.person_model import PersonFit
 
-__all__ = ["PERSON_FIGURE_FILE", "WAY_COLOURS", "calibration_panels", "person_figure", "write_person_figure"]
+__all__ = [
+    "PERSON_FIGURE_FILE",
+    "WAY_COLOURS",
+    "calibration_panels",
+    "person_figure",
+    "person_figure_png",
+    "write_person_figure",
+]
 
 #: The figure's name in a person-model folder (beside person-model.json).
 PERSON_FIGURE_FILE = "person-model.png"
@@ -99,10 +106,15 @@ def person_figure(panels: Sequence[tuple[str, PersonFit]]) -> Any:
 
 def write_person_figure(panels: Sequence[tuple[str, PersonFit]], path: str | Path) -> Path:
     """:func:`person_figure` to the PNG ``path`` (written whole or not at all); returns the path."""
+    return atomic_write_bytes(path, person_figure_png(panels))
+
+
+def person_figure_png(panels: Sequence[tuple[str, PersonFit]]) -> bytes:
+    """:func:`person_figure` as PNG bytes (drawn in memory: a caller that writes other files first writes this last)."""
     import matplotlib.pyplot as plt
 
     fig = person_figure(panels)
     try:
-        return save_figure(fig, path)
+        return figure_bytes(fig)
     finally:
         plt.close(fig)

@@ -273,7 +273,8 @@ class LiveFeed:
         from coassist.runtime.loop import TargetDwell  # here: the Foxglove worker imports this module without the loop
 
         tick, task, plan = episode.tick, episode.task, np.asarray(episode.plan, dtype=float)
-        frame = optional_member(episode.world, "base_frame") or "base"  # coassist ros2 --base-frame; the others' "base"
+        frame = optional_member(episode.world, "base_frame")  # coassist ros2 --base-frame; the others' "base"
+        frame = "base" if frame is None else frame
         if not isinstance(frame, str) or not frame:
             raise ValueError(f"the world's base_frame must be a frame name, got {frame!r}")
         dt = float(tick.dt)

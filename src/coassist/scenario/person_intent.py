@@ -503,6 +503,7 @@ class PersonPathsIntent:
         px, py, vx, vy, wx, wy = history[-1, :6].tolist()
         total = px + py + vx + vy + wx + wy
         if total - total != 0.0:  # a NaN or an infinity in the row: kept out of every state (the filters, the odds)
+            self._on_curves = False  # nothing read this tick
             return np.full((self.horizon, 2), np.nan)  # the loop's check falls back to the plan for this tick alone
         ux, uy = self._hand.step(vx, vy, wx, wy)  # the hand's force, the object's inertia put back
         if self._yaw is not None:  # the hand point, not the tip: the object's yaw on its mount

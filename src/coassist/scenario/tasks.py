@@ -91,7 +91,13 @@ class NominalPath:
             raise ValueError("NominalPath.points has repeated consecutive points (arc length must increase)")
         arc = np.concatenate([[0.0], np.cumsum(seg)])
         tan = np.gradient(pts, arc, axis=0)
-        tan /= np.linalg.norm(tan, axis=1, keepdims=True)
+        norm = np.linalg.norm(tan, axis=1, keepdims=True)
+        turn = norm[:, 0] == 0.0  # a plan that turns straight back: no central direction there
+        if turn.any():  # the incoming segment's (nothing changes where the gradient is not zero)
+            k = np.flatnonzero(turn)
+            tan[k] = (pts[k] - pts[k - 1]) / seg[k - 1, None]
+            norm[k] = 1.0
+        tan /= norm
         for name, value in (("points", pts), ("arc", arc), ("tangents", tan)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
