@@ -278,21 +278,6 @@ class FilterSettings:
         object.__setattr__(self, "shape_grid", grid)
 
 
-def _in_the_way(
-    path: np.ndarray, obstacles: tuple[tuple[tuple[float, float], tuple[float, float]], ...], clearance: float
-) -> tuple[tuple[tuple[float, float], tuple[float, float]], ...]:
-    """The boxes (centre, size) the nominal path ``path`` (P, 2) does not clear by half of ``clearance`` [m]: those a
-    person must go round (:func:`deformed_path`'s own test of a cleared box). A box beside the path, or across the
-    room, a scene file may name with every other fixture is not an obstacle of this path: a detour round it would
-    lead the tool away from a plan that already passes it."""
-    out = []
-    for obstacle in obstacles:
-        box = Box(obstacle[0], obstacle[1])
-        if float(box.signed_distance(path).min()) < 0.5 * clearance:
-            out.append(obstacle)
-    return tuple(out)
-
-
 def _scene_task(path: np.ndarray, obstacle: tuple[Sequence[float], Sequence[float]]) -> Task:
     """A :class:`Task` for :func:`deformed_path` from what the robot is told: the nominal path's
     polyline and one box (centre, size); the obstacle's arc length is where the path passes
@@ -422,10 +407,10 @@ class PathHypothesesIntent:
         self._hyp = None
         obstacles = tuple(context.obstacles) if self.use_obstacles else ()
         shape = self.shapes.get(context.user, self.default)
-        if obstacles and context.path is not None:
-            path = np.asarray(context.path, dtype=float)
+        path = None if context.path is None else np.asarray(context.path, dtype=float)
+        if obstacles and path is not None:
             obstacles = self.in_the_way(path, obstacles, context.user)
-        if obstacles and context.path is not None:
+        if obstacles and path is not None:
             # the obstacle the path passes nearest: one detour per trial (the scenarios have one box)
             near = min(obstacles, key=lambda o: float(np.min(np.linalg.norm(path - np.asarray(o[0]), axis=1))))
             task = _scene_task(path, near)
@@ -453,12 +438,13 @@ class PathHypothesesIntent:
         self, path: np.ndarray, obstacles: tuple[tuple[tuple[float, float], tuple[float, float]], ...], user: str
     ) -> tuple[tuple[tuple[float, float], tuple[float, float]], ...]:
         """The boxes of ``obstacles`` (centre, size) [m] the nominal ``path`` (P, 2) does not clear by half of
-        ``user``'s largest clearance (their shape's times the largest factor of ``shape_grid``): those a trial's
-        hypotheses go round (:meth:`reset`); the others lie clear of the plan."""
-        shape = self.shapes.get(user, self.default)
-        return _in_the_way(
-            np.asarray(path, dtype=float), tuple(obstacles), shape.clearance * max(self.settings.shape_grid)
-        )
+        ``user``'s largest clearance (their shape's times the largest factor of ``shape_grid``; :func:`deformed_path`'s
+        own test of a cleared box): those a trial's hypotheses go round (:meth:`reset`). A box beside the path, or
+        across the room, a scene file may name with every other fixture lies clear of it: a detour round it would
+        lead the tool away from a plan that already passes it."""
+        clearance = self.shapes.get(user, self.default).clearance * max(self.settings.shape_grid)
+        points = np.asarray(path, dtype=float)
+        return tuple(o for o in obstacles if float(Box(o[0], o[1]).signed_distance(points).min()) < 0.5 * clearance)
 
     @property
     def curves(self) -> tuple[np.ndarray, np.ndarray]:
@@ -476,7 +462,7 @@ class PathHypothesesIntent:
         if not self._ready:
             raise RuntimeError("PathHypothesesIntent.predict called before reset")
         row = history[-1]
-        total = float(np.add.reduce(row[:6]))
+        total = sum(row[:6].tolist())  # plain floats, as the person filter's guard
         if total - total != 0.0:  # a NaN or an infinity in the row: kept out of every state (the hand's filter)
             return np.full((self.horizon, 2), np.nan)  # the loop's check falls back to the plan for this tick alone
         p, v, w = row[0:2], row[2:4], row[4:6]

@@ -85,7 +85,7 @@ class FitJob:
     """One person model to fit for the participant ``person`` whose folder is ``root``: from the trials
     of its blocks ``data``, into ``root/models/<model>``; ``base`` the name of a person model of theirs
     whose arm is kept and whose demonstrations are added (an iterative refit), or None (a calibration:
-    the arm measured); ``base_fit`` that model's fit as the progress log records it (its ``arm``,
+    the arm measured): ``base_fit``, that model's fit as the progress log records it (its ``model``, ``arm``,
     ``arm_measured``, ``blocks`` and ``demonstrations``): what the refit builds on is the record the folder's
     audit checks, not a ``fit.json`` on disk, which nothing checks."""
 
@@ -93,8 +93,12 @@ class FitJob:
     data: tuple[str, ...]
     model: str
     person: str
-    base: str | None = None
     base_fit: Mapping[str, Any] | None = None
+
+    @property
+    def base(self) -> str | None:
+        """The name of the person model the refit builds on (``base_fit``'s), or None (a calibration)."""
+        return None if self.base_fit is None else str(self.base_fit["model"])
 
     @property
     def out(self) -> Path:
@@ -146,10 +150,8 @@ def fit_job(job: FitJob) -> dict[str, Any]:
     trials = _read(job.root, job.data)
     if not trials:
         raise CalibrationFailed("no calibration trial to fit the person model from")
-    if job.base is not None:
-        base = job.base_fit
-        if base is None:
-            raise CalibrationFailed(f"refitting from {job.base} needs its fit's record (FitJob.base_fit)")
+    base = job.base_fit
+    if base is not None:
         arm = ArmEstimate(**base["arm"])
         demos_of_base = {f for files in base["demonstrations"].values() for f in files}
         trials = [(f, t) for f, t in _read(job.root, base["blocks"]) if f in demos_of_base] + trials

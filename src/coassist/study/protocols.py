@@ -62,7 +62,7 @@ from __future__ import annotations
 from typing import Any
 
 from coassist.study.design import participant_order
-from coassist.study.plan import CALIBRATED, Condition, StudyPlan
+from coassist.study.plan import CALIBRATED, CALIBRATION_TRIALS_MAX, Condition, StudyPlan
 
 __all__ = [
     "ASKED_SEED_OFFSET",
@@ -85,10 +85,6 @@ PROBE_CONTROLLER = "manual-probe"
 CALIBRATED_MODEL = "P0"
 #: The seeds of an attempt's asked trials start this far past its calibration trials' (at most 10 of those).
 ASKED_SEED_OFFSET = 50
-#: The most calibration attempts a participant may make: attempt a's seeds start 8000 + 100 (a − 1) past their
-#: base, its asked trials' 50 further and at most 10 of them, so attempt 20's end at 9969, inside the participant's
-#: SEED_BAND; a 21st would take the next participant's seeds.
-MAX_CALIBRATION_ATTEMPTS = 20
 
 
 def person_ref(model: str = CALIBRATED_MODEL) -> str:
@@ -110,6 +106,12 @@ def condition_names(plan: StudyPlan) -> list[str]:
 
 #: How many seeds each participant's trials draw from, past their base (module docstring).
 SEED_BAND = 10_000
+
+#: The most calibration attempts a participant may make: attempt a's seeds start 8000 + 100 (a − 1) past their
+#: base, its trials and asked trials at most CALIBRATION_TRIALS_MAX in all, the asked ones from ASKED_SEED_OFFSET on;
+#: so the last attempt whose seeds all lie inside the participant's SEED_BAND (20: its last seed 9958 at most, a 21st's
+#: the next participant's).
+MAX_CALIBRATION_ATTEMPTS = (SEED_BAND - 8000 - ASKED_SEED_OFFSET - CALIBRATION_TRIALS_MAX) // 100 + 1
 
 
 def trial_seed_base(plan: StudyPlan, number: int) -> int:

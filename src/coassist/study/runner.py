@@ -437,12 +437,9 @@ class ParticipantRun:
 
     def _fit(self, k: int, step: dict[str, Any]) -> dict[str, Any]:
         data = list(step["data"])
-        job = FitJob(root=str(self.folder.folder), data=tuple(data), model=step["model"], person=self.id, base=None)
-        if step.get("base") is not None:
-            base = self._person_fit(step["base"])  # the recorded line: the audit holds the folder to it
-            job = FitJob(
-                root=job.root, data=job.data, model=job.model, person=job.person, base=base["model"], base_fit=base
-            )
+        # an iterative refit builds on its base's recorded line (the audit holds the folder to it)
+        base = None if step.get("base") is None else self._person_fit(step["base"])
+        job = FitJob(root=str(self.folder.folder), data=tuple(data), model=step["model"], person=self.id, base_fit=base)
         key = f"fit:{step['index']}"
         self._show({"kind": "wait", "text": "the robot is getting to know how you move: a moment…"})
         self.training.submit(key, job, work=fit_job)
