@@ -110,20 +110,65 @@ class _Told:
         return self.inner.predict(history)
 
 
+class _Sink:
+    """A live view's sink keeping the trials it was shown (what Foxglove would draw)."""
+
+    def __init__(self) -> None:
+        self.trials: list = []
+
+    def publish(self, snapshot) -> None:
+        if not self.trials or self.trials[-1] is not snapshot.trial:
+            self.trials.append(snapshot.trial)
+
+    def close(self) -> None:
+        pass
+
+
 def test_a_scene_file_reaches_the_source_on_an_arm():
-    # a real arm's world ("ur"), here MuJoCo behind it: the robot is told nothing of the task, only the scene (a box
-    # on the plan, y = −0.615 m from x = −0.1 to 0.4 m in the base frame: one a person goes round)
+    # a real arm's world ("ur"), here MuJoCo behind it with a scripted hand: the robot is told nothing of the task,
+    # only the scene (a box on the plan, y = −0.615 m from x = −0.1 to 0.4 m in the base frame: one a person goes
+    # round); MuJoCo's own world, where the simulated operator goes round the task's box, is told that box. What
+    # the source was told, what the one-line statement says and what the live view draws are one answer
+    # (build_episode's context): the live view had drawn the task's box for the scripted hand on "ur", which the
+    # source never saw.
+    from coassist.runtime.live import LiveFeed
+
     scene = Scene((SceneBox((0.15, -0.6), (0.12, 0.12), "box"),), "scene.toml")
-    base = {"world": "ur", "controller": "manual", "task": "linear", "time_limit": 0.3}
-    for given in (None, scene):
-        source = _Told()
-        world = MujocoUR5World("handle", seed=0)
+    base = {"controller": "cooperative", "task": "linear", "time_limit": 0.3, "intent": "paths"}
+    head = "assistance: cooperative, toward the path hypotheses"
+    guard = "; a damper if the hand force oscillates above 20 N (the stability guard)"
+    cases = (
+        ("ur", None, head + ", but the robot is told no obstacle: the present estimate (give --scene FILE)"),
+        ("ur", scene, head + " round the 1 obstacle of the scene file scene.toml (the robot is told the scene)"),
+        ("mujoco", None, head + " round the 1 obstacle of the simulated task (the robot is told the scene)"),
+    )
+    for name, given, statement in cases:
+        source, sink, said = _Told(), _Sink(), []
+        world = MujocoUR5World("handle", seed=0) if name == "ur" else None
         try:
-            trial = drive(DriveConfig(**base, scene=given), world=world, intent_source=source, operator=PUSH)
+            with LiveFeed(sink, rate_hz=100.0) as live:
+                trial = drive(
+                    DriveConfig(**base, world=name, scene=given),
+                    world=world,
+                    intent_source=source,
+                    operator=PUSH if name == "ur" else None,
+                    say=said.append,
+                    live=live,
+                )
+                assert live.flush(10)
         finally:
-            world.close()
+            if world is not None:
+                world.close()
         (context,) = source.contexts
-        if given is None:
+        (shown,) = sink.trials
+        assert said == [statement + guard]
+        assert [(c.tolist(), z.tolist()) for c, z in shown.obstacles] == [
+            (list(c), list(z)) for c, z in context.obstacles
+        ]
+        np.testing.assert_array_equal(shown.path, context.path)
+        if name == "mujoco":
+            assert len(context.obstacles) == 1 and source.inner.curves[0].size > 0
+        elif given is None:
             assert context.obstacles == () and "scene" not in trial.meta.extra
             assert source.inner.curves[0].size == 0  # no obstacle: paths is the present estimate
         else:

@@ -212,36 +212,16 @@ def test_the_publisher_runs_at_the_watching_threads_policy():
 
 
 def test_the_scene_shows_the_obstacles_the_intent_source_is_told_of():
-    # The live view draws what the run's source is told (build_episode's TrialContext.obstacles): it drew
-    # the task generator's box on every run, where a robot was told a scene file's boxes, or nothing.
-    from types import SimpleNamespace
-
+    # The live view draws what the run's source was told: the context build_episode reset the tick with (the rule,
+    # on every world: tests/robot/test_drive_calibration.py). Here the point mass's simulated operator: the task's
+    # box, moved with the plan.
     from coassist.runtime.live import told_obstacles
 
-    task = SimpleNamespace(start=(0.1, 0.2), obstacle=SimpleNamespace(center=(0.3, 0.25), size=(0.08, 0.06)))
-    plan = np.array([[0.6, -0.1, 0.0, 0.0], [0.61, -0.1, 0.0, 0.0]])  # laid out 0.5 m along x, 0.3 m along -y
-
-    def episode(log_intent: bool, extra: dict) -> SimpleNamespace:
-        return SimpleNamespace(task=task, plan=plan, log_intent=log_intent, extra=extra)
-
-    # the simulated operator at the handle (a simulated world, the point mass): the task's box, moved with the plan
-    (box,) = told_obstacles(episode(True, {}))
-    np.testing.assert_allclose(box[0], [0.8, -0.05], rtol=0, atol=1e-15)
-    np.testing.assert_array_equal(box[1], [0.08, 0.06])
-    # a person at a real arm, no scene file: told of none, drawn none
-    assert told_obstacles(episode(False, {"world": "ros2"})) == ()
-    # a scene file: its boxes as they are (in the robot's base frame, the plan's), on any world
-    scene = {
-        "file": "lab.toml",
-        "frame": "base",
-        "obstacles": [
-            {"center": [0.3, 0.35], "size": [0.1, 0.12], "name": "fixture"},
-            {"center": [-0.2, 0.5], "size": [0.05, 0.05], "name": "post"},
-        ],
-    }
-    for log_intent in (False, True):
-        boxes = told_obstacles(episode(log_intent, {"scene": scene}))
-        assert [(c.tolist(), s.tolist()) for c, s in boxes] == [([0.3, 0.35], [0.1, 0.12]), ([-0.2, 0.5], [0.05, 0.05])]
+    episode = spec_episode(SPEC)
+    (box,) = told_obstacles(episode)
+    shift = np.asarray(episode.plan)[0, :2] - np.asarray(episode.task.start)
+    np.testing.assert_array_equal(box[0], np.asarray(episode.task.obstacle.center) + shift)
+    np.testing.assert_array_equal(box[1], episode.task.obstacle.size)
 
 
 def test_watching_records_the_live_start_in_the_trial():

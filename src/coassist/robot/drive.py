@@ -654,20 +654,14 @@ def _prepare(
                 "stability_guard": None if guarded is None else asdict(guarded),
             },
         )
-        # what build_episode tells the source (TrialContext.path, .obstacles), for the one-line statement
-        shift = ref_abs[0, :2] - np.asarray(task.start, dtype=float)
-        told: tuple = ()
-        if config.scene is not None:
-            told = config.scene.told()
-        elif simulated:
-            told = ((tuple(np.asarray(task.obstacle.center) + shift), task.obstacle.size),)
         assistance = assistance_line(
             config.controller,
             config.intent,
             loaded,
             user=user,
-            path=task.path.points + shift,
-            obstacles=told,
+            # what build_episode told the source, read back rather than decided again (TrialContext.path, .obstacles)
+            path=episode.context.path,
+            obstacles=episode.context.obstacles,
             scene=None if config.scene is None else config.scene.source,
         )
         if guarded is not None:

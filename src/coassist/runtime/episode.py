@@ -136,6 +136,9 @@ class Episode:
     log_intent : whether the Trial keeps true_intent as its intent column (not where a person,
     not the simulated operator, held the handle).
     labels : :class:`EpisodeLabels`.  arrive_radius [m], dwell [s] : the termination's ball.
+    context : what the tick's stages were reset with (the intent source is told its plan, path and obstacles
+    from it and nothing else): the one record of what the robot was told, which the drive's one-line
+    statement and the live view read.
     extra : the world's own meta fields.
     """
 
@@ -151,6 +154,7 @@ class Episode:
     labels: EpisodeLabels
     arrive_radius: float
     dwell: float
+    context: TrialContext
     extra: Mapping[str, Any] = field(default_factory=dict)
 
     @property
@@ -382,6 +386,7 @@ def build_episode(
         labels=labels,
         arrive_radius=float(arrive_radius),
         dwell=float(dwell),
+        context=context,
         extra=dict(extra or {}),
     )
 

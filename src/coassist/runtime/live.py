@@ -158,27 +158,14 @@ def _set_thread_policy(want: Policy) -> bool:
 
 def told_obstacles(episode: Any) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
     """The boxes ``episode``'s intent source is told of, ((centre (2,), size (2,)), …) [m] in the plan's
-    frame, as :func:`~coassist.runtime.episode.build_episode` told them (what the live view draws):
-
-    - a lab's scene file's boxes, where the run has one (recorded as ``extra["scene"]``, already in the
-      plan's frame: the robot's base frame);
-    - else the task's obstacle where the simulated operator, who goes round it, holds the handle
-      (``episode.log_intent``: a simulated world, the point mass, the page's; the task moved with the plan);
-    - else none: a person at a real arm is told of no obstacle (the assistance line says so).
-
-    The episode keeps its context's obstacles nowhere else; this follows the rule the drive and the
-    simulators tell them by (:mod:`coassist.robot.drive`'s *What the robot is told*)."""
-    scene = episode.extra.get("scene")
-    if scene is not None:
-        return tuple(
-            (np.array(box["center"][:2], dtype=float), np.array(box["size"][:2], dtype=float))
-            for box in scene["obstacles"]
-        )
-    if not episode.log_intent:
-        return ()
-    task = episode.task
-    shift = np.asarray(episode.plan, dtype=float)[0, :2] - np.asarray(task.start, dtype=float)
-    return ((np.asarray(task.obstacle.center, dtype=float) + shift, np.asarray(task.obstacle.size, dtype=float)),)
+    frame: those of the context :func:`~coassist.runtime.episode.build_episode` reset its tick with
+    (``Episode.context.obstacles``: a lab's scene file's, the task's where the simulated operator goes round
+    it, or none), read from there rather than decided again, so that the live view draws what the source was
+    told on every world."""
+    return tuple(
+        (np.array(centre[:2], dtype=float), np.array(size[:2], dtype=float))
+        for centre, size in episode.context.obstacles
+    )
 
 
 def _alpha_reader(controller: Any) -> Callable[[], float | None] | None:
@@ -270,9 +257,7 @@ class LiveFeed:
         return on_tick_live
 
     def _trial(self, episode: Any, joint_names: Sequence[str] | None) -> LiveTrial:
-        from coassist.runtime.loop import TargetDwell  # here: the Foxglove worker imports this module without the loop
-
-        tick, task, plan = episode.tick, episode.task, np.asarray(episode.plan, dtype=float)
+        tick, plan = episode.tick, np.asarray(episode.plan, dtype=float)
         frame = optional_member(episode.world, "base_frame")  # coassist ros2 --base-frame; the others' "base"
         frame = "base" if frame is None else frame
         if not isinstance(frame, str) or not frame:
@@ -282,9 +267,7 @@ class LiveFeed:
         names = tuple(joint_names) if joint_names is not None else tuple(f"joint_{i + 1}" for i in range(nj))
         if len(names) != nj:
             raise ValueError(f"joint_names: {nj} names needed, got {len(names)}")
-        shift = plan[0, :2] - np.asarray(task.start, dtype=float)  # the plan's frame (as build_episode's)
-        term = episode.termination
-        target = np.array((term.tx, term.ty)) if isinstance(term, TargetDwell) else np.asarray(task.target) + shift
+        target = np.array(episode.context.target, dtype=float)  # where the run ends (the termination's ball)
         start_ns = max(time.time_ns(), self._last_end_ns)
         trial = LiveTrial(
             number=self._trials,
@@ -297,7 +280,7 @@ class LiveFeed:
             plan=plan if tick.intent.nominal else None,
             joint_names=names if nj else (),
             obstacles=told_obstacles(episode),
-            path=np.asarray(task.path.points, dtype=float) + shift,
+            path=np.asarray(episode.context.path, dtype=float),  # the source's (build_episode's)
             target=target,
             arrive_radius=float(episode.arrive_radius),
             frame_id=frame,
