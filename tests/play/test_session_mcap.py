@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -45,3 +47,16 @@ def test_saved_trials_are_written_as_mcap_too(tmp_path):
     assert [p.stem for p in mcaps] == [p.stem for p in parquet] and len(mcaps) == 2
     assert load_bag_trial(mcaps[1]).pose.tobytes() == trial.pose.tobytes()
     assert len(read_dataset(folder).trials) == 2  # the dataset is untouched by the MCAP files beside it
+    # a trial a live view watched (--foxglove) is stamped as the view stamped it, as drive's MCAP is; else from 0
+    from rosbags.highlevel import AnyReader
+
+    from coassist.data.run_pair import LIVE_START
+
+    def pose_stamps(path):
+        with AnyReader([path]) as reader:
+            return [stamp for conn, stamp, _ in reader.messages() if conn.topic == "/current_pose"]
+
+    start = 1_764_000_000_123_456_789
+    session._save(replace(trial, meta=replace(meta, extra={**meta.extra, LIVE_START: start})))
+    assert pose_stamps(sorted(folder.glob("*.mcap"))[-1]) == [start + round(float(v) * 1e9) for v in t]
+    assert pose_stamps(mcaps[1]) == [round(float(v) * 1e9) for v in t]
