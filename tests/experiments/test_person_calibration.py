@@ -314,6 +314,23 @@ def test_the_arm_is_measured_on_a_rigid_object_and_used_only_where_it_says_enoug
     )
 
 
+def test_the_main_jobs_fits_decide_the_arm_as_calibrate_does(alice, monkeypatch):
+    """fit_people (the report's calibrations) uses a measured arm only where calibrate would: the report's person
+    model is the one a lab gets. A measurement at the bound of a person's range gives the typical arm there too."""
+    from coassist.scenario import person_model
+    from coassist.scenario.arm_identification import ArmEstimate
+
+    trials = [t.trial for t in alice]
+    (fit,) = person_model.fit_people(trials).values()
+    assert fit.arm == identify_arm(trials) and fit.arm.method == "probe-iv"
+    clipped = ArmEstimate(
+        stiffness=120.0, damping=-100.0, stiffness_se=30.0, damping_se=9.0, trials=4, method="probe-iv"
+    )
+    monkeypatch.setattr(person_model, "identify_arm", lambda trials: clipped)
+    (fit,) = person_model.fit_people(trials).values()
+    assert fit.arm == ASSUMED_ARM
+
+
 def test_a_figure_that_cannot_be_written_leaves_the_model_there_was(alice, tmp_path):
     data = write_dataset([t.trial for t in alice], tmp_path / "cal", "cal")
     out = tmp_path / "my model"

@@ -5,7 +5,8 @@ at the sensor, the robot's effort and the nominal plan — of a few trials per p
 manual guidance with the probe (controller ``manual-probe``), with no intent label and no
 obstacle told:
 
-1. the arm, K̂ and Ĉ (:func:`~coassist.scenario.arm_identification.identify_arm`);
+1. the arm, K̂ and Ĉ (:func:`~coassist.scenario.arm_identification.identify_arm`; the typical arm where that
+   measurement says too little: :func:`~coassist.scenario.arm_identification.measured_arm`);
 2. each trial's intent path, reconstructed with that arm: q = p + (w + Ĉ v)/K̂, smoothed
    (zero-phase, ``smoothing`` Hz) — the path the person pursued, not the one the tool took;
 3. the person's paths on the task (:func:`~coassist.scenario.path_model.fit_path_model`), with the
@@ -30,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from coassist._io import read_hashed_json, write_hashed_json
-from coassist.scenario.arm_identification import ArmEstimate, identify_arm
+from coassist.scenario.arm_identification import ArmEstimate, identify_arm, measured_arm
 from coassist.scenario.path_model import (
     ASKED_WAY,
     PathFrame,
@@ -161,7 +162,9 @@ def fit_person(
     smoothing: float = 1.5,
 ) -> PersonFit:
     """One person's :class:`PersonFit` from their calibration trials on one task (module docstring).
-    ``arm``: use this arm instead of measuring it (e.g. to study what a wrong arm costs)."""
+    ``arm``: use this arm instead of measuring it (e.g. to study what a wrong arm costs); None: measured from the
+    trials' probe and used as a lab uses it (:func:`~coassist.scenario.arm_identification.measured_arm`: the
+    typical arm where the measurement says too little, as ``coassist calibrate`` and a study decide)."""
     if not trials:
         raise ValueError("fit_person needs at least one trial")
     nominal = _nominal_of(trials[0])
@@ -172,7 +175,7 @@ def fit_person(
                 f"fit_person: the trials follow different nominal paths ({trials[0].meta.task!r}, {t.meta.task!r}); "
                 "fit each task apart"
             )
-    arm = identify_arm(trials) if arm is None else arm
+    arm = measured_arm(identify_arm(trials))[0] if arm is None else arm
     ways = [asked_way(t) for t in trials]
     paths, noise = intent_paths(trials, arm, smoothing=smoothing)
     model = fit_path_model(nominal, paths, noise=max(noise, 1e-4), settings=settings)
