@@ -283,3 +283,38 @@ def test_realtime_intent_without_a_network_says_it_only_paces_the_world():
     )
     assert said[0].endswith(note) and said[0].startswith("assistance: cooperative, toward the path hypotheses")
     assert said[1] == said[0][: -len(note)]
+
+
+def test_an_arm_moving_when_the_drive_starts_is_ramped_down_from_its_velocity():
+    """drive reads the world before the run (to zero the sensor) and hands that state to the tick: the safety
+    layer's acceleration ramp starts from the measured joint velocity, so an arm moving at 0.4 rad/s on every joint
+    is slowed by at most margin·a·dt a tick, not told to stop in one (it had started from q̇ = 0, whatever the arm
+    was doing: a 0.4 rad/s step in 8 ms, unflagged)."""
+    from dataclasses import replace
+
+    class MovingAtStart(MujocoUR5World):
+        """MuJoCo's UR5, read once as moving (an arm still coasting when the run starts); the commands it is sent."""
+
+        def __init__(self) -> None:
+            super().__init__("handle", seed=0)
+            self.reads, self.sent = 0, []
+
+        def read(self):
+            state = super().read()
+            self.reads += 1
+            return replace(state, qd=np.full(6, 0.4)) if self.reads == 1 else state
+
+        def apply(self, command) -> None:
+            self.sent.append(None if command.qd is None else np.array(command.qd))
+            super().apply(command)
+
+    world = MovingAtStart()
+    config = DriveConfig(world="ur", controller="manual", task="linear", time_limit=0.1)
+    try:
+        trial = drive(config, world=world, operator=ScriptedForce.constant((0.0,) * 6))
+    finally:
+        world.close()
+    step = config.limits.margin * config.limits.joint_acceleration * config.dt  # 0.98 · 8 rad/s² · 8 ms
+    first = world.sent[0]
+    np.testing.assert_allclose(first, np.full(6, 0.4 - step), rtol=0, atol=1e-9)
+    assert Fault(int(trial.fault[0])) & Fault.JOINT_ACCELERATION_LIMIT

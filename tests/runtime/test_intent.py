@@ -144,3 +144,112 @@ def test_a_row_far_from_the_tool_is_a_fallback_not_a_push():
     assert pred is None and flags == Fault.PREDICTION_FALLBACK | Fault.PREDICTOR_STALLED
     with pytest.raises(ValueError, match="plausibility must be a PlausibilityLimits"):
         WindowIntent(WindowSource(1, 5), 5, plausibility=0.5)
+
+
+@pytest.mark.parametrize("dtype", [np.complex128, object, bool, np.str_])
+def test_an_answer_not_of_real_numbers_is_a_fallback_not_a_clean_row(dtype):
+    """A source's answer of complex, object, boolean or string dtype is no positions: a fallback (flagged,
+    PREDICTOR_STALLED once it persists), never a clean row on which the tick's human_reference then raised
+    (a complex answer once passed as Fault.NONE and ended the run with internal_error). The array twin
+    refuses such an answer whole (every row would be a fallback)."""
+    stage = WindowIntent(WindowSource(0, 3), 3, stall_ticks=2)
+    stage.reset(CONTEXT)
+    tool = (0.3, -0.2)
+    answer = np.tile(np.array(tool), (3, 1)).astype(dtype)  # the tool's own position: plausible as numbers
+    flags = []
+    for k in range(4):
+        stage.push(k, (*tool, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        pred, f = stage.accept(answer)
+        assert pred is None
+        flags.append(f)
+    fb, stalled = Fault.PREDICTION_FALLBACK, Fault.PREDICTION_FALLBACK | Fault.PREDICTOR_STALLED
+    assert flags == [fb, fb, stalled, stalled]
+    batch = WindowIntentBatch([stage])
+    rows = np.arange(1)
+    batch.push(4, rows, np.array([[*tool, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]]))
+    with pytest.raises(ValueError, match="real numbers"):
+        batch.accept(rows, answer[None])
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.int64, np.uint8])
+def test_an_answer_of_another_real_dtype_is_used_as_float64(dtype):
+    """Floats and ints are positions: the stage and its array twin take them, converted to float64 with the
+    same values (what the tick's float64 arithmetic would have promoted them to), flagged nothing."""
+    stage = WindowIntent(WindowSource(0, 3), 3)
+    stage.reset(CONTEXT)
+    tool = (2.0, 3.0)  # integral, so an int answer can lie on the tool
+    answer = np.array([[2.0, 3.0], [2.0, 3.0], [2.0, 3.0]], dtype=dtype)
+    stage.push(0, (*tool, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    pred, flags = stage.accept(answer)
+    assert flags == Fault.NONE and pred.dtype == np.float64 and pred.tolist() == [[2.0, 3.0]] * 3
+    batch = WindowIntentBatch([stage])
+    rows = np.arange(1)
+    batch.push(0, rows, np.array([[*tool, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]]))
+    positions, ok = batch.accept(rows, answer[None])
+    assert ok.tolist() == [True] and positions.dtype == np.float64 and positions[0].tolist() == [[2.0, 3.0]] * 3
+    same = np.full((3, 2), 0.25)  # a float64 answer is returned as it is: no copy, nothing computed anew
+    stage.push(1, (0.25, 0.25, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    assert stage.accept(same)[0].base is same
+
+
+class _DuckPredictor:
+    """A real-time predictor as a lab's own may be: tick() answers whatever it is told to, checking nothing."""
+
+    horizon, history, errors, model_id = 3, 2, 0, "duck"
+
+    def __init__(self, answers) -> None:
+        self.answers = list(answers)
+
+    def reset(self, context) -> None:
+        pass
+
+    def tick(self, sample, nominal):
+        return self.answers.pop(0), Fault.NONE, 0
+
+
+def test_the_realtime_stage_refuses_implausible_rows_as_the_window_stage_does():
+    """RealtimeIntent holds what reaches the controller to prediction_plausible whatever its predictor checked:
+    rows farther than max_distance from the tick's tool, or faster than max_speed, are a fallback, counted toward
+    a stall after the history filled (before, a duck-typed predictor's rows 3 m from the tool reached the
+    controller unflagged); rows within both bounds are used as they are. Its limits default to the predictor's
+    own config.plausibility where it has one; anything but a PlausibilityLimits is refused."""
+    from coassist.interfaces import PlausibilityLimits
+    from coassist.runtime.intent import RealtimeIntent
+
+    lim = PlausibilityLimits(max_distance=0.2, max_speed=1.0)
+    tool = np.array([0.4, -0.1])
+    near = tool + np.arange(1, 4)[:, None] * [0.99 * DT, 0.0]  # 0.99 m/s, 3 rows ahead: plausible
+    far = tool + [0.2 + 1e-9, 0.0] + np.zeros((3, 1))  # just beyond max_distance, at rest
+    fast = tool + np.arange(1, 4)[:, None] * [1.01 * DT, 0.0]  # 1 % faster than max_speed
+    script = [(near, True), (far, False), (near, True), (fast, False), (far, False), (far, False), (far, False)]
+    stage = RealtimeIntent(_DuckPredictor([a for a, _ in script]), stall_ticks=2, plausibility=lim)
+    stage.reset(CONTEXT)
+    row = (*tool.tolist(), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    got = []
+    for k, (answer, usable) in enumerate(script):
+        pred, flags = stage.update(k, row, np.zeros((3, 2)))
+        assert (pred is not None) == usable, k
+        if usable:
+            assert pred.tolist() == answer.tolist()
+        got.append(flags)
+    fb = Fault.PREDICTION_FALLBACK
+    # tick 1 is before the history (2) filled: no stall count; ticks 3, 4, 5, 6 count 1, 2, 3, 4 > stall_ticks = 2
+    assert got == [Fault.NONE, fb, Fault.NONE, fb, fb, fb | Fault.PREDICTOR_STALLED, fb | Fault.PREDICTOR_STALLED]
+
+    class Configured(_DuckPredictor):
+        class config:  # noqa: N801 - a RealtimePredictor's config, duck-typed
+            plausibility = lim
+
+    assert RealtimeIntent(Configured([])).plausibility is lim
+    assert RealtimeIntent(_DuckPredictor([])).plausibility == PlausibilityLimits()
+    with pytest.raises(ValueError, match="plausibility must be a PlausibilityLimits"):
+        RealtimeIntent(_DuckPredictor([]), plausibility=0.5)
+
+
+def test_the_realtime_stage_refuses_a_complex_answer():
+    """A real-time answer of complex numbers is a fallback (its imaginary part was dropped with a ComplexWarning)."""
+    from coassist.runtime.intent import RealtimeIntent
+
+    answer = np.zeros((3, 2)) + 0.1j
+    pred, flags = RealtimeIntent(_DuckPredictor([answer])).update(0, (0.0,) * 8, np.zeros((3, 2)))
+    assert pred is None and flags == Fault.PREDICTION_FALLBACK

@@ -386,3 +386,132 @@ def test_a_contact_force_over_the_threshold_ends_the_run_with_a_safety_stop():
     assert log.fault[0] & int(Fault.CONTACT_FORCE_LIMIT) and log.fault[0] & int(Fault.STOPPED)
     np.testing.assert_array_equal(world.efforts[0], 0.0)
     assert "contact threshold" in log.message
+
+
+# ---------------------------------------------------------------------------- the tick's stages, checked
+
+
+@pytest.mark.parametrize(
+    "safety_dt, wrench_dt, field",
+    [(4 * DT, DT, "safety.dt"), (DT / 2, DT, "safety.dt"), (DT, DT / 2, "wrench.dt")],
+)
+def test_a_stage_built_for_another_period_than_the_ticks_is_refused(safety_dt, wrench_dt, field):
+    """The safety layer's acceleration limit is a step of a·dt per tick: a layer built for 32 ms in an 8 ms tick
+    allowed 4× the limit (31 rad/s² against 8), and nothing checked. ControlTick refuses it, and a wrench pipeline
+    on another period, naming both periods; the same period written two ways (1/125, 0.008) is the same."""
+    kin = LinearKinematics(well_conditioned_jacobian(), POSE0)
+    model = ImpedanceModel(M, D, 0.0, DT)
+
+    def build(s_dt, w_dt):
+        return ControlTick(
+            ManualGuidance(model),
+            NominalStage(H),
+            WrenchPipeline(CLEAN, w_dt),
+            SafetyLayer(SafetyLimits(), s_dt, 6),
+            command_space="joint_velocity",
+            kinematics=kin,
+        )
+
+    with pytest.raises(
+        ValueError,
+        match=rf"{field} \({(safety_dt if field == 'safety.dt' else wrench_dt)!r} s.*"
+        rf"model\.dt \({DT!r} s\)",
+    ):
+        build(safety_dt, wrench_dt)
+    assert build(1.0 / 125.0, 1.0 / 125.0).dt == DT  # 0.008 and 1/125 differ by float rounding only
+
+
+def test_a_run_that_starts_with_the_arm_moving_ramps_from_its_measured_joint_velocity():
+    """reset(plan, context, state): the safety layer's ramp starts from the measured q̇, so tick 0 of an arm moving at
+    0.5 rad/s on every joint (the hold asks for rest) is one margin·a·dt step toward rest, not a 0.5 rad/s step (the
+    state was ignored: the layer started from q̇⁻ = 0). Without a state, or with a non-finite q̇, it starts from rest
+    as before; an arm at rest (q̇ = 0, every simulated world's first state) gives the same commands bit for bit."""
+    from dataclasses import replace
+
+    limits = replace(WIDE, joint_acceleration=8.0)  # only the acceleration limit binds
+    step = limits.margin * limits.joint_acceleration * DT  # 0.06272 rad/s
+    ref = _reference(POSE0[:2])
+
+    def first_commands(qd0, with_state: bool, hand=None, n=1, measured=None):
+        kin = LinearKinematics(well_conditioned_jacobian(), POSE0)
+        world = FakeArmWorld(kin, lambda k: np.zeros(6) if hand is None else hand)
+        world.qd = np.array(qd0, dtype=float)
+        tick = _arm_tick(kin, limits)
+        state = world.read() if with_state else None
+        if measured is not None:  # the state reset is given measured another q̇ than the world's
+            state = replace(state, qd=np.array(measured, dtype=float))
+        tick.reset(Plan(ref, POSE0), _context(ref), state=state)
+        outs = []
+        for k in range(n):
+            out = tick.step(k, world.read())
+            world.apply(out.command)
+            outs.append(out)
+        return outs
+
+    out = first_commands(np.full(6, 0.5), with_state=True)[0]
+    np.testing.assert_allclose(out.command.qd, np.full(6, 0.5 - step), rtol=0, atol=1e-12)
+    assert out.fault == Fault.JOINT_ACCELERATION_LIMIT
+    rest = first_commands(np.zeros(6), with_state=False)[0]  # no state: from rest, to the hold's (J⁻¹ 0 ≈ 0)
+    assert first_commands(np.full(6, 0.5), with_state=False)[0].command.qd.tobytes() == rest.command.qd.tobytes()
+    np.testing.assert_allclose(rest.command.qd, np.zeros(6), rtol=0, atol=1e-12)
+    assert rest.fault == Fault.NONE
+    glitch = first_commands(np.zeros(6), with_state=True, measured=[np.nan, 0.5, 0.5, 0.5, 0.5, 0.5])[0]
+    assert glitch.command.qd.tobytes() == rest.command.qd.tobytes()  # a non-finite q̇ is nothing to ramp from: rest
+    push = np.array([30.0, -20.0, 0.0, 0.0, 0.0, 0.0])
+    at_rest = first_commands(np.zeros(6), with_state=True, hand=push, n=20)
+    without = first_commands(np.zeros(6), with_state=False, hand=push, n=20)
+    for a, b in zip(at_rest, without, strict=True):
+        assert a.command.qd.tobytes() == b.command.qd.tobytes() and a.fault == b.fault
+    assert np.abs(at_rest[-1].command.qd).max() > 4 * step  # the push moved the arm: real commands compared
+    # an effort world has no joint velocity to ramp: its state changes nothing
+    eff = _effort_tick(ref)
+    poses = ref[:5, :2] + 0.01
+    eff.reset(
+        Plan(ref, np.array([*ref[0, :2], 0.0, 0.0, 0.0, 0.0])), _context(ref), state=ScriptedEffortWorld(poses).read()
+    )
+    assert run_loop(ScriptedEffortWorld(poses), eff, 5).effort_r.tobytes() == (
+        run_loop(ScriptedEffortWorld(poses), _effort_tick(ref), 5).effort_r.tobytes()
+    )
+
+
+class _ComplexSource:
+    """A source whose answer is of a dtype that is no real number's (complex, object): zeros, finite as numbers."""
+
+    history, horizon, model_id = 0, H, "odd-dtype"
+
+    def __init__(self, dtype) -> None:
+        self.dtype = dtype
+
+    def reset(self, context: object) -> None:
+        pass
+
+    def predict(self, window: np.ndarray) -> np.ndarray:
+        return np.zeros((H, 2), dtype=self.dtype)
+
+
+@pytest.mark.parametrize("dtype", [np.complex128, object])
+def test_a_complex_prediction_falls_back_to_the_plan_and_the_run_goes_on(dtype):
+    """A source answering in complex (or object) numbers is a failing predictor: PREDICTION_FALLBACK on every tick
+    and the plan's rows, the run to its end with the nominal stage's commands bit for bit (it passed as a clean
+    row and ended the run at tick 0 with internal_error), in run_loop and in lockstep."""
+    from coassist.runtime.batched_loops import Loop, run_loops
+    from coassist.runtime.intent import WindowIntent
+
+    ref = _reference((0.1, 0.2), velocity=(0.05, 0.0))
+    poses = ref[:40, :2] + 0.01
+    world, nominal = ScriptedEffortWorld(poses), ScriptedEffortWorld(poses)
+
+    def stage():
+        return WindowIntent(_ComplexSource(dtype), H, stall_ticks=1000)  # no stall: the plan's rows throughout
+
+    log = run_loop(world, _impedance_tick(ref, stage()), 30)
+    run_loop(nominal, _impedance_tick(ref, NominalStage(H)), 30)
+    assert log.ended == "time_limit" and log.n == 30
+    assert [int(f) for f in log.fault] == [int(Fault.PREDICTION_FALLBACK)] * 30
+    np.testing.assert_array_equal(np.array(world.efforts), np.array(nominal.efforts))
+    assert np.abs(np.array(world.efforts)).max() > 0.1  # the spring pulled: a real effort was compared
+    worlds = [ScriptedEffortWorld(poses), ScriptedEffortWorld(poses)]
+    logs = run_loops([Loop(w, _impedance_tick(ref, stage()), 30) for w in worlds])
+    for w, lg in zip(worlds, logs):
+        assert lg.ended == "time_limit" and [int(f) for f in lg.fault] == [int(Fault.PREDICTION_FALLBACK)] * 30
+        np.testing.assert_array_equal(np.array(w.efforts), np.array(nominal.efforts))

@@ -191,3 +191,41 @@ def test_every_run_on_the_board_as_arrays_equals_every_trial_alone_bit_for_bit()
     assert len({t.n_samples for t in alone}) > 1
     for spec, a, ep, log in zip(specs, alone, eps, logs):
         assert a.equals(ep.finish(log)), spec
+
+
+class ComplexBatched(ConstantVelocityIntent):
+    """Constant velocity answered as complex numbers (imaginary part 0), batched or one run at a time."""
+
+    model_id = "constant-velocity-complex"
+
+    def __init__(self, horizon: int, batched: bool) -> None:
+        super().__init__(horizon)
+        self.batched = batched
+
+    @property
+    def batcher(self):
+        return self if self.batched else None
+
+    def predict(self, history: np.ndarray) -> np.ndarray:
+        return super().predict(history).astype(complex)
+
+    def predict_batch(self, windows: np.ndarray) -> np.ndarray:
+        return np.stack([super(ComplexBatched, self).predict(w) for w in windows]).astype(complex)
+
+
+@pytest.mark.parametrize("batched", [True, False])
+def test_a_complex_answer_sends_its_trials_to_the_reference_path_and_loses_none(batched):
+    """Complex predictions are no positions: every trial leaves the array path at tick 0 (before, they passed as
+    clean rows and human_reference raised out of run_point_mass_lockstep, losing every trial of the batch), and the
+    reference path runs each to its end, its first tick flagged PREDICTION_FALLBACK."""
+    specs = _specs("constant-velocity", n=3, objects=("handle",))
+    sources = {("constant-velocity", HORIZON, "auto"): ComplexBatched(HORIZON, batched)}
+    eps = _episodes(specs, sources)
+    assert run_point_mass_lockstep([ep.loop for ep in eps]) == [None, None, None]
+    eps = _episodes(specs, sources)
+    from coassist.runtime.batched_loops import run_loops
+
+    logs = run_loops([ep.loop for ep in eps])
+    for log in logs:
+        assert log.n > 0 and log.ended != "internal_error"
+        assert int(log.fault[0]) == int(Fault.PREDICTION_FALLBACK)

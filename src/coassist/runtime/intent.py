@@ -19,12 +19,14 @@ real-time prediction failed (raised, non-finite or misshapen: a network that gav
 not trusted with the next, though a prediction still in use may be fresh enough). A stalled
 predictor is a bad tick for the safety layer: the robot decelerates, and stops if it persists.
 
-What a row may ask of the controller is bounded: a window source's rows are used only when
-they are finite *and* plausible for a hand (:func:`coassist.interfaces.prediction_plausible`
+What a row may ask of the controller is bounded: either stage uses a prediction only when it
+is an array of real numbers (float or int; complex, object, boolean or string answers are a
+failing source's), finite *and* plausible for a hand (:func:`coassist.interfaces.prediction_plausible`
 against the tool's position of the row pushed: every row within
 ``PlausibilityLimits.max_distance`` of the tool, consecutive rows no faster than
-``max_speed``), as the real-time predictor's are. A row far from the tool is a fault
-(PREDICTION_FALLBACK, and PREDICTOR_STALLED when it persists), never a push toward it.
+``max_speed``). The real-time stage checks this itself, whatever its predictor checked. Anything
+else is a fault (PREDICTION_FALLBACK, and PREDICTOR_STALLED when it persists), never a push
+toward it nor a tick that fails on it.
 """
 
 from __future__ import annotations
@@ -144,10 +146,15 @@ class WindowIntent:
         return hist[i + 1 : i + 1 + L]
 
     def accept(self, pred: Any) -> tuple[np.ndarray | None, Fault]:
-        """The source's answer for the last pushed window (None: it raised) → (positions or None, flags)."""
+        """The source's answer for the last pushed window (None: it raised) → (positions or None, flags).
+
+        Only an array of real numbers is positions (:func:`_real_positions`): a complex, object, boolean
+        or string answer is a fallback, never a clean row that the tick's arithmetic then fails on."""
         try:
             ok = isinstance(pred, np.ndarray) and pred.ndim == 2 and pred.shape[0] >= self.need and pred.shape[1] == 2
-            ok = ok and self._plausible(pred[: self.horizon])
+            if ok:
+                pred = _real_positions(pred)
+                ok = pred is not None and self._plausible(pred[: self.horizon])
         except Exception:  # a malformed answer is a fallback like any other
             ok = False
         if ok:
@@ -157,28 +164,42 @@ class WindowIntent:
         return None, (_FALLBACK | Fault.PREDICTOR_STALLED) if self._bad > self.stall_ticks else _FALLBACK
 
     def _plausible(self, p: np.ndarray) -> bool:
-        """:func:`~coassist.interfaces.prediction_plausible` of rows (m, 2) against the tool of the row
-        pushed last, written for the tick (a NaN fails every comparison, so finiteness comes with it)."""
-        lim = self.plausibility.max_distance
-        if p.dtype != np.float64:  # another dtype: its own promotion against the tool's floats, column by column
-            dx = p[:, 0] - self._x
-            dy = p[:, 1] - self._y
-            if not (float(np.max(np.abs(dx))) <= lim and float(np.max(np.abs(dy))) <= lim):
-                return False
-            if p.shape[0] > 1:
-                return float(np.max(np.abs(p[1:] - p[:-1]))) <= self.max_step
-            return True
-        # the same differences and comparisons in fewer calls (this runs every tick of every run with a source
-        # of its own: issue 44): both columns' distances at once, and the ufuncs' reduce without np.max's wrapper
-        off = p - np.array((self._x, self._y))
-        np.abs(off, out=off)
-        if not np.maximum.reduce(off, axis=None) <= lim:
-            return False
-        if p.shape[0] > 1:
-            step = p[1:] - p[:-1]
-            np.abs(step, out=step)
-            return bool(np.maximum.reduce(step, axis=None) <= self.max_step)
-        return True
+        """:func:`~coassist.interfaces.prediction_plausible` of float64 rows (m, 2) against the tool of
+        the row pushed last (:func:`_plausible_rows`)."""
+        return _plausible_rows(p, self._x, self._y, self.plausibility.max_distance, self.max_step)
+
+
+def _real_positions(pred: np.ndarray) -> np.ndarray | None:
+    """``pred`` as float64 when its dtype is a real number's (float, signed or unsigned int), else None.
+
+    A complex, object, boolean or string array is no position a controller can follow: a source
+    that gives one is failing, and its answer is a fallback (an object array of floats too: the
+    tick's arithmetic needs numbers, not what a source's elements may turn out to be). float64,
+    the dtype of every source the loop ships, is returned as it is (no copy, so nothing a
+    fault-free run computes changes); another real dtype is converted (exact for float16/32).
+    """
+    if pred.dtype == np.float64:
+        return pred
+    if pred.dtype.kind not in "fiu":
+        return None
+    return pred.astype(np.float64)
+
+
+def _plausible_rows(p: np.ndarray, x: float, y: float, lim: float, max_step: float) -> bool:
+    """:func:`~coassist.interfaces.prediction_plausible` of float64 rows p (m, 2), written for the tick:
+    every row within ``lim`` of the tool (x, y) on each axis, consecutive rows at most ``max_step``
+    apart (a NaN fails every comparison, so finiteness comes with it)."""
+    # the same differences and comparisons in fewer calls (this runs every tick of every run with a source
+    # of its own: issue 44): both columns' distances at once, and the ufuncs' reduce without np.max's wrapper
+    off = p - np.array((x, y))
+    np.abs(off, out=off)
+    if not np.maximum.reduce(off, axis=None) <= lim:
+        return False
+    if p.shape[0] > 1:
+        step = p[1:] - p[:-1]
+        np.abs(step, out=step)
+        return bool(np.maximum.reduce(step, axis=None) <= max_step)
+    return True
 
 
 class WindowIntentBatch:
@@ -233,7 +254,8 @@ class WindowIntentBatch:
         """The source's answer (len(rows), m, 2) for the stages ``rows`` → (positions (len(rows),
         min(m, horizon), 2), ok (len(rows),) bool: the stage would take its row).
 
-        Raises ValueError on an answer that is not such an array (every row would be a fallback)."""
+        Raises ValueError on an answer that is not such an array of real numbers (every row would be
+        a fallback, as :meth:`WindowIntent.accept` makes each: a complex or object answer included)."""
         if not (
             isinstance(answer, np.ndarray)
             and answer.ndim == 3
@@ -241,7 +263,10 @@ class WindowIntentBatch:
             and answer.shape[2] == 2
         ):
             raise ValueError("malformed predictions")
-        positions = answer[:, : self.horizon]
+        real = _real_positions(answer)
+        if real is None:
+            raise ValueError(f"predictions must be real numbers, got dtype {answer.dtype}")
+        positions = real[:, : self.horizon]
         # WindowIntent._plausible row by row (the same comparisons: a NaN fails them)
         far = np.abs(positions - self._tool[rows][:, None, :]).max(axis=(1, 2))
         ok = (answer.shape[1] >= self._need[rows]) & (far <= self._max_distance[rows])
@@ -262,12 +287,31 @@ class RealtimeIntent:
         the predictor stalled (≥ 1; default 25 = 0.2 s at 125 Hz).
     model_id : the id logged with the trial; None: the predictor's ``model_id``, else
         ``"realtime"``.
+    plausibility : what a row may ask of the controller (module docstring), checked against the
+        tool of the tick's own row: a row farther, or faster, is a fallback (PREDICTOR_STALLED when
+        it persists), as a window source's is. A :class:`~coassist.intent.RealtimePredictor` checks
+        its predictions against the window it predicted from; this stage checks what reaches the
+        controller whatever the predictor is (a duck-typed one may check nothing). None: the
+        predictor's own ``config.plausibility`` where it has one (the two checks then agree),
+        else the default :class:`~coassist.interfaces.PlausibilityLimits`.
     """
 
     nominal = False
     reads_true_intent = False  # a network predictor: what an arm measures, nothing else
 
-    def __init__(self, predictor: Any, stall_ticks: int = 25, model_id: str | None = None) -> None:
+    def __init__(
+        self,
+        predictor: Any,
+        stall_ticks: int = 25,
+        model_id: str | None = None,
+        plausibility: PlausibilityLimits | None = None,
+    ) -> None:
+        if plausibility is None:
+            own = getattr(getattr(predictor, "config", None), "plausibility", None)
+            plausibility = own if isinstance(own, PlausibilityLimits) else PlausibilityLimits()
+        elif not isinstance(plausibility, PlausibilityLimits):
+            raise ValueError(f"plausibility must be a PlausibilityLimits, got {type(plausibility).__name__}")
+        self.plausibility = plausibility
         for attr in ("tick", "horizon"):
             if not hasattr(predictor, attr):
                 raise ValueError(f"predictor must have '{attr}' (a coassist.intent.RealtimePredictor)")
@@ -282,11 +326,13 @@ class RealtimeIntent:
         self._sample = np.zeros(_N_FEATURES)
         self._bad = 0
         self._errors = 0
+        self.max_step = math.inf  # the most consecutive rows may move apart [m] (max_speed · dt, from reset)
 
     def reset(self, context: TrialContext) -> None:
         self.predictor.reset(context)
         self._bad = 0
         self._errors = int(getattr(self.predictor, "errors", 0))
+        self.max_step = self.plausibility.max_speed * float(context.dt)
 
     def update(self, k: int, row: tuple[float, ...], nominal: np.ndarray) -> tuple[np.ndarray | None, Fault]:
         self._sample[:] = row
@@ -301,9 +347,15 @@ class RealtimeIntent:
         arr = None
         usable = not (fault & _FALLBACK_I) and pos is not None
         if usable:
-            try:  # an answer that is no array of numbers (ragged, strings) is a failing predictor's
-                arr = np.asarray(pos, dtype=float)
-                usable = arr.shape == (self.horizon, 2) and bool(np.isfinite(arr).all())
+            # an answer that is no array of real numbers (ragged, strings, complex, objects) is a failing
+            # predictor's; a finite one far from the tool, or faster than a hand, is as unusable (module docstring)
+            try:
+                arr = _real_positions(np.asarray(pos))
+                usable = (
+                    arr is not None
+                    and arr.shape == (self.horizon, 2)
+                    and _plausible_rows(arr, row[0], row[1], self.plausibility.max_distance, self.max_step)
+                )
             except (TypeError, ValueError):
                 usable = False
         warm = k >= self.history  # before the window fills the fallback is expected

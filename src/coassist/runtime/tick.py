@@ -111,6 +111,32 @@ def human_reference(positions: np.ndarray, x0: np.ndarray, inv_dt: float, out: n
         out[..., 0, d : d + 2] = 0.0
 
 
+#: How far a stage's period may differ from the tick's, relative: float rounding of one period
+#: written two ways (1/125 against 0.008), never another rate.
+_PERIOD_RTOL = 1e-9
+
+
+def _check_period(dt: float, stage: Any, field: str, what: str) -> None:
+    """Refuse a stage built for another period than the tick's (ValueError naming both).
+
+    The safety layer's acceleration limit is a step of a·dt per call and the wrench pipeline's
+    filter and staleness run on dt: a layer built for 32 ms in an 8 ms tick lets the joints
+    accelerate 4× the limit, and nothing downstream could tell. A stage without ``dt`` has no
+    period of its own to compare."""
+    stage_dt = getattr(stage, "dt", None)
+    if stage_dt is None:
+        return
+    try:
+        ok = abs(float(stage_dt) - dt) <= _PERIOD_RTOL * dt
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(
+            f"{field}.dt ({stage_dt!r} s, {what}'s period) must equal the tick's period, the controller's "
+            f"model.dt ({dt!r} s): build {what} for the control period"
+        )
+
+
 @dataclass(frozen=True)
 class TickConfig:
     """How the tick maps the admittance to a tool twist (arm worlds).
@@ -216,7 +242,9 @@ class ControlTick:
         controlled DOFs (``name``, ``model``, ``horizon``, ``step``).
     intent : a :class:`~coassist.runtime.intent.TickIntent` (WindowIntent or RealtimeIntent).
     wrench : a :class:`~coassist.runtime.wrench.WrenchPipeline`.
-    safety : a :class:`~coassist.runtime.safety.SafetyLayer` (always on).
+    safety : a :class:`~coassist.runtime.safety.SafetyLayer` (always on), built for the tick's
+        period (``safety.dt`` = ``controller.model.dt``, as a wrench pipeline's ``dt``: ValueError
+        otherwise, since a layer for a longer period would allow a larger acceleration).
     command_space : the world's, ``"joint_velocity"`` or ``"effort"``.
     kinematics : for joint-velocity worlds: ``forward_and_jacobian(q) -> (p, R, J)``
         (:class:`coassist.robot.kinematics.UR5Kinematics`).
@@ -245,6 +273,8 @@ class ControlTick:
             raise ValueError("a joint-velocity world needs kinematics (the Jacobian of eq. 3.6)")
         if int(intent.horizon) < int(controller.horizon):
             raise ValueError(f"intent horizon ({intent.horizon}) must be >= the controller's ({controller.horizon})")
+        _check_period(float(model.dt), safety, "safety", "the safety layer")
+        _check_period(float(model.dt), wrench, "wrench", "the wrench pipeline")
         self.controller, self.intent, self.wrench, self.safety = controller, intent, wrench, safety
         self.kinematics, self.command_space = kinematics, command_space
         # a redundant arm (n > 6) resolves eq. 3.6 itself (null-space posture, joint limits)
@@ -270,7 +300,13 @@ class ControlTick:
     # ------------------------------------------------------------------ per run
     def reset(self, plan: Plan, context: TrialContext, state: RobotState | None = None) -> None:
         """Start a run: the plan's grids, the intent, a zero admittance state, the safety layer, and
-        the controller when it keeps state between ticks (an online-α arbitration)."""
+        the controller when it keeps state between ticks (an online-α arbitration).
+
+        state : the world's state at the start, if the caller has read it. In a joint-velocity world
+        the safety layer's acceleration ramp then starts from its measured joint velocity
+        (``SafetyLayer.reset(qd)``), so an arm already moving at tick 0 is not told to stop in one
+        step; without a state, or with a measured qd that is no finite vector, it starts from rest.
+        (An arm at rest measures q̇ = 0, where both agree exactly.)"""
         if not isinstance(plan, Plan):
             raise ValueError(f"plan must be a Plan, got {type(plan).__name__}")
         d = self.d
@@ -296,7 +332,13 @@ class ControlTick:
             controller_reset()
         self.intent.reset(context)
         self.wrench.reset()
-        self.safety.reset()
+        moving = None
+        if state is not None and self.command_space == "joint_velocity":
+            moving = finite_vector(getattr(state, "qd", None), int(self.kinematics.n_joints))
+        if moving is None:
+            self.safety.reset()
+        else:
+            self.safety.reset(moving)
         self._za = np.zeros(2 * d)
         self._R_start = _spatial.rotation_matrix(start[3:6])
         self._J = None
