@@ -57,6 +57,7 @@ __all__ = [
     "figure_bytes",
     "fsync_dir",
     "json_sha256",
+    "no_constant",
     "no_duplicate_keys",
     "partial_folder",
     "read_hashed_json",
@@ -407,7 +408,9 @@ def no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def _no_constant(name: str) -> Any:
+def no_constant(name: str) -> Any:
+    """A ``json.loads`` ``parse_constant`` refusing NaN and ±Infinity (ValueError naming it): JSON has no such
+    numbers, Python's reader accepts them, and none of the project's files is written with them."""
     raise ValueError(f"{name} is not a number a file may hold")
 
 
@@ -435,7 +438,7 @@ def read_hashed_json(
     except OSError as exc:
         raise fail(f"cannot be read: {exc.strerror}") from None
     try:
-        doc = json.loads(raw.decode("utf-8"), object_pairs_hook=no_duplicate_keys, parse_constant=_no_constant)
+        doc = json.loads(raw.decode("utf-8"), object_pairs_hook=no_duplicate_keys, parse_constant=no_constant)
     except RecursionError:
         raise fail("JSON nested too deeply") from None
     except UnicodeDecodeError as exc:

@@ -88,3 +88,25 @@ def test_a_sidecar_without_a_digest_key_is_refused_in_one_line(model_dir, tmp_pa
     with pytest.raises(ModelFileError) as err:
         load_model(folder)
     assert "\n" not in str(err.value) and f"{key!r} must be a hex digest" in str(err.value)
+
+
+@pytest.mark.parametrize("key, value", [("n_dof", float("nan")), ("dt", float("inf")), ("foo", float("-inf"))])
+def test_a_sidecar_holding_nan_or_infinity_is_refused_in_one_line(model_dir, tmp_path, key, value):
+    """``"n_dof": NaN`` written by hand: once a bare ValueError from hashing the sidecar (allow_nan=False), and
+    `coassist evaluate` printed its traceback. A sidecar coassist writes never holds one (save_model refuses them)."""
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+
+    folder = Path(shutil.copytree(model_dir, tmp_path / "m"))
+    side = json.loads((folder / "model.json").read_text())
+    side[key] = value
+    (folder / "model.json").write_text(json.dumps(side))  # json writes NaN / Infinity / -Infinity
+    constant = json.dumps(value)
+    with pytest.raises(ModelFileError) as err:
+        load_model(folder)
+    assert str(err.value) == (f"{folder / 'model.json'}: malformed JSON: {constant} is not a number a file may hold")
+    res = CliRunner().invoke(app, ["evaluate", "--model", str(folder), "--data", str(tmp_path)])
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output and isinstance(res.exception, (SystemExit, type(None))), res.output
+    assert f"{constant} is not a number a file may hold" in " ".join(res.output.split()), res.output

@@ -614,6 +614,103 @@ def test_resume_of_an_interrupted_run_with_other_data_is_refused(tmp_path):
         train_model(again, TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
 
 
+def test_resume_on_trials_with_another_robot_effort_is_refused(tmp_path):
+    """The hand_alone label's targets are built from the robot's effort u_r and the rendered plant
+    (meta.extra["plant"]): a resume on the same ids and poses with another u_r once went on, on other labels."""
+    from coassist.intent import LabeledTrial
+    from coassist.intent.checkpoint import trials_digest
+    from coassist.intent.training import train_model
+
+    def hand(scale=1.0, damping=50.0):
+        out = []
+        for lt in labeled(4):
+            t = lt.trial
+            meta = replace(t.meta, extra={"plant": {"M": [10.0, 10.0], "D": [damping, damping], "K": [0.0, 0.0]}})
+            effort = scale * 5.0 * np.sin(np.arange(t.n_samples)[:, None] * 0.05 + np.arange(2))
+            out.append(LabeledTrial(lt.id, lt.dataset, replace(t, meta=meta, effort_r=effort, effort_h=effort)))
+        return out
+
+    preset = replace(TINY, window=replace(TINY.window, label="hand_alone"))
+    cfg = replace(preset.train, epochs=3)
+
+    class Stop(Exception):
+        pass
+
+    def stop(record):
+        if record["epoch"] == 1:
+            raise Stop
+
+    with pytest.raises(Stop):
+        train_model(hand(), preset, cfg, checkpoint_to=tmp_path / "m", on_epoch=stop)
+    digests = {trials_digest(hand()), trials_digest(hand(-3.0)), trials_digest(hand(damping=60.0))}
+    assert len(digests) == 3
+    for other in (hand(-3.0), hand(damping=60.0)):
+        with pytest.raises(ValueError, match="interrupted run on other data under the same trial ids"):
+            train_model(other, preset, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
+    resumed = train_model(hand(), preset, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
+    assert [r["epoch"] for r in resumed.info["training_history"]] == [1, 2, 3]
+    # trials without efforts or plant hash as before they were included: such a checkpoint of an older version
+    # still resumes
+    assert trials_digest(labeled(1)) == "90b7e161826e2f91bf9a619c9a83b903933ecc125ca07c8c57b093e0d62915e0"
+
+
+def test_resume_with_an_option_other_than_the_interrupted_runs_is_refused(tmp_path):
+    """The interrupted run continues on its own configuration: --epochs 6 --lr 0.05 were once silently ignored."""
+    from coassist.intent import load_trials
+    from coassist.intent.training import train_model
+
+    write_dataset([make_trial(i, n=220) for i in range(4)], tmp_path / "D0", "D0")
+
+    class Stop(Exception):
+        pass
+
+    def stop(record):
+        if record["epoch"] == 1:
+            raise Stop
+
+    cfg = replace(TINY.train, epochs=3)
+    out = tmp_path / "m"
+    with pytest.raises(Stop):
+        train_model(load_trials([tmp_path / "D0"]), TINY, cfg, checkpoint_to=out, on_epoch=stop)
+    with pytest.raises(ValueError) as err:  # the library: the fields the caller chose (given)
+        train_model(
+            load_trials([tmp_path / "D0"]), TINY, replace(cfg, epochs=6, init=f"resume:{out}"), given=["epochs"]
+        )
+    assert str(err.value).startswith(f"train.epochs 6 asked, but {partial_folder(out)} is an interrupted run with ")
+    args = ["train", str(tmp_path / "D0"), "--out", str(out), "--init", f"resume:{out}", "--threads", "1"]
+    res = CliRunner().invoke(app, [*args, "--lr", "0.05", "--epochs", "3"])
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert " ".join(res.output.split()) == (
+        f"error: --lr 0.05 asked, but {partial_folder(out)} is an interrupted run with --lr 0.003: continue it "
+        "without --lr (it keeps its own), or start a new stage from it with finetune:"
+    )
+    assert not out.exists() and (partial_folder(out) / "checkpoint.json").is_file()  # the run is still there
+    res = CliRunner().invoke(app, [*args, "--epochs", "3", "--batch-size", "32"])  # its own values: continued
+    assert res.exit_code == 0, res.output
+    assert [r["epoch"] for r in json.loads((out / "history.json").read_text())] == [1, 2, 3]
+
+
+def test_resume_of_a_finished_model_into_its_own_folder_needs_overwrite(tmp_path):
+    """`--init resume:M --out M` of a finished M once replaced it without --overwrite (its lineage then naming
+    itself); only an interrupted run (a checkpoint beside M) is continued in place without it."""
+    from coassist.intent import load_model
+
+    write_dataset([make_trial(i, n=220) for i in range(4)], tmp_path / "D0", "D0")
+    out = tmp_path / "m"
+    base = ["train", str(tmp_path / "D0"), "--out", str(out), "--epochs", "1", "--threads", "1", "--batch-size", "256"]
+    res = CliRunner().invoke(app, base)
+    assert res.exit_code == 0, res.output
+    before = load_model(out)
+    res = CliRunner().invoke(app, [*base, "--init", f"resume:{out}"])
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert "already holds files; pass --overwrite to replace it" in " ".join(res.output.split())
+    assert same_weights(load_model(out), before) and load_model(out).info["init"] == "scratch"
+    res = CliRunner().invoke(app, [*base, "--init", f"resume:{out}", "--overwrite"])  # a new stage, asked for
+    assert res.exit_code == 0, res.output
+    after = load_model(out)
+    assert after.info["init"] == f"resume:{out}" and [r["epoch"] for r in after.info["training_history"]] == [1, 2]
+
+
 @pytest.mark.parametrize(
     "field, value, says",
     [("epoch", "x", "'epoch' must be an integer"), ("epoch", 1_000_000, "epoch 1000000 done of a run of 3")],

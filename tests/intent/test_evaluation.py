@@ -13,7 +13,7 @@ from coassist.data import default_real_data, write_dataset
 from coassist.intent import evaluate_model, load_trials, split_trials, train_model
 from coassist.intent.evaluation import BASELINES, ModelEvaluation, best_baselines, comparison_lines
 
-from .conftest import make_trial
+from .conftest import labeled, make_trial
 
 
 def test_best_baseline_and_per_trial_spread(trials, tiny):
@@ -228,3 +228,24 @@ def test_a_scoring_stride_scores_every_predictor_on_every_nth_window(trials, tin
     assert res.n_ticks == expect < every.n_ticks
     with pytest.raises(ValueError, match="stride"):
         model.predict_trial(t, stride=0)
+
+
+def test_held_out_only_leaves_out_what_the_starting_model_trained_on(tmp_path, trials, tiny):
+    """A model fine-tuned on new trials is not held out from those its parent trained on: once evaluate scored
+    them as held out (the sidecar's own train_trials only)."""
+    from dataclasses import replace
+
+    from coassist.intent import save_model
+    from coassist.intent.model import lineage_train_trials
+
+    cfg = replace(tiny.train, epochs=1)
+    parent = train_model(trials, tiny, cfg)
+    save_model(parent, tmp_path / "p")
+    new = labeled(5, prefix="U")
+    ft = train_model(new, tiny, replace(cfg, init=f"finetune:{tmp_path / 'p'}"))
+    assert ft.info["parent"]["train_trials"] == parent.info["train_trials"]
+    assert lineage_train_trials(ft.info) == {*parent.info["train_trials"], *ft.info["train_trials"]}
+    ev = evaluate_model(ft, trials + new, held_out_only=True)
+    assert list(ev.trials) == ["T/trial_02", "U/trial_02"]  # the parent's test trial and the model's own
+    assert sorted(ev.skipped) == sorted([*parent.info["train_trials"], *ft.info["train_trials"]])
+    assert len(evaluate_model(ft, trials + new, held_out_only=False).trials) == 10

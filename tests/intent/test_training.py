@@ -300,3 +300,91 @@ def test_a_bigger_batch_scales_the_learning_rate_by_the_square_root_rule():
     }
     with pytest.raises(ValueError, match="train.batch_size"):
         with_batch_size(base, 0)
+
+
+def test_a_model_whose_window_cannot_be_mirrored_transfers_and_says_how_to_finetune(tmp_path, trials, tiny):
+    """A source with an absolute window (the thesis'), started from with a mirroring configuration (the CLI's
+    default preset): transfer never mirrors, so it trains; once it was refused for train.mirror, which the CLI
+    has no option for. Finetune would mirror: refused, saying what to pass."""
+    from dataclasses import replace
+
+    absolute = replace(tiny, window=replace(tiny.window, input_frame="absolute", target="absolute"))
+    save_model(train_model(trials, absolute, replace(tiny.train, epochs=1)), tmp_path / "src")
+    mirroring = replace(tiny.train, epochs=1, mirror=True)
+    tl = train_model(labeled(3, prefix="U"), tiny, replace(mirroring, init=f"transfer:{tmp_path / 'src'}"))
+    assert tl.info["frozen"] == ["lstm"] and tl.info["mirrored"] is False
+    assert tl.window.input_frame == "absolute"
+    with pytest.raises(ValueError) as err:
+        train_model(labeled(3, prefix="U"), tiny, replace(mirroring, init=f"finetune:{tmp_path / 'src'}"))
+    assert str(err.value) == (
+        f"{tmp_path / 'src'}: its window (input_frame 'absolute', target 'absolute') cannot be mirrored, which "
+        "train.mirror (on in this configuration) asks; finetune: it with train.mirror off (--preset thesis does "
+        "not mirror)"
+    )
+    ft = train_model(
+        labeled(3, prefix="U"), tiny, replace(mirroring, mirror=False, init=f"finetune:{tmp_path / 'src'}")
+    )
+    assert ft.info["mirrored"] is False and ft.info["frozen"] == []
+    with pytest.raises(ValueError, match=r"^train.mirror needs window.input_frame='relative'"):  # from scratch
+        train_model(trials, absolute, mirroring)
+
+
+def test_a_diverged_training_stops_naming_the_epoch_and_writes_nothing(tmp_path, trials, tiny):
+    """lr 1e30: once "Out of range float values are not JSON compliant: inf" from writing the checkpoint."""
+    from dataclasses import replace
+
+    from coassist._io import partial_folder
+
+    cfg = replace(tiny.train, epochs=3, lr=1e30, optimizer="sgd")
+    with pytest.raises(ValueError) as err:
+        train_model(trials, tiny, cfg, checkpoint_to=tmp_path / "m")
+    msg = str(err.value)
+    assert msg.startswith("training diverged at epoch 1 (") and msg.endswith("); lower train.lr"), msg
+    assert msg.split("(")[1].split(")")[0] in {f"{k} loss {v}" for k in ("train", "test") for v in ("inf", "nan")}
+    assert not (tmp_path / "m").exists() and not partial_folder(tmp_path / "m").exists()
+
+
+def test_a_test_split_too_short_to_window_is_named(trials, tiny):
+    """Once "no trial is long enough …" although the training trials were: the held-out one is the short one."""
+    from dataclasses import replace
+
+    from coassist.intent import LabeledTrial
+    from coassist.intent.features import split_trials
+
+    from .conftest import make_trial
+
+    _, (short,) = split_trials([t.id for t in trials], tiny.train.test_fraction, tiny.train.seed)
+    trials[short] = LabeledTrial(trials[short].id, trials[short].dataset, make_trial(short, n=25))
+    with pytest.raises(ValueError) as err:
+        train_model(trials, tiny, replace(tiny.train, epochs=1))
+    assert str(err.value) == (
+        f"the test split (1 trial: {trials[short].id}): no trial is long enough for history 20 + horizon 10 samples"
+    )
+
+
+def test_trials_a_starting_model_trained_on_stay_on_the_training_side(tmp_path, trials, tiny):
+    """finetune:/resume: with another seed or more data: the new split would hold out trials the parent trained
+    on. They go to the training side; with none of them among the trials, the split is split_trials' own."""
+    from dataclasses import replace
+
+    from coassist.intent.features import split_trials
+
+    cfg = replace(tiny.train, epochs=1)
+    parent = train_model(trials, tiny, cfg)
+    save_model(parent, tmp_path / "p")
+    ids = [t.id for t in trials]
+    plain_train, plain_test = split_trials(ids, cfg.test_fraction, 3)
+    assert [ids[i] for i in plain_test] == ["T/trial_04"]  # seed 3 would hold out a trial the parent trained on
+    assert parent.info["test_trials"] == ["T/trial_02"] and "T/trial_04" in parent.info["train_trials"]
+    ft = train_model(trials, tiny, replace(cfg, seed=3, init=f"finetune:{tmp_path / 'p'}"))
+    assert ft.info["test_trials"] == [] and ft.info["train_trials"] == ids and ft.info["n_test_windows"] == 0
+    more = trials + labeled(5, prefix="U")
+    stage = train_model(more, tiny, replace(cfg, init=f"resume:{tmp_path / 'p'}"))
+    _, test = split_trials([t.id for t in more], cfg.test_fraction, 0)
+    assert [more[i].id for i in test] == ["T/trial_04", "U/trial_01"]  # T/trial_04: the parent's training trial
+    assert stage.info["test_trials"] == ["U/trial_01"]
+    assert set(parent.info["train_trials"]) <= set(stage.info["train_trials"])
+    # a starting model that never saw these trials: the split as split_trials makes it
+    tl = train_model(labeled(5, prefix="V"), tiny, replace(cfg, init=f"transfer:{tmp_path / 'p'}"))
+    _, test = split_trials([f"V/trial_{i:02d}" for i in range(5)], cfg.test_fraction, 0)
+    assert tl.info["test_trials"] == [f"V/trial_{i:02d}" for i in test]

@@ -62,12 +62,20 @@ def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, 
 
 def _check_model_out(out: Path, overwrite: bool, init: str) -> None:
     """Refuse before any work an --out that is a file, or an existing model without --overwrite."""
+    from coassist._io import partial_folder
+
     bad_parent = next((p for p in reversed(out.parents) if p.exists() and not p.is_dir()), None)
     if bad_parent is not None:
         fail(f"--out {out}: {bad_parent} is a file, not a folder", 2)
     if out.exists() and not out.is_dir():
         fail(f"--out {out}: is a file; give a folder for the model", 2)
-    continuing = init.startswith("resume:") and Path(init.partition(":")[2]).absolute() == out.absolute()
+    # Only an interrupted run (its checkpoint in the partial folder beside --out) is continued in place;
+    # a new stage from the finished model in --out replaces it, as any other run would.
+    continuing = (
+        init.startswith("resume:")
+        and Path(init.partition(":")[2]).absolute() == out.absolute()
+        and (partial_folder(out) / "checkpoint.json").is_file()  # intent.checkpoint.CHECKPOINT_JSON
+    )
     if out.is_dir() and any(out.iterdir()) and not (overwrite or continuing):
         fail(
             f"--out {out}: already holds files; pass --overwrite to replace it (the old model stays until the new "
@@ -118,7 +126,9 @@ def train(
     """Train the intent predictor (thesis §5.2.2; Algorithm 4.1 with resume:, 4.2 with transfer:).
 
     After each epoch a checkpoint is kept beside --out (.<name>.partial); if the run is
-    stopped, --init resume:<out> continues it where it stopped, with the same result.
+    stopped, --init resume:<out> continues it where it stopped, with the same result (with
+    its own options: one given otherwise is refused). resume:<out> of a finished model in
+    --out is a new stage that replaces it: --overwrite.
     """
     _check_model_out(out, overwrite, init)
     folder_out(out, "--out")  # before the slow imports: a bad --out is told at once
@@ -171,7 +181,16 @@ def train(
     set_torch_threads(p.train.threads)
     try:
         with OutputLock(out):
-            model = train_model(trials, p, p.train, progress=True, checkpoint_to=out)
+            chosen = {
+                "epochs": epochs,
+                "lr": lr,
+                "batch_size": batch_size,
+                "seed": seed,
+                "test_fraction": test_fraction,
+                "optimizer": optimizer,
+            }
+            given = [name for name, value in chosen.items() if value is not None]
+            model = train_model(trials, p, p.train, progress=True, checkpoint_to=out, given=given)
             write_model(model, out)
     except ValueError as exc:  # mismatched model, unknown init, too-short trials
         fail(typed(str(exc), TRAIN_OPTIONS), 2)
@@ -193,7 +212,9 @@ def evaluate(
     out: Path = typer.Option(
         None, help="JSON file for the results, or a folder for evaluation.json (default: <model>/evaluation.json)."
     ),
-    include_training: bool = typer.Option(False, help="Also score trials the model was trained on."),
+    include_training: bool = typer.Option(
+        False, help="Also score trials the model (or the model it was started from) was trained on."
+    ),
     skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
     bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
 ) -> None:

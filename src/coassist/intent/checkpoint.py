@@ -79,18 +79,27 @@ def checkpoint_files(
 
 
 def trials_digest(trials: Sequence[Any]) -> str:
-    """SHA-256 of what labeled ``trials`` hold (each one's id and the arrays a training reads, in order): the
-    same ids collected again are other data."""
+    """SHA-256 of what labeled ``trials`` hold (each one's id and what a training reads, in order: the
+    arrays, the efforts and the rendered impedance ``meta.extra["plant"]`` the ``hand_alone`` label is
+    built from): the same ids collected again are other data.
+
+    A trial without efforts or plant hashes as it did before they were included; one with them
+    does not, so a checkpoint an older coassist wrote on such trials is refused as on other data.
+    """
     h = hashlib.sha256()
     for lt in trials:
         h.update(str(lt.id).encode() + b"\0")
         t = lt.trial
-        for name in ("time", "pose", "velocity", "wrench", "reference", "intent"):
+        for name in ("time", "pose", "velocity", "wrench", "reference", "intent", "effort_r", "effort_h"):
             value = getattr(t, name, None)
             if value is not None:
                 arr = np.ascontiguousarray(value, dtype=np.float64)
                 h.update(name.encode() + str(arr.shape).encode())
                 h.update(arr.tobytes())
+        meta = getattr(t, "meta", None)
+        plant = meta.to_dict()["extra"].get("plant") if meta is not None else None
+        if plant is not None:
+            h.update(b"plant" + json.dumps(plant, sort_keys=True, allow_nan=False).encode())
     return h.hexdigest()
 
 

@@ -34,7 +34,7 @@ from coassist.intent.baselines import (
 )
 from coassist.intent.features import feature_names
 from coassist.intent.kalman import KalmanCA
-from coassist.intent.model import IntentModel
+from coassist.intent.model import IntentModel, lineage_train_trials
 from coassist.intent.trials import LabeledTrial
 from coassist.metrics import HORIZONS, prediction_errors_by_horizon
 
@@ -119,7 +119,8 @@ def evaluate_model(
     trials : the labelled trials to score it on (the baselines are scored on the same ticks).
     horizons : the prediction horizons [ticks] to report.
     held_out_only : bool
-        Skip trials the model was trained on (its sidecar's ``train_trials``); the
+        Skip trials the model or the models it was started from were trained on (its sidecar's
+        ``train_trials`` and its ``parent``'s: :func:`~coassist.intent.model.lineage_train_trials`); the
         skipped ids are listed in the result.
     stride : score every n-th of the model's ticks (:meth:`IntentModel.predict_trial`), every predictor on the
         same ticks (1: every tick).
@@ -133,11 +134,14 @@ def evaluate_model(
     horizons = [int(h) for h in horizons if int(h) <= model.horizon]
     if not horizons:
         raise ValueError(f"no horizon fits the model's horizon of {model.horizon} samples")
-    trained_on = set(model.info.get("train_trials", [])) if held_out_only else set()
+    trained_on = lineage_train_trials(model.info) if held_out_only else set()
     used = [lt for lt in trials if lt.id not in trained_on]
     skipped = [lt.id for lt in trials if lt.id in trained_on]
     if not used:
-        raise ValueError(f"every given trial was used to train the model ({len(skipped)} trials); nothing held out")
+        raise ValueError(
+            f"every given trial was used to train the model or the one it was started from ({len(skipped)} trials); "
+            "nothing held out"
+        )
     kalman = model_kalman(model)
     names = [p for p in PREDICTORS if p != "ridge" or model.ridge is not None]
     per: dict[str, dict[int, dict[str, list[np.ndarray]]]] = {

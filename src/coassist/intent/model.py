@@ -47,7 +47,7 @@ from safetensors.torch import load as st_load
 from safetensors.torch import save as st_save
 
 from coassist._checks import check_int, is_real_number
-from coassist._io import OutputLock, atomic_write_bytes, staged_folder
+from coassist._io import OutputLock, atomic_write_bytes, no_constant, staged_folder
 from coassist.data import Trial
 from coassist.errors import CoassistError
 from coassist.intent.features import (
@@ -61,7 +61,15 @@ from coassist.intent.features import (
 )
 from coassist.intent.network import IntentNet, NetworkConfig
 
-__all__ = ["FORMAT", "IntentModel", "ModelFileError", "ModelMismatchError", "load_model", "save_model"]
+__all__ = [
+    "FORMAT",
+    "IntentModel",
+    "ModelFileError",
+    "ModelMismatchError",
+    "lineage_train_trials",
+    "load_model",
+    "save_model",
+]
 
 FORMAT = "coassist-intent/1"
 WEIGHTS = "weights.safetensors"
@@ -304,6 +312,21 @@ def _fail(path: Path, what: str) -> ModelFileError:
     return ModelFileError(f"{path}: {what}")
 
 
+def lineage_train_trials(info: Mapping[str, Any]) -> set[str]:
+    """The trial ids a model and the models it was started from trained on, as its sidecar records them
+    (``train_trials``, then each ``parent``'s, as deep as the record goes; a training records its starting
+    model's, so a model's own and its parent's): what is not held out from it."""
+    out: set[str] = set()
+    seen = 0
+    node: Any = info
+    while isinstance(node, Mapping) and seen < 1000:  # (a record is a tree: the bound only guards a hand edit)
+        trained = node.get("train_trials")
+        if isinstance(trained, (list, tuple)):
+            out.update(t for t in trained if isinstance(t, str))
+        node, seen = node.get("parent"), seen + 1
+    return out
+
+
 def read_sidecar(folder: str | os.PathLike[str]) -> dict[str, Any]:
     """The sidecar of a model folder, its format and fields checked (:class:`ModelFileError`)."""
     folder = Path(folder)
@@ -315,12 +338,12 @@ def read_sidecar(folder: str | os.PathLike[str]) -> dict[str, Any]:
     try:
         if path.stat().st_size > MAX_SIDECAR_BYTES:
             raise _fail(path, f"larger than {MAX_SIDECAR_BYTES // 2**20} MiB: not a model sidecar")
-        meta = json.loads(path.read_bytes().decode("utf-8"))
+        meta = json.loads(path.read_bytes().decode("utf-8"), parse_constant=no_constant)  # save_model writes none
     except RecursionError:
         raise _fail(path, "JSON nested too deeply: not a model sidecar") from None
     except UnicodeDecodeError as exc:
         raise _fail(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    except json.JSONDecodeError as exc:
+    except ValueError as exc:  # json.JSONDecodeError is one; so is no_constant's refusal
         raise _fail(path, f"malformed JSON: {exc}") from None
     except OSError as exc:
         raise _fail(path, f"cannot be read: {exc.strerror}") from None

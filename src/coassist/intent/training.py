@@ -36,7 +36,7 @@ import math
 import os
 import shutil
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import IO, Any
@@ -57,7 +57,7 @@ from coassist.intent.checkpoint import (
     trials_digest,
 )
 from coassist.intent.features import WindowConfig, WindowSet, feature_names, scale_targets, split_trials
-from coassist.intent.model import IntentModel, load_model, save_model
+from coassist.intent.model import IntentModel, lineage_train_trials, load_model, save_model
 from coassist.intent.network import IntentNet
 from coassist.intent.presets import Preset, TrainConfig
 from coassist.intent.trials import LabeledTrial
@@ -281,6 +281,27 @@ def _epoch_order(
     return perm, torch.from_numpy(np.concatenate(signs))
 
 
+def _split_windows(
+    split: str, trials: Sequence[LabeledTrial], idx: Sequence[int], window: WindowConfig, dt: float, stride: int
+) -> WindowSet:
+    """The windows of one split's trials; a refusal names the split (and its trials)."""
+    try:
+        return WindowSet([trials[i].trial for i in idx], window, dt, stride=stride)
+    except ValueError as exc:
+        names = ", ".join(trials[i].id for i in idx[:3]) + (", …" if len(idx) > 3 else "")
+        raise ValueError(f"the {split} split ({len(idx)} trial{'s' * (len(idx) != 1)}: {names}): {exc}") from None
+
+
+def _check_finite(record: dict[str, Any]) -> None:
+    """Refuse an epoch whose losses are not finite: the run diverged (nothing of it is worth keeping)."""
+    for key in ("train_loss", "test_loss"):
+        value = record[key]
+        if value is not None and not math.isfinite(value):
+            raise ValueError(
+                f"training diverged at epoch {record['epoch']} ({key.replace('_', ' ')} {value}); lower train.lr"
+            )
+
+
 def train_model(
     trials: Sequence[LabeledTrial],
     preset: Preset,
@@ -289,6 +310,7 @@ def train_model(
     progress: bool = False,
     on_epoch: Callable[[dict[str, Any]], None] | None = None,
     checkpoint_to: str | os.PathLike[str] | None = None,
+    given: Collection[str] = (),
 ) -> IntentModel:
     """Train on ``trials`` (split by trial) and return the model, its sidecar info filled.
 
@@ -306,6 +328,8 @@ def train_model(
     ``k+1 … epochs``; a run stopped after epoch k and continued ends with the same
     weights as one never stopped. ``resume:`` of a finished model starts a new stage
     instead (Algorithm 4.1: ``epochs`` more, fresh optimizer, the history continued).
+    ``given``: the :class:`TrainConfig` fields the caller set on purpose (the CLI: the options
+    typed); continuing an interrupted run with one of them other than the run's own is refused.
     The network has no dropout, so torch draws no random numbers after initialisation
     (its weights come from a generator seeded in :func:`build_model`): nothing of torch's
     to save. Torch's thread count is the caller's to set (``torch.set_num_threads``).
@@ -338,13 +362,21 @@ def train_model(
                 "again?); continue it with the data it began on, or start a new stage from it with finetune:"
             )
         try:
-            config = replace(TrainConfig(**ckpt["train_config"]), threads=config.threads, device=config.device)
+            own = replace(TrainConfig(**ckpt["train_config"]), threads=config.threads, device=config.device)
         except TypeError as exc:  # a checkpoint of another coassist version
             raise ValueError(
                 f"{base_path}: checkpoint's training configuration is not this version's ({exc})"
             ) from None
         except ValueError as exc:  # its values refused (TrainConfig names the field, not an option given here)
             raise ValueError(f"{base_path}: unusable checkpoint (its train_config: {exc})") from None
+        for name in given:  # the run continues on its own configuration: one asked for otherwise is refused
+            if name not in ("init", "threads", "device") and getattr(config, name) != getattr(own, name):
+                raise ValueError(
+                    f"train.{name} {getattr(config, name)} asked, but {base_path} is an interrupted run with train.{name} "
+                    f"{getattr(own, name)}: continue it without train.{name} (it keeps its own), or start a new stage "
+                    "from it with finetune:"
+                )
+        config = own
         if ckpt["epoch"] > config.epochs:  # epochs done of this run: at most its own
             raise ValueError(
                 f"{base_path}: unusable checkpoint (epoch {ckpt['epoch']} done of a run of {config.epochs}); start a "
@@ -355,16 +387,33 @@ def train_model(
     net, window, dt = model.net, model.window, model.dt
 
     train_idx, test_idx = split_trials(ids, config.test_fraction, config.seed)
-    train_ws = WindowSet([trials[i].trial for i in train_idx], window, dt, stride=config.train_stride)
-    test_ws = (
-        WindowSet([trials[i].trial for i in test_idx], window, dt, stride=config.eval_stride) if test_idx else None
-    )
+    # Trials the starting model or its parent trained on are not held out: they go to the training side (a
+    # continued run: its own split, as it began). Where none of them is among the trials, the split is as it was.
+    if ckpt is not None:
+        ancestors = set(base.info.get("train_trials") or ())
+    else:
+        ancestors = lineage_train_trials(base.info) if mode != "scratch" else set()
+    trained_before = [i for i in test_idx if ids[i] in ancestors]
+    if trained_before:
+        train_idx = sorted([*train_idx, *trained_before])
+        test_idx = [i for i in test_idx if i not in trained_before]
+    train_ws = _split_windows("training", trials, train_idx, window, dt, config.train_stride)
+    test_ws = _split_windows("test", trials, test_idx, window, dt, config.eval_stride) if test_idx else None
 
     frozen = mode == "transfer"
-    if config.mirror and (window.input_frame != "relative" or window.target == "absolute"):
-        raise ValueError("train.mirror needs window.input_frame='relative' and a relative or residual window.target")
     # Transfer caches the frozen LSTM's features of the windows as they are: no mirroring there.
     mirror = config.mirror and not frozen
+    if mirror and (window.input_frame != "relative" or window.target == "absolute"):
+        if mode == "scratch":
+            raise ValueError(
+                "train.mirror needs window.input_frame='relative' and a relative or residual window.target"
+            )
+        # the window is the starting model's; train.mirror came with the configuration (a preset's)
+        raise ValueError(
+            f"{base_path}: its window (input_frame {window.input_frame!r}, target {window.target!r}) cannot be "
+            f"mirrored, which train.mirror (on in this configuration) asks; {mode}: it with train.mirror off "
+            "(--preset thesis does not mirror)"
+        )
     if frozen:
         for p in net.lstm_parameters():
             p.requires_grad_(False)
@@ -473,6 +522,7 @@ def train_model(
                 "lr": opt.param_groups[0]["lr"],
                 "seconds": time.perf_counter() - t0,
             }
+            _check_finite(record)  # before anything of this epoch is kept
             history.append(record)
             if checkpoint_to is not None:
                 snapshot = IntentModel(net, window, model.input_scaler, model.target_scaler, dt, info(False))
