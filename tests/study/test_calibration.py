@@ -281,6 +281,42 @@ def test_the_arm_is_assumed_where_the_measurement_says_too_little():
     assert measured_arm(ASSUMED_ARM) == (ASSUMED_ARM, "no pushes measured in the trials")
 
 
+def test_a_person_model_trial_recovered_after_a_kill_keeps_its_model_on_its_line(calibrated_study):
+    """A kill between the person-model trial's dataset commit and its progress line: the recovered line names the
+    model and its file's hash as the run's own line does (from the trial's meta; a trial written before the meta
+    held the hash: from the model's fit line), so the report still says the person model was used there."""
+    pf = StudyFolder(calibrated_study).participant("S01")
+    lines = pf.progress_file.read_text().splitlines(keepends=True)
+    k = next(i for i, line in enumerate(lines) if json.loads(line).get("block") == "person")
+    original = json.loads(lines[k])
+    assert original["model"] == "P0" and len(original["model_sha256"]) == 64
+    pf.progress_file.write_text("".join(lines[:k]))  # the kill: the trial is in its dataset, its line is not
+    with ParticipantRun(StudyFolder(calibrated_study), "S01", simulate=True) as run:
+        recovered = run.done[k]
+        assert recovered["recovered"] is True
+        step = run.steps[k]
+        run.run()
+    assert recovered["model"] == "P0" and recovered["model_sha256"] == original["model_sha256"]
+    assert recovered["waited_for_model_s"] is None  # not kept: the wait is unknown after a kill
+    assert {key for key in original if key != "t"} | {"recovered"} == {key for key in recovered if key != "t"}
+    (p0,) = study_summary(calibrated_study)["participants"]["S01"]["person_models"]
+    assert p0["used_in"] == ["person"]
+    # a trial whose meta lacks the hash (written before it was kept there): the fit line's digest for its task
+    from coassist.study.folder import _recovered_model_fields
+
+    (trial,) = read_dataset(pf.block("person")).trials
+    extra = {key: v for key, v in trial.meta.extra.items() if key != "study_model_sha256"}
+    done = [json.loads(line) for line in lines[:k]]
+    assert _recovered_model_fields(done, step, extra) == {
+        "model": "P0",
+        "waited_for_model_s": None,
+        "model_sha256": original["model_sha256"],
+    }
+    mg = next(json.loads(line) for line in lines if json.loads(line).get("block") == "mg")
+    mg_extra = read_dataset(pf.block("mg")).trials[0].meta.extra
+    assert _recovered_model_fields(done, run.steps[mg["step"]], mg_extra) == {"model": None, "waited_for_model_s": None}
+
+
 def test_a_person_model_changed_after_its_fit_is_refused_in_one_line(calibrated_study):
     study = StudyFolder(calibrated_study)
     path = study.participant("S01").folder / "models" / "P0" / "curved" / PERSON_MODEL_FILE

@@ -98,6 +98,48 @@ def test_a_bad_plan_is_one_line_naming_the_field(edit, field):
         assert message.startswith(field), message
 
 
+@pytest.mark.parametrize(
+    ("edit", "line"),
+    [
+        (
+            lambda t: t.replace('name = "manual"', 'name = "manual\\n"'),
+            "condition[2].name must be 1-32 lower-case letters, digits, '-' or '_' (not one of ['adaptation', "
+            "'answers', 'calibrated', 'calibration', 'models', 'practice', 'transfer-set'], round-* or calibration-*), "
+            "got 'manual\\n'",
+        ),
+        (
+            lambda t: t.replace('name = "comparison"', 'name = "comparison\\n"'),
+            "study.name must be 1-64 letters, digits, '-' or '_', got 'comparison\\n'",
+        ),
+    ],
+)
+def test_a_name_with_a_trailing_newline_is_refused(edit, line):
+    """``$`` matches before a final newline: a name is matched whole (as the participant ids are)."""
+    with pytest.raises(PlanError) as err:
+        plan_from_text(edit(_plan(timing="motion_time = 3.0")), ".")
+    assert str(err.value) == line
+
+
+@pytest.mark.parametrize("controller", ["manual", "impedance", "manual-probe"])
+def test_an_intent_on_a_controller_that_reads_none_is_refused(controller):
+    """MG, its probe and IMP never read the intent: two such conditions differing in intent only would run the
+    same trials under two names. The default intent (written or not) is accepted."""
+    text = _plan(timing="motion_time = 3.0").replace(
+        'controller = "manual"', f'controller = "{controller}"\nintent = "constant-velocity"'
+    )
+    with pytest.raises(PlanError) as err:
+        plan_from_text(text, ".")
+    assert str(err.value) == (
+        f"condition[2].intent: controller '{controller}' does not use an intent (its trials are the same whatever "
+        "the source), got 'constant-velocity'; leave intent out, or use a controller that reads it (cooperative, "
+        "cooperative-arbitrated, cooperative-damped)"
+    )
+    plain = _plan(timing="motion_time = 3.0").replace(
+        'controller = "manual"', 'controller = "manual"\nintent = "nominal"'
+    )
+    assert [c.intent for c in plan_from_text(plain, ".").conditions] == ["nominal"] * 3
+
+
 def test_a_model_the_plan_names_must_exist(tmp_path):
     text = _plan().replace('controller = "cooperative"', 'controller = "cooperative"\nintent = "models/M9"')
     with pytest.raises(PlanError, match=r"^condition\[0\]\.intent: 'models/M9' is not a source a person can run"):

@@ -252,3 +252,48 @@ def test_a_source_registered_later_is_a_condition_with_nothing_changed_in_the_st
         run.run()
     (trial,) = read_dataset(study.participant("S01").block("c1")).trials
     assert trial.meta.model_id == "constant-velocity" and trial.meta.extra["ended"] == "target"  # its class's id
+
+
+@pytest.mark.parametrize(
+    ("participants", "conditions", "line"),
+    [
+        (
+            4,
+            3,
+            "warning: study.participants = 4 is not a multiple of 6, the rows of the balanced Latin square of 3 "
+            "conditions (3 rows and their mirror, 3 being odd): their order is not counterbalanced (every condition "
+            "equally often in every position, every pair next to each other equally often) unless the number of "
+            "participants who finish is a multiple of 6; plan 6",
+        ),
+        (
+            9,
+            4,
+            "warning: study.participants = 9 is not a multiple of 4, the rows of the balanced Latin square of 4 "
+            "conditions (4 rows, 4 being even): their order is not counterbalanced (every condition equally often in "
+            "every position, every pair next to each other equally often) unless the number of participants who "
+            "finish is a multiple of 4; plan 8 or 12",
+        ),
+        (12, 3, None),
+        (4, 2, None),
+    ],
+)
+def test_init_warns_of_participants_that_fill_no_whole_latin_square(tmp_path, participants, conditions, line):
+    """Participants take the Latin square's rows in turn: a count that is not a multiple of its rows leaves the
+    order unbalanced. study init says so (a warning, not an error: the folder is made), as the estimate's lines."""
+    plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0)
+    extra = '[[condition]]\nname = "arbitrated"\ncontroller = "cooperative-arbitrated"\n\n[trials]'
+    text = plan.read_text().replace("participants = 4", f"participants = {participants}")
+    if conditions == 4:
+        text = text.replace("[trials]", extra)
+    elif conditions == 2:
+        text = text.replace('[[condition]]\nname = "manual"\ncontroller = "manual"\n', "")
+    plan.write_text(text)
+    out = tmp_path / "study"
+    result = CliRunner().invoke(app, ["study", "init", str(plan), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert len(StudyFolder(out).labels) == conditions
+    warnings = [w for w in result.output.splitlines() if w.startswith("warning: ")]
+    assert warnings == ([line] if line else [])
+    estimate = StudyFolder(out).estimate()
+    lines = estimate.lines()  # what study run shows before the first trial too
+    assert [f"warning: {w}" for w in estimate.warnings] == warnings == lines[len(lines) - len(warnings) :]

@@ -40,6 +40,8 @@ KEYS = [
     "limits",
     "collections",
     "models",
+    "conditions",  # added with the table of what each condition was
+    "trials",  # added with the counts of trials that reached the target
 ]
 PARTICIPANT_KEYS = [
     "number",
@@ -53,6 +55,7 @@ PARTICIPANT_KEYS = [
     "answers",
     "checks",
     "person_models",
+    "trials",  # added with the counts of trials that reached the target
 ]
 
 
@@ -164,8 +167,8 @@ def test_every_table_holds_the_summary_formatted_as_the_f_string_report_did(writ
             "measure",
             "a − b",
             "n",
-            "mean difference [95 % bootstrap]",
-            "d_z [95 % bootstrap]",
+            "mean difference [95 % paired t]",  # was "[95 % bootstrap]": the interval is the paired t one now
+            "d_z",  # was "d_z [95 % bootstrap]": a percentile bootstrap of a few pairs covers far less than 95 %
             "rank-biserial r",
             "Wilcoxon p / Holm",
             "paired t p / Holm",
@@ -177,7 +180,7 @@ def test_every_table_holds_the_summary_formatted_as_the_f_string_report_did(writ
             str(c["n"]),
             f"{_fmt(c['mean_diff'], units[c['metric']][1])} [{_fmt(c['mean_diff_ci'][0], units[c['metric']][1])}, "
             f"{_fmt(c['mean_diff_ci'][1], units[c['metric']][1])}] {units[c['metric']][0]}",
-            f"{_fmt(c['dz'])} [{_fmt(c['dz_ci'][0])}, {_fmt(c['dz_ci'][1])}]",
+            _fmt(c["dz"]),
             _fmt(c["rank_biserial"]),
             f"{_p(c['p_wilcoxon'])} / {_p(c['p_wilcoxon_holm'])}",
             f"{_p(c['p_t'])} / {_p(c['p_t_holm'])}",
@@ -208,8 +211,40 @@ def test_every_table_holds_the_summary_formatted_as_the_f_string_report_did(writ
         ]
         for pid, p in j["participants"].items()
     ]
-    # a comparison study with the questionnaire: these five tables, in this order, and no other
-    assert tables == [pooled, comparisons, questionnaire, order, participants]
+    conditions = [["condition", "controller", "intent", "intent sha256"]] + [
+        [name(b), c["controller"], c["intent"], "—"] for b, c in j["conditions"].items()
+    ]
+    assert conditions[1:] == [
+        [name("assistive"), "cooperative", "nominal", "—"],
+        [name("impedance"), "impedance", "nominal", "—"],
+        [name("manual"), "manual", "nominal", "—"],
+    ]
+    reached = (
+        [["", *[name(b) for b in blocks]]]
+        + [
+            [
+                pid,
+                *[
+                    f"{c['reached']} of {c['n']}" + (f" ({c['missed']} missed)" if c["missed"] else "")
+                    for c in (p["trials"][b] for b in blocks)
+                ],
+            ]
+            for pid, p in j["participants"].items()
+        ]
+        + [
+            [
+                "all",
+                *[
+                    f"{j['trials'][b]['reached']} of {j['trials'][b]['n']} (missed {j['trials'][b]['missed']}, "
+                    f"{_fmt(j['trials'][b]['miss_rate'], 100, 0)} %)"
+                    for b in blocks
+                ],
+            ]
+        ]
+    )
+    # a comparison study with the questionnaire: these seven tables, in this order, and no other (the conditions'
+    # and the trials' were added to the five of the f-string report)
+    assert tables == [conditions, pooled, reached, comparisons, questionnaire, order, participants]
     # not vacuous: 3 pairs × every measure, 3 pairs × (raw TLX + the Likert items), 4 participants
     assert len(comparisons) == 1 + 3 * len(MEASURES) and len(participants) == 5 and len(questionnaire) > 1
     assert any(row[-1] != "— / —" for row in comparisons[1:])  # the paired t ran on some measure
@@ -258,3 +293,84 @@ def test_a_block_stopped_before_its_last_trial_stays_out_of_the_pooled_numbers(t
     assert all(c.n == 1 for c in summary.comparisons if block in (c.a, c.b))  # S01's pair alone
     assert any(f"S02: {block}" in line for line in summary.limits)
     assert summary.n_participants == 2 and summary.to_json()["limits"] == list(summary.limits)
+
+
+def test_the_summary_and_the_report_say_what_each_condition_was(tmp_path):
+    """Each condition's controller and intent, and for a folder the hash study init recorded of it (before, the
+    report listed names and labels only: what a condition was could not be read from it)."""
+    import hashlib
+
+    from coassist.scenario.path_hypotheses import write_calibration
+    from coassist.study.folder import StudyFolder, init_study
+    from coassist.study.runner import ParticipantRun
+
+    calibration = write_calibration(tmp_path / "calibration", {})
+    marker = next(p for p in Path(calibration).iterdir() if p.suffix == ".json")
+    plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0)
+    plan.write_text(
+        plan.read_text().replace(
+            'controller = "impedance"', f'controller = "cooperative-arbitrated"\nintent = "{calibration}"'
+        )
+    )
+    study = init_study(plan, tmp_path / "study")
+    with ParticipantRun(study, "S01", simulate=True) as run:
+        assert run.run()
+    digest = hashlib.sha256(marker.read_bytes()).hexdigest()
+    assert StudyFolder(study.folder).record["models"] == {str(calibration): digest}
+    html_path, json_path = write_report(study.folder)
+    assert json.loads(json_path.read_text())["conditions"] == {
+        "assistive": {"controller": "cooperative", "intent": "nominal", "intent_sha256": None},
+        "impedance": {"controller": "cooperative-arbitrated", "intent": str(calibration), "intent_sha256": digest},
+        "manual": {"controller": "manual", "intent": "nominal", "intent_sha256": None},
+    }
+    parser = _Tables()
+    parser.feed(html_path.read_text())
+    labels = study.labels
+    assert parser.tables[0] == [
+        ["condition", "controller", "intent", "intent sha256"],
+        [f"assistive ({labels['assistive']})", "cooperative", "nominal", "—"],
+        [f"impedance ({labels['impedance']})", "cooperative-arbitrated", str(calibration), digest[:12]],
+        [f"manual ({labels['manual']})", "manual", "nominal", "—"],
+    ]
+
+
+def test_trials_that_never_reached_the_target_are_counted_not_silently_dropped(tmp_path):
+    """A 4 mm target ball: the simulated participant reaches it in one of the two trials of every condition (the
+    curved path misses). σ, overshoot and time to target are undefined for the miss and left out of the means; the
+    summary and the report count the miss and say how many trials each mean is over (before, nothing did)."""
+    from coassist.study.folder import init_study
+    from coassist.study.measures import trial_measures
+    from coassist.study.runner import ParticipantRun
+    from coassist.study.summarise import read_block
+
+    timing = "motion_time = 3.0\ndwell = 1.0\narrive_radius = 0.004\ntime_limit = 8.0"
+    s = init_study(comparison_plan(tmp_path / "plans", per_condition=2, practice=0, timing=timing), tmp_path / "study")
+    with ParticipantRun(s, "S01", simulate=True) as run:
+        assert run.run()
+    html_path, json_path = write_report(s.folder)
+    j = json.loads(json_path.read_text())
+    covered = {"f_rms": 2, "sigma": 1, "overshoot": 1, "jerk": 2, "time_to_target": 1, "e_rms": 2}
+    count = {"n": 2, "reached": 1, "missed": 1, "miss_rate": 0.5, "covered": covered}
+    blocks = ["assistive", "impedance", "manual"]
+    assert j["participants"]["S01"]["trials"] == {b: count for b in blocks}
+    assert j["trials"] == {b: count for b in blocks}
+    for b in blocks:  # the mean is the reached trial's alone
+        ttt = [trial_measures(t)["time_to_target"] for t in read_block(s.participant("S01").block(b))]
+        assert sum(math.isnan(v) for v in ttt) == 1
+        assert j["participants"]["S01"]["means"][b]["time_to_target"] == pytest.approx(
+            next(v for v in ttt if not math.isnan(v)), rel=1e-12
+        )
+    assert j["limits"][-1] == (
+        "3 of 6 measured trials never reached the target (assistive: 1 of 2; impedance: 1 of 2; manual: 1 of 2): "
+        "their σ, overshoot and time to target are undefined and left out of those means (each participant's mean "
+        "is over the trials that reached it; the counts are in the table of trials), so a condition that misses "
+        "more can look better on them than it is; f_RMS and jerk are over every trial."
+    )
+    parser = _Tables()
+    parser.feed(html_path.read_text())
+    name = {b: f"{b} ({s.labels[b]})" for b in blocks}
+    assert parser.tables[2] == [
+        ["", *name.values()],
+        ["S01", *["1 of 2 (1 missed)"] * 3],
+        ["all", *["1 of 2 (missed 1, 50 %)"] * 3],
+    ]

@@ -27,9 +27,12 @@ either value is non-finite are left out.
   assumes d roughly normal, which a sample of four cannot check.
 - Holm's step-down correction over a family of m tests (Holm 1979): with p sorted
   ascending, p̃_(i) = max_{j ≤ i} min(1, (m − j + 1) p_(j)); controls the family-wise error.
-- Effect sizes: the mean difference d̄ (in the metric's unit), Cohen's d_z = d̄ / s_d, and the
-  matched-pairs rank-biserial correlation r = (W⁺ − W⁻)/(W⁺ + W⁻) (Kerby 2014), each with a
-  seeded percentile bootstrap interval (pairs resampled with replacement).
+- Effect sizes (:func:`paired_comparison`): the mean difference d̄ (in the metric's unit) with its
+  paired Student-t interval (:func:`paired_difference`), Cohen's d_z = d̄ / s_d and the matched-pairs
+  rank-biserial correlation r = (W⁺ − W⁻)/(W⁺ + W⁻) (Kerby 2014), these two with a seeded percentile
+  bootstrap interval (pairs resampled with replacement). A percentile bootstrap of the mean covers
+  74–88 % instead of 95 % at 3–8 pairs of normal differences (it resamples from n values: too narrow),
+  which is why the mean difference's interval is the t interval.
 """
 
 from __future__ import annotations
@@ -289,8 +292,10 @@ def mean_rows(d: np.ndarray) -> np.ndarray:
 class PairedComparison:
     """Condition ``a`` against ``b`` on one metric, over the participants who have both.
 
-    d = a − b per participant. ``p_*_holm``: after Holm's correction over the report's family
-    (set by :func:`holm_family`; NaN until then)."""
+    d = a − b per participant. ``mean_diff_ci``: the paired Student-t 95 % interval of the mean difference
+    (:func:`paired_difference`); ``dz_ci``, ``rank_biserial_ci``: percentile bootstrap 95 % intervals, which
+    cover well under 95 % at a few pairs (module docstring). ``p_*_holm``: after Holm's correction over the
+    report's family (set by :func:`holm_family`; NaN until then)."""
 
     metric: str
     a: str
@@ -342,7 +347,7 @@ def paired_comparison(
     if n >= 2 and d.std(ddof=1) > 0:
         res_t = stats.ttest_rel(x, y)
         t, p_t = float(res_t.statistic), float(res_t.pvalue)
-    mean_ci = bootstrap_interval(d, mean_rows, seed=seed, n_boot=n_boot)[:2] if n >= 2 else nan2
+    mean_ci = paired_difference(x, y)[1:3]  # the paired t interval (module docstring); NaN below two pairs
     dz_ci = bootstrap_interval(d, cohen_dz_rows, seed=seed, n_boot=n_boot)[:2] if n >= 2 else nan2
     rb_ci = bootstrap_interval(d, rank_biserial_rows, seed=seed, n_boot=n_boot)[:2] if n >= 2 else nan2
     return PairedComparison(

@@ -660,12 +660,30 @@ class ParticipantFolder:
         if manifest is None:
             return 0
         for entry in manifest["trials"]:
-            if entry.get("meta", {}).get("extra", {}).get("study_step") == k:
+            extra = entry.get("meta", {}).get("extra", {})
+            if extra.get("study_step") == k:
                 file = entry["file"]
                 sha = file_sha256(self.block(step["block"]) / file)
-                self.append(trial_record(k, step, file, entry["meta"], sha256=sha, recovered=True))
+                more = _recovered_model_fields(done, step, extra)
+                self.append(trial_record(k, step, file, entry["meta"], sha256=sha, recovered=True, **more))
                 return 1
         return 0
+
+
+def _recovered_model_fields(done: list[dict[str, Any]], step: Mapping[str, Any], extra: Mapping[str, Any]) -> dict:
+    """The model fields of a recovered trial's line, as the run writes them (``model``, ``model_sha256`` where a person
+    model assisted, ``waited_for_model_s``): from the trial's own meta (``study_model``, ``study_model_sha256``), else
+    (a trial written before the meta held it) the digest for the trial's task that the model's last fit line records
+    (the run checks the file against it before every trial). The wait was not kept: None."""
+    model = extra.get("study_model")
+    more: dict[str, Any] = {"model": model, "waited_for_model_s": None}
+    digest = extra.get("study_model_sha256")
+    if digest is None and str(step.get("intent", "")).startswith("person:"):
+        fits = [r for r in done if r.get("kind") == "fit" and not r.get("failed") and r.get("model") == model]
+        digest = fits[-1].get("sha256", {}).get(step.get("task")) if fits else None
+    if digest is not None:
+        more["model_sha256"] = digest
+    return more
 
 
 def file_sha256(path: Path) -> str:

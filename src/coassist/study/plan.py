@@ -131,7 +131,12 @@ CALIBRATED = "calibrated"
 CALIBRATION_TRIALS_MAX = 10
 #: What an iterative study's rounds assist with: the network of Algorithm 4.1, or the person model.
 ITERATIVE_SOURCES = ("network", CALIBRATED)
-_NAME = re.compile(r"^[a-z0-9][a-z0-9_-]{0,31}$")
+_NAME = re.compile(r"[a-z0-9][a-z0-9_-]{0,31}")  # matched whole (fullmatch: "$" would let a trailing newline by)
+_STUDY_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
+#: Controllers that never read the intent (MG and its probe apply no effort toward any reference, IMP pulls
+#: toward the nominal plan x_ref,r only): a condition of one takes no ``intent`` but the default (two would run
+#: bit-for-bit the same trials under different names). A controller registered later is taken to read it.
+INTENT_FREE_CONTROLLERS = frozenset({"manual", "impedance", "manual-probe"})
 _MAX_CONDITIONS = 26  # labelled A … Z
 #: The ranges of the plan's numbers a study can use (module docstring), [s] unless said.
 MOTION_TIME_RANGE = (0.5, 120.0)  # a reach of the thesis takes 10-20 s
@@ -493,7 +498,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
     if "name" not in s:
         raise PlanError("study.name is missing (a short name: letters, digits, - and _)")
     name = s["name"]
-    if not isinstance(name, str) or not re.match(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$", name):
+    if not isinstance(name, str) or not _STUDY_NAME.fullmatch(name):
         raise PlanError(f"study.name must be 1-64 letters, digits, '-' or '_', got {name!r}")
     protocol = _choice(s.get("protocol", "comparison"), "study.protocol", PROTOCOLS, "protocol")
     world = _choice(s.get("world", PLAY), "study.world", study_worlds(), "study world")
@@ -704,7 +709,7 @@ def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Con
         name = c.get("name")
         if (
             not isinstance(name, str)
-            or not _NAME.match(name)
+            or not _NAME.fullmatch(name)
             or name in RESERVED_NAMES
             or name.startswith(("round-", "calibration-"))
         ):
@@ -713,7 +718,14 @@ def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Con
                 f"{sorted(RESERVED_NAMES)}, round-* or calibration-*), got {name!r}"
             )
         controller = _choice(c.get("controller"), f"{where}.controller", tuple(CONTROLLERS), "controller")
-        out.append(Condition(name, controller, _intent(c.get("intent", "nominal"), f"{where}.intent", base)))
+        intent = _intent(c.get("intent", "nominal"), f"{where}.intent", base)
+        if controller in INTENT_FREE_CONTROLLERS and intent != "nominal":
+            raise PlanError(
+                f"{where}.intent: controller {controller!r} does not use an intent (its trials are the same whatever "
+                f"the source), got {c.get('intent')!r}; leave intent out, or use a controller that reads it "
+                f"({', '.join(k for k in CONTROLLERS if k not in INTENT_FREE_CONTROLLERS)})"
+            )
+        out.append(Condition(name, controller, intent))
     names = [c.name for c in out]
     if len(set(names)) != len(names):
         dup = next(n for n in names if names.count(n) > 1)

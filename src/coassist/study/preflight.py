@@ -57,7 +57,7 @@ from typing import Any
 
 from coassist.config import CONTROL_PRESETS
 from coassist.scenario import intent_registry
-from coassist.study.design import blinding_labels
+from coassist.study.design import blinding_labels, latin_square_rows
 from coassist.study.plan import CALIBRATED, PlanError, StudyPlan, TrainingPlan
 from coassist.study.protocols import SEED_BAND, condition_names, participant_steps, trial_seed_base
 
@@ -67,6 +67,7 @@ __all__ = [
     "MAX_SESSION_HOURS",
     "SessionEstimate",
     "bytes_per_tick",
+    "counterbalance_warning",
     "preflight",
     "training_windows",
 ]
@@ -108,6 +109,11 @@ class SessionEstimate:
     training_bytes: int = 0
     s_per_window: float | None = None
     models: dict[str, float] = field(default_factory=dict)
+    #: what the plan allows but should not be run as it is (:func:`counterbalance_warning`), shown as "warning: …"
+    warnings: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "warnings", tuple(self.warnings))  # a list as read back from study.json
 
     def lines(self) -> list[str]:
         """What ``study init`` and ``study run`` show before the first trial."""
@@ -125,6 +131,7 @@ class SessionEstimate:
         if self.training_bytes:
             mem += f", {_mb(self.training_bytes)} for the largest training"
         out.append(mem)
+        out.extend(f"warning: {w}" for w in self.warnings)
         return out
 
     def to_json(self) -> dict[str, Any]:
@@ -139,7 +146,31 @@ class SessionEstimate:
             "training_bytes": int(self.training_bytes),
             "s_per_window": self.s_per_window,
             "models": {k: round(v, 1) for k, v in self.models.items()},
+            **({"warnings": list(self.warnings)} if self.warnings else {}),
         }
+
+
+def counterbalance_warning(plan: StudyPlan) -> str | None:
+    """One line where ``[study] participants`` is not a whole number of the balanced Latin square's rows (n rows
+    for an even number n of blinded conditions, 2n for an odd n: :func:`coassist.study.design.latin_square_rows`):
+    participants take the rows in turn, so only a whole number of squares puts every condition equally often in
+    every position and every pair of conditions next to each other equally often. None where it is (or where
+    nothing is counterbalanced: fewer than two conditions)."""
+    n = len(condition_names(plan))
+    if n < 2:
+        return None
+    rows = len(latin_square_rows(n))
+    k = plan.participants
+    if k % rows == 0:
+        return None
+    near = [m for m in (k // rows * rows, (k // rows + 1) * rows) if m > 0]
+    square = f"{n} rows and their mirror, {n} being odd" if n % 2 else f"{n} rows, {n} being even"
+    return (
+        f"study.participants = {k} is not a multiple of {rows}, the rows of the balanced Latin square of {n} "
+        f"conditions ({square}): their order is not counterbalanced (every condition equally often in every "
+        f"position, every pair next to each other equally often) unless the number of participants who finish "
+        f"is a multiple of {rows}; plan {' or '.join(map(str, near))}"
+    )
 
 
 def _duration(seconds: float) -> str:
@@ -457,6 +488,7 @@ def preflight(plan: StudyPlan) -> SessionEstimate:
         training_bytes=training_bytes,
         s_per_window=s_per_window,
         models=train_s,
+        warnings=tuple(w for w in (counterbalance_warning(plan),) if w),
     )
     if expected > 3600 * MAX_SESSION_HOURS:
         raise PlanError(

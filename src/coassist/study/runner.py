@@ -330,6 +330,8 @@ class ParticipantRun:
             "study_position": step["position"],
             "study_practice": step["practice"],
             "study_model": model_name,
+            # the person model's file the trial ran with: a trial recovered after a kill rebuilds its line from it
+            **({"study_model_sha256": model_sha} if model_sha is not None else {}),
             "study_operator": None
             if operator is None
             else simulated_profile(operator, plan.seed, plan.population).name,

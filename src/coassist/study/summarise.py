@@ -8,8 +8,8 @@
   (or round), each participant's value the mean over their measured trials (practice trials
   left out); pooled, the mean and sample sd (ddof = 1) of those means over participants;
 - paired comparisons between every two conditions (:mod:`coassist.analysis.paired`: Wilcoxon
-  signed-rank and paired t, Holm-corrected over the measures × pairs family, effect sizes
-  with seeded bootstrap intervals), and the same for the raw TLX and each Likert item (their
+  signed-rank and paired t, Holm-corrected over the measures × pairs family, the mean difference
+  with its paired t interval, d_z and r), and the same for the raw TLX and each Likert item (their
   own family);
 - order effects: the position's F test beside condition and participant, and the means per
   condition × position (:func:`coassist.study.stats.order_effect`);
@@ -20,6 +20,11 @@
   arm measured from the probe's trials or assumed, K̂ and Ĉ with their standard errors, the
   file's SHA-256), what it was told (``Told``) and which blocks' trials ran with it (by that
   hash), the failed attempts with their reasons;
+- per participant × block and pooled per block, the measured trials that reached the target and those
+  that missed (σ, overshoot and time to target are undefined for a miss: left out of those means), and
+  per measure the trials its mean is over (:class:`~coassist.study.summary.TrialCount`);
+- what each compared condition was: its controller, intent and, for a folder, the hash ``study init``
+  recorded (:class:`~coassist.study.summary.ConditionInfo`);
 - what a sample this size can and cannot show (:func:`sample_limits`), said plainly.
 
 The folder is read as evidence: the participant table and every participant's log are
@@ -53,6 +58,7 @@ from coassist.study.summary import (
     ArmFit,
     Calibration,
     Collection,
+    ConditionInfo,
     CriterionCheck,
     ForceTrace,
     OrderEffect,
@@ -62,6 +68,7 @@ from coassist.study.summary import (
     QuestionnaireSummary,
     StudySummary,
     TrainedModel,
+    TrialCount,
     finite_number,
 )
 
@@ -153,11 +160,56 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str], form: For
             "trials": per_trial,
             "means": {k: _nanmean(m[k] for m in per_trial) for k, *_ in MEASURES},
             "models": [t.meta.extra.get("study_model") for t in trials],
+            "count": _count(per_trial),
             # a block cut short (the participant stopped mid-condition) has fewer trials, of other tasks: its
             # mean is not paired with the other blocks' and stays out of the pooled numbers
             "partial": len(trials) < planned.get(b, 0),
         }
     return data
+
+
+def _count(per_trial: list[dict[str, float]]) -> TrialCount:
+    """A block's trials counted: how many, how many reached the target (a finite time to target), and per measure
+    how many gave a finite value (what its mean is over)."""
+    return TrialCount(
+        n=len(per_trial),
+        reached=sum(1 for m in per_trial if math.isfinite(m["time_to_target"])),
+        covered={k: sum(1 for m in per_trial if math.isfinite(m[k])) for k, *_ in MEASURES},
+    )
+
+
+def _total(counts: list[TrialCount]) -> TrialCount:
+    """Counts summed (a block over participants)."""
+    return TrialCount(
+        n=sum(c.n for c in counts),
+        reached=sum(c.reached for c in counts),
+        covered={k: sum(c.covered.get(k, 0) for c in counts) for k, *_ in MEASURES},
+    )
+
+
+def _missed_note(totals: Mapping[str, TrialCount]) -> tuple[str, ...]:
+    """The line that counts the measured trials that never reached the target (none: no line)."""
+    missed = {b: c for b, c in totals.items() if c.missed}
+    if not missed:
+        return ()
+    n, k = sum(c.n for c in totals.values()), sum(c.missed for c in missed.values())
+    where = "; ".join(f"{b}: {c.missed} of {c.n}" for b, c in missed.items())
+    return (
+        f"{k} of {n} measured trials never reached the target ({where}): their σ, overshoot and time to target are "
+        "undefined and left out of those means (each participant's mean is over the trials that reached it; the "
+        "counts are in the table of trials), so a condition that misses more can look better on them than it is; "
+        "f_RMS and jerk are over every trial.",
+    )
+
+
+def _conditions(study: StudyFolder, plan) -> dict[str, ConditionInfo]:
+    """What each compared condition was (the comparison protocol's, from the plan; the others: none): controller,
+    intent and, for a folder, the hash ``study init`` recorded of it."""
+    hashes = study.record.get("models") or {}
+    return {
+        c.name: ConditionInfo(controller=c.controller, intent=c.intent, intent_sha256=hashes.get(c.intent))
+        for c in plan.conditions
+    }
 
 
 def _fit_summary(rec: dict[str, Any], progress: list[dict[str, Any]]) -> PersonModelFit:
@@ -274,8 +326,9 @@ def sample_limits(n: int, n_tests: int, simulated: bool) -> list[str]:
         )
     lines.append(
         "What it can show: whether the differences point the same way for every participant (the lines), "
-        "and how large they are, with bootstrap intervals that are wide at this size (and rest on so few "
-        "distinct resamples that their ends are coarse)."
+        "and how large they are: the mean difference with its paired t interval (95 % if the differences are "
+        "roughly normal). d_z and r are shown without an interval: a percentile bootstrap of so few pairs covers "
+        "far less than it claims (74–88 % for a nominal 95 % at 3–8 participants)."
     )
     lines.append(
         "What it cannot show: that a result holds for other people (the sample is small and not drawn at "
@@ -309,6 +362,8 @@ def summarise_study(folder: str | Path) -> StudySummary:
         pid: {b: d["blocks"][b]["means"] for b in blocks if b in d["blocks"] and b not in partial[pid]}
         for pid, d in measured.items()
     }
+    counts = {pid: {b: measured[pid]["blocks"][b]["count"] for b in means} for pid, means in per_participant.items()}
+    totals = {b: _total([c[b] for c in counts.values() if b in c]) for b in blocks}
     pooled: dict[str, dict[str, PooledMeasure]] = {}
     for b in blocks:
         pooled[b] = {}
@@ -389,6 +444,7 @@ def summarise_study(folder: str | Path) -> StudySummary:
                 answers=d["answers"],
                 checks=tuple(d["checks"]),
                 person_models=tuple(d["fits"]),
+                trials=counts.get(pid, {}),
             )
             for pid, d in participants.items()
         },
@@ -405,6 +461,7 @@ def summarise_study(folder: str | Path) -> StudySummary:
         order_effects=order,
         simulated=simulated,
         limits=tuple(sample_limits(len(per_participant), len(comparisons), simulated))
+        + _missed_note(totals)
         + _partial_note({pid: bs for pid, bs in partial.items() if bs}),
         collections={
             pid: {
@@ -418,6 +475,8 @@ def summarise_study(folder: str | Path) -> StudySummary:
             for pid, d in participants.items()
         },
         models=_models(study, participants),
+        conditions=_conditions(study, plan),
+        trials=totals,
     )
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -29,6 +29,7 @@ __all__ = [
     "ArmFit",
     "Calibration",
     "Collection",
+    "ConditionInfo",
     "CriterionCheck",
     "ForceTrace",
     "OrderEffect",
@@ -38,6 +39,7 @@ __all__ = [
     "QuestionnaireSummary",
     "StudySummary",
     "TrainedModel",
+    "TrialCount",
     "finite_number",
 ]
 
@@ -246,11 +248,64 @@ class PersonModelFit:
 
 
 @dataclass(frozen=True)
+class TrialCount:
+    """The measured trials of one block (one participant's, or all participants' summed): ``n`` trials, ``reached``
+    of them entered the target's ε-ball (a finite time to target), ``missed`` = n − reached never did, and
+    ``covered``: per measure, how many trials gave it a finite value, the trials its mean is over (σ, overshoot and
+    time to target are undefined for a trial that missed the target: left out of their means)."""
+
+    n: int
+    reached: int
+    covered: Mapping[str, int] = field(default_factory=dict)
+
+    @property
+    def missed(self) -> int:
+        return self.n - self.reached
+
+    @property
+    def miss_rate(self) -> float | None:
+        return self.missed / self.n if self.n else None
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "n": self.n,
+            "reached": self.reached,
+            "missed": self.missed,
+            "miss_rate": self.miss_rate,
+            "covered": dict(self.covered),
+        }
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> TrialCount:
+        return cls(n=int(d["n"]), reached=int(d["reached"]), covered={k: int(v) for k, v in d["covered"].items()})
+
+
+@dataclass(frozen=True)
+class ConditionInfo:
+    """What a compared condition was, as the plan set it: its ``controller``
+    (:data:`coassist.control.presets.CONTROLLERS`), its ``intent`` (a named source, ``calibrated``: the
+    participant's own person model, or the absolute path of a folder) and, for a folder, ``intent_sha256``: what
+    ``study init`` recorded of it (a model's ``weights_sha256``, a calibration's marker file's SHA-256)."""
+
+    controller: str
+    intent: str
+    intent_sha256: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return {"controller": self.controller, "intent": self.intent, "intent_sha256": self.intent_sha256}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> ConditionInfo:
+        return cls(controller=str(d["controller"]), intent=str(d["intent"]), intent_sha256=d.get("intent_sha256"))
+
+
+@dataclass(frozen=True)
 class ParticipantRow:
     """One participant: their number and Latin-square row, how far they got, the block ``order`` they met,
     their ``means`` (block → measure → mean over their measured trials, SI units; None where no trial
-    gave a finite value), their questionnaire ``answers`` (block → item → answer), the criterion checks
-    and the person models fitted."""
+    gave a finite value), their questionnaire ``answers`` (block → item → answer), the criterion checks,
+    the person models fitted, and ``trials``: block → :class:`TrialCount` (the trials each mean is over, those
+    that missed the target)."""
 
     number: int
     row: int
@@ -263,6 +318,7 @@ class ParticipantRow:
     answers: Mapping[str, Mapping[str, int]]
     checks: tuple[CriterionCheck, ...]
     person_models: tuple[PersonModelFit, ...]
+    trials: Mapping[str, TrialCount] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -277,6 +333,7 @@ class ParticipantRow:
             "answers": {b: dict(a) for b, a in self.answers.items()},
             "checks": [c.to_json() for c in self.checks],
             "person_models": [f.to_json() for f in self.person_models],
+            "trials": {b: c.to_json() for b, c in self.trials.items()},
         }
 
     @classmethod
@@ -293,6 +350,8 @@ class ParticipantRow:
             answers={b: dict(a) for b, a in d["answers"].items()},
             checks=tuple(CriterionCheck.from_json(c) for c in d["checks"]),
             person_models=tuple(PersonModelFit.from_json(f) for f in d["person_models"]),
+            # a summary written before the trials were counted has none
+            trials={b: TrialCount.from_json(c) for b, c in d.get("trials", {}).items()},
         )
 
 
@@ -422,7 +481,9 @@ class StudySummary:
     ``blocks``: the conditions in the plan's order, or the rounds (``round-k``) of the iterative
     protocol; ``labels``: the blinding key (condition → label on the page). Mappings are keyed by
     participant id, block and measure (:data:`~coassist.study.measures.MEASURES`' keys) in the
-    order the report lists them."""
+    order the report lists them. ``conditions``: what each compared condition was (the comparison protocol's;
+    empty for the others, whose blocks the protocol sets); ``trials``: block → :class:`TrialCount` over the
+    participants whose means are pooled (the trials that reached the target, and the measures' counts)."""
 
     study: str
     protocol: str
@@ -442,6 +503,8 @@ class StudySummary:
     limits: tuple[str, ...]
     collections: Mapping[str, Mapping[str, Collection]]
     models: Mapping[str, Mapping[str, TrainedModel]]
+    conditions: Mapping[str, ConditionInfo] = field(default_factory=dict)
+    trials: Mapping[str, TrialCount] = field(default_factory=dict)
 
     def name(self, block: str) -> str:
         """A block as the report names it: ``block (label)``, or the block alone where it has no label."""
@@ -469,13 +532,16 @@ class StudySummary:
             "limits": list(self.limits),
             "collections": {pid: {b: c.to_json() for b, c in cs.items()} for pid, cs in self.collections.items()},
             "models": {pid: {n: m.to_json() for n, m in ms.items()} for pid, ms in self.models.items()},
+            "conditions": {b: c.to_json() for b, c in self.conditions.items()},
+            "trials": {b: c.to_json() for b, c in self.trials.items()},
         }
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> StudySummary:
         """The summary back from :meth:`to_json`'s data (``summary.json`` as read); a key missing at the top
         is a ValueError naming it."""
-        missing = [f.name for f in fields(cls) if f.name not in d]
+        required = [f for f in fields(cls) if f.default is MISSING and f.default_factory is MISSING]
+        missing = [f.name for f in required if f.name not in d]  # a key added since (a default) may be absent
         if missing:
             raise ValueError(f"a study summary without {missing}: not a summary.json of coassist study report")
         return cls(
@@ -499,6 +565,8 @@ class StudySummary:
                 pid: {b: Collection.from_json(c) for b, c in cs.items()} for pid, cs in d["collections"].items()
             },
             models={pid: {n: TrainedModel.from_json(m) for n, m in ms.items()} for pid, ms in d["models"].items()},
+            conditions={b: ConditionInfo.from_json(c) for b, c in d.get("conditions", {}).items()},
+            trials={b: TrialCount.from_json(c) for b, c in d.get("trials", {}).items()},
         )
 
 
