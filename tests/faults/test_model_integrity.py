@@ -90,6 +90,20 @@ def test_a_sidecar_without_a_digest_key_is_refused_in_one_line(model_dir, tmp_pa
     assert "\n" not in str(err.value) and f"{key!r} must be a hex digest" in str(err.value)
 
 
+def test_a_sidecar_too_large_is_refused_as_that(model_dir, tmp_path):
+    """The size refusal is said as it is (it had been wrapped as "malformed JSON: …" by the JSON refusals' handler)."""
+    from coassist.intent.model import MAX_SIDECAR_BYTES
+
+    folder = Path(shutil.copytree(model_dir, tmp_path / "m"))
+    with open(folder / "model.json", "r+b") as f:
+        f.truncate(MAX_SIDECAR_BYTES + 1)  # sparse: nothing read before the size is
+    with pytest.raises(ModelFileError) as err:
+        load_model(folder)
+    assert str(err.value) == (
+        f"{folder / 'model.json'}: larger than {MAX_SIDECAR_BYTES // 2**20} MiB: not a model sidecar"
+    )
+
+
 @pytest.mark.parametrize("key, value", [("n_dof", float("nan")), ("dt", float("inf")), ("foo", float("-inf"))])
 def test_a_sidecar_holding_nan_or_infinity_is_refused_in_one_line(model_dir, tmp_path, key, value):
     """``"n_dof": NaN`` written by hand: once a bare ValueError from hashing the sidecar (allow_nan=False), and

@@ -285,15 +285,15 @@ def test_realtime_intent_without_a_network_says_it_only_paces_the_world():
     assert said[1] == said[0][: -len(note)]
 
 
-def test_an_arm_moving_when_the_drive_starts_is_ramped_down_from_its_velocity():
-    """drive reads the world before the run (to zero the sensor) and hands that state to the tick: the safety
-    layer's acceleration ramp starts from the measured joint velocity, so an arm moving at 0.4 rad/s on every joint
-    is slowed by at most margin·a·dt a tick, not told to stop in one (it had started from q̇ = 0, whatever the arm
-    was doing: a 0.4 rad/s step in 8 ms, unflagged)."""
+def test_an_arm_read_moving_before_the_run_is_not_told_to_keep_moving():
+    """drive reads the world before the run (to zero the sensor; a real arm's person then confirms the limits): a
+    velocity read then may be stale by tick 0, so the safety layer's ramp starts from rest, never from it. Seeded from
+    that read (as tried in review), an arm read at 0.4 rad/s and at rest by tick 0, with nobody pushing, was sent
+    0.34 rad/s on every joint and driven to 0.18 rad/s."""
     from dataclasses import replace
 
-    class MovingAtStart(MujocoUR5World):
-        """MuJoCo's UR5, read once as moving (an arm still coasting when the run starts); the commands it is sent."""
+    class ReadMovingFirst(MujocoUR5World):
+        """MuJoCo's UR5 at rest, read once as moving (a stale first read); the commands it is sent."""
 
         def __init__(self) -> None:
             super().__init__("handle", seed=0)
@@ -308,13 +308,13 @@ def test_an_arm_moving_when_the_drive_starts_is_ramped_down_from_its_velocity():
             self.sent.append(None if command.qd is None else np.array(command.qd))
             super().apply(command)
 
-    world = MovingAtStart()
+    world = ReadMovingFirst()
     config = DriveConfig(world="ur", controller="manual", task="linear", time_limit=0.1)
     try:
-        trial = drive(config, world=world, operator=ScriptedForce.constant((0.0,) * 6))
+        drive(config, world=world, operator=ScriptedForce.constant((0.0,) * 6))
     finally:
         world.close()
     step = config.limits.margin * config.limits.joint_acceleration * config.dt  # 0.98 · 8 rad/s² · 8 ms
-    first = world.sent[0]
-    np.testing.assert_allclose(first, np.full(6, 0.4 - step), rtol=0, atol=1e-9)
-    assert Fault(int(trial.fault[0])) & Fault.JOINT_ACCELERATION_LIMIT
+    sent = [c for c in world.sent if c is not None]  # (the close's stop carries no velocity)
+    assert len(sent) > 5 and np.abs(sent[0]).max() <= step  # one step from rest at most, not 0.4 − step
+    assert max(np.abs(c).max() for c in sent) < 0.01  # at rest with nobody pushing: it stays so

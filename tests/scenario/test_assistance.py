@@ -68,7 +68,7 @@ def test_a_person_model_says_whose_arm_and_paths(person_model):
         "(alice: arm measured, 3 demonstrations (2 left, 1 right; left from 2 paths only, right from 1 path only))"
     )
     bob = assistance_line("cooperative", person_model, source, user="bob", path=LINE)
-    assert "bob: arm ASSUMED (their trials carried no probe), 3 demonstrations" in bob
+    assert "bob: arm ASSUMED (the typical arm: their trials measured none usable), 3 demonstrations" in bob
     # another plan: the model serves only the plan it was recorded on (the source's own test)
     moved = LINE + [0.0, 0.05]
     assert "recorded on another plan than this run's: the present estimate with their arm" in assistance_line(

@@ -120,24 +120,26 @@ def test_a_name_with_a_trailing_newline_is_refused(edit, line):
     assert str(err.value) == line
 
 
-@pytest.mark.parametrize("controller", ["manual", "impedance", "manual-probe"])
-def test_an_intent_on_a_controller_that_reads_none_is_refused(controller):
-    """MG, its probe and IMP never read the intent: two such conditions differing in intent only would run the
-    same trials under two names. The default intent (written or not) is accepted."""
+@pytest.mark.parametrize("controller", ["manual", "impedance"])
+def test_two_conditions_the_person_cannot_tell_apart_are_refused(controller):
+    """MG and IMP never read the intent: two conditions of one that differ in intent only move the person the same
+    (only the logged prediction and its e_RMS differ), one condition under two names. One such condition with a
+    source is accepted: its e_RMS is the source's, measured with no assistance."""
     text = _plan(timing="motion_time = 3.0").replace(
-        'controller = "manual"', f'controller = "{controller}"\nintent = "constant-velocity"'
+        'controller = "manual"', 'controller = "manual"\nintent = "constant-velocity"'
     )
+    assert [c.intent for c in plan_from_text(text, ".").conditions] == ["nominal", "nominal", "constant-velocity"]
+    twin = f'\n[[condition]]\nname = "twin"\ncontroller = "{controller}"\nintent = "present"\n'
+    at = _plan(timing="motion_time = 3.0").index("[trials]")
+    base = _plan(timing="motion_time = 3.0")
     with pytest.raises(PlanError) as err:
-        plan_from_text(text, ".")
+        plan_from_text(base[:at] + twin + "\n" + base[at:], ".")
+    i = 1 if controller == "impedance" else 2
     assert str(err.value) == (
-        f"condition[2].intent: controller '{controller}' does not use an intent (its trials are the same whatever "
-        "the source), got 'constant-velocity'; leave intent out, or use a controller that reads it (cooperative, "
-        "cooperative-arbitrated, cooperative-damped)"
+        f"condition[{i}] and condition[3] give the person the same motion: controller '{controller}' reads no intent "
+        "('nominal' and 'present' differ only in the prediction logged); keep one, or use a controller that reads it "
+        "(cooperative, cooperative-arbitrated, cooperative-damped)"
     )
-    plain = _plan(timing="motion_time = 3.0").replace(
-        'controller = "manual"', 'controller = "manual"\nintent = "nominal"'
-    )
-    assert [c.intent for c in plan_from_text(plain, ".").conditions] == ["nominal"] * 3
 
 
 def test_a_model_the_plan_names_must_exist(tmp_path):

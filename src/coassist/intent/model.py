@@ -339,6 +339,8 @@ def read_sidecar(folder: str | os.PathLike[str]) -> dict[str, Any]:
         if path.stat().st_size > MAX_SIDECAR_BYTES:
             raise _fail(path, f"larger than {MAX_SIDECAR_BYTES // 2**20} MiB: not a model sidecar")
         meta = json.loads(path.read_bytes().decode("utf-8"), parse_constant=no_constant)  # save_model writes none
+    except ModelFileError:  # (a ValueError too: the size refusal, not to be called malformed JSON)
+        raise
     except RecursionError:
         raise _fail(path, "JSON nested too deeply: not a model sidecar") from None
     except UnicodeDecodeError as exc:

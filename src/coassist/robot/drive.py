@@ -630,7 +630,6 @@ def _prepare(
             # real arm sees no such box (the path-hypotheses source then is the present estimate alone)
             tell_obstacles=told_task,
             told_obstacles=None if config.scene is None else config.scene.told(),
-            state=state0,  # an arm already moving at the start: the safety layer ramps from its velocity
             kinematics=kin,
             tick_config=TickConfig(dofs=dofs),
             extra={

@@ -323,7 +323,6 @@ def build_episode(
     extra: Mapping[str, Any] | None = None,
     tell_obstacles: bool = True,
     told_obstacles: Sequence[tuple[tuple[float, float], tuple[float, float]]] | None = None,
-    state: RobotState | None = None,
 ) -> Episode:
     """The tick of ``world``'s stages reset for ``task`` and the termination rule (module docstring, step 2).
 
@@ -339,10 +338,6 @@ def build_episode(
     told_obstacles : the boxes the robot is told of instead (a lab's scene file,
     :mod:`coassist.scenario.scene`), each ((x, y) centre, (width, depth) size) [m] already in the plan's
     frame (an arm's base frame); None: as ``tell_obstacles`` says.
-    state : the world's state as read before the run (a drive reads it to zero the sensor): the safety
-    layer's acceleration ramp starts from its joint velocity (:meth:`ControlTick.reset
-    <coassist.runtime.tick.ControlTick.reset>`: an arm already moving is not told to stop in one tick);
-    None: from rest. Not read here: a simulated world's read may draw its sensor noise.
     """
     tick = ControlTick(
         controller, intent, wrench, safety, command_space=world.command_space, kinematics=kinematics, config=tick_config
@@ -375,7 +370,7 @@ def build_episode(
         obstacles=told,  # type: ignore[arg-type]
         seed=labels.seed,
     )
-    tick.reset(Plan(plan, start_pose), context, state)
+    tick.reset(Plan(plan, start_pose), context)
     t_done = float(task.planner.end_time) if intent_end_time is None else max(task.planner.end_time, intent_end_time)
     termination = TargetDwell(target, arrive_radius, int(math.ceil(float(dwell) / dt)), int(math.ceil(t_done / dt)))
     return Episode(

@@ -302,11 +302,11 @@ class ControlTick:
         """Start a run: the plan's grids, the intent, a zero admittance state, the safety layer, and
         the controller when it keeps state between ticks (an online-α arbitration).
 
-        state : the world's state at the start, if the caller has read it. In a joint-velocity world
-        the safety layer's acceleration ramp then starts from its measured joint velocity
-        (``SafetyLayer.reset(qd)``), so an arm already moving at tick 0 is not told to stop in one
-        step; without a state, or with a measured qd that is no finite vector, it starts from rest.
-        (An arm at rest measures q̇ = 0, where both agree exactly.)"""
+        The safety layer's acceleration ramp starts from rest (q̇⁻ = 0), whatever ``state`` says: a
+        velocity read before the run (before a person confirmed the limits, say) may be stale, and one
+        read wrong would seed commands of a motion the arm is not making; braking from a motion is the
+        direction a wrong start errs safely in. (Seeding it from a measured q̇ was tried and removed in
+        review: an arm read coasting, then at rest by tick 0, was driven to 0.18 rad/s.)"""
         if not isinstance(plan, Plan):
             raise ValueError(f"plan must be a Plan, got {type(plan).__name__}")
         d = self.d
@@ -332,13 +332,7 @@ class ControlTick:
             controller_reset()
         self.intent.reset(context)
         self.wrench.reset()
-        moving = None
-        if state is not None and self.command_space == "joint_velocity":
-            moving = finite_vector(getattr(state, "qd", None), int(self.kinematics.n_joints))
-        if moving is None:
-            self.safety.reset()
-        else:
-            self.safety.reset(moving)
+        self.safety.reset()
         self._za = np.zeros(2 * d)
         self._R_start = _spatial.rotation_matrix(start[3:6])
         self._J = None

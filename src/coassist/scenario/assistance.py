@@ -126,7 +126,11 @@ def _person(intent: str, source: Any, user: str, path: np.ndarray | None) -> str
     if not isinstance(source, PersonPathsIntent) or not (source.arms or source.paths):
         return name
     arm = source.arms.get(user, source.default_arm)
-    how = "arm measured" if arm.method == "probe-iv" else "arm ASSUMED (their trials carried no probe)"
+    how = (
+        "arm measured"
+        if arm.method == "probe-iv"
+        else "arm ASSUMED (the typical arm: their trials measured none usable)"
+    )
     model = source.paths.get(user, source.default_paths)
     if model is None:
         return f"{name} ({user}: {how}, no demonstrations: the present estimate)"

@@ -134,8 +134,9 @@ ITERATIVE_SOURCES = ("network", CALIBRATED)
 _NAME = re.compile(r"[a-z0-9][a-z0-9_-]{0,31}")  # matched whole (fullmatch: "$" would let a trailing newline by)
 _STUDY_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
 #: Controllers that never read the intent (MG and its probe apply no effort toward any reference, IMP pulls
-#: toward the nominal plan x_ref,r only): a condition of one takes no ``intent`` but the default (two would run
-#: bit-for-bit the same trials under different names). A controller registered later is taken to read it.
+#: toward the nominal plan x_ref,r only): the person moves the same whatever the source (its rows are logged, and
+#: scored as e_RMS, only), so two conditions of one that differ only in the intent are refused. A controller
+#: registered later is taken to read it.
 INTENT_FREE_CONTROLLERS = frozenset({"manual", "impedance", "manual-probe"})
 _MAX_CONDITIONS = 26  # labelled A … Z
 #: The ranges of the plan's numbers a study can use (module docstring), [s] unless said.
@@ -719,20 +720,25 @@ def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Con
             )
         controller = _choice(c.get("controller"), f"{where}.controller", tuple(CONTROLLERS), "controller")
         intent = _intent(c.get("intent", "nominal"), f"{where}.intent", base)
-        if controller in INTENT_FREE_CONTROLLERS and intent != "nominal":
-            raise PlanError(
-                f"{where}.intent: controller {controller!r} does not use an intent (its trials are the same whatever "
-                f"the source), got {c.get('intent')!r}; leave intent out, or use a controller that reads it "
-                f"({', '.join(k for k in CONTROLLERS if k not in INTENT_FREE_CONTROLLERS)})"
-            )
         out.append(Condition(name, controller, intent))
     names = [c.name for c in out]
     if len(set(names)) != len(names):
         dup = next(n for n in names if names.count(n) > 1)
         raise PlanError(f"condition: the name {dup!r} is used twice")
-    pairs = [(c.controller, c.intent) for c in out]
-    if len(set(pairs)) != len(pairs):
-        raise PlanError("condition: two conditions have the same controller and intent (nothing to compare)")
+    # what the person gets: a controller that reads no intent moves the same whatever the source (only the logged
+    # prediction, and its e_RMS, differ): two such conditions are one condition under two names for the person
+    felt = [(c.controller, None if c.controller in INTENT_FREE_CONTROLLERS else c.intent) for c in out]
+    for j, key in enumerate(felt):
+        i = felt.index(key)
+        if i == j:
+            continue
+        if out[i].intent == out[j].intent:
+            raise PlanError("condition: two conditions have the same controller and intent (nothing to compare)")
+        raise PlanError(
+            f"condition[{i}] and condition[{j}] give the person the same motion: controller {key[0]!r} reads no "
+            f"intent ({out[i].intent!r} and {out[j].intent!r} differ only in the prediction logged); keep one, or "
+            f"use a controller that reads it ({', '.join(k for k in CONTROLLERS if k not in INTENT_FREE_CONTROLLERS)})"
+        )
     return tuple(out)
 
 
