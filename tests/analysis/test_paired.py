@@ -17,6 +17,7 @@ from coassist.analysis.paired import (
     cohen_dz_rows,
     gain_share,
     holm,
+    holm_family,
     mean_rows,
     paired_comparison,
     paired_difference,
@@ -216,6 +217,46 @@ def test_holm_equals_the_step_down_by_hand():
     assert holm(p)[:4] == pytest.approx([0.03, 0.06, 0.06, 0.02])
     assert math.isnan(holm(p)[4])
     assert holm([0.5, 0.6]) == pytest.approx([1.0, 1.0])  # capped at 1
+
+
+def test_the_wilcoxon_floor_and_n_are_the_non_zero_pairs():
+    """Five pairs, one with no difference: scipy's default zero_method "wilcox" drops it, so the test ranks four,
+    and its smallest two-sided p is 2/2^4 = 0.125, not 2/2^5 = 0.0625 (what the comparison claimed before). The four
+    differences +1, +2, +1, +1 all point one way: of the 2^4 sign patterns only all + and all − have min(W+, W−) = 0,
+    p = 2/16 = 0.125, the floor itself."""
+    a = {"S01": 6.0, "S02": 6.0, "S03": 5.0, "S04": 7.0, "S05": 4.0}
+    b = {"S01": 5.0, "S02": 4.0, "S03": 4.0, "S04": 6.0, "S05": 4.0}
+    c = paired_comparison("likert_0", "A", "B", a, b, n_boot=200)
+    assert (c.n, c.n_wilcoxon) == (5, 4)  # the mean difference and the t test are over the five pairs
+    assert c.smallest_p_wilcoxon == 2 / 2**4 == 0.125
+    assert c.p_wilcoxon == pytest.approx(2 / 16, abs=1e-12) and c.wilcoxon_w == 0.0
+    assert c.p_wilcoxon == pytest.approx(
+        stats.wilcoxon(list(a.values()), list(b.values()), zero_method="wilcox").pvalue
+    )
+    assert c.mean_diff == pytest.approx(5 / 5)  # (1 + 2 + 1 + 1 + 0) / 5: the zero counts here
+    # no zero: the floor is of every pair (2/2^6), and no difference at all: no test, no floor
+    assert paired_comparison("f_rms", "a", "b", A, B, n_boot=200).n_wilcoxon == 6
+    same = paired_comparison("f_rms", "a", "b", {"S01": 1.0, "S02": 2.0}, {"S01": 1.0, "S02": 2.0})
+    assert (same.n, same.n_wilcoxon) == (2, 0) and math.isnan(same.smallest_p_wilcoxon) and math.isnan(same.p_wilcoxon)
+
+
+def test_holm_family_counts_only_the_comparisons_with_a_p_value():
+    """Four comparisons, one with no difference at all (no Wilcoxon p, no t p: NaN): Holm's m is 3, not 4. With p
+    0.01, 0.04, 0.03 by hand: 0.01 × 3 = 0.03, 0.03 × 2 = 0.06, 0.04 × 1 = 0.04 → max(0.06, 0.04) = 0.06 (m = 4
+    would give 0.04, 0.09, 0.09)."""
+    from dataclasses import replace
+
+    base = paired_comparison("f_rms", "a", "b", A, B, n_boot=200)
+    none = paired_comparison("f_rms", "a", "c", {"S01": 1.0, "S02": 2.0}, {"S01": 1.0, "S02": 2.0})
+    assert math.isnan(none.p_wilcoxon) and math.isnan(none.p_t)
+    family = [replace(base, p_wilcoxon=p, p_t=p) for p in (0.01, 0.04)] + [
+        none,
+        replace(base, p_wilcoxon=0.03, p_t=0.03),
+    ]
+    out = holm_family(family)
+    for got in ([c.p_wilcoxon_holm for c in out], [c.p_t_holm for c in out]):
+        assert got[0] == pytest.approx(0.03) and got[1] == pytest.approx(0.06) and got[3] == pytest.approx(0.06)
+        assert math.isnan(got[2])
 
 
 def test_rank_biserial_drops_zeros_and_averages_ties():

@@ -4,6 +4,7 @@ difference against the paired t interval by hand (the other paired statistics: t
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -72,3 +73,53 @@ def test_what_the_sample_can_show_names_the_t_interval_not_wide_bootstraps():
         "than it claims (74–88 % for a nominal 95 % at 3–8 participants)."
     )
     assert not any("bootstrap intervals that are wide" in line for line in lines)
+
+
+def test_the_limits_are_over_the_comparisons_own_n_and_holms_m_counts_the_tests_that_ran():
+    """Two comparisons over four participants and one over three (a participant without one of its conditions)
+    whose differences are all the same (no paired t p): the limits give 3 to 4 participants, 2/2^3 = 0.25 and
+    2/2^4 = 0.125, and Holm's m is the two comparisons with a t p, not three. Before, the limits counted everyone
+    with a whole block, and m every comparison."""
+    from coassist.study.summarise import comparison_limits
+
+    a = {"S01": 10.0, "S02": 12.0, "S03": 11.0, "S04": 13.5}
+    b = {"S01": 9.0, "S02": 11.8, "S03": 8.0, "S04": 13.3}
+    four = paired_comparison("f_rms", "A", "B", a, b, n_boot=200)
+    other = paired_comparison("jerk", "A", "B", a, b, n_boot=200)
+    three = paired_comparison("f_rms", "A", "C", a, {"S01": 9.0, "S02": 11.0, "S03": 10.0}, n_boot=200)
+    assert (four.n, three.n) == (4, 3) and math.isfinite(four.p_t) and math.isnan(three.p_t)
+    lines = comparison_limits([four, other, three], simulated=False)
+    assert lines[0] == (
+        "The comparisons are over 3 to 4 participants (those with both conditions; each comparison's n is in its "
+        "table): the smallest two-sided p a Wilcoxon signed-rank test can give is 2/2^3 = 0.25 with 3, 2/2^4 = 0.125 "
+        "with 4 — it cannot reach 0.05 whatever the data; its p values show direction and consistency, not "
+        "significance."
+    )
+    assert "Holm's correction over 2 tests" in lines[1] and lines[1].startswith("A paired t test on 4 participants")
+
+    # the d_z quoted reach 80 % power by hand: P(|T| > t_{1−α/2, n−1}), T noncentral t (n − 1, d_z √n); scipy's
+    # lower tail is NaN at a large noncentrality, where it is below P(Z < −nc) = Φ(−nc): 0 here
+    def power(d, alpha, n):
+        tc, nc = stats.t.ppf(1 - alpha / 2, n - 1), d * math.sqrt(n)
+        lower = stats.nct.cdf(-tc, n - 1, nc)
+        assert math.isfinite(lower) or stats.norm.cdf(-nc) < 1e-10
+        return stats.nct.sf(tc, n - 1, nc) + (lower if math.isfinite(lower) else 0.0)
+
+    quoted = [float(v) for v in re.findall(r"≥ ([0-9.]+)", lines[1])]
+    assert len(quoted) == 4  # at 4 participants, α and α/2; at 3, the same
+    for d, alpha, n in zip(quoted, (0.05, 0.025, 0.05, 0.025), (4, 4, 3, 3), strict=True):
+        assert power(d - 0.005, alpha, n) < 0.8 < power(d + 0.005, alpha, n)
+    # one n for every comparison: the sentence as before
+    assert comparison_limits([four, other], simulated=False)[0].startswith(
+        "4 participants: the smallest two-sided p a Wilcoxon signed-rank test can give is 2/2^4 = 0.125 —"
+    )
+
+
+def test_the_detectable_effect_after_holm_is_not_understated_where_scipys_tail_is_nan():
+    """Four participants, 18 tests: 80 % power at α/18 needs d_z ≥ 5.74 (200 000 simulated samples of four normal
+    differences with d_z = 5.735 reject at 0.05/18 in 80.05 %). Before, scipy's NaN lower tail was taken as power 1
+    and the sentence said 3.74, an effect such a test detects in 43 % of samples."""
+    from coassist.study.summarise import sample_limits
+
+    line = sample_limits(4, 18, simulated=False)[1]
+    assert "d_z ≥ 2.13 (≥ 5.74 for the smallest p after Holm's correction over 18 tests)" in line

@@ -142,6 +142,11 @@ def _p(v):  # the f-string report's _p
     return "—" if v is None else (f"{v:.3f}" if v >= 0.001 else "<0.001")
 
 
+def _zeros(c):  # the Wilcoxon test's pairs where zero differences were dropped (added with n_wilcoxon)
+    k = c["n"] - c["n_wilcoxon"]
+    return f" (n={c['n_wilcoxon']}: {k} zero difference{'s' if k != 1 else ''} dropped)" if k else ""
+
+
 def test_every_table_holds_the_summary_formatted_as_the_f_string_report_did(written):
     page, j = written
     parser = _Tables()
@@ -167,6 +172,7 @@ def test_every_table_holds_the_summary_formatted_as_the_f_string_report_did(writ
             "measure",
             "a − b",
             "n",
+            "a; b",  # added with the means over each comparison's own pairs (the table of means may pool more)
             "mean difference [95 % paired t]",  # was "[95 % bootstrap]": the interval is the paired t one now
             "d_z",  # was "d_z [95 % bootstrap]": a percentile bootstrap of a few pairs covers far less than 95 %
             "rank-biserial r",
@@ -178,11 +184,13 @@ def test_every_table_holds_the_summary_formatted_as_the_f_string_report_did(writ
             c["metric"],
             f"{name(c['a'])} − {name(c['b'])}",
             str(c["n"]),
+            f"{_fmt(c['mean_a'], units[c['metric']][1])}; {_fmt(c['mean_b'], units[c['metric']][1])} "
+            f"{units[c['metric']][0]}",
             f"{_fmt(c['mean_diff'], units[c['metric']][1])} [{_fmt(c['mean_diff_ci'][0], units[c['metric']][1])}, "
             f"{_fmt(c['mean_diff_ci'][1], units[c['metric']][1])}] {units[c['metric']][0]}",
             _fmt(c["dz"]),
             _fmt(c["rank_biserial"]),
-            f"{_p(c['p_wilcoxon'])} / {_p(c['p_wilcoxon_holm'])}",
+            f"{_p(c['p_wilcoxon'])} / {_p(c['p_wilcoxon_holm'])}{_zeros(c)}",
             f"{_p(c['p_t'])} / {_p(c['p_t_holm'])}",
         ]
         for c in j["comparisons"]
@@ -194,7 +202,7 @@ def test_every_table_holds_the_summary_formatted_as_the_f_string_report_did(writ
             str(c["n"]),
             _fmt(c["mean_diff"]),
             _fmt(c["rank_biserial"]),
-            f"{_p(c['p_wilcoxon'])} / {_p(c['p_wilcoxon_holm'])}",
+            f"{_p(c['p_wilcoxon'])} / {_p(c['p_wilcoxon_holm'])}{_zeros(c)}",
         ]
         for c in j["questionnaire"]["comparisons"]
     ]
@@ -256,6 +264,7 @@ def test_every_table_holds_the_summary_formatted_as_the_f_string_report_did(writ
     assert lead in page
     assert "".join(f"<li>{line}</li>" for line in j["limits"]).replace("'", "&#x27;") in page
     assert page.count("<img src='data:image/png;base64,") == 3  # the lines, the force traces, the questionnaire
+    assert not any("leave out participants" in line for line in j["limits"])  # all four in every comparison
 
 
 def test_a_summary_missing_a_key_is_refused_naming_it(written):
@@ -374,3 +383,50 @@ def test_trials_that_never_reached_the_target_are_counted_not_silently_dropped(t
         ["S01", *["1 of 2 (1 missed)"] * 3],
         ["all", *["1 of 2 (missed 1, 50 %)"] * 3],
     ]
+
+
+def test_a_participant_who_left_after_one_condition_is_out_of_the_limits_and_named(tmp_path):
+    """Three participants complete, S04 leaves after their first condition: every comparison is over the three with
+    both conditions, so the limits are of three (2/2^3 = 0.25), not four (2/2^4 = 0.125, what they said before);
+    the table of means pools S04 into their condition, so a line names S04 and the comparisons carry their own
+    means (over S01–S03, by hand here), which differ from the table's there."""
+    import numpy as np
+
+    from coassist.study.folder import init_study
+    from coassist.study.runner import ParticipantRun
+
+    s = init_study(comparison_plan(tmp_path / "plans", per_condition=1, practice=0), tmp_path / "study")
+    for pid in ("S01", "S02", "S03"):
+        with ParticipantRun(s, pid, simulate=True) as run:
+            assert run.run()
+    with ParticipantRun(s, "S04", simulate=True) as run:
+        first = next(step["block"] for step in run.steps if step["kind"] == "trial")
+        run.steps = run.steps[
+            : next(k for k, step in enumerate(run.steps) if step["kind"] == "trial" and step["block"] != first)
+        ]
+        assert run.run()
+    summary = summarise_study(s.folder)
+    means = {pid: p.means for pid, p in summary.participants.items()}
+    assert list(means["S04"]) == [first] and summary.pooled[first]["f_rms"].n == 4
+    assert {c.n for c in summary.comparisons} == {3} and len(summary.comparisons) == 3 * len(MEASURES)
+    assert all(math.isfinite(c.p_t) for c in summary.comparisons)  # Holm's m: all 18
+    assert summary.limits[0] == (
+        "3 participants: the smallest two-sided p a Wilcoxon signed-rank test can give is 2/2^3 = 0.25 — it cannot "
+        "reach 0.05 whatever the data; its p values show direction and consistency, not significance."
+    )
+    assert summary.limits[1].startswith("A paired t test on 3 participants") and "over 18 tests" in summary.limits[1]
+    assert (
+        "The table of means pools each condition over every participant with a value in it; a comparison is over "
+        f"those with both conditions (its n). 12 of 18 comparisons leave out participants the table includes (S04: "
+        f"{first} only): for those, a difference of the table's means is not the comparison's mean difference, and "
+        "the table of comparisons gives each one's means over its own pairs."
+    ) in summary.limits
+    for c in summary.comparisons:
+        if c.metric == "f_rms" and first in (c.a, c.b):
+            three = np.mean([means[p][first]["f_rms"] for p in ("S01", "S02", "S03")])
+            four = np.mean([means[p][first]["f_rms"] for p in ("S01", "S02", "S03", "S04")])
+            own = c.mean_a if c.a == first else c.mean_b
+            assert own == pytest.approx(three, rel=1e-12) and summary.pooled[first]["f_rms"].mean == pytest.approx(four)
+            assert abs(three - four) > 1e-6  # the table's mean is not the comparison's
+    html_path, _ = write_report(s.folder)
+    assert "S04: " + first + " only" in html_path.read_text()

@@ -19,14 +19,17 @@ either value is non-finite are left out.
   counted: scipy's own interval would be NaN then).
 - The share of a reference's gain (:func:`gain_share`): mean_i(base_i − x_i) / mean_i(base_i − ref_i),
   with its percentile bootstrap interval (the three resampled together).
-- Wilcoxon signed-rank test (:func:`scipy.stats.wilcoxon`, two-sided, exact null distribution
-  for n ≤ 50 without ties or zeros): nothing assumed about the shape of d. With n pairs the
-  smallest two-sided p it can give is 2/2ⁿ (n = 4: 0.125, n = 5: 0.0625): below six participants
-  it cannot reach 0.05, whatever the data.
+- Wilcoxon signed-rank test (:func:`scipy.stats.wilcoxon`, two-sided, ``zero_method="wilcox"``:
+  a zero difference is dropped before ranking, so the test is on the k ≤ n non-zero pairs; the exact
+  null distribution up to 50 pairs without ties or zeros, with them the exact distribution of the 2ⁿ
+  sign patterns up to 13 pairs, the normal one beyond): nothing assumed about the shape of d. With k non-zero
+  pairs the smallest two-sided p it can give is 2/2ᵏ (k = 4: 0.125, k = 5: 0.0625): below six
+  it cannot reach 0.05, whatever the data; five pairs with one zero are four to the test.
 - Paired t test (:func:`scipy.stats.ttest_rel`): t = d̄ / (s_d/√n), n − 1 degrees of freedom;
   assumes d roughly normal, which a sample of four cannot check.
 - Holm's step-down correction over a family of m tests (Holm 1979): with p sorted
-  ascending, p̃_(i) = max_{j ≤ i} min(1, (m − j + 1) p_(j)); controls the family-wise error.
+  ascending, p̃_(i) = max_{j ≤ i} min(1, (m − j + 1) p_(j)); controls the family-wise error. m counts
+  the tests with a p value (a test that could not run, p NaN, is not one of the family).
 - Effect sizes (:func:`paired_comparison`): the mean difference d̄ (in the metric's unit) with its
   paired Student-t interval (:func:`paired_difference`), Cohen's d_z = d̄ / s_d and the matched-pairs
   rank-biserial correlation r = (W⁺ − W⁻)/(W⁺ + W⁻) (Kerby 2014), these two with a seeded percentile
@@ -295,12 +298,15 @@ class PairedComparison:
     d = a − b per participant. ``mean_diff_ci``: the paired Student-t 95 % interval of the mean difference
     (:func:`paired_difference`); ``dz_ci``, ``rank_biserial_ci``: percentile bootstrap 95 % intervals, which
     cover well under 95 % at a few pairs (module docstring). ``p_*_holm``: after Holm's correction over the
-    report's family (set by :func:`holm_family`; NaN until then)."""
+    report's family (set by :func:`holm_family`; NaN until then). ``n``: the pairs (participants with both
+    values), what the means, the t test and the intervals are over; ``n_wilcoxon``: those of them with a non-zero
+    difference, what the Wilcoxon test ranks (zeros dropped) and ``smallest_p_wilcoxon`` = 2/2^n_wilcoxon is of."""
 
     metric: str
     a: str
     b: str
     n: int
+    n_wilcoxon: int
     mean_a: float
     mean_b: float
     mean_diff: float
@@ -315,7 +321,7 @@ class PairedComparison:
     p_t: float
     p_wilcoxon_holm: float = math.nan
     p_t_holm: float = math.nan
-    smallest_p_wilcoxon: float = math.nan  # the smallest two-sided p the exact test can give with n pairs
+    smallest_p_wilcoxon: float = math.nan  # the smallest two-sided p the test can give: 2/2^n_wilcoxon
 
     def to_json(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
@@ -339,10 +345,11 @@ def paired_comparison(
     y = np.array([b[k] for k in keys], dtype=float)
     d = x - y
     n = int(d.size)
+    k = int(np.count_nonzero(d))  # the pairs the Wilcoxon test ranks: zero_method="wilcox" drops the zeros
     nan2 = (math.nan, math.nan)
     w = p_w = t = p_t = math.nan
-    if n >= 1 and np.any(d != 0):
-        res = stats.wilcoxon(x, y)
+    if k >= 1:
+        res = stats.wilcoxon(x, y, zero_method="wilcox")
         w, p_w = float(res.statistic), float(res.pvalue)
     if n >= 2 and d.std(ddof=1) > 0:
         res_t = stats.ttest_rel(x, y)
@@ -355,6 +362,7 @@ def paired_comparison(
         a=a_name,
         b=b_name,
         n=n,
+        n_wilcoxon=k,
         mean_a=float(x.mean()) if n else math.nan,
         mean_b=float(y.mean()) if n else math.nan,
         mean_diff=float(d.mean()) if n else math.nan,
@@ -367,12 +375,13 @@ def paired_comparison(
         p_wilcoxon=p_w,
         t=t,
         p_t=p_t,
-        smallest_p_wilcoxon=2.0 / 2**n if n else math.nan,
+        smallest_p_wilcoxon=2.0 / 2**k if k else math.nan,
     )
 
 
 def holm_family(comparisons: Sequence[PairedComparison]) -> list[PairedComparison]:
-    """The comparisons with their p values Holm-corrected over the whole family (each test kind apart)."""
+    """The comparisons with their p values Holm-corrected over the whole family (each test kind apart): m is the
+    number of comparisons whose test gave a p value (:func:`holm`; a NaN p is not counted and stays NaN)."""
     pw = holm([c.p_wilcoxon for c in comparisons])
     pt = holm([c.p_t for c in comparisons])
     return [replace(c, p_wilcoxon_holm=w, p_t_holm=t) for c, w, t in zip(comparisons, pw, pt, strict=True)]

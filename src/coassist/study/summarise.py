@@ -25,7 +25,11 @@
   per measure the trials its mean is over (:class:`~coassist.study.summary.TrialCount`);
 - what each compared condition was: its controller, intent and, for a folder, the hash ``study init``
   recorded (:class:`~coassist.study.summary.ConditionInfo`);
-- what a sample this size can and cannot show (:func:`sample_limits`), said plainly.
+- what a sample this size can and cannot show (:func:`sample_limits`), said plainly, of the comparisons' own n
+  (the participants with both conditions; the range where it differs between comparisons) and Holm's m the
+  comparisons with a p value (:func:`comparison_limits`); where the table of means pools participants some
+  comparison leaves out (one who left after some conditions), a line names them: the comparisons carry the means of
+  their own pairs.
 
 The folder is read as evidence: the participant table and every participant's log are
 cross-checked first (:meth:`~coassist.study.folder.StudyFolder.check_table`,
@@ -40,13 +44,13 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from coassist.analysis.paired import holm_family, paired_comparison
+from coassist.analysis.paired import PairedComparison, holm_family, paired_comparison
 from coassist.data import read_dataset
 from coassist.data.datasets import MANIFEST_NAME
 from coassist.study.folder import StudyFolder, StudyFolderError, finite_json
@@ -77,6 +81,7 @@ __all__ = [
     "POWER",
     "answer_value",
     "calibrated_blocks",
+    "comparison_limits",
     "force_traces",
     "read_block",
     "sample_limits",
@@ -276,8 +281,12 @@ def calibrated_blocks(plan) -> list[str]:
     return [CALIBRATED] if extra is not None and extra.compare_calibrated else []
 
 
-def sample_limits(n: int, n_tests: int, simulated: bool) -> list[str]:
+def sample_limits(n: int | Sequence[int], n_tests: int, simulated: bool) -> list[str]:
     """Plain sentences on what ``n`` participants can and cannot show.
+
+    ``n``: the participants each comparison is over (those with both conditions: its pairs), or one count for
+    all; where the comparisons' counts differ (a participant who left after some conditions, a measure undefined
+    for some), the sentences give the range. ``n_tests``: the comparisons with a paired t p value, Holm's m.
 
     The smallest two-sided p of the exact Wilcoxon signed-rank test on n pairs is 2/2^n; the smallest
     Cohen's d_z a two-sided paired t test detects with :data:`POWER` at :data:`ALPHA` (and at α/n_tests,
@@ -286,38 +295,60 @@ def sample_limits(n: int, n_tests: int, simulated: bool) -> list[str]:
     """
     from scipy import optimize, stats
 
+    counts = sorted({n} if isinstance(n, int) else {int(k) for k in n} - {0})
     lines = []
-    if n == 0:
-        return ["No participant has finished a condition yet: nothing to compare."]
-    smallest = 2.0 / 2**n
-    lines.append(
-        f"{n} participant{'s' if n != 1 else ''}: the smallest two-sided p a Wilcoxon signed-rank test can "
-        f"give is 2/2^{n} = {smallest:.3g}"
-        + (
-            " — it cannot reach 0.05 whatever the data; its p values show direction and consistency, not significance."
-            if smallest > 0.05
-            else "."
-        )
+    if not counts or counts[-1] == 0:
+        return ["No participant has finished two conditions yet: nothing to compare."]
+    lo, hi = counts[0], counts[-1]
+    no_floor = (
+        " — it cannot reach 0.05 whatever the data; its p values show direction and consistency, not significance."
     )
-    if n >= 3:
-
-        def power(d: float, alpha: float) -> float:
-            df, nc = n - 1, d * math.sqrt(n)
-            tc = stats.t.ppf(1 - alpha / 2, df)
-            p = float(stats.nct.sf(tc, df, nc) + stats.nct.cdf(-tc, df, nc))
-            return p if math.isfinite(p) else 1.0  # the noncentral t's tail fails only far past any power asked
-
-        def detectable(alpha: float) -> float:
-            hi = 1.0
-            while power(hi, alpha) < POWER:
-                hi *= 2.0
-            return float(optimize.brentq(lambda d: power(d, alpha) - POWER, 1e-3, hi))
-
-        d80, d80h = detectable(ALPHA), detectable(ALPHA / max(n_tests, 1))
+    if lo == hi:
         lines.append(
-            f"A paired t test on {n} participants detects, with {POWER:.0%} power at α = {ALPHA}, only effects "
-            f"of Cohen's d_z ≥ {d80:.2f} (≥ {d80h:.2f} for the smallest p after Holm's correction over "
-            f"{n_tests} tests): a smaller difference may be real and go unseen. It also assumes the differences "
+            f"{hi} participant{'s' if hi != 1 else ''}: the smallest two-sided p a Wilcoxon signed-rank test can "
+            f"give is 2/2^{hi} = {2.0 / 2**hi:.3g}" + (no_floor if 2.0 / 2**hi > 0.05 else ".")
+        )
+    else:
+        lines.append(
+            f"The comparisons are over {lo} to {hi} participants (those with both conditions; each comparison's n "
+            f"is in its table): the smallest two-sided p a Wilcoxon signed-rank test can give is 2/2^{lo} = "
+            f"{2.0 / 2**lo:.3g} with {lo}, 2/2^{hi} = {2.0 / 2**hi:.3g} with {hi}"
+            + (
+                no_floor
+                if 2.0 / 2**hi > 0.05
+                else " — with five or fewer it cannot reach 0.05 whatever the data: those p values show direction "
+                "and consistency, not significance."
+                if 2.0 / 2**lo > 0.05
+                else "."
+            )
+        )
+
+    def power(d: float, alpha: float, n: int) -> float:
+        df, nc = n - 1, d * math.sqrt(n)
+        tc = stats.t.ppf(1 - alpha / 2, df)
+        # scipy's noncentral t gives NaN for the far lower tail at a large noncentrality (from d_z ≈ 2.6 at six
+        # participants and α/18): that tail, P(T < −t_c) ≤ P(Z < −nc) = Φ(−nc) < 1e-10 there, counts as 0 (taken
+        # as power 1 before, the Holm threshold's d_z came out too small: 3.74 for 5.74 at four and 18 tests)
+        lower = float(stats.nct.cdf(-tc, df, nc))
+        return float(stats.nct.sf(tc, df, nc)) + (lower if math.isfinite(lower) else 0.0)
+
+    def detectable(alpha: float, n: int) -> float:
+        hi = 1.0
+        while power(hi, alpha, n) < POWER:
+            hi *= 2.0
+        return float(optimize.brentq(lambda d: power(d, alpha, n) - POWER, 1e-3, hi))
+
+    tested = [k for k in (hi, lo) if k >= 3]
+    if tested:
+        d80 = [(detectable(ALPHA, k), detectable(ALPHA / max(n_tests, 1), k)) for k in dict.fromkeys(tested)]
+        k = tested[0]
+        lines.append(
+            f"A paired t test on {k} participants detects, with {POWER:.0%} power at α = {ALPHA}, only effects "
+            f"of Cohen's d_z ≥ {d80[0][0]:.2f} (≥ {d80[0][1]:.2f} for the smallest p after Holm's correction over "
+            f"{n_tests} tests)"
+            + (f"; on {lo}, d_z ≥ {d80[1][0]:.2f} (≥ {d80[1][1]:.2f})" if len(d80) > 1 else "")
+            + (f"; on {lo}, fewer than three, no test has a meaningful null distribution" if lo < 3 else "")
+            + ": a smaller difference may be real and go unseen. It also assumes the differences "
             "are roughly normal, which so few cannot check."
         )
     else:
@@ -342,6 +373,12 @@ def sample_limits(n: int, n_tests: int, simulated: bool) -> list[str]:
             "are a function of the measured force, not opinions."
         )
     return lines
+
+
+def comparison_limits(comparisons: Sequence[PairedComparison], simulated: bool) -> list[str]:
+    """:func:`sample_limits` of the measures' comparisons: over each one's own n (the participants with both
+    conditions, not everyone with some block), Holm's m the comparisons whose paired t test gave a p value."""
+    return sample_limits([c.n for c in comparisons], sum(1 for c in comparisons if math.isfinite(c.p_t)), simulated)
 
 
 def summarise_study(folder: str | Path) -> StudySummary:
@@ -460,7 +497,8 @@ def summarise_study(folder: str | Path) -> StudySummary:
         questionnaire=QuestionnaireSummary(pooled=q_pooled, comparisons=tuple(q_comparisons)),
         order_effects=order,
         simulated=simulated,
-        limits=tuple(sample_limits(len(per_participant), len(comparisons), simulated))
+        limits=tuple(comparison_limits(comparisons, simulated))
+        + _unpaired_note(comparisons, pooled, per_participant, blocks)
         + _missed_note(totals)
         + _partial_note({pid: bs for pid, bs in partial.items() if bs}),
         collections={
@@ -477,6 +515,49 @@ def summarise_study(folder: str | Path) -> StudySummary:
         models=_models(study, participants),
         conditions=_conditions(study, plan),
         trials=totals,
+    )
+
+
+def _unpaired_note(
+    comparisons: Sequence[PairedComparison],
+    pooled: Mapping[str, Mapping[str, PooledMeasure]],
+    per_participant: Mapping[str, Mapping[str, Mapping[str, float]]],
+    blocks: Sequence[str],
+) -> tuple[str, ...]:
+    """The line that says the table of means pools participants some comparisons leave out (none: no line).
+
+    The table pools, per condition, everyone with a whole block of it and a finite value; a comparison is over
+    those with both conditions (its n). Where the two differ (a participant who left after some conditions, a
+    measure undefined in one of a participant's blocks), a difference of the table's means is not a comparison's
+    mean difference: the line names who is in the table but not in every comparison, and why; the table of
+    comparisons gives each one's means over its own pairs (``mean_a``, ``mean_b``)."""
+    short = [c for c in comparisons if c.n < max(pooled[c.a][c.metric].n, pooled[c.b][c.metric].n)]
+    if not short:
+        return ()
+
+    def value(pid: str, block: str, metric: str) -> float:
+        return per_participant[pid].get(block, {}).get(metric, math.nan)
+
+    why: dict[str, list[str]] = {}
+    for pid in sorted(per_participant):
+        out = [c for c in short if math.isfinite(value(pid, c.a, c.metric)) != math.isfinite(value(pid, c.b, c.metric))]
+        if not out:
+            continue
+        has = [b for b in blocks if b in per_participant[pid]]
+        undefined: dict[str, list[str]] = {}
+        for c in out:
+            for x in (c.a, c.b):
+                if x in has and not math.isfinite(value(pid, x, c.metric)) and x not in undefined.get(c.metric, []):
+                    undefined.setdefault(c.metric, []).append(x)
+        why[pid] = ([f"{', '.join(has)} only"] if len(has) < len(blocks) else []) + [
+            f"{metric} undefined in {', '.join(xs)}" for metric, xs in undefined.items()
+        ]
+    named = "; ".join(f"{pid}: {', '.join(what)}" for pid, what in why.items())
+    return (
+        "The table of means pools each condition over every participant with a value in it; a comparison is over "
+        f"those with both conditions (its n). {len(short)} of {len(comparisons)} comparisons leave out participants "
+        f"the table includes ({named}): for those, a difference of the table's means is not the comparison's mean "
+        "difference, and the table of comparisons gives each one's means over its own pairs.",
     )
 
 
