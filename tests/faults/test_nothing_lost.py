@@ -734,6 +734,83 @@ def test_a_checkpoint_edited_by_hand_is_refused_naming_it(tmp_path, field, value
     assert says in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.parametrize("model_of, checkpoint_of", [(1, 2), (2, 1)])
+def test_a_folder_mixing_two_epochs_is_refused_naming_it(tmp_path, model_of, checkpoint_of):
+    """The model files of one epoch beside the checkpoint of another (a folder copied by hand, or read while the
+    run swapped in its next epoch) once resumed silently: epoch-1 weights with the epoch-2 optimizer state and
+    epoch count, a history [1, 3] and weights no unbroken run has. The checkpoint records the SHA-256 of the
+    weights it was written with and the model's last epoch; a resume checks both against the files beside it."""
+    import shutil
+
+    from coassist.intent.checkpoint import CHECKPOINT, CHECKPOINT_JSON
+    from coassist.intent.training import train_model
+
+    class Stop(Exception):
+        pass
+
+    out, kept = tmp_path / "m", {}
+
+    def keep(record):  # each epoch's partial folder, as it was after that epoch's save
+        kept[record["epoch"]] = shutil.copytree(partial_folder(out), tmp_path / f"e{record['epoch']}")
+        if record["epoch"] == 2:
+            raise Stop
+
+    cfg = replace(TINY.train, epochs=3)
+    with pytest.raises(Stop):
+        train_model(labeled(4), TINY, cfg, checkpoint_to=out, on_epoch=keep)
+    mixed = partial_folder(out)
+    shutil.rmtree(mixed)
+    shutil.copytree(kept[model_of], mixed)
+    for name in (CHECKPOINT_JSON, CHECKPOINT):
+        shutil.copy(kept[checkpoint_of] / name, mixed / name)
+    with pytest.raises(ValueError) as err:
+        train_model(labeled(4), TINY, replace(cfg, init=f"resume:{out}"))
+    said = str(err.value)
+    assert said.startswith(f"{mixed}: unusable checkpoint: {CHECKPOINT_JSON} was not written with the model files ")
+    assert f"their history ends at epoch {model_of}, the checkpoint at epoch {checkpoint_of}" in said
+    assert "weights' SHA-256" in said and "finetune:" in said and "\n" not in said
+    # each epoch's own folder, unmixed, still continues
+    shutil.rmtree(mixed)
+    shutil.copytree(kept[checkpoint_of], mixed)
+    resumed = train_model(labeled(4), TINY, replace(cfg, init=f"resume:{out}"))
+    assert [r["epoch"] for r in resumed.info["training_history"]] == [1, 2, 3]
+
+
+def test_a_checkpoint_of_an_older_version_is_refused_saying_so(tmp_path):
+    """A checkpoint written before checkpoints recorded their weights cannot be told apart from one beside
+    other weights: refused, saying why (the project has no released checkpoints to keep)."""
+    from coassist.intent.checkpoint import CHECKPOINT_JSON
+    from coassist.intent.training import train_model
+
+    cfg = _stopped_after_epoch_1(tmp_path / "m")
+    path = partial_folder(tmp_path / "m") / CHECKPOINT_JSON
+    record = json.loads(path.read_text())
+    del record["weights_sha256"], record["model_epoch"]
+    path.write_text(json.dumps(record))
+    with pytest.raises(ValueError) as err:
+        train_model(labeled(4), TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
+    said = str(err.value)
+    assert said.startswith(f"{path}: unusable checkpoint (written by an older coassist, before a checkpoint ")
+    assert f"finetune:{partial_folder(tmp_path / 'm')}" in said and "\n" not in said
+
+
+def test_resume_of_a_run_another_process_is_writing_is_refused(tmp_path):
+    """resume:A -o B reads A's partial folder under A's lock (held by the run writing A from start to end):
+    refused while that run goes on, where it could read one epoch's model beside the next one's checkpoint."""
+    cfg = _stopped_after_epoch_1(tmp_path / "m")
+    child = hold_lock_in_child(tmp_path / "m", tmp_path / "ready")
+    from coassist.intent.training import train_model
+
+    try:
+        with pytest.raises(OutputBusyError, match=f"pid {child.pid}"):
+            train_model(labeled(4), TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"), checkpoint_to=tmp_path / "b")
+    finally:
+        child.send_signal(signal.SIGKILL)
+        child.wait()
+    resumed = train_model(labeled(4), TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"), checkpoint_to=tmp_path / "b")
+    assert [r["epoch"] for r in resumed.info["training_history"]] == [1, 2, 3]
+
+
 @pytest.mark.slow  # ~11 s: two trainings and a child process; the library test above covers the resume itself
 def test_cli_train_resumes_a_killed_run(tmp_path):
     """`coassist train` killed after epoch 1 of 2; the same command with --init resume:<out> finishes it."""

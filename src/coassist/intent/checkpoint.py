@@ -7,6 +7,14 @@ ids, training configuration, the optimizer's other state, the learning-rate sche
 position and the batch-order generator's state). :func:`checkpoint_files` builds those
 files, :func:`read_checkpoint` reads them back from a model folder and
 :func:`restore_checkpoint` puts the optimizer, schedule and generator where they were.
+
+A checkpoint is bound to the model files it was written with: it records the SHA-256 of their
+weights file (``weights_sha256``, the sidecar's, which :func:`coassist.intent.model.load_model`
+verifies) and the epoch of their training history's last entry (``model_epoch``).
+:func:`check_binding` refuses a checkpoint beside other weights (the files of two epochs mixed: a
+folder copied by hand, or read while a run swapped in its next epoch), which would otherwise
+continue from one epoch's weights with another's optimizer state and epoch count. A checkpoint
+without them (written by a coassist before the check) is refused by :func:`read_checkpoint`.
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ __all__ = [
     "CHECKPOINT",
     "CHECKPOINT_FORMAT",
     "CHECKPOINT_JSON",
+    "check_binding",
     "checkpoint_files",
     "read_checkpoint",
     "restore_checkpoint",
@@ -48,8 +57,13 @@ def checkpoint_files(
     trials: list[str],
     contents: str,
     config: TrainConfig,
+    weights_sha256: str,
+    model_epoch: int,
 ) -> dict[str, bytes]:
-    """What a resume needs beyond the weights: optimizer tensors (safetensors) and the rest (JSON)."""
+    """What a resume needs beyond the weights: optimizer tensors (safetensors) and the rest (JSON).
+
+    ``weights_sha256``, ``model_epoch``: the SHA-256 of the weights file written beside it and the
+    epoch of that model's last history entry (:func:`check_binding`)."""
     from safetensors.torch import save as st_save
 
     state = opt.state_dict()
@@ -67,6 +81,8 @@ def checkpoint_files(
         "epoch0": epoch0,
         "trials": trials,
         "trials_sha256": contents,  # what the trials hold (trials_digest): a resume on other data is refused
+        "weights_sha256": weights_sha256,  # the model files it belongs to (check_binding)
+        "model_epoch": model_epoch,
         "train_config": asdict(config),
         "optimizer": {"param_groups": state["param_groups"], "scalars": scalars},
         "scheduler": sched_state,
@@ -116,10 +132,18 @@ def read_checkpoint(folder: Path) -> dict[str, Any] | None:
         record = json.loads(path.read_bytes().decode("utf-8"))
         if not isinstance(record, dict) or record.get("format") != CHECKPOINT_FORMAT:
             raise ValueError(f"format is not {CHECKPOINT_FORMAT!r}")
-        for key in ("epoch", "epoch0", "trials", "train_config", "optimizer", "scheduler", "numpy_rng"):
+        if "weights_sha256" not in record:  # (all else it holds may be in order: said apart from a damaged file)
+            raise ValueError(
+                "written by an older coassist, before a checkpoint recorded the weights it belongs to, so it cannot "
+                "be checked against the model beside it"
+            )
+        for key in ("epoch", "epoch0", "trials", "train_config", "optimizer", "scheduler", "numpy_rng", "model_epoch"):
             if key not in record:
                 raise ValueError(f"missing {key!r}")
-        for key in ("epoch", "epoch0"):  # epochs done: a count (the run's own total is checked where it is known)
+        sha = record["weights_sha256"]
+        if not isinstance(sha, str) or len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha):
+            raise ValueError(f"'weights_sha256' must be a SHA-256 hex digest, got {json.dumps(sha)}")
+        for key in ("epoch", "epoch0", "model_epoch"):  # epochs done: a count (the run's total is checked where known)
             value = record[key]
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"{key!r} must be an integer >= 0, got {json.dumps(value)}")
@@ -131,6 +155,25 @@ def read_checkpoint(folder: Path) -> dict[str, Any] | None:
     except (OSError, ValueError, RecursionError, SafetensorError) as exc:
         raise ValueError(f"{path}: unusable checkpoint ({exc}); start a new stage with finetune:{folder}") from None
     return record
+
+
+def check_binding(ckpt: dict[str, Any], folder: Path, weights_sha256: str | None, model_epoch: int | None) -> None:
+    """Refuse (ValueError, one line naming ``folder``) a checkpoint that is not the one written with the model
+    files beside it: ``weights_sha256`` (the loaded model's, verified against its weights file) and
+    ``model_epoch`` (its history's last epoch) must be what the checkpoint recorded."""
+    wrong = []
+    if ckpt["weights_sha256"] != weights_sha256:
+        wrong.append(
+            f"their weights' SHA-256 is {str(weights_sha256)[:12]}…, the checkpoint's {ckpt['weights_sha256'][:12]}…"
+        )
+    if ckpt["model_epoch"] != model_epoch:
+        wrong.append(f"their history ends at epoch {model_epoch}, the checkpoint at epoch {ckpt['model_epoch']}")
+    if wrong:
+        raise ValueError(
+            f"{folder}: unusable checkpoint: {CHECKPOINT_JSON} was not written with the model files beside it "
+            f"({'; '.join(wrong)}): files of two saves mixed (copied by hand, or read while a run replaced them?); "
+            f"start a new stage from the model with finetune:{folder}"
+        )
 
 
 def restore_checkpoint(ckpt: dict[str, Any], opt: torch.optim.Optimizer, sched: Any, rng: np.random.Generator) -> None:

@@ -36,7 +36,7 @@ import hashlib
 import json
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -278,14 +278,16 @@ def save_model(
     model: IntentModel,
     folder: str | os.PathLike[str],
     *,
-    extra_files: Mapping[str, bytes] | None = None,
+    extra_files: Mapping[str, bytes] | Callable[[str], Mapping[str, bytes]] | None = None,
 ) -> Path:
     """Write ``model`` as the folder ``folder``, replacing what was there; returns the folder.
 
     The folder is written beside ``folder`` and swapped in whole, under the output lock
     (:class:`coassist._io.OutputLock`; a second writer gets ``OutputBusyError``).
     ``extra_files`` (name -> bytes: history, figures, a training checkpoint) go into the
-    same swap. Whether an existing model may be replaced is the caller's decision.
+    same swap; given as a function, it is called with the weights file's SHA-256 (the sidecar's
+    ``weights_sha256``, what :func:`load_model` verifies), for files bound to these weights (a
+    training checkpoint). Whether an existing model may be replaced is the caller's decision.
     """
     folder = Path(folder)
     state = {k: v.detach().cpu().contiguous() for k, v in model.net.state_dict().items()}
@@ -296,7 +298,8 @@ def save_model(
     weights = st_save(state, metadata={_SIDECAR_HASH_KEY: sidecar_hash})
     meta["weights_sha256"] = _sha256(weights)
     text = json.dumps(meta, indent=1, allow_nan=False)
-    files = {WEIGHTS: weights, **({RIDGE: ridge} if ridge is not None else {}), **dict(extra_files or {})}
+    extra = extra_files(meta["weights_sha256"]) if callable(extra_files) else extra_files
+    files = {WEIGHTS: weights, **({RIDGE: ridge} if ridge is not None else {}), **dict(extra or {})}
     files[SIDECAR] = (text + "\n").encode("utf-8")
     if folder.exists() and not folder.is_dir():
         raise ModelFileError(f"{folder} exists and is not a folder")

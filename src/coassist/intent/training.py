@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import functools
 import math
 import os
 import shutil
@@ -45,12 +46,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from coassist._io import partial_folder, save_figure
+from coassist._io import OutputLock, partial_folder, save_figure
 from coassist._progress import progress_bar
 from coassist.intent.baselines import UNTUNED_RIDGE_ALPHA, RidgeBaseline, fit_tuned_baselines, tune_ridge_alpha
 from coassist.intent.batches import DeviceWindows
 from coassist.intent.checkpoint import (
     CHECKPOINT_JSON,
+    check_binding,
     checkpoint_files,
     read_checkpoint,
     restore_checkpoint,
@@ -338,19 +340,31 @@ def train_model(
         raise ValueError("no trials to train on")
     t_start = time.perf_counter()
     mode, base_path = config.start
-    if mode == "resume" and (partial_folder(base_path) / CHECKPOINT_JSON).is_file():
-        base_path = str(partial_folder(base_path))  # an interrupted run on that folder: newer than it
-    base, tuning = _build_model(
-        preset,
-        trials,
-        replace(config, init=f"resume:{base_path}") if mode == "resume" else config,
-        fit_linear_skip=False,
-    )
+    reading: contextlib.AbstractContextManager[Any] = contextlib.nullcontext()
+    if mode == "resume" and base_path is not None and (partial_folder(base_path) / CHECKPOINT_JSON).is_file():
+        # An interrupted run on that folder: newer than it. Another output's (resume:A -o B) is read under A's
+        # lock, which the run writing A holds from start to end (the CLI's, a study's): a reader is refused while
+        # it goes on, rather than read its partial folder as the next epoch is swapped in (or write_model removes
+        # it). Not the partial folder's own lock: that one is taken for each epoch's save, which would fail if a
+        # reader held it. Not for resume:A -o A: the caller holds A's lock (taken again under another spelling
+        # of the path, the flock would refuse the process its own lock).
+        if checkpoint_to is None or os.path.realpath(base_path) != os.path.realpath(checkpoint_to):
+            reading = OutputLock(base_path)
+        base_path = str(partial_folder(base_path))
+    with reading:
+        base, tuning = _build_model(
+            preset,
+            trials,
+            replace(config, init=f"resume:{base_path}") if mode == "resume" else config,
+            fit_linear_skip=False,
+        )
+        ckpt = read_checkpoint(Path(base_path)) if mode == "resume" and not base.info.get("finished", True) else None
     ids = [lt.id for lt in trials]
-    ckpt = read_checkpoint(Path(base_path)) if mode == "resume" and not base.info.get("finished", True) else None
     # what the trials hold, for a checkpoint to be continued only on them (hashed only where one is read or kept)
     contents = trials_digest(trials) if ckpt is not None or checkpoint_to is not None else ""
     if ckpt is not None:
+        history0 = base.info.get("training_history") or [{}]
+        check_binding(ckpt, Path(base_path), base.weights_sha256, history0[-1].get("epoch"))
         if ckpt["trials"] != ids:
             raise ValueError(
                 f"{base_path} is an interrupted run on {len(ckpt['trials'])} other trials; continue it with the same "
@@ -525,14 +539,29 @@ def train_model(
             _check_finite(record)  # before anything of this epoch is kept
             history.append(record)
             if checkpoint_to is not None:
+                # One save, swapped in whole: the model files, the checkpoint (bound to them by the weights'
+                # SHA-256 and the history's last epoch, check_binding) and history.json are staged in a new
+                # folder and put in place of the last epoch's by one rename (coassist._io.swap_in). A kill
+                # before it leaves the last epoch's folder whole, after it this one's; the checkpoint is built
+                # from the weights' digest before anything is written (save_model calls _epoch_files first).
+                # A folder mixing two saves can only come from elsewhere (a copy by hand, a reader straddling
+                # a swap): resume refuses it, as it refuses a checkpoint that records no weights.
                 snapshot = IntentModel(net, window, model.input_scaler, model.target_scaler, dt, info(False))
-                files = checkpoint_files(
-                    opt, sched, rng, epoch0=epoch0, epoch=epoch, trials=ids, contents=contents, config=config
-                )
                 save_model(
                     snapshot,
                     partial_folder(checkpoint_to),
-                    extra_files={**files, "history.json": _json(history).encode()},
+                    extra_files=functools.partial(
+                        _epoch_files,
+                        opt,
+                        sched,
+                        rng,
+                        epoch0=epoch0,
+                        epoch=epoch,
+                        trials=ids,
+                        contents=contents,
+                        config=config,
+                        history=history,
+                    ),
                 )
             if on_epoch:
                 on_epoch(record)
@@ -613,6 +642,20 @@ def write_model(model: IntentModel, out: str | os.PathLike[str]) -> None:
     save_model(model, out, extra_files={"history.json": _json(history).encode(), "loss.png": png.getvalue()})
     # The run is complete: the per-epoch checkpoint of train_model(checkpoint_to=out) is done with.
     shutil.rmtree(partial_folder(out), ignore_errors=True)
+
+
+def _epoch_files(
+    opt: torch.optim.Optimizer,
+    sched: Any,
+    rng: np.random.Generator,
+    weights_sha256: str,
+    *,
+    history: list[dict[str, Any]],
+    **kw: Any,
+) -> dict[str, bytes]:
+    """An epoch's files beside its model: the checkpoint bound to the weights ``weights_sha256`` and history.json."""
+    files = checkpoint_files(opt, sched, rng, weights_sha256=weights_sha256, model_epoch=history[-1]["epoch"], **kw)
+    return {**files, "history.json": _json(history).encode()}
 
 
 def _json(obj: Any) -> str:
