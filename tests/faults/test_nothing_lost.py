@@ -582,9 +582,9 @@ def test_train_two_epochs_then_resume_two_equals_four(tmp_path, optimizer):
     assert max(float((unbroken[k] - naive[k]).abs().max()) for k in unbroken) > 1e-4
 
 
-def _stopped_after_epoch_1(out):
-    """A 3-epoch training of four labeled trials, stopped after its first epoch (its checkpoint beside ``out``);
-    returns its training configuration."""
+def _stopped_after_epoch_1(out, trials=None):
+    """A 3-epoch training of ``trials`` (default: four labeled trials), stopped after its first epoch (its checkpoint
+    beside ``out``); returns its training configuration."""
     from coassist.intent.training import train_model
 
     class Stop(Exception):
@@ -596,7 +596,7 @@ def _stopped_after_epoch_1(out):
 
     cfg = replace(TINY.train, epochs=3)
     with pytest.raises(Stop):
-        train_model(labeled(4), TINY, cfg, checkpoint_to=out, on_epoch=stop)
+        train_model(labeled(4) if trials is None else trials, TINY, cfg, checkpoint_to=out, on_epoch=stop)
     return cfg
 
 
@@ -660,18 +660,8 @@ def test_resume_with_an_option_other_than_the_interrupted_runs_is_refused(tmp_pa
     from coassist.intent.training import train_model
 
     write_dataset([make_trial(i, n=220) for i in range(4)], tmp_path / "D0", "D0")
-
-    class Stop(Exception):
-        pass
-
-    def stop(record):
-        if record["epoch"] == 1:
-            raise Stop
-
-    cfg = replace(TINY.train, epochs=3)
     out = tmp_path / "m"
-    with pytest.raises(Stop):
-        train_model(load_trials([tmp_path / "D0"]), TINY, cfg, checkpoint_to=out, on_epoch=stop)
+    cfg = _stopped_after_epoch_1(out, load_trials([tmp_path / "D0"]))
     with pytest.raises(ValueError) as err:  # the library: the fields the caller chose (given)
         train_model(
             load_trials([tmp_path / "D0"]), TINY, replace(cfg, epochs=6, init=f"resume:{out}"), given=["epochs"]
