@@ -320,13 +320,12 @@ def lineage_train_trials(info: Mapping[str, Any]) -> set[str]:
     (``train_trials``, then each ``parent``'s, as deep as the record goes; a training records its starting
     model's, so a model's own and its parent's): what is not held out from it."""
     out: set[str] = set()
-    seen = 0
     node: Any = info
-    while isinstance(node, Mapping) and seen < 1000:  # (a record is a tree: the bound only guards a hand edit)
+    while isinstance(node, Mapping):  # a JSON record has no cycle: each parent is nested one level deeper
         trained = node.get("train_trials")
         if isinstance(trained, (list, tuple)):
             out.update(t for t in trained if isinstance(t, str))
-        node, seen = node.get("parent"), seen + 1
+        node = node.get("parent")
     return out
 
 
