@@ -338,9 +338,6 @@ def train_model(
     """
     if not trials:
         raise ValueError("no trials to train on")
-    # The same trials listed in another order are the same data: they are trained in id order, so that
-    # `coassist train A B` and `coassist train B A` give one model (the split was order-free; the windows were not).
-    trials = sorted(trials, key=lambda lt: str(lt.id))
     t_start = time.perf_counter()
     mode, base_path = config.start
     reading: contextlib.AbstractContextManager[Any] = contextlib.nullcontext()
