@@ -137,12 +137,16 @@ def read_checkpoint(folder: Path) -> dict[str, Any] | None:
                 "written by an older coassist, before a checkpoint recorded the weights it belongs to, so it cannot "
                 "be checked against the model beside it"
             )
-        for key in ("epoch", "epoch0", "trials", "train_config", "optimizer", "scheduler", "numpy_rng", "model_epoch"):
+        for key in (
+            "epoch", "epoch0", "trials", "trials_sha256", "train_config", "optimizer", "scheduler", "numpy_rng",
+            "model_epoch",
+        ):  # fmt: skip
             if key not in record:
                 raise ValueError(f"missing {key!r}")
-        sha = record["weights_sha256"]
-        if not isinstance(sha, str) or len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha):
-            raise ValueError(f"'weights_sha256' must be a SHA-256 hex digest, got {json.dumps(sha)}")
+        for key in ("weights_sha256", "trials_sha256"):
+            sha = record[key]
+            if not isinstance(sha, str) or len(sha) != 64 or any(c not in "0123456789abcdef" for c in sha):
+                raise ValueError(f"{key!r} must be a SHA-256 hex digest, got {json.dumps(sha)}")
         for key in ("epoch", "epoch0", "model_epoch"):  # epochs done: a count (the run's total is checked where known)
             value = record[key]
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:

@@ -370,7 +370,7 @@ def train_model(
                 f"{base_path} is an interrupted run on {len(ckpt['trials'])} other trials; continue it with the same "
                 "data, or start a new stage from it with finetune:"
             )
-        if ckpt.get("trials_sha256", contents) != contents:  # (a checkpoint written before it: ids alone)
+        if ckpt["trials_sha256"] != contents:
             raise ValueError(
                 f"{base_path} is an interrupted run on other data under the same trial ids (a dataset collected "
                 "again?); continue it with the data it began on, or start a new stage from it with finetune:"
