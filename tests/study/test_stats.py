@@ -115,6 +115,31 @@ def test_the_limits_are_over_the_comparisons_own_n_and_holms_m_counts_the_tests_
     )
 
 
+def test_the_wilcoxon_floor_is_over_the_pairs_it_ranks_not_the_participants():
+    """Six participants, one of whose differences is zero: scipy's Wilcoxon test (zeros dropped) ranks five pairs,
+    and its smallest two-sided p is then 2/2^5 = 0.0625, reached when all five point the same way; the limits said
+    2/2^6 = 0.031 (below 0.05) for that comparison before."""
+    from coassist.study.summarise import comparison_limits
+
+    a = {f"S0{i}": 10.0 + i for i in range(1, 7)}
+    b = {pid: v - (0.0 if pid == "S01" else 0.5 + 0.1 * i) for i, (pid, v) in enumerate(a.items())}
+    tie = paired_comparison("f_rms", "A", "B", a, b, n_boot=200)
+    assert (tie.n, tie.n_wilcoxon) == (6, 5)
+    floor = stats.wilcoxon([a[p] - b[p] for p in a], zero_method="wilcox", alternative="two-sided").pvalue
+    assert math.isclose(floor, 2 / 2**5, rel_tol=1e-12)  # all five ranked pairs the same way: the floor itself
+    assert comparison_limits([tie], simulated=False)[0] == (
+        "6 participants: the smallest two-sided p a Wilcoxon signed-rank test can give is 2/2^5 = 0.0625 (over the "
+        "pairs it ranks: a zero difference is dropped) — it cannot reach 0.05 whatever the data; its p values show "
+        "direction and consistency, not significance."
+    )
+    c = {pid: v - 0.3 - 0.05 * i for i, (pid, v) in enumerate(a.items())}
+    full = paired_comparison("f_rms", "A", "C", a, c, n_boot=200)
+    assert comparison_limits([tie, full], simulated=False)[0].startswith(
+        "6 participants: the smallest two-sided p a Wilcoxon signed-rank test can give is 2/2^5 = 0.0625 with 5, "
+        "2/2^6 = 0.0312 with 6 (over the pairs it ranks: a zero difference is dropped) — with five or fewer"
+    )
+
+
 def test_the_detectable_effect_after_holm_is_not_understated_where_scipys_tail_is_nan():
     """Four participants, 18 tests: 80 % power at α/18 needs d_z ≥ 5.74 (200 000 simulated samples of four normal
     differences with d_z = 5.735 reject at 0.05/18 in 80.05 %). Before, scipy's NaN lower tail was taken as power 1

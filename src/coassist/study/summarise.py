@@ -281,44 +281,67 @@ def calibrated_blocks(plan) -> list[str]:
     return [CALIBRATED] if extra is not None and extra.compare_calibrated else []
 
 
-def sample_limits(n: int | Sequence[int], n_tests: int, simulated: bool) -> list[str]:
+def sample_limits(
+    n: int | Sequence[int], n_tests: int, simulated: bool, ranked: int | Sequence[int] | None = None
+) -> list[str]:
     """Plain sentences on what ``n`` participants can and cannot show.
 
     ``n``: the participants each comparison is over (those with both conditions: its pairs), or one count for
     all; where the comparisons' counts differ (a participant who left after some conditions, a measure undefined
     for some), the sentences give the range. ``n_tests``: the comparisons with a paired t p value, Holm's m.
+    ``ranked``: the pairs each comparison's Wilcoxon test ranks (its non-zero differences; ``n`` where omitted).
 
-    The smallest two-sided p of the exact Wilcoxon signed-rank test on n pairs is 2/2^n; the smallest
+    The smallest two-sided p of the exact Wilcoxon signed-rank test on k ranked pairs is 2/2^k (a zero difference
+    is dropped, so six pairs with one zero can give no p below 2/2^5 = 0.0625); the smallest
     Cohen's d_z a two-sided paired t test detects with :data:`POWER` at :data:`ALPHA` (and at α/n_tests,
     Holm's smallest threshold) solves 1 − β = P(|T| > t_{1−α/2, n−1}), T noncentral t with n − 1 degrees of
     freedom and noncentrality d_z √n.
     """
     from scipy import optimize, stats
 
-    counts = sorted({n} if isinstance(n, int) else {int(k) for k in n} - {0})
+    each = [n] if isinstance(n, int) else [int(k) for k in n]
+    counts = sorted(set(each) - {0})
     lines = []
-    if not counts or counts[-1] == 0:
+    if not counts:
         return ["No participant has finished two conditions yet: nothing to compare."]
     lo, hi = counts[0], counts[-1]
+    # the Wilcoxon test's floor is of the pairs it ranks: where a difference is zero, fewer than the participants
+    each_ranked = each if ranked is None else [ranked] if isinstance(ranked, int) else [int(k) for k in ranked]
+    if len(each_ranked) != len(each):
+        raise ValueError(f"sample_limits: {len(each_ranked)} ranked counts for {len(each)} comparisons")
+    ranks = sorted(set(each_ranked) - {0})
+    dropped = any(r < k for r, k in zip(each_ranked, each, strict=True) if k > 0)
+    over = " (over the pairs it ranks: a zero difference is dropped)" if dropped else ""
     no_floor = (
         " — it cannot reach 0.05 whatever the data; its p values show direction and consistency, not significance."
     )
-    if lo == hi:
+    head = (
+        f"{hi} participant{'s' if hi != 1 else ''}"
+        if lo == hi
+        else f"The comparisons are over {lo} to {hi} participants (those with both conditions; each comparison's n "
+        "is in its table)"
+    )
+    if not ranks:
+        lines.append(f"{head}: no comparison has a non-zero difference for a Wilcoxon signed-rank test to rank.")
+    elif ranks[0] == ranks[-1]:
+        k = ranks[0]
         lines.append(
-            f"{hi} participant{'s' if hi != 1 else ''}: the smallest two-sided p a Wilcoxon signed-rank test can "
-            f"give is 2/2^{hi} = {2.0 / 2**hi:.3g}" + (no_floor if 2.0 / 2**hi > 0.05 else ".")
+            f"{head}: the smallest two-sided p a Wilcoxon signed-rank test can give is 2/2^{k} = {2.0 / 2**k:.3g}"
+            + over
+            + (no_floor if 2.0 / 2**k > 0.05 else ".")
         )
     else:
+        wlo, whi = ranks[0], ranks[-1]
         lines.append(
-            f"The comparisons are over {lo} to {hi} participants (those with both conditions; each comparison's n "
-            f"is in its table): the smallest two-sided p a Wilcoxon signed-rank test can give is 2/2^{lo} = "
-            f"{2.0 / 2**lo:.3g} with {lo}, 2/2^{hi} = {2.0 / 2**hi:.3g} with {hi}"
+            f"{head}: the smallest two-sided p a Wilcoxon signed-rank test can give is 2/2^{wlo} = "
+            f"{2.0 / 2**wlo:.3g} with {wlo}, 2/2^{whi} = {2.0 / 2**whi:.3g} with {whi}"
+            + over
             + (
                 no_floor
-                if 2.0 / 2**hi > 0.05
+                if 2.0 / 2**whi > 0.05
                 else " — with five or fewer it cannot reach 0.05 whatever the data: those p values show direction "
                 "and consistency, not significance."
-                if 2.0 / 2**lo > 0.05
+                if 2.0 / 2**wlo > 0.05
                 else "."
             )
         )
@@ -377,8 +400,14 @@ def sample_limits(n: int | Sequence[int], n_tests: int, simulated: bool) -> list
 
 def comparison_limits(comparisons: Sequence[PairedComparison], simulated: bool) -> list[str]:
     """:func:`sample_limits` of the measures' comparisons: over each one's own n (the participants with both
-    conditions, not everyone with some block), Holm's m the comparisons whose paired t test gave a p value."""
-    return sample_limits([c.n for c in comparisons], sum(1 for c in comparisons if math.isfinite(c.p_t)), simulated)
+    conditions, not everyone with some block), the Wilcoxon floor over the pairs each ranks (its non-zero
+    differences), Holm's m the comparisons whose paired t test gave a p value."""
+    return sample_limits(
+        [c.n for c in comparisons],
+        sum(1 for c in comparisons if math.isfinite(c.p_t)),
+        simulated,
+        ranked=[c.n_wilcoxon for c in comparisons],
+    )
 
 
 def summarise_study(folder: str | Path) -> StudySummary:
