@@ -35,3 +35,20 @@ def test_the_configuration_still_names_the_field_it_refuses():
     assert Ros2Config(payload=(2, (0, 0, 1))).payload == (2.0, (0.0, 0.0, 1.0))
     with pytest.raises(ValueError, match=r"Ros2Config\.command_topic .* the topic of Ros2Config\.wrench_topic"):
         Ros2Config(command_topic="/force_torque_sensor_broadcaster/wrench")
+
+
+def test_the_unused_wrench_in_base_option_says_it_does_nothing(tmp_path):
+    """``--wrench-in-base`` is kept for old scripts, but each wrench message's ``frame_id`` decides its frame: a
+    user who passes it is told so (it was accepted silently), before anything else fails or the robot moves."""
+    pytest.importorskip("rclpy", reason="coassist ros2 needs the ros2 extra (rclpy)")
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+
+    out = tmp_path / "run.parquet"
+    out.write_bytes(b"a recorded run")
+    said = CliRunner().invoke(app, ["ros2", "--wrench-in-base", "--out", str(out), "--yes"])
+    assert said.exit_code == 2 and "exists; pass --overwrite" in said.output
+    assert "note: --wrench-in-base does nothing: each wrench message's frame_id says its frame" in said.output
+    plain = CliRunner().invoke(app, ["ros2", "--out", str(out), "--yes"])
+    assert plain.exit_code == 2 and "--wrench-in-base" not in plain.output

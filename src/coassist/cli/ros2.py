@@ -16,6 +16,7 @@ from coassist.cli._common import (
     STABILITY_HELP,
     choose,
     console,
+    err_console,
     fail,
     floats,
     say,
@@ -166,6 +167,14 @@ def ros2(
         )
     except ValueError as exc:
         fail(typed(str(exc), ROS2_OPTIONS), 2)
+    if wrench_in_base:
+        # accepted so that scripts written for it keep running, but said: the option no longer decides anything
+        err_console.print(
+            f"note: --wrench-in-base does nothing: each wrench message's frame_id says its frame ({base_frame!r}: the "
+            f"base frame's axes; {wrench_frame!r}: the sensor's, rotated to the base); another frame stops the run",
+            markup=False,
+            soft_wrap=True,
+        )
     out = run_out(out, overwrite, mcap)
 
     confirm = confirm_move(yes, "the emergency stop")
