@@ -680,6 +680,31 @@ def test_resume_with_an_option_other_than_the_interrupted_runs_is_refused(tmp_pa
     assert [r["epoch"] for r in json.loads((out / "history.json").read_text())] == [1, 2, 3]
 
 
+def test_a_rerun_of_an_interrupted_training_says_it_starts_again_and_how_to_continue(tmp_path):
+    """The command that was stopped, run again as it was (``--init scratch``), trains from scratch and replaces the
+    interrupted run's checkpoint: once silently, so a user took it for the continuation. Now it says so, naming the
+    epochs the checkpoint had done and the option that continues it; a resume says nothing of the kind."""
+    from coassist.intent import load_trials
+
+    write_dataset([make_trial(i, n=220) for i in range(4)], tmp_path / "D0", "D0")
+    out = tmp_path / "m"
+    _stopped_after_epoch_1(out, load_trials([tmp_path / "D0"]))
+    args = ["train", str(tmp_path / "D0"), "--out", str(out), "--threads", "1", "--batch-size", "32"]
+    res = CliRunner().invoke(app, [*args, "--epochs", "2"])
+    said = " ".join(res.output.split())
+    assert res.exit_code == 0, res.output
+    assert (
+        f"note: {partial_folder(out)} holds the checkpoint of an interrupted training, 1 of 3 epochs done; this run "
+        f"starts again and replaces it (to continue it instead: --init resume:{out})"
+    ) in said
+    assert [r["epoch"] for r in json.loads((out / "history.json").read_text())] == [1, 2]
+    out2 = tmp_path / "m2"
+    _stopped_after_epoch_1(out2, load_trials([tmp_path / "D0"]))
+    args2 = ["train", str(tmp_path / "D0"), "--out", str(out2), "--threads", "1", "--epochs", "3", "--batch-size", "32"]
+    res = CliRunner().invoke(app, [*args2, "--init", f"resume:{out2}"])
+    assert res.exit_code == 0 and "interrupted training" not in res.output, res.output
+
+
 def test_resume_of_a_finished_model_into_its_own_folder_needs_overwrite(tmp_path):
     """`--init resume:M --out M` of a finished M once replaced it without --overwrite (its lineage then naming
     itself); only an interrupted run (a checkpoint beside M) is continued in place without it."""

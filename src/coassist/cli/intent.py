@@ -15,6 +15,7 @@ from coassist.cli._common import (
     check_threads,
     choose,
     console,
+    err_console,
     fail,
     file_out,
     folder_out,
@@ -60,6 +61,18 @@ def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, 
         fail(typed(str(exc), TRAIN_OPTIONS), 2)
 
 
+def _epochs_done(checkpoint: Path) -> str:
+    """ ", E of N epochs done" from an interrupted run's checkpoint.json, or "" where it cannot be read."""
+    import json
+
+    try:
+        ckpt = json.loads(checkpoint.read_text())
+        done, total = ckpt["epoch"], ckpt["train_config"]["epochs"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return ""
+    return f", {done} of {total} epochs done" if isinstance(done, int) and isinstance(total, int) else ""
+
+
 def _check_model_out(out: Path, overwrite: bool, init: str) -> None:
     """Refuse before any work an --out that is a file, or an existing model without --overwrite."""
     from coassist._io import partial_folder
@@ -76,6 +89,16 @@ def _check_model_out(out: Path, overwrite: bool, init: str) -> None:
         and Path(init.partition(":")[2]).absolute() == out.absolute()
         and (partial_folder(out) / "checkpoint.json").is_file()  # intent.checkpoint.CHECKPOINT_JSON
     )
+    checkpoint = partial_folder(out) / "checkpoint.json"
+    if not continuing and checkpoint.is_file():
+        # an interrupted run's epochs are kept until this run's first epoch replaces them: said, so that a rerun
+        # of the command that was stopped is not taken for its continuation
+        err_console.print(
+            f"note: {checkpoint.parent} holds the checkpoint of an interrupted training{_epochs_done(checkpoint)}; "
+            f"this run starts again and replaces it (to continue it instead: --init resume:{out})",
+            markup=False,
+            soft_wrap=True,
+        )
     if out.is_dir() and any(out.iterdir()) and not (overwrite or continuing):
         fail(
             f"--out {out}: already holds files; pass --overwrite to replace it (the old model stays until the new "
@@ -127,7 +150,8 @@ def train(
 
     After each epoch a checkpoint is kept beside --out (.<name>.partial); if the run is
     stopped, --init resume:<out> continues it where it stopped, with the same result (with
-    its own options: one given otherwise is refused). resume:<out> of a finished model in
+    its own options: one given otherwise is refused); run again without it, it starts again (and
+    says so). resume:<out> of a finished model in
     --out is a new stage that replaces it: --overwrite.
     """
     _check_model_out(out, overwrite, init)
