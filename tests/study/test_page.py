@@ -27,16 +27,24 @@ from .pagedriver import SECRETS, OperatorPath  # noqa: E402
 
 
 def play_page(
-    url: str, path: OperatorPath, received: list[str], timeout: float = 120.0, *, impatient: bool = False
+    url: str,
+    path: OperatorPath,
+    received: list[str],
+    timeout: float = 120.0,
+    *,
+    impatient: bool = False,
+    abort_first: bool = False,
 ) -> dict:
     """Be the page until the study says it is done; returns what was entered per step.
 
     impatient : press Start twice per trial step, and once more as each trial's result arrives (an
-    impatient person, or a page that lags); the study must run each step's trial once."""
+    impatient person, or a page that lags); the study must run each step's trial once.
+    abort_first : press Abort 20 frames into the first trial (once); its step is shown again."""
     entered: dict = {"answers": {}, "starts": []}
     ws_url = url.replace("http://", "ws://").rstrip("/").split("?")[0] + "/ws"
     with ws_client.connect(ws_url, open_timeout=10) as ws:
         bounds, view, running, seq, k = None, None, False, 0, -1
+        frames_to_abort = 20 if abort_first else None
         pressed = None  # the step whose Start was pressed: a page shows it again (init and step may
         # both carry it when the page connects as it is shown) but a person presses once per showing
         t_end = time.monotonic() + timeout
@@ -65,6 +73,12 @@ def play_page(
             elif kind == "status" and m.get("level") in ("warn", "error"):
                 pressed = None  # aborted or failed: the step is shown again
             if kind == "frame" and running:
+                if frames_to_abort is not None:
+                    frames_to_abort -= 1
+                    if frames_to_abort == 0:
+                        ws.send(json.dumps({"type": "abort"}))
+                        frames_to_abort, running = None, False
+                        continue
                 x, y = path.at(k, m["t"])
                 seq += 1
                 x = min(bounds[1], max(bounds[0], x))
@@ -94,7 +108,7 @@ def play_page(
     raise AssertionError("the study did not end in time")
 
 
-def _study_on_the_page(tmp_path, *, impatient: bool = False):
+def _study_on_the_page(tmp_path, *, impatient: bool = False, abort_first: bool = False):
     """A one-trial-per-condition comparison for participant S01, played to its end by :func:`play_page`:
     (the study, every message the page received, what the page entered)."""
     plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0, timing="motion_time = 1.5\ndwell = 0.5")
@@ -104,25 +118,40 @@ def _study_on_the_page(tmp_path, *, impatient: bool = False):
     with ParticipantRun(study, "S01", simulate=True, page=("127.0.0.1", 0, None)) as run:
         done = threading.Thread(target=run.run, daemon=True)
         done.start()
-        entered = play_page(run.url, OperatorPath(study.folder, "S01"), received, impatient=impatient)
+        entered = play_page(
+            run.url, OperatorPath(study.folder, "S01"), received, impatient=impatient, abort_first=abort_first
+        )
         done.join(30)
         assert not done.is_alive() and run.complete
     return study, received, entered
 
 
 def test_the_page_is_blinded_and_a_simulated_hand_drives_the_study(tmp_path):
-    study, received, entered = _study_on_the_page(tmp_path)
+    """The whole study through the page, Abort pressed once in the first condition's trial: nothing of that
+    attempt is written, the step is shown again, the trial that ran to its end records that it was the second
+    start, and the summary counts it as repeated in that condition (once, a repeat went uncounted: the report
+    could not say a condition was broken off)."""
+    from coassist.study.report import summarise_study
+
+    study, received, entered = _study_on_the_page(tmp_path, abort_first=True)
     labels = study.labels
     # blinding: not one message names a controller kind or a condition
     assert received and not [s for s in SECRETS if any(s in text for text in received)]
     frames = [json.loads(t) for t in received if '"type": "frame"' in t]
     assert len(frames) > 300 and {f["controller"] for f in frames} <= set(labels.values())
-    # the page started each condition by its label, in the participant's order (row 0: the plan's order)
-    assert entered["starts"] == [labels["assistive"], labels["impedance"], labels["manual"]]
+    # the page started each condition by its label, in the participant's order (row 0: the plan's order); the
+    # first twice (aborted, then run to its end)
+    assert entered["starts"] == [labels["assistive"], labels["assistive"], labels["impedance"], labels["manual"]]
+    assert sum('"type": "started"' in t for t in received) == 4 and sum('"type": "result"' in t for t in received) == 3
     pf = study.participant("S01")
     for name in ("assistive", "impedance", "manual"):
-        trial = read_dataset(pf.block(name)).trials[0]
+        (trial,) = read_dataset(pf.block(name)).trials
         assert trial.meta.extra["controller_name"] == labels[name] and trial.meta.extra["ended"] == "target"
+        assert trial.meta.extra["attempts"] == (2 if name == "assistive" else 1)
+    summary = summarise_study(study.folder)
+    repeated = {b: c.repeated for b, c in summary.participants["S01"].trials.items()}
+    assert repeated == {"assistive": 1, "impedance": 0, "manual": 0}
+    assert any(line.startswith("1 of 3 measured trials were started again") for line in summary.limits)
     # the answers entered on the page are the ones stored, per condition
     stored = {r["step"]: list(r["answers"].values()) for r in pf.progress() if r["kind"] == "questionnaire"}
     assert stored == {int(k): v for k, v in entered["answers"].items()}

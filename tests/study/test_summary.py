@@ -359,7 +359,7 @@ def test_trials_that_never_reached_the_target_are_counted_not_silently_dropped(t
     html_path, json_path = write_report(s.folder)
     j = json.loads(json_path.read_text())
     covered = {"f_rms": 2, "sigma": 1, "overshoot": 1, "jerk": 2, "time_to_target": 1, "e_rms": 2}
-    count = {"n": 2, "reached": 1, "missed": 1, "miss_rate": 0.5, "covered": covered}
+    count = {"n": 2, "reached": 1, "missed": 1, "miss_rate": 0.5, "covered": covered, "repeated": 0}
     blocks = ["assistive", "impedance", "manual"]
     assert j["participants"]["S01"]["trials"] == {b: count for b in blocks}
     assert j["trials"] == {b: count for b in blocks}

@@ -304,8 +304,9 @@ class StudySession(PlaySession):
         self.publish({"type": "step", **view})
 
     def run(self, setup: TrialSetup, *, wait_for_page: bool) -> Trial:
-        """Run ``setup``'s trial and return it. ``wait_for_page``: the page's Start begins it (a trial the
-        person aborts, or whose hand left, is shown again); else it starts at once."""
+        """Run ``setup``'s trial and return it, ``meta.extra["attempts"]`` the times it was started.
+        ``wait_for_page``: the page's Start begins it (a trial the person aborts, or whose hand left, is
+        shown again); else it starts at once."""
         if self.world == "play":
             for other in [i for i in self._realtimes if i != setup.intent]:  # one model worker process at a time
                 rt = self._realtimes.pop(other)
@@ -316,7 +317,9 @@ class StudySession(PlaySession):
         self.setup = setup
         self.hand = setup.hand if setup.hand is not None else self._page_hand
         self.current = None
+        attempts = 0
         while True:
+            attempts += 1
             self._captured = None
             self._trial_over.clear()
             with self._lock:
@@ -327,7 +330,11 @@ class StudySession(PlaySession):
                 raise RuntimeError("a trial is already running")
             self._trial_over.wait()
             if self._captured is not None:
-                return self._captured
+                # the times this step's trial was started, this one included: a trial the person aborted, or whose
+                # hand left, is shown again, and the report counts those repeated (a condition people abort is news)
+                trial = self._captured
+                extra = {**trial.meta.extra, "attempts": attempts}
+                return dataclasses.replace(trial, meta=dataclasses.replace(trial.meta, extra=extra))
             if not wait_for_page:
                 raise RuntimeError("the simulated trial ended without a result (see the session's status)")
 

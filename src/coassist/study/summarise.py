@@ -165,7 +165,7 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str], form: For
             "trials": per_trial,
             "means": {k: _nanmean(m[k] for m in per_trial) for k, *_ in MEASURES},
             "models": [t.meta.extra.get("study_model") for t in trials],
-            "count": _count(per_trial),
+            "count": _count(per_trial, [int(t.meta.extra.get("attempts", 1)) for t in trials]),
             # a block cut short (the participant stopped mid-condition) has fewer trials, of other tasks: its
             # mean is not paired with the other blocks' and stays out of the pooled numbers
             "partial": len(trials) < planned.get(b, 0),
@@ -173,13 +173,15 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str], form: For
     return data
 
 
-def _count(per_trial: list[dict[str, float]]) -> TrialCount:
-    """A block's trials counted: how many, how many reached the target (a finite time to target), and per measure
-    how many gave a finite value (what its mean is over)."""
+def _count(per_trial: list[dict[str, float]], attempts: list[int]) -> TrialCount:
+    """A block's trials counted: how many, how many reached the target (a finite time to target), per measure
+    how many gave a finite value (what its mean is over), and how many were started more than once (``attempts``:
+    each trial's starts, ``meta.extra["attempts"]``; 1 where a trial does not record it)."""
     return TrialCount(
         n=len(per_trial),
         reached=sum(1 for m in per_trial if math.isfinite(m["time_to_target"])),
         covered={k: sum(1 for m in per_trial if math.isfinite(m[k])) for k, *_ in MEASURES},
+        repeated=sum(1 for a in attempts if a > 1),
     )
 
 
@@ -189,6 +191,21 @@ def _total(counts: list[TrialCount]) -> TrialCount:
         n=sum(c.n for c in counts),
         reached=sum(c.reached for c in counts),
         covered={k: sum(c.covered.get(k, 0) for c in counts) for k, *_ in MEASURES},
+        repeated=sum(c.repeated for c in counts),
+    )
+
+
+def _repeated_note(totals: Mapping[str, TrialCount]) -> tuple[str, ...]:
+    """The line that counts the measured trials started again after an abort (none: no line)."""
+    repeated = {b: c for b, c in totals.items() if c.repeated}
+    if not repeated:
+        return ()
+    n, k = sum(c.n for c in totals.values()), sum(c.repeated for c in repeated.values())
+    where = "; ".join(f"{b}: {c.repeated} of {c.n}" for b, c in repeated.items())
+    return (
+        f"{k} of {n} measured trials were started again after the person aborted them or their hand left ({where}): "
+        "only the attempt that ran to its end is measured, so a condition people break off more often may look "
+        "better than its first attempts were.",
     )
 
 
@@ -529,6 +546,7 @@ def summarise_study(folder: str | Path) -> StudySummary:
         limits=tuple(comparison_limits(comparisons, simulated))
         + _unpaired_note(comparisons, pooled, per_participant, blocks)
         + _missed_note(totals)
+        + _repeated_note(totals)
         + _partial_note({pid: bs for pid, bs in partial.items() if bs}),
         collections={
             pid: {

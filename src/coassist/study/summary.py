@@ -252,11 +252,13 @@ class TrialCount:
     """The measured trials of one block (one participant's, or all participants' summed): ``n`` trials, ``reached``
     of them entered the target's ε-ball (a finite time to target), ``missed`` = n − reached never did, and
     ``covered``: per measure, how many trials gave it a finite value, the trials its mean is over (σ, overshoot and
-    time to target are undefined for a trial that missed the target: left out of their means)."""
+    time to target are undefined for a trial that missed the target: left out of their means); ``repeated``: how many
+    were started more than once (the person aborted it, or their hand left, and it was shown again)."""
 
     n: int
     reached: int
     covered: Mapping[str, int] = field(default_factory=dict)
+    repeated: int = 0  # of the n, trials started more than once (aborted on the page, or the hand left, first)
 
     @property
     def missed(self) -> int:
@@ -273,11 +275,17 @@ class TrialCount:
             "missed": self.missed,
             "miss_rate": self.miss_rate,
             "covered": dict(self.covered),
+            "repeated": self.repeated,
         }
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> TrialCount:
-        return cls(n=int(d["n"]), reached=int(d["reached"]), covered={k: int(v) for k, v in d["covered"].items()})
+        return cls(
+            n=int(d["n"]),
+            reached=int(d["reached"]),
+            covered={k: int(v) for k, v in d["covered"].items()},
+            repeated=int(d.get("repeated", 0)),  # summaries written before it was counted
+        )
 
 
 @dataclass(frozen=True)
