@@ -195,13 +195,21 @@ def _total(counts: list[TrialCount]) -> TrialCount:
     )
 
 
+def _counted(totals: Mapping[str, TrialCount], what: str) -> tuple[int, int, str] | None:
+    """(how many of the measured trials have count ``what``, how many there are, "block: k of n; …"), None if none."""
+    some = {b: getattr(c, what) for b, c in totals.items() if getattr(c, what)}
+    if not some:
+        return None
+    where = "; ".join(f"{b}: {k} of {totals[b].n}" for b, k in some.items())
+    return sum(some.values()), sum(c.n for c in totals.values()), where
+
+
 def _repeated_note(totals: Mapping[str, TrialCount]) -> tuple[str, ...]:
     """The line that counts the measured trials started again after an abort (none: no line)."""
-    repeated = {b: c for b, c in totals.items() if c.repeated}
-    if not repeated:
+    counted = _counted(totals, "repeated")
+    if counted is None:
         return ()
-    n, k = sum(c.n for c in totals.values()), sum(c.repeated for c in repeated.values())
-    where = "; ".join(f"{b}: {c.repeated} of {c.n}" for b, c in repeated.items())
+    k, n, where = counted
     return (
         f"{k} of {n} measured trials were started again after the person aborted them or their hand left ({where}): "
         "only the attempt that ran to its end is measured, so a condition people break off more often may look "
@@ -211,11 +219,10 @@ def _repeated_note(totals: Mapping[str, TrialCount]) -> tuple[str, ...]:
 
 def _missed_note(totals: Mapping[str, TrialCount]) -> tuple[str, ...]:
     """The line that counts the measured trials that never reached the target (none: no line)."""
-    missed = {b: c for b, c in totals.items() if c.missed}
-    if not missed:
+    counted = _counted(totals, "missed")
+    if counted is None:
         return ()
-    n, k = sum(c.n for c in totals.values()), sum(c.missed for c in missed.values())
-    where = "; ".join(f"{b}: {c.missed} of {c.n}" for b, c in missed.items())
+    k, n, where = counted
     return (
         f"{k} of {n} measured trials never reached the target ({where}): their σ, overshoot and time to target are "
         "undefined and left out of those means (each participant's mean is over the trials that reached it; the "
