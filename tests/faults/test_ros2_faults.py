@@ -136,6 +136,7 @@ def _config(sim, **kw) -> Ros2Config:
         lockstep=True,
         pace=False,
         stale_after=0.5,
+        stamps_on_this_clock=False,  # the simulated driver stamps on the simulator's clock
         tcp_offset=tuple(sim.kinematics().tcp_offset),
         payload=(mass, tuple(com)),
         connect_timeout=10.0,
@@ -196,7 +197,8 @@ class _Peer(ros._SpunNode):
 
     def _tick(self) -> None:
         self.n += 1
-        ns = EPOCH_NS + self.n * 20_000_000 if self.stamp_ns is None else self.stamp_ns
+        # stamped as a driver on this computer stamps: its clock, the node's (a stamp far behind it is refused)
+        ns = time.time_ns() if self.stamp_ns is None else self.stamp_ns
         if self.heard or self.js_pub.get_subscription_count() > 0:
             self.heard += 1
         if self.unstamped_first and self.heard <= self.unstamped_first:

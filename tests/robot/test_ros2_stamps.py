@@ -4,7 +4,9 @@ A node of this test publishes hand-made joint states and wrenches, each stamp ch
 world's :meth:`~coassist.robot.ros2_world.Ros2World.read` says what it made of them: a driver that
 republishes its last sample is a lost link (it kept a run going for a whole trial with the joint
 state frozen); a message with the newest stamp and other values is refused on either topic; a
-stamp ahead of the node's clock is refused and does not make the correct messages after it late.
+stamp ahead of the node's clock is refused and does not make the correct messages after it late; one
+more than stale_after behind it (a recording replayed) is refused unless the robot has a clock of its own;
+joint states whose stamps advance over positions that do not, while the arm is commanded, lose the link.
 """
 
 from __future__ import annotations
@@ -23,8 +25,15 @@ from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
-from coassist.robot.ros2_world import MAX_STAMP_LEAD, UR_JOINT_NAMES, Ros2Config, Ros2InputError, Ros2World  # noqa: E402
-from coassist.runtime.world import RobotLinkError  # noqa: E402
+from coassist.robot.ros2_world import (  # noqa: E402
+    FROZEN_MOTION,
+    MAX_STAMP_LEAD,
+    UR_JOINT_NAMES,
+    Ros2Config,
+    Ros2InputError,
+    Ros2World,
+)
+from coassist.runtime.world import Command, RobotLinkError  # noqa: E402
 
 from .test_ros2_world import DOMAIN, _SpunNode  # noqa: E402
 
@@ -49,10 +58,11 @@ def now_ns() -> int:
 
 class Feeder(_SpunNode):
     """A driver whose every message the test writes: :meth:`js` and :meth:`wr` publish one, stamped ``ns``.
-    Until :meth:`stop_ticking`, a thread also publishes both every 10 ms, stamped with the clock one second
-    ago (a driver running while the world connects); ``ahead`` [s] shifts those stamps."""
+    Until :meth:`stop_ticking`, a thread also publishes both every 10 ms, stamped with the clock 0.2 s ago (a
+    driver running while the world connects, its stamps older than the test's own, within ``STALE`` of the
+    node's clock); ``ahead`` [s] shifts those stamps."""
 
-    def __init__(self, ahead: float = -1.0) -> None:
+    def __init__(self, ahead: float = -0.2) -> None:
         self._open("hand_made_driver")
         self.js_pub = self.node.create_publisher(JointState, JOINTS, 10)
         self.w_pub = self.node.create_publisher(WrenchStamped, WRENCH, 10)
@@ -230,3 +240,66 @@ def test_stamps_just_behind_the_nodes_clock_are_accepted_on_one_computer():
             world.close()
     finally:
         feeder.close()
+
+
+def test_a_recording_replayed_is_refused_unless_the_robot_has_a_clock_of_its_own():
+    """A driver whose stamps are a day behind this node's clock (``ros2 bag play`` of yesterday's run, with no live
+    driver): every stamp advances, so each message looked fresh, and a run drove a real arm on the recording (the
+    tool moved 518 mm with nobody at the handle). Refused at connect, naming the topic and why; a robot on a clock
+    of its own (``stamps_on_this_clock=False``) is read, its stamps only ordered."""
+    feeder = Feeder(ahead=-86400.0)
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(Ros2InputError) as info:
+            _world().close()
+        waited = time.monotonic() - t0
+        msg = str(info.value)
+        assert (JOINTS in msg or WRENCH in msg) and "s before this node's clock" in msg, msg
+        assert "a recording replayed" in msg and "\n" not in msg and waited < 5.0
+        world = _world(stamps_on_this_clock=False)
+        try:
+            before = world.read().wrench_seq
+            _until(lambda: world.read().wrench_seq >= before + 5, "five more wrenches")
+            assert world.rejected_messages == 0
+        finally:
+            world.close()
+    finally:
+        feeder.close()
+
+
+def test_joint_states_frozen_under_advancing_stamps_lose_the_link_once_the_arm_was_commanded(fed):
+    """A driver whose stamps advance while its positions do not (a hung hardware interface republishing its last
+    sample with new stamps): read as fresh, the loop kept commanding 0.24 rad/s with the hand off the handle, the
+    arm moving while its pose was read still. With the arm at rest (zeros sent) the same state is only an arm
+    at rest; once the commands since it last changed would have turned a joint more than FROZEN_MOTION, read()
+    raises a lost link, naming the topic; a position that changes resets the count."""
+    feeder, world = fed
+
+    def tick(q, qd):
+        ns = now_ns()
+        feeder.js(ns, q)
+        feeder.wr(ns, 0.0)
+        _until(lambda: world.read().t >= 0 and world._js[0] >= ns and world._wr[0] >= ns, "the tick's messages")
+        state = world.read()
+        world.apply(Command(qd=np.full(6, qd)))
+        return state
+
+    for _ in range(50):  # at rest, commanded nothing: no limit on how long the state may stay the same
+        tick(Q0, 0.0)
+    q = Q0.copy()
+    for _ in range(30):  # commanded and following: the positions change every tick
+        q = q + 1e-4
+        tick(q, 0.1)
+    per_tick = 0.1 * world.dt
+    frozen_ticks = int(FROZEN_MOTION / per_tick)  # commands the frozen state is allowed before the link is lost
+    error, read = None, 0
+    while error is None and read < frozen_ticks + 5:
+        try:
+            tick(q, 0.1)
+            read += 1
+        except RobotLinkError as exc:
+            error = exc
+    assert error is not None, "a frozen joint state under commands was read for ever"
+    assert frozen_ticks - 1 <= read <= frozen_ticks + 2, (read, frozen_ticks)
+    msg = str(error)
+    assert f"the joint states on {JOINTS} advance their stamps but not their positions" in msg and "\n" not in msg

@@ -158,6 +158,7 @@ def ros_run(config: DriveConfig, *, stale_after=0.5, silent_after=None, silent_t
         lockstep=lockstep,
         pace=not lockstep,
         stale_after=stale_after,
+        stamps_on_this_clock=False,  # the simulated driver stamps on the simulator's clock
         rate_hz=config.rate_hz,
         tcp_offset=tuple(offset),
         payload=(mass, tuple(com)),

@@ -108,6 +108,12 @@ def ros2(
     lockstep: bool = typer.Option(
         False, help="A simulated robot that steps once per command: wait for its answer every tick."
     ),
+    robot_clock: bool = typer.Option(
+        False,
+        help="The robot stamps on a clock of its own (a simulator's time): order its messages by their stamps but "
+        "do not refuse one stamped more than --stale-after before this computer's clock (by default an old message: "
+        "a recording replayed, a buffering bridge, or the driver's clock behind).",
+    ),
     yes: bool = typer.Option(False, "--yes", help="Do not ask for confirmation before the robot moves (scripts)."),
     mcap: bool = typer.Option(False, help="Also write the run as <out>.mcap (ROS 2 messages Foxglove opens)."),
     plot: bool = typer.Option(True, help="Also write the monitor figure (<out>.png)."),
@@ -162,6 +168,7 @@ def ros2(
             connect_timeout=connect_timeout,
             lockstep=lockstep,
             pace=not lockstep,
+            stamps_on_this_clock=not robot_clock,
             domain_id=domain_id,
             tcp_offset=floats(tcp_offset, "--tcp-offset") or (0.0,) * 6,
         )

@@ -58,6 +58,11 @@ class Ros2Config:
     prediction_seconds : [s] how much of the prediction ``~/prediction`` carries.
     prediction_stride : ``~/prediction`` carries every stride-th row of it, and the last.
     lockstep : wait for fresh state each tick (simulated robots).  pace : wait for the period's end.
+    stamps_on_this_clock : the driver stamps on a clock kept with this computer's (the same computer,
+        or chrony/NTP): a message stamped more than ``stale_after`` before this node's clock is then
+        refused as old (a recording replayed, a bridge that buffers, a driver's clock behind). False
+        for a robot on a clock of its own (a simulator's time): its stamps are only ordered. In
+        lockstep the robot's clock is the simulator's, and stamps are never compared with this one.
     domain_id : ROS_DOMAIN_ID (None: the environment's).
     tcp_offset : TCP pose in the flange frame ``[x, y, z, rx, ry, rz]``, at most
         :data:`MAX_TCP_OFFSET` from the flange.
@@ -89,6 +94,7 @@ class Ros2Config:
     prediction_stride: int = 5
     lockstep: bool = False
     pace: bool = True
+    stamps_on_this_clock: bool = True
     domain_id: int | None = None
     tcp_offset: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     payload: tuple[float, tuple[float, float, float]] = (0.0, (0.0, 0.0, 0.0))
@@ -121,7 +127,7 @@ class Ros2Config:
         if len(names) != len(UR_JOINT_NAMES):
             raise bad("joint_names", f"{len(UR_JOINT_NAMES)} names, one per joint of the UR5 (got {len(names)})")
         object.__setattr__(self, "joint_names", names)
-        for name in ("wrench_in_base", "sensor_reliable", "lockstep", "pace"):
+        for name in ("wrench_in_base", "sensor_reliable", "lockstep", "pace", "stamps_on_this_clock"):
             if not isinstance(getattr(self, name), bool):
                 raise bad(name, "True or False")
         for name in ("command_depth", "prediction_stride"):

@@ -40,7 +40,10 @@ Trust in the inputs. A message replaces the newest one of its topic only when it
 stamp is newer: a late message (stamped before the newest) never does, and a stamp of 0 — a
 driver that does not stamp — is refused, as is a stamp more than :data:`MAX_STAMP_LEAD` ahead
 of this node's clock (a wrong stamp, or a driver's computer whose clock is ahead: accepted,
-it would make every correct message after it a late one). The same stamp again with the same
+it would make every correct message after it a late one), and one more than ``stale_after``
+behind it (``stamps_on_this_clock``, the default but in lockstep: a recording replayed with
+``ros2 bag play``, a bridge that buffers, or a driver whose clock is behind; its stamps would
+advance and look fresh, and the loop would close on old states). The same stamp again with the same
 values is a repeat (a driver republishing its last sample): no news, and not a sign of life
 either (below); with other values (two publishers, or a driver that does not advance its
 stamp) it is refused, on either topic, and the message first stamped so is kept. A joint
@@ -51,7 +54,11 @@ non-finite value. Joint states that jump — a joint farther from the newest sta
 between their arrivals), plus :data:`JOINT_JUMP_TOLERANCE` — come from two sources (a second
 node publishing another pose on the topic): the robot's state is unknown, so the run stops
 (or does not start) with one line naming the topic and the joint, as for a wrench in an
-unknown frame. Refused messages are counted (``rejected_messages``) and never reach
+unknown frame. Joint states whose stamps advance while their positions stay the same, bit for
+bit, while the commands sent since would have turned a joint more than :data:`FROZEN_MOTION`,
+are a driver republishing a frozen state (or an arm that no longer follows): read as a lost
+link, which stops the arm — on a frozen pose the loop's position terms never close, and the
+workspace limit, checked on that pose, never trips. Refused messages are counted (``rejected_messages``) and never reach
 the tick; if nothing valid follows, the topic goes stale and the arm stops, with the
 reason in the message (``"12 message(s) on /joint_states arrived but were refused: a
 joint state needs one position and one velocity per name …"``, not "no message"). At connect, a
@@ -150,6 +157,12 @@ REFUSED_AT_CONNECT = 1.0
 #: accepted it would make every correct message after it late, for as long as it is ahead: below
 #: ``stale_after``'s default (0.1 s), one such message cannot stop the run.
 MAX_STAMP_LEAD = 0.05
+#: [rad] how far the commands sent since the joint state last changed may have turned the fastest joint
+#: before a state that does not change (bit for bit) while its stamps advance is taken as frozen (module
+#: docstring). An arm that follows moves its encoders (1e-5 rad) within a few ms of a command; from rest at
+#: 8 rad/s² (the safety layer's acceleration limit at 125 Hz) 0.02 rad is 70 ms of commands, some 10 mm at the
+#: tool: room for the arm's and the driver's delay, little motion of an arm that is not where it is read.
+FROZEN_MOTION = 0.02
 
 
 class Ros2InputError(CoassistError, ValueError):
@@ -223,6 +236,8 @@ class Ros2World:
         self._used_js = -1
         self._used_wr = -1
         self._await_fresh = False  # lockstep: a command went out, so the next read waits for its state
+        self._last_q: np.ndarray | None = None  # the positions the last read gave, and
+        self._commanded = 0.0  # [rad] the fastest joint's commanded motion since they last changed (FROZEN_MOTION)
         self._t0_ns: int | None = None
         self._last_t = -math.inf
         self._period_start: float | None = None
@@ -345,7 +360,8 @@ class Ros2World:
         """Whether a message stamped ``stamp`` is newer than the newest one (stamped ``newest``): True,
         False for the same stamp (the caller compares the values), None when it is refused (module
         docstring): a stamp of 0 (a driver that does not stamp), one older than the newest (a late
-        message), or one more than MAX_STAMP_LEAD ahead of this node's clock."""
+        message), one more than MAX_STAMP_LEAD ahead of this node's clock, or (``stamps_on_this_clock``, not in
+        lockstep) one more than ``stale_after`` behind it."""
         if stamp <= 0:
             self._reject(
                 topic,
@@ -364,7 +380,18 @@ class Ros2World:
                 "the driver's computer's clock is ahead of this one's (synchronise them: chrony, NTP)",
             )
             return None
-        return newest is None or stamp > newest
+        c = self.config
+        news = newest is None or stamp > newest  # the newest stamp again is a repeat, old or not (the caller's)
+        if news and c.stamps_on_this_clock and not c.lockstep and -lead > c.stale_after:
+            self._reject(
+                topic,
+                f"stamped {-lead:.3f} s before this node's clock (more than stale_after, {c.stale_after:g} s): an old "
+                "message — a recording replayed, a bridge that buffers, or the driver's computer's clock behind this "
+                "one's (synchronise them: chrony, NTP); a robot on a clock of its own (a simulator's time): "
+                "stamps_on_this_clock=False (coassist ros2 --robot-clock)",
+            )
+            return None
+        return news
 
     def _same_stamp(self, topic: str, same_values: bool, now: float) -> None:
         """A message stamped as the newest one of ``topic``: a repeat when its values are the same (no
@@ -502,6 +529,16 @@ class Ros2World:
                     + (f": {why}" if why else "")
                     + "; the arm is stopped. Check the driver and the network, then rerun."
                 )
+        if self._last_q is None or not np.array_equal(q, self._last_q):
+            self._last_q, self._commanded = q, 0.0
+        elif self._commanded > FROZEN_MOTION:
+            topic = c.joint_state_topic
+            raise RobotLinkError(
+                f"the joint states on {topic} advance their stamps but not their positions: since they last "
+                f"changed the commands would have turned a joint {self._commanded:.3f} rad (more than "
+                f"{FROZEN_MOTION:g}): a driver republishing a frozen state, or an arm that does not follow its "
+                "commands (a protective stop?); the arm is stopped"
+            )
         self._state_rx = min(js_rx, wr_rx)
         self._used_js, self._used_wr = js_stamp, wr_stamp
         self._await_fresh = False
@@ -558,6 +595,8 @@ class Ros2World:
             qd = None
             log.warning("Ros2World: a command computed from state %.3f s old was not sent (zeros instead)", state_age)
         self._publish_command(np.zeros(self.n_joints) if qd is None else qd)
+        if qd is not None:
+            self._commanded += float(np.max(np.abs(qd))) * self.dt
         self._await_fresh = True
         if self.config.pace:
             start = self._period_start if self._period_start is not None else time.perf_counter()
