@@ -28,7 +28,7 @@ pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra: pi
 pytest.importorskip("pinocchio", reason="the Panda kinematics need the robot extra: pip install 'coassist[robot]'")
 
 from coassist.interfaces import Fault  # noqa: E402
-from coassist.robot.drive import DriveConfig, drive  # noqa: E402
+from coassist.robot.drive import ZERO_READINGS, DriveConfig, drive  # noqa: E402
 from coassist.robot.mujoco_world import MujocoArmWorld  # noqa: E402
 from coassist.runtime.safety_limits import SafetyLimits, within_limits  # noqa: E402
 
@@ -127,7 +127,7 @@ def test_mujoco_panda(case):
 
 class ScriptedSensor:
     """An F/T sensor on franky-sim's hand: the case's scripted hand force, applied to the simulated
-    hand body at the same time (zero at the first reading, with which the pipeline zeroes)."""
+    hand body at the same time (zero at the readings drive zeroes the pipeline on, its first ZERO_READINGS)."""
 
     #: Reading noise [N, N·m], seeded: a real sensor's noise moves some channel every sample, so the
     #: pipeline's frozen-sensor check (on for measured sensors) only trips on the frozen case.
@@ -139,7 +139,8 @@ class ScriptedSensor:
 
     def read(self):
         self.n += 1
-        w = np.zeros(6) if self.n == 1 else np.asarray(self.operator.force((self.n - 2) * DT, None, None), dtype=float)
+        k = self.n - ZERO_READINGS - 2  # the loop's tick (read 1: the test's own, for the limits; then drive's)
+        w = np.zeros(6) if k < 0 else np.asarray(self.operator.force(k * DT, None, None), dtype=float)
         if (w[:3] != self.sent).any():
             self.server.push(w[:3])  # the hand pushes the clean force; the sensor reads it with noise
             self.sent = w[:3].copy()

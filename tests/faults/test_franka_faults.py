@@ -38,7 +38,7 @@ pytestmark = pytest.mark.realtime
 
 from coassist.data import read_trial, write_trial  # noqa: E402
 from coassist.interfaces import Fault  # noqa: E402
-from coassist.robot.drive import DriveConfig, drive  # noqa: E402
+from coassist.robot.drive import ZERO_READINGS, DriveConfig, drive  # noqa: E402
 from coassist.robot.franka_world import FrankaWorld  # noqa: E402
 from coassist.runtime.safety_limits import SafetyLimits  # noqa: E402
 
@@ -113,8 +113,9 @@ def _drive(world, time_limit, **kwargs):
 
 
 def test_an_ft_read_timeout_once_is_one_flagged_tick_and_the_run_goes_on(server, tmp_path):
-    # read 1 zeroes the pipeline (drive's first read); loop tick k is read k + 2: tick 98 is read 100
-    sensor = FlakySensor(server, (5.0, 0.0, 0.0), raises={100})
+    # reads 1 … ZERO_READINGS zero the pipeline (drive's reads before the run); loop tick k is read
+    # k + ZERO_READINGS + 1: tick 98 is read 99 + ZERO_READINGS
+    sensor = FlakySensor(server, (5.0, 0.0, 0.0), raises={99 + ZERO_READINGS})
     world = FrankaWorld(server.host, arm="fr3", ft_sensor=sensor, link_timeout=sim.LINK_TIMEOUT)
     trial = _drive(world, 1.2)
     back = _written(trial, tmp_path)
@@ -124,7 +125,7 @@ def test_an_ft_read_timeout_once_is_one_flagged_tick_and_the_run_goes_on(server,
 
 
 def test_an_ft_sensor_that_keeps_raising_stops_the_arm_and_the_trial_is_written(server, tmp_path):
-    sensor = FlakySensor(server, (5.0, 0.0, 0.0), raises=range(100, 10**6))
+    sensor = FlakySensor(server, (5.0, 0.0, 0.0), raises=range(99 + ZERO_READINGS, 10**6))  # from tick 98 on
     world = FrankaWorld(server.host, arm="fr3", ft_sensor=sensor, link_timeout=sim.LINK_TIMEOUT)
     sent = []
     trial = _drive(world, 2.0, on_tick=lambda k, st, out: sent.append(out.command))
@@ -182,7 +183,10 @@ def test_a_driver_error_on_a_command_is_a_controlled_stop_with_the_trial_kept(se
 
 def test_a_sensor_rotation_of_1e300_is_one_flagged_tick_and_the_trial_is_written(server, tmp_path):
     world = FrankaWorld(
-        server.host, arm="fr3", ft_sensor=BadRotation(server, (5.0, 0.0, 0.0), at=60), link_timeout=sim.LINK_TIMEOUT
+        server.host,
+        arm="fr3",
+        ft_sensor=BadRotation(server, (5.0, 0.0, 0.0), at=59 + ZERO_READINGS),
+        link_timeout=sim.LINK_TIMEOUT,
     )
     trial = _drive(world, 1.2)
     back = _written(trial, tmp_path)
@@ -242,14 +246,16 @@ def test_a_stalled_loop_is_flagged_and_the_arm_restarts_from_its_measured_veloci
     # the scenario: the arm was moving fast before the stall, and had braked to rest by its end
     assert np.abs(sent[at]).max() > 0.3
     assert np.abs(measured[after]).max() < 0.05
-    # flagged on the tick after the stall (its read, the (after + 2)-th: drive reads once before the loop,
-    # saw the robot's clock jump by the stall); any miss before it the machine made, and it shows: the
+    # flagged on the tick after the stall (its read, the (after + ZERO_READINGS + 1)-th: drive reads ZERO_READINGS
+    # times before the loop, to zero the sensor, saw the robot's clock jump by the stall); any miss before it the machine made, and it shows: the
     # robot's clock ran over at that tick's read, or tick k − 1's own work overran the period (the wall
     # clock between the monitor's calls of ticks k − 2 and k − 1 spans it)
-    assert trial.fault[after] & _DM and overruns[after + 1] >= STALL - 2 * DT
+    assert trial.fault[after] & _DM and overruns[after + ZERO_READINGS] >= STALL - 2 * DT
     gaps = np.diff(clock, prepend=-np.inf)
     for k in np.flatnonzero(trial.fault[:after] & _DM):
-        assert overruns[k + 1] > 0.0 or gaps[k - 1] > DT, f"tick {k}: DEADLINE_MISS, but no overrun measured"
+        assert overruns[k + ZERO_READINGS] > 0.0 or gaps[k - 1] > DT, (
+            f"tick {k}: DEADLINE_MISS, but no overrun measured"
+        )
     # its command is one acceleration step (the layer's margin) from what the arm measures, not a jump
     assert np.abs(sent[after] - measured[after]).max() <= A_DT * (1 + 1e-9)
     assert world.last_overrun == 0.0  # reset by the next command

@@ -44,7 +44,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from coassist.interfaces import Fault  # noqa: E402
-from coassist.robot.drive import DriveConfig, drive  # noqa: E402
+from coassist.robot.drive import ZERO_READINGS, DriveConfig, drive  # noqa: E402
 from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
 from coassist.runtime.safety_limits import SafetyLimits  # noqa: E402
@@ -369,7 +369,9 @@ class StallsAfterRead(Ros2World):
 
     def read(self):
         state = super().read()
-        if self.reads == self.STALL_AT + 1:  # drive's own first read, then tick 0 … : read k + 1 is tick k
+        # drive's ZERO_READINGS reads before the run (the sensor's zero), then tick 0 …: read k + ZERO_READINGS + 1
+        # (counted from 1) is tick k
+        if self.reads == self.STALL_AT + ZERO_READINGS:
             time.sleep(0.35)
         self.reads += 1
         return state

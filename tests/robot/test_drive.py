@@ -318,3 +318,82 @@ def test_an_arm_read_moving_before_the_run_is_not_told_to_keep_moving():
     sent = [c for c in world.sent if c is not None]  # (the close's stop carries no velocity)
     assert len(sent) > 5 and np.abs(sent[0]).max() <= step  # one step from rest at most, not 0.4 − step
     assert max(np.abs(c).max() for c in sent) < 0.01  # at rest with nobody pushing: it stays so
+
+
+def test_a_real_sensor_is_zeroed_from_readings_that_agree_and_a_glitch_is_refused():
+    """drive zeroes the force sensor before the run. From one reading, a 60 N glitch in it (below the sensor's range
+    and the contact limit) became a push the arm followed for the whole run with nobody at the handle (716 mm at
+    the tool-speed limit, in review). A real arm's world (here MuJoCo's UR5 run as the ``ur`` world, so it is read
+    as a real sensor is) is zeroed from ``zero_samples`` readings one period apart: one glitched reading is
+    refused before anything moves, saying what to do; readings that agree give their mean, less the payload (the
+    closed form of ``WrenchPipeline.zero``), as the bias; a simulated world is zeroed from its one reading, as
+    before."""
+    from dataclasses import replace
+
+    from coassist.robot.drive import SensorZeroError
+    from coassist.runtime.wrench import WrenchConfig, payload_wrench
+
+    class Glitching(MujocoUR5World):
+        """MuJoCo's UR5 at rest; read k's wrench offset by ``offsets[k]`` (the rest: none); the commands it gets."""
+
+        def __init__(self, offsets) -> None:
+            super().__init__("handle", seed=0)
+            self.offsets, self.reads, self.sent = offsets, [], []
+
+        def read(self):
+            state = super().read()
+            k = len(self.reads)
+            state = replace(state, wrench=np.asarray(state.wrench) + (self.offsets[k] if k < len(self.offsets) else 0))
+            self.reads.append(state)
+            return state
+
+        def apply(self, command) -> None:
+            self.sent.append(command)
+            super().apply(command)
+
+    n = WrenchConfig().zero_samples
+    nobody = ScriptedForce.constant((0.0,) * 6)
+    glitch = Glitching([np.array([-60.0, 0, 0, 0, 0, 0])])
+    try:
+        with pytest.raises(SensorZeroError) as info:
+            drive(
+                DriveConfig(world="ur", controller="manual", task="linear", time_limit=0.1),
+                world=glitch,
+                operator=nobody,
+            )
+    finally:
+        glitch.close()
+    assert len(glitch.reads) == n and all(c.stop for c in glitch.sent)  # read n times; no motion (a stop on close)
+    msg = str(info.value)
+    assert (
+        "spread 60.0 N on fx (at most 5 N)" in msg and "let go of the tool and start again" in msg and "\n" not in msg
+    )
+
+    # readings that agree, each a little apart (a still sensor's noise): the bias is their mean less the payload
+    rng = np.random.default_rng(0)
+    noise = rng.normal(0.0, [0.3, 0.3, 0.3, 0.02, 0.02, 0.02], size=(n, 6))
+    still = Glitching(list(noise))
+    try:
+        trial = drive(
+            DriveConfig(world="ur", controller="manual", task="linear", time_limit=0.1), world=still, operator=nobody
+        )
+    finally:
+        still.close()
+    mass, com = still.tool_mass_and_com()
+    zeroing = still.reads[:n]
+    raw = np.array([s.wrench for s in zeroing])
+    R = np.array([s.sensor_rotation for s in zeroing])
+    expected = (raw - payload_wrench(mass, tuple(com), WrenchConfig().gravity, R)).mean(axis=0)
+    # the same arithmetic (a mean of 25 rows of O(10) N): equal to a few ulp of the largest term
+    np.testing.assert_allclose(trial.meta.extra["sensor_bias"], expected, rtol=0, atol=1e-12)
+    one = raw[0] - payload_wrench(mass, tuple(com), WrenchConfig().gravity, R[:1])[0]
+    assert np.abs(one - expected).max() > 0.1  # not the first reading's alone (its noise, 0.3 N, is averaged)
+
+    sim = Glitching([np.array([-60.0, 0, 0, 0, 0, 0])])  # a simulated world: its one reading, as before
+    try:
+        trial = drive(
+            DriveConfig(world="mujoco", controller="manual", task="linear", time_limit=0.1), world=sim, operator=nobody
+        )
+    finally:
+        sim.close()
+    assert trial.meta.extra["sensor_bias"][0] < -50.0  # the test's glitch, zeroed as the simulated sample

@@ -30,7 +30,7 @@ import franky  # noqa: E402
 from coassist.interfaces import Fault, fault_names  # noqa: E402
 from coassist.robot import franka_world  # noqa: E402
 from coassist.robot.arms import arm_kinematics  # noqa: E402
-from coassist.robot.drive import DriveConfig, drive  # noqa: E402
+from coassist.robot.drive import ZERO_READINGS, DriveConfig, drive  # noqa: E402
 from coassist.robot.franka_world import FrankaLinkError, FrankaWorld  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
 from coassist.runtime.safety_limits import SafetyLimits, within_limits  # noqa: E402
@@ -76,8 +76,8 @@ class SimServer:
 
 
 class PushSensor:
-    """An F/T sensor on the hand: zero at the first reading (the pipeline zeroes on it), then the push
-    it starts in the simulator at its second reading (so the two agree to a tick)."""
+    """An F/T sensor on the hand: zero at the readings drive zeroes the pipeline on (its first ZERO_READINGS), then
+    the push it starts in the simulator at the next reading, the loop's first (so the two agree to a tick)."""
 
     # Noise-free and says so (as MuJoCo's sensor does), so drive leaves out the frozen-sensor check,
     # which a real sensor's noise never trips.
@@ -88,10 +88,10 @@ class PushSensor:
 
     def read(self):
         self.n += 1
-        if self.n == 2:
+        if self.n == ZERO_READINGS + 1:
             self.server.push(self.force)
         w = np.zeros(6)
-        if self.n >= 2:
+        if self.n > ZERO_READINGS:
             w[:3] = self.force
         return w, np.eye(3), self.n
 

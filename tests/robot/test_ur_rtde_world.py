@@ -306,10 +306,16 @@ def test_a_control_link_reported_down_ends_the_run_link_lost_without_another_com
 
     trial = None
     for _attempt in range(3):
-        world, robot = make(frequency=125.0)
+        robot = FakeRobot()
+        robot.step_time = 1 / 125.0  # a CB3's controller
+        world, robot = make(robot, frequency=125.0)
+        # the receive stream runs on its own while drive reads it to zero the sensor before the run (a step a read,
+        # one period apart); from the loop's first tick on, the fake's cycle is the loop's (waitPeriod)
+        robot.stream = True
         at: dict = {}
 
         def on_tick(k, state, out, robot=robot, at=at):
+            robot.stream = False
             if k == 30:  # after tick 30's speedJ: ur-rtde's receive thread saw the connection end and tore it down
                 robot.control_connected = False
                 at["calls"] = len(robot.calls)

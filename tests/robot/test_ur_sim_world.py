@@ -533,10 +533,11 @@ def test_each_fault_ends_in_a_controlled_stop_with_the_trial_kept_and_what_to_do
         with simulator() as sim:
 
             def on_tick(k, state, out, sim=sim):
+                if k == 0:  # the hand pushes from the run's start (drive zeroes the sensor before it, hands off)
+                    sim.push([10.0, 0.0, 0.0])
                 if k == 60:
                     inject(sim)
 
-            sim.push([10.0, 0.0, 0.0])
             with realtime_priority():  # ur-rtde's receive threads, started here, inherit it
                 world = URRTDEWorld(sim.host, frequency=125.0)
                 trial = drive(

@@ -128,7 +128,9 @@ def test_two_conditions_the_person_cannot_tell_apart_are_refused(controller):
     text = _plan(timing="motion_time = 3.0").replace(
         'controller = "manual"', 'controller = "manual"\nintent = "constant-velocity"'
     )
-    assert [c.intent for c in plan_from_text(text, ".").conditions] == ["nominal", "nominal", "constant-velocity"]
+    # no intent given: the cooperative condition assists with what every arm command does (present-held; nominal,
+    # which it was, needs more hand force than MG), the impedance one logs the plan's rows
+    assert [c.intent for c in plan_from_text(text, ".").conditions] == ["present-held", "nominal", "constant-velocity"]
     twin = f'\n[[condition]]\nname = "twin"\ncontroller = "{controller}"\nintent = "present"\n'
     at = _plan(timing="motion_time = 3.0").index("[trials]")
     base = _plan(timing="motion_time = 3.0")

@@ -223,7 +223,7 @@ def test_every_table_holds_the_summary_formatted_as_the_f_string_report_did(writ
         [name(b), c["controller"], c["intent"], "—"] for b, c in j["conditions"].items()
     ]
     assert conditions[1:] == [
-        [name("assistive"), "cooperative", "nominal", "—"],
+        [name("assistive"), "cooperative", "present-held", "—"],
         [name("impedance"), "impedance", "nominal", "—"],
         [name("manual"), "manual", "nominal", "—"],
     ]
@@ -328,7 +328,7 @@ def test_the_summary_and_the_report_say_what_each_condition_was(tmp_path):
     assert StudyFolder(study.folder).record["models"] == {str(calibration): digest}
     html_path, json_path = write_report(study.folder)
     assert json.loads(json_path.read_text())["conditions"] == {
-        "assistive": {"controller": "cooperative", "intent": "nominal", "intent_sha256": None},
+        "assistive": {"controller": "cooperative", "intent": "present-held", "intent_sha256": None},
         "impedance": {"controller": "cooperative-arbitrated", "intent": str(calibration), "intent_sha256": digest},
         "manual": {"controller": "manual", "intent": "nominal", "intent_sha256": None},
     }
@@ -337,7 +337,7 @@ def test_the_summary_and_the_report_say_what_each_condition_was(tmp_path):
     labels = study.labels
     assert parser.tables[0] == [
         ["condition", "controller", "intent", "intent sha256"],
-        [f"assistive ({labels['assistive']})", "cooperative", "nominal", "—"],
+        [f"assistive ({labels['assistive']})", "cooperative", "present-held", "—"],
         [f"impedance ({labels['impedance']})", "cooperative-arbitrated", str(calibration), digest[:12]],
         [f"manual ({labels['manual']})", "manual", "nominal", "—"],
     ]

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import logging
 import re
+import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
@@ -49,6 +50,7 @@ from coassist.config import APPLICATION_PRESET, GameWeights, ImpedanceParameters
 from coassist.control.presets import CONTROLLERS, get_preset, make_controller
 from coassist.control.stability import StabilityGuard, StabilityGuardParameters
 from coassist.data import Trial
+from coassist.errors import CoassistError
 from coassist.interfaces import FEATURES
 from coassist.robot.worlds import WORLDS, ArmWorld, HandWorld, WorldRequest, arm_worlds, build_world, missing_members
 from coassist.runtime.episode import EpisodeLabels, build_episode, episode_ticks, plan_grid
@@ -70,7 +72,17 @@ from coassist.scenario.tasks import OBSTACLES, TASKS, task_for_seed
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["GUARDED_CONTROLLERS", "DriveConfig", "drive", "drive_lockstep", "move_tasks", "workspace_for"]
+__all__ = [
+    "GUARDED_CONTROLLERS",
+    "DriveConfig",
+    "ZERO_READINGS",
+    "SensorZeroError",
+    "drive",
+    "drive_lockstep",
+    "move_tasks",
+    "workspace_for",
+    "zero_readings",
+]
 
 #: Where the real-time predictor runs (coassist.intent.realtime.BACKENDS).
 PREDICTOR_BACKENDS = ("process", "onnx", "torch")
@@ -562,6 +574,10 @@ def _prepare(
                 f"lacks {', '.join(missing_members(world, ArmWorld))}"
             )
         state0 = world.read()
+        # the sensor's zero: a real sensor from zero_samples readings of its stream that agree (one glitched sample
+        # zeroed alone became a push the arm followed on its own); a simulated world's read repeats one sample
+        # until it steps: that one. Read now, before a simulated handle is given its operator (who would push).
+        zeroing = zero_readings(world, state0, 1 if simulated else ZERO_READINGS, dt)
         start_pose = np.asarray(state0.tool_pose, dtype=float).copy()
         hand: HandWorld | None = world if isinstance(world, HandWorld) else None  # a handle to hold
         # the simulated operator at a simulated handle: MuJoCo's, or coassist ur-sim's behind the ur world
@@ -674,12 +690,62 @@ def _prepare(
                 f"; realtime_intent runs no predictor ({config.intent} has no network, it is computed in the tick)"
                 + (": it only paces the simulated world to the wall clock" if simulated else "")
             )
-        # zero the sensor with the tool still and nobody touching it (the hand starts at rest)
-        wrench.zero(np.asarray(state0.wrench, dtype=float)[None], np.asarray(state0.sensor_rotation, dtype=float)[None])
+        # zero the sensor with the tool still and nobody touching it (the hand starts at rest), from the readings
+        # taken before a simulated hand was given its operator
+        wrench.zero(*zeroing)
     except BaseException:
         _release(world, built_here, intent_stage)
         raise
     return _PreparedDrive(episode, world, limits, wrench, built_here, intent_stage, assistance)
+
+
+#: readings of a real arm's sensor :func:`drive` zeroes it from, before the run (the wrench pipeline's
+#: ``zero_samples``: 0.2 s at 125 Hz); a simulated world's one
+ZERO_READINGS = WrenchConfig().zero_samples
+#: [N], [N·m] how far one reading of the zeroing may be from their median, per channel: a still sensor's
+#: noise is well below (the deadband alone is 0.2 N), a hand resting on the tool or a glitched sample above.
+ZERO_SPREAD_FORCE, ZERO_SPREAD_TORQUE = 5.0, 0.5
+
+
+class SensorZeroError(CoassistError, ValueError):
+    """The force sensor could not be zeroed: its readings with nobody touching the tool do not agree, or are
+    not finite. Nothing was moved."""
+
+
+def zero_readings(world: Any, state0: Any, n: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(raw (n, 6), rotations (n, 3, 3)): ``state0``'s wrench and sensor rotation and n − 1 more read from
+    ``world`` one period ``dt`` apart, for :meth:`~coassist.runtime.wrench.WrenchPipeline.zero`.
+
+    Refused (:class:`SensorZeroError`, saying what to do) where a reading is not finite or one channel's
+    readings spread more than :data:`ZERO_SPREAD_FORCE` / :data:`ZERO_SPREAD_TORQUE` from their median: zeroed
+    on one glitched sample (a 60 N spike, below the sensor's range and the contact limit), the arm read the
+    glitch as a push for the whole run and moved on its own at the tool-speed limit."""
+    states = [state0]
+    for _ in range(n - 1):
+        time.sleep(dt)
+        states.append(world.read())
+    raw = np.array([np.asarray(s.wrench, dtype=float) for s in states])
+    rotations = np.array([np.asarray(s.sensor_rotation, dtype=float) for s in states])
+    if not (np.isfinite(raw).all() and np.isfinite(rotations).all()):
+        bad = int(np.flatnonzero(~np.isfinite(raw).all(axis=1) | ~np.isfinite(rotations).all(axis=(1, 2)))[0])
+        raise SensorZeroError(
+            f"the force sensor cannot be zeroed: reading {bad + 1} of {n} is not finite (a sensor or driver fault); "
+            "nothing was moved"
+        )
+    spread = np.abs(raw - np.median(raw, axis=0)).max(axis=0)
+    limit = np.array([ZERO_SPREAD_FORCE] * 3 + [ZERO_SPREAD_TORQUE] * 3)
+    if (spread > limit).any():
+        i = int(np.argmax(spread / limit))
+        unit = "N" if i < 3 else "N·m"
+        raise SensorZeroError(
+            f"the force sensor cannot be zeroed: its {n} readings over {(n - 1) * dt:.2f} s spread {spread[i]:.1f} "
+            f"{unit} on {('fx', 'fy', 'fz', 'tx', 'ty', 'tz')[i]} (at most {limit[i]:g} {unit}): someone touching "
+            "the tool, a cable pulling on it, or a glitched sample; let go of the tool and start again (nothing "
+            "was moved)"
+        )
+    if (raw == raw[0]).all() and (rotations == rotations[0]).all():
+        return raw[:1], rotations[:1]  # a world that repeats its sample (a simulator waiting for a command): that one
+    return raw, rotations
 
 
 def move_tasks(robot: str, ref_abs: np.ndarray, intent: np.ndarray):

@@ -15,8 +15,8 @@ mean"), so ``coassist study init`` can print it as it is. The plan of a comparis
     [[condition]]                  # comparison: two or more; shown on the page as A, B, C…
     name = "assistive"
     controller = "cooperative"     # coassist.control.presets.CONTROLLERS
-    intent = "nominal"             # a named source a person can run (nominal, constant-velocity,
-                                   # present, paths, …) or a folder: a model, a path-hypotheses calibration
+    intent = "present-held"        # a named source a person can run (present-held, the default; nominal,
+                                   # present, paths, …), calibrated, or a folder: a model, a calibration
     [[condition]]
     name = "impedance"
     controller = "impedance"
@@ -78,6 +78,7 @@ from coassist.robot.drive import MAX_TIME_LIMIT
 from coassist.robot.worlds import PLAY, WORLDS, study_worlds
 from coassist.runtime.episode import DWELL
 from coassist.scenario import intent_registry
+from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.objects import OBJECTS
 from coassist.scenario.populations import POPULATIONS
 from coassist.scenario.tasks import OBSTACLES, TASKS, task_for_seed
@@ -261,6 +262,9 @@ class Condition:
     controller : one of :data:`coassist.control.presets.CONTROLLERS`.
     intent : a name of :func:`person_intents` (``"nominal"``, ``"paths"``, …) or the absolute path of a
         folder of a kind in :data:`~coassist.scenario.intent_registry.INTENT_FOLDERS` (a model, a calibration).
+        A plan that gives none: :data:`~coassist.scenario.assistance.DEFAULT_INTENT` for a controller that reads
+        it (what every arm command assists with; ``nominal``, the plan, needs more hand force than MG), ``nominal``
+        for one that does not (:data:`INTENT_FREE_CONTROLLERS`: only its logged prediction is the source's).
     """
 
     name: str
@@ -719,7 +723,10 @@ def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Con
                 f"{sorted(RESERVED_NAMES)}, round-* or calibration-*), got {name!r}"
             )
         controller = _choice(c.get("controller"), f"{where}.controller", tuple(CONTROLLERS), "controller")
-        intent = _intent(c.get("intent", "nominal"), f"{where}.intent", base)
+        # no intent given: what the arm commands assist with, never the plan (which a person pushes against); a
+        # controller that reads none logs the plan's rows, as before
+        unsaid = "nominal" if controller in INTENT_FREE_CONTROLLERS else DEFAULT_INTENT
+        intent = _intent(c.get("intent", unsaid), f"{where}.intent", base)
         out.append(Condition(name, controller, intent))
     names = [c.name for c in out]
     if len(set(names)) != len(names):
