@@ -175,6 +175,53 @@ def test_manifest_not_utf8(dataset):
         read_dataset(dataset)
 
 
+def test_a_hand_edited_manifest_with_a_key_twice_nan_or_a_huge_number_is_one_clear_error(dataset):
+    """A manifest with the dataset's id given twice was read with the second (plain JSON keeps the last), a second
+    'trials' list replaced the first; a 5000-digit number was Python's ValueError without the file's name."""
+    text = (dataset / "manifest.json").read_text()
+    cases = {
+        "the key 'dataset_id' appears twice": text.replace(
+            '"dataset_id":', '"dataset_id": "renamed", "dataset_id":', 1
+        ),
+        "NaN is not a number a file may hold": text.replace('"format_version": 1', '"format_version": NaN', 1),
+        "digits": text.replace('"format_version": 1', '"format_version": ' + "9" * 5000, 1),
+    }
+    for says, edited in cases.items():
+        assert edited != text, says
+        (dataset / "manifest.json").write_text(edited)
+        with pytest.raises(TrialFileError, match=r"D/manifest\.json: .*" + says):
+            read_dataset(dataset)
+    (dataset / "manifest.json").write_text(text)
+    # the sample count a manifest lists is quoted as JSON: a string "200" is not shown as the number 200
+    n = read_dataset(dataset).trials[1].n_samples
+    _edit_manifest(
+        dataset, lambda m: {**m, "trials": [m["trials"][0], {**m["trials"][1], "n_samples": str(n)}, m["trials"][2]]}
+    )
+    with pytest.raises(TrialFileError, match=rf'holds {n} samples, .*manifest\.json lists "{n}"'):
+        read_dataset(dataset)
+
+
+def test_an_unreadable_manifest_is_one_clear_error(dataset, monkeypatch):
+    """Once a PermissionError traceback from every command that reads a dataset (show, train, evaluate). The read
+    is refused as the kernel refuses it to a user without the permission (this suite may run as root, whom mode
+    000 does not stop)."""
+    import errno
+    import os
+    import pathlib
+
+    manifest = dataset / "manifest.json"
+    read_bytes = pathlib.Path.read_bytes
+
+    def refused(self):
+        if self == manifest:
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(self))
+        return read_bytes(self)
+
+    monkeypatch.setattr(pathlib.Path, "read_bytes", refused)
+    with pytest.raises(TrialFileError, match=r"D/manifest\.json: cannot be read: Permission denied$"):
+        read_dataset(dataset)
+
+
 # --------------------------------------------------------------------------- model folders
 
 

@@ -30,7 +30,16 @@ import pyarrow.parquet as pq
 
 import coassist
 from coassist._checks import check_int, is_integer
-from coassist._io import OutputLock, atomic_write, partial_folder, remove_stale, staged_folder, swap_in
+from coassist._io import (
+    OutputLock,
+    atomic_write,
+    no_constant,
+    no_duplicate_keys,
+    partial_folder,
+    remove_stale,
+    staged_folder,
+    swap_in,
+)
 from coassist.data.trial import Trial, TrialMeta
 from coassist.data.trial_file import FORMAT_VERSION, META_KEY, TrialFileError, read_trial, write_trial
 
@@ -125,13 +134,20 @@ def _read_manifest(folder: Path) -> dict[str, Any]:
     if not path.is_file():
         raise FileNotFoundError(f"no dataset at {folder}: {MANIFEST_NAME} not found")
     try:
-        manifest = json.loads(path.read_bytes().decode("utf-8"))
+        data = path.read_bytes()
+    except OSError as exc:  # unreadable (its permissions, a dead mount): named, not a traceback
+        raise ManifestError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+    try:
+        # a key given twice (a hand edit: plain JSON keeps the last silently), NaN or ±Infinity: refused
+        manifest = json.loads(data.decode("utf-8"), object_pairs_hook=no_duplicate_keys, parse_constant=no_constant)
     except UnicodeDecodeError as exc:
         raise ManifestError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except json.JSONDecodeError as exc:
         raise ManifestError(f"{path}: malformed JSON: {exc}") from None
     except RecursionError:  # nested deeper than the parser goes: no manifest coassist writes
         raise ManifestError(f"{path}: malformed JSON: nested too deep") from None
+    except ValueError as exc:  # the hooks' refusals, an integer of more digits than Python converts
+        raise ManifestError(f"{path}: {exc}") from None
     if not isinstance(manifest, dict):
         raise ManifestError(f"{path}: must hold a JSON object, got {type(manifest).__name__}")
     for key in ("dataset_id", "trials", "format_version"):
@@ -351,7 +367,7 @@ def _read_entry(folder: Path, entry: Mapping[str, Any]) -> Trial:
         raise TrialFileError(f"{path}: meta differs from the one listed in {folder / MANIFEST_NAME}")
     n = entry.get("n_samples")
     if n is not None and n != trial.n_samples:
-        raise TrialFileError(f"{path}: holds {trial.n_samples} samples, {folder / MANIFEST_NAME} lists {n}")
+        raise TrialFileError(f"{path}: holds {trial.n_samples} samples, {folder / MANIFEST_NAME} lists {json.dumps(n)}")
     return trial
 
 
