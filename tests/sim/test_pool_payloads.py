@@ -114,3 +114,37 @@ def test_a_pools_workers_send_through_its_folder_which_goes_with_the_pool(tmp_pa
         _assert_same(items, pool.submit(P.Payloads, items).result())
         assert not list(folder.iterdir())
     assert not folder.exists()
+
+
+def test_a_trial_travels_whole_its_arms_joints_too():
+    """trial_payload listed the fields to ship by hand and left out ``joints`` and ``joint_velocity``: a MuJoCo
+    trial run in a worker arrived without its arm's joints. Every array field of Trial goes, bit for bit."""
+    import dataclasses
+
+    from coassist.data import Trial, TrialMeta
+
+    rng = np.random.default_rng(5)
+    n = 50
+    arrays = {
+        "time": np.arange(n) * 0.008,
+        "pose": rng.standard_normal((n, 2)),
+        "velocity": rng.standard_normal((n, 2)),
+        "wrench": rng.standard_normal((n, 2)),
+        "reference": rng.standard_normal((n, 2)),
+        "prediction": rng.standard_normal((n, 4, 2)),
+        "intent": rng.standard_normal((n, 2)),
+        "effort_h": rng.standard_normal((n, 2)),
+        "effort_r": rng.standard_normal((n, 2)),
+        "fault": rng.integers(0, 2**20, n),
+        "joints": rng.standard_normal((n, 6)),
+        "joint_velocity": rng.standard_normal((n, 6)),
+    }
+    assert set(arrays) == {f.name for f in dataclasses.fields(Trial)} - {"meta"}  # every field of Trial, set
+    meta = TrialMeta(
+        user="u0", task="linear", object="handle", controller="manual", model_id=None, seed=1, origin="sim", dt=0.008
+    )
+    trial = Trial(meta=meta, **arrays)
+    back = P.trial_from_payload(pickle.loads(pickle.dumps(P.Payloads([P.trial_payload(trial)])))[0])
+    assert back.equals(trial)
+    for name, x in arrays.items():
+        assert getattr(back, name).tobytes() == x.tobytes(), name

@@ -23,6 +23,7 @@ its run.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import shutil
 import tempfile
@@ -54,26 +55,17 @@ __all__ = [
 ]
 
 
+#: The array fields of :class:`~coassist.data.Trial`: all of its fields but ``meta``.
+TRIAL_ARRAYS = tuple(f.name for f in dataclasses.fields(Trial) if f.name != "meta")
+
+
 def trial_payload(trial: Trial) -> tuple[dict, dict]:
     """The trial as plain data to send between processes: (meta dict, arrays by name).
 
-    TrialMeta holds read-only mapping proxies, which do not pickle: ship plain data."""
-    arrays = {
-        name: getattr(trial, name)
-        for name in (
-            "time",
-            "pose",
-            "velocity",
-            "wrench",
-            "reference",
-            "prediction",
-            "intent",
-            "effort_h",
-            "effort_r",
-            "fault",
-        )
-    }
-    return trial.meta.to_dict(), arrays
+    TrialMeta holds read-only mapping proxies, which do not pickle: ship plain data. Every array field of
+    :class:`~coassist.data.Trial` goes (a hand-written list once left out the arm's joints and joint velocities:
+    the MuJoCo trials a worker ran arrived without them)."""
+    return trial.meta.to_dict(), {name: getattr(trial, name) for name in TRIAL_ARRAYS}
 
 
 def trial_from_payload(payload: tuple[dict, dict]) -> Trial:
