@@ -66,6 +66,41 @@ def test_trial_missing_one_axis_is_not_read_as_fewer_dofs(tmp_path, drop):
         read_trial(path)
 
 
+@pytest.mark.parametrize(
+    "column, to",
+    [("pose_x", "timestamp[us]"), ("pose_x", "string"), ("pose_x", "int64"), ("vel_y", "float32"), ("fault", "double")],
+)
+def test_a_column_of_another_type_is_refused_naming_it(tmp_path, column, to):
+    """A trial file whose column is not of the type written (a foreign or hand-made file): a timestamp column was a
+    numpy traceback that ``--skip-bad-trials`` could not skip; strings, integers and float32 loaded as if they
+    were the float64 written. The file keeps its metadata but not its checksum (a file before the checksum)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    from coassist.data.trial_file import CHECKSUM_KEY
+
+    trial = _trial()
+    fields = {f: getattr(trial, f) for f in ("meta", "time", "pose", "velocity", "wrench", "reference")}
+    path = write_trial(Trial(**fields, fault=np.zeros(40, dtype=np.int64)), tmp_path / "t.parquet")
+    table = pq.read_table(path)
+    i = table.column_names.index(column)
+    col = table.column(column)
+    if to == "timestamp[us]":
+        new = pa.array(np.arange(len(col)), type=pa.timestamp("us"))
+    elif to == "string":
+        new = pc.cast(col, pa.string())
+    elif to == "int64":
+        new = pa.array(np.arange(len(col)), type=pa.int64())
+    else:
+        new = pc.cast(col, pa.float32() if to == "float32" else pa.float64())
+    md = {k: v for k, v in (table.schema.metadata or {}).items() if k != CHECKSUM_KEY}
+    table = table.set_column(i, column, new).replace_schema_metadata(md)
+    pq.write_table(table, path)
+    expected = "int64" if column == "fault" else "double"
+    with pytest.raises(TrialFileError, match=rf"t\.parquet: column '{column}' has type \S+, expected {expected}$"):
+        read_trial(path)
+
+
 def test_truncated_trial_file_names_the_file(tmp_path):
     path = write_trial(_trial(), tmp_path / "t.parquet")
     path.write_bytes(path.read_bytes()[:200])

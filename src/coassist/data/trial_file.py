@@ -142,9 +142,15 @@ def write_trial(trial: Trial, path: str | os.PathLike[str]) -> Path:
 
 
 def _column(table: pa.Table, name: str, path: Path) -> np.ndarray:
+    """Column ``name`` as numpy, of the type :func:`write_trial` writes it with (int64 ``fault``, else float64): a
+    timestamp column failed numpy's stacking with a traceback, and strings, integers or decimals loaded as if
+    they were the floats written."""
     if name not in table.column_names:
         raise TrialFileError(f"{path}: missing column {name!r}")
     col = table.column(name).combine_chunks()
+    expected = pa.int64() if name == "fault" else pa.float64()
+    if col.type != expected:
+        raise TrialFileError(f"{path}: column {name!r} has type {col.type}, expected {expected}")
     if col.null_count:
         raise TrialFileError(f"{path}: column {name!r} has {col.null_count} null values")
     return col.to_numpy(zero_copy_only=False)
@@ -222,7 +228,7 @@ def read_trial(path: str | os.PathLike[str]) -> Trial:
             if name not in names:
                 raise TrialFileError(f"{path}: missing column {name!r}")
             col = table.column(name).combine_chunks()
-            if not pa.types.is_fixed_size_list(col.type):
+            if not pa.types.is_fixed_size_list(col.type) or col.type.value_type != pa.float64():
                 raise TrialFileError(f"{path}: column {name!r} has type {col.type}, expected fixed_size_list<double>")
             horizon = col.type.list_size
             values = col.flatten().to_numpy(zero_copy_only=False)
