@@ -299,7 +299,9 @@ class OutputLock:
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
-        path = Path(path).absolute()
+        # resolved: a folder reached through a symlink (its own, or a parent's) is locked as itself, so two runs
+        # writing it by two names still exclude each other
+        path = Path(path).resolve()
         self.path = path
         self.lock_file = path.parent / f".{path.name}.lock"
 

@@ -220,6 +220,36 @@ def test_dataset_refuses_non_empty_folder_unless_overwrite(tmp_path):
     assert sorted(p.name for p in folder.iterdir()) == ["manifest.json", "notes.txt", "trial_00000.parquet"]
 
 
+def test_an_overwrite_leaves_the_replaced_trials_companions_behind(tmp_path):
+    """``play --mcap`` keeps ``trial_00000.mcap`` beside ``trial_00000.parquet``; an overwrite carried the old MCAP
+    beside the new trial of that name, where it looked like the new trial's own. Files of no trial's name (notes)
+    are carried as before."""
+    folder = write_dataset([full_trial(seed=s) for s in range(2)], tmp_path / "D", "D1")
+    (folder / "trial_00000.mcap").write_bytes(b"the old trial's recording")
+    (folder / "trial_00001.png").write_bytes(b"the old trial's figure")
+    (folder / "notes.txt").write_text("keep me")
+    write_dataset([minimal_trial()], folder, "D1b", overwrite=True)
+    assert sorted(p.name for p in folder.iterdir()) == ["manifest.json", "notes.txt", "trial_00000.parquet"]
+
+
+def test_a_dataset_reached_through_a_symlink_is_written_where_it_is_and_locked_as_itself(tmp_path):
+    """A dataset kept on another disk, reached through a link: an overwrite swapped the link itself for a new folder
+    (the linked data left as they were, the link gone), and a writer through the link took another lock than one
+    through the folder's own path, so two could write it at once."""
+    from coassist._io import OutputLock
+
+    real = write_dataset([full_trial(seed=0)], tmp_path / "store" / "D", "D1")
+    link = tmp_path / "D"
+    link.symlink_to(real)
+    assert OutputLock(link).lock_file == OutputLock(real).lock_file
+    write_dataset([minimal_trial()], link, "D1b", overwrite=True)
+    assert link.is_symlink() and link.resolve() == real.resolve()
+    assert read_dataset(real).id == "D1b" and len(read_dataset(link)) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["D", "store"]  # nothing staged or left beside the link
+    append_to_dataset([full_trial(seed=1)], link)
+    assert len(read_dataset(real)) == 2
+
+
 def test_dataset_into_empty_existing_folder(tmp_path):
     (tmp_path / "E").mkdir()
     assert len(read_dataset(write_dataset([minimal_trial()], tmp_path / "E", "E"))) == 1

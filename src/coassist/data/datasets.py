@@ -203,6 +203,14 @@ def _new_manifest(dataset_id: str, description: str, entries: list[dict[str, Any
     }
 
 
+def _destination(folder: str | os.PathLike[str]) -> Path:
+    """The folder a dataset is written into: a symlink's target (a dataset kept on another disk), so that it is
+    staged, swapped and locked where its data are; the link was swapped out for a new folder beside it, the linked
+    data left as they were."""
+    folder = Path(folder)
+    return folder.resolve() if folder.is_symlink() else folder
+
+
 def _check_destination(folder: Path, overwrite: bool) -> None:
     """Refuse a destination that is a file, or a non-empty folder without ``overwrite``."""
     if folder.exists() or folder.is_symlink():
@@ -218,14 +226,18 @@ def _check_destination(folder: Path, overwrite: bool) -> None:
 
 
 def _keep_unlisted(old: Path, new: Path) -> None:
-    """Carry the files of ``old`` that its manifest does not list (notes, figures) into ``new``."""
+    """Carry the files of ``old`` that its manifest does not list (notes, figures) into ``new``, but those named
+    after a trial file of either (``trial_00000.mcap`` beside ``trial_00000.parquet``: the replaced trial's, which
+    beside the new trial of that name looked like its own)."""
     listed = {MANIFEST_NAME}
     try:
         listed |= {e["file"] for e in _read_manifest(old)["trials"]}
     except (FileNotFoundError, TrialFileError):
         pass
+    trials = {name.partition(".")[0] for name in listed - {MANIFEST_NAME}}
+    trials |= {e["file"].partition(".")[0] for e in _read_manifest(new)["trials"]}
     for p in old.iterdir():
-        if p.name in listed or (new / p.name).exists():
+        if p.name in listed or p.name.partition(".")[0] in trials or (new / p.name).exists():
             continue
         if p.is_dir():
             shutil.copytree(p, new / p.name)
@@ -269,7 +281,7 @@ def write_dataset(
     Path
         The dataset folder.
     """
-    folder = Path(folder)
+    folder = _destination(folder)
     _check_id(dataset_id)
     if not isinstance(description, str):
         raise ValueError(f"description must be a string, got {type(description).__name__}")
@@ -295,7 +307,7 @@ def append_to_dataset(trials: Iterable[Trial], folder: str | os.PathLike[str]) -
     The manifest, the commit point, is rewritten atomically after the new trial files
     are in place; a crash before leaves the old dataset (plus unlisted files).
     """
-    folder = Path(folder)
+    folder = _destination(folder)
     items = _collect_trials(trials)
     with OutputLock(folder):
         manifest = _read_manifest(folder)
@@ -417,7 +429,7 @@ class DatasetWriter:
         overwrite: bool = False,
         keep: bool = False,
     ) -> None:
-        self.folder = Path(folder)
+        self.folder = _destination(folder)
         self.dataset_id = _check_id(dataset_id)
         self._kept: dict[int, Trial] | None = {} if keep else None
         self._finished = False
