@@ -397,3 +397,31 @@ def test_a_real_sensor_is_zeroed_from_readings_that_agree_and_a_glitch_is_refuse
     finally:
         sim.close()
     assert trial.meta.extra["sensor_bias"][0] < -50.0  # the test's glitch, zeroed as the simulated sample
+
+
+def test_a_first_pose_that_is_not_finite_is_refused_before_anything_moves():
+    """drive lays the plan out from the TCP pose it reads first: a NaN there (a Franka's glitched orientation reads
+    as one) shifted the plan by NaN. Refused in one line, nothing commanded."""
+    from dataclasses import replace
+
+    class FirstPoseNaN(MujocoUR5World):
+        def __init__(self) -> None:
+            super().__init__("handle", seed=0)
+            self.reads, self.sent = 0, []
+
+        def read(self):
+            state = super().read()
+            self.reads += 1
+            return replace(state, tool_pose=np.full(6, np.nan)) if self.reads == 1 else state
+
+        def apply(self, command) -> None:
+            self.sent.append(command)
+            super().apply(command)
+
+    world = FirstPoseNaN()
+    try:
+        with pytest.raises(ValueError, match=r"reports a TCP pose that is not finite .* nothing was moved"):
+            drive(DriveConfig(world="ur", controller="manual", task="linear", time_limit=0.1), world=world)
+    finally:
+        world.close()
+    assert world.reads == 1 and all(c.stop for c in world.sent)

@@ -488,6 +488,37 @@ def test_general_rotation_round_trip():
     assert "zeroFtSensor" not in robot.names()
 
 
+def test_a_non_finite_orientation_is_a_flagged_state_not_the_end_of_the_run():
+    """One sample whose TCP orientation is NaN: read() raised ValueError("rv has non-finite entries") and the run
+    ended ``world_error``; before any good sample, a bare ValueError. Now the pose goes on with its NaN (the tick
+    flags NONFINITE_STATE and holds the last good pose), the force rotated as the last good sample's; a first
+    sample so is refused naming it."""
+    rv = [0.1, -0.2, 0.3]
+    robot = FakeRobot(tcp_pose=[0.4, 0.0, 0.3, *rv], tcp_force=[3.0, -1.0, 7.0, 0.1, 0.2, 0.3])
+    world, _ = make(robot, zero_sensor=False)
+    good = world.read()
+    robot.tcp_pose = [0.4, 0.0, 0.3, float("nan"), -0.2, 0.3]
+    glitch = world.read()
+    assert np.isnan(glitch.tool_pose[3]) and np.isfinite(glitch.tool_pose[:3]).all()
+    assert glitch.sensor_rotation.tobytes() == good.sensor_rotation.tobytes()
+    assert glitch.wrench.tobytes() == good.wrench.tobytes()  # the same force, rotated as before
+    first = FakeRobot(tcp_pose=[0.4, 0.0, 0.3, float("nan"), 0.0, 0.0])
+    world, _ = make(first, zero_sensor=False)
+    with pytest.raises(ValueError, match=r"reports a TCP pose whose orientation is not finite .* nothing was moved"):
+        world.read()
+
+
+def test_franka_pose_of_a_non_finite_rotation_is_a_nan_orientation():
+    pytest.importorskip("pinocchio", reason="the Franka world's module needs the robot extra")
+    from coassist.robot.franka_world import pose_from_franka
+
+    T = np.eye(4)
+    T[:3, 3] = (0.3, 0.0, 0.5)
+    T[0, 1] = float("nan")
+    pose = pose_from_franka(T)
+    assert pose[:3].tolist() == [0.3, 0.0, 0.5] and np.isnan(pose[3:]).all()
+
+
 def test_wrench_seq_and_strictly_increasing_time():
     world, robot = make()
     world.apply(Command(qd=np.zeros(6)))  # the first apply arms the watchdog (a round trip)

@@ -574,6 +574,11 @@ def _prepare(
                 f"lacks {', '.join(missing_members(world, ArmWorld))}"
             )
         state0 = world.read()
+        if not np.isfinite(np.asarray(state0.tool_pose, dtype=float)).all():  # the plan is laid out from it
+            raise ValueError(
+                f"the robot reports a TCP pose that is not finite ({np.asarray(state0.tool_pose).tolist()}) before "
+                "the run: nothing was moved; check the robot's state, then rerun"
+            )
         # the sensor's zero: a real sensor from zero_samples readings of its stream that agree (one glitched sample
         # zeroed alone became a push the arm followed on its own); a simulated world's read repeats one sample
         # until it steps: that one. Read now, before a simulated handle is given its operator (who would push).

@@ -95,11 +95,14 @@ class FrankaLinkError(RobotLinkError):
 
 
 def pose_from_franka(T: Any) -> np.ndarray:
-    """(6,) ``[x, y, z, rx, ry, rz]`` of a transform: franky's ``Affine`` (``.matrix``, 4 × 4) or a 4 × 4 array."""
+    """(6,) ``[x, y, z, rx, ry, rz]`` of a transform: franky's ``Affine`` (``.matrix``, 4 × 4) or a 4 × 4 array.
+    A rotation with a non-finite entry gives a NaN orientation (a glitched state: the tick flags it and brakes;
+    it was a ValueError out of the world's read, which ended the run)."""
     M = np.asarray(getattr(T, "matrix", T), dtype=float)
     if M.shape != (4, 4):
         raise ValueError(f"a transform is a 4 x 4 matrix, got shape {M.shape}")
-    return np.concatenate((M[:3, 3], rotation_vector(M[:3, :3])))
+    rv = rotation_vector(M[:3, :3]) if np.isfinite(M[:3, :3]).all() else np.full(3, np.nan)
+    return np.concatenate((M[:3, 3], rv))
 
 
 def reported_arm(robot: Any) -> tuple[str, str] | None:

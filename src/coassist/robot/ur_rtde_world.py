@@ -360,6 +360,7 @@ class URRTDEWorld:
         self._last_ts: float | None = None
         self._last_t = -math.inf
         self._last_force: np.ndarray | None = None
+        self._last_R: np.ndarray | None = None  # the last finite orientation's rotation (a glitched one reuses it)
         self._last_advance_wall = time.monotonic()
         self._wrench_seq = 0
         self._usual_delay = math.inf  # the smallest (local clock − robot timestamp) seen, drifting up slowly
@@ -581,7 +582,17 @@ class URRTDEWorld:
         self.safety_status_bits = bits
 
         state_stop = bool(bits & SafetyStatus.PROTECTIVE), bool(bits & SafetyStatus.EMERGENCY)
-        R = rotation_matrix(pose[3:])
+        if np.isfinite(pose[3:]).all():
+            R = self._last_R = rotation_matrix(pose[3:])
+        elif self._last_R is not None:
+            # a glitched orientation: the pose goes on with its NaN (the tick flags it, holds the last good pose and
+            # brakes), the force is rotated as the last good sample's (it ended the run, a ValueError out of read)
+            R = self._last_R
+        else:
+            raise ValueError(
+                f"the robot at {self.host} reports a TCP pose whose orientation is not finite ({pose[3:].tolist()}): "
+                "nothing was moved; check the robot's state on the teach pendant, then rerun"
+            )
         wrench = np.concatenate((R.T @ force[:3], R.T @ force[3:]))
         state = RobotState(
             t=t,
