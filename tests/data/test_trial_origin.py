@@ -20,7 +20,7 @@ import pytest
 from coassist.data import Trial, TrialFileError, TrialMeta, append_to_dataset, read_dataset, read_trial, write_trial
 from coassist.data.datasets import MANIFEST_NAME, write_dataset
 from coassist.data.trial import FORMER_KEYS, ORIGINS
-from coassist.data.trial_file import META_KEY
+from coassist.data.trial_file import META_CHECKSUM_KEY, META_KEY
 
 FIELDS = [f.name for f in fields(TrialMeta)]
 
@@ -37,9 +37,11 @@ def legacy_meta_json(meta: TrialMeta) -> bytes:
 
 def rewrite_meta(path, value: bytes) -> None:
     """Replace a trial file's stored meta, its columns and every other key untouched, as
-    :func:`coassist.data.trial_file.write_trial` writes (zstd, no dictionaries)."""
+    :func:`coassist.data.trial_file.write_trial` writes (zstd, no dictionaries); without the metadata's checksum,
+    which files of that time did not have."""
     table = pq.read_table(path)
-    table = table.replace_schema_metadata({**table.schema.metadata, META_KEY: value})
+    kept = {k: v for k, v in table.schema.metadata.items() if k != META_CHECKSUM_KEY}
+    table = table.replace_schema_metadata({**kept, META_KEY: value})
     pq.write_table(table, path, compression="zstd", use_dictionary=False)
 
 

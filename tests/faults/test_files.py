@@ -101,6 +101,26 @@ def test_a_column_of_another_type_is_refused_naming_it(tmp_path, column, to):
         read_trial(path)
 
 
+def test_damaged_metadata_is_refused_and_a_file_without_its_checksum_still_reads(tmp_path):
+    """The column checksum does not cover the schema's metadata: a bit flipped there read back as another trial
+    (the controller "cooparative" in a review's bit-flip sweep). The metadata's own SHA-256 is written with them and
+    checked; a file written before it (none) is read as before."""
+    from coassist.data.trial_file import META_CHECKSUM_KEY, META_KEY
+
+    path = write_trial(_trial(), tmp_path / "t.parquet")
+    table = pq.read_table(path)
+    md = dict(table.schema.metadata)
+    assert META_CHECKSUM_KEY in md
+    damaged = {**md, META_KEY: md[META_KEY].replace(b'"impedance"', b'"impedancf"')}
+    assert damaged[META_KEY] != md[META_KEY]
+    pq.write_table(table.replace_schema_metadata(damaged), path)
+    with pytest.raises(TrialFileError, match=r"t\.parquet: the metadata do not match the checksum written with them"):
+        read_trial(path)
+    older = {k: v for k, v in damaged.items() if k != META_CHECKSUM_KEY}
+    pq.write_table(table.replace_schema_metadata(older), path)
+    assert read_trial(path).meta.controller == "impedancf"  # no checksum to check it by: read as before
+
+
 def test_truncated_trial_file_names_the_file(tmp_path):
     path = write_trial(_trial(), tmp_path / "t.parquet")
     path.write_bytes(path.read_bytes()[:200])

@@ -52,6 +52,10 @@ META_KEY = b"coassist.trial_meta"
 VERSION_KEY = b"coassist.format_version"
 #: SHA-256 of the columns' values (:func:`_table_checksum`), recorded at write time.
 CHECKSUM_KEY = b"coassist.sha256"
+#: SHA-256 of the metadata's bytes (:data:`META_KEY`): the column checksum does not cover them, and a bit flipped in
+#: the schema's metadata read back as another trial's (a controller "cooparative", another seed). Files written
+#: before it have none.
+META_CHECKSUM_KEY = b"coassist.meta_sha256"
 #: Largest magnitude of any value in a trial [SI units]: 1000 km, 1 MN, 1e6 s. Finite
 #: values beyond it (a wrench of 6e307 N from damaged bytes) are not a recording.
 PLAUSIBLE_MAGNITUDE = 1e6
@@ -92,11 +96,13 @@ def _trial_table(trial: Trial) -> pa.Table:
             flat = pa.array(np.ascontiguousarray(trial.prediction[:, :, j]).ravel(), type=pa.float64())
             cols[f"prediction_{AXES[j]}"] = pa.FixedSizeListArray.from_arrays(flat, horizon)
     table = pa.table(cols)
+    meta = trial.meta.to_json().encode()
     return table.replace_schema_metadata(
         {
-            META_KEY: trial.meta.to_json().encode(),
+            META_KEY: meta,
             VERSION_KEY: str(FORMAT_VERSION).encode(),
             CHECKSUM_KEY: _table_checksum(table).encode(),
+            META_CHECKSUM_KEY: hashlib.sha256(meta).hexdigest().encode(),
         }
     )
 
@@ -187,6 +193,9 @@ def read_trial(path: str | os.PathLike[str]) -> Trial:
         raise TrialFileError(f"{path}: bad format version {version_raw!r}") from None
     if version > FORMAT_VERSION:
         raise TrialFileError(f"{path}: format version {version} is newer than this coassist reads ({FORMAT_VERSION})")
+    meta_sha = md.get(META_CHECKSUM_KEY)
+    if meta_sha is not None and meta_sha.decode("ascii", "replace") != hashlib.sha256(md[META_KEY]).hexdigest():
+        raise TrialFileError(f"{path}: the metadata do not match the checksum written with them (damaged bytes)")
     try:
         meta = TrialMeta.from_json(md[META_KEY])
     except ValueError as exc:
