@@ -361,8 +361,6 @@ class URRTDEWorld:
         self._last_t = -math.inf
         self._last_force: np.ndarray | None = None
         self._last_R: np.ndarray | None = None  # the last finite orientation's rotation (a glitched one reuses it)
-        #: samples whose timestamp ran further ahead of the last than the wall clock allows (not taken as newest)
-        self.timestamp_glitches = 0
         self._last_advance_wall = time.monotonic()
         self._wrench_seq = 0
         self._usual_delay = math.inf  # the smallest (local clock − robot timestamp) seen, drifting up slowly
@@ -566,16 +564,6 @@ class URRTDEWorld:
         now = time.monotonic()
 
         advanced = self._last_ts is None or ts > self._last_ts
-        if (
-            advanced
-            and self._last_ts is not None
-            and ts - self._last_ts > now - self._last_advance_wall + self.link_timeout
-        ):
-            # further ahead than the wall clock allows (a glitched timestamp): latched, every correct sample after it
-            # read as no news and the link was lost "stuck" while the stream ran; not taken as the newest
-            self.timestamp_glitches += 1
-            advanced = False
-            ts = self._last_ts
         if advanced:
             self._last_advance_wall = now
             self._check_delay(now, ts)
