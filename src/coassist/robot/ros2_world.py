@@ -55,9 +55,10 @@ between their arrivals), plus :data:`JOINT_JUMP_TOLERANCE` — come from two sou
 node publishing another pose on the topic): the robot's state is unknown, so the run stops
 (or does not start) with one line naming the topic and the joint, as for a wrench in an
 unknown frame. Joint states whose stamps advance while their positions stay the same, bit for
-bit, while the commands sent since would have turned a joint more than :data:`FROZEN_MOTION`,
-are a driver republishing a frozen state (or an arm that no longer follows): read as a lost
-link, which stops the arm — on a frozen pose the loop's position terms never close, and the
+bit, for longer than ``stale_after`` while the commands sent since would have turned a joint
+more than :data:`FROZEN_MOTION`, are a driver republishing a frozen state (or an arm that no
+longer follows): read as a lost link (judged on a new stamp: the same message read again is a
+gap, which ``stale_after`` bounds as before), which stops the arm — on a frozen pose the loop's position terms never close, and the
 workspace limit, checked on that pose, never trips. Refused messages are counted (``rejected_messages``) and never reach
 the tick; if nothing valid follows, the topic goes stale and the arm stops, with the
 reason in the message (``"12 message(s) on /joint_states arrived but were refused: a
@@ -238,6 +239,7 @@ class Ros2World:
         self._await_fresh = False  # lockstep: a command went out, so the next read waits for its state
         self._last_q: np.ndarray | None = None  # the positions the last read gave, and
         self._commanded = 0.0  # [rad] the fastest joint's commanded motion since they last changed (FROZEN_MOTION)
+        self._q_changed_at = math.inf  # when they last changed (time.monotonic)
         self._t0_ns: int | None = None
         self._last_t = -math.inf
         self._period_start: float | None = None
@@ -530,13 +532,15 @@ class Ros2World:
                     + "; the arm is stopped. Check the driver and the network, then rerun."
                 )
         if self._last_q is None or not np.array_equal(q, self._last_q):
-            self._last_q, self._commanded = q, 0.0
-        elif self._commanded > FROZEN_MOTION:
+            self._last_q, self._commanded, self._q_changed_at = q, 0.0, now
+        elif js_stamp > self._used_js and self._commanded > FROZEN_MOTION and now - self._q_changed_at > c.stale_after:
+            # judged on a new stamp only (the same message read again is a gap, which stale_after bounds), and only
+            # after stale_after without a change (a message or two lost on a fast arm is no frozen state)
             topic = c.joint_state_topic
             raise RobotLinkError(
-                f"the joint states on {topic} advance their stamps but not their positions: since they last "
-                f"changed the commands would have turned a joint {self._commanded:.3f} rad (more than "
-                f"{FROZEN_MOTION:g}): a driver republishing a frozen state, or an arm that does not follow its "
+                f"the joint states on {topic} advance their stamps but not their positions: in the "
+                f"{now - self._q_changed_at:.3f} s since they last changed (stale_after {c.stale_after:g} s) the "
+                f"commands would have turned a joint {self._commanded:.3f} rad (more than {FROZEN_MOTION:g}): a driver republishing a frozen state, or an arm that does not follow its "
                 "commands (a protective stop?); the arm is stopped"
             )
         self._state_rx = min(js_rx, wr_rx)
