@@ -202,3 +202,30 @@ def test_a_refused_page_option_registers_nobody(tmp_path, host, token):
     assert res.exit_code == 2 and ("--token" in res.output or "--host" in res.output), res.output
     assert "Traceback" not in res.output
     assert not (study.folder / "participants" / "P01").exists() and not study.any_started()
+
+
+def test_a_study_folder_keeps_the_default_intent_it_was_made_with(tmp_path):
+    """A cooperative condition that names no intent runs present-held in a study made today; it ran nominal before.
+    The folder keeps its plan's bytes and re-reads them on every run, so a folder made before the change once read
+    that condition as present-held: its next participant ran another condition than its first, under one name, and
+    the report said so of all of them. The default is recorded at init (a folder without it: nominal), and an
+    amended plan is read with the folder's."""
+    from coassist.study.folder import STUDY_NAME, amend_study
+
+    plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0)
+    made = init_study(plan, tmp_path / "new")
+    assert made.record["default_intent"] == "present-held"
+    assert [(c.name, c.intent) for c in made.plan().conditions][0] == ("assistive", "present-held")
+
+    older = init_study(plan, tmp_path / "old")
+    record = json.loads((older.folder / STUDY_NAME).read_text())
+    del record["default_intent"]  # as a folder made before it was recorded
+    (older.folder / STUDY_NAME).write_text(json.dumps(record))
+    older = StudyFolder(older.folder)
+    assert [(c.name, c.intent) for c in older.plan().conditions][0] == ("assistive", "nominal")
+    amended = plan.parent / "amended.toml"
+    amended.write_text(plan.read_text().replace("participants = 4", "participants = 5"))
+    assert "participants = 5" in amended.read_text()
+    amend_study(older.folder, amended, reason="a fifth participant")  # a safe field: the condition is read alike
+    again = StudyFolder(older.folder)
+    assert again.plan().participants == 5 and again.plan().conditions[0].intent == "nominal"

@@ -61,6 +61,7 @@ from coassist._io import OutputLock, atomic_write_bytes, atomic_write_text, fsyn
 from coassist.data.datasets import MANIFEST_NAME
 from coassist.errors import CoassistError
 from coassist.scenario import intent_registry
+from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.study.design import blinding_labels, latin_square_rows
 from coassist.study.ids import IdError, check_id
 from coassist.study.plan import StudyPlan, load_plan
@@ -192,6 +193,8 @@ def init_study(plan_file: str | Path, out: str | Path) -> StudyFolder:
             "models": {p: intent_folder_hash(p) for p in plan.intent_folders()},
             "latin_square": latin_square_rows(max(len(names), 1)),
             "estimate": estimate.to_json(),
+            # what a condition that names no intent runs, fixed for this folder (the parser's default may change)
+            "default_intent": DEFAULT_INTENT,
         }
         out.mkdir(parents=True, exist_ok=True)
         (out / "participants").mkdir(exist_ok=True)
@@ -230,7 +233,7 @@ def amend_study(folder: str | Path, plan_file: str | Path, reason: str) -> dict[
     study = StudyFolder(folder)
     old = study.plan()
     plan_file = Path(plan_file)
-    new = load_plan(plan_file)
+    new = load_plan(plan_file, study.default_intent)  # read as the folder's plan is
     raw = plan_file.read_bytes()
     changed = plan_differences(old, new)
     if not changed:
@@ -288,7 +291,16 @@ class StudyFolder:
         self.check_plan()
         from coassist.study.plan import plan_from_text
 
-        return plan_from_text((self.folder / PLAN_NAME).read_text("utf-8"), self.record["plan_dir"])
+        return plan_from_text(
+            (self.folder / PLAN_NAME).read_text("utf-8"), self.record["plan_dir"], self.default_intent
+        )
+
+    @property
+    def default_intent(self) -> str:
+        """The intent of a condition that names none (and whose controller reads one) in this folder's plan: the one
+        recorded at init, so that a plan on disk keeps its meaning; ``nominal`` for a folder made before it was
+        recorded (the default then)."""
+        return str(self.record.get("default_intent", "nominal"))
 
     def check_plan(self) -> None:
         """One line if ``plan.toml`` or a model it names changed since ``study init``."""

@@ -493,8 +493,10 @@ _TOP = (
 )
 
 
-def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
-    """The :class:`StudyPlan` of a parsed TOML document; :class:`PlanError` naming the field."""
+def parse_plan(data: Mapping[str, Any], base: str | Path = ".", default_intent: str = DEFAULT_INTENT) -> StudyPlan:
+    """The :class:`StudyPlan` of a parsed TOML document; :class:`PlanError` naming the field. ``default_intent``: a
+    condition's whose controller reads one and names none (:class:`Condition`); a study folder keeps the one it was
+    made with (``nominal`` before it was :data:`~coassist.scenario.assistance.DEFAULT_INTENT`)."""
     base = Path(base)
     for k in data:
         if k not in _TOP:
@@ -577,7 +579,7 @@ def parse_plan(data: Mapping[str, Any], base: str | Path = ".") -> StudyPlan:
         _int(q.get("likert_points", 7), "questionnaire.likert_points", 3, 11),
     )
 
-    conditions = _conditions(data, protocol, base)
+    conditions = _conditions(data, protocol, base, default_intent)
     calibration = None
     if "calibration" in data:
         cal = _table(data, "calibration", tuple(CalibrationPlan.__dataclass_fields__))
@@ -693,7 +695,9 @@ def _check_trial_time(plan: StudyPlan, limit_given: bool) -> None:
         )
 
 
-def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Condition, ...]:
+def _conditions(
+    data: Mapping[str, Any], protocol: str, base: Path, default_intent: str = DEFAULT_INTENT
+) -> tuple[Condition, ...]:
     raw = data.get("condition", [])
     if protocol != "comparison":
         if raw:
@@ -725,7 +729,7 @@ def _conditions(data: Mapping[str, Any], protocol: str, base: Path) -> tuple[Con
         controller = _choice(c.get("controller"), f"{where}.controller", tuple(CONTROLLERS), "controller")
         # no intent given: what the arm commands assist with, never the plan (which a person pushes against); a
         # controller that reads none logs the plan's rows, as before
-        unsaid = "nominal" if controller in INTENT_FREE_CONTROLLERS else DEFAULT_INTENT
+        unsaid = "nominal" if controller in INTENT_FREE_CONTROLLERS else default_intent
         intent = _intent(c.get("intent", unsaid), f"{where}.intent", base)
         out.append(Condition(name, controller, intent))
     names = [c.name for c in out]
@@ -791,8 +795,9 @@ def _training(data: Mapping[str, Any]) -> TrainingPlan:
     )
 
 
-def load_plan(path: str | Path) -> StudyPlan:
-    """Read and validate the plan file ``path`` (:class:`PlanError` for a file that is not a plan)."""
+def load_plan(path: str | Path, default_intent: str = DEFAULT_INTENT) -> StudyPlan:
+    """Read and validate the plan file ``path`` (:class:`PlanError` for a file that is not a plan);
+    ``default_intent``: :func:`parse_plan`'s."""
     path = Path(path)
     try:
         text = path.read_bytes().decode("utf-8")
@@ -802,13 +807,14 @@ def load_plan(path: str | Path) -> StudyPlan:
         raise PlanError(f"{path}: is a folder; give the plan's .toml file") from None
     except UnicodeDecodeError:
         raise PlanError(f"{path}: not UTF-8 text") from None
-    return plan_from_text(text, path.parent)
+    return plan_from_text(text, path.parent, default_intent)
 
 
-def plan_from_text(text: str, base: str | Path) -> StudyPlan:
-    """The plan of TOML ``text`` whose relative model paths are relative to ``base``."""
+def plan_from_text(text: str, base: str | Path, default_intent: str = DEFAULT_INTENT) -> StudyPlan:
+    """The plan of TOML ``text`` whose relative model paths are relative to ``base``; ``default_intent``:
+    :func:`parse_plan`'s."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise PlanError(f"not TOML: {exc}") from None
-    return parse_plan(data, base)
+    return parse_plan(data, base, default_intent)
