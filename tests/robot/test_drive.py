@@ -285,6 +285,24 @@ def test_realtime_intent_without_a_network_says_it_only_paces_the_world():
     assert said[1] == said[0][: -len(note)]
 
 
+class AlteredReads(MujocoUR5World):
+    """MuJoCo's UR5 at rest (the handle, seed 0), read k's state put through ``alter(k, state)``; the states read
+    (``reads``) and the commands sent (``sent``) kept."""
+
+    def __init__(self, alter) -> None:
+        super().__init__("handle", seed=0)
+        self.alter, self.reads, self.sent = alter, [], []
+
+    def read(self):
+        state = self.alter(len(self.reads), super().read())
+        self.reads.append(state)
+        return state
+
+    def apply(self, command) -> None:
+        self.sent.append(command)
+        super().apply(command)
+
+
 def test_an_arm_read_moving_before_the_run_is_not_told_to_keep_moving():
     """drive reads the world before the run (to zero the sensor; a real arm's person then confirms the limits): a
     velocity read then may be stale by tick 0, so the safety layer's ramp starts from rest, never from it. Seeded from
@@ -292,30 +310,14 @@ def test_an_arm_read_moving_before_the_run_is_not_told_to_keep_moving():
     0.34 rad/s on every joint and driven to 0.18 rad/s."""
     from dataclasses import replace
 
-    class ReadMovingFirst(MujocoUR5World):
-        """MuJoCo's UR5 at rest, read once as moving (a stale first read); the commands it is sent."""
-
-        def __init__(self) -> None:
-            super().__init__("handle", seed=0)
-            self.reads, self.sent = 0, []
-
-        def read(self):
-            state = super().read()
-            self.reads += 1
-            return replace(state, qd=np.full(6, 0.4)) if self.reads == 1 else state
-
-        def apply(self, command) -> None:
-            self.sent.append(None if command.qd is None else np.array(command.qd))
-            super().apply(command)
-
-    world = ReadMovingFirst()
+    world = AlteredReads(lambda k, state: replace(state, qd=np.full(6, 0.4)) if k == 0 else state)
     config = DriveConfig(world="ur", controller="manual", task="linear", time_limit=0.1)
     try:
         drive(config, world=world, operator=ScriptedForce.constant((0.0,) * 6))
     finally:
         world.close()
     step = config.limits.margin * config.limits.joint_acceleration * config.dt  # 0.98 · 8 rad/s² · 8 ms
-    sent = [c for c in world.sent if c is not None]  # (the close's stop carries no velocity)
+    sent = [np.asarray(c.qd) for c in world.sent if c.qd is not None]  # (the close's stop carries no velocity)
     assert len(sent) > 5 and np.abs(sent[0]).max() <= step  # one step from rest at most, not 0.4 − step
     assert max(np.abs(c).max() for c in sent) < 0.01  # at rest with nobody pushing: it stays so
 
@@ -333,27 +335,17 @@ def test_a_real_sensor_is_zeroed_from_readings_that_agree_and_a_glitch_is_refuse
     from coassist.robot.drive import SensorZeroError
     from coassist.runtime.wrench import WrenchConfig, payload_wrench
 
-    class Glitching(MujocoUR5World):
-        """MuJoCo's UR5 at rest; read k's wrench offset by ``offsets[k]`` (the rest: none); the commands it gets."""
+    def glitching(offsets):
+        """read k's wrench offset by ``offsets[k]`` (the rest: none)"""
 
-        def __init__(self, offsets) -> None:
-            super().__init__("handle", seed=0)
-            self.offsets, self.reads, self.sent = offsets, [], []
+        def alter(k, state):
+            return replace(state, wrench=np.asarray(state.wrench) + (offsets[k] if k < len(offsets) else 0))
 
-        def read(self):
-            state = super().read()
-            k = len(self.reads)
-            state = replace(state, wrench=np.asarray(state.wrench) + (self.offsets[k] if k < len(self.offsets) else 0))
-            self.reads.append(state)
-            return state
-
-        def apply(self, command) -> None:
-            self.sent.append(command)
-            super().apply(command)
+        return AlteredReads(alter)
 
     n = WrenchConfig().zero_samples
     nobody = ScriptedForce.constant((0.0,) * 6)
-    glitch = Glitching([np.array([-60.0, 0, 0, 0, 0, 0])])
+    glitch = glitching([np.array([-60.0, 0, 0, 0, 0, 0])])
     try:
         with pytest.raises(SensorZeroError) as info:
             drive(
@@ -372,7 +364,7 @@ def test_a_real_sensor_is_zeroed_from_readings_that_agree_and_a_glitch_is_refuse
     # readings that agree, each a little apart (a still sensor's noise): the bias is their mean less the payload
     rng = np.random.default_rng(0)
     noise = rng.normal(0.0, [0.3, 0.3, 0.3, 0.02, 0.02, 0.02], size=(n, 6))
-    still = Glitching(list(noise))
+    still = glitching(list(noise))
     try:
         trial = drive(
             DriveConfig(world="ur", controller="manual", task="linear", time_limit=0.1), world=still, operator=nobody
@@ -389,7 +381,7 @@ def test_a_real_sensor_is_zeroed_from_readings_that_agree_and_a_glitch_is_refuse
     one = raw[0] - payload_wrench(mass, tuple(com), WrenchConfig().gravity, R[:1])[0]
     assert np.abs(one - expected).max() > 0.1  # not the first reading's alone (its noise, 0.3 N, is averaged)
 
-    sim = Glitching([np.array([-60.0, 0, 0, 0, 0, 0])])  # a simulated world: its one reading, as before
+    sim = glitching([np.array([-60.0, 0, 0, 0, 0, 0])])  # a simulated world: its one reading, as before
     try:
         trial = drive(
             DriveConfig(world="mujoco", controller="manual", task="linear", time_limit=0.1), world=sim, operator=nobody
@@ -404,24 +396,10 @@ def test_a_first_pose_that_is_not_finite_is_refused_before_anything_moves():
     as one) shifted the plan by NaN. Refused in one line, nothing commanded."""
     from dataclasses import replace
 
-    class FirstPoseNaN(MujocoUR5World):
-        def __init__(self) -> None:
-            super().__init__("handle", seed=0)
-            self.reads, self.sent = 0, []
-
-        def read(self):
-            state = super().read()
-            self.reads += 1
-            return replace(state, tool_pose=np.full(6, np.nan)) if self.reads == 1 else state
-
-        def apply(self, command) -> None:
-            self.sent.append(command)
-            super().apply(command)
-
-    world = FirstPoseNaN()
+    world = AlteredReads(lambda k, state: replace(state, tool_pose=np.full(6, np.nan)) if k == 0 else state)
     try:
         with pytest.raises(ValueError, match=r"reports a TCP pose that is not finite .* nothing was moved"):
             drive(DriveConfig(world="ur", controller="manual", task="linear", time_limit=0.1), world=world)
     finally:
         world.close()
-    assert world.reads == 1 and all(c.stop for c in world.sent)
+    assert len(world.reads) == 1 and all(c.stop for c in world.sent)

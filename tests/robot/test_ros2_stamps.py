@@ -227,17 +227,22 @@ def test_a_driver_whose_stamps_are_all_ahead_is_refused_at_connect_naming_the_to
     assert waited < 5.0  # at REFUSED_AT_CONNECT (1 s), not at connect_timeout (10 s)
 
 
+def _reads_every_message(n: int, **kw) -> None:
+    """A world (``kw``: its config's) connects to the ticking feeder and reads n more wrenches, refusing none."""
+    world = _world(**kw)
+    try:
+        before = world.read().wrench_seq
+        _until(lambda: world.read().wrench_seq >= before + n, f"{n} more wrenches")
+        assert world.rejected_messages == 0
+    finally:
+        world.close()
+
+
 def test_stamps_just_behind_the_nodes_clock_are_accepted_on_one_computer():
     # a driver on this computer stamps before it sends: its stamps are never ahead, and each is read
     feeder = Feeder(ahead=0.0)
     try:
-        world = _world()
-        try:
-            before = world.read().wrench_seq
-            _until(lambda: world.read().wrench_seq >= before + 10, "ten more wrenches")
-            assert world.rejected_messages == 0
-        finally:
-            world.close()
+        _reads_every_message(10)
     finally:
         feeder.close()
 
@@ -256,13 +261,7 @@ def test_a_recording_replayed_is_refused_unless_the_robot_has_a_clock_of_its_own
         msg = str(info.value)
         assert (JOINTS in msg or WRENCH in msg) and "s before this node's clock" in msg, msg
         assert "a recording replayed" in msg and "\n" not in msg and waited < 5.0
-        world = _world(stamps_on_this_clock=False)
-        try:
-            before = world.read().wrench_seq
-            _until(lambda: world.read().wrench_seq >= before + 5, "five more wrenches")
-            assert world.rejected_messages == 0
-        finally:
-            world.close()
+        _reads_every_message(5, stamps_on_this_clock=False)
     finally:
         feeder.close()
 
