@@ -212,3 +212,66 @@ def test_a_flood_is_cut_at_the_rate_limit_and_the_link_survives(tmp_path):
         dropped = dict(server.hub.dropped)
     assert pong == {"type": "pong", "seq": 7}
     assert 0 < dropped.get("rate", 0) <= 500  # all that came past MAX_RATE within one second, no more
+
+
+def test_a_link_gone_silent_without_closing_is_a_hand_that_left(tmp_path):
+    """Wi-Fi lost or a laptop asleep: the page's socket stays open and says nothing. The hand let go after 0.25 s,
+    but the link was only closed after uvicorn's default keepalive (20 s + 20 s): the trial ran to its end with
+    nobody in it and was written as played, and the person's reloaded page was a watcher. The server pings each
+    page (WS_PING_INTERVAL) and closes a link that does not answer (WS_PING_TIMEOUT): the trial is aborted after
+    the grace, nothing written, and the next page is the hand again."""
+    from coassist.play.server import WS_PING_INTERVAL, WS_PING_TIMEOUT
+
+    session = PlaySession(short_config(tmp_path, motion_time=5.0))
+    silent = WS_PING_INTERVAL + WS_PING_TIMEOUT + session.config.grace + 1.5
+
+    async def grab_and_go_silent(port: int) -> None:
+        ws = await websockets.connect(f"ws://127.0.0.1:{port}/ws")
+        init = json.loads(await ws.recv())
+        x, y = init["scene"]["start"]
+        await ws.send(json.dumps({"type": "start", "controller": "manual"}))
+        for seq in range(1, 20):
+            m = json.loads(await ws.recv())
+            await ws.send(json.dumps({"type": "pointer", "x": x, "y": y + 0.05, "down": True, "seq": seq}))
+        assert m["type"] == "frame" and m["held"]
+        time.sleep(silent)  # the event loop blocked: the client neither reads, sends nor answers a ping
+        assert not session.running  # aborted while the link was silent (a 22 s trial otherwise)
+
+    async def next_page(port: int) -> str:
+        async with websockets.connect(f"ws://127.0.0.1:{port}/ws") as ws:
+            return json.loads(await ws.recv())["role"]
+
+    with PlayServer(session, port=0) as server:
+        asyncio.run(grab_and_go_silent(server.port))
+        assert asyncio.run(next_page(server.port)) == "hand"
+    assert not (tmp_path / "alice" / "manifest.json").exists()  # nothing written of the trial nobody was in
+
+
+def test_a_pointer_message_older_than_the_last_is_dropped(tmp_path):
+    """Messages overtaken or replayed: an older pointer (seq 5 after seq 100) reversed the hand's pull from +18 to
+    −21 N, and one repeated kept the hand held past its stale-after. Dropped now, counted, the hand as the newest."""
+    session = PlaySession(short_config(tmp_path, motion_time=5.0))
+
+    async def pull_then_replay(port: int) -> list[dict]:
+        async with websockets.connect(f"ws://127.0.0.1:{port}/ws") as ws:
+            init = json.loads(await ws.recv())
+            x, y = init["scene"]["start"]
+            await ws.send(json.dumps({"type": "start", "controller": "manual"}))
+            frames = []
+            for i in range(30):
+                m = json.loads(await ws.recv())
+                if m["type"] != "frame":
+                    continue
+                frames.append(m)
+                seq, dy = (100 + i, 0.05) if i < 10 else (5, -0.05)  # then an old message, again and again
+                await ws.send(json.dumps({"type": "pointer", "x": x, "y": y + dy, "down": True, "seq": seq}))
+            await ws.send(json.dumps({"type": "abort"}))
+            return frames
+
+    with PlayServer(session, port=0) as server:
+        frames = asyncio.run(pull_then_replay(server.port))
+        dropped = dict(server.hub.dropped)
+    assert dropped.get("pointer: stale seq", 0) >= 15
+    late = frames[12:]
+    # never the old message's pull (−y), never its seq: the newest pull, or let go once it is stale (0 N)
+    assert late and all(f["seq"] >= 100 and f["fh"][1] >= 0.0 for f in late)

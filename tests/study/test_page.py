@@ -139,6 +139,12 @@ def test_the_page_is_blinded_and_a_simulated_hand_drives_the_study(tmp_path):
     assert received and not [s for s in SECRETS if any(s in text for text in received)]
     frames = [json.loads(t) for t in received if '"type": "frame"' in t]
     assert len(frames) > 300 and {f["controller"] for f in frames} <= set(labels.values())
+    # nor a field that tells them apart: the robot's effort (zero under MG), whether a prediction ran, its rows
+    # (once sent: MG's label had ur = 0 in every frame, the cooperative one predicted = true)
+    from coassist.study.session import BLIND_FRAME_KEYS
+
+    assert all(set(f) <= {*BLIND_FRAME_KEYS, "controller", "prediction", "dropped"} for f in frames), frames[0]
+    assert all(f["prediction"] == [] and "ur" not in f and "predicted" not in f for f in frames)
     # the page started each condition by its label, in the participant's order (row 0: the plan's order); the
     # first twice (aborted, then run to its end)
     assert entered["starts"] == [labels["assistive"], labels["assistive"], labels["impedance"], labels["manual"]]

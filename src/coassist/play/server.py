@@ -81,6 +81,11 @@ MAX_RATE = 1000
 MAX_QUEUED = 1000
 #: Largest websocket frame the server reads at all [bytes]; larger ones close the link.
 WS_MAX_SIZE = 65536
+#: [s] how often the server pings each page, and how long it waits for the answer before closing the link (a browser
+#: answers pings itself, in a background tab too): a link gone silent without closing is let go within 2 s, inside
+#: the session's ``grace`` (3 s by default), after which its trial is aborted, not written.
+WS_PING_INTERVAL = 1.0
+WS_PING_TIMEOUT = 1.0
 
 
 def _split_host(header: str) -> tuple[str, int | None] | None:
@@ -162,6 +167,7 @@ class _Client:
         self.wake = asyncio.Event()
         self.window_start = time.monotonic()
         self.window_count = 0
+        self.last_pointer_seq = 0  # the page numbers its messages in order within a connection
 
 
 class Hub:
@@ -317,6 +323,11 @@ def create_app(
             hub.drop("watcher")
             return
         if isinstance(msg, Pointer):
+            # one older than the last (a message overtaken, or replayed) would move the hand back and keep it held
+            if msg.seq <= client.last_pointer_seq:
+                hub.drop("pointer: stale seq")
+                return
+            client.last_pointer_seq = msg.seq
             session.hand.set_pointer(msg.x, msg.y, msg.down, msg.seq)
         elif isinstance(msg, Start):
             if not session.start_trial(msg.controller):  # start_trial tells the pages
@@ -399,6 +410,11 @@ class PlayServer:
             ws="websockets-sansio",
             ws_max_size=WS_MAX_SIZE,
             ws_per_message_deflate=False,
+            # a link that goes silent without closing (Wi-Fi lost, a laptop asleep) is a hand that left: pinged and
+            # closed within WS_PING_INTERVAL + WS_PING_TIMEOUT, well inside the session's grace (uvicorn's own 20 s +
+            # 20 s kept such a trial running to its end with nobody in it, and the person's page a watcher)
+            ws_ping_interval=WS_PING_INTERVAL,
+            ws_ping_timeout=WS_PING_TIMEOUT,
             lifespan="off",
         )
         self._server = uvicorn.Server(config)

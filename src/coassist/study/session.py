@@ -60,6 +60,28 @@ class TrialSetup:
     way: int = 0
 
 
+#: What a study frame carries to the page: what the page draws and times (the tool, the hand's force, the plan's
+#: point, the fault flags, the hand's state, the frame's place in the trial). Everything else a frame carries (the
+#: robot's effort, whether a prediction ran, the prediction's rows) tells the conditions apart (:meth:`for_page`).
+BLIND_FRAME_KEYS = (
+    "type",
+    "index",
+    "k",
+    "t",
+    "x",
+    "y",
+    "vx",
+    "vy",
+    "fh",
+    "ref",
+    "faults",
+    "seq",
+    "held",
+    "misses",
+    "world",
+)
+
+
 class _Aborted(CoassistError, RuntimeError):
     """The page aborted an arm world's trial (raised from drive's on_tick to end its loop)."""
 
@@ -151,7 +173,12 @@ class StudySession(PlaySession):
         kind = message.get("type")
         name = self.setup.page_name if self.setup is not None else None
         if kind == "frame":
-            return dict(message, controller=name)
+            # what the page draws, the controller as its label; not the robot's effort (zero under MG), whether a
+            # prediction ran, nor its rows (the plan's under two conditions, a source's under the third): each told
+            # a condition apart to anyone who opened the page's developer tools
+            out = {k: message[k] for k in BLIND_FRAME_KEYS if k in message}
+            out.update(controller=name, prediction=[])
+            return out
         out = dict(message)
         if kind == "init":
             out.update(
