@@ -45,6 +45,25 @@ def print_forces(folder: Path) -> None:
     )
 
 
+def _check_people(intent: str, users: list[int] | None, population: str, population_seed: int) -> None:
+    """Refuse, before any trial, a person model that holds none of the simulated people asked for (as ``drive`` and
+    ``play`` do for the person at the handle): each would get the extrapolated present estimate, which overshot
+    more than MG (7.4 mm against 2.7, in review)."""
+    from coassist.scenario.assistance import check_person
+    from coassist.scenario.intent_registry import intent_folder_kind, load_intent_source
+    from coassist.scenario.populations import population_profile
+
+    if intent_folder_kind(intent) != "person-model":
+        return
+    source = load_intent_source(intent, horizon=2)
+    for u in users if users is not None else (0,):
+        try:
+            name = population_profile(population, u, population_seed).name
+            check_person(source, name, intent, fix="collect the people it holds (--users), or calibrate them")
+        except ValueError as exc:
+            fail(f"--users {u}: {exc}", 2)
+
+
 def collect(
     out: Path = typer.Option(..., help="Dataset folder to write (trial Parquet files + manifest.json)."),
     controller: str = typer.Option(
@@ -132,6 +151,7 @@ def collect(
         check_intent(intent)
     except ValueError as exc:
         fail(f"--intent {exc}", 2)
+    _check_people(intent, user_list, population, population_seed)
     folder_out(out, "--out")  # told as typed
     out = out.absolute()  # "--out ." is a folder with a name (the dataset's id), swapped into place by its path
     live = open_live(foxglove)

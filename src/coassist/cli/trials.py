@@ -5,6 +5,7 @@ from __future__ import annotations
 import shlex
 from pathlib import Path
 
+import numpy as np
 import typer
 
 from coassist.cli._common import (
@@ -49,13 +50,35 @@ def calibrate(
         fail(f"--out {out}: is a file; give a folder for the person model", 2)
     if (out / PERSON_MODEL_FILE).exists() and not overwrite:
         fail(f"--out {out}: already holds a person model; pass --overwrite to replace it", 2)
+    from coassist.scenario.intent_registry import INTENT_FOLDERS
+
+    for name in INTENT_FOLDERS:  # --intent reads a folder by the first marker it holds: the model would be hidden
+        kind = INTENT_FOLDERS[name]
+        if kind.marker != PERSON_MODEL_FILE and (out / kind.marker).exists():
+            fail(
+                f"--out {out}: holds {kind.marker} ({kind.summary}); --intent would read the folder as that, not the "
+                "person model: give the person model a folder of its own",
+                2,
+            )
     folder_out(out, "--out")
     from coassist._io import atomic_write_bytes
     from coassist.experiments.person_calibration import CalibrationError, calibrate_people, summary_line
     from coassist.experiments.person_figure import PERSON_FIGURE_FILE, calibration_panels, person_figure_png
-    from coassist.scenario.person_model import write_person_model
+    from coassist.scenario.person_model import person_filter_for, write_person_model
 
     trials = intent_trials(data, skip_bad_trials, bag_topics=bag_topics)
+    # the world the trials come from says how the person's hand holds the object (the online filter's yaw mode): one
+    # world per model; on the MuJoCo UR5, which holds every object rigidly, no yaw mode (with it the tool's jerk
+    # about doubled on the board)
+    origins = {it.trial.meta.origin for it in trials}
+    if len(origins) > 1:
+        first = {o: next(it.id for it in trials if it.trial.meta.origin == o) for o in sorted(origins)}
+        fail(
+            "the trials come from more than one world ("
+            + ", ".join(f"{o}: {tid}" for o, tid in first.items())
+            + "): calibrate each world's trials into a model of its own",
+            2,
+        )
     try:
         people = calibrate_people(trials, task=task, min_trials=min_trials)
     except CalibrationError as exc:
@@ -65,6 +88,14 @@ def calibrate(
         fail(message, 2)
     for c in people:
         console.print(summary_line(c), markup=False, highlight=False, soft_wrap=True)
+    no_way = [c for c in people if not np.any(c.fit.paths.sides != 0)]
+    if no_way:  # their curves would hold the tool to the plan: worse than pulling to it with nominal
+        c = no_way[0]
+        fail(
+            f"{c.person}: none of their {len(c.trials)} trials went round the obstacle (no way round to learn; "
+            f"first: {c.trials[0]}); record them with the obstacle in place (--obstacle), or leave the person out",
+            2,
+        )
     figure = out / PERSON_FIGURE_FILE
     if figure.is_dir():
         fail(f"--out {out}: {figure} is a folder; the person model's figure is written there", 2)
@@ -72,7 +103,7 @@ def calibrate(
     # cannot be written leaves the folder as it was; a figure that cannot be written after it is said
     png = person_figure_png(calibration_panels(people))
     try:
-        write_person_model(out, {c.person: c.fit for c in people})
+        write_person_model(out, {c.person: c.fit for c in people}, settings=person_filter_for(origins.pop()))
     except (OSError, ValueError) as exc:
         fail(
             f"--out {out}: cannot write {PERSON_MODEL_FILE} ({getattr(exc, 'strerror', None) or exc}); nothing changed"

@@ -401,11 +401,9 @@ def mujoco_person_filter() -> PersonFilterSettings:
     (:data:`~coassist.scenario.person_model.PERSON_FILTER`) told no yaw mode (``object_yaw`` off). The MuJoCo
     UR5 holds every object rigidly (:mod:`coassist.robot.ur5_mjcf`: the cup's torsion is not modelled), so
     there the hand moves with the tip; a lab tells the source its own object's mount the same way."""
-    from dataclasses import replace
+    from coassist.scenario.person_model import person_filter_for
 
-    from coassist.scenario.person_model import PERSON_FILTER
-
-    return replace(PERSON_FILTER, object_yaw=False)
+    return person_filter_for("mujoco")
 
 
 def calibrate_then_drive(probes: list[list], folder: str, configs: list, asked: int = 0) -> list[tuple[dict, dict]]:

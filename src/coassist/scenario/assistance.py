@@ -60,19 +60,21 @@ def _told(obstacles: Sequence[Any], scene: str | None) -> str:
     return f"{n} obstacle{'s' if n != 1 else ''} of {where}"
 
 
-def check_person(source: Any, user: str, intent: str) -> None:
+def check_person(
+    source: Any,
+    user: str,
+    intent: str,
+    fix: str = "name the person at the handle (--person), or calibrate them (coassist calibrate)",
+) -> None:
     """ValueError in one line when ``source`` is a person model (``coassist calibrate``) holding no calibration
-    of ``user`` (the person at the handle): it names who it holds."""
+    of ``user`` (the person at the handle): it names who it holds, and ``fix``, what to do."""
     from coassist.scenario.person_intent import PersonPathsIntent
 
     # the named present-estimate sources are the same class knowing nobody: no person model to check
     fitted = isinstance(source, PersonPathsIntent) and bool(source.arms or source.paths)
     if fitted and user not in source.arms and source.default_paths is None:
         held = ", ".join(sorted(source.arms)) or "nobody"
-        raise ValueError(
-            f"intent {intent}: the person model holds no calibration of {user!r} (it holds {held}); "
-            "name the person at the handle (--person), or calibrate them (coassist calibrate)"
-        )
+        raise ValueError(f"intent {intent}: the person model holds no calibration of {user!r} (it holds {held}); {fix}")
 
 
 def assistance_line(

@@ -225,6 +225,14 @@ def _model_from(doc: Mapping) -> PathModel:
     )
 
 
+def person_filter_for(origin: str) -> PersonFilterSettings:
+    """The online filter for a person model calibrated on trials from ``origin`` (``TrialMeta.origin``): on the MuJoCo
+    UR5 (``mujoco``), which holds every object rigidly (:mod:`coassist.robot.ur5_mjcf`), the hand moves with the tip:
+    no yaw mode (``object_yaw`` off; with it the tool's jerk about doubled on the board); elsewhere
+    :data:`PERSON_FILTER`."""
+    return replace(PERSON_FILTER, object_yaw=False) if origin == "mujoco" else PERSON_FILTER
+
+
 def write_person_model(
     folder: str | Path,
     fits: Mapping[str, PersonFit],

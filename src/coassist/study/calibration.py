@@ -144,7 +144,7 @@ def fit_job(job: FitJob) -> dict[str, Any]:
     from coassist._io import OutputLock, atomic_write_text, staged_folder
     from coassist.experiments.person_figure import PERSON_FIGURE_FILE, write_person_figure
     from coassist.scenario.arm_identification import ArmEstimate, identify_arm
-    from coassist.scenario.person_model import fit_person, write_person_model
+    from coassist.scenario.person_model import fit_person, person_filter_for, write_person_model
 
     t0, c0 = time.perf_counter(), time.process_time()
     trials = _read(job.root, job.data)
@@ -208,7 +208,9 @@ def fit_job(job: FitJob) -> dict[str, Any]:
     with OutputLock(job.out), staged_folder(job.out) as stage:
         for task, fit in fits.items():
             folder = person_model_folder(stage, task)
-            write_person_model(folder, {job.person: fit}, default=job.person)
+            # the filter of the study's world (one world a study: its trials' origin; the MuJoCo UR5's has no yaw)
+            settings = person_filter_for(trials[0][1].meta.origin)
+            write_person_model(folder, {job.person: fit}, default=job.person, settings=settings)
             heading = f"{job.person}, {job.model} ({task}, {len(demos[task])} demonstrations)"
             write_person_figure([(heading, fit)], folder / PERSON_FIGURE_FILE)
         atomic_write_text(stage / FIT_FILE, json.dumps(record, indent=1, allow_nan=False) + "\n")
