@@ -88,7 +88,7 @@ def test_probe_trials_recorded_by_drive_fit_a_person_model(probe_trials, tmp_pat
         DriveConfig(task="curved", intent=str(folder), person="alice", time_limit=0.2),
         say=said.append,
     )
-    assert "recorded on another plan than this run's: the present estimate with their arm" in said[0]
+    assert "recorded on another plan than this run's: the present estimate held, with their arm" in said[0]
     # a person it holds no calibration of is refused before anything moves
     with pytest.raises(ValueError, match=r"holds no calibration of 'bob' \(it holds alice\).*--person"):
         drive(DriveConfig(task="linear", intent=str(folder), person="bob", time_limit=0.2))

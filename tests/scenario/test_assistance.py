@@ -71,9 +71,11 @@ def test_a_person_model_says_whose_arm_and_paths(person_model):
     assert "bob: arm ASSUMED (the typical arm: their trials measured none usable), 3 demonstrations" in bob
     # another plan: the model serves only the plan it was recorded on (the source's own test)
     moved = LINE + [0.0, 0.05]
-    assert "recorded on another plan than this run's: the present estimate with their arm" in assistance_line(
-        "cooperative", person_model, source, user="alice", path=moved
-    )
+    part = LINE[: int(0.6 * len(LINE))]  # its vertices on the model's plan: another plan for the source, and said so
+    for other in (moved, part):
+        assert "recorded on another plan than this run's: the present estimate held, with their arm" in (
+            assistance_line("cooperative", person_model, source, user="alice", path=other)
+        )
     check_person(source, "alice", person_model)
     with pytest.raises(ValueError, match=r"holds no calibration of 'carol' \(it holds alice, bob\)"):
         check_person(source, "carol", person_model)

@@ -121,8 +121,7 @@ def assistance_line(
 
 
 def _person(intent: str, source: Any, user: str, path: np.ndarray | None) -> str:
-    from coassist.scenario.path_model import PathFrame
-    from coassist.scenario.person_intent import PersonPathsIntent
+    from coassist.scenario.person_intent import PersonPathsIntent, same_plan
 
     name = f"the person model {intent}"
     if not isinstance(source, PersonPathsIntent) or not (source.arms or source.paths):
@@ -135,10 +134,9 @@ def _person(intent: str, source: Any, user: str, path: np.ndarray | None) -> str
     )
     model = source.paths.get(user, source.default_paths)
     if model is None:
-        return f"{name} ({user}: {how}, no demonstrations: the present estimate)"
+        return f"{name} ({user}: {how}, no demonstrations: the present estimate held)"
     known = f"{user}: {how}, {_ways(model.sides)}"
-    if path is not None:
-        # the person model's own test of the plan (coassist.scenario.person_intent.PersonPathsIntent.reset)
-        if PathFrame(model.nominal).distance_to(np.asarray(path, dtype=float)) > 0.01:
-            return f"{name} ({known}, recorded on another plan than this run's: the present estimate with their arm)"
+    # the person model's own test of the plan (PersonPathsIntent.reset's)
+    if path is not None and not same_plan(model.nominal, path):
+        return f"{name} ({known}, recorded on another plan than this run's: the present estimate held, with their arm)"
     return f"{name} ({known})"

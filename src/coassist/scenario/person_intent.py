@@ -49,8 +49,9 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    the tool's jerk.
 
 Where the tool is far from every curve (``max_offset``: another task, a person who left the plan
-for good) or the model knows no path for the trial's plan, the rows are the present estimate's
-at constant velocity. A curve whose phase is held more than ``max_offset`` from the tool (left in a
+for good), the rows are the present estimate's at constant velocity (``extrapolation``); where
+the model knows no path for the person or the trial's plan, the present estimate held (as the
+default source, ``present-held``). A curve whose phase is held more than ``max_offset`` from the tool (left in a
 local minimum round a detour wider than any demonstrated) gives no rows, and a way with none near
 gives the present estimate's rows, as on a change of mind.
 """
@@ -71,7 +72,7 @@ from coassist.scenario.hand_force import HandForce, HandPoint
 from coassist.scenario.path_model import PathFrame, PathModel
 from coassist.scenario.row_smoothing import RowSmoothing
 
-__all__ = ["PersonFilterSettings", "PersonPathsIntent", "normal_cdf_between", "onset_log_ratio"]
+__all__ = ["PersonFilterSettings", "PersonPathsIntent", "normal_cdf_between", "onset_log_ratio", "same_plan"]
 
 #: The control period [s] κ was chosen at; at another rate κ scales by dt / REFERENCE_DT.
 REFERENCE_DT = 0.008
@@ -361,6 +362,21 @@ def _frame_of(path: np.ndarray) -> PathFrame:
     return frame
 
 
+def same_plan(nominal: np.ndarray, path: np.ndarray, frame: PathFrame | None = None) -> bool:
+    """Whether a run's plan ``path`` (P, 2) is the plan ``nominal`` a person model was recorded on: their ends within
+    :data:`SAME_PLAN` and each within it of the other, both ways (one-sided, a plan whose vertices lie on the other's
+    passed: a straight line from the Z's start to its end, the Z's first third). ``frame``: ``nominal``'s, where
+    already built. The one test of the source (:meth:`PersonPathsIntent.reset`) and of what ``drive`` says
+    (:func:`~coassist.scenario.assistance.assistance_line`)."""
+    path = np.asarray(path, dtype=float)
+    nominal = np.asarray(nominal, dtype=float)
+    ends = max(float(np.linalg.norm(path[0] - nominal[0])), float(np.linalg.norm(path[-1] - nominal[-1])))
+    frame = _frame_of(nominal) if frame is None else frame
+    return (
+        ends <= SAME_PLAN and frame.distance_to(path) <= SAME_PLAN and _frame_of(path).distance_to(nominal) <= SAME_PLAN
+    )
+
+
 class PersonPathsIntent:
     """The intent source of a person model (module docstring), one trial at a time.
 
@@ -369,7 +385,7 @@ class PersonPathsIntent:
     horizon : rows predicted.
     paths : person (TrialContext.user) → their :class:`PathModel`.
     arms : person → :class:`ArmEstimate`.
-    default_paths : the path model for anyone not in ``paths`` (None: the present estimate alone for them).
+    default_paths : the path model for anyone not in ``paths`` (None: the present estimate held, for them).
     default_arm : the arm for anyone not in ``arms`` (None: the assumed arm).
     settings : the filter's constants.
     model_id : what trials record as the source.
@@ -429,18 +445,8 @@ class PersonPathsIntent:
         self._hyp: _Curves | None = None
         if model is not None and context.path is not None:
             frame, curves = self._curves(model)
-            # the model knows one plan: another plan gets the present estimate alone. Both ways: a plan whose
-            # vertices lie on the model's (a straight line from the Z's start to its end, the Z's first third) is
-            # another plan too
-            path = np.asarray(context.path, dtype=float)
-            ends = max(
-                float(np.linalg.norm(path[0] - model.nominal[0])), float(np.linalg.norm(path[-1] - model.nominal[-1]))
-            )
-            if (
-                ends <= SAME_PLAN
-                and frame.distance_to(path) <= SAME_PLAN
-                and _frame_of(path).distance_to(model.nominal) <= SAME_PLAN
-            ):
+            # the model knows one plan: another plan gets the present estimate, held
+            if same_plan(model.nominal, context.path, frame):
                 self._hyp = curves
         if self._hyp is not None and model is not None:
             hyp = self._hyp
@@ -514,6 +520,12 @@ class PersonPathsIntent:
         qx = px + (ux + C * vx) / K + lead * vx
         qy = py + (uy + C * vy) / K + lead * vy
         if self._hyp is None:
+            if self.paths or self.default_paths is not None:
+                # a person model with no path for this person or plan: the present estimate held, as the default
+                # source (present-held) gives it; carried at the tool's velocity it overshot more than MG (7.4 mm
+                # against 2.7, for people a model did not hold, in review)
+                return np.tile(np.array((qx, qy)), (self.horizon, 1))
+            # the named present-estimate sources (no paths at all): their own extrapolation
             return np.array((qx, qy)) + self._present_steps * np.array((vx, vy))
         return self._smoothing(self._filter(self._hyp, px, py, vx, vy, ux, uy, qx, qy))
 
