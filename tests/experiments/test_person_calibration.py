@@ -410,6 +410,9 @@ def test_calibrate_refuses_what_would_be_a_model_worse_than_none(alice, tmp_path
     said = " ".join(res.output.split())
     assert res.exit_code == 2 and "the trials come from more than one world (mujoco: " in said and "sim: " in said
 
+    # worlds of one filter go together: a UR's exported bags ("real") beside its drive trials ("ur5")
+    ur = write_dataset(retagged(alice[:2], origin="real") + retagged(alice[2:], origin="ur5"), tmp_path / "ur", "ur")
+    assert runner.invoke(app, ["calibrate", str(ur), "--out", str(tmp_path / "m-ur")]).exit_code == 0
     arm = write_dataset(retagged(alice, origin="mujoco"), tmp_path / "mj", "mj")
     res = runner.invoke(app, ["calibrate", str(arm), "--out", str(tmp_path / "m-mj")])
     assert res.exit_code == 0, res.output

@@ -46,9 +46,8 @@ def print_forces(folder: Path) -> None:
 
 
 def _check_people(intent: str, users: list[int] | None, population: str, population_seed: int) -> None:
-    """Refuse, before any trial, a person model that holds none of the simulated people asked for (as ``drive`` and
-    ``play`` do for the person at the handle): each would get the extrapolated present estimate, which overshot
-    more than MG (7.4 mm against 2.7, in review)."""
+    """Refuse, before any trial, a person model that does not hold each of the simulated people asked for, naming the
+    first (as ``drive`` and ``play`` do for the person at the handle): they would get no path of their own."""
     from coassist.scenario.assistance import check_person
     from coassist.scenario.intent_registry import intent_folder_kind, load_intent_source
     from coassist.scenario.populations import population_profile

@@ -51,6 +51,7 @@ def calibrate(
     if (out / PERSON_MODEL_FILE).exists() and not overwrite:
         fail(f"--out {out}: already holds a person model; pass --overwrite to replace it", 2)
     from coassist.scenario.intent_registry import INTENT_FOLDERS
+    from coassist.scenario.person_model import person_filter_for, write_person_model
 
     for name in INTENT_FOLDERS:  # --intent reads a folder by the first marker it holds: the model would be hidden
         kind = INTENT_FOLDERS[name]
@@ -64,19 +65,18 @@ def calibrate(
     from coassist._io import atomic_write_bytes
     from coassist.experiments.person_calibration import CalibrationError, calibrate_people, summary_line
     from coassist.experiments.person_figure import PERSON_FIGURE_FILE, calibration_panels, person_figure_png
-    from coassist.scenario.person_model import person_filter_for, write_person_model
 
     trials = intent_trials(data, skip_bad_trials, bag_topics=bag_topics)
-    # the world the trials come from says how the person's hand holds the object (the online filter's yaw mode): one
-    # world per model; on the MuJoCo UR5, which holds every object rigidly, no yaw mode (with it the tool's jerk
-    # about doubled on the board)
+    # the world the trials come from says how the person's hand holds the object (the online filter's yaw mode): on
+    # the MuJoCo UR5, which holds every object rigidly, no yaw mode (with it the tool's jerk about doubled on the
+    # board); worlds of one filter (a UR's exported bags, "real", beside its drive trials, "ur5") go together
     origins = {it.trial.meta.origin for it in trials}
-    if len(origins) > 1:
+    if len({person_filter_for(o) for o in origins}) > 1:
         first = {o: next(it.id for it in trials if it.trial.meta.origin == o) for o in sorted(origins)}
         fail(
             "the trials come from more than one world ("
             + ", ".join(f"{o}: {tid}" for o, tid in first.items())
-            + "): calibrate each world's trials into a model of its own",
+            + "), whose people hold the object otherwise: calibrate each world's trials into a model of its own",
             2,
         )
     try:

@@ -82,10 +82,12 @@ MAX_QUEUED = 1000
 #: Largest websocket frame the server reads at all [bytes]; larger ones close the link.
 WS_MAX_SIZE = 65536
 #: [s] how often the server pings each page, and how long it waits for the answer before closing the link (a browser
-#: answers pings itself, in a background tab too): a link gone silent without closing is let go within 2 s, inside
-#: the session's ``grace`` (3 s by default), after which its trial is aborted, not written.
+#: answers pings itself, in a background tab too): a link gone silent without closing is let go within 3 s, about the
+#: session's ``grace`` (3 s by default), after which its trial is aborted, not written. The timeout is not shorter: a
+#: Wi-Fi pause of 1.5 s closed a healthy link with 1 s (the page then reconnects a second after the pause, its hand
+#: let go meanwhile, as on any stale link).
 WS_PING_INTERVAL = 1.0
-WS_PING_TIMEOUT = 1.0
+WS_PING_TIMEOUT = 2.0
 
 
 def _split_host(header: str) -> tuple[str, int | None] | None:
@@ -411,8 +413,8 @@ class PlayServer:
             ws_max_size=WS_MAX_SIZE,
             ws_per_message_deflate=False,
             # a link that goes silent without closing (Wi-Fi lost, a laptop asleep) is a hand that left: pinged and
-            # closed within WS_PING_INTERVAL + WS_PING_TIMEOUT, well inside the session's grace (uvicorn's own 20 s +
-            # 20 s kept such a trial running to its end with nobody in it, and the person's page a watcher)
+            # closed within WS_PING_INTERVAL + WS_PING_TIMEOUT (uvicorn's own 20 s + 20 s kept such a trial running
+            # to its end with nobody in it, and the person's page a watcher)
             ws_ping_interval=WS_PING_INTERVAL,
             ws_ping_timeout=WS_PING_TIMEOUT,
             lifespan="off",
