@@ -222,8 +222,10 @@ def test_a_link_gone_silent_without_closing_is_a_hand_that_left(tmp_path):
     the grace, nothing written, and the next page is the hand again."""
     from coassist.play.server import WS_PING_INTERVAL, WS_PING_TIMEOUT
 
+    assert WS_PING_INTERVAL + WS_PING_TIMEOUT <= 10.0  # the default lets a silent link go well before uvicorn's 40 s
+    ping = (0.5, 1.0)  # shorter here, so the test waits less
     session = PlaySession(short_config(tmp_path, motion_time=5.0))
-    silent = WS_PING_INTERVAL + WS_PING_TIMEOUT + session.config.grace + 1.5
+    silent = sum(ping) + session.config.grace + 1.5
 
     async def grab_and_go_silent(port: int) -> None:
         ws = await websockets.connect(f"ws://127.0.0.1:{port}/ws")
@@ -241,7 +243,7 @@ def test_a_link_gone_silent_without_closing_is_a_hand_that_left(tmp_path):
         async with websockets.connect(f"ws://127.0.0.1:{port}/ws") as ws:
             return json.loads(await ws.recv())["role"]
 
-    with PlayServer(session, port=0) as server:
+    with PlayServer(session, port=0, ping=ping) as server:
         asyncio.run(grab_and_go_silent(server.port))
         assert asyncio.run(next_page(server.port)) == "hand"
     assert not (tmp_path / "alice" / "manifest.json").exists()  # nothing written of the trial nobody was in

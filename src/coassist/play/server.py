@@ -82,12 +82,12 @@ MAX_QUEUED = 1000
 #: Largest websocket frame the server reads at all [bytes]; larger ones close the link.
 WS_MAX_SIZE = 65536
 #: [s] how often the server pings each page, and how long it waits for the answer before closing the link (a browser
-#: answers pings itself, in a background tab too): a link gone silent without closing is let go within 3 s, about the
-#: session's ``grace`` (3 s by default), after which its trial is aborted, not written. The timeout is not shorter: a
-#: Wi-Fi pause of 1.5 s closed a healthy link with 1 s (the page then reconnects a second after the pause, its hand
-#: let go meanwhile, as on any stale link).
-WS_PING_INTERVAL = 1.0
-WS_PING_TIMEOUT = 2.0
+#: answers pings itself, in a background tab too): a link gone silent without closing is let go within 7 s, then its
+#: trial is aborted after the session's ``grace``, not written (uvicorn's own 20 s + 20 s let such a trial run to its
+#: end). Not shorter: a 1 s timeout closed a healthy link on a 1.5 s Wi-Fi pause, and a loaded machine (a browser, the
+#: loop and the test workers on two cores) must not lose a page mid-questionnaire.
+WS_PING_INTERVAL = 2.0
+WS_PING_TIMEOUT = 5.0
 
 
 def _split_host(header: str) -> tuple[str, int | None] | None:
@@ -390,10 +390,14 @@ class PlayServer:
         port: int = 8765,
         token: str | None = None,
         frame_rate: float | None = None,
+        ping: tuple[float, float] = (WS_PING_INTERVAL, WS_PING_TIMEOUT),
     ) -> None:
         import uvicorn
 
         check_token(token, host)
+        if len(ping) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in ping):
+            raise ValueError(f"ping must be (interval, timeout), two numbers > 0 [s], got {ping!r}")
+        self.ping = (float(ping[0]), float(ping[1]))  # [s] the keepalive's interval and timeout (WS_PING_INTERVAL)
         self.session, self.host, self.token = session, host, token
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._sock = socket.socket(family, socket.SOCK_STREAM)
@@ -415,8 +419,8 @@ class PlayServer:
             # a link that goes silent without closing (Wi-Fi lost, a laptop asleep) is a hand that left: pinged and
             # closed within WS_PING_INTERVAL + WS_PING_TIMEOUT (uvicorn's own 20 s + 20 s kept such a trial running
             # to its end with nobody in it, and the person's page a watcher)
-            ws_ping_interval=WS_PING_INTERVAL,
-            ws_ping_timeout=WS_PING_TIMEOUT,
+            ws_ping_interval=self.ping[0],
+            ws_ping_timeout=self.ping[1],
             lifespan="off",
         )
         self._server = uvicorn.Server(config)
