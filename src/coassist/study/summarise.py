@@ -195,40 +195,30 @@ def _total(counts: list[TrialCount]) -> TrialCount:
     )
 
 
-def _counted(totals: Mapping[str, TrialCount], what: str) -> tuple[int, int, str] | None:
-    """(how many of the measured trials have count ``what``, how many there are, "block: k of n; …"), None if none."""
-    some = {b: getattr(c, what) for b, c in totals.items() if getattr(c, what)}
-    if not some:
-        return None
-    where = "; ".join(f"{b}: {k} of {totals[b].n}" for b, k in some.items())
-    return sum(some.values()), sum(c.n for c in totals.values()), where
-
-
-def _repeated_note(totals: Mapping[str, TrialCount]) -> tuple[str, ...]:
-    """The line that counts the measured trials started again after an abort (none: no line)."""
-    counted = _counted(totals, "repeated")
-    if counted is None:
-        return ()
-    k, n, where = counted
-    return (
-        f"{k} of {n} measured trials were started again after the person aborted them or their hand left ({where}): "
-        "only the attempt that ran to its end is measured, so a condition people break off more often may look "
-        "better than its first attempts were.",
-    )
-
-
-def _missed_note(totals: Mapping[str, TrialCount]) -> tuple[str, ...]:
-    """The line that counts the measured trials that never reached the target (none: no line)."""
-    counted = _counted(totals, "missed")
-    if counted is None:
-        return ()
-    k, n, where = counted
-    return (
-        f"{k} of {n} measured trials never reached the target ({where}): their σ, overshoot and time to target are "
+#: The lines that count the measured trials a block's :class:`TrialCount` field flags ({k} of {n}, {where}: per block).
+_COUNT_NOTES = {
+    "missed": (
+        "{k} of {n} measured trials never reached the target ({where}): their σ, overshoot and time to target are "
         "undefined and left out of those means (each participant's mean is over the trials that reached it; the "
         "counts are in the table of trials), so a condition that misses more can look better on them than it is; "
-        "f_RMS and jerk are over every trial.",
-    )
+        "f_RMS and jerk are over every trial."
+    ),
+    "repeated": (
+        "{k} of {n} measured trials were started again after the person aborted them or their hand left ({where}): "
+        "only the attempt that ran to its end is measured, so a condition people break off more often may look "
+        "better than its first attempts were."
+    ),
+}
+
+
+def _count_note(totals: Mapping[str, TrialCount], what: str) -> tuple[str, ...]:
+    """The line of :data:`_COUNT_NOTES` for the field ``what`` (``missed``, ``repeated``) of the blocks' counts; none
+    where no trial has it."""
+    some = {b: getattr(c, what) for b, c in totals.items() if getattr(c, what)}
+    if not some:
+        return ()
+    where = "; ".join(f"{b}: {k} of {totals[b].n}" for b, k in some.items())
+    return (_COUNT_NOTES[what].format(k=sum(some.values()), n=sum(c.n for c in totals.values()), where=where),)
 
 
 def _conditions(study: StudyFolder, plan) -> dict[str, ConditionInfo]:
@@ -552,8 +542,8 @@ def summarise_study(folder: str | Path) -> StudySummary:
         simulated=simulated,
         limits=tuple(comparison_limits(comparisons, simulated))
         + _unpaired_note(comparisons, pooled, per_participant, blocks)
-        + _missed_note(totals)
-        + _repeated_note(totals)
+        + _count_note(totals, "missed")
+        + _count_note(totals, "repeated")
         + _partial_note({pid: bs for pid, bs in partial.items() if bs}),
         collections={
             pid: {
