@@ -358,6 +358,8 @@ class URRTDEWorld:
         self._anchor_wall = 0.0
         self._k = 0
         self._last_ts: float | None = None
+        # since the newest stamp: the last older stamp read, and whether the older stamps moved (read())
+        self._behind: tuple[float, bool] | None = None
         self._last_t = -math.inf
         self._last_force: np.ndarray | None = None
         self._last_R: np.ndarray | None = None  # the last finite orientation's rotation (a glitched one reuses it)
@@ -566,13 +568,29 @@ class URRTDEWorld:
         advanced = self._last_ts is None or ts > self._last_ts
         if advanced:
             self._last_advance_wall = now
+            self._behind = None
             self._check_delay(now, ts)
-        elif now - self._last_advance_wall > self.link_timeout:
-            raise RobotLinkError(
-                f"no new data from the robot at {self.host} for {now - self._last_advance_wall:.3f} s "
-                f"(timestamp stuck at {ts:.3f} s; link_timeout {self.link_timeout:g} s): the link "
-                "is lost. The watchdog (when armed) stops the arm; check the network, then rerun."
-            )
+        else:
+            # Stamps that move on below the newest are not a stuck stream: the controller's clock went back (a
+            # restart) or one sample was stamped ahead of the rest. The run stops either way (every later sample
+            # reads as old), but the reason it names is the one the robot gave.
+            if self._behind is None:
+                self._behind = (ts, False)
+            elif ts != self._behind[0]:
+                self._behind = (ts, True)
+            if now - self._last_advance_wall > self.link_timeout:
+                assert self._last_ts is not None  # advanced is False only after a first sample
+                why = (
+                    f"its timestamps went back: the newest was {self._last_ts:.3f} s, the stream is at {ts:.3f} s "
+                    "(the controller restarted, or one sample was stamped ahead of the rest)"
+                    if self._behind[1]
+                    else f"timestamp stuck at {ts:.3f} s"
+                )
+                raise RobotLinkError(
+                    f"no new data from the robot at {self.host} for {now - self._last_advance_wall:.3f} s "
+                    f"({why}; link_timeout {self.link_timeout:g} s): the link "
+                    "is lost. The watchdog (when armed) stops the arm; check the network, then rerun."
+                )
         if advanced or self._last_force is None or not np.array_equal(force, self._last_force):
             self._wrench_seq += 1
         self._last_force = force
