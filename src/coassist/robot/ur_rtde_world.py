@@ -579,7 +579,6 @@ class URRTDEWorld:
             elif ts != self._behind[0]:
                 self._behind = (ts, True)
             if now - self._last_advance_wall > self.link_timeout:
-                assert self._last_ts is not None  # advanced is False only after a first sample
                 why = (
                     f"its timestamps went back: the newest was {self._last_ts:.3f} s, the stream is at {ts:.3f} s "
                     "(the controller restarted, or one sample was stamped ahead of the rest)"
