@@ -579,3 +579,17 @@ def test_the_summary_names_a_thin_way(alice):
         "; the right way shown in 1 trial only: the model follows that path alone there; record more going right (asked: --ask-way right)"
     )
     assert ("record more" in summary_line(c)) == bool(thin_ways(sides))
+
+
+def test_the_summary_says_whether_the_model_leads_the_person(alice):
+    from coassist.scenario.person_model import LeadCheck
+
+    (c,) = calibrate_people(alice)
+    # these trials name no control preset: not replayed against a twin, the person led, and the line says why
+    assert c.fit.lead is not None and c.fit.lead.follow and c.fit.lead.folds == 0
+    assert "lead not checked" in summary_line(c) and "control preset" in summary_line(c)
+    held = replace(c, fit=replace(c.fit, lead=LeadCheck(follow=False, folds=4, person_mm=5.04, mg_mm=1.96)))
+    assert (
+        "; present estimate held (the lead did not pay): their twin overshot 5.0 mm with the lead, 2.0 mm under MG "
+        "(4 trials replayed)" in summary_line(held)
+    )

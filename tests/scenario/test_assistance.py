@@ -82,6 +82,19 @@ def test_a_person_model_says_whose_arm_and_paths(person_model):
     check_person(load_intent_source("present"), "carol", "present")  # other sources have no person to check
 
 
+def test_a_person_the_twin_check_turned_away_is_told_what_they_get(tmp_path):
+    from coassist.scenario.person_model import LeadCheck
+
+    paths = fit_path_model(LINE, [_detour(1), _detour(1), _detour(-1)], noise=0.001)
+    held = LeadCheck(follow=False, folds=3, person_mm=6.0, mg_mm=2.0, low_mm=1.5)
+    folder = str(write_person_model(tmp_path / "cal", {"carol": PersonFit(ASSUMED_ARM, paths, lead=held)}))
+    line = assistance_line("cooperative", folder, load_intent_source(folder), user="carol", path=LINE)
+    assert line.endswith(
+        "not led along their paths: their calibration's twin overshot more with the lead than under MG: present-held, "
+        "every world's default)"
+    )
+
+
 def test_no_world_defaults_to_the_plan():
     from coassist.cli import app
     from coassist.play.session import PlayConfig

@@ -212,6 +212,9 @@ def test_the_block_runs_under_the_probe_and_fits_the_participants_person_model(c
     # how far the demonstrations repeat, recorded with the fit (None where no way was taken twice)
     r = by_hand.repeatability()
     assert fit["paths"]["curved"]["repeatability"] == (None if r is None else pytest.approx(r, abs=1e-9))
+    # whether the model leads them, recorded with the fit and written with the model (the twin check)
+    lead = fit["paths"]["curved"]["lead"]
+    assert lead is not None and lead["follow"] == ("S01" not in source.held) and lead["folds"] in (0, 3)
     # the calibrated condition ran with it, each trial recording its file's hash; MG with nothing
     person = read_dataset(pf.block("person")).trials
     # the model's id: the folder's name and the first 12 hex digits of the file's SHA-256

@@ -423,6 +423,7 @@ def calibrate_then_drive(probes: list[list], folder: str, configs: list, asked: 
     from coassist.robot.drive import drive_lockstep
     from coassist.scenario.calibration_draws import write_draws
     from coassist.scenario.person_model import fit_people, write_person_model
+    from coassist.sim.person_twin import checked_people
 
     torch.set_num_threads(1)
     if not probes or not all(probes):
@@ -441,6 +442,14 @@ def calibrate_then_drive(probes: list[list], folder: str, configs: list, asked: 
             if draw:
                 fits[k] = fit_people(own[k] + list(driven[at : at + len(draw)]))
             at += len(draw)
+    # whether to lead each person along their paths: their calibration replayed against their twin (in the
+    # point-mass world, as every calibration's check is: coassist.sim.person_twin)
+    settings = mujoco_person_filter()
+    at = 0
+    for k in range(len(probes)):
+        extra = list(driven[at : at + len(more[k])]) if asked else []
+        at += len(extra)
+        fits[k] = checked_people(own[k] + extra, fits[k], settings)
     if len(fits) == 1:
         write_person_model(folder, fits[0], settings=mujoco_person_filter())
     else:

@@ -30,7 +30,7 @@ import hashlib
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
@@ -49,7 +49,8 @@ from coassist.scenario.path_model import (
     check_way,
     few_paths,
 )
-from coassist.scenario.person_model import PersonFit, fit_person
+from coassist.scenario.person_model import PersonFit, fit_person, person_filter_for
+from coassist.sim.person_twin import lead_check
 
 __all__ = [
     "MIN_TRIALS",
@@ -320,6 +321,9 @@ def calibrate_people(
             fit = fit_person([it.trial for it in items], arm=arm)
         except ValueError as exc:
             raise CalibrationError(f"{person}: {exc}") from None
+        # whether to lead this person along their paths: their calibration replayed against their twin
+        origin = str(items[0].trial.meta.origin)
+        fit = replace(fit, lead=lead_check([it.trial for it in items], fit, person_filter_for(origin)))
         out.append(
             PersonCalibration(
                 person=person,
@@ -396,7 +400,8 @@ def thin_ways(sides: np.ndarray) -> str:
 
 def summary_line(c: PersonCalibration) -> str:
     """One line of what was learnt of a person: the arm (measured by the probe, or assumed and why), the
-    demonstrations per way round, the fit's time, and a way shown too few times to follow (:func:`thin_ways`)."""
+    demonstrations per way round, the fit's time, a way shown too few times to follow (:func:`thin_ways`), and whether
+    the model leads them along their paths (:class:`~coassist.scenario.person_model.LeadCheck`)."""
     arm = c.fit.arm
     if arm.method == "probe-iv":
         se = "" if arm.trials >= 3 else " (no standard error below 3 trials)"
@@ -420,7 +425,8 @@ def summary_line(c: PersonCalibration) -> str:
             f"{'the probe ' + why if unused else why}"
         )
     thin = thin_ways(c.fit.paths.sides)
+    lead = "" if c.fit.lead is None else f"; {c.fit.lead.line}"
     return (
         f"{c.person} ({c.task}, {len(c.trials)} trials): {measured}; demonstrations: {_ways(c.fit.paths, c.asked_other_way)}; "
-        f"fit {c.seconds:.1f} s ({c.cpu_seconds:.1f} CPU-s){'; ' + thin if thin else ''}"
+        f"fit {c.seconds:.1f} s ({c.cpu_seconds:.1f} CPU-s){lead}{'; ' + thin if thin else ''}"
     )

@@ -128,7 +128,8 @@ def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "
     the trial of seed s meets draw s mod ``draws``), so that an evaluation's intervals carry the calibration's
     own variance."""
     from coassist.scenario.calibration_draws import MAX_DRAWS, write_draws
-    from coassist.scenario.person_model import fit_people, write_person_model
+    from coassist.scenario.person_model import PERSON_FILTER, fit_people, write_person_model
+    from coassist.sim.person_twin import checked_people
 
     if not 1 <= int(draws) <= MAX_DRAWS:
         raise ValueError(f"draws must be 1 to {MAX_DRAWS}, got {draws!r}")
@@ -152,7 +153,9 @@ def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "
     fitted = []
     for trials, fits, asked in drawn:
         added = [t for more, more_options in asked.items() for t in ws.collect(more, **more_options)[1].trials]
-        fitted.append(fit_people(list(trials) + added) if added else fits)
+        fits = fit_people(list(trials) + added) if added else fits
+        # whether to lead each person along their paths: their calibration replayed against their twin
+        fitted.append(checked_people(list(trials) + added, fits, PERSON_FILTER))
     if draws == 1:
         return str(write_person_model(ws.out / "models" / f"person{_suffix(population)}", fitted[0]))
     folder = ws.out / "models" / f"person{_suffix(population)}-draws"

@@ -136,6 +136,12 @@ def _person(intent: str, source: Any, user: str, path: np.ndarray | None) -> str
     if model is None:
         return f"{name} ({user}: {how}, no demonstrations: the present estimate held)"
     known = f"{user}: {how}, {_ways(model.sides)}"
+    if (user if user in source.paths else source.DEFAULT) in source.held:
+        # the calibration's twin check (coassist.sim.person_twin): leading along their paths cost them overshoot
+        return (
+            f"{name} ({known}; not led along their paths: their calibration's twin overshot more with the lead "
+            "than under MG: present-held, every world's default)"
+        )
     # the person model's own test of the plan (PersonPathsIntent.reset's)
     if path is not None and not same_plan(model.nominal, path):
         return f"{name} ({known}, recorded on another plan than this run's: the present estimate held, with their arm)"

@@ -59,7 +59,7 @@ gives the present estimate's rows, as on a change of mind.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -394,6 +394,8 @@ class PersonPathsIntent:
     """
 
     history = 1
+    #: The name :attr:`held` gives the default model's person (whoever else is at the handle).
+    DEFAULT = "\x00default"
 
     def __init__(
         self,
@@ -406,8 +408,12 @@ class PersonPathsIntent:
         settings: PersonFilterSettings | None = None,
         model_id: str = "person",
         extrapolation: float = 1.0,
+        held: Iterable[str] = (),
     ) -> None:
         self.horizon = check_int(horizon, "PersonPathsIntent.horizon", 1)
+        # the people not led along their paths (their calibration's twin overshot more with the lead than under MG:
+        # coassist.sim.person_twin); DEFAULT among them: whoever gets the default model is not led either
+        self.held = frozenset(str(name) for name in held)
         self.extrapolation = check_real(extrapolation, "PersonPathsIntent.extrapolation", 0.0, 1.0)
         self.paths = dict(paths or {})
         self.arms = dict(arms or {})
@@ -442,8 +448,15 @@ class PersonPathsIntent:
         self._lead_time = st.reaction_lead
         self._smoothing = RowSmoothing(self.dt, st.row_smoothing, self.horizon)
         model = self.paths.get(context.user, self.default_paths)
+        led = (context.user if context.user in self.paths else self.DEFAULT) not in self.held
+        # a person the calibration's twin check turned away gets what every world gives without a calibration: the
+        # present estimate held with the typical arm (present-held: never more force nor overshoot than MG)
+        self._unled: PersonPathsIntent | None = None
+        if not led:
+            self._unled = PersonPathsIntent(self.horizon, extrapolation=0.0, model_id=self.model_id)
+            self._unled.reset(context)
         self._hyp: _Curves | None = None
-        if model is not None and context.path is not None:
+        if model is not None and context.path is not None and led:
             frame, curves = self._curves(model)
             # the model knows one plan: another plan gets the present estimate, held
             if same_plan(model.nominal, context.path, frame):
@@ -503,6 +516,8 @@ class PersonPathsIntent:
     def predict(self, history: np.ndarray) -> np.ndarray:
         if not self._ready:
             raise RuntimeError("PersonPathsIntent.predict called before reset")
+        if self._unled is not None:
+            return self._unled.predict(history)
         # the tick's two-vectors as Python floats: a numpy call on two elements costs more than the arithmetic
         # (each component's operations are those of the vectors', in the same order: the same bits; a dot product
         # of two is x0·y0 + x1·y1, which is what OpenBLAS's ddot gave for it, benchmarks/check_person_rows.py)

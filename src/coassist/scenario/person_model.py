@@ -10,7 +10,11 @@ obstacle told:
 2. each trial's intent path, reconstructed with that arm: q = p + (w + Ĉ v)/K̂, smoothed
    (zero-phase, ``smoothing`` Hz) — the path the person pursued, not the one the tool took;
 3. the person's paths on the task (:func:`~coassist.scenario.path_model.fit_path_model`), with the
-   present estimate's noise σ (the RMS of q less its smoothed self, lateral to the plan).
+   present estimate's noise σ (the RMS of q less its smoothed self, lateral to the plan);
+4. where the calibration flows run it (``coassist calibrate``, a study's block, the main job), whether to lead the
+   person along those paths at all (:class:`LeadCheck`, :func:`coassist.sim.person_twin.lead_check`: each trial
+   replayed, leave-one-out, against a twin of the person with the measured arm; a person the lead would make
+   overshoot more than MG gets the present estimate held).
 
 The folder (``person-model.json``) is one JSON document carrying its own SHA-256
 (:func:`coassist._io.write_hashed_json`: a hand edit is refused in one line): per person their arm and, per task
@@ -30,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from coassist._checks import check_int, check_real
 from coassist._io import read_hashed_json, write_hashed_json
 from coassist.scenario.arm_identification import ArmEstimate, identify_arm, measured_arm
 from coassist.scenario.path_model import (
@@ -44,13 +49,16 @@ from coassist.scenario.person_intent import PersonFilterSettings, PersonPathsInt
 
 __all__ = [
     "PERSON_FILTER",
+    "INTENT_SMOOTHING",
     "PERSON_MODEL_FILE",
+    "LeadCheck",
     "PersonFit",
     "asked_way",
     "fit_people",
     "fit_person",
     "intent_paths",
     "read_person_model",
+    "without_trial",
     "write_person_model",
 ]
 
@@ -116,12 +124,59 @@ PERSON_FILTER = PersonFilterSettings(
 _FORMAT = "coassist-person-model-1"
 
 
+#: The low-pass of the reconstructed intent paths [Hz] (zero phase; step 2 of the module docstring).
+INTENT_SMOOTHING = 1.5
+
+
+@dataclass(frozen=True)
+class LeadCheck:
+    """Whether the person model leads this person along their paths (:func:`coassist.sim.person_twin.lead_check`:
+    their calibration replayed against a twin of them, leave-one-out).
+
+    follow : lead along their paths (True), or give them the present estimate held (False: the twin overshot more
+        with the lead than under MG, beyond the trials' spread). folds : the trials replayed. person_mm, mg_mm : the
+        twin's mean overshoot [mm] with the person model and under MG; low_mm : the lower end of the 95 % Student-t
+        interval of their paired difference [mm] (each None where not checked). note : "checked", or why not.
+    """
+
+    follow: bool = True
+    folds: int = 0
+    person_mm: float | None = None
+    mg_mm: float | None = None
+    low_mm: float | None = None
+    note: str = "checked"
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.follow, bool):
+            raise ValueError(f"LeadCheck.follow must be true or false, got {self.follow!r}")
+        object.__setattr__(self, "folds", check_int(self.folds, "LeadCheck.folds", 0, 1000))
+        for name, lo in (("person_mm", 0.0), ("mg_mm", 0.0), ("low_mm", -1e4)):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, check_real(value, f"LeadCheck.{name}", lo, 1e4))
+        if not isinstance(self.note, str):
+            raise ValueError(f"LeadCheck.note must be text, got {self.note!r}")
+
+    @property
+    def line(self) -> str:
+        """What the check found, in a few words (the calibrate line)."""
+        if self.person_mm is None or self.mg_mm is None:
+            return f"lead {self.note}"
+        verdict = "led along their paths" if self.follow else "present estimate held (the lead did not pay)"
+        low = "" if self.low_mm is None else f", the difference's 95 % interval from {self.low_mm:+.1f} mm"
+        return (
+            f"{verdict}: their twin overshot {self.person_mm:.1f} mm with the lead, {self.mg_mm:.1f} mm under MG "
+            f"({self.folds} trials replayed{low})"
+        )
+
+
 @dataclass(frozen=True, eq=False)
 class PersonFit:
-    """One person's fit: their arm and their path model on one task."""
+    """One person's fit: their arm, their path model on one task and, where checked, whether to lead them."""
 
     arm: ArmEstimate
     paths: PathModel
+    lead: LeadCheck | None = None
 
 
 def _nominal_of(trial) -> np.ndarray:
@@ -131,7 +186,9 @@ def _nominal_of(trial) -> np.ndarray:
     return ref[keep]
 
 
-def intent_paths(trials: Sequence, arm: ArmEstimate, *, smoothing: float = 1.5) -> tuple[list[np.ndarray], float]:
+def intent_paths(
+    trials: Sequence, arm: ArmEstimate, *, smoothing: float = INTENT_SMOOTHING
+) -> tuple[list[np.ndarray], float]:
     """Each trial's reconstructed intent path (module docstring, step 2) and the present estimate's
     noise σ [m] about it: (paths, σ). The handle's sensor reads the hand's force (no inertia put back)."""
     from scipy.signal import butter, sosfiltfilt
@@ -159,7 +216,7 @@ def fit_person(
     *,
     settings: PathModelSettings | None = None,
     arm: ArmEstimate | None = None,
-    smoothing: float = 1.5,
+    smoothing: float = INTENT_SMOOTHING,
 ) -> PersonFit:
     """One person's :class:`PersonFit` from their calibration trials on one task (module docstring).
     ``arm``: use this arm instead of measuring it (e.g. to study what a wrong arm costs); None: measured from the
@@ -183,6 +240,28 @@ def fit_person(
     # neither) is what the person chose against the lab's asking: in the prior, as every chosen path
     asked = [way != 0 and way == side for way, side in zip(ways, model.sides.tolist())]
     return PersonFit(arm=arm, paths=replace(model, asked=np.asarray(asked)) if any(asked) else model)
+
+
+def without_trial(fit: PersonFit, trials: Sequence, leave: int) -> PersonFit:
+    """``fit`` (of ``trials``, by :func:`fit_person`) as fitted to the same trials less trial ``leave``, without
+    fitting the others' paths again: each demonstration's primitive is fitted alone, so dropping its row is the refit
+    of the rest, weights and way bit for bit; the noise σ is the others' (:func:`intent_paths`, as
+    :func:`fit_person` takes it); the arm and the plan stay the fit's (the plan is the first trial's)."""
+    n = len(fit.paths.sides)
+    if len(trials) != n or not 0 <= leave < n:
+        raise ValueError(f"without_trial: {len(trials)} trials for a fit of {n} paths, leave {leave}")
+    keep = np.arange(n) != leave
+    rest = [t for j, t in enumerate(trials) if j != leave]
+    _, noise = intent_paths(rest, fit.arm)
+    asked = None if fit.paths.asked is None or not np.any(fit.paths.asked[keep]) else fit.paths.asked[keep]
+    paths = replace(
+        fit.paths,
+        weights=fit.paths.weights[keep],
+        sides=fit.paths.sides[keep],
+        noise=max(noise, 1e-4),
+        asked=asked,
+    )
+    return replace(fit, paths=paths, lead=None)
 
 
 def asked_way(trial) -> int:
@@ -248,7 +327,15 @@ def write_person_model(
     folder.mkdir(parents=True, exist_ok=True)
     doc: dict[str, Any] = {
         "filter": asdict(settings or PERSON_FILTER),
-        "people": {name: {"arm": asdict(f.arm), "paths": _model_doc(f.paths)} for name, f in fits.items()},
+        "people": {
+            name: {
+                "arm": asdict(f.arm),
+                "paths": _model_doc(f.paths),
+                # written only where it was checked: a model fitted without the check is written as before
+                **({} if f.lead is None else {"lead": asdict(f.lead)}),
+            }
+            for name, f in fits.items()
+        },
     }
     if default is not None:
         doc["default"] = default
@@ -261,7 +348,7 @@ def write_person_model(
 #: fresh source for every trial (its state is the trial's) from the same few folders, and parsing the file and
 #: rebuilding the path models was about 80 ms of CPU a trial (issue 44). Content that was not read before (an edit,
 #: a rewrite) is read and its own hash checked. Bounded.
-_READ_MEMO: dict[bytes, tuple[dict, dict, str | None, PersonFilterSettings]] = {}
+_READ_MEMO: dict[bytes, tuple[dict, dict, str | None, PersonFilterSettings, frozenset[str]]] = {}
 _READ_MEMO_SIZE = 32
 
 
@@ -279,7 +366,7 @@ def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsInten
             if len(_READ_MEMO) >= _READ_MEMO_SIZE:
                 _READ_MEMO.pop(next(iter(_READ_MEMO)))
             _READ_MEMO[key] = read
-    paths, arms, default, settings = read
+    paths, arms, default, settings, held = read
     return PersonPathsIntent(
         horizon,
         paths=paths,
@@ -287,23 +374,26 @@ def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsInten
         default_paths=None if default is None else paths[default],
         default_arm=None if default is None else arms[default],
         settings=settings,
+        held=held | ({PersonPathsIntent.DEFAULT} if default in held else set()),
         # the folder's name and the file's digest: two calibrations written to folders of one name (or one
         # folder rewritten with --overwrite) give their trials different ids, as a trained model's do
         model_id=f"person:{Path(folder).name}@{'' if key is None else key.hex()[:12]}",
     )
 
 
-def _read_people(path: Path) -> tuple[dict, dict, str | None, PersonFilterSettings]:
-    """A person-model file's people's path models and arms, its default person and its filter (errors name the
-    file and field)."""
+def _read_people(path: Path) -> tuple[dict, dict, str | None, PersonFilterSettings, frozenset[str]]:
+    """A person-model file's people's path models and arms, its default person, its filter and the people it does
+    not lead (their :class:`LeadCheck` said so; errors name the file and field)."""
     doc = read_hashed_json(path, format=_FORMAT)  # one line naming the file: missing, edited, another format
     try:
         people = dict(doc["people"])
         paths = {name: _model_from(p["paths"]) for name, p in people.items()}
         arms = {name: ArmEstimate(**p["arm"]) for name, p in people.items()}
+        leads = {name: LeadCheck(**p["lead"]) for name, p in people.items() if "lead" in p}
         default = doc.get("default")
         if default is not None and default not in people:
             raise ValueError(f"default {default!r} is not one of its people ({', '.join(people)})")
-        return paths, arms, default, PersonFilterSettings(**doc.get("filter", {}))
+        held = frozenset(name for name, lead in leads.items() if not lead.follow)
+        return paths, arms, default, PersonFilterSettings(**doc.get("filter", {})), held
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"{path}: {exc}") from None

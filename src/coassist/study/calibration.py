@@ -52,7 +52,7 @@ import hashlib
 import json
 import time
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -145,6 +145,7 @@ def fit_job(job: FitJob) -> dict[str, Any]:
     from coassist.experiments.person_figure import PERSON_FIGURE_FILE, write_person_figure
     from coassist.scenario.arm_identification import ArmEstimate, identify_arm
     from coassist.scenario.person_model import fit_person, person_filter_for, write_person_model
+    from coassist.sim.person_twin import lead_check
 
     t0, c0 = time.perf_counter(), time.process_time()
     trials = _read(job.root, job.data)
@@ -178,9 +179,12 @@ def fit_job(job: FitJob) -> dict[str, Any]:
                 "person model cannot learn the way there"
             )
         try:
-            fits[task] = fit_person([t for _, t in use], arm=arm)
+            fit = fit_person([t for _, t in use], arm=arm)
         except ValueError as exc:
             raise CalibrationFailed(f"the paths of task {task!r} could not be fitted: {exc}") from None
+        # whether to lead the person along their paths: their calibration replayed against their twin
+        origin = str(use[0][1].meta.origin)
+        fits[task] = replace(fit, lead=lead_check([t for _, t in use], fit, person_filter_for(origin)))
         demos[task] = [f for f, _ in use]
     blocks = list(dict.fromkeys(f.split("/", 1)[0] for f, _ in trials))
     record = {
@@ -201,6 +205,8 @@ def fit_job(job: FitJob) -> dict[str, Any]:
                 "noise_m": float(fit.paths.noise),
                 # how far the demonstrations repeat (PathModel.repeatability; None: no way taken twice)
                 "repeatability": fit.paths.repeatability(),
+                # whether the model leads them along their paths (the calibration's twin check, LeadCheck)
+                "lead": None if fit.lead is None else asdict(fit.lead),
             }
             for task, fit in fits.items()
         },

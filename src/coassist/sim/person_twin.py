@@ -1,0 +1,207 @@
+"""A person's twin: their calibration replayed in closed loop, to check that leading along their paths helps them.
+
+The person model (:mod:`coassist.scenario.person_intent`) leads the tool along the paths a person showed in
+their calibration trials. Where a person's path this time is not one they showed (their detours vary from trial to
+trial more than the calibration's few trials tell), the lead carries the tool past the person's turn, and they
+overshoot more than with no help (MG): docs/person-model.md, *A twin of the person*. Before a person model assists
+a person, :func:`lead_check` replays each of their calibration trials, leave-one-out, against a twin of that
+person, and says whether the lead pays:
+
+- the twin's arm is the one measured (:class:`~coassist.scenario.arm_identification.ArmEstimate`), a spring and
+  damper pulling toward the trial's own intent path as the fit reconstructs it::
+
+      u_h(k) = K̂ (q(k) − p(k)) − Ĉ ṗ(k),   q = p + (w + Ĉ v)/K̂, low-passed (zero phase) as the fit does
+
+  (:func:`~coassist.scenario.person_model.intent_paths`; q is the recorded trial's, on its own time course);
+- the robot is the point-mass world's (the plant of the trial's control preset, its object and plan) with the
+  arbitrated controller, run twice per trial: under MG, and with the person model of the person's *other* trials
+  (:func:`~coassist.scenario.person_model.without_trial`: the fit less that trial's path, the measured arm);
+- the twin's overshoot past q (:func:`coassist.metrics.overshoot`) is compared, trial by trial.
+
+The person is followed (:attr:`~coassist.scenario.person_model.LeadCheck.follow`) unless the person model overshoots
+more than MG beyond the trials' spread (the paired difference's 95 % Student-t interval above zero); then the person
+model gives that person what every world gives without a calibration (``present-held``: the present estimate held,
+with the typical arm), and says so. Told: nothing but the calibration: the trials' poses,
+velocities, wrenches, plan, preset and object, and the arm measured from them. The world's operator profile is a
+placeholder whose intent and arm are replaced; nothing of the simulated operator's paths or arm reaches the twin.
+A trial whose plan cannot be rebuilt from its task and seed (a plan of a lab's own) leaves the person followed, and
+the check says why.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from coassist.analysis.paired import paired_difference
+from coassist.control.presets import CONTROL_PRESETS, get_preset, make_controller
+from coassist.metrics import overshoot
+from coassist.runtime.episode import run_episode
+from coassist.scenario.objects import get_object
+from coassist.scenario.operator import AUTHOR
+from coassist.scenario.person_intent import PersonFilterSettings, PersonPathsIntent
+from coassist.scenario.person_model import INTENT_SMOOTHING, LeadCheck, PersonFit, asked_way, without_trial
+from coassist.scenario.tasks import TASKS, task_for_seed
+from coassist.sim.point_mass import PointMassWorld
+from coassist.sim.trial_runner import build_trial
+
+__all__ = ["TWIN_CONTROLLER", "TWIN_OBJECT", "TwinArm", "checked_people", "lead_check", "twin_overshoot", "why_no_twin"]
+
+#: The controller the twin is assisted with: the application's (the arbitrated cooperative game).
+TWIN_CONTROLLER = "cooperative-arbitrated"
+#: The horizon of the person model's rows in the twin's loop [ticks] (the controller's, 0.4 s at 125 Hz).
+TWIN_HORIZON = 50
+#: The object the twin carries: a rigid one of the application's mass (the heavy load). Chosen on the tuning
+#: population (docs/person-model.md, *A twin of the person*): with the handle (no mass) MG barely overshoots and the
+#: check turned away from the lead a thesis operator whom it helps in the report's trials; with the board the twin's
+#: arm (no delay, an effective damping that may be negative) swings the board on its twisting mount, and the check
+#: turned every thesis operator away.
+TWIN_OBJECT = "heavy"
+#: How far the twin's rebuilt plan may lie from the trial's recorded one [m] before the check is left out.
+PLAN_TOLERANCE = 1e-6
+
+
+class TwinArm:
+    """The twin's arm (module docstring): u_h = K̂ (q(k) − p) − Ĉ ṗ, per axis, no delay, no noise.
+
+    Parameters
+    ----------
+    intent : (n, 2) the intent q on the tick grid [m]; ticks past its end hold its last row.
+    stiffness : K̂ [N/m]. damping : Ĉ [N·s/m] (may be negative: the effective damping of an arm with a delay).
+    """
+
+    def __init__(self, intent: np.ndarray, stiffness: float, damping: float) -> None:
+        self._x, self._y = intent[:, 0].tolist(), intent[:, 1].tolist()
+        self._n = len(self._x)
+        self.K, self.C = float(stiffness), float(damping)
+        self.stiffness = self.K  # what the world logs of an arm
+
+    def force(self, k: int, px: float, py: float, vx: float, vy: float) -> tuple[float, float]:
+        """u_h(k) [N] for hand position (px, py) [m] and velocity (vx, vy) [m/s] at tick k."""
+        i = k if k < self._n else self._n - 1
+        return self.K * (self._x[i] - px) - self.C * vx, self.K * (self._y[i] - py) - self.C * vy
+
+
+def why_no_twin(trial) -> str:
+    """Why ``trial`` cannot be replayed against a twin ("" where it can): the twin rebuilds the trial's plan from
+    its task and seed and its robot from its control preset, as the trial recorded them."""
+    meta = trial.meta
+    if meta.task not in TASKS or meta.seed is None:
+        return f"its task {meta.task!r} is not one coassist rebuilds"
+    if meta.extra.get("preset") not in CONTROL_PRESETS:
+        return "it does not name a control preset coassist knows"
+    return ""
+
+
+def twin_overshoot(
+    trial, intent: np.ndarray, arm, source: PersonPathsIntent | None, obj: str = TWIN_OBJECT
+) -> float | None:
+    """The twin's overshoot past ``intent`` [m] (module docstring) in ``trial``'s task and preset, assisted by the
+    arbitrated controller with ``source`` (None: MG), carrying ``obj``; None where the trial cannot be replayed
+    (:func:`why_no_twin`) or its plan is not rebuilt within :data:`PLAN_TOLERANCE` of its recorded one (nothing is
+    run then)."""
+    if why_no_twin(trial):
+        return None
+    meta = trial.meta
+    motion = meta.extra.get("motion_time")
+    task = task_for_seed(meta.task, int(meta.seed), motion_time=None if motion is None else float(motion))
+    preset = get_preset(str(meta.extra["preset"]))
+    controller = make_controller("manual" if source is None else TWIN_CONTROLLER, preset)
+    episode = build_trial(
+        task,
+        replace(AUTHOR, name=str(meta.user)),  # a placeholder: its intent and arm are replaced below
+        get_object(obj),
+        controller,
+        source,
+        int(meta.seed),
+        preset_name=preset.name,
+    )
+    recorded = np.asarray(trial.reference[:, :2], dtype=float)
+    n = min(len(recorded), len(episode.plan))
+    if n == 0 or float(np.max(np.abs(episode.plan[:n, :2] - recorded[:n]))) > PLAN_TOLERANCE:
+        return None
+    world = episode.world
+    if not isinstance(world, PointMassWorld):  # build_trial's world; a check that it is the one replaced here
+        raise TypeError(f"the twin's world must be a PointMassWorld, got {type(world).__name__}")
+    grid_n = max(len(world.intent.positions), len(intent))
+    grid = np.vstack([intent, np.repeat(intent[-1:], grid_n - len(intent), axis=0)])
+    # the world calls its arm's force() once a tick and logs its stiffness: the twin's arm stands in for the
+    # operator's (this episode runs alone, never in a batch of operator arms)
+    world.arm = TwinArm(grid, arm.stiffness, arm.damping)  # type: ignore[assignment]
+    run = run_episode(episode)
+    m = len(run.pose)
+    return overshoot(run.pose[:, :2], grid[:m])
+
+
+def lead_check(trials: Sequence, fit: PersonFit, settings: PersonFilterSettings, obj: str = TWIN_OBJECT) -> LeadCheck:
+    """Whether the person model should lead this person (module docstring): each of their chosen-way calibration
+    trials (``trials``, one person's, those :func:`~coassist.scenario.person_model.fit_person` gave ``fit``) replayed
+    against their twin, under MG and with the model of their other trials (``settings``: the filter it will run
+    with). Trials the lab asked a way of stay in every fold's fit and are not replayed (the person did not choose
+    them). Deterministic: the same trials give the same check."""
+    trials = list(trials)
+    chosen = [i for i, t in enumerate(trials) if asked_way(t) == 0]
+    if len(chosen) < 2:
+        return LeadCheck(follow=True, folds=0, note="not checked: fewer than two chosen-way trials")
+    full = _full_intents(trials, fit.arm)
+    user = str(trials[0].meta.user)
+    led, unled = [], []
+    for i in chosen:
+        fold = without_trial(fit, trials, i)  # the model of the other trials
+        source = PersonPathsIntent(
+            TWIN_HORIZON, paths={user: fold.paths}, arms={user: fit.arm}, settings=settings, model_id="twin"
+        )
+        why = why_no_twin(trials[i])
+        if why:
+            return LeadCheck(follow=True, folds=0, note=f"not checked: trial {i + 1} cannot be replayed ({why})")
+        mg = twin_overshoot(trials[i], full[i], fit.arm, None, obj)
+        if mg is None:
+            return LeadCheck(follow=True, folds=0, note=f"not checked: trial {i + 1}'s plan is not its task's")
+        person = twin_overshoot(trials[i], full[i], fit.arm, source, obj)
+        if person is None or not (math.isfinite(person) and math.isfinite(mg)):
+            continue
+        led.append(person)
+        unled.append(mg)
+    if len(led) < 2:
+        return LeadCheck(follow=True, folds=len(led), note="not checked: fewer than two trials could be replayed")
+    # turned away only where the lead costs overshoot beyond the folds' own spread: the paired difference's 95 %
+    # Student-t interval above zero (a person whose lead is about as good as MG is led: it saves them force)
+    _, low, _, _ = paired_difference(1000.0 * np.asarray(led), 1000.0 * np.asarray(unled))
+    return LeadCheck(
+        follow=not low > 0.0,
+        folds=len(led),
+        person_mm=1000.0 * float(np.mean(led)),
+        mg_mm=1000.0 * float(np.mean(unled)),
+        low_mm=float(low),
+        note="checked",
+    )
+
+
+def _full_intents(trials: Sequence, arm) -> list[np.ndarray]:
+    """Each trial's reconstructed intent on its whole time course (the fit's q, low-passed as it does: before
+    leaving the start and after reaching the end as well, so that the twin's intent is on the trial's clock)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    out = []
+    for trial in trials:
+        dt = float(trial.meta.dt)
+        q = trial.pose[:, :2] + (trial.wrench[:, :2] + arm.damping * trial.velocity[:, :2]) / arm.stiffness
+        sos = butter(2, INTENT_SMOOTHING, "lowpass", fs=1.0 / dt, output="sos")
+        out.append(sosfiltfilt(sos, q, axis=0))
+    return out
+
+
+def checked_people(
+    trials: Sequence, fits: Mapping[str, PersonFit], settings: PersonFilterSettings, obj: str = TWIN_OBJECT
+) -> dict[str, PersonFit]:
+    """``fits`` (by person, as :func:`~coassist.scenario.person_model.fit_people` gives them) each with its
+    :func:`lead_check` from that person's trials among ``trials`` (grouped by ``meta.user``)."""
+    by_user: dict[str, list] = {}
+    for trial in trials:
+        by_user.setdefault(str(trial.meta.user), []).append(trial)
+    return {
+        name: replace(fit, lead=lead_check(by_user.get(name, []), fit, settings, obj)) for name, fit in fits.items()
+    }

@@ -1,0 +1,162 @@
+"""A person's twin (coassist.sim.person_twin): their calibration replayed in closed loop says whether the person
+model should lead them along their paths; told nothing but the calibration trials."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from coassist.control.presets import get_preset, make_controller
+from coassist.data import Trial
+from coassist.interfaces import TrialContext
+from coassist.scenario.intent_registry import load_intent_source
+from coassist.scenario.objects import get_object
+from coassist.scenario.operator import AUTHOR
+from coassist.scenario.person_intent import PersonPathsIntent
+from coassist.scenario.person_model import (
+    PERSON_FILTER,
+    LeadCheck,
+    fit_person,
+    read_person_model,
+    write_person_model,
+)
+from coassist.scenario.populations import population_profile
+from coassist.scenario.tasks import task_for_seed
+from coassist.sim.person_twin import TwinArm, lead_check, twin_overshoot, why_no_twin
+from coassist.sim.trial_runner import run_trial
+
+PRESET = get_preset("thesis-application-damped")
+SEEDS = range(880000, 880005)
+
+
+def _probes(profile) -> list[Trial]:
+    ctrl = make_controller("manual-probe", PRESET)
+    return [
+        run_trial(
+            task_for_seed("curved", s, obstacle="large"),
+            profile,
+            get_object("handle"),
+            ctrl,
+            None,
+            s,
+            preset_name=PRESET.name,
+        )
+        for s in SEEDS
+    ]
+
+
+@pytest.fixture(scope="module")
+def steady():
+    """Five probe trials of the author going left every time, their detour the same shape each time."""
+    trials = _probes(replace(AUTHOR, name="steady", shape_jitter=0.0, left_preference=1.0))
+    return trials, fit_person(trials)
+
+
+@pytest.fixture(scope="module")
+def corrective():
+    """Five probe trials of held-out operator 2: detours of several corrective strokes that differ every time."""
+    trials = _probes(population_profile("held-out", 2, 0))
+    return trials, fit_person(trials)
+
+
+def test_the_twin_arm_is_a_spring_and_damper_toward_the_intent():
+    q = np.array([[0.1, -0.2], [0.3, 0.4]])
+    arm = TwinArm(q, 650.0, -12.0)
+    fx, fy = arm.force(1, 0.25, 0.5, 0.2, -0.1)
+    assert fx == pytest.approx(650.0 * (0.3 - 0.25) + 12.0 * 0.2, abs=1e-12)
+    assert fy == pytest.approx(650.0 * (0.4 - 0.5) - 12.0 * 0.1, abs=1e-12)
+    assert arm.force(7, 0.3, 0.4, 0.0, 0.0) == (0.0, 0.0)  # past its end the intent holds its last row
+    assert arm.stiffness == 650.0
+
+
+def test_the_lead_is_kept_where_it_pays_and_dropped_where_it_costs_overshoot(steady, corrective):
+    led = lead_check(*steady, PERSON_FILTER)
+    assert led.follow and led.note == "checked" and led.folds == len(SEEDS)
+    assert led.person_mm < led.mg_mm  # the lead halves what MG overshoots, or better
+    held = lead_check(*corrective, PERSON_FILTER)
+    assert not held.follow and held.folds == len(SEEDS)
+    assert held.person_mm > held.mg_mm
+    assert "present estimate held" in held.line and f"{held.person_mm:.1f} mm with the lead" in held.line
+    # the same trials give the same check
+    assert lead_check(*steady, PERSON_FILTER) == led
+
+
+def test_the_twin_reads_nothing_of_the_simulated_operator(steady):
+    # what a lab's trial would not carry (the simulated operator, its intent and detour) taken out of the meta: the
+    # twin's overshoot is the same to the last bit
+    trials, fit = steady
+    t = trials[0]
+    secret = ("operator", "intent_side", "intent_amplitude", "intent_pace", "intent_end_time", "obstacle")
+    bare = replace(t, meta=replace(t.meta, extra={k: v for k, v in t.meta.extra.items() if k not in secret}))
+    q = t.pose[:, :2] + (t.wrench[:, :2] + fit.arm.damping * t.velocity[:, :2]) / fit.arm.stiffness
+    assert twin_overshoot(bare, q, fit.arm, None) == twin_overshoot(t, q, fit.arm, None)
+
+
+def test_trials_that_cannot_be_replayed_leave_the_person_led_and_say_why(steady):
+    trials, fit = steady
+    no_preset = [replace(t, meta=replace(t.meta, extra={**t.meta.extra, "preset": None})) for t in trials]
+    check = lead_check(no_preset, fit, PERSON_FILTER)
+    assert check.follow and check.folds == 0 and "control preset" in check.note
+    assert why_no_twin(replace(trials[0], meta=replace(trials[0].meta, task="lab-plan"))).startswith("its task")
+    # a plan moved away from the task's (a lab's own plan under a task's name): not replayed
+    moved = [replace(t, reference=t.reference + 0.01) for t in trials]
+    check = lead_check(moved, fit, PERSON_FILTER)
+    assert check.follow and check.folds == 0 and "plan is not its task's" in check.note
+    assert lead_check(trials[:1], fit, PERSON_FILTER).note.startswith("not checked")
+
+
+def _context(user: str, path: np.ndarray) -> TrialContext:
+    return TrialContext(
+        dt=0.008,
+        horizon=50,
+        start=path[0],
+        target=path[-1],
+        reference=np.zeros((50, 4)),
+        task="curved",
+        object="heavy",
+        user=user,
+        path=path,
+    )
+
+
+def test_a_person_the_check_turned_away_gets_the_present_estimate_held(tmp_path, steady):
+    trials, fit = steady
+    path = fit.paths.nominal
+    fits = {"led": fit, "held": replace(fit, lead=LeadCheck(follow=False, folds=5, person_mm=6.0, mg_mm=2.0))}
+    folder = write_person_model(tmp_path / "pm", fits, default="held")
+    source = read_person_model(folder)
+    assert source.held == {"held", PersonPathsIntent.DEFAULT}
+    t = trials[0]
+
+    def rows_of(src, user: str) -> np.ndarray:
+        src.reset(_context(user, path))
+        out = []
+        for k in range(600, 700):  # the feature rows of a trial: pose, velocity, wrench, plan
+            row = np.concatenate([t.pose[k, :2], t.velocity[k, :2], t.wrench[k, :2], t.reference[k, :2]])[None, :]
+            out.append(src.predict(row))
+        return np.asarray(out)
+
+    rows = {user: rows_of(source, user) for user in ("led", "held", "someone-else")}
+    # held: what every world gives without a calibration (present-held), bit for bit
+    np.testing.assert_array_equal(rows["held"], rows_of(load_intent_source("present-held", horizon=50), "held"))
+    assert np.all(rows["held"] == rows["held"][:, :1, :])
+    assert not np.all(rows["led"] == rows["led"][:, :1, :])
+    np.testing.assert_array_equal(rows["someone-else"], rows["held"])  # the default person is held: so is anyone
+    # and a file with the check read back gives it again
+    again = read_person_model(folder)
+    assert again.held == source.held
+
+
+def test_a_fold_is_the_fit_of_the_other_trials(corrective):
+    from coassist.scenario.person_model import without_trial
+
+    trials, fit = corrective
+    for leave in range(1, len(trials)):  # the plan is the first trial's: leave it in
+        fold = without_trial(fit, trials, leave).paths
+        refit = fit_person([t for j, t in enumerate(trials) if j != leave], arm=fit.arm).paths
+        np.testing.assert_array_equal(fold.weights, refit.weights)  # each path's primitive fitted alone
+        np.testing.assert_array_equal(fold.sides, refit.sides)
+        assert fold.noise == refit.noise
+        np.testing.assert_array_equal(fold.asked, refit.asked)
+    with pytest.raises(ValueError, match="leave 9"):
+        without_trial(fit, trials, 9)
