@@ -98,11 +98,46 @@ def test_trials_that_cannot_be_replayed_leave_the_person_led_and_say_why(steady)
     check = lead_check(no_preset, fit, PERSON_FILTER)
     assert check.follow and check.folds == 0 and "control preset" in check.note
     assert why_no_twin(replace(trials[0], meta=replace(trials[0].meta, task="lab-plan"))).startswith("its task")
-    # a plan moved away from the task's (a lab's own plan under a task's name): not replayed
-    moved = [replace(t, reference=t.reference + 0.01) for t in trials]
-    check = lead_check(moved, fit, PERSON_FILTER)
+    # a plan of another shape than the task's (a lab's own plan under a task's name): not replayed
+    bent = []
+    for t in trials:
+        ref = np.array(t.reference, dtype=float)
+        ref[:, 1] += 0.01 * np.sin(np.linspace(0.0, np.pi, len(ref)))
+        bent.append(replace(t, reference=ref))
+    check = lead_check(bent, fit, PERSON_FILTER)
     assert check.follow and check.folds == 0 and "plan is not its task's" in check.note
     assert lead_check(trials[:1], fit, PERSON_FILTER).note.startswith("not checked")
+    negative = [replace(t, meta=replace(t.meta, seed=-1)) for t in trials]
+    assert "seed -1" in lead_check(negative, fit, PERSON_FILTER).note
+
+
+def test_a_real_arms_trials_are_checked_in_their_tasks_frame_and_rate(corrective):
+    # a real arm lays the task's plan out from where its tool stands (each trial a little elsewhere): the same person,
+    # the same verdict
+    trials, fit = corrective
+    base = lead_check(trials, fit, PERSON_FILTER)
+    moved = []
+    for k, t in enumerate(trials):
+        by = np.array([0.41 + 0.003 * k, -0.137])
+        pose, ref = np.array(t.pose, dtype=float), np.array(t.reference, dtype=float)
+        pose[:, :2] += by
+        ref[:, :2] += by
+        moved.append(replace(t, pose=pose, reference=ref))
+    shifted = lead_check(moved, fit_person(moved), PERSON_FILTER)
+    assert shifted.note == "checked" and shifted.folds == base.folds and shifted.follow == base.follow
+    assert shifted.person_mm == pytest.approx(base.person_mm, abs=1e-6)  # the same twins, to rounding
+    assert shifted.mg_mm == pytest.approx(base.mg_mm, abs=1e-6)
+
+
+def test_a_trial_at_500_hz_is_resampled_onto_the_presets_ticks():
+    from coassist.sim.person_twin import on_ticks
+
+    t = np.linspace(0.0, 2.0, 1001)
+    xy = np.stack([np.sin(t), t**2], axis=1)  # 500 Hz
+    coarse = on_ticks(xy, 0.002, 0.008)
+    assert coarse.shape == (251, 2)
+    np.testing.assert_allclose(coarse, np.stack([np.sin(t[::4]), t[::4] ** 2], axis=1), rtol=0, atol=1e-12)
+    assert on_ticks(xy, 0.008, 0.008) is xy  # the same rows where the rates agree
 
 
 def _context(user: str, path: np.ndarray) -> TrialContext:

@@ -391,6 +391,8 @@ class PersonPathsIntent:
     model_id : what trials record as the source.
     extrapolation : the share e ∈ [0, 1] of the tool's velocity the present estimate's rows carry where
         there is no path model (or the tool is far from its paths): q + e·i·dt·v (0: held, 1: constant velocity).
+    held : the people not led along their paths (the calibration's twin check, :mod:`coassist.sim.person_twin`):
+        they get ``present-held``'s rows; :attr:`DEFAULT` among them: whoever gets the default model too.
     """
 
     history = 1

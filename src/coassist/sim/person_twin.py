@@ -13,8 +13,8 @@ person, and says whether the lead pays:
       u_h(k) = K̂ (q(k) − p(k)) − Ĉ ṗ(k),   q = p + (w + Ĉ v)/K̂, low-passed (zero phase) as the fit does
 
   (:func:`~coassist.scenario.person_model.intent_paths`; q is the recorded trial's, on its own time course);
-- the robot is the point-mass world's (the plant of the trial's control preset, its object and plan) with the
-  arbitrated controller, run twice per trial: under MG, and with the person model of the person's *other* trials
+- the robot is the point-mass world's (the plant of the trial's control preset, its plan; the object
+  :data:`TWIN_OBJECT`) with the arbitrated controller, run twice per trial: under MG, and with the person model of the person's *other* trials
   (:func:`~coassist.scenario.person_model.without_trial`: the fit less that trial's path, the measured arm);
 - the twin's overshoot past q (:func:`coassist.metrics.overshoot`) is compared, trial by trial.
 
@@ -22,7 +22,7 @@ The person is followed (:attr:`~coassist.scenario.person_model.LeadCheck.follow`
 more than MG beyond the trials' spread (the paired difference's 95 % Student-t interval above zero); then the person
 model gives that person what every world gives without a calibration (``present-held``: the present estimate held,
 with the typical arm), and says so. Told: nothing but the calibration: the trials' poses,
-velocities, wrenches, plan, preset and object, and the arm measured from them. The world's operator profile is a
+velocities, wrenches, plan and preset, and the arm measured from them. The world's operator profile is a
 placeholder whose intent and arm are replaced; nothing of the simulated operator's paths or arm reaches the twin.
 A trial whose plan cannot be rebuilt from its task and seed (a plan of a lab's own) leaves the person followed, and
 the check says why.
@@ -43,12 +43,21 @@ from coassist.runtime.episode import run_episode
 from coassist.scenario.objects import get_object
 from coassist.scenario.operator import AUTHOR
 from coassist.scenario.person_intent import PersonFilterSettings, PersonPathsIntent
-from coassist.scenario.person_model import INTENT_SMOOTHING, LeadCheck, PersonFit, asked_way, without_trial
+from coassist.scenario.person_model import INTENT_SMOOTHING, LeadCheck, PersonFit, asked_way, fit_person, without_trial
 from coassist.scenario.tasks import TASKS, task_for_seed
 from coassist.sim.point_mass import PointMassWorld
 from coassist.sim.trial_runner import build_trial
 
-__all__ = ["TWIN_CONTROLLER", "TWIN_OBJECT", "TwinArm", "checked_people", "lead_check", "twin_overshoot", "why_no_twin"]
+__all__ = [
+    "TWIN_CONTROLLER",
+    "TWIN_OBJECT",
+    "TwinArm",
+    "checked_people",
+    "lead_check",
+    "on_ticks",
+    "twin_overshoot",
+    "why_no_twin",
+]
 
 #: The controller the twin is assisted with: the application's (the arbitrated cooperative game).
 TWIN_CONTROLLER = "cooperative-arbitrated"
@@ -60,8 +69,9 @@ TWIN_HORIZON = 50
 #: arm (no delay, an effective damping that may be negative) swings the board on its twisting mount, and the check
 #: turned every thesis operator away.
 TWIN_OBJECT = "heavy"
-#: How far the twin's rebuilt plan may lie from the trial's recorded one [m] before the check is left out.
-PLAN_TOLERANCE = 1e-6
+#: How far the twin's rebuilt plan may lie from the trial's recorded one [m] (its first rows put together) before the
+#: check is left out: a plan resampled from 500 Hz onto 125 Hz ticks is within 1e-6 m of the task's.
+PLAN_TOLERANCE = 1e-4
 
 
 class TwinArm:
@@ -70,7 +80,8 @@ class TwinArm:
     Parameters
     ----------
     intent : (n, 2) the intent q on the tick grid [m]; ticks past its end hold its last row.
-    stiffness : K̂ [N/m]. damping : Ĉ [N·s/m] (may be negative: the effective damping of an arm with a delay).
+    stiffness : K̂ [N/m].
+    damping : Ĉ [N·s/m] (may be negative: the effective damping of an arm with a delay).
     """
 
     def __init__(self, intent: np.ndarray, stiffness: float, damping: float) -> None:
@@ -89,11 +100,20 @@ def why_no_twin(trial) -> str:
     """Why ``trial`` cannot be replayed against a twin ("" where it can): the twin rebuilds the trial's plan from
     its task and seed and its robot from its control preset, as the trial recorded them."""
     meta = trial.meta
-    if meta.task not in TASKS or meta.seed is None:
-        return f"its task {meta.task!r} is not one coassist rebuilds"
+    if meta.task not in TASKS or meta.seed is None or int(meta.seed) < 0:
+        return f"its task {meta.task!r} (seed {meta.seed}) is not one coassist rebuilds"
     if meta.extra.get("preset") not in CONTROL_PRESETS:
         return "it does not name a control preset coassist knows"
     return ""
+
+
+def on_ticks(values: np.ndarray, dt: float, step: float) -> np.ndarray:
+    """(T, 2) samples ``dt`` apart resampled ``step`` apart over the same span (linear; the same rows where equal)."""
+    if dt == step:
+        return values
+    t = dt * np.arange(len(values))
+    k = step * np.arange(int(t[-1] / step) + 1)
+    return np.stack([np.interp(k, t, values[:, j]) for j in (0, 1)], axis=1)
 
 
 def twin_overshoot(
@@ -101,8 +121,11 @@ def twin_overshoot(
 ) -> float | None:
     """The twin's overshoot past ``intent`` [m] (module docstring) in ``trial``'s task and preset, assisted by the
     arbitrated controller with ``source`` (None: MG), carrying ``obj``; None where the trial cannot be replayed
-    (:func:`why_no_twin`) or its plan is not rebuilt within :data:`PLAN_TOLERANCE` of its recorded one (nothing is
-    run then)."""
+    (:func:`why_no_twin`) or its plan is not its task's within :data:`PLAN_TOLERANCE` (nothing is run then).
+
+    A real arm lays the task's plan out from where its tool stands at the start (``drive``): the recorded plan is the
+    task's moved by its first row's offset, and the twin runs in the task's own frame, the intent moved back by it.
+    A trial recorded at another rate than its preset's (a 500 Hz arm) is resampled onto the preset's ticks."""
     if why_no_twin(trial):
         return None
     meta = trial.meta
@@ -119,10 +142,16 @@ def twin_overshoot(
         int(meta.seed),
         preset_name=preset.name,
     )
-    recorded = np.asarray(trial.reference[:, :2], dtype=float)
+    step = float(controller.model.dt)  # the twin runs at the preset's own period
+    recorded = on_ticks(np.asarray(trial.reference[:, :2], dtype=float), float(meta.dt), step)
+    intent = on_ticks(np.asarray(intent, dtype=float), float(meta.dt), step)
     n = min(len(recorded), len(episode.plan))
-    if n == 0 or float(np.max(np.abs(episode.plan[:n, :2] - recorded[:n]))) > PLAN_TOLERANCE:
+    if n == 0:
         return None
+    offset = recorded[0] - episode.plan[0, :2]  # where the arm laid the plan out (zero in a simulated world)
+    if float(np.max(np.abs(episode.plan[:n, :2] + offset - recorded[:n]))) > PLAN_TOLERANCE:
+        return None
+    intent = intent - offset
     world = episode.world
     if not isinstance(world, PointMassWorld):  # build_trial's world; a check that it is the one replaced here
         raise TypeError(f"the twin's world must be a PointMassWorld, got {type(world).__name__}")
@@ -146,6 +175,19 @@ def lead_check(trials: Sequence, fit: PersonFit, settings: PersonFilterSettings,
     chosen = [i for i, t in enumerate(trials) if asked_way(t) == 0]
     if len(chosen) < 2:
         return LeadCheck(follow=True, folds=0, note="not checked: fewer than two chosen-way trials")
+    for i, trial in enumerate(trials):
+        why = why_no_twin(trial)
+        if why:
+            return LeadCheck(follow=True, folds=0, note=f"not checked: trial {i + 1} cannot be replayed ({why})")
+    # a real arm lays each trial's plan out from where its tool stood (drive): each trial moved back into its task's
+    # frame, where the twin runs, and the paths fitted there (the arm, measured from motion and force, is the same)
+    offsets = [_plan_offset(t) for t in trials]
+    if any(np.any(o != 0.0) for o in offsets):
+        trials = [_moved(t, -o) for t, o in zip(trials, offsets)]
+        try:
+            fit = replace(fit, paths=fit_person(trials, arm=fit.arm).paths)
+        except ValueError as exc:
+            return LeadCheck(follow=True, folds=0, note=f"not checked: the trials moved to their task's frame ({exc})")
     full = _full_intents(trials, fit.arm)
     user = str(trials[0].meta.user)
     led, unled = [], []
@@ -154,10 +196,10 @@ def lead_check(trials: Sequence, fit: PersonFit, settings: PersonFilterSettings,
         source = PersonPathsIntent(
             TWIN_HORIZON, paths={user: fold.paths}, arms={user: fit.arm}, settings=settings, model_id="twin"
         )
-        why = why_no_twin(trials[i])
-        if why:
-            return LeadCheck(follow=True, folds=0, note=f"not checked: trial {i + 1} cannot be replayed ({why})")
-        mg = twin_overshoot(trials[i], full[i], fit.arm, None, obj)
+        try:
+            mg = twin_overshoot(trials[i], full[i], fit.arm, None, obj)
+        except ValueError as exc:  # a recording the twin cannot take: the calibration goes on, the person led
+            return LeadCheck(follow=True, folds=0, note=f"not checked: trial {i + 1} could not be replayed ({exc})")
         if mg is None:
             return LeadCheck(follow=True, folds=0, note=f"not checked: trial {i + 1}'s plan is not its task's")
         person = twin_overshoot(trials[i], full[i], fit.arm, source, obj)
@@ -178,6 +220,22 @@ def lead_check(trials: Sequence, fit: PersonFit, settings: PersonFilterSettings,
         low_mm=float(low),
         note="checked",
     )
+
+
+def _plan_offset(trial) -> np.ndarray:
+    """(2,) how far ``trial``'s recorded plan starts from its task's start [m] (zero in a simulated world)."""
+    meta = trial.meta
+    motion = meta.extra.get("motion_time")
+    task = task_for_seed(meta.task, int(meta.seed), motion_time=None if motion is None else float(motion))
+    return np.asarray(trial.reference[0, :2], dtype=float) - np.asarray(task.start, dtype=float)[:2]
+
+
+def _moved(trial, by: np.ndarray):
+    """``trial`` with its positions (tool pose and plan) moved by ``by`` (2,) [m]."""
+    pose, reference = np.array(trial.pose, dtype=float), np.array(trial.reference, dtype=float)
+    pose[:, :2] += by
+    reference[:, :2] += by
+    return replace(trial, pose=pose, reference=reference)
 
 
 def _full_intents(trials: Sequence, arm) -> list[np.ndarray]:
