@@ -125,8 +125,10 @@ def test_a_real_arms_trials_are_checked_in_their_tasks_frame_and_rate(corrective
         moved.append(replace(t, pose=pose, reference=ref))
     shifted = lead_check(moved, fit_person(moved), PERSON_FILTER)
     assert shifted.note == "checked" and shifted.folds == base.folds and shifted.follow == base.follow
-    assert shifted.person_mm == pytest.approx(base.person_mm, abs=1e-6)  # the same twins, to rounding
-    assert shifted.mg_mm == pytest.approx(base.mg_mm, abs=1e-6)
+    # the same twins: the positions moved out and back differ by rounding (1e-16 m), which the closed loop and the
+    # filter's thresholds could carry further on another BLAS; a micron still tells a wrong frame (millimetres)
+    assert shifted.person_mm == pytest.approx(base.person_mm, abs=1e-3)
+    assert shifted.mg_mm == pytest.approx(base.mg_mm, abs=1e-3)
 
 
 def test_a_trial_at_500_hz_is_resampled_onto_the_presets_ticks():

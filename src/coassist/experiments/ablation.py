@@ -431,7 +431,7 @@ def calibrate_then_drive(probes: list[list], folder: str, configs: list, asked: 
     trials = drive_lockstep([c for draw in probes for c in draw])
     fits, own, at = [], [], 0
     for draw in probes:
-        own.append(list(trials[at : at + len(draw)]))
+        own.append(list(trials[at : at + len(draw)]))  # each draw's calibration trials (the asked ones join below)
         fits.append(fit_people(own[-1]))
         at += len(draw)
     if asked:
@@ -440,22 +440,19 @@ def calibrate_then_drive(probes: list[list], folder: str, configs: list, asked: 
         at = 0
         for k, draw in enumerate(more):
             if draw:
-                fits[k] = fit_people(own[k] + list(driven[at : at + len(draw)]))
+                own[k] += driven[at : at + len(draw)]
+                fits[k] = fit_people(own[k])
             at += len(draw)
     # whether to lead each person along their paths: their calibration replayed against their twin (in the
     # point-mass world, as every calibration's check is: coassist.sim.person_twin)
     settings = mujoco_person_filter()
-    at = 0
-    for k in range(len(probes)):
-        extra = list(driven[at : at + len(more[k])]) if asked else []
-        at += len(extra)
-        fits[k] = checked_people(own[k] + extra, fits[k], settings)
+    fits = [checked_people(calibrated, fit, settings) for calibrated, fit in zip(own, fits)]
     if len(fits) == 1:
-        write_person_model(folder, fits[0], settings=mujoco_person_filter())
+        write_person_model(folder, fits[0], settings=settings)
     else:
         names = [f"draw-{k}" for k in range(len(fits))]
         for name, fit in zip(names, fits):
-            write_person_model(Path(folder) / name, fit, settings=mujoco_person_filter())
+            write_person_model(Path(folder) / name, fit, settings=settings)
         write_draws(folder, names)
     return _drive_batch(configs)
 

@@ -153,9 +153,10 @@ def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "
     fitted = []
     for trials, fits, asked in drawn:
         added = [t for more, more_options in asked.items() for t in ws.collect(more, **more_options)[1].trials]
-        fits = fit_people(list(trials) + added) if added else fits
+        calibrated = list(trials) + added
+        fits = fit_people(calibrated) if added else fits
         # whether to lead each person along their paths: their calibration replayed against their twin
-        fitted.append(checked_people(list(trials) + added, fits, PERSON_FILTER))
+        fitted.append(checked_people(calibrated, fits, PERSON_FILTER))
     if draws == 1:
         return str(write_person_model(ws.out / "models" / f"person{_suffix(population)}", fitted[0]))
     folder = ws.out / "models" / f"person{_suffix(population)}-draws"

@@ -56,6 +56,7 @@ __all__ = [
     "asked_way",
     "fit_people",
     "fit_person",
+    "intent_estimate",
     "intent_paths",
     "read_person_model",
     "without_trial",
@@ -186,19 +187,25 @@ def _nominal_of(trial) -> np.ndarray:
     return ref[keep]
 
 
+def intent_estimate(trial, arm: ArmEstimate, *, smoothing: float = INTENT_SMOOTHING) -> tuple[np.ndarray, np.ndarray]:
+    """(q, its low-pass): the present estimate q = p + (w + Ĉ v)/K̂ of ``trial`` on its whole time course, (T, 2) [m],
+    and q low-passed at ``smoothing`` Hz with zero phase (module docstring, step 2). The handle's sensor reads the
+    hand's force (no inertia put back)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    q = trial.pose[:, :2] + (trial.wrench[:, :2] + arm.damping * trial.velocity[:, :2]) / arm.stiffness
+    sos = butter(2, smoothing, "lowpass", fs=1.0 / float(trial.meta.dt), output="sos")
+    return q, sosfiltfilt(sos, q, axis=0)
+
+
 def intent_paths(
     trials: Sequence, arm: ArmEstimate, *, smoothing: float = INTENT_SMOOTHING
 ) -> tuple[list[np.ndarray], float]:
-    """Each trial's reconstructed intent path (module docstring, step 2) and the present estimate's
-    noise σ [m] about it: (paths, σ). The handle's sensor reads the hand's force (no inertia put back)."""
-    from scipy.signal import butter, sosfiltfilt
-
+    """Each trial's reconstructed intent path (module docstring, step 2: :func:`intent_estimate`, from leaving the
+    start to reaching the end of the plan) and the present estimate's noise σ [m] about it: (paths, σ)."""
     paths, resid = [], []
     for trial in trials:
-        dt = float(trial.meta.dt)
-        q = trial.pose[:, :2] + (trial.wrench[:, :2] + arm.damping * trial.velocity[:, :2]) / arm.stiffness
-        sos = butter(2, smoothing, "lowpass", fs=1.0 / dt, output="sos")
-        smooth = sosfiltfilt(sos, q, axis=0)
+        q, smooth = intent_estimate(trial, arm, smoothing=smoothing)
         # the part the person moved: from leaving the start to reaching the end of the plan
         start, end = trial.reference[0, :2], trial.reference[-1, :2]
         moved = np.flatnonzero(np.linalg.norm(trial.pose[:, :2] - start, axis=1) > 0.005)

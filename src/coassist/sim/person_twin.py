@@ -43,7 +43,7 @@ from coassist.runtime.episode import run_episode
 from coassist.scenario.objects import get_object
 from coassist.scenario.operator import AUTHOR
 from coassist.scenario.person_intent import PersonFilterSettings, PersonPathsIntent
-from coassist.scenario.person_model import INTENT_SMOOTHING, LeadCheck, PersonFit, asked_way, fit_person, without_trial
+from coassist.scenario.person_model import LeadCheck, PersonFit, asked_way, fit_person, intent_estimate, without_trial
 from coassist.scenario.tasks import TASKS, task_for_seed
 from coassist.sim.point_mass import PointMassWorld
 from coassist.sim.trial_runner import build_trial
@@ -69,9 +69,10 @@ TWIN_HORIZON = 50
 #: arm (no delay, an effective damping that may be negative) swings the board on its twisting mount, and the check
 #: turned every thesis operator away.
 TWIN_OBJECT = "heavy"
-#: How far the twin's rebuilt plan may lie from the trial's recorded one [m] (its first rows put together) before the
-#: check is left out: a plan resampled from 500 Hz onto 125 Hz ticks is within 1e-6 m of the task's.
-PLAN_TOLERANCE = 1e-4
+#: How far the twin's rebuilt plan may lie from the trial's recorded one [m] (in the task's frame) before the check
+#: is left out: rounding room for a plan moved back from where an arm laid it out (a 500 Hz plan resampled onto the
+#: 125 Hz ticks equals the 125 Hz plan exactly: the curved, Z and linear tasks, three seeds each, measured).
+PLAN_TOLERANCE = 1e-6
 
 
 class TwinArm:
@@ -121,11 +122,9 @@ def twin_overshoot(
 ) -> float | None:
     """The twin's overshoot past ``intent`` [m] (module docstring) in ``trial``'s task and preset, assisted by the
     arbitrated controller with ``source`` (None: MG), carrying ``obj``; None where the trial cannot be replayed
-    (:func:`why_no_twin`) or its plan is not its task's within :data:`PLAN_TOLERANCE` (nothing is run then).
-
-    A real arm lays the task's plan out from where its tool stands at the start (``drive``): the recorded plan is the
-    task's moved by its first row's offset, and the twin runs in the task's own frame, the intent moved back by it.
-    A trial recorded at another rate than its preset's (a 500 Hz arm) is resampled onto the preset's ticks."""
+    (:func:`why_no_twin`) or its plan is not its task's within :data:`PLAN_TOLERANCE` (nothing is run then). The
+    trial and ``intent`` are in the task's frame (:func:`lead_check` moves a real arm's there); a trial recorded at
+    another rate than its preset's (a 500 Hz arm) is resampled onto the preset's ticks."""
     if why_no_twin(trial):
         return None
     meta = trial.meta
@@ -146,12 +145,8 @@ def twin_overshoot(
     recorded = on_ticks(np.asarray(trial.reference[:, :2], dtype=float), float(meta.dt), step)
     intent = on_ticks(np.asarray(intent, dtype=float), float(meta.dt), step)
     n = min(len(recorded), len(episode.plan))
-    if n == 0:
+    if n == 0 or float(np.max(np.abs(episode.plan[:n, :2] - recorded[:n]))) > PLAN_TOLERANCE:
         return None
-    offset = recorded[0] - episode.plan[0, :2]  # where the arm laid the plan out (zero in a simulated world)
-    if float(np.max(np.abs(episode.plan[:n, :2] + offset - recorded[:n]))) > PLAN_TOLERANCE:
-        return None
-    intent = intent - offset
     world = episode.world
     if not isinstance(world, PointMassWorld):  # build_trial's world; a check that it is the one replaced here
         raise TypeError(f"the twin's world must be a PointMassWorld, got {type(world).__name__}")
@@ -188,7 +183,8 @@ def lead_check(trials: Sequence, fit: PersonFit, settings: PersonFilterSettings,
             fit = replace(fit, paths=fit_person(trials, arm=fit.arm).paths)
         except ValueError as exc:
             return LeadCheck(follow=True, folds=0, note=f"not checked: the trials moved to their task's frame ({exc})")
-    full = _full_intents(trials, fit.arm)
+    # each trial's reconstructed intent on its whole clock (before leaving the start and after the end as well)
+    full = [intent_estimate(t, fit.arm)[1] for t in trials]
     user = str(trials[0].meta.user)
     led, unled = [], []
     for i in chosen:
@@ -236,20 +232,6 @@ def _moved(trial, by: np.ndarray):
     pose[:, :2] += by
     reference[:, :2] += by
     return replace(trial, pose=pose, reference=reference)
-
-
-def _full_intents(trials: Sequence, arm) -> list[np.ndarray]:
-    """Each trial's reconstructed intent on its whole time course (the fit's q, low-passed as it does: before
-    leaving the start and after reaching the end as well, so that the twin's intent is on the trial's clock)."""
-    from scipy.signal import butter, sosfiltfilt
-
-    out = []
-    for trial in trials:
-        dt = float(trial.meta.dt)
-        q = trial.pose[:, :2] + (trial.wrench[:, :2] + arm.damping * trial.velocity[:, :2]) / arm.stiffness
-        sos = butter(2, INTENT_SMOOTHING, "lowpass", fs=1.0 / dt, output="sos")
-        out.append(sosfiltfilt(sos, q, axis=0))
-    return out
 
 
 def checked_people(
