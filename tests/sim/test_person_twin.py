@@ -69,6 +69,34 @@ def test_the_twin_arm_is_a_spring_and_damper_toward_the_intent():
     assert arm.stiffness == 650.0
 
 
+def test_the_twins_arms_in_a_batch_are_each_twin_arm_row_for_row():
+    from coassist.sim.person_twin import TwinArmBatch
+
+    rng = np.random.default_rng(7)
+    arms = [TwinArm(rng.normal(size=(n, 2)), K, C) for n, K, C in ((5, 650.0, -12.0), (3, 410.0, 8.5), (7, 1.3e3, 0.0))]
+    batch = TwinArm.batch(arms)
+    assert isinstance(batch, TwinArmBatch)
+    for k in range(9):  # past each one's end too
+        rows = np.array([0, 2] if k % 2 else [0, 1, 2])
+        p, v = rng.normal(size=(len(rows), 2)), rng.normal(size=(len(rows), 2))
+        got = batch.force(k, rows, p, v)
+        want = [arms[r].force(k, *p[j], *v[j]) for j, r in enumerate(rows)]
+        np.testing.assert_array_equal(got, np.asarray(want))  # the same operations in the same order: the same bits
+    with pytest.raises(ValueError, match="TwinArm"):
+        TwinArmBatch([])
+
+
+def test_the_checks_twins_run_together_give_what_each_gives_alone(corrective, monkeypatch):
+    # the check runs its twin trials in one lockstep batch on the point-mass array path; every trial on the reference
+    # path, one at a time, gives the same check to the last bit
+    import coassist.sim.person_twin as person_twin
+
+    together = lead_check(*corrective, PERSON_FILTER)
+    monkeypatch.setattr(person_twin, "fast_path_eligible", lambda loop: False)
+    alone = lead_check(*corrective, PERSON_FILTER)
+    assert alone == together and together.folds == len(SEEDS)
+
+
 def test_the_lead_is_kept_where_it_pays_and_dropped_where_it_costs_overshoot(steady, corrective):
     led = lead_check(*steady, PERSON_FILTER)
     assert led.follow and led.note == "checked" and led.folds == len(SEEDS)

@@ -63,3 +63,16 @@ def test_only_fresh_point_mass_worlds_join_a_batch():
     stopped.stop()
     assert stopped.stopped and not PointMassWorldBatch.accepts(stopped)
     assert not PointMassWorldBatch.accepts(object())
+
+
+def test_a_batchs_worlds_share_one_kind_of_arm_with_an_array_twin():
+    from coassist.sim.person_twin import TwinArm, TwinArmBatch
+
+    operator, twin, plain = _worlds([TrialSpec(task="linear", seed=s) for s in (0, 1, 2)])
+    twin.arm = TwinArm(np.zeros((3, 2)), 500.0, 5.0)  # type: ignore[assignment]
+    assert PointMassWorldBatch.accepts(twin)
+    assert isinstance(PointMassWorldBatch([twin]).arms, TwinArmBatch)
+    with pytest.raises(ValueError, match="one kind of arm, got OperatorArm, TwinArm"):
+        PointMassWorldBatch([operator, twin])
+    plain.arm = object()  # type: ignore[assignment]  # an arm with no array twin: the reference path's alone
+    assert not PointMassWorldBatch.accepts(plain)

@@ -452,6 +452,12 @@ class OperatorArm:
             fy *= scale
         return fx, fy
 
+    @staticmethod
+    def batch(arms: Sequence[OperatorArm]) -> OperatorArmBatch:
+        """The array twin of ``arms`` (each an :class:`OperatorArm`, none called yet) for the point-mass array path
+        (:class:`~coassist.sim.point_mass.PointMassWorldBatch` builds its arms' batch with their type's ``batch``)."""
+        return OperatorArmBatch(arms)
+
 
 def _axis_force(K, b, e, e_delayed, damping, v, noise):
     """Eq. 4.1 on one axis before the force limit: K [(1 − β) e + β e(k − d)] − C_h v + n.

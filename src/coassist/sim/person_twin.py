@@ -39,12 +39,13 @@ import numpy as np
 from coassist.analysis.paired import paired_difference
 from coassist.control.presets import CONTROL_PRESETS, get_preset, make_controller
 from coassist.metrics import overshoot
-from coassist.runtime.episode import run_episode
+from coassist.runtime.episode import Episode, run_episode
 from coassist.scenario.objects import get_object
 from coassist.scenario.operator import AUTHOR
 from coassist.scenario.person_intent import PersonFilterSettings, PersonPathsIntent
 from coassist.scenario.person_model import LeadCheck, PersonFit, asked_way, fit_person, intent_estimate, without_trial
 from coassist.scenario.tasks import TASKS, task_for_seed
+from coassist.sim.array_runner import fast_path_eligible, run_point_mass_lockstep
 from coassist.sim.point_mass import PointMassWorld
 from coassist.sim.trial_runner import build_trial
 
@@ -96,6 +97,39 @@ class TwinArm:
         i = k if k < self._n else self._n - 1
         return self.K * (self._x[i] - px) - self.C * vx, self.K * (self._y[i] - py) - self.C * vy
 
+    @staticmethod
+    def batch(arms: Sequence[TwinArm]) -> TwinArmBatch:
+        """The array twin of ``arms`` for the point-mass array path (:class:`TwinArmBatch`)."""
+        return TwinArmBatch(arms)
+
+
+class TwinArmBatch:
+    """:meth:`TwinArm.force` for B twins at once, row for row the same floats (the same operations in the same order,
+    elementwise): what lets a person's twin trials run together on the point-mass array path
+    (:mod:`coassist.sim.array_runner`).
+
+    Parameters
+    ----------
+    arms : the B twins' arms (:class:`TwinArm`).
+    """
+
+    def __init__(self, arms: Sequence[TwinArm]) -> None:
+        if not arms or not all(type(a) is TwinArm for a in arms):
+            raise ValueError("TwinArmBatch takes one or more TwinArm objects")
+        self.last = np.array([a._n - 1 for a in arms], dtype=np.intp)
+        n = int(self.last.max()) + 1
+        self.intent = np.zeros((len(arms), n, 2))
+        for b, a in enumerate(arms):
+            self.intent[b, : a._n] = np.column_stack([a._x, a._y])
+        self.K = np.array([a.K for a in arms])[:, None]
+        self.C = np.array([a.C for a in arms])[:, None]
+
+    def force(self, k: int, rows: np.ndarray, p: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """u_h(k) [N], (len(rows), 2), of the twins ``rows`` (indices) for their hand points p and velocities v,
+        (len(rows), 2) [m, m/s]: each row what its arm's :meth:`TwinArm.force` gives."""
+        q = self.intent[rows, np.minimum(k, self.last[rows])]
+        return self.K[rows] * (q - p) - self.C[rows] * v
+
 
 def why_no_twin(trial) -> str:
     """Why ``trial`` cannot be replayed against a twin ("" where it can): the twin rebuilds the trial's plan from
@@ -125,39 +159,67 @@ def twin_overshoot(
     (:func:`why_no_twin`) or its plan is not its task's within :data:`PLAN_TOLERANCE` (nothing is run then). The
     trial and ``intent`` are in the task's frame (:func:`lead_check` moves a real arm's there); a trial recorded at
     another rate than its preset's (a 500 Hz arm) is resampled onto the preset's ticks."""
+    built = _twin_run(trial, intent, arm, source, obj)
+    return None if built is None else _overshoots([built])[0]
+
+
+def _twin_run(trial, intent: np.ndarray, arm, source: PersonPathsIntent | None, obj: str):
+    """:func:`twin_overshoot`'s closed loop built, not run: (how to build it again, its episode, the intent on its
+    ticks), or None where it is not run."""
     if why_no_twin(trial):
         return None
     meta = trial.meta
     motion = meta.extra.get("motion_time")
     task = task_for_seed(meta.task, int(meta.seed), motion_time=None if motion is None else float(motion))
     preset = get_preset(str(meta.extra["preset"]))
-    controller = make_controller("manual" if source is None else TWIN_CONTROLLER, preset)
-    episode = build_trial(
-        task,
-        replace(AUTHOR, name=str(meta.user)),  # a placeholder: its intent and arm are replaced below
-        get_object(obj),
-        controller,
-        source,
-        int(meta.seed),
-        preset_name=preset.name,
-    )
-    step = float(controller.model.dt)  # the twin runs at the preset's own period
+    step = float(preset.impedance.dt)  # the twin runs at the preset's own period (its controllers' dt)
     recorded = on_ticks(np.asarray(trial.reference[:, :2], dtype=float), float(meta.dt), step)
     intent = on_ticks(np.asarray(intent, dtype=float), float(meta.dt), step)
+
+    def build() -> tuple[Episode, np.ndarray]:
+        controller = make_controller("manual" if source is None else TWIN_CONTROLLER, preset)
+        episode = build_trial(
+            task,
+            replace(AUTHOR, name=str(meta.user)),  # a placeholder: its intent and arm are replaced below
+            get_object(obj),
+            controller,
+            source,
+            int(meta.seed),
+            preset_name=preset.name,
+        )
+        world = episode.world
+        if not isinstance(world, PointMassWorld):  # build_trial's world; a check that it is the one replaced here
+            raise TypeError(f"the twin's world must be a PointMassWorld, got {type(world).__name__}")
+        grid_n = max(len(world.intent.positions), len(intent))
+        grid = np.vstack([intent, np.repeat(intent[-1:], grid_n - len(intent), axis=0)])
+        # the world calls its arm's force() once a tick (its array twin, TwinArmBatch, on the array path)
+        world.arm = TwinArm(grid, arm.stiffness, arm.damping)  # type: ignore[assignment]
+        return episode, grid
+
+    episode, grid = build()
     n = min(len(recorded), len(episode.plan))
     if n == 0 or float(np.max(np.abs(episode.plan[:n, :2] - recorded[:n]))) > PLAN_TOLERANCE:
         return None
-    world = episode.world
-    if not isinstance(world, PointMassWorld):  # build_trial's world; a check that it is the one replaced here
-        raise TypeError(f"the twin's world must be a PointMassWorld, got {type(world).__name__}")
-    grid_n = max(len(world.intent.positions), len(intent))
-    grid = np.vstack([intent, np.repeat(intent[-1:], grid_n - len(intent), axis=0)])
-    # the world calls its arm's force() once a tick and logs its stiffness: the twin's arm stands in for the
-    # operator's (this episode runs alone, never in a batch of operator arms)
-    world.arm = TwinArm(grid, arm.stiffness, arm.damping)  # type: ignore[assignment]
-    run = run_episode(episode)
-    m = len(run.pose)
-    return overshoot(run.pose[:, :2], grid[:m])
+    return build, episode, grid
+
+
+def _overshoots(runs: Sequence) -> list[float]:
+    """The overshoots of the built twin runs ``runs`` (:func:`_twin_run`'s), all in one lockstep batch on the point-mass
+    array path; a run that cannot take it or leaves it (a fault flag) runs again, built afresh, on the reference path:
+    the same trial either way (:mod:`coassist.sim.array_runner`)."""
+    fast = [j for j, (_, episode, _) in enumerate(runs) if fast_path_eligible(episode.loop)]
+    logs: list = [None] * len(runs)
+    for j, log in zip(fast, run_point_mass_lockstep([runs[j][1].loop for j in fast])):
+        logs[j] = log
+    out = []
+    for (build, episode, grid), log in zip(runs, logs):
+        if log is None:
+            episode, grid = build()
+            pose = run_episode(episode).pose
+        else:
+            pose = episode.finish(log).pose
+        out.append(overshoot(pose[:, :2], grid[: len(pose)]))
+    return out
 
 
 def lead_check(trials: Sequence, fit: PersonFit, settings: PersonFilterSettings, obj: str = TWIN_OBJECT) -> LeadCheck:
@@ -186,20 +248,24 @@ def lead_check(trials: Sequence, fit: PersonFit, settings: PersonFilterSettings,
     # each trial's reconstructed intent on its whole clock (before leaving the start and after the end as well)
     full = [intent_estimate(t, fit.arm)[1] for t in trials]
     user = str(trials[0].meta.user)
-    led, unled = [], []
+    runs = []  # each chosen trial's twin under MG, then with the model of the other trials
     for i in chosen:
         fold = without_trial(fit, trials, i)  # the model of the other trials
         source = PersonPathsIntent(
             TWIN_HORIZON, paths={user: fold.paths}, arms={user: fit.arm}, settings=settings, model_id="twin"
         )
         try:
-            mg = twin_overshoot(trials[i], full[i], fit.arm, None, obj)
+            pair = [_twin_run(trials[i], full[i], fit.arm, way, obj) for way in (None, source)]
         except ValueError as exc:  # a recording the twin cannot take: the calibration goes on, the person led
             return LeadCheck(follow=True, folds=0, note=f"not checked: trial {i + 1} could not be replayed ({exc})")
-        if mg is None:
+        if pair[0] is None or pair[1] is None:  # the same plan and its check, with the lead or without
             return LeadCheck(follow=True, folds=0, note=f"not checked: trial {i + 1}'s plan is not its task's")
-        person = twin_overshoot(trials[i], full[i], fit.arm, source, obj)
-        if person is None or not (math.isfinite(person) and math.isfinite(mg)):
+        runs += pair
+    # every twin trial of the check in one lockstep batch on the point-mass array path: what each gives alone
+    over = _overshoots(runs)
+    led, unled = [], []
+    for mg, person in zip(over[0::2], over[1::2]):
+        if not (math.isfinite(person) and math.isfinite(mg)):
             continue
         led.append(person)
         unled.append(mg)

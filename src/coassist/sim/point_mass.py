@@ -38,7 +38,7 @@ from coassist.model.impedance import ImpedanceModel
 from coassist.model.plant import PointMassPlant, plant_step
 from coassist.runtime.world import Command, RobotState
 from coassist.scenario.objects import CarriedObject, ForceSensor, YawConstants, hand_point, yaw_step
-from coassist.scenario.operator import OperatorArm, OperatorArmBatch, OperatorProfile, intent_trajectory, motor_noise
+from coassist.scenario.operator import OperatorArm, OperatorProfile, intent_trajectory, motor_noise
 from coassist.scenario.seeds import trial_rngs
 from coassist.scenario.tasks import Task
 
@@ -228,8 +228,15 @@ class PointMassWorldBatch:
 
     @staticmethod
     def accepts(world: object) -> bool:
-        """Whether ``world`` can join a batch: a :class:`PointMassWorld` at tick 0, not stopped."""
-        return type(world) is PointMassWorld and world.k == 0 and not world.stopped
+        """Whether ``world`` can join a batch: a :class:`PointMassWorld` at tick 0, not stopped, whose arm's type has
+        an array twin (a ``batch`` of its arms: the simulated operator's, :meth:`OperatorArm.batch`, or a person's
+        twin's, :meth:`coassist.sim.person_twin.TwinArm.batch`)."""
+        return (
+            type(world) is PointMassWorld
+            and world.k == 0
+            and not world.stopped
+            and callable(getattr(type(world.arm), "batch", None))
+        )
 
     def __init__(self, worlds: Sequence[PointMassWorld]) -> None:
         for i, w in enumerate(worlds):
@@ -268,7 +275,11 @@ class PointMassWorldBatch:
             self._fresh[b, : len(w._fresh)] = w._fresh
             self._noise[b, : len(w._nsx), 0] = w._nsx
             self._noise[b, : len(w._nsy), 1] = w._nsy
-        self.arms = OperatorArmBatch([w.arm for w in worlds])
+        kinds = {type(w.arm) for w in worlds}
+        if len(kinds) != 1:  # one array twin steps every row's arm
+            names = ", ".join(sorted(k.__name__ for k in kinds))
+            raise ValueError(f"the worlds of a PointMassWorldBatch must share one kind of arm, got {names}")
+        self.arms = kinds.pop().batch([w.arm for w in worlds])
         # the per-world constants, gathered once per set of rows still going (the board's
         # columns last: read only where some world yaws)
         self._constants = RowConstants(
