@@ -225,3 +225,31 @@ def test_a_fold_is_the_fit_of_the_other_trials(corrective):
         np.testing.assert_array_equal(fold.asked, refit.asked)
     with pytest.raises(ValueError, match="leave 9"):
         without_trial(fit, trials, 9)
+
+
+def test_the_verdict_turns_away_a_lead_worse_beyond_its_spread_or_in_too_many_trials():
+    from coassist.sim.person_twin import SIGN_LEVEL, lead_verdict
+
+    # worse in 7 of 8 trials, one trial of the rare way round (MG 12.3 mm) widening the interval below zero: the sign
+    # test, P(≥ 7 of 8 | a fair coin) = 9/256 = 0.035, turns the lead away
+    mg = np.array([2.8, 3.0, 1.1, 1.9, 12.3, 0.8, 1.1, 0.4])
+    led = np.array([6.9, 4.5, 6.4, 12.0, 5.4, 7.7, 4.8, 0.5])
+    check = lead_verdict(led, mg)
+    d = led - mg
+    low = d.mean() - 2.3646242510102993 * d.std(ddof=1) / np.sqrt(8)  # t(0.975, 7)
+    assert check.low_mm == pytest.approx(low, rel=1e-9) and low < 0.0
+    assert 9 / 256 < SIGN_LEVEL and check.worse == 7 and not check.follow
+    assert "more with the lead in 7" in check.line
+    # 6 of 8 (P = 37/256 = 0.145) and the interval across zero: led
+    mg6 = np.array([2.8, 3.0, 1.1, 1.9, 12.3, 0.8, 7.1, 0.4])
+    assert lead_verdict(led, mg6).follow and lead_verdict(led, mg6).worse == 6
+    # worse by 5 mm in 6 of 8 and better by 0.1 mm in two: the interval above zero (mean 3.725 mm, its lower end
+    # 3.725 − 2.365 · 2.361 / √8 = 1.75 mm) turns the lead away where the sign test would not
+    worse6 = mg + np.array([5.0, 5.0, 5.0, 5.0, 5.0, 5.0, -0.1, -0.1])
+    check = lead_verdict(worse6, mg)
+    assert check.worse == 6 and check.low_mm == pytest.approx(1.751, abs=1e-3) and not check.follow
+    # ties count for neither side; a lead better in every trial is followed
+    assert lead_verdict(mg, mg).worse == 0 and lead_verdict(mg, mg).follow
+    assert lead_verdict(0.5 * mg, mg).follow
+    with pytest.raises(ValueError, match="paired"):
+        lead_verdict(led[:1], mg[:1])

@@ -135,9 +135,11 @@ class LeadCheck:
     their calibration replayed against a twin of them, leave-one-out).
 
     follow : lead along their paths (True), or give them the present estimate held (False: the twin overshot more
-        with the lead than under MG, beyond the trials' spread). folds : the trials replayed. person_mm, mg_mm : the
-        twin's mean overshoot [mm] with the person model and under MG; low_mm : the lower end of the 95 % Student-t
-        interval of their paired difference [mm] (each None where not checked). note : "checked", or why not.
+        with the lead than under MG, beyond the trials' spread, or in too many of the trials to be chance). folds :
+        the trials replayed. person_mm, mg_mm : the twin's mean overshoot [mm] with the person model and under MG;
+        low_mm : the lower end of the 95 % Student-t interval of their paired difference [mm]; worse : in how many
+        of the trials the twin overshot more with the lead (each None where not checked; ``worse`` also in a file
+        written before it was kept). note : "checked", or why not.
     """
 
     follow: bool = True
@@ -146,6 +148,7 @@ class LeadCheck:
     mg_mm: float | None = None
     low_mm: float | None = None
     note: str = "checked"
+    worse: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.follow, bool):
@@ -157,6 +160,8 @@ class LeadCheck:
                 object.__setattr__(self, name, check_real(value, f"LeadCheck.{name}", lo, 1e4))
         if not isinstance(self.note, str):
             raise ValueError(f"LeadCheck.note must be text, got {self.note!r}")
+        if self.worse is not None:
+            object.__setattr__(self, "worse", check_int(self.worse, "LeadCheck.worse", 0, self.folds))
 
     @property
     def line(self) -> str:
@@ -165,9 +170,10 @@ class LeadCheck:
             return f"lead {self.note}"
         verdict = "led along their paths" if self.follow else "present estimate held (the lead did not pay)"
         low = "" if self.low_mm is None else f", the difference's 95 % interval from {self.low_mm:+.1f} mm"
+        worse = "" if self.worse is None else f", more with the lead in {self.worse}"
         return (
             f"{verdict}: their twin overshot {self.person_mm:.1f} mm with the lead, {self.mg_mm:.1f} mm under MG "
-            f"({self.folds} trials replayed{low})"
+            f"({self.folds} trials replayed{worse}{low})"
         )
 
 

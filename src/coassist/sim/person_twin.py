@@ -19,7 +19,8 @@ person, and says whether the lead pays:
 - the twin's overshoot past q (:func:`coassist.metrics.overshoot`) is compared, trial by trial.
 
 The person is followed (:attr:`~coassist.scenario.person_model.LeadCheck.follow`) unless the person model overshoots
-more than MG beyond the trials' spread (the paired difference's 95 % Student-t interval above zero); then the person
+more than MG beyond the trials' spread (the paired difference's 95 % Student-t interval above zero) or in more of the
+trials than chance would give (the one-sided sign test at :data:`SIGN_LEVEL`: :func:`lead_verdict`); then the person
 model gives that person what every world gives without a calibration (``present-held``: the present estimate held,
 with the typical arm), and says so. Told: nothing but the calibration: the trials' poses,
 velocities, wrenches, plan and preset, and the arm measured from them. The world's operator profile is a
@@ -35,6 +36,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
+from scipy.stats import binomtest
 
 from coassist.analysis.paired import paired_difference
 from coassist.control.presets import CONTROL_PRESETS, get_preset, make_controller
@@ -50,11 +52,14 @@ from coassist.sim.point_mass import PointMassWorld
 from coassist.sim.trial_runner import build_trial
 
 __all__ = [
+    "SIGN_LEVEL",
     "TWIN_CONTROLLER",
     "TWIN_OBJECT",
     "TwinArm",
+    "TwinArmBatch",
     "checked_people",
     "lead_check",
+    "lead_verdict",
     "on_ticks",
     "twin_overshoot",
     "why_no_twin",
@@ -74,6 +79,9 @@ TWIN_OBJECT = "heavy"
 #: is left out: rounding room for a plan moved back from where an arm laid it out (a 500 Hz plan resampled onto the
 #: 125 Hz ticks equals the 125 Hz plan exactly: the curved, Z and linear tasks, three seeds each, measured).
 PLAN_TOLERANCE = 1e-6
+#: The sign test's level: a person is turned away where the twin overshot more with the lead in so many of their
+#: trials that a fair coin gives as many that seldom (one-sided; 7 or more of 8 trials, 5 of 5).
+SIGN_LEVEL = 0.05
 
 
 class TwinArm:
@@ -271,16 +279,30 @@ def lead_check(trials: Sequence, fit: PersonFit, settings: PersonFilterSettings,
         unled.append(mg)
     if len(led) < 2:
         return LeadCheck(follow=True, folds=len(led), note="not checked: fewer than two trials could be replayed")
-    # turned away only where the lead costs overshoot beyond the folds' own spread: the paired difference's 95 %
-    # Student-t interval above zero (a person whose lead is about as good as MG is led: it saves them force)
-    _, low, _, _ = paired_difference(1000.0 * np.asarray(led), 1000.0 * np.asarray(unled))
+    return lead_verdict(1000.0 * np.asarray(led), 1000.0 * np.asarray(unled))
+
+
+def lead_verdict(led_mm: np.ndarray, mg_mm: np.ndarray) -> LeadCheck:
+    """The check's verdict from the twin's overshoots [mm], (n,) each, paired trial by trial: with the lead
+    (``led_mm``) and under MG (``mg_mm``). The person is turned away only where the lead costs overshoot beyond chance
+    (a person whose lead is about as good as MG is led: it saves them force): the paired difference's 95 % Student-t
+    interval above zero, or the lead worse in so many trials that a fair coin gives as many less often than
+    :data:`SIGN_LEVEL` (the one-sided sign test, ties left out: a trial the person went their rare way round, where
+    MG overshoots several times as much, widens the interval of anyone)."""
+    led_mm, mg_mm = np.asarray(led_mm, dtype=float), np.asarray(mg_mm, dtype=float)
+    if led_mm.shape != mg_mm.shape or led_mm.ndim != 1 or len(led_mm) < 2:
+        raise ValueError(f"lead_verdict needs two paired (n,) arrays, n >= 2; got {led_mm.shape} and {mg_mm.shape}")
+    _, low, _, _ = paired_difference(led_mm, mg_mm)
+    worse, better = int(np.sum(led_mm > mg_mm)), int(np.sum(led_mm < mg_mm))
+    by_chance = binomtest(worse, worse + better, 0.5, alternative="greater").pvalue if worse else 1.0
     return LeadCheck(
-        follow=not low > 0.0,
-        folds=len(led),
-        person_mm=1000.0 * float(np.mean(led)),
-        mg_mm=1000.0 * float(np.mean(unled)),
+        follow=not (low > 0.0 or by_chance < SIGN_LEVEL),
+        folds=len(led_mm),
+        person_mm=float(np.mean(led_mm)),
+        mg_mm=float(np.mean(mg_mm)),
         low_mm=float(low),
         note="checked",
+        worse=worse,
     )
 
 
