@@ -59,7 +59,9 @@ CELLS = (
     ("varied", (0, 3, 4, 5, 7, 8), 60000),
 )
 TRIALS = 4
-PERSON_MODEL_FORMAT = "coassist-person-model-1"
+PERSON_MODEL_FORMAT = "coassist-person-model-2"
+#: What a reference written before the lead check kept its count may hold (read, written back as the current).
+PERSON_MODEL_READS = (PERSON_MODEL_FORMAT, "coassist-person-model-1")
 
 
 def _suffix(population: str) -> str:
@@ -144,7 +146,7 @@ def run_variant(out: Path, name: str, override: dict, population: str, users, ba
         shutil.rmtree(draws)
     shutil.copytree(ref / f"base-{base}" / "models" / f"person{_suffix(population)}-draws", draws)
     for path in sorted(draws.glob("draw-*/person-model.json")):
-        doc = read_hashed_json(path, format=PERSON_MODEL_FORMAT)
+        doc = read_hashed_json(path, format=PERSON_MODEL_READS)
         doc["filter"].update(override)
         PersonFilterSettings(**doc["filter"])  # refuse a bad setting before anything runs
         write_hashed_json(path, doc, format=PERSON_MODEL_FORMAT)

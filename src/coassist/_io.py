@@ -417,9 +417,12 @@ def no_constant(name: str) -> Any:
 
 
 def read_hashed_json(
-    path: str | os.PathLike[str], *, format: str, max_bytes: int = MAX_HASHED_JSON_BYTES
+    path: str | os.PathLike[str], *, format: str | tuple[str, ...], max_bytes: int = MAX_HASHED_JSON_BYTES
 ) -> dict[str, Any]:
     """The document :func:`write_hashed_json` wrote at ``path``, without ``"format"`` and :data:`HASH_KEY`.
+
+    ``format``: the format the file must be, or a tuple of those accepted (the current first, then older ones a
+    reader still takes; the caller reads which one it is from the fields).
 
     :class:`HashedJsonError` (one line naming the file) when the file is missing or unreadable,
     larger than ``max_bytes``, not UTF-8 JSON (NaN, Infinity, a key given twice, nesting too deep
@@ -427,6 +430,8 @@ def read_hashed_json(
     not match its hash (edited after it was written). What the fields mean is the caller's to check.
     """
     path = Path(path)
+    formats = (format,) if isinstance(format, str) else tuple(format)
+    format = formats[0]
 
     def fail(what: str) -> HashedJsonError:
         return HashedJsonError(f"{path}: {what}")
@@ -449,8 +454,8 @@ def read_hashed_json(
         raise fail(f"malformed JSON: {exc}") from None
     if not isinstance(doc, dict):
         raise fail(f"must hold a JSON object, got {type(doc).__name__}")
-    if doc.get("format") != format:
-        raise fail(f"format {doc.get('format')!r}, expected {format!r}")
+    if doc.get("format") not in formats:
+        raise fail(f"format {doc.get('format')!r}, expected {' or '.join(repr(f) for f in formats)}")
     recorded = doc.pop(HASH_KEY, None)
     if recorded is None:
         raise fail(

@@ -432,7 +432,7 @@ def test_the_held_out_cells_meet_their_own_people(tiny_run):
     ):
         for k in range(cfg.calibration_draws):
             doc = read_hashed_json(
-                out / "models" / folder / f"draw-{k}" / "person-model.json", format="coassist-person-model-1"
+                out / "models" / folder / f"draw-{k}" / "person-model.json", format="coassist-person-model-2"
             )
             assert set(doc["people"]) == names, (folder, k)
     # and the held-out person cells' intervals resampled (operator, draw) clusters

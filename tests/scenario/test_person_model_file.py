@@ -144,3 +144,27 @@ def test_a_trials_asked_way_is_read_from_its_meta():
     for bad in (2, True, "left"):
         with pytest.raises(ValueError, match="alice seed 7: meta.extra\\['asked_way'\\]"):
             person_model.asked_way(trial({ASKED_WAY: bad}))
+
+
+def test_a_file_of_the_previous_format_reads_with_its_checks_count_unknown(tmp_path):
+    # coassist-person-model-1 (before the lead check kept how many trials the lead was worse in) still reads, its check
+    # with worse None; the current format is -2, which a reader of -1 alone refuses by its format in one line
+    from coassist._io import HashedJsonError, read_hashed_json, write_hashed_json
+    from coassist.scenario.person_model import LeadCheck
+
+    paths = fit_path_model(LINE, [_detour(1), _detour(-1)], noise=0.001)
+    check = LeadCheck(follow=False, folds=8, person_mm=6.0, mg_mm=2.9, low_mm=-1.2, worse=7)
+    folder = write_person_model(tmp_path / "cal", {"bob": PersonFit(ArmEstimate(), paths, check)})
+    path = folder / PERSON_MODEL_FILE
+    assert json.loads(path.read_text())["format"] == "coassist-person-model-2"
+    assert read_person_model(folder).held == {"bob"}
+    with pytest.raises(HashedJsonError, match="expected 'coassist-person-model-1'") as err:
+        read_hashed_json(path, format="coassist-person-model-1")
+    assert "\n" not in str(err.value)
+    doc = read_hashed_json(path, format="coassist-person-model-2")
+    del doc["people"]["bob"]["lead"]["worse"]
+    write_hashed_json(path, doc, format="coassist-person-model-1")
+    assert read_person_model(folder).held == {"bob"}  # the verdict is what was written
+    write_hashed_json(path, doc, format="coassist-person-model-0")  # any other format: refused, naming both
+    with pytest.raises(HashedJsonError, match="expected 'coassist-person-model-2' or 'coassist-person-model-1'"):
+        read_person_model(folder)

@@ -88,10 +88,28 @@ def test_the_twins_arms_in_a_batch_are_each_twin_arm_row_for_row():
 
 def test_the_checks_twins_run_together_give_what_each_gives_alone(corrective, monkeypatch):
     # the check runs its twin trials in one lockstep batch on the point-mass array path; every trial on the reference
-    # path, one at a time, gives the same check to the last bit
+    # path, one at a time, gives the same check to the last bit, and so do trials that leave the array path midway
+    # (built again and run alone)
     import coassist.sim.person_twin as person_twin
 
+    array_path = person_twin.run_point_mass_lockstep
+    batches = []
+
+    def seen(loops):
+        logs = array_path(loops)
+        batches.append(logs)
+        return logs
+
+    monkeypatch.setattr(person_twin, "run_point_mass_lockstep", seen)
     together = lead_check(*corrective, PERSON_FILTER)
+    assert [len(logs) for logs in batches] == [2 * len(SEEDS)]  # one batch, every fold under MG and led
+    assert all(log is not None for log in batches[0])  # none left the array path: the batch is what was measured
+
+    def leaving(loops):  # every other run leaves the array path at its end, after its source has run the whole trial
+        return [None if j % 2 else log for j, log in enumerate(array_path(loops))]
+
+    monkeypatch.setattr(person_twin, "run_point_mass_lockstep", leaving)
+    assert lead_check(*corrective, PERSON_FILTER) == together
     monkeypatch.setattr(person_twin, "fast_path_eligible", lambda loop: False)
     alone = lead_check(*corrective, PERSON_FILTER)
     assert alone == together and together.folds == len(SEEDS)
@@ -137,6 +155,19 @@ def test_trials_that_cannot_be_replayed_leave_the_person_led_and_say_why(steady)
     assert lead_check(trials[:1], fit, PERSON_FILTER).note.startswith("not checked")
     negative = [replace(t, meta=replace(t.meta, seed=-1)) for t in trials]
     assert "seed -1" in lead_check(negative, fit, PERSON_FILTER).note
+
+
+def test_a_twin_trial_that_cannot_be_scored_leaves_the_person_led_and_says_why(steady, monkeypatch):
+    # (a Trial refuses non-finite samples, so a scoring failure is stood in for: the check must not raise)
+    import coassist.sim.person_twin as person_twin
+
+    def refuses(pose, intent):
+        raise ValueError("intent has non-finite values")
+
+    monkeypatch.setattr(person_twin, "overshoot", refuses)
+    check = lead_check(*steady, PERSON_FILTER)
+    assert check.follow and check.folds == 0
+    assert check.note == "not checked: its twin trials could not be run (intent has non-finite values)"
 
 
 def test_a_real_arms_trials_are_checked_in_their_tasks_frame_and_rate(corrective):

@@ -122,7 +122,10 @@ PERSON_FILTER = PersonFilterSettings(
     dead_zone_noise=3.0,
     residual_time=0.2,
 )
-_FORMAT = "coassist-person-model-1"
+_FORMAT = "coassist-person-model-2"
+#: The formats :func:`read_person_model` reads: the current, and ``-1`` (written before a check kept ``worse``: its
+#: checks read with ``worse`` None). A reader of ``-1`` alone refuses a ``-2`` file by its format, in one line.
+_READS = (_FORMAT, "coassist-person-model-1")
 
 
 #: The low-pass of the reconstructed intent paths [Hz] (zero phase; step 2 of the module docstring).
@@ -397,7 +400,7 @@ def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsInten
 def _read_people(path: Path) -> tuple[dict, dict, str | None, PersonFilterSettings, frozenset[str]]:
     """A person-model file's people's path models and arms, its default person, its filter and the people it does
     not lead (their :class:`LeadCheck` said so; errors name the file and field)."""
-    doc = read_hashed_json(path, format=_FORMAT)  # one line naming the file: missing, edited, another format
+    doc = read_hashed_json(path, format=_READS)  # one line naming the file: missing, edited, another format
     try:
         people = dict(doc["people"])
         paths = {name: _model_from(p["paths"]) for name, p in people.items()}

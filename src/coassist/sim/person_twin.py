@@ -212,17 +212,23 @@ def _twin_run(trial, intent: np.ndarray, arm, source: PersonPathsIntent | None, 
 
 
 def _overshoots(runs: Sequence) -> list[float]:
-    """The overshoots of the built twin runs ``runs`` (:func:`_twin_run`'s), all in one lockstep batch on the point-mass
-    array path; a run that cannot take it or leaves it (a fault flag) runs again, built afresh, on the reference path:
-    the same trial either way (:mod:`coassist.sim.array_runner`)."""
-    fast = [j for j, (_, episode, _) in enumerate(runs) if fast_path_eligible(episode.loop)]
+    """The overshoots of the built twin runs ``runs`` (:func:`_twin_run`'s), in lockstep batches (one per period) on the
+    point-mass array path; a run that cannot take it runs alone on the reference path, and one that leaves it (a
+    fault flag) runs again there, built afresh: the same trial either way (:mod:`coassist.sim.array_runner`)."""
     logs: list = [None] * len(runs)
-    for j, log in zip(fast, run_point_mass_lockstep([runs[j][1].loop for j in fast])):
-        logs[j] = log
+    by_dt: dict[float, list[int]] = {}  # a batch's worlds share one period
+    for j, (_, episode, _) in enumerate(runs):
+        if fast_path_eligible(episode.loop):
+            by_dt.setdefault(float(episode.world.dt), []).append(j)
+    for batch in by_dt.values():
+        for j, log in zip(batch, run_point_mass_lockstep([runs[j][1].loop for j in batch])):
+            logs[j] = log
+    fast = {j for batch in by_dt.values() for j in batch}
     out = []
-    for (build, episode, grid), log in zip(runs, logs):
+    for j, ((build, episode, grid), log) in enumerate(zip(runs, logs)):
         if log is None:
-            episode, grid = build()
+            if j in fast:  # its episode went some way on the array path: built again to run from the start
+                episode, grid = build()
             pose = run_episode(episode).pose
         else:
             pose = episode.finish(log).pose
@@ -270,7 +276,10 @@ def lead_check(trials: Sequence, fit: PersonFit, settings: PersonFilterSettings,
             return LeadCheck(follow=True, folds=0, note=f"not checked: trial {i + 1}'s plan is not its task's")
         runs += pair
     # every twin trial of the check in one lockstep batch on the point-mass array path: what each gives alone
-    over = _overshoots(runs)
+    try:
+        over = _overshoots(runs)
+    except ValueError as exc:  # a recording the twin cannot take: the calibration goes on, the person led
+        return LeadCheck(follow=True, folds=0, note=f"not checked: its twin trials could not be run ({exc})")
     led, unled = [], []
     for mg, person in zip(over[0::2], over[1::2]):
         if not (math.isfinite(person) and math.isfinite(mg)):
