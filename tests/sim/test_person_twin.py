@@ -284,3 +284,19 @@ def test_the_verdict_turns_away_a_lead_worse_beyond_its_spread_or_in_too_many_tr
     assert lead_verdict(0.5 * mg, mg).follow
     with pytest.raises(ValueError, match="paired"):
         lead_verdict(led[:1], mg[:1])
+
+
+def test_a_calibration_checked_from_its_folders_is_checked_as_its_trials(tmp_path, corrective):
+    # the main job checks each calibration draw on its pool, from the draw's dataset folders (a trial does not pickle):
+    # the trials read back give the checks of the trials in memory, bit for bit
+    from coassist.data import write_dataset
+    from coassist.experiments.source_training import checked_calibration
+    from coassist.sim.person_twin import checked_people
+
+    trials, fit = corrective
+    first = write_dataset(trials[:3], tmp_path / "probe", "probe")
+    asked = write_dataset(trials[3:], tmp_path / "probe-ask", "probe-ask")
+    fits = {"held-out-user-2": fit}
+    from_folders = checked_calibration([str(first), str(asked)], fits, PERSON_FILTER)
+    assert from_folders["held-out-user-2"].lead == checked_people(trials, fits, PERSON_FILTER)["held-out-user-2"].lead
+    assert from_folders["held-out-user-2"].lead.folds == len(SEEDS)

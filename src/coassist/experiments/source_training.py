@@ -35,12 +35,15 @@ all of them again on the report's trials).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from coassist.experiments.pipeline import Workspace, train_in_worker
+
+if TYPE_CHECKING:
+    from coassist.scenario.person_intent import PersonFilterSettings
 
 __all__ = [
     "APPLICATION_SOURCE",
@@ -51,6 +54,7 @@ __all__ = [
     "calibrate_person",
     "calibration_draw_options",
     "calibration_options",
+    "checked_calibration",
     "seed_names",
     "train_sources",
     "training_datasets",
@@ -129,7 +133,6 @@ def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "
     own variance."""
     from coassist.scenario.calibration_draws import MAX_DRAWS, write_draws
     from coassist.scenario.person_model import PERSON_FILTER, fit_people, write_person_model
-    from coassist.sim.person_twin import checked_people
 
     if not 1 <= int(draws) <= MAX_DRAWS:
         raise ValueError(f"draws must be 1 to {MAX_DRAWS}, got {draws!r}")
@@ -144,19 +147,25 @@ def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "
     # draws are fitted); then each draw fitted again with its asked trials
     drawn = []
     for name, options in collections.items():
-        _, ds = ws.collect(name, **options)
+        folder, ds = ws.collect(name, **options)
         fits = fit_people(ds.trials)
         asked = _asked_collections(ws, name, options, fits)
         for more, more_options in asked.items():
             ws.prefetch(more, **more_options)
-        drawn.append((ds.trials, fits, asked))
-    fitted = []
-    for trials, fits, asked in drawn:
-        added = [t for more, more_options in asked.items() for t in ws.collect(more, **more_options)[1].trials]
-        calibrated = list(trials) + added
-        fits = fit_people(calibrated) if added else fits
-        # whether to lead each person along their paths: their calibration replayed against their twin
-        fitted.append(checked_people(calibrated, fits, PERSON_FILTER))
+        drawn.append((folder, ds.trials, fits, asked))
+    # whether to lead each person along their paths: their calibration replayed against their twin, each draw's
+    # people a job on the pool (its workers are otherwise idle here, waiting for the calibration; without a pool,
+    # here), which reads the draw's trials from their folders (a trial does not pickle)
+    checks = []
+    for folder, trials, fits, asked in drawn:
+        extra = [ws.collect(name, **more_options) for name, more_options in asked.items()]
+        if extra:
+            fits = fit_people(list(trials) + [t for _, more_ds in extra for t in more_ds.trials])
+        args = ([str(folder)] + [str(f) for f, _ in extra], fits, PERSON_FILTER)
+        key = f"lead check: {folder.name}"
+        ws.submit(key, checked_calibration, *args)
+        checks.append((key, args))
+    fitted = [ws.result_of(key, checked_calibration, *args) for key, args in checks]
     if draws == 1:
         return str(write_person_model(ws.out / "models" / f"person{_suffix(population)}", fitted[0]))
     folder = ws.out / "models" / f"person{_suffix(population)}-draws"
@@ -164,6 +173,19 @@ def calibrate_person(ws: Workspace, seed: int | None = None, population: str = "
     for name, fits in zip(names, fitted):
         write_person_model(folder / name, fits)
     return str(write_draws(folder, names))
+
+
+def checked_calibration(
+    folders: Sequence[str], fits: Mapping[str, Any], settings: PersonFilterSettings
+) -> dict[str, Any]:
+    """A calibration draw's people with their lead checks (:func:`~coassist.sim.person_twin.checked_people`): the
+    trials read from ``folders`` in order (the draw's probe trials, then those it asked for), ``fits`` fitted to them,
+    ``settings`` the filter the model runs with. A pool's job (:func:`calibrate_person`)."""
+    from coassist.data import read_dataset
+    from coassist.sim.person_twin import checked_people
+
+    trials = [t for folder in folders for t in read_dataset(folder).trials]
+    return checked_people(trials, fits, settings)
 
 
 def asked_way_seed(first: int, users: int, trials: int, position: int, way: int, most: int) -> int:
