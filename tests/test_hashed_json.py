@@ -83,3 +83,15 @@ def test_an_edit_after_writing_is_refused_and_so_is_a_file_too_large(tmp_path):
     assert read_hashed_json(path, format=FORMAT) == {"stiffness": 800.0}
     with pytest.raises(HashedJsonError, match=f"larger than {len(text) - 1} bytes"):
         read_hashed_json(path, format=FORMAT, max_bytes=len(text) - 1)
+
+
+def test_a_reader_may_take_several_formats_and_names_them_when_refusing(tmp_path):
+    path = tmp_path / "m.json"
+    write_hashed_json(path, {"a": 1}, format="thing-1")
+    assert read_hashed_json(path, format=("thing-2", "thing-1")) == {"a": 1}  # an older format a reader still takes
+    with pytest.raises(HashedJsonError, match="format 'thing-1', expected 'thing-3' or 'thing-2'") as err:
+        read_hashed_json(path, format=("thing-3", "thing-2"))
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+    for bad in ((), ("thing-1", ""), ("thing-1", 2)):
+        with pytest.raises(ValueError, match="format must be a name"):
+            read_hashed_json(path, format=bad)  # type: ignore[arg-type]

@@ -431,6 +431,8 @@ def read_hashed_json(
     """
     path = Path(path)
     formats = (format,) if isinstance(format, str) else tuple(format)
+    if not formats or not all(isinstance(f, str) and f for f in formats):
+        raise ValueError(f"read_hashed_json: format must be a name or a tuple of names, got {format!r}")
     format = formats[0]
 
     def fail(what: str) -> HashedJsonError:

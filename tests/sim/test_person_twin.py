@@ -59,6 +59,12 @@ def corrective():
     return trials, fit_person(trials)
 
 
+@pytest.fixture(scope="module")
+def corrective_check(corrective):
+    """The check of ``corrective``, as it runs (computed once: several tests compare other ways of running it with it)."""
+    return lead_check(*corrective, PERSON_FILTER)
+
+
 def test_the_twin_arm_is_a_spring_and_damper_toward_the_intent():
     q = np.array([[0.1, -0.2], [0.3, 0.4]])
     arm = TwinArm(q, 650.0, -12.0)
@@ -86,40 +92,34 @@ def test_the_twins_arms_in_a_batch_are_each_twin_arm_row_for_row():
         TwinArmBatch([])
 
 
-def test_the_checks_twins_run_together_give_what_each_gives_alone(corrective, monkeypatch):
-    # the check runs its twin trials in one lockstep batch on the point-mass array path; every trial on the reference
-    # path, one at a time, gives the same check to the last bit, and so do trials that leave the array path midway
-    # (built again and run alone)
+def test_the_checks_twins_run_together_give_what_each_gives_alone(corrective, corrective_check, monkeypatch):
+    # the check runs its twin trials in one lockstep batch on the point-mass array path (corrective_check); every
+    # trial on the reference path, one at a time, gives the same check to the last bit, and so do trials that leave
+    # the array path midway (built again and run alone)
     import coassist.sim.person_twin as person_twin
 
     array_path = person_twin.run_point_mass_lockstep
     batches = []
 
-    def seen(loops):
+    def leaving(loops):  # every other run leaves the array path at its end, after its source has run the whole trial
         logs = array_path(loops)
         batches.append(logs)
-        return logs
-
-    monkeypatch.setattr(person_twin, "run_point_mass_lockstep", seen)
-    together = lead_check(*corrective, PERSON_FILTER)
-    assert [len(logs) for logs in batches] == [2 * len(SEEDS)]  # one batch, every fold under MG and led
-    assert all(log is not None for log in batches[0])  # none left the array path: the batch is what was measured
-
-    def leaving(loops):  # every other run leaves the array path at its end, after its source has run the whole trial
-        return [None if j % 2 else log for j, log in enumerate(array_path(loops))]
+        return [None if j % 2 else log for j, log in enumerate(logs)]
 
     monkeypatch.setattr(person_twin, "run_point_mass_lockstep", leaving)
-    assert lead_check(*corrective, PERSON_FILTER) == together
+    assert lead_check(*corrective, PERSON_FILTER) == corrective_check
+    assert [len(logs) for logs in batches] == [2 * len(SEEDS)]  # one batch, every fold under MG and led
+    assert all(log is not None for log in batches[0])  # none left the array path of itself: the batch is measured
     monkeypatch.setattr(person_twin, "fast_path_eligible", lambda loop: False)
-    alone = lead_check(*corrective, PERSON_FILTER)
-    assert alone == together and together.folds == len(SEEDS)
+    assert lead_check(*corrective, PERSON_FILTER) == corrective_check
+    assert corrective_check.folds == len(SEEDS)
 
 
-def test_the_lead_is_kept_where_it_pays_and_dropped_where_it_costs_overshoot(steady, corrective):
+def test_the_lead_is_kept_where_it_pays_and_dropped_where_it_costs_overshoot(steady, corrective_check):
     led = lead_check(*steady, PERSON_FILTER)
     assert led.follow and led.note == "checked" and led.folds == len(SEEDS)
     assert led.person_mm < led.mg_mm  # the lead halves what MG overshoots, or better
-    held = lead_check(*corrective, PERSON_FILTER)
+    held = corrective_check
     assert not held.follow and held.folds == len(SEEDS)
     assert held.person_mm > held.mg_mm
     assert "present estimate held" in held.line and f"{held.person_mm:.1f} mm with the lead" in held.line
@@ -170,11 +170,11 @@ def test_a_twin_trial_that_cannot_be_scored_leaves_the_person_led_and_says_why(s
     assert check.note == "not checked: its twin trials could not be run (intent has non-finite values)"
 
 
-def test_a_real_arms_trials_are_checked_in_their_tasks_frame_and_rate(corrective):
+def test_a_real_arms_trials_are_checked_in_their_tasks_frame_and_rate(corrective, corrective_check):
     # a real arm lays the task's plan out from where its tool stands (each trial a little elsewhere): the same person,
     # the same verdict
     trials, fit = corrective
-    base = lead_check(trials, fit, PERSON_FILTER)
+    base = corrective_check
     moved = []
     for k, t in enumerate(trials):
         by = np.array([0.41 + 0.003 * k, -0.137])
@@ -286,17 +286,16 @@ def test_the_verdict_turns_away_a_lead_worse_beyond_its_spread_or_in_too_many_tr
         lead_verdict(led[:1], mg[:1])
 
 
-def test_a_calibration_checked_from_its_folders_is_checked_as_its_trials(tmp_path, corrective):
+def test_a_calibration_checked_from_its_folders_is_checked_as_its_trials(tmp_path, corrective, corrective_check):
     # the main job checks each calibration draw on its pool, from the draw's dataset folders (a trial does not pickle):
     # the trials read back give the checks of the trials in memory, bit for bit
     from coassist.data import write_dataset
     from coassist.experiments.source_training import checked_calibration
-    from coassist.sim.person_twin import checked_people
 
     trials, fit = corrective
     first = write_dataset(trials[:3], tmp_path / "probe", "probe")
     asked = write_dataset(trials[3:], tmp_path / "probe-ask", "probe-ask")
     fits = {"held-out-user-2": fit}
     from_folders = checked_calibration([str(first), str(asked)], fits, PERSON_FILTER)
-    assert from_folders["held-out-user-2"].lead == checked_people(trials, fits, PERSON_FILTER)["held-out-user-2"].lead
+    assert from_folders["held-out-user-2"].lead == corrective_check  # every trial is that person's
     assert from_folders["held-out-user-2"].lead.folds == len(SEEDS)
