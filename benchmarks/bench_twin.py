@@ -8,7 +8,8 @@ model and times :func:`coassist.sim.person_twin.lead_check` on them two ways, al
 
 - ``together``: the check as it runs, every twin trial of the person in one lockstep batch on the point-mass
   array path (:mod:`coassist.sim.array_runner`);
-- ``alone`` (the naive baseline): each twin trial on the reference path, one after the other (``run_episode``).
+- ``alone`` (the naive baseline): each twin trial on the reference path, its own scalar tick every period
+  (``run_loops``, as without the array path).
 
 The two must give the same check to the last bit (the benchmark stops otherwise). Times are the process's CPU time
 per person's check; prints median and p99 [s] of each way and the ratio of the medians. One BLAS thread.
@@ -34,7 +35,7 @@ from coassist.scenario.objects import get_object  # noqa: E402
 from coassist.scenario.person_model import PERSON_FILTER, fit_person  # noqa: E402
 from coassist.scenario.populations import population_profile  # noqa: E402
 from coassist.scenario.tasks import task_for_seed  # noqa: E402
-from coassist.sim import person_twin  # noqa: E402
+from coassist.sim import person_twin, trial_runner  # noqa: E402
 from coassist.sim.trial_runner import run_trial  # noqa: E402
 
 
@@ -74,7 +75,7 @@ def main() -> None:
             t0 = time.process_time()
             together = person_twin.lead_check(trials, fit, PERSON_FILTER)
             times["together"].append(time.process_time() - t0)
-            with mock.patch.object(person_twin, "fast_path_eligible", lambda loop: False):
+            with mock.patch.object(trial_runner, "fast_path_eligible", lambda loop: False):
                 t0 = time.process_time()
                 alone = person_twin.lead_check(trials, fit, PERSON_FILTER)
                 times["alone"].append(time.process_time() - t0)

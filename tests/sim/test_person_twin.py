@@ -72,7 +72,6 @@ def test_the_twin_arm_is_a_spring_and_damper_toward_the_intent():
     assert fx == pytest.approx(650.0 * (0.3 - 0.25) + 12.0 * 0.2, abs=1e-12)
     assert fy == pytest.approx(650.0 * (0.4 - 0.5) - 12.0 * 0.1, abs=1e-12)
     assert arm.force(7, 0.3, 0.4, 0.0, 0.0) == (0.0, 0.0)  # past its end the intent holds its last row
-    assert arm.stiffness == 650.0
 
 
 def test_the_twins_arms_in_a_batch_are_each_twin_arm_row_for_row():
@@ -94,23 +93,23 @@ def test_the_twins_arms_in_a_batch_are_each_twin_arm_row_for_row():
 
 def test_the_checks_twins_run_together_give_what_each_gives_alone(corrective, corrective_check, monkeypatch):
     # the check runs its twin trials in one lockstep batch on the point-mass array path (corrective_check); every
-    # trial on the reference path, one at a time, gives the same check to the last bit, and so do trials that leave
-    # the array path midway (built again and run alone)
-    import coassist.sim.person_twin as person_twin
+    # trial on the reference path (each its own scalar tick) gives the same check to the last bit, and so do trials
+    # that leave the array path midway (built again and run on the reference path)
+    import coassist.sim.trial_runner as trial_runner
 
-    array_path = person_twin.run_point_mass_lockstep
+    array_path = trial_runner.run_point_mass_lockstep
     batches = []
 
-    def leaving(loops):  # every other run leaves the array path at its end, after its source has run the whole trial
-        logs = array_path(loops)
+    def leaving(loops, on_end):  # every other run leaves the array path at its end, its source run to the end
+        logs = array_path(loops, on_end=lambda j, log: None if j % 2 else on_end(j, log))
         batches.append(logs)
         return [None if j % 2 else log for j, log in enumerate(logs)]
 
-    monkeypatch.setattr(person_twin, "run_point_mass_lockstep", leaving)
+    monkeypatch.setattr(trial_runner, "run_point_mass_lockstep", leaving)
     assert lead_check(*corrective, PERSON_FILTER) == corrective_check
     assert [len(logs) for logs in batches] == [2 * len(SEEDS)]  # one batch, every fold under MG and led
     assert all(log is not None for log in batches[0])  # none left the array path of itself: the batch is measured
-    monkeypatch.setattr(person_twin, "fast_path_eligible", lambda loop: False)
+    monkeypatch.setattr(trial_runner, "fast_path_eligible", lambda loop: False)
     assert lead_check(*corrective, PERSON_FILTER) == corrective_check
     assert corrective_check.folds == len(SEEDS)
 

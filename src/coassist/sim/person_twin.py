@@ -41,15 +41,14 @@ from scipy.stats import binomtest
 from coassist.analysis.paired import paired_difference
 from coassist.control.presets import CONTROL_PRESETS, get_preset, make_controller
 from coassist.metrics import overshoot
-from coassist.runtime.episode import Episode, run_episode
+from coassist.runtime.episode import Episode
 from coassist.scenario.objects import get_object
 from coassist.scenario.operator import AUTHOR
 from coassist.scenario.person_intent import PersonFilterSettings, PersonPathsIntent
 from coassist.scenario.person_model import LeadCheck, PersonFit, asked_way, fit_person, intent_estimate, without_trial
 from coassist.scenario.tasks import TASKS, task_for_seed
-from coassist.sim.array_runner import fast_path_eligible, run_point_mass_lockstep
 from coassist.sim.point_mass import PointMassWorld
-from coassist.sim.trial_runner import build_trial
+from coassist.sim.trial_runner import build_trial, run_episodes_lockstep
 
 __all__ = [
     "SIGN_LEVEL",
@@ -98,7 +97,6 @@ class TwinArm:
         self._x, self._y = intent[:, 0].tolist(), intent[:, 1].tolist()
         self._n = len(self._x)
         self.K, self.C = float(stiffness), float(damping)
-        self.stiffness = self.K  # what the world logs of an arm
 
     def force(self, k: int, px: float, py: float, vx: float, vy: float) -> tuple[float, float]:
         """u_h(k) [N] for hand position (px, py) [m] and velocity (vx, vy) [m/s] at tick k."""
@@ -212,28 +210,16 @@ def _twin_run(trial, intent: np.ndarray, arm, source: PersonPathsIntent | None, 
 
 
 def _overshoots(runs: Sequence) -> list[float]:
-    """The overshoots of the built twin runs ``runs`` (:func:`_twin_run`'s), in lockstep batches (one per period) on the
-    point-mass array path; a run that cannot take it runs alone on the reference path, and one that leaves it (a
-    fault flag) runs again there, built afresh: the same trial either way (:mod:`coassist.sim.array_runner`)."""
-    logs: list = [None] * len(runs)
-    by_dt: dict[float, list[int]] = {}  # a batch's worlds share one period
-    for j, (_, episode, _) in enumerate(runs):
-        if fast_path_eligible(episode.loop):
-            by_dt.setdefault(float(episode.world.dt), []).append(j)
-    for batch in by_dt.values():
-        for j, log in zip(batch, run_point_mass_lockstep([runs[j][1].loop for j in batch])):
-            logs[j] = log
-    fast = {j for batch in by_dt.values() for j in batch}
-    out = []
-    for j, ((build, episode, grid), log) in enumerate(zip(runs, logs)):
-        if log is None:
-            if j in fast:  # its episode went some way on the array path: built again to run from the start
-                episode, grid = build()
-            pose = run_episode(episode).pose
-        else:
-            pose = episode.finish(log).pose
-        out.append(overshoot(pose[:, :2], grid[: len(pose)]))
-    return out
+    """The overshoots of the built twin runs ``runs`` (:func:`_twin_run`'s), run together
+    (:func:`~coassist.sim.trial_runner.run_episodes_lockstep`: the point-mass array path, a run that leaves it
+    built again and run on the reference path; the same trials either way)."""
+    poses: list = [None] * len(runs)
+
+    def keep(i: int, trial) -> None:
+        poses[i] = trial.pose
+
+    run_episodes_lockstep([episode for _, episode, _ in runs], lambda i: runs[i][0]()[0], keep)
+    return [overshoot(pose[:, :2], grid[: len(pose)]) for pose, (_, _, grid) in zip(poses, runs)]
 
 
 def lead_check(trials: Sequence, fit: PersonFit, settings: PersonFilterSettings, obj: str = TWIN_OBJECT) -> LeadCheck:

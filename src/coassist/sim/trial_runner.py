@@ -97,6 +97,7 @@ __all__ = [
     "NAMED_GROUP",
     "TrialSpec",
     "build_trial",
+    "run_episodes_lockstep",
     "run_spec",
     "run_spec_lockstep",
     "run_trial",
@@ -379,7 +380,6 @@ def run_spec_lockstep(
             controllers.pop((spec.controller, spec.preset), None)
         return episode
 
-    episodes = [build(spec) for spec in specs]
     trials: list[Trial | None] = [None] * len(specs)
 
     def keep(i: int, trial: Trial) -> None:
@@ -388,8 +388,35 @@ def run_spec_lockstep(
         else:
             trials[i] = trial
 
+    run_episodes_lockstep([build(spec) for spec in specs], lambda i: build(specs[i]), keep, arrays=arrays)
+    return [] if on_result is not None else [t for t in trials if t is not None]
+
+
+def run_episodes_lockstep(
+    episodes: Sequence[Episode],
+    rebuild: Callable[[int], Episode],
+    keep: Callable[[int, Trial], None],
+    *,
+    arrays: bool = True,
+) -> None:
+    """Run built episodes in lockstep, each trial i handed to ``keep(i, trial)`` as it ends (:func:`run_spec_lockstep`'s
+    runner; a person's twin trials, :mod:`coassist.sim.person_twin`, are built otherwise and run here too).
+
+    Those that can run as arrays (:mod:`coassist.sim.array_runner`, one batch per period); a trial that leaves that
+    path is built again (``rebuild(i)``: episode i afresh) and runs, with those that could not take it, on
+    :func:`~coassist.runtime.batched_loops.run_loops`: the same trials bit for bit either way. ``arrays`` False: every
+    trial on ``run_loops``.
+
+    Parameters
+    ----------
+    episodes : the episodes, none run yet.
+    rebuild : episode i built again, from its start.
+    keep : called with (i, the trial) as trial i ends.
+    arrays : whether the array path is tried.
+    """
+    episodes = list(episodes)
     fast = [i for i, ep in enumerate(episodes) if arrays and fast_path_eligible(ep.loop)]
-    rest = sorted(set(range(len(specs))) - set(fast))
+    rest = sorted(set(range(len(episodes))) - set(fast))
     by_dt: dict[float, list[int]] = {}  # one array batch per period (the presets share one: one batch)
     for i in fast:
         by_dt.setdefault(float(episodes[i].world.dt), []).append(i)
@@ -400,12 +427,11 @@ def run_spec_lockstep(
 
         for i, log in zip(batch, run_point_mass_lockstep([episodes[i].loop for i in batch], on_end=done)):
             if log is None:  # it left the array path (something unusual happened): the reference path, afresh
-                episodes[i] = build(specs[i])
+                episodes[i] = rebuild(i)
                 rest.append(i)
     rest.sort()
     if rest:
         run_loops([episodes[i].loop for i in rest], on_end=lambda j, log: keep(rest[j], episodes[rest[j]].finish(log)))
-    return [] if on_result is not None else [t for t in trials if t is not None]
 
 
 def _run_batch(specs: list[TrialSpec]) -> list[tuple[dict, dict]]:
