@@ -60,7 +60,7 @@ def run_job(kind: str, run: Path) -> dict:
     """One worker job of ``kind`` (module docstring) with ``run``'s models: CPU seconds, trials, ticks, digest."""
     import torch
 
-    from coassist.experiments.ablation import mujoco_task
+    from coassist.experiments.ablation import calibrate_then_drive, mujoco_task
     from coassist.experiments.ablation_cells import ARBITRATED
     from coassist.experiments.application import cell_options
     from coassist.experiments.pipeline import Workspace
@@ -83,11 +83,14 @@ def run_job(kind: str, run: Path) -> dict:
         source = MUJOCO[kind]
         with tempfile.TemporaryDirectory() as tmp:  # the person model fitted on the arm is written here
             fn, args = mujoco_task(Workspace(cfg, Path(tmp), False), source, {source: str(models / source)})
-            configs = args[-1]  # both objects' trials, the board's first: its cell alone, as the point-mass jobs
+            # both objects' trials, the board's first: its cell alone, as the point-mass jobs
+            # (_drive_batch(configs); calibrate_then_drive(probes, intent, configs, asked): its probe trials first)
+            at = 2 if fn is calibrate_then_drive else 0
+            configs = args[at]
             boards = [c for c in configs if c.object == "board"]
             if configs[: len(boards)] != boards:
                 raise RuntimeError("the MuJoCo job's configs no longer start with the board's cell")
-            payloads = fn(*args[:-1], boards)
+            payloads = fn(*args[:at], boards, *args[at + 1 :])
     cpu, wall = time.process_time() - c0, time.perf_counter() - t0
     digest = hashlib.sha256()
     for _, arrays in payloads:

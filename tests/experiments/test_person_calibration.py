@@ -77,6 +77,14 @@ def test_each_person_gets_their_own_fit_and_a_line(alice, bob):
     assert f"K̂ {a.fit.arm.stiffness:.0f} ± {a.fit.arm.stiffness_se:.0f} N/m" in line_a
     assert "measured by the probe in 4 trial(s)" in line_a and "ASSUMED" not in line_a
     assert "arm ASSUMED, not measured" in line_b and "carry no probe" in line_b and "manual-probe" in line_b
+    # the same trials as a bag gives them (no record of the controller that ran): the line says that, not "no
+    # probe", and what to calibrate instead (drive's trial files beside its bags)
+    unknown = [Named(t.id, replace(t.trial, meta=replace(t.trial.meta, controller="unknown"))) for t in bob]
+    for trials, what in ((unknown, "the trials do"), ([*unknown[:2], bob[2]], "2 of the trials do")):
+        (c,) = calibrate_people(trials)
+        line = summary_line(c)
+        assert c.unrecorded == len(trials) - (what != "the trials do") and "carry no probe" not in line, line
+        assert f"{what} not record which controller ran" in line and "drive's .parquet" in line, line
     # demonstrations per way round, as the path model labelled them
     for c, line in ((a, line_a), (b, line_b)):
         sides = c.fit.paths.sides

@@ -488,6 +488,36 @@ def test_recording_folder_with_a_bad_trial_is_skipped(tmp_path):
     assert seen[0][0].endswith("trial_2") and "human_wrench.csv" in seen[0][1]
 
 
+def test_trials_named_one_by_one_are_skipped_as_a_folders_are(tmp_path, dataset_with_a_truncated_trial):
+    """A trial file or a recording folder given by name (``calibrate runs/P07-*.parquet``, ``rec/user-x/trial_*``) is
+    left out where it cannot be read and on_bad is given (--skip-bad-trials), as the same trial in its folder is; without
+    on_bad the first one raises, naming it."""
+    from coassist.intent import load_trials
+
+    files = sorted(dataset_with_a_truncated_trial.glob("trial_*.parquet"))
+    user = tmp_path / "user-x"
+    make_recording(user / "trial_1")
+    (make_recording(user / "trial_2") / "human_wrench.csv").write_text("Time,header.seq\n")
+    named = [*files, user / "trial_1", user / "trial_2"]
+    with pytest.raises(TrialFileError, match=r"trial_00002\.parquet"):
+        load_trials(named)
+    with pytest.raises(ValueError, match=r"trial_2/human_wrench\.csv"):
+        load_trials(named[3:])
+    seen = []
+    out = load_trials(named, on_bad=lambda where, why: seen.append((where, why)))
+    assert [lt.id for lt in out] == [f"D0/trial_{i:05d}" for i in (0, 1, 3, 4)] + [f"{tmp_path.name}/user-x/trial_1"]
+    assert [where for where, _ in seen] == [str(files[2]), str(user / "trial_2")]
+    assert "not a readable Parquet file" in seen[0][1] and "human_wrench.csv" in seen[1][1]
+    # and from the command line: the hint's flag does what it says
+    common = ["--out", str(tmp_path / "m"), "--epochs", "1", "--threads", "1", "--batch-size", "256"]
+    res = CliRunner().invoke(app, ["train", *map(str, files), *common])
+    assert res.exit_code != 0 and "trial_00002.parquet" in res.output and "--skip-bad-trials" in res.output
+    res = CliRunner().invoke(app, ["train", *map(str, files), "--skip-bad-trials", *common])
+    assert res.exit_code == 0 and "skipped" in res.output and "trial_00002.parquet" in _flat(res.output), res.output
+    side = json.loads((tmp_path / "m" / "model.json").read_text())
+    assert sorted(side["train_trials"] + side["test_trials"]) == [f"D0/trial_{i:05d}" for i in (0, 1, 3, 4)]
+
+
 def _flat(output: str) -> str:
     """The CLI's output with rich's line wrapping undone."""
     return output.replace("\n", "")

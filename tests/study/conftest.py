@@ -130,8 +130,10 @@ def _calibrated_study(tmp_path_factory) -> Path:
 
     root = tmp_path_factory.mktemp("calibrated")
     study = init_study(calibrated_plan(root / "plans"), root / "study")
-    with ParticipantRun(study, "S01", simulate=True) as run:
+    said: list[str] = []
+    with ParticipantRun(study, "S01", simulate=True, say=said.append) as run:
         run.run()
+    (root / "said.txt").write_text("".join(line + "\n" for line in said))  # what the console said, beside the folder
     return study.folder
 
 

@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import asdict
 from html import escape
 from pathlib import Path
 
@@ -27,7 +28,7 @@ from coassist.experiments.person_calibration import thin_ways
 from coassist.metrics import f_rms
 from coassist.scenario import intent_registry
 from coassist.scenario.arm_identification import ARM_SE_MAX, ASSUMED_ARM, ArmEstimate, identify_arm, measured_arm
-from coassist.scenario.person_model import PERSON_MODEL_FILE, fit_person, read_person_model
+from coassist.scenario.person_model import PERSON_MODEL_FILE, LeadCheck, fit_person, read_person_model
 from coassist.scenario.tasks import task_for_seed
 from coassist.study.calibration import FitJob, fit_job
 from coassist.study.folder import StudyFolder, StudyFolderError, init_study
@@ -229,7 +230,7 @@ def test_the_block_runs_under_the_probe_and_fits_the_participants_person_model(c
     assert f_rms(person[0].wrench[:, :2]) < f_rms(mg[0].wrench[:, :2])
 
 
-def test_the_report_says_what_used_the_person_model_and_what_it_was_fitted_from(calibrated_study):
+def test_the_report_says_what_used_the_person_model_and_what_it_was_fitted_from(calibrated_study, _calibrated_study):
     html_path, json_path = write_report(calibrated_study)
     summary = json.loads(json_path.read_text())
     assert summary["calibration"] == {"trials": 3, "calibrated": ["person"], "asked": 0}
@@ -242,7 +243,7 @@ def test_the_report_says_what_used_the_person_model_and_what_it_was_fitted_from(
     # what the model was told, and the blocks whose trials ran with its file (by the hash on their lines)
     arm = "measured" if p0["arm"]["measured"] else "assumed"
     assert p0["told"] == f"arm {arm}; from the person's trials: paths round obstacles and the arm"
-    assert p0["used_in"] == ["person"] and f"<td>{escape(p0['told'])}</td><td>person</td>" in html
+    assert p0["used_in"] == ["person"] and f"<td>{escape(p0['told'])}</td>" in html and "<td>person</td>" in html
     # and the person model as the calibration drew it, the figure's own bytes
     png = (calibrated_study / "participants" / "S01" / "models" / "P0" / "curved" / "person-model.png").read_bytes()
     uri = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
@@ -252,6 +253,30 @@ def test_the_report_says_what_used_the_person_model_and_what_it_was_fitted_from(
     note = thin_ways(np.asarray(fit["paths"]["curved"]["sides"]))
     assert p0["thin_ways"] == ({"curved": note} if note else {})
     assert (f"curved: {escape(note)}" in html) if note else ("record more going" not in html)
+    # whether the model led them (its twin check), as the calibrate line says it, and as the console said at the fit
+    lead = LeadCheck(**fit["paths"]["curved"]["lead"])
+    assert p0["lead"] == {"curved": lead.line} and f"<td>curved: {escape(lead.line)}</td>" in html
+    (said,) = [x for x in (_calibrated_study.parent / "said.txt").read_text().splitlines() if "fitted in" in x]
+    assert said.startswith("S01: person model P0 fitted in ") and said.endswith(f"; curved: {lead.line}"), said
+
+
+def test_the_report_says_who_the_twin_check_turned_away(calibrated_study):
+    """A participant whose twin overshot more with the lead got the present estimate held in the calibrated
+    condition: the report says so on their person model's row (and summary.json), not the line of one led."""
+    progress = calibrated_study / "participants" / "S01" / "progress.jsonl"
+    lines = [json.loads(line) for line in progress.read_text().splitlines()]
+    held = LeadCheck(follow=False, folds=3, person_mm=6.2, mg_mm=2.1, low_mm=1.4, worse=3)
+    for r in lines:
+        if r["kind"] == "fit":
+            r["paths"]["curved"]["lead"] = asdict(held)
+    progress.write_text("".join(json.dumps(r) + "\n" for r in lines))
+    html_path, json_path = write_report(calibrated_study)
+    (p0,) = json.loads(json_path.read_text())["participants"]["S01"]["person_models"]
+    line = (
+        "present estimate held (the lead did not pay): their twin overshot 6.2 mm with the lead, 2.1 mm under MG "
+        "(3 trials replayed, more with the lead in 3, the difference's 95 % interval from +1.4 mm)"
+    )
+    assert p0["lead"] == {"curved": line} and f"<td>curved: {escape(line)}</td>" in html_path.read_text()
 
 
 def test_the_report_names_a_way_shown_in_too_few_calibration_trials(calibrated_study):
@@ -627,3 +652,33 @@ def test_a_calibration_cannot_ask_beyond_ten_trials():
     limit = one.max_s - none.max_s - FIT_SECONDS  # one trial run to its time limit
     assert limit >= plan.trials.motion_time + plan.trials.dwell
     assert two.max_s - none.max_s == pytest.approx(2 * limit + FIT_SECONDS)
+
+
+def test_a_person_model_folder_that_holds_no_participant_refuses_them_before_they_start(tmp_path):
+    """A condition naming a person-model folder (coassist calibrate) that holds no calibration of the participant
+    would give them the present estimate held while the report names the model: refused in one line, as drive, play
+    and collect refuse it, before the participant is registered (nothing locked); the person it holds runs."""
+    from coassist.scenario.path_model import fit_path_model
+    from coassist.scenario.person_model import PersonFit, write_person_model
+
+    line = np.stack([np.linspace(0.0, 0.4, 81), np.zeros(81)], axis=1)
+    x = np.linspace(0.0, 0.4, 200)
+    detours = [np.stack([x, s * 0.05 * np.exp(-(((x - 0.2) / 0.05) ** 2))], axis=1) for s in (1, 1, -1)]
+    folder = write_person_model(
+        tmp_path / "cal", {"P07": PersonFit(ASSUMED_ARM, fit_path_model(line, detours, noise=0.001))}
+    )
+    text = (
+        _plan()
+        .replace("[calibration]\ntrials = 3\nasked = 0\n", "")
+        .replace('intent = "calibrated"', f"intent = {json.dumps(str(folder))}")
+    )
+    (tmp_path / "plan.toml").write_text(text)
+    study = init_study(tmp_path / "plan.toml", tmp_path / "study")
+    with pytest.raises(StudyFolderError) as err:
+        ParticipantRun(study, "P08", page=("127.0.0.1", 0, None))
+    msg = str(err.value)
+    assert msg.startswith("condition[1] (person): intent ") and "\n" not in msg, msg
+    assert "holds no calibration of 'P08' (it holds P07)" in msg and 'intent = "calibrated"' in msg, msg
+    assert study.participants() == {}  # not registered: the plan stays open to amend
+    run = ParticipantRun(study, "P07", page=("127.0.0.1", 0, None))  # the person it holds: registered, as ever
+    assert run.record["number"] == 1 and list(study.participants()) == ["P07"]

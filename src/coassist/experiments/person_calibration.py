@@ -55,6 +55,7 @@ from coassist.sim.person_twin import lead_check
 __all__ = [
     "MIN_TRIALS",
     "PROBE_CONTROLLER",
+    "UNRECORDED_CONTROLLER",
     "CalibrationError",
     "PersonCalibration",
     "calibrate_people",
@@ -68,6 +69,8 @@ __all__ = [
 MIN_TRIALS = 3
 #: The controller kind whose trials carry the probe (coassist.control.presets).
 PROBE_CONTROLLER = "manual-probe"
+#: The controller a trial records where its file does not say (a bag or a ROS recording: coassist.data.rosbag_csv).
+UNRECORDED_CONTROLLER = "unknown"
 #: [m] two trials follow one nominal path when no point of one lies further than this from the other
 #: (the person model's own test: coassist.scenario.person_intent).
 SAME_PATH = 0.01
@@ -120,6 +123,9 @@ class PersonCalibration:
     asked_other_way: int = 0
     #: why the arm is assumed though the probe measured one, or what was left out of its fit ("" where neither)
     arm_note: str = ""
+    #: trials that do not record which controller ran (a bag, a ROS recording: controller "unknown"), so that a
+    #: probe in them cannot be known
+    unrecorded: int = 0
 
 
 def _nominal(trial: Trial) -> np.ndarray:
@@ -335,6 +341,7 @@ def calibrate_people(
                 cpu_seconds=time.process_time() - cpu,
                 asked_other_way=_asked_other_way(items, np.asarray(fit.paths.asked, dtype=bool)),
                 arm_note=note,
+                unrecorded=sum(it.trial.meta.controller == UNRECORDED_CONTROLLER for it in items),
             )
         )
     return out
@@ -416,6 +423,13 @@ def summary_line(c: PersonCalibration) -> str:
             why = (
                 f"the probe was not measurable in its {c.probe_trials} manual-probe trial(s) (shorter than 3 s, or "
                 "no push in the robot's effort)"
+            )
+        elif c.unrecorded:
+            # drive's MCAP bags and ROS recordings keep no trial record: nothing says the probe ran (issue 40's review)
+            why = (
+                f"{'the trials do' if c.unrecorded == len(c.trials) else f'{c.unrecorded} of the trials do'} not "
+                "record which controller ran (a bag or a ROS recording): calibrate the trial files coassist wrote "
+                "beside the bags (drive's .parquet), or record with --controller manual-probe"
             )
         else:
             why = "the trials carry no probe (record them with --controller manual-probe)"

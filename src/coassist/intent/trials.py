@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import NamedTuple
 
-from coassist.data import RecordingError, Trial, load_ros_trial, read_dataset
+from coassist.data import RecordingError, Trial, TrialFileError, load_ros_trial, read_dataset
 from coassist.data.bags import bag_paths, is_bag, load_bag_trial
 from coassist.data.datasets import MANIFEST_NAME
 from coassist.data.rosbag_csv import recording_folders
@@ -39,20 +39,17 @@ def _load_one(
 ) -> list[LabeledTrial]:
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file or folder")
+    # a trial named alone (a file, a bag, a recording folder) is left out as the trials of a folder are where it
+    # cannot be read and on_bad is given (--skip-bad-trials)
     if is_bag(path):
         dataset = path.absolute().parent.name
-        return [
-            LabeledTrial(
-                f"{dataset}/{path.stem if path.is_file() else path.name}",
-                dataset,
-                load_bag_trial(path, topics=bag_topics),
-            )
-        ]
+        name = f"{dataset}/{path.stem if path.is_file() else path.name}"
+        return _load_each([path], lambda bag: load_bag_trial(bag, topics=bag_topics), dataset, on_bad, name=name)
     if path.is_file():  # one trial file (coassist collect / drive / play write them)
         from coassist.data import read_trial
 
         dataset = path.absolute().parent.name
-        return [LabeledTrial(f"{dataset}/{path.stem}", dataset, read_trial(path))]
+        return _load_each([path], read_trial, dataset, on_bad, name=f"{dataset}/{path.stem}")
     if (path / MANIFEST_NAME).is_file():
         ds = read_dataset(path, skip_bad=on_bad is not None)
         for name, reason in ds.skipped:
@@ -60,8 +57,7 @@ def _load_one(
         return [LabeledTrial(f"{ds.id}/{Path(f).stem}", ds.id, t) for f, t in zip(ds.files, ds.trials)]
     if (path / "current_pose.csv").is_file():
         dataset = f"{path.absolute().parent.parent.name}/{path.absolute().parent.name}"
-        t = load_ros_trial(path)
-        return [LabeledTrial(f"{dataset}/{path.name}", dataset, t)]
+        return _load_each([path], load_ros_trial, dataset, on_bad, name=f"{dataset}/{path.name}")
     bags = bag_paths(path)
     dataset = f"{path.absolute().parent.name}/{path.name}"
     if bags:
@@ -77,19 +73,25 @@ def _load_one(
 
 
 def _load_each(
-    paths, load: Callable[[Path], Trial], dataset: str, on_bad: Callable[[str, str], None] | None
+    paths,
+    load: Callable[[Path], Trial],
+    dataset: str,
+    on_bad: Callable[[str, str], None] | None,
+    name: str | None = None,
 ) -> list[LabeledTrial]:
-    """``load`` each recording or bag of a folder; an unreadable one raises, or goes to ``on_bad`` and is left out."""
+    """``load`` each recording, bag or trial file of ``paths``; an unreadable one (a :class:`RecordingError` or
+    :class:`TrialFileError`) raises, or goes to ``on_bad`` and is left out. ``name``: the id of a trial named alone
+    (else ``dataset/<its recording>``)."""
     out = []
     for item in paths:
         try:
             t = load(item)
-        except RecordingError as exc:
+        except (RecordingError, TrialFileError) as exc:
             if on_bad is None:
                 raise
             on_bad(str(item), str(exc))
             continue
-        out.append(LabeledTrial(f"{dataset}/{t.meta.extra['recording']}", dataset, t))
+        out.append(LabeledTrial(name or f"{dataset}/{t.meta.extra['recording']}", dataset, t))
     return out
 
 

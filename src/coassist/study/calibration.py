@@ -66,6 +66,7 @@ __all__ = [
     "CalibrationFailed",
     "FitJob",
     "fit_job",
+    "lead_lines",
     "model_hashes",
     "person_model_folder",
 ]
@@ -78,6 +79,20 @@ MOVED = 0.005
 
 class CalibrationFailed(CoassistError, ValueError):
     """A calibration that gave no person model; the text is one line saying why."""
+
+
+def lead_lines(record: Mapping[str, Any]) -> dict[str, str]:
+    """Per task of a fit's record (:func:`fit_job`'s), what its twin check decided, in a few words
+    (:attr:`~coassist.scenario.person_model.LeadCheck.line`: "led along their paths: …" or "present estimate held
+    (the lead did not pay): …"); tasks of a record written before the check left out."""
+    from coassist.scenario.person_model import LeadCheck
+
+    out = {}
+    for task, paths in (record.get("paths") or {}).items():
+        lead = paths.get("lead") if isinstance(paths, Mapping) else None
+        if isinstance(lead, Mapping):
+            out[task] = LeadCheck(**lead).line
+    return out
 
 
 @dataclass(frozen=True)

@@ -45,7 +45,14 @@ from coassist.data.datasets import MANIFEST_NAME, manifest_files
 from coassist.play.session import PlayConfig
 from coassist.scenario.path_model import ASKED_WAY, WAY_NAMES
 from coassist.scenario.tasks import task_for_seed
-from coassist.study.calibration import CalibrationFailed, FitJob, fit_job, model_hashes, person_model_folder
+from coassist.study.calibration import (
+    CalibrationFailed,
+    FitJob,
+    fit_job,
+    lead_lines,
+    model_hashes,
+    person_model_folder,
+)
 from coassist.study.folder import (
     ParticipantFolder,
     StudyFolder,
@@ -118,6 +125,7 @@ class ParticipantRun:
                 + (", or against coassist ur-sim (--robot-host its address)" if self.plan.world == "ur" else "")
             )
         self.id = participant
+        self._check_person_models()  # before the participant is registered: a refusal must not lock the plan
         self.simulate, self.page, self.realtime = simulate, page, realtime
         self.host, self.confirm = host, confirm
         self.say = say or (lambda line: None)
@@ -127,6 +135,29 @@ class ParticipantRun:
         self.server: Any = None
         self.training = BackgroundTraining()
         self._lock: Any = None
+
+    def _check_person_models(self) -> None:
+        """StudyFolderError in one line where a condition names a person-model folder (``coassist calibrate``) that
+        holds no calibration of this participant: their trials of it would get the present estimate held, the model
+        never applied, and the report would name it (drive, play and collect refuse such a folder as well)."""
+        from coassist.control.presets import CONTROL_PRESETS
+        from coassist.scenario.assistance import check_person
+        from coassist.scenario.intent_registry import intent_folder_kind, load_intent_source
+
+        horizon = max(int(CONTROL_PRESETS[self.plan.trials.preset].game.horizon), 2)
+        for i, c in enumerate(self.plan.conditions):
+            if intent_folder_kind(c.intent) not in ("person-model", "calibration-draws"):
+                continue  # a network's or a named source: no person in it to check
+            try:
+                check_person(
+                    load_intent_source(c.intent, horizon=horizon),
+                    self.id,
+                    c.intent,
+                    fix="calibrate them into it (coassist calibrate), or let the study calibrate each participant: "
+                    'intent = "calibrated" and a [calibration] block (docs/study.md)',
+                )
+            except (ValueError, OSError) as exc:
+                raise StudyFolderError(f"condition[{i}] ({c.name}): {exc}") from None
 
     # ------------------------------------------------------------------ set up and tear down
     def __enter__(self) -> ParticipantRun:
@@ -455,6 +486,8 @@ class ParticipantRun:
             f"{self.id}: person model {record['model']} fitted in {record['fit_seconds']:.1f} s from "
             + ", ".join(f"{len(v)} {t} trials" for t, v in record["demonstrations"].items())
             + f"; arm K = {arm['stiffness']:.0f} N/m, C = {arm['damping']:.1f} N·s/m ({how})"
+            # whether the model leads them (its twin check): a participant turned away gets the present estimate held
+            + "".join(f"; {task}: {line}" for task, line in lead_lines(record).items())
         )
         out = {"attempt": step["attempt"], **record}
         asks = self._asks(step, record)

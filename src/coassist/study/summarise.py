@@ -239,6 +239,7 @@ def _fit_summary(rec: dict[str, Any], progress: list[dict[str, Any]]) -> PersonM
 
     from coassist.experiments.person_calibration import thin_ways
     from coassist.scenario.intent_registry import INTENT_FOLDERS
+    from coassist.study.calibration import lead_lines
 
     model, attempt = rec.get("model"), rec.get("attempt")
     if rec.get("failed"):
@@ -280,6 +281,7 @@ def _fit_summary(rec: dict[str, Any], progress: list[dict[str, Any]]) -> PersonM
             for task, paths in (rec.get("paths") or {}).items()
             if (note := thin_ways(np.asarray(paths.get("sides", []), dtype=int)))
         },
+        lead=lead_lines(rec),
     )
 
 

@@ -190,7 +190,9 @@ class PersonModelFit:
     ``told`` (:class:`~coassist.scenario.intent_registry.Told`), ``used_in``: the blocks whose trials ran
     with its files (their lines' ``model_sha256`` among its ``sha256``), the fit's wall time [s], and per task a way
     round shown in too few of its trials to follow (``thin_ways``:
-    :func:`~coassist.experiments.person_calibration.thin_ways`; tasks with none left out)."""
+    :func:`~coassist.experiments.person_calibration.thin_ways`; tasks with none left out), and per task whether the
+    model leads them along their paths (``lead``: its twin check's line, :func:`~coassist.study.calibration.lead_lines`;
+    a participant turned away was assisted with the present estimate held)."""
 
     model: str | None
     attempt: int | None
@@ -207,6 +209,7 @@ class PersonModelFit:
     sha256: Mapping[str, str] | None = None
     fit_seconds: float | None = None
     thin_ways: Mapping[str, str] = field(default_factory=dict)
+    lead: Mapping[str, str] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"model": self.model, "attempt": self.attempt, "failed": self.failed}
@@ -224,6 +227,7 @@ class PersonModelFit:
             "sha256": None if self.sha256 is None else dict(self.sha256),
             "fit_seconds": self.fit_seconds,
             "thin_ways": dict(self.thin_ways),
+            "lead": dict(self.lead),
         }
 
     @classmethod
@@ -244,6 +248,7 @@ class PersonModelFit:
             sha256=None if d["sha256"] is None else dict(d["sha256"]),
             fit_seconds=finite_number(d["fit_seconds"]),
             thin_ways=dict(d.get("thin_ways", {})),  # summaries written before it: none said
+            lead=dict(d.get("lead", {})),  # summaries written before the twin check: none said
         )
 
 
