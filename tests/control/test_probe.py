@@ -95,3 +95,68 @@ def test_the_controller_is_manual_guidance_plus_the_trials_probe():
 def test_bad_parameters_name_the_field(field, value, match):
     with pytest.raises(ValueError, match=match):
         ProbeParameters(**{field: value})
+
+
+def test_probes_stepped_together_are_each_probe_stepped_alone():
+    """probed_steps (run_loops) and probed_efforts (the array path) against twins stepped one by one, 40 ticks of five
+    trials of their own seeds: every row's effort, model and flags bit for bit, a row MG refuses (NaN, out of bounds)
+    flagged as alone and its clock on as alone, probed_efforts' clean rows exactly the unflagged steps."""
+    from coassist.control.probe import probe_key, probed_efforts, probed_steps
+
+    preset = get_preset("thesis-application-damped")
+    seeds = (3, 4, 5, 6, 7)
+
+    def built():
+        out = [make_controller("manual-probe", preset) for _ in seeds]
+        for c, s in zip(out, seeds):
+            c.reset_for(_context(s))
+        return out
+
+    alone, together, efforts = built(), built(), built()
+    assert len({probe_key(c) for c in together}) == 1 and probe_key(object()) is None
+    rng = np.random.default_rng(0)
+    B = len(seeds)
+    for k in range(40):
+        z = rng.normal(0.0, 0.05, (B, 4))
+        ref = rng.normal(0.0, 0.05, (B, 1, 4))
+        w = rng.normal(0.0, 5.0, (B, 2))
+        if k in (3, 17):
+            z[1, 0] = np.nan  # a non-finite state: refused, no push
+        if k == 9:
+            w[4, 1] = 1e6  # beyond the guard's wrench bound: refused
+        want = [c.step(z[b], ref[b], ref[b], w[b]) for b, c in enumerate(alone)]
+        got = probed_steps(together, z, ref, ref, w)
+        for a, b in zip(want, got, strict=True):
+            assert np.array_equal(a.u_r, b.u_r) and np.array_equal(a.u_h_model, b.u_h_model) and a.fault == b.fault
+        u, clean = probed_efforts(efforts, z, ref, ref, w)
+        assert clean.tolist() == [s.fault == Fault.NONE for s in want]
+        for b in range(B):
+            if clean[b]:
+                assert np.array_equal(u[b], want[b].u_r)
+            else:  # not stepped: the caller steps that row itself (effort_batch's contract), which reports it
+                s = efforts[b].step(z[b], ref[b], ref[b], w[b])
+                assert np.array_equal(s.u_r, want[b].u_r) and s.fault == want[b].fault != Fault.NONE
+        if k in (3, 9):
+            assert not clean.all()
+    assert [c._k for c in together] == [c._k for c in efforts] == [c._k for c in alone] == [40] * B
+
+
+def test_calibration_runs_are_grouped_by_their_probe_and_a_shared_controller_is_left_alone():
+    from types import SimpleNamespace
+
+    from coassist.control.controllers import InputBounds, ManualGuidance
+    from coassist.control.probe import ProbedGuidance
+    from coassist.runtime.batched_loops import probed_groups
+
+    preset = get_preset("thesis-application-damped")
+    a, b, shared = (make_controller("manual-probe", preset) for _ in range(3))
+    other = ProbedGuidance(a.model)
+    other.guidance = ManualGuidance(a.model, bounds=InputBounds(wrench=50.0))  # another guard: not a's group
+    lone = ProbedGuidance(a.model)
+    mg = make_controller("manual", preset)
+    longer = make_controller("manual-probe", preset)
+    ticks = [SimpleNamespace(controller=c, H=50) for c in (a, mg, b, shared, shared, other, lone)]
+    ticks.append(SimpleNamespace(controller=longer, H=60))
+    # a, b and lone step together; MG, the controller two runs share (its clock is theirs in turn), the one of
+    # another guard and the one of another horizon (its arguments do not stack with theirs) each step alone
+    assert probed_groups(ticks) == [0, None, 0, None, None, None, 0, None]

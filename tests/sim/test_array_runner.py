@@ -229,3 +229,46 @@ def test_a_complex_answer_sends_its_trials_to_the_reference_path_and_loses_none(
     for log in logs:
         assert log.n > 0 and log.ended != "internal_error"
         assert int(log.fault[0]) == int(Fault.PREDICTION_FALLBACK)
+
+
+def test_calibration_trials_in_lockstep_step_their_probes_together_and_equal_every_trial_alone(monkeypatch):
+    """MG with the probe (each trial its own controller: the probe's clock and phases are the trial's): one
+    probed_efforts a tick on the array path, one probed_steps in run_loops, and every trial alone's bit for bit."""
+    from coassist.control import probe
+    from coassist.runtime import batched_loops
+    from coassist.sim import array_runner
+
+    specs = [
+        TrialSpec(
+            task=TASKS[i % 4],
+            seed=70 + i,
+            user=i % 3,
+            object=("handle", "heavy")[i % 2],
+            controller="manual-probe",
+            intent="nominal",
+            preset=PRESET,
+        )
+        for i in range(5)
+    ]
+    calls = {"arrays": 0, "loops": 0}
+
+    def spy(name, real):
+        def counted(*args):
+            calls[name] += 1
+            return real(*args)
+
+        return counted
+
+    monkeypatch.setattr(array_runner, "probed_efforts", spy("arrays", probe.probed_efforts))
+    monkeypatch.setattr(batched_loops, "probed_steps", spy("loops", probe.probed_steps))
+    alone = [run_spec(spec) for spec in specs]
+    assert len({t.n_samples for t in alone}) > 1 and all(np.abs(t.effort_r).max() > 0.5 for t in alone)  # pushed
+    for arrays in (True, False):
+        before = dict(calls)
+        together = run_spec_lockstep(specs, arrays=arrays)
+        for spec, a, b in zip(specs, alone, together, strict=True):
+            assert a.equals(b), (arrays, spec)
+        # one batched call a tick while two runs or more go on: the longest trial's second-longest length at least
+        second = sorted(t.n_samples for t in alone)[-2]
+        assert calls["arrays" if arrays else "loops"] - before["arrays" if arrays else "loops"] >= second - 1
+    assert calls["arrays"] and calls["loops"]

@@ -22,6 +22,7 @@ from coassist.scenario.person_model import (
 )
 from coassist.scenario.populations import population_profile
 from coassist.scenario.tasks import task_for_seed
+from coassist.sim import person_twin
 from coassist.sim.person_twin import TwinArm, lead_check, twin_overshoot, why_no_twin
 from coassist.sim.trial_runner import run_trial
 
@@ -106,7 +107,11 @@ def test_the_checks_twins_run_together_give_what_each_gives_alone(corrective, co
         return [None if j % 2 else log for j, log in enumerate(logs)]
 
     monkeypatch.setattr(trial_runner, "run_point_mass_lockstep", leaving)
+    built = []  # the runs under MG share one MG (it keeps no state): stepped once a tick for all of them
+    make = person_twin.make_controller
+    monkeypatch.setattr(person_twin, "make_controller", lambda kind, preset: built.append(kind) or make(kind, preset))
     assert lead_check(*corrective, PERSON_FILTER) == corrective_check
+    assert built.count("manual") == 1 and built.count(person_twin.TWIN_CONTROLLER) == 2 * len(SEEDS)  # led: rebuilt
     assert [len(logs) for logs in batches] == [2 * len(SEEDS)]  # one batch, every fold under MG and led
     assert all(log is not None for log in batches[0])  # none left the array path of itself: the batch is measured
     monkeypatch.setattr(trial_runner, "fast_path_eligible", lambda loop: False)

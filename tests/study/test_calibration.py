@@ -682,3 +682,9 @@ def test_a_person_model_folder_that_holds_no_participant_refuses_them_before_the
     assert study.participants() == {}  # not registered: the plan stays open to amend
     run = ParticipantRun(study, "P07", page=("127.0.0.1", 0, None))  # the person it holds: registered, as ever
     assert run.record["number"] == 1 and list(study.participants()) == ["P07"]
+    # one registered without the check (a study begun before it) is let in, as one who finished must be to be listed,
+    # and refused before their next step
+    study.register("P08")
+    late = ParticipantRun(study, "P08", page=("127.0.0.1", 0, None))
+    with pytest.raises(StudyFolderError, match=r"holds no calibration of 'P08' \(it holds P07\)"):
+        late.run()

@@ -78,3 +78,31 @@ def test_the_same_plan_runs_on_the_mujoco_ur5(tmp_path):
     trial = read_dataset(folder / "participants" / "S02" / "manual").trials[0]
     assert trial.meta.origin == "mujoco" and trial.meta.extra["world"] == "mujoco" and trial.joints is not None
     assert trial.meta.user == "S02" and trial.meta.extra["study_operator"] == "user-2"  # operator 2 stood in
+
+
+def test_on_the_mujoco_ur5_the_person_at_the_handle_is_the_participant(tmp_path):
+    """A condition naming a person-model folder (coassist calibrate) of the participant runs on an arm world as on the
+    page: drive is told the participant's id as the person at the handle (before, it looked the folder up under the
+    simulated operator's name, 'user-0', and refused the trial partway through the study)."""
+    pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra")
+    from coassist.scenario.arm_identification import ASSUMED_ARM
+    from coassist.scenario.path_model import fit_path_model
+    from coassist.scenario.person_model import PersonFit, write_person_model
+
+    line = np.stack([np.linspace(0.0, 0.4, 81), np.zeros(81)], axis=1)
+    x = np.linspace(0.0, 0.4, 200)
+    detours = [np.stack([x, s * 0.05 * np.exp(-(((x - 0.2) / 0.05) ** 2))], axis=1) for s in (1, 1, -1)]
+    cal = write_person_model(
+        tmp_path / "cal", {"S01": PersonFit(ASSUMED_ARM, fit_path_model(line, detours, noise=0.001))}
+    )
+    plan = tmp_path / "plan.toml"
+    plan.write_text(
+        '[study]\nname = "arm"\nprotocol = "comparison"\nworld = "mujoco"\nparticipants = 1\nseed = 3\n\n'
+        '[[condition]]\nname = "manual"\ncontroller = "manual"\n\n'
+        f'[[condition]]\nname = "person"\ncontroller = "cooperative"\nintent = {json.dumps(str(cal))}\n\n'
+        '[trials]\ntasks = ["curved"]\nper_condition = 1\npractice = 0\n\n[rest]\nbetween_conditions = 0.0\n'
+    )
+    folder, summary = _run_study(tmp_path, plan)
+    assert summary["n_complete"] == 1
+    (trial,) = read_dataset(folder / "participants" / "S01" / "person").trials
+    assert trial.meta.user == "S01" and trial.meta.model_id.startswith("person:cal@")

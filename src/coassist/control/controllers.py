@@ -36,7 +36,7 @@ The effort is then saturated to ``effort_limit`` keeping its direction (``SATURA
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
@@ -217,7 +217,15 @@ class _GuardedController:
             n = self._zero.shape[0]
             return ControlStep(np.zeros(n), np.zeros(n), Fault.INTERNAL_ERROR)
 
-    def step_batch(self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray) -> list[ControlStep]:
+    def step_batch(
+        self,
+        z: np.ndarray,
+        ref_h: np.ndarray,
+        ref_r: np.ndarray,
+        wrench: np.ndarray,
+        *,
+        alone: Sequence[_GuardedController] | None = None,
+    ) -> list[ControlStep]:
         """:meth:`step` for B ticks at once (many trials in lockstep sharing this controller):
         z (B, 2n), ref_h and ref_r (B, rows, 2n), wrench (B, n), float64 arrays.
 
@@ -227,9 +235,16 @@ class _GuardedController:
         finds bad — out of bounds, non-finite, a non-finite effort — goes through
         :meth:`step` itself, which refuses it with its flag and its one warning. Anything
         else (other shapes or dtypes, a law that raises) falls back to :meth:`step` per row.
-        Never raises.
+        ``alone``: whose :meth:`step` redoes row b there (``alone[b]``: controllers built alike, each
+        with its own warnings; default this one for every row). Never raises.
         """
-        return self._steps(self._batch_core(z, ref_h, ref_r, wrench), z, ref_h, ref_r, wrench, lambda b: self.step)
+        return self._steps(self._batch_core(z, ref_h, ref_r, wrench), z, ref_h, ref_r, wrench, self._step_of(alone))
+
+    def _step_of(self, alone: Sequence[_GuardedController] | None) -> Callable[[int], Callable[..., ControlStep]]:
+        """Whose guarded step redoes row b where a batch cannot (:meth:`step_batch`'s ``alone``)."""
+        if alone is None:
+            return lambda b: self.step
+        return lambda b: alone[b].step
 
     def _steps(
         self, core, z, ref_h, ref_r, wrench, step_of: Callable[[int], Callable[..., ControlStep]]
@@ -253,7 +268,13 @@ class _GuardedController:
         return [s if s is not None else step_of(b)(z[b], ref_h[b], ref_r[b], wrench[b]) for b, s in enumerate(out)]
 
     def effort_batch(
-        self, z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray
+        self,
+        z: np.ndarray,
+        ref_h: np.ndarray,
+        ref_r: np.ndarray,
+        wrench: np.ndarray,
+        *,
+        alone: Sequence[_GuardedController] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """The robot efforts of :meth:`step_batch`'s clean rows, as arrays, for a runner that
         only goes on with ticks that carry no flag (:mod:`coassist.sim.array_runner`).
@@ -263,11 +284,11 @@ class _GuardedController:
         no fault flag (not even SATURATED); elsewhere ``u_r[b]`` is 0 and the caller must
         not use it (step that row itself, which reports it). On the batched path nothing is
         logged or warned: a row that is not clean has not been stepped. Inputs the batch
-        cannot take (other dtypes or shapes) go through :meth:`step` row by row, which
-        warns as it always does. Never raises.
+        cannot take (other dtypes or shapes) go through :meth:`step` row by row (``alone``'s, as
+        :meth:`step_batch`'s), which warns as it always does. Never raises.
         """
         return self._clean_efforts(
-            self._batch_core(z, ref_h, ref_r, wrench), z, ref_h, ref_r, wrench, lambda b: self.step
+            self._batch_core(z, ref_h, ref_r, wrench), z, ref_h, ref_r, wrench, self._step_of(alone)
         )
 
     def _clean_efforts(

@@ -33,6 +33,7 @@ arm's log carries it the same way).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,7 +44,16 @@ from coassist.control.controllers import ControlStep, ManualGuidance
 from coassist.interfaces import ZERO_EFFORT_FAULTS, TrialContext
 from coassist.model.impedance import ImpedanceModel
 
-__all__ = ["PROBE_BLOCK", "ProbeParameters", "ProbedGuidance", "probe_phases", "probe_signal"]
+__all__ = [
+    "PROBE_BLOCK",
+    "ProbeParameters",
+    "ProbedGuidance",
+    "probe_key",
+    "probe_phases",
+    "probe_signal",
+    "probed_efforts",
+    "probed_steps",
+]
 
 
 def _frequencies(values: object, name: str) -> tuple[float, ...]:
@@ -167,10 +177,53 @@ class ProbedGuidance:
         return self._block[i]
 
     def step(self, z: ArrayLike, ref_h: ArrayLike, ref_r: ArrayLike, wrench: ArrayLike) -> ControlStep:
-        out = self.guidance.step(z, ref_h, ref_r, wrench)
-        k = self._k
-        self._k += 1
+        return self._pushed(self.guidance.step(z, ref_h, ref_r, wrench))
+
+    def _pushed(self, out: ControlStep) -> ControlStep:
+        """MG's step ``out`` of this tick with this tick's push added (none on a tick MG refused)."""
+        k = self._tick()
         if out.fault & ZERO_EFFORT_FAULTS:
             return out
-        push = self._push(k)
-        return ControlStep(out.u_r + push, out.u_h_model, out.fault)
+        return ControlStep(out.u_r + self._push(k), out.u_h_model, out.fault)
+
+    def _tick(self) -> int:
+        """This tick's number on the probe's clock (steps since the reset); the clock on by one."""
+        k = self._k
+        self._k += 1
+        return k
+
+
+def probe_key(controller: object) -> tuple | None:
+    """What :class:`ProbedGuidance` controllers must share to be stepped together (:func:`probed_steps`): their MG's
+    DOFs and input bounds (its law, zero effort, reads nothing else); None for any other controller."""
+    if type(controller) is not ProbedGuidance:
+        return None
+    return (controller.n, controller.guidance.bounds)
+
+
+def probed_steps(
+    controllers: Sequence[ProbedGuidance], z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray
+) -> list[ControlStep]:
+    """Row b is ``controllers[b].step(z[b], ref_h[b], ref_r[b], wrench[b])`` bit for bit (each its own clock and
+    phases), for calibration trials in lockstep (:func:`coassist.runtime.batched_loops.run_loops`): MG's guard once
+    over the batch (:meth:`~coassist.control.controllers.ManualGuidance.step_batch` of the first's MG, a row it
+    refuses redone by that row's own), then each row's push. The controllers share one :func:`probe_key`.
+    z (B, 2n), ref_h and ref_r (B, rows, 2n), wrench (B, n)."""
+    mg = [c.guidance for c in controllers]
+    steps = mg[0].step_batch(z, ref_h, ref_r, wrench, alone=mg)
+    return [c._pushed(s) for c, s in zip(controllers, steps)]
+
+
+def probed_efforts(
+    controllers: Sequence[ProbedGuidance], z: np.ndarray, ref_h: np.ndarray, ref_r: np.ndarray, wrench: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(u_r (B, n), clean (B,) bool) of :func:`probed_steps`' rows as the point-mass array path takes them
+    (:meth:`~coassist.control.controllers.ManualGuidance.effort_batch`'s contract): where ``clean[b]``, ``u_r[b]`` is
+    ``controllers[b].step(…).u_r`` bit for bit and that step carries no flag, its clock on; elsewhere the row was not
+    stepped (its run leaves the array path and is run again)."""
+    mg = [c.guidance for c in controllers]
+    u, clean = mg[0].effort_batch(z, ref_h, ref_r, wrench, alone=mg)
+    for b in np.flatnonzero(clean).tolist():
+        c = controllers[b]
+        u[b] = u[b] + c._push(c._tick())  # as step: MG's zero effort plus the push (0.0 + r, a −0.0 made +0.0)
+    return u, clean

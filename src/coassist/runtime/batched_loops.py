@@ -10,6 +10,7 @@ would, one period at a time for all of them together::
         args_i = run_i.tick.control_inputs(intent_i)        z, ref_h, ref_r, w
         runs sharing a controller → one step_batch(B rows)  (the game's gains are shared)
         online-α runs of one guard → one arbitrated_step_batch (each run its own α)
+        calibration runs (MG + probe) → one probed_steps     (each run its own probe)
         over_i = run_i.act(k, intent_i, control_i)          safety, command, log, end?
 
 A run that ends (its termination rule, ``n_max``, a safety or robot stop, a lost link)
@@ -55,11 +56,12 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from coassist.control.arbitration import ArbitratedController, arbitrated_step_batch, guard_key
+from coassist.control.probe import probe_key, probed_steps
 from coassist.runtime.loop import LINK_LOST, LoopLog, LoopRun, Termination
 from coassist.runtime.tick import ControlTick
 from coassist.runtime.world import World
 
-__all__ = ["Loop", "arbitrated_groups", "intent_batcher", "run_loops", "shared_controller"]
+__all__ = ["Loop", "arbitrated_groups", "intent_batcher", "probed_groups", "run_loops", "shared_controller"]
 
 
 class Loop(NamedTuple):
@@ -95,6 +97,7 @@ def run_loops(
     batchers = [intent_batcher(run.tick) for run in runs]
     steppers = [shared_controller(run.tick) for run in runs]
     arbitrated = arbitrated_groups([run.tick for run in runs])
+    probed = probed_groups([run.tick for run in runs])
     active = [i for i, run in enumerate(runs) if run.n_max > 0]
     if on_end is not None:
         for i, run in enumerate(runs):
@@ -133,7 +136,7 @@ def run_loops(
             for i, pred in zip(members, preds):
                 runs[i].charge(share)
                 answers[i] = runs[i].accept(pred)
-        controls = _step_controllers(runs, going, answers, steppers, arbitrated, clock, stacks)
+        controls = _step_controllers(runs, going, answers, steppers, arbitrated, probed, clock, stacks)
         active = []
         for i in going:
             if not runs[i].act(k, answers[i], controls.get(i)) and k + 1 < runs[i].n_max:
@@ -187,6 +190,28 @@ def shared_controller(tick: ControlTick) -> Any:
     return controller
 
 
+def probed_groups(ticks: Sequence[ControlTick]) -> list[int | None]:
+    """Per tick, the group of calibration runs (:class:`~coassist.control.probe.ProbedGuidance`, each its own: the
+    probe's clock and phases are the trial's) that one :func:`~coassist.control.probe.probed_steps` may step together
+    (an index; None: the tick steps its controller itself): one :func:`~coassist.control.probe.probe_key` and horizon,
+    two runs or more."""
+    uses: dict[int, int] = {}
+    for tick in ticks:
+        c = tick.controller
+        uses[id(c)] = uses.get(id(c), 0) + 1
+    keys: dict[tuple, list[int]] = {}
+    for i, tick in enumerate(ticks):
+        key = probe_key(tick.controller)
+        if key is not None and uses[id(tick.controller)] == 1:  # a controller two runs share keeps their order
+            # the tick's horizon too: its arguments' rows, which one call stacks
+            keys.setdefault((key, getattr(tick, "H", None)), []).append(i)
+    out: list[int | None] = [None] * len(ticks)
+    for g, members in enumerate(m for m in keys.values() if len(m) > 1):
+        for i in members:
+            out[i] = g
+    return out
+
+
 def arbitrated_groups(ticks: Sequence[ControlTick]) -> list[int | None]:
     """Per tick, the group of online-α runs whose controllers one :func:`~coassist.control.arbitration.arbitrated_step_batch`
     may step together (an index; None: the tick steps its controller itself): an
@@ -214,13 +239,15 @@ def _step_controllers(
     answers: dict[int, Any],
     steppers: list[Any],
     arbitrated: list[int | None],
+    probed: list[int | None],
     clock: Callable[[], float],
     stacks: _Stacks,
 ) -> dict[int, Any]:
     """Run i's controller step for this tick, for the runs whose controller is shared: one
-    ``step_batch`` per controller (row for row its ``step``, bit for bit); and for the online-α
-    runs of one :func:`arbitrated_groups` group: one ``arbitrated_step_batch`` (row for row each
-    run's ``step``, bit for bit). Each run is charged its inputs' time and its share of the call."""
+    ``step_batch`` per controller (row for row its ``step``, bit for bit); for the online-α
+    runs of one :func:`arbitrated_groups` group: one ``arbitrated_step_batch``, and for the calibration
+    runs of one :func:`probed_groups` group one ``probed_steps`` (each row for row each run's ``step``,
+    bit for bit). Each run is charged its inputs' time and its share of the call."""
     groups: dict[Any, tuple[Any, list[int], list[tuple[np.ndarray, ...]]]] = {}
     for i in going:
         controller = steppers[i]
@@ -228,6 +255,8 @@ def _step_controllers(
             key: Any = id(controller)
         elif arbitrated[i] is not None:
             key = ("arbitrated", arbitrated[i])
+        elif probed[i] is not None:
+            key = ("probed", probed[i])
         else:
             continue
         t0 = clock()
@@ -244,8 +273,9 @@ def _step_controllers(
         t0 = clock()
         if len(members) == 1:  # a controller of its own (a drive builds one per run): its step, the same rows
             steps = [runs[members[0]].tick.controller.step(*rows[0])]
-        elif controller is None:  # the online-α runs of one group, each its own controller
-            steps = arbitrated_step_batch(
+        elif controller is None:  # the online-α or calibration runs of one group, each its own controller
+            batch = arbitrated_step_batch if key[0] == "arbitrated" else probed_steps
+            steps = batch(
                 [runs[i].tick.controller for i in members],
                 *(stacks.stack((key, j), column) for j, column in enumerate(zip(*rows))),
             )

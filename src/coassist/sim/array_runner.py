@@ -13,8 +13,9 @@ trials of a group advance as arrays of shape (B, ·): per tick k, for the trials
               (oracle, constant velocity); none (nominal)
     control   z = [x − x0; v], ref_h from the predictions (human_reference, runtime.tick),
               ref_r from the plan → one effort_batch per shared controller; one
-              arbitrated_effort_batch per group of online-α runs (each its own α); any
-              other stateful one: its own step per trial
+              arbitrated_effort_batch per group of online-α runs (each its own α); one
+              probed_efforts per group of calibration runs (MG + the probe: each its own
+              push); any other stateful one: its own step per trial
     safety    contact force, tool speed (the effort stage)   SafetyLayerBatch (runtime.safety)
     world     operator arm (eq. 4.1: delay, adaptation, noise, force limit), board yaw,
               exact ZOH plant, the sensor's next sample        PointMassWorldBatch (sim.point_mass),
@@ -58,7 +59,8 @@ from typing import Any
 import numpy as np
 
 from coassist.control.arbitration import ArbitratedController, arbitrated_effort_batch, guard_key
-from coassist.runtime.batched_loops import Loop, intent_batcher, shared_controller
+from coassist.control.probe import probed_efforts
+from coassist.runtime.batched_loops import Loop, intent_batcher, probed_groups, shared_controller
 from coassist.runtime.intent import WindowIntentBatch
 from coassist.runtime.loop import LoopLog, TargetDwellBatch
 from coassist.runtime.safety import SafetyLayerBatch
@@ -180,6 +182,10 @@ class _Batch:
             if uses[id(c)] == 1 and uses[id(c.game)] == 1:
                 self.arb_gid[i] = keys.setdefault(guard_key(c), len(keys))
         self.n_arb = len(keys)
+        # calibration runs (MG + the probe, each its own clock and phases) of one probe_key: one probed_efforts a tick
+        probed = probed_groups(ticks)
+        self.probe_gid = np.array([-1 if g is None else g for g in probed], dtype=np.intp)
+        self.n_probe = int(self.probe_gid.max(initial=-1)) + 1
         self.nominal = np.array([bool(t.intent.nominal) for t in ticks])
         # rows a prediction must have: the intent stage's need and the controller's horizon
         self.rows_needed = np.maximum([int(getattr(t.intent, "need", 0)) for t in ticks], self.H)
@@ -306,7 +312,21 @@ class _Batch:
                         )
                         left[sel[~ok]] = True
                         u_r[sel[ok]] = u[ok]
-                for j in js[ag < 0].tolist():  # any other: its own step, its horizon
+                pg = rows.probe_gid[js]
+                for a in range(self.n_probe):  # the calibration runs of one key: one batched step, each its own push
+                    sel = js[pg == a]
+                    if sel.size:
+                        h = int(H[sel[0]])
+                        u, ok = probed_efforts(
+                            [self.ticks[i].controller for i in act[sel].tolist()],
+                            z[sel],
+                            ref_h_all[sel, :h],
+                            ref_r_all[sel, :h],
+                            w2[sel],
+                        )
+                        left[sel[~ok]] = True
+                        u_r[sel[ok]] = u[ok]
+                for j in js[(ag < 0) & (pg < 0)].tolist():  # any other: its own step, its horizon
                     h = int(H[j])
                     s = self.ticks[act[j]].controller.step(z[j], ref_h_all[j, :h], ref_r_all[j, :h], w2[j])
                     if s[2]:
@@ -387,6 +407,7 @@ class _Rows:
         self.Hmax = int(self.H.max())
         self.n_max = batch.n_max[act]
         self.arb_gid = batch.arb_gid[act]
+        self.probe_gid = batch.probe_gid[act]
         gid = batch.model_gid[act]
         self.models = []
         for g in range(len(batch.model_list)):

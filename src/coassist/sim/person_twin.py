@@ -169,9 +169,10 @@ def twin_overshoot(
     return None if built is None else _overshoots([built])[0]
 
 
-def _twin_run(trial, intent: np.ndarray, arm, source: PersonPathsIntent | None, obj: str):
+def _twin_run(trial, intent: np.ndarray, arm, source: PersonPathsIntent | None, obj: str, mg: dict | None = None):
     """:func:`twin_overshoot`'s closed loop built, not run: (how to build it again, its episode, the intent on its
-    ticks), or None where it is not run."""
+    ticks), or None where it is not run. ``mg``: MG's controllers by preset, shared by the runs under MG (it keeps no
+    state: runs in lockstep sharing one step it once a tick for all, row for row its step)."""
     if why_no_twin(trial):
         return None
     meta = trial.meta
@@ -183,7 +184,12 @@ def _twin_run(trial, intent: np.ndarray, arm, source: PersonPathsIntent | None, 
     intent = on_ticks(np.asarray(intent, dtype=float), float(meta.dt), step)
 
     def build() -> tuple[Episode, np.ndarray]:
-        controller = make_controller("manual" if source is None else TWIN_CONTROLLER, preset)
+        if source is None and mg is not None:
+            if preset.name not in mg:
+                mg[preset.name] = make_controller("manual", preset)
+            controller = mg[preset.name]
+        else:
+            controller = make_controller("manual" if source is None else TWIN_CONTROLLER, preset)
         episode = build_trial(
             task,
             replace(AUTHOR, name=str(meta.user)),  # a placeholder: its intent and arm are replaced below
@@ -249,13 +255,14 @@ def lead_check(trials: Sequence, fit: PersonFit, settings: PersonFilterSettings,
     full = [intent_estimate(t, fit.arm)[1] for t in trials]
     user = str(trials[0].meta.user)
     runs = []  # each chosen trial's twin under MG, then with the model of the other trials
+    mg: dict = {}  # MG's controller per preset, one for every run under MG
     for i in chosen:
         fold = without_trial(fit, trials, i)  # the model of the other trials
         source = PersonPathsIntent(
             TWIN_HORIZON, paths={user: fold.paths}, arms={user: fit.arm}, settings=settings, model_id="twin"
         )
         try:
-            pair = [_twin_run(trials[i], full[i], fit.arm, way, obj) for way in (None, source)]
+            pair = [_twin_run(trials[i], full[i], fit.arm, way, obj, mg) for way in (None, source)]
         except ValueError as exc:  # a recording the twin cannot take: the calibration goes on, the person led
             return LeadCheck(follow=True, folds=0, note=f"not checked: trial {i + 1} could not be replayed ({exc})")
         if pair[0] is None or pair[1] is None:  # the same plan and its check, with the lead or without

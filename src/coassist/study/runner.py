@@ -125,7 +125,8 @@ class ParticipantRun:
                 + (", or against coassist ur-sim (--robot-host its address)" if self.plan.world == "ur" else "")
             )
         self.id = participant
-        self._check_person_models()  # before the participant is registered: a refusal must not lock the plan
+        if participant not in study.participants():
+            self._check_person_models()  # before the participant is registered: a refusal must not lock the plan
         self.simulate, self.page, self.realtime = simulate, page, realtime
         self.host, self.confirm = host, confirm
         self.say = say or (lambda line: None)
@@ -138,16 +139,17 @@ class ParticipantRun:
 
     def _check_person_models(self) -> None:
         """StudyFolderError in one line where a condition names a person-model folder (``coassist calibrate``) that
-        holds no calibration of this participant: their trials of it would get the present estimate held, the model
-        never applied, and the report would name it (drive, play and collect refuse such a folder as well)."""
+        holds no calibration of this participant (in every world the person at the handle is the participant: the
+        page's user, drive's ``person``): their trials of it would be refused partway through the study, or get the
+        present estimate held while the report names the model."""
         from coassist.control.presets import CONTROL_PRESETS
         from coassist.scenario.assistance import check_person
         from coassist.scenario.intent_registry import intent_folder_kind, load_intent_source
 
         horizon = max(int(CONTROL_PRESETS[self.plan.trials.preset].game.horizon), 2)
         for i, c in enumerate(self.plan.conditions):
-            if intent_folder_kind(c.intent) not in ("person-model", "calibration-draws"):
-                continue  # a network's or a named source: no person in it to check
+            if intent_folder_kind(c.intent) != "person-model":
+                continue  # a network's, a named source or draws (a simulation's own people): no person to check
             try:
                 check_person(
                     load_intent_source(c.intent, horizon=horizon),
@@ -269,6 +271,7 @@ class ParticipantRun:
 
     def run(self) -> bool:
         """Run the steps not yet on record; True once the participant has done all of them."""
+        self._check_person_models()  # a participant resumed (one who finished is not run, and not refused)
         self._refuse_exhausted()
         if self.done:
             self.say(f"{self.id}: resuming at step {len(self.done) + 1} of {len(self.steps)}")

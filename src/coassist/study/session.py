@@ -247,6 +247,9 @@ class StudySession(PlaySession):
             seed=setup.seed,
             intent=setup.intent,
             user=setup.operator or 0,
+            # the person at the handle is the participant, as on the page (play): whose calibration a person model
+            # uses and what every source is told (a simulated participant's arm and paths stay operator `user`'s)
+            person=self.config.user,
             way=setup.way,
             realtime_intent=False if simulated else None,
             **self.drive_options,
