@@ -255,14 +255,14 @@ def lead_check(trials: Sequence, fit: PersonFit, settings: PersonFilterSettings,
     full = [intent_estimate(t, fit.arm)[1] for t in trials]
     user = str(trials[0].meta.user)
     runs = []  # each chosen trial's twin under MG, then with the model of the other trials
-    mg: dict = {}  # MG's controller per preset, one for every run under MG
+    shared_mg: dict = {}  # MG's controller per preset, one for every run under MG
     for i in chosen:
         fold = without_trial(fit, trials, i)  # the model of the other trials
         source = PersonPathsIntent(
             TWIN_HORIZON, paths={user: fold.paths}, arms={user: fit.arm}, settings=settings, model_id="twin"
         )
         try:
-            pair = [_twin_run(trials[i], full[i], fit.arm, way, obj, mg) for way in (None, source)]
+            pair = [_twin_run(trials[i], full[i], fit.arm, way, obj, shared_mg) for way in (None, source)]
         except ValueError as exc:  # a recording the twin cannot take: the calibration goes on, the person led
             return LeadCheck(follow=True, folds=0, note=f"not checked: trial {i + 1} could not be replayed ({exc})")
         if pair[0] is None or pair[1] is None:  # the same plan and its check, with the lead or without
