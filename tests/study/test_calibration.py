@@ -263,15 +263,8 @@ def test_the_report_says_what_used_the_person_model_and_what_it_was_fitted_from(
 def test_the_report_says_who_the_twin_check_turned_away(calibrated_study):
     """A participant whose twin overshot more with the lead got the present estimate held in the calibrated
     condition: the report says so on their person model's row (and summary.json), not the line of one led."""
-    progress = calibrated_study / "participants" / "S01" / "progress.jsonl"
-    lines = [json.loads(line) for line in progress.read_text().splitlines()]
     held = LeadCheck(follow=False, folds=3, person_mm=6.2, mg_mm=2.1, low_mm=1.4, worse=3)
-    for r in lines:
-        if r["kind"] == "fit":
-            r["paths"]["curved"]["lead"] = asdict(held)
-    progress.write_text("".join(json.dumps(r) + "\n" for r in lines))
-    html_path, json_path = write_report(calibrated_study)
-    (p0,) = json.loads(json_path.read_text())["participants"]["S01"]["person_models"]
+    html_path, p0 = _report_with_the_fit(calibrated_study, "lead", asdict(held))
     line = (
         "present estimate held (the lead did not pay): their twin overshot 6.2 mm with the lead, 2.1 mm under MG "
         "(3 trials replayed, more with the lead in 3, the difference's 95 % interval from +1.4 mm)"
@@ -279,16 +272,23 @@ def test_the_report_says_who_the_twin_check_turned_away(calibrated_study):
     assert p0["lead"] == {"curved": line} and f"<td>curved: {escape(line)}</td>" in html_path.read_text()
 
 
-def test_the_report_names_a_way_shown_in_too_few_calibration_trials(calibrated_study):
-    # the fit's record, as if one of the three paths had gone left: both ways thin, each named with what to record
-    progress = calibrated_study / "participants" / "S01" / "progress.jsonl"
+def _report_with_the_fit(study: Path, field: str, value) -> tuple[Path, dict]:
+    """The report of ``study`` after its S01's fit record's curved ``paths`` entry ``field`` is set to ``value``:
+    (report.html, S01's person model in summary.json)."""
+    progress = study / "participants" / "S01" / "progress.jsonl"
     lines = [json.loads(line) for line in progress.read_text().splitlines()]
     for r in lines:
         if r["kind"] == "fit":
-            r["paths"]["curved"]["sides"] = [1, -1, -1]
+            r["paths"]["curved"][field] = value
     progress.write_text("".join(json.dumps(r) + "\n" for r in lines))
-    html_path, json_path = write_report(calibrated_study)
+    html_path, json_path = write_report(study)
     (p0,) = json.loads(json_path.read_text())["participants"]["S01"]["person_models"]
+    return html_path, p0
+
+
+def test_the_report_names_a_way_shown_in_too_few_calibration_trials(calibrated_study):
+    # the fit's record, as if one of the three paths had gone left: both ways thin, each named with what to record
+    html_path, p0 = _report_with_the_fit(calibrated_study, "sides", [1, -1, -1])
     note = (
         "the left way shown in 1 trial only: the model follows that path alone there; record more going left (asked: --ask-way left); "
         "the right way shown in 2 trials only: the model follows those 2 paths alone there; record more going right (asked: --ask-way right)"

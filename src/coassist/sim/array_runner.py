@@ -298,34 +298,26 @@ class _Batch:
             if not js.size:
                 continue
             if controller is None:  # each run's own controller (state between ticks)
-                ag = rows.arb_gid[js]
-                for a in range(self.n_arb):  # the arbitrated runs sharing a guard: one batched step, each its own α
-                    sel = js[ag == a]
-                    if sel.size:
-                        h = int(H[sel[0]])
-                        u, ok = arbitrated_effort_batch(
-                            [self.ticks[i].controller for i in act[sel].tolist()],
-                            z[sel],
-                            ref_h_all[sel, :h],
-                            ref_r_all[sel, :h],
-                            w2[sel],
-                        )
-                        left[sel[~ok]] = True
-                        u_r[sel[ok]] = u[ok]
-                pg = rows.probe_gid[js]
-                for a in range(self.n_probe):  # the calibration runs of one key: one batched step, each its own push
-                    sel = js[pg == a]
-                    if sel.size:
-                        h = int(H[sel[0]])
-                        u, ok = probed_efforts(
-                            [self.ticks[i].controller for i in act[sel].tolist()],
-                            z[sel],
-                            ref_h_all[sel, :h],
-                            ref_r_all[sel, :h],
-                            w2[sel],
-                        )
-                        left[sel[~ok]] = True
-                        u_r[sel[ok]] = u[ok]
+                ag, pg = rows.arb_gid[js], rows.probe_gid[js]
+                # the arbitrated runs sharing a guard (each its own α), the calibration runs of one probe key (each
+                # its own push): one batched step per group
+                for gid, n_groups, batch in (
+                    (ag, self.n_arb, arbitrated_effort_batch),
+                    (pg, self.n_probe, probed_efforts),
+                ):
+                    for a in range(n_groups):
+                        sel = js[gid == a]
+                        if sel.size:
+                            h = int(H[sel[0]])
+                            u, ok = batch(
+                                [self.ticks[i].controller for i in act[sel].tolist()],
+                                z[sel],
+                                ref_h_all[sel, :h],
+                                ref_r_all[sel, :h],
+                                w2[sel],
+                            )
+                            left[sel[~ok]] = True
+                            u_r[sel[ok]] = u[ok]
                 for j in js[(ag < 0) & (pg < 0)].tolist():  # any other: its own step, its horizon
                     h = int(H[j])
                     s = self.ticks[act[j]].controller.step(z[j], ref_h_all[j, :h], ref_r_all[j, :h], w2[j])
