@@ -204,7 +204,7 @@ def probed_groups(ticks: Sequence[ControlTick]) -> list[int | None]:
         key = probe_key(tick.controller)
         if key is not None and uses[id(tick.controller)] == 1:  # a controller two runs share keeps their order
             # the tick's horizon too: its arguments' rows, which one call stacks
-            keys.setdefault((key, getattr(tick, "H", None)), []).append(i)
+            keys.setdefault((key, tick.H), []).append(i)
     out: list[int | None] = [None] * len(ticks)
     for g, members in enumerate(m for m in keys.values() if len(m) > 1):
         for i in members:

@@ -165,14 +165,14 @@ def twin_overshoot(
     (:func:`why_no_twin`) or its plan is not its task's within :data:`PLAN_TOLERANCE` (nothing is run then). The
     trial and ``intent`` are in the task's frame (:func:`lead_check` moves a real arm's there); a trial recorded at
     another rate than its preset's (a 500 Hz arm) is resampled onto the preset's ticks."""
-    built = _twin_run(trial, intent, arm, source, obj)
+    built = _twin_run(trial, intent, arm, source, obj, {})
     return None if built is None else _overshoots([built])[0]
 
 
-def _twin_run(trial, intent: np.ndarray, arm, source: PersonPathsIntent | None, obj: str, mg: dict | None = None):
+def _twin_run(trial, intent: np.ndarray, arm, source: PersonPathsIntent | None, obj: str, mg: dict):
     """:func:`twin_overshoot`'s closed loop built, not run: (how to build it again, its episode, the intent on its
-    ticks), or None where it is not run. ``mg``: MG's controllers by preset, shared by the runs under MG (it keeps no
-    state: runs in lockstep sharing one step it once a tick for all, row for row its step)."""
+    ticks), or None where it is not run. ``mg``: MG's controllers by preset name, filled here, shared by the runs under
+    MG (it keeps no state: runs in lockstep sharing one step it once a tick for all, row for row its step)."""
     if why_no_twin(trial):
         return None
     meta = trial.meta
@@ -184,12 +184,12 @@ def _twin_run(trial, intent: np.ndarray, arm, source: PersonPathsIntent | None, 
     intent = on_ticks(np.asarray(intent, dtype=float), float(meta.dt), step)
 
     def build() -> tuple[Episode, np.ndarray]:
-        if source is None and mg is not None:
+        if source is not None:
+            controller = make_controller(TWIN_CONTROLLER, preset)
+        else:
             if preset.name not in mg:
                 mg[preset.name] = make_controller("manual", preset)
             controller = mg[preset.name]
-        else:
-            controller = make_controller("manual" if source is None else TWIN_CONTROLLER, preset)
         episode = build_trial(
             task,
             replace(AUTHOR, name=str(meta.user)),  # a placeholder: its intent and arm are replaced below
