@@ -125,3 +125,25 @@ def test_an_error_after_trials_have_run_is_one_line_and_the_participant_resumes(
     for block in ("assistive", "impedance", "manual"):
         assert len(read_dataset(pf.block(block)).trials) == 1  # none lost, none run twice
     assert json.loads((study.folder / "participants.json").read_text())["S01"]["number"] == 1
+
+
+def test_a_rest_amended_from_none_says_whom_it_does_not_reach(tmp_path):
+    """A rest of 0 s is no step of an order, and an order is fixed at a participant's first run: an amendment to a
+    rest of some seconds reached only those who began after it, while the docs said it applied from everyone's next
+    run (review, 2026-12-06). It says whom it does not reach, in the output and the record."""
+    study = init_study(comparison_plan(tmp_path / "plans", per_condition=2, practice=0), tmp_path / "study")
+    with ParticipantRun(study, "S01", simulate=True):
+        pass  # S01 begins: their order is written
+    amended = _amended(study.folder, "between_conditions = 30.0", "between_conditions = 30.0\nbetween_trials = 5.0")
+    result = CliRunner().invoke(app, ["study", "amend", str(study.folder), str(amended), "--reason", "tired"])
+    assert result.exit_code == 0, result.output
+    assert "rest.between_trials: 0.0 -> 5.0" in result.output
+    assert "rest.between_trials: S01 began with none there" in " ".join(result.output.split()), result.output
+    (record,) = StudyFolder(study.folder).record["amendments"]
+    assert record["not_reached"] == {"rest.between_trials": ["S01"]}
+    with ParticipantRun(StudyFolder(study.folder), "S02", simulate=True) as run:  # who begins now has the rests
+        assert sum(s["kind"] == "rest" and s["why"] == "between trials" for s in run.steps) == 3
+    # from some seconds to more: everyone's order holds the rests, nobody is left out
+    again = _amended(study.folder, "between_trials = 5.0", "between_trials = 8.0")
+    amended_again = CliRunner().invoke(app, ["study", "amend", str(study.folder), str(again), "--reason", "longer"])
+    assert amended_again.exit_code == 0 and "began with none" not in amended_again.output

@@ -194,6 +194,7 @@ def _set(text: str, table: str, line: str) -> str:
         ("trials", "dwell = 1e300", "trials.dwell"),
         ("trials", "dwell = 20.0", "trials.dwell"),  # longer than the default time limit leaves after the motion
         ("trials", 'arrive_radius = "0.03"', "trials.arrive_radius"),  # a string is not a number
+        ("trials", "arrive_radius = 0.5", "trials.arrive_radius"),  # every task's start is 0.5 m from its target
         ("trials", "motion_time = nan", "trials.motion_time"),
         ("rest", "between_conditions = 1e300", "rest.between_conditions"),
         ("rest", "between_trials = inf", "rest.between_trials"),

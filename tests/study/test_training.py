@@ -312,3 +312,39 @@ def test_the_training_worker_dies_with_its_run_and_a_resume_follows_at_once(tmp_
         for w in workers:
             if _alive(w):
                 os.kill(w, signal.SIGKILL)
+
+
+def test_an_online_study_stopped_while_an_update_trains_resumes_and_freezes_the_last_update(tmp_path, source_model):
+    """A kill -9 while an online update trained (its line recorded, its model not written) left a participant who
+    could never go on: every resume stopped at the freeze with "no online model was trained", or, where an earlier
+    update had finished, froze that one instead of the last (review, 2026-12-06)."""
+    plan = tmp_path / "online.toml"
+    plan.write_text(
+        '[study]\nname = "online"\nprotocol = "online"\nworld = "play"\nparticipants = 1\n\n'
+        f'[online]\nsource_model = "{source_model}"\ntrials = 2\n' + TRIALS + TRAINING
+    )
+    study = init_study(plan, tmp_path / "study")
+    pf = study.participant("S01")
+    with pytest.raises(KeyboardInterrupt):  # the stop: right after the last update's line, while training goes on
+        with ParticipantRun(study, "S01", simulate=True) as run:
+            append = run.folder.append
+
+            def append_then_stop(record):
+                append(record)
+                if record["kind"] == "train" and record["model"] == "online-1":  # two trials: one update
+                    raise KeyboardInterrupt
+
+            run.folder.append = append_then_stop  # type: ignore[method-assign]
+            run.run()
+    lines = pf.progress()
+    assert lines[-1]["kind"] == "train" and lines[-1]["model"] == "online-1"
+    started = [r["model"] for r in lines if r["kind"] == "train" and not r.get("deferred")]
+    assert started == ["online-1"] and not (pf.folder / "models" / started[-1] / "model.json").exists()  # cut off
+    with ParticipantRun(study, "S01", simulate=True) as run:
+        run.run()
+        assert run.complete
+    freeze = next(r for r in pf.progress() if r["kind"] == "freeze")
+    assert freeze["model_from"] == started[-1]  # the last update started, trained again
+    assert (pf.folder / "models" / started[-1] / "model.json").is_file()
+    online = read_dataset(pf.block("online")).trials[0]
+    assert online.meta.model_id.startswith(f"{started[-1]}@")

@@ -81,6 +81,13 @@ def study_amend(
         fail(str(exc), 2)
     for name, (old, new) in amendment["fields"].items():
         console.print(f"{name}: {old!r} -> {new!r}", highlight=False, markup=False)
+    for name, began in amendment.get("not_reached", {}).items():
+        console.print(
+            f"{name}: {', '.join(began)} began with none there (a participant's steps are fixed at their first run): "
+            "the new rest reaches the participants who begin from now",
+            highlight=False,
+            markup=False,
+        )
     wrote(f"{folder} (plan {amendment['to_sha256'][:12]}; the old plan in plans/{amendment['from_sha256']}.toml)")
 
 

@@ -65,14 +65,18 @@ def check_person(
     user: str,
     intent: str,
     fix: str = "name the person at the handle (--person), or calibrate them (coassist calibrate)",
+    *,
+    by_default: bool = True,
 ) -> None:
     """ValueError in one line when ``source`` is a person model (``coassist calibrate``) holding no calibration
-    of ``user`` (the person at the handle): it names who it holds, and ``fix``, what to do."""
+    of ``user`` (the person at the handle): it names who it holds, and ``fix``, what to do. ``by_default``: a model
+    with a default person (a study's own fit names its participant so) serves anyone else with that person's model;
+    False: only the people it holds (a study, where the person at the handle is always the participant)."""
     from coassist.scenario.person_intent import PersonPathsIntent
 
     # the named present-estimate sources are the same class knowing nobody: no person model to check
     fitted = isinstance(source, PersonPathsIntent) and bool(source.arms or source.paths)
-    if fitted and user not in source.arms and source.default_paths is None:
+    if fitted and user not in source.arms and (source.default_paths is None or not by_default):
         held = ", ".join(sorted(source.arms)) or "nobody"
         raise ValueError(f"intent {intent}: the person model holds no calibration of {user!r} (it holds {held}); {fix}")
 

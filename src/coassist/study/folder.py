@@ -66,7 +66,7 @@ from coassist.study.design import blinding_labels, latin_square_rows
 from coassist.study.ids import IdError, check_id
 from coassist.study.plan import StudyPlan, load_plan
 from coassist.study.preflight import SessionEstimate, preflight
-from coassist.study.protocols import condition_names
+from coassist.study.protocols import condition_names, participant_steps
 
 __all__ = [
     "SAFE_FIELDS",
@@ -245,6 +245,7 @@ def amend_study(folder: str | Path, plan_file: str | Path, reason: str) -> dict[
                 f"trial means; a study amends only {', '.join(SAFE_FIELDS)} (anything else: a new study folder)"
             )
     estimate = preflight(new)
+    not_reached = _rests_not_reached(study, new, changed)
     with OutputLock(study.folder / STUDY_NAME):
         record = dict(study.record)
         old_raw = (study.folder / PLAN_NAME).read_bytes()
@@ -258,6 +259,8 @@ def amend_study(folder: str | Path, plan_file: str | Path, reason: str) -> dict[
             "reason": reason.strip(),
             "trials_before": study.any_started(),
         }
+        if not_reached:
+            amendment["not_reached"] = not_reached
         record.update(
             plan_sha256=_sha256(raw),
             plan_dir=str(plan_file.parent.resolve()),
@@ -267,6 +270,34 @@ def amend_study(folder: str | Path, plan_file: str | Path, reason: str) -> dict[
         atomic_write_bytes(study.folder / PLAN_NAME, raw)
         atomic_write_text(study.folder / STUDY_NAME, _json(record))
     return amendment
+
+
+#: The rests whose length an amendment changes, and the steps' ``why`` that take it (the participants' waits while a
+#: model trains take ``between_conditions`` too, but are in every order)
+_PLAN_RESTS = {
+    "rest.between_trials": ("between trials",),
+    "rest.between_conditions": ("between conditions", "after the calibration"),
+}
+
+
+def _rests_not_reached(study: StudyFolder, new: StudyPlan, changed: dict[str, Any]) -> dict[str, list[str]]:
+    """Per rest amended from 0 s to more, the participants who began without it: a rest of 0 s is no step of their
+    order (fixed at their first run), so the new length reaches only those who begin after the amendment."""
+    out: dict[str, list[str]] = {}
+    for name, whys in _PLAN_RESTS.items():
+        if name not in changed or not (changed[name][0] == 0 and changed[name][1] > 0):
+            continue
+        fresh = participant_steps(new, study.labels, 1, 0)
+        if not any(s["kind"] == "rest" and s.get("why") in whys for s in fresh):
+            continue  # the protocol places none (one trial per condition): nobody misses it
+        began = [
+            pid
+            for pid, order in study.started().items()
+            if not any(s.get("kind") == "rest" and s.get("why") in whys for s in order.get("steps", []))
+        ]
+        if began:
+            out[name] = began
+    return out
 
 
 class StudyFolder:

@@ -157,6 +157,7 @@ class ParticipantRun:
                     c.intent,
                     fix="calibrate them into it (coassist calibrate), or let the study calibrate each participant: "
                     'intent = "calibrated" and a [calibration] block (docs/study.md)',
+                    by_default=False,  # another participant's own fit (its default is them) is not this one's
                 )
             except (ValueError, OSError) as exc:
                 raise StudyFolderError(f"condition[{i}] ({c.name}): {exc}") from None
@@ -630,6 +631,11 @@ class ParticipantRun:
         for name in self._online_models():  # the last update, if one is still training
             if self.training.running(name):
                 self.training.wait(name)
+        # the last update started, trained again if a stop cut it off (a kill -9 while it trained): the run that was
+        # not stopped froze it once it finished, and training is deterministic (the same model)
+        started = [n for n in self._train_jobs() if n in self._online_models()]
+        if started:
+            self._ensure_model(started[-1])
         newest = self._newest_online()
         if newest is None:
             raise StudyFolderError("no online model was trained (every update failed?)")
