@@ -359,7 +359,8 @@ def test_trials_that_never_reached_the_target_are_counted_not_silently_dropped(t
     html_path, json_path = write_report(s.folder)
     j = json.loads(json_path.read_text())
     covered = {"f_rms": 2, "sigma": 1, "overshoot": 1, "jerk": 2, "time_to_target": 1, "e_rms": 2}
-    count = {"n": 2, "reached": 1, "missed": 1, "miss_rate": 0.5, "covered": covered, "repeated": 0}
+    # the trial that reached the 4 mm ball left it again and ended at the time limit: unfinished, and said so
+    count = {"n": 2, "reached": 1, "missed": 1, "miss_rate": 0.5, "covered": covered, "repeated": 0, "unfinished": 1}
     blocks = ["assistive", "impedance", "manual"]
     assert j["participants"]["S01"]["trials"] == {b: count for b in blocks}
     assert j["trials"] == {b: count for b in blocks}
@@ -369,7 +370,15 @@ def test_trials_that_never_reached_the_target_are_counted_not_silently_dropped(t
         assert j["participants"]["S01"]["means"][b]["time_to_target"] == pytest.approx(
             next(v for v in ttt if not math.isnan(v)), rel=1e-12
         )
+    assert [t.meta.extra["ended"] for b in blocks for t in read_block(s.participant("S01").block(b))] == [
+        "time_limit"
+    ] * 6
     assert j["limits"][-1] == (
+        "3 of 6 measured trials ended otherwise than held in the target for the dwell, at the time limit or a stop "
+        "(assistive: 1 of 2; impedance: 1 of 2; manual: 1 of 2): one whose tool entered the target's ball and left it "
+        "again counts as reached, and its σ and time to target are those of a trial that did not finish."
+    )
+    assert j["limits"][-2] == (
         "3 of 6 measured trials never reached the target (assistive: 1 of 2; impedance: 1 of 2; manual: 1 of 2): "
         "their σ, overshoot and time to target are undefined and left out of those means (each participant's mean "
         "is over the trials that reached it; the counts are in the table of trials), so a condition that misses "
@@ -380,8 +389,8 @@ def test_trials_that_never_reached_the_target_are_counted_not_silently_dropped(t
     name = {b: f"{b} ({s.labels[b]})" for b in blocks}
     assert parser.tables[2] == [
         ["", *name.values()],
-        ["S01", *["1 of 2 (1 missed)"] * 3],
-        ["all", *["1 of 2 (missed 1, 50 %)"] * 3],
+        ["S01", *["1 of 2 (1 missed); 1 unfinished"] * 3],
+        ["all", *["1 of 2 (missed 1, 50 %; 1 ended at the time limit or a stop)"] * 3],
     ]
 
 

@@ -181,8 +181,13 @@ def test_a_transfer_study_trains_the_frozen_lstm_transfer_as_coassist_train(tmp_
     assert any(not np.array_equal(src[k], tl[k]) for k in src if k.startswith("head"))
     from coassist.study.report import write_report
 
-    html, _ = write_report(study.folder)
+    html, summary = write_report(study.folder)
     assert "transferred (" in html.read_text() and "transfer-set" in html.read_text()
+    # the collection names the model in its loop, the source folder the plan named (it said None: review, 2026-12-06)
+    import json
+
+    models = json.loads(summary.read_text())["collections"]["S01"]["transfer-set"]["models"]
+    assert len(models) == 3 and all(m.startswith("source@") for m in models), models
 
 
 def test_online_adaptation_never_delays_the_loop_and_meets_the_offline_transfer(tmp_path, source_model):

@@ -164,8 +164,14 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str], form: For
         data["blocks"][b] = {
             "trials": per_trial,
             "means": {k: _nanmean(m[k] for m in per_trial) for k, *_ in MEASURES},
-            "models": [t.meta.extra.get("study_model") for t in trials],
-            "count": _count(per_trial, [int(t.meta.extra.get("attempts", 1)) for t in trials]),
+            # the model in the loop: one the study trained, by its name; else what the trial records (a model folder
+            # the plan names, e.g. a transfer's source: its name and hash)
+            "models": [t.meta.extra.get("study_model") or t.meta.model_id or None for t in trials],
+            "count": _count(
+                per_trial,
+                [int(t.meta.extra.get("attempts", 1)) for t in trials],
+                [t.meta.extra.get("ended") for t in trials],
+            ),
             # a block cut short (the participant stopped mid-condition) has fewer trials, of other tasks: its
             # mean is not paired with the other blocks' and stays out of the pooled numbers
             "partial": len(trials) < planned.get(b, 0),
@@ -173,15 +179,21 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str], form: For
     return data
 
 
-def _count(per_trial: list[dict[str, float]], attempts: list[int]) -> TrialCount:
+def _count(per_trial: list[dict[str, float]], attempts: list[int], ended: list[Any]) -> TrialCount:
     """A block's trials counted: how many, how many reached the target (a finite time to target), per measure
-    how many gave a finite value (what its mean is over), and how many were started more than once (``attempts``:
-    each trial's starts, ``meta.extra["attempts"]``; 1 where a trial does not record it)."""
+    how many gave a finite value (what its mean is over), how many were started more than once (``attempts``:
+    each trial's starts, ``meta.extra["attempts"]``; 1 where a trial does not record it) and how many of those that
+    reached it ended otherwise than held there (``ended``: each trial's ``meta.extra["ended"]``; None where not
+    recorded)."""
     return TrialCount(
         n=len(per_trial),
         reached=sum(1 for m in per_trial if math.isfinite(m["time_to_target"])),
         covered={k: sum(1 for m in per_trial if math.isfinite(m[k])) for k, *_ in MEASURES},
         repeated=sum(1 for a in attempts if a > 1),
+        # entered the ball, and yet ended otherwise than held there: counted reached, a trial that did not finish
+        unfinished=sum(
+            1 for m, e in zip(per_trial, ended) if math.isfinite(m["time_to_target"]) and e not in (None, "target")
+        ),
     )
 
 
@@ -192,6 +204,7 @@ def _total(counts: list[TrialCount]) -> TrialCount:
         reached=sum(c.reached for c in counts),
         covered={k: sum(c.covered.get(k, 0) for c in counts) for k, *_ in MEASURES},
         repeated=sum(c.repeated for c in counts),
+        unfinished=sum(c.unfinished for c in counts),
     )
 
 
@@ -203,6 +216,11 @@ _COUNT_NOTES = {
         "counts are in the table of trials), so a condition that misses more can look better on them than it is; "
         "f_RMS and jerk are over every trial."
     ),
+    "unfinished": (
+        "{k} of {n} measured trials ended otherwise than held in the target for the dwell, at the time limit or a "
+        "stop ({where}): one whose tool entered the target's ball and left it again counts as reached, and its σ and "
+        "time to target are those of a trial that did not finish."
+    ),
     "repeated": (
         "{k} of {n} measured trials were started again after the person aborted them or their hand left ({where}): "
         "only the attempt that ran to its end is measured, so a condition people break off more often may look "
@@ -212,7 +230,7 @@ _COUNT_NOTES = {
 
 
 def _count_note(totals: Mapping[str, TrialCount], what: str) -> tuple[str, ...]:
-    """The line of :data:`_COUNT_NOTES` for the field ``what`` (``missed``, ``repeated``) of the blocks' counts; none
+    """The line of :data:`_COUNT_NOTES` for the field ``what`` (``missed``, ``unfinished``, ``repeated``) of the blocks' counts; none
     where no trial has it."""
     some = {b: getattr(c, what) for b, c in totals.items() if getattr(c, what)}
     if not some:
@@ -545,6 +563,7 @@ def summarise_study(folder: str | Path) -> StudySummary:
         limits=tuple(comparison_limits(comparisons, simulated))
         + _unpaired_note(comparisons, pooled, per_participant, blocks)
         + _count_note(totals, "missed")
+        + _count_note(totals, "unfinished")
         + _count_note(totals, "repeated")
         + _partial_note({pid: bs for pid, bs in partial.items() if bs}),
         collections={

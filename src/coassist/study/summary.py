@@ -258,12 +258,16 @@ class TrialCount:
     of them entered the target's ε-ball (a finite time to target), ``missed`` = n − reached never did, and
     ``covered``: per measure, how many trials gave it a finite value, the trials its mean is over (σ, overshoot and
     time to target are undefined for a trial that missed the target: left out of their means); ``repeated``: how many
-    were started more than once (the person aborted it, or their hand left, and it was shown again)."""
+    were started more than once (the person aborted it, or their hand left, and it was shown again); ``unfinished``:
+    how many ended otherwise than held in the target for the dwell (the time limit, a safety stop): a trial whose tool
+    entered the ball once and left it again counts as reached, and its σ and time to target are a trial's that did
+    not finish (a trial that never reached it is missed, not unfinished)."""
 
     n: int
     reached: int
     covered: Mapping[str, int] = field(default_factory=dict)
     repeated: int = 0  # of the n, trials started more than once (aborted on the page, or the hand left, first)
+    unfinished: int = 0  # of the reached, trials that ended otherwise than held in the target (the time limit, a stop)
 
     @property
     def missed(self) -> int:
@@ -281,6 +285,7 @@ class TrialCount:
             "miss_rate": self.miss_rate,
             "covered": dict(self.covered),
             "repeated": self.repeated,
+            "unfinished": self.unfinished,
         }
 
     @classmethod
@@ -290,6 +295,7 @@ class TrialCount:
             reached=int(d["reached"]),
             covered={k: int(v) for k, v in d["covered"].items()},
             repeated=int(d.get("repeated", 0)),  # summaries written before it was counted
+            unfinished=int(d.get("unfinished", 0)),  # the same
         )
 
 
