@@ -403,3 +403,55 @@ def test_a_first_pose_that_is_not_finite_is_refused_before_anything_moves():
     finally:
         world.close()
     assert len(world.reads) == 1 and all(c.stop for c in world.sent)
+
+
+class _CtrlC:
+    """An on_tick that presses Ctrl-C at tick ``at`` (the interrupt arrives inside the loop, as a signal's does)."""
+
+    def __init__(self, at: int) -> None:
+        self.at = at
+
+    def __call__(self, k, state, out) -> None:
+        if k == self.at:
+            raise KeyboardInterrupt
+
+
+def test_ctrl_c_stops_the_arm_and_the_ticks_before_it_make_the_trial(tmp_path, monkeypatch):
+    """Ctrl-C during drive lost the whole trial and said nothing (review, 2026-12-06): the arm was stopped, no file.
+    Now the world is stopped as on any failure, the ticks finished before the interrupt make a trial (``ended``
+    "interrupted"), and ``coassist drive`` writes it, says so and exits 130; a caller that does not look for it sees
+    a KeyboardInterrupt as before."""
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+    from coassist.runtime.loop import RunInterrupted
+
+    cfg = DriveConfig(controller="manual", task="linear", time_limit=2.0)
+    stops = []
+    real_stop = MujocoUR5World.stop
+    monkeypatch.setattr(MujocoUR5World, "stop", lambda self: (stops.append(True), real_stop(self))[1])
+    with pytest.raises(KeyboardInterrupt) as caught:
+        drive(cfg, on_tick=_CtrlC(40))
+    stop = caught.value
+    assert isinstance(stop, RunInterrupted) and stops  # the world was told to stop
+    trial = stop.trial
+    assert trial.n_samples == 40 and trial.meta.extra["ended"] == "interrupted"
+    whole = drive(cfg)  # the same run, not interrupted: its first 40 ticks are the interrupted one's
+    assert np.array_equal(trial.pose, whole.pose[:40]) and np.array_equal(trial.wrench, whole.wrench[:40])
+    with pytest.raises(RunInterrupted) as early:  # before the first tick finished: nothing to make a trial of
+        drive(cfg, on_tick=_CtrlC(0))
+    assert early.value.trial is None
+
+    import coassist.robot.drive as drive_module
+
+    real = drive_module.drive
+    monkeypatch.setattr(drive_module, "drive", lambda config, **kw: real(config, on_tick=_CtrlC(25), **kw))
+    out = tmp_path / "cut.parquet"
+    result = CliRunner().invoke(
+        app,
+        ["drive", "--world", "mujoco", "--controller", "manual", "--task", "linear", "--out", str(out), "--no-plot"],
+    )
+    assert result.exit_code == 130, result.output
+    assert "interrupted (Ctrl-C): the ticks before it are written" in result.output
+    kept = read_trial(out)
+    assert kept.n_samples == 25 and kept.meta.extra["ended"] == "interrupted"

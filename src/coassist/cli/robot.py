@@ -15,6 +15,7 @@ from coassist.cli._common import (
     SCENE_HELP,
     STABILITY_HELP,
     choose,
+    err_console,
     fail,
     floats,
     lookup,
@@ -139,20 +140,27 @@ def drive(
     confirm = confirm_move(yes, "the teach pendant's emergency stop")
     live = open_live(foxglove)
     try:
+        from coassist.robot.ros2_world import UR_JOINT_NAMES  # (no rclpy needed for the names)
+        from coassist.runtime.loop import RunInterrupted
+
+        # The UR's joint names; another arm's joints are named joint_1 … joint_n in the MCAP.
+        names = UR_JOINT_NAMES if config.robot == "ur5" else None
+        alpha = run_alpha(preset, controller) if mcap else None
         try:
             trial = run_drive(
                 config, host=host, view=view, confirm=None if WORLDS[world].simulated else confirm, live=live, say=say
             )
         except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
             fail(str(exc))
-        from coassist.robot.ros2_world import UR_JOINT_NAMES  # (no rclpy needed for the names)
-
-        # The UR's joint names; another arm's joints are named joint_1 … joint_n in the MCAP.
-        names = UR_JOINT_NAMES if config.robot == "ur5" else None
+        except RunInterrupted as stop:  # Ctrl-C: the arm stopped; the ticks before it are written, as on an error
+            if stop.trial is None:
+                err_console.print("interrupted (Ctrl-C) before the first tick: nothing to write", markup=False)
+            else:
+                write_run(stop.trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=names)
+                err_console.print("interrupted (Ctrl-C): the ticks before it are written", markup=False)
+            raise typer.Exit(130) from None
         # the run is written before the live view closes, as ros2 does: whatever became of the view, the trial is kept
-        write_run(
-            trial, out, alpha=run_alpha(preset, controller) if mcap else None, mcap=mcap, plot=plot, joint_names=names
-        )
+        write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=names)
     finally:
         close_live(live)
 

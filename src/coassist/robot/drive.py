@@ -55,6 +55,7 @@ from coassist.interfaces import FEATURES
 from coassist.robot.worlds import WORLDS, ArmWorld, HandWorld, WorldRequest, arm_worlds, build_world, missing_members
 from coassist.runtime.episode import EpisodeLabels, build_episode, episode_ticks, plan_grid
 from coassist.runtime.intent import RealtimeIntent, WindowIntent
+from coassist.runtime.loop import RunInterrupted
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.safety_limits import SafetyLimits
 from coassist.runtime.tick import TickConfig
@@ -411,6 +412,7 @@ def drive(
         run; ``joint_names`` name its joint states (default: the UR's for a UR5, else joint_1 …).
     """
     run = _prepare(config, operator=operator, world=world, host=host, view=view, intent_source=intent_source)
+    interrupted: RunInterrupted | None = None
     try:
         if say is not None:
             say(run.assistance)
@@ -422,9 +424,16 @@ def drive(
 
                 joint_names = UR_JOINT_NAMES
             on_tick = live.watch(run.episode, on_tick, joint_names=joint_names)
-        log = run.episode.run(deadline=config.dt if run.world.realtime else None, on_tick=on_tick)
+        try:
+            log = run.episode.run(deadline=config.dt if run.world.realtime else None, on_tick=on_tick)
+        except RunInterrupted as stop:  # Ctrl-C: the arm stopped, the ticks before it made a trial (below)
+            interrupted, log = stop, stop.log
     finally:
         run.close()
+    if interrupted is not None:
+        if log.n:
+            interrupted.trial = run.finish(log)
+        raise interrupted
     return run.finish(log)
 
 

@@ -45,7 +45,7 @@ from coassist.interfaces import Fault
 from coassist.runtime.tick import ControlTick
 from coassist.runtime.world import RobotState, World, finite_vector, optional_member
 
-__all__ = ["LINK_LOST", "LoopLog", "LoopRun", "TargetDwell", "TargetDwellBatch", "run_loop"]
+__all__ = ["LINK_LOST", "LoopLog", "LoopRun", "RunInterrupted", "TargetDwell", "TargetDwellBatch", "run_loop"]
 
 Termination = Callable[[int, np.ndarray], bool]
 
@@ -175,13 +175,31 @@ def run_loop(
     not block). Returns the :class:`LoopLog`; the world is left at rest but not closed.
     """
     run = LoopRun(world, tick, n_max, termination, deadline=deadline, on_tick=on_tick, clock=clock)
-    for k in range(n_max):
-        row = run.sense(k)
-        if row is LINK_LOST:
-            break
-        if run.act(k, None if row is None else run.predict(k, row)):
-            break
+    k = 0
+    try:
+        for k in range(n_max):
+            row = run.sense(k)
+            if row is LINK_LOST:
+                break
+            if run.act(k, None if row is None else run.predict(k, row)):
+                break
+    except KeyboardInterrupt:
+        # Ctrl-C: the world stopped as on any failure, the ticks finished before it kept (tick k was cut off
+        # wherever it was), and the interrupt goes on to the caller with them
+        run.interrupt(k)
+        raise RunInterrupted(run.log()) from None
     return run.log()
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a run (:func:`run_loop`): the world was stopped; ``log`` holds the ticks finished before it
+    (``ended = "interrupted"``) and ``trial``, where the caller made one of them (``coassist drive`` writes it), that
+    trial. A KeyboardInterrupt still: whoever does not look for it stops as before."""
+
+    def __init__(self, log: LoopLog) -> None:
+        super().__init__(f"interrupted after {log.n} ticks")
+        self.log = log
+        self.trial: Any = None
 
 
 #: The intent stage's answer where the stage itself raised: no prediction (the plan's rows), flagged as a failing
@@ -362,6 +380,10 @@ class LoopRun:
         """Charge the current tick with work done for it elsewhere (a share of a batched network
         call); ``split`` runs only, between :meth:`sense` and :meth:`act`."""
         self._spent += seconds
+
+    def interrupt(self, k: int) -> None:
+        """Ctrl-C during tick k: end the run with rows 0 … k−1 and stop the world."""
+        self._failed(min(k, self.n), "interrupted", f"stopped by Ctrl-C at tick {k}; the arm was stopped")
 
     def _world_failed(self, k: int, exc: Exception, where: str) -> None:
         """The world's ``read`` or ``apply`` of tick k raised: end the run with rows 0 … k−1."""
