@@ -197,6 +197,21 @@ def test_the_statement_names_the_scene_for_paths():
     ]
 
 
+def test_a_scene_box_on_the_plans_start_or_target_is_refused_before_the_arm_moves():
+    """A box of the scene file holding the plan's start (where the tool stands) or its target was taken as given:
+    the path hypotheses led the tool round it, 10.9 N of hand force against MG's 6.3 (review, 2026-12-06). Refused
+    in one line naming the box, before anything moves (the linear plan from −0.1 to 0.4 m at y = −0.615 m)."""
+    from coassist.scenario.scene import SceneError
+
+    for center, what in (((-0.1, -0.615), "start (where the tool stands)"), ((0.4, -0.615), "target")):
+        scene = Scene((SceneBox(center, (0.12, 0.12), "crate"),), "lab/scene.toml")
+        with pytest.raises(SceneError) as err:
+            drive(DriveConfig(task="linear", intent="paths", scene=scene, time_limit=0.2))
+        msg = str(err.value)
+        assert msg.startswith("scene lab/scene.toml: obstacle 1 (crate)") and f"holds the plan's {what}" in msg, msg
+        assert "\n" not in msg
+
+
 def test_the_commands_say_what_the_person_gets_and_refuse_bad_lab_inputs(tmp_path):
     from typer.testing import CliRunner
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any, NoReturn
 
 import click
 import typer
@@ -13,6 +14,7 @@ from rich.markup import escape
 
 from coassist.cli._common import (
     console,
+    err_console,
     fail,
     file_out,
     need_bags,
@@ -137,3 +139,23 @@ def write_run(
         from coassist.sim.monitor import plot_trial
 
         wrote(str(plot_trial(trial, path.with_suffix(".png"))))
+
+
+def write_interrupted(
+    stop: Any,
+    out: Path,
+    *,
+    alpha: float | None,
+    mcap: bool,
+    plot: bool,
+    joint_names: Sequence[str] | None,
+    frame_id: str = "base",
+) -> NoReturn:
+    """Ctrl-C during a drive/ros2 run (``stop``: :class:`~coassist.runtime.loop.RunInterrupted`, the arm already
+    stopped): the ticks before it written as :func:`write_run` writes a run, a line saying so, exit status 130."""
+    if stop.trial is None:
+        err_console.print("interrupted (Ctrl-C) before the first tick: nothing to write", markup=False)
+    else:
+        write_run(stop.trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=joint_names, frame_id=frame_id)
+        err_console.print("interrupted (Ctrl-C): the ticks before it are written", markup=False)
+    raise typer.Exit(130)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from coassist.cli._arm_runs import DRIVE_OPTIONS, confirm_move, run_alpha, run_out, write_run
+from coassist.cli._arm_runs import DRIVE_OPTIONS, confirm_move, run_alpha, run_out, write_interrupted, write_run
 from coassist.cli._common import (
     ARM_CONTROLLER_HELP,
     ASK_WAY_HELP,
@@ -15,7 +15,6 @@ from coassist.cli._common import (
     SCENE_HELP,
     STABILITY_HELP,
     choose,
-    err_console,
     fail,
     floats,
     lookup,
@@ -153,12 +152,7 @@ def drive(
         except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
             fail(str(exc))
         except RunInterrupted as stop:  # Ctrl-C: the arm stopped; the ticks before it are written, as on an error
-            if stop.trial is None:
-                err_console.print("interrupted (Ctrl-C) before the first tick: nothing to write", markup=False)
-            else:
-                write_run(stop.trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=names)
-                err_console.print("interrupted (Ctrl-C): the ticks before it are written", markup=False)
-            raise typer.Exit(130) from None
+            write_interrupted(stop, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=names)
         # the run is written before the live view closes, as ros2 does: whatever became of the view, the trial is kept
         write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=names)
     finally:

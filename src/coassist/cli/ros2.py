@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from coassist.cli._arm_runs import DRIVE_OPTIONS, confirm_move, run_alpha, run_out, write_run
+from coassist.cli._arm_runs import DRIVE_OPTIONS, confirm_move, run_alpha, run_out, write_interrupted, write_run
 from coassist.cli._common import (
     ARM_CONTROLLER_HELP,
     ASK_WAY_HELP,
@@ -130,6 +130,7 @@ def ros2(
     from coassist.robot.drive import DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World
+    from coassist.runtime.loop import RunInterrupted
     from coassist.runtime.safety_limits import SafetyLimits
     from coassist.scenario.objects import OBJECTS
 
@@ -204,6 +205,10 @@ def ros2(
                 world.close()
         except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
             fail(str(exc))
+        except RunInterrupted as stop:  # Ctrl-C: the arm stopped; the ticks before it are written, as on an error
+            write_interrupted(
+                stop, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=rcfg.joint_names, frame_id=rcfg.base_frame
+            )
         # the run is written before the live view closes: whatever became of the view, the trial is kept
         write_run(
             trial,

@@ -67,9 +67,9 @@ from coassist.scenario.objects import OBJECTS, get_object
 from coassist.scenario.operator import OperatorArm, asked_to_go, intent_trajectory, motor_noise
 from coassist.scenario.path_model import ASKED_WAY, check_way
 from coassist.scenario.populations import POPULATIONS, population_profile
-from coassist.scenario.scene import Scene
+from coassist.scenario.scene import Scene, SceneError
 from coassist.scenario.seeds import trial_rngs
-from coassist.scenario.tasks import OBSTACLES, TASKS, task_for_seed
+from coassist.scenario.tasks import OBSTACLES, TASKS, Box, task_for_seed
 
 logger = logging.getLogger(__name__)
 
@@ -506,6 +506,23 @@ class _PreparedDrive:
         return self.episode.finish(log, {"sensor_bias": [float(v) for v in self.wrench.bias]})
 
 
+def _check_scene(scene: Scene, start: np.ndarray, target: np.ndarray) -> None:
+    """ValueError in one line, nothing moved, where a box of the lab's scene file holds the plan's start (where the
+    tool stands) or its target: no person can take the tool there, and a source told of it leads the tool round a
+    box that is not where the file says (most often the file is in another frame than the robot's base, or in mm)."""
+    for i, b in enumerate(scene.boxes):
+        center, size = b.center, b.size
+        box = Box(center, size)
+        for what, point in (("start (where the tool stands)", start), ("target", target)):
+            if float(box.signed_distance(np.asarray(point, dtype=float))) <= 0.0:
+                named = f"obstacle {i + 1}" + (f" ({b.name})" if b.name else "")
+                raise SceneError(
+                    f"scene {scene.source}: {named} (centre {center[0]:.3f}, {center[1]:.3f} m, size "
+                    f"{size[0]:.3f} × {size[1]:.3f} m) holds the plan's {what} at {point[0]:.3f}, {point[1]:.3f} m: "
+                    "a box there cannot be; give the obstacles in the robot's base frame, in metres"
+                )
+
+
 def _release(world: Any, built_here: bool, intent_stage: Any) -> None:
     """Close the world if the drive built it, and a real-time predictor's worker."""
     try:
@@ -605,6 +622,8 @@ def _prepare(
             ref_abs = ref_abs.copy()
             ref_abs[:, :2] += shift
             target = target + shift
+        if config.scene is not None:
+            _check_scene(config.scene, ref_abs[0, :2], target[:2])
         if operator is None and hand is not None:
             noise = motor_noise(profile, rng_motor, ref_abs.shape[0], dt)  # as long as the intent: stop() may step on
             arm = OperatorArm(profile, intent_pos, dt, noise)
