@@ -455,3 +455,17 @@ def test_ctrl_c_stops_the_arm_and_the_ticks_before_it_make_the_trial(tmp_path, m
     assert "interrupted (Ctrl-C): the ticks before it are written" in result.output
     kept = read_trial(out)
     assert kept.n_samples == 25 and kept.meta.extra["ended"] == "interrupted"
+
+
+def test_full_pose_says_it_runs_without_the_stability_guard():
+    """The guard watches x-y control: with --full-pose it was dropped without a word, --stability-guard given or not
+    (review, 2026-12-06). The assistance line says so; the trial records no guard; x-y control keeps it."""
+    said: list[str] = []
+    full = drive(DriveConfig(task="linear", full_pose=True, time_limit=0.2), say=said.append)
+    planar = drive(DriveConfig(task="linear", time_limit=0.2), say=said.append)
+    assert said[0].endswith("; no stability guard (it watches x-y control, not the full pose)"), said[0]
+    assert full.meta.extra["stability_guard"] is None
+    assert "(the stability guard)" in said[1] and planar.meta.extra["stability_guard"] is not None
+    off: list[str] = []  # turned off: nothing to say
+    drive(DriveConfig(task="linear", full_pose=True, time_limit=0.2, stability=None), say=off.append)
+    assert "stability guard" not in off[0]

@@ -92,6 +92,11 @@ def test_probe_trials_recorded_by_drive_fit_a_person_model(probe_trials, tmp_pat
     # a person it holds no calibration of is refused before anything moves
     with pytest.raises(ValueError, match=r"holds no calibration of 'bob' \(it holds alice\).*--person"):
         drive(DriveConfig(task="linear", intent=str(folder), person="bob", time_limit=0.2))
+    # and by play, whose option is --user (its line named --person, an option play does not have: review, 2026-12-06)
+    from coassist.play.session import PlayConfig, PlaySession
+
+    with pytest.raises(ValueError, match=r"holds no calibration of 'bob' \(it holds alice\); play as .*\(--user\)"):
+        PlaySession(PlayConfig(user="bob", out=tmp_path / "play", controllers=("cooperative",), intent=str(folder)))
 
 
 class _Told:

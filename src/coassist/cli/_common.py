@@ -273,7 +273,8 @@ STABILITY_HELP = (
     "The stability guard on the assistive controllers (x-y): once the hand force, low-passed over 0.5 s, passes "
     "20 N while it turns (an oscillation, not a push held one way) the robot becomes a damper for the rest of the "
     "run (a stiff person behind a long reflex delay can fall into a limit cycle with assistance that follows their "
-    "force; docs/robots.md). Off: the controller as it is."
+    "force; docs/robots.md). Off: the controller as it is. Not with --full-pose (it watches x-y control): the "
+    "assistance line says so."
 )
 
 

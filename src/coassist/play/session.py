@@ -247,7 +247,12 @@ class PlaySession:
         H = int(self.preset.game.horizon)
         self.source = load_intent_source(config.intent, horizon=max(H, 2))
         if not getattr(self, "watch_only", False):  # a monitored drive checks its own person (robot.drive)
-            check_person(self.source, config.user, config.intent)
+            check_person(
+                self.source,
+                config.user,
+                config.intent,
+                fix="play as a person it holds (--user), or calibrate them (coassist calibrate)",
+            )
         if int(self.source.horizon) < H:
             raise ValueError(f"the intent model predicts {self.source.horizon} steps; the controller needs {H}")
         model = getattr(self.source, "model", None)

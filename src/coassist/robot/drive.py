@@ -717,6 +717,9 @@ def _prepare(
             assistance += (
                 f"; a damper if the hand force oscillates above {guarded.force_threshold:g} N (the stability guard)"
             )
+        elif config.full_pose and config.controller in GUARDED_CONTROLLERS and config.stability is not None:
+            # asked for (its default), but the guard watches x-y control alone: said, not dropped silently
+            assistance += "; no stability guard (it watches x-y control, not the full pose)"
         if config.realtime_intent and intent_source is None and not needs_network(config.intent):
             # asked for a real-time predictor where there is none to run: say what it does instead
             assistance += (

@@ -386,6 +386,18 @@ class URRTDEWorld:
             # the state at the controller's own rate (500 Hz e-Series, 125 Hz CB3): each read() gets a
             # sample at most one controller step old, whatever the loop's rate
             self._rtde_r = receive_factory(host, -1.0)
+        except ImportError:
+            raise
+        except Exception as exc:
+            raise RobotLinkError(f"could not connect to the UR at {host}: {exc}; {connect_hint(host, exc)}") from exc
+        # every controller streams at least 125 Hz: a faster loop needs an e-Series (500 Hz). Asked of the stream
+        # before the control interface opens: a CB3's refuses a 500 Hz recipe with a timeout that names nothing
+        if freq > 125.0 and 1.0 / freq < self._stream_step() - 1e-9:
+            raise RobotLinkError(
+                f"the UR at {host} streams its state every {self._stream_step() * 1e3:g} ms: a {freq:g} Hz loop "
+                "would run ahead of it; pass frequency=125 (a CB3) or -1"
+            )
+        try:
             before = socket_fds()
             self._rtde_c = control_factory(host, freq)
             self._watch = self._watch_control_socket(before)
@@ -411,12 +423,6 @@ class URRTDEWorld:
             # ur-rtde's -1 picks 500 Hz on an e-Series and 125 Hz on a CB3. getStepTime cannot
             # tell which (module docstring): the stream's timestamps advance one step per package.
             self.step_time = self.dt = self._stream_step()
-        # every controller streams at least 125 Hz: a faster loop needs an e-Series (500 Hz)
-        if freq > 125.0 and 1.0 / freq < self._stream_step() - 1e-9:
-            raise RobotLinkError(
-                f"the UR at {host} streams its state every {self._stream_step() * 1e3:g} ms: a {freq:g} Hz loop "
-                "would run ahead of it; pass frequency=125 (a CB3) or -1"
-            )
         if self.zero_sensor:
             # Zero with the tool still and nobody touching it (module docstring).
             self._require(self._call_c("zeroFtSensor"), "zeroFtSensor")
