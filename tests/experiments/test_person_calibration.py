@@ -601,3 +601,27 @@ def test_the_summary_says_whether_the_model_leads_the_person(alice):
         "; present estimate held (the lead did not pay): their twin overshot 5.0 mm with the lead, 2.0 mm under MG "
         "(4 trials replayed)" in summary_line(held)
     )
+
+
+def test_a_trial_the_safety_layer_held_to_its_limits_is_refused_naming_it(alice):
+    """A probe trial whose motion the safety layer limited on half its ticks (a low --tool-speed) was fitted as if
+    the arm had answered the probe: K̂ 453 N/m where the same trials unlimited gave 727 (review, 2026-12-06). More
+    than MAX_LIMITED of its ticks limited: refused, naming the trial, the share and the limits; a few: fitted."""
+    from coassist.experiments.person_calibration import MAX_LIMITED
+    from coassist.interfaces import Fault
+
+    first = _run(ALICE, "manual-probe", [7])[0].trial  # a fifth trial (a copy of one of the four is refused)
+    n = first.n_samples
+    fault = np.zeros(n, dtype=np.int64)
+    fault[: n // 2] = int(Fault.TOOL_SPEED_LIMIT)
+    fault[n // 2 : n // 2 + 10] = int(Fault.JOINT_ACCELERATION_LIMIT | Fault.PREDICTION_STALE)
+    with pytest.raises(
+        CalibrationError,
+        match=r"alice: trial lab/slow: the safety layer limited the tool's motion on 50 % of its ticks "
+        r"\(JOINT_ACCELERATION_LIMIT, TOOL_SPEED_LIMIT\)",
+    ):
+        calibrate_people([*alice, Named("lab/slow", _trial(first, fault=fault))])
+    few = np.zeros(n, dtype=np.int64)
+    few[: int(MAX_LIMITED * n)] = int(Fault.TOOL_SPEED_LIMIT)  # a clip at a fast turn: fitted
+    few[-50:] = int(Fault.PREDICTION_STALE)  # not a limit of the motion
+    calibrate_people([*alice, Named("lab/clip", _trial(first, fault=few))])
