@@ -53,3 +53,21 @@ def test_an_arm_out_of_a_persons_range_is_refused(field, value):
     with pytest.raises(ValueError, match=f"ArmEstimate.{field}"):
         ArmEstimate(**{field: value})
     assert np.isfinite(ArmEstimate().stiffness)
+
+
+def test_an_arm_measured_in_fewer_than_three_trials_is_not_used():
+    """Below three trials there is no jackknife error (it read "± 0" and passed every check: review, 2026-12-06), so
+    the measured arm cannot be told from a bad one: the typical arm, and the note says why; three are judged."""
+    from coassist.scenario.arm_identification import ARM_SE_MAX, measured_arm
+
+    two = ArmEstimate(735.0, 4.2, 0.0, 0.0, samples=2000, trials=2, method="probe-iv")
+    arm, note = measured_arm(two)
+    assert arm == ASSUMED_ARM
+    assert (
+        note
+        == "measured K = 735 N/m, C = 4.2 N·s/m from 2 trial(s): its error cannot be told below 3 (record 3 or more probe trials)"
+    )
+    three = replace(two, trials=3, stiffness_se=0.1 * 735.0, damping_se=1.0)
+    assert measured_arm(three) == (three, "")
+    wide = replace(three, stiffness_se=(ARM_SE_MAX + 0.01) * 735.0)
+    assert measured_arm(wide)[0] == ASSUMED_ARM

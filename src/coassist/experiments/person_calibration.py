@@ -451,10 +451,9 @@ def summary_line(c: PersonCalibration) -> str:
     the model leads them along their paths (:class:`~coassist.scenario.person_model.LeadCheck`)."""
     arm = c.fit.arm
     if arm.method == "probe-iv":
-        se = "" if arm.trials >= 3 else " (no standard error below 3 trials)"
         measured = (
             f"arm K̂ {arm.stiffness:.0f} ± {arm.stiffness_se:.0f} N/m, Ĉ {arm.damping:.1f} ± {arm.damping_se:.1f} "
-            f"N·s/m, measured by the probe in {arm.trials} trial(s){se}{' (' + c.arm_note + ')' if c.arm_note else ''}"
+            f"N·s/m, measured by the probe in {arm.trials} trial(s){' (' + c.arm_note + ')' if c.arm_note else ''}"
         )
     else:
         if c.arm_note:  # measured but not usable, or every probe trial left out of the fit

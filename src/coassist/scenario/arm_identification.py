@@ -196,7 +196,8 @@ def measured_arm(arm: ArmEstimate) -> tuple[ArmEstimate, str]:
     """(the arm to use, why the typical one is assumed: "" when the measured one is used) of :func:`identify_arm`'s
     estimate ``arm``. The typical arm (:data:`ASSUMED_ARM`) is used where nothing was measured, and where the
     measurement says too little to be used: K̂ or Ĉ at the bound of a person's range (:func:`identify_arm` clips
-    to it: the clipped value is no measurement), or K̂'s jackknife error above :data:`ARM_SE_MAX` of it (a few short
+    to it: the clipped value is no measurement), fewer than three trials (no jackknife error to judge it by), or
+    K̂'s jackknife error above :data:`ARM_SE_MAX` of it (a few short
     trials: a K̂ of 100 ± 715 N/m, clipped at the bound, would turn the present estimate's hand force into 8 times
     the displacement it is). ``coassist calibrate`` and the study's calibration block both decide so."""
     if arm.method == "assumed":
@@ -206,7 +207,12 @@ def measured_arm(arm: ArmEstimate) -> tuple[ArmEstimate, str]:
     )
     if arm.stiffness in STIFFNESS_RANGE or arm.damping in DAMPING_RANGE:  # identify_arm clips to the range
         return ASSUMED_ARM, f"measured {measured} from {arm.trials} trials: at the bound of a person's range"
-    if arm.trials >= 3 and arm.stiffness_se > ARM_SE_MAX * arm.stiffness:
+    if arm.trials < 3:  # the jackknife needs three: an arm whose error cannot be told is not one to lean on
+        return ASSUMED_ARM, (
+            f"measured K = {arm.stiffness:.0f} N/m, C = {arm.damping:.1f} N·s/m from {arm.trials} trial(s): its error "
+            "cannot be told below 3 (record 3 or more probe trials)"
+        )
+    if arm.stiffness_se > ARM_SE_MAX * arm.stiffness:
         return ASSUMED_ARM, (
             f"measured {measured} from {arm.trials} trials: too uncertain (error above {100 * ARM_SE_MAX:.0f} % of K)"
         )
