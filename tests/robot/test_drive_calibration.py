@@ -254,6 +254,10 @@ def test_the_commands_say_what_the_person_gets_and_refuse_bad_lab_inputs(tmp_pat
     res = runner.invoke(app, ["drive", "--person", "a b", "--out", str(tmp_path / "u.parquet")])
     assert res.exit_code == 2 and "--person must be 1-32 letters, digits" in res.output
     assert not (tmp_path / "u.parquet").exists()
+    # a trial file is Parquet: a .csv name was written as Parquet without a word (review, 2026-12-06)
+    res = runner.invoke(app, ["drive", "--time-limit", "0.2", "--out", str(tmp_path / "t.csv")])
+    assert res.exit_code == 2 and "a trial is written as Parquet: give a .parquet name" in res.output
+    assert not (tmp_path / "t.csv").exists()
     pytest.importorskip("starlette", reason="play needs the web extra")
     res = runner.invoke(app, ["play", "--scene", str(bad), "--no-open"])
     assert res.exit_code == 2 and "a scene file is for --drive (an arm)" in res.output

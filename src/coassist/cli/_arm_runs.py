@@ -57,6 +57,10 @@ def run_out(out: Path, overwrite: bool, mcap: bool) -> Path:
     out = file_out(out, "--out", "trial.parquet")
     if out.suffix == ".mcap":
         fail(f"--out {out}: give the trial file (e.g. trial.parquet); --mcap writes the .mcap beside it", 2)
+    if out.suffix.lower() != ".parquet":  # a trial file is Parquet whatever its name: a .csv name would hide that
+        fail(
+            f"--out {out}: a trial is written as Parquet: give a .parquet name (e.g. {out.with_suffix('.parquet')})", 2
+        )
     if not overwrite:
         for path in (out, out.with_suffix(".mcap")):
             if path.exists() or path.is_symlink():  # a recorded run is not replaced silently
