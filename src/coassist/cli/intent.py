@@ -11,6 +11,7 @@ from rich.markup import escape
 from coassist.cli._common import (
     BAG_TOPICS_HELP,
     SKIP_BAD_HELP,
+    busy_cores_hint,
     check_device,
     check_threads,
     choose,
@@ -202,6 +203,7 @@ def train(
         p = replace(p, window=replace(p.window, label=label))
     check_device(device)
     trials = intent_trials(data, skip_bad_trials, bag_topics=bag_topics)
+    busy_cores_hint(p.train.threads)
     set_torch_threads(p.train.threads)
     try:
         with OutputLock(out):
@@ -304,6 +306,7 @@ def tune(
         file_out(sqlite_file, "--storage", "study.db")
     p = _intent_preset(preset)
     trials = intent_trials(data)
+    busy_cores_hint(p.train.threads)
     set_torch_threads(p.train.threads)
     try:
         result = run_study(
