@@ -36,6 +36,7 @@ __all__ = [
     "NETWORK_BACKENDS",
     "FEATURES",
     "Fault",
+    "MOTION_LIMITED",
     "IntentSource",
     "PlausibilityLimits",
     "TrialContext",
@@ -87,6 +88,17 @@ class Fault(enum.IntFlag):
 
 #: (bit, name) of every single fault flag, built once: fault_names runs every tick.
 _FAULT_BITS = tuple((int(f), f.name) for f in Fault if f and f.name)
+
+#: The safety layer's interventions on the commanded motion: scaled or clipped to a limit, ramped down, stopped
+MOTION_LIMITED = (
+    Fault.JOINT_VELOCITY_LIMIT
+    | Fault.JOINT_ACCELERATION_LIMIT
+    | Fault.TOOL_SPEED_LIMIT
+    | Fault.WORKSPACE_LIMIT
+    | Fault.SINGULARITY
+    | Fault.DECELERATING
+    | Fault.STOPPED
+)
 
 
 def fault_names(value: int) -> list[str]:

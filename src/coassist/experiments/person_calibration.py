@@ -38,7 +38,7 @@ import numpy as np
 from coassist._checks import check_int
 from coassist.data import Trial
 from coassist.errors import CoassistError
-from coassist.interfaces import Fault
+from coassist.interfaces import MOTION_LIMITED, Fault
 from coassist.scenario.arm_identification import identify_arm, measured_arm
 from coassist.scenario.objects import get_object
 from coassist.scenario.path_model import (
@@ -184,16 +184,7 @@ def _check_trial(person: str, tid: str, trial: Trial) -> None:
 
 
 #: The faults of a tick whose commanded motion was not the controller's (the safety layer scaled, clipped or stopped it)
-LIMITING = (
-    Fault.SATURATED
-    | Fault.JOINT_VELOCITY_LIMIT
-    | Fault.JOINT_ACCELERATION_LIMIT
-    | Fault.TOOL_SPEED_LIMIT
-    | Fault.WORKSPACE_LIMIT
-    | Fault.SINGULARITY
-    | Fault.DECELERATING
-    | Fault.STOPPED
-)
+LIMITING = MOTION_LIMITED | Fault.SATURATED
 #: The share of a calibration trial's ticks that may be limited (:data:`LIMITING`): a brief clip at a fast turn
 #: moves the fit little; a trial held to a speed limit for long stretches measures the limit (review, 2026-12-06: a
 #: MuJoCo probe trial speed-limited on half its ticks gave K̂ 453 N/m where the same trials unlimited gave 727)

@@ -55,7 +55,7 @@ import numpy as np
 
 from coassist import spatial as _spatial
 from coassist._checks import check_positive_scalar, is_integer
-from coassist.interfaces import Fault, TrialContext
+from coassist.interfaces import MOTION_LIMITED, Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
 from coassist.runtime.world import COMMAND_SPACES, Command, RobotState, finite_vector
 
@@ -75,15 +75,7 @@ UPSTREAM_BAD = (
     | Fault.DEADLINE_MISS
 )
 #: Safety interventions after which the admittance state is reset to the command.
-_RESET_ADMITTANCE = (
-    Fault.JOINT_VELOCITY_LIMIT
-    | Fault.JOINT_ACCELERATION_LIMIT
-    | Fault.TOOL_SPEED_LIMIT
-    | Fault.WORKSPACE_LIMIT
-    | Fault.SINGULARITY
-    | Fault.DECELERATING
-    | Fault.STOPPED
-)
+_RESET_ADMITTANCE = MOTION_LIMITED
 _ROTATION = (3, 4, 5)
 _DEADLINE_MISS = int(Fault.DEADLINE_MISS)
 
