@@ -30,6 +30,11 @@ def _coassist_exceptions() -> list[type[BaseException]]:
 def test_every_coassist_exception_derives_from_the_base():
     found = _coassist_exceptions()
     assert len(found) >= 8  # the scan itself must find the known ones
+    # an interrupt is no error: it stays a KeyboardInterrupt alone, so that no `except Exception` swallows a Ctrl-C
+    interrupts = [c for c in found if issubclass(c, KeyboardInterrupt)]
+    assert [c.__qualname__ for c in interrupts] == ["RunInterrupted"]
+    assert not any(issubclass(c, Exception) for c in interrupts)
+    found = [c for c in found if c not in interrupts]
     assert [c.__qualname__ for c in found if not issubclass(c, CoassistError)] == []
     # and none is only a CoassistError: callers that catch the built-in keep working
     assert [c.__qualname__ for c in found if c.__mro__[1:] == (CoassistError, Exception, BaseException, object)] == []

@@ -354,6 +354,10 @@ def test_a_control_link_reported_down_ends_the_run_link_lost_without_another_com
 
         try:
             trial = drive(DriveConfig(world="ur", controller="manual", time_limit=1.0), world=world, on_tick=on_tick)
+        except RobotLinkError as exc:  # a stall while drive zeroed the sensor, before the run (a busy CI machine)
+            if "later than usual" not in str(exc):
+                raise
+            continue
         except RuntimeError as exc:  # a stall before the first tick: the fake's stream starved (link_timeout)
             if "before its first tick" not in str(exc):
                 raise
