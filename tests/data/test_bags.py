@@ -336,3 +336,44 @@ def test_show_reads_bags_with_renamed_topics(tmp_path):
     assert res.exit_code == 2 and "PATH: " in res.output and "no topic /ft" in res.output
     res = CliRunner().invoke(app, ["show", str(folder), "--bag-topics", "wrench"])
     assert res.exit_code == 2 and "--bag-topics: expected field=/topic pairs" in res.output
+
+
+def test_a_folder_named_dot_and_trial_files_beside_their_bags(tmp_path, monkeypatch):
+    """Three readings a review found wrong (2026-12-06): "." named no user ("TrialMeta.user must be a non-empty
+    string"); a folder of drive's runs, each a trial file and its .mcap bag, read the bags (no controller, no person,
+    the folder's name as the user) where the trial files hold the whole record; two folders of one name (a/D, b/D)
+    were "given twice"."""
+    from dataclasses import replace as _replace
+
+    from coassist.data import read_trial, write_dataset, write_trial
+    from coassist.intent import load_trials
+
+    folder = tmp_path / "user-s"
+    synthetic_bag(folder / "run_1", n=6)
+    synthetic_bag(folder / "run_2", n=7)
+    monkeypatch.chdir(folder)
+    for given in (".", "./"):
+        got = load_trials([given])
+        assert [lt.trial.meta.user for lt in got] == ["user-s", "user-s"]
+        assert [lt.id for lt in got] == [f"{tmp_path.name}/user-s/run_1", f"{tmp_path.name}/user-s/run_2"]
+    # drive's runs: run_1.parquet beside run_1.mcap; the trial file is read, and a bag without one too
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    made = load_trials([folder / "run_1"])[0].trial
+    mine = _replace(made, meta=_replace(made.meta, user="P07", controller="manual-probe"))
+    write_trial(mine, runs / "run_1.parquet")
+    synthetic_bag(runs / "run_1.mcap", n=9)  # another recording under the same name: not read
+    synthetic_bag(runs / "run_9.mcap", n=5)
+    got = load_trials([runs])
+    assert [lt.id for lt in got] == ["runs/run_1", "runs/run_9"]
+    assert got[0].trial.equals(read_trial(runs / "run_1.parquet")) and got[0].trial.meta.user == "P07"
+    assert got[1].trial.n_samples == 5
+    # two dataset folders of one name, other trials: both read, the second named by the folder where they part
+    for side, run in (("a", "run_1"), ("b", "run_2")):
+        t = load_trials([folder / run])[0].trial
+        write_dataset([t], tmp_path / side / "D", "D")
+    got = load_trials([tmp_path / "a" / "D", tmp_path / "b" / "D"])
+    assert [lt.id for lt in got] == ["D/trial_00000", "b/D/trial_00000"]
+    assert [lt.trial.n_samples for lt in got] == [6, 7]
+    with pytest.raises(ValueError, match=r"trial 'D/trial_00000' is given twice \(.*a/D and .*a/D\)"):
+        load_trials([tmp_path / "a" / "D", tmp_path / "a" / ".." / "a" / "D"])

@@ -170,6 +170,15 @@ MANIFEST_CASES = {
     "absolute file": (lambda m: {**m, "trials": [{**m["trials"][0], "file": "/etc/passwd"}]}, r"points outside"),
     "file is the folder": (lambda m: {**m, "trials": [{**m["trials"][0], "file": "."}]}, r"points outside"),
     "file twice": (lambda m: {**m, "trials": [m["trials"][0], m["trials"][0]], "n_trials": 2}, r"a second time"),
+    # the same file spelt otherwise (read twice before: review, 2026-12-06)
+    "file twice, spelt ./": (
+        lambda m: {
+            **m,
+            "trials": [m["trials"][0], {**m["trials"][0], "file": "./" + m["trials"][0]["file"]}],
+            "n_trials": 2,
+        },
+        r"trials\[1\] lists '\./trial_00000\.parquet' a second time",
+    ),
     "meta missing": (lambda m: {**m, "trials": [{"file": "trial_00000.parquet"}]}, r"has no 'meta' object"),
     "n_trials wrong": (lambda m: {**m, "n_trials": 7}, r"'n_trials' is 7 but 'trials' lists 3"),
     "dataset_id empty": (lambda m: {**m, "dataset_id": ""}, r"'dataset_id' must be a non-empty string"),

@@ -175,9 +175,11 @@ def _read_manifest(folder: Path) -> dict[str, Any]:
         if "file" not in entry:
             raise ManifestError(f"{path}: {where} has no 'file'")
         name = _confined(folder, entry["file"], where, path)
-        if name in seen:
+        # the file it names, not its spelling: "./trial_00000.parquet" is "trial_00000.parquet" a second time
+        target = str((folder / name).resolve())
+        if target in seen:
             raise ManifestError(f"{path}: {where} lists {name!r} a second time")
-        seen.add(name)
+        seen.add(target)
         if not isinstance(entry.get("meta"), dict):
             raise ManifestError(f"{path}: {where} ({name}) has no 'meta' object")
     n = manifest.get("n_trials", len(entries))

@@ -7,7 +7,12 @@ A path may be
   ``.../ur5-thesis/user-a``);
 - one recording folder (``current_pose.csv`` and friends);
 - one ROS 1 or ROS 2 bag (``.bag``, ``.mcap``, ``.db3`` or a ROS 2 bag folder), or a
-  folder of bags (:mod:`coassist.data.bags`, the same topics as the CSV export).
+  folder of bags (:mod:`coassist.data.bags`, the same topics as the CSV export);
+- a folder of trial files (``drive``'s and ``ros2``'s runs): the files, and a bag beside them only where no trial
+  file has its name (``drive --mcap`` writes each run twice: the trial file keeps the whole record).
+
+A folder given as ``.`` is named by its own name. Two trials of one id from two different paths (two folders ``D``)
+are both read, the second named by the folder where the paths part (``b/D/…``); one path given twice is refused.
 
 Each trial gets a stable id, ``<dataset id>/<trial name>``, used to split by trial and
 recorded in the model's sidecar.
@@ -55,16 +60,32 @@ def _load_one(
         for name, reason in ds.skipped:
             on_bad(str(path / name), reason)  # type: ignore[misc]
         return [LabeledTrial(f"{ds.id}/{Path(f).stem}", ds.id, t) for f, t in zip(ds.files, ds.trials)]
+    here = path.resolve()  # "." or "./" name the folder by its own name (its user, its dataset)
     if (path / "current_pose.csv").is_file():
-        dataset = f"{path.absolute().parent.parent.name}/{path.absolute().parent.name}"
-        return _load_each([path], load_ros_trial, dataset, on_bad, name=f"{dataset}/{path.name}")
+        dataset = f"{here.parent.parent.name}/{here.parent.name}"
+        return _load_each([path], load_ros_trial, dataset, on_bad, name=f"{dataset}/{here.name}")
     bags = bag_paths(path)
-    dataset = f"{path.absolute().parent.name}/{path.name}"
+    loose = sorted(p for p in path.glob("*.parquet") if p.is_file()) if path.is_dir() else []
+    if loose:
+        # trial files side by side (drive's and ros2's, with their .mcap bags beside them): the files, which keep the
+        # whole trial record (the controller, the person, the intent); a bag without a trial file of its name too
+        from coassist.data import read_trial
+
+        out = []
+        for file in loose:
+            out += _load_each([file], read_trial, here.name, on_bad, name=f"{here.name}/{file.stem}")
+        stems = {file.stem for file in loose}
+        alone = [bag for bag in bags if Path(bag).stem not in stems]
+        for bag in alone:
+            name = f"{here.name}/{Path(bag).stem}"
+            out += _load_each([bag], lambda b: load_bag_trial(b, topics=bag_topics), here.name, on_bad, name=name)
+        return out
+    dataset = f"{here.parent.name}/{here.name}"
     if bags:
-        return _load_each(bags, lambda bag: load_bag_trial(bag, user=path.name, topics=bag_topics), dataset, on_bad)
+        return _load_each(bags, lambda bag: load_bag_trial(bag, user=here.name, topics=bag_topics), dataset, on_bad)
     if path.is_dir() and any(p.is_dir() and p.name.startswith("trial_") for p in path.iterdir()):
         return _load_each(
-            recording_folders(path), lambda folder: load_ros_trial(folder, user=path.name), dataset, on_bad
+            recording_folders(path), lambda folder: load_ros_trial(folder, user=here.name), dataset, on_bad
         )
     raise FileNotFoundError(
         f"{path}: not a dataset folder ({MANIFEST_NAME}), a recording folder (current_pose.csv), "
@@ -108,13 +129,30 @@ def load_trials(
     ``bag_topics``: field -> topic name for bags (:func:`coassist.data.bags.load_bag_trial`).
     """
     out: list[LabeledTrial] = []
+    seen: dict[str, Path] = {}  # id -> the path given that holds it
     for p in paths:
-        out.extend(_load_one(Path(p), on_bad, bag_topics))
+        given = Path(p)
+        for lt in _load_one(given, on_bad, bag_topics):
+            if lt.id in seen:
+                first = seen[lt.id]
+                if first.resolve() == given.resolve():  # the same file or folder, given twice
+                    raise ValueError(f"trial {lt.id!r} is given twice ({first} and {given})")
+                # another trial of the same name (two folders D, two files x/run): named by the folders above it
+                lt = lt._replace(id=_distinct(lt.id, given, first, seen))
+            seen[lt.id] = given
+            out.append(lt)
     if not out:
         raise ValueError("no trials given")
-    seen: set[str] = set()
-    for lt in out:
-        if lt.id in seen:
-            raise ValueError(f"trial {lt.id!r} is given twice")
-        seen.add(lt.id)
     return out
+
+
+def _distinct(tid: str, given: Path, first: Path, seen: Mapping[str, Path]) -> str:
+    """``tid`` prefixed with the name in ``given``'s path where it parts from ``first``'s (two folders ``a/D`` and
+    ``b/D``: ``b/D/…``), and the names above it while that is an id a trial loaded so far has."""
+    mine, theirs = given.resolve().parts, first.resolve().parts
+    k = next((k for k in range(1, len(mine) + 1) if k > len(theirs) or mine[-k] != theirs[-k]), len(mine))
+    for name in reversed(mine[1 : len(mine) - k + 1]):  # the differing name, then the ones above it
+        tid = f"{name}/{tid}"
+        if tid not in seen:
+            return tid
+    raise ValueError(f"trial {tid!r} is given twice ({first} and {given})")
