@@ -357,9 +357,26 @@ def test_a_test_split_too_short_to_window_is_named(trials, tiny):
     trials[short] = LabeledTrial(trials[short].id, trials[short].dataset, make_trial(short, n=25))
     with pytest.raises(ValueError) as err:
         train_model(trials, tiny, replace(tiny.train, epochs=1))
-    assert str(err.value) == (
+    assert str(err.value).startswith(
         f"the test split (1 trial: {trials[short].id}): no trial is long enough for history 20 + horizon 10 samples"
     )
+
+
+def test_window_errors_name_the_trials(tiny):
+    """A validation split or an evaluation of one short trial, and a trial of other DOFs among the rest, said "no
+    trial is long enough …" and "all trials must have the same number of DOFs" naming none (review, 2026-12-06)."""
+    from coassist.intent.features import WindowSet
+
+    from .conftest import make_trial
+
+    short = make_trial(3, n=25)
+    with pytest.raises(ValueError) as err:
+        WindowSet([short], tiny.window, 0.008)
+    assert str(err.value).endswith(f"(1 given: user-t's seed {short.meta.seed} (25 samples))"), str(err.value)
+    with pytest.raises(ValueError) as err:
+        WindowSet([make_trial(1), make_trial(2, d=3)], tiny.window, 0.008)
+    assert "all trials must have the same number of DOFs: user-t's seed" in str(err.value)
+    assert "(260 samples) has 3, user-t's" in str(err.value) and str(err.value).endswith(" 2")
 
 
 def test_trials_a_starting_model_trained_on_stay_on_the_training_side(tmp_path, trials, tiny):

@@ -215,6 +215,12 @@ class Scaler:
             raise ValueError(f"malformed scaler {data!r}: {exc}") from None
 
 
+def _trial_name(t: Trial) -> str:
+    """A trial as an error names it: its person, its recording (or seed) and its length."""
+    which = t.meta.extra.get("recording") or (f"seed {t.meta.seed}" if t.meta.seed is not None else t.meta.task)
+    return f"{t.meta.user}'s {which} ({t.n_samples} samples)"
+
+
 def split_trials(ids: Sequence[str], test_fraction: float = 0.2, seed: int = 0) -> tuple[list[int], list[int]]:
     """Split trials (not windows) into train and test, deterministically.
 
@@ -268,8 +274,12 @@ class WindowSet:
         if not trials:
             raise ValueError("WindowSet needs at least one trial")
         d = trials[0].n_dof
-        if any(t.n_dof != d for t in trials):
-            raise ValueError("all trials must have the same number of DOFs")
+        other = next((t for t in trials if t.n_dof != d), None)
+        if other is not None:
+            raise ValueError(
+                f"all trials must have the same number of DOFs: {_trial_name(other)} has {other.n_dof}, "
+                f"{_trial_name(trials[0])} {d}"
+            )
         check_int_at_least(stride, "stride", 1)
         self.window, self.dt, self.n_dof = window, float(dt), d
         feats, ends, owner, start = [], [], [], 0
@@ -305,7 +315,13 @@ class WindowSet:
         self.ends = np.concatenate(ends).astype(np.int64)
         self.trial = np.concatenate(owner)
         if self.ends.size == 0:
-            raise ValueError(f"no trial is long enough for history {window.history} + horizon {window.horizon} samples")
+            named = ", ".join(_trial_name(t) for t in trials[:3]) + (
+                f" and {len(trials) - 3} more" if len(trials) > 3 else ""
+            )
+            raise ValueError(
+                f"no trial is long enough for history {window.history} + horizon {window.horizon} samples "
+                f"({len(trials)} given: {named})"
+            )
 
     def __len__(self) -> int:
         return int(self.ends.size)
