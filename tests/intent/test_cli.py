@@ -100,3 +100,54 @@ def test_train_says_when_its_threads_would_share_busy_cores(tmp_path, monkeypatc
     import os
 
     assert measured is None or -1e-9 <= measured <= (os.cpu_count() or 1) + 1e-9
+
+
+def test_a_model_another_run_writes_meanwhile_is_not_replaced(tmp_path, monkeypatch):
+    """Two trainings into one --out: the check for a model there ran before the lock, so the second to take it
+    replaced the first's finished model without --overwrite (review, 2026-12-06). Checked again under the lock."""
+    import shutil
+
+    from coassist.cli import intent as intent_cli
+
+    write_dataset([make_trial(i, n=220) for i in range(3)], tmp_path / "D0", "D0")
+    args = ["train", str(tmp_path / "D0"), "--epochs", "1", "--batch-size", "256", "--threads", "1"]
+    first = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "other")])
+    assert first.exit_code == 0, first.output
+    out = tmp_path / "m"
+
+    def the_other_run_finishes(threads, option="--threads"):  # between the check and the lock
+        shutil.copytree(tmp_path / "other", out)
+
+    monkeypatch.setattr(intent_cli, "busy_cores_hint", the_other_run_finishes)
+    res = CliRunner().invoke(app, [*args, "--seed", "5", "--out", str(out)])
+    assert res.exit_code == 2 and "another coassist run wrote a model there meanwhile" in res.output, res.output
+    assert (out / "model.json").read_bytes() == (tmp_path / "other" / "model.json").read_bytes()  # kept
+
+
+def test_a_start_the_training_cannot_take_or_would_not_honour_is_refused(tmp_path):
+    """--init from a linear model ended in torch's "optimizer got an empty parameter list"; --preset intent (or
+    linear) with --init resume: trained the starting model's network on its own label without a word (review,
+    2026-12-06). Both refused in one line; a preset of the same label gives its training settings, as before."""
+    write_dataset([make_trial(i, n=220) for i in range(3)], tmp_path / "D0", "D0")
+    base = ["train", str(tmp_path / "D0"), "--epochs", "1", "--batch-size", "256", "--threads", "1"]
+    for name, preset in (("lin", "linear"), ("net", "default")):
+        made = CliRunner().invoke(app, [*base, "--preset", preset, "--out", str(tmp_path / name)])
+        assert made.exit_code == 0, made.output
+    res = CliRunner().invoke(app, [*base, "--init", f"transfer:{tmp_path / 'lin'}", "--out", str(tmp_path / "a")])
+    assert (
+        res.exit_code == 2
+        and "is a linear model (the tuned ridge alone, closed form): nothing to transfer" in res.output
+    )
+    for preset in ("intent", "linear"):
+        res = CliRunner().invoke(
+            app, [*base, "--preset", preset, "--init", f"resume:{tmp_path / 'net'}", "--out", str(tmp_path / "b")]
+        )
+        said = " ".join(res.output.split())
+        assert (
+            res.exit_code == 2
+            and f"--preset {preset}: --init resume: keeps the starting model's network and label" in said
+        )
+    res = CliRunner().invoke(
+        app, [*base, "--preset", "lstm", "--init", f"finetune:{tmp_path / 'net'}", "--out", str(tmp_path / "c")]
+    )
+    assert res.exit_code == 0, res.output  # the same label: its training settings

@@ -74,6 +74,47 @@ def _epochs_done(checkpoint: Path) -> str:
     return f", {done} of {total} epochs done" if isinstance(done, int) and isinstance(total, int) else ""
 
 
+def _check_start(init: str, preset: str | None) -> None:
+    """Refuse in one line a start the training cannot take or would not honour: a linear model (the ridge alone,
+    closed form: no network to continue; torch said "optimizer got an empty parameter list") and a --preset whose
+    network or label is not the starting model's (the model's were kept without a word). Where model.json cannot be
+    read the training's own reading says what is wrong."""
+    import json
+
+    from coassist.intent.presets import MODEL_PRESETS
+
+    kind, _, path = init.partition(":")
+    try:
+        info = json.loads((Path(path) / "model.json").read_text("utf-8"))
+        layers, label, own = info["network"]["lstm_layers"], info["window"]["label"], info.get("preset")
+    except (OSError, ValueError, KeyError, TypeError):
+        return
+    if not layers:
+        fail(
+            f"--init {init}: {path} is a linear model (the tuned ridge alone, closed form): nothing to {kind}; "
+            "train it again on the data, or --init scratch",
+            2,
+        )
+    wanted = MODEL_PRESETS.get(preset) if preset is not None else None
+    if wanted is not None and (preset == "linear" or wanted.window.label != label):
+        fail(
+            f"--preset {preset}: --init {kind}: keeps the starting model's network and label ({path}: preset {own}, "
+            f"label {label}); there the preset gives the training's settings only: drop --preset, or --init scratch",
+            2,
+        )
+
+
+def _continues(out: Path, init: str) -> bool:
+    """Whether the run continues an interrupted one in place (``resume:`` of --out, its checkpoint beside it)."""
+    from coassist._io import partial_folder
+
+    return (
+        init.startswith("resume:")
+        and Path(init.partition(":")[2]).absolute() == out.absolute()
+        and (partial_folder(out) / "checkpoint.json").is_file()  # intent.checkpoint.CHECKPOINT_JSON
+    )
+
+
 def _check_model_out(out: Path, overwrite: bool, init: str) -> None:
     """Refuse before any work an --out that is a file, or an existing model without --overwrite."""
     from coassist._io import partial_folder
@@ -85,11 +126,7 @@ def _check_model_out(out: Path, overwrite: bool, init: str) -> None:
         fail(f"--out {out}: is a file; give a folder for the model", 2)
     # Only an interrupted run (its checkpoint in the partial folder beside --out) is continued in place;
     # a new stage from the finished model in --out replaces it, as any other run would.
-    continuing = (
-        init.startswith("resume:")
-        and Path(init.partition(":")[2]).absolute() == out.absolute()
-        and (partial_folder(out) / "checkpoint.json").is_file()  # intent.checkpoint.CHECKPOINT_JSON
-    )
+    continuing = _continues(out, init)
     checkpoint = partial_folder(out) / "checkpoint.json"
     if not continuing and checkpoint.is_file():
         # an interrupted run's epochs are kept until this run's first epoch replaces them: said, so that a rerun
@@ -116,8 +153,8 @@ def train(
         ..., "--out", "-o", help="Model folder to write (weights, model.json, history.json, loss.png)."
     ),
     preset: str = typer.Option(
-        "default",
-        help="Starting configuration: 'default' (LSTM 2×64 learning the residual over the validation-tuned ridge), 'lstm' (the same, skip trained too), 'intent' (lstm learning the simulated operator's true intent: simulated data only), 'linear' (the tuned ridge alone, closed form) or 'thesis' (exact §5.2.2).",
+        None,
+        help="Starting configuration: 'default' (LSTM 2×64 learning the residual over the validation-tuned ridge), 'lstm' (the same, skip trained too), 'intent' (lstm learning the simulated operator's true intent: simulated data only), 'linear' (the tuned ridge alone, closed form) or 'thesis' (exact §5.2.2). Default: default. With another --init than scratch, its training settings only (the network and its label are the starting model's).",
     ),
     init: str = typer.Option(
         "scratch", help="scratch | resume:<model> | finetune:<model> | transfer:<model> (LSTM frozen)."
@@ -184,8 +221,10 @@ def train(
             "keeps the starting model's",
             2,
         )
+    if init != "scratch":
+        _check_start(init, preset)
     p = _intent_preset(
-        preset,
+        preset or "default",
         network=sizes,
         epochs=epochs,
         lr=lr,
@@ -207,6 +246,12 @@ def train(
     set_torch_threads(p.train.threads)
     try:
         with OutputLock(out):
+            if out.is_dir() and any(out.iterdir()) and not overwrite and not _continues(out, init):
+                # another run wrote a model there since the check above (it held the lock first): not replaced
+                fail(
+                    f"--out {out}: another coassist run wrote a model there meanwhile; pass --overwrite to replace it",
+                    2,
+                )
             chosen = {
                 "epochs": epochs,
                 "lr": lr,
