@@ -151,3 +151,30 @@ def test_a_start_the_training_cannot_take_or_would_not_honour_is_refused(tmp_pat
         app, [*base, "--preset", "lstm", "--init", f"finetune:{tmp_path / 'net'}", "--out", str(tmp_path / "c")]
     )
     assert res.exit_code == 0, res.output  # the same label: its training settings
+
+
+def test_tune_makes_its_database_folder_and_prints_the_command_it_measured(tmp_path):
+    """A --storage SQLite file in a folder not made yet ended in a traceback ("unable to open database file"), and
+    the printed train command left out the study's --preset and --epochs: it trained another configuration than the
+    one scored (review, 2026-12-06)."""
+    write_dataset([make_trial(i, n=220) for i in range(4)], tmp_path / "D0", "D0")
+    db = tmp_path / "new" / "deeper" / "study.db"
+    res = CliRunner().invoke(
+        app,
+        [
+            "tune",
+            str(tmp_path / "D0"),
+            "--trials",
+            "1",
+            "--epochs",
+            "1",
+            "--preset",
+            "lstm",
+            "--storage",
+            f"sqlite:///{db}",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    assert db.is_file()
+    line = next(x for x in res.output.splitlines() if x.startswith("train with them:"))
+    assert " --preset lstm --epochs 1 " in line, line

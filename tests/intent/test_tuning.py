@@ -130,3 +130,18 @@ def test_check_storage(tmp_path):
         check_storage("bogus://x")
     with pytest.raises(ValueError, match="not a database URL"):
         check_storage("study.db")
+
+
+def test_a_resumed_study_draws_new_points_and_keeps_its_setup(tmp_path, study):
+    """Resumed, the study's sampler was seeded as at its start: TPE drew its first points again (trials 0 and 3 the
+    same parameters, the same value); another preset or epochs count was run into the same study (review, 2026-12-06)."""
+    trials, result, _ = study
+    storage = f"sqlite:///{tmp_path / 'resumed.db'}"
+    run_study(trials, TINY, n_trials=2, storage=storage, study_name="r", epochs=EPOCHS, seed=0)
+    run_study(trials, TINY, n_trials=1, storage=storage, study_name="r", epochs=EPOCHS, seed=0)
+    params = [t.params for t in optuna.load_study(study_name="r", storage=storage).trials]
+    assert len(params) == 3 and params[2] not in params[:2]
+    with pytest.raises(
+        StudyMismatchError, match=r"study 'r' .* was run with preset tiny, 1 epochs a trial \(this run: tiny, 2\)"
+    ):
+        run_study(trials, TINY, n_trials=1, storage=storage, study_name="r", epochs=2, seed=0)

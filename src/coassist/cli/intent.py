@@ -349,6 +349,7 @@ def tune(
         fail(f"--storage {storage}: {exc}", 2)
     if sqlite_file is not None:
         file_out(sqlite_file, "--storage", "study.db")
+        sqlite_file.parent.mkdir(parents=True, exist_ok=True)  # SQLite makes the file, not its folder
     p = _intent_preset(preset)
     trials = intent_trials(data)
     busy_cores_hint(p.train.threads)
@@ -369,9 +370,11 @@ def tune(
     except ValueError as exc:
         fail(str(exc), 2)
     console.print(f"best validation e_RMS {1e3 * result['best_value']:.2f} mm", highlight=False)
+    # what the study trained: its preset and epochs too (without them the command trained another configuration)
+    setup = [*(["--preset", preset] if preset != "default" else []), *(["--epochs", str(epochs)] if epochs else [])]
     console.print(
         f"train with them: coassist train {' '.join(map(str, data))} --out <model> "
-        f"{' '.join(train_options(result['best_params']))}",
+        f"{' '.join([*setup, *train_options(result['best_params'])])}",
         markup=False,
         highlight=False,
         soft_wrap=True,

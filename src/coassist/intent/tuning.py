@@ -25,6 +25,7 @@ from coassist.intent.trials import LabeledTrial
 __all__ = ["StudyMismatchError", "check_storage", "run_study", "train_options"]
 
 _DATA_KEY = "coassist_trials"  # study user attribute: the fit and validation trial ids
+_SETUP_KEY = "coassist_setup"  # study user attribute: the preset and the epochs a trial (a study before it: none)
 
 
 class StudyMismatchError(CoassistError, ValueError):
@@ -115,7 +116,18 @@ def run_study(
     study = optuna.create_study(
         storage=storage, study_name=study_name, direction="minimize", sampler=sampler, load_if_exists=True
     )
+    # a resumed study draws on from where it stopped (its sampler seeded past the trials it holds: seeded as at its
+    # start, TPE drew its first points again, a repeat of trials already run)
+    study.sampler = optuna.samplers.TPESampler(seed=seed + len(study.trials))
     data = {"fit": [lt.id for lt in fit], "validation": [lt.id for lt in val]}
+    setup = {"preset": preset.name, "epochs": int(epochs or preset.train.epochs)}
+    held = study.user_attrs.get(_SETUP_KEY)
+    if held is not None and held != setup:
+        raise StudyMismatchError(
+            f"study {study_name!r} in {storage} was run with preset {held['preset']}, {held['epochs']} epochs a trial "
+            f"(this run: {setup['preset']}, {setup['epochs']}): resuming it would mix incomparable results; give "
+            "the same, or another study name"
+        )
     recorded = study.user_attrs.get(_DATA_KEY)
     if recorded is None and study.trials:
         raise StudyMismatchError(
@@ -130,6 +142,8 @@ def run_study(
         )
     if recorded is None:
         study.set_user_attr(_DATA_KEY, data)
+    if held is None:
+        study.set_user_attr(_SETUP_KEY, setup)
     study.optimize(objective, n_trials=n_trials, show_progress_bar=progress)
     return {
         "best_params": study.best_params,
