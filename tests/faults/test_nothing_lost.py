@@ -873,3 +873,19 @@ def test_cli_train_resumes_a_killed_run(tmp_path):
         rtol=0,
         atol=0,
     )
+
+
+def test_an_unfinished_training_is_not_evaluated_nor_put_in_the_loop(tmp_path):
+    """The checkpoint of a stopped training (``.m.partial``, which train's note names) was scored by evaluate against
+    fewer, untuned baselines (21.6 % better than constant velocity, no ridge) and run by collect --intent without a
+    word (review, 2026-12-06). Both refuse it in one line."""
+    from coassist.scenario.intent_registry import load_intent_source
+
+    _stopped_after_epoch_1(tmp_path / "m")
+    partial = partial_folder(tmp_path / "m")
+    write_dataset([make_trial(i, n=220) for i in range(2)], tmp_path / "E", "E")
+    res = CliRunner().invoke(app, ["evaluate", "--model", str(partial), "--data", str(tmp_path / "E")])
+    said = " ".join(res.output.split())
+    assert res.exit_code == 2 and "an unfinished training (the checkpoint after epoch 1 of 3" in said, res.output
+    with pytest.raises(ValueError, match=r"an unfinished training \(the checkpoint after epoch 1 of 3"):
+        load_intent_source(str(partial), horizon=TINY.window.horizon)

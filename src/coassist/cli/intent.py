@@ -301,11 +301,14 @@ def evaluate(
     from coassist._io import atomic_write_text
     from coassist.intent import ModelFileError, ModelMismatchError, evaluate_model, load_model, results_table
     from coassist.intent.evaluation import comparison_lines
+    from coassist.intent.model import unfinished
 
     try:
         m = load_model(model)
     except (ModelFileError, OSError) as exc:
         fail(f"--model {model}: {exc}", 2)
+    if why := unfinished(m):  # scored against fewer, untuned baselines it would read better than it is
+        fail(f"--model {model}: {why}", 2)
     trials = intent_trials(data, skip_bad_trials, "--data", bag_topics=bag_topics)
     try:
         result = evaluate_model(m, trials, held_out_only=not include_training)

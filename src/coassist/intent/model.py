@@ -69,6 +69,7 @@ __all__ = [
     "lineage_train_trials",
     "load_model",
     "save_model",
+    "unfinished",
 ]
 
 FORMAT = "coassist-intent/1"
@@ -397,6 +398,19 @@ def _tensors(path: Path, raw: bytes) -> dict[str, torch.Tensor]:
         return st_load(raw)
     except SafetensorError as exc:
         raise _fail(path, f"not a readable safetensors file: {exc}") from None
+
+
+def unfinished(model: IntentModel) -> str:
+    """"" for a finished training; else one line saying it is not (a checkpoint ``train`` writes after each epoch, in
+    ``.<out>.partial``: its baselines untuned, its epochs not all run), for the commands that would use it."""
+    if model.info.get("finished", True):
+        return ""
+    done = (model.info.get("training_history") or [{}])[-1].get("epoch", "?")
+    of = (model.info.get("train_config") or {}).get("epochs", "?")
+    return (
+        f"an unfinished training (the checkpoint after epoch {done} of {of}; its baselines not tuned): finish it "
+        "with coassist train … --init resume:<its --out> first"
+    )
 
 
 def load_model(

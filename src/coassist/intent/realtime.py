@@ -542,7 +542,7 @@ def load_model_intent(path: str, backend: str = "auto") -> ModelIntent:
     Leaves torch's thread count alone: the simulator's worker processes set one thread
     each (one process per core); a single-process caller chooses its own.
     """
-    from coassist.intent.model import load_model
+    from coassist.intent.model import load_model, unfinished
 
     if backend not in NETWORK_BACKENDS:
         raise ValueError(f"network backend must be one of {NETWORK_BACKENDS}, got {backend!r}")
@@ -551,5 +551,7 @@ def load_model_intent(path: str, backend: str = "auto") -> ModelIntent:
 
         backend = "onnx" if onnx_runtime_available() else "torch"
     model = load_model(path, features=FEATURES)
+    if why := unfinished(model):  # a checkpoint in the loop: a model its training has not finished (review)
+        raise ValueError(f"{path}: {why}")
     digest = str(model.weights_sha256)[:12]  # the weights that were loaded and verified
     return ModelIntent(model, f"{Path(path).name}@{digest}", backend)
