@@ -405,3 +405,23 @@ def test_trials_a_starting_model_trained_on_stay_on_the_training_side(tmp_path, 
     tl = train_model(labeled(5, prefix="V"), tiny, replace(cfg, init=f"transfer:{tmp_path / 'p'}"))
     _, test = split_trials([f"V/trial_{i:02d}" for i in range(5)], cfg.test_fraction, 0)
     assert tl.info["test_trials"] == [f"V/trial_{i:02d}" for i in test]
+
+
+def test_a_grandparents_training_trials_stay_on_the_training_side(tmp_path, trials, tiny):
+    """A model records its starting model's training trials, but the record stopped there: from the third generation
+    on, the first model's training trials were held out and scored as new (review, 2026-12-06)."""
+    from dataclasses import replace
+
+    from coassist.intent.model import lineage_train_trials
+
+    cfg = replace(tiny.train, epochs=1)
+    first = train_model(trials, tiny, cfg)
+    save_model(first, tmp_path / "a")
+    second = train_model(labeled(5, prefix="U"), tiny, replace(cfg, init=f"resume:{tmp_path / 'a'}"))
+    save_model(second, tmp_path / "b")
+    third = train_model(labeled(5, prefix="V"), tiny, replace(cfg, init=f"resume:{tmp_path / 'b'}"))
+    # what evaluate leaves out of the third model's score, and what a fourth generation keeps on the training side
+    assert set(first.info["train_trials"]) <= lineage_train_trials(third.info)
+    save_model(third, tmp_path / "c")
+    fourth = train_model(trials, tiny, replace(cfg, seed=3, init=f"resume:{tmp_path / 'c'}"))
+    assert not set(first.info["train_trials"]) & set(fourth.info["test_trials"])  # seed 3 would hold out T/trial_04

@@ -483,6 +483,8 @@ def train_model(
                 "dataset_ids": base.info.get("dataset_ids"),
                 "preset": base.info.get("preset"),
                 "train_trials": base.info.get("train_trials"),
+                # its own lineage, as deep as it goes: a grandparent's training trials are not held out either
+                "parent": base.info.get("parent"),
             },
             "frozen": ["lstm"] if frozen else [],
             "mirrored": mirror,
