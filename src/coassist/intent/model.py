@@ -401,7 +401,7 @@ def _tensors(path: Path, raw: bytes) -> dict[str, torch.Tensor]:
 
 
 def unfinished(model: IntentModel) -> str:
-    """"" for a finished training; else one line saying it is not (a checkpoint ``train`` writes after each epoch, in
+    """ "" for a finished training; else one line saying it is not (a checkpoint ``train`` writes after each epoch, in
     ``.<out>.partial``: its baselines untuned, its epochs not all run), for the commands that would use it."""
     if model.info.get("finished", True):
         return ""
