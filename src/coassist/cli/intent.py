@@ -147,7 +147,8 @@ def _check_model_out(out: Path, overwrite: bool, init: str) -> None:
 
 def train(
     data: list[Path] = typer.Argument(
-        ..., help="Dataset folders, real-recording folders (e.g. .../ur5-thesis/user-a) or single recordings."
+        ...,
+        help="Dataset folders, real-recording folders (e.g. .../ur5-thesis/user-a), folders of trial files (drive's runs), bags or single recordings.",
     ),
     out: Path = typer.Option(
         ..., "--out", "-o", help="Model folder to write (weights, model.json, history.json, loss.png)."
