@@ -4,7 +4,7 @@ question asked before an arm moves, and the run's files once it ended."""
 from __future__ import annotations
 
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -145,21 +145,12 @@ def write_run(
         wrote(str(plot_trial(trial, path.with_suffix(".png"))))
 
 
-def write_interrupted(
-    stop: Any,
-    out: Path,
-    *,
-    alpha: float | None,
-    mcap: bool,
-    plot: bool,
-    joint_names: Sequence[str] | None,
-    frame_id: str = "base",
-) -> NoReturn:
+def write_interrupted(stop: Any, write: Callable[[Any], None]) -> NoReturn:
     """Ctrl-C during a drive/ros2 run (``stop``: :class:`~coassist.runtime.loop.RunInterrupted`, the arm already
-    stopped): the ticks before it written as :func:`write_run` writes a run, a line saying so, exit status 130."""
+    stopped): the ticks before it written by ``write`` (the run's :func:`write_run`), a line saying so, exit 130."""
     if stop.trial is None:
         err_console.print("interrupted (Ctrl-C) before the first tick: nothing to write", markup=False)
     else:
-        write_run(stop.trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=joint_names, frame_id=frame_id)
+        write(stop.trial)
         err_console.print("interrupted (Ctrl-C): the ticks before it are written", markup=False)
     raise typer.Exit(130)

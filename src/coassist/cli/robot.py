@@ -145,6 +145,10 @@ def drive(
         # The UR's joint names; another arm's joints are named joint_1 … joint_n in the MCAP.
         names = UR_JOINT_NAMES if config.robot == "ur5" else None
         alpha = run_alpha(preset, controller) if mcap else None
+
+        def write(trial) -> None:
+            write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=names)
+
         try:
             trial = run_drive(
                 config, host=host, view=view, confirm=None if WORLDS[world].simulated else confirm, live=live, say=say
@@ -152,9 +156,9 @@ def drive(
         except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
             fail(str(exc))
         except RunInterrupted as stop:  # Ctrl-C: the arm stopped; the ticks before it are written, as on an error
-            write_interrupted(stop, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=names)
+            write_interrupted(stop, write)
         # the run is written before the live view closes, as ros2 does: whatever became of the view, the trial is kept
-        write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=names)
+        write(trial)
     finally:
         close_live(live)
 

@@ -188,6 +188,10 @@ def ros2(
     confirm = confirm_move(yes, "the emergency stop")
     alpha = run_alpha(preset, controller)
     live = open_live(foxglove)
+
+    def write(trial) -> None:
+        write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=rcfg.joint_names, frame_id=rcfg.base_frame)
+
     try:
         try:
             world = Ros2World(rcfg, alpha=alpha)
@@ -206,19 +210,9 @@ def ros2(
         except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
             fail(str(exc))
         except RunInterrupted as stop:  # Ctrl-C: the arm stopped; the ticks before it are written, as on an error
-            write_interrupted(
-                stop, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=rcfg.joint_names, frame_id=rcfg.base_frame
-            )
+            write_interrupted(stop, write)
         # the run is written before the live view closes: whatever became of the view, the trial is kept
-        write_run(
-            trial,
-            out,
-            alpha=alpha,
-            mcap=mcap,
-            plot=plot,
-            joint_names=rcfg.joint_names,
-            frame_id=rcfg.base_frame,
-        )
+        write(trial)
     finally:
         close_live(live)
 
