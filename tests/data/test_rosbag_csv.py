@@ -348,3 +348,16 @@ def test_a_topic_that_stopped_early_is_said(tmp_path):
         warnings.simplefilter("always")
         load_ros_trial(whole)
     assert [str(w.message) for w in seen if "dropped" in str(w.message)] == []
+
+
+def test_a_users_folder_of_recordings_is_read_as_recordings_beside_a_trial_file(tmp_path):
+    """A folder of trial_* recordings with a trial file beside them (an export kept there) is still a user's
+    recordings: a folder of trial files is read as such only where it holds no recordings."""
+    from coassist.intent import load_trials
+
+    user = tmp_path / "user-z"
+    make_recording(user / "trial_1")
+    make_recording(user / "trial_2")
+    write_trial(load_ros_trial(user / "trial_1"), user / "kept.parquet")
+    got = load_trials([user])
+    assert [lt.id for lt in got] == [f"{tmp_path.name}/user-z/trial_1", f"{tmp_path.name}/user-z/trial_2"]

@@ -65,7 +65,8 @@ def _load_one(
         dataset = f"{here.parent.parent.name}/{here.parent.name}"
         return _load_each([path], load_ros_trial, dataset, on_bad, name=f"{dataset}/{here.name}")
     bags = bag_paths(path)
-    loose = sorted(p for p in path.glob("*.parquet") if p.is_file()) if path.is_dir() else []
+    recordings = path.is_dir() and any(p.is_dir() and p.name.startswith("trial_") for p in path.iterdir())
+    loose = sorted(p for p in path.glob("*.parquet") if p.is_file()) if path.is_dir() and not recordings else []
     if loose:
         # trial files side by side (drive's and ros2's, with their .mcap bags beside them): the files, which keep the
         # whole trial record (the controller, the person, the intent); a bag without a trial file of its name too
@@ -83,7 +84,7 @@ def _load_one(
     dataset = f"{here.parent.name}/{here.name}"
     if bags:
         return _load_each(bags, lambda bag: load_bag_trial(bag, user=here.name, topics=bag_topics), dataset, on_bad)
-    if path.is_dir() and any(p.is_dir() and p.name.startswith("trial_") for p in path.iterdir()):
+    if recordings:
         return _load_each(
             recording_folders(path), lambda folder: load_ros_trial(folder, user=here.name), dataset, on_bad
         )
