@@ -182,7 +182,7 @@ def test_tune_makes_its_database_folder_and_prints_the_command_it_measured(tmp_p
 
 def test_one_recording_given_twice_under_two_ids_is_refused(tmp_path):
     """A dataset and one of its own files (ids labA/trial_00001 and Dx/trial_00001) trained on one copy and tested on
-    the other (review, 2026-12-06): refused naming both."""
+    the other (review, 2026-12-06): refused naming both. (Copies of one recording in two files are not looked for.)"""
     write_dataset([make_trial(i, n=220) for i in range(3)], tmp_path / "Dx", "labA")
     res = CliRunner().invoke(
         app,
@@ -190,4 +190,6 @@ def test_one_recording_given_twice_under_two_ids_is_refused(tmp_path):
          "--out", str(tmp_path / "m")],
     )  # fmt: skip
     said = " ".join(res.output.split())
-    assert res.exit_code == 2 and "trials labA/trial_00001 and Dx/trial_00001 hold the same recording" in said, said
+    assert res.exit_code == 2 and f"trial_00001.parquet is one of the trials of {tmp_path / 'Dx'}, given too" in said, (
+        said
+    )

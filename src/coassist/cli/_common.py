@@ -237,6 +237,7 @@ def intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA
         reason = reason.removeprefix(f"{where}: ")  # the reason usually names the file already
         console.print(f"[yellow]skipped[/] {where}: {reason}", highlight=False)
 
+    _refuse_copies(paths, option)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -249,29 +250,20 @@ def intent_trials(paths: list[Path], skip_bad: bool = False, option: str = "DATA
         fail(f"{option}: {exc}{hint}", 2)
     for w in caught:
         console.print(f"[yellow]warning:[/] {w.message}", highlight=False)
-    _refuse_copies(trials, option)
     return trials
 
 
-def _refuse_copies(trials, option: str) -> None:
-    """One recording reached twice under two ids (a dataset and one of its own files, a dataset collected again
-    elsewhere): refused naming both, before it trains on one copy and is tested on the other (review, 2026-12-06)."""
-    import hashlib
-
-    import numpy as np
-
-    seen: dict[str, str] = {}
-    for lt in trials:
-        t = lt.trial
-        digest = hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in (t.time, t.pose, t.wrench)))
-        key = digest.hexdigest()
-        if key in seen:
-            fail(
-                f"{option}: trials {seen[key]} and {lt.id} hold the same recording (their time, pose and wrench are "
-                "equal): give each trial once",
-                2,
-            )
-        seen[key] = lt.id
+def _refuse_copies(paths: list[Path], option: str) -> None:
+    """A file given beside a folder given that holds it (a dataset and one of its own files: ids labA/trial_00001
+    and Dx/trial_00001, trained on one copy and tested on the other; review, 2026-12-06): refused naming both."""
+    folders = [(p, p.resolve()) for p in paths if p.is_dir()]
+    for p in paths:
+        if not p.is_file():
+            continue
+        here = p.resolve()
+        for folder, where in folders:
+            if here.is_relative_to(where):
+                fail(f"{option}: {p} is one of the trials of {folder}, given too: give each trial once", 2)
 
 
 def _items(text: str, option: str, distinct: bool) -> list[str]:
