@@ -165,7 +165,7 @@ def busy_cores_hint(threads: int, option: str = "--threads") -> None:
     """A line where ``threads`` torch threads would share cores with other work: they wait for each other at every
     step, spinning (OpenMP), and a training beside other work ran several times slower on two threads than on one
     (this 2-core VM beside other work: ``coassist train`` 80 s on two threads, 18 s on one; quiet, two were 1.8 times
-    one's speed: docs/performance.md). Nothing is changed: the same command trains the same model whatever the load."""
+    one's speed: docs/history.md). Nothing is changed: the same command trains the same model whatever the load."""
     if threads < 2:
         return
     idle = idle_cores()
