@@ -79,13 +79,12 @@ def _check_start(init: str, preset: str | None) -> None:
     closed form: no network to continue; torch said "optimizer got an empty parameter list") and a --preset whose
     network or label is not the starting model's (the model's were kept without a word). Where model.json cannot be
     read the training's own reading says what is wrong."""
-    import json
-
+    from coassist.intent.model import read_sidecar
     from coassist.intent.presets import MODEL_PRESETS
 
     kind, _, path = init.partition(":")
     try:
-        info = json.loads((Path(path) / "model.json").read_text("utf-8"))
+        info = read_sidecar(path)
         layers, label, own = info["network"]["lstm_layers"], info["window"]["label"], info.get("preset")
     except (OSError, ValueError, KeyError, TypeError):
         return

@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import NamedTuple
 
-from coassist.data import RecordingError, Trial, TrialFileError, load_ros_trial, read_dataset
+from coassist.data import RecordingError, Trial, TrialFileError, load_ros_trial, read_dataset, read_trial
 from coassist.data.bags import bag_paths, is_bag, load_bag_trial
 from coassist.data.datasets import MANIFEST_NAME
 from coassist.data.rosbag_csv import recording_folders
@@ -51,8 +51,6 @@ def _load_one(
         name = f"{dataset}/{path.stem if path.is_file() else path.name}"
         return _load_each([path], lambda bag: load_bag_trial(bag, topics=bag_topics), dataset, on_bad, name=name)
     if path.is_file():  # one trial file (coassist collect / drive / play write them)
-        from coassist.data import read_trial
-
         dataset = path.absolute().parent.name
         return _load_each([path], read_trial, dataset, on_bad, name=f"{dataset}/{path.stem}")
     if (path / MANIFEST_NAME).is_file():
@@ -70,8 +68,6 @@ def _load_one(
     if loose:
         # trial files side by side (drive's and ros2's, with their .mcap bags beside them): the files, which keep the
         # whole trial record (the controller, the person, the intent); a bag without a trial file of its name too
-        from coassist.data import read_trial
-
         out = []
         for file in loose:
             out += _load_each([file], read_trial, here.name, on_bad, name=f"{here.name}/{file.stem}")

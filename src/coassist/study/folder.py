@@ -284,10 +284,11 @@ def _rests_not_reached(study: StudyFolder, new: StudyPlan, changed: dict[str, An
     """Per rest amended from 0 s to more, the participants who began without it: a rest of 0 s is no step of their
     order (fixed at their first run), so the new length reaches only those who begin after the amendment."""
     out: dict[str, list[str]] = {}
+    fresh: list[dict[str, Any]] | None = None  # a new participant's steps under the new plan, made once if needed
     for name, whys in _PLAN_RESTS.items():
         if name not in changed or not (changed[name][0] == 0 and changed[name][1] > 0):
             continue
-        fresh = participant_steps(new, study.labels, 1, 0)
+        fresh = participant_steps(new, study.labels, 1, 0) if fresh is None else fresh
         if not any(s["kind"] == "rest" and s.get("why") in whys for s in fresh):
             continue  # the protocol places none (one trial per condition): nobody misses it
         began = [
