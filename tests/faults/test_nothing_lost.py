@@ -605,7 +605,7 @@ def test_resume_of_an_interrupted_run_with_other_data_is_refused(tmp_path):
 
     cfg = _stopped_after_epoch_1(tmp_path / "m")
     with pytest.raises(ValueError, match="interrupted run on 4 other trials"):
-        train_model(labeled(4, prefix="X"), TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
+        train_model(labeled(4, prefix="X", first_seed=300), TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
     # the same ids holding other data (a dataset collected again under the same id): refused too, where it once
     # continued on the new trials with the old ones' scalers
     again = labeled(4)

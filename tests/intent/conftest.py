@@ -26,8 +26,15 @@ def make_trial(seed: int, n: int = 260, d: int = 2, dt: float = 0.008, user: str
     return Trial(meta=meta, time=t, pose=pose, velocity=vel, wrench=wrench, reference=ref)
 
 
-def labeled(n_trials: int = 5, d: int = 2, dt: float = 0.008, n: int = 260, prefix: str = "T") -> list[LabeledTrial]:
-    return [LabeledTrial(f"{prefix}/trial_{i:02d}", prefix, make_trial(i, n=n, d=d, dt=dt)) for i in range(n_trials)]
+def labeled(
+    n_trials: int = 5, d: int = 2, dt: float = 0.008, n: int = 260, prefix: str = "T", first_seed: int = 0
+) -> list[LabeledTrial]:
+    """``n_trials`` of :func:`make_trial` (seeds ``first_seed`` on) named ``<prefix>/trial_<i>``: the same seeds under
+    another prefix are copies of the same trials (a training knows them by their contents too)."""
+    return [
+        LabeledTrial(f"{prefix}/trial_{i:02d}", prefix, make_trial(first_seed + i, n=n, d=d, dt=dt))
+        for i in range(n_trials)
+    ]
 
 
 TINY = Preset(

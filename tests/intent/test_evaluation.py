@@ -51,6 +51,8 @@ def test_best_baseline_and_per_trial_spread(trials, tiny):
         "baselines",
         "results",
         "best_baseline",
+        "copies",  # then what is new, at the end
+        "against",
     ]
     assert record["horizons"] == [5, 10] and record["results"]["ridge"]["10"]["e_rms"] == r["e_rms"]
     assert record["best_baseline"]["5"]["name"] == res.best_baseline[5]["name"]
@@ -241,7 +243,7 @@ def test_held_out_only_leaves_out_what_the_starting_model_trained_on(tmp_path, t
     cfg = replace(tiny.train, epochs=1)
     parent = train_model(trials, tiny, cfg)
     save_model(parent, tmp_path / "p")
-    new = labeled(5, prefix="U")
+    new = labeled(5, prefix="U", first_seed=100)  # other trials
     ft = train_model(new, tiny, replace(cfg, init=f"finetune:{tmp_path / 'p'}"))
     assert ft.info["parent"]["train_trials"] == parent.info["train_trials"]
     assert lineage_train_trials(ft.info) == {*parent.info["train_trials"], *ft.info["train_trials"]}
@@ -249,3 +251,123 @@ def test_held_out_only_leaves_out_what_the_starting_model_trained_on(tmp_path, t
     assert list(ev.trials) == ["T/trial_02", "U/trial_02"]  # the parent's test trial and the model's own
     assert sorted(ev.skipped) == sorted([*parent.info["train_trials"], *ft.info["train_trials"]])
     assert len(evaluate_model(ft, trials + new, held_out_only=False).trials) == 10
+
+
+def test_a_copy_of_a_training_trial_under_another_name_is_not_held_out(tmp_path, trials, tiny):
+    """A model's training trials copied under other names (another dataset folder, a file copied away) were scored
+    as held out: evaluate knew them by id alone. Their contents' digests (the sidecar's train_digests, its parent's
+    too) leave them out, named apart; a training started from a model moves such copies to its training side."""
+    import copy
+    from dataclasses import replace
+
+    from coassist.intent import save_model
+    from coassist.intent.trials import content_digest
+
+    cfg = replace(tiny.train, epochs=1)
+    model = train_model(trials, tiny, cfg)
+    trained = set(model.info["train_trials"])
+    assert model.info["train_digests"] == [content_digest(lt.trial) for lt in trials if lt.id in trained]
+    copies = labeled(5, prefix="C")  # the same trials (the same seeds), named C/…
+    ev = evaluate_model(model, copies, held_out_only=True)
+    held = [c.id for c, t in zip(copies, trials) if t.id not in trained]
+    assert list(ev.trials) == held and len(held) == 1  # the copy of the trial it held out is scored
+    assert sorted(ev.copies) == sorted(ev.skipped) == sorted(c.id for c in copies if c.id not in held)
+    assert ev.to_dict()["copies"] == list(ev.copies)
+    # a value changed is another trial: scored
+    moved = copies[0].trial
+    other = copies[0]._replace(trial=replace(moved, pose=moved.pose + 1e-9))
+    assert content_digest(other.trial) != content_digest(moved)
+    assert other.id in evaluate_model(model, [other, *copies[1:]], held_out_only=True).trials
+    with pytest.raises(ValueError, match="copies of its training trials"):
+        evaluate_model(model, [c for c in copies if c.id not in held], held_out_only=True)
+    # a sidecar from before train_digests: by id alone, as then
+    old = copy.copy(model)
+    old.info = {k: v for k, v in model.info.items() if k != "train_digests"}
+    assert evaluate_model(old, copies, held_out_only=True).copies == ()
+    # fine-tuning on the copies: none of its held-out trials is one its parent trained on
+    save_model(model, tmp_path / "p")
+    ft = train_model(copies, tiny, replace(cfg, init=f"finetune:{tmp_path / 'p'}"))
+    assert ft.info["parent"]["train_digests"] == model.info["train_digests"]
+    test_contents = {content_digest(c.trial) for c in copies if c.id in ft.info["test_trials"]}
+    assert not test_contents & set(model.info["train_digests"])
+    assert set(ft.info["train_trials"]) >= {c.id for c in copies if c.id not in held}
+
+
+def test_evaluate_names_copies_of_training_trials(tmp_path, trials, tiny):
+    from dataclasses import replace
+
+    from coassist.intent import save_model
+
+    model = train_model(trials, tiny, replace(tiny.train, epochs=1))
+    save_model(model, tmp_path / "m")
+    write_dataset([lt.trial for lt in trials], tmp_path / "copy", "copy")
+    res = CliRunner().invoke(app, ["evaluate", "--model", str(tmp_path / "m"), "--data", str(tmp_path / "copy")])
+    assert res.exit_code == 0, res.output
+    assert "skipped 4 training trials, 4 of them copies of training trials under other names" in " ".join(
+        res.output.split()
+    )
+    record = json.loads((tmp_path / "m" / "evaluation.json").read_text())
+    assert len(record["trials"]) == 1 and len(record["copies"]) == 4
+
+
+def _with_intent(lt, offset):
+    """``lt`` on its plan (reference = pose) with a recorded intent ``offset`` [m] (2,) from the tool."""
+    from dataclasses import replace
+
+    t = lt.trial
+    return lt._replace(trial=replace(t, reference=t.pose.copy(), intent=t.pose + np.asarray(offset)))
+
+
+def test_scored_against_the_intent_the_errors_are_the_intents(trials, tiny):
+    """against="intent": every predictor's rows against the recorded intent. A tool on its plan exactly, the intent
+    5 mm off it: the plan's rows (nominal) err 0 against the tool and 5 mm against the intent at every horizon; an
+    intent equal to the tool scores as the tool, bit for bit; a trial without an intent is named."""
+    from dataclasses import replace
+
+    model = train_model(trials, tiny, replace(tiny.train, epochs=1))
+    off = [_with_intent(lt, (0.003, 0.004)) for lt in trials]
+    tool = evaluate_model(model, off, held_out_only=False)
+    intent = evaluate_model(model, off, held_out_only=False, against="intent")
+    assert tool.against == "tool" and intent.against == "intent" == intent.to_dict()["against"]
+    for h in tool.horizons:
+        assert tool.results["nominal"][h]["e_rms"] == 0.0
+        assert intent.results["nominal"][h]["e_rms"] == pytest.approx(0.005, rel=1e-9)
+    same = [lt._replace(trial=replace(lt.trial, intent=lt.trial.pose.copy())) for lt in trials]
+    a = evaluate_model(model, same, held_out_only=False, against="intent")
+    b = evaluate_model(model, same, held_out_only=False)
+    assert a.results == b.results
+    with pytest.raises(ValueError, match="trial T/trial_00 records no intent"):
+        evaluate_model(model, trials, held_out_only=False, against="intent")
+    with pytest.raises(ValueError, match="against must be one of"):
+        evaluate_model(model, trials, against="hand")
+
+
+def test_evaluate_scores_an_intent_model_against_the_intent_where_the_trials_record_it(tmp_path, trials, tiny):
+    """coassist evaluate scored an intent-label model's rows against the tool's path without a word. By default it
+    scores a model against what it predicts where every trial records it, says against what, and where it cannot
+    (a recording: no intent) says that the rows are scored against the tool's path."""
+    from dataclasses import replace
+
+    from coassist.intent import save_model
+
+    sim = [_with_intent(lt, (0.003, 0.004)) for lt in trials]
+    preset = replace(tiny, window=replace(tiny.window, label="intent"))
+    save_model(train_model(sim, preset, replace(tiny.train, epochs=1)), tmp_path / "m")
+    write_dataset([lt.trial for lt in sim], tmp_path / "sim", "sim")
+    write_dataset([lt.trial for lt in trials], tmp_path / "rec", "rec")
+
+    def run(*args):
+        res = CliRunner().invoke(app, ["evaluate", "--model", str(tmp_path / "m"), "--include-training", *args])
+        return res.exit_code, " ".join(res.output.split())
+
+    code, out = run("--data", str(tmp_path / "sim"), "--out", str(tmp_path / "a.json"))
+    assert code == 0 and "against the person's true intent" in out, out
+    assert json.loads((tmp_path / "a.json").read_text())["against"] == "intent"
+    code, out = run("--data", str(tmp_path / "rec"), "--out", str(tmp_path / "b.json"))
+    assert code == 0 and "against the tool's future path" in out, out
+    assert "the model predicts the person's intent (label 'intent')" in out
+    assert "scored against the tool's path here" in out
+    code, out = run("--data", str(tmp_path / "rec"), "--against", "intent")
+    assert code == 2 and "--against intent: trial rec/" in out and "records no intent" in out, out
+    code, out = run("--data", str(tmp_path / "rec"), "--against", "pose")
+    assert code == 2 and "--against must be one of tool, intent, got 'pose'" in out, out

@@ -38,7 +38,7 @@ def test_training_reduces_the_loss(trials, tiny):
 def test_transfer_freezes_the_lstm_bit_for_bit(tmp_path, trials, tiny):
     base = train_model(trials, tiny, tiny.train)
     save_model(base, tmp_path / "base")
-    new_user = labeled(3, prefix="U")
+    new_user = labeled(3, prefix="U", first_seed=100)
     tl = train_model(new_user, tiny, TrainConfig(**{**tiny.train.__dict__, "init": f"transfer:{tmp_path / 'base'}"}))
     sb, st = _state(base), _state(tl)
     lstm = [k for k in sb if k.startswith("lstm.")]
@@ -65,7 +65,7 @@ def test_transfer_refits_a_frozen_skip_to_the_new_datas_ridge(tmp_path, trials, 
     preset = replace(tiny, skip=True, train=replace(tiny.train, freeze_skip=True, skip_alpha=0.5))
     base = train_model(trials, preset, preset.train)
     save_model(base, tmp_path / "base")
-    new_user = labeled(4, prefix="U")
+    new_user = labeled(4, prefix="U", first_seed=100)
     cfg = replace(preset.train, init=f"transfer:{tmp_path / 'base'}")
     tl = train_model(new_user, preset, cfg)
     train_idx, _ = split_trials([t.id for t in new_user], cfg.test_fraction, cfg.seed)
@@ -254,7 +254,7 @@ def test_fit_stride_fits_the_scalers_and_the_skip_on_every_nth_window(tmp_path, 
     assert np.abs(third.net.skip.weight.detach().numpy() - every.net.skip.weight.detach().numpy()).max() > 1e-4
     # a transfer's skip is refitted on the new trials' every 3rd window, in the source's scalers
     save_model(every, tmp_path / "base")
-    new_user = labeled(4, prefix="U")
+    new_user = labeled(4, prefix="U", first_seed=100)
     cfg = replace(p.train, init=f"transfer:{tmp_path / 'base'}", fit_stride=3, epochs=1)
     tl = train_model(new_user, p, cfg)
     idx, _ = split_trials([t.id for t in new_user], cfg.test_fraction, cfg.seed)
@@ -311,18 +311,24 @@ def test_a_model_whose_window_cannot_be_mirrored_transfers_and_says_how_to_finet
     absolute = replace(tiny, window=replace(tiny.window, input_frame="absolute", target="absolute"))
     save_model(train_model(trials, absolute, replace(tiny.train, epochs=1)), tmp_path / "src")
     mirroring = replace(tiny.train, epochs=1, mirror=True)
-    tl = train_model(labeled(3, prefix="U"), tiny, replace(mirroring, init=f"transfer:{tmp_path / 'src'}"))
+    tl = train_model(
+        labeled(3, prefix="U", first_seed=100), tiny, replace(mirroring, init=f"transfer:{tmp_path / 'src'}")
+    )
     assert tl.info["frozen"] == ["lstm"] and tl.info["mirrored"] is False
     assert tl.window.input_frame == "absolute"
     with pytest.raises(ValueError) as err:
-        train_model(labeled(3, prefix="U"), tiny, replace(mirroring, init=f"finetune:{tmp_path / 'src'}"))
+        train_model(
+            labeled(3, prefix="U", first_seed=100), tiny, replace(mirroring, init=f"finetune:{tmp_path / 'src'}")
+        )
     assert str(err.value) == (
         f"{tmp_path / 'src'}: its window (input_frame 'absolute', target 'absolute') cannot be mirrored, which "
         "train.mirror (on in this configuration) asks; finetune: it with train.mirror off (--preset thesis does "
         "not mirror)"
     )
     ft = train_model(
-        labeled(3, prefix="U"), tiny, replace(mirroring, mirror=False, init=f"finetune:{tmp_path / 'src'}")
+        labeled(3, prefix="U", first_seed=100),
+        tiny,
+        replace(mirroring, mirror=False, init=f"finetune:{tmp_path / 'src'}"),
     )
     assert ft.info["mirrored"] is False and ft.info["frozen"] == []
     with pytest.raises(ValueError, match=r"^train.mirror needs window.input_frame='relative'"):  # from scratch
@@ -395,14 +401,14 @@ def test_trials_a_starting_model_trained_on_stay_on_the_training_side(tmp_path, 
     assert parent.info["test_trials"] == ["T/trial_02"] and "T/trial_04" in parent.info["train_trials"]
     ft = train_model(trials, tiny, replace(cfg, seed=3, init=f"finetune:{tmp_path / 'p'}"))
     assert ft.info["test_trials"] == [] and ft.info["train_trials"] == ids and ft.info["n_test_windows"] == 0
-    more = trials + labeled(5, prefix="U")
+    more = trials + labeled(5, prefix="U", first_seed=100)  # other trials
     stage = train_model(more, tiny, replace(cfg, init=f"resume:{tmp_path / 'p'}"))
     _, test = split_trials([t.id for t in more], cfg.test_fraction, 0)
     assert [more[i].id for i in test] == ["T/trial_04", "U/trial_01"]  # T/trial_04: the parent's training trial
     assert stage.info["test_trials"] == ["U/trial_01"]
     assert set(parent.info["train_trials"]) <= set(stage.info["train_trials"])
     # a starting model that never saw these trials: the split as split_trials makes it
-    tl = train_model(labeled(5, prefix="V"), tiny, replace(cfg, init=f"transfer:{tmp_path / 'p'}"))
+    tl = train_model(labeled(5, prefix="V", first_seed=200), tiny, replace(cfg, init=f"transfer:{tmp_path / 'p'}"))
     _, test = split_trials([f"V/trial_{i:02d}" for i in range(5)], cfg.test_fraction, 0)
     assert tl.info["test_trials"] == [f"V/trial_{i:02d}" for i in test]
 
@@ -417,9 +423,9 @@ def test_a_grandparents_training_trials_stay_on_the_training_side(tmp_path, tria
     cfg = replace(tiny.train, epochs=1)
     first = train_model(trials, tiny, cfg)
     save_model(first, tmp_path / "a")
-    second = train_model(labeled(5, prefix="U"), tiny, replace(cfg, init=f"resume:{tmp_path / 'a'}"))
+    second = train_model(labeled(5, prefix="U", first_seed=100), tiny, replace(cfg, init=f"resume:{tmp_path / 'a'}"))
     save_model(second, tmp_path / "b")
-    third = train_model(labeled(5, prefix="V"), tiny, replace(cfg, init=f"resume:{tmp_path / 'b'}"))
+    third = train_model(labeled(5, prefix="V", first_seed=200), tiny, replace(cfg, init=f"resume:{tmp_path / 'b'}"))
     # what evaluate leaves out of the third model's score, and what a fourth generation keeps on the training side
     assert set(first.info["train_trials"]) <= lineage_train_trials(third.info)
     save_model(third, tmp_path / "c")

@@ -35,22 +35,28 @@ from coassist.intent.baselines import (
 from coassist.intent.features import feature_names
 from coassist.intent.kalman import KalmanCA
 from coassist.intent.model import IntentModel, lineage_train_trials
-from coassist.intent.trials import LabeledTrial
+from coassist.intent.trials import LabeledTrial, content_digest
 from coassist.metrics import HORIZONS, prediction_errors_by_horizon
 
 __all__ = [
+    "AGAINST",
     "BASELINES",
     "PREDICTORS",
     "ModelEvaluation",
     "best_baselines",
     "comparison_lines",
     "evaluate_model",
+    "records_intent",
     "results_table",
 ]
 
 PREDICTORS = ("model", "nominal", "constant_velocity", "constant_acceleration", "ridge")
 BASELINES = PREDICTORS[1:]
 
+
+#: What :func:`evaluate_model` can score the predictors against: the tool's future path (the thesis' e_RMS) or the
+#: person's true intent (simulated trials).
+AGAINST = ("tool", "intent")
 
 #: Scores of one predictor at one horizon: e_rms, e_max_mean, e_max_max [m], e_rms_trials
 #: {trial id: e_RMS}, trial_median, trial_min, trial_max [m].
@@ -61,7 +67,10 @@ Scores = dict[str, Any]
 class ModelEvaluation:
     """What :func:`evaluate_model` measured (errors in m, horizons in ticks).
 
-    trials : the scored trial ids.  skipped : the ids left out (the model trained on them).
+    trials : the scored trial ids.  skipped : the ids left out (the model trained on them).  copies : those of
+        ``skipped`` left out for their contents (a training trial's, under another name).
+    against : what every predictor's rows were scored against: ``"tool"`` (the tool's future path, the thesis'
+        e_RMS) or ``"intent"`` (the person's true intent, simulated trials: what an intent-label model predicts).
     n_ticks : ticks scored per horizon (the model's, every predictor on the same ones).
     horizons : the horizons [ticks] reported, ascending.  dt : [s] per tick.
     baselines : how the baselines were set up (the ridge's α, the Kalman filter's noise, the
@@ -80,6 +89,8 @@ class ModelEvaluation:
     results: dict[str, dict[int, Scores]]
     best_baseline: dict[int, dict[str, Any]]
     unit: str = "m"
+    copies: tuple[str, ...] = ()
+    against: str = "tool"
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON record (``coassist evaluate``'s evaluation.json, the report's summary.json);
@@ -94,6 +105,8 @@ class ModelEvaluation:
             "baselines": self.baselines,
             "results": self.results,
             "best_baseline": self.best_baseline,
+            "copies": list(self.copies),
+            "against": self.against,
         }
 
 
@@ -110,6 +123,7 @@ def evaluate_model(
     horizons: Sequence[int] = HORIZONS,
     held_out_only: bool = True,
     stride: int = 1,
+    against: str = "tool",
 ) -> ModelEvaluation:
     """e_RMS and e_MAX per horizon for the model and the baselines, in m.
 
@@ -120,10 +134,14 @@ def evaluate_model(
     horizons : the prediction horizons [ticks] to report.
     held_out_only : bool
         Skip trials the model or the models it was started from were trained on (its sidecar's
-        ``train_trials`` and its ``parent``'s: :func:`~coassist.intent.model.lineage_train_trials`); the
-        skipped ids are listed in the result.
+        ``train_trials`` and its ``parent``'s: :func:`~coassist.intent.model.lineage_train_trials`), and copies of
+        them under other names (their contents' digests, ``train_digests``); the skipped ids are listed in the
+        result, the copies apart.
     stride : score every n-th of the model's ticks (:meth:`IntentModel.predict_trial`), every predictor on the
         same ticks (1: every tick).
+    against : ``"tool"`` (every predictor against the tool's future path: what the thesis scores) or ``"intent"``
+        (against the trial's true intent, which simulated trials record: an intent-label model's own target; a
+        trial without it raises, naming it). :data:`AGAINST`.
 
     Returns
     -------
@@ -134,13 +152,19 @@ def evaluate_model(
     horizons = [int(h) for h in horizons if int(h) <= model.horizon]
     if not horizons:
         raise ValueError(f"no horizon fits the model's horizon of {model.horizon} samples")
+    if against not in AGAINST:
+        raise ValueError(f"against must be one of {AGAINST}, got {against!r}")
     trained_on = lineage_train_trials(model.info) if held_out_only else set()
-    used = [lt for lt in trials if lt.id not in trained_on]
-    skipped = [lt.id for lt in trials if lt.id in trained_on]
+    contents = lineage_train_trials(model.info, "train_digests") if held_out_only else set()
+    copies = [lt.id for lt in trials if lt.id not in trained_on and contents and content_digest(lt.trial) in contents]
+    left_out = trained_on | set(copies)
+    skipped = [lt.id for lt in trials if lt.id in left_out]
+    used = [lt for lt in trials if lt.id not in left_out]
     if not used:
+        copied = f", {len(copies)} of them copies of its training trials under other names" if copies else ""
         raise ValueError(
-            f"every given trial was used to train the model or the one it was started from ({len(skipped)} trials); "
-            "nothing held out"
+            f"every given trial was used to train the model or the one it was started from ({len(skipped)} "
+            f"trials{copied}); nothing held out"
         )
     kalman = model_kalman(model)
     names = [p for p in PREDICTORS if p != "ridge" or model.ridge is not None]
@@ -152,6 +176,7 @@ def evaluate_model(
     for lt in used:
         t = lt.trial
         model.check_compatible(feature_names(t.n_dof), t.meta.dt, what=f"trial {lt.id}")
+        target = t.pose if against == "tool" else _intent_of(lt)
         pm = model.predict_trial(t, stride=stride)
         mask = ~np.all(np.isfinite(pm), axis=(1, 2))
         preds = {
@@ -166,7 +191,7 @@ def evaluate_model(
         for p, pred in preds.items():
             pred = pred.copy()
             pred[mask] = np.nan  # score every predictor on the model's ticks only
-            errors = prediction_errors_by_horizon(pred, t.pose, scored)  # prediction_errors' per h, bit for bit
+            errors = prediction_errors_by_horizon(pred, target, scored)  # prediction_errors' per h, bit for bit
             for h in scored:
                 e = errors[h]
                 per[p][h]["rms"].append(e.rms)
@@ -207,6 +232,8 @@ def evaluate_model(
     return ModelEvaluation(
         trials=tuple(lt.id for lt in used),
         skipped=tuple(skipped),
+        copies=tuple(copies),
+        against=against,
         n_ticks=n_ticks,
         horizons=tuple(horizons),
         dt=model.dt,
@@ -214,6 +241,22 @@ def evaluate_model(
         results=results,
         best_baseline=best_baselines(results, horizons),
     )
+
+
+def records_intent(trial) -> bool:
+    """Whether ``trial`` records the person's true intent (a simulated trial's; a recording or an arm's has none)."""
+    return trial.intent is not None and bool(np.isfinite(trial.intent).any())
+
+
+def _intent_of(lt: LabeledTrial) -> np.ndarray:
+    """The true intent of ``lt``'s trial, (T, d) [m]: what ``against="intent"`` scores against."""
+    intent = lt.trial.intent
+    if not records_intent(lt.trial):
+        raise ValueError(
+            f"trial {lt.id} records no intent (a recording or an arm's trial: only simulated trials know the "
+            "person's intent); score against the tool's path there"
+        )
+    return np.asarray(intent, dtype=np.float64)
 
 
 def best_baselines(

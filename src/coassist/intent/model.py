@@ -316,14 +316,16 @@ def _fail(path: Path, what: str) -> ModelFileError:
     return ModelFileError(f"{path}: {what}")
 
 
-def lineage_train_trials(info: Mapping[str, Any]) -> set[str]:
+def lineage_train_trials(info: Mapping[str, Any], key: str = "train_trials") -> set[str]:
     """The trial ids a model and the models it was started from trained on, as its sidecar records them
     (``train_trials``, then each ``parent``'s, as deep as the record goes; a training records its starting
-    model's, so a model's own and its parent's): what is not held out from it."""
+    model's, so a model's own and its parent's): what is not held out from it. ``key="train_digests"``: the
+    same trials' contents (:func:`~coassist.intent.trials.content_digest`; models trained before they were
+    recorded have none), which know a copy of a training trial under another name."""
     out: set[str] = set()
     node: Any = info
     while isinstance(node, Mapping):  # a JSON record has no cycle: each parent is nested one level deeper
-        trained = node.get("train_trials")
+        trained = node.get(key)
         if isinstance(trained, (list, tuple)):
             out.update(t for t in trained if isinstance(t, str))
         node = node.get("parent")

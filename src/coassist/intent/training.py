@@ -62,7 +62,7 @@ from coassist.intent.features import WindowConfig, WindowSet, feature_names, sca
 from coassist.intent.model import IntentModel, lineage_train_trials, load_model, save_model
 from coassist.intent.network import IntentNet
 from coassist.intent.presets import Preset, TrainConfig
-from coassist.intent.trials import LabeledTrial
+from coassist.intent.trials import LabeledTrial, content_digest
 
 __all__ = [
     "CHOICE_RELAX",
@@ -402,12 +402,18 @@ def train_model(
 
     train_idx, test_idx = split_trials(ids, config.test_fraction, config.seed)
     # Trials the starting model or its parent trained on are not held out: they go to the training side (a
-    # continued run: its own split, as it began). Where none of them is among the trials, the split is as it was.
+    # continued run: its own split, as it began), and so do copies of them under other names (their contents'
+    # digests). Where none of them is among the trials, the split is as it was.
+    digests = [content_digest(lt.trial) for lt in trials]
     if ckpt is not None:
         ancestors = set(base.info.get("train_trials") or ())
+        ancestor_contents = set(base.info.get("train_digests") or ())
+    elif mode != "scratch":
+        ancestors = lineage_train_trials(base.info)
+        ancestor_contents = lineage_train_trials(base.info, "train_digests")
     else:
-        ancestors = lineage_train_trials(base.info) if mode != "scratch" else set()
-    trained_before = [i for i in test_idx if ids[i] in ancestors]
+        ancestors, ancestor_contents = set(), set()
+    trained_before = [i for i in test_idx if ids[i] in ancestors or digests[i] in ancestor_contents]
     if trained_before:
         train_idx = sorted([*train_idx, *trained_before])
         test_idx = [i for i in test_idx if i not in trained_before]
@@ -472,6 +478,7 @@ def train_model(
             "preset": base.info.get("preset", preset.name) if mode != "scratch" or ckpt else preset.name,
             "dataset_ids": sorted({lt.dataset for lt in trials}),
             "train_trials": [ids[i] for i in train_idx],
+            "train_digests": [digests[i] for i in train_idx],  # their contents: a copy under another name is known
             "test_trials": [ids[i] for i in test_idx],
             "n_train_windows": len(train_ws),
             "n_test_windows": len(test_ws) if test_ws else 0,
@@ -483,6 +490,7 @@ def train_model(
                 "dataset_ids": base.info.get("dataset_ids"),
                 "preset": base.info.get("preset"),
                 "train_trials": base.info.get("train_trials"),
+                "train_digests": base.info.get("train_digests"),
                 # its own lineage, as deep as it goes: a grandparent's training trials are not held out either
                 "parent": base.info.get("parent"),
             },

@@ -15,28 +15,50 @@ A folder given as ``.`` is named by its own name. Two trials of one id from two 
 are both read, the second named by the folder where the paths part (``b/D/…``); one path given twice is refused.
 
 Each trial gets a stable id, ``<dataset id>/<trial name>``, used to split by trial and
-recorded in the model's sidecar.
+recorded in the model's sidecar, with its contents' digest (:func:`content_digest`: a copy of a trial under another
+name is still the trial a model trained on).
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import NamedTuple
+
+import numpy as np
 
 from coassist.data import RecordingError, Trial, TrialFileError, load_ros_trial, read_dataset, read_trial
 from coassist.data.bags import bag_paths, is_bag, load_bag_trial
 from coassist.data.datasets import MANIFEST_NAME
 from coassist.data.rosbag_csv import recording_folders
 
-__all__ = ["LabeledTrial", "load_trials"]
+__all__ = ["LabeledTrial", "content_digest", "load_trials"]
 
 
 class LabeledTrial(NamedTuple):
     id: str  # unique, stable: "<dataset>/<trial>"
     dataset: str  # dataset id ("D0", "ur5-thesis/user-a", …)
     trial: Trial
+
+
+#: What a trial's contents are, for :func:`content_digest`: what a model's windows read (its features, its plan and
+#: the tool's future) and the clock they are on.
+DIGEST_ARRAYS = ("time", "pose", "velocity", "wrench", "reference")
+
+
+def content_digest(trial: Trial) -> str:
+    """A fingerprint of ``trial``'s contents (16 hex digits of the SHA-256 of :data:`DIGEST_ARRAYS` as float64, with
+    their shapes), not of its name or file: the same trial copied to another folder, file or format that keeps every
+    value has the same digest. A training records its trials' digests (``train_digests``) so that ``coassist
+    evaluate`` leaves out a copy of a training trial as it leaves out the trial (what its id alone cannot tell)."""
+    h = hashlib.sha256()
+    for name in DIGEST_ARRAYS:
+        arr = np.ascontiguousarray(getattr(trial, name), dtype=np.float64)
+        h.update(name.encode() + str(arr.shape).encode())
+        h.update(arr.data)
+    return h.hexdigest()[:16]
 
 
 def _load_one(
