@@ -479,15 +479,26 @@ def test_collect_killed_after_two_trials_continues_and_matches_an_unbroken_run(t
     assert len(a) == 4 and all(x.equals(y) for x, y in zip(a.trials, b.trials))
 
 
-def test_collect_with_other_options_does_not_reuse_a_partial_folder(tmp_path):
+def test_collect_with_other_options_neither_reuses_nor_silently_removes_a_partial_folder(tmp_path):
+    """Another collection's unfinished trials in the destination were removed with a line said after the fact (an
+    hour's trials lost to a mistyped option): refused naming them and what they were, then discarded only when told
+    (overwrite)."""
     from coassist.data import DatasetWriter
     from coassist.sim.collect import collect_dataset
 
     out = tmp_path / "D"
-    with DatasetWriter(out, "D", n_trials=4, key="another collection") as w:
+    with DatasetWriter(out, "D", n_trials=4, key="another collection", description="simulated: 4 board trials") as w:
         w.add(0, make_trial(0))  # then "killed": no finish()
     said = []
-    collect_dataset(out, workers=1, progress=False, say=said.append, **{**COLLECT, "trials": 1})
+    with pytest.raises(FileExistsError) as err:
+        collect_dataset(out, workers=1, progress=False, say=said.append, **{**COLLECT, "trials": 1})
+    assert str(err.value).startswith(
+        f"{partial_folder(out)} holds 1 of 4 finished trials of another, unfinished collection (simulated: 4 board "
+        "trials): the command that started it continues it"
+    )
+    assert "overwrite=True (coassist collect --overwrite)" in str(err.value) and said == []
+    assert (partial_folder(out) / "trial_00000.parquet").is_file()  # nothing lost
+    collect_dataset(out, workers=1, progress=False, say=said.append, overwrite=True, **{**COLLECT, "trials": 1})
     assert said == [f"removed the unfinished trials of a different collection in {partial_folder(out)}"]
     assert read_dataset(out).trials[0].meta.task == "linear"
 

@@ -120,7 +120,8 @@ def collect(
     """Simulate trials and write them as a dataset (thesis §5.2.2: 60 trials; D0 with --intent nominal).
 
     Each trial is written as it finishes; if the run is stopped, the same command
-    continues where it stopped.
+    continues where it stopped. Another command's unfinished trials in --out are kept and
+    refused, naming them (--overwrite discards them).
     """
     from coassist._io import OutputBusyError
     from coassist.config import CONTROL_PRESETS

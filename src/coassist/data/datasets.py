@@ -403,7 +403,8 @@ class DatasetWriter:
     Trials go into ``.<name>.partial`` beside the destination, each file atomic, so a
     killed run keeps every trial it finished. A later writer for the same destination
     and the same ``key`` (a digest of what is being collected) picks them up
-    (:meth:`has` tells which); a different key discards them. :meth:`finish` writes the
+    (:meth:`has` tells which); a different key is refused, naming them, unless ``overwrite`` (which discards them:
+    :attr:`discarded`). :meth:`finish` writes the
     manifest and swaps the folder in at the destination, replacing an old dataset only
     then. The destination is locked from ``__enter__`` to ``__exit__``.
 
@@ -470,11 +471,18 @@ class DatasetWriter:
                     continue
                 same = same or (isinstance(record, dict) and record.get(field_name) == self.key)
             if not same:
+                if not self.overwrite:  # hours of another collection's trials are not removed unasked
+                    raise FileExistsError(self._other_collection())
                 shutil.rmtree(self.partial)
                 self.discarded = True
         if not self.partial.is_dir():
             os.mkdir(self.partial)
-            progress = {"key": self.key, "dataset_id": self.dataset_id, "n_trials": self.n_trials}
+            progress = {
+                "key": self.key,
+                "dataset_id": self.dataset_id,
+                "n_trials": self.n_trials,
+                "description": self.description,  # what a refusal of another collection names
+            }
             atomic_write(self.partial / self.PROGRESS, lambda fh: fh.write(json.dumps(progress).encode()))
             return
         remove_stale(self.partial)
@@ -488,6 +496,22 @@ class DatasetWriter:
                     continue
                 self._done.add(i)
         self.resumed = sorted(self._done)
+
+    def _other_collection(self) -> str:
+        """Why :attr:`partial`, another collection's unfinished trials, is not discarded without ``overwrite``."""
+        done = len(list(self.partial.glob("trial_*.parquet")))
+        try:
+            record = json.loads((self.partial / self.PROGRESS).read_text("utf-8"))
+            what = str(record.get("description") or "") if isinstance(record, dict) else ""
+            total = f" of {record['n_trials']}" if isinstance(record, dict) and "n_trials" in record else ""
+        except (OSError, ValueError):
+            what, total = "", ""
+        return (
+            f"{self.partial} holds {done}{total} finished trials of another, unfinished collection"
+            + (f" ({what})" if what else "")
+            + ": the command that started it continues it; to discard them and collect this one instead, pass "
+            "overwrite=True (coassist collect --overwrite)"
+        )
 
     def has(self, index: int) -> bool:
         """Whether trial ``index`` is already written (this run or an interrupted one)."""

@@ -152,7 +152,8 @@ def collect_dataset(
     written as soon as it finishes (:class:`coassist.data.DatasetWriter`), so memory
     does not grow with the trial count and a killed run loses only the trials in
     flight: running the same collection again continues where it stopped (``say``
-    is told how many trials it found), and once it has finished, running it again
+    is told how many trials it found; another collection's unfinished trials there are
+    refused, naming them, unless ``overwrite``), and once it has finished, running it again
     finds the complete dataset and does nothing. The dataset replaces an old one in
     ``out`` (``overwrite=True``) only once it is complete.
     """
