@@ -152,6 +152,26 @@ def test_trial_time_must_strictly_increase():
         make_trial(time=time)
 
 
+def test_a_trial_whose_clock_is_not_its_period_is_refused():
+    """A trial's time column and its meta.dt were never compared: a 500 Hz recording named 125 Hz (or a clock in ms)
+    was cut into windows, a plant and rates four times off. The median step must lie within CLOCK_TOLERANCE of dt;
+    jitter and gaps (a few late ticks, one dropped stretch) pass."""
+    from coassist.data.trial import CLOCK_TOLERANCE
+
+    with pytest.raises(ValueError, match=r"steps by 0.002 s .* meta.dt is 0.008 s: a trial of 500 Hz named 125 Hz"):
+        make_trial(time=np.arange(10) * 0.002)
+    with pytest.raises(ValueError, match=r"steps by 8 s"):
+        make_trial(time=np.arange(10) * 8.0)  # milliseconds
+    rng = np.random.default_rng(0)
+    jitter = np.cumsum(0.008 * (1.0 + rng.uniform(-0.2, 0.2, 10)))
+    jitter[6:] += 0.1  # a gap of 12 periods
+    assert make_trial(time=jitter).n_samples == 10
+    edge = np.arange(10) * 0.008 * CLOCK_TOLERANCE * 0.999
+    assert make_trial(time=edge).n_samples == 10
+    with pytest.raises(ValueError, match="steps by"):
+        make_trial(time=np.arange(10) * 0.008 * CLOCK_TOLERANCE * 1.001)
+
+
 def test_trial_allows_nan_prediction_rows():
     pred = np.zeros((10, 4, 2))
     pred[:3] = np.nan  # no prediction yet

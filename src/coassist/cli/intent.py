@@ -44,6 +44,12 @@ TRAIN_OPTIONS = {
 }
 
 
+AGAINST_HELP = (  # coassist evaluate --against
+    "Score every predictor against 'tool' (the tool's future path) or 'intent' (the true intent, simulated trials). "
+    "Default: what the model predicts where the trials record it (an intent model on simulated trials), else tool."
+)
+
+
 def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, **overrides):
     """The intent preset named by --preset, with the training (and network-size) options applied."""
     from dataclasses import replace
@@ -288,12 +294,7 @@ def evaluate(
     ),
     skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
     bag_topics: str = typer.Option(None, help=BAG_TOPICS_HELP),
-    against: str = typer.Option(
-        None,
-        help="Score every predictor against 'tool' (the tool's future path) or 'intent' (the person's true intent, "
-        "simulated trials). Default: what the model predicts where the trials record it (an intent-label model on "
-        "simulated trials: intent), else the tool.",
-    ),
+    against: str = typer.Option(None, help=AGAINST_HELP),
 ) -> None:
     """e_RMS and e_MAX per horizon [mm] for the model and the baselines (nominal, constant velocity, tuned constant
     acceleration and ridge), and the best baseline per horizon with the model's gain over it."""
@@ -306,12 +307,11 @@ def evaluate(
 
     from coassist._io import atomic_write_text
     from coassist.intent import ModelFileError, ModelMismatchError, evaluate_model, load_model, results_table
-    from coassist.intent.evaluation import AGAINST, comparison_lines, records_intent
+    from coassist.intent.evaluation import AGAINST, comparison_lines, scoring_target
     from coassist.intent.model import unfinished
 
     if against is not None and against not in AGAINST:
         fail(f"--against must be one of {', '.join(AGAINST)}, got {against!r}", 2)
-
     try:
         m = load_model(model)
     except (ModelFileError, OSError) as exc:
@@ -319,35 +319,21 @@ def evaluate(
     if why := unfinished(m):  # scored against fewer, untuned baselines it would read better than it is
         fail(f"--model {model}: {why}", 2)
     trials = intent_trials(data, skip_bad_trials, "--data", bag_topics=bag_topics)
-    label = m.window.label
-    if against is None:  # what the model predicts, where every trial records it
-        against = "intent" if label == "intent" and all(records_intent(lt.trial) for lt in trials) else "tool"
+    against, note = scoring_target(m.window.label, trials, against)
     try:
         result = evaluate_model(m, trials, held_out_only=not include_training, against=against)
     except (ModelMismatchError, ValueError) as exc:
         fail(f"--against {against}: {exc}" if "records no intent" in str(exc) else str(exc), 2)
-    target = "the tool's future path" if against == "tool" else "the person's true intent"
-    console.print(
-        results_table(result, f"{model}: {len(result.trials)} trials, {result.n_ticks} ticks, against {target}")
-    )
-    if against == "tool" and label != "tool":
-        what = "the person's intent" if label == "intent" else "the path the person alone would take"
-        why = "" if label == "intent" else " (a target that is not one path of the trial: not scored here)"
-        console.print(
-            f"the model predicts {what} (label {label!r}){why}; its rows are scored against the tool's path here",
-            markup=False,
-            highlight=False,
-            soft_wrap=True,
-        )
+    title = f"{model}: {len(result.trials)} trials, {result.n_ticks} ticks, against {AGAINST[against]}"
+    console.print(results_table(result, title))
+    if note:
+        console.print(note, markup=False, highlight=False, soft_wrap=True)
     for line in comparison_lines(result):
         console.print(line, highlight=False, soft_wrap=True)
     if result.skipped:
         copied = f", {len(result.copies)} of them copies of training trials under other names" if result.copies else ""
-        console.print(
-            f"skipped {len(result.skipped)} training trials{copied} (use --include-training to score them)",
-            markup=False,
-            highlight=False,
-        )
+        say = f"skipped {len(result.skipped)} training trials{copied} (use --include-training to score them)"
+        console.print(say, markup=False, highlight=False)
     try:
         atomic_write_text(dest, json.dumps({**result.to_dict(), "model": str(model)}, indent=1) + "\n")
     except OSError as exc:

@@ -205,6 +205,11 @@ def _renamed(data: Mapping[str, Any]) -> tuple[dict[str, Any], list[str]]:
     return out, former
 
 
+#: How far a trial's median time step may lie from ``meta.dt`` (a factor either way): a recording's steps jitter and
+#: it has gaps (the lab's UR5 CSVs: the median step is 8 ms in all 18 trials), another rate is a factor of 2 or more.
+CLOCK_TOLERANCE = 1.25
+
+
 def time_gaps(time: ArrayLike, dt: float, factor: float = GAP_FACTOR) -> np.ndarray:
     """Indices k where ``time[k+1] − time[k] > factor · dt``: the samples after which data is missing.
 
@@ -316,6 +321,16 @@ class Trial:
             raise ValueError(
                 f"Trial.time must be strictly increasing; time[{k + 1}] = {time[k + 1]!r} <= time[{k}] = {time[k]!r}"
             )
+        if steps.size >= 2:
+            # the clock and the period must agree: windows, the plant and every rate are built on meta.dt (the median
+            # step: a recording's jitter and gaps move it little)
+            median = float(np.median(steps))
+            if not 1.0 / CLOCK_TOLERANCE <= median / self.meta.dt <= CLOCK_TOLERANCE:
+                raise ValueError(
+                    f"Trial.time steps by {median:.6g} s (the median of its steps) but meta.dt is {self.meta.dt:g} s: "
+                    f"a trial of {1.0 / median:.4g} Hz named {1.0 / self.meta.dt:.4g} Hz (its clock in other units, or "
+                    "another rate's meta?)"
+                )
         set_("time", time)
         n = time.shape[0]
 

@@ -48,15 +48,16 @@ __all__ = [
     "evaluate_model",
     "records_intent",
     "results_table",
+    "scoring_target",
 ]
 
 PREDICTORS = ("model", "nominal", "constant_velocity", "constant_acceleration", "ridge")
 BASELINES = PREDICTORS[1:]
 
 
-#: What :func:`evaluate_model` can score the predictors against: the tool's future path (the thesis' e_RMS) or the
-#: person's true intent (simulated trials).
-AGAINST = ("tool", "intent")
+#: What :func:`evaluate_model` can score the predictors against (and what it is): the tool's future path (the thesis'
+#: e_RMS) or the person's true intent (simulated trials).
+AGAINST = {"tool": "the tool's future path", "intent": "the person's true intent"}
 
 #: Scores of one predictor at one horizon: e_rms, e_max_mean, e_max_max [m], e_rms_trials
 #: {trial id: e_RMS}, trial_median, trial_min, trial_max [m].
@@ -246,6 +247,22 @@ def evaluate_model(
 def records_intent(trial) -> bool:
     """Whether ``trial`` records the person's true intent (a simulated trial's; a recording or an arm's has none)."""
     return trial.intent is not None and bool(np.isfinite(trial.intent).any())
+
+
+def scoring_target(label: str, trials: Sequence[LabeledTrial], against: str | None) -> tuple[str, str]:
+    """(what a model of window label ``label`` is scored against on ``trials``, a line to say or ""): ``against``
+    where given, else what the model predicts where every trial records it (an intent model on simulated trials:
+    ``"intent"``), else ``"tool"``; the line says where a model of another label is scored against the tool."""
+    if against is None:
+        against = "intent" if label == "intent" and all(records_intent(lt.trial) for lt in trials) else "tool"
+    if against != "tool" or label == "tool":
+        return against, ""
+    what = "the person's intent" if label == "intent" else "the path the person alone would take"
+    why = "" if label == "intent" else " (a target that is not one path of the trial: not scored here)"
+    return (
+        against,
+        f"the model predicts {what} (label {label!r}){why}; its rows are scored against the tool's path here",
+    )
 
 
 def _intent_of(lt: LabeledTrial) -> np.ndarray:
