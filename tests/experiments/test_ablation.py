@@ -155,6 +155,11 @@ def test_each_cell_says_what_its_source_was_told():
     person, paths = told_of("person"), told_of("paths")
     assert (person.scene, person.family, person.arm, person.label) == (False, "", "measured", "")
     assert paths.scene and paths.family and paths.arm == "assumed"
+    # the cells' paths ran with each operator's path-hypotheses calibration: the table said nothing of it
+    assert paths.person == "detour shape and side" and "from the person's trials" in paths.text()
+    from coassist.experiments.application import told_text
+
+    assert told_text("paths") == paths.text()  # the first screen's caption says the same
     assert told_of("lstm-intent-s2") == told_of("lstm-intent")
     assert "intent" in told_of("lstm-intent").label and "tool" in told_of("lstm-tool").label
     assert told_of("nominal").text() == "the plan only"
@@ -246,6 +251,12 @@ def test_a_claims_figures_are_printed_on_their_side_of_its_bar():
     assert shown(85.4, 0, 85.0) == "85" and shown(84.96, 0) == "85"  # no bar: plain rounding
     assert shown(0.3, 0, 0.0, strict=True) == "0.3" and shown(-0.3, 0, 0.0, strict=True) == "-0"  # "> 0" bars
     assert shown(0.04, 1, 0.0, strict=True, signed=True) == "+0.04" and shown(1.1004, 2, 1.1, strict=True) == "1.1004"
+    # an interval printed beside such a share stays on its side too: "84.9 % [85, 85]" missed its own share
+    from coassist.experiments.ablation_report import share_text
+
+    assert share_text((0.84856, 0.84856, 0.84856), 0.85) == "84.9 % [84.9, 84.9]"
+    assert share_text((0.9, 0.84856, 0.95), 0.85) == "90 % [84.9, 95]"
+    assert share_text((0.9, 0.7, 0.95), 0.85, lower_bar=0.7) == "90 % [70, 95]"
     (claim,) = person_claims(_result(0.8496, 1.05))  # both shares 84.96 % exactly (_result)
     assert not claim.holds and "force 84.96 %" in claim.evidence and "overshoot 85 %" in claim.evidence
 
@@ -330,3 +341,12 @@ def test_the_defaults_claims_need_less_force_and_overshoot_than_mg_with_an_inter
     assert worse.shares("point-mass", "board", "cooperative-arbitrated", "present-held")["overshoot"][1] > 0.0
     assert not default_claims(worse)[0].holds
     assert default_claims(_result(0.9, 1.0)) == []  # no cells of the default: no claim
+
+
+def test_a_single_pair_prints_its_difference_without_an_interval():
+    """One paired trial has no interval (NaN bounds): the tables printed "(-0.25 [+nan, +nan])"."""
+    from coassist.experiments.application import paired_text
+
+    assert paired_text([0.003], [0.0025], 1e3, 2) == "+0.50, one trial: no interval"
+    text = paired_text([0.003, 0.004, 0.002], [0.001, 0.001, 0.001], 1e3, 1)
+    assert text.startswith("+2.0 [") and "nan" not in text

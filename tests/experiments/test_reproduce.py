@@ -377,6 +377,11 @@ def test_report_is_complete_and_consistent_with_the_summary(tiny_run):
         "6. Which intent makes assistance better?",
     ):
         assert title in html
+    # figures as the run had them: the stop criterion (0.25 mm read "0.2 mm"), no NaN interval of a one-trial cell,
+    # and every transfer's comparison with its best baseline (empty, "M_TL against its best tuned baseline: </p>")
+    assert summary["config"]["tol"] == 2.5e-4 and "0.25 mm at 50 samples" in html
+    assert not re.search(r"\bnan\b", html, flags=re.IGNORECASE), re.findall(r".{60}\bnan\b.{20}", html)
+    assert "baseline: </p>" not in html and "baseline:</p>" not in html
     claims = summary["claims"]
     assert len(claims) >= 10
     for c in claims:

@@ -79,6 +79,9 @@ def test_comparison_lines_state_the_best_baseline_in_mm():
     (line,) = comparison_lines(res)
     assert line.startswith("0.05 s: best baseline ridge (α = 1e-03, tuned on validation trials) e_RMS 1 mm")
     assert "model 0.8 mm: 20.0 % better (+0.2 mm), model better on 1 of 2 trials" in line
+    # the model named otherwise (the report's "M_TL"): the same line, so named; it gave none before
+    (named,) = comparison_lines(res, "M_TL")
+    assert named == line.replace("model", "M_TL")
 
 
 def test_evaluate_prints_the_best_baseline_per_horizon(tmp_path):

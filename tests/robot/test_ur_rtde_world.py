@@ -366,8 +366,10 @@ def test_a_control_link_reported_down_ends_the_run_link_lost_without_another_com
             world.close()
         # Again only where the machine stalled before tick 30 (CI, 3 workers on 2 cores: a safety stop after
         # repeated stale or late ticks): the link was never taken down, so nothing of what is tested ran. A run
-        # that reached tick 30 is judged below, whatever it did.
-        if "calls" in at:
+        # that reached tick 30 is judged below, whatever it did, but for a stall of the machine itself at the very
+        # tick the disconnect is read (the stream's own timeout ended the run first: "later than usual", seen once
+        # beside two reviewers' work at load 7), which is run again too.
+        if "calls" in at and "later than usual" not in str(trial.meta.extra.get("stop_message", "")):
             break
     assert trial is not None, "three runs of three stalled before their first tick"
     extra = trial.meta.extra

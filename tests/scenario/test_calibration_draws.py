@@ -134,6 +134,11 @@ def test_the_report_says_where_the_calibrations_asked(tmp_path):
     models = {"person": str(asked), MUJOCO_PERSON: str(chosen), "ridge": str(tmp_path / "ridge")}
     assert asked_in_calibrations(models) == {"point-mass world": (1, 2, 1)}
     assert asked_in_calibrations({"person": str(tmp_path / "gone")}) == {}
+    # the held-out population's calibrations too (the report left them out)
+    from coassist.experiments.ablation import HELD_OUT_PERSON
+
+    both = {**models, HELD_OUT_PERSON: str(asked)}
+    assert asked_in_calibrations(both) == {"point-mass world": (1, 2, 1), "held-out population": (1, 2, 1)}
     # and the ablation's section says it, for the world whose calibrations asked
     from coassist.experiments.ablation_cells import AblationResult
     from coassist.experiments.ablation_report import ablation_section

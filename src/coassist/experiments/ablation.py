@@ -146,6 +146,7 @@ def run_ablation(
     world_intents = {POINT_MASS: intents}
     if cfg.held_out_trials > 0:
         world_intents[HELD_OUT] = _run_held_out(ws, intents, metrics, mg, pairs, errors)
+        models = {**models, HELD_OUT_PERSON: world_intents[HELD_OUT]["person"]}  # its calibrations, for the report
     why = _mujoco_unavailable()
     if why is None and cfg.ablation_mujoco_trials > 0:
         _run_mujoco(ws, intents, metrics, mg, pairs, errors)
@@ -517,6 +518,8 @@ def _mujoco_job(cfg, source: str, intent: str) -> list:
 #: The MuJoCo UR5's person model when it is calibrated there (``reproduce.mujoco_person_calibration``): its folder
 #: under the run's ``models`` (a calibration-draws folder where ``reproduce.calibration_draws`` > 1).
 MUJOCO_PERSON = "person-mujoco"
+#: The held-out population's person model (its operators' own calibrations), as the ablation's models name it.
+HELD_OUT_PERSON = "person-held-out"
 
 
 def mujoco_intent(ws: Workspace, source: str, intents: dict[str, str]) -> str:

@@ -60,6 +60,9 @@ HELD_OUT_SOURCES = ("nominal", "present", DEFAULT_INTENT, "lstm-intent", "paths"
 ABLATION_CELLS = (POINT_MASS, "mujoco", HELD_OUT)
 #: The sources calibrated per operator (not trained): their folder is written per population.
 CALIBRATED = ("paths", "person")
+#: The folder kind (:data:`~coassist.scenario.intent_registry.INTENT_FOLDERS`) each calibrated source's cells run
+#: with: what it was told is that folder's (the operator's own trials besides the source's own knowledge).
+CALIBRATED_KINDS = {"paths": "path-hypotheses", "person": "person-model"}
 #: Issue 18's bar: a learned predictor in the loop gets this share of the oracle's benefit over MG.
 ORACLE_SHARE_BAR = 0.8
 #: Issue 34's bars for the application's source (arbitrated controller): shares of the oracle's force
@@ -239,10 +242,10 @@ class AblationResult:
 def told_of(source: str) -> Told:
     """What a cell's source was told besides what an arm measures (:class:`~coassist.scenario.intent_registry.Told`)."""
     base = base_source(source)
+    if base in CALIBRATED_KINDS:  # run with its calibration's folder (the registry's "paths" alone is told less)
+        return INTENT_FOLDERS[CALIBRATED_KINDS[base]].told
     if base in INTENT_SOURCES:
         return INTENT_SOURCES[base].told
-    if base == "person":
-        return INTENT_FOLDERS["person-model"].told
     label = LEARNED[base][1] if base in LEARNED else ""
     return Told(
         label={

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from coassist.analysis.paired import paired_difference
-from coassist.experiments.ablation import MUJOCO_PERSON
+from coassist.experiments.ablation import HELD_OUT_PERSON, MUJOCO_PERSON
 from coassist.experiments.ablation_cells import (
     ABLATION_CELLS,
     ARBITRATED,
@@ -29,7 +29,7 @@ from coassist.experiments.ablation_cells import (
     AblationResult,
     told_of,
 )
-from coassist.experiments.application import OBJECTS
+from coassist.experiments.application import OBJECTS, paired_text
 from coassist.experiments.pipeline import EVAL_HORIZONS
 from coassist.experiments.report import Claim, Section
 from coassist.experiments.source_training import APPLICATION_SOURCE
@@ -66,7 +66,10 @@ def share_text(
         return "n/a"
     pct = None if bar is None else 100 * bar
     low = None if lower_bar is None else 100 * lower_bar
-    bracket = f" [{shown(100 * lo, 0, low, lower_strict)}, {100 * hi:.0f}]" if np.isfinite(lo) else ""
+    # the bounds kept on the share's side of its bar too where the lower bound has none (84.86 % [85, 85] read as
+    # an interval that misses its own share)
+    lo_text = shown(100 * lo, 0, pct, False) if low is None else shown(100 * lo, 0, low, lower_strict)
+    bracket = f" [{lo_text}, {shown(100 * hi, 0, pct)}]" if np.isfinite(lo) else ""
     return f"{shown(100 * share, 0, pct)} %{bracket}"
 
 
@@ -272,7 +275,6 @@ def ablation_section(result: AblationResult) -> Section:
                 if (w, ob) != (world, obj):
                     continue
                 sh = result.shares(world, obj, controller, source)
-                d, lo, hi, _ = paired_difference(r["overshoot_trials"], m["overshoot_trials"])
                 os_side = result.by_side(world, obj, controller, source, "overshoot")
                 cd_side = result.by_side(world, obj, controller, source, "clearance_deficit")
                 rows.append(
@@ -282,7 +284,7 @@ def ablation_section(result: AblationResult) -> Section:
                         source,
                         f"{r['f_rms']:.2f}",
                         f"{r['sigma'] * 1e3:.2f}",
-                        f"{r['overshoot'] * 1e3:.1f} ({d * 1e3:+.1f} [{lo * 1e3:+.1f}, {hi * 1e3:+.1f}])",
+                        f"{r['overshoot'] * 1e3:.1f} ({paired_text(r['overshoot_trials'], m['overshoot_trials'], 1e3, 1)})",
                         _side_text(os_side[1]),
                         _side_text(os_side[-1]),
                         _side_text(cd_side[1]),
@@ -370,7 +372,8 @@ DEFAULT_CELLS = (
 
 
 def asked_in_calibrations(models: dict[str, str]) -> dict[str, tuple[int, int, int]]:
-    """Per person-model folder of ``models`` whose calibrations asked for a way (point-mass world, MuJoCo UR5):
+    """Per person-model folder of ``models`` whose calibrations asked for a way (point-mass world, held-out
+    population, MuJoCo UR5):
     :func:`~coassist.scenario.calibration_draws.asked_paths`; a folder no longer there is left out."""
     from pathlib import Path
 
@@ -378,7 +381,11 @@ def asked_in_calibrations(models: dict[str, str]) -> dict[str, tuple[int, int, i
     from coassist.scenario.person_model import PERSON_MODEL_FILE
 
     out = {}
-    for label, where in (("person", "point-mass world"), (MUJOCO_PERSON, "MuJoCo UR5")):
+    for label, where in (
+        ("person", "point-mass world"),
+        (HELD_OUT_PERSON, "held-out population"),
+        (MUJOCO_PERSON, "MuJoCo UR5"),
+    ):
         folder = Path(models.get(label, ""))
         if label in models and ((folder / DRAWS_FILE).is_file() or (folder / PERSON_MODEL_FILE).is_file()):
             counts = asked_paths(folder)

@@ -227,9 +227,9 @@ def headline_table(result: ApplicationResult) -> tuple[str, list[str], list[list
                     variant,
                     f"{100 * s_mg:.0f} ± {100 * sd_mg:.0f} %",
                     f"{100 * s_imp:.0f} ± {100 * sd_imp:.0f} %",
-                    f"{v['sigma'] * 1e3:.2f} vs {m['sigma'] * 1e3:.2f} ({_ci(v['sigma_trials'], m['sigma_trials'], 1e3, 2)})",
+                    f"{v['sigma'] * 1e3:.2f} vs {m['sigma'] * 1e3:.2f} ({paired_text(v['sigma_trials'], m['sigma_trials'], 1e3, 2)})",
                     f"{v['overshoot'] * 1e3:.1f} vs {m['overshoot'] * 1e3:.1f} "
-                    f"({_ci(v['overshoot_trials'], m['overshoot_trials'], 1e3, 1)})",
+                    f"({paired_text(v['overshoot_trials'], m['overshoot_trials'], 1e3, 1)})",
                     f"{v['jerk_rms']:.2f} vs {m['jerk_rms']:.2f}",
                 ]
             )
@@ -237,7 +237,7 @@ def headline_table(result: ApplicationResult) -> tuple[str, list[str], list[list
         f"Application scenario, {result.trials_per_controller} paired trials per object and controller "
         f"(operators {', '.join(str(u) for u in result.users)}): force saved per trial (mean ± std), and the "
         "assistive controller against MG with the paired difference and its 95 % interval. The assistive "
-        f"controllers' intent source: '{result.source}' (told: {_told_text(result.source)})"
+        f"controllers' intent source: '{result.source}' (told: {told_text(result.source)})"
     )
     header = [
         "object",
@@ -251,10 +251,12 @@ def headline_table(result: ApplicationResult) -> tuple[str, list[str], list[list
     return caption, header, rows
 
 
-def _told_text(source: str) -> str:
+def told_text(source: str) -> str:
+    """What the application's source was told: its calibration folder's where it runs with one (``paths``)."""
+    from coassist.experiments.ablation_cells import told_of
     from coassist.scenario.intent_registry import INTENT_SOURCES
 
-    return INTENT_SOURCES[source].told.text() if source in INTENT_SOURCES else "see the ablation"
+    return told_of(source).text() if source in INTENT_SOURCES else "see the ablation"
 
 
 def application_metrics(trials) -> dict[str, Any]:
@@ -310,9 +312,12 @@ def _clearance_deficit(trial) -> float:
     return clearance_deficit(trial.pose, trial.intent, np.asarray(box["center"], dtype=float) + shift, box["size"])
 
 
-def _ci(a, b, scale: float, digits: int) -> str:
-    """'+d [lo, hi]': the paired difference a − b and its 95 % interval, in the table's unit."""
+def paired_text(a, b, scale: float, digits: int) -> str:
+    """'+d [lo, hi]': the paired difference a − b and its 95 % interval, in the table's unit ('+d, one trial: no
+    interval' for a single pair, where the interval is NaN)."""
     d, lo, hi, _ = paired_difference(a, b)
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return f"{d * scale:+.{digits}f}, one trial: no interval"
     return f"{d * scale:+.{digits}f} [{lo * scale:+.{digits}f}, {hi * scale:+.{digits}f}]"
 
 
@@ -435,9 +440,9 @@ def application_section(result: ApplicationResult) -> Section:
                         and v["overshoot"] <= m["overshoot"]
                     ),
                     f"force {100 * saving:.0f} % below MG; σ {v['sigma'] * 1000:.2f} vs MG {m['sigma'] * 1000:.2f} mm "
-                    f"(paired {_ci(v['sigma_trials'], m['sigma_trials'], 1000.0, 2)} mm); overshoot "
+                    f"(paired {paired_text(v['sigma_trials'], m['sigma_trials'], 1000.0, 2)} mm); overshoot "
                     f"{v['overshoot'] * 1000:.1f} vs MG {m['overshoot'] * 1000:.1f} mm "
-                    f"(paired {_ci(v['overshoot_trials'], m['overshoot_trials'], 1000.0, 1)} mm); jerk RMS {v['jerk_rms']:.2f} vs MG "
+                    f"(paired {paired_text(v['overshoot_trials'], m['overshoot_trials'], 1000.0, 1)} mm); jerk RMS {v['jerk_rms']:.2f} vs MG "
                     f"{m['jerk_rms']:.2f} m/s³",
                     reason="the prediction does not know where the operator wants the tool at every turn: the robot pushes "
                     "past the turns it misses (section 6 compares every intent source on these trials)",

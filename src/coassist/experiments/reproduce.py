@@ -553,7 +553,7 @@ def iterative_section(it: IterativeStageResult) -> Section:
     )
     s.paragraphs.append(
         "Stop criterion |e_RMS^{k+1} − e_RMS^k| < "
-        f"{it.tol * 1000:.1f} mm at 50 samples: "
+        f"{it.tol * 1000:g} mm at 50 samples: "  # 0.25 mm, which .1f printed as 0.2
         + (
             f"first met between M{result.converged_at} and M{result.converged_at + 1}"
             if result.converged_at is not None

@@ -327,10 +327,11 @@ def _mm(metres: float) -> str:
 
 
 def comparison_lines(result: ModelEvaluation, model: str = "model") -> list[str]:
-    """One line per horizon: the best baseline, its e_RMS, and the model's gain over it, in mm and %."""
+    """One line per horizon: the best baseline, its e_RMS, and the model's gain over it, in mm and %. ``model``: what
+    the lines call the model (its scores are :func:`evaluate_model`'s ``"model"`` whatever it is called)."""
     dt = result.dt
     lines = []
-    for h, b in best_baselines(result.results, result.horizons, model).items():
+    for h, b in best_baselines(result.results, result.horizons).items():
         diff = 1e3 * (b["e_rms"] - b["model_e_rms"])
         verdict = "better" if diff > 0 else "worse" if diff < 0 else "equal"
         lines.append(

@@ -40,7 +40,7 @@ import numpy as np
 from coassist._checks import check_int_at_least
 from coassist.interfaces import FEATURES, Fault, IntentSource, PlausibilityLimits, TrialContext
 
-__all__ = ["RealtimeIntent", "TickIntent", "WindowIntent", "WindowIntentBatch"]
+__all__ = ["RealtimeIntent", "TickIntent", "WindowIntent", "WindowIntentBatch", "accept_together"]
 
 _N_FEATURES = len(FEATURES)
 _FALLBACK = Fault.PREDICTION_FALLBACK
@@ -114,12 +114,17 @@ class WindowIntent:
         self.max_step = self.plausibility.max_speed * float(context.dt)
 
     def update(self, k: int, row: tuple[float, ...], nominal: np.ndarray) -> tuple[np.ndarray | None, Fault]:
+        return self.accept(self.answer(k, row))
+
+    def answer(self, k: int, row: tuple[float, ...]) -> Any:
+        """Push tick k's row and get the source's answer as it gave it, unchecked (None where it raised): the
+        first half of :meth:`update`, whose :meth:`accept` a runner may do for many stages at once
+        (:func:`accept_together`)."""
         window = self.push(k, row)
         try:
-            pred = self.source.predict(window)
+            return self.source.predict(window)
         except Exception:  # a failing predictor must not stop the loop
-            pred = None
-        return self.accept(pred)
+            return None
 
     # The two halves of :meth:`update`, for a runner that batches the network call over
     # trials (coassist.runtime.batched_loops): push the row, predict elsewhere, accept the result.
@@ -200,6 +205,39 @@ def _plausible_rows(p: np.ndarray, x: float, y: float, lim: float, max_step: flo
         np.abs(step, out=step)
         return bool(np.maximum.reduce(step, axis=None) <= max_step)
     return True
+
+
+def accept_together(stages: Sequence[WindowIntent], answers: Sequence[Any]) -> list[tuple[np.ndarray | None, Fault]]:
+    """Each stage's :meth:`WindowIntent.accept` of its answer (:meth:`WindowIntent.answer`), the same (positions or
+    None, flags) to the last bit: the answers of one shape (float64 (m, 2), the stages' horizon) checked in one set of
+    array operations (the same subtractions and comparisons as :func:`_plausible_rows`, whose NaN fails them too);
+    any other answer, and any that fails, by its own stage's :meth:`~WindowIntent.accept` (which counts the stall)."""
+    out: list[tuple[np.ndarray | None, Fault] | None] = [None] * len(answers)
+    groups: dict[tuple[int, int], list[int]] = {}
+    for n, (stage, a) in enumerate(zip(stages, answers)):
+        if isinstance(a, np.ndarray) and a.dtype == np.float64 and a.ndim == 2 and a.shape[1] == 2:
+            groups.setdefault((a.shape[0], stage.horizon), []).append(n)
+        else:
+            out[n] = stage.accept(a)
+    for (m, horizon), members in groups.items():
+        group = [stages[n] for n in members]
+        rows = np.stack([answers[n] for n in members])[:, :horizon]
+        tools = np.array([(stage._x, stage._y) for stage in group])
+        off = rows - tools[:, None, :]
+        np.abs(off, out=off)
+        ok = np.maximum.reduce(off, axis=(1, 2)) <= np.array([stage.plausibility.max_distance for stage in group])
+        ok &= m >= np.array([stage.need for stage in group])
+        if rows.shape[1] > 1:
+            step = rows[:, 1:] - rows[:, :-1]
+            np.abs(step, out=step)
+            ok &= np.maximum.reduce(step, axis=(1, 2)) <= np.array([stage.max_step for stage in group])
+        for n, stage, good in zip(members, group, ok.tolist()):
+            if good:
+                stage._bad = 0
+                out[n] = (answers[n][:horizon], Fault.NONE)
+            else:
+                out[n] = stage.accept(answers[n])
+    return out  # type: ignore[return-value]
 
 
 class WindowIntentBatch:

@@ -60,8 +60,9 @@ import numpy as np
 
 from coassist.control.arbitration import ArbitratedController, arbitrated_effort_batch, guard_key
 from coassist.control.probe import probed_efforts
+from coassist.interfaces import Fault
 from coassist.runtime.batched_loops import Loop, intent_batcher, probed_groups, shared_controller
-from coassist.runtime.intent import WindowIntentBatch
+from coassist.runtime.intent import WindowIntent, WindowIntentBatch, accept_together
 from coassist.runtime.loop import LoopLog, TargetDwellBatch
 from coassist.runtime.safety import SafetyLayerBatch
 from coassist.runtime.tick import human_reference
@@ -257,9 +258,24 @@ class _Batch:
             # human_reference together, grouped by how many rows they give (elementwise: the same values; rows.alone
             # is in ascending positions, so a group of every run is act's order, as the paths below assume)
             answered: dict[int, tuple[list[int], list[np.ndarray]]] = {}
+            # a window stage's answer is checked with the others' (accept_together: each stage's accept, bit for bit)
+            waiting: list[tuple[int, int]] = []
+            stages: list[WindowIntent] = []
+            answers: list = []
+            results: list[tuple[int, int, tuple[np.ndarray | None, Fault]]] = []
             for i, j in rows.alone:
                 row = (x[j, 0], x[j, 1], v[j, 0], v[j, 1], hand[j, 0], hand[j, 1], ref_pos[j, 0], ref_pos[j, 1])
-                answer, pf = self.ticks[i].predict(k, row)
+                stage = self.ticks[i].intent
+                if type(stage) is WindowIntent:
+                    waiting.append((i, j))
+                    stages.append(stage)
+                    answers.append(stage.answer(k, row))
+                else:
+                    results.append((i, j, self.ticks[i].predict(k, row)))
+            if waiting:
+                results += [(i, j, r) for (i, j), r in zip(waiting, accept_together(stages, answers))]
+                results.sort(key=lambda r: r[1])  # act's order, as rows.alone gives it
+            for i, j, (answer, pf) in results:
                 if pf or answer is None or answer.shape[0] < self.rows_needed[i]:
                     left[j] = True
                 else:
