@@ -253,3 +253,43 @@ def test_the_realtime_stage_refuses_a_complex_answer():
     answer = np.zeros((3, 2)) + 0.1j
     pred, flags = RealtimeIntent(_DuckPredictor([answer])).update(0, (0.0,) * 8, np.zeros((3, 2)))
     assert pred is None and flags == Fault.PREDICTION_FALLBACK
+
+
+def test_answers_accepted_together_are_each_stages_accept_bit_for_bit():
+    """accept_together (the array path's check of its per-run sources' answers, issue 44) gives each stage's own
+    accept: the rows and flags, the stall count of a fallback, for answers of one shape and of others (a short one, a
+    float32 one, an object one, a raised predict's None), with NaNs in and past the horizon, far and fast rows."""
+    from coassist.runtime.intent import accept_together
+
+    rng = np.random.default_rng(7)
+    horizon, need, n = 5, 3, 9
+    source = WindowSource(2, horizon)
+    stages = [WindowIntent(source, need, stall_ticks=1) for _ in range(n)]
+    twins = [WindowIntent(source, need, stall_ticks=1) for _ in range(n)]
+    lim = stages[0].plausibility
+    for stage in stages + twins:
+        stage.reset(CONTEXT)
+    for k in range(4):
+        features = rng.normal(0.0, 0.01, (n, 8))
+        answers = [stage.answer(k, tuple(f)) for stage, f in zip(stages, features)]
+        for twin, f in zip(twins, features):
+            twin.push(k, tuple(f))
+        answers[0] = answers[0].copy()
+        answers[0][1, 0] = np.nan  # a NaN in use
+        answers[1] = np.vstack([answers[1], np.full((2, 2), np.nan)])  # NaNs past the horizon: taken
+        answers[2] = answers[2].copy()
+        answers[2][3, 1] = features[2, 1] + lim.max_distance * 1.01  # too far
+        answers[3] = answers[3][: need - 1]  # too short
+        answers[4] = answers[4].astype(np.float32)  # another real dtype: converted
+        answers[5] = answers[5].astype(object)  # no numbers
+        answers[6] = None  # the source raised
+        answers[7] = answers[7].copy()
+        answers[7][:, 0] = features[7, 0] + lim.max_speed * DT * 1.01 * np.arange(horizon)  # too fast
+        together = accept_together(stages, answers)
+        for j, (stage, twin, answer) in enumerate(zip(stages, twins, answers)):
+            want = twin.accept(answer)
+            got = together[j]
+            assert got[1] == want[1], (k, j)
+            assert (got[0] is None) == (want[0] is None) and (got[0] is None or got[0].tobytes() == want[0].tobytes())
+            assert stage._bad == twin._bad  # the stall count as the stage's own accept leaves it
+        assert [g[1] == Fault.NONE for g in together] == [False, True, False, False, True, False, False, False, True]
