@@ -459,6 +459,18 @@ def test_calibrate_refuses_what_would_be_a_model_worse_than_none(alice, tmp_path
         and f"--users 1: intent {tmp_path / 'm-u0'}: the person model holds no calibration of" in said
     )
     assert f"{who!r} (it holds {held})" in said and not (tmp_path / "c").exists()
+    # on a task whose plan the paths were not recorded on: said (collect ran it on the present estimate silently,
+    # its trials naming the person model), and not on the task they were
+    for task, other in (("curved", True), ("linear", False)):
+        res = runner.invoke(
+            app,
+            ["collect", "--out", str(tmp_path / f"c-{task}"), "--trials", "1", "--tasks", task, "--intent",
+             str(tmp_path / "m-u0")],
+        )  # fmt: skip
+        said = " ".join(res.output.split())
+        assert res.exit_code == 0, res.output
+        note = f"{held}'s paths were recorded on another plan than task {task}'s: those trials get the present estimate"
+        assert (note in said) == other, said
 
     shared = tmp_path / "shared"
     shared.mkdir()

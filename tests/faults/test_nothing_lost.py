@@ -737,6 +737,30 @@ def test_resume_of_a_finished_model_into_its_own_folder_needs_overwrite(tmp_path
     assert after.info["init"] == f"resume:{out}" and [r["epoch"] for r in after.info["training_history"]] == [1, 2]
 
 
+def test_train_overwrite_replaces_a_model_not_a_folder_of_other_files(tmp_path, monkeypatch):
+    """`train --out F --overwrite` of a folder holding other files than a model (a thesis.tex, notes/) swapped it out
+    whole and deleted them; `--out .` trained, then failed to swap the current folder in (EBUSY) and left a partial
+    folder. Both refused before any work now, naming why; every file kept."""
+    write_dataset([make_trial(i, n=220) for i in range(4)], tmp_path / "D0", "D0")
+    mine = tmp_path / "p4"
+    (mine / "notes").mkdir(parents=True)
+    (mine / "thesis.tex").write_text("important")
+    args = ["train", str(tmp_path / "D0"), "--epochs", "1", "--threads", "1", "--batch-size", "256", "--overwrite"]
+    res = CliRunner().invoke(app, [*args, "--out", str(mine)])
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert "holds files but no model (no model.json), which --overwrite would delete" in " ".join(res.output.split())
+    assert (mine / "thesis.tex").read_text() == "important" and (mine / "notes").is_dir()
+    monkeypatch.chdir(mine / "notes")
+    for here in (".", ".."):
+        res = CliRunner().invoke(app, [*args, "--out", here])
+        assert res.exit_code == 2 and "is the current folder or holds it" in " ".join(res.output.split()), res.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["D0", "p4"]  # no partial folder, nothing trained
+    # a starting model that is no model folder: the refusal names --init (it named the file alone)
+    res = CliRunner().invoke(app, [*args[:-1], "--out", str(tmp_path / "m"), "--init", f"transfer:{mine}"])
+    said = " ".join(res.output.split())
+    assert res.exit_code == 2 and f"--init transfer:{mine}: {mine / 'model.json'}: not found" in said, said
+
+
 @pytest.mark.parametrize(
     "field, value, says",
     [("epoch", "x", "'epoch' must be an integer"), ("epoch", 1_000_000, "epoch 1000000 done of a run of 3")],

@@ -373,4 +373,36 @@ def test_evaluate_scores_an_intent_model_against_the_intent_where_the_trials_rec
     code, out = run("--data", str(tmp_path / "rec"), "--against", "intent")
     assert code == 2 and "--against intent: trial rec/" in out and "records no intent" in out, out
     code, out = run("--data", str(tmp_path / "rec"), "--against", "pose")
-    assert code == 2 and "--against must be one of tool, intent, got 'pose'" in out, out
+    assert code == 2 and "--against 'pose': no such target (choose from: tool, intent)" in out, out
+
+
+def test_evaluate_replaces_only_its_own_results(tmp_path, trials, tiny):
+    """--out replaced any file: a trial file, the model's own sidecar, a figure (each then unreadable); a name
+    without .json wrote a file where a folder was meant. Now only an earlier evaluation is replaced."""
+    from dataclasses import replace
+
+    from coassist.intent import save_model
+
+    save_model(train_model(trials, tiny, replace(tiny.train, epochs=1)), tmp_path / "m")
+    write_dataset([lt.trial for lt in trials], tmp_path / "D", "D")
+    sidecar = (tmp_path / "m" / "model.json").read_bytes()
+    trial = (tmp_path / "D" / "trial_00000.parquet").read_bytes()
+
+    def run(*out):
+        res = CliRunner().invoke(
+            app, ["evaluate", "--model", str(tmp_path / "m"), "--data", str(tmp_path / "D"), "--include-training", *out]
+        )
+        return res.exit_code, " ".join(res.output.split())
+
+    code, out = run("--out", str(tmp_path / "m" / "model.json"))  # JSON, but not an evaluation
+    assert code == 1 and "exists and is not a file this command wrote; give another name (nothing replaced)" in out
+    code, out = run("--out", str(tmp_path / "D" / "trial_00000.parquet"))
+    assert code == 1 and "give a .json file" in out, out
+    assert (tmp_path / "m" / "model.json").read_bytes() == sidecar
+    assert (tmp_path / "D" / "trial_00000.parquet").read_bytes() == trial
+    code, out = run("--out", str(tmp_path / "results"))
+    assert code == 1 and "give a .json file, or an existing folder to write evaluation.json in" in out, out
+    assert not (tmp_path / "results").exists()
+    assert run()[0] == 0 and run()[0] == 0  # its own evaluation.json, written and then replaced
+    (tmp_path / "out").mkdir()
+    assert run("--out", str(tmp_path / "out"))[0] == 0 and (tmp_path / "out" / "evaluation.json").is_file()

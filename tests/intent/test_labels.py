@@ -130,8 +130,11 @@ def test_labels_say_what_they_need():
     no_plant = _trial(u_h, np.zeros_like(u_h), plant=False)
     with pytest.raises(ValueError, match=r"hand_alone.*meta.extra\['plant'\]"):
         WindowSet([no_plant], WindowConfig(history=10, horizon=5, label="hand_alone"), DT)
-    with pytest.raises(ValueError, match="label 'intent' needs the operator's true intent"):
+    with pytest.raises(ValueError, match="label 'intent' needs the operator's true intent") as err:
         WindowSet([no_plant], WindowConfig(history=10, horizon=5, label="intent"), DT)
+    # the trial as the other window errors name it (its person and recording or seed), and the option
+    assert "but the trial " in str(err.value) and " samples) has no intent" in str(err.value)
+    assert str(err.value).endswith("(coassist train --label)")
     with pytest.raises(ValueError, match="window.label must be one of"):
         WindowConfig(label="future")
     # Windows for prediction only (no future) need no label data.

@@ -120,3 +120,19 @@ def test_a_model_drives_in_lockstep_to_its_rounding_with_one_call_per_tick(tiny_
 def test_lockstep_takes_simulated_drives_only():
     with pytest.raises(ValueError, match=r"configs\[1\] must be a DriveConfig of a simulated world \(mujoco\)"):
         drive_lockstep([DriveConfig(), DriveConfig(world="ur")])
+
+
+@pytest.mark.parametrize("realtime", [False, True])
+def test_a_model_of_another_rate_is_refused_naming_intent_and_rate(tiny_model, realtime):
+    """A 125 Hz model driven at --rate 500 was refused with "intent source horizon (50) must be >= the controller's
+    (200)", naming neither option nor the rates (the real-time path said the rates, not the options)."""
+    config = DriveConfig(
+        world="mujoco", controller="cooperative", intent=tiny_model, rate_hz=500, time_limit=0.5,
+        realtime_intent=realtime,
+    )  # fmt: skip
+    with pytest.raises(ValueError) as err:
+        drive(config)
+    assert str(err.value) == (
+        f"--intent {tiny_model}: the model was trained at 125 Hz (dt 0.008 s), this run is at --rate 500 (dt 0.002 s): "
+        "drive at --rate 125, or train a model on trials of this rate"
+    )

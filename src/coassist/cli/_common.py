@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import NoReturn, TypeVar
 
@@ -89,18 +89,26 @@ def folder_out(path: Path, option: str, typed: Path | None = None) -> Path:
     return path
 
 
-def file_out(path: Path, option: str, default_name: str) -> Path:
+def file_out(
+    path: Path, option: str, default_name: str, *, ours: Callable[[Path], bool] | None = None, ext: str = ""
+) -> Path:
     """The file to write for ``--out path``: ``path`` itself, or ``path/default_name`` if it is a folder.
 
-    Fails now (not after the work) if the file's folder cannot be created or written.
+    Fails now (not after the work) if the file's folder cannot be created or written. ``ours``: a file already there
+    is replaced only where ``ours(file)`` says this command wrote it (an earlier result), never another file (a trial,
+    a model's sidecar, a figure); ``ext``: a file name must end with it (``results`` is no file of ``.json``).
     """
     if path.is_dir():
         path = path / default_name
     if path.is_dir():
         fail(f"{option} {path}: is a folder; give a file name")
+    if ext and path.suffix.lower() != ext:
+        fail(f"{option} {path}: give a {ext} file, or an existing folder to write {default_name} in")
     folder_out(path.parent, option, typed=path)
     if path.exists() and not os.access(path, os.W_OK):
         fail(f"{option} {path}: is not writable (permission denied)")
+    if ours is not None and path.exists() and not ours(path):
+        fail(f"{option} {path}: exists and is not a file this command wrote; give another name (nothing replaced)")
     return path
 
 

@@ -45,12 +45,18 @@ def print_forces(folder: Path) -> None:
     )
 
 
-def _check_people(intent: str, users: list[int] | None, population: str, population_seed: int) -> None:
+def _check_people(
+    intent: str, users: list[int] | None, population: str, population_seed: int, tasks: list[str], seed: int
+) -> None:
     """Refuse, before any trial, a person model that does not hold each of the simulated people asked for, naming the
-    first (as ``drive`` and ``play`` do for the person at the handle): they would get no path of their own."""
+    first (as ``drive`` and ``play`` do for the person at the handle): they would get no path of their own. Say the
+    tasks whose plan a person's paths were not recorded on (their trials get the present estimate held, with their
+    arm, as ``drive`` says; the trials still name the model)."""
     from coassist.scenario.assistance import check_person
     from coassist.scenario.intent_registry import intent_folder_kind, load_intent_source
+    from coassist.scenario.person_intent import same_plan
     from coassist.scenario.populations import population_profile
+    from coassist.scenario.tasks import task_for_seed
 
     if intent_folder_kind(intent) != "person-model":
         return
@@ -61,6 +67,18 @@ def _check_people(intent: str, users: list[int] | None, population: str, populat
             check_person(source, name, intent, fix="collect the people it holds (--users), or calibrate them")
         except ValueError as exc:
             fail(f"--users {u}: {exc}", 2)
+        model = getattr(source, "paths", {}).get(name, getattr(source, "default_paths", None))  # PersonPathsIntent's
+        other = [
+            t for t in tasks if model is not None and not same_plan(model.nominal, task_for_seed(t, seed).path.points)
+        ]
+        if other:
+            console.print(
+                f"note: --intent {intent}: {name}'s paths were recorded on another plan than task {', '.join(other)}'s:"
+                " those trials get the present estimate held, with their arm (calibrate on the task to lead them)",
+                markup=False,
+                highlight=False,
+                soft_wrap=True,
+            )
 
 
 def collect(
@@ -151,7 +169,7 @@ def collect(
         check_intent(intent)
     except ValueError as exc:
         fail(f"--intent {exc}", 2)
-    _check_people(intent, user_list, population, population_seed)
+    _check_people(intent, user_list, population, population_seed, task_list, seed)
     folder_out(out, "--out")  # told as typed
     out = out.absolute()  # "--out ." is a folder with a name (the dataset's id), swapped into place by its path
     live = open_live(foxglove)

@@ -195,7 +195,7 @@ def reproduce(
     ),
     preset: str = typer.Option(
         "default",
-        help="default (about 6 min on 2 CPU cores), full (the pre-issue-35 default: more training data), "
+        help="default (about 10 min on 2 CPU cores), full (the pre-issue-35 default: more training data), "
         "tiny (smoke run) or thesis (thesis sizes; GPU).",
     ),
     seed: int = typer.Option(0, help="Seed of every dataset and training."),

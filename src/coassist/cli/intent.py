@@ -16,7 +16,6 @@ from coassist.cli._common import (
     check_threads,
     choose,
     console,
-    err_console,
     fail,
     file_out,
     folder_out,
@@ -27,6 +26,7 @@ from coassist.cli._common import (
     typed,
     wrote,
 )
+from coassist.cli._model_out import check_model_out, continues
 
 # --------------------------------------------------------------------------- intent model
 
@@ -68,30 +68,24 @@ def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, 
         fail(typed(str(exc), TRAIN_OPTIONS), 2)
 
 
-def _epochs_done(checkpoint: Path) -> str:
-    """ ", E of N epochs done" from an interrupted run's checkpoint.json, or "" where it cannot be read."""
-    import json
-
-    try:
-        ckpt = json.loads(checkpoint.read_text())
-        done, total = ckpt["epoch"], ckpt["train_config"]["epochs"]
-    except (OSError, ValueError, KeyError, TypeError):
-        return ""
-    return f", {done} of {total} epochs done" if isinstance(done, int) and isinstance(total, int) else ""
-
-
 def _check_start(init: str, preset: str | None) -> None:
     """Refuse in one line a start the training cannot take or would not honour: a linear model (the ridge alone,
     closed form: no network to continue; torch said "optimizer got an empty parameter list") and a --preset whose
     network or label is not the starting model's (the model's were kept without a word). Where model.json cannot be
-    read the training's own reading says what is wrong."""
-    from coassist.intent.model import read_sidecar
+    read, the reading's error, named --init (it named the file alone)."""
+    from coassist.intent.model import ModelFileError, read_sidecar
     from coassist.intent.presets import MODEL_PRESETS
 
     kind, _, path = init.partition(":")
+    if kind not in ("resume", "finetune", "transfer"):
+        return  # the preset's own check names what --init may be
     try:
         info = read_sidecar(path)
         layers, label, own = info["network"]["lstm_layers"], info["window"]["label"], info.get("preset")
+    except ModelFileError as exc:  # an interrupted run's folder holds its checkpoint beside it, no model yet
+        if not continues(Path(path), init):
+            fail(f"--init {init}: {exc}", 2)
+        return
     except (OSError, ValueError, KeyError, TypeError):
         return
     if not layers:
@@ -105,47 +99,6 @@ def _check_start(init: str, preset: str | None) -> None:
         fail(
             f"--preset {preset}: --init {kind}: keeps the starting model's network and label ({path}: preset {own}, "
             f"label {label}); there the preset gives the training's settings only: drop --preset, or --init scratch",
-            2,
-        )
-
-
-def _continues(out: Path, init: str) -> bool:
-    """Whether the run continues an interrupted one in place (``resume:`` of --out, its checkpoint beside it)."""
-    from coassist._io import partial_folder
-
-    return (
-        init.startswith("resume:")
-        and Path(init.partition(":")[2]).absolute() == out.absolute()
-        and (partial_folder(out) / "checkpoint.json").is_file()  # intent.checkpoint.CHECKPOINT_JSON
-    )
-
-
-def _check_model_out(out: Path, overwrite: bool, init: str) -> None:
-    """Refuse before any work an --out that is a file, or an existing model without --overwrite."""
-    from coassist._io import partial_folder
-
-    bad_parent = next((p for p in reversed(out.parents) if p.exists() and not p.is_dir()), None)
-    if bad_parent is not None:
-        fail(f"--out {out}: {bad_parent} is a file, not a folder", 2)
-    if out.exists() and not out.is_dir():
-        fail(f"--out {out}: is a file; give a folder for the model", 2)
-    # Only an interrupted run (its checkpoint in the partial folder beside --out) is continued in place;
-    # a new stage from the finished model in --out replaces it, as any other run would.
-    continuing = _continues(out, init)
-    checkpoint = partial_folder(out) / "checkpoint.json"
-    if not continuing and checkpoint.is_file():
-        # an interrupted run's epochs are kept until this run's first epoch replaces them: said, so that a rerun
-        # of the command that was stopped is not taken for its continuation
-        err_console.print(
-            f"note: {checkpoint.parent} holds the checkpoint of an interrupted training{_epochs_done(checkpoint)}; "
-            f"this run starts again and replaces it (to continue it instead: --init resume:{out})",
-            markup=False,
-            soft_wrap=True,
-        )
-    if out.is_dir() and any(out.iterdir()) and not (overwrite or continuing):
-        fail(
-            f"--out {out}: already holds files; pass --overwrite to replace it (the old model stays until the new "
-            "one is complete)",
             2,
         )
 
@@ -198,7 +151,7 @@ def train(
     says so). resume:<out> of a finished model in
     --out is a new stage that replaces it: --overwrite.
     """
-    _check_model_out(out, overwrite, init)
+    check_model_out(out, overwrite, init)
     folder_out(out, "--out")  # before the slow imports: a bad --out is told at once
     from coassist._io import OutputBusyError, OutputLock
     from coassist.intent.presets import OPTIMIZERS
@@ -252,7 +205,7 @@ def train(
     set_torch_threads(p.train.threads)
     try:
         with OutputLock(out):
-            if out.is_dir() and any(out.iterdir()) and not overwrite and not _continues(out, init):
+            if out.is_dir() and any(out.iterdir()) and not overwrite and not continues(out, init):
                 # another run wrote a model there since the check above (it held the lock first): not replaced
                 fail(
                     f"--out {out}: another coassist run wrote a model there meanwhile; pass --overwrite to replace it",
@@ -298,20 +251,20 @@ def evaluate(
 ) -> None:
     """e_RMS and e_MAX per horizon [mm] for the model and the baselines (nominal, constant velocity, tuned constant
     acceleration and ridge), and the best baseline per horizon with the model's gain over it."""
-    if not model.exists():
-        fail(f"--model {model}: no such folder", 2)
     if not model.is_dir():
-        fail(f"--model {model}: is a file; give the model's folder (coassist train writes one)", 2)
-    dest = file_out(out or model / "evaluation.json", "--out", "evaluation.json")
+        why = "is a file; give the model's folder (coassist train writes one)" if model.exists() else "no such folder"
+        fail(f"--model {model}: {why}", 2)
     import json
 
     from coassist._io import atomic_write_text
     from coassist.intent import ModelFileError, ModelMismatchError, evaluate_model, load_model, results_table
-    from coassist.intent.evaluation import AGAINST, comparison_lines, scoring_target
+    from coassist.intent.evaluation import AGAINST, comparison_lines, is_evaluation_file, scoring_target
+
+    dest = file_out(out or model / "evaluation.json", "--out", "evaluation.json", ours=is_evaluation_file, ext=".json")
     from coassist.intent.model import unfinished
 
-    if against is not None and against not in AGAINST:
-        fail(f"--against must be one of {', '.join(AGAINST)}, got {against!r}", 2)
+    if against is not None:
+        choose(against, AGAINST, "--against", "target")
     try:
         m = load_model(model)
     except (ModelFileError, OSError) as exc:

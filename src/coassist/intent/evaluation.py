@@ -21,8 +21,10 @@ pooled e_RMS there; the model's gain over it is (e_best − e_model) / e_best.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -46,6 +48,7 @@ __all__ = [
     "best_baselines",
     "comparison_lines",
     "evaluate_model",
+    "is_evaluation_file",
     "records_intent",
     "results_table",
     "scoring_target",
@@ -242,6 +245,18 @@ def evaluate_model(
         results=results,
         best_baseline=best_baselines(results, horizons),
     )
+
+
+def is_evaluation_file(path: Path) -> bool:
+    """Whether ``path`` holds an evaluation record (``coassist evaluate``'s JSON: :meth:`ModelEvaluation.to_dict`
+    and the model), which a new evaluation may replace; any other file (a trial, a sidecar, a figure) is not."""
+    try:
+        if path.stat().st_size > 64 * 2**20:
+            return False
+        record = json.loads(path.read_bytes())
+    except (OSError, ValueError):
+        return False
+    return isinstance(record, dict) and {"trials", "results", "best_baseline", "model"} <= set(record)
 
 
 def records_intent(trial) -> bool:

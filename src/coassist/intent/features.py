@@ -506,7 +506,7 @@ def _label_series(trial: Trial, label: str) -> np.ndarray:
     if series is None or not np.isfinite(series).any():
         what = "the operator's true intent (simulated trials only)" if label == "intent" else "the robot's effort u_r"
         raise ValueError(
-            f"label {label!r} needs {what}, but trial {trial.meta.user}/{trial.meta.task}/seed {trial.meta.seed} "
-            f"has no {name}; label 'tool' works on any trial"
+            f"label {label!r} needs {what}, but the trial {_trial_name(trial)} has no {name}; label 'tool' works on any "
+            "trial (coassist train --label)"
         )
     return np.asarray(series, dtype=np.float64)

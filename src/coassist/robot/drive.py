@@ -37,6 +37,7 @@ world, the boxes of a lab's scene file instead (``DriveConfig.scene``,
 from __future__ import annotations
 
 import logging
+import math
 import re
 import time
 from collections.abc import Sequence
@@ -804,6 +805,23 @@ def _task_shift(robot: str) -> np.ndarray:
     return np.array(arm[:2]) - np.array(ur5[:2])
 
 
+def _check_model_rate(config: DriveConfig) -> None:
+    """Refuse a model trained at another rate than the run's (its rows are a horizon of its own ticks: a 125 Hz
+    model's 50 rows are 0.4 s, a 500 Hz controller asks 200), naming --intent and --rate, before anything is loaded."""
+    from coassist.intent.model import DT_RTOL, ModelFileError, read_sidecar
+
+    try:
+        dt = float(read_sidecar(config.intent).get("dt") or config.dt)
+    except (ModelFileError, OSError, TypeError, ValueError):
+        return  # the loader below says what is wrong with the folder
+    if not math.isclose(dt, config.dt, rel_tol=DT_RTOL):
+        raise ValueError(
+            f"--intent {config.intent}: the model was trained at {1 / dt:g} Hz (dt {dt:g} s), this run is at --rate "
+            f"{config.rate_hz} (dt {config.dt:g} s): drive at --rate {round(1 / dt)}, or train a model on trials of "
+            "this rate"
+        )
+
+
 def _intent_stage(config: DriveConfig, H: int, source: Any, sources: dict | None = None):
     realtime = config.realtime_intent if config.realtime_intent is not None else not WORLDS[config.world].simulated
     if source is not None:
@@ -813,6 +831,7 @@ def _intent_stage(config: DriveConfig, H: int, source: Any, sources: dict | None
     if not needs_network(config.intent):  # a named source or a calibration, computed in the tick: no network
         src = load_intent_source(config.intent, horizon=max(H, 2))
         return WindowIntent(src, H), src.model_id
+    _check_model_rate(config)
     if realtime:
         from coassist.intent import RealtimeConfig, RealtimePredictor
         from coassist.intent.model import load_model
