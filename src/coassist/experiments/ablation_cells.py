@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from coassist.analysis.paired import clustered_difference, gain_share, paired_difference
-from coassist.experiments.source_training import LEARNED, seed_names
+from coassist.experiments.source_training import CALIBRATED_KINDS, LEARNED, seed_names
 from coassist.robot.worlds import POINT_MASS
 from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told
@@ -60,9 +60,6 @@ HELD_OUT_SOURCES = ("nominal", "present", DEFAULT_INTENT, "lstm-intent", "paths"
 ABLATION_CELLS = (POINT_MASS, "mujoco", HELD_OUT)
 #: The sources calibrated per operator (not trained): their folder is written per population.
 CALIBRATED = ("paths", "person")
-#: The folder kind (:data:`~coassist.scenario.intent_registry.INTENT_FOLDERS`) each calibrated source's cells run
-#: with: what it was told is that folder's (the operator's own trials besides the source's own knowledge).
-CALIBRATED_KINDS = {"paths": "path-hypotheses", "person": "person-model"}
 #: Issue 18's bar: a learned predictor in the loop gets this share of the oracle's benefit over MG.
 ORACLE_SHARE_BAR = 0.8
 #: Issue 34's bars for the application's source (arbitrated controller): shares of the oracle's force

@@ -29,6 +29,7 @@ from coassist.experiments.report import Claim, Section
 from coassist.experiments.seed_plan import application_seed, heavy_transfer_seed, trial_seed_base
 from coassist.experiments.source_training import (
     APPLICATION_SOURCE,
+    CALIBRATED_KINDS,
     calibrate_paths,
     calibrate_person,
     calibration_draw_options,
@@ -253,10 +254,11 @@ def headline_table(result: ApplicationResult) -> tuple[str, list[str], list[list
 
 def told_text(source: str) -> str:
     """What the application's source was told: its calibration folder's where it runs with one (``paths``)."""
-    from coassist.experiments.ablation_cells import told_of
-    from coassist.scenario.intent_registry import INTENT_SOURCES
+    from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES
 
-    return told_of(source).text() if source in INTENT_SOURCES else "see the ablation"
+    if source in CALIBRATED_KINDS:
+        return INTENT_FOLDERS[CALIBRATED_KINDS[source]].told.text()
+    return INTENT_SOURCES[source].told.text() if source in INTENT_SOURCES else "see the ablation"
 
 
 def application_metrics(trials) -> dict[str, Any]:

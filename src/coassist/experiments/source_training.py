@@ -50,6 +50,7 @@ __all__ = [
     "DRAW_SEED_STEP",
     "LEARNED",
     "asked_way_seed",
+    "CALIBRATED_KINDS",
     "calibrate_paths",
     "calibrate_person",
     "calibration_draw_options",
@@ -79,6 +80,10 @@ LEARNED = {
 #: path hypotheses got 87 / 92 % of the oracle's force saving and 69 / 72 % of its overshoot reduction
 #: (board / heavy), the LSTM+FC on the intent label 87 / 90 % and −3 / −12 %.
 APPLICATION_SOURCE = "paths"
+#: The folder kind (:data:`~coassist.scenario.intent_registry.INTENT_FOLDERS`) each source calibrated per operator
+#: here is given as (:func:`calibrate_paths`, :func:`calibrate_person`): what it was told is that folder's (the
+#: operator's own trials besides the source's own knowledge).
+CALIBRATED_KINDS = {"paths": "path-hypotheses", "person": "person-model"}
 
 
 def seed_names(source: str, seeds: int) -> list[str]:
