@@ -30,6 +30,7 @@ import numpy as np
 import torch
 
 from coassist.intent.presets import TrainConfig
+from coassist.intent.trials import hash_arrays
 
 __all__ = [
     "CHECKPOINT",
@@ -106,12 +107,7 @@ def trials_digest(trials: Sequence[Any]) -> str:
     for lt in trials:
         h.update(str(lt.id).encode() + b"\0")
         t = lt.trial
-        for name in ("time", "pose", "velocity", "wrench", "reference", "intent", "effort_r", "effort_h"):
-            value = getattr(t, name, None)
-            if value is not None:
-                arr = np.ascontiguousarray(value, dtype=np.float64)
-                h.update(name.encode() + str(arr.shape).encode())
-                h.update(arr.tobytes())
+        hash_arrays(h, t, ("time", "pose", "velocity", "wrench", "reference", "intent", "effort_r", "effort_h"))
         meta = getattr(t, "meta", None)
         plant = meta.to_dict()["extra"].get("plant") if meta is not None else None
         if plant is not None:

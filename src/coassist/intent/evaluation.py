@@ -157,7 +157,7 @@ def evaluate_model(
     if not horizons:
         raise ValueError(f"no horizon fits the model's horizon of {model.horizon} samples")
     if against not in AGAINST:
-        raise ValueError(f"against must be one of {AGAINST}, got {against!r}")
+        raise ValueError(f"against must be one of {tuple(AGAINST)}, got {against!r}")
     trained_on = lineage_train_trials(model.info) if held_out_only else set()
     contents = lineage_train_trials(model.info, "train_digests") if held_out_only else set()
     copies = [lt.id for lt in trials if lt.id not in trained_on and contents and content_digest(lt.trial) in contents]

@@ -25,7 +25,7 @@ import hashlib
 import os
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -34,7 +34,7 @@ from coassist.data.bags import bag_paths, is_bag, load_bag_trial
 from coassist.data.datasets import MANIFEST_NAME
 from coassist.data.rosbag_csv import recording_folders
 
-__all__ = ["LabeledTrial", "content_digest", "load_trials"]
+__all__ = ["LabeledTrial", "content_digest", "hash_arrays", "load_trials"]
 
 
 class LabeledTrial(NamedTuple):
@@ -54,11 +54,19 @@ def content_digest(trial: Trial) -> str:
     value has the same digest. A training records its trials' digests (``train_digests``) so that ``coassist
     evaluate`` leaves out a copy of a training trial as it leaves out the trial (what its id alone cannot tell)."""
     h = hashlib.sha256()
-    for name in DIGEST_ARRAYS:
-        arr = np.ascontiguousarray(getattr(trial, name), dtype=np.float64)
-        h.update(name.encode() + str(arr.shape).encode())
-        h.update(arr.data)
+    hash_arrays(h, trial, DIGEST_ARRAYS)
     return h.hexdigest()[:16]
+
+
+def hash_arrays(h: Any, trial: Trial, names: Iterable[str]) -> None:
+    """Feed ``h`` (a hashlib object) each of ``trial``'s arrays ``names`` that it has (None: left out), as float64
+    with its name and shape: what :func:`content_digest` and a checkpoint's ``trials_digest`` hash."""
+    for name in names:
+        value = getattr(trial, name, None)
+        if value is not None:
+            arr = np.ascontiguousarray(value, dtype=np.float64)
+            h.update(name.encode() + str(arr.shape).encode())
+            h.update(arr.data)
 
 
 def _load_one(
