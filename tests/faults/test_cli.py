@@ -424,3 +424,27 @@ def test_collect_into_the_current_folder_names_the_dataset_after_it(tmp_path):
     res = run("collect", "--out", ".", "--trials", "1", "--tasks", "linear", "--workers", "1", cwd=here)
     assert res.exit_code == 0, res.output
     assert json.loads((here / "manifest.json").read_text())["dataset_id"] == "here"
+
+
+def test_drive_view_is_refused_where_it_would_do_nothing_or_fail(tmp_path, monkeypatch):
+    """``--view`` opens MuJoCo's viewer: on another world it would be ignored unsaid, and without a display it
+    failed naming ``view=True``; each is one line naming ``--view`` before anything runs or is written."""
+    out = tmp_path / "t.parquet"
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    base = ["drive", "--view", "--time-limit", "0.2", "--no-plot", "--out", out]
+    assert_one_line_error(run(*base), "--view needs a display", code=2)
+    assert_one_line_error(run(*base, "--world", "ur", "--host", "127.0.0.1"), "--view", "--world mujoco", code=2)
+    assert not out.exists()
+
+
+def test_collect_into_a_folder_of_other_files_names_the_option_as_typed(tmp_path):
+    """The dataset writer's refusal says ``overwrite=True`` (the library's argument); ``collect`` says
+    ``--overwrite``, and leaves the folder as it was."""
+    (tmp_path / "D").mkdir()
+    (tmp_path / "D" / "notes.txt").write_text("the lab's notes")
+    line = assert_one_line_error(
+        run("collect", "--out", tmp_path / "D", "--trials", "1", "--tasks", "z"), "--overwrite"
+    )
+    assert "overwrite=True" not in line and "exists and is not empty" in line
+    assert [p.name for p in (tmp_path / "D").iterdir()] == ["notes.txt"]

@@ -496,7 +496,7 @@ def test_collect_with_other_options_neither_reuses_nor_silently_removes_a_partia
         f"{partial_folder(out)} holds 1 of 4 finished trials of another, unfinished collection (simulated: 4 board "
         "trials): the command that started it continues it"
     )
-    assert "overwrite=True (coassist collect --overwrite)" in str(err.value) and said == []
+    assert str(err.value).endswith("pass overwrite=True") and said == []
     assert (partial_folder(out) / "trial_00000.parquet").is_file()  # nothing lost
     collect_dataset(out, workers=1, progress=False, say=said.append, overwrite=True, **{**COLLECT, "trials": 1})
     assert said == [f"removed the unfinished trials of a different collection in {partial_folder(out)}"]
@@ -759,6 +759,33 @@ def test_train_overwrite_replaces_a_model_not_a_folder_of_other_files(tmp_path, 
     res = CliRunner().invoke(app, [*args[:-1], "--out", str(tmp_path / "m"), "--init", f"transfer:{mine}"])
     said = " ".join(res.output.split())
     assert res.exit_code == 2 and f"--init transfer:{mine}: {mine / 'model.json'}: not found" in said, said
+
+
+def test_train_overwrite_of_a_model_keeps_the_files_beside_it_that_no_model_holds(tmp_path):
+    """A model folder the lab also kept notes in: `--overwrite` swapped the folder out whole with them. Refused now,
+    naming them; the model's own files (what train and evaluate write: MODEL_FILES) are replaced as before."""
+    from coassist.cli._model_out import MODEL_FILES
+    from coassist.intent import load_model
+
+    write_dataset([make_trial(i, n=220) for i in range(4)], tmp_path / "D0", "D0")
+    out = tmp_path / "m"
+    args = ["train", str(tmp_path / "D0"), "--out", str(out), "--epochs", "1", "--threads", "1", "--batch-size", "256"]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    res = CliRunner().invoke(app, ["evaluate", "--model", str(out), "--data", str(tmp_path / "D0")])
+    assert res.exit_code == 0, res.output
+    written = {p.name for p in out.iterdir()}
+    assert "evaluation.json" in written and written <= MODEL_FILES, written - MODEL_FILES
+    (out / "notes.md").write_text("subject 3 tired")
+    before = load_model(out)
+    res = CliRunner().invoke(app, [*args, "--overwrite", "--seed", "1"])
+    said = " ".join(res.output.split())
+    assert res.exit_code == 2 and "holds files a model does not (notes.md), which --overwrite would delete" in said
+    assert (out / "notes.md").read_text() == "subject 3 tired" and same_weights(load_model(out), before)
+    (out / "notes.md").unlink()
+    res = CliRunner().invoke(app, [*args, "--overwrite", "--seed", "1"])
+    assert res.exit_code == 0, res.output
+    assert not same_weights(load_model(out), before)
 
 
 @pytest.mark.parametrize(

@@ -210,6 +210,25 @@ def test_drive_mcap_does_not_silently_replace_an_existing_mcap(tmp_path):
     assert (tmp_path / "run.mcap").read_bytes() == b"another run's recording" and not out.exists()
 
 
+def test_drive_does_not_silently_replace_a_figure_at_out_png(tmp_path):
+    """The monitor figure <out>.png is refused like the MCAP (a figure of an earlier run, or the lab's own file):
+    --no-plot writes none and runs; --overwrite replaces it."""
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+
+    out = tmp_path / "run.parquet"
+    figure = tmp_path / "run.png"
+    figure.write_bytes(b"the lab's figure")
+    base = ["drive", "--controller", "manual", "--time-limit", "0.2", "--out", str(out)]
+    res = CliRunner().invoke(app, base)
+    assert res.exit_code == 2 and "run.png exists; pass --overwrite" in res.output and "--no-plot" in res.output
+    assert figure.read_bytes() == b"the lab's figure" and not out.exists()
+    res = CliRunner().invoke(app, [*base, "--no-plot"])
+    assert res.exit_code == 0, res.output
+    assert figure.read_bytes() == b"the lab's figure" and out.exists()
+
+
 #: The writers' parent: it imports the CLI and runs ``drive`` once (argv[1]: its own output, elsewhere), so that
 #: what a fresh interpreter pays once (~1 CPU-s: imports, the UR5's model) is paid once, not by each writer; then,
 #: per line n on stdin, it forks a writer that runs ``drive argv[2:]`` (the same command line, a process of its

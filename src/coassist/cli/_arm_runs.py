@@ -51,9 +51,10 @@ DRIVE_OPTIONS = {
 }
 
 
-def run_out(out: Path, overwrite: bool, mcap: bool) -> Path:
+def run_out(out: Path, overwrite: bool, mcap: bool, plot: bool) -> Path:
     """The trial file of a drive/ros2 run: a recorded run (its trial, or the MCAP beside it) is not
-    replaced without --overwrite, checked before the robot moves."""
+    replaced without --overwrite, nor a figure at <out>.png the run would write (``plot``), checked
+    before the robot moves."""
     out = file_out(out, "--out", "trial.parquet")
     if out.suffix == ".mcap":
         fail(f"--out {out}: give the trial file (e.g. trial.parquet); --mcap writes the .mcap beside it", 2)
@@ -62,9 +63,10 @@ def run_out(out: Path, overwrite: bool, mcap: bool) -> Path:
             f"--out {out}: a trial is written as Parquet: give a .parquet name (e.g. {out.with_suffix('.parquet')})", 2
         )
     if not overwrite:
-        for path in (out, out.with_suffix(".mcap")):
-            if path.exists() or path.is_symlink():  # a recorded run is not replaced silently
-                fail(f"--out {out}: {path} exists; pass --overwrite to replace the run", 2)
+        for path in (out, out.with_suffix(".mcap")) + ((out.with_suffix(".png"),) if plot else ()):
+            if path.exists() or path.is_symlink():  # a recorded run, or its figure, is not replaced silently
+                also = "" if path.suffix != ".png" else " (or --no-plot to write no figure)"
+                fail(f"--out {out}: {path} exists; pass --overwrite to replace the run{also}", 2)
     if mcap:
         need_bags("--mcap")
     return out

@@ -7,7 +7,13 @@ from pathlib import Path
 
 from coassist.cli._common import err_console, fail
 
-__all__ = ["check_model_out", "continues"]
+__all__ = ["MODEL_FILES", "check_model_out", "continues"]
+
+#: What a model folder holds: the sidecar, weights and ridge (coassist.intent.model's SIDECAR, WEIGHTS, RIDGE), the
+#: training's history and loss figure (coassist.intent.training.write_model) and evaluate's default record.
+MODEL_FILES = frozenset(
+    {"model.json", "weights.safetensors", "ridge.safetensors", "history.json", "loss.png", "evaluation.json"}
+)
 
 
 def _epochs_done(checkpoint: Path) -> str:
@@ -53,6 +59,16 @@ def check_model_out(out: Path, overwrite: bool, init: str) -> None:
             "an empty or new folder for the model",
             2,
         )
+    if overwrite and (out / "model.json").is_file():
+        # the model is swapped out whole: files it did not write (notes, another evaluation) would go with it
+        others = sorted(p.name + ("/" if p.is_dir() else "") for p in out.iterdir() if p.name not in MODEL_FILES)
+        if others:
+            fail(
+                f"--out {out}: holds files a model does not ({', '.join(others[:5])}"
+                f"{f', … {len(others)} in all' if len(others) > 5 else ''}), which --overwrite would delete with the "
+                "old model; move them out first, or give another folder for the model",
+                2,
+            )
     # Only an interrupted run (its checkpoint in the partial folder beside --out) is continued in place;
     # a new stage from the finished model in --out replaces it, as any other run would.
     continuing = continues(out, init)

@@ -15,6 +15,7 @@ from coassist.cli._common import (
     int_list,
     lookup,
     name_list,
+    typed,
     way_option,
     wrote,
 )
@@ -199,7 +200,7 @@ def collect(
             live=live,
         )
     except (ValueError, FileExistsError, NotADirectoryError, RuntimeError, OutputBusyError) as exc:
-        fail(f"{exc}")
+        fail(typed(str(exc), {"overwrite=True": "--overwrite"}))  # the library's argument, as typed here
     except OSError as exc:
         fail(f"cannot write {exc.filename or out}: {exc.strerror}")
     finally:

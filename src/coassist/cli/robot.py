@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import typer
@@ -132,7 +133,11 @@ def drive(
         )
     except ValueError as exc:
         fail(typed(str(exc), DRIVE_OPTIONS), 2)
-    out = run_out(out, overwrite, mcap)
+    if view and world != "mujoco":  # the only world with a viewer: elsewhere --view would do nothing, unsaid
+        fail(f"--view opens MuJoCo's viewer: it needs --world mujoco (not {world})", 2)
+    if view and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        fail("--view needs a display (DISPLAY / WAYLAND_DISPLAY is not set); run without --view", 2)
+    out = run_out(out, overwrite, mcap, plot)
     if intent not in INTENT_SOURCES:
         set_torch_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
 

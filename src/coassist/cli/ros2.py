@@ -183,7 +183,7 @@ def ros2(
             markup=False,
             soft_wrap=True,
         )
-    out = run_out(out, overwrite, mcap)
+    out = run_out(out, overwrite, mcap, plot)
 
     confirm = confirm_move(yes, "the emergency stop")
     alpha = run_alpha(preset, controller)

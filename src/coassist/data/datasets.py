@@ -219,9 +219,7 @@ def _check_destination(folder: Path, overwrite: bool) -> None:
         if not folder.is_dir():
             raise FileExistsError(f"{folder} exists and is not a folder")
         if any(folder.iterdir()) and not overwrite:
-            raise FileExistsError(
-                f"{folder} exists and is not empty; pass overwrite=True (coassist collect --overwrite) to replace it"
-            )
+            raise FileExistsError(f"{folder} exists and is not empty; pass overwrite=True to replace it")
     elif any(p.exists() and not p.is_dir() for p in folder.parents):
         bad = next(p for p in reversed(folder.parents) if p.exists() and not p.is_dir())
         raise NotADirectoryError(f"{folder}: {bad} is a file, not a folder")
@@ -510,7 +508,7 @@ class DatasetWriter:
             f"{self.partial} holds {done}{total} finished trials of another, unfinished collection"
             + (f" ({what})" if what else "")
             + ": the command that started it continues it; to discard them and collect this one instead, pass "
-            "overwrite=True (coassist collect --overwrite)"
+            "overwrite=True"
         )
 
     def has(self, index: int) -> bool:
