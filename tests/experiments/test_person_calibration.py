@@ -243,15 +243,16 @@ def test_the_progress_is_read_along_the_plans_segments_whatever_its_vertices(ali
     end, is accepted (on a tie the later vertex: the return leg; it had read 38 %); a tool that moves 4 cm between two
     samples (a trial recorded at a few hertz) is followed (it had read about half)."""
 
-    def trial(base, waypoints, *, held=False, until=1.0, every=1):
+    def trial(base, waypoints, *, held=False, until=1.0, every=1, tool=None):
         """``base`` with the plan ``waypoints`` (walked densely, or each waypoint held a share of the trial) and the
-        tool walked along it up to ``until`` (a new position every ``every`` samples)."""
+        tool walked along it (or along the waypoints ``tool``) up to ``until`` (a new position every ``every``
+        samples)."""
         n = base.n_samples
         w = np.asarray(waypoints, dtype=float)
         ref = base.reference.copy()
         ref[:, :2] = w[np.minimum(np.arange(n) * len(w) // n, len(w) - 1)] if held else _along(w, n)
         pose = base.pose.copy()
-        pose[:, :2] = np.repeat(_along(w, -(-n // every), until), every, axis=0)[:n]
+        pose[:, :2] = np.repeat(_along(w if tool is None else tool, -(-n // every), until), every, axis=0)[:n]
         return _trial(base, reference=ref, pose=pose)
 
     bases = [t.trial for t in alice]
@@ -267,6 +268,15 @@ def test_the_progress_is_read_along_the_plans_segments_whatever_its_vertices(ali
     calibrate_people([Named(f"lab/back-{i}", trial(b, back)) for i, b in enumerate(bases[:3])])
     line = [(0.0, 0.0), (0.5, 0.0)]  # the tool on by about 4 cm every 170th sample
     calibrate_people([Named(f"lab/coarse-{i}", trial(b, line, every=170)) for i, b in enumerate(bases[:3])])
+    # a detour round the Z's diagonal back along its first leg (a large obstacle passed on the far side), then down
+    # and along the last leg to the target: followed sample by sample the progress read going back along the first
+    # leg (48 % of a simulated Z trial that ended at its target); a tool that ends at the plan's end reached it
+    zig = [(0.0, 0.0), (0.3, 0.0), (0.0, -0.3), (0.35, -0.3)]
+    round_back = [(0.0, 0.0), (0.3, 0.0), (-0.05, 0.01), (-0.05, -0.3), (0.35, -0.3)]
+    calibrate_people([Named(f"lab/z-{i}", trial(b, zig, tool=round_back)) for i, b in enumerate(bases[:3])])
+    stopped = Named("lab/z-stopped", trial(bases[3], zig, tool=round_back, until=0.7))  # held on the way down
+    with pytest.raises(CalibrationError, match=r"lab/z-stopped: the tool moved \d+ mm and reached \d+ % of the plan"):
+        calibrate_people([*[Named(f"lab/z-{i}", trial(b, zig, tool=round_back)) for i, b in enumerate(bases[:3])], stopped])
 
 
 def test_a_sensor_spike_a_copy_and_a_recording_cut_short_are_refused_naming_them(alice):
