@@ -276,7 +276,9 @@ def test_the_progress_is_read_along_the_plans_segments_whatever_its_vertices(ali
     calibrate_people([Named(f"lab/z-{i}", trial(b, zig, tool=round_back)) for i, b in enumerate(bases[:3])])
     stopped = Named("lab/z-stopped", trial(bases[3], zig, tool=round_back, until=0.7))  # held on the way down
     with pytest.raises(CalibrationError, match=r"lab/z-stopped: the tool moved \d+ mm and reached \d+ % of the plan"):
-        calibrate_people([*[Named(f"lab/z-{i}", trial(b, zig, tool=round_back)) for i, b in enumerate(bases[:3])], stopped])
+        calibrate_people(
+            [*[Named(f"lab/z-{i}", trial(b, zig, tool=round_back)) for i, b in enumerate(bases[:3])], stopped]
+        )
 
 
 def test_a_sensor_spike_a_copy_and_a_recording_cut_short_are_refused_naming_them(alice):

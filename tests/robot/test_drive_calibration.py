@@ -18,7 +18,7 @@ from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.mujoco_world import MujocoUR5World  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
 from coassist.scenario.intent_registry import INTENT_SOURCES  # noqa: E402
-from coassist.scenario.person_model import PERSON_MODEL_FILE, write_person_model  # noqa: E402
+from coassist.scenario.person_model import PERSON_MODEL_FILE, person_filter_for, write_person_model  # noqa: E402
 from coassist.scenario.scene import Scene, SceneBox  # noqa: E402
 
 PUSH = ScriptedForce.constant((5.0, 0.0, 0.0, 0.0, 0.0, 0.0))
@@ -60,7 +60,8 @@ def test_probe_trials_recorded_by_drive_fit_a_person_model(probe_trials, tmp_pat
     assert arm.method == "probe-iv" and arm.trials == 3
     # the simulated operator's arm stiffens from 550 to 1300 N/m with their effort: the estimate lies there
     assert 550.0 - 3 * arm.stiffness_se < arm.stiffness < 1300.0 + 3 * arm.stiffness_se
-    folder = write_person_model(tmp_path / "cal", {"alice": c.fit})
+    # the MuJoCo world's filter, as calibrate writes it for trials of that world
+    folder = write_person_model(tmp_path / "cal", {"alice": c.fit}, settings=person_filter_for("mujoco"))
 
     # assisting with it: drive names the person model, whose arm and how many demonstrations
     said = []
@@ -97,6 +98,29 @@ def test_probe_trials_recorded_by_drive_fit_a_person_model(probe_trials, tmp_pat
 
     with pytest.raises(ValueError, match=r"holds no calibration of 'bob' \(it holds alice\); play as .*\(--user\)"):
         PlaySession(PlayConfig(user="bob", out=tmp_path / "play", controllers=("cooperative",), intent=str(folder)))
+    # a model of another world, whose filter, arm and paths are that world's, is refused where it would run: the
+    # point-mass world's filter on the MuJoCo UR5 (its jerk 2.4-3.7 m/s³ against MG's 1.8 in review), the arm's on the page,
+    # in a collection or a comparison (the point-mass world)
+    elsewhere = write_person_model(tmp_path / "pm", {"alice": c.fit}, settings=person_filter_for("sim"))
+    with pytest.raises(ValueError, match=r"object twists on its mount.*not of the mujoco world.*manual-probe"):
+        drive(DriveConfig(task="linear", intent=str(elsewhere), person="alice", time_limit=0.2))
+    with pytest.raises(ValueError, match=r"calibrated on trials of the MuJoCo UR5 .*not of the play world"):
+        PlaySession(PlayConfig(user="alice", out=tmp_path / "play", controllers=("cooperative",), intent=str(folder)))
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+
+    res = CliRunner().invoke(app, ["collect", "--out", str(tmp_path / "D"), "--trials", "1", "--intent", str(folder)])
+    said_line = " ".join(res.output.split())
+    assert (
+        res.exit_code == 2
+        and f"--intent {folder}: the person model was calibrated on trials of the MuJoCo" in said_line
+    )
+    assert not (tmp_path / "D").exists()
+    from coassist.experiments.precision import compare_intents
+
+    with pytest.raises(ValueError, match=r"source pm: .*alice's person model was fitted on task 'linear', not on task"):
+        compare_intents({"pm": str(elsewhere)}, tmp_path / "cmp", bases=[50000])
 
 
 class _Told:

@@ -659,7 +659,7 @@ def test_a_person_model_folder_that_holds_no_participant_refuses_them_before_the
     would give them the present estimate held while the report names the model: refused in one line, as drive, play
     and collect refuse it, before the participant is registered (nothing locked); the person it holds runs."""
     from coassist.scenario.path_model import fit_path_model
-    from coassist.scenario.person_model import PersonFit, write_person_model
+    from coassist.scenario.person_model import PersonFit, person_filter_for, write_person_model
     from coassist.scenario.tasks import nominal_path
 
     curve = nominal_path("curved").points  # the plan's task: a model of another path is refused at init (below)
@@ -718,3 +718,15 @@ def test_a_person_model_folder_that_holds_no_participant_refuses_them_before_the
     )
     (tmp_path / "plan-moved.toml").write_text(text.replace(json.dumps(str(folder)), json.dumps(str(moved))))
     init_study(tmp_path / "plan-moved.toml", tmp_path / "study-moved")  # accepted
+    # a folder calibrated on the MuJoCo UR5 (its filter that world's: person_filter_for) named for a study on the page:
+    # refused at init, naming both worlds (its arm, paths and filter are the arm's: review, 2026-12-06)
+    arm = write_person_model(
+        tmp_path / "cal-mujoco",
+        {"P07": PersonFit(ASSUMED_ARM, fit_path_model(line, detours, noise=0.001))},
+        settings=person_filter_for("mujoco"),
+    )
+    (tmp_path / "plan-arm.toml").write_text(text.replace(json.dumps(str(folder)), json.dumps(str(arm))))
+    with pytest.raises(
+        PlanError, match=r"condition\[1\]\.intent: .*calibrated on trials of the MuJoCo UR5.*not of the play world"
+    ):
+        init_study(tmp_path / "plan-arm.toml", tmp_path / "study-arm")

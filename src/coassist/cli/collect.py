@@ -53,7 +53,7 @@ def _check_people(
     first (as ``drive`` and ``play`` do for the person at the handle): they would get no path of their own. Say the
     tasks whose plan a person's paths were not recorded on (their trials get the present estimate held, with their
     arm, as ``drive`` says; the trials still name the model)."""
-    from coassist.scenario.assistance import check_person
+    from coassist.scenario.assistance import check_person, check_person_world
     from coassist.scenario.intent_registry import intent_folder_kind, load_intent_source
     from coassist.scenario.person_intent import same_plan
     from coassist.scenario.populations import population_profile
@@ -62,6 +62,10 @@ def _check_people(
     if intent_folder_kind(intent) != "person-model":
         return
     source = load_intent_source(intent, horizon=2)
+    try:
+        check_person_world(source, "sim", "point-mass", intent)  # the origin a collection's trials record
+    except ValueError as exc:
+        fail(f"--{exc}", 2)  # "--intent …"
     for u in users if users is not None else (0,):
         try:
             name = population_profile(population, u, population_seed).name

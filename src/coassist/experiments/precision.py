@@ -91,12 +91,23 @@ def compare_intents(
             f"bases {off}: a validation base must be {VALIDATION_BASES[0]}–{VALIDATION_BASES[1]} past a multiple "
             f"of {RUN_SEED_STRIDE} (e.g. 50000), so that its trials are no run's own (the report's seeds)"
         )
+    from coassist.scenario.assistance import check_person_tasks, check_person_world
     from coassist.scenario.intent_registry import load_intent_source
 
+    task = REPRODUCE_PRESETS["default"].application_task
     for label, spec in sources.items():  # refuse a bad source before anything runs
         if spec not in ("paths", "person"):
             try:
-                load_intent_source(spec, horizon=50)
+                loaded = load_intent_source(spec, horizon=50)
+                # a person model of another task or world: its rows would be the present estimate held, or its
+                # filter another world's, under its label
+                check_person_tasks(
+                    loaded,
+                    (task,),
+                    spec,
+                    fix=f"calibrate on the application's task (--tasks {task}), or compare person",
+                )
+                check_person_world(loaded, "sim", "point-mass", spec)
             except ValueError as exc:
                 raise ValueError(f"source {label}: {exc}") from None
     controllers = dict(controllers or {})

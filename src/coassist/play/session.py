@@ -60,7 +60,7 @@ from coassist.runtime.intent import RealtimeIntent, WindowIntent
 from coassist.runtime.loop import run_loop
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.wrench import WrenchPipeline
-from coassist.scenario.assistance import DEFAULT_INTENT, check_person
+from coassist.scenario.assistance import DEFAULT_INTENT, check_person, check_person_world
 from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source
 from coassist.scenario.path_model import ASKED_WAY, WAY_NAMES, check_way
 from coassist.scenario.tasks import TASK_KINDS, TASKS, Task, nominal_path, task_for_seed
@@ -253,6 +253,7 @@ class PlaySession:
                 config.intent,
                 fix="play as a person it holds (--user), or calibrate them (coassist calibrate)",
             )
+            check_person_world(self.source, "sim", "play", config.intent)  # the origin its trials record
         if int(self.source.horizon) < H:
             raise ValueError(f"the intent model predicts {self.source.horizon} steps; the controller needs {H}")
         model = getattr(self.source, "model", None)

@@ -61,7 +61,7 @@ from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.safety_limits import SafetyLimits
 from coassist.runtime.tick import TickConfig
 from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPipeline
-from coassist.scenario.assistance import DEFAULT_INTENT, assistance_line, check_person
+from coassist.scenario.assistance import DEFAULT_INTENT, assistance_line, check_person, check_person_world
 from coassist.scenario.hand import SimulatedHand
 from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source, needs_network, shared_intent_source
 from coassist.scenario.objects import OBJECTS, get_object
@@ -570,6 +570,7 @@ def _prepare(
         intent_stage, model_id = _intent_stage(config, H, intent_source, sources)
         loaded = getattr(intent_stage, "source", None)
         check_person(loaded, user, config.intent)
+        check_person_world(loaded, entry.origin, config.world, config.intent)
         ref_abs = plan_grid(task, dt, n_max, max(H, int(intent_stage.horizon)))
         rng_intent, rng_motor = trial_rngs(config.seed, 2)
         intent_traj = intent_trajectory(task, profile, rng_intent, ref_abs.shape[0], dt)

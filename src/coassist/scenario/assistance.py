@@ -20,7 +20,7 @@ import numpy as np
 from coassist.scenario.intent_registry import INTENT_SOURCES, intent_folder_kind
 from coassist.scenario.path_model import few_paths
 
-__all__ = ["DEFAULT_INTENT", "assistance_line", "check_person"]
+__all__ = ["DEFAULT_INTENT", "assistance_line", "check_person", "check_person_tasks", "check_person_world"]
 
 #: The intent source of every world and command when none is given: the safest measured on the
 #: validation seeds of the application scenario without a calibration (docs/precision.md, *The default
@@ -79,6 +79,60 @@ def check_person(
     if fitted and user not in source.arms and (source.default_paths is None or not by_default):
         held = ", ".join(sorted(source.arms)) or "nobody"
         raise ValueError(f"intent {intent}: the person model holds no calibration of {user!r} (it holds {held}); {fix}")
+
+
+def check_person_tasks(source: Any, tasks: Sequence[str], intent: str, fix: str) -> None:
+    """ValueError in one line where ``source`` is a person model (``coassist calibrate``) fitted on another path than
+    one of ``tasks``: the source gives such a trial the present estimate held (it knows one plan), while the trial and
+    the report name the model; ``fix``: what to do. The paths are compared in shape (each from its own start: an arm
+    lays its plan out from where its tool stands), as :func:`~coassist.scenario.person_intent.same_plan` compares a
+    run's plan with the model's."""
+    from coassist.scenario.person_intent import PersonPathsIntent, same_plan
+    from coassist.scenario.tasks import TASKS, nominal_path
+
+    if not isinstance(source, PersonPathsIntent):
+        return
+
+    def shape(points: Any) -> np.ndarray:
+        points = np.asarray(points, dtype=float)[:, :2]
+        return points - points[0]
+
+    kinds = {kind: shape(nominal_path(kind).points) for kind in TASKS}
+    for person, model in source.paths.items():  # the default person is one of them
+        fitted = shape(model.nominal)
+        for task in tasks:
+            if not same_plan(fitted, kinds[task]):
+                known = [k for k, path in kinds.items() if same_plan(fitted, path)]
+                on = f"task {known[0]!r}" if known else "a path of none of the tasks"
+                raise ValueError(
+                    f"{intent}: {person}'s person model was fitted on {on}, not on task {task!r}: its trials of that "
+                    f"task would get the present estimate held while the report names the model; {fix}"
+                )
+
+
+def check_person_world(source: Any, origin: str, world: str, intent: str) -> None:
+    """ValueError in one line when ``source`` is a person model calibrated on trials of a world that holds the object
+    otherwise than the run's (``origin``: the run's ``TrialMeta.origin``; ``world``: its name, for the message): its
+    online filter was chosen for those trials (:func:`~coassist.scenario.person_model.person_filter_for`: the yaw
+    mode of an object that twists on its mount, or none on the MuJoCo UR5, which holds every object rigidly), and its
+    arm and paths were measured there. Driven on the MuJoCo board with the point-mass world's filter, the tool's jerk
+    rose to 2.4–3.7 m/s³ against MG's 1.8 (a review, two seeds)."""
+    from coassist.scenario.person_intent import PersonPathsIntent
+    from coassist.scenario.person_model import person_filter_for
+
+    if not isinstance(source, PersonPathsIntent) or not (source.arms or source.paths):
+        return
+    if source.settings.object_yaw != person_filter_for(origin).object_yaw:
+        there = (
+            "a world where the object twists on its mount (the point-mass simulation, a real arm)"
+            if source.settings.object_yaw
+            else "the MuJoCo UR5 (which holds the object rigidly)"
+        )
+        raise ValueError(
+            f"intent {intent}: the person model was calibrated on trials of {there}, not of the {world} world: its arm, "
+            f"paths and filter are that world's; calibrate the person on {world} trials (--controller manual-probe, "
+            "then coassist calibrate)"
+        )
 
 
 def assistance_line(

@@ -55,10 +55,10 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from coassist.config import CONTROL_PRESETS
+from coassist.robot.worlds import WORLDS
 from coassist.scenario import intent_registry
+from coassist.scenario.assistance import check_person_tasks, check_person_world
 from coassist.study.design import blinding_labels, latin_square_rows
 from coassist.study.plan import CALIBRATED, PlanError, StudyPlan, TrainingPlan
 from coassist.study.protocols import SEED_BAND, condition_names, participant_steps, trial_seed_base
@@ -238,41 +238,20 @@ def _check_sources(plan: StudyPlan, H: int, dt: float) -> dict[str, Any]:
                     f"{where}: the model has {n_params:,} parameters; a study runs at most {MAX_PARAMETERS:,} in the loop"
                 )
             models[c.intent] = model
-        _check_person_tasks(source, plan.trials.tasks, where, c.intent)
+        try:
+            check_person_tasks(
+                source,
+                plan.trials.tasks,
+                c.intent,
+                fix='give [trials] tasks the model\'s task, or calibrate in the study (intent = "calibrated")',
+            )
+            check_person_world(source, WORLDS[plan.world].origin, plan.world, c.intent)
+        except ValueError as exc:
+            raise PlanError(f"{where}: {exc}") from None
         horizon = getattr(source, "horizon", H)
         if horizon < H:
             raise PlanError(f"{where}: {c.intent!r} predicts {horizon} steps; the controller needs {H}")
     return models
-
-
-def _check_person_tasks(source: Any, tasks: tuple[str, ...], where: str, intent: str) -> None:
-    """PlanError in one line where a person-model folder was fitted on another path than one of the plan's tasks: the
-    source gives such a trial the present estimate held (it knows one plan), while the trial and the report name the
-    model. The paths are compared in shape (each from its own start: an arm lays its plan out from where its tool
-    stands), as :func:`~coassist.scenario.person_intent.same_plan` compares a run's plan with the model's."""
-    from coassist.scenario.person_intent import PersonPathsIntent, same_plan
-    from coassist.scenario.tasks import TASKS, nominal_path
-
-    if not isinstance(source, PersonPathsIntent):
-        return
-    models = dict(source.paths)  # the default person is one of them
-
-    def shape(points: Any) -> np.ndarray:
-        points = np.asarray(points, dtype=float)[:, :2]
-        return points - points[0]
-
-    kinds = {kind: shape(nominal_path(kind).points) for kind in TASKS}
-    for person, model in models.items():
-        fitted = shape(model.nominal)
-        for task in tasks:
-            if not same_plan(fitted, kinds[task]):
-                known = [k for k, path in kinds.items() if same_plan(fitted, path)]
-                on = f"task {known[0]!r}" if known else "a path of none of the tasks"
-                raise PlanError(
-                    f"{where}: {intent}: {person}'s person model was fitted on {on}, not on task {task!r}: its "
-                    "trials of that task would get the present estimate held while the report names the model; "
-                    'give [trials] tasks the model\'s task, or calibrate in the study (intent = "calibrated")'
-                )
 
 
 def _person_source(H: int):
