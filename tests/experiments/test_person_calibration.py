@@ -303,6 +303,20 @@ def test_a_sensor_spike_a_copy_and_a_recording_cut_short_are_refused_naming_them
         CalibrationError, match=r"trial lab/cut's stops short; was its recording stopped before the end"
     ):
         calibrate_people([*alice, Named("lab/cut", cut)])
+    # the short one first, on a plan that turns (the curve): the same line (it had been "follows another nominal path …
+    # start every trial from the same place", sending a lab to move the arm's start for nothing: review, 2026-12-06)
+    zs = _run(ALICE, "manual-probe", [32, 33, 34], task="curved")
+    z = zs[0].trial
+    n = int(0.4 * z.n_samples)  # its plan 0.41 of 0.60 m: the rest of the curve 3.2 cm off its last vertex's normal
+    cut_z = Trial(
+        meta=z.meta, time=z.time[:n], pose=z.pose[:n], velocity=z.velocity[:n], wrench=z.wrench[:n],
+        reference=z.reference[:n], effort_r=z.effort_r[:n],
+    )  # fmt: skip
+    for order in ([Named("lab/cut-z", cut_z), *zs[1:]], [*zs[1:], Named("lab/cut-z", cut_z)]):
+        with pytest.raises(
+            CalibrationError, match=r"trial lab/cut-z's stops short; was its recording stopped before the end"
+        ):
+            calibrate_people(order)
 
 
 def test_the_arm_is_measured_on_a_rigid_object_and_used_only_where_it_says_enough(alice, monkeypatch):

@@ -296,7 +296,9 @@ def _check_person(person: str, items: list[NamedTrial], min_trials: int) -> str:
         other = _nominal(it.trial)
         # the offsets from the path, and its ends (a plan moved along itself has no offset)
         start, end = float(np.linalg.norm(other[0] - nominal[0])), float(np.linalg.norm(other[-1] - nominal[-1]))
-        apart = frame.distance_to(other)
+        # either way round: a plan that stops short lies on the other (whichever of the two came first), and is named
+        # as that below, not as another path (the order of the trials given had decided which was said)
+        apart = min(frame.distance_to(other), PathFrame(other).distance_to(nominal))
         if max(apart, start) > SAME_PATH:
             raise CalibrationError(
                 f"{person}: trial {it.id} follows another nominal path than trial {first.id} "
