@@ -82,6 +82,18 @@ def test_a_person_model_says_whose_arm_and_paths(person_model):
     check_person(load_intent_source("present"), "carol", "present")  # other sources have no person to check
 
 
+def test_another_person_given_the_default_model_is_told_whose_it_is(tmp_path):
+    """A study's own fit names its participant the model's default (anyone else at the handle gets it): the line named
+    the person at the handle as though it were their calibration (review, 2026-12-06)."""
+    paths = fit_path_model(LINE, [_detour(1), _detour(1), _detour(-1)], noise=0.001)
+    folder = str(write_person_model(tmp_path / "S01", {"S01": PersonFit(ASSUMED_ARM, paths)}, default="S01"))
+    source = load_intent_source(folder)
+    line = assistance_line("cooperative", folder, source, user="user-0", path=LINE)
+    assert "(user-0: S01's calibration, the model's default person: arm ASSUMED" in line, line
+    own = assistance_line("cooperative", folder, source, user="S01", path=LINE)
+    assert "(S01: arm ASSUMED" in own and "default person" not in own
+
+
 def test_a_person_the_twin_check_turned_away_is_told_what_they_get(tmp_path):
     from coassist.scenario.person_model import LeadCheck
 

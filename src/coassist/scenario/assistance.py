@@ -194,6 +194,11 @@ def _person(intent: str, source: Any, user: str, path: np.ndarray | None) -> str
     if model is None:
         return f"{name} ({user}: {how}, no demonstrations: the present estimate held)"
     known = f"{user}: {how}, {_ways(model.sides)}"
+    if user not in source.paths and source.default_person is not None:
+        # another person's calibration, served as the folder's default (a study's own fit): said whose
+        known = (
+            f"{user}: {source.default_person}'s calibration, the model's default person: {how}, {_ways(model.sides)}"
+        )
     if (user if user in source.paths else source.DEFAULT) in source.held:
         # the calibration's twin check (coassist.sim.person_twin): leading along their paths cost them overshoot
         return (

@@ -393,6 +393,8 @@ class PersonPathsIntent:
         there is no path model (or the tool is far from its paths): q + e·i·dt·v (0: held, 1: constant velocity).
     held : the people not led along their paths (the calibration's twin check, :mod:`coassist.sim.person_twin`):
         they get ``present-held``'s rows; :attr:`DEFAULT` among them: whoever gets the default model too.
+    default_person : whose calibration ``default_paths`` and ``default_arm`` are (None: not known), for the line
+        that says what the person at the handle gets.
     """
 
     history = 1
@@ -411,6 +413,7 @@ class PersonPathsIntent:
         model_id: str = "person",
         extrapolation: float = 1.0,
         held: Iterable[str] = (),
+        default_person: str | None = None,
     ) -> None:
         self.horizon = check_int(horizon, "PersonPathsIntent.horizon", 1)
         # the people not led along their paths (their calibration's twin overshot more with the lead than under MG:
@@ -420,6 +423,8 @@ class PersonPathsIntent:
         self.paths = dict(paths or {})
         self.arms = dict(arms or {})
         self.default_paths = default_paths
+        #: whose calibration the default model is (a study's own fit names its participant), where known
+        self.default_person = default_person
         self.default_arm = ASSUMED_ARM if default_arm is None else default_arm
         self.settings = PersonFilterSettings() if settings is None else settings
         self.model_id = model_id

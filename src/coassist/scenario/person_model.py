@@ -391,6 +391,7 @@ def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsInten
         default_arm=None if default is None else arms[default],
         settings=settings,
         held=held | ({PersonPathsIntent.DEFAULT} if default in held else set()),
+        default_person=default,
         # the folder's name and the file's digest: two calibrations written to folders of one name (or one
         # folder rewritten with --overwrite) give their trials different ids, as a trained model's do
         model_id=f"person:{Path(folder).name}@{'' if key is None else key.hex()[:12]}",
