@@ -106,6 +106,19 @@ def test_probe_trials_recorded_by_drive_fit_a_person_model(probe_trials, tmp_pat
         drive(DriveConfig(task="linear", intent=str(elsewhere), person="alice", time_limit=0.2))
     with pytest.raises(ValueError, match=r"calibrated on trials of the MuJoCo UR5 .*not of the play world"):
         PlaySession(PlayConfig(user="alice", out=tmp_path / "play", controllers=("cooperative",), intent=str(folder)))
+    # play's line says each task of the session: the model leads on its own plan only (the first task's alone was said)
+    from coassist.cli.play import _page_assistance
+
+    session = PlaySession(
+        PlayConfig(
+            user="alice", out=tmp_path / "play2", controllers=("cooperative",), intent=str(elsewhere),
+            tasks=("curved", "linear", "z"),
+        )
+    )  # fmt: skip
+    line = _page_assistance(session)
+    assert line.startswith(f"assistance: cooperative, on task curved, z: toward the person model {elsewhere} (alice:")
+    assert "recorded on another plan than this run's" in line.split("; on task linear: ")[0]
+    assert "recorded on another plan" not in line.split("; on task linear: ")[1], line
     from typer.testing import CliRunner
 
     from coassist.cli import app

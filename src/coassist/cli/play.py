@@ -199,17 +199,30 @@ def _page_assistance(session) -> str:
     """The one-line statement of a play page: what its assisting controller (the first offered) will give."""
     from coassist.scenario.assistance import assistance_line
 
+    from coassist.scenario.tasks import task_for_seed
+
     cfg = session.config
     kinds = cfg.controllers
     controller = next((c for c in kinds if c.startswith("cooperative")), kinds[0])
-    task = session.next_task()
-    line = assistance_line(
-        controller,
-        cfg.intent,
-        session.source,
-        user=cfg.user,
-        path=task.path.points,
-        obstacles=(task.obstacle.to_dict(),),
-    )
+    first = session.next_task()
+    # each task of the session: a person model serves only the plan it was recorded on, so the line may differ by task
+    # (the first task's alone had been said: a session's other tasks then got the present estimate held unsaid)
+    by_line: dict[str, list[str]] = {}
+    for kind in dict.fromkeys([first.kind, *cfg.tasks]):
+        task = first if kind == first.kind else task_for_seed(kind, cfg.seed, motion_time=cfg.motion_time)
+        said = assistance_line(
+            controller,
+            cfg.intent,
+            session.source,
+            user=cfg.user,
+            path=task.path.points,
+            obstacles=(task.obstacle.to_dict(),),
+        )
+        by_line.setdefault(said, []).append(kind)
+    lines = list(by_line)
+    line = lines[0]
+    if len(lines) > 1:
+        head = f"assistance: {controller}, "
+        line = head + "; ".join(f"on task {', '.join(by_line[said])}: {said.removeprefix(head)}" for said in lines)
     others = [c for c in kinds if c != controller]
     return line + (f" (the page also offers {', '.join(others)})" if others else "")
