@@ -554,6 +554,10 @@ def test_a_way_shown_in_fewer_than_three_trials_is_named_with_what_to_record():
     )
     # every way shown three times or more, or never (the present estimate's rows there, not a path of one trial)
     assert thin_ways(np.array([1, 1, 1, -1, -1, -1])) == thin_ways(np.array([1, 1, 1, 0])) == ""
+    # a person the model does not lead (the twin check) is followed along no path: only what to record is said
+    assert thin_ways(np.array([1, 1, 1, -1, 1, 1, 1, 1]), led=False) == (
+        "the right way shown in 1 trial only; record more going right (asked: --ask-way right)"
+    )
 
 
 def test_a_calibration_asks_for_each_thin_way_within_its_budget():
@@ -573,6 +577,21 @@ def test_the_summary_says_how_many_paths_were_asked_for(alice):
     paths = c.fit.paths
     asked = replace(c, fit=replace(c.fit, paths=replace(paths, asked=np.arange(len(paths.sides)) < 2)))
     assert f"right ({2} asked for, not in the prior); fit" in summary_line(asked)
+    # turned away by the twin check, with a way shown once: the line said "present estimate held" and "the model
+    # follows that path alone there" at once (review, 2026-12-06)
+    from coassist.scenario.person_model import LeadCheck
+
+    sides = np.where(np.arange(len(paths.sides)) == 0, -1, 1)
+    held = replace(
+        c,
+        fit=replace(
+            c.fit,
+            paths=replace(paths, sides=sides),
+            lead=LeadCheck(follow=False, folds=3, person_mm=6.0, mg_mm=2.0, low_mm=1.5),
+        ),
+    )
+    line = summary_line(held)
+    assert "the right way shown in 1 trial only; record more going right" in line and "follows that path" not in line
     assert "asked for" not in summary_line(c)
 
 

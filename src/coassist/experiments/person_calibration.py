@@ -430,16 +430,19 @@ def ways_to_ask(sides: np.ndarray, room: int) -> list[tuple[int, int]]:
     return out
 
 
-def thin_ways(sides: np.ndarray) -> str:
+def thin_ways(sides: np.ndarray, led: bool = True) -> str:
     """What to record more of: each way round shown in fewer than
     :data:`~coassist.scenario.path_model.FEW_PATHS` of the person's trials but at least once
     (:func:`~coassist.scenario.path_model.few_paths`), e.g. "the right way shown in 1 trial only: the model follows
-    that path alone there; record more going right"; "" where every way shown was shown often enough."""
+    that path alone there; record more going right"; "" where every way shown was shown often enough. ``led``: False
+    where the model does not lead the person along their paths (the twin check): it follows none, and says only what
+    to record."""
     notes = []
     for name, n in few_paths(sides).items():
         paths = "that path" if n == 1 else f"those {n} paths"
+        follows = f": the model follows {paths} alone there" if led else ""
         notes.append(
-            f"the {name} way shown in {n} trial{'s' if n > 1 else ''} only: the model follows {paths} alone there; "
+            f"the {name} way shown in {n} trial{'s' if n > 1 else ''} only{follows}; "
             f"record more going {name} (asked: --ask-way {name})"
         )
     return "; ".join(notes)
@@ -477,7 +480,8 @@ def summary_line(c: PersonCalibration) -> str:
             f"arm ASSUMED{'' if unused else ', not measured'} (K̂ {arm.stiffness:.0f} N/m, Ĉ {arm.damping:.1f} N·s/m): "
             f"{'the probe ' + why if unused else why}"
         )
-    thin = thin_ways(c.fit.paths.sides)
+    # a person not led along their paths is followed along none: their thin way is only what to record more of
+    thin = thin_ways(c.fit.paths.sides, led=c.fit.lead is None or c.fit.lead.follow)
     lead = "" if c.fit.lead is None else f"; {c.fit.lead.line}"
     return (
         f"{c.person} ({c.task}, {len(c.trials)} trials): {measured}; demonstrations: {_ways(c.fit.paths, c.asked_other_way)}; "
