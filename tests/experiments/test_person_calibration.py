@@ -414,6 +414,7 @@ def test_the_command_writes_a_person_model_drive_can_load(alice, bob, tmp_path):
     assert res.exit_code == 2 and "--min-trials must be >= 1" in res.output
     res = runner.invoke(app, ["calibrate", str(data), "--out", str(tmp_path / "m3"), "--min-trials", "4"])
     assert res.exit_code == 2 and "error: bob: 3 trial(s) of task 'linear'" in res.output
+    assert "a person model needs at least 4 (--min-trials)" in " ".join(res.output.split())  # the option named
     assert not (tmp_path / "m3").exists()
     res = runner.invoke(app, ["calibrate", str(tmp_path / "nothing"), "--out", str(tmp_path / "m4")])
     assert res.exit_code == 2 and "nothing: no such file or folder" in res.output

@@ -448,3 +448,23 @@ def test_collect_into_a_folder_of_other_files_names_the_option_as_typed(tmp_path
     )
     assert "overwrite=True" not in line and "exists and is not empty" in line
     assert [p.name for p in (tmp_path / "D").iterdir()] == ["notes.txt"]
+
+
+def test_show_names_a_trial_files_figure_after_its_stem(work, tmp_path):
+    """`show run.parquet` wrote run.parquet.png where drive writes run.png and the help says <name>.png."""
+    trial = tmp_path / "run.parquet"
+    shutil.copy(sorted((work / "D").glob("*.parquet"))[0], trial)
+    res = run("show", trial, cwd=tmp_path)
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "run.png").is_file() and not (tmp_path / "run.parquet.png").exists()
+
+
+def test_commands_name_intent_for_a_missing_folder(tmp_path):
+    """drive and play said "intent 'models/x' is neither…" without the option (collect named it)."""
+    for args in (
+        ["drive", "--time-limit", "0.2", "--no-plot", "--out", tmp_path / "t.parquet"],
+        ["play", "--no-open", "--port", "0", "--out", tmp_path / "p"],
+        ["collect", "--trials", "1", "--out", tmp_path / "D"],
+    ):
+        assert_one_line_error(run(*args, "--intent", tmp_path / "nonexist"), "--intent", "not one of", code=2)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -81,7 +81,9 @@ def test_the_cli_says_what_is_wrong_in_one_line(tmp_path):
     result = CliRunner().invoke(
         app, ["play", "--intent", str(tmp_path / "missing"), "--out", str(tmp_path), "--no-open"]
     )
-    assert result.exit_code == 1 and "missing" in result.output and "Traceback" not in result.output
+    # a bad option, named (exit 2), before the session is built
+    assert result.exit_code == 2 and "--intent" in result.output and "missing" in result.output, result.output
+    assert "Traceback" not in result.output
     # the controllers' former names (before drive and play took the kinds) are named, not guessed at
     result = CliRunner().invoke(app, ["play", "--controller", "mg,imp", "--out", str(tmp_path), "--no-open"])
     assert result.exit_code == 2 and "'mg' is now called 'manual'" in result.output

@@ -72,6 +72,17 @@ def run_out(out: Path, overwrite: bool, mcap: bool, plot: bool) -> Path:
     return out
 
 
+def intent_option(intent: str) -> None:
+    """Fail naming --intent unless it is a registered source or an intent folder (one line, exit 2), before a world
+    is built: a missing folder was said as "intent 'models/x' is neither…", not naming the option."""
+    from coassist.scenario.intent_registry import check_intent
+
+    try:
+        check_intent(intent)
+    except ValueError as exc:
+        fail(f"--intent {exc}", 2)
+
+
 def run_alpha(preset: str, controller: str) -> float | None:
     """The game's α of a drive/ros2 run (the assistive controller's preset), None for IMP and MG."""
     from coassist.config import CONTROL_PRESETS

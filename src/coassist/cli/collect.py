@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from coassist.cli._arm_runs import intent_option
 from coassist.cli._common import (
     INTENT_DEFAULT_HELP,
     choose,
@@ -23,7 +24,7 @@ from coassist.cli._live import FOXGLOVE_PORT, LIVE_HELP, close_live, open_live
 from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET
 from coassist.interfaces import NETWORK_BACKENDS
 from coassist.scenario.assistance import DEFAULT_INTENT
-from coassist.scenario.intent_registry import check_intent, intent_choices
+from coassist.scenario.intent_registry import intent_choices
 
 
 def print_forces(folder: Path) -> None:
@@ -170,10 +171,7 @@ def collect(
     user_list = int_list(users, "--users")
     task_list = name_list(tasks, "--tasks", tuple(TASKS), "task")
     object_list = name_list(objects, "--objects", tuple(OBJECTS), "object")
-    try:
-        check_intent(intent)
-    except ValueError as exc:
-        fail(f"--intent {exc}", 2)
+    intent_option(intent)
     _check_people(intent, user_list, population, population_seed, task_list, seed)
     folder_out(out, "--out")  # told as typed
     out = out.absolute()  # "--out ." is a folder with a name (the dataset's id), swapped into place by its path

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from coassist.cli._arm_runs import intent_option
 from coassist.cli._common import (
     ASK_WAY_HELP,
     INTENT_DEFAULT_HELP,
@@ -126,6 +127,7 @@ def play(
         from coassist.scenario.tasks import TASKS
 
         lookup(CONTROL_PRESETS, preset, "--preset")
+        intent_option(intent)
         if drive is not None:
             choose(drive, arm_worlds(), "--drive", "world")
         try:
@@ -198,7 +200,6 @@ def play(
 def _page_assistance(session) -> str:
     """The one-line statement of a play page: what its assisting controller (the first offered) will give."""
     from coassist.scenario.assistance import assistance_line
-
     from coassist.scenario.tasks import task_for_seed
 
     cfg = session.config

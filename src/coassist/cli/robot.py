@@ -7,7 +7,15 @@ from pathlib import Path
 
 import typer
 
-from coassist.cli._arm_runs import DRIVE_OPTIONS, confirm_move, run_alpha, run_out, write_interrupted, write_run
+from coassist.cli._arm_runs import (
+    DRIVE_OPTIONS,
+    confirm_move,
+    intent_option,
+    run_alpha,
+    run_out,
+    write_interrupted,
+    write_run,
+)
 from coassist.cli._common import (
     ARM_CONTROLLER_HELP,
     ASK_WAY_HELP,
@@ -106,6 +114,7 @@ def drive(
     choose(controller, CONTROLLERS, "--controller", "controller")
     choose(obj, OBJECTS, "--object", "object")
     lookup(CONTROL_PRESETS, preset, "--preset")
+    intent_option(intent)
     try:
         limits = SafetyLimits(tool_speed=tool_speed, contact_force=contact_force)
         config = DriveConfig(

@@ -6,7 +6,15 @@ from pathlib import Path
 
 import typer
 
-from coassist.cli._arm_runs import DRIVE_OPTIONS, confirm_move, run_alpha, run_out, write_interrupted, write_run
+from coassist.cli._arm_runs import (
+    DRIVE_OPTIONS,
+    confirm_move,
+    intent_option,
+    run_alpha,
+    run_out,
+    write_interrupted,
+    write_run,
+)
 from coassist.cli._common import (
     ARM_CONTROLLER_HELP,
     ASK_WAY_HELP,
@@ -127,6 +135,7 @@ def ros2(
         import rclpy  # noqa: F401  (the ros2 extra, checked before anything starts)
     except ImportError as exc:
         fail(f"coassist ros2 needs the ros2 extra ({exc.name} missing): pip install 'coassist[ros2]'", 2)
+    intent_option(intent)
     from coassist.robot.drive import DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World

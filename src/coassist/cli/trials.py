@@ -83,6 +83,8 @@ def calibrate(
         people = calibrate_people(trials, task=task, min_trials=min_trials)
     except CalibrationError as exc:
         message = str(exc)
+        if message.endswith(f"a person model needs at least {min_trials}"):  # the option that sets it, named
+            message += " (--min-trials)"
         if task is not None and message.startswith("no trial of task"):  # the option that asked for it, named
             message = f"--task {task}: {message}"
         fail(message, 2)
@@ -131,7 +133,9 @@ def show(
     """The monitor view of a trial (thesis Fig. 5.7–5.8) and its force over time."""
     from coassist.sim.monitor import plot_trial
 
-    name = f"{path.resolve().name}{'' if index == 0 else f'_{index}'}.png"
+    # a trial file's stem (run.parquet → run.png, as drive names its figure), a folder's name
+    named = path.resolve()
+    name = f"{named.stem if named.is_file() else named.name}{'' if index == 0 else f'_{index}'}.png"
     out = file_out(Path(name) if out is None else out, "--out", name)
     kinds = ("png", "pdf", "svg", "jpg", "jpeg")  # what the monitor's figure is written as
     if out.suffix.lower().lstrip(".") not in kinds:
