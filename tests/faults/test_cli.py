@@ -468,3 +468,39 @@ def test_commands_name_intent_for_a_missing_folder(tmp_path):
     ):
         assert_one_line_error(run(*args, "--intent", tmp_path / "nonexist"), "--intent", "not one of", code=2)
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc (a folder nothing can be made in)")
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["sweep", "--duration", "0.1"],
+        ["compare-intents", "--source", "a=present", "--trials", "1", "--bases", "50000", "--users", "0"],
+        ["reproduce", "--preset", "tiny"],
+        ["drive", "--time-limit", "0.2", "--no-plot"],
+    ],
+    ids=lambda a: a[0],
+)
+def test_an_out_nothing_can_be_made_in_is_refused_before_the_work(args):
+    """/proc passes os.access for root, then every write fails: the commands ran (a sweep, a drive) and ended in a
+    traceback. A file made and removed in the folder now tells, before any work."""
+    assert_one_line_error(run(*args, "--out", "/proc/coassist-x"), "--out /proc/coassist-x: cannot write in /proc")
+
+
+def test_an_out_name_too_long_for_its_hidden_siblings_is_refused_before_the_run(tmp_path):
+    """A 235-character trial name is a valid file name, but its temporary sibling (.<name>.<pid>.<hex>.new) is not:
+    drive ran the whole trial, then lost it in a traceback (review, 2026-12-06)."""
+    out = tmp_path / "d" / ("a" * 235 + ".parquet")
+    line = assert_one_line_error(run("drive", "--time-limit", "0.2", "--no-plot", "--out", out), "is too long")
+    assert "at most" in line and not (tmp_path / "d").exists()
+    res = run("drive", "--time-limit", "0.2", "--no-plot", "--out", tmp_path / "d" / ("a" * 100 + ".parquet"))
+    assert res.exit_code == 0, res.output
+
+
+def test_play_into_a_file_is_refused_before_the_page_opens(tmp_path):
+    """`play --out afile` opened the page and said so after the person's first trial ("the trial failed: afile is a
+    file, not a folder"), the trial lost (review, 2026-12-06)."""
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    assert_one_line_error(run("play", "--out", afile, "--no-open", "--port", "0"), "--out", "is a file, not a folder")
+    assert afile.read_text() == "x"

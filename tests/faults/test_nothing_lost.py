@@ -951,3 +951,40 @@ def test_an_unfinished_training_is_not_evaluated_nor_put_in_the_loop(tmp_path):
     assert res.exit_code == 2 and "an unfinished training (the checkpoint after epoch 1 of 3" in said, res.output
     with pytest.raises(ValueError, match=r"an unfinished training \(the checkpoint after epoch 1 of 3"):
         load_intent_source(str(partial), horizon=TINY.window.horizon)
+
+
+def test_a_collection_that_fails_before_its_first_trial_leaves_no_partial_folder(tmp_path):
+    """A collect refused after its writer opened (a damaged --intent folder, a cluster not reached) left an empty
+    .<name>.partial that the next, correct command then refused as "another, unfinished collection" (review,
+    2026-12-06). The writer removes the partial it made where no trial was written; one with trials is kept."""
+    from coassist.data import DatasetWriter
+
+    out = tmp_path / "D"
+    with pytest.raises(RuntimeError, match="before any trial"):
+        with DatasetWriter(out, "D", n_trials=2, key="k"):
+            raise RuntimeError("failed before any trial")
+    assert not partial_folder(out).exists()
+    with pytest.raises(RuntimeError, match="after one trial"):
+        with DatasetWriter(out, "D", n_trials=2, key="k") as w:
+            w.add(0, make_trial(0))
+            raise RuntimeError("failed after one trial")
+    assert (partial_folder(out) / "trial_00000.parquet").is_file()  # kept, for the same command to continue
+    with pytest.raises(RuntimeError, match="again"):
+        with DatasetWriter(out, "D", n_trials=2, key="k", keep=True) as w:
+            assert w.resumed == [0]
+            raise RuntimeError("failed again")
+    assert (partial_folder(out) / "trial_00000.parquet").is_file()  # another run's partial is never removed
+
+
+def test_collect_with_a_damaged_intent_folder_is_refused_in_one_line_leaving_nothing(tmp_path):
+    from typer.testing import CliRunner
+
+    folder = tmp_path / "pm"
+    folder.mkdir()
+    (folder / "person-model.json").write_text("")
+    res = CliRunner().invoke(
+        app, ["collect", "--out", str(tmp_path / "o" / "x"), "--trials", "1", "--intent", str(folder)]
+    )
+    said = " ".join(res.output.split())
+    assert res.exit_code == 2 and f"--intent {folder}: {folder}/person-model.json: malformed JSON" in said, said
+    assert "Traceback" not in res.output and not (tmp_path / "o").exists()

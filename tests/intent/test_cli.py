@@ -81,13 +81,13 @@ def test_train_command_sets_the_torch_threads_it_is_given(tmp_path):
 def test_train_says_when_its_threads_would_share_busy_cores(tmp_path, monkeypatch):
     """Two torch threads beside other work wait for each other at every step: `coassist train` ran 80 s where one
     thread took 18 s (a review, 2026-12-06). The command says so where the cores are busy, and changes nothing."""
-    from coassist.cli import _common
+    from coassist.cli import _threads
 
     write_dataset([make_trial(i, n=220) for i in range(3)], tmp_path / "D0", "D0")
     args = ["train", str(tmp_path / "D0"), "--epochs", "1", "--batch-size", "256"]
     said = {}
     for idle in (0.3, 2.0):
-        monkeypatch.setattr(_common, "idle_cores", lambda idle=idle: idle)
+        monkeypatch.setattr(_threads, "idle_cores", lambda idle=idle: idle)
         res = CliRunner().invoke(app, [*args, "--out", str(tmp_path / f"m{idle}")])
         assert res.exit_code == 0, res.output
         said[idle] = " ".join(res.output.split())
@@ -96,7 +96,7 @@ def test_train_says_when_its_threads_would_share_busy_cores(tmp_path, monkeypatc
     res = CliRunner().invoke(app, [*args, "--threads", "1", "--out", str(tmp_path / "one")])  # one thread: nothing
     assert res.exit_code == 0 and "note:" not in res.output
     monkeypatch.undo()
-    measured = _common.idle_cores(0.05)  # the measurement itself: a number of cores, where /proc/stat is read
+    measured = _threads.idle_cores(0.05)  # the measurement itself: a number of cores, where /proc/stat is read
     import os
 
     assert measured is None or -1e-9 <= measured <= (os.cpu_count() or 1) + 1e-9

@@ -86,7 +86,28 @@ def folder_out(path: Path, option: str, typed: Path | None = None) -> Path:
         fail(f"{shown}: {base} is a file, not a folder")
     if not os.access(base, os.W_OK | os.X_OK):
         fail(f"{shown}: {base} is not writable (permission denied)")
+    _can_write(base, Path(os.path.abspath(path)).parts[len(base.parts) :], shown)
     return path
+
+
+def _can_write(base: Path, names: Iterable[str], shown: str) -> None:
+    """Fail now where nothing can be made in ``base`` (a read-only or virtual file system such as /proc, which
+    ``os.access`` passes for root) or one of ``names`` is too long for the hidden siblings written beside it (the
+    temporary and partial names of coassist._io): found only after the work, it was a traceback."""
+    import tempfile
+
+    from coassist._io import temp_name
+
+    try:
+        with tempfile.NamedTemporaryFile(dir=base, prefix=".coassist-probe-"):
+            pass
+        limit = os.pathconf(base, "PC_NAME_MAX")
+    except OSError as exc:
+        fail(f"{shown}: cannot write in {base} ({exc.strerror})")
+    for name in names:
+        extra = len(os.fsencode(temp_name(name, "partial"))) - len(os.fsencode(name))
+        if len(os.fsencode(name)) + extra > limit:
+            fail(f"{shown}: the name {name[:20]}… is too long: at most {limit - extra} characters here")
 
 
 def file_out(
@@ -105,6 +126,7 @@ def file_out(
     if ext and path.suffix.lower() != ext:
         fail(f"{option} {path}: give a {ext} file, or an existing folder to write {default_name} in")
     folder_out(path.parent, option, typed=path)
+    _can_write(_existing_ancestor(path.parent), (path.name,), f"{option} {path}")
     if path.exists() and not os.access(path, os.W_OK):
         fail(f"{option} {path}: is not writable (permission denied)")
     if ours is not None and path.exists() and not ours(path):
@@ -132,65 +154,6 @@ def check_device(device: str | None, option: str = "--device") -> None:
         fail(f"{option} {device}: Apple MPS is not available here; use --device cpu")
     elif dev.type not in ("cpu", "cuda", "mps"):
         fail(f"{option} {device}: use cpu, cuda or cuda:<n>", 2)
-
-
-def usable_cores() -> int:
-    """The cores this process may run on (its affinity, else the machine's)."""
-    import os
-
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
-def check_threads(threads: int | None, option: str = "--threads") -> None:
-    """Refuse a thread count given on the command line above :func:`usable_cores` (``--threads 100000`` once ran
-    out of memory in a traceback)."""
-    if threads is not None and threads > (cores := usable_cores()):
-        fail(f"{option} must be at most the {cores} cores this process may use, got {threads}", 2)
-
-
-def idle_cores(seconds: float = 0.2) -> float | None:
-    """How many of the machine's cores were idle over the next ``seconds`` (Linux ``/proc/stat``: idle and iowait
-    time over all time, times the cores), this process asleep meanwhile; None where it cannot be read."""
-    import time
-
-    def sample() -> tuple[int, int] | None:
-        try:
-            with open("/proc/stat", encoding="ascii") as f:
-                fields = [int(v) for v in f.readline().split()[1:]]
-        except (OSError, ValueError):
-            return None
-        return (fields[3] + (fields[4] if len(fields) > 4 else 0), sum(fields)) if len(fields) >= 4 else None
-
-    first = sample()
-    time.sleep(seconds)
-    last = sample()
-    if first is None or last is None or last[1] <= first[1]:
-        return None
-    return (last[0] - first[0]) / (last[1] - first[1]) * (os.cpu_count() or 1)
-
-
-def busy_cores_hint(threads: int, option: str = "--threads") -> None:
-    """A line where ``threads`` torch threads would share cores with other work: they wait for each other at every
-    step, spinning (OpenMP), and a training beside other work ran several times slower on two threads than on one
-    (this 2-core VM beside other work: ``coassist train`` 80 s on two threads, 18 s on one; quiet, two were 1.8 times
-    one's speed: docs/history.md). Nothing is changed: the same command trains the same model whatever the load."""
-    if threads < 2:
-        return
-    idle = idle_cores()
-    if idle is not None and idle < threads - 0.5:
-        console.print(
-            f"note: {idle:.1f} of this machine's {os.cpu_count()} cores are idle: {threads} torch threads that wait for "
-            f"each other run several times slower beside other work; {option} 1 trains alone on one",
-            highlight=False,
-            markup=False,
-        )
-
-
-def set_torch_threads(threads: int) -> None:
-    """Torch's intra-op thread count for this process: the command's choice (the library never sets it)."""
-    import torch
-
-    torch.set_num_threads(threads)
 
 
 def wrote(text: str) -> None:

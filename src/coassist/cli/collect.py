@@ -50,7 +50,7 @@ def print_forces(folder: Path) -> None:
 def _check_people(
     intent: str, users: list[int] | None, population: str, population_seed: int, tasks: list[str], seed: int
 ) -> None:
-    """Refuse, before any trial, a person model that does not hold each of the simulated people asked for, naming the
+    """Refuse, before any trial, an intent folder that cannot be read, and a person model that does not hold each of the simulated people asked for, naming the
     first (as ``drive`` and ``play`` do for the person at the handle): they would get no path of their own. Say the
     tasks whose plan a person's paths were not recorded on (their trials get the present estimate held, with their
     arm, as ``drive`` says; the trials still name the model)."""
@@ -60,9 +60,14 @@ def _check_people(
     from coassist.scenario.populations import population_profile
     from coassist.scenario.tasks import task_for_seed
 
+    if intent_folder_kind(intent) is None:
+        return  # a named source
+    try:  # every intent folder read now: a damaged one is refused before the collection starts (a traceback once)
+        source = load_intent_source(intent, horizon=2)
+    except (ValueError, OSError) as exc:
+        fail(f"--intent {intent}: {exc}", 2)
     if intent_folder_kind(intent) != "person-model":
         return
-    source = load_intent_source(intent, horizon=2)
     try:
         check_person_world(source, "sim", "point-mass", intent)  # the origin a collection's trials record
     except ValueError as exc:

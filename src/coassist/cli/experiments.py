@@ -16,10 +16,10 @@ from coassist.cli._common import (
     folder_out,
     int_list,
     lookup,
-    set_torch_threads,
     typed,
     wrote,
 )
+from coassist.cli._threads import set_torch_threads
 
 
 def sweep(

@@ -11,9 +11,7 @@ from rich.markup import escape
 from coassist.cli._common import (
     BAG_TOPICS_HELP,
     SKIP_BAD_HELP,
-    busy_cores_hint,
     check_device,
-    check_threads,
     choose,
     console,
     fail,
@@ -22,11 +20,11 @@ from coassist.cli._common import (
     int_list,
     intent_trials,
     lookup,
-    set_torch_threads,
     typed,
     wrote,
 )
 from coassist.cli._model_out import check_model_out, continues
+from coassist.cli._threads import busy_cores_hint, check_threads, set_torch_threads
 
 # --------------------------------------------------------------------------- intent model
 

@@ -15,6 +15,7 @@ from coassist.cli._common import (
     choose,
     console,
     fail,
+    folder_out,
     lookup,
     name_list,
     need_bags,
@@ -114,6 +115,7 @@ def play(
         fail("--scene: the page's own world tells the robot its obstacle; a scene file is for --drive (an arm)", 2)
     told = scene_option(scene)
     way = way_option(ask_way)
+    folder_out(out, "--out")  # a file there: refused now, not after the person's first trial
     if token is None and not is_loopback(host):
         token = new_token()
     try:

@@ -30,13 +30,13 @@ from coassist.cli._common import (
     real_arm_hosts,
     say,
     scene_option,
-    set_torch_threads,
     simulation_only_sources,
     stability_option,
     typed,
     way_option,
 )
 from coassist.cli._live import FOXGLOVE_PORT, LIVE_HELP, close_live, open_live
+from coassist.cli._threads import set_torch_threads
 from coassist.config import APPLICATION_PRESET
 from coassist.robot.worlds import WORLDS, arm_choices, arm_worlds, world_choices
 from coassist.scenario.assistance import DEFAULT_INTENT

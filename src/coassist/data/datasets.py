@@ -434,6 +434,7 @@ class DatasetWriter:
         self.dataset_id = _check_id(dataset_id)
         self._kept: dict[int, Trial] | None = {} if keep else None
         self._finished = False
+        self._created = False  # whether this writer made the partial folder (nothing of another run's in it)
         n_trials = check_int(n_trials, "n_trials", 1)
         if not isinstance(key, str) or not key:
             raise ValueError(f"key must be a non-empty string, got {key!r}")
@@ -456,7 +457,13 @@ class DatasetWriter:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self._lock.__exit__(*exc)
+        try:
+            if exc[0] is not None and self._created and not self._done and not self._finished:
+                # a run that failed before its first trial (a broken --intent folder, a cluster not reached): its
+                # empty partial folder would read as another, unfinished collection and refuse the next command
+                shutil.rmtree(self.partial, ignore_errors=True)
+        finally:
+            self._lock.__exit__(*exc)
 
     def _open_partial(self) -> None:
         if self.partial.is_dir():
@@ -475,6 +482,7 @@ class DatasetWriter:
                 self.discarded = True
         if not self.partial.is_dir():
             os.mkdir(self.partial)
+            self._created = True
             progress = {
                 "key": self.key,
                 "dataset_id": self.dataset_id,
