@@ -103,6 +103,7 @@ def test_observation_on_a_single_valued_axis_is_not_applicable():
         ("horizons", (float("nan"),)),
         ("robot_effort_weights", (float("inf"),)),
         ("position_scale", 0.0),
+        ("position_scale", 1e20),  # finite, but the game's Hessian is no longer positive definite (a traceback once)
         ("velocity_weight", float("nan")),
         ("human_amplitude", float("inf")),
     ],

@@ -135,6 +135,24 @@ def test_tune_bad_storage(work, storage, message):
     assert_one_line_error(res, f"--storage {storage}", message, code=2)
 
 
+def test_tune_storage_that_is_no_database_is_refused_and_kept(work, tmp_path):
+    """A text file, a damaged database and a folder named as the storage ended in SQLAlchemy's tracebacks; an empty
+    study name was taken (review, 2026-12-06)."""
+    notes = tmp_path / "notes.txt"
+    notes.write_text("notes")
+    res = run("tune", work / "D", "--storage", f"sqlite:///{notes}", "--trials", "1", "--epochs", "1")
+    assert_one_line_error(res, "--storage", "is not an SQLite database", code=2)
+    assert notes.read_text() == "notes"
+    damaged = tmp_path / "study.db"
+    damaged.write_bytes(b"SQLite format 3\x00" + b"\x00" * 84)  # a header, then nothing
+    res = run("tune", work / "D", "--storage", f"sqlite:///{damaged}", "--trials", "1", "--epochs", "1")
+    assert_one_line_error(res, f"--storage sqlite:///{damaged}", code=2)
+    res = run("tune", work / "D", "--storage", f"sqlite:///{tmp_path}", "--trials", "1", "--epochs", "1")
+    assert_one_line_error(res, "--storage", "is a folder; name the database file", code=2)
+    res = run("tune", work / "D", "--study-name", " ", "--storage", f"sqlite:///{tmp_path / 'n.db'}")
+    assert_one_line_error(res, "--study-name must not be empty", code=2)
+
+
 @pytest.mark.parametrize("option", ["--epochs", "--trials"])
 def test_tune_zero_is_refused(work, option, tmp_path):
     res = run("tune", work / "D", option, "0", "--storage", f"sqlite:///{tmp_path / 's.db'}")
@@ -504,3 +522,12 @@ def test_play_into_a_file_is_refused_before_the_page_opens(tmp_path):
     afile.write_text("x")
     assert_one_line_error(run("play", "--out", afile, "--no-open", "--port", "0"), "--out", "is a file, not a folder")
     assert afile.read_text() == "x"
+
+
+@pytest.mark.parametrize("label", ["a/b", "x/../../esc", "..", ".hidden", ""])
+def test_compare_intents_refuses_a_label_that_is_no_folder_name(label, tmp_path):
+    """A label names the source's dataset folders: "x/../../esc" ran part of the comparison, then failed in a
+    traceback leaving datasets behind (review, 2026-12-06)."""
+    res = run("compare-intents", "--source", f"{label}=present", "--out", tmp_path / "o")
+    assert res.exit_code == 2 and "Traceback" not in res.output
+    assert not (tmp_path / "o").exists()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import typer
@@ -144,6 +145,8 @@ def compare_intents(
         label, sep, spec = item.partition("=")
         if not sep or not label or not spec:
             fail(f"--source {item!r}: expected LABEL=INTENT", 2)
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_+.-]*", label) or ".." in label:  # it names dataset folders
+            fail(f"--source {item!r}: a label is letters, digits and - _ + . (it names folders), got {label!r}", 2)
         if label in pairs:
             fail(f"--source {label}: given twice", 2)
         pairs[label] = spec

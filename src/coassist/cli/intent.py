@@ -300,11 +300,14 @@ def tune(
     study_name: str = typer.Option("intent", help="Study name (resumed if it exists and was run on the same trials)."),
     epochs: int = typer.Option(None, help="Epochs per trial (default: the preset's)."),
     seed: int = typer.Option(0, help="Sampler seed."),
+    skip_bad_trials: bool = typer.Option(False, help=SKIP_BAD_HELP),
 ) -> None:
     """Optuna search over optimiser, learning rate and sizes; objective: validation e_RMS at the full horizon.
 
     Prints the best parameters as the `coassist train` options that use them.
     """
+    from sqlalchemy.exc import SQLAlchemyError
+
     from coassist.intent.tuning import StudyMismatchError, check_storage, run_study, train_options
 
     for value, option in ((n_trials, "--trials"), (epochs, "--epochs")):
@@ -317,10 +320,18 @@ def tune(
     except ValueError as exc:
         fail(f"--storage {storage}: {exc}", 2)
     if sqlite_file is not None:
+        if sqlite_file.is_dir():  # file_out would write study.db inside: the URL still names the folder
+            fail(f"--storage {storage}: {sqlite_file} is a folder; name the database file (e.g. sqlite:///study.db)", 2)
         file_out(sqlite_file, "--storage", "study.db")
+        if sqlite_file.is_file() and sqlite_file.stat().st_size > 0:
+            with sqlite_file.open("rb") as fh:
+                if fh.read(16) != b"SQLite format 3\x00":  # a text file named as the database: refused, kept
+                    fail(f"--storage {storage}: {sqlite_file} is not an SQLite database (nothing changed)", 2)
         sqlite_file.parent.mkdir(parents=True, exist_ok=True)  # SQLite makes the file, not its folder
+    if not study_name.strip():
+        fail("--study-name must not be empty (it names the study in the database)", 2)
     p = _intent_preset(preset)
-    trials = intent_trials(data)
+    trials = intent_trials(data, skip_bad_trials)  # its errors point to --skip-bad-trials, which tune has too
     busy_cores_hint(p.train.threads)
     set_torch_threads(p.train.threads)
     try:
@@ -338,6 +349,8 @@ def tune(
         fail(f"--study-name {study_name}: {exc}", 2)
     except ValueError as exc:
         fail(str(exc), 2)
+    except SQLAlchemyError as exc:  # a damaged database file, a server that refuses: one line naming the option
+        fail(f"--storage {storage}: {getattr(exc, 'orig', None) or exc}", 2)
     console.print(f"best validation e_RMS {1e3 * result['best_value']:.2f} mm", highlight=False)
     # what the study trained: its preset and epochs too (without them the command trained another configuration)
     setup = [*(["--preset", preset] if preset != "default" else []), *(["--epochs", str(epochs)] if epochs else [])]

@@ -43,6 +43,8 @@ HORIZONS = (5, 20, 50)
 
 #: [s] The longest case a sweep simulates (an hour: 450 000 ticks at the thesis' 8 ms).
 MAX_DURATION = 3600.0
+#: The largest output scaling of positions in the cost: millimetres (1 is SI, 10 the thesis' decimetres).
+MAX_POSITION_SCALE = 1000.0
 
 
 @dataclass(frozen=True)
@@ -76,6 +78,11 @@ class SweepConfig:
             "robot_amplitude",
         ):
             object.__setattr__(self, name, check_positive_scalar(getattr(self, name), name))
+        if self.position_scale > MAX_POSITION_SCALE:  # 1e20 made the game's Hessian indefinite in floating point
+            raise ValueError(
+                f"position_scale must be at most {MAX_POSITION_SCALE:g} (positions in millimetres), got "
+                f"{self.position_scale:g}"
+            )
         if self.duration < self.dt:
             raise ValueError(f"duration must be at least one sample (dt = {self.dt}), got {self.duration}")
         if self.duration > MAX_DURATION:  # a case is simulated tick by tick: 1e308 s never ends (or overflows)
