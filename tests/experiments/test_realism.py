@@ -103,3 +103,25 @@ def test_realism_of_the_populations(tmp_path):
     assert "--population varied --population held-out --population-users 0,1" in text
     with pytest.raises(ValueError, match="population must be one of"):
         run_realism(REAL, presets=(), tasks=("linear",), progress=False, populations=("all",))
+
+
+def test_realism_replaces_only_an_earlier_report(tmp_path):
+    """`realism --out data.csv` overwrote the lab's data with the report (review, 2026-12-06): only a file the command
+    wrote is replaced (the repository's docs/realism.md is one), and a name must end in .md; refused before any work."""
+    from pathlib import Path
+
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+    from coassist.experiments.realism import is_realism_report
+
+    docs = Path(__file__).resolve().parents[2] / "docs" / "realism.md"
+    assert is_realism_report(docs)
+    notes = tmp_path / "notes.md"
+    notes.write_text("# my notes\n")
+    real = tmp_path / "real"
+    real.mkdir()
+    for out, says in ((notes, "is not a file this command wrote"), (tmp_path / "data.csv", "give a .md file")):
+        res = CliRunner().invoke(app, ["realism", "--out", str(out), "--real", str(real), "--trials", "1"])
+        assert res.exit_code != 0 and says in " ".join(res.output.split()), res.output
+    assert notes.read_text() == "# my notes\n" and not is_realism_report(notes)

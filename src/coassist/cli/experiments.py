@@ -80,7 +80,8 @@ def realism(
     real = real or default_real_data() / "user-a"
     if not real.is_dir():
         fail(f"--real {real}: no such folder (set COASSIST_REAL_DATA to the folder holding user-a/)", 2)
-    out = file_out(out, "--out", "realism.md")
+    # an earlier report is replaced, no other file (a CSV of data, notes: overwritten unasked once)
+    out = file_out(out, "--out", "realism.md", ours=realism_exp.is_realism_report, ext=".md")
     try:
         result = realism_exp.run_realism(
             real,
