@@ -108,6 +108,27 @@ def test_obstacle_and_target_come_from_the_meta(drawn):
     assert ball.center == pytest.approx((0.11, 0.0)) and ball.radius == pytest.approx(0.02)
 
 
+@pytest.mark.parametrize(
+    "extra",
+    [
+        {"obstacle": {"center": [0, "a"], "size": [-1, 0]}, "target": "x", "arrive_radius": -1},
+        {"obstacle": [1, 2], "target": [1.0, 2.0, 3.0], "arrive_radius": "r"},
+    ],
+)
+def test_a_scene_the_meta_tells_badly_is_left_out_not_a_traceback(drawn, extra):
+    """A file of the format without checksums, its meta edited by hand: ``show`` ended in a TypeError (review,
+    2026-12-06). What is malformed is not drawn; the target falls back to the plan's end."""
+    from dataclasses import replace
+
+    trial = _trial()
+    trial = replace(trial, meta=replace(trial.meta, extra=extra))
+    _, fig = drawn(trial)
+    ax = fig.axes[0]
+    assert not [p for p in ax.patches if isinstance(p, Rectangle)]
+    (ball,) = [p for p in ax.patches if isinstance(p, Circle)]
+    assert ball.center == pytest.approx(tuple(trial.reference[-1])) and ball.radius == pytest.approx(0.025)
+
+
 @pytest.mark.parametrize("n_predictions", [3, 6])
 def test_prediction_strokes_are_predictions_at_moving_ticks(drawn, n_predictions):
     trial = _trial()

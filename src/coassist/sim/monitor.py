@@ -10,12 +10,24 @@ ones (target = the last nominal reference point; no obstacle known).
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 
 from coassist._io import save_figure
 from coassist.data import Trial
+
+
+def _numbers(value: object, n: int) -> tuple[float, ...] | None:
+    """``value`` as ``n`` finite numbers (positive where ``n`` is 1), or None where it is not."""
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        return None
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
+        return None
+    if n == 1 and not value[0] > 0:
+        return None
+    return tuple(float(v) for v in value)
 
 
 def plot_trial(trial: Trial, out: str | Path, *, n_predictions: int = 6, title: str | None = None) -> Path:
@@ -38,12 +50,16 @@ def plot_trial(trial: Trial, out: str | Path, *, n_predictions: int = 6, title: 
     if trial.intent is not None:
         ax.plot(trial.intent[:, 0], trial.intent[:, 1], color="tab:green", lw=1.0, alpha=0.8, label="operator intent")
     ax.plot(trial.pose[:, 0], trial.pose[:, 1], color="tab:blue", lw=1.8, label="tip path")
-    obstacle = extra.get("obstacle")
-    if obstacle is not None:
-        (cx, cy), (w, h) = obstacle["center"], obstacle["size"]
+    # what meta.extra says of the scene is drawn where it is well formed (a file of the format without checksums, edited
+    # by hand, made this a traceback), else left out: the trial's own arrays are drawn whatever it says
+    box = _numbers(extra.get("obstacle", {}).get("center") if isinstance(extra.get("obstacle"), dict) else None, 2)
+    size = _numbers(extra["obstacle"].get("size") if box is not None else None, 2)
+    if box is not None and size is not None and min(size) > 0:
+        (cx, cy), (w, h) = box, size
         ax.add_patch(Rectangle((cx - w / 2, cy - h / 2), w, h, color="tab:red", alpha=0.6, label="obstacle"))
-    target = extra.get("target", list(trial.reference[-1]))
-    radius = extra.get("arrive_radius", 0.025)
+    told = _numbers(extra.get("target"), 2)
+    target = (told[0], told[1]) if told is not None else (float(trial.reference[-1, 0]), float(trial.reference[-1, 1]))
+    radius = (_numbers([extra.get("arrive_radius")], 1) or (0.025,))[0]
     ax.add_patch(Circle(target, radius, fill=False, color="tab:orange", lw=1.5))
     ax.plot(*target, marker="x", color="tab:orange", ms=10, mew=2, ls="", label="target")
     ax.plot(*trial.pose[0], marker="o", color="k", ms=5, ls="", label="start")
