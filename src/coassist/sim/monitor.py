@@ -11,6 +11,7 @@ ones (target = the last nominal reference point; no obstacle known).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -52,8 +53,9 @@ def plot_trial(trial: Trial, out: str | Path, *, n_predictions: int = 6, title: 
     ax.plot(trial.pose[:, 0], trial.pose[:, 1], color="tab:blue", lw=1.8, label="tip path")
     # what meta.extra says of the scene is drawn where it is well formed (a file of the format without checksums, edited
     # by hand, made this a traceback), else left out: the trial's own arrays are drawn whatever it says
-    box = _numbers(extra.get("obstacle", {}).get("center") if isinstance(extra.get("obstacle"), dict) else None, 2)
-    size = _numbers(extra["obstacle"].get("size") if box is not None else None, 2)
+    told_box = extra.get("obstacle")
+    told_box = told_box if isinstance(told_box, Mapping) else {}  # meta.extra is frozen: read-only mappings
+    box, size = _numbers(told_box.get("center"), 2), _numbers(told_box.get("size"), 2)
     if box is not None and size is not None and min(size) > 0:
         (cx, cy), (w, h) = box, size
         ax.add_patch(Rectangle((cx - w / 2, cy - h / 2), w, h, color="tab:red", alpha=0.6, label="obstacle"))
