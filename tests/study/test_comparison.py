@@ -87,15 +87,17 @@ def test_on_the_mujoco_ur5_the_person_at_the_handle_is_the_participant(tmp_path)
     pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra")
     from coassist.scenario.arm_identification import ASSUMED_ARM
     from coassist.scenario.path_model import fit_path_model
-    from coassist.scenario.person_model import PersonFit, write_person_model
+    from coassist.scenario.person_model import PersonFit, person_filter_for, write_person_model
     from coassist.scenario.tasks import nominal_path
 
     curve = nominal_path("curved").points  # the plan's task (a model of another path is refused at init)
     line = curve[::25]
     bump = 0.05 * np.exp(-(((curve[:, 0] - 0.15) / 0.05) ** 2))
     detours = [curve + np.stack([np.zeros_like(bump), s * bump], axis=1) for s in (1, 1, -1)]
-    cal = write_person_model(
-        tmp_path / "cal", {"S01": PersonFit(ASSUMED_ARM, fit_path_model(line, detours, noise=0.001))}
+    cal = write_person_model(  # the MuJoCo world's filter, as calibrate writes it for trials of that world
+        tmp_path / "cal",
+        {"S01": PersonFit(ASSUMED_ARM, fit_path_model(line, detours, noise=0.001))},
+        settings=person_filter_for("mujoco"),
     )
     plan = tmp_path / "plan.toml"
     plan.write_text(
