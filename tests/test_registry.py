@@ -104,3 +104,37 @@ def test_an_entry_point_names_a_module_attribute_imported_when_asked():
     assert not any(is_entry_point(v) for v in ("a:b:c", ":x", "x:", "x", None, 3))
     with pytest.raises(ImportError):  # the caller names the extra to install
         load_entry_point("coassist_no_such_module:thing")
+
+
+def test_every_registry_refuses_an_entry_of_another_class_or_another_name():
+    """Four registries took any entry ({"not": "a preset"}), which failed far away (an AttributeError in run_spec); a
+    preset registered under another name than its own made trials record a name no registry knows (review,
+    2026-12-06). Every registry of the project checks its entries' class, and a named entry's name."""
+    from dataclasses import replace
+
+    from coassist.config import CONTROL_PRESETS
+    from coassist.control.presets import CONTROLLERS
+    from coassist.experiments.reproduce_config import REPRODUCE_PRESETS
+    from coassist.robot.worlds import WORLDS
+    from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES
+    from coassist.scenario.tasks import TASKS
+
+    registries = [CONTROL_PRESETS, CONTROLLERS, REPRODUCE_PRESETS, WORLDS, INTENT_FOLDERS, INTENT_SOURCES, TASKS]
+    try:
+        from coassist.intent.presets import MODEL_PRESETS
+
+        registries.append(MODEL_PRESETS)
+    except ImportError:  # torch missing
+        pass
+    for registry in registries:
+        assert registry.entry_type is not None, registry.what
+        with pytest.raises(ValueError, match=rf"{registry.what} 'bogus' must be a "):
+            registry.register("bogus", {"not": "an entry"})
+        assert "bogus" not in registry
+    preset = CONTROL_PRESETS["thesis-evaluation"]
+    with pytest.raises(ValueError, match=r"control preset 'mine': its entry is named 'other'; register it under"):
+        CONTROL_PRESETS.register("mine", replace(preset, name="other"))
+    CONTROL_PRESETS.register("mine", replace(preset, name="mine"))
+    CONTROL_PRESETS.unregister("mine")
+    r = Registry("widget", {"a": 1})  # entries without a name of their own: any name
+    r.register("b", 2)

@@ -258,6 +258,7 @@ CONTROL_PRESETS: Registry[ControlPreset] = Registry(
             THESIS_APPLICATION, APPLICATION_DAMPED_SCALE, "thesis-application-damped"
         ),
     },
+    entry_type=ControlPreset,
 )
 
 #: The preset of data collection: the main job's datasets D_0 … D_k (``coassist collect``'s

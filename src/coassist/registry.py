@@ -81,6 +81,11 @@ class Registry(Mapping[str, T], Generic[T]):
             raise ValueError(f"{self.what} names must be non-empty strings, got {name!r}")
         if self.entry_type is not None and not isinstance(entry, self.entry_type):
             raise ValueError(f"{self.what} {name!r} must be a {self.entry_type.__name__}, got {type(entry).__name__}")
+        own = getattr(entry, "name", name)
+        if isinstance(own, str) and own != name:
+            # an entry that names itself (a preset: trials record its name) is registered under that name, or the
+            # recorded name is none the registry knows
+            raise ValueError(f"{self.what} {name!r}: its entry is named {own!r}; register it under that name")
 
     def register(self, name: str, entry: T) -> None:
         """Add ``entry`` as ``name`` (after the declared ones) from any module: a plug-in's, a test's.

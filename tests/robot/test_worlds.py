@@ -77,6 +77,17 @@ def test_the_point_mass_has_one_name_and_its_trials_origin():
         build_world(PLAY, REQUEST)
     with pytest.raises(ValueError, match="WorldEntry without a builder .* takes no arms"):
         WorldEntry(None, ("ur5",), "x", simulated=True, host=None, extras=(), origin="sim")
+    # a world's trials record its origin: one outside TrialMeta's lost the run at its end; "False" is truthy (a real
+    # arm taken for a simulator: its guards off). Refused when the entry is made (review, 2026-12-06)
+    arm = ("coassist.robot.mujoco_world:build_world", ("ur5",), "x")
+    with pytest.raises(ValueError, match=r"WorldEntry.origin must be one of \('sim'.*got 'mylab'"):
+        WorldEntry(*arm, simulated=True, host=None, extras=(), origin="mylab")
+    with pytest.raises(ValueError, match=r"WorldEntry.simulated must be True or False, got 'False'"):
+        WorldEntry(*arm, simulated="False", host=None, extras=(), origin="ur5")  # type: ignore[arg-type]
+    from coassist.scenario.intent_registry import IntentSourceEntry
+
+    with pytest.raises(ValueError, match=r"IntentSourceEntry.simulation_only must be True or False"):
+        IntentSourceEntry("coassist.scenario.reference_intents:NominalIntent", "x", simulation_only="False")  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("name", list(arm_worlds()))

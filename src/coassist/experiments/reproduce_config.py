@@ -309,4 +309,5 @@ REPRODUCE_PRESETS: Registry[ReproduceConfig] = Registry(
             mujoco_sources=(),
         ),
     },
+    entry_type=ReproduceConfig,
 )

@@ -232,6 +232,7 @@ MODEL_PRESETS: Registry[Preset] = Registry(
         # the intent source that wins the in-loop ablation (docs/intent-labels.md); simulated data only.
         "intent": replace(_LSTM, name="intent", window=replace(_LSTM.window, label="intent")),
     },
+    entry_type=Preset,
 )
 
 

@@ -159,6 +159,13 @@ class WorldEntry:
     studies: bool = True
 
     def __post_init__(self) -> None:
+        from coassist.data.trial import ORIGINS
+
+        for flag in ("simulated", "studies"):  # "False" is truthy: a real arm would be taken for a simulator
+            if not isinstance(getattr(self, flag), bool):
+                raise ValueError(f"WorldEntry.{flag} must be True or False, got {getattr(self, flag)!r}")
+        if self.origin not in ORIGINS:  # a trial records it: another value lost the run at its end
+            raise ValueError(f"WorldEntry.origin must be one of {ORIGINS} (TrialMeta.origin), got {self.origin!r}")
         if self.build is None:
             if self.arms or self.host is not None:
                 raise ValueError(

@@ -127,8 +127,9 @@ class IntentSourceEntry:
             raise ValueError(f"IntentSourceEntry.source must be 'package.module:attribute', got {self.source!r}")
         if not isinstance(self.summary, str) or not self.summary:
             raise ValueError(f"IntentSourceEntry.summary must be a non-empty string, got {self.summary!r}")
-        if not isinstance(self.ablation, bool):
-            raise ValueError(f"IntentSourceEntry.ablation must be True or False, got {self.ablation!r}")
+        for flag in ("ablation", "simulation_only"):  # "False" is truthy: a real arm's guard would be off
+            if not isinstance(getattr(self, flag), bool):
+                raise ValueError(f"IntentSourceEntry.{flag} must be True or False, got {getattr(self, flag)!r}")
 
     def build(self, horizon: int) -> IntentSource:
         """A new source of this kind predicting ``horizon`` rows."""
@@ -273,6 +274,7 @@ INTENT_FOLDERS: Registry[IntentFolderKind] = Registry(
             told=Told(label="what the model was trained on (its sidecar: the tool's future or the intent)"),
         ),  # intent.model.SIDECAR
     },
+    entry_type=IntentFolderKind,
 )
 
 
