@@ -274,3 +274,26 @@ def test_the_ablation_runs_a_registered_intent_source(echo_cv, tmp_path):
                 and mine["overshoot_trials"] == builtin["overshoot_trials"]
             )
     assert "point-mass/board/cooperative-arbitrated/echo-cv" in result.summary()["cells"]
+
+
+def test_a_registered_controller_kind_is_what_its_trials_record():
+    """A kind built on ImpedanceControl recorded TrialMeta.controller 'impedance': its data read as IMP (review,
+    2026-12-06). A registered kind's trials record the kind; the declared kinds record what they always did."""
+    from coassist.config import CONTROL_PRESETS
+    from coassist.control.controllers import ImpedanceControl
+    from coassist.control.presets import CONTROLLERS, ControllerEntry, make_controller
+    from coassist.sim.trial_runner import TrialSpec, run_spec
+
+    def soft(model, preset):
+        return ImpedanceControl(model, K=50.0, effort_limit=preset.effort_limit)
+
+    CONTROLLERS.register("soft-imp", ControllerEntry(soft, "a softer impedance"))
+    try:
+        preset = CONTROL_PRESETS["thesis-application"]
+        assert make_controller("soft-imp", preset).name == "soft-imp"
+        assert make_controller("impedance", preset).name == "impedance"  # the declared kind: unchanged
+        assert make_controller("cooperative-arbitrated", preset).name == "cooperative+target"
+        trial = run_spec(TrialSpec(task="linear", controller="soft-imp", seed=3))
+        assert trial.meta.controller == "soft-imp"
+    finally:
+        CONTROLLERS.unregister("soft-imp")

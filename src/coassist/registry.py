@@ -101,6 +101,10 @@ class Registry(Mapping[str, T], Generic[T]):
             raise ValueError(f"{self.what} {name!r} is already registered")
         self._entries[name] = entry
 
+    def is_declared(self, name: str) -> bool:
+        """Whether ``name`` is one of the entries the registry was made with (not one :meth:`register` added)."""
+        return name in self._declared
+
     def unregister(self, name: str) -> None:
         """Remove an entry :meth:`register` added; the declared entries stay (ValueError)."""
         if name in self._declared:
