@@ -3,8 +3,10 @@ have a learned predictor in the loop agree with the main job's application stage
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
+import pytest
 import typer
 
 from coassist.cli import app
@@ -39,3 +41,28 @@ def test_the_default_presets_exist_and_the_application_one_is_not_the_ringing_dm
     # predictor in the loop (tests/control/test_game.py measures it); the default is not them.
     assert APPLICATION_PRESET in CONTROL_PRESETS and COLLECTION_PRESET in CONTROL_PRESETS
     assert APPLICATION_PRESET != "thesis-application-dm"
+
+
+@pytest.mark.parametrize(
+    "field, value, says",
+    [
+        ("control_preset", "thesis-evalution-dm", "did you mean 'thesis-evaluation-dm'"),
+        ("application_task", "spiral", "no such task"),
+        ("device", "gpu0", "cpu, cuda, cuda:<n> or mps"),
+        ("tol", "x", "must be > 0"),
+        ("tol", float("inf"), "finite"),
+        ("new_users", -1, "user indices"),
+        ("sweep_duration", -1.0, "> 0"),
+        ("name", float("nan"), "non-empty string"),
+        ("real_data", -1, "a folder"),
+    ],
+)
+def test_a_reproduce_config_refuses_what_a_stage_would_fail_on_late(field, value, says):
+    """A name or number read late (a control preset, the application's task, the device) failed minutes into a run,
+    or raised a TypeError (review, 2026-12-06): each is a ValueError naming the field when the config is made."""
+    from dataclasses import replace
+
+    from coassist.experiments.reproduce_config import REPRODUCE_PRESETS
+
+    with pytest.raises(ValueError, match=rf"reproduce\.{field} .*{re.escape(says)}"):
+        replace(REPRODUCE_PRESETS["tiny"], **{field: value})

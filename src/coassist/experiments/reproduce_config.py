@@ -10,11 +10,12 @@ strides, workers, which sources and cells run), validated on construction (error
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from coassist._checks import is_integer
 from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET
-from coassist.registry import Registry
+from coassist.registry import Registry, unknown_name_message
 from coassist.robot.worlds import POINT_MASS
 from coassist.scenario.assistance import DEFAULT_INTENT
 
@@ -206,13 +207,23 @@ class ReproduceConfig:
             )
         if self.transfer_trials < 3:
             raise ValueError(f"reproduce.transfer_trials must be >= 3 (one per task), got {self.transfer_trials}")
-        if not (isinstance(self.skip_alpha, (int, float)) and self.skip_alpha >= 0):
+        if isinstance(self.skip_alpha, bool) or not (
+            isinstance(self.skip_alpha, (int, float)) and self.skip_alpha >= 0
+        ):
             raise ValueError(f"reproduce.skip_alpha must be a number >= 0, got {self.skip_alpha!r}")
-        if not self.tol > 0:
+        if isinstance(self.tol, bool) or not isinstance(self.tol, (int, float)) or not self.tol > 0:
             raise ValueError(f"reproduce.tol must be > 0, got {self.tol!r}")
-        if not self.new_users or any(u < 1 for u in self.new_users):
+        if (
+            not isinstance(self.new_users, tuple)
+            or not self.new_users
+            or any(not is_integer(u) or u < 1 for u in self.new_users)
+        ):
             raise ValueError(f"reproduce.new_users must be user indices >= 1 (0 is the author), got {self.new_users!r}")
-        if not self.application_users or any(not is_integer(u) or u < 0 for u in self.application_users):
+        if (
+            not isinstance(self.application_users, tuple)
+            or not self.application_users
+            or any(not is_integer(u) or u < 0 for u in self.application_users)
+        ):
             raise ValueError(f"reproduce.application_users must be user indices >= 0, got {self.application_users!r}")
         from coassist.experiments.iterative import TRANSFER_STARTS
 
@@ -245,6 +256,39 @@ class ReproduceConfig:
             )
         if not is_integer(self.seed) or self.seed < 0:
             raise ValueError(f"reproduce.seed must be an integer >= 0, got {self.seed!r}")
+        self._check_names()
+
+    def _check_names(self) -> None:
+        """The names and numbers a stage reads late: a typo in them failed minutes into a run (review, 2026-12-06)."""
+        import math
+
+        from coassist.config import CONTROL_PRESETS
+        from coassist.scenario.tasks import TASKS  # (imported here: tasks' own registry is built after this module)
+
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"reproduce.name must be a non-empty string, got {self.name!r}")
+        for field, value in (("control_preset", self.control_preset), ("application_preset", self.application_preset)):
+            if value not in CONTROL_PRESETS:
+                raise ValueError(
+                    f"reproduce.{field} {unknown_name_message(str(value), CONTROL_PRESETS, 'control preset')}"
+                )
+        if self.application_task not in TASKS:
+            raise ValueError(
+                f"reproduce.application_task {unknown_name_message(str(self.application_task), TASKS, 'task')}"
+            )
+        for field in ("intent_preset", "real_intent_preset", "device"):
+            if not isinstance(getattr(self, field), str) or not getattr(self, field):
+                raise ValueError(f"reproduce.{field} must be a non-empty string, got {getattr(self, field)!r}")
+        if not (self.device in ("cpu", "mps") or re.fullmatch(r"cuda(:\d+)?", self.device)):
+            raise ValueError(f"reproduce.device must be cpu, cuda, cuda:<n> or mps, got {self.device!r}")
+        for field in ("tol", "skip_alpha", "sweep_duration"):
+            v = getattr(self, field)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"reproduce.{field} must be a finite number, got {v!r}")
+        if not self.sweep_duration > 0:
+            raise ValueError(f"reproduce.sweep_duration must be > 0 (s), got {self.sweep_duration!r}")
+        if self.real_data is not None and (not isinstance(self.real_data, str) or not self.real_data):
+            raise ValueError(f"reproduce.real_data must be a folder (a string) or None, got {self.real_data!r}")
 
 
 #: Reproduce presets by name.
