@@ -297,3 +297,36 @@ def test_a_registered_controller_kind_is_what_its_trials_record():
         assert trial.meta.controller == "soft-imp"
     finally:
         CONTROLLERS.unregister("soft-imp")
+
+
+def test_a_source_that_is_no_intent_source_is_told_what_it_lacks():
+    """A custom source without ``history`` was refused as "must implement IntentSource, got NoHistory", naming no
+    member (the world path names them): both paths now say what it lacks (review, 2026-12-06)."""
+    from coassist.config import CONTROL_PRESETS
+    from coassist.control.presets import make_controller
+    from coassist.runtime.intent import WindowIntent
+    from coassist.scenario.objects import get_object
+    from coassist.scenario.populations import population_profile
+    from coassist.scenario.tasks import task_for_seed
+    from coassist.sim.trial_runner import build_trial
+
+    class NoHistory:
+        horizon = 50
+        model_id = "mine"
+
+        def reset(self, context) -> None:
+            pass
+
+        def predict(self, history):
+            return history[-1:, :2].repeat(50, axis=0)
+
+    with pytest.raises(ValueError, match=r"got NoHistory, which lacks history$"):
+        WindowIntent(NoHistory(), 50)
+    with pytest.raises(ValueError, match=r"got NoHistory, which lacks history$"):
+        build_trial(
+            task_for_seed("linear", 0),
+            population_profile("thesis", 0),
+            get_object("handle"),
+            make_controller("cooperative", CONTROL_PRESETS["thesis-application"]),
+            NoHistory(),
+        )

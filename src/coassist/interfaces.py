@@ -42,6 +42,7 @@ __all__ = [
     "TrialContext",
     "ZERO_EFFORT_FAULTS",
     "fault_names",
+    "missing_members",
     "prediction_plausible",
 ]
 
@@ -241,3 +242,14 @@ def prediction_plausible(
     if p.shape[0] > 1 and float(np.max(np.abs(np.diff(p, axis=0)))) > limits.max_speed * dt:
         return False
     return True
+
+
+def missing_members(obj: object, protocol: type) -> list[str]:
+    """The members of ``protocol`` (a Protocol class) that ``obj`` lacks (a world, an intent source), for the error that names them."""
+    names = set()
+    for klass in protocol.__mro__:
+        if klass is object or klass is Protocol or klass.__module__ == "typing":
+            continue
+        names |= {n for n in getattr(klass, "__annotations__", {}) if not n.startswith("_")}
+        names |= {n for n, v in vars(klass).items() if callable(v) and not n.startswith("_")}
+    return sorted(n for n in names if not hasattr(obj, n))

@@ -41,6 +41,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from coassist.interfaces import missing_members
 from coassist.registry import Registry, is_entry_point, load_entry_point
 from coassist.runtime.world import HandOperator, World
 
@@ -95,17 +96,6 @@ class HandWorld(Protocol):
     def hand_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The handle's pose (6,) and twist (6,) in the base frame."""
         ...
-
-
-def missing_members(world: object, protocol: type) -> list[str]:
-    """The members of ``protocol`` (a Protocol class) that ``world`` lacks, for the error that names them."""
-    names = set()
-    for klass in protocol.__mro__:
-        if klass is object or klass is Protocol or klass.__module__ == "typing":
-            continue
-        names |= {n for n in getattr(klass, "__annotations__", {}) if not n.startswith("_")}
-        names |= {n for n, v in vars(klass).items() if callable(v) and not n.startswith("_")}
-    return sorted(n for n in names if not hasattr(world, n))
 
 
 @dataclass(frozen=True)

@@ -38,7 +38,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from coassist._checks import check_int_at_least
-from coassist.interfaces import FEATURES, Fault, IntentSource, PlausibilityLimits, TrialContext
+from coassist.interfaces import FEATURES, Fault, IntentSource, PlausibilityLimits, TrialContext, missing_members
 
 __all__ = ["RealtimeIntent", "TickIntent", "WindowIntent", "WindowIntentBatch", "accept_together"]
 
@@ -86,7 +86,10 @@ class WindowIntent:
             raise ValueError(f"plausibility must be a PlausibilityLimits, got {type(plausibility).__name__}")
         self.plausibility = PlausibilityLimits() if plausibility is None else plausibility
         if not isinstance(source, IntentSource):
-            raise ValueError(f"intent source must implement IntentSource, got {type(source).__name__}")
+            raise ValueError(
+                f"intent source must implement IntentSource, got {type(source).__name__}, which lacks "
+                f"{', '.join(missing_members(source, IntentSource))}"
+            )
         self.source = source
         self.need = check_int_at_least(horizon, "horizon", 1)
         self.horizon = int(source.horizon)

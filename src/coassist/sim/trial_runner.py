@@ -63,7 +63,7 @@ from coassist._progress import progress_bar
 from coassist.config import THESIS_EVALUATION
 from coassist.control.presets import CONTROLLERS, get_preset, make_controller
 from coassist.data import Trial
-from coassist.interfaces import NETWORK_BACKENDS, IntentSource
+from coassist.interfaces import NETWORK_BACKENDS, IntentSource, missing_members
 from coassist.model.impedance import ImpedanceModel
 from coassist.runtime.batched_loops import run_loops
 from coassist.runtime.episode import (
@@ -203,7 +203,10 @@ def build_trial(
     H = int(controller.horizon)
     source = NominalIntent(max(H, 2)) if intent_source is None else intent_source
     if not isinstance(source, IntentSource):
-        raise ValueError(f"intent_source must implement IntentSource, got {type(source).__name__}")
+        raise ValueError(
+            f"intent_source must implement IntentSource, got {type(source).__name__}, which lacks "
+            f"{', '.join(missing_members(source, IntentSource))}"
+        )
     Hs = int(source.horizon)
     if Hs < H:
         raise ValueError(f"intent source horizon ({Hs}) must be >= the controller's ({H})")
