@@ -114,3 +114,12 @@ def test_a_session_recorded_under_the_former_controller_names_scores_by_kind():
         )
         trial = Trial(meta=meta, time=t, pose=pose, velocity=np.zeros((n, 2)), wrench=np.ones((n, 2)), reference=pose)
         assert score_trial(trial, "trial_00000.parquet", 0).controller == kind
+
+
+def test_a_config_naming_no_source_is_refused_when_made(tmp_path):
+    """PlayConfig(intent="nominl") was accepted and failed when the session loaded it, though every field is
+    validated (review, 2026-12-06)."""
+    with pytest.raises(ValueError, match=r"^PlayConfig.intent 'nominl': not one of nominal, .*did you mean 'nominal'"):
+        PlayConfig(user="u", out=tmp_path, intent="nominl")
+    with pytest.raises(ValueError, match=r"PlayConfig.intent .*not one of"):
+        PlayConfig(user="u", out=tmp_path, intent=str(tmp_path / "no-model"))

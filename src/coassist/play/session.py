@@ -61,7 +61,7 @@ from coassist.runtime.loop import run_loop
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.wrench import WrenchPipeline
 from coassist.scenario.assistance import DEFAULT_INTENT, check_person, check_person_world
-from coassist.scenario.intent_registry import INTENT_SOURCES, load_intent_source
+from coassist.scenario.intent_registry import INTENT_SOURCES, check_intent, load_intent_source
 from coassist.scenario.path_model import ASKED_WAY, WAY_NAMES, check_way
 from coassist.scenario.tasks import TASK_KINDS, TASKS, Task, nominal_path, task_for_seed
 
@@ -167,6 +167,10 @@ class PlayConfig:
             raise ValueError(
                 f"PlayConfig.intent must be a named source or a folder (a person has no oracle), got {self.intent!r}"
             )
+        try:  # a name or folder nothing knows: refused now, not when the session loads it
+            check_intent(self.intent, simulation=False)
+        except ValueError as exc:
+            raise ValueError(f"PlayConfig.intent {exc}") from None
         try:
             get_preset(self.preset)
         except ValueError as exc:
