@@ -431,3 +431,30 @@ def test_a_grandparents_training_trials_stay_on_the_training_side(tmp_path, tria
     save_model(third, tmp_path / "c")
     fourth = train_model(trials, tiny, replace(cfg, seed=3, init=f"resume:{tmp_path / 'c'}"))
     assert not set(first.info["train_trials"]) & set(fourth.info["test_trials"])  # seed 3 would hold out T/trial_04
+
+
+def test_a_copy_of_a_training_trial_among_the_trials_is_not_held_out(trials, tiny):
+    """A dataset appended to twice holds each trial twice under two names: a test trial's copy trained, so the test
+    loss was a training loss (review, 2026-12-06). Copies go to the training side with their original; trials with
+    no copy are split as before."""
+    from dataclasses import replace
+
+    from coassist.intent.features import split_trials
+
+    cfg = replace(tiny.train, epochs=1)
+    doubled = trials + labeled(5, prefix="C")  # the same five trials again, other names
+    ids = [t.id for t in doubled]
+    train, test = split_trials(ids, cfg.test_fraction, 0)
+    held = [ids[i] for i in test]
+    twins = {f"T/{name.split('/')[1]}" if name.startswith("C/") else f"C/{name.split('/')[1]}" for name in held}
+    assert twins & {ids[i] for i in train}, "the plain split must put some test trial's copy in training"
+    model = train_model(doubled, tiny, cfg)
+    kept = model.info["test_trials"]
+    assert set(kept) <= set(held)
+    for name in kept:  # no held-out trial has a copy among the training trials
+        twin = ("C/" if name.startswith("T/") else "T/") + name.split("/")[1]
+        assert twin not in model.info["train_trials"]
+    plain = train_model(trials, tiny, cfg)  # no copies: the split as split_trials makes it
+    assert plain.info["test_trials"] == [
+        trials[i].id for i in split_trials([t.id for t in trials], cfg.test_fraction, 0)[1]
+    ]

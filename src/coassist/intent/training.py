@@ -403,7 +403,7 @@ def train_model(
     train_idx, test_idx = split_trials(ids, config.test_fraction, config.seed)
     # Trials the starting model or its parent trained on are not held out: they go to the training side (a
     # continued run: its own split, as it began), and so do copies of them under other names (their contents'
-    # digests). Where none of them is among the trials, the split is as it was.
+    # digests). Where none of them (and no copy of a training trial) is among the trials, the split is as it was.
     digests = [content_digest(lt.trial) for lt in trials]
     if ckpt is not None:
         ancestors = set(base.info.get("train_trials") or ())
@@ -413,6 +413,8 @@ def train_model(
         ancestor_contents = lineage_train_trials(base.info, "train_digests")
     else:
         ancestors, ancestor_contents = set(), set()
+    # and a copy of a training-side trial within these trials (a dataset appended to twice) trains, not tests
+    ancestor_contents = set(ancestor_contents) | {digests[i] for i in train_idx}
     trained_before = [i for i in test_idx if ids[i] in ancestors or digests[i] in ancestor_contents]
     if trained_before:
         train_idx = sorted([*train_idx, *trained_before])
