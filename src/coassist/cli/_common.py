@@ -101,9 +101,12 @@ def _can_write(base: Path, names: Iterable[str], shown: str) -> None:
     try:
         with tempfile.NamedTemporaryFile(dir=base, prefix=".coassist-probe-"):
             pass
-        limit = os.pathconf(base, "PC_NAME_MAX")
     except OSError as exc:
         fail(f"{shown}: cannot write in {base} ({exc.strerror})")
+    try:
+        limit = os.pathconf(base, "PC_NAME_MAX")
+    except (AttributeError, OSError, ValueError):  # no pathconf (Windows), or the file system does not say
+        limit = 255
     for name in names:
         extra = len(os.fsencode(temp_name(name, "partial"))) - len(os.fsencode(name))
         if len(os.fsencode(name)) + extra > limit:
