@@ -138,6 +138,10 @@ def test_tune_bad_storage(work, storage, message):
 def test_tune_storage_that_is_no_database_is_refused_and_kept(work, tmp_path):
     """A text file, a damaged database and a folder named as the storage ended in SQLAlchemy's tracebacks; an empty
     study name was taken (review, 2026-12-06)."""
+    optuna = pytest.importorskip("optuna")
+    # optuna's log handler is made on first use, on the stream of the moment: made here, not on a CliRunner's stream
+    # that closes with the command (a later test's optuna log was then a "Logging error" traceback)
+    optuna.logging.get_logger("optuna")
     notes = tmp_path / "notes.txt"
     notes.write_text("notes")
     res = run("tune", work / "D", "--storage", f"sqlite:///{notes}", "--trials", "1", "--epochs", "1")
@@ -531,3 +535,34 @@ def test_compare_intents_refuses_a_label_that_is_no_folder_name(label, tmp_path)
     res = run("compare-intents", "--source", f"{label}=present", "--out", tmp_path / "o")
     assert res.exit_code == 2 and "Traceback" not in res.output
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "args, name",
+    [
+        (["sweep", "--duration", "0.1"], "summary.json"),
+        (["compare-intents", "--source", "a=present", "--trials", "1", "--bases", "50000", "--users", "0"], "table.md"),
+        (["reproduce", "--preset", "tiny"], "report.html"),
+    ],
+    ids=lambda a: a[0] if isinstance(a, list) else a,
+)
+def test_a_results_folder_holding_another_programs_summary_is_refused(args, name, tmp_path):
+    """sweep, compare-intents, reproduce and study report wrote their summary.json (and page, table) over another
+    program's file of that name in --out (review, 2026-12-06): refused before any work, nothing replaced."""
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "summary.json").write_text('{"precious": true}')
+    (out / name).write_bytes((out / name).read_bytes() if (out / name).exists() else b"mine")
+    assert_one_line_error(run(*args, "--out", out), "--out", "that this command did not write", code=2)
+    assert (out / "summary.json").read_text() == '{"precious": true}'
+    assert sorted(p.name for p in out.iterdir()) == sorted({"summary.json", name})
+
+
+def test_a_sweep_replaces_its_own_summary(tmp_path):
+    res = run("sweep", "--duration", "0.1", "--out", tmp_path / "s")
+    assert res.exit_code == 0, res.output
+    first = json.loads((tmp_path / "s" / "summary.json").read_text())
+    res = run("sweep", "--duration", "0.1", "--out", tmp_path / "s")  # its own summary: replaced, as ever
+    assert res.exit_code == 0, res.output
+    again = json.loads((tmp_path / "s" / "summary.json").read_text())
+    assert again["experiment"] == "dmpc_sweep" and again["cases"] == first["cases"]

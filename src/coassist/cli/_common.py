@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import NoReturn, TypeVar
 
@@ -135,6 +135,33 @@ def file_out(
     if ours is not None and path.exists() and not ours(path):
         fail(f"{option} {path}: exists and is not a file this command wrote; give another name (nothing replaced)")
     return path
+
+
+def results_out(out: Path, option: str, names: Sequence[str], marks: Sequence[Sequence[str]]) -> Path:
+    """``--out`` of a command that writes the files ``names`` (its ``summary.json`` first) into a folder: fail now
+    where one of them is there but that ``summary.json`` is not one this command wrote (a JSON object holding every
+    key of one of ``marks``): another program's summary or page would be replaced."""
+    folder_out(out, option)
+    present = [name for name in names if (out / name).exists()]
+    if present and not _summary_with(out / names[0], marks):
+        fail(
+            f"{option} {out}: holds {', '.join(present)} that this command did not write (nothing replaced); give an "
+            "empty or new folder",
+            2,
+        )
+    return out
+
+
+def _summary_with(path: Path, marks: Sequence[Sequence[str]]) -> bool:
+    import json
+
+    try:
+        if path.stat().st_size > 256 * 2**20:
+            return False
+        doc = json.loads(path.read_bytes())
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and any(set(keys) <= set(doc) for keys in marks)
 
 
 def check_device(device: str | None, option: str = "--device") -> None:

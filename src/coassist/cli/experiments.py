@@ -14,9 +14,9 @@ from coassist.cli._common import (
     console,
     fail,
     file_out,
-    folder_out,
     int_list,
     lookup,
+    results_out,
     typed,
     wrote,
 )
@@ -39,7 +39,7 @@ def sweep(
         config = dmpc_study.SweepConfig(duration=duration, **kwargs)
     except ValueError as exc:
         fail(typed(str(exc), {"duration": "--duration", "position_scale": "--position-scale"}), 2)
-    folder_out(out, "--out")
+    results_out(out, "--out", ("summary.json", "dmpc_sweep.png"), (("experiment", "cases", "si_units"),))
     result = dmpc_study.run_sweep(config, out, progress=True)
     dmpc_study.print_summary(result, console)
     wrote(f"{out / 'summary.json'} and {out / 'dmpc_sweep.png'}")
@@ -169,7 +169,7 @@ def compare_intents(
             fail(f"{option} must be >= 1, got {value}", 2)
     if asked_trials is not None and not 0 <= asked_trials <= 8:
         fail(f"--asked-trials must be 0 to 8, got {asked_trials}", 2)
-    out = folder_out(out, "--out")
+    out = results_out(out, "--out", ("summary.json", "table.md"), (("preset", "models", "cells", "pairs"),))
     try:
         result = run(
             pairs,
@@ -251,7 +251,8 @@ def reproduce(
             ),
             2,
         )
-    folder_out(out, "--out")
+    # a single run's summary holds its config, several seeds' their list: another program's is not replaced
+    results_out(out, "--out", ("summary.json", "report.html"), (("config",), ("preset", "seeds", "claims")))
     set_torch_threads(config.threads)  # training runs in this process
     if seed_list is not None:
         across = multi.run_seeds(

@@ -12,6 +12,7 @@ from coassist.cli._common import (
     console,
     fail,
     folder_out,
+    results_out,
     wrote,
 )
 from coassist.cli._live import FOXGLOVE_PAGE_PORT, LIVE_HELP, close_live, live_command, open_live
@@ -204,8 +205,8 @@ def study_report(
     from coassist.study.plan import PlanError
     from coassist.study.report import write_report
 
-    if out is not None:
-        folder_out(out, "--out")
+    if out is not None:  # another program's summary.json or page there is not replaced
+        results_out(out, "--out", ("summary.json", "report.html"), (("study", "protocol", "plan_sha256"),))
     try:
         html_path, json_path = write_report(folder, out)
     except (StudyFolderError, PlanError, OSError) as exc:
