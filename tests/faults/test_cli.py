@@ -566,3 +566,11 @@ def test_a_sweep_replaces_its_own_summary(tmp_path):
     assert res.exit_code == 0, res.output
     again = json.loads((tmp_path / "s" / "summary.json").read_text())
     assert again["experiment"] == "dmpc_sweep" and again["cases"] == first["cases"]
+
+
+def test_collect_names_ray_address_when_the_cluster_cannot_be_reached(tmp_path):
+    """ "error: Invalid address format: bogus" named no option (review, 2026-12-06); nothing is left in --out."""
+    pytest.importorskip("ray", reason="--ray-address needs the cluster extra")
+    res = run("collect", "--out", tmp_path / "o" / "x", "--trials", "1", "--tasks", "z", "--ray-address", "bogus")
+    assert_one_line_error(res, "--ray-address bogus: the Ray cluster at 'bogus' could not be reached", code=2)
+    assert not (tmp_path / "o" / "x").exists() and not any((tmp_path / "o").glob(".x.partial"))

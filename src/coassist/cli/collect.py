@@ -206,6 +206,8 @@ def collect(
             say=lambda line: console.print(line, highlight=False),
             live=live,
         )
+    except ConnectionError as exc:  # only the cluster is reached over a network here
+        fail(f"--ray-address {ray_address}: {exc}", 2)
     except (ValueError, FileExistsError, NotADirectoryError, RuntimeError, OutputBusyError) as exc:
         fail(typed(str(exc), {"overwrite=True": "--overwrite"}))  # the library's argument, as typed here
     except OSError as exc:

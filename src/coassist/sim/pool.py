@@ -327,7 +327,10 @@ def run_on_ray(
             "run_trials(ray_address=...) needs Ray, an optional extra: pip install coassist[cluster]"
         ) from None
     if not ray.is_initialized():
-        ray.init(address=address)
+        try:
+            ray.init(address=address)
+        except (ValueError, ConnectionError, RuntimeError) as exc:  # the cluster's own words, with what was asked
+            raise ConnectionError(f"the Ray cluster at {address!r} could not be reached: {exc}") from None
     remote = ray.remote(job)
     refs = [remote.remote([spec]) for spec in specs]
     index = {ref: i for i, ref in enumerate(refs)}
