@@ -39,7 +39,7 @@ import os
 import re
 import secrets
 import shutil
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
@@ -47,6 +47,7 @@ from typing import IO, Any
 from coassist.errors import CoassistError
 
 __all__ = [
+    "json_object_with",
     "HASH_KEY",
     "HashedJsonError",
     "OutputBusyError",
@@ -471,3 +472,16 @@ def read_hashed_json(
         )
     del doc["format"]
     return doc
+
+
+def json_object_with(path: str | os.PathLike[str], keys: Iterable[str], max_bytes: int = 64 * 2**20) -> bool:
+    """Whether ``path`` holds a JSON object with every one of ``keys`` (a file a command wrote and may replace: an
+    earlier result of its own); False for anything else, a file over ``max_bytes`` or one that cannot be read."""
+    try:
+        if os.stat(path).st_size > max_bytes:
+            return False
+        with open(path, "rb") as fh:
+            doc = json.loads(fh.read())
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and set(keys) <= set(doc)

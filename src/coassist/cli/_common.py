@@ -15,6 +15,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from coassist._checks import is_ascii_integer
+from coassist._io import json_object_with
 from coassist.registry import Registry, UnknownNameError, unknown_name_message
 from coassist.robot.worlds import WORLDS
 from coassist.scenario.assistance import DEFAULT_INTENT
@@ -86,23 +87,22 @@ def folder_out(path: Path, option: str, typed: Path | None = None) -> Path:
         fail(f"{shown}: {base} is a file, not a folder")
     if not os.access(base, os.W_OK | os.X_OK):
         fail(f"{shown}: {base} is not writable (permission denied)")
-    _can_write(base, Path(os.path.abspath(path)).parts[len(base.parts) :], shown)
-    return path
-
-
-def _can_write(base: Path, names: Iterable[str], shown: str) -> None:
-    """Fail now where nothing can be made in ``base`` (a read-only or virtual file system such as /proc, which
-    ``os.access`` passes for root) or one of ``names`` is too long for the hidden siblings written beside it (the
-    temporary and partial names of coassist._io): found only after the work, it was a traceback."""
     import tempfile
 
-    from coassist._io import temp_name
-
-    try:
+    try:  # a read-only or virtual file system (/proc passes os.access for root): found after the work, a traceback
         with tempfile.NamedTemporaryFile(dir=base, prefix=".coassist-probe-"):
             pass
     except OSError as exc:
         fail(f"{shown}: cannot write in {base} ({exc.strerror})")
+    _check_names(base, Path(os.path.abspath(path)).parts[len(base.parts) :], shown)
+    return path
+
+
+def _check_names(base: Path, names: Iterable[str], shown: str) -> None:
+    """Fail now where one of ``names`` (to be made below ``base``) is too long for the hidden siblings written beside
+    it (the temporary and partial names of coassist._io): found only after the work, it was a traceback."""
+    from coassist._io import temp_name
+
     try:
         limit = os.pathconf(base, "PC_NAME_MAX")
     except (AttributeError, OSError, ValueError):  # no pathconf (Windows), or the file system does not say
@@ -129,7 +129,7 @@ def file_out(
     if ext and path.suffix.lower() != ext:
         fail(f"{option} {path}: give a {ext} file, or an existing folder to write {default_name} in")
     folder_out(path.parent, option, typed=path)
-    _can_write(_existing_ancestor(path.parent), (path.name,), f"{option} {path}")
+    _check_names(_existing_ancestor(path.parent), (path.name,), f"{option} {path}")  # its folder: probed above
     if path.exists() and not os.access(path, os.W_OK):
         fail(f"{option} {path}: is not writable (permission denied)")
     if ours is not None and path.exists() and not ours(path):
@@ -143,25 +143,13 @@ def results_out(out: Path, option: str, names: Sequence[str], marks: Sequence[Se
     key of one of ``marks``): another program's summary or page would be replaced."""
     folder_out(out, option)
     present = [name for name in names if (out / name).exists()]
-    if present and not _summary_with(out / names[0], marks):
+    if present and not any(json_object_with(out / names[0], keys) for keys in marks):
         fail(
             f"{option} {out}: holds {', '.join(present)} that this command did not write (nothing replaced); give an "
             "empty or new folder",
             2,
         )
     return out
-
-
-def _summary_with(path: Path, marks: Sequence[Sequence[str]]) -> bool:
-    import json
-
-    try:
-        if path.stat().st_size > 256 * 2**20:
-            return False
-        doc = json.loads(path.read_bytes())
-    except (OSError, ValueError):
-        return False
-    return isinstance(doc, dict) and any(set(keys) <= set(doc) for keys in marks)
 
 
 def check_device(device: str | None, option: str = "--device") -> None:

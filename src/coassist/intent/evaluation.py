@@ -21,7 +21,6 @@ pooled e_RMS there; the model's gain over it is (e_best − e_model) / e_best.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from coassist._io import json_object_with
 from coassist.intent.baselines import (
     constant_acceleration_prediction,
     constant_velocity_prediction,
@@ -250,13 +250,7 @@ def evaluate_model(
 def is_evaluation_file(path: Path) -> bool:
     """Whether ``path`` holds an evaluation record (``coassist evaluate``'s JSON: :meth:`ModelEvaluation.to_dict`
     and the model), which a new evaluation may replace; any other file (a trial, a sidecar, a figure) is not."""
-    try:
-        if path.stat().st_size > 64 * 2**20:
-            return False
-        record = json.loads(path.read_bytes())
-    except (OSError, ValueError):
-        return False
-    return isinstance(record, dict) and {"trials", "results", "best_baseline", "model"} <= set(record)
+    return json_object_with(path, ("trials", "results", "best_baseline", "model"))
 
 
 def records_intent(trial) -> bool:

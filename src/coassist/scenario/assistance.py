@@ -193,12 +193,13 @@ def _person(intent: str, source: Any, user: str, path: np.ndarray | None) -> str
     model = source.paths.get(user, source.default_paths)
     if model is None:
         return f"{name} ({user}: {how}, no demonstrations: the present estimate held)"
-    known = f"{user}: {how}, {_ways(model.sides)}"
-    if user not in source.paths and source.default_person is not None:
-        # another person's calibration, served as the folder's default (a study's own fit): said whose
-        known = (
-            f"{user}: {source.default_person}'s calibration, the model's default person: {how}, {_ways(model.sides)}"
-        )
+    # another person's calibration, served as the folder's default (a study's own fit): said whose
+    whose = (
+        f"{source.default_person}'s calibration, the model's default person: "
+        if user not in source.paths and source.default_person is not None
+        else ""
+    )
+    known = f"{user}: {whose}{how}, {_ways(model.sides)}"
     if (user if user in source.paths else source.DEFAULT) in source.held:
         # the calibration's twin check (coassist.sim.person_twin): leading along their paths cost them overshoot
         return (
