@@ -185,3 +185,105 @@ def test_a_non_finite_value_never_reaches_a_json_file(finished_study):
     pf.append({"step": n, "kind": "check", "key": "x", "e_rms": math.nan, "delta": [math.inf, 1.0]})
     last = json.loads(pf.progress_file.read_text().splitlines()[-1])
     assert last["e_rms"] is None and last["delta"] == [None, 1.0]
+
+
+def test_a_blinding_key_edited_after_the_trials_is_one_line_in_the_report(finished_study):
+    """The review of 3063e1e: study.json's labels edited by hand were taken, and the report named condition A what
+    the page had shown as B."""
+    record = json.loads((finished_study / "study.json").read_text())
+    shown = dict(record["labels"])
+    swapped = dict(zip(shown, [shown[c] for c in ("impedance", "manual", "assistive")], strict=True))
+    record["labels"] = swapped
+    (finished_study / "study.json").write_text(json.dumps(record))
+    line = _one_line_error(["study", "report", str(finished_study)], "study.json", "order.json", "S01")
+    assert f"the label {swapped['assistive']!r}" in line and f"S01 {shown['assistive']!r}" in line
+    assert not (finished_study / "report").exists()
+    record["labels"] = shown  # put back, it reports
+    (finished_study / "study.json").write_text(json.dumps(record))
+    assert CliRunner().invoke(app, ["study", "report", str(finished_study)]).exit_code == 0
+
+
+def test_a_registered_participant_whose_folder_was_lost_is_one_line_never_a_participant_who_never_started(
+    finished_study,
+):
+    """The review of 3063e1e: with participants/S01 deleted, the report showed S01 with 0 of 0 steps done, as if
+    they had registered and never started, and a run went on to the next participant."""
+    import shutil
+
+    shutil.rmtree(finished_study / "participants" / "S01")
+    _refused_everywhere(finished_study, "participants/S01", "participants.json", "(number 1)", "withdrawn")
+
+
+def _second_participant(folder: Path) -> None:
+    with ParticipantRun(StudyFolder(folder), "S02", simulate=True) as run:
+        run.run()
+
+
+def test_a_withdrawn_participant_is_named_by_number_and_the_square_left_unbalanced_is_said(finished_study):
+    """The review of 3063e1e: a participant taken out of the table and their folder deleted (withdrawn) left the
+    numbers 2, 3, … and an unbalanced Latin square without a word."""
+    import shutil
+
+    _second_participant(finished_study)
+    result = CliRunner().invoke(app, ["study", "report", str(finished_study), "--out", str(finished_study / "r2")])
+    assert result.exit_code == 0, result.output
+    limits = json.loads((finished_study / "r2" / "summary.json").read_text())["limits"]
+    # two of the six rows of three conditions' square (n odd: the square and its mirror) taken once each
+    assert (
+        "The order of conditions is not counterbalanced over the 2 participants with every block: rows 0–5 of the "
+        "Latin square were taken by 1, 1, 0, 0, 0, 0 of them; order and condition are balanced only when every "
+        "row is taken equally often." in limits
+    )
+    table = json.loads((finished_study / "participants.json").read_text())
+    del table["S01"]
+    (finished_study / "participants.json").write_text(json.dumps(table))
+    shutil.rmtree(finished_study / "participants" / "S01")
+    result = CliRunner().invoke(app, ["study", "report", str(finished_study), "--out", str(finished_study / "r1")])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((finished_study / "r1" / "summary.json").read_text())
+    assert list(summary["participants"]) == ["S02"] and summary["participants"]["S02"]["number"] == 2
+    assert (
+        "Number 1 is in no participant's record: taken out of the study (withdrawn?), with their row of the Latin "
+        "square (0)." in summary["limits"]
+    )
+    assert any("rows 0–5 of the Latin square were taken by 0, 1, 0, 0, 0, 0" in line for line in summary["limits"])
+
+
+def test_simulated_participants_beside_a_person_keep_the_reports_caveat(finished_study):
+    """The review of 3063e1e: one person in a folder of simulated operators (study run now refuses it; a folder of
+    an older version may hold both) turned the summary's "simulated" off and dropped the caveat, while every
+    pooled number was the simulated operators'."""
+    _second_participant(finished_study)
+    table = json.loads((finished_study / "participants.json").read_text())
+    table["S02"]["simulated"] = False  # as an older version registered a person after a rehearsal
+    (finished_study / "participants.json").write_text(json.dumps(table))
+    result = CliRunner().invoke(app, ["study", "report", str(finished_study)])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((finished_study / "report" / "summary.json").read_text())
+    assert summary["simulated"] is True
+    assert any(line.startswith("These participants are simulated operators") for line in summary["limits"])
+    assert (
+        "1 of 2 participants are simulated operators (S01), pooled here with people: nothing of this report is "
+        "evidence about people until they are reported apart." in summary["limits"]
+    )
+    assert "simulated participants" in (finished_study / "report" / "report.html").read_text()
+
+
+def test_a_participant_beyond_the_planned_number_is_warned_of_the_square_they_repeat(finished_study):
+    """The review of 3063e1e: participants beyond the planned number were taken without a word (a seventh of six
+    planned repeated row 0's order, unbalancing the square); here four are planned and the square has six rows."""
+    said: list[str] = []
+    for k in range(2, 9):
+        with ParticipantRun(StudyFolder(finished_study), f"S{k:02d}", simulate=True, say=said.append) as run:
+            assert run.record["number"] == k
+    warned = [line for line in said if line.startswith("warning:")]
+    assert warned == [
+        f"warning: S{k:02d} is participant {k} of 4 planned (row {k - 1} of the Latin square's 6): the order of "
+        "conditions stays balanced only if the participants who finish fill whole squares of 6 rows"
+        for k in (5, 6)
+    ] + [
+        "warning: S07 is participant 7 of 4 planned (row 0 of the Latin square's 6): the order of conditions stays "
+        "balanced only if the participants who finish fill whole squares of 6 rows",
+        "warning: S08 is participant 8 of 4 planned (row 1 of the Latin square's 6): the order of conditions stays "
+        "balanced only if the participants who finish fill whole squares of 6 rows",
+    ]

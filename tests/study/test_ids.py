@@ -72,5 +72,24 @@ def test_the_study_registers_pseudonyms_only_and_unique_in_any_case(tmp_path):
     assert study.register("P01")["number"] == 1
     with pytest.raises(StudyFolderError, match="the study has P01, which differs in case only"):
         study.register("p01")  # bdc84ed: a second id that shares P01's folder on a case-insensitive file system
-    assert study.register("P01")["number"] == 1 and study.register("S02", simulated=True)["number"] == 2
-    assert list(study.participants()) == ["P01", "S02"]
+    assert study.register("P01")["number"] == 1 and study.register("P02")["number"] == 2
+    assert list(study.participants()) == ["P01", "P02"]
+
+
+def test_a_study_folder_holds_people_or_simulated_participants_never_both(tmp_path):
+    # the review of 3063e1e: a --simulate run in a folder with a person was taken, and the report called its
+    # simulated operators people (summary's "simulated" false, the caveat gone)
+    plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0)
+    people, rehearsal = init_study(plan, tmp_path / "study"), init_study(plan, tmp_path / "rehearsal")
+    people.register("P01")
+    with pytest.raises(StudyFolderError, match=r"holds people \(P01\); rehearse with --simulate in a folder"):
+        people.register("S02", simulated=True)
+    rehearsal.register("S01", simulated=True)
+    with pytest.raises(StudyFolderError, match=r"holds simulated participants \(S01\), a rehearsal"):
+        rehearsal.register("P02")
+    assert list(people.participants()) == ["P01"] and list(rehearsal.participants()) == ["S01"]  # nothing taken
+    # registering makes the participant's folder, so a registered participant without one is a loss, named
+    assert (tmp_path / "study" / "participants" / "P01").is_dir()
+    (tmp_path / "study" / "participants" / "P01").rmdir()
+    with pytest.raises(StudyFolderError, match=r"P01: missing, but .*participants.json registers P01 \(number 1\)"):
+        people.register("P02")

@@ -148,3 +148,32 @@ def test_the_detectable_effect_after_holm_is_not_understated_where_scipys_tail_i
 
     line = sample_limits(4, 18, simulated=False)[1]
     assert "d_z ≥ 2.13 (≥ 5.74 for the smallest p after Holm's correction over 18 tests)" in line
+
+
+@pytest.mark.parametrize("n", [6, 9, 10])
+def test_the_limits_say_when_holms_correction_leaves_the_wilcoxon_column_no_way_to_reach_005(n):
+    """The review of 3063e1e: six participants, 18 comparisons, every difference the same way: each exact Wilcoxon
+    p is its floor 2/2^6 = 0.03125 (scipy's, below), and Holm's smallest adjusted p is 18 × 0.03125 = 0.5625, so the
+    report's Holm-corrected Wilcoxon column could never show significance, and the limits said only the floor."""
+    from coassist.analysis.paired import holm_family
+    from coassist.study.summarise import comparison_limits
+
+    rng = np.random.default_rng(n)
+    a = {f"S{i:02d}": 10.0 + i for i in range(1, n + 1)}
+    comps = []
+    for k in range(18):  # every difference positive, magnitudes distinct: the exact test's floor each time
+        b = {pid: v - 0.5 - rng.uniform(0, 1) for pid, v in a.items()}
+        comps.append(paired_comparison(f"m{k}", "A", f"B{k}", a, b, n_boot=50))
+    floor = stats.wilcoxon([1.0 + 0.1 * i for i in range(n)], alternative="two-sided").pvalue
+    assert math.isclose(floor, 2 / 2**n, rel_tol=1e-12) and all(math.isclose(c.p_wilcoxon, floor) for c in comps)
+    smallest = min(c.p_wilcoxon_holm for c in holm_family(comps))
+    assert math.isclose(smallest, min(1.0, 18 * 2 / 2**n), rel_tol=1e-12)  # by hand: Holm's first step, m·p
+    said = [line for line in comparison_limits(comps, simulated=False) if line.startswith("After Holm's")]
+    if smallest > 0.05:  # n = 6: 0.5625; n = 9: 18/256 = 0.0703
+        assert said == [
+            f"After Holm's correction over the 18 Wilcoxon tests, the smallest adjusted p is at least 18·2/2^{n} = "
+            f"{smallest:.3g}: that column cannot reach 0.05 whatever the data; read it for direction and "
+            "consistency, the paired t test for significance."
+        ]
+    else:  # n = 10: 18/512 = 0.0352 can reach it
+        assert said == [] and n == 10

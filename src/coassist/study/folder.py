@@ -69,7 +69,9 @@ from coassist.study.preflight import SessionEstimate, preflight
 from coassist.study.protocols import condition_names, participant_steps
 
 __all__ = [
+    "ORDER_NAME",
     "SAFE_FIELDS",
+    "STUDY_NAME",
     "ParticipantFolder",
     "StudyFolder",
     "StudyFolderError",
@@ -420,6 +422,14 @@ class StudyFolder:
         numbers = [rec["number"] for rec in table.values()]
         if len(set(numbers)) != len(numbers):
             raise StudyFolderError(f"{path}: two participants have the same number (edited by hand?); {_RESTORE}")
+        for pid, rec in table.items():
+            where = self.folder / "participants" / pid
+            if not where.is_dir():  # registration makes it: their data lost, or a participant half taken out
+                raise StudyFolderError(
+                    f"{where}: missing, but {path} registers {pid} (number {rec['number']}): {_RESTORE}; a "
+                    f"participant whose data was deleted on purpose (withdrawn) is taken out of {path.name} too, "
+                    "and the report names their number"
+                )
         return table
 
     def any_started(self) -> bool:
@@ -452,8 +462,25 @@ class StudyFolder:
                         f"{'add' if rec.get('simulated') else 'leave out'} --simulate"
                     )
                 return rec
+            # one kind a folder: a rehearsal's simulated operators pooled with people would be reported as people
+            other = sorted(pid for pid, r in table.items() if bool(r.get("simulated")) != bool(simulated))
+            if other:
+                shown = ", ".join(other[:3]) + (f" and {len(other) - 3} more" if len(other) > 3 else "")
+                raise StudyFolderError(
+                    f"--participant {participant}: this study folder holds "
+                    + (
+                        f"people ({shown}); rehearse with --simulate in a folder of its own "
+                        f"(coassist study init PLAN.toml --out {self.folder}-rehearsal)"
+                        if simulated
+                        else f"simulated participants ({shown}), a rehearsal; people take part in a folder of "
+                        "their own (coassist study init PLAN.toml --out <new folder>)"
+                    )
+                    + ": the report pools everyone in a folder"
+                )
             number = max((r["number"] for r in table.values()), default=0) + 1
             rec = {"number": number, "row": number - 1, "simulated": bool(simulated), "registered": utc_now()}
+            # the folder first: a registered participant always has one (the table's check names a lost one)
+            self.participant(participant).folder.mkdir(parents=True, exist_ok=True)
             table[participant] = rec
             atomic_write_text(self.folder / PARTICIPANTS_NAME, _json(table))
             return rec

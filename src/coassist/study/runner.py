@@ -125,12 +125,24 @@ class ParticipantRun:
                 + (", or against coassist ur-sim (--robot-host its address)" if self.plan.world == "ur" else "")
             )
         self.id = participant
-        if participant not in study.participants():
+        new = participant not in study.participants()
+        if new:
             self._check_person_models()  # before the participant is registered: a refusal must not lock the plan
         self.simulate, self.page, self.realtime = simulate, page, realtime
         self.host, self.confirm = host, confirm
         self.say = say or (lambda line: None)
         self.record = study.register(participant, simulated=simulate)  # the table cross-checked first
+        if new and self.record["number"] > self.plan.participants:
+            rows = len(study.record.get("latin_square") or ())
+            self.say(
+                f"warning: {participant} is participant {self.record['number']} of {self.plan.participants} planned"
+                + (
+                    f" (row {self.record['row'] % rows} of the Latin square's {rows}): the order of conditions "
+                    f"stays balanced only if the participants who finish fill whole squares of {rows} rows"
+                    if rows > 1 and self.plan.protocol != "iterative"
+                    else ""
+                )
+            )
         self.folder: ParticipantFolder = study.participant(participant)
         self.session: Any = None
         self.server: Any = None

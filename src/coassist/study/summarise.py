@@ -42,6 +42,7 @@ its scale.
 
 from __future__ import annotations
 
+import collections
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -53,7 +54,7 @@ import numpy as np
 from coassist.analysis.paired import PairedComparison, holm_family, paired_comparison
 from coassist.data import read_dataset
 from coassist.data.datasets import MANIFEST_NAME
-from coassist.study.folder import StudyFolder, StudyFolderError, finite_json
+from coassist.study.folder import ORDER_NAME, STUDY_NAME, StudyFolder, StudyFolderError, finite_json
 from coassist.study.measures import MEASURES, trial_measures
 from coassist.study.questionnaires import TLX_ITEMS, Form, form_for, raw_tlx
 from coassist.study.stats import order_effect
@@ -136,6 +137,14 @@ def _participant_data(study: StudyFolder, pid: str, blocks: list[str], form: For
     order = pf.order() or {"steps": []}
     progress = pf.progress()
     pf.audit(order["steps"], progress)
+    key = study.labels
+    for s in order["steps"]:  # the blinding key against the labels the page showed (what each trial records)
+        if s.get("label") and s.get("condition") in key and key[s["condition"]] != s["label"]:
+            raise StudyFolderError(
+                f"{study.folder / STUDY_NAME}: its blinding key gives condition {s['condition']!r} the label "
+                f"{key[s['condition']]!r}, but {pf.folder / ORDER_NAME} showed {pid} {s['label']!r} for it "
+                f"(edited by hand?); restore it from your backup of the study folder"
+            )
     data: dict[str, Any] = {
         "complete": bool(order["steps"])
         and (len(progress) == len(order["steps"]) or bool(progress and progress[-1].get("stop"))),
@@ -316,7 +325,11 @@ def calibrated_blocks(plan) -> list[str]:
 
 
 def sample_limits(
-    n: int | Sequence[int], n_tests: int, simulated: bool, ranked: int | Sequence[int] | None = None
+    n: int | Sequence[int],
+    n_tests: int,
+    simulated: bool,
+    ranked: int | Sequence[int] | None = None,
+    n_ranked_tests: int = 1,
 ) -> list[str]:
     """Plain sentences on what ``n`` participants can and cannot show.
 
@@ -324,6 +337,8 @@ def sample_limits(
     all; where the comparisons' counts differ (a participant who left after some conditions, a measure undefined
     for some), the sentences give the range. ``n_tests``: the comparisons with a paired t p value, Holm's m.
     ``ranked``: the pairs each comparison's Wilcoxon test ranks (its non-zero differences; ``n`` where omitted).
+    ``n_ranked_tests``: the comparisons whose Wilcoxon test gave a p, that column's Holm m: the smallest
+    Holm-adjusted p is m times the smallest p, so at least m·2/2^k for the most pairs k any test ranks.
 
     The smallest two-sided p of the exact Wilcoxon signed-rank test on k ranked pairs is 2/2^k (a zero difference
     is dropped, so six pairs with one zero can give no p below 2/2^5 = 0.0625); the smallest
@@ -395,6 +410,13 @@ def sample_limits(
             hi *= 2.0
         return float(optimize.brentq(lambda d: power(d, alpha, n) - POWER, 1e-3, hi))
 
+    if ranks and 2.0 / 2 ** ranks[-1] <= 0.05 < n_ranked_tests * 2.0 / 2 ** ranks[-1]:
+        k = ranks[-1]
+        lines.append(
+            f"After Holm's correction over the {n_ranked_tests} Wilcoxon tests, the smallest adjusted p is at least "
+            f"{n_ranked_tests}·2/2^{k} = {min(1.0, n_ranked_tests * 2.0 / 2**k):.3g}: that column cannot reach 0.05 "
+            "whatever the data; read it for direction and consistency, the paired t test for significance."
+        )
     tested = [k for k in (hi, lo) if k >= 3]
     if tested:
         d80 = [(detectable(ALPHA, k), detectable(ALPHA / max(n_tests, 1), k)) for k in dict.fromkeys(tested)]
@@ -441,6 +463,7 @@ def comparison_limits(comparisons: Sequence[PairedComparison], simulated: bool) 
         sum(1 for c in comparisons if math.isfinite(c.p_t)),
         simulated,
         ranked=[c.n_wilcoxon for c in comparisons],
+        n_ranked_tests=sum(1 for c in comparisons if math.isfinite(c.p_wilcoxon)),
     )
 
 
@@ -523,7 +546,8 @@ def summarise_study(folder: str | Path) -> StudySummary:
         if plan.protocol != "iterative"
         else {}
     )
-    simulated = bool(table) and all(r.get("simulated") for r in table.values())
+    # any, not all: one person beside simulated operators (a folder of an older version) keeps the caveat
+    simulated = any(r.get("simulated") for r in table.values())
     return StudySummary(
         study=plan.name,
         protocol=plan.protocol,
@@ -561,6 +585,11 @@ def summarise_study(folder: str | Path) -> StudySummary:
         order_effects=order,
         simulated=simulated,
         limits=tuple(comparison_limits(comparisons, simulated))
+        + _roster_note(
+            table,
+            [pid for pid, v in per_participant.items() if all(b in v for b in blocks)],
+            len(study.record.get("latin_square") or ()) if plan.protocol != "iterative" and len(blocks) > 1 else 0,
+        )
         + _unpaired_note(comparisons, pooled, per_participant, blocks)
         + _count_note(totals, "missed")
         + _count_note(totals, "unfinished")
@@ -636,6 +665,38 @@ def _partial_note(partial: Mapping[str, list[str]]) -> tuple[str, ...]:
         f"trial ({cut}). Their trials are in the study folder; a block's mean over some of its trials is of "
         "other tasks than the other blocks' and would not pair with them.",
     )
+
+
+def _roster_note(table: Mapping[str, Mapping[str, Any]], compared: Sequence[str], rows: int) -> tuple[str, ...]:
+    """The lines on who the numbers are of (none where nothing is amiss): simulated operators beside people (a
+    folder of an older version: ``study run`` now keeps one kind a folder); numbers in no participant's record (a
+    participant taken out of the table, withdrawn); and, where ``rows`` > 0 (the Latin square's rows: conditions
+    counterbalanced), whether the participants ``compared`` (every block whole) took every row equally often."""
+    lines = []
+    sims = sorted(pid for pid, r in table.items() if r.get("simulated"))
+    if sims and len(sims) < len(table):
+        lines.append(
+            f"{len(sims)} of {len(table)} participants are simulated operators ({', '.join(sims)}), pooled here with "
+            "people: nothing of this report is evidence about people until they are reported apart."
+        )
+    numbers = {int(r["number"]) for r in table.values()}
+    gone = [k for k in range(1, max(numbers, default=0) + 1) if k not in numbers]
+    if gone:
+        lines.append(
+            f"Number{'s' if len(gone) > 1 else ''} {', '.join(map(str, gone))} {'are' if len(gone) > 1 else 'is'} "
+            "in no participant's record: taken out of the study (withdrawn?), with their row of the Latin square "
+            f"({', '.join(str(k - 1) for k in gone)})."
+        )
+    if rows > 0 and compared:
+        took = collections.Counter(int(table[pid]["row"]) % rows for pid in compared)
+        if len(took) < rows or len(set(took.values())) > 1:
+            lines.append(
+                f"The order of conditions is not counterbalanced over the {len(compared)} participants with every "
+                f"block: rows 0–{rows - 1} of the Latin square were taken by "
+                f"{', '.join(str(took.get(r, 0)) for r in range(rows))} of them; order and condition are balanced "
+                "only when every row is taken equally often."
+            )
+    return tuple(lines)
 
 
 def study_summary(folder: str | Path) -> dict[str, Any]:
