@@ -790,11 +790,20 @@ def test_train_overwrite_of_a_model_keeps_the_files_beside_it_that_no_model_hold
 
 @pytest.mark.parametrize(
     "field, value, says",
-    [("epoch", "x", "'epoch' must be an integer"), ("epoch", 1_000_000, "epoch 1000000 done of a run of 3")],
+    [
+        ("epoch", "x", "'epoch' must be an integer"),
+        ("epoch", 1_000_000, "its contents are not those written"),
+        ("epoch", 2, "its contents are not those written"),  # review of 3063e1e: resumed, history [1, 3]
+        ("scheduler.last_epoch", 0, "its contents are not those written"),  # review of 3063e1e: other weights
+        ("optimizer.param_groups.0.lr", 0.5, "its contents are not those written"),
+        ("numpy_rng.state.state", 12345, "its contents are not those written"),
+    ],
 )
 def test_a_checkpoint_edited_by_hand_is_refused_naming_it(tmp_path, field, value, says):
-    """checkpoint.json carries no hash: its values are checked (once a string epoch was a traceback, and a huge
-    one wrote a run stopped at epoch 1 of 3 out as finished)."""
+    """checkpoint.json's values are checked (once a string epoch was a traceback, and a huge one wrote a run stopped
+    at epoch 1 of 3 out as finished), and since the review of 3063e1e its record carries its own SHA-256: an epoch
+    count, a learning rate, a schedule's position or the generator's state edited resumed without a word, to
+    weights no unbroken run has."""
     import json
 
     from coassist._io import partial_folder
@@ -804,11 +813,31 @@ def test_a_checkpoint_edited_by_hand_is_refused_naming_it(tmp_path, field, value
     cfg = _stopped_after_epoch_1(tmp_path / "m")
     path = partial_folder(tmp_path / "m") / CHECKPOINT_JSON
     record = json.loads(path.read_text())
-    record[field] = value
+    *parents, last = field.split(".")
+    at = record
+    for key in parents:
+        at = at[int(key)] if isinstance(at, list) else at[key]
+    at[last] = value
     path.write_text(json.dumps(record))
     with pytest.raises(ValueError, match="unusable checkpoint") as err:
         train_model(labeled(4), TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
     assert says in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_checkpoints_tensors_changed_in_place_are_refused(tmp_path):
+    """The review of 3063e1e: 200 floats of the optimizer's moments rewritten in checkpoint.safetensors, its size
+    kept, resumed without a word to weights 506 away from the unbroken run's. The record keeps the tensors' SHA-256."""
+    from coassist.intent.checkpoint import CHECKPOINT
+    from coassist.intent.training import train_model
+
+    cfg = _stopped_after_epoch_1(tmp_path / "m")
+    path = partial_folder(tmp_path / "m") / CHECKPOINT
+    raw = bytearray(path.read_bytes())
+    raw[-16:] = bytes(16)  # the last four float32 of the last tensor zeroed: still a readable safetensors file
+    path.write_bytes(bytes(raw))
+    with pytest.raises(ValueError, match="unusable checkpoint") as err:
+        train_model(labeled(4), TINY, replace(cfg, init=f"resume:{tmp_path / 'm'}"))
+    assert f"{CHECKPOINT} is not the file written with it" in str(err.value) and "finetune:" in str(err.value)
 
 
 @pytest.mark.parametrize("model_of, checkpoint_of", [(1, 2), (2, 1)])
@@ -988,3 +1017,29 @@ def test_collect_with_a_damaged_intent_folder_is_refused_in_one_line_leaving_not
     said = " ".join(res.output.split())
     assert res.exit_code == 2 and f"--intent {folder}: {folder}/person-model.json: malformed JSON" in said, said
     assert "Traceback" not in res.output and not (tmp_path / "o").exists()
+
+
+def test_an_unfinished_collection_is_never_read_as_a_folder_of_trial_files(tmp_path):
+    """The review of 3063e1e: a killed collect's .<out>.partial (9 of 24 trials) was scored by evaluate and trained
+    on by train as a folder of trial files, without a word: some of a collection passing for all of it."""
+    from coassist.data import DatasetWriter
+    from coassist.intent import load_trials
+
+    out = tmp_path / "D"
+    with DatasetWriter(out, "D", n_trials=4, key="k", description="simulated: 4 board trials") as w:
+        w.add(0, make_trial(0))
+        w.add(2, make_trial(2))  # then "killed": no finish()
+    partial = partial_folder(out)
+    expected = (
+        f"{partial}: an unfinished collection (2 of 4 trials written; simulated: 4 board trials): the command that "
+        "started it finishes it (run it again: it resumes), then read the folder it writes"
+    )
+    with pytest.raises(ValueError) as err:
+        load_trials([partial])
+    assert str(err.value) == expected
+    assert load_trials([partial / "trial_00000.parquet"])[0].trial.equals(make_trial(0))  # one whole trial: read
+    for args in (["train", str(partial), "--out", str(tmp_path / "m"), "--epochs", "1"], ["show", str(partial)]):
+        result = CliRunner().invoke(app, args)
+        assert result.exit_code == 2 and "an unfinished collection (2 of 4 trials written" in result.output, result
+    assert sorted(p.name for p in partial.glob("trial_*")) == ["trial_00000.parquet", "trial_00002.parquet"]
+    assert not (tmp_path / "m").exists()

@@ -457,6 +457,45 @@ def test_ctrl_c_stops_the_arm_and_the_ticks_before_it_make_the_trial(tmp_path, m
     assert kept.n_samples == 25 and kept.meta.extra["ended"] == "interrupted"
 
 
+def test_ctrl_c_once_the_run_is_over_keeps_the_whole_trial(tmp_path, monkeypatch):
+    """The review of 3063e1e: a Ctrl-C in the second after the loop's last tick (the world closing, the trial made,
+    its files written) lost the whole trial, exit 130 and no line. Now it is held until the trial is written, which
+    the command then says. The signal is a real SIGINT to this process, sent while the world closes, then while the
+    files are written."""
+    import os
+    import signal
+
+    from typer.testing import CliRunner
+
+    import coassist.data.run_pair as run_pair
+    from coassist.cli import app
+
+    args = ["drive", "--world", "mujoco", "--controller", "manual", "--task", "linear", "--time-limit", "0.5"]
+    real_close, real_write = MujocoUR5World.close, run_pair.write_run_pair
+    whole = drive(DriveConfig(controller="manual", task="linear", time_limit=0.5))
+
+    def ctrl_c_then(call):
+        def pressed(*a, **kw):
+            os.kill(os.getpid(), signal.SIGINT)
+            return call(*a, **kw)
+
+        return pressed
+
+    for patch in (
+        (MujocoUR5World, "close", ctrl_c_then(real_close)),
+        (run_pair, "write_run_pair", ctrl_c_then(real_write)),
+    ):
+        with monkeypatch.context() as m:
+            m.setattr(*patch)
+            out = tmp_path / f"{patch[1]}.parquet"
+            result = CliRunner().invoke(app, [*args, "--out", str(out), "--no-plot"])
+        assert result.exit_code == 130, (patch[1], result.output, result.exception)
+        assert "Ctrl-C after the trial ended: the whole trial is written" in result.output, result.output
+        kept = read_trial(out)  # the whole run: what the same drive gives uninterrupted
+        assert kept.meta.extra["ended"] == "time_limit" and np.array_equal(kept.pose, whole.pose)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+
+
 def test_full_pose_says_it_runs_without_the_stability_guard():
     """The guard watches x-y control: with --full-pose it was dropped without a word, --stability-guard given or not
     (review, 2026-12-06). The assistance line says so; the trial records no guard; x-y control keeps it."""

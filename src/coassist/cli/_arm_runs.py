@@ -160,10 +160,32 @@ def write_run(
 
 def write_interrupted(stop: Any, write: Callable[[Any], None]) -> NoReturn:
     """Ctrl-C during a drive/ros2 run (``stop``: :class:`~coassist.runtime.loop.RunInterrupted`, the arm already
-    stopped): the ticks before it written by ``write`` (the run's :func:`write_run`), a line saying so, exit 130."""
+    stopped): the ticks before it written by ``write`` (the run's :func:`write_run`), a line saying so, exit 130.
+    A Ctrl-C once the run was over (``stop.after_end``) or while it is written: the whole trial, said so."""
+    from coassist.runtime.loop import InterruptsHeld
+
     if stop.trial is None:
         err_console.print("interrupted (Ctrl-C) before the first tick: nothing to write", markup=False)
-    else:
+        raise typer.Exit(130)
+    with InterruptsHeld():
         write(stop.trial)
-        err_console.print("interrupted (Ctrl-C): the ticks before it are written", markup=False)
+    err_console.print(
+        "Ctrl-C after the trial ended: the whole trial is written"
+        if stop.after_end
+        else "interrupted (Ctrl-C): the ticks before it are written",
+        markup=False,
+    )
     raise typer.Exit(130)
+
+
+def write_finished(trial: Any, write: Callable[[Any], None], *, interrupted: bool = False) -> None:
+    """Write a drive/ros2 run that ran to its end with ``write`` (:func:`write_run`), Ctrl-C held until it is
+    written (a KeyboardInterrupt in the writing lost the trial, no line said so); one that came then, or before
+    (``interrupted``: held while the world closed): a line, exit 130."""
+    from coassist.runtime.loop import InterruptsHeld
+
+    with InterruptsHeld() as held:
+        write(trial)
+    if held.pending or interrupted:
+        err_console.print("Ctrl-C after the trial ended: the whole trial is written", markup=False)
+        raise typer.Exit(130)

@@ -13,6 +13,7 @@ from coassist.cli._arm_runs import (
     intent_option,
     run_alpha,
     run_out,
+    write_finished,
     write_interrupted,
     write_run,
 )
@@ -172,7 +173,7 @@ def drive(
         except RunInterrupted as stop:  # Ctrl-C: the arm stopped; the ticks before it are written, as on an error
             write_interrupted(stop, write)
         # the run is written before the live view closes, as ros2 does: whatever became of the view, the trial is kept
-        write(trial)
+        write_finished(trial, write)
     finally:
         close_live(live)
 

@@ -12,6 +12,7 @@ from coassist.cli._arm_runs import (
     intent_option,
     run_alpha,
     run_out,
+    write_finished,
     write_interrupted,
     write_run,
 )
@@ -139,7 +140,7 @@ def ros2(
     from coassist.robot.drive import DriveConfig
     from coassist.robot.drive import drive as run_drive
     from coassist.robot.ros2_world import UR_JOINT_NAMES, Ros2Config, Ros2World
-    from coassist.runtime.loop import RunInterrupted
+    from coassist.runtime.loop import InterruptsHeld, RunInterrupted
     from coassist.runtime.safety_limits import SafetyLimits
     from coassist.scenario.objects import OBJECTS
 
@@ -201,6 +202,7 @@ def ros2(
     def write(trial) -> None:
         write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=rcfg.joint_names, frame_id=rcfg.base_frame)
 
+    held = InterruptsHeld()  # while the world closes after the run: a Ctrl-C there must not lose the trial
     try:
         try:
             world = Ros2World(rcfg, alpha=alpha)
@@ -215,13 +217,14 @@ def ros2(
                     say=say,
                 )
             finally:
-                world.close()
+                with held:
+                    world.close()
         except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
             fail(str(exc))
         except RunInterrupted as stop:  # Ctrl-C: the arm stopped; the ticks before it are written, as on an error
             write_interrupted(stop, write)
         # the run is written before the live view closes: whatever became of the view, the trial is kept
-        write(trial)
+        write_finished(trial, write, interrupted=held.pending)
     finally:
         close_live(live)
 

@@ -53,6 +53,7 @@ __all__ = [
     "manifest_files",
     "read_dataset",
     "read_dataset_trial",
+    "unfinished_collection",
     "write_dataset",
 ]
 
@@ -390,6 +391,27 @@ def read_dataset_trial(folder: str | os.PathLike[str], index: int) -> Trial:
     if not is_integer(index) or not 0 <= index < len(entries):
         raise ValueError(f"{folder}: index must be in [0, {len(entries)}), got {index!r}")
     return _read_entry(folder, entries[index])
+
+
+def unfinished_collection(folder: str | os.PathLike[str]) -> str:
+    """ "" where ``folder`` is not a :class:`DatasetWriter`'s unfinished ``.<name>.partial`` (its ``progress.json``
+    there until :meth:`DatasetWriter.finish`); else one line saying it is one, for the commands that would read its
+    trials as a folder of trial files: some of a collection would pass for all of it."""
+    folder = Path(folder)
+    if not (folder / DatasetWriter.PROGRESS).is_file():
+        return ""
+    done = len(list(folder.glob("trial_*.parquet")))
+    try:
+        record = json.loads((folder / DatasetWriter.PROGRESS).read_text("utf-8"))
+    except (OSError, ValueError):
+        record = None
+    record = record if isinstance(record, dict) else {}
+    of = f" of {record['n_trials']}" if is_integer(record.get("n_trials")) else ""
+    what = f"; {record['description']}" if isinstance(record.get("description"), str) and record["description"] else ""
+    return (
+        f"{folder}: an unfinished collection ({done}{of} trials written{what}): the command that started it finishes "
+        "it (run it again: it resumes), then read the folder it writes"
+    )
 
 
 # --------------------------------------------------------------------------- resumable writing

@@ -15,6 +15,9 @@ verifies) and the epoch of their training history's last entry (``model_epoch``)
 folder copied by hand, or read while a run swapped in its next epoch), which would otherwise
 continue from one epoch's weights with another's optimizer state and epoch count. A checkpoint
 without them (written by a coassist before the check) is refused by :func:`read_checkpoint`.
+It also records the SHA-256 of its tensors file (``tensors_sha256``) and of its own record (``record_sha256``):
+a resume from edited or damaged state (an epoch count, a learning rate, the generator's state, the optimizer's
+moments) would not give the unbroken run's weights, and is refused.
 """
 
 from __future__ import annotations
@@ -89,10 +92,17 @@ def checkpoint_files(
         "scheduler": sched_state,
         "numpy_rng": rng.bit_generator.state,
     }
-    return {
-        CHECKPOINT: st_save(tensors),
-        CHECKPOINT_JSON: (json.dumps(record, indent=1, allow_nan=False) + "\n").encode(),
-    }
+    raw = st_save(tensors)
+    record["tensors_sha256"] = hashlib.sha256(raw).hexdigest()  # the optimizer's tensors it was written with
+    record["record_sha256"] = _record_digest(record)  # what it holds: an epoch, a rate, a generator state edited
+    return {CHECKPOINT: raw, CHECKPOINT_JSON: (json.dumps(record, indent=1, allow_nan=False) + "\n").encode()}
+
+
+def _record_digest(record: dict[str, Any]) -> str:
+    """SHA-256 of the checkpoint's record without its own digest, keys sorted: the same for the record as written
+    and as read back (JSON's numbers round-trip exactly)."""
+    body = {k: v for k, v in record.items() if k not in ("record_sha256", "tensors")}
+    return hashlib.sha256(json.dumps(body, sort_keys=True, allow_nan=False).encode()).hexdigest()
 
 
 def trials_digest(trials: Sequence[Any]) -> str:
@@ -151,7 +161,23 @@ def read_checkpoint(folder: Path) -> dict[str, Any] | None:
             raise ValueError("'trials' must be a list of trial ids")
         if not isinstance(record["train_config"], dict):
             raise ValueError("'train_config' must be an object")
-        record["tensors"] = st_load((folder / CHECKPOINT).read_bytes())
+        for key in ("tensors_sha256", "record_sha256"):
+            if key not in record:
+                raise ValueError(
+                    "written by an older coassist, before a checkpoint recorded digests of what it holds, so an edit "
+                    "or a damaged file cannot be told"
+                )
+        if record["record_sha256"] != _record_digest(record):
+            raise ValueError(
+                "its contents are not those written (their SHA-256 differs from the one recorded: edited by hand?)"
+            )
+        raw = (folder / CHECKPOINT).read_bytes()
+        if hashlib.sha256(raw).hexdigest() != record["tensors_sha256"]:
+            raise ValueError(
+                f"{CHECKPOINT} is not the file written with it (its SHA-256 differs from the one recorded: damaged, "
+                "or another run's?)"
+            )
+        record["tensors"] = st_load(raw)
     except (OSError, ValueError, RecursionError, SafetensorError) as exc:
         raise ValueError(f"{path}: unusable checkpoint ({exc}); start a new stage with finetune:{folder}") from None
     return record

@@ -31,7 +31,7 @@ import numpy as np
 
 from coassist.data import RecordingError, Trial, TrialFileError, load_ros_trial, read_dataset, read_trial
 from coassist.data.bags import bag_paths, is_bag, load_bag_trial
-from coassist.data.datasets import MANIFEST_NAME
+from coassist.data.datasets import MANIFEST_NAME, unfinished_collection
 from coassist.data.rosbag_csv import recording_folders
 
 __all__ = ["LabeledTrial", "content_digest", "hash_arrays", "load_trials"]
@@ -88,6 +88,9 @@ def _load_one(
         for name, reason in ds.skipped:
             on_bad(str(path / name), reason)  # type: ignore[misc]
         return [LabeledTrial(f"{ds.id}/{Path(f).stem}", ds.id, t) for f, t in zip(ds.files, ds.trials)]
+    unfinished = unfinished_collection(path)
+    if unfinished:  # a killed collect's .<out>.partial: some of its trials, no manifest yet
+        raise ValueError(unfinished)
     here = path.resolve()  # "." or "./" name the folder by its own name (its user, its dataset)
     if (path / "current_pose.csv").is_file():
         dataset = f"{here.parent.parent.name}/{here.parent.name}"

@@ -56,7 +56,7 @@ from coassist.interfaces import FEATURES
 from coassist.robot.worlds import WORLDS, ArmWorld, HandWorld, WorldRequest, arm_worlds, build_world, missing_members
 from coassist.runtime.episode import EpisodeLabels, build_episode, episode_ticks, plan_grid
 from coassist.runtime.intent import RealtimeIntent, WindowIntent
-from coassist.runtime.loop import RunInterrupted
+from coassist.runtime.loop import InterruptsHeld, RunInterrupted
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.safety_limits import SafetyLimits
 from coassist.runtime.tick import TickConfig
@@ -429,13 +429,19 @@ def drive(
             log = run.episode.run(deadline=config.dt if run.world.realtime else None, on_tick=on_tick)
         except RunInterrupted as stop:  # Ctrl-C: the arm stopped, the ticks before it made a trial (below)
             interrupted, log = stop, stop.log
-    finally:
+    except BaseException:
         run.close()
+        raise
+    with InterruptsHeld() as held:  # the run is over: a Ctrl-C from here on must not lose its trial
+        run.close()
+        trial = run.finish(log) if log.n or interrupted is None else None
+    if interrupted is None and held.pending:
+        interrupted = RunInterrupted(log, after_end=True)
     if interrupted is not None:
-        if log.n:
-            interrupted.trial = run.finish(log)
+        interrupted.trial = trial
         raise interrupted
-    return run.finish(log)
+    assert trial is not None  # a run not interrupted is made a trial above, whatever its length
+    return trial
 
 
 def drive_lockstep(configs: Sequence[DriveConfig], *, together: bool = True) -> list[Trial]:

@@ -32,6 +32,8 @@ what raised where, so the run's record is written and no traceback reaches the u
 
 from __future__ import annotations
 
+import signal
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -45,7 +47,16 @@ from coassist.interfaces import Fault
 from coassist.runtime.tick import ControlTick
 from coassist.runtime.world import RobotState, World, finite_vector, optional_member
 
-__all__ = ["LINK_LOST", "LoopLog", "LoopRun", "RunInterrupted", "TargetDwell", "TargetDwellBatch", "run_loop"]
+__all__ = [
+    "LINK_LOST",
+    "InterruptsHeld",
+    "LoopLog",
+    "LoopRun",
+    "RunInterrupted",
+    "TargetDwell",
+    "TargetDwellBatch",
+    "run_loop",
+]
 
 Termination = Callable[[int, np.ndarray], bool]
 
@@ -196,10 +207,36 @@ class RunInterrupted(KeyboardInterrupt):
     (``ended = "interrupted"``) and ``trial``, where the caller made one of them (``coassist drive`` writes it), that
     trial. A KeyboardInterrupt still: whoever does not look for it stops as before."""
 
-    def __init__(self, log: LoopLog) -> None:
-        super().__init__(f"interrupted after {log.n} ticks")
+    def __init__(self, log: LoopLog, *, after_end: bool = False) -> None:
+        super().__init__(f"interrupted after {log.n} ticks" + (", the run over" if after_end else ""))
         self.log = log
         self.trial: Any = None
+        #: Ctrl-C came once the run was over (its arm stopped, the trial being made): the trial is whole
+        self.after_end = after_end
+
+
+class InterruptsHeld:
+    """Ctrl-C held, not raised, while a run that is over is stopped, made a trial and written (``with
+    InterruptsHeld() as held: …``; ``held.pending`` then says whether one came): a KeyboardInterrupt there lost the
+    whole trial, the loop's own catch being behind it. In the main thread only (where Python delivers signals);
+    elsewhere it holds nothing and ``pending`` stays False."""
+
+    def __init__(self) -> None:
+        self.pending = False
+        self._old: Any = None
+
+    def _note(self, signum: int, frame: Any) -> None:
+        self.pending = True
+
+    def __enter__(self) -> InterruptsHeld:
+        if threading.current_thread() is threading.main_thread():
+            self._old = signal.signal(signal.SIGINT, self._note)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+            self._old = None
 
 
 #: The intent stage's answer where the stage itself raised: no prediction (the plan's rows), flagged as a failing
