@@ -55,6 +55,7 @@ class Fault(enum.IntFlag):
     Wrench pipeline (``runtime.wrench``): SENSOR_*, WRENCH_SPIKE.
     Safety layer (``runtime.safety``): the limits, DEADLINE_MISS, DECELERATING, STOPPED.
     Robot: ROBOT_PROTECTIVE_STOP, ROBOT_EMERGENCY_STOP (reported by the world).
+    Arm tick (``runtime.tick``): STATE_MISMATCH.
     """
 
     NONE = 0
@@ -85,6 +86,7 @@ class Fault(enum.IntFlag):
     STABILITY_DAMPING = (
         1 << 24
     )  # a large hand force turned, an oscillation: the robot is a damper (coassist.control.stability)
+    STATE_MISMATCH = 1 << 25  # the joints' forward kinematics left the reported tool pose: one of them is wrong
 
 
 #: (bit, name) of every single fault flag, built once: fault_names runs every tick.

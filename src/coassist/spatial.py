@@ -23,6 +23,7 @@ __all__ = [
     "orientation_error",
     "quaternion_from_rotation_vector",
     "rotation_matrix",
+    "rotation_matrix_of",
     "rotation_vector",
     "rotation_vector_from_quaternion",
     "unwrap_rotation_vectors",
@@ -125,6 +126,12 @@ def rotation_matrix(rv: ArrayLike) -> np.ndarray:
         Rotation matrix.
     """
     x, y, z = checked_vector(rv, "rv", 3).tolist()
+    return rotation_matrix_of(x, y, z)
+
+
+def rotation_matrix_of(x: float, y: float, z: float) -> np.ndarray:
+    """:func:`rotation_matrix` of the rotation vector (x, y, z), finite floats, unchecked (the control tick's: its
+    pose is checked finite already)."""
     t2 = x * x + y * y + z * z
     if t2 < 1e-8:
         a = 1.0 - t2 / 6.0 + t2 * t2 / 120.0

@@ -196,6 +196,10 @@ def _pose_jump(k, s):
     s.tool_pose = s.tool_pose + np.array([1.0, 0, 0, 0, 0, 0])  # the reported TCP 1 m away in x; the joints disagree
 
 
+def _joint_glitch(k, s):
+    s.q = s.q + np.array([0.3, 0, 0, 0, 0, 0])  # a finite glitch (a second publisher, say): the tool pose disagrees
+
+
 @dataclass
 class Case:
     name: str
@@ -290,7 +294,16 @@ CASES = [
         operator=ScriptedForce.steps([(0.0, (15.0, 0, 0, 0, 0, 0)), (0.8, (0, 0, 0, 0, 0, 0))]),
         stops=True,
     ),
-    Case("reported pose jumps +1 m in x (20 ticks)", Fault.WORKSPACE_LIMIT, _set(range(100, 120), _pose_jump)),
+    Case(
+        "reported pose jumps +1 m in x (20 ticks)",
+        Fault.STATE_MISMATCH | Fault.DECELERATING,
+        _set(range(100, 120), _pose_jump),
+    ),
+    Case(
+        "joint 1 reads +0.3 rad, the pose true (10 ticks)",
+        Fault.STATE_MISMATCH | Fault.DECELERATING,
+        _set(range(100, 110), _joint_glitch),
+    ),
     *GLITCHES,
 ]
 

@@ -86,6 +86,26 @@ def test_non_finite_or_failing_prediction_falls_back(model):
         assert all(rt.tick(s, nominal(model)).fault == Fault.PREDICTION_FALLBACK for s in x)
 
 
+def test_a_runner_that_reuses_its_output_buffer_never_changes_the_prediction_kept(model):
+    """The review of 3063e1e: a runner writing into one buffer of its own (as a preallocated network runner does)
+    had its good prediction kept by reference; its next, failed run wrote NaN into it, and the predictor served NaN
+    rows flagged only stale. The prediction kept is a copy."""
+    buf = np.zeros((model.horizon, model.n_dof))
+    calls = []
+
+    def runner(window):
+        calls.append(1)
+        buf[:] = window[-1, : model.n_dof] if len(calls) == 1 else np.nan
+        return buf
+
+    x = samples(model, model.history + 1)
+    with RealtimePredictor(model, RealtimeConfig(threaded=False), runner=runner) as rt:
+        outs = [rt.tick(s, nominal(model)) for s in x]
+    assert rt.errors == 1 and outs[-1].fault == Fault.PREDICTION_STALE
+    assert np.isfinite(outs[-1].positions).all()
+    np.testing.assert_array_equal(outs[-2].positions, outs[-1].positions)
+
+
 def test_threaded_worker_catches_up(model):
     x = samples(model, model.history + 5)
     with RealtimePredictor(model, RealtimeConfig(threaded=True)) as rt:

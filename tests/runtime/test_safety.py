@@ -669,13 +669,22 @@ def test_effort_stage_brakes_above_the_tool_speed_and_latches_on_contact_force()
     u, f, stop = layer.limit_effort(np.array([3.0, 4.0]), np.array([0.1, 0.0]), calm, Fault.NONE)
     np.testing.assert_array_equal(u, [3.0, 4.0])
     assert f == Fault.NONE and not stop
-    # above it, only the forward component along v is removed (hand-computed: v along x)
+    # above it, the effort may only brake: forward and sideways parts removed (hand-computed: v along x). The
+    # sideways part was kept until the review of 3063e1e: 50 N across v took a 10 kg tool from 0.30 to 0.50 m/s
     u, f, stop = layer.limit_effort(np.array([3.0, 4.0]), np.array([0.3, 0.0]), calm, Fault.NONE)
-    np.testing.assert_allclose(u, [0.0, 4.0], atol=1e-15)
+    np.testing.assert_array_equal(u, [0.0, 0.0])
     assert f == Fault.TOOL_SPEED_LIMIT and not stop
-    # a braking effort above the limit is kept
-    u, _, _ = layer.limit_effort(np.array([-3.0, 0.0]), np.array([0.3, 0.0]), calm, Fault.NONE)
+    u, f, _ = layer.limit_effort(np.array([-3.0, 4.0]), np.array([0.3, 0.0]), calm, Fault.NONE)
+    np.testing.assert_allclose(u, [-3.0, 0.0], rtol=1e-15)
+    assert f == Fault.TOOL_SPEED_LIMIT
+    # a braking effort above the limit is kept as it is, on any direction of v (its sideways part only rounding)
+    u, f, _ = layer.limit_effort(np.array([-3.0, 0.0]), np.array([0.3, 0.0]), calm, Fault.NONE)
     np.testing.assert_array_equal(u, [-3.0, 0.0])
+    assert f == Fault.NONE
+    v = np.array([0.21, -0.17])
+    u, f, _ = layer.limit_effort(-7.3 * v, v, calm, Fault.NONE)
+    np.testing.assert_array_equal(u, -7.3 * v)
+    assert f == Fault.NONE
     # a hand force over the threshold latches the stop, for good
     hard = np.array([100.0, 80.0, 0.0, 0.0, 0.0, 0.0])  # 128 N
     u, f, stop = layer.limit_effort(np.array([3.0, 4.0]), np.array([0.1, 0.0]), hard, Fault.NONE)
@@ -688,10 +697,10 @@ def test_effort_stage_brakes_above_the_tool_speed_and_latches_on_contact_force()
 @pytest.mark.parametrize("upstream", [Fault.NONFINITE_WRENCH, Fault.INVALID_INPUT, Fault.INTERNAL_ERROR])
 def test_the_effort_stage_limits_the_tool_speed_after_a_wrench_fault_too(upstream):
     """A wrench fault zeroes the hand's force (the pipeline), not the controller's effort: above the tool speed the
-    forward component along v is still removed (hand-computed as above), and a zero effort passes unflagged."""
+    forward and sideways parts are still removed (hand-computed as above), and a zero effort passes unflagged."""
     layer = SafetyLayer(SafetyLimits(tool_speed=0.25), 0.008, 6)
     u, f, stop = layer.limit_effort(np.array([3.0, 4.0]), np.array([0.3, 0.0]), np.zeros(6), upstream)
-    np.testing.assert_allclose(u, [0.0, 4.0], atol=1e-15)
+    np.testing.assert_array_equal(u, [0.0, 0.0])
     assert f == Fault.TOOL_SPEED_LIMIT and not stop
     u, f, stop = layer.limit_effort(np.zeros(2), np.array([0.3, 0.0]), np.zeros(6), upstream)
     assert not u.any() and f == Fault.NONE and not stop
@@ -738,3 +747,17 @@ def test_the_batch_effort_stage_passes_u_r_where_each_layer_does():
     stopped = [layer for layer in layers if layer.stopped]  # the contact force latched STOPPED
     assert stopped and not any(SafetyLayerBatch.accepts(layer) for layer in stopped)
     assert SafetyLayerBatch.accepts(SafetyLayer(limits[0], DT, 6))
+
+
+def test_the_effort_stage_alone_and_batched_agree_on_which_efforts_pass_above_the_tool_speed():
+    """SafetyLayerBatch.limit_effort says which rows the layer leaves alone (the array path keeps those): a sideways
+    effort above the tool speed is the layer's to change, as a forward one is; braking straight against v is not."""
+    from coassist.runtime.safety import SafetyLayerBatch
+
+    layers = [SafetyLayer(SafetyLimits(tool_speed=0.25), 0.008, 6) for _ in range(5)]
+    v = np.array([[0.3, 0.0], [0.3, 0.0], [0.3, 0.0], [0.21, -0.17], [0.1, 0.0]])
+    u = np.array([[0.0, 50.0], [3.0, 0.0], [-3.0, 0.0], -7.3 * v[3], [0.0, 50.0]])
+    hand = np.zeros((5, 3))
+    clean = SafetyLayerBatch(layers).limit_effort(np.arange(5), u, v, hand)
+    alone = [layer.limit_effort(u[i], v[i], np.zeros(6), Fault.NONE)[1] == Fault.NONE for i, layer in enumerate(layers)]
+    assert clean.tolist() == alone == [False, False, True, True, True]

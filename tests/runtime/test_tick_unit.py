@@ -492,3 +492,97 @@ def test_a_complex_prediction_falls_back_to_the_plan_and_the_run_goes_on(dtype):
     for w, lg in zip(worlds, logs):
         assert lg.ended == "time_limit" and [int(f) for f in lg.fault] == [int(Fault.PREDICTION_FALLBACK)] * 30
         np.testing.assert_array_equal(np.array(w.efforts), np.array(nominal.efforts))
+
+
+def test_a_finite_joint_glitch_is_a_state_mismatch_and_moves_nothing():
+    """The review of 3063e1e: joint 0 read 0.3 rad high for 10 ticks (the tool pose reported true), nobody pushing:
+    the tick drove the arm at up to 0.63 rad/s to correct an error it did not have, and the tool drifted 67 mm with
+    only motion-limit flags. The joints' forward kinematics leaving the reported pose is now STATE_MISMATCH, a bad
+    tick: the arm is held (here at rest), and the admittance is not moved by it."""
+    kin = LinearKinematics(well_conditioned_jacobian(), POSE0)
+    world = FakeArmWorld(kin, lambda k: np.zeros(6))
+    read = world.read
+
+    def glitched():
+        state = read()
+        if 50 <= world.k < 60:
+            state.q = state.q + np.array([0.3, 0, 0, 0, 0, 0])
+        return state
+
+    world.read = glitched
+    tick = _arm_tick(kin, SafetyLimits(min_manipulability=0.0))
+    log = run_loop(world, tick, 120)
+    flagged = np.flatnonzero(log.fault & int(Fault.STATE_MISMATCH)).tolist()
+    assert flagged == list(range(50, 60))
+    assert all(Fault(int(f)) & Fault.DECELERATING for f in log.fault[50:60])
+    # the true arm never moved: commands of rounding only (the hold terms' rotation arithmetic, ~1e-16), where the
+    # glitch drove 0.63 rad/s
+    assert np.abs(log.joint_velocity).max() < 1e-12 and np.abs(world.q).max() < 1e-12
+    assert np.isfinite(tick._za).all() and np.abs(tick._za).max() < 1e-12
+
+
+def test_a_glitch_under_the_tolerance_or_a_constant_offset_is_not_a_mismatch():
+    """The reported pose may sit off the forward kinematics by a constant (a TCP or a calibration): that is the
+    run's first tick's, held in the tool's frame; 0.5 mm, 0.01 rad of glitch are under the tolerance (1 cm, 0.05 rad)."""
+    from coassist.runtime.tick import STATE_MISMATCH_ANGLE, STATE_MISMATCH_POSITION
+
+    assert (STATE_MISMATCH_POSITION, STATE_MISMATCH_ANGLE) == (0.01, 0.05)
+    kin = LinearKinematics(well_conditioned_jacobian(), POSE0)
+    hand = np.array([6.0, -4.0, 0, 0, 0, 0])
+    world = FakeArmWorld(kin, lambda k: hand)
+    read = world.read
+
+    def offset():
+        state = read()
+        state.tool_pose = state.tool_pose + np.array([0.03, -0.02, 0.01, 0.0, 0.0, 0.0])  # 3.7 cm, all along
+        if 40 <= world.k < 45:
+            state.tool_pose = state.tool_pose + np.array([0.0005, 0, 0, 0.01, 0, 0])
+        return state
+
+    world.read = offset
+    log = run_loop(world, _arm_tick(kin, SafetyLimits(min_manipulability=0.0)), 100)
+    assert not (np.bitwise_or.reduce(log.fault) & int(Fault.STATE_MISMATCH))
+    assert world.q.any()  # followed the hand
+
+
+class _NaNController:
+    """Manual guidance whose effort is NaN on the ticks ``at`` (a controller plugged in that fails to guard itself)."""
+
+    def __init__(self, at) -> None:
+        self.inner, self.at, self.k = ManualGuidance(ImpedanceModel(M, D, 0.0, DT)), at, -1
+        self.model, self.horizon = self.inner.model, self.inner.horizon
+
+    def step(self, z, ref_h, ref_r, wrench):
+        self.k += 1
+        out = self.inner.step(z, ref_h, ref_r, wrench)
+        return out._replace(u_r=np.full(2, np.nan)) if self.k in self.at else out
+
+
+@pytest.mark.parametrize("at, stops", [(range(60, 61), False), (range(40, 10_000), True)])
+def test_a_controllers_nan_is_a_bad_tick_never_the_admittance_state(at, stops):
+    """The review of 3063e1e: one NaN effort from a controller (arm worlds) made the admittance state NaN for the rest
+    of the run: every later command zero, the tool still under a push, only INVALID_INPUT flagged, never a stop, and
+    the log's effort NaN. Now it is NONFINITE_EFFORT, a bad tick (decelerate; 25 in a row stop), the effort logged 0."""
+    kin = LinearKinematics(well_conditioned_jacobian(), POSE0)
+    world = FakeArmWorld(kin, lambda k: np.array([2.0, 0, 0, 0, 0, 0]))
+    tick = ControlTick(
+        _NaNController(at),
+        NominalStage(H),
+        WrenchPipeline(CLEAN, DT),
+        SafetyLayer(SafetyLimits(min_manipulability=0.0), DT, 6),
+        command_space="joint_velocity",
+        kinematics=kin,
+    )
+    ref = _reference(POSE0[:2])
+    tick.reset(Plan(ref, POSE0), _context(ref))
+    log = run_loop(world, tick, 150)
+    first = at[0]
+    assert Fault(int(log.fault[first])) & (Fault.NONFINITE_EFFORT | Fault.DECELERATING) == (
+        Fault.NONFINITE_EFFORT | Fault.DECELERATING
+    )
+    assert np.isfinite(log.effort_r).all() and np.isfinite(tick._za).all()
+    if stops:  # the layer's max_bad_ticks (25) in a row
+        assert log.ended == "safety_stop" and log.n == first + 25
+    else:  # the push moves the tool on after the one bad tick
+        assert log.ended == "time_limit" and not log.fault[first + 5 :].any()
+        assert log.pose[-1, 0] - log.pose[first + 1, 0] > 0.01

@@ -601,3 +601,20 @@ def test_the_batch_gives_each_pipelines_hand_force_on_every_clean_tick():
             break
     assert kinds["clean"] > 1000 and kinds["held"] > 300 and kinds["left"] > 20 and kinds["left_unflagged"] > 0, kinds
     assert flags == Fault.SENSOR_STALE | Fault.WRENCH_SPIKE | Fault.SENSOR_SATURATED | Fault.NONFINITE_WRENCH
+
+
+@pytest.mark.parametrize(
+    "rotation",
+    [np.zeros((3, 3)), 0.3 * np.eye(3), np.diag([1.0, 1.0, -1.0]), np.array([[1.0, 1.0, 0], [0, 1.0, 0], [0, 0, 1.0]])],
+    ids=["zeros", "scaled", "mirrored", "sheared"],
+)
+def test_a_sensor_rotation_that_is_not_a_rotation_is_invalid_input(rotation):
+    """The review of 3063e1e: a sensor rotation of zeros passed (every entry a cosine) and a 250 N push read 0 N, no
+    contact stop, no flag; 0.3·I read it as 75 N. Not a rotation (RᵀR ≠ I or det < 0): INVALID_INPUT, zero hand."""
+    pipe = WrenchPipeline(WrenchConfig(**PLAIN), dt=0.008)
+    reading = pipe.update(np.array([250.0, 0, 0, 0, 0, 0]), rotation, 1, 0.0)
+    assert reading.fault == Fault.INVALID_INPUT and np.all(reading.hand == 0.0)
+    turned = Rotation.from_rotvec([0.3, -1.1, 2.0]).as_matrix()  # a rotation, composed: passes, force turned
+    ok = pipe.update(np.array([250.0, 0, 0, 0, 0, 0]), turned @ rot_x(33.0), 2, 0.008)
+    assert ok.fault == Fault.NONE
+    np.testing.assert_allclose(ok.hand[:3], turned @ rot_x(33.0) @ [250.0, 0, 0], rtol=1e-12)

@@ -424,7 +424,8 @@ class RealtimePredictor:
         t0 = time.perf_counter()
         plausible = True
         try:
-            pos = np.asarray(self._run(window), dtype=np.float64)
+            # a copy: a runner that writes into one buffer of its own would change the stored prediction
+            pos = np.array(self._run(window), dtype=np.float64)
             ok = pos.shape == (self.horizon, self.n_dof) and bool(np.all(np.isfinite(pos)))
             if ok:
                 plausible = prediction_plausible(pos, window[-1, : self.n_dof], self.dt, self.config.plausibility)

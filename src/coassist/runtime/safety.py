@@ -155,7 +155,12 @@ BAD_TICK_FAULTS = (
     | Fault.WRENCH_SPIKE
     | Fault.INTERNAL_ERROR
     | Fault.INVALID_INPUT
+    | Fault.STATE_MISMATCH
 )  # SENSOR_SATURATED is not here: it stops the robot (step 1), it does not merely decelerate it
+
+#: The sideways part of an effort above ``tool_speed``, relative to |u| |v|, that the effort stage removes: more than
+#: the rounding of an effort straight against v.
+_ACROSS = 1e-9
 
 _ROBOT_STOPS = int(Fault.ROBOT_PROTECTIVE_STOP | Fault.ROBOT_EMERGENCY_STOP)
 _SAT = int(Fault.SENSOR_SATURATED)
@@ -346,8 +351,9 @@ class SafetyLayer:
           is not a vector at all); v or hand missing, short or non-finite: zero effort,
           INVALID_INPUT (the contact and speed checks cannot be made);
         - above ``tool_speed``, with or without an upstream fault (a wrench fault zeroes the hand's
-          force, not the controller's effort), the effort may only brake: its component along v, if it
-          pushes forward, is removed (TOOL_SPEED_LIMIT).
+          force, not the controller's effort), the effort may only brake: of its x-y force only the
+          component against v is kept, the rest (forward, and sideways: a sideways push turns and,
+          stepped over a period, speeds the tool) removed (TOOL_SPEED_LIMIT).
 
         Never raises (as the joint stage); d is u_r's length, or the last good call's.
         """
@@ -388,8 +394,10 @@ class SafetyLayer:
         flags = 0
         if speed > lim.tool_speed and u.shape[0] >= 2:
             along = float(u[0] * vel[0] + u[1] * vel[1])
-            if along > 0.0:
-                u[:2] -= along / (speed * speed) * vel[:2]
+            across = float(u[0] * vel[1] - u[1] * vel[0])
+            # (an effort straight against v is kept as it is: its sideways part is then rounding, ≤ 1e-9 of it)
+            if along > 0.0 or abs(across) > _ACROSS * math.hypot(float(u[0]), float(u[1])) * speed:
+                u[:2] = min(along, 0.0) / (speed * speed) * vel[:2]
                 flags |= _TS
                 self._count(flags)
         return u, _fault(flags), False
@@ -803,7 +811,9 @@ class SafetyLayerBatch:
         clean = ~(f2 > contact2 * (1.0 - 1e-12))
         speed = np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1])
         along = u_r[:, 0] * v[:, 0] + u_r[:, 1] * v[:, 1]
-        clean &= ~((speed > tool_speed) & (along > 0.0))
+        across = u_r[:, 0] * v[:, 1] - u_r[:, 1] * v[:, 0]  # the sideways part, which the layer removes there too
+        sideways = np.abs(across) > _ACROSS * np.sqrt(u_r[:, 0] * u_r[:, 0] + u_r[:, 1] * u_r[:, 1]) * speed
+        clean &= ~((speed > tool_speed) & ((along > 0.0) | sideways))
         # as the docstring says: a non-finite effort, velocity or hand force is the layer's to flag
         clean &= np.isfinite(u_r).all(axis=1) & np.isfinite(v).all(axis=1) & np.isfinite(hand).all(axis=1)
         return clean

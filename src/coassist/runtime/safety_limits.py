@@ -75,7 +75,9 @@ class SafetyLimits:
         (the layer never pushes back on its own).
     contact_force : float [N], default 120.0
         Hand force (norm of the measured hand wrench's force) above which the robot
-        makes a protective stop.
+        makes a protective stop. The hand wrench is the wrench pipeline's: filtered, and its
+        deadband (``WrenchConfig.deadband_force``, 0.2 N by default) taken off, so the sensor's force
+        must pass contact_force plus the deadband.
     contact_torque : float [N·m], default 15.0
         The same for the hand torque.
     min_manipulability : float [-], default 0.01; 0 disables

@@ -48,6 +48,7 @@ tool speed the effort may only brake). Every flag raised on the way is OR-ed int
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -59,7 +60,17 @@ from coassist.interfaces import MOTION_LIMITED, Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
 from coassist.runtime.world import COMMAND_SPACES, Command, RobotState, finite_vector
 
-__all__ = ["ControlTick", "Plan", "TickConfig", "TickOutput", "TickReferences", "UPSTREAM_BAD", "human_reference"]
+__all__ = [
+    "STATE_MISMATCH_ANGLE",
+    "STATE_MISMATCH_POSITION",
+    "UPSTREAM_BAD",
+    "ControlTick",
+    "Plan",
+    "TickConfig",
+    "TickOutput",
+    "TickReferences",
+    "human_reference",
+]
 
 #: Faults of the stages before the safety layer that make a tick "bad" for it.
 UPSTREAM_BAD = (
@@ -73,7 +84,16 @@ UPSTREAM_BAD = (
     | Fault.WRENCH_SPIKE
     | Fault.PREDICTOR_STALLED
     | Fault.DEADLINE_MISS
+    | Fault.STATE_MISMATCH
 )
+#: [m], [rad] How far the reported tool pose may move from the joints' forward kinematics, against where it was at the
+#: run's first tick (in the tool's frame: a TCP or calibration offset is constant there), before the tick is
+#: STATE_MISMATCH: a joint reading glitched by a finite amount (a second publisher, a wrong message) otherwise drives
+#: the arm to correct an error it does not have. A real arm's calibration moves the two apart by well under a
+#: millimetre over a task's few decimetres; 0.3 rad on a UR5's base joint is some 15 cm.
+STATE_MISMATCH_POSITION = 0.01
+STATE_MISMATCH_ANGLE = 0.05
+_MISMATCH_FROB2 = 8.0 * math.sin(STATE_MISMATCH_ANGLE / 2) ** 2  # ‖R₁ − R₂‖²_F of two rotations that far apart
 #: Safety interventions after which the admittance state is reset to the command.
 _RESET_ADMITTANCE = MOTION_LIMITED
 _ROTATION = (3, 4, 5)
@@ -333,6 +353,7 @@ class ControlTick:
             start, dtype=np.float64
         )  # held over a glitch of the state (step()); a buffer of its own
         self._last_twist = np.zeros(6)
+        self._fk_offset: tuple[float, ...] | None = None  # the reported pose in the FK's tool frame (R row by row, p)
 
     def references(self) -> TickReferences:
         """This run's grids (:class:`TickReferences`), for a runner that does the tick's
@@ -444,6 +465,9 @@ class ControlTick:
             fault |= cf
         if state_bad:  # as the controller does on a non-finite state: no effort from a held one
             u_r = np.zeros(d)
+        elif not np.isfinite(u_r).all():  # a controller's NaN: no effort, a bad tick, never in the admittance or log
+            u_r = np.zeros(d)
+            fault |= Fault.NONFINITE_EFFORT
         if self.command_space == "effort":
             effort, sf, stop = self.safety.limit_effort(u_r, v, hand, fault, self._robot_stop(state))
             command = Command(effort=effort, stop=stop)
@@ -480,6 +504,8 @@ class ControlTick:
         pose_ok = pose is not None
         if pose is None:
             pose = np.full(6, np.nan)  # the safety layer treats the tick as bad (decelerates)
+        elif R_meas is not None and self._moved_apart(p_meas, R_meas, pose):
+            f |= Fault.STATE_MISMATCH
         bad = (upstream | f) & UPSTREAM_BAD
         qd = np.zeros(self.kinematics.n_joints)
         sf = Fault.NONE
@@ -528,3 +554,35 @@ class ControlTick:
                 for j in self._ctrl_rot:
                     self._za[j] = dr[dofs[j] - 3]
         return Command(qd=qd, twist=twist_cmd, stop=stop), sf
+
+    def _moved_apart(self, p_fk: np.ndarray, R_fk: np.ndarray, pose: np.ndarray) -> bool:
+        """Whether the reported tool ``pose`` and the forward kinematics (``p_fk``, ``R_fk``) of the measured joints
+        have moved apart by more than :data:`STATE_MISMATCH_POSITION` / :data:`STATE_MISMATCH_ANGLE` since the run's
+        first tick (the offset of the reported pose in the FK's tool frame, held from then)."""
+        # in Python floats: some 30 small numpy calls otherwise, 15 µs a tick
+        x, y, z, a, b, c = pose.tolist()
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R_fk.tolist()
+        px, py, pz = p_fk.tolist()
+        (s00, s01, s02), (s10, s11, s12), (s20, s21, s22) = _spatial.rotation_matrix_of(a, b, c).tolist()
+        dx, dy, dz = x - px, y - py, z - pz
+        offset = (  # R_fkᵀ R_rep, row by row, then R_fkᵀ (p_rep − p_fk)
+            r00 * s00 + r10 * s10 + r20 * s20,
+            r00 * s01 + r10 * s11 + r20 * s21,
+            r00 * s02 + r10 * s12 + r20 * s22,
+            r01 * s00 + r11 * s10 + r21 * s20,
+            r01 * s01 + r11 * s11 + r21 * s21,
+            r01 * s02 + r11 * s12 + r21 * s22,
+            r02 * s00 + r12 * s10 + r22 * s20,
+            r02 * s01 + r12 * s11 + r22 * s21,
+            r02 * s02 + r12 * s12 + r22 * s22,
+            r00 * dx + r10 * dy + r20 * dz,
+            r01 * dx + r11 * dy + r21 * dz,
+            r02 * dx + r12 * dy + r22 * dz,
+        )
+        if self._fk_offset is None:
+            self._fk_offset = offset
+            return False
+        e = [u - v for u, v in zip(offset, self._fk_offset, strict=True)]
+        rot2 = sum(v * v for v in e[:9])  # two rotations θ apart differ by 2√2 sin(θ/2) in the Frobenius norm
+        pos2 = e[9] * e[9] + e[10] * e[10] + e[11] * e[11]
+        return pos2 > STATE_MISMATCH_POSITION**2 or rot2 > _MISMATCH_FROB2

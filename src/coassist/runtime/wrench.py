@@ -98,6 +98,28 @@ MEASURED_FROZEN_TIME = 0.1
 #: Largest entry of a sensor rotation accepted (a rotation's entries are cosines, |r_ij| ≤ 1;
 #: the margin covers rounding of a composed or quaternion-made matrix).
 _R_MAX = 1.0 + 1e-6
+#: How far a sensor rotation's columns may be from unit length and orthogonal (|RᵀR − I|, entry by entry), as
+#: :meth:`WrenchPipeline.zero` allows: rounding of a composed or quaternion-made matrix.
+_R_ORTHO = 1e-6
+
+
+def _is_rotation(
+    r00: float, r01: float, r02: float, r10: float, r11: float, r12: float, r20: float, r21: float, r22: float
+) -> bool:
+    """Whether the 3 × 3 matrix of these entries (row by row, Python floats) is a rotation: RᵀR = I within
+    :data:`_R_ORTHO` and det R > 0 (a mirrored frame turns the hand force)."""
+    t = _R_ORTHO
+    return (
+        abs(r00 * r00 + r10 * r10 + r20 * r20 - 1.0) <= t
+        and abs(r01 * r01 + r11 * r11 + r21 * r21 - 1.0) <= t
+        and abs(r02 * r02 + r12 * r12 + r22 * r22 - 1.0) <= t
+        and abs(r00 * r01 + r10 * r11 + r20 * r21) <= t
+        and abs(r00 * r02 + r10 * r12 + r20 * r22) <= t
+        and abs(r01 * r02 + r11 * r12 + r21 * r22) <= t
+        and r00 * (r11 * r22 - r12 * r21) - r01 * (r10 * r22 - r12 * r20) + r02 * (r10 * r21 - r11 * r20) > 0.0
+    )
+
+
 #: Relative margin under the range at which a channel counts as saturated (the sensor
 #: clips exactly at its range; float noise must not hide it).
 _SATURATION_MARGIN = 1e-6
@@ -451,6 +473,10 @@ class WrenchPipeline:
                 fault |= Fault.INVALID_INPUT
             elif max(abs(r00), abs(r01), abs(r02), abs(r10), abs(r11), abs(r12), abs(r20), abs(r21), abs(r22)) > _R_MAX:
                 # not a rotation (its entries are cosines): a 1e300 would poison the filter for seconds
+                fault |= Fault.INVALID_INPUT
+            elif not _is_rotation(r00, r01, r02, r10, r11, r12, r20, r21, r22):
+                # cosines, but not a rotation (zeros, a scaled or mirrored frame): the hand force read too small
+                # (all zeros: no force, no contact stop) or turned
                 fault |= Fault.INVALID_INPUT
         w = raw
         if not (type(w) is np.ndarray and w.shape == (6,) and w.dtype.kind == "f"):
