@@ -197,7 +197,9 @@ def _pose_jump(k, s):
 
 
 def _joint_glitch(k, s):
-    s.q = s.q + np.array([0.3, 0, 0, 0, 0, 0])  # a finite glitch (a second publisher, say): the tool pose disagrees
+    q = np.array(s.q, dtype=float)  # a finite glitch (a second publisher, say): the tool pose disagrees
+    q[0] += 0.3  # (any arm: six joints or seven)
+    s.q = q
 
 
 @dataclass
