@@ -225,6 +225,8 @@ class FakeRTDEControl:
 
     def setWatchdog(self, min_frequency: float = 10.0) -> bool:
         self._rec("setWatchdog", min_frequency)
+        if self.robot.protective_stopped or not self.robot.script_running:  # as the controller: no script to ask
+            return False
         self.robot.send_code(35)
         self.robot.wait_for_script()
         return True

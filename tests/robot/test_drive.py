@@ -496,6 +496,27 @@ def test_ctrl_c_once_the_run_is_over_keeps_the_whole_trial(tmp_path, monkeypatch
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
 
 
+def test_a_world_whose_teardown_fails_after_the_run_keeps_the_trial(monkeypatch, caplog):
+    """The review of 3063e1e: ur-sim's `drop` fault left the dashboard socket reset; closing it after the run raised
+    BrokenPipeError and `drive` lost the trial (exit 1, "Broken pipe"). The ticks are the trial whatever the world's
+    teardown raises; the error is logged."""
+    import logging
+
+    real_close = MujocoUR5World.close
+
+    def broken(self):
+        real_close(self)
+        raise BrokenPipeError(32, "Broken pipe")
+
+    cfg = DriveConfig(controller="manual", task="linear", time_limit=0.3)
+    whole = drive(cfg)
+    monkeypatch.setattr(MujocoUR5World, "close", broken)
+    with caplog.at_level(logging.WARNING, logger="coassist.robot.drive"):
+        trial = drive(cfg)
+    assert np.array_equal(trial.pose, whole.pose) and trial.meta.extra["ended"] == whole.meta.extra["ended"]
+    assert "closing the world after the run raised BrokenPipeError" in caplog.text
+
+
 def test_full_pose_says_it_runs_without_the_stability_guard():
     """The guard watches x-y control: with --full-pose it was dropped without a word, --stability-guard given or not
     (review, 2026-12-06). The assistance line says so; the trial records no guard; x-y control keeps it."""

@@ -108,7 +108,7 @@ def test_every_apply_is_init_speedj_wait_with_the_exact_qd_and_no_kick():
     sent = [c for c in period if c.name == "speedJ"]
     for call, qd in zip(sent, commanded, strict=True):
         assert call.args[0] == [float(v) for v in qd]  # bit for bit
-        assert call.args[1:] == (1.4, world.dt)
+        assert call.args[1:] == (8.0, world.dt)  # the safety layer's joint acceleration (below)
     assert all(type(v) is float for v in sent[0].args[0])
     # the arm integrated the commands
     assert np.all(np.abs(world.read().q) > 0)
@@ -425,6 +425,50 @@ def test_rejected_speedj_after_a_long_period_names_the_watchdog():
     robot.script_running = False
     with pytest.raises(URProgramStopped, match="watchdog stopped .* over the watchdog's 0.05 s"):
         world.apply(Command(qd=np.zeros(6)))
+
+
+def test_a_stop_in_the_second_before_the_first_tick_is_named_not_a_lost_link():
+    """The review of 3063e1e (on coassist ur-sim): a stop on the pendant, a protective or an emergency stop between the
+    script's start and the first tick made setWatchdog fail, and the run said "the link to the robot was lost …
+    check the cable". A stopped script is said so; a safety stop is left to read() (the run ends on it, named)."""
+    world, robot = make()
+    robot.script_running = False
+    world.read()
+    with pytest.raises(
+        URProgramStopped, match=r"rejected setWatchdog\(10.0\): ur-rtde's control script is not running"
+    ):
+        world.apply(Command(qd=np.zeros(6)))
+    assert robot.n_speedj == 0 and world.stop_detail.endswith("Check the teach pendant, then rerun.")
+    world, robot = make()
+    robot.safety_bits |= fake_rtde.PROTECTIVE_STOPPED_BIT
+    state = world.read()
+    world.apply(Command(qd=np.zeros(6)))  # no raise: the watchdog asked again with the next command
+    assert state.protective_stop and stop_message(state, world.safety_status_bits).startswith("Protective stop")
+    assert "'unlock protective stop'" in stop_message(state, world.safety_status_bits)  # the dashboard's own words
+
+
+def test_speedj_ramps_as_fast_as_the_safety_layer_lets_the_command_change(monkeypatch):
+    """The review of 3063e1e (on coassist ur-sim): speedJ ramped at 1.4 rad/s² while the layer let the command change
+    at 8, so the arm lagged it by up to 0.39 rad/s; on the curved path round the large obstacle the person and the
+    arm fell into a 40 N limit cycle MuJoCo's arm never showed. speedJ gets the layer's joint acceleration."""
+    from coassist.robot import drive as drive_module
+    from coassist.robot.drive import DriveConfig, drive
+    from coassist.runtime.safety_limits import SafetyLimits
+
+    world, robot = make()
+    run_ticks(world, 2)
+    assert world.acceleration == SafetyLimits().joint_acceleration == 8.0
+    assert {c.args[1] for c in robot.calls if c.name == "speedJ"} == {8.0}
+    world, robot = make(acceleration=5.0)
+    run_ticks(world, 2)
+    assert {c.args[1] for c in robot.calls if c.name == "speedJ"} == {5.0}
+    seen = []
+    real = drive_module.build_world
+    monkeypatch.setattr(
+        drive_module, "build_world", lambda name, request: (seen.append(request), real(name, request))[1]
+    )
+    drive(DriveConfig(task="linear", time_limit=0.05, limits=SafetyLimits(joint_acceleration=5.0)))
+    assert [r.joint_acceleration for r in seen] == [5.0]
 
 
 def test_late_wait_period_gives_an_overrun():

@@ -433,7 +433,10 @@ def drive(
         run.close()
         raise
     with InterruptsHeld() as held:  # the run is over: a Ctrl-C from here on must not lose its trial
-        run.close()
+        try:
+            run.close()
+        except Exception as exc:  # the world's teardown on a dropped link (a broken pipe): the ticks are the trial
+            logger.warning("drive: closing the world after the run raised %s: %s", type(exc).__name__, exc)
         trial = run.finish(log) if log.n or interrupted is None else None
     if interrupted is None and held.pending:
         interrupted = RunInterrupted(log, after_end=True)
@@ -600,6 +603,7 @@ def _prepare(
                     host,
                     view,
                     realtime=view or bool(config.realtime_intent),
+                    joint_acceleration=config.limits.joint_acceleration,
                 ),
             )
         if not isinstance(world, ArmWorld):

@@ -68,8 +68,13 @@ The controller's output is a joint velocity (``command_space = "joint_velocity"`
 takes a position and tracks it through a lookahead filter (``lookahead_time`` ≥ 0.03 s
 plus gain), which adds about 34 ms of lag to the human-robot loop: the person feels it
 as extra inertia, and it erodes the stability margin of the admittance loop.
-``acceleration`` (default 1.4 rad/s², leading axis) bounds how fast the arm follows a
-change of command; the safety layer limits it too.
+``acceleration`` (default 8 rad/s², leading axis; ``drive`` passes the safety layer's
+``joint_acceleration``) is how fast the arm ramps to a new command. The safety layer already
+bounds how fast the command changes by that much, so the arm follows each command within its
+period. A slower ramp (1.4 rad/s², ur-rtde's examples') made the arm lag the command by up to
+0.39 rad/s where the person turned: on the curved path round the large obstacle the person and
+the lagging arm fell into a 40 N limit cycle that MuJoCo's arm, following its command, never
+showed (found on ``coassist ur-sim``, 2026-12-06).
 
 Watchdog
 --------
@@ -274,7 +279,7 @@ class URRTDEWorld:
         host: str,
         *,
         frequency: float = -1.0,
-        acceleration: float = 1.4,
+        acceleration: float = 8.0,
         deceleration: float = 4.0,
         watchdog_hz: float | None = 10.0,
         tcp_offset: Sequence[float] | None = None,
@@ -395,7 +400,8 @@ class URRTDEWorld:
         if freq > 125.0 and 1.0 / freq < self._stream_step() - 1e-9:
             raise RobotLinkError(
                 f"the UR at {host} streams its state every {self._stream_step() * 1e3:g} ms: a {freq:g} Hz loop "
-                "would run ahead of it; pass frequency=125 (a CB3) or -1"
+                "would run ahead of it (a CB3); run at 125 Hz: coassist drive/ros2 --rate 125 (URRTDEWorld: "
+                "frequency=125, or -1 to take the stream's)"
             )
         try:
             before = socket_fds()
@@ -470,7 +476,7 @@ class URRTDEWorld:
         if not (math.isfinite(step) and 0.0 < step <= 1.0 / _MIN_AUTO_FREQUENCY):
             raise RobotLinkError(
                 f"could not tell the control period of the UR at {self.host} from its RTDE stream "
-                f"(timestamps {seen!r}); pass frequency= explicitly (125 for a CB3, 500 for an e-Series)"
+                f"(timestamps {seen!r}); give the rate: coassist drive/ros2 --rate 125 (a CB3) or 500 (an e-Series) (URRTDEWorld: frequency=)"
             )
         return step
 
@@ -539,11 +545,35 @@ class URRTDEWorld:
         self._t0_wall = self._anchor_wall + offset
 
     def _arm_watchdog(self) -> None:
-        """setWatchdog once, before the first period opens (it waits for the script's answer)."""
+        """setWatchdog once, before the first period opens (it waits for the script's answer). Rejected: a safety stop
+        the receive stream shows is left to the next read() (the run ends on it, naming it; the watchdog is asked
+        for again at the next command), anything else is a control script that is not running, said so."""
         if not self._watchdog_armed:
             if self.watchdog_hz is not None:
-                self._require(self._call_c("setWatchdog", self.watchdog_hz), "setWatchdog", self.watchdog_hz)
+                if self._call_c("setWatchdog", self.watchdog_hz) is False:
+                    if self._safety_stop_shown():
+                        return
+                    # a stop in the second before the first tick read as a lost link ("check the cable")
+                    what = (
+                        f"the controller at {self.host} rejected setWatchdog({self.watchdog_hz!r}): ur-rtde's control "
+                        "script is not running (the program was stopped on the teach pendant or through the "
+                        "dashboard, or remote control was lost); nothing moved. Check the teach pendant, then rerun."
+                    )
+                    self.stop_detail = what
+                    raise URProgramStopped(what)
             self._watchdog_armed = True
+
+    def _safety_stop_shown(self) -> bool:
+        """Whether the receive stream shows a protective or emergency stop, given two controller steps to show it
+        (the control interface's answer may be a package ahead of the receive interface's)."""
+        end = time.monotonic() + 2.0 * self.dt + 0.004
+        while True:
+            bits = int(self._call_r("getSafetyStatusBits"))
+            if bits & (SafetyStatus.PROTECTIVE | SafetyStatus.EMERGENCY) or time.monotonic() > end:
+                break
+            time.sleep(0.0005)
+        self.safety_status_bits = bits
+        return bool(bits & (SafetyStatus.PROTECTIVE | SafetyStatus.EMERGENCY))
 
     def read(self) -> RobotState:
         """The robot's latest sample (ur-rtde's receive thread keeps it; no waiting).
@@ -745,16 +775,7 @@ class URRTDEWorld:
         return [float(v) for v in arr]
 
     def _on_rejected_speedj(self) -> None:
-        # The control interface's stream may be a package ahead of the receive interface's: give the
-        # receive side two controller steps to show a safety stop before calling it a stopped program.
-        end = time.monotonic() + 2.0 * self.dt + 0.004
-        while True:
-            bits = int(self._call_r("getSafetyStatusBits"))
-            if bits & (SafetyStatus.PROTECTIVE | SafetyStatus.EMERGENCY) or time.monotonic() > end:
-                break
-            time.sleep(0.0005)
-        self.safety_status_bits = bits
-        if bits & (SafetyStatus.PROTECTIVE | SafetyStatus.EMERGENCY):
+        if self._safety_stop_shown():
             return  # the next read() reports the stop
         timeout = None if self.watchdog_hz is None else 1.0 / self.watchdog_hz
         gap = time.perf_counter() - self._t0_wall
@@ -923,4 +944,6 @@ def _disconnect(ifaces: list[Any], host: str) -> None:
 
 def build_world(request: WorldRequest) -> URRTDEWorld:
     """The ``ur`` world of :data:`coassist.robot.worlds.WORLDS`: the UR at ``request.host``, at the run's rate."""
-    return URRTDEWorld(request.host or "", frequency=float(request.rate_hz))  # "": URRTDEWorld names the missing host
+    return URRTDEWorld(  # "": URRTDEWorld names the missing host
+        request.host or "", frequency=float(request.rate_hz), acceleration=request.joint_acceleration
+    )

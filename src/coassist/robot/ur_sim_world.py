@@ -48,6 +48,8 @@ class _Dashboard:
     def close(self) -> None:
         try:
             self.file.close()
+        except OSError:  # a dropped connection: nothing left to flush to (a broken pipe lost drive's trial)
+            pass
         finally:
             self.sock.close()
 
@@ -73,10 +75,12 @@ class URSimWorld(URRTDEWorld):
     ----------
     host : the simulator's address.
     start : (3,) where the TCP starts [m] (the tool down); None: where it is.
-    frequency : the loop's rate [Hz] (URRTDEWorld's).
+    frequency : the loop's rate [Hz] (URRTDEWorld's).  acceleration : speedJ's [rad/s²] (URRTDEWorld's).
     """
 
-    def __init__(self, host: str, *, start: Sequence[float] | None = None, frequency: float = -1.0) -> None:
+    def __init__(
+        self, host: str, *, start: Sequence[float] | None = None, frequency: float = -1.0, acceleration: float = 8.0
+    ) -> None:
         self._board = _Dashboard(host)
         self._operator: HandOperator | None = None
         self._go = False
@@ -85,7 +89,7 @@ class URSimWorld(URRTDEWorld):
                 answer = self._board.ask("coassist start " + " ".join(repr(float(v)) for v in start))
                 if answer != "ok":
                     raise RobotLinkError(f"the simulator at {host} could not start at {list(start)}: {answer}")
-            super().__init__(host, frequency=frequency)
+            super().__init__(host, frequency=frequency, acceleration=acceleration)
         except BaseException:
             self._board.close()
             raise
@@ -155,6 +159,7 @@ def build_world(request: WorldRequest) -> Any:
     """The ``ur`` world of :data:`coassist.robot.worlds.WORLDS`: :class:`URSimWorld` at the run's start on
     ``coassist ur-sim``, else :class:`~coassist.robot.ur_rtde_world.URRTDEWorld` (a robot), at the run's rate."""
     host = request.host or ""  # "": URRTDEWorld names the missing host
+    acc = request.joint_acceleration  # speedJ's ramp: as fast as the safety layer lets the command change
     if host and is_simulator(host):
-        return URSimWorld(host, start=request.start, frequency=float(request.rate_hz))
-    return URRTDEWorld(host, frequency=float(request.rate_hz))
+        return URSimWorld(host, start=request.start, frequency=float(request.rate_hz), acceleration=acc)
+    return URRTDEWorld(host, frequency=float(request.rate_hz), acceleration=acc)

@@ -68,7 +68,7 @@ def stop_message(state: RobotState, safety_status_bits: int | None = None) -> st
         return (
             "Protective stop: the robot's safety system stopped the arm (a force or speed "
             "limit, or a collision). Check the workspace and the person, clear the stop on "
-            "the teach pendant (or with the dashboard's unlockProtectiveStop, at least 5 s "
+            "the teach pendant (or with the dashboard's 'unlock protective stop', at least 5 s "
             "after it happened), then rerun."
         )
     return None

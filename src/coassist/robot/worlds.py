@@ -107,6 +107,9 @@ class WorldRequest:
     start : (3,) where a simulated TCP starts [m] (a real arm starts where it is).
     host : the robot's address, or None.  view : open a viewer (MuJoCo).
     realtime : pace a simulated world to the wall clock (a viewer, a real-time predictor).
+    joint_acceleration : [rad/s²] the safety layer's bound on how fast the joint velocity command changes
+        (``SafetyLimits.joint_acceleration``): an arm that ramps to each command by its own acceleration (a UR's
+        ``speedJ``) ramps at least this fast, so it follows the command the layer let through instead of lagging.
     """
 
     robot: str
@@ -117,6 +120,7 @@ class WorldRequest:
     host: str | None = None
     view: bool = False
     realtime: bool = False
+    joint_acceleration: float = 8.0
 
 
 @dataclass(frozen=True)
