@@ -618,3 +618,15 @@ def test_a_sensor_rotation_that_is_not_a_rotation_is_invalid_input(rotation):
     ok = pipe.update(np.array([250.0, 0, 0, 0, 0, 0]), turned @ rot_x(33.0), 2, 0.008)
     assert ok.fault == Fault.NONE
     np.testing.assert_allclose(ok.hand[:3], turned @ rot_x(33.0) @ [250.0, 0, 0], rtol=1e-12)
+
+
+def test_the_batched_pipeline_refuses_a_rotation_its_pipelines_would_flag():
+    """The review of the fix: WrenchPipelineBatch took a mirrored, scaled or zero "rotation" and called its rows clean,
+    where each WrenchPipeline now flags them INVALID_INPUT (its docstring: a clean row is the pipeline's floats)."""
+    from coassist.runtime.wrench import WrenchPipelineBatch
+
+    pipes = [WrenchPipeline(WrenchConfig(**PLAIN), dt=0.008) for _ in range(2)]
+    for bad in (np.diag([1.0, 1.0, -1.0]), 0.5 * np.eye(3), np.zeros((3, 3))):
+        with pytest.raises(ValueError, match="rotation must be a rotation matrix"):
+            WrenchPipelineBatch(pipes, bad)
+    WrenchPipelineBatch(pipes, rot_x(30.0))  # a rotation: taken

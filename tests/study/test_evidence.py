@@ -287,3 +287,28 @@ def test_a_participant_beyond_the_planned_number_is_warned_of_the_square_they_re
         "warning: S08 is participant 8 of 4 planned (row 1 of the Latin square's 6): the order of conditions stays "
         "balanced only if the participants who finish fill whole squares of 6 rows",
     ]
+
+
+def test_the_highest_numbered_participant_withdrawn_is_named_and_their_number_never_given_again(finished_study):
+    """The review of the fix: withdrawing the last-numbered participant left no line, and the next participant took
+    their number and row. The study keeps the highest number it gave (numbers.json); a withdrawn number's row is
+    the Latin square's (mod its 6 rows here)."""
+    import shutil
+
+    for k in range(2, 9):  # registered, order written, no trial run: numbers 2 … 8
+        with ParticipantRun(StudyFolder(finished_study), f"S{k:02d}", simulate=True):
+            pass
+    table = json.loads((finished_study / "participants.json").read_text())
+    for pid in ("S07", "S08"):  # numbers 7 and 8, the highest
+        del table[pid]
+        shutil.rmtree(finished_study / "participants" / pid)
+    (finished_study / "participants.json").write_text(json.dumps(table))
+    result = CliRunner().invoke(app, ["study", "report", str(finished_study)])
+    assert result.exit_code == 0, result.output
+    limits = json.loads((finished_study / "report" / "summary.json").read_text())["limits"]
+    assert (
+        "Numbers 7, 8 are in no participant's record: taken out of the study (withdrawn?), with their row of the "
+        "Latin square (0, 1)." in limits
+    )
+    with ParticipantRun(StudyFolder(finished_study), "S09", simulate=True) as run:
+        assert (run.record["number"], run.record["row"]) == (9, 8)

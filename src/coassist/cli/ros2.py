@@ -218,7 +218,10 @@ def ros2(
                 )
             finally:
                 with held:
-                    world.close()
+                    try:
+                        world.close()
+                    except Exception as exc:  # the teardown after the run must not lose its trial (as drive's)
+                        err_console.print(f"warning: closing the ROS 2 world raised {exc}", markup=False)
         except (ValueError, RuntimeError, ImportError, ConnectionError, OSError) as exc:
             fail(str(exc))
         except RunInterrupted as stop:  # Ctrl-C: the arm stopped; the ticks before it are written, as on an error

@@ -681,6 +681,8 @@ class WrenchPipelineBatch:
         R = np.asarray(rotation, dtype=float)
         if R.shape != (3, 3) or not np.isfinite(R).all():
             raise ValueError(f"rotation must be a finite (3, 3) matrix, got shape {R.shape}")
+        if not _is_rotation(*R.ravel().tolist()):  # the pipelines' own check: every row would be INVALID_INPUT
+            raise ValueError("rotation must be a rotation matrix (RᵀR = I within 1e-6, det > 0)")
         B = len(pipes)
 
         def f(seq) -> np.ndarray:

@@ -7,6 +7,7 @@
       study.json                 its SHA-256, the blinding key (condition → label), the
                                  weights' SHA-256 of every model it names, the Latin square
       participants.json          pseudonymous id → number, Latin-square row, simulated or not
+      numbers.json               the highest participant number given (a withdrawn one is not given again)
       participants/<id>/
         order.json               the participant's steps, fixed at their first run
         progress.jsonl           the manifest of what ran: one line per finished step
@@ -85,6 +86,8 @@ FORMAT = "coassist-study/1"
 PLAN_NAME = "plan.toml"
 STUDY_NAME = "study.json"
 PARTICIPANTS_NAME = "participants.json"
+#: the highest participant number the study has given: a number stays taken after its participant is withdrawn
+NUMBERS_NAME = "numbers.json"
 ORDER_NAME = "order.json"
 PROGRESS_NAME = "progress.jsonl"
 PLANS_NAME = "plans"  # the plans an amendment replaced, as <sha256>.toml
@@ -477,13 +480,33 @@ class StudyFolder:
                     )
                     + ": the report pools everyone in a folder"
                 )
-            number = max((r["number"] for r in table.values()), default=0) + 1
+            # a withdrawn participant's number (and row) is not given again, even the highest one
+            number = max(self.numbers_issued(), *(r["number"] for r in table.values()), 0) + 1
             rec = {"number": number, "row": number - 1, "simulated": bool(simulated), "registered": utc_now()}
             # the folder first: a registered participant always has one (the table's check names a lost one)
             self.participant(participant).folder.mkdir(parents=True, exist_ok=True)
             table[participant] = rec
             atomic_write_text(self.folder / PARTICIPANTS_NAME, _json(table))
+            atomic_write_text(self.folder / NUMBERS_NAME, _json({"issued": number}))  # after: a kill between is safe
             return rec
+
+    def numbers_issued(self) -> int:
+        """The highest participant number this study has given (0: none, or a folder of an older version, which
+        kept no count: its table's numbers are then all there is)."""
+        try:
+            record = json.loads((self.folder / NUMBERS_NAME).read_bytes().decode("utf-8"))
+        except FileNotFoundError:
+            return 0
+        except (OSError, UnicodeDecodeError, ValueError):
+            raise StudyFolderError(
+                f"{self.folder / NUMBERS_NAME}: not readable JSON (edited by hand?); {_RESTORE}"
+            ) from None
+        issued = record.get("issued") if isinstance(record, dict) else None
+        if isinstance(issued, bool) or not isinstance(issued, int) or issued < 0:
+            raise StudyFolderError(
+                f"{self.folder / NUMBERS_NAME}: not the study's count of participant numbers (edited by hand?); {_RESTORE}"
+            )
+        return issued
 
     def participant(self, participant: str) -> ParticipantFolder:
         return ParticipantFolder(self.folder / "participants" / participant, participant)

@@ -589,6 +589,7 @@ def summarise_study(folder: str | Path) -> StudySummary:
             table,
             [pid for pid, v in per_participant.items() if all(b in v for b in blocks)],
             len(study.record.get("latin_square") or ()) if plan.protocol != "iterative" and len(blocks) > 1 else 0,
+            study.numbers_issued(),
         )
         + _unpaired_note(comparisons, pooled, per_participant, blocks)
         + _count_note(totals, "missed")
@@ -667,10 +668,12 @@ def _partial_note(partial: Mapping[str, list[str]]) -> tuple[str, ...]:
     )
 
 
-def _roster_note(table: Mapping[str, Mapping[str, Any]], compared: Sequence[str], rows: int) -> tuple[str, ...]:
+def _roster_note(
+    table: Mapping[str, Mapping[str, Any]], compared: Sequence[str], rows: int, issued: int = 0
+) -> tuple[str, ...]:
     """The lines on who the numbers are of (none where nothing is amiss): simulated operators beside people (a
-    folder of an older version: ``study run`` now keeps one kind a folder); numbers in no participant's record (a
-    participant taken out of the table, withdrawn); and, where ``rows`` > 0 (the Latin square's rows: conditions
+    folder of an older version: ``study run`` now keeps one kind a folder); numbers up to ``issued`` (the highest the
+    study gave) in no participant's record (a participant taken out of the table, withdrawn); and, where ``rows`` > 0 (the Latin square's rows: conditions
     counterbalanced), whether the participants ``compared`` (every block whole) took every row equally often."""
     lines = []
     sims = sorted(pid for pid, r in table.items() if r.get("simulated"))
@@ -680,12 +683,16 @@ def _roster_note(table: Mapping[str, Mapping[str, Any]], compared: Sequence[str]
             "people: nothing of this report is evidence about people until they are reported apart."
         )
     numbers = {int(r["number"]) for r in table.values()}
-    gone = [k for k in range(1, max(numbers, default=0) + 1) if k not in numbers]
+    gone = [k for k in range(1, max(issued, *numbers, 0) + 1) if k not in numbers]
     if gone:
         lines.append(
             f"Number{'s' if len(gone) > 1 else ''} {', '.join(map(str, gone))} {'are' if len(gone) > 1 else 'is'} "
-            "in no participant's record: taken out of the study (withdrawn?), with their row of the Latin square "
-            f"({', '.join(str(k - 1) for k in gone)})."
+            "in no participant's record: taken out of the study (withdrawn?)"
+            + (
+                f", with their row of the Latin square ({', '.join(str((k - 1) % rows) for k in gone)})."
+                if rows > 0
+                else "."
+            )
         )
     if rows > 0 and compared:
         took = collections.Counter(int(table[pid]["row"]) % rows for pid in compared)
