@@ -75,7 +75,8 @@ class URSimWorld(URRTDEWorld):
     ----------
     host : the simulator's address.
     start : (3,) where the TCP starts [m] (the tool down); None: where it is.
-    frequency : the loop's rate [Hz] (URRTDEWorld's).  acceleration : speedJ's [rad/s²] (URRTDEWorld's).
+    frequency : the loop's rate [Hz] (URRTDEWorld's).
+    acceleration : speedJ's [rad/s²] (URRTDEWorld's).
     """
 
     def __init__(
