@@ -253,3 +253,17 @@ def test_load_for_show_reads_a_trial_file_and_names_a_bad_path(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(ValueError, match=r"empty: neither a dataset \(manifest\.json\) nor a recording"):
         monitor.load_for_show(tmp_path / "empty")
+
+
+def test_the_title_of_a_trial_whose_controller_reads_no_intent_does_not_name_a_model():
+    """The UR review of 3063e1e: an MG calibration trial's figure said "model present-held" where drive's line said
+    "assistance: none": MG, its probe and IMP log a source's rows but read none."""
+    from dataclasses import replace
+
+    meta = _trial().meta
+    for controller in ("manual", "manual-probe", "impedance"):
+        title = monitor.trial_title(replace(meta, controller=controller, model_id="present-held"))
+        assert title.endswith(f"· {controller} · no intent read (present-held's rows logged)"), title
+    assembled = monitor.trial_title(replace(meta, controller="cooperative", model_id="present-held"))
+    assert assembled.endswith("· cooperative · model present-held")
+    assert monitor.trial_title(replace(meta, controller="manual", model_id=None)).endswith("· manual")

@@ -51,6 +51,7 @@ __all__ = [
     "DECELERATION_DAMPING",
     "FORMER_NAMES",
     "IMPEDANCE_STIFFNESS",
+    "INTENT_FREE_CONTROLLERS",
     "PROBE",
     "get_preset",
     "make_controller",
@@ -158,6 +159,10 @@ CONTROLLERS: Registry[ControllerEntry] = Registry(
     },
     entry_type=ControllerEntry,
 )
+#: Controllers that never read the intent (MG and its probe apply no effort toward any reference, IMP pulls toward
+#: the nominal plan x_ref,r only): the person moves the same whatever the source; its rows are logged (and scored as
+#: e_RMS) only. A controller registered later is taken to read it.
+INTENT_FREE_CONTROLLERS = frozenset({"manual", "impedance", "manual-probe"})
 #: The built-in kinds' names (a kind registered later is in :data:`CONTROLLERS`, not here).
 #: "cooperative-arbitrated": the cooperative game with α set every tick by the law :data:`ARBITRATION`.
 CONTROLLER_KINDS: tuple[str, ...] = tuple(CONTROLLERS)

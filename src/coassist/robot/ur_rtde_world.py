@@ -788,8 +788,9 @@ class URRTDEWorld:
         else:
             what = (
                 f"ur-rtde's control script stopped running on the UR at {self.host} (the program was "
-                "stopped on the teach pendant or through the dashboard, or remote control was lost); the "
-                "arm is at rest. Check the teach pendant, then rerun."
+                "stopped on the teach pendant or through the dashboard, remote control was lost, or the "
+                "controller's watchdog saw no command for its timeout though this loop's periods were on time: "
+                "commands delayed on their way); the arm is at rest. Check the teach pendant, then rerun."
             )
         self.stop_detail = what
         raise URProgramStopped(what)

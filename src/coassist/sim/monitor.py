@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from coassist._io import save_figure
-from coassist.data import Trial
+from coassist.control.presets import INTENT_FREE_CONTROLLERS
+from coassist.data import Trial, TrialMeta
 
 
 def _numbers(value: object, n: int) -> tuple[float, ...] | None:
@@ -29,6 +30,18 @@ def _numbers(value: object, n: int) -> tuple[float, ...] | None:
     if n == 1 and not value[0] > 0:
         return None
     return tuple(float(v) for v in value)
+
+
+def trial_title(meta: TrialMeta) -> str:
+    """A trial figure's title from its ``meta`` (:class:`~coassist.data.TrialMeta`): where, who, what task, object and
+    controller, and the intent source. A controller that reads no intent (MG, its probe, IMP) logs a source's rows
+    all the same: the title says so, not "model present-held" beside an MG trial that had no assistance."""
+    head = f"{meta.origin}: {meta.user} · {meta.task} · {meta.object} · {meta.controller}"
+    if not meta.model_id:
+        return head
+    if meta.controller in INTENT_FREE_CONTROLLERS:
+        return f"{head} · no intent read ({meta.model_id}'s rows logged)"
+    return f"{head} · model {meta.model_id}"
 
 
 def plot_trial(trial: Trial, out: str | Path, *, n_predictions: int = 6, title: str | None = None) -> Path:
@@ -92,9 +105,7 @@ def plot_trial(trial: Trial, out: str | Path, *, n_predictions: int = 6, title: 
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     meta = trial.meta
-    label = title or f"{meta.origin}: {meta.user} · {meta.task} · {meta.object} · {meta.controller}" + (
-        f" · model {meta.model_id}" if meta.model_id else ""
-    )
+    label = title or trial_title(meta)
     ax.set_title(label, fontsize=10)
 
     f = trial.wrench

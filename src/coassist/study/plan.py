@@ -71,7 +71,7 @@ from typing import Any
 
 from coassist._checks import is_integer, is_real_number
 from coassist.config import APPLICATION_PRESET, CONTROL_PRESETS
-from coassist.control.presets import CONTROLLERS
+from coassist.control.presets import CONTROLLERS, INTENT_FREE_CONTROLLERS
 from coassist.errors import CoassistError
 from coassist.registry import unknown_name_message
 from coassist.robot.drive import MAX_TIME_LIMIT
@@ -137,11 +137,7 @@ ARRIVE_RADIUS_MAX = 0.1
 ITERATIVE_SOURCES = ("network", CALIBRATED)
 _NAME = re.compile(r"[a-z0-9][a-z0-9_-]{0,31}")  # matched whole (fullmatch: "$" would let a trailing newline by)
 _STUDY_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
-#: Controllers that never read the intent (MG and its probe apply no effort toward any reference, IMP pulls
-#: toward the nominal plan x_ref,r only): the person moves the same whatever the source (its rows are logged, and
-#: scored as e_RMS, only), so two conditions of one that differ only in the intent are refused. A controller
-#: registered later is taken to read it.
-INTENT_FREE_CONTROLLERS = frozenset({"manual", "impedance", "manual-probe"})
+# INTENT_FREE_CONTROLLERS (coassist.control.presets): two conditions of one that differ only in the intent are refused
 _MAX_CONDITIONS = 26  # labelled A … Z
 #: The ranges of the plan's numbers a study can use (module docstring), [s] unless said.
 MOTION_TIME_RANGE = (0.5, 120.0)  # a reach of the thesis takes 10-20 s
