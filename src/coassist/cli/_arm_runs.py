@@ -167,14 +167,11 @@ def write_interrupted(stop: Any, write: Callable[[Any], None]) -> NoReturn:
     if stop.trial is None:
         err_console.print("interrupted (Ctrl-C) before the first tick: nothing to write", markup=False)
         raise typer.Exit(130)
+    if stop.after_end:
+        write_finished(stop.trial, write, interrupted=True)  # says so, exits 130
     with InterruptsHeld():
         write(stop.trial)
-    err_console.print(
-        "Ctrl-C after the trial ended: the whole trial is written"
-        if stop.after_end
-        else "interrupted (Ctrl-C): the ticks before it are written",
-        markup=False,
-    )
+    err_console.print("interrupted (Ctrl-C): the ticks before it are written", markup=False)
     raise typer.Exit(130)
 
 

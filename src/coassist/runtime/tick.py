@@ -87,10 +87,11 @@ UPSTREAM_BAD = (
     | Fault.STATE_MISMATCH
 )
 #: [m], [rad] How far the reported tool pose may move from the joints' forward kinematics, against where it was at the
-#: run's first tick (in the tool's frame: a TCP or calibration offset is constant there), before the tick is
-#: STATE_MISMATCH: a joint reading glitched by a finite amount (a second publisher, a wrong message) otherwise drives
-#: the arm to correct an error it does not have. A real arm's calibration moves the two apart by well under a
-#: millimetre over a task's few decimetres; 0.3 rad on a UR5's base joint is some 15 cm.
+#: run's first tick (in the tool's frame: a TCP offset is constant there), before the tick is STATE_MISMATCH: a joint
+#: reading glitched by a finite amount (a second publisher, a wrong message) otherwise drives the arm to correct an
+#: error it does not have. The tolerance leaves a real arm's calibration room to move the two apart over a task's few
+#: decimetres (not measured on a real arm: no normal run of the simulated worlds flags a tick); 0.3 rad on a UR5's
+#: base joint is some 15 cm.
 STATE_MISMATCH_POSITION = 0.01
 STATE_MISMATCH_ANGLE = 0.05
 _MISMATCH_FROB2 = 8.0 * math.sin(STATE_MISMATCH_ANGLE / 2) ** 2  # ‖R₁ − R₂‖²_F of two rotations that far apart
