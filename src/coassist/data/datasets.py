@@ -400,18 +400,25 @@ def unfinished_collection(folder: str | os.PathLike[str]) -> str:
     folder = Path(folder)
     if not (folder / DatasetWriter.PROGRESS).is_file():
         return ""
-    done = len(list(folder.glob("trial_*.parquet")))
+    done, of, what = _partial_progress(folder)
+    return (
+        f"{folder}: an unfinished collection ({done}{of} trials written{'; ' + what if what else ''}): the command "
+        "that started it finishes it (run it again: it resumes), then read the folder it writes"
+    )
+
+
+def _partial_progress(partial: Path) -> tuple[int, str, str]:
+    """What an unfinished collection's ``partial`` folder holds, for a line naming it: its trial files, " of N" (the
+    trials it was to write; "" where its progress record does not say) and its description ("" likewise)."""
+    done = len(list(partial.glob("trial_*.parquet")))
     try:
-        record = json.loads((folder / DatasetWriter.PROGRESS).read_text("utf-8"))
+        record = json.loads((partial / DatasetWriter.PROGRESS).read_text("utf-8"))
     except (OSError, ValueError):
         record = None
     record = record if isinstance(record, dict) else {}
     of = f" of {record['n_trials']}" if is_integer(record.get("n_trials")) else ""
-    what = f"; {record['description']}" if isinstance(record.get("description"), str) and record["description"] else ""
-    return (
-        f"{folder}: an unfinished collection ({done}{of} trials written{what}): the command that started it finishes "
-        "it (run it again: it resumes), then read the folder it writes"
-    )
+    what = record["description"] if isinstance(record.get("description"), str) else ""
+    return done, of, what
 
 
 # --------------------------------------------------------------------------- resumable writing
@@ -527,13 +534,7 @@ class DatasetWriter:
 
     def _other_collection(self) -> str:
         """Why :attr:`partial`, another collection's unfinished trials, is not discarded without ``overwrite``."""
-        done = len(list(self.partial.glob("trial_*.parquet")))
-        try:
-            record = json.loads((self.partial / self.PROGRESS).read_text("utf-8"))
-            what = str(record.get("description") or "") if isinstance(record, dict) else ""
-            total = f" of {record['n_trials']}" if isinstance(record, dict) and "n_trials" in record else ""
-        except (OSError, ValueError):
-            what, total = "", ""
+        done, total, what = _partial_progress(self.partial)
         return (
             f"{self.partial} holds {done}{total} finished trials of another, unfinished collection"
             + (f" ({what})" if what else "")
