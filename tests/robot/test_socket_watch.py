@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import os
+import select
 import socket
 import struct
 from collections.abc import Iterator
@@ -10,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from coassist.robot.socket_watch import SocketWatch, socket_fds, sockets_to
+from coassist.robot.socket_watch import ENDED, SocketWatch, socket_fds, sockets_to
 
 HAS_PROC = Path("/proc/self/fd").is_dir()
 
@@ -63,6 +65,27 @@ def test_a_descriptor_closed_by_its_owner_has_ended():
         watch = SocketWatch(client.fileno())
         client.close()
         assert watch.ended()
+
+
+def test_another_socket_under_the_watched_number_has_ended():
+    # ur-rtde reconnects by itself after a reset, and its new socket took the old one's number within
+    # 3-10 ms on coassist ur-sim: poll(2) on the number then answers for the live new connection
+    with connection() as (client, peer, port):
+        watch = SocketWatch(client.fileno())
+        with socket.create_connection(("127.0.0.1", port), timeout=2.0) as new:
+            os.dup2(new.fileno(), client.fileno())  # the old connection closed, its number now the new one's
+            alone = select.poll()
+            alone.register(client.fileno(), ENDED)
+            assert not alone.poll(0)  # poll(2) alone: a live connection, the reset missed
+            assert watch.ended()
+            assert watch.ended()  # asked again: still ended, the number is still another socket's
+
+
+def test_a_closed_descriptor_cannot_be_watched():
+    with connection() as (client, _, _):
+        fd = client.fileno()
+    with pytest.raises(ValueError, match="not an open descriptor"):
+        SocketWatch(fd)
 
 
 @pytest.mark.skipif(not HAS_PROC, reason="the descriptors are listed from /proc/self/fd")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import os
 import socket
 import struct
 import sys
@@ -383,21 +384,29 @@ def test_a_control_link_reported_down_ends_the_run_link_lost_without_another_com
 
 
 @pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="the control socket is found through /proc")
-@pytest.mark.parametrize("how", ["reset", "closed"])
+@pytest.mark.parametrize("how", ["reset", "closed", "reconnected"])
 def test_a_control_connection_the_robot_ended_gets_no_command_and_stop_sends_nothing(how):
-    """The kernel says first: no call reaches ur-rtde, whose own threads would tear the connection down."""
+    """The kernel says first: no call reaches ur-rtde, whose own threads would tear the connection down.
+
+    reconnected: ur-rtde's own reconnection after a reset, its new socket under the old one's number before the
+    loop's next call (3-10 ms after the reset on coassist ur-sim): a poll(2) on the number alone saw a live link
+    and the next speedJ went into a connection whose control script had ended (reported as a pendant stop)."""
     with socket.create_server((free_host(), 30004)) as server:  # the RTDE port, as the control interface's
         robot = FakeRobot()
         robot.rtde_address = server.getsockname()[:2]
         world, robot = make(robot)
         peer, _ = server.accept()
         run_ticks(world, 3)
-        if how == "reset":  # RST: a controller restart, the simulator's dropped connection
+        if how != "closed":  # RST: a controller restart, the simulator's dropped connection
             peer.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
         peer.close()  # else FIN: the controller closed it
+        if how == "reconnected":
+            again = socket.create_connection(server.getsockname()[:2], timeout=2.0)
+            os.dup2(again.fileno(), robot.rtde_socket.fileno())  # the new connection, the old descriptor number
+            again.close()
         n = len(robot.calls)
         world.read()  # the receive interface's connection is another one
-        with pytest.raises(RobotLinkError, match=r"the robot closed the control connection\); no command was sent"):
+        with pytest.raises(RobotLinkError, match=r"the control connection ended.*\); no command was sent"):
             world.apply(Command(qd=np.full(6, 0.01)))
         with pytest.raises(RobotLinkError, match="was lost"):
             world.stop()

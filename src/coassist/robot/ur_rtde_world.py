@@ -177,6 +177,10 @@ _JITTER_WINDOW = 1.0
 _JITTER_SHARE = 0.25
 #: The RTDE interface runs at most at the e-Series controller rate.
 _MAX_FREQUENCY = 500.0
+#: Why the link is lost when the control socket's watch says ended: the robot reset or closed it, or the link
+#: dropped and ur-rtde reconnected under the same descriptor (coassist.robot.socket_watch), its script gone.
+_CONTROL_ENDED = "the control connection ended: the robot closed it, or it dropped and ur-rtde reconnected"
+
 #: [kg] The heaviest payload a UR-class arm carries (the UR30's 30 kg): more is a typo, not a tool.
 MAX_PAYLOAD = 30.0
 #: [s] how far behind its schedule the loop may fall and still catch up (module docstring, the schedule);
@@ -450,7 +454,7 @@ class URRTDEWorld:
         acts on it), then ur-rtde's own flag (its receive thread has torn the connection down)."""
         if self._lost is None:
             if self._watch is not None and self._watch.ended():
-                self._lose("the robot closed the control connection")
+                self._lose(_CONTROL_ENDED)
             elif not self._call_c("isConnected"):
                 self._lose("the control interface reports it is disconnected")
         return self._lost
@@ -802,7 +806,7 @@ class URRTDEWorld:
         if self._lost is not None:
             return False
         if self._watch is not None and self._watch.ended():
-            self._lose("the robot closed the control connection")
+            self._lose(_CONTROL_ENDED)
             return False
         try:
             connected = bool(self._rtde_c.isConnected()) and bool(self._rtde_r.isConnected())
