@@ -56,6 +56,7 @@ def full_trial(n: int = 50, d: int = 2, h: int = 5, seed: int = 0, **meta_change
         effort_h=rng.normal(size=(n, d)),
         effort_r=rng.normal(size=(n, d)),
         fault=rng.integers(0, 4, size=n),
+        alpha=rng.uniform(0.0, 1.0, size=n),
     )
 
 
@@ -100,6 +101,7 @@ def test_columns_and_schema(tmp_path):
         "effort_r_x",
         "effort_r_y",
         "fault",
+        "alpha",
         "prediction_x",
         "prediction_y",
     ]

@@ -137,6 +137,9 @@ def test_trial_arrays_are_float64_read_only_copies():
         ("wrench", np.full((10, 2), np.nan), r"Trial.wrench has non-finite"),
         ("prediction", np.full((10, 4, 2), np.inf), r"Trial.prediction has infinite"),
         ("velocity", None, r"Trial.velocity is required"),
+        ("alpha", np.full(9, 0.5), r"Trial.alpha has shape \(9,\), expected \(10,\)"),
+        ("alpha", np.full(10, 1.5), r"Trial.alpha must lie in \[0, 1\]; alpha\[0\] = 1.5"),
+        ("alpha", np.full(10, np.nan), r"Trial.alpha has non-finite"),
         ("meta", {"user": "x"}, r"Trial.meta must be a TrialMeta"),
     ],
 )

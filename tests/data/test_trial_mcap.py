@@ -169,3 +169,16 @@ def test_bad_arguments_and_a_failed_write_leave_nothing(tmp_path, monkeypatch):
     with pytest.raises(OSError, match="disk full"):
         write_trial_mcap(six_dof_trial(seed=1), path)
     assert path.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["a.mcap"]
+
+
+def test_the_trials_own_alpha_goes_out_tick_by_tick_and_a_given_one_wins(tmp_path):
+    # the arbitration's online α: recorded by the arm worlds' loop, it was on no /alpha (drive and ros2 gave the
+    # preset's α for the plain game only)
+    from dataclasses import replace
+
+    alpha = 0.6 + 0.3 * np.sin(np.arange(N) / 7.0) ** 2
+    trial = replace(six_dof_trial(), alpha=alpha)
+    _, msgs = read_all(write_trial_mcap(trial, tmp_path / "a.mcap"))
+    assert [m.data for _, m in msgs["/alpha"]] == alpha.tolist()
+    _, msgs = read_all(write_trial_mcap(trial, tmp_path / "b.mcap", alpha=0.5))
+    assert [m.data for _, m in msgs["/alpha"]] == [0.5] * N

@@ -420,6 +420,8 @@ REFUSED = {
     "train --layers 0": (["train", "{D}", "--layers", "0"], ["--layers must be >= 1", "--preset linear"]),
     "train --threads 100000": (["train", "{D}", "--threads", "100000"], ["--threads must be at most"]),
     "show --out x.txt": (["show", "{D}", "--out", "{OUT}/x.txt"], ["--out", "give a file ending in .png"]),
+    # a folder not made yet: the line said only "give a file ending in .png" (a review, 2026-12-06)
+    "show --out missing/": (["show", "{D}", "--out", "{OUT}/figs/"], ["--out", "no such folder (make it first"]),
     "sweep --duration 1e308": (["sweep", "--duration", "1e308"], ["--duration must be at most 3600"]),
     "evaluate -m a file": (["evaluate", "-m", "{work}/afile", "-d", "{D}"], ["--model", "is a file"]),
     "ur-sim --seed -1": (["ur-sim", "--seed", "-1"], ["--seed must be >= 0"]),

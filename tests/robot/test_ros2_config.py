@@ -52,3 +52,17 @@ def test_the_unused_wrench_in_base_option_says_it_does_nothing(tmp_path):
     assert "note: --wrench-in-base does nothing: each wrench message's frame_id says its frame" in said.output
     plain = CliRunner().invoke(app, ["ros2", "--out", str(out), "--yes"])
     assert plain.exit_code == 2 and "--wrench-in-base" not in plain.output
+
+
+def test_the_urs_joints_out_of_kinematic_order_are_refused():
+    # q is read in joint_names' order and taken for joint 1..6 by the forward kinematics: the UR's names in
+    # ur_robot_driver's alphabetical order made a +8 N push move the tool against it (a review, 2026-12-06)
+    from coassist.robot.ros2_config import UR_JOINT_NAMES, Ros2Config
+
+    for names in (sorted(UR_JOINT_NAMES), UR_JOINT_NAMES[::-1], tuple("ur5e_" + n for n in sorted(UR_JOINT_NAMES))):
+        with pytest.raises(ValueError, match=r"Ros2Config\.joint_names must be the UR's joints from the base"):
+            Ros2Config(joint_names=tuple(names))
+    prefixed = tuple("left_" + n for n in UR_JOINT_NAMES)  # a description's prefix, in kinematic order
+    assert Ros2Config(joint_names=prefixed).joint_names == prefixed
+    custom = ("j1", "j2", "j3", "j4", "j5", "j6")  # names it cannot place: taken as base to tool, as documented
+    assert Ros2Config(joint_names=custom).joint_names == custom

@@ -291,12 +291,24 @@ class Listener(_SpunNode):
         super().close()
 
 
-def test_the_monitor_topics_carry_the_run():
+@pytest.mark.parametrize("controller", ["cooperative", "cooperative-arbitrated"])
+def test_the_monitor_topics_carry_the_run(controller):
+    """The plain game with the oracle's rows; the arbitrated one with the plan's (the nominal source gives the tick
+    no rows: the monitor published none, while the MCAP and the live view drew the plan's) and its online α (a
+    constant α given to the world was published instead)."""
     from coassist.scenario.reference_intents import OracleIntent
 
+    nominal = controller == "cooperative-arbitrated"
     listener = Listener()
     try:
-        config = DriveConfig(world="ur", controller="cooperative", task="linear", time_limit=0.6, seed=1)
+        config = DriveConfig(
+            world="ur",
+            controller=controller,
+            intent="nominal" if nominal else DriveConfig.intent,
+            task="linear",
+            time_limit=0.6,
+            seed=1,
+        )
         sim = mujoco_world(config)
         robot = SimRobot(sim)
         mass, com = sim.tool_mass_and_com()
@@ -309,7 +321,7 @@ def test_the_monitor_topics_carry_the_run():
             payload=(mass, tuple(com)),
             connect_timeout=10.0,
         )
-        world = Ros2World(cfg, alpha=0.8)
+        world = Ros2World(cfg, alpha=0.123)  # until the run is followed: then its controller's
         deadline = time.monotonic() + 5.0  # the monitor's subscriptions are matched before the run
         while world._pubs["tool_pose"].get_subscription_count() == 0 and time.monotonic() < deadline:
             time.sleep(0.01)
@@ -322,7 +334,7 @@ def test_the_monitor_topics_carry_the_run():
                 world.publish_monitor(k, state, out)
                 time.sleep(0.004)
 
-            trial = drive(config, world=world, on_tick=on_tick, intent_source=OracleIntent(60))
+            trial = drive(config, world=world, on_tick=on_tick, intent_source=None if nominal else OracleIntent(60))
         finally:
             world.close()
             robot.close()
@@ -344,7 +356,14 @@ def test_the_monitor_topics_carry_the_run():
     assert [q.header.stamp.sec * 10**9 + q.header.stamp.nanosec - t0 for q in paths[3].poses] == [
         (i + 1) * 8_000_000 for i in rows
     ]
-    assert [m.data for m in listener.got["/coassist/alpha"]] == [0.8] * 15
+    alphas = [m.data for m in listener.got["/coassist/alpha"]]
+    assert alphas == trial.alpha[::5].tolist()
+    if nominal:
+        assert len(set(alphas)) > 1  # the arbitration's online α moves
+    else:
+        from coassist.control.presets import get_preset
+
+        assert alphas == [get_preset(trial.meta.extra["preset"]).game.alpha] * 15  # the run's preset's α
     forces = listener.got["/coassist/hand_force"]
     np.testing.assert_array_equal([[f.wrench.force.x, f.wrench.force.y] for f in forces], trial.wrench[::5])
     diags = listener.got["/diagnostics"]

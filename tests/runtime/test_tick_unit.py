@@ -8,6 +8,8 @@ dwell rule's end tick by counting, and the safety layer's ramp toward rest.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from scipy.signal import cont2discrete
@@ -586,3 +588,37 @@ def test_a_controllers_nan_is_a_bad_tick_never_the_admittance_state(at, stops):
     else:  # the push moves the tool on after the one bad tick
         assert log.ended == "time_limit" and not log.fault[first + 5 :].any()
         assert log.pose[-1, 0] - log.pose[first + 1, 0] > 0.01
+
+
+class _ScriptedAlphaController(_NaNController):
+    """Manual guidance whose ``alpha`` is set by its own step: 0.5 + 0.001·k at step k, NaN at step 7 (a bad read)."""
+
+    def __init__(self) -> None:
+        super().__init__(at=())
+        self.alpha = 0.5
+
+    def step(self, z, ref_h, ref_r, wrench):
+        out = super().step(z, ref_h, ref_r, wrench)
+        self.alpha = math.nan if self.k == 7 else 0.5 + 0.001 * self.k
+        return out
+
+
+def test_the_log_keeps_the_alpha_each_ticks_command_was_computed_with():
+    # the arbitration's online α was in no record of a run (only the plain game's constant, on the MCAP's /alpha);
+    # one value that is no α keeps the tick before's, the row never lost
+    target = np.array([0.3, 0.1])
+    world = ScriptedEffortWorld(np.tile(target + 0.05, (40, 1)))
+    ref = _reference(target)
+    tick = ControlTick(
+        _ScriptedAlphaController(),
+        NominalStage(H),
+        WrenchPipeline(CLEAN, DT),
+        SafetyLayer(SafetyLimits(), DT, 6),
+        command_space="effort",
+    )
+    tick.reset(Plan(ref, np.array([*ref[0, :2], 0.0, 0.0, 0.0, 0.0])), _context(ref))
+    log = run_loop(world, tick, 12)
+    expected = 0.5 + 0.001 * np.arange(12)
+    expected[7] = expected[6]
+    np.testing.assert_array_equal(log.alpha, expected)
+    assert run_loop(ScriptedEffortWorld(np.tile(target + 0.05, (40, 1))), _effort_tick(ref), 5).alpha is None  # MG

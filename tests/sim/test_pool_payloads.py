@@ -138,6 +138,7 @@ def test_a_trial_travels_whole_its_arms_joints_too():
         "fault": rng.integers(0, 2**20, n),
         "joints": rng.standard_normal((n, 6)),
         "joint_velocity": rng.standard_normal((n, 6)),
+        "alpha": rng.uniform(0.0, 1.0, n),
     }
     assert set(arrays) == {f.name for f in dataclasses.fields(Trial)} - {"meta"}  # every field of Trial, set
     meta = TrialMeta(

@@ -83,13 +83,6 @@ def intent_option(intent: str) -> None:
         fail(f"--intent {exc}", 2)
 
 
-def run_alpha(preset: str, controller: str) -> float | None:
-    """The game's α of a drive/ros2 run (the assistive controller's preset), None for IMP and MG."""
-    from coassist.config import CONTROL_PRESETS
-
-    return CONTROL_PRESETS.lookup(preset).game.alpha if controller == "cooperative" else None
-
-
 def confirm_move(yes: bool, stop_hint: str):
     """The question drive and ros2 ask before an arm moves: the limits in force, then "Move the robot?".
 
@@ -131,19 +124,19 @@ def write_run(
     trial,
     out: Path,
     *,
-    alpha: float | None,
     mcap: bool,
     plot: bool,
     joint_names: Sequence[str] | None,
     frame_id: str = "base",
 ) -> None:
-    """Write a drive/ros2 run: the trial file, how it ended, and <out>.mcap / <out>.png on request.
+    """Write a drive/ros2 run: the trial file, how it ended, and <out>.mcap / <out>.png on request (the
+    MCAP's ``/alpha`` is the trial's own α, tick by tick).
     ``joint_names``: the arm's, in the trial's joint order (None: joint_1 … joint_n in the MCAP);
     ``frame_id``: the robot's base frame, the MCAP's poses' frame (``coassist ros2 --base-frame``)."""
     from coassist.data.run_pair import write_run_pair
 
     # the trial and its MCAP as one pair: no crash leaves a trial beside another run's MCAP
-    path, mcap_path = write_run_pair(trial, out, mcap=mcap, alpha=alpha, joint_names=joint_names, frame_id=frame_id)
+    path, mcap_path = write_run_pair(trial, out, mcap=mcap, joint_names=joint_names, frame_id=frame_id)
     extra = trial.meta.extra
     wrote(f"{path}: {trial.n_samples} ticks, ended: {extra['ended']}")
     if extra.get("stop_message"):

@@ -11,7 +11,6 @@ from coassist.cli._arm_runs import (
     DRIVE_OPTIONS,
     confirm_move,
     intent_option,
-    run_alpha,
     run_out,
     write_finished,
     write_interrupted,
@@ -159,10 +158,9 @@ def drive(
 
         # The UR's joint names; another arm's joints are named joint_1 … joint_n in the MCAP.
         names = UR_JOINT_NAMES if config.robot == "ur5" else None
-        alpha = run_alpha(preset, controller) if mcap else None
 
         def write(trial) -> None:
-            write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=names)
+            write_run(trial, out, mcap=mcap, plot=plot, joint_names=names)
 
         try:
             trial = run_drive(

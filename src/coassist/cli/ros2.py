@@ -10,7 +10,6 @@ from coassist.cli._arm_runs import (
     DRIVE_OPTIONS,
     confirm_move,
     intent_option,
-    run_alpha,
     run_out,
     write_finished,
     write_interrupted,
@@ -96,7 +95,7 @@ def ros2(
     ),
     joint_names: str = typer.Option(
         None,
-        help="Joint order of the commands, comma-separated (default: the UR's, shoulder_pan_joint … wrist_3_joint).",
+        help="The joints from the base to the tool, comma-separated: the order of the commands (default: the UR's, shoulder_pan_joint … wrist_3_joint).",
     ),
     base_frame: str = typer.Option(
         "base", help="frame_id of the published poses (a wrench in it is rotated into the sensor's)."
@@ -196,16 +195,15 @@ def ros2(
     out = run_out(out, overwrite, mcap, plot)
 
     confirm = confirm_move(yes, "the emergency stop")
-    alpha = run_alpha(preset, controller)
     live = open_live(foxglove)
 
     def write(trial) -> None:
-        write_run(trial, out, alpha=alpha, mcap=mcap, plot=plot, joint_names=rcfg.joint_names, frame_id=rcfg.base_frame)
+        write_run(trial, out, mcap=mcap, plot=plot, joint_names=rcfg.joint_names, frame_id=rcfg.base_frame)
 
     held = InterruptsHeld()  # while the world closes after the run: a Ctrl-C there must not lose the trial
     try:
         try:
-            world = Ros2World(rcfg, alpha=alpha)
+            world = Ros2World(rcfg)
             try:
                 trial = run_drive(
                     config,

@@ -139,7 +139,8 @@ def show(
     out = file_out(Path(name) if out is None else out, "--out", name)
     kinds = ("png", "pdf", "svg", "jpg", "jpeg")  # what the monitor's figure is written as
     if out.suffix.lower().lstrip(".") not in kinds:
-        fail(f"--out {out}: give a file ending in .{', .'.join(kinds)} (the figure's format)", 2)
+        folder = "" if out.suffix else "no such folder (make it first for the figure to go in it), or "
+        fail(f"--out {out}: {folder}give a file ending in .{', .'.join(kinds)} (the figure's format)", 2)
     trials = intent_trials([path], skip_bad_trials, option="PATH", bag_topics=bag_topics)
     if not 0 <= index < len(trials):
         fail(f"--index {index}: {path} holds {len(trials)} trial(s), so it must be in 0 … {len(trials) - 1}", 2)

@@ -285,6 +285,10 @@ class Trial:
         Measured joint positions q in rad (arm worlds: MuJoCo UR5, the real UR5).
     joint_velocity : ndarray, shape (T, J), optional
         Joint velocity command q̇ sent at each tick in rad/s (after the safety layer).
+    alpha : ndarray, shape (T,), optional
+        The cooperative game's α each tick's command was computed with, in [0, 1] (the
+        arbitration's online one; constant for the plain game). Recorded by the arm worlds'
+        loop (drive, ros2, play, a study on an arm); IMP and MG have none.
 
     Notes
     -----
@@ -305,6 +309,7 @@ class Trial:
     fault: np.ndarray | None = None
     joints: np.ndarray | None = None
     joint_velocity: np.ndarray | None = None
+    alpha: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.meta, TrialMeta):
@@ -389,6 +394,15 @@ class Trial:
             n_joints = arr.shape[1]
             _check_finite(arr, name)
             set_(name, arr)
+
+        if self.alpha is not None:
+            alpha = _float_array(self.alpha, "alpha")
+            _check_shape(alpha, "alpha", (n,))
+            _check_finite(alpha, "alpha")
+            if np.any((alpha < 0.0) | (alpha > 1.0)):
+                k = int(np.argmax((alpha < 0.0) | (alpha > 1.0)))
+                raise ValueError(f"Trial.alpha must lie in [0, 1]; alpha[{k}] = {float(alpha[k])!r}")
+            set_("alpha", alpha)
 
     @property
     def n_samples(self) -> int:

@@ -6,6 +6,7 @@ Columns, for the d controlled DOFs named ``x, y, z, rx, ry, rz`` in order::
     pose_<ax>, vel_<ax>, wrench_<ax>, ref_<ax>   float64   m, m/s, N, m
     intent_<ax>, effort_h_<ax>, effort_r_<ax>    float64   optional
     fault                                  int64     optional
+    alpha                                  float64   optional (the game's α each tick)
     q_<j>, qd_cmd_<j>  (j = 0 … J−1)       float64   rad, rad/s  optional (arm worlds)
     prediction_<ax>                        fixed_size_list<float64>[H]   optional
 
@@ -84,6 +85,8 @@ def _trial_table(trial: Trial) -> pa.Table:
                 cols[f"{prefix}_{AXES[j]}"] = pa.array(np.ascontiguousarray(arr[:, j]), type=pa.float64())
     if trial.fault is not None:
         cols["fault"] = pa.array(trial.fault, type=pa.int64())
+    if trial.alpha is not None:
+        cols["alpha"] = pa.array(trial.alpha, type=pa.float64())
     for field_name, prefix in _JOINT.items():
         arr = getattr(trial, field_name)
         if arr is not None:
@@ -224,6 +227,8 @@ def read_trial(path: str | os.PathLike[str]) -> Trial:
             kwargs[field_name] = block(prefix)
     if "fault" in names:
         kwargs["fault"] = _column(table, "fault", path)
+    if "alpha" in names:
+        kwargs["alpha"] = _column(table, "alpha", path)
     for field_name, prefix in _JOINT.items():
         n_j = 0
         while f"{prefix}_{n_j}" in names:

@@ -13,8 +13,8 @@ topic                              type                                   conten
 ``/current_velocity``              geometry_msgs/TwistStamped             measured tool twist
 ``/human_wrench``                  geometry_msgs/WrenchStamped            hand force (and torque) used
 ``/robot_ref_pos``                 geometry_msgs/PoseStamped              the nominal reference
-``/prediction``                    nav_msgs/Path                          intent prediction, pose i at t_k + i·dt
-``/alpha``                         std_msgs/Float64                       the game's α (when given)
+``/prediction``                    nav_msgs/Path                          intent prediction, pose i at t_k + (i+1)·dt
+``/alpha``                         std_msgs/Float64                       the game's α (the trial's, or given)
 ``/faults``                        diagnostic_msgs/DiagnosticArray        the tick's fault flags
 ``/joint_states``                  sensor_msgs/JointState                 measured joint positions
 ``/forward_velocity_controller/    std_msgs/Float64MultiArray             commanded joint velocities
@@ -222,7 +222,8 @@ def write_trial_mcap(
     ----------
     trial : the trial (any source).
     path : the file to write; parent folders are created.
-    alpha : the game's α, one number for the run or one per tick (n,); None: no ``/alpha``.
+    alpha : the game's α, one number for the run or one per tick (n,); None: the trial's own
+        (:attr:`~coassist.data.Trial.alpha`, recorded by the arm worlds' loop), else no ``/alpha``.
     joint_names : names for ``/joint_states`` (default ``joint_1 …``); used when the trial has joints.
     frame_id : frame of the poses and wrenches.
     start_ns : header stamp of tick 0 [ns since the epoch] (0: the trial's own clock).
@@ -246,6 +247,8 @@ def write_trial_mcap(
         raise ValueError(f"start_ns must be an int >= 0, got {start_ns!r}")
     n = trial.n_samples
     alphas = None
+    if alpha is None:
+        alpha = trial.alpha
     if alpha is not None:
         alphas = (
             np.broadcast_to(np.asarray(alpha, dtype=float), (n,))

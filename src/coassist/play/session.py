@@ -530,12 +530,11 @@ class PlaySession:
             from coassist.data.run_pair import LIVE_START
             from coassist.data.trial_mcap import write_trial_mcap
 
-            alpha = self.preset.game.alpha if trial.meta.controller == "cooperative" else None
-            # stamped as the live view stamped the run (--foxglove), as drive's and ros2's MCAPs are; else from 0
+            # stamped as the live view stamped the run (--foxglove), as drive's and ros2's MCAPs are; else from 0;
+            # its /alpha the trial's own, tick by tick (the arbitration's online α too)
             write_trial_mcap(
                 trial,
                 (folder / manifest_files(folder)[-1]).with_suffix(".mcap"),
-                alpha=alpha,
                 start_ns=trial.meta.extra.get(LIVE_START, 0),
             )
         result = score_trial(trial, manifest_files(folder)[-1], len(self.results))

@@ -60,6 +60,7 @@ from coassist.runtime.loop import InterruptsHeld, RunInterrupted
 from coassist.runtime.safety import SafetyLayer
 from coassist.runtime.safety_limits import SafetyLimits
 from coassist.runtime.tick import TickConfig
+from coassist.runtime.world import optional_member
 from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPipeline
 from coassist.scenario.assistance import DEFAULT_INTENT, assistance_line, check_person, check_person_world
 from coassist.scenario.hand import SimulatedHand
@@ -415,6 +416,9 @@ def drive(
     run = _prepare(config, operator=operator, world=world, host=host, view=view, intent_source=intent_source)
     interrupted: RunInterrupted | None = None
     try:
+        follow = optional_member(run.world, "follow_episode")
+        if callable(follow):  # a world that publishes the run (ROS 2's monitor): its controller's α, its plan
+            follow(run.episode)
         if say is not None:
             say(run.assistance)
         if confirm is not None and not confirm(run.limits.describe()):

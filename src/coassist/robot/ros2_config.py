@@ -46,7 +46,8 @@ class Ros2Config:
     wrench_frame : ``frame_id`` of a wrench in the sensor frame, whose axes are the
         flange's (the UR driver's ``tool0``). A wrench stamped in ``base_frame`` is
         rotated from there instead; any other frame is refused and stops the run.
-    joint_names : the order of ``q`` and of the command: the UR5's 6 joints.
+    joint_names : the UR5's 6 joints from the base to the tool: the order of ``q`` and of the command (the
+        joint states are matched by name); the UR's own names out of that order are refused.
     wrench_in_base : kept for scripts that set it: each wrench message's ``frame_id`` now
         says whether it is in the base frame or the sensor's (module docstring).
     sensor_reliable : subscribe to the sensor topics reliable (default best effort).
@@ -126,6 +127,15 @@ class Ros2Config:
             raise bad("joint_names", "distinct joint names")
         if len(names) != len(UR_JOINT_NAMES):
             raise bad("joint_names", f"{len(UR_JOINT_NAMES)} names, one per joint of the UR5 (got {len(names)})")
+        known = [next((k for k, ur in enumerate(UR_JOINT_NAMES) if n.endswith(ur)), -1) for n in names]
+        if sorted(known) == list(range(len(UR_JOINT_NAMES))) and known != sorted(known):
+            # the UR's own joints (a description's prefix allowed) out of order: q read in that order would be
+            # taken for the kinematic one, the forward kinematics wrong and the arm pushed against the person
+            raise bad(
+                "joint_names",
+                "the UR's joints from the base to the tool (shoulder_pan … wrist_3: the order of q and of the "
+                f"commands; the joint states are matched by name), got {', '.join(names)}",
+            )
         object.__setattr__(self, "joint_names", names)
         for name in ("wrench_in_base", "sensor_reliable", "lockstep", "pace", "stamps_on_this_clock"):
             if not isinstance(getattr(self, name), bool):

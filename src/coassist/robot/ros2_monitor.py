@@ -83,12 +83,15 @@ class Ros2Monitor:
             if getattr(config, f"{name}_topic")
         }
 
-    def publish(self, k: int, state: RobotState, out: Any, alpha: float | None) -> None:
+    def publish(
+        self, k: int, state: RobotState, out: Any, alpha: float | None, prediction: np.ndarray | None = None
+    ) -> None:
         """Tick ``k``'s tool pose, prediction, α, hand force and fault flags at ``monitor_rate_hz``
         (every ``round(rate_hz / monitor_rate_hz)``-th tick, from tick 0).
 
         ``out`` is the tick's :class:`~coassist.runtime.tick.TickOutput`; ``alpha`` the game's α (None: not
-        published). Faults go out on every tick that has one (and at the monitor rate otherwise), so none
+        published); ``prediction`` (H, ≥2) the rows to publish (None: ``out.prediction``; the nominal plan's
+        rows are the caller's, as the tick gives none). Faults go out on every tick that has one (and at the monitor rate otherwise), so none
         is missed.
         """
         due = k % self.every == 0
@@ -114,16 +117,18 @@ class Ros2Monitor:
             self.publishers["hand_force"].publish(m)
         if "alpha" in self.publishers and alpha is not None:
             self.publishers["alpha"].publish(self._msg["Float64"](data=alpha))
-        if "prediction" in self.publishers and out.prediction is not None:
+        if prediction is None:
+            prediction = out.prediction
+        if "prediction" in self.publishers and prediction is not None and len(prediction):
             # Every stride-th row of the first prediction_seconds, and the last: a path to draw,
             # built in well under a millisecond (all 50 rows cost ~1 ms of the tick).
-            n = max(1, min(len(out.prediction), round(self.config.prediction_seconds / self._dt)))
+            n = max(1, min(len(prediction), round(self.config.prediction_seconds / self._dt)))
             rows = sorted(set(range(self.config.prediction_stride - 1, n, self.config.prediction_stride)) | {n - 1})
             path = self._msg["Path"]()
             path.header.stamp, path.header.frame_id = stamp, frame
             qx, qy, qz, qw = quaternion_from_rotation_vector(pose[3:6])  # the tool's orientation, held
             t0 = stamp_ns(stamp)
-            d = out.prediction.shape[1]
+            d = prediction.shape[1]
             poses = []
             for i in rows:
                 ps = self._msg["PoseStamped"]()
@@ -134,7 +139,7 @@ class Ros2Monitor:
                     frame,
                 )
                 xyz = pose[:3].copy()
-                xyz[: min(d, 3)] = out.prediction[i, : min(d, 3)]
+                xyz[: min(d, 3)] = prediction[i, : min(d, 3)]
                 pp = ps.pose
                 pp.position.x, pp.position.y, pp.position.z = float(xyz[0]), float(xyz[1]), float(xyz[2])
                 pp.orientation.x, pp.orientation.y, pp.orientation.z, pp.orientation.w = qx, qy, qz, qw

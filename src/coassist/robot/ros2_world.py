@@ -123,6 +123,7 @@ from coassist.robot.ros2_config import MAX_STALE_AFTER, MAX_TCP_OFFSET, UR_JOINT
 from coassist.robot.ros2_monitor import Ros2Monitor
 from coassist.robot.ros2_node import Ros2Node, install_hint, stamp_ns
 from coassist.robot.worlds import WorldRequest
+from coassist.runtime.loop import alpha_reader
 from coassist.runtime.world import Command, RobotLinkError, RobotState
 from coassist.spatial import rotation_matrix, rotation_vector
 
@@ -177,7 +178,8 @@ class Ros2World:
     Parameters
     ----------
     config : :class:`Ros2Config`.
-    alpha : the game's α to publish on ``~/alpha`` (None: not published).
+    alpha : the game's α to publish on ``~/alpha`` (None: not published) until :meth:`follow_episode`
+        is told the run, whose controller's α it then publishes, tick by tick.
 
     Attributes
     ----------
@@ -215,6 +217,9 @@ class Ros2World:
         self.tcp_offset_pose = np.asarray(config.tcp_offset, dtype=float)
         self.base_frame = config.base_frame
         self.alpha = None if alpha is None else float(alpha)
+        self._alpha_of: Any = None  # the followed run's controller's α now (follow_episode), else self.alpha
+        self._plan: np.ndarray | None = None  # the followed run's plan (x, y) where its intent source is the plan
+        self._horizon = 0
         self.last_overrun = 0.0
         self.rejected_messages = 0
         self.rejected_commands = 0
@@ -654,11 +659,24 @@ class Ros2World:
 
     # -- monitor ---------------------------------------------------------------------
 
+    def follow_episode(self, episode: Any) -> None:
+        """Publish what ``episode`` (:class:`~coassist.runtime.episode.Episode`) does: its controller's α
+        each tick (an arbitration's online one; none for IMP and MG), and where its intent source is the
+        plan, the plan's next rows as ``~/prediction`` (what its MCAP and the live view show)."""
+        tick = episode.tick
+        self._alpha_of = alpha_reader(tick.controller) or (lambda: None)
+        self._plan = np.asarray(episode.plan, dtype=float)[:, :2] if tick.intent.nominal else None
+        self._horizon = int(tick.Hs)
+
     def publish_monitor(self, k: int, state: RobotState, out: Any) -> None:
         """The loop's ``on_tick``: the monitor topics (:meth:`~coassist.robot.ros2_monitor.Ros2Monitor.publish`)."""
         if self._closed:
             return
-        self._monitor.publish(k, state, out, self.alpha)
+        alpha = self.alpha if self._alpha_of is None else self._alpha_of()
+        prediction = out.prediction
+        if prediction is None and self._plan is not None:
+            prediction = self._plan[k + 1 : k + 1 + self._horizon]
+        self._monitor.publish(k, state, out, alpha, prediction)
 
 
 def build_world(request: WorldRequest) -> Ros2World:

@@ -250,6 +250,7 @@ class Episode:
             fault=fault,
             joints=c["joints"],
             joint_velocity=c["joint_velocity"],
+            alpha=log.alpha,
         )
 
 

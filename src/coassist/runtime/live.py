@@ -47,6 +47,7 @@ import numpy as np
 
 from coassist._checks import check_real
 from coassist.data.run_pair import LIVE_START
+from coassist.runtime.loop import alpha_reader
 from coassist.runtime.world import RobotState, finite_vector, optional_member
 
 __all__ = ["LiveFeed", "LiveSink", "LiveTrial", "TickSnapshot", "told_obstacles"]
@@ -168,14 +169,6 @@ def told_obstacles(episode: Any) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
     )
 
 
-def _alpha_reader(controller: Any) -> Callable[[], float | None] | None:
-    """A reader of the controller's α now (the cooperative game's, an arbitration's online one),
-    or None for a controller without one (IMP, MG)."""
-    if getattr(controller, "alpha", None) is None:
-        return None
-    return lambda: getattr(controller, "alpha", None)
-
-
 class LiveFeed:
     """The latest-value slot and its publishing thread (module docstring).
 
@@ -217,7 +210,7 @@ class LiveFeed:
         episode.extra[LIVE_START] = trial.start_ns  # the trial file keeps it: its MCAP is stamped alike
         self._want_policy = _thread_policy()  # the publisher follows it (module docstring)
         tick = episode.tick
-        alpha_of = _alpha_reader(tick.controller)
+        alpha_of = alpha_reader(tick.controller)
         nj = int(episode.world.n_joints)
         horizon = trial.horizon
         held = [np.zeros(nj)]  # the joints of the last finite reading (a glitch repeats it, as the log)

@@ -55,6 +55,7 @@ __all__ = [
     "RunInterrupted",
     "TargetDwell",
     "TargetDwellBatch",
+    "alpha_reader",
     "run_loop",
 ]
 
@@ -138,6 +139,9 @@ class LoopLog:
     or None (nominal source). fault : (n,) int64. joints, joint_velocity : (n, J) measured
     q [rad] and the commanded q̇ [rad/s], or None for worlds without joints.
     compute : (n,) seconds of the tick's own work. ended : why the run ended.
+    alpha : (n,) the game's α each tick's command was computed with (the arbitration's online
+    one; :func:`alpha_reader`), or None (a controller without one: IMP, MG; the point-mass
+    array runner does not record it).
     """
 
     pose: np.ndarray
@@ -153,6 +157,7 @@ class LoopLog:
     compute: np.ndarray
     ended: str
     message: str = ""
+    alpha: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -292,6 +297,8 @@ class LoopRun:
         self.jvel = np.empty((n_max, nj)) if nj else None
         self.compute = np.zeros(n_max)
         self.hand_of = _hand_reader(world)
+        self.alpha_of = alpha_reader(tick.controller)
+        self.alpha = None if self.alpha_of is None else np.zeros(n_max)
         self.overrun_of = optional_member(world, "last_overrun") is not None
         self.upstream = Fault.NONE
         self.ended, self.message, self.n = "time_limit", "", n_max
@@ -382,6 +389,12 @@ class LoopRun:
         self.eff_r[k] = out.u_r if out.command.effort is None else out.command.effort
         self.eff_h[k] = self.hand_of()[:d] if self.hand_of is not None else out.wrench
         self.fault[k] = int(out.fault)
+        if self.alpha is not None and self.alpha_of is not None:
+            alpha = self.alpha_of()
+            if isinstance(alpha, (int, float)) and 0.0 <= alpha <= 1.0:  # a game's α is; no row is lost over one not
+                self.alpha[k] = alpha
+            else:
+                self.alpha[k] = self.alpha[k - 1] if k else 0.0
         nj = self.nj
         if nj:
             self.jvel[k] = out.command.qd if out.command.qd is not None else 0.0
@@ -463,7 +476,17 @@ class LoopRun:
             compute=self.compute[:n],
             ended=self.ended,
             message=self.message,
+            alpha=None if self.alpha is None else self.alpha[:n],
         )
+
+
+def alpha_reader(controller: Any) -> Callable[[], float | None] | None:
+    """A reader of the controller's α now (the cooperative game's, an arbitration's online one),
+    or None for a controller without one (IMP, MG): what the log's ``alpha`` column, a live view and
+    the ROS 2 monitor show."""
+    if getattr(controller, "alpha", None) is None:
+        return None
+    return lambda: getattr(controller, "alpha", None)
 
 
 def _hand_reader(world: World) -> Callable[[], object] | None:

@@ -191,6 +191,11 @@ class OptionalWorldMembers(Protocol):
         point-mass world's (2,)); preferred to ``hand_wrench`` where a world has both."""
         ...
 
+    def follow_episode(self, episode: Any) -> None:
+        """Told the run's :class:`~coassist.runtime.episode.Episode` before it starts, by a world that
+        publishes what the run does (ROS 2's monitor: its controller's α, its plan's rows)."""
+        ...
+
 
 #: Every member of :class:`OptionalWorldMembers` → what the runtime reads when a world lacks it.
 OPTIONAL_WORLD_MEMBERS: dict[str, None] = {
@@ -199,6 +204,7 @@ OPTIONAL_WORLD_MEMBERS: dict[str, None] = {
     "hand_force": None,
     "hand_wrench": None,
     "base_frame": None,
+    "follow_episode": None,
 }
 
 

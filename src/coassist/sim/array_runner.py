@@ -63,7 +63,7 @@ from coassist.control.probe import probed_efforts
 from coassist.interfaces import Fault
 from coassist.runtime.batched_loops import Loop, intent_batcher, probed_groups, shared_controller
 from coassist.runtime.intent import WindowIntent, WindowIntentBatch, accept_together
-from coassist.runtime.loop import LoopLog, TargetDwellBatch
+from coassist.runtime.loop import LoopLog, TargetDwellBatch, alpha_reader
 from coassist.runtime.safety import SafetyLayerBatch
 from coassist.runtime.tick import human_reference
 from coassist.runtime.wrench import WrenchPipelineBatch
@@ -213,6 +213,11 @@ class _Batch:
         self.eff_h_log = np.empty((B, N, 2))
         self.eff_r_log = np.empty((B, N, 2))
         self.compute = np.zeros((B, N))
+        # the game's α each tick (LoopLog.alpha), read as LoopRun reads it: an arbitration moves it, and so may what
+        # wraps one (decel-damping's), so every run's is read every tick, not only an ArbitratedController's
+        self.alpha_of = [alpha_reader(t.controller) for t in ticks]
+        self.has_alpha = np.array([r is not None for r in self.alpha_of], dtype=bool)
+        self.alpha_log = np.zeros((B, N)) if self.has_alpha.any() else None
         # what a tick reads of the runs still going that only changes when one ends (_Rows)
         self._rows: _Rows | None = None
 
@@ -375,6 +380,9 @@ class _Batch:
             for js, p in predicted:
                 self.pred_log[act[js], k, : p.shape[1]] = p
         self.eff_r_log[act, k] = u_r
+        if self.alpha_log is not None:
+            read = act[self.has_alpha[act]]
+            self.alpha_log[read, k] = [self.alpha_of[i]() for i in read.tolist()]
         self.eff_h_log[act, k] = fh
         done_target = self.dwell(k, act, x)
         done_time = k + 1 >= rows.n_max
@@ -399,7 +407,12 @@ class _Batch:
             joint_velocity=None,
             compute=self.compute[i, :n].copy(),
             ended=ended,
+            alpha=self._alpha(i, n),
         )
+
+    def _alpha(self, i: int, n: int) -> np.ndarray | None:
+        """Run ``i``'s first ``n`` α (None: its controller has none), as :class:`~coassist.runtime.loop.LoopRun` logs them."""
+        return None if self.alpha_log is None or not self.has_alpha[i] else self.alpha_log[i, :n].copy()
 
 
 class _Rows:
