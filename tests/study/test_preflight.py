@@ -170,9 +170,11 @@ def test_the_estimate_is_what_a_dry_run_takes(_finished_study):
     took = sum(t.n_samples * t.meta.dt for t in trials)
     assert estimate.trials_s == pytest.approx(took, rel=0.15), (estimate.trials_s, took)
     arrays = sum(v.nbytes for t in trials for v in vars(t).values() if hasattr(v, "nbytes"))
-    assert bytes_per_tick(50) * sum(t.n_samples for t in trials) == arrays  # 912 B a tick, exactly
+    without_alpha = sum(t.n_samples for t in trials if t.alpha is None)  # IMP and MG: no game, no α
+    assert without_alpha == sum(t.n_samples for t in trials[1:])
+    assert bytes_per_tick(50) * sum(t.n_samples for t in trials) - 8 * without_alpha == arrays  # 920 B a tick, exactly
     limit = 2.0 * 3.9 + 10.0  # the default time limit of a 3 s motion (ending at 3.9 s)
-    assert estimate.trial_bytes == 2 * math.ceil(limit / 0.008) * 912
+    assert estimate.trial_bytes == 2 * math.ceil(limit / 0.008) * 920
     # questionnaires (ten items, ten seconds each) and the two rests of 30 s make up the rest of the session
     assert estimate.expected_s == pytest.approx(estimate.trials_s + 3 * 10 * 10.0 + 2 * 30.0)
 

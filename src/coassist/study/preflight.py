@@ -41,8 +41,9 @@ The session estimate, shown before the first trial: participant 1's steps
 
 windows per model: Σ over its trials of ⌊(T − history − H_model)/train_stride⌋ + 1, T the
 expected ticks, the held-out trials (``test_fraction``) left out. Memory: a trial's arrays
-are 8 B × (2 + 6 d + H d + 2 n_joints) a tick ((d,) pose, velocity, wrench, reference and
-both efforts, (H, d) prediction, time and fault, joints and their speeds on an arm), the
+are 8 B × (3 + 6 d + H d + 2 n_joints) a tick ((d,) pose, velocity, wrench, reference and
+both efforts, (H, d) prediction, time, fault and the game's α (none under IMP and MG: 8 B less),
+joints and their speeds on an arm), the
 loop's log as much again; training holds 16 B a parameter (weights, gradients, Adam's two
 moments) and the trials' features.
 """
@@ -188,8 +189,8 @@ def _mb(n: int) -> str:
 
 
 def bytes_per_tick(horizon: int, n_dof: int = STUDY_DOF, n_joints: int = 0) -> int:
-    """A trial's arrays per tick [B] (module docstring): 8 (2 + 6 d + H d + 2 n_joints)."""
-    return 8 * (2 + 6 * n_dof + horizon * n_dof + 2 * n_joints)
+    """A trial's arrays per tick [B] (module docstring): 8 (3 + 6 d + H d + 2 n_joints), α included."""
+    return 8 * (3 + 6 * n_dof + horizon * n_dof + 2 * n_joints)
 
 
 def training_windows(ticks: list[int], history: int, horizon: int, stride: int, test_fraction: float) -> int:
