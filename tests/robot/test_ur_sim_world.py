@@ -123,8 +123,10 @@ def test_each_command_through_the_real_client():
             # joints follow it with the servo's lag
             t = time.monotonic()
             assert c.speedStop(4.0)
-            time.sleep(0.004)  # the next package
-            assert time.monotonic() - t >= 0.045 and max(abs(v) for v in r.getTargetQd()) < 1e-9
+            returned, stamp = time.monotonic(), r.getTimestamp()
+            while r.getTimestamp() <= stamp and time.monotonic() < returned + 1.0:  # the next package (a busy
+                time.sleep(0.001)  # machine's receive thread read it late: 4 ms of sleep once gave a stale one)
+            assert returned - t >= 0.045 and max(abs(v) for v in r.getTargetQd()) < 1e-9
             time.sleep(0.15)
             assert max(abs(v) for v in r.getActualQd()) < 1e-3
             # speedL: the TCP's speed in the base frame
@@ -540,15 +542,23 @@ def test_each_fault_ends_in_a_controlled_stop_with_the_trial_kept_and_what_to_do
 
             with realtime_priority():  # ur-rtde's receive threads, started here, inherit it
                 world = URRTDEWorld(sim.host, frequency=125.0)
-                trial = drive(
-                    DriveConfig(world="ur", controller="manual", time_limit=4.0), world=world, on_tick=on_tick
-                )
+                try:
+                    trial = drive(
+                        DriveConfig(world="ur", controller="manual", time_limit=4.0), world=world, on_tick=on_tick
+                    )
+                except RobotLinkError as exc:  # the stream stalled while the sensor was zeroed (CI at load 3.5)
+                    if "no new data" not in str(exc):
+                        raise
+                    world.close()
+                    trial = None
+                    continue
             t = time.monotonic()
             world.close()  # on any link, dead or alive: never raises, never hangs
             closed_in = time.monotonic() - t
             status = sim.status()
         if trial.n_samples > 60:
             break
+    assert trial is not None, "the stream stalled before every run of three"
     extra = trial.meta.extra
     assert extra["ended"] == ended, extra.get("stop_message")
     message = extra["stop_message"]
