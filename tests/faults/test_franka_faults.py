@@ -210,6 +210,8 @@ def _stall_for(world, seconds: float) -> None:
         time.sleep(0.005)
 
 
+@pytest.mark.alone  # beside another franky-sim test on this 2-core VM the arm never ran at speed for 10 clean
+# ticks before the stall (CI, 2026-12-06)
 def test_a_stalled_loop_is_flagged_and_the_arm_restarts_from_its_measured_velocity(server):
     world = FrankaWorld(
         server.host, arm="fr3", ft_sensor=sim.PushSensor(server, (25.0, 0.0, 0.0)), link_timeout=sim.LINK_TIMEOUT

@@ -58,3 +58,25 @@ def test_a_watcher_sees_the_drive_run_live_and_cannot_steer_it(tmp_path):
         assert f["fh"] == [trial.wrench[k, 0], trial.wrench[k, 1]]
     assert dropped >= 2
     assert np.abs(trial.wrench).max() > 0.5  # the simulated operator pushed; nobody on the page did
+
+
+def test_stopping_the_server_mid_drive_stops_the_arm_and_keeps_the_ticks(tmp_path):
+    # a review (2026-12-06): Ctrl+C (the server's stop, an abort) left the drive running 10 s, then the process
+    # exited with it mid-run and nothing written
+    import time
+
+    drive = DriveConfig(world="mujoco", controller="manual", task="linear", time_limit=20.0, seed=1)
+    monitor = DriveMonitor(drive, PlayConfig(user="lab", out=tmp_path, controllers=("manual",), tasks=("linear",)))
+    server = PlayServer(monitor, port=0)
+    with server:
+        assert monitor.start()
+        deadline = time.monotonic() + 30.0
+        while (monitor.frame is None or monitor.frame["k"] < 100) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert monitor.frame is not None and monitor.frame["k"] >= 100, "the drive never reached tick 100"
+        t = time.monotonic()
+        server.stop()
+        took = time.monotonic() - t
+    assert not monitor.running and took < 5.0  # at once, not after the 10 s the server waits
+    trial = read_dataset(tmp_path / "lab").trials[0]
+    assert trial.meta.extra["ended"] == "interrupted" and 100 <= trial.n_samples < 20.0 / drive.dt / 2

@@ -277,3 +277,30 @@ def test_a_pointer_message_older_than_the_last_is_dropped(tmp_path):
     late = frames[12:]
     # never the old message's pull (−y), never its seq: the newest pull, or let go once it is stale (0 N)
     assert late and all(f["seq"] >= 100 and f["fh"][1] >= 0.0 for f in late)
+
+
+def test_when_the_hand_closes_its_tab_another_open_tab_becomes_the_hand_and_is_told(tmp_path):
+    # a review (2026-12-06): the other tab stayed "watching (another page is the hand)", its start refused, until
+    # it was reloaded
+    session = PlaySession(short_config(tmp_path))
+
+    async def two_tabs(port: int) -> tuple[str, str, dict]:
+        url = f"ws://127.0.0.1:{port}/ws"
+        a = await websockets.connect(url)
+        first = json.loads(await a.recv())["role"]
+        async with websockets.connect(url) as b:
+            second = json.loads(await b.recv())["role"]
+            await a.close()  # b is told it is the hand now
+            promoted = json.loads(await asyncio.wait_for(b.recv(), 5.0))
+            await b.send(json.dumps({"type": "start", "controller": "manual"}))
+            while json.loads(await asyncio.wait_for(b.recv(), 5.0))["type"] != "frame":
+                pass
+            return first, second, promoted
+
+    with PlayServer(session, port=0) as server:
+        first, second, promoted = asyncio.run(two_tabs(server.port))
+        assert session.running  # b's start was taken
+        session.abort()
+        assert session.wait(5.0)
+    assert (first, second) == ("hand", "watcher")
+    assert promoted["type"] == "init" and promoted["role"] == "hand"

@@ -60,3 +60,36 @@ def test_saved_trials_are_written_as_mcap_too(tmp_path):
     session._save(replace(trial, meta=replace(meta, extra={**meta.extra, LIVE_START: start})))
     assert pose_stamps(sorted(folder.glob("*.mcap"))[-1]) == [start + round(float(v) * 1e9) for v in t]
     assert pose_stamps(mcaps[1]) == [round(float(v) * 1e9) for v in t]
+
+
+def test_an_mcap_that_cannot_be_written_leaves_the_trial_counted(tmp_path, monkeypatch):
+    # a review (2026-12-06): the MCAP failing once (a full disk) made the page say "the trial failed" after the trial
+    # was in the dataset, and the protocol's next trial repeated it
+    import coassist.data.trial_mcap as trial_mcap
+
+    session = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("cooperative",), mcap=True))
+    said: list[dict] = []
+    session.publish = said.append
+    n = 30
+    t = np.arange(n) * 0.008
+    pose = np.column_stack([0.1 * t, -0.05 * t])
+    meta = TrialMeta(
+        user="bob",
+        task="linear",
+        object="none",
+        controller="cooperative",
+        model_id=None,
+        seed=0,
+        origin="sim",
+        dt=0.008,
+        extra={"target": [0.5, 0.0], "arrive_radius": 0.025, "ended": "target"},
+    )
+    trial = Trial(meta=meta, time=t, pose=pose, velocity=np.zeros((n, 2)), wrench=np.ones((n, 2)), reference=pose)
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(trial_mcap, "write_trial_mcap", full_disk)
+    result = session._save(trial)
+    assert [r.file for r in session.results] == [result.file] and len(read_dataset(tmp_path / "bob").trials) == 1
+    assert said and said[-1]["level"] == "warn" and "its MCAP not" in said[-1]["text"]

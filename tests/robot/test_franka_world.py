@@ -131,6 +131,8 @@ def test_the_model_matches_the_simulated_arm(server):
     world.close()
 
 
+@pytest.mark.alone  # franky-sim's own loop tracks at the push's speed only with a core to itself: beside another
+# franky-sim test on this 2-core VM it settled at 0.090 m/s for 0.1 (CI, 2026-12-06, 1 run in 3)
 def test_mg_with_a_constant_push_settles_at_f_over_d(mg_run):
     trial, sent, world = mg_run
     assert trial.meta.extra["ended"] == "time_limit"

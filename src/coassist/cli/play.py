@@ -159,6 +159,9 @@ def play(
             from coassist.play.monitor import DriveMonitor
             from coassist.robot.drive import DriveConfig
 
+            if motion_time is not None:  # was ignored: a drive runs its path's planned motion time
+                fail("--motion-time does not apply with --drive (the drive runs its path's planned motion time)", 2)
+
             def confirm(text: str) -> bool:
                 console.print(text, markup=False)
                 return typer.confirm("Keep the emergency stop within reach. Move the robot?", default=False)
@@ -179,7 +182,7 @@ def play(
                 ),
                 config,
                 host=robot_host,
-                confirm=confirm,
+                confirm=None if WORLDS[drive].simulated else confirm,  # asked before a real arm moves (drive's)
                 say=say,
                 live=live,
             )

@@ -287,8 +287,8 @@ class Trial:
         Joint velocity command q̇ sent at each tick in rad/s (after the safety layer).
     alpha : ndarray, shape (T,), optional
         The cooperative game's α each tick's command was computed with, in [0, 1] (the
-        arbitration's online one; constant for the plain game). Recorded by the arm worlds'
-        loop (drive, ros2, play, a study on an arm); IMP and MG have none.
+        arbitration's online one; constant for the plain game). Recorded by every loop
+        (simulated and on an arm) since 2026-12-06; IMP and MG have none.
 
     Notes
     -----

@@ -223,7 +223,7 @@ def write_trial_mcap(
     trial : the trial (any source).
     path : the file to write; parent folders are created.
     alpha : the game's α, one number for the run or one per tick (n,); None: the trial's own
-        (:attr:`~coassist.data.Trial.alpha`, recorded by the arm worlds' loop), else no ``/alpha``.
+        (:attr:`~coassist.data.Trial.alpha`, recorded by every loop), else no ``/alpha``.
     joint_names : names for ``/joint_states`` (default ``joint_1 …``); used when the trial has joints.
     frame_id : frame of the poses and wrenches.
     start_ns : header stamp of tick 0 [ns since the epoch] (0: the trial's own clock).

@@ -6,7 +6,9 @@ calls ``on_tick(k, state, out)`` every period and the monitor turns that into th
 frame (tool x-y, the measured hand force, the prediction in use, the reference, the robot's
 effort, fault flags), at most 125 frames a second. The page only watches: its pointer,
 start and abort messages are dropped (counted as ``"watcher"``). The run is written to the
-session folder like a played trial, and scored the same way.
+session folder like a played trial, and scored the same way. Stopping the server (Ctrl+C) stops
+the arm at the next tick, and the ticks before it are the trial (``ended = "interrupted"``), as
+``coassist drive``'s Ctrl-C keeps them; a played trial aborted so is not written.
 
 A simulated arm (the MuJoCo UR5) runs paced to the wall clock (so the page shows it at its
 real speed); a real arm is paced by its controller. The task is the drive's (same seed); where the drive
@@ -24,6 +26,7 @@ import numpy as np
 from coassist.play.session import PlayConfig, PlaySession, TrialResult, arm_frame, points_bounds
 from coassist.robot.drive import TASK_HEIGHT, DriveConfig, drive
 from coassist.robot.worlds import WORLDS, WorldRequest, build_world
+from coassist.runtime.loop import RunInterrupted
 from coassist.scenario.tasks import task_for_seed
 
 __all__ = ["DriveMonitor"]
@@ -75,6 +78,8 @@ class DriveMonitor(PlaySession):
         shift: list[np.ndarray] = []
 
         def on_tick(k: int, state, out) -> None:
+            if self._abort is not None:  # Ctrl+C or the page: stop the arm now, keep the ticks (as drive's Ctrl-C)
+                raise KeyboardInterrupt
             if not shift:  # the plan may be laid out from the arm's start pose: match the scene to it
                 shift.append(np.asarray(out.reference[:2], dtype=float) - task.planner.reference(k * c.dt)[:2])
                 if np.linalg.norm(shift[0]) > 1e-9:
@@ -107,6 +112,11 @@ class DriveMonitor(PlaySession):
                 say=self.say,
                 live=self.live,
             )
+        except RunInterrupted as stop:  # the server stopping (Ctrl+C) ran the drive on for 10 s, then lost it
+            if stop.trial is None:
+                raise
+            trial = stop.trial
+            self.publish({"type": "status", "level": "warn", "text": "stopped: the arm at rest, the ticks so far kept"})
         finally:
             if world is not None:
                 world.close()

@@ -297,6 +297,11 @@ def create_app(
             if hub.hand is client:  # the hand let go: zero force now, the trial waits `grace` for it
                 hub.hand = None
                 session.hand_left()
+                if hub.clients and not session.running:  # another tab open: it is the hand now, and told so (it
+                    hub.hand = successor = hub.clients[0]  # stayed "watching (another page is the hand)", unable
+                    session.hand_back()  # to start, until it was reloaded)
+                    successor.queue.append(hub.init_message(successor))
+                    successor.wake.set()
 
     def _handle(client: _Client, text: str | None) -> None:
         now = time.monotonic()

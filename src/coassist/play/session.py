@@ -63,7 +63,7 @@ from coassist.runtime.wrench import WrenchPipeline
 from coassist.scenario.assistance import DEFAULT_INTENT, check_person, check_person_world
 from coassist.scenario.intent_registry import INTENT_SOURCES, check_intent, load_intent_source
 from coassist.scenario.path_model import ASKED_WAY, WAY_NAMES, check_way
-from coassist.scenario.tasks import TASK_KINDS, TASKS, Task, nominal_path, task_for_seed
+from coassist.scenario.tasks import MOTION_TIME_RANGE, TASK_KINDS, TASKS, Task, nominal_path, task_for_seed
 
 __all__ = ["PlayConfig", "PlaySession", "TrialResult", "view_bounds"]
 
@@ -183,6 +183,9 @@ class PlayConfig:
         for name in ("motion_time", "time_limit"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"PlayConfig.{name}"))
+        lo, hi = MOTION_TIME_RANGE  # 1e9 s was taken and failed at the first trial, allocating 1.8 TiB
+        if self.motion_time is not None and not lo <= self.motion_time <= hi:
+            raise ValueError(f"PlayConfig.motion_time must be within {lo:g} … {hi:g} s, got {self.motion_time!r}")
         for name in ("arrive_radius", "dwell", "grace"):
             object.__setattr__(self, name, check_positive_scalar(getattr(self, name), f"PlayConfig.{name}"))
         if not isinstance(self.arm, SpringDamper):
@@ -405,7 +408,8 @@ class PlaySession:
             result = self._run_trial(task, name, controller)
         except Exception as exc:  # never leave the server with a dead trial: say why
             result = None
-            self.publish({"type": "status", "level": "error", "text": f"the trial failed: {exc}"})
+            why = str(exc) or type(exc).__name__  # (a refused prompt's Abort has no text: the line ended "failed: ")
+            self.publish({"type": "status", "level": "error", "text": f"the trial failed: {why}"})
         finally:
             self.running = False
             self.current = None
@@ -526,19 +530,23 @@ class PlaySession:
             write_dataset(
                 [trial], folder, self.config.dataset_id, f"played in a browser by {self.config.user} (coassist play)"
             )
+        # the trial is in the dataset: it counts from here whatever follows (an MCAP that failed once said "the trial
+        # failed", and the protocol's next trial repeated this one)
+        result = score_trial(trial, manifest_files(folder)[-1], len(self.results))
+        self.results.append(result)
         if self.config.mcap:
             from coassist.data.run_pair import LIVE_START
             from coassist.data.trial_mcap import write_trial_mcap
 
             # stamped as the live view stamped the run (--foxglove), as drive's and ros2's MCAPs are; else from 0;
             # its /alpha the trial's own, tick by tick (the arbitration's online α too)
-            write_trial_mcap(
-                trial,
-                (folder / manifest_files(folder)[-1]).with_suffix(".mcap"),
-                start_ns=trial.meta.extra.get(LIVE_START, 0),
-            )
-        result = score_trial(trial, manifest_files(folder)[-1], len(self.results))
-        self.results.append(result)
+            mcap = (folder / result.file).with_suffix(".mcap")
+            try:
+                write_trial_mcap(trial, mcap, start_ns=trial.meta.extra.get(LIVE_START, 0))
+            except (OSError, ValueError, ImportError) as exc:
+                self.publish(
+                    {"type": "status", "level": "warn", "text": f"trial {result.file} written, its MCAP not: {exc}"}
+                )
         return result
 
 

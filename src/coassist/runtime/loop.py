@@ -140,8 +140,7 @@ class LoopLog:
     q [rad] and the commanded q̇ [rad/s], or None for worlds without joints.
     compute : (n,) seconds of the tick's own work. ended : why the run ended.
     alpha : (n,) the game's α each tick's command was computed with (the arbitration's online
-    one; :func:`alpha_reader`), or None (a controller without one: IMP, MG; the point-mass
-    array runner does not record it).
+    one; :func:`alpha_reader`), or None (a controller without one: IMP, MG).
     """
 
     pose: np.ndarray

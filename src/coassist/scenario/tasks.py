@@ -411,6 +411,11 @@ def make_task(
     return Task(kind=kind, planner=planner, obstacle=box, obstacle_arc=s_obs)
 
 
+#: [s] the planned motion times a person can follow (a reach of the thesis takes 10-20 s): a study plan's and the
+#: browser page's bounds.
+MOTION_TIME_RANGE = (0.5, 120.0)
+
+
 def task_for_seed(kind: str, seed: int, *, obstacle: str = "small", motion_time: float | None = None) -> Task:
     """The task ``kind`` of trial seed ``seed`` in every world: the obstacle ``obstacle`` (a name of
     :data:`OBSTACLES`) placed from :func:`coassist.scenario.seeds.task_rng`."""

@@ -81,7 +81,7 @@ from coassist.scenario import intent_registry
 from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.objects import OBJECTS
 from coassist.scenario.populations import POPULATIONS
-from coassist.scenario.tasks import OBSTACLES, TASKS, task_for_seed
+from coassist.scenario.tasks import MOTION_TIME_RANGE, OBSTACLES, TASKS, task_for_seed
 from coassist.study.ids import DEFAULT_ID_PATTERN, IdError, compile_id_pattern
 
 __all__ = [
@@ -140,7 +140,6 @@ _STUDY_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
 # INTENT_FREE_CONTROLLERS (coassist.control.presets): two conditions of one that differ only in the intent are refused
 _MAX_CONDITIONS = 26  # labelled A … Z
 #: The ranges of the plan's numbers a study can use (module docstring), [s] unless said.
-MOTION_TIME_RANGE = (0.5, 120.0)  # a reach of the thesis takes 10-20 s
 DWELL_RANGE = (0.0, 30.0)  # (open below) the thesis' arm trials dwell 5 s
 REST_BETWEEN_CONDITIONS_MAX = 3600.0  # an hour's break is the most a session holds
 REST_BETWEEN_TRIALS_MAX = 600.0
