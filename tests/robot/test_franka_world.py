@@ -366,6 +366,8 @@ def _late_ticks(monkeypatch, flagged) -> None:
     monkeypatch.setattr(MujocoArmWorld, "apply", applying)
 
 
+@pytest.mark.alone  # a track against MuJoCo's, as the UR simulator's are: beside another franky-sim test on this
+# 2-core VM it drifted 1.75 mm from MuJoCo's for 1.5 (CI, 2026-12-06)
 def test_the_assistive_controller_through_franky_sim(monkeypatch):
     # A short assistive run (the cooperative game, nominal intent) with a 10 N push along +x.
     trial, seen, sent, rest, kin = _assistive_run()
