@@ -13,11 +13,8 @@ from coassist.play.session import PlayConfig, PlaySession
 pytest.importorskip("rosbags", reason="the bags extra (rosbags) is not installed")
 
 
-def test_saved_trials_are_written_as_mcap_too(tmp_path):
-    from coassist.data.bags import load_bag_trial
-
-    session = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("cooperative",), mcap=True))
-    n = 30
+def played_trial(n: int = 30) -> Trial:
+    """A short played trial of bob's: moving at (0.1, −0.05) m/s, 1 N of hand force."""
     t = np.arange(n) * 0.008
     pose = np.column_stack([0.1 * t, -0.05 * t])
     meta = TrialMeta(
@@ -31,7 +28,7 @@ def test_saved_trials_are_written_as_mcap_too(tmp_path):
         dt=0.008,
         extra={"target": [0.5, 0.0], "arrive_radius": 0.025, "ended": "target"},
     )
-    trial = Trial(
+    return Trial(
         meta=meta,
         time=t,
         pose=pose,
@@ -39,6 +36,14 @@ def test_saved_trials_are_written_as_mcap_too(tmp_path):
         wrench=np.ones((n, 2)),
         reference=pose + 0.01,
     )
+
+
+def test_saved_trials_are_written_as_mcap_too(tmp_path):
+    from coassist.data.bags import load_bag_trial
+
+    session = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("cooperative",), mcap=True))
+    trial = played_trial()
+    meta = trial.meta
     session._save(trial)
     session._save(trial)
     folder = tmp_path / "bob"
@@ -58,8 +63,8 @@ def test_saved_trials_are_written_as_mcap_too(tmp_path):
 
     start = 1_764_000_000_123_456_789
     session._save(replace(trial, meta=replace(meta, extra={**meta.extra, LIVE_START: start})))
-    assert pose_stamps(sorted(folder.glob("*.mcap"))[-1]) == [start + round(float(v) * 1e9) for v in t]
-    assert pose_stamps(mcaps[1]) == [round(float(v) * 1e9) for v in t]
+    assert pose_stamps(sorted(folder.glob("*.mcap"))[-1]) == [start + round(float(v) * 1e9) for v in trial.time]
+    assert pose_stamps(mcaps[1]) == [round(float(v) * 1e9) for v in trial.time]
 
 
 def test_an_mcap_that_cannot_be_written_leaves_the_trial_counted(tmp_path, monkeypatch):
@@ -70,21 +75,7 @@ def test_an_mcap_that_cannot_be_written_leaves_the_trial_counted(tmp_path, monke
     session = PlaySession(PlayConfig(user="bob", out=tmp_path, controllers=("cooperative",), mcap=True))
     said: list[dict] = []
     session.publish = said.append
-    n = 30
-    t = np.arange(n) * 0.008
-    pose = np.column_stack([0.1 * t, -0.05 * t])
-    meta = TrialMeta(
-        user="bob",
-        task="linear",
-        object="none",
-        controller="cooperative",
-        model_id=None,
-        seed=0,
-        origin="sim",
-        dt=0.008,
-        extra={"target": [0.5, 0.0], "arrive_radius": 0.025, "ended": "target"},
-    )
-    trial = Trial(meta=meta, time=t, pose=pose, velocity=np.zeros((n, 2)), wrench=np.ones((n, 2)), reference=pose)
+    trial = played_trial()
 
     def full_disk(*args, **kwargs):
         raise OSError(28, "No space left on device")
