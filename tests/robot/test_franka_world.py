@@ -34,6 +34,7 @@ from coassist.robot.drive import ZERO_READINGS, DriveConfig, drive  # noqa: E402
 from coassist.robot.franka_world import FrankaLinkError, FrankaWorld  # noqa: E402
 from coassist.runtime.operators import ScriptedForce  # noqa: E402
 from coassist.runtime.safety_limits import SafetyLimits, within_limits  # noqa: E402
+from coassist.runtime.wrench import WrenchConfig  # noqa: E402
 
 SERVER = Path(__file__).with_name("franky_sim_server.py")
 D = 100.0  # the preset's damping [N·s/m]: MG renders M a + D v = F
@@ -137,8 +138,11 @@ def test_mg_with_a_constant_push_settles_at_f_over_d(mg_run):
     trial, sent, world = mg_run
     assert trial.meta.extra["ended"] == "time_limit"
     v = trial.velocity
-    # 10 N / 100 N·s/m = 0.1 m/s; time constant M/D = 0.1 s, so from 0.4 s on it has settled. 5 %:
-    # franky-sim's joint velocity loop is a finite damper (kv = 200-450 N·m·s/rad), the push lags it.
+    # M a + D v = F − deadband: 9.8 N / 100 N·s/m = 0.098 m/s (the wrench pipeline takes its 0.2 N deadband off
+    # the push); time constant M/D = 0.1 s, so from 0.4 s on the admittance has settled. 5 %: the arm follows it
+    # through the position loop (10/s) and franky-sim's joint velocity loop, a finite damper (kv = 200-450
+    # N·m·s/rad) that the push on the hand leads, so the window still holds their transient: measured 0.4-1.5 %
+    # below at rest, 3.3 % below in CI on a slower machine (2026-12-07).
     # A busy machine makes the loop miss deadlines now and then (flagged: the layer decelerates a step, the
     # admittance restarts from the command): the 25 ticks (2 time constants) from one on are left out.
     settled = np.zeros(trial.n_samples, dtype=bool)
@@ -146,7 +150,7 @@ def test_mg_with_a_constant_push_settles_at_f_over_d(mg_run):
     for k in np.flatnonzero(trial.fault & int(Fault.DEADLINE_MISS | Fault.DECELERATING)):
         settled[k : k + 25] = False
     assert settled.sum() >= 40, f"the machine left {settled.sum()} undisturbed ticks of 100"
-    assert v[settled, 0].mean() == pytest.approx(10.0 / D, rel=0.05)
+    assert v[settled, 0].mean() == pytest.approx((10.0 - WrenchConfig().deadband_force) / D, rel=0.05)
     assert np.abs(v[settled, 1]).max() < 5e-3
     # the 7th DOF: the null space holds the start posture, the tool's orientation held too
     assert np.abs(trial.joints[settled][:, [0, 2, 4, 6]] - trial.joints[0, [0, 2, 4, 6]]).max() < 0.02
