@@ -154,3 +154,46 @@ def test_play_drive_asks_move_the_robot_before_a_real_arm_only(tmp_path, monkeyp
     result = CliRunner().invoke(app, args + (["--robot-host", "192.0.2.10"] if asks else []))
     assert result.exit_code == 0, result.output
     assert (seen["confirm"] is not None) == asks
+
+
+HOLD_A_SESSION = """
+import sys
+from pathlib import Path
+from coassist.play.session import PlayConfig, PlaySession
+session = PlaySession(PlayConfig(user="bob", out=Path(sys.argv[1]), controllers=("manual",)))
+print("READY", flush=True)
+sys.stdin.readline()
+session.close()
+print("CLOSED", flush=True)
+sys.stdin.readline()
+"""
+
+
+def test_a_second_session_on_the_same_folder_is_refused_until_the_first_closes(tmp_path):
+    # Two servers on one --out/--user each kept a protocol of their own and wrote the same protocol trial twice
+    # (a review, 2026-12-06): the folder is the session's from its start to its close.
+    import subprocess
+    import sys
+
+    from coassist._io import OutputBusyError
+    from coassist.cli import app
+
+    config = PlayConfig(user="bob", out=tmp_path, controllers=("manual",))
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLD_A_SESSION, str(tmp_path)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert holder.stdout.readline().strip() == "READY"
+        with pytest.raises(OutputBusyError, match=f"pid {holder.pid}"):
+            PlaySession(config)
+        res = CliRunner().invoke(app, ["play", "--out", str(tmp_path), "--user", "bob", "--no-open", "--port", "0"])
+        assert res.exit_code == 1 and "another coassist run" in res.output, res.output
+        assert not (tmp_path / "bob").exists()  # nothing written by the refused ones
+        PlaySession(PlayConfig(user="ann", out=tmp_path, controllers=("manual",))).close()  # another person: free
+        holder.stdin.write("close\n")
+        holder.stdin.flush()
+        assert holder.stdout.readline().strip() == "CLOSED"
+        PlaySession(config).close()  # the first gave the folder up: the next session opens it (the process lives on)
+    finally:
+        holder.kill()
+        holder.wait(10)

@@ -103,6 +103,7 @@ def play(
         import starlette  # noqa: F401  (the web extra, checked before anything starts)
         import uvicorn  # noqa: F401
 
+        from coassist._io import OutputBusyError
         from coassist.play.server import PlayServer, check_token, is_loopback, new_token
         from coassist.play.session import PlayConfig, PlaySession
     except ImportError as exc:
@@ -187,7 +188,7 @@ def play(
                 live=live,
             )
         server = PlayServer(session, host=host, port=port, token=token)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, OutputBusyError) as exc:  # busy: another play runs this --out/--user
         fail(f"{exc}")
     console.print(
         f"coassist play: open [bold]{server.url}[/] (Ctrl+C to stop); trials go to {config.folder}", highlight=False

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from coassist._checks import check_int, check_positive_scalar
+from coassist._io import OutputLock
 from coassist.config import APPLICATION_PRESET
 from coassist.control.presets import CONTROLLERS, FORMER_NAMES, get_preset, make_controller
 from coassist.data import Trial, append_to_dataset, write_dataset
@@ -245,6 +246,16 @@ class PlaySession:
         self.config = config
         self.live = live  # a LiveFeed (coassist.runtime.live) that watches every trial, or None
         self.results: list[TrialResult] = []
+        # The folder is this session's until close(): a second server on the same --out/--user would keep a protocol
+        # of its own and write the same protocol trial twice (OutputBusyError names the other run's pid).
+        self._folder_lock: OutputLock | None = OutputLock(config.folder).__enter__()
+        try:
+            self._open(config, hand)
+        except BaseException:
+            self._release_folder()
+            raise
+
+    def _open(self, config: PlayConfig, hand: BrowserHand | None) -> None:
         self._resume()  # a folder that is not a session fails here, before anything is built
         self.hand = hand or BrowserHand(config.arm)
         self.preset = get_preset(config.preset)
@@ -391,10 +402,18 @@ class PlaySession:
         return True
 
     def close(self) -> None:
-        """Stop the model's worker process (the session's trials are all on disk already)."""
-        if self._realtime is not None:
-            self._realtime.close()
-            self._realtime = None
+        """Stop the model's worker process and give the folder up (the session's trials are all on disk already)."""
+        try:
+            if self._realtime is not None:
+                self._realtime.close()
+                self._realtime = None
+        finally:
+            self._release_folder()
+
+    def _release_folder(self) -> None:
+        lock, self._folder_lock = self._folder_lock, None
+        if lock is not None:
+            lock.__exit__(None, None, None)
 
     def wait(self, timeout: float | None = None) -> bool:
         """Wait for the running trial's thread; True when none is running."""
