@@ -158,6 +158,10 @@ def test_a_dropped_link_lets_go_at_once_and_aborts_the_trial_after_the_grace(tmp
             assert m["type"] == "frame" and m["held"] and abs(m["fh"][1]) > 5.0
         # closed without a word
 
+    async def come_back(port: int) -> list[dict]:
+        async with websockets.connect(f"ws://127.0.0.1:{port}/ws") as ws:
+            return [json.loads(await asyncio.wait_for(ws.recv(), 5.0)) for _ in range(2)]
+
     with PlayServer(session, port=0) as server:
         asyncio.run(grab_and_vanish(server.port))
         time.sleep(0.1)
@@ -165,6 +169,17 @@ def test_a_dropped_link_lets_go_at_once_and_aborts_the_trial_after_the_grace(tmp
         frame = session.frame
         assert frame["fh"] == (0.0, 0.0) and not frame["held"]  # let go, not frozen
         assert session.wait(3.0)  # aborted after the 0.5 s grace
+        # the page that comes back is told its trial was aborted (it was told nothing: no page was there to hear it)
+        init, told = asyncio.run(come_back(server.port))
+        assert init["type"] == "init" and init["role"] == "hand" and not init["running"] and init["results"] == []
+        assert told == {
+            "type": "status",
+            "level": "warn",
+            "text": "the hand left for too long: trial aborted (nothing written)",
+        }
+        assert session.start_trial("manual") and session.notice is None  # the next trial's start clears it
+        session.abort()
+        assert session.wait(3.0)
     assert not (tmp_path / "alice" / "manifest.json").exists()
 
 

@@ -116,7 +116,7 @@ class DriveMonitor(PlaySession):
             if stop.trial is None:
                 raise
             trial = stop.trial
-            self.publish({"type": "status", "level": "warn", "text": "stopped: the arm at rest, the ticks so far kept"})
+            self._notify({"type": "status", "level": "warn", "text": "stopped: the arm at rest, the ticks so far kept"})
         finally:
             if world is not None:
                 world.close()

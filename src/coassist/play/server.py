@@ -282,6 +282,9 @@ def create_app(
             session.hand_back()
         sender = asyncio.create_task(_send(client))
         client.queue.append(hub.init_message(client))
+        notice = session.notice
+        if notice is not None and not session.running:  # how the last trial ended, which this page did not see
+            client.queue.append(notice)
         client.wake.set()
         try:
             while True:

@@ -290,6 +290,9 @@ class PlaySession:
         self._abort: str | None = None
         self._left_at: float | None = None
         self.running = False
+        #: the status that ended the last trial (aborted, failed, its MCAP not written), None after a clean one:
+        #: sent to a page that connects between trials, which missed it
+        self.notice: dict[str, Any] | None = None
         self.current: dict[str, Any] | None = None
         self.frame: dict[str, Any] | None = None
 
@@ -392,6 +395,7 @@ class PlaySession:
             ctrl = self.controller(controller)
             self.running = True
             self._abort = None
+            self.notice = None
         task = self.next_task()
         self.current = {"controller": controller, "scene": self.scene(task)}
         self.publish({"type": "started", "controller": controller, "scene": self.current["scene"]})
@@ -400,6 +404,12 @@ class PlaySession:
         )
         self._thread.start()
         return True
+
+    def _notify(self, message: dict[str, Any]) -> None:
+        """Publish a status about the last trial's end and keep it: a page that connects after it (the hand that
+        left and came back after its trial was aborted) is told it too (:attr:`notice`)."""
+        self.notice = message
+        self.publish(message)
 
     def close(self) -> None:
         """Stop the model's worker process and give the folder up (the session's trials are all on disk already)."""
@@ -428,7 +438,7 @@ class PlaySession:
         except Exception as exc:  # never leave the server with a dead trial: say why
             result = None
             why = str(exc) or type(exc).__name__  # (a refused prompt's Abort has no text: the line ended "failed: ")
-            self.publish({"type": "status", "level": "error", "text": f"the trial failed: {why}"})
+            self._notify({"type": "status", "level": "error", "text": f"the trial failed: {why}"})
         finally:
             self.running = False
             self.current = None
@@ -526,7 +536,7 @@ class PlaySession:
             on_tick = self.live.watch(episode, on_tick)
         log = run_loop(episode.world, episode.tick, episode.n_max, termination, on_tick=on_tick)
         if self._abort is not None:
-            self.publish(
+            self._notify(
                 {
                     "type": "status",
                     "level": "warn",
@@ -563,7 +573,7 @@ class PlaySession:
             try:
                 write_trial_mcap(trial, mcap, start_ns=trial.meta.extra.get(LIVE_START, 0))
             except (OSError, ValueError, ImportError) as exc:
-                self.publish(
+                self._notify(
                     {"type": "status", "level": "warn", "text": f"trial {result.file} written, its MCAP not: {exc}"}
                 )
         return result
