@@ -240,3 +240,28 @@ def test_the_cli_prints_the_plan_error_on_one_line(tmp_path):
     lines = [line for line in result.output.splitlines() if line.strip()]
     assert lines == [f"error: {bad}: trials.per_condition must be an integer in 1 … 1000, got 0"]
     assert not (tmp_path / "s" / "study.json").exists()
+
+
+@pytest.mark.parametrize("source", ["network", "calibrated"])
+def test_each_round_is_rated_before_its_stop_check(source):
+    # A check whose criterion is met ends the protocol (runner: the participant is complete): asked after it, the
+    # questionnaire of the converged round, the best model's, was never asked (a review ran it, 2026-12-07)
+    from coassist.study.protocols import participant_steps
+
+    text = (
+        '[study]\nname = "it"\nprotocol = "iterative"\n\n'
+        + ("[calibration]\ntrials = 2\n\n" if source == "calibrated" else "")
+        + "[iterative]\nrounds = 3\ntrials_per_round = 1\n"
+        + ('source = "calibrated"\n' if source == "calibrated" else "")
+        + '\n[trials]\ntasks = ["curved"]\nmotion_time = 3.0\ndwell = 1.0\n\n[questionnaire]\ntlx = true\n'
+        + ("\n[training]\nepochs = 1\n" if source == "network" else "")
+    )
+    steps = participant_steps(plan_from_text(text, "."), {}, 1, 0)
+    ends = [(s["kind"], s["block"]) for s in steps if s["kind"] in ("questionnaire", "check")]
+    assert ends == [
+        ("questionnaire", "round-0"),
+        ("questionnaire", "round-1"),
+        ("check", "round-1"),
+        ("questionnaire", "round-2"),
+        ("check", "round-2"),
+    ]

@@ -352,14 +352,20 @@ def _iterative(steps, plan: StudyPlan, base: int) -> None:
         intent = "nominal" if k == 0 else f"model:M{k - 1}"
         seed0 = base + k * it.trials_per_round
         _trials(steps, plan, block, it.trials_per_round, it.controller, intent, seed0, position=k, rests=False)
-        if k >= 1:
-            _add(steps, "check", block=block, index=k, round=k)
-        if plan.questionnaire.asked:
-            _add(steps, "questionnaire", block=block, index=k, condition=block, label=None)
+        _round_end(steps, plan, block, k)
         init = "scratch" if k == 0 else "resume:model:M" + str(k - 1)
         _add(steps, "train", block="models", model=f"M{k}", data=[block], init=init, wait=k == it.rounds - 1)
         if k < it.rounds - 1:
             _rest(steps, plan, f"M{k} trains")
+
+
+def _round_end(steps, plan: StudyPlan, block: str, k: int) -> None:
+    """Round k's questionnaire, then its stop check: the check may end the protocol, and the round it ends on is rated
+    too (asked after the check, the converged round, the best model's, went unrated)."""
+    if plan.questionnaire.asked:
+        _add(steps, "questionnaire", block=block, index=k, condition=block, label=None)
+    if k >= 1:
+        _add(steps, "check", block=block, index=k, round=k)
 
 
 def _iterative_person(steps, plan: StudyPlan, base: int) -> None:
@@ -372,10 +378,7 @@ def _iterative_person(steps, plan: StudyPlan, base: int) -> None:
         _trials(
             steps, plan, block, it.trials_per_round, it.controller, person_ref(f"P{k}"), seed0, position=k, rests=False
         )
-        if k >= 1:
-            _add(steps, "check", block=block, index=k, round=k)
-        if plan.questionnaire.asked:
-            _add(steps, "questionnaire", block=block, index=k, condition=block, label=None)
+        _round_end(steps, plan, block, k)
         model = f"P{k + 1}"
         data = [f"round-{r}" for r in range(k + 1)]
         _add(steps, "fit", block="models", index=model, model=model, data=data, base=CALIBRATED_MODEL, attempt=1)
