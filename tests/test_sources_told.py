@@ -1,5 +1,7 @@
 """What each intent source is told: no source an arm may run is handed the simulated operator's intent."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -56,5 +58,10 @@ def test_every_source_says_what_it_is_told():
     assert INTENT_SOURCES["paths"].told.scene and INTENT_SOURCES["paths"].told.family
     person = INTENT_FOLDERS["person-model"].told
     assert person.arm == "measured" and not person.scene and not person.family and not person.label
+    assert person.text() == "arm measured; from the person's trials: paths round obstacles and the arm"
+    # a calibration that fell back to the typical arm learnt only the paths from the person (a study's report said
+    # "arm assumed; from the person's trials: paths round obstacles and the arm": a review, 2026-12-07)
+    assumed = replace(person, arm="assumed").text()
+    assert assumed == "arm assumed; from the person's trials: paths round obstacles"
     with pytest.raises(ValueError, match="Told.arm"):
         Told(arm="guessed")

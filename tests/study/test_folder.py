@@ -204,6 +204,29 @@ def test_a_refused_page_option_registers_nobody(tmp_path, host, token):
     assert not (study.folder / "participants" / "P01").exists() and not study.any_started()
 
 
+def test_a_taken_page_port_registers_nobody(tmp_path):
+    """The page's port in use (a server left running) registered the participant, spent number 1 and row 0 of the
+    Latin square and wrote their order, which locks the plan, before the page failed to listen (a review ran it,
+    2026-12-07): the port is bound before anyone is registered."""
+    import socket
+
+    from typer.testing import CliRunner
+
+    from coassist.cli import app
+
+    study = init_study(comparison_plan(tmp_path / "plans", per_condition=1, practice=0), tmp_path / "study")
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        args = ["study", "run", str(study.folder), "--participant", "P01", "--port", str(port), "--no-open"]
+        res = CliRunner().invoke(app, args)
+        assert res.exit_code != 0 and f"cannot listen on 127.0.0.1:{port}" in res.output, res.output
+        assert "Traceback" not in res.output
+    assert study.participants() == {} and not study.any_started()
+    assert not (study.folder / "participants" / "P01").exists()
+
+
 def test_a_study_folder_keeps_the_default_intent_it_was_made_with(tmp_path):
     """A cooperative condition that names no intent runs present-held in a study made today; it ran nominal before.
     The folder keeps its plan's bytes and re-reads them on every run, so a folder made before the change once read
@@ -229,3 +252,19 @@ def test_a_study_folder_keeps_the_default_intent_it_was_made_with(tmp_path):
     amend_study(older.folder, amended, reason="a fifth participant")  # a safe field: the condition is read alike
     again = StudyFolder(older.folder)
     assert again.plan().participants == 5 and again.plan().conditions[0].intent == "nominal"
+
+
+@pytest.mark.parametrize("realtime", [False, True])
+def test_a_simulated_participant_rests_only_when_paced_to_the_wall_clock(tmp_path, realtime):
+    """docs/study.md: a simulated participant does not rest unless --realtime paces it to the wall clock (it never
+    rested: a paced rehearsal under-counted the session's length by every rest; a review, 2026-12-07)."""
+    plan = comparison_plan(tmp_path / "plans", per_condition=1, practice=0)
+    plan.write_text(plan.read_text().replace("between_conditions = 30.0", "between_conditions = 0.4"))
+    study = init_study(plan, tmp_path / "study")
+    with ParticipantRun(study, "S01", simulate=True, realtime=realtime) as run:
+        k = next(i for i, s in enumerate(run.steps) if s["kind"] == "rest")
+        rested = run._rest(k, run.steps[k])["rested_s"]
+    if realtime:
+        assert 0.4 <= rested < 5.0
+    else:
+        assert rested < 0.4

@@ -383,12 +383,28 @@ def create_app(
     return app
 
 
+def bind_page_socket(host: str, port: int) -> socket.socket:
+    """The page's listening socket, bound to ``host:port`` (0: a free port); ValueError in one line where it cannot
+    be (the port taken). Bound before anything is recorded (a study's participant), and handed to
+    :class:`PlayServer` (``sock=``)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise ValueError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+    return sock
+
+
 class PlayServer:
     """uvicorn serving :func:`create_app` on ``host:port`` (port 0: any free one).
 
     ``run()`` serves in this thread until interrupted (the CLI); ``start()`` serves in a
     background thread and returns once it listens (tests, the benchmark); ``stop()``
-    aborts a running trial and shuts down.
+    aborts a running trial and shuts down. ``sock``: a socket :func:`bind_page_socket` bound already to
+    ``host:port`` (a study binds it before it registers the participant); None: bound here.
     """
 
     def __init__(
@@ -399,6 +415,7 @@ class PlayServer:
         token: str | None = None,
         frame_rate: float | None = None,
         ping: tuple[float, float] = (WS_PING_INTERVAL, WS_PING_TIMEOUT),
+        sock: socket.socket | None = None,
     ) -> None:
         import uvicorn
 
@@ -407,14 +424,11 @@ class PlayServer:
             raise ValueError(f"ping must be (interval, timeout), two numbers > 0 [s], got {ping!r}")
         self.ping = (float(ping[0]), float(ping[1]))  # [s] the keepalive's interval and timeout (WS_PING_INTERVAL)
         self.session, self.host, self.token = session, host, token
-        family = socket.AF_INET6 if ":" in host else socket.AF_INET
-        self._sock = socket.socket(family, socket.SOCK_STREAM)
-        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            self._sock.bind((host, port))
-        except OSError as exc:
-            self._sock.close()
-            raise ValueError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+        if sock is None:
+            sock = bind_page_socket(host, port)
+        elif sock.getsockname()[1] != port and port != 0:
+            raise ValueError(f"sock is bound to port {sock.getsockname()[1]}, not {port}")
+        self._sock = sock
         self.port = int(self._sock.getsockname()[1])
         self.app = create_app(session, bind=(host, self.port), token=token, frame_rate=frame_rate)
         config = uvicorn.Config(

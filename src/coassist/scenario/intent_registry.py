@@ -77,7 +77,8 @@ class Told:
         (identified from the person's calibration trials).
     label : what it learnt to predict from trials ("": it learnt nothing; "the simulated operator's
         intent" needs a simulation to train).
-    person : what it learnt from the person's own trials ("": nothing).
+    person : what it learnt from the person's own trials ("": nothing); a measured arm is learnt from them too, and
+        the line says so ("… and the arm"; where a calibration fell back to the typical arm, it does not).
     """
 
     scene: bool = False
@@ -94,7 +95,8 @@ class Told:
         """One line: e.g. "scene; family: the simulated operator's detours; arm assumed"."""
         parts = ["scene" if self.scene else "", f"family: {self.family}" if self.family else ""]
         parts += [f"arm {self.arm}" if self.arm != "none" else "", f"label: {self.label}" if self.label else ""]
-        parts += [f"from the person's trials: {self.person}" if self.person else ""]
+        person = f"{self.person} and the arm" if self.person and self.arm == "measured" else self.person
+        parts += [f"from the person's trials: {person}" if person else ""]
         return "; ".join(p for p in parts if p) or "the plan only"
 
 
@@ -255,7 +257,7 @@ INTENT_FOLDERS: Registry[IntentFolderKind] = Registry(
             _load_person_model,
             network=False,
             module="coassist.scenario.person_model",
-            told=Told(arm="measured", person="paths round obstacles and the arm"),
+            told=Told(arm="measured", person="paths round obstacles"),
         ),
         "calibration-draws": IntentFolderKind(
             "calibration-draws.json",
@@ -263,7 +265,7 @@ INTENT_FOLDERS: Registry[IntentFolderKind] = Registry(
             _load_draws,
             network=False,
             module="coassist.scenario.calibration_draws",
-            told=Told(arm="measured", person="paths round obstacles and the arm"),
+            told=Told(arm="measured", person="paths round obstacles"),
         ),
         "model": IntentFolderKind(
             "model.json",

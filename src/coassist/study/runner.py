@@ -131,7 +131,16 @@ class ParticipantRun:
         self.simulate, self.page, self.realtime = simulate, page, realtime
         self.host, self.confirm = host, confirm
         self.say = say or (lambda line: None)
-        self.record = study.register(participant, simulated=simulate)  # the table cross-checked first
+        self._page_sock: Any = None
+        if page is not None:  # the page's port too: one taken registered the participant and locked the plan
+            from coassist.play.server import bind_page_socket
+
+            self._page_sock = bind_page_socket(page[0], page[1])
+        try:
+            self.record = study.register(participant, simulated=simulate)  # the table cross-checked first
+        except BaseException:
+            self._close_page_socket()
+            raise
         if new and self.record["number"] > self.plan.participants:
             rows = len(study.record.get("latin_square") or ())
             self.say(
@@ -257,14 +266,21 @@ class ParticipantRun:
             from coassist.play.server import PlayServer
 
             host, port, token = self.page
-            self.server = PlayServer(self.session, host=host, port=port, token=token).start()
+            sock, self._page_sock = self._page_sock, None
+            self.server = PlayServer(self.session, host=host, port=port, token=token, sock=sock).start()
 
     @property
     def url(self) -> str | None:
         return None if self.server is None else self.server.url
 
+    def _close_page_socket(self) -> None:
+        sock, self._page_sock = self._page_sock, None
+        if sock is not None:
+            sock.close()
+
     def close(self, *, interrupted: bool = False) -> None:
         try:
+            self._close_page_socket()  # bound, never served (the run stopped before the page): let the port go
             self.training.close(interrupted=interrupted)
         finally:
             if self.server is not None:
@@ -696,7 +712,8 @@ class ParticipantRun:
         t0 = time.monotonic()
         rest = self.plan.rest  # the plan's length, not the recorded step's (coassist study amend may change it)
         planned = rest.between_trials if step.get("why") == "between trials" else rest.between_conditions
-        seconds = float(planned) if self.page is not None else 0.0
+        # a simulated participant rests only when paced to the wall clock (--realtime: the session's length rehearsed)
+        seconds = float(planned) if self.page is not None or self.realtime else 0.0
         view = self._view(
             k,
             step,
