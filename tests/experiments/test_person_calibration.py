@@ -336,6 +336,17 @@ def test_the_arm_is_measured_on_a_rigid_object_and_used_only_where_it_says_enoug
     assert (
         "arm ASSUMED, not measured (K̂ 800 N/m, Ĉ 10.0 N·s/m): 3 probe trial(s) on the board left out" in summary_line(c)
     )
+    # a world that holds every object rigidly (the MuJoCo UR5): no twist in series, the board's probes measure the arm
+    # (they were left out there too, and the line asked for the handle: a review, 2026-12-07)
+    from coassist.data import TrialMeta
+
+    rigid = [
+        Named(t.id, replace(t.trial, meta=TrialMeta(**{**t.trial.meta.to_dict(), "origin": "mujoco"}))) for t in board
+    ]
+    (c,) = calibrate_people(rigid)
+    assert c.fit.arm == identify_arm([t.trial for t in rigid]) and c.fit.arm.method == "probe-iv"
+    assert "left out" not in summary_line(c)
+    assert person_calibration.probes_for_arm([t.trial for t in rigid]) == ([t.trial for t in rigid], "")
     clipped = ArmEstimate(
         stiffness=5000.0, damping=20.0, stiffness_se=800.0, damping_se=3.0, trials=4, method="probe-iv"
     )

@@ -731,3 +731,38 @@ def test_a_person_model_folder_that_holds_no_participant_refuses_them_before_the
         PlanError, match=r"condition\[1\]\.intent: .*calibrated on trials of the MuJoCo UR5.*not of the play world"
     ):
         init_study(tmp_path / "plan-arm.toml", tmp_path / "study-arm")
+
+
+@pytest.mark.parametrize("origin", ["sim", "mujoco"])
+def test_the_block_measures_the_arm_as_calibrate_does_leaving_a_twisting_mount_out(tmp_path, origin):
+    """A study's calibration block on the board measured the arm with the mount's twist in series (K̂ about half the
+    handle's) and recorded it as measured, where coassist calibrate leaves those trials out (a review, 2026-12-07):
+    the block decides as calibrate does (probes_for_arm); in a world that holds every object rigidly (MuJoCo) the
+    board's probes measure the arm."""
+    from dataclasses import replace
+
+    from coassist.config import APPLICATION_PRESET
+    from coassist.control.presets import get_preset, make_controller
+    from coassist.data import TrialMeta, write_dataset
+    from coassist.scenario.objects import get_object
+    from coassist.scenario.operator import AUTHOR
+    from coassist.sim.trial_runner import run_trial
+
+    probe = make_controller("manual-probe", get_preset(APPLICATION_PRESET))
+    trials = [
+        run_trial(task_for_seed("curved", s, obstacle="large"), AUTHOR, get_object("board"), probe, None, s)
+        for s in range(3)
+    ]
+    trials = [replace(t, meta=TrialMeta(**{**t.meta.to_dict(), "origin": origin, "user": "S01"})) for t in trials]
+    write_dataset(trials, tmp_path / "S01" / "calibration", "calibration")
+    record = fit_job(FitJob(root=str(tmp_path / "S01"), data=("calibration",), model="P0", person="S01"))
+    if origin == "sim":  # the point-mass world's board twists on its mount
+        assert record["arm_measured"] is False and record["arm"] == asdict(ASSUMED_ARM)
+        assert "3 probe trial(s) on the board left out of the arm's fit" in record["arm_note"]
+    else:
+        arm, note = measured_arm(identify_arm(trials))
+        assert (
+            record["arm"] == asdict(arm)
+            and record["arm_measured"] is (not note)
+            and "left out" not in record["arm_note"]
+        )

@@ -50,7 +50,7 @@ from coassist.scenario.path_model import (
     check_way,
     few_paths,
 )
-from coassist.scenario.person_model import PersonFit, fit_person, person_filter_for
+from coassist.scenario.person_model import RIGID_HOLD_ORIGINS, PersonFit, fit_person, person_filter_for
 from coassist.sim.person_twin import lead_check
 
 __all__ = [
@@ -60,6 +60,8 @@ __all__ = [
     "CalibrationError",
     "PersonCalibration",
     "calibrate_people",
+    "mount_twists",
+    "probes_for_arm",
     "summary_line",
     "thin_ways",
     "ways_to_ask",
@@ -350,18 +352,13 @@ def calibrate_people(
     for person, items in groups.items():
         kind = _check_person(person, items, min_trials)
         probed = [it.trial for it in items if it.trial.meta.controller == PROBE_CONTROLLER]
-        rigid = [t for t in probed if not _twists(t.meta.object)]
+        rigid, left_out = probes_for_arm(probed)
         wall, cpu = time.perf_counter(), time.process_time()
         estimate = identify_arm(rigid)
         arm, note = measured_arm(estimate)
         if estimate.method == "assumed":  # nothing measured: summary_line says why from the trials
             note = ""
-        if len(rigid) < len(probed):
-            twisting = ", ".join(sorted({t.meta.object for t in probed} - {t.meta.object for t in rigid}))
-            left_out = (
-                f"{len(probed) - len(rigid)} probe trial(s) on the {twisting} left out of the arm's fit (its mount "
-                "twists in series with the arm: record the probe trials with the handle)"
-            )
+        if left_out:
             note = left_out if not rigid else f"{note}; {left_out}" if note else left_out
         try:
             fit = fit_person([it.trial for it in items], arm=arm)
@@ -387,13 +384,34 @@ def calibrate_people(
     return out
 
 
-def _twists(name: str) -> bool:
-    """Whether the object ``name`` is held through a mount that twists (a yaw mode); an object the project does not
-    know (a lab's own) is taken to be rigid."""
+def mount_twists(trial: Trial) -> bool:
+    """Whether ``trial``'s object was held through a mount that twists in series with the arm (a yaw mode: the
+    board), so that its probe measures the arm and the twist together (the same K = 700 N/m arm measured 449 ± 27 N/m
+    on the board, 735 ± 56 on the handle). Not in a world that holds every object rigidly
+    (:data:`~coassist.scenario.person_model.RIGID_HOLD_ORIGINS`: the MuJoCo UR5); an object the project does not know
+    (a lab's own) is taken to be rigid."""
+    if str(trial.meta.origin) in RIGID_HOLD_ORIGINS:
+        return False
     try:
-        return get_object(name).has_yaw
+        return get_object(trial.meta.object).has_yaw
     except ValueError:
         return False
+
+
+def probes_for_arm(trials: Sequence[Trial]) -> tuple[list[Trial], str]:
+    """The probe trials among ``trials`` the person's arm is measured from (those whose mount does not twist:
+    :func:`mount_twists`), and a note naming those left out ("": none), as ``coassist calibrate`` and a study's
+    calibration block both decide it."""
+    probed = [t for t in trials if t.meta.controller == PROBE_CONTROLLER]
+    twisting = [t for t in probed if mount_twists(t)]
+    rigid = [t for t in trials if not mount_twists(t)]
+    if not twisting:
+        return rigid, ""
+    objects = ", ".join(sorted({t.meta.object for t in twisting}))
+    return rigid, (
+        f"{len(twisting)} probe trial(s) on the {objects} left out of the arm's fit (its mount twists in series with "
+        "the arm: record the probe trials with the handle)"
+    )
 
 
 def _asked_other_way(items: Sequence[NamedTrial], asked: np.ndarray) -> int:

@@ -320,12 +320,17 @@ def _model_from(doc: Mapping) -> PathModel:
     )
 
 
+#: The worlds (``TrialMeta.origin``) that hold every object rigidly: the MuJoCo UR5 (:mod:`coassist.robot.ur5_mjcf`)
+#: has no yaw mode, so there the hand moves with the tip and a board's probe measures the arm as the handle's does.
+RIGID_HOLD_ORIGINS = frozenset({"mujoco"})
+
+
 def person_filter_for(origin: str) -> PersonFilterSettings:
     """The online filter for a person model calibrated on trials from ``origin`` (``TrialMeta.origin``): on the MuJoCo
     UR5 (``mujoco``), which holds every object rigidly (:mod:`coassist.robot.ur5_mjcf`), the hand moves with the tip:
     no yaw mode (``object_yaw`` off; with it the tool's jerk about doubled on the board); elsewhere
     :data:`PERSON_FILTER`."""
-    return replace(PERSON_FILTER, object_yaw=False) if origin == "mujoco" else PERSON_FILTER
+    return replace(PERSON_FILTER, object_yaw=False) if origin in RIGID_HOLD_ORIGINS else PERSON_FILTER
 
 
 def write_person_model(

@@ -157,6 +157,7 @@ def fit_job(job: FitJob) -> dict[str, Any]:
     """Fit and write one person model (module docstring); returns what the study records of it.
     :class:`CalibrationFailed` (one line) where a task has no demonstration or cannot be fitted."""
     from coassist._io import OutputLock, atomic_write_text, staged_folder
+    from coassist.experiments.person_calibration import probes_for_arm
     from coassist.experiments.person_figure import PERSON_FIGURE_FILE, write_person_figure
     from coassist.scenario.arm_identification import ArmEstimate, identify_arm
     from coassist.scenario.person_model import fit_person, person_filter_for, write_person_model
@@ -173,11 +174,14 @@ def fit_job(job: FitJob) -> dict[str, Any]:
         trials = [(f, t) for f, t in _read(job.root, base["blocks"]) if f in demos_of_base] + trials
         arm_note = f"{job.base}'s (the rounds ran without pushes)"
         measured = base.get("arm_measured", False)
-    else:
-        estimate = identify_arm([t for _, t in trials])
+    else:  # from the probe trials whose mount does not twist, as coassist calibrate measures it
+        rigid, twisting = probes_for_arm([t for _, t in trials])
+        estimate = identify_arm(rigid)
         arm, arm_note = measured_arm(estimate)
         measured = not arm_note
         arm_note = arm_note or f"measured from {arm.trials} trials with pushes"
+        if twisting:
+            arm_note = f"{arm_note}; {twisting}"
     tasks = list(dict.fromkeys(t.meta.task for _, t in trials))
     fits, demos, left_out = {}, {}, {}
     for task in tasks:
