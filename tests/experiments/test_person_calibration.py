@@ -466,6 +466,24 @@ def test_calibrate_refuses_what_would_be_a_model_worse_than_none(alice, tmp_path
     sim = write_dataset([t.trial for t in alice], tmp_path / "sim", "sim")
     assert runner.invoke(app, ["calibrate", str(sim), "--out", str(tmp_path / "m-sim")]).exit_code == 0
     assert read_person_model(tmp_path / "m-sim").settings == PERSON_FILTER
+    # a simulation's trials beside an arm's (one filter, but a simulated hand measured the arm): refused; the model
+    # records the worlds its trials came from, and a run in a world of another kind refuses it (a point-mass or a
+    # browser calibration went to a real arm: a review, 2026-12-07)
+    sim_ur = write_dataset(retagged(alice[:2], origin="ur5") + [t.trial for t in alice[2:]], tmp_path / "su", "su")
+    res = runner.invoke(app, ["calibrate", str(sim_ur), "--out", str(tmp_path / "m-su")])
+    said = " ".join(res.output.split())
+    assert res.exit_code == 2 and "the trials come from more than one world (sim: " in said and "ur5: " in said
+    from coassist.scenario.assistance import check_person_world
+
+    assert read_person_model(tmp_path / "m-ur").origins == ("real", "ur5")
+    assert read_person_model(tmp_path / "m-sim").origins == ("sim",)
+    check_person_world(read_person_model(tmp_path / "m-sim"), "sim", "point-mass", "m-sim")  # its own kind: taken
+    check_person_world(read_person_model(tmp_path / "m-ur"), "franka", "franka", "m-ur")  # an arm's: taken at an arm
+    for model, origin, world in (("m-sim", "ur5", "ur"), ("m-sim", "franka", "franka"), ("m-ur", "sim", "play")):
+        with pytest.raises(
+            ValueError, match=rf"intent {model}: the person model was calibrated on trials of .*not of "
+        ):
+            check_person_world(read_person_model(tmp_path / model), origin, world, model)
 
     # collect with the model for a simulated person it does not hold: refused before any trial (drive and play
     # refuse theirs; collect ran them on the extrapolated present estimate, 7.4 mm of overshoot against MG's 2.7)

@@ -51,7 +51,7 @@ def calibrate(
     if (out / PERSON_MODEL_FILE).exists() and not overwrite:
         fail(f"--out {out}: already holds a person model; pass --overwrite to replace it", 2)
     from coassist.scenario.intent_registry import INTENT_FOLDERS
-    from coassist.scenario.person_model import person_filter_for, write_person_model
+    from coassist.scenario.person_model import origin_kind, person_filter_for, write_person_model
 
     for name in INTENT_FOLDERS:  # --intent reads a folder by the first marker it holds: the model would be hidden
         kind = INTENT_FOLDERS[name]
@@ -67,16 +67,18 @@ def calibrate(
     from coassist.experiments.person_figure import PERSON_FIGURE_FILE, calibration_panels, person_figure_png
 
     trials = intent_trials(data, skip_bad_trials, bag_topics=bag_topics)
-    # the world the trials come from says how the person's hand holds the object (the online filter's yaw mode): on
-    # the MuJoCo UR5, which holds every object rigidly, no yaw mode (with it the tool's jerk about doubled on the
-    # board); worlds of one filter (a UR's exported bags, "real", beside its drive trials, "ur5") go together
+    # the world the trials come from says how the person's hand holds the object (the online filter's yaw mode: on
+    # the MuJoCo UR5, which holds every object rigidly, none) and what measured their arm (a simulated operator, the
+    # browser's pointer spring, a person at a real handle): worlds of one kind (a UR's exported bags, "real", beside
+    # its drive trials, "ur5") go together; a simulation's beside an arm's went into one model (a review, 2026-12-07)
     origins = {it.trial.meta.origin for it in trials}
-    if len({person_filter_for(o) for o in origins}) > 1:
+    if len({origin_kind(o) for o in origins}) > 1:
         first = {o: next(it.id for it in trials if it.trial.meta.origin == o) for o in sorted(origins)}
         fail(
             "the trials come from more than one world ("
             + ", ".join(f"{o}: {tid}" for o, tid in first.items())
-            + "), whose people hold the object otherwise: calibrate each world's trials into a model of its own",
+            + "), whose hands hold the object and measure the arm otherwise: calibrate each world's trials into a "
+            "model of its own",
             2,
         )
     try:
@@ -105,7 +107,12 @@ def calibrate(
     # cannot be written leaves the folder as it was; a figure that cannot be written after it is said
     png = person_figure_png(calibration_panels(people))
     try:
-        write_person_model(out, {c.person: c.fit for c in people}, settings=person_filter_for(origins.pop()))
+        write_person_model(
+            out,
+            {c.person: c.fit for c in people},
+            settings=person_filter_for(next(iter(origins))),
+            origins=sorted(origins),
+        )
     except (OSError, ValueError) as exc:
         fail(
             f"--out {out}: cannot write {PERSON_MODEL_FILE} ({getattr(exc, 'strerror', None) or exc}); nothing changed"

@@ -118,10 +118,19 @@ def check_person_world(source: Any, origin: str, world: str, intent: str) -> Non
     arm and paths were measured there. Driven on the MuJoCo board with the point-mass world's filter, the tool's jerk
     rose to 2.4–3.7 m/s³ against MG's 1.8 (a review, two seeds)."""
     from coassist.scenario.person_intent import PersonPathsIntent
-    from coassist.scenario.person_model import person_filter_for
+    from coassist.scenario.person_model import origin_kind, person_filter_for
 
     if not isinstance(source, PersonPathsIntent) or not (source.arms or source.paths):
         return
+    # the kind of world its trials came from, where the file records it (a point-mass or browser calibration passed
+    # the filter's check to a real arm: a review, 2026-12-07)
+    kinds = sorted({origin_kind(o) for o in source.origins})
+    if kinds and origin_kind(origin) not in kinds:
+        raise ValueError(
+            f"intent {intent}: the person model was calibrated on trials of {' and '.join(kinds)}, not of the {world} "
+            f"world ({origin_kind(origin)}): its arm, paths and filter are that world's; calibrate the person on "
+            f"{world} trials (--controller manual-probe, then coassist calibrate)"
+        )
     if source.settings.object_yaw != person_filter_for(origin).object_yaw:
         there = (
             "a world where the object twists on its mount (the point-mass simulation, a real arm)"

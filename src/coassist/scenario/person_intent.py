@@ -395,6 +395,8 @@ class PersonPathsIntent:
         they get ``present-held``'s rows; :attr:`DEFAULT` among them: whoever gets the default model too.
     default_person : whose calibration ``default_paths`` and ``default_arm`` are (None: not known), for the line
         that says what the person at the handle gets.
+    origins : the worlds its calibration trials came from (``TrialMeta.origin``; empty: not recorded): a run in a
+        world of another kind refuses it (:func:`~coassist.scenario.assistance.check_person_world`).
     """
 
     history = 1
@@ -414,8 +416,10 @@ class PersonPathsIntent:
         extrapolation: float = 1.0,
         held: Iterable[str] = (),
         default_person: str | None = None,
+        origins: Iterable[str] = (),
     ) -> None:
         self.horizon = check_int(horizon, "PersonPathsIntent.horizon", 1)
+        self.origins = tuple(sorted({str(o) for o in origins}))
         # the people not led along their paths (their calibration's twin overshot more with the lead than under MG:
         # coassist.sim.person_twin); DEFAULT among them: whoever gets the default model is not led either
         self.held = frozenset(str(name) for name in held)

@@ -325,6 +325,29 @@ def _model_from(doc: Mapping) -> PathModel:
 RIGID_HOLD_ORIGINS = frozenset({"mujoco"})
 
 
+#: The kinds of world a person model serves, by the ``TrialMeta.origin`` of its trials: the person's arm was measured
+#: through that world's hand (the browser's pointer spring, a simulated operator, a person at a real handle) and their
+#: paths in its frame, so a model of one kind is refused in a world of another.
+ORIGIN_KINDS = {
+    "sim": "a simulation (the point-mass world or the browser page)",
+    "mujoco": "the MuJoCo UR5",
+    "ur5": "an arm (a UR, a Franka, their recordings)",
+    "franka": "an arm (a UR, a Franka, their recordings)",
+    "real": "an arm (a UR, a Franka, their recordings)",
+}
+
+
+def origin_kind(origin: str) -> str:
+    """The kind of world (:data:`ORIGIN_KINDS`) trials of ``origin`` come from, in words."""
+    return ORIGIN_KINDS.get(str(origin), str(origin))
+
+
+def _check_origins(origins: Sequence[str], where: str) -> tuple[str, ...]:
+    if isinstance(origins, str) or not all(isinstance(o, str) and o in ORIGIN_KINDS for o in origins):
+        raise ValueError(f"{where} must be a list of {tuple(ORIGIN_KINDS)}, got {origins!r}")
+    return tuple(sorted(set(origins)))
+
+
 def person_filter_for(origin: str) -> PersonFilterSettings:
     """The online filter for a person model calibrated on trials from ``origin`` (``TrialMeta.origin``): on the MuJoCo
     UR5 (``mujoco``), which holds every object rigidly (:mod:`coassist.robot.ur5_mjcf`), the hand moves with the tip:
@@ -339,11 +362,15 @@ def write_person_model(
     *,
     settings: PersonFilterSettings | None = None,
     default: str | None = None,
+    origins: Sequence[str] = (),
 ) -> Path:
     """Write a person-model folder (``person-model.json``, atomically); returns the folder. ``default``: the
-    person (a key of ``fits``) whose model anyone else at the handle gets (module docstring)."""
+    person (a key of ``fits``) whose model anyone else at the handle gets (module docstring). ``origins``: the worlds
+    its trials came from (``TrialMeta.origin``), recorded so that a run in a world of another kind refuses it
+    (:func:`origin_kind`); empty: not recorded (as before 2026-12-07)."""
     if default is not None and default not in fits:
         raise ValueError(f"default must be one of the people fitted ({', '.join(fits)}), got {default!r}")
+    origins = _check_origins(origins, "origins")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     doc: dict[str, Any] = {
@@ -360,6 +387,8 @@ def write_person_model(
     }
     if default is not None:
         doc["default"] = default
+    if origins:
+        doc["origins"] = list(origins)
     # the file carries its own SHA-256: a person model is something the robot obeys, an edit by hand is refused
     write_hashed_json(folder / PERSON_MODEL_FILE, doc, format=_FORMAT)
     return folder
@@ -369,7 +398,7 @@ def write_person_model(
 #: fresh source for every trial (its state is the trial's) from the same few folders, and parsing the file and
 #: rebuilding the path models was about 80 ms of CPU a trial (issue 44). Content that was not read before (an edit,
 #: a rewrite) is read and its own hash checked. Bounded.
-_READ_MEMO: dict[bytes, tuple[dict, dict, str | None, PersonFilterSettings, frozenset[str]]] = {}
+_READ_MEMO: dict[bytes, tuple[dict, dict, str | None, PersonFilterSettings, frozenset[str], tuple[str, ...]]] = {}
 _READ_MEMO_SIZE = 32
 
 
@@ -387,7 +416,7 @@ def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsInten
             if len(_READ_MEMO) >= _READ_MEMO_SIZE:
                 _READ_MEMO.pop(next(iter(_READ_MEMO)))
             _READ_MEMO[key] = read
-    paths, arms, default, settings, held = read
+    paths, arms, default, settings, held, origins = read
     return PersonPathsIntent(
         horizon,
         paths=paths,
@@ -397,15 +426,19 @@ def read_person_model(folder: str | Path, horizon: int = 50) -> PersonPathsInten
         settings=settings,
         held=held | ({PersonPathsIntent.DEFAULT} if default in held else set()),
         default_person=default,
+        origins=origins,
         # the folder's name and the file's digest: two calibrations written to folders of one name (or one
         # folder rewritten with --overwrite) give their trials different ids, as a trained model's do
         model_id=f"person:{Path(folder).name}@{'' if key is None else key.hex()[:12]}",
     )
 
 
-def _read_people(path: Path) -> tuple[dict, dict, str | None, PersonFilterSettings, frozenset[str]]:
-    """A person-model file's people's path models and arms, its default person, its filter and the people it does
-    not lead (their :class:`LeadCheck` said so; errors name the file and field)."""
+def _read_people(
+    path: Path,
+) -> tuple[dict, dict, str | None, PersonFilterSettings, frozenset[str], tuple[str, ...]]:
+    """A person-model file's people's path models and arms, its default person, its filter, the people it does
+    not lead (their :class:`LeadCheck` said so) and the worlds its trials came from (errors name the file and
+    field)."""
     doc = read_hashed_json(path, format=_READS)  # one line naming the file: missing, edited, another format
     try:
         people = dict(doc["people"])
@@ -416,6 +449,7 @@ def _read_people(path: Path) -> tuple[dict, dict, str | None, PersonFilterSettin
         if default is not None and default not in people:
             raise ValueError(f"default {default!r} is not one of its people ({', '.join(people)})")
         held = frozenset(name for name, lead in leads.items() if not lead.follow)
-        return paths, arms, default, PersonFilterSettings(**doc.get("filter", {})), held
+        origins = _check_origins(doc.get("origins", []), "origins")
+        return paths, arms, default, PersonFilterSettings(**doc.get("filter", {})), held, origins
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"{path}: {exc}") from None

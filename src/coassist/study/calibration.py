@@ -235,7 +235,8 @@ def fit_job(job: FitJob) -> dict[str, Any]:
             folder = person_model_folder(stage, task)
             # the filter of the study's world (one world a study: its trials' origin; the MuJoCo UR5's has no yaw)
             settings = person_filter_for(trials[0][1].meta.origin)
-            write_person_model(folder, {job.person: fit}, default=job.person, settings=settings)
+            origins = sorted({t.meta.origin for _, t in trials})
+            write_person_model(folder, {job.person: fit}, default=job.person, settings=settings, origins=origins)
             heading = f"{job.person}, {job.model} ({task}, {len(demos[task])} demonstrations)"
             write_person_figure([(heading, fit)], folder / PERSON_FIGURE_FILE)
         atomic_write_text(stage / FIT_FILE, json.dumps(record, indent=1, allow_nan=False) + "\n")
