@@ -32,7 +32,7 @@ import pytest
 pytest.importorskip("mujoco", reason="the MuJoCo world needs the robot extra: pip install 'coassist[robot]'")
 pytest.importorskip("pinocchio", reason="the UR5 kinematics need the robot extra: pip install 'coassist[robot]'")
 
-from coassist.data import RecordingError, read_trial, write_trial  # noqa: E402
+from coassist.data import read_trial, write_trial  # noqa: E402
 from coassist.interfaces import Fault  # noqa: E402
 from coassist.robot.drive import DriveConfig, drive  # noqa: E402
 from coassist.robot.mujoco_world import MujocoUR5World  # noqa: E402
@@ -185,10 +185,10 @@ def test_a_fuzzed_run_is_written_with_its_mcap_and_figure(tmp_path):
     back = read_trial(path)
     assert back.equals(trial) and back.n_samples == trial.n_samples
     assert np.all(back.fault[5:] & int(Fault.NONFINITE_STATE | Fault.NONFINITE_WRENCH | Fault.INVALID_INPUT))
-    # the MCAP keeps the raw values too; read back as a recording to learn from, the implausible ones are
-    # refused in one line naming the topic (the run itself is the trial file above)
-    with pytest.raises(RecordingError, match=r"topic /\w+: message \d+"):
-        load_bag_trial(mcap)
+    # the MCAP holds the run's log: an implausible pose or twist (1e300) is a glitch held as a NaN is (since
+    # 2026-12-07; the log had kept it, and the MCAP read back as a recording was refused), so the recording reads
+    recording = load_bag_trial(mcap)
+    assert recording.n_samples == trial.n_samples and np.abs(recording.pose).max() < 1e3
     assert plot_trial(trial, tmp_path / "fuzz.png").stat().st_size > 0
 
 

@@ -374,7 +374,7 @@ def test_a_control_link_reported_down_ends_the_run_link_lost_without_another_com
             break
     assert trial is not None, "three runs of three stalled before their first tick"
     extra = trial.meta.extra
-    assert extra["ended"] == "link_lost" and "reports it is disconnected" in extra["stop_message"]
+    assert extra["ended"] == "link_lost" and "reports it is disconnected" in extra["stop_message"], extra
     assert "no command was sent" in extra["stop_message"]
     # tick 31 read the state (the receive link is up) and asked before its speedJ: rows 0-30 kept
     assert trial.n_samples == 31 and np.all(np.isfinite(trial.pose))

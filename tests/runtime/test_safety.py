@@ -754,10 +754,15 @@ def test_the_effort_stage_alone_and_batched_agree_on_which_efforts_pass_above_th
     effort above the tool speed is the layer's to change, as a forward one is; braking straight against v is not."""
     from coassist.runtime.safety import SafetyLayerBatch
 
-    layers = [SafetyLayer(SafetyLimits(tool_speed=0.25), 0.008, 6) for _ in range(5)]
-    v = np.array([[0.3, 0.0], [0.3, 0.0], [0.3, 0.0], [0.21, -0.17], [0.1, 0.0]])
-    u = np.array([[0.0, 50.0], [3.0, 0.0], [-3.0, 0.0], -7.3 * v[3], [0.0, 50.0]])
-    hand = np.zeros((5, 3))
-    clean = SafetyLayerBatch(layers).limit_effort(np.arange(5), u, v, hand)
-    alone = [layer.limit_effort(u[i], v[i], np.zeros(6), Fault.NONE)[1] == Fault.NONE for i, layer in enumerate(layers)]
-    assert clean.tolist() == alone == [False, False, True, True, True]
+    # the last two: a velocity whose square overflows (its speed read inf, and the sideways 40 N passed unflagged: a
+    # review, 2026-12-07) and one at the plausibility bound, both INVALID_INPUT with zero effort
+    layers = [SafetyLayer(SafetyLimits(tool_speed=0.25), 0.008, 6) for _ in range(7)]
+    v = np.array([[0.3, 0.0], [0.3, 0.0], [0.3, 0.0], [0.21, -0.17], [0.1, 0.0], [1e155, 0.0], [0.0, -1e3]])
+    u = np.array([[0.0, 50.0], [3.0, 0.0], [-3.0, 0.0], -7.3 * v[3], [0.0, 50.0], [0.0, 40.0], [0.0, 40.0]])
+    hand = np.zeros((7, 3))
+    clean = SafetyLayerBatch(layers).limit_effort(np.arange(7), u, v, hand)
+    out = [layer.limit_effort(u[i], v[i], np.zeros(6), Fault.NONE) for i, layer in enumerate(layers)]
+    alone = [f == Fault.NONE for _, f, _ in out]
+    assert clean.tolist() == alone == [False, False, True, True, True, False, False]
+    for effort, f, _ in out[5:]:
+        assert f == Fault.INVALID_INPUT and not effort.any()

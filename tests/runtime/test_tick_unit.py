@@ -523,6 +523,35 @@ def test_a_finite_joint_glitch_is_a_state_mismatch_and_moves_nothing():
     assert np.isfinite(tick._za).all() and np.abs(tick._za).max() < 1e-12
 
 
+@pytest.mark.parametrize("glitched_ticks", ["the first", "every even"])
+def test_a_glitch_at_the_first_tick_does_not_become_the_reference(glitched_ticks):
+    """A review (2026-12-07): the check's reference is the first tick's offset, taken on trust. Joint 0 read 0.3 rad
+    high at tick 0 alone: every correct tick after it was flagged and the run stopped. On every even tick from 0: the
+    wrong ticks passed unflagged, the correct ones were flagged, and the arm moved on its own (39 mm in 2 s) until
+    5.4 s. Now two agreeing ticks replace a first tick no tick agreed with, and a flip-flop flags every tick."""
+    kin = LinearKinematics(well_conditioned_jacobian(), POSE0)
+    world = FakeArmWorld(kin, lambda k: np.zeros(6))
+    read = world.read
+    wrong = (lambda k: k == 0) if glitched_ticks == "the first" else (lambda k: k % 2 == 0)
+
+    def glitched():
+        state = read()
+        if wrong(world.k):
+            state.q = state.q + np.array([0.3, 0, 0, 0, 0, 0])
+        return state
+
+    world.read = glitched
+    log = run_loop(world, _arm_tick(kin, SafetyLimits(min_manipulability=0.0)), 120)
+    flagged = np.flatnonzero(log.fault & int(Fault.STATE_MISMATCH)).tolist()
+    if glitched_ticks == "the first":
+        assert flagged == [1] and log.ended == "time_limit"  # tick 1 disagreed with tick 0; ticks 1 and 2 agreed
+    else:
+        assert flagged == list(range(1, log.n)) and log.ended == "safety_stop"
+    # tick 0's wrong reading, which nothing can tell from a true one, moves the arm by its acceleration-limited step
+    # (8 rad/s² over 8 ms, for a tick or two: 0.5 mrad a tick) before the flags brake it; the flip-flop drifted 39 mm
+    assert np.abs(world.q).max() < 1e-3
+
+
 def test_a_glitch_under_the_tolerance_or_a_constant_offset_is_not_a_mismatch():
     """The reported pose may sit off the forward kinematics by a constant (a TCP or a calibration): that is the
     run's first tick's, held in the tool's frame; 0.5 mm, 0.01 rad of glitch are under the tolerance (1 cm, 0.05 rad)."""
@@ -622,3 +651,88 @@ def test_the_log_keeps_the_alpha_each_ticks_command_was_computed_with():
     expected[7] = expected[6]
     np.testing.assert_array_equal(log.alpha, expected)
     assert run_loop(ScriptedEffortWorld(np.tile(target + 0.05, (40, 1))), _effort_tick(ref), 5).alpha is None  # MG
+
+
+@pytest.mark.parametrize("overrun", ["late", np.array([0.01, 0.02]), float("nan")])
+def test_an_overrun_that_is_not_a_number_counts_as_late_and_raises_nothing(overrun):
+    """A world's last_overrun of the wrong type raised out of run_loop with the last command standing and no
+    world.stop(); a NaN was taken as on time (a review, 2026-12-07). Each counts as a missed deadline."""
+    kin = LinearKinematics(well_conditioned_jacobian(), POSE0)
+    world = FakeArmWorld(kin, lambda k: np.array([6.0, 0, 0, 0, 0, 0]))
+    world.last_overrun = 0.0
+    apply = world.apply
+
+    def late_from_tick_20(command):
+        apply(command)
+        world.last_overrun = overrun if world.k > 20 else 0.0
+
+    world.apply = late_from_tick_20
+    log = run_loop(world, _arm_tick(kin, SafetyLimits(min_manipulability=0.0)), 80)
+    late = np.flatnonzero(log.fault & int(Fault.DEADLINE_MISS))
+    assert late.size and late[0] <= 22 and not (log.fault[:20] & int(Fault.DEADLINE_MISS)).any()
+    assert log.ended == "safety_stop" and world.stops >= 1  # late every tick: the layer stopped the arm
+
+
+def test_a_simulated_hand_that_raises_ends_the_run_with_the_arm_stopped():
+    """hand_force() raising escaped run_loop, world.stop() never called, the last command (0.126 rad/s) standing (a
+    review, 2026-12-07): it ends the run as internal_error with the rows so far."""
+    kin = LinearKinematics(well_conditioned_jacobian(), POSE0)
+    world = FakeArmWorld(kin, lambda k: np.array([6.0, 0, 0, 0, 0, 0]))
+
+    def hand_force():
+        if world.k > 30:
+            raise RuntimeError("the simulated operator failed")
+        return np.zeros(6)
+
+    world.hand_force = hand_force
+    log = run_loop(world, _arm_tick(kin, SafetyLimits(min_manipulability=0.0)), 80)
+    assert log.ended == "internal_error" and "hand_force failed" in log.message and world.stops == 1
+    assert log.n == 30
+
+
+@pytest.mark.parametrize(
+    "field, value, flag",
+    [
+        ("tool_pose", np.array([0.3, 0.1, 0.4, 1e200, 0.0, 0.0]), Fault.INVALID_INPUT),  # raised: math domain error
+        ("tool_twist", np.array([1e200, 0.0, 0.0, 0.0, 0.0, 0.0]), Fault.INVALID_INPUT),
+        ("qd", np.full(6, np.nan), Fault.NONFINITE_STATE),  # not flagged at all
+    ],
+)
+def test_a_finite_but_implausible_or_a_nan_joint_speed_state_is_flagged_and_the_run_goes_on(field, value, flag):
+    """A review (2026-12-07): a pose rotation of 1e200 ended the run (internal_error) where a glitch is flagged and
+    the last good value held; a NaN joint velocity was not flagged. Five glitched ticks: flagged, decelerated, and
+    the run goes on to its end."""
+    kin = LinearKinematics(well_conditioned_jacobian(), POSE0)
+    world = FakeArmWorld(kin, lambda k: np.array([6.0, 0, 0, 0, 0, 0]))
+    read = world.read
+
+    def glitched():
+        state = read()
+        if 40 <= world.k < 45:
+            setattr(state, field, value)
+        return state
+
+    world.read = glitched
+    log = run_loop(world, _arm_tick(kin, SafetyLimits(min_manipulability=0.0)), 100)
+    assert log.ended == "time_limit" and log.n == 100
+    flagged = np.flatnonzero(log.fault & int(flag)).tolist()
+    assert flagged == list(range(40, 45))
+    assert all(Fault(int(f)) & Fault.DECELERATING for f in log.fault[40:45])
+    assert np.isfinite(np.array([c.qd for c in world.commands])).all()
+
+
+def test_a_stop_flag_that_is_no_truth_value_reads_as_a_stop():
+    """protective_stop reported as an array raised in the tick (internal_error): it is read as a stop."""
+    kin = LinearKinematics(well_conditioned_jacobian(), POSE0)
+    world = FakeArmWorld(kin, lambda k: np.array([6.0, 0, 0, 0, 0, 0]))
+    read = world.read
+
+    def glitched():
+        state = read()
+        if world.k >= 30:
+            state.protective_stop = np.array([False, False])
+        return state
+
+    world.read = glitched
+    log = run_loop(world, _arm_tick(kin, SafetyLimits(min_manipulability=0.0)), 100)
+    assert log.ended == "robot_stop" and log.fault[30] & int(Fault.ROBOT_PROTECTIVE_STOP) and world.stops >= 1

@@ -281,6 +281,29 @@ def test_a_100hz_sensor_is_never_stale_but_a_frozen_one_is(dt):
     assert (first - n_freeze) * dt == pytest.approx(0.032)  # the first tick more than 30 ms on
 
 
+@pytest.mark.parametrize("clock", ["stopped", "ran back 2 s", "runs backwards"])
+def test_a_clock_that_does_not_go_forward_is_invalid_input_and_cannot_hide_a_stuck_sensor(clock):
+    """The sample ages run on the tick clock t: a clock that stopped or ran back left a stuck sensor unflagged, and
+    the arm followed its last push to the workspace's edge (440 mm; a review, 2026-12-07). Every such tick is
+    INVALID_INPUT (zero wrench, the tick decelerates) and the ages run on from the latest t seen."""
+    dt = 0.008
+    pipe = WrenchPipeline(WrenchConfig(**PLAIN), dt=dt)
+    for k in range(40):  # a live sensor on a live clock
+        assert pipe.update([5.0, 0, 0, 0, 0, 0], np.eye(3), k, k * dt).fault == Fault.NONE
+    t_stop = 39 * dt
+    for k in range(40, 80):  # the counter stuck at 39 from here, and the clock:
+        t = {"stopped": t_stop, "ran back 2 s": t_stop - 2.0 + (k - 40) * 1e-9, "runs backwards": t_stop - k * dt}[
+            clock
+        ]
+        r = pipe.update([5.0, 0, 0, 0, 0, 0], np.eye(3), 39, t)
+        assert r.fault & Fault.INVALID_INPUT and not r.hand.any(), k
+    # the clock goes forward again (from where it stood): the stuck counter is stale from the latest t seen
+    r = pipe.update([5.0, 0, 0, 0, 0, 0], np.eye(3), 39, t_stop + 0.04)
+    assert r.fault == Fault.SENSOR_STALE
+    pipe.reset()  # a new trial's clock starts again
+    assert pipe.update([5.0, 0, 0, 0, 0, 0], np.eye(3), 0, 0.0).fault == Fault.NONE
+
+
 def test_output_ramps_back_through_the_filter_when_a_stale_sensor_recovers():
     dt, fc = 0.008, 15.0
     pipe = WrenchPipeline(WrenchConfig(cutoff_hz=fc, deadband_force=0.0, deadband_torque=0.0), dt=dt)

@@ -305,6 +305,17 @@ class LoopRun:
         self._state: RobotState | None = None
         self._t0 = self._spent = 0.0
 
+    def _overran(self) -> bool:
+        """Whether the world reports its period overran (``last_overrun`` > 0). A value that is not a number, or NaN,
+        counts as late (it raised out of the loop, with the arm moving, or was taken as on time: a review,
+        2026-12-07)."""
+        value = optional_member(self.world, "last_overrun")
+        try:
+            late = float(value or 0.0)
+        except (TypeError, ValueError):
+            return True
+        return not late <= 0.0
+
     def sense(self, k: int) -> Any:  # the feature row, None, or LINK_LOST
         """Read the world and begin tick k (class docstring)."""
         try:
@@ -314,7 +325,7 @@ class LoopRun:
             self._world_failed(k, exc, "read")
             return LINK_LOST
         upstream = self.upstream
-        if self.overrun_of and float(optional_member(self.world, "last_overrun") or 0.0) > 0.0:
+        if self.overrun_of and self._overran():
             # a world that measures the gap at read (the robot's own clock): this tick is late too
             upstream |= Fault.DEADLINE_MISS
         try:
@@ -375,7 +386,7 @@ class LoopRun:
         upstream = Fault.NONE
         if self.deadline is not None and spent > self.deadline:
             upstream |= Fault.DEADLINE_MISS
-        if self.overrun_of and float(optional_member(world, "last_overrun") or 0.0) > 0.0:
+        if self.overrun_of and self._overran():
             upstream |= Fault.DEADLINE_MISS
         self.upstream = upstream
         d = self.tick.d
@@ -386,7 +397,13 @@ class LoopRun:
         if self.pred is not None and out.prediction is not None:
             self.pred[k, : out.prediction.shape[0]] = out.prediction
         self.eff_r[k] = out.u_r if out.command.effort is None else out.command.effort
-        self.eff_h[k] = self.hand_of()[:d] if self.hand_of is not None else out.wrench
+        try:
+            self.eff_h[k] = self.hand_of()[:d] if self.hand_of is not None else out.wrench
+        except Exception as exc:  # noqa: BLE001 - a simulated world's hand that fails: stop, keep what was logged
+            self._failed(
+                k, "internal_error", f"the world's hand_force failed at tick {k} ({_what(exc)}); the arm was stopped"
+            )
+            return True
         self.fault[k] = int(out.fault)
         if self.alpha is not None and self.alpha_of is not None:
             alpha = self.alpha_of()

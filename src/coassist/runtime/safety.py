@@ -161,6 +161,10 @@ BAD_TICK_FAULTS = (
 #: The sideways part of an effort above ``tool_speed``, relative to |u| |v|, that the effort stage removes: more than
 #: the rounding of an effort straight against v.
 _ACROSS = 1e-9
+#: [m/s] A tool velocity at or above this is no measurement (no tool moves so fast): INVALID_INPUT, zero effort. Its
+#: square overflowed above ~1e154, the speed read inf, and a sideways effort passed the tool-speed check unflagged
+#: (a review, 2026-12-07).
+_V_MAX = 1e3
 
 _ROBOT_STOPS = int(Fault.ROBOT_PROTECTIVE_STOP | Fault.ROBOT_EMERGENCY_STOP)
 _SAT = int(Fault.SENSOR_SATURATED)
@@ -348,8 +352,8 @@ class SafetyLayer:
           the sensor's range: the force is at least that, above ``contact_force``) latches STOPPED
           (CONTACT_FORCE_LIMIT for the last two): zero effort and ``stop`` from now on (the world brakes);
         - u_r not a finite vector: zero effort, NONFINITE_EFFORT (INVALID_INPUT when it
-          is not a vector at all); v or hand missing, short or non-finite: zero effort,
-          INVALID_INPUT (the contact and speed checks cannot be made);
+          is not a vector at all); v or hand missing, short or non-finite, or v at or above 1000 m/s (no
+          measurement): zero effort, INVALID_INPUT (the contact and speed checks cannot be made);
         - above ``tool_speed``, with or without an upstream fault (a wrench fault zeroes the hand's
           force, not the controller's effort), the effort may only brake: of its x-y force only the
           component against v is kept, the rest (forward, and sideways: a sideways push turns and,
@@ -382,7 +386,7 @@ class SafetyLayer:
         bad = 0
         if u is None:
             bad |= _NE if np.ndim(u_r) == 1 and np.size(u_r) else _II
-        if vel is None or w is None or up is None or rs is None:
+        if vel is None or w is None or up is None or rs is None or not abs(vel[:2]).max() < _V_MAX:
             bad |= _II
         if bad or u is None or vel is None or w is None or up is None or rs is None:  # (the Nones set bad)
             self._count(bad & _II)
@@ -814,6 +818,7 @@ class SafetyLayerBatch:
         across = u_r[:, 0] * v[:, 1] - u_r[:, 1] * v[:, 0]  # the sideways part, which the layer removes there too
         sideways = np.abs(across) > _ACROSS * np.sqrt(u_r[:, 0] * u_r[:, 0] + u_r[:, 1] * u_r[:, 1]) * speed
         clean &= ~((speed > tool_speed) & ((along > 0.0) | sideways))
-        # as the docstring says: a non-finite effort, velocity or hand force is the layer's to flag
-        clean &= np.isfinite(u_r).all(axis=1) & np.isfinite(v).all(axis=1) & np.isfinite(hand).all(axis=1)
+        # as the docstring says: a non-finite effort, velocity or hand force is the layer's to flag, and so is an
+        # implausible velocity (_V_MAX: its square overflows)
+        clean &= np.isfinite(u_r).all(axis=1) & (np.abs(v[:, :2]) < _V_MAX).all(axis=1) & np.isfinite(hand).all(axis=1)
         return clean

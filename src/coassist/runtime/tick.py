@@ -95,6 +95,40 @@ UPSTREAM_BAD = (
 STATE_MISMATCH_POSITION = 0.01
 STATE_MISMATCH_ANGLE = 0.05
 _MISMATCH_FROB2 = 8.0 * math.sin(STATE_MISMATCH_ANGLE / 2) ** 2  # ‖R₁ − R₂‖²_F of two rotations that far apart
+#: The run's first ticks, within which the reference of the STATE_MISMATCH check (the reported pose in the FK's tool
+#: frame) is taken again from two ticks that agree with each other where no tick agreed with the first tick's.
+_ANCHOR_TICKS = 10
+
+
+#: [m], [rad], [m/s], [rad/s] A pose or twist entry at or above this is no measurement of a tool (INVALID_INPUT).
+_PLAUSIBLE = 1e3
+
+
+def _plausible(x: np.ndarray) -> bool:
+    """Whether every entry of the finite vector ``x`` lies within ±:data:`_PLAUSIBLE`."""
+    return max(x.max(), -x.min()) < _PLAUSIBLE
+
+
+def _stop_reported(flag: object) -> bool:
+    """A robot's stop flag as reported: a flag that is not one truth value (an array, an object whose truth raises)
+    reads as a stop, the safe reading (an array raised in the tick and ended the run: a review, 2026-12-07)."""
+    if flag is True or flag is False:
+        return flag
+    try:
+        return bool(flag)
+    except Exception:  # noqa: BLE001 - whatever it is, it is not "no stop"
+        return True
+
+
+def _offsets_apart(a: tuple[float, ...], b: tuple[float, ...]) -> bool:
+    """Whether two offsets of the reported pose in the FK's tool frame (R row by row, then p) lie further apart than
+    :data:`STATE_MISMATCH_POSITION` / :data:`STATE_MISMATCH_ANGLE`."""
+    e = [u - v for u, v in zip(a, b, strict=True)]
+    rot2 = sum(v * v for v in e[:9])  # two rotations θ apart differ by 2√2 sin(θ/2) in the Frobenius norm
+    pos2 = e[9] * e[9] + e[10] * e[10] + e[11] * e[11]
+    return pos2 > STATE_MISMATCH_POSITION**2 or rot2 > _MISMATCH_FROB2
+
+
 #: Safety interventions after which the admittance state is reset to the command.
 _RESET_ADMITTANCE = MOTION_LIMITED
 _ROTATION = (3, 4, 5)
@@ -355,6 +389,9 @@ class ControlTick:
         )  # held over a glitch of the state (step()); a buffer of its own
         self._last_twist = np.zeros(6)
         self._fk_offset: tuple[float, ...] | None = None  # the reported pose in the FK's tool frame (R row by row, p)
+        self._fk_last: tuple[float, ...] | None = None  # that offset at the last tick
+        self._fk_ticks = 0  # ticks compared so far
+        self._fk_confirmed = False  # whether a later tick agreed with the reference
 
     def references(self) -> TickReferences:
         """This run's grids (:class:`TickReferences`), for a runner that does the tick's
@@ -389,6 +426,10 @@ class ControlTick:
         # so the intent, the controller and the log never see it (the safety layer decelerates)
         pose = finite_vector(state.tool_pose, 6)
         twist = finite_vector(state.tool_twist, 6)
+        if (pose is not None and not _plausible(pose)) or (twist is not None and not _plausible(twist)):
+            # finite but no measurement (1e200 in the pose's rotation overflowed its angle, and the tick raised)
+            fault |= Fault.INVALID_INPUT
+            pose = twist = None
         state_bad = pose is None or twist is None
         if pose is None:
             pose = self._last_pose
@@ -481,9 +522,9 @@ class ControlTick:
     # ------------------------------------------------------------------ stages
     def _robot_stop(self, state: RobotState) -> Fault:
         f = Fault.NONE
-        if state.protective_stop:
+        if _stop_reported(state.protective_stop):
             f |= Fault.ROBOT_PROTECTIVE_STOP
-        if state.emergency_stop:
+        if _stop_reported(state.emergency_stop):
             f |= Fault.ROBOT_EMERGENCY_STOP
         return f
 
@@ -493,6 +534,8 @@ class ControlTick:
         q = finite_vector(state.q, self.kinematics.n_joints)
         J = self._J
         R_meas = p_meas = None
+        if finite_vector(state.qd, self.kinematics.n_joints) is None:  # (read after a stall: the layer's ramp start)
+            f |= Fault.NONFINITE_STATE
         if q is not None:
             try:
                 p_meas, R_meas, J = self.kinematics.forward_and_jacobian(q)
@@ -502,6 +545,8 @@ class ControlTick:
         else:
             f |= Fault.NONFINITE_STATE
         pose = finite_vector(state.tool_pose, 6)
+        if pose is not None and not _plausible(pose):  # flagged by sense() (INVALID_INPUT)
+            pose = None
         pose_ok = pose is not None
         if pose is None:
             pose = np.full(6, np.nan)  # the safety layer treats the tick as bad (decelerates)
@@ -580,10 +625,23 @@ class ControlTick:
             r01 * dx + r11 * dy + r21 * dz,
             r02 * dx + r12 * dy + r22 * dz,
         )
+        last, self._fk_last = self._fk_last, offset
+        self._fk_ticks += 1
         if self._fk_offset is None:
             self._fk_offset = offset
             return False
-        e = [u - v for u, v in zip(offset, self._fk_offset, strict=True)]
-        rot2 = sum(v * v for v in e[:9])  # two rotations θ apart differ by 2√2 sin(θ/2) in the Frobenius norm
-        pos2 = e[9] * e[9] + e[10] * e[10] + e[11] * e[11]
-        return pos2 > STATE_MISMATCH_POSITION**2 or rot2 > _MISMATCH_FROB2
+        # Against the first tick's offset; and, until a tick has confirmed that reference (agreeing with it and with
+        # the tick before), against the last tick's too: on a sound arm the offset does not move, so a jump between
+        # two ticks means one of them is wrong. The first tick alone is no proof: one wrong joint reading there made
+        # every correct tick after it the mismatch, and readings wrong every other tick passed unflagged while the
+        # correct ones were flagged (the arm moved on its own, 39 mm in 2 s: a review, 2026-12-07). Now such a
+        # flip-flop flags every tick (the safety layer stops the arm), and where the first tick's offset was the odd
+        # one out, two ticks that agree with each other replace it.
+        moved = _offsets_apart(offset, self._fk_offset)
+        jumped = last is not None and _offsets_apart(offset, last)
+        if not moved and not jumped:
+            self._fk_confirmed = True
+        elif moved and not jumped and not self._fk_confirmed and self._fk_ticks <= _ANCHOR_TICKS:
+            self._fk_offset, self._fk_confirmed = offset, True
+            return False
+        return moved or (jumped and not self._fk_confirmed)

@@ -55,7 +55,10 @@ What each fault does, and why:
 Timing. The 100 Hz Robotiq FT300 read at 125 Hz repeats one sample in five: a repeated
 ``seq`` is normal and the held wrench is used; only when ``seq`` has not moved for more
 than ``max_sample_age`` (measured on the tick clock ``t`` from the tick that first saw
-the current sample) is the sensor stale. The low-pass filter runs on *every* tick, on
+the current sample) is the sensor stale. That clock must go forward: a tick whose ``t`` is not
+after the last tick's is INVALID_INPUT (a clock that stopped or ran back hid a stuck sensor, and
+the arm followed its last push to the workspace's edge: a review, 2026-12-07), and the sample
+ages run on from the latest ``t`` seen. The low-pass filter runs on *every* tick, on
 the held value, so its time base is the control period ``dt`` and its step response
 at tick k after a step accepted at tick 0 is exactly ``1 − exp(−2π f_c (k+1) dt)``.
 
@@ -351,6 +354,7 @@ class WrenchPipeline:
         self._cand_n = 0  # consecutive, mutually consistent jump samples so far
         self._seq: object = None
         self._seq_t = 0.0  # tick time at which the current seq was first seen
+        self._last_t = -math.inf  # the latest tick time seen (the clock must go forward)
         self._last_raw: tuple[float, ...] | None = None  # the previous new sample's raw values
         self._same_t = 0.0  # tick time of the first sample with those values
         self._frozen = False  # those values have repeated for longer than max_frozen_time
@@ -449,6 +453,11 @@ class WrenchPipeline:
         if type(seq) is not int:
             seq = int(seq) if isinstance(seq, np.integer) else None
         new = stale = False
+        if t <= self._last_t:  # a clock that stopped or ran back: the ages below would stop with it
+            fault |= Fault.INVALID_INPUT
+            t = self._last_t
+        elif math.isfinite(t):  # (a NaN or ±inf is flagged below and does not become the clock)
+            self._last_t = t
         if seq is not None and math.isfinite(t):
             if seq != self._seq:
                 new = True
