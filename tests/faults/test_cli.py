@@ -576,3 +576,19 @@ def test_collect_names_ray_address_when_the_cluster_cannot_be_reached(tmp_path):
     res = run("collect", "--out", tmp_path / "o" / "x", "--trials", "1", "--tasks", "z", "--ray-address", "bogus")
     assert_one_line_error(res, "--ray-address bogus: the Ray cluster at 'bogus' could not be reached", code=2)
     assert not (tmp_path / "o" / "x").exists() and not any((tmp_path / "o").glob(".x.partial"))
+
+
+def test_compare_intents_refuses_a_model_of_another_rate_before_simulating(tmp_path):
+    """A 62.5 Hz model was refused only after the MG and oracle datasets had been simulated, and the line did not name
+    the source (a review, 2026-12-07): refused first, naming it, nothing written."""
+    from dataclasses import replace
+
+    from coassist.intent.training import train_model, write_model
+
+    from ..intent.conftest import TINY, labeled
+
+    preset = replace(TINY, window=replace(TINY.window, horizon=50))
+    write_model(train_model(labeled(3, dt=0.016), preset, replace(TINY.train, epochs=1)), tmp_path / "m16")
+    res = run("compare-intents", "--source", f"m={tmp_path / 'm16'}", "--out", tmp_path / "o")
+    assert_one_line_error(res, "source m: model was trained at dt = 0.016 s", code=2)
+    assert not (tmp_path / "o").exists()

@@ -686,6 +686,12 @@ def test_resume_with_an_option_other_than_the_interrupted_runs_is_refused(tmp_pa
         "without --lr (it keeps its own), or start a new stage from it with finetune:"
     )
     assert not out.exists() and (partial_folder(out) / "checkpoint.json").is_file()  # the run is still there
+    # a preset other than its own was ignored without a word (the run continued on its own: a review, 2026-12-07)
+    res = CliRunner().invoke(app, [*args, "--preset", "intent"])
+    assert res.exit_code == 2 and " ".join(res.output.split()) == (
+        f"error: --preset intent: --init resume:{out} continues an interrupted run on its own settings (preset "
+        "tiny): drop --preset, or start a new stage from it with finetune:"
+    ), res.output
     res = CliRunner().invoke(app, [*args, "--epochs", "3", "--batch-size", "32"])  # its own values: continued
     assert res.exit_code == 0, res.output
     assert [r["epoch"] for r in json.loads((out / "history.json").read_text())] == [1, 2, 3]

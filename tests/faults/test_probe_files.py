@@ -78,7 +78,8 @@ def test_a_deeply_nested_sidecar_is_one_clear_error(model_dir, tmp_path):
             100_000,
             r"model\.json: .*network: 40,004,800,188 parameters .* more than the 100,000,000",
         ),  # any model's bound
-        (2_000, r"model\.json: the network .* has \d+ parameters .* holds \d+ bytes"),  # under it, over its weights
+        # under it, over its weights
+        (2_000, r"weights\.safetensors: holds \d+ bytes, too few for the network in model\.json .* \d+ parameters"),
     ],
 )
 def test_a_huge_network_is_refused_before_any_allocation(model_dir, tmp_path, hidden, says):
@@ -95,6 +96,17 @@ def test_a_huge_network_is_refused_before_any_allocation(model_dir, tmp_path, hi
     finally:
         tracemalloc.stop()
     assert peak < 50 * 2**20  # nothing of the network's size was allocated
+
+
+def test_truncated_weights_are_named_as_the_damaged_file(model_dir, tmp_path):
+    """A weights file cut short was reported as a model.json problem (a review, 2026-12-07)."""
+    from coassist.intent import ModelFileError, load_model
+
+    folder = _copy(model_dir, tmp_path)
+    weights = folder / "weights.safetensors"
+    weights.write_bytes(weights.read_bytes()[:200])
+    with pytest.raises(ModelFileError, match=r"m/weights\.safetensors: holds 200 bytes, too few .* truncated"):
+        load_model(folder)
 
 
 def test_the_parameter_count_from_sizes_matches_the_network():

@@ -406,3 +406,22 @@ def test_evaluate_replaces_only_its_own_results(tmp_path, trials, tiny):
     assert run()[0] == 0 and run()[0] == 0  # its own evaluation.json, written and then replaced
     (tmp_path / "out").mkdir()
     assert run("--out", str(tmp_path / "out"))[0] == 0 and (tmp_path / "out" / "evaluation.json").is_file()
+
+
+def test_trials_too_short_for_the_longest_horizon_score_the_shorter_ones_and_too_short_for_any_is_one_line(
+    trials, tiny
+):
+    """`coassist evaluate` on trials longer than the history but shorter than history + the longest horizon raised
+    "min() arg is an empty sequence" out of the table (a review, 2026-12-07): the horizons they reach are scored, the
+    ticks counted at the longest of those, and trials too short for any horizon are refused in one line."""
+    from coassist.intent.evaluation import results_table
+
+    model = train_model(trials, tiny, tiny.train)
+    n = 27  # history 20: the 5-sample horizon reaches ticks 19-21 of each trial, the 10-sample one none
+    short = labeled(3, n=n, prefix="S", first_seed=50)
+    res = evaluate_model(model, short)
+    assert set(res.results["model"]) == {5} and set(res.best_baseline) == {5}
+    assert res.n_ticks == 3 * (n - 5 - (20 - 1))  # ticks 19 … n-6 of each: a full history, and 5 samples measured
+    results_table(res)  # a horizon no trial reached has no best, and its cells say "–"
+    with pytest.raises(ValueError, match=r"no held-out trial is long enough to score: .* the longest of the 3 has 22"):
+        evaluate_model(model, labeled(3, n=22, prefix="R", first_seed=60))

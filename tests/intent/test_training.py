@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from coassist.intent import IntentNet, NetworkConfig, TrainConfig, save_model, train_model
+from coassist.intent.features import Scaler
 
 from .conftest import labeled
 
@@ -458,3 +459,17 @@ def test_a_copy_of_a_training_trial_among_the_trials_is_not_held_out(trials, tin
     assert plain.info["test_trials"] == [
         trials[i].id for i in split_trials([t.id for t in trials], cfg.test_fraction, 0)[1]
     ]
+
+
+def test_the_ridge_tuning_says_its_split_had_no_window():
+    """With one trial long enough of two, the α tuning's part without it raised "no trial is long enough", read as of
+    every trial given (a review, 2026-12-07): it says it is the tuning's split."""
+    from coassist.intent.baselines import tune_ridge_alpha
+
+    from .conftest import TINY
+
+    trials = labeled(1, n=260) + labeled(1, n=25, prefix="S", first_seed=9)
+    big = np.full(64, 10.0)
+    scaler = Scaler(-big, big)
+    with pytest.raises(ValueError, match=r"^the ridge's α is tuned on a split of the 2 training trials \(1 to fit, 1 "):
+        tune_ridge_alpha([t.trial for t in trials], [t.id for t in trials], TINY.window, 0.008, scaler, scaler, seed=0)

@@ -83,6 +83,19 @@ def _check_start(init: str, preset: str | None) -> None:
     except ModelFileError as exc:  # an interrupted run's folder holds its checkpoint beside it, no model yet
         if not continues(Path(path), init):
             fail(f"--init {init}: {exc}", 2)
+        if preset is not None:  # it continues on its own settings: another preset was ignored without a word
+            from coassist._io import partial_folder
+
+            try:
+                own = read_sidecar(partial_folder(Path(path))).get("preset")
+            except (ModelFileError, OSError, ValueError):
+                own = None
+            if preset != own:
+                fail(
+                    f"--preset {preset}: --init {init} continues an interrupted run on its own settings (preset "
+                    f"{own or 'unknown'}): drop --preset, or start a new stage from it with finetune:",
+                    2,
+                )
         return
     except (OSError, ValueError, KeyError, TypeError):
         return

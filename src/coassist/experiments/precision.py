@@ -91,10 +91,13 @@ def compare_intents(
             f"bases {off}: a validation base must be {VALIDATION_BASES[0]}–{VALIDATION_BASES[1]} past a multiple "
             f"of {RUN_SEED_STRIDE} (e.g. 50000), so that its trials are no run's own (the report's seeds)"
         )
+    from coassist.control.presets import get_preset
+    from coassist.interfaces import FEATURES
     from coassist.scenario.assistance import check_person_tasks, check_person_world
     from coassist.scenario.intent_registry import load_intent_source
 
     task = REPRODUCE_PRESETS["default"].application_task
+    dt = float(get_preset(REPRODUCE_PRESETS["default"].application_preset).impedance.dt)  # the compared loop's
     for label, spec in sources.items():  # refuse a bad source before anything runs
         if spec not in ("paths", "person"):
             try:
@@ -108,6 +111,10 @@ def compare_intents(
                     fix=f"calibrate on the application's task (--tasks {task}), or compare person",
                 )
                 check_person_world(loaded, "sim", "point-mass", spec)
+                model = getattr(loaded, "model", None)
+                if model is not None:  # a network of other features or another rate: refused now, not after the
+                    # baselines' datasets were simulated (a review, 2026-12-07)
+                    model.check_compatible(FEATURES, dt, what="the simulated loop")
             except ValueError as exc:
                 raise ValueError(f"source {label}: {exc}") from None
     controllers = dict(controllers or {})

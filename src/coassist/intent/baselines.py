@@ -231,8 +231,14 @@ def tune_ridge_alpha(
     if len(trials) != len(ids):
         raise ValueError(f"need one id per training trial, got {len(trials)} trials and {len(ids)} ids")
     fit_idx, val_idx = validation_split(ids, seed)
-    fit_ws = WindowSet([trials[i] for i in fit_idx], window, dt, stride=stride)
-    val_ws = WindowSet([trials[i] for i in val_idx], window, dt, stride=stride)
+    try:
+        fit_ws = WindowSet([trials[i] for i in fit_idx], window, dt, stride=stride)
+        val_ws = WindowSet([trials[i] for i in val_idx], window, dt, stride=stride)
+    except ValueError as exc:  # said of the split (it read as if of every trial given: a review, 2026-12-07)
+        raise ValueError(
+            f"the ridge's α is tuned on a split of the {len(trials)} training trials ({len(fit_idx)} to fit, "
+            f"{len(val_idx)} to validate on) and one part has no window: {exc}; give more trials long enough"
+        ) from None
     alphas = [float(a) for a in alphas]
     errors = ridge_validation_errors(fit_ws, val_ws, input_scaler, target_scaler, alphas)
     record = {

@@ -12,8 +12,9 @@ per-tick maximum, see :func:`coassist.metrics.e_max`) of
 - the ridge baseline fitted on the model's training windows, its α tuned on the same
   validation trials (when the model has one),
 
-all scored on exactly the same ticks: those where the model has a full history and
-the whole horizon has been measured. Per-tick errors are pooled over all trials (long
+all scored on exactly the same ticks at each horizon: those where the model has a full history and
+that horizon has been measured (so a shorter horizon also scores the ticks near a trial's end that a
+longer one cannot: ``n_ticks`` counts the longest horizon's). Per-tick errors are pooled over all trials (long
 trials weigh more, as in the thesis' per-dataset figures); the per-trial e_RMS is kept
 too, for the spread. The *best baseline* at a horizon is the baseline with the lowest
 pooled e_RMS there; the model's gain over it is (e_best − e_model) / e_best.
@@ -21,6 +22,7 @@ pooled e_RMS there; the model's gain over it is (e_best − e_model) / e_best.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -75,7 +77,8 @@ class ModelEvaluation:
         ``skipped`` left out for their contents (a training trial's, under another name).
     against : what every predictor's rows were scored against: ``"tool"`` (the tool's future path, the thesis'
         e_RMS) or ``"intent"`` (the person's true intent, simulated trials: what an intent-label model predicts).
-    n_ticks : ticks scored per horizon (the model's, every predictor on the same ones).
+    n_ticks : ticks scored at the longest horizon any trial was long enough for (the model's, every predictor on the
+        same ones; a shorter horizon scores these and the ticks near each trial's end that only it reaches).
     horizons : the horizons [ticks] reported, ascending.  dt : [s] per tick.
     baselines : how the baselines were set up (the ridge's α, the Kalman filter's noise, the
         tuning protocol).
@@ -176,7 +179,7 @@ def evaluate_model(
         p: {h: {"rms": [], "max": []} for h in horizons} for p in names
     }
     per_trial: dict[str, dict[int, dict[str, float]]] = {p: {h: {} for h in horizons} for p in names}
-    n_ticks = 0
+    ticks = dict.fromkeys(horizons, 0)  # ticks scored at each horizon
     for lt in used:
         t = lt.trial
         model.check_compatible(feature_names(t.n_dof), t.meta.dt, what=f"trial {lt.id}")
@@ -201,7 +204,17 @@ def evaluate_model(
                 per[p][h]["rms"].append(e.rms)
                 per[p][h]["max"].append(e.max)
                 per_trial[p][h][lt.id] = float(e.rms.mean())
-        n_ticks += int(np.sum(~mask[: max(0, t.n_samples - max(horizons))]))
+        for h in scored:
+            ticks[h] += int(np.sum(~mask[: t.n_samples - h]))
+    reached = [h for h in horizons if per["model"][h]["rms"]]
+    n_ticks = ticks[max(reached)] if reached else 0  # the longest horizon scored's (a shorter one's are more)
+    if not reached:  # (the table's best-of and the gains need one score)
+        longest = max(lt.trial.n_samples for lt in used)
+        raise ValueError(
+            f"no held-out trial is long enough to score: each needs more than the model's history of "
+            f"{model.window.history} samples plus a horizon of {min(horizons)}; the longest of the {len(used)} has "
+            f"{longest}"
+        )
     results: dict[str, dict[int, Scores]] = {}
     for p in names:
         results[p] = {}
@@ -366,7 +379,8 @@ def results_table(result: ModelEvaluation, title: str = "") -> Any:
         table.add_column(f"e_RMS {h * dt:.2f}s [mm]", justify="right")
     for h in hs:
         table.add_column(f"e_MAX {h * dt:.2f}s [mm]", justify="right")
-    best = {h: min(r[h]["e_rms"] for r in result.results.values() if h in r) for h in hs}
+    # a horizon no held-out trial was long enough for has no best (a row's cell says "–")
+    best = {h: min((r[h]["e_rms"] for r in result.results.values() if h in r), default=math.inf) for h in hs}
     for p, r in result.results.items():
         cells = []
         for h in hs:

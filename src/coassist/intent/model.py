@@ -454,10 +454,11 @@ def load_model(
     n_params = net_cfg.n_parameters
     size = weights_path.stat().st_size
     if 4 * n_params > size:  # before any allocation: the network must fit its float32 weights
+        # named as the weights file (a truncated copy is the usual cause; the sidecar's network, the other)
         raise _fail(
-            sidecar,
-            f"the network {json.dumps(meta['network'])} has {n_params} parameters "
-            f"({4 * n_params} bytes as float32) but {WEIGHTS} holds {size} bytes",
+            weights_path,
+            f"holds {size} bytes, too few for the network in {SIDECAR} ({json.dumps(meta['network'])}: {n_params} "
+            f"parameters, {4 * n_params} bytes as float32): truncated, or from another model",
         )
     raw = weights_path.read_bytes()
     if _sha256(raw) != meta["weights_sha256"]:
