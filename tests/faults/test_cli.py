@@ -592,3 +592,24 @@ def test_compare_intents_refuses_a_model_of_another_rate_before_simulating(tmp_p
     res = run("compare-intents", "--source", f"m={tmp_path / 'm16'}", "--out", tmp_path / "o")
     assert_one_line_error(res, "source m: model was trained at dt = 0.016 s", code=2)
     assert not (tmp_path / "o").exists()
+
+
+def test_train_on_the_same_datasets_in_another_order_trains_the_same_model(tmp_path):
+    """`train D0 D2 --seed 3` and `train D2 D0 --seed 3` trained two models (a review, 2026-12-07): the split was by
+    id, the windows and batches in the order given. The trials are taken by id."""
+    import numpy as np
+    from safetensors.numpy import load_file
+
+    from coassist.data import write_dataset
+
+    from ..intent.conftest import make_trial
+
+    write_dataset([make_trial(i, n=220) for i in range(3)], tmp_path / "D0", "D0")
+    write_dataset([make_trial(10 + i, n=220) for i in range(3)], tmp_path / "D2", "D2")
+    sizes = ["--epochs", "1", "--layers", "1", "--hidden", "8", "--fc", "8", "--seed", "3", "--threads", "1"]
+    for name, order in (("ab", ("D0", "D2")), ("ba", ("D2", "D0"))):
+        res = run("train", *(tmp_path / d for d in order), "--out", tmp_path / name, *sizes)
+        assert res.exit_code == 0, res.output
+    for f in ("weights.safetensors", "ridge.safetensors"):
+        a, b = load_file(str(tmp_path / "ab" / f)), load_file(str(tmp_path / "ba" / f))
+        assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a), f

@@ -115,6 +115,8 @@ def test_evaluate_prints_the_best_baseline_per_horizon(tmp_path):
         assert ln.startswith(f"{h * out['dt']:.2f} s: best baseline")
         assert f"e_RMS {1e3 * b['e_rms']:.3g} mm" in ln and f"{abs(100 * b['gain']):.1f} %" in ln
     assert "errors in mm" in " ".join(res.output.split())  # the table says its unit
+    # and the scoring shows its progress (a thesis-size model scored for a minute in silence: a review, 2026-12-07)
+    assert f"scoring {len(out['trials'])} held-out trials" in res.output
 
 
 USER_A = default_real_data() / "user-a"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -64,6 +65,11 @@ def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, 
         return p
     except ValueError as exc:
         fail(typed(str(exc), TRAIN_OPTIONS), 2)
+
+
+def _natural(trial_id: str) -> tuple:
+    """Sort key of a trial id with its digit runs as numbers (``user-a/trial_2`` before ``user-a/trial_10``)."""
+    return tuple(int(p) if p.isdigit() else p for p in re.split(r"(\d+)", trial_id))
 
 
 def _check_start(init: str, preset: str | None) -> None:
@@ -211,7 +217,10 @@ def train(
 
         p = replace(p, window=replace(p.window, label=label))
     check_device(device)
-    trials = intent_trials(data, skip_bad_trials, bag_topics=bag_topics)
+    # by id, numbers as numbers (trial_2 before trial_10, as a recording's folder is read): the same data given in
+    # another order trains the same model (the split already was by id, but the windows and batches followed the
+    # order of the arguments: two models from one seed, a review, 2026-12-07)
+    trials = sorted(intent_trials(data, skip_bad_trials, bag_topics=bag_topics), key=lambda lt: _natural(lt.id))
     busy_cores_hint(p.train.threads)
     set_torch_threads(p.train.threads)
     try:
@@ -285,7 +294,7 @@ def evaluate(
     trials = intent_trials(data, skip_bad_trials, "--data", bag_topics=bag_topics)
     against, note = scoring_target(m.window.label, trials, against)
     try:
-        result = evaluate_model(m, trials, held_out_only=not include_training, against=against)
+        result = evaluate_model(m, trials, held_out_only=not include_training, against=against, progress=True)
     except (ModelMismatchError, ValueError) as exc:
         fail(f"--against {against}: {exc}" if "records no intent" in str(exc) else str(exc), 2)
     title = f"{model}: {len(result.trials)} trials, {result.n_ticks} ticks, against {AGAINST[against]}"
