@@ -179,8 +179,13 @@ def test_undefined_share_and_bad_input():
         gain_share([1.0, 2.0], [1.0], [1.0, 2.0])
 
 
-def test_share_of_one_pair_has_no_width():
-    assert gain_share([4.0], [3.0], [2.0]) == (0.5, 0.5, 0.5)
+def test_share_of_one_pair_or_one_cluster_has_no_interval():
+    # one pair resamples to itself: an interval of no width had been read as a lower bound, and two claims of the
+    # report held on a single trial (a review, 2026-12-07)
+    share, lo, hi = gain_share([4.0], [3.0], [2.0])
+    assert share == 0.5 and np.isnan(lo) and np.isnan(hi)
+    share, lo, hi = gain_share([4.0, 5.0], [3.0, 3.0], [2.0, 1.0], clusters=["a", "a"])
+    assert share == pytest.approx(3.0 / 6.0) and np.isnan(lo) and np.isnan(hi)
 
 
 # --------------------------------------------------------------------------- the study's tests and effect sizes

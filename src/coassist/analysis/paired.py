@@ -223,8 +223,8 @@ def gain_share(
         statistic = lambda gx, gr: gx.sum(axis=1) / gr.sum(axis=1)  # noqa: E731
     else:
         statistic = lambda gx, gr: gx.mean(axis=1) / gr.mean(axis=1)  # noqa: E731
-    if gain_x.size == 1:  # every resample is the one pair (or cluster): the interval has no width
-        return share, share, share
+    if gain_x.size == 1:  # every resample is the one pair (or cluster): no interval (one of no width had been read as
+        return share, math.nan, math.nan  # a lower bound, and claims held on a single trial: a review, 2026-12-07)
     lo, hi, undefined = bootstrap_interval(
         (gain_x, gain_ref),
         statistic,

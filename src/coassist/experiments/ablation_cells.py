@@ -27,7 +27,7 @@ from coassist.analysis.paired import clustered_difference, gain_share, paired_di
 from coassist.experiments.source_training import CALIBRATED_KINDS, LEARNED, seed_names
 from coassist.robot.worlds import POINT_MASS
 from coassist.scenario.assistance import DEFAULT_INTENT
-from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told
+from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told, folder_told
 
 SOURCES = (
     "nominal",
@@ -236,11 +236,13 @@ class AblationResult:
         return out
 
 
-def told_of(source: str) -> Told:
-    """What a cell's source was told besides what an arm measures (:class:`~coassist.scenario.intent_registry.Told`)."""
+def told_of(source: str, folder: str | None = None) -> Told:
+    """What a cell's source was told besides what an arm measures (:class:`~coassist.scenario.intent_registry.Told`);
+    ``folder``: the calibration it ran with, where known (its arms measured or assumed: ``folder_told``)."""
     base = base_source(source)
     if base in CALIBRATED_KINDS:  # run with its calibration's folder (the registry's "paths" alone is told less)
-        return INTENT_FOLDERS[CALIBRATED_KINDS[base]].told
+        kind = CALIBRATED_KINDS[base]
+        return INTENT_FOLDERS[kind].told if folder is None else folder_told(kind, folder)
     if base in INTENT_SOURCES:
         return INTENT_SOURCES[base].told
     label = LEARNED[base][1] if base in LEARNED else ""

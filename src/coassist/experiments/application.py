@@ -456,7 +456,7 @@ def application_section(result: ApplicationResult) -> Section:
 #: How the report names each learned source the assistive controllers may use.
 _SOURCE_TEXT = {
     "paths": "path hypotheses round the obstacle the robot is told of (coassist.scenario.path_hypotheses): the nominal "
-    "path deformed to either side, each operator's detour shape fitted to four trials of theirs with MG, a "
+    "path deformed to either side, each operator's detour shape fitted to their calibration trials with MG, a "
     "filter that decides the side from the hand force and runs the rows along the likely path; the source "
     "that did best in the in-loop ablation on validation seeds this report never uses",
     "lstm-intent": "the LSTM+FC trained from scratch on every simulated dataset to predict the operator's intent; the "

@@ -238,10 +238,18 @@ def transfer_section(
     targets = result.targets
     n = result.transfer_trials
     s = Section("3. Transfer learning (Algorithm 4.2, thesis §5.3.2)")
+    # what this run trained beside M_TL (reproduce.transfer_starts: the default leaves the fine-tuned one out; the
+    # sentence had named it whatever ran, a review, 2026-12-07)
+    ran = {start for t in targets.values() for start in ("scratch", "finetune_all") if start in t.e_rms}
+    beyond = " and ".join(
+        text
+        for start, text in (("scratch", "a model from scratch"), ("finetune_all", "one fine-tuned in all layers"))
+        if start in ran
+    )
     s.paragraphs.append(
         f"From the last iterative model ({result.source_model.name}), each target gets a small dataset collected with that "
         f"model in the loop ({n} trials per target; thesis: 15). On it we train M_TL with the LSTM frozen (only the FC "
-        "layers learn), and — beyond the thesis — a model from scratch and one fine-tuned in all layers. All are compared "
+        "layers learn)" + (f", and — beyond the thesis — {beyond}" if beyond else "") + ". All are compared "
         "on held-out trials of the target, with the previous model M_prev and the baselines."
     )
     rows, time_rows = [], []

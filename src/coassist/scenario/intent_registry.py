@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -211,6 +211,21 @@ def _load_calibration(folder: str, horizon: int, network: str) -> IntentSource:
     from coassist.scenario.path_hypotheses import read_calibration
 
     return read_calibration(folder, horizon)
+
+
+def folder_told(kind: str, folder: str | Path) -> Told:
+    """What the source of a ``kind`` folder (:data:`INTENT_FOLDERS`; the folder's own marker decides where it has
+    one) was told: its kind's :class:`Told`, with the arm "assumed" unless every person model in it measured its
+    person's arm (a calibration that fell back to the typical arm for someone did not learn theirs; the report said
+    "arm measured" of models that held the typical arm)."""
+    kind = intent_folder_kind(str(folder)) or kind
+    told = INTENT_FOLDERS[kind].told
+    if told.arm != "measured":
+        return told
+    source = INTENT_FOLDERS[kind].load(str(folder), 2, "auto")
+    people = getattr(source, "draws", (source,))
+    arms = [arm for person in people for arm in getattr(person, "arms", {}).values()]
+    return told if arms and all(arm.method != "assumed" for arm in arms) else replace(told, arm="assumed")
 
 
 def _load_person_model(folder: str, horizon: int, network: str) -> IntentSource:
