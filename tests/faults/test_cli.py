@@ -613,3 +613,27 @@ def test_train_on_the_same_datasets_in_another_order_trains_the_same_model(tmp_p
     for f in ("weights.safetensors", "ridge.safetensors"):
         a, b = load_file(str(tmp_path / "ab" / f)), load_file(str(tmp_path / "ba" / f))
         assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a), f
+
+
+def test_play_with_the_paths_source_says_what_it_assists_with(tmp_path):
+    """`play --intent paths` raised KeyError out of its assistance line (the task's obstacle passed as a dict where a
+    (centre, size) pair is read: a review, 2026-12-07). Here the page's port is taken, so the run stops right after
+    the line, in one line."""
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        res = run("play", "--intent", "paths", "--out", tmp_path, "--no-open", "--port", str(port))
+    said = " ".join(res.output.split())
+    assert "assistance: cooperative, toward the path hypotheses round the 1 obstacle of the simulated task" in said
+    assert_one_line_error(res, f"cannot listen on 127.0.0.1:{port}")
+
+
+def test_drive_refuses_an_address_for_a_simulated_world(tmp_path):
+    """`drive --host 192.168.1.10` without --world ran the default MuJoCo world, the address ignored unsaid (a
+    review, 2026-12-07): a lab that forgot --world ur would think it drove its arm."""
+    res = run("drive", "--world", "mujoco", "--host", "192.168.1.10", "--no-plot", "--out", tmp_path / "t.parquet")
+    assert_one_line_error(res, "--host 192.168.1.10: the mujoco world is a simulation", "--world ur", code=2)
+    assert not (tmp_path / "t.parquet").exists()

@@ -239,6 +239,21 @@ def test_the_statement_names_the_scene_for_paths():
     ]
 
 
+def test_the_statement_says_which_of_several_boxes_paths_goes_round():
+    """Two boxes on the plan, one off it: the line said "round the 3 obstacles" while one detour a run goes round the
+    box in the way the plan passes nearest and the predictions ran through the other (a review, 2026-12-07)."""
+    guard = "; a damper if the hand force oscillates above 20 N (the stability guard)"
+    said: list[str] = []
+    boxes = ((0.03, -0.615), (0.27, -0.615), (0.52, 0.16))
+    scene = Scene(tuple(SceneBox(b, (0.08, 0.08)) for b in boxes), "lab/scene.toml")
+    drive(DriveConfig(task="linear", intent="paths", scene=scene, time_limit=0.2), say=said.append)
+    assert said == [
+        "assistance: cooperative, toward the path hypotheses round one of the 3 obstacles of the scene file "
+        "lab/scene.toml, the one in the way its plan passes nearest; 1 more in the way is NOT gone round (the "
+        "predictions run through it: one detour a run); 1 lies clear of the plan (the robot is told the scene)" + guard
+    ]
+
+
 def test_a_scene_box_on_the_plans_start_or_target_is_refused_before_the_arm_moves():
     """A box of the scene file holding the plan's start (where the tool stands) or its target was taken as given:
     the path hypotheses led the tool round it, 10.9 N of hand force against MG's 6.3 (review, 2026-12-06). Refused
@@ -286,8 +301,15 @@ def test_the_commands_say_what_the_person_gets_and_refuse_bad_lab_inputs(tmp_pat
         assert [x for x in res.output.splitlines() if x.startswith("assistance:")] == [line]
     bad = tmp_path / "scene.toml"
     bad.write_text("[[obstacle]]\ncenter = [0.5, 0.1]\n")
-    res = runner.invoke(app, ["drive", "--scene", str(bad), "--out", str(tmp_path / "u.parquet")])
+    res = runner.invoke(app, ["drive", "--intent", "paths", "--scene", str(bad), "--out", str(tmp_path / "u.parquet")])
     assert res.exit_code == 2 and f"error: --scene {bad}: obstacle[0].size is missing" in res.output
+    # a scene given to a run that reads none was recorded with its trial as if the robot had been told it (a
+    # review, 2026-12-07): refused, for every source and controller but the path hypotheses under assistance
+    good = tmp_path / "good.toml"
+    good.write_text("[[obstacle]]\ncenter = [0.5, 0.1]\nsize = [0.1, 0.1]\n")
+    for args in (["--intent", "present-held"], ["--controller", "manual", "--intent", "paths"], ["--intent", "oracle"]):
+        res = runner.invoke(app, ["drive", *args, "--scene", str(good), "--out", str(tmp_path / "u.parquet")])
+        assert res.exit_code == 2 and f"error: --scene {good}: " in res.output and "reads no scene" in res.output
     res = runner.invoke(app, ["drive", "--person", "a b", "--out", str(tmp_path / "u.parquet")])
     assert res.exit_code == 2 and "--person must be 1-32 letters, digits" in res.output
     assert not (tmp_path / "u.parquet").exists()

@@ -461,7 +461,8 @@ def test_coassist_ros2_with_a_live_view_writes_the_run_first_and_shows_what_the_
     sim = mujoco_world(config)
     robot = SimRobot(sim)
     offset = ",".join(repr(float(v)) for v in sim.kinematics().tcp_offset)
-    args = ["ros2", "--controller", "manual", "--time-limit", "0.4", "--domain-id", str(DOMAIN), "--lockstep"]
+    # the path hypotheses, which read a scene (MG with --scene is refused: it records a scene nothing read)
+    args = ["ros2", "--intent", "paths", "--time-limit", "0.4", "--domain-id", str(DOMAIN), "--lockstep"]
     args += ["--yes", "--tcp-offset", offset, "--stale-after", "0.5", "--out", str(out), "--mcap", "--no-plot"]
     args += ["--scene", str(scene), "--base-frame", "world", "--foxglove", "0"]
     try:

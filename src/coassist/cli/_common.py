@@ -352,11 +352,21 @@ def real_arm_hosts(option: str) -> str:
     return ", ".join(f"{e.host} ({option} {n})" for n, e in WORLDS.items() if e.host)
 
 
-def scene_option(path: Path | None):
-    """The scene of --scene, read and validated before anything moves (None: none given)."""
+def scene_option(path: Path | None, controller: str, intent: str):
+    """The scene of --scene, read and validated before anything moves (None: none given); refused where the run's
+    controller and source read no scene (the trial would record a scene the robot never used, reported apart as if
+    it had been told one)."""
     if path is None:
         return None
+    from coassist.scenario.assistance import reads_scene
     from coassist.scenario.scene import SceneError, read_scene
+
+    if not reads_scene(controller, intent):
+        fail(
+            f"--scene {path}: {controller} toward {intent} reads no scene (the path hypotheses do: an assisting "
+            "controller with --intent paths or a path-hypotheses folder); drop --scene",
+            2,
+        )
 
     try:
         return read_scene(path)

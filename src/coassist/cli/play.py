@@ -114,7 +114,7 @@ def play(
         need_bags("--mcap")
     if scene is not None and drive is None:
         fail("--scene: the page's own world tells the robot its obstacle; a scene file is for --drive (an arm)", 2)
-    told = scene_option(scene)
+    told = scene_option(scene, controller.split(",")[0].strip(), intent)  # the drive's controller: the first
     way = way_option(ask_way)
     folder_out(out, "--out")  # a file there: refused now, not after the person's first trial
     if token is None and not is_loopback(host):
@@ -223,7 +223,8 @@ def _page_assistance(session) -> str:
             session.source,
             user=cfg.user,
             path=task.path.points,
-            obstacles=(task.obstacle.to_dict(),),
+            # (centre, size), as the episode tells the source (a dict raised KeyError out of `play --intent paths`)
+            obstacles=((tuple(task.obstacle.center), tuple(task.obstacle.size)),),
         )
         by_line.setdefault(said, []).append(kind)
     lines = list(by_line)

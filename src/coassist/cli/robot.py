@@ -136,12 +136,15 @@ def drive(
             robot=robot,
             population=population,
             person=person,
-            scene=scene_option(scene),
+            scene=scene_option(scene, controller, intent),
             stability=stability_option(stability_guard),
             way=way_option(ask_way),
         )
     except ValueError as exc:
         fail(typed(str(exc), DRIVE_OPTIONS), 2)
+    if host is not None and WORLDS[world].simulated:  # (the default world then ran in its place, unsaid)
+        arms = ", ".join(name for name in arm_worlds() if not WORLDS[name].simulated)
+        fail(f"--host {host}: the {world} world is a simulation and has no address; an arm's: --world {arms}", 2)
     if view and world != "mujoco":  # the only world with a viewer: elsewhere --view would do nothing, unsaid
         fail(f"--view opens MuJoCo's viewer: it needs --world mujoco (not {world})", 2)
     if view and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):

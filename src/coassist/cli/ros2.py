@@ -159,7 +159,7 @@ def ros2(
             limits=limits,
             predictor_backend=predictor_backend,
             person=person,
-            scene=scene_option(scene),
+            scene=scene_option(scene, controller, intent),
             stability=stability_option(stability_guard),
             way=way_option(ask_way),
         )

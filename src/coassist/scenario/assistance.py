@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from coassist.scenario.intent_registry import INTENT_SOURCES, intent_folder_kind
+from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, intent_folder_kind
 from coassist.scenario.path_model import few_paths
 
 __all__ = ["DEFAULT_INTENT", "assistance_line", "check_person", "check_person_tasks", "check_person_world"]
@@ -52,6 +52,17 @@ def _ways(sides: np.ndarray) -> str:
     # a way shown once or twice is followed from those few paths alone (coassist.scenario.path_model.FEW_PATHS)
     thin = ", ".join(f"{name} from {k} path{'s' if k != 1 else ''} only" for name, k in few_paths(sides).items())
     return f"{n} demonstration{'s' if n != 1 else ''} ({left} left, {right} right{'; ' + thin if thin else ''})"
+
+
+def reads_scene(controller: str, intent: str) -> bool:
+    """Whether a run of ``controller`` toward ``intent`` reads the obstacles it is told (a scene file): an assisting
+    controller with a source told the scene (:class:`~coassist.scenario.intent_registry.Told`'s ``scene``: ``paths``,
+    a path-hypotheses folder)."""
+    if controller in _CONTROLLERS:
+        return False
+    kind = intent_folder_kind(intent)
+    told = INTENT_FOLDERS[kind].told if kind else INTENT_SOURCES[intent].told if intent in INTENT_SOURCES else None
+    return bool(told is not None and told.scene)
 
 
 def _told(obstacles: Sequence[Any], scene: str | None) -> str:
@@ -171,11 +182,26 @@ def assistance_line(
     if intent == "paths" or intent_folder_kind(intent) == "path-hypotheses":
         what = "the path hypotheses" + ("" if intent == "paths" else f" calibrated in {intent}")
         if obstacles and path is not None and callable(getattr(source, "in_the_way", None)):
-            if not source.in_the_way(path, tuple(obstacles), user):  # what the source's reset will find
+            way = source.in_the_way(path, tuple(obstacles), user)  # what the source's reset will find
+            if not way:
                 return head + (
                     f"{what}, but the {_told(obstacles, scene)} {'lies' if len(obstacles) == 1 else 'lie'} clear of "
                     "this run's plan: nothing to go round, "
                     "the present estimate"
+                )
+            if len(obstacles) > 1:  # one detour a run: the box in the way the plan passes nearest (the line had said
+                # "round the 2 obstacles" while the rows ran through the second: a review, 2026-12-07)
+                more, clear = len(way) - 1, len(obstacles) - len(way)
+                return head + (
+                    f"{what} round one of the {_told(obstacles, scene)}, the one in the way its plan passes nearest"
+                    + (
+                        f"; {more} more in the way {'is' if more == 1 else 'are'} NOT gone round (the predictions run "
+                        f"through {'it' if more == 1 else 'them'}: one detour a run)"
+                        if more
+                        else ""
+                    )
+                    + (f"; {clear} {'lies' if clear == 1 else 'lie'} clear of the plan" if clear else "")
+                    + " (the robot is told the scene)"
                 )
         if obstacles:
             return head + f"{what} round the {_told(obstacles, scene)} (the robot is told the scene)"
