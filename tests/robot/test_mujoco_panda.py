@@ -171,3 +171,18 @@ def test_a_panda_run_is_written_as_mcap_with_its_seven_joints(tmp_path):
     trial, back = read_trial(out), load_bag_trial(tmp_path / "p.mcap")
     assert trial.joints.shape[1] == 7
     assert back.pose.tobytes() == trial.pose.tobytes()
+
+
+def test_the_trial_records_the_task_where_the_run_put_it(mg_push):
+    """The tasks are laid out for the UR5 and moved to the Panda: its trial recorded the UR5's start, target and box
+    (the figure drew the box 0.6 m off the path; σ and the overshoot read NaN for a run that reached its target; a
+    review, 2026-12-07). They are recorded in the run's frame: the plan starts at the start, and the target and the
+    box lie from it as the UR5's layout of the task has them."""
+    from coassist.scenario.tasks import task_for_seed
+
+    extra, plan = mg_push.meta.extra, mg_push.reference
+    np.testing.assert_allclose(extra["start"], plan[0, :2], atol=1e-9)
+    ur5 = task_for_seed("linear", 0)
+    for name, there in (("target", extra["target"]), ("obstacle", extra["obstacle"]["center"])):
+        here = ur5.target if name == "target" else ur5.obstacle.center
+        np.testing.assert_allclose(np.asarray(there) - extra["start"], np.asarray(here) - ur5.start, atol=1e-9)

@@ -591,9 +591,22 @@ def _prepare(
         target = np.array(task.target, dtype=float)
         start = (float(task.start[0]), float(task.start[1]), TASK_HEIGHT)
         robot = config.robot or entry.arms[0]  # DriveConfig sets it; `or` for the type checker
+        moved: dict[str, Any] = {}  # the task's places in this run's frame, where it was moved
         if simulated and robot != "ur5":  # the tasks, laid out for the UR5, moved to this arm
             ref_abs, intent_pos, start = move_tasks(robot, ref_abs, intent_pos)
-            target = target + _task_shift(robot)
+            shift = _task_shift(robot)
+            target = target + shift
+            # recorded where the run put them (the Panda's trial said the UR5's: its figure drew the box 0.6 m off
+            # the path, and σ and the overshoot read NaN for a run that reached its target; a review, 2026-12-07)
+            recorded = task.to_extra()
+            moved = {
+                "start": [float(v) for v in np.asarray(recorded["start"], dtype=float) + shift],
+                "target": [float(v) for v in target],
+                "obstacle": {
+                    **recorded["obstacle"],
+                    "center": [float(v) for v in np.asarray(recorded["obstacle"]["center"], dtype=float) + shift],
+                },
+            }
         if world is None:
             # A real-time predictor runs against the wall clock: so must the simulated world it serves.
             world = build_world(
@@ -717,6 +730,7 @@ def _prepare(
                 **({ASKED_WAY: config.way} if config.way else {}),
                 # whether the run's controller was wrapped in the stability guard, and with what (None: not)
                 "stability_guard": None if guarded is None else asdict(guarded),
+                **moved,
             },
         )
         assistance = assistance_line(
