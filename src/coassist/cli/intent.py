@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -65,11 +64,6 @@ def _intent_preset(preset: str, *, network: Mapping[str, object] | None = None, 
         return p
     except ValueError as exc:
         fail(typed(str(exc), TRAIN_OPTIONS), 2)
-
-
-def _natural(trial_id: str) -> tuple:
-    """Sort key of a trial id with its digit runs as numbers (``user-a/trial_2`` before ``user-a/trial_10``)."""
-    return tuple(int(p) if p.isdigit() else p for p in re.split(r"(\d+)", trial_id))
 
 
 def _check_start(init: str, preset: str | None) -> None:
@@ -217,10 +211,12 @@ def train(
 
         p = replace(p, window=replace(p.window, label=label))
     check_device(device)
+    from coassist.data.rosbag_csv import natural_text_key
+
     # by id, numbers as numbers (trial_2 before trial_10, as a recording's folder is read): the same data given in
     # another order trains the same model (the split already was by id, but the windows and batches followed the
     # order of the arguments: two models from one seed, a review, 2026-12-07)
-    trials = sorted(intent_trials(data, skip_bad_trials, bag_topics=bag_topics), key=lambda lt: _natural(lt.id))
+    trials = sorted(intent_trials(data, skip_bad_trials, bag_topics=bag_topics), key=lambda lt: natural_text_key(lt.id))
     busy_cores_hint(p.train.threads)
     set_torch_threads(p.train.threads)
     try:

@@ -448,7 +448,12 @@ def _name(source: str, where: str) -> str:
 
 def natural_key(path: Path) -> tuple:
     """Sort key of a file name with its digit runs as numbers (``trial_2`` before ``trial_10``)."""
-    return tuple(int(p) if p.isdigit() else p for p in re.split(r"(\d+)", path.name))
+    return natural_text_key(path.name)
+
+
+def natural_text_key(text: str) -> tuple:
+    """Sort key of ``text`` with its digit runs as numbers (``user-a/trial_2`` before ``user-a/trial_10``)."""
+    return tuple(int(p) if p.isdigit() else p for p in re.split(r"(\d+)", text))
 
 
 def load_ros_user(folder: str | os.PathLike[str], *, dofs: Sequence[str] = ("x", "y")) -> list[Trial]:
