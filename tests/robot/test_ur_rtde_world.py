@@ -656,6 +656,87 @@ def test_get_step_time_answers_from_the_register_before_the_script_ran():
     assert c.getStepTime() == 0.008  # a cycle later
 
 
+def test_a_watchdog_faster_than_the_streams_rate_is_refused_before_it_is_armed():
+    # frequency=-1 takes the stream's rate: a 200 Hz watchdog over a CB3's 125 Hz loop stops the program every period
+    robot = FakeRobot(step_time=0.008)
+    with pytest.raises(ValueError, match=r"watchdog_hz must be at most the loop's frequency \(125 Hz"):
+        make(robot, frequency=-1, watchdog_hz=200.0)
+    assert "setWatchdog" not in robot.names() and robot.names()[-2:] == ["disconnect", "disconnect"]
+    world, _ = make(FakeRobot(step_time=0.008), frequency=-1, watchdog_hz=125.0)  # at the loop's rate: taken
+    assert world.dt == 0.008
+    world.close()
+
+
+def test_a_stopped_stream_ages_its_last_sample_by_the_clock():
+    # ur-rtde serves its last sample when the stream stops: the time read() gives runs on by this computer's clock,
+    # so the wrench pipeline's sample age grows and the stale push is flagged (at +1 µs a read it was used unflagged
+    # for the whole link_timeout)
+    from coassist.interfaces import Fault
+    from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
+
+    world, robot = make(FakeRobot(step_time=0.008), frequency=125.0, link_timeout=0.5)
+    pipeline = WrenchPipeline(WrenchConfig(), world.dt)
+    rng = np.random.default_rng(0)
+    faults, ages = [], []
+    t_last = -math.inf
+    for k in range(200):
+        if k < 20:
+            robot.tcp_force = [10.0 + rng.normal(0.0, 0.05), *rng.normal(0.0, 0.05, 5)]  # a 10 N push, noisy
+        elif k == 20:
+            robot.frozen = True  # the stream stops
+        before = time.monotonic()
+        try:
+            s = world.read()
+        except RobotLinkError:
+            break
+        assert s.t > t_last
+        t_last = s.t
+        if k == 20:
+            t_frozen, wall_frozen = s.t, time.monotonic()
+        elif k > 20:
+            ages.append((s.t - t_frozen, before - wall_frozen))
+        faults.append(pipeline.update(s.wrench, s.sensor_rotation, s.wrench_seq, s.t).fault)
+        world.apply(Command(qd=np.zeros(6)))
+    world.close()
+    assert ages and all(age >= wall for age, wall in ages)  # at least the wall time since the last sample
+    stale = [bool(f & Fault.SENSOR_STALE) for f in faults[21:]]
+    assert not any(faults[:20]) and any(stale)
+    first = stale.index(True)
+    assert ages[first][0] > WrenchConfig().max_sample_age and all(stale[first:])  # flagged once older, and after
+
+
+def test_a_force_that_repeats_on_a_moving_tool_is_seen_frozen():
+    # the controller's base-frame force, rotated into the moving tool's frame, changed its low bits each sample: the
+    # frozen-sensor check (bit for bit) never fired and the arm followed a stuck push. A repeat is given as before.
+    from coassist.interfaces import Fault
+    from coassist.runtime.wrench import MEASURED_FROZEN_TIME, WrenchConfig, WrenchPipeline
+
+    def pose(q):  # the tool turns with joint 0
+        return [0.4, 0.1, 0.3, 0.0, 0.0, 0.3 + float(q[0])]
+
+    world, robot = make(FakeRobot(step_time=0.008, pose_fn=pose), frequency=125.0)
+    pipeline = WrenchPipeline(WrenchConfig(max_frozen_time=MEASURED_FROZEN_TIME), world.dt)
+    rng = np.random.default_rng(1)
+    states, faults = [], []
+    for k in range(40):
+        if k < 10:
+            robot.tcp_force = [10.0 + rng.normal(0.0, 0.05), *rng.normal(0.0, 0.05, 5)]
+        s = world.read()
+        states.append(s)
+        faults.append(pipeline.update(s.wrench, s.sensor_rotation, s.wrench_seq, s.t).fault)
+        world.apply(Command(qd=np.r_[0.2, np.zeros(5)]))
+    world.close()
+    frozen = states[10:]
+    assert not np.allclose(frozen[0].tool_pose[3:], frozen[-1].tool_pose[3:])  # the tool turned meanwhile
+    assert all(np.array_equal(s.wrench, frozen[0].wrench) for s in frozen)
+    # the same force in the base frame (rotation matrices of entries ≤ 1: rounding at 1e-15 of 10 N)
+    np.testing.assert_allclose(frozen[-1].sensor_rotation @ frozen[-1].wrench[:3], robot.tcp_force[:3], atol=1e-12)
+    stale = [bool(f & Fault.SENSOR_STALE) for f in faults]
+    assert not any(stale[:10]) and stale[-1]
+    first = stale.index(True)
+    assert states[first].t - states[9].t <= MEASURED_FROZEN_TIME + 3 * world.dt  # flagged once frozen that long
+
+
 def test_a_stream_that_shows_no_step_asks_for_the_frequency():
     robot = FakeRobot(step_time=0.002)
     robot.frozen = True  # the timestamps do not advance
@@ -675,6 +756,8 @@ def test_a_stream_that_shows_no_step_asks_for_the_frequency():
         ({"acceleration": -1}, "acceleration"),
         ({"acceleration": math.nan}, "acceleration"),
         ({"deceleration": 0}, "deceleration"),
+        ({"acceleration": 40.5}, "acceleration must be at most 40 rad/s²"),  # speedJ refuses more (ur-rtde)
+        ({"deceleration": 50}, "deceleration must be at most 40 rad/s²"),
         ({"watchdog_hz": 0}, "watchdog_hz"),
         ({"tcp_offset": [0, 0, 0.1]}, "tcp_offset"),
         ({"tcp_offset": [0, 0, math.inf, 0, 0, 0]}, "tcp_offset"),

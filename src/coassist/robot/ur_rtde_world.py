@@ -177,6 +177,9 @@ _JITTER_WINDOW = 1.0
 _JITTER_SHARE = 0.25
 #: The RTDE interface runs at most at the e-Series controller rate.
 _MAX_FREQUENCY = 500.0
+#: [rad/s²] the largest joint acceleration speedJ takes (ur-rtde's UR_JOINT_ACCELERATION_MAX): it refuses more
+#: with an argument error, which on the stop's speedJ left the arm to the watchdog
+MAX_JOINT_ACCELERATION = 40.0
 #: Why the link is lost when the control socket's watch says ended: the robot reset or closed it, or the link
 #: dropped and ur-rtde reconnected under the same descriptor (coassist.robot.socket_watch), its script gone.
 _CONTROL_ENDED = "the control connection ended: the robot closed it, or it dropped and ur-rtde reconnected"
@@ -303,6 +306,12 @@ class URRTDEWorld:
             )
         self.acceleration = _check_number(acceleration, "acceleration")
         self.deceleration = _check_number(deceleration, "deceleration")
+        for name, value in (("acceleration", self.acceleration), ("deceleration", self.deceleration)):
+            if value > MAX_JOINT_ACCELERATION:
+                raise ValueError(
+                    f"{name} must be at most {MAX_JOINT_ACCELERATION:g} rad/s², the most speedJ takes (ur-rtde refuses "
+                    f"more, and a refused stop leaves the arm to the watchdog), got {value!r}"
+                )
         self.watchdog_hz = None if watchdog_hz is None else _check_number(watchdog_hz, "watchdog_hz")
         if self.watchdog_hz is not None and frequency > 0 and self.watchdog_hz > frequency:
             raise ValueError(
@@ -372,6 +381,7 @@ class URRTDEWorld:
         self._last_t = -math.inf
         self._last_force: np.ndarray | None = None
         self._last_R: np.ndarray | None = None  # the last finite orientation's rotation (a glitched one reuses it)
+        self._last_reading: tuple[np.ndarray, np.ndarray] | None = None  # (wrench, rotation) read() last gave
         self._last_advance_wall = time.monotonic()
         self._wrench_seq = 0
         self._usual_delay = math.inf  # the smallest (local clock − robot timestamp) seen, drifting up slowly
@@ -433,6 +443,13 @@ class URRTDEWorld:
             # ur-rtde's -1 picks 500 Hz on an e-Series and 125 Hz on a CB3. getStepTime cannot
             # tell which (module docstring): the stream's timestamps advance one step per package.
             self.step_time = self.dt = self._stream_step()
+            if self.watchdog_hz is not None and self.watchdog_hz > 1.0 / self.dt + 1e-9:
+                # the check the constructor makes of a rate given, now the stream's is known (before the watchdog is
+                # armed: nothing has moved)
+                raise ValueError(
+                    f"watchdog_hz must be at most the loop's frequency ({1.0 / self.dt:g} Hz, the stream's): a loop "
+                    f"slower than its watchdog stops the program every period, got {self.watchdog_hz!r}"
+                )
         if self.zero_sensor:
             # Zero with the tool still and nobody touching it (module docstring).
             self._require(self._call_c("zeroFtSensor"), "zeroFtSensor")
@@ -583,9 +600,14 @@ class URRTDEWorld:
         """The robot's latest sample (ur-rtde's receive thread keeps it; no waiting).
 
         ``t`` is the robot's timestamp [s since the controller started]; when it has not
-        advanced since the last read, ``t`` is the last one + 1 µs (the protocol wants it
-        strictly increasing) and ``wrench_seq`` is unchanged. ``wrench_seq`` grows when
-        the timestamp advanced or the force sample changed. The getters are separate
+        advanced since the last read, ``t`` is that timestamp plus the time this computer's
+        clock has run since it was seen (at least the last ``t`` + 1 µs: the protocol wants it
+        strictly increasing), so a sample the stream left unrenewed ages as it would have, and
+        ``wrench_seq`` is unchanged. ``wrench_seq`` grows when the timestamp advanced or the
+        force sample changed. ``wrench`` is the controller's base-frame force in the tool's
+        frame, ``sensor_rotation`` that frame's; a force repeated bit for bit is given with the
+        frame it was given in before (the frozen-sensor check compares readings bit for bit;
+        rotated by a tool that moved, a stuck sensor's repeats differed). The getters are separate
         calls, so in rare cases one reading mixes two consecutive controller steps.
         Raises :class:`RobotLinkError` when the link is lost (module docstring).
         """
@@ -630,11 +652,19 @@ class URRTDEWorld:
                     f"({why}; link_timeout {self.link_timeout:g} s): the link "
                     "is lost. The watchdog (when armed) stops the arm; check the network, then rerun."
                 )
-        if advanced or self._last_force is None or not np.array_equal(force, self._last_force):
+        repeated = self._last_force is not None and np.array_equal(force, self._last_force)
+        if advanced or not repeated:
             self._wrench_seq += 1
         self._last_force = force
         self._last_ts = ts if self._last_ts is None else max(ts, self._last_ts)
-        t = ts if ts > self._last_t else self._last_t + 1e-6
+        if advanced:
+            t = ts if ts > self._last_t else self._last_t + 1e-6
+        else:
+            # no new sample: the time since the last one runs on by this computer's clock, so the wrench pipeline's
+            # sample age grows (a stream that stopped is SENSOR_STALE after max_sample_age, about 4 periods, and the
+            # arm brakes; the link is lost after link_timeout). At +1 µs a read the age stayed at microseconds and the
+            # tick pushed on with the last sample for the whole link_timeout
+            t = max(self._last_t + 1e-6, self._last_ts + (now - self._last_advance_wall))
         self._last_t = t
         self.safety_status_bits = bits
 
@@ -650,7 +680,15 @@ class URRTDEWorld:
                 f"the robot at {self.host} reports a TCP pose whose orientation is not finite ({pose[3:].tolist()}): "
                 "nothing was moved; check the robot's state on the teach pendant, then rerun"
             )
-        wrench = np.concatenate((R.T @ force[:3], R.T @ force[3:]))
+        if repeated and self._last_reading is not None:
+            # the controller's force repeated bit for bit: given in the frame it was given in before, so the frozen-
+            # sensor check (which compares readings bit for bit) sees the repeat. Rotated by the moving tool's new
+            # orientation its low bits moved, and a stuck sensor on a moving arm was never flagged (the arm followed
+            # the last push). The same force in the base frame either way.
+            wrench, R = self._last_reading
+        else:
+            wrench = np.concatenate((R.T @ force[:3], R.T @ force[3:]))
+            self._last_reading = (wrench, R)
         state = RobotState(
             t=t,
             q=q,
