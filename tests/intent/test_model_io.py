@@ -61,6 +61,28 @@ def test_refuses_mismatched_features_or_dt(tmp_path, trained):
         trained.predict_trial(make_trial(0, d=1))
 
 
+def test_tensors_of_other_shapes_are_refused_in_one_line(tmp_path, trained):
+    import hashlib
+
+    from safetensors import safe_open
+    from safetensors.torch import save_file
+
+    save_model(trained, tmp_path / "m")
+    weights = tmp_path / "m" / "weights.safetensors"
+    with safe_open(str(weights), "pt") as f:
+        metadata = f.metadata()
+        tensors = {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118 (safe_open is no mapping)
+    name = next(k for k, t in tensors.items() if t.ndim == 2 and t.shape[0] != t.shape[1])
+    tensors[name] = tensors[name].T.contiguous()  # the same numbers, another shape
+    save_file(tensors, str(weights), metadata=metadata)
+    side = json.loads((tmp_path / "m" / "model.json").read_text())
+    side["weights_sha256"] = hashlib.sha256(weights.read_bytes()).hexdigest()
+    (tmp_path / "m" / "model.json").write_text(json.dumps(side))
+    with pytest.raises(ModelFileError, match=f"tensors do not fit the network.*size mismatch for {name}") as err:
+        load_model(tmp_path / "m")
+    assert "\n" not in str(err.value)
+
+
 def test_refuses_weights_from_another_save(tmp_path, trained, trials, tiny):
     other = train_model(trials, tiny, type(tiny.train)(**{**tiny.train.__dict__, "seed": 5}))
     save_model(trained, tmp_path / "a")

@@ -467,7 +467,10 @@ def load_model(
     try:
         net.load_state_dict(_tensors(weights_path, raw), strict=True)
     except RuntimeError as exc:
-        raise _fail(weights_path, f"tensors do not fit the network in {SIDECAR}: {exc}") from None
+        # torch's message is a header and a line a tensor: the first three, on one line
+        lines = [line.strip() for line in str(exc).splitlines()[1:] if line.strip()] or [str(exc).strip()]
+        shown = "; ".join(lines[:3]) + (f"; and {len(lines) - 3} more" if len(lines) > 3 else "")
+        raise _fail(weights_path, f"tensors do not fit the network in {SIDECAR}: {shown}") from None
     ridge = None
     if meta["ridge_sha256"]:
         ridge_path = folder / RIDGE
