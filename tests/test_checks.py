@@ -104,9 +104,23 @@ def test_check_positive_scalar():
         (float("nan"), "finite number > 0"),
         (-1, "> 0, got -1"),
         ("abc", "dt must be a number, got 'abc'"),
+        (True, "dt must be a number, got True"),  # float(True) is 1: a one-second period
+        (np.bool_(True), "dt must be a number, got np.True_|dt must be a number, got True"),
     ):
         with pytest.raises(ValueError, match=message):
             check_positive_scalar(bad, "dt")
+
+
+@pytest.mark.parametrize("bad", [True, [True, True], np.array([True, False])], ids=repr)
+def test_gains_that_are_no_numbers_are_refused_naming_the_field(bad):
+    from coassist.config import ImpedanceParameters
+    from coassist.model import ImpedanceModel
+
+    with pytest.raises(ValueError, match="impedance.M must be a list of numbers"):
+        ImpedanceParameters(M=bad if isinstance(bad, list) else (bad, bad))
+    with pytest.raises(ValueError, match="^M must be a (matrix of numbers|number)"):
+        ImpedanceModel(bad, np.diag([100.0, 100.0]), 0, 0.008)
+    assert ImpedanceParameters(M=(np.int64(3), 4)).M == (3.0, 4.0)  # integers are numbers
 
 
 def _realtime_config(**kw):

@@ -6,6 +6,7 @@ field. Matrices that are diagonal in the thesis are given as their diagonals.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -16,12 +17,15 @@ from coassist._checks import (
     check_positive_definite,
     check_positive_scalar,
     check_positive_semidefinite,
+    check_real,
 )
 from coassist.registry import Registry
 
 
 def _diag(values, name: str, length: int | None = None, *, positive: bool = False) -> tuple[float, ...]:
     try:
+        if np.asarray(values).dtype.kind == "b":  # truth values are no gains (float(True) is 1)
+            raise ValueError
         arr = np.atleast_1d(np.asarray(values, dtype=float))
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a list of numbers, got {values!r}") from None
@@ -171,10 +175,7 @@ class GameParameters:
             raise ValueError(f"game.weights must be a GameWeights, got {type(self.weights).__name__}")
         if not 1 <= self.weights.n_dof <= 6:  # type: ignore[operator]
             raise ValueError(f"game.weights must be on 1 to 6 DOFs, got {self.weights.n_dof}")
-        try:
-            alpha = float(self.alpha)
-        except (TypeError, ValueError):
-            raise ValueError(f"game.alpha must be a number, got {self.alpha!r}") from None
+        alpha = check_real(self.alpha, "game.alpha", -math.inf)  # a truth value is no α (float(True) is 1)
         if not 0.0 <= alpha <= 1.0:
             raise ValueError(f"game.alpha must be in [0, 1], got {self.alpha!r}")
         if self.input_weighting == "alpha_scaled" and not 0.0 < alpha < 1.0:

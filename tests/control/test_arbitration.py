@@ -231,3 +231,10 @@ def test_arbitrated_step_batch_gives_each_controllers_step_bit_for_bit(law):
     assert (
         arbitrated_step_batch([], np.zeros((0, 4)), np.zeros((0, 20, 4)), np.zeros((0, 20, 4)), np.zeros((0, 2))) == []
     )
+
+
+@pytest.mark.parametrize("alpha0", [math.nan, math.inf, True])
+def test_the_arbiter_refuses_an_alpha0_that_is_no_finite_number(alpha0):
+    # min/max carried a NaN through: α was NaN on every tick and after every reset
+    with pytest.raises(ValueError, match="alpha0 must be"):
+        AlphaArbiter(ArbitrationParameters(law="hand_force"), 2, 0.008, alpha0)

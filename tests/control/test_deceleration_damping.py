@@ -80,3 +80,21 @@ def test_damped_kind_is_the_arbitrated_controller_with_the_preset_law():
     assert ctrl.alpha == pytest.approx(0.9)
     with pytest.raises(ValueError, match="DampingParameters.decel_ref"):
         DampingParameters(decel_ref=0.0)
+
+
+@pytest.mark.parametrize("bad", [None, np.array([0.0]), np.array([0.0, 0.0, 0.2])], ids=repr)
+def test_a_state_of_other_dofs_is_refused_and_leaves_the_filter(bad):
+    # the inner controller flags it; the wrapper neither raises (None, [0.0]) nor reads a short state's tail as the
+    # velocity into its acceleration estimate (a 3-long state was broadcast into â and moved the efforts after it)
+    ref = np.zeros((1, 4))
+    z0 = np.array([0.0, 0.0, 0.10, 0.0])
+    z1 = np.array([0.0, 0.0, 0.098, 0.0])  # −0.25 m/s² over one tick
+
+    def efforts(with_bad_tick):
+        ctrl = DecelerationDamping(_Constant(_model(), [1.0, -2.0]), P)
+        ctrl.step(z0, ref, ref, np.zeros(2))
+        if with_bad_tick:
+            assert ctrl.step(bad, ref, ref, np.zeros(2)).u_r.tolist() == [1.0, -2.0]  # the inner step, nothing added
+        return ctrl.step(z1, ref, ref, np.zeros(2)).u_r
+
+    np.testing.assert_array_equal(efforts(True), efforts(False))

@@ -664,3 +664,32 @@ def test_game_weights_validation_names_the_weight(build, message):
     model = ImpedanceModel([10, 10], [100, 100], 0, 0.008)
     with pytest.raises(ValueError, match=message):
         build(GameWeights, model)
+
+
+def test_the_game_of_each_discretisation_is_its_own():
+    # cooperative_game memoises a build per model: zoh and tustin of one M, D, K, dt are two games (the second asked
+    # was handed the first's gains and model)
+    from coassist.config import THESIS_WEIGHTS, GameParameters
+    from coassist.control.game import cooperative_game
+
+    params = GameParameters(weights=THESIS_WEIGHTS, alpha=0.8, horizon=50)
+    dt = 0.2  # long enough for the two discretisations' gains to differ clearly
+    models = {d: ImpedanceModel(np.diag([10.0, 10.0]), np.diag([100.0, 100.0]), 0, dt, d) for d in ("tustin", "zoh")}
+    memo = {d: cooperative_game(m, params) for d, m in models.items()}
+    for d, m in models.items():
+        fresh = CooperativeGame(m, THESIS_WEIGHTS, alpha=0.8, horizon=50)
+        assert memo[d].model.discretization == d
+        np.testing.assert_allclose(memo[d].gains.G_z, fresh.gains.G_z, rtol=1e-12, atol=0.0)
+    gap = np.abs(memo["zoh"].gains.G_z - memo["tustin"].gains.G_z).max() / np.abs(memo["zoh"].gains.G_z).max()
+    assert gap > 1e-4
+
+
+@pytest.mark.parametrize("alpha", [True, np.bool_(False)])
+def test_alpha_that_is_no_number_is_refused(alpha):
+    from coassist.config import THESIS_WEIGHTS, GameParameters
+
+    model = ImpedanceModel(np.diag([10.0, 10.0]), np.diag([100.0, 100.0]), 0, 0.008)
+    with pytest.raises(ValueError, match="alpha must be a number"):
+        CooperativeGame(model, THESIS_WEIGHTS, alpha=alpha, horizon=5)
+    with pytest.raises(ValueError, match="game.alpha must be a number"):
+        GameParameters(weights=THESIS_WEIGHTS, alpha=alpha)

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from coassist._checks import check_int_at_least, check_positive_scalar
+from coassist._checks import check_int_at_least, check_positive_scalar, check_real
 from coassist.control.controllers import AssistiveController, ControlStep
 from coassist.control.game import CooperativeGame, solve_with_gains
 
@@ -135,7 +135,9 @@ class AlphaArbiter:
         self.params = params
         self.n = check_int_at_least(n_dof, "n_dof", 1)
         self.dt = check_positive_scalar(dt, "dt")
-        self.alpha0 = min(max(float(alpha0), params.alpha_min), params.alpha_max)
+        # a NaN would pass min/max into every tick's α, and a truth value is no α
+        alpha0 = check_real(alpha0, "alpha0", -math.inf)
+        self.alpha0 = min(max(alpha0, params.alpha_min), params.alpha_max)
         self._gain = min(1.0, self.dt / params.time_constant)
         d = params.error_lag
         self._pred = np.full((d, self.n), np.nan)  # ring: the position predicted for k+d at tick k

@@ -102,7 +102,10 @@ class DecelerationDamping:
 
     def step(self, z: ArrayLike, ref_h: ArrayLike, ref_r: ArrayLike, wrench: ArrayLike) -> ControlStep:
         out = self.controller.step(z, ref_h, ref_r, wrench)
-        v = np.asarray(z, dtype=float)[self.n : 2 * self.n]
+        z = np.asarray(z)
+        if z.shape != (2 * self.n,) or z.dtype.kind not in "iuf":
+            return out  # no state of n DOFs (the inner guard has flagged it): neither read nor filtered
+        v = z[self.n :].astype(float)
         if not np.isfinite(v).all():
             return out  # the inner guard has flagged it; the filter keeps its last good state
         if self._v_prev is not None:

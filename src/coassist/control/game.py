@@ -425,6 +425,8 @@ class CooperativeGame(_LinearQuadraticGame):
         return twin
 
     def _check_alpha(self, alpha: float) -> float:
+        if isinstance(alpha, (bool, np.bool_)):  # a truth value is no α (float(True) is 1)
+            raise ValueError(f"alpha must be a number, got {alpha!r}")
         try:
             a = float(alpha)
         except (TypeError, ValueError):
@@ -712,6 +714,7 @@ def cooperative_game(model: ImpedanceModel, params: GameParameters) -> Cooperati
     key = (
         params,
         float(model.dt),
+        model.discretization,  # zoh and tustin of one M, D, K, dt are two games
         *(np.asarray(a, float).tobytes() for a in (model.M, model.D, model.K)),
         np.shape(model.M),
     )
