@@ -405,6 +405,22 @@ def test_a_first_pose_that_is_not_finite_is_refused_before_anything_moves():
     assert len(world.reads) == 1 and all(c.stop for c in world.sent)
 
 
+@pytest.mark.parametrize("rate", [500.0, 62.5])
+def test_a_world_at_another_rate_than_the_drives_is_refused_before_anything_moves(rate):
+    """The tick, the admittance and the safety layer's per-tick steps run on the drive's period, the world paces on its
+    own: a Franka world at 500 Hz under the default 125 Hz stepped each 2 ms period by a 125 Hz period's acceleration
+    (31 rad/s² for 8) and its trial's clock ran four times the robot's (a review)."""
+    world = MujocoUR5World("handle", control_dt=1.0 / rate)
+    try:
+        before = world.read()
+        with pytest.raises(ValueError, match=rf"world runs at {rate:g} Hz .* drive at 125 Hz .* nothing was moved"):
+            drive(DriveConfig(world="ur", controller="manual", task="linear", time_limit=0.1), world=world)
+        after = world.read()  # never stepped
+        assert after.t == before.t and np.array_equal(after.q, before.q)
+    finally:
+        world.close()
+
+
 class _CtrlC:
     """An on_tick that presses Ctrl-C at tick ``at`` (the interrupt arrives inside the loop, as a signal's does)."""
 

@@ -110,3 +110,16 @@ def test_the_cli_names_the_option_of_a_backend_without_a_network(tmp_path):
         "error: --predictor-backend must be 'process' (the default) with intent 'paths' (it has no network to run), "
         "got 'onnx'"
     ) in result.output
+
+
+def test_a_joint_acceleration_beyond_the_arms_own_is_refused_and_the_smallest_holds():
+    from coassist.robot.drive import arm_limits
+    from coassist.runtime.safety_limits import SafetyLimits
+
+    for robot in ("panda", "fr3"):  # 1000 rad/s² limited nothing (the review's DriveConfig was accepted)
+        message = refused(world="franka", robot=robot, limits=SafetyLimits(joint_acceleration=1000.0))
+        assert f"SafetyLimits.joint_acceleration must be at most the {robot}'s own joint accelerations" in message
+    # the layer's one bound holds every joint: at most the arm's smallest (the Panda's joint 2)
+    assert arm_limits(SafetyLimits(), "panda").joint_acceleration == 7.5
+    assert arm_limits(SafetyLimits(joint_acceleration=5.0), "panda").joint_acceleration == 5.0
+    assert arm_limits(SafetyLimits(joint_acceleration=20.0), "ur5").joint_acceleration == 20.0  # no datasheet figure

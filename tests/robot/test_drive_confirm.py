@@ -36,6 +36,11 @@ def test_no_terminal_no_yes_is_one_line_and_no_motion(tmp_path, monkeypatch):
     result = CliRunner().invoke(app, args, input="")
     assert result.exit_code == 1 and not moved
     _check_one_line(result.stdout, [line for line in result.stderr.splitlines() if line.strip()])
+    # what stops a Franka: its user stop (it has no teach pendant), a UR's pendant
+    assert "Keep the Franka's user stop button within reach." in result.stdout
+    args[2] = "ur"
+    result = CliRunner().invoke(app, args, input="")
+    assert "Keep the teach pendant's emergency stop within reach." in result.stdout and not moved
 
 
 @pytest.mark.realtime  # franky-sim runs the arm's loop in threads: run alone (./dev test), as the Franka tests

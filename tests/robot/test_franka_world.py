@@ -279,6 +279,37 @@ def test_a_repeated_robot_clock_reads_forward_and_as_no_new_wrench_sample(server
         world.close()
 
 
+def test_the_robots_force_estimate_is_read_as_the_hands(server):
+    """libfranka's O_F_ext_hat_K is the robot's force on the environment (franky's documentation of the field): a
+    hand pushing the tool along +x reads −x there, and coassist's wrench is the hand's, +x. Taken as it came, the
+    arm moved against the push. (franky-sim reports 0: the robot's state is the real one but for this field.)"""
+    real = franky.Robot(server.host, realtime_config=franky.RealtimeConfig.Ignore)
+    estimate = np.array([-10.0, 2.0, -3.0, 0.1, -0.2, 0.3])  # the robot's on the environment
+
+    class Pushed:  # the state franky reports, with the estimate of a hand pushing along +x
+        def __init__(self, state):
+            self._state = state
+
+        def __getattr__(self, name):
+            return estimate if name == "O_F_ext_hat_K" else getattr(self._state, name)
+
+    class Robot:
+        def __getattr__(self, name):
+            return getattr(real, name)
+
+        @property
+        def state(self):
+            return Pushed(real.state)
+
+    world = FrankaWorld(server.host, arm="fr3", robot=Robot(), link_timeout=1.0)
+    try:
+        s = world.read()
+        np.testing.assert_array_equal(s.wrench, -estimate)
+        np.testing.assert_array_equal(s.sensor_rotation, np.eye(3))  # base-frame axes
+    finally:
+        world.close()
+
+
 def test_the_world_takes_the_limits_of_the_arm_it_is_told(server, monkeypatch):
     # franky-sim simulates an FR3: told "fr3", the world holds the FR3's joint range and speeds
     world = FrankaWorld(server.host, arm="fr3")

@@ -42,6 +42,9 @@ from coassist.robot.worlds import WORLDS, arm_choices, arm_worlds, world_choices
 from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.intent_registry import INTENT_SOURCES, intent_choices
 
+#: What the person keeps within reach, by world (asked before an arm moves): a Franka has no teach pendant
+STOP_HINTS = {"ur": "the teach pendant's emergency stop", "franka": "the Franka's user stop button"}
+
 
 def drive(
     out: Path = typer.Option(
@@ -153,7 +156,8 @@ def drive(
     if intent not in INTENT_SOURCES:
         set_torch_threads(1)  # one core for a model run in this process (the tick's own thread stays free)
 
-    confirm = confirm_move(yes, "the teach pendant's emergency stop")
+    # what stops the arm at hand: a UR's teach pendant, a Franka's user stop (it has no pendant)
+    confirm = confirm_move(yes, STOP_HINTS.get(world, "the emergency stop"))
     live = open_live(foxglove)
     try:
         from coassist.robot.ros2_world import UR_JOINT_NAMES  # (no rclpy needed for the names)

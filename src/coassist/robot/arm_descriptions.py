@@ -34,6 +34,10 @@ class ArmDescription:
         frames, a gripper: the tools are mounted on the flange; :mod:`coassist.robot.arm_mjcf`).
     tool_speed_limit : [m/s] the arm's own largest TCP speed (the datasheet's; a safety
         limit above it is refused: it would limit nothing).
+    joint_acceleration_limit : (n,) [rad/s²] the datasheet's joint accelerations; None where the
+        maker publishes none (the UR's speedJ takes up to 40 rad/s²: the UR world checks it). The safety
+        layer's one acceleration bound (‖q̇ − q̇⁻‖∞ ≤ a dt) is then at most the smallest of them, and a
+        ``SafetyLimits.joint_acceleration`` above the largest is refused (it would limit no joint).
     task_centre : (3,) [m] where the MuJoCo worlds put the tasks, in the base frame: the
         centre of their x-y area and the height of their plane (the tasks are laid out
         for the UR5: (0.15, −0.615) at 0.2 m; an arm with another reach moves them).
@@ -51,6 +55,7 @@ class ArmDescription:
     mujoco_drop: tuple[str, ...] = ()
     task_centre: tuple[float, float, float] = (0.15, -0.615, 0.20)
     tool_speed_limit: float = 1.0
+    joint_acceleration_limit: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         n = self.n_joints
@@ -60,6 +65,13 @@ class ArmDescription:
             v = np.asarray(getattr(self, name), dtype=float)
             if v.shape != (n,) or not np.isfinite(v).all():
                 raise ValueError(f"ArmDescription.{name} must be {n} finite numbers, got {getattr(self, name)!r}")
+        if self.joint_acceleration_limit is not None:
+            a = np.asarray(self.joint_acceleration_limit, dtype=float)
+            if a.shape != (n,) or not (np.isfinite(a).all() and (a > 0.0).all()):
+                raise ValueError(
+                    f"ArmDescription.joint_acceleration_limit must be {n} finite numbers > 0 [rad/s²] or None, got "
+                    f"{self.joint_acceleration_limit!r}"
+                )
         if not (isinstance(self.tool_speed_limit, float) and 0.0 < self.tool_speed_limit < 10.0):
             raise ValueError(
                 f"ArmDescription.tool_speed_limit must be a speed in (0, 10) m/s, got {self.tool_speed_limit!r}"
@@ -99,6 +111,9 @@ ARMS: dict[str, ArmDescription] = {
         mujoco_drop=("panda_hand",),
         task_centre=(0.5, 0.0, 0.4),  # every task point reachable tool-down, > 0.2 rad from a limit
         tool_speed_limit=1.7,  # libfranka's Cartesian translation limit (franky: translation_velocity_limit.max)
+        # libfranka's joint-space limits for the Panda (Franka's control parameters; franky.Robot's
+        # joint_acceleration_limit): joint 2 the lowest
+        joint_acceleration_limit=(15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0),
     ),
     # Franka Research 3: the Panda's kinematics (the same DH table and flange; franky-sim's
     # FR3 matches the Panda model to 1e-4 m, tests/robot/test_franka_world.py) with its own
@@ -125,6 +140,9 @@ ARMS: dict[str, ArmDescription] = {
             (-3.0508, 3.0508),
         ),
         tool_speed_limit=1.7,  # what franky reports for franky-sim's FR3 (translation_velocity_limit.max)
+        # what franky's motion generator holds either arm to (franky.Robot.joint_acceleration_limit, read from
+        # franky-sim's FR3): the Panda's
+        joint_acceleration_limit=(15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0),
     ),
 }
 

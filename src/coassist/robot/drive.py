@@ -297,11 +297,29 @@ def _check_limits_for_arm(limits: SafetyLimits, robot: str | None) -> None:
             f"SafetyLimits.joint_velocity must be at most the {arm.name}'s own joint speeds ({shown}) "
             f"rad/s, got {limits.joint_velocity!r}"
         )
+    if arm.joint_acceleration_limit is not None and limits.joint_acceleration > max(arm.joint_acceleration_limit):
+        shown = ", ".join(f"{a:g}" for a in arm.joint_acceleration_limit)
+        raise ValueError(
+            f"SafetyLimits.joint_acceleration must be at most the {arm.name}'s own joint accelerations ({shown} "
+            f"rad/s²; the layer holds every joint to the smallest), got {limits.joint_acceleration!r}"
+        )
     if limits.contact_force > MAX_CONTACT_FORCE:
         raise ValueError(
             f"SafetyLimits.contact_force must be at most {MAX_CONTACT_FORCE:g} N, the force sensor's range "
             f"(above it the protective stop could never trip), got {limits.contact_force!r}"
         )
+
+
+def arm_limits(limits: SafetyLimits, robot: str | None) -> SafetyLimits:
+    """``limits`` with the joint acceleration bound at most the arm's smallest joint acceleration
+    (:attr:`~coassist.robot.arm_descriptions.ArmDescription.joint_acceleration_limit`): the layer's one bound
+    ‖q̇ − q̇⁻‖∞ ≤ a dt holds every joint to it (the default 8 rad/s² let a Panda's joint 2, 7.5 rad/s², take 7.84)."""
+    from coassist.robot.arm_descriptions import get_arm
+
+    own = get_arm(robot or "ur5").joint_acceleration_limit
+    if own is None or limits.joint_acceleration <= min(own):
+        return limits
+    return replace(limits, joint_acceleration=float(min(own)))
 
 
 #: The controller kinds the stability guard wraps (:attr:`DriveConfig.stability`): the assistive ones. Manual
@@ -620,13 +638,23 @@ def _prepare(
                     host,
                     view,
                     realtime=view or bool(config.realtime_intent),
-                    joint_acceleration=config.limits.joint_acceleration,
+                    joint_acceleration=arm_limits(config.limits, robot).joint_acceleration,
                 ),
             )
         if not isinstance(world, ArmWorld):
             raise ValueError(
                 f"world must be an arm world (coassist.robot.worlds.ArmWorld); a {type(world).__name__} "
                 f"lacks {', '.join(missing_members(world, ArmWorld))}"
+            )
+        world_dt = float(world.dt)
+        if not math.isclose(world_dt, dt, rel_tol=1e-9):
+            # the tick, the admittance and the safety layer's per-tick steps run on config.dt and the world paces on
+            # its own: at 500 Hz under a 125 Hz config each period stepped the speed by a 125 Hz period's
+            # acceleration (31 rad/s² for 8), and the trial's clock ran 4 times the robot's
+            raise ValueError(
+                f"the world runs at {1.0 / world_dt:g} Hz (dt {world_dt:g} s) and the drive at {config.rate_hz:g} Hz "
+                f"(DriveConfig.rate_hz): build the world at the drive's rate, or give the drive the world's; "
+                "nothing was moved"
             )
         state0 = world.read()
         if not np.isfinite(np.asarray(state0.tool_pose, dtype=float)).all():  # the plan is laid out from it
@@ -674,7 +702,7 @@ def _prepare(
             ),
             dt,
         )
-        limits = config.limits
+        limits = arm_limits(config.limits, robot)
         if limits.workspace_lower is None:
             lo, hi = workspace_for(ref_abs, start_pose)
             limits = replace(limits, workspace_lower=tuple(lo), workspace_upper=tuple(hi))

@@ -29,9 +29,12 @@ The wrench
 ----------
 Without an external sensor, the wrench is libfranka's estimate ``O_F_ext_hat_K``: the
 external wrench acting on the stiffness frame K, in base-frame axes, from the joint
-torque sensors. Taken here as the wrench the environment (the hand) applies, so a hand
-pushing the tool along +x_base reads +f_x, coassist's sign (:mod:`coassist.runtime.world`),
-with ``sensor_rotation`` = I. An external F/T sensor is any object with
+torque sensors. libfranka's sign is the robot's ("forces applied by the robot to the
+environment are positive, while forces applied by the environment on the robot are
+negative", franky's and libfranka's documentation of the field): its negative is the wrench
+the environment (the hand) applies, so a hand pushing the tool along +x_base reads +f_x,
+coassist's sign (:mod:`coassist.runtime.world`), with ``sensor_rotation`` = I. (Taken
+unnegated, the arm moved against the push, into the person.) An external F/T sensor is any object with
 ``read() -> (wrench (6,), sensor_rotation (3, 3), seq)`` in coassist's convention
 (``ft_sensor=``). franky-sim 1.0.4 reports ``O_F_ext_hat_K`` = 0 always, so the tests
 use the sensor path.
@@ -308,7 +311,8 @@ class FrankaWorld:
         except ValueError:  # a non-finite q: the tick flags it and brakes
             twist = np.full(6, np.nan)
         if self.ft_sensor is None:
-            wrench, R = np.asarray(s.O_F_ext_hat_K, dtype=float), np.eye(3)
+            # libfranka's sign is the robot's on the environment: the hand's is its negative (module docstring)
+            wrench, R = -np.asarray(s.O_F_ext_hat_K, dtype=float), np.eye(3)
             if advanced:  # a new sample only with a new state: a stuck robot's wrench reads as stale
                 self._seq += 1
             seq = self._seq
