@@ -115,12 +115,15 @@ def test_tool_mass_below_the_sensor(tool):
     mass, com = world.tool_mass_and_com()
     m_exp, c_exp = expected_tool(tool)
     assert mass == pytest.approx(m_exp, rel=1e-9)
-    np.testing.assert_allclose(com, c_exp, atol=1e-9)
+    # from the TCP, the point the reading's torque is about: the TCP is the kinematics' (the flange's frame is the
+    # sensor's on the UR5)
+    np.testing.assert_allclose(world.tcp_lever, world.flange_to_tcp()[:3], atol=1e-12)
+    np.testing.assert_allclose(com + world.tcp_lever, c_exp, atol=1e-9)
     if tool == "board":
         # The board's COM 0.2 m off the cup toward the operator (−y base = +y tool).
         board = OBJECTS["board"]
         c_board = (board.mass * 0.20 + MOUNT_MASS * 0.0) / (board.mass + MOUNT_MASS)
-        assert com[1] == pytest.approx(c_board, rel=1e-9)
+        assert com[1] + world.tcp_lever[1] == pytest.approx(c_board, rel=1e-9)
         hand = world.hand_pose()[0][:3] - world.read().tool_pose[:3]
         np.testing.assert_allclose(hand[:2], board.grasp_offset, atol=1e-9)  # hand 0.61 m from the cup, −y
 
@@ -237,6 +240,7 @@ def test_twist_is_linear_then_angular_in_the_base_frame():
 def test_static_reading_is_the_tools_weight(tool):
     world = MujocoUR5World(tool, sensor=QUIET)
     mass, com = expected_tool(tool)
+    com = com - world.tcp_lever  # from the TCP, the point the torque is about
     for s in (world.read(), hold(world, 0.2)):
         R = s.sensor_rotation
         weight = mass * R.T @ G  # the force the tool applies to the sensor, sensor frame
@@ -266,10 +270,10 @@ def test_hand_wrench_adds_exactly(tool):
     mass, com = expected_tool(tool)
     s = hold(world, 1.0)
     R = s.sensor_rotation
-    p_sensor = world.data.site_xpos[world.model.site("ft_sensor").id]
-    r_hand = world.hand_pose()[0][:3] - p_sensor
+    p_tcp = world.data.site_xpos[world.model.site("tcp").id]  # the point the reading's torque is about
+    r_hand = world.hand_pose()[0][:3] - p_tcp
     f_base = R @ s.wrench[:3] - mass * G
-    t_base = R @ s.wrench[3:] - np.cross(R @ com, mass * G)
+    t_base = R @ s.wrench[3:] - np.cross(R @ (com - world.tcp_lever), mass * G)
     np.testing.assert_allclose(f_base, F, atol=5e-3 * np.linalg.norm(F))
     expected_t = T + np.cross(r_hand, F)
     np.testing.assert_allclose(t_base, expected_t, atol=5e-3 * np.linalg.norm(expected_t))
@@ -464,3 +468,29 @@ def test_realtime_paces_apply_to_the_wall_clock():
     for _ in range(25):
         world.apply(Command(qd=np.zeros(6)))
     assert time.perf_counter() - t0 >= 24 * world.dt  # the first period anchors the clock
+
+
+@pytest.mark.parametrize("tool", ["handle", "board"])
+def test_the_readings_torque_is_about_the_tcp_as_a_urs(tool):
+    # a UR controller reports its TCP force with the torque about the TCP; the MuJoCo world's sensor sits at the
+    # flange, and about the flange a pure push at the handle turned a full-pose drive's tool 4.3°. The same push
+    # through the pipeline: the UR simulator's actual_TCP_force and the MuJoCo world's hand agree
+    from coassist.robot.ur_sim.arm import SimArm
+    from coassist.runtime.wrench import WrenchConfig, WrenchPipeline
+
+    push = ConstantHand([10.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    world = MujocoUR5World(tool, sensor=QUIET, operator=push)
+    mass, com = world.tool_mass_and_com()
+    config = WrenchConfig(tool_mass=mass, tool_com=tuple(com), cutoff_hz=None, deadband_force=0, deadband_torque=0)
+    pipeline = WrenchPipeline(config, world.dt)
+    arm = SimArm(0.008, tool=tool, sensor=QUIET)
+    arm.operator = push
+    for _ in range(50):
+        world.apply(Command(qd=np.zeros(6)))
+        s = world.read()
+        hand = pipeline.update(s.wrench, s.sensor_rotation, s.wrench_seq, s.t).hand
+        arm.step()
+    r = world.hand_pose()[0][:3] - world.read().tool_pose[:3]  # the hand from the TCP, base frame
+    np.testing.assert_allclose(hand[:3], [10.0, 0.0, 0.0], atol=0.05)
+    np.testing.assert_allclose(hand[3:], np.cross(r, [10.0, 0.0, 0.0]), atol=0.01)  # 0 at the handle's TCP
+    np.testing.assert_allclose(arm.tcp_force, hand, atol=0.01)

@@ -20,8 +20,9 @@ lag of ``servo_time_constant`` and tracks it by computed torque (the arm's inert
 gravity and Coriolis terms, and a critically damped position/velocity loop at
 ``servo_bandwidth``; :mod:`coassist.robot.ur5_mjcf`), clipped to the arm's joint
 torques. So the joints follow the command with that lag and the hand does not
-back-drive them (a 10 N push deflects the arm by a fraction of a milliradian), as on
-the real geared arm.
+back-drive them (a 10 N push deflects the UR5 by 0.07–0.21 mrad, the Panda with the
+handle by 1.6 mrad), as on the real geared arm. An arm whose joint torques cannot hold the
+tool at its start (the Panda under the 8 kg board) is refused when the world is built.
 
 Timing within a period: the operator sees the state at the start of the period; the
 sensor's samples are taken at their own instants (the physics step in which a sample
@@ -32,7 +33,12 @@ sensors at ``rate_hz`` (100 Hz, a Robotiq FT300), adds a constant bias and white
 drawn from ``np.random.default_rng(seed)``, and clips to its range; a sample is held
 until the next one and ``RobotState.wrench_seq`` counts them. The reading has the sign
 of the force the tool applies to the sensor (at rest: the tool's weight, m Rᵀ g with
-g = (0, 0, −9.81)), in the sensor frame (the flange frame, ``tool0`` on the UR5).
+g = (0, 0, −9.81)), in the sensor frame (the flange frame, ``tool0`` on the UR5), its torque about the
+TCP, as a UR controller reports its TCP force (the sensor's own torque less r × f, r the TCP from the
+sensor, :attr:`MujocoArmWorld.tcp_lever`: a push at the TCP has no torque there; noise and bias on the
+sensor's own channels, the range on the reading's); :meth:`MujocoArmWorld.tool_mass_and_com` gives the
+centre of mass from the TCP to match. (About the flange, a full-pose drive turned the tool 4.3° under
+a pure 10 N push at the handle, which a UR's TCP force leaves untouched.)
 
 Determinism: the physics is deterministic and the only randomness is the sensor noise,
 so the same seed and the same commands give bit-identical states.
@@ -374,6 +380,21 @@ class MujocoArmWorld:
         d.qpos[:] = self.q_start
         d.qvel[:] = 0.0
         mujoco.mj_forward(m, d)
+        #: (3,) [m] the TCP from the sensor's origin, in the sensor frame (the tool is rigid: a constant); the
+        #: reading's torque is about the TCP, the sensor's own is τ + tcp_lever × f
+        self.tcp_lever = d.site_xmat[self._ft].reshape(3, 3).T @ (d.site_xpos[self._tcp] - d.site_xpos[self._ft])
+        self.tcp_lever.setflags(write=False)
+        # at rest the bias force is gravity's: an arm whose actuators cannot hold the tool falls from the first tick
+        # (the Panda under the 8 kg board: its wrist at 1.84 × its 12 N·m; with nobody touching it the sensor read a
+        # falling arm as pushes up to 169 N)
+        share = np.abs(d.qfrc_bias[:n]) / m.actuator_forcerange[:n, 1]
+        if share.max() > 1.0:
+            j = int(np.argmax(share))
+            raise ValueError(
+                f"the {arm.name} cannot hold the {tool}: at its start its joint {j + 1} needs "
+                f"{abs(d.qfrc_bias[j]):.1f} N·m against gravity, {share[j]:.2f} × its {m.actuator_forcerange[j, 1]:g} "
+                f"N·m; carry another object (tool: one of {', '.join(t for t in TOOLS if t != tool)})"
+            )
         self._set_servo(hold=True)
         mujoco.mj_forward(m, d)  # sensors at rest under the holding torques; also mj_step1's state
         self._wrench = self._sample()
@@ -463,6 +484,9 @@ class MujocoArmWorld:
         noise = self._rng.standard_normal(6)
         noise *= self._sigma
         raw += noise
+        raw[3:] -= np.cross(
+            self.tcp_lever, raw[:3]
+        )  # the sensor's reading, its torque about the TCP (module docstring)
         np.minimum(raw, self._range, out=raw)
         return np.maximum(raw, -self._range, out=raw)
 
@@ -612,10 +636,11 @@ class MujocoArmWorld:
         return not (self.sensor.noise_force or self.sensor.noise_torque)
 
     def tool_mass_and_com(self) -> tuple[float, np.ndarray]:
-        """Mass [kg] of everything below the sensor and its centre of mass (3,) in the sensor frame [m]."""
+        """Mass [kg] of everything below the sensor and its centre of mass (3,) from the TCP, in the sensor frame
+        [m]: the point the reading's torque is about (module docstring)."""
         d = self.data
         R = d.site_xmat[self._ft].reshape(3, 3)
-        com = R.T @ (d.subtree_com[self._tool0] - d.site_xpos[self._ft])
+        com = R.T @ (d.subtree_com[self._tool0] - d.site_xpos[self._tcp])
         return float(self.model.body_subtreemass[self._tool0]), com
 
     def flange_to_tcp(self) -> np.ndarray:
@@ -735,6 +760,7 @@ class MujocoArmGroup:
             [[*range(w._force_adr, w._force_adr + 3), *range(w._torque_adr, w._torque_adr + 3)] for w in worlds]
         )
         self._ft_bias = np.array([w._bias for w in worlds], dtype=float)
+        self._tcp_levers = np.array([w.tcp_lever for w in worlds], dtype=float)
         self._ft_sigma = np.array([w._sigma for w in worlds], dtype=float)
         self._ft_range = np.array([w._range for w in worlds], dtype=float)
 
@@ -835,6 +861,7 @@ class MujocoArmGroup:
             w._rng.standard_normal(out=row)
         noise *= self._ft_sigma
         raw += noise
+        raw[:, 3:] -= np.cross(self._tcp_levers, raw[:, :3])  # each member's torque about its TCP
         np.minimum(raw, self._ft_range, out=raw)
         np.maximum(raw, -self._ft_range, out=raw)
         for w, row in zip(self.worlds, raw):

@@ -161,6 +161,9 @@ class SimArm:
         self._vel6 = np.zeros(6)
         self._scratch = mujoco.MjData(model)  # kinematics at the reference joints (target_TCP_pose)
         mass, com = self.world.tool_mass_and_com()  # the tool below the sensor, in the sensor (flange) frame
+        # the world gives its reading's torque and the centre of mass about its TCP; the controller's are the flange's
+        self._lever = np.asarray(self.world.tcp_lever, dtype=float)
+        com = com + self._lever
         self.tcp_offset = np.asarray(self.world.flange_to_tcp() if tcp_offset is None else tcp_offset, dtype=float)
         if payload is None:
             self.payload_mass, self.payload_cog = float(mass), np.asarray(com, dtype=float)
@@ -471,7 +474,8 @@ class SimArm:
         mujoco.mj_objectVelocity(self._model, d, mujoco.mjtObj.mjOBJ_BODY, self._flange, self._vel6, 0)
         omega, v_f = self._vel6[:3].copy(), self._vel6[3:].copy()
         self.tcp_speed = np.concatenate((v_f + _cross(omega, self.tcp_position - self.flange_position), omega))
-        self._sensor_wrench = np.asarray(state.wrench, dtype=float)  # sensor (flange) frame, "tool on sensor" sign
+        self._sensor_wrench = w = np.array(state.wrench, dtype=float)  # sensor (flange) frame, "tool on sensor" sign
+        w[3:] += _cross(self._lever, w[:3])  # the flange sensor's own torque (the world's is about its TCP)
         self._sensor_rotation = np.asarray(state.sensor_rotation, dtype=float)
         comp = self._compensated_sensor_frame() - self.zero_offset
         self.tcp_force = self._to_tcp_base(comp)
