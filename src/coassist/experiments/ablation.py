@@ -215,7 +215,14 @@ def held_out_models(ws: Workspace, intents: dict[str, str]) -> dict[str, str]:
 
 
 def _held_out_options(cfg, j: int, obj: str, controller: str, intent: str) -> dict[str, Any]:
-    return {**cell_options(cfg, j, obj, controller, intent), "trials": cfg.held_out_trials, "population": HELD_OUT}
+    # the population's own trial seeds (seed_plan.HELD_OUT_APPLICATION_SEED_OFFSET), not the thesis cells'
+    seed = application_seed(trial_seed_base(cfg.seed), j, HELD_OUT)
+    return {
+        **cell_options(cfg, j, obj, controller, intent),
+        "trials": cfg.held_out_trials,
+        "population": HELD_OUT,
+        "seed": seed,
+    }
 
 
 def _run_held_out(

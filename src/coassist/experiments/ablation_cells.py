@@ -28,6 +28,7 @@ from coassist.experiments.source_training import CALIBRATED_KINDS, LEARNED, seed
 from coassist.robot.worlds import POINT_MASS
 from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told, folder_told
+from coassist.scenario.populations import HELD_OUT
 
 SOURCES = (
     "nominal",
@@ -50,7 +51,6 @@ CONTROLLERS = ("cooperative", ARBITRATED)
 DAMPED_SOURCES = ("paths", "oracle")
 #: The held-out population's cells (:mod:`coassist.experiments.ablation`'s docstring): the arbitrated
 #: controller with these sources.
-HELD_OUT = "held-out"
 HELD_OUT_SOURCES = ("nominal", "present", DEFAULT_INTENT, "lstm-intent", "paths", "person", "oracle")
 #: The report's world cells, the first item of every cell key (world, object, controller, source) and
 #: the order the report's tables run in: not a list of worlds to choose from. "point-mass" and

@@ -10,6 +10,8 @@ checks the thesis preset's sizes and three seeds).
 
 from __future__ import annotations
 
+from coassist.scenario.populations import HELD_OUT
+
 #: The trial seeds of run seed k are k·RUN_SEED_STRIDE … (k + 1)·RUN_SEED_STRIDE − 1.
 RUN_SEED_STRIDE = 1_000_000
 
@@ -50,12 +52,23 @@ def heavy_transfer_seed(base: int) -> int:
     return base + HEAVY_TRANSFER_SEED_OFFSET
 
 
-def calibration_seed(base: int) -> int:
-    """First trial seed of the application operators' calibration trials (``base``: as :func:`iteration_seed`'s)."""
-    return base + CALIBRATION_SEED_OFFSET
+#: The held-out population's calibration and application trials have seeds of their own: on the thesis cells' seeds,
+#: its trials were ones seen while the person model's lead check, its sign test and its filter's lock guard were
+#: chosen (docs/person-model.md, *What the held-out cells were told*). Past the validation bases' trials (50000 and
+#: 60000: calibrations from 930 000, application trials up to 961 999) and inside a run's block.
+HELD_OUT_CALIBRATION_SEED_OFFSET = 975_000
+HELD_OUT_APPLICATION_SEED_OFFSET = 985_000
 
 
-def application_seed(base: int, j: int) -> int:
-    """First trial seed of the application trials with object j (``base``: as :func:`iteration_seed`'s; the
-    validation trials of docs/precision.md are bases 50000 and 60000, which no run seed's collections use)."""
-    return base + APPLICATION_SEED_OFFSET + APPLICATION_SEED_STEP * j
+def calibration_seed(base: int, population: str = "thesis") -> int:
+    """First trial seed of ``population``'s application operators' calibration trials (``base``: as
+    :func:`iteration_seed`'s; the held-out population's its own, :data:`HELD_OUT_CALIBRATION_SEED_OFFSET`)."""
+    return base + (HELD_OUT_CALIBRATION_SEED_OFFSET if population == HELD_OUT else CALIBRATION_SEED_OFFSET)
+
+
+def application_seed(base: int, j: int, population: str = "thesis") -> int:
+    """First trial seed of ``population``'s application trials with object j (``base``: as :func:`iteration_seed`'s;
+    the validation trials of docs/precision.md are bases 50000 and 60000, which no run seed's collections use; the
+    held-out population's its own, :data:`HELD_OUT_APPLICATION_SEED_OFFSET`)."""
+    offset = HELD_OUT_APPLICATION_SEED_OFFSET if population == HELD_OUT else APPLICATION_SEED_OFFSET
+    return base + offset + APPLICATION_SEED_STEP * j

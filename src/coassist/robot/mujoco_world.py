@@ -30,7 +30,7 @@ time falls; MuJoCo's force sensor reflects that step's start state, 1 physics st
 
 The force/torque sensor (:class:`FTSensorModel`) samples MuJoCo's force and torque
 sensors at ``rate_hz`` (100 Hz, a Robotiq FT300), adds a constant bias and white noise
-drawn from ``np.random.default_rng(seed)``, and clips to its range; a sample is held
+drawn from the trial's sensor stream (:func:`coassist.scenario.seeds.trial_rngs`), and clips to its range; a sample is held
 until the next one and ``RobotState.wrench_seq`` counts them. The reading has the sign
 of the force the tool applies to the sensor (at rest: the tool's weight, m Rᵀ g with
 g = (0, 0, −9.81)), in the sensor frame (the flange frame, ``tool0`` on the UR5), its torque about the
@@ -66,6 +66,7 @@ from coassist.robot.arms import NullSpacePosture, arm_kinematics, get_arm
 from coassist.robot.ur5_mjcf import Q_SEED
 from coassist.robot.worlds import WorldRequest
 from coassist.runtime.world import Command, HandOperator, RobotState
+from coassist.scenario.seeds import trial_rngs
 from coassist.spatial import rotation_vector, rotation_vector_unchecked  # rotation_vector: re-exported
 
 __all__ = [
@@ -215,7 +216,8 @@ class MujocoArmWorld:
     servo_time_constant : [s] first-order lag of the joint velocity behind the command.
     sensor : the :class:`FTSensorModel` (default: 0.05 N noise at 100 Hz, no bias).
     operator : the :class:`~coassist.runtime.world.HandOperator`, or None (no hand).
-    seed : seeds the sensor noise (``np.random.default_rng(seed)``).
+    seed : the trial's seed: the sensor noise is its sensor stream (:func:`coassist.scenario.seeds.trial_rngs`'s
+        third); None: unseeded.
     tcp_offset : (3,) the TCP in the tool0 frame [m]; None: the tool's default (the
         handle point for the handle and the heavy block, the vacuum cup for the board).
     gravity : False turns gravity off (tests).
@@ -336,7 +338,9 @@ class MujocoArmWorld:
         self._sigma = np.array([sensor.noise_force] * 3 + [sensor.noise_torque] * 3)
         self._range = np.array([sensor.force_range] * 3 + [sensor.torque_range] * 3)
         self._bias = np.asarray(sensor.bias, dtype=float)
-        self._rng = np.random.default_rng(seed)
+        # the trial's sensor stream (coassist.scenario.seeds: the third child of the trial's, as the point-mass world's
+        # sensor): default_rng(seed) drew the sensor's noise from the task's own stream (SeedSequence([s, 0]))
+        self._rng = np.random.default_rng() if seed is None else trial_rngs(seed, 3)[2]
 
         self.q_start = tool_down_ik(self.model, start_arr, q0)
         # Servo state: the lagged reference velocity and its integral.

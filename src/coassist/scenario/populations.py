@@ -43,10 +43,12 @@ from coassist._checks import check_int
 from coassist.scenario.detours import Asymmetric, Corrective, DetourFamily, Hesitant, Skewed, Swing
 from coassist.scenario.operator import AUTHOR, OperatorProfile, operator_profile
 
-__all__ = ["FAMILY_RANGES", "POPULATIONS", "POPULATION_FAMILIES", "population_profile"]
+__all__ = ["FAMILY_RANGES", "HELD_OUT", "POPULATIONS", "POPULATION_FAMILIES", "population_profile"]
 
+#: The population kept out of everything tuned: used only to report.
+HELD_OUT = "held-out"
 #: The populations by name, in the order the help lists them.
-POPULATIONS = ("thesis", "varied", "held-out")
+POPULATIONS = ("thesis", "varied", HELD_OUT)
 
 #: Each drawn population's families (the thesis population's is the bump alone).
 POPULATION_FAMILIES: dict[str, tuple[type[DetourFamily], ...]] = {
