@@ -50,7 +50,46 @@ def _collections(cfg):
                 cfg.application_trials * len(cfg.application_users),
             )
         )
+    if cfg.held_out_trials > 0:  # the held-out population's own calibrations and cells
+        for k in range(cfg.calibration_draws):
+            out.append(
+                (
+                    f"held-out calibration draw {k}",
+                    seed_plan.calibration_seed(base, "held-out") + k * DRAW_SEED_STEP,
+                    per_user * len(cfg.application_users),
+                )
+            )
+        for j in range(2):
+            out.append(
+                (
+                    f"held-out application {j}",
+                    seed_plan.application_seed(base, j, "held-out"),
+                    cfg.held_out_trials * len(cfg.application_users),
+                )
+            )
     return out
+
+
+def test_the_held_out_cells_meet_trials_of_their_own():
+    # on the thesis cells' seeds the held-out cells were trials seen while settings were chosen (a review): their
+    # seeds are their own, and none is a validation base's (precision.py: bases 50000 and 60000)
+    cfg = reproduce_config.REPRODUCE_PRESETS["default"]
+    assert cfg.held_out_trials > 0
+    run = {name: (s, n) for name, s, n in _collections(cfg)}
+    held = [(s, n) for name, (s, n) in run.items() if name.startswith("held-out")]
+    validation = [
+        (f(b, *a), 4 * DRAW_SEED_STEP if f is seed_plan.calibration_seed else 24)
+        for b in (50_000, 60_000)
+        for f, a in (
+            (seed_plan.calibration_seed, ()),
+            (seed_plan.application_seed, (0,)),
+            (seed_plan.application_seed, (1,)),
+        )
+    ]
+    thesis = [run["application 0"], run["application 1"], run["calibration"]]
+    for s, n in held:
+        for t, m in validation + thesis:
+            assert s + n <= t or t + m <= s, ((s, n), (t, m))
 
 
 @pytest.mark.parametrize("name", ["default", "tiny", "thesis"])
@@ -78,6 +117,9 @@ def test_seed_plan_offsets():
     assert seed_plan.heavy_transfer_seed(7) == 7 + 800_000
     assert seed_plan.application_seed(7, 1) == 7 + 901_000
     assert seed_plan.calibration_seed(7) == 7 + 880_000
+    assert seed_plan.calibration_seed(7, "held-out") == 7 + 975_000
+    assert seed_plan.application_seed(7, 1, "held-out") == 7 + 986_000
+    assert seed_plan.application_seed(7, 1, "varied") == 7 + 901_000  # the validation populations' as before
 
 
 @pytest.fixture(scope="module")

@@ -351,6 +351,19 @@ def test_same_seed_is_bit_identical():
     np.testing.assert_array_equal(a[:, :2], c[:, :2])
 
 
+def test_the_sensor_noise_is_the_trials_sensor_stream_not_the_tasks():
+    # default_rng(seed) is SeedSequence([s, 0]): the task's own stream (where the obstacle sits), which the sensor
+    # drew its noise from (a review); it is the trial's sensor stream, the point-mass world's
+    from coassist.scenario.seeds import task_rng, trial_rngs
+
+    sigma = 0.5
+    world = MujocoUR5World("handle", sensor=FTSensorModel(noise_force=sigma, noise_torque=0.0, rate_hz=None), seed=11)
+    quiet = MujocoUR5World("handle", sensor=QUIET, seed=11)
+    noise = (world.read().wrench - quiet.read().wrench)[:3] / sigma  # the first sample's draws, at rest
+    np.testing.assert_allclose(noise, trial_rngs(11, 3)[2].standard_normal(6)[:3], rtol=1e-9, atol=1e-9)
+    assert not np.allclose(noise, task_rng(11).standard_normal(6)[:3], atol=1e-3)
+
+
 # ----------------------------------------------------------------------------- closed loop
 
 
