@@ -5,8 +5,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from coassist.interfaces import TRIAL_SLOTS
 from coassist.runtime.episode import run_episode
 from coassist.scenario.arm_identification import ASSUMED_ARM
+from coassist.scenario.calibration_draws import MAX_DRAWS, draw_of
 from coassist.scenario.intent_registry import INTENT_FOLDERS, INTENT_SOURCES, Told, load_intent_source
 from coassist.scenario.path_hypotheses import PersonShape, write_calibration
 from coassist.scenario.path_model import fit_path_model
@@ -32,7 +34,9 @@ def test_only_the_oracle_is_handed_the_simulated_operators_intent(tmp_path):
     specs.update({f"folder:{k}": v for k, v in _folders(tmp_path).items()})
     assert set(specs) >= {"nominal", "present", "paths", "oracle", "folder:person-model"}
     for name, intent in specs.items():
-        spec = TrialSpec("linear", user=0, controller="cooperative-arbitrated", seed=3, intent=intent, obstacle="large")
+        spec = TrialSpec(
+            "linear", user=0, controller="cooperative-arbitrated", seed=900_017, intent=intent, obstacle="large"
+        )
         source = load_intent_source(intent, horizon=50)
         seen = []
         reset = source.reset
@@ -47,6 +51,16 @@ def test_only_the_oracle_is_handed_the_simulated_operators_intent(tmp_path):
         else:
             assert seen[0].true_intent is None, f"{name} was handed the simulated operator's intent"
             assert getattr(source, "reads_true_intent", False) is False, name
+        # nor the seed the simulation's streams grow from (with it and the user a review rebuilt the operator's
+        # intent bit for bit): the seed modulo TRIAL_SLOTS, which picks a calibration draw as the seed does
+        assert seen[0].seed == 900_017 % TRIAL_SLOTS == 377, name
+
+
+def test_a_draw_picked_from_the_slot_is_the_seeds():
+    for draws in range(1, MAX_DRAWS + 1):
+        assert TRIAL_SLOTS % draws == 0
+        for seed in (0, 17, 900_017, 2_985_123):
+            assert draw_of(seed % TRIAL_SLOTS, draws) == draw_of(seed, draws)
 
 
 def test_every_source_says_what_it_is_told():

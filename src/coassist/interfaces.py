@@ -39,6 +39,7 @@ __all__ = [
     "MOTION_LIMITED",
     "IntentSource",
     "PlausibilityLimits",
+    "TRIAL_SLOTS",
     "TrialContext",
     "ZERO_EFFORT_FAULTS",
     "fault_names",
@@ -147,7 +148,11 @@ class TrialContext:
     obstacles : the boxes the robot is told of, each ((x, y) centre, (width, depth) size) [m] in
         the plan's frame; empty when it is told of none (the person may still see some).
     seed : the trial's seed (TrialMeta.seed), the root of the robot's own random draws in the
-        trial (the calibration probe's phases: coassist.control.probe); None: none given.
+        trial (the calibration probe's phases: coassist.control.probe); None: none given. An intent
+        source is handed it modulo :data:`TRIAL_SLOTS` only (the tick's reset): enough to choose
+        among calibration draws, not the seed the simulation's streams grow from (with it, and
+        the user, a review rebuilt the simulated operator's intent bit for bit in a source that
+        is told none).
     """
 
     dt: float
@@ -162,6 +167,11 @@ class TrialContext:
     path: np.ndarray | None = None
     obstacles: tuple[tuple[tuple[float, float], tuple[float, float]], ...] = ()
     seed: int | None = None
+
+
+#: An intent source sees the trial's seed modulo this (:class:`TrialContext`): every count of calibration draws up to
+#: 8 divides it (lcm 1…8), so seed mod draws is the same either way.
+TRIAL_SLOTS = 840
 
 
 @runtime_checkable

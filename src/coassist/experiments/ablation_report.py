@@ -175,7 +175,9 @@ def headline_rows(result: AblationResult, world: str = POINT_MASS) -> tuple[str,
             )
     n = len(result.pairs.get((world, OBJECTS[0]), ()))
     who = (
-        "the held-out population: operators whose detour families and arms nothing was tuned to, point-mass world"
+        "the held-out population: operators of detour families and arms the tuning populations lack, on trials of "
+        "their own (these operators were seen, on other trials, while the person model's lead check, its sign test "
+        "and its lock guard were chosen: docs/person-model.md), point-mass world"
         if world == HELD_OUT
         else "the MuJoCo UR5: each operator's first trials of the point-mass world, driven on the arm"
         if world == "mujoco"

@@ -127,8 +127,8 @@ class ReproduceConfig:
     # and source (each operator's first application trials; the point-mass world runs application_trials); 0 leaves
     # the MuJoCo world out. Eight (all 24 paired trials per object; 1 until issue 40) resolve the direction of the
     # person model against MG on both objects of seeds 0, 1 and 2 (every paired difference's 95 % interval below
-    # zero); four did on five of the six (docs/person-model.md). A MuJoCo trial is 0.5–1.4 CPU-s: eight add about
-    # 170 CPU-s to a run against one, four about 96.
+    # zero); four did on five of the six (docs/person-model.md): a count chosen on the report's own seeds, which the
+    # report says. A MuJoCo trial is 0.5–1.4 CPU-s: eight add about 170 CPU-s to a run against one, four about 96.
     ablation_mujoco_trials: int = 8
     # The held-out population's cells of the ablation (experiments.ablation): trials per operator and
     # object (application_users of the held-out population); 0 leaves them out.

@@ -49,14 +49,14 @@ tool speed the effort may only brake). Every flag raised on the way is OR-ed int
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from coassist import spatial as _spatial
 from coassist._checks import check_positive_scalar, is_integer
-from coassist.interfaces import MOTION_LIMITED, Fault, TrialContext
+from coassist.interfaces import MOTION_LIMITED, TRIAL_SLOTS, Fault, TrialContext
 from coassist.model.impedance import ImpedanceModel
 from coassist.runtime.world import COMMAND_SPACES, Command, RobotState, finite_vector
 
@@ -377,7 +377,9 @@ class ControlTick:
             reset_for(context)
         elif callable(controller_reset):
             controller_reset()
-        self.intent.reset(context)
+        # the source sees the seed modulo TRIAL_SLOTS (TrialContext): the controller's draws grow from the whole seed
+        seed = context.seed
+        self.intent.reset(context if seed is None else replace(context, seed=int(seed) % TRIAL_SLOTS))
         self.wrench.reset()
         self.safety.reset()
         self._za = np.zeros(2 * d)
