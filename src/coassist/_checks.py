@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 
-def _not_truth(value: object, name: str) -> None:
+def refuse_truth_value(value: object, name: str) -> None:
     """A ValueError naming ``name`` for a truth value where a number is wanted (module docstring: ``float(True)`` is
     1.0, and ``dt=True`` a one-second period)."""
     if isinstance(value, (bool, np.bool_)):
@@ -27,8 +27,7 @@ def as_square_matrix(value: ArrayLike, name: str, n: int | None = None) -> np.nd
     A scalar or a 1-D vector is read as a diagonal, which is how gains are usually
     written (``M = diag(10, 10)``). Truth values are refused (no number).
     """
-    _not_truth(value, name)
-    if np.asarray(value).dtype.kind == "b":
+    if np.asarray(value).dtype.kind == "b":  # a truth value or an array of them (float(True) is 1)
         raise ValueError(f"{name} must be a matrix of numbers, got {value!r}")
     arr = np.array(value, dtype=float)
     if arr.ndim == 0:
@@ -70,7 +69,7 @@ def check_positive_semidefinite(arr: np.ndarray, name: str) -> None:
 
 
 def check_positive_scalar(value: float, name: str) -> float:
-    _not_truth(value, name)
+    refuse_truth_value(value, name)
     try:
         out = float(value)
     except (TypeError, ValueError):
@@ -82,7 +81,7 @@ def check_positive_scalar(value: float, name: str) -> float:
 
 def check_real(value: object, name: str, lo: float, hi: float = math.inf, *, open_lo: bool = False) -> float:
     """``value`` as a finite float in [lo, hi] ((lo, hi] with ``open_lo``); a ValueError naming ``name`` otherwise."""
-    _not_truth(value, name)
+    refuse_truth_value(value, name)
     try:
         v = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError):

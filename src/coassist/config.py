@@ -24,11 +24,11 @@ from coassist.registry import Registry
 
 def _diag(values, name: str, length: int | None = None, *, positive: bool = False) -> tuple[float, ...]:
     try:
-        if np.asarray(values).dtype.kind == "b":  # truth values are no gains (float(True) is 1)
-            raise ValueError
         arr = np.atleast_1d(np.asarray(values, dtype=float))
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a list of numbers, got {values!r}") from None
+        arr = None
+    if arr is None or np.asarray(values).dtype.kind == "b":  # truth values are no gains (float(True) is 1)
+        raise ValueError(f"{name} must be a list of numbers, got {values!r}")
     if arr.ndim != 1:
         raise ValueError(f"{name} must be a list of diagonal entries, got shape {arr.shape}")
     if length is not None and arr.size != length:

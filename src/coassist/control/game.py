@@ -86,6 +86,7 @@ import scipy.linalg
 from numpy.typing import ArrayLike
 from threadpoolctl import threadpool_limits
 
+from coassist._checks import refuse_truth_value
 from coassist.config import GameParameters, GameWeights
 from coassist.control.prediction import prediction_matrices
 from coassist.model.impedance import ImpedanceModel
@@ -425,8 +426,7 @@ class CooperativeGame(_LinearQuadraticGame):
         return twin
 
     def _check_alpha(self, alpha: float) -> float:
-        if isinstance(alpha, (bool, np.bool_)):  # a truth value is no α (float(True) is 1)
-            raise ValueError(f"alpha must be a number, got {alpha!r}")
+        refuse_truth_value(alpha, "alpha")  # (float(True) is 1)
         try:
             a = float(alpha)
         except (TypeError, ValueError):

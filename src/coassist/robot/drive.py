@@ -625,6 +625,7 @@ def _prepare(
                     "center": [float(v) for v in np.asarray(recorded["obstacle"]["center"], dtype=float) + shift],
                 },
             }
+        limits = arm_limits(config.limits, robot)  # the layer's, and the ramp a simulated arm is built with
         if world is None:
             # A real-time predictor runs against the wall clock: so must the simulated world it serves.
             world = build_world(
@@ -638,7 +639,7 @@ def _prepare(
                     host,
                     view,
                     realtime=view or bool(config.realtime_intent),
-                    joint_acceleration=arm_limits(config.limits, robot).joint_acceleration,
+                    joint_acceleration=limits.joint_acceleration,
                 ),
             )
         if not isinstance(world, ArmWorld):
@@ -702,7 +703,6 @@ def _prepare(
             ),
             dt,
         )
-        limits = arm_limits(config.limits, robot)
         if limits.workspace_lower is None:
             lo, hi = workspace_for(ref_abs, start_pose)
             limits = replace(limits, workspace_lower=tuple(lo), workspace_upper=tuple(hi))

@@ -20,8 +20,9 @@ lag of ``servo_time_constant`` and tracks it by computed torque (the arm's inert
 gravity and Coriolis terms, and a critically damped position/velocity loop at
 ``servo_bandwidth``; :mod:`coassist.robot.ur5_mjcf`), clipped to the arm's joint
 torques. So the joints follow the command with that lag and the hand does not
-back-drive them (a 10 N push deflects the UR5 by 0.07–0.21 mrad, the Panda with the
-handle by 1.6 mrad), as on the real geared arm. An arm whose joint torques cannot hold the
+back-drive them (a 10 N push held 1 s deflects the UR5 by 0.04–0.21 mrad, the Panda with
+the handle by 1.6 mrad; the Panda with the heavy block, at 0.95 × its wrist torque, by 36
+mrad under a sideways push), as on the real geared arm. An arm whose joint torques cannot hold the
 tool at its start (the Panda under the 8 kg board) is refused when the world is built.
 
 Timing within a period: the operator sees the state at the start of the period; the
@@ -488,9 +489,8 @@ class MujocoArmWorld:
         noise = self._rng.standard_normal(6)
         noise *= self._sigma
         raw += noise
-        raw[3:] -= np.cross(
-            self.tcp_lever, raw[:3]
-        )  # the sensor's reading, its torque about the TCP (module docstring)
+        # the sensor's reading, its torque about the TCP (module docstring)
+        raw[3:] -= np.cross(self.tcp_lever, raw[:3])
         np.minimum(raw, self._range, out=raw)
         return np.maximum(raw, -self._range, out=raw)
 

@@ -45,7 +45,8 @@ from coassist.scenario.operator import AUTHOR, OperatorProfile, operator_profile
 
 __all__ = ["FAMILY_RANGES", "HELD_OUT", "POPULATIONS", "POPULATION_FAMILIES", "population_profile"]
 
-#: The population kept out of everything tuned: used only to report.
+#: The population no setting is searched on, used only to report (docs/person-model.md, *What the held-out cells were
+#: told*, names the choices made while seeing its operators).
 HELD_OUT = "held-out"
 #: The populations by name, in the order the help lists them.
 POPULATIONS = ("thesis", "varied", HELD_OUT)

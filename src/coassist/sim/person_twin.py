@@ -70,10 +70,10 @@ TWIN_CONTROLLER = "cooperative-arbitrated"
 TWIN_HORIZON = 50
 #: The object the twin carries: a rigid one of the application's mass (the heavy load). Chosen on seed 0's
 #: calibrations of the thesis and the held-out populations (docs/person-model.md, *A twin of the person*: the
-#: held-out ones were seen while choosing; their report cells now meet trials of their own): with the handle (no mass) MG barely overshoots and the
-#: check turned away from the lead a thesis operator whom it helps in the report's trials; with the board the twin's
-#: arm (no delay, an effective damping that may be negative) swings the board on its twisting mount, and the check
-#: turned every thesis operator away.
+#: held-out ones were seen while choosing; their report cells now meet trials of their own): with the handle (no
+#: mass) MG barely overshoots and the check turned away from the lead a thesis operator whom it helps in the report's
+#: trials; with the board the twin's arm (no delay, an effective damping that may be negative) swings the board on
+#: its twisting mount, and the check turned every thesis operator away.
 TWIN_OBJECT = "heavy"
 #: How far the twin's rebuilt plan may lie from the trial's recorded one [m] (in the task's frame) before the check
 #: is left out: rounding room for a plan moved back from where an arm laid it out (a 500 Hz plan resampled onto the
