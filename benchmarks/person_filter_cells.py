@@ -19,7 +19,9 @@ again (delete its folder to redo it).
 
 Prints, per cell and object, each source's force share / overshoot share [95 %, (operator, calibration)
 clusters] / jerk × MG, and per variant the paired differences from the reference over the 144 trials
-(overshoot [mm], f_RMS [N], jerk RMS [m/s³]; Student-t 95 % intervals). Reads the simulated intent (the
+(overshoot [mm], f_RMS [N], jerk RMS [m/s³]; 95 % cluster-robust Student-t intervals over the (cell, operator,
+calibration draw) clusters: the trials of one calibration, both objects, share its person model, so they are not
+144 independent pairs). Reads the simulated intent (the
 overshoot): a measure of the filter in simulation.
 """
 
@@ -39,7 +41,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from coassist._io import read_hashed_json, write_hashed_json  # noqa: E402
-from coassist.analysis.paired import gain_share, paired_difference  # noqa: E402
+from coassist.analysis.paired import clustered_difference, gain_share  # noqa: E402
 from coassist.data import read_dataset  # noqa: E402
 from coassist.experiments.ablation_cells import ARBITRATED  # noqa: E402
 from coassist.experiments.application import OBJECTS, OBSTACLE, application_metrics, pair_key  # noqa: E402
@@ -181,6 +183,8 @@ def report(out: Path, names: list[str], against: str = "ref") -> None:
     """The table (module docstring); each variant's paired differences are from ``against`` (the default or a
     variant)."""
     pooled: dict[str, dict[str, list[float]]] = {n: {"overshoot": [], "f_rms": [], "jerk_rms": []} for n in names}
+    # each pooled pair's (cell, person, draw): the trials that share one person model (both objects)
+    pooled_clusters: dict[str, list[tuple[str, str, int]]] = {n: [] for n in names}
     for population, _, base in CELLS:
         cell = f"{population}-{base}"
         ref = out / "ref" / cell
@@ -214,6 +218,7 @@ def report(out: Path, names: list[str], against: str = "ref") -> None:
                         pooled[n][metric] += list(
                             np.subtract(v[f"{metric}_trials"], values[against][f"{metric}_trials"])
                         )
+                    pooled_clusters[n] += [(cell, *c) for c in clusters]
             print("  ".join(line))
     for n in names:
         d = pooled[n]
@@ -221,16 +226,23 @@ def report(out: Path, names: list[str], against: str = "ref") -> None:
             continue
         parts = []
         for metric, scale, unit in (("overshoot", 1e3, "mm"), ("f_rms", 1.0, "N"), ("jerk_rms", 1.0, "m/s³")):
-            mean, lo, hi, count = paired_difference(scale * np.asarray(d[metric]), np.zeros(len(d[metric])))
+            mean, lo, hi, count = clustered_difference(
+                scale * np.asarray(d[metric]), np.zeros(len(d[metric])), pooled_clusters[n]
+            )
             parts.append(f"{metric} {mean:+.3f} [{lo:+.3f}, {hi:+.3f}] {unit}")
-        print(f"{n} − {against} over {count} paired trials: " + ", ".join(parts))
+        print(
+            f"{n} − {against} over {count} paired trials in {len(set(pooled_clusters[n]))} calibrations: "
+            + ", ".join(parts)
+        )
 
 
 def compare_references(out: Path, other: Path) -> None:
     """Two references on the same trials with other calibrations (``--paired-with``): per cell and object each one's
     force share / overshoot share / jerk × MG, then the paired differences of ``out``'s person-model trials from
-    ``other``'s over every cell both ran (overshoot [mm], f_RMS [N], jerk RMS [m/s³]; Student-t 95 %)."""
+    ``other``'s over every cell both ran (overshoot [mm], f_RMS [N], jerk RMS [m/s³]; 95 % cluster-robust Student-t
+    over the (cell, operator, draw) clusters of ``out``'s calibrations)."""
     pooled: dict[str, list[float]] = {"overshoot": [], "f_rms": [], "jerk_rms": []}
+    pooled_clusters: list[tuple[str, str, int]] = []
     for population, _, base in CELLS:
         cell = f"{population}-{base}"
         folders = [o / "ref" / cell for o in (out, other)]
@@ -264,13 +276,19 @@ def compare_references(out: Path, other: Path) -> None:
                 pooled[metric] += list(
                     np.subtract(m[0]["person"][f"{metric}_trials"], m[1]["person"][f"{metric}_trials"])
                 )
+            pooled_clusters += [(cell, *c) for c in clusters]
         print("  ".join(line))
     if pooled["overshoot"]:
         parts = []
         for metric, scale, unit in (("overshoot", 1e3, "mm"), ("f_rms", 1.0, "N"), ("jerk_rms", 1.0, "m/s³")):
-            mean, lo, hi, count = paired_difference(scale * np.asarray(pooled[metric]), np.zeros(len(pooled[metric])))
+            mean, lo, hi, count = clustered_difference(
+                scale * np.asarray(pooled[metric]), np.zeros(len(pooled[metric])), pooled_clusters
+            )
             parts.append(f"{metric} {mean:+.3f} [{lo:+.3f}, {hi:+.3f}] {unit}")
-        print(f"{out.name} − {other.name} over {count} paired trials: " + ", ".join(parts))
+        print(
+            f"{out.name} − {other.name} over {count} paired trials in {len(set(pooled_clusters))} calibrations: "
+            + ", ".join(parts)
+        )
 
 
 def main() -> None:

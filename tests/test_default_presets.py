@@ -55,6 +55,8 @@ def test_the_default_presets_exist_and_the_application_one_is_not_the_ringing_dm
         ("sweep_duration", -1.0, "> 0"),
         ("name", float("nan"), "non-empty string"),
         ("real_data", -1, "a folder"),
+        ("intent_preset", "lsmt", "did you mean 'lstm'"),
+        ("real_intent_preset", "defualt", "did you mean 'default'"),
     ],
 )
 def test_a_reproduce_config_refuses_what_a_stage_would_fail_on_late(field, value, says):

@@ -279,6 +279,15 @@ class ReproduceConfig:
         for field in ("intent_preset", "real_intent_preset", "device"):
             if not isinstance(getattr(self, field), str) or not getattr(self, field):
                 raise ValueError(f"reproduce.{field} must be a non-empty string, got {getattr(self, field)!r}")
+        # the model presets a stage builds its networks from: a typo failed minutes in, at the first training
+        from coassist.intent.presets import MODEL_PRESETS
+
+        for field in ("intent_preset", "real_intent_preset"):
+            if getattr(self, field) not in MODEL_PRESETS:
+                raise ValueError(
+                    f"reproduce.{field} "
+                    f"{unknown_name_message(getattr(self, field), MODEL_PRESETS, 'intent-model preset')}"
+                )
         if not (self.device in ("cpu", "mps") or re.fullmatch(r"cuda(:\d+)?", self.device)):
             raise ValueError(f"reproduce.device must be cpu, cuda, cuda:<n> or mps, got {self.device!r}")
         for field in ("tol", "skip_alpha", "sweep_duration"):
