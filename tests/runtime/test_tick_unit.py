@@ -695,6 +695,9 @@ def test_a_simulated_hand_that_raises_ends_the_run_with_the_arm_stopped():
     [
         ("tool_pose", np.array([0.3, 0.1, 0.4, 1e200, 0.0, 0.0]), Fault.INVALID_INPUT),  # raised: math domain error
         ("tool_twist", np.array([1e200, 0.0, 0.0, 0.0, 0.0, 0.0]), Fault.INVALID_INPUT),
+        # at the plausibility bound (1e3), on either side: no measurement of a tool
+        ("tool_pose", np.array([0.3, 0.1, 0.4, 0.0, 0.0, -1e3]), Fault.INVALID_INPUT),
+        ("tool_twist", np.array([0.0, 0.0, 0.0, 0.0, 1e3, 0.0]), Fault.INVALID_INPUT),
         ("qd", np.full(6, np.nan), Fault.NONFINITE_STATE),  # not flagged at all
     ],
 )

@@ -299,3 +299,37 @@ def test_a_simulated_hand_travels_as_json_and_pushes_the_same_bit_for_bit():
     del bad["noise"]
     with pytest.raises(ValueError, match="no 'noise'"):
         SimulatedHand.from_dict(bad)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [("pose", 0, np.nan), ("twist", 5, np.inf), ("twist", 1, -np.inf)],
+)
+def test_a_simulated_hand_lets_go_of_a_non_finite_state_and_not_of_a_large_finite_one(bad):
+    """A NaN or ±inf in the hand's pose or twist: no force that tick (zero), and the arm's clock still advances; entries
+    of 1e308 (their sum overflows) are a finite state, pushed on as numpy's own check says."""
+    from coassist.scenario.hand import SimulatedHand
+    from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
+    from coassist.scenario.tasks import task_for_seed
+
+    profile = operator_profile(0)
+    rng = np.random.default_rng(3)
+    task = task_for_seed("curved", 1)
+    n, dt = 20, 1 / 125
+    intent = intent_trajectory(task, profile, rng, n, dt).positions
+    noise = motor_noise(profile, rng, n, dt)
+
+    def build():
+        return SimulatedHand(OperatorArm(profile, intent, dt, noise), dt, np.r_[intent[0], 0.2, np.pi, 0, 0])
+
+    hand = build()
+    pose, twist = np.r_[intent[0], 0.2, np.pi, 0, 0], np.zeros(6)
+    which, i, value = bad
+    glitched = [pose.copy(), twist.copy()]
+    glitched[0 if which == "pose" else 1][i] = value
+    assert not hand.force(0.0, *glitched).any() and hand.k == 1
+    # a finite twist whose plain sum overflows (inf, and inf − inf is NaN): pushed on (the arm's damping against
+    # 1e308 m/s)
+    huge = np.r_[1e308, 1e308, 0.0, 0.0, 0.0, 0.0]
+    with np.errstate(over="ignore"):
+        assert hand.force(dt, pose, huge)[0] != 0.0 and hand.k == 2

@@ -106,7 +106,9 @@ _PLAUSIBLE = 1e3
 
 def _plausible(x: np.ndarray) -> bool:
     """Whether every entry of the finite vector ``x`` lies within ±:data:`_PLAUSIBLE`."""
-    return max(x.max(), -x.min()) < _PLAUSIBLE
+    # on plain floats: for six entries numpy's max and min cost five times the list (the same comparisons)
+    entries = x.tolist()
+    return max(entries) < _PLAUSIBLE and min(entries) > -_PLAUSIBLE
 
 
 def _stop_reported(flag: object) -> bool:
