@@ -113,6 +113,7 @@ def test_the_cli_names_the_option_of_a_backend_without_a_network(tmp_path):
 
 
 def test_a_joint_acceleration_beyond_the_arms_own_is_refused_and_the_smallest_holds():
+    from coassist.robot.arm_descriptions import get_arm
     from coassist.robot.drive import arm_limits
     from coassist.runtime.safety_limits import SafetyLimits
 
@@ -123,3 +124,10 @@ def test_a_joint_acceleration_beyond_the_arms_own_is_refused_and_the_smallest_ho
     assert arm_limits(SafetyLimits(), "panda").joint_acceleration == 7.5
     assert arm_limits(SafetyLimits(joint_acceleration=5.0), "panda").joint_acceleration == 5.0
     assert arm_limits(SafetyLimits(joint_acceleration=20.0), "ur5").joint_acceleration == 20.0  # no datasheet figure
+    # the FR3: Franka's FCI table, 10 rad/s² on every joint (the Panda's 15 and 20 abort an FR3's motion): 12 is
+    # refused for it and not for the Panda, and the default 8 holds on it as it is
+    assert get_arm("fr3").joint_acceleration_limit == (10.0,) * 7
+    message = refused(world="franka", robot="fr3", limits=SafetyLimits(joint_acceleration=12.0))
+    assert "SafetyLimits.joint_acceleration must be at most the fr3's own joint accelerations" in message
+    assert arm_limits(SafetyLimits(joint_acceleration=12.0), "panda").joint_acceleration == 7.5
+    assert arm_limits(SafetyLimits(), "fr3").joint_acceleration == SafetyLimits().joint_acceleration == 8.0

@@ -140,9 +140,10 @@ ARMS: dict[str, ArmDescription] = {
             (-3.0508, 3.0508),
         ),
         tool_speed_limit=1.7,  # what franky reports for franky-sim's FR3 (translation_velocity_limit.max)
-        # what franky's motion generator holds either arm to (franky.Robot.joint_acceleration_limit, read from
-        # franky-sim's FR3): the Panda's
-        joint_acceleration_limit=(15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0),
+        # Franka's FCI documentation, "Limits for Franka Research 3 (FR3)" (joint-space table, a necessary condition:
+        # a command beyond it aborts the motion): 10 rad/s² on every joint (jerk 5000 rad/s³). franky-sim's FR3
+        # reports the Panda's (15, 7.5, 10, 12.5, 15, 20, 20), which a real FR3 would refuse on joints 1 and 4–7
+        joint_acceleration_limit=(10.0,) * 7,
     ),
 }
 
