@@ -424,3 +424,35 @@ def test_transfer_collection_shares_are_each_targets_training_ticks_over_all_tic
     )
     assert shares == pytest.approx([400 / 1000, 200 / 1000, 0.0], rel=1e-15)
     assert collection_shares([(dataset(), dataset())]) == [0.0]
+
+
+@pytest.mark.parametrize("people", [0, 5])
+def test_the_held_out_people_are_the_configs_and_only_the_held_out_populations(tmp_path, people):
+    """``reproduce.held_out_people`` is the held-out population's population seed: every collection of that
+    population the ablation starts (its calibrations, every draw's probe trials, MG's cells) draws its operators of
+    that seed, and no other population's does; 0 leaves the options as they were (no key: the collections' keys and
+    trials unchanged)."""
+    from coassist.experiments.source_training import calibration_options
+    from coassist.scenario.populations import HELD_OUT, population_profile
+    from coassist.sim.collect import dataset_specs
+
+    cfg = replace(
+        reproduce_config.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=0, mujoco_sources=(), held_out_people=people
+    )
+    ws = pipeline.Workspace(cfg, tmp_path, progress=False, pool=_RecordingPool())
+    AblationAhead(ws, handed_to_ablation())({})
+    held_out = {k for k in ws._pending if "held-out" in k}
+    assert held_out == _held_out(cfg)
+    for key, ((options, _), _) in ws._pending.items():
+        if key in held_out:
+            assert options.get("population_seed") == (people or None)
+            assert {s.population_seed for s in dataset_specs(**options)} == {people}
+        else:
+            assert "population_seed" not in options, key
+    assert "population_seed" not in calibration_options(ws, "manual")  # the thesis population's
+    if people:  # other operators than the report's usual three
+        first = [population_profile(HELD_OUT, u, 0) for u in cfg.application_users]
+        drawn = [population_profile(HELD_OUT, u, people) for u in cfg.application_users]
+        assert all(a.stiffness_min != b.stiffness_min for a, b in zip(first, drawn))
+    with pytest.raises(ValueError, match=r"reproduce\.held_out_people must be an integer >= 0, got -1"):
+        replace(cfg, held_out_people=-1)

@@ -213,6 +213,11 @@ def reproduce(
     real_data: Path = typer.Option(
         None, help="Folder with user-a/ and user-b/ recordings (default: $COASSIST_REAL_DATA; see README)."
     ),
+    held_out_people: int = typer.Option(
+        None,
+        help="Which people of the held-out population the report meets: its population seed (default 0, the "
+        "operators every report has met; another draws new people of its families, whom no choice has seen).",
+    ),
 ) -> None:
     """The thesis' experiments end to end in simulation (dMPC study, iterative training, transfer, application, real data): one HTML report."""
     from dataclasses import replace
@@ -236,6 +241,8 @@ def reproduce(
         changes["workers"] = workers
     if device is not None:
         changes["device"] = device
+    if held_out_people is not None:
+        changes["held_out_people"] = held_out_people
     if real_data is not None:
         if not real_data.is_dir():
             fail(f"--real-data {real_data}: no such folder", 2)
@@ -247,7 +254,13 @@ def reproduce(
     except ValueError as exc:
         fail(
             typed(
-                str(exc), {"reproduce.seed": "--seed", "reproduce.workers": "--workers", "reproduce.device": "--device"}
+                str(exc),
+                {
+                    "reproduce.seed": "--seed",
+                    "reproduce.workers": "--workers",
+                    "reproduce.device": "--device",
+                    "reproduce.held_out_people": "--held-out-people",
+                },
             ),
             2,
         )

@@ -156,7 +156,9 @@ def run_ablation(
     else:
         skipped["mujoco"] = why or "reproduce.ablation_mujoco_trials is 0"
     clusters = draw_clusters_of(world_intents, metrics, pairs)
-    return AblationResult(metrics, mg, pairs, models, skipped, cfg.application_preset, errors, clusters)
+    return AblationResult(
+        metrics, mg, pairs, models, skipped, cfg.application_preset, errors, clusters, cfg.held_out_people
+    )
 
 
 def draw_clusters_of(
@@ -222,6 +224,8 @@ def _held_out_options(cfg, j: int, obj: str, controller: str, intent: str) -> di
         "trials": cfg.held_out_trials,
         "population": HELD_OUT,
         "seed": seed,
+        # which of the population's people (reproduce.held_out_people; 0: the options, and keys, as before)
+        **({"population_seed": cfg.held_out_people} if cfg.held_out_people else {}),
     }
 
 

@@ -136,6 +136,8 @@ class AblationResult:
     #: trials are not independent: the person model's calibration draws (scenario.calibration_draws). Its
     #: shares' intervals resample the clusters whole (:func:`~coassist.analysis.paired.gain_share`).
     clusters: dict[tuple[str, str, str, str], list] = field(default_factory=dict)
+    #: The held-out population's people the cells met (reproduce.held_out_people: its population seed).
+    held_out_people: int = 0
 
     def shares(self, world: str, obj: str, controller: str, source: str) -> dict[str, tuple[float, float, float]]:
         """The share of the oracle's benefit for force and for overshoot (:func:`~coassist.analysis.paired.gain_share`

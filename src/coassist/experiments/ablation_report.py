@@ -175,9 +175,15 @@ def headline_rows(result: AblationResult, world: str = POINT_MASS) -> tuple[str,
             )
     n = len(result.pairs.get((world, OBJECTS[0]), ()))
     who = (
-        "the held-out population: operators of detour families and arms the tuning populations lack, on trials of "
-        "their own (these operators were seen, on other trials, while the person model's lead check, its sign test "
-        "and its lock guard were chosen: docs/person-model.md), point-mass world"
+        (
+            "the held-out population: operators of detour families and arms the tuning populations lack, on trials of "
+            "their own (these operators were seen, on other trials, while the person model's lead check, its sign "
+            "test and its lock guard were chosen: docs/person-model.md), point-mass world"
+            if not result.held_out_people
+            else f"the held-out population's people of seed {result.held_out_people}: operators of its detour "
+            "families drawn anew, whom no choice of the person model has seen (their families were: "
+            "docs/person-model.md), on trials of their own, point-mass world"
+        )
         if world == HELD_OUT
         else "the MuJoCo UR5: each operator's first trials of the point-mass world, driven on the arm"
         if world == "mujoco"

@@ -88,13 +88,14 @@ class Workspace:
         groups: int | None = None,
         population: str = "thesis",
         way: int = 0,
+        population_seed: int = 0,
     ):
         """Simulate a dataset into ``out/datasets/<name>``; return its folder and the dataset (as
         :func:`~coassist.data.read_dataset` reads it; the trials simulated here as written, not read back).
 
         ``groups``: how many lockstep groups the trials are split into on the pool
         (:func:`~coassist.sim.trial_runner.submit_trials`; None: its rule), an option like the others.
-        ``population``: who the simulated operators are (:mod:`coassist.scenario.populations`).
+        ``population``, ``population_seed``: who the simulated operators are (:mod:`coassist.scenario.populations`).
         ``way``: the way round the operators are asked to take (+1 left, −1 right; 0 their own choice).
         A collection :meth:`prefetch` started with the same options is waited for, not run
         again (the same trials bit for bit: the same jobs); one started under this name with
@@ -102,7 +103,7 @@ class Workspace:
         from coassist.sim.collect import collect_dataset
 
         options = self._spec_options(
-            tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population, way
+            tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population, way, population_seed
         )
         if (options, groups) == self._deferred.get(name):
             self.run_deferred()  # this one and every other collection deferred so far, in lockstep
@@ -143,6 +144,7 @@ class Workspace:
         groups: int | None = None,
         population: str = "thesis",
         way: int = 0,
+        population_seed: int = 0,
     ) -> None:
         """Start :meth:`collect`'s simulations for these options on the run's pool now and
         return at once; a thread of this process writes the dataset as the jobs end, and the
@@ -164,7 +166,7 @@ class Workspace:
         from coassist.sim.trial_runner import submit_trials
 
         options = self._spec_options(
-            tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population, way
+            tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population, way, population_seed
         )
         if self.pool is None:
             if _may_defer(dataset_specs(**options)) and name not in self._deferred:
@@ -264,21 +266,38 @@ class Workspace:
         return fn(*args) if future is None else future.result()
 
     def _spec_options(
-        self, tasks, users, objects, trials, seed, controller, preset, intent, obstacle, population, way=0
+        self,
+        tasks,
+        users,
+        objects,
+        trials,
+        seed,
+        controller,
+        preset,
+        intent,
+        obstacle,
+        population,
+        way=0,
+        population_seed=0,
     ) -> dict[str, Any]:
-        # coassist.sim.collect.dataset_specs' keyword arguments (way only where asked: the options as before)
-        return ({"way": way} if way else {}) | {
-            "controller": controller,
-            "users": list(users),
-            "tasks": list(tasks),
-            "objects": list(objects),
-            "trials": trials,
-            "seed": seed,
-            "preset": preset or self.config.control_preset,
-            "intent": intent,
-            "obstacle": obstacle,
-            "population": population,
-        }
+        # coassist.sim.collect.dataset_specs' keyword arguments (way and population_seed only where asked: the
+        # options, and so the collections' keys, as before)
+        return (
+            ({"way": way} if way else {})
+            | ({"population_seed": population_seed} if population_seed else {})
+            | {
+                "controller": controller,
+                "users": list(users),
+                "tasks": list(tasks),
+                "objects": list(objects),
+                "trials": trials,
+                "seed": seed,
+                "preset": preset or self.config.control_preset,
+                "intent": intent,
+                "obstacle": obstacle,
+                "population": population,
+            }
+        )
 
     def train(
         self,

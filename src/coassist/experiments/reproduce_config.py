@@ -133,6 +133,11 @@ class ReproduceConfig:
     # The held-out population's cells of the ablation (experiments.ablation): trials per operator and
     # object (application_users of the held-out population); 0 leaves them out.
     held_out_trials: int = 8
+    # Which people of the held-out population the report meets: its population seed (scenario.populations). 0, the
+    # default: the three operators every report so far has met, whose families and arms three of the person model's
+    # settings were chosen while seeing (docs/person-model.md, "What the held-out cells were told"). Another seed
+    # draws three new people of the same families, whom no choice has seen: `coassist reproduce --held-out-people N`.
+    held_out_people: int = 0
     # The sources the MuJoCo UR5 runs (empty: every source of the point-mass cells). The claims read the
     # application's source, the person model and every world's default without a calibration (present-held)
     # against MG there, and the LSTM and the oracle put them in context. The full and thesis presets run
@@ -200,6 +205,8 @@ class ReproduceConfig:
             )
         if not is_integer(self.held_out_trials) or self.held_out_trials < 0:
             raise ValueError(f"reproduce.held_out_trials must be an integer >= 0, got {self.held_out_trials!r}")
+        if not is_integer(self.held_out_people) or self.held_out_people < 0:
+            raise ValueError(f"reproduce.held_out_people must be an integer >= 0, got {self.held_out_people!r}")
         if self.ablation_mujoco_trials > self.application_trials:
             raise ValueError(
                 f"reproduce.ablation_mujoco_trials ({self.ablation_mujoco_trials}) must be <= "

@@ -103,6 +103,7 @@ def calibration_options(ws: Workspace, controller: str, seed: int | None = None,
     from coassist.experiments.application import OBSTACLE
     from coassist.experiments.person_calibration import PROBE_CONTROLLER
     from coassist.experiments.seed_plan import calibration_seed, trial_seed_base
+    from coassist.scenario.populations import HELD_OUT
 
     cfg = ws.config
     # the probe's trials are the person model's (coassist calibrate fits its arm from them): their own count
@@ -118,6 +119,8 @@ def calibration_options(ws: Workspace, controller: str, seed: int | None = None,
         "intent": "nominal",
         "obstacle": OBSTACLE,
         "population": population,
+        # the held-out population's people (reproduce.held_out_people; 0 and the other populations: as before)
+        **({"population_seed": cfg.held_out_people} if population == HELD_OUT and cfg.held_out_people else {}),
     }
 
 
@@ -223,7 +226,7 @@ def _asked_collections(
         )
     out = {}
     for position, user in enumerate(users):
-        who = population_profile(options["population"], user, 0).name
+        who = population_profile(options["population"], user, options.get("population_seed", 0)).name
         for way, count in ways_to_ask(fits[who].paths.sides, most):
             seed = asked_way_seed(options["seed"], len(users), options["trials"], position, way, most)
             out[f"{name}-ask-{user}-{WAY_NAMES[way]}"] = {
