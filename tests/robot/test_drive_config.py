@@ -131,3 +131,7 @@ def test_a_joint_acceleration_beyond_the_arms_own_is_refused_and_the_smallest_ho
     assert "SafetyLimits.joint_acceleration must be at most the fr3's own joint accelerations" in message
     assert arm_limits(SafetyLimits(joint_acceleration=12.0), "panda").joint_acceleration == 7.5
     assert arm_limits(SafetyLimits(), "fr3").joint_acceleration == SafetyLimits().joint_acceleration == 8.0
+    # through franky, whose own motion generator holds joint 2 of either arm to 7.5 (franky-sim's FR3 reports it),
+    # the FR3's bound is that: the layer's steps are what franky follows
+    assert arm_limits(SafetyLimits(), "fr3", "franka").joint_acceleration == 7.5
+    assert arm_limits(SafetyLimits(joint_acceleration=5.0), "fr3", "franka").joint_acceleration == 5.0

@@ -430,3 +430,12 @@ def test_the_assistive_controller_through_franky_sim(monkeypatch):
         operator=ScriptedForce.constant((10.0, 0.0, 0.0, 0.0, 0.0, 0.0)),
     )
     np.testing.assert_allclose(trial.pose[:, 0] - trial.pose[0, 0], mj.pose[:, 0] - mj.pose[0, 0], atol=1.5e-3)
+
+
+def test_franky_holds_the_joints_to_the_accelerations_the_drive_caps_a_franka_arm_at(server):
+    """What franky's own motion generator holds the joints to (franky-sim's FR3) is FRANKY_JOINT_ACCELERATION, which
+    the drive's layer takes the smaller of with the arm's own: the layer's steps are what franky follows."""
+    from coassist.robot.arm_descriptions import FRANKY_JOINT_ACCELERATION
+
+    real = franky.Robot(server.host, realtime_config=franky.RealtimeConfig.Ignore)
+    assert tuple(float(a) for a in real.joint_acceleration_limit.max) == FRANKY_JOINT_ACCELERATION

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ARMS", "ArmDescription", "get_arm"]
+__all__ = ["ARMS", "FRANKY_JOINT_ACCELERATION", "ArmDescription", "get_arm"]
 
 
 @dataclass(frozen=True)
@@ -82,6 +82,11 @@ class ArmDescription:
         if any(abs(s) != 1.0 for s in self.base_signs) or self.base_signs[2] != 1.0:
             raise ValueError(f"ArmDescription.base_signs must be (1, 1, 1) or (-1, -1, 1), got {self.base_signs!r}")
 
+
+#: [rad/s²] What franky's own motion generator holds a Franka arm's joints to (its ``Robot.joint_acceleration_limit``,
+#: libfranka's Panda figures, which franky 2.0 reports for franky-sim's FR3 too): through franky a joint is held to the
+#: smaller of this and its arm's own (:func:`coassist.robot.drive.arm_limits`), or franky smooths what the layer sent.
+FRANKY_JOINT_ACCELERATION = (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0)
 
 ARMS: dict[str, ArmDescription] = {
     # UR5 (CB3): UR's base frame is the URDF base_link turned by π about z (kinematics.py).

@@ -310,13 +310,18 @@ def _check_limits_for_arm(limits: SafetyLimits, robot: str | None) -> None:
         )
 
 
-def arm_limits(limits: SafetyLimits, robot: str | None) -> SafetyLimits:
+def arm_limits(limits: SafetyLimits, robot: str | None, world: str | None = None) -> SafetyLimits:
     """``limits`` with the joint acceleration bound at most the arm's smallest joint acceleration
     (:attr:`~coassist.robot.arm_descriptions.ArmDescription.joint_acceleration_limit`): the layer's one bound
-    ‖q̇ − q̇⁻‖∞ ≤ a dt holds every joint to it (the default 8 rad/s² let a Panda's joint 2, 7.5 rad/s², take 7.84)."""
-    from coassist.robot.arm_descriptions import get_arm
+    ‖q̇ − q̇⁻‖∞ ≤ a dt holds every joint to it (the default 8 rad/s² let a Panda's joint 2, 7.5 rad/s², take 7.84).
+    Through franky (``world`` "franka") each joint's bound is also at most franky's own motion generator's
+    (:data:`~coassist.robot.arm_descriptions.FRANKY_JOINT_ACCELERATION`: an FR3's joint 2, 10 rad/s² on the arm, is
+    held to 7.5 by franky, which would smooth the layer's 8 there)."""
+    from coassist.robot.arm_descriptions import FRANKY_JOINT_ACCELERATION, get_arm
 
     own = get_arm(robot or "ur5").joint_acceleration_limit
+    if own is not None and world == "franka":
+        own = tuple(min(a, b) for a, b in zip(own, FRANKY_JOINT_ACCELERATION))
     if own is None or limits.joint_acceleration <= min(own):
         return limits
     return replace(limits, joint_acceleration=float(min(own)))
@@ -625,7 +630,7 @@ def _prepare(
                     "center": [float(v) for v in np.asarray(recorded["obstacle"]["center"], dtype=float) + shift],
                 },
             }
-        limits = arm_limits(config.limits, robot)  # the layer's, and the ramp a simulated arm is built with
+        limits = arm_limits(config.limits, robot, config.world)  # the layer's, and a simulated arm's ramp
         if world is None:
             # A real-time predictor runs against the wall clock: so must the simulated world it serves.
             world = build_world(
