@@ -268,25 +268,33 @@ def test_trial_shape_draws_come_after_side_and_pace():
     assert trial_shape(fixed, np.random.default_rng(0)) == (AUTHOR.clearance, AUTHOR.anticipation)
 
 
-def test_a_simulated_hand_travels_as_json_and_pushes_the_same_bit_for_bit():
-    import json
-
+def _hand_builder(user: int, seed: int, task_seed: int, n: int, full_pose: bool = False):
+    """A builder of the same simulated hand (user's arm on a curved task's intent, n ticks at 125 Hz), and the
+    intent and dt."""
     from coassist.scenario.hand import SimulatedHand
     from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
     from coassist.scenario.tasks import task_for_seed
 
-    profile = operator_profile(3)
-    rng = np.random.default_rng(7)
-    task = task_for_seed("curved", 2)
-    n, dt = 300, 1 / 125
-    intent = intent_trajectory(task, profile, rng, n, dt).positions
+    profile = operator_profile(user)
+    rng = np.random.default_rng(seed)
+    dt = 1 / 125
+    intent = intent_trajectory(task_for_seed("curved", task_seed), profile, rng, n, dt).positions
     noise = motor_noise(profile, rng, n, dt)
 
     def build():
-        return SimulatedHand(
-            OperatorArm(profile, intent, dt, noise), dt, np.r_[intent[0], 0.2, np.pi, 0, 0], full_pose=True
-        )
+        arm = OperatorArm(profile, intent, dt, noise)
+        return SimulatedHand(arm, dt, np.r_[intent[0], 0.2, np.pi, 0, 0], full_pose=full_pose)
 
+    return build, intent, dt
+
+
+def test_a_simulated_hand_travels_as_json_and_pushes_the_same_bit_for_bit():
+    import json
+
+    from coassist.scenario.hand import SimulatedHand
+
+    n = 300
+    build, intent, dt = _hand_builder(3, 7, 2, n, full_pose=True)
     original = build()
     copy = SimulatedHand.from_dict(json.loads(json.dumps(original.to_dict())))
     states = np.random.default_rng(1).normal(0, 0.05, size=(n, 12))
@@ -308,20 +316,7 @@ def test_a_simulated_hand_travels_as_json_and_pushes_the_same_bit_for_bit():
 def test_a_simulated_hand_lets_go_of_a_non_finite_state_and_not_of_a_large_finite_one(bad):
     """A NaN or ±inf in the hand's pose or twist: no force that tick (zero), and the arm's clock still advances; entries
     of 1e308 (their sum overflows) are a finite state, pushed on as numpy's own check says."""
-    from coassist.scenario.hand import SimulatedHand
-    from coassist.scenario.operator import OperatorArm, intent_trajectory, motor_noise, operator_profile
-    from coassist.scenario.tasks import task_for_seed
-
-    profile = operator_profile(0)
-    rng = np.random.default_rng(3)
-    task = task_for_seed("curved", 1)
-    n, dt = 20, 1 / 125
-    intent = intent_trajectory(task, profile, rng, n, dt).positions
-    noise = motor_noise(profile, rng, n, dt)
-
-    def build():
-        return SimulatedHand(OperatorArm(profile, intent, dt, noise), dt, np.r_[intent[0], 0.2, np.pi, 0, 0])
-
+    build, intent, dt = _hand_builder(0, 3, 1, 20)
     hand = build()
     pose, twist = np.r_[intent[0], 0.2, np.pi, 0, 0], np.zeros(6)
     which, i, value = bad

@@ -11,11 +11,25 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CurveSearch", "SearchTables"]
+__all__ = ["CurveSearch", "SearchTables", "window_distances"]
 
 #: (padded x (N·(P + 2·widest),), padded y (same), each curve's first padded index (N,), the window's offsets
 #: (2·widest + 1,), the sample within its curve each padded index stands for (N·(P + 2·widest),)).
 SearchTables = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def window_distances(pad_x: np.ndarray, pad_y: np.ndarray, flat: np.ndarray, px: float, py: float) -> np.ndarray:
+    """(x − px)² + (y − py)² [m²] of the padded samples ``flat`` (N, 2·widest + 1) indexes: each curve's window's
+    squared distances from the tool (px, py), a new array. Gathered with ``take`` and squared in place: the same
+    operations on the same numbers as fancy indexing and temporaries, a third less time (docs/performance.md)."""
+    d2 = pad_x.take(flat)
+    d2 -= px
+    d2 *= d2
+    dy = pad_y.take(flat)
+    dy -= py
+    dy *= dy
+    d2 += dy
+    return d2
 
 
 class CurveSearch:

@@ -82,7 +82,7 @@ import numpy as np
 from coassist._checks import check_int, check_real, is_real_number
 from coassist._io import read_hashed_json, write_hashed_json
 from coassist.interfaces import TrialContext
-from coassist.scenario.curve_search import CurveSearch
+from coassist.scenario.curve_search import CurveSearch, window_distances
 from coassist.scenario.hand_force import HandForce
 from coassist.scenario.operator import deformed_path
 from coassist.scenario.tasks import Box, MotionPlanner, NominalPath, Task
@@ -524,15 +524,7 @@ class PathHypothesesIntent:
         # curves padded with copies of their ends (:class:`~coassist.scenario.curve_search.CurveSearch`: what a clipped index reads)
         px, py = p.tolist()
         flat = (self._pad_first + self._idx)[:, None] + self._window
-        # = Σ over x, y of (point − p)², bit for bit; gathered with take and squared in place (a (N, 2W + 1)
-        # array a tick: fancy indexing and the temporaries cost a third more)
-        d2 = self._pad_x.take(flat)
-        d2 -= px
-        d2 *= d2
-        dy = self._pad_y.take(flat)
-        dy -= py
-        dy *= dy
-        d2 += dy
+        d2 = window_distances(self._pad_x, self._pad_y, flat, px, py)  # = Σ over x, y of (point − p)², bit for bit
         near = self._pad_local.take(flat[:, 0] + d2.argmin(axis=1))  # each curve's nearest sample
         at = near + hyp.row_start  # its flat index
         self._idx = near

@@ -67,7 +67,7 @@ import numpy as np
 from coassist._checks import check_int, check_real
 from coassist.interfaces import TrialContext
 from coassist.scenario.arm_identification import ASSUMED_ARM, ArmEstimate
-from coassist.scenario.curve_search import CurveSearch
+from coassist.scenario.curve_search import CurveSearch, window_distances
 from coassist.scenario.hand_force import HandForce, HandPoint
 from coassist.scenario.path_model import PathFrame, PathModel
 from coassist.scenario.row_smoothing import RowSmoothing
@@ -566,14 +566,7 @@ class PersonPathsIntent:
         # curves padded with copies of their ends (:class:`~coassist.scenario.curve_search.CurveSearch`: what a clipped index reads)
         # (every step below is a handful of whole-array operations: the tick's cost is their count, not their size)
         flat = (self._pad_first + self._idx)[:, None] + self._window
-        # (x − px)² + (y − py)², gathered with take and squared in place: the same numbers, fewer temporaries
-        d2 = self._pad_x.take(flat)
-        d2 -= px
-        d2 *= d2
-        dy = self._pad_y.take(flat)
-        dy -= py
-        dy *= dy
-        d2 += dy
+        d2 = window_distances(self._pad_x, self._pad_y, flat, px, py)
         best = d2.argmin(axis=1)
         pad_at = flat[:, 0] + best
         self._idx = self._pad_local.take(pad_at)
