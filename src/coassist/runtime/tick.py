@@ -392,6 +392,7 @@ class ControlTick:
             start, dtype=np.float64
         )  # held over a glitch of the state (step()); a buffer of its own
         self._last_twist = np.zeros(6)
+        self._pose_read: np.ndarray | None = None  # this tick's measured pose, finite and plausible (sense())
         self._fk_offset: tuple[float, ...] | None = None  # the reported pose in the FK's tool frame (R row by row, p)
         self._fk_last: tuple[float, ...] | None = None  # that offset at the last tick
         self._fk_ticks = 0  # ticks compared so far
@@ -430,7 +431,9 @@ class ControlTick:
         # so the intent, the controller and the log never see it (the safety layer decelerates)
         pose = finite_vector(state.tool_pose, 6)
         twist = finite_vector(state.tool_twist, 6)
-        if (pose is not None and not _plausible(pose)) or (twist is not None and not _plausible(twist)):
+        # the measured pose as the arm stage reads it (finite and plausible; its twist is not its concern): read once
+        self._pose_read = pose if pose is not None and _plausible(pose) else None
+        if (pose is not None and self._pose_read is None) or (twist is not None and not _plausible(twist)):
             # finite but no measurement (1e200 in the pose's rotation overflowed its angle, and the tick raised)
             fault |= Fault.INVALID_INPUT
             pose = twist = None
@@ -548,9 +551,7 @@ class ControlTick:
                 f |= Fault.INTERNAL_ERROR
         else:
             f |= Fault.NONFINITE_STATE
-        pose = finite_vector(state.tool_pose, 6)
-        if pose is not None and not _plausible(pose):  # flagged by sense() (INVALID_INPUT)
-            pose = None
+        pose = self._pose_read  # as sense() read it (an implausible one flagged there, INVALID_INPUT)
         pose_ok = pose is not None
         if pose is None:
             pose = np.full(6, np.nan)  # the safety layer treats the tick as bad (decelerates)
