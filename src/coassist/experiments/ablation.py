@@ -90,6 +90,7 @@ from coassist.experiments.source_training import (
     calibrate_person,
     calibration_draw_options,
     calibration_options,
+    population_options,
 )
 from coassist.robot.worlds import POINT_MASS
 from coassist.scenario.calibration_draws import draw_clusters, draw_count
@@ -222,10 +223,8 @@ def _held_out_options(cfg, j: int, obj: str, controller: str, intent: str) -> di
     return {
         **cell_options(cfg, j, obj, controller, intent),
         "trials": cfg.held_out_trials,
-        "population": HELD_OUT,
         "seed": seed,
-        # which of the population's people (reproduce.held_out_people; 0: the options, and keys, as before)
-        **({"population_seed": cfg.held_out_people} if cfg.held_out_people else {}),
+        **population_options(cfg, HELD_OUT),  # its people: reproduce.held_out_people
     }
 
 

@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING, Any
 from coassist.experiments.pipeline import Workspace, train_in_worker
 
 if TYPE_CHECKING:
+    from coassist.experiments.reproduce_config import ReproduceConfig
     from coassist.scenario.person_intent import PersonFilterSettings
 
 __all__ = [
@@ -54,6 +55,7 @@ __all__ = [
     "calibrate_paths",
     "calibrate_person",
     "calibration_draw_options",
+    "population_options",
     "calibration_options",
     "checked_calibration",
     "seed_names",
@@ -103,7 +105,6 @@ def calibration_options(ws: Workspace, controller: str, seed: int | None = None,
     from coassist.experiments.application import OBSTACLE
     from coassist.experiments.person_calibration import PROBE_CONTROLLER
     from coassist.experiments.seed_plan import calibration_seed, trial_seed_base
-    from coassist.scenario.populations import HELD_OUT
 
     cfg = ws.config
     # the probe's trials are the person model's (coassist calibrate fits its arm from them): their own count
@@ -118,10 +119,18 @@ def calibration_options(ws: Workspace, controller: str, seed: int | None = None,
         "preset": cfg.application_preset,
         "intent": "nominal",
         "obstacle": OBSTACLE,
-        "population": population,
-        # the held-out population's people (reproduce.held_out_people; 0 and the other populations: as before)
-        **({"population_seed": cfg.held_out_people} if population == HELD_OUT and cfg.held_out_people else {}),
+        **population_options(cfg, population),
     }
+
+
+def population_options(cfg: ReproduceConfig, population: str) -> dict[str, Any]:
+    """The collection options (:meth:`Workspace.collect`) naming ``population``'s people: the held-out population's
+    are those of ``reproduce.held_out_people`` (its population seed); 0, and every other population, name none (the
+    options, and so the collections' keys, as before)."""
+    from coassist.scenario.populations import HELD_OUT
+
+    people = cfg.held_out_people if population == HELD_OUT else 0
+    return {"population": population, **({"population_seed": people} if people else {})}
 
 
 def _suffix(population: str) -> str:
