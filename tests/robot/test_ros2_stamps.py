@@ -113,6 +113,13 @@ def _world(**kw) -> Ros2World:
     return Ros2World(Ros2Config(domain_id=DOMAIN, pace=False, stale_after=STALE, connect_timeout=10.0, **kw))
 
 
+def _received(world: Ros2World, ns: int, what: str) -> None:
+    """Wait until the world holds a joint state and a wrench stamped ``ns`` or later. A read before they arrive may
+    find the link stale (the fixture's ticking has stopped: on a loaded machine stale_after can pass before a
+    test's first messages come through DDS; CI at 6b8e5de), which says nothing of how they are read."""
+    _until(lambda: world._js[0] >= ns and world._wr[0] >= ns, what)
+
+
 def _until(condition, what: str, seconds: float = 10.0) -> None:
     """Wait until ``condition()`` holds (a DDS message's way through a loaded machine takes its time)."""
     deadline = time.monotonic() + seconds
@@ -146,7 +153,8 @@ def test_a_driver_republishing_its_last_joint_state_loses_the_link(fed):
     t_sent = time.monotonic()  # the frozen message arrives after this: its age is counted from later
     feeder.js(frozen, q)
     feeder.wr(frozen, 1.0)
-    _until(lambda: world.read().q[0] == q[0], "the frozen joint state")
+    _received(world, frozen, "the frozen joint state")
+    assert world.read().q[0] == q[0]
     error = None
     while time.monotonic() - t_sent < 10 * STALE:
         feeder.js(frozen, q)  # the same stamp, the same values
@@ -171,7 +179,8 @@ def test_the_newest_stamp_again_with_other_values_is_refused_on_either_topic(fed
     qa = Q0 + 0.02
     feeder.js(ns, qa)
     feeder.wr(ns, 1.0)
-    _until(lambda: world.read().q[0] == qa[0] and world.read().wrench[0] == 1.0, "the first message of each")
+    _received(world, ns, "the first message of each")
+    assert world.read().q[0] == qa[0] and world.read().wrench[0] == 1.0
     assert world.rejected_messages == 0
     # the same stamps, other values: 0.2 rad on one joint (a jump of 0 s were it read as one: the run would stop on a
     # second publisher's message, which is refused instead), 55 N
@@ -189,12 +198,13 @@ def test_the_newest_stamp_again_with_other_values_is_refused_on_either_topic(fed
     # a newer stamp with the other values is news
     feeder.js(ns + 1_000_000, qa + [0.008, 0, 0, 0, 0, 0])
     feeder.wr(ns + 1_000_000, 55.0)
-    _until(lambda: world.read().wrench[0] == 55.0 and world.read().q[0] == qa[0] + 0.008, "the newer messages")
+    _received(world, ns + 1_000_000, "the newer messages")
+    assert world.read().wrench[0] == 55.0 and world.read().q[0] == qa[0] + 0.008
 
 
 def test_a_stamp_ahead_of_the_nodes_clock_is_refused_and_the_next_correct_one_is_not_late(fed):
     feeder, world = fed
-    seq0 = world.read().wrench_seq
+    seq0 = world._wrench_seq
     feeder.wr(now_ns() + 2_000_000_000, 3.0)  # 2 s ahead of the node's clock: a wrong stamp
     _until(lambda: world.rejected_messages == 1, "the wrench stamped ahead refused")
     why = world._why_stale(WRENCH)
@@ -205,9 +215,11 @@ def test_a_stamp_ahead_of_the_nodes_clock_is_refused_and_the_next_correct_one_is
         )[1]
     )
     assert 1.9 < lead <= 2.0, why
-    feeder.js(now_ns(), Q0)
-    feeder.wr(now_ns(), 4.0)  # correct: it used to be refused as "a late message" for the next 2 s
-    _until(lambda: world.read().wrench[0] == 4.0, "the correct wrench")
+    ns = now_ns()
+    feeder.js(ns, Q0)
+    feeder.wr(ns, 4.0)  # correct: it used to be refused as "a late message" for the next 2 s
+    _received(world, ns, "the correct wrench")
+    assert world.read().wrench[0] == 4.0
     assert world.read().wrench_seq > seq0 and world.rejected_messages == 1
 
 
