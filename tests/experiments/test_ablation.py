@@ -76,6 +76,7 @@ def test_mujoco_cells_meet_mgs_trials(tmp_path):
     for people, says in ((0, "these operators were seen"), (100, "people of seed 100")):
         caption, _, _ = headline_rows(replace(result, held_out_people=people), "held-out")
         assert says in caption and ("no choice" in caption) == bool(people), caption
+    assert result.held_out_population == cfg.held_out_population == "held-out"
 
 
 def test_the_mujoco_cells_run_the_person_model_calibrated_on_the_arm(tmp_path):
@@ -239,7 +240,9 @@ def test_the_per_side_differences_of_a_cell_with_clusters_are_the_clusters_inter
 
 
 def test_the_person_models_claims_follow_issue_40s_bars():
-    from coassist.experiments.ablation_report import person_claims
+    from dataclasses import replace
+
+    from coassist.experiments.ablation_report import held_out_caption, person_claims
 
     (good,) = person_claims(_result(0.9, 1.05))
     assert good.holds and "force 90 %" in good.evidence and "1.05× MG" in good.evidence
@@ -249,6 +252,14 @@ def test_the_person_models_claims_follow_issue_40s_bars():
     assert held_out.holds and "held-out population" in held_out.text
     assert not person_claims(_result(0.7, 1.0, world="held-out"))[0].holds  # force 70 % < 80 %
     assert not person_claims(_result(-0.1, 1.0, world="held-out"))[0].holds  # worse than MG on both sides
+    # the held-out cells of the families made after every choice (reproduce.held_out_population) say so, claim and table
+    unseen = replace(_result(0.85, 1.5, world="held-out"), held_out_population="unseen", held_out_people=7)
+    (claim,) = person_claims(unseen)
+    assert claim.holds and "board, unseen population: the person model" in claim.text, claim.text
+    caption = held_out_caption(unseen.held_out_population, unseen.held_out_people)
+    assert caption.startswith("the unseen population's people of seed 7: operators of detour families made after")
+    assert "these operators were seen" in held_out_caption("held-out", 0)
+    assert "people of seed 100" in held_out_caption("held-out", 100)
 
 
 def test_a_claims_figures_are_printed_on_their_side_of_its_bar():

@@ -426,18 +426,23 @@ def test_transfer_collection_shares_are_each_targets_training_ticks_over_all_tic
     assert collection_shares([(dataset(), dataset())]) == [0.0]
 
 
-@pytest.mark.parametrize("people", [0, 5])
-def test_the_held_out_people_are_the_configs_and_only_the_held_out_populations(tmp_path, people):
+@pytest.mark.parametrize(("population", "people"), [("held-out", 0), ("held-out", 5), ("unseen", 0)])
+def test_the_held_out_people_are_the_configs_and_only_the_held_out_populations(tmp_path, population, people):
     """``reproduce.held_out_people`` is the held-out population's population seed: every collection of that
     population the ablation starts (its calibrations, every draw's probe trials, MG's cells) draws its operators of
     that seed, and no other population's does; 0 leaves the options as they were (no key: the collections' keys and
-    trials unchanged)."""
+    trials unchanged). ``reproduce.held_out_population`` is whose families those collections draw (the cells keep
+    their name and seeds), and only a population no setting is chosen on may be named."""
     from coassist.experiments.source_training import calibration_options
     from coassist.scenario.populations import HELD_OUT, population_profile
     from coassist.sim.collect import dataset_specs
 
     cfg = replace(
-        reproduce_config.REPRODUCE_PRESETS["tiny"], ablation_mujoco_trials=0, mujoco_sources=(), held_out_people=people
+        reproduce_config.REPRODUCE_PRESETS["tiny"],
+        ablation_mujoco_trials=0,
+        mujoco_sources=(),
+        held_out_people=people,
+        held_out_population=population,
     )
     ws = pipeline.Workspace(cfg, tmp_path, progress=False, pool=_RecordingPool())
     AblationAhead(ws, handed_to_ablation())({})
@@ -447,8 +452,11 @@ def test_the_held_out_people_are_the_configs_and_only_the_held_out_populations(t
         if key in held_out:
             assert options.get("population_seed") == (people or None)
             assert {s.population_seed for s in dataset_specs(**options)} == {people}
+            assert options["population"] == population
+            assert {s.population for s in dataset_specs(**options)} == {population}
         else:
             assert "population_seed" not in options, key
+            assert options.get("population", "thesis") in ("thesis", "varied"), key
     assert "population_seed" not in calibration_options(ws, "manual")  # the thesis population's
     if people:  # other operators than the report's usual three
         first = [population_profile(HELD_OUT, u, 0) for u in cfg.application_users]
@@ -456,3 +464,6 @@ def test_the_held_out_people_are_the_configs_and_only_the_held_out_populations(t
         assert all(a.stiffness_min != b.stiffness_min for a, b in zip(first, drawn))
     with pytest.raises(ValueError, match=r"reproduce\.held_out_people must be an integer >= 0, got -1"):
         replace(cfg, held_out_people=-1)
+    for tuned in ("varied", "thesis", "unseen2"):
+        with pytest.raises(ValueError, match=rf"reproduce\.held_out_population must be one of .* got '{tuned}'"):
+            replace(cfg, held_out_population=tuned)

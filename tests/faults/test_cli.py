@@ -412,6 +412,11 @@ REFUSED = {
         ["--users lists 0 twice"],
     ),
     "reproduce --seeds full-width": (["reproduce", "--seeds", "１,２"], ["--seeds must be a count or"]),
+    # a population settings are chosen on cannot stand in for the held-out one
+    "reproduce --held-out-population varied": (
+        ["reproduce", "--held-out-population", "varied", "--out", "{OUT}/out"],
+        ["--held-out-population must be one of ('held-out', 'unseen')", "got 'varied'"],
+    ),
     "train --fc 64,,32": (["train", "{D}", "--fc", "64,,32"], ["--fc has an empty item"]),
     # sizes a model cannot have: once a traceback (allocation) or a build that never ended
     "train --hidden 1e8": (["train", "{D}", "--hidden", "100000000"], ["more than the 100,000,000"]),

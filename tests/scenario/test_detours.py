@@ -16,7 +16,9 @@ from coassist.scenario.detours import (
     Asymmetric,
     Bump,
     Corrective,
+    Feint,
     Hesitant,
+    Ringing,
     Skewed,
     Swing,
     Window,
@@ -168,6 +170,56 @@ def test_corrective_is_made_of_its_sub_movements():
     assert ratio.min() == pytest.approx(1.0 - 0.6, abs=0.01)
 
 
+def test_feint_leans_the_other_way_before_going_round():
+    task = _middle_task()
+    lean, ratio = 0.25, 1.0
+    intent = intent_trajectory(
+        task, _person(Feint(lean=lean, lean_ratio=ratio, jitter=0.0)), np.random.default_rng(1), N, DT
+    )
+    assert intent.side == 1
+    x, d = _lateral(intent)
+    x_o = task.obstacle.center[0]
+    # the right first, by lean · A, at its deepest before the rise to the left has begun (λ = 1: −P − 1.5a) ...
+    low = int(np.argmin(d))
+    assert -d[low] == pytest.approx(lean * intent.amplitude, rel=2e-3)
+    assert x[low] - x_o == pytest.approx(-(0.05 + 1.5 * 0.06), abs=1e-3)
+    # ... then round the left, the bump's height, the box cleared
+    assert d.max() == pytest.approx(intent.amplitude, rel=2e-3) and x[int(np.argmax(d))] > x[low]
+    assert task.obstacle.signed_distance(intent.positions).min() >= 0.01 - 1e-9
+    # it leaves the path 2λa before the rise's half (−P − a/2 − 2λa) and is back on it a after the plateau
+    leaving = np.flatnonzero(np.abs(d) > 1e-7)
+    assert x[leaving[0]] - x_o == pytest.approx(-(0.05 + 0.03 + 2 * ratio * 0.06), abs=1e-3)
+    assert x[leaving[-1]] - x_o == pytest.approx(0.05 + 0.06, abs=1e-3)
+
+
+def test_ringing_swings_through_the_path_each_swing_decay_times_the_last():
+    task = _middle_task()
+    o, r, mu = 0.3, 0.5, 0.8
+    family = Ringing(overshoot=o, decay=r, swings=3, swing_ratio=mu, jitter=0.0)
+    intent = intent_trajectory(task, _person(family), np.random.default_rng(1), N, DT)
+    x, d = _lateral(intent)
+    top = int(np.argmax(d))
+    # after the top, each run on one side of the path has its extreme: −o A, +o r A, −o r² A, then the path
+    after = d[top:]
+    signs = np.sign(np.where(np.abs(after) > 1e-9, after, 0.0))
+    runs = np.split(after, np.flatnonzero(np.diff(signs))[0:] + 1)
+    extremes = [float(run[np.argmax(np.abs(run))]) for run in runs if np.abs(run).max() > 1e-9][1:]
+    A = intent.amplitude
+    assert extremes == pytest.approx([-o * A, o * r * A, -o * r * r * A], rel=2e-3)
+    # back on the path a + 3 μ a after the plateau
+    x_o = task.obstacle.center[0]
+    last = x[np.flatnonzero(np.abs(d) > 1e-7)[-1]]
+    assert last - x_o == pytest.approx(0.05 + 0.06 * (1 + 3 * mu), abs=1e-3)
+    # one swing is the swing family's return (its settle ratio μ)
+    u = np.linspace(-0.3, 0.4, 2001)
+    np.testing.assert_allclose(
+        Ringing(overshoot=o, swings=1, swing_ratio=mu).profile(u, 0.05, 0.06),
+        Swing(overshoot=o, settle_ratio=mu).profile(u, 0.05, 0.06),
+        rtol=0.0,
+        atol=1e-15,
+    )
+
+
 def _arc(positions):
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
 
@@ -232,7 +284,7 @@ def _forced_side_intents(task, profile, seed, n=N):
     return left, right
 
 
-PEOPLE = [(pop, user) for pop in ("varied", "held-out") for user in range(6)]
+PEOPLE = [(pop, user) for pop in ("varied", "held-out", "unseen") for user in range(6)]
 
 
 @pytest.mark.parametrize(("population", "user"), PEOPLE)
@@ -278,7 +330,7 @@ def test_families_round_trip_through_their_record_and_name_bad_fields():
     for population, user in PEOPLE:
         family = population_profile(population, user).detour
         assert family_from_extra(family.to_extra()) == family
-    assert set(FAMILIES) == {"asymmetric", "skewed", "swing", "corrective", "hesitant", "bump"}
+    assert set(FAMILIES) == {"asymmetric", "skewed", "swing", "corrective", "hesitant", "feint", "ringing", "bump"}
     assert family_from_extra(Bump().to_extra()) == Bump()
     with pytest.raises(ValueError, match="Asymmetric.return_ratio"):
         Asymmetric(return_ratio=0.0)
@@ -288,6 +340,10 @@ def test_families_round_trip_through_their_record_and_name_bad_fields():
         Corrective(out_weights=())
     with pytest.raises(ValueError, match="Hesitant.depth"):
         Hesitant(depth=1.5)
+    with pytest.raises(ValueError, match="Feint.lean"):
+        Feint(lean=-0.1)
+    with pytest.raises(ValueError, match="Ringing.swings"):
+        Ringing(swings=0)
     with pytest.raises(ValueError, match="unknown parameters"):
         family_from_extra({"family": "swing", "overshot": 0.2})
     with pytest.raises(ValueError, match="OperatorProfile.detour"):

@@ -8,7 +8,12 @@ import pytest
 
 from coassist.scenario.detours import FAMILIES, family_from_extra
 from coassist.scenario.operator import AUTHOR, OperatorProfile, operator_profile
-from coassist.scenario.populations import POPULATION_FAMILIES, POPULATIONS, population_profile
+from coassist.scenario.populations import (
+    POPULATION_FAMILIES,
+    POPULATIONS,
+    REPORT_ONLY_POPULATIONS,
+    population_profile,
+)
 
 
 def test_the_thesis_population_is_operator_profile():
@@ -24,11 +29,14 @@ def test_the_thesis_population_is_operator_profile():
 
 def test_the_held_out_families_are_of_another_kind_and_in_no_other_population():
     varied, held_out = POPULATION_FAMILIES["varied"], POPULATION_FAMILIES["held-out"]
+    unseen = POPULATION_FAMILIES["unseen"]
     assert set(POPULATION_FAMILIES) == set(POPULATIONS) - {"thesis"}
-    assert not set(varied) & set(held_out)
+    assert not set(varied) & set(held_out) and not set(unseen) & set(varied + held_out)
     assert {f.kind for f in varied} == {"shape"} and {f.kind for f in held_out} == {"segmented"}
-    assert len(varied) >= 3 and len(held_out) >= 2
-    assert FAMILIES["bump"] not in varied + held_out  # the thesis' family (and the fallback) in neither
+    assert {f.kind for f in unseen} == {"reversing"}
+    assert len(varied) >= 3 and len(held_out) >= 2 and len(unseen) >= 2
+    assert FAMILIES["bump"] not in varied + held_out + unseen  # the thesis' family (and the fallback) in none
+    assert REPORT_ONLY_POPULATIONS == ("held-out", "unseen") and not set(REPORT_ONLY_POPULATIONS) & {"thesis", "varied"}
     # what each population's people actually draw, over many users
     for name, families in POPULATION_FAMILIES.items():
         drawn = {type(population_profile(name, u, 5).detour) for u in range(30)}
@@ -38,7 +46,7 @@ def test_the_held_out_families_are_of_another_kind_and_in_no_other_population():
 
 
 def test_drawn_populations_are_seeded_and_named():
-    for name in ("varied", "held-out"):
+    for name in ("varied", "held-out", "unseen"):
         assert population_profile(name, 3, 1) == population_profile(name, 3, 1)
         assert population_profile(name, 3, 1) != population_profile(name, 3, 2)
         assert population_profile(name, 0).name == f"{name}-user-0"
@@ -46,9 +54,10 @@ def test_drawn_populations_are_seeded_and_named():
     # a different stream from the thesis population's: not the same arm for the same (user, seed)
     assert population_profile("varied", 2).stiffness_min != operator_profile(2).stiffness_min
     assert population_profile("varied", 2).stiffness_min != population_profile("held-out", 2).stiffness_min
+    assert population_profile("unseen", 2).stiffness_min != population_profile("held-out", 2).stiffness_min
 
 
-@pytest.mark.parametrize("name", ["varied", "held-out"])
+@pytest.mark.parametrize("name", ["varied", "held-out", "unseen"])
 def test_arms_and_paths_spread_over_the_documented_ranges(name):
     people = [population_profile(name, u, 7) for u in range(300)]
 

@@ -117,7 +117,7 @@ def collect(
     ),
     population: str = typer.Option(
         "thesis",
-        help="Who the simulated operators are: thesis (the main job's: user 0 the thesis' author), varied (detour families to tune on), held-out (other kinds of detour, to report only); docs/realism.md.",
+        help="Who the simulated operators are: thesis (the main job's: user 0 the thesis' author), varied (detour families to tune on), held-out and unseen (other kinds of detour, to report only); docs/realism.md.",
     ),
     population_seed: int = typer.Option(0, help="Seed of the population the users are drawn from."),
     ask_way: str = typer.Option(

@@ -56,7 +56,7 @@ def realism(
     population: list[str] = typer.Option(
         [],
         "--population",
-        help="Also a population's users against user-a (repeatable): thesis, varied or held-out.",
+        help="Also a population's users against user-a (repeatable): thesis, varied, held-out or unseen.",
     ),
     population_users: str = typer.Option("0,1,2,3,4,5", help="The users of each --population."),
     population_trials: int = typer.Option(3, help="Trials per --population user and task."),
@@ -218,6 +218,11 @@ def reproduce(
         help="Which people of the held-out population the report meets: its population seed (default 0, the "
         "operators every report has met; another draws new people of its families, whom no choice has seen).",
     ),
+    held_out_population: str = typer.Option(
+        None,
+        help="Whose detour families the held-out cells meet: held-out (Corrective, Hesitant; the default) or "
+        "unseen (Feint, Ringing: families made after every choice of the person model; docs/person-model.md).",
+    ),
 ) -> None:
     """The thesis' experiments end to end in simulation (dMPC study, iterative training, transfer, application, real data): one HTML report."""
     from dataclasses import replace
@@ -243,6 +248,8 @@ def reproduce(
         changes["device"] = device
     if held_out_people is not None:
         changes["held_out_people"] = held_out_people
+    if held_out_population is not None:
+        changes["held_out_population"] = held_out_population
     if real_data is not None:
         if not real_data.is_dir():
             fail(f"--real-data {real_data}: no such folder", 2)
@@ -260,6 +267,7 @@ def reproduce(
                     "reproduce.workers": "--workers",
                     "reproduce.device": "--device",
                     "reproduce.held_out_people": "--held-out-people",
+                    "reproduce.held_out_population": "--held-out-population",
                 },
             ),
             2,

@@ -78,7 +78,7 @@ def drive(
     ),
     user: int = typer.Option(0, help="Simulated operator (MuJoCo world)."),
     population: str = typer.Option(
-        "thesis", help="The simulated operator's population: thesis, varied or held-out (docs/realism.md)."
+        "thesis", help="The simulated operator's population: thesis, varied, held-out or unseen (docs/realism.md)."
     ),
     seed: int = typer.Option(0, help="Seed of the task, the simulated operator and the sensor noise."),
     obstacle: str = typer.Option(

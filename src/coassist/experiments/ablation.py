@@ -158,7 +158,16 @@ def run_ablation(
         skipped["mujoco"] = why or "reproduce.ablation_mujoco_trials is 0"
     clusters = draw_clusters_of(world_intents, metrics, pairs)
     return AblationResult(
-        metrics, mg, pairs, models, skipped, cfg.application_preset, errors, clusters, cfg.held_out_people
+        metrics,
+        mg,
+        pairs,
+        models,
+        skipped,
+        cfg.application_preset,
+        errors,
+        clusters,
+        cfg.held_out_people,
+        cfg.held_out_population,
     )
 
 
@@ -224,7 +233,7 @@ def _held_out_options(cfg, j: int, obj: str, controller: str, intent: str) -> di
         **cell_options(cfg, j, obj, controller, intent),
         "trials": cfg.held_out_trials,
         "seed": seed,
-        **population_options(cfg, HELD_OUT),  # its people: reproduce.held_out_people
+        **population_options(cfg, HELD_OUT),  # its people: reproduce.held_out_population, held_out_people
     }
 
 

@@ -138,6 +138,8 @@ class AblationResult:
     clusters: dict[tuple[str, str, str, str], list] = field(default_factory=dict)
     #: The held-out population's people the cells met (reproduce.held_out_people: its population seed).
     held_out_people: int = 0
+    #: Whose families the held-out cells met (reproduce.held_out_population).
+    held_out_population: str = "held-out"
 
     def shares(self, world: str, obj: str, controller: str, source: str) -> dict[str, tuple[float, float, float]]:
         """The share of the oracle's benefit for force and for overshoot (:func:`~coassist.analysis.paired.gain_share`

@@ -36,6 +36,7 @@ from coassist.experiments.source_training import APPLICATION_SOURCE
 from coassist.robot.worlds import POINT_MASS
 from coassist.scenario.assistance import DEFAULT_INTENT
 from coassist.scenario.path_model import FEW_PATHS
+from coassist.scenario.populations import UNSEEN
 
 
 def shown(value: float, digits: int, bar: float | None = None, strict: bool = False, signed: bool = False) -> str:
@@ -125,6 +126,28 @@ HEADLINE = (
 )
 
 
+def held_out_caption(population: str, people: int) -> str:
+    """Who the held-out cells met, for their table's caption: the population (reproduce.held_out_population) and its
+    people (reproduce.held_out_people), with what was chosen while seeing them."""
+    if population == UNSEEN:
+        return (
+            f"the unseen population's people{f' of seed {people}' if people else ''}: operators of detour families "
+            "made after every choice of the person model and its evaluation (a lean the other way first, a return "
+            "that rings: docs/person-model.md), on trials of their own, point-mass world"
+        )
+    if people:
+        return (
+            f"the held-out population's people of seed {people}: operators of its detour families drawn anew, whom no "
+            "choice of the person model has seen (their families were: docs/person-model.md), on trials of their "
+            "own, point-mass world"
+        )
+    return (
+        "the held-out population: operators of detour families and arms the tuning populations lack, on trials of "
+        "their own (these operators were seen, on other trials, while the person model's lead check, its sign test "
+        "and its lock guard were chosen: docs/person-model.md), point-mass world"
+    )
+
+
 def headline_rows(result: AblationResult, world: str = POINT_MASS) -> tuple[str, list[str], list[list[Any]]]:
     """The report's first-screen table (issue 34): per object, MG and each headline source with the
     arbitrated controller: f_RMS and its share of the oracle's saving, overshoot past the intent per side
@@ -175,15 +198,7 @@ def headline_rows(result: AblationResult, world: str = POINT_MASS) -> tuple[str,
             )
     n = len(result.pairs.get((world, OBJECTS[0]), ()))
     who = (
-        (
-            "the held-out population: operators of detour families and arms the tuning populations lack, on trials of "
-            "their own (these operators were seen, on other trials, while the person model's lead check, its sign "
-            "test and its lock guard were chosen: docs/person-model.md), point-mass world"
-            if not result.held_out_people
-            else f"the held-out population's people of seed {result.held_out_people}: operators of its detour "
-            "families drawn anew, whom no choice of the person model has seen (their families were: "
-            "docs/person-model.md), on trials of their own, point-mass world"
-        )
+        held_out_caption(result.held_out_population, result.held_out_people)
         if world == HELD_OUT
         else "the MuJoCo UR5: each operator's first trials of the point-mass world, driven on the arm"
         if world == "mujoco"
@@ -478,7 +493,7 @@ def person_claims(result: AblationResult, source: str = "person") -> list[Claim]
             sh = result.shares(*key)
             (f, _, _), (o, o_lo, _) = sh["f_rms"], sh["overshoot"]
             r, m = result.metrics[key], result.mg[(world, obj)]
-            where = "held-out population" if world == HELD_OUT else f"{world} world"
+            where = f"{result.held_out_population} population" if world == HELD_OUT else f"{world} world"
             ok = all(np.isfinite(v) for v in (f, o, o_lo)) and f >= force_bar and o >= over_bar and o_lo >= lower_bar
             jerk = r["jerk_rms"] / m["jerk_rms"]
             text = (

@@ -18,6 +18,7 @@ from coassist.config import APPLICATION_PRESET, COLLECTION_PRESET
 from coassist.registry import Registry, unknown_name_message
 from coassist.robot.worlds import POINT_MASS
 from coassist.scenario.assistance import DEFAULT_INTENT
+from coassist.scenario.populations import REPORT_ONLY_POPULATIONS
 
 #: The learned intent sources a run may train (coassist.experiments.source_training.LEARNED's names).
 LEARNED_SOURCES = ("ridge", "ridge-intent", "lstm-tool", "lstm-hand-alone", "lstm-intent")
@@ -138,6 +139,10 @@ class ReproduceConfig:
     # settings were chosen while seeing (docs/person-model.md, "What the held-out cells were told"). Another seed
     # draws three new people of the same families, whom no choice has seen: `coassist reproduce --held-out-people N`.
     held_out_people: int = 0
+    # Whose families the held-out cells meet: "held-out" (Corrective, Hesitant; every report's) or "unseen" (Feint,
+    # Ringing: families made after every choice of the person model and its evaluation, report only). The cells'
+    # seeds are the same either way; only the people differ.
+    held_out_population: str = "held-out"
     # The sources the MuJoCo UR5 runs (empty: every source of the point-mass cells). The claims read the
     # application's source, the person model and every world's default without a calibration (present-held)
     # against MG there, and the LSTM and the oracle put them in context. The full and thesis presets run
@@ -207,6 +212,11 @@ class ReproduceConfig:
             raise ValueError(f"reproduce.held_out_trials must be an integer >= 0, got {self.held_out_trials!r}")
         if not is_integer(self.held_out_people) or self.held_out_people < 0:
             raise ValueError(f"reproduce.held_out_people must be an integer >= 0, got {self.held_out_people!r}")
+        if self.held_out_population not in REPORT_ONLY_POPULATIONS:
+            raise ValueError(
+                f"reproduce.held_out_population must be one of {REPORT_ONLY_POPULATIONS} (no population a setting "
+                f"is chosen on), got {self.held_out_population!r}"
+            )
         if self.ablation_mujoco_trials > self.application_trials:
             raise ValueError(
                 f"reproduce.ablation_mujoco_trials ({self.ablation_mujoco_trials}) must be <= "

@@ -124,13 +124,16 @@ def calibration_options(ws: Workspace, controller: str, seed: int | None = None,
 
 
 def population_options(cfg: ReproduceConfig, population: str) -> dict[str, Any]:
-    """The collection options (:meth:`Workspace.collect`) naming ``population``'s people: the held-out population's
-    are those of ``reproduce.held_out_people`` (its population seed); 0, and every other population, name none (the
-    options, and so the collections' keys, as before)."""
+    """The collection options (:meth:`Workspace.collect`) naming ``population``'s people: the held-out cells' are
+    ``reproduce.held_out_population``'s people of population seed ``reproduce.held_out_people``; the defaults
+    ("held-out", 0), and every other population, name the population alone (the options, and so the collections'
+    keys, as before)."""
     from coassist.scenario.populations import HELD_OUT
 
-    people = cfg.held_out_people if population == HELD_OUT else 0
-    return {"population": population, **({"population_seed": people} if people else {})}
+    if population != HELD_OUT:
+        return {"population": population}
+    people = cfg.held_out_people
+    return {"population": cfg.held_out_population, **({"population_seed": people} if people else {})}
 
 
 def _suffix(population: str) -> str:

@@ -46,6 +46,13 @@ to [0, 1] is the smoothstep, a the trial's anticipation [m]:
   f = (O − B) − o (B − C), O = Σ w_j S_j, B = Σ w'_j S'_j, C the correction; the return
   swings through by o·A. Its progress is made of sub-movements too (below).
 - :class:`Hesitant` (held out): the symmetric bump, and the progress hesitates at the onset.
+- :class:`Feint` (unseen): a lean the other way first, e·A over 2λa, ending half way up the rise
+  of the bump on the side taken: f = β(u) − e (S((u − u_l)/(λa)) − S((u − u_l − λa)/(λa))),
+  u_l = −P − a/2 − 2λa. The person starts round one side and goes round the other.
+- :class:`Ringing` (unseen): the return rings: from 1 through the path to −o, then to +o r,
+  −o r², … (n extremes, each r times the last), then onto the path, each stroke a smoothstep
+  between successive extremes, the first over a and the others over μa. n = 1 is the swing's
+  return.
 
 Progress
 --------
@@ -87,7 +94,9 @@ __all__ = [
     "Bump",
     "Corrective",
     "DetourFamily",
+    "Feint",
     "Hesitant",
+    "Ringing",
     "Skewed",
     "Swing",
     "Window",
@@ -457,6 +466,87 @@ class Hesitant(DetourFamily):
 
 
 @dataclass(frozen=True)
+class Feint(DetourFamily):
+    """A lean the other way, ``lean`` · A over 2 ``lean_ratio`` · the anticipation, before the bump on the side
+    taken (module docstring): the person starts round one side and goes round the other."""
+
+    name: ClassVar[str] = "feint"
+    kind: ClassVar[str] = "reversing"
+    lean: float = 0.2
+    lean_ratio: float = 1.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "lean", _num("Feint", "lean", self.lean, 0.0, 1.0))
+        object.__setattr__(self, "lean_ratio", _num("Feint", "lean_ratio", self.lean_ratio, 0.05, 10.0))
+
+    def trial(self, rng: np.random.Generator) -> Feint:
+        jit = rng.normal(0.0, self.jitter, 2)
+        return replace(
+            self,
+            lean=min(1.0, self.lean * float(np.exp(jit[0]))),
+            lean_ratio=min(10.0, self.lean_ratio * float(np.exp(jit[1]))),
+        )
+
+    def reach(self) -> tuple[float, float]:
+        return max(1.0, 0.5 + 2.0 * self.lean_ratio), 1.0
+
+    def profile(self, u: np.ndarray, plateau: float, anticipation: float) -> np.ndarray:
+        width = self.lean_ratio * anticipation
+        start = -plateau - 0.5 * anticipation - 2.0 * width
+        lean = smoothstep((u - start) / width) - smoothstep((u - start - width) / width)
+        return _bump(u, plateau, anticipation) - self.lean * lean
+
+
+@dataclass(frozen=True)
+class Ringing(DetourFamily):
+    """The return rings: through the path by ``overshoot`` · A, then ``swings`` − 1 more extremes each ``decay``
+    times the last, alternating sides, before it settles; the strokes after the first over ``swing_ratio`` · the
+    anticipation (module docstring)."""
+
+    name: ClassVar[str] = "ringing"
+    kind: ClassVar[str] = "reversing"
+    overshoot: float = 0.2
+    decay: float = 0.5
+    swings: int = 3
+    swing_ratio: float = 0.7
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "overshoot", _num("Ringing", "overshoot", self.overshoot, 0.0, 1.0))
+        object.__setattr__(self, "decay", _num("Ringing", "decay", self.decay, 0.0, 1.0))
+        object.__setattr__(self, "swings", check_int(self.swings, "Ringing.swings", 1, 10))
+        object.__setattr__(self, "swing_ratio", _num("Ringing", "swing_ratio", self.swing_ratio, 0.05, 20.0))
+
+    def trial(self, rng: np.random.Generator) -> Ringing:
+        jit = rng.normal(0.0, self.jitter, 3)
+        return replace(
+            self,
+            overshoot=min(1.0, self.overshoot * float(np.exp(jit[0]))),
+            decay=min(1.0, self.decay * float(np.exp(jit[1]))),
+            swing_ratio=self.swing_ratio * float(np.exp(jit[2])),
+        )
+
+    def reach(self) -> tuple[float, float]:
+        return 1.0, 1.0 + self.swings * self.swing_ratio
+
+    def extremes(self) -> np.ndarray:
+        """(swings + 2,) the return's levels: 1, −o, +o r, −o r², …, then 0 (the path)."""
+        k = np.arange(self.swings)
+        ringing = self.overshoot * (-1.0) ** (k + 1) * self.decay**k
+        return np.concatenate([[1.0], ringing, [0.0]])
+
+    def profile(self, u: np.ndarray, plateau: float, anticipation: float) -> np.ndarray:
+        levels = self.extremes()
+        back = np.full_like(u, levels[0])
+        start, length = plateau, anticipation
+        for k in range(1, len(levels)):
+            back = back + (levels[k] - levels[k - 1]) * smoothstep((u - start) / length)
+            start, length = start + length, self.swing_ratio * anticipation
+        return np.where(u < 0.0, _rise(u, plateau, anticipation), back)
+
+
+@dataclass(frozen=True)
 class Bump(DetourFamily):
     """The thesis' symmetric bump, f = β(u) = 1 − S((|u| − P)/a): in no population of
     :mod:`coassist.scenario.populations` (whose thesis population runs
@@ -474,7 +564,9 @@ class Bump(DetourFamily):
 
 
 #: The families by name.
-FAMILIES: dict[str, type[DetourFamily]] = {f.name: f for f in (Asymmetric, Skewed, Swing, Corrective, Hesitant, Bump)}
+FAMILIES: dict[str, type[DetourFamily]] = {
+    f.name: f for f in (Asymmetric, Skewed, Swing, Corrective, Hesitant, Feint, Ringing, Bump)
+}
 
 
 def family_from_extra(extra: dict) -> DetourFamily:

@@ -15,9 +15,14 @@ A population is chosen by name beside its seed (``TrialSpec.population`` /
   report: :class:`~coassist.scenario.detours.Corrective` (sub-movements in the path and the
   progress) and :class:`~coassist.scenario.detours.Hesitant` (the progress pauses at the
   onset). No family is in two populations (tests/scenario/test_populations.py).
+- ``unseen``: families of a third kind, made after every choice of the person model and its
+  evaluation had been made (2026-12-07), to report only (``coassist reproduce
+  --held-out-population unseen``): :class:`~coassist.scenario.detours.Feint` (a lean the other
+  way before going round) and :class:`~coassist.scenario.detours.Ringing` (a return that swings
+  through the path several times). No setting was chosen while reading them.
 
-In ``varied`` and ``held-out`` every user (0 too) is drawn from a Generator seeded by
-SeedSequence([population_seed, user_index, tag]) (tag 1 / 2: a stream of its own, apart from
+In ``varied``, ``held-out`` and ``unseen`` every user (0 too) is drawn from a Generator seeded by
+SeedSequence([population_seed, user_index, tag]) (tag 1 / 2 / 3: a stream of its own, apart from
 the thesis population's [population_seed, user_index]); user i's family is the population's
 family i mod (its number of families), so users 0…k−1 meet each family once. The name is
 "<population>-user-<i>". Spreads (log-uniform where "×", else uniform):
@@ -40,25 +45,38 @@ from collections.abc import Callable
 import numpy as np
 
 from coassist._checks import check_int
-from coassist.scenario.detours import Asymmetric, Corrective, DetourFamily, Hesitant, Skewed, Swing
+from coassist.scenario.detours import Asymmetric, Corrective, DetourFamily, Feint, Hesitant, Ringing, Skewed, Swing
 from coassist.scenario.operator import AUTHOR, OperatorProfile, operator_profile
 
-__all__ = ["FAMILY_RANGES", "HELD_OUT", "POPULATIONS", "POPULATION_FAMILIES", "population_profile"]
+__all__ = [
+    "FAMILY_RANGES",
+    "HELD_OUT",
+    "POPULATIONS",
+    "POPULATION_FAMILIES",
+    "REPORT_ONLY_POPULATIONS",
+    "UNSEEN",
+    "population_profile",
+]
 
 #: The population no setting is searched on, used only to report (docs/person-model.md, *What the held-out cells were
 #: told*, names the choices made while seeing its operators).
 HELD_OUT = "held-out"
+#: A population of families made after every choice was made, to report only (module docstring).
+UNSEEN = "unseen"
 #: The populations by name, in the order the help lists them.
-POPULATIONS = ("thesis", "varied", HELD_OUT)
+POPULATIONS = ("thesis", "varied", HELD_OUT, UNSEEN)
+#: The populations no setting is chosen on: a report's held-out cells meet one of them.
+REPORT_ONLY_POPULATIONS = (HELD_OUT, UNSEEN)
 
 #: Each drawn population's families (the thesis population's is the bump alone).
 POPULATION_FAMILIES: dict[str, tuple[type[DetourFamily], ...]] = {
     "varied": (Asymmetric, Skewed, Swing),
     "held-out": (Corrective, Hesitant),
+    "unseen": (Feint, Ringing),
 }
 
 #: The stream tag of each drawn population (SeedSequence([population_seed, user, tag])).
-_TAGS = {"varied": 1, "held-out": 2}
+_TAGS = {"varied": 1, "held-out": 2, "unseen": 3}
 
 #: What each family's person parameters are drawn from (module docstring): text for the docs,
 #: the draws themselves in :func:`_draw_family`.
@@ -73,6 +91,8 @@ FAMILY_RANGES = {
         "return_ratio 0.7–1.6 (×), 3–6 progress dips of depth 0.4–0.8 and width 0.3–0.6 s"
     ),
     "hesitant": "depth 0.6–1 (1: a pause), duration 0.3–1 s, delay 0–0.2 s after the onset",
+    "feint": "lean e 0.1–0.35 of the detour's amplitude, over 2λ anticipations, λ 0.5–1.5",
+    "ringing": "overshoot o 0.1–0.3, decay r 0.3–0.6, 2–4 swings, each stroke after the first 0.5–1 anticipations",
 }
 
 
@@ -113,6 +133,16 @@ def _draw_family(family: type[DetourFamily], rng: np.random.Generator) -> Detour
             depth=float(rng.uniform(0.6, 1.0)),
             duration=float(rng.uniform(0.3, 1.0)),
             delay=float(rng.uniform(0.0, 0.2)),
+        )
+    if family is Feint:
+        return Feint(jitter=jitter, lean=float(rng.uniform(0.1, 0.35)), lean_ratio=float(rng.uniform(0.5, 1.5)))
+    if family is Ringing:
+        return Ringing(
+            jitter=jitter,
+            overshoot=float(rng.uniform(0.1, 0.3)),
+            decay=float(rng.uniform(0.3, 0.6)),
+            swings=int(rng.integers(2, 5)),
+            swing_ratio=float(rng.uniform(0.5, 1.0)),
         )
     raise ValueError(f"no person draw for detour family {family.__name__}")
 
