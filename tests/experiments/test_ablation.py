@@ -346,6 +346,8 @@ def _default_result(gain_share: float, worlds=(("point-mass", "cooperative-arbit
 def test_the_defaults_claims_need_less_force_and_overshoot_than_mg_with_an_interval_and_on_each_side():
     """Issue 40's goal for every world's default: per cell where it ran, on both objects, both shares' bootstrap
     lower bounds above zero and no side with more overshoot than MG."""
+    from dataclasses import replace
+
     from coassist.experiments.ablation_report import DEFAULT_CELLS, default_claims
 
     cells = [(w, c) for w, c, _ in DEFAULT_CELLS]
@@ -353,6 +355,11 @@ def test_the_defaults_claims_need_less_force_and_overshoot_than_mg_with_an_inter
     assert [c.holds for c in claims] == [True] * len(DEFAULT_CELLS)
     assert all("force 40 % [40, 40]" in c.evidence and "right" in c.evidence for c in claims)
     assert "drive's default" in claims[0].text and "MuJoCo UR5" in claims[-1].text
+    assert claims[2].text.startswith("held-out population, the arbitrated game: without a calibration")
+    # the held-out cells of the families made after every choice say so (reproduce.held_out_population)
+    unseen = default_claims(replace(_default_result(0.4, cells), held_out_population="unseen"))
+    assert unseen[2].text.startswith("unseen population, the arbitrated game: without a calibration")
+    assert [c.text for i, c in enumerate(unseen) if i != 2] == [c.text for i, c in enumerate(claims) if i != 2]
     assert not default_claims(_default_result(0.0))[0].holds  # the same as MG: a lower bound of 0
     assert not default_claims(_default_result(-0.1))[0].holds  # worse than MG
     # less overshoot than MG in all (share and its lower bound > 0), but 0.1 mm more than MG on the left (+0.4 and

@@ -443,6 +443,8 @@ def default_claims(result: AblationResult, source: str = DEFAULT_INTENT) -> list
     with an interval), and on each side of the detour a paired overshoot difference from MG ≤ 0."""
     claims = []
     for world, controller, where in DEFAULT_CELLS:
+        if world == HELD_OUT:  # the population its cells met (reproduce.held_out_population)
+            where = where.replace("held-out population", f"{result.held_out_population} population")
         keys = [(world, obj, controller, source) for obj in OBJECTS]
         if not all(k in result.metrics for k in keys):
             continue
