@@ -242,7 +242,7 @@ def test_the_per_side_differences_of_a_cell_with_clusters_are_the_clusters_inter
 def test_the_person_models_claims_follow_issue_40s_bars():
     from dataclasses import replace
 
-    from coassist.experiments.ablation_report import held_out_caption, person_claims
+    from coassist.experiments.ablation_report import cell_name, held_out_caption, person_claims
 
     (good,) = person_claims(_result(0.9, 1.05))
     assert good.holds and "force 90 %" in good.evidence and "1.05× MG" in good.evidence
@@ -260,6 +260,8 @@ def test_the_person_models_claims_follow_issue_40s_bars():
     assert caption.startswith("the unseen population's people of seed 7: operators of detour families made after")
     assert "these operators were seen" in held_out_caption("held-out", 0)
     assert "people of seed 100" in held_out_caption("held-out", 100)
+    assert cell_name(unseen, "held-out") == "held-out (unseen population)" and cell_name(unseen, "mujoco") == "mujoco"
+    assert cell_name(_result(0.85, 1.5, world="held-out"), "held-out") == "held-out"
 
 
 def test_a_claims_figures_are_printed_on_their_side_of_its_bar():

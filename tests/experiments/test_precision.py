@@ -47,8 +47,9 @@ def test_bad_requests_name_what_is_wrong(tmp_path):
         compare_intents({"oracle-cooperative": "present"}, tmp_path)
     with pytest.raises(ValueError, match="'cooperative-damped', 'cooperative', got"):
         compare_intents({"a": "present"}, tmp_path, controllers={"a": "manual"})
-    with pytest.raises(ValueError, match="kept out of everything tuned"):  # the held-out population only reports
-        compare_intents({"a": "present"}, tmp_path, population="held-out")
+    for report_only in ("held-out", "unseen"):  # the populations that only report
+        with pytest.raises(ValueError, match="kept out of everything tuned"):
+            compare_intents({"a": "present"}, tmp_path, population=report_only)
     with pytest.raises(ValueError, match="population must be one of thesis, varied"):
         compare_intents({"a": "present"}, tmp_path, population="nobody")
     for bad in (0, 2.5):

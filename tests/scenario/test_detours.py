@@ -210,7 +210,7 @@ def test_ringing_swings_through_the_path_each_swing_decay_times_the_last():
     x_o = task.obstacle.center[0]
     last = x[np.flatnonzero(np.abs(d) > 1e-7)[-1]]
     assert last - x_o == pytest.approx(0.05 + 0.06 * (1 + 3 * mu), abs=1e-3)
-    # one swing is the swing family's return (its settle ratio μ)
+    # one swing is the swing family's return (its settle ratio μ), up to the rounding of its other sum (a few ulp of 1)
     u = np.linspace(-0.3, 0.4, 2001)
     np.testing.assert_allclose(
         Ringing(overshoot=o, swings=1, swing_ratio=mu).profile(u, 0.05, 0.06),
@@ -218,6 +218,22 @@ def test_ringing_swings_through_the_path_each_swing_decay_times_the_last():
         rtol=0.0,
         atol=1e-15,
     )
+
+
+def test_every_familys_profile_is_exactly_0_outside_its_reach_and_not_just_inside():
+    """f = 0 exactly before −P − k_b a and after P + k_a a (:meth:`DetourFamily.reach`): the path is the plan's there,
+    to the last bit (where the operator's onset and the target are read); and the detour does reach both ends."""
+    P, a = 0.05, 0.06
+    families = [population_profile(pop, u, 3).detour.trial(np.random.default_rng(u)) for pop, u in PEOPLE]
+    for family in [*families, Bump()]:
+        k_b, k_a = family.reach()
+        lo, hi = -P - k_b * a, P + k_a * a
+        # strictly outside (at the ends themselves a stroke's unit time may round to just under 1)
+        outside = np.concatenate([np.linspace(lo - 0.5, lo - 1e-6, 200), np.linspace(hi + 1e-6, hi + 3.0, 600)])
+        f_out = family.profile(outside, P, a)
+        assert not np.any(f_out), (family, outside[np.flatnonzero(f_out)[:3]])
+        inside = np.array([lo + 0.02 * a, hi - 0.02 * a])
+        assert np.all(family.profile(inside, P, a) != 0.0), family
 
 
 def _arc(positions):

@@ -215,7 +215,7 @@ def reproduce(
     ),
     held_out_people: int = typer.Option(
         None,
-        help="Which people of the held-out population the report meets: its population seed (default 0, the "
+        help="Which people of the held-out cells' population the report meets: its population seed (default 0, the "
         "operators every report has met; another draws new people of its families, whom no choice has seen).",
     ),
     held_out_population: str = typer.Option(

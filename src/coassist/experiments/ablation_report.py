@@ -126,6 +126,14 @@ HEADLINE = (
 )
 
 
+def cell_name(result: AblationResult, world: str) -> str:
+    """A cell world's name in the report: the held-out cells' with their population where it is not the held-out one
+    (reproduce.held_out_population)."""
+    if world == HELD_OUT and result.held_out_population != HELD_OUT:
+        return f"{world} ({result.held_out_population} population)"
+    return world
+
+
 def held_out_caption(population: str, people: int) -> str:
     """Who the held-out cells met, for their table's caption: the population (reproduce.held_out_population) and its
     people (reproduce.held_out_people), with what was chosen while seeing them."""
@@ -260,7 +268,8 @@ def ablation_section(result: AblationResult) -> Section:
         # the calibrations the cells' trials ran with (a run may fit more than its trials meet: the report had said
         # "calibrated that many times" of the ones met; a review, 2026-12-07)
         where = ", ".join(
-            f"{w} (trials ran with {k} calibration{'s' if k != 1 else ''} of each operator)" for w, k in drawn
+            f"{cell_name(result, w)} (trials ran with {k} calibration{'s' if k != 1 else ''} of each operator)"
+            for w, k in drawn
         )
         s.paragraphs.append(
             f"The person model's cells of {where}: each calibration on the operator's own probe trials, their trials "
@@ -269,7 +278,7 @@ def ablation_section(result: AblationResult) -> Section:
             "trials'. Their per-side differences from MG too: a t interval over those clusters (cluster-robust, "
             "G − 1 degrees of freedom), not over the trials."
         )
-    asked = asked_in_calibrations(result.models)
+    asked = asked_in_calibrations(result.models, result.held_out_population)
     if asked:
         s.paragraphs.append(
             "Where an operator's probe trials showed a way round in fewer than "
@@ -340,7 +349,7 @@ def ablation_section(result: AblationResult) -> Section:
             n = len(result.pairs[(world, OBJECTS[0])])
             s.tables.append(
                 (
-                    f"{world} world, {n} paired trials per cell: f_RMS [N], σ [mm], overshoot past the intent [mm] (paired "
+                    f"{cell_name(result, world)} world, {n} paired trials per cell: f_RMS [N], σ [mm], overshoot past the intent [mm] (paired "
                     "difference from MG, 95 % interval), the same per side of the detour, the clearance deficit per side [mm], "
                     "jerk RMS [m/s³], peak robot/hand effort, share of the oracle's benefit",
                     [
@@ -412,9 +421,9 @@ DEFAULT_CELLS = (
 )
 
 
-def asked_in_calibrations(models: dict[str, str]) -> dict[str, tuple[int, int, int]]:
-    """Per person-model folder of ``models`` whose calibrations asked for a way (point-mass world, held-out
-    population, MuJoCo UR5):
+def asked_in_calibrations(models: dict[str, str], population: str = HELD_OUT) -> dict[str, tuple[int, int, int]]:
+    """Per person-model folder of ``models`` whose calibrations asked for a way (point-mass world, the held-out
+    cells' ``population``, MuJoCo UR5):
     :func:`~coassist.scenario.calibration_draws.asked_paths`; a folder no longer there is left out."""
     from pathlib import Path
 
@@ -424,7 +433,7 @@ def asked_in_calibrations(models: dict[str, str]) -> dict[str, tuple[int, int, i
     out = {}
     for label, where in (
         ("person", "point-mass world"),
-        (HELD_OUT_PERSON, "held-out population"),
+        (HELD_OUT_PERSON, f"{population} population"),
         (MUJOCO_PERSON, "MuJoCo UR5"),
     ):
         folder = Path(models.get(label, ""))

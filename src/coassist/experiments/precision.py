@@ -69,7 +69,7 @@ def compare_intents(
     MG and the oracle on the same trials (the arbitrated controller's; also the plain game's where a source runs
     with it: a share is measured against the oracle of its own controller, the damped one's against the arbitrated).
     ``population``: the simulated operators (:data:`TUNING_POPULATIONS`: the thesis population or ``varied``, the
-    in-family one to tune on; never ``held-out``, which only the report runs). ``probe_trials``: each operator's
+    in-family one to tune on; never ``held-out`` nor ``unseen``, which only the report runs). ``probe_trials``: each operator's
     probe trials per calibration draw for ``person`` (default the main job's ``person_calibration_trials``);
     ``asked_trials``: the most trials each calibration then asks of an operator for a way round shown too seldom
     (default the main job's ``person_calibration_asked``). Datasets

@@ -137,7 +137,8 @@ class ReproduceConfig:
     # Which people of the held-out population the report meets: its population seed (scenario.populations). 0, the
     # default: the three operators every report so far has met, whose families and arms three of the person model's
     # settings were chosen while seeing (docs/person-model.md, "What the held-out cells were told"). Another seed
-    # draws three new people of the same families, whom no choice has seen: `coassist reproduce --held-out-people N`.
+    # draws three new people of the same families, whom no choice has seen: `coassist reproduce --held-out-people N`
+    # (the population seed of held_out_population's people, below).
     held_out_people: int = 0
     # Whose families the held-out cells meet: "held-out" (Corrective, Hesitant; every report's) or "unseen" (Feint,
     # Ringing: families made after every choice of the person model and its evaluation, report only). The cells'

@@ -177,7 +177,8 @@ def _num(owner: str, name: str, value: object, lo: float, hi: float = math.inf, 
 class DetourFamily:
     """One person's way round the obstacle (module docstring). Subclasses set ``name``, ``kind``
     ("shape": one smooth stroke out and back, the progress one re-plan; "segmented": sub-movements
-    or hesitation in the progress) and the profile f.
+    or hesitation in the progress; "reversing": a lean the other way first, or a return that rings)
+    and the profile f.
 
     jitter : trial-to-trial standard deviation (relative, log-normal) of the family's own
         parameters, drawn by :meth:`trial` after the operator's side, pace and shape.
@@ -524,7 +525,7 @@ class Ringing(DetourFamily):
             self,
             overshoot=min(1.0, self.overshoot * float(np.exp(jit[0]))),
             decay=min(1.0, self.decay * float(np.exp(jit[1]))),
-            swing_ratio=self.swing_ratio * float(np.exp(jit[2])),
+            swing_ratio=min(20.0, self.swing_ratio * float(np.exp(jit[2]))),
         )
 
     def reach(self) -> tuple[float, float]:
@@ -543,6 +544,8 @@ class Ringing(DetourFamily):
         for k in range(1, len(levels)):
             back = back + (levels[k] - levels[k - 1]) * smoothstep((u - start) / length)
             start, length = start + length, self.swing_ratio * anticipation
+        # on the path from the last stroke's end: the sum of the strokes' steps leaves a rounding there (~1e-16)
+        back = np.where(u >= start, 0.0, back)
         return np.where(u < 0.0, _rise(u, plateau, anticipation), back)
 
 
