@@ -16,6 +16,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -84,3 +85,35 @@ def test_trials_come_back_from_a_worker_through_shared_memory_bit_for_bit_and_ch
     # through the folder, and 0.92-1.01x with the folder's path switched off (both ways inline: what the bar must
     # catch); 1.4x leaves room for load and the CPU clock's 10 ms ticks
     assert result["ratios"]["parent_cpu"] >= 1.4, result
+
+
+def test_the_twins_fidelity_rebuilds_the_simulated_person_a_trial_recorded_bit_for_bit():
+    # benchmarks/twin_fidelity.py runs the person a calibration trial recorded (their profile and task, rebuilt from the
+    # trial's metadata) in place of the twin: rebuilt, the same controller and seed give the recorded trial again
+    import importlib.util
+
+    from coassist.control.presets import get_preset, make_controller
+    from coassist.scenario.objects import get_object
+    from coassist.scenario.populations import population_profile
+    from coassist.scenario.tasks import task_for_seed
+    from coassist.sim.trial_runner import run_trial
+
+    spec = importlib.util.spec_from_file_location("twin_fidelity", ROOT / "benchmarks" / "twin_fidelity.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    preset = get_preset("thesis-application-damped")
+    for population, user in (("unseen", 1), ("held-out", 2), ("thesis", 1)):
+        profile = population_profile(population, user)
+        task = task_for_seed("curved", 880001, obstacle="large")
+
+        def run(profile, task):
+            ctrl = make_controller("manual-probe", preset)
+            return run_trial(task, profile, get_object("handle"), ctrl, None, 880001, preset_name=preset.name)
+
+        trial = run(profile, task)
+        assert bench.profile_of(trial) == profile
+        rebuilt = bench.task_of(trial)
+        assert rebuilt.to_extra() == task.to_extra()
+        again = run(bench.profile_of(trial), rebuilt)
+        np.testing.assert_array_equal(again.pose, trial.pose)
+        np.testing.assert_array_equal(again.intent, trial.intent)

@@ -53,6 +53,7 @@ from coassist.sim.trial_runner import build_trial, run_episodes_lockstep
 __all__ = [
     "SIGN_LEVEL",
     "TWIN_CONTROLLER",
+    "TWIN_HORIZON",
     "TWIN_OBJECT",
     "TwinArm",
     "TwinArmBatch",
