@@ -2,8 +2,10 @@
 
     .venv/bin/python benchmarks/twin_fidelity.py RUN [--cells held-out] [--cutoffs 1.5,3,6] [--draws 4]
 
-RUN is a ``coassist reproduce`` output folder. For each calibration draw of the cells named (``thesis``: the
-thesis cells' calibrations, ``held-out``: the held-out cells', of whichever population the run drew there) and each
+RUN is a ``coassist reproduce`` output folder, or a base folder of ``coassist compare-intents --source
+person=person`` (``OUT/base-<seed>``). For each calibration draw of the cells named (``thesis``: the thesis cells'
+calibrations, ``held-out``: the held-out cells', of whichever population the run drew there, ``varied``: a comparison's
+on the varied population) and each
 person in it, every fold of the twin check (:func:`coassist.sim.person_twin.lead_check`: each chosen-way trial
 replayed with the model of the person's other trials, under MG and with the lead, carrying the twin's object) is
 run three ways:
@@ -58,7 +60,11 @@ from coassist.sim.person_twin import (  # noqa: E402
 from coassist.sim.trial_runner import build_trial, run_episodes_lockstep  # noqa: E402
 
 #: The calibration datasets' names in a run, per cells (draw k > 0 adds ``-draw<k>``; asked trials ``-ask-…``).
-CALIBRATIONS = {"thesis": "calibration-probe", "held-out": "calibration-probe-held-out"}
+CALIBRATIONS = {
+    "thesis": "calibration-probe",
+    "held-out": "calibration-probe-held-out",
+    "varied": "calibration-probe-varied",
+}
 
 
 def profile_of(trial) -> OperatorProfile:
