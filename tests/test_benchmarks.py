@@ -5,7 +5,8 @@ tick in parts): it timed no tick and failed on an empty array; and its naive con
 per-process copy of a game built once, so the naive tick rebuilt nothing and was as fast as coassist's (0.119 against
 0.103 ms). Run small, it must time every tick the loop ran and find the naive tick, which builds the game anew every
 tick (2.0 ms against 0.1 ms measured: 13-21x), several times slower. ``benchmarks/bench_mujoco_arms.py`` measures a
-saving only where its arms stepped together are its worlds, bit for bit.
+saving only where its arms stepped together are its worlds, bit for bit. ``benchmarks/twin_fidelity.py`` stands the
+simulated person a trial recorded in for the twin: rebuilt from the trial's record, they must give that trial again.
 """
 
 from __future__ import annotations
