@@ -97,7 +97,7 @@ def task_of(trial):
     return task
 
 
-def person_overshoots(trials, chosen, models, user) -> tuple[np.ndarray, np.ndarray]:
+def person_overshoots(trials, chosen, models) -> tuple[np.ndarray, np.ndarray]:
     """The simulated person themself on each chosen trial's task and seed, under MG and with the fold's model
     (``models[i]``): overshoot past their true intent [mm], (lead, MG)."""
     builds = []
@@ -156,8 +156,11 @@ def fidelity(run: Path, cells: str, cutoffs: list[float], draws: int) -> list[di
                 led, mg = [], []
                 for i, model in zip(chosen, models):
                     q = intent_of(own[i])
-                    mg.append(1000.0 * twin_overshoot(own[i], q, fit.arm, None))
-                    led.append(1000.0 * twin_overshoot(own[i], q, fit.arm, model))
+                    pair = [twin_overshoot(own[i], q, fit.arm, source) for source in (None, model)]
+                    if None in pair:  # a plan the twin cannot rebuild: the check itself leaves such a person led
+                        raise SystemExit(f"{user}, draw {k}: trial {i + 1} cannot be replayed by the twin")
+                    mg.append(1000.0 * pair[0])
+                    led.append(1000.0 * pair[1])
                 check = lead_verdict(np.asarray(led), np.asarray(mg))
                 row[label] = {
                     "led": float(np.mean(led)),
@@ -165,7 +168,7 @@ def fidelity(run: Path, cells: str, cutoffs: list[float], draws: int) -> list[di
                     "worse": check.worse,
                     "follow": check.follow,
                 }
-            led, mg = person_overshoots(own, chosen, models, user)
+            led, mg = person_overshoots(own, chosen, models)
             row["the person"] = {"led": float(led.mean()), "mg": float(mg.mean()), "worse": int(np.sum(led > mg))}
             rows.append(row)
             print(
