@@ -88,12 +88,14 @@ def test_trials_come_back_from_a_worker_through_shared_memory_bit_for_bit_and_ch
     assert result["ratios"]["parent_cpu"] >= 1.4, result
 
 
-def test_the_twins_fidelity_rebuilds_the_simulated_person_a_trial_recorded_bit_for_bit():
+def test_the_twins_fidelity_rebuilds_the_simulated_person_a_trial_recorded_bit_for_bit(tmp_path):
     # benchmarks/twin_fidelity.py runs the person a calibration trial recorded (their profile and task, rebuilt from the
-    # trial's metadata) in place of the twin: rebuilt, the same controller and seed give the recorded trial again
+    # trial's metadata as a run's dataset holds it: written and read back) in place of the twin: rebuilt, the same
+    # controller and seed give the recorded trial again
     import importlib.util
 
     from coassist.control.presets import get_preset, make_controller
+    from coassist.data.trial_file import read_trial, write_trial
     from coassist.scenario.objects import get_object
     from coassist.scenario.populations import population_profile
     from coassist.scenario.tasks import task_for_seed
@@ -111,7 +113,7 @@ def test_the_twins_fidelity_rebuilds_the_simulated_person_a_trial_recorded_bit_f
             ctrl = make_controller("manual-probe", preset)
             return run_trial(task, profile, get_object("handle"), ctrl, None, 880001, preset_name=preset.name)
 
-        trial = run(profile, task)
+        trial = read_trial(write_trial(run(profile, task), tmp_path / f"{population}.parquet"))
         assert bench.profile_of(trial) == profile
         rebuilt = bench.task_of(trial)
         assert rebuilt.to_extra() == task.to_extra()
