@@ -107,6 +107,37 @@ def test_the_way_is_found_soon_after_the_detour_starts_and_the_rows_follow_it(am
     assert np.max(error) < 5e-3 and np.median(error) < 2e-3
 
 
+def _feint(way, amplitude=0.08, lean=0.3):
+    """A path round the bump at 0.5 on ``way`` (+1 left) that first leans the other way (a feint: ``lean`` of the
+    amplitude, at 0.25 of the plan, back on the plan before the detour starts)."""
+    path = _bump(0.5, way * amplitude)
+    path[:, 1] += _bump(0.25, -way * lean * amplitude, width=0.06)[:, 1]
+    return path
+
+
+@pytest.mark.parametrize("rule", ["offset", "onset"])
+@pytest.mark.parametrize("way", [1, -1], ids=["left", "right"])
+def test_a_person_who_feints_is_read_by_the_side_their_own_paths_lie_on(way, rule):
+    # a person whose every path leans the wrong way before going round (left paths lean right first, right paths
+    # left): with side_orientation the lean is evidence for the way their paths lean there, so the way they take is
+    # decided at the lean and never the other; without it an offset to the left is evidence for the left way, and the
+    # lean decides the wrong one first (the rows then pull the tool the wrong way until the person's detour undoes it)
+    demos = [_feint(1) for _ in range(3)] + [_feint(-1) for _ in range(2)]
+    model = fit_path_model(NOMINAL, demos, noise=0.001)
+    intent = _walk(_feint(way))
+    lean = int(np.argmax(np.abs(intent[:, 1]) > 0.002))  # the lean leaves the plan by 2 mm
+    sides = {}
+    for oriented in (False, True):
+        st = PersonFilterSettings(side_orientation=oriented, side_rule=rule)
+        src = PersonPathsIntent(paths={"u": model}, arms={"u": ARM}, settings=st)
+        src.reset(_context())
+        sides[oriented] = _scripted(src, intent)[0]
+    assert (sides[False] == -way).any()  # the lean, read as a way, decided the wrong one
+    assert not (sides[True] == -way).any()
+    decided = int(np.argmax(sides[True] == way))
+    assert (sides[True][decided:] == way).all() and (decided - lean) * DT < 0.5  # at the lean, and it stays
+
+
 def test_a_person_who_goes_straight_gets_no_detour_and_no_single_tick_decides():
     src = PersonPathsIntent(paths={"u": _model(left=(0.5,) * 4, right=(0.5,))}, arms={"u": ARM})
     src.reset(_context())

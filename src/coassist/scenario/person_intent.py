@@ -28,7 +28,9 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    plan when each way's offset there is anywhere between the plan and its mean path (how far into the
    detour the person is, unknown: :func:`onset_log_ratio`), counted only where the ways' mean paths are
    ``evidence_gap`` apart: a person still on the plan where their demonstrations had already left it
-   says nothing about the way;
+   says nothing about the way. With ``side_orientation`` the offset counts toward the way whose mean path lies on
+   its side there, not the left way wherever it is to the left: a person who leans the wrong way before going round
+   (the left way's paths right of the right way's there) is read by their own paths;
 4. **rows**: once |log-odds| > ``decide`` the rows run along the decided way's likeliest curves
    (at most :data:`MIXTURE`, weighted) from their present estimates at the tool's speed along
    them (on a way nobody took, with ``follow_mirror`` off, the present estimate's rows instead); while
@@ -129,6 +131,11 @@ class PersonFilterSettings:
     min_way_paths : a way round shown at least once but in fewer of the calibration's paths than this gives the
         present estimate's rows, as a way nobody took does with ``follow_mirror`` off (a way nobody took is left to
         ``follow_mirror``; 1: every way shown at least once is followed).
+    side_orientation : with the "offset" and "onset" rules, read the present estimate's offset as evidence for the way
+        whose mean path lies on that side of the other's at this point of the plan (True), or for the left way wherever
+        the offset is to the left (False). The two differ only where the left way's mean path lies right of the right
+        way's: a person whose paths lean the wrong way before going round (a feint), whose lean read as left-is-left
+        decided the way they were not taking.
     """
 
     kappa: float = 0.2
@@ -161,6 +168,7 @@ class PersonFilterSettings:
     hedge_leaving: float = 1.0
     pace_time: float = 0.0
     min_way_paths: int = 1
+    side_orientation: bool = False
 
     def __post_init__(self) -> None:
         for name, lo, hi, open_lo in (
@@ -195,7 +203,7 @@ class PersonFilterSettings:
         object.__setattr__(
             self, "min_way_paths", check_int(self.min_way_paths, "PersonFilterSettings.min_way_paths", 1, 100)
         )
-        for flag in ("object_yaw", "follow_mirror", "hedge_lateral"):
+        for flag in ("object_yaw", "follow_mirror", "hedge_lateral", "side_orientation"):
             if not isinstance(getattr(self, flag), bool):
                 raise ValueError(f"PersonFilterSettings.{flag} must be true or false, got {getattr(self, flag)!r}")
         if self.side_rule not in ("offset", "mixture", "onset"):
@@ -321,6 +329,11 @@ class _Curves:
         self.nominal_list = self.nominal_points.tolist()
         self.normal_list = self.nominal_normals.tolist()
         self.gap_list = self.gap.tolist()
+        # which side of the other way's mean path the left way's lies at each point of the plan: +1 left, −1 where
+        # it lies right of it (a person who leans the wrong way before going round: a feint)
+        self.way_sign_list = (
+            np.where(mean[1] - mean[-1] < 0.0, -1.0, 1.0) if len(mean) == 2 else np.ones(len(s))
+        ).tolist()
 
     def along(self, n: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Points of curves n (k,) at their own arc lengths s (k, H), clipped to each curve: (k, H, 2). One
@@ -654,6 +667,8 @@ class PersonPathsIntent:
                 # proportion to how far the ways are apart here: staying on the line is no evidence against
                 # a way that would have left it already (its detour may come later this time)
                 off = z - self._bias
+                if st.side_orientation:
+                    off *= hyp.way_sign_list[k]  # toward the way whose mean path lies on that side here
                 off = math.copysign(max(abs(off) - self._dead_zone, 0.0), off)
                 if st.side_rule == "onset":
                     gain = self._kappa * onset_log_ratio(off, 0.5 * D, self._noise)

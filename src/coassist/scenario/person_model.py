@@ -109,6 +109,12 @@ PERSON_MODEL_FILE = "person-model.json"
 #: force for jerk and a longer low-pass jerk and overshoot for force; together, on the same eight cells against 0.06 /
 #: 0.06 s, overshoot −0.139 [−0.283, +0.006] mm, hand force −0.051 [−0.065, −0.037] N, jerk −0.029 [−0.036, −0.021]
 #: m/s³, every cell's force share 87–96 % (docs/person-model.md, "The lead and the rows' low-pass together").
+#: The side evidence reads an offset toward the way whose mean path lies on that side of the other's there
+#: (side_orientation): a person whose paths lean the wrong way before going round (the unseen population's feint) had
+#: their lean read as the other way, decided in every one of eight replayed calibration folds and undone some 2 s
+#: later. On the eight cells every trial is the same to the last bit (no tuning person's ways cross where the evidence
+#: counts), so the cells could not choose it: it was found on the unseen population (docs/person-model.md, "A person
+#: who feints").
 PERSON_FILTER = PersonFilterSettings(
     blend_time=0.05,
     hedge_leaving=0.5,
@@ -121,6 +127,7 @@ PERSON_FILTER = PersonFilterSettings(
     hedge_lateral=False,
     dead_zone_noise=3.0,
     residual_time=0.2,
+    side_orientation=True,
 )
 _FORMAT = "coassist-person-model-2"
 #: The formats :func:`read_person_model` reads: the current, and ``-1`` (written before a check kept ``worse``: its
