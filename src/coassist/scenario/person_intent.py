@@ -321,19 +321,18 @@ class _Curves:
             w: np.exp(self.log_prior[i] - np.logaddexp.reduce(self.log_prior[i])) @ self.offsets[i]
             for w, i in self.on_way.items()
         }
-        # how far apart the ways' (prior-weighted) mean paths are at each point of the plan [m]
-        self.gap = np.abs(mean[1] - mean[-1]) if len(mean) == 2 else np.abs(next(iter(mean.values())))
+        # how far apart the ways' (prior-weighted) mean paths are at each point of the plan [m], and which side of the
+        # right way's the left way's lies: +1 left, −1 where it lies right of it (a person who leans the wrong way
+        # before going round: a feint)
+        apart = mean[1] - mean[-1] if len(mean) == 2 else next(iter(mean.values()))
+        self.gap = np.abs(apart)
         # the way taken is settled once the tool passes the place where the ways are furthest apart
         self.peak = int(np.argmax(self.gap))
         # the plan's grid as Python floats, for the tick's scalar arithmetic on one point of it
         self.nominal_list = self.nominal_points.tolist()
         self.normal_list = self.nominal_normals.tolist()
         self.gap_list = self.gap.tolist()
-        # which side of the other way's mean path the left way's lies at each point of the plan: +1 left, −1 where
-        # it lies right of it (a person who leans the wrong way before going round: a feint)
-        self.way_sign_list = (
-            np.where(mean[1] - mean[-1] < 0.0, -1.0, 1.0) if len(mean) == 2 else np.ones(len(s))
-        ).tolist()
+        self.way_sign_list = np.where(apart < 0.0, -1.0, 1.0).tolist()  # read by the side evidence of two ways only
 
     def along(self, n: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Points of curves n (k,) at their own arc lengths s (k, H), clipped to each curve: (k, H, 2). One
