@@ -585,3 +585,55 @@ def test_another_plan_whose_points_lie_on_the_models_gets_the_present_estimate()
         src = PersonPathsIntent(paths={"u": model}, arms={"u": ARM})
         src.reset(_context(path=plan))
         assert src.on_curves is used
+
+
+def test_the_curves_likelihoods_forget_at_the_memorys_rate():
+    # likelihood_memory τ_m: each curve's log-likelihood is the sum of its ticks' terms, each weighted by
+    # e^(−age·dt/τ_m), less its way's best (a constant per way, which the weights do not see). The terms are those of
+    # the same trial without the memory (whose log-likelihoods sum them unweighted: their tick-to-tick changes, up to a
+    # constant per way); the way's evidence does not read the likelihoods, and with no lateral bias (which is learnt
+    # while the rows follow a way, and so reads them) both runs see the same ticks. A curve once at the floor of −60 in
+    # either run (clipped there) is left out from then on
+    tau = 0.3
+    intent = _walk(_bump(0.5, 0.08))
+    srcs = []
+    for memory in (0.0, tau):
+        src = PersonPathsIntent(
+            paths={"u": _model()},
+            arms={"u": ARM},
+            settings=PersonFilterSettings(likelihood_memory=memory, bias_limit=0.0),
+        )
+        src.reset(_context())
+        srcs.append(src)
+    hyp = srcs[0]._hyp
+    decay = np.exp(-DT / tau)
+    summed = np.zeros(len(hyp.ways))
+    before = [src._loglik.copy() for src in srcs]
+    clipped = np.zeros(len(hyp.ways), dtype=bool)
+    checked = 0
+    for k in range(len(intent)):
+        for src in srcs:
+            _tick(src, intent, k)
+        plain, kept = srcs[0]._loglik, srcs[1]._loglik
+        assert srcs[0].side == srcs[1].side
+        clipped |= (plain <= -60.0) | (kept <= -60.0)
+        for way in hyp.on_way:
+            part = hyp.way_slice[way]
+            step = plain[part] - before[0][part]
+            q = srcs[0]._q[hyp.by_way[part]]  # the way's curves' present estimates this tick (the same in both runs)
+            if np.max(np.sum((q - q.mean(axis=0)) ** 2, axis=1)) < src.settings.divergence**2:
+                # the way's curves were not apart: neither run's likelihoods moved
+                assert not step.any() and (kept[part] == before[1][part]).all()
+                continue
+            summed[part] = decay * summed[part] + step
+            top = int(np.argmax(kept[part]))
+            keep = ~clipped[part]
+            if keep[top] and keep.sum() >= 2:
+                want = summed[part] - summed[part][top]
+                np.testing.assert_allclose(kept[part][keep], want[keep], atol=1e-9 * (1.0 + np.abs(want[keep]).max()))
+                checked += 1
+        before = [plain.copy(), kept.copy()]
+    assert checked > 200
+    # and it forgets: without the memory the likelihoods keep what the trial showed early on; with it they are bounded
+    # by about τ_m's worth of ticks
+    assert np.ptp(srcs[1]._loglik) < np.ptp(srcs[0]._loglik)

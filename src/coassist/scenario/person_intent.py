@@ -20,7 +20,8 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    curve's present estimate qₙ = Cₙ(sₙ + ℓₙ) with the lead ℓₙ = tₙ·(w + m a + Ĉ v)/K̂ along it;
 3. **evidence**: each curve's log-likelihood grows by −κ‖q − b − qₙ‖²/(2σ²) (σ the present estimate's
    noise measured in the calibration; κ discounts the correlation of successive ticks; b the
-   lateral bias learnt on the shared path, as in ``paths``). The ways' log-odds move with the
+   lateral bias learnt on the shared path, as in ``paths``; with ``likelihood_memory`` τ_m the sum forgets at the rate
+   1/τ_m). The ways' log-odds move with the
    change of their marginal log-likelihoods log Σₙ πₙ exp(ℓₙ) per way, at most ``evidence_rate``·dt
    per tick, from the ways' prior (bounded to ``prior_share`` of ``decide``: a habit never decides
    alone), until the tool passes the place where the ways are furthest apart. With ``side_rule``
@@ -136,6 +137,10 @@ class PersonFilterSettings:
         the offset is to the left (False). The two differ only where the left way's mean path lies right of the right
         way's: a person whose paths lean the wrong way before going round (a feint), whose lean read as left-is-left
         decided the way they were not taking.
+    likelihood_memory : [s] τ_m. 0: each curve's log-likelihood sums the evidence of the whole trial (step 3). > 0:
+        it forgets at the rate 1/τ_m (ℓₙ ← e^(−dt/τ_m)·ℓₙ − the tick's term, where the way's curves are apart): a
+        person whose trial follows one demonstration on the way out and another on the way back (a return that rings
+        as some trials rang) is read by what they did in the last τ_m or so.
     """
 
     kappa: float = 0.2
@@ -169,6 +174,7 @@ class PersonFilterSettings:
     pace_time: float = 0.0
     min_way_paths: int = 1
     side_orientation: bool = False
+    likelihood_memory: float = 0.0
 
     def __post_init__(self) -> None:
         for name, lo, hi, open_lo in (
@@ -196,6 +202,7 @@ class PersonFilterSettings:
             ("evidence_gap", 0.0, 0.1, False),
             ("hedge_leaving", 0.0, 1.0, False),
             ("pace_time", 0.0, 5.0, False),
+            ("likelihood_memory", 0.0, 60.0, False),
         ):
             object.__setattr__(
                 self, name, check_real(getattr(self, name), f"PersonFilterSettings.{name}", lo, hi, open_lo=open_lo)
@@ -496,6 +503,7 @@ class PersonPathsIntent:
             self._nominal_at = 0
             self._nominal_window = max(2, int(math.ceil(st.search_window / hyp.nominal_step)))
             self._loglik = np.zeros(n)  # in the order of hyp.by_way
+            self._memory = math.exp(-self.dt / st.likelihood_memory) if st.likelihood_memory > 0.0 else 1.0
             self._q = np.zeros((n + 1, 2))  # the curves' present estimates, and a row of zeros (hyp.way_padded)
             self._two = len(hyp.on_way) == 2
             bound = st.prior_share * st.decide
@@ -693,7 +701,11 @@ class PersonPathsIntent:
             ll -= np.minimum.reduceat(ll, starts).take(ranks)
             ll *= self._kappa
             ll /= self._two_noise2
-            np.subtract(loglik, ll, out=ll)
+            if self._memory < 1.0:  # the evidence of long ago fades (likelihood_memory)
+                ll -= self._memory * loglik
+                np.negative(ll, out=ll)
+            else:
+                np.subtract(loglik, ll, out=ll)
             ll -= np.maximum.reduceat(ll, starts).take(ranks)
             if all(apart):
                 self._loglik = loglik = ll

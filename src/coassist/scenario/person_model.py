@@ -114,7 +114,10 @@ PERSON_MODEL_FILE = "person-model.json"
 #: their lean read as the other way, decided in every one of eight replayed calibration folds and undone some 2 s
 #: later. On the eight cells every trial is the same to the last bit (no tuning person's ways cross where the evidence
 #: counts), so the cells could not choose it: it was found on the unseen population (docs/person-model.md, "A person
-#: who feints").
+#: who feints"). The curves' log-likelihoods forget over likelihood_memory = 1.5 s: on the eight cells, against the
+#: whole trial's, overshoot +0.005 [−0.040, +0.050] mm, hand force −0.013 [−0.018, −0.008] N, jerk −0.003 [−0.006,
+#: −0.001] m/s³; 0.3 and 0.5 s saved more force and cost overshoot beyond their intervals (+0.120, +0.092 mm), 2 and
+#: 3 s saved less (docs/person-model.md, "The curves' evidence forgets").
 PERSON_FILTER = PersonFilterSettings(
     blend_time=0.05,
     hedge_leaving=0.5,
@@ -128,6 +131,7 @@ PERSON_FILTER = PersonFilterSettings(
     dead_zone_noise=3.0,
     residual_time=0.2,
     side_orientation=True,
+    likelihood_memory=1.5,
 )
 _FORMAT = "coassist-person-model-2"
 #: The formats :func:`read_person_model` reads: the current, and ``-1`` (written before a check kept ``worse``: its
