@@ -621,7 +621,7 @@ def test_the_curves_likelihoods_forget_at_the_memorys_rate():
             part = hyp.way_slice[way]
             step = plain[part] - before[0][part]
             q = srcs[0]._q[hyp.by_way[part]]  # the way's curves' present estimates this tick (the same in both runs)
-            if np.max(np.sum((q - q.mean(axis=0)) ** 2, axis=1)) < src.settings.divergence**2:
+            if np.max(np.sum((q - q.mean(axis=0)) ** 2, axis=1)) < srcs[0].settings.divergence ** 2:
                 # the way's curves were not apart: neither run's likelihoods moved
                 assert not step.any() and (kept[part] == before[1][part]).all()
                 continue

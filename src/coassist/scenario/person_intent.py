@@ -701,11 +701,8 @@ class PersonPathsIntent:
             ll -= np.minimum.reduceat(ll, starts).take(ranks)
             ll *= self._kappa
             ll /= self._two_noise2
-            if self._memory < 1.0:  # the evidence of long ago fades (likelihood_memory)
-                ll -= self._memory * loglik
-                np.negative(ll, out=ll)
-            else:
-                np.subtract(loglik, ll, out=ll)
+            # the evidence of long ago fades (likelihood_memory; without it the factor is 1, which changes no bit)
+            np.subtract(self._memory * loglik, ll, out=ll)
             ll -= np.maximum.reduceat(ll, starts).take(ranks)
             if all(apart):
                 self._loglik = loglik = ll
