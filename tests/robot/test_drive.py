@@ -486,6 +486,8 @@ def test_ctrl_c_once_the_run_is_over_keeps_the_whole_trial(tmp_path, monkeypatch
     import coassist.data.run_pair as run_pair
     from coassist.cli import app
 
+    # the handler this process started with (a job started in the background with SIGINT ignored has SIG_IGN)
+    before = signal.getsignal(signal.SIGINT)
     args = ["drive", "--world", "mujoco", "--controller", "manual", "--task", "linear", "--time-limit", "0.5"]
     real_close, real_write = MujocoUR5World.close, run_pair.write_run_pair
     whole = drive(DriveConfig(controller="manual", task="linear", time_limit=0.5))
@@ -509,7 +511,7 @@ def test_ctrl_c_once_the_run_is_over_keeps_the_whole_trial(tmp_path, monkeypatch
         assert "Ctrl-C after the trial ended: the whole trial is written" in result.output, result.output
         kept = read_trial(out)  # the whole run: what the same drive gives uninterrupted
         assert kept.meta.extra["ended"] == "time_limit" and np.array_equal(kept.pose, whole.pose)
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+    assert signal.getsignal(signal.SIGINT) is before  # put back
 
 
 def test_a_world_whose_teardown_fails_after_the_run_keeps_the_trial(monkeypatch, caplog):

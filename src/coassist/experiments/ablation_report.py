@@ -410,15 +410,23 @@ def ablation_section(result: AblationResult) -> Section:
     return s
 
 
-#: The cells of the default's claims (:func:`default_claims`): (world, controller, what they are). `drive`,
+#: The cells of the default's claims (:func:`default_claims`): (world, controller, the game in words). `drive`,
 #: `ros2`, `play` and `collect` run the plain cooperative game by default; the study and the report's
 #: application the arbitrated one.
 DEFAULT_CELLS = (
-    (POINT_MASS, "cooperative", "point-mass world, the plain cooperative game (drive's default)"),
-    (POINT_MASS, ARBITRATED, "point-mass world, the arbitrated game"),
-    (HELD_OUT, ARBITRATED, "held-out population, the arbitrated game"),
-    ("mujoco", ARBITRATED, "MuJoCo UR5, the arbitrated game"),
+    (POINT_MASS, "cooperative", "the plain cooperative game (drive's default)"),
+    (POINT_MASS, ARBITRATED, "the arbitrated game"),
+    (HELD_OUT, ARBITRATED, "the arbitrated game"),
+    ("mujoco", ARBITRATED, "the arbitrated game"),
 )
+
+
+def _default_cell_world(world: str, result: AblationResult) -> str:
+    """Where a cell of :data:`DEFAULT_CELLS` ran, in words: the held-out cells name the population they met
+    (reproduce.held_out_population)."""
+    if world == HELD_OUT:
+        return f"{result.held_out_population} population"
+    return {POINT_MASS: "point-mass world", "mujoco": "MuJoCo UR5"}[world]
 
 
 def asked_in_calibrations(models: dict[str, str], population: str = HELD_OUT) -> dict[str, tuple[int, int, int]]:
@@ -451,9 +459,8 @@ def default_claims(result: AblationResult, source: str = DEFAULT_INTENT) -> list
     oracle's force saving and overshoot reduction above zero with their bootstrap lower bounds (less than MG,
     with an interval), and on each side of the detour a paired overshoot difference from MG ≤ 0."""
     claims = []
-    for world, controller, where in DEFAULT_CELLS:
-        if world == HELD_OUT:  # the population its cells met (reproduce.held_out_population)
-            where = where.replace("held-out population", f"{result.held_out_population} population")
+    for world, controller, game in DEFAULT_CELLS:
+        where = f"{_default_cell_world(world, result)}, {game}"
         keys = [(world, obj, controller, source) for obj in OBJECTS]
         if not all(k in result.metrics for k in keys):
             continue

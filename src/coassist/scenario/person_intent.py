@@ -18,20 +18,21 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    0.61 m from the cup: :class:`~coassist.scenario.hand_force.HandPoint`);
 2. **phase**: the tool's nearest point on each curve within ``search_window`` of its last, and each
    curve's present estimate qₙ = Cₙ(sₙ + ℓₙ) with the lead ℓₙ = tₙ·(w + m a + Ĉ v)/K̂ along it;
-3. **evidence**: each curve's log-likelihood grows by −κ‖q − b − qₙ‖²/(2σ²) (σ the present estimate's
-   noise measured in the calibration; κ discounts the correlation of successive ticks; b the
-   lateral bias learnt on the shared path, as in ``paths``; with ``likelihood_memory`` τ_m the sum forgets at the rate
-   1/τ_m). The ways' log-odds move with the
-   change of their marginal log-likelihoods log Σₙ πₙ exp(ℓₙ) per way, at most ``evidence_rate``·dt
-   per tick, from the ways' prior (bounded to ``prior_share`` of ``decide``: a habit never decides
-   alone), until the tool passes the place where the ways are furthest apart. With ``side_rule``
-   "onset" the way's evidence is the log-likelihood ratio of the present estimate's offset z from the
-   plan when each way's offset there is anywhere between the plan and its mean path (how far into the
-   detour the person is, unknown: :func:`onset_log_ratio`), counted only where the ways' mean paths are
-   ``evidence_gap`` apart: a person still on the plan where their demonstrations had already left it
-   says nothing about the way. With ``side_orientation`` the offset counts toward the way whose mean path lies on
-   its side there, not the left way wherever it is to the left: a person who leans the wrong way before going round
-   (the left way's paths right of the right way's there) is read by their own paths;
+3. **evidence**: while a way's curves are apart, each curve's log-likelihood grows by −κ‖q − b − qₙ‖²/(2σ²)
+   (σ the present estimate's noise measured in the calibration; κ discounts the correlation of successive ticks;
+   b the lateral bias learnt on the shared path, as in ``paths``; with ``likelihood_memory`` τ_m the sum forgets at
+   the rate 1/τ_m): it weighs a way's curves against each other (the shape), not the ways. The ways' log-odds move
+   by the present estimate's offset z − b from the plan beyond a dead zone (``side_rule``: "offset" z·D/σ², the
+   linear log-likelihood ratio of two ways whose offsets are ±D/2; "mixture" each way's curves' offsets as a
+   mixture; "onset" each way's offset anywhere between the plan and its mean path, how far into the detour the
+   person is being unknown: :func:`onset_log_ratio`), at most ``evidence_rate``·dt per tick, from the ways'
+   prior (bounded to ``prior_share`` of ``decide``: a habit never decides alone), counted only where the ways'
+   mean paths are ``evidence_gap`` apart and, once a way is decided, only until the tool passes the place where they
+   are furthest apart: a person still on the plan where their demonstrations had already left it says nothing
+   about the way. With
+   ``side_orientation`` the offset counts toward the way whose mean path lies on its side there, not the left way
+   wherever it is to the left: a person who leans the wrong way before going round (the left way's paths right of
+   the right way's there) is read by their own paths;
 4. **rows**: once |log-odds| > ``decide`` the rows run along the decided way's likeliest curves
    (at most :data:`MIXTURE`, weighted) from their present estimates at the tool's speed along
    them (on a way nobody took, with ``follow_mirror`` off, the present estimate's rows instead); while
