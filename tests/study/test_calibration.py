@@ -542,8 +542,7 @@ def test_a_kill_after_the_asked_refit_wrote_p0_but_not_its_line_resumes(tmp_path
     from coassist.study.folder import ParticipantFolder
 
     study = init_study(calibrated_plan(tmp_path / "plans", asked=2), tmp_path / "study")
-    with ParticipantRun(study, "S01", simulate=True) as run:  # S02 is participant 2: seed 3 asks them for a way
-        run.run()
+    study.register("S01", simulated=True)  # S02 is participant 2: seed 3 asks them for a way
 
     class Killed(Exception):
         pass
