@@ -119,8 +119,8 @@ PERSON_MODEL_FILE = "person-model.json"
 #: −0.001] m/s³; 0.3 and 0.5 s saved more force and cost overshoot beyond their intervals (+0.120, +0.092 mm), 2 and
 #: 3 s saved less (docs/person-model.md, "The curves' evidence forgets"). With the memory, the evidence's discount
 #: κ (kappa) 0.2 → 0.05: on the eight cells overshoot −0.106 [−0.243, +0.030] mm, hand force −0.005 [−0.021, +0.010]
-#: N, jerk −0.008 [−0.015, −0.001] m/s³; 0.02–0.15 all lower on all three point estimates, 0.3 and 0.5 higher
-#: (docs/person-model.md, "The evidence's discount again").
+#: N, jerk −0.008 [−0.015, −0.001] m/s³; from 0.15 down to 0.02 the overshoot and jerk lower, the force within
+#: ±0.007 N; 0.3 and 0.5 higher on all three (docs/person-model.md, "The evidence's discount again").
 PERSON_FILTER = PersonFilterSettings(
     kappa=0.05,
     blend_time=0.05,
