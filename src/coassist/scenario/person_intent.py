@@ -29,10 +29,9 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    prior (bounded to ``prior_share`` of ``decide``: a habit never decides alone), counted only where the ways'
    mean paths are ``evidence_gap`` apart and, once a way is decided, only until the tool passes the place where they
    are furthest apart: a person still on the plan where their demonstrations had already left it says nothing
-   about the way. With
-   ``side_orientation`` the offset counts toward the way whose mean path lies on its side there, not the left way
-   wherever it is to the left: a person who leans the wrong way before going round (the left way's paths right of
-   the right way's there) is read by their own paths;
+   about the way. With ``side_orientation`` the offset counts toward the way whose mean path lies on its side
+   there, not the left way wherever it is to the left: a person who leans the wrong way before going round (the
+   left way's paths right of the right way's there) is read by their own paths;
 4. **rows**: once |log-odds| > ``decide`` the rows run along the decided way's likeliest curves
    (at most :data:`MIXTURE`, weighted) from their present estimates at the tool's speed along
    them (on a way nobody took, with ``follow_mirror`` off, the present estimate's rows instead); while
