@@ -45,6 +45,14 @@ def _context(path=NOMINAL, user="u"):
     )
 
 
+def _ready(settings=None):
+    """The person filter on :func:`_model`'s person with ``settings`` (None: the class's default), reset to
+    :func:`_context`."""
+    src = PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM}, settings=settings)
+    src.reset(_context())
+    return src
+
+
 def _walk(intent):
     """The intent walked at 0.1 m/s: its points 1 mm apart (X is 0.25 mm apart)."""
     seg = np.linalg.norm(np.diff(intent, axis=0), axis=1)
@@ -89,8 +97,7 @@ def test_it_is_an_intent_source_of_the_persons_arm():
 
 @pytest.mark.parametrize(("amplitude", "centre"), [(0.08, 0.505), (-0.08, 0.515)], ids=["left", "right"])
 def test_the_way_is_found_soon_after_the_detour_starts_and_the_rows_follow_it(amplitude, centre):
-    src = PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM})
-    src.reset(_context())
+    src = _ready()
     intent = _walk(_bump(centre, amplitude))
     sides, first = _scripted(src, intent)
     way = int(np.sign(amplitude))
@@ -154,8 +161,7 @@ def test_a_person_who_goes_straight_gets_no_detour_and_no_single_tick_decides():
 
 
 def test_each_curve_keeps_its_nearest_point_within_the_search_window():
-    src = PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM})
-    src.reset(_context())
+    src = _ready()
     hyp = src._hyp
     intent = _walk(_bump(0.5, 0.08))
     G = hyp.points.shape[1]
@@ -198,8 +204,7 @@ def test_a_curve_held_far_from_the_tool_gives_no_rows():
     far ones, 0.18 m behind the tool, and the robot held the tool there against 35 N until the time limit.
     Here: the way decided, its curves' phases put 0.25 m behind the tool; the rows must be the present
     estimate's, not the far curves'."""
-    src = PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM})
-    src.reset(_context())
+    src = _ready()
     intent = _walk(NOMINAL)
     k = int(np.argmax(intent[:, 0] > 0.3))
     for i in range(k):
@@ -425,12 +430,7 @@ def test_the_rows_keep_the_persons_offset_from_their_curves_fading_over_the_resi
     intent = _walk(_bump(0.5, 0.08) + [0.0, shift])
     rows = {}
     for residual in (0.0, tau):
-        src = PersonPathsIntent(
-            paths={"u": _model()},
-            arms={"u": ARM},
-            settings=PersonFilterSettings(residual_time=residual, bias_limit=0.0),
-        )
-        src.reset(_context())
+        src = _ready(PersonFilterSettings(residual_time=residual, bias_limit=0.0))
         rows[residual] = [(_tick(src, intent, k), src.side) for k in range(len(intent))]
     fade = np.exp(-DT * np.arange(1, 51) / tau)
     top = [k for k in range(len(intent)) if abs(intent[k, 0] - 0.5) < 0.03]  # the bump's flat top, ±3 cm
@@ -453,8 +453,7 @@ def test_the_hedge_carries_a_share_of_the_progress_while_the_person_leaves_their
     rows = {}
     for leaving in (1.0, 0.5):
         st = PersonFilterSettings(hedge_lateral=False, hedge_leaving=leaving, bias_limit=0.0, decide=20.0)
-        src = PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM}, settings=st)
-        src.reset(_context())
+        src = _ready(st)
         rows[leaving] = [(_tick(src, intent, k), src._mix) for k in range(len(intent))]
     steps = 0.5 * DT * np.arange(1, 51)
     inside = outside = 0
@@ -481,8 +480,7 @@ def test_the_rows_advance_at_the_persons_pace_when_told_to():
     tau, lag = 0.1, 6
     rows = {}
     for pace in (0.0, tau):
-        src = PersonPathsIntent(paths={"u": _model()}, arms={"u": ARM}, settings=PersonFilterSettings(pace_time=pace))
-        src.reset(_context())
+        src = _ready(PersonFilterSettings(pace_time=pace))
         rows[pace] = [_tick(src, intent, k, lag) for k in range(len(intent))]
     gain, low, steps = 1.0 - np.exp(-DT / tau), None, DT * np.arange(1, 51)
     slowed = 0
@@ -596,15 +594,7 @@ def test_the_curves_likelihoods_forget_at_the_memorys_rate():
     # either run (clipped there) is left out from then on
     tau = 0.3
     intent = _walk(_bump(0.5, 0.08))
-    srcs = []
-    for memory in (0.0, tau):
-        src = PersonPathsIntent(
-            paths={"u": _model()},
-            arms={"u": ARM},
-            settings=PersonFilterSettings(likelihood_memory=memory, bias_limit=0.0),
-        )
-        src.reset(_context())
-        srcs.append(src)
+    srcs = [_ready(PersonFilterSettings(likelihood_memory=memory, bias_limit=0.0)) for memory in (0.0, tau)]
     hyp = srcs[0]._hyp
     decay = np.exp(-DT / tau)
     summed = np.zeros(len(hyp.ways))
