@@ -627,3 +627,24 @@ def test_the_curves_likelihoods_forget_at_the_memorys_rate():
     # and it forgets: without the memory the likelihoods keep what the trial showed early on; with it they are bounded
     # by about τ_m's worth of ticks
     assert np.ptp(srcs[1]._loglik) < np.ptp(srcs[0]._loglik)
+
+
+def test_the_brake_puts_every_row_its_time_of_the_tools_velocity_behind():
+    # brake_time τ_b: every row of a led person is the brake-free filter's row less τ_b·v (v the tool's velocity of
+    # the tick), and nothing else of the filter moves (the way, the phases, the likelihoods: the brake reads nothing
+    # back); τ_b = 0 is the filter as it was, and a bad τ_b names its field
+    tau = 0.06
+    intent = _walk(_bump(0.5, 0.08))
+    plain, braked = _ready(PersonFilterSettings()), _ready(PersonFilterSettings(brake_time=tau))
+    moving = 0
+    for k in range(len(intent)):
+        tool_v = (intent[max(k - 6, 0)] - intent[max(k - 7, 0)]) / DT  # what _tick tells the filter
+        want, got = _tick(plain, intent, k), _tick(braked, intent, k)
+        assert got.shape == want.shape == (plain.horizon, 2)
+        # one subtraction of the same two floats per column: the same bits as the closed form
+        np.testing.assert_array_equal(got, want - np.array((tau * tool_v[0], tau * tool_v[1])))
+        assert plain.side == braked.side and (plain._loglik == braked._loglik).all()
+        moving += bool(np.any(tool_v))
+    assert moving > len(intent) // 2  # the tool moved on most ticks: the brake was measured, not a zero
+    with pytest.raises(ValueError, match="brake_time"):
+        PersonFilterSettings(brake_time=-0.01)

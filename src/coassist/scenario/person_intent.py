@@ -141,6 +141,10 @@ class PersonFilterSettings:
         it forgets at the rate 1/τ_m (ℓₙ ← e^(−dt/τ_m)·ℓₙ − the tick's term, where the way's curves are apart): a
         person whose trial follows one demonstration on the way out and another on the way back (a return that rings
         as some trials rang) is read by what they did in the last τ_m or so.
+    brake_time : [s] τ_b. Every row the filter gives a led person lags the tool by τ_b of its velocity,
+        rows − τ_b·v (v the tool's, or the hand point's with ``object_yaw``): the game's pull toward the rows then
+        takes energy out of the motion, a linear damper, where the person's turn comes sooner or harder than the rows
+        foresaw (docs/person-model.md, "A brake in the rows"). 0: the rows as predicted.
     """
 
     kappa: float = 0.2
@@ -175,6 +179,7 @@ class PersonFilterSettings:
     min_way_paths: int = 1
     side_orientation: bool = False
     likelihood_memory: float = 0.0
+    brake_time: float = 0.0
 
     def __post_init__(self) -> None:
         for name, lo, hi, open_lo in (
@@ -203,6 +208,7 @@ class PersonFilterSettings:
             ("hedge_leaving", 0.0, 1.0, False),
             ("pace_time", 0.0, 5.0, False),
             ("likelihood_memory", 0.0, 60.0, False),
+            ("brake_time", 0.0, 0.5, False),
         ):
             object.__setattr__(
                 self, name, check_real(getattr(self, name), f"PersonFilterSettings.{name}", lo, hi, open_lo=open_lo)
@@ -476,6 +482,7 @@ class PersonPathsIntent:
         arm = self.arms.get(context.user, self.default_arm)
         self._K, self._C = arm.stiffness, arm.damping
         self._lead_time = st.reaction_lead
+        self._brake = st.brake_time
         self._smoothing = RowSmoothing(self.dt, st.row_smoothing, self.horizon)
         model = self.paths.get(context.user, self.default_paths)
         led = (context.user if context.user in self.paths else self.DEFAULT) not in self.held
@@ -573,7 +580,10 @@ class PersonPathsIntent:
                 return np.tile(np.array((qx, qy)), (self.horizon, 1))
             # the named present-estimate sources (no paths at all): their own extrapolation
             return np.array((qx, qy)) + self._present_steps * np.array((vx, vy))
-        return self._smoothing(self._filter(self._hyp, px, py, vx, vy, ux, uy, qx, qy))
+        rows = self._smoothing(self._filter(self._hyp, px, py, vx, vy, ux, uy, qx, qy))
+        if self._brake > 0.0:  # every row a little behind the tool: the robot's pull toward them damps its motion
+            rows = rows - np.array((self._brake * vx, self._brake * vy))  # a new array: smoothing may hand back its own
+        return rows
 
     def _filter(
         self, hyp: _Curves, px: float, py: float, vx: float, vy: float, ux: float, uy: float, qx: float, qy: float
