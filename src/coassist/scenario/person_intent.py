@@ -50,6 +50,8 @@ nobody took: N rigid curves Cₙ on the nominal path's arc-length grid, each wit
    advanced by the filter's lag (:class:`~coassist.scenario.row_smoothing.RowSmoothing`): the
    tick-to-tick noise of the phase, the lead and the mixture leaves the robot's effort, and with it
    the tool's jerk.
+6. **brake**: with ``brake_time`` τ_b every row then lags the tool by τ_b of its velocity, rows − τ_b·v: the game's
+   pull toward the rows damps the motion too (a trade of hand force for overshoot, docs/person-model.md).
 
 Where the tool is far from every curve (``max_offset``: another task, a person who left the plan
 for good), the rows are the present estimate's at constant velocity (``extrapolation``); where
