@@ -632,7 +632,7 @@ def test_the_curves_likelihoods_forget_at_the_memorys_rate():
 def test_the_brake_puts_every_row_its_time_of_the_tools_velocity_behind():
     # brake_time τ_b: every row of a led person is the brake-free filter's row less τ_b·v (v the tool's velocity of
     # the tick), and nothing else of the filter moves (the way, the phases, the likelihoods: the brake reads nothing
-    # back); τ_b = 0 is the filter as it was, and a bad τ_b names its field
+    # back); a bad τ_b names its field
     tau = 0.06
     intent = _walk(_bump(0.5, 0.08))
     plain, braked = _ready(PersonFilterSettings()), _ready(PersonFilterSettings(brake_time=tau))
