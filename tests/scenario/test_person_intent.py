@@ -61,11 +61,15 @@ def _walk(intent):
     return np.stack([np.interp(s, arc, intent[:, 0]), np.interp(s, arc, intent[:, 1])], axis=1)
 
 
+def _tool(intent, k, lag=6):
+    """The tool's position and velocity at tick k of a scripted trial: ``lag`` ticks behind the intent."""
+    return intent[max(k - lag, 0)], (intent[max(k - lag, 0)] - intent[max(k - lag - 1, 0)]) / DT
+
+
 def _tick(src, intent, k, lag=6):
-    """Tick k of a scripted trial: the tool trails the intent by ``lag`` ticks and the hand pulls with the
-    arm the model knows (so the present estimate is the intent itself); the rows."""
-    tool = intent[max(k - lag, 0)]
-    vel = (intent[max(k - lag, 0)] - intent[max(k - lag - 1, 0)]) / DT
+    """Tick k of a scripted trial: the tool trails the intent by ``lag`` ticks (:func:`_tool`) and the hand pulls
+    with the arm the model knows (so the present estimate is the intent itself); the rows."""
+    tool, vel = _tool(intent, k, lag)
     w = K * (intent[k] - tool) - ARM.damping * vel
     return src.predict(np.array([[tool[0], tool[1], vel[0], vel[1], w[0], w[1], 0.0, 0.0]]))
 
@@ -638,7 +642,7 @@ def test_the_brake_puts_every_row_its_time_of_the_tools_velocity_behind():
     plain, braked = _ready(PersonFilterSettings()), _ready(PersonFilterSettings(brake_time=tau))
     moving = 0
     for k in range(len(intent)):
-        tool_v = (intent[max(k - 6, 0)] - intent[max(k - 7, 0)]) / DT  # what _tick tells the filter
+        tool_v = _tool(intent, k)[1]  # the velocity _tick tells the filter
         want, got = _tick(plain, intent, k), _tick(braked, intent, k)
         assert got.shape == want.shape == (plain.horizon, 2)
         # one subtraction of the same two floats per column: the same bits as the closed form
